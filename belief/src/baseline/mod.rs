@@ -1,0 +1,1 @@
+//! Yardsticks for the Radon engine (Table III of the paper).

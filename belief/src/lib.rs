@@ -1,0 +1,36 @@
+//! # idmesh-belief — the inference engine
+//!
+//! Pure, synchronous, no I/O: every filter here takes events and answers
+//! questions, so it can be tested and benchmarked alone and embedded in the
+//! leader actors unchanged.
+//!
+//! A map of the crate:
+//! - [`event`] — the `mix` and `observe` events and the [`Field`] a filter
+//!   starts from (n tracks, k red or a prior over k, initial assignment).
+//! - [`filter`] — [`PropertyFilter`], the interface every property filter
+//!   offers, and the spec's prediction and scoring rules.
+//! - [`track_set`] — [`TrackSet`], the index α of a Radon basis function.
+//! - [`weights`] — binomial weights W(j) = C(n − j, k − j) in log space.
+//! - [`radon`] — the core: a sparse belief on the overcomplete Radon
+//!   dictionary (Jiang et al., TOSN 2013, Sections 4–5): rollup (Alg. 1),
+//!   conditioning (Alg. 2), exact answers, thresholding and OMP (Sec. 5.3),
+//!   and the distributed conditioning rule (Sec. 5.4).
+//! - [`baseline`] — yardsticks: the exact dense filter over all k-sets and
+//!   the low-order Radon filters of order 1, 2, 3 (Table III).
+//! - [`workload`] — seeded random event streams for tests and benchmarks.
+
+pub mod baseline;
+pub mod error;
+pub mod event;
+pub mod filter;
+pub mod radon;
+pub mod track_set;
+pub mod weights;
+pub mod workload;
+
+pub use error::BeliefError;
+pub use event::{Event, Field, Mix, Observe, RedCount};
+pub use filter::{predict_red, tracking_error, PropertyFilter};
+pub use radon::{RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
+pub use track_set::TrackSet;
+pub use weights::Weights;

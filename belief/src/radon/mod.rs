@@ -1,0 +1,240 @@
+//! The core of idmesh: a sparse, lazy (unnormalized) belief over which k of n
+//! tracks are red, written on the overcomplete Radon dictionary of Jiang et
+//! al., *Property Management in Wireless Sensor Networks with Overcomplete
+//! Radon Bases* (TOSN 2013), Section 4.2:
+//!
+//! f = Σ_α c_α φ_α, over sets α with |α| ≤ k, where φ_α(x) = [α ⊆ x].
+//!
+//! ## Representation: masses, not coefficients
+//! We store, for each α, its *mass* m_α = c_α·W(|α|) — the l1 contribution of
+//! c_α φ_α to f (Section 5.3.2), W(j) = C(n − j, k − j) — times a global scale
+//! e^{log_scale}. Every update then needs only the ratios W(j + 1)/W(j) =
+//! (k − j)/(n − j), so nothing overflows for n up to 10,000 even though W(0)
+//! has thousands of digits. The masses are renormalized to sum 1 after every
+//! conditioning and sparsification, the factor going into `log_scale`: the
+//! belief stays lazy (the normalizing constant is kept, not discarded) and
+//! numerically sound over millions of events.
+//!
+//! ## Files
+//! - [`rollup`](self::rollup) — Algorithm 1, mixing.
+//! - [`condition`](self::condition) — Algorithm 2 for likelihoods in
+//!   span{φ_∅, φ_t}, with the distributed rule of Section 5.4 as an option.
+//! - [`answer`](self::answer) — exact marginals, P(set all red), normalizer.
+//! - [`threshold`](self::threshold), [`omp`](self::omp) — Section 5.3.
+//! - [`sparsify`](self::sparsify) — when to run which approximation.
+//! - [`mixing_log`](self::mixing_log) — per-track mixing partners since the
+//!   last observation, for the distributed rule.
+
+mod answer;
+mod condition;
+mod mixing_log;
+pub mod omp;
+mod rollup;
+mod sparsify;
+mod threshold;
+
+pub use mixing_log::MixingLog;
+pub use omp::OmpOptions;
+pub use sparsify::{Sparsify, SparsifyMethod};
+
+use crate::error::BeliefError;
+use crate::event::{Field, Mix, Observe};
+use crate::filter::PropertyFilter;
+use crate::track_set::TrackSet;
+use crate::weights::Weights;
+use rustc_hash::FxHashMap;
+
+/// Options of the Radon engine. The default prunes nothing and conditions
+/// exactly, so the belief is exact.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RadonOptions {
+    /// Sparse approximation once the coefficient count exceeds a budget.
+    pub sparsify: Option<Sparsify>,
+    /// Condition with the distributed rule of Section 5.4: an observation of
+    /// t only adds {t} ∪ β for sets β that meet the tracks t mixed with since
+    /// t was last observed. An approximation; off = exact Algorithm 2.
+    pub distributed_rule: bool,
+}
+
+/// Counters a user of the engine may want to see.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RadonStats {
+    pub events: u64,
+    pub max_coefficients: usize,
+    pub thresholdings: u64,
+    pub omp_runs: u64,
+}
+
+/// A belief over red sets on the overcomplete Radon dictionary.
+#[derive(Debug, Clone)]
+pub struct RadonBelief {
+    field: Field,
+    weights: Weights,
+    masses: FxHashMap<TrackSet, f64>,
+    log_scale: f64,
+    options: RadonOptions,
+    mixing_log: MixingLog,
+    stats: RadonStats,
+    /// (mixes, observations) since OMP last ran, to time it after runs of
+    /// mixing (Section 5.5, "Timing for Sparsification").
+    since_omp: (u32, u32),
+}
+
+impl RadonBelief {
+    /// An exact belief (nothing pruned, exact conditioning).
+    pub fn new(field: Field) -> Result<Self, BeliefError> {
+        Self::with_options(field, RadonOptions::default())
+    }
+
+    pub fn with_options(field: Field, options: RadonOptions) -> Result<Self, BeliefError> {
+        field.validate()?;
+        if let Some(sparsify) = &options.sparsify {
+            sparsify.validate()?;
+        }
+        let weights = Weights::new(field.tracks, &field.red);
+        let mut masses = FxHashMap::default();
+        let start = match &field.initial_red {
+            Some(red) => TrackSet::from_tracks(red.iter().copied()),
+            None => TrackSet::empty(),
+        };
+        let log_scale = weights.ln(start.len());
+        masses.insert(start, 1.0);
+        let mixing_log = MixingLog::new(field.tracks);
+        Ok(RadonBelief {
+            field,
+            weights,
+            masses,
+            log_scale,
+            options,
+            mixing_log,
+            stats: RadonStats {
+                max_coefficients: 1,
+                ..RadonStats::default()
+            },
+            since_omp: (0, 0),
+        })
+    }
+
+    /// A belief given directly by Radon coefficients c_α (the paper's
+    /// notation), e.g. to start from a worked example.
+    pub fn from_coefficients(
+        field: Field,
+        options: RadonOptions,
+        coefficients: impl IntoIterator<Item = (TrackSet, f64)>,
+    ) -> Result<Self, BeliefError> {
+        let mut belief = Self::with_options(field, options)?;
+        belief.masses.clear();
+        belief.log_scale = 0.0;
+        for (set, c) in coefficients {
+            for &t in set.tracks() {
+                belief.field.check_track(t)?;
+            }
+            let ln_w = belief.weights.ln(set.len());
+            if c != 0.0 && ln_w.is_finite() {
+                *belief.masses.entry(set).or_insert(0.0) += c * ln_w.exp();
+            }
+        }
+        belief.renormalize()?;
+        Ok(belief)
+    }
+
+    pub fn options(&self) -> &RadonOptions {
+        &self.options
+    }
+
+    pub fn stats(&self) -> &RadonStats {
+        &self.stats
+    }
+
+    pub fn weights(&self) -> &Weights {
+        &self.weights
+    }
+
+    /// The Radon coefficient c_α in the paper's units (f = Σ c_α φ_α),
+    /// 0 for a set not held. Finite only while c_α fits an f64.
+    pub fn coefficient(&self, set: &TrackSet) -> f64 {
+        match self.masses.get(set) {
+            Some(&m) => m * (self.log_scale - self.weights.ln(set.len())).exp(),
+            None => 0.0,
+        }
+    }
+
+    /// Every held set with its coefficient c_α, in the paper's units.
+    pub fn coefficients_iter(&self) -> impl Iterator<Item = (&TrackSet, f64)> + '_ {
+        self.masses
+            .iter()
+            .map(|(s, &m)| (s, m * (self.log_scale - self.weights.ln(s.len())).exp()))
+    }
+
+    /// Every held set with its share of the total mass (sums to 1).
+    pub fn masses(&self) -> impl Iterator<Item = (&TrackSet, f64)> + '_ {
+        let total = self.total_mass();
+        self.masses.iter().map(move |(s, &m)| (s, m / total))
+    }
+
+    fn total_mass(&self) -> f64 {
+        self.masses.values().sum()
+    }
+
+    /// Divides the masses by their sum and moves the factor into the scale.
+    fn renormalize(&mut self) -> Result<(), BeliefError> {
+        let total = self.total_mass();
+        if !(total.is_finite() && total > 0.0) {
+            return Err(BeliefError::Degenerate { normalizer: total });
+        }
+        for m in self.masses.values_mut() {
+            *m /= total;
+        }
+        self.log_scale += total.ln();
+        Ok(())
+    }
+
+    fn note_size(&mut self) {
+        self.stats.max_coefficients = self.stats.max_coefficients.max(self.masses.len());
+    }
+
+    /// Runs the configured sparse approximation if the budget is exceeded.
+    fn maybe_sparsify(&mut self) -> Result<(), BeliefError> {
+        let Some(sparsify) = self.options.sparsify.clone() else {
+            return Ok(());
+        };
+        if self.masses.len() <= sparsify.budget {
+            return Ok(());
+        }
+        self.sparsify_now(&sparsify)
+    }
+}
+
+impl PropertyFilter for RadonBelief {
+    fn field(&self) -> &Field {
+        &self.field
+    }
+
+    fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
+        self.field.check_mix(&mix)?;
+        self.rollup(mix);
+        self.mixing_log.record(mix.a, mix.b);
+        self.stats.events += 1;
+        self.since_omp.0 += 1;
+        self.note_size();
+        self.maybe_sparsify()
+    }
+
+    fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        self.field.check_observe(&observe)?;
+        self.condition(observe)?;
+        self.mixing_log.clear(observe.track);
+        self.stats.events += 1;
+        self.since_omp.1 += 1;
+        self.note_size();
+        self.maybe_sparsify()
+    }
+
+    fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
+        self.exact_marginals()
+    }
+
+    fn coefficients(&self) -> usize {
+        self.masses.len()
+    }
+}
