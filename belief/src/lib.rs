@@ -18,19 +18,28 @@
 //! - [`baseline`] — yardsticks: the exact dense filter over all k-sets and
 //!   the low-order Radon filters of order 1, 2, 3 (Table III).
 //! - [`workload`] — seeded random event streams for tests and benchmarks.
+//! - [`identity`] — identity management (Shin et al., IPSN 2005): the exact
+//!   filter over N! assignments, the belief matrix, the information matrix
+//!   with marginals on demand, and identities coded by property bits.
 
 pub mod baseline;
 pub mod error;
 pub mod event;
 pub mod filter;
+pub mod identity;
 pub mod radon;
 pub mod track_set;
 pub mod weights;
 pub mod workload;
 
+pub use baseline::{DenseFilter, LowOrderFilter};
 pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
+pub use identity::{
+    identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
+    IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,
+};
 pub use radon::{RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
 pub use track_set::TrackSet;
 pub use weights::Weights;

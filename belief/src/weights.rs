@@ -1,21 +1,26 @@
-//! Binomial weights W(j) = Σ_x [α ⊆ x]·π(|x|) for a set α of size j: how many
-//! admissible red sets a basis function φ_α covers, weighted by the prior over
-//! the number of red targets. With k known, W(j) = C(n − j, k − j), the l1
-//! norm of φ_α used throughout Section 5 (normalizing constant, thresholding,
-//! OMP inner products ⟨φ_β, φ_α⟩ = W(|α ∪ β|)).
+//! Binomial weights: how many admissible red sets a dictionary atom covers.
+//!
+//! The Radon atom φ_α (|α| = i) covers W(i) = C(n − i, k − i) k-sets — the l1
+//! norm used throughout Section 5 (normalizing constant, thresholding, OMP
+//! inner products ⟨φ_β, φ_α⟩ = W(|α ∪ β|)). Our dictionary also has atoms that
+//! fix some tracks blue (see [`crate::radon::atom`]); an atom with i red and
+//! o blue tracks covers W(i, o) = C(n − i − o, k − i) k-sets, and W(i) = W(i, 0).
 //!
 //! These numbers overflow f64 long before n = 10,000 (C(10000, 5000) has
-//! about 3000 digits), so they live in log space, and the engine works with
-//! ratios W(j + 1)/W(j) = (k − j)/(n − j), which never overflow.
+//! about 3000 digits), so they live in log space, and the engine mostly works
+//! with ratios such as W(i + 1, o)/W(i, o) = (k − i)/(n − i − o), which never
+//! overflow.
 //!
-//! With k unknown, the prior p over the count enters as π(k) = p(k)/C(n, k)
-//! (every set of a given size equally likely); rollup and conditioning do not
-//! depend on it (Section 5.5), only these weights do.
+//! With k unknown, a prior p over the count enters as π(k) = p(k)/C(n, k)
+//! (every set of a given size equally likely), W(i, o) = Σ_k π(k)·C(n−i−o, k−i);
+//! rollup and conditioning do not depend on it (Section 5.5), only these
+//! weights do.
 
 use crate::event::RedCount;
+use std::cell::RefCell;
+use rustc_hash::FxHashMap;
 
-/// ln C(n, r) via the log-gamma-free sum of logs, exact enough (< 1e-12
-/// relative) and monotone.
+/// ln C(n, r) by a sum of logs: exact to ~1e-13 relative, no tables.
 pub fn ln_binomial(n: usize, r: usize) -> f64 {
     if r > n {
         return f64::NEG_INFINITY;
@@ -36,70 +41,154 @@ fn ln_add(a: f64, b: f64) -> f64 {
     hi + (lo - hi).exp().ln_1p()
 }
 
-/// The table ln W(j) for j = 0..=max_red, for one field.
+#[derive(Debug, Clone)]
+enum Count {
+    Known(usize),
+    /// ln p(k) − ln C(n, k) for every k with p(k) > 0.
+    Unknown(Vec<(usize, f64)>),
+}
+
+/// The weights of one field.
 #[derive(Debug, Clone)]
 pub struct Weights {
     tracks: usize,
-    ln_w: Vec<f64>,
+    count: Count,
+    max_red: usize,
+    /// ln n! for n = 0..=tracks, so that ln C is three lookups.
+    ln_factorial: Vec<f64>,
+    /// ln W(i, o) for unknown k, computed on first use (O(n) each).
+    cache: RefCell<FxHashMap<(usize, usize), f64>>,
 }
 
 impl Weights {
     pub fn new(tracks: usize, red: &RedCount) -> Self {
-        let ln_w = match red {
-            RedCount::Known(k) => (0..=*k).map(|j| ln_binomial(tracks - j, k - j)).collect(),
+        let mut ln_factorial = Vec::with_capacity(tracks + 1);
+        let mut acc = 0.0;
+        ln_factorial.push(0.0);
+        for i in 1..=tracks {
+            acc += (i as f64).ln();
+            ln_factorial.push(acc);
+        }
+        let count = match red {
+            RedCount::Known(k) => Count::Known(*k),
             RedCount::Unknown { prior } => {
                 let total: f64 = prior.iter().sum();
-                let max = red.max_red();
-                // ln[C(n−j, k−j)/C(n, k)] = ln[k!/(k−j)!] − ln[n!/(n−j)!], built up in j.
-                let mut ln_w = vec![f64::NEG_INFINITY; max + 1];
-                for (k, &p) in prior.iter().enumerate() {
-                    if p <= 0.0 {
-                        continue;
-                    }
-                    let mut term = (p / total).ln();
-                    for (j, slot) in ln_w.iter_mut().enumerate().take(k + 1) {
-                        if j > 0 {
-                            term += ((k - j + 1) as f64 / (tracks - j + 1) as f64).ln();
-                        }
-                        *slot = ln_add(*slot, term);
-                    }
-                }
-                ln_w
+                Count::Unknown(
+                    prior
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, p)| **p > 0.0)
+                        .map(|(k, p)| (k, (p / total).ln() - ln_binomial(tracks, k)))
+                        .collect(),
+                )
             }
         };
-        Weights { tracks, ln_w }
+        Weights {
+            tracks,
+            count,
+            max_red: red.max_red(),
+            ln_factorial,
+            cache: RefCell::new(FxHashMap::default()),
+        }
     }
 
     pub fn tracks(&self) -> usize {
         self.tracks
     }
 
-    /// The largest size a set can have and still cover an admissible red set.
+    /// The largest number of red tracks an atom can fix and still cover an
+    /// admissible red set.
     pub fn max_size(&self) -> usize {
-        self.ln_w.len() - 1
+        self.max_red
     }
 
-    /// ln W(j); −∞ when no admissible red set has j or more tracks.
-    pub fn ln(&self, j: usize) -> f64 {
-        self.ln_w.get(j).copied().unwrap_or(f64::NEG_INFINITY)
-    }
-
-    /// W(j + 1)/W(j): the share of the sets covered by φ_α (|α| = j) that
-    /// also hold one given track outside α.
-    pub fn ratio(&self, j: usize) -> f64 {
-        if j + 1 >= self.ln_w.len() {
-            0.0
+    fn ln_c(&self, n: usize, r: usize) -> f64 {
+        if r > n {
+            f64::NEG_INFINITY
         } else {
-            (self.ln_w[j + 1] - self.ln_w[j]).exp()
+            self.ln_factorial[n] - self.ln_factorial[r] - self.ln_factorial[n - r]
         }
     }
 
-    /// W(to)/W(from) for to ≥ from.
-    pub fn ratio_between(&self, from: usize, to: usize) -> f64 {
-        if to >= self.ln_w.len() {
+    /// ln W(i, o); −∞ when no admissible red set has i red tracks and o
+    /// other tracks blue.
+    pub fn ln2(&self, red: usize, blue: usize) -> f64 {
+        if red + blue > self.tracks {
+            return f64::NEG_INFINITY;
+        }
+        match &self.count {
+            Count::Known(k) => {
+                if red > *k || blue > self.tracks - k {
+                    f64::NEG_INFINITY
+                } else {
+                    ln_binomial(self.tracks - red - blue, k - red)
+                }
+            }
+            Count::Unknown(terms) => {
+                if let Some(v) = self.cache.borrow().get(&(red, blue)) {
+                    return *v;
+                }
+                let free = self.tracks - red - blue;
+                let v = terms
+                    .iter()
+                    .filter(|(k, _)| *k >= red && *k - red <= free)
+                    .fold(f64::NEG_INFINITY, |acc, (k, lp)| {
+                        ln_add(acc, lp + self.ln_c(free, k - red))
+                    });
+                self.cache.borrow_mut().insert((red, blue), v);
+                v
+            }
+        }
+    }
+
+    /// ln W(j) = ln W(j, 0), the Radon atom of j tracks.
+    pub fn ln(&self, j: usize) -> f64 {
+        self.ln2(j, 0)
+    }
+
+    /// W(i + 1, o)/W(i, o): the share of the sets an atom covers in which one
+    /// given free track is red.
+    pub fn ratio_red(&self, red: usize, blue: usize) -> f64 {
+        match &self.count {
+            Count::Known(k) => {
+                let free = self.tracks.saturating_sub(red + blue);
+                if red >= *k || free == 0 {
+                    0.0
+                } else {
+                    (k - red) as f64 / free as f64
+                }
+            }
+            Count::Unknown(_) => self.ratio_between((red, blue), (red + 1, blue)),
+        }
+    }
+
+    /// W(i, o + 1)/W(i, o): the share in which one given free track is blue.
+    pub fn ratio_blue(&self, red: usize, blue: usize) -> f64 {
+        match &self.count {
+            Count::Known(k) => {
+                let free = self.tracks.saturating_sub(red + blue);
+                if free == 0 || blue >= self.tracks - k {
+                    0.0
+                } else {
+                    (self.tracks - k - blue) as f64 / free as f64
+                }
+            }
+            Count::Unknown(_) => self.ratio_between((red, blue), (red, blue + 1)),
+        }
+    }
+
+    /// W(j + 1)/W(j) for Radon atoms.
+    pub fn ratio(&self, j: usize) -> f64 {
+        self.ratio_red(j, 0)
+    }
+
+    /// W(to)/W(from) for (red, blue) sizes; 0 when `to` covers nothing.
+    pub fn ratio_between(&self, from: (usize, usize), to: (usize, usize)) -> f64 {
+        let hi = self.ln2(to.0, to.1);
+        if hi == f64::NEG_INFINITY {
             0.0
         } else {
-            (self.ln_w[to] - self.ln_w[from]).exp()
+            (hi - self.ln2(from.0, from.1)).exp()
         }
     }
 }
@@ -113,9 +202,12 @@ mod tests {
         let w = Weights::new(10, &RedCount::Known(5));
         assert!((w.ln(0).exp() - 252.0).abs() < 1e-9);
         assert!((w.ln(2).exp() - 56.0).abs() < 1e-9);
+        assert!((w.ln2(1, 2).exp() - 35.0).abs() < 1e-9); // C(7, 4)
         assert!((w.ratio(0) - 0.5).abs() < 1e-12);
+        assert!((w.ratio_blue(1, 2) - 3.0 / 7.0).abs() < 1e-15);
         assert_eq!(w.ratio(5), 0.0);
         assert_eq!(w.ln(6), f64::NEG_INFINITY);
+        assert_eq!(w.ln2(0, 6), f64::NEG_INFINITY);
     }
 
     #[test]
@@ -128,14 +220,15 @@ mod tests {
 
     #[test]
     fn unknown_k_with_binomial_prior_is_independent_halves() {
-        // p(k) = C(n,k)/2^n makes every subset equally likely: W(j) = 2^-j.
+        // p(k) = C(n,k)/2^n makes every subset equally likely: W(i, o) = 2^-(i+o).
         let n = 12;
-        let prior: Vec<f64> = (0..=n)
-            .map(|k| ln_binomial(n, k).exp() / 2f64.powi(n as i32))
-            .collect();
+        let prior: Vec<f64> = (0..=n).map(|k| ln_binomial(n, k).exp() / 2f64.powi(n as i32)).collect();
         let w = Weights::new(n, &RedCount::Unknown { prior });
-        for j in 0..=n {
-            assert!((w.ln(j) - (j as f64) * 0.5f64.ln()).abs() < 1e-9, "j={j}");
+        for i in 0..=n {
+            for o in 0..=(n - i) {
+                assert!((w.ln2(i, o) - ((i + o) as f64) * 0.5f64.ln()).abs() < 1e-9, "i={i} o={o}");
+            }
         }
+        assert!((w.ratio_red(3, 2) - 0.5).abs() < 1e-9);
     }
 }

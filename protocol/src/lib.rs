@@ -3,3 +3,15 @@
 //! Every message and key expression idmesh exchanges, and the trace format
 //! (shared/spec/trace.md) that simulators write, sensors publish and replay
 //! and scoring read. Types and their decoding only: no inference logic.
+//!
+//! A map of the crate:
+//! - [`trace`] — the trace format, version 1: one type per line kind
+//!   ([`trace::Line`]), the spec's validity rules, a validating
+//!   [`TraceReader`] and a validating [`TraceWriter`].
+
+pub mod trace;
+
+pub use trace::{
+    Header, Identify, Line, Mix, Move, NumberedLine, Observe, Problem, TraceError, TraceReader,
+    TraceWriter, Truth,
+};

@@ -31,11 +31,15 @@ impl RadonBelief {
         let total = self.checked_total()?;
         let mut outside = 0.0;
         let mut inside = vec![0.0; self.field.tracks];
-        for (set, &m) in &self.masses {
-            let ratio = self.weights.ratio(set.len());
+        for (atom, &m) in &self.masses {
+            let (i, o) = atom.sizes();
+            let ratio = self.weights.ratio_red(i, o);
             outside += m * ratio;
-            for &t in set.tracks() {
+            for &t in atom.red.tracks() {
                 inside[t as usize] += m * (1.0 - ratio);
+            }
+            for &t in atom.blue.tracks() {
+                inside[t as usize] -= m * ratio;
             }
         }
         Ok(inside.into_iter().map(|x| (outside + x) / total).collect())
@@ -50,10 +54,10 @@ impl RadonBelief {
         let sum: f64 = self
             .masses
             .iter()
-            .map(|(alpha, &m)| {
-                m * self
-                    .weights
-                    .ratio_between(alpha.len(), alpha.union_len(set))
+            .filter(|(atom, _)| atom.blue.intersection_len(set) == 0)
+            .map(|(atom, &m)| {
+                let (i, o) = atom.sizes();
+                m * self.weights.ratio_between((i, o), (atom.red.union_len(set), o))
             })
             .sum();
         Ok(sum / total)
@@ -75,14 +79,15 @@ impl RadonBelief {
             RedCount::Known(k) => posterior[*k] = 1.0,
             RedCount::Unknown { prior } => {
                 let prior_total: f64 = prior.iter().sum();
-                // φ_α covers C(n−|α|, j−|α|) sets of size j, each with weight
-                // p(j)/C(n, j); divide by W(|α|) to turn mass back into c_α.
-                for (set, &m) in &self.masses {
-                    let size = set.len();
-                    let ln_w = self.weights.ln(size);
-                    for (j, p) in prior.iter().enumerate().skip(size) {
-                        if *p > 0.0 {
-                            let ln_cover = ln_binomial(n - size, j - size) - ln_binomial(n, j)
+                // φ_{α|β} covers C(n−|α|−|β|, j−|α|) sets of size j, each with
+                // weight p(j)/C(n, j); divide by W(|α|, |β|) to turn mass
+                // back into a coefficient.
+                for (atom, &m) in &self.masses {
+                    let (i, o) = atom.sizes();
+                    let ln_w = self.weights.ln2(i, o);
+                    for (j, p) in prior.iter().enumerate().skip(i) {
+                        if *p > 0.0 && j - i <= n - i - o {
+                            let ln_cover = ln_binomial(n - i - o, j - i) - ln_binomial(n, j)
                                 + (p / prior_total).ln();
                             posterior[j] += m * (ln_cover - ln_w).exp();
                         }

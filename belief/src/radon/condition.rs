@@ -1,77 +1,141 @@
 //! Conditioning on an observation: Algorithm 2 of the paper (Section 5.2)
-//! specialised to the likelihoods of the trace format, L = b·φ_∅ + (a − b)·φ_t
-//! (a = `red`, b = `blue`).
+//! specialised to the likelihoods of the trace format, L(x) = a if t ∈ x,
+//! b otherwise (a = `red`, b = `blue`).
 //!
-//! φ_α·φ_∅ = φ_α and φ_α·φ_t = φ_{α ∪ {t}} (or 0 when |α ∪ {t}| exceeds every
-//! admissible red count), so with ρ = a/b and the factor b kept in the scale
-//! (the paper's "b = 1" trick, which Section 5.4 relies on):
-//! - α ∋ t: c_α ← ρ·c_α;
-//! - α ∌ t: c_α unchanged, and (ρ − 1)·c_α is added to α ∪ {t}.
+//! In the paper's dictionary L = b·φ_∅ + (a − b)·φ_t, and φ_α·φ_t = φ_{α∪{t}}
+//! (0 when α ∪ {t} exceeds every admissible red count), so an atom fixing t
+//! red is scaled by a, and any other atom α keeps b·c_α and adds (a − b)·c_α
+//! to α ∪ {t}. When a < b we write L = a·φ_∅ + (b − a)·φ_{∅|t} instead (unless
+//! `signed`): the atom keeps a·c_α and adds (b − a)·c_α to the atom that also
+//! fixes t blue — positive either way (see [`atom`](super::atom)). An atom
+//! fixing t blue is scaled by b. Exact when nothing is pruned.
 //!
-//! When b = 0 we factor out a instead: sets without t vanish and pass all of
-//! their weight to α ∪ {t}. The result is exact when nothing is pruned.
-//! In masses (m = c·W(|α|)) the addition to α ∪ {t} is (ρ − 1)·m_α·W(|α|+1)/W(|α|).
+//! The common factor min(a, b) is moved into the global scale (the paper's
+//! "b = 1" trick, which Section 5.4 relies on): atoms that do not involve t
+//! then keep their value, and only atoms grown from them are new.
+//! In masses (m = c·W) a grown atom gets (factor)·m·W(i+1, o)/W(i, o) (red) or
+//! (factor)·m·W(i, o+1)/W(i, o) (blue).
 
+use super::atom::Atom;
 use super::RadonBelief;
 use crate::error::BeliefError;
 use crate::event::Observe;
-use crate::track_set::TrackSet;
 use rustc_hash::FxHashMap;
 use std::collections::hash_map::Entry;
+
+/// The likelihood, rescaled, as the engine applies it.
+struct Update {
+    /// Moved into the global scale.
+    scale: f64,
+    /// Factor on atoms fixing the track red / blue / neither.
+    red: f64,
+    blue: f64,
+    keep: f64,
+    /// Weight added to the grown atom (negative only in signed form), and
+    /// whether the grown atom fixes the track red (else blue).
+    grow: f64,
+    grow_red: bool,
+}
+
+impl Update {
+    fn new(observe: &Observe, signed: bool) -> Self {
+        let (a, b) = (observe.red, observe.blue);
+        let grow_red = signed || a >= b;
+        let keep_raw = if grow_red { b } else { a };
+        // Scale so the untouched atoms keep their value when possible.
+        let scale = if keep_raw > 0.0 { keep_raw } else { a.max(b) };
+        let (a, b) = (a / scale, b / scale);
+        let keep = if grow_red { b } else { a };
+        let grow = if grow_red { a - b } else { b - a };
+        Update {
+            scale,
+            red: a,
+            blue: b,
+            keep,
+            grow,
+            grow_red,
+        }
+    }
+}
 
 impl RadonBelief {
     pub(super) fn condition(&mut self, observe: Observe) -> Result<(), BeliefError> {
         let t = observe.track;
-        // Factor the likelihood as scale·(φ_∅·base + φ_t·(ρ − base)).
-        let (scale, base, rho) = if observe.blue > 0.0 {
-            (observe.blue, 1.0, observe.red / observe.blue)
-        } else {
-            (observe.red, 0.0, 1.0)
-        };
+        let update = Update::new(&observe, self.options.signed);
         let partners: Option<Vec<u32>> = self
             .options
             .distributed_rule
             .then(|| self.mixing_log.partners(t).to_vec());
-        let grows = |set: &TrackSet| match &partners {
-            Some(p) => set.meets(p),
+        let grows = |atom: &Atom| match &partners {
+            Some(p) => atom.meets(p),
             None => true,
         };
+        let weights = &self.weights;
+        // What the atom says of t: fixed red or blue, or free. An atom whose
+        // free tracks are all forced (|α| = k: the rest are blue; |β| = n − k:
+        // the rest are red) fixes t implicitly; treating it so keeps the
+        // dictionary free of duplicates of the same k-set.
+        let role = |atom: &Atom| -> Option<bool> {
+            atom.fixes(t).or_else(|| {
+                let (i, o) = atom.sizes();
+                if weights.ratio_red(i, o) == 0.0 {
+                    Some(false)
+                } else if weights.ratio_blue(i, o) == 0.0 {
+                    Some(true)
+                } else {
+                    None
+                }
+            })
+        };
+        let growth_ratio = |atom: &Atom| {
+            let (i, o) = atom.sizes();
+            if update.grow_red {
+                weights.ratio_red(i, o)
+            } else {
+                weights.ratio_blue(i, o)
+            }
+        };
 
-        // First a read-only pass for the new total, so that an impossible
+        // A read-only pass for the new total first, so that an impossible
         // observation leaves the belief untouched.
         let mut total = 0.0;
-        for (set, &m) in &self.masses {
-            if set.contains(t) {
-                total += rho * m;
-            } else {
-                total += base * m;
-                if grows(set) {
-                    total += (rho - base) * m * self.weights.ratio(set.len());
-                }
-            }
+        for (atom, &m) in &self.masses {
+            total += match role(atom) {
+                Some(true) => update.red * m,
+                Some(false) => update.blue * m,
+                None if grows(atom) => update.keep * m + update.grow * m * growth_ratio(atom),
+                None => update.keep * m,
+            };
         }
         let old_total = self.total_mass();
         if !(total.is_finite() && total > 0.0) {
             return Err(BeliefError::ImpossibleObservation {
-                probability: scale * total / old_total,
+                probability: update.scale * total / old_total,
             });
         }
 
-        let mut added: FxHashMap<TrackSet, f64> = FxHashMap::default();
-        self.masses.retain(|set, m| {
-            if set.contains(t) {
-                *m *= rho;
-            } else {
-                let ratio = self.weights.ratio(set.len());
-                if ratio > 0.0 && grows(set) && rho != base {
-                    *added.entry(set.with(t)).or_insert(0.0) += (rho - base) * *m * ratio;
+        let mut added: FxHashMap<Atom, f64> = FxHashMap::default();
+        self.masses.retain(|atom, m| {
+            match role(atom) {
+                Some(true) => *m *= update.red,
+                Some(false) => *m *= update.blue,
+                None => {
+                    if update.grow != 0.0 && grows(atom) {
+                        let ratio = growth_ratio(atom);
+                        let grown = if update.grow_red {
+                            atom.with_red(t)
+                        } else {
+                            atom.with_blue(t)
+                        };
+                        *added.entry(grown).or_insert(0.0) += update.grow * *m * ratio;
+                    }
+                    *m *= update.keep;
                 }
-                *m *= base;
             }
             *m != 0.0
         });
-        for (set, m) in added {
-            match self.masses.entry(set) {
+        for (atom, m) in added {
+            match self.masses.entry(atom) {
                 Entry::Occupied(mut held) => {
                     *held.get_mut() += m;
                     if *held.get() == 0.0 {
@@ -85,7 +149,55 @@ impl RadonBelief {
                 }
             }
         }
-        self.log_scale += scale.ln();
+        self.log_scale += update.scale.ln();
         self.renormalize()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::event::{Field, Observe};
+    use crate::filter::PropertyFilter;
+    use crate::radon::{RadonBelief, RadonOptions};
+    use crate::track_set::TrackSet;
+
+    #[test]
+    fn blue_sighting_gives_negative_coefficients_in_the_signed_form_only() {
+        let signed = RadonOptions {
+            signed: true,
+            ..RadonOptions::default()
+        };
+        let mut paper = RadonBelief::with_options(Field::uniform(5, 2), signed).unwrap();
+        let mut ours = RadonBelief::new(Field::uniform(5, 2)).unwrap();
+        let blue = Observe { track: 3, red: 0.1, blue: 0.7 };
+        paper.observe(blue).unwrap();
+        ours.observe(blue).unwrap();
+        assert!(paper.coefficient(&TrackSet::singleton(3)) < 0.0);
+        assert!(ours.coefficients_iter().all(|(_, c)| c > 0.0));
+        let (p, q) = (paper.marginals().unwrap(), ours.marginals().unwrap());
+        for (x, y) in p.iter().zip(&q) {
+            assert!((x - y).abs() < 1e-12);
+        }
+        assert!((paper.log_normalizer() - ours.log_normalizer()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn certain_blue_removes_every_set_with_the_track() {
+        let mut belief = RadonBelief::new(Field::uniform(6, 3)).unwrap();
+        belief.observe(Observe { track: 2, red: 0.9, blue: 0.3 }).unwrap();
+        belief.observe(Observe { track: 2, red: 0.0, blue: 1.0 }).unwrap();
+        let p = belief.marginals().unwrap();
+        assert!(p[2].abs() < 1e-12);
+        assert!((p.iter().sum::<f64>() - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn impossible_observation_leaves_the_belief_unchanged() {
+        let mut belief = RadonBelief::new(Field::known(4, vec![0, 1])).unwrap();
+        let before: Vec<f64> = belief.marginals().unwrap();
+        let err = belief.observe(Observe { track: 3, red: 1.0, blue: 0.0 });
+        assert!(matches!(err, Err(crate::BeliefError::ImpossibleObservation { .. })));
+        assert_eq!(belief.marginals().unwrap(), before);
+        assert_eq!(belief.coefficients(), 1);
     }
 }

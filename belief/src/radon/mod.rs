@@ -5,9 +5,14 @@
 //!
 //! f = Σ_α c_α φ_α, over sets α with |α| ≤ k, where φ_α(x) = [α ⊆ x].
 //!
+//! Our atoms may also fix tracks blue (φ_{α|β}, see [`atom`](self::atom)),
+//! which keeps every coefficient positive under blue-favouring sightings;
+//! with `RadonOptions::signed` the engine stays in the paper's dictionary and
+//! such sightings produce negative coefficients, exactly as Algorithm 2 does.
+//!
 //! ## Representation: masses, not coefficients
-//! We store, for each α, its *mass* m_α = c_α·W(|α|) — the l1 contribution of
-//! c_α φ_α to f (Section 5.3.2), W(j) = C(n − j, k − j) — times a global scale
+//! We store, for each atom, its *mass* m_α = c_α·W(|α|) — the l1 contribution
+//! of c_α φ_α to f (Section 5.3.2), W(j) = C(n − j, k − j) — times a global scale
 //! e^{log_scale}. Every update then needs only the ratios W(j + 1)/W(j) =
 //! (k − j)/(n − j), so nothing overflows for n up to 10,000 even though W(0)
 //! has thousands of digits. The masses are renormalized to sum 1 after every
@@ -26,6 +31,7 @@
 //!   last observation, for the distributed rule.
 
 mod answer;
+pub mod atom;
 mod condition;
 mod mixing_log;
 pub mod omp;
@@ -33,6 +39,7 @@ mod rollup;
 mod sparsify;
 mod threshold;
 
+pub use atom::Atom;
 pub use mixing_log::MixingLog;
 pub use omp::OmpOptions;
 pub use sparsify::{Sparsify, SparsifyMethod};
@@ -54,6 +61,10 @@ pub struct RadonOptions {
     /// t only adds {t} ∪ β for sets β that meet the tracks t mixed with since
     /// t was last observed. An approximation; off = exact Algorithm 2.
     pub distributed_rule: bool,
+    /// Stay in the paper's dictionary (Radon atoms only): a sighting that
+    /// favours blue then adds negative coefficients. Off = such a sighting
+    /// fixes the track blue in a positive atom instead (see `atom`).
+    pub signed: bool,
 }
 
 /// Counters a user of the engine may want to see.
@@ -70,7 +81,7 @@ pub struct RadonStats {
 pub struct RadonBelief {
     field: Field,
     weights: Weights,
-    masses: FxHashMap<TrackSet, f64>,
+    masses: FxHashMap<Atom, f64>,
     log_scale: f64,
     options: RadonOptions,
     mixing_log: MixingLog,
@@ -98,7 +109,7 @@ impl RadonBelief {
             None => TrackSet::empty(),
         };
         let log_scale = weights.ln(start.len());
-        masses.insert(start, 1.0);
+        masses.insert(Atom::radon(start), 1.0);
         let mixing_log = MixingLog::new(field.tracks);
         Ok(RadonBelief {
             field,
@@ -131,7 +142,7 @@ impl RadonBelief {
             }
             let ln_w = belief.weights.ln(set.len());
             if c != 0.0 && ln_w.is_finite() {
-                *belief.masses.entry(set).or_insert(0.0) += c * ln_w.exp();
+                *belief.masses.entry(Atom::radon(set)).or_insert(0.0) += c * ln_w.exp();
             }
         }
         belief.renormalize()?;
@@ -150,26 +161,36 @@ impl RadonBelief {
         &self.weights
     }
 
-    /// The Radon coefficient c_α in the paper's units (f = Σ c_α φ_α),
+    /// The Radon coefficient c_α of φ_α in the paper's units (f = Σ c_α φ_α),
     /// 0 for a set not held. Finite only while c_α fits an f64.
     pub fn coefficient(&self, set: &TrackSet) -> f64 {
-        match self.masses.get(set) {
-            Some(&m) => m * (self.log_scale - self.weights.ln(set.len())).exp(),
+        self.coefficient_of(&Atom::radon(set.clone()))
+    }
+
+    /// The coefficient of any atom, in the paper's units.
+    pub fn coefficient_of(&self, atom: &Atom) -> f64 {
+        match self.masses.get(atom) {
+            Some(&m) => m * (self.log_scale - self.ln_weight(atom)).exp(),
             None => 0.0,
         }
     }
 
-    /// Every held set with its coefficient c_α, in the paper's units.
-    pub fn coefficients_iter(&self) -> impl Iterator<Item = (&TrackSet, f64)> + '_ {
+    /// Every held atom with its coefficient, in the paper's units.
+    pub fn coefficients_iter(&self) -> impl Iterator<Item = (&Atom, f64)> + '_ {
         self.masses
             .iter()
-            .map(|(s, &m)| (s, m * (self.log_scale - self.weights.ln(s.len())).exp()))
+            .map(|(a, &m)| (a, m * (self.log_scale - self.ln_weight(a)).exp()))
     }
 
-    /// Every held set with its share of the total mass (sums to 1).
-    pub fn masses(&self) -> impl Iterator<Item = (&TrackSet, f64)> + '_ {
+    /// Every held atom with its share of the total mass (sums to 1).
+    pub fn masses(&self) -> impl Iterator<Item = (&Atom, f64)> + '_ {
         let total = self.total_mass();
-        self.masses.iter().map(move |(s, &m)| (s, m / total))
+        self.masses.iter().map(move |(a, &m)| (a, m / total))
+    }
+
+    fn ln_weight(&self, atom: &Atom) -> f64 {
+        let (red, blue) = atom.sizes();
+        self.weights.ln2(red, blue)
     }
 
     fn total_mass(&self) -> f64 {

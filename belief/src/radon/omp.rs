@@ -19,9 +19,9 @@
 //! Every atom is a non-negative function, so the approximation is a
 //! non-negative function whatever the signs in the target were.
 
+use super::atom::Atom;
 use super::RadonBelief;
 use crate::error::BeliefError;
-use crate::track_set::TrackSet;
 use crate::weights::Weights;
 use nalgebra::{DMatrix, DVector};
 use rustc_hash::FxHashSet;
@@ -75,13 +75,13 @@ impl OmpOptions {
     }
 }
 
-/// The downsampled dictionary for a target: its sets and their subsets down
-/// to `depth` elements smaller, heaviest targets first, at most `max`.
-fn candidates(target: &[(TrackSet, f64)], depth: usize, max: usize) -> Vec<TrackSet> {
-    let mut seen: FxHashSet<TrackSet> = FxHashSet::default();
+/// The downsampled dictionary for a target: its atoms and their sub-atoms
+/// down to `depth` tracks fewer, heaviest targets first, at most `max`.
+fn candidates(target: &[(Atom, f64)], depth: usize, max: usize) -> Vec<Atom> {
+    let mut seen: FxHashSet<Atom> = FxHashSet::default();
     let mut out = Vec::new();
-    for (set, _) in target {
-        let mut layer = vec![set.clone()];
+    for (atom, _) in target {
+        let mut layer = vec![atom.clone()];
         for level in 0..=depth {
             let mut next = Vec::new();
             for beta in layer {
@@ -89,8 +89,11 @@ fn candidates(target: &[(TrackSet, f64)], depth: usize, max: usize) -> Vec<Track
                     return out;
                 }
                 if level < depth {
-                    for &t in beta.tracks() {
-                        next.push(beta.without(t));
+                    for &t in beta.red.tracks() {
+                        next.push(Atom::new(beta.red.without(t), beta.blue.clone()));
+                    }
+                    for &t in beta.blue.tracks() {
+                        next.push(Atom::new(beta.red.clone(), beta.blue.without(t)));
                     }
                 }
                 if seen.insert(beta.clone()) {
@@ -103,41 +106,108 @@ fn candidates(target: &[(TrackSet, f64)], depth: usize, max: usize) -> Vec<Track
     out
 }
 
-/// OMP on a target given by masses m_α (m = c·W(|α|)): returns at most
-/// `options.atoms` sets with non-negative masses whose sum of φ's best fits
-/// the target in l2 over the admissible red sets.
+/// Atoms packed as bit masks (red, blue) when the field is small enough, so
+/// that the union sizes that dominate OMP are a few popcounts; sorted
+/// merges otherwise.
+struct Packed<'a> {
+    atoms: Vec<&'a Atom>,
+    words: usize,
+    bits: Vec<u64>,
+}
+
+impl<'a> Packed<'a> {
+    const MAX_WORDS: usize = 16;
+
+    fn new(atoms: impl Iterator<Item = &'a Atom>, tracks: usize) -> Self {
+        let atoms: Vec<&Atom> = atoms.collect();
+        let words = tracks.div_ceil(64);
+        let mut bits = Vec::new();
+        if words <= Self::MAX_WORDS {
+            bits = vec![0u64; 2 * words * atoms.len()];
+            for (i, atom) in atoms.iter().enumerate() {
+                let base = 2 * words * i;
+                for &t in atom.red.tracks() {
+                    bits[base + (t as usize) / 64] |= 1u64 << (t % 64);
+                }
+                for &t in atom.blue.tracks() {
+                    bits[base + words + (t as usize) / 64] |= 1u64 << (t % 64);
+                }
+            }
+        }
+        Packed { atoms, words, bits }
+    }
+
+    fn sizes(&self, i: usize) -> (usize, usize) {
+        self.atoms[i].sizes()
+    }
+
+    /// The sizes (red, blue) of the product of two atoms, None when they
+    /// contradict each other (a track red in one and blue in the other).
+    fn product(&self, i: usize, other: &Packed, j: usize) -> Option<(usize, usize)> {
+        if self.bits.is_empty() || other.bits.is_empty() {
+            let (a, b) = (self.atoms[i], other.atoms[j]);
+            if a.red.intersection_len(&b.blue) > 0 || b.red.intersection_len(&a.blue) > 0 {
+                return None;
+            }
+            return Some((a.red.union_len(&b.red), a.blue.union_len(&b.blue)));
+        }
+        let w = self.words;
+        let a = &self.bits[2 * w * i..2 * w * (i + 1)];
+        let b = &other.bits[2 * w * j..2 * w * (j + 1)];
+        let (mut red, mut blue) = (0, 0);
+        for x in 0..w {
+            let r = a[x] | b[x];
+            let l = a[w + x] | b[w + x];
+            if r & l != 0 {
+                return None;
+            }
+            red += r.count_ones() as usize;
+            blue += l.count_ones() as usize;
+        }
+        Some((red, blue))
+    }
+}
+
+/// OMP on a target given by masses m (m = c·W): returns at most
+/// `options.atoms` atoms with non-negative masses whose sum best fits the
+/// target in l2 over the admissible red sets.
 pub fn pursue(
     weights: &Weights,
-    target: &[(TrackSet, f64)],
+    target: &[(Atom, f64)],
     options: &OmpOptions,
-) -> Result<Vec<(TrackSet, f64)>, BeliefError> {
+) -> Result<Vec<(Atom, f64)>, BeliefError> {
     let dictionary = candidates(target, options.depth, options.max_candidates);
     if dictionary.is_empty() {
         return Ok(Vec::new());
     }
+    let ln_w = |(i, o): (usize, usize)| weights.ln2(i, o);
     // Correlations carry a common factor √W_ref so that they stay in range.
-    let (lo, hi) = dictionary.iter().fold((usize::MAX, 0), |(lo, hi), b| {
-        (lo.min(b.len()), hi.max(b.len()))
+    let (lo, hi) = dictionary.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), b| {
+        let w = ln_w(b.sizes());
+        (lo.min(w), hi.max(w))
     });
-    let ln_ref = 0.5 * (weights.ln(lo) + weights.ln(hi));
-    let half: Vec<f64> = dictionary
-        .iter()
-        .map(|b| 0.5 * (weights.ln(b.len()) - ln_ref))
-        .collect();
+    let ln_ref = 0.5 * (lo + hi);
+    let ln_half: Vec<f64> = dictionary.iter().map(|b| 0.5 * ln_w(b.sizes())).collect();
+    let half: Vec<f64> = ln_half.iter().map(|h| h - 0.5 * ln_ref).collect();
+    let packed = Packed::new(dictionary.iter(), weights.tracks());
+    let packed_target = Packed::new(target.iter().map(|(a, _)| a), weights.tracks());
     let gram = |i: usize, j: usize| -> f64 {
-        let (b, g) = (&dictionary[i], &dictionary[j]);
-        let u = b.union_len(g);
-        (weights.ln(u) - 0.5 * weights.ln(b.len()) - 0.5 * weights.ln(g.len())).exp()
+        match packed.product(i, &packed, j) {
+            Some(sizes) => (ln_w(sizes) - ln_half[i] - ln_half[j]).exp(),
+            None => 0.0,
+        }
     };
-    let projections: Vec<f64> = dictionary
-        .iter()
-        .zip(&half)
-        .map(|(beta, h)| {
+    let projections: Vec<f64> = (0..dictionary.len())
+        .map(|i| {
             let sum: f64 = target
                 .iter()
-                .map(|(alpha, m)| m * weights.ratio_between(alpha.len(), alpha.union_len(beta)))
+                .enumerate()
+                .filter_map(|(a, (_, m))| {
+                    let to = packed.product(i, &packed_target, a)?;
+                    Some(m * weights.ratio_between(packed_target.sizes(a), to))
+                })
                 .sum();
-            sum * (-h).exp()
+            sum * (-half[i]).exp()
         })
         .collect();
     if projections.iter().any(|x| !x.is_finite()) {
@@ -226,21 +296,17 @@ pub fn pursue(
 
 impl RadonBelief {
     /// Enforces the budget with OMP (Section 5.3.1): the heaviest
-    /// `budget − atoms` sets are kept as they are, the heaviest `targets` of
-    /// the rest are re-expressed by at most `atoms` atoms (OMP warm-started
-    /// with the kept sets fixed in its support), the remainder is dropped.
-    pub(super) fn pursue(
-        &mut self,
-        budget: usize,
-        options: &OmpOptions,
-    ) -> Result<(), BeliefError> {
+    /// `budget − atoms` atoms are kept as they are (OMP warm-started with
+    /// them fixed in its support), the heaviest `targets` of the rest are
+    /// re-expressed by at most `atoms` atoms, and the remainder is dropped.
+    pub(super) fn pursue(&mut self, budget: usize, options: &OmpOptions) -> Result<(), BeliefError> {
         let before = self.clone();
         let keep = budget.saturating_sub(options.atoms).max(1);
-        let mut dropped = self.split_off_lightest(keep);
-        dropped.truncate(options.targets);
-        let result = pursue(&self.weights, &dropped, options).and_then(|atoms| {
-            for (set, m) in atoms {
-                *self.masses.entry(set).or_insert(0.0) += m;
+        let removed = self.split_off_lightest(keep);
+        let targets = &removed[..removed.len().min(options.targets)];
+        let result = pursue(&self.weights, targets, options).and_then(|atoms| {
+            for (atom, m) in atoms {
+                *self.masses.entry(atom).or_insert(0.0) += m;
             }
             self.masses.retain(|_, m| *m != 0.0);
             self.stats.omp_runs += 1;
@@ -255,8 +321,10 @@ mod tests {
     use super::*;
     use crate::event::RedCount;
 
-    fn set(t: &[u32]) -> TrackSet {
-        TrackSet::from_tracks(t.iter().copied())
+    use crate::track_set::TrackSet;
+
+    fn set(t: &[u32]) -> Atom {
+        Atom::radon(TrackSet::from_tracks(t.iter().copied()))
     }
 
     /// Example 5.2 (0-based): φ_{0,1}·½ + φ_{1,2}·¼ + φ_{1,3}·¼ with n = 4,

@@ -1,43 +1,39 @@
 //! Rollup for a mixing event: Algorithm 1 of the paper (Section 5.1).
 //!
 //! The transition matrices commute with the Radon bases (Theorem 2), so
-//! mixing acts on the coefficients like it acts on the sets themselves: a set
-//! holding both or neither of the two tracks is unchanged; a set α holding
-//! exactly one keeps p·c_α and sends (1 − p)·c_α to α △ {a, b}. Sizes are
-//! preserved, so masses transform exactly like coefficients.
+//! mixing acts on the coefficients like it acts on the sets themselves: an
+//! atom the transposition (a b) leaves unchanged keeps its value; any other
+//! atom α keeps p·c_α and sends (1 − p)·c_α to its image (α △ {a, b} for a
+//! Radon atom). Sizes are preserved, so masses transform like coefficients.
 
+use super::atom::Atom;
 use super::RadonBelief;
 use crate::event::Mix;
-use crate::track_set::TrackSet;
 use rustc_hash::FxHashMap;
 
 impl RadonBelief {
     pub(super) fn rollup(&mut self, mix: Mix) {
         let (a, b) = (mix.a, mix.b);
         let keep = 1.0 - mix.swap;
-        // Take out every set that holds exactly one of the two tracks; the
-        // others are untouched (Algorithm 1, first branch).
-        let moved: FxHashMap<TrackSet, f64> = self
+        // Take out every atom the swap moves; the others are untouched
+        // (Algorithm 1, first branch).
+        let moved: FxHashMap<Atom, f64> = self
             .masses
-            .extract_if(|set, _| set.contains(a) != set.contains(b))
+            .extract_if(|atom, _| !atom.invariant_under(a, b))
             .collect();
-        for (set, &mass) in &moved {
-            let partner = if set.contains(a) {
-                set.replace(a, b)
-            } else {
-                set.replace(b, a)
-            };
-            // New value of α: p·m_α + (1 − p)·m_{α △ {a,b}}, computed directly
-            // (not as a difference) so that swap = 0 or 1 moves values exactly.
-            let partner_mass = moved.get(&partner).copied();
-            let value = keep * mass + mix.swap * partner_mass.unwrap_or(0.0);
+        for (atom, &mass) in &moved {
+            let image = atom.swapped(a, b);
+            // New value of α: p·m_α + (1 − p)·m_{σα}, computed directly (not
+            // as a difference) so that swap = 0 or 1 moves values exactly.
+            let image_mass = moved.get(&image).copied();
+            let value = keep * mass + mix.swap * image_mass.unwrap_or(0.0);
             if value != 0.0 {
-                self.masses.insert(set.clone(), value);
+                self.masses.insert(atom.clone(), value);
             }
-            if partner_mass.is_none() {
+            if image_mass.is_none() {
                 let value = mix.swap * mass;
                 if value != 0.0 {
-                    self.masses.insert(partner, value);
+                    self.masses.insert(image, value);
                 }
             }
         }
@@ -46,7 +42,7 @@ impl RadonBelief {
 
 #[cfg(test)]
 mod tests {
-    use crate::event::{Field, Mix};
+    use crate::event::{Field, Mix, Observe};
     use crate::filter::PropertyFilter;
     use crate::radon::RadonBelief;
     use crate::track_set::TrackSet;
@@ -60,24 +56,12 @@ mod tests {
     #[test]
     fn table_ii_distributions() {
         let mut belief = RadonBelief::new(Field::known(4, vec![0, 1])).unwrap();
-        belief
-            .mix(Mix {
-                a: 0,
-                b: 2,
-                swap: 0.5,
-            })
-            .unwrap();
+        belief.mix(Mix { a: 0, b: 2, swap: 0.5 }).unwrap();
         assert!((belief.coefficient(&set(&[0, 1])) - 0.5).abs() < 1e-12);
         assert!((belief.coefficient(&set(&[1, 2])) - 0.5).abs() < 1e-12);
         assert_eq!(belief.coefficients(), 2);
         // Example 5.1: the mix of tracks 3 and 4.
-        belief
-            .mix(Mix {
-                a: 2,
-                b: 3,
-                swap: 0.5,
-            })
-            .unwrap();
+        belief.mix(Mix { a: 2, b: 3, swap: 0.5 }).unwrap();
         assert!((belief.coefficient(&set(&[0, 1])) - 0.5).abs() < 1e-12);
         assert!((belief.coefficient(&set(&[1, 2])) - 0.25).abs() < 1e-12);
         assert!((belief.coefficient(&set(&[1, 3])) - 0.25).abs() < 1e-12);
@@ -87,48 +71,20 @@ mod tests {
     #[test]
     fn rollup_preserves_total_mass_and_moves_exactly_on_certain_swaps() {
         let mut belief = RadonBelief::new(Field::uniform(6, 3)).unwrap();
-        belief
-            .observe(crate::event::Observe {
-                track: 1,
-                red: 0.8,
-                blue: 0.2,
-            })
-            .unwrap();
+        belief.observe(Observe { track: 1, red: 0.8, blue: 0.2 }).unwrap();
+        belief.observe(Observe { track: 2, red: 0.1, blue: 0.7 }).unwrap();
         let before = belief.log_normalizer();
-        belief
-            .mix(Mix {
-                a: 1,
-                b: 4,
-                swap: 0.3,
-            })
-            .unwrap();
+        belief.mix(Mix { a: 1, b: 4, swap: 0.3 }).unwrap();
         assert!((belief.log_normalizer() - before).abs() < 1e-12);
-        belief
-            .mix(Mix {
-                a: 1,
-                b: 4,
-                swap: 1.0,
-            })
-            .unwrap();
+        belief.mix(Mix { a: 2, b: 4, swap: 1.0 }).unwrap();
         assert!((belief.log_normalizer() - before).abs() < 1e-12);
-        // swap = 1 is a relabelling: {4} now holds what {1} held.
+        // swap = 1 is a relabelling: applying it twice restores every value.
         let mut again = belief.clone();
-        again
-            .mix(Mix {
-                a: 1,
-                b: 4,
-                swap: 1.0,
-            })
-            .unwrap();
-        again
-            .mix(Mix {
-                a: 1,
-                b: 4,
-                swap: 1.0,
-            })
-            .unwrap();
-        for (s, c) in belief.coefficients_iter() {
-            assert_eq!(again.coefficient(s), c);
+        again.mix(Mix { a: 1, b: 4, swap: 1.0 }).unwrap();
+        again.mix(Mix { a: 1, b: 4, swap: 1.0 }).unwrap();
+        assert_eq!(again.coefficients(), belief.coefficients());
+        for (atom, c) in belief.coefficients_iter() {
+            assert_eq!(again.coefficient_of(atom), c);
         }
     }
 }

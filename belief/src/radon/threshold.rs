@@ -1,37 +1,55 @@
 //! Thresholding (Section 5.3.2): keep the sets with the largest l1
 //! contribution |c_α|·W(|α|) — which is exactly |m_α|, the stored mass — and
-//! drop the rest. Fully local: a leader can threshold its own sets without
+//! drop the rest. Our atoms keep every mass positive (see
+//! [`atom`](super::atom)), so dropping removes hypotheses and never makes the
+//! belief negative. Fully local: a leader can threshold its own atoms without
 //! asking anyone (Section 5.4.3).
 
 use super::RadonBelief;
 use crate::error::BeliefError;
-use crate::track_set::TrackSet;
+use super::atom::Atom;
 
 impl RadonBelief {
-    /// Keeps the `keep` heaviest sets; returns the dropped ones, heaviest
-    /// first, so that OMP can re-express part of them.
-    pub(super) fn split_off_lightest(&mut self, keep: usize) -> Vec<(TrackSet, f64)> {
+    /// Keeps the `keep` heaviest atoms; returns the removed ones, heaviest
+    /// first, so that OMP can re-express part of them. Selects on a copy of
+    /// the weights and removes in place, so kept atoms are not rehashed.
+    pub(super) fn split_off_lightest(&mut self, keep: usize) -> Vec<(Atom, f64)> {
         if self.masses.len() <= keep {
             return Vec::new();
         }
-        let mut all: Vec<(TrackSet, f64)> = self.masses.drain().collect();
-        // Heaviest first; ties broken by the set so that runs are deterministic.
-        let by_weight = |x: &(TrackSet, f64), y: &(TrackSet, f64)| {
-            y.1.abs().total_cmp(&x.1.abs()).then_with(|| x.0.cmp(&y.0))
+        let mut sizes: Vec<f64> = self.masses.values().map(|m| m.abs()).collect();
+        let cut = if keep == 0 {
+            f64::INFINITY
+        } else {
+            *sizes
+                .select_nth_unstable_by(keep - 1, |x, y| y.total_cmp(x))
+                .1
         };
-        if keep > 0 {
-            all.select_nth_unstable_by(keep - 1, by_weight);
+        // Atoms strictly heavier than the cut all stay; ties at the cut fill
+        // the remaining places.
+        let mut ties = keep - sizes[..keep].iter().filter(|&&x| x > cut).count();
+        let mut removed = Vec::with_capacity(self.masses.len() - keep);
+        for (atom, m) in self.masses.extract_if(|_, m| {
+            let size = m.abs();
+            if size > cut {
+                false
+            } else if size == cut && ties > 0 {
+                ties -= 1;
+                false
+            } else {
+                true
+            }
+        }) {
+            removed.push((atom, m));
         }
-        let mut dropped = all.split_off(keep);
-        dropped.sort_unstable_by(by_weight);
-        self.masses.extend(all);
-        dropped
+        removed.sort_unstable_by(|x, y| y.1.abs().total_cmp(&x.1.abs()).then_with(|| x.0.cmp(&y.0)));
+        removed
     }
 
-    /// Thresholds down to `keep` sets and renormalizes.
-    pub fn threshold(&mut self, keep: usize) -> Result<(), BeliefError> {
+    /// Thresholds down to `budget` atoms and renormalizes.
+    pub fn threshold(&mut self, budget: usize) -> Result<(), BeliefError> {
         let before = self.clone();
-        self.split_off_lightest(keep.max(1));
+        self.split_off_lightest(budget.max(1));
         self.stats.thresholdings += 1;
         self.renormalize().inspect_err(|_| *self = before)
     }

@@ -1,0 +1,1 @@
+pub struct BitCode; pub struct PropertyBitsFilter;

@@ -1,0 +1,383 @@
+//! Sinkhorn scaling of a non-negative N × N matrix to a doubly stochastic
+//! one (Sinkhorn–Knopp: alternately divide rows and columns by their sums).
+//!
+//! Used three times in the identity engine:
+//! - the belief matrix renormalizes after every read (Shin et al., IPSN
+//!   2005, Section 4: the normalization the information matrix postpones);
+//! - the cheap approximate marginals of an information matrix: scale exp(L)
+//!   ([`crate::identity::marginals::MarginalMethod::Sinkhorn`]);
+//! - the property-bits filter turns per-bit scores into identity marginals.
+//!
+//! Sinkhorn–Knopp converges (linearly) exactly when the matrix has *total
+//! support*: every positive entry lies on some positive diagonal, i.e. in a
+//! perfect matching of its positive pattern. An entry that is on no positive
+//! diagonal tends to 0 in the limit but only like 1/k, so the iteration would
+//! crawl. A perfect read (accuracy 1) produces exactly such entries. We
+//! therefore first zero every entry on no positive diagonal (one perfect
+//! matching, then the strongly connected components of the alternating-path
+//! graph: O(N²)); this does not change the limit, which is supported on the
+//! total-support part. A matrix with no positive diagonal at all cannot be
+//! scaled and is refused. An iteration that does not reach the tolerance
+//! within the cap is reported as an error, never returned silently.
+
+use crate::error::BeliefError;
+
+/// When Sinkhorn scaling stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SinkhornOptions {
+    /// Stop when every row sum is within this of 1 (columns are exact at
+    /// that point). Default 1e-10.
+    pub tolerance: f64,
+    /// Give up (with an error) after this many row-and-column sweeps.
+    /// Default 100,000.
+    pub max_iterations: usize,
+}
+
+impl Default for SinkhornOptions {
+    fn default() -> Self {
+        SinkhornOptions {
+            tolerance: 1e-10,
+            max_iterations: 100_000,
+        }
+    }
+}
+
+impl SinkhornOptions {
+    pub fn validate(&self) -> Result<(), BeliefError> {
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) || self.max_iterations == 0 {
+            return Err(BeliefError::Unsupported {
+                method: "sinkhorn",
+                what: "a tolerance that is not positive and finite, or no iterations",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// How a scaling went.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SinkhornReport {
+    /// Row-and-column sweeps done.
+    pub iterations: usize,
+    /// The largest |row sum − 1| at the end.
+    pub residual: f64,
+    /// Positive entries zeroed because they lie on no positive diagonal.
+    pub pruned: usize,
+}
+
+/// Scales the row-major n × n `matrix` in place to doubly stochastic.
+///
+/// Errors (the matrix is then unspecified; callers work on a copy):
+/// negative or non-finite entries ([`BeliefError::Numerical`]); no positive
+/// diagonal ([`BeliefError::Degenerate`] with normalizer 0 — the permanent
+/// is 0); no convergence within the cap ([`BeliefError::Numerical`]).
+pub fn sinkhorn(
+    n: usize,
+    matrix: &mut [f64],
+    options: &SinkhornOptions,
+) -> Result<SinkhornReport, BeliefError> {
+    options.validate()?;
+    if n == 0 || matrix.len() != n * n {
+        return Err(BeliefError::Numerical {
+            step: "sinkhorn",
+            detail: format!("expected {n} × {n} entries, got {}", matrix.len()),
+        });
+    }
+    if let Some(&bad) = matrix.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
+        return Err(BeliefError::Numerical {
+            step: "sinkhorn",
+            detail: format!("entry {bad} is negative or not finite"),
+        });
+    }
+    // Scale every row to max 1 first, so sums neither overflow nor vanish.
+    for row in matrix.chunks_mut(n) {
+        let top = row.iter().copied().fold(0.0, f64::max);
+        if top == 0.0 {
+            return Err(BeliefError::Degenerate { normalizer: 0.0 });
+        }
+        row.iter_mut().for_each(|x| *x /= top);
+    }
+    let pruned = prune_to_total_support(n, matrix)?;
+
+    let mut col = vec![0.0; n];
+    for iteration in 1..=options.max_iterations {
+        col.iter_mut().for_each(|c| *c = 0.0);
+        for row in matrix.chunks(n) {
+            for (c, &x) in col.iter_mut().zip(row) {
+                *c += x;
+            }
+        }
+        for row in matrix.chunks_mut(n) {
+            for (x, &c) in row.iter_mut().zip(&col) {
+                *x /= c;
+            }
+        }
+        let mut residual: f64 = 0.0;
+        for row in matrix.chunks_mut(n) {
+            let sum: f64 = row.iter().sum();
+            residual = residual.max((sum - 1.0).abs());
+            row.iter_mut().for_each(|x| *x /= sum);
+        }
+        if residual <= options.tolerance {
+            return Ok(SinkhornReport {
+                iterations: iteration,
+                residual,
+                pruned,
+            });
+        }
+        if !residual.is_finite() {
+            break;
+        }
+    }
+    let residual = matrix
+        .chunks(n)
+        .map(|r| (r.iter().sum::<f64>() - 1.0).abs())
+        .fold(0.0, f64::max)
+        .max(column_residual(n, matrix));
+    Err(BeliefError::Numerical {
+        step: "sinkhorn",
+        detail: format!(
+            "no convergence to tolerance {} within {} iterations (residual {residual:e})",
+            options.tolerance, options.max_iterations
+        ),
+    })
+}
+
+/// Sinkhorn scaling of a matrix given by rows.
+pub fn sinkhorn_rows(
+    matrix: &[Vec<f64>],
+    options: &SinkhornOptions,
+) -> Result<(Vec<Vec<f64>>, SinkhornReport), BeliefError> {
+    let n = super::event::check_square(matrix)?;
+    let mut flat: Vec<f64> = matrix.iter().flatten().copied().collect();
+    let report = sinkhorn(n, &mut flat, options)?;
+    Ok((super::filter::to_rows(n, &flat), report))
+}
+
+fn column_residual(n: usize, matrix: &[f64]) -> f64 {
+    (0..n)
+        .map(|i| (matrix.iter().skip(i).step_by(n).sum::<f64>() - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Zeroes every positive entry that lies on no positive diagonal; returns
+/// how many. Refuses a matrix with no positive diagonal.
+///
+/// With a perfect matching M (row t ↔ column m(t)), an entry (t, j) with
+/// j ≠ m(t) is in some perfect matching iff it closes an alternating cycle:
+/// in the graph on columns with an edge m(t) → j for every positive (t, j),
+/// iff m(t) and j are in the same strongly connected component.
+fn prune_to_total_support(n: usize, matrix: &mut [f64]) -> Result<usize, BeliefError> {
+    if matrix.iter().all(|&x| x > 0.0) {
+        return Ok(0);
+    }
+    let row_of_col = perfect_matching(n, matrix).ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
+    let mut col_of_row = vec![0usize; n];
+    for (c, &r) in row_of_col.iter().enumerate() {
+        col_of_row[r] = c;
+    }
+    let component = column_components(n, matrix, &row_of_col, &col_of_row);
+    let mut pruned = 0;
+    for t in 0..n {
+        let home = component[col_of_row[t]];
+        for j in 0..n {
+            let x = &mut matrix[t * n + j];
+            if *x > 0.0 && component[j] != home {
+                *x = 0.0;
+                pruned += 1;
+            }
+        }
+    }
+    Ok(pruned)
+}
+
+/// A perfect matching of the positive pattern (Kuhn's augmenting paths,
+/// O(N³) dense): `result[column] = row`; None when there is none.
+fn perfect_matching(n: usize, matrix: &[f64]) -> Option<Vec<usize>> {
+    const FREE: usize = usize::MAX;
+    let mut row_of_col = vec![FREE; n];
+    let mut visited = vec![usize::MAX; n];
+    for start in 0..n {
+        // Iterative DFS over rows; `parent_col[r]` is the column through
+        // which row r was reached.
+        let mut stack: Vec<(usize, usize)> = vec![(start, 0)];
+        let mut via: Vec<(usize, usize)> = Vec::new(); // (row, column) path
+        let mut found = false;
+        visited[start] = start;
+        while let Some(&mut (r, ref mut next)) = stack.last_mut() {
+            let mut advanced = false;
+            while *next < n {
+                let c = *next;
+                *next += 1;
+                if matrix[r * n + c] <= 0.0 {
+                    continue;
+                }
+                let owner = row_of_col[c];
+                if owner == FREE {
+                    via.push((r, c));
+                    found = true;
+                    break;
+                }
+                if visited[owner] != start {
+                    visited[owner] = start;
+                    via.push((r, c));
+                    stack.push((owner, 0));
+                    advanced = true;
+                    break;
+                }
+            }
+            if found {
+                break;
+            }
+            if !advanced {
+                stack.pop();
+                via.pop();
+            }
+        }
+        if !found {
+            return None;
+        }
+        // Flip the augmenting path: each (row, column) on it is matched.
+        for &(r, c) in &via {
+            row_of_col[c] = r;
+        }
+    }
+    Some(row_of_col)
+}
+
+/// Strongly connected components (Kosaraju, iterative) of the graph on
+/// columns with an edge m(t) → j for each positive entry (t, j).
+fn column_components(
+    n: usize,
+    matrix: &[f64],
+    row_of_col: &[usize],
+    col_of_row: &[usize],
+) -> Vec<usize> {
+    // Pass 1: finish order on the graph.
+    let mut seen = vec![false; n];
+    let mut order = Vec::with_capacity(n);
+    for root in 0..n {
+        if seen[root] {
+            continue;
+        }
+        seen[root] = true;
+        let mut stack = vec![(root, 0usize)];
+        while let Some(&mut (c, ref mut next)) = stack.last_mut() {
+            let r = row_of_col[c];
+            let mut pushed = false;
+            while *next < n {
+                let j = *next;
+                *next += 1;
+                if matrix[r * n + j] > 0.0 && !seen[j] {
+                    seen[j] = true;
+                    stack.push((j, 0));
+                    pushed = true;
+                    break;
+                }
+            }
+            if !pushed {
+                order.push(c);
+                stack.pop();
+            }
+        }
+    }
+    // Pass 2: components on the reversed graph, in reverse finish order.
+    // The predecessors of column j are m(r) for rows r with (r, j) > 0.
+    let mut component = vec![usize::MAX; n];
+    let mut count = 0;
+    for &root in order.iter().rev() {
+        if component[root] != usize::MAX {
+            continue;
+        }
+        component[root] = count;
+        let mut stack = vec![root];
+        while let Some(j) = stack.pop() {
+            for r in 0..n {
+                let c = col_of_row[r];
+                if matrix[r * n + j] > 0.0 && component[c] == usize::MAX {
+                    component[c] = count;
+                    stack.push(c);
+                }
+            }
+        }
+        count += 1;
+    }
+    component
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identity::filter::doubly_stochastic_residual;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn scales_positive_matrices() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for n in 1..=12 {
+            let m: Vec<Vec<f64>> = (0..n)
+                .map(|_| (0..n).map(|_| rng.gen_range(0.01..10.0)).collect())
+                .collect();
+            let (s, report) = sinkhorn_rows(&m, &SinkhornOptions::default()).unwrap();
+            assert!(doubly_stochastic_residual(&s) < 1e-9, "n={n}");
+            assert_eq!(report.pruned, 0);
+            // Scaling keeps cross ratios: s00·s11/(s01·s10) is invariant.
+            if n >= 2 {
+                let before = m[0][0] * m[1][1] / (m[0][1] * m[1][0]);
+                let after = s[0][0] * s[1][1] / (s[0][1] * s[1][0]);
+                assert!((before / after - 1.0).abs() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn prunes_entries_on_no_positive_diagonal() {
+        // Row 0 is pinned to column 0 (a perfect read): (1, 0) and (2, 0)
+        // lie on no positive diagonal. Plain Sinkhorn would crawl.
+        let m = vec![
+            vec![1.0, 0.0, 0.0],
+            vec![0.3, 0.5, 0.2],
+            vec![0.2, 0.2, 0.6],
+        ];
+        let (s, report) = sinkhorn_rows(&m, &SinkhornOptions::default()).unwrap();
+        assert_eq!(report.pruned, 2);
+        assert!(doubly_stochastic_residual(&s) < 1e-9);
+        assert_eq!(s[1][0], 0.0);
+        assert_eq!(s[0][0], 1.0);
+        assert!(report.iterations < 100);
+    }
+
+    #[test]
+    fn refuses_what_cannot_be_scaled() {
+        let opts = SinkhornOptions::default();
+        // No positive diagonal: two rows can only use column 0.
+        let m = vec![
+            vec![1.0, 0.0, 0.0],
+            vec![1.0, 0.0, 0.0],
+            vec![0.2, 0.2, 0.6],
+        ];
+        assert_eq!(
+            sinkhorn_rows(&m, &opts).unwrap_err(),
+            BeliefError::Degenerate { normalizer: 0.0 }
+        );
+        assert!(sinkhorn_rows(&[vec![-1.0]], &opts).is_err());
+        assert!(sinkhorn_rows(&[vec![f64::NAN]], &opts).is_err());
+        // A cap too small to converge is an error, not a silent answer.
+        let hard = vec![vec![1.0, 1e-6], vec![1.0, 1.0]];
+        let tight = SinkhornOptions {
+            tolerance: 1e-14,
+            max_iterations: 2,
+        };
+        assert!(matches!(
+            sinkhorn_rows(&hard, &tight),
+            Err(BeliefError::Numerical { step: "sinkhorn", .. })
+        ));
+        assert!(SinkhornOptions {
+            tolerance: 0.0,
+            max_iterations: 1
+        }
+        .validate()
+        .is_err());
+    }
+}

@@ -1,0 +1,367 @@
+//! `idmesh replay`: run one filter over a recorded trace, offline.
+//!
+//! The header makes the [`Field`]; `mix` and `observe` lines are applied in
+//! order (`move` and `identify` lines mean nothing to a property filter and
+//! are skipped); at every `truth` line one JSON line is written with the
+//! marginals, the predicted red tracks and the coefficient count; at the end
+//! a summary line with the mean tracking error and the engine's own time.
+//!
+//! Every error — a bad line, an event the engine rejects — is reported as
+//! `FILE:LINE: reason` and ends the replay.
+
+use crate::cli::{Method, ReplayArgs};
+use anyhow::{anyhow, bail, Context, Result};
+use idmesh_belief::baseline::{DenseFilter, LowOrderFilter};
+use idmesh_belief::{
+    predict_red, tracking_error, BeliefError, Event, Field, PropertyFilter, RadonBelief,
+    RadonOptions, RedCount, Sparsify,
+};
+use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
+use serde::Serialize;
+use std::io::{BufRead, Write};
+use std::time::{Duration, Instant};
+use tracing::{debug, info, info_span};
+
+/// The answers at one `truth` line.
+#[derive(Debug, Serialize)]
+struct Answer<'a> {
+    time: f64,
+    p_red: &'a [f64],
+    predicted_red: &'a [u32],
+    coefficients: usize,
+}
+
+/// The last line of a replay.
+#[derive(Debug, Serialize)]
+struct Summary {
+    kind: &'static str,
+    method: &'static str,
+    events: u64,
+    seconds: f64,
+    error: Option<f64>,
+    max_coefficients: usize,
+}
+
+/// Replays the trace named by `args` and writes the answers to `out`.
+pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
+    check_options(args)?;
+    let reader = TraceReader::open(&args.trace)
+        .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
+    replay(args, reader, out)
+}
+
+/// The flags that make no sense together, refused before anything is read.
+fn check_options(args: &ReplayArgs) -> Result<()> {
+    let method = args.method;
+    if method == Method::Threshold && args.budget.is_none() {
+        bail!("--method threshold needs --budget N: the number of coefficients to keep");
+    }
+    if !method.is_radon() {
+        if args.budget.is_some() {
+            bail!(
+                "--budget applies to the Radon methods (overcomplete, threshold), not to --method {}",
+                method.name()
+            );
+        }
+        if args.distributed_rule {
+            bail!(
+                "--distributed-rule applies to the Radon methods (overcomplete, threshold), not to --method {}",
+                method.name()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Replays a trace from any reader (the testable core of [`run`]).
+pub fn replay<R: BufRead>(
+    args: &ReplayArgs,
+    mut reader: TraceReader<R>,
+    mut out: impl Write,
+) -> Result<()> {
+    let span = info_span!(
+        "replay",
+        trace = reader.source(),
+        method = args.method.name()
+    );
+    let _entered = span.enter();
+
+    let header = reader.read_header()?;
+    let source = reader.source().to_string();
+    let at =
+        |line: usize, kind: &str, error: BeliefError| anyhow!("{source}:{line}: {kind}: {error}");
+    let field = field_of(&header);
+    debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
+    let mut engine =
+        Engine::start(|| build(args, field.clone())).map_err(|e| at(1, "header", e))?;
+
+    let write_error = |e: std::io::Error| anyhow!("cannot write the output: {e}");
+    let mut errors = Vec::new();
+    for line in reader {
+        let NumberedLine { number, line } = line?;
+        match &line {
+            Line::Mix(mix) => {
+                let event = Event::Mix(idmesh_belief::Mix {
+                    a: mix.a,
+                    b: mix.b,
+                    swap: mix.swap,
+                });
+                engine.apply(&event).map_err(|e| at(number, "mix", e))?;
+            }
+            Line::Observe(observe) => {
+                let event = Event::Observe(idmesh_belief::Observe {
+                    track: observe.track,
+                    red: observe.red,
+                    blue: observe.blue,
+                });
+                engine.apply(&event).map_err(|e| at(number, "observe", e))?;
+            }
+            Line::Truth(truth) => {
+                let p_red = engine.marginals().map_err(|e| at(number, "truth", e))?;
+                let predicted = predict_red(&p_red, field.red.known());
+                if let Some(red) = &truth.red {
+                    errors.push(tracking_error(field.tracks, &predicted, red));
+                }
+                let answer = Answer {
+                    time: truth.time,
+                    p_red: &p_red,
+                    predicted_red: &predicted,
+                    coefficients: engine.filter.coefficients(),
+                };
+                serde_json::to_writer(&mut out, &answer)
+                    .map_err(std::io::Error::from)
+                    .and_then(|()| out.write_all(b"\n"))
+                    .map_err(write_error)?;
+            }
+            // Positions and identity reads do not bear on a property belief.
+            Line::Move(_) | Line::Identify(_) | Line::Header(_) => {}
+        }
+        debug!(
+            line = number,
+            kind = line.kind(),
+            coefficients = engine.filter.coefficients(),
+            "line"
+        );
+    }
+
+    let summary = Summary {
+        kind: "summary",
+        method: args.method.name(),
+        events: engine.events,
+        seconds: engine.time.as_secs_f64(),
+        error: (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64),
+        max_coefficients: engine.max_coefficients,
+    };
+    info!(
+        events = summary.events,
+        seconds = summary.seconds,
+        error = ?summary.error,
+        max_coefficients = summary.max_coefficients,
+        "replayed"
+    );
+    serde_json::to_writer(&mut out, &summary)
+        .map_err(std::io::Error::from)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush())
+        .map_err(write_error)?;
+    Ok(())
+}
+
+/// The field a trace header describes: k known (from `red` or the length of
+/// `initial_red`) or unknown with the uniform prior over counts, and the
+/// red tracks at time 0 when the header gives them.
+pub fn field_of(header: &Header) -> Field {
+    let red = match header.red_count() {
+        Some(k) => RedCount::Known(k),
+        None => RedCount::unknown_uniform(header.tracks),
+    };
+    Field {
+        tracks: header.tracks,
+        red,
+        initial_red: header.initial_red.clone(),
+    }
+}
+
+/// The filter `args.method` names, for `field`.
+fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
+    let radon = |sparsify: Option<Sparsify>| -> Result<Box<dyn PropertyFilter>, BeliefError> {
+        let options = RadonOptions {
+            sparsify,
+            distributed_rule: args.distributed_rule,
+            ..RadonOptions::default()
+        };
+        Ok(Box::new(RadonBelief::with_options(field.clone(), options)?))
+    };
+    match args.method {
+        Method::Overcomplete => radon(args.budget.map(Sparsify::overcomplete)),
+        // `check_options` made sure the budget is there.
+        Method::Threshold => radon(args.budget.map(Sparsify::threshold)),
+        Method::Exact => Ok(Box::new(DenseFilter::new(field)?)),
+        Method::Order1 => Ok(Box::new(LowOrderFilter::new(field, 1)?)),
+        Method::Order2 => Ok(Box::new(LowOrderFilter::new(field, 2)?)),
+        Method::Order3 => Ok(Box::new(LowOrderFilter::new(field, 3)?)),
+    }
+}
+
+/// A filter with the bookkeeping of a replay: the time spent inside the
+/// filter (and nothing else), the events applied, the largest coefficient
+/// count seen.
+struct Engine {
+    filter: Box<dyn PropertyFilter>,
+    time: Duration,
+    events: u64,
+    max_coefficients: usize,
+}
+
+impl Engine {
+    fn start(
+        build: impl FnOnce() -> Result<Box<dyn PropertyFilter>, BeliefError>,
+    ) -> Result<Self, BeliefError> {
+        let clock = Instant::now();
+        let filter = build()?;
+        let time = clock.elapsed();
+        let max_coefficients = filter.coefficients();
+        Ok(Engine {
+            filter,
+            time,
+            events: 0,
+            max_coefficients,
+        })
+    }
+
+    fn apply(&mut self, event: &Event) -> Result<(), BeliefError> {
+        let clock = Instant::now();
+        let result = self.filter.apply(event);
+        self.time += clock.elapsed();
+        result?;
+        self.events += 1;
+        self.max_coefficients = self.max_coefficients.max(self.filter.coefficients());
+        Ok(())
+    }
+
+    fn marginals(&mut self) -> Result<Vec<f64>, BeliefError> {
+        let clock = Instant::now();
+        let result = self.filter.marginals();
+        self.time += clock.elapsed();
+        result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn args(method: Method, budget: Option<usize>) -> ReplayArgs {
+        ReplayArgs {
+            trace: PathBuf::from("mem.jsonl"),
+            method,
+            budget,
+            distributed_rule: false,
+        }
+    }
+
+    /// The replay's output lines, parsed, or its error as text.
+    fn replay_text(args: &ReplayArgs, trace: &str) -> Result<Vec<serde_json::Value>, String> {
+        check_options(args).map_err(|e| format!("{e:#}"))?;
+        let mut out = Vec::new();
+        replay(
+            args,
+            TraceReader::new(trace.as_bytes(), "mem.jsonl"),
+            &mut out,
+        )
+        .map_err(|e| format!("{e:#}"))?;
+        Ok(String::from_utf8(out)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect())
+    }
+
+    const TABLE1: &str = concat!(
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":4,"red":2,"initial_red":[0,1]}"#,
+        "\n",
+        r#"{"kind":"mix","time":1,"a":0,"b":2,"swap":0.5}"#,
+        "\n",
+        r#"{"kind":"mix","time":2,"a":2,"b":3,"swap":0.5}"#,
+        "\n",
+        r#"{"kind":"move","time":2,"track":3,"x":1.5,"y":0}"#,
+        "\n",
+        r#"{"kind":"observe","time":3,"track":2,"red":1,"blue":0}"#,
+        "\n",
+        r#"{"kind":"truth","time":3,"red":[1,2]}"#,
+        "\n",
+    );
+
+    #[test]
+    fn table_one_on_the_radon_engine() {
+        let out = replay_text(&args(Method::Overcomplete, None), TABLE1).unwrap();
+        assert_eq!(out.len(), 2);
+        let p: Vec<f64> = serde_json::from_value(out[0]["p_red"].clone()).unwrap();
+        for (got, want) in p.iter().zip([0.0, 1.0, 1.0, 0.0]) {
+            assert!((got - want).abs() < 1e-9, "{p:?}");
+        }
+        assert_eq!(out[0]["predicted_red"], serde_json::json!([1, 2]));
+        assert_eq!(out[0]["time"], 3.0);
+        assert_eq!(out[1]["kind"], "summary");
+        assert_eq!(out[1]["method"], "overcomplete");
+        assert_eq!(out[1]["events"], 3);
+        assert_eq!(out[1]["error"], 0.0);
+        assert!(out[1]["max_coefficients"].as_u64().unwrap() >= 1);
+        assert!(out[1]["seconds"].as_f64().unwrap() >= 0.0);
+    }
+
+    #[test]
+    fn engine_errors_name_their_line() {
+        let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"initial_red":[0]}"#,
+            "\n",
+            r#"{"kind":"observe","time":0,"track":1,"red":1,"blue":0}"#,
+            "\n",
+        );
+        let error = replay_text(&args(Method::Overcomplete, None), trace).unwrap_err();
+        assert!(error.starts_with("mem.jsonl:2: observe: "), "{error}");
+    }
+
+    #[test]
+    fn no_truth_means_no_error() {
+        let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"red":1}"#,
+            "\n",
+            r#"{"kind":"mix","time":0,"a":0,"b":1,"swap":0.25}"#,
+            "\n",
+        );
+        let out = replay_text(&args(Method::Overcomplete, Some(8)), trace).unwrap();
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0]["error"], serde_json::Value::Null);
+        assert_eq!(out[0]["events"], 1);
+    }
+
+    #[test]
+    fn field_from_header() {
+        let mut header = Header::new(5);
+        assert_eq!(field_of(&header).red, RedCount::unknown_uniform(5));
+        header.initial_red = Some(vec![4, 2]);
+        let field = field_of(&header);
+        assert_eq!(field.red, RedCount::Known(2));
+        assert_eq!(field.initial_red, Some(vec![4, 2]));
+        header.initial_red = None;
+        header.red = Some(3);
+        assert_eq!(field_of(&header), Field::uniform(5, 3));
+    }
+
+    #[test]
+    fn options_that_do_not_fit_are_refused() {
+        let threshold = check_options(&args(Method::Threshold, None)).unwrap_err();
+        assert!(
+            threshold.to_string().contains("needs --budget"),
+            "{threshold}"
+        );
+        let exact = check_options(&args(Method::Exact, Some(10))).unwrap_err();
+        assert!(exact.to_string().contains("--budget applies"), "{exact}");
+        let mut order = args(Method::Order2, None);
+        order.distributed_rule = true;
+        assert!(check_options(&order).is_err());
+        assert!(check_options(&args(Method::Threshold, Some(4))).is_ok());
+    }
+}

@@ -1,0 +1,29 @@
+//! The trace format, version 1 (shared/spec/trace.md): the record of what
+//! the sensors of a field reported, plus ground truth when there is any.
+//!
+//! - [`line`](self::line) — one type per line kind.
+//! - [`parse`](self::parse) — text to a [`Line`], with precise messages.
+//! - [`validate`](self::validate) — the spec's rules, per line and per
+//!   sequence ([`Validator`]).
+//! - [`problem`](self::problem) — why a line is rejected ([`Problem`]).
+//! - [`error`](self::error) — [`TraceError`], a problem at `FILE:LINE`.
+//! - [`reader`](self::reader), [`writer`](self::writer) — validating
+//!   [`TraceReader`] and [`TraceWriter`].
+
+pub mod error;
+pub mod line;
+pub mod parse;
+pub mod problem;
+pub mod reader;
+pub mod validate;
+pub mod writer;
+
+#[cfg(test)]
+mod tests;
+
+pub use error::TraceError;
+pub use line::{Header, Identify, Line, Mix, Move, Observe, Truth, FORMAT, VERSION};
+pub use problem::Problem;
+pub use reader::{NumberedLine, TraceReader};
+pub use validate::Validator;
+pub use writer::TraceWriter;

@@ -1,0 +1,30 @@
+//! Scenarios: the whole path from a motion model to a trace, as in the
+//! paper's Section 6 — "simulated crowds of up to 100 moving targets
+//! wearing either red or blue clothes", mixing and observation events
+//! extracted by distance, the share of mixes steered by the distances.
+//!
+//! - [`builder`] — the [`Scenario`] builder, its options and defaults.
+//! - [`options`] — model, red choice and run length.
+//! - [`run`] — generation (deterministic per seed).
+//! - [`trace`] — the [`GeneratedTrace`] it returns.
+//! - [`progress`] — the progress hook for a command line's progress bar.
+//! - [`trace_out`] — writing a [`GeneratedTrace`] as a trace file.
+//! - [`error`] — what can go wrong.
+
+pub mod builder;
+pub mod error;
+pub mod options;
+pub mod progress;
+pub mod run;
+pub mod trace;
+pub mod trace_out;
+
+pub use builder::Scenario;
+pub use error::ScenarioError;
+pub use options::{Length, Model, RedChoice, SceneSource};
+pub use progress::Progress;
+pub use run::BuiltMotion;
+pub use trace::{GeneratedTrace, TraceHeader, TraceStats};
+
+#[cfg(test)]
+mod tests;

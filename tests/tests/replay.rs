@@ -1,0 +1,352 @@
+//! `idmesh replay` as a user runs it: the real binary on small traces
+//! written to a scratch directory, checking stdout, stderr and the exit
+//! status.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// The `idmesh` binary, built (or found fresh) once per test process.
+///
+/// Cargo builds a package's binaries only for that package's own
+/// integration tests, so this package asks Cargo for it: `cargo build
+/// --bin idmesh` in the profile these tests were built in, whose JSON
+/// messages name the executable. When it is fresh that is a no-op, and it
+/// never runs a stale binary.
+fn idmesh() -> &'static Path {
+    static BINARY: OnceLock<PathBuf> = OnceLock::new();
+    BINARY.get_or_init(|| {
+        let cargo = option_env!("CARGO").unwrap_or("cargo");
+        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
+        let mut command = Command::new(cargo);
+        command.args(["build", "--quiet", "--message-format=json"]);
+        command.args(["-p", "idmesh-deploy", "--bin", "idmesh", "--manifest-path"]);
+        command.arg(&manifest);
+        // target/<profile>/deps/<this test>: build in the same profile.
+        let exe = std::env::current_exe().expect("the test knows where it is");
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .and_then(Path::file_name)
+            .and_then(|name| name.to_str())
+            .unwrap_or("debug");
+        match profile_dir {
+            "debug" => {}
+            "release" => {
+                command.arg("--release");
+            }
+            other => {
+                command.args(["--profile", other]);
+            }
+        }
+        let output = command.output().expect("cargo runs");
+        let messages: Vec<Value> = String::from_utf8_lossy(&output.stdout)
+            .lines()
+            .filter_map(|line| serde_json::from_str::<Value>(line).ok())
+            .collect();
+        if !output.status.success() {
+            let diagnostics: Vec<&str> = messages
+                .iter()
+                .filter(|m| m["reason"] == "compiler-message")
+                .filter_map(|m| m["message"]["rendered"].as_str())
+                .collect();
+            panic!(
+                "building idmesh failed:\n{}{}",
+                diagnostics.concat(),
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        messages
+            .iter()
+            .filter(|m| m["reason"] == "compiler-artifact")
+            .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+            .expect("cargo names the idmesh executable")
+    })
+}
+
+/// Writes `trace` to a scratch file named after the test.
+fn trace_file(name: &str, trace: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("replay");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("{name}.jsonl"));
+    std::fs::write(&path, trace).unwrap();
+    path
+}
+
+fn replay(trace: &Path, extra: &[&str]) -> Output {
+    Command::new(idmesh())
+        .arg("replay")
+        .arg("--trace")
+        .arg(trace)
+        .args(extra)
+        .env_remove("RUST_LOG")
+        .output()
+        .expect("idmesh runs")
+}
+
+/// The JSON lines on stdout of a successful run.
+fn lines(output: &Output) -> Vec<Value> {
+    assert!(
+        output.status.success(),
+        "idmesh failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout.clone())
+        .unwrap()
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("stdout is JSON lines"))
+        .collect()
+}
+
+/// stderr of a run that must fail.
+fn failure(output: &Output) -> String {
+    assert!(
+        !output.status.success(),
+        "idmesh succeeded: {}",
+        String::from_utf8_lossy(&output.stdout)
+    );
+    assert_eq!(output.status.code(), Some(1));
+    String::from_utf8(output.stderr.clone()).unwrap()
+}
+
+fn numbers(value: &Value) -> Vec<f64> {
+    value
+        .as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
+}
+
+fn assert_close(got: &[f64], want: &[f64]) {
+    assert_eq!(got.len(), want.len(), "{got:?} vs {want:?}");
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() < 1e-9, "{got:?} vs {want:?}");
+    }
+}
+
+/// The worked example of the paper's Table I (0-based tracks).
+const TABLE1: &str = r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":4,"red":2,"initial_red":[0,1]}
+{"kind":"mix","time":1,"a":0,"b":2,"swap":0.5}
+{"kind":"mix","time":2,"a":2,"b":3,"swap":0.5}
+{"kind":"observe","time":3,"track":2,"red":1,"blue":0}
+{"kind":"truth","time":3,"red":[1,2]}
+"#;
+
+fn check_table1(method: &str) {
+    let trace = trace_file(&format!("table1-{method}"), TABLE1);
+    let out = lines(&replay(&trace, &["--method", method]));
+    assert_eq!(out.len(), 2, "{out:?}");
+    assert_eq!(out[0]["time"], 3.0);
+    assert_close(&numbers(&out[0]["p_red"]), &[0.0, 1.0, 1.0, 0.0]);
+    assert_eq!(out[0]["predicted_red"], serde_json::json!([1, 2]));
+    assert!(out[0]["coefficients"].as_u64().unwrap() >= 1);
+    let summary = &out[1];
+    assert_eq!(summary["kind"], "summary");
+    assert_eq!(summary["method"], method);
+    assert_eq!(summary["events"], 3);
+    assert_eq!(summary["error"], 0.0);
+    assert!(summary["seconds"].as_f64().unwrap() >= 0.0);
+    assert!(summary["max_coefficients"].as_u64().unwrap() >= 1);
+}
+
+#[test]
+fn table1_overcomplete() {
+    check_table1("overcomplete");
+}
+
+#[test]
+fn table1_exact() {
+    check_table1("exact");
+}
+
+#[test]
+fn every_method_replays_table1() {
+    let trace = trace_file("table1-all", TABLE1);
+    for extra in [
+        &["--method", "overcomplete", "--budget", "2"][..],
+        &["--method", "overcomplete", "--distributed-rule"],
+        &["--method", "threshold", "--budget", "4"],
+        &["--method", "order1"],
+        &["--method", "order2"],
+        &["--method", "order3"],
+    ] {
+        let out = lines(&replay(&trace, extra));
+        assert_eq!(out.len(), 2, "{extra:?}: {out:?}");
+        assert_eq!(out[1]["method"], extra[1]);
+        let p = numbers(&out[0]["p_red"]);
+        assert_eq!(p.len(), 4);
+        assert!(p.iter().all(|x| (-1e-9..=1.0 + 1e-9).contains(x)), "{p:?}");
+        assert!(out[1]["error"].as_f64().is_some());
+    }
+}
+
+#[test]
+fn the_shipped_example_is_table1() {
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/table1.jsonl");
+    let out = lines(&replay(&example, &[]));
+    assert_close(&numbers(&out[0]["p_red"]), &[0.0, 1.0, 1.0, 0.0]);
+    assert_eq!(out[1]["error"], 0.0);
+}
+
+#[test]
+fn more_red_than_tracks_is_refused_at_the_header() {
+    let trace = trace_file(
+        "too-many-red",
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"red":3}
+{"kind":"mix","time":0,"a":0,"b":1,"swap":0.5}
+"#,
+    );
+    let stderr = failure(&replay(&trace, &[]));
+    assert!(
+        stderr.contains(&format!(
+            "{}:1: header: red = 3 but there are only 2 tracks",
+            trace.display()
+        )),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_negative_likelihood_names_its_line() {
+    let trace = trace_file(
+        "negative-likelihood",
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":4,"red":2}
+{"kind":"mix","time":0,"a":0,"b":1,"swap":0.5}
+{"kind":"observe","time":1,"track":1,"red":-0.5,"blue":0.2}
+{"kind":"truth","time":1,"red":[0,1]}
+"#,
+    );
+    let output = replay(&trace, &[]);
+    let stderr = failure(&output);
+    assert_eq!(
+        stderr.trim_end(),
+        format!(
+            "{}:3: observe: likelihood red = -0.5 is negative",
+            trace.display()
+        )
+    );
+    // Nothing was answered: the error came before the truth line.
+    assert!(output.stdout.is_empty());
+}
+
+#[test]
+fn an_unknown_track_names_its_line() {
+    let trace = trace_file(
+        "unknown-track",
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":4,"red":1}
+{"kind":"mix","time":0,"a":0,"b":9,"swap":0.5}
+"#,
+    );
+    let stderr = failure(&replay(&trace, &[]));
+    assert!(
+        stderr.contains(&format!(
+            "{}:2: mix: b = 9 is not a track: there are 4 tracks (0..4)",
+            trace.display()
+        )),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn malformed_json_names_its_line() {
+    let trace = trace_file(
+        "malformed",
+        "{\"kind\":\"header\",\"format\":\"idmesh-trace\",\"version\":1,\"tracks\":4}\n{\"kind\":\"mix\",\n",
+    );
+    let stderr = failure(&replay(&trace, &[]));
+    assert!(
+        stderr.starts_with(&format!("{}:2: malformed JSON: ", trace.display())),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn an_impossible_observation_is_an_engine_error_at_its_line() {
+    // Track 0 is known red and k = 1: nothing else can be red.
+    let trace = trace_file(
+        "impossible",
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"initial_red":[0]}
+{"kind":"observe","time":0,"track":1,"red":1,"blue":0}
+"#,
+    );
+    for method in ["overcomplete", "exact"] {
+        let stderr = failure(&replay(&trace, &["--method", method]));
+        assert!(
+            stderr.starts_with(&format!("{}:2: observe: ", trace.display())),
+            "{method}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn unknown_red_count_uses_the_uniform_count_prior() {
+    // k unknown, uniform over 0..=3 and then over sets: seeing track 0 red
+    // for sure leaves P(track 1 red) = P(track 2 red) = 2/3.
+    let trace = trace_file(
+        "unknown-k",
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3}
+{"kind":"observe","time":0,"track":0,"red":1,"blue":0}
+{"kind":"truth","time":0,"red":[0,2]}
+"#,
+    );
+    for method in ["overcomplete", "exact"] {
+        let out = lines(&replay(&trace, &["--method", method]));
+        assert_close(&numbers(&out[0]["p_red"]), &[1.0, 2.0 / 3.0, 2.0 / 3.0]);
+        // Unknown k: every track at least as likely red as not is predicted.
+        assert_eq!(out[0]["predicted_red"], serde_json::json!([0, 1, 2]));
+        assert!((out[1]["error"].as_f64().unwrap() - 1.0 / 3.0).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn positions_and_identity_reads_are_skipped_and_no_truth_means_null_error() {
+    let trace = trace_file(
+        "no-truth",
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"red":1,"identities":3}
+{"kind":"move","time":0,"track":0,"x":1,"y":2}
+{"kind":"identify","time":0,"track":0,"identity":1,"accuracy":0.9}
+{"kind":"mix","time":1,"a":0,"b":1,"swap":0.5}
+"#,
+    );
+    let output = replay(&trace, &[]);
+    let out = lines(&output);
+    assert_eq!(out.len(), 1);
+    assert_eq!(out[0]["events"], 1);
+    assert_eq!(out[0]["error"], Value::Null);
+    assert!(output.stderr.is_empty(), "logs are off by default");
+}
+
+#[test]
+fn threshold_needs_a_budget() {
+    let trace = trace_file("threshold-no-budget", TABLE1);
+    let stderr = failure(&replay(&trace, &["--method", "threshold"]));
+    assert!(
+        stderr.contains("--method threshold needs --budget"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_missing_trace_is_reported() {
+    let missing = Path::new(env!("CARGO_TARGET_TMPDIR")).join("replay/does-not-exist.jsonl");
+    let stderr = failure(&replay(&missing, &[]));
+    assert!(stderr.starts_with("cannot open trace "), "{stderr}");
+}
+
+#[test]
+fn debug_logs_go_to_stderr_only() {
+    let trace = trace_file("logs", TABLE1);
+    let output = Command::new(idmesh())
+        .args(["replay", "--trace"])
+        .arg(&trace)
+        .env("RUST_LOG", "debug")
+        .output()
+        .unwrap();
+    let out = lines(&output);
+    assert_eq!(out.len(), 2);
+    let stderr = String::from_utf8(output.stderr).unwrap();
+    assert!(stderr.contains("replay"), "{stderr}");
+    assert!(stderr.contains("line=4"), "{stderr}");
+}
