@@ -12,7 +12,7 @@ use std::hash::{Hash, Hasher};
 /// A sorted set of distinct track ids.
 #[derive(Clone, PartialEq, Eq, PartialOrd, Ord, Default)]
 pub struct TrackSet {
-    tracks: SmallVec<[u32; 6]>,
+    tracks: SmallVec<[u32; 8]>,
     hash: u64,
 }
 
@@ -36,14 +36,14 @@ impl TrackSet {
         TrackSet::default()
     }
 
-    fn sorted(tracks: SmallVec<[u32; 6]>) -> Self {
+    fn sorted(tracks: SmallVec<[u32; 8]>) -> Self {
         let hash = tracks.iter().fold(0, |h, &t| h ^ word(t));
         TrackSet { tracks, hash }
     }
 
     /// A set from any ids; duplicates are merged.
     pub fn from_tracks(tracks: impl IntoIterator<Item = u32>) -> Self {
-        let mut v: SmallVec<[u32; 6]> = tracks.into_iter().collect();
+        let mut v: SmallVec<[u32; 8]> = tracks.into_iter().collect();
         v.sort_unstable();
         v.dedup();
         TrackSet::sorted(v)
@@ -200,9 +200,15 @@ mod tests {
         assert!(!b.is_subset(&a));
         assert!(a.meets(&[5, 3]));
         let big = TrackSet::from_tracks(0..40);
-        assert_eq!(big.replace(3, 45), TrackSet::from_tracks((0..40).filter(|&t| t != 3).chain([45])));
+        assert_eq!(
+            big.replace(3, 45),
+            TrackSet::from_tracks((0..40).filter(|&t| t != 3).chain([45]))
+        );
         assert_eq!(big.replace(39, 41).tracks().last(), Some(&41));
-        assert_eq!(TrackSet::from_tracks([5, 9]).replace(9, 1).tracks(), &[1, 5]);
+        assert_eq!(
+            TrackSet::from_tracks([5, 9]).replace(9, 1).tracks(),
+            &[1, 5]
+        );
     }
 
     #[test]
@@ -210,8 +216,14 @@ mod tests {
         let a = TrackSet::from_tracks([1, 2, 3]);
         let b = TrackSet::singleton(2).with(3).with(1);
         assert_eq!(a.zobrist(), b.zobrist());
-        assert_eq!(a.without(2).zobrist(), TrackSet::from_tracks([1, 3]).zobrist());
-        assert_eq!(a.replace(1, 7).zobrist(), TrackSet::from_tracks([2, 3, 7]).zobrist());
+        assert_eq!(
+            a.without(2).zobrist(),
+            TrackSet::from_tracks([1, 3]).zobrist()
+        );
+        assert_eq!(
+            a.replace(1, 7).zobrist(),
+            TrackSet::from_tracks([2, 3, 7]).zobrist()
+        );
         assert_eq!(TrackSet::empty().zobrist(), 0);
         assert_ne!(a.zobrist(), TrackSet::from_tracks([1, 2]).zobrist());
     }

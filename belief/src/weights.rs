@@ -17,8 +17,8 @@
 //! weights do.
 
 use crate::event::RedCount;
-use std::cell::RefCell;
 use rustc_hash::FxHashMap;
+use std::cell::RefCell;
 
 /// ln C(n, r) by a sum of logs: exact to ~1e-13 relative, no tables.
 pub fn ln_binomial(n: usize, r: usize) -> f64 {
@@ -121,7 +121,7 @@ impl Weights {
                 if red > *k || blue > self.tracks - k {
                     f64::NEG_INFINITY
                 } else {
-                    ln_binomial(self.tracks - red - blue, k - red)
+                    self.ln_c(self.tracks - red - blue, k - red)
                 }
             }
             Count::Unknown(terms) => {
@@ -222,11 +222,16 @@ mod tests {
     fn unknown_k_with_binomial_prior_is_independent_halves() {
         // p(k) = C(n,k)/2^n makes every subset equally likely: W(i, o) = 2^-(i+o).
         let n = 12;
-        let prior: Vec<f64> = (0..=n).map(|k| ln_binomial(n, k).exp() / 2f64.powi(n as i32)).collect();
+        let prior: Vec<f64> = (0..=n)
+            .map(|k| ln_binomial(n, k).exp() / 2f64.powi(n as i32))
+            .collect();
         let w = Weights::new(n, &RedCount::Unknown { prior });
         for i in 0..=n {
             for o in 0..=(n - i) {
-                assert!((w.ln2(i, o) - ((i + o) as f64) * 0.5f64.ln()).abs() < 1e-9, "i={i} o={o}");
+                assert!(
+                    (w.ln2(i, o) - ((i + o) as f64) * 0.5f64.ln()).abs() < 1e-9,
+                    "i={i} o={o}"
+                );
             }
         }
         assert!((w.ratio_red(3, 2) - 0.5).abs() < 1e-9);

@@ -17,6 +17,25 @@
 //!   track-to-target assignment, mixing and observation detection.
 //! - [`scenario`] — the [`Scenario`] builder that ties them together into a
 //!   [`GeneratedTrace`], with progress reporting and trace output.
+//!
+//! ```
+//! use idmesh_sensor::Scenario;
+//! use idmesh_sensor::scenario::trace_out::write_trace;
+//!
+//! let trace = Scenario::crowd()
+//!     .targets(20)       // n
+//!     .red(10)           // k
+//!     .duration(60.0)    // seconds of motion
+//!     .mix_distance(1.0) // metres
+//!     .swap(0.5)
+//!     .seed(42)
+//!     .generate_with_progress(&mut |done, total| assert!(done <= total))
+//!     .unwrap();
+//! let stats = trace.stats();
+//! assert!(stats.mixes > 0 && stats.observations > 0);
+//! let jsonl = write_trace(&trace, Vec::new(), "crowd.jsonl").unwrap();
+//! assert!(jsonl.starts_with(br#"{"kind":"header""#));
+//! ```
 
 pub mod events;
 pub mod geometry;

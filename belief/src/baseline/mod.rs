@@ -21,7 +21,7 @@ pub mod dense;
 pub mod low_order;
 
 pub use dense::{DenseFilter, MAX_STATES, MAX_TRACKS};
-pub use low_order::LowOrderFilter;
+pub use low_order::{lift_coefficients, LowOrderFilter, LowOrderRepair};
 
 /// Binomial coefficients C(c, i) for c ≤ `top`, i ≤ `width`, saturating at
 /// `usize::MAX` so that size checks can run before anything is allocated.
@@ -42,7 +42,11 @@ impl Binomials {
             table[c * stride] = 1;
             for i in 1..=width.min(c) {
                 let above = table[(c - 1) * stride + i - 1];
-                let left = if i < c { table[(c - 1) * stride + i] } else { 0 };
+                let left = if i < c {
+                    table[(c - 1) * stride + i]
+                } else {
+                    0
+                };
                 table[c * stride + i] = above.saturating_add(left);
             }
         }

@@ -195,7 +195,13 @@ mod tests {
             Err(BeliefError::ImpossibleObservation { probability: 0.0 })
         );
         assert_eq!(bm, before);
-        assert!(bm.mix(Mix { a: 0, b: 0, swap: 0.5 }).is_err());
+        assert!(bm
+            .mix(Mix {
+                a: 0,
+                b: 0,
+                swap: 0.5
+            })
+            .is_err());
         assert_eq!(bm, before);
     }
 

@@ -60,7 +60,11 @@ impl ExactPermutationFilter {
     /// pairings) but not +∞ or NaN, and some assignment must stay possible.
     pub fn from_log_likelihoods(l: &[Vec<f64>]) -> Result<Self, BeliefError> {
         let n = check_square(l)?;
-        if let Some(&bad) = l.iter().flatten().find(|x| x.is_nan() || **x == f64::INFINITY) {
+        if let Some(&bad) = l
+            .iter()
+            .flatten()
+            .find(|x| x.is_nan() || **x == f64::INFINITY)
+        {
             return Err(BeliefError::Numerical {
                 step: "log-likelihood matrix",
                 detail: format!("entry {bad} is not finite or −∞"),
@@ -285,7 +289,13 @@ mod tests {
         assert!(ExactPermutationFilter::from_assignment(&[0, 0]).is_err());
         let mut f = ExactPermutationFilter::uniform(3).unwrap();
         let before = f.probabilities().to_vec();
-        assert!(f.mix(Mix { a: 0, b: 3, swap: 0.5 }).is_err());
+        assert!(f
+            .mix(Mix {
+                a: 0,
+                b: 3,
+                swap: 0.5
+            })
+            .is_err());
         assert!(f.identify(read(0, 3, 0.9)).is_err());
         assert!(f.identify(read(0, 1, 0.0)).is_err());
         assert_eq!(f.probabilities(), &before[..]);

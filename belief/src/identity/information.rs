@@ -300,7 +300,11 @@ fn check_rows(a: &[f64], b: &[f64], swap: f64) -> Result<usize, BeliefError> {
     if n < 2 || b.len() != n {
         return Err(BeliefError::Numerical {
             step: "information matrix mixing",
-            detail: format!("rows of lengths {} and {}; need two equal lengths ≥ 2", n, b.len()),
+            detail: format!(
+                "rows of lengths {} and {}; need two equal lengths ≥ 2",
+                n,
+                b.len()
+            ),
         });
     }
     if a.iter().chain(b).any(|x| !x.is_finite()) {
@@ -365,10 +369,7 @@ pub fn paper_merge_pinv(a: &[f64], b: &[f64]) -> Result<Vec<f64>, BeliefError> {
         p[(row, k)] = 1.0;
         gamma[row] = g[m * n + k];
     }
-    let pinv = p.pseudo_inverse(1e-9).map_err(|e| BeliefError::Numerical {
-        step: "pseudoinverse",
-        detail: e.to_string(),
-    })?;
+    let pinv = checked_pseudo_inverse(p)?;
     Ok((pinv * gamma).iter().copied().collect())
 }
 
@@ -431,15 +432,47 @@ pub fn fit_mixed_rows_pinv(
             }
         }
     }
-    let pinv = design.pseudo_inverse(1e-9).map_err(|e| BeliefError::Numerical {
-        step: "pseudoinverse",
-        detail: e.to_string(),
-    })?;
+    let pinv = checked_pseudo_inverse(design)?;
     let sol = pinv * rhs;
     Ok((
         sol.iter().take(n).copied().collect(),
         sol.iter().skip(n).copied().collect(),
     ))
+}
+
+/// The Moore–Penrose pseudoinverse by nalgebra's SVD, checked.
+///
+/// nalgebra 0.33's SVD returns wrong singular values for some of these
+/// rank-deficient 0/1 designs (the two-row design at N = 8 and N = 12: top
+/// singular value 3.85 instead of √14; upstream issue
+/// dimforge/nalgebra#1172). So we check the Penrose identity D·D⁺·D = D
+/// and, when it fails, compute D⁺ = (DᵀD)⁺Dᵀ from the symmetric
+/// eigendecomposition of DᵀD instead — the same matrix in exact arithmetic.
+/// If both fail the reference reports an error rather than a wrong answer.
+fn checked_pseudo_inverse(design: DMatrix<f64>) -> Result<DMatrix<f64>, BeliefError> {
+    let holds = |pinv: &DMatrix<f64>| (&design * pinv * &design - &design).abs().max() < 1e-9;
+    if let Ok(pinv) = design.clone().pseudo_inverse(1e-9) {
+        if holds(&pinv) {
+            return Ok(pinv);
+        }
+    }
+    let gram = design.transpose() * &design;
+    let eigen = nalgebra::SymmetricEigen::new(gram);
+    let inverted = eigen
+        .eigenvalues
+        .map(|l| if l.abs() > 1e-9 { 1.0 / l } else { 0.0 });
+    let pinv = &eigen.eigenvectors
+        * DMatrix::from_diagonal(&inverted)
+        * eigen.eigenvectors.transpose()
+        * design.transpose();
+    if holds(&pinv) {
+        Ok(pinv)
+    } else {
+        Err(BeliefError::Numerical {
+            step: "pseudoinverse",
+            detail: "neither the SVD nor the eigendecomposition gave D·D⁺·D = D".into(),
+        })
+    }
 }
 
 #[cfg(test)]
@@ -454,11 +487,18 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn max_diff(x: &[f64], y: &[f64]) -> f64 {
-        x.iter().zip(y).map(|(p, q)| (p - q).abs()).fold(0.0, f64::max)
+        x.iter()
+            .zip(y)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max)
     }
 
     fn random_rows(rng: &mut ChaCha8Rng, n: usize, spread: f64) -> (Vec<f64>, Vec<f64>) {
-        let mut row = || (0..n).map(|_| rng.gen_range(-spread..spread)).collect::<Vec<_>>();
+        let mut row = || {
+            (0..n)
+                .map(|_| rng.gen_range(-spread..spread))
+                .collect::<Vec<_>>()
+        };
         (row(), row())
     }
 
@@ -466,8 +506,8 @@ mod tests {
     /// and the exact filter started from the same L; returns the largest
     /// marginal difference seen.
     fn run_against_exact(l0: &[Vec<f64>], events: &[crate::identity::IdentityEvent]) -> f64 {
-        let mut info = InformationMatrix::from_log_likelihoods(l0, InformationOptions::default())
-            .unwrap();
+        let mut info =
+            InformationMatrix::from_log_likelihoods(l0, InformationOptions::default()).unwrap();
         let mut exact = ExactPermutationFilter::from_log_likelihoods(l0).unwrap();
         let mut worst: f64 = 0.0;
         for e in events {
@@ -499,7 +539,10 @@ mod tests {
             let (a, b) = random_rows(&mut rng, n, 4.0);
             let beta = paper_merge(&a, &b).unwrap();
             let (x, y) = fit_mixed_rows(&a, &b, 0.5).unwrap();
-            assert!(max_diff(&x, &beta) < 1e-9 && max_diff(&y, &beta) < 1e-9, "n={n}");
+            assert!(
+                max_diff(&x, &beta) < 1e-9 && max_diff(&y, &beta) < 1e-9,
+                "n={n}"
+            );
         }
     }
 
@@ -580,7 +623,11 @@ mod tests {
     fn not_exact_for_three_tracks_off_one_half() {
         // The paper's theorem needs α = ½. With s = 0.2 the exact belief
         // leaves the family every information matrix lies in.
-        let l0 = vec![vec![2.0, 0.0, 0.0], vec![0.0, 2.0, 0.0], vec![0.0, 0.0, 2.0]];
+        let l0 = vec![
+            vec![2.0, 0.0, 0.0],
+            vec![0.0, 2.0, 0.0],
+            vec![0.0, 0.0, 2.0],
+        ];
         let mut exact = ExactPermutationFilter::from_log_likelihoods(&l0).unwrap();
         assert!(sign_component(&exact).abs() < 1e-12);
         let mix = Mix {
@@ -641,7 +688,13 @@ mod tests {
             }),
             Err(BeliefError::Unsupported { .. })
         ));
-        assert!(info.mix(Mix { a: 0, b: 9, swap: 0.5 }).is_err());
+        assert!(info
+            .mix(Mix {
+                a: 0,
+                b: 9,
+                swap: 0.5
+            })
+            .is_err());
         assert_eq!(info, before);
     }
 

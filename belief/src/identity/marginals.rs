@@ -18,6 +18,23 @@
 //!   uncertainty of a 2-assignment belief twice.) The tests measure its
 //!   error; it is an estimate of the right shape, not of the right
 //!   sharpness.
+//! - [`MarginalMethod::FractionalBethe`] — the stationary point of the
+//!   fractional Bethe free energy of the matching problem (Chertkov and
+//!   Yedidia, "Approximating the permanent with fractional belief
+//!   propagation", JMLR 2013):
+//!
+//!     F_γ(P) = Σ_ij P_ij ln(P_ij/A_ij) − γ·Σ_ij (1 − P_ij) ln(1 − P_ij)
+//!
+//!   over doubly stochastic P. γ = 0 is plain Sinkhorn, γ = 1 the Bethe
+//!   (belief propagation) approximation. Setting the gradient to the row and
+//!   column multipliers gives P_ij·(1 − P_ij)^γ = A_ij·x_i·y_j, i.e. the
+//!   fixed point P = Sinkhorn(A ⊙ (1 − P)^{−γ}), which we iterate. For
+//!   N = 2 (P = [[p, q], [q, p]]) the entropy terms give odds
+//!   p/q = (exact odds)^{1/(2(1−γ))}: γ = ½ is *exact* for two tracks,
+//!   while pure Bethe (γ = 1) collapses to 0/1 there. γ = ½ is our default
+//!   ([`MarginalMethod::half_bethe`]); the tests measure it against the
+//!   permanent for N = 3..6. 1 − P_ij is computed as the sum of the other
+//!   entries of its row, so it does not round to 0 for confident entries.
 
 use super::metropolis::metropolis_marginals;
 use super::permanent::{exp_rows, marginals_from_log_likelihoods};
@@ -25,7 +42,7 @@ use super::sinkhorn::{sinkhorn, SinkhornOptions};
 use crate::error::BeliefError;
 
 /// How marginals are computed from an information matrix.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum MarginalMethod {
     /// Exact, by the permanent (N ≤ [`super::permanent::MAX_PERMANENT_TRACKS`]).
     #[default]
@@ -39,6 +56,27 @@ pub enum MarginalMethod {
     },
     /// Sinkhorn scaling of exp(L) (approximate, see the module docs).
     Sinkhorn,
+    /// The fractional Bethe fixed point with parameter `gamma` in [0, 1]
+    /// (see the module docs; ½ is exact for N = 2), iterated at most
+    /// `max_iterations` times until no marginal moves more than
+    /// `tolerance`.
+    FractionalBethe {
+        gamma: f64,
+        max_iterations: usize,
+        tolerance: f64,
+    },
+}
+
+impl MarginalMethod {
+    /// [`MarginalMethod::FractionalBethe`] with γ = ½, 1,000 iterations,
+    /// tolerance 1e-10.
+    pub fn half_bethe() -> Self {
+        MarginalMethod::FractionalBethe {
+            gamma: 0.5,
+            max_iterations: 1_000,
+            tolerance: 1e-10,
+        }
+    }
 }
 
 /// Marginals (row-major) of p(π) ∝ exp(Σ_t l\[t·n + π(t)\]).
@@ -60,7 +98,69 @@ pub fn information_marginals(
             sinkhorn(n, &mut a, sinkhorn_options)?;
             Ok(a)
         }
+        MarginalMethod::FractionalBethe {
+            gamma,
+            max_iterations,
+            tolerance,
+        } => fractional_bethe(n, l, gamma, max_iterations, tolerance, sinkhorn_options),
     }
+}
+
+/// Iterates P ← Sinkhorn(A ⊙ (1 − P)^{−γ}) from P = Sinkhorn(A).
+fn fractional_bethe(
+    n: usize,
+    l: &[f64],
+    gamma: f64,
+    max_iterations: usize,
+    tolerance: f64,
+    sinkhorn_options: &SinkhornOptions,
+) -> Result<Vec<f64>, BeliefError> {
+    if !((0.0..=1.0).contains(&gamma) && tolerance > 0.0 && tolerance.is_finite()) {
+        return Err(BeliefError::Unsupported {
+            method: "fractional Bethe marginals",
+            what: "gamma outside [0, 1] or a tolerance that is not positive and finite",
+        });
+    }
+    let a = exp_rows(n, l)?;
+    let mut p = a.clone();
+    sinkhorn(n, &mut p, sinkhorn_options)?;
+    let mut others = vec![0.0; n];
+    for _ in 0..max_iterations {
+        let mut w = a.clone();
+        for (w_row, p_row) in w.chunks_mut(n).zip(p.chunks(n)) {
+            // others[j] = Σ_{k≠j} P_ik = 1 − P_ij without cancellation.
+            let mut before = 0.0;
+            for j in 0..n {
+                others[j] = before;
+                before += p_row[j];
+            }
+            let mut after = 0.0;
+            for j in (0..n).rev() {
+                others[j] += after;
+                after += p_row[j];
+            }
+            for (x, &o) in w_row.iter_mut().zip(&others) {
+                // A row with one positive entry is fixed by scaling anyway.
+                if o > 0.0 {
+                    *x *= o.powf(-gamma);
+                }
+            }
+        }
+        sinkhorn(n, &mut w, sinkhorn_options)?;
+        let change = w
+            .iter()
+            .zip(&p)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        p = w;
+        if change <= tolerance {
+            return Ok(p);
+        }
+    }
+    Err(BeliefError::Numerical {
+        step: "fractional Bethe",
+        detail: format!("no fixed point within {max_iterations} iterations"),
+    })
 }
 
 #[cfg(test)]
@@ -116,8 +216,8 @@ mod tests {
     #[test]
     fn sinkhorn_error_against_the_permanent() {
         // Measured worst |Δp| over 30 realistic matrices per N (seeded):
-        // N=3 0.21, N=4 0.22, N=5 0.21, N=6 0.20 — the bias of the module
-        // docs, largest when a track is torn between two identities.
+        // N=3 0.195, N=4 0.261, N=5 0.294, N=6 0.239 — the bias of the
+        // module docs, largest when a track is torn between two identities.
         for n in 3..=6 {
             let mut worst: f64 = 0.0;
             for seed in 0..30 {
@@ -126,14 +226,42 @@ mod tests {
                 assert!(doubly_stochastic_residual(&s) < 1e-9);
                 worst = worst.max(max_abs_difference(&s, &exact(n, &l)));
             }
-            assert!(worst < 0.3, "n={n}: {worst}");
+            eprintln!("MEASURE sinkhorn n={n} worst={worst}");
+            assert!(worst < 0.35, "n={n}: {worst}");
+        }
+    }
+
+    #[test]
+    fn half_bethe_is_exact_for_two_tracks() {
+        let l = [1.3, -0.2, 0.4, 2.0];
+        let b = by(MarginalMethod::half_bethe(), 2, &l);
+        let diff = max_abs_difference(&b, &exact(2, &l));
+        assert!(diff < 1e-9, "{diff}");
+    }
+
+    #[test]
+    fn half_bethe_error_against_the_permanent() {
+        for n in 3..=6 {
+            let mut worst: f64 = 0.0;
+            let mut worst_sinkhorn: f64 = 0.0;
+            for seed in 0..30 {
+                let l = realistic(n, seed);
+                let e = exact(n, &l);
+                let b = by(MarginalMethod::half_bethe(), n, &l);
+                assert!(doubly_stochastic_residual(&b) < 1e-9);
+                worst = worst.max(max_abs_difference(&b, &e));
+                let s = by(MarginalMethod::Sinkhorn, n, &l);
+                worst_sinkhorn = worst_sinkhorn.max(max_abs_difference(&s, &e));
+            }
+            eprintln!("MEASURE half-bethe n={n} worst={worst} sinkhorn={worst_sinkhorn}");
+            assert!(worst < worst_sinkhorn, "n={n}: {worst} vs {worst_sinkhorn}");
         }
     }
 
     #[test]
     fn metropolis_converges_to_the_permanent() {
         // Measured worst |Δp| (N = 6, 10 realistic matrices): 1e3 samples
-        // ~0.2, 1e4 ~0.05, 1e5 ~0.015, 1e6 ~0.005 — the 1/√samples rate.
+        // 0.116, 1e4 0.036, 1e5 0.019 — roughly the 1/√samples rate.
         let n = 6;
         let mut errors = Vec::new();
         for samples in [1_000, 10_000, 100_000] {
@@ -151,6 +279,7 @@ mod tests {
             }
             errors.push(worst);
         }
+        eprintln!("MEASURE metropolis {errors:?}");
         assert!(errors[2] < 0.03, "{errors:?}");
         assert!(errors[2] < errors[0], "{errors:?}");
     }

@@ -57,7 +57,9 @@ impl RadonBelief {
             .filter(|(atom, _)| atom.blue.intersection_len(set) == 0)
             .map(|(atom, &m)| {
                 let (i, o) = atom.sizes();
-                m * self.weights.ratio_between((i, o), (atom.red.union_len(set), o))
+                m * self
+                    .weights
+                    .ratio_between((i, o), (atom.red.union_len(set), o))
             })
             .sum();
         Ok(sum / total)

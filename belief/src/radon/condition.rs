@@ -98,17 +98,21 @@ impl RadonBelief {
 
         // A read-only pass for the new total first, so that an impossible
         // observation leaves the belief untouched.
-        let mut total = 0.0;
+        let (mut total, mut size) = (0.0, 0.0);
         for (atom, &m) in &self.masses {
-            total += match role(atom) {
-                Some(true) => update.red * m,
-                Some(false) => update.blue * m,
-                None if grows(atom) => update.keep * m + update.grow * m * growth_ratio(atom),
-                None => update.keep * m,
+            let (kept, grown) = match role(atom) {
+                Some(true) => (update.red * m, 0.0),
+                Some(false) => (update.blue * m, 0.0),
+                None if grows(atom) => (update.keep * m, update.grow * m * growth_ratio(atom)),
+                None => (update.keep * m, 0.0),
             };
+            total += kept + grown;
+            size += kept.abs() + grown.abs();
         }
         let old_total = self.total_mass();
-        if !(total.is_finite() && total > 0.0) {
+        // A signed expansion can cancel to rounding noise where the true
+        // probability is 0: below that noise the observation is impossible.
+        if !(total.is_finite() && total > 1e-12 * size) {
             return Err(BeliefError::ImpossibleObservation {
                 probability: update.scale * total / old_total,
             });
@@ -169,7 +173,11 @@ mod tests {
         };
         let mut paper = RadonBelief::with_options(Field::uniform(5, 2), signed).unwrap();
         let mut ours = RadonBelief::new(Field::uniform(5, 2)).unwrap();
-        let blue = Observe { track: 3, red: 0.1, blue: 0.7 };
+        let blue = Observe {
+            track: 3,
+            red: 0.1,
+            blue: 0.7,
+        };
         paper.observe(blue).unwrap();
         ours.observe(blue).unwrap();
         assert!(paper.coefficient(&TrackSet::singleton(3)) < 0.0);
@@ -184,8 +192,20 @@ mod tests {
     #[test]
     fn certain_blue_removes_every_set_with_the_track() {
         let mut belief = RadonBelief::new(Field::uniform(6, 3)).unwrap();
-        belief.observe(Observe { track: 2, red: 0.9, blue: 0.3 }).unwrap();
-        belief.observe(Observe { track: 2, red: 0.0, blue: 1.0 }).unwrap();
+        belief
+            .observe(Observe {
+                track: 2,
+                red: 0.9,
+                blue: 0.3,
+            })
+            .unwrap();
+        belief
+            .observe(Observe {
+                track: 2,
+                red: 0.0,
+                blue: 1.0,
+            })
+            .unwrap();
         let p = belief.marginals().unwrap();
         assert!(p[2].abs() < 1e-12);
         assert!((p.iter().sum::<f64>() - 3.0).abs() < 1e-12);
@@ -195,8 +215,15 @@ mod tests {
     fn impossible_observation_leaves_the_belief_unchanged() {
         let mut belief = RadonBelief::new(Field::known(4, vec![0, 1])).unwrap();
         let before: Vec<f64> = belief.marginals().unwrap();
-        let err = belief.observe(Observe { track: 3, red: 1.0, blue: 0.0 });
-        assert!(matches!(err, Err(crate::BeliefError::ImpossibleObservation { .. })));
+        let err = belief.observe(Observe {
+            track: 3,
+            red: 1.0,
+            blue: 0.0,
+        });
+        assert!(matches!(
+            err,
+            Err(crate::BeliefError::ImpossibleObservation { .. })
+        ));
         assert_eq!(belief.marginals().unwrap(), before);
         assert_eq!(belief.coefficients(), 1);
     }

@@ -168,6 +168,67 @@ impl<'a> Packed<'a> {
     }
 }
 
+/// W(i, o) for every size pair a run can meet, relative to a reference, so
+/// that a ratio of weights is one division instead of two logarithms and an
+/// exponential. Falls back to the logarithms when the weights span more than
+/// an f64 can hold.
+struct RatioTable<'a> {
+    weights: &'a Weights,
+    blue_sizes: usize,
+    values: Vec<f64>,
+}
+
+impl<'a> RatioTable<'a> {
+    fn new(weights: &'a Weights, dictionary: &[Atom], target: &[(Atom, f64)]) -> Self {
+        let max = |f: &dyn Fn(&Atom) -> usize| {
+            dictionary
+                .iter()
+                .map(f)
+                .chain(target.iter().map(|(a, _)| f(a)))
+                .max()
+                .unwrap_or(0)
+        };
+        let n = weights.tracks();
+        let reds = (2 * max(&|a| a.red.len())).min(n) + 1;
+        let blues = (2 * max(&|a| a.blue.len())).min(n) + 1;
+        let ln: Vec<f64> = (0..reds * blues)
+            .map(|x| weights.ln2(x / blues, x % blues))
+            .collect();
+        let finite = ln.iter().filter(|v| v.is_finite());
+        let hi = finite.clone().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
+        let lo = finite.fold(f64::INFINITY, |a, &b| a.min(b));
+        let values = if hi - lo < 600.0 {
+            ln.iter().map(|v| (v - hi).exp()).collect()
+        } else {
+            Vec::new()
+        };
+        RatioTable {
+            weights,
+            blue_sizes: blues,
+            values,
+        }
+    }
+
+    /// W(to)/W(from).
+    fn ratio(&self, from: (usize, usize), to: (usize, usize)) -> f64 {
+        let at = |(i, o): (usize, usize)| i * self.blue_sizes + o;
+        match (self.values.get(at(from)), self.values.get(at(to))) {
+            (Some(f), Some(t))
+                if !self.values.is_empty()
+                    && o_fits(from, self.blue_sizes)
+                    && o_fits(to, self.blue_sizes) =>
+            {
+                t / f
+            }
+            _ => self.weights.ratio_between(from, to),
+        }
+    }
+}
+
+fn o_fits((_, o): (usize, usize), blue_sizes: usize) -> bool {
+    o < blue_sizes
+}
+
 /// OMP on a target given by masses m (m = c·W): returns at most
 /// `options.atoms` atoms with non-negative masses whose sum best fits the
 /// target in l2 over the admissible red sets.
@@ -182,15 +243,18 @@ pub fn pursue(
     }
     let ln_w = |(i, o): (usize, usize)| weights.ln2(i, o);
     // Correlations carry a common factor √W_ref so that they stay in range.
-    let (lo, hi) = dictionary.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), b| {
-        let w = ln_w(b.sizes());
-        (lo.min(w), hi.max(w))
-    });
+    let (lo, hi) = dictionary
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), b| {
+            let w = ln_w(b.sizes());
+            (lo.min(w), hi.max(w))
+        });
     let ln_ref = 0.5 * (lo + hi);
     let ln_half: Vec<f64> = dictionary.iter().map(|b| 0.5 * ln_w(b.sizes())).collect();
     let half: Vec<f64> = ln_half.iter().map(|h| h - 0.5 * ln_ref).collect();
     let packed = Packed::new(dictionary.iter(), weights.tracks());
     let packed_target = Packed::new(target.iter().map(|(a, _)| a), weights.tracks());
+    let table = RatioTable::new(weights, &dictionary, target);
     let gram = |i: usize, j: usize| -> f64 {
         match packed.product(i, &packed, j) {
             Some(sizes) => (ln_w(sizes) - ln_half[i] - ln_half[j]).exp(),
@@ -204,7 +268,7 @@ pub fn pursue(
                 .enumerate()
                 .filter_map(|(a, (_, m))| {
                     let to = packed.product(i, &packed_target, a)?;
-                    Some(m * weights.ratio_between(packed_target.sizes(a), to))
+                    Some(m * table.ratio(packed_target.sizes(a), to))
                 })
                 .sum();
             sum * (-half[i]).exp()
@@ -299,11 +363,22 @@ impl RadonBelief {
     /// `budget − atoms` atoms are kept as they are (OMP warm-started with
     /// them fixed in its support), the heaviest `targets` of the rest are
     /// re-expressed by at most `atoms` atoms, and the remainder is dropped.
-    pub(super) fn pursue(&mut self, budget: usize, options: &OmpOptions) -> Result<(), BeliefError> {
+    pub(super) fn pursue(
+        &mut self,
+        budget: usize,
+        options: &OmpOptions,
+    ) -> Result<(), BeliefError> {
         let before = self.clone();
         let keep = budget.saturating_sub(options.atoms).max(1);
-        let removed = self.split_off_lightest(keep);
-        let targets = &removed[..removed.len().min(options.targets)];
+        let mut removed = self.split_off_lightest(keep);
+        let targets = options.targets.min(removed.len());
+        if targets > 0 && targets < removed.len() {
+            removed.select_nth_unstable_by(targets - 1, |x, y| y.1.abs().total_cmp(&x.1.abs()));
+        }
+        // Heaviest first, ties by atom, so that runs are deterministic.
+        removed[..targets]
+            .sort_unstable_by(|x, y| y.1.abs().total_cmp(&x.1.abs()).then_with(|| x.0.cmp(&y.0)));
+        let targets = &removed[..targets];
         let result = pursue(&self.weights, targets, options).and_then(|atoms| {
             for (atom, m) in atoms {
                 *self.masses.entry(atom).or_insert(0.0) += m;

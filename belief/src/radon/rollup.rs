@@ -56,12 +56,24 @@ mod tests {
     #[test]
     fn table_ii_distributions() {
         let mut belief = RadonBelief::new(Field::known(4, vec![0, 1])).unwrap();
-        belief.mix(Mix { a: 0, b: 2, swap: 0.5 }).unwrap();
+        belief
+            .mix(Mix {
+                a: 0,
+                b: 2,
+                swap: 0.5,
+            })
+            .unwrap();
         assert!((belief.coefficient(&set(&[0, 1])) - 0.5).abs() < 1e-12);
         assert!((belief.coefficient(&set(&[1, 2])) - 0.5).abs() < 1e-12);
         assert_eq!(belief.coefficients(), 2);
         // Example 5.1: the mix of tracks 3 and 4.
-        belief.mix(Mix { a: 2, b: 3, swap: 0.5 }).unwrap();
+        belief
+            .mix(Mix {
+                a: 2,
+                b: 3,
+                swap: 0.5,
+            })
+            .unwrap();
         assert!((belief.coefficient(&set(&[0, 1])) - 0.5).abs() < 1e-12);
         assert!((belief.coefficient(&set(&[1, 2])) - 0.25).abs() < 1e-12);
         assert!((belief.coefficient(&set(&[1, 3])) - 0.25).abs() < 1e-12);
@@ -71,17 +83,53 @@ mod tests {
     #[test]
     fn rollup_preserves_total_mass_and_moves_exactly_on_certain_swaps() {
         let mut belief = RadonBelief::new(Field::uniform(6, 3)).unwrap();
-        belief.observe(Observe { track: 1, red: 0.8, blue: 0.2 }).unwrap();
-        belief.observe(Observe { track: 2, red: 0.1, blue: 0.7 }).unwrap();
+        belief
+            .observe(Observe {
+                track: 1,
+                red: 0.8,
+                blue: 0.2,
+            })
+            .unwrap();
+        belief
+            .observe(Observe {
+                track: 2,
+                red: 0.1,
+                blue: 0.7,
+            })
+            .unwrap();
         let before = belief.log_normalizer();
-        belief.mix(Mix { a: 1, b: 4, swap: 0.3 }).unwrap();
+        belief
+            .mix(Mix {
+                a: 1,
+                b: 4,
+                swap: 0.3,
+            })
+            .unwrap();
         assert!((belief.log_normalizer() - before).abs() < 1e-12);
-        belief.mix(Mix { a: 2, b: 4, swap: 1.0 }).unwrap();
+        belief
+            .mix(Mix {
+                a: 2,
+                b: 4,
+                swap: 1.0,
+            })
+            .unwrap();
         assert!((belief.log_normalizer() - before).abs() < 1e-12);
         // swap = 1 is a relabelling: applying it twice restores every value.
         let mut again = belief.clone();
-        again.mix(Mix { a: 1, b: 4, swap: 1.0 }).unwrap();
-        again.mix(Mix { a: 1, b: 4, swap: 1.0 }).unwrap();
+        again
+            .mix(Mix {
+                a: 1,
+                b: 4,
+                swap: 1.0,
+            })
+            .unwrap();
+        again
+            .mix(Mix {
+                a: 1,
+                b: 4,
+                swap: 1.0,
+            })
+            .unwrap();
         assert_eq!(again.coefficients(), belief.coefficients());
         for (atom, c) in belief.coefficients_iter() {
             assert_eq!(again.coefficient_of(atom), c);

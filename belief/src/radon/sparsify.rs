@@ -12,7 +12,6 @@
 //!   them mixes); after observations the belief is peaky and thresholding
 //!   suits it (Section 5.5).
 
-
 use super::omp::OmpOptions;
 use super::RadonBelief;
 use crate::error::BeliefError;

@@ -5,13 +5,13 @@
 //! belief negative. Fully local: a leader can threshold its own atoms without
 //! asking anyone (Section 5.4.3).
 
+use super::atom::Atom;
 use super::RadonBelief;
 use crate::error::BeliefError;
-use super::atom::Atom;
 
 impl RadonBelief {
-    /// Keeps the `keep` heaviest atoms; returns the removed ones, heaviest
-    /// first, so that OMP can re-express part of them. Selects on a copy of
+    /// Keeps the `keep` heaviest atoms; returns the removed ones (in no
+    /// particular order) so that OMP can re-express part of them. Selects on a copy of
     /// the weights and removes in place, so kept atoms are not rehashed.
     pub(super) fn split_off_lightest(&mut self, keep: usize) -> Vec<(Atom, f64)> {
         if self.masses.len() <= keep {
@@ -42,16 +42,19 @@ impl RadonBelief {
         }) {
             removed.push((atom, m));
         }
-        removed.sort_unstable_by(|x, y| y.1.abs().total_cmp(&x.1.abs()).then_with(|| x.0.cmp(&y.0)));
         removed
     }
 
     /// Thresholds down to `budget` atoms and renormalizes.
     pub fn threshold(&mut self, budget: usize) -> Result<(), BeliefError> {
-        let before = self.clone();
-        self.split_off_lightest(budget.max(1));
+        let removed = self.split_off_lightest(budget.max(1));
+        if let Err(e) = self.renormalize() {
+            // Only a signed expansion can get here; put everything back.
+            self.masses.extend(removed);
+            return Err(e);
+        }
         self.stats.thresholdings += 1;
-        self.renormalize().inspect_err(|_| *self = before)
+        Ok(())
     }
 }
 

@@ -37,7 +37,7 @@ pub const DEFAULT_EVENTS_WITHIN: f64 = 3600.0;
 /// | `red` (k) | ⌊n/2⌋ drawn by the seed |
 /// | `length` | 300 s for crowd / waypoint; pedestrians: to the end of the scene |
 /// | `field` | square of 25 m² per target, origin (0, 0) |
-/// | `dt` | 0.1 s |
+/// | `dt` | 0.1 s (a replay is sampled at this step, interpolating its 0.4 s annotations) |
 /// | `warmup` | 10 s (synthetic models only) |
 /// | `mix_distance` | 1.0 m (release 1.25 × that) |
 /// | `observe_distance` | 3.5 m |

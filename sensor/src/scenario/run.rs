@@ -145,8 +145,10 @@ impl Scenario {
 
         let mut events: Vec<TimedEvent> = Vec::new();
         let mut sensing = 0usize;
-        let mut next_move = 0.0;
-        let mut next_truth = self.truth_interval;
+        // Moves at j·move_interval (j ≥ 0), truths at j·truth_interval (j ≥ 1):
+        // multiples, not running sums, so long runs do not drift.
+        let mut moves_done = 0u64;
+        let mut truths_done = 0u64;
         let mut last_truth_step = None;
         let mut step = 0u64;
         loop {
@@ -154,7 +156,7 @@ impl Scenario {
             let limit = event_goal.map_or(usize::MAX, |c| c - sensing);
             sensing += extractor.step(time, motion.positions(), &mut events, limit);
             if let Some(interval) = self.move_interval {
-                if time >= next_move - EPS {
+                if time >= moves_done as f64 * interval - EPS {
                     let positions = motion.positions();
                     for track in 0..n {
                         let target = extractor.assignment().target_on(track) as usize;
@@ -169,14 +171,13 @@ impl Scenario {
                             });
                         }
                     }
-                    while next_move <= time + EPS {
-                        next_move += interval;
-                    }
+                    moves_done = ((time + EPS) / interval).floor() as u64 + 1;
                 }
             }
             let goal_reached = event_goal.is_some_and(|c| sensing >= c);
             let last = goal_reached || step >= last_step;
-            if (step > 0 && time >= next_truth - EPS) || last {
+            let truth_due = (truths_done + 1) as f64 * self.truth_interval;
+            if (step > 0 && time >= truth_due - EPS) || last {
                 events.push(TimedEvent {
                     time,
                     event: SimEvent::Truth {
@@ -184,9 +185,7 @@ impl Scenario {
                     },
                 });
                 last_truth_step = Some(step);
-                while next_truth <= time + EPS {
-                    next_truth += self.truth_interval;
-                }
+                truths_done = ((time + EPS) / self.truth_interval).floor() as u64;
             }
             progress.report(event_goal.map_or(step, |_| sensing as u64));
             if last {

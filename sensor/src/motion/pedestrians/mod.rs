@@ -3,7 +3,7 @@
 //! from real crowds exactly as the paper's Section 6 extracts them from its
 //! simulated market.
 //!
-//! - [`format`] — the obsmat (8-column) and four-column file formats.
+//! - [`format`](mod@format) — the obsmat (8-column) and four-column file formats.
 //! - [`scene`] — a loaded scene: timing, people, interpolated positions.
 //! - [`window`] — which people become tracks, and for how long (each person
 //!   is one track for the whole run; see there).
