@@ -15,8 +15,13 @@
 //!   dictionary (Jiang et al., TOSN 2013, Sections 4–5): rollup (Alg. 1),
 //!   conditioning (Alg. 2), exact answers, thresholding and OMP (Sec. 5.3),
 //!   and the distributed conditioning rule (Sec. 5.4).
+//! - [`factored`] — a product of small exact beliefs over groups of tracks
+//!   coupled through the red count, split by moment matching when a group
+//!   grows too large.
 //! - [`baseline`] — yardsticks: the exact dense filter over all k-sets and
 //!   the low-order Radon filters of order 1, 2, 3 (Table III).
+//! - [`particle`] — [`ParticleFilter`], sequential Monte Carlo over red
+//!   sets: the yardstick a practitioner would reach for.
 //! - [`workload`] — seeded random event streams for tests and benchmarks.
 //! - [`identity`] — identity management (Shin et al., IPSN 2005): the exact
 //!   filter over N! assignments, the belief matrix, the information matrix
@@ -25,8 +30,10 @@
 pub mod baseline;
 pub mod error;
 pub mod event;
+pub mod factored;
 pub mod filter;
 pub mod identity;
+pub mod particle;
 pub mod radon;
 pub mod track_set;
 pub mod weights;
@@ -35,11 +42,13 @@ pub mod workload;
 pub use baseline::{DenseFilter, LowOrderFilter};
 pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
+pub use factored::{FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
     IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,
 };
+pub use particle::ParticleFilter;
 pub use radon::{RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
 pub use track_set::TrackSet;
 pub use weights::Weights;

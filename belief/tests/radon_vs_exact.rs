@@ -249,3 +249,12 @@ fn unknown_count_certain_sightings_agree() {
         );
     }
 }
+
+#[test]
+fn a_known_start_with_an_unknown_count_is_that_set_exactly() {
+    let field = Field { tracks: 5, red: RedCount::unknown_uniform(5), initial_red: Some(vec![1, 3]) };
+    let exact = DenseFilter::new(field.clone()).unwrap();
+    let radon = RadonBelief::new(field).unwrap();
+    assert_close(&exact.marginals().unwrap(), &radon.marginals().unwrap(), "start");
+    assert_close(&radon.marginals().unwrap(), &[0.0, 1.0, 0.0, 1.0, 0.0], "delta");
+}

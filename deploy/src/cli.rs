@@ -18,6 +18,97 @@ pub enum Command {
     /// Replay a trace through one filter offline: one JSON line with the
     /// answers at every `truth` line, then a summary line.
     Replay(ReplayArgs),
+    /// Simulate targets moving in a field (or replay real pedestrians) and
+    /// write the sensors' events as a trace.
+    Simulate(SimulateArgs),
+    /// Run the evaluation grid (methods × scenarios on both cores): print
+    /// the tables, write results.md and the SVG plots to --out-dir.
+    Eval(EvalArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalArgs {
+    /// How big a grid: `quick` (a tiny grid in seconds, for tests) or
+    /// `full` (the tables and figures of docs/results.md).
+    #[arg(long, value_enum, default_value_t = Preset::Quick)]
+    pub preset: Preset,
+    /// Where results.md and the SVG plots go (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "docs")]
+    pub out_dir: PathBuf,
+    /// Worker threads for the grid.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: u16,
+    /// Seeds per scenario (default: 1 for quick, 5 for full).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    pub seeds: Option<u16>,
+    /// More methods for every Table III point, by registry name
+    /// (exact, order1, order3, threshold:B, overcomplete:B, distributed:B,
+    /// particles:P, factored), comma-separated.
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    pub methods: Vec<String>,
+}
+
+/// Grid sizes of `eval`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Preset {
+    /// A tiny grid that runs in seconds: every table and plot, few points.
+    Quick,
+    /// The grid behind docs/results.md (under 30 minutes on 2 cores).
+    Full,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct SimulateArgs {
+    /// The motion model.
+    #[arg(long, value_enum, default_value_t = Motion::Crowd)]
+    pub model: Motion,
+    /// For `--model pedestrians`: a scene file of shared/data/pedestrians
+    /// (obsmat.txt or one of the 4-column files).
+    #[arg(long, value_name = "FILE", required_if_eq("model", "pedestrians"))]
+    pub scene: Option<PathBuf>,
+    /// n, the number of targets (pedestrians: a cap on the people taken).
+    #[arg(long)]
+    pub targets: Option<usize>,
+    /// k, the number of red targets (default n/2).
+    #[arg(long)]
+    pub red: Option<usize>,
+    /// Seconds of motion (default 300; pedestrians: to the end of the scene).
+    #[arg(long, conflicts_with = "events")]
+    pub duration: Option<f64>,
+    /// Stop after this many mix + observe events instead.
+    #[arg(long)]
+    pub events: Option<usize>,
+    /// Two targets closer than this (metres) mix.
+    #[arg(long)]
+    pub mix_distance: Option<f64>,
+    /// A target farther than this (metres) from every other is observed.
+    #[arg(long)]
+    pub observe_distance: Option<f64>,
+    /// Probability that a mix exchanges the two targets' tracks.
+    #[arg(long)]
+    pub swap: Option<f64>,
+    /// Seconds between `truth` lines.
+    #[arg(long)]
+    pub truth_interval: Option<f64>,
+    /// Leave the initial red tracks out of the header (uniform prior).
+    #[arg(long)]
+    pub hide_initial: bool,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Where to write the trace.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+}
+
+/// Motion models of `simulate`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Motion {
+    /// A social-force crowd, dense and interacting.
+    Crowd,
+    /// Random waypoint with pauses.
+    Waypoint,
+    /// Real pedestrian trajectories (--scene).
+    Pedestrians,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -40,6 +131,14 @@ pub struct ReplayArgs {
     /// track mixed into since it was last observed.
     #[arg(long)]
     pub distributed_rule: bool,
+
+    /// The number of particles of --method particles (default 1000).
+    #[arg(long, value_name = "P", value_parser = parse_particles)]
+    pub particles: Option<usize>,
+
+    /// The seed of --method particles (default 0).
+    #[arg(long)]
+    pub seed: Option<u64>,
 }
 
 /// The filters `replay` can run.
@@ -58,6 +157,9 @@ pub enum Method {
     Order2,
     /// Third-order Radon projection (Table III baseline).
     Order3,
+    /// Sequential Monte Carlo over red sets: --particles weighted
+    /// particles, resampled when the effective sample size halves.
+    Particles,
 }
 
 impl Method {
@@ -70,6 +172,7 @@ impl Method {
             Method::Order1 => "order1",
             Method::Order2 => "order2",
             Method::Order3 => "order3",
+            Method::Particles => "particles",
         }
     }
 
@@ -77,6 +180,14 @@ impl Method {
     /// --distributed-rule).
     pub fn is_radon(self) -> bool {
         matches!(self, Method::Overcomplete | Method::Threshold)
+    }
+}
+
+fn parse_particles(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Err("there must be at least 1 particle".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(format!("not a whole number of particles: {e}")),
     }
 }
 
@@ -120,12 +231,46 @@ mod tests {
             "--distributed-rule",
         ])
         .unwrap();
-        let Command::Replay(args) = cli.command;
+        let Command::Replay(args) = cli.command else {
+            panic!("parsed as replay")
+        };
         assert_eq!(args.method, Method::Threshold);
         assert_eq!(args.budget, Some(64));
         assert!(args.distributed_rule);
         assert!(
             Cli::try_parse_from(["idmesh", "replay", "--trace", "t", "--budget", "0"]).is_err()
         );
+    }
+
+    #[test]
+    fn particle_and_eval_arguments() {
+        let cli = Cli::try_parse_from([
+            "idmesh",
+            "replay",
+            "--trace",
+            "t.jsonl",
+            "--method",
+            "particles",
+            "--particles",
+            "5000",
+            "--seed",
+            "9",
+        ])
+        .unwrap();
+        let Command::Replay(args) = cli.command else {
+            panic!("parsed as replay")
+        };
+        assert_eq!(args.method, Method::Particles);
+        assert_eq!((args.particles, args.seed), (Some(5000), Some(9)));
+        assert!(Cli::try_parse_from(["idmesh", "replay", "--trace", "t", "--particles", "0"]).is_err());
+
+        let cli = Cli::try_parse_from(["idmesh", "eval", "--preset", "full", "--out-dir", "x"]).unwrap();
+        let Command::Eval(args) = cli.command else {
+            panic!("parsed as eval")
+        };
+        assert_eq!(args.preset, Preset::Full);
+        assert_eq!(args.out_dir, PathBuf::from("x"));
+        assert_eq!((args.jobs, args.seeds), (2, None));
+        assert!(Cli::try_parse_from(["idmesh", "eval", "--jobs", "0"]).is_err());
     }
 }

@@ -5,8 +5,10 @@
 //! default `warn`); stdout carries only results.
 
 mod cli;
+mod eval;
 mod logging;
 mod replay;
+mod simulate;
 
 use clap::Parser;
 use cli::{Cli, Command};
@@ -31,5 +33,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let stdout = BufWriter::new(std::io::stdout().lock());
             replay::run(&args, stdout)
         }
+        Command::Simulate(args) => simulate::run(&args),
+        Command::Eval(args) => eval::run(&args),
     }
 }

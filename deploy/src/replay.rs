@@ -13,8 +13,8 @@ use crate::cli::{Method, ReplayArgs};
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter};
 use idmesh_belief::{
-    predict_red, tracking_error, BeliefError, Event, Field, PropertyFilter, RadonBelief,
-    RadonOptions, RedCount, Sparsify,
+    predict_red, tracking_error, BeliefError, Event, Field, ParticleFilter, PropertyFilter,
+    RadonBelief, RadonOptions, RedCount, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use serde::Serialize;
@@ -50,9 +50,26 @@ pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
     replay(args, reader, out)
 }
 
+/// The particle count of `--method particles` when `--particles` is not given.
+pub const DEFAULT_PARTICLES: usize = 1000;
+
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
     let method = args.method;
+    if method != Method::Particles {
+        if args.particles.is_some() {
+            bail!(
+                "--particles applies to --method particles, not to --method {}",
+                method.name()
+            );
+        }
+        if args.seed.is_some() {
+            bail!(
+                "--seed applies to --method particles (the only randomized filter), not to --method {}",
+                method.name()
+            );
+        }
+    }
     if method == Method::Threshold && args.budget.is_none() {
         bail!("--method threshold needs --budget N: the number of coefficients to keep");
     }
@@ -200,6 +217,11 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         Method::Order1 => Ok(Box::new(LowOrderFilter::new(field, 1)?)),
         Method::Order2 => Ok(Box::new(LowOrderFilter::new(field, 2)?)),
         Method::Order3 => Ok(Box::new(LowOrderFilter::new(field, 3)?)),
+        Method::Particles => Ok(Box::new(ParticleFilter::new(
+            field,
+            args.particles.unwrap_or(DEFAULT_PARTICLES),
+            args.seed.unwrap_or(0),
+        )?)),
     }
 }
 
@@ -258,6 +280,8 @@ mod tests {
             method,
             budget,
             distributed_rule: false,
+            particles: None,
+            seed: None,
         }
     }
 
@@ -363,5 +387,30 @@ mod tests {
         order.distributed_rule = true;
         assert!(check_options(&order).is_err());
         assert!(check_options(&args(Method::Threshold, Some(4))).is_ok());
+        let mut particles = args(Method::Exact, None);
+        particles.particles = Some(10);
+        let error = check_options(&particles).unwrap_err();
+        assert!(error.to_string().contains("--particles applies"), "{error}");
+        particles.particles = None;
+        particles.seed = Some(1);
+        assert!(check_options(&particles).is_err());
+        particles.method = Method::Particles;
+        assert!(check_options(&particles).is_ok());
+        particles.budget = Some(3);
+        assert!(check_options(&particles).is_err());
+    }
+
+    #[test]
+    fn table_one_on_the_particle_filter() {
+        let mut particles = args(Method::Particles, None);
+        particles.particles = Some(200);
+        particles.seed = Some(4);
+        let out = replay_text(&particles, TABLE1).unwrap();
+        assert_eq!(out.len(), 2);
+        assert_eq!(out[0]["p_red"], serde_json::json!([0.0, 1.0, 1.0, 0.0]));
+        assert_eq!(out[0]["coefficients"], 200);
+        assert_eq!(out[1]["method"], "particles");
+        assert_eq!(out[1]["error"], 0.0);
+        assert_eq!(out[1]["max_coefficients"], 200);
     }
 }

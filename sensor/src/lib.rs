@@ -37,6 +37,7 @@
 //! assert!(jsonl.starts_with(br#"{"kind":"header""#));
 //! ```
 
+pub mod acoustic;
 pub mod events;
 pub mod geometry;
 pub mod motion;

@@ -75,9 +75,11 @@ pub enum LowOrderRepair {
 /// u ≤ j (C(n, j) numbers at the top order, which is what
 /// [`coefficients`](PropertyFilter::coefficients) reports), normalized to
 /// M_0 = 1. The order used is min(j, k); j = k (or j ≥ n − k) is exact.
-/// Each event costs O(C(n, j)·j): n = 100, j = 3 means 161,700 numbers per
-/// level; construction fails with [`BeliefError::TooLarge`] when
-/// Σ_{u ≤ j} C(n, u) exceeds [`MAX_STATES`](super::MAX_STATES).
+/// An observation costs O(C(n, j)·j) and a mix O(C(n − 2, j − 1)): n = 100,
+/// j = 3 means 161,700 numbers at the top level. Memory is twice
+/// Σ_{u ≤ j} C(n, u) f64 (the marginals and the working space of the
+/// conditioning step); construction fails with [`BeliefError::TooLarge`]
+/// when that sum exceeds [`MAX_STATES`](super::MAX_STATES).
 ///
 /// The projection is orthogonal in l2, not onto the probability simplex: the
 /// represented function may be negative on some k-sets, and its marginals
@@ -95,8 +97,7 @@ pub struct LowOrderFilter {
     /// M_u/M_0 of the uniform belief: W(u)/W(0).
     uniform: Vec<f64>,
     binom: Binomials,
-    /// `levels[u][rank(S)]` = M_u(S)/M_0 … except between the update and the
-    /// renormalization of one observation.
+    /// `levels[u][rank(S)]` = M_u(S), scaled so that M_0 = 1.
     levels: Vec<Vec<f64>>,
     /// λ_0, …, λ_order.
     lift: Vec<f64>,

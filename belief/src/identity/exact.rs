@@ -4,7 +4,7 @@
 //! identity filter is tested against.
 //!
 //! - Mixing (Definition 2, eq. 1) is the convolution with the two-point
-//!   distribution m = (1 − swap)·[identity] + swap·[transposition (a b)]:
+//!   distribution m = (1 − swap)·δ(identity) + swap·δ(transposition (a b)):
 //!   q(π) = (1 − swap)·p(π) + swap·p(π ∘ (a b)). With assignments indexed by
 //!   Lehmer rank ([`Permutations`]) this pairs every rank with the rank of
 //!   its transposed assignment: O(N!·N), not the paper's O((N!)²).

@@ -226,7 +226,6 @@ mod tests {
                 assert!(doubly_stochastic_residual(&s) < 1e-9);
                 worst = worst.max(max_abs_difference(&s, &exact(n, &l)));
             }
-            eprintln!("MEASURE sinkhorn n={n} worst={worst}");
             assert!(worst < 0.35, "n={n}: {worst}");
         }
     }
@@ -241,6 +240,9 @@ mod tests {
 
     #[test]
     fn half_bethe_error_against_the_permanent() {
+        // Measured worst |Δp| over the 30 matrices per N of the Sinkhorn
+        // test: N=3 0.067, N=4 0.077, N=5 0.112, N=6 0.141 (Sinkhorn 0.195,
+        // 0.261, 0.294, 0.239 on the same matrices).
         for n in 3..=6 {
             let mut worst: f64 = 0.0;
             let mut worst_sinkhorn: f64 = 0.0;
@@ -253,7 +255,7 @@ mod tests {
                 let s = by(MarginalMethod::Sinkhorn, n, &l);
                 worst_sinkhorn = worst_sinkhorn.max(max_abs_difference(&s, &e));
             }
-            eprintln!("MEASURE half-bethe n={n} worst={worst} sinkhorn={worst_sinkhorn}");
+            assert!(worst < 0.2, "n={n}: {worst}");
             assert!(worst < worst_sinkhorn, "n={n}: {worst} vs {worst_sinkhorn}");
         }
     }
@@ -279,7 +281,6 @@ mod tests {
             }
             errors.push(worst);
         }
-        eprintln!("MEASURE metropolis {errors:?}");
         assert!(errors[2] < 0.03, "{errors:?}");
         assert!(errors[2] < errors[0], "{errors:?}");
     }

@@ -1,5 +1,5 @@
 //! The Metropolis sampler the paper uses to turn an information matrix into
-//! marginals (Shin et al., IPSN 2005, Section 3.4, citing [4] for
+//! marginals (Shin et al., IPSN 2005, Section 3.4, citing its ref. 4 for
 //! Metropolis; evaluated in Section 5.1): a Markov chain over assignments
 //! whose stationary distribution is p(π) ∝ exp(Σ_t L\[t\]\[π(t)\]).
 //!

@@ -27,7 +27,10 @@
 //!   really requires.
 //! - [`marginals`], [`permanent`], [`metropolis`], [`sinkhorn`] — marginals
 //!   of an information matrix on demand ([`MarginalMethod`]): exact by the
-//!   permanent (Ryser), the paper's Metropolis sampler, Sinkhorn scaling.
+//!   permanent (Ryser or Glynn, Gray code, all N² marginals in one pass),
+//!   the paper's Metropolis sampler, Sinkhorn scaling, and a fractional
+//!   Bethe fixed point. [`sinkhorn`] is also the doubly stochastic scaling
+//!   the belief matrix and the property-bits filter use.
 //! - [`property_bits`] — [`PropertyBitsFilter`]: identities coded by b
 //!   binary properties, one Radon property belief per bit (TOSN Sec. 5.5).
 //! - [`workload`] — seeded random identity event streams with ground truth.
@@ -53,6 +56,7 @@ pub use exact::ExactPermutationFilter;
 pub use filter::{IdentityFilter, Marginals};
 pub use information::{InformationMatrix, InformationOptions, MixSolver};
 pub use marginals::MarginalMethod;
+pub use permanent::PermanentFormula;
 pub use property_bits::{BitCode, PropertyBitsFilter};
 pub use sinkhorn::{SinkhornOptions, SinkhornReport};
 pub use workload::{IdentityWorkload, IdentityWorkloadSpec};

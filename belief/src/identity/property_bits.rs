@@ -49,7 +49,13 @@
 //! track as independent (computed in log space), and ignores that the
 //! identities are one-to-one. Sinkhorn scaling to a doubly stochastic matrix
 //! restores the one-to-one constraint (it is the closest doubly stochastic
-//! matrix to the scores in relative entropy), giving the marginals.
+//! matrix to the scores in relative entropy), giving the marginals. Bit
+//! probabilities are floored at [`BIT_FLOOR`] first (see there).
+//!
+//! ## Cost
+//! Without a budget every bit belief is exact, and exact Radon beliefs can
+//! grow exponentially with mixing; for more than a few dozen tracks give
+//! [`RadonOptions`] a [`crate::radon::Sparsify`] budget.
 
 use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
@@ -58,6 +64,13 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use crate::radon::{RadonBelief, RadonOptions};
+
+/// Bit probabilities are clamped to [this, 1 − this] before they are
+/// combined. Under a coefficient budget a bit belief can become spuriously
+/// certain; a hard 0 would then rule out the true assignment and can leave
+/// the score matrix with no positive diagonal (seen at n = 100, 9 bits,
+/// budget 200). The floor changes exact answers by ~1e-12.
+pub const BIT_FLOOR: f64 = 1e-12;
 
 /// The longest code [`BitCode::new`] searches (it scans up to 2^b words).
 pub const MAX_CODE_BITS: usize = 16;
@@ -318,7 +331,7 @@ impl IdentityFilter for PropertyBitsFilter {
             for i in 0..n {
                 score[t * n + i] = (0..self.code.bits())
                     .map(|j| {
-                        let red = bits[j][t].clamp(0.0, 1.0);
+                        let red = bits[j][t].clamp(BIT_FLOOR, 1.0 - BIT_FLOOR);
                         if self.code.bit(i, j) {
                             red.ln()
                         } else {
@@ -405,7 +418,8 @@ mod tests {
     #[test]
     fn perfect_reads_without_mixing_recover_every_identity() {
         for (n, b) in [(5, 3), (8, 3), (8, 6), (12, 7)] {
-            let truth: Vec<u32> = (0..n as u32).map(|t| (t * 5 + 3) % n as u32).collect();
+            // 7 is coprime to every n here, so this is a permutation.
+            let truth: Vec<u32> = (0..n as u32).map(|t| (t * 7 + 2) % n as u32).collect();
             let code = BitCode::new(n, b).unwrap();
             let mut f = PropertyBitsFilter::new(code, None, RadonOptions::default()).unwrap();
             for (t, &i) in truth.iter().enumerate() {
@@ -482,9 +496,10 @@ mod tests {
     #[test]
     fn with_mixing_it_beats_chance() {
         // N = 8 (chance error 7/8), reads of accuracy 0.9, half the events
-        // mixes with swap ½. Measured mean errors over 4 streams of 200
-        // events — exact filter / 3 bits / 6 bits / 6 bits with a budget of
-        // 20 coefficients per bit: see MEASURE lines.
+        // mixes with swap ½ between nearby tracks. Measured mean error of
+        // the most likely assignment over 4 streams of 200 events: exact
+        // filter 0.353; 3 bits 0.425; 6 bits 0.378; 6 bits with at most 20
+        // Radon coefficients per bit 0.381.
         let n = 8;
         let mut sums = [0.0f64; 4];
         for seed in 0..4 {
@@ -517,9 +532,10 @@ mod tests {
             }
         }
         let means: Vec<f64> = sums.iter().map(|s| s / 4.0).collect();
-        eprintln!("MEASURE property-bits exact/3/6/6-budget {means:?}");
         for &m in &means[1..] {
-            assert!(m < 0.6, "{means:?}");
+            assert!(m < 0.5, "{means:?}");
         }
+        // Redundant bits help.
+        assert!(means[2] < means[1], "{means:?}");
     }
 }

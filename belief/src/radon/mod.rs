@@ -105,11 +105,19 @@ impl RadonBelief {
         let weights = Weights::new(field.tracks, &field.red);
         let mut masses = FxHashMap::default();
         let start = match &field.initial_red {
-            Some(red) => TrackSet::from_tracks(red.iter().copied()),
-            None => TrackSet::empty(),
+            // With k unknown a known start must also fix every other track
+            // blue: φ_{x0} alone would allow any superset of x0.
+            Some(red) if field.red.known().is_none() => {
+                let red = TrackSet::from_tracks(red.iter().copied());
+                let blue = (0..field.tracks as u32).filter(|t| !red.contains(*t)).collect();
+                Atom::new(red, blue)
+            }
+            Some(red) => Atom::radon(TrackSet::from_tracks(red.iter().copied())),
+            None => Atom::default(),
         };
-        let log_scale = weights.ln(start.len());
-        masses.insert(Atom::radon(start), 1.0);
+        let (i, o) = start.sizes();
+        let log_scale = weights.ln2(i, o);
+        masses.insert(start, 1.0);
         let mixing_log = MixingLog::new(field.tracks);
         Ok(RadonBelief {
             field,

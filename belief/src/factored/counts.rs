@@ -1,0 +1,364 @@
+//! The count coupling between components.
+//!
+//! The belief is P(x) ∝ Π_C g_C(x ∩ C) · π(|x|). Component C enters the
+//! coupling only through its count vector c_C[r] = Σ_{|y| = r} g_C(y), so
+//! - the normalizer is Z = Σ_s π(s)·(⊛_C c_C)[s], and
+//! - the weight a component's own red count r gets from everything else is
+//!   R_{−C}(r) = Σ_s π(s)·(⊛_{C' ≠ C} c_{C'})[s − r].
+//!
+//! All leave-one-out weights come from one forward pass (prefix convolutions
+//! F_i = c_1 ⊛ … ⊛ c_i) and one backward pass (B_i(m) = the weight of a count
+//! m reached by the first i components, Σ_s (c_{i+1} ⊛ … ⊛ c_m)[s]·π(m + s)):
+//! R_{−i}(r) = Σ_m F_{i−1}[m]·B_i(m + r). Cost O(n · Σ_C |C|).
+//!
+//! Every vector is kept scaled to a largest entry of 1 (the fast path). The
+//! scales only matter across components, and each caller compares weights
+//! within one component, so they are dropped. When a result lands so low
+//! that entries flushed to zero on the way could matter (fields of about a
+//! thousand tracks with an unknown count, or badly conflicting evidence), the
+//! same computation is redone in log space.
+
+use crate::event::{Field, RedCount};
+use crate::weights::ln_binomial;
+
+/// A fast-path result whose scale fell below this (relative to the largest
+/// entries of its inputs) is recomputed in log space: anything flushed on
+/// the way is below 1e-308 of its own vector, so 1e-280 leaves 1e-28 of
+/// relative slack, far below the tolerances anyone checks.
+const FAST_FLOOR_LN: f64 = -644.7; // ln 1e-280
+
+/// The prior weight π(s) of one red set of size s, s = 0..=n.
+#[derive(Debug, Clone)]
+pub(crate) struct CountPrior {
+    /// ln π(s); −∞ where no set of size s is admissible.
+    ln: Vec<f64>,
+    /// π(s)/max π.
+    scaled: Vec<f64>,
+}
+
+impl CountPrior {
+    /// k known: π = [s = k]. A known initial red set fixes the count (mixing
+    /// never changes it), so π = [s = |initial|] with weight 1, as the exact
+    /// filter does. Unknown k, uniform start: π(s) = p(s)/C(n, s), p
+    /// normalized, so that the prior mass is 1.
+    pub(crate) fn new(field: &Field) -> Self {
+        let n = field.tracks;
+        let mut ln = vec![f64::NEG_INFINITY; n + 1];
+        match (&field.initial_red, &field.red) {
+            (Some(red), _) => ln[red.len()] = 0.0,
+            (None, RedCount::Known(k)) => ln[*k] = 0.0,
+            (None, RedCount::Unknown { prior }) => {
+                let total: f64 = prior.iter().sum();
+                for (s, &p) in prior.iter().enumerate() {
+                    if p > 0.0 {
+                        ln[s] = (p / total).ln() - ln_binomial(n, s);
+                    }
+                }
+            }
+        }
+        let ln_max = ln.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let scaled = ln.iter().map(|&l| (l - ln_max).exp()).collect();
+        CountPrior { ln, scaled }
+    }
+}
+
+/// a ⊛ b into `out` (resized).
+fn convolve(a: &[f64], b: &[f64], out: &mut Vec<f64>) {
+    out.clear();
+    out.resize(a.len() + b.len() - 1, 0.0);
+    for (r, &y) in b.iter().enumerate() {
+        if y == 0.0 {
+            continue;
+        }
+        for (o, &x) in out[r..].iter_mut().zip(a) {
+            *o += x * y;
+        }
+    }
+}
+
+/// Divides by the largest entry; returns its log (−∞ when all are zero).
+fn normalize_max(v: &mut [f64]) -> f64 {
+    let max = v.iter().copied().fold(0.0, f64::max);
+    if max > 0.0 && max.is_finite() {
+        for x in v.iter_mut() {
+            *x /= max;
+        }
+        max.ln()
+    } else {
+        f64::NEG_INFINITY
+    }
+}
+
+fn ln_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
+    let max = terms.clone().fold(f64::NEG_INFINITY, f64::max);
+    if max == f64::NEG_INFINITY {
+        return max;
+    }
+    max + terms.map(|t| (t - max).exp()).sum::<f64>().ln()
+}
+
+fn ln_vec(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|x| x.ln()).collect()
+}
+
+/// a ⊛ b in log space.
+fn ln_convolve(a: &[f64], b: &[f64]) -> Vec<f64> {
+    (0..a.len() + b.len() - 1)
+        .map(|s| {
+            let lo = s.saturating_sub(a.len() - 1);
+            let hi = s.min(b.len() - 1);
+            ln_sum_exp((lo..=hi).map(move |r| a[s - r] + b[r]))
+        })
+        .collect()
+}
+
+/// Scales a log vector to a largest entry of 1 and leaves the log domain;
+/// `None` when every entry is −∞.
+fn exp_normalized(v: &[f64]) -> Option<Vec<f64>> {
+    let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if max == f64::NEG_INFINITY || max.is_nan() {
+        return None;
+    }
+    Some(v.iter().map(|x| (x - max).exp()).collect())
+}
+
+impl CountPrior {
+    /// R_{−j}, the weight of each red count r = 0..=|C_j| of component j
+    /// from all the others and π, scaled to a largest entry of 1. `None`
+    /// when every count of j is ruled out (the belief has no mass).
+    pub(crate) fn leave_one_out(&self, counts: &[&[f64]], j: usize) -> Option<Vec<f64>> {
+        match self.fast_leave_one_out(counts, j) {
+            Some(r) => Some(r),
+            None => self.ln_leave_one_out(counts, j),
+        }
+    }
+
+    /// R_{−j} for every component j (see [`leave_one_out`](Self::leave_one_out)).
+    pub(crate) fn all_leave_one_out(&self, counts: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
+        match self.fast_all(counts) {
+            Some(all) => all.into_iter().map(Some).collect(),
+            None => self.ln_all(counts),
+        }
+    }
+
+    /// ln Σ_s π(s)·(⊛ counts)[s], in log space (not on a hot path).
+    pub(crate) fn ln_total(&self, counts: &[&[f64]]) -> f64 {
+        let mut f = vec![0.0];
+        for c in counts {
+            f = ln_convolve(&f, &ln_vec(c));
+        }
+        ln_sum_exp(f.iter().enumerate().map(|(s, &x)| x + self.ln[s]))
+    }
+
+    /// P(|x| = s) for s = 0..=n, in log space (not on a hot path).
+    pub(crate) fn count_posterior(&self, counts: &[&[f64]]) -> Option<Vec<f64>> {
+        let mut f = vec![0.0];
+        for c in counts {
+            f = ln_convolve(&f, &ln_vec(c));
+        }
+        let joint: Vec<f64> = f.iter().enumerate().map(|(s, &x)| x + self.ln[s]).collect();
+        let mut p = exp_normalized(&joint)?;
+        let total: f64 = p.iter().sum();
+        for x in &mut p {
+            *x /= total;
+        }
+        Some(p)
+    }
+
+    /// Fast path of `leave_one_out`: G = ⊛_{i ≠ j} c_i, then
+    /// R(r) = Σ_m G[m]·π(m + r).
+    pub(crate) fn fast_leave_one_out(&self, counts: &[&[f64]], j: usize) -> Option<Vec<f64>> {
+        let mut g = vec![1.0];
+        let mut next = Vec::new();
+        for (i, c) in counts.iter().enumerate() {
+            if i == j {
+                continue;
+            }
+            convolve(&g, c, &mut next);
+            std::mem::swap(&mut g, &mut next);
+            normalize_max(&mut g);
+        }
+        let width = counts[j].len();
+        let mut r: Vec<f64> = (0..width)
+            .map(|r| {
+                g.iter()
+                    .zip(&self.scaled[r..])
+                    .map(|(x, p)| x * p)
+                    .sum::<f64>()
+            })
+            .collect();
+        (normalize_max(&mut r) >= FAST_FLOOR_LN).then_some(r)
+    }
+
+    fn ln_leave_one_out(&self, counts: &[&[f64]], j: usize) -> Option<Vec<f64>> {
+        let mut g = vec![0.0];
+        for (i, c) in counts.iter().enumerate() {
+            if i != j {
+                g = ln_convolve(&g, &ln_vec(c));
+            }
+        }
+        let r: Vec<f64> = (0..counts[j].len())
+            .map(|r| ln_sum_exp(g.iter().enumerate().map(move |(m, &x)| x + self.ln[m + r])))
+            .collect();
+        exp_normalized(&r)
+    }
+
+    /// Fast path of `all_leave_one_out`; `None` when any result is unsafe.
+    pub(crate) fn fast_all(&self, counts: &[&[f64]]) -> Option<Vec<Vec<f64>>> {
+        let k = counts.len();
+        // Prefix convolutions F_0 = [1], F_i = F_{i−1} ⊛ c_i, each scaled.
+        let mut prefix: Vec<Vec<f64>> = Vec::with_capacity(k);
+        let mut f = vec![1.0];
+        for c in counts {
+            let mut next = Vec::new();
+            convolve(&f, c, &mut next);
+            normalize_max(&mut next);
+            prefix.push(std::mem::replace(&mut f, next));
+        }
+        // Backward: B_k = π; B_{i−1}(m) = Σ_r c_i[r]·B_i(m + r) over the
+        // counts m the first i − 1 components can reach.
+        let mut back = self.scaled.clone();
+        // Σ of the logs of the scales dropped from `back`: a flushed entry
+        // of an earlier B weighs that much more now.
+        let mut back_drop = 0.0;
+        let mut out = vec![Vec::new(); k];
+        for i in (0..k).rev() {
+            let fi = &prefix[i];
+            let c = counts[i];
+            let mut r: Vec<f64> = (0..c.len())
+                .map(|r| fi.iter().zip(&back[r..]).map(|(x, b)| x * b).sum::<f64>())
+                .collect();
+            if normalize_max(&mut r) + back_drop < FAST_FLOOR_LN {
+                return None;
+            }
+            out[i] = r;
+            if i > 0 {
+                let reach = fi.len();
+                let mut prev: Vec<f64> = (0..reach)
+                    .map(|m| c.iter().zip(&back[m..]).map(|(x, b)| x * b).sum::<f64>())
+                    .collect();
+                back_drop += normalize_max(&mut prev);
+                if back_drop < FAST_FLOOR_LN {
+                    return None;
+                }
+                back = prev;
+            }
+        }
+        Some(out)
+    }
+
+    fn ln_all(&self, counts: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
+        let k = counts.len();
+        let logs: Vec<Vec<f64>> = counts.iter().map(|c| ln_vec(c)).collect();
+        let mut prefix = Vec::with_capacity(k);
+        let mut f = vec![0.0];
+        for c in &logs {
+            let next = ln_convolve(&f, c);
+            prefix.push(std::mem::replace(&mut f, next));
+        }
+        let mut back = self.ln.clone();
+        let mut out = vec![None; k];
+        for i in (0..k).rev() {
+            let fi: &Vec<f64> = &prefix[i];
+            let c = &logs[i];
+            let r: Vec<f64> = (0..c.len())
+                .map(|r| ln_sum_exp(fi.iter().zip(&back[r..]).map(|(x, b)| x + b)))
+                .collect();
+            out[i] = exp_normalized(&r);
+            if i > 0 {
+                back = (0..fi.len())
+                    .map(|m| ln_sum_exp(c.iter().zip(&back[m..]).map(|(x, b)| x + b)))
+                    .collect();
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn brute_leave_one_out(prior: &CountPrior, counts: &[&[f64]], j: usize) -> Vec<f64> {
+        let mut g = vec![1.0];
+        for (i, c) in counts.iter().enumerate() {
+            if i != j {
+                let mut next = Vec::new();
+                convolve(&g, c, &mut next);
+                g = next;
+            }
+        }
+        let mut r: Vec<f64> = (0..counts[j].len())
+            .map(|r| {
+                g.iter()
+                    .enumerate()
+                    .map(|(m, x)| x * prior.ln[m + r].exp())
+                    .sum()
+            })
+            .collect();
+        normalize_max(&mut r);
+        r
+    }
+
+    fn close(a: &[f64], b: &[f64], tol: f64) {
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() <= tol, "{a:?} vs {b:?}");
+        }
+    }
+
+    #[test]
+    fn every_path_agrees_with_brute_force() {
+        let field = Field {
+            tracks: 7,
+            red: RedCount::Unknown {
+                prior: vec![0.1, 0.2, 0.05, 0.3, 0.1, 0.1, 0.1, 0.05],
+            },
+            initial_red: None,
+        };
+        for prior in [
+            CountPrior::new(&field),
+            CountPrior::new(&Field::uniform(7, 3)),
+        ] {
+            let c1 = [0.2, 0.5, 0.3];
+            let c2 = [0.6, 0.4];
+            let c3 = [0.1, 0.0, 0.7, 0.2];
+            let c4 = [0.0, 1.0];
+            let counts: Vec<&[f64]> = vec![&c1, &c2, &c3, &c4];
+            let fast = prior.fast_all(&counts).unwrap();
+            let slow = prior.ln_all(&counts);
+            for j in 0..counts.len() {
+                let want = brute_leave_one_out(&prior, &counts, j);
+                close(&fast[j], &want, 1e-12);
+                close(slow[j].as_ref().unwrap(), &want, 1e-12);
+                close(&prior.fast_leave_one_out(&counts, j).unwrap(), &want, 1e-12);
+                close(&prior.ln_leave_one_out(&counts, j).unwrap(), &want, 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_thousand_tracks_with_unknown_count_stay_finite() {
+        let n = 1000;
+        let field = Field {
+            tracks: n,
+            red: RedCount::unknown_uniform(n),
+            initial_red: None,
+        };
+        let prior = CountPrior::new(&field);
+        let half = [0.5, 0.5];
+        let tilted = [0.9, 0.1];
+        let counts: Vec<&[f64]> = (0..n)
+            .map(|i| if i % 3 == 0 { &tilted[..] } else { &half[..] })
+            .collect();
+        let all = prior.all_leave_one_out(&counts);
+        for r in &all {
+            let r = r.as_ref().unwrap();
+            assert!(r.iter().all(|x| x.is_finite() && *x >= 0.0));
+            assert!((r.iter().copied().fold(0.0, f64::max) - 1.0).abs() < 1e-12);
+        }
+        let one = prior.leave_one_out(&counts, 10).unwrap();
+        close(&one, all[10].as_ref().unwrap(), 1e-9);
+        assert!(prior.ln_total(&counts).is_finite());
+    }
+}

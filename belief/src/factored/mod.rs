@@ -1,0 +1,572 @@
+//! A factored belief: a product of small exact beliefs over groups of tracks,
+//! coupled only through the number of red targets.
+//!
+//! With a known initial assignment, mixing never changes how many red
+//! targets a connected group of mixed tracks holds, so the exact belief
+//! factorizes over the connected components of the mixing graph; with the
+//! uniform prior the components are coupled only through the total count.
+//! [`FactoredBelief`] keeps
+//!
+//! P(x) ∝ Π_C g_C(x ∩ C) · π(|x|),
+//!
+//! where the components C partition the tracks, each g_C is an exact dense
+//! table over all 2^|C| subsets of C (with a log scale), and π(s) is the
+//! prior weight of one red set of size s (k known: [s = k]; k unknown:
+//! p(s)/C(n, s)). See [`counts`] for how the count coupling is evaluated.
+//!
+//! - Mixing tracks of one component is the exact rollup on its table.
+//! - Mixing tracks of two components merges them (outer product, then
+//!   rollup) while the result has at most [`FactoredOptions::max_component`]
+//!   tracks (and the tables fit [`FactoredOptions::max_numbers`]).
+//!   Otherwise the merged table is split back into two by moment matching
+//!   (an M-projection, the assumed-density step of Boyen and Koller; see
+//!   [`split`]), along a partition chosen by [`SplitRule`].
+//! - An observation multiplies the observed track's component table by the
+//!   likelihood. Tracks it leaves certain (marginal within
+//!   [`FactoredOptions::certain`] of 0 or 1) are split off exactly.
+//!
+//! Until the first split the belief is exact: the tables hold the exact
+//! belief of each connected component of the mixing graph.
+
+mod counts;
+mod split;
+mod table;
+
+use crate::error::BeliefError;
+use crate::event::{Field, Mix, Observe};
+use crate::filter::PropertyFilter;
+use counts::CountPrior;
+use split::Weighted;
+use table::Component;
+
+/// The largest `max_component`: merging two components of 12 tracks
+/// materializes a table of 2^24 numbers (128 MiB) before it is split.
+pub const MAX_COMPONENT_LIMIT: usize = 12;
+
+/// How a merged component too large to keep is cut in two.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SplitRule {
+    /// The tracks stay where they were before the mix (the plain
+    /// Boyen–Koller projection onto the old clusters).
+    Original,
+    /// The tracks that mixed most recently (the two just mixed first) stay
+    /// together; the ones that have gone longest without mixing are pushed
+    /// out.
+    Recent,
+    /// Start from [`Recent`](SplitRule::Recent) and the original partition,
+    /// then greedily exchange pairs of tracks between the halves while that
+    /// lowers KL(P‖P′), the information the split loses; at most `rounds`
+    /// exchanges.
+    LeastLoss { rounds: usize },
+}
+
+/// Options of [`FactoredBelief`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FactoredOptions {
+    /// The most tracks one component may hold (1..=[`MAX_COMPONENT_LIMIT`]).
+    /// A component of m tracks stores 2^m numbers.
+    pub max_component: usize,
+    /// The most numbers all tables together may hold after a mix (None = no
+    /// limit beyond `max_component`). Must be at least 2n.
+    pub max_numbers: Option<usize>,
+    pub split: SplitRule,
+    /// L1 tolerance of the moment matching on the marginals it preserves.
+    pub tolerance: f64,
+    /// Sinkhorn sweeps of the moment matching before it switches to Newton
+    /// steps (which reach solutions at infinity quickly); if those fail too
+    /// the mix reports [`BeliefError::Numerical`].
+    pub max_sweeps: usize,
+    /// A track whose marginal is within this of 0 or 1 after an observation
+    /// or before a split is split off as certain.
+    pub certain: f64,
+}
+
+impl Default for FactoredOptions {
+    fn default() -> Self {
+        FactoredOptions {
+            max_component: 8,
+            max_numbers: None,
+            split: SplitRule::Recent,
+            tolerance: 1e-12,
+            max_sweeps: 200,
+            certain: 1e-12,
+        }
+    }
+}
+
+impl FactoredOptions {
+    pub fn validate(&self, tracks: usize) -> Result<(), BeliefError> {
+        let unsupported = |what| {
+            Err(BeliefError::Unsupported {
+                method: "factored",
+                what,
+            })
+        };
+        if !(1..=MAX_COMPONENT_LIMIT).contains(&self.max_component) {
+            return unsupported("a max_component outside 1..=12");
+        }
+        if self.max_numbers.is_some_and(|m| m < 2 * tracks) {
+            return unsupported("a max_numbers below 2 per track");
+        }
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) || self.max_sweeps == 0 {
+            return unsupported("a non-positive tolerance or sweep limit");
+        }
+        if !(0.0..0.5).contains(&self.certain) {
+            return unsupported("a certainty margin outside [0, 0.5)");
+        }
+        Ok(())
+    }
+}
+
+/// Counters of what the belief did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FactoredStats {
+    pub events: u64,
+    /// Mixes that merged two components into one.
+    pub merges: u64,
+    /// Mixes that merged two components and split them by moment matching.
+    pub splits: u64,
+    /// Tracks split off because they became certain.
+    pub certain_splits: u64,
+    /// Σ KL(P‖P′) over the splits where it was computed (LeastLoss).
+    pub split_loss: f64,
+    /// The most iterations (Sinkhorn sweeps + Newton steps) one moment
+    /// matching needed.
+    pub max_sweeps: usize,
+    pub max_coefficients: usize,
+    pub max_component: usize,
+}
+
+/// The factored belief (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct FactoredBelief {
+    field: Field,
+    options: FactoredOptions,
+    prior: CountPrior,
+    comps: Vec<Component>,
+    /// (component, local bit) of every track.
+    home: Vec<(usize, usize)>,
+    /// When each track last mixed (event number), for [`SplitRule::Recent`].
+    last_mix: Vec<u64>,
+    stats: FactoredStats,
+}
+
+impl FactoredBelief {
+    /// Every track its own component, with the default options.
+    pub fn new(field: Field) -> Result<Self, BeliefError> {
+        Self::with_options(field, FactoredOptions::default())
+    }
+
+    pub fn with_options(field: Field, options: FactoredOptions) -> Result<Self, BeliefError> {
+        field.validate()?;
+        options.validate(field.tracks)?;
+        let n = field.tracks;
+        let comps: Vec<Component> = match &field.initial_red {
+            Some(red) => {
+                let mut is_red = vec![false; n];
+                for &t in red {
+                    is_red[t as usize] = true;
+                }
+                (0..n as u32)
+                    .map(|t| {
+                        if is_red[t as usize] {
+                            Component::singleton(t, 0.0, 1.0)
+                        } else {
+                            Component::singleton(t, 1.0, 0.0)
+                        }
+                    })
+                    .collect()
+            }
+            None => (0..n as u32)
+                .map(|t| Component::singleton(t, 1.0, 1.0))
+                .collect(),
+        };
+        let prior = CountPrior::new(&field);
+        let mut belief = FactoredBelief {
+            field,
+            options,
+            prior,
+            comps,
+            home: vec![(0, 0); n],
+            last_mix: vec![0; n],
+            stats: FactoredStats::default(),
+        };
+        belief.rehome();
+        belief.note_size();
+        Ok(belief)
+    }
+
+    pub fn options(&self) -> &FactoredOptions {
+        &self.options
+    }
+
+    pub fn stats(&self) -> &FactoredStats {
+        &self.stats
+    }
+
+    /// The current partition of the tracks, each component in its local
+    /// order.
+    pub fn components(&self) -> Vec<Vec<u32>> {
+        self.comps.iter().map(|c| c.tracks.clone()).collect()
+    }
+
+    /// ln Z, Z = Σ_x f(x) of the unnormalized belief: the prior mass times
+    /// the likelihood of every observation so far (the meaning of
+    /// [`DenseFilter::log_normalizer`](crate::DenseFilter::log_normalizer));
+    /// exact until the first split, after which each split keeps the mass
+    /// of what it replaces.
+    pub fn log_normalizer(&self) -> f64 {
+        let scales: f64 = self.comps.iter().map(|c| c.log_scale).sum();
+        scales + self.prior.ln_total(&self.count_refs())
+    }
+
+    /// P(every track of `tracks` is red). Repeated tracks count once.
+    pub fn prob_all_red(&self, tracks: &[u32]) -> Result<f64, BeliefError> {
+        let mut need = vec![0usize; self.comps.len()];
+        for &t in tracks {
+            self.field.check_track(t)?;
+            let (c, bit) = self.home[t as usize];
+            need[c] |= 1 << bit;
+        }
+        let all = self.count_refs();
+        let total = self.prior.ln_total(&all);
+        if total == f64::NEG_INFINITY || total.is_nan() {
+            return Err(BeliefError::Degenerate { normalizer: 0.0 });
+        }
+        let held: Vec<Vec<f64>> = self
+            .comps
+            .iter()
+            .zip(&need)
+            .map(|(c, &m)| {
+                if m == 0 {
+                    Vec::new()
+                } else {
+                    c.counts_holding(m)
+                }
+            })
+            .collect();
+        let restricted: Vec<&[f64]> = self
+            .comps
+            .iter()
+            .zip(&held)
+            .map(|(c, h)| if h.is_empty() { &c.counts[..] } else { &h[..] })
+            .collect();
+        Ok((self.prior.ln_total(&restricted) - total).exp().min(1.0))
+    }
+
+    /// P(exactly j tracks are red) for j = 0..=n.
+    pub fn count_posterior(&self) -> Result<Vec<f64>, BeliefError> {
+        self.prior
+            .count_posterior(&self.count_refs())
+            .ok_or(BeliefError::Degenerate { normalizer: 0.0 })
+    }
+
+    fn count_refs(&self) -> Vec<&[f64]> {
+        self.comps.iter().map(|c| &c.counts[..]).collect()
+    }
+
+    fn rehome(&mut self) {
+        for (ci, c) in self.comps.iter().enumerate() {
+            for (bit, &t) in c.tracks.iter().enumerate() {
+                self.home[t as usize] = (ci, bit);
+            }
+        }
+    }
+
+    fn note_size(&mut self) {
+        self.stats.max_coefficients = self.stats.max_coefficients.max(self.coefficients());
+        let largest = self.comps.iter().map(|c| c.len()).max().unwrap_or(0);
+        self.stats.max_component = self.stats.max_component.max(largest);
+    }
+
+    /// Replaces the components at `remove` by `add`.
+    fn replace(&mut self, remove: &[usize], add: Vec<Component>) {
+        let mut remove = remove.to_vec();
+        remove.sort_unstable_by(|a, b| b.cmp(a));
+        for i in remove {
+            self.comps.swap_remove(i);
+        }
+        self.comps.extend(add);
+        self.rehome();
+    }
+
+    /// The certain local bits of a component whose bit marginals are `m`.
+    fn certain_bits(&self, m: &[f64]) -> Vec<(usize, bool)> {
+        if m.len() < 2 {
+            return Vec::new();
+        }
+        let eps = self.options.certain;
+        m.iter()
+            .enumerate()
+            .filter_map(|(b, &p)| {
+                if p <= eps {
+                    Some((b, false))
+                } else if p >= 1.0 - eps {
+                    Some((b, true))
+                } else {
+                    None
+                }
+            })
+            .collect()
+    }
+
+    /// The mix of two tracks in different components (0 < swap < 1).
+    fn mix_across(&mut self, mix: Mix) -> Result<(), BeliefError> {
+        let (ca, ba) = self.home[mix.a as usize];
+        let (cb, bb) = self.home[mix.b as usize];
+        let (c1, c2) = (&self.comps[ca], &self.comps[cb]);
+        if c1.len() == 1 && c2.len() == 1 && c1.table == c2.table {
+            // Two interchangeable tracks: the mix changes nothing.
+            return Ok(());
+        }
+        let mut merged = c1.outer(c2);
+        merged.rollup(ba, c1.len() + bb, mix.swap);
+        let others = self.coefficients() - c1.table.len() - c2.table.len();
+        let (max, budget) = (self.options.max_component, self.options.max_numbers);
+        let fits = |size: usize, extra: usize| {
+            size <= max && budget.is_none_or(|b| others + extra + (1usize << size) <= b)
+        };
+        if fits(merged.len(), 0) {
+            self.stats.merges += 1;
+            self.replace(&[ca, cb], vec![merged]);
+            return Ok(());
+        }
+        // The weight Q of the merged red count from everything else.
+        let mut counts: Vec<&[f64]> = (self.comps.iter().enumerate())
+            .filter(|&(i, _)| i != ca && i != cb)
+            .map(|(_, c)| &c.counts[..])
+            .collect();
+        counts.push(&merged.counts);
+        let last = counts.len() - 1;
+        let mut q = self
+            .prior
+            .leave_one_out(&counts, last)
+            .ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
+        drop(counts);
+        let mut pieces = Vec::new();
+        // Tracks the mix left certain leave exactly.
+        let fixed = {
+            let weighted = Weighted::new(&merged, &q)?;
+            self.certain_bits(&weighted.marginals())
+        };
+        if !fixed.is_empty() && fixed.len() < merged.len() {
+            let (rest, singles) = merged.restrict(&fixed)?;
+            let shift = fixed.iter().filter(|f| f.1).count();
+            q = q[shift..shift + rest.len() + 1].to_vec();
+            merged = rest;
+            self.stats.certain_splits += singles.len() as u64;
+            pieces = singles;
+        }
+        let extra = 2 * pieces.len();
+        if fits(merged.len(), extra) {
+            self.stats.merges += 1;
+            pieces.push(merged);
+            self.replace(&[ca, cb], pieces);
+            return Ok(());
+        }
+        let weighted = Weighted::new(&merged, &q)?;
+        let side_a: usize = merged
+            .tracks
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| self.home[**t as usize].0 == ca)
+            .map(|(b, _)| 1usize << b)
+            .sum();
+        let projection = self.choose_split(&weighted, &merged, side_a, others + extra, mix)?;
+        self.stats.splits += 1;
+        self.stats.max_sweeps = self.stats.max_sweeps.max(projection.sweeps);
+        if projection.kl.is_finite() {
+            self.stats.split_loss += projection.kl;
+        }
+        pieces.push(projection.a);
+        pieces.push(projection.b);
+        self.replace(&[ca, cb], pieces);
+        Ok(())
+    }
+
+    /// The size of the first half of a split of m tracks: the largest that
+    /// keeps both halves within `max_component` and the tables within
+    /// `max_numbers`, else an even split.
+    fn split_size(&self, m: usize, others: usize) -> usize {
+        let max = self.options.max_component;
+        let lo = m.div_ceil(2);
+        let hi = max.min(m - 1);
+        (lo..=hi)
+            .rev()
+            .find(|&a| {
+                m - a <= max
+                    && self
+                        .options
+                        .max_numbers
+                        .is_none_or(|b| others + (1usize << a) + (1usize << (m - a)) <= b)
+            })
+            .unwrap_or(lo)
+    }
+
+    fn choose_split(
+        &self,
+        weighted: &Weighted,
+        merged: &Component,
+        original: usize,
+        others: usize,
+        mix: Mix,
+    ) -> Result<split::Projection, BeliefError> {
+        let m = merged.len();
+        let (tol, sweeps) = (self.options.tolerance, self.options.max_sweeps);
+        let original_ok = {
+            let a = original.count_ones() as usize;
+            a > 0 && a < m && a <= self.options.max_component && m - a <= self.options.max_component
+        };
+        let recent = || {
+            let size = self.split_size(m, others);
+            let mut order: Vec<usize> = (0..m).collect();
+            order.sort_by_key(|&b| {
+                let t = merged.tracks[b];
+                let when = if t == mix.a || t == mix.b {
+                    u64::MAX
+                } else {
+                    self.last_mix[t as usize]
+                };
+                (std::cmp::Reverse(when), t)
+            });
+            order[..size].iter().map(|&b| 1usize << b).sum::<usize>()
+        };
+        match self.options.split {
+            SplitRule::Original if original_ok => weighted.project(original, tol, sweeps, false),
+            SplitRule::Original | SplitRule::Recent => {
+                weighted.project(recent(), tol, sweeps, false)
+            }
+            SplitRule::LeastLoss { rounds } => {
+                let start = recent();
+                let mut best = weighted.project(start, tol, sweeps, true)?;
+                let mut best_part = start;
+                if original_ok && original != start && (!original & ((1 << m) - 1)) != start {
+                    let p = weighted.project(original, tol, sweeps, true)?;
+                    if p.kl < best.kl {
+                        best = p;
+                        best_part = original;
+                    }
+                }
+                for _ in 0..rounds {
+                    let mut improved = None;
+                    let mut improved_kl = best.kl;
+                    for i in (0..m).filter(|i| best_part & (1 << i) != 0) {
+                        for j in (0..m).filter(|j| best_part & (1 << j) == 0) {
+                            let part = best_part ^ (1 << i) ^ (1 << j);
+                            let p = weighted.project(part, tol, sweeps, true)?;
+                            if p.kl < improved_kl - 1e-12 {
+                                improved_kl = p.kl;
+                                improved = Some((part, p));
+                            }
+                        }
+                    }
+                    match improved {
+                        Some((part, p)) => {
+                            best_part = part;
+                            best = p;
+                        }
+                        None => break,
+                    }
+                }
+                Ok(best)
+            }
+        }
+    }
+}
+
+impl PropertyFilter for FactoredBelief {
+    fn field(&self) -> &Field {
+        &self.field
+    }
+
+    fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
+        self.field.check_mix(&mix)?;
+        if mix.swap == 0.0 {
+            self.stats.events += 1;
+            return Ok(());
+        }
+        let (a, b) = (mix.a as usize, mix.b as usize);
+        let (ca, ba) = self.home[a];
+        let (cb, bb) = self.home[b];
+        if mix.swap == 1.0 {
+            // The targets certainly exchanged tracks: relabel.
+            self.comps[ca].tracks[ba] = mix.b;
+            self.comps[cb].tracks[bb] = mix.a;
+            self.home.swap(a, b);
+        } else if ca == cb {
+            self.comps[ca].rollup(ba, bb, mix.swap);
+        } else {
+            self.mix_across(mix)?;
+        }
+        self.stats.events += 1;
+        self.last_mix[a] = self.stats.events;
+        self.last_mix[b] = self.stats.events;
+        self.note_size();
+        Ok(())
+    }
+
+    fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        self.field.check_observe(&observe)?;
+        let (c, bit) = self.home[observe.track as usize];
+        let comp = &self.comps[c];
+        let table = comp.observed(bit, observe.red, observe.blue);
+        let new_counts = table::counts_of(&table, comp.len());
+        let r = self
+            .prior
+            .leave_one_out(&self.count_refs(), c)
+            .ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
+        let dot = |v: &[f64]| v.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
+        let (before, after) = (dot(&comp.counts), dot(&new_counts));
+        if !(after > 0.0) {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: if before > 0.0 { after / before } else { 0.0 },
+            });
+        }
+        let updated = Component::from_table(comp.tracks.clone(), table, comp.log_scale)?;
+        let (m, _) = updated.weighted_marginals(&r);
+        let fixed = self.certain_bits(&m);
+        if !fixed.is_empty() {
+            let (rest, singles) = if fixed.len() == updated.len() {
+                // Everything certain: keep one track as the rest.
+                let (rest, singles) = updated.restrict(&fixed[1..])?;
+                (rest, singles)
+            } else {
+                updated.restrict(&fixed)?
+            };
+            self.stats.certain_splits += singles.len() as u64;
+            let mut add = singles;
+            add.push(rest);
+            self.replace(&[c], add);
+        } else {
+            self.comps[c] = updated;
+        }
+        self.stats.events += 1;
+        self.note_size();
+        Ok(())
+    }
+
+    fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
+        let all = self.prior.all_leave_one_out(&self.count_refs());
+        let mut out = vec![0.0; self.field.tracks];
+        for (c, r) in self.comps.iter().zip(all) {
+            let r = r.ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
+            let (m, total) = c.weighted_marginals(&r);
+            if !(total > 0.0) {
+                return Err(BeliefError::Degenerate { normalizer: total });
+            }
+            for (&t, p) in c.tracks.iter().zip(m) {
+                out[t as usize] = p.clamp(0.0, 1.0);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Σ_C 2^|C|: the numbers in the tables (the per-component log scales
+    /// and count vectors are derived bookkeeping and not counted).
+    fn coefficients(&self) -> usize {
+        self.comps.iter().map(|c| c.table.len()).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,538 @@
+//! Splitting one table into two by moment matching (an M-projection, the
+//! assumed-density step of Boyen–Koller).
+//!
+//! The merged component M has table g over x ⊆ M, and everything else weighs
+//! its red count s through Q(s) (the other components and π), so its part of
+//! the belief is P(x) ∝ g(x)·Q(|x|). For a partition M = A ∪ B we look for
+//! g_A, g_B with P′(x) ∝ g_A(x_A)·g_B(x_B)·Q(|x_A| + |x_B|) having the same
+//! marginals on x_A and on x_B as P: the closest such product in KL(P‖P′).
+//!
+//! P′(x_A) = g_A(x_A)·H_B(|x_A|) with H_B(r) = Σ_q c_B[q]·Q(r + q), so within
+//! a count class g_A must be proportional to P(x_A): g_A(x_A) = P(x_A)·α_r,
+//! g_B(x_B) = P(x_B)·β_q, r = |x_A|, q = |x_B|. What is left is a matrix
+//! scaling problem on the (|A|+1)×(|B|+1) kernel K[r][q] = Q(r + q): find
+//! u_r = p_A[r]·α_r, v_q = p_B[q]·β_q such that diag(u)·K·diag(v) has row
+//! sums p_A and column sums p_B (the count marginals of P). Iterative
+//! proportional fitting on the tables reduces to Sinkhorn on this kernel, so
+//! a sweep costs O(|A|·|B|); the tables are touched once before and once
+//! after. The problem is feasible (P's own joint count table is a solution
+//! pattern), so Sinkhorn converges; it stops at an L1 error of `tolerance` on
+//! the count marginals, which is also the L1 error of P′(x_A) against P(x_A).
+
+use super::table::Component;
+use crate::error::BeliefError;
+
+/// P(x) ∝ g(x)·Q(|x|) over a merged table, with what every projection of it
+/// needs.
+#[derive(Debug, Clone)]
+pub(crate) struct Weighted<'a> {
+    merged: &'a Component,
+    q: &'a [f64],
+    /// g(x)·Q(|x|).
+    w: Vec<f64>,
+    total: f64,
+}
+
+/// The two halves of a split and how good it is.
+#[derive(Debug, Clone)]
+pub(crate) struct Projection {
+    pub(crate) a: Component,
+    pub(crate) b: Component,
+    /// KL(P‖P′) in nats when asked for, else NaN.
+    pub(crate) kl: f64,
+    pub(crate) sweeps: usize,
+}
+
+/// pext: the bits of x selected by `mask`, packed low.
+fn gather(x: usize, mask: usize) -> usize {
+    let (mut out, mut bit, mut m) = (0usize, 0, mask);
+    while m != 0 {
+        let low = m & m.wrapping_neg();
+        if x & low != 0 {
+            out |= 1 << bit;
+        }
+        bit += 1;
+        m ^= low;
+    }
+    out
+}
+
+/// Lookup tables so that gather(x, mask) = low[x & lo_mask] + high[x >> half].
+struct Gather {
+    half: usize,
+    low: Vec<usize>,
+    high: Vec<usize>,
+}
+
+impl Gather {
+    fn new(mask: usize, bits: usize) -> Self {
+        let half = bits / 2;
+        let lo_mask = (1usize << half) - 1;
+        let shift = (mask & lo_mask).count_ones();
+        let low = (0..1usize << half)
+            .map(|x| gather(x, mask & lo_mask))
+            .collect();
+        let high = (0..1usize << (bits - half))
+            .map(|x| gather(x, mask >> half) << shift)
+            .collect();
+        Gather { half, low, high }
+    }
+}
+
+/// Calls visit(x, index in A, index in B) for every x over `bits` bits.
+fn for_each_split(bits: usize, part_a: usize, mut visit: impl FnMut(usize, usize, usize)) {
+    let part_b = ((1usize << bits) - 1) & !part_a;
+    let ga = Gather::new(part_a, bits);
+    let gb = Gather::new(part_b, bits);
+    let lows = ga.low.len();
+    for (h, (&ha, &hb)) in ga.high.iter().zip(&gb.high).enumerate() {
+        let base = h << ga.half;
+        for l in 0..lows {
+            visit(base + l, ha + ga.low[l], hb + gb.low[l]);
+        }
+    }
+    debug_assert_eq!(ga.half, gb.half);
+}
+
+impl<'a> Weighted<'a> {
+    /// `q[s]` for s = 0..=|M|, the weight of the merged red count.
+    pub(crate) fn new(merged: &'a Component, q: &'a [f64]) -> Result<Self, BeliefError> {
+        debug_assert_eq!(q.len(), merged.len() + 1);
+        let w: Vec<f64> = merged
+            .table
+            .iter()
+            .enumerate()
+            .map(|(x, &g)| g * q[x.count_ones() as usize])
+            .collect();
+        let total: f64 = w.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return Err(BeliefError::Degenerate { normalizer: total });
+        }
+        Ok(Weighted {
+            merged,
+            q,
+            w,
+            total,
+        })
+    }
+
+    /// P(bit i set) for every local bit of the merged table.
+    pub(crate) fn marginals(&self) -> Vec<f64> {
+        (0..self.merged.len())
+            .map(|i| {
+                let half = 1usize << i;
+                let s: f64 = self
+                    .w
+                    .chunks_exact(2 * half)
+                    .map(|b| b[half..].iter().sum::<f64>())
+                    .sum();
+                s / self.total
+            })
+            .collect()
+    }
+
+    /// The M-projection onto A = the local bits in `part_a` and B = the
+    /// rest: at most `max_sweeps` Sinkhorn sweeps, then Newton steps. Fails
+    /// with [`BeliefError::Numerical`] if the marginals are not matched to
+    /// `tolerance` in the end.
+    pub(crate) fn project(
+        &self,
+        part_a: usize,
+        tolerance: f64,
+        max_sweeps: usize,
+        want_kl: bool,
+    ) -> Result<Projection, BeliefError> {
+        let bits = self.merged.len();
+        let part_b = ((1usize << bits) - 1) & !part_a;
+        let (na, nb) = (part_a.count_ones() as usize, part_b.count_ones() as usize);
+        debug_assert!(na > 0 && nb > 0);
+        // Marginal tables of P on x_A and x_B.
+        let mut pa = vec![0.0; 1 << na];
+        let mut pb = vec![0.0; 1 << nb];
+        for_each_split(bits, part_a, |x, ia, ib| {
+            pa[ia] += self.w[x];
+            pb[ib] += self.w[x];
+        });
+        for p in pa.iter_mut().chain(pb.iter_mut()) {
+            *p /= self.total;
+        }
+        let count_a = super::table::counts_of(&pa, na);
+        let count_b = super::table::counts_of(&pb, nb);
+        let (alpha, beta, sweeps) =
+            scale_counts(self.q, &count_a, &count_b, tolerance, max_sweeps)?;
+        let ga: Vec<f64> = pa
+            .iter()
+            .enumerate()
+            .map(|(y, &p)| p * alpha[y.count_ones() as usize])
+            .collect();
+        let gb: Vec<f64> = pb
+            .iter()
+            .enumerate()
+            .map(|(y, &p)| p * beta[y.count_ones() as usize])
+            .collect();
+        // S′ = Σ g_A·g_B·Q, through the count vectors.
+        let ca = super::table::counts_of(&ga, na);
+        let cb = super::table::counts_of(&gb, nb);
+        let mut s_prime = 0.0;
+        for (r, &x) in ca.iter().enumerate() {
+            for (q, &y) in cb.iter().enumerate() {
+                s_prime += x * y * self.q[r + q];
+            }
+        }
+        let kl = if want_kl {
+            let mut kl = 0.0;
+            let ln_t = self.total.ln();
+            let ln_s = s_prime.ln();
+            for_each_split(bits, part_a, |x, ia, ib| {
+                let w = self.w[x];
+                if w > 0.0 {
+                    let p = w.ln() - ln_t;
+                    let p_prime = (ga[ia] * gb[ib] * self.q[x.count_ones() as usize]).ln() - ln_s;
+                    kl += (w / self.total) * (p - p_prime);
+                }
+            });
+            kl.max(0.0)
+        } else {
+            f64::NAN
+        };
+        let tracks_of = |mask: usize| -> Vec<u32> {
+            (0..bits)
+                .filter(|b| mask & (1 << b) != 0)
+                .map(|b| self.merged.tracks[b])
+                .collect()
+        };
+        // Keep the mass this component contributes: e^L·Σ g·Q.
+        let scale = self.merged.log_scale + self.total.ln() - s_prime.ln();
+        let a = Component::from_table(tracks_of(part_a), ga, scale)?;
+        let b = Component::from_table(tracks_of(part_b), gb, 0.0)?;
+        Ok(Projection { a, b, kl, sweeps })
+    }
+}
+
+/// Count-space IPF: α_r, β_q such that J[r][q] = p_A[r]·α_r·K[r][q]·β_q·p_B[q],
+/// K[r][q] = Q(r + q), has row sums p_A and column sums p_B to `tolerance`
+/// (L1 over both). Returns (α, β, iterations).
+///
+/// Sinkhorn sweeps first (`max_sweeps` at most). They converge linearly when
+/// the solution is interior, but only as O(1/t) when it lies at infinity:
+/// when the merged table's own count support is narrower than Q allows (a
+/// mix of a certain track, say), every matrix with these margins has zeros
+/// where K has none, and the product family reaches them only in the limit.
+/// Then a damped Newton method on the convex dual
+/// F(x, y) = Σ K[r][q]·e^{x_r + y_q} − Σ p_A·x − Σ p_B·y finishes the job:
+/// along an escape direction F behaves like e^{−t} and Newton steps by a
+/// constant, so the error falls geometrically.
+fn scale_counts(
+    q: &[f64],
+    pa: &[f64],
+    pb: &[f64],
+    tolerance: f64,
+    max_sweeps: usize,
+) -> Result<(Vec<f64>, Vec<f64>, usize), BeliefError> {
+    let k = |r: usize, s: usize| q[r + s];
+    let mut u = vec![0.0; pa.len()];
+    let mut v: Vec<f64> = pb
+        .iter()
+        .map(|&p| if p > 0.0 { 1.0 } else { 0.0 })
+        .collect();
+    let infeasible = |what: &str| BeliefError::Numerical {
+        step: "factored split",
+        detail: format!("the count marginal of {what} is not reachable under the count weights"),
+    };
+    let mut sweeps = 0;
+    let mut err = f64::INFINITY;
+    while sweeps < max_sweeps {
+        sweeps += 1;
+        for (r, ur) in u.iter_mut().enumerate() {
+            let kv: f64 = v.iter().enumerate().map(|(s, &vs)| k(r, s) * vs).sum();
+            *ur = if pa[r] > 0.0 {
+                if !(kv > 0.0 && kv.is_finite()) {
+                    return Err(infeasible("A"));
+                }
+                pa[r] / kv
+            } else {
+                0.0
+            };
+        }
+        // v from u: the columns match exactly; the rows are off by `err`.
+        for (s, vs) in v.iter_mut().enumerate() {
+            let ku: f64 = u.iter().enumerate().map(|(r, &ur)| k(r, s) * ur).sum();
+            *vs = if pb[s] > 0.0 {
+                if !(ku > 0.0 && ku.is_finite()) {
+                    return Err(infeasible("B"));
+                }
+                pb[s] / ku
+            } else {
+                0.0
+            };
+        }
+        err = u
+            .iter()
+            .enumerate()
+            .map(|(r, &ur)| {
+                let kv: f64 = v.iter().enumerate().map(|(s, &vs)| k(r, s) * vs).sum();
+                (ur * kv - pa[r]).abs()
+            })
+            .sum();
+        if err <= tolerance {
+            break;
+        }
+    }
+    let (mut x, mut y): (Vec<f64>, Vec<f64>) = (
+        u.iter().map(|v| v.ln()).collect(),
+        v.iter().map(|v| v.ln()).collect(),
+    );
+    let mut iterations = sweeps;
+    if !(err <= tolerance) {
+        iterations += newton(q, pa, pb, &mut x, &mut y, tolerance)?;
+    }
+    let alpha = x
+        .iter()
+        .zip(pa)
+        .map(|(&x, &p)| if p > 0.0 { x.exp() / p } else { 0.0 })
+        .collect();
+    let beta = y
+        .iter()
+        .zip(pb)
+        .map(|(&y, &p)| if p > 0.0 { y.exp() / p } else { 0.0 })
+        .collect();
+    Ok((alpha, beta, iterations))
+}
+
+/// Most Newton steps before giving up.
+const MAX_NEWTON: usize = 200;
+
+/// Damped Newton on the dual of the scaling problem, from (x, y) = (ln u,
+/// ln v); rows and columns with zero target stay at −∞. The last live
+/// column is held fixed (the gauge x + c, y − c changes nothing).
+fn newton(
+    q: &[f64],
+    pa: &[f64],
+    pb: &[f64],
+    x: &mut [f64],
+    y: &mut [f64],
+    tolerance: f64,
+) -> Result<usize, BeliefError> {
+    use nalgebra::{DMatrix, DVector};
+    let rows: Vec<usize> = (0..pa.len()).filter(|&r| pa[r] > 0.0).collect();
+    let cols: Vec<usize> = (0..pb.len()).filter(|&s| pb[s] > 0.0).collect();
+    let free_cols = &cols[..cols.len() - 1];
+    let dim = rows.len() + free_cols.len();
+    let lnk: Vec<f64> = q.iter().map(|v| v.ln()).collect();
+    // J, its margins, and F at (x, y).
+    let eval = |x: &[f64], y: &[f64]| {
+        let mut j = vec![vec![0.0; pb.len()]; pa.len()];
+        let mut f = 0.0;
+        for &r in &rows {
+            for &s in &cols {
+                let e = (lnk[r + s] + x[r] + y[s]).exp();
+                j[r][s] = e;
+                f += e;
+            }
+            f -= pa[r] * x[r];
+        }
+        for &s in &cols {
+            f -= pb[s] * y[s];
+        }
+        (j, f)
+    };
+    let margins_error = |j: &[Vec<f64>]| -> (Vec<f64>, Vec<f64>, f64) {
+        let rs: Vec<f64> = j.iter().map(|row| row.iter().sum()).collect();
+        let cs: Vec<f64> = (0..pb.len())
+            .map(|s| j.iter().map(|row| row[s]).sum())
+            .collect();
+        let err = rs.iter().zip(pa).map(|(a, b)| (a - b).abs()).sum::<f64>()
+            + cs.iter().zip(pb).map(|(a, b)| (a - b).abs()).sum::<f64>();
+        (rs, cs, err)
+    };
+    let (mut j, mut f) = eval(x, y);
+    for step in 1..=MAX_NEWTON {
+        let (rs, cs, err) = margins_error(&j);
+        if err <= tolerance {
+            return Ok(step - 1);
+        }
+        if !f.is_finite() {
+            break;
+        }
+        let mut grad = DVector::zeros(dim);
+        let mut hess = DMatrix::zeros(dim, dim);
+        for (i, &r) in rows.iter().enumerate() {
+            grad[i] = rs[r] - pa[r];
+            hess[(i, i)] = rs[r];
+            for (l, &s) in free_cols.iter().enumerate() {
+                hess[(i, rows.len() + l)] = j[r][s];
+                hess[(rows.len() + l, i)] = j[r][s];
+            }
+        }
+        for (l, &s) in free_cols.iter().enumerate() {
+            grad[rows.len() + l] = cs[s] - pb[s];
+            hess[(rows.len() + l, rows.len() + l)] = cs[s];
+        }
+        // A whisper of damping keeps the system solvable when some
+        // directions have (numerically) no curvature left.
+        let mut lambda = 1e-16;
+        let dir = loop {
+            let mut h = hess.clone();
+            for i in 0..dim {
+                h[(i, i)] += lambda;
+            }
+            if let Some(ch) = h.cholesky() {
+                break -ch.solve(&grad);
+            }
+            lambda *= 100.0;
+            if lambda > 1.0 {
+                break -grad.clone();
+            }
+        };
+        let slope = grad.dot(&dir);
+        let mut t = 1.0;
+        let mut moved = false;
+        for _ in 0..80 {
+            let (mut nx, mut ny) = (x.to_vec(), y.to_vec());
+            for (i, &r) in rows.iter().enumerate() {
+                nx[r] += t * dir[i];
+            }
+            for (l, &s) in free_cols.iter().enumerate() {
+                ny[s] += t * dir[rows.len() + l];
+            }
+            let (nj, nf) = eval(&nx, &ny);
+            if nf.is_finite() && nf <= f + 1e-4 * t * slope {
+                x.copy_from_slice(&nx);
+                y.copy_from_slice(&ny);
+                (j, f) = (nj, nf);
+                moved = true;
+                break;
+            }
+            t /= 2.0;
+        }
+        if !moved {
+            break;
+        }
+    }
+    let (_, _, err) = margins_error(&j);
+    if err <= tolerance {
+        return Ok(MAX_NEWTON);
+    }
+    Err(BeliefError::Numerical {
+        step: "factored split",
+        detail: format!(
+            "moment matching did not converge: L1 error {err:e} on the count marginals"
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn gather_packs_selected_bits() {
+        assert_eq!(gather(0b1011, 0b1010), 0b11);
+        assert_eq!(gather(0b0100, 0b1110), 0b010);
+        let g = Gather::new(0b10110, 5);
+        for x in 0..32 {
+            assert_eq!(g.low[x & 0b11] + g.high[x >> 2], gather(x, 0b10110));
+        }
+    }
+
+    fn marginal(table: &[f64], q: &[f64], bits: usize, part: usize) -> Vec<f64> {
+        let mut out = vec![0.0; 1 << part.count_ones()];
+        let mut total = 0.0;
+        for x in 0..1usize << bits {
+            let w = table[x] * q[x.count_ones() as usize];
+            out[gather(x, part)] += w;
+            total += w;
+        }
+        out.iter().map(|v| v / total).collect()
+    }
+
+    /// The projection keeps both marginal tables of P(x) ∝ g(x)·Q(|x|).
+    #[test]
+    fn projection_preserves_both_marginals_on_random_tables() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for case in 0..200 {
+            let bits = rng.gen_range(2..=9);
+            let table: Vec<f64> = (0..1 << bits)
+                .map(|_| {
+                    if rng.gen::<f64>() < 0.1 {
+                        0.0
+                    } else {
+                        rng.gen()
+                    }
+                })
+                .collect();
+            let mut q: Vec<f64> = (0..=bits).map(|_| rng.gen::<f64>()).collect();
+            if case % 3 == 0 {
+                // A count window, as with k known.
+                let lo = rng.gen_range(0..=bits);
+                for (s, x) in q.iter_mut().enumerate() {
+                    if s < lo || s > lo + 2 {
+                        *x = 0.0;
+                    }
+                }
+            }
+            let tracks: Vec<u32> = (0..bits as u32).collect();
+            let Ok(merged) = Component::from_table(tracks, table, 0.0) else {
+                continue;
+            };
+            let Ok(weighted) = Weighted::new(&merged, &q) else {
+                continue;
+            };
+            let part_a = rng.gen_range(1..(1usize << bits) - 1);
+            let part_b = ((1 << bits) - 1) & !part_a;
+            let p = weighted.project(part_a, 1e-12, 100_000, true).unwrap();
+            // Rebuild P′ over the merged order.
+            let mut prime = vec![0.0; 1 << bits];
+            for (x, v) in prime.iter_mut().enumerate() {
+                *v = p.a.table[gather(x, part_a)] * p.b.table[gather(x, part_b)];
+            }
+            for (want, got) in [
+                (
+                    marginal(&merged.table, &q, bits, part_a),
+                    marginal(&prime, &q, bits, part_a),
+                ),
+                (
+                    marginal(&merged.table, &q, bits, part_b),
+                    marginal(&prime, &q, bits, part_b),
+                ),
+            ] {
+                for (x, y) in want.iter().zip(&got) {
+                    assert!((x - y).abs() < 1e-9, "case {case}: {want:?} vs {got:?}");
+                }
+            }
+            assert!(p.kl >= 0.0);
+            // The mass the component contributes is kept.
+            let mass = |t: &[f64], ln: f64| {
+                ln + t
+                    .iter()
+                    .enumerate()
+                    .map(|(x, g)| g * q[x.count_ones() as usize])
+                    .sum::<f64>()
+                    .ln()
+            };
+            let before = mass(&merged.table, merged.log_scale);
+            let after = mass(&prime, p.a.log_scale + p.b.log_scale);
+            assert!((before - after).abs() < 1e-9, "case {case}");
+        }
+    }
+
+    /// A product table is its own projection, with KL 0.
+    #[test]
+    fn a_product_is_a_fixed_point() {
+        let a = Component::from_table(vec![0, 1], vec![0.1, 0.2, 0.3, 0.4], 0.0).unwrap();
+        let b = Component::from_table(vec![2, 3], vec![0.4, 0.1, 0.3, 0.2], 0.0).unwrap();
+        let merged = a.outer(&b);
+        let q = [0.0, 0.5, 1.0, 0.7, 0.0];
+        let weighted = Weighted::new(&merged, &q).unwrap();
+        let p = weighted.project(0b0011, 1e-12, 1000, true).unwrap();
+        assert!(p.kl.abs() < 1e-12);
+        for (x, y) in p.a.table.iter().zip(&a.table) {
+            assert!((x - y).abs() < 1e-9);
+        }
+        for (x, y) in p.b.table.iter().zip(&b.table) {
+            assert!((x - y).abs() < 1e-9);
+        }
+    }
+}

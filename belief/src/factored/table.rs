@@ -1,0 +1,235 @@
+//! One component: an exact dense table over every subset of its tracks.
+
+use crate::error::BeliefError;
+
+/// g_C over all subsets y of C, indexed by the bit mask of y in the local
+/// order `tracks` (bit i ↔ `tracks[i]`), normalized to sum 1 with the factor
+/// kept in `log_scale`, and its count vector c_C[r] = Σ_{|y| = r} g_C(y).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Component {
+    pub(crate) tracks: Vec<u32>,
+    pub(crate) table: Vec<f64>,
+    pub(crate) log_scale: f64,
+    pub(crate) counts: Vec<f64>,
+}
+
+/// Σ_{|y| = r} table[y] for r = 0..=bits.
+pub(crate) fn counts_of(table: &[f64], bits: usize) -> Vec<f64> {
+    let mut counts = vec![0.0; bits + 1];
+    for (y, &g) in table.iter().enumerate() {
+        counts[y.count_ones() as usize] += g;
+    }
+    counts
+}
+
+impl Component {
+    /// One track with weight `blue` on "not red" and `red` on "red".
+    pub(crate) fn singleton(track: u32, blue: f64, red: f64) -> Self {
+        Component::from_table(vec![track], vec![blue, red], 0.0)
+            .expect("a singleton with positive weight")
+    }
+
+    /// Normalizes `table` (its sum goes into the scale) and counts it.
+    pub(crate) fn from_table(
+        tracks: Vec<u32>,
+        mut table: Vec<f64>,
+        log_scale: f64,
+    ) -> Result<Self, BeliefError> {
+        debug_assert_eq!(table.len(), 1 << tracks.len());
+        let total: f64 = table.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return Err(BeliefError::Degenerate { normalizer: total });
+        }
+        for g in &mut table {
+            *g /= total;
+        }
+        let counts = counts_of(&table, tracks.len());
+        Ok(Component {
+            tracks,
+            table,
+            log_scale: log_scale + total.ln(),
+            counts,
+        })
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.tracks.len()
+    }
+
+    /// Exact rollup of a mix of local bits i ≠ j: every set holding exactly
+    /// one of them trades `swap` of its weight with its image.
+    pub(crate) fn rollup(&mut self, i: usize, j: usize, swap: f64) {
+        let (bi, bj) = (1usize << i, 1usize << j);
+        let stay = 1.0 - swap;
+        for y in 0..self.table.len() {
+            if y & bi != 0 && y & bj == 0 {
+                let z = y ^ bi ^ bj;
+                let (gy, gz) = (self.table[y], self.table[z]);
+                self.table[y] = stay * gy + swap * gz;
+                self.table[z] = stay * gz + swap * gy;
+            }
+        }
+        // The count vector is unchanged: the two images have equal size.
+    }
+
+    /// The table times the likelihood of a sighting of local bit `bit`
+    /// (unnormalized).
+    pub(crate) fn observed(&self, bit: usize, red: f64, blue: f64) -> Vec<f64> {
+        let b = 1usize << bit;
+        self.table
+            .iter()
+            .enumerate()
+            .map(|(y, &g)| g * if y & b != 0 { red } else { blue })
+            .collect()
+    }
+
+    /// The product table of two components: `self`'s tracks take the low
+    /// bits, `other`'s the high ones.
+    pub(crate) fn outer(&self, other: &Component) -> Component {
+        let mut tracks = self.tracks.clone();
+        tracks.extend_from_slice(&other.tracks);
+        let mut table = Vec::with_capacity(self.table.len() * other.table.len());
+        for &h in &other.table {
+            table.extend(self.table.iter().map(|&l| l * h));
+        }
+        let mut counts = vec![0.0; tracks.len() + 1];
+        for (r, &x) in self.counts.iter().enumerate() {
+            for (q, &y) in other.counts.iter().enumerate() {
+                counts[r + q] += x * y;
+            }
+        }
+        Component {
+            tracks,
+            table,
+            log_scale: self.log_scale + other.log_scale,
+            counts,
+        }
+    }
+
+    /// P(bit i set) for every local bit under the weights table[y]·w(|y|),
+    /// and the total weight Σ_y table[y]·w(|y|).
+    pub(crate) fn weighted_marginals(&self, w: &[f64]) -> (Vec<f64>, f64) {
+        let bits = self.len();
+        let mut weighted: Vec<f64> = self
+            .table
+            .iter()
+            .enumerate()
+            .map(|(y, &g)| g * w[y.count_ones() as usize])
+            .collect();
+        let total: f64 = weighted.iter().sum();
+        let mut marginals = vec![0.0; bits];
+        // Per bit, the strided sum of the sets holding it.
+        for (i, m) in marginals.iter_mut().enumerate() {
+            let half = 1usize << i;
+            let mut s = 0.0;
+            for block in weighted.chunks_exact(2 * half) {
+                s += block[half..].iter().sum::<f64>();
+            }
+            *m = if total > 0.0 { s / total } else { 0.0 };
+        }
+        weighted.clear();
+        (marginals, total)
+    }
+
+    /// c[r] = Σ_{|y| = r, y ⊇ need} table[y].
+    pub(crate) fn counts_holding(&self, need: usize) -> Vec<f64> {
+        let mut counts = vec![0.0; self.len() + 1];
+        for (y, &g) in self.table.iter().enumerate() {
+            if y & need == need {
+                counts[y.count_ones() as usize] += g;
+            }
+        }
+        counts
+    }
+
+    /// Splits off the local bits in `fixed` (bit, red?), each assumed
+    /// certain: the rest keeps the slice of the table where those bits take
+    /// their fixed values, and each fixed track becomes a certain singleton.
+    /// Exact when the sets outside the slice have no weight; drops their
+    /// weight otherwise.
+    pub(crate) fn restrict(
+        &self,
+        fixed: &[(usize, bool)],
+    ) -> Result<(Component, Vec<Component>), BeliefError> {
+        let fixed_mask: usize = fixed.iter().map(|&(b, _)| 1usize << b).sum();
+        let value: usize = fixed
+            .iter()
+            .filter(|&&(_, red)| red)
+            .map(|&(b, _)| 1usize << b)
+            .sum();
+        let keep: Vec<usize> = (0..self.len())
+            .filter(|b| fixed_mask & (1 << b) == 0)
+            .collect();
+        let tracks = keep.iter().map(|&b| self.tracks[b]).collect();
+        let table = (0..1usize << keep.len())
+            .map(|local| {
+                let mut y = value;
+                for (i, &b) in keep.iter().enumerate() {
+                    if local & (1 << i) != 0 {
+                        y |= 1 << b;
+                    }
+                }
+                self.table[y]
+            })
+            .collect();
+        let rest = Component::from_table(tracks, table, self.log_scale)?;
+        let singles = fixed
+            .iter()
+            .map(|&(b, red)| {
+                let t = self.tracks[b];
+                if red {
+                    Component::singleton(t, 0.0, 1.0)
+                } else {
+                    Component::singleton(t, 1.0, 0.0)
+                }
+            })
+            .collect();
+        Ok((rest, singles))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rollup_blends_images_and_keeps_counts() {
+        let mut c = Component::from_table(vec![5, 6], vec![0.1, 0.2, 0.3, 0.4], 0.0).unwrap();
+        let before = c.counts.clone();
+        c.rollup(0, 1, 0.25);
+        // y = {5} (mask 1) and z = {6} (mask 2) trade a quarter.
+        assert!((c.table[1] - (0.75 * 0.2 + 0.25 * 0.3)).abs() < 1e-15);
+        assert!((c.table[2] - (0.75 * 0.3 + 0.25 * 0.2)).abs() < 1e-15);
+        assert_eq!(c.table[0], 0.1);
+        assert_eq!(c.table[3], 0.4);
+        assert_eq!(c.counts, before);
+    }
+
+    #[test]
+    fn outer_product_and_restriction_invert() {
+        let a = Component::from_table(vec![0, 1], vec![0.1, 0.2, 0.3, 0.4], 0.5).unwrap();
+        let b = Component::singleton(2, 0.0, 1.0);
+        let m = a.outer(&b);
+        assert_eq!(m.tracks, vec![0, 1, 2]);
+        assert_eq!(m.counts, counts_of(&m.table, 3));
+        let (rest, singles) = m.restrict(&[(2, true)]).unwrap();
+        assert_eq!(rest.tracks, a.tracks);
+        for (x, y) in rest.table.iter().zip(&a.table) {
+            assert!((x - y).abs() < 1e-15);
+        }
+        assert!((rest.log_scale - a.log_scale).abs() < 1e-15);
+        assert_eq!(singles, vec![b]);
+    }
+
+    #[test]
+    fn weighted_marginals_count_the_sets_holding_each_bit() {
+        let c = Component::from_table(vec![0, 1], vec![0.1, 0.2, 0.3, 0.4], 0.0).unwrap();
+        let (m, total) = c.weighted_marginals(&[1.0, 1.0, 1.0]);
+        assert!((total - 1.0).abs() < 1e-15);
+        assert!((m[0] - 0.6).abs() < 1e-15);
+        assert!((m[1] - 0.7).abs() < 1e-15);
+        // Only sets of one track count: P(bit 0) = 0.2 / 0.5.
+        let (m, _) = c.weighted_marginals(&[0.0, 1.0, 0.0]);
+        assert!((m[0] - 0.4).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,407 @@
+use super::split::Weighted;
+use super::*;
+use crate::baseline::DenseFilter;
+use crate::event::{Event, RedCount};
+use crate::workload::{generate, WorkloadSpec};
+
+fn close(a: &[f64], b: &[f64], tol: f64, what: &str) {
+    assert_eq!(a.len(), b.len(), "{what}");
+    for (x, y) in a.iter().zip(b) {
+        assert!((x - y).abs() <= tol, "{what}: {a:?} vs {b:?}");
+    }
+}
+
+/// A workload whose every fifth sighting is certain (and true).
+fn workload(n: usize, k: usize, events: usize, seed: u64) -> (Vec<u32>, Vec<Event>) {
+    let mut work = generate(&WorkloadSpec {
+        tracks: n,
+        red: k,
+        events,
+        mix_share: 0.55,
+        swap: 0.35,
+        neighbourhood: n,
+        ..WorkloadSpec::table3(n, seed)
+    });
+    let mut sightings = 0;
+    for (event, truth) in work.events.iter_mut().zip(&work.truth) {
+        if let Event::Observe(o) = event {
+            sightings += 1;
+            if sightings % 5 == 0 {
+                let red = truth.contains(&o.track);
+                (o.red, o.blue) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
+            }
+        }
+        if let Event::Mix(m) = event {
+            // Some certain exchanges and non-events too.
+            match seed.wrapping_add(m.a as u64) % 9 {
+                0 => m.swap = 1.0,
+                1 => m.swap = 0.0,
+                _ => {}
+            }
+        }
+    }
+    (work.initial_red, work.events)
+}
+
+fn fields(n: usize, k: usize, initial: &[u32]) -> Vec<Field> {
+    let prior: Vec<f64> = (0..=n).map(|j| 1.0 + (j % 3) as f64).collect();
+    vec![
+        Field::known(n, initial.to_vec()),
+        Field::uniform(n, k),
+        Field {
+            tracks: n,
+            red: RedCount::Unknown { prior },
+            initial_red: None,
+        },
+    ]
+}
+
+fn exact_options() -> FactoredOptions {
+    FactoredOptions {
+        max_component: MAX_COMPONENT_LIMIT,
+        ..FactoredOptions::default()
+    }
+}
+
+#[test]
+fn exact_until_the_first_split() {
+    for (n, k, seed) in [(4, 2, 1), (7, 3, 2), (9, 5, 3), (10, 4, 4), (10, 7, 5)] {
+        let (initial, events) = workload(n, k, 150, seed);
+        for field in fields(n, k, &initial) {
+            let mut dense = DenseFilter::new(field.clone()).unwrap();
+            let mut factored =
+                FactoredBelief::with_options(field.clone(), exact_options()).unwrap();
+            for event in &events {
+                let a = dense.apply(event);
+                let b = factored.apply(event);
+                assert_eq!(a.is_ok(), b.is_ok(), "{event:?}: {a:?} vs {b:?}");
+                close(
+                    &dense.marginals().unwrap(),
+                    &factored.marginals().unwrap(),
+                    1e-9,
+                    "marginals",
+                );
+            }
+            assert_eq!(factored.stats().splits, 0);
+            assert!(
+                (dense.log_normalizer() - factored.log_normalizer()).abs() < 1e-9,
+                "{} vs {}",
+                dense.log_normalizer(),
+                factored.log_normalizer()
+            );
+            for pair in [[0u32, 1], [1, n as u32 - 1], [2, 2]] {
+                let want = dense.prob_all_red(&pair).unwrap();
+                assert!((want - factored.prob_all_red(&pair).unwrap()).abs() < 1e-9);
+            }
+            close(
+                &dense.count_posterior().unwrap(),
+                &factored.count_posterior().unwrap(),
+                1e-9,
+                "count posterior",
+            );
+        }
+    }
+}
+
+#[test]
+fn merging_then_splitting_along_the_original_partition_is_the_identity() {
+    let a = Component::from_table(vec![3, 1, 4], (1..=8).map(|x| x as f64).collect(), 0.7).unwrap();
+    let b = Component::from_table(vec![0, 2], vec![0.5, 0.1, 0.3, 0.9], -0.2).unwrap();
+    for q in [
+        vec![1.0; 6],
+        vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+        vec![0.1, 0.5, 1.0, 0.3, 0.2, 0.05],
+    ] {
+        let merged = a.outer(&b);
+        let weighted = Weighted::new(&merged, &q).unwrap();
+        let p = weighted.project(0b00111, 1e-12, 10_000, true).unwrap();
+        assert!(p.kl.abs() < 1e-12);
+        let product = |x: &Component, y: &Component| -> Vec<f64> {
+            let m = x.outer(y);
+            m.table
+                .iter()
+                .enumerate()
+                .map(|(i, g)| g * q[(i as u32).count_ones() as usize])
+                .collect()
+        };
+        // Equal as beliefs: same weights g_A·g_B·Q (normalized), same mass.
+        let (want, got) = (product(&a, &b), product(&p.a, &p.b));
+        let (sw, sg): (f64, f64) = (want.iter().sum(), got.iter().sum());
+        for (x, y) in want.iter().zip(&got) {
+            assert!((x / sw - y / sg).abs() < 1e-12);
+        }
+        let mass_before = a.log_scale + b.log_scale + sw.ln();
+        let mass_after = p.a.log_scale + p.b.log_scale + sg.ln();
+        assert!((mass_before - mass_after).abs() < 1e-12);
+        assert_eq!(p.a.tracks, a.tracks);
+        assert_eq!(p.b.tracks, b.tracks);
+        if q.iter().all(|&x| x > 0.0) {
+            // With every count allowed the tables themselves come back.
+            close(&p.a.table, &a.table, 1e-12, "A");
+            close(&p.b.table, &b.table, 1e-12, "B");
+        }
+    }
+}
+
+#[test]
+fn a_split_keeps_the_mass_and_the_count() {
+    // max_component 2: a mix across two pairs merges four tracks and splits.
+    let field = Field::uniform(6, 3);
+    let options = FactoredOptions {
+        max_component: 2,
+        split: SplitRule::Original,
+        ..FactoredOptions::default()
+    };
+    let mut f = FactoredBelief::with_options(field, options).unwrap();
+    let events = [
+        Event::Observe(Observe {
+            track: 0,
+            red: 0.8,
+            blue: 0.2,
+        }),
+        Event::Mix(Mix {
+            a: 0,
+            b: 1,
+            swap: 0.3,
+        }),
+        Event::Observe(Observe {
+            track: 2,
+            red: 0.1,
+            blue: 0.7,
+        }),
+        Event::Mix(Mix {
+            a: 2,
+            b: 3,
+            swap: 0.4,
+        }),
+    ];
+    for e in &events {
+        f.apply(e).unwrap();
+    }
+    let before = f.marginals().unwrap();
+    let ln_z = f.log_normalizer();
+    f.mix(Mix {
+        a: 1,
+        b: 2,
+        swap: 0.0,
+    })
+    .unwrap();
+    close(&before, &f.marginals().unwrap(), 1e-12, "swap 0");
+    assert_eq!(f.stats().splits, 0);
+    // A true mix across the pairs, split along the old pairs.
+    let mut g = f.clone();
+    g.mix(Mix {
+        a: 1,
+        b: 2,
+        swap: 0.5,
+    })
+    .unwrap();
+    assert_eq!(g.stats().splits, 1);
+    let after = g.marginals().unwrap();
+    assert!((after.iter().sum::<f64>() - 3.0).abs() < 1e-9);
+    assert!((g.log_normalizer() - ln_z).abs() < 1e-9);
+}
+
+#[test]
+fn an_impossible_observation_leaves_the_state_unchanged() {
+    for field in [
+        Field::known(5, vec![1, 3]),
+        Field::uniform(5, 2),
+        Field {
+            tracks: 5,
+            red: RedCount::Known(1),
+            initial_red: None,
+        },
+    ] {
+        let options = FactoredOptions {
+            max_component: 2,
+            ..FactoredOptions::default()
+        };
+        let mut f = FactoredBelief::with_options(field.clone(), options).unwrap();
+        let events = [
+            Event::Mix(Mix {
+                a: 0,
+                b: 1,
+                swap: 0.5,
+            }),
+            Event::Observe(Observe {
+                track: 4,
+                red: 0.0,
+                blue: 1.0,
+            }),
+            Event::Mix(Mix {
+                a: 1,
+                b: 2,
+                swap: 0.5,
+            }),
+        ];
+        for e in &events {
+            f.apply(e).unwrap();
+        }
+        let (marginals, ln_z, parts, coefs) = (
+            f.marginals().unwrap(),
+            f.log_normalizer(),
+            f.components(),
+            f.coefficients(),
+        );
+        // Track 4 is blue for sure: seeing it certainly red is impossible.
+        let err = f
+            .observe(Observe {
+                track: 4,
+                red: 1.0,
+                blue: 0.0,
+            })
+            .unwrap_err();
+        assert!(
+            matches!(err, BeliefError::ImpossibleObservation { probability } if probability == 0.0)
+        );
+        assert_eq!(f.marginals().unwrap(), marginals);
+        assert_eq!(f.log_normalizer(), ln_z);
+        assert_eq!(f.components(), parts);
+        assert_eq!(f.coefficients(), coefs);
+    }
+    // Impossible only through the count: k = 1 and track 0 is red for sure,
+    // so track 3 (its own component) cannot be red too.
+    let mut f = FactoredBelief::new(Field::uniform(4, 1)).unwrap();
+    f.observe(Observe {
+        track: 0,
+        red: 1.0,
+        blue: 0.0,
+    })
+    .unwrap();
+    let before = f.marginals().unwrap();
+    assert!(matches!(
+        f.observe(Observe {
+            track: 3,
+            red: 1.0,
+            blue: 0.0
+        }),
+        Err(BeliefError::ImpossibleObservation { .. })
+    ));
+    assert_eq!(f.marginals().unwrap(), before);
+}
+
+#[test]
+fn splits_keep_a_valid_belief() {
+    for (n, k, seed) in [(12, 5, 1), (30, 10, 2), (40, 20, 3)] {
+        let (initial, events) = workload(n, k, 400, seed);
+        for rule in [
+            SplitRule::Original,
+            SplitRule::Recent,
+            SplitRule::LeastLoss { rounds: 2 },
+        ] {
+            for field in fields(n, k, &initial) {
+                let options = FactoredOptions {
+                    max_component: 4,
+                    split: rule,
+                    ..FactoredOptions::default()
+                };
+                let mut f = FactoredBelief::with_options(field.clone(), options).unwrap();
+                for event in &events {
+                    match f.apply(event) {
+                        Ok(()) => {}
+                        // The approximation may rule out what is possible.
+                        Err(BeliefError::ImpossibleObservation { .. }) => {}
+                        Err(e) => panic!("{e}"),
+                    }
+                    let p = f.marginals().unwrap();
+                    assert!(p.iter().all(|x| (0.0..=1.0).contains(x)));
+                    if let Some(k) = field.red.known() {
+                        assert!((p.iter().sum::<f64>() - k as f64).abs() < 1e-9);
+                    }
+                    assert!(f.components().iter().all(|c| c.len() <= 4));
+                }
+                assert!(f.stats().splits > 0, "{rule:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_number_budget_holds() {
+    let (initial, events) = workload(20, 10, 600, 7);
+    let options = FactoredOptions {
+        max_component: 8,
+        max_numbers: Some(300),
+        ..FactoredOptions::default()
+    };
+    let mut f = FactoredBelief::with_options(Field::known(20, initial), options).unwrap();
+    for event in &events {
+        let _ = f.apply(event);
+        assert!(f.coefficients() <= 300, "{}", f.coefficients());
+    }
+}
+
+#[test]
+fn certain_tracks_leave_their_component() {
+    let mut f = FactoredBelief::new(Field::uniform(4, 2)).unwrap();
+    f.mix(Mix {
+        a: 0,
+        b: 1,
+        swap: 0.5,
+    })
+    .unwrap();
+    // (0.5, 0.5) singletons mixing: nothing to do.
+    assert_eq!(f.components().len(), 4);
+    f.observe(Observe {
+        track: 0,
+        red: 0.9,
+        blue: 0.3,
+    })
+    .unwrap();
+    f.mix(Mix {
+        a: 0,
+        b: 1,
+        swap: 0.5,
+    })
+    .unwrap();
+    assert_eq!(f.components().len(), 3);
+    f.observe(Observe {
+        track: 1,
+        red: 0.0,
+        blue: 1.0,
+    })
+    .unwrap();
+    assert_eq!(f.components().len(), 4);
+    assert_eq!(f.coefficients(), 8);
+}
+
+#[test]
+fn a_thousand_tracks() {
+    let n = 1000;
+    let work = generate(&WorkloadSpec {
+        tracks: n,
+        red: 500,
+        events: 1500,
+        mix_share: 0.5,
+        swap: 0.5,
+        neighbourhood: 5,
+        ..WorkloadSpec::table3(n, 1)
+    });
+    let unknown = Field {
+        tracks: n,
+        red: RedCount::unknown_uniform(n),
+        initial_red: None,
+    };
+    for field in [
+        Field::known(n, work.initial_red.clone()),
+        Field::uniform(n, 500),
+        unknown,
+    ] {
+        let options = FactoredOptions {
+            max_component: 5,
+            ..FactoredOptions::default()
+        };
+        let mut f = FactoredBelief::with_options(field.clone(), options).unwrap();
+        for event in &work.events {
+            f.apply(event).unwrap();
+        }
+        let p = f.marginals().unwrap();
+        assert!(p.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)));
+        if let Some(k) = field.red.known() {
+            assert!((p.iter().sum::<f64>() - k as f64).abs() < 1e-6);
+        }
+        assert!(f.log_normalizer().is_finite());
+        assert!(f.stats().splits > 0);
+    }
+}

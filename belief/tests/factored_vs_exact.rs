@@ -1,0 +1,241 @@
+//! Property tests of the factored belief against the exact dense filter:
+//! - while no component has had to be split (max_component ≥ n), it is the
+//!   exact belief: marginals, normalizer, P(pair red) and the count
+//!   posterior equal the dense filter's, for random event streams with red
+//!   and blue sightings, certain sightings (one likelihood 0), swaps of 0, 1
+//!   and in between, k known or unknown, from a known start or the prior;
+//! - the first split keeps the marginals of every track it touches (the
+//!   moment matching preserves the two marginal tables);
+//! - with splits it stays a valid belief: marginals in [0, 1] summing to k;
+//! - a rejected observation leaves the belief exactly as it was.
+
+use idmesh_belief::baseline::DenseFilter;
+use idmesh_belief::{
+    BeliefError, Event, FactoredBelief, FactoredOptions, Field, Mix, Observe, PropertyFilter,
+    RedCount, SplitRule,
+};
+use proptest::prelude::*;
+
+#[derive(Debug, Clone)]
+enum Start {
+    Uniform,
+    Known,
+    UnknownCount,
+}
+
+fn field(n: usize, k: usize, start: &Start, seed: u64) -> Field {
+    match start {
+        Start::Uniform => Field::uniform(n, k),
+        Start::Known => {
+            // A seeded choice of k distinct tracks.
+            let mut ids: Vec<u32> = (0..n as u32).collect();
+            let mut s = seed;
+            for i in (1..ids.len()).rev() {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ids.swap(i, (s >> 33) as usize % (i + 1));
+            }
+            Field::known(n, ids[..k].to_vec())
+        }
+        Start::UnknownCount => {
+            // A lopsided prior over the count, to see it used.
+            let prior = (0..=n)
+                .map(|j| 1.0 + ((j + seed as usize) % 4) as f64)
+                .collect();
+            Field {
+                tracks: n,
+                red: RedCount::Unknown { prior },
+                initial_red: None,
+            }
+        }
+    }
+}
+
+fn likelihood() -> impl Strategy<Value = (f64, f64)> {
+    prop_oneof![
+        (0.01f64..1.0, 0.01f64..1.0),
+        Just((0.8, 0.2)),
+        Just((0.1, 0.7)),
+        Just((1.0, 0.0)),
+        Just((0.0, 1.0)),
+    ]
+}
+
+fn swap() -> impl Strategy<Value = f64> {
+    prop_oneof![0.0f64..=1.0, Just(0.0), Just(1.0), Just(0.5)]
+}
+
+fn events(n: usize, len: usize) -> impl Strategy<Value = Vec<Event>> {
+    let n = n as u32;
+    let one = prop_oneof![
+        3 => (0..n, 1..n, swap()).prop_map(move |(a, d, swap)| Event::Mix(Mix {
+            a,
+            b: (a + d) % n,
+            swap
+        })),
+        2 => (0..n, likelihood()).prop_map(|(track, (red, blue))| Event::Observe(Observe {
+            track,
+            red,
+            blue
+        })),
+    ];
+    prop::collection::vec(one, 0..len)
+}
+
+fn case(max_n: usize, len: usize) -> impl Strategy<Value = (usize, usize, Start, u64, Vec<Event>)> {
+    (2usize..=max_n).prop_flat_map(move |n| {
+        (
+            Just(n),
+            0..=n,
+            prop_oneof![
+                Just(Start::Uniform),
+                Just(Start::Known),
+                Just(Start::UnknownCount)
+            ],
+            any::<u64>(),
+            events(n, len),
+        )
+    })
+}
+
+fn rule() -> impl Strategy<Value = SplitRule> {
+    prop_oneof![
+        Just(SplitRule::Original),
+        Just(SplitRule::Recent),
+        (0usize..3).prop_map(|rounds| SplitRule::LeastLoss { rounds }),
+    ]
+}
+
+fn assert_close(a: &[f64], b: &[f64], what: &str) {
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(b) {
+        assert!((x - y).abs() < 1e-9, "{what}: {a:?} vs {b:?}");
+    }
+}
+
+/// Everything observable about a belief, to check a rejected update.
+fn snapshot(f: &FactoredBelief) -> (Vec<f64>, f64, Vec<Vec<u32>>, usize) {
+    (
+        f.marginals().unwrap(),
+        f.log_normalizer(),
+        f.components(),
+        f.coefficients(),
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(600))]
+
+    #[test]
+    fn unsplit_factored_belief_equals_the_exact_filter((n, k, start, seed, events) in case(10, 30)) {
+        let field = field(n, k, &start, seed);
+        let mut exact = DenseFilter::new(field.clone()).unwrap();
+        let options = FactoredOptions { max_component: 12, ..FactoredOptions::default() };
+        let mut factored = FactoredBelief::with_options(field, options).unwrap();
+        for event in &events {
+            let a = exact.apply(event);
+            let b = factored.apply(event);
+            match (&a, &b) {
+                (Ok(()), Ok(())) => {}
+                (
+                    Err(BeliefError::ImpossibleObservation { .. }),
+                    Err(BeliefError::ImpossibleObservation { .. }),
+                ) => {}
+                _ => panic!("exact {a:?} vs factored {b:?} on {event:?}"),
+            }
+            assert_close(&exact.marginals().unwrap(), &factored.marginals().unwrap(), "marginals");
+        }
+        prop_assert_eq!(factored.stats().splits, 0);
+        prop_assert!((exact.log_normalizer() - factored.log_normalizer()).abs() < 1e-9,
+            "ln Z {} vs {}", exact.log_normalizer(), factored.log_normalizer());
+        let pair = [0u32, 1];
+        prop_assert!((exact.prob_all_red(&pair).unwrap() - factored.prob_all_red(&pair).unwrap()).abs() < 1e-9);
+        assert_close(&exact.count_posterior().unwrap(), &factored.count_posterior().unwrap(), "count");
+    }
+
+    #[test]
+    fn the_first_split_keeps_the_marginals_it_touches((n, k, start, seed, events) in case(9, 40), max in 1usize..=4, rule in rule()) {
+        let field = field(n, k, &start, seed);
+        let mut exact = DenseFilter::new(field.clone()).unwrap();
+        let options = FactoredOptions { max_component: max, split: rule, ..FactoredOptions::default() };
+        let mut factored = FactoredBelief::with_options(field, options).unwrap();
+        for event in &events {
+            let parts = factored.components();
+            let a = exact.apply(event);
+            let b = factored.apply(event);
+            // Before the first split both are exact, so they agree on what
+            // is possible.
+            prop_assert_eq!(a.is_ok(), b.is_ok(), "{:?} vs {:?}", a, b);
+            if factored.stats().splits == 0 {
+                assert_close(&exact.marginals().unwrap(), &factored.marginals().unwrap(), "before");
+                continue;
+            }
+            // This event split the two components it mixed: the marginals
+            // of their tracks are preserved.
+            let Event::Mix(mix) = event else { unreachable!() };
+            let touched: Vec<u32> = parts
+                .into_iter()
+                .filter(|c| c.contains(&mix.a) || c.contains(&mix.b))
+                .flatten()
+                .collect();
+            let (p, q) = (exact.marginals().unwrap(), factored.marginals().unwrap());
+            for &t in &touched {
+                prop_assert!((p[t as usize] - q[t as usize]).abs() < 1e-9,
+                    "track {}: {:?} vs {:?} (touched {:?})", t, p, q, touched);
+            }
+            break;
+        }
+    }
+
+    #[test]
+    fn with_splits_the_belief_stays_valid((n, k, start, seed, events) in case(16, 60), max in 1usize..=5, rule in rule()) {
+        let field = field(n, k, &start, seed);
+        let options = FactoredOptions { max_component: max, split: rule, ..FactoredOptions::default() };
+        let mut factored = FactoredBelief::with_options(field.clone(), options).unwrap();
+        for event in &events {
+            let before = snapshot(&factored);
+            match factored.apply(event) {
+                Ok(()) => {}
+                Err(BeliefError::ImpossibleObservation { .. }) => {
+                    prop_assert_eq!(&snapshot(&factored), &before);
+                }
+                Err(e) => panic!("{e} on {event:?}"),
+            }
+            let p = factored.marginals().unwrap();
+            prop_assert!(p.iter().all(|x| (0.0..=1.0).contains(x)), "{:?}", p);
+            if let Some(k) = field.red.known() {
+                prop_assert!((p.iter().sum::<f64>() - k as f64).abs() < 1e-9, "{:?}", p);
+            }
+            prop_assert!(factored.components().iter().all(|c| c.len() <= max));
+            prop_assert!(factored.log_normalizer().is_finite());
+        }
+    }
+
+    #[test]
+    fn a_rejected_observation_changes_nothing((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>()) {
+        let track = track % n as u32;
+        let field = field(n, k, &start, seed);
+        let options = FactoredOptions { max_component: max, ..FactoredOptions::default() };
+        let mut factored = FactoredBelief::with_options(field, options).unwrap();
+        for event in &events {
+            let _ = factored.apply(event);
+        }
+        let (r, b) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
+        let (want, other) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
+        let before = snapshot(&factored);
+        let p = before.0[track as usize];
+        match factored.observe(Observe { track, red: r, blue: b }) {
+            Ok(()) => {
+                let now = factored.marginals().unwrap()[track as usize];
+                prop_assert!((now - want).abs() < 1e-9, "now {}", now);
+            }
+            Err(BeliefError::ImpossibleObservation { probability }) => {
+                prop_assert_eq!(probability, 0.0);
+                prop_assert!((p - other).abs() < 1e-9, "p = {}", p);
+                prop_assert_eq!(snapshot(&factored), before);
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+}

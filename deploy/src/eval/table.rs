@@ -1,0 +1,400 @@
+//! The markdown tables of results.md: Table III in the paper's shape with
+//! its numbers side by side, the small-scale and sensitivity sweeps, the
+//! pedestrian scenes, the distributed rule's cost and the particle filter
+//! at equal time and equal memory.
+
+use super::methods::Method;
+use super::plan::{paper_table3, Experiment, PARTICLES};
+use super::results::{PointResult, Results, Summary};
+use std::fmt::Write;
+
+/// A tracking error with its spread over seeds: `0.173 ± 0.012`; `—` when
+/// nothing was scored.
+pub fn error(s: &Summary) -> String {
+    if !s.ok() {
+        return "—".into();
+    }
+    let mut text = if s.runs > 1 {
+        format!("{:.3} ± {:.3}", s.error, s.error_sd)
+    } else {
+        format!("{:.3}", s.error)
+    };
+    if s.refused > 0 {
+        write!(text, " ({} refused)", s.refused).unwrap();
+    }
+    if !s.failures.is_empty() {
+        write!(text, " ({} failed)", s.failures.len()).unwrap();
+    }
+    text
+}
+
+/// Seconds to three significant digits (at least whole seconds).
+pub fn seconds(s: f64) -> String {
+    if !s.is_finite() {
+        return "—".into();
+    }
+    if s <= 0.0 {
+        return "0".into();
+    }
+    let digits = (2 - s.log10().floor() as i32).max(0) as usize;
+    format!("{s:.digits$}")
+}
+
+fn coefficients(x: f64) -> String {
+    if !x.is_finite() {
+        "—".into()
+    } else if x >= 100.0 {
+        format!("{x:.0}")
+    } else {
+        format!("{x:.1}")
+    }
+}
+
+fn points(results: &Results, experiment: Experiment) -> Vec<&PointResult> {
+    results
+        .points
+        .iter()
+        .filter(|p| p.point.experiment == experiment)
+        .collect()
+}
+
+/// The method slots of a set of points: position i of their method
+/// lists (the points of one experiment list the same kinds of method,
+/// with budgets scaled to n).
+fn slots(points: &[&PointResult]) -> usize {
+    points
+        .iter()
+        .map(|p| p.point.methods.len())
+        .max()
+        .unwrap_or(0)
+}
+
+/// Table III: method, n, error, seconds, mean and max coefficients, and
+/// the paper's error and seconds where it has them.
+pub fn table3(results: &Results, swap: f64) -> String {
+    let points: Vec<&PointResult> = points(results, Experiment::Table3)
+        .into_iter()
+        .filter(|p| p.point.swap == swap)
+        .collect();
+    let mut out = String::new();
+    out.push_str(
+        "| method | n | tracking error | seconds | mean coeff. | max coeff. | paper error | paper seconds | faster than paper |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    let row = |out: &mut String, label: &str, n: usize, s: &Summary, paper: Option<(f64, f64)>| {
+        let (pe, ps, speedup) = match paper {
+            Some((e, t)) => (
+                format!("{e:.3}"),
+                seconds(t),
+                if s.ok() && s.seconds > 0.0 {
+                    format!("×{:.0}", t / s.seconds)
+                } else {
+                    "—".into()
+                },
+            ),
+            None => ("—".into(), "—".into(), "—".into()),
+        };
+        writeln!(
+            out,
+            "| {label} | {n} | {} | {} | {} | {} | {pe} | {ps} | {speedup} |",
+            error(s),
+            seconds(s.seconds),
+            coefficients(s.mean_coefficients),
+            s.max_coefficients,
+        )
+        .unwrap();
+    };
+    for slot in 0..slots(&points) {
+        for p in &points {
+            let Some(method) = p.point.methods.get(slot) else {
+                continue;
+            };
+            let Some(s) = p.summary(method) else {
+                continue;
+            };
+            let label = match method {
+                Method::Particles(b) if *b != PARTICLES => {
+                    format!("particles, equal memory (P = B = {b})")
+                }
+                m => m.label(),
+            };
+            row(
+                &mut out,
+                &label,
+                p.point.n,
+                s,
+                paper_table3(method, p.point.n),
+            );
+        }
+        // The equal-time particle filter right after the overcomplete rows.
+        if points
+            .iter()
+            .any(|p| matches!(p.point.methods.get(slot), Some(Method::Overcomplete(_))))
+        {
+            for p in &points {
+                for e in &p.equal_time {
+                    if matches!(e.base, Method::Overcomplete(_)) {
+                        let label = format!(
+                            "particles, equal time to overcomplete (P = {})",
+                            e.particles
+                        );
+                        row(&mut out, &label, p.point.n, &e.summary, None);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A sweep: one row per method, one column per point (the x value and,
+/// for mixing, the measured share), then the mean coefficients and
+/// seconds over the points.
+pub fn sweep(results: &Results, experiment: Experiment, n: Option<usize>, x_name: &str) -> String {
+    let points: Vec<&PointResult> = points(results, experiment)
+        .into_iter()
+        .filter(|p| n.is_none_or(|n| p.point.n == n))
+        .collect();
+    if points.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from("| method |");
+    for p in &points {
+        match experiment {
+            Experiment::SmallScale | Experiment::MixingLarge => {
+                write!(out, " {x_name} {:.2} |", p.mix_share()).unwrap()
+            }
+            _ => write!(out, " {x_name} {} |", p.point.x).unwrap(),
+        }
+    }
+    out.push_str(" mean coeff. | max coeff. | seconds |\n|---|");
+    out.push_str(&"---:|".repeat(points.len() + 3));
+    out.push('\n');
+    for slot in 0..slots(&points) {
+        let Some(method) = points.iter().find_map(|p| p.point.methods.get(slot)) else {
+            continue;
+        };
+        let cells: Vec<Option<&Summary>> = points
+            .iter()
+            .map(|p| p.point.methods.get(slot).and_then(|m| p.summary(m)))
+            .collect();
+        if cells.iter().all(Option::is_none) {
+            continue;
+        }
+        write!(out, "| {} |", method.label()).unwrap();
+        for c in &cells {
+            write!(out, " {} |", c.map_or("—".into(), error)).unwrap();
+        }
+        let ran: Vec<&Summary> = cells.iter().flatten().copied().filter(|s| s.ok()).collect();
+        let mean = |f: &dyn Fn(&Summary) -> f64| {
+            ran.iter().map(|s| f(s)).sum::<f64>() / ran.len().max(1) as f64
+        };
+        writeln!(
+            out,
+            " {} | {} | {} |",
+            coefficients(mean(&|s| s.mean_coefficients)),
+            ran.iter().map(|s| s.max_coefficients).max().unwrap_or(0),
+            seconds(mean(&|s| s.seconds)),
+        )
+        .unwrap();
+    }
+    out
+}
+
+/// Table III on the pedestrian scenes: per scene window, its facts and
+/// every method.
+pub fn pedestrians(results: &Results) -> String {
+    let points = points(results, Experiment::Pedestrians);
+    let mut out = String::from(
+        "| scene | n (mean) | events (mean) | mixing share | method | tracking error | seconds | mean coeff. | max coeff. |\n\
+         |---|---:|---:|---:|---|---:|---:|---:|---:|\n",
+    );
+    for p in points {
+        if p.traces.is_empty() {
+            writeln!(
+                out,
+                "| {} | — | — | — | no window could be made: {} | | | | |",
+                p.point.label,
+                p.trace_errors.join("; ")
+            )
+            .unwrap();
+            continue;
+        }
+        let mut first = true;
+        for (method, s) in &p.methods {
+            let facts = if first {
+                format!(
+                    "{} | {:.0} | {:.0} | {:.2}",
+                    p.point.label,
+                    p.mean_info(|t| t.tracks as f64),
+                    p.mean_info(|t| (t.mixes + t.observations) as f64),
+                    p.mix_share()
+                )
+            } else {
+                " | | |".into()
+            };
+            first = false;
+            writeln!(
+                out,
+                "| {facts} | {} | {} | {} | {} | {} |",
+                method.label(),
+                error(s),
+                seconds(s.seconds),
+                coefficients(s.mean_coefficients),
+                s.max_coefficients
+            )
+            .unwrap();
+        }
+    }
+    out
+}
+
+/// The distributed conditioning rule against exact conditioning at the
+/// same budget (and the exact filter where it runs).
+pub fn distributed(results: &Results) -> String {
+    let mut out = String::from(
+        "| scenario | n | exact filter | overcomplete, exact conditioning | overcomplete, distributed rule | cost of the rule | seconds (exact cond.) | seconds (distributed) |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for p in results.points.iter().filter(|p| {
+        matches!(
+            p.point.experiment,
+            Experiment::Table3 | Experiment::Pedestrians
+        )
+    }) {
+        let find =
+            |f: &dyn Fn(&Method) -> bool| p.methods.iter().find(|(m, _)| f(m)).map(|(_, s)| s);
+        let (Some(exact_cond), Some(dist)) = (
+            find(&|m| matches!(m, Method::Overcomplete(_))),
+            find(&|m| matches!(m, Method::Distributed(_))),
+        ) else {
+            continue;
+        };
+        let exact = find(&|m| *m == Method::Exact).map_or("—".into(), error);
+        let cost = if exact_cond.ok() && dist.ok() {
+            format!("{:+.3}", dist.error - exact_cond.error)
+        } else {
+            "—".into()
+        };
+        writeln!(
+            out,
+            "| {} | {} | {exact} | {} | {} | {cost} | {} | {} |",
+            p.point.label,
+            p.point.n,
+            error(exact_cond),
+            error(dist),
+            seconds(exact_cond.seconds),
+            seconds(dist.seconds)
+        )
+        .unwrap();
+    }
+    out
+}
+
+/// Every method against a particle filter given the same time.
+pub fn equal_time(results: &Results) -> String {
+    let mut out = String::from(
+        "| n | swap | method | tracking error | seconds | P at equal time | particle error | particle seconds | method − particles |\n\
+         |---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for p in points(results, Experiment::Table3) {
+        for e in &p.equal_time {
+            let Some(base) = p.summary(&e.base) else {
+                continue;
+            };
+            let gap = if base.ok() && e.summary.ok() {
+                format!("{:+.3}", base.error - e.summary.error)
+            } else {
+                "—".into()
+            };
+            writeln!(
+                out,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {gap} |",
+                p.point.n,
+                p.point.swap,
+                e.base.label(),
+                error(base),
+                seconds(base.seconds),
+                e.particles,
+                error(&e.summary),
+                seconds(e.summary.seconds)
+            )
+            .unwrap();
+        }
+    }
+    out
+}
+
+/// The Radon methods against a particle filter holding as many sets.
+pub fn equal_memory(results: &Results) -> String {
+    let mut out = String::from(
+        "| n | swap | B = P | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
+         |---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for p in points(results, Experiment::Table3) {
+        let b = super::plan::budget(p.point.n);
+        let cell = |m: Method| p.summary(&m).map_or("—".into(), error);
+        writeln!(
+            out,
+            "| {} | {} | {b} | {} | {} | {} | {} |",
+            p.point.n,
+            p.point.swap,
+            cell(Method::Threshold(b)),
+            cell(Method::Overcomplete(b)),
+            cell(Method::Particles(b)),
+            cell(Method::Particles(PARTICLES)),
+        )
+        .unwrap();
+    }
+    out
+}
+
+/// The facts of the traces of every point: how the scenarios came out.
+pub fn traces(results: &Results) -> String {
+    let mut out = String::from(
+        "| experiment | point | traces | n | events | mixing share | truth lines | mix / observe distance (m) |\n\
+         |---|---|---:|---:|---:|---:|---:|---|\n",
+    );
+    for p in &results.points {
+        writeln!(
+            out,
+            "| {:?} | {} | {} | {:.0} | {:.0} | {:.3} | {:.0} | {:.2} / {:.2} |",
+            p.point.experiment,
+            p.point.label,
+            p.traces.len(),
+            p.mean_info(|t| t.tracks as f64),
+            p.mean_info(|t| (t.mixes + t.observations) as f64),
+            p.mix_share(),
+            p.mean_info(|t| t.truths as f64),
+            p.mean_info(|t| t.mix_distance),
+            p.mean_info(|t| t.observe_distance),
+        )
+        .unwrap();
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_are_formatted_for_reading() {
+        assert_eq!(seconds(1342.35), "1342");
+        assert_eq!(seconds(29.79), "29.8");
+        assert_eq!(seconds(0.46), "0.460");
+        assert_eq!(seconds(0.0012345), "0.00123");
+        assert_eq!(seconds(f64::NAN), "—");
+        let s = Summary {
+            runs: 3,
+            error: 0.1734,
+            error_sd: 0.01,
+            seconds: 0.5,
+            mean_coefficients: 99.0,
+            max_coefficients: 100,
+            refused: 0,
+            failures: vec![],
+        };
+        assert_eq!(error(&s), "0.173 ± 0.010");
+    }
+}
