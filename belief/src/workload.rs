@@ -24,9 +24,6 @@ pub struct WorkloadSpec {
     /// close in the field); `tracks` = any pair.
     pub neighbourhood: usize,
     pub seed: u64,
-    /// Record the true red tracks after every `truth_every`-th event (0 =
-    /// never): long streams on large fields cannot keep them all.
-    pub truth_every: usize,
 }
 
 impl WorkloadSpec {
@@ -40,14 +37,13 @@ impl WorkloadSpec {
             swap: 0.5,
             neighbourhood: 4,
             seed,
-            truth_every: 1,
         }
     }
 }
 
 /// A drawn stream: the true red tracks at time 0, the events, and the true
-/// red tracks after every `truth_every`-th event (`truth[i]` follows event
-/// `(i + 1)·truth_every − 1`).
+/// red tracks after every event (after every `truth_every`-th event with
+/// [`generate_with`]: `truth[i]` follows event `(i + 1)·truth_every − 1`).
 #[derive(Debug, Clone)]
 pub struct Workload {
     pub initial_red: Vec<u32>,
@@ -69,6 +65,12 @@ pub fn colour_histogram(rng: &mut impl Rng, is_red: bool) -> (f64, f64) {
 }
 
 pub fn generate(spec: &WorkloadSpec) -> Workload {
+    generate_with(spec, 1)
+}
+
+/// As [`generate`], recording the truth only after every `truth_every`-th
+/// event (0 = never): long streams on large fields cannot keep it all.
+pub fn generate_with(spec: &WorkloadSpec, truth_every: usize) -> Workload {
     let mut rng = ChaCha8Rng::seed_from_u64(spec.seed);
     let n = spec.tracks;
     let mut ids: Vec<u32> = (0..n as u32).collect();
@@ -103,7 +105,7 @@ pub fn generate(spec: &WorkloadSpec) -> Workload {
                 blue: b,
             }));
         }
-        if spec.truth_every > 0 && (events.len() % spec.truth_every == 0) {
+        if truth_every > 0 && events.len() % truth_every == 0 {
             truth.push(red_tracks(&red));
         }
     }

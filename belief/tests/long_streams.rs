@@ -3,16 +3,15 @@
 //! thousands of digits, must leave finite, normalized answers — and the
 //! normalizer, which shrinks with every observation, must stay finite too.
 
-use idmesh_belief::workload::{generate, WorkloadSpec};
+use idmesh_belief::workload::{generate_with, WorkloadSpec};
 use idmesh_belief::{Field, PropertyFilter, RadonBelief, RadonOptions, Sparsify};
 
 fn run(field: Field, sparsify: Sparsify, events: usize) {
     let spec = WorkloadSpec {
         events,
-        truth_every: 0,
         ..WorkloadSpec::table3(10_000, 11)
     };
-    let workload = generate(&spec);
+    let workload = generate_with(&spec, 0);
     let field = match field.initial_red {
         Some(_) => Field::known(10_000, workload.initial_red.clone()),
         None => field,

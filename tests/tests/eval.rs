@@ -153,7 +153,10 @@ fn quick_eval_writes_tables_and_plots() {
         assert!(stdout.contains(row), "no row {row} in\n{stdout}");
     }
     // The paper's numbers beside ours.
-    assert!(stdout.contains("| 0.317 |") && stdout.contains("| 0.173 |"), "{stdout}");
+    assert!(
+        stdout.contains("| 0.317 |") && stdout.contains("| 0.173 |"),
+        "{stdout}"
+    );
 
     // results.md: every section, and links to plots that exist.
     let md = std::fs::read_to_string(dir.join("results.md")).expect("results.md written");
@@ -190,11 +193,19 @@ fn quick_eval_writes_tables_and_plots() {
         "results-likelihood.svg",
     ] {
         assert!(names.iter().any(|n| n == want), "no {want} in {names:?}");
-        assert!(md.contains(&format!("]({want})")), "results.md does not link {want}");
+        assert!(
+            md.contains(&format!("]({want})")),
+            "results.md does not link {want}"
+        );
     }
     for svg in &svgs {
         let text = std::fs::read_to_string(svg).unwrap();
-        assert!(text.starts_with("<svg"), "{}: {}", svg.display(), &text[..20]);
+        assert!(
+            text.starts_with("<svg"),
+            "{}: {}",
+            svg.display(),
+            &text[..20]
+        );
         let elements = check_xml(&text).unwrap_or_else(|e| panic!("{}: {e}", svg.display()));
         assert!(elements > 20, "{}: only {elements} elements", svg.display());
         // One legend entry per method line, the exact filter among them.

@@ -396,7 +396,12 @@ fn newton(
                 ny[s] += t * dir[rows.len() + l];
             }
             let (nj, nf) = eval(&nx, &ny);
-            if nf.is_finite() && nf <= f + 1e-4 * t * slope {
+            // Near the end F moves by less than its rounding; then the step
+            // must shrink the margin error instead.
+            let flat = (nf - f).abs() <= 1e-13 * (1.0 + f.abs());
+            if nf.is_finite()
+                && (nf <= f + 1e-4 * t * slope || (flat && margins_error(&nj).2 < err))
+            {
                 x.copy_from_slice(&nx);
                 y.copy_from_slice(&ny);
                 (j, f) = (nj, nf);

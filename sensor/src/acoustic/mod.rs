@@ -11,6 +11,7 @@ pub mod field;
 pub mod metrics;
 pub mod parallel;
 pub mod pipeline;
+pub mod resolution;
 pub mod source;
 
 pub use error::AcousticError;

@@ -6,6 +6,7 @@
 //! - [`select`] — (4) selection: link correlation over n_slot slots.
 //! - [`intersect`] — (5) intersection of the hearing groups' ranges, on
 //!   the 5 m tiles of [`tiles`].
+//! - [`vote_link`] — (6) voting and path linking (Appendix A).
 
 pub mod cluster;
 pub mod intersect;
@@ -13,3 +14,4 @@ pub mod prepare;
 pub mod select;
 pub mod separate;
 pub mod tiles;
+pub mod vote_link;

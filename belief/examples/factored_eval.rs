@@ -1,0 +1,245 @@
+//! Tracking error and time of the factored belief against the exact filter,
+//! the first-order Radon baseline and the thresholded Radon belief, on
+//! recorded traces (JSON Lines, shared/spec/trace.md), e.g. the crowd
+//! simulator's:
+//!
+//! ```sh
+//! idmesh simulate --model crowd --targets 20 --events 1000 --seed 1 --out crowd.jsonl
+//! cargo run --release -p idmesh-belief --example factored_eval -- \
+//!     --method exact --method order1 --method threshold:500 \
+//!     --method factored:max=8,rule=recent,budget=500 crowd.jsonl
+//! ```
+//!
+//! Methods: `exact`, `order1`, `threshold:N`, `overcomplete:N`,
+//! `factored[:max=M,rule=original|recent|loss|lossR,budget=N]` (`lossR` =
+//! LeastLoss with R rounds). For each trace and method it prints one line:
+//! the mean tracking error over the truth lines (the spec's score: the k
+//! tracks with the largest marginals are predicted red), the filter's own
+//! seconds (events and marginals; reading excluded), the largest number of
+//! stored numbers, and how many events the filter rejected (and skipped).
+//!
+//! The reader handles the flat objects of the trace format only; it is not
+//! a JSON parser, just enough for traces this workspace writes.
+
+use idmesh_belief::baseline::{LowOrderFilter, LowOrderRepair};
+use idmesh_belief::{
+    predict_red, tracking_error, DenseFilter, Event, FactoredBelief, FactoredOptions, Field, Mix,
+    Observe, PropertyFilter, RadonBelief, RadonOptions, Sparsify, SplitRule,
+};
+use std::time::Instant;
+
+enum Line {
+    Event(Event),
+    Truth(Vec<u32>),
+}
+
+struct Trace {
+    name: String,
+    field: Field,
+    lines: Vec<Line>,
+}
+
+/// The raw text after `"key":` up to the next top-level `,` or `}`.
+fn raw<'a>(line: &'a str, key: &str) -> Option<&'a str> {
+    let pat = format!("\"{key}\":");
+    let at = line.find(&pat)? + pat.len();
+    let rest = line[at..].trim_start();
+    if rest.starts_with('[') {
+        let end = rest.find(']')?;
+        return Some(&rest[..=end]);
+    }
+    let end = rest.find([',', '}']).unwrap_or(rest.len());
+    Some(rest[..end].trim())
+}
+
+fn num(line: &str, key: &str) -> Result<f64, String> {
+    raw(line, key)
+        .ok_or_else(|| format!("no {key}"))?
+        .parse()
+        .map_err(|e| format!("{key}: {e}"))
+}
+
+fn ids(line: &str, key: &str) -> Result<Option<Vec<u32>>, String> {
+    let Some(text) = raw(line, key) else {
+        return Ok(None);
+    };
+    let inner = text.trim_start_matches('[').trim_end_matches(']').trim();
+    if inner.is_empty() {
+        return Ok(Some(Vec::new()));
+    }
+    inner
+        .split(',')
+        .map(|x| x.trim().parse().map_err(|e| format!("{key}: {e}")))
+        .collect::<Result<Vec<u32>, String>>()
+        .map(Some)
+}
+
+fn read_trace(path: &str) -> Result<Trace, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
+    let mut field = None;
+    let mut lines = Vec::new();
+    for (no, line) in text.lines().enumerate() {
+        let at = |e: String| format!("{path}:{}: {e}", no + 1);
+        let kind = raw(line, "kind").ok_or_else(|| at("no kind".into()))?;
+        match kind.trim_matches('"') {
+            "header" => {
+                let n = num(line, "tracks").map_err(at)? as usize;
+                let k = num(line, "red").map_err(at)? as usize;
+                field = Some(match ids(line, "initial_red").map_err(at)? {
+                    Some(red) => Field::known(n, red),
+                    None => Field::uniform(n, k),
+                });
+            }
+            "mix" => lines.push(Line::Event(Event::Mix(Mix {
+                a: num(line, "a").map_err(at)? as u32,
+                b: num(line, "b").map_err(at)? as u32,
+                swap: num(line, "swap").map_err(at)?,
+            }))),
+            "observe" => lines.push(Line::Event(Event::Observe(Observe {
+                track: num(line, "track").map_err(at)? as u32,
+                red: num(line, "red").map_err(at)?,
+                blue: num(line, "blue").map_err(at)?,
+            }))),
+            "truth" => {
+                if let Some(red) = ids(line, "red").map_err(at)? {
+                    lines.push(Line::Truth(red));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(Trace {
+        name: path.rsplit('/').next().unwrap_or(path).to_string(),
+        field: field.ok_or_else(|| format!("{path}: no header"))?,
+        lines,
+    })
+}
+
+fn factored_options(spec: &str) -> Result<FactoredOptions, String> {
+    let mut options = FactoredOptions::default();
+    for part in spec.split(',').filter(|p| !p.is_empty()) {
+        let (key, value) = part.split_once('=').ok_or(format!("bad option {part}"))?;
+        match key {
+            "max" => options.max_component = value.parse().map_err(|e| format!("{e}"))?,
+            "budget" => options.max_numbers = Some(value.parse().map_err(|e| format!("{e}"))?),
+            "rule" => {
+                options.split = match value {
+                    "original" => SplitRule::Original,
+                    "recent" => SplitRule::Recent,
+                    v if v.starts_with("loss") => SplitRule::LeastLoss {
+                        rounds: v[4..].parse().unwrap_or(2),
+                    },
+                    v => return Err(format!("unknown rule {v}")),
+                }
+            }
+            k => return Err(format!("unknown option {k}")),
+        }
+    }
+    Ok(options)
+}
+
+fn build(method: &str, field: &Field) -> Result<Box<dyn PropertyFilter>, String> {
+    let (name, arg) = method.split_once(':').unwrap_or((method, ""));
+    let field = field.clone();
+    let e = |e: idmesh_belief::BeliefError| e.to_string();
+    Ok(match name {
+        "exact" => Box::new(DenseFilter::new(field).map_err(e)?),
+        "order1" => Box::new(
+            LowOrderFilter::with_repair(field, 1, LowOrderRepair::ShrinkToUniform).map_err(e)?,
+        ),
+        "threshold" | "overcomplete" => {
+            let budget = arg.parse().map_err(|e| format!("{method}: {e}"))?;
+            let sparsify = if name == "threshold" {
+                Sparsify::threshold(budget)
+            } else {
+                Sparsify::overcomplete(budget)
+            };
+            let options = RadonOptions {
+                sparsify: Some(sparsify),
+                ..RadonOptions::default()
+            };
+            Box::new(RadonBelief::with_options(field, options).map_err(e)?)
+        }
+        "factored" => {
+            Box::new(FactoredBelief::with_options(field, factored_options(arg)?).map_err(e)?)
+        }
+        _ => return Err(format!("unknown method {method}")),
+    })
+}
+
+struct Score {
+    error: f64,
+    seconds: f64,
+    max_numbers: usize,
+    rejected: usize,
+}
+
+fn run(trace: &Trace, method: &str) -> Result<Score, String> {
+    let mut filter = build(method, &trace.field)?;
+    let k = trace.field.red.known();
+    let (mut errors, mut truths, mut rejected) = (0.0, 0usize, 0usize);
+    let mut max_numbers = filter.coefficients();
+    let mut seconds = 0.0;
+    for line in &trace.lines {
+        match line {
+            Line::Event(event) => {
+                let start = Instant::now();
+                let result = filter.apply(event);
+                seconds += start.elapsed().as_secs_f64();
+                if result.is_err() {
+                    rejected += 1;
+                }
+                max_numbers = max_numbers.max(filter.coefficients());
+            }
+            Line::Truth(red) => {
+                let start = Instant::now();
+                let marginals = filter.marginals().map_err(|e| e.to_string())?;
+                seconds += start.elapsed().as_secs_f64();
+                let predicted = predict_red(&marginals, k);
+                errors += tracking_error(trace.field.tracks, &predicted, red);
+                truths += 1;
+            }
+        }
+    }
+    Ok(Score {
+        error: errors / truths.max(1) as f64,
+        seconds,
+        max_numbers,
+        rejected,
+    })
+}
+
+fn main() {
+    let mut methods = Vec::new();
+    let mut paths = Vec::new();
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        if arg == "--method" {
+            methods.push(args.next().expect("--method needs a value"));
+        } else {
+            paths.push(arg);
+        }
+    }
+    if methods.is_empty() {
+        methods = vec!["factored".into()];
+    }
+    println!("trace\tmethod\terror\tseconds\tmax_numbers\trejected");
+    for path in &paths {
+        let trace = match read_trace(path) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("{e}");
+                std::process::exit(1);
+            }
+        };
+        for method in &methods {
+            match run(&trace, method) {
+                Ok(s) => println!(
+                    "{}\t{}\t{:.4}\t{:.4}\t{}\t{}",
+                    trace.name, method, s.error, s.seconds, s.max_numbers, s.rejected
+                ),
+                Err(e) => println!("{}\t{}\tFAILED: {}", trace.name, method, e),
+            }
+        }
+    }
+}
