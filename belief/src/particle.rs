@@ -376,20 +376,23 @@ mod tests {
     /// event, for k known from a uniform or a known start and for k
     /// unknown.
     ///
-    /// Tolerance: a marginal estimated from P independent draws has
-    /// standard deviation √(p(1 − p)/P); the filter's draws are not
-    /// independent (resampling duplicates particles, which costs a factor
-    /// of about 1/(ESS/P) ≤ 2 in variance after each observation, and the
-    /// error of earlier steps is carried forward), so we measured the
-    /// largest deviation in those units over 8 seeds × 3 fields × 120
-    /// events × 8 tracks (≈ 23,000 correlated z-scores): it was 4.2 (seed
-    /// 0: 3.1). We allow 7, which a correct filter exceeds with negligible
-    /// probability while a wrong rule (say, swap applied twice, or a
-    /// likelihood inverted) misses by far more: with P = 2^16 one unit is
-    /// at most 0.002, and such bugs move marginals by 0.05 or more.
+    /// Tolerance, measured (`measure_deviation`, 8 workload seeds × 3
+    /// fields, 120 events, every track after every event): the largest gap
+    /// |particle − exact| was 0.0123 (k known) and 0.0245 (k unknown) at
+    /// P = 2^18, and 0.017 / 0.039 at P = 2^16 — it halves when P
+    /// quadruples, the 1/√P of Monte Carlo error, so there is no bias to
+    /// see at this size. It is several times the √(p(1 − p)/P) ≈ 0.001 of
+    /// independent draws because resampling duplicates particles and
+    /// carries earlier errors forward; with k unknown the count of red
+    /// targets never mixes, so the particles of the right count are never
+    /// replenished (the static-parameter degeneracy of particle filters).
+    /// We allow twice the worst measured gap: 0.025 (k known), 0.05 (k
+    /// unknown). A wrong rule (a swap applied twice, a likelihood inverted,
+    /// resampling that favours light particles) moves marginals by 0.1 or
+    /// more on this workload.
     #[test]
     fn converges_to_the_exact_filter() {
-        let particles = 1 << 16;
+        let particles = 1 << 18;
         let spec = WorkloadSpec {
             tracks: 8,
             red: 3,
@@ -401,18 +404,23 @@ mod tests {
         };
         let w = generate(&spec);
         let fields = [
-            Field::uniform(8, 3),
-            Field::known(8, w.initial_red.clone()),
-            Field {
-                tracks: 8,
-                red: RedCount::unknown_uniform(8),
-                initial_red: None,
-            },
+            (Field::uniform(8, 3), 0.025),
+            (Field::known(8, w.initial_red.clone()), 0.025),
+            (
+                Field {
+                    tracks: 8,
+                    red: RedCount::unknown_uniform(8),
+                    initial_red: None,
+                },
+                0.05,
+            ),
         ];
-        for field in &fields {
+        for (field, tolerance) in &fields {
             let (z, gap) = deviation(field, &w.events, particles, 0);
-            assert!(z < 7.0, "{field:?}: {z} standard deviations ({gap})");
-            assert!(gap < 0.015, "{field:?}: gap {gap}");
+            assert!(
+                gap < *tolerance,
+                "{field:?}: gap {gap} ({z} binomial standard deviations)"
+            );
         }
     }
 
@@ -443,7 +451,7 @@ mod tests {
                     initial_red: None,
                 },
             ] {
-                let (z, gap) = deviation(&field, &w.events, 1 << 16, seed);
+                let (z, gap) = deviation(&field, &w.events, 1 << 18, seed);
                 println!(
                     "seed {seed} known={:?}: z {z:.2} gap {gap:.4}",
                     field.red.known()
@@ -537,7 +545,8 @@ mod tests {
         };
         let pf = ParticleFilter::new(unknown, 100, 0).unwrap();
         assert!((0..100).all(|p| pf.particle(p).len() == 3));
-        assert_eq!(pf.predicted_red().unwrap().len(), 3);
+        let total: f64 = pf.marginals().unwrap().iter().sum();
+        assert!((total - 3.0).abs() < 1e-9, "{total}");
     }
 
     #[test]

@@ -76,7 +76,7 @@ fn events(n: usize) -> impl Strategy<Value = Vec<Event>> {
 }
 
 fn case() -> impl Strategy<Value = (usize, usize, Start, u64, Vec<Event>, bool)> {
-    (2usize..=8).prop_flat_map(|n| {
+    (2usize..=10).prop_flat_map(|n| {
         (
             Just(n),
             0..=n,

@@ -1,3 +1,66 @@
-//! Multi-process tests live in `tests/tests/`: each starts the real `idmesh`
-//! binary (built by Cargo for this package's tests) and checks what a user
-//! would see.
+//! Shared pieces of the multi-process tests in `tests/tests/`: each starts
+//! the real `idmesh` binary and checks what a user would see.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// The `idmesh` binary, built (or found fresh) once per test process.
+///
+/// Cargo builds a package's binaries only for that package's own
+/// integration tests, so this package asks Cargo for it: `cargo build
+/// --bin idmesh` in the profile these tests were built in, whose JSON
+/// messages name the executable. When it is fresh that is a no-op, and it
+/// never runs a stale binary.
+pub fn idmesh() -> &'static Path {
+    static BINARY: OnceLock<PathBuf> = OnceLock::new();
+    BINARY.get_or_init(|| {
+        let cargo = option_env!("CARGO").unwrap_or("cargo");
+        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
+        let mut command = Command::new(cargo);
+        command.args(["build", "--quiet", "--message-format=json"]);
+        command.args(["-p", "idmesh-deploy", "--bin", "idmesh", "--manifest-path"]);
+        command.arg(&manifest);
+        // target/<profile>/deps/<this test>: build in the same profile.
+        let exe = std::env::current_exe().expect("the test knows where it is");
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .and_then(Path::file_name)
+            .and_then(|name| name.to_str())
+            .unwrap_or("debug");
+        match profile_dir {
+            "debug" => {}
+            "release" => {
+                command.arg("--release");
+            }
+            other => {
+                command.args(["--profile", other]);
+            }
+        }
+        let output = command.output().expect("cargo runs");
+        let messages: Vec<Value> = String::from_utf8_lossy(&output.stdout)
+            .lines()
+            .filter_map(|line| serde_json::from_str::<Value>(line).ok())
+            .collect();
+        if !output.status.success() {
+            let diagnostics: Vec<&str> = messages
+                .iter()
+                .filter(|m| m["reason"] == "compiler-message")
+                .filter_map(|m| m["message"]["rendered"].as_str())
+                .collect();
+            panic!(
+                "building idmesh failed:\n{}{}",
+                diagnostics.concat(),
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        messages
+            .iter()
+            .filter(|m| m["reason"] == "compiler-artifact")
+            .find_map(|m| m["executable"].as_str().map(PathBuf::from))
+            .expect("cargo names the idmesh executable")
+    })
+}
+

@@ -39,9 +39,13 @@ use counts::CountPrior;
 use split::Weighted;
 use table::Component;
 
-/// The largest `max_component`: merging two components of 12 tracks
-/// materializes a table of 2^24 numbers (128 MiB) before it is split.
-pub const MAX_COMPONENT_LIMIT: usize = 12;
+/// The largest `max_component` with [`SplitRule::Original`], which never
+/// builds a table larger than one component: 2^20 numbers (8 MiB) each.
+pub const MAX_COMPONENT_LIMIT: usize = 20;
+
+/// The largest `max_component` with the other rules, which build the merged
+/// table of two components before splitting it: 2^24 numbers (128 MiB).
+pub const MAX_COMPONENT_MERGED: usize = 12;
 
 /// How a merged component too large to keep is cut in two.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,7 +67,8 @@ pub enum SplitRule {
 /// Options of [`FactoredBelief`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FactoredOptions {
-    /// The most tracks one component may hold (1..=[`MAX_COMPONENT_LIMIT`]).
+    /// The most tracks one component may hold: 1..=[`MAX_COMPONENT_LIMIT`]
+    /// with [`SplitRule::Original`], 1..=[`MAX_COMPONENT_MERGED`] otherwise.
     /// A component of m tracks stores 2^m numbers.
     pub max_component: usize,
     /// The most numbers all tables together may hold after a mix (None = no
@@ -102,8 +107,14 @@ impl FactoredOptions {
                 what,
             })
         };
-        if !(1..=MAX_COMPONENT_LIMIT).contains(&self.max_component) {
-            return unsupported("a max_component outside 1..=12");
+        let limit = match self.split {
+            SplitRule::Original => MAX_COMPONENT_LIMIT,
+            _ => MAX_COMPONENT_MERGED,
+        };
+        if !(1..=limit).contains(&self.max_component) {
+            return unsupported(
+                "a max_component outside 1..=20 (1..=12 unless the rule is Original)",
+            );
         }
         if self.max_numbers.is_some_and(|m| m < 2 * tracks) {
             return unsupported("a max_numbers below 2 per track");
@@ -319,32 +330,94 @@ impl FactoredBelief {
             // Two interchangeable tracks: the mix changes nothing.
             return Ok(());
         }
-        let mut merged = c1.outer(c2);
-        merged.rollup(ba, c1.len() + bb, mix.swap);
         let others = self.coefficients() - c1.table.len() - c2.table.len();
         let (max, budget) = (self.options.max_component, self.options.max_numbers);
         let fits = |size: usize, extra: usize| {
             size <= max && budget.is_none_or(|b| others + extra + (1usize << size) <= b)
         };
-        if fits(merged.len(), 0) {
+        let size = c1.len() + c2.len();
+        if fits(size, 0) {
+            let mut merged = c1.outer(c2);
+            merged.rollup(ba, c1.len() + bb, mix.swap);
             self.stats.merges += 1;
             self.replace(&[ca, cb], vec![merged]);
             return Ok(());
         }
-        // The weight Q of the merged red count from everything else.
+        // The weight Q of the merged red count from everything else (the
+        // rollup keeps the merged count vector: c1 ⊛ c2).
+        let mut merged_counts = vec![0.0; size + 1];
+        for (r, &x) in c1.counts.iter().enumerate() {
+            for (t, &y) in c2.counts.iter().enumerate() {
+                merged_counts[r + t] += x * y;
+            }
+        }
         let mut counts: Vec<&[f64]> = (self.comps.iter().enumerate())
             .filter(|&(i, _)| i != ca && i != cb)
             .map(|(_, c)| &c.counts[..])
             .collect();
-        counts.push(&merged.counts);
+        counts.push(&merged_counts);
         let last = counts.len() - 1;
-        let mut q = self
+        let q = self
             .prior
             .leave_one_out(&counts, last)
             .ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
         drop(counts);
+        let (tol, sweeps) = (self.options.tolerance, self.options.max_sweeps);
+        let pieces = if self.options.split == SplitRule::Original {
+            // Project onto the old pair without building the merged table.
+            let (pa, pb, total) = split::mixed_pair_marginals(c1, ba, c2, bb, mix.swap, &q)?;
+            // P(x_A), P(x_B) are the merged belief's marginals, and the
+            // split keeps them: tracks certain there are certain after.
+            let certain_a = self.certain_bits(&bit_marginals(&pa, c1.len()));
+            let certain_b = self.certain_bits(&bit_marginals(&pb, c2.len()));
+            let log_mass = c1.log_scale + c2.log_scale + total.ln();
+            let (a, b, used) = split::fit(
+                pa,
+                pb,
+                c1.tracks.clone(),
+                c2.tracks.clone(),
+                &q,
+                log_mass,
+                tol,
+                sweeps,
+            )?;
+            self.stats.max_sweeps = self.stats.max_sweeps.max(used);
+            let mut pieces = Vec::new();
+            for (half, fixed) in [(a, certain_a), (b, certain_b)] {
+                if fixed.is_empty() {
+                    pieces.push(half);
+                } else {
+                    // Keep at least one track in the half.
+                    let keep = fixed.len().min(half.len() - 1);
+                    let (rest, singles) = half.restrict(&fixed[..keep])?;
+                    self.stats.certain_splits += singles.len() as u64;
+                    pieces.extend(singles);
+                    pieces.push(rest);
+                }
+            }
+            pieces
+        } else {
+            let mut merged = c1.outer(c2);
+            merged.rollup(ba, c1.len() + bb, mix.swap);
+            self.split_materialized(merged, q, ca, others, mix)?
+        };
+        self.stats.splits += 1;
+        self.replace(&[ca, cb], pieces);
+        Ok(())
+    }
+
+    /// Splits a merged table by the configured rule, after splitting off
+    /// the tracks it leaves certain (and keeping it whole if that is enough
+    /// to fit).
+    fn split_materialized(
+        &mut self,
+        mut merged: Component,
+        mut q: Vec<f64>,
+        ca: usize,
+        others: usize,
+        mix: Mix,
+    ) -> Result<Vec<Component>, BeliefError> {
         let mut pieces = Vec::new();
-        // Tracks the mix left certain leave exactly.
         let fixed = {
             let weighted = Weighted::new(&merged, &q)?;
             self.certain_bits(&weighted.marginals())
@@ -358,11 +431,14 @@ impl FactoredBelief {
             pieces = singles;
         }
         let extra = 2 * pieces.len();
-        if fits(merged.len(), extra) {
-            self.stats.merges += 1;
+        let fits = merged.len() <= self.options.max_component
+            && self
+                .options
+                .max_numbers
+                .is_none_or(|b| others + extra + (1usize << merged.len()) <= b);
+        if fits {
             pieces.push(merged);
-            self.replace(&[ca, cb], pieces);
-            return Ok(());
+            return Ok(pieces);
         }
         let weighted = Weighted::new(&merged, &q)?;
         let side_a: usize = merged
@@ -373,15 +449,13 @@ impl FactoredBelief {
             .map(|(b, _)| 1usize << b)
             .sum();
         let projection = self.choose_split(&weighted, &merged, side_a, others + extra, mix)?;
-        self.stats.splits += 1;
         self.stats.max_sweeps = self.stats.max_sweeps.max(projection.sweeps);
         if projection.kl.is_finite() {
             self.stats.split_loss += projection.kl;
         }
         pieces.push(projection.a);
         pieces.push(projection.b);
-        self.replace(&[ca, cb], pieces);
-        Ok(())
+        Ok(pieces)
     }
 
     /// The size of the first half of a split of m tracks: the largest that
@@ -566,6 +640,19 @@ impl PropertyFilter for FactoredBelief {
     fn coefficients(&self) -> usize {
         self.comps.iter().map(|c| c.table.len()).sum()
     }
+}
+
+/// P(bit i set) for every bit of a normalized table.
+fn bit_marginals(table: &[f64], bits: usize) -> Vec<f64> {
+    (0..bits)
+        .map(|i| {
+            let half = 1usize << i;
+            table
+                .chunks_exact(2 * half)
+                .map(|b| b[half..].iter().sum::<f64>())
+                .sum()
+        })
+        .collect()
 }
 
 #[cfg(test)]

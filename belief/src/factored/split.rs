@@ -156,38 +156,34 @@ impl<'a> Weighted<'a> {
         for p in pa.iter_mut().chain(pb.iter_mut()) {
             *p /= self.total;
         }
-        let count_a = super::table::counts_of(&pa, na);
-        let count_b = super::table::counts_of(&pb, nb);
-        let (alpha, beta, sweeps) =
-            scale_counts(self.q, &count_a, &count_b, tolerance, max_sweeps)?;
-        let ga: Vec<f64> = pa
-            .iter()
-            .enumerate()
-            .map(|(y, &p)| p * alpha[y.count_ones() as usize])
-            .collect();
-        let gb: Vec<f64> = pb
-            .iter()
-            .enumerate()
-            .map(|(y, &p)| p * beta[y.count_ones() as usize])
-            .collect();
-        // S′ = Σ g_A·g_B·Q, through the count vectors.
-        let ca = super::table::counts_of(&ga, na);
-        let cb = super::table::counts_of(&gb, nb);
-        let mut s_prime = 0.0;
-        for (r, &x) in ca.iter().enumerate() {
-            for (q, &y) in cb.iter().enumerate() {
-                s_prime += x * y * self.q[r + q];
-            }
-        }
+        let tracks_of = |mask: usize| -> Vec<u32> {
+            (0..bits)
+                .filter(|b| mask & (1 << b) != 0)
+                .map(|b| self.merged.tracks[b])
+                .collect()
+        };
+        let log_mass = self.merged.log_scale + self.total.ln();
+        let (a, b, sweeps) = fit(
+            pa,
+            pb,
+            tracks_of(part_a),
+            tracks_of(part_b),
+            self.q,
+            log_mass,
+            tolerance,
+            max_sweeps,
+        )?;
         let kl = if want_kl {
+            // P′(x) = g_A·g_B·Q / S′ over the normalized tables.
+            let s_prime = pair_mass(&a.counts, &b.counts, self.q);
+            let (ln_t, ln_s) = (self.total.ln(), s_prime.ln());
             let mut kl = 0.0;
-            let ln_t = self.total.ln();
-            let ln_s = s_prime.ln();
             for_each_split(bits, part_a, |x, ia, ib| {
                 let w = self.w[x];
                 if w > 0.0 {
                     let p = w.ln() - ln_t;
-                    let p_prime = (ga[ia] * gb[ib] * self.q[x.count_ones() as usize]).ln() - ln_s;
+                    let p_prime =
+                        (a.table[ia] * b.table[ib] * self.q[x.count_ones() as usize]).ln() - ln_s;
                     kl += (w / self.total) * (p - p_prime);
                 }
             });
@@ -195,18 +191,145 @@ impl<'a> Weighted<'a> {
         } else {
             f64::NAN
         };
-        let tracks_of = |mask: usize| -> Vec<u32> {
-            (0..bits)
-                .filter(|b| mask & (1 << b) != 0)
-                .map(|b| self.merged.tracks[b])
-                .collect()
-        };
-        // Keep the mass this component contributes: e^L·Σ g·Q.
-        let scale = self.merged.log_scale + self.total.ln() - s_prime.ln();
-        let a = Component::from_table(tracks_of(part_a), ga, scale)?;
-        let b = Component::from_table(tracks_of(part_b), gb, 0.0)?;
         Ok(Projection { a, b, kl, sweeps })
     }
+}
+
+/// Σ_{r,q} c_A[r]·c_B[q]·Q(r + q).
+fn pair_mass(ca: &[f64], cb: &[f64], q: &[f64]) -> f64 {
+    let mut total = 0.0;
+    for (r, &x) in ca.iter().enumerate() {
+        for (s, &y) in cb.iter().enumerate() {
+            total += x * y * q[r + s];
+        }
+    }
+    total
+}
+
+/// The two tables of the projection whose marginals are `pa` over
+/// `tracks_a` and `pb` over `tracks_b` (each normalized), under the count
+/// weight `q`; `log_mass` = ln of the mass e^L·Σ g·Q the pair must keep.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fit(
+    pa: Vec<f64>,
+    pb: Vec<f64>,
+    tracks_a: Vec<u32>,
+    tracks_b: Vec<u32>,
+    q: &[f64],
+    log_mass: f64,
+    tolerance: f64,
+    max_sweeps: usize,
+) -> Result<(Component, Component, usize), BeliefError> {
+    let (na, nb) = (tracks_a.len(), tracks_b.len());
+    let count_a = super::table::counts_of(&pa, na);
+    let count_b = super::table::counts_of(&pb, nb);
+    let (alpha, beta, sweeps) = scale_counts(q, &count_a, &count_b, tolerance, max_sweeps)?;
+    let mut ga = pa;
+    for (y, g) in ga.iter_mut().enumerate() {
+        *g *= alpha[y.count_ones() as usize];
+    }
+    let mut gb = pb;
+    for (y, g) in gb.iter_mut().enumerate() {
+        *g *= beta[y.count_ones() as usize];
+    }
+    let s_prime = pair_mass(
+        &super::table::counts_of(&ga, na),
+        &super::table::counts_of(&gb, nb),
+        q,
+    );
+    let a = Component::from_table(tracks_a, ga, log_mass - s_prime.ln())?;
+    let b = Component::from_table(tracks_b, gb, 0.0)?;
+    Ok((a, b, sweeps))
+}
+
+/// One side of [`mixed_pair_marginals`]: P(x_1) (unnormalized) for the
+/// table `g1` whose bit `i1` mixed with a bit of the other component, whose
+/// count vectors split by that bit are `other[0]` (bit clear) and
+/// `other[1]` (bit set).
+fn mixed_side(
+    g1: &[f64],
+    bits: usize,
+    i1: usize,
+    other: &[Vec<f64>; 2],
+    swap: f64,
+    q: &[f64],
+) -> Vec<f64> {
+    let top = q.len() as isize;
+    let at = |s: isize| {
+        if (0..top).contains(&s) {
+            q[s as usize]
+        } else {
+            0.0
+        }
+    };
+    // h[r] = Σ_q c[q]·Q(r + q + shift) for a count vector c.
+    let weigh = |c: &[f64], shift: isize| -> Vec<f64> {
+        (0..=bits)
+            .map(|r| {
+                c.iter()
+                    .enumerate()
+                    .map(|(s, &x)| x * at(r as isize + s as isize + shift))
+                    .sum()
+            })
+            .collect()
+    };
+    let all: Vec<f64> = other[0].iter().zip(&other[1]).map(|(x, y)| x + y).collect();
+    let h = weigh(&all, 0);
+    // The part of the other side that trades with a set whose bit is α
+    // holds the other bit 1 − α; it came from (or goes to) a set of the
+    // other side with bit α, one red track more (α = 0) or fewer.
+    let trade = [weigh(&other[1], 0), weigh(&other[0], 0)];
+    let image = [weigh(&other[0], 1), weigh(&other[1], -1)];
+    let e = 1usize << i1;
+    (0..g1.len())
+        .map(|x| {
+            let r = x.count_ones() as usize;
+            let alpha = usize::from(x & e != 0);
+            g1[x] * (h[r] - swap * trade[alpha][r]) + swap * g1[x ^ e] * image[alpha][r]
+        })
+        .collect()
+}
+
+/// Count vectors of a table split by one bit: [bit clear, bit set].
+fn split_counts(table: &[f64], bits: usize, bit: usize) -> [Vec<f64>; 2] {
+    let mut out = [vec![0.0; bits + 1], vec![0.0; bits + 1]];
+    for (y, &g) in table.iter().enumerate() {
+        out[(y >> bit) & 1][y.count_ones() as usize] += g;
+    }
+    out
+}
+
+/// The marginal tables P(x_1), P(x_2) (normalized) and the mass T = Σ g′·Q
+/// of the merged model right after a mix of bit `i1` of `c1` with bit `i2`
+/// of `c2`, without building the 2^(|C1|+|C2|) table: the rolled-up table
+/// is g1·g2 except where the two bits differ, where a share `swap` of the
+/// weight moves to the image with both bits flipped (same red count), so
+/// each marginal needs only the other side's count vectors split by its
+/// mixed bit. O(2^|C1| + 2^|C2| + |C1|·|C2|).
+pub(crate) fn mixed_pair_marginals(
+    c1: &Component,
+    i1: usize,
+    c2: &Component,
+    i2: usize,
+    swap: f64,
+    q: &[f64],
+) -> Result<(Vec<f64>, Vec<f64>, f64), BeliefError> {
+    let split1 = split_counts(&c1.table, c1.len(), i1);
+    let split2 = split_counts(&c2.table, c2.len(), i2);
+    let mut p1 = mixed_side(&c1.table, c1.len(), i1, &split2, swap, q);
+    let mut p2 = mixed_side(&c2.table, c2.len(), i2, &split1, swap, q);
+    let total: f64 = p1.iter().sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return Err(BeliefError::Degenerate { normalizer: total });
+    }
+    let total2: f64 = p2.iter().sum();
+    for p in &mut p1 {
+        *p = (*p / total).max(0.0);
+    }
+    for p in &mut p2 {
+        *p = (*p / total2).max(0.0);
+    }
+    Ok((p1, p2, total))
 }
 
 /// Count-space IPF: α_r, β_q such that J[r][q] = p_A[r]·α_r·K[r][q]·β_q·p_B[q],
