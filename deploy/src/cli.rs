@@ -262,9 +262,12 @@ mod tests {
         };
         assert_eq!(args.method, Method::Particles);
         assert_eq!((args.particles, args.seed), (Some(5000), Some(9)));
-        assert!(Cli::try_parse_from(["idmesh", "replay", "--trace", "t", "--particles", "0"]).is_err());
+        assert!(
+            Cli::try_parse_from(["idmesh", "replay", "--trace", "t", "--particles", "0"]).is_err()
+        );
 
-        let cli = Cli::try_parse_from(["idmesh", "eval", "--preset", "full", "--out-dir", "x"]).unwrap();
+        let cli =
+            Cli::try_parse_from(["idmesh", "eval", "--preset", "full", "--out-dir", "x"]).unwrap();
         let Command::Eval(args) = cli.command else {
             panic!("parsed as eval")
         };

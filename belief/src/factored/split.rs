@@ -646,6 +646,92 @@ mod tests {
         }
     }
 
+    /// The closed-form marginals after a mix across two components equal
+    /// those of the materialized merged table, and so does the split.
+    #[test]
+    fn mixed_pair_marginals_match_the_merged_table() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for case in 0..300 {
+            let (n1, n2) = (rng.gen_range(1..=5), rng.gen_range(1..=5));
+            let mut table = |n: usize| -> Vec<f64> {
+                (0..1 << n)
+                    .map(|_| {
+                        if rng.gen::<f64>() < 0.15 {
+                            0.0
+                        } else {
+                            rng.gen()
+                        }
+                    })
+                    .collect()
+            };
+            let (t1, t2) = (table(n1), table(n2));
+            let Ok(c1) = Component::from_table((0..n1 as u32).collect(), t1, 0.3) else {
+                continue;
+            };
+            let Ok(c2) = Component::from_table((10..10 + n2 as u32).collect(), t2, -1.1) else {
+                continue;
+            };
+            let mut q: Vec<f64> = (0..=n1 + n2).map(|_| rng.gen::<f64>()).collect();
+            if case % 2 == 0 {
+                let lo = rng.gen_range(0..=n1 + n2);
+                for (s, x) in q.iter_mut().enumerate() {
+                    if s < lo || s > lo + 1 {
+                        *x = 0.0;
+                    }
+                }
+            }
+            let (i1, i2) = (rng.gen_range(0..n1), rng.gen_range(0..n2));
+            let swap = [0.5, 1.0, rng.gen::<f64>()][case % 3];
+            let mut merged = c1.outer(&c2);
+            merged.rollup(i1, n1 + i2, swap);
+            let Ok(weighted) = Weighted::new(&merged, &q) else {
+                assert!(mixed_pair_marginals(&c1, i1, &c2, i2, swap, &q).is_err());
+                continue;
+            };
+            let (p1, p2, total) = mixed_pair_marginals(&c1, i1, &c2, i2, swap, &q).unwrap();
+            let low = (1usize << n1) - 1;
+            let (want1, want2) = (
+                marginal(&merged.table, &q, n1 + n2, low),
+                marginal(&merged.table, &q, n1 + n2, !low & ((1 << (n1 + n2)) - 1)),
+            );
+            for (x, y) in p1.iter().zip(&want1).chain(p2.iter().zip(&want2)) {
+                assert!((x - y).abs() < 1e-12, "case {case}: {p1:?} vs {want1:?}");
+            }
+            assert!((total - weighted.total).abs() < 1e-12 * weighted.total);
+            let Ok(slow) = weighted.project(low, 1e-12, 200, false) else {
+                continue;
+            };
+            let log_mass = c1.log_scale + c2.log_scale + total.ln();
+            let (a, b, _) = fit(
+                p1,
+                p2,
+                c1.tracks.clone(),
+                c2.tracks.clone(),
+                &q,
+                log_mass,
+                1e-12,
+                200,
+            )
+            .unwrap();
+            for (x, y) in a.table.iter().zip(&slow.a.table) {
+                assert!((x - y).abs() < 1e-9, "case {case}");
+            }
+            for (x, y) in b.table.iter().zip(&slow.b.table) {
+                assert!((x - y).abs() < 1e-9, "case {case}");
+            }
+            assert!(
+                (a.log_scale + b.log_scale - slow.a.log_scale - slow.b.log_scale).abs() < 1e-9,
+                "case {case}: {} {} vs {} {}; merged {} total {total} vs {}",
+                a.log_scale,
+                b.log_scale,
+                slow.a.log_scale,
+                slow.b.log_scale,
+                merged.log_scale,
+                weighted.total
+            );
+        }
+    }
+
     /// A product table is its own projection, with KL 0.
     #[test]
     fn a_product_is_a_fixed_point() {

@@ -51,10 +51,10 @@ impl OmpOptions {
         OmpOptions {
             depth: 1,
             atoms,
-            targets: 4 * atoms,
+            targets: 2 * atoms,
             max_candidates: 8192,
             tolerance: 1e-9,
-            every: 16,
+            every: 24,
         }
     }
 

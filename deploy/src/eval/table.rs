@@ -328,21 +328,87 @@ pub fn equal_time(results: &Results) -> String {
 /// The Radon methods against a particle filter holding as many sets.
 pub fn equal_memory(results: &Results) -> String {
     let mut out = String::from(
-        "| n | swap | B = P | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
-         |---:|---:|---:|---:|---:|---:|---:|\n",
+        "| n | swap | B = P | exact | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for p in points(results, Experiment::Table3) {
         let b = super::plan::budget(p.point.n);
         let cell = |m: Method| p.summary(&m).map_or("—".into(), error);
         writeln!(
             out,
-            "| {} | {} | {b} | {} | {} | {} | {} |",
+            "| {} | {} | {b} | {} | {} | {} | {} | {} |",
             p.point.n,
             p.point.swap,
+            cell(Method::Exact),
             cell(Method::Threshold(b)),
             cell(Method::Overcomplete(b)),
             cell(Method::Particles(b)),
             cell(Method::Particles(PARTICLES)),
+        )
+        .unwrap();
+    }
+    out
+}
+
+/// The headline of Table III: at each swap and n, the paper's three
+/// methods ranked by our error and by the paper's, whether the order
+/// matches, and how much faster our overcomplete method is.
+pub fn ordering(results: &Results) -> String {
+    let mut out = String::from(
+        "| swap | n | our ranking | paper's ranking | same best | same order | overcomplete: ours vs paper seconds |\n\
+         |---:|---:|---|---|---|---|---|\n",
+    );
+    for p in points(results, Experiment::Table3) {
+        let n = p.point.n;
+        let three = [
+            Method::Order(1),
+            Method::Order(3),
+            Method::Overcomplete(super::plan::budget(n)),
+        ];
+        let mut ours: Vec<(f64, &str)> = Vec::new();
+        let mut paper: Vec<(f64, &str)> = Vec::new();
+        let name = |m: &Method| match m {
+            Method::Order(1) => "order 1",
+            Method::Order(_) => "order 3",
+            _ => "overcomplete",
+        };
+        for m in &three {
+            if let (Some(s), Some((e, _))) = (p.summary(m).filter(|s| s.ok()), paper_table3(m, n)) {
+                ours.push((s.error, name(m)));
+                paper.push((e, name(m)));
+            }
+        }
+        if ours.len() < 3 {
+            continue;
+        }
+        ours.sort_by(|a, b| a.0.total_cmp(&b.0));
+        paper.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let rank = |v: &[(f64, &str)]| {
+            v.iter()
+                .map(|(e, m)| format!("{m} {e:.3}"))
+                .collect::<Vec<_>>()
+                .join(" < ")
+        };
+        let same_best = ours[0].1 == paper[0].1;
+        let same_order = ours.iter().zip(&paper).all(|(a, b)| a.1 == b.1);
+        let speed = match (p.summary(&three[2]), paper_table3(&three[2], n)) {
+            (Some(s), Some((_, t))) if s.ok() && s.seconds > 0.0 => format!(
+                "{} s vs {} s (×{:.0})",
+                seconds(s.seconds),
+                seconds(t),
+                t / s.seconds
+            ),
+            _ => "—".into(),
+        };
+        let yes = |b: bool| if b { "yes" } else { "**no**" };
+        writeln!(
+            out,
+            "| {} | {n} | {} | {} | {} | {} | {speed} |",
+            p.point.swap,
+            rank(&ours),
+            rank(&paper),
+            yes(same_best),
+            yes(same_order)
         )
         .unwrap();
     }

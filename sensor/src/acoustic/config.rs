@@ -18,6 +18,8 @@ use super::pipeline::separate::SeparationSettings;
 /// | `linkage` | average | agglomerative, linkage not given |
 /// | `separation` | FastICA logcosh, symmetric, tol 10⁻⁴, 200 iterations; directions above 4× the noise floor | FastICA |
 /// | `link_candidates` | 8 strongest links per segment | (all) |
+/// | `min_link` | mean link correlation ≥ 0.9 along the chain | ranks by it (see `pipeline::select`) |
+/// | `min_support` | heard by ≥ 3 groups | not given |
 /// | `hear_threshold` | \|corr\| ≥ 0.9 | "highly correlated" |
 /// | `tile` | 5 m | 5 m |
 /// | `vote_tolerance` | 0 m | 0 |
@@ -33,6 +35,8 @@ pub struct PipelineConfig {
     pub linkage: Linkage,
     pub separation: SeparationSettings,
     pub link_candidates: usize,
+    pub min_link: f64,
+    pub min_support: u32,
     pub hear_threshold: f64,
     pub tile: f64,
     pub vote_tolerance: f64,
@@ -53,6 +57,8 @@ impl Default for PipelineConfig {
             linkage: Linkage::Average,
             separation: SeparationSettings::default(),
             link_candidates: 8,
+            min_link: 0.9,
+            min_support: 3,
             hear_threshold: 0.9,
             tile: 5.0,
             vote_tolerance: 0.0,
@@ -141,6 +147,9 @@ impl AcousticConfig {
         }
         if p.link_candidates == 0 {
             return bad("link_candidates must be ≥ 1".into());
+        }
+        if !(0.0..=1.0).contains(&p.min_link) {
+            return bad(format!("min_link must be in [0, 1], got {}", p.min_link));
         }
         if !(0.0..=1.0).contains(&p.hear_threshold) {
             return bad(format!("hear_threshold must be in [0, 1], got {}", p.hear_threshold));

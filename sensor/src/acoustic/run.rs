@@ -15,10 +15,10 @@ use super::error::AcousticError;
 use super::field::Field;
 use super::metrics::tracking::{evaluate, TrackingMetrics};
 use super::parallel::par_map_progress;
-use super::pipeline::cluster::cluster_slot;
+use super::pipeline::cluster::{cluster_slot, SlotClusters};
 use super::pipeline::intersect::{hearing_groups, intersect, Area, GroupRanges};
 use super::pipeline::prepare::{nearest_groups, Segmentation, SensorGroup};
-use super::pipeline::select::{link_layer, select_cts, Chain, LinkLayer};
+use super::pipeline::select::{link_layer, select_cts, Chain, LinkLayer, SelectSettings};
 use super::pipeline::separate::{estimate_noise_variance, separate_slot, SeparationReport, SlotSegments};
 use super::pipeline::tiles::TileGrid;
 use super::pipeline::vote_link::{link, vote, CtsEstimate, Fragment, VoteSettings};
@@ -152,7 +152,7 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         |&j| {
             separate_slot(&field.signals, &groups, &seg, j, &p.separation, noise_variance, config.seed).map(
                 |(segs, rep)| {
-                    let labels = cluster_slot(&segs, clusters, p.linkage);
+                    let labels = cluster_slot(&segs, clusters, p.linkage, p.hear_threshold as f32);
                     (segs, labels, rep)
                 },
             )
@@ -160,7 +160,7 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         &mut |d| report(1 + d as u64, progress),
     );
     let mut slots: Vec<SlotSegments> = Vec::with_capacity(v);
-    let mut labels: Vec<Vec<u32>> = Vec::with_capacity(v);
+    let mut labels: Vec<SlotClusters> = Vec::with_capacity(v);
     let mut separation = SeparationReport::default();
     for r in separated {
         let (s, l, rep) = r?;
@@ -181,11 +181,16 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         &mut |d| report(1 + v as u64 + d as u64, progress),
     );
     let n_cts = v + 1 - p.n_slot.min(v);
+    let select = SelectSettings {
+        k,
+        min_link: p.min_link as f32,
+        min_support: p.min_support,
+    };
     let chains: Vec<Vec<Chain>> = (0..n_cts)
         .map(|u| {
             let span = p.n_slot.min(v);
             let refs: Vec<&LinkLayer> = layers[u..u + span - 1].iter().collect();
-            select_cts(&refs, &labels[u], slots[u + span - 1].len(), k)
+            select_cts(&refs, &labels[u].labels, &labels[u].support, slots[u + span - 1].len(), &select)
         })
         .collect();
     times.link_select = t.elapsed().as_secs_f64();

@@ -153,12 +153,52 @@ fn nn_chain(d: &mut DMatrix<f32>, linkage: Linkage) -> Vec<(usize, usize, f32)> 
     merges
 }
 
-/// Clusters one slot's segments into `clusters` clusters.
-pub fn cluster_slot(segs: &SlotSegments, clusters: usize, linkage: Linkage) -> Vec<u32> {
+/// The clusters of one slot, and the spatial support of every segment.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SlotClusters {
+    /// Cluster of every segment, 0-based.
+    pub labels: Vec<u32>,
+    /// Per segment, the number of distinct groups (its own included) that
+    /// separated a segment with |corr| ≥ the hearing threshold to it: how
+    /// many neighbouring groups "hear" it — the spatial redundancy that
+    /// Section IV-C's rationale rests on.
+    pub support: Vec<u32>,
+}
+
+/// Clusters one slot's segments into `clusters` clusters and counts each
+/// segment's support at `hear_threshold`.
+pub fn cluster_slot(segs: &SlotSegments, clusters: usize, linkage: Linkage, hear_threshold: f32) -> SlotClusters {
     if segs.is_empty() {
-        return Vec::new();
+        return SlotClusters::default();
     }
-    agglomerate(correlation_distances(segs), clusters, linkage)
+    let d = correlation_distances(segs);
+    let support = support(&d, &segs.group, hear_threshold);
+    SlotClusters {
+        labels: agglomerate(d, clusters, linkage),
+        support,
+    }
+}
+
+/// Distinct groups within distance 1 − `threshold` of every item.
+fn support(d: &DMatrix<f32>, group: &[u32], threshold: f32) -> Vec<u32> {
+    let n = d.nrows();
+    let max_d = 1.0 - threshold;
+    let groups = group.iter().map(|&g| g as usize + 1).max().unwrap_or(0);
+    let mut seen = vec![usize::MAX; groups];
+    (0..n)
+        .map(|i| {
+            let col = d.column(i);
+            let mut count = 0;
+            for j in 0..n {
+                let g = group[j] as usize;
+                if col[j] <= max_d && seen[g] != i {
+                    seen[g] = i;
+                    count += 1;
+                }
+            }
+            count
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -248,7 +288,11 @@ mod tests {
         for g in 12..14u32 {
             segs.push(g, (0..100).map(|_| rng.gen::<f64>() - 0.5));
         }
-        let labels = cluster_slot(&segs, 5, Linkage::Average);
+        let clusters = cluster_slot(&segs, 5, Linkage::Average, 0.9);
+        let labels = &clusters.labels;
+        // Each source is heard by its four groups; noise only by its own.
+        assert_eq!(&clusters.support[..12], &[4; 12]);
+        assert_eq!(&clusters.support[12..], &[1, 1]);
         for i in 0..12 {
             for j in 0..12 {
                 assert_eq!(labels[i] == labels[j], i % 3 == j % 3, "{labels:?}");

@@ -8,10 +8,24 @@
 //! Over a CTS (n_slot consecutive slots) the score of a segment is the
 //! best sum of link correlations along a chain of segments starting at it,
 //! one per slot (equation (5)); the chain is found by dynamic programming
-//! (Viterbi, max-sum). In each CTS the K best-scoring segments of the
-//! first slot, at most one per cluster, are selected, each with its chain:
-//! the chain's segment in slot j is C^u_{k,j}, the k-th individual segment
-//! of slot j according to CTS_u.
+//! (Viterbi, max-sum). In each CTS K segments of the first slot, at most
+//! one per cluster, are selected, each with its chain: the chain's segment
+//! in slot j is C^u_{k,j}, the k-th individual segment of slot j according
+//! to CTS_u.
+//!
+//! **Where we depart from the paper.** Ranking by equation (5) alone does
+//! not work in simulation: successive slots share (l_seg − l_step)/l_seg
+//! = 90 % of their samples, so *any* fixed projection of one group's data
+//! — an aggregate of two sources, a direction made by a moving source's
+//! changing gain — links to itself with ρ ≈ 1, and real sources and
+//! artefacts all score ≈ n_slot − 1. Equation (5) is therefore used as a
+//! gate (mean link ≥ `min_link`), and candidates are ranked by their
+//! spatial support — how many groups hear them (computed in the clustering
+//! step) — the redundancy the paper's own rationale for clustering rests
+//! on (Section IV-C: artefacts of one group are "unlikely to be generated
+//! by more than one group"). Candidates heard by fewer than `min_support`
+//! groups are not selected, so a slot may yield fewer than K segments
+//! when fewer than K sources are separable in it.
 
 use super::separate::SlotSegments;
 use nalgebra::DMatrix;
@@ -85,12 +99,31 @@ pub struct Chain {
     pub segments: Vec<Option<u32>>,
 }
 
-/// Selects the K chains of CTS_u. `layers[i]` links slot u + i to
-/// u + i + 1 (n_slot − 1 layers); `labels` are the clusters of slot u's
-/// segments and `last_len` the number of segments in the CTS's last slot.
-pub fn select_cts(layers: &[&LinkLayer], labels: &[u32], last_len: usize, k: usize) -> Vec<Chain> {
+/// How candidates are gated and ranked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SelectSettings {
+    /// K, the number of chains per CTS.
+    pub k: usize,
+    /// Least mean link correlation along a candidate's chain.
+    pub min_link: f32,
+    /// Least number of groups that must hear a candidate.
+    pub min_support: u32,
+}
+
+/// Selects the chains of CTS_u. `layers[i]` links slot u + i to
+/// u + i + 1 (n_slot − 1 layers); `labels` and `support` are the clusters
+/// and support of slot u's segments and `last_len` the number of segments
+/// in the CTS's last slot.
+pub fn select_cts(
+    layers: &[&LinkLayer],
+    labels: &[u32],
+    support: &[u32],
+    last_len: usize,
+    settings: &SelectSettings,
+) -> Vec<Chain> {
     let steps = layers.len();
-    // best[i][s]: best chain score from segment s of slot u + i to the end.
+    // best[i][s]: best chain score from segment s of slot u + i to the end
+    // (−∞ when the chain cannot reach the last slot).
     let mut best: Vec<Vec<f32>> = vec![Vec::new(); steps + 1];
     let mut next: Vec<Vec<Option<u32>>> = vec![Vec::new(); steps];
     best[steps] = vec![0.0; last_len];
@@ -99,10 +132,10 @@ pub fn select_cts(layers: &[&LinkLayer], labels: &[u32], last_len: usize, k: usi
             .links
             .iter()
             .map(|links| {
-                let mut top = (0.0f32, None);
+                let mut top = (f32::NEG_INFINITY, None);
                 for &(t, rho) in links {
-                    let v = rho + best[i + 1].get(t as usize).copied().unwrap_or(0.0);
-                    if top.1.is_none() || v > top.0 {
+                    let v = rho + best[i + 1].get(t as usize).copied().unwrap_or(f32::NEG_INFINITY);
+                    if v > top.0 {
                         top = (v, Some(t));
                     }
                 }
@@ -112,27 +145,32 @@ pub fn select_cts(layers: &[&LinkLayer], labels: &[u32], last_len: usize, k: usi
         best[i] = scores;
         next[i] = nexts;
     }
-    let first = if steps == 0 { &best[0] } else { &best[0] };
-    // The best segment of every cluster, then the K best clusters.
+    let gate = settings.min_link * steps as f32;
+    // Per cluster, the gated candidate with the most support (then the
+    // best chain, then the lowest index); then the best clusters.
     let clusters = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
-    let mut per_cluster: Vec<Option<(f32, u32)>> = vec![None; clusters];
+    let mut per_cluster: Vec<Option<(u32, f32, u32)>> = vec![None; clusters];
     for (s, &l) in labels.iter().enumerate() {
-        let v = first.get(s).copied().unwrap_or(0.0);
+        let score = best[0].get(s).copied().unwrap_or(f32::NEG_INFINITY);
+        let sup = support.get(s).copied().unwrap_or(0);
+        if !(score >= gate) || sup < settings.min_support {
+            continue;
+        }
         let slot = &mut per_cluster[l as usize];
-        if slot.is_none_or(|(b, _)| v > b) {
-            *slot = Some((v, s as u32));
+        if slot.is_none_or(|(bs, bv, _)| (sup, score) > (bs, bv)) {
+            *slot = Some((sup, score, s as u32));
         }
     }
-    let mut ranked: Vec<(f32, u32, u32)> = per_cluster
+    let mut ranked: Vec<(u32, f32, u32, u32)> = per_cluster
         .iter()
         .enumerate()
-        .filter_map(|(c, b)| b.map(|(v, s)| (v, c as u32, s)))
+        .filter_map(|(c, b)| b.map(|(sup, v, s)| (sup, v, c as u32, s)))
         .collect();
-    ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.2.cmp(&b.2)));
+    ranked.sort_by(|a, b| b.0.cmp(&a.0).then(b.1.total_cmp(&a.1)).then(a.3.cmp(&b.3)));
     ranked
         .into_iter()
-        .take(k)
-        .map(|(score, cluster, s)| {
+        .take(settings.k)
+        .map(|(_, score, cluster, s)| {
             let mut segments = Vec::with_capacity(steps + 1);
             let mut cur = Some(s);
             segments.push(cur);
@@ -190,8 +228,14 @@ mod tests {
         let s = slots(4);
         let layers: Vec<LinkLayer> = (0..3).map(|j| link_layer(&s[j], &s[j + 1], 5, 3)).collect();
         let refs: Vec<&LinkLayer> = layers.iter().collect();
-        // Each segment its own cluster.
-        let chains = select_cts(&refs, &[0, 1, 2], s[3].len(), 2);
+        let settings = SelectSettings {
+            k: 2,
+            min_link: 0.9,
+            min_support: 1,
+        };
+        // Each segment its own cluster; all equally supported: the gate
+        // removes the noise.
+        let chains = select_cts(&refs, &[0, 1, 2], &[1, 1, 1], s[3].len(), &settings);
         assert_eq!(chains.len(), 2);
         let mut firsts: Vec<u32> = chains.iter().map(|c| c.segments[0].unwrap()).collect();
         firsts.sort();
@@ -201,10 +245,14 @@ mod tests {
             let s0 = c.segments[0].unwrap();
             assert!(c.segments.iter().all(|&x| x == Some(s0)));
         }
-        // Sources 1 and 2 in one cluster: only one of them may be chosen.
-        let chains = select_cts(&refs, &[0, 1, 1], s[3].len(), 2);
-        assert_eq!(chains.len(), 2);
-        assert_eq!(chains[1].segments[0], Some(0));
-        assert!(chains[1].score < chains[0].score);
+        // Sources 1 and 2 in one cluster: only one of them may be chosen,
+        // the better supported; the noise fails the gate.
+        let chains = select_cts(&refs, &[0, 1, 1], &[5, 2, 3], s[3].len(), &settings);
+        assert_eq!(chains.len(), 1);
+        assert_eq!(chains[0].segments[0], Some(2));
+        // Support ranks clusters; too little support is not selected.
+        let chains = select_cts(&refs, &[0, 1, 2], &[9, 2, 3], s[3].len(), &SelectSettings { min_support: 3, ..settings });
+        assert_eq!(chains.len(), 1);
+        assert_eq!(chains[0].segments[0], Some(2));
     }
 }

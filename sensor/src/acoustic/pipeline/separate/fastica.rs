@@ -273,41 +273,44 @@ impl FastIca {
     fn symmetric(&self, z: &DMatrix<f64>, w0: DMatrix<f64>) -> Result<(DMatrix<f64>, usize), Stall> {
         let (n, t) = z.shape();
         let nl = self.config.nonlinearity;
+        // nalgebra is column-major: the transpose's columns are the rows of
+        // Z, so each whitened channel is one contiguous slice. The loop
+        // below works on such slices with no allocation per iteration — at
+        // the pipeline's sizes (n ≈ 1–6, T = 100) the overhead of general
+        // matrix products would dominate.
         let zt = z.transpose();
+        let rows = zt.as_slice();
+        let row = |j: usize| &rows[j * t..(j + 1) * t];
+        let inv_t = 1.0 / t as f64;
         let mut w = sym_decorrelate(&w0);
-        let mut wz = DMatrix::<f64>::zeros(n, t);
-        let mut g = DMatrix::<f64>::zeros(n, t);
-        let mut gzt = DMatrix::<f64>::zeros(n, n);
-        // nalgebra is column-major: row i of W·Z is strided, so the
-        // nonlinearity works on the transpose (T × n), whose columns are
-        // the component time series, contiguous.
+        let mut w1 = DMatrix::<f64>::zeros(n, n);
         let mut u = vec![0.0; t];
         let mut gu = vec![0.0; t];
-        let mut mean_dg = vec![0.0; n];
         let mut change = f64::INFINITY;
         for it in 1..=self.config.max_iter {
-            w.mul_to(z, &mut wz);
             for i in 0..n {
-                for (k, uk) in u.iter_mut().enumerate() {
-                    *uk = wz[(i, k)];
+                u.iter_mut().for_each(|x| *x = 0.0);
+                for j in 0..n {
+                    let wij = w[(i, j)];
+                    for (x, zj) in u.iter_mut().zip(row(j)) {
+                        *x += wij * zj;
+                    }
                 }
-                mean_dg[i] = nl.apply(&u, &mut gu);
-                for (k, gk) in gu.iter().enumerate() {
-                    g[(i, k)] = *gk;
+                let mean_dg = nl.apply(&u, &mut gu);
+                for j in 0..n {
+                    let dot: f64 = gu.iter().zip(row(j)).map(|(a, b)| a * b).sum();
+                    w1[(i, j)] = dot * inv_t - mean_dg * w[(i, j)];
                 }
             }
-            g.mul_to(&zt, &mut gzt);
-            let inv_t = 1.0 / t as f64;
-            let mut w1 = DMatrix::from_fn(n, n, |i, j| gzt[(i, j)] * inv_t - mean_dg[i] * w[(i, j)]);
-            w1 = sym_decorrelate(&w1);
-            // max_i | |⟨w1_i, w_i⟩| − 1 |
+            let next = sym_decorrelate(&w1);
+            // max_i | |⟨w⁺_i, w_i⟩| − 1 |
             change = (0..n)
                 .map(|i| {
-                    let d: f64 = (0..n).map(|j| w1[(i, j)] * w[(i, j)]).sum();
+                    let d: f64 = (0..n).map(|j| next[(i, j)] * w[(i, j)]).sum();
                     (d.abs() - 1.0).abs()
                 })
                 .fold(0.0, f64::max);
-            w = w1;
+            w = next;
             if change < self.config.tol {
                 return Ok((w, it));
             }
@@ -325,6 +328,10 @@ impl FastIca {
     fn deflation(&self, z: &DMatrix<f64>, w0: DMatrix<f64>) -> Result<(DMatrix<f64>, usize), Stall> {
         let (n, t) = z.shape();
         let nl = self.config.nonlinearity;
+        let zt = z.transpose();
+        let rows = zt.as_slice();
+        let row = |j: usize| &rows[j * t..(j + 1) * t];
+        let inv_t = 1.0 / t as f64;
         let mut w = DMatrix::<f64>::zeros(n, n);
         let mut u = vec![0.0; t];
         let mut gu = vec![0.0; t];
@@ -336,30 +343,25 @@ impl FastIca {
             let mut converged = false;
             let mut change = f64::INFINITY;
             let mut it = 0;
+            let mut w1 = vec![0.0; n];
             while it < self.config.max_iter {
                 it += 1;
-                // u = wᵀ Z: columns of Z are contiguous samples.
-                for (k, uk) in u.iter_mut().enumerate() {
-                    let col = z.column(k);
-                    *uk = (0..n).map(|i| wp[i] * col[i]).sum();
-                }
-                let mean_dg = nl.apply(&u, &mut gu);
-                let mut w1 = vec![0.0; n];
-                for (k, gk) in gu.iter().enumerate() {
-                    let col = z.column(k);
-                    for i in 0..n {
-                        w1[i] += col[i] * gk;
+                u.iter_mut().for_each(|x| *x = 0.0);
+                for (j, &wj) in wp.iter().enumerate() {
+                    for (x, zj) in u.iter_mut().zip(row(j)) {
+                        *x += wj * zj;
                     }
                 }
-                let inv_t = 1.0 / t as f64;
-                for i in 0..n {
-                    w1[i] = w1[i] * inv_t - mean_dg * wp[i];
+                let mean_dg = nl.apply(&u, &mut gu);
+                for (j, w1j) in w1.iter_mut().enumerate() {
+                    let dot: f64 = gu.iter().zip(row(j)).map(|(a, b)| a * b).sum();
+                    *w1j = dot * inv_t - mean_dg * wp[j];
                 }
                 gram_schmidt(&mut w1, &w, p);
                 normalize(&mut w1);
                 let d: f64 = w1.iter().zip(&wp).map(|(a, b)| a * b).sum();
                 change = (d.abs() - 1.0).abs();
-                wp = w1;
+                wp.copy_from_slice(&w1);
                 if change < self.config.tol {
                     converged = true;
                     break;
