@@ -46,6 +46,8 @@ fn main() {
             "l_step" => c.pipeline.l_step = num() as usize,
             "n_slot" => c.pipeline.n_slot = num() as usize,
             "hear" => c.pipeline.hear_threshold = num(),
+            "same" => c.pipeline.same_source = num(),
+            "maxiter" => c.pipeline.separation.ica.max_iter = num() as usize,
             "tolerance" => c.pipeline.vote_tolerance = num(),
             "keep" => c.pipeline.separation.keep_factor = num(),
             "threads" => c.threads = num() as usize,

@@ -2,63 +2,10 @@
 //! writing into a scratch directory; the tables and the SVG plots must be
 //! there and well formed.
 
-use serde_json::Value;
+use idmesh_tests::idmesh;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::OnceLock;
 use std::time::Instant;
-
-/// The `idmesh` binary, built (or found fresh) once per test process, in
-/// the profile these tests were built in (as in `replay.rs`).
-fn idmesh() -> &'static Path {
-    static BINARY: OnceLock<PathBuf> = OnceLock::new();
-    BINARY.get_or_init(|| {
-        let cargo = option_env!("CARGO").unwrap_or("cargo");
-        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
-        let mut command = Command::new(cargo);
-        command.args(["build", "--quiet", "--message-format=json"]);
-        command.args(["-p", "idmesh-deploy", "--bin", "idmesh", "--manifest-path"]);
-        command.arg(&manifest);
-        let exe = std::env::current_exe().expect("the test knows where it is");
-        let profile_dir = exe
-            .parent()
-            .and_then(Path::parent)
-            .and_then(Path::file_name)
-            .and_then(|name| name.to_str())
-            .unwrap_or("debug");
-        match profile_dir {
-            "debug" => {}
-            "release" => {
-                command.arg("--release");
-            }
-            other => {
-                command.args(["--profile", other]);
-            }
-        }
-        let output = command.output().expect("cargo runs");
-        let messages: Vec<Value> = String::from_utf8_lossy(&output.stdout)
-            .lines()
-            .filter_map(|line| serde_json::from_str::<Value>(line).ok())
-            .collect();
-        if !output.status.success() {
-            let diagnostics: Vec<&str> = messages
-                .iter()
-                .filter(|m| m["reason"] == "compiler-message")
-                .filter_map(|m| m["message"]["rendered"].as_str())
-                .collect();
-            panic!(
-                "building idmesh failed:\n{}{}",
-                diagnostics.concat(),
-                String::from_utf8_lossy(&output.stderr)
-            );
-        }
-        messages
-            .iter()
-            .filter(|m| m["reason"] == "compiler-artifact")
-            .find_map(|m| m["executable"].as_str().map(PathBuf::from))
-            .expect("cargo names the idmesh executable")
-    })
-}
 
 /// Checks that `text` is well-formed XML as far as tags go: every element
 /// opened is closed in order, one root, nothing after it.
@@ -148,6 +95,7 @@ fn quick_eval_writes_tables_and_plots() {
         "| overcomplete, distributed rule (B = 100) | 20 |",
         "| particles, equal memory (P = B = 100) | 20 |",
         "| particles (P = 1000) | 20 |",
+        "| factored | 20 |",
         "| particles, equal time to overcomplete (P = ",
     ] {
         assert!(stdout.contains(row), "no row {row} in\n{stdout}");

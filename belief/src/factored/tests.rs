@@ -58,7 +58,7 @@ fn fields(n: usize, k: usize, initial: &[u32]) -> Vec<Field> {
 
 fn exact_options() -> FactoredOptions {
     FactoredOptions {
-        max_component: MAX_COMPONENT_LIMIT,
+        max_component: MAX_COMPONENT_MERGED,
         ..FactoredOptions::default()
     }
 }

@@ -1,13 +1,15 @@
 //! The registry of methods `eval` can run, each named as on its command line
 //! and in its tables: `exact`, `order1`…`order3`, `threshold:B`,
 //! `overcomplete:B`, `distributed:B` (overcomplete with the distributed
-//! conditioning rule of Section 5.4), `particles:P`, and `factored` once the
-//! factored belief exists (see [`FACTORED_AVAILABLE`]).
+//! conditioning rule of Section 5.4), `particles:P`, and `factored` (the
+//! factored belief of `idmesh_belief::factored`, default options; see
+//! [`FACTORED_AVAILABLE`]).
 
 use anyhow::{bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
 use idmesh_belief::{
-    BeliefError, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions, Sparsify,
+    BeliefError, FactoredBelief, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions,
+    Sparsify,
 };
 use std::fmt;
 
@@ -15,11 +17,10 @@ use std::fmt;
 /// 184,756 states): "where n ≤ 20 the exact filter is in every table".
 pub const EXACT_UP_TO: usize = 20;
 
-/// HOOK(factored): set to `true` (and fill in [`Method::build`]) once
-/// `idmesh_belief::factored::FactoredBelief` exists; the `factored` method
-/// then joins every grid that lists it (see `plan.rs`). Until then the name
-/// parses and the method is skipped with a note.
-pub const FACTORED_AVAILABLE: bool = false;
+/// Whether `factored` (`idmesh_belief::FactoredBelief` with its default
+/// options) joins the grids (see `plan.rs`). Set it to `false` to run the
+/// grids without it; the name still parses.
+pub const FACTORED_AVAILABLE: bool = true;
 
 /// One method of the evaluation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -37,7 +38,7 @@ pub enum Method {
     Distributed(usize),
     /// Particle filter with P particles.
     Particles(usize),
-    /// The factored belief (HOOK(factored)).
+    /// The factored belief: exact tables over groups of tracks.
     Factored,
 }
 
@@ -137,15 +138,7 @@ impl Method {
             Method::Overcomplete(b) => radon(Sparsify::overcomplete(b), false),
             Method::Distributed(b) => radon(Sparsify::overcomplete(b), true),
             Method::Particles(p) => Ok(Box::new(ParticleFilter::new(field, p, seed)?)),
-            // HOOK(factored): once `idmesh_belief::factored::FactoredBelief`
-            // implements `PropertyFilter`, build it here, e.g.
-            //     Method::Factored => Ok(Box::new(
-            //         idmesh_belief::factored::FactoredBelief::new(field)?)),
-            // and set FACTORED_AVAILABLE.
-            Method::Factored => Err(BeliefError::Unsupported {
-                method: "factored",
-                what: "anything yet: idmesh_belief::factored::FactoredBelief is not there",
-            }),
+            Method::Factored => Ok(Box::new(FactoredBelief::new(field)?)),
         }
     }
 }
@@ -200,6 +193,7 @@ mod tests {
             "overcomplete:50",
             "distributed:50",
             "particles:100",
+            "factored",
         ] {
             let mut filter = Method::parse(name)
                 .unwrap()

@@ -281,17 +281,14 @@ impl Plan {
 
     /// The crowd events per trace.
     pub fn events(&self) -> usize {
-        match self
-            .points
+        self.points
             .iter()
             .flat_map(|p| &p.specs)
             .find_map(|s| match s.source {
                 Source::Crowd { events, .. } => Some(events),
                 _ => None,
-            }) {
-            Some(e) => e,
-            None => 0,
-        }
+            })
+            .unwrap_or_default()
     }
 }
 

@@ -20,7 +20,9 @@ use super::pipeline::separate::SeparationSettings;
 /// | `link_candidates` | 8 strongest links per segment | (all) |
 /// | `min_link` | mean link correlation ≥ 0.9 along the chain | ranks by it (see `pipeline::select`) |
 /// | `min_support` | heard by ≥ 3 groups | not given |
-/// | `hear_threshold` | \|corr\| ≥ 0.9 | "highly correlated" |
+/// | `aggregate_r2` | 0.9: a candidate two others explain is an aggregate | not given |
+/// | `same_source` | \|corr\| ≥ 0.9: two segments are one source (support, duplicates) | not given |
+/// | `hear_threshold` | \|corr\| ≥ 0.7: a group hears a selected segment (intersection) | "highly correlated" |
 /// | `tile` | 5 m | 5 m |
 /// | `vote_tolerance` | 0 m | 0 |
 /// | `link_gate` | 50 m (+ `max_speed` × elapsed samples) | none |
@@ -37,6 +39,8 @@ pub struct PipelineConfig {
     pub link_candidates: usize,
     pub min_link: f64,
     pub min_support: u32,
+    pub aggregate_r2: f64,
+    pub same_source: f64,
     pub hear_threshold: f64,
     pub tile: f64,
     pub vote_tolerance: f64,
@@ -59,7 +63,9 @@ impl Default for PipelineConfig {
             link_candidates: 8,
             min_link: 0.9,
             min_support: 3,
-            hear_threshold: 0.9,
+            aggregate_r2: 0.9,
+            same_source: 0.9,
+            hear_threshold: 0.7,
             tile: 5.0,
             vote_tolerance: 0.0,
             link_gate: 50.0,
@@ -150,6 +156,9 @@ impl AcousticConfig {
         }
         if !(0.0..=1.0).contains(&p.min_link) {
             return bad(format!("min_link must be in [0, 1], got {}", p.min_link));
+        }
+        if !(0.0..=1.0).contains(&p.same_source) {
+            return bad(format!("same_source must be in [0, 1], got {}", p.same_source));
         }
         if !(0.0..=1.0).contains(&p.hear_threshold) {
             return bad(format!("hear_threshold must be in [0, 1], got {}", p.hear_threshold));

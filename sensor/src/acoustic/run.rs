@@ -109,6 +109,28 @@ pub struct AcousticResult {
     pub events: Vec<TimedEvent>,
 }
 
+/// |corr| of two equally long slices.
+fn overlap_correlation(x: &[f32], y: &[f32]) -> f64 {
+    let n = x.len().min(y.len()) as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let mx = x.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let my = y.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (&a, &b) in x.iter().zip(y) {
+        let (a, b) = (f64::from(a) - mx, f64::from(b) - my);
+        sxy += a * b;
+        sxx += a * a;
+        syy += b * b;
+    }
+    if sxx > 0.0 && syy > 0.0 {
+        (sxy / (sxx * syy).sqrt()).abs()
+    } else {
+        0.0
+    }
+}
+
 /// Runs the whole pipeline on the field `config` describes. `progress` is
 /// called on the calling thread with (done, total) — never decreasing,
 /// ending at (total, total) — for a progress bar.
@@ -152,7 +174,7 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         |&j| {
             separate_slot(&field.signals, &groups, &seg, j, &p.separation, noise_variance, config.seed).map(
                 |(segs, rep)| {
-                    let labels = cluster_slot(&segs, clusters, p.linkage, p.hear_threshold as f32);
+                    let labels = cluster_slot(&segs, clusters, p.linkage, p.same_source as f32);
                     (segs, labels, rep)
                 },
             )
@@ -185,12 +207,28 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         k,
         min_link: p.min_link as f32,
         min_support: p.min_support,
+        aggregate_r2: p.aggregate_r2 as f32,
     };
     let chains: Vec<Vec<Chain>> = (0..n_cts)
         .map(|u| {
             let span = p.n_slot.min(v);
             let refs: Vec<&LinkLayer> = layers[u..u + span - 1].iter().collect();
-            select_cts(&refs, &labels[u].labels, &labels[u].support, slots[u + span - 1].len(), &select)
+            let slot = &slots[u];
+            let corr = |a: u32, b: u32| -> f32 {
+                slot.segment(a as usize)
+                    .iter()
+                    .zip(slot.segment(b as usize))
+                    .map(|(x, y)| x * y)
+                    .sum()
+            };
+            select_cts(
+                &refs,
+                &labels[u].labels,
+                &labels[u].support,
+                slots[u + span - 1].len(),
+                &select,
+                &corr,
+            )
         })
         .collect();
     times.link_select = t.elapsed().as_secs_f64();
@@ -260,15 +298,27 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         link_gate: p.link_gate,
         max_speed: p.max_speed,
         l_step: p.l_step,
+        min_link: p.min_link,
     };
+    let same = p.same_source as f32;
     let same_source = |j: usize, a: u32, b: u32| -> bool {
         let s = &slots[j];
         let c: f32 = s.segment(a as usize).iter().zip(s.segment(b as usize)).map(|(x, y)| x * y).sum();
-        c.abs() >= threshold
+        c.abs() >= same
     };
     let pseg = vote(&estimates, v, &areas, &grid, &settings, &same_source);
     let kept = pseg.iter().map(Vec::len).sum();
-    let (linked, dropped) = link(&pseg, k, &areas, &grid, &settings);
+    let continuity = |ja: usize, a: u32, jb: usize, b: u32| -> Option<f64> {
+        let shift = (jb - ja) * seg.l_step;
+        // At least a quarter segment in common, or the correlation is noise.
+        if shift * 4 > seg.l_seg * 3 {
+            return None;
+        }
+        let x = &slots[ja].segment(a as usize)[shift..];
+        let y = &slots[jb].segment(b as usize)[..seg.l_seg - shift];
+        Some(overlap_correlation(x, y))
+    };
+    let (linked, dropped) = link(&pseg, k, &areas, &grid, &settings, &continuity);
     times.vote_link = t.elapsed().as_secs_f64();
 
     let t = Instant::now();

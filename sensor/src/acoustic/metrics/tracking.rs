@@ -184,6 +184,7 @@ mod tests {
                 paths[l].push(Fragment {
                     slot,
                     area: areas.len() as u32 - 1,
+                    segment: 0,
                 });
             }
         }

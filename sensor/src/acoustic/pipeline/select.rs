@@ -26,6 +26,16 @@
 //! by more than one group"). Candidates heard by fewer than `min_support`
 //! groups are not selected, so a slot may yield fewer than K segments
 //! when fewer than K sources are separable in it.
+//!
+//! Aggregate segments (Section III-B: a mixture of sources that several
+//! groups cannot unmix, typically far groups hearing two close targets
+//! with nearly proportional gains) are heard consistently by many groups
+//! and link perfectly too. They are recognised as what they are: a
+//! candidate that two other, mutually uncorrelated candidates explain
+//! (multiple correlation R² ≥ `aggregate_r2`) is a mixture of them and is
+//! not selected. (An individual source is also "explained" by the
+//! aggregate and its partner, but those two are correlated, so the test
+//! does not fire for it.)
 
 use super::separate::SlotSegments;
 use nalgebra::DMatrix;
@@ -108,18 +118,23 @@ pub struct SelectSettings {
     pub min_link: f32,
     /// Least number of groups that must hear a candidate.
     pub min_support: u32,
+    /// R² above which a candidate counts as an aggregate of two others
+    /// (> 1 disables the test).
+    pub aggregate_r2: f32,
 }
 
 /// Selects the chains of CTS_u. `layers[i]` links slot u + i to
 /// u + i + 1 (n_slot − 1 layers); `labels` and `support` are the clusters
 /// and support of slot u's segments and `last_len` the number of segments
 /// in the CTS's last slot.
+/// `corr(a, b)` is the correlation of segments a and b of slot u.
 pub fn select_cts(
     layers: &[&LinkLayer],
     labels: &[u32],
     support: &[u32],
     last_len: usize,
     settings: &SelectSettings,
+    corr: &dyn Fn(u32, u32) -> f32,
 ) -> Vec<Chain> {
     let steps = layers.len();
     // best[i][s]: best chain score from segment s of slot u + i to the end
@@ -166,6 +181,15 @@ pub fn select_cts(
         .enumerate()
         .filter_map(|(c, b)| b.map(|(sup, v, s)| (sup, v, c as u32, s)))
         .collect();
+    if settings.aggregate_r2 <= 1.0 && ranked.len() >= 3 {
+        let reps: Vec<u32> = ranked.iter().map(|r| r.3).collect();
+        let aggregate = aggregates(&reps, settings.aggregate_r2, corr);
+        let mut i = 0;
+        ranked.retain(|_| {
+            i += 1;
+            !aggregate[i - 1]
+        });
+    }
     ranked.sort_by(|a, b| b.0.cmp(&a.0).then(b.1.total_cmp(&a.1)).then(a.3.cmp(&b.3)));
     ranked
         .into_iter()
@@ -183,6 +207,42 @@ pub fn select_cts(
                 cluster,
                 segments,
             }
+        })
+        .collect()
+}
+
+/// Which of `reps` are mixtures of two others: R² of the regression on a
+/// pair (a, b) with |corr(a, b)| small (< 0.3), neither of them the same
+/// source as the candidate (|corr| < 0.9).
+fn aggregates(reps: &[u32], r2_min: f32, corr: &dyn Fn(u32, u32) -> f32) -> Vec<bool> {
+    let n = reps.len();
+    let mut c = vec![0f32; n * n];
+    for i in 0..n {
+        for j in i + 1..n {
+            let v = corr(reps[i], reps[j]);
+            c[i * n + j] = v;
+            c[j * n + i] = v;
+        }
+    }
+    (0..n)
+        .map(|x| {
+            for a in 0..n {
+                let rxa = c[x * n + a];
+                if a == x || rxa.abs() >= 0.9 {
+                    continue;
+                }
+                for b in a + 1..n {
+                    let (rxb, rab) = (c[x * n + b], c[a * n + b]);
+                    if b == x || rxb.abs() >= 0.9 || rab.abs() >= 0.3 {
+                        continue;
+                    }
+                    let r2 = (rxa * rxa + rxb * rxb - 2.0 * rxa * rxb * rab) / (1.0 - rab * rab);
+                    if r2 >= r2_min {
+                        return true;
+                    }
+                }
+            }
+            false
         })
         .collect()
 }
@@ -213,6 +273,34 @@ mod tests {
     }
 
     #[test]
+    fn an_aggregate_of_two_candidates_is_not_selected() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let a: Vec<f64> = (0..100).map(|_| rng.gen::<f64>() - 0.5).collect();
+        let b: Vec<f64> = (0..100).map(|_| rng.gen::<f64>() - 0.5).collect();
+        let mut segs = SlotSegments {
+            l_seg: 100,
+            ..SlotSegments::default()
+        };
+        segs.push(0, a.iter().zip(&b).map(|(x, y)| x + 0.8 * y));
+        segs.push(1, a.iter().copied());
+        segs.push(2, b.iter().copied());
+        let corr = |i: u32, j: u32| -> f32 { segs.segment(i as usize).iter().zip(segs.segment(j as usize)).map(|(x, y)| x * y).sum() };
+        assert_eq!(aggregates(&[0, 1, 2], 0.9, &corr), vec![true, false, false]);
+        // The aggregate has the most support, yet the two sources win.
+        let layer = LinkLayer {
+            links: vec![vec![(0, 1.0)], vec![(1, 1.0)], vec![(2, 1.0)]],
+        };
+        let settings = SelectSettings {
+            k: 3,
+            min_link: 0.9,
+            min_support: 1,
+            aggregate_r2: 0.9,
+        };
+        let chains = select_cts(&[&layer], &[0, 1, 2], &[50, 10, 10], 3, &settings, &corr);
+        assert_eq!(chains.iter().map(|c| c.segments[0].unwrap()).collect::<Vec<_>>(), vec![1, 2]);
+    }
+
+    #[test]
     fn link_correlation_chains_the_same_source() {
         let s = slots(2);
         let layer = link_layer(&s[0], &s[1], 5, 3);
@@ -232,10 +320,12 @@ mod tests {
             k: 2,
             min_link: 0.9,
             min_support: 1,
+            aggregate_r2: 0.9,
         };
+        let corr = |a: u32, b: u32| -> f32 { s[0].segment(a as usize).iter().zip(s[0].segment(b as usize)).map(|(x, y)| x * y).sum() };
         // Each segment its own cluster; all equally supported: the gate
         // removes the noise.
-        let chains = select_cts(&refs, &[0, 1, 2], &[1, 1, 1], s[3].len(), &settings);
+        let chains = select_cts(&refs, &[0, 1, 2], &[1, 1, 1], s[3].len(), &settings, &corr);
         assert_eq!(chains.len(), 2);
         let mut firsts: Vec<u32> = chains.iter().map(|c| c.segments[0].unwrap()).collect();
         firsts.sort();
@@ -247,11 +337,18 @@ mod tests {
         }
         // Sources 1 and 2 in one cluster: only one of them may be chosen,
         // the better supported; the noise fails the gate.
-        let chains = select_cts(&refs, &[0, 1, 1], &[5, 2, 3], s[3].len(), &settings);
+        let chains = select_cts(&refs, &[0, 1, 1], &[5, 2, 3], s[3].len(), &settings, &corr);
         assert_eq!(chains.len(), 1);
         assert_eq!(chains[0].segments[0], Some(2));
         // Support ranks clusters; too little support is not selected.
-        let chains = select_cts(&refs, &[0, 1, 2], &[9, 2, 3], s[3].len(), &SelectSettings { min_support: 3, ..settings });
+        let chains = select_cts(
+            &refs,
+            &[0, 1, 2],
+            &[9, 2, 3],
+            s[3].len(),
+            &SelectSettings { min_support: 3, ..settings },
+            &corr,
+        );
         assert_eq!(chains.len(), 1);
         assert_eq!(chains[0].segments[0], Some(2));
     }

@@ -18,12 +18,19 @@
 //! **Linking.** Slot by slot, the kept fragments are attached to the K
 //! estimated paths: each path continues with the nearest fragment (zero
 //! distance first, as in Algorithm 1; one fragment per path and one path
-//! per fragment, nearest pairs first). Two choices the paper leaves open:
+//! per fragment, nearest pairs first). Where fragments of two targets
+//! overlap (close targets, large areas) "nearest" is ambiguous, and the
+//! paper's tie-break (the fragment's index) swaps tracks at random; we
+//! first prefer the fragment whose segment continues the path's last
+//! segment in the signal itself (link correlation of the overlapping
+//! samples ≥ `min_link` — the chaining of Fig. 4 applied across CTSs),
+//! then zero distance, then the nearest centroid. Further choices the
+//! paper leaves open:
 //! a fragment farther from every path than a gate (`link_gate` plus the
 //! distance a target can cover at `max_speed` since the path's last
 //! fragment) starts a new path while one is free and is dropped otherwise,
 //! and two kept fragments of one slot whose segments are the same source
-//! (|corr| ≥ the hearing threshold) count once.
+//! (|corr| ≥ `same_source`) count once.
 
 use super::intersect::Area;
 use super::tiles::TileGrid;
@@ -56,7 +63,13 @@ pub struct VoteSettings {
     pub max_speed: f64,
     /// Samples between slots.
     pub l_step: usize,
+    /// Link correlation at which a fragment continues a path's signal.
+    pub min_link: f64,
 }
+
+/// `continuity(slot_a, seg_a, slot_b, seg_b)`: the link correlation of two
+/// segments over their common samples, `None` if they share too few.
+pub type Continuity<'a> = &'a dyn Fn(usize, u32, usize, u32) -> Option<f64>;
 
 /// The vote: for each of the `slots` slots, the fragments kept (Pseg).
 /// `estimates[u]` is CTS_u's. `same_source(slot, s1, s2)` tells whether two
@@ -118,37 +131,62 @@ pub fn vote(
 pub struct Fragment {
     pub slot: usize,
     pub area: u32,
+    /// The segment (of its slot) it was located from.
+    pub segment: u32,
 }
 
 /// Links the kept fragments into `k` paths (some may stay empty).
 /// Returns the paths and the number of fragments dropped.
-pub fn link(pseg: &[Vec<Kept>], k: usize, areas: &[Area], grid: &TileGrid, settings: &VoteSettings) -> (Vec<Vec<Fragment>>, usize) {
+pub fn link(
+    pseg: &[Vec<Kept>],
+    k: usize,
+    areas: &[Area],
+    grid: &TileGrid,
+    settings: &VoteSettings,
+    continuity: Continuity<'_>,
+) -> (Vec<Vec<Fragment>>, usize) {
     let mut paths: Vec<Vec<Fragment>> = vec![Vec::new(); k];
     let mut dropped = 0;
     for (j, kept) in pseg.iter().enumerate() {
         if kept.is_empty() {
             continue;
         }
-        let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+        // (signal does not continue, d_area, centroid distance, path, fragment)
+        let mut pairs: Vec<(bool, f64, f64, usize, usize)> = Vec::new();
         for (p, path) in paths.iter().enumerate() {
             let Some(last) = path.last() else { continue };
             let gap = (j - last.slot) * settings.l_step;
             let gate = settings.link_gate + settings.max_speed * gap as f64;
+            let from = &areas[last.area as usize];
             for (f, frag) in kept.iter().enumerate() {
-                let d = areas[last.area as usize].tiles.distance(&areas[frag.area as usize].tiles, grid);
-                if d <= gate {
-                    pairs.push((d, p, f));
+                let to = &areas[frag.area as usize];
+                let d = from.tiles.distance(&to.tiles, grid);
+                if d > gate {
+                    continue;
                 }
+                let same_signal = continuity(last.slot, last.segment, j, frag.segment)
+                    .is_some_and(|rho| rho >= settings.min_link);
+                pairs.push((!same_signal, d, from.centroid.distance(to.centroid), p, f));
             }
         }
-        pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        pairs.sort_by(|a, b| {
+            a.0.cmp(&b.0)
+                .then(a.1.total_cmp(&b.1))
+                .then(a.2.total_cmp(&b.2))
+                .then(a.3.cmp(&b.3))
+                .then(a.4.cmp(&b.4))
+        });
         let mut path_done = vec![false; k];
         let mut frag_done = vec![false; kept.len()];
-        for (_, p, f) in pairs {
+        for (_, _, _, p, f) in pairs {
             if path_done[p] || frag_done[f] {
                 continue;
             }
-            paths[p].push(Fragment { slot: j, area: kept[f].area });
+            paths[p].push(Fragment {
+                slot: j,
+                area: kept[f].area,
+                segment: kept[f].segment,
+            });
             path_done[p] = true;
             frag_done[f] = true;
         }
@@ -157,7 +195,11 @@ pub fn link(pseg: &[Vec<Kept>], k: usize, areas: &[Area], grid: &TileGrid, setti
                 continue;
             }
             match paths.iter().position(|p| p.is_empty()) {
-                Some(p) => paths[p].push(Fragment { slot: j, area: frag.area }),
+                Some(p) => paths[p].push(Fragment {
+                    slot: j,
+                    area: frag.area,
+                    segment: frag.segment,
+                }),
                 None => dropped += 1,
             }
         }
@@ -191,6 +233,7 @@ mod tests {
             link_gate: 50.0,
             max_speed: 0.15,
             l_step: 10,
+            min_link: 0.9,
         }
     }
 
@@ -218,7 +261,7 @@ mod tests {
         // Last CTS hands on its later slots that touch its first fragment.
         assert_eq!(pseg[2].iter().map(|k| k.area).collect::<Vec<_>>(), vec![2]);
         assert_eq!(pseg[3].iter().map(|k| k.area).collect::<Vec<_>>(), vec![3]);
-        let (paths, dropped) = link(&pseg, 2, &areas, &grid(), &settings());
+        let (paths, dropped) = link(&pseg, 2, &areas, &grid(), &settings(), &|_, _, _, _| None);
         assert_eq!(dropped, 0);
         let ids = |p: &Vec<Fragment>| p.iter().map(|f| f.area).collect::<Vec<_>>();
         assert_eq!(ids(&paths[0]), vec![0, 1, 2, 3]);
@@ -238,10 +281,17 @@ mod tests {
         // Slot 0: two fragments; slot 1: the same two targets listed in the
         // other order plus a far one with no free path.
         let pseg = vec![kept(&[0, 1]), kept(&[3, 2, 4])];
-        let (paths, dropped) = link(&pseg, 2, &areas, &grid(), &settings());
+        let (paths, dropped) = link(&pseg, 2, &areas, &grid(), &settings(), &|_, _, _, _| None);
         assert_eq!(paths[0].iter().map(|f| f.area).collect::<Vec<_>>(), vec![0, 2]);
         assert_eq!(paths[1].iter().map(|f| f.area).collect::<Vec<_>>(), vec![1, 3]);
         assert_eq!(dropped, 1);
+        // Overlapping fragments of two targets: the signal decides.
+        let areas = vec![disk(100.0, 100.0), disk(110.0, 100.0), disk(105.0, 100.0), disk(106.0, 100.0)];
+        let pseg = vec![kept(&[0, 1]), kept(&[2, 3])];
+        let signal = |_: usize, a: u32, _: usize, b: u32| Some(if (a, b) == (0, 3) || (a, b) == (1, 2) { 0.99 } else { 0.1 });
+        let (paths, _) = link(&pseg, 2, &areas, &grid(), &settings(), &signal);
+        assert_eq!(paths[0].iter().map(|f| f.area).collect::<Vec<_>>(), vec![0, 3]);
+        assert_eq!(paths[1].iter().map(|f| f.area).collect::<Vec<_>>(), vec![1, 2]);
         // Duplicates of one source in a slot count once.
         let estimates = vec![CtsEstimate {
             chains: vec![vec![Some((0, 7)), Some((0, 7))], vec![Some((2, 8)), Some((2, 8))]],
