@@ -162,10 +162,6 @@ fn build(method: &str, field: &Field) -> Result<Box<dyn PropertyFilter>, String>
             };
             Box::new(RadonBelief::with_options(field, options).map_err(e)?)
         }
-        "particle" => {
-            let count = arg.parse().map_err(|e| format!("{method}: {e}"))?;
-            Box::new(idmesh_belief::ParticleFilter::new(field, count, 7).map_err(e)?)
-        }
         "factored" => {
             Box::new(FactoredBelief::with_options(field, factored_options(arg)?).map_err(e)?)
         }

@@ -155,7 +155,7 @@ proptest! {
     }
 
     #[test]
-    fn the_first_split_keeps_the_marginals_it_touches((n, k, start, seed, events) in case(9, 40), max in 1usize..=4, rule in rule()) {
+    fn factored_first_split_keeps_the_marginals_it_touches((n, k, start, seed, events) in case(9, 40), max in 1usize..=4, rule in rule()) {
         let field = field(n, k, &start, seed);
         let mut exact = DenseFilter::new(field.clone()).unwrap();
         let options = FactoredOptions { max_component: max, split: rule, ..FactoredOptions::default() };
@@ -189,7 +189,7 @@ proptest! {
     }
 
     #[test]
-    fn with_splits_the_belief_stays_valid((n, k, start, seed, events) in case(16, 60), max in 1usize..=5, rule in rule()) {
+    fn factored_with_splits_stays_a_valid_belief((n, k, start, seed, events) in case(16, 60), max in 1usize..=5, rule in rule()) {
         let field = field(n, k, &start, seed);
         let options = FactoredOptions { max_component: max, split: rule, ..FactoredOptions::default() };
         let mut factored = FactoredBelief::with_options(field.clone(), options).unwrap();
@@ -213,7 +213,7 @@ proptest! {
     }
 
     #[test]
-    fn a_rejected_observation_changes_nothing((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>()) {
+    fn factored_rejected_observation_changes_nothing((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>()) {
         let track = track % n as u32;
         let field = field(n, k, &start, seed);
         let options = FactoredOptions { max_component: max, ..FactoredOptions::default() };

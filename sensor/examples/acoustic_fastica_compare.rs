@@ -60,13 +60,17 @@ fn make(case: &Case, seed: u64) -> Rep {
                 })
                 .collect()
         } else {
-            (0..case.samples).map(|_| rng.gen::<f64>() * 2.0 - 1.0).collect()
+            (0..case.samples)
+                .map(|_| rng.gen::<f64>() * 2.0 - 1.0)
+                .collect()
         };
         for (k, v) in row.into_iter().enumerate() {
             s[(i, k)] = v;
         }
     }
-    let a = DMatrix::from_fn(case.sensors, case.sources, |_, _| rng.gen::<f64>() * 2.0 - 1.0);
+    let a = DMatrix::from_fn(case.sensors, case.sources, |_, _| {
+        rng.gen::<f64>() * 2.0 - 1.0
+    });
     Rep { x: &a * &s, a, s }
 }
 
@@ -87,8 +91,10 @@ impl Summary {
     fn add(&mut self, seconds: f64, amari: f64, corr: &[f64], converged: bool) {
         self.seconds.push(seconds);
         self.amari.push(amari);
-        self.corr_mean.push(corr.iter().sum::<f64>() / corr.len().max(1) as f64);
-        self.corr_min.push(corr.iter().cloned().fold(f64::INFINITY, f64::min));
+        self.corr_mean
+            .push(corr.iter().sum::<f64>() / corr.len().max(1) as f64);
+        self.corr_min
+            .push(corr.iter().cloned().fold(f64::INFINITY, f64::min));
         self.not_converged += usize::from(!converged);
     }
 }
@@ -107,20 +113,59 @@ fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let r = |n: usize| if quick { n.div_ceil(10) } else { n };
     let cases = [
-        Case { name: "10 src x 10 sensors x 100 samples (Laplace/uniform)", sources: 10, sensors: 10, samples: 100, reps: r(200), acoustic: false },
-        Case { name: "10 src x 10 sensors x 100 samples (chirps/AR)", sources: 10, sensors: 10, samples: 100, reps: r(200), acoustic: true },
-        Case { name: "3 src x 10 sensors x 100 samples (pipeline-sized)", sources: 3, sensors: 10, samples: 100, reps: r(500), acoustic: false },
-        Case { name: "10 src x 10 sensors x 5000 samples (Laplace/uniform)", sources: 10, sensors: 10, samples: 5000, reps: r(20), acoustic: false },
-        Case { name: "20 src x 20 sensors x 20000 samples (chirps/AR)", sources: 20, sensors: 20, samples: 20000, reps: r(5), acoustic: true },
+        Case {
+            name: "10 src x 10 sensors x 100 samples (Laplace/uniform)",
+            sources: 10,
+            sensors: 10,
+            samples: 100,
+            reps: r(200),
+            acoustic: false,
+        },
+        Case {
+            name: "10 src x 10 sensors x 100 samples (chirps/AR)",
+            sources: 10,
+            sensors: 10,
+            samples: 100,
+            reps: r(200),
+            acoustic: true,
+        },
+        Case {
+            name: "3 src x 10 sensors x 100 samples (pipeline-sized)",
+            sources: 3,
+            sensors: 10,
+            samples: 100,
+            reps: r(500),
+            acoustic: false,
+        },
+        Case {
+            name: "10 src x 10 sensors x 5000 samples (Laplace/uniform)",
+            sources: 10,
+            sensors: 10,
+            samples: 5000,
+            reps: r(20),
+            acoustic: false,
+        },
+        Case {
+            name: "20 src x 20 sensors x 20000 samples (chirps/AR)",
+            sources: 20,
+            sensors: 20,
+            samples: 20000,
+            reps: r(5),
+            acoustic: true,
+        },
     ];
     let mut data = Vec::new();
     let mut ours = Vec::new();
     for (ci, case) in cases.iter().enumerate() {
-        let reps: Vec<Rep> = (0..case.reps).map(|i| make(case, 1000 * ci as u64 + i as u64)).collect();
+        let reps: Vec<Rep> = (0..case.reps)
+            .map(|i| make(case, 1000 * ci as u64 + i as u64))
+            .collect();
         let mut sum = Summary::default();
         for (i, rep) in reps.iter().enumerate() {
             let ica = FastIca::new(FastIcaConfig {
-                components: idmesh_sensor::acoustic::pipeline::separate::Components::Fixed(case.sources),
+                components: idmesh_sensor::acoustic::pipeline::separate::Components::Fixed(
+                    case.sources,
+                ),
                 seed: i as u64,
                 ..FastIcaConfig::default()
             });
@@ -136,7 +181,12 @@ fn main() {
                 }
             };
             let corr = max_abs_correlations(&rep.s, &result.sources);
-            sum.add(seconds, amari_index(&(&result.unmixing * &rep.a)), &corr, converged);
+            sum.add(
+                seconds,
+                amari_index(&(&result.unmixing * &rep.a)),
+                &corr,
+                converged,
+            );
         }
         ours.push(sum);
         data.push(json!({
@@ -213,7 +263,12 @@ fn main() {
         if let Some(v) = &sk {
             let mut s = Summary::default();
             for r in v["cases"][ci]["results"].as_array().into_iter().flatten() {
-                let corr: Vec<f64> = r["max_corr"].as_array().into_iter().flatten().filter_map(|c| c.as_f64()).collect();
+                let corr: Vec<f64> = r["max_corr"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .filter_map(|c| c.as_f64())
+                    .collect();
                 s.add(
                     r["seconds"].as_f64().unwrap_or(f64::NAN),
                     r["amari"].as_f64().unwrap_or(f64::NAN),
@@ -221,7 +276,11 @@ fn main() {
                     r["converged"].as_bool().unwrap_or(false),
                 );
             }
-            line("sklearn", &s, format!("{:.1}x", mean(&s.seconds) / mean(&o.seconds)));
+            line(
+                "sklearn",
+                &s,
+                format!("{:.1}x", mean(&s.seconds) / mean(&o.seconds)),
+            );
         }
     }
     println!("\namari: Amari index of W·A (0 = perfect); corr: mean over sources of the best |corr| with an estimate; min corr: the worst source; n.c.: runs that hit 200 iterations (kept, as scikit-learn does); speedup = sklearn mean time / idmesh mean time.");

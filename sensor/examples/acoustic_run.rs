@@ -32,8 +32,16 @@ fn main() {
             "targets" => c.field.targets = num() as usize,
             "seed" => c.seed = num() as u64,
             "samples" => c.field.samples = num() as usize,
-            "speed" => c.field.paths = PathSpec::Random { speed: (num(), num()) },
-            "maxspeed" => c.field.paths = PathSpec::Random { speed: (num() / 3.0, num()) },
+            "speed" => {
+                c.field.paths = PathSpec::Random {
+                    speed: (num(), num()),
+                }
+            }
+            "maxspeed" => {
+                c.field.paths = PathSpec::Random {
+                    speed: (num() / 3.0, num()),
+                }
+            }
             "zigzag" => {
                 c.field.paths = PathSpec::Zigzag {
                     periods: num() as u32,
@@ -135,10 +143,11 @@ fn main() {
             eprintln!("{path}: {e}");
             std::process::exit(1)
         });
-        let w = write_trace(&result, std::io::BufWriter::new(file), path.clone()).unwrap_or_else(|e| {
-            eprintln!("{e}");
-            std::process::exit(1)
-        });
+        let w =
+            write_trace(&result, std::io::BufWriter::new(file), path.clone()).unwrap_or_else(|e| {
+                eprintln!("{e}");
+                std::process::exit(1)
+            });
         drop(w);
         let _ = std::io::stdout().flush();
         println!("trace written to {path}");

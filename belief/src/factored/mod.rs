@@ -12,15 +12,25 @@
 //! where the components C partition the tracks, each g_C is an exact dense
 //! table over all 2^|C| subsets of C (with a log scale), and π(s) is the
 //! prior weight of one red set of size s (k known: [s = k]; k unknown:
-//! p(s)/C(n, s)). See [`counts`] for how the count coupling is evaluated.
+//! p(s)/C(n, s)). The private `counts` module evaluates the count coupling.
 //!
 //! - Mixing tracks of one component is the exact rollup on its table.
 //! - Mixing tracks of two components merges them (outer product, then
 //!   rollup) while the result has at most [`FactoredOptions::max_component`]
 //!   tracks (and the tables fit [`FactoredOptions::max_numbers`]).
-//!   Otherwise the merged table is split back into two by moment matching
-//!   (an M-projection, the assumed-density step of Boyen and Koller; see
-//!   [`split`]), along a partition chosen by [`SplitRule`].
+//!   Otherwise the pair is split back into two by moment matching (an
+//!   M-projection, the assumed-density step of Boyen and Koller; see the
+//!   private `split` module), along a partition chosen by [`SplitRule`].
+//!   With the default [`SplitRule::Original`] the 2^(|C1|+|C2|) merged
+//!   table is never built: the two marginal tables it needs have a closed
+//!   form.
+//!
+//! Measured on the crowd simulator's traces (seeds 1–3, 1000 events; the
+//! `factored_eval` example): at n = 20 the default stays within 0.005 of the
+//! exact filter's tracking error with at most 320 numbers, about 100 times
+//! faster; at n = 60 and 100 it beats the first-order baseline by 0.03–0.05
+//! and the thresholded Radon belief (500 coefficients) by 0.08–0.11. The
+//! error hardly moves between max_component 4 and 16.
 //! - An observation multiplies the observed track's component table by the
 //!   likelihood. Tracks it leaves certain (marginal within
 //!   [`FactoredOptions::certain`] of 0 or 1) are split off exactly.
@@ -82,16 +92,16 @@ pub struct FactoredOptions {
     /// the mix reports [`BeliefError::Numerical`].
     pub max_sweeps: usize,
     /// A track whose marginal is within this of 0 or 1 after an observation
-    /// or before a split is split off as certain.
+    /// or a split is split off as certain.
     pub certain: f64,
 }
 
 impl Default for FactoredOptions {
     fn default() -> Self {
         FactoredOptions {
-            max_component: 8,
+            max_component: 7,
             max_numbers: None,
-            split: SplitRule::Recent,
+            split: SplitRule::Original,
             tolerance: 1e-12,
             max_sweeps: 200,
             certain: 1e-12,
@@ -591,7 +601,7 @@ impl PropertyFilter for FactoredBelief {
             .ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
         let dot = |v: &[f64]| v.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
         let (before, after) = (dot(&comp.counts), dot(&new_counts));
-        if !(after > 0.0) {
+        if after.is_nan() || after <= 0.0 {
             return Err(BeliefError::ImpossibleObservation {
                 probability: if before > 0.0 { after / before } else { 0.0 },
             });
@@ -625,7 +635,7 @@ impl PropertyFilter for FactoredBelief {
         for (c, r) in self.comps.iter().zip(all) {
             let r = r.ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
             let (m, total) = c.weighted_marginals(&r);
-            if !(total > 0.0) {
+            if total.is_nan() || total <= 0.0 {
                 return Err(BeliefError::Degenerate { normalizer: total });
             }
             for (&t, p) in c.tracks.iter().zip(m) {

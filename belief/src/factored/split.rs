@@ -406,7 +406,7 @@ fn scale_counts(
         v.iter().map(|v| v.ln()).collect(),
     );
     let mut iterations = sweeps;
-    if !(err <= tolerance) {
+    if err.is_nan() || err > tolerance {
         iterations += newton(q, pa, pb, &mut x, &mut y, tolerance)?;
     }
     let alpha = x

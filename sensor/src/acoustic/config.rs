@@ -143,10 +143,16 @@ impl AcousticConfig {
         let p = &self.pipeline;
         let bad = |what: String| Err(AcousticError::Config(what));
         if p.n_group == 0 || p.n_group > self.field.sensors {
-            return bad(format!("n_group must be in 1..={}, got {}", self.field.sensors, p.n_group));
+            return bad(format!(
+                "n_group must be in 1..={}, got {}",
+                self.field.sensors, p.n_group
+            ));
         }
         if p.n_slot < 2 {
-            return bad(format!("n_slot must be ≥ 2 (a CTS links slots), got {}", p.n_slot));
+            return bad(format!(
+                "n_slot must be ≥ 2 (a CTS links slots), got {}",
+                p.n_slot
+            ));
         }
         if p.clusters_per_target == 0 {
             return bad("clusters_per_target must be ≥ 1".into());
@@ -158,10 +164,16 @@ impl AcousticConfig {
             return bad(format!("min_link must be in [0, 1], got {}", p.min_link));
         }
         if !(0.0..=1.0).contains(&p.same_source) {
-            return bad(format!("same_source must be in [0, 1], got {}", p.same_source));
+            return bad(format!(
+                "same_source must be in [0, 1], got {}",
+                p.same_source
+            ));
         }
         if !(0.0..=1.0).contains(&p.hear_threshold) {
-            return bad(format!("hear_threshold must be in [0, 1], got {}", p.hear_threshold));
+            return bad(format!(
+                "hear_threshold must be in [0, 1], got {}",
+                p.hear_threshold
+            ));
         }
         if !(p.tile.is_finite() && p.tile > 0.0) {
             return bad(format!("tile must be > 0 m, got {}", p.tile));
@@ -175,7 +187,9 @@ impl AcousticConfig {
                 return bad(format!("{name} must be ≥ 0, got {v}"));
             }
         }
-        if !(p.separation.keep_factor.is_finite() && p.separation.keep_factor > 0.0) || p.separation.max_components == 0 {
+        if !(p.separation.keep_factor.is_finite() && p.separation.keep_factor > 0.0)
+            || p.separation.max_components == 0
+        {
             return bad(format!(
                 "separation keep_factor must be > 0 and max_components ≥ 1, got {} and {}",
                 p.separation.keep_factor, p.separation.max_components
@@ -187,10 +201,16 @@ impl AcousticConfig {
             .map_err(|e| AcousticError::Config(e.to_string()))?;
         let o = &self.output;
         if !(o.mix_distance.is_finite() && o.mix_distance > 0.0) {
-            return bad(format!("mix_distance must be > 0 m, got {}", o.mix_distance));
+            return bad(format!(
+                "mix_distance must be > 0 m, got {}",
+                o.mix_distance
+            ));
         }
         if !(o.release_factor.is_finite() && o.release_factor >= 1.0) {
-            return bad(format!("release_factor must be ≥ 1, got {}", o.release_factor));
+            return bad(format!(
+                "release_factor must be ≥ 1, got {}",
+                o.release_factor
+            ));
         }
         if !(0.0..=1.0).contains(&o.swap) {
             return bad(format!("swap must be in [0, 1], got {}", o.swap));

@@ -9,7 +9,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// `f` over `items` on up to `threads` threads (the caller's thread is one
 /// of them), results in input order.
-pub fn par_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+pub fn par_map<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
     par_map_progress(items, threads, f, &mut |_| {})
 }
 
@@ -39,7 +43,9 @@ pub fn par_map_progress<T: Sync, R: Send>(
         out
     };
     let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|scope| {
-        let helpers: Vec<_> = (1..threads).map(|_| scope.spawn(|| work(&mut |_| {}))).collect();
+        let helpers: Vec<_> = (1..threads)
+            .map(|_| scope.spawn(|| work(&mut |_| {})))
+            .collect();
         let mut parts = vec![work(progress)];
         for h in helpers {
             match h.join() {
@@ -56,7 +62,10 @@ pub fn par_map_progress<T: Sync, R: Send>(
             slots[i] = Some(r);
         }
     }
-    slots.into_iter().map(|r| r.expect("every item is mapped exactly once")).collect()
+    slots
+        .into_iter()
+        .map(|r| r.expect("every item is mapped exactly once"))
+        .collect()
 }
 
 #[cfg(test)]

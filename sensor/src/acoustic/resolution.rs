@@ -42,7 +42,10 @@ pub fn average_resolution(range: f64, r: f64, l: f64) -> Option<f64> {
         return None;
     }
     let s = (p * p - l * l / 4.0).sqrt();
-    Some(p * p / (4.0 * l * l) * (l / (2.0 * p)).asin() * (p - 2.0 * s) + 3.0 * p * p / (16.0 * l) - l / 16.0)
+    Some(
+        p * p / (4.0 * l * l) * (l / (2.0 * p)).asin() * (p - 2.0 * s) + 3.0 * p * p / (16.0 * l)
+            - l / 16.0,
+    )
 }
 
 /// Simpson's rule with `n` (even) intervals.
@@ -64,7 +67,14 @@ pub fn finest_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
         return None;
     }
     let x = (p * p - l * l / 4.0).sqrt();
-    Some(0.5 * simpson(|y| ((p * p - y * y).max(0.0).sqrt() - x) / l, 0.0, l / 2.0, 2000))
+    Some(
+        0.5 * simpson(
+            |y| ((p * p - y * y).max(0.0).sqrt() - x) / l,
+            0.0,
+            l / 2.0,
+            2000,
+        ),
+    )
 }
 
 /// Appendix C's integral, (1/2)∫_Z^{R+r}∫₀^{l/2} ((R+r)cos θ₂ − x)/l² dy dx
@@ -75,7 +85,14 @@ pub fn average_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
         return None;
     }
     let z = 2.0 * (p * p - l * l / 4.0).sqrt();
-    let inner = |x: f64| simpson(|y| ((p * p - y * y).max(0.0).sqrt() - x) / (l * l), 0.0, l / 2.0, 400);
+    let inner = |x: f64| {
+        simpson(
+            |y| ((p * p - y * y).max(0.0).sqrt() - x) / (l * l),
+            0.0,
+            l / 2.0,
+            400,
+        )
+    };
     Some(0.5 * simpson(inner, z, p, 400))
 }
 
@@ -90,7 +107,10 @@ mod tests {
             for l in [3.0, 15.0, 100.0, 300.0] {
                 let closed = finest_resolution(250.0, r, l).unwrap();
                 let integral = finest_resolution_integral(250.0, r, l).unwrap();
-                assert!((closed - integral).abs() < 1e-6 * (1.0 + closed), "{sensors} {l}: {closed} vs {integral}");
+                assert!(
+                    (closed - integral).abs() < 1e-6 * (1.0 + closed),
+                    "{sensors} {l}: {closed} vs {integral}"
+                );
             }
         }
     }
@@ -108,7 +128,10 @@ mod tests {
         // The closed form is about half the printed integral for short l.
         let integral = average_resolution_integral(250.0, r, 3.0).unwrap();
         let closed = average_resolution(250.0, r, 3.0).unwrap();
-        assert!((integral / closed - 2.0).abs() < 0.01, "{integral} {closed}");
+        assert!(
+            (integral / closed - 2.0).abs() < 0.01,
+            "{integral} {closed}"
+        );
         assert!(average_resolution(250.0, r, 0.0).is_none());
         assert!(average_resolution(250.0, r, 1000.0).is_none());
     }

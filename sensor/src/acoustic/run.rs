@@ -19,7 +19,9 @@ use super::pipeline::cluster::{cluster_slot, SlotClusters};
 use super::pipeline::intersect::{hearing_groups, intersect, Area, GroupRanges};
 use super::pipeline::prepare::{nearest_groups, Segmentation, SensorGroup};
 use super::pipeline::select::{link_layer, select_cts, Chain, LinkLayer, SelectSettings};
-use super::pipeline::separate::{estimate_noise_variance, separate_slot, SeparationReport, SlotSegments};
+use super::pipeline::separate::{
+    estimate_noise_variance, separate_slot, SeparationReport, SlotSegments,
+};
 use super::pipeline::tiles::TileGrid;
 use super::pipeline::vote_link::{link, vote, CtsEstimate, Fragment, VoteSettings};
 use super::resolution;
@@ -134,7 +136,10 @@ fn overlap_correlation(x: &[f32], y: &[f32]) -> f64 {
 /// Runs the whole pipeline on the field `config` describes. `progress` is
 /// called on the calling thread with (done, total) — never decreasing,
 /// ending at (total, total) — for a progress bar.
-pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<AcousticResult, AcousticError> {
+pub fn run(
+    config: &AcousticConfig,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<AcousticResult, AcousticError> {
     config.validate()?;
     let start = Instant::now();
     let p = &config.pipeline;
@@ -172,12 +177,19 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         &slot_ids,
         threads,
         |&j| {
-            separate_slot(&field.signals, &groups, &seg, j, &p.separation, noise_variance, config.seed).map(
-                |(segs, rep)| {
-                    let labels = cluster_slot(&segs, clusters, p.linkage, p.same_source as f32);
-                    (segs, labels, rep)
-                },
+            separate_slot(
+                &field.signals,
+                &groups,
+                &seg,
+                j,
+                &p.separation,
+                noise_variance,
+                config.seed,
             )
+            .map(|(segs, rep)| {
+                let labels = cluster_slot(&segs, clusters, p.linkage, p.same_source as f32);
+                (segs, labels, rep)
+            })
         },
         &mut |d| report(1 + d as u64, progress),
     );
@@ -261,7 +273,12 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
             let hearing = hearing_groups(&slots[j as usize], s as usize, threshold);
             intersect(&ranges, &hearing)
         },
-        &mut |d| report(1 + 2 * v as u64 + d as u64 * v as u64 / area_total, progress),
+        &mut |d| {
+            report(
+                1 + 2 * v as u64 + d as u64 * v as u64 / area_total,
+                progress,
+            )
+        },
     );
     let mut areas: Vec<Area> = Vec::new();
     let mut area_of: FxHashMap<(u32, u32), u32> = FxHashMap::default();
@@ -286,7 +303,9 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
                     c.segments
                         .iter()
                         .enumerate()
-                        .map(|(i, s)| s.and_then(|s| area_of.get(&((u + i) as u32, s)).map(|&a| (a, s))))
+                        .map(|(i, s)| {
+                            s.and_then(|s| area_of.get(&((u + i) as u32, s)).map(|&a| (a, s)))
+                        })
                         .collect()
                 })
                 .collect(),
@@ -303,7 +322,12 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let same = p.same_source as f32;
     let same_source = |j: usize, a: u32, b: u32| -> bool {
         let s = &slots[j];
-        let c: f32 = s.segment(a as usize).iter().zip(s.segment(b as usize)).map(|(x, y)| x * y).sum();
+        let c: f32 = s
+            .segment(a as usize)
+            .iter()
+            .zip(s.segment(b as usize))
+            .map(|(x, y)| x * y)
+            .sum();
         c.abs() >= same
     };
     let pseg = vote(&estimates, v, &areas, &grid, &settings, &same_source);
@@ -339,7 +363,12 @@ pub fn run(config: &AcousticConfig, progress: &mut dyn FnMut(u64, u64)) -> Resul
         .collect();
     let events = path_events(&paths, &seg, &config.output);
     let mean_speed = field.paths.iter().map(|p| p.mean_speed()).sum::<f64>() / k as f64;
-    let r = resolution::group_radius(p.n_group, config.field.size, config.field.size, config.field.sensors);
+    let r = resolution::group_radius(
+        p.n_group,
+        config.field.size,
+        config.field.size,
+        config.field.sensors,
+    );
     let l = mean_speed * p.l_seg as f64;
     let resolution = ResolutionSummary {
         group_radius: r,

@@ -35,9 +35,16 @@ fn position_at(path: &EstimatedPath, j: usize) -> Option<Vec2> {
 
 /// The `mix` and `move` events of estimated paths, in time order (mixes
 /// before moves at one time, as the scenario generator writes them).
-pub fn path_events(paths: &[EstimatedPath], seg: &Segmentation, output: &OutputConfig) -> Vec<TimedEvent> {
+pub fn path_events(
+    paths: &[EstimatedPath],
+    seg: &Segmentation,
+    output: &OutputConfig,
+) -> Vec<TimedEvent> {
     let mut events = Vec::new();
-    let mut detector = MixDetector::new(output.mix_distance, output.mix_distance * output.release_factor);
+    let mut detector = MixDetector::new(
+        output.mix_distance,
+        output.mix_distance * output.release_factor,
+    );
     let mut grid = NeighbourGrid::new();
     let mut positions: Vec<Option<Vec2>> = vec![None; paths.len()];
     let mut entering = Vec::new();
@@ -106,7 +113,11 @@ pub fn header_line(result: &AcousticResult) -> Line {
 
 /// Writes the run's trace to `output`; `sink` names it in errors. Returns
 /// the output, flushed.
-pub fn write_trace<W: Write>(result: &AcousticResult, output: W, sink: impl Into<String>) -> Result<W, TraceError> {
+pub fn write_trace<W: Write>(
+    result: &AcousticResult,
+    output: W,
+    sink: impl Into<String>,
+) -> Result<W, TraceError> {
     let mut writer = TraceWriter::new(output, sink);
     writer.write(&header_line(result))?;
     for e in &result.events {
@@ -143,10 +154,16 @@ mod tests {
                 .collect(),
         };
         let events = path_events(&[a.clone(), b.clone()], &seg, &OutputConfig::default());
-        let mixes: Vec<_> = events.iter().filter(|e| matches!(e.event, SimEvent::Mix { .. })).collect();
+        let mixes: Vec<_> = events
+            .iter()
+            .filter(|e| matches!(e.event, SimEvent::Mix { .. }))
+            .collect();
         assert_eq!(mixes.len(), 1, "{mixes:?}");
         assert!(matches!(mixes[0].event, SimEvent::Mix { a: 0, b: 1, .. }));
-        let moves = events.iter().filter(|e| matches!(e.event, SimEvent::Move { .. })).count();
+        let moves = events
+            .iter()
+            .filter(|e| matches!(e.event, SimEvent::Move { .. }))
+            .count();
         assert_eq!(moves, a.fragments.len() + b.fragments.len());
         assert!(events.windows(2).all(|w| w[0].time <= w[1].time));
         assert_eq!(position_at(&b, 10), Some(Vec2::new(100.0, 0.0)));

@@ -4,6 +4,7 @@
 //! mixes) and plain, documented choices where it does not.
 
 use super::error::ScenarioError;
+use super::identity::IdentityOptions;
 use super::options::{Length, Model, RedChoice, SceneSource};
 use crate::events::{ExtractionParams, SensorModel};
 use crate::geometry::Rect;
@@ -47,6 +48,7 @@ pub const DEFAULT_EVENTS_WITHIN: f64 = 3600.0;
 /// | `truth_interval` | 1 s (and at the end) |
 /// | `move_interval` | 1 s (`None` = no `move` lines) |
 /// | `reveal_initial_red` | true |
+/// | `identities` | false (no identity trace); read accuracy 0.9, `initial_identity` revealed |
 /// | `seed` | 0 |
 #[derive(Debug, Clone)]
 pub struct Scenario {
@@ -61,6 +63,7 @@ pub struct Scenario {
     pub(super) truth_interval: f64,
     pub(super) move_interval: Option<f64>,
     pub(super) reveal_initial_red: bool,
+    pub(super) identity: IdentityOptions,
     pub(super) seed: u64,
 }
 
@@ -79,6 +82,7 @@ impl Scenario {
             truth_interval: 1.0,
             move_interval: Some(1.0),
             reveal_initial_red: true,
+            identity: IdentityOptions::default(),
             seed: 0,
         }
     }
@@ -246,6 +250,33 @@ impl Scenario {
         self
     }
 
+    /// Whether to write an identity trace: every target carries an
+    /// identity, RFID-like readers read isolated targets, and the trace gets
+    /// `identities`, `initial_identity`, `identify` lines and `truth`
+    /// identities (see [`super::identity`]). The other events do not change.
+    pub fn identities(mut self, on: bool) -> Self {
+        self.identity.enabled = on;
+        self
+    }
+
+    /// P(an identity read is right), in (0, 1]; default 0.9. A wrong read
+    /// is one of the other identities, each equally likely.
+    pub fn identity_accuracy(mut self, accuracy: f64) -> Self {
+        self.identity.accuracy = accuracy;
+        self
+    }
+
+    /// Whether the header of an identity trace carries `initial_identity`
+    /// (default true; false = uniform prior over the n! assignments).
+    pub fn reveal_initial_identity(mut self, reveal: bool) -> Self {
+        self.identity.reveal_initial = reveal;
+        self
+    }
+
+    pub fn identity_options(&self) -> &IdentityOptions {
+        &self.identity
+    }
+
     /// For a pedestrian scene: start this many seconds after its first
     /// annotation. Ignored by the synthetic models.
     pub fn start(mut self, seconds: f64) -> Self {
@@ -350,6 +381,7 @@ impl Scenario {
             return bad("there must be at least one target".into());
         }
         self.extraction.validate().map_err(ScenarioError::Invalid)?;
+        self.identity.validate().map_err(ScenarioError::Invalid)?;
         match &self.model {
             Model::Crowd(p) => p.validate().map_err(ScenarioError::Invalid)?,
             Model::Waypoint(p) => p.validate().map_err(ScenarioError::Invalid)?,

@@ -10,9 +10,13 @@
 //! - [`progress`] — the progress hook for a command line's progress bar.
 //! - [`trace_out`] — writing a [`GeneratedTrace`] as a trace file.
 //! - [`error`] — what can go wrong.
+//! - [`identity`] — identity traces: identities, the RFID reader model;
+//!   [`identity_out`] weaves them into the trace lines.
 
 pub mod builder;
 pub mod error;
+pub mod identity;
+pub mod identity_out;
 pub mod options;
 pub mod progress;
 pub mod run;
@@ -21,10 +25,13 @@ pub mod trace_out;
 
 pub use builder::Scenario;
 pub use error::ScenarioError;
+pub use identity::{IdentityOptions, IdentityRead, IdentityTrace};
 pub use options::{Length, Model, RedChoice, SceneSource};
 pub use progress::Progress;
 pub use run::BuiltMotion;
 pub use trace::{GeneratedTrace, TraceHeader, TraceStats};
 
+#[cfg(test)]
+mod identity_tests;
 #[cfg(test)]
 mod tests;

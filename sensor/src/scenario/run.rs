@@ -5,17 +5,21 @@
 //! colours (2), swap draws (3), sensor draws (4). So the motion of a seed is
 //! the same whatever the distances, swap probability or sensor; changing
 //! the mixing distance changes which encounters count as mixes, not where
-//! people walk.
+//! people walk. An identity trace adds two more — the targets' identities
+//! (5) and the identity reads (6) — so turning identities on changes no
+//! other event.
 //!
 //! Time 0 is the first recorded step (after the warm-up of a synthetic
 //! model; the window start of a replay). Events of step s are at s·dt
 //! (rounded to the nanosecond), in
-//! the order: mixes, observations, moves (every `move_interval`, from time
-//! 0, for every track whose target is present), truth (every
-//! `truth_interval` after time 0, and at the last step).
+//! the order: mixes, observations, identity reads (kept apart in the
+//! trace's identity part, woven in when written), moves (every
+//! `move_interval`, from time 0, for every track whose target is present),
+//! truth (every `truth_interval` after time 0, and at the last step).
 
 use super::builder::{Scenario, DEFAULT_TARGETS};
 use super::error::ScenarioError;
+use super::identity::IdentityReader;
 use super::options::{Length, Model, RedChoice, SceneSource};
 use super::progress::{Progress, Throttle};
 use super::trace::{GeneratedTrace, TraceHeader};
@@ -33,6 +37,8 @@ const STREAM_MOTION: u64 = 1;
 const STREAM_COLOURS: u64 = 2;
 const STREAM_SWAPS: u64 = 3;
 const STREAM_SENSOR: u64 = 4;
+const STREAM_IDENTITIES: u64 = 5;
+const STREAM_READS: u64 = 6;
 const EPS: f64 = 1e-9;
 
 fn stream(seed: u64, stream: u64) -> ChaCha8Rng {
@@ -129,6 +135,15 @@ impl Scenario {
             stream(self.seed, STREAM_SENSOR),
         );
         let true_initial_red = extractor.red_tracks();
+        let mut reader = self.identity.enabled.then(|| {
+            IdentityReader::new(
+                &self.identity,
+                &self.extraction,
+                n,
+                stream(self.seed, STREAM_IDENTITIES),
+                stream(self.seed, STREAM_READS),
+            )
+        });
         let dt = motion.dt();
 
         // How far to run, and what progress counts.
@@ -155,6 +170,9 @@ impl Scenario {
             let time = step_time(step, dt);
             let limit = event_goal.map_or(usize::MAX, |c| c - sensing);
             sensing += extractor.step(time, motion.positions(), &mut events, limit);
+            if let Some(reader) = &mut reader {
+                reader.step(time, motion.positions(), extractor.assignment());
+            }
             if let Some(interval) = self.move_interval {
                 if time >= moves_done as f64 * interval - EPS {
                     let positions = motion.positions();
@@ -219,11 +237,17 @@ impl Scenario {
         progress.finish();
 
         let x = &self.extraction;
-        let description = format!(
+        let mut description = format!(
             "{motion_description}; {n} tracks, {k} red; dt {dt} s; mix within {} m \
              (swap {}), observe beyond {} m at most every {} s; seed {}",
             x.mix_distance, x.swap, x.observe_distance, x.observe_interval, self.seed
         );
+        if reader.is_some() {
+            description.push_str(&format!(
+                "; identities read with accuracy {}",
+                self.identity.accuracy
+            ));
+        }
         Ok(GeneratedTrace {
             header: TraceHeader {
                 tracks: n,
@@ -235,6 +259,7 @@ impl Scenario {
             events,
             true_initial_red,
             duration,
+            identity: reader.map(|r| r.finish(self.identity.reveal_initial)),
         })
     }
 

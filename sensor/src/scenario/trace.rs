@@ -1,6 +1,7 @@
 //! What a scenario produces: the header facts of a trace and its events in
 //! time order, plus the hidden ground truth needed to check it.
 
+use super::identity::IdentityTrace;
 use crate::events::{SimEvent, TimedEvent};
 
 /// The facts of the trace's `header` line.
@@ -29,6 +30,9 @@ pub struct GeneratedTrace {
     pub true_initial_red: Vec<u32>,
     /// Seconds of motion covered (the time of the last step).
     pub duration: f64,
+    /// The identities and their reads, for a scenario with
+    /// [`identities`](super::Scenario::identities) on.
+    pub identity: Option<IdentityTrace>,
 }
 
 /// Counts of a trace's events.

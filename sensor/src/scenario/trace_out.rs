@@ -7,7 +7,9 @@
 //! the ground-truth `exchanged` flag (a trace's mix line says only what the
 //! tracker knows); `truth` carries `red` only. `move` positions are rounded
 //! to 0.1 mm, which is all a leader placing tracks needs and keeps files
-//! small.
+//! small. An identity trace (scenario option `identities`) also carries
+//! `identities` and `initial_identity` (when revealed) in the header,
+//! `identify` lines, and `identity` on every `truth` line.
 
 use super::trace::GeneratedTrace;
 use crate::events::{SimEvent, TimedEvent};
@@ -23,6 +25,10 @@ pub fn header_line(trace: &GeneratedTrace) -> Line {
     header.initial_red = h.initial_red.clone();
     header.source = Some(h.source.clone());
     header.description = Some(h.description.clone());
+    if let Some(identity) = &trace.identity {
+        header.identities = Some(h.tracks);
+        header.initial_identity = identity.reveal_initial.then(|| identity.initial.clone());
+    }
     Line::Header(header)
 }
 
@@ -57,9 +63,10 @@ pub fn event_line(e: &TimedEvent) -> Line {
     }
 }
 
-/// Every line of the trace, header first.
+/// Every line of the trace, header first (with the `identify` lines and
+/// `truth` identities of an identity trace, see [`super::identity_out`]).
 pub fn lines(trace: &GeneratedTrace) -> impl Iterator<Item = Line> + '_ {
-    std::iter::once(header_line(trace)).chain(trace.events.iter().map(event_line))
+    std::iter::once(header_line(trace)).chain(super::identity_out::EventLines::new(trace))
 }
 
 /// Writes the whole trace to `output` (wrap a file in a `BufWriter`);

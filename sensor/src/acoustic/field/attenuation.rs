@@ -60,7 +60,9 @@ pub fn iso9613_absorption(frequency: f64, celsius: f64, humidity: f64, kpa: f64)
     let c = -6.8346 * (t01 / t).powf(1.261) + 4.6151;
     let h = humidity * 10f64.powf(c) / pa;
     let fr_o = pa * (24.0 + 4.04e4 * h * (0.02 + h) / (0.391 + h));
-    let fr_n = pa * (t / t0).powf(-0.5) * (9.0 + 280.0 * h * (-4.170 * ((t / t0).powf(-1.0 / 3.0) - 1.0)).exp());
+    let fr_n = pa
+        * (t / t0).powf(-0.5)
+        * (9.0 + 280.0 * h * (-4.170 * ((t / t0).powf(-1.0 / 3.0) - 1.0)).exp());
     let f2 = frequency * frequency;
     8.686
         * f2
@@ -88,7 +90,10 @@ mod tests {
             (20.0, 70.0, 8000.0, 76.6),
         ] {
             let a = iso9613_absorption(f, celsius, humidity, 101.325) * 1000.0;
-            assert!((a / table - 1.0).abs() < 0.02, "{celsius} °C {humidity} % {f} Hz: {a} dB/km vs {table}");
+            assert!(
+                (a / table - 1.0).abs() < 0.02,
+                "{celsius} °C {humidity} % {f} Hz: {a} dB/km vs {table}"
+            );
         }
     }
 

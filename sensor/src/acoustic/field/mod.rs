@@ -91,7 +91,10 @@ impl FieldConfig {
         if !(self.size.is_finite() && self.size > 0.0) {
             return bad(&format!("field size must be > 0 m, got {}", self.size));
         }
-        if !(self.target_area.is_finite() && self.target_area > 0.0 && self.target_area <= self.size) {
+        if !(self.target_area.is_finite()
+            && self.target_area > 0.0
+            && self.target_area <= self.size)
+        {
             return bad(&format!(
                 "target area side must be in (0, {}] m, got {}",
                 self.size, self.target_area
@@ -113,7 +116,9 @@ impl FieldConfig {
             return bad(&format!("noise std must be ≥ 0, got {}", self.noise_std));
         }
         self.attenuation.validate().map_err(AcousticError::Config)?;
-        self.paths.validate(self.target_bounds()).map_err(AcousticError::Config)
+        self.paths
+            .validate(self.target_bounds())
+            .map_err(AcousticError::Config)
     }
 }
 
@@ -131,7 +136,11 @@ pub struct Field {
 impl Field {
     /// Generates the field for `seed`, recording on `threads` threads. The
     /// same config and seed give the same field.
-    pub fn generate(config: &FieldConfig, seed: u64, threads: usize) -> Result<Field, AcousticError> {
+    pub fn generate(
+        config: &FieldConfig,
+        seed: u64,
+        threads: usize,
+    ) -> Result<Field, AcousticError> {
         config.validate()?;
         // Independent streams per part, so that (say) changing the path
         // model does not move the sensors.
@@ -148,7 +157,12 @@ impl Field {
             config.target_bounds(),
             &mut path_rng,
         );
-        let sources = source::generate(&config.sources, config.targets, config.samples, &mut source_rng);
+        let sources = source::generate(
+            &config.sources,
+            config.targets,
+            config.samples,
+            &mut source_rng,
+        );
         let signals = signals::record(
             &sensors,
             &paths,
@@ -187,7 +201,10 @@ mod tests {
         assert_eq!(a.signals, b.signals);
         assert_eq!(a.sensors.len(), 50);
         assert_eq!(a.paths.len(), 3);
-        assert!(a.paths.iter().all(|p| p.positions.iter().all(|q| config.target_bounds().contains(*q))));
+        assert!(a.paths.iter().all(|p| p
+            .positions
+            .iter()
+            .all(|q| config.target_bounds().contains(*q))));
         let c = Field::generate(&config, 8, 2).unwrap();
         assert_ne!(a.signals, c.signals);
         let err = Field::generate(

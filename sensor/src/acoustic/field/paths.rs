@@ -33,7 +33,9 @@ pub enum PathSpec {
 
 impl Default for PathSpec {
     fn default() -> Self {
-        PathSpec::Random { speed: (0.05, 0.15) }
+        PathSpec::Random {
+            speed: (0.05, 0.15),
+        }
     }
 }
 
@@ -50,7 +52,10 @@ impl PathSpec {
                 length,
                 width,
             } => {
-                if periods == 0 || !(length.is_finite() && length > 0.0) || !(width.is_finite() && width >= 0.0) {
+                if periods == 0
+                    || !(length.is_finite() && length > 0.0)
+                    || !(width.is_finite() && width >= 0.0)
+                {
                     return Err(format!(
                         "zigzag needs ≥ 1 period, length > 0 and width ≥ 0 (got {periods}, {length}, {width})"
                     ));
@@ -86,7 +91,10 @@ impl TruePath {
         if from >= to {
             return 0.0;
         }
-        self.positions[from..=to].windows(2).map(|w| w[0].distance(w[1])).sum()
+        self.positions[from..=to]
+            .windows(2)
+            .map(|w| w[0].distance(w[1]))
+            .sum()
     }
 
     /// Mean speed, metres per sample.
@@ -96,7 +104,13 @@ impl TruePath {
 }
 
 /// `count` paths of `samples` positions inside `area`.
-pub fn generate(spec: &PathSpec, count: usize, samples: usize, area: Rect, rng: &mut ChaCha8Rng) -> Vec<TruePath> {
+pub fn generate(
+    spec: &PathSpec,
+    count: usize,
+    samples: usize,
+    area: Rect,
+    rng: &mut ChaCha8Rng,
+) -> Vec<TruePath> {
     match *spec {
         PathSpec::Random { speed } => {
             let params = WaypointParams {
@@ -104,7 +118,13 @@ pub fn generate(spec: &PathSpec, count: usize, samples: usize, area: Rect, rng: 
                 pause: (0.0, 0.0),
             };
             let seed: u64 = rng.gen();
-            let mut motion = Waypoint::new(count, area, 1.0, params, rand::SeedableRng::seed_from_u64(seed));
+            let mut motion = Waypoint::new(
+                count,
+                area,
+                1.0,
+                params,
+                rand::SeedableRng::seed_from_u64(seed),
+            );
             let mut paths: Vec<Vec<Vec2>> = vec![Vec::with_capacity(samples); count];
             for t in 0..samples {
                 if t > 0 {
@@ -115,18 +135,30 @@ pub fn generate(spec: &PathSpec, count: usize, samples: usize, area: Rect, rng: 
                     paths[i].push(p.unwrap_or_default());
                 }
             }
-            paths.into_iter().map(|positions| TruePath { positions }).collect()
+            paths
+                .into_iter()
+                .map(|positions| TruePath { positions })
+                .collect()
         }
         PathSpec::Zigzag {
             periods,
             length,
             width,
-        } => (0..count).map(|_| zigzag(periods, length, width, samples, area, rng)).collect(),
+        } => (0..count)
+            .map(|_| zigzag(periods, length, width, samples, area, rng))
+            .collect(),
     }
 }
 
 /// One zigzag at a random place and heading that fits inside `area`.
-fn zigzag(periods: u32, length: f64, width: f64, samples: usize, area: Rect, rng: &mut ChaCha8Rng) -> TruePath {
+fn zigzag(
+    periods: u32,
+    length: f64,
+    width: f64,
+    samples: usize,
+    area: Rect,
+    rng: &mut ChaCha8Rng,
+) -> TruePath {
     let half = width / 2.0;
     // Shrink by the half width so the excursions stay inside too.
     let inner = area.shrink(half);
@@ -160,7 +192,11 @@ fn zigzag(periods: u32, length: f64, width: f64, samples: usize, area: Rect, rng
 /// `samples` points evenly spaced by arc length along a polyline.
 fn walk_polyline(corners: &[Vec2], samples: usize) -> Vec<Vec2> {
     let total: f64 = corners.windows(2).map(|w| w[0].distance(w[1])).sum();
-    let step = if samples > 1 { total / (samples - 1) as f64 } else { 0.0 };
+    let step = if samples > 1 {
+        total / (samples - 1) as f64
+    } else {
+        0.0
+    };
     let mut out = Vec::with_capacity(samples);
     let mut leg = 0;
     let mut leg_start = 0.0;
@@ -171,7 +207,11 @@ fn walk_polyline(corners: &[Vec2], samples: usize) -> Vec<Vec2> {
             leg += 1;
         }
         let len = corners[leg].distance(corners[leg + 1]);
-        let f = if len > 0.0 { ((s - leg_start) / len).clamp(0.0, 1.0) } else { 0.0 };
+        let f = if len > 0.0 {
+            ((s - leg_start) / len).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         out.push(corners[leg].lerp(corners[leg + 1], f));
     }
     out
@@ -218,8 +258,13 @@ mod tests {
             let a = p.positions[0];
             let b = *p.positions.last().unwrap();
             assert!((a.distance(b) - 300.0).abs() < 1e-6);
-            let expected = 4.0 * periods as f64 * (50f64.powi(2) + (75.0 / periods as f64).powi(2)).sqrt();
-            assert!((p.length() - expected).abs() < 1e-6, "{} vs {expected}", p.length());
+            let expected =
+                4.0 * periods as f64 * (50f64.powi(2) + (75.0 / periods as f64).powi(2)).sqrt();
+            assert!(
+                (p.length() - expected).abs() < 1e-6,
+                "{} vs {expected}",
+                p.length()
+            );
             // Constant speed along the path.
             let d0 = p.positions[0].distance(p.positions[1]);
             assert!((d0 - expected / 3000.0).abs() < 1e-9);

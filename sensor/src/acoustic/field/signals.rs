@@ -49,8 +49,11 @@ pub fn record(
     let indices: Vec<usize> = (0..sensors.len()).collect();
     let rows = par_map(&indices, threads, |&i| {
         let at = sensors[i];
-        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        let mut row: Vec<f64> = (0..samples).map(|_| noise_std * standard_normal(&mut rng)).collect();
+        let mut rng =
+            ChaCha8Rng::seed_from_u64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut row: Vec<f64> = (0..samples)
+            .map(|_| noise_std * standard_normal(&mut rng))
+            .collect();
         for (path, source) in paths.iter().zip(sources) {
             for (t, x) in row.iter_mut().enumerate() {
                 let d2 = at.distance_sq(path.positions[t]);
@@ -86,6 +89,9 @@ mod tests {
         assert_eq!(s.sensor(1), &[0.0; 4]);
         let noisy = record(&sensors, &paths, &sources, 4, 250.0, &att, 1e-3, 1, 1);
         assert!(noisy.sensor(1).iter().all(|v| v.abs() < 1e-2 && *v != 0.0));
-        assert_eq!(noisy, record(&sensors, &paths, &sources, 4, 250.0, &att, 1e-3, 1, 2));
+        assert_eq!(
+            noisy,
+            record(&sensors, &paths, &sources, 4, 250.0, &att, 1e-3, 1, 2)
+        );
     }
 }

@@ -92,14 +92,23 @@ mod tests {
 
     #[test]
     fn finds_the_optimum() {
-        let cost = vec![vec![4.0, 1.0, 3.0], vec![2.0, 0.0, 5.0], vec![3.0, 2.0, 2.0]];
+        let cost = vec![
+            vec![4.0, 1.0, 3.0],
+            vec![2.0, 0.0, 5.0],
+            vec![3.0, 2.0, 2.0],
+        ];
         assert_eq!(min_cost_assignment(&cost), vec![1, 0, 2]);
-        let rect = vec![vec![10.0, 1.0, 10.0, 10.0], vec![1.0, 10.0, 10.0, f64::INFINITY]];
+        let rect = vec![
+            vec![10.0, 1.0, 10.0, 10.0],
+            vec![1.0, 10.0, 10.0, f64::INFINITY],
+        ];
         assert_eq!(min_cost_assignment(&rect), vec![1, 0]);
         // Brute force on random 5 × 5.
         let mut seed = 7u64;
         let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 33) as f64 / (1u64 << 31) as f64
         };
         for _ in 0..20 {

@@ -67,7 +67,11 @@ pub fn max_abs_correlations(truth: &DMatrix<f64>, estimate: &DMatrix<f64>) -> Ve
     let t = rows(truth);
     let e = rows(estimate);
     t.iter()
-        .map(|s| e.iter().map(|y| correlation(s, y).abs()).fold(0.0, f64::max))
+        .map(|s| {
+            e.iter()
+                .map(|y| correlation(s, y).abs())
+                .fold(0.0, f64::max)
+        })
         .collect()
 }
 

@@ -52,7 +52,11 @@ pub struct TrackingMetrics {
 fn point_segment(p: Vec2, a: Vec2, b: Vec2) -> f64 {
     let ab = b - a;
     let len2 = ab.norm_sq();
-    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     p.distance(a + ab * t)
 }
 
@@ -61,7 +65,12 @@ fn point_segment(p: Vec2, a: Vec2, b: Vec2) -> f64 {
 /// stride of a slot step loses at most a fraction of a metre at corners.
 fn polyline(path: &TruePath, stride: usize) -> Vec<Vec2> {
     let n = path.positions.len();
-    let mut out: Vec<Vec2> = path.positions.iter().step_by(stride.max(1)).copied().collect();
+    let mut out: Vec<Vec2> = path
+        .positions
+        .iter()
+        .step_by(stride.max(1))
+        .copied()
+        .collect();
     if n > 0 && (n - 1) % stride.max(1) != 0 {
         out.push(path.positions[n - 1]);
     }
@@ -72,12 +81,21 @@ fn distance_to_polyline(p: Vec2, line: &[Vec2]) -> f64 {
     match line {
         [] => f64::INFINITY,
         [a] => p.distance(*a),
-        _ => line.windows(2).map(|w| point_segment(p, w[0], w[1])).fold(f64::INFINITY, f64::min),
+        _ => line
+            .windows(2)
+            .map(|w| point_segment(p, w[0], w[1]))
+            .fold(f64::INFINITY, f64::min),
     }
 }
 
 /// Evaluates estimated paths (fragments over `areas`) against the truth.
-pub fn evaluate(paths: &[Vec<Fragment>], areas: &[Area], grid: &TileGrid, truth: &[TruePath], seg: &Segmentation) -> TrackingMetrics {
+pub fn evaluate(
+    paths: &[Vec<Fragment>],
+    areas: &[Area],
+    grid: &TileGrid,
+    truth: &[TruePath],
+    seg: &Segmentation,
+) -> TrackingMetrics {
     let k = truth.len();
     let position_at = |t: usize, slot: usize| -> Vec2 {
         let pos = &truth[t].positions;
@@ -93,7 +111,11 @@ pub fn evaluate(paths: &[Vec<Fragment>], areas: &[Area], grid: &TileGrid, truth:
                 .map(|t| {
                     paths[l]
                         .iter()
-                        .map(|f| areas[f.area as usize].centroid.distance(position_at(t, f.slot)))
+                        .map(|f| {
+                            areas[f.area as usize]
+                                .centroid
+                                .distance(position_at(t, f.slot))
+                        })
                         .sum::<f64>()
                         / paths[l].len() as f64
                 })
@@ -108,7 +130,9 @@ pub fn evaluate(paths: &[Vec<Fragment>], areas: &[Area], grid: &TileGrid, truth:
     } else if nonempty.len() > k {
         // More paths than targets: pair the targets with their best paths,
         // leave the rest unpaired.
-        let transposed: Vec<Vec<f64>> = (0..k).map(|t| cost.iter().map(|r| r[t]).collect()).collect();
+        let transposed: Vec<Vec<f64>> = (0..k)
+            .map(|t| cost.iter().map(|r| r[t]).collect())
+            .collect();
         for (t, row) in min_cost_assignment(&transposed).into_iter().enumerate() {
             target_of[nonempty[row]] = Some(t);
         }
@@ -123,7 +147,9 @@ pub fn evaluate(paths: &[Vec<Fragment>], areas: &[Area], grid: &TileGrid, truth:
         let mut union = TileSet::empty(grid);
         for f in path {
             union.union_with(&areas[f.area as usize].tiles);
-            aligned += areas[f.area as usize].centroid.distance(position_at(t, f.slot));
+            aligned += areas[f.area as usize]
+                .centroid
+                .distance(position_at(t, f.slot));
             fragments += 1;
         }
         for (r, c) in union.points() {
@@ -134,20 +160,44 @@ pub fn evaluate(paths: &[Vec<Fragment>], areas: &[Area], grid: &TileGrid, truth:
         }
         let gaps: f64 = path
             .windows(2)
-            .map(|w| areas[w[0].area as usize].tiles.distance(&areas[w[1].area as usize].tiles, grid))
+            .map(|w| {
+                areas[w[0].area as usize]
+                    .tiles
+                    .distance(&areas[w[1].area as usize].tiles, grid)
+            })
             .sum();
         let length = truth[t].length();
-        coverage[t] = if length > 0.0 { (1.0 - gaps / length).clamp(0.0, 1.0) } else { 1.0 };
+        coverage[t] = if length > 0.0 {
+            (1.0 - gaps / length).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
         slots_with[t] = path.len();
     }
-    let mean = if points > 0 { sum / points as f64 } else { f64::NAN };
-    let var = if points > 0 { (sum2 / points as f64 - mean * mean).max(0.0) } else { f64::NAN };
+    let mean = if points > 0 {
+        sum / points as f64
+    } else {
+        f64::NAN
+    };
+    let var = if points > 0 {
+        (sum2 / points as f64 - mean * mean).max(0.0)
+    } else {
+        f64::NAN
+    };
     TrackingMetrics {
         mean_error: mean,
         std_error: var.sqrt(),
         points,
-        coverage: if k > 0 { coverage.iter().sum::<f64>() / k as f64 } else { 0.0 },
-        aligned_error: if fragments > 0 { aligned / fragments as f64 } else { f64::NAN },
+        coverage: if k > 0 {
+            coverage.iter().sum::<f64>() / k as f64
+        } else {
+            0.0
+        },
+        aligned_error: if fragments > 0 {
+            aligned / fragments as f64
+        } else {
+            f64::NAN
+        },
         slot_share: slots_with.iter().sum::<usize>() as f64 / (k * seg.slots()).max(1) as f64,
         target_of,
     }

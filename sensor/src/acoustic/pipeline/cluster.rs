@@ -167,7 +167,12 @@ pub struct SlotClusters {
 
 /// Clusters one slot's segments into `clusters` clusters and counts each
 /// segment's support at `hear_threshold`.
-pub fn cluster_slot(segs: &SlotSegments, clusters: usize, linkage: Linkage, hear_threshold: f32) -> SlotClusters {
+pub fn cluster_slot(
+    segs: &SlotSegments,
+    clusters: usize,
+    linkage: Linkage,
+    hear_threshold: f32,
+) -> SlotClusters {
     if segs.is_empty() {
         return SlotClusters::default();
     }
@@ -215,7 +220,9 @@ mod tests {
             match linkage {
                 Linkage::Single => it.map(|(i, j)| d[(i, j)]).fold(f32::INFINITY, f32::min),
                 Linkage::Complete => it.map(|(i, j)| d[(i, j)]).fold(0.0, f32::max),
-                Linkage::Average => it.map(|(i, j)| d[(i, j)]).sum::<f32>() / (a.len() * b.len()) as f32,
+                Linkage::Average => {
+                    it.map(|(i, j)| d[(i, j)]).sum::<f32>() / (a.len() * b.len()) as f32
+                }
             }
         };
         while groups.len() > clusters {
@@ -275,7 +282,9 @@ mod tests {
         // Three sources, each seen by four groups with a little noise, plus
         // two pure-noise segments.
         let mut rng = ChaCha8Rng::seed_from_u64(2);
-        let src: Vec<Vec<f64>> = (0..3).map(|_| (0..100).map(|_| rng.gen::<f64>() - 0.5).collect()).collect();
+        let src: Vec<Vec<f64>> = (0..3)
+            .map(|_| (0..100).map(|_| rng.gen::<f64>() - 0.5).collect())
+            .collect();
         let mut segs = SlotSegments {
             l_seg: 100,
             ..SlotSegments::default()
@@ -283,7 +292,10 @@ mod tests {
         for g in 0..12u32 {
             let s = &src[g as usize % 3];
             let sign = if g % 2 == 0 { 1.0 } else { -1.0 };
-            segs.push(g, s.iter().map(|v| sign * v + 0.05 * (rng.gen::<f64>() - 0.5)));
+            segs.push(
+                g,
+                s.iter().map(|v| sign * v + 0.05 * (rng.gen::<f64>() - 0.5)),
+            );
         }
         for g in 12..14u32 {
             segs.push(g, (0..100).map(|_| rng.gen::<f64>() - 0.5));

@@ -6,9 +6,9 @@
 //! skipped (its hearing is inconsistent with the better ones before it).
 //! The result, area^u_{k,j}, is an estimated path fragment.
 
+use super::prepare::SensorGroup;
 use super::separate::SlotSegments;
 use super::tiles::{TileGrid, TileSet};
-use super::prepare::SensorGroup;
 use crate::geometry::Vec2;
 
 /// The sensing range of every group, on the tile grid.
@@ -49,7 +49,13 @@ pub fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> Vec<(u32
     let target = segs.segment(c);
     let mut best: Vec<(u32, f32)> = Vec::new();
     for i in 0..segs.len() {
-        let corr: f32 = segs.segment(i).iter().zip(target).map(|(a, b)| a * b).sum::<f32>().abs();
+        let corr: f32 = segs
+            .segment(i)
+            .iter()
+            .zip(target)
+            .map(|(a, b)| a * b)
+            .sum::<f32>()
+            .abs();
         if corr < threshold {
             continue;
         }
@@ -117,10 +123,17 @@ mod tests {
         segs.push(0, sig.iter().copied());
         segs.push(1, sig.iter().map(|v| -v));
         let hearing = hearing_groups(&segs, 2, 0.9);
-        assert_eq!(hearing.iter().map(|h| h.0).collect::<Vec<_>>(), vec![0, 1, 2]);
+        assert_eq!(
+            hearing.iter().map(|h| h.0).collect::<Vec<_>>(),
+            vec![0, 1, 2]
+        );
         let area = intersect(&ranges, &hearing).unwrap();
         assert_eq!(area.groups, 3);
-        assert!(area.centroid.distance(Vec2::new(200.0, 190.0)) < 15.0, "{:?}", area.centroid);
+        assert!(
+            area.centroid.distance(Vec2::new(200.0, 190.0)) < 15.0,
+            "{:?}",
+            area.centroid
+        );
         // Every point is within range of all three.
         for (r, c) in area.tiles.points() {
             for s in &sensors[..3] {

@@ -37,7 +37,12 @@ pub fn nearest_groups(sensors: &[Vec2], n_group: usize) -> Result<Vec<SensorGrou
     let mut order: Vec<(f64, u32)> = Vec::with_capacity(sensors.len());
     for &s in sensors {
         order.clear();
-        order.extend(sensors.iter().enumerate().map(|(j, &p)| (s.distance_sq(p), j as u32)));
+        order.extend(
+            sensors
+                .iter()
+                .enumerate()
+                .map(|(j, &p)| (s.distance_sq(p), j as u32)),
+        );
         // Ties broken by index, so grouping is deterministic.
         order.select_nth_unstable_by(n_group - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut members: Vec<u32> = order[..n_group].iter().map(|&(_, j)| j).collect();
@@ -45,7 +50,10 @@ pub fn nearest_groups(sensors: &[Vec2], n_group: usize) -> Result<Vec<SensorGrou
         if !seen.insert(members.clone()) {
             continue;
         }
-        let center = members.iter().fold(Vec2::ZERO, |acc, &m| acc + sensors[m as usize]) * (1.0 / n_group as f64);
+        let center = members
+            .iter()
+            .fold(Vec2::ZERO, |acc, &m| acc + sensors[m as usize])
+            * (1.0 / n_group as f64);
         let radius = members
             .iter()
             .map(|&m| sensors[m as usize].distance(center))
@@ -111,7 +119,12 @@ impl Segmentation {
 
 /// The segment group OG_{i,j}: the recordings of `group`'s members during
 /// slot `slot`, one row per member (n_group × l_seg).
-pub fn segment_group(signals: &SensorSignals, group: &SensorGroup, seg: &Segmentation, slot: usize) -> DMatrix<f64> {
+pub fn segment_group(
+    signals: &SensorSignals,
+    group: &SensorGroup,
+    seg: &Segmentation,
+    slot: usize,
+) -> DMatrix<f64> {
     let start = seg.start(slot);
     DMatrix::from_fn(group.members.len(), seg.l_seg, |p, k| {
         signals.sensor(group.members[p] as usize)[start + k]
@@ -163,7 +176,13 @@ mod tests {
         };
         let s = Segmentation::new(4, 2, 6).unwrap();
         let m = segment_group(&signals, &g, &s, 1);
-        assert_eq!(m.row(0).iter().copied().collect::<Vec<_>>(), vec![8.0, 9.0, 10.0, 11.0]);
-        assert_eq!(m.row(1).iter().copied().collect::<Vec<_>>(), vec![2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(
+            m.row(0).iter().copied().collect::<Vec<_>>(),
+            vec![8.0, 9.0, 10.0, 11.0]
+        );
+        assert_eq!(
+            m.row(1).iter().copied().collect::<Vec<_>>(),
+            vec![2.0, 3.0, 4.0, 5.0]
+        );
     }
 }

@@ -57,7 +57,11 @@ fn overlap_rows(segs: &SlotSegments, l_step: usize, from_tail: bool) -> DMatrix<
         let s = segs.segment(i);
         let part = if from_tail { &s[l_step..] } else { &s[..ov] };
         let mean = part.iter().sum::<f32>() / ov as f32;
-        let norm = part.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>().sqrt();
+        let norm = part
+            .iter()
+            .map(|v| (v - mean) * (v - mean))
+            .sum::<f32>()
+            .sqrt();
         let inv = if norm > 0.0 { 1.0 / norm } else { 0.0 };
         for (k, v) in part.iter().enumerate() {
             m[(i, k)] = (v - mean) * inv;
@@ -149,7 +153,11 @@ pub fn select_cts(
             .map(|links| {
                 let mut top = (f32::NEG_INFINITY, None);
                 for &(t, rho) in links {
-                    let v = rho + best[i + 1].get(t as usize).copied().unwrap_or(f32::NEG_INFINITY);
+                    let v = rho
+                        + best[i + 1]
+                            .get(t as usize)
+                            .copied()
+                            .unwrap_or(f32::NEG_INFINITY);
                     if v > top.0 {
                         top = (v, Some(t));
                     }
@@ -257,7 +265,9 @@ mod tests {
     /// slot also has a fresh noise segment.
     fn slots(n: usize) -> Vec<SlotSegments> {
         let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let src: Vec<Vec<f64>> = (0..2).map(|_| (0..200).map(|_| rng.gen::<f64>() - 0.5).collect()).collect();
+        let src: Vec<Vec<f64>> = (0..2)
+            .map(|_| (0..200).map(|_| rng.gen::<f64>() - 0.5).collect())
+            .collect();
         (0..n)
             .map(|j| {
                 let mut s = SlotSegments {
@@ -284,7 +294,13 @@ mod tests {
         segs.push(0, a.iter().zip(&b).map(|(x, y)| x + 0.8 * y));
         segs.push(1, a.iter().copied());
         segs.push(2, b.iter().copied());
-        let corr = |i: u32, j: u32| -> f32 { segs.segment(i as usize).iter().zip(segs.segment(j as usize)).map(|(x, y)| x * y).sum() };
+        let corr = |i: u32, j: u32| -> f32 {
+            segs.segment(i as usize)
+                .iter()
+                .zip(segs.segment(j as usize))
+                .map(|(x, y)| x * y)
+                .sum()
+        };
         assert_eq!(aggregates(&[0, 1, 2], 0.9, &corr), vec![true, false, false]);
         // The aggregate has the most support, yet the two sources win.
         let layer = LinkLayer {
@@ -297,7 +313,13 @@ mod tests {
             aggregate_r2: 0.9,
         };
         let chains = select_cts(&[&layer], &[0, 1, 2], &[50, 10, 10], 3, &settings, &corr);
-        assert_eq!(chains.iter().map(|c| c.segments[0].unwrap()).collect::<Vec<_>>(), vec![1, 2]);
+        assert_eq!(
+            chains
+                .iter()
+                .map(|c| c.segments[0].unwrap())
+                .collect::<Vec<_>>(),
+            vec![1, 2]
+        );
     }
 
     #[test]
@@ -322,7 +344,13 @@ mod tests {
             min_support: 1,
             aggregate_r2: 0.9,
         };
-        let corr = |a: u32, b: u32| -> f32 { s[0].segment(a as usize).iter().zip(s[0].segment(b as usize)).map(|(x, y)| x * y).sum() };
+        let corr = |a: u32, b: u32| -> f32 {
+            s[0].segment(a as usize)
+                .iter()
+                .zip(s[0].segment(b as usize))
+                .map(|(x, y)| x * y)
+                .sum()
+        };
         // Each segment its own cluster; all equally supported: the gate
         // removes the noise.
         let chains = select_cts(&refs, &[0, 1, 2], &[1, 1, 1], s[3].len(), &settings, &corr);
@@ -346,7 +374,10 @@ mod tests {
             &[0, 1, 2],
             &[9, 2, 3],
             s[3].len(),
-            &SelectSettings { min_support: 3, ..settings },
+            &SelectSettings {
+                min_support: 3,
+                ..settings
+            },
             &corr,
         );
         assert_eq!(chains.len(), 1);

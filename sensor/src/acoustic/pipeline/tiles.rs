@@ -69,8 +69,18 @@ impl TileSet {
         let s = grid.spacing;
         let last = grid.side as isize - 1;
         let row_of = |y: f64| (y / s).floor() as isize;
-        let lo = centers.iter().map(|c| row_of(c.y - radius)).min().unwrap_or(0).clamp(0, last) as usize;
-        let hi = centers.iter().map(|c| row_of(c.y + radius) + 1).max().unwrap_or(0).clamp(0, last) as usize;
+        let lo = centers
+            .iter()
+            .map(|c| row_of(c.y - radius))
+            .min()
+            .unwrap_or(0)
+            .clamp(0, last) as usize;
+        let hi = centers
+            .iter()
+            .map(|c| row_of(c.y + radius) + 1)
+            .max()
+            .unwrap_or(0)
+            .clamp(0, last) as usize;
         let mut set = TileSet {
             row0: lo,
             words: grid.words,
@@ -281,7 +291,10 @@ impl TileSet {
                     continue;
                 }
                 let i = cols.partition_point(|&c| c < qc);
-                for &c in cols.get(i.saturating_sub(1)..(i + 1).min(cols.len())).unwrap_or(&[]) {
+                for &c in cols
+                    .get(i.saturating_sub(1)..(i + 1).min(cols.len()))
+                    .unwrap_or(&[])
+                {
                     let dx = c as i64 - qc as i64;
                     best = best.min(dx * dx + dy * dy);
                 }
@@ -319,7 +332,11 @@ mod tests {
         let mut u = a.clone();
         u.union_with(&far);
         assert_eq!(u.count(), 2 * 49);
-        let two = TileSet::disk_union(&grid, &[Vec2::new(50.0, 50.0), Vec2::new(150.0, 50.0)], 20.0);
+        let two = TileSet::disk_union(
+            &grid,
+            &[Vec2::new(50.0, 50.0), Vec2::new(150.0, 50.0)],
+            20.0,
+        );
         assert_eq!(two, u);
         assert!(a.boundary().len() < 49 && a.boundary().len() >= 16);
         // Clipped at the field's edge.
@@ -339,6 +356,8 @@ mod tests {
             .count();
         assert_eq!(a.count(), expected);
         let pts: Vec<_> = a.points().collect();
-        assert!(pts.iter().all(|&(r, c)| grid.point(r, c).distance(Vec2::new(800.0, 800.0)) <= 250.0 + 1e-9));
+        assert!(pts
+            .iter()
+            .all(|&(r, c)| grid.point(r, c).distance(Vec2::new(800.0, 800.0)) <= 250.0 + 1e-9));
     }
 }

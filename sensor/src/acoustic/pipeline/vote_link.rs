@@ -85,12 +85,19 @@ pub fn vote(
     let n_slot = settings.n_slot;
     let tol = settings.tolerance;
     let close = |a: u32, b: u32| -> bool {
-        a == b || areas[a as usize].tiles.distance(&areas[b as usize].tiles, grid) <= tol
+        a == b
+            || areas[a as usize]
+                .tiles
+                .distance(&areas[b as usize].tiles, grid)
+                <= tol
     };
     let mut pseg: Vec<Vec<Kept>> = vec![Vec::new(); slots];
     let mut keep = |slot: usize, k: Kept| {
         let list = &mut pseg[slot];
-        if !list.iter().any(|x| x.segment == k.segment || same_source(slot, x.segment, k.segment)) {
+        if !list
+            .iter()
+            .any(|x| x.segment == k.segment || same_source(slot, x.segment, k.segment))
+        {
             list.push(k);
         }
     };
@@ -100,7 +107,9 @@ pub fn vote(
             let Some(Some((first, seg0))) = chain.first().copied() else {
                 continue;
             };
-            let dcur_ok = chain[1..].iter().all(|c| c.is_some_and(|(a, _)| close(first, a)));
+            let dcur_ok = chain[1..]
+                .iter()
+                .all(|c| c.is_some_and(|(a, _)| close(first, a)));
             let dpre_ok = (1..n_slot.min(u + 1)).all(|m| {
                 let earlier: Vec<u32> = estimates[u - m]
                     .chains
@@ -110,13 +119,25 @@ pub fn vote(
                 earlier.is_empty() || earlier.iter().any(|&a| close(first, a))
             });
             if dcur_ok && dpre_ok {
-                keep(u, Kept { area: first, segment: seg0 });
+                keep(
+                    u,
+                    Kept {
+                        area: first,
+                        segment: seg0,
+                    },
+                );
             }
             if u == last {
                 for (i, c) in chain.iter().enumerate().skip(1) {
                     if let Some((a, s)) = *c {
                         if u + i < slots && close(first, a) {
-                            keep(u + i, Kept { area: a, segment: s });
+                            keep(
+                                u + i,
+                                Kept {
+                                    area: a,
+                                    segment: s,
+                                },
+                            );
                         }
                     }
                 }
@@ -241,7 +262,9 @@ mod tests {
     fn consistent_fragments_are_kept_and_outliers_voted_out() {
         // Two targets moving right, one at y = 100, one at y = 500; areas
         // 0..6 along the first, 6..12 along the second; 12 is far off.
-        let mut areas: Vec<Area> = (0..6).map(|i| disk(100.0 + 5.0 * i as f64, 100.0)).collect();
+        let mut areas: Vec<Area> = (0..6)
+            .map(|i| disk(100.0 + 5.0 * i as f64, 100.0))
+            .collect();
         areas.extend((0..6).map(|i| disk(100.0 + 5.0 * i as f64, 500.0)));
         areas.push(disk(800.0, 800.0));
         // 4 slots, n_slot 3: CTS 0 and 1. Segment id = area id.
@@ -255,8 +278,13 @@ mod tests {
                 chains: vec![chain(&[1, 2, 3]), chain(&[12, 8, 9])],
             },
         ];
-        let pseg = vote(&estimates, 4, &areas, &grid(), &settings(), &|_, _, _| false);
-        assert_eq!(pseg[0].iter().map(|k| k.area).collect::<Vec<_>>(), vec![0, 6]);
+        let pseg = vote(&estimates, 4, &areas, &grid(), &settings(), &|_, _, _| {
+            false
+        });
+        assert_eq!(
+            pseg[0].iter().map(|k| k.area).collect::<Vec<_>>(),
+            vec![0, 6]
+        );
         assert_eq!(pseg[1].iter().map(|k| k.area).collect::<Vec<_>>(), vec![1]);
         // Last CTS hands on its later slots that touch its first fragment.
         assert_eq!(pseg[2].iter().map(|k| k.area).collect::<Vec<_>>(), vec![2]);
@@ -277,31 +305,67 @@ mod tests {
             disk(390.0, 100.0),
             disk(900.0, 900.0),
         ];
-        let kept = |ids: &[u32]| ids.iter().map(|&a| Kept { area: a, segment: a }).collect::<Vec<_>>();
+        let kept = |ids: &[u32]| {
+            ids.iter()
+                .map(|&a| Kept {
+                    area: a,
+                    segment: a,
+                })
+                .collect::<Vec<_>>()
+        };
         // Slot 0: two fragments; slot 1: the same two targets listed in the
         // other order plus a far one with no free path.
         let pseg = vec![kept(&[0, 1]), kept(&[3, 2, 4])];
         let (paths, dropped) = link(&pseg, 2, &areas, &grid(), &settings(), &|_, _, _, _| None);
-        assert_eq!(paths[0].iter().map(|f| f.area).collect::<Vec<_>>(), vec![0, 2]);
-        assert_eq!(paths[1].iter().map(|f| f.area).collect::<Vec<_>>(), vec![1, 3]);
+        assert_eq!(
+            paths[0].iter().map(|f| f.area).collect::<Vec<_>>(),
+            vec![0, 2]
+        );
+        assert_eq!(
+            paths[1].iter().map(|f| f.area).collect::<Vec<_>>(),
+            vec![1, 3]
+        );
         assert_eq!(dropped, 1);
         // Overlapping fragments of two targets: the signal decides.
-        let areas = vec![disk(100.0, 100.0), disk(110.0, 100.0), disk(105.0, 100.0), disk(106.0, 100.0)];
+        let areas = vec![
+            disk(100.0, 100.0),
+            disk(110.0, 100.0),
+            disk(105.0, 100.0),
+            disk(106.0, 100.0),
+        ];
         let pseg = vec![kept(&[0, 1]), kept(&[2, 3])];
-        let signal = |_: usize, a: u32, _: usize, b: u32| Some(if (a, b) == (0, 3) || (a, b) == (1, 2) { 0.99 } else { 0.1 });
+        let signal = |_: usize, a: u32, _: usize, b: u32| {
+            Some(if (a, b) == (0, 3) || (a, b) == (1, 2) {
+                0.99
+            } else {
+                0.1
+            })
+        };
         let (paths, _) = link(&pseg, 2, &areas, &grid(), &settings(), &signal);
-        assert_eq!(paths[0].iter().map(|f| f.area).collect::<Vec<_>>(), vec![0, 3]);
-        assert_eq!(paths[1].iter().map(|f| f.area).collect::<Vec<_>>(), vec![1, 2]);
+        assert_eq!(
+            paths[0].iter().map(|f| f.area).collect::<Vec<_>>(),
+            vec![0, 3]
+        );
+        assert_eq!(
+            paths[1].iter().map(|f| f.area).collect::<Vec<_>>(),
+            vec![1, 2]
+        );
         // Duplicates of one source in a slot count once.
         let estimates = vec![CtsEstimate {
-            chains: vec![vec![Some((0, 7)), Some((0, 7))], vec![Some((2, 8)), Some((2, 8))]],
+            chains: vec![
+                vec![Some((0, 7)), Some((0, 7))],
+                vec![Some((2, 8)), Some((2, 8))],
+            ],
         }];
         let pseg = vote(
             &estimates,
             2,
             &areas,
             &grid(),
-            &VoteSettings { n_slot: 2, ..settings() },
+            &VoteSettings {
+                n_slot: 2,
+                ..settings()
+            },
             &|_, a, b| (a, b) == (7, 8) || (a, b) == (8, 7),
         );
         assert_eq!(pseg[0].len(), 1);

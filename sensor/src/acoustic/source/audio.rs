@@ -114,7 +114,8 @@ fn load_ogg(path: &Path) -> Result<Recording, AudioError> {
         path: path.to_path_buf(),
         cause,
     };
-    let mut reader = lewton::inside_ogg::OggStreamReader::new(BufReader::new(file)).map_err(vorbis)?;
+    let mut reader =
+        lewton::inside_ogg::OggStreamReader::new(BufReader::new(file)).map_err(vorbis)?;
     let channels = usize::from(reader.ident_hdr.audio_channels.max(1));
     let rate = reader.ident_hdr.audio_sample_rate;
     let mut interleaved = Vec::new();
@@ -193,7 +194,10 @@ pub fn load_dir(dir: &Path, rate: u32) -> Vec<Recording> {
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
             matches!(
-                p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref(),
+                p.extension()
+                    .and_then(|e| e.to_str())
+                    .map(str::to_ascii_lowercase)
+                    .as_deref(),
                 Some("wav") | Some("ogg") | Some("oga")
             )
         })
@@ -259,7 +263,10 @@ mod tests {
         assert_eq!(recs[0].samples.len(), 500);
         let peak = recs[0].samples.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         assert!((0.4..0.5).contains(&peak), "{peak}");
-        assert!(matches!(load(&dir.join("b.ogg")), Err(AudioError::Vorbis { .. })));
+        assert!(matches!(
+            load(&dir.join("b.ogg")),
+            Err(AudioError::Vorbis { .. })
+        ));
         let err = load(&dir.join("c.wav")).unwrap_err();
         assert!(err.to_string().contains("c.wav"), "{err}");
         assert!(load_dir(&dir.join("missing"), 8000).is_empty());

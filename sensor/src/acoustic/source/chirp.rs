@@ -35,7 +35,9 @@ pub fn chirp_song(samples: usize, params: &ChirpParams, rng: &mut impl Rng) -> V
     let mut out = vec![0.0; samples];
     let mut t = rng.gen_range(0..=params.gap.1.max(1));
     while t < samples {
-        let len = rng.gen_range(params.syllable.0..=params.syllable.1.max(params.syllable.0)).max(2);
+        let len = rng
+            .gen_range(params.syllable.0..=params.syllable.1.max(params.syllable.0))
+            .max(2);
         let f0 = rng.gen_range(params.frequency.0..=params.frequency.1);
         let f1 = (f0 * rng.gen_range(params.sweep.0..=params.sweep.1)).min(0.45);
         let amplitude = rng.gen_range(0.5..=1.5);

@@ -75,9 +75,16 @@ pub(crate) fn normalize(x: &mut [f64]) {
 
 /// `count` independent source signals of `samples` samples each, zero mean
 /// and unit RMS, drawn from `rng`.
-pub fn generate(kind: &SourceKind, count: usize, samples: usize, rng: &mut ChaCha8Rng) -> Vec<Vec<f64>> {
+pub fn generate(
+    kind: &SourceKind,
+    count: usize,
+    samples: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Vec<f64>> {
     match kind {
-        SourceKind::Chirps(p) => (0..count).map(|_| chirp::chirp_song(samples, p, rng)).collect(),
+        SourceKind::Chirps(p) => (0..count)
+            .map(|_| chirp::chirp_song(samples, p, rng))
+            .collect(),
         SourceKind::Ar(p) => (0..count).map(|_| ar::ar_source(samples, p, rng)).collect(),
         SourceKind::Mixed => (0..count)
             .map(|i| {
@@ -170,7 +177,9 @@ mod tests {
     #[test]
     fn shared_recordings_give_distinct_windows() {
         let kind = SourceKind::shared_recordings();
-        let SourceKind::Recordings { dir, .. } = &kind else { unreachable!() };
+        let SourceKind::Recordings { dir, .. } = &kind else {
+            unreachable!()
+        };
         if !dir.is_dir() {
             return;
         }

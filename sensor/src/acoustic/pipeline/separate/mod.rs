@@ -82,11 +82,16 @@ impl SlotSegments {
         let v: Vec<f64> = samples.collect();
         debug_assert_eq!(v.len(), self.l_seg);
         let mean = v.iter().sum::<f64>() / v.len() as f64;
-        let norm = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>().sqrt();
+        let norm = v
+            .iter()
+            .map(|x| (x - mean) * (x - mean))
+            .sum::<f64>()
+            .sqrt();
         if !(norm > 0.0 && norm.is_finite()) {
             return;
         }
-        self.data.extend(v.iter().map(|x| ((x - mean) / norm) as f32));
+        self.data
+            .extend(v.iter().map(|x| ((x - mean) / norm) as f32));
         self.group.push(group);
     }
 }
@@ -143,7 +148,11 @@ pub fn separate_slot(
         max: settings.max_components,
     };
     for (g, group) in groups.iter().enumerate() {
-        let fail = |source| AcousticError::Separation { group: g, slot, source };
+        let fail = |source| AcousticError::Separation {
+            group: g,
+            slot,
+            source,
+        };
         let x = segment_group(signals, group, seg, slot);
         let (whitening, z) = whiten(&x, &components).map_err(fail)?;
         if whitening.components() == 0 {
@@ -238,8 +247,16 @@ mod tests {
         let var = estimate_noise_variance(&field.signals, &groups, &seg, 300);
         let truth = config.noise_std * config.noise_std;
         assert!((var / truth - 1.0).abs() < 0.3, "{var} vs {truth}");
-        let (segs, report) =
-            separate_slot(&field.signals, &groups, &seg, 5, &SeparationSettings::default(), var, 1).unwrap();
+        let (segs, report) = separate_slot(
+            &field.signals,
+            &groups,
+            &seg,
+            5,
+            &SeparationSettings::default(),
+            var,
+            1,
+        )
+        .unwrap();
         assert_eq!(report.separations + report.silent, groups.len());
         assert_eq!(report.segments, segs.len());
         assert!(segs.len() > 0);
@@ -257,10 +274,9 @@ mod tests {
                 .paths
                 .iter()
                 .filter(|p| {
-                    group
-                        .members
-                        .iter()
-                        .any(|&m| field.sensors[m as usize].distance(p.positions[mid]) <= config.range + 10.0)
+                    group.members.iter().any(|&m| {
+                        field.sensors[m as usize].distance(p.positions[mid]) <= config.range + 10.0
+                    })
                 })
                 .count();
             let got = segs.group.iter().filter(|&&x| x as usize == g).count();
@@ -273,7 +289,9 @@ mod tests {
         let start = seg.start(5);
         for (t, src) in field.sources.iter().enumerate() {
             let heard_by_someone = groups.iter().any(|group| {
-                group.members.iter().all(|&m| field.sensors[m as usize].distance(field.paths[t].positions[mid]) <= 150.0)
+                group.members.iter().all(|&m| {
+                    field.sensors[m as usize].distance(field.paths[t].positions[mid]) <= 150.0
+                })
             });
             if !heard_by_someone {
                 continue;

@@ -100,7 +100,10 @@ pub fn whiten(
     let eigenvalues: Vec<f64> = order.iter().map(|&i| eig.eigenvalues[i]).collect();
     let top = eigenvalues[0].max(0.0);
     let numerical_floor = top * 1e-12;
-    let rank = eigenvalues.iter().filter(|&&l| l > numerical_floor && l > 0.0).count();
+    let rank = eigenvalues
+        .iter()
+        .filter(|&&l| l > numerical_floor && l > 0.0)
+        .count();
     let n = match *components {
         Components::All => rank,
         Components::Fixed(n) => {

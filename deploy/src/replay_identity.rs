@@ -1,0 +1,755 @@
+//! `idmesh replay` on identity traces: run one identity filter over a
+//! recorded trace, offline.
+//!
+//! The header must say `identities` (an identity trace, shared/spec/trace.md);
+//! `initial_identity`, when present, is the known start, otherwise every
+//! assignment is equally likely. `mix` and `identify` lines are applied in
+//! order (`observe` and `move` lines mean nothing to an identity filter and
+//! are skipped); at every `truth` line one JSON line is written,
+//!
+//! ```text
+//! {"time":T,"p_identity":[[…],…],"predicted_identity":[…]}
+//! ```
+//!
+//! with `p_identity[t][i]` = P(track t carries identity i) and
+//! `predicted_identity[t]` the identity of track t in the most likely
+//! one-to-one assignment under those marginals (Hungarian algorithm on
+//! −ln p); at the end a summary line
+//!
+//! ```text
+//! {"kind":"summary","method":"…","events":E,"seconds":S,"error":X}
+//! ```
+//!
+//! with the events applied, the filter's own time (building it, applying
+//! events, computing marginals and the assignment — not reading or
+//! printing) and the mean identity error (the share of tracks whose
+//! predicted identity is wrong) over the `truth` lines that carry
+//! `identity` (`null` when none do).
+//!
+//! Every error — a bad line, an event the engine rejects, a trace the method
+//! cannot take — is reported as `FILE:LINE: reason` and ends the replay.
+//!
+//! The methods ([`IdentityMethod`]) are the engine's identity filters
+//! (`idmesh_belief::identity`): the exact filter over the N! assignments
+//! (N ≤ 9), the belief matrix, the information matrix with marginals on
+//! demand ([`MarginalChoice`]), and identities coded by property bits (one
+//! Radon property belief per bit, `--bits`, optional `--budget`).
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::{Args, ValueEnum};
+use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
+use idmesh_belief::identity::{
+    identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
+    Identify, IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions,
+    MarginalMethod, PropertyBitsFilter,
+};
+use idmesh_belief::{BeliefError, Mix, RadonOptions, Sparsify};
+use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
+use serde::Serialize;
+use std::io::{BufRead, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use tracing::{debug, info, info_span};
+
+/// The options of an identity replay; a `clap` argument group, so it can be
+/// flattened into a subcommand.
+#[derive(Debug, Clone, PartialEq, Args)]
+pub struct IdentityReplayOptions {
+    /// The identity trace to replay (JSON Lines, shared/spec/trace.md).
+    #[arg(long, value_name = "FILE")]
+    pub trace: PathBuf,
+
+    /// The identity filter to run.
+    #[arg(long, value_enum, default_value_t = IdentityMethod::InformationMatrix)]
+    pub method: IdentityMethod,
+
+    /// How --method information-matrix turns its log-likelihoods into
+    /// marginals (default exact, N ≤ 22).
+    #[arg(long, value_enum)]
+    pub marginals: Option<MarginalChoice>,
+
+    /// The number of property bits of --method property-bits (at least
+    /// ⌈log₂ N⌉, at most 16; default ⌈log₂ N⌉).
+    #[arg(long, value_name = "B", value_parser = parse_positive)]
+    pub bits: Option<usize>,
+
+    /// The most Radon coefficients each bit's belief of --method
+    /// property-bits may hold after an event (OMP, then thresholding);
+    /// none = exact bit beliefs.
+    #[arg(long, value_name = "N", value_parser = parse_positive)]
+    pub budget: Option<usize>,
+
+    /// The seed of --marginals metropolis.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+
+    /// Counted steps of --marginals metropolis (default 10,000; a tenth as
+    /// many burn-in steps before them).
+    #[arg(long, value_name = "S", value_parser = parse_positive)]
+    pub samples: Option<usize>,
+}
+
+impl IdentityReplayOptions {
+    /// Options for `trace` and `method` with every other option at its
+    /// default.
+    pub fn new(trace: impl Into<PathBuf>, method: IdentityMethod) -> Self {
+        IdentityReplayOptions {
+            trace: trace.into(),
+            method,
+            marginals: None,
+            bits: None,
+            budget: None,
+            seed: 0,
+            samples: None,
+        }
+    }
+}
+
+/// The identity filters replay can run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum IdentityMethod {
+    /// The exact filter over all N! assignments (N ≤ 9).
+    ExactPerm,
+    /// The belief matrix: doubly stochastic marginals, renormalized after
+    /// every read (Shin, Guibas and Zhao 2003).
+    BeliefMatrix,
+    /// The information matrix: accumulated log-likelihoods, marginals on
+    /// demand by --marginals (Shin et al. 2005).
+    InformationMatrix,
+    /// Identities coded by --bits binary properties, one Radon property
+    /// belief per bit (Jiang et al., TOSN 2013, Section 5.5).
+    PropertyBits,
+}
+
+impl IdentityMethod {
+    /// The name on the command line and in the summary.
+    pub fn name(self) -> &'static str {
+        match self {
+            IdentityMethod::ExactPerm => "exact-perm",
+            IdentityMethod::BeliefMatrix => "belief-matrix",
+            IdentityMethod::InformationMatrix => "information-matrix",
+            IdentityMethod::PropertyBits => "property-bits",
+        }
+    }
+}
+
+/// How an information matrix is turned into marginals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ValueEnum)]
+pub enum MarginalChoice {
+    /// Exact, by the matrix permanent (N ≤ 22).
+    #[default]
+    Exact,
+    /// The paper's Metropolis sampler (--samples, --seed).
+    Metropolis,
+    /// Sinkhorn scaling of exp(L): cheap, deterministic, under-confident.
+    Sinkhorn,
+    /// The fractional Bethe fixed point with γ = ½ (exact for N = 2).
+    Bethe,
+}
+
+impl MarginalChoice {
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            MarginalChoice::Exact => "exact",
+            MarginalChoice::Metropolis => "metropolis",
+            MarginalChoice::Sinkhorn => "sinkhorn",
+            MarginalChoice::Bethe => "bethe",
+        }
+    }
+}
+
+/// Counted Metropolis steps when --samples is not given.
+pub const DEFAULT_SAMPLES: usize = 10_000;
+
+/// L\[t\]\[i\] of a known initial assignment in the information matrix: the
+/// log-odds of the known identity against each other one. The least-squares
+/// mixing rule needs finite entries; e^-20 ≈ 2e-9 on each wrong pairing
+/// changes no printed digit.
+pub const KNOWN_START_CONFIDENCE: f64 = 20.0;
+
+/// The answers at one `truth` line.
+#[derive(Debug, Serialize)]
+struct Answer<'a> {
+    time: f64,
+    p_identity: &'a [Vec<f64>],
+    predicted_identity: &'a [u32],
+}
+
+/// The last line of a replay.
+#[derive(Debug, Serialize)]
+struct Summary {
+    kind: &'static str,
+    method: &'static str,
+    events: u64,
+    seconds: f64,
+    error: Option<f64>,
+}
+
+/// Replays the identity trace named by `args` and writes the answers to
+/// `out`.
+pub fn run(args: &IdentityReplayOptions, out: impl Write) -> Result<()> {
+    check_options(args)?;
+    let reader = TraceReader::open(&args.trace)
+        .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
+    replay(args, reader, out)
+}
+
+/// Refuses flags that make no sense together, before anything is read.
+pub fn check_options(args: &IdentityReplayOptions) -> Result<()> {
+    let method = args.method;
+    if method != IdentityMethod::PropertyBits {
+        if args.bits.is_some() {
+            bail!(
+                "--bits applies to --method property-bits, not to --method {}",
+                method.name()
+            );
+        }
+        if args.budget.is_some() {
+            bail!(
+                "--budget applies to --method property-bits, not to --method {}",
+                method.name()
+            );
+        }
+    }
+    if method != IdentityMethod::InformationMatrix {
+        if let Some(m) = args.marginals {
+            bail!(
+                "--marginals {} applies to --method information-matrix, not to --method {}",
+                m.name(),
+                method.name()
+            );
+        }
+    }
+    if args.samples.is_some() && args.marginals != Some(MarginalChoice::Metropolis) {
+        bail!("--samples applies to --marginals metropolis");
+    }
+    Ok(())
+}
+
+/// Replays a trace from any reader (the testable core of [`run`]).
+pub fn replay<R: BufRead>(
+    args: &IdentityReplayOptions,
+    mut reader: TraceReader<R>,
+    mut out: impl Write,
+) -> Result<()> {
+    let span = info_span!(
+        "replay_identity",
+        trace = reader.source(),
+        method = args.method.name()
+    );
+    let _entered = span.enter();
+
+    let header = reader.read_header()?;
+    let source = reader.source().to_string();
+    let at = |line: usize, kind: &str, error: BeliefError| anyhow!("{source}:{line}: {kind}: {error}");
+    let n = match header.identities {
+        Some(n) => n,
+        None => bail!(
+            "{source}:1: header: not an identity trace (no `identities`); \
+             replay it with a property method"
+        ),
+    };
+    debug!(
+        identities = n,
+        known_start = header.initial_identity.is_some(),
+        "identities"
+    );
+    let mut engine = Engine::start(|| build(args, &header)).map_err(|e| match e {
+        Built::Engine(e) => at(1, "header", e),
+        Built::Refused(reason) => anyhow!("{source}:1: header: {reason}"),
+    })?;
+
+    let write_error = |e: std::io::Error| anyhow!("cannot write the output: {e}");
+    let mut errors = Vec::new();
+    for line in reader {
+        let NumberedLine { number, line } = line?;
+        match &line {
+            Line::Mix(mix) => {
+                let event = IdentityEvent::Mix(Mix {
+                    a: mix.a,
+                    b: mix.b,
+                    swap: mix.swap,
+                });
+                engine.apply(&event).map_err(|e| at(number, "mix", e))?;
+            }
+            Line::Identify(read) => {
+                let event = IdentityEvent::Identify(Identify {
+                    track: read.track,
+                    identity: read.identity,
+                    accuracy: read.accuracy,
+                });
+                engine.apply(&event).map_err(|e| at(number, "identify", e))?;
+            }
+            Line::Truth(truth) => {
+                let (p, predicted) = engine.answer().map_err(|e| at(number, "truth", e))?;
+                if let Some(identity) = &truth.identity {
+                    errors.push(identity_error(&predicted, identity));
+                }
+                let answer = Answer {
+                    time: truth.time,
+                    p_identity: &p,
+                    predicted_identity: &predicted,
+                };
+                serde_json::to_writer(&mut out, &answer)
+                    .map_err(std::io::Error::from)
+                    .and_then(|()| out.write_all(b"\n"))
+                    .map_err(write_error)?;
+            }
+            // Colour sightings and positions do not bear on identities.
+            Line::Observe(_) | Line::Move(_) | Line::Header(_) => {}
+        }
+        debug!(line = number, kind = line.kind(), "line");
+    }
+
+    let summary = Summary {
+        kind: "summary",
+        method: args.method.name(),
+        events: engine.events,
+        seconds: engine.time.as_secs_f64(),
+        error: (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64),
+    };
+    info!(
+        events = summary.events,
+        seconds = summary.seconds,
+        error = ?summary.error,
+        "replayed"
+    );
+    serde_json::to_writer(&mut out, &summary)
+        .map_err(std::io::Error::from)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush())
+        .map_err(write_error)?;
+    Ok(())
+}
+
+/// Why no filter could be built for a header.
+enum Built {
+    /// The engine refused (e.g. too many tracks for the exact filter).
+    Engine(BeliefError),
+    /// The options do not fit this trace.
+    Refused(String),
+}
+
+impl From<BeliefError> for Built {
+    fn from(e: BeliefError) -> Self {
+        Built::Engine(e)
+    }
+}
+
+/// The marginal method `args` asks for.
+fn marginal_method(args: &IdentityReplayOptions) -> MarginalMethod {
+    match args.marginals.unwrap_or_default() {
+        MarginalChoice::Exact => MarginalMethod::Exact,
+        MarginalChoice::Metropolis => {
+            let samples = args.samples.unwrap_or(DEFAULT_SAMPLES);
+            MarginalMethod::Metropolis {
+                samples,
+                burn_in: samples / 10,
+                seed: args.seed,
+            }
+        }
+        MarginalChoice::Sinkhorn => MarginalMethod::Sinkhorn,
+        MarginalChoice::Bethe => MarginalMethod::half_bethe(),
+    }
+}
+
+/// The filter `args.method` names, for the trace `header` (which has
+/// `identities`).
+fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn IdentityFilter>, Built> {
+    let n = header.tracks;
+    let initial = header.initial_identity.as_deref();
+    Ok(match args.method {
+        IdentityMethod::ExactPerm => Box::new(match initial {
+            Some(start) => ExactPermutationFilter::from_assignment(start)?,
+            None => ExactPermutationFilter::uniform(n)?,
+        }),
+        IdentityMethod::BeliefMatrix => Box::new(match initial {
+            Some(start) => BeliefMatrix::from_assignment(start)?,
+            None => BeliefMatrix::uniform(n)?,
+        }),
+        IdentityMethod::InformationMatrix => {
+            let choice = args.marginals.unwrap_or_default();
+            if choice == MarginalChoice::Exact && n > MAX_PERMANENT_TRACKS {
+                return Err(Built::Refused(format!(
+                    "exact marginals of an information matrix take at most \
+                     {MAX_PERMANENT_TRACKS} tracks, this trace has {n}; \
+                     use --marginals metropolis, sinkhorn or bethe"
+                )));
+            }
+            let options = InformationOptions {
+                marginals: marginal_method(args),
+                ..InformationOptions::default()
+            };
+            Box::new(match initial {
+                Some(start) => {
+                    InformationMatrix::from_assignment(start, KNOWN_START_CONFIDENCE, options)?
+                }
+                None => InformationMatrix::uniform_with(n, options)?,
+            })
+        }
+        IdentityMethod::PropertyBits => {
+            let bits = args.bits.unwrap_or_else(|| BitCode::min_bits(n));
+            let code = BitCode::new(n, bits).map_err(|_| {
+                Built::Refused(format!(
+                    "--bits {bits} cannot code {n} identities: it takes from {} to 16 bits",
+                    BitCode::min_bits(n)
+                ))
+            })?;
+            let options = RadonOptions {
+                sparsify: args.budget.map(Sparsify::overcomplete),
+                ..RadonOptions::default()
+            };
+            Box::new(PropertyBitsFilter::new(code, initial, options)?)
+        }
+    })
+}
+
+/// A filter with the bookkeeping of a replay: the time spent inside the
+/// filter (and nothing else) and the events applied.
+struct Engine {
+    filter: Box<dyn IdentityFilter>,
+    time: Duration,
+    events: u64,
+}
+
+impl Engine {
+    fn start<E>(build: impl FnOnce() -> Result<Box<dyn IdentityFilter>, E>) -> Result<Self, E> {
+        let clock = Instant::now();
+        let filter = build()?;
+        Ok(Engine {
+            filter,
+            time: clock.elapsed(),
+            events: 0,
+        })
+    }
+
+    fn apply(&mut self, event: &IdentityEvent) -> Result<(), BeliefError> {
+        let clock = Instant::now();
+        let result = self.filter.apply(event);
+        self.time += clock.elapsed();
+        result?;
+        self.events += 1;
+        Ok(())
+    }
+
+    /// The marginals and the most likely assignment under them.
+    fn answer(&mut self) -> Result<(Vec<Vec<f64>>, Vec<u32>), BeliefError> {
+        let clock = Instant::now();
+        let result = self
+            .filter
+            .marginals()
+            .and_then(|p| most_likely_assignment(&p).map(|best| (p, best)));
+        self.time += clock.elapsed();
+        result
+    }
+}
+
+fn parse_positive(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(format!("not a whole number: {e}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn options(method: IdentityMethod) -> IdentityReplayOptions {
+        IdentityReplayOptions::new("mem.jsonl", method)
+    }
+
+    /// The replay's output lines, parsed, or its error as text.
+    fn replay_text(
+        args: &IdentityReplayOptions,
+        trace: &str,
+    ) -> Result<Vec<serde_json::Value>, String> {
+        check_options(args).map_err(|e| format!("{e:#}"))?;
+        let mut out = Vec::new();
+        replay(
+            args,
+            TraceReader::new(trace.as_bytes(), "mem.jsonl"),
+            &mut out,
+        )
+        .map_err(|e| format!("{e:#}"))?;
+        Ok(String::from_utf8(out)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect())
+    }
+
+    fn matrix(value: &serde_json::Value) -> Vec<Vec<f64>> {
+        serde_json::from_value(value.clone()).unwrap()
+    }
+
+    /// Three people with known identities; tracks 0 and 1 mix with
+    /// probability ½, a reader says identity 0 (accuracy 0.9) on track 0; a
+    /// colour sighting and a move in between are skipped. The exact
+    /// posterior of "no swap" is 0.9/(0.9 + 0.05) = 18/19.
+    const SMALL: &str = concat!(
+        r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"red":1,"identities":3,"initial_identity":[0,1,2]}"#,
+        "\n",
+        r#"{"kind":"mix","time":1,"a":0,"b":1,"swap":0.5}"#,
+        "\n",
+        r#"{"kind":"observe","time":1.5,"track":2,"red":0.8,"blue":0.2}"#,
+        "\n",
+        r#"{"kind":"move","time":1.5,"track":2,"x":3,"y":4}"#,
+        "\n",
+        r#"{"kind":"truth","time":1.5,"red":[2]}"#,
+        "\n",
+        r#"{"kind":"identify","time":2,"track":0,"identity":0,"accuracy":0.9}"#,
+        "\n",
+        r#"{"kind":"truth","time":3,"identity":[0,1,2]}"#,
+        "\n",
+    );
+
+    fn assert_close(got: &[Vec<f64>], want: &[Vec<f64>], tolerance: f64) {
+        for (g, w) in got.iter().flatten().zip(want.iter().flatten()) {
+            assert!((g - w).abs() < tolerance, "{got:?} vs {want:?}");
+        }
+    }
+
+    #[test]
+    fn exact_and_information_matrix_give_the_exact_posterior() {
+        let (s, r) = (18.0 / 19.0, 1.0 / 19.0);
+        let posterior = vec![vec![s, r, 0.0], vec![r, s, 0.0], vec![0.0, 0.0, 1.0]];
+        let half = vec![vec![0.5, 0.5, 0.0], vec![0.5, 0.5, 0.0], vec![0.0, 0.0, 1.0]];
+        let mut infos = vec![options(IdentityMethod::InformationMatrix)];
+        for m in [
+            MarginalChoice::Exact,
+            MarginalChoice::Metropolis,
+            MarginalChoice::Bethe,
+        ] {
+            let mut o = options(IdentityMethod::InformationMatrix);
+            o.marginals = Some(m);
+            infos.push(o);
+        }
+        for (k, args) in std::iter::once(options(IdentityMethod::ExactPerm))
+            .chain(infos)
+            .enumerate()
+        {
+            let out = replay_text(&args, SMALL).unwrap();
+            assert_eq!(out.len(), 3, "{out:?}");
+            // Metropolis is an estimate: 10,000 samples.
+            let tolerance = if args.marginals == Some(MarginalChoice::Metropolis) {
+                0.02
+            } else {
+                1e-8
+            };
+            assert_eq!(out[0]["time"], 1.5);
+            assert_close(&matrix(&out[0]["p_identity"]), &half, tolerance);
+            assert_eq!(out[1]["time"], 3.0);
+            assert_close(&matrix(&out[1]["p_identity"]), &posterior, tolerance);
+            assert_eq!(out[1]["predicted_identity"], serde_json::json!([0, 1, 2]));
+            let summary = &out[2];
+            assert_eq!(summary["kind"], "summary", "case {k}");
+            assert_eq!(summary["method"], args.method.name());
+            assert_eq!(summary["events"], 2);
+            // Only the truth line with `identity` is scored.
+            assert_eq!(summary["error"], 0.0);
+            assert!(summary["seconds"].as_f64().unwrap() >= 0.0);
+            let keys: Vec<&String> = summary.as_object().unwrap().keys().collect();
+            assert_eq!(keys.len(), 5, "{keys:?}");
+        }
+    }
+
+    #[test]
+    fn belief_matrix_and_property_bits_on_the_small_trace() {
+        // The belief matrix keeps the 2 × 2 cross ratio: odds √18.
+        let out = replay_text(&options(IdentityMethod::BeliefMatrix), SMALL).unwrap();
+        let odds = 18f64.sqrt();
+        let p = matrix(&out[1]["p_identity"]);
+        assert!((p[0][0] - odds / (1.0 + odds)).abs() < 1e-9, "{p:?}");
+        assert_eq!(out[2]["method"], "belief-matrix");
+        assert_eq!(out[2]["error"], 0.0);
+        // Property bits (2 bits by default, 3 and a budget on request).
+        for (bits, budget) in [(None, None), (Some(3), Some(4))] {
+            let mut args = options(IdentityMethod::PropertyBits);
+            args.bits = bits;
+            args.budget = budget;
+            let out = replay_text(&args, SMALL).unwrap();
+            let p = matrix(&out[1]["p_identity"]);
+            assert!(p[0][0] > 0.8 && p[2][2] > 0.999, "{p:?}");
+            assert_eq!(out[1]["predicted_identity"], serde_json::json!([0, 1, 2]));
+            assert_eq!(out[2]["method"], "property-bits");
+            assert_eq!(out[2]["error"], 0.0);
+        }
+    }
+
+    #[test]
+    fn the_error_is_the_mean_over_scored_truth_lines() {
+        // Uniform start, no events: the prediction is some assignment; a
+        // sure read pins track 0 and the two truths disagree on the rest.
+        let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"identities":2}"#,
+            "\n",
+            r#"{"kind":"identify","time":0,"track":0,"identity":1,"accuracy":0.99}"#,
+            "\n",
+            r#"{"kind":"truth","time":1,"identity":[1,0]}"#,
+            "\n",
+            r#"{"kind":"truth","time":2,"identity":[0,1]}"#,
+            "\n",
+        );
+        for method in [
+            IdentityMethod::ExactPerm,
+            IdentityMethod::BeliefMatrix,
+            IdentityMethod::InformationMatrix,
+            IdentityMethod::PropertyBits,
+        ] {
+            let out = replay_text(&options(method), trace).unwrap();
+            assert_eq!(out[0]["predicted_identity"], serde_json::json!([1, 0]));
+            // Right at time 1, both tracks wrong at time 2: mean ½.
+            assert_eq!(out[2]["error"], 0.5, "{}", method.name());
+        }
+    }
+
+    #[test]
+    fn no_identity_truth_means_no_error() {
+        let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"identities":3}"#,
+            "\n",
+            r#"{"kind":"mix","time":0,"a":0,"b":2,"swap":0.3}"#,
+            "\n",
+        );
+        let out = replay_text(&options(IdentityMethod::BeliefMatrix), trace).unwrap();
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0]["error"], serde_json::Value::Null);
+        assert_eq!(out[0]["events"], 1);
+    }
+
+    #[test]
+    fn engine_errors_name_their_line() {
+        // A perfect read that contradicts the known start.
+        let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"identities":3,"initial_identity":[0,1,2]}"#,
+            "\n",
+            r#"{"kind":"mix","time":0,"a":0,"b":1,"swap":0.5}"#,
+            "\n",
+            r#"{"kind":"identify","time":1,"track":2,"identity":0,"accuracy":1}"#,
+            "\n",
+        );
+        let exact = replay_text(&options(IdentityMethod::ExactPerm), trace).unwrap_err();
+        assert!(exact.starts_with("mem.jsonl:3: identify: "), "{exact}");
+        // The information matrix refuses any perfect read.
+        let info = replay_text(&options(IdentityMethod::InformationMatrix), trace).unwrap_err();
+        assert!(info.starts_with("mem.jsonl:3: identify: "), "{info}");
+        // A line that breaks the format stops the replay at that line.
+        let bad = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"identities":3}"#,
+            "\n",
+            r#"{"kind":"identify","time":0,"track":0,"identity":5,"accuracy":0.9}"#,
+            "\n",
+        );
+        let error = replay_text(&options(IdentityMethod::BeliefMatrix), bad).unwrap_err();
+        assert!(error.starts_with("mem.jsonl:2: "), "{error}");
+    }
+
+    #[test]
+    fn traces_the_method_cannot_take_are_refused_at_the_header() {
+        let property = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"red":1}"#,
+            "\n",
+        );
+        let error = replay_text(&options(IdentityMethod::BeliefMatrix), property).unwrap_err();
+        assert!(
+            error.starts_with("mem.jsonl:1: header: not an identity trace"),
+            "{error}"
+        );
+        let big = |n: usize| {
+            format!(
+                r#"{{"kind":"header","format":"idmesh-trace","version":1,"tracks":{n},"identities":{n}}}"#
+            ) + "\n"
+        };
+        let error = replay_text(&options(IdentityMethod::ExactPerm), &big(10)).unwrap_err();
+        assert!(error.starts_with("mem.jsonl:1: header: "), "{error}");
+        let error = replay_text(&options(IdentityMethod::InformationMatrix), &big(23)).unwrap_err();
+        assert!(
+            error.starts_with("mem.jsonl:1: header: exact marginals"),
+            "{error}"
+        );
+        let mut sinkhorn = options(IdentityMethod::InformationMatrix);
+        sinkhorn.marginals = Some(MarginalChoice::Sinkhorn);
+        let out = replay_text(&sinkhorn, &big(23)).unwrap();
+        assert_eq!(out[0]["kind"], "summary");
+        let mut bits = options(IdentityMethod::PropertyBits);
+        bits.bits = Some(2);
+        let error = replay_text(&bits, &big(5)).unwrap_err();
+        assert!(
+            error.starts_with("mem.jsonl:1: header: --bits 2 cannot code 5"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn options_that_do_not_fit_are_refused() {
+        let mut args = options(IdentityMethod::BeliefMatrix);
+        args.bits = Some(4);
+        assert!(check_options(&args)
+            .unwrap_err()
+            .to_string()
+            .contains("--bits applies"));
+        args.bits = None;
+        args.budget = Some(10);
+        assert!(check_options(&args).is_err());
+        args.budget = None;
+        args.marginals = Some(MarginalChoice::Sinkhorn);
+        assert!(check_options(&args)
+            .unwrap_err()
+            .to_string()
+            .contains("--marginals sinkhorn applies"));
+        let mut info = options(IdentityMethod::InformationMatrix);
+        info.samples = Some(100);
+        assert!(check_options(&info).is_err());
+        info.marginals = Some(MarginalChoice::Metropolis);
+        assert!(check_options(&info).is_ok());
+        let mut bits = options(IdentityMethod::PropertyBits);
+        bits.bits = Some(5);
+        bits.budget = Some(50);
+        assert!(check_options(&bits).is_ok());
+    }
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        options: IdentityReplayOptions,
+    }
+
+    #[test]
+    fn the_options_flatten_into_a_command_line() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+        let cli = Cli::try_parse_from([
+            "idmesh",
+            "--trace",
+            "t.jsonl",
+            "--method",
+            "information-matrix",
+            "--marginals",
+            "metropolis",
+            "--samples",
+            "500",
+            "--seed",
+            "3",
+        ])
+        .unwrap();
+        let mut want = IdentityReplayOptions::new("t.jsonl", IdentityMethod::InformationMatrix);
+        want.marginals = Some(MarginalChoice::Metropolis);
+        want.samples = Some(500);
+        want.seed = 3;
+        assert_eq!(cli.options, want);
+        let cli = Cli::try_parse_from(["idmesh", "--trace", "t", "--method", "property-bits", "--bits", "7", "--budget", "200"]).unwrap();
+        assert_eq!(cli.options.bits, Some(7));
+        assert_eq!(cli.options.budget, Some(200));
+        assert!(Cli::try_parse_from(["idmesh", "--trace", "t", "--bits", "0"]).is_err());
+        for method in IdentityMethod::value_variants() {
+            assert_eq!(method.to_possible_value().unwrap().get_name(), method.name());
+        }
+        for m in MarginalChoice::value_variants() {
+            assert_eq!(m.to_possible_value().unwrap().get_name(), m.name());
+        }
+    }
+}
