@@ -151,15 +151,20 @@ pub enum Method {
     Threshold,
     /// The exact dense filter over every red set (small fields only).
     Exact,
-    /// First-order Radon projection (Table III baseline).
+    /// First-order Radon projection (Table III baseline; shrunk towards
+    /// uniform whenever the projection leaves the probability simplex).
     Order1,
-    /// Second-order Radon projection (Table III baseline).
+    /// Second-order Radon projection (as order1).
     Order2,
-    /// Third-order Radon projection (Table III baseline).
+    /// Third-order Radon projection (as order1).
     Order3,
     /// Sequential Monte Carlo over red sets: --particles weighted
     /// particles, resampled when the effective sample size halves.
     Particles,
+    /// Our improvement: exact per-component beliefs over the connected
+    /// groups of mixed tracks, coupled by the red count, split by moment
+    /// matching when a group outgrows a cap.
+    Factored,
 }
 
 impl Method {
@@ -173,6 +178,7 @@ impl Method {
             Method::Order2 => "order2",
             Method::Order3 => "order3",
             Method::Particles => "particles",
+            Method::Factored => "factored",
         }
     }
 

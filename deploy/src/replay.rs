@@ -11,9 +11,10 @@
 
 use crate::cli::{Method, ReplayArgs};
 use anyhow::{anyhow, bail, Context, Result};
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter};
+use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
-    predict_red, tracking_error, BeliefError, Event, Field, ParticleFilter, PropertyFilter,
+    predict_red, tracking_error, BeliefError, Event, FactoredBelief, Field, ParticleFilter,
+    PropertyFilter,
     RadonBelief, RadonOptions, RedCount, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
@@ -214,9 +215,21 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         // `check_options` made sure the budget is there.
         Method::Threshold => radon(args.budget.map(Sparsify::threshold)),
         Method::Exact => Ok(Box::new(DenseFilter::new(field)?)),
-        Method::Order1 => Ok(Box::new(LowOrderFilter::new(field, 1)?)),
-        Method::Order2 => Ok(Box::new(LowOrderFilter::new(field, 2)?)),
-        Method::Order3 => Ok(Box::new(LowOrderFilter::new(field, 3)?)),
+        // The paper's projection alone leaves the simplex on real traces and
+        // then refuses observations as impossible; the repair keeps it going.
+        Method::Order1 | Method::Order2 | Method::Order3 => {
+            let order = match args.method {
+                Method::Order1 => 1,
+                Method::Order2 => 2,
+                _ => 3,
+            };
+            Ok(Box::new(LowOrderFilter::with_repair(
+                field,
+                order,
+                LowOrderRepair::ShrinkToUniform,
+            )?))
+        }
+        Method::Factored => Ok(Box::new(FactoredBelief::new(field)?)),
         Method::Particles => Ok(Box::new(ParticleFilter::new(
             field,
             args.particles.unwrap_or(DEFAULT_PARTICLES),

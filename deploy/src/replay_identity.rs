@@ -40,8 +40,8 @@ use clap::{Args, ValueEnum};
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_belief::identity::{
     identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
-    Identify, IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions,
-    MarginalMethod, PropertyBitsFilter,
+    Identify, IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
+    PropertyBitsFilter,
 };
 use idmesh_belief::{BeliefError, Mix, RadonOptions, Sparsify};
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
@@ -242,7 +242,8 @@ pub fn replay<R: BufRead>(
 
     let header = reader.read_header()?;
     let source = reader.source().to_string();
-    let at = |line: usize, kind: &str, error: BeliefError| anyhow!("{source}:{line}: {kind}: {error}");
+    let at =
+        |line: usize, kind: &str, error: BeliefError| anyhow!("{source}:{line}: {kind}: {error}");
     let n = match header.identities {
         Some(n) => n,
         None => bail!(
@@ -279,7 +280,9 @@ pub fn replay<R: BufRead>(
                     identity: read.identity,
                     accuracy: read.accuracy,
                 });
-                engine.apply(&event).map_err(|e| at(number, "identify", e))?;
+                engine
+                    .apply(&event)
+                    .map_err(|e| at(number, "identify", e))?;
             }
             Line::Truth(truth) => {
                 let (p, predicted) = engine.answer().map_err(|e| at(number, "truth", e))?;
@@ -517,7 +520,11 @@ mod tests {
     fn exact_and_information_matrix_give_the_exact_posterior() {
         let (s, r) = (18.0 / 19.0, 1.0 / 19.0);
         let posterior = vec![vec![s, r, 0.0], vec![r, s, 0.0], vec![0.0, 0.0, 1.0]];
-        let half = vec![vec![0.5, 0.5, 0.0], vec![0.5, 0.5, 0.0], vec![0.0, 0.0, 1.0]];
+        let half = vec![
+            vec![0.5, 0.5, 0.0],
+            vec![0.5, 0.5, 0.0],
+            vec![0.0, 0.0, 1.0],
+        ];
         let mut infos = vec![options(IdentityMethod::InformationMatrix)];
         for m in [
             MarginalChoice::Exact,
@@ -741,12 +748,26 @@ mod tests {
         want.samples = Some(500);
         want.seed = 3;
         assert_eq!(cli.options, want);
-        let cli = Cli::try_parse_from(["idmesh", "--trace", "t", "--method", "property-bits", "--bits", "7", "--budget", "200"]).unwrap();
+        let cli = Cli::try_parse_from([
+            "idmesh",
+            "--trace",
+            "t",
+            "--method",
+            "property-bits",
+            "--bits",
+            "7",
+            "--budget",
+            "200",
+        ])
+        .unwrap();
         assert_eq!(cli.options.bits, Some(7));
         assert_eq!(cli.options.budget, Some(200));
         assert!(Cli::try_parse_from(["idmesh", "--trace", "t", "--bits", "0"]).is_err());
         for method in IdentityMethod::value_variants() {
-            assert_eq!(method.to_possible_value().unwrap().get_name(), method.name());
+            assert_eq!(
+                method.to_possible_value().unwrap().get_name(),
+                method.name()
+            );
         }
         for m in MarginalChoice::value_variants() {
             assert_eq!(m.to_possible_value().unwrap().get_name(), m.name());
