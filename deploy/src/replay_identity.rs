@@ -89,22 +89,6 @@ pub struct IdentityReplayOptions {
     pub samples: Option<usize>,
 }
 
-impl IdentityReplayOptions {
-    /// Options for `trace` and `method` with every other option at its
-    /// default.
-    pub fn new(trace: impl Into<PathBuf>, method: IdentityMethod) -> Self {
-        IdentityReplayOptions {
-            trace: trace.into(),
-            method,
-            marginals: None,
-            bits: None,
-            budget: None,
-            seed: 0,
-            samples: None,
-        }
-    }
-}
-
 /// The identity filters replay can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum IdentityMethod {
@@ -461,8 +445,20 @@ mod tests {
     use super::*;
     use clap::Parser;
 
+    fn new(trace: &str, method: IdentityMethod) -> IdentityReplayOptions {
+        IdentityReplayOptions {
+            trace: trace.into(),
+            method,
+            marginals: None,
+            bits: None,
+            budget: None,
+            seed: 0,
+            samples: None,
+        }
+    }
+
     fn options(method: IdentityMethod) -> IdentityReplayOptions {
-        IdentityReplayOptions::new("mem.jsonl", method)
+        new("mem.jsonl", method)
     }
 
     /// The replay's output lines, parsed, or its error as text.
@@ -743,7 +739,7 @@ mod tests {
             "3",
         ])
         .unwrap();
-        let mut want = IdentityReplayOptions::new("t.jsonl", IdentityMethod::InformationMatrix);
+        let mut want = new("t.jsonl", IdentityMethod::InformationMatrix);
         want.marginals = Some(MarginalChoice::Metropolis);
         want.samples = Some(500);
         want.seed = 3;

@@ -100,6 +100,13 @@ fn quick_eval_writes_tables_and_plots() {
     ] {
         assert!(stdout.contains(row), "no row {row} in\n{stdout}");
     }
+    // Table III under both starts.
+    for heading in [
+        "Table III, swap 0.5, known start:",
+        "Table III, swap 0.5, uniform prior:",
+    ] {
+        assert!(stdout.contains(heading), "no {heading} in\n{stdout}");
+    }
     // The paper's numbers beside ours.
     assert!(
         stdout.contains("| 0.317 |") && stdout.contains("| 0.173 |"),
@@ -111,8 +118,13 @@ fn quick_eval_writes_tables_and_plots() {
     for section in [
         "# idmesh evaluation results",
         "--preset quick",
+        "## Summary",
+        "## Setup",
         "## Small scale",
         "## Table III",
+        "### Known start, swap probability 0.5",
+        "### Uniform prior, swap probability 0.5",
+        "## Beating the paper: the factored belief",
         "## Sensitivity",
         "## The same table on real pedestrian scenes",
         "## Cost of the distributed conditioning rule",
@@ -124,6 +136,20 @@ fn quick_eval_writes_tables_and_plots() {
     for method in ["| exact |", "| order 1 |", "| order 2 |", "| order 3 |"] {
         assert!(md.contains(method), "no row {method} in results.md");
     }
+    // The distributed rule under both starts, and the goals with their
+    // numbers filled in.
+    for row in [
+        "| n = 20, swap 0.5 | 20 | known start |",
+        "| n = 20, swap 0.5 | 20 | uniform prior |",
+        "| known start | 0.5 | factored |",
+        "| known start | 0.5 | 20 |",
+    ] {
+        assert!(md.contains(row), "no row {row} in results.md:\n{md}");
+    }
+    assert!(
+        !md.contains("NaN"),
+        "a number is missing in results.md:\n{md}"
+    );
 
     let svgs: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap()

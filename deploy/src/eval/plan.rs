@@ -7,9 +7,16 @@
 //! particle filter with P = B particles holds as many sets as the Radon
 //! belief: that is the equal-memory comparison; the equal-time one is
 //! calibrated after the first pass (see `mod.rs`).
+//!
+//! Every point starts from the known red tracks except the uniform-prior
+//! copies of the Table III points (every Table III method) and of the
+//! pedestrian windows (the exact filter and the overcomplete method with
+//! and without the distributed rule): with a known start the distributed
+//! rule has next to nothing to restrict (see the section on its cost in
+//! results.md), so its cost is measured under both starts.
 
 use super::methods::{Method, FACTORED_AVAILABLE};
-use super::scenarios::{ScenarioSpec, Sensor, Source};
+use super::scenarios::{ScenarioSpec, Sensor, Source, Start};
 use crate::cli::Preset;
 
 /// The experiments, each one table or plot of results.md.
@@ -38,6 +45,8 @@ pub struct Point {
     pub n: usize,
     /// The swap probability of every mix.
     pub swap: f64,
+    /// What the filters know at time 0.
+    pub start: Start,
     /// The value on the plot's x axis (target mixing share, swap
     /// probability, sensor accuracy), or 0.
     pub x: f64,
@@ -81,6 +90,17 @@ fn table3_methods(n: usize) -> Vec<Method> {
         methods.push(Method::Factored);
     }
     methods
+}
+
+/// The uniform-prior copies of the pedestrian windows: enough for the
+/// cost of the distributed rule.
+fn distributed_methods(n: usize) -> Vec<Method> {
+    let b = budget(n);
+    vec![
+        Method::Exact,
+        Method::Overcomplete(b),
+        Method::Distributed(b),
+    ]
 }
 
 /// The lines of the plots at n.
@@ -132,6 +152,9 @@ struct Sizes {
     scenes: Vec<(&'static str, Option<usize>)>,
 }
 
+/// The starts of the Table III and pedestrian points, in table order.
+pub const STARTS: [Start; 2] = [Start::Known, Start::Uniform];
+
 impl Plan {
     /// The grid of `preset` with `seeds` seeds per point (default: 1 for
     /// quick, 5 for full).
@@ -177,19 +200,24 @@ impl Plan {
                 },
             ),
         };
-        let crowd = |n: usize, share: f64, swap: f64, sensor: Sensor| -> Vec<ScenarioSpec> {
-            (0..seeds as u64)
-                .map(|seed| ScenarioSpec {
-                    source: Source::Crowd {
-                        n,
-                        events: sizes.events,
-                        share: Some(share),
-                    },
-                    swap,
-                    sensor,
-                    seed,
-                })
-                .collect()
+        let crowd_from =
+            |n: usize, share: f64, swap: f64, sensor: Sensor, start: Start| -> Vec<ScenarioSpec> {
+                (0..seeds as u64)
+                    .map(|seed| ScenarioSpec {
+                        source: Source::Crowd {
+                            n,
+                            events: sizes.events,
+                            share: Some(share),
+                        },
+                        swap,
+                        sensor,
+                        seed,
+                        start,
+                    })
+                    .collect()
+            };
+        let crowd = |n: usize, share: f64, swap: f64, sensor: Sensor| {
+            crowd_from(n, share, swap, sensor, Start::Known)
         };
         let mut points = Vec::new();
         for &share in &sizes.small_shares {
@@ -197,23 +225,27 @@ impl Plan {
                 experiment: Experiment::SmallScale,
                 n: 10,
                 swap: 0.5,
+                start: Start::Known,
                 x: share,
                 label: format!("mixing share {share}"),
                 specs: crowd(10, share, 0.5, Sensor::Histogram),
                 methods: small_methods(10),
             });
         }
-        for &swap in &sizes.table3_swaps {
-            for &n in &sizes.table3_n {
-                points.push(Point {
-                    experiment: Experiment::Table3,
-                    n,
-                    swap,
-                    x: 0.5,
-                    label: format!("n = {n}, swap {swap}"),
-                    specs: crowd(n, 0.5, swap, Sensor::Histogram),
-                    methods: table3_methods(n),
-                });
+        for start in STARTS {
+            for &swap in &sizes.table3_swaps {
+                for &n in &sizes.table3_n {
+                    points.push(Point {
+                        experiment: Experiment::Table3,
+                        n,
+                        swap,
+                        start,
+                        x: 0.5,
+                        label: format!("n = {n}, swap {swap}"),
+                        specs: crowd_from(n, 0.5, swap, Sensor::Histogram, start),
+                        methods: table3_methods(n),
+                    });
+                }
             }
         }
         for &n in &sizes.large_n {
@@ -222,6 +254,7 @@ impl Plan {
                     experiment: Experiment::MixingLarge,
                     n,
                     swap: 0.5,
+                    start: Start::Known,
                     x: share,
                     label: format!("n = {n}, mixing share {share}"),
                     specs: crowd(n, share, 0.5, Sensor::Histogram),
@@ -235,6 +268,7 @@ impl Plan {
                 experiment: Experiment::Swap,
                 n,
                 swap,
+                start: Start::Known,
                 x: swap,
                 label: format!("swap {swap}"),
                 specs: crowd(n, 0.5, swap, Sensor::Histogram),
@@ -246,35 +280,43 @@ impl Plan {
                 experiment: Experiment::Likelihood,
                 n,
                 swap: 0.5,
+                start: Start::Known,
                 x: a,
                 label: format!("sensor accuracy {a}"),
                 specs: crowd(n, 0.5, 0.5, Sensor::Symmetric(a)),
                 methods: plot_methods(n),
             });
         }
-        for &(scene, cap) in &sizes.scenes {
-            let n = cap.unwrap_or(100);
-            points.push(Point {
-                experiment: Experiment::Pedestrians,
-                n,
-                swap: 0.5,
-                x: 0.0,
-                label: format!("{scene}, n ≤ {n}"),
-                specs: (0..seeds)
-                    .map(|window| ScenarioSpec {
-                        source: Source::Pedestrians {
-                            scene,
-                            cap,
-                            window,
-                            windows: seeds,
-                        },
-                        swap: 0.5,
-                        sensor: Sensor::Histogram,
-                        seed: window as u64,
-                    })
-                    .collect(),
-                methods: table3_methods(n),
-            });
+        for start in STARTS {
+            for &(scene, cap) in &sizes.scenes {
+                let n = cap.unwrap_or(100);
+                points.push(Point {
+                    experiment: Experiment::Pedestrians,
+                    n,
+                    swap: 0.5,
+                    start,
+                    x: 0.0,
+                    label: format!("{scene}, n ≤ {n}"),
+                    specs: (0..seeds)
+                        .map(|window| ScenarioSpec {
+                            source: Source::Pedestrians {
+                                scene,
+                                cap,
+                                window,
+                                windows: seeds,
+                            },
+                            swap: 0.5,
+                            sensor: Sensor::Histogram,
+                            seed: window as u64,
+                            start,
+                        })
+                        .collect(),
+                    methods: match start {
+                        Start::Known => table3_methods(n),
+                        Start::Uniform => distributed_methods(n),
+                    },
+                });
+            }
         }
         Plan { seeds, points }
     }
@@ -333,6 +375,20 @@ mod tests {
                 assert!(plan.points.iter().any(|p| p.experiment == e), "{e:?}");
             }
             assert!(plan.points.iter().all(|p| p.specs.len() == plan.seeds));
+            assert!(plan
+                .points
+                .iter()
+                .all(|p| p.specs.iter().all(|s| s.start == p.start)));
+            // Table III under both starts, the same (swap, n) grid.
+            let grid = |start: Start| -> Vec<(u64, usize)> {
+                plan.points
+                    .iter()
+                    .filter(|p| p.experiment == Experiment::Table3 && p.start == start)
+                    .map(|p| (p.swap.to_bits(), p.n))
+                    .collect()
+            };
+            assert!(!grid(Start::Known).is_empty());
+            assert_eq!(grid(Start::Known), grid(Start::Uniform));
         }
         assert_eq!(Plan::new(Preset::Full, None).seeds, 5);
         assert_eq!(Plan::new(Preset::Full, None).events(), 1000);

@@ -14,6 +14,13 @@ pub struct Summary {
     /// Mean and standard deviation (over seeds) of the tracking error.
     pub error: f64,
     pub error_sd: f64,
+    /// Mean of the runs' own expected error (see `score::bayes_risk`).
+    pub expected_error: f64,
+    /// Mean of the runs' expected error of their top-k labelling.
+    pub expected_topk: f64,
+    /// Every run's error in seed order (NaN for a failed run), to compare
+    /// two methods run by run.
+    pub run_errors: Vec<f64>,
     /// Mean seconds inside the filter per run.
     pub seconds: f64,
     /// Mean over runs of the mean coefficient count; largest count seen.
@@ -50,6 +57,9 @@ impl Summary {
             runs,
             error,
             error_sd,
+            expected_error: mean(&|s| s.expected_error),
+            expected_topk: mean(&|s| s.expected_topk),
+            run_errors: scores.iter().map(|s| s.error).collect(),
             seconds: mean(&|s| s.seconds),
             mean_coefficients: mean(&|s| s.mean_coefficients),
             max_coefficients: ok.iter().map(|s| s.max_coefficients).max().unwrap_or(0),

@@ -2,7 +2,7 @@
 //! as `belief` events and truth lines.
 //!
 //! - A **crowd**: the social-force crowd of `idmesh_sensor::Scenario`, n
-//!   targets (k = n/2, known at time 0), run until a number of mix + observe
+//!   targets (k = n/2), run until a number of mix + observe
 //!   events. Its share of mixing events is steered, as in the paper, by the
 //!   two distances: one knob x ∈ [0, 1] sets the mixing distance to
 //!   0.25 + 2.75x m and the observation distance to 2.5 + 3.5x m (both
@@ -15,7 +15,12 @@
 //!   scene, default distances.
 //!
 //! The swap probability and the sensor (the trace spec's colour histogram
-//! or a symmetric sensor of accuracy a) are options of both.
+//! or a symmetric sensor of accuracy a) are options of both, and so is the
+//! [`Start`]: the red tracks at time 0 revealed (`Field::known`) or not
+//! (`Field::uniform(n, k)`, the scenario's `.reveal_initial_red(false)`).
+//! The start changes only what the filters are told, never the motion or
+//! the events: a uniform-prior trace is the known-start trace of the same
+//! spec with its field replaced ([`Trace::with_start`]).
 
 use anyhow::{anyhow, Context, Result};
 use idmesh_belief::{Event, Field, Mix, Observe};
@@ -52,6 +57,25 @@ impl Sensor {
     }
 }
 
+/// What the filters know at time 0 (k is known either way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Start {
+    /// The red tracks at time 0 are revealed.
+    Known,
+    /// Nothing is revealed: every k-set is equally likely at time 0.
+    Uniform,
+}
+
+impl Start {
+    /// How the tables name it.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Start::Known => "known start",
+            Start::Uniform => "uniform prior",
+        }
+    }
+}
+
 /// Where the motion comes from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Source {
@@ -79,6 +103,7 @@ pub struct ScenarioSpec {
     pub swap: f64,
     pub sensor: Sensor,
     pub seed: u64,
+    pub start: Start,
 }
 
 /// One line of an in-memory trace.
@@ -106,8 +131,10 @@ pub struct TraceInfo {
 /// A generated trace as the filters consume it.
 #[derive(Debug, Clone)]
 pub struct Trace {
-    /// n, k and the red tracks at time 0 (known).
+    /// n, k and, with a known start, the red tracks at time 0.
     pub field: Field,
+    /// The red tracks at time 0, whether or not the field reveals them.
+    pub initial_red: Vec<u32>,
     pub steps: Vec<Step>,
     pub info: TraceInfo,
 }
@@ -155,6 +182,14 @@ pub fn distances(x: f64) -> (f64, f64) {
 }
 
 impl ScenarioSpec {
+    /// The same scenario with another start.
+    pub fn with_start(&self, start: Start) -> ScenarioSpec {
+        ScenarioSpec {
+            start,
+            ..self.clone()
+        }
+    }
+
     /// Generates the trace (deterministic).
     pub fn generate(&self, scenes: &Scenes) -> Result<Trace> {
         let sensor = self.sensor.model()?;
@@ -163,7 +198,7 @@ impl ScenarioSpec {
                 .sensor(sensor.clone())
                 .seed(self.seed)
                 .move_interval(None)
-                .reveal_initial_red(true)
+                .reveal_initial_red(self.start == Start::Known)
         };
         match &self.source {
             Source::Crowd { n, events, share } => {
@@ -241,7 +276,22 @@ fn steer(
     Ok(best.expect("at least one try").1)
 }
 
-/// A generated trace as `belief` events and truth lines.
+impl Trace {
+    /// The same trace told another start: the field only.
+    pub fn with_start(&self, start: Start) -> Trace {
+        let (n, k) = (self.field.tracks, self.info.red);
+        Trace {
+            field: match start {
+                Start::Known => Field::known(n, self.initial_red.clone()),
+                Start::Uniform => Field::uniform(n, k),
+            },
+            ..self.clone()
+        }
+    }
+}
+
+/// A generated trace as `belief` events and truth lines; the field is
+/// known or uniform as the trace's header reveals the red tracks or not.
 pub fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64) -> Trace {
     let stats = trace.stats();
     let steps = trace
@@ -262,8 +312,13 @@ pub fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64)
             SimEvent::Move { .. } => None,
         })
         .collect();
+    let field = match &trace.header.initial_red {
+        Some(red) => Field::known(trace.header.tracks, red.clone()),
+        None => Field::uniform(trace.header.tracks, trace.header.red),
+    };
     Trace {
-        field: Field::known(trace.header.tracks, trace.true_initial_red.clone()),
+        field,
+        initial_red: trace.true_initial_red.clone(),
         steps,
         info: TraceInfo {
             tracks: trace.header.tracks,
@@ -295,6 +350,7 @@ mod tests {
                 swap: 0.5,
                 sensor: Sensor::Histogram,
                 seed: 1,
+                start: Start::Known,
             };
             let trace = spec.generate(&Scenes::default()).unwrap();
             assert!(
@@ -314,6 +370,16 @@ mod tests {
             // Same spec, same trace.
             let again = spec.generate(&Scenes::default()).unwrap();
             assert_eq!(again.steps, trace.steps);
+            // The uniform prior: the same events, nothing revealed.
+            let uniform = spec
+                .with_start(Start::Uniform)
+                .generate(&Scenes::default())
+                .unwrap();
+            assert_eq!(uniform.steps, trace.steps);
+            assert_eq!(uniform.field, Field::uniform(10, 5));
+            assert_eq!(uniform.initial_red, trace.initial_red);
+            assert_eq!(trace.with_start(Start::Uniform).field, uniform.field);
+            assert_eq!(uniform.with_start(Start::Known).field, trace.field);
         }
     }
 
@@ -329,6 +395,7 @@ mod tests {
             swap: 0.5,
             sensor: Sensor::Symmetric(0.9),
             seed: 0,
+            start: Start::Known,
         };
         let scenes = Scenes::load_for(std::slice::from_ref(&spec)).unwrap();
         let trace = spec.generate(&scenes).unwrap();

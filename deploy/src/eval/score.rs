@@ -12,6 +12,13 @@
 //! and keeps its marginals; the prediction and scoring come after. The
 //! coefficient count is read after every event for its mean and maximum.
 //!
+//! Beside the error the filter makes, the error its own belief expects:
+//! at a truth line with marginals p, Σ_t min(p_t, 1 − p_t)/n — the Bayes
+//! risk of labelling each track by itself under that belief (the fewest
+//! mislabeled tracks it expects of any labelling, the top-k one included).
+//! A calibrated belief's actual error comes out near it; the exact
+//! filter's is the least error any filter can expect on the trace.
+//!
 //! An event the filter refuses (an observation a particle filter's
 //! particles all rule out, say) leaves it unchanged, as the
 //! `PropertyFilter` contract says; the run goes on and the refusal is
@@ -62,6 +69,14 @@ pub struct Score {
     /// Mean tracking error over the truth lines (NaN if the run failed or
     /// had no truth line).
     pub error: f64,
+    /// Mean over the truth lines of the belief's own expected error
+    /// Σ_t min(p_t, 1 − p_t)/n (NaN as `error`).
+    pub expected_error: f64,
+    /// Mean over the truth lines of the error the belief expects of the
+    /// labelling actually scored (its top k red): never below
+    /// `expected_error`, and equal to `error` in expectation when the belief
+    /// is the true posterior.
+    pub expected_topk: f64,
     /// Seconds inside the filter.
     pub seconds: f64,
     /// Mean and largest coefficient count after an event.
@@ -78,6 +93,8 @@ impl Score {
     fn failed(reason: String) -> Score {
         Score {
             error: f64::NAN,
+            expected_error: f64::NAN,
+            expected_topk: f64::NAN,
             seconds: 0.0,
             mean_coefficients: 0.0,
             max_coefficients: 0,
@@ -119,16 +136,24 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
     let seconds = clock.seconds();
     let n = trace.field.tracks;
     let k = trace.field.red.known();
-    let errors: f64 = answers
-        .iter()
-        .map(|(m, red)| tracking_error(n, &predict_red(m, k), red))
-        .sum();
-    Score {
-        error: if answers.is_empty() {
+    let (mut errors, mut expected, mut expected_topk) = (0.0, 0.0, 0.0);
+    for (m, red) in &answers {
+        let predicted = predict_red(m, k);
+        errors += tracking_error(n, &predicted, red);
+        expected += bayes_risk(m);
+        expected_topk += expected_mislabels(m, &predicted);
+    }
+    let mean = |total: f64| {
+        if answers.is_empty() {
             f64::NAN
         } else {
-            errors / answers.len() as f64
-        },
+            total / answers.len() as f64
+        }
+    };
+    Score {
+        error: mean(errors),
+        expected_error: mean(expected),
+        expected_topk: mean(expected_topk),
         seconds,
         mean_coefficients: if events > 0 {
             coefficient_sum / events as f64
@@ -139,6 +164,46 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
         refused,
         failure: None,
     }
+}
+
+/// The error a belief with these marginals expects of the best per-track
+/// labelling: Σ_t min(p_t, 1 − p_t)/n.
+pub fn bayes_risk(marginals: &[f64]) -> f64 {
+    if marginals.is_empty() {
+        return f64::NAN;
+    }
+    let sum: f64 = marginals
+        .iter()
+        .map(|&p| p.clamp(0.0, 1.0).min(1.0 - p.clamp(0.0, 1.0)))
+        .sum();
+    sum / marginals.len() as f64
+}
+
+/// The error a belief with these marginals expects of labelling exactly
+/// `predicted` red: (Σ_{t ∈ predicted} (1 − p_t) + Σ_{t ∉ predicted} p_t)/n.
+pub fn expected_mislabels(marginals: &[f64], predicted: &[u32]) -> f64 {
+    if marginals.is_empty() {
+        return f64::NAN;
+    }
+    let mut red = vec![false; marginals.len()];
+    for &t in predicted {
+        if let Some(r) = red.get_mut(t as usize) {
+            *r = true;
+        }
+    }
+    let sum: f64 = marginals
+        .iter()
+        .zip(&red)
+        .map(|(&p, &r)| {
+            let p = p.clamp(0.0, 1.0);
+            if r {
+                1.0 - p
+            } else {
+                p
+            }
+        })
+        .sum();
+    sum / marginals.len() as f64
 }
 
 #[cfg(test)]
@@ -191,11 +256,25 @@ mod tests {
         // track 0, so {0, 1} is predicted against the truth {1, 2} (error
         // 1/2); after the observation the answer is certain (error 0).
         assert_eq!(exact.error, 0.25);
+        // It expects as much: 2 of 4 tracks at 1/2, then certainty.
+        assert!((exact.expected_error - 0.125).abs() < 1e-12);
+        assert!((exact.expected_topk - 0.125).abs() < 1e-12);
         assert_eq!(exact.refused, 0);
         assert_eq!(exact.max_coefficients, 6);
         assert!(exact.seconds > 0.0 && exact.failure.is_none());
         let particles = score(Method::Particles(64), &trace, 0);
         assert_eq!(particles.mean_coefficients, 64.0);
+    }
+
+    #[test]
+    fn bayes_risk_counts_the_expected_mistakes() {
+        assert_eq!(bayes_risk(&[0.0, 1.0, 1.0, 0.0]), 0.0);
+        assert!((bayes_risk(&[0.5, 0.5, 0.9, 0.2]) - 1.3 / 4.0).abs() < 1e-12);
+        assert!(bayes_risk(&[]).is_nan());
+        // Labelling 3 red although 0.5 < 0.9: 0.5 + 0.5 + 0.1 + 0.2 over 4.
+        let p = [0.5, 0.5, 0.9, 0.2];
+        assert!((expected_mislabels(&p, &[0, 2]) - 1.3 / 4.0).abs() < 1e-12);
+        assert!((expected_mislabels(&p, &[3, 2]) - 1.9 / 4.0).abs() < 1e-12);
     }
 
     #[test]

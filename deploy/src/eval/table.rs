@@ -6,6 +6,7 @@
 use super::methods::Method;
 use super::plan::{paper_table3, Experiment, PARTICLES};
 use super::results::{PointResult, Results, Summary};
+use super::scenarios::Start;
 use std::fmt::Write;
 
 /// A tracking error with its spread over seeds: `0.173 ± 0.012`; `—` when
@@ -40,7 +41,7 @@ pub fn seconds(s: f64) -> String {
     format!("{s:.digits$}")
 }
 
-fn coefficients(x: f64) -> String {
+pub fn coefficients(x: f64) -> String {
     if !x.is_finite() {
         "—".into()
     } else if x >= 100.0 {
@@ -71,10 +72,10 @@ fn slots(points: &[&PointResult]) -> usize {
 
 /// Table III: method, n, error, seconds, mean and max coefficients, and
 /// the paper's error and seconds where it has them.
-pub fn table3(results: &Results, swap: f64) -> String {
+pub fn table3(results: &Results, swap: f64, start: Start) -> String {
     let points: Vec<&PointResult> = points(results, Experiment::Table3)
         .into_iter()
-        .filter(|p| p.point.swap == swap)
+        .filter(|p| p.point.swap == swap && p.point.start == start)
         .collect();
     let mut out = String::new();
     out.push_str(
@@ -201,10 +202,13 @@ pub fn sweep(results: &Results, experiment: Experiment, n: Option<usize>, x_name
     out
 }
 
-/// Table III on the pedestrian scenes: per scene window, its facts and
-/// every method.
+/// Table III on the pedestrian scenes (known start): per scene window, its
+/// facts and every method.
 pub fn pedestrians(results: &Results) -> String {
-    let points = points(results, Experiment::Pedestrians);
+    let points: Vec<&PointResult> = points(results, Experiment::Pedestrians)
+        .into_iter()
+        .filter(|p| p.point.start == Start::Known)
+        .collect();
     let mut out = String::from(
         "| scene | n (mean) | events (mean) | mixing share | method | tracking error | seconds | mean coeff. | max coeff. |\n\
          |---|---:|---:|---:|---|---:|---:|---:|---:|\n",
@@ -250,52 +254,79 @@ pub fn pedestrians(results: &Results) -> String {
 }
 
 /// The distributed conditioning rule against exact conditioning at the
-/// same budget (and the exact filter where it runs).
+/// same budget (and the exact filter where it runs), known-start rows
+/// first: how many runs the rule changed at all, the cost in error, and
+/// the coefficients each keeps.
 pub fn distributed(results: &Results) -> String {
     let mut out = String::from(
-        "| scenario | n | exact filter | overcomplete, exact conditioning | overcomplete, distributed rule | cost of the rule | seconds (exact cond.) | seconds (distributed) |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| scenario | n | start | exact filter | overcomplete, exact conditioning | overcomplete, distributed rule | cost of the rule | runs changed | mean coeff. (exact cond. / distributed) | seconds (exact cond. / distributed) |\n\
+         |---|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
-    for p in results.points.iter().filter(|p| {
-        matches!(
-            p.point.experiment,
-            Experiment::Table3 | Experiment::Pedestrians
-        )
-    }) {
-        let find =
-            |f: &dyn Fn(&Method) -> bool| p.methods.iter().find(|(m, _)| f(m)).map(|(_, s)| s);
-        let (Some(exact_cond), Some(dist)) = (
-            find(&|m| matches!(m, Method::Overcomplete(_))),
-            find(&|m| matches!(m, Method::Distributed(_))),
-        ) else {
-            continue;
-        };
-        let exact = find(&|m| *m == Method::Exact).map_or("—".into(), error);
-        let cost = if exact_cond.ok() && dist.ok() {
-            format!("{:+.3}", dist.error - exact_cond.error)
-        } else {
-            "—".into()
-        };
-        writeln!(
-            out,
-            "| {} | {} | {exact} | {} | {} | {cost} | {} | {} |",
-            p.point.label,
-            p.point.n,
-            error(exact_cond),
-            error(dist),
-            seconds(exact_cond.seconds),
-            seconds(dist.seconds)
-        )
-        .unwrap();
+    for start in super::plan::STARTS {
+        for p in results.points.iter().filter(|p| {
+            p.point.start == start
+                && matches!(
+                    p.point.experiment,
+                    Experiment::Table3 | Experiment::Pedestrians
+                )
+        }) {
+            let Some((exact_cond, dist)) = distributed_pair(p) else {
+                continue;
+            };
+            let exact = p.summary(&Method::Exact).map_or("—".into(), error);
+            let cost = if exact_cond.ok() && dist.ok() {
+                format!("{:+.3}", dist.error - exact_cond.error)
+            } else {
+                "—".into()
+            };
+            let (changed, compared) = runs_changed(exact_cond, dist);
+            writeln!(
+                out,
+                "| {} | {} | {} | {exact} | {} | {} | {cost} | {changed} of {compared} | {} / {} | {} / {} |",
+                p.point.label,
+                p.point.n,
+                start.label(),
+                error(exact_cond),
+                error(dist),
+                coefficients(exact_cond.mean_coefficients),
+                coefficients(dist.mean_coefficients),
+                seconds(exact_cond.seconds),
+                seconds(dist.seconds)
+            )
+            .unwrap();
+        }
     }
     out
+}
+
+/// The overcomplete method's summaries at a point, conditioning exactly
+/// and with the distributed rule.
+pub fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
+    let find = |f: &dyn Fn(&Method) -> bool| p.methods.iter().find(|(m, _)| f(m)).map(|(_, s)| s);
+    Some((
+        find(&|m| matches!(m, Method::Overcomplete(_)))?,
+        find(&|m| matches!(m, Method::Distributed(_)))?,
+    ))
+}
+
+/// (runs whose error differs at all, runs compared): the same seeds, run
+/// by run.
+pub fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
+    let pairs: Vec<(f64, f64)> = a
+        .run_errors
+        .iter()
+        .zip(&b.run_errors)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .map(|(x, y)| (*x, *y))
+        .collect();
+    (pairs.iter().filter(|(x, y)| x != y).count(), pairs.len())
 }
 
 /// Every method against a particle filter given the same time.
 pub fn equal_time(results: &Results) -> String {
     let mut out = String::from(
-        "| n | swap | method | tracking error | seconds | P at equal time | particle error | particle seconds | method − particles |\n\
-         |---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
+        "| start | n | swap | method | tracking error | seconds | P at equal time | particle error | particle seconds | method − particles |\n\
+         |---|---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
     );
     for p in points(results, Experiment::Table3) {
         for e in &p.equal_time {
@@ -309,7 +340,8 @@ pub fn equal_time(results: &Results) -> String {
             };
             writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {gap} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {gap} |",
+                p.point.start.label(),
                 p.point.n,
                 p.point.swap,
                 e.base.label(),
@@ -328,15 +360,16 @@ pub fn equal_time(results: &Results) -> String {
 /// The Radon methods against a particle filter holding as many sets.
 pub fn equal_memory(results: &Results) -> String {
     let mut out = String::from(
-        "| n | swap | B = P | exact | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
-         |---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| start | n | swap | B = P | exact | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for p in points(results, Experiment::Table3) {
         let b = super::plan::budget(p.point.n);
         let cell = |m: Method| p.summary(&m).map_or("—".into(), error);
         writeln!(
             out,
-            "| {} | {} | {b} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {b} | {} | {} | {} | {} | {} |",
+            p.point.start.label(),
             p.point.n,
             p.point.swap,
             cell(Method::Exact),
@@ -355,8 +388,8 @@ pub fn equal_memory(results: &Results) -> String {
 /// matches, and how much faster our overcomplete method is.
 pub fn ordering(results: &Results) -> String {
     let mut out = String::from(
-        "| swap | n | our ranking | paper's ranking | same best | same order | overcomplete: ours vs paper seconds |\n\
-         |---:|---:|---|---|---|---|---|\n",
+        "| start | swap | n | our ranking | paper's ranking | same best | same order | overcomplete: ours vs paper seconds |\n\
+         |---|---:|---:|---|---|---|---|---|\n",
     );
     for p in points(results, Experiment::Table3) {
         let n = p.point.n;
@@ -403,7 +436,8 @@ pub fn ordering(results: &Results) -> String {
         let yes = |b: bool| if b { "yes" } else { "**no**" };
         writeln!(
             out,
-            "| {} | {n} | {} | {} | {} | {} | {speed} |",
+            "| {} | {} | {n} | {} | {} | {} | {} | {speed} |",
+            p.point.start.label(),
             p.point.swap,
             rank(&ours),
             rank(&paper),
@@ -415,13 +449,19 @@ pub fn ordering(results: &Results) -> String {
     out
 }
 
-/// The facts of the traces of every point: how the scenarios came out.
+/// The facts of the traces of every point: how the scenarios came out (a
+/// uniform-prior point runs the traces of its known-start twin, so only
+/// the known-start points are listed).
 pub fn traces(results: &Results) -> String {
     let mut out = String::from(
         "| experiment | point | traces | n | events | mixing share | truth lines | mix / observe distance (m) |\n\
          |---|---|---:|---:|---:|---:|---:|---|\n",
     );
-    for p in &results.points {
+    for p in results
+        .points
+        .iter()
+        .filter(|p| p.point.start == Start::Known)
+    {
         writeln!(
             out,
             "| {:?} | {} | {} | {:.0} | {:.0} | {:.3} | {:.0} | {:.2} / {:.2} |",
@@ -455,6 +495,9 @@ mod tests {
             runs: 3,
             error: 0.1734,
             error_sd: 0.01,
+            expected_error: 0.17,
+            expected_topk: 0.175,
+            run_errors: vec![0.16, 0.17, 0.19],
             seconds: 0.5,
             mean_coefficients: 99.0,
             max_coefficients: 100,

@@ -71,7 +71,7 @@ fn polyline(path: &TruePath, stride: usize) -> Vec<Vec2> {
         .step_by(stride.max(1))
         .copied()
         .collect();
-    if n > 0 && (n - 1) % stride.max(1) != 0 {
+    if n > 0 && !(n - 1).is_multiple_of(stride.max(1)) {
         out.push(path.positions[n - 1]);
     }
     out

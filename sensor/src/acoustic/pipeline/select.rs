@@ -176,7 +176,11 @@ pub fn select_cts(
     for (s, &l) in labels.iter().enumerate() {
         let score = best[0].get(s).copied().unwrap_or(f32::NEG_INFINITY);
         let sup = support.get(s).copied().unwrap_or(0);
-        if !(score >= gate) || sup < settings.min_support {
+        // NaN scores (never produced, but) fail the gate too.
+        let passes = score
+            .partial_cmp(&gate)
+            .is_some_and(|o| o != std::cmp::Ordering::Less);
+        if !passes || sup < settings.min_support {
             continue;
         }
         let slot = &mut per_cluster[l as usize];

@@ -259,7 +259,7 @@ mod tests {
         .unwrap();
         assert_eq!(report.separations + report.silent, groups.len());
         assert_eq!(report.segments, segs.len());
-        assert!(segs.len() > 0);
+        assert!(!segs.is_empty());
         // Every segment is unit norm.
         for i in 0..segs.len() {
             let n: f32 = segs.segment(i).iter().map(|v| v * v).sum();
