@@ -21,6 +21,10 @@ pub enum Command {
     /// Simulate targets moving in a field (or replay real pedestrians) and
     /// write the sensors' events as a trace.
     Simulate(SimulateArgs),
+    /// Track indistinguishable targets from the summed sound the sensors
+    /// hear (blind source separation) and write the recovered paths and
+    /// their mixes as a trace.
+    Acoustic(AcousticArgs),
     /// Run the evaluation grid (methods × scenarios on both cores): print
     /// the tables, write results.md and the SVG plots to --out-dir.
     Eval(EvalArgs),
@@ -93,6 +97,24 @@ pub struct SimulateArgs {
     /// Leave the initial red tracks out of the header (uniform prior).
     #[arg(long)]
     pub hide_initial: bool,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Where to write the trace.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct AcousticArgs {
+    /// How many acoustic sensors are deployed at random in the field.
+    #[arg(long, default_value_t = 1000)]
+    pub sensors: usize,
+    /// How many targets move and emit sound.
+    #[arg(long, default_value_t = 10)]
+    pub targets: usize,
+    /// Zigzag paths instead of random straight legs.
+    #[arg(long)]
+    pub zigzag: bool,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Where to write the trace.

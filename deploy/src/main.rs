@@ -4,6 +4,7 @@
 //! reason` when a trace line is at fault; logs go to stderr too (`RUST_LOG`,
 //! default `warn`); stdout carries only results.
 
+mod acoustic;
 mod cli;
 mod eval;
 mod logging;
@@ -34,6 +35,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             replay::run(&args, stdout)
         }
         Command::Simulate(args) => simulate::run(&args),
+        Command::Acoustic(args) => acoustic::run(&args),
         Command::Eval(args) => eval::run(&args),
     }
 }

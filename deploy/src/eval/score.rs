@@ -215,6 +215,7 @@ mod tests {
     fn table_one() -> Trace {
         Trace {
             field: Field::known(4, vec![0, 1]),
+            initial_red: vec![0, 1],
             steps: vec![
                 Step::Event(Event::Mix(Mix {
                     a: 0,
