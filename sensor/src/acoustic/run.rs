@@ -100,6 +100,9 @@ pub struct AcousticResult {
     pub segmentation: Segmentation,
     /// Every intersection area referred to by a path.
     pub areas: Vec<Area>,
+    /// Ground truth, for diagnostics: per area, |corr| of the segment it
+    /// was located from with each target's source over the same slot.
+    pub area_source_corr: Vec<Vec<f32>>,
     pub grid: TileGrid,
     /// K estimated paths (some may be empty).
     pub paths: Vec<EstimatedPath>,
@@ -281,11 +284,28 @@ pub fn run(
         },
     );
     let mut areas: Vec<Area> = Vec::new();
+    let mut area_source_corr: Vec<Vec<f32>> = Vec::new();
     let mut area_of: FxHashMap<(u32, u32), u32> = FxHashMap::default();
     for (key, area) in wanted.iter().zip(computed) {
         if let Some(a) = area {
             area_of.insert(*key, areas.len() as u32);
             areas.push(a);
+            let (j, s) = (key.0 as usize, key.1 as usize);
+            let x: Vec<f32> = slots[j].segment(s).to_vec();
+            let from = seg.start(j);
+            area_source_corr.push(
+                field
+                    .sources
+                    .iter()
+                    .map(|src| {
+                        let y: Vec<f32> = src[from..from + seg.l_seg]
+                            .iter()
+                            .map(|&v| v as f32)
+                            .collect();
+                        overlap_correlation(&x, &y) as f32
+                    })
+                    .collect(),
+            );
         }
     }
     times.intersect = t.elapsed().as_secs_f64();
@@ -397,6 +417,7 @@ pub fn run(
         groups,
         segmentation: seg,
         areas,
+        area_source_corr,
         grid,
         paths,
         metrics,

@@ -230,6 +230,7 @@ mod tests {
                     centroid: tiles.centroid(&grid).unwrap(),
                     tiles,
                     groups: 1,
+                    hearing: Vec::new(),
                 });
                 paths[l].push(Fragment {
                     slot,

@@ -38,6 +38,8 @@ pub struct Area {
     pub tiles: TileSet,
     /// Groups whose ranges were intersected.
     pub groups: usize,
+    /// The groups that heard the segment, strongest first, with |corr|.
+    pub hearing: Vec<(u32, f32)>,
     /// Mean position of the tiles.
     pub centroid: Vec2,
 }
@@ -86,6 +88,7 @@ pub fn intersect(ranges: &GroupRanges, hearing: &[(u32, f32)]) -> Option<Area> {
     Some(Area {
         tiles,
         groups: used,
+        hearing: hearing.to_vec(),
         centroid,
     })
 }

@@ -244,6 +244,7 @@ mod tests {
             centroid: tiles.centroid(&grid()).unwrap(),
             tiles,
             groups: 1,
+                    hearing: Vec::new(),
         }
     }
 
