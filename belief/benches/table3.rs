@@ -4,6 +4,7 @@
 //!   coefficients, single-threaded — the paper took 1342 s; goal < 0.5 s;
 //! - the exact dense filter on n = 20, k = 10 (184,756 k-sets), 1000 events
 //!   — goal < 1 s.
+//!
 //! The first-order Radon baseline runs in the same process as the yardstick
 //! the figures are reported against (the machine is noisy; ratios are not).
 //!

@@ -56,8 +56,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     );
     let trace = scenario
         .generate_with_progress(&mut |done, total| {
-            bar.set_length(total as u64);
-            bar.set_position(done as u64);
+            bar.set_length(total);
+            bar.set_position(done);
         })
         .context("simulation failed")?;
     bar.finish_and_clear();
