@@ -157,7 +157,7 @@ fn ratios(quick: bool) {
         "  pseudoinverse rule time ~ {scale:.3e} s · N^{exponent:.2} (fit on N = 25, 50, 100)"
     );
     println!(
-        "  {:>5} | {:>14} | {:>14} | {:>26} | {:>12} | {:>10}",
+        "  {:>5} | {:>14} | {:>14} | {:>27} | {:>12} | {:>10}",
         "N", "paper, closed", "mix, closed", "paper, pseudoinverse", "pinv/closed", "pinv/mix"
     );
     for n in [100usize, 1000] {

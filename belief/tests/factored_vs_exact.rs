@@ -11,93 +11,12 @@
 
 use idmesh_belief::baseline::DenseFilter;
 use idmesh_belief::{
-    BeliefError, Event, FactoredBelief, FactoredOptions, Field, Mix, Observe, PropertyFilter,
-    RedCount, SplitRule,
+    BeliefError, Event, FactoredBelief, FactoredOptions, Observe, PropertyFilter, SplitRule,
 };
 use proptest::prelude::*;
 
-#[derive(Debug, Clone)]
-enum Start {
-    Uniform,
-    Known,
-    UnknownCount,
-}
-
-fn field(n: usize, k: usize, start: &Start, seed: u64) -> Field {
-    match start {
-        Start::Uniform => Field::uniform(n, k),
-        Start::Known => {
-            // A seeded choice of k distinct tracks.
-            let mut ids: Vec<u32> = (0..n as u32).collect();
-            let mut s = seed;
-            for i in (1..ids.len()).rev() {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ids.swap(i, (s >> 33) as usize % (i + 1));
-            }
-            Field::known(n, ids[..k].to_vec())
-        }
-        Start::UnknownCount => {
-            // A lopsided prior over the count, to see it used.
-            let prior = (0..=n)
-                .map(|j| 1.0 + ((j + seed as usize) % 4) as f64)
-                .collect();
-            Field {
-                tracks: n,
-                red: RedCount::Unknown { prior },
-                initial_red: None,
-            }
-        }
-    }
-}
-
-fn likelihood() -> impl Strategy<Value = (f64, f64)> {
-    prop_oneof![
-        (0.01f64..1.0, 0.01f64..1.0),
-        Just((0.8, 0.2)),
-        Just((0.1, 0.7)),
-        Just((1.0, 0.0)),
-        Just((0.0, 1.0)),
-    ]
-}
-
-fn swap() -> impl Strategy<Value = f64> {
-    prop_oneof![0.0f64..=1.0, Just(0.0), Just(1.0), Just(0.5)]
-}
-
-fn events(n: usize, len: usize) -> impl Strategy<Value = Vec<Event>> {
-    let n = n as u32;
-    let one = prop_oneof![
-        3 => (0..n, 1..n, swap()).prop_map(move |(a, d, swap)| Event::Mix(Mix {
-            a,
-            b: (a + d) % n,
-            swap
-        })),
-        2 => (0..n, likelihood()).prop_map(|(track, (red, blue))| Event::Observe(Observe {
-            track,
-            red,
-            blue
-        })),
-    ];
-    prop::collection::vec(one, 0..len)
-}
-
-fn case(max_n: usize, len: usize) -> impl Strategy<Value = (usize, usize, Start, u64, Vec<Event>)> {
-    (2usize..=max_n).prop_flat_map(move |n| {
-        (
-            Just(n),
-            0..=n,
-            prop_oneof![
-                Just(Start::Uniform),
-                Just(Start::Known),
-                Just(Start::UnknownCount)
-            ],
-            any::<u64>(),
-            events(n, len),
-        )
-    })
-}
+mod common;
+use common::{assert_close, case, field};
 
 fn rule() -> impl Strategy<Value = SplitRule> {
     prop_oneof![
@@ -105,13 +24,6 @@ fn rule() -> impl Strategy<Value = SplitRule> {
         Just(SplitRule::Recent),
         (0usize..3).prop_map(|rounds| SplitRule::LeastLoss { rounds }),
     ]
-}
-
-fn assert_close(a: &[f64], b: &[f64], what: &str) {
-    assert_eq!(a.len(), b.len());
-    for (x, y) in a.iter().zip(b) {
-        assert!((x - y).abs() < 1e-9, "{what}: {a:?} vs {b:?}");
-    }
 }
 
 /// Everything observable about a belief, to check a rejected update.

@@ -29,9 +29,14 @@ fn run(field: Field, sparsify: Sparsify, events: usize) {
         belief.apply(event).unwrap();
         if i % 100_000 == 99_999 || i + 1 == workload.events.len() {
             let p = belief.marginals().unwrap();
-            assert!(p.iter().all(|x| x.is_finite() && (-1e-9..=1.0 + 1e-9).contains(x)));
+            assert!(p
+                .iter()
+                .all(|x| x.is_finite() && (-1e-9..=1.0 + 1e-9).contains(x)));
             let sum: f64 = p.iter().sum();
-            assert!((sum - (n / 2) as f64).abs() < 1e-6, "sum of marginals {sum}");
+            assert!(
+                (sum - (n / 2) as f64).abs() < 1e-6,
+                "sum of marginals {sum}"
+            );
             let z = belief.log_normalizer();
             // Every observation multiplies the total by a likelihood ≤ 1.
             assert!(z.is_finite() && z <= last + 1e-9, "log Z {z} after {last}");
@@ -45,12 +50,20 @@ fn run(field: Field, sparsify: Sparsify, events: usize) {
 
 #[test]
 fn a_million_events_uniform_prior() {
-    run(Field::uniform(1_000, 500), Sparsify::threshold(32), 1_000_000);
+    run(
+        Field::uniform(1_000, 500),
+        Sparsify::threshold(32),
+        1_000_000,
+    );
 }
 
 #[test]
 fn ten_thousand_tracks_uniform_prior() {
-    run(Field::uniform(10_000, 5_000), Sparsify::threshold(64), 100_000);
+    run(
+        Field::uniform(10_000, 5_000),
+        Sparsify::threshold(64),
+        100_000,
+    );
 }
 
 /// A known start keeps every hypothesis a full 5,000-track set, so each
@@ -63,5 +76,9 @@ fn ten_thousand_tracks_known_start() {
 
 #[test]
 fn omp_on_ten_thousand_tracks() {
-    run(Field::uniform(10_000, 5_000), Sparsify::overcomplete(64), 100_000);
+    run(
+        Field::uniform(10_000, 5_000),
+        Sparsify::overcomplete(64),
+        100_000,
+    );
 }

@@ -14,79 +14,17 @@ use idmesh_belief::{
 };
 use proptest::prelude::*;
 
-#[derive(Debug, Clone)]
-enum Start {
-    Uniform,
-    Known,
-    UnknownCount,
-}
-
-fn field(n: usize, k: usize, start: &Start, seed: u64) -> Field {
-    match start {
-        Start::Uniform => Field::uniform(n, k),
-        Start::Known => {
-            // A seeded choice of k distinct tracks.
-            let mut ids: Vec<u32> = (0..n as u32).collect();
-            let mut s = seed;
-            for i in (1..ids.len()).rev() {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ids.swap(i, (s >> 33) as usize % (i + 1));
-            }
-            Field::known(n, ids[..k].to_vec())
-        }
-        Start::UnknownCount => Field {
-            tracks: n,
-            red: RedCount::unknown_uniform(n),
-            initial_red: None,
-        },
-    }
-}
-
-fn likelihood() -> impl Strategy<Value = (f64, f64)> {
-    prop_oneof![
-        (0.01f64..1.0, 0.01f64..1.0),
-        Just((0.8, 0.2)),
-        Just((0.1, 0.7)),
-        Just((1.0, 0.0)),
-        Just((0.0, 1.0)),
-    ]
-}
-
-fn swap() -> impl Strategy<Value = f64> {
-    prop_oneof![0.0f64..=1.0, Just(0.0), Just(1.0), Just(0.5)]
-}
-
-fn events(n: usize) -> impl Strategy<Value = Vec<Event>> {
-    let n = n as u32;
-    let one = prop_oneof![
-        (0..n, 1..n, swap()).prop_map(move |(a, d, swap)| Event::Mix(Mix {
-            a,
-            b: (a + d) % n,
-            swap
-        })),
-        (0..n, likelihood()).prop_map(|(track, (red, blue))| Event::Observe(Observe {
-            track,
-            red,
-            blue
-        })),
-    ];
-    prop::collection::vec(one, 0..24)
-}
+mod common;
+use common::{assert_close, field, Start};
 
 fn case() -> impl Strategy<Value = (usize, usize, Start, u64, Vec<Event>, bool)> {
-    (2usize..=10).prop_flat_map(|n| {
+    common::case(10, 24).prop_flat_map(|(n, k, start, seed, events)| {
         (
             Just(n),
-            0..=n,
-            prop_oneof![
-                Just(Start::Uniform),
-                Just(Start::Known),
-                Just(Start::UnknownCount)
-            ],
-            any::<u64>(),
-            events(n),
+            Just(k),
+            Just(start),
+            Just(seed),
+            Just(events),
             any::<bool>(),
         )
     })
@@ -103,12 +41,6 @@ fn step(exact: &mut DenseFilter, radon: &mut dyn PropertyFilter, event: &Event) 
             Err(BeliefError::ImpossibleObservation { .. }),
         ) => false,
         _ => panic!("exact {a:?} vs radon {b:?} on {event:?}"),
-    }
-}
-
-fn assert_close(a: &[f64], b: &[f64], what: &str) {
-    for (x, y) in a.iter().zip(b) {
-        assert!((x - y).abs() < 1e-9, "{what}: {a:?} vs {b:?}");
     }
 }
 
@@ -252,9 +184,21 @@ fn unknown_count_certain_sightings_agree() {
 
 #[test]
 fn a_known_start_with_an_unknown_count_is_that_set_exactly() {
-    let field = Field { tracks: 5, red: RedCount::unknown_uniform(5), initial_red: Some(vec![1, 3]) };
+    let field = Field {
+        tracks: 5,
+        red: RedCount::unknown_uniform(5),
+        initial_red: Some(vec![1, 3]),
+    };
     let exact = DenseFilter::new(field.clone()).unwrap();
     let radon = RadonBelief::new(field).unwrap();
-    assert_close(&exact.marginals().unwrap(), &radon.marginals().unwrap(), "start");
-    assert_close(&radon.marginals().unwrap(), &[0.0, 1.0, 0.0, 1.0, 0.0], "delta");
+    assert_close(
+        &exact.marginals().unwrap(),
+        &radon.marginals().unwrap(),
+        "start",
+    );
+    assert_close(
+        &radon.marginals().unwrap(),
+        &[0.0, 1.0, 0.0, 1.0, 0.0],
+        "delta",
+    );
 }
