@@ -27,12 +27,134 @@ fn quantiles(mut v: Vec<f64>) -> String {
     )
 }
 
+/// Replays separation, clustering and selection for CTS `u` and prints,
+/// per cluster, its size and its best candidate, and per true source the
+/// best-matching segment of slot u.
+fn slot_report(c: &AcousticConfig, u: usize) {
+    use idmesh_sensor::acoustic::field::Field;
+    use idmesh_sensor::acoustic::pipeline::cluster::cluster_slot;
+    use idmesh_sensor::acoustic::pipeline::prepare::{nearest_groups, Segmentation};
+    use idmesh_sensor::acoustic::pipeline::select::{link_layer, select_cts, SelectSettings};
+    use idmesh_sensor::acoustic::pipeline::separate::{estimate_noise_variance, separate_slot};
+    let p = &c.pipeline;
+    let field = Field::generate(&c.field, c.seed, 2).unwrap();
+    let groups = nearest_groups(&field.sensors, p.n_group).unwrap();
+    let seg = Segmentation::new(p.l_seg, p.l_step, c.field.samples).unwrap();
+    let nv = estimate_noise_variance(&field.signals, &groups, &seg, p.noise_probes);
+    let slots: Vec<_> = (u..u + p.n_slot)
+        .map(|j| {
+            separate_slot(&field.signals, &groups, &seg, j, &p.separation, nv, c.seed)
+                .unwrap()
+                .0
+        })
+        .collect();
+    let k = c.field.targets;
+    let cl = cluster_slot(&slots[0], p.clusters_per_target * k, p.linkage, p.same_source as f32);
+    let layers: Vec<_> = (0..p.n_slot - 1)
+        .map(|i| link_layer(&slots[i], &slots[i + 1], p.l_step, p.link_candidates))
+        .collect();
+    let refs: Vec<_> = layers.iter().collect();
+    let s0 = &slots[0];
+    let dot = |a: usize, b: usize| -> f32 {
+        s0.segment(a).iter().zip(s0.segment(b)).map(|(x, y)| x * y).sum()
+    };
+    let chains = select_cts(
+        &refs,
+        &cl.labels,
+        &cl.support,
+        slots[p.n_slot - 1].len(),
+        &SelectSettings {
+            k,
+            min_link: p.min_link as f32,
+            min_support: p.min_support,
+            aggregate_r2: p.aggregate_r2 as f32,
+            same_source: p.same_source as f32,
+            distinct_cap: 4 * k,
+        },
+        &|a, b| dot(a as usize, b as usize),
+    );
+    let from = seg.start(u);
+    let src_corr = |i: usize| -> Vec<f32> {
+        let x = s0.segment(i);
+        field
+            .sources
+            .iter()
+            .map(|src| {
+                let y = &src[from..from + seg.l_seg];
+                let my = y.iter().sum::<f64>() / y.len() as f64;
+                let ny = y.iter().map(|v| (v - my) * (v - my)).sum::<f64>().sqrt();
+                (x.iter()
+                    .zip(y)
+                    .map(|(a, b)| f64::from(*a) * (b - my))
+                    .sum::<f64>()
+                    / ny)
+                    .abs() as f32
+            })
+            .collect()
+    };
+    let fmt = |v: &[f32]| {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|a, b| v[*b].total_cmp(&v[*a]));
+        format!("s{}={:.2} s{}={:.2}", idx[0], v[idx[0]], idx[1], v[idx[1]])
+    };
+    println!("slot {u}: {} segments", s0.len());
+    let win = |t: usize| -> Vec<f64> {
+        let y = &field.sources[t][from..from + seg.l_seg];
+        let my = y.iter().sum::<f64>() / y.len() as f64;
+        let ny = y.iter().map(|v| (v - my) * (v - my)).sum::<f64>().sqrt();
+        y.iter().map(|v| (v - my) / ny).collect()
+    };
+    for a in 0..k {
+        for b in a + 1..k {
+            let c: f64 = win(a).iter().zip(win(b)).map(|(x, y)| x * y).sum();
+            if c.abs() > 0.3 {
+                println!("sources {a} and {b} correlate {c:.2} in this slot");
+            }
+        }
+    }
+    let nclusters = cl.labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    for cidx in 0..nclusters {
+        let members: Vec<usize> = (0..s0.len()).filter(|&i| cl.labels[i] as usize == cidx).collect();
+        let best = members.iter().max_by_key(|&&i| cl.support[i]).copied().unwrap();
+        let chosen = chains.iter().any(|ch| ch.cluster as usize == cidx);
+        println!(
+            "cluster {cidx:2}: {:4} segs, top support {:3} ({}){}",
+            members.len(),
+            cl.support[best],
+            fmt(&src_corr(best)),
+            if chosen { "  SELECTED" } else { "" }
+        );
+    }
+    for ch in &chains {
+        let s = ch.segments[0].unwrap() as usize;
+        println!(
+            "chain: cluster {} seg {s} support {} score {:.2} {}",
+            ch.cluster,
+            cl.support[s],
+            ch.score,
+            fmt(&src_corr(s))
+        );
+    }
+    for t in 0..k {
+        let (best, corr) = (0..s0.len())
+            .map(|i| (i, src_corr(i)[t]))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap();
+        let n9 = (0..s0.len()).filter(|&i| src_corr(i)[t] >= 0.9).count();
+        println!(
+            "source {t}: best seg {best} |corr| {corr:.2} cluster {} support {}; {n9} segments ≥ 0.9",
+            cl.labels[best], cl.support[best]
+        );
+    }
+}
+
 fn main() {
     let mut c = AcousticConfig::paper(400, 10, 1);
     c.field.samples = 1000;
     c.field.paths = PathSpec::Random {
         speed: (0.03, 0.03),
     };
+    let mut slot = None;
     for arg in std::env::args().skip(1) {
         let (k, v) = arg.split_once('=').expect("key=value");
         let num = || v.parse::<f64>().expect("number");
@@ -44,8 +166,45 @@ fn main() {
             "speed" => c.field.paths = PathSpec::Random { speed: (num(), num()) },
             "hear" => c.pipeline.hear_threshold = num(),
             "n_group" => c.pipeline.n_group = num() as usize,
+            "slot" => slot = Some(num() as usize),
             _ => panic!("unknown option {k}"),
         }
+    }
+    if std::env::var("DIAG_SOURCES").is_ok() {
+        use idmesh_sensor::acoustic::field::Field;
+        let field = Field::generate(&c.field, c.seed, 2).unwrap();
+        let l = c.pipeline.l_seg;
+        let k = field.sources.len();
+        let mut all = vec![];
+        let mut start = 0;
+        while start + l <= c.field.samples {
+            let win = |t: usize| -> Vec<f64> {
+                let y = &field.sources[t][start..start + l];
+                let my = y.iter().sum::<f64>() / l as f64;
+                let ny = y.iter().map(|v| (v - my) * (v - my)).sum::<f64>().sqrt().max(1e-300);
+                y.iter().map(|v| (v - my) / ny).collect()
+            };
+            for a in 0..k {
+                for b in a + 1..k {
+                    let cab: f64 = win(a).iter().zip(win(b)).map(|(x, y)| x * y).sum();
+                    all.push(cab.abs());
+                }
+            }
+            start += c.pipeline.l_step;
+        }
+        let n = all.len() as f64;
+        println!(
+            "pairwise |corr| over {}-sample windows: >0.3 {:.1} %, >0.5 {:.1} %, >0.7 {:.1} %",
+            l,
+            100.0 * all.iter().filter(|&&x| x > 0.3).count() as f64 / n,
+            100.0 * all.iter().filter(|&&x| x > 0.5).count() as f64 / n,
+            100.0 * all.iter().filter(|&&x| x > 0.7).count() as f64 / n
+        );
+        return;
+    }
+    if let Some(u) = slot {
+        slot_report(&c, u);
+        return;
     }
     let r = run(&c, &mut |_, _| {}).expect("run");
     let m = &r.metrics;
@@ -84,6 +243,9 @@ fn main() {
     let (mut wrong, mut total) = (0, 0);
     let (mut mass_bad, mut mass) = (0.0, 0.0);
     let mut contains = 0;
+    // Multiset ("concatenated") metric: every area's points count once per
+    // fragment; against the paired target, and against the best target.
+    let (mut ms_sum, mut ms_n, mut best_sum) = (0.0, 0usize, 0.0);
     for (l, path) in r.paths.iter().enumerate() {
         let Some(t) = m.target_of[l] else { continue };
         for f in &path.fragments {
@@ -120,6 +282,16 @@ fn main() {
                 .sum::<f64>()
                 / a.tiles.count() as f64;
             tile_err.push(te);
+            ms_sum += te * a.tiles.count() as f64;
+            ms_n += a.tiles.count();
+            best_sum += (0..r.field.paths.len())
+                .map(|u| {
+                    a.tiles
+                        .points()
+                        .map(|(i, j)| dist_path(u, r.grid.point(i, j)))
+                        .sum::<f64>()
+                })
+                .fold(f64::INFINITY, f64::min);
             mass += te * a.tiles.count() as f64;
             if near_t != t {
                 mass_bad += te * a.tiles.count() as f64;
@@ -143,9 +315,11 @@ fn main() {
                     .map(|(i, c)| (i, *c))
                     .unwrap();
                 line += &format!(
-                    " {}:t{u}/{d:.0}/{}/s{bt}={bc:.2}",
+                    " {}:t{u}/{d:.0}/{}/s{bt}={bc:.2}/{}of{}",
                     f.slot,
-                    a.tiles.count()
+                    a.tiles.count(),
+                    a.groups,
+                    a.hearing.len()
                 );
             }
             println!("{line}");
@@ -160,6 +334,11 @@ fn main() {
         }
     }
     println!("fragments {total}, centroid nearer another target: {wrong}, area contains own target: {contains}");
+    println!(
+        "multiset mean error {:.1} m (paired target), {:.1} m (each area vs its best target)",
+        ms_sum / ms_n as f64,
+        best_sum / ms_n as f64
+    );
     println!("area points        {}", quantiles(sizes));
     println!("groups intersected {}", quantiles(used));
     println!("groups hearing     {}", quantiles(heard));

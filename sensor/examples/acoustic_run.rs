@@ -114,9 +114,11 @@ fn main() {
         s.dropped
     );
     println!(
-        "mean error {:.1} m  std {:.1} m  coverage {:.1} %  aligned error {:.1} m  slots tracked {:.1} %  points {}",
+        "mean error {:.1} m  std {:.1} m  (union of areas: {:.1} m, std {:.1} m)  coverage {:.1} %  aligned error {:.1} m  slots tracked {:.1} %  points {}",
         m.mean_error,
         m.std_error,
+        m.mean_error_union,
+        m.std_error_union,
         100.0 * m.coverage,
         m.aligned_error,
         100.0 * m.slot_share,

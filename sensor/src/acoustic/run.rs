@@ -223,6 +223,8 @@ pub fn run(
         min_link: p.min_link as f32,
         min_support: p.min_support,
         aggregate_r2: p.aggregate_r2 as f32,
+        same_source: p.same_source as f32,
+        distinct_cap: 4 * k,
     };
     let chains: Vec<Vec<Chain>> = (0..n_cts)
         .map(|u| {

@@ -92,14 +92,15 @@ fn check_reads_against_motion(scenario: &Scenario, trace: &GeneratedTrace) -> (u
         match item {
             Item::Event(e) => match &e.event {
                 SimEvent::Mix {
-                    a, b, exchanged, ..
+                    a,
+                    b,
+                    exchanged: true,
+                    ..
                 } => {
-                    if *exchanged {
-                        let i = assignment.target_on(*a as usize) as usize;
-                        let j = assignment.target_on(*b as usize) as usize;
-                        assignment.exchange_targets(i, j);
-                        identity_on.swap(*a as usize, *b as usize);
-                    }
+                    let i = assignment.target_on(*a as usize) as usize;
+                    let j = assignment.target_on(*b as usize) as usize;
+                    assignment.exchange_targets(i, j);
+                    identity_on.swap(*a as usize, *b as usize);
                 }
                 SimEvent::Truth { .. } => {
                     // The replayed identities are those of the followed targets.

@@ -125,6 +125,11 @@ pub struct SelectSettings {
     /// R² above which a candidate counts as an aggregate of two others
     /// (> 1 disables the test).
     pub aggregate_r2: f32,
+    /// |corr| at which two segments are the same source.
+    pub same_source: f32,
+    /// Most distinct signals per slot considered (aggregate test cost is
+    /// cubic in it).
+    pub distinct_cap: usize,
 }
 
 /// Selects the chains of CTS_u. `layers[i]` links slot u + i to
@@ -169,38 +174,63 @@ pub fn select_cts(
         next[i] = nexts;
     }
     let gate = settings.min_link * steps as f32;
-    // Per cluster, the gated candidate with the most support (then the
-    // best chain, then the lowest index); then the best clusters.
-    let clusters = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
-    let mut per_cluster: Vec<Option<(u32, f32, u32)>> = vec![None; clusters];
-    for (s, &l) in labels.iter().enumerate() {
-        let score = best[0].get(s).copied().unwrap_or(f32::NEG_INFINITY);
-        let sup = support.get(s).copied().unwrap_or(0);
-        // NaN scores (never produced, but) fail the gate too.
-        let passes = score
-            .partial_cmp(&gate)
-            .is_some_and(|o| o != std::cmp::Ordering::Less);
-        if !passes || sup < settings.min_support {
-            continue;
-        }
-        let slot = &mut per_cluster[l as usize];
-        if slot.is_none_or(|(bs, bv, _)| (sup, score) > (bs, bv)) {
-            *slot = Some((sup, score, s as u32));
-        }
-    }
-    let mut ranked: Vec<(u32, f32, u32, u32)> = per_cluster
+    // Every gated, supported segment, best supported first.
+    let mut candidates: Vec<(u32, f32, u32)> = labels
         .iter()
         .enumerate()
-        .filter_map(|(c, b)| b.map(|(sup, v, s)| (sup, v, c as u32, s)))
+        .filter_map(|(s, _)| {
+            let score = best[0].get(s).copied().unwrap_or(f32::NEG_INFINITY);
+            let sup = support.get(s).copied().unwrap_or(0);
+            // NaN scores (never produced, but) fail the gate too.
+            let passes = score
+                .partial_cmp(&gate)
+                .is_some_and(|o| o != std::cmp::Ordering::Less);
+            (passes && sup >= settings.min_support).then_some((sup, score, s as u32))
+        })
         .collect();
-    if settings.aggregate_r2 <= 1.0 && ranked.len() >= 3 {
-        let reps: Vec<u32> = ranked.iter().map(|r| r.3).collect();
+    candidates.sort_by(|a, b| b.0.cmp(&a.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
+    // The distinct signals among them: a candidate the same source as a
+    // better supported one (|corr| ≥ same_source) is a copy of it. At
+    // most `distinct_cap` are kept — the K sources and the aggregates and
+    // artefacts that compete with them.
+    let cap = settings.distinct_cap.max(settings.k);
+    let mut distinct: Vec<(u32, f32, u32)> = Vec::new();
+    for &cand in &candidates {
+        if distinct.len() >= cap {
+            break;
+        }
+        if !distinct
+            .iter()
+            .any(|d| corr(d.2, cand.2).abs() >= settings.same_source)
+        {
+            distinct.push(cand);
+        }
+    }
+    // Aggregates (Section III-B) among all distinct signals, not only among
+    // the clusters' best: an aggregate of two sources shares a cluster with
+    // one of them (its distance to each is only 1 − |corr| ≈ 0.3) and,
+    // heard by the many groups that cannot unmix them, often outnumbers
+    // it; it must not hide the source it contains.
+    if settings.aggregate_r2 <= 1.0 && distinct.len() >= 3 {
+        let reps: Vec<u32> = distinct.iter().map(|d| d.2).collect();
         let aggregate = aggregates(&reps, settings.aggregate_r2, corr);
         let mut i = 0;
-        ranked.retain(|_| {
+        distinct.retain(|_| {
             i += 1;
             !aggregate[i - 1]
         });
+    }
+    // Per cluster (Section IV-D: "only one individual segment will be
+    // selected from a cluster"), the best supported remaining signal.
+    let clusters = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let mut taken = vec![false; clusters];
+    let mut ranked: Vec<(u32, f32, u32, u32)> = Vec::new();
+    for &(sup, score, s) in &distinct {
+        let c = labels[s as usize] as usize;
+        if !taken[c] {
+            taken[c] = true;
+            ranked.push((sup, score, c as u32, s));
+        }
     }
     ranked.sort_by(|a, b| b.0.cmp(&a.0).then(b.1.total_cmp(&a.1)).then(a.3.cmp(&b.3)));
     ranked
@@ -315,6 +345,8 @@ mod tests {
             min_link: 0.9,
             min_support: 1,
             aggregate_r2: 0.9,
+            same_source: 0.9,
+            distinct_cap: 40,
         };
         let chains = select_cts(&[&layer], &[0, 1, 2], &[50, 10, 10], 3, &settings, &corr);
         assert_eq!(
@@ -347,6 +379,8 @@ mod tests {
             min_link: 0.9,
             min_support: 1,
             aggregate_r2: 0.9,
+            same_source: 0.9,
+            distinct_cap: 40,
         };
         let corr = |a: u32, b: u32| -> f32 {
             s[0].segment(a as usize)
