@@ -34,7 +34,7 @@ fn slot_report(c: &AcousticConfig, u: usize) {
     use idmesh_sensor::acoustic::field::Field;
     use idmesh_sensor::acoustic::pipeline::cluster::cluster_slot;
     use idmesh_sensor::acoustic::pipeline::prepare::{nearest_groups, Segmentation};
-    use idmesh_sensor::acoustic::pipeline::select::{link_layer, select_cts, SelectSettings};
+    use idmesh_sensor::acoustic::pipeline::select::{link_layer, negentropy, select_cts, SelectSettings};
     use idmesh_sensor::acoustic::pipeline::separate::{estimate_noise_variance, separate_slot};
     let p = &c.pipeline;
     let field = Field::generate(&c.field, c.seed, 2).unwrap();
@@ -72,6 +72,7 @@ fn slot_report(c: &AcousticConfig, u: usize) {
             distinct_cap: 4 * k,
         },
         &|a, b| dot(a as usize, b as usize),
+        &|a| negentropy(s0.segment(a as usize)),
     );
     let from = seg.start(u);
     let src_corr = |i: usize| -> Vec<f32> {

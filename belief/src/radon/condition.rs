@@ -66,8 +66,11 @@ impl RadonBelief {
             .options
             .distributed_rule
             .then(|| self.mixing_log.partners(t).to_vec());
+        // The distributed rule grows only atoms meeting t's mixing log; the
+        // empty atom (kept only when k is unknown, see `expand_empty`) is
+        // grown always, or the belief could never leave the prior.
         let grows = |atom: &Atom| match &partners {
-            Some(p) => atom.meets(p),
+            Some(p) => atom.meets(p) || (atom.red.is_empty() && atom.blue.is_empty()),
             None => true,
         };
         let weights = &self.weights;
@@ -261,5 +264,29 @@ mod tests {
         // The log was cleared: observing 3 again grows nothing new.
         belief.observe(Observe { track: 3, red: 0.8, blue: 0.2 }).unwrap();
         assert_eq!(belief.coefficients(), expected.len());
+    }
+
+    /// From the uniform prior the distributed rule starts from the 1-sets
+    /// (Section 5.4: "each 1-set is always maintained", the empty set never),
+    /// so a sighting moves the belief even before any mix: the same first
+    /// step as exact conditioning.
+    #[test]
+    fn distributed_rule_starts_from_the_one_sets() {
+        let options = RadonOptions {
+            distributed_rule: true,
+            ..RadonOptions::default()
+        };
+        let mut rule = RadonBelief::with_options(Field::uniform(6, 3), options).unwrap();
+        assert_eq!(rule.coefficients(), 6);
+        assert!(rule.coefficients_iter().all(|(a, _)| a.red.len() == 1));
+        let mut exact = RadonBelief::new(Field::uniform(6, 3)).unwrap();
+        let sighting = Observe { track: 2, red: 0.8, blue: 0.2 };
+        rule.observe(sighting).unwrap();
+        exact.observe(sighting).unwrap();
+        let (p, q) = (rule.marginals().unwrap(), exact.marginals().unwrap());
+        assert!(p[2] > 0.5 + 0.1, "{p:?}");
+        assert!((p.iter().sum::<f64>() - 3.0).abs() < 1e-12);
+        // Not exact: the rule drops the pairs {2, s} exact conditioning adds.
+        assert!((p[2] - q[2]).abs() > 1e-6);
     }
 }

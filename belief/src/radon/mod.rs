@@ -119,7 +119,7 @@ impl RadonBelief {
         let log_scale = weights.ln2(i, o);
         masses.insert(start, 1.0);
         let mixing_log = MixingLog::new(field.tracks);
-        Ok(RadonBelief {
+        let mut belief = RadonBelief {
             field,
             weights,
             masses,
@@ -131,7 +131,31 @@ impl RadonBelief {
                 ..RadonStats::default()
             },
             since_omp: (0, 0),
-        })
+        };
+        belief.expand_empty();
+        Ok(belief)
+    }
+
+    /// Under the distributed rule, Section 5.4 keeps every 1-set and never
+    /// the empty set: φ_∅ = (1/k)·Σ_t φ_{t} when k is known. An atom that
+    /// fixes no track meets no mixing log, so kept as φ_∅ it would never
+    /// grow and the belief would stay uniform forever. With k unknown the
+    /// identity does not hold (Σ_t φ_t = |x|·φ_∅), and the rule grows the
+    /// empty atom on every observation instead (see `condition`).
+    fn expand_empty(&mut self) {
+        if !self.options.distributed_rule || self.field.red.known().is_none() {
+            return;
+        }
+        let Some(mass) = self.masses.remove(&Atom::default()) else {
+            return;
+        };
+        // Each of the n singletons carries 1/k of the coefficient, i.e.
+        // 1/n of the mass (W(1)/W(0) = k/n).
+        let share = mass / self.field.tracks as f64;
+        for t in 0..self.field.tracks as u32 {
+            *self.masses.entry(Atom::radon(TrackSet::singleton(t))).or_insert(0.0) += share;
+        }
+        self.masses.retain(|_, m| *m != 0.0);
     }
 
     /// A belief given directly by Radon coefficients c_α (the paper's
@@ -153,6 +177,7 @@ impl RadonBelief {
                 *belief.masses.entry(Atom::radon(set)).or_insert(0.0) += c * ln_w.exp();
             }
         }
+        belief.expand_empty();
         belief.renormalize()?;
         Ok(belief)
     }

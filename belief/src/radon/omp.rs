@@ -384,6 +384,7 @@ impl RadonBelief {
                 *self.masses.entry(atom).or_insert(0.0) += m;
             }
             self.masses.retain(|_, m| *m != 0.0);
+            self.expand_empty();
             self.stats.omp_runs += 1;
             self.renormalize()
         });

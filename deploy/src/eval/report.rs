@@ -724,9 +724,12 @@ pub fn distributed_intro(results: &Results) -> String {
         } else {
             writeln!(
                 out,
-                "The belief starts as the single atom φ_∅ (every k-set alike) and every set it \
-                 holds grows out of it through observations, so restricting which atoms grow \
-                 now matters: the distributed belief holds {} coefficients on average.\n",
+                "The belief starts from the uniform prior. As Section 5.4 prescribes, the \
+                 distributed belief holds the 1-sets {{t}} instead of the empty set \
+                 (φ_∅ = Σ_t φ_{{t}}/k), so that every track's own atom can be scaled by its \
+                 observations; pairs and larger sets then grow only from atoms that meet \
+                 the observed track's mixing log, which is what the rule costs here. The \
+                 distributed belief holds {} coefficients on average.\n",
                 coefficients(kept)
             )
             .unwrap();

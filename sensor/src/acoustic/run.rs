@@ -18,7 +18,7 @@ use super::parallel::par_map_progress;
 use super::pipeline::cluster::{cluster_slot, SlotClusters};
 use super::pipeline::intersect::{hearing_groups, intersect, Area, GroupRanges};
 use super::pipeline::prepare::{nearest_groups, Segmentation, SensorGroup};
-use super::pipeline::select::{link_layer, select_cts, Chain, LinkLayer, SelectSettings};
+use super::pipeline::select::{link_layer, negentropy, select_cts, Chain, LinkLayer, SelectSettings};
 use super::pipeline::separate::{
     estimate_noise_variance, separate_slot, SeparationReport, SlotSegments,
 };
@@ -245,6 +245,7 @@ pub fn run(
                 slots[u + span - 1].len(),
                 &select,
                 &corr,
+                &|a: u32| negentropy(slot.segment(a as usize)),
             )
         })
         .collect();
