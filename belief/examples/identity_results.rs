@@ -233,7 +233,7 @@ fn transpose(p: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 fn print_pair(title: &str, ours: &[[f64; 3]; 3], paper: &[[f64; 3]; 3]) {
     println!(
-        "{title} (row = identity, column = object); max |Δ| = {:.4}\n",
+        "{title} (row = identity, column = object); max |Δ| = {:.1e}\n",
         max_abs(ours, paper)
     );
     println!("| ours | | | paper | | |");

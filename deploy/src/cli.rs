@@ -1,6 +1,7 @@
 //! The command line: one subcommand per role idmesh plays. Parsing only;
 //! what a subcommand does lives in its own module.
 
+use crate::replay_identity::{IdentityMethod, MarginalChoice};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -97,6 +98,13 @@ pub struct SimulateArgs {
     /// Leave the initial red tracks out of the header (uniform prior).
     #[arg(long)]
     pub hide_initial: bool,
+    /// Also write identity reads (`identify` lines) and true identities:
+    /// an identity trace for the identity methods of replay.
+    #[arg(long)]
+    pub identities: bool,
+    /// Accuracy of an identity read (with --identities).
+    #[arg(long, default_value_t = 0.9)]
+    pub identity_accuracy: f64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Where to write the trace.
@@ -158,9 +166,24 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "P", value_parser = parse_particles)]
     pub particles: Option<usize>,
 
-    /// The seed of --method particles (default 0).
+    /// The seed of --method particles or of --marginals metropolis
+    /// (default 0).
     #[arg(long)]
     pub seed: Option<u64>,
+
+    /// Identity methods: how --method information-matrix turns its
+    /// log-likelihoods into marginals (default exact, N ≤ 22).
+    #[arg(long, value_enum)]
+    pub marginals: Option<MarginalChoice>,
+
+    /// Identity methods: the number of property bits of --method
+    /// property-bits (default ⌈log₂ N⌉).
+    #[arg(long, value_name = "B")]
+    pub bits: Option<usize>,
+
+    /// Identity methods: counted steps of --marginals metropolis.
+    #[arg(long, value_name = "S")]
+    pub samples: Option<usize>,
 }
 
 /// The filters `replay` can run.
@@ -187,6 +210,16 @@ pub enum Method {
     /// groups of mixed tracks, coupled by the red count, split by moment
     /// matching when a group outgrows a cap.
     Factored,
+    /// Identity traces: the exact filter over all N! assignments (N ≤ 9).
+    ExactPerm,
+    /// Identity traces: the belief matrix (doubly stochastic marginals).
+    BeliefMatrix,
+    /// Identity traces: the information matrix (lazy log-likelihoods),
+    /// marginals by --marginals.
+    InformationMatrix,
+    /// Identity traces: identities coded by --bits properties, one Radon
+    /// belief per bit.
+    PropertyBits,
 }
 
 impl Method {
@@ -201,6 +234,21 @@ impl Method {
             Method::Order3 => "order3",
             Method::Particles => "particles",
             Method::Factored => "factored",
+            Method::ExactPerm => "exact-perm",
+            Method::BeliefMatrix => "belief-matrix",
+            Method::InformationMatrix => "information-matrix",
+            Method::PropertyBits => "property-bits",
+        }
+    }
+
+    /// The identity filter this method names, if it is one.
+    pub fn identity(self) -> Option<IdentityMethod> {
+        match self {
+            Method::ExactPerm => Some(IdentityMethod::ExactPerm),
+            Method::BeliefMatrix => Some(IdentityMethod::BeliefMatrix),
+            Method::InformationMatrix => Some(IdentityMethod::InformationMatrix),
+            Method::PropertyBits => Some(IdentityMethod::PropertyBits),
+            _ => None,
         }
     }
 

@@ -57,6 +57,12 @@ pub const DEFAULT_PARTICLES: usize = 1000;
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
     let method = args.method;
+    if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() {
+        bail!(
+            "--marginals, --bits and --samples apply to the identity methods, not to --method {}",
+            method.name()
+        );
+    }
     if method != Method::Particles {
         if args.particles.is_some() {
             bail!(
@@ -230,6 +236,13 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
             )?))
         }
         Method::Factored => Ok(Box::new(FactoredBelief::new(field)?)),
+        // Identity methods are replayed by `replay_identity` (see main).
+        Method::ExactPerm | Method::BeliefMatrix | Method::InformationMatrix | Method::PropertyBits => {
+            Err(BeliefError::Unsupported {
+                method: "the property replay",
+                what: "an identity method",
+            })
+        }
         Method::Particles => Ok(Box::new(ParticleFilter::new(
             field,
             args.particles.unwrap_or(DEFAULT_PARTICLES),

@@ -43,6 +43,12 @@ pub fn scenario(args: &SimulateArgs) -> Result<Scenario> {
     if let Some(t) = args.truth_interval {
         s = s.truth_interval(t);
     }
+    if args.identities {
+        s = s
+            .identities(true)
+            .identity_accuracy(args.identity_accuracy)
+            .reveal_initial_identity(!args.hide_initial);
+    }
     Ok(s.reveal_initial_red(!args.hide_initial).seed(args.seed))
 }
 

@@ -34,7 +34,7 @@ fn slot_report(c: &AcousticConfig, u: usize) {
     use idmesh_sensor::acoustic::field::Field;
     use idmesh_sensor::acoustic::pipeline::cluster::cluster_slot;
     use idmesh_sensor::acoustic::pipeline::prepare::{nearest_groups, Segmentation};
-    use idmesh_sensor::acoustic::pipeline::select::{link_layer, negentropy, select_cts, SelectSettings};
+    use idmesh_sensor::acoustic::pipeline::select::{link_layer, select_cts, SelectSettings};
     use idmesh_sensor::acoustic::pipeline::separate::{estimate_noise_variance, separate_slot};
     let p = &c.pipeline;
     let field = Field::generate(&c.field, c.seed, 2).unwrap();
@@ -68,11 +68,8 @@ fn slot_report(c: &AcousticConfig, u: usize) {
             min_link: p.min_link as f32,
             min_support: p.min_support,
             aggregate_r2: p.aggregate_r2 as f32,
-            same_source: p.same_source as f32,
-            distinct_cap: 4 * k,
         },
         &|a, b| dot(a as usize, b as usize),
-        &|a| negentropy(s0.segment(a as usize)),
     );
     let from = seg.start(u);
     let src_corr = |i: usize| -> Vec<f32> {
@@ -126,6 +123,11 @@ fn slot_report(c: &AcousticConfig, u: usize) {
             if chosen { "  SELECTED" } else { "" }
         );
     }
+    if std::env::var("SELECT_DEBUG").is_ok() {
+        for i in 0..s0.len() {
+            println!("SEG {i} support {} {}", cl.support[i], fmt(&src_corr(i)));
+        }
+    }
     for ch in &chains {
         let s = ch.segments[0].unwrap() as usize;
         println!(
@@ -166,6 +168,7 @@ fn main() {
             "samples" => c.field.samples = num() as usize,
             "speed" => c.field.paths = PathSpec::Random { speed: (num(), num()) },
             "hear" => c.pipeline.hear_threshold = num(),
+            "silent" => c.pipeline.exclude_silent = num() != 0.0,
             "n_group" => c.pipeline.n_group = num() as usize,
             "slot" => slot = Some(num() as usize),
             _ => panic!("unknown option {k}"),
@@ -333,6 +336,43 @@ fn main() {
                 .fold(f64::INFINITY, f64::min);
             println!("target {t} at ({:.0}, {:.0}), nearest other {others:.0} m", p0.x, p0.y);
         }
+    }
+    // Hearing rate by the distance of a group's nearest member to the
+    // source, for fragments located from a clean segment (|corr| ≥ 0.9
+    // with their target's source).
+    {
+        let mut bins = vec![(0usize, 0usize); 8];
+        for (l, path) in r.paths.iter().enumerate() {
+            let Some(t) = m.target_of[l] else { continue };
+            for f in &path.fragments {
+                let a = &r.areas[f.area as usize];
+                if r.area_source_corr[f.area as usize][t] < 0.9 {
+                    continue;
+                }
+                let p = at(t, f.slot);
+                for (g, group) in r.groups.iter().enumerate() {
+                    let d = group
+                        .members
+                        .iter()
+                        .map(|&s| r.field.sensors[s as usize].distance(p))
+                        .fold(f64::INFINITY, f64::min);
+                    let b = (d / 50.0) as usize;
+                    if b >= bins.len() {
+                        continue;
+                    }
+                    bins[b].1 += 1;
+                    if a.hearing.iter().any(|h| h.0 == g as u32) {
+                        bins[b].0 += 1;
+                    }
+                }
+            }
+        }
+        let line: Vec<String> = bins
+            .iter()
+            .enumerate()
+            .map(|(i, (h, n))| format!("{}-{} m: {:.0} %", i * 50, i * 50 + 50, 100.0 * *h as f64 / (*n).max(1) as f64))
+            .collect();
+        println!("hearing rate by nearest member distance: {}", line.join(", "));
     }
     println!("fragments {total}, centroid nearer another target: {wrong}, area contains own target: {contains}");
     println!(

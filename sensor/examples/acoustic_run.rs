@@ -2,7 +2,7 @@
 //! predicted resolutions and the time per stage. Options as `key=value`:
 //! `sensors=` (N), `targets=` (K), `seed=`, `samples=`, `speed=` (max,
 //! m/sample; `speed=v` fixes it), `zigzag=` (periods), `n_group=`,
-//! `l_seg=`, `l_step=`, `n_slot=`, `threads=`, `sources=chirps|ar|mixed|audio`,
+//! `l_seg=`, `l_step=`, `n_slot=`, `hear=`, `silent=0|1`, `threads=`, `sources=chirps|ar|mixed|audio`,
 //! `out=` (write the trace there).
 //!
 //! `cargo run --release -p idmesh-sensor --example acoustic_run -- sensors=1000`
@@ -54,6 +54,7 @@ fn main() {
             "l_step" => c.pipeline.l_step = num() as usize,
             "n_slot" => c.pipeline.n_slot = num() as usize,
             "hear" => c.pipeline.hear_threshold = num(),
+            "silent" => c.pipeline.exclude_silent = num() != 0.0,
             "same" => c.pipeline.same_source = num(),
             "maxiter" => c.pipeline.separation.ica.max_iter = num() as usize,
             "tolerance" => c.pipeline.vote_tolerance = num(),

@@ -23,6 +23,7 @@ use super::pipeline::separate::SeparationSettings;
 /// | `aggregate_r2` | 0.9: a candidate two others explain is an aggregate | not given |
 /// | `same_source` | \|corr\| ≥ 0.9: two segments are one source (support, duplicates) | not given |
 /// | `hear_threshold` | \|corr\| ≥ 0.7: a group hears a selected segment (intersection) | "highly correlated" |
+/// | `exclude_silent` | true: of the intersection, keep the points fewest non-hearing groups cover | no (hearing groups only) |
 /// | `tile` | 5 m | 5 m |
 /// | `vote_tolerance` | 0 m | 0 |
 /// | `link_gate` | 50 m (+ `max_speed` × elapsed samples) | none |
@@ -42,6 +43,7 @@ pub struct PipelineConfig {
     pub aggregate_r2: f64,
     pub same_source: f64,
     pub hear_threshold: f64,
+    pub exclude_silent: bool,
     pub tile: f64,
     pub vote_tolerance: f64,
     pub link_gate: f64,
@@ -66,6 +68,7 @@ impl Default for PipelineConfig {
             aggregate_r2: 0.9,
             same_source: 0.9,
             hear_threshold: 0.7,
+            exclude_silent: false,
             tile: 5.0,
             vote_tolerance: 0.0,
             link_gate: 50.0,

@@ -18,7 +18,7 @@ use super::parallel::par_map_progress;
 use super::pipeline::cluster::{cluster_slot, SlotClusters};
 use super::pipeline::intersect::{hearing_groups, intersect, Area, GroupRanges};
 use super::pipeline::prepare::{nearest_groups, Segmentation, SensorGroup};
-use super::pipeline::select::{link_layer, negentropy, select_cts, Chain, LinkLayer, SelectSettings};
+use super::pipeline::select::{link_layer, select_cts, Chain, LinkLayer, SelectSettings};
 use super::pipeline::separate::{
     estimate_noise_variance, separate_slot, SeparationReport, SlotSegments,
 };
@@ -223,8 +223,6 @@ pub fn run(
         min_link: p.min_link as f32,
         min_support: p.min_support,
         aggregate_r2: p.aggregate_r2 as f32,
-        same_source: p.same_source as f32,
-        distinct_cap: 4 * k,
     };
     let chains: Vec<Vec<Chain>> = (0..n_cts)
         .map(|u| {
@@ -245,7 +243,6 @@ pub fn run(
                 slots[u + span - 1].len(),
                 &select,
                 &corr,
-                &|a: u32| negentropy(slot.segment(a as usize)),
             )
         })
         .collect();
@@ -277,7 +274,7 @@ pub fn run(
         threads,
         |&(j, s)| {
             let hearing = hearing_groups(&slots[j as usize], s as usize, threshold);
-            intersect(&ranges, &hearing)
+            intersect(&ranges, &hearing, p.exclude_silent)
         },
         &mut |d| {
             report(

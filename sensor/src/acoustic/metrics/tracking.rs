@@ -261,6 +261,7 @@ mod tests {
                     tiles,
                     groups: 1,
                     hearing: Vec::new(),
+            silent_cover: 0,
                 });
                 paths[l].push(Fragment {
                     slot,
@@ -290,6 +291,7 @@ mod tests {
             tiles: stray_tiles,
             groups: 1,
             hearing: Vec::new(),
+            silent_cover: 0,
         };
         let two = vec![good, stray];
         let mut one_path: Vec<Fragment> = (0..seg.slots() - 1)

@@ -125,19 +125,13 @@ pub struct SelectSettings {
     /// R² above which a candidate counts as an aggregate of two others
     /// (> 1 disables the test).
     pub aggregate_r2: f32,
-    /// |corr| at which two segments are the same source.
-    pub same_source: f32,
-    /// Most distinct signals per slot considered (aggregate test cost is
-    /// cubic in it).
-    pub distinct_cap: usize,
 }
 
 /// Selects the chains of CTS_u. `layers[i]` links slot u + i to
 /// u + i + 1 (n_slot − 1 layers); `labels` and `support` are the clusters
 /// and support of slot u's segments and `last_len` the number of segments
 /// in the CTS's last slot.
-/// `corr(a, b)` is the correlation of segments a and b of slot u, and
-/// `nongauss(a)` the non-Gaussianity of segment a (see [`negentropy`]).
+/// `corr(a, b)` is the correlation of segments a and b of slot u.
 pub fn select_cts(
     layers: &[&LinkLayer],
     labels: &[u32],
@@ -145,7 +139,6 @@ pub fn select_cts(
     last_len: usize,
     settings: &SelectSettings,
     corr: &dyn Fn(u32, u32) -> f32,
-    nongauss: &dyn Fn(u32) -> f32,
 ) -> Vec<Chain> {
     let steps = layers.len();
     // best[i][s]: best chain score from segment s of slot u + i to the end
@@ -176,63 +169,38 @@ pub fn select_cts(
         next[i] = nexts;
     }
     let gate = settings.min_link * steps as f32;
-    // Every gated, supported segment, best supported first.
-    let mut candidates: Vec<(u32, f32, u32)> = labels
-        .iter()
-        .enumerate()
-        .filter_map(|(s, _)| {
-            let score = best[0].get(s).copied().unwrap_or(f32::NEG_INFINITY);
-            let sup = support.get(s).copied().unwrap_or(0);
-            // NaN scores (never produced, but) fail the gate too.
-            let passes = score
-                .partial_cmp(&gate)
-                .is_some_and(|o| o != std::cmp::Ordering::Less);
-            (passes && sup >= settings.min_support).then_some((sup, score, s as u32))
-        })
-        .collect();
-    candidates.sort_by(|a, b| b.0.cmp(&a.0).then(b.1.total_cmp(&a.1)).then(a.2.cmp(&b.2)));
-    // The distinct signals among them: a candidate the same source as a
-    // better supported one (|corr| ≥ same_source) is a copy of it. At
-    // most `distinct_cap` are kept — the K sources and the aggregates and
-    // artefacts that compete with them.
-    let cap = settings.distinct_cap.max(settings.k);
-    let mut distinct: Vec<(u32, f32, u32)> = Vec::new();
-    for &cand in &candidates {
-        if distinct.len() >= cap {
-            break;
+    // Per cluster, the gated candidate with the most support (then the
+    // best chain, then the lowest index); then the best clusters.
+    let clusters = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let mut per_cluster: Vec<Option<(u32, f32, u32)>> = vec![None; clusters];
+    for (s, &l) in labels.iter().enumerate() {
+        let score = best[0].get(s).copied().unwrap_or(f32::NEG_INFINITY);
+        let sup = support.get(s).copied().unwrap_or(0);
+        // NaN scores (never produced, but) fail the gate too.
+        let passes = score
+            .partial_cmp(&gate)
+            .is_some_and(|o| o != std::cmp::Ordering::Less);
+        if !passes || sup < settings.min_support {
+            continue;
         }
-        if !distinct
-            .iter()
-            .any(|d| corr(d.2, cand.2).abs() >= settings.same_source)
-        {
-            distinct.push(cand);
+        let slot = &mut per_cluster[l as usize];
+        if slot.is_none_or(|(bs, bv, _)| (sup, score) > (bs, bv)) {
+            *slot = Some((sup, score, s as u32));
         }
     }
-    // Aggregates (Section III-B) among all distinct signals, not only among
-    // the clusters' best: an aggregate of two sources shares a cluster with
-    // one of them (its distance to each is only 1 − |corr| ≈ 0.3) and,
-    // heard by the many groups that cannot unmix them, often outnumbers
-    // it; it must not hide the source it contains.
-    if settings.aggregate_r2 <= 1.0 && distinct.len() >= 3 {
-        let reps: Vec<u32> = distinct.iter().map(|d| d.2).collect();
-        let aggregate = aggregates(&reps, settings.aggregate_r2, corr, nongauss);
+    let mut ranked: Vec<(u32, f32, u32, u32)> = per_cluster
+        .iter()
+        .enumerate()
+        .filter_map(|(c, b)| b.map(|(sup, v, s)| (sup, v, c as u32, s)))
+        .collect();
+    if settings.aggregate_r2 <= 1.0 && ranked.len() >= 3 {
+        let reps: Vec<u32> = ranked.iter().map(|r| r.3).collect();
+        let aggregate = aggregates(&reps, settings.aggregate_r2, corr);
         let mut i = 0;
-        distinct.retain(|_| {
+        ranked.retain(|_| {
             i += 1;
             !aggregate[i - 1]
         });
-    }
-    // Per cluster (Section IV-D: "only one individual segment will be
-    // selected from a cluster"), the best supported remaining signal.
-    let clusters = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
-    let mut taken = vec![false; clusters];
-    let mut ranked: Vec<(u32, f32, u32, u32)> = Vec::new();
-    for &(sup, score, s) in &distinct {
-        let c = labels[s as usize] as usize;
-        if !taken[c] {
-            taken[c] = true;
-            ranked.push((sup, score, c as u32, s));
-        }
     }
     ranked.sort_by(|a, b| b.0.cmp(&a.0).then(b.1.total_cmp(&a.1)).then(a.3.cmp(&b.3)));
     ranked
@@ -255,24 +223,10 @@ pub fn select_cts(
         .collect()
 }
 
-/// Which of `reps` are mixtures of two others: R² ≥ `r2_min` of the
-/// regression on a pair (a, b) with |corr(a, b)| small (< 0.3), neither of
-/// them the same source as the candidate (|corr| < 0.9), neither of them
-/// already found to be a mixture.
-///
-/// Candidates are examined from the most Gaussian (lowest `nongauss`) to
-/// the least: mixing makes signals more Gaussian (the premise of FastICA),
-/// so an aggregate is examined, and discarded, before the sources it
-/// mixes. Without the order, a source is itself "explained" by two
-/// uncorrelated mixtures of it and a partner — (s₁ + s₂)/√2 and
-/// (s₁ − s₂)/√2, which a group that fails to unmix the two produces —
-/// and would be discarded with them.
-fn aggregates(
-    reps: &[u32],
-    r2_min: f32,
-    corr: &dyn Fn(u32, u32) -> f32,
-    nongauss: &dyn Fn(u32) -> f32,
-) -> Vec<bool> {
+/// Which of `reps` are mixtures of two others: R² of the regression on a
+/// pair (a, b) with |corr(a, b)| small (< 0.3), neither of them the same
+/// source as the candidate (|corr| < 0.9).
+fn aggregates(reps: &[u32], r2_min: f32, corr: &dyn Fn(u32, u32) -> f32) -> Vec<bool> {
     let n = reps.len();
     let mut c = vec![0f32; n * n];
     for i in 0..n {
@@ -282,52 +236,27 @@ fn aggregates(
             c[j * n + i] = v;
         }
     }
-    let ng: Vec<f32> = reps.iter().map(|&r| nongauss(r)).collect();
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&x, &y| ng[x].total_cmp(&ng[y]).then(x.cmp(&y)));
-    let mut flagged = vec![false; n];
-    for x in order {
-        'pairs: for a in 0..n {
-            let rxa = c[x * n + a];
-            if a == x || flagged[a] || rxa.abs() >= 0.9 {
-                continue;
-            }
-            for b in a + 1..n {
-                let (rxb, rab) = (c[x * n + b], c[a * n + b]);
-                if b == x || flagged[b] || rxb.abs() >= 0.9 || rab.abs() >= 0.3 {
+    (0..n)
+        .map(|x| {
+            for a in 0..n {
+                let rxa = c[x * n + a];
+                if a == x || rxa.abs() >= 0.9 {
                     continue;
                 }
-                let r2 = (rxa * rxa + rxb * rxb - 2.0 * rxa * rxb * rab) / (1.0 - rab * rab);
-                if r2 >= r2_min {
-                    flagged[x] = true;
-                    break 'pairs;
+                for b in a + 1..n {
+                    let (rxb, rab) = (c[x * n + b], c[a * n + b]);
+                    if b == x || rxb.abs() >= 0.9 || rab.abs() >= 0.3 {
+                        continue;
+                    }
+                    let r2 = (rxa * rxa + rxb * rxb - 2.0 * rxa * rxb * rab) / (1.0 - rab * rab);
+                    if r2 >= r2_min {
+                        return true;
+                    }
                 }
             }
-        }
-    }
-    flagged
-}
-
-/// Non-Gaussianity of a centred, unit-norm segment: the negentropy
-/// approximation (E[log cosh y] − E[log cosh ν])² of Hyvärinen & Oja, with
-/// y the segment scaled to unit variance and ν standard normal.
-pub fn negentropy(segment: &[f32]) -> f32 {
-    const GAUSS_LOGCOSH: f64 = 0.374_567_207_801_356_3;
-    let n = segment.len();
-    if n == 0 {
-        return 0.0;
-    }
-    let scale = (n as f64).sqrt();
-    let m = segment
-        .iter()
-        .map(|&v| {
-            let y = (f64::from(v) * scale).abs();
-            // log cosh y = |y| + log(1 + e^{−2|y|}) − log 2, stable.
-            y + (-2.0 * y).exp().ln_1p() - std::f64::consts::LN_2
+            false
         })
-        .sum::<f64>()
-        / n as f64;
-    ((m - GAUSS_LOGCOSH) * (m - GAUSS_LOGCOSH)) as f32
+        .collect()
 }
 
 #[cfg(test)]
@@ -376,11 +305,7 @@ mod tests {
                 .map(|(x, y)| x * y)
                 .sum()
         };
-        let ng = |i: u32| negentropy(segs.segment(i as usize));
-        assert_eq!(
-            aggregates(&[0, 1, 2], 0.9, &corr, &ng),
-            vec![true, false, false]
-        );
+        assert_eq!(aggregates(&[0, 1, 2], 0.9, &corr), vec![true, false, false]);
         // The aggregate has the most support, yet the two sources win.
         let layer = LinkLayer {
             links: vec![vec![(0, 1.0)], vec![(1, 1.0)], vec![(2, 1.0)]],
@@ -390,18 +315,8 @@ mod tests {
             min_link: 0.9,
             min_support: 1,
             aggregate_r2: 0.9,
-            same_source: 0.9,
-            distinct_cap: 40,
         };
-        let chains = select_cts(
-            &[&layer],
-            &[0, 1, 2],
-            &[50, 10, 10],
-            3,
-            &settings,
-            &corr,
-            &ng,
-        );
+        let chains = select_cts(&[&layer], &[0, 1, 2], &[50, 10, 10], 3, &settings, &corr);
         assert_eq!(
             chains
                 .iter()
@@ -432,8 +347,6 @@ mod tests {
             min_link: 0.9,
             min_support: 1,
             aggregate_r2: 0.9,
-            same_source: 0.9,
-            distinct_cap: 40,
         };
         let corr = |a: u32, b: u32| -> f32 {
             s[0].segment(a as usize)
@@ -444,16 +357,7 @@ mod tests {
         };
         // Each segment its own cluster; all equally supported: the gate
         // removes the noise.
-        let ng = |a: u32| negentropy(s[0].segment(a as usize));
-        let chains = select_cts(
-            &refs,
-            &[0, 1, 2],
-            &[1, 1, 1],
-            s[3].len(),
-            &settings,
-            &corr,
-            &ng,
-        );
+        let chains = select_cts(&refs, &[0, 1, 2], &[1, 1, 1], s[3].len(), &settings, &corr);
         assert_eq!(chains.len(), 2);
         let mut firsts: Vec<u32> = chains.iter().map(|c| c.segments[0].unwrap()).collect();
         firsts.sort();
@@ -465,15 +369,7 @@ mod tests {
         }
         // Sources 1 and 2 in one cluster: only one of them may be chosen,
         // the better supported; the noise fails the gate.
-        let chains = select_cts(
-            &refs,
-            &[0, 1, 1],
-            &[5, 2, 3],
-            s[3].len(),
-            &settings,
-            &corr,
-            &ng,
-        );
+        let chains = select_cts(&refs, &[0, 1, 1], &[5, 2, 3], s[3].len(), &settings, &corr);
         assert_eq!(chains.len(), 1);
         assert_eq!(chains[0].segments[0], Some(2));
         // Support ranks clusters; too little support is not selected.
@@ -487,50 +383,8 @@ mod tests {
                 ..settings
             },
             &corr,
-            &ng,
         );
         assert_eq!(chains.len(), 1);
         assert_eq!(chains[0].segments[0], Some(2));
-    }
-
-    #[test]
-    fn sources_survive_their_rotated_mixtures() {
-        // Two uniform sources and the two orthogonal mixtures a group that
-        // fails to unmix them yields: each source is a combination of the
-        // two (uncorrelated) mixtures, and each mixture of the two sources.
-        // The mixtures are the more Gaussian, so they are the aggregates.
-        let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let a: Vec<f64> = (0..400).map(|_| rng.gen::<f64>() - 0.5).collect();
-        let b: Vec<f64> = (0..400).map(|_| rng.gen::<f64>() - 0.5).collect();
-        let mut segs = SlotSegments {
-            l_seg: 400,
-            ..SlotSegments::default()
-        };
-        segs.push(0, a.iter().zip(&b).map(|(x, y)| x + y));
-        segs.push(1, a.iter().zip(&b).map(|(x, y)| x - y));
-        segs.push(2, a.iter().copied());
-        segs.push(3, b.iter().copied());
-        let corr = |i: u32, j: u32| -> f32 {
-            segs.segment(i as usize)
-                .iter()
-                .zip(segs.segment(j as usize))
-                .map(|(x, y)| x * y)
-                .sum()
-        };
-        let ng = |i: u32| negentropy(segs.segment(i as usize));
-        assert!(ng(2).min(ng(3)) > ng(0).max(ng(1)));
-        assert_eq!(
-            aggregates(&[0, 1, 2, 3], 0.9, &corr, &ng),
-            vec![true, true, false, false]
-        );
-        assert_eq!(
-            aggregates(&[2, 3, 0, 1], 0.9, &corr, &ng),
-            vec![false, false, true, true]
-        );
-        // Examined in index order instead, the sources (listed first) go.
-        assert_eq!(
-            aggregates(&[2, 3, 0, 1], 0.9, &corr, &|_| 0.0),
-            vec![true, true, false, false]
-        );
     }
 }

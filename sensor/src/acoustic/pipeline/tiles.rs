@@ -107,6 +107,26 @@ impl TileSet {
         set
     }
 
+    /// The set of the given (row, col) points, which must be in the grid.
+    pub fn from_points(grid: &TileGrid, points: impl IntoIterator<Item = (usize, usize)>) -> Self {
+        let pts: Vec<(usize, usize)> = points.into_iter().collect();
+        let (Some(lo), Some(hi)) = (
+            pts.iter().map(|p| p.0).min(),
+            pts.iter().map(|p| p.0).max(),
+        ) else {
+            return TileSet::empty(grid);
+        };
+        let mut set = TileSet {
+            row0: lo,
+            words: grid.words,
+            bits: vec![0; (hi - lo + 1) * grid.words],
+        };
+        for (r, c) in pts {
+            set.bits[(r - lo) * grid.words + c / 64] |= 1 << (c % 64);
+        }
+        set
+    }
+
     /// Sets columns c0..=c1 of local row `lr`.
     fn fill(&mut self, lr: usize, c0: usize, c1: usize) {
         let row = &mut self.bits[lr * self.words..(lr + 1) * self.words];

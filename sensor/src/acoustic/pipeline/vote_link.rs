@@ -245,6 +245,7 @@ mod tests {
             tiles,
             groups: 1,
                     hearing: Vec::new(),
+            silent_cover: 0,
         }
     }
 
