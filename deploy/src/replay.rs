@@ -14,8 +14,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
     predict_red, tracking_error, BeliefError, Event, FactoredBelief, Field, ParticleFilter,
-    PropertyFilter,
-    RadonBelief, RadonOptions, RedCount, Sparsify,
+    PropertyFilter, RadonBelief, RadonOptions, RedCount, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use serde::Serialize;
@@ -237,12 +236,13 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         }
         Method::Factored => Ok(Box::new(FactoredBelief::new(field)?)),
         // Identity methods are replayed by `replay_identity` (see main).
-        Method::ExactPerm | Method::BeliefMatrix | Method::InformationMatrix | Method::PropertyBits => {
-            Err(BeliefError::Unsupported {
-                method: "the property replay",
-                what: "an identity method",
-            })
-        }
+        Method::ExactPerm
+        | Method::BeliefMatrix
+        | Method::InformationMatrix
+        | Method::PropertyBits => Err(BeliefError::Unsupported {
+            method: "the property replay",
+            what: "an identity method",
+        }),
         Method::Particles => Ok(Box::new(ParticleFilter::new(
             field,
             args.particles.unwrap_or(DEFAULT_PARTICLES),
@@ -308,6 +308,9 @@ mod tests {
             distributed_rule: false,
             particles: None,
             seed: None,
+            marginals: None,
+            bits: None,
+            samples: None,
         }
     }
 

@@ -15,7 +15,10 @@ pub fn scenario(args: &SimulateArgs) -> Result<Scenario> {
         Motion::Crowd => Scenario::crowd(),
         Motion::Waypoint => Scenario::waypoint(),
         Motion::Pedestrians => {
-            let scene = args.scene.as_ref().context("--model pedestrians needs --scene FILE")?;
+            let scene = args
+                .scene
+                .as_ref()
+                .context("--model pedestrians needs --scene FILE")?;
             Scenario::pedestrians(scene)
         }
     };

@@ -49,14 +49,23 @@ fn slot_report(c: &AcousticConfig, u: usize) {
         })
         .collect();
     let k = c.field.targets;
-    let cl = cluster_slot(&slots[0], p.clusters_per_target * k, p.linkage, p.same_source as f32);
+    let cl = cluster_slot(
+        &slots[0],
+        p.clusters_per_target * k,
+        p.linkage,
+        p.same_source as f32,
+    );
     let layers: Vec<_> = (0..p.n_slot - 1)
         .map(|i| link_layer(&slots[i], &slots[i + 1], p.l_step, p.link_candidates))
         .collect();
     let refs: Vec<_> = layers.iter().collect();
     let s0 = &slots[0];
     let dot = |a: usize, b: usize| -> f32 {
-        s0.segment(a).iter().zip(s0.segment(b)).map(|(x, y)| x * y).sum()
+        s0.segment(a)
+            .iter()
+            .zip(s0.segment(b))
+            .map(|(x, y)| x * y)
+            .sum()
     };
     let chains = select_cts(
         &refs,
@@ -112,8 +121,14 @@ fn slot_report(c: &AcousticConfig, u: usize) {
     }
     let nclusters = cl.labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
     for cidx in 0..nclusters {
-        let members: Vec<usize> = (0..s0.len()).filter(|&i| cl.labels[i] as usize == cidx).collect();
-        let best = members.iter().max_by_key(|&&i| cl.support[i]).copied().unwrap();
+        let members: Vec<usize> = (0..s0.len())
+            .filter(|&i| cl.labels[i] as usize == cidx)
+            .collect();
+        let best = members
+            .iter()
+            .max_by_key(|&&i| cl.support[i])
+            .copied()
+            .unwrap();
         let chosen = chains.iter().any(|ch| ch.cluster as usize == cidx);
         println!(
             "cluster {cidx:2}: {:4} segs, top support {:3} ({}){}",
@@ -166,7 +181,11 @@ fn main() {
             "targets" => c.field.targets = num() as usize,
             "seed" => c.seed = num() as u64,
             "samples" => c.field.samples = num() as usize,
-            "speed" => c.field.paths = PathSpec::Random { speed: (num(), num()) },
+            "speed" => {
+                c.field.paths = PathSpec::Random {
+                    speed: (num(), num()),
+                }
+            }
             "hear" => c.pipeline.hear_threshold = num(),
             "silent" => c.pipeline.exclude_silent = num() != 0.0,
             "n_group" => c.pipeline.n_group = num() as usize,
@@ -185,7 +204,12 @@ fn main() {
             let win = |t: usize| -> Vec<f64> {
                 let y = &field.sources[t][start..start + l];
                 let my = y.iter().sum::<f64>() / l as f64;
-                let ny = y.iter().map(|v| (v - my) * (v - my)).sum::<f64>().sqrt().max(1e-300);
+                let ny = y
+                    .iter()
+                    .map(|v| (v - my) * (v - my))
+                    .sum::<f64>()
+                    .sqrt()
+                    .max(1e-300);
                 y.iter().map(|v| (v - my) / ny).collect()
             };
             for a in 0..k {
@@ -276,7 +300,9 @@ fn main() {
                 wrong += 1;
             }
             let s = r.grid.spacing;
-            if a.tiles.contains((p.y / s).round() as usize, (p.x / s).round() as usize) {
+            if a.tiles
+                .contains((p.y / s).round() as usize, (p.x / s).round() as usize)
+            {
                 contains += 1;
             }
             let te: f64 = a
@@ -334,7 +360,10 @@ fn main() {
                 .filter(|&u| u != t)
                 .map(|u| at(u, 0).distance(p0))
                 .fold(f64::INFINITY, f64::min);
-            println!("target {t} at ({:.0}, {:.0}), nearest other {others:.0} m", p0.x, p0.y);
+            println!(
+                "target {t} at ({:.0}, {:.0}), nearest other {others:.0} m",
+                p0.x, p0.y
+            );
         }
     }
     // Hearing rate by the distance of a group's nearest member to the
@@ -370,9 +399,19 @@ fn main() {
         let line: Vec<String> = bins
             .iter()
             .enumerate()
-            .map(|(i, (h, n))| format!("{}-{} m: {:.0} %", i * 50, i * 50 + 50, 100.0 * *h as f64 / (*n).max(1) as f64))
+            .map(|(i, (h, n))| {
+                format!(
+                    "{}-{} m: {:.0} %",
+                    i * 50,
+                    i * 50 + 50,
+                    100.0 * *h as f64 / (*n).max(1) as f64
+                )
+            })
             .collect();
-        println!("hearing rate by nearest member distance: {}", line.join(", "));
+        println!(
+            "hearing rate by nearest member distance: {}",
+            line.join(", ")
+        );
     }
     println!("fragments {total}, centroid nearer another target: {wrong}, area contains own target: {contains}");
     println!(
@@ -383,7 +422,10 @@ fn main() {
     println!("area points        {}", quantiles(sizes));
     println!("groups intersected {}", quantiles(used));
     println!("groups hearing     {}", quantiles(heard));
-    println!("share of hearing groups really in range {}", quantiles(true_share));
+    println!(
+        "share of hearing groups really in range {}",
+        quantiles(true_share)
+    );
     println!("groups really in range {}", quantiles(truly));
     println!("centroid→own target {}", quantiles(own));
     println!("centroid→nearest target {}", quantiles(nearest));

@@ -63,4 +63,3 @@ pub fn idmesh() -> &'static Path {
             .expect("cargo names the idmesh executable")
     })
 }
-

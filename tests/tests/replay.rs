@@ -2,8 +2,8 @@
 //! written to a scratch directory, checking stdout, stderr and the exit
 //! status.
 
-use serde_json::Value;
 use idmesh_tests::idmesh;
+use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

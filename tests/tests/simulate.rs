@@ -36,7 +36,11 @@ fn same_seed_same_trace_and_replay_scores_it() {
         .arg(simulate("d", &["--seed", "3"]))
         .output()
         .unwrap();
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let stdout = String::from_utf8(output.stdout).unwrap();
     let summary: Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
     let events = summary["events"].as_u64().unwrap();

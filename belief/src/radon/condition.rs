@@ -237,32 +237,75 @@ mod tests {
     /// only, rescales {3} and {3,5}, and leaves the rest unchanged.
     #[test]
     fn distributed_rule_grows_only_sets_meeting_the_mixing_log() {
-        let held = [vec![1], vec![3], vec![3, 5], vec![5], vec![4, 5], vec![5, 8]];
+        let held = [
+            vec![1],
+            vec![3],
+            vec![3, 5],
+            vec![5],
+            vec![4, 5],
+            vec![5, 8],
+        ];
         let options = RadonOptions {
             distributed_rule: true,
             ..RadonOptions::default()
         };
-        let coefficients = held.iter().map(|s| (TrackSet::from_tracks(s.iter().copied()), 1.0));
-        let mut belief = RadonBelief::from_coefficients(Field::uniform(9, 4), options, coefficients).unwrap();
+        let coefficients = held
+            .iter()
+            .map(|s| (TrackSet::from_tracks(s.iter().copied()), 1.0));
+        let mut belief =
+            RadonBelief::from_coefficients(Field::uniform(9, 4), options, coefficients).unwrap();
         for partner in [8, 1, 2] {
             // swap = 0: logged as a mix, the coefficients do not move.
-            belief.mix(crate::event::Mix { a: 3, b: partner, swap: 0.0 }).unwrap();
+            belief
+                .mix(crate::event::Mix {
+                    a: 3,
+                    b: partner,
+                    swap: 0.0,
+                })
+                .unwrap();
         }
-        let before: Vec<(crate::radon::Atom, f64)> =
-            belief.coefficients_iter().map(|(a, c)| (a.clone(), c)).collect();
-        belief.observe(Observe { track: 3, red: 0.8, blue: 0.2 }).unwrap();
-        let mut now: Vec<Vec<u32>> = belief.coefficients_iter().map(|(a, _)| a.red.tracks().to_vec()).collect();
+        let before: Vec<(crate::radon::Atom, f64)> = belief
+            .coefficients_iter()
+            .map(|(a, c)| (a.clone(), c))
+            .collect();
+        belief
+            .observe(Observe {
+                track: 3,
+                red: 0.8,
+                blue: 0.2,
+            })
+            .unwrap();
+        let mut now: Vec<Vec<u32>> = belief
+            .coefficients_iter()
+            .map(|(a, _)| a.red.tracks().to_vec())
+            .collect();
         now.sort();
-        let mut expected: Vec<Vec<u32>> = held.iter().cloned().chain([vec![1, 3], vec![3, 5, 8]]).collect();
+        let mut expected: Vec<Vec<u32>> = held
+            .iter()
+            .cloned()
+            .chain([vec![1, 3], vec![3, 5, 8]])
+            .collect();
         expected.sort();
         assert_eq!(now, expected);
         // Relative to {1}, untouched sets keep their ratio; {3} is scaled by 4.
         let c = |s: &[u32]| belief.coefficient(&TrackSet::from_tracks(s.iter().copied()));
-        let c0 = |s: &[u32]| before.iter().find(|(a, _)| a.red.tracks() == s).map(|x| x.1).unwrap();
+        let c0 = |s: &[u32]| {
+            before
+                .iter()
+                .find(|(a, _)| a.red.tracks() == s)
+                .map(|x| x.1)
+                .unwrap()
+        };
         assert!((c(&[5]) / c(&[1]) - c0(&[5]) / c0(&[1])).abs() < 1e-12);
         assert!((c(&[3]) / c(&[1]) - 4.0 * c0(&[3]) / c0(&[1])).abs() < 1e-12);
         // The log was cleared: observing 3 again grows nothing new.
-        belief.observe(Observe { track: 3, red: 0.8, blue: 0.2 }).unwrap();
+        belief
+            .observe(Observe {
+                track: 3,
+                red: 0.8,
+                blue: 0.2,
+            })
+            .unwrap();
         assert_eq!(belief.coefficients(), expected.len());
     }
 
@@ -280,7 +323,11 @@ mod tests {
         assert_eq!(rule.coefficients(), 6);
         assert!(rule.coefficients_iter().all(|(a, _)| a.red.len() == 1));
         let mut exact = RadonBelief::new(Field::uniform(6, 3)).unwrap();
-        let sighting = Observe { track: 2, red: 0.8, blue: 0.2 };
+        let sighting = Observe {
+            track: 2,
+            red: 0.8,
+            blue: 0.2,
+        };
         rule.observe(sighting).unwrap();
         exact.observe(sighting).unwrap();
         let (p, q) = (rule.marginals().unwrap(), exact.marginals().unwrap());

@@ -109,7 +109,9 @@ impl RadonBelief {
             // blue: φ_{x0} alone would allow any superset of x0.
             Some(red) if field.red.known().is_none() => {
                 let red = TrackSet::from_tracks(red.iter().copied());
-                let blue = (0..field.tracks as u32).filter(|t| !red.contains(*t)).collect();
+                let blue = (0..field.tracks as u32)
+                    .filter(|t| !red.contains(*t))
+                    .collect();
                 Atom::new(red, blue)
             }
             Some(red) => Atom::radon(TrackSet::from_tracks(red.iter().copied())),
@@ -153,7 +155,10 @@ impl RadonBelief {
         // 1/n of the mass (W(1)/W(0) = k/n).
         let share = mass / self.field.tracks as f64;
         for t in 0..self.field.tracks as u32 {
-            *self.masses.entry(Atom::radon(TrackSet::singleton(t))).or_insert(0.0) += share;
+            *self
+                .masses
+                .entry(Atom::radon(TrackSet::singleton(t)))
+                .or_insert(0.0) += share;
         }
         self.masses.retain(|_, m| *m != 0.0);
     }

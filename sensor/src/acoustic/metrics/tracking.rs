@@ -171,10 +171,12 @@ pub fn evaluate(
             aligned += area.centroid.distance(position_at(t, f.slot));
             fragments += 1;
             let (s1, s2, n) = *per_area.entry(f.area).or_insert_with(|| {
-                area.tiles.points().fold((0.0, 0.0, 0), |(s1, s2, n), (r, c)| {
-                    let d = distance_to_polyline(grid.point(r, c), &line);
-                    (s1 + d, s2 + d * d, n + 1)
-                })
+                area.tiles
+                    .points()
+                    .fold((0.0, 0.0, 0), |(s1, s2, n), (r, c)| {
+                        let d = distance_to_polyline(grid.point(r, c), &line);
+                        (s1 + d, s2 + d * d, n + 1)
+                    })
             });
             sum += s1;
             sum2 += s2;
@@ -261,7 +263,7 @@ mod tests {
                     tiles,
                     groups: 1,
                     hearing: Vec::new(),
-            silent_cover: 0,
+                    silent_cover: 0,
                 });
                 paths[l].push(Fragment {
                     slot,

@@ -139,7 +139,10 @@ pub fn exclude_silent(
     }
     let at = |&(r, c): &(usize, usize)| count[(r - rows.start) * width + (c - c0)];
     let fewest = pts.iter().map(at).min().unwrap_or(0);
-    let kept = TileSet::from_points(&ranges.grid, pts.iter().copied().filter(|p| at(p) == fewest));
+    let kept = TileSet::from_points(
+        &ranges.grid,
+        pts.iter().copied().filter(|p| at(p) == fewest),
+    );
     (kept, fewest)
 }
 

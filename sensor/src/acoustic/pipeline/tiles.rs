@@ -110,10 +110,8 @@ impl TileSet {
     /// The set of the given (row, col) points, which must be in the grid.
     pub fn from_points(grid: &TileGrid, points: impl IntoIterator<Item = (usize, usize)>) -> Self {
         let pts: Vec<(usize, usize)> = points.into_iter().collect();
-        let (Some(lo), Some(hi)) = (
-            pts.iter().map(|p| p.0).min(),
-            pts.iter().map(|p| p.0).max(),
-        ) else {
+        let (Some(lo), Some(hi)) = (pts.iter().map(|p| p.0).min(), pts.iter().map(|p| p.0).max())
+        else {
             return TileSet::empty(grid);
         };
         let mut set = TileSet {

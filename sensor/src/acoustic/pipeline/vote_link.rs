@@ -244,7 +244,7 @@ mod tests {
             centroid: tiles.centroid(&grid()).unwrap(),
             tiles,
             groups: 1,
-                    hearing: Vec::new(),
+            hearing: Vec::new(),
             silent_cover: 0,
         }
     }
