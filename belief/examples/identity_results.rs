@@ -27,6 +27,9 @@ use idmesh_belief::identity::{
 use idmesh_belief::{Mix, RadonOptions, Sparsify};
 use std::time::Instant;
 
+
+/// Builds a filter from a known initial assignment.
+type Builder = dyn Fn(&[u32]) -> Box<dyn IdentityFilter>;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let all = args.is_empty();
@@ -566,7 +569,7 @@ fn table4() {
         };
         let bethe = info_with(MarginalMethod::half_bethe());
         let exact = info_with(MarginalMethod::Exact);
-        let mut methods: Vec<(&str, &dyn Fn(&[u32]) -> Box<dyn IdentityFilter>)> = vec![
+        let mut methods: Vec<(&str, &Builder)> = vec![
             ("belief matrix", &belief),
             ("information matrix, half-Bethe", &bethe),
         ];
