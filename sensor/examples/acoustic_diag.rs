@@ -188,8 +188,11 @@ fn main() {
             }
             "hear" => c.pipeline.hear_threshold = num(),
             "silent" => c.pipeline.exclude_silent = num() != 0.0,
+            "slack" => c.pipeline.silent_slack = num() as u32,
+            "tolerance" => c.pipeline.vote_tolerance = num(),
             "n_group" => c.pipeline.n_group = num() as usize,
             "slot" => slot = Some(num() as usize),
+            "default_paths" => c.field.paths = PathSpec::default(),
             _ => panic!("unknown option {k}"),
         }
     }
@@ -345,11 +348,12 @@ fn main() {
                     .map(|(i, c)| (i, *c))
                     .unwrap();
                 line += &format!(
-                    " {}:t{u}/{d:.0}/{}/s{bt}={bc:.2}/{}of{}",
+                    " {}:t{u}/{d:.0}/{}/s{bt}={bc:.2}/{}of{}/v{}",
                     f.slot,
                     a.tiles.count(),
                     a.groups,
-                    a.hearing.len()
+                    a.hearing.len(),
+                    a.silent_cover
                 );
             }
             println!("{line}");

@@ -55,6 +55,7 @@ fn main() {
             "n_slot" => c.pipeline.n_slot = num() as usize,
             "hear" => c.pipeline.hear_threshold = num(),
             "silent" => c.pipeline.exclude_silent = num() != 0.0,
+            "slack" => c.pipeline.silent_slack = num() as u32,
             "same" => c.pipeline.same_source = num(),
             "maxiter" => c.pipeline.separation.ica.max_iter = num() as usize,
             "tolerance" => c.pipeline.vote_tolerance = num(),

@@ -23,9 +23,10 @@ use super::pipeline::separate::SeparationSettings;
 /// | `aggregate_r2` | 0.9: a candidate two others explain is an aggregate | not given |
 /// | `same_source` | \|corr\| ≥ 0.9: two segments are one source (support, duplicates) | not given |
 /// | `hear_threshold` | \|corr\| ≥ 0.7: a group hears a selected segment (intersection) | "highly correlated" |
-/// | `exclude_silent` | true: of the intersection, keep the points fewest non-hearing groups cover | no (hearing groups only) |
+/// | `exclude_silent` | true: of the intersection, keep the points the fewest *non*-hearing groups' ranges cover | no: hearing groups only |
+/// | `silent_slack` | 1: the fewest and one more (a group can miss a source it should hear) | — |
 /// | `tile` | 5 m | 5 m |
-/// | `vote_tolerance` | 0 m | 0 |
+/// | `vote_tolerance` | 0 m | 0 (overlapping areas) |
 /// | `link_gate` | 50 m (+ `max_speed` × elapsed samples) | none |
 /// | `max_speed` | 0.15 m/sample | speed limit, assumption (4) |
 #[derive(Debug, Clone, PartialEq)]
@@ -44,12 +45,26 @@ pub struct PipelineConfig {
     pub same_source: f64,
     pub hear_threshold: f64,
     pub exclude_silent: bool,
+    /// With `exclude_silent`: also keep points that this many more silent
+    /// groups cover than the fewest.
+    pub silent_slack: u32,
     pub tile: f64,
     pub vote_tolerance: f64,
     pub link_gate: f64,
     pub max_speed: f64,
     /// (group, slot) pairs probed to estimate the noise floor.
     pub noise_probes: usize,
+}
+
+impl PipelineConfig {
+    /// The paper's intersection as written: the ranges of the hearing
+    /// groups only. The default also removes the ranges of the groups that
+    /// do not hear (`exclude_silent`, see `pipeline::intersect` and
+    /// docs/acoustic.md).
+    pub fn paper_intersection(mut self) -> Self {
+        self.exclude_silent = false;
+        self
+    }
 }
 
 impl Default for PipelineConfig {
@@ -68,7 +83,8 @@ impl Default for PipelineConfig {
             aggregate_r2: 0.9,
             same_source: 0.9,
             hear_threshold: 0.7,
-            exclude_silent: false,
+            exclude_silent: true,
+            silent_slack: 1,
             tile: 5.0,
             vote_tolerance: 0.0,
             link_gate: 50.0,

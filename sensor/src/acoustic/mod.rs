@@ -48,4 +48,4 @@ pub mod trace;
 pub use config::{AcousticConfig, OutputConfig, PipelineConfig};
 pub use error::AcousticError;
 pub use field::FieldConfig;
-pub use run::{run, AcousticResult, EstimatedFragment, EstimatedPath};
+pub use run::{run, run_variants, AcousticResult, EstimatedFragment, EstimatedPath};

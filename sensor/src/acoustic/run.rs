@@ -10,7 +10,7 @@
 //! random choice is seeded from the config's seed and the task's index, so
 //! the result does not depend on the number of threads.
 
-use super::config::AcousticConfig;
+use super::config::{AcousticConfig, PipelineConfig};
 use super::error::AcousticError;
 use super::field::Field;
 use super::metrics::tracking::{evaluate, TrackingMetrics};
@@ -143,7 +143,53 @@ pub fn run(
     config: &AcousticConfig,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<AcousticResult, AcousticError> {
+    let mut results = run_variants(config, std::slice::from_ref(&config.pipeline), progress)?;
+    Ok(results.pop().expect("one variant, one result"))
+}
+
+/// Whether two pipeline configs agree on everything up to and including
+/// the selection step, so that one separation can serve both.
+fn same_front(a: &PipelineConfig, b: &PipelineConfig) -> bool {
+    a.n_group == b.n_group
+        && a.l_seg == b.l_seg
+        && a.l_step == b.l_step
+        && a.n_slot == b.n_slot
+        && a.clusters_per_target == b.clusters_per_target
+        && a.linkage == b.linkage
+        && a.separation == b.separation
+        && a.link_candidates == b.link_candidates
+        && a.min_link == b.min_link
+        && a.min_support == b.min_support
+        && a.aggregate_r2 == b.aggregate_r2
+        && a.same_source == b.same_source
+        && a.noise_probes == b.noise_probes
+}
+
+/// Runs the pipeline once up to the selection step (field, separation,
+/// clustering, selection: nearly all the time) and finishes it —
+/// intersection, voting, linking, metrics — once per entry of `variants`,
+/// which may differ from `config.pipeline` only in those later steps
+/// (`hear_threshold`, `exclude_silent`, `silent_slack`, `tile`,
+/// `vote_tolerance`, `link_gate`, `max_speed`). One result per variant, in
+/// order; each result's `config` has its variant's pipeline.
+pub fn run_variants(
+    config: &AcousticConfig,
+    variants: &[PipelineConfig],
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Vec<AcousticResult>, AcousticError> {
     config.validate()?;
+    for variant in variants {
+        if !same_front(&config.pipeline, variant) {
+            return Err(AcousticError::Config(
+                "a variant differs from the run before the intersection step".into(),
+            ));
+        }
+        AcousticConfig {
+            pipeline: variant.clone(),
+            ..config.clone()
+        }
+        .validate()?;
+    }
     let start = Instant::now();
     let p = &config.pipeline;
     let k = config.field.targets;
@@ -151,8 +197,8 @@ pub fn run(
     let seg = Segmentation::new(p.l_seg, p.l_step, config.field.samples)?;
     let v = seg.slots();
     // Progress units: 1 for the field, v for separation, v for links and
-    // selection, v for intersection, 1 for the rest.
-    let total = 3 * v as u64 + 2;
+    // selection, v per variant for intersection, 1 for the rest.
+    let total = (2 + variants.len() as u64) * v as u64 + 2;
     let mut done = 0u64;
     let mut report = |d: u64, progress: &mut dyn FnMut(u64, u64)| {
         if d > done {
@@ -249,6 +295,69 @@ pub fn run(
     times.link_select = t.elapsed().as_secs_f64();
     report(1 + 2 * v as u64, progress);
 
+    let front_secs = start.elapsed().as_secs_f64();
+    let mut results = Vec::with_capacity(variants.len());
+    for (i, variant) in variants.iter().enumerate() {
+        let base = 1 + (2 + i as u64) * v as u64;
+        let config = AcousticConfig {
+            pipeline: variant.clone(),
+            ..config.clone()
+        };
+        let mut result = finish(
+            &config,
+            Front {
+                field: &field,
+                groups: &groups,
+                seg,
+                noise_variance,
+                slots: &slots,
+                chains: &chains,
+                separation,
+                times,
+            },
+            &mut |d| report(base + d, progress),
+        );
+        result.stats.times.total += front_secs;
+        results.push(result);
+    }
+    report(total, progress);
+    Ok(results)
+}
+
+/// What the front end (up to selection) hands to [`finish`].
+struct Front<'a> {
+    field: &'a Field,
+    groups: &'a [SensorGroup],
+    seg: Segmentation,
+    noise_variance: f64,
+    slots: &'a [SlotSegments],
+    chains: &'a [Vec<Chain>],
+    separation: SeparationReport,
+    times: StageTimes,
+}
+
+/// Intersection, voting, linking, metrics and events of one variant.
+/// `progress(d)` reports d of v slots' worth of intersections done.
+fn finish(
+    config: &AcousticConfig,
+    front: Front<'_>,
+    progress: &mut dyn FnMut(u64),
+) -> AcousticResult {
+    let start = Instant::now();
+    let Front {
+        field,
+        groups,
+        seg,
+        noise_variance,
+        slots,
+        chains,
+        separation,
+        mut times,
+    } = front;
+    let p = &config.pipeline;
+    let k = config.field.targets;
+    let threads = config.threads;
+    let v = seg.slots();
     // (5) intersection, once per distinct (slot, segment).
     let t = Instant::now();
     let grid = TileGrid::new(config.field.size, p.tile);
@@ -274,14 +383,13 @@ pub fn run(
         threads,
         |&(j, s)| {
             let hearing = hearing_groups(&slots[j as usize], s as usize, threshold);
-            intersect(&ranges, &hearing, p.exclude_silent)
-        },
-        &mut |d| {
-            report(
-                1 + 2 * v as u64 + d as u64 * v as u64 / area_total,
-                progress,
+            intersect(
+                &ranges,
+                &hearing,
+                p.exclude_silent.then_some(p.silent_slack),
             )
         },
+        &mut |d| progress(d as u64 * v as u64 / area_total),
     );
     let mut areas: Vec<Area> = Vec::new();
     let mut area_source_corr: Vec<Vec<f32>> = Vec::new();
@@ -309,7 +417,7 @@ pub fn run(
         }
     }
     times.intersect = t.elapsed().as_secs_f64();
-    report(1 + 3 * v as u64, progress);
+    progress(v as u64);
 
     // (6) voting and linking.
     let t = Instant::now();
@@ -398,10 +506,7 @@ pub fn run(
     };
     times.metrics = t.elapsed().as_secs_f64();
     times.total = start.elapsed().as_secs_f64();
-    report(total, progress);
-    // Free the big per-slot data before handing back the result.
-    drop(slots);
-    Ok(AcousticResult {
+    AcousticResult {
         config: config.clone(),
         stats: RunStats {
             groups: groups.len(),
@@ -413,8 +518,8 @@ pub fn run(
             dropped,
             times,
         },
-        field,
-        groups,
+        field: field.clone(),
+        groups: groups.to_vec(),
         segmentation: seg,
         areas,
         area_source_corr,
@@ -423,5 +528,63 @@ pub fn run(
         metrics,
         resolution,
         events,
-    })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small() -> AcousticConfig {
+        let mut c = AcousticConfig::paper(250, 3, 5);
+        c.field.size = 800.0;
+        c.field.target_area = 400.0;
+        c.field.samples = 400;
+        c
+    }
+
+    #[test]
+    fn a_small_field_is_tracked_and_variants_match_single_runs() {
+        let config = small();
+        let paper = config.pipeline.clone().paper_intersection();
+        let mut last = (0, 0);
+        let both = run_variants(
+            &config,
+            &[config.pipeline.clone(), paper.clone()],
+            &mut |d, t| {
+                assert!(d >= last.0 && d <= t);
+                last = (d, t);
+            },
+        )
+        .unwrap();
+        assert_eq!(last.0, last.1);
+        assert_eq!(both.len(), 2);
+        let single = run(&config, &mut |_, _| {}).unwrap();
+        let single_paper = run(
+            &AcousticConfig {
+                pipeline: paper.clone(),
+                ..config.clone()
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        for (a, b) in [(&both[0], &single), (&both[1], &single_paper)] {
+            assert_eq!(a.config, b.config);
+            assert_eq!(a.paths, b.paths);
+            assert_eq!(a.metrics, b.metrics);
+        }
+        // Every target is tracked somewhere, to within tens of metres, and
+        // excluding the silent groups' ranges shrinks the areas.
+        let m = &single.metrics;
+        assert!(m.slot_share > 0.15, "{m:?}");
+        assert!(m.mean_error < 40.0, "{m:?}");
+        let mean_area = |r: &AcousticResult| {
+            r.areas.iter().map(|a| a.tiles.count()).sum::<usize>() as f64 / r.areas.len() as f64
+        };
+        assert!(mean_area(&single) < mean_area(&single_paper));
+        // A variant that would separate differently is refused.
+        let mut other = config.pipeline.clone();
+        other.l_step = 20;
+        assert!(run_variants(&config, &[other], &mut |_, _| {}).is_err());
+    }
 }

@@ -19,8 +19,8 @@
 //!
 //! Estimated paths are paired with targets by a minimum-cost assignment
 //! on the time-aligned distance (fragment centroid to the target's
-//! position at the middle of the fragment's slot), since the tracker's
-//! path ids mean nothing. Two extra numbers the paper does not report are
+//! position at the middle of the fragment's slot, summed over the path's
+//! fragments), since the tracker's path ids mean nothing. Two extra numbers the paper does not report are
 //! given beside, because the paper's metrics are blind to them: the
 //! time-aligned error (a path that jumps to another target's track
 //! scores well on the paper's error distance but not on this) and the
@@ -117,7 +117,12 @@ pub fn evaluate(
         let i = (seg.middle(slot).round() as usize).min(pos.len() - 1);
         pos[i]
     };
-    // Pair estimated paths with targets: cost = mean aligned distance.
+    // Pair estimated paths with targets: cost = the aligned distances
+    // summed over the path's fragments, so that a long path goes to the
+    // target it follows and a stray path of two fragments cannot take its
+    // place. (A mean per path, as first written, weighs both alike: a
+    // stray two-fragment path near target A and a long path on A, with
+    // target B never tracked, paired the long path with B.)
     let nonempty: Vec<usize> = (0..paths.len()).filter(|&l| !paths[l].is_empty()).collect();
     let cost: Vec<Vec<f64>> = nonempty
         .iter()
@@ -132,7 +137,6 @@ pub fn evaluate(
                                 .distance(position_at(t, f.slot))
                         })
                         .sum::<f64>()
-                        / paths[l].len() as f64
                 })
                 .collect()
         })
@@ -316,6 +320,47 @@ mod tests {
         assert_eq!(m.points_union, 13 + 49);
         assert!(m.mean_error < 30.0, "{m:?}");
         assert!(m.mean_error_union > 70.0, "{m:?}");
+        // Target A crosses the field (4 m/sample) to where B waits; a long
+        // path follows A, a stray two-fragment path lies 40 m off A's
+        // start. Per-path *mean* costs would pair the long path with B
+        // (about 200 m on average) and the stray with A (40 m); summed
+        // over fragments, the long path is A's.
+        let moving = vec![
+            TruePath {
+                positions: (0..101)
+                    .map(|k| Vec2::new(50.0 + 4.0 * k as f64, 50.0))
+                    .collect(),
+            },
+            TruePath {
+                positions: vec![Vec2::new(450.0, 60.0); 101],
+            },
+        ];
+        let mut on_a = Vec::new();
+        let mut long = Vec::new();
+        let mut stray = Vec::new();
+        for slot in 0..seg.slots() {
+            let p = moving[0].positions[seg.middle(slot).round() as usize];
+            for (off, list) in [(0.0, &mut long), (40.0, &mut stray)] {
+                if off > 0.0 && slot >= 2 {
+                    continue;
+                }
+                let tiles = TileSet::disk_union(&grid, &[p + Vec2::new(0.0, off)], 10.0);
+                on_a.push(Area {
+                    centroid: tiles.centroid(&grid).unwrap(),
+                    tiles,
+                    groups: 1,
+                    hearing: Vec::new(),
+                    silent_cover: 0,
+                });
+                list.push(Fragment {
+                    slot,
+                    area: on_a.len() as u32 - 1,
+                    segment: 0,
+                });
+            }
+        }
+        let m = evaluate(&[long, stray], &on_a, &grid, &moving, &seg);
+        assert_eq!(m.target_of, vec![Some(0), Some(1)]);
         // No paths at all.
         let m = evaluate(&[vec![], vec![]], &areas, &grid, &truth, &seg);
         assert_eq!(m.coverage, 0.0);

@@ -361,6 +361,8 @@ mod tests {
         let corner = TileSet::disk_union(&grid, &[Vec2::new(0.0, 0.0)], 10.0);
         assert_eq!(corner.count(), 6);
         assert_eq!(TileSet::empty(&grid).distance(&a, &grid), f64::INFINITY);
+        assert_eq!(TileSet::from_points(&grid, a.points()), a);
+        assert!(TileSet::from_points(&grid, std::iter::empty()).is_empty());
     }
 
     #[test]
