@@ -27,7 +27,6 @@ use idmesh_belief::identity::{
 use idmesh_belief::{Mix, RadonOptions, Sparsify};
 use std::time::Instant;
 
-
 /// Builds a filter from a known initial assignment.
 type Builder = dyn Fn(&[u32]) -> Box<dyn IdentityFilter>;
 fn main() {

@@ -374,7 +374,7 @@ fn main() {
     // source, for fragments located from a clean segment (|corr| ≥ 0.9
     // with their target's source).
     {
-        let mut bins = vec![(0usize, 0usize); 8];
+        let mut bins = [(0usize, 0usize); 8];
         for (l, path) in r.paths.iter().enumerate() {
             let Some(t) = m.target_of[l] else { continue };
             for f in &path.fragments {

@@ -162,12 +162,19 @@ fn measured(rows: &[Row], pick: impl Fn(&Stats) -> f64) -> [Line; 2] {
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// A tick label without trailing zeros: 400, 0.03, 2.5.
+fn tick(v: &f64) -> String {
+    let s = format!("{v:.2}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
 fn panel(
     area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
     title: &str,
     x_label: &str,
     y_label: &str,
     y_range: Option<(f64, f64)>,
+    legend: SeriesLabelPosition,
     lines: &[Line],
 ) -> DrawResult {
     let xs = lines.iter().flat_map(|l| l.points.iter().map(|p| p.0));
@@ -180,7 +187,8 @@ fn panel(
             .iter()
             .flat_map(|l| l.points.iter().map(|p| p.1))
             .fold(0.0f64, f64::max);
-        (0.0, if top > 0.0 { top * 1.15 } else { 1.0 })
+        // Head room for the legend (upper right).
+        (0.0, if top > 0.0 { top * 1.45 } else { 1.0 })
     });
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 17))
@@ -192,6 +200,8 @@ fn panel(
         .configure_mesh()
         .x_desc(x_label)
         .y_desc(y_label)
+        .x_label_formatter(&tick)
+        .y_label_formatter(&|v| format!("{v:.0}"))
         .light_line_style(WHITE.mix(0.0))
         .draw()?;
     for l in lines {
@@ -209,7 +219,7 @@ fn panel(
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK.mix(0.4))
-        .position(SeriesLabelPosition::UpperRight)
+        .position(legend)
         .draw()?;
     Ok(())
 }
@@ -236,6 +246,7 @@ fn plot(
         x_label,
         "mean error distance (m)",
         None,
+        SeriesLabelPosition::UpperRight,
         &errors,
     )?;
     panel(
@@ -244,6 +255,7 @@ fn plot(
         x_label,
         "percentage of coverage (%)",
         Some((0.0, 105.0)),
+        SeriesLabelPosition::LowerRight,
         &measured(rows, |s| s.coverage),
     )?;
     root.present()?;

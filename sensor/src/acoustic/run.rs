@@ -361,7 +361,7 @@ fn finish(
     // (5) intersection, once per distinct (slot, segment).
     let t = Instant::now();
     let grid = TileGrid::new(config.field.size, p.tile);
-    let ranges = GroupRanges::new(grid, &groups, &field.sensors, config.field.range);
+    let ranges = GroupRanges::new(grid, groups, &field.sensors, config.field.range);
     let mut wanted: Vec<(u32, u32)> = chains
         .iter()
         .enumerate()
