@@ -10,6 +10,7 @@
 //! one pass over the sets. Likewise P(S all red) = Σ_α m_α·W(|α ∪ S|)/W(|α|)
 //! / Σ m_α, and the normalizing constant Z = Σ_x f(x) = e^{log_scale}·Σ m_α.
 
+use super::share::PartialSums;
 use super::RadonBelief;
 use crate::error::BeliefError;
 use crate::event::RedCount;
@@ -28,21 +29,8 @@ impl RadonBelief {
 
     /// P(track t is red) for every track.
     pub fn exact_marginals(&self) -> Result<Vec<f64>, BeliefError> {
-        let total = self.checked_total()?;
-        let mut outside = 0.0;
-        let mut inside = vec![0.0; self.field.tracks];
-        for (atom, &m) in &self.masses {
-            let (i, o) = atom.sizes();
-            let ratio = self.weights.ratio_red(i, o);
-            outside += m * ratio;
-            for &t in atom.red.tracks() {
-                inside[t as usize] += m * (1.0 - ratio);
-            }
-            for &t in atom.blue.tracks() {
-                inside[t as usize] -= m * ratio;
-            }
-        }
-        Ok(inside.into_iter().map(|x| (outside + x) / total).collect())
+        self.checked_total()?;
+        PartialSums::of(&self.masses, &self.weights, self.log_scale).marginals(self.field.tracks)
     }
 
     /// P(every track of `set` is red).

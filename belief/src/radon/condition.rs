@@ -20,17 +20,18 @@ use super::atom::Atom;
 use super::RadonBelief;
 use crate::error::BeliefError;
 use crate::event::Observe;
+use crate::weights::Weights;
 use rustc_hash::FxHashMap;
 use std::collections::hash_map::Entry;
 
 /// The likelihood, rescaled, as the engine applies it.
-struct Update {
+pub(super) struct Update {
     /// Moved into the global scale.
-    scale: f64,
+    pub(super) scale: f64,
     /// Factor on atoms fixing the track red / blue / neither.
     red: f64,
     blue: f64,
-    keep: f64,
+    pub(super) keep: f64,
     /// Weight added to the grown atom (negative only in signed form), and
     /// whether the grown atom fixes the track red (else blue).
     grow: f64,
@@ -38,7 +39,7 @@ struct Update {
 }
 
 impl Update {
-    fn new(observe: &Observe, signed: bool) -> Self {
+    pub(super) fn new(observe: &Observe, signed: bool) -> Self {
         let (a, b) = (observe.red, observe.blue);
         let grow_red = signed || a >= b;
         let keep_raw = if grow_red { b } else { a };
@@ -58,77 +59,98 @@ impl Update {
     }
 }
 
-impl RadonBelief {
-    pub(super) fn condition(&mut self, observe: Observe) -> Result<(), BeliefError> {
-        let t = observe.track;
-        let update = Update::new(&observe, self.options.signed);
-        let partners: Option<Vec<u32>> = self
-            .options
-            .distributed_rule
-            .then(|| self.mixing_log.partners(t).to_vec());
-        // The distributed rule grows only atoms meeting t's mixing log; the
-        // empty atom (kept only when k is unknown, see `expand_empty`) is
-        // grown always, or the belief could never leave the prior.
-        let grows = |atom: &Atom| match &partners {
-            Some(p) => atom.meets(p) || (atom.red.is_empty() && atom.blue.is_empty()),
-            None => true,
-        };
-        let weights = &self.weights;
-        // What the atom says of t: fixed red or blue, or free. An atom whose
-        // free tracks are all forced (|α| = k: the rest are blue; |β| = n − k:
-        // the rest are red) fixes t implicitly; treating it so keeps the
-        // dictionary free of duplicates of the same k-set.
-        let role = |atom: &Atom| -> Option<bool> {
-            atom.fixes(t).or_else(|| {
-                let (i, o) = atom.sizes();
-                if weights.ratio_red(i, o) == 0.0 {
-                    Some(false)
-                } else if weights.ratio_blue(i, o) == 0.0 {
-                    Some(true)
-                } else {
-                    None
-                }
-            })
-        };
-        let growth_ratio = |atom: &Atom| {
-            let (i, o) = atom.sizes();
-            if update.grow_red {
-                weights.ratio_red(i, o)
-            } else {
-                weights.ratio_blue(i, o)
-            }
-        };
+/// Which atoms an observation of t grows into atoms that also fix t.
+#[derive(Debug, Clone, Copy)]
+pub enum Growth<'a> {
+    /// Every atom: exact conditioning (Algorithm 2).
+    All,
+    /// Atoms meeting these tracks (t's mixing log), and the empty atom: the
+    /// distributed rule of Section 5.4 (Algorithm 5).
+    Meeting(&'a [u32]),
+}
 
-        // A read-only pass for the new total first, so that an impossible
-        // observation leaves the belief untouched.
+impl Growth<'_> {
+    fn grows(&self, atom: &Atom) -> bool {
+        match self {
+            Growth::All => true,
+            // The empty atom (kept only when k is unknown, see
+            // `expand_empty`) is grown always, or the belief could never
+            // leave the prior.
+            Growth::Meeting(p) => {
+                atom.meets(p) || (atom.red.is_empty() && atom.blue.is_empty())
+            }
+        }
+    }
+}
+
+/// Conditioning of a collection of masses on an observation of track `t`:
+/// per atom, linear, so a leader's share of the belief is conditioned with
+/// exactly the arithmetic of the whole. Returns nothing; the caller owns
+/// the scale and the normalization.
+pub(super) struct Conditioning<'a> {
+    pub(super) weights: &'a Weights,
+    pub(super) t: u32,
+    pub(super) update: Update,
+    pub(super) growth: Growth<'a>,
+}
+
+impl Conditioning<'_> {
+    /// What the atom says of t: fixed red or blue, or free. An atom whose
+    /// free tracks are all forced (|α| = k: the rest are blue; |β| = n − k:
+    /// the rest are red) fixes t implicitly; treating it so keeps the
+    /// dictionary free of duplicates of the same k-set.
+    fn role(&self, atom: &Atom) -> Option<bool> {
+        atom.fixes(self.t).or_else(|| {
+            let (i, o) = atom.sizes();
+            if self.weights.ratio_red(i, o) == 0.0 {
+                Some(false)
+            } else if self.weights.ratio_blue(i, o) == 0.0 {
+                Some(true)
+            } else {
+                None
+            }
+        })
+    }
+
+    fn growth_ratio(&self, atom: &Atom) -> f64 {
+        let (i, o) = atom.sizes();
+        if self.update.grow_red {
+            self.weights.ratio_red(i, o)
+        } else {
+            self.weights.ratio_blue(i, o)
+        }
+    }
+
+    /// (new total, total of absolute values) without changing anything.
+    pub(super) fn totals(&self, masses: &FxHashMap<Atom, f64>) -> (f64, f64) {
+        let update = &self.update;
         let (mut total, mut size) = (0.0, 0.0);
-        for (atom, &m) in &self.masses {
-            let (kept, grown) = match role(atom) {
+        for (atom, &m) in masses {
+            let (kept, grown) = match self.role(atom) {
                 Some(true) => (update.red * m, 0.0),
                 Some(false) => (update.blue * m, 0.0),
-                None if grows(atom) => (update.keep * m, update.grow * m * growth_ratio(atom)),
+                None if self.growth.grows(atom) => {
+                    (update.keep * m, update.grow * m * self.growth_ratio(atom))
+                }
                 None => (update.keep * m, 0.0),
             };
             total += kept + grown;
             size += kept.abs() + grown.abs();
         }
-        let old_total = self.total_mass();
-        // A signed expansion can cancel to rounding noise where the true
-        // probability is 0: below that noise the observation is impossible.
-        if !(total.is_finite() && total > 1e-12 * size) {
-            return Err(BeliefError::ImpossibleObservation {
-                probability: update.scale * total / old_total,
-            });
-        }
+        (total, size)
+    }
 
+    pub(super) fn apply(&self, masses: &mut FxHashMap<Atom, f64>) {
+        let update = &self.update;
+        let t = self.t;
         let mut added: FxHashMap<Atom, f64> = FxHashMap::default();
-        self.masses.retain(|atom, m| {
-            match role(atom) {
+        masses.retain(|atom, m| {
+            match self.role(atom) {
                 Some(true) => *m *= update.red,
                 Some(false) => *m *= update.blue,
                 None => {
-                    if update.grow != 0.0 && grows(atom) {
-                        let ratio = growth_ratio(atom);
+                    if update.grow != 0.0 && self.growth.grows(atom) {
+                        let ratio = self.growth_ratio(atom);
                         let grown = if update.grow_red {
                             atom.with_red(t)
                         } else {
@@ -142,7 +164,7 @@ impl RadonBelief {
             *m != 0.0
         });
         for (atom, m) in added {
-            match self.masses.entry(atom) {
+            match masses.entry(atom) {
                 Entry::Occupied(mut held) => {
                     *held.get_mut() += m;
                     if *held.get() == 0.0 {
@@ -156,7 +178,37 @@ impl RadonBelief {
                 }
             }
         }
-        self.log_scale += update.scale.ln();
+    }
+}
+
+impl RadonBelief {
+    pub(super) fn condition(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        let partners: Option<Vec<u32>> = self
+            .options
+            .distributed_rule
+            .then(|| self.mixing_log.partners(observe.track).to_vec());
+        let conditioning = Conditioning {
+            weights: &self.weights,
+            t: observe.track,
+            update: Update::new(&observe, self.options.signed),
+            growth: match &partners {
+                Some(p) => Growth::Meeting(p),
+                None => Growth::All,
+            },
+        };
+        // A read-only pass for the new total first, so that an impossible
+        // observation leaves the belief untouched.
+        let (total, size) = conditioning.totals(&self.masses);
+        let old_total = self.total_mass();
+        // A signed expansion can cancel to rounding noise where the true
+        // probability is 0: below that noise the observation is impossible.
+        if !(total.is_finite() && total > 1e-12 * size) {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: conditioning.update.scale * total / old_total,
+            });
+        }
+        conditioning.apply(&mut self.masses);
+        self.log_scale += conditioning.update.scale.ln();
         self.renormalize()
     }
 }

@@ -27,6 +27,8 @@
 //! - [`answer`](self::answer) — exact marginals, P(set all red), normalizer.
 //! - [`threshold`](self::threshold), [`omp`](self::omp) — Section 5.3.
 //! - [`sparsify`](self::sparsify) — when to run which approximation.
+//! - [`share`](self::share) — a leader's share of the belief and the partial
+//!   sums queries are answered from (Section 5.4 as a distributed system).
 //! - [`mixing_log`](self::mixing_log) — per-track mixing partners since the
 //!   last observation, for the distributed rule.
 
@@ -36,10 +38,13 @@ mod condition;
 mod mixing_log;
 pub mod omp;
 mod rollup;
+pub mod share;
 mod sparsify;
 mod threshold;
 
 pub use atom::Atom;
+pub use condition::Growth;
+pub use share::{PartialSums, RadonShare};
 pub use mixing_log::MixingLog;
 pub use omp::OmpOptions;
 pub use sparsify::{Sparsify, SparsifyMethod};

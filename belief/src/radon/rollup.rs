@@ -13,28 +13,33 @@ use rustc_hash::FxHashMap;
 
 impl RadonBelief {
     pub(super) fn rollup(&mut self, mix: Mix) {
-        let (a, b) = (mix.a, mix.b);
-        let keep = 1.0 - mix.swap;
-        // Take out every atom the swap moves; the others are untouched
-        // (Algorithm 1, first branch).
-        let moved: FxHashMap<Atom, f64> = self
-            .masses
-            .extract_if(|atom, _| !atom.invariant_under(a, b))
-            .collect();
-        for (atom, &mass) in &moved {
-            let image = atom.swapped(a, b);
-            // New value of α: p·m_α + (1 − p)·m_{σα}, computed directly (not
-            // as a difference) so that swap = 0 or 1 moves values exactly.
-            let image_mass = moved.get(&image).copied();
-            let value = keep * mass + mix.swap * image_mass.unwrap_or(0.0);
+        rollup_masses(&mut self.masses, mix);
+    }
+}
+
+/// Algorithm 1 on any collection of masses: linear, so it may run on a
+/// leader's share of the belief as well as on the whole.
+pub(super) fn rollup_masses(masses: &mut FxHashMap<Atom, f64>, mix: Mix) {
+    let (a, b) = (mix.a, mix.b);
+    let keep = 1.0 - mix.swap;
+    // Take out every atom the swap moves; the others are untouched
+    // (Algorithm 1, first branch).
+    let moved: FxHashMap<Atom, f64> = masses
+        .extract_if(|atom, _| !atom.invariant_under(a, b))
+        .collect();
+    for (atom, &mass) in &moved {
+        let image = atom.swapped(a, b);
+        // New value of α: p·m_α + (1 − p)·m_{σα}, computed directly (not
+        // as a difference) so that swap = 0 or 1 moves values exactly.
+        let image_mass = moved.get(&image).copied();
+        let value = keep * mass + mix.swap * image_mass.unwrap_or(0.0);
+        if value != 0.0 {
+            masses.insert(atom.clone(), value);
+        }
+        if image_mass.is_none() {
+            let value = mix.swap * mass;
             if value != 0.0 {
-                self.masses.insert(atom.clone(), value);
-            }
-            if image_mass.is_none() {
-                let value = mix.swap * mass;
-                if value != 0.0 {
-                    self.masses.insert(image, value);
-                }
+                masses.insert(image, value);
             }
         }
     }
