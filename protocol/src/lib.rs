@@ -8,8 +8,12 @@
 //! - [`trace`] — the trace format, version 1: one type per line kind
 //!   ([`trace::Line`]), the spec's validity rules, a validating
 //!   [`TraceReader`] and a validating [`TraceWriter`].
+//! - [`wire`] — the distributed runtime's messages (postcard, versioned),
+//!   its key expressions, the routing rule of the event stream and the
+//!   JSON answers of the query API.
 
 pub mod trace;
+pub mod wire;
 
 pub use trace::{
     Header, Identify, Line, Mix, Move, NumberedLine, Observe, Problem, TraceError, TraceReader,

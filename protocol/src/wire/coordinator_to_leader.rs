@@ -1,0 +1,42 @@
+//! What a leader tells the coordinator: its partial sums at a cut (a get on
+//! `P/leader/*/partial?cut=<seq>`) and its counters (`P/leader/*/stats`).
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Partial {
+    pub version: u16,
+    pub leader: String,
+    pub cut: u64,
+    pub log_scale: f64,
+    pub total: f64,
+    pub outside: f64,
+    pub inside: Vec<(u32, f64)>,
+    pub coefficients: u64,
+}
+super::versioned!(Partial, "partial sums");
+
+/// A leader's counters, also the JSON of `P/query/stats` (one per leader).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct LeaderStats {
+    pub version: u16,
+    pub leader: String,
+    /// Stream items applied, and of them mixes, observations, handovers.
+    pub items: u64,
+    pub mixes: u64,
+    pub observations: u64,
+    pub handovers: u64,
+    pub batches: u64,
+    pub bytes_received: u64,
+    pub transfers_sent: u64,
+    pub transfers_received: u64,
+    pub sets_sent: u64,
+    pub bytes_sent: u64,
+    pub follows: u64,
+    pub coefficients: u64,
+    pub tracks_owned: u64,
+    pub tracks_followed: u64,
+    /// The seq of the last item applied.
+    pub position: u64,
+}
+super::versioned!(LeaderStats, "leader stats");

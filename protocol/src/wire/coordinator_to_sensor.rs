@@ -1,0 +1,21 @@
+//! A cut of the event stream for a query: the sensor puts a `Cut` item into
+//! every leader's stream and says where (postcard reply to a get on
+//! `P/sensor/<name>/cut`).
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CutPlaced {
+    pub version: u16,
+    pub sensor: String,
+    /// The seq of the cut item.
+    pub seq: u64,
+    /// Trace events the cut includes (the watermark).
+    pub events: u64,
+    pub leaders: Vec<String>,
+    pub tracks: u32,
+    pub red: Option<u32>,
+    /// The stream is over (the sensor read its whole source).
+    pub finished: bool,
+}
+super::versioned!(CutPlaced, "cut");

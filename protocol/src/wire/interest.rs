@@ -1,0 +1,163 @@
+//! Who receives which item of the event stream. Part of the wire contract:
+//! the sensor routes with it and each leader keeps the same record of what
+//! it is sent, so both agree without talking.
+//!
+//! A leader's *interest* is every track that may appear in one of its sets,
+//! its own tracks among them. It receives an item when the item may change
+//! one of its sets; the sets an item creates only add the item's tracks to
+//! the interest (a mix moves a set from a to b; an observation of t grows
+//! sets into sets with t). Sets that arrive from another leader may carry
+//! tracks beyond it: the receiver then asks the sensor to follow them
+//! ([`leader_to_sensor`](super::leader_to_sensor)). An interest only grows;
+//! pruning can leave it larger than the sets need, which costs traffic, not
+//! correctness.
+
+use super::sensor_to_leader::{Growth, Item};
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Interest {
+    leader: u16,
+    follows: Vec<bool>,
+    count: usize,
+    /// This leader holds φ_∅ (k unknown under the distributed rule): every
+    /// observation grows it.
+    holds_empty: bool,
+}
+
+impl Interest {
+    pub fn new(leader: u16, tracks: usize, holds_empty: bool) -> Self {
+        Interest {
+            leader,
+            follows: vec![false; tracks],
+            count: 0,
+            holds_empty,
+        }
+    }
+
+    pub fn follows(&self, track: u32) -> bool {
+        self.follows.get(track as usize).copied().unwrap_or(false)
+    }
+
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Adds a track; false if it was already followed or is out of range.
+    pub fn add(&mut self, track: u32) -> bool {
+        match self.follows.get_mut(track as usize) {
+            Some(slot) if !*slot => {
+                *slot = true;
+                self.count += 1;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    fn meets(&self, tracks: &[u32]) -> bool {
+        tracks.iter().any(|&t| self.follows(t))
+    }
+
+    /// Whether this leader is sent `item`.
+    pub fn receives(&self, item: &Item) -> bool {
+        match item {
+            Item::Begin(_) | Item::Cut { .. } => true,
+            Item::Mix { a, b, .. } => self.follows(*a) || self.follows(*b),
+            Item::Observe {
+                track,
+                growth,
+                global,
+                ..
+            } => {
+                *global
+                    || self.holds_empty
+                    || self.follows(*track)
+                    || matches!(growth, Growth::Meeting(p) if self.meets(p))
+            }
+            Item::Handover { from, to, .. } => *from == self.leader || *to == self.leader,
+        }
+    }
+
+    /// Grows the interest by what `item` may add to this leader's sets.
+    /// Call for every item this leader receives, in seq order.
+    pub fn note(&mut self, item: &Item) {
+        match item {
+            Item::Begin(begin) => {
+                for (t, &owner) in begin.owners.iter().enumerate() {
+                    if owner == self.leader {
+                        self.add(t as u32);
+                    }
+                }
+            }
+            Item::Mix { a, b, .. } => {
+                if self.follows(*a) || self.follows(*b) {
+                    self.add(*a);
+                    self.add(*b);
+                }
+            }
+            Item::Observe { track, growth, .. } => {
+                let grows = match growth {
+                    Growth::All => true,
+                    Growth::Meeting(p) => self.holds_empty || self.meets(p),
+                };
+                if grows {
+                    self.add(*track);
+                }
+            }
+            Item::Handover { track, to, .. } => {
+                if *to == self.leader {
+                    self.add(*track);
+                }
+            }
+            Item::Cut { .. } => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mix(a: u32, b: u32) -> Item {
+        Item::Mix {
+            a,
+            b,
+            swap: 0.5,
+            owner_a: 0,
+            owner_b: 0,
+        }
+    }
+
+    #[test]
+    fn a_mix_reaches_followers_of_either_track_and_spreads_interest() {
+        let mut i = Interest::new(1, 6, false);
+        i.add(2);
+        assert!(!i.receives(&mix(0, 1)));
+        assert!(i.receives(&mix(2, 5)));
+        i.note(&mix(2, 5));
+        assert!(i.follows(5) && i.len() == 2);
+        i.note(&mix(0, 1));
+        assert!(!i.follows(0));
+    }
+
+    #[test]
+    fn the_distributed_rule_reaches_holders_of_the_mixing_log() {
+        let mut i = Interest::new(0, 6, false);
+        i.add(4);
+        let observe = |track, partners: Vec<u32>| Item::Observe {
+            track,
+            red: 0.8,
+            blue: 0.2,
+            growth: Growth::Meeting(partners),
+            global: false,
+        };
+        assert!(!i.receives(&observe(1, vec![2, 3])));
+        assert!(i.receives(&observe(1, vec![4])));
+        i.note(&observe(1, vec![4]));
+        assert!(i.follows(1));
+    }
+}

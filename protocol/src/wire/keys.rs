@@ -1,0 +1,113 @@
+//! Key expressions. Everything lives under a deployment prefix (default
+//! `idmesh/default`) so that several deployments can share a network.
+//!
+//! | key | who declares | what |
+//! |---|---|---|
+//! | `P/leader/<name>/events` | leader subscribes | its event stream ([`sensor_to_leader`](super::sensor_to_leader)) |
+//! | `P/leader/<name>/transfer` | leader subscribes | sets handed to it ([`leader_to_leader`](super::leader_to_leader)) |
+//! | `P/leader/<name>/partial` | leader queryable | partial sums at a cut |
+//! | `P/leader/<name>/stats` | leader queryable | its counters |
+//! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |
+//! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
+//! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
+//! | `P/alive/<role>/<name>` | every process | liveliness token |
+
+pub const DEFAULT_PREFIX: &str = "idmesh/default";
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Keys {
+    prefix: String,
+}
+
+impl Keys {
+    pub fn new(prefix: impl Into<String>) -> Self {
+        let prefix: String = prefix.into();
+        Keys {
+            prefix: prefix.trim_end_matches('/').to_string(),
+        }
+    }
+
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    pub fn leader_events(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/events", self.prefix)
+    }
+
+    pub fn leader_transfer(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/transfer", self.prefix)
+    }
+
+    pub fn leader_partial(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/partial", self.prefix)
+    }
+
+    pub fn every_leader_partial(&self) -> String {
+        format!("{}/leader/*/partial", self.prefix)
+    }
+
+    pub fn leader_stats(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/stats", self.prefix)
+    }
+
+    pub fn every_leader_stats(&self) -> String {
+        format!("{}/leader/*/stats", self.prefix)
+    }
+
+    pub fn sensor_cut(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/cut", self.prefix)
+    }
+
+    pub fn every_sensor_cut(&self) -> String {
+        format!("{}/sensor/*/cut", self.prefix)
+    }
+
+    pub fn sensor_follow(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/follow", self.prefix)
+    }
+
+    pub fn query_marginals(&self) -> String {
+        format!("{}/query/marginals", self.prefix)
+    }
+
+    pub fn query_track(&self, track: u32) -> String {
+        format!("{}/query/track/{track}", self.prefix)
+    }
+
+    pub fn query_any_track(&self) -> String {
+        format!("{}/query/track/*", self.prefix)
+    }
+
+    pub fn query_stats(&self) -> String {
+        format!("{}/query/stats", self.prefix)
+    }
+
+    pub fn alive(&self, role: &str, name: &str) -> String {
+        format!("{}/alive/{role}/{name}", self.prefix)
+    }
+
+    pub fn alive_role(&self, role: &str) -> String {
+        format!("{}/alive/{role}/*", self.prefix)
+    }
+
+    /// The last chunk of a key: the name in `P/leader/<name>/partial`, the
+    /// track in `P/query/track/<t>`, the name in `P/alive/leader/<name>`.
+    pub fn chunk(key: &str, from_end: usize) -> Option<&str> {
+        key.rsplit('/').nth(from_end)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_sit_under_the_prefix_and_names_can_be_read_back() {
+        let keys = Keys::new("idmesh/test/");
+        assert_eq!(keys.leader_events("l0"), "idmesh/test/leader/l0/events");
+        assert_eq!(keys.query_track(12), "idmesh/test/query/track/12");
+        assert_eq!(Keys::chunk(&keys.leader_partial("l3"), 1), Some("l3"));
+        assert_eq!(Keys::chunk(&keys.alive("leader", "l2"), 0), Some("l2"));
+    }
+}

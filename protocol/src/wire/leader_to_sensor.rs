@@ -1,0 +1,25 @@
+//! A leader that received sets with tracks it did not follow asks the
+//! sensor to route those tracks' events to it from now on, and gets back the
+//! items it was not sent since `after` (postcard, as the payload of a get on
+//! `P/sensor/<name>/follow`).
+
+use super::sensor_to_leader::Sequenced;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Follow {
+    pub version: u16,
+    pub leader: u16,
+    pub after: u64,
+    pub tracks: Vec<u32>,
+}
+super::versioned!(Follow, "follow request");
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Followed {
+    pub version: u16,
+    /// Every item after `after` that touches the tracks (as the interest
+    /// rule grows them), up to the stream's head when the sensor answered.
+    pub items: Vec<Sequenced>,
+}
+super::versioned!(Followed, "follow reply");

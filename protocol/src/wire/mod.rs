@@ -1,0 +1,81 @@
+//! The messages of the distributed runtime, one module per direction (as in
+//! dora's `coordinator_to_daemon`), all encoded with postcard and carrying
+//! [`VERSION`]; the user-facing answers are JSON ([`query`]).
+//!
+//! - [`keys`] — every key expression, under a deployment prefix.
+//! - [`sensor_to_leader`] — the sequenced event stream, in batches.
+//! - [`leader_to_leader`] — sets handed over at a cross-leader mix or a move.
+//! - [`leader_to_sensor`] — a request to follow more tracks, from a seq on.
+//! - [`coordinator_to_sensor`] — a request for a cut of the stream.
+//! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
+//! - [`interest`] — the routing rule both ends of the event stream apply.
+//! - [`query`] — what a user gets back, as JSON.
+
+pub mod coordinator_to_leader;
+pub mod coordinator_to_sensor;
+pub mod interest;
+pub mod keys;
+pub mod leader_to_leader;
+pub mod leader_to_sensor;
+pub mod query;
+pub mod sensor_to_leader;
+
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+/// The version of every postcard message below; a receiver rejects others.
+pub const VERSION: u16 = 1;
+
+/// Why bytes from the network were not a message.
+#[derive(Debug, thiserror::Error)]
+pub enum WireError {
+    #[error("{what}: undecodable ({source})")]
+    Decode {
+        what: &'static str,
+        source: postcard::Error,
+    },
+    #[error("{what}: version {found}, this build speaks {VERSION}")]
+    Version { what: &'static str, found: u16 },
+    #[error("{what}: {problem}")]
+    Invalid {
+        what: &'static str,
+        problem: String,
+    },
+}
+
+/// A message that carries the protocol version.
+pub trait Versioned {
+    const WHAT: &'static str;
+    fn version(&self) -> u16;
+}
+
+pub fn encode<T: Serialize>(message: &T) -> Vec<u8> {
+    // Serializing our own plain types into a Vec cannot fail.
+    postcard::to_allocvec(message).unwrap_or_default()
+}
+
+pub fn decode<T: DeserializeOwned + Versioned>(bytes: &[u8]) -> Result<T, WireError> {
+    let message: T = postcard::from_bytes(bytes).map_err(|source| WireError::Decode {
+        what: T::WHAT,
+        source,
+    })?;
+    if message.version() != VERSION {
+        return Err(WireError::Version {
+            what: T::WHAT,
+            found: message.version(),
+        });
+    }
+    Ok(message)
+}
+
+macro_rules! versioned {
+    ($t:ty, $what:literal) => {
+        impl $crate::wire::Versioned for $t {
+            const WHAT: &'static str = $what;
+            fn version(&self) -> u16 {
+                self.version
+            }
+        }
+    };
+}
+pub(crate) use versioned;

@@ -1,0 +1,83 @@
+//! The event stream from the sensor gateway to one leader.
+//!
+//! The sensor stamps every item with a sequence number that is global to the
+//! deployment (the order in which the sensor read the events) and sends each
+//! leader only the items that concern it (see [`interest`](super::interest)),
+//! in batches, over one FIFO link: a leader that has a batch has every item
+//! meant for it with a smaller seq. `through` says how far the stream has
+//! got even when nothing in it was for this leader.
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Batch {
+    pub version: u16,
+    pub sensor: String,
+    /// Counts batches to this leader from 0: a gap is a lost batch.
+    pub number: u64,
+    /// Every item for this leader with seq ≤ `through` is in this batch or
+    /// an earlier one.
+    pub through: u64,
+    pub items: Vec<Sequenced>,
+}
+super::versioned!(Batch, "event batch");
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sequenced {
+    pub seq: u64,
+    pub item: Item,
+}
+
+/// How an observation grows sets (the conditioning rule in force).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Growth {
+    /// Exact conditioning: every set grows (Algorithm 2).
+    All,
+    /// The distributed rule: sets meeting these tracks (the observed
+    /// track's mixing log) grow (Algorithm 5).
+    Meeting(Vec<u32>),
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Item {
+    /// The start of the stream: the field and who owns which track.
+    Begin(Begin),
+    /// Targets on tracks a and b mixed. `owner_a`/`owner_b` are the leaders
+    /// (indices into `Begin::leaders`) surveilling them at this point.
+    Mix {
+        a: u32,
+        b: u32,
+        swap: f64,
+        owner_a: u16,
+        owner_b: u16,
+    },
+    Observe {
+        track: u32,
+        red: f64,
+        blue: f64,
+        growth: Growth,
+        /// Every leader must apply it: exact conditioning, or a certain
+        /// sighting, which removes the sets that do not fix the track.
+        global: bool,
+    },
+    /// Track `track` left the region of leader `from` for that of `to`.
+    Handover { track: u32, from: u16, to: u16 },
+    /// A consistent cut asked for by a query: every leader computes its
+    /// partial sums here. `events` counts the trace events before it.
+    Cut { events: u64 },
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Begin {
+    pub tracks: u32,
+    /// k, when known.
+    pub red: Option<u32>,
+    pub initial_red: Option<Vec<u32>>,
+    /// The leaders' names, in the order the indices refer to.
+    pub leaders: Vec<String>,
+    /// The owner (leader index) of every track at the start.
+    pub owners: Vec<u16>,
+    pub distributed_rule: bool,
+    /// Each leader's coefficient budget (0 = no pruning).
+    pub budget: u32,
+}
