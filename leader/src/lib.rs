@@ -1,5 +1,19 @@
-//! # idmesh-leader — the leader actor
+//! # idmesh-leader — the leader
 //!
-//! An async process that owns the coefficient sets touching the tracks it
-//! surveils, applies events and exchanges sets with peers (Section 5.4 of the
-//! property-management paper; built by the distributed-runtime issue).
+//! A leader surveils the tracks in its region, holds the coefficient sets
+//! that touch them, applies the events that may change its sets, hands sets
+//! to peers when tracks cross regions or mix across them, and answers the
+//! coordinator with partial sums at consistent cuts (Section 5.4 of the
+//! property-management paper; docs/architecture.md says why it converges).
+//!
+//! A map of the crate:
+//! - [`state`] — [`Leader`], the protocol as a pure state machine.
+//! - [`actor`] — the tokio/Zenoh process around it: [`actor::run`].
+//! - [`error`] — [`LeaderError`].
+
+pub mod actor;
+pub mod error;
+pub mod state;
+
+pub use error::LeaderError;
+pub use state::{combine, field_of, start, Action, Leader};

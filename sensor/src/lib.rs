@@ -39,6 +39,7 @@
 
 pub mod acoustic;
 pub mod events;
+pub mod gateway;
 pub mod geometry;
 pub mod motion;
 pub mod scenario;

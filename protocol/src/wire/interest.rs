@@ -58,6 +58,15 @@ impl Interest {
         }
     }
 
+    /// The followed tracks, in order.
+    pub fn tracks(&self) -> impl Iterator<Item = u32> + '_ {
+        self.follows
+            .iter()
+            .enumerate()
+            .filter(|x| *x.1)
+            .map(|x| x.0 as u32)
+    }
+
     fn meets(&self, tracks: &[u32]) -> bool {
         tracks.iter().any(|&t| self.follows(t))
     }

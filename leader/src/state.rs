@@ -1,0 +1,491 @@
+//! The leader as a pure state machine: items of its event stream in, sets
+//! for other leaders and follow requests out. No I/O, so the whole protocol
+//! can be run in one process by tests (see `tests` below) and the actor in
+//! [`actor`](crate::actor) only moves bytes.
+//!
+//! Section 5.4 of the property-management paper, with one departure: a set
+//! is held by exactly one of the leaders that surveil its tracks (the paper
+//! keeps a replica at each of them). Every item is applied, in seq order, by
+//! every leader whose sets it may change ([`Interest`]), so there are no
+//! replicas to keep consistent: the belief is the sum of the leaders' shares
+//! ([`RadonShare`]), whatever the split.
+//!
+//! Sets move only at the two points where the paper moves them, always to
+//! a leader that takes part in the same item, so the receiver knows to wait:
+//! - a mix of tracks of two leaders (Algorithm 4): after the rollup each
+//!   sends the other the sets left with none of its own tracks (the image
+//!   of a set whose only own track was the mixed one);
+//! - a handover: a track leaves a leader's region; the sets left with none
+//!   of its own tracks go to the new leader.
+//!
+//! The empty set (k unknown) never moves. Thresholding is local, each
+//! leader against its own budget (Section 5.4.3: "fully distributive").
+
+use crate::error::LeaderError;
+use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, PartialSums, RadonOptions, RadonShare};
+use idmesh_belief::{Field, Mix, Observe, RedCount, TrackSet};
+use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
+use idmesh_protocol::wire::interest::Interest;
+use idmesh_protocol::wire::leader_to_leader::{Transfer, WireSet};
+use idmesh_protocol::wire::leader_to_sensor::Follow;
+use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
+use idmesh_protocol::wire::VERSION;
+use std::collections::{BTreeMap, HashMap, VecDeque};
+
+/// How many recent cuts a leader keeps answers for.
+const CUTS_KEPT: usize = 256;
+
+/// What the leader asks its actor to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// Send these sets to leader `to` (an index into `Begin::leaders`).
+    Send { to: u16, transfer: Transfer },
+    /// Ask the sensor to follow more tracks; answer with
+    /// [`Leader::followed`].
+    Follow(Follow),
+    /// The partial sums at a cut are ready.
+    CutReady(Partial),
+}
+
+/// Where the leader is stopped, if anywhere.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Waiting {
+    /// For the sets of leader `from` at item `seq`.
+    Transfer { seq: u64, from: u16 },
+    /// For the sensor's answer to a follow request made at `seq`.
+    Follow { seq: u64 },
+}
+
+struct Started {
+    begin: Begin,
+    share: RadonShare,
+    own: Vec<bool>,
+    interest: Interest,
+}
+
+pub struct Leader {
+    name: String,
+    started: Option<Started>,
+    /// Items received and not yet applied, by seq (duplicates collapse).
+    queue: BTreeMap<u64, Item>,
+    /// Every item for this leader with seq ≤ frontier has been received.
+    frontier: u64,
+    /// Seq of the last item applied (0 before any).
+    position: u64,
+    /// Next batch number expected from the sensor.
+    next_batch: u64,
+    /// Sets that arrived before the leader reached their item.
+    transfers: HashMap<(u64, u16), Vec<WireSet>>,
+    waiting: Option<Waiting>,
+    cuts: VecDeque<Partial>,
+    stats: LeaderStats,
+}
+
+impl Leader {
+    pub fn new(name: impl Into<String>) -> Self {
+        let name = name.into();
+        Leader {
+            stats: LeaderStats {
+                version: VERSION,
+                leader: name.clone(),
+                ..LeaderStats::default()
+            },
+            name,
+            started: None,
+            queue: BTreeMap::new(),
+            frontier: 0,
+            position: 0,
+            next_batch: 0,
+            transfers: HashMap::new(),
+            waiting: None,
+            cuts: VecDeque::new(),
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    pub fn position(&self) -> u64 {
+        self.position
+    }
+
+    pub fn stats(&self) -> LeaderStats {
+        let mut stats = self.stats.clone();
+        stats.position = self.position;
+        if let Some(s) = &self.started {
+            stats.coefficients = s.share.len() as u64;
+            stats.tracks_owned = s.own.iter().filter(|&&o| o).count() as u64;
+            stats.tracks_followed = s.interest.len() as u64;
+        }
+        stats
+    }
+
+    /// Counts bytes the actor sent for this leader.
+    pub fn note_sent(&mut self, bytes: usize) {
+        self.stats.bytes_sent += bytes as u64;
+    }
+
+    /// The answer at cut `seq`, if this leader has passed it recently.
+    pub fn cut(&self, seq: u64) -> Option<&Partial> {
+        self.cuts.iter().find(|p| p.cut == seq)
+    }
+
+    /// The share this leader holds (for tests and diagnostics).
+    pub fn share(&self) -> Option<&RadonShare> {
+        self.started.as_ref().map(|s| &s.share)
+    }
+
+    /// A batch of the event stream arrived.
+    pub fn batch(&mut self, batch: Batch, bytes: usize) -> Result<Vec<Action>, LeaderError> {
+        if batch.number != self.next_batch {
+            return Err(LeaderError::Gap {
+                expected: self.next_batch,
+                got: batch.number,
+            });
+        }
+        self.next_batch += 1;
+        self.stats.batches += 1;
+        self.stats.bytes_received += bytes as u64;
+        for Sequenced { seq, item } in batch.items {
+            if seq > self.position {
+                self.queue.insert(seq, item);
+            }
+            self.frontier = self.frontier.max(seq);
+        }
+        self.frontier = self.frontier.max(batch.through);
+        self.advance()
+    }
+
+    /// Sets from another leader arrived.
+    pub fn transfer(&mut self, transfer: Transfer, bytes: usize) -> Result<Vec<Action>, LeaderError> {
+        self.stats.transfers_received += 1;
+        self.stats.bytes_received += bytes as u64;
+        if transfer.seq <= self.position {
+            return Err(LeaderError::LateTransfer {
+                seq: transfer.seq,
+                from: transfer.from,
+                position: self.position,
+            });
+        }
+        self.transfers
+            .insert((transfer.seq, transfer.from), transfer.sets);
+        self.advance()
+    }
+
+    /// The sensor answered a follow request: the items this leader missed.
+    pub fn followed(&mut self, items: Vec<Sequenced>) -> Result<Vec<Action>, LeaderError> {
+        let Some(Waiting::Follow { seq }) = self.waiting else {
+            return Err(LeaderError::Unexpected("a follow reply nobody asked for"));
+        };
+        for Sequenced { seq: s, item } in items {
+            if s > seq {
+                self.queue.insert(s, item);
+            }
+        }
+        self.waiting = None;
+        self.finish(seq);
+        self.advance()
+    }
+
+    /// Applies queued items in seq order until one must wait.
+    fn advance(&mut self) -> Result<Vec<Action>, LeaderError> {
+        let mut actions = Vec::new();
+        loop {
+            match self.waiting {
+                Some(Waiting::Transfer { seq, from }) => match self.transfers.remove(&(seq, from)) {
+                    Some(sets) => {
+                        self.waiting = None;
+                        self.receive_sets(seq, sets, &mut actions)?;
+                        if self.waiting.is_some() {
+                            return Ok(actions);
+                        }
+                        self.finish(seq);
+                    }
+                    None => return Ok(actions),
+                },
+                Some(Waiting::Follow { .. }) => return Ok(actions),
+                None => {}
+            }
+            let Some((&seq, _)) = self.queue.first_key_value() else {
+                return Ok(actions);
+            };
+            if seq > self.frontier {
+                return Ok(actions);
+            }
+            let item = self.queue.remove(&seq).unwrap_or(Item::Cut { events: 0 });
+            let _span = tracing::debug_span!("item", leader = %self.name, seq).entered();
+            self.apply(seq, item, &mut actions)?;
+            if self.waiting.is_none() {
+                self.finish(seq);
+            }
+        }
+    }
+
+    fn started(&mut self) -> Result<&mut Started, LeaderError> {
+        self.started
+            .as_mut()
+            .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))
+    }
+
+    fn apply(&mut self, seq: u64, item: Item, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+        self.stats.items += 1;
+        if let Item::Begin(begin) = &item {
+            return self.begin(begin.clone());
+        }
+        let me = self.me()?;
+        let started = self.started()?;
+        started.interest.note(&item);
+        match item {
+            Item::Begin(_) => {}
+            Item::Mix {
+                a,
+                b,
+                swap,
+                owner_a,
+                owner_b,
+            } => {
+                self.stats.mixes += 1;
+                let started = self.started()?;
+                started.share.mix(Mix { a, b, swap })?;
+                let other = match (owner_a == me, owner_b == me) {
+                    (true, false) => Some(owner_b),
+                    (false, true) => Some(owner_a),
+                    _ => None,
+                };
+                if let Some(other) = other {
+                    // Algorithm 4: both leaders of a cross-leader mix hand
+                    // over what left their tracks, and wait for the other.
+                    self.send_homeless(seq, other, actions)?;
+                    self.waiting = Some(Waiting::Transfer { seq, from: other });
+                }
+            }
+            Item::Observe {
+                track,
+                red,
+                blue,
+                growth,
+                ..
+            } => {
+                self.stats.observations += 1;
+                let observe = Observe { track, red, blue };
+                let started = self.started()?;
+                match &growth {
+                    Growth::All => started.share.observe(observe, BeliefGrowth::All)?,
+                    Growth::Meeting(p) => started.share.observe(observe, BeliefGrowth::Meeting(p))?,
+                }
+            }
+            Item::Handover { track, from, to } => {
+                self.stats.handovers += 1;
+                let started = self.started()?;
+                let slot = started
+                    .own
+                    .get_mut(track as usize)
+                    .ok_or(LeaderError::Unexpected("a handover of an unknown track"))?;
+                if from == me {
+                    *slot = false;
+                    self.send_homeless(seq, to, actions)?;
+                } else if to == me {
+                    *slot = true;
+                    self.waiting = Some(Waiting::Transfer { seq, from });
+                }
+            }
+            Item::Cut { events: _ } => {
+                let sums = self.started()?.share.partial_sums();
+                let partial = Partial {
+                    version: VERSION,
+                    leader: self.name.clone(),
+                    cut: seq,
+                    log_scale: sums.log_scale,
+                    total: sums.total,
+                    outside: sums.outside,
+                    inside: sums.inside,
+                    coefficients: sums.coefficients,
+                };
+                if self.cuts.len() == CUTS_KEPT {
+                    self.cuts.pop_front();
+                }
+                self.cuts.push_back(partial.clone());
+                actions.push(Action::CutReady(partial));
+            }
+        }
+        Ok(())
+    }
+
+    fn me(&self) -> Result<u16, LeaderError> {
+        let started = self
+            .started
+            .as_ref()
+            .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))?;
+        started
+            .begin
+            .leaders
+            .iter()
+            .position(|l| *l == self.name)
+            .map(|i| i as u16)
+            .ok_or_else(|| LeaderError::NotListed(self.name.clone()))
+    }
+
+    fn begin(&mut self, begin: Begin) -> Result<(), LeaderError> {
+        let me = begin
+            .leaders
+            .iter()
+            .position(|l| *l == self.name)
+            .ok_or_else(|| LeaderError::NotListed(self.name.clone()))? as u16;
+        let (share, interest) = start(&begin, me)?;
+        let own = begin.owners.iter().map(|&o| o == me).collect();
+        self.started = Some(Started {
+            begin,
+            share,
+            own,
+            interest,
+        });
+        Ok(())
+    }
+
+    /// Takes out the sets with none of this leader's tracks (but not φ_∅)
+    /// and sends them to `to` as the transfer of item `seq`.
+    fn send_homeless(&mut self, seq: u64, to: u16, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let own = &started.own;
+        let sets: Vec<WireSet> = started
+            .share
+            .extract(|atom| {
+                let mut tracks = atom.tracks().peekable();
+                tracks.peek().is_some() && !tracks.any(|t| own[t as usize])
+            })
+            .into_iter()
+            .map(|(atom, ln_mass)| WireSet {
+                red: atom.red.tracks().to_vec(),
+                blue: atom.blue.tracks().to_vec(),
+                ln_mass,
+            })
+            .collect();
+        self.stats.transfers_sent += 1;
+        self.stats.sets_sent += sets.len() as u64;
+        actions.push(Action::Send {
+            to,
+            transfer: Transfer {
+                version: VERSION,
+                from: me,
+                seq,
+                sets,
+            },
+        });
+        Ok(())
+    }
+
+    /// Adds sets received at item `seq`; asks to follow tracks they bring.
+    fn receive_sets(&mut self, seq: u64, sets: Vec<WireSet>, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let tracks = started.begin.tracks;
+        let mut atoms = Vec::with_capacity(sets.len());
+        for set in sets {
+            if let Some(&t) = set.red.iter().chain(&set.blue).find(|&&t| t >= tracks) {
+                return Err(LeaderError::BadTransfer(format!("set with track {t} of {tracks}")));
+            }
+            if set.ln_mass.is_nan() || set.ln_mass == f64::INFINITY {
+                return Err(LeaderError::BadTransfer(format!("set with log mass {}", set.ln_mass)));
+            }
+            atoms.push((
+                Atom::new(
+                    TrackSet::from_tracks(set.red.iter().copied()),
+                    TrackSet::from_tracks(set.blue.iter().copied()),
+                ),
+                set.ln_mass,
+            ));
+        }
+        let mut new_tracks: Vec<u32> = Vec::new();
+        for (atom, _) in &atoms {
+            for t in atom.tracks() {
+                if started.interest.add(t) {
+                    new_tracks.push(t);
+                }
+            }
+        }
+        started.share.absorb(atoms);
+        if !new_tracks.is_empty() {
+            new_tracks.sort_unstable();
+            self.stats.follows += 1;
+            actions.push(Action::Follow(Follow {
+                version: VERSION,
+                leader: me,
+                after: seq,
+                tracks: new_tracks,
+            }));
+            self.waiting = Some(Waiting::Follow { seq });
+        }
+        Ok(())
+    }
+
+    /// Item `seq` is fully applied.
+    fn finish(&mut self, seq: u64) {
+        self.position = seq;
+        if let Some(started) = &mut self.started {
+            let budget = started.begin.budget as usize;
+            if budget > 0 {
+                started.share.threshold(budget);
+            }
+        }
+    }
+}
+
+/// Leader `me`'s share of the start belief and its interest: each set
+/// starts with the leader of its first track, φ_∅ with leader 0. The sensor
+/// computes the same to route the first items.
+pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), LeaderError> {
+    let tracks = begin.tracks as usize;
+    if begin.owners.len() != tracks
+        || begin.owners.iter().any(|&o| o as usize >= begin.leaders.len())
+    {
+        return Err(LeaderError::Unexpected(
+            "a Begin whose owners do not match its tracks and leaders",
+        ));
+    }
+    let options = RadonOptions {
+        distributed_rule: begin.distributed_rule,
+        ..RadonOptions::default()
+    };
+    let mut share = RadonShare::start(field_of(begin), &options)?;
+    let owners = &begin.owners;
+    share.extract(|atom| atom.tracks().min().map(|t| owners[t as usize]).unwrap_or(0) != me);
+    let holds_empty = share.atoms().any(|(a, _)| a.tracks().next().is_none());
+    let mut interest = Interest::new(me, tracks, holds_empty);
+    for (atom, _) in share.atoms() {
+        for t in atom.tracks() {
+            interest.add(t);
+        }
+    }
+    interest.note(&Item::Begin(begin.clone()));
+    Ok((share, interest))
+}
+
+/// The field a stream's Begin describes (as `idmesh replay` reads a header).
+pub fn field_of(begin: &Begin) -> Field {
+    let tracks = begin.tracks as usize;
+    Field {
+        tracks,
+        red: match begin.red {
+            Some(k) => RedCount::Known(k as usize),
+            None => RedCount::unknown_uniform(tracks),
+        },
+        initial_red: begin.initial_red.clone(),
+    }
+}
+
+/// The answer to a query from every leader's partial sums.
+pub fn combine(parts: &[Partial]) -> PartialSums {
+    let sums: Vec<PartialSums> = parts
+        .iter()
+        .map(|p| PartialSums {
+            log_scale: p.log_scale,
+            total: p.total,
+            outside: p.outside,
+            inside: p.inside.clone(),
+            coefficients: p.coefficients,
+        })
+        .collect();
+    PartialSums::combine(&sums)
+}

@@ -1,0 +1,12 @@
+//! The sensor gateway: the process that turns a trace (a file or a live
+//! simulation) into the deployment's event stream.
+//!
+//! - [`router`] — sequences the events, keeps the log, and routes each item
+//!   to the leaders whose sets it may change (pure, no I/O).
+//! - [`actor`] — publishes the stream over Zenoh at a rate, places cuts for
+//!   queries and answers leaders' follow requests.
+
+pub mod actor;
+pub mod router;
+
+pub use router::{LeaderPlace, Router, RouterConfig, RouterError};

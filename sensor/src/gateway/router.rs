@@ -1,0 +1,263 @@
+//! Sequencing and routing of the event stream.
+//!
+//! Every trace event becomes an item with the next global seq. The router
+//! knows which leader surveils each track (the nearest leader to the
+//! track's last position, or track mod L before any position), turns a
+//! change of region into a `Handover`, stamps observations with the
+//! observed track's mixing log (the sensor network's log of Section 5.4.2),
+//! and sends each item to the leaders whose [`Interest`] it meets — routed
+//! by key expression, one key per leader, never broadcast and filtered.
+//! The log of every item is kept so that a leader that starts following a
+//! track can be sent what it missed.
+
+use idmesh_belief::radon::{MixingLog, RadonShare};
+use idmesh_leader::LeaderError;
+use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::interest::Interest;
+use idmesh_protocol::wire::leader_to_sensor::Follow;
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
+use idmesh_protocol::Header;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeaderPlace {
+    pub name: String,
+    /// Where the leader sits; tracks belong to the nearest leader. None for
+    /// every leader = tracks stay with leader (track mod L).
+    pub at: Option<(f64, f64)>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RouterConfig {
+    pub sensor: String,
+    pub leaders: Vec<LeaderPlace>,
+    pub distributed_rule: bool,
+    pub budget: u32,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum RouterError {
+    #[error("a deployment needs at least one leader")]
+    NoLeaders,
+    #[error("follow request from leader index {0}, which does not exist")]
+    UnknownLeader(u16),
+    #[error("follow request names track {track}, but there are {tracks} tracks")]
+    UnknownTrack { track: u32, tracks: u32 },
+    #[error(transparent)]
+    Start(#[from] LeaderError),
+}
+
+pub struct Router {
+    config: RouterConfig,
+    begin: Begin,
+    interests: Vec<Interest>,
+    owners: Vec<u16>,
+    mixing_log: MixingLog,
+    seq: u64,
+    events: u64,
+    log: Vec<Sequenced>,
+    outbox: Vec<Vec<Sequenced>>,
+}
+
+impl Router {
+    /// A router for a trace with this header; queues the `Begin` item.
+    pub fn new(config: RouterConfig, header: &Header) -> Result<Self, RouterError> {
+        let leaders = config.leaders.len();
+        if leaders == 0 {
+            return Err(RouterError::NoLeaders);
+        }
+        let tracks = header.tracks;
+        let begin = Begin {
+            tracks: tracks as u32,
+            red: header.red_count().map(|k| k as u32),
+            initial_red: header.initial_red.clone(),
+            leaders: config.leaders.iter().map(|l| l.name.clone()).collect(),
+            owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
+            distributed_rule: config.distributed_rule,
+            budget: config.budget,
+        };
+        let mut interests = Vec::with_capacity(leaders);
+        for me in 0..leaders {
+            interests.push(idmesh_leader::start(&begin, me as u16)?.1);
+        }
+        let mut router = Router {
+            owners: begin.owners.clone(),
+            begin: begin.clone(),
+            interests,
+            mixing_log: MixingLog::new(tracks),
+            seq: 0,
+            events: 0,
+            log: Vec::new(),
+            outbox: vec![Vec::new(); leaders],
+            config,
+        };
+        let seq = router.next_seq();
+        for outbox in &mut router.outbox {
+            outbox.push(Sequenced {
+                seq,
+                item: Item::Begin(begin.clone()),
+            });
+        }
+        Ok(router)
+    }
+
+    pub fn begin(&self) -> &Begin {
+        &self.begin
+    }
+
+    /// The seq of the last item.
+    pub fn seq(&self) -> u64 {
+        self.seq
+    }
+
+    /// Trace events routed so far.
+    pub fn events(&self) -> u64 {
+        self.events
+    }
+
+    pub fn leaders(&self) -> usize {
+        self.outbox.len()
+    }
+
+    fn next_seq(&mut self) -> u64 {
+        self.seq += 1;
+        self.seq
+    }
+
+    /// Routes one trace line (header, truth and identify lines carry no
+    /// event for the property leaders and are skipped).
+    pub fn line(&mut self, line: &Line) {
+        match line {
+            Line::Mix(mix) => {
+                self.events += 1;
+                self.mixing_log.record(mix.a, mix.b);
+                let item = Item::Mix {
+                    a: mix.a,
+                    b: mix.b,
+                    swap: mix.swap,
+                    owner_a: self.owners[mix.a as usize],
+                    owner_b: self.owners[mix.b as usize],
+                };
+                self.route(item);
+            }
+            Line::Observe(observe) => {
+                self.events += 1;
+                let likelihood = idmesh_belief::Observe {
+                    track: observe.track,
+                    red: observe.red,
+                    blue: observe.blue,
+                };
+                let (growth, global) = if self.config.distributed_rule {
+                    (
+                        Growth::Meeting(self.mixing_log.partners(observe.track).to_vec()),
+                        RadonShare::observation_is_global(&likelihood, false),
+                    )
+                } else {
+                    (Growth::All, true)
+                };
+                self.mixing_log.clear(observe.track);
+                self.route(Item::Observe {
+                    track: observe.track,
+                    red: observe.red,
+                    blue: observe.blue,
+                    growth,
+                    global,
+                });
+            }
+            Line::Move(m) => {
+                self.events += 1;
+                let Some(to) = self.nearest(m.x, m.y) else {
+                    return;
+                };
+                let from = self.owners[m.track as usize];
+                if from != to {
+                    self.owners[m.track as usize] = to;
+                    self.route(Item::Handover {
+                        track: m.track,
+                        from,
+                        to,
+                    });
+                }
+            }
+            Line::Header(_) | Line::Truth(_) | Line::Identify(_) => {}
+        }
+    }
+
+    fn nearest(&self, x: f64, y: f64) -> Option<u16> {
+        let mut best: Option<(f64, u16)> = None;
+        for (i, leader) in self.config.leaders.iter().enumerate() {
+            let (lx, ly) = leader.at?;
+            let d = (lx - x).powi(2) + (ly - y).powi(2);
+            if best.is_none_or(|(b, _)| d < b) {
+                best = Some((d, i as u16));
+            }
+        }
+        best.map(|b| b.1)
+    }
+
+    fn route(&mut self, item: Item) {
+        let seq = self.next_seq();
+        for (interest, outbox) in self.interests.iter_mut().zip(&mut self.outbox) {
+            if interest.receives(&item) {
+                interest.note(&item);
+                outbox.push(Sequenced {
+                    seq,
+                    item: item.clone(),
+                });
+            }
+        }
+        self.log.push(Sequenced { seq, item });
+    }
+
+    /// Places a cut in every leader's stream: (seq of the cut, events in it).
+    pub fn cut(&mut self) -> (u64, u64) {
+        let seq = self.next_seq();
+        let item = Item::Cut {
+            events: self.events,
+        };
+        for outbox in &mut self.outbox {
+            outbox.push(Sequenced {
+                seq,
+                item: item.clone(),
+            });
+        }
+        (seq, self.events)
+    }
+
+    /// A leader follows more tracks from `after` on: the items it was not
+    /// sent that touch them (as the interest rule grows them).
+    pub fn follow(&mut self, follow: &Follow) -> Result<Vec<Sequenced>, RouterError> {
+        let leader = follow.leader as usize;
+        let tracks = self.begin.tracks;
+        if leader >= self.interests.len() {
+            return Err(RouterError::UnknownLeader(follow.leader));
+        }
+        if let Some(&track) = follow.tracks.iter().find(|&&t| t >= tracks) {
+            return Err(RouterError::UnknownTrack { track, tracks });
+        }
+        let mut grown = Interest::new(follow.leader, tracks as usize, false);
+        for &t in &follow.tracks {
+            grown.add(t);
+        }
+        // Items are logged in seq order, one per seq except Begin and cuts.
+        let from = self.log.partition_point(|s| s.seq <= follow.after);
+        let mut missed = Vec::new();
+        for sequenced in &self.log[from..] {
+            if matches!(sequenced.item, Item::Mix { .. } | Item::Observe { .. })
+                && grown.receives(&sequenced.item)
+            {
+                grown.note(&sequenced.item);
+                missed.push(sequenced.clone());
+            }
+        }
+        let interest = &mut self.interests[leader];
+        for t in grown.tracks() {
+            interest.add(t);
+        }
+        Ok(missed)
+    }
+
+    /// The items queued for leader `i` since the last call.
+    pub fn take(&mut self, i: usize) -> Vec<Sequenced> {
+        std::mem::take(&mut self.outbox[i])
+    }
+}
