@@ -1,4 +1,18 @@
-//! # idmesh-coordinator — lazy answers to user queries
+//! # idmesh-coordinator — answers user queries lazily
 //!
-//! Collects local results from leaders only when a query asks for them
-//! (built by the distributed-runtime issue).
+//! Nothing is pushed to the coordinator between queries (like the lazy
+//! information matrix of the identity paper). A query asks the sensor
+//! gateway for a cut of the event stream, then every leader for its partial
+//! sums at that cut (Σ m, Σ m·W(|α|+1)/W(|α|) and per track the part of
+//! P(t red)·Z that its sets fix — never the sets), adds them, normalizes and
+//! answers in JSON, with the cut's watermark. A leader that does not answer
+//! in time makes the query fail, naming it.
+//!
+//! A map of the crate:
+//! - [`gather`] — one consistent answer: cut, partial sums, combination.
+//! - [`actor`] — the Zenoh queryables of the user API: [`actor::run`].
+
+pub mod actor;
+pub mod gather;
+
+pub use gather::{Gathered, GatherError};

@@ -29,6 +29,103 @@ pub enum Command {
     /// Run the evaluation grid (methods × scenarios on both cores): print
     /// the tables, write results.md and the SVG plots to --out-dir.
     Eval(EvalArgs),
+    /// Run the sensor gateway of a topology: stream its trace to the leaders.
+    Sensor(RoleArgs),
+    /// Run a leader of a topology.
+    Leader(RoleArgs),
+    /// Run the coordinator of a topology: answer queries.
+    Coordinator(RoleArgs),
+    /// Start every process of a topology on this host; Ctrl-C stops them.
+    Up(UpArgs),
+    /// A coordinator, four leaders and a sensor on loopback, streaming a
+    /// simulated crowd, with live answers; the coordinator listens on
+    /// tcp/127.0.0.1:7447.
+    Demo(DemoArgs),
+    /// Ask a running deployment: marginals, one track, or leader counters.
+    Query(QueryArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RoleArgs {
+    /// The topology file.
+    #[arg(long)]
+    pub config: PathBuf,
+    /// This process's name in it.
+    #[arg(long)]
+    pub name: String,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct UpArgs {
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Start only the processes of this host (default: all).
+    #[arg(long)]
+    pub host: Option<String>,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct DemoArgs {
+    /// Stop streaming after this many events (queries go on until Ctrl-C).
+    #[arg(long)]
+    pub events: Option<u64>,
+    #[arg(long, default_value_t = 40)]
+    pub targets: usize,
+    #[arg(long, default_value_t = 10)]
+    pub red: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Events per second the sensor streams.
+    #[arg(long, default_value_t = 200.0)]
+    pub rate: f64,
+    /// Where the simulated trace and the topology are written.
+    #[arg(long, default_value = "target/idmesh-demo")]
+    pub dir: PathBuf,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct QueryArgs {
+    /// marginals | track | stats
+    pub what: String,
+    /// The track, for `track`.
+    pub track: Option<u32>,
+    /// The coordinator's endpoint.
+    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+    pub connect: String,
+    #[arg(long, default_value = idmesh_protocol::wire::keys::DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// Print the JSON reply as it came.
+    #[arg(long)]
+    pub json: bool,
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+    /// Ask this many times, --interval-ms apart.
+    #[arg(long, default_value_t = 1)]
+    pub repeat: u32,
+    #[arg(long, default_value_t = 1000)]
+    pub interval_ms: u64,
+}
+
+impl QueryArgs {
+    pub fn options(&self) -> anyhow::Result<crate::runtime::query::QueryOptions> {
+        use crate::runtime::query::{QueryOptions, Question};
+        let what = match (self.what.as_str(), self.track) {
+            ("marginals", None) => Question::Marginals,
+            ("stats", None) => Question::Stats,
+            ("track", Some(t)) => Question::Track(t),
+            ("track", None) => anyhow::bail!("query track needs a track number: idmesh query track 12"),
+            (other, _) => anyhow::bail!("unknown query {other:?}: marginals, track T or stats"),
+        };
+        Ok(QueryOptions {
+            what,
+            connect: self.connect.clone(),
+            prefix: self.prefix.clone(),
+            json: self.json,
+            timeout: std::time::Duration::from_millis(self.timeout_ms),
+            repeat: self.repeat,
+            interval: std::time::Duration::from_millis(self.interval_ms),
+        })
+    }
 }
 
 #[derive(Debug, Clone, Args)]

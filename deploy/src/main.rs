@@ -10,6 +10,7 @@ mod eval;
 mod logging;
 mod replay;
 mod replay_identity;
+mod runtime;
 mod simulate;
 
 use clap::Parser;
@@ -52,5 +53,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Sensor(args) => runtime::roles::run(runtime::roles::Role::Sensor, &args.config, &args.name),
+        Command::Leader(args) => runtime::roles::run(runtime::roles::Role::Leader, &args.config, &args.name),
+        Command::Coordinator(args) => {
+            runtime::roles::run(runtime::roles::Role::Coordinator, &args.config, &args.name)
+        }
+        Command::Up(args) => runtime::launch::up(&args.config, args.host.as_deref()),
+        Command::Demo(args) => runtime::launch::demo(&runtime::launch::DemoOptions {
+            events: args.events,
+            targets: args.targets,
+            red: args.red,
+            seed: args.seed,
+            rate: args.rate,
+            dir: args.dir,
+        }),
+        Command::Query(args) => runtime::query::run(&args.options()?),
     }
 }

@@ -1,0 +1,111 @@
+//! The coordinator process: the user API's queryables. Each query is
+//! answered in its own task, with a span, so slow leaders do not hold up
+//! other users.
+
+use crate::gather::{self, GatherError};
+use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::query::{QueryError, StatsAnswer, TrackAnswer};
+use serde::Serialize;
+use std::future::Future;
+use std::time::Duration;
+use tracing::Instrument;
+use zenoh::bytes::Encoding;
+use zenoh::query::Query;
+use zenoh::Session;
+
+#[derive(Debug, Clone)]
+pub struct CoordinatorConfig {
+    pub name: String,
+    pub keys: Keys,
+    /// How long a leader may take to answer.
+    pub timeout: Duration,
+}
+
+pub async fn run(
+    session: Session,
+    config: CoordinatorConfig,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), zenoh::Error> {
+    let keys = config.keys.clone();
+    let marginals = session.declare_queryable(keys.query_marginals()).await?;
+    let tracks = session.declare_queryable(keys.query_any_track()).await?;
+    let stats = session.declare_queryable(keys.query_stats()).await?;
+    let _token = session
+        .liveliness()
+        .declare_token(keys.alive("coordinator", &config.name))
+        .await?;
+    tracing::info!(coordinator = %config.name, "coordinator up");
+    tokio::pin!(shutdown);
+    loop {
+        let (kind, query) = tokio::select! {
+            _ = &mut shutdown => break,
+            q = marginals.recv_async() => ("marginals", q),
+            q = tracks.recv_async() => ("track", q),
+            q = stats.recv_async() => ("stats", q),
+        };
+        let Ok(query) = query else { break };
+        let session = session.clone();
+        let config = config.clone();
+        let span = tracing::info_span!("query", kind, key = %query.key_expr());
+        tokio::spawn(answer(session, config, kind, query).instrument(span));
+    }
+    Ok(())
+}
+
+async fn answer(session: Session, config: CoordinatorConfig, kind: &'static str, query: Query) {
+    let keys = &config.keys;
+    let result: Result<Vec<u8>, String> = match kind {
+        "marginals" => gather::marginals(&session, keys, config.timeout)
+            .await
+            .map(|g| json(&g.answer))
+            .map_err(|e| e.to_string()),
+        "track" => track(&session, &config, &query).await,
+        _ => gather::stats(&session, keys, config.timeout)
+            .await
+            .map(|leaders| json(&StatsAnswer { leaders }))
+            .map_err(|e| e.to_string()),
+    };
+    let sent = match result {
+        Ok(body) => {
+            query
+                .reply(query.key_expr().clone(), body)
+                .encoding(Encoding::APPLICATION_JSON)
+                .await
+        }
+        Err(error) => {
+            tracing::warn!(%error, "query not answered");
+            query
+                .reply_err(json(&QueryError { error }))
+                .encoding(Encoding::APPLICATION_JSON)
+                .await
+        }
+    };
+    if let Err(e) = sent {
+        tracing::warn!(error = %e, "could not send the reply");
+    }
+}
+
+async fn track(session: &Session, config: &CoordinatorConfig, query: &Query) -> Result<Vec<u8>, String> {
+    let key = query.key_expr().as_str();
+    let track: u32 = Keys::chunk(key, 0)
+        .and_then(|t| t.parse().ok())
+        .ok_or_else(|| format!("{key}: the last chunk must be a track number"))?;
+    let gathered = gather::marginals(session, &config.keys, config.timeout)
+        .await
+        .map_err(|e: GatherError| e.to_string())?;
+    let p_red = *gathered.answer.p_red.get(track as usize).ok_or_else(|| {
+        format!(
+            "track {track} is out of range: there are {} tracks",
+            gathered.answer.tracks
+        )
+    })?;
+    Ok(json(&TrackAnswer {
+        watermark: gathered.answer.watermark,
+        track,
+        p_red,
+    }))
+}
+
+fn json(value: &impl Serialize) -> Vec<u8> {
+    serde_json::to_vec(value).unwrap_or_default()
+}

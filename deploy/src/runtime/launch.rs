@@ -1,0 +1,233 @@
+//! `idmesh up` starts the processes of a topology that run on this host,
+//! each as its own OS process, and stops them all on Ctrl-C. `idmesh demo`
+//! is `up` on a built-in loopback topology: it simulates a crowd, streams it
+//! through four leaders, and prints live answers.
+
+use super::mesh::{self, MeshOptions};
+use super::query::ask;
+use super::topology::Topology;
+use anyhow::{bail, Context, Result};
+use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
+use idmesh_protocol::wire::query::MarginalsAnswer;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+pub struct Processes {
+    children: Vec<(String, Child)>,
+}
+
+impl Processes {
+    /// Starts every process of `config` whose host is `host` (all if None).
+    pub fn start(config: &Path, host: Option<&str>) -> Result<Self> {
+        let topology = Topology::load(config)?;
+        let exe = std::env::current_exe().context("cannot find the idmesh binary")?;
+        let mut children = Vec::new();
+        let members: Vec<_> = topology
+            .members()
+            .into_iter()
+            .filter(|m| host.is_none_or(|h| m.host == h))
+            .collect();
+        if members.is_empty() {
+            bail!("{}: no process runs on host {:?}", config.display(), host.unwrap_or(""));
+        }
+        for m in members {
+            let child = Command::new(&exe)
+                .arg(m.role)
+                .arg("--config")
+                .arg(config)
+                .arg("--name")
+                .arg(&m.name)
+                .spawn()
+                .with_context(|| format!("cannot start {} {}", m.role, m.name))?;
+            tracing::info!(role = m.role, name = %m.name, pid = child.id(), "started");
+            children.push((m.name, child));
+        }
+        Ok(Processes { children })
+    }
+
+    /// The first child to exit, if any has.
+    pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
+        for (name, child) in &mut self.children {
+            if let Ok(Some(status)) = child.try_wait() {
+                return Some((name.clone(), status));
+            }
+        }
+        None
+    }
+
+    /// SIGTERM to all, then SIGKILL to whoever is still there after 5 s.
+    pub fn stop(&mut self) {
+        for (_, child) in &mut self.children {
+            // SAFETY: kill(2) on a pid we spawned and have not reaped.
+            unsafe {
+                libc::kill(child.id() as i32, libc::SIGTERM);
+            }
+        }
+        let deadline = Instant::now() + Duration::from_secs(5);
+        for (name, child) in &mut self.children {
+            loop {
+                match child.try_wait() {
+                    Ok(Some(_)) => break,
+                    _ if Instant::now() > deadline => {
+                        tracing::warn!(%name, "did not stop in time; killing it");
+                        let _ = child.kill();
+                        let _ = child.wait();
+                        break;
+                    }
+                    _ => std::thread::sleep(Duration::from_millis(20)),
+                }
+            }
+        }
+        self.children.clear();
+    }
+}
+
+impl Drop for Processes {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// `idmesh up`: runs until Ctrl-C or until a process fails.
+pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
+    let mut processes = Processes::start(config, host)?;
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let failed = runtime.block_on(async {
+        loop {
+            tokio::select! {
+                _ = super::roles::shutdown() => return None,
+                _ = tokio::time::sleep(Duration::from_millis(200)) => {
+                    if let Some(exit) = processes.exited() {
+                        return Some(exit);
+                    }
+                }
+            }
+        }
+    });
+    processes.stop();
+    match failed {
+        Some((name, status)) if !status.success() => bail!("{name} exited with {status}"),
+        _ => Ok(()),
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    pub events: Option<u64>,
+    pub targets: usize,
+    pub red: usize,
+    pub seed: u64,
+    /// Events per second.
+    pub rate: f64,
+    pub dir: PathBuf,
+}
+
+/// `idmesh demo`: a crowd simulated here, four leaders, live answers.
+pub fn demo(options: &DemoOptions) -> Result<()> {
+    std::fs::create_dir_all(&options.dir)
+        .with_context(|| format!("cannot create {}", options.dir.display()))?;
+    let trace = options.dir.join("crowd.jsonl");
+    let exe = std::env::current_exe()?;
+    let status = Command::new(&exe)
+        .args(["simulate", "--model", "crowd", "--duration", "600"])
+        .args(["--targets", &options.targets.to_string()])
+        .args(["--red", &options.red.to_string()])
+        .args(["--seed", &options.seed.to_string()])
+        .arg("--out")
+        .arg(&trace)
+        .status()?;
+    if !status.success() {
+        bail!("the crowd simulation failed");
+    }
+    let corners = field_corners(&trace)?;
+    let config = options.dir.join("topology.toml");
+    std::fs::write(&config, demo_topology(&trace, corners, options))?;
+    eprintln!("demo: topology {} · coordinator on tcp/127.0.0.1:7447 · Ctrl-C stops", config.display());
+    let mut processes = Processes::start(&config, None)?;
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let result = runtime.block_on(watch(&mut processes));
+    processes.stop();
+    result
+}
+
+/// Prints a live answer every second until Ctrl-C.
+async fn watch(processes: &mut Processes) -> Result<()> {
+    let session = mesh::open(&MeshOptions {
+        client: false,
+        listen: vec![],
+        connect: vec!["tcp/127.0.0.1:7447".into()],
+    })
+    .await?;
+    let keys = Keys::new(DEFAULT_PREFIX);
+    let ctrl_c = super::roles::shutdown();
+    tokio::pin!(ctrl_c);
+    loop {
+        tokio::select! {
+            _ = &mut ctrl_c => break,
+            _ = tokio::time::sleep(Duration::from_secs(1)) => {}
+        }
+        if let Some((name, status)) = processes.exited() {
+            bail!("{name} exited with {status}");
+        }
+        let started = Instant::now();
+        match ask(&session, &keys.query_marginals(), Duration::from_secs(3)).await {
+            Ok(body) => {
+                let a: MarginalsAnswer = serde_json::from_slice(&body)?;
+                let events: u64 = a.watermark.values().sum();
+                let sure: Vec<String> = a
+                    .predicted_red
+                    .iter()
+                    .map(|&t| format!("{t}:{:.2}", a.p_red[t as usize]))
+                    .collect();
+                println!(
+                    "{events:>7} events{} · {} sets on {} leaders · {:>5.1} ms · red: {}",
+                    if a.finished { " (all)" } else { "" },
+                    a.coefficients,
+                    a.leaders,
+                    started.elapsed().as_secs_f64() * 1e3,
+                    sure.join(" ")
+                );
+            }
+            Err(e) => println!("query: {e}"),
+        }
+    }
+    let _ = session.close().await;
+    Ok(())
+}
+
+/// The bounding box of the trace's positions: (min x, min y, max x, max y).
+pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
+    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
+    reader.read_header()?;
+    let mut b = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    while let Some(n) = reader.read_line()? {
+        if let idmesh_protocol::Line::Move(m) = n.line {
+            b = (b.0.min(m.x), b.1.min(m.y), b.2.max(m.x), b.3.max(m.y));
+        }
+    }
+    if !b.0.is_finite() {
+        return Ok((0.0, 0.0, 1.0, 1.0));
+    }
+    Ok(b)
+}
+
+fn demo_topology(trace: &Path, (x0, y0, x1, y1): (f64, f64, f64, f64), options: &DemoOptions) -> String {
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let (dx, dy) = ((x1 - x0) / 4.0, (y1 - y0) / 4.0);
+    let mut leaders = String::new();
+    for (i, (sx, sy)) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)].iter().enumerate() {
+        leaders.push_str(&format!(
+            "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{:.3}, {:.3}]\n",
+            7448 + i,
+            cx + sx * dx,
+            cy + sy * dy
+        ));
+    }
+    let events = options.events.map(|n| format!("events = {n}\n")).unwrap_or_default();
+    format!(
+        "prefix = \"{DEFAULT_PREFIX}\"\ndistributed_rule = true\nbudget = 400\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"tcp/127.0.0.1:7447\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:7452\"\ntrace = {:?}\nrate = {}\n{events}{leaders}",
+        trace.display().to_string(),
+        options.rate
+    )
+}

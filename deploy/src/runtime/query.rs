@@ -1,0 +1,132 @@
+//! `idmesh query marginals|track T|stats`: a Zenoh client of the user API.
+//! Human-readable by default, `--json` prints the reply as it came.
+
+use super::mesh::{self, MeshOptions};
+use anyhow::{anyhow, bail, Result};
+use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::query::{MarginalsAnswer, QueryError, StatsAnswer, TrackAnswer};
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+#[derive(Debug, Clone)]
+pub struct QueryOptions {
+    pub what: Question,
+    pub connect: String,
+    pub prefix: String,
+    pub json: bool,
+    pub timeout: Duration,
+    /// Ask this many times (for watching a stream), `interval` apart.
+    pub repeat: u32,
+    pub interval: Duration,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Question {
+    Marginals,
+    Track(u32),
+    Stats,
+}
+
+pub fn run(options: &QueryOptions) -> Result<()> {
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    runtime.block_on(async {
+        let session = mesh::open(&MeshOptions {
+            client: true,
+            listen: vec![],
+            connect: vec![options.connect.clone()],
+        })
+        .await?;
+        let keys = Keys::new(options.prefix.clone());
+        let key = match options.what {
+            Question::Marginals => keys.query_marginals(),
+            Question::Track(t) => keys.query_track(t),
+            Question::Stats => keys.query_stats(),
+        };
+        let mut failures = 0;
+        for i in 0..options.repeat.max(1) {
+            if i > 0 {
+                tokio::time::sleep(options.interval).await;
+            }
+            let started = Instant::now();
+            match ask(&session, &key, options.timeout).await {
+                Ok(body) => print(options, &body, started.elapsed())?,
+                Err(e) => {
+                    failures += 1;
+                    eprintln!("{key}: {e}");
+                }
+            }
+        }
+        let _ = session.close().await;
+        if failures > 0 {
+            bail!("{failures} of {} queries failed", options.repeat.max(1));
+        }
+        Ok(())
+    })
+}
+
+/// One get; the reply body, or the error reply's message.
+pub async fn ask(session: &zenoh::Session, key: &str, timeout: Duration) -> Result<Vec<u8>> {
+    let replies = session
+        .get(key)
+        .timeout(timeout)
+        .await
+        .map_err(|e| anyhow!("{e}"))?;
+    let reply = tokio::time::timeout(timeout + Duration::from_secs(1), replies.recv_async())
+        .await
+        .map_err(|_| anyhow!("no reply within {timeout:?}"))?
+        .map_err(|_| anyhow!("no reply: is the coordinator up and listening there?"))?;
+    match reply.result() {
+        Ok(sample) => Ok(sample.payload().to_bytes().into_owned()),
+        Err(e) => {
+            let body = e.payload().to_bytes();
+            let message = serde_json::from_slice::<QueryError>(&body)
+                .map(|q| q.error)
+                .unwrap_or_else(|_| String::from_utf8_lossy(&body).into_owned());
+            bail!("{message}")
+        }
+    }
+}
+
+fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    if options.json {
+        out.write_all(body)?;
+        writeln!(out)?;
+        return Ok(());
+    }
+    match options.what {
+        Question::Marginals => {
+            let a: MarginalsAnswer = serde_json::from_slice(body)?;
+            let events: Vec<String> = a.watermark.iter().map(|(s, e)| format!("{s}: {e} events")).collect();
+            writeln!(
+                out,
+                "{} ({}) · {} leaders · {} sets · {:.1} ms",
+                events.join(", "),
+                if a.finished { "stream over" } else { "streaming" },
+                a.leaders,
+                a.coefficients,
+                took.as_secs_f64() * 1e3
+            )?;
+            writeln!(out, "predicted red: {:?}", a.predicted_red)?;
+            for (t, p) in a.p_red.iter().enumerate() {
+                writeln!(out, "  track {t:>4}  P(red) = {p:.4}")?;
+            }
+        }
+        Question::Track(_) => {
+            let a: TrackAnswer = serde_json::from_slice(body)?;
+            writeln!(out, "track {}: P(red) = {:.4}", a.track, a.p_red)?;
+        }
+        Question::Stats => {
+            let a: StatsAnswer = serde_json::from_slice(body)?;
+            writeln!(out, "{:<12} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>7}", "leader", "items", "mixes", "observes", "bytes in", "bytes out", "sets", "follows")?;
+            for l in a.leaders {
+                writeln!(
+                    out,
+                    "{:<12} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>7}",
+                    l.leader, l.items, l.mixes, l.observations, l.bytes_received, l.bytes_sent, l.coefficients, l.follows
+                )?;
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,139 @@
+//! `idmesh sensor|leader|coordinator --config T --name N`: one process of a
+//! deployment. Each opens its Zenoh session from the topology (listen on
+//! its endpoint, connect to everyone else's), logs under a span named after
+//! it, and stops cleanly on Ctrl-C or SIGTERM.
+
+use super::mesh::{self, MeshOptions};
+use super::topology::Topology;
+use anyhow::{anyhow, Context, Result};
+use idmesh_coordinator::actor::CoordinatorConfig;
+use idmesh_leader::actor::LeaderConfig;
+use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::TraceReader;
+use idmesh_sensor::gateway::actor::GatewayConfig;
+use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
+use std::path::Path;
+use std::time::Duration;
+use tracing::Instrument;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    Sensor,
+    Leader,
+    Coordinator,
+}
+
+pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
+    let topology = Topology::load(config)?;
+    let member = topology.member(name)?;
+    let expected = match role {
+        Role::Sensor => "sensor",
+        Role::Leader => "leader",
+        Role::Coordinator => "coordinator",
+    };
+    if member.role != expected {
+        return Err(anyhow!("{name:?} is a {} in the topology, not a {expected}", member.role));
+    }
+    let options = MeshOptions {
+        client: false,
+        listen: vec![member.listen.clone()],
+        connect: topology
+            .members()
+            .into_iter()
+            .filter(|m| m.name != name)
+            .map(|m| m.listen)
+            .collect(),
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let span = tracing::info_span!("process", name = %name);
+    runtime.block_on(
+        async move {
+            let session = mesh::open(&options).await?;
+            let keys = Keys::new(topology.prefix.clone());
+            let result = match role {
+                Role::Sensor => sensor(session.clone(), &topology, keys).await,
+                Role::Leader => idmesh_leader::actor::run(
+                    session.clone(),
+                    LeaderConfig {
+                        name: name.to_string(),
+                        keys,
+                        sensor: topology.sensor.name.clone(),
+                        follow_timeout: Duration::from_millis(topology.query_timeout_ms),
+                    },
+                    shutdown(),
+                )
+                .await
+                .map_err(anyhow::Error::from),
+                Role::Coordinator => idmesh_coordinator::actor::run(
+                    session.clone(),
+                    CoordinatorConfig {
+                        name: name.to_string(),
+                        keys,
+                        timeout: Duration::from_millis(topology.query_timeout_ms),
+                    },
+                    shutdown(),
+                )
+                .await
+                .map_err(|e| anyhow!("coordinator: {e}")),
+            };
+            let _ = session.close().await;
+            result
+        }
+        .instrument(span),
+    )
+}
+
+async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Result<()> {
+    let path = topology.trace_path();
+    let mut reader = TraceReader::open(&path)
+        .with_context(|| format!("cannot open trace {}", path.display()))?;
+    let header = reader.read_header()?;
+    let mut lines = Vec::new();
+    while let Some(numbered) = reader.read_line()? {
+        lines.push(numbered.line);
+    }
+    let router = Router::new(
+        RouterConfig {
+            sensor: topology.sensor.name.clone(),
+            leaders: topology
+                .leader
+                .iter()
+                .map(|l| LeaderPlace {
+                    name: l.name.clone(),
+                    at: l.at.map(|[x, y]| (x, y)),
+                })
+                .collect(),
+            distributed_rule: topology.distributed_rule,
+            budget: topology.budget,
+        },
+        &header,
+    )?;
+    let config = GatewayConfig {
+        name: topology.sensor.name.clone(),
+        keys,
+        rate: topology.sensor.rate,
+        realtime: topology.sensor.realtime,
+        limit: topology.sensor.events,
+        wait_for_leaders: Duration::from_secs(60),
+    };
+    idmesh_sensor::gateway::actor::run(session, config, router, lines, shutdown()).await?;
+    Ok(())
+}
+
+/// Ctrl-C or SIGTERM.
+pub async fn shutdown() {
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+        Ok(term) => term,
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+            return;
+        }
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = term.recv() => {}
+    }
+}

@@ -1,0 +1,209 @@
+//! The topology file: every process of a deployment, where it runs and
+//! listens, and the belief settings they share. One file for a whole LAN;
+//! `idmesh up --host NAME` starts the processes of one host.
+//!
+//! ```toml
+//! prefix = "idmesh/default"      # key-expression prefix
+//! distributed_rule = false       # Algorithm 5 instead of exact conditioning
+//! budget = 0                     # sets per leader (0 = no pruning)
+//! query_timeout_ms = 2000
+//!
+//! [coordinator]
+//! name = "coordinator"
+//! listen = "tcp/127.0.0.1:7447"
+//!
+//! [sensor]
+//! name = "sensor-0"
+//! listen = "tcp/127.0.0.1:7452"
+//! trace = "crowd.jsonl"          # relative to this file
+//! rate = 2000                    # events/s; absent = as fast as possible
+//!
+//! [[leader]]
+//! name = "leader-0"
+//! listen = "tcp/127.0.0.1:7448"
+//! at = [10.0, 10.0]              # tracks go to the nearest leader
+//! ```
+
+use anyhow::{bail, Context, Result};
+use idmesh_protocol::wire::keys::DEFAULT_PREFIX;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Topology {
+    #[serde(default = "default_prefix")]
+    pub prefix: String,
+    #[serde(default)]
+    pub distributed_rule: bool,
+    #[serde(default)]
+    pub budget: u32,
+    #[serde(default = "default_timeout")]
+    pub query_timeout_ms: u64,
+    pub coordinator: Process,
+    pub sensor: SensorProcess,
+    pub leader: Vec<LeaderProcess>,
+    /// Where the file was read from (relative paths start there).
+    #[serde(skip)]
+    pub dir: PathBuf,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Process {
+    pub name: String,
+    #[serde(default = "default_host")]
+    pub host: String,
+    pub listen: String,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorProcess {
+    pub name: String,
+    #[serde(default = "default_host")]
+    pub host: String,
+    pub listen: String,
+    pub trace: PathBuf,
+    pub rate: Option<f64>,
+    #[serde(default)]
+    pub realtime: bool,
+    pub events: Option<u64>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LeaderProcess {
+    pub name: String,
+    #[serde(default = "default_host")]
+    pub host: String,
+    pub listen: String,
+    pub at: Option<[f64; 2]>,
+}
+
+fn default_prefix() -> String {
+    DEFAULT_PREFIX.to_string()
+}
+
+fn default_host() -> String {
+    "local".to_string()
+}
+
+fn default_timeout() -> u64 {
+    2000
+}
+
+/// A process of the deployment, whatever its role.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Member {
+    pub role: &'static str,
+    pub name: String,
+    pub host: String,
+    pub listen: String,
+}
+
+impl Topology {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the topology", path.display()))?;
+        let mut topology: Topology =
+            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        topology.dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        topology.check().with_context(|| format!("{}", path.display()))?;
+        Ok(topology)
+    }
+
+    fn check(&self) -> Result<()> {
+        if self.leader.is_empty() {
+            bail!("at least one [[leader]] is needed");
+        }
+        let members = self.members();
+        for (i, m) in members.iter().enumerate() {
+            if members[..i].iter().any(|o| o.name == m.name) {
+                bail!("two processes are named {:?}", m.name);
+            }
+            if members[..i].iter().any(|o| o.listen == m.listen) {
+                bail!("two processes listen on {}", m.listen);
+            }
+        }
+        let placed = self.leader.iter().filter(|l| l.at.is_some()).count();
+        if placed != 0 && placed != self.leader.len() {
+            bail!("give every leader a position (at = [x, y]) or none");
+        }
+        if let Some(rate) = self.sensor.rate {
+            if !(rate.is_finite() && rate > 0.0) {
+                bail!("sensor rate {rate} must be a positive number of events per second");
+            }
+        }
+        Ok(())
+    }
+
+    pub fn members(&self) -> Vec<Member> {
+        let mut all = vec![
+            Member {
+                role: "coordinator",
+                name: self.coordinator.name.clone(),
+                host: self.coordinator.host.clone(),
+                listen: self.coordinator.listen.clone(),
+            },
+            Member {
+                role: "sensor",
+                name: self.sensor.name.clone(),
+                host: self.sensor.host.clone(),
+                listen: self.sensor.listen.clone(),
+            },
+        ];
+        all.extend(self.leader.iter().map(|l| Member {
+            role: "leader",
+            name: l.name.clone(),
+            host: l.host.clone(),
+            listen: l.listen.clone(),
+        }));
+        all
+    }
+
+    pub fn member(&self, name: &str) -> Result<Member> {
+        self.members()
+            .into_iter()
+            .find(|m| m.name == name)
+            .with_context(|| format!("no process named {name:?} in the topology"))
+    }
+
+    pub fn trace_path(&self) -> PathBuf {
+        self.dir.join(&self.sensor.trace)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_topology_with_a_mistake_is_rejected_naming_it() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let good = r#"
+[coordinator]
+name = "c"
+listen = "tcp/127.0.0.1:1"
+[sensor]
+name = "s"
+listen = "tcp/127.0.0.1:2"
+trace = "x.jsonl"
+[[leader]]
+name = "l0"
+listen = "tcp/127.0.0.1:3"
+"#;
+        std::fs::write(&path, good).unwrap();
+        let t = Topology::load(&path).unwrap();
+        assert_eq!(t.members().len(), 3);
+        assert_eq!(t.prefix, DEFAULT_PREFIX);
+        std::fs::write(&path, good.replace(":3", ":2")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("listen on tcp/127.0.0.1:2"), "{e}");
+        std::fs::write(&path, format!("{good}\nbogus = 1\n")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("bogus"), "{e}");
+    }
+}
