@@ -40,6 +40,9 @@ struct Summary {
     seconds: f64,
     error: Option<f64>,
     max_coefficients: usize,
+    /// P(red) of every track after the last event (what a live deployment
+    /// answers at the end of the stream).
+    final_p_red: Option<Vec<f64>>,
 }
 
 /// Replays the trace named by `args` and writes the answers to `out`.
@@ -174,6 +177,7 @@ pub fn replay<R: BufRead>(
         seconds: engine.time.as_secs_f64(),
         error: (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64),
         max_coefficients: engine.max_coefficients,
+        final_p_red: engine.marginals().ok(),
     };
     info!(
         events = summary.events,

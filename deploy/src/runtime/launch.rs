@@ -92,7 +92,7 @@ impl Drop for Processes {
 /// `idmesh up`: runs until Ctrl-C or until a process fails.
 pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
     let mut processes = Processes::start(config, host)?;
-    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     let failed = runtime.block_on(async {
         loop {
             tokio::select! {
@@ -145,7 +145,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     std::fs::write(&config, demo_topology(&trace, corners, options))?;
     eprintln!("demo: topology {} · coordinator on tcp/127.0.0.1:7447 · Ctrl-C stops", config.display());
     let mut processes = Processes::start(&config, None)?;
-    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     let result = runtime.block_on(watch(&mut processes));
     processes.stop();
     result

@@ -28,7 +28,7 @@ pub enum Question {
 }
 
 pub fn run(options: &QueryOptions) -> Result<()> {
-    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
     runtime.block_on(async {
         let session = mesh::open(&MeshOptions {
             client: true,
