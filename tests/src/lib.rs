@@ -1,6 +1,8 @@
 //! Shared pieces of the multi-process tests in `tests/tests/`: each starts
 //! the real `idmesh` binary and checks what a user would see.
 
+pub mod deployment;
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,0 +1,197 @@
+//! A real deployment for a test: a topology on free loopback ports, `idmesh
+//! up` in its own process group, and queries through `idmesh query`.
+
+use crate::idmesh;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub struct Settings {
+    pub leaders: usize,
+    pub distributed_rule: bool,
+    pub budget: u32,
+    /// Events per second; None = as fast as possible.
+    pub rate: Option<f64>,
+}
+
+pub struct Deployment {
+    pub dir: PathBuf,
+    pub coordinator: String,
+    pub prefix: String,
+    up: Child,
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free loopback port")
+}
+
+/// The bounding box of a trace's positions.
+pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
+    let text = std::fs::read_to_string(trace).expect("trace readable");
+    let mut b = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for line in text.lines() {
+        let v: Value = serde_json::from_str(line).expect("trace line is JSON");
+        if v["kind"] == "move" {
+            let (x, y) = (v["x"].as_f64().unwrap(), v["y"].as_f64().unwrap());
+            b = (b.0.min(x), b.1.min(y), b.2.max(x), b.3.max(y));
+        }
+    }
+    b
+}
+
+impl Deployment {
+    /// Starts a deployment streaming `trace`; leaders sit on a grid over the
+    /// trace's field so that tracks cross between them.
+    pub fn start(name: &str, trace: &Path, settings: &Settings) -> Deployment {
+        let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let (x0, y0, x1, y1) = corners(trace);
+        let columns = (settings.leaders as f64).sqrt().ceil() as usize;
+        let rows = settings.leaders.div_ceil(columns);
+        let coordinator = format!("tcp/127.0.0.1:{}", free_port());
+        let prefix = format!("idmesh/test-{name}-{}", std::process::id());
+        let mut toml = format!(
+            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            settings.distributed_rule,
+            settings.budget,
+            free_port(),
+            trace.display().to_string()
+        );
+        if let Some(rate) = settings.rate {
+            toml.push_str(&format!("rate = {rate}\n"));
+        }
+        for i in 0..settings.leaders {
+            let (c, r) = (i % columns, i / columns);
+            let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
+            let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
+            toml.push_str(&format!(
+                "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{x}, {y}]\n",
+                free_port()
+            ));
+        }
+        let config = dir.join("topology.toml");
+        std::fs::write(&config, toml).unwrap();
+        let log = std::fs::File::create(dir.join("up.log")).unwrap();
+        let up = Command::new(idmesh())
+            .args(["up", "--config"])
+            .arg(&config)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("idmesh up starts");
+        Deployment {
+            dir,
+            coordinator,
+            prefix,
+            up,
+        }
+    }
+
+    /// `idmesh query <args> --json`: the parsed replies, or the error text.
+    pub fn query(&self, args: &[&str]) -> Result<Vec<Value>, String> {
+        let output = Command::new(idmesh())
+            .arg("query")
+            .args(args)
+            .args(["--json", "--connect", &self.coordinator, "--prefix", &self.prefix])
+            .output()
+            .expect("idmesh query runs");
+        if !output.status.success() {
+            return Err(String::from_utf8_lossy(&output.stderr).into_owned());
+        }
+        Ok(String::from_utf8_lossy(&output.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).expect("query prints JSON"))
+            .collect())
+    }
+
+    /// The marginals once the whole stream is in, or panics after `patience`.
+    pub fn final_marginals(&self, patience: Duration) -> Value {
+        let started = Instant::now();
+        let mut last = String::new();
+        while started.elapsed() < patience {
+            match self.query(&["marginals", "--timeout-ms", "5000"]) {
+                Ok(replies) if replies[0]["finished"] == true => return replies[0].clone(),
+                Ok(replies) => last = replies[0]["watermark"].to_string(),
+                Err(e) => last = e,
+            }
+            std::thread::sleep(Duration::from_millis(300));
+        }
+        panic!(
+            "no final answer within {patience:?}; last: {last}\n{}",
+            self.log()
+        );
+    }
+
+    /// Waits until the deployment answers a marginals query at all.
+    pub fn first_answer(&self, patience: Duration) -> Value {
+        let started = Instant::now();
+        let mut last = String::new();
+        while started.elapsed() < patience {
+            match self.query(&["marginals", "--timeout-ms", "5000"]) {
+                Ok(replies) => return replies[0].clone(),
+                Err(e) => last = e,
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        panic!("no answer within {patience:?}; last: {last}\n{}", self.log());
+    }
+
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("up.log")).unwrap_or_default()
+    }
+}
+
+impl Drop for Deployment {
+    fn drop(&mut self) {
+        // SIGTERM lets `up` stop its children; then make sure.
+        unsafe {
+            libc::kill(self.up.id() as i32, libc::SIGTERM);
+        }
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.up.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = self.up.kill();
+        let _ = self.up.wait();
+    }
+}
+
+/// `idmesh simulate` a crowd into `dir`.
+pub fn crowd(dir: &Path, targets: usize, red: usize, duration: f64, seed: u64) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let out = dir.join(format!("crowd-{targets}-{red}-{seed}.jsonl"));
+    let status = Command::new(idmesh())
+        .args(["simulate", "--model", "crowd"])
+        .args(["--targets", &targets.to_string(), "--red", &red.to_string()])
+        .args(["--duration", &duration.to_string(), "--seed", &seed.to_string()])
+        .arg("--out")
+        .arg(&out)
+        .stderr(Stdio::null())
+        .status()
+        .expect("simulate runs");
+    assert!(status.success());
+    out
+}
+
+/// The summary line of `idmesh replay` on `trace` with `args`.
+pub fn replay_summary(trace: &Path, args: &[&str]) -> Value {
+    let output = Command::new(idmesh())
+        .arg("replay")
+        .arg("--trace")
+        .arg(trace)
+        .args(args)
+        .output()
+        .expect("replay runs");
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let text = String::from_utf8_lossy(&output.stdout);
+    serde_json::from_str(text.lines().last().expect("a summary line")).unwrap()
+}

@@ -1,0 +1,134 @@
+//! The distributed runtime, as real processes on loopback: the answer of a
+//! deployment equals the centralized engine's.
+
+use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Settings};
+use serde_json::Value;
+use std::time::Duration;
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
+}
+
+/// Exact conditioning, no pruning: through 1, 2, 4 and 8 leaders the
+/// coordinator's marginals equal `idmesh replay --method overcomplete` to
+/// 1e-9, on a crowd whose tracks move between leaders and mix across them.
+#[test]
+fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-exact-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let expected = floats(&central["final_p_red"]);
+    for leaders in [1, 2, 4, 8] {
+        let settings = Settings {
+            leaders,
+            distributed_rule: false,
+            budget: 0,
+            rate: None,
+        };
+        let deployment = Deployment::start(&format!("exact{leaders}"), &trace, &settings);
+        let answer = deployment.final_marginals(Duration::from_secs(60));
+        let got = floats(&answer["p_red"]);
+        assert_eq!(got.len(), expected.len());
+        for (t, (g, e)) in got.iter().zip(&expected).enumerate() {
+            assert!((g - e).abs() < 1e-9, "{leaders} leaders, track {t}: {g} vs {e}");
+        }
+        assert_eq!(answer["leaders"], leaders);
+        let stats = deployment.query(&["stats"]).expect("stats answer");
+        let leaders_stats = stats[0]["leaders"].as_array().unwrap();
+        assert_eq!(leaders_stats.len(), leaders);
+        if leaders > 1 {
+            // Tracks did cross regions, and sets did move between leaders.
+            let handovers: u64 = leaders_stats.iter().map(|l| l["handovers"].as_u64().unwrap()).sum();
+            let sent: u64 = leaders_stats.iter().map(|l| l["sets_sent"].as_u64().unwrap()).sum();
+            assert!(handovers > 0 && sent > 0, "{stats:?}");
+        }
+    }
+}
+
+/// The paper's distributed rule with a budget: the deployment's error at the
+/// end of the stream stays within 0.02 of the centralized run's.
+#[test]
+fn distributed_rule_with_a_budget_stays_within_two_points_of_the_centralized_run() {
+    let dir = std::env::temp_dir().join(format!("idmesh-rule-{}", std::process::id()));
+    let trace = crowd(&dir, 50, 10, 120.0, 9);
+    let central = replay_summary(
+        &trace,
+        &["--method", "threshold", "--budget", "200", "--distributed-rule"],
+    );
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let truth: Vec<u64> = text
+        .lines()
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter(|v| v["kind"] == "truth")
+        .last()
+        .map(|v| v["red"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap()).collect())
+        .expect("the crowd trace has truth lines");
+    let error = |predicted: &[u64]| {
+        let wrong = predicted.iter().filter(|t| !truth.contains(t)).count();
+        2.0 * wrong as f64 / 50.0
+    };
+    let central_p = floats(&central["final_p_red"]);
+    let mut order: Vec<u64> = (0..50).collect();
+    order.sort_by(|a, b| central_p[*b as usize].total_cmp(&central_p[*a as usize]));
+    let central_error = error(&order[..10]);
+    let deployment = Deployment::start(
+        "rule",
+        &trace,
+        &Settings {
+            leaders: 4,
+            distributed_rule: true,
+            budget: 200,
+            rate: None,
+        },
+    );
+    let answer = deployment.final_marginals(Duration::from_secs(60));
+    let predicted: Vec<u64> = answer["predicted_red"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_u64().unwrap())
+        .collect();
+    let distributed_error = error(&predicted);
+    assert!(
+        distributed_error <= central_error + 0.02,
+        "distributed {distributed_error} vs centralized {central_error}"
+    );
+}
+
+/// Queries fired while the stream runs see marginals that sum to k and a
+/// watermark that only moves forward.
+#[test]
+fn queries_during_the_stream_sum_to_k_and_the_watermark_only_grows() {
+    let dir = std::env::temp_dir().join(format!("idmesh-live-{}", std::process::id()));
+    let trace = crowd(&dir, 20, 6, 200.0, 2);
+    let deployment = Deployment::start(
+        "live",
+        &trace,
+        &Settings {
+            leaders: 4,
+            distributed_rule: false,
+            budget: 300,
+            rate: Some(400.0),
+        },
+    );
+    // The first answers may come before the leaders are up: wait for one.
+    deployment.first_answer(Duration::from_secs(30));
+    let replies = deployment
+        .query(&["marginals", "--repeat", "40", "--interval-ms", "50"])
+        .expect("every query answered");
+    let mut last = 0;
+    let mut moved = false;
+    for reply in &replies {
+        let sum: f64 = floats(&reply["p_red"]).iter().sum();
+        assert!((sum - 6.0).abs() < 1e-9, "marginals sum to {sum}: {reply}");
+        let events = reply["watermark"]["sensor-0"].as_u64().unwrap();
+        assert!(events >= last, "watermark went back from {last} to {events}");
+        moved |= events > last && last > 0;
+        last = events;
+    }
+    assert!(moved, "the stream did not advance during the queries");
+}
