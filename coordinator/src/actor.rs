@@ -85,7 +85,11 @@ async fn answer(session: Session, config: CoordinatorConfig, kind: &'static str,
     }
 }
 
-async fn track(session: &Session, config: &CoordinatorConfig, query: &Query) -> Result<Vec<u8>, String> {
+async fn track(
+    session: &Session,
+    config: &CoordinatorConfig,
+    query: &Query,
+) -> Result<Vec<u8>, String> {
     let key = query.key_expr().as_str();
     let track: u32 = Keys::chunk(key, 0)
         .and_then(|t| t.parse().ok())

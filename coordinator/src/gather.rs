@@ -4,9 +4,9 @@ use idmesh_belief::predict_red;
 use idmesh_leader::combine;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
+use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{MarginalsAnswer, Watermark};
-use idmesh_protocol::wire::decode;
 use std::collections::BTreeMap;
 use std::time::Duration;
 use zenoh::query::{ConsolidationMode, QueryTarget};
@@ -61,7 +61,10 @@ pub async fn marginals(
                 Ok(p) if p.cut == cut.seq => {
                     parts.insert(p.leader.clone(), p);
                 }
-                Ok(p) => errors.push(format!("{} answered cut {} for {}", p.leader, p.cut, cut.seq)),
+                Ok(p) => errors.push(format!(
+                    "{} answered cut {} for {}",
+                    p.leader, p.cut, cut.seq
+                )),
                 Err(e) => errors.push(e.to_string()),
             },
             Err(e) => errors.push(String::from_utf8_lossy(&e.payload().to_bytes()).into_owned()),
@@ -103,7 +106,11 @@ pub async fn marginals(
     Ok(Gathered { cut, answer })
 }
 
-async fn place_cut(session: &Session, keys: &Keys, timeout: Duration) -> Result<CutPlaced, GatherError> {
+async fn place_cut(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+) -> Result<CutPlaced, GatherError> {
     let replies = session
         .get(keys.every_sensor_cut())
         .consolidation(ConsolidationMode::None)
@@ -121,7 +128,11 @@ async fn place_cut(session: &Session, keys: &Keys, timeout: Duration) -> Result<
 }
 
 /// Every leader's counters.
-pub async fn stats(session: &Session, keys: &Keys, timeout: Duration) -> Result<Vec<LeaderStats>, GatherError> {
+pub async fn stats(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+) -> Result<Vec<LeaderStats>, GatherError> {
     let replies = session
         .get(keys.every_leader_stats())
         .consolidation(ConsolidationMode::None)

@@ -15,4 +15,4 @@
 pub mod actor;
 pub mod gather;
 
-pub use gather::{Gathered, GatherError};
+pub use gather::{GatherError, Gathered};

@@ -113,7 +113,9 @@ impl QueryArgs {
             ("marginals", None) => Question::Marginals,
             ("stats", None) => Question::Stats,
             ("track", Some(t)) => Question::Track(t),
-            ("track", None) => anyhow::bail!("query track needs a track number: idmesh query track 12"),
+            ("track", None) => {
+                anyhow::bail!("query track needs a track number: idmesh query track 12")
+            }
             (other, _) => anyhow::bail!("unknown query {other:?}: marginals, track T or stats"),
         };
         Ok(QueryOptions {

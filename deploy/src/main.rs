@@ -53,8 +53,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),
         Command::Eval(args) => eval::run(&args),
-        Command::Sensor(args) => runtime::roles::run(runtime::roles::Role::Sensor, &args.config, &args.name),
-        Command::Leader(args) => runtime::roles::run(runtime::roles::Role::Leader, &args.config, &args.name),
+        Command::Sensor(args) => {
+            runtime::roles::run(runtime::roles::Role::Sensor, &args.config, &args.name)
+        }
+        Command::Leader(args) => {
+            runtime::roles::run(runtime::roles::Role::Leader, &args.config, &args.name)
+        }
         Command::Coordinator(args) => {
             runtime::roles::run(runtime::roles::Role::Coordinator, &args.config, &args.name)
         }

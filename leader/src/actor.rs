@@ -16,8 +16,8 @@ use idmesh_protocol::wire::{decode, encode};
 use std::future::Future;
 use std::time::Duration;
 use tokio::sync::mpsc;
-use zenoh::query::{ConsolidationMode, Query, QueryTarget};
 use zenoh::qos::CongestionControl;
+use zenoh::query::{ConsolidationMode, Query, QueryTarget};
 use zenoh::Session;
 
 #[derive(Debug, Clone)]
@@ -62,7 +62,8 @@ pub async fn run(
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
     tracing::info!(leader = %name, "leader up");
 
-    let (followed_tx, mut followed_rx) = mpsc::unbounded_channel::<Result<Vec<Sequenced>, String>>();
+    let (followed_tx, mut followed_rx) =
+        mpsc::unbounded_channel::<Result<Vec<Sequenced>, String>>();
     let mut leader = Leader::new(name.clone());
     let mut held: Vec<(u64, Query)> = Vec::new();
     let mut names: Vec<String> = Vec::new();
@@ -172,7 +173,9 @@ pub async fn run(
                         if cut == partial.cut {
                             reply_partial(&query, &partial).await;
                         } else if cut < partial.cut {
-                            let _ = query.reply_err(format!("cut {cut} was never reached")).await;
+                            let _ = query
+                                .reply_err(format!("cut {cut} was never reached"))
+                                .await;
                         } else {
                             still.push((cut, query));
                         }
@@ -219,12 +222,19 @@ async fn answer_partial(
     held: &mut Vec<(u64, Query)>,
 ) {
     if let Some(failure) = failure {
-        let _ = query.reply_err(format!("leader {} failed: {failure}", leader.name())).await;
+        let _ = query
+            .reply_err(format!("leader {} failed: {failure}", leader.name()))
+            .await;
         return;
     }
-    let cut = query.parameters().get("cut").and_then(|c| c.parse::<u64>().ok());
+    let cut = query
+        .parameters()
+        .get("cut")
+        .and_then(|c| c.parse::<u64>().ok());
     let Some(cut) = cut else {
-        let _ = query.reply_err("a partial-sums query needs cut=<seq>").await;
+        let _ = query
+            .reply_err("a partial-sums query needs cut=<seq>")
+            .await;
         return;
     };
     if let Some(partial) = leader.cut(cut) {
@@ -233,7 +243,10 @@ async fn answer_partial(
         held.push((cut, query));
     } else {
         let _ = query
-            .reply_err(format!("leader {} is past cut {cut} and no longer has it", leader.name()))
+            .reply_err(format!(
+                "leader {} is past cut {cut} and no longer has it",
+                leader.name()
+            ))
             .await;
     }
 }
@@ -243,4 +256,3 @@ async fn reply_partial(query: &Query, partial: &Partial) {
         tracing::warn!(error = %e, "could not answer a partial-sums query");
     }
 }
-

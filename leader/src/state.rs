@@ -158,7 +158,11 @@ impl Leader {
     }
 
     /// Sets from another leader arrived.
-    pub fn transfer(&mut self, transfer: Transfer, bytes: usize) -> Result<Vec<Action>, LeaderError> {
+    pub fn transfer(
+        &mut self,
+        transfer: Transfer,
+        bytes: usize,
+    ) -> Result<Vec<Action>, LeaderError> {
         self.stats.transfers_received += 1;
         self.stats.bytes_received += bytes as u64;
         if transfer.seq <= self.position {
@@ -193,17 +197,19 @@ impl Leader {
         let mut actions = Vec::new();
         loop {
             match self.waiting {
-                Some(Waiting::Transfer { seq, from }) => match self.transfers.remove(&(seq, from)) {
-                    Some(sets) => {
-                        self.waiting = None;
-                        self.receive_sets(seq, sets, &mut actions)?;
-                        if self.waiting.is_some() {
-                            return Ok(actions);
+                Some(Waiting::Transfer { seq, from }) => {
+                    match self.transfers.remove(&(seq, from)) {
+                        Some(sets) => {
+                            self.waiting = None;
+                            self.receive_sets(seq, sets, &mut actions)?;
+                            if self.waiting.is_some() {
+                                return Ok(actions);
+                            }
+                            self.finish(seq);
                         }
-                        self.finish(seq);
+                        None => return Ok(actions),
                     }
-                    None => return Ok(actions),
-                },
+                }
                 Some(Waiting::Follow { .. }) => return Ok(actions),
                 None => {}
             }
@@ -228,7 +234,12 @@ impl Leader {
             .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))
     }
 
-    fn apply(&mut self, seq: u64, item: Item, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+    fn apply(
+        &mut self,
+        seq: u64,
+        item: Item,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
         self.stats.items += 1;
         if let Item::Begin(begin) = &item {
             return self.begin(begin.clone());
@@ -272,7 +283,9 @@ impl Leader {
                 let started = self.started()?;
                 match &growth {
                     Growth::All => started.share.observe(observe, BeliefGrowth::All)?,
-                    Growth::Meeting(p) => started.share.observe(observe, BeliefGrowth::Meeting(p))?,
+                    Growth::Meeting(p) => {
+                        started.share.observe(observe, BeliefGrowth::Meeting(p))?
+                    }
                 }
             }
             Item::Handover { track, from, to } => {
@@ -345,7 +358,12 @@ impl Leader {
 
     /// Takes out the sets with none of this leader's tracks (but not φ_∅)
     /// and sends them to `to` as the transfer of item `seq`.
-    fn send_homeless(&mut self, seq: u64, to: u16, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+    fn send_homeless(
+        &mut self,
+        seq: u64,
+        to: u16,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
         let me = self.me()?;
         let started = self.started()?;
         let own = &started.own;
@@ -377,17 +395,27 @@ impl Leader {
     }
 
     /// Adds sets received at item `seq`; asks to follow tracks they bring.
-    fn receive_sets(&mut self, seq: u64, sets: Vec<WireSet>, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+    fn receive_sets(
+        &mut self,
+        seq: u64,
+        sets: Vec<WireSet>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
         let me = self.me()?;
         let started = self.started()?;
         let tracks = started.begin.tracks;
         let mut atoms = Vec::with_capacity(sets.len());
         for set in sets {
             if let Some(&t) = set.red.iter().chain(&set.blue).find(|&&t| t >= tracks) {
-                return Err(LeaderError::BadTransfer(format!("set with track {t} of {tracks}")));
+                return Err(LeaderError::BadTransfer(format!(
+                    "set with track {t} of {tracks}"
+                )));
             }
             if set.ln_mass.is_nan() || set.ln_mass == f64::INFINITY {
-                return Err(LeaderError::BadTransfer(format!("set with log mass {}", set.ln_mass)));
+                return Err(LeaderError::BadTransfer(format!(
+                    "set with log mass {}",
+                    set.ln_mass
+                )));
             }
             atoms.push((
                 Atom::new(
@@ -438,7 +466,10 @@ impl Leader {
 pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), LeaderError> {
     let tracks = begin.tracks as usize;
     if begin.owners.len() != tracks
-        || begin.owners.iter().any(|&o| o as usize >= begin.leaders.len())
+        || begin
+            .owners
+            .iter()
+            .any(|&o| o as usize >= begin.leaders.len())
     {
         return Err(LeaderError::Unexpected(
             "a Begin whose owners do not match its tracks and leaders",

@@ -32,7 +32,12 @@ fn free_port() -> u16 {
 /// The bounding box of a trace's positions.
 pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     let text = std::fs::read_to_string(trace).expect("trace readable");
-    let mut b = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    let mut b = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
     for line in text.lines() {
         let v: Value = serde_json::from_str(line).expect("trace line is JSON");
         if v["kind"] == "move" {
@@ -47,7 +52,8 @@ impl Deployment {
     /// Starts a deployment streaming `trace`; leaders sit on a grid over the
     /// trace's field so that tracks cross between them.
     pub fn start(name: &str, trace: &Path, settings: &Settings) -> Deployment {
-        let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-deployment-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let (x0, y0, x1, y1) = corners(trace);
@@ -98,7 +104,13 @@ impl Deployment {
         let output = Command::new(idmesh())
             .arg("query")
             .args(args)
-            .args(["--json", "--connect", &self.coordinator, "--prefix", &self.prefix])
+            .args([
+                "--json",
+                "--connect",
+                &self.coordinator,
+                "--prefix",
+                &self.prefix,
+            ])
             .output()
             .expect("idmesh query runs");
         if !output.status.success() {
@@ -139,7 +151,10 @@ impl Deployment {
             }
             std::thread::sleep(Duration::from_millis(100));
         }
-        panic!("no answer within {patience:?}; last: {last}\n{}", self.log());
+        panic!(
+            "no answer within {patience:?}; last: {last}\n{}",
+            self.log()
+        );
     }
 
     pub fn log(&self) -> String {
@@ -172,7 +187,12 @@ pub fn crowd(dir: &Path, targets: usize, red: usize, duration: f64, seed: u64) -
     let status = Command::new(idmesh())
         .args(["simulate", "--model", "crowd"])
         .args(["--targets", &targets.to_string(), "--red", &red.to_string()])
-        .args(["--duration", &duration.to_string(), "--seed", &seed.to_string()])
+        .args([
+            "--duration",
+            &duration.to_string(),
+            "--seed",
+            &seed.to_string(),
+        ])
         .arg("--out")
         .arg(&out)
         .stderr(Stdio::null())
@@ -191,7 +211,11 @@ pub fn replay_summary(trace: &Path, args: &[&str]) -> Value {
         .args(args)
         .output()
         .expect("replay runs");
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let text = String::from_utf8_lossy(&output.stdout);
     serde_json::from_str(text.lines().last().expect("a summary line")).unwrap()
 }

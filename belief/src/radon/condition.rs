@@ -76,9 +76,7 @@ impl Growth<'_> {
             // The empty atom (kept only when k is unknown, see
             // `expand_empty`) is grown always, or the belief could never
             // leave the prior.
-            Growth::Meeting(p) => {
-                atom.meets(p) || (atom.red.is_empty() && atom.blue.is_empty())
-            }
+            Growth::Meeting(p) => atom.meets(p) || (atom.red.is_empty() && atom.blue.is_empty()),
         }
     }
 }

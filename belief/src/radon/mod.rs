@@ -44,9 +44,9 @@ mod threshold;
 
 pub use atom::Atom;
 pub use condition::Growth;
-pub use share::{PartialSums, RadonShare};
 pub use mixing_log::MixingLog;
 pub use omp::OmpOptions;
+pub use share::{PartialSums, RadonShare};
 pub use sparsify::{Sparsify, SparsifyMethod};
 
 use crate::error::BeliefError;

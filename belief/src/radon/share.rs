@@ -137,10 +137,7 @@ impl RadonShare {
             return;
         }
         if self.masses.is_empty() {
-            self.log_scale = atoms
-                .iter()
-                .map(|x| x.1)
-                .fold(f64::NEG_INFINITY, f64::max);
+            self.log_scale = atoms.iter().map(|x| x.1).fold(f64::NEG_INFINITY, f64::max);
         }
         for (atom, ln_mass) in atoms {
             let m = (ln_mass - self.log_scale).exp();
@@ -245,7 +242,11 @@ impl PartialSums {
             .map(|p| p.log_scale)
             .fold(f64::NEG_INFINITY, f64::max);
         let mut sum = PartialSums {
-            log_scale: if log_scale.is_finite() { log_scale } else { 0.0 },
+            log_scale: if log_scale.is_finite() {
+                log_scale
+            } else {
+                0.0
+            },
             coefficients: parts.iter().map(|p| p.coefficients).sum(),
             ..PartialSums::default()
         };
@@ -345,7 +346,9 @@ mod tests {
                     shares[1].absorb(moved);
                 }
                 let parts: Vec<PartialSums> = shares.iter().map(|s| s.partial_sums()).collect();
-                let p = PartialSums::combine(&parts).marginals(field.tracks).unwrap();
+                let p = PartialSums::combine(&parts)
+                    .marginals(field.tracks)
+                    .unwrap();
                 let q = whole.marginals().unwrap();
                 for (x, y) in p.iter().zip(&q) {
                     assert!((x - y).abs() < 1e-9, "step {step}: {p:?} vs {q:?}");

@@ -29,7 +29,11 @@ impl Processes {
             .filter(|m| host.is_none_or(|h| m.host == h))
             .collect();
         if members.is_empty() {
-            bail!("{}: no process runs on host {:?}", config.display(), host.unwrap_or(""));
+            bail!(
+                "{}: no process runs on host {:?}",
+                config.display(),
+                host.unwrap_or("")
+            );
         }
         for m in members {
             let child = Command::new(&exe)
@@ -92,7 +96,10 @@ impl Drop for Processes {
 /// `idmesh up`: runs until Ctrl-C or until a process fails.
 pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
     let mut processes = Processes::start(config, host)?;
-    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()?;
     let failed = runtime.block_on(async {
         loop {
             tokio::select! {
@@ -143,9 +150,15 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     let corners = field_corners(&trace)?;
     let config = options.dir.join("topology.toml");
     std::fs::write(&config, demo_topology(&trace, corners, options))?;
-    eprintln!("demo: topology {} · coordinator on tcp/127.0.0.1:7447 · Ctrl-C stops", config.display());
+    eprintln!(
+        "demo: topology {} · coordinator on tcp/127.0.0.1:7447 · Ctrl-C stops",
+        config.display()
+    );
     let mut processes = Processes::start(&config, None)?;
-    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()?;
     let result = runtime.block_on(watch(&mut processes));
     processes.stop();
     result
@@ -200,7 +213,12 @@ async fn watch(processes: &mut Processes) -> Result<()> {
 pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
     let mut reader = idmesh_protocol::TraceReader::open(trace)?;
     reader.read_header()?;
-    let mut b = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    let mut b = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
     while let Some(n) = reader.read_line()? {
         if let idmesh_protocol::Line::Move(m) = n.line {
             b = (b.0.min(m.x), b.1.min(m.y), b.2.max(m.x), b.3.max(m.y));
@@ -212,11 +230,18 @@ pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
     Ok(b)
 }
 
-fn demo_topology(trace: &Path, (x0, y0, x1, y1): (f64, f64, f64, f64), options: &DemoOptions) -> String {
+fn demo_topology(
+    trace: &Path,
+    (x0, y0, x1, y1): (f64, f64, f64, f64),
+    options: &DemoOptions,
+) -> String {
     let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
     let (dx, dy) = ((x1 - x0) / 4.0, (y1 - y0) / 4.0);
     let mut leaders = String::new();
-    for (i, (sx, sy)) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)].iter().enumerate() {
+    for (i, (sx, sy)) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
+        .iter()
+        .enumerate()
+    {
         leaders.push_str(&format!(
             "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{:.3}, {:.3}]\n",
             7448 + i,
@@ -224,7 +249,10 @@ fn demo_topology(trace: &Path, (x0, y0, x1, y1): (f64, f64, f64, f64), options: 
             cy + sy * dy
         ));
     }
-    let events = options.events.map(|n| format!("events = {n}\n")).unwrap_or_default();
+    let events = options
+        .events
+        .map(|n| format!("events = {n}\n"))
+        .unwrap_or_default();
     format!(
         "prefix = \"{DEFAULT_PREFIX}\"\ndistributed_rule = true\nbudget = 400\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"tcp/127.0.0.1:7447\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:7452\"\ntrace = {:?}\nrate = {}\n{events}{leaders}",
         trace.display().to_string(),

@@ -28,8 +28,16 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
     };
     let mode = if options.client { "client" } else { "peer" };
     set(&mut config, "mode", format!("{mode:?}"))?;
-    set(&mut config, "listen/endpoints", serde_json::to_string(&options.listen)?)?;
-    set(&mut config, "connect/endpoints", serde_json::to_string(&options.connect)?)?;
+    set(
+        &mut config,
+        "listen/endpoints",
+        serde_json::to_string(&options.listen)?,
+    )?;
+    set(
+        &mut config,
+        "connect/endpoints",
+        serde_json::to_string(&options.connect)?,
+    )?;
     set(&mut config, "scouting/multicast/enabled", "false".into())?;
     Ok(config)
 }

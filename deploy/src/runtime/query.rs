@@ -28,7 +28,10 @@ pub enum Question {
 }
 
 pub fn run(options: &QueryOptions) -> Result<()> {
-    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()?;
     runtime.block_on(async {
         let session = mesh::open(&MeshOptions {
             client: true,
@@ -97,12 +100,20 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
     match options.what {
         Question::Marginals => {
             let a: MarginalsAnswer = serde_json::from_slice(body)?;
-            let events: Vec<String> = a.watermark.iter().map(|(s, e)| format!("{s}: {e} events")).collect();
+            let events: Vec<String> = a
+                .watermark
+                .iter()
+                .map(|(s, e)| format!("{s}: {e} events"))
+                .collect();
             writeln!(
                 out,
                 "{} ({}) · {} leaders · {} sets · {:.1} ms",
                 events.join(", "),
-                if a.finished { "stream over" } else { "streaming" },
+                if a.finished {
+                    "stream over"
+                } else {
+                    "streaming"
+                },
                 a.leaders,
                 a.coefficients,
                 took.as_secs_f64() * 1e3
@@ -118,12 +129,23 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
         }
         Question::Stats => {
             let a: StatsAnswer = serde_json::from_slice(body)?;
-            writeln!(out, "{:<12} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>7}", "leader", "items", "mixes", "observes", "bytes in", "bytes out", "sets", "follows")?;
+            writeln!(
+                out,
+                "{:<12} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>7}",
+                "leader", "items", "mixes", "observes", "bytes in", "bytes out", "sets", "follows"
+            )?;
             for l in a.leaders {
                 writeln!(
                     out,
                     "{:<12} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>7}",
-                    l.leader, l.items, l.mixes, l.observations, l.bytes_received, l.bytes_sent, l.coefficients, l.follows
+                    l.leader,
+                    l.items,
+                    l.mixes,
+                    l.observations,
+                    l.bytes_received,
+                    l.bytes_sent,
+                    l.coefficients,
+                    l.follows
                 )?;
             }
         }

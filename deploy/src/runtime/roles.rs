@@ -32,7 +32,10 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
         Role::Coordinator => "coordinator",
     };
     if member.role != expected {
-        return Err(anyhow!("{name:?} is a {} in the topology, not a {expected}", member.role));
+        return Err(anyhow!(
+            "{name:?} is a {} in the topology, not a {expected}",
+            member.role
+        ));
     }
     let options = MeshOptions {
         client: false,

@@ -109,7 +109,9 @@ impl Topology {
         let mut topology: Topology =
             toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         topology.dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        topology.check().with_context(|| format!("{}", path.display()))?;
+        topology
+            .check()
+            .with_context(|| format!("{}", path.display()))?;
         Ok(topology)
     }
 

@@ -37,10 +37,7 @@ pub enum WireError {
     #[error("{what}: version {found}, this build speaks {VERSION}")]
     Version { what: &'static str, found: u16 },
     #[error("{what}: {problem}")]
-    Invalid {
-        what: &'static str,
-        problem: String,
-    },
+    Invalid { what: &'static str, problem: String },
 }
 
 /// A message that carries the protocol version.
