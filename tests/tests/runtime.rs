@@ -78,9 +78,9 @@ fn distributed_rule_with_a_budget_stays_within_two_points_of_the_centralized_run
     let text = std::fs::read_to_string(&trace).unwrap();
     let truth: Vec<u64> = text
         .lines()
+        .rev()
         .filter_map(|l| serde_json::from_str::<Value>(l).ok())
-        .filter(|v| v["kind"] == "truth")
-        .last()
+        .find(|v| v["kind"] == "truth")
         .map(|v| {
             v["red"]
                 .as_array()
