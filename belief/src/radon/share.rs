@@ -19,6 +19,7 @@
 use super::atom::Atom;
 use super::condition::{Conditioning, Growth, Update};
 use super::rollup::rollup_masses;
+use super::threshold::split_off_lightest;
 use super::{RadonBelief, RadonOptions};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
@@ -151,28 +152,7 @@ impl RadonShare {
 
     /// Keeps the `budget` heaviest atoms (Section 5.3.2): fully local.
     pub fn threshold(&mut self, budget: usize) -> usize {
-        if self.masses.len() <= budget {
-            return 0;
-        }
-        let mut sizes: Vec<f64> = self.masses.values().map(|m| m.abs()).collect();
-        let keep = budget.max(1);
-        let cut = *sizes
-            .select_nth_unstable_by(keep - 1, |x, y| y.total_cmp(x))
-            .1;
-        let mut ties = keep - sizes[..keep].iter().filter(|&&x| x > cut).count();
-        let before = self.masses.len();
-        self.masses.retain(|_, m| {
-            let size = m.abs();
-            if size > cut {
-                true
-            } else if size == cut && ties > 0 {
-                ties -= 1;
-                true
-            } else {
-                false
-            }
-        });
-        before - self.masses.len()
+        split_off_lightest(&mut self.masses, budget.max(1)).len()
     }
 
     /// The sums this share contributes to the marginals.

@@ -8,41 +8,50 @@
 use super::atom::Atom;
 use super::RadonBelief;
 use crate::error::BeliefError;
+use rustc_hash::FxHashMap;
+
+/// Keeps the `keep` heaviest atoms of `masses`; returns the removed ones (in
+/// no particular order). Selects on a copy of the weights and removes in
+/// place, so kept atoms are not rehashed.
+pub(super) fn split_off_lightest(
+    masses: &mut FxHashMap<Atom, f64>,
+    keep: usize,
+) -> Vec<(Atom, f64)> {
+    if masses.len() <= keep {
+        return Vec::new();
+    }
+    let mut sizes: Vec<f64> = masses.values().map(|m| m.abs()).collect();
+    let cut = if keep == 0 {
+        f64::INFINITY
+    } else {
+        *sizes
+            .select_nth_unstable_by(keep - 1, |x, y| y.total_cmp(x))
+            .1
+    };
+    // Atoms strictly heavier than the cut all stay; ties at the cut fill
+    // the remaining places.
+    let mut ties = keep - sizes[..keep].iter().filter(|&&x| x > cut).count();
+    let mut removed = Vec::with_capacity(masses.len() - keep);
+    for (atom, m) in masses.extract_if(|_, m| {
+        let size = m.abs();
+        if size > cut {
+            false
+        } else if size == cut && ties > 0 {
+            ties -= 1;
+            false
+        } else {
+            true
+        }
+    }) {
+        removed.push((atom, m));
+    }
+    removed
+}
 
 impl RadonBelief {
-    /// Keeps the `keep` heaviest atoms; returns the removed ones (in no
-    /// particular order) so that OMP can re-express part of them. Selects on a copy of
-    /// the weights and removes in place, so kept atoms are not rehashed.
+    /// The removed atoms are returned so that OMP can re-express part of them.
     pub(super) fn split_off_lightest(&mut self, keep: usize) -> Vec<(Atom, f64)> {
-        if self.masses.len() <= keep {
-            return Vec::new();
-        }
-        let mut sizes: Vec<f64> = self.masses.values().map(|m| m.abs()).collect();
-        let cut = if keep == 0 {
-            f64::INFINITY
-        } else {
-            *sizes
-                .select_nth_unstable_by(keep - 1, |x, y| y.total_cmp(x))
-                .1
-        };
-        // Atoms strictly heavier than the cut all stay; ties at the cut fill
-        // the remaining places.
-        let mut ties = keep - sizes[..keep].iter().filter(|&&x| x > cut).count();
-        let mut removed = Vec::with_capacity(self.masses.len() - keep);
-        for (atom, m) in self.masses.extract_if(|_, m| {
-            let size = m.abs();
-            if size > cut {
-                false
-            } else if size == cut && ties > 0 {
-                ties -= 1;
-                false
-            } else {
-                true
-            }
-        }) {
-            removed.push((atom, m));
-        }
-        removed
+        split_off_lightest(&mut self.masses, keep)
     }
 
     /// Thresholds down to `budget` atoms and renormalizes.
