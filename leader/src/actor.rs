@@ -66,7 +66,6 @@ pub async fn run(
         mpsc::unbounded_channel::<Result<Vec<Sequenced>, String>>();
     let mut leader = Leader::new(name.clone());
     let mut held: Vec<(u64, Query)> = Vec::new();
-    let mut names: Vec<String> = Vec::new();
     let mut failure: Option<String> = None;
     tokio::pin!(shutdown);
 
@@ -77,14 +76,7 @@ pub async fn run(
                 let Ok(sample) = sample else { break };
                 let bytes = sample.payload().to_bytes();
                 match decode::<Batch>(&bytes) {
-                    Ok(batch) => {
-                        if let Some(idmesh_protocol::wire::sensor_to_leader::Item::Begin(begin)) =
-                            batch.items.first().map(|s| &s.item)
-                        {
-                            names = begin.leaders.clone();
-                        }
-                        leader.batch(batch, bytes.len())
-                    }
+                    Ok(batch) => leader.batch(batch, bytes.len()),
                     Err(e) => {
                         tracing::error!(leader = %name, error = %e, "dropped an undecodable batch");
                         continue;
@@ -142,7 +134,7 @@ pub async fn run(
         for action in actions {
             match action {
                 Action::Send { to, transfer } => {
-                    let Some(peer) = names.get(to as usize) else {
+                    let Some(peer) = leader.peer(to).map(str::to_owned) else {
                         failure = Some(format!("transfer to unknown leader index {to}"));
                         continue;
                     };
@@ -150,7 +142,7 @@ pub async fn run(
                     tracing::debug!(leader = %name, to = %peer, seq = transfer.seq, sets = transfer.sets.len(), "hand over sets");
                     leader.note_sent(body.len());
                     if let Err(e) = session
-                        .put(keys.leader_transfer(peer), body)
+                        .put(keys.leader_transfer(&peer), body)
                         .congestion_control(CongestionControl::Block)
                         .await
                     {

@@ -57,6 +57,8 @@ enum Waiting {
 }
 
 struct Started {
+    /// This leader's index in `begin.leaders`.
+    me: u16,
     begin: Begin,
     share: RadonShare,
     own: Vec<bool>,
@@ -213,13 +215,13 @@ impl Leader {
                 Some(Waiting::Follow { .. }) => return Ok(actions),
                 None => {}
             }
-            let Some((&seq, _)) = self.queue.first_key_value() else {
+            let Some(next) = self.queue.first_entry() else {
                 return Ok(actions);
             };
-            if seq > self.frontier {
+            if *next.key() > self.frontier {
                 return Ok(actions);
             }
-            let item = self.queue.remove(&seq).unwrap_or(Item::Cut { events: 0 });
+            let (seq, item) = next.remove_entry();
             let _span = tracing::debug_span!("item", leader = %self.name, seq).entered();
             self.apply(seq, item, &mut actions)?;
             if self.waiting.is_none() {
@@ -326,17 +328,20 @@ impl Leader {
     }
 
     fn me(&self) -> Result<u16, LeaderError> {
-        let started = self
-            .started
+        self.started
             .as_ref()
-            .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))?;
+            .map(|s| s.me)
+            .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))
+    }
+
+    /// The name of leader `index` of the stream's list.
+    pub fn peer(&self, index: u16) -> Option<&str> {
+        let started = self.started.as_ref()?;
         started
             .begin
             .leaders
-            .iter()
-            .position(|l| *l == self.name)
-            .map(|i| i as u16)
-            .ok_or_else(|| LeaderError::NotListed(self.name.clone()))
+            .get(index as usize)
+            .map(String::as_str)
     }
 
     fn begin(&mut self, begin: Begin) -> Result<(), LeaderError> {
@@ -348,6 +353,7 @@ impl Leader {
         let (share, interest) = start(&begin, me)?;
         let own = begin.owners.iter().map(|&o| o == me).collect();
         self.started = Some(Started {
+            me,
             begin,
             share,
             own,

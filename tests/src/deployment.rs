@@ -124,35 +124,28 @@ impl Deployment {
 
     /// The marginals once the whole stream is in, or panics after `patience`.
     pub fn final_marginals(&self, patience: Duration) -> Value {
-        let started = Instant::now();
-        let mut last = String::new();
-        while started.elapsed() < patience {
-            match self.query(&["marginals", "--timeout-ms", "5000"]) {
-                Ok(replies) if replies[0]["finished"] == true => return replies[0].clone(),
-                Ok(replies) => last = replies[0]["watermark"].to_string(),
-                Err(e) => last = e,
-            }
-            std::thread::sleep(Duration::from_millis(300));
-        }
-        panic!(
-            "no final answer within {patience:?}; last: {last}\n{}",
-            self.log()
-        );
+        self.marginals_when(patience, |answer| answer["finished"] == true)
     }
 
     /// Waits until the deployment answers a marginals query at all.
     pub fn first_answer(&self, patience: Duration) -> Value {
+        self.marginals_when(patience, |_| true)
+    }
+
+    /// Asks for the marginals until an answer satisfies `wanted`.
+    fn marginals_when(&self, patience: Duration, wanted: impl Fn(&Value) -> bool) -> Value {
         let started = Instant::now();
         let mut last = String::new();
         while started.elapsed() < patience {
             match self.query(&["marginals", "--timeout-ms", "5000"]) {
-                Ok(replies) => return replies[0].clone(),
+                Ok(replies) if wanted(&replies[0]) => return replies[0].clone(),
+                Ok(replies) => last = replies[0]["watermark"].to_string(),
                 Err(e) => last = e,
             }
             std::thread::sleep(Duration::from_millis(100));
         }
         panic!(
-            "no answer within {patience:?}; last: {last}\n{}",
+            "no answer as wanted within {patience:?}; last: {last}\n{}",
             self.log()
         );
     }
