@@ -45,6 +45,14 @@ struct Summary {
     final_p_red: Option<Vec<f64>>,
 }
 
+/// Writes one JSON Lines record.
+pub fn write_line(out: &mut impl Write, value: &impl serde::Serialize) -> Result<()> {
+    serde_json::to_writer(&mut *out, value)
+        .map_err(std::io::Error::from)
+        .and_then(|()| out.write_all(b"\n"))
+        .map_err(|e| anyhow!("cannot write the output: {e}"))
+}
+
 /// Replays the trace named by `args` and writes the answers to `out`.
 pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
     check_options(args)?;
@@ -121,7 +129,6 @@ pub fn replay<R: BufRead>(
     let mut engine =
         Engine::start(|| build(args, field.clone())).map_err(|e| at(1, "header", e))?;
 
-    let write_error = |e: std::io::Error| anyhow!("cannot write the output: {e}");
     let mut errors = Vec::new();
     for line in reader {
         let NumberedLine { number, line } = line?;
@@ -154,10 +161,7 @@ pub fn replay<R: BufRead>(
                     predicted_red: &predicted,
                     coefficients: engine.filter.coefficients(),
                 };
-                serde_json::to_writer(&mut out, &answer)
-                    .map_err(std::io::Error::from)
-                    .and_then(|()| out.write_all(b"\n"))
-                    .map_err(write_error)?;
+                write_line(&mut out, &answer)?;
             }
             // Positions and identity reads do not bear on a property belief.
             Line::Move(_) | Line::Identify(_) | Line::Header(_) => {}
@@ -186,11 +190,9 @@ pub fn replay<R: BufRead>(
         max_coefficients = summary.max_coefficients,
         "replayed"
     );
-    serde_json::to_writer(&mut out, &summary)
-        .map_err(std::io::Error::from)
-        .and_then(|()| out.write_all(b"\n"))
-        .and_then(|()| out.flush())
-        .map_err(write_error)?;
+    write_line(&mut out, &summary)?;
+    out.flush()
+        .map_err(|e| anyhow!("cannot write the output: {e}"))?;
     Ok(())
 }
 

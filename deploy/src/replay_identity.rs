@@ -35,6 +35,7 @@
 //! demand ([`MarginalChoice`]), and identities coded by property bits (one
 //! Radon property belief per bit, `--bits`, optional `--budget`).
 
+use crate::replay::write_line;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
@@ -245,7 +246,6 @@ pub fn replay<R: BufRead>(
         Built::Refused(reason) => anyhow!("{source}:1: header: {reason}"),
     })?;
 
-    let write_error = |e: std::io::Error| anyhow!("cannot write the output: {e}");
     let mut errors = Vec::new();
     for line in reader {
         let NumberedLine { number, line } = line?;
@@ -278,10 +278,7 @@ pub fn replay<R: BufRead>(
                     p_identity: &p,
                     predicted_identity: &predicted,
                 };
-                serde_json::to_writer(&mut out, &answer)
-                    .map_err(std::io::Error::from)
-                    .and_then(|()| out.write_all(b"\n"))
-                    .map_err(write_error)?;
+                write_line(&mut out, &answer)?;
             }
             // Colour sightings and positions do not bear on identities.
             Line::Observe(_) | Line::Move(_) | Line::Header(_) => {}
@@ -302,11 +299,9 @@ pub fn replay<R: BufRead>(
         error = ?summary.error,
         "replayed"
     );
-    serde_json::to_writer(&mut out, &summary)
-        .map_err(std::io::Error::from)
-        .and_then(|()| out.write_all(b"\n"))
-        .and_then(|()| out.flush())
-        .map_err(write_error)?;
+    write_line(&mut out, &summary)?;
+    out.flush()
+        .map_err(|e| anyhow!("cannot write the output: {e}"))?;
     Ok(())
 }
 
