@@ -43,6 +43,38 @@ pub enum Command {
     Demo(DemoArgs),
     /// Ask a running deployment: marginals, one track, or leader counters.
     Query(QueryArgs),
+    /// Measure the distributed runtime on loopback: events/s through 1, 2,
+    /// 4 leaders, bytes per leader, and marginals latency against the raw
+    /// Zenoh round trip; prints Markdown.
+    Bench(BenchArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchArgs {
+    #[arg(long, default_value_t = 40)]
+    pub targets: usize,
+    #[arg(long, default_value_t = 10)]
+    pub red: usize,
+    /// Seconds of simulated crowd (the stream's length).
+    #[arg(long, default_value_t = 3000.0)]
+    pub duration: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Leader counts to stream through, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+    pub leaders: Vec<usize>,
+    /// Sets per leader.
+    #[arg(long, default_value_t = 400)]
+    pub budget: u32,
+    /// Marginals queries (and as many raw gets of each kind) for latency.
+    #[arg(long, default_value_t = 2000)]
+    pub queries: usize,
+    /// Where the trace and topologies are written.
+    #[arg(long, default_value = "target/idmesh-bench")]
+    pub dir: PathBuf,
+    /// Also write the Markdown report here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -5,6 +5,7 @@
 //! default `warn`); stdout carries only results.
 
 mod acoustic;
+mod bench;
 mod cli;
 mod eval;
 mod logging;
@@ -72,5 +73,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             dir: args.dir,
         }),
         Command::Query(args) => runtime::query::run(&args.options()?),
+        Command::Bench(args) => bench::run(&bench::BenchOptions {
+            targets: args.targets,
+            red: args.red,
+            duration: args.duration,
+            seed: args.seed,
+            leaders: args.leaders,
+            budget: args.budget,
+            queries: args.queries,
+            dir: args.dir,
+            out: args.out,
+        }),
     }
 }

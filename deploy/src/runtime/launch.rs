@@ -3,6 +3,7 @@
 //! is `up` on a built-in loopback topology: it simulates a crowd, streams it
 //! through four leaders, and prints live answers.
 
+use super::loopback::{Loopback, Ports};
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
 use super::topology::Topology;
@@ -135,23 +136,21 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     std::fs::create_dir_all(&options.dir)
         .with_context(|| format!("cannot create {}", options.dir.display()))?;
     let trace = options.dir.join("crowd.jsonl");
-    let exe = std::env::current_exe()?;
-    let status = Command::new(&exe)
-        .args(["simulate", "--model", "crowd", "--duration", "600"])
-        .args(["--targets", &options.targets.to_string()])
-        .args(["--red", &options.red.to_string()])
-        .args(["--seed", &options.seed.to_string()])
-        .arg("--out")
-        .arg(&trace)
-        .status()?;
-    if !status.success() {
-        bail!("the crowd simulation failed");
-    }
-    let corners = field_corners(&trace)?;
+    simulate_crowd(options.targets, options.red, 600.0, options.seed, &trace)?;
+    let plan = Loopback {
+        prefix: DEFAULT_PREFIX.to_string(),
+        leaders: 4,
+        distributed_rule: true,
+        budget: 400,
+        rate: Some(options.rate),
+        events: options.events,
+        ports: Ports::From(7447),
+    };
+    let (topology, coordinator) = plan.topology(&trace)?;
     let config = options.dir.join("topology.toml");
-    std::fs::write(&config, demo_topology(&trace, corners, options))?;
+    std::fs::write(&config, topology)?;
     eprintln!(
-        "demo: topology {} · coordinator on tcp/127.0.0.1:7447 · Ctrl-C stops",
+        "demo: topology {} · coordinator on {coordinator} · Ctrl-C stops",
         config.display()
     );
     let mut processes = Processes::start(&config, None)?;
@@ -159,17 +158,17 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         .worker_threads(1)
         .enable_all()
         .build()?;
-    let result = runtime.block_on(watch(&mut processes));
+    let result = runtime.block_on(watch(&mut processes, &coordinator));
     processes.stop();
     result
 }
 
 /// Prints a live answer every second until Ctrl-C.
-async fn watch(processes: &mut Processes) -> Result<()> {
+async fn watch(processes: &mut Processes, coordinator: &str) -> Result<()> {
     let session = mesh::open(&MeshOptions {
         client: false,
         listen: vec![],
-        connect: vec!["tcp/127.0.0.1:7447".into()],
+        connect: vec![coordinator.to_string()],
     })
     .await?;
     let keys = Keys::new(DEFAULT_PREFIX);
@@ -209,6 +208,22 @@ async fn watch(processes: &mut Processes) -> Result<()> {
     Ok(())
 }
 
+/// Simulates a social-force crowd into `out` (the demo's and the bench's
+/// stream).
+pub fn simulate_crowd(targets: usize, red: usize, duration: f64, seed: u64, out: &Path) -> Result<()> {
+    let trace = idmesh_sensor::Scenario::crowd()
+        .targets(targets)
+        .red(red)
+        .duration(duration)
+        .seed(seed)
+        .generate()
+        .context("the crowd simulation failed")?;
+    let path = out.display().to_string();
+    let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
+    idmesh_sensor::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;
+    Ok(())
+}
+
 /// The bounding box of the trace's positions: (min x, min y, max x, max y).
 pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
     let mut reader = idmesh_protocol::TraceReader::open(trace)?;
@@ -228,34 +243,4 @@ pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
         return Ok((0.0, 0.0, 1.0, 1.0));
     }
     Ok(b)
-}
-
-fn demo_topology(
-    trace: &Path,
-    (x0, y0, x1, y1): (f64, f64, f64, f64),
-    options: &DemoOptions,
-) -> String {
-    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
-    let (dx, dy) = ((x1 - x0) / 4.0, (y1 - y0) / 4.0);
-    let mut leaders = String::new();
-    for (i, (sx, sy)) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
-        .iter()
-        .enumerate()
-    {
-        leaders.push_str(&format!(
-            "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{:.3}, {:.3}]\n",
-            7448 + i,
-            cx + sx * dx,
-            cy + sy * dy
-        ));
-    }
-    let events = options
-        .events
-        .map(|n| format!("events = {n}\n"))
-        .unwrap_or_default();
-    format!(
-        "prefix = \"{DEFAULT_PREFIX}\"\ndistributed_rule = true\nbudget = 400\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"tcp/127.0.0.1:7447\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:7452\"\ntrace = {:?}\nrate = {}\n{events}{leaders}",
-        trace.display().to_string(),
-        options.rate
-    )
 }

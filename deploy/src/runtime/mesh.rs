@@ -42,6 +42,24 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
     Ok(config)
 }
 
+/// Answers `key` at once with `name`, from Zenoh's own thread: the raw
+/// round trip to this process, with none of its work in it. Health checks
+/// and the bench (the floor a query is compared with) use it.
+pub async fn answer_pings(session: &Session, key: String, name: String) -> Result<()> {
+    use zenoh::Wait;
+    let reply_key = key.clone();
+    session
+        .declare_queryable(&key)
+        .callback(move |query| {
+            if let Err(e) = query.reply(&reply_key, name.as_bytes()).wait() {
+                tracing::debug!(error = %e, "could not answer a ping");
+            }
+        })
+        .background()
+        .await
+        .map_err(|e| anyhow!("cannot declare the ping queryable {key}: {e}"))
+}
+
 pub async fn open(options: &MeshOptions) -> Result<Session> {
     zenoh::open(config(options)?)
         .await

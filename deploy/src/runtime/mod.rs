@@ -1,8 +1,10 @@
 //! The distributed runtime's side of the binary: the topology file, the
 //! one function that opens a Zenoh session, one runner per role, the
-//! launcher (`up`, `demo`) and the query client.
+//! launcher (`up`, `demo`), the loopback topology they and the bench use,
+//! and the query client.
 
 pub mod launch;
+pub mod loopback;
 pub mod mesh;
 pub mod query;
 pub mod roles;

@@ -56,6 +56,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
         async move {
             let session = mesh::open(&options).await?;
             let keys = Keys::new(topology.prefix.clone());
+            mesh::answer_pings(&session, keys.ping(expected, name), name.to_string()).await?;
             let result = match role {
                 Role::Sensor => sensor(session.clone(), &topology, keys).await,
                 Role::Leader => idmesh_leader::actor::run(

@@ -11,6 +11,7 @@
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
+//! | `P/ping/<role>/<name>` | every process | answers at once: the raw round trip, for health checks and the bench |
 
 pub const DEFAULT_PREFIX: &str = "idmesh/default";
 
@@ -89,6 +90,14 @@ impl Keys {
 
     pub fn alive_role(&self, role: &str) -> String {
         format!("{}/alive/{role}/*", self.prefix)
+    }
+
+    pub fn ping(&self, role: &str, name: &str) -> String {
+        format!("{}/ping/{role}/{name}", self.prefix)
+    }
+
+    pub fn every_ping(&self, role: &str) -> String {
+        format!("{}/ping/{role}/*", self.prefix)
     }
 
     /// The last chunk of a key: the name in `P/leader/<name>/partial`, the

@@ -1,0 +1,131 @@
+//! Query latency against the physical floor. Each round asks, one after the
+//! other: the coordinator for the marginals; the coordinator's ping (one
+//! raw get round trip); and every leader's ping at once (the raw fan-out a
+//! marginals query has to make anyway). Interleaving puts the three under
+//! the same noise.
+
+use super::Deployment;
+use crate::runtime::query::ask;
+use anyhow::{anyhow, bail, Result};
+use std::fmt::Write as _;
+use std::time::{Duration, Instant};
+use zenoh::query::{ConsolidationMode, QueryTarget};
+
+const TIMEOUT: Duration = Duration::from_secs(10);
+const WARM_UP: usize = 50;
+
+pub struct Latencies {
+    pub leaders: usize,
+    pub marginals: Vec<Duration>,
+    pub ping_one: Vec<Duration>,
+    pub ping_leaders: Vec<Duration>,
+}
+
+pub async fn measure(deployment: &Deployment, queries: usize) -> Result<Latencies> {
+    let keys = deployment.keys();
+    let marginals_key = keys.query_marginals();
+    let coordinator = keys.ping("coordinator", &deployment.topology.coordinator.name);
+    let leaders = keys.every_ping("leader");
+    let mut l = Latencies {
+        leaders: deployment.leaders,
+        marginals: Vec::with_capacity(queries),
+        ping_one: Vec::with_capacity(queries),
+        ping_leaders: Vec::with_capacity(queries),
+    };
+    for round in 0..WARM_UP + queries {
+        let started = Instant::now();
+        ask(&deployment.session, &marginals_key, TIMEOUT).await?;
+        let marginals = started.elapsed();
+        let started = Instant::now();
+        ping(deployment, &coordinator, 1).await?;
+        let one = started.elapsed();
+        let started = Instant::now();
+        ping(deployment, &leaders, deployment.leaders).await?;
+        let fan_out = started.elapsed();
+        if round >= WARM_UP {
+            l.marginals.push(marginals);
+            l.ping_one.push(one);
+            l.ping_leaders.push(fan_out);
+        }
+    }
+    Ok(l)
+}
+
+/// A get on `key` that returns once `answers` replies are in.
+async fn ping(deployment: &Deployment, key: &str, answers: usize) -> Result<()> {
+    let replies = deployment
+        .session
+        .get(key)
+        .consolidation(ConsolidationMode::None)
+        .target(QueryTarget::All)
+        .timeout(TIMEOUT)
+        .await
+        .map_err(|e| anyhow!("ping {key}: {e}"))?;
+    let mut got = 0;
+    while got < answers {
+        match replies.recv_async().await {
+            Ok(reply) if reply.result().is_ok() => got += 1,
+            Ok(_) => bail!("ping {key}: an error reply"),
+            Err(_) => bail!("ping {key}: {got} of {answers} answered"),
+        }
+    }
+    Ok(())
+}
+
+fn percentile(samples: &[Duration], p: f64) -> Duration {
+    let mut sorted = samples.to_vec();
+    sorted.sort();
+    let rank = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
+}
+
+pub fn report(l: &Latencies, out: &mut String) -> Result<()> {
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let row = |name: &str, samples: &[Duration], out: &mut String| -> Result<()> {
+        let (p50, p99) = (percentile(samples, 0.5), percentile(samples, 0.99));
+        writeln!(
+            out,
+            "| {name} | {:.3} | {:.3} | {:.1}× | {:.1}× | {:.1}× | {:.1}× |",
+            ms(p50),
+            ms(p99),
+            ms(p50) / ms(percentile(&l.ping_one, 0.5)),
+            ms(p99) / ms(percentile(&l.ping_one, 0.99)),
+            ms(p50) / ms(percentile(&l.ping_leaders, 0.5)),
+            ms(p99) / ms(percentile(&l.ping_leaders, 0.99)),
+        )?;
+        Ok(())
+    };
+    writeln!(
+        out,
+        "### Query latency, {} leaders, stream over ({} queries of each kind, interleaved)\n",
+        l.leaders,
+        l.marginals.len()
+    )?;
+    writeln!(
+        out,
+        "| get | p50 ms | p99 ms | p50 / one get | p99 / one get | p50 / fan-out | p99 / fan-out |"
+    )?;
+    writeln!(out, "|---|---:|---:|---:|---:|---:|---:|")?;
+    row("`query/marginals`", &l.marginals, out)?;
+    row("raw get, one process", &l.ping_one, out)?;
+    row(
+        &format!("raw get fanned out to {} leaders", l.leaders),
+        &l.ping_leaders,
+        out,
+    )?;
+    writeln!(out)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_take_the_sample_at_or_above_the_rank() {
+        let samples: Vec<Duration> = (1..=100).rev().map(Duration::from_millis).collect();
+        assert_eq!(percentile(&samples, 0.5), Duration::from_millis(50));
+        assert_eq!(percentile(&samples, 0.99), Duration::from_millis(99));
+        assert_eq!(percentile(&samples[..1], 0.99), Duration::from_millis(100));
+    }
+}

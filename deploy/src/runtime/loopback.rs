@@ -1,0 +1,117 @@
+//! A whole deployment on this machine's loopback, written as a topology
+//! file: the demo's and the bench's. Leaders sit at the centres of a grid of
+//! cells over the trace's field, so tracks cross between their regions and
+//! mix across them, as in the paper's sensor grid.
+
+use super::launch::field_corners;
+use anyhow::Result;
+use std::path::Path;
+
+#[derive(Debug, Clone)]
+pub struct Loopback {
+    pub prefix: String,
+    pub leaders: usize,
+    pub distributed_rule: bool,
+    /// Sets per leader; 0 = no pruning.
+    pub budget: u32,
+    /// Events per second; None = as fast as the mesh takes them.
+    pub rate: Option<f64>,
+    /// Stop the stream after this many events.
+    pub events: Option<u64>,
+    pub ports: Ports,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub enum Ports {
+    /// The coordinator on this port, leaders and the sensor on the ones after
+    /// it (the demo's well-known endpoint).
+    From(u16),
+    /// Whatever the kernel has free (the bench, side by side with others).
+    Free,
+}
+
+impl Ports {
+    fn take(self, index: u16) -> Result<u16> {
+        match self {
+            Ports::From(first) => Ok(first + index),
+            Ports::Free => Ok(std::net::TcpListener::bind("127.0.0.1:0")?
+                .local_addr()?
+                .port()),
+        }
+    }
+}
+
+impl Loopback {
+    /// The topology streaming `trace`, with its coordinator's endpoint.
+    pub fn topology(&self, trace: &Path) -> Result<(String, String)> {
+        let (x0, y0, x1, y1) = field_corners(trace)?;
+        let columns = (self.leaders as f64).sqrt().ceil().max(1.0) as usize;
+        let rows = self.leaders.div_ceil(columns);
+        let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
+        let mut toml = format!(
+            "prefix = {:?}\ndistributed_rule = {}\nbudget = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            self.prefix,
+            self.distributed_rule,
+            self.budget,
+            self.ports.take(self.leaders as u16 + 1)?,
+            trace.display().to_string(),
+        );
+        if let Some(rate) = self.rate {
+            toml.push_str(&format!("rate = {rate}\n"));
+        }
+        if let Some(events) = self.events {
+            toml.push_str(&format!("events = {events}\n"));
+        }
+        for i in 0..self.leaders {
+            let (c, r) = (i % columns, i / columns);
+            let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
+            let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
+            toml.push_str(&format!(
+                "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{x:.3}, {y:.3}]\n",
+                self.ports.take(i as u16 + 1)?
+            ));
+        }
+        Ok((toml, coordinator))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::runtime::topology::Topology;
+
+    #[test]
+    fn a_loopback_topology_loads_with_every_leader_placed_inside_the_field() {
+        let dir = std::env::temp_dir().join(format!("idmesh-loopback-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let trace = dir.join("t.jsonl");
+        std::fs::write(
+            &trace,
+            "{\"kind\":\"header\",\"format\":\"idmesh-trace\",\"version\":1,\"tracks\":2,\"red\":1}\n\
+             {\"kind\":\"move\",\"time\":0.0,\"track\":0,\"x\":0.0,\"y\":0.0}\n\
+             {\"kind\":\"move\",\"time\":1.0,\"track\":1,\"x\":30.0,\"y\":20.0}\n",
+        )
+        .unwrap();
+        let plan = Loopback {
+            prefix: "idmesh/t".into(),
+            leaders: 5,
+            distributed_rule: true,
+            budget: 100,
+            rate: Some(50.0),
+            events: None,
+            ports: Ports::From(9000),
+        };
+        let (toml, coordinator) = plan.topology(&trace).unwrap();
+        assert_eq!(coordinator, "tcp/127.0.0.1:9000");
+        let config = dir.join("topology.toml");
+        std::fs::write(&config, toml).unwrap();
+        let topology = Topology::load(&config).unwrap();
+        assert_eq!(topology.leader.len(), 5);
+        assert_eq!(topology.sensor.listen, "tcp/127.0.0.1:9006");
+        for l in &topology.leader {
+            let [x, y] = l.at.unwrap();
+            assert!((0.0..=30.0).contains(&x) && (0.0..=20.0).contains(&y));
+        }
+        assert!(topology.distributed_rule && topology.budget == 100);
+    }
+}
