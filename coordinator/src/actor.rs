@@ -2,7 +2,8 @@
 //! answered in its own task, with a span, so slow leaders do not hold up
 //! other users.
 
-use crate::gather::{self, GatherError};
+use crate::gather::{self, GatherError, Memory};
+use std::sync::Arc;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{QueryError, StatsAnswer, TrackAnswer};
 use serde::Serialize;
@@ -35,6 +36,7 @@ pub async fn run(
         .declare_token(keys.alive("coordinator", &config.name))
         .await?;
     tracing::info!(coordinator = %config.name, "coordinator up");
+    let memory = Arc::new(Memory::default());
     tokio::pin!(shutdown);
     loop {
         let (kind, query) = tokio::select! {
@@ -47,19 +49,25 @@ pub async fn run(
         let session = session.clone();
         let config = config.clone();
         let span = tracing::info_span!("query", kind, key = %query.key_expr());
-        tokio::spawn(answer(session, config, kind, query).instrument(span));
+        tokio::spawn(answer(session, config, memory.clone(), kind, query).instrument(span));
     }
     Ok(())
 }
 
-async fn answer(session: Session, config: CoordinatorConfig, kind: &'static str, query: Query) {
+async fn answer(
+    session: Session,
+    config: CoordinatorConfig,
+    memory: Arc<Memory>,
+    kind: &'static str,
+    query: Query,
+) {
     let keys = &config.keys;
     let result: Result<Vec<u8>, String> = match kind {
-        "marginals" => gather::marginals(&session, keys, config.timeout)
+        "marginals" => gather::marginals(&session, keys, config.timeout, &memory)
             .await
             .map(|g| json(&g.answer))
             .map_err(|e| e.to_string()),
-        "track" => track(&session, &config, &query).await,
+        "track" => track(&session, &config, &memory, &query).await,
         _ => gather::stats(&session, keys, config.timeout)
             .await
             .map(|leaders| json(&StatsAnswer { leaders }))
@@ -88,13 +96,14 @@ async fn answer(session: Session, config: CoordinatorConfig, kind: &'static str,
 async fn track(
     session: &Session,
     config: &CoordinatorConfig,
+    memory: &Memory,
     query: &Query,
 ) -> Result<Vec<u8>, String> {
     let key = query.key_expr().as_str();
     let track: u32 = Keys::chunk(key, 0)
         .and_then(|t| t.parse().ok())
         .ok_or_else(|| format!("{key}: the last chunk must be a track number"))?;
-    let gathered = gather::marginals(session, &config.keys, config.timeout)
+    let gathered = gather::marginals(session, &config.keys, config.timeout, memory)
         .await
         .map_err(|e: GatherError| e.to_string())?;
     let p_red = *gathered.answer.p_red.get(track as usize).ok_or_else(|| {

@@ -8,6 +8,7 @@ use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{MarginalsAnswer, Watermark};
 use std::collections::BTreeMap;
+use std::sync::Mutex;
 use std::time::Duration;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
@@ -36,42 +37,104 @@ pub struct Gathered {
     pub answer: MarginalsAnswer,
 }
 
+/// What the coordinator keeps between queries: the last cut of a stream
+/// that was over. Nothing is pushed to it; it only remembers what it asked.
+#[derive(Debug, Default)]
+pub struct Memory {
+    finished: Mutex<Option<CutPlaced>>,
+}
+
+impl Memory {
+    fn finished(&self) -> Option<CutPlaced> {
+        self.finished.lock().ok().and_then(|c| c.clone())
+    }
+
+    fn remember(&self, cut: &CutPlaced) {
+        if let Ok(mut slot) = self.finished.lock() {
+            *slot = cut.finished.then(|| cut.clone());
+        }
+    }
+}
+
+/// The marginals at a consistent cut. Once the stream is over the leaders
+/// rest at its end, and asking them where they rest is enough; otherwise
+/// a fresh cut is placed.
 pub async fn marginals(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
+    memory: &Memory,
 ) -> Result<Gathered, GatherError> {
-    let cut = place_cut(session, keys, timeout).await?;
+    if let Some(last) = memory.finished() {
+        if let Some(gathered) = at_rest(session, keys, timeout, last).await {
+            return Ok(gathered);
+        }
+    }
+    let gathered = at_fresh_cut(session, keys, timeout).await?;
+    memory.remember(&gathered.cut);
+    Ok(gathered)
+}
+
+/// The answer where the leaders rest, if every leader of `last` rests at
+/// the same seq at the end of the stream (they then hold the final belief:
+/// every set sent has been received). None sends the query the long way.
+async fn at_rest(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+    last: CutPlaced,
+) -> Option<Gathered> {
+    let (parts, errors) = partials(session, keys, "quiet", None, timeout).await.ok()?;
+    let first = parts.values().next()?;
+    let agreed = errors.is_empty()
+        && parts.values().all(|p| p.finished && p.cut == first.cut)
+        && last.leaders.iter().all(|l| parts.contains_key(l));
+    if !agreed {
+        return None;
+    }
+    let cut = CutPlaced {
+        seq: first.cut,
+        events: first.events,
+        ..last
+    };
+    answer(cut, parts, Vec::new(), timeout).ok()
+}
+
+/// The marginals at a fresh cut. The sensor is asked to place the cut and
+/// the leaders to answer at it in the same breath: each leader holds the
+/// query until the cut's tag reaches it in its stream, so a query costs one
+/// round trip to the slowest of them rather than two in a row.
+async fn at_fresh_cut(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+) -> Result<Gathered, GatherError> {
+    let tag = fresh_tag();
+    let at_tag = format!("tag={tag}");
+    // No cut, no answer: an error there stops the wait for the leaders.
+    let (cut, (parts, errors)) = tokio::try_join!(
+        place_cut(session, keys, tag, timeout),
+        partials(session, keys, &at_tag, Some(tag), timeout)
+    )?;
+    answer(cut, parts, errors, timeout)
+}
+
+/// Combines the leaders' partial sums at `cut`, or says who is missing or
+/// what went wrong: never a partial answer dressed as complete.
+fn answer(
+    cut: CutPlaced,
+    parts: BTreeMap<String, Partial>,
+    mut errors: Vec<String>,
+    timeout: Duration,
+) -> Result<Gathered, GatherError> {
     if cut.leaders.is_empty() {
         return Err(GatherError::NoLeaders);
     }
-    let selector = format!("{}?cut={}", keys.every_leader_partial(), cut.seq);
-    let replies = session
-        .get(selector)
-        .consolidation(ConsolidationMode::None)
-        .target(QueryTarget::All)
-        .timeout(timeout)
-        .await
-        .map_err(|e| GatherError::Failed(format!("query the leaders: {e}")))?;
-    let mut parts: BTreeMap<String, Partial> = BTreeMap::new();
-    let mut errors = Vec::new();
-    while let Ok(reply) = replies.recv_async().await {
-        match reply.result() {
-            Ok(sample) => match decode::<Partial>(&sample.payload().to_bytes()) {
-                Ok(p) if p.cut == cut.seq => {
-                    parts.insert(p.leader.clone(), p);
-                }
-                Ok(p) => errors.push(format!(
-                    "{} answered cut {} for {}",
-                    p.leader, p.cut, cut.seq
-                )),
-                Err(e) => errors.push(e.to_string()),
-            },
-            Err(e) => errors.push(String::from_utf8_lossy(&e.payload().to_bytes()).into_owned()),
-        }
-        if cut.leaders.iter().all(|l| parts.contains_key(l)) {
-            break;
-        }
+    for p in parts.values().filter(|p| p.cut != cut.seq) {
+        errors.push(format!(
+            "{} answered at seq {} for a cut at {}",
+            p.leader, p.cut, cut.seq
+        ));
     }
     if !errors.is_empty() {
         return Err(GatherError::Failed(errors.join("; ")));
@@ -106,13 +169,59 @@ pub async fn marginals(
     Ok(Gathered { cut, answer })
 }
 
+/// A tag no other query of any coordinator is likely to use: the std
+/// hasher's random keys over a per-process counter.
+fn fresh_tag() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    hasher.write_u64(NEXT.fetch_add(1, Ordering::Relaxed));
+    hasher.finish()
+}
+
+/// Every leader's partial sums (`?tag=<tag>` at a cut, `?quiet` where it
+/// rests), by leader, and the error replies.
+async fn partials(
+    session: &Session,
+    keys: &Keys,
+    parameters: &str,
+    tag: Option<u64>,
+    timeout: Duration,
+) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
+    let selector = format!("{}?{parameters}", keys.every_leader_partial());
+    let replies = session
+        .get(selector)
+        .consolidation(ConsolidationMode::None)
+        .target(QueryTarget::All)
+        .timeout(timeout)
+        .await
+        .map_err(|e| GatherError::Failed(format!("query the leaders: {e}")))?;
+    let mut parts = BTreeMap::new();
+    let mut errors = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        match reply.result() {
+            Ok(sample) => match decode::<Partial>(&sample.payload().to_bytes()) {
+                Ok(p) if tag.is_none_or(|t| t == p.tag) => {
+                    parts.insert(p.leader.clone(), p);
+                }
+                Ok(p) => errors.push(format!("{} answered tag {} for {tag:?}", p.leader, p.tag)),
+                Err(e) => errors.push(e.to_string()),
+            },
+            Err(e) => errors.push(String::from_utf8_lossy(&e.payload().to_bytes()).into_owned()),
+        }
+    }
+    Ok((parts, errors))
+}
+
 async fn place_cut(
     session: &Session,
     keys: &Keys,
+    tag: u64,
     timeout: Duration,
 ) -> Result<CutPlaced, GatherError> {
     let replies = session
-        .get(keys.every_sensor_cut())
+        .get(format!("{}?tag={tag}", keys.every_sensor_cut()))
         .consolidation(ConsolidationMode::None)
         .target(QueryTarget::All)
         .timeout(timeout)

@@ -69,6 +69,9 @@ pub struct BenchArgs {
     /// Marginals queries (and as many raw gets of each kind) for latency.
     #[arg(long, default_value_t = 2000)]
     pub queries: usize,
+    /// Events per second of the stream that queries are timed during.
+    #[arg(long, default_value_t = 2000.0)]
+    pub stream_rate: f64,
     /// Where the trace and topologies are written.
     #[arg(long, default_value = "target/idmesh-bench")]
     pub dir: PathBuf,

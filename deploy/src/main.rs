@@ -81,6 +81,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             leaders: args.leaders,
             budget: args.budget,
             queries: args.queries,
+            stream_rate: args.stream_rate,
             dir: args.dir,
             out: args.out,
         }),

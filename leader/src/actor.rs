@@ -2,8 +2,11 @@
 //!
 //! One task owns the state; everything else (stream batches, transfers from
 //! peers, the sensor's follow replies, the coordinator's queries) reaches it
-//! through channels, so items are applied strictly one at a time. A query
-//! for a cut the leader has not reached yet is held until it gets there.
+//! through channels, so items are applied strictly one at a time. The
+//! coordinator asks for a cut by its tag at the same time as it asks the
+//! sensor to place it, so a query usually comes before its cut: it is held
+//! until the cut arrives, or answered with an error once it has waited the
+//! query timeout.
 
 use crate::error::MeshError;
 use crate::state::{Action, Leader};
@@ -14,7 +17,7 @@ use idmesh_protocol::wire::leader_to_sensor::Followed;
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Sequenced};
 use idmesh_protocol::wire::{decode, encode};
 use std::future::Future;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 use zenoh::qos::CongestionControl;
 use zenoh::query::{ConsolidationMode, Query, QueryTarget};
@@ -26,7 +29,8 @@ pub struct LeaderConfig {
     pub keys: Keys,
     /// The sensor gateway to ask when sets bring tracks to follow.
     pub sensor: String,
-    /// How long to wait for the sensor's follow reply.
+    /// How long to wait for the sensor's follow reply, and how long a query
+    /// is held for a cut that has not arrived.
     pub follow_timeout: Duration,
 }
 
@@ -65,8 +69,9 @@ pub async fn run(
     let (followed_tx, mut followed_rx) =
         mpsc::unbounded_channel::<Result<Vec<Sequenced>, String>>();
     let mut leader = Leader::new(name.clone());
-    let mut held: Vec<(u64, Query)> = Vec::new();
+    let mut held: Vec<Held> = Vec::new();
     let mut failure: Option<String> = None;
+    let mut sweep = tokio::time::interval(Duration::from_millis(250));
     tokio::pin!(shutdown);
 
     loop {
@@ -108,6 +113,10 @@ pub async fn run(
             query = partials.recv_async() => {
                 let Ok(query) = query else { break };
                 answer_partial(&leader, &failure, query, &mut held).await;
+                continue;
+            }
+            _ = sweep.tick(), if !held.is_empty() => {
+                expire(&mut held, config.follow_timeout).await;
                 continue;
             }
             query = stats.recv_async() => {
@@ -161,15 +170,11 @@ pub async fn run(
                 }
                 Action::CutReady(partial) => {
                     let mut still = Vec::new();
-                    for (cut, query) in held.drain(..) {
-                        if cut == partial.cut {
-                            reply_partial(&query, &partial).await;
-                        } else if cut < partial.cut {
-                            let _ = query
-                                .reply_err(format!("cut {cut} was never reached"))
-                                .await;
+                    for h in held.drain(..) {
+                        if h.tag == partial.tag {
+                            reply_partial(&h.query, &partial).await;
                         } else {
-                            still.push((cut, query));
+                            still.push(h);
                         }
                     }
                     held = still;
@@ -207,11 +212,18 @@ async fn ask_to_follow(
     }
 }
 
+/// A partial-sums query waiting for its cut.
+struct Held {
+    tag: u64,
+    since: Instant,
+    query: Query,
+}
+
 async fn answer_partial(
     leader: &Leader,
     failure: &Option<String>,
     query: Query,
-    held: &mut Vec<(u64, Query)>,
+    held: &mut Vec<Held>,
 ) {
     if let Some(failure) = failure {
         let _ = query
@@ -219,28 +231,55 @@ async fn answer_partial(
             .await;
         return;
     }
-    let cut = query
+    if query.parameters().contains_key("quiet") {
+        match leader.quiet() {
+            Some(partial) => reply_partial(&query, &partial).await,
+            None => {
+                let _ = query
+                    .reply_err(format!("leader {} is not at a quiet point", leader.name()))
+                    .await;
+            }
+        }
+        return;
+    }
+    let tag = query
         .parameters()
-        .get("cut")
+        .get("tag")
         .and_then(|c| c.parse::<u64>().ok());
-    let Some(cut) = cut else {
+    let Some(tag) = tag else {
         let _ = query
-            .reply_err("a partial-sums query needs cut=<seq>")
+            .reply_err("a partial-sums query needs tag=<u64> (the tag of the cut it asks for) or quiet")
             .await;
         return;
     };
-    if let Some(partial) = leader.cut(cut) {
-        reply_partial(&query, partial).await;
-    } else if cut > leader.position() {
-        held.push((cut, query));
-    } else {
-        let _ = query
-            .reply_err(format!(
-                "leader {} is past cut {cut} and no longer has it",
-                leader.name()
-            ))
-            .await;
+    match leader.cut(tag) {
+        Some(partial) => reply_partial(&query, partial).await,
+        None => held.push(Held {
+            tag,
+            since: Instant::now(),
+            query,
+        }),
     }
+}
+
+/// Answers with an error every query that has waited longer than `timeout`
+/// for its cut (the sensor never placed it, or the stream is stuck).
+async fn expire(held: &mut Vec<Held>, timeout: Duration) {
+    let mut still = Vec::new();
+    for h in held.drain(..) {
+        if h.since.elapsed() > timeout {
+            let _ = h
+                .query
+                .reply_err(format!(
+                    "the cut tagged {} did not reach this leader within {timeout:?}",
+                    h.tag
+                ))
+                .await;
+        } else {
+            still.push(h);
+        }
+    }
+    *held = still;
 }
 
 async fn reply_partial(query: &Query, partial: &Partial) {

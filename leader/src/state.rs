@@ -80,6 +80,9 @@ pub struct Leader {
     transfers: HashMap<(u64, u16), Vec<WireSet>>,
     waiting: Option<Waiting>,
     cuts: VecDeque<Partial>,
+    /// The watermark and end-of-stream flag of the last batch.
+    events: u64,
+    finished: bool,
     stats: LeaderStats,
 }
 
@@ -101,6 +104,8 @@ impl Leader {
             transfers: HashMap::new(),
             waiting: None,
             cuts: VecDeque::new(),
+            events: 0,
+            finished: false,
         }
     }
 
@@ -128,9 +133,40 @@ impl Leader {
         self.stats.bytes_sent += bytes as u64;
     }
 
-    /// The answer at cut `seq`, if this leader has passed it recently.
-    pub fn cut(&self, seq: u64) -> Option<&Partial> {
-        self.cuts.iter().find(|p| p.cut == seq)
+    /// The answer at the cut tagged `tag`, if this leader has passed it
+    /// recently.
+    pub fn cut(&self, tag: u64) -> Option<&Partial> {
+        self.cuts.iter().find(|p| p.tag == tag)
+    }
+
+    /// The partial sums now, if the leader is at a quiet point: it has
+    /// applied every item the sensor sent it and waits for no peer. Leaders
+    /// quiet at the same seq together hold the belief at that seq (every
+    /// set sent before it has been received), which is how the coordinator
+    /// answers a finished stream without placing a cut.
+    pub fn quiet(&self) -> Option<Partial> {
+        if self.waiting.is_some() || !self.queue.is_empty() {
+            return None;
+        }
+        self.partial(self.frontier, 0, self.events)
+    }
+
+    /// The partial sums of the share as it is (None before the Begin).
+    fn partial(&self, cut: u64, tag: u64, events: u64) -> Option<Partial> {
+        let sums = self.started.as_ref()?.share.partial_sums();
+        Some(Partial {
+            version: VERSION,
+            leader: self.name.clone(),
+            cut,
+            tag,
+            events,
+            finished: self.finished,
+            log_scale: sums.log_scale,
+            total: sums.total,
+            outside: sums.outside,
+            inside: sums.inside,
+            coefficients: sums.coefficients,
+        })
     }
 
     /// The share this leader holds (for tests and diagnostics).
@@ -156,6 +192,8 @@ impl Leader {
             self.frontier = self.frontier.max(seq);
         }
         self.frontier = self.frontier.max(batch.through);
+        self.events = batch.events;
+        self.finished = batch.finished;
         self.advance()
     }
 
@@ -305,18 +343,10 @@ impl Leader {
                     self.waiting = Some(Waiting::Transfer { seq, from });
                 }
             }
-            Item::Cut { events: _ } => {
-                let sums = self.started()?.share.partial_sums();
-                let partial = Partial {
-                    version: VERSION,
-                    leader: self.name.clone(),
-                    cut: seq,
-                    log_scale: sums.log_scale,
-                    total: sums.total,
-                    outside: sums.outside,
-                    inside: sums.inside,
-                    coefficients: sums.coefficients,
-                };
+            Item::Cut { events, tag } => {
+                let partial = self
+                    .partial(seq, tag, events)
+                    .ok_or(LeaderError::Unexpected("a cut before the stream's Begin"))?;
                 if self.cuts.len() == CUTS_KEPT {
                     self.cuts.pop_front();
                 }

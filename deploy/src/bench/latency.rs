@@ -7,6 +7,7 @@
 use super::Deployment;
 use crate::runtime::query::ask;
 use anyhow::{anyhow, bail, Result};
+use idmesh_protocol::wire::query::MarginalsAnswer;
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 use zenoh::query::{ConsolidationMode, QueryTarget};
@@ -21,7 +22,9 @@ pub struct Latencies {
     pub ping_leaders: Vec<Duration>,
 }
 
-pub async fn measure(deployment: &Deployment, queries: usize) -> Result<Latencies> {
+/// Times `queries` rounds; `streaming` checks that the stream was still
+/// running when the last marginals answer came.
+pub async fn measure(deployment: &Deployment, queries: usize, streaming: bool) -> Result<Latencies> {
     let keys = deployment.keys();
     let marginals_key = keys.query_marginals();
     let coordinator = keys.ping("coordinator", &deployment.topology.coordinator.name);
@@ -32,10 +35,21 @@ pub async fn measure(deployment: &Deployment, queries: usize) -> Result<Latencie
         ping_one: Vec::with_capacity(queries),
         ping_leaders: Vec::with_capacity(queries),
     };
+    // The bench's session connects to each process on its own; wait until
+    // it reaches them all.
+    let started = Instant::now();
+    while let Err(e) = ping(deployment, &leaders, deployment.leaders).await {
+        if started.elapsed() > TIMEOUT {
+            return Err(e);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let mut finished = false;
     for round in 0..WARM_UP + queries {
         let started = Instant::now();
-        ask(&deployment.session, &marginals_key, TIMEOUT).await?;
+        let body = ask(&deployment.session, &marginals_key, TIMEOUT).await?;
         let marginals = started.elapsed();
+        finished = serde_json::from_slice::<MarginalsAnswer>(&body)?.finished;
         let started = Instant::now();
         ping(deployment, &coordinator, 1).await?;
         let one = started.elapsed();
@@ -47,6 +61,9 @@ pub async fn measure(deployment: &Deployment, queries: usize) -> Result<Latencie
             l.ping_one.push(one);
             l.ping_leaders.push(fan_out);
         }
+    }
+    if streaming && finished {
+        bail!("the stream ended before the queries did: make it longer or slower");
     }
     Ok(l)
 }
@@ -79,7 +96,7 @@ fn percentile(samples: &[Duration], p: f64) -> Duration {
     sorted[rank - 1]
 }
 
-pub fn report(l: &Latencies, out: &mut String) -> Result<()> {
+pub fn report(l: &Latencies, when: &str, out: &mut String) -> Result<()> {
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     let row = |name: &str, samples: &[Duration], out: &mut String| -> Result<()> {
         let (p50, p99) = (percentile(samples, 0.5), percentile(samples, 0.99));
@@ -97,7 +114,7 @@ pub fn report(l: &Latencies, out: &mut String) -> Result<()> {
     };
     writeln!(
         out,
-        "### Query latency, {} leaders, stream over ({} queries of each kind, interleaved)\n",
+        "### Query latency, {} leaders, {when} ({} queries of each kind, interleaved)\n",
         l.leaders,
         l.marginals.len()
     )?;

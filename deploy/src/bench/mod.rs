@@ -35,6 +35,8 @@ pub struct BenchOptions {
     pub budget: u32,
     /// Queries for the latency figures.
     pub queries: usize,
+    /// Events per second of the stream queries are timed during.
+    pub stream_rate: f64,
     pub dir: PathBuf,
     /// Also write the report here.
     pub out: Option<PathBuf>,
@@ -68,25 +70,37 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         options.targets, options.red, options.duration, options.budget
     )?;
     let mut streams = Vec::new();
-    let mut latencies = None;
     for &leaders in &options.leaders {
-        let deployment = runtime.block_on(Deployment::start(options, &trace, leaders))?;
+        let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
         eprintln!("bench: streaming through {leaders} leader(s)");
         streams.push(runtime.block_on(throughput::measure(&deployment))?);
-        // Latency with four leaders, as the issue asks, else the largest.
-        if leaders == 4 || (latencies.is_none() && Some(&leaders) == options.leaders.last()) {
-            eprintln!(
-                "bench: {} marginals queries with {leaders} leaders",
-                options.queries
-            );
-            latencies = Some(runtime.block_on(latency::measure(&deployment, options.queries))?);
-        }
         runtime.block_on(deployment.close());
     }
     throughput::report(&streams, &mut report)?;
-    if let Some(latencies) = latencies {
-        latency::report(&latencies, &mut report)?;
-    }
+    // Latency with four leaders: at rest after the stream (the leaders
+    // answer where they rest), and during a paced stream (every query
+    // places a fresh cut).
+    let leaders = 4;
+    eprintln!("bench: {} marginals queries with {leaders} leaders at rest", options.queries);
+    let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
+    runtime.block_on(throughput::measure(&deployment))?;
+    let at_rest = runtime.block_on(latency::measure(&deployment, options.queries, false))?;
+    runtime.block_on(deployment.close());
+    latency::report(&at_rest, "stream over", &mut report)?;
+    eprintln!(
+        "bench: {} marginals queries with {leaders} leaders during a stream at {} events/s",
+        options.queries, options.stream_rate
+    );
+    let rate = Some(options.stream_rate);
+    let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, rate))?;
+    runtime.block_on(throughput::first_moving_answer(&deployment))?;
+    let streaming = runtime.block_on(latency::measure(&deployment, options.queries, true))?;
+    runtime.block_on(deployment.close());
+    latency::report(
+        &streaming,
+        &format!("during a stream at {} events/s", options.stream_rate),
+        &mut report,
+    )?;
     print!("{report}");
     if let Some(out) = &options.out {
         std::fs::write(out, &report).with_context(|| format!("cannot write {}", out.display()))?;
@@ -105,13 +119,18 @@ pub struct Deployment {
 }
 
 impl Deployment {
-    async fn start(options: &BenchOptions, trace: &Path, leaders: usize) -> Result<Self> {
+    async fn start(
+        options: &BenchOptions,
+        trace: &Path,
+        leaders: usize,
+        rate: Option<f64>,
+    ) -> Result<Self> {
         let plan = Loopback {
             prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
             leaders,
             distributed_rule: true,
             budget: options.budget,
-            rate: None,
+            rate,
             events: None,
             ports: Ports::Free,
         };

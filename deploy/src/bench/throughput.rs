@@ -77,6 +77,28 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
     }
 }
 
+/// Waits until the coordinator answers with the stream moving.
+pub async fn first_moving_answer(deployment: &Deployment) -> Result<()> {
+    let key = deployment.keys().query_marginals();
+    let started = Instant::now();
+    loop {
+        let last = match ask(&deployment.session, &key, ASK_TIMEOUT).await {
+            Ok(body) => {
+                let answer: MarginalsAnswer = serde_json::from_slice(&body)?;
+                if answer.watermark.values().sum::<u64>() > 0 {
+                    return Ok(());
+                }
+                "the stream has not started".to_string()
+            }
+            Err(e) => e.to_string(),
+        };
+        if started.elapsed() > START_PATIENCE {
+            bail!("the deployment did not start streaming within {START_PATIENCE:?}: {last}");
+        }
+        tokio::time::sleep(POLL).await;
+    }
+}
+
 async fn stats(deployment: &Deployment) -> Result<Vec<LeaderStats>> {
     let body = ask(
         &deployment.session,

@@ -1,5 +1,8 @@
 //! What a leader tells the coordinator: its partial sums at a cut (a get on
-//! `P/leader/*/partial?cut=<seq>`) and its counters (`P/leader/*/stats`).
+//! `P/leader/*/partial?tag=<tag>`, answered once the cut with that tag has
+//! reached the leader), or at the quiet point it rests at (`?quiet`: it has
+//! applied everything the sensor sent and waits for nothing), and its
+//! counters (`P/leader/*/stats`).
 
 use serde::{Deserialize, Serialize};
 
@@ -7,7 +10,13 @@ use serde::{Deserialize, Serialize};
 pub struct Partial {
     pub version: u16,
     pub leader: String,
+    /// The seq of the cut item and the query's tag it carried; for a quiet
+    /// answer, the seq the leader has applied everything through, tag 0.
     pub cut: u64,
+    pub tag: u64,
+    /// Trace events up to `cut`, and whether the stream was over there.
+    pub events: u64,
+    pub finished: bool,
     pub log_scale: f64,
     pub total: f64,
     pub outside: f64,

@@ -1,6 +1,6 @@
-//! A cut of the event stream for a query: the sensor puts a `Cut` item into
-//! every leader's stream and says where (postcard reply to a get on
-//! `P/sensor/<name>/cut`).
+//! A cut of the event stream for a query: the sensor puts a `Cut` item with
+//! the query's tag into every leader's stream and says where (postcard reply
+//! to a get on `P/sensor/<name>/cut?tag=<tag>`).
 
 use serde::{Deserialize, Serialize};
 

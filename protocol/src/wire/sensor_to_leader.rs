@@ -18,6 +18,10 @@ pub struct Batch {
     /// Every item for this leader with seq ≤ `through` is in this batch or
     /// an earlier one.
     pub through: u64,
+    /// Trace events read through `through` (the watermark there).
+    pub events: u64,
+    /// The sensor has read its whole source: nothing comes after `through`.
+    pub finished: bool,
     pub items: Vec<Sequenced>,
 }
 super::versioned!(Batch, "event batch");
@@ -63,8 +67,10 @@ pub enum Item {
     /// Track `track` left the region of leader `from` for that of `to`.
     Handover { track: u32, from: u16, to: u16 },
     /// A consistent cut asked for by a query: every leader computes its
-    /// partial sums here. `events` counts the trace events before it.
-    Cut { events: u64 },
+    /// partial sums here. `events` counts the trace events before it; `tag`
+    /// is the query's, so leaders asked for it before it reaches them know
+    /// which cut to wait for.
+    Cut { events: u64, tag: u64 },
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

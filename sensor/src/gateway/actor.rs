@@ -89,14 +89,15 @@ pub async fn run(
     wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
     tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(), "streaming");
 
+    let limit = config.limit.unwrap_or(u64::MAX) as usize;
+    let lines = &lines[..lines.len().min(limit)];
     let mut stream = Stream {
         numbers: vec![0; names.len()],
         publishers,
         sensor: config.name.clone(),
+        finished: lines.is_empty(),
     };
     stream.flush(&mut router).await;
-    let limit = config.limit.unwrap_or(u64::MAX) as usize;
-    let lines = &lines[..lines.len().min(limit)];
     let started = Instant::now();
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
@@ -116,6 +117,7 @@ pub async fn run(
                 router.line(line);
             }
             next += due;
+            stream.finished = next >= lines.len();
             stream.flush(&mut router).await;
             if next >= lines.len() {
                 tracing::info!(sensor = %config.name, events = router.events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
@@ -128,7 +130,11 @@ pub async fn run(
             _ = &mut shutdown => break,
             query = cuts.recv_async() => {
                 let Ok(query) = query else { break };
-                let (seq, events) = router.cut();
+                let Some(tag) = query.parameters().get("tag").and_then(|t| t.parse::<u64>().ok()) else {
+                    let _ = query.reply_err("a cut needs tag=<u64>: the tag leaders will be asked for").await;
+                    continue;
+                };
+                let (seq, events) = router.cut(tag);
                 stream.flush(&mut router).await;
                 let begin = router.begin();
                 let placed = CutPlaced {
@@ -173,6 +179,8 @@ struct Stream {
     numbers: Vec<u64>,
     publishers: Vec<Publisher<'static>>,
     sensor: String,
+    /// The whole source has been read.
+    finished: bool,
 }
 
 impl Stream {
@@ -185,6 +193,8 @@ impl Stream {
                 sensor: self.sensor.clone(),
                 number: self.numbers[i],
                 through,
+                events: router.events(),
+                finished: self.finished,
                 items: router.take(i),
             };
             self.numbers[i] += 1;

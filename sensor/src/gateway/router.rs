@@ -208,11 +208,13 @@ impl Router {
         self.log.push(Sequenced { seq, item });
     }
 
-    /// Places a cut in every leader's stream: (seq of the cut, events in it).
-    pub fn cut(&mut self) -> (u64, u64) {
+    /// Places a cut tagged `tag` in every leader's stream: (seq of the cut,
+    /// events in it).
+    pub fn cut(&mut self, tag: u64) -> (u64, u64) {
         let seq = self.next_seq();
         let item = Item::Cut {
             events: self.events,
+            tag,
         };
         for outbox in &mut self.outbox {
             outbox.push(Sequenced {
