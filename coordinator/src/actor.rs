@@ -2,7 +2,7 @@
 //! answered in its own task, with a span, so slow leaders do not hold up
 //! other users.
 
-use crate::gather::{self, GatherError, Memory};
+use crate::gather::{self, At, GatherError, Memory};
 use std::sync::Arc;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{QueryError, StatsAnswer, TrackAnswer};
@@ -62,12 +62,13 @@ async fn answer(
     query: Query,
 ) {
     let keys = &config.keys;
-    let result: Result<Vec<u8>, String> = match kind {
-        "marginals" => gather::marginals(&session, keys, config.timeout, &memory)
+    let result: Result<Vec<u8>, String> = match (kind, at(&query)) {
+        (_, Err(e)) => Err(e),
+        ("marginals", Ok(at)) => gather::marginals(&session, keys, config.timeout, &memory, at)
             .await
             .map(|g| json(&g.answer))
             .map_err(|e| e.to_string()),
-        "track" => track(&session, &config, &memory, &query).await,
+        ("track", Ok(at)) => track(&session, &config, &memory, &query, at).await,
         _ => gather::stats(&session, keys, config.timeout)
             .await
             .map(|leaders| json(&StatsAnswer { leaders }))
@@ -98,12 +99,13 @@ async fn track(
     config: &CoordinatorConfig,
     memory: &Memory,
     query: &Query,
+    at: At,
 ) -> Result<Vec<u8>, String> {
     let key = query.key_expr().as_str();
     let track: u32 = Keys::chunk(key, 0)
         .and_then(|t| t.parse().ok())
         .ok_or_else(|| format!("{key}: the last chunk must be a track number"))?;
-    let gathered = gather::marginals(session, &config.keys, config.timeout, memory)
+    let gathered = gather::marginals(session, &config.keys, config.timeout, memory, at)
         .await
         .map_err(|e: GatherError| e.to_string())?;
     let p_red = *gathered.answer.p_red.get(track as usize).ok_or_else(|| {
@@ -117,6 +119,17 @@ async fn track(
         track,
         p_red,
     }))
+}
+
+/// `?events=N`: the answer right after the stream's N-th event.
+fn at(query: &Query) -> Result<At, String> {
+    match query.parameters().get("events") {
+        None => Ok(At::Latest),
+        Some(n) => n
+            .parse()
+            .map(At::Events)
+            .map_err(|_| format!("events={n}: expected a count of events")),
+    }
 }
 
 fn json(value: &impl Serialize) -> Vec<u8> {

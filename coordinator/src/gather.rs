@@ -56,6 +56,16 @@ impl Memory {
     }
 }
 
+/// Where in the stream an answer is wanted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum At {
+    /// As far as the stream has got.
+    Latest,
+    /// Right after the stream's n-th event (which may not have come yet:
+    /// the answer waits for it, up to the timeout).
+    Events(u64),
+}
+
 /// The marginals at a consistent cut. Once the stream is over the leaders
 /// rest at its end, and asking them where they rest is enough; otherwise
 /// a fresh cut is placed.
@@ -64,13 +74,14 @@ pub async fn marginals(
     keys: &Keys,
     timeout: Duration,
     memory: &Memory,
+    at: At,
 ) -> Result<Gathered, GatherError> {
-    if let Some(last) = memory.finished() {
+    if let (At::Latest, Some(last)) = (at, memory.finished()) {
         if let Some(gathered) = at_rest(session, keys, timeout, last).await {
             return Ok(gathered);
         }
     }
-    let gathered = at_fresh_cut(session, keys, timeout).await?;
+    let gathered = at_fresh_cut(session, keys, timeout, at).await?;
     memory.remember(&gathered.cut);
     Ok(gathered)
 }
@@ -108,12 +119,17 @@ async fn at_fresh_cut(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
+    at: At,
 ) -> Result<Gathered, GatherError> {
     let tag = fresh_tag();
     let at_tag = format!("tag={tag}");
+    let cut_parameters = match at {
+        At::Latest => at_tag.clone(),
+        At::Events(n) => format!("{at_tag};events={n}"),
+    };
     // No cut, no answer: an error there stops the wait for the leaders.
     let (cut, (parts, errors)) = tokio::try_join!(
-        place_cut(session, keys, tag, timeout),
+        place_cut(session, keys, &cut_parameters, timeout),
         partials(session, keys, &at_tag, Some(tag), timeout)
     )?;
     answer(cut, parts, errors, timeout)
@@ -217,20 +233,28 @@ async fn partials(
 async fn place_cut(
     session: &Session,
     keys: &Keys,
-    tag: u64,
+    parameters: &str,
     timeout: Duration,
 ) -> Result<CutPlaced, GatherError> {
     let replies = session
-        .get(format!("{}?tag={tag}", keys.every_sensor_cut()))
+        .get(format!("{}?{parameters}", keys.every_sensor_cut()))
         .consolidation(ConsolidationMode::None)
         .target(QueryTarget::All)
         .timeout(timeout)
         .await
         .map_err(|e| GatherError::Failed(format!("ask for a cut: {e}")))?;
     while let Ok(reply) = replies.recv_async().await {
-        if let Ok(sample) = reply.result() {
-            return decode::<CutPlaced>(&sample.payload().to_bytes())
-                .map_err(|e| GatherError::Failed(e.to_string()));
+        match reply.result() {
+            Ok(sample) => {
+                return decode::<CutPlaced>(&sample.payload().to_bytes())
+                    .map_err(|e| GatherError::Failed(e.to_string()))
+            }
+            Err(e) => {
+                return Err(GatherError::Failed(format!(
+                    "the sensor placed no cut: {}",
+                    String::from_utf8_lossy(&e.payload().to_bytes())
+                )))
+            }
         }
     }
     Err(GatherError::NoSensor)

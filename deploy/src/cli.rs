@@ -137,6 +137,11 @@ pub struct QueryArgs {
     /// Ask this many times, --interval-ms apart.
     #[arg(long, default_value_t = 1)]
     pub repeat: u32,
+    /// Answers right after these event counts of the stream (comma-separated;
+    /// all asked at once, each waits for its point; a point already passed
+    /// is an error). For marginals and track.
+    #[arg(long, value_delimiter = ',')]
+    pub at_events: Vec<u64>,
     #[arg(long, default_value_t = 1000)]
     pub interval_ms: u64,
 }
@@ -153,6 +158,9 @@ impl QueryArgs {
             }
             (other, _) => anyhow::bail!("unknown query {other:?}: marginals, track T or stats"),
         };
+        if what == Question::Stats && !self.at_events.is_empty() {
+            anyhow::bail!("--at-events is for marginals and track, not stats");
+        }
         Ok(QueryOptions {
             what,
             connect: self.connect.clone(),
@@ -161,6 +169,7 @@ impl QueryArgs {
             timeout: std::time::Duration::from_millis(self.timeout_ms),
             repeat: self.repeat,
             interval: std::time::Duration::from_millis(self.interval_ms),
+            at_events: self.at_events.clone(),
         })
     }
 }

@@ -101,6 +101,25 @@ impl Deployment {
 
     /// `idmesh query <args> --json`: the parsed replies, or the error text.
     pub fn query(&self, args: &[&str]) -> Result<Vec<Value>, String> {
+        let (answers, errors, success) = self.run_query(args);
+        if success {
+            Ok(answers)
+        } else {
+            Err(errors)
+        }
+    }
+
+    /// Like [`Deployment::query`], but takes what was answered when some
+    /// questions were refused.
+    pub fn query_lenient(&self, args: &[&str]) -> Vec<Value> {
+        let (answers, errors, _) = self.run_query(args);
+        eprintln!("{errors}");
+        answers
+    }
+
+    /// The JSON lines `idmesh query` printed, its stderr, and whether it
+    /// succeeded.
+    fn run_query(&self, args: &[&str]) -> (Vec<Value>, String, bool) {
         let output = Command::new(idmesh())
             .arg("query")
             .args(args)
@@ -113,13 +132,15 @@ impl Deployment {
             ])
             .output()
             .expect("idmesh query runs");
-        if !output.status.success() {
-            return Err(String::from_utf8_lossy(&output.stderr).into_owned());
-        }
-        Ok(String::from_utf8_lossy(&output.stdout)
+        let answers = String::from_utf8_lossy(&output.stdout)
             .lines()
             .map(|l| serde_json::from_str(l).expect("query prints JSON"))
-            .collect())
+            .collect();
+        (
+            answers,
+            String::from_utf8_lossy(&output.stderr).into_owned(),
+            output.status.success(),
+        )
     }
 
     /// The marginals once the whole stream is in, or panics after `patience`.
@@ -197,6 +218,17 @@ pub fn crowd(dir: &Path, targets: usize, red: usize, duration: f64, seed: u64) -
 
 /// The summary line of `idmesh replay` on `trace` with `args`.
 pub fn replay_summary(trace: &Path, args: &[&str]) -> Value {
+    replay(trace, args).pop().expect("a summary line")
+}
+
+/// The answers of `idmesh replay` at the truth lines, summary left out.
+pub fn replay_lines(trace: &Path, args: &[&str]) -> Vec<Value> {
+    let mut lines = replay(trace, args);
+    lines.pop();
+    lines
+}
+
+fn replay(trace: &Path, args: &[&str]) -> Vec<Value> {
     let output = Command::new(idmesh())
         .arg("replay")
         .arg("--trace")
@@ -209,6 +241,8 @@ pub fn replay_summary(trace: &Path, args: &[&str]) -> Value {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let text = String::from_utf8_lossy(&output.stdout);
-    serde_json::from_str(text.lines().last().expect("a summary line")).unwrap()
+    String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("replay prints JSON lines"))
+        .collect()
 }

@@ -18,6 +18,9 @@ pub struct QueryOptions {
     /// Ask this many times (for watching a stream), `interval` apart.
     pub repeat: u32,
     pub interval: Duration,
+    /// Ask instead, all at once, for the answers right after these event
+    /// counts (`?events=N`), printed in this order.
+    pub at_events: Vec<u64>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -45,6 +48,9 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             Question::Track(t) => keys.query_track(t),
             Question::Stats => keys.query_stats(),
         };
+        if !options.at_events.is_empty() {
+            return at_events(&session, &key, options).await;
+        }
         let mut failures = 0;
         for i in 0..options.repeat.max(1) {
             if i > 0 {
@@ -65,6 +71,39 @@ pub fn run(options: &QueryOptions) -> Result<()> {
         }
         Ok(())
     })
+}
+
+/// Every `--at-events` point asked at once; the answers in point order.
+async fn at_events(session: &zenoh::Session, key: &str, options: &QueryOptions) -> Result<()> {
+    let asked: Vec<_> = options
+        .at_events
+        .iter()
+        .map(|n| {
+            let (session, selector) = (session.clone(), format!("{key}?events={n}"));
+            let timeout = options.timeout;
+            tokio::spawn(async move {
+                let started = Instant::now();
+                let answer = ask(&session, &selector, timeout).await;
+                (selector, answer, started.elapsed())
+            })
+        })
+        .collect();
+    let mut failures = 0;
+    for handle in asked {
+        let (selector, answer, took) = handle.await?;
+        match answer {
+            Ok(body) => print(options, &body, took)?,
+            Err(e) => {
+                failures += 1;
+                eprintln!("{selector}: {e}");
+            }
+        }
+    }
+    let _ = session.clone().close().await;
+    if failures > 0 {
+        bail!("{failures} of {} points were not answered", options.at_events.len());
+    }
+    Ok(())
 }
 
 /// One get; the reply body, or the error reply's message.

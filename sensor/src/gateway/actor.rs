@@ -7,14 +7,15 @@
 //! leaders apply. After the source is exhausted it keeps serving cuts and
 //! follows until shut down, so queries keep being answered.
 
+use super::cuts::{place, Cuts, Placed, Request};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
-use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
+use tracing::Instrument;
 use std::time::{Duration, Instant};
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
@@ -62,7 +63,7 @@ pub async fn run(
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), GatewayError> {
     let keys = &config.keys;
-    let cuts = session
+    let cut_requests = session
         .declare_queryable(keys.sensor_cut(&config.name))
         .await
         .map_err(mesh("declare the cut queryable"))?;
@@ -102,6 +103,7 @@ pub async fn run(
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
     let chunk = 512usize;
+    let mut cuts = Cuts::default();
     tokio::pin!(shutdown);
     loop {
         let finished = next >= lines.len();
@@ -112,15 +114,25 @@ pub async fn run(
             due_lines(&config, lines, next, started, first_time, chunk)
         };
         if due > 0 {
-            let _span = tracing::debug_span!("chunk", from = next, lines = due).entered();
+            let mut placed = Vec::new();
             for line in &lines[next..next + due] {
                 router.line(line);
+                cuts.reached(&mut router, &config.name, &mut placed);
             }
             next += due;
             stream.finished = next >= lines.len();
-            stream.flush(&mut router).await;
-            if next >= lines.len() {
+            stream
+                .flush(&mut router)
+                .instrument(tracing::debug_span!("chunk", from = next - due, lines = due))
+                .await;
+            for p in placed {
+                reply_placed(p).await;
+            }
+            if stream.finished {
                 tracing::info!(sensor = %config.name, events = router.events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
+                for (query, reason) in cuts.refuse_all(&router) {
+                    let _ = query.reply_err(reason).await;
+                }
             }
             // Let queries in between chunks.
             tokio::task::yield_now().await;
@@ -128,27 +140,18 @@ pub async fn run(
         tokio::select! {
             biased;
             _ = &mut shutdown => break,
-            query = cuts.recv_async() => {
+            query = cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
-                let Some(tag) = query.parameters().get("tag").and_then(|t| t.parse::<u64>().ok()) else {
-                    let _ = query.reply_err("a cut needs tag=<u64>: the tag leaders will be asked for").await;
-                    continue;
-                };
-                let (seq, events) = router.cut(tag);
-                stream.flush(&mut router).await;
-                let begin = router.begin();
-                let placed = CutPlaced {
-                    version: VERSION,
-                    sensor: config.name.clone(),
-                    seq,
-                    events,
-                    leaders: begin.leaders.clone(),
-                    tracks: begin.tracks,
-                    red: begin.red,
-                    finished: next >= lines.len(),
-                };
-                if let Err(e) = query.reply(query.key_expr().clone(), encode(&placed)).await {
-                    tracing::warn!(error = %e, "could not answer a cut");
+                match cuts.request(query, &router, stream.finished) {
+                    Request::Now { tag, query } => {
+                        let p = place(&mut router, &config.name, tag, query, stream.finished);
+                        stream.flush(&mut router).await;
+                        reply_placed(p).await;
+                    }
+                    Request::Scheduled => {}
+                    Request::Refused { query, reason } => {
+                        let _ = query.reply_err(reason).await;
+                    }
                 }
             }
             query = follows.recv_async() => {
@@ -173,6 +176,16 @@ pub async fn run(
         }
     }
     Ok(())
+}
+
+async fn reply_placed(placed: Placed) {
+    let query = placed.query;
+    if let Err(e) = query
+        .reply(query.key_expr().clone(), encode(&placed.answer))
+        .await
+    {
+        tracing::warn!(error = %e, "could not answer a cut");
+    }
 }
 
 struct Stream {

@@ -5,8 +5,10 @@
 //!   to the leaders whose sets it may change (pure, no I/O).
 //! - [`actor`] — publishes the stream over Zenoh at a rate, places cuts for
 //!   queries and answers leaders' follow requests.
+//! - [`cuts`] — cut requests: now, or at a future event count.
 
 pub mod actor;
+pub mod cuts;
 pub mod router;
 
 pub use router::{LeaderPlace, Router, RouterConfig, RouterError};

@@ -1,0 +1,124 @@
+//! Cuts asked for by the coordinator (`P/sensor/<name>/cut?tag=T`): placed
+//! at once, or, with `&events=N`, at the point of the stream where the N-th
+//! event has been read (a query about a moment that has not come yet: the
+//! scoring of a live deployment against the truth lines uses it). A point
+//! already passed cannot be given back: the stream keeps no history.
+
+use super::router::Router;
+use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
+use idmesh_protocol::wire::VERSION;
+use std::collections::BTreeMap;
+use zenoh::query::Query;
+
+/// Cuts waiting for their event count, at most this many.
+const MAX_SCHEDULED: usize = 10_000;
+
+/// What to do with a cut request.
+pub enum Request {
+    /// Place it now.
+    Now { tag: u64, query: Query },
+    /// Held until the stream reaches its point.
+    Scheduled,
+    /// Refused, with the reason.
+    Refused { query: Query, reason: String },
+}
+
+#[derive(Default)]
+pub struct Cuts {
+    scheduled: BTreeMap<u64, Vec<(u64, Query)>>,
+    held: usize,
+}
+
+/// A cut placed in the stream, and the query to tell once it is sent.
+pub struct Placed {
+    pub query: Query,
+    pub answer: CutPlaced,
+}
+
+impl Cuts {
+    /// Sorts a request: now, later, or never.
+    pub fn request(&mut self, query: Query, router: &Router, finished: bool) -> Request {
+        let parameters = query.parameters();
+        let Some(tag) = parameters.get("tag").and_then(|t| t.parse::<u64>().ok()) else {
+            return Request::Refused {
+                query,
+                reason: "a cut needs tag=<u64>: the tag leaders will be asked for".into(),
+            };
+        };
+        let at = match parameters.get("events").map(str::parse::<u64>) {
+            None => return Request::Now { tag, query },
+            Some(Ok(at)) => at,
+            Some(Err(_)) => {
+                return Request::Refused {
+                    query,
+                    reason: "events=<n> must be a count of events".into(),
+                }
+            }
+        };
+        let now = router.events();
+        if at == now {
+            return Request::Now { tag, query };
+        }
+        let reason = if at < now {
+            format!("the stream is past event {at} (it is at {now}) and keeps no history")
+        } else if finished {
+            format!("the stream ended at {now} events, before event {at}")
+        } else if self.held >= MAX_SCHEDULED {
+            format!("{MAX_SCHEDULED} cuts are already waiting for their point")
+        } else {
+            self.scheduled.entry(at).or_default().push((tag, query));
+            self.held += 1;
+            return Request::Scheduled;
+        };
+        Request::Refused { query, reason }
+    }
+
+    /// Places the cuts whose point the router has reached (call after each
+    /// line), adding them to `placed`.
+    pub fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed>) {
+        while let Some(entry) = self.scheduled.first_entry() {
+            if *entry.key() > router.events() {
+                return;
+            }
+            for (tag, query) in entry.remove() {
+                self.held -= 1;
+                placed.push(place(router, name, tag, query, false));
+            }
+        }
+    }
+
+    /// The stream is over: every cut still waiting is refused.
+    pub fn refuse_all(&mut self, router: &Router) -> Vec<(Query, String)> {
+        self.held = 0;
+        std::mem::take(&mut self.scheduled)
+            .into_iter()
+            .flat_map(|(at, waiting)| {
+                waiting.into_iter().map(move |(_, query)| {
+                    (
+                        query,
+                        format!("the stream ended at {} events, before event {at}", router.events()),
+                    )
+                })
+            })
+            .collect()
+    }
+}
+
+/// Places a cut tagged `tag` in every leader's stream now.
+pub fn place(router: &mut Router, name: &str, tag: u64, query: Query, finished: bool) -> Placed {
+    let (seq, events) = router.cut(tag);
+    let begin = router.begin();
+    Placed {
+        query,
+        answer: CutPlaced {
+            version: VERSION,
+            sensor: name.to_string(),
+            seq,
+            events,
+            leaders: begin.leaders.clone(),
+            tracks: begin.tracks,
+            red: begin.red,
+            finished,
+        },
+    }
+}
