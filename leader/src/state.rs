@@ -22,7 +22,9 @@
 //! leader against its own budget (Section 5.4.3: "fully distributive").
 
 use crate::error::LeaderError;
-use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, PartialSums, RadonOptions, RadonShare};
+use idmesh_belief::radon::{
+    Atom, Growth as BeliefGrowth, PartialSums, RadonOptions, RadonShare, Sparsify,
+};
 use idmesh_belief::{Field, Mix, Observe, RedCount, TrackSet};
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
@@ -122,6 +124,7 @@ impl Leader {
         stats.position = self.position;
         if let Some(s) = &self.started {
             stats.coefficients = s.share.len() as u64;
+            stats.omp_runs = s.share.omp_runs();
             stats.tracks_owned = s.own.iter().filter(|&&o| o).count() as u64;
             stats.tracks_followed = s.interest.len() as u64;
         }
@@ -490,7 +493,15 @@ impl Leader {
         if let Some(started) = &mut self.started {
             let budget = started.begin.budget as usize;
             if budget > 0 {
-                started.share.threshold(budget);
+                let sparsify = if started.begin.omp {
+                    Sparsify::overcomplete(budget)
+                } else {
+                    Sparsify::threshold(budget)
+                };
+                // A numerical failure of OMP leaves the share thresholded.
+                if let Err(e) = started.share.sparsify(&sparsify) {
+                    tracing::warn!(leader = %self.name, seq, error = %e, "OMP failed; thresholded instead");
+                }
             }
         }
     }

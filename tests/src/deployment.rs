@@ -11,6 +11,8 @@ pub struct Settings {
     pub leaders: usize,
     pub distributed_rule: bool,
     pub budget: u32,
+    /// OMP before thresholding at the leaders (`sparsify = "overcomplete"`).
+    pub overcomplete: bool,
     /// Events per second; None = as fast as possible.
     pub rate: Option<f64>,
 }
@@ -62,9 +64,14 @@ impl Deployment {
         let coordinator = format!("tcp/127.0.0.1:{}", free_port());
         let prefix = format!("idmesh/test-{name}-{}", std::process::id());
         let mut toml = format!(
-            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             settings.distributed_rule,
             settings.budget,
+            if settings.overcomplete {
+                "overcomplete"
+            } else {
+                "threshold"
+            },
             free_port(),
             trace.display().to_string()
         );

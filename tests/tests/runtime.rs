@@ -27,6 +27,7 @@ fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
             leaders,
             distributed_rule: false,
             budget: 0,
+            overcomplete: false,
             rate: None,
         };
         let deployment = Deployment::start(&format!("exact{leaders}"), &trace, &settings);
@@ -58,34 +59,41 @@ fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
     }
 }
 
-/// The paper's distributed rule with a budget: the deployment's mean error
-/// over the trace's truth lines stays within 0.02 of the centralized run's
-/// with the same settings. The deployment is asked, while it streams, for
-/// its answer right after the events that precede each truth line, which
-/// is where the centralized replay answers.
+/// The paper's distributed rule with a budget, thresholding: the
+/// deployment's mean error over the trace's truth lines stays within 0.02
+/// of the centralized run's with the same settings.
 #[test]
 fn distributed_rule_with_a_budget_stays_within_two_points_of_the_centralized_run() {
-    let dir = std::env::temp_dir().join(format!("idmesh-rule-{}", std::process::id()));
+    scored_against_the_centralized_run("rule", "threshold", false);
+}
+
+/// The same with the overcomplete method: each leader runs OMP on its own
+/// sets before thresholding.
+#[test]
+fn overcomplete_leaders_stay_within_two_points_of_the_centralized_run() {
+    scored_against_the_centralized_run("omp", "overcomplete", true);
+}
+
+/// Streams a crowd through 4 leaders and asks, while it streams, for the
+/// answer right after the events that precede each truth line (where the
+/// centralized replay answers); compares the mean errors over the points.
+fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bool) {
+    let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
     let trace = crowd(&dir, 50, 10, 120.0, 9);
     let central = replay_lines(
         &trace,
-        &[
-            "--method",
-            "threshold",
-            "--budget",
-            "200",
-            "--distributed-rule",
-        ],
+        &["--method", method, "--budget", "200", "--distributed-rule"],
     );
     let truths = truth_lines(&trace);
     assert_eq!(central.len(), truths.len());
     let deployment = Deployment::start(
-        "rule",
+        name,
         &trace,
         &Settings {
             leaders: 4,
             distributed_rule: true,
             budget: 200,
+            overcomplete,
             rate: Some(2000.0),
         },
     );
@@ -119,12 +127,20 @@ fn distributed_rule_with_a_budget_stays_within_two_points_of_the_centralized_run
         central_error / scored as f64,
     );
     eprintln!(
-        "{scored} truth points: mean error {distributed_error:.4} distributed, {central_error:.4} centralized"
+        "{method}: {scored} truth points, mean error {distributed_error:.4} distributed, {central_error:.4} centralized"
     );
     assert!(
         (distributed_error - central_error).abs() <= 0.02,
-        "distributed {distributed_error} vs centralized {central_error}"
+        "{method}: distributed {distributed_error} vs centralized {central_error}"
     );
+    let stats = deployment.query(&["stats"]).expect("stats answer");
+    let omp_runs: u64 = stats[0]["leaders"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["omp_runs"].as_u64().unwrap())
+        .sum();
+    assert_eq!(omp_runs > 0, overcomplete, "OMP runs at the leaders: {omp_runs}");
 }
 
 /// A truth line of a trace: the red tracks, and how many events precede it.
@@ -179,6 +195,7 @@ fn queries_during_the_stream_sum_to_k_and_the_watermark_only_grows() {
             leaders: 4,
             distributed_rule: false,
             budget: 300,
+            overcomplete: false,
             rate: Some(400.0),
         },
     );
@@ -216,6 +233,7 @@ fn a_python_zenoh_client_gets_the_marginals_as_json() {
             leaders: 2,
             distributed_rule: false,
             budget: 0,
+            overcomplete: false,
             rate: None,
         },
     );

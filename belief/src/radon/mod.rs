@@ -47,7 +47,7 @@ pub use condition::Growth;
 pub use mixing_log::MixingLog;
 pub use omp::OmpOptions;
 pub use share::{PartialSums, RadonShare};
-pub use sparsify::{Sparsify, SparsifyMethod};
+pub use sparsify::{OmpSchedule, Sparsify, SparsifyMethod};
 
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
@@ -91,9 +91,7 @@ pub struct RadonBelief {
     options: RadonOptions,
     mixing_log: MixingLog,
     stats: RadonStats,
-    /// (mixes, observations) since OMP last ran, to time it after runs of
-    /// mixing (Section 5.5, "Timing for Sparsification").
-    since_omp: (u32, u32),
+    since_omp: OmpSchedule,
 }
 
 impl RadonBelief {
@@ -137,7 +135,7 @@ impl RadonBelief {
                 max_coefficients: 1,
                 ..RadonStats::default()
             },
-            since_omp: (0, 0),
+            since_omp: OmpSchedule::default(),
         };
         belief.expand_empty();
         Ok(belief)
@@ -279,7 +277,7 @@ impl PropertyFilter for RadonBelief {
         self.rollup(mix);
         self.mixing_log.record(mix.a, mix.b);
         self.stats.events += 1;
-        self.since_omp.0 += 1;
+        self.since_omp.mixed();
         self.note_size();
         self.maybe_sparsify()
     }
@@ -289,7 +287,7 @@ impl PropertyFilter for RadonBelief {
         self.condition(observe)?;
         self.mixing_log.clear(observe.track);
         self.stats.events += 1;
-        self.since_omp.1 += 1;
+        self.since_omp.observed();
         self.note_size();
         self.maybe_sparsify()
     }

@@ -229,6 +229,24 @@ fn o_fits((_, o): (usize, usize), blue_sizes: usize) -> bool {
     o < blue_sizes
 }
 
+/// How many of the heaviest sets an OMP run keeps as they are: the budget
+/// less the atoms the run may add.
+pub(super) fn kept_by_pursuit(budget: usize, options: &OmpOptions) -> usize {
+    budget.saturating_sub(options.atoms).max(1)
+}
+
+/// The `count` heaviest of `removed`, heaviest first, ties by atom so that
+/// runs are deterministic: what OMP re-expresses.
+pub(super) fn heaviest(removed: &mut [(Atom, f64)], count: usize) -> &[(Atom, f64)] {
+    let count = count.min(removed.len());
+    if count > 0 && count < removed.len() {
+        removed.select_nth_unstable_by(count - 1, |x, y| y.1.abs().total_cmp(&x.1.abs()));
+    }
+    removed[..count]
+        .sort_unstable_by(|x, y| y.1.abs().total_cmp(&x.1.abs()).then_with(|| x.0.cmp(&y.0)));
+    &removed[..count]
+}
+
 /// OMP on a target given by masses m (m = c·W): returns at most
 /// `options.atoms` atoms with non-negative masses whose sum best fits the
 /// target in l2 over the admissible red sets.
@@ -369,16 +387,8 @@ impl RadonBelief {
         options: &OmpOptions,
     ) -> Result<(), BeliefError> {
         let before = self.clone();
-        let keep = budget.saturating_sub(options.atoms).max(1);
-        let mut removed = self.split_off_lightest(keep);
-        let targets = options.targets.min(removed.len());
-        if targets > 0 && targets < removed.len() {
-            removed.select_nth_unstable_by(targets - 1, |x, y| y.1.abs().total_cmp(&x.1.abs()));
-        }
-        // Heaviest first, ties by atom, so that runs are deterministic.
-        removed[..targets]
-            .sort_unstable_by(|x, y| y.1.abs().total_cmp(&x.1.abs()).then_with(|| x.0.cmp(&y.0)));
-        let targets = &removed[..targets];
+        let mut removed = self.split_off_lightest(kept_by_pursuit(budget, options));
+        let targets = heaviest(&mut removed, options.targets);
         let result = pursue(&self.weights, targets, options).and_then(|atoms| {
             for (atom, m) in atoms {
                 *self.masses.entry(atom).or_insert(0.0) += m;

@@ -19,8 +19,9 @@
 use super::atom::Atom;
 use super::condition::{Conditioning, Growth, Update};
 use super::rollup::rollup_masses;
+use super::omp::{heaviest, kept_by_pursuit, pursue, OmpOptions};
 use super::threshold::split_off_lightest;
-use super::{RadonBelief, RadonOptions};
+use super::{OmpSchedule, RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::weights::Weights;
@@ -35,6 +36,8 @@ pub struct RadonShare {
     masses: FxHashMap<Atom, f64>,
     log_scale: f64,
     signed: bool,
+    since_omp: OmpSchedule,
+    omp_runs: u64,
 }
 
 impl RadonShare {
@@ -53,6 +56,8 @@ impl RadonShare {
             masses: belief.masses.clone(),
             log_scale: belief.log_scale,
             signed: belief.options.signed,
+            since_omp: OmpSchedule::default(),
+            omp_runs: 0,
         })
     }
 
@@ -64,7 +69,14 @@ impl RadonShare {
             masses: FxHashMap::default(),
             log_scale: 0.0,
             signed,
+            since_omp: OmpSchedule::default(),
+            omp_runs: 0,
         }
+    }
+
+    /// How many times OMP has re-expressed part of this share.
+    pub fn omp_runs(&self) -> u64 {
+        self.omp_runs
     }
 
     pub fn field(&self) -> &Field {
@@ -92,6 +104,7 @@ impl RadonShare {
     pub fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
         self.field.check_mix(&mix)?;
         rollup_masses(&mut self.masses, mix);
+        self.since_omp.mixed();
         Ok(())
     }
 
@@ -103,6 +116,7 @@ impl RadonShare {
                 self.field.check_track(t)?;
             }
         }
+        self.since_omp.observed();
         let conditioning = Conditioning {
             weights: &self.weights,
             t: observe.track,
@@ -153,6 +167,50 @@ impl RadonShare {
     /// Keeps the `budget` heaviest atoms (Section 5.3.2): fully local.
     pub fn threshold(&mut self, budget: usize) -> usize {
         split_off_lightest(&mut self.masses, budget.max(1)).len()
+    }
+
+    /// Brings the share within `sparsify.budget` sets as the whole belief
+    /// does (OMP after runs of mixing, then thresholding), on this share's
+    /// atoms alone. OMP's atoms are subsets of the sets it re-expresses, so
+    /// they touch only tracks the leader already follows; and since the
+    /// shares add up to the belief, approximating each share approximates
+    /// the sum. No leader needs to agree with another: each set has one
+    /// holder. Nothing is normalized here (shares share one scale); the
+    /// coordinator normalizes the sum. On a numerical failure of OMP the
+    /// share is left as it was and thresholded.
+    pub fn sparsify(&mut self, sparsify: &Sparsify) -> Result<(), BeliefError> {
+        if self.masses.len() <= sparsify.budget {
+            return Ok(());
+        }
+        let mut result = Ok(());
+        if let SparsifyMethod::Overcomplete(omp) = &sparsify.method {
+            if self.since_omp.due(omp) {
+                self.since_omp.ran();
+                result = self.pursue(sparsify.budget, omp);
+            }
+        }
+        self.threshold(sparsify.budget);
+        result
+    }
+
+    fn pursue(&mut self, budget: usize, options: &OmpOptions) -> Result<(), BeliefError> {
+        let mut removed = split_off_lightest(&mut self.masses, kept_by_pursuit(budget, options));
+        let targets = heaviest(&mut removed, options.targets);
+        match pursue(&self.weights, targets, options) {
+            Ok(atoms) => {
+                for (atom, m) in atoms {
+                    *self.masses.entry(atom).or_insert(0.0) += m;
+                }
+                self.masses.retain(|_, m| *m != 0.0);
+                self.rescale();
+                self.omp_runs += 1;
+                Ok(())
+            }
+            Err(e) => {
+                self.masses.extend(removed);
+                Err(e)
+            }
+        }
     }
 
     /// The sums this share contributes to the marginals.
@@ -333,6 +391,63 @@ mod tests {
                 for (x, y) in p.iter().zip(&q) {
                     assert!((x - y).abs() < 1e-9, "step {step}: {p:?} vs {q:?}");
                 }
+            }
+        }
+    }
+
+    /// A share holding the whole belief, sparsified with the belief's own
+    /// rule (thresholding, or OMP after runs of mixing), keeps the belief's
+    /// marginals: the leaders run the paper's approximation, not another.
+    #[test]
+    fn one_share_sparsified_is_the_sparsified_belief() {
+        // Thresholding from a uniform start with fair swaps, where many sets
+        // tie by symmetry; OMP, whose greedy choices rounding can still
+        // flip between near-equal candidates, from a known start with
+        // unfair swaps.
+        let runs = [
+            (Sparsify::threshold(12), Field::uniform(9, 3), 0.5),
+            (Sparsify::overcomplete(12), Field::known(9, vec![0, 4, 7]), 0.37),
+        ];
+        for (sparsify, field, swap) in runs {
+            let options = RadonOptions {
+                distributed_rule: true,
+                sparsify: Some(sparsify.clone()),
+                ..RadonOptions::default()
+            };
+            let spec = WorkloadSpec {
+                tracks: 9,
+                red: 3,
+                events: 200,
+                swap,
+                ..WorkloadSpec::table3(9, 11)
+            };
+            let workload = crate::workload::generate(&spec);
+            let mut whole = RadonBelief::with_options(field.clone(), options.clone()).unwrap();
+            let mut share = RadonShare::start(field.clone(), &options).unwrap();
+            let mut log = crate::radon::MixingLog::new(field.tracks);
+            for (step, event) in workload.events.iter().enumerate() {
+                match *event {
+                    Event::Mix(mix) => {
+                        whole.mix(mix).unwrap();
+                        log.record(mix.a, mix.b);
+                        share.mix(mix).unwrap();
+                    }
+                    Event::Observe(o) => {
+                        whole.observe(o).unwrap();
+                        share.observe(o, Growth::Meeting(log.partners(o.track))).unwrap();
+                        log.clear(o.track);
+                    }
+                }
+                share.sparsify(&sparsify).unwrap();
+                assert!(share.len() <= 12);
+                let p = share.partial_sums().marginals(field.tracks).unwrap();
+                let q = whole.marginals().unwrap();
+                for (x, y) in p.iter().zip(&q) {
+                    assert!((x - y).abs() < 1e-9, "{sparsify:?} step {step}: {p:?} vs {q:?}");
+                }
+            }
+            if matches!(sparsify.method, SparsifyMethod::Overcomplete(_)) {
+                assert!(whole.stats().omp_runs > 0, "OMP never ran: the test shows nothing");
             }
         }
     }

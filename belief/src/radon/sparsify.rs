@@ -59,6 +59,35 @@ impl Sparsify {
     }
 }
 
+/// Mixes and observations since OMP last ran, to time it after runs of
+/// mixing (Section 5.5, "Timing for Sparsification"). The whole belief and
+/// each leader's share keep one.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct OmpSchedule {
+    mixes: u32,
+    observations: u32,
+}
+
+impl OmpSchedule {
+    pub fn mixed(&mut self) {
+        self.mixes += 1;
+    }
+
+    pub fn observed(&mut self) {
+        self.observations += 1;
+    }
+
+    /// At least `every` events since the last run, at least half of them
+    /// mixes.
+    pub fn due(&self, omp: &OmpOptions) -> bool {
+        self.mixes + self.observations >= omp.every && self.mixes >= self.observations
+    }
+
+    pub fn ran(&mut self) {
+        *self = OmpSchedule::default();
+    }
+}
+
 impl RadonBelief {
     pub(super) fn sparsify_now(&mut self, sparsify: &Sparsify) -> Result<(), BeliefError> {
         match &sparsify.method {
@@ -66,11 +95,9 @@ impl RadonBelief {
                 self.threshold(sparsify.budget)?;
             }
             SparsifyMethod::Overcomplete(omp) => {
-                let (mixes, observes) = self.since_omp;
-                let due = mixes + observes >= omp.every && mixes >= observes;
-                if due {
+                if self.since_omp.due(omp) {
                     self.pursue(sparsify.budget, omp)?;
-                    self.since_omp = (0, 0);
+                    self.since_omp.ran();
                 }
                 if self.masses.len() > sparsify.budget {
                     self.threshold(sparsify.budget)?;

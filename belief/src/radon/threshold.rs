@@ -8,7 +8,10 @@
 use super::atom::Atom;
 use super::RadonBelief;
 use crate::error::BeliefError;
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
+
+/// Relative difference below which two masses tie.
+const TIE: f64 = 1e-9;
 
 /// Keeps the `keep` heaviest atoms of `masses`; returns the removed ones (in
 /// no particular order). Selects on a copy of the weights and removes in
@@ -28,20 +31,25 @@ pub(super) fn split_off_lightest(
             .select_nth_unstable_by(keep - 1, |x, y| y.total_cmp(x))
             .1
     };
-    // Atoms strictly heavier than the cut all stay; ties at the cut fill
-    // the remaining places.
-    let mut ties = keep - sizes[..keep].iter().filter(|&&x| x > cut).count();
+    // Atoms clearly heavier than the cut all stay; ties at the cut fill the
+    // remaining places, smallest atoms first. Masses equal but for rounding
+    // count as ties (sets equal by symmetry are computed along different
+    // paths), so the choice depends neither on the map's order nor on the
+    // last bits: a leader's share and the whole belief drop the same sets.
+    let band = cut * TIE;
+    let places = keep - sizes[..keep].iter().filter(|&&x| x > cut + band).count();
+    let mut tied: Vec<Atom> = masses
+        .iter()
+        .filter(|(_, m)| (m.abs() - cut).abs() <= band)
+        .map(|(a, _)| a.clone())
+        .collect();
+    tied.sort_unstable();
+    tied.truncate(places);
+    let kept_ties: FxHashSet<Atom> = tied.into_iter().collect();
     let mut removed = Vec::with_capacity(masses.len() - keep);
-    for (atom, m) in masses.extract_if(|_, m| {
+    for (atom, m) in masses.extract_if(|atom, m| {
         let size = m.abs();
-        if size > cut {
-            false
-        } else if size == cut && ties > 0 {
-            ties -= 1;
-            false
-        } else {
-            true
-        }
+        size <= cut + band && !kept_ties.contains(atom)
     }) {
         removed.push((atom, m));
     }

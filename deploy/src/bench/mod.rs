@@ -18,7 +18,7 @@ mod throughput;
 use crate::runtime::launch::{simulate_crowd, Processes};
 use crate::runtime::loopback::{Loopback, Ports};
 use crate::runtime::mesh::{self, MeshOptions};
-use crate::runtime::topology::Topology;
+use crate::runtime::topology::{Sparsification, Topology};
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -130,6 +130,7 @@ impl Deployment {
             leaders,
             distributed_rule: true,
             budget: options.budget,
+            sparsify: Sparsification::Threshold,
             rate,
             events: None,
             ports: Ports::Free,

@@ -4,6 +4,7 @@
 //! through four leaders, and prints live answers.
 
 use super::loopback::{Loopback, Ports};
+use super::topology::Sparsification;
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
 use super::topology::Topology;
@@ -142,6 +143,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         leaders: 4,
         distributed_rule: true,
         budget: 400,
+        sparsify: Sparsification::Overcomplete,
         rate: Some(options.rate),
         events: options.events,
         ports: Ports::From(7447),

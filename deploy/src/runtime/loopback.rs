@@ -4,6 +4,7 @@
 //! mix across them, as in the paper's sensor grid.
 
 use super::launch::field_corners;
+use super::topology::Sparsification;
 use anyhow::Result;
 use std::path::Path;
 
@@ -14,6 +15,7 @@ pub struct Loopback {
     pub distributed_rule: bool,
     /// Sets per leader; 0 = no pruning.
     pub budget: u32,
+    pub sparsify: Sparsification,
     /// Events per second; None = as fast as the mesh takes them.
     pub rate: Option<f64>,
     /// Stop the stream after this many events.
@@ -49,10 +51,14 @@ impl Loopback {
         let rows = self.leaders.div_ceil(columns);
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
         let mut toml = format!(
-            "prefix = {:?}\ndistributed_rule = {}\nbudget = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = {:?}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             self.prefix,
             self.distributed_rule,
             self.budget,
+            match self.sparsify {
+                Sparsification::Threshold => "threshold",
+                Sparsification::Overcomplete => "overcomplete",
+            },
             self.ports.take(self.leaders as u16 + 1)?,
             trace.display().to_string(),
         );
@@ -97,6 +103,7 @@ mod tests {
             leaders: 5,
             distributed_rule: true,
             budget: 100,
+            sparsify: Sparsification::Overcomplete,
             rate: Some(50.0),
             events: None,
             ports: Ports::From(9000),
@@ -113,5 +120,6 @@ mod tests {
             assert!((0.0..=30.0).contains(&x) && (0.0..=20.0).contains(&y));
         }
         assert!(topology.distributed_rule && topology.budget == 100);
+        assert_eq!(topology.sparsify, Sparsification::Overcomplete);
     }
 }

@@ -4,7 +4,7 @@
 //! it, and stops cleanly on Ctrl-C or SIGTERM.
 
 use super::mesh::{self, MeshOptions};
-use super::topology::Topology;
+use super::topology::{Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::actor::CoordinatorConfig;
 use idmesh_leader::actor::LeaderConfig;
@@ -112,6 +112,7 @@ async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Res
                 .collect(),
             distributed_rule: topology.distributed_rule,
             budget: topology.budget,
+            omp: topology.sparsify == Sparsification::Overcomplete,
         },
         &header,
     )?;

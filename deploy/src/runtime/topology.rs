@@ -6,6 +6,7 @@
 //! prefix = "idmesh/default"      # key-expression prefix
 //! distributed_rule = false       # Algorithm 5 instead of exact conditioning
 //! budget = 0                     # sets per leader (0 = no pruning)
+//! sparsify = "threshold"         # or "overcomplete": OMP, then threshold
 //! query_timeout_ms = 2000
 //!
 //! [coordinator]
@@ -38,6 +39,8 @@ pub struct Topology {
     pub distributed_rule: bool,
     #[serde(default)]
     pub budget: u32,
+    #[serde(default)]
+    pub sparsify: Sparsification,
     #[serde(default = "default_timeout")]
     pub query_timeout_ms: u64,
     pub coordinator: Process,
@@ -46,6 +49,17 @@ pub struct Topology {
     /// Where the file was read from (relative paths start there).
     #[serde(skip)]
     pub dir: PathBuf,
+}
+
+/// How leaders bring their sets within the budget.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sparsification {
+    /// Drop the lightest sets (Section 5.3.2).
+    #[default]
+    Threshold,
+    /// OMP re-expresses the heaviest of them first (Section 5.3.1).
+    Overcomplete,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -42,6 +42,8 @@ pub struct LeaderStats {
     pub sets_sent: u64,
     pub bytes_sent: u64,
     pub follows: u64,
+    /// OMP runs on this leader's sets (the overcomplete method).
+    pub omp_runs: u64,
     pub coefficients: u64,
     pub tracks_owned: u64,
     pub tracks_followed: u64,

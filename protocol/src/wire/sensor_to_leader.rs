@@ -86,4 +86,7 @@ pub struct Begin {
     pub distributed_rule: bool,
     /// Each leader's coefficient budget (0 = no pruning).
     pub budget: u32,
+    /// Over budget, re-express with OMP after runs of mixing before
+    /// thresholding (the overcomplete method), each leader on its own sets.
+    pub omp: bool,
 }

@@ -32,6 +32,8 @@ pub struct RouterConfig {
     pub leaders: Vec<LeaderPlace>,
     pub distributed_rule: bool,
     pub budget: u32,
+    /// OMP before thresholding (needs k known and a budget).
+    pub omp: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -42,6 +44,8 @@ pub enum RouterError {
     UnknownLeader(u16),
     #[error("follow request names track {track}, but there are {tracks} tracks")]
     UnknownTrack { track: u32, tracks: u32 },
+    #[error("OMP at the leaders needs {0}")]
+    Omp(&'static str),
     #[error(transparent)]
     Start(#[from] LeaderError),
 }
@@ -65,6 +69,14 @@ impl Router {
         if leaders == 0 {
             return Err(RouterError::NoLeaders);
         }
+        if config.omp && config.budget == 0 {
+            return Err(RouterError::Omp("a budget (it re-expresses what the budget drops)"));
+        }
+        // OMP may put mass on φ_∅, which only leader 0 can hold when k is
+        // unknown (every observation grows it).
+        if config.omp && header.red_count().is_none() {
+            return Err(RouterError::Omp("k, the number of red targets, in the trace header"));
+        }
         let tracks = header.tracks;
         let begin = Begin {
             tracks: tracks as u32,
@@ -74,6 +86,7 @@ impl Router {
             owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
             distributed_rule: config.distributed_rule,
             budget: config.budget,
+            omp: config.omp,
         };
         let mut interests = Vec::with_capacity(leaders);
         for me in 0..leaders {
