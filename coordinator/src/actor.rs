@@ -3,11 +3,11 @@
 //! other users.
 
 use crate::gather::{self, At, GatherError, Memory};
-use std::sync::Arc;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{QueryError, StatsAnswer, TrackAnswer};
 use serde::Serialize;
 use std::future::Future;
+use std::sync::Arc;
 use std::time::Duration;
 use tracing::Instrument;
 use zenoh::bytes::Encoding;

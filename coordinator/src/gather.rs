@@ -243,21 +243,18 @@ async fn place_cut(
         .timeout(timeout)
         .await
         .map_err(|e| GatherError::Failed(format!("ask for a cut: {e}")))?;
-    while let Ok(reply) = replies.recv_async().await {
-        match reply.result() {
-            Ok(sample) => {
-                return decode::<CutPlaced>(&sample.payload().to_bytes())
-                    .map_err(|e| GatherError::Failed(e.to_string()))
-            }
-            Err(e) => {
-                return Err(GatherError::Failed(format!(
-                    "the sensor placed no cut: {}",
-                    String::from_utf8_lossy(&e.payload().to_bytes())
-                )))
-            }
-        }
+    // The first reply decides: one sensor places the cut.
+    let Ok(reply) = replies.recv_async().await else {
+        return Err(GatherError::NoSensor);
+    };
+    match reply.result() {
+        Ok(sample) => decode::<CutPlaced>(&sample.payload().to_bytes())
+            .map_err(|e| GatherError::Failed(e.to_string())),
+        Err(e) => Err(GatherError::Failed(format!(
+            "the sensor placed no cut: {}",
+            String::from_utf8_lossy(&e.payload().to_bytes())
+        ))),
     }
-    Err(GatherError::NoSensor)
 }
 
 /// Every leader's counters.

@@ -248,7 +248,9 @@ async fn answer_partial(
         .and_then(|c| c.parse::<u64>().ok());
     let Some(tag) = tag else {
         let _ = query
-            .reply_err("a partial-sums query needs tag=<u64> (the tag of the cut it asks for) or quiet")
+            .reply_err(
+                "a partial-sums query needs tag=<u64> (the tag of the cut it asks for) or quiet",
+            )
             .await;
         return;
     };

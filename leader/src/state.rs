@@ -567,3 +567,110 @@ pub fn combine(parts: &[Partial]) -> PartialSums {
         .collect();
     PartialSums::combine(&sums)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
+        Item::Begin(Begin {
+            tracks: owners.len() as u32,
+            red: Some(2),
+            initial_red: Some(vec![0, 1]),
+            leaders: leaders.iter().map(|l| l.to_string()).collect(),
+            owners,
+            distributed_rule: false,
+            budget: 0,
+            omp: false,
+        })
+    }
+
+    fn batch(number: u64, items: Vec<(u64, Item)>, through: u64, finished: bool) -> Batch {
+        Batch {
+            version: VERSION,
+            sensor: "sensor-0".into(),
+            number,
+            through,
+            events: through,
+            finished,
+            items: items
+                .into_iter()
+                .map(|(seq, item)| Sequenced { seq, item })
+                .collect(),
+        }
+    }
+
+    fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
+        Item::Mix {
+            a,
+            b,
+            swap: 0.5,
+            owner_a,
+            owner_b,
+        }
+    }
+
+    #[test]
+    fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody() {
+        let mut leader = Leader::new("a");
+        assert!(leader.quiet().is_none(), "no Begin yet");
+        leader
+            .batch(
+                batch(0, vec![(1, begin(&["a", "b"], vec![0, 0, 1, 1]))], 1, false),
+                0,
+            )
+            .unwrap();
+        let rest = leader.quiet().expect("quiet after the Begin");
+        assert_eq!((rest.cut, rest.finished), (1, false));
+        // A mix with b's track: the leader must wait for b's sets.
+        let actions = leader
+            .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, true), 0)
+            .unwrap();
+        assert!(actions
+            .iter()
+            .any(|a| matches!(a, Action::Send { to: 1, .. })));
+        assert!(leader.quiet().is_none(), "waiting for b's sets");
+        leader
+            .transfer(
+                Transfer {
+                    version: VERSION,
+                    from: 1,
+                    seq: 2,
+                    sets: Vec::new(),
+                },
+                0,
+            )
+            .unwrap();
+        let rest = leader.quiet().expect("quiet once b's sets are in");
+        assert_eq!((rest.cut, rest.events, rest.finished), (2, 2, true));
+    }
+
+    #[test]
+    fn a_cut_is_answered_by_its_tag_and_a_lost_batch_is_a_gap() {
+        let mut leader = Leader::new("a");
+        leader
+            .batch(
+                batch(0, vec![(1, begin(&["a"], vec![0, 0, 0]))], 1, false),
+                0,
+            )
+            .unwrap();
+        let cut = Item::Cut { events: 7, tag: 42 };
+        let actions = leader
+            .batch(batch(1, vec![(2, mix(0, 2, 0, 0)), (3, cut)], 3, false), 0)
+            .unwrap();
+        assert!(actions
+            .iter()
+            .any(|a| matches!(a, Action::CutReady(p) if p.tag == 42 && p.cut == 3)));
+        let partial = leader.cut(42).expect("kept for late queries");
+        assert_eq!(partial.events, 7);
+        assert!(leader.cut(41).is_none());
+        let gap = leader.batch(batch(3, vec![], 4, false), 0);
+        assert!(matches!(
+            gap,
+            Err(LeaderError::Gap {
+                expected: 2,
+                got: 3
+            })
+        ));
+    }
+}

@@ -140,7 +140,11 @@ fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bo
         .iter()
         .map(|l| l["omp_runs"].as_u64().unwrap())
         .sum();
-    assert_eq!(omp_runs > 0, overcomplete, "OMP runs at the leaders: {omp_runs}");
+    assert_eq!(
+        omp_runs > 0,
+        overcomplete,
+        "OMP runs at the leaders: {omp_runs}"
+    );
 }
 
 /// A truth line of a trace: the red tracks, and how many events precede it.

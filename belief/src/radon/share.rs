@@ -18,8 +18,8 @@
 
 use super::atom::Atom;
 use super::condition::{Conditioning, Growth, Update};
-use super::rollup::rollup_masses;
 use super::omp::{heaviest, kept_by_pursuit, pursue, OmpOptions};
+use super::rollup::rollup_masses;
 use super::threshold::split_off_lightest;
 use super::{OmpSchedule, RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
 use crate::error::BeliefError;
@@ -406,7 +406,11 @@ mod tests {
         // unfair swaps.
         let runs = [
             (Sparsify::threshold(12), Field::uniform(9, 3), 0.5),
-            (Sparsify::overcomplete(12), Field::known(9, vec![0, 4, 7]), 0.37),
+            (
+                Sparsify::overcomplete(12),
+                Field::known(9, vec![0, 4, 7]),
+                0.37,
+            ),
         ];
         for (sparsify, field, swap) in runs {
             let options = RadonOptions {
@@ -434,7 +438,9 @@ mod tests {
                     }
                     Event::Observe(o) => {
                         whole.observe(o).unwrap();
-                        share.observe(o, Growth::Meeting(log.partners(o.track))).unwrap();
+                        share
+                            .observe(o, Growth::Meeting(log.partners(o.track)))
+                            .unwrap();
                         log.clear(o.track);
                     }
                 }
@@ -443,11 +449,17 @@ mod tests {
                 let p = share.partial_sums().marginals(field.tracks).unwrap();
                 let q = whole.marginals().unwrap();
                 for (x, y) in p.iter().zip(&q) {
-                    assert!((x - y).abs() < 1e-9, "{sparsify:?} step {step}: {p:?} vs {q:?}");
+                    assert!(
+                        (x - y).abs() < 1e-9,
+                        "{sparsify:?} step {step}: {p:?} vs {q:?}"
+                    );
                 }
             }
             if matches!(sparsify.method, SparsifyMethod::Overcomplete(_)) {
-                assert!(whole.stats().omp_runs > 0, "OMP never ran: the test shows nothing");
+                assert!(
+                    whole.stats().omp_runs > 0,
+                    "OMP never ran: the test shows nothing"
+                );
             }
         }
     }

@@ -24,7 +24,11 @@ pub struct Latencies {
 
 /// Times `queries` rounds; `streaming` checks that the stream was still
 /// running when the last marginals answer came.
-pub async fn measure(deployment: &Deployment, queries: usize, streaming: bool) -> Result<Latencies> {
+pub async fn measure(
+    deployment: &Deployment,
+    queries: usize,
+    streaming: bool,
+) -> Result<Latencies> {
     let keys = deployment.keys();
     let marginals_key = keys.query_marginals();
     let coordinator = keys.ping("coordinator", &deployment.topology.coordinator.name);

@@ -81,7 +81,10 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     // answer where they rest), and during a paced stream (every query
     // places a fresh cut).
     let leaders = 4;
-    eprintln!("bench: {} marginals queries with {leaders} leaders at rest", options.queries);
+    eprintln!(
+        "bench: {} marginals queries with {leaders} leaders at rest",
+        options.queries
+    );
     let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
     runtime.block_on(throughput::measure(&deployment))?;
     let at_rest = runtime.block_on(latency::measure(&deployment, options.queries, false))?;
@@ -133,6 +136,8 @@ impl Deployment {
             sparsify: Sparsification::Threshold,
             rate,
             events: None,
+            // Streaming flat out, leaders can be seconds behind the sensor.
+            query_timeout_ms: 60_000,
             ports: Ports::Free,
         };
         let (toml, _) = plan.topology(&std::fs::canonicalize(trace)?)?;

@@ -1,8 +1,10 @@
 //! Events per second through a deployment: the sensor streams as fast as
 //! the mesh takes it, and the bench asks the coordinator for the marginals
-//! every few milliseconds. The rate is the events between the first answer
-//! that saw the stream moving and the first that covered all of it, over
-//! the time between them: what a user watching the answers would see.
+//! every few milliseconds. The stream starts after the last answer that saw
+//! no event (the question was sent before the first event: the clock starts
+//! then) and is through when an answer covers all of it: what a user
+//! watching the answers would see, leaders' backlog included. If the bench
+//! never saw the stream at zero, it counts from the first answer it got.
 
 use super::Deployment;
 use crate::runtime::query::ask;
@@ -38,6 +40,7 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
     let key = keys.query_marginals();
     let started = Instant::now();
     let mut first: Option<(Instant, u64)> = None;
+    let mut last_zero: Option<Instant> = None;
     let mut queries = 0;
     let mut last_error = String::new();
     loop {
@@ -47,12 +50,17 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
                 queries += 1;
                 let answer: MarginalsAnswer = serde_json::from_slice(&body)?;
                 let events: u64 = answer.watermark.values().sum();
-                if first.is_none() && events > 0 {
-                    first = Some((asked, events));
+                if events == 0 {
+                    last_zero = Some(asked);
+                } else if first.is_none() {
+                    first = Some((
+                        last_zero.unwrap_or(asked),
+                        if last_zero.is_some() { 0 } else { events },
+                    ));
                 }
                 if answer.finished {
-                    let Some((since, first_seen)) = first else {
-                        bail!("the stream was over before the first answer: make it longer");
+                    let Some((since, first_seen)) = first.filter(|f| f.1 < events) else {
+                        bail!("the stream was over before the bench could time it: make it longer");
                     };
                     let stats = stats(deployment).await?;
                     return Ok(Stream {
@@ -65,12 +73,14 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
                     });
                 }
             }
-            Err(e) if first.is_none() && started.elapsed() < START_PATIENCE => {
+            Err(e)
+                if first.is_none() && last_zero.is_none() && started.elapsed() < START_PATIENCE =>
+            {
                 last_error = e.to_string();
             }
             Err(e) => bail!("marginals query failed during the stream: {e}"),
         }
-        if first.is_none() && started.elapsed() > START_PATIENCE {
+        if first.is_none() && last_zero.is_none() && started.elapsed() > START_PATIENCE {
             bail!("the deployment did not start streaming within {START_PATIENCE:?}: {last_error}");
         }
         tokio::time::sleep(POLL).await;
@@ -114,17 +124,17 @@ pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
     writeln!(out, "### Throughput\n")?;
     writeln!(
         out,
-        "| leaders | events | measured over | events/s | vs 1 leader | marginals queries during the stream |"
+        "| leaders | events | timed from event | seconds | events/s | vs 1 leader | marginals answers during the stream |"
     )?;
-    writeln!(out, "|---:|---:|---:|---:|---:|---:|")?;
+    writeln!(out, "|---:|---:|---:|---:|---:|---:|---:|")?;
     let base = streams.first().map(Stream::events_per_second);
     for s in streams {
         writeln!(
             out,
-            "| {} | {} | {} events, {:.2} s | {:.0} | {:.2}× | {} |",
+            "| {} | {} | {} | {:.2} | {:.0} | {:.2}× | {} |",
             s.leaders,
             s.events,
-            s.events - s.first_seen,
+            s.first_seen,
             s.seconds,
             s.events_per_second(),
             base.map_or(1.0, |b| s.events_per_second() / b),

@@ -4,9 +4,9 @@
 //! through four leaders, and prints live answers.
 
 use super::loopback::{Loopback, Ports};
-use super::topology::Sparsification;
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
+use super::topology::Sparsification;
 use super::topology::Topology;
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
@@ -146,6 +146,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         sparsify: Sparsification::Overcomplete,
         rate: Some(options.rate),
         events: options.events,
+        query_timeout_ms: 2000,
         ports: Ports::From(7447),
     };
     let (topology, coordinator) = plan.topology(&trace)?;
@@ -212,7 +213,13 @@ async fn watch(processes: &mut Processes, coordinator: &str) -> Result<()> {
 
 /// Simulates a social-force crowd into `out` (the demo's and the bench's
 /// stream).
-pub fn simulate_crowd(targets: usize, red: usize, duration: f64, seed: u64, out: &Path) -> Result<()> {
+pub fn simulate_crowd(
+    targets: usize,
+    red: usize,
+    duration: f64,
+    seed: u64,
+    out: &Path,
+) -> Result<()> {
     let trace = idmesh_sensor::Scenario::crowd()
         .targets(targets)
         .red(red)

@@ -20,6 +20,8 @@ pub struct Loopback {
     pub rate: Option<f64>,
     /// Stop the stream after this many events.
     pub events: Option<u64>,
+    /// How long the coordinator waits for the leaders.
+    pub query_timeout_ms: u64,
     pub ports: Ports,
 }
 
@@ -51,7 +53,7 @@ impl Loopback {
         let rows = self.leaders.div_ceil(columns);
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
         let mut toml = format!(
-            "prefix = {:?}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = {:?}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             self.prefix,
             self.distributed_rule,
             self.budget,
@@ -59,6 +61,7 @@ impl Loopback {
                 Sparsification::Threshold => "threshold",
                 Sparsification::Overcomplete => "overcomplete",
             },
+            self.query_timeout_ms,
             self.ports.take(self.leaders as u16 + 1)?,
             trace.display().to_string(),
         );
@@ -106,6 +109,7 @@ mod tests {
             sparsify: Sparsification::Overcomplete,
             rate: Some(50.0),
             events: None,
+            query_timeout_ms: 1500,
             ports: Ports::From(9000),
         };
         let (toml, coordinator) = plan.topology(&trace).unwrap();
@@ -121,5 +125,6 @@ mod tests {
         }
         assert!(topology.distributed_rule && topology.budget == 100);
         assert_eq!(topology.sparsify, Sparsification::Overcomplete);
+        assert_eq!(topology.query_timeout_ms, 1500);
     }
 }

@@ -101,7 +101,10 @@ async fn at_events(session: &zenoh::Session, key: &str, options: &QueryOptions) 
     }
     let _ = session.clone().close().await;
     if failures > 0 {
-        bail!("{failures} of {} points were not answered", options.at_events.len());
+        bail!(
+            "{failures} of {} points were not answered",
+            options.at_events.len()
+        );
     }
     Ok(())
 }

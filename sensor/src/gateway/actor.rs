@@ -15,8 +15,8 @@ use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
-use tracing::Instrument;
 use std::time::{Duration, Instant};
+use tracing::Instrument;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::Session;
@@ -123,7 +123,11 @@ pub async fn run(
             stream.finished = next >= lines.len();
             stream
                 .flush(&mut router)
-                .instrument(tracing::debug_span!("chunk", from = next - due, lines = due))
+                .instrument(tracing::debug_span!(
+                    "chunk",
+                    from = next - due,
+                    lines = due
+                ))
                 .await;
             for p in placed {
                 reply_placed(p).await;

@@ -96,7 +96,10 @@ impl Cuts {
                 waiting.into_iter().map(move |(_, query)| {
                     (
                         query,
-                        format!("the stream ended at {} events, before event {at}", router.events()),
+                        format!(
+                            "the stream ended at {} events, before event {at}",
+                            router.events()
+                        ),
                     )
                 })
             })

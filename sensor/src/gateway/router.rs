@@ -70,12 +70,16 @@ impl Router {
             return Err(RouterError::NoLeaders);
         }
         if config.omp && config.budget == 0 {
-            return Err(RouterError::Omp("a budget (it re-expresses what the budget drops)"));
+            return Err(RouterError::Omp(
+                "a budget (it re-expresses what the budget drops)",
+            ));
         }
         // OMP may put mass on φ_∅, which only leader 0 can hold when k is
         // unknown (every observation grows it).
         if config.omp && header.red_count().is_none() {
-            return Err(RouterError::Omp("k, the number of red targets, in the trace header"));
+            return Err(RouterError::Omp(
+                "k, the number of red targets, in the trace header",
+            ));
         }
         let tracks = header.tracks;
         let begin = Begin {
