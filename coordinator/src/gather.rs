@@ -206,13 +206,7 @@ async fn partials(
     timeout: Duration,
 ) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
     let selector = format!("{}?{parameters}", keys.every_leader_partial());
-    let replies = session
-        .get(selector)
-        .consolidation(ConsolidationMode::None)
-        .target(QueryTarget::All)
-        .timeout(timeout)
-        .await
-        .map_err(|e| GatherError::Failed(format!("query the leaders: {e}")))?;
+    let replies = ask_everyone(session, selector, timeout, "query the leaders").await?;
     let mut parts = BTreeMap::new();
     let mut errors = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
@@ -236,13 +230,8 @@ async fn place_cut(
     parameters: &str,
     timeout: Duration,
 ) -> Result<CutPlaced, GatherError> {
-    let replies = session
-        .get(format!("{}?{parameters}", keys.every_sensor_cut()))
-        .consolidation(ConsolidationMode::None)
-        .target(QueryTarget::All)
-        .timeout(timeout)
-        .await
-        .map_err(|e| GatherError::Failed(format!("ask for a cut: {e}")))?;
+    let selector = format!("{}?{parameters}", keys.every_sensor_cut());
+    let replies = ask_everyone(session, selector, timeout, "ask for a cut").await?;
     // The first reply decides: one sensor places the cut.
     let Ok(reply) = replies.recv_async().await else {
         return Err(GatherError::NoSensor);
@@ -263,13 +252,13 @@ pub async fn stats(
     keys: &Keys,
     timeout: Duration,
 ) -> Result<Vec<LeaderStats>, GatherError> {
-    let replies = session
-        .get(keys.every_leader_stats())
-        .consolidation(ConsolidationMode::None)
-        .target(QueryTarget::All)
-        .timeout(timeout)
-        .await
-        .map_err(|e| GatherError::Failed(format!("query the leaders: {e}")))?;
+    let replies = ask_everyone(
+        session,
+        keys.every_leader_stats(),
+        timeout,
+        "query the leaders",
+    )
+    .await?;
     let mut all = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
         if let Ok(sample) = reply.result() {
@@ -283,4 +272,21 @@ pub async fn stats(
     }
     all.sort_by(|a, b| a.leader.cmp(&b.leader));
     Ok(all)
+}
+
+/// A get that every matching queryable answers on its own key (no
+/// consolidation: replies from several processes must not collapse).
+async fn ask_everyone(
+    session: &Session,
+    selector: String,
+    timeout: Duration,
+    what: &str,
+) -> Result<zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>, GatherError> {
+    session
+        .get(selector)
+        .consolidation(ConsolidationMode::None)
+        .target(QueryTarget::All)
+        .timeout(timeout)
+        .await
+        .map_err(|e| GatherError::Failed(format!("{what}: {e}")))
 }

@@ -6,10 +6,18 @@ use serde_json::Value;
 use std::time::Duration;
 
 fn floats(v: &Value) -> Vec<f64> {
+    array(v, Value::as_f64)
+}
+
+fn integers(v: &Value) -> Vec<u64> {
+    array(v, Value::as_u64)
+}
+
+fn array<T>(v: &Value, item: impl Fn(&Value) -> Option<T>) -> Vec<T> {
     v.as_array()
         .expect("an array")
         .iter()
-        .map(|x| x.as_f64().expect("a number"))
+        .map(|x| item(x).unwrap_or_else(|| panic!("{x} in {v}")))
         .collect()
 }
 
@@ -176,14 +184,6 @@ fn error(predicted: &[u64], truth: &[u64], tracks: usize) -> f64 {
     let missed = truth.iter().filter(|t| !predicted.contains(t)).count();
     let wrong = predicted.iter().filter(|t| !truth.contains(t)).count();
     (missed + wrong) as f64 / tracks as f64
-}
-
-fn integers(v: &Value) -> Vec<u64> {
-    v.as_array()
-        .expect("an array")
-        .iter()
-        .map(|x| x.as_u64().expect("an integer"))
-        .collect()
 }
 
 /// Queries fired while the stream runs see marginals that sum to k and a
