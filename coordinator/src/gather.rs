@@ -95,7 +95,7 @@ async fn at_rest(
     timeout: Duration,
     last: CutPlaced,
 ) -> Option<Gathered> {
-    let (parts, errors) = partials(session, keys, "quiet", None, timeout).await.ok()?;
+    let (parts, errors) = partials(session, keys, None, timeout).await.ok()?;
     let first = parts.values().next()?;
     let agreed = errors.is_empty()
         && parts.values().all(|p| p.finished && p.cut == first.cut)
@@ -122,15 +122,14 @@ async fn at_fresh_cut(
     at: At,
 ) -> Result<Gathered, GatherError> {
     let tag = fresh_tag();
-    let at_tag = format!("tag={tag}");
     let cut_parameters = match at {
-        At::Latest => at_tag.clone(),
-        At::Events(n) => format!("{at_tag};events={n}"),
+        At::Latest => format!("tag={tag}"),
+        At::Events(n) => format!("tag={tag};events={n}"),
     };
     // No cut, no answer: an error there stops the wait for the leaders.
     let (cut, (parts, errors)) = tokio::try_join!(
         place_cut(session, keys, &cut_parameters, timeout),
-        partials(session, keys, &at_tag, Some(tag), timeout)
+        partials(session, keys, Some(tag), timeout)
     )?;
     answer(cut, parts, errors, timeout)
 }
@@ -196,16 +195,19 @@ fn fresh_tag() -> u64 {
     hasher.finish()
 }
 
-/// Every leader's partial sums (`?tag=<tag>` at a cut, `?quiet` where it
-/// rests), by leader, and the error replies.
+/// Every leader's partial sums (`?tag=<tag>` at the cut with that tag,
+/// `?quiet` where it rests when `tag` is None), by leader, and the error
+/// replies.
 async fn partials(
     session: &Session,
     keys: &Keys,
-    parameters: &str,
     tag: Option<u64>,
     timeout: Duration,
 ) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
-    let selector = format!("{}?{parameters}", keys.every_leader_partial());
+    let selector = match tag {
+        Some(tag) => format!("{}?tag={tag}", keys.every_leader_partial()),
+        None => format!("{}?quiet", keys.every_leader_partial()),
+    };
     let replies = ask_everyone(session, selector, timeout, "query the leaders").await?;
     let mut parts = BTreeMap::new();
     let mut errors = Vec::new();

@@ -169,15 +169,10 @@ pub async fn run(
                     });
                 }
                 Action::CutReady(partial) => {
-                    let mut still = Vec::new();
-                    for h in held.drain(..) {
-                        if h.tag == partial.tag {
-                            reply_partial(&h.query, &partial).await;
-                        } else {
-                            still.push(h);
-                        }
+                    let ready: Vec<Held> = held.extract_if(.., |h| h.tag == partial.tag).collect();
+                    for h in ready {
+                        reply_partial(&h.query, &partial).await;
                     }
-                    held = still;
                 }
             }
         }
@@ -267,21 +262,18 @@ async fn answer_partial(
 /// Answers with an error every query that has waited longer than `timeout`
 /// for its cut (the sensor never placed it, or the stream is stuck).
 async fn expire(held: &mut Vec<Held>, timeout: Duration) {
-    let mut still = Vec::new();
-    for h in held.drain(..) {
-        if h.since.elapsed() > timeout {
-            let _ = h
-                .query
-                .reply_err(format!(
-                    "the cut tagged {} did not reach this leader within {timeout:?}",
-                    h.tag
-                ))
-                .await;
-        } else {
-            still.push(h);
-        }
+    let expired: Vec<Held> = held
+        .extract_if(.., |h| h.since.elapsed() > timeout)
+        .collect();
+    for h in expired {
+        let _ = h
+            .query
+            .reply_err(format!(
+                "the cut tagged {} did not reach this leader within {timeout:?}",
+                h.tag
+            ))
+            .await;
     }
-    *held = still;
 }
 
 async fn reply_partial(query: &Query, partial: &Partial) {

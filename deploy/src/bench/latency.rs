@@ -6,11 +6,10 @@
 
 use super::Deployment;
 use crate::runtime::query::ask;
-use anyhow::{anyhow, bail, Result};
+use anyhow::{bail, Result};
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
-use zenoh::query::{ConsolidationMode, QueryTarget};
 
 const TIMEOUT: Duration = Duration::from_secs(10);
 const WARM_UP: usize = 50;
@@ -42,7 +41,7 @@ pub async fn measure(
     // The bench's session connects to each process on its own; wait until
     // it reaches them all.
     let started = Instant::now();
-    while let Err(e) = ping(deployment, &leaders, deployment.leaders).await {
+    while let Err(e) = deployment.ping(&leaders, deployment.leaders).await {
         if started.elapsed() > TIMEOUT {
             return Err(e);
         }
@@ -55,10 +54,10 @@ pub async fn measure(
         let marginals = started.elapsed();
         finished = serde_json::from_slice::<MarginalsAnswer>(&body)?.finished;
         let started = Instant::now();
-        ping(deployment, &coordinator, 1).await?;
+        deployment.ping(&coordinator, 1).await?;
         let one = started.elapsed();
         let started = Instant::now();
-        ping(deployment, &leaders, deployment.leaders).await?;
+        deployment.ping(&leaders, deployment.leaders).await?;
         let fan_out = started.elapsed();
         if round >= WARM_UP {
             l.marginals.push(marginals);
@@ -70,27 +69,6 @@ pub async fn measure(
         bail!("the stream ended before the queries did: make it longer or slower");
     }
     Ok(l)
-}
-
-/// A get on `key` that returns once `answers` replies are in.
-async fn ping(deployment: &Deployment, key: &str, answers: usize) -> Result<()> {
-    let replies = deployment
-        .session
-        .get(key)
-        .consolidation(ConsolidationMode::None)
-        .target(QueryTarget::All)
-        .timeout(TIMEOUT)
-        .await
-        .map_err(|e| anyhow!("ping {key}: {e}"))?;
-    let mut got = 0;
-    while got < answers {
-        match replies.recv_async().await {
-            Ok(reply) if reply.result().is_ok() => got += 1,
-            Ok(_) => bail!("ping {key}: an error reply"),
-            Err(_) => bail!("ping {key}: {got} of {answers} answered"),
-        }
-    }
-    Ok(())
 }
 
 fn percentile(samples: &[Duration], p: f64) -> Duration {

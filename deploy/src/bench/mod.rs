@@ -19,9 +19,12 @@ use crate::runtime::launch::{simulate_crowd, Processes};
 use crate::runtime::loopback::{Loopback, Ports};
 use crate::runtime::mesh::{self, MeshOptions};
 use crate::runtime::topology::{Sparsification, Topology};
-use anyhow::{Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
+use idmesh_protocol::wire::keys::Keys;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use zenoh::query::{ConsolidationMode, QueryTarget};
 
 #[derive(Debug, Clone)]
 pub struct BenchOptions {
@@ -69,27 +72,40 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         "Crowd of {} targets ({} red), {} s simulated; distributed rule, budget {} sets per leader; every process on this machine's loopback.\n",
         options.targets, options.red, options.duration, options.budget
     )?;
-    let mut streams = Vec::new();
-    for &leaders in &options.leaders {
-        let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
-        eprintln!("bench: streaming through {leaders} leader(s)");
-        streams.push(runtime.block_on(throughput::measure(&deployment))?);
-        runtime.block_on(deployment.close());
-    }
-    throughput::report(&streams, &mut report)?;
     // Latency with four leaders: at rest after the stream (the leaders
     // answer where they rest), and during a paced stream (every query
     // places a fresh cut).
     let leaders = 4;
-    eprintln!(
-        "bench: {} marginals queries with {leaders} leaders at rest",
-        options.queries
-    );
-    let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
-    runtime.block_on(throughput::measure(&deployment))?;
-    let at_rest = runtime.block_on(latency::measure(&deployment, options.queries, false))?;
-    runtime.block_on(deployment.close());
-    latency::report(&at_rest, "stream over", &mut report)?;
+    let at_rest = |deployment: &Deployment| {
+        eprintln!(
+            "bench: {} marginals queries with {leaders} leaders at rest",
+            options.queries
+        );
+        runtime.block_on(latency::measure(deployment, options.queries, false))
+    };
+    let mut streams = Vec::new();
+    let mut rest = None;
+    for &count in &options.leaders {
+        let deployment = runtime.block_on(Deployment::start(options, &trace, count, None))?;
+        eprintln!("bench: streaming through {count} leader(s)");
+        streams.push(runtime.block_on(throughput::measure(&deployment))?);
+        if count == leaders {
+            rest = Some(at_rest(&deployment)?);
+        }
+        runtime.block_on(deployment.close());
+    }
+    throughput::report(&streams, &mut report)?;
+    let rest = match rest {
+        Some(rest) => rest,
+        None => {
+            let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
+            runtime.block_on(throughput::measure(&deployment))?;
+            let rest = at_rest(&deployment)?;
+            runtime.block_on(deployment.close());
+            rest
+        }
+    };
+    latency::report(&rest, "stream over", &mut report)?;
     eprintln!(
         "bench: {} marginals queries with {leaders} leaders during a stream at {} events/s",
         options.queries, options.stream_rate
@@ -118,7 +134,7 @@ pub struct Deployment {
     pub leaders: usize,
     pub topology: Topology,
     pub session: zenoh::Session,
-    _processes: Processes,
+    _processes: [Processes; 2],
 }
 
 impl Deployment {
@@ -144,7 +160,10 @@ impl Deployment {
         let config = options.dir.join(format!("topology-{leaders}.toml"));
         std::fs::write(&config, toml)?;
         let topology = Topology::load(&config)?;
-        let processes = Processes::start(&config, None)?;
+        // The sensor starts last, once the coordinator answers here, so
+        // that the bench sees the stream from its first events even when it
+        // is over in a fraction of a second.
+        let others = Processes::start_some(&config, |m| m.role != "sensor")?;
         let connect = topology.members().into_iter().map(|m| m.listen).collect();
         let session = mesh::open(&MeshOptions {
             client: false,
@@ -152,19 +171,58 @@ impl Deployment {
             connect,
         })
         .await?;
+        let keys = Keys::new(topology.prefix.clone());
+        let coordinator = keys.ping("coordinator", &topology.coordinator.name);
+        let started = Instant::now();
+        while let Err(e) = ping(&session, &coordinator, 1).await {
+            if started.elapsed() > STARTUP {
+                return Err(e.context("the coordinator did not come up"));
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let sensor = Processes::start_some(&config, |m| m.role == "sensor")?;
         Ok(Deployment {
             leaders,
             topology,
             session,
-            _processes: processes,
+            _processes: [sensor, others],
         })
+    }
+
+    /// A get on `key` that returns once `answers` replies are in.
+    pub async fn ping(&self, key: &str, answers: usize) -> Result<()> {
+        ping(&self.session, key, answers).await
     }
 
     async fn close(self) {
         let _ = self.session.close().await;
     }
 
-    pub fn keys(&self) -> idmesh_protocol::wire::keys::Keys {
-        idmesh_protocol::wire::keys::Keys::new(self.topology.prefix.clone())
+    pub fn keys(&self) -> Keys {
+        Keys::new(self.topology.prefix.clone())
     }
+}
+
+/// How long a deployment may take to come up.
+const STARTUP: Duration = Duration::from_secs(60);
+
+/// A get on `key` (the processes' ping queryables) that returns once
+/// `answers` replies are in.
+async fn ping(session: &zenoh::Session, key: &str, answers: usize) -> Result<()> {
+    let replies = session
+        .get(key)
+        .consolidation(ConsolidationMode::None)
+        .target(QueryTarget::All)
+        .timeout(Duration::from_secs(10))
+        .await
+        .map_err(|e| anyhow!("ping {key}: {e}"))?;
+    let mut got = 0;
+    while got < answers {
+        match replies.recv_async().await {
+            Ok(reply) if reply.result().is_ok() => got += 1,
+            Ok(_) => bail!("ping {key}: an error reply"),
+            Err(_) => bail!("ping {key}: {got} of {answers} answered"),
+        }
+    }
+    Ok(())
 }

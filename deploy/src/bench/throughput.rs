@@ -36,74 +36,73 @@ impl Stream {
 }
 
 pub async fn measure(deployment: &Deployment) -> Result<Stream> {
-    let keys = deployment.keys();
-    let key = keys.query_marginals();
-    let started = Instant::now();
     let mut first: Option<(Instant, u64)> = None;
     let mut last_zero: Option<Instant> = None;
     let mut queries = 0;
-    let mut last_error = String::new();
-    loop {
-        let asked = Instant::now();
-        match ask(&deployment.session, &key, ASK_TIMEOUT).await {
-            Ok(body) => {
-                queries += 1;
-                let answer: MarginalsAnswer = serde_json::from_slice(&body)?;
-                let events: u64 = answer.watermark.values().sum();
-                if events == 0 {
-                    last_zero = Some(asked);
-                } else if first.is_none() {
-                    first = Some((
-                        last_zero.unwrap_or(asked),
-                        if last_zero.is_some() { 0 } else { events },
-                    ));
-                }
-                if answer.finished {
-                    let Some((since, first_seen)) = first.filter(|f| f.1 < events) else {
-                        bail!("the stream was over before the bench could time it: make it longer");
-                    };
-                    let stats = stats(deployment).await?;
-                    return Ok(Stream {
-                        leaders: deployment.leaders,
-                        events,
-                        first_seen,
-                        seconds: since.elapsed().as_secs_f64(),
-                        queries,
-                        stats,
-                    });
-                }
-            }
-            Err(e)
-                if first.is_none() && last_zero.is_none() && started.elapsed() < START_PATIENCE =>
-            {
-                last_error = e.to_string();
-            }
-            Err(e) => bail!("marginals query failed during the stream: {e}"),
+    let (since, first_seen, events) = watch(deployment, |asked, answer| {
+        queries += 1;
+        let events: u64 = answer.watermark.values().sum();
+        if events == 0 {
+            last_zero = Some(asked);
+        } else if first.is_none() {
+            first = Some(match last_zero {
+                Some(zero) => (zero, 0),
+                None => (asked, events),
+            });
         }
-        if first.is_none() && last_zero.is_none() && started.elapsed() > START_PATIENCE {
-            bail!("the deployment did not start streaming within {START_PATIENCE:?}: {last_error}");
-        }
-        tokio::time::sleep(POLL).await;
-    }
+        answer
+            .finished
+            .then(|| first.map(|(since, seen)| (since, seen, events)))
+    })
+    .await?
+    .filter(|(_, seen, events)| seen < events)
+    .ok_or_else(|| {
+        anyhow::anyhow!("the stream was over before the bench could time it: make it longer")
+    })?;
+    Ok(Stream {
+        leaders: deployment.leaders,
+        events,
+        first_seen,
+        seconds: since.elapsed().as_secs_f64(),
+        queries,
+        stats: stats(deployment).await?,
+    })
 }
 
 /// Waits until the coordinator answers with the stream moving.
 pub async fn first_moving_answer(deployment: &Deployment) -> Result<()> {
+    watch(deployment, |_, answer| {
+        (answer.watermark.values().sum::<u64>() > 0).then_some(())
+    })
+    .await
+}
+
+/// Asks for the marginals every few milliseconds until `seen` (given when
+/// each question was sent and its answer) returns something. Until the first
+/// answer, errors are the deployment starting up and are borne for a while;
+/// after it, an error ends the watch.
+async fn watch<T>(
+    deployment: &Deployment,
+    mut seen: impl FnMut(Instant, &MarginalsAnswer) -> Option<T>,
+) -> Result<T> {
     let key = deployment.keys().query_marginals();
     let started = Instant::now();
+    let mut answered = false;
     loop {
-        let last = match ask(&deployment.session, &key, ASK_TIMEOUT).await {
+        let asked = Instant::now();
+        match ask(&deployment.session, &key, ASK_TIMEOUT).await {
             Ok(body) => {
+                answered = true;
                 let answer: MarginalsAnswer = serde_json::from_slice(&body)?;
-                if answer.watermark.values().sum::<u64>() > 0 {
-                    return Ok(());
+                if let Some(done) = seen(asked, &answer) {
+                    return Ok(done);
                 }
-                "the stream has not started".to_string()
             }
-            Err(e) => e.to_string(),
-        };
-        if started.elapsed() > START_PATIENCE {
-            bail!("the deployment did not start streaming within {START_PATIENCE:?}: {last}");
+            Err(e) if answered => bail!("marginals query failed during the stream: {e}"),
+            Err(e) if started.elapsed() > START_PATIENCE => {
+                bail!("the deployment did not answer within {START_PATIENCE:?}: {e}")
+            }
+            Err(_) => {}
         }
         tokio::time::sleep(POLL).await;
     }

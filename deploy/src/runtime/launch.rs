@@ -6,8 +6,8 @@
 use super::loopback::{Loopback, Ports};
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
-use super::topology::Sparsification;
 use super::topology::Topology;
+use super::topology::{Member, Sparsification};
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
 use idmesh_protocol::wire::query::MarginalsAnswer;
@@ -22,21 +22,23 @@ pub struct Processes {
 impl Processes {
     /// Starts every process of `config` whose host is `host` (all if None).
     pub fn start(config: &Path, host: Option<&str>) -> Result<Self> {
-        let topology = Topology::load(config)?;
-        let exe = std::env::current_exe().context("cannot find the idmesh binary")?;
-        let mut children = Vec::new();
-        let members: Vec<_> = topology
-            .members()
-            .into_iter()
-            .filter(|m| host.is_none_or(|h| m.host == h))
-            .collect();
-        if members.is_empty() {
+        let processes = Self::start_some(config, |m| host.is_none_or(|h| m.host == h))?;
+        if processes.children.is_empty() {
             bail!(
                 "{}: no process runs on host {:?}",
                 config.display(),
                 host.unwrap_or("")
             );
         }
+        Ok(processes)
+    }
+
+    /// Starts the processes of `config` that `keep` picks.
+    pub fn start_some(config: &Path, keep: impl Fn(&Member) -> bool) -> Result<Self> {
+        let topology = Topology::load(config)?;
+        let exe = std::env::current_exe().context("cannot find the idmesh binary")?;
+        let mut children = Vec::new();
+        let members: Vec<_> = topology.members().into_iter().filter(keep).collect();
         for m in members {
             let child = Command::new(&exe)
                 .arg(m.role)

@@ -106,9 +106,8 @@ pub async fn run(
     let mut cuts = Cuts::default();
     tokio::pin!(shutdown);
     loop {
-        let finished = next >= lines.len();
         // How many lines are due now, and when the next one is.
-        let (due, wait) = if finished {
+        let (due, wait) = if stream.finished {
             (0, Duration::from_secs(3600))
         } else {
             due_lines(&config, lines, next, started, first_time, chunk)
