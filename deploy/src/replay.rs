@@ -53,6 +53,39 @@ pub fn write_line(out: &mut impl Write, value: &impl serde::Serialize) -> Result
         .map_err(|e| anyhow!("cannot write the output: {e}"))
 }
 
+/// The `FILE:LINE: kind: reason` error of the replays, for trace `source`.
+pub fn line_error(source: &str) -> impl Fn(usize, &str, BeliefError) -> anyhow::Error + '_ {
+    move |line, kind, error| anyhow!("{source}:{line}: {kind}: {error}")
+}
+
+/// The mean error over the truth lines (None when there were none).
+pub fn mean_error(errors: &[f64]) -> Option<f64> {
+    (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
+}
+
+/// Writes the summary line and flushes: the end of every replay.
+pub fn finish(mut out: impl Write, summary: &impl serde::Serialize) -> Result<()> {
+    write_line(&mut out, summary)?;
+    out.flush()
+        .map_err(|e| anyhow!("cannot write the output: {e}"))
+}
+
+/// Time spent inside a filter, and nothing else (reading and printing
+/// excluded): the `seconds` of a replay's summary.
+#[derive(Debug, Default)]
+pub struct Stopwatch {
+    pub total: Duration,
+}
+
+impl Stopwatch {
+    pub fn time<T>(&mut self, work: impl FnOnce() -> T) -> T {
+        let clock = Instant::now();
+        let result = work();
+        self.total += clock.elapsed();
+        result
+    }
+}
+
 /// Replays the trace named by `args` and writes the answers to `out`.
 pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
     check_options(args)?;
@@ -122,8 +155,7 @@ pub fn replay<R: BufRead>(
 
     let header = reader.read_header()?;
     let source = reader.source().to_string();
-    let at =
-        |line: usize, kind: &str, error: BeliefError| anyhow!("{source}:{line}: {kind}: {error}");
+    let at = line_error(&source);
     let field = field_of(&header);
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
     let mut engine =
@@ -178,8 +210,8 @@ pub fn replay<R: BufRead>(
         kind: "summary",
         method: args.method.name(),
         events: engine.events,
-        seconds: engine.time.as_secs_f64(),
-        error: (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64),
+        seconds: engine.time.total.as_secs_f64(),
+        error: mean_error(&errors),
         max_coefficients: engine.max_coefficients,
         final_p_red: engine.marginals().ok(),
     };
@@ -190,10 +222,7 @@ pub fn replay<R: BufRead>(
         max_coefficients = summary.max_coefficients,
         "replayed"
     );
-    write_line(&mut out, &summary)?;
-    out.flush()
-        .map_err(|e| anyhow!("cannot write the output: {e}"))?;
-    Ok(())
+    finish(out, &summary)
 }
 
 /// The field a trace header describes: k known (from `red` or the length of
@@ -262,7 +291,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
 /// count seen.
 struct Engine {
     filter: Box<dyn PropertyFilter>,
-    time: Duration,
+    time: Stopwatch,
     events: u64,
     max_coefficients: usize,
 }
@@ -271,9 +300,8 @@ impl Engine {
     fn start(
         build: impl FnOnce() -> Result<Box<dyn PropertyFilter>, BeliefError>,
     ) -> Result<Self, BeliefError> {
-        let clock = Instant::now();
-        let filter = build()?;
-        let time = clock.elapsed();
+        let mut time = Stopwatch::default();
+        let filter = time.time(build)?;
         let max_coefficients = filter.coefficients();
         Ok(Engine {
             filter,
@@ -284,20 +312,16 @@ impl Engine {
     }
 
     fn apply(&mut self, event: &Event) -> Result<(), BeliefError> {
-        let clock = Instant::now();
-        let result = self.filter.apply(event);
-        self.time += clock.elapsed();
-        result?;
+        let filter = &mut self.filter;
+        self.time.time(|| filter.apply(event))?;
         self.events += 1;
         self.max_coefficients = self.max_coefficients.max(self.filter.coefficients());
         Ok(())
     }
 
     fn marginals(&mut self) -> Result<Vec<f64>, BeliefError> {
-        let clock = Instant::now();
-        let result = self.filter.marginals();
-        self.time += clock.elapsed();
-        result
+        let filter = &self.filter;
+        self.time.time(|| filter.marginals())
     }
 }
 

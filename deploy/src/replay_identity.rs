@@ -35,7 +35,7 @@
 //! demand ([`MarginalChoice`]), and identities coded by property bits (one
 //! Radon property belief per bit, `--bits`, optional `--budget`).
 
-use crate::replay::write_line;
+use crate::replay::{finish, line_error, mean_error, write_line, Stopwatch};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
@@ -49,7 +49,6 @@ use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use serde::Serialize;
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 use tracing::{debug, info, info_span};
 
 /// The options of an identity replay; a `clap` argument group, so it can be
@@ -227,8 +226,7 @@ pub fn replay<R: BufRead>(
 
     let header = reader.read_header()?;
     let source = reader.source().to_string();
-    let at =
-        |line: usize, kind: &str, error: BeliefError| anyhow!("{source}:{line}: {kind}: {error}");
+    let at = line_error(&source);
     let n = match header.identities {
         Some(n) => n,
         None => bail!(
@@ -290,8 +288,8 @@ pub fn replay<R: BufRead>(
         kind: "summary",
         method: args.method.name(),
         events: engine.events,
-        seconds: engine.time.as_secs_f64(),
-        error: (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64),
+        seconds: engine.time.total.as_secs_f64(),
+        error: mean_error(&errors),
     };
     info!(
         events = summary.events,
@@ -299,10 +297,7 @@ pub fn replay<R: BufRead>(
         error = ?summary.error,
         "replayed"
     );
-    write_line(&mut out, &summary)?;
-    out.flush()
-        .map_err(|e| anyhow!("cannot write the output: {e}"))?;
-    Ok(())
+    finish(out, &summary)
 }
 
 /// Why no filter could be built for a header.
@@ -391,39 +386,36 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
 /// filter (and nothing else) and the events applied.
 struct Engine {
     filter: Box<dyn IdentityFilter>,
-    time: Duration,
+    time: Stopwatch,
     events: u64,
 }
 
 impl Engine {
     fn start<E>(build: impl FnOnce() -> Result<Box<dyn IdentityFilter>, E>) -> Result<Self, E> {
-        let clock = Instant::now();
-        let filter = build()?;
+        let mut time = Stopwatch::default();
+        let filter = time.time(build)?;
         Ok(Engine {
             filter,
-            time: clock.elapsed(),
+            time,
             events: 0,
         })
     }
 
     fn apply(&mut self, event: &IdentityEvent) -> Result<(), BeliefError> {
-        let clock = Instant::now();
-        let result = self.filter.apply(event);
-        self.time += clock.elapsed();
-        result?;
+        let filter = &mut self.filter;
+        self.time.time(|| filter.apply(event))?;
         self.events += 1;
         Ok(())
     }
 
     /// The marginals and the most likely assignment under them.
     fn answer(&mut self) -> Result<(Vec<Vec<f64>>, Vec<u32>), BeliefError> {
-        let clock = Instant::now();
-        let result = self
-            .filter
-            .marginals()
-            .and_then(|p| most_likely_assignment(&p).map(|best| (p, best)));
-        self.time += clock.elapsed();
-        result
+        let filter = &self.filter;
+        self.time.time(|| {
+            filter
+                .marginals()
+                .and_then(|p| most_likely_assignment(&p).map(|best| (p, best)))
+        })
     }
 }
 
