@@ -38,6 +38,7 @@
 use crate::replay::{finish, line_error, mean_error, write_line, Stopwatch};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
+use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_belief::identity::{
     identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
@@ -146,11 +147,6 @@ impl MarginalChoice {
 /// Counted Metropolis steps when --samples is not given.
 pub const DEFAULT_SAMPLES: usize = 10_000;
 
-/// L\[t\]\[i\] of a known initial assignment in the information matrix: the
-/// log-odds of the known identity against each other one. The least-squares
-/// mixing rule needs finite entries; e^-20 ≈ 2e-9 on each wrong pairing
-/// changes no printed digit.
-pub const KNOWN_START_CONFIDENCE: f64 = 20.0;
 
 /// The answers at one `truth` line.
 #[derive(Debug, Serialize)]

@@ -187,10 +187,10 @@ impl InformationMatrix {
             });
         }
         options.sinkhorn.validate()?;
-        let mut l = vec![0.0; n * n];
-        for (t, &i) in assignment.iter().enumerate() {
-            l[t * n + i as usize] = confidence;
-        }
+        let l = assignment
+            .iter()
+            .flat_map(|&i| start_row(n, Some(i), confidence))
+            .collect();
         Ok(InformationMatrix { n, l, options })
     }
 
@@ -229,22 +229,11 @@ impl IdentityFilter for InformationMatrix {
         check_mix(self.n, &mix)?;
         let n = self.n;
         let (a, b) = (mix.a as usize, mix.b as usize);
-        if mix.swap == 0.0 {
-            return Ok(());
-        }
         let row_a = &self.l[a * n..(a + 1) * n];
         let row_b = &self.l[b * n..(b + 1) * n];
-        let (mut x, mut y) = if mix.swap == 1.0 {
-            // A sure swap is exact: exchange the rows.
-            (row_b.to_vec(), row_a.to_vec())
-        } else {
-            match self.options.solver {
-                MixSolver::ClosedForm => fit_mixed_rows(row_a, row_b, mix.swap)?,
-                MixSolver::PseudoInverse => fit_mixed_rows_pinv(row_a, row_b, mix.swap)?,
-            }
+        let Some((x, y)) = mixed_rows(row_a, row_b, mix.swap, self.options.solver)? else {
+            return Ok(());
         };
-        shift_to_max_zero(&mut x)?;
-        shift_to_max_zero(&mut y)?;
         self.l[a * n..(a + 1) * n].copy_from_slice(&x);
         self.l[b * n..(b + 1) * n].copy_from_slice(&y);
         Ok(())
@@ -253,28 +242,85 @@ impl IdentityFilter for InformationMatrix {
     fn identify(&mut self, identify: Identify) -> Result<(), BeliefError> {
         let n = self.n;
         check_identify(n, &identify)?;
-        let odds = identify.log_odds(n);
-        if !odds.is_finite() {
-            return Err(BeliefError::Unsupported {
-                method: "information matrix",
-                what: "a perfect read (accuracy 1): its log-likelihood ratio is infinite",
-            });
-        }
-        let slot = identify.track as usize * n + identify.identity as usize;
-        let next = self.l[slot] + odds;
-        if !next.is_finite() {
-            return Err(BeliefError::Numerical {
-                step: "information matrix evidence",
-                detail: format!("log-likelihood {next} is not finite"),
-            });
-        }
-        self.l[slot] = next;
-        Ok(())
+        let row = identify.track as usize * n;
+        add_evidence(&mut self.l[row..row + n], &identify)
     }
 
     fn marginals(&self) -> Result<Marginals, BeliefError> {
         self.marginals_with(&self.options.marginals)
     }
+}
+
+/// L\[t\]\[i\] of a known initial assignment: the log-odds of the known
+/// identity against each other one. The least-squares mixing rule needs
+/// finite entries; e^-20 ≈ 2e-9 on each wrong pairing changes no printed
+/// digit.
+pub const KNOWN_START_CONFIDENCE: f64 = 20.0;
+
+/// Row t of a start: 0 everywhere (uniform), or `confidence` on the known
+/// identity.
+pub fn start_row(n: usize, known: Option<u32>, confidence: f64) -> Vec<f64> {
+    let mut row = vec![0.0; n];
+    if let Some(slot) = known.and_then(|i| row.get_mut(i as usize)) {
+        *slot = confidence;
+    }
+    row
+}
+
+/// Evidence on the row of the read track (checked by the caller): adds
+/// the read's log-odds to the one entry it names, the O(1) lazy update.
+pub fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefError> {
+    let n = row.len();
+    let odds = identify.log_odds(n);
+    if !odds.is_finite() {
+        return Err(BeliefError::Unsupported {
+            method: "information matrix",
+            what: "a perfect read (accuracy 1): its log-likelihood ratio is infinite",
+        });
+    }
+    let slot = row
+        .get_mut(identify.identity as usize)
+        .ok_or(BeliefError::UnknownIdentity {
+            identity: identify.identity,
+            track: identify.track,
+            identities: n,
+        })?;
+    let next = *slot + odds;
+    if !next.is_finite() {
+        return Err(BeliefError::Numerical {
+            step: "information matrix evidence",
+            detail: format!("log-likelihood {next} is not finite"),
+        });
+    }
+    *slot = next;
+    Ok(())
+}
+
+/// The rows of tracks a and b after a mix with swap probability `swap`,
+/// each shifted to max 0; None when the mix changes nothing (s = 0). A
+/// pure function of its inputs: two leaders that each hold one of the rows
+/// and exchange them compute the same pair, bit for bit.
+pub fn mixed_rows(
+    row_a: &[f64],
+    row_b: &[f64],
+    swap: f64,
+    solver: MixSolver,
+) -> Result<Option<(Vec<f64>, Vec<f64>)>, BeliefError> {
+    if swap == 0.0 {
+        return Ok(None);
+    }
+    let (mut x, mut y) = if swap == 1.0 {
+        // A sure swap is exact: exchange the rows.
+        (row_b.to_vec(), row_a.to_vec())
+    } else {
+        match solver {
+            MixSolver::ClosedForm => fit_mixed_rows(row_a, row_b, swap)?,
+            MixSolver::PseudoInverse => fit_mixed_rows_pinv(row_a, row_b, swap)?,
+        }
+    };
+    shift_to_max_zero(&mut x)?;
+    shift_to_max_zero(&mut y)?;
+    Ok(Some((x, y)))
 }
 
 /// Adds a constant so the largest entry is 0 (Property 1: same belief).

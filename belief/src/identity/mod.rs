@@ -25,6 +25,9 @@
 //!   (Section 3): O(1) reads, the least-squares mixing rule (the paper's
 //!   pseudoinverse and an O(N²) closed form), and what "exact for N ≤ 3"
 //!   really requires.
+//! - [`rows`] — [`InformationRows`], one leader's rows of an information
+//!   matrix: reads applied locally, rows exchanged at a mix across leaders,
+//!   the whole matrix assembled only for a query (Section 4's distribution).
 //! - [`marginals`], [`permanent`], [`metropolis`], [`sinkhorn`] — marginals
 //!   of an information matrix on demand ([`MarginalMethod`]): exact by the
 //!   permanent (Ryser or Glynn, Gray code, all N² marginals in one pass),
@@ -46,6 +49,7 @@ pub mod metropolis;
 pub mod permanent;
 pub mod permutation;
 pub mod property_bits;
+pub mod rows;
 pub mod sinkhorn;
 pub mod workload;
 
@@ -58,5 +62,6 @@ pub use information::{InformationMatrix, InformationOptions, MixSolver};
 pub use marginals::MarginalMethod;
 pub use permanent::PermanentFormula;
 pub use property_bits::{BitCode, PropertyBitsFilter};
+pub use rows::InformationRows;
 pub use sinkhorn::{SinkhornOptions, SinkhornReport};
 pub use workload::{IdentityWorkload, IdentityWorkloadSpec};
