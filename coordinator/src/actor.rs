@@ -3,8 +3,9 @@
 //! other users.
 
 use crate::gather::{self, At, GatherError, Memory};
+use crate::identity::{self, Method};
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::{QueryError, StatsAnswer, TrackAnswer};
+use idmesh_protocol::wire::query::{IdentityTrackAnswer, QueryError, StatsAnswer, TrackAnswer};
 use serde::Serialize;
 use std::future::Future;
 use std::sync::Arc;
@@ -31,6 +32,10 @@ pub async fn run(
     let marginals = session.declare_queryable(keys.query_marginals()).await?;
     let tracks = session.declare_queryable(keys.query_any_track()).await?;
     let stats = session.declare_queryable(keys.query_stats()).await?;
+    let identities = session.declare_queryable(keys.query_identity()).await?;
+    let identity_tracks = session
+        .declare_queryable(keys.query_any_identity_track())
+        .await?;
     let _token = session
         .liveliness()
         .declare_token(keys.alive("coordinator", &config.name))
@@ -44,6 +49,8 @@ pub async fn run(
             q = marginals.recv_async() => ("marginals", q),
             q = tracks.recv_async() => ("track", q),
             q = stats.recv_async() => ("stats", q),
+            q = identities.recv_async() => ("identity", q),
+            q = identity_tracks.recv_async() => ("identity track", q),
         };
         let Ok(query) = query else { break };
         let session = session.clone();
@@ -69,6 +76,14 @@ async fn answer(
             .map(|g| json(&g.answer))
             .map_err(|e| e.to_string()),
         ("track", Ok(at)) => track(&session, &config, &memory, &query, at).await,
+        ("identity", Ok(at)) => match method(&query) {
+            Ok(method) => identity::identity(&session, keys, config.timeout, &memory, at, method)
+                .await
+                .map(|a| json(&a))
+                .map_err(|e| e.to_string()),
+            Err(e) => Err(e),
+        },
+        ("identity track", Ok(at)) => identity_track(&session, &config, &memory, &query, at).await,
         _ => gather::stats(&session, keys, config.timeout)
             .await
             .map(|leaders| json(&StatsAnswer { leaders }))
@@ -101,10 +116,7 @@ async fn track(
     query: &Query,
     at: At,
 ) -> Result<Vec<u8>, String> {
-    let key = query.key_expr().as_str();
-    let track: u32 = Keys::chunk(key, 0)
-        .and_then(|t| t.parse().ok())
-        .ok_or_else(|| format!("{key}: the last chunk must be a track number"))?;
+    let track = track_of(query)?;
     let gathered = gather::marginals(session, &config.keys, config.timeout, memory, at)
         .await
         .map_err(|e: GatherError| e.to_string())?;
@@ -119,6 +131,61 @@ async fn track(
         track,
         p_red,
     }))
+}
+
+/// Who is on one track: the track's row of the identity answer.
+async fn identity_track(
+    session: &Session,
+    config: &CoordinatorConfig,
+    memory: &Memory,
+    query: &Query,
+    at: At,
+) -> Result<Vec<u8>, String> {
+    let track = track_of(query)?;
+    let method = method(query)?;
+    let answer = identity::identity(session, &config.keys, config.timeout, memory, at, method)
+        .await
+        .map_err(|e| e.to_string())?;
+    let out_of_range = || {
+        format!(
+            "track {track} is out of range: there are {} tracks",
+            answer.tracks
+        )
+    };
+    let p_identity = answer
+        .p_identity
+        .get(track as usize)
+        .cloned()
+        .ok_or_else(out_of_range)?;
+    let predicted_identity = *answer
+        .predicted_identity
+        .get(track as usize)
+        .ok_or_else(out_of_range)?;
+    Ok(json(&IdentityTrackAnswer {
+        watermark: answer.watermark,
+        track,
+        p_identity,
+        predicted_identity,
+        marginals: answer.marginals,
+    }))
+}
+
+/// The track in `P/query/track/<t>` or `P/query/identity/<t>`.
+fn track_of(query: &Query) -> Result<u32, String> {
+    let key = query.key_expr().as_str();
+    Keys::chunk(key, 0)
+        .and_then(|t| t.parse().ok())
+        .ok_or_else(|| format!("{key}: the last chunk must be a track number"))
+}
+
+/// `?marginals=<method>[;samples=S][;seed=X]` of an identity query.
+fn method(query: &Query) -> Result<Method, String> {
+    let parameters = query.parameters();
+    Method::from_parameters(
+        parameters.get("marginals"),
+        parameters.get("samples"),
+        parameters.get("seed"),
+    )
 }
 
 /// `?events=N`: the answer right after the stream's N-th event.

@@ -1,4 +1,5 @@
-//! One answer at a consistent cut.
+//! The leaders' shares at one consistent cut, and the property marginals
+//! from them (identity marginals: [`crate::identity`]).
 
 use idmesh_belief::predict_red;
 use idmesh_leader::combine;
@@ -37,6 +38,31 @@ pub struct Gathered {
     pub answer: MarginalsAnswer,
 }
 
+/// Every leader's share at one cut: all of them, at the same seq.
+#[derive(Debug, Clone)]
+pub struct Collected {
+    pub cut: CutPlaced,
+    pub parts: Vec<Partial>,
+}
+
+impl Collected {
+    /// What the answer includes: per sensor, its events.
+    pub fn watermark(&self) -> Watermark {
+        let mut watermark = Watermark::new();
+        watermark.insert(self.cut.sensor.clone(), self.cut.events);
+        watermark
+    }
+}
+
+/// What the leaders add to their partial sums.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Share {
+    /// The partial sums of the property belief only.
+    Sums,
+    /// Their rows of the information matrix too (identity queries).
+    Rows,
+}
+
 /// What the coordinator keeps between queries: the last cut of a stream
 /// that was over. Nothing is pushed to it; it only remembers what it asked.
 #[derive(Debug, Default)]
@@ -66,9 +92,7 @@ pub enum At {
     Events(u64),
 }
 
-/// The marginals at a consistent cut. Once the stream is over the leaders
-/// rest at its end, and asking them where they rest is enough; otherwise
-/// a fresh cut is placed.
+/// The marginals at a consistent cut.
 pub async fn marginals(
     session: &Session,
     keys: &Keys,
@@ -76,14 +100,48 @@ pub async fn marginals(
     memory: &Memory,
     at: At,
 ) -> Result<Gathered, GatherError> {
+    let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
+    let sums = combine(&collected.parts);
+    let cut = &collected.cut;
+    let p_red = sums
+        .marginals(cut.tracks as usize)
+        .map_err(|_| GatherError::Degenerate)?;
+    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
+    let answer = MarginalsAnswer {
+        watermark: collected.watermark(),
+        tracks: cut.tracks,
+        red: cut.red,
+        p_red,
+        predicted_red,
+        leaders: collected.parts.len() as u32,
+        coefficients: sums.coefficients,
+        finished: cut.finished,
+    };
+    Ok(Gathered {
+        cut: collected.cut,
+        answer,
+    })
+}
+
+/// Every leader's share at a consistent cut. Once the stream is over the
+/// leaders rest at its end, and asking them where they rest is enough;
+/// otherwise a fresh cut is placed.
+pub async fn collect(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+    memory: &Memory,
+    at: At,
+    share: Share,
+) -> Result<Collected, GatherError> {
     if let (At::Latest, Some(last)) = (at, memory.finished()) {
-        if let Some(gathered) = at_rest(session, keys, timeout, last).await {
-            return Ok(gathered);
+        if let Some(collected) = at_rest(session, keys, timeout, last, share).await {
+            return Ok(collected);
         }
     }
-    let gathered = at_fresh_cut(session, keys, timeout, at).await?;
-    memory.remember(&gathered.cut);
-    Ok(gathered)
+    let collected = at_fresh_cut(session, keys, timeout, at, share).await?;
+    memory.remember(&collected.cut);
+    Ok(collected)
 }
 
 /// The answer where the leaders rest, if every leader of `last` rests at
@@ -94,8 +152,9 @@ async fn at_rest(
     keys: &Keys,
     timeout: Duration,
     last: CutPlaced,
-) -> Option<Gathered> {
-    let (parts, errors) = partials(session, keys, None, timeout).await.ok()?;
+    share: Share,
+) -> Option<Collected> {
+    let (parts, errors) = partials(session, keys, None, share, timeout).await.ok()?;
     let first = parts.values().next()?;
     let agreed = errors.is_empty()
         && parts.values().all(|p| p.finished && p.cut == first.cut)
@@ -108,7 +167,7 @@ async fn at_rest(
         events: first.events,
         ..last
     };
-    answer(cut, parts, Vec::new(), timeout).ok()
+    check(cut, parts, Vec::new(), timeout).ok()
 }
 
 /// The marginals at a fresh cut. The sensor is asked to place the cut and
@@ -120,28 +179,32 @@ async fn at_fresh_cut(
     keys: &Keys,
     timeout: Duration,
     at: At,
-) -> Result<Gathered, GatherError> {
+    share: Share,
+) -> Result<Collected, GatherError> {
     let tag = fresh_tag();
-    let cut_parameters = match at {
+    let mut cut_parameters = match at {
         At::Latest => format!("tag={tag}"),
         At::Events(n) => format!("tag={tag};events={n}"),
     };
+    if share == Share::Rows {
+        cut_parameters.push_str(";rows");
+    }
     // No cut, no answer: an error there stops the wait for the leaders.
     let (cut, (parts, errors)) = tokio::try_join!(
         place_cut(session, keys, &cut_parameters, timeout),
-        partials(session, keys, Some(tag), timeout)
+        partials(session, keys, Some(tag), share, timeout)
     )?;
-    answer(cut, parts, errors, timeout)
+    check(cut, parts, errors, timeout)
 }
 
-/// Combines the leaders' partial sums at `cut`, or says who is missing or
-/// what went wrong: never a partial answer dressed as complete.
-fn answer(
+/// The leaders' shares at `cut` if every leader answered there, or who is
+/// missing or what went wrong: never a partial answer dressed as complete.
+fn check(
     cut: CutPlaced,
     parts: BTreeMap<String, Partial>,
     mut errors: Vec<String>,
     timeout: Duration,
-) -> Result<Gathered, GatherError> {
+) -> Result<Collected, GatherError> {
     if cut.leaders.is_empty() {
         return Err(GatherError::NoLeaders);
     }
@@ -163,25 +226,10 @@ fn answer(
     if !missing.is_empty() {
         return Err(GatherError::Missing { missing, timeout });
     }
-    let parts: Vec<Partial> = parts.into_values().collect();
-    let sums = combine(&parts);
-    let p_red = sums
-        .marginals(cut.tracks as usize)
-        .map_err(|_| GatherError::Degenerate)?;
-    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
-    let mut watermark = Watermark::new();
-    watermark.insert(cut.sensor.clone(), cut.events);
-    let answer = MarginalsAnswer {
-        watermark,
-        tracks: cut.tracks,
-        red: cut.red,
-        p_red,
-        predicted_red,
-        leaders: parts.len() as u32,
-        coefficients: sums.coefficients,
-        finished: cut.finished,
-    };
-    Ok(Gathered { cut, answer })
+    Ok(Collected {
+        cut,
+        parts: parts.into_values().collect(),
+    })
 }
 
 /// A tag no other query of any coordinator is likely to use: the std
@@ -196,17 +244,19 @@ fn fresh_tag() -> u64 {
 }
 
 /// Every leader's partial sums (`?tag=<tag>` at the cut with that tag,
-/// `?quiet` where it rests when `tag` is None), by leader, and the error
-/// replies.
+/// `?quiet` where it rests when `tag` is None; `;rows` adds the rows
+/// where it rests, a cut says so itself), by leader, and the error replies.
 async fn partials(
     session: &Session,
     keys: &Keys,
     tag: Option<u64>,
+    share: Share,
     timeout: Duration,
 ) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
-    let selector = match tag {
-        Some(tag) => format!("{}?tag={tag}", keys.every_leader_partial()),
-        None => format!("{}?quiet", keys.every_leader_partial()),
+    let selector = match (tag, share) {
+        (Some(tag), _) => format!("{}?tag={tag}", keys.every_leader_partial()),
+        (None, Share::Sums) => format!("{}?quiet", keys.every_leader_partial()),
+        (None, Share::Rows) => format!("{}?quiet;rows", keys.every_leader_partial()),
     };
     let replies = ask_everyone(session, selector, timeout, "query the leaders").await?;
     let mut parts = BTreeMap::new();

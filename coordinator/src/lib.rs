@@ -9,10 +9,14 @@
 //! in time makes the query fail, naming it.
 //!
 //! A map of the crate:
-//! - [`gather`] — one consistent answer: cut, partial sums, combination.
+//! - [`gather`] — the leaders' shares at one consistent cut; property
+//!   marginals from their partial sums.
+//! - [`identity`] — identity marginals from the leaders' rows of the
+//!   information matrix, computed only when asked.
 //! - [`actor`] — the Zenoh queryables of the user API: [`actor::run`].
 
 pub mod actor;
 pub mod gather;
+pub mod identity;
 
 pub use gather::{GatherError, Gathered};

@@ -120,10 +120,15 @@ pub struct DemoArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct QueryArgs {
-    /// marginals | track | stats
+    /// marginals | track | identity | stats
     pub what: String,
-    /// The track, for `track`.
+    /// The track, for `track` (needed) and `identity` (optional: one track's
+    /// identities instead of every track's).
     pub track: Option<u32>,
+    /// How `identity` turns the information matrix into marginals (default:
+    /// exact up to 16 tracks, bethe beyond).
+    #[arg(long, value_enum)]
+    pub marginals: Option<MarginalChoice>,
     /// The coordinator's endpoint.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub connect: String,
@@ -139,7 +144,7 @@ pub struct QueryArgs {
     pub repeat: u32,
     /// Answers right after these event counts of the stream (comma-separated;
     /// all asked at once, each waits for its point; a point already passed
-    /// is an error). For marginals and track.
+    /// is an error). For marginals, track and identity.
     #[arg(long, value_delimiter = ',')]
     pub at_events: Vec<u64>,
     #[arg(long, default_value_t = 1000)]
@@ -153,13 +158,19 @@ impl QueryArgs {
             ("marginals", None) => Question::Marginals,
             ("stats", None) => Question::Stats,
             ("track", Some(t)) => Question::Track(t),
+            ("identity", track) => Question::Identity(track),
             ("track", None) => {
                 anyhow::bail!("query track needs a track number: idmesh query track 12")
             }
-            (other, _) => anyhow::bail!("unknown query {other:?}: marginals, track T or stats"),
+            (other, _) => {
+                anyhow::bail!("unknown query {other:?}: marginals, track T, identity [T] or stats")
+            }
         };
         if what == Question::Stats && !self.at_events.is_empty() {
-            anyhow::bail!("--at-events is for marginals and track, not stats");
+            anyhow::bail!("--at-events is for marginals, track and identity, not stats");
+        }
+        if self.marginals.is_some() && !matches!(what, Question::Identity(_)) {
+            anyhow::bail!("--marginals is for identity queries");
         }
         Ok(QueryOptions {
             what,
@@ -170,6 +181,7 @@ impl QueryArgs {
             repeat: self.repeat,
             interval: std::time::Duration::from_millis(self.interval_ms),
             at_events: self.at_events.clone(),
+            marginals: self.marginals.map(|m| m.name().to_string()),
         })
     }
 }

@@ -39,6 +39,7 @@ use crate::replay::{finish, line_error, mean_error, write_line, Stopwatch};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_belief::identity::{
     identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
@@ -143,10 +144,6 @@ impl MarginalChoice {
         }
     }
 }
-
-/// Counted Metropolis steps when --samples is not given.
-pub const DEFAULT_SAMPLES: usize = 10_000;
-
 
 /// The answers at one `truth` line.
 #[derive(Debug, Serialize)]
@@ -312,19 +309,9 @@ impl From<BeliefError> for Built {
 
 /// The marginal method `args` asks for.
 fn marginal_method(args: &IdentityReplayOptions) -> MarginalMethod {
-    match args.marginals.unwrap_or_default() {
-        MarginalChoice::Exact => MarginalMethod::Exact,
-        MarginalChoice::Metropolis => {
-            let samples = args.samples.unwrap_or(DEFAULT_SAMPLES);
-            MarginalMethod::Metropolis {
-                samples,
-                burn_in: samples / 10,
-                seed: args.seed,
-            }
-        }
-        MarginalChoice::Sinkhorn => MarginalMethod::Sinkhorn,
-        MarginalChoice::Bethe => MarginalMethod::half_bethe(),
-    }
+    let choice = args.marginals.unwrap_or_default();
+    let samples = args.samples.unwrap_or(DEFAULT_SAMPLES);
+    MarginalMethod::named(choice.name(), samples, args.seed).unwrap_or_default()
 }
 
 /// The filter `args.method` names, for the trace `header` (which has

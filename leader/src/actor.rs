@@ -227,7 +227,8 @@ async fn answer_partial(
         return;
     }
     if query.parameters().contains_key("quiet") {
-        match leader.quiet() {
+        // `;rows`: an identity query wants the rows of the information matrix.
+        match leader.quiet(query.parameters().contains_key("rows")) {
             Some(partial) => reply_partial(&query, &partial).await,
             None => {
                 let _ = query

@@ -20,15 +20,24 @@
 //!
 //! The empty set (k unknown) never moves. Thresholding is local, each
 //! leader against its own budget (Section 5.4.3: "fully distributive").
+//!
+//! On an identity stream each leader also holds the rows of the information
+//! matrix of the tracks it surveils ([`InformationRows`]; Shin et al., IPSN
+//! 2005, Section 4): a read is applied to the owner's row with no message;
+//! a cross-leader mix puts each leader's row of its mixed track, as it was
+//! before the mix, in the transfer it sends anyway, and both fit the same
+//! pair; a handover moves the track's row with its sets.
 
 use crate::error::LeaderError;
+use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_belief::identity::{Identify, InformationRows};
 use idmesh_belief::radon::{
     Atom, Growth as BeliefGrowth, PartialSums, RadonOptions, RadonShare, Sparsify,
 };
 use idmesh_belief::{Field, Mix, Observe, RedCount, TrackSet};
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
-use idmesh_protocol::wire::leader_to_leader::{Transfer, WireSet};
+use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::Follow;
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use idmesh_protocol::wire::VERSION;
@@ -65,6 +74,11 @@ struct Started {
     share: RadonShare,
     own: Vec<bool>,
     interest: Interest,
+    /// The rows of the information matrix of the tracks owned, on an
+    /// identity stream.
+    rows: Option<InformationRows>,
+    /// A cross-leader mix whose fit waits for the partner's row.
+    row_mix: Option<Mix>,
 }
 
 pub struct Leader {
@@ -78,8 +92,8 @@ pub struct Leader {
     position: u64,
     /// Next batch number expected from the sensor.
     next_batch: u64,
-    /// Sets that arrived before the leader reached their item.
-    transfers: HashMap<(u64, u16), Vec<WireSet>>,
+    /// Sets and rows that arrived before the leader reached their item.
+    transfers: HashMap<(u64, u16), (Vec<WireSet>, Vec<WireRow>)>,
     waiting: Option<Waiting>,
     cuts: VecDeque<Partial>,
     /// The watermark and end-of-stream flag of the last batch.
@@ -127,6 +141,7 @@ impl Leader {
             stats.omp_runs = s.share.omp_runs();
             stats.tracks_owned = s.own.iter().filter(|&&o| o).count() as u64;
             stats.tracks_followed = s.interest.len() as u64;
+            stats.rows_held = s.rows.as_ref().map_or(0, |r| r.len() as u64);
         }
         stats
     }
@@ -147,16 +162,29 @@ impl Leader {
     /// quiet at the same seq together hold the belief at that seq (every
     /// set sent before it has been received), which is how the coordinator
     /// answers a finished stream without placing a cut.
-    pub fn quiet(&self) -> Option<Partial> {
+    /// With `rows`, the leader's rows of the information matrix too.
+    pub fn quiet(&self, rows: bool) -> Option<Partial> {
         if self.waiting.is_some() || !self.queue.is_empty() {
             return None;
         }
-        self.partial(self.frontier, 0, self.events)
+        self.partial(self.frontier, 0, self.events, rows)
     }
 
-    /// The partial sums of the share as it is (None before the Begin).
-    fn partial(&self, cut: u64, tag: u64, events: u64) -> Option<Partial> {
-        let sums = self.started.as_ref()?.share.partial_sums();
+    /// The partial sums of the share as it is (None before the Begin),
+    /// with the rows held when `rows` asks for them.
+    fn partial(&self, cut: u64, tag: u64, events: u64, rows: bool) -> Option<Partial> {
+        let started = self.started.as_ref()?;
+        let sums = started.share.partial_sums();
+        let rows = match (&started.rows, rows) {
+            (Some(held), true) => held
+                .rows()
+                .map(|(track, row)| WireRow {
+                    track,
+                    ln_likelihoods: row.to_vec(),
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
         Some(Partial {
             version: VERSION,
             leader: self.name.clone(),
@@ -169,6 +197,7 @@ impl Leader {
             outside: sums.outside,
             inside: sums.inside,
             coefficients: sums.coefficients,
+            rows,
         })
     }
 
@@ -215,8 +244,10 @@ impl Leader {
                 position: self.position,
             });
         }
-        self.transfers
-            .insert((transfer.seq, transfer.from), transfer.sets);
+        self.transfers.insert(
+            (transfer.seq, transfer.from),
+            (transfer.sets, transfer.rows),
+        );
         self.advance()
     }
 
@@ -242,8 +273,9 @@ impl Leader {
             match self.waiting {
                 Some(Waiting::Transfer { seq, from }) => {
                     match self.transfers.remove(&(seq, from)) {
-                        Some(sets) => {
+                        Some((sets, rows)) => {
                             self.waiting = None;
+                            self.receive_rows(rows)?;
                             self.receive_sets(seq, sets, &mut actions)?;
                             if self.waiting.is_some() {
                                 return Ok(actions);
@@ -300,17 +332,33 @@ impl Leader {
                 owner_b,
             } => {
                 self.stats.mixes += 1;
+                let mix = Mix { a, b, swap };
                 let started = self.started()?;
-                started.share.mix(Mix { a, b, swap })?;
-                let other = match (owner_a == me, owner_b == me) {
-                    (true, false) => Some(owner_b),
-                    (false, true) => Some(owner_a),
-                    _ => None,
+                started.share.mix(mix)?;
+                let (mine, other) = match (owner_a == me, owner_b == me) {
+                    (true, false) => (Some(a), Some(owner_b)),
+                    (false, true) => (Some(b), Some(owner_a)),
+                    (true, true) => {
+                        if let Some(rows) = &mut started.rows {
+                            rows.mix(mix)?;
+                        }
+                        (None, None)
+                    }
+                    (false, false) => (None, None),
                 };
-                if let Some(other) = other {
+                if let (Some(mine), Some(other)) = (mine, other) {
                     // Algorithm 4: both leaders of a cross-leader mix hand
                     // over what left their tracks, and wait for the other.
-                    self.send_homeless(seq, other, actions)?;
+                    // The row of the mixed track goes along, unmixed: the
+                    // fit needs both, and both leaders compute it.
+                    let row = match &started.rows {
+                        Some(rows) => {
+                            started.row_mix = Some(mix);
+                            vec![wire_row(rows, mine)?]
+                        }
+                        None => Vec::new(),
+                    };
+                    self.send_homeless(seq, other, row, actions)?;
                     self.waiting = Some(Waiting::Transfer { seq, from: other });
                 }
             }
@@ -340,15 +388,43 @@ impl Leader {
                     .ok_or(LeaderError::Unexpected("a handover of an unknown track"))?;
                 if from == me {
                     *slot = false;
-                    self.send_homeless(seq, to, actions)?;
+                    let row = match &mut started.rows {
+                        Some(rows) => {
+                            let row = wire_row(rows, track)?;
+                            rows.take(track);
+                            vec![row]
+                        }
+                        None => Vec::new(),
+                    };
+                    self.send_homeless(seq, to, row, actions)?;
                 } else if to == me {
                     *slot = true;
                     self.waiting = Some(Waiting::Transfer { seq, from });
                 }
             }
-            Item::Cut { events, tag } => {
+            Item::Identify {
+                track,
+                identity,
+                accuracy,
+                ..
+            } => {
+                self.stats.identifies += 1;
+                let rows = self
+                    .started()?
+                    .rows
+                    .as_mut()
+                    .ok_or(LeaderError::Unexpected(
+                        "an identity read on a stream without identities",
+                    ))?;
+                rows.identify(Identify {
+                    track,
+                    identity,
+                    accuracy,
+                })?;
+            }
+            Item::Cut { events, tag, rows } => {
                 let partial = self
-                    .partial(seq, tag, events)
+                    .partial(seq, tag, events, rows)
                     .ok_or(LeaderError::Unexpected("a cut before the stream's Begin"))?;
                 if self.cuts.len() == CUTS_KEPT {
                     self.cuts.pop_front();
@@ -384,23 +460,37 @@ impl Leader {
             .position(|l| *l == self.name)
             .ok_or_else(|| LeaderError::NotListed(self.name.clone()))? as u16;
         let (share, interest) = start(&begin, me)?;
-        let own = begin.owners.iter().map(|&o| o == me).collect();
+        let own: Vec<bool> = begin.owners.iter().map(|&o| o == me).collect();
+        let rows = if begin.identities {
+            let held = (0..begin.tracks).filter(|&t| own[t as usize]);
+            Some(InformationRows::start(
+                begin.tracks as usize,
+                held,
+                begin.initial_identity.as_deref(),
+                KNOWN_START_CONFIDENCE,
+            )?)
+        } else {
+            None
+        };
         self.started = Some(Started {
             me,
             begin,
             share,
             own,
             interest,
+            rows,
+            row_mix: None,
         });
         Ok(())
     }
 
     /// Takes out the sets with none of this leader's tracks (but not φ_∅)
-    /// and sends them to `to` as the transfer of item `seq`.
+    /// and sends them, with `rows`, to `to` as the transfer of item `seq`.
     fn send_homeless(
         &mut self,
         seq: u64,
         to: u16,
+        rows: Vec<WireRow>,
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let me = self.me()?;
@@ -428,8 +518,50 @@ impl Leader {
                 from: me,
                 seq,
                 sets,
+                rows,
             },
         });
+        Ok(())
+    }
+
+    /// Rows received with a transfer: the partner's row of a cross-leader
+    /// mix (the fit is made now), or the row of a track handed over.
+    fn receive_rows(&mut self, received: Vec<WireRow>) -> Result<(), LeaderError> {
+        let started = self.started()?;
+        let pending = started.row_mix.take();
+        let Some(rows) = &mut started.rows else {
+            return match received.is_empty() {
+                true => Ok(()),
+                false => Err(LeaderError::BadTransfer(
+                    "rows of an information matrix on a stream without identities".into(),
+                )),
+            };
+        };
+        match pending {
+            Some(mix) => {
+                let partner = match received.as_slice() {
+                    [row]
+                        if !rows.holds(row.track) && (row.track == mix.a || row.track == mix.b) =>
+                    {
+                        row
+                    }
+                    _ => return Err(LeaderError::BadTransfer(format!(
+                        "a mix of tracks {} and {} needs the partner's one row, got rows of {:?}",
+                        mix.a,
+                        mix.b,
+                        received.iter().map(|r| r.track).collect::<Vec<_>>()
+                    ))),
+                };
+                rows.mix_with(mix, &partner.ln_likelihoods)
+                    .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+            }
+            None => {
+                for row in received {
+                    rows.insert(row.track, row.ln_likelihoods)
+                        .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+                }
+            }
+        }
         Ok(())
     }
 
@@ -507,6 +639,17 @@ impl Leader {
     }
 }
 
+/// Row `track` as it goes on the wire.
+fn wire_row(rows: &InformationRows, track: u32) -> Result<WireRow, LeaderError> {
+    let row = rows.row(track).ok_or(LeaderError::Unexpected(
+        "an event on an owned track whose row this leader does not hold",
+    ))?;
+    Ok(WireRow {
+        track,
+        ln_likelihoods: row.to_vec(),
+    })
+}
+
 /// Leader `me`'s share of the start belief and its interest: each set
 /// starts with the leader of its first track, φ_∅ with leader 0. The sensor
 /// computes the same to route the first items.
@@ -582,6 +725,8 @@ mod tests {
             distributed_rule: false,
             budget: 0,
             omp: false,
+            identities: false,
+            initial_identity: None,
         })
     }
 
@@ -613,14 +758,14 @@ mod tests {
     #[test]
     fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody() {
         let mut leader = Leader::new("a");
-        assert!(leader.quiet().is_none(), "no Begin yet");
+        assert!(leader.quiet(false).is_none(), "no Begin yet");
         leader
             .batch(
                 batch(0, vec![(1, begin(&["a", "b"], vec![0, 0, 1, 1]))], 1, false),
                 0,
             )
             .unwrap();
-        let rest = leader.quiet().expect("quiet after the Begin");
+        let rest = leader.quiet(false).expect("quiet after the Begin");
         assert_eq!((rest.cut, rest.finished), (1, false));
         // A mix with b's track: the leader must wait for b's sets.
         let actions = leader
@@ -629,7 +774,7 @@ mod tests {
         assert!(actions
             .iter()
             .any(|a| matches!(a, Action::Send { to: 1, .. })));
-        assert!(leader.quiet().is_none(), "waiting for b's sets");
+        assert!(leader.quiet(false).is_none(), "waiting for b's sets");
         leader
             .transfer(
                 Transfer {
@@ -637,11 +782,12 @@ mod tests {
                     from: 1,
                     seq: 2,
                     sets: Vec::new(),
+                    rows: Vec::new(),
                 },
                 0,
             )
             .unwrap();
-        let rest = leader.quiet().expect("quiet once b's sets are in");
+        let rest = leader.quiet(false).expect("quiet once b's sets are in");
         assert_eq!((rest.cut, rest.events, rest.finished), (2, 2, true));
     }
 
@@ -654,7 +800,11 @@ mod tests {
                 0,
             )
             .unwrap();
-        let cut = Item::Cut { events: 7, tag: 42 };
+        let cut = Item::Cut {
+            events: 7,
+            tag: 42,
+            rows: false,
+        };
         let actions = leader
             .batch(batch(1, vec![(2, mix(0, 2, 0, 0)), (3, cut)], 3, false), 0)
             .unwrap();
@@ -672,5 +822,122 @@ mod tests {
                 got: 3
             })
         ));
+    }
+
+    /// Two leaders on an identity stream, driven by hand: reads cost no
+    /// message, a cross-leader mix exchanges the two rows, a handover moves
+    /// one; the rows put together equal the centralized information matrix.
+    #[test]
+    fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them() {
+        use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
+        let start = vec![2, 0, 3, 1];
+        let begin = Item::Begin(Begin {
+            tracks: 4,
+            red: None,
+            initial_red: None,
+            leaders: vec!["a".into(), "b".into()],
+            owners: vec![0, 0, 1, 1],
+            distributed_rule: false,
+            budget: 0,
+            omp: false,
+            identities: true,
+            initial_identity: Some(start.clone()),
+        });
+        let read = |track, identity, owner| Item::Identify {
+            track,
+            identity,
+            accuracy: 0.8,
+            owner,
+        };
+        let mut central = InformationMatrix::from_assignment(
+            &start,
+            KNOWN_START_CONFIDENCE,
+            InformationOptions::default(),
+        )
+        .unwrap();
+        let (mut a, mut b) = (Leader::new("a"), Leader::new("b"));
+        a.batch(batch(0, vec![(1, begin.clone())], 1, false), 0)
+            .unwrap();
+        b.batch(batch(0, vec![(1, begin)], 1, false), 0).unwrap();
+
+        // Reads: applied where the row is, nothing sent.
+        let actions = a
+            .batch(batch(1, vec![(2, read(0, 1, 0))], 2, false), 0)
+            .unwrap();
+        assert!(actions.is_empty(), "{actions:?}");
+        let actions = b
+            .batch(batch(1, vec![(3, read(3, 3, 1))], 3, false), 0)
+            .unwrap();
+        assert!(actions.is_empty(), "{actions:?}");
+        for (track, identity) in [(0, 1), (3, 3)] {
+            central
+                .identify(Identify {
+                    track,
+                    identity,
+                    accuracy: 0.8,
+                })
+                .unwrap();
+        }
+
+        // A mix across the two: each sends its row, unmixed, and waits.
+        let mix = |seq| {
+            (
+                seq,
+                Item::Mix {
+                    a: 1,
+                    b: 2,
+                    swap: 0.3,
+                    owner_a: 0,
+                    owner_b: 1,
+                },
+            )
+        };
+        let sent_by_a = a.batch(batch(2, vec![mix(4)], 4, false), 0).unwrap();
+        let sent_by_b = b.batch(batch(2, vec![mix(4)], 4, false), 0).unwrap();
+        central
+            .mix(Mix {
+                a: 1,
+                b: 2,
+                swap: 0.3,
+            })
+            .unwrap();
+        let transfer = |actions: Vec<Action>| match actions.as_slice() {
+            [Action::Send { transfer, .. }] => transfer.clone(),
+            other => panic!("one transfer expected, got {other:?}"),
+        };
+        let (to_b, to_a) = (transfer(sent_by_a), transfer(sent_by_b));
+        assert_eq!(to_b.rows.iter().map(|r| r.track).collect::<Vec<_>>(), [1]);
+        assert_eq!(to_a.rows.iter().map(|r| r.track).collect::<Vec<_>>(), [2]);
+        a.transfer(to_a, 0).unwrap();
+        b.transfer(to_b, 0).unwrap();
+
+        // Track 0 moves to b: its row goes along.
+        let handover = (
+            5,
+            Item::Handover {
+                track: 0,
+                from: 0,
+                to: 1,
+            },
+        );
+        let sent = a
+            .batch(batch(3, vec![handover.clone()], 5, true), 0)
+            .unwrap();
+        b.batch(batch(3, vec![handover], 5, true), 0).unwrap();
+        b.transfer(transfer(sent), 0).unwrap();
+        assert_eq!(a.stats().rows_held, 1);
+        assert_eq!(b.stats().rows_held, 3);
+        assert_eq!((a.stats().identifies, b.stats().identifies), (1, 1));
+
+        let rows = [a.quiet(true).unwrap(), b.quiet(true).unwrap()]
+            .into_iter()
+            .flat_map(|p| p.rows)
+            .map(|r| (r.track, r.ln_likelihoods));
+        let assembled = InformationRows::assemble(4, rows, InformationOptions::default()).unwrap();
+        assert_eq!(assembled.log_likelihoods(), central.log_likelihoods());
+        assert!(
+            a.quiet(false).unwrap().rows.is_empty(),
+            "rows only when asked"
+        );
     }
 }

@@ -67,7 +67,37 @@ pub enum MarginalMethod {
     },
 }
 
+/// Counted Metropolis steps when none are asked for.
+pub const DEFAULT_SAMPLES: usize = 10_000;
+
 impl MarginalMethod {
+    /// The method a command line or a query names: `exact`, `metropolis`
+    /// (`samples` counted steps after a tenth as many burn-in steps, from
+    /// `seed`), `sinkhorn` or `bethe` (γ = ½).
+    pub fn named(name: &str, samples: usize, seed: u64) -> Option<Self> {
+        Some(match name {
+            "exact" => MarginalMethod::Exact,
+            "metropolis" => MarginalMethod::Metropolis {
+                samples,
+                burn_in: samples / 10,
+                seed,
+            },
+            "sinkhorn" => MarginalMethod::Sinkhorn,
+            "bethe" => MarginalMethod::half_bethe(),
+            _ => return None,
+        })
+    }
+
+    /// The name [`MarginalMethod::named`] reads.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MarginalMethod::Exact => "exact",
+            MarginalMethod::Metropolis { .. } => "metropolis",
+            MarginalMethod::Sinkhorn => "sinkhorn",
+            MarginalMethod::FractionalBethe { .. } => "bethe",
+        }
+    }
+
     /// [`MarginalMethod::FractionalBethe`] with γ = ½, 1,000 iterations,
     /// tolerance 1e-10.
     pub fn half_bethe() -> Self {
@@ -174,6 +204,15 @@ mod tests {
     use crate::identity::workload::{generate, IdentityWorkloadSpec};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn methods_are_named_as_the_command_line_and_queries_name_them() {
+        for name in ["exact", "metropolis", "sinkhorn", "bethe"] {
+            let method = MarginalMethod::named(name, 100, 1).unwrap();
+            assert_eq!(method.name(), name);
+        }
+        assert!(MarginalMethod::named("permanent", 100, 1).is_none());
+    }
 
     fn by(method: MarginalMethod, n: usize, l: &[f64]) -> Vec<Vec<f64>> {
         to_rows(

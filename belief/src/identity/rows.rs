@@ -305,7 +305,10 @@ mod tests {
         assert!(share.mix_with(across, &[0.0; 3]).is_err());
         assert!(share.mix_with(across, &[0.0, f64::NAN, 0.0, 0.0]).is_err());
         assert!(share.insert(9, vec![0.0; 4]).is_err());
-        let only_two = share.rows().map(|(t, r)| (t, r.to_vec())).collect::<Vec<_>>();
+        let only_two = share
+            .rows()
+            .map(|(t, r)| (t, r.to_vec()))
+            .collect::<Vec<_>>();
         let err = InformationRows::assemble(4, only_two.clone(), InformationOptions::default())
             .unwrap_err();
         assert!(err.to_string().contains("track 2"), "{err}");

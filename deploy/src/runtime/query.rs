@@ -1,10 +1,13 @@
-//! `idmesh query marginals|track T|stats`: a Zenoh client of the user API.
+//! `idmesh query marginals|track T|identity [T]|stats`: a Zenoh client of
+//! the user API.
 //! Human-readable by default, `--json` prints the reply as it came.
 
 use super::mesh::{self, MeshOptions};
 use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::{MarginalsAnswer, QueryError, StatsAnswer, TrackAnswer};
+use idmesh_protocol::wire::query::{
+    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, QueryError, StatsAnswer, TrackAnswer,
+};
 use std::io::Write;
 use std::time::{Duration, Instant};
 
@@ -21,12 +24,17 @@ pub struct QueryOptions {
     /// Ask instead, all at once, for the answers right after these event
     /// counts (`?events=N`), printed in this order.
     pub at_events: Vec<u64>,
+    /// How identity marginals are computed (`?marginals=`); None = the
+    /// coordinator's choice.
+    pub marginals: Option<String>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum Question {
     Marginals,
     Track(u32),
+    /// Every track's identities, or one track's.
+    Identity(Option<u32>),
     Stats,
 }
 
@@ -46,11 +54,19 @@ pub fn run(options: &QueryOptions) -> Result<()> {
         let key = match options.what {
             Question::Marginals => keys.query_marginals(),
             Question::Track(t) => keys.query_track(t),
+            Question::Identity(None) => keys.query_identity(),
+            Question::Identity(Some(t)) => keys.query_identity_track(t),
             Question::Stats => keys.query_stats(),
         };
+        let parameters: Vec<String> = options
+            .marginals
+            .iter()
+            .map(|m| format!("marginals={m}"))
+            .collect();
         if !options.at_events.is_empty() {
-            return at_events(&session, &key, options).await;
+            return at_events(&session, &key, &parameters, options).await;
         }
+        let key = selector(&key, &parameters);
         let mut failures = 0;
         for i in 0..options.repeat.max(1) {
             if i > 0 {
@@ -73,13 +89,29 @@ pub fn run(options: &QueryOptions) -> Result<()> {
     })
 }
 
+/// `key?a;b;…`, or the key alone.
+fn selector(key: &str, parameters: &[String]) -> String {
+    if parameters.is_empty() {
+        key.to_string()
+    } else {
+        format!("{key}?{}", parameters.join(";"))
+    }
+}
+
 /// Every `--at-events` point asked at once; the answers in point order.
-async fn at_events(session: &zenoh::Session, key: &str, options: &QueryOptions) -> Result<()> {
+async fn at_events(
+    session: &zenoh::Session,
+    key: &str,
+    parameters: &[String],
+    options: &QueryOptions,
+) -> Result<()> {
     let asked: Vec<_> = options
         .at_events
         .iter()
         .map(|n| {
-            let (session, selector) = (session.clone(), format!("{key}?events={n}"));
+            let mut at = parameters.to_vec();
+            at.push(format!("events={n}"));
+            let (session, selector) = (session.clone(), selector(key, &at));
             let timeout = options.timeout;
             tokio::spawn(async move {
                 let started = Instant::now();
@@ -168,6 +200,32 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
         Question::Track(_) => {
             let a: TrackAnswer = serde_json::from_slice(body)?;
             writeln!(out, "track {}: P(red) = {:.4}", a.track, a.p_red)?;
+        }
+        Question::Identity(None) => {
+            let a: IdentityAnswer = serde_json::from_slice(body)?;
+            let events: Vec<String> = a
+                .watermark
+                .iter()
+                .map(|(s, e)| format!("{s}: {e} events"))
+                .collect();
+            writeln!(
+                out,
+                "{} · {} leaders · {} marginals · {:.1} ms",
+                events.join(", "),
+                a.leaders,
+                a.marginals,
+                took.as_secs_f64() * 1e3
+            )?;
+            for (t, (row, &i)) in a.p_identity.iter().zip(&a.predicted_identity).enumerate() {
+                let p = row.get(i as usize).copied().unwrap_or(f64::NAN);
+                writeln!(out, "  track {t:>4}  identity {i:>4}  P = {p:.4}")?;
+            }
+        }
+        Question::Identity(Some(_)) => {
+            let a: IdentityTrackAnswer = serde_json::from_slice(body)?;
+            let i = a.predicted_identity;
+            let p = a.p_identity.get(i as usize).copied().unwrap_or(f64::NAN);
+            writeln!(out, "track {}: identity {i} (P = {p:.4})", a.track)?;
         }
         Question::Stats => {
             let a: StatsAnswer = serde_json::from_slice(body)?;

@@ -4,6 +4,7 @@
 //! applied everything the sensor sent and waits for nothing), and its
 //! counters (`P/leader/*/stats`).
 
+use super::leader_to_leader::WireRow;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -22,6 +23,9 @@ pub struct Partial {
     pub outside: f64,
     pub inside: Vec<(u32, f64)>,
     pub coefficients: u64,
+    /// The leader's rows of the information matrix, when the query asked
+    /// for them (identity queries); empty otherwise.
+    pub rows: Vec<WireRow>,
 }
 super::versioned!(Partial, "partial sums");
 
@@ -44,6 +48,10 @@ pub struct LeaderStats {
     pub follows: u64,
     /// OMP runs on this leader's sets (the overcomplete method).
     pub omp_runs: u64,
+    /// Identity reads applied (each to a row held here, with no message).
+    pub identifies: u64,
+    /// Rows of the information matrix held now.
+    pub rows_held: u64,
     pub coefficients: u64,
     pub tracks_owned: u64,
     pub tracks_followed: u64,

@@ -1,6 +1,7 @@
 //! A cut of the event stream for a query: the sensor puts a `Cut` item with
 //! the query's tag into every leader's stream and says where (postcard reply
-//! to a get on `P/sensor/<name>/cut?tag=<tag>`).
+//! to a get on `P/sensor/<name>/cut?tag=<tag>`, `;rows` for an identity
+//! query, whose cut asks the leaders for their rows too).
 
 use serde::{Deserialize, Serialize};
 
@@ -17,5 +18,7 @@ pub struct CutPlaced {
     pub red: Option<u32>,
     /// The stream is over (the sensor read its whole source).
     pub finished: bool,
+    /// An identity stream: leaders hold rows of an information matrix.
+    pub identities: bool,
 }
 super::versioned!(CutPlaced, "cut");

@@ -88,6 +88,7 @@ impl Interest {
                     || matches!(growth, Growth::Meeting(p) if self.meets(p))
             }
             Item::Handover { from, to, .. } => *from == self.leader || *to == self.leader,
+            Item::Identify { owner, .. } => *owner == self.leader,
         }
     }
 
@@ -122,7 +123,8 @@ impl Interest {
                     self.add(*track);
                 }
             }
-            Item::Cut { .. } => {}
+            // A read changes one row of the information matrix, no set.
+            Item::Cut { .. } | Item::Identify { .. } => {}
         }
     }
 }

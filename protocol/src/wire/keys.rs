@@ -10,6 +10,7 @@
 //! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
+//! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
 //! | `P/ping/<role>/<name>` | every process | answers at once: the raw round trip, for health checks and the bench |
 
@@ -78,6 +79,18 @@ impl Keys {
 
     pub fn query_any_track(&self) -> String {
         format!("{}/query/track/*", self.prefix)
+    }
+
+    pub fn query_identity(&self) -> String {
+        format!("{}/query/identity", self.prefix)
+    }
+
+    pub fn query_identity_track(&self, track: u32) -> String {
+        format!("{}/query/identity/{track}", self.prefix)
+    }
+
+    pub fn query_any_identity_track(&self) -> String {
+        format!("{}/query/identity/*", self.prefix)
     }
 
     pub fn query_stats(&self) -> String {

@@ -2,6 +2,11 @@
 //! cross-leader mix, and the handover when a track changes region). A
 //! transfer is tied to the seq of the item that caused it; the receiver
 //! adds the sets at exactly that point of its own stream.
+//!
+//! On an identity stream the same transfer carries rows of the information
+//! matrix (Shin et al., Section 4): at a cross-leader mix, each leader's
+//! row of its mixed track as it was before the mix (both then compute the
+//! same fit); at a handover, the row of the track that changes region.
 
 use serde::{Deserialize, Serialize};
 
@@ -12,6 +17,7 @@ pub struct Transfer {
     pub from: u16,
     pub seq: u64,
     pub sets: Vec<WireSet>,
+    pub rows: Vec<WireRow>,
 }
 super::versioned!(Transfer, "transfer");
 
@@ -21,4 +27,12 @@ pub struct WireSet {
     pub red: Vec<u32>,
     pub blue: Vec<u32>,
     pub ln_mass: f64,
+}
+
+/// Row `track` of an information matrix: accumulated log-likelihoods, one
+/// per identity.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WireRow {
+    pub track: u32,
+    pub ln_likelihoods: Vec<f64>,
 }

@@ -24,7 +24,7 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 /// The version of every postcard message below; a receiver rejects others.
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

@@ -1,6 +1,7 @@
 //! The user-facing answers, JSON with Zenoh's JSON encoding.
-//! `P/query/marginals`, `P/query/track/<t>` and `P/query/stats`; an answer
-//! that cannot be given is an error reply carrying [`QueryError`].
+//! `P/query/marginals`, `P/query/track/<t>`, `P/query/identity`,
+//! `P/query/identity/<t>` and `P/query/stats`; an answer that cannot be
+//! given is an error reply carrying [`QueryError`].
 
 use super::coordinator_to_leader::LeaderStats;
 use serde::{Deserialize, Serialize};
@@ -27,6 +28,33 @@ pub struct TrackAnswer {
     pub watermark: Watermark,
     pub track: u32,
     pub p_red: f64,
+}
+
+/// Who is on which track: `p_identity[t][i]` = P(track t carries identity
+/// i), computed by the coordinator from the leaders' rows of the
+/// information matrix when asked, by `marginals` (exact, metropolis,
+/// sinkhorn, bethe); `predicted_identity` is the most likely one-to-one
+/// assignment under them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IdentityAnswer {
+    pub watermark: Watermark,
+    pub tracks: u32,
+    pub p_identity: Vec<Vec<f64>>,
+    pub predicted_identity: Vec<u32>,
+    pub marginals: String,
+    pub leaders: u32,
+    pub finished: bool,
+}
+
+/// Who is on one track: the track's row of [`IdentityAnswer`] and the
+/// identity the assignment gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IdentityTrackAnswer {
+    pub watermark: Watermark,
+    pub track: u32,
+    pub p_identity: Vec<f64>,
+    pub predicted_identity: u32,
+    pub marginals: String,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

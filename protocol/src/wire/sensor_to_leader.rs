@@ -64,13 +64,24 @@ pub enum Item {
         /// sighting, which removes the sets that do not fix the track.
         global: bool,
     },
+    /// A sensor read `identity` on track `track` (identity streams), sent
+    /// only to `owner`, the leader surveilling the track, which holds the
+    /// track's row of the information matrix: evidence costs no message
+    /// between leaders.
+    Identify {
+        track: u32,
+        identity: u32,
+        accuracy: f64,
+        owner: u16,
+    },
     /// Track `track` left the region of leader `from` for that of `to`.
     Handover { track: u32, from: u16, to: u16 },
     /// A consistent cut asked for by a query: every leader computes its
     /// partial sums here. `events` counts the trace events before it; `tag`
     /// is the query's, so leaders asked for it before it reaches them know
-    /// which cut to wait for.
-    Cut { events: u64, tag: u64 },
+    /// which cut to wait for. `rows`: an identity query, leaders add their
+    /// rows of the information matrix to their answer.
+    Cut { events: u64, tag: u64, rows: bool },
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -89,4 +100,9 @@ pub struct Begin {
     /// Over budget, re-express with OMP after runs of mixing before
     /// thresholding (the overcomplete method), each leader on its own sets.
     pub omp: bool,
+    /// An identity stream (one identity per track): each leader keeps the
+    /// rows of the information matrix of the tracks it surveils.
+    pub identities: bool,
+    /// The known identity on every track at the start; None = uniform.
+    pub initial_identity: Option<Vec<u32>>,
 }

@@ -146,8 +146,8 @@ pub async fn run(
             query = cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
                 match cuts.request(query, &router, stream.finished) {
-                    Request::Now { tag, query } => {
-                        let p = place(&mut router, &config.name, tag, query, stream.finished);
+                    Request::Now { wanted, query } => {
+                        let p = place(&mut router, &config.name, wanted, query, stream.finished);
                         stream.flush(&mut router).await;
                         reply_placed(p).await;
                     }

@@ -2,7 +2,9 @@
 //! at once, or, with `&events=N`, at the point of the stream where the N-th
 //! event has been read (a query about a moment that has not come yet: the
 //! scoring of a live deployment against the truth lines uses it). A point
-//! already passed cannot be given back: the stream keeps no history.
+//! already passed cannot be given back: the stream keeps no history. With
+//! `;rows` (an identity query) the cut asks the leaders for their rows of
+//! the information matrix too.
 
 use super::router::Router;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
@@ -13,10 +15,17 @@ use zenoh::query::Query;
 /// Cuts waiting for their event count, at most this many.
 const MAX_SCHEDULED: usize = 10_000;
 
+/// The cut a query asks for: its tag, and whether leaders add their rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wanted {
+    pub tag: u64,
+    pub rows: bool,
+}
+
 /// What to do with a cut request.
 pub enum Request {
     /// Place it now.
-    Now { tag: u64, query: Query },
+    Now { wanted: Wanted, query: Query },
     /// Held until the stream reaches its point.
     Scheduled,
     /// Refused, with the reason.
@@ -25,7 +34,7 @@ pub enum Request {
 
 #[derive(Default)]
 pub struct Cuts {
-    scheduled: BTreeMap<u64, Vec<(u64, Query)>>,
+    scheduled: BTreeMap<u64, Vec<(Wanted, Query)>>,
     held: usize,
 }
 
@@ -45,8 +54,12 @@ impl Cuts {
                 reason: "a cut needs tag=<u64>: the tag leaders will be asked for".into(),
             };
         };
+        let wanted = Wanted {
+            tag,
+            rows: parameters.contains_key("rows"),
+        };
         let at = match parameters.get("events").map(str::parse::<u64>) {
-            None => return Request::Now { tag, query },
+            None => return Request::Now { wanted, query },
             Some(Ok(at)) => at,
             Some(Err(_)) => {
                 return Request::Refused {
@@ -57,7 +70,7 @@ impl Cuts {
         };
         let now = router.events();
         if at == now {
-            return Request::Now { tag, query };
+            return Request::Now { wanted, query };
         }
         let reason = if at < now {
             format!("the stream is past event {at} (it is at {now}) and keeps no history")
@@ -66,7 +79,7 @@ impl Cuts {
         } else if self.held >= MAX_SCHEDULED {
             format!("{MAX_SCHEDULED} cuts are already waiting for their point")
         } else {
-            self.scheduled.entry(at).or_default().push((tag, query));
+            self.scheduled.entry(at).or_default().push((wanted, query));
             self.held += 1;
             return Request::Scheduled;
         };
@@ -80,9 +93,9 @@ impl Cuts {
             if *entry.key() > router.events() {
                 return;
             }
-            for (tag, query) in entry.remove() {
+            for (wanted, query) in entry.remove() {
                 self.held -= 1;
-                placed.push(place(router, name, tag, query, false));
+                placed.push(place(router, name, wanted, query, false));
             }
         }
     }
@@ -107,9 +120,15 @@ impl Cuts {
     }
 }
 
-/// Places a cut tagged `tag` in every leader's stream now.
-pub fn place(router: &mut Router, name: &str, tag: u64, query: Query, finished: bool) -> Placed {
-    let (seq, events) = router.cut(tag);
+/// Places the cut a query wants in every leader's stream now.
+pub fn place(
+    router: &mut Router,
+    name: &str,
+    wanted: Wanted,
+    query: Query,
+    finished: bool,
+) -> Placed {
+    let (seq, events) = router.cut(wanted);
     let begin = router.begin();
     Placed {
         query,
@@ -122,6 +141,7 @@ pub fn place(router: &mut Router, name: &str, tag: u64, query: Query, finished: 
             tracks: begin.tracks,
             red: begin.red,
             finished,
+            identities: begin.identities,
         },
     }
 }

@@ -10,6 +10,7 @@
 //! The log of every item is kept so that a leader that starts following a
 //! track can be sent what it missed.
 
+use super::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
 use idmesh_leader::LeaderError;
 use idmesh_protocol::trace::Line;
@@ -91,6 +92,8 @@ impl Router {
             distributed_rule: config.distributed_rule,
             budget: config.budget,
             omp: config.omp,
+            identities: header.identities.is_some(),
+            initial_identity: header.initial_identity.clone(),
         };
         let mut interests = Vec::with_capacity(leaders);
         for me in 0..leaders {
@@ -140,8 +143,8 @@ impl Router {
         self.seq
     }
 
-    /// Routes one trace line (header, truth and identify lines carry no
-    /// event for the property leaders and are skipped).
+    /// Routes one trace line (header and truth lines carry no event and are
+    /// skipped). An identity read goes to the track's owner alone.
     pub fn line(&mut self, line: &Line) {
         match line {
             Line::Mix(mix) => {
@@ -195,7 +198,18 @@ impl Router {
                     });
                 }
             }
-            Line::Header(_) | Line::Truth(_) | Line::Identify(_) => {}
+            Line::Identify(read) => {
+                self.events += 1;
+                // Only the owner holds the track's row; nobody else hears.
+                let owner = self.owners[read.track as usize];
+                self.route(Item::Identify {
+                    track: read.track,
+                    identity: read.identity,
+                    accuracy: read.accuracy,
+                    owner,
+                });
+            }
+            Line::Header(_) | Line::Truth(_) => {}
         }
     }
 
@@ -225,13 +239,14 @@ impl Router {
         self.log.push(Sequenced { seq, item });
     }
 
-    /// Places a cut tagged `tag` in every leader's stream: (seq of the cut,
+    /// Places the cut `wanted` in every leader's stream: (seq of the cut,
     /// events in it).
-    pub fn cut(&mut self, tag: u64) -> (u64, u64) {
+    pub fn cut(&mut self, wanted: Wanted) -> (u64, u64) {
         let seq = self.next_seq();
         let item = Item::Cut {
             events: self.events,
-            tag,
+            tag: wanted.tag,
+            rows: wanted.rows,
         };
         for outbox in &mut self.outbox {
             outbox.push(Sequenced {

@@ -1,0 +1,160 @@
+//! Who is on which track, computed only when a user asks — the lazy part of
+//! Shin et al., *Lazy Inference on Object Identities in Wireless Sensor
+//! Networks* (IPSN 2005), Sections 3–4, across processes: leaders keep the
+//! rows of the information matrix of their tracks and never normalize; the
+//! coordinator collects the rows at a consistent cut, puts the matrix back
+//! together and turns it into marginals by the method the query names
+//! (`?marginals=exact|metropolis|sinkhorn|bethe`; exact by default up to
+//! [`EXACT_BY_DEFAULT`] tracks, the Bethe estimate beyond), then the most
+//! likely one-to-one assignment under them.
+
+use crate::gather::{collect, At, Collected, GatherError, Memory, Share};
+use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
+use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
+use idmesh_belief::identity::{
+    most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
+};
+use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::query::IdentityAnswer;
+use std::time::Duration;
+use zenoh::Session;
+
+/// The most tracks for which a query that names no method gets exact
+/// marginals (the permanent of an N × N matrix: 2^16 Gray-code steps of
+/// N² each, milliseconds; at 22 it is seconds).
+pub const EXACT_BY_DEFAULT: usize = 16;
+
+/// How a query wants its marginals computed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Method {
+    /// Exact up to [`EXACT_BY_DEFAULT`] tracks, the Bethe estimate beyond.
+    BySize,
+    Named(MarginalMethod),
+}
+
+impl Method {
+    /// `marginals=<name>` (and `samples=`, `seed=` for metropolis) from a
+    /// query's parameters.
+    pub fn from_parameters(
+        marginals: Option<&str>,
+        samples: Option<&str>,
+        seed: Option<&str>,
+    ) -> Result<Method, String> {
+        let Some(name) = marginals else {
+            return Ok(Method::BySize);
+        };
+        let samples = match samples {
+            None => DEFAULT_SAMPLES,
+            Some(s) => s
+                .parse()
+                .ok()
+                .filter(|&s: &usize| s > 0)
+                .ok_or_else(|| format!("samples={s}: expected a positive count"))?,
+        };
+        let seed = match seed {
+            None => 0,
+            Some(s) => s
+                .parse()
+                .map_err(|_| format!("seed={s}: expected an unsigned integer"))?,
+        };
+        MarginalMethod::named(name, samples, seed)
+            .map(Method::Named)
+            .ok_or_else(|| {
+                format!("marginals={name}: expected exact, metropolis, sinkhorn or bethe")
+            })
+    }
+
+    fn for_tracks(self, n: usize) -> Result<MarginalMethod, GatherError> {
+        match self {
+            Method::BySize if n <= EXACT_BY_DEFAULT => Ok(MarginalMethod::Exact),
+            Method::BySize => Ok(MarginalMethod::half_bethe()),
+            Method::Named(MarginalMethod::Exact) if n > MAX_PERMANENT_TRACKS => {
+                Err(GatherError::Failed(format!(
+                    "exact identity marginals take at most {MAX_PERMANENT_TRACKS} tracks, \
+                     this stream has {n}; ask for marginals=bethe, sinkhorn or metropolis"
+                )))
+            }
+            Method::Named(method) => Ok(method),
+        }
+    }
+}
+
+/// The identity marginals of every track at a consistent cut.
+pub async fn identity(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+    memory: &Memory,
+    at: At,
+    method: Method,
+) -> Result<IdentityAnswer, GatherError> {
+    let collected = collect(session, keys, timeout, memory, at, Share::Rows).await?;
+    if !collected.cut.identities {
+        return Err(GatherError::Failed(
+            "the stream carries no identities (its trace header has no `identities`)".into(),
+        ));
+    }
+    let n = collected.cut.tracks as usize;
+    let method = method.for_tracks(n)?;
+    // Ryser's sum for twenty tracks is a second of arithmetic: keep it off
+    // the threads that move messages.
+    tokio::task::spawn_blocking(move || marginals(collected, method))
+        .await
+        .map_err(|e| GatherError::Failed(format!("the marginals task failed: {e}")))?
+}
+
+/// The marginals from the rows collected at one cut.
+fn marginals(collected: Collected, method: MarginalMethod) -> Result<IdentityAnswer, GatherError> {
+    let n = collected.cut.tracks as usize;
+    let rows = collected
+        .parts
+        .iter()
+        .flat_map(|p| p.rows.iter())
+        .map(|r| (r.track, r.ln_likelihoods.clone()));
+    let options = InformationOptions {
+        marginals: method,
+        ..InformationOptions::default()
+    };
+    let failed = |e: idmesh_belief::BeliefError| GatherError::Failed(e.to_string());
+    let matrix = InformationRows::assemble(n, rows, options).map_err(failed)?;
+    let p_identity = matrix.marginals_with(&method).map_err(failed)?;
+    let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
+    Ok(IdentityAnswer {
+        watermark: collected.watermark(),
+        tracks: collected.cut.tracks,
+        p_identity,
+        predicted_identity,
+        marginals: method.name().to_string(),
+        leaders: collected.parts.len() as u32,
+        finished: collected.cut.finished,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_query_names_its_method_or_gets_one_by_size() {
+        let by_size = Method::from_parameters(None, None, None).unwrap();
+        assert_eq!(by_size.for_tracks(12).unwrap(), MarginalMethod::Exact);
+        assert_eq!(
+            by_size.for_tracks(40).unwrap(),
+            MarginalMethod::half_bethe()
+        );
+        let sampled = Method::from_parameters(Some("metropolis"), Some("500"), Some("7")).unwrap();
+        assert_eq!(
+            sampled.for_tracks(40).unwrap(),
+            MarginalMethod::Metropolis {
+                samples: 500,
+                burn_in: 50,
+                seed: 7
+            }
+        );
+        let exact = Method::from_parameters(Some("exact"), None, None).unwrap();
+        assert!(exact.for_tracks(40).is_err());
+        assert!(Method::from_parameters(Some("guess"), None, None).is_err());
+        assert!(Method::from_parameters(Some("metropolis"), Some("0"), None).is_err());
+        assert!(Method::from_parameters(Some("metropolis"), None, Some("-1")).is_err());
+    }
+}
