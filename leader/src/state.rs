@@ -545,12 +545,14 @@ impl Leader {
                     {
                         row
                     }
-                    _ => return Err(LeaderError::BadTransfer(format!(
+                    _ => {
+                        return Err(LeaderError::BadTransfer(format!(
                         "a mix of tracks {} and {} needs the partner's one row, got rows of {:?}",
                         mix.a,
                         mix.b,
                         received.iter().map(|r| r.track).collect::<Vec<_>>()
-                    ))),
+                    )))
+                    }
                 };
                 rows.mix_with(mix, &partner.ln_likelihoods)
                     .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;

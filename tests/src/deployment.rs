@@ -152,20 +152,33 @@ impl Deployment {
 
     /// The marginals once the whole stream is in, or panics after `patience`.
     pub fn final_marginals(&self, patience: Duration) -> Value {
-        self.marginals_when(patience, |answer| answer["finished"] == true)
+        self.answer_when(&["marginals"], patience, |answer| {
+            answer["finished"] == true
+        })
     }
 
     /// Waits until the deployment answers a marginals query at all.
     pub fn first_answer(&self, patience: Duration) -> Value {
-        self.marginals_when(patience, |_| true)
+        self.answer_when(&["marginals"], patience, |_| true)
     }
 
-    /// Asks for the marginals until an answer satisfies `wanted`.
-    fn marginals_when(&self, patience: Duration, wanted: impl Fn(&Value) -> bool) -> Value {
+    /// Asks `question` (e.g. `["identity"]`) until an answer satisfies
+    /// `wanted`.
+    pub fn answer_when(
+        &self,
+        question: &[&str],
+        patience: Duration,
+        wanted: impl Fn(&Value) -> bool,
+    ) -> Value {
         let started = Instant::now();
         let mut last = String::new();
+        let args: Vec<&str> = question
+            .iter()
+            .copied()
+            .chain(["--timeout-ms", "5000"])
+            .collect();
         while started.elapsed() < patience {
-            match self.query(&["marginals", "--timeout-ms", "5000"]) {
+            match self.query(&args) {
                 Ok(replies) if wanted(&replies[0]) => return replies[0].clone(),
                 Ok(replies) => last = replies[0]["watermark"].to_string(),
                 Err(e) => last = e,
@@ -203,10 +216,38 @@ impl Drop for Deployment {
 
 /// `idmesh simulate` a crowd into `dir`.
 pub fn crowd(dir: &Path, targets: usize, red: usize, duration: f64, seed: u64) -> PathBuf {
+    simulate_crowd(dir, targets, red, duration, seed, false)
+}
+
+/// A crowd whose identities are read now and then too (`identify` lines).
+pub fn crowd_with_identities(
+    dir: &Path,
+    targets: usize,
+    red: usize,
+    duration: f64,
+    seed: u64,
+) -> PathBuf {
+    simulate_crowd(dir, targets, red, duration, seed, true)
+}
+
+fn simulate_crowd(
+    dir: &Path,
+    targets: usize,
+    red: usize,
+    duration: f64,
+    seed: u64,
+    identities: bool,
+) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
-    let out = dir.join(format!("crowd-{targets}-{red}-{seed}.jsonl"));
+    let kind = if identities {
+        "identity-crowd"
+    } else {
+        "crowd"
+    };
+    let out = dir.join(format!("{kind}-{targets}-{red}-{seed}.jsonl"));
     let status = Command::new(idmesh())
         .args(["simulate", "--model", "crowd"])
+        .args(identities.then_some("--identities"))
         .args(["--targets", &targets.to_string(), "--red", &red.to_string()])
         .args([
             "--duration",
@@ -252,4 +293,26 @@ fn replay(trace: &Path, args: &[&str]) -> Vec<Value> {
         .lines()
         .map(|l| serde_json::from_str(l).expect("replay prints JSON lines"))
         .collect()
+}
+
+/// A truth line of a trace, and how many events (the lines the sensor
+/// counts: mix, observe, move, identify) precede it.
+pub struct Truth {
+    pub events: u64,
+    pub line: Value,
+}
+
+pub fn truth_lines(trace: &Path) -> Vec<Truth> {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let mut events = 0;
+    let mut truths = Vec::new();
+    for line in text.lines() {
+        let v: Value = serde_json::from_str(line).unwrap();
+        match v["kind"].as_str() {
+            Some("mix" | "observe" | "move" | "identify") => events += 1,
+            Some("truth") => truths.push(Truth { events, line: v }),
+            _ => {}
+        }
+    }
+    truths
 }

@@ -1,7 +1,9 @@
 //! The distributed runtime, as real processes on loopback: the answer of a
 //! deployment equals the centralized engine's.
 
-use idmesh_tests::deployment::{crowd, replay_lines, replay_summary, Deployment, Settings};
+use idmesh_tests::deployment::{
+    crowd, replay_lines, replay_summary, truth_lines, Deployment, Settings,
+};
 use serde_json::Value;
 use std::time::Duration;
 
@@ -120,8 +122,16 @@ fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bo
             .unwrap_or_else(|| panic!("an answer at {events} events, not a truth point"));
         let sum: f64 = floats(&answer["p_red"]).iter().sum();
         assert!((sum - 10.0).abs() < 1e-9, "marginals sum to {sum}");
-        distributed_error += error(&integers(&answer["predicted_red"]), &truths[i].red, 50);
-        central_error += error(&integers(&central[i]["predicted_red"]), &truths[i].red, 50);
+        distributed_error += error(
+            &integers(&answer["predicted_red"]),
+            &integers(&truths[i].line["red"]),
+            50,
+        );
+        central_error += error(
+            &integers(&central[i]["predicted_red"]),
+            &integers(&truths[i].line["red"]),
+            50,
+        );
         scored += 1;
     }
     assert!(
@@ -153,30 +163,6 @@ fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bo
         overcomplete,
         "OMP runs at the leaders: {omp_runs}"
     );
-}
-
-/// A truth line of a trace: the red tracks, and how many events precede it.
-struct Truth {
-    events: u64,
-    red: Vec<u64>,
-}
-
-fn truth_lines(trace: &std::path::Path) -> Vec<Truth> {
-    let text = std::fs::read_to_string(trace).unwrap();
-    let mut events = 0;
-    let mut truths = Vec::new();
-    for line in text.lines() {
-        let v: Value = serde_json::from_str(line).unwrap();
-        match v["kind"].as_str() {
-            Some("mix" | "observe" | "move") => events += 1,
-            Some("truth") => truths.push(Truth {
-                events,
-                red: integers(&v["red"]),
-            }),
-            _ => {}
-        }
-    }
-    truths
 }
 
 /// The fraction of tracks labelled wrongly.

@@ -1,0 +1,185 @@
+//! Identities in the distributed runtime, as real processes on loopback:
+//! each leader holds the rows of the information matrix of its tracks, the
+//! coordinator computes marginals only when asked, and the answer equals
+//! the centralized `idmesh replay --method information-matrix`.
+
+use idmesh_tests::deployment::{
+    crowd_with_identities, replay_lines, truth_lines, Deployment, Settings,
+};
+use serde_json::Value;
+use std::path::Path;
+use std::time::Duration;
+
+fn matrix(v: &Value) -> Vec<Vec<f64>> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("a matrix: {v}"))
+        .iter()
+        .map(|row| {
+            row.as_array()
+                .unwrap_or_else(|| panic!("a row: {row}"))
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        })
+        .collect()
+}
+
+fn largest_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| {
+            assert_eq!(x.len(), y.len());
+            x.iter().zip(y).map(|(p, q)| (p - q).abs())
+        })
+        .fold(0.0, f64::max)
+}
+
+fn settings(leaders: usize, rate: Option<f64>) -> Settings {
+    Settings {
+        leaders,
+        distributed_rule: false,
+        budget: 0,
+        overcomplete: false,
+        rate,
+    }
+}
+
+/// Through 1 and 4 leaders (tracks crossing regions, mixes across leaders),
+/// the identity marginals asked for right after the events before every
+/// truth line equal the centralized information matrix's to 1e-9; a
+/// one-track question agrees with the whole answer.
+#[test]
+fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-identity-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, 12, 4, 90.0, 5);
+    let central = replay_lines(&trace, &["--method", "information-matrix"]);
+    let truths = truth_lines(&trace);
+    assert_eq!(central.len(), truths.len());
+    let points: Vec<String> = truths.iter().map(|t| t.events.to_string()).collect();
+    for leaders in [1, 4] {
+        let deployment = Deployment::start(
+            &format!("identity{leaders}"),
+            &trace,
+            &settings(leaders, Some(2000.0)),
+        );
+        deployment.first_answer(Duration::from_secs(30));
+        let answers = deployment.query_lenient(&["identity", "--at-events", &points.join(",")]);
+        for answer in &answers {
+            let events = answer["watermark"]["sensor-0"].as_u64().unwrap();
+            let i = truths
+                .iter()
+                .position(|t| t.events == events)
+                .unwrap_or_else(|| panic!("an answer at {events} events, not a truth point"));
+            let difference = largest_difference(
+                &matrix(&answer["p_identity"]),
+                &matrix(&central[i]["p_identity"]),
+            );
+            assert!(
+                difference < 1e-9,
+                "{leaders} leaders, {events} events: off by {difference}"
+            );
+            assert_eq!(
+                answer["predicted_identity"],
+                central[i]["predicted_identity"]
+            );
+            assert_eq!(answer["marginals"], "exact");
+        }
+        assert!(
+            answers.len() * 10 >= truths.len() * 8,
+            "{leaders} leaders: only {} of {} truth points answered\n{}",
+            answers.len(),
+            truths.len(),
+            deployment.log()
+        );
+
+        let last = deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
+            a["finished"] == true
+        });
+        let one = deployment.query(&["identity", "7"]).expect("one track");
+        let whole = matrix(&last["p_identity"]);
+        let row: Vec<f64> = one[0]["p_identity"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert!(largest_difference(&[row], &whole[7..8]) < 1e-12);
+        assert_eq!(one[0]["predicted_identity"], last["predicted_identity"][7]);
+        if leaders > 1 {
+            let stats = deployment.query(&["stats"]).expect("stats");
+            let held: u64 = sum(&stats[0], "rows_held");
+            assert_eq!(held, 12, "every row held once: {stats:?}");
+            assert!(sum(&stats[0], "handovers") > 0, "tracks crossed regions");
+        }
+    }
+}
+
+/// The same trace with and without its identity reads: the leaders send
+/// each other exactly the same messages with the same sets and rows, and
+/// every read is applied once, by one leader. Evidence costs no traffic
+/// between leaders. (Bytes may differ by one per message: reads take seq
+/// numbers, so a transfer's seq, a varint, can be a byte longer.)
+#[test]
+fn identity_reads_cost_no_messages_between_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-reads-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, 12, 4, 90.0, 11);
+    let unread = dir.join("no-reads.jsonl");
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let kept: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.contains("\"kind\":\"identify\""))
+        .collect();
+    let reads = text.lines().count() - kept.len();
+    assert!(reads > 20, "the trace has {reads} reads");
+    std::fs::write(&unread, kept.join("\n") + "\n").unwrap();
+
+    let traffic = |name: &str, trace: &Path| {
+        let deployment = Deployment::start(name, trace, &settings(4, None));
+        deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
+            a["finished"] == true
+        });
+        let stats = deployment.query(&["stats"]).expect("stats");
+        let leaders = stats[0]["leaders"].as_array().unwrap().clone();
+        let field = |l: &Value, f: &str| l[f].as_u64().unwrap();
+        let messages: Vec<(String, u64, u64, u64)> = leaders
+            .iter()
+            .map(|l| {
+                (
+                    l["leader"].as_str().unwrap().to_string(),
+                    field(l, "transfers_sent"),
+                    field(l, "sets_sent"),
+                    field(l, "follows"),
+                )
+            })
+            .collect();
+        let bytes: Vec<u64> = leaders.iter().map(|l| field(l, "bytes_sent")).collect();
+        (messages, bytes, sum(&stats[0], "identifies"))
+    };
+    let (with_reads, bytes_with, applied) = traffic("reads", &trace);
+    let (without_reads, bytes_without, none) = traffic("no-reads", &unread);
+    assert_eq!(with_reads, without_reads);
+    assert!(
+        with_reads.iter().any(|l| l.1 > 0),
+        "leaders did talk: {with_reads:?}"
+    );
+    for ((leader, transfers, ..), (with, without)) in
+        with_reads.iter().zip(bytes_with.iter().zip(&bytes_without))
+    {
+        assert!(
+            with >= without && with - without <= *transfers,
+            "{leader}: {with} bytes with reads, {without} without, {transfers} transfers"
+        );
+    }
+    assert_eq!(applied, reads as u64, "every read applied once");
+    assert_eq!(none, 0);
+}
+
+fn sum(stats: &Value, field: &str) -> u64 {
+    stats["leaders"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l[field].as_u64().unwrap())
+        .sum()
+}
