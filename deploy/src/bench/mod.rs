@@ -59,6 +59,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             options.red,
             options.duration,
             options.seed,
+            false,
             &trace,
         )?;
     }

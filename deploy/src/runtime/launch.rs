@@ -10,7 +10,7 @@ use super::topology::Topology;
 use super::topology::{Member, Sparsification};
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
-use idmesh_protocol::wire::query::MarginalsAnswer;
+use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
@@ -134,12 +134,13 @@ pub struct DemoOptions {
     pub dir: PathBuf,
 }
 
-/// `idmesh demo`: a crowd simulated here, four leaders, live answers.
+/// `idmesh demo`: a crowd simulated here (colours and identity reads), four
+/// leaders, live answers to both questions.
 pub fn demo(options: &DemoOptions) -> Result<()> {
     std::fs::create_dir_all(&options.dir)
         .with_context(|| format!("cannot create {}", options.dir.display()))?;
     let trace = options.dir.join("crowd.jsonl");
-    simulate_crowd(options.targets, options.red, 600.0, options.seed, &trace)?;
+    simulate_crowd(options.targets, options.red, 600.0, options.seed, true, &trace)?;
     let plan = Loopback {
         prefix: DEFAULT_PREFIX.to_string(),
         leaders: 4,
@@ -208,18 +209,45 @@ async fn watch(processes: &mut Processes, coordinator: &str) -> Result<()> {
             }
             Err(e) => println!("query: {e}"),
         }
+        match ask(&session, &keys.query_identity(), Duration::from_secs(3)).await {
+            Ok(body) => {
+                let a: IdentityAnswer = serde_json::from_slice(&body)?;
+                let sure = a
+                    .p_identity
+                    .iter()
+                    .zip(&a.predicted_identity)
+                    .filter(|(row, &i)| row.get(i as usize).is_some_and(|&p| p >= 0.9))
+                    .count();
+                let first: Vec<String> = a
+                    .predicted_identity
+                    .iter()
+                    .take(8)
+                    .enumerate()
+                    .map(|(t, i)| format!("{t}→{i}"))
+                    .collect();
+                println!(
+                    "{:>14} identities ({}): {sure} of {} tracks sure (P ≥ 0.9) · {} …",
+                    "",
+                    a.marginals,
+                    a.tracks,
+                    first.join(" ")
+                );
+            }
+            Err(e) => println!("identity query: {e}"),
+        }
     }
     let _ = session.close().await;
     Ok(())
 }
 
 /// Simulates a social-force crowd into `out` (the demo's and the bench's
-/// stream).
+/// stream), with identity reads when `identities`.
 pub fn simulate_crowd(
     targets: usize,
     red: usize,
     duration: f64,
     seed: u64,
+    identities: bool,
     out: &Path,
 ) -> Result<()> {
     let trace = idmesh_sensor::Scenario::crowd()
@@ -227,6 +255,7 @@ pub fn simulate_crowd(
         .red(red)
         .duration(duration)
         .seed(seed)
+        .identities(identities)
         .generate()
         .context("the crowd simulation failed")?;
     let path = out.display().to_string();
