@@ -4,12 +4,6 @@ use idmesh_belief::BeliefError;
 
 #[derive(Debug, thiserror::Error)]
 pub enum LeaderError {
-    #[error("event batch {got} arrived where {expected} was expected: batches were lost")]
-    Gap { expected: u64, got: u64 },
-    #[error(
-        "sets of item {seq} from leader {from} arrived after this leader passed it (at {position})"
-    )]
-    LateTransfer { seq: u64, from: u16, position: u64 },
     #[error("this leader ({0}) is not in the stream's list of leaders")]
     NotListed(String),
     #[error("bad transfer: {0}")]

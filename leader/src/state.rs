@@ -92,6 +92,14 @@ pub struct Leader {
     position: u64,
     /// Next batch number expected from the sensor.
     next_batch: u64,
+    /// Batches that came ahead of a missing one, by number, with their size.
+    ahead: BTreeMap<u64, (Batch, usize)>,
+    /// Every transfer sent, with its receiver: a restarted peer asks for
+    /// the ones it lost while it was down.
+    sent: Vec<(u16, Transfer)>,
+    /// The follow request waiting for its answer (asked again after a
+    /// restart).
+    asked: Option<Follow>,
     /// Sets and rows that arrived before the leader reached their item.
     transfers: HashMap<(u64, u16), (Vec<WireSet>, Vec<WireRow>)>,
     waiting: Option<Waiting>,
@@ -117,6 +125,9 @@ impl Leader {
             frontier: 0,
             position: 0,
             next_batch: 0,
+            ahead: BTreeMap::new(),
+            sent: Vec::new(),
+            asked: None,
             transfers: HashMap::new(),
             waiting: None,
             cuts: VecDeque::new(),
@@ -206,14 +217,77 @@ impl Leader {
         self.started.as_ref().map(|s| &s.share)
     }
 
-    /// A batch of the event stream arrived.
+    /// A batch of the event stream arrived. Batches are applied in number
+    /// order: one seen before is dropped (counted as a duplicate), one
+    /// ahead of a missing one waits for it ([`Leader::missing_batches`]
+    /// says which to ask the sensor for again).
     pub fn batch(&mut self, batch: Batch, bytes: usize) -> Result<Vec<Action>, LeaderError> {
-        if batch.number != self.next_batch {
-            return Err(LeaderError::Gap {
-                expected: self.next_batch,
-                got: batch.number,
-            });
+        if batch.number < self.next_batch || self.ahead.contains_key(&batch.number) {
+            self.stats.duplicates += 1;
+            return Ok(Vec::new());
         }
+        if batch.number > self.next_batch {
+            if self.ahead.is_empty() {
+                self.stats.gaps += 1;
+            }
+            self.ahead.insert(batch.number, (batch, bytes));
+            return Ok(Vec::new());
+        }
+        let mut actions = self.take_batch(batch, bytes)?;
+        while let Some(entry) = self.ahead.first_entry() {
+            if *entry.key() != self.next_batch {
+                break;
+            }
+            let (batch, bytes) = entry.remove();
+            actions.extend(self.take_batch(batch, bytes)?);
+        }
+        Ok(actions)
+    }
+
+    /// The first batch number missing before one that arrived, if any.
+    pub fn missing_batches(&self) -> Option<u64> {
+        (!self.ahead.is_empty()).then_some(self.next_batch)
+    }
+
+    /// The number of the next batch this leader will apply.
+    pub fn next_batch(&self) -> u64 {
+        self.next_batch
+    }
+
+    /// The transfers sent to leader `to` for items after `after`.
+    pub fn sent_to(&self, to: u16, after: u64) -> Vec<Transfer> {
+        self.sent
+            .iter()
+            .filter(|(receiver, t)| *receiver == to && t.seq > after)
+            .map(|(_, t)| t.clone())
+            .collect()
+    }
+
+    /// Every transfer sent, with its receiver (resent after a restart: the
+    /// peers drop the ones they have).
+    pub fn all_sent(&self) -> &[(u16, Transfer)] {
+        &self.sent
+    }
+
+    /// The follow request still waiting for the sensor's answer.
+    pub fn pending_follow(&self) -> Option<&Follow> {
+        self.asked.as_ref()
+    }
+
+    /// The leaders of the stream, once it began.
+    pub fn leaders(&self) -> &[String] {
+        self.started
+            .as_ref()
+            .map_or(&[], |s| s.begin.leaders.as_slice())
+    }
+
+    /// This leader's index in the stream's list, once it began.
+    pub fn index(&self) -> Option<u16> {
+        self.started.as_ref().map(|s| s.me)
+    }
+
+    /// Applies the next batch in number order.
+    fn take_batch(&mut self, batch: Batch, bytes: usize) -> Result<Vec<Action>, LeaderError> {
         self.next_batch += 1;
         self.stats.batches += 1;
         self.stats.bytes_received += bytes as u64;
@@ -229,21 +303,23 @@ impl Leader {
         self.advance()
     }
 
-    /// Sets from another leader arrived.
+    /// Sets from another leader arrived. A leader never passes an item
+    /// whose transfer it waits for, so one for an item already passed, or
+    /// already here, is a duplicate (a restarted peer resends what it
+    /// sent): dropped and counted.
     pub fn transfer(
         &mut self,
         transfer: Transfer,
         bytes: usize,
     ) -> Result<Vec<Action>, LeaderError> {
+        if transfer.seq <= self.position
+            || self.transfers.contains_key(&(transfer.seq, transfer.from))
+        {
+            self.stats.duplicates += 1;
+            return Ok(Vec::new());
+        }
         self.stats.transfers_received += 1;
         self.stats.bytes_received += bytes as u64;
-        if transfer.seq <= self.position {
-            return Err(LeaderError::LateTransfer {
-                seq: transfer.seq,
-                from: transfer.from,
-                position: self.position,
-            });
-        }
         self.transfers.insert(
             (transfer.seq, transfer.from),
             (transfer.sets, transfer.rows),
@@ -256,6 +332,7 @@ impl Leader {
         let Some(Waiting::Follow { seq }) = self.waiting else {
             return Err(LeaderError::Unexpected("a follow reply nobody asked for"));
         };
+        self.asked = None;
         for Sequenced { seq: s, item } in items {
             if s > seq {
                 self.queue.insert(s, item);
@@ -511,16 +588,15 @@ impl Leader {
             .collect();
         self.stats.transfers_sent += 1;
         self.stats.sets_sent += sets.len() as u64;
-        actions.push(Action::Send {
-            to,
-            transfer: Transfer {
-                version: VERSION,
-                from: me,
-                seq,
-                sets,
-                rows,
-            },
-        });
+        let transfer = Transfer {
+            version: VERSION,
+            from: me,
+            seq,
+            sets,
+            rows,
+        };
+        self.sent.push((to, transfer.clone()));
+        actions.push(Action::Send { to, transfer });
         Ok(())
     }
 
@@ -610,12 +686,14 @@ impl Leader {
         if !new_tracks.is_empty() {
             new_tracks.sort_unstable();
             self.stats.follows += 1;
-            actions.push(Action::Follow(Follow {
+            let follow = Follow {
                 version: VERSION,
                 leader: me,
                 after: seq,
                 tracks: new_tracks,
-            }));
+            };
+            self.asked = Some(follow.clone());
+            actions.push(Action::Follow(follow));
             self.waiting = Some(Waiting::Follow { seq });
         }
         Ok(())
@@ -794,7 +872,7 @@ mod tests {
     }
 
     #[test]
-    fn a_cut_is_answered_by_its_tag_and_a_lost_batch_is_a_gap() {
+    fn a_cut_is_answered_by_its_tag_and_a_gap_waits_for_the_missing_batch() {
         let mut leader = Leader::new("a");
         leader
             .batch(
@@ -816,14 +894,102 @@ mod tests {
         let partial = leader.cut(42).expect("kept for late queries");
         assert_eq!(partial.events, 7);
         assert!(leader.cut(41).is_none());
-        let gap = leader.batch(batch(3, vec![], 4, false), 0);
-        assert!(matches!(
-            gap,
-            Err(LeaderError::Gap {
-                expected: 2,
-                got: 3
-            })
-        ));
+        // Batch 3 before batch 2: held, and batch 2 is asked for.
+        let ahead = batch(3, vec![(5, mix(1, 2, 0, 0))], 5, false);
+        assert!(leader.batch(ahead.clone(), 0).unwrap().is_empty());
+        assert_eq!(leader.missing_batches(), Some(2));
+        assert_eq!(leader.position(), 3);
+        leader
+            .batch(batch(2, vec![(4, mix(0, 1, 0, 0))], 4, false), 0)
+            .unwrap();
+        assert_eq!(leader.missing_batches(), None);
+        assert_eq!(leader.position(), 5);
+        // Both again: dropped, counted, nothing applied twice.
+        leader.batch(ahead, 0).unwrap();
+        leader.batch(batch(2, vec![], 4, false), 0).unwrap();
+        let stats = leader.stats();
+        assert_eq!((stats.mixes, stats.duplicates, stats.gaps), (3, 2, 1));
+    }
+
+    /// Delivered twice, with batches out of order, an exchange between two
+    /// leaders ends in the same shares as delivered once in order.
+    #[test]
+    fn duplicates_and_reordered_batches_change_nothing() {
+        let begin = begin(&["a", "b"], vec![0, 0, 1, 1]);
+        let items = [
+            (2, mix(0, 2, 0, 1)),
+            (3, mix(1, 3, 0, 1)),
+            (4, mix(0, 1, 0, 0)),
+            (5, mix(2, 3, 1, 1)),
+        ];
+        let batches = |leader: &str| -> Vec<Batch> {
+            let mut out = vec![batch(0, vec![(1, begin.clone())], 1, false)];
+            for (i, (seq, item)) in items.iter().enumerate() {
+                let wanted = match item {
+                    Item::Mix {
+                        owner_a, owner_b, ..
+                    } => {
+                        let me = if leader == "a" { 0 } else { 1 };
+                        *owner_a == me || *owner_b == me
+                    }
+                    _ => true,
+                };
+                let sent = if wanted {
+                    vec![(*seq, item.clone())]
+                } else {
+                    vec![]
+                };
+                out.push(batch(i as u64 + 1, sent, *seq, i + 1 == items.len()));
+            }
+            out
+        };
+        // Runs both leaders to the end, delivering each one's batches in
+        // `order` (indices, repeats allowed) and every transfer twice.
+        let run = |order: &[usize]| {
+            let (mut a, mut b) = (Leader::new("a"), Leader::new("b"));
+            let (batches_a, batches_b) = (batches("a"), batches("b"));
+            let mut mail: Vec<(u16, Transfer)> = Vec::new();
+            for &i in order {
+                for (leader, batches) in [(&mut a, &batches_a), (&mut b, &batches_b)] {
+                    for action in leader.batch(batches[i].clone(), 0).unwrap() {
+                        if let Action::Send { to, transfer } = action {
+                            mail.push((to, transfer));
+                        }
+                    }
+                }
+                while let Some((to, transfer)) = mail.pop() {
+                    for _ in 0..2 {
+                        let leader = if to == 0 { &mut a } else { &mut b };
+                        for action in leader.transfer(transfer.clone(), 0).unwrap() {
+                            if let Action::Send { to, transfer } = action {
+                                mail.push((to, transfer));
+                            }
+                        }
+                    }
+                }
+            }
+            let shares: Vec<Vec<(Atom, f64)>> = [&a, &b]
+                .iter()
+                .map(|l| {
+                    let mut atoms: Vec<(Atom, f64)> = l
+                        .share()
+                        .unwrap()
+                        .atoms()
+                        .map(|(atom, m)| (atom.clone(), m))
+                        .collect();
+                    atoms.sort_by(|x, y| format!("{:?}", x.0).cmp(&format!("{:?}", y.0)));
+                    atoms
+                })
+                .collect();
+            (shares, a.position(), b.position(), a.stats().duplicates)
+        };
+        let once = run(&[0, 1, 2, 3, 4]);
+        let shuffled = run(&[0, 3, 1, 1, 4, 2, 0, 3, 4]);
+        // a is not sent the last mix (b's tracks only).
+        assert_eq!((once.1, once.2), (4, 5));
+        assert_eq!((shuffled.1, shuffled.2), (4, 5));
+        assert_eq!(once.0, shuffled.0);
+        assert!(shuffled.3 > once.3, "duplicates were seen and dropped");
     }
 
     /// Two leaders on an identity stream, driven by hand: reads cost no

@@ -140,7 +140,14 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     std::fs::create_dir_all(&options.dir)
         .with_context(|| format!("cannot create {}", options.dir.display()))?;
     let trace = options.dir.join("crowd.jsonl");
-    simulate_crowd(options.targets, options.red, 600.0, options.seed, true, &trace)?;
+    simulate_crowd(
+        options.targets,
+        options.red,
+        600.0,
+        options.seed,
+        true,
+        &trace,
+    )?;
     let plan = Loopback {
         prefix: DEFAULT_PREFIX.to_string(),
         leaders: 4,

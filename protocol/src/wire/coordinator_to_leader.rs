@@ -48,6 +48,10 @@ pub struct LeaderStats {
     pub follows: u64,
     /// OMP runs on this leader's sets (the overcomplete method).
     pub omp_runs: u64,
+    /// Batches and transfers that came twice (dropped), and gaps in the
+    /// batch numbers (the missing batches were asked for again).
+    pub duplicates: u64,
+    pub gaps: u64,
     /// Identity reads applied (each to a row held here, with no message).
     pub identifies: u64,
     /// Rows of the information matrix held now.

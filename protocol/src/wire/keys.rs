@@ -9,6 +9,8 @@
 //! | `P/leader/<name>/stats` | leader queryable | its counters |
 //! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
+//! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
+//! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
@@ -67,6 +69,14 @@ impl Keys {
 
     pub fn sensor_follow(&self, sensor: &str) -> String {
         format!("{}/sensor/{sensor}/follow", self.prefix)
+    }
+
+    pub fn sensor_resend(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/resend", self.prefix)
+    }
+
+    pub fn leader_sent(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/sent", self.prefix)
     }
 
     pub fn query_marginals(&self) -> String {

@@ -36,3 +36,22 @@ pub struct WireRow {
     pub track: u32,
     pub ln_likelihoods: Vec<f64>,
 }
+
+/// A restarted leader asks a peer for the transfers the peer sent it with
+/// seq after `after` (sent while it was down, they were lost): postcard,
+/// the payload of a get on `P/leader/<peer>/sent`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransfersWanted {
+    pub version: u16,
+    /// The asking leader's index.
+    pub to: u16,
+    pub after: u64,
+}
+super::versioned!(TransfersWanted, "transfers request");
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransfersSent {
+    pub version: u16,
+    pub transfers: Vec<Transfer>,
+}
+super::versioned!(TransfersSent, "transfers reply");

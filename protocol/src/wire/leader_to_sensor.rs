@@ -3,7 +3,7 @@
 //! items it was not sent since `after` (postcard, as the payload of a get on
 //! `P/sensor/<name>/follow`).
 
-use super::sensor_to_leader::Sequenced;
+use super::sensor_to_leader::{Batch, Sequenced};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -23,3 +23,23 @@ pub struct Followed {
     pub items: Vec<Sequenced>,
 }
 super::versioned!(Followed, "follow reply");
+
+/// A leader that lost batches of its stream (a gap in their numbers, or
+/// the time it was down) asks for them again: every batch numbered `from`
+/// or later that the sensor sent it (postcard, the payload of a get on
+/// `P/sensor/<name>/resend`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Resend {
+    pub version: u16,
+    pub leader: u16,
+    pub from: u64,
+}
+super::versioned!(Resend, "resend request");
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Resent {
+    pub version: u16,
+    /// The batches, in number order, as first sent.
+    pub batches: Vec<Batch>,
+}
+super::versioned!(Resent, "resend reply");

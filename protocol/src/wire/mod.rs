@@ -4,8 +4,10 @@
 //!
 //! - [`keys`] — every key expression, under a deployment prefix.
 //! - [`sensor_to_leader`] — the sequenced event stream, in batches.
-//! - [`leader_to_leader`] — sets handed over at a cross-leader mix or a move.
-//! - [`leader_to_sensor`] — a request to follow more tracks, from a seq on.
+//! - [`leader_to_leader`] — sets handed over at a cross-leader mix or a move;
+//!   a restarted leader's request for the transfers it missed.
+//! - [`leader_to_sensor`] — a request to follow more tracks, from a seq on;
+//!   a request for lost batches.
 //! - [`coordinator_to_sensor`] — a request for a cut of the stream.
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
