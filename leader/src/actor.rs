@@ -7,15 +7,25 @@
 //! sensor to place it, so a query usually comes before its cut: it is held
 //! until the cut arrives, or answered with an error once it has waited the
 //! query timeout.
+//!
+//! Nothing is lost when the process dies ([`crate::journal`]): every input
+//! is journaled before it is applied, a restarted leader replays its
+//! journal and then fetches what it missed — batches from the sensor (a
+//! replay queryable: exact, by batch number, rather than zenoh-ext's
+//! advanced subscriber, whose bounded cache and sample-level recovery do
+//! not know our batch numbers), transfers from its peers — and sends its
+//! own transfers again. A gap in batch numbers, or a cut that is late, is
+//! repaired the same way. Duplicates are dropped by the state machine.
 
-use crate::error::MeshError;
+use crate::error::{MeshError, RunError};
+use crate::journal::{Journal, JournalOptions, Kind};
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::leader_to_leader::Transfer;
-use idmesh_protocol::wire::leader_to_sensor::Followed;
-use idmesh_protocol::wire::sensor_to_leader::{Batch, Sequenced};
-use idmesh_protocol::wire::{decode, encode};
+use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
+use idmesh_protocol::wire::leader_to_sensor::{Followed, Resend, Resent};
+use idmesh_protocol::wire::sensor_to_leader::Batch;
+use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
@@ -32,14 +42,31 @@ pub struct LeaderConfig {
     /// How long to wait for the sensor's follow reply, and how long a query
     /// is held for a cut that has not arrived.
     pub follow_timeout: Duration,
+    /// Where to keep the input journal; None = no journal (a leader that
+    /// dies cannot come back).
+    pub journal: Option<JournalOptions>,
 }
 
-/// Runs a leader until `shutdown` completes.
+/// Replies to the gets the leader makes, back in its one task.
+enum Reply {
+    /// The sensor's answer to a follow request (a `Followed`, as bytes).
+    Followed(Result<Vec<u8>, String>),
+    /// Batches asked for again.
+    Resent(Result<Vec<Batch>, String>),
+    /// Transfers a peer sent while this leader was down.
+    Transfers(Result<Vec<Transfer>, String>),
+}
+
+/// Runs a leader until `shutdown` completes. With a journal that already
+/// holds entries, the leader first replays them (rebuilding the state it
+/// had when it died), then asks the sensor for every batch from the next
+/// one it expects, its peers for the transfers they sent it since, and
+/// sends again every transfer it sent (the receivers drop what they have).
 pub async fn run(
     session: Session,
     config: LeaderConfig,
     shutdown: impl Future<Output = ()>,
-) -> Result<(), MeshError> {
+) -> Result<(), RunError> {
     let keys = &config.keys;
     let name = config.name.clone();
     let events = session
@@ -58,6 +85,33 @@ pub async fn run(
         .declare_queryable(keys.leader_stats(&name))
         .await
         .map_err(|e| MeshError::new("declare the stats queryable", e))?;
+    let sent = session
+        .declare_queryable(keys.leader_sent(&name))
+        .await
+        .map_err(|e| MeshError::new("declare the sent-transfers queryable", e))?;
+
+    let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
+    let mut leader = Leader::new(name.clone());
+    let mut failure: Option<String> = None;
+    let mut journal = None;
+    if let Some(options) = &config.journal {
+        let (opened, entries) = Journal::open(options)?;
+        if !entries.is_empty() {
+            let started = Instant::now();
+            for entry in &entries {
+                if let Err(e) = feed(&mut leader, entry.kind, &entry.bytes) {
+                    failure.get_or_insert(format!("replaying the journal: {e}"));
+                }
+            }
+            tracing::info!(leader = %name, entries = entries.len(), position = leader.position(),
+                seconds = started.elapsed().as_secs_f64(), "journal replayed");
+        }
+        let recovered = !entries.is_empty();
+        journal = Some(opened);
+        if recovered {
+            catch_up(&session, &config, &leader, &reply_tx).await;
+        }
+    }
     // Declared last: whoever sees the token can use everything above.
     let _token = session
         .liveliness()
@@ -66,57 +120,73 @@ pub async fn run(
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
     tracing::info!(leader = %name, "leader up");
 
-    let (followed_tx, mut followed_rx) =
-        mpsc::unbounded_channel::<Result<Vec<Sequenced>, String>>();
-    let mut leader = Leader::new(name.clone());
     let mut held: Vec<Held> = Vec::new();
-    let mut failure: Option<String> = None;
+    let mut resending = false;
     let mut sweep = tokio::time::interval(Duration::from_millis(250));
     tokio::pin!(shutdown);
 
     loop {
-        let actions = tokio::select! {
+        // Inputs of the state machine: journaled, then applied.
+        let inputs: Vec<(Kind, Vec<u8>)> = tokio::select! {
             _ = &mut shutdown => break,
             sample = events.recv_async() => {
                 let Ok(sample) = sample else { break };
-                let bytes = sample.payload().to_bytes();
-                match decode::<Batch>(&bytes) {
-                    Ok(batch) => leader.batch(batch, bytes.len()),
-                    Err(e) => {
-                        tracing::error!(leader = %name, error = %e, "dropped an undecodable batch");
-                        continue;
-                    }
-                }
+                vec![(Kind::Batch, sample.payload().to_bytes().into_owned())]
             }
             sample = transfers.recv_async() => {
                 let Ok(sample) = sample else { break };
-                let bytes = sample.payload().to_bytes();
-                match decode::<Transfer>(&bytes) {
-                    Ok(transfer) => leader.transfer(transfer, bytes.len()),
-                    Err(e) => {
-                        tracing::error!(leader = %name, error = %e, "dropped an undecodable transfer");
-                        continue;
+                vec![(Kind::Transfer, sample.payload().to_bytes().into_owned())]
+            }
+            reply = replies.recv() => match reply {
+                None => break,
+                Some(Reply::Followed(Ok(bytes))) => vec![(Kind::Followed, bytes)],
+                Some(Reply::Followed(Err(e))) => {
+                    failure = Some(format!("follow request failed: {e}"));
+                    tracing::error!(leader = %name, error = %e, "follow request failed");
+                    continue;
+                }
+                Some(Reply::Resent(result)) => {
+                    resending = false;
+                    match result {
+                        Ok(batches) => batches.iter().map(|b| (Kind::Batch, encode(b))).collect(),
+                        Err(e) => {
+                            tracing::warn!(leader = %name, error = %e, "resend request failed; asking again");
+                            continue;
+                        }
                     }
                 }
-            }
-            reply = followed_rx.recv() => {
-                match reply {
-                    Some(Ok(items)) => leader.followed(items),
-                    Some(Err(e)) => {
-                        failure = Some(format!("follow request failed: {e}"));
-                        tracing::error!(leader = %name, error = %e, "follow request failed");
-                        continue;
-                    }
-                    None => break,
+                Some(Reply::Transfers(Ok(sent))) => {
+                    sent.iter().map(|t| (Kind::Transfer, encode(t))).collect()
                 }
-            }
+                Some(Reply::Transfers(Err(e))) => {
+                    tracing::warn!(leader = %name, error = %e, "a peer did not resend its transfers");
+                    continue;
+                }
+            },
             query = partials.recv_async() => {
                 let Ok(query) = query else { break };
                 answer_partial(&leader, &failure, query, &mut held).await;
                 continue;
             }
-            _ = sweep.tick(), if !held.is_empty() => {
+            query = sent.recv_async() => {
+                let Ok(query) = query else { break };
+                answer_sent(&leader, query).await;
+                continue;
+            }
+            _ = sweep.tick() => {
+                if let Some(j) = &mut journal {
+                    if let Err(e) = j.sync() {
+                        failure = Some(e.to_string());
+                    }
+                }
                 expire(&mut held, config.follow_timeout).await;
+                // A gap, or a cut that is late (the batch with it, or the
+                // last of the stream, may be lost): ask for the batches again.
+                let late = held.iter().any(|h| h.since.elapsed() > Duration::from_millis(500));
+                if !resending && (leader.missing_batches().is_some() || late) {
+                    resending = true;
+                    resend(&session, &config, &leader, &reply_tx);
+                }
                 continue;
             }
             query = stats.recv_async() => {
@@ -132,61 +202,242 @@ pub async fn run(
                 continue;
             }
         };
-        let actions = match actions {
-            Ok(actions) => actions,
-            Err(e) => {
-                tracing::error!(leader = %name, error = %e, "leader cannot go on applying its stream");
-                failure = Some(e.to_string());
-                continue;
-            }
-        };
-        for action in actions {
-            match action {
-                Action::Send { to, transfer } => {
-                    let Some(peer) = leader.peer(to).map(str::to_owned) else {
-                        failure = Some(format!("transfer to unknown leader index {to}"));
-                        continue;
-                    };
-                    let body = encode(&transfer);
-                    tracing::debug!(leader = %name, to = %peer, seq = transfer.seq, sets = transfer.sets.len(), "hand over sets");
-                    leader.note_sent(body.len());
-                    if let Err(e) = session
-                        .put(keys.leader_transfer(&peer), body)
-                        .congestion_control(CongestionControl::Block)
-                        .await
-                    {
-                        failure = Some(format!("could not send sets to {peer}: {e}"));
-                    }
-                }
-                Action::Follow(follow) => {
-                    let session = session.clone();
-                    let key = keys.sensor_follow(&config.sensor);
-                    let tx = followed_tx.clone();
-                    let timeout = config.follow_timeout;
-                    tokio::spawn(async move {
-                        let result = ask_to_follow(&session, &key, encode(&follow), timeout).await;
-                        let _ = tx.send(result);
-                    });
-                }
-                Action::CutReady(partial) => {
-                    let ready: Vec<Held> = held.extract_if(.., |h| h.tag == partial.tag).collect();
-                    for h in ready {
-                        reply_partial(&h.query, &partial).await;
-                    }
+        for (kind, bytes) in inputs {
+            if let Some(j) = &mut journal {
+                if let Err(e) = j.append(kind, &bytes) {
+                    tracing::error!(leader = %name, error = %e, "cannot journal an input");
+                    failure = Some(e.to_string());
                 }
             }
+            let actions = match feed(&mut leader, kind, &bytes) {
+                Ok(actions) => actions,
+                Err(e) => {
+                    tracing::error!(leader = %name, error = %e, "leader cannot go on applying its stream");
+                    failure = Some(e);
+                    continue;
+                }
+            };
+            act(
+                &session,
+                &config,
+                &mut leader,
+                actions,
+                &mut held,
+                &reply_tx,
+                &mut failure,
+            )
+            .await;
         }
+        if !resending && leader.missing_batches().is_some() {
+            resending = true;
+            resend(&session, &config, &leader, &reply_tx);
+        }
+    }
+    if let Some(j) = &mut journal {
+        let _ = j.sync();
     }
     tracing::info!(leader = %name, "leader stopped");
     Ok(())
 }
 
-async fn ask_to_follow(
+/// Decodes one input and applies it; the error says what was wrong.
+fn feed(leader: &mut Leader, kind: Kind, bytes: &[u8]) -> Result<Vec<Action>, String> {
+    let applied = match kind {
+        Kind::Batch => {
+            let batch = decode::<Batch>(bytes).map_err(|e| e.to_string())?;
+            leader.batch(batch, bytes.len())
+        }
+        Kind::Transfer => {
+            let transfer = decode::<Transfer>(bytes).map_err(|e| e.to_string())?;
+            leader.transfer(transfer, bytes.len())
+        }
+        Kind::Followed => {
+            let followed = decode::<Followed>(bytes).map_err(|e| e.to_string())?;
+            leader.followed(followed.items)
+        }
+    };
+    applied.map_err(|e| e.to_string())
+}
+
+/// Carries out what the state machine asks for.
+async fn act(
+    session: &Session,
+    config: &LeaderConfig,
+    leader: &mut Leader,
+    actions: Vec<Action>,
+    held: &mut Vec<Held>,
+    reply_tx: &mpsc::UnboundedSender<Reply>,
+    failure: &mut Option<String>,
+) {
+    let keys = &config.keys;
+    for action in actions {
+        match action {
+            Action::Send { to, transfer } => {
+                if let Err(e) = send(session, keys, leader, to, &transfer).await {
+                    *failure = Some(e);
+                }
+            }
+            Action::Follow(follow) => {
+                let session = session.clone();
+                let key = keys.sensor_follow(&config.sensor);
+                let tx = reply_tx.clone();
+                let timeout = config.follow_timeout;
+                tokio::spawn(async move {
+                    let result = ask(&session, &key, encode(&follow), timeout).await;
+                    let _ = tx.send(Reply::Followed(result));
+                });
+            }
+            Action::CutReady(partial) => {
+                let ready: Vec<Held> = held.extract_if(.., |h| h.tag == partial.tag).collect();
+                for h in ready {
+                    reply_partial(&h.query, &partial).await;
+                }
+            }
+        }
+    }
+}
+
+/// Puts one transfer on the peer's key.
+async fn send(
+    session: &Session,
+    keys: &Keys,
+    leader: &mut Leader,
+    to: u16,
+    transfer: &Transfer,
+) -> Result<(), String> {
+    let peer = leader
+        .peer(to)
+        .map(str::to_owned)
+        .ok_or_else(|| format!("transfer to unknown leader index {to}"))?;
+    let body = encode(transfer);
+    tracing::debug!(leader = %leader.name(), to = %peer, seq = transfer.seq, sets = transfer.sets.len(), "hand over sets");
+    leader.note_sent(body.len());
+    session
+        .put(keys.leader_transfer(&peer), body)
+        .congestion_control(CongestionControl::Block)
+        .await
+        .map_err(|e| format!("could not send sets to {peer}: {e}"))
+}
+
+/// After a restart: everything sent and received while down, again.
+async fn catch_up(
+    session: &Session,
+    config: &LeaderConfig,
+    leader: &Leader,
+    reply_tx: &mpsc::UnboundedSender<Reply>,
+) {
+    let keys = &config.keys;
+    for (to, transfer) in leader.all_sent() {
+        if let Some(peer) = leader.peer(*to) {
+            if let Err(e) = session
+                .put(keys.leader_transfer(peer), encode(transfer))
+                .congestion_control(CongestionControl::Block)
+                .await
+            {
+                tracing::warn!(to = %peer, error = %e, "could not resend a transfer");
+            }
+        }
+    }
+    resend(session, config, leader, reply_tx);
+    if let Some(me) = leader.index() {
+        let wanted = TransfersWanted {
+            version: VERSION,
+            to: me,
+            after: leader.position(),
+        };
+        for peer in leader.leaders().iter().filter(|p| **p != config.name) {
+            let (session, tx) = (session.clone(), reply_tx.clone());
+            let (key, body, timeout) = (
+                keys.leader_sent(peer),
+                encode(&wanted),
+                config.follow_timeout,
+            );
+            tokio::spawn(async move {
+                let result = ask(&session, &key, body, timeout).await.and_then(|bytes| {
+                    decode::<TransfersSent>(&bytes)
+                        .map(|t| t.transfers)
+                        .map_err(|e| e.to_string())
+                });
+                let _ = tx.send(Reply::Transfers(result));
+            });
+        }
+    }
+    if let Some(follow) = leader.pending_follow() {
+        let (session, tx) = (session.clone(), reply_tx.clone());
+        let (key, body, timeout) = (
+            keys.sensor_follow(&config.sensor),
+            encode(follow),
+            config.follow_timeout,
+        );
+        tokio::spawn(async move {
+            let result = ask(&session, &key, body, timeout).await;
+            let _ = tx.send(Reply::Followed(result));
+        });
+    }
+    tracing::info!(leader = %config.name, next_batch = leader.next_batch(), position = leader.position(), "catching up");
+}
+
+/// Asks the sensor for every batch from the next one this leader expects.
+fn resend(
+    session: &Session,
+    config: &LeaderConfig,
+    leader: &Leader,
+    reply_tx: &mpsc::UnboundedSender<Reply>,
+) {
+    let request = Resend {
+        version: VERSION,
+        leader: config.name.clone(),
+        from: leader.next_batch(),
+    };
+    let (session, tx) = (session.clone(), reply_tx.clone());
+    let (key, timeout) = (
+        config.keys.sensor_resend(&config.sensor),
+        config.follow_timeout,
+    );
+    tokio::spawn(async move {
+        let result = ask(&session, &key, encode(&request), timeout)
+            .await
+            .and_then(|bytes| {
+                decode::<Resent>(&bytes)
+                    .map(|r| r.batches)
+                    .map_err(|e| e.to_string())
+            });
+        let _ = tx.send(Reply::Resent(result));
+    });
+}
+
+/// A peer restarted and asks for the transfers it lost.
+async fn answer_sent(leader: &Leader, query: Query) {
+    let request = query
+        .payload()
+        .map(|p| p.to_bytes().into_owned())
+        .unwrap_or_default();
+    let reply = match decode::<TransfersWanted>(&request) {
+        Ok(wanted) => {
+            query
+                .reply(
+                    query.key_expr().clone(),
+                    encode(&TransfersSent {
+                        version: VERSION,
+                        transfers: leader.sent_to(wanted.to, wanted.after),
+                    }),
+                )
+                .await
+        }
+        Err(e) => query.reply_err(e.to_string()).await,
+    };
+    if let Err(e) = reply {
+        tracing::warn!(error = %e, "could not answer a request for sent transfers");
+    }
+}
+
+/// One get, answered by one process: the reply's bytes, or why not.
+async fn ask(
     session: &Session,
     key: &str,
     body: Vec<u8>,
     timeout: Duration,
-) -> Result<Vec<Sequenced>, String> {
+) -> Result<Vec<u8>, String> {
     let replies = session
         .get(key)
         .payload(body)
@@ -197,13 +448,11 @@ async fn ask_to_follow(
         .map_err(|e| e.to_string())?;
     match tokio::time::timeout(timeout + Duration::from_secs(1), replies.recv_async()).await {
         Ok(Ok(reply)) => match reply.result() {
-            Ok(sample) => decode::<Followed>(&sample.payload().to_bytes())
-                .map(|f| f.items)
-                .map_err(|e| e.to_string()),
+            Ok(sample) => Ok(sample.payload().to_bytes().into_owned()),
             Err(e) => Err(String::from_utf8_lossy(&e.payload().to_bytes()).into_owned()),
         },
-        Ok(Err(_)) => Err("the sensor did not answer".into()),
-        Err(_) => Err("the sensor did not answer in time".into()),
+        Ok(Err(_)) => Err(format!("{key}: nobody answered")),
+        Err(_) => Err(format!("{key}: no answer in time")),
     }
 }
 

@@ -30,3 +30,12 @@ impl MeshError {
         }
     }
 }
+
+/// Why a leader process stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error(transparent)]
+    Journal(#[from] crate::journal::JournalError),
+}

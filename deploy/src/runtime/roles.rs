@@ -8,9 +8,10 @@ use super::topology::{Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::actor::CoordinatorConfig;
 use idmesh_leader::actor::LeaderConfig;
+use idmesh_leader::journal::JournalOptions;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::TraceReader;
-use idmesh_sensor::gateway::actor::GatewayConfig;
+use idmesh_sensor::gateway::actor::{Faults, GatewayConfig};
 use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
 use std::path::Path;
 use std::time::Duration;
@@ -66,6 +67,10 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                         keys,
                         sensor: topology.sensor.name.clone(),
                         follow_timeout: Duration::from_millis(topology.query_timeout_ms),
+                        journal: topology.journal_path(name).map(|path| JournalOptions {
+                            path,
+                            fsync_every: Duration::from_millis(topology.fsync_ms),
+                        }),
                     },
                     shutdown(),
                 )
@@ -123,6 +128,10 @@ async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Res
         realtime: topology.sensor.realtime,
         limit: topology.sensor.events,
         wait_for_leaders: Duration::from_secs(60),
+        faults: Faults {
+            duplicate: topology.sensor.faults.duplicate,
+            drop_every: topology.sensor.faults.drop_every,
+        },
     };
     idmesh_sensor::gateway::actor::run(session, config, router, lines, shutdown()).await?;
     Ok(())

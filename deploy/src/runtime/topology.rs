@@ -8,6 +8,10 @@
 //! budget = 0                     # sets per leader (0 = no pruning)
 //! sparsify = "threshold"         # or "overcomplete": OMP, then threshold
 //! query_timeout_ms = 2000
+//! state_dir = "state"            # leaders' journals (relative to this file);
+//!                                # absent = no journal, a leader that dies
+//!                                # cannot come back
+//! fsync_ms = 100                 # longest a journal entry waits for fsync
 //!
 //! [coordinator]
 //! name = "coordinator"
@@ -18,6 +22,9 @@
 //! listen = "tcp/127.0.0.1:7452"
 //! trace = "crowd.jsonl"          # relative to this file
 //! rate = 2000                    # events/s; absent = as fast as possible
+//! [sensor.faults]                # tests only: a lossy, doubling network
+//! duplicate = true               # every batch published twice
+//! drop_every = 7                 # every 7th batch to a leader not published
 //!
 //! [[leader]]
 //! name = "leader-0"
@@ -43,6 +50,9 @@ pub struct Topology {
     pub sparsify: Sparsification,
     #[serde(default = "default_timeout")]
     pub query_timeout_ms: u64,
+    pub state_dir: Option<PathBuf>,
+    #[serde(default = "default_fsync")]
+    pub fsync_ms: u64,
     pub coordinator: Process,
     pub sensor: SensorProcess,
     pub leader: Vec<LeaderProcess>,
@@ -83,6 +93,17 @@ pub struct SensorProcess {
     #[serde(default)]
     pub realtime: bool,
     pub events: Option<u64>,
+    #[serde(default)]
+    pub faults: FaultSection,
+}
+
+/// Faults the sensor injects on purpose (see `idmesh_sensor::gateway`).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultSection {
+    #[serde(default)]
+    pub duplicate: bool,
+    pub drop_every: Option<u64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -105,6 +126,10 @@ fn default_host() -> String {
 
 fn default_timeout() -> u64 {
     2000
+}
+
+fn default_fsync() -> u64 {
+    100
 }
 
 /// A process of the deployment, whatever its role.
@@ -145,6 +170,9 @@ impl Topology {
         let placed = self.leader.iter().filter(|l| l.at.is_some()).count();
         if placed != 0 && placed != self.leader.len() {
             bail!("give every leader a position (at = [x, y]) or none");
+        }
+        if self.sensor.faults.drop_every.is_some_and(|n| n < 2) {
+            bail!("sensor.faults.drop_every must be 2 or more (1 would drop every batch)");
         }
         if let Some(rate) = self.sensor.rate {
             if !(rate.is_finite() && rate > 0.0) {
@@ -187,6 +215,13 @@ impl Topology {
 
     pub fn trace_path(&self) -> PathBuf {
         self.dir.join(&self.sensor.trace)
+    }
+
+    /// Where leader `name` keeps its journal, if leaders keep one.
+    pub fn journal_path(&self, name: &str) -> Option<PathBuf> {
+        self.state_dir
+            .as_ref()
+            .map(|dir| self.dir.join(dir).join(format!("{name}.journal")))
     }
 }
 

@@ -31,7 +31,9 @@ super::versioned!(Followed, "follow reply");
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Resend {
     pub version: u16,
-    pub leader: u16,
+    /// The leader's name: one that lost the stream's Begin does not know
+    /// its index yet.
+    pub leader: String,
     pub from: u64,
 }
 super::versioned!(Resend, "resend request");

@@ -6,12 +6,19 @@
 //! between chunks, so a cut is always a point of the same global order the
 //! leaders apply. After the source is exhausted it keeps serving cuts and
 //! follows until shut down, so queries keep being answered.
+//!
+//! Every batch sent is kept, by leader and number, so that a leader that
+//! lost some (a gap in the numbers, or the time it was down and
+//! restarting) gets them again on `P/sensor/<name>/resend`. The log lives
+//! in memory for the stream's life: the sensor is the source of truth of
+//! the stream, not a process this design lets die. [`Faults`] drops or
+//! doubles batches on purpose, for the tests that show neither matters.
 
 use super::cuts::{place, Cuts, Placed, Request};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed};
+use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
@@ -33,6 +40,18 @@ pub struct GatewayConfig {
     pub limit: Option<u64>,
     /// How long to wait for every leader to be up.
     pub wait_for_leaders: Duration,
+    pub faults: Faults,
+}
+
+/// Faults injected on purpose (tests): the network losing or doubling
+/// event batches.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Faults {
+    /// Every batch is published twice.
+    pub duplicate: bool,
+    /// Every n-th batch to each leader is not published at all (it stays
+    /// in the log, for the leader to ask for again).
+    pub drop_every: Option<u64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -71,6 +90,10 @@ pub async fn run(
         .declare_queryable(keys.sensor_follow(&config.name))
         .await
         .map_err(mesh("declare the follow queryable"))?;
+    let resends = session
+        .declare_queryable(keys.sensor_resend(&config.name))
+        .await
+        .map_err(mesh("declare the resend queryable"))?;
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -93,7 +116,9 @@ pub async fn run(
     let limit = config.limit.unwrap_or(u64::MAX) as usize;
     let lines = &lines[..lines.len().min(limit)];
     let mut stream = Stream {
-        numbers: vec![0; names.len()],
+        sent: vec![Vec::new(); names.len()],
+        names: names.clone(),
+        faults: config.faults,
         publishers,
         sensor: config.name.clone(),
         finished: lines.is_empty(),
@@ -175,6 +200,23 @@ pub async fn run(
                     }
                 }
             }
+            query = resends.recv_async() => {
+                let Ok(query) = query else { break };
+                let request = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
+                match decode::<Resend>(&request).map_err(|e| e.to_string()).and_then(|r| stream.resend(&r)) {
+                    Ok(batches) => {
+                        tracing::info!(batches = batches.len(), "resend");
+                        let reply = Resent { version: VERSION, batches };
+                        if let Err(e) = query.reply(query.key_expr().clone(), encode(&reply)).await {
+                            tracing::warn!(error = %e, "could not answer a resend request");
+                        }
+                    }
+                    Err(e) => {
+                        tracing::error!(error = %e, "bad resend request");
+                        let _ = query.reply_err(e).await;
+                    }
+                }
+            }
             _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
         }
     }
@@ -192,7 +234,10 @@ async fn reply_placed(placed: Placed) {
 }
 
 struct Stream {
-    numbers: Vec<u64>,
+    /// Every batch sent to each leader; its number is its index.
+    sent: Vec<Vec<Batch>>,
+    names: Vec<String>,
+    faults: Faults,
     publishers: Vec<Publisher<'static>>,
     sensor: String,
     /// The whole source has been read.
@@ -204,20 +249,49 @@ impl Stream {
     async fn flush(&mut self, router: &mut Router) {
         let through = router.seq();
         for (i, publisher) in self.publishers.iter().enumerate() {
+            let number = self.sent[i].len() as u64;
             let batch = Batch {
                 version: VERSION,
                 sensor: self.sensor.clone(),
-                number: self.numbers[i],
+                number,
                 through,
                 events: router.events(),
                 finished: self.finished,
                 items: router.take(i),
             };
-            self.numbers[i] += 1;
-            if let Err(e) = publisher.put(encode(&batch)).await {
-                tracing::error!(error = %e, "could not publish a batch");
+            let body = encode(&batch);
+            self.sent[i].push(batch);
+            let dropped = self
+                .faults
+                .drop_every
+                .is_some_and(|n| n > 0 && number % n == n - 1);
+            if dropped {
+                tracing::debug!(leader = i, number, "fault: batch not published");
+                continue;
+            }
+            for _ in 0..if self.faults.duplicate { 2 } else { 1 } {
+                if let Err(e) = publisher.put(body.clone()).await {
+                    tracing::error!(error = %e, "could not publish a batch");
+                }
             }
         }
+    }
+
+    /// The batches leader `request.leader` asks for again.
+    fn resend(&self, request: &Resend) -> Result<Vec<Batch>, String> {
+        let sent = self
+            .names
+            .iter()
+            .position(|n| *n == request.leader)
+            .map(|i| &self.sent[i])
+            .ok_or_else(|| {
+                format!(
+                    "resend request from {:?}, which is not a leader of this stream",
+                    request.leader
+                )
+            })?;
+        let from = (request.from as usize).min(sent.len());
+        Ok(sent[from..].to_vec())
     }
 }
 
