@@ -20,7 +20,7 @@ pub enum GatherError {
     NoSensor,
     #[error("no leader is listed by the sensor")]
     NoLeaders,
-    #[error("leaders {missing:?} did not answer within {timeout:?}; no partial answer is given")]
+    #[error("degraded: leaders {missing:?} did not answer (waited up to {timeout:?}); no partial answer is given")]
     Missing {
         missing: Vec<String>,
         timeout: Duration,

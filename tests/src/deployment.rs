@@ -1,5 +1,6 @@
 //! A real deployment for a test: a topology on free loopback ports, `idmesh
-//! up` in its own process group, and queries through `idmesh query`.
+//! up` (or every process on its own, for tests that kill and restart one),
+//! and queries through `idmesh query`.
 
 use crate::idmesh;
 use serde_json::Value;
@@ -7,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+#[derive(Debug, Clone, Default)]
 pub struct Settings {
     pub leaders: usize,
     pub distributed_rule: bool,
@@ -15,13 +17,19 @@ pub struct Settings {
     pub overcomplete: bool,
     /// Events per second; None = as fast as possible.
     pub rate: Option<f64>,
+    /// Leaders journal their inputs (`state_dir`), so they can restart.
+    pub journal: bool,
+    /// The sensor's `[sensor.faults]` section, e.g. `duplicate = true`.
+    pub faults: Option<String>,
 }
 
 pub struct Deployment {
     pub dir: PathBuf,
     pub coordinator: String,
     pub prefix: String,
-    up: Child,
+    config: PathBuf,
+    /// `idmesh up`, or every process by its name.
+    children: Vec<(String, Child)>,
 }
 
 fn free_port() -> u16 {
@@ -51,9 +59,64 @@ pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
 }
 
 impl Deployment {
-    /// Starts a deployment streaming `trace`; leaders sit on a grid over the
-    /// trace's field so that tracks cross between them.
+    /// Starts a deployment streaming `trace` under `idmesh up`; leaders sit
+    /// on a grid over the trace's field so that tracks cross between them.
     pub fn start(name: &str, trace: &Path, settings: &Settings) -> Deployment {
+        let mut deployment = Self::configure(name, trace, settings);
+        let child = deployment.spawn(&["up"]);
+        deployment.children.push(("up".into(), child));
+        deployment
+    }
+
+    /// The same deployment with every process started on its own (the
+    /// sensor last, once the others are up), so that one can be killed and
+    /// started again.
+    pub fn start_each(name: &str, trace: &Path, settings: &Settings) -> Deployment {
+        let mut deployment = Self::configure(name, trace, settings);
+        deployment.launch("coordinator", "coordinator");
+        for i in 0..settings.leaders {
+            deployment.launch("leader", &format!("leader-{i}"));
+        }
+        deployment.launch("sensor", "sensor-0");
+        deployment
+    }
+
+    /// Starts process `name` in `role`.
+    pub fn launch(&mut self, role: &str, name: &str) {
+        let child = self.spawn(&[role, "--name", name]);
+        self.children.push((name.to_string(), child));
+    }
+
+    /// SIGKILL to process `name`: no chance to flush or say goodbye.
+    pub fn kill(&mut self, name: &str) {
+        let i = self
+            .children
+            .iter()
+            .position(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("no process {name}"));
+        let (_, mut child) = self.children.remove(i);
+        child.kill().expect("SIGKILL");
+        child.wait().expect("reaped");
+    }
+
+    fn spawn(&self, args: &[&str]) -> Child {
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.dir.join("up.log"))
+            .unwrap();
+        Command::new(idmesh())
+            .args(args)
+            .arg("--config")
+            .arg(&self.config)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("idmesh starts")
+    }
+
+    fn configure(name: &str, trace: &Path, settings: &Settings) -> Deployment {
         let dir =
             std::env::temp_dir().join(format!("idmesh-deployment-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -87,22 +150,20 @@ impl Deployment {
                 free_port()
             ));
         }
+        if settings.journal {
+            toml.insert_str(0, "state_dir = \"state\"\n");
+        }
+        if let Some(faults) = &settings.faults {
+            toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
+        }
         let config = dir.join("topology.toml");
         std::fs::write(&config, toml).unwrap();
-        let log = std::fs::File::create(dir.join("up.log")).unwrap();
-        let up = Command::new(idmesh())
-            .args(["up", "--config"])
-            .arg(&config)
-            .env("RUST_LOG", "warn")
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .expect("idmesh up starts");
         Deployment {
             dir,
             coordinator,
             prefix,
-            up,
+            config,
+            children: Vec::new(),
         }
     }
 
@@ -199,18 +260,22 @@ impl Deployment {
 impl Drop for Deployment {
     fn drop(&mut self) {
         // SIGTERM lets `up` stop its children; then make sure.
-        unsafe {
-            libc::kill(self.up.id() as i32, libc::SIGTERM);
+        for (_, child) in &self.children {
+            unsafe {
+                libc::kill(child.id() as i32, libc::SIGTERM);
+            }
         }
         let deadline = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.up.try_wait() {
-                return;
+        for (_, child) in &mut self.children {
+            while Instant::now() < deadline {
+                if let Ok(Some(_)) = child.try_wait() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(50));
             }
-            std::thread::sleep(Duration::from_millis(50));
+            let _ = child.kill();
+            let _ = child.wait();
         }
-        let _ = self.up.kill();
-        let _ = self.up.wait();
     }
 }
 

@@ -42,6 +42,7 @@ fn settings(leaders: usize, rate: Option<f64>) -> Settings {
         budget: 0,
         overcomplete: false,
         rate,
+        ..Settings::default()
     }
 }
 

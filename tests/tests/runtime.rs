@@ -39,6 +39,7 @@ fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
             budget: 0,
             overcomplete: false,
             rate: None,
+            ..Settings::default()
         };
         let deployment = Deployment::start(&format!("exact{leaders}"), &trace, &settings);
         let answer = deployment.final_marginals(Duration::from_secs(60));
@@ -105,6 +106,7 @@ fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bo
             budget: 200,
             overcomplete,
             rate: Some(2000.0),
+            ..Settings::default()
         },
     );
     deployment.first_answer(Duration::from_secs(30));
@@ -187,6 +189,7 @@ fn queries_during_the_stream_sum_to_k_and_the_watermark_only_grows() {
             budget: 300,
             overcomplete: false,
             rate: Some(400.0),
+            ..Settings::default()
         },
     );
     // The first answers may come before the leaders are up: wait for one.
@@ -225,6 +228,7 @@ fn a_python_zenoh_client_gets_the_marginals_as_json() {
             budget: 0,
             overcomplete: false,
             rate: None,
+            ..Settings::default()
         },
     );
     let ours = deployment.final_marginals(Duration::from_secs(60));
