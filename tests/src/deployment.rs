@@ -252,6 +252,40 @@ impl Deployment {
         );
     }
 
+    /// Asks `question` (e.g. `marginals`) right after the events before
+    /// every truth line, all at once (`--at-events`): the answers, each with
+    /// the index of its truth line. Points the stream passed before the
+    /// question reached it are refused (stderr).
+    pub fn at_truth_points(&self, question: &str, truths: &[Truth]) -> Vec<(usize, Value)> {
+        let points: Vec<String> = truths.iter().map(|t| t.events.to_string()).collect();
+        self.query_lenient(&[question, "--at-events", &points.join(",")])
+            .into_iter()
+            .map(|answer| {
+                let events = answer["watermark"]["sensor-0"].as_u64().unwrap();
+                let i = truths
+                    .iter()
+                    .position(|t| t.events == events)
+                    .unwrap_or_else(|| panic!("an answer at {events} events, not a truth point"));
+                (i, answer)
+            })
+            .collect()
+    }
+
+    /// A counter of `idmesh query stats`, summed over the leaders.
+    pub fn leaders_total(&self, field: &str) -> u64 {
+        let stats = self.query(&["stats"]).expect("stats answer");
+        stats[0]["leaders"]
+            .as_array()
+            .expect("leaders")
+            .iter()
+            .map(|l| {
+                l[field]
+                    .as_u64()
+                    .unwrap_or_else(|| panic!("{field} in {l}"))
+            })
+            .sum()
+    }
+
     pub fn log(&self) -> String {
         std::fs::read_to_string(self.dir.join("up.log")).unwrap_or_default()
     }

@@ -57,7 +57,6 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
     let central = replay_lines(&trace, &["--method", "information-matrix"]);
     let truths = truth_lines(&trace);
     assert_eq!(central.len(), truths.len());
-    let points: Vec<String> = truths.iter().map(|t| t.events.to_string()).collect();
     for leaders in [1, 4] {
         let deployment = Deployment::start(
             &format!("identity{leaders}"),
@@ -65,13 +64,9 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
             &settings(leaders, Some(2000.0)),
         );
         deployment.first_answer(Duration::from_secs(30));
-        let answers = deployment.query_lenient(&["identity", "--at-events", &points.join(",")]);
-        for answer in &answers {
-            let events = answer["watermark"]["sensor-0"].as_u64().unwrap();
-            let i = truths
-                .iter()
-                .position(|t| t.events == events)
-                .unwrap_or_else(|| panic!("an answer at {events} events, not a truth point"));
+        let answers = deployment.at_truth_points("identity", &truths);
+        for (i, answer) in &answers {
+            let (i, events) = (*i, &answer["watermark"]["sensor-0"]);
             let difference = largest_difference(
                 &matrix(&answer["p_identity"]),
                 &matrix(&central[i]["p_identity"]),
@@ -109,9 +104,12 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
         assert_eq!(one[0]["predicted_identity"], last["predicted_identity"][7]);
         if leaders > 1 {
             let stats = deployment.query(&["stats"]).expect("stats");
-            let held: u64 = sum(&stats[0], "rows_held");
+            let held = deployment.leaders_total("rows_held");
             assert_eq!(held, 12, "every row held once: {stats:?}");
-            assert!(sum(&stats[0], "handovers") > 0, "tracks crossed regions");
+            assert!(
+                deployment.leaders_total("handovers") > 0,
+                "tracks crossed regions"
+            );
         }
     }
 }
@@ -155,7 +153,7 @@ fn identity_reads_cost_no_messages_between_leaders() {
             })
             .collect();
         let bytes: Vec<u64> = leaders.iter().map(|l| field(l, "bytes_sent")).collect();
-        (messages, bytes, sum(&stats[0], "identifies"))
+        (messages, bytes, deployment.leaders_total("identifies"))
     };
     let (with_reads, bytes_with, applied) = traffic("reads", &trace);
     let (without_reads, bytes_without, none) = traffic("no-reads", &unread);
@@ -174,13 +172,4 @@ fn identity_reads_cost_no_messages_between_leaders() {
     }
     assert_eq!(applied, reads as u64, "every read applied once");
     assert_eq!(none, 0);
-}
-
-fn sum(stats: &Value, field: &str) -> u64 {
-    stats["leaders"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|l| l[field].as_u64().unwrap())
-        .sum()
 }

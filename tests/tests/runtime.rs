@@ -110,18 +110,10 @@ fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bo
         },
     );
     deployment.first_answer(Duration::from_secs(30));
-    let points: Vec<String> = truths.iter().map(|t| t.events.to_string()).collect();
-    // Points the stream passed before the question reached it are refused
-    // (stderr): the rest are answered, in order.
-    let answers = deployment.query_lenient(&["marginals", "--at-events", &points.join(",")]);
+    let answers = deployment.at_truth_points("marginals", &truths);
     let mut scored = 0;
     let (mut distributed_error, mut central_error) = (0.0, 0.0);
-    for answer in &answers {
-        let events = answer["watermark"]["sensor-0"].as_u64().unwrap();
-        let i = truths
-            .iter()
-            .position(|t| t.events == events)
-            .unwrap_or_else(|| panic!("an answer at {events} events, not a truth point"));
+    for &(i, ref answer) in &answers {
         let sum: f64 = floats(&answer["p_red"]).iter().sum();
         assert!((sum - 10.0).abs() < 1e-9, "marginals sum to {sum}");
         distributed_error += error(

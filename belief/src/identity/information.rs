@@ -296,6 +296,9 @@ pub fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefEr
     Ok(())
 }
 
+/// Two rows of an information matrix: tracks a's and b's.
+pub type RowPair = (Vec<f64>, Vec<f64>);
+
 /// The rows of tracks a and b after a mix with swap probability `swap`,
 /// each shifted to max 0; None when the mix changes nothing (s = 0). A
 /// pure function of its inputs: two leaders that each hold one of the rows
@@ -305,7 +308,7 @@ pub fn mixed_rows(
     row_b: &[f64],
     swap: f64,
     solver: MixSolver,
-) -> Result<Option<(Vec<f64>, Vec<f64>)>, BeliefError> {
+) -> Result<Option<RowPair>, BeliefError> {
     if swap == 0.0 {
         return Ok(None);
     }

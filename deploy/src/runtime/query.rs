@@ -7,6 +7,7 @@ use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
     IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, QueryError, StatsAnswer, TrackAnswer,
+    Watermark,
 };
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -174,15 +175,10 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
     match options.what {
         Question::Marginals => {
             let a: MarginalsAnswer = serde_json::from_slice(body)?;
-            let events: Vec<String> = a
-                .watermark
-                .iter()
-                .map(|(s, e)| format!("{s}: {e} events"))
-                .collect();
             writeln!(
                 out,
                 "{} ({}) · {} leaders · {} sets · {:.1} ms",
-                events.join(", "),
+                events(&a.watermark),
                 if a.finished {
                     "stream over"
                 } else {
@@ -203,15 +199,10 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
         }
         Question::Identity(None) => {
             let a: IdentityAnswer = serde_json::from_slice(body)?;
-            let events: Vec<String> = a
-                .watermark
-                .iter()
-                .map(|(s, e)| format!("{s}: {e} events"))
-                .collect();
             writeln!(
                 out,
                 "{} · {} leaders · {} marginals · {:.1} ms",
-                events.join(", "),
+                events(&a.watermark),
                 a.leaders,
                 a.marginals,
                 took.as_secs_f64() * 1e3
@@ -251,4 +242,13 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// "sensor-0: 1200 events, …"
+fn events(watermark: &Watermark) -> String {
+    let events: Vec<String> = watermark
+        .iter()
+        .map(|(s, e)| format!("{s}: {e} events"))
+        .collect();
+    events.join(", ")
 }
