@@ -5,7 +5,9 @@
 use crate::gather::{self, At, GatherError, Memory};
 use crate::identity::{self, Method};
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::{IdentityTrackAnswer, QueryError, StatsAnswer, TrackAnswer};
+use idmesh_protocol::wire::query::{
+    IdentityAnswer, IdentityTrackAnswer, QueryError, StatsAnswer, TrackAnswer,
+};
 use serde::Serialize;
 use std::future::Future;
 use std::sync::Arc;
@@ -76,13 +78,9 @@ async fn answer(
             .map(|g| json(&g.answer))
             .map_err(|e| e.to_string()),
         ("track", Ok(at)) => track(&session, &config, &memory, &query, at).await,
-        ("identity", Ok(at)) => match method(&query) {
-            Ok(method) => identity::identity(&session, keys, config.timeout, &memory, at, method)
-                .await
-                .map(|a| json(&a))
-                .map_err(|e| e.to_string()),
-            Err(e) => Err(e),
-        },
+        ("identity", Ok(at)) => identities(&session, &config, &memory, &query, at)
+            .await
+            .map(|a| json(&a)),
         ("identity track", Ok(at)) => identity_track(&session, &config, &memory, &query, at).await,
         _ => gather::stats(&session, keys, config.timeout)
             .await
@@ -142,10 +140,7 @@ async fn identity_track(
     at: At,
 ) -> Result<Vec<u8>, String> {
     let track = track_of(query)?;
-    let method = method(query)?;
-    let answer = identity::identity(session, &config.keys, config.timeout, memory, at, method)
-        .await
-        .map_err(|e| e.to_string())?;
+    let answer = identities(session, config, memory, query, at).await?;
     let out_of_range = || {
         format!(
             "track {track} is out of range: there are {} tracks",
@@ -178,14 +173,24 @@ fn track_of(query: &Query) -> Result<u32, String> {
         .ok_or_else(|| format!("{key}: the last chunk must be a track number"))
 }
 
-/// `?marginals=<method>[;samples=S][;seed=X]` of an identity query.
-fn method(query: &Query) -> Result<Method, String> {
+/// Every track's identities, by the method the query names
+/// (`?marginals=<method>[;samples=S][;seed=X]`).
+async fn identities(
+    session: &Session,
+    config: &CoordinatorConfig,
+    memory: &Memory,
+    query: &Query,
+    at: At,
+) -> Result<IdentityAnswer, String> {
     let parameters = query.parameters();
-    Method::from_parameters(
+    let method = Method::from_parameters(
         parameters.get("marginals"),
         parameters.get("samples"),
         parameters.get("seed"),
-    )
+    )?;
+    identity::identity(session, &config.keys, config.timeout, memory, at, method)
+        .await
+        .map_err(|e| e.to_string())
 }
 
 /// `?events=N`: the answer right after the stream's N-th event.

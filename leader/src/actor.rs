@@ -23,7 +23,7 @@ use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use idmesh_protocol::wire::leader_to_sensor::{Followed, Resend, Resent};
+use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
@@ -96,6 +96,7 @@ pub async fn run(
     let mut journal = None;
     if let Some(options) = &config.journal {
         let (opened, entries) = Journal::open(options)?;
+        journal = Some(opened);
         if !entries.is_empty() {
             let started = Instant::now();
             for entry in &entries {
@@ -105,11 +106,7 @@ pub async fn run(
             }
             tracing::info!(leader = %name, entries = entries.len(), position = leader.position(),
                 seconds = started.elapsed().as_secs_f64(), "journal replayed");
-        }
-        let recovered = !entries.is_empty();
-        journal = Some(opened);
-        if recovered {
-            catch_up(&session, &config, &leader, &reply_tx).await;
+            catch_up(&session, &config, &mut leader, &reply_tx).await;
         }
     }
     // Declared last: whoever sees the token can use everything above.
@@ -277,16 +274,7 @@ async fn act(
                     *failure = Some(e);
                 }
             }
-            Action::Follow(follow) => {
-                let session = session.clone();
-                let key = keys.sensor_follow(&config.sensor);
-                let tx = reply_tx.clone();
-                let timeout = config.follow_timeout;
-                tokio::spawn(async move {
-                    let result = ask(&session, &key, encode(&follow), timeout).await;
-                    let _ = tx.send(Reply::Followed(result));
-                });
-            }
+            Action::Follow(follow) => ask_to_follow(session, config, &follow, reply_tx),
             Action::CutReady(partial) => {
                 let ready: Vec<Held> = held.extract_if(.., |h| h.tag == partial.tag).collect();
                 for h in ready {
@@ -323,58 +311,60 @@ async fn send(
 async fn catch_up(
     session: &Session,
     config: &LeaderConfig,
-    leader: &Leader,
+    leader: &mut Leader,
     reply_tx: &mpsc::UnboundedSender<Reply>,
 ) {
-    let keys = &config.keys;
-    for (to, transfer) in leader.all_sent() {
-        if let Some(peer) = leader.peer(*to) {
-            if let Err(e) = session
-                .put(keys.leader_transfer(peer), encode(transfer))
-                .congestion_control(CongestionControl::Block)
-                .await
-            {
-                tracing::warn!(to = %peer, error = %e, "could not resend a transfer");
-            }
+    for (to, transfer) in leader.all_sent().to_vec() {
+        if let Err(e) = send(session, &config.keys, leader, to, &transfer).await {
+            tracing::warn!(leader = %config.name, error = %e, "could not resend a transfer");
         }
     }
     resend(session, config, leader, reply_tx);
     if let Some(me) = leader.index() {
-        let wanted = TransfersWanted {
+        let wanted = encode(&TransfersWanted {
             version: VERSION,
             to: me,
             after: leader.position(),
-        };
+        });
         for peer in leader.leaders().iter().filter(|p| **p != config.name) {
-            let (session, tx) = (session.clone(), reply_tx.clone());
-            let (key, body, timeout) = (
-                keys.leader_sent(peer),
-                encode(&wanted),
-                config.follow_timeout,
+            spawn_ask(
+                session,
+                config.keys.leader_sent(peer),
+                wanted.clone(),
+                config,
+                reply_tx,
+                |reply| {
+                    Reply::Transfers(reply.and_then(|bytes| {
+                        decode::<TransfersSent>(&bytes)
+                            .map(|t| t.transfers)
+                            .map_err(|e| e.to_string())
+                    }))
+                },
             );
-            tokio::spawn(async move {
-                let result = ask(&session, &key, body, timeout).await.and_then(|bytes| {
-                    decode::<TransfersSent>(&bytes)
-                        .map(|t| t.transfers)
-                        .map_err(|e| e.to_string())
-                });
-                let _ = tx.send(Reply::Transfers(result));
-            });
         }
     }
     if let Some(follow) = leader.pending_follow() {
-        let (session, tx) = (session.clone(), reply_tx.clone());
-        let (key, body, timeout) = (
-            keys.sensor_follow(&config.sensor),
-            encode(follow),
-            config.follow_timeout,
-        );
-        tokio::spawn(async move {
-            let result = ask(&session, &key, body, timeout).await;
-            let _ = tx.send(Reply::Followed(result));
-        });
+        ask_to_follow(session, config, follow, reply_tx);
     }
     tracing::info!(leader = %config.name, next_batch = leader.next_batch(), position = leader.position(), "catching up");
+}
+
+/// Asks the sensor to route more tracks here, with the items missed.
+fn ask_to_follow(
+    session: &Session,
+    config: &LeaderConfig,
+    follow: &Follow,
+    reply_tx: &mpsc::UnboundedSender<Reply>,
+) {
+    let key = config.keys.sensor_follow(&config.sensor);
+    spawn_ask(
+        session,
+        key,
+        encode(follow),
+        config,
+        reply_tx,
+        Reply::Followed,
+    );
 }
 
 /// Asks the sensor for every batch from the next one this leader expects.
@@ -384,25 +374,35 @@ fn resend(
     leader: &Leader,
     reply_tx: &mpsc::UnboundedSender<Reply>,
 ) {
-    let request = Resend {
+    let request = encode(&Resend {
         version: VERSION,
         leader: config.name.clone(),
         from: leader.next_batch(),
-    };
-    let (session, tx) = (session.clone(), reply_tx.clone());
-    let (key, timeout) = (
-        config.keys.sensor_resend(&config.sensor),
-        config.follow_timeout,
-    );
+    });
+    let key = config.keys.sensor_resend(&config.sensor);
+    spawn_ask(session, key, request, config, reply_tx, |reply| {
+        Reply::Resent(reply.and_then(|bytes| {
+            decode::<Resent>(&bytes)
+                .map(|r| r.batches)
+                .map_err(|e| e.to_string())
+        }))
+    });
+}
+
+/// Makes one get in its own task; its answer comes back to the leader's
+/// task as `reply(answer)`.
+fn spawn_ask(
+    session: &Session,
+    key: String,
+    body: Vec<u8>,
+    config: &LeaderConfig,
+    reply_tx: &mpsc::UnboundedSender<Reply>,
+    reply: fn(Result<Vec<u8>, String>) -> Reply,
+) {
+    let (session, tx, timeout) = (session.clone(), reply_tx.clone(), config.follow_timeout);
     tokio::spawn(async move {
-        let result = ask(&session, &key, encode(&request), timeout)
-            .await
-            .and_then(|bytes| {
-                decode::<Resent>(&bytes)
-                    .map(|r| r.batches)
-                    .map_err(|e| e.to_string())
-            });
-        let _ = tx.send(Reply::Resent(result));
+        let answer = ask(&session, &key, body, timeout).await;
+        let _ = tx.send(reply(answer));
     });
 }
 

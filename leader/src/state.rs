@@ -189,10 +189,7 @@ impl Leader {
         let rows = match (&started.rows, rows) {
             (Some(held), true) => held
                 .rows()
-                .map(|(track, row)| WireRow {
-                    track,
-                    ln_likelihoods: row.to_vec(),
-                })
+                .map(|(track, row)| to_wire(track, row))
                 .collect(),
             _ => Vec::new(),
         };
@@ -412,18 +409,19 @@ impl Leader {
                 let mix = Mix { a, b, swap };
                 let started = self.started()?;
                 started.share.mix(mix)?;
-                let (mine, other) = match (owner_a == me, owner_b == me) {
-                    (true, false) => (Some(a), Some(owner_b)),
-                    (false, true) => (Some(b), Some(owner_a)),
+                // My mixed track and the other leader, for a mix across two.
+                let across = match (owner_a == me, owner_b == me) {
+                    (true, false) => Some((a, owner_b)),
+                    (false, true) => Some((b, owner_a)),
                     (true, true) => {
                         if let Some(rows) = &mut started.rows {
                             rows.mix(mix)?;
                         }
-                        (None, None)
+                        None
                     }
-                    (false, false) => (None, None),
+                    (false, false) => None,
                 };
-                if let (Some(mine), Some(other)) = (mine, other) {
+                if let Some((mine, other)) = across {
                     // Algorithm 4: both leaders of a cross-leader mix hand
                     // over what left their tracks, and wait for the other.
                     // The row of the mixed track goes along, unmixed: the
@@ -467,9 +465,11 @@ impl Leader {
                     *slot = false;
                     let row = match &mut started.rows {
                         Some(rows) => {
-                            let row = wire_row(rows, track)?;
-                            rows.take(track);
-                            vec![row]
+                            let ln_likelihoods = rows.take(track).ok_or(NOT_HELD)?;
+                            vec![WireRow {
+                                track,
+                                ln_likelihoods,
+                            }]
                         }
                         None => Vec::new(),
                     };
@@ -719,15 +719,20 @@ impl Leader {
     }
 }
 
+/// An owned track's row is missing: the state is broken.
+const NOT_HELD: LeaderError =
+    LeaderError::Unexpected("an event on an owned track whose row this leader does not hold");
+
 /// Row `track` as it goes on the wire.
 fn wire_row(rows: &InformationRows, track: u32) -> Result<WireRow, LeaderError> {
-    let row = rows.row(track).ok_or(LeaderError::Unexpected(
-        "an event on an owned track whose row this leader does not hold",
-    ))?;
-    Ok(WireRow {
+    Ok(to_wire(track, rows.row(track).ok_or(NOT_HELD)?))
+}
+
+fn to_wire(track: u32, row: &[f64]) -> WireRow {
+    WireRow {
         track,
         ln_likelihoods: row.to_vec(),
-    })
+    }
 }
 
 /// Leader `me`'s share of the start belief and its interest: each set

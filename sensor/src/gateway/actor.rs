@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 use tracing::Instrument;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
+use zenoh::query::Query;
 use zenoh::Session;
 
 #[derive(Debug, Clone)]
@@ -184,43 +185,52 @@ pub async fn run(
             }
             query = follows.recv_async() => {
                 let Ok(query) = query else { break };
-                let request = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
-                match decode::<Follow>(&request).map_err(|e| e.to_string()).and_then(|f| router.follow(&f).map_err(|e| e.to_string())) {
-                    Ok(items) => {
-                        tracing::debug!(items = items.len(), "follow");
-                        let reply = Followed { version: VERSION, items };
-                        if let Err(e) = query.reply(query.key_expr().clone(), encode(&reply)).await {
-                            tracing::warn!(error = %e, "could not answer a follow request");
-                        }
-                        stream.flush(&mut router).await;
-                    }
-                    Err(e) => {
-                        tracing::error!(error = %e, "bad follow request");
-                        let _ = query.reply_err(e).await;
-                    }
+                let answer = decode::<Follow>(&payload(&query))
+                    .map_err(|e| e.to_string())
+                    .and_then(|f| router.follow(&f).map_err(|e| e.to_string()))
+                    .map(|items| Followed { version: VERSION, items });
+                let followed = answer.is_ok();
+                reply_to(&query, answer, "follow").await;
+                if followed {
+                    stream.flush(&mut router).await;
                 }
             }
             query = resends.recv_async() => {
                 let Ok(query) = query else { break };
-                let request = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
-                match decode::<Resend>(&request).map_err(|e| e.to_string()).and_then(|r| stream.resend(&r)) {
-                    Ok(batches) => {
-                        tracing::info!(batches = batches.len(), "resend");
-                        let reply = Resent { version: VERSION, batches };
-                        if let Err(e) = query.reply(query.key_expr().clone(), encode(&reply)).await {
-                            tracing::warn!(error = %e, "could not answer a resend request");
-                        }
-                    }
-                    Err(e) => {
-                        tracing::error!(error = %e, "bad resend request");
-                        let _ = query.reply_err(e).await;
-                    }
-                }
+                let answer = decode::<Resend>(&payload(&query))
+                    .map_err(|e| e.to_string())
+                    .and_then(|r| stream.resend(&r))
+                    .map(|batches| Resent { version: VERSION, batches });
+                reply_to(&query, answer, "resend").await;
             }
             _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
         }
     }
     Ok(())
+}
+
+/// The postcard request a get carries.
+fn payload(query: &Query) -> Vec<u8> {
+    query
+        .payload()
+        .map(|p| p.to_bytes().into_owned())
+        .unwrap_or_default()
+}
+
+/// Answers a `what` request with its reply, or with why there is none.
+async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>, what: &str) {
+    match answer {
+        Ok(reply) => {
+            tracing::debug!(what, "answered");
+            if let Err(e) = query.reply(query.key_expr().clone(), encode(&reply)).await {
+                tracing::warn!(what, error = %e, "could not answer a request");
+            }
+        }
+        Err(e) => {
+            tracing::error!(what, error = %e, "bad request");
+            let _ = query.reply_err(e).await;
+        }
+    }
 }
 
 async fn reply_placed(placed: Placed) {
