@@ -7,7 +7,7 @@ use crate::error::BeliefError;
 
 /// Targets on tracks `a` and `b` came close; with probability `swap` they
 /// exchanged tracks (the paper's 1 − p, Section 3.3).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Mix {
     pub a: u32,
     pub b: u32,
@@ -32,7 +32,7 @@ pub enum Event {
 }
 
 /// How many targets are red.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum RedCount {
     /// Exactly `k` of the tracks carry red targets.
     Known(usize),
@@ -70,7 +70,7 @@ impl RedCount {
 
 /// What a property filter starts from: n tracks, how many are red, and
 /// either the known red tracks at time 0 or the uniform prior.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Field {
     pub tracks: usize,
     pub red: RedCount,

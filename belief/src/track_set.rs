@@ -25,6 +25,21 @@ fn word(t: u32) -> u64 {
     z ^ (z >> 31)
 }
 
+/// On disk (a leader's snapshot) a set is its sorted ids; the hash is
+/// derived again on the way back.
+impl serde::Serialize for TrackSet {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_seq(self.tracks.iter())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for TrackSet {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let tracks = Vec::<u32>::deserialize(deserializer)?;
+        Ok(TrackSet::from_tracks(tracks))
+    }
+}
+
 impl Hash for TrackSet {
     fn hash<H: Hasher>(&self, state: &mut H) {
         state.write_u64(self.hash);

@@ -137,7 +137,9 @@ pub struct QueryArgs {
     /// Print the JSON reply as it came.
     #[arg(long)]
     pub json: bool,
-    #[arg(long, default_value_t = 5000)]
+    /// How long to wait for the coordinator; longer than its own query
+    /// timeout, so that its "degraded" answer arrives rather than none.
+    #[arg(long, default_value_t = 15000)]
     pub timeout_ms: u64,
     /// Ask this many times, --interval-ms apart.
     #[arg(long, default_value_t = 1)]

@@ -23,7 +23,7 @@ use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
@@ -90,6 +90,10 @@ pub async fn run(
         .await
         .map_err(|e| MeshError::new("declare the sent-transfers queryable", e))?;
 
+    let durables = session
+        .declare_subscriber(keys.every_leader_durable())
+        .await
+        .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
     let mut leader = Leader::new(name.clone());
     let mut failure: Option<String> = None;
@@ -119,6 +123,7 @@ pub async fn run(
 
     let mut held: Vec<Held> = Vec::new();
     let mut resending = false;
+    let mut published: Option<Durable> = None;
     let mut sweep = tokio::time::interval(Duration::from_millis(250));
     tokio::pin!(shutdown);
 
@@ -170,11 +175,31 @@ pub async fn run(
                 answer_sent(&leader, query).await;
                 continue;
             }
+            sample = durables.recv_async() => {
+                let Ok(sample) = sample else { break };
+                match decode::<Durable>(&sample.payload().to_bytes()) {
+                    Ok(mark) if mark.leader != name => {
+                        leader.forget_sent(&mark.leader, mark.position);
+                    }
+                    Ok(_) => {}
+                    Err(e) => tracing::warn!(leader = %name, error = %e, "bad durable mark"),
+                }
+                continue;
+            }
             _ = sweep.tick() => {
                 if let Some(j) = &mut journal {
                     if let Err(e) = j.sync() {
                         failure = Some(e.to_string());
                     }
+                }
+                // Everything journaled so far is on disk now: the others
+                // may stop keeping it.
+                let mark = leader.durable();
+                if failure.is_none() && published.as_ref() != Some(&mark) {
+                    if let Err(e) = session.put(keys.leader_durable(&name), encode(&mark)).await {
+                        tracing::warn!(leader = %name, error = %e, "could not publish the durable mark");
+                    }
+                    published = Some(mark);
                 }
                 expire(&mut held, config.follow_timeout).await;
                 // A gap, or a cut that is late (the batch with it, or the

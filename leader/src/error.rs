@@ -12,6 +12,8 @@ pub enum LeaderError {
     Unexpected(&'static str),
     #[error(transparent)]
     Belief(#[from] BeliefError),
+    #[error("unreadable snapshot: {0}")]
+    Snapshot(String),
 }
 
 /// A Zenoh call failed (declaring, sending, querying).

@@ -38,9 +38,10 @@ use idmesh_belief::{Field, Mix, Observe, RedCount, TrackSet};
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
-use idmesh_protocol::wire::leader_to_sensor::Follow;
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use idmesh_protocol::wire::VERSION;
+use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap, VecDeque};
 
 /// How many recent cuts a leader keeps answers for.
@@ -59,7 +60,7 @@ pub enum Action {
 }
 
 /// Where the leader is stopped, if anywhere.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 enum Waiting {
     /// For the sets of leader `from` at item `seq`.
     Transfer { seq: u64, from: u16 },
@@ -67,6 +68,7 @@ enum Waiting {
     Follow { seq: u64 },
 }
 
+#[derive(Serialize, Deserialize)]
 struct Started {
     /// This leader's index in `begin.leaders`.
     me: u16,
@@ -81,6 +83,9 @@ struct Started {
     row_mix: Option<Mix>,
 }
 
+/// Serialized whole as a snapshot ([`Leader::snapshot`]): the state a
+/// journal would rebuild, so that the journal can start again empty.
+#[derive(Serialize, Deserialize)]
 pub struct Leader {
     name: String,
     started: Option<Started>,
@@ -140,6 +145,21 @@ impl Leader {
         &self.name
     }
 
+    /// The whole state, as bytes ([`Leader::restore`] reads them back).
+    pub fn snapshot(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// The leader a snapshot was taken of.
+    pub fn restore(bytes: &[u8]) -> Result<Leader, LeaderError> {
+        postcard::from_bytes(bytes).map_err(|e| LeaderError::Snapshot(e.to_string()))
+    }
+
+    /// Counts a snapshot taken.
+    pub fn note_snapshot(&mut self) {
+        self.stats.snapshots += 1;
+    }
+
     pub fn position(&self) -> u64 {
         self.position
     }
@@ -147,6 +167,7 @@ impl Leader {
     pub fn stats(&self) -> LeaderStats {
         let mut stats = self.stats.clone();
         stats.position = self.position;
+        stats.transfers_kept = self.sent.len() as u64;
         if let Some(s) = &self.started {
             stats.coefficients = s.share.len() as u64;
             stats.omp_runs = s.share.omp_runs();
@@ -264,6 +285,30 @@ impl Leader {
     /// peers drop the ones they have).
     pub fn all_sent(&self) -> &[(u16, Transfer)] {
         &self.sent
+    }
+
+    /// Leader `name` has its state safe through item `position`: it will
+    /// never ask for the transfers of items up to there again, so they are
+    /// dropped. Returns how many were.
+    pub fn forget_sent(&mut self, name: &str, position: u64) -> usize {
+        let Some(to) = self.leaders().iter().position(|l| l == name) else {
+            return 0;
+        };
+        let before = self.sent.len();
+        self.sent
+            .retain(|(receiver, t)| *receiver as usize != to || t.seq > position);
+        before - self.sent.len()
+    }
+
+    /// How far this leader is, as a mark for the others: the next batch
+    /// it expects and the last item it applied.
+    pub fn durable(&self) -> Durable {
+        Durable {
+            version: VERSION,
+            leader: self.name.clone(),
+            batch: self.next_batch,
+            position: self.position,
+        }
     }
 
     /// The follow request still waiting for the sensor's answer.
@@ -950,11 +995,17 @@ mod tests {
         };
         // Runs both leaders to the end, delivering each one's batches in
         // `order` (indices, repeats allowed) and every transfer twice.
-        let run = |order: &[usize]| {
+        // With `snapshots`, both leaders are replaced by what their
+        // snapshot restores before every delivery.
+        let run = |order: &[usize], snapshots: bool| {
             let (mut a, mut b) = (Leader::new("a"), Leader::new("b"));
             let (batches_a, batches_b) = (batches("a"), batches("b"));
             let mut mail: Vec<(u16, Transfer)> = Vec::new();
             for &i in order {
+                if snapshots {
+                    a = Leader::restore(&a.snapshot()).unwrap();
+                    b = Leader::restore(&b.snapshot()).unwrap();
+                }
                 for (leader, batches) in [(&mut a, &batches_a), (&mut b, &batches_b)] {
                     for action in leader.batch(batches[i].clone(), 0).unwrap() {
                         if let Action::Send { to, transfer } = action {
@@ -988,13 +1039,21 @@ mod tests {
                 .collect();
             (shares, a.position(), b.position(), a.stats().duplicates)
         };
-        let once = run(&[0, 1, 2, 3, 4]);
-        let shuffled = run(&[0, 3, 1, 1, 4, 2, 0, 3, 4]);
+        let once = run(&[0, 1, 2, 3, 4], false);
+        let shuffled = run(&[0, 3, 1, 1, 4, 2, 0, 3, 4], false);
         // a is not sent the last mix (b's tracks only).
         assert_eq!((once.1, once.2), (4, 5));
         assert_eq!((shuffled.1, shuffled.2), (4, 5));
         assert_eq!(once.0, shuffled.0);
         assert!(shuffled.3 > once.3, "duplicates were seen and dropped");
+        // Restored from snapshots at every step, held batches, transfers
+        // waited for and all: the same shares.
+        let restored = run(&[0, 3, 1, 1, 4, 2, 0, 3, 4], true);
+        assert_eq!((restored.1, restored.2, restored.3), (4, 5, shuffled.3));
+        for (x, y) in restored.0.iter().flatten().zip(shuffled.0.iter().flatten()) {
+            assert_eq!(x.0, y.0);
+            assert!((x.1 - y.1).abs() < 1e-12, "{x:?} vs {y:?}");
+        }
     }
 
     /// Two leaders on an identity stream, driven by hand: reads cost no

@@ -96,7 +96,7 @@ use crate::event::Mix;
 use nalgebra::{DMatrix, DVector};
 
 /// How the mixing least-squares problem is solved.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum MixSolver {
     /// The O(N²) closed form (the default).
     #[default]

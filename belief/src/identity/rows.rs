@@ -23,7 +23,7 @@ use crate::event::Mix;
 use std::collections::BTreeMap;
 
 /// The rows of some tracks of an N × N information matrix.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct InformationRows {
     n: usize,
     rows: BTreeMap<u32, Vec<f64>>,

@@ -29,7 +29,10 @@ use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
 
 /// Part of a belief: some atoms with their masses, on a scale of its own.
-#[derive(Debug, Clone)]
+/// Serialized (a leader's snapshot) as [`ShareForm`]: the weights are a
+/// function of the field and are derived again.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(from = "ShareForm", into = "ShareForm")]
 pub struct RadonShare {
     field: Field,
     weights: Weights,
@@ -38,6 +41,44 @@ pub struct RadonShare {
     signed: bool,
     since_omp: OmpSchedule,
     omp_runs: u64,
+}
+
+/// A share as it is written down: everything but the derived weights.
+#[derive(Serialize, Deserialize)]
+struct ShareForm {
+    field: Field,
+    masses: Vec<(Atom, f64)>,
+    log_scale: f64,
+    signed: bool,
+    since_omp: OmpSchedule,
+    omp_runs: u64,
+}
+
+impl From<RadonShare> for ShareForm {
+    fn from(share: RadonShare) -> Self {
+        ShareForm {
+            field: share.field,
+            masses: share.masses.into_iter().collect(),
+            log_scale: share.log_scale,
+            signed: share.signed,
+            since_omp: share.since_omp,
+            omp_runs: share.omp_runs,
+        }
+    }
+}
+
+impl From<ShareForm> for RadonShare {
+    fn from(form: ShareForm) -> Self {
+        RadonShare {
+            weights: Weights::new(form.field.tracks, &form.field.red),
+            field: form.field,
+            masses: form.masses.into_iter().collect(),
+            log_scale: form.log_scale,
+            signed: form.signed,
+            since_omp: form.since_omp,
+            omp_runs: form.omp_runs,
+        }
+    }
 }
 
 impl RadonShare {

@@ -62,7 +62,7 @@ impl Sparsify {
 /// Mixes and observations since OMP last ran, to time it after runs of
 /// mixing (Section 5.5, "Timing for Sparsification"). The whole belief and
 /// each leader's share keep one.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct OmpSchedule {
     mixes: u32,
     observations: u32,

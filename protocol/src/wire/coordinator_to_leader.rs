@@ -61,5 +61,12 @@ pub struct LeaderStats {
     pub tracks_followed: u64,
     /// The seq of the last item applied.
     pub position: u64,
+    /// Transfers kept for peers that have not yet said their state is safe
+    /// past them (bounded: peers publish durable marks).
+    #[serde(default)]
+    pub transfers_kept: u64,
+    /// Snapshots written (each lets the journal start again empty).
+    #[serde(default)]
+    pub snapshots: u64,
 }
 super::versioned!(LeaderStats, "leader stats");

@@ -14,7 +14,7 @@
 
 use super::sensor_to_leader::{Growth, Item};
 
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Interest {
     leader: u16,
     follows: Vec<bool>,

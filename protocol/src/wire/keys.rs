@@ -11,6 +11,7 @@
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
+//! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
@@ -77,6 +78,14 @@ impl Keys {
 
     pub fn leader_sent(&self, leader: &str) -> String {
         format!("{}/leader/{leader}/sent", self.prefix)
+    }
+
+    pub fn leader_durable(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/durable", self.prefix)
+    }
+
+    pub fn every_leader_durable(&self) -> String {
+        format!("{}/leader/*/durable", self.prefix)
     }
 
     pub fn query_marginals(&self) -> String {

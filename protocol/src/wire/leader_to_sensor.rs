@@ -45,3 +45,21 @@ pub struct Resent {
     pub batches: Vec<Batch>,
 }
 super::versioned!(Resent, "resend reply");
+
+/// How far a leader's state is safe on disk (or, with no journal, applied):
+/// it will never ask for batches numbered below `batch` again, nor for the
+/// transfers of items at or before `position`. Published on
+/// `P/leader/<name>/durable` whenever it moves; the sensor drops what it
+/// keeps below it (its batch log, and items every leader has passed), and
+/// peers drop the transfers they keep for this leader. This is what keeps
+/// every log of a long-running deployment bounded.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Durable {
+    pub version: u16,
+    pub leader: String,
+    /// Every batch numbered below this one is applied and kept.
+    pub batch: u64,
+    /// Every item at or before this seq is applied and kept.
+    pub position: u64,
+}
+super::versioned!(Durable, "durable mark");

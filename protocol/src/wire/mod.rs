@@ -7,7 +7,8 @@
 //! - [`leader_to_leader`] — sets handed over at a cross-leader mix or a move;
 //!   a restarted leader's request for the transfers it missed.
 //! - [`leader_to_sensor`] — a request to follow more tracks, from a seq on;
-//!   a request for lost batches.
+//!   a request for lost batches; how far a leader's state is safe (what
+//!   the sensor and peers may stop keeping for it).
 //! - [`coordinator_to_sensor`] — a request for a cut of the stream.
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`interest`] — the routing rule both ends of the event stream apply.

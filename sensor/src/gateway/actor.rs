@@ -9,16 +9,19 @@
 //!
 //! Every batch sent is kept, by leader and number, so that a leader that
 //! lost some (a gap in the numbers, or the time it was down and
-//! restarting) gets them again on `P/sensor/<name>/resend`. The log lives
-//! in memory for the stream's life: the sensor is the source of truth of
-//! the stream, not a process this design lets die. [`Faults`] drops or
-//! doubles batches on purpose, for the tests that show neither matters.
+//! restarting) gets them again on `P/sensor/<name>/resend`, until the
+//! leader publishes a durable mark past it ([`BatchLog`]); items every
+//! leader has passed leave the router's log the same way. The logs live in
+//! memory: the sensor is the source of truth of the stream, not a process
+//! this design lets die. [`Faults`] drops or doubles batches on purpose,
+//! for the tests that show neither matters.
 
+use super::batch_log::BatchLog;
 use super::cuts::{place, Cuts, Placed, Request};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
@@ -95,6 +98,10 @@ pub async fn run(
         .declare_queryable(keys.sensor_resend(&config.name))
         .await
         .map_err(mesh("declare the resend queryable"))?;
+    let durables = session
+        .declare_subscriber(keys.every_leader_durable())
+        .await
+        .map_err(mesh("declare the durable-mark subscriber"))?;
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -117,7 +124,8 @@ pub async fn run(
     let limit = config.limit.unwrap_or(u64::MAX) as usize;
     let lines = &lines[..lines.len().min(limit)];
     let mut stream = Stream {
-        sent: vec![Vec::new(); names.len()],
+        sent: (0..names.len()).map(|_| BatchLog::default()).collect(),
+        durable: vec![None; names.len()],
         names: names.clone(),
         faults: config.faults,
         publishers,
@@ -195,6 +203,13 @@ pub async fn run(
                     stream.flush(&mut router).await;
                 }
             }
+            sample = durables.recv_async() => {
+                let Ok(sample) = sample else { break };
+                match decode::<Durable>(&sample.payload().to_bytes()) {
+                    Ok(mark) => stream.forget(&mark, &mut router),
+                    Err(e) => tracing::warn!(error = %e, "bad durable mark"),
+                }
+            }
             query = resends.recv_async() => {
                 let Ok(query) = query else { break };
                 let answer = decode::<Resend>(&payload(&query))
@@ -244,8 +259,10 @@ async fn reply_placed(placed: Placed) {
 }
 
 struct Stream {
-    /// Every batch sent to each leader; its number is its index.
-    sent: Vec<Vec<Batch>>,
+    /// The batches sent to each leader that it may still ask for.
+    sent: Vec<BatchLog>,
+    /// The last durable position each leader published.
+    durable: Vec<Option<u64>>,
     names: Vec<String>,
     faults: Faults,
     publishers: Vec<Publisher<'static>>,
@@ -259,7 +276,7 @@ impl Stream {
     async fn flush(&mut self, router: &mut Router) {
         let through = router.seq();
         for (i, publisher) in self.publishers.iter().enumerate() {
-            let number = self.sent[i].len() as u64;
+            let number = self.sent[i].next_number();
             let batch = Batch {
                 version: VERSION,
                 sensor: self.sensor.clone(),
@@ -300,8 +317,22 @@ impl Stream {
                     request.leader
                 )
             })?;
-        let from = (request.from as usize).min(sent.len());
-        Ok(sent[from..].to_vec())
+        sent.from(&request.leader, request.from)
+    }
+
+    /// A leader's state is safe through `mark`: drop its batches below it,
+    /// and the items every leader has passed.
+    fn forget(&mut self, mark: &Durable, router: &mut Router) {
+        let Some(i) = self.names.iter().position(|n| *n == mark.leader) else {
+            tracing::warn!(leader = %mark.leader, "durable mark from a leader not of this stream");
+            return;
+        };
+        let batches = self.sent[i].forget(mark);
+        self.durable[i] = Some(self.durable[i].unwrap_or(0).max(mark.position));
+        let passed = self.durable.iter().copied().min().flatten();
+        let items = passed.map_or(0, |seq| router.forget(seq));
+        tracing::trace!(leader = %mark.leader, batches, items, kept = self.sent[i].len(),
+            logged = router.logged(), "forgot what is safe");
     }
 }
 

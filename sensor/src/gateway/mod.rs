@@ -6,8 +6,11 @@
 //! - [`actor`] — publishes the stream over Zenoh at a rate, places cuts for
 //!   queries and answers leaders' follow requests.
 //! - [`cuts`] — cut requests: now, or at a future event count.
+//! - [`batch_log`] — the batches sent each leader, kept until it says its
+//!   state is safe past them.
 
 pub mod actor;
+pub mod batch_log;
 pub mod cuts;
 pub mod router;
 

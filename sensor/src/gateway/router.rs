@@ -290,6 +290,20 @@ impl Router {
         Ok(missed)
     }
 
+    /// Every leader has its state safe through item `seq`: no follow
+    /// request will ask for items at or before it again, so the log drops
+    /// them. Returns how many it dropped.
+    pub fn forget(&mut self, seq: u64) -> usize {
+        let through = self.log.partition_point(|s| s.seq <= seq);
+        self.log.drain(..through);
+        through
+    }
+
+    /// Items kept for follow requests.
+    pub fn logged(&self) -> usize {
+        self.log.len()
+    }
+
     /// The items queued for leader `i` since the last call.
     pub fn take(&mut self, i: usize) -> Vec<Sequenced> {
         std::mem::take(&mut self.outbox[i])
