@@ -27,6 +27,10 @@ pub enum GatherError {
     },
     #[error("{0}")]
     Failed(String),
+    /// Leaders answered, but not all with their share at the cut (one is
+    /// recovering, waits for a peer that is down, …).
+    #[error("degraded: {0}; no partial answer is given")]
+    Refused(String),
     #[error("the belief has no mass at this cut: the observations contradict each other")]
     Degenerate,
 }
@@ -215,7 +219,7 @@ fn check(
         ));
     }
     if !errors.is_empty() {
-        return Err(GatherError::Failed(errors.join("; ")));
+        return Err(GatherError::Refused(errors.join("; ")));
     }
     let missing: Vec<String> = cut
         .leaders

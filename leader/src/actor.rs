@@ -25,7 +25,7 @@ use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
-use idmesh_protocol::wire::{decode, encode, VERSION};
+use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
@@ -35,7 +35,13 @@ use zenoh::Session;
 
 #[derive(Debug, Clone)]
 pub struct LeaderConfig {
+    /// The role: the leader's name in the stream and on its keys.
     pub name: String,
+    /// The process running it (itself, or the one that adopted the role).
+    pub host: String,
+    /// The role was adopted from a process gone for good: catch up even if
+    /// its journal is empty.
+    pub adopted: bool,
     pub keys: Keys,
     /// The sensor gateway to ask when sets bring tracks to follow.
     pub sensor: String,
@@ -45,6 +51,9 @@ pub struct LeaderConfig {
     /// Where to keep the input journal; None = no journal (a leader that
     /// dies cannot come back).
     pub journal: Option<JournalOptions>,
+    /// Write a snapshot (and start the journal again) after this many
+    /// inputs; None = never (the journal grows with the stream).
+    pub snapshot_every: Option<usize>,
 }
 
 /// Replies to the gets the leader makes, back in its one task.
@@ -95,31 +104,44 @@ pub async fn run(
         .await
         .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
-    let mut leader = Leader::new(name.clone());
-    let mut failure: Option<String> = None;
-    let mut journal = None;
-    if let Some(options) = &config.journal {
-        let (opened, entries) = Journal::open(options)?;
-        journal = Some(opened);
-        if !entries.is_empty() {
-            let started = Instant::now();
-            for entry in &entries {
-                if let Err(e) = feed(&mut leader, entry.kind, &entry.bytes) {
-                    failure.get_or_insert(format!("replaying the journal: {e}"));
-                }
-            }
-            tracing::info!(leader = %name, entries = entries.len(), position = leader.position(),
-                seconds = started.elapsed().as_secs_f64(), "journal replayed");
-            catch_up(&session, &config, &mut leader, &reply_tx).await;
-        }
-    }
-    // Declared last: whoever sees the token can use everything above.
+    // The token claims the role (a process coming back finds it taken);
+    // queries meanwhile are told the leader is recovering.
     let _token = session
         .liveliness()
         .declare_token(keys.alive("leader", &name))
         .await
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
-    tracing::info!(leader = %name, "leader up");
+    let mut leader = Leader::new(name.clone());
+    leader.set_host(&config.host);
+    let mut failure: Option<String> = None;
+    let mut journal = None;
+    let mut recovery: Option<Recovery> = None;
+    if let Some(options) = &config.journal {
+        let (opened, recovered) = Journal::open(options)?;
+        journal = Some(opened);
+        if !recovered.is_empty() || config.adopted {
+            let started = Instant::now();
+            if let Some(snapshot) = &recovered.snapshot {
+                leader = Leader::restore(snapshot)?;
+                leader.set_host(&config.host);
+            }
+            for entry in &recovered.entries {
+                if let Err(e) = feed(&mut leader, entry.kind, &entry.bytes) {
+                    failure.get_or_insert(format!("replaying the journal: {e}"));
+                }
+            }
+            tracing::info!(leader = %name, snapshot = recovered.snapshot.is_some(),
+                entries = recovered.entries.len(), position = leader.position(),
+                seconds = started.elapsed().as_secs_f64(), "state recovered");
+            let peers = catch_up(&session, &config, &mut leader, &reply_tx).await;
+            recovery = Some(Recovery {
+                since: started,
+                batches: false,
+                peers,
+            });
+        }
+    }
+    tracing::info!(leader = %name, host = %config.host, "leader up");
 
     let mut held: Vec<Held> = Vec::new();
     let mut resending = false;
@@ -150,7 +172,12 @@ pub async fn run(
                 Some(Reply::Resent(result)) => {
                     resending = false;
                     match result {
-                        Ok(batches) => batches.iter().map(|b| (Kind::Batch, encode(b))).collect(),
+                        Ok(batches) => {
+                            if let Some(r) = &mut recovery {
+                                r.batches = true;
+                            }
+                            batches.iter().map(|b| (Kind::Batch, encode(b))).collect()
+                        }
                         Err(e) => {
                             tracing::warn!(leader = %name, error = %e, "resend request failed; asking again");
                             continue;
@@ -158,21 +185,32 @@ pub async fn run(
                     }
                 }
                 Some(Reply::Transfers(Ok(sent))) => {
+                    if let Some(r) = &mut recovery {
+                        r.peers = r.peers.saturating_sub(1);
+                    }
                     sent.iter().map(|t| (Kind::Transfer, encode(t))).collect()
                 }
                 Some(Reply::Transfers(Err(e))) => {
+                    // A peer that is down itself sends its transfers again
+                    // when it comes back.
+                    if let Some(r) = &mut recovery {
+                        r.peers = r.peers.saturating_sub(1);
+                    }
                     tracing::warn!(leader = %name, error = %e, "a peer did not resend its transfers");
                     continue;
                 }
             },
             query = partials.recv_async() => {
                 let Ok(query) = query else { break };
-                answer_partial(&leader, &failure, query, &mut held).await;
+                let recovering = recovery.as_ref().map(|r| r.since);
+                let answer = partial_answer(&leader, &failure, recovering, &query);
+                answer_partial(answer, query, &mut held).await;
                 continue;
             }
             query = sent.recv_async() => {
                 let Ok(query) = query else { break };
-                answer_sent(&leader, query).await;
+                let answer = sent_answer(&leader, &query);
+                answer_sent(answer, query).await;
                 continue;
             }
             sample = durables.recv_async() => {
@@ -205,7 +243,8 @@ pub async fn run(
                 // A gap, or a cut that is late (the batch with it, or the
                 // last of the stream, may be lost): ask for the batches again.
                 let late = held.iter().any(|h| h.since.elapsed() > Duration::from_millis(500));
-                if !resending && (leader.missing_batches().is_some() || late) {
+                let unanswered = recovery.as_ref().is_some_and(|r| !r.batches);
+                if !resending && (leader.missing_batches().is_some() || late || unanswered) {
                     resending = true;
                     resend(&session, &config, &leader, &reply_tx);
                 }
@@ -254,6 +293,28 @@ pub async fn run(
             resending = true;
             resend(&session, &config, &leader, &reply_tx);
         }
+        if recovery
+            .as_ref()
+            .is_some_and(|r| r.batches && r.peers == 0 && leader.missing_batches().is_none())
+        {
+            let seconds = recovery.take().map_or(0.0, |r| r.since.elapsed().as_secs_f64());
+            leader.note_recovered(seconds);
+            tracing::info!(leader = %name, host = %config.host, seconds, position = leader.position(), "caught up");
+        }
+        // Every input journaled is applied: the state can replace them.
+        if let (Some(j), Some(every)) = (&mut journal, config.snapshot_every) {
+            if j.entries() >= every {
+                let started = Instant::now();
+                leader.note_snapshot();
+                match j.compact(&leader.snapshot()) {
+                    Ok(()) => tracing::debug!(leader = %name, seconds = started.elapsed().as_secs_f64(), "snapshot written"),
+                    Err(e) => {
+                        tracing::error!(leader = %name, error = %e, "cannot write a snapshot");
+                        failure = Some(e.to_string());
+                    }
+                }
+            }
+        }
     }
     if let Some(j) = &mut journal {
         let _ = j.sync();
@@ -277,6 +338,7 @@ fn feed(leader: &mut Leader, kind: Kind, bytes: &[u8]) -> Result<Vec<Action>, St
             let followed = decode::<Followed>(bytes).map_err(|e| e.to_string())?;
             leader.followed(followed.items)
         }
+        Kind::Generation => return Ok(Vec::new()),
     };
     applied.map_err(|e| e.to_string())
 }
@@ -332,13 +394,24 @@ async fn send(
         .map_err(|e| format!("could not send sets to {peer}: {e}"))
 }
 
+/// A leader restarted (or adopted) and not yet caught up.
+struct Recovery {
+    since: Instant,
+    /// The sensor has answered the resend of what the journal misses.
+    batches: bool,
+    /// Peers yet to answer the request for transfers.
+    peers: usize,
+}
+
 /// After a restart: everything sent and received while down, again.
+/// Returns how many peers were asked for their transfers.
 async fn catch_up(
     session: &Session,
     config: &LeaderConfig,
     leader: &mut Leader,
     reply_tx: &mpsc::UnboundedSender<Reply>,
-) {
+) -> usize {
+    let mut asked = 0;
     for (to, transfer) in leader.all_sent().to_vec() {
         if let Err(e) = send(session, &config.keys, leader, to, &transfer).await {
             tracing::warn!(leader = %config.name, error = %e, "could not resend a transfer");
@@ -352,6 +425,7 @@ async fn catch_up(
             after: leader.position(),
         });
         for peer in leader.leaders().iter().filter(|p| **p != config.name) {
+            asked += 1;
             spawn_ask(
                 session,
                 config.keys.leader_sent(peer),
@@ -372,6 +446,7 @@ async fn catch_up(
         ask_to_follow(session, config, follow, reply_tx);
     }
     tracing::info!(leader = %config.name, next_batch = leader.next_batch(), position = leader.position(), "catching up");
+    asked
 }
 
 /// Asks the sensor to route more tracks here, with the items missed.
@@ -432,23 +507,22 @@ fn spawn_ask(
 }
 
 /// A peer restarted and asks for the transfers it lost.
-async fn answer_sent(leader: &Leader, query: Query) {
+fn sent_answer(leader: &Leader, query: &Query) -> Result<Vec<u8>, WireError> {
     let request = query
         .payload()
         .map(|p| p.to_bytes().into_owned())
         .unwrap_or_default();
-    let reply = match decode::<TransfersWanted>(&request) {
-        Ok(wanted) => {
-            query
-                .reply(
-                    query.key_expr().clone(),
-                    encode(&TransfersSent {
-                        version: VERSION,
-                        transfers: leader.sent_to(wanted.to, wanted.after),
-                    }),
-                )
-                .await
-        }
+    decode::<TransfersWanted>(&request).map(|wanted| {
+        encode(&TransfersSent {
+            version: VERSION,
+            transfers: leader.sent_to(wanted.to, wanted.after),
+        })
+    })
+}
+
+async fn answer_sent(answer: Result<Vec<u8>, WireError>, query: Query) {
+    let reply = match answer {
+        Ok(body) => query.reply(query.key_expr().clone(), body).await,
         Err(e) => query.reply_err(e.to_string()).await,
     };
     if let Err(e) = reply {
@@ -488,49 +562,65 @@ struct Held {
     query: Query,
 }
 
-async fn answer_partial(
+/// What a partial-sums query gets.
+enum Answer {
+    Now(Partial),
+    Refused(String),
+    /// Its cut has not reached this leader yet.
+    Hold(u64),
+}
+
+/// Sends `answer` (made by [`partial_answer`] beforehand: the leader is
+/// not shared across an await) or holds the query for its cut.
+async fn answer_partial(answer: Answer, query: Query, held: &mut Vec<Held>) {
+    match answer {
+        Answer::Now(partial) => reply_partial(&query, &partial).await,
+        Answer::Refused(why) => {
+            let _ = query.reply_err(why).await;
+        }
+        Answer::Hold(tag) => held.push(Held {
+            tag,
+            since: Instant::now(),
+            query,
+        }),
+    }
+}
+
+fn partial_answer(
     leader: &Leader,
     failure: &Option<String>,
-    query: Query,
-    held: &mut Vec<Held>,
-) {
+    recovering: Option<Instant>,
+    query: &Query,
+) -> Answer {
     if let Some(failure) = failure {
-        let _ = query
-            .reply_err(format!("leader {} failed: {failure}", leader.name()))
-            .await;
-        return;
+        return Answer::Refused(format!("leader {} failed: {failure}", leader.name()));
+    }
+    if let Some(since) = recovering {
+        return Answer::Refused(format!(
+            "degraded: leader {} is recovering its state (for {:.1} s); ask again shortly",
+            leader.name(),
+            since.elapsed().as_secs_f64()
+        ));
     }
     if query.parameters().contains_key("quiet") {
         // `;rows`: an identity query wants the rows of the information matrix.
-        match leader.quiet(query.parameters().contains_key("rows")) {
-            Some(partial) => reply_partial(&query, &partial).await,
-            None => {
-                let _ = query
-                    .reply_err(format!("leader {} is not at a quiet point", leader.name()))
-                    .await;
-            }
-        }
-        return;
+        return match leader.quiet(query.parameters().contains_key("rows")) {
+            Some(partial) => Answer::Now(partial),
+            None => Answer::Refused(format!("leader {} is not at a quiet point", leader.name())),
+        };
     }
     let tag = query
         .parameters()
         .get("tag")
         .and_then(|c| c.parse::<u64>().ok());
     let Some(tag) = tag else {
-        let _ = query
-            .reply_err(
-                "a partial-sums query needs tag=<u64> (the tag of the cut it asks for) or quiet",
-            )
-            .await;
-        return;
+        return Answer::Refused(
+            "a partial-sums query needs tag=<u64> (the tag of the cut it asks for) or quiet".into(),
+        );
     };
     match leader.cut(tag) {
-        Some(partial) => reply_partial(&query, partial).await,
-        None => held.push(Held {
-            tag,
-            since: Instant::now(),
-            query,
-        }),
+        Some(partial) => Answer::Now(partial.clone()),
+        None => Answer::Hold(tag),
     }
 }
 

@@ -40,4 +40,6 @@ pub enum RunError {
     Mesh(#[from] MeshError),
     #[error(transparent)]
     Journal(#[from] crate::journal::JournalError),
+    #[error("cannot restore the leader: {0}")]
+    Restore(#[from] LeaderError),
 }

@@ -1,20 +1,27 @@
-//! The leader's durable input log: every message the [`Leader`] state
-//! machine is fed (stream batches, peers' transfers, follow replies) is
-//! appended here, as the bytes that came off the wire, before it is applied.
-//! The state machine is deterministic, so replaying the journal in order
-//! rebuilds exactly the state the process had when it died, bit for bit —
-//! the event log of the reliability issue, kept at the input rather than
-//! the state so that no state needs a serialized form.
+//! The leader's durable state: a snapshot plus an input log. Every message
+//! the [`Leader`] state machine is fed (stream batches, peers' transfers,
+//! follow replies) is appended to the journal, as the bytes that came off
+//! the wire, before it is applied. The state machine is deterministic, so
+//! the snapshot plus the journal replayed in order rebuild exactly the
+//! state the process had when it died.
 //!
 //! Frame: kind (1 byte), length (u32, little-endian), the message. A crash
 //! can tear only the last frame; [`Journal::open`] reads up to the last
 //! whole frame and cuts the file there.
 //!
+//! Compaction ([`Journal::compact`]): the whole state is written to
+//! `<journal>.snapshot` (to a temporary file, fsynced, renamed over the
+//! old one), then the journal starts again empty. Both carry a generation:
+//! the journal's first frame names the snapshot it continues, so a crash
+//! between the two steps leaves a journal whose entries are already in the
+//! snapshot, and it is dropped rather than applied twice.
+//!
 //! Durability: every append is written to the file before the message is
 //! applied, so a killed process (SIGKILL, a panic) loses nothing. It is
 //! fsynced at most every [`JournalOptions::fsync_every`]: a power cut can
 //! lose that window, which the restarted leader fetches again from the
-//! sensor and its peers like anything else it missed (see the actor).
+//! sensor and its peers like anything else it missed (see the actor). The
+//! leader tells the others how far it is safe only after an fsync.
 //!
 //! [`Leader`]: crate::state::Leader
 
@@ -32,6 +39,9 @@ pub enum Kind {
     Transfer = 2,
     /// The sensor's `Followed` reply.
     Followed = 3,
+    /// The first frame: the generation of the snapshot this journal
+    /// continues (u64, little-endian). Not an input.
+    Generation = 4,
 }
 
 impl Kind {
@@ -40,6 +50,7 @@ impl Kind {
             1 => Some(Kind::Batch),
             2 => Some(Kind::Transfer),
             3 => Some(Kind::Followed),
+            4 => Some(Kind::Generation),
             _ => None,
         }
     }
@@ -66,6 +77,8 @@ pub enum JournalError {
         path: String,
         source: std::io::Error,
     },
+    #[error("snapshot {path}: {problem}")]
+    Snapshot { path: String, problem: String },
     #[error("journal {path}: entry {entry} at byte {offset} has unknown kind {kind}")]
     Corrupt {
         path: String,
@@ -82,15 +95,37 @@ pub struct Journal {
     fsync_every: Duration,
     synced: Instant,
     dirty: bool,
+    /// The generation of the snapshot the entries continue (0: none).
+    generation: u64,
+    /// Entries appended since the snapshot.
+    entries: usize,
+}
+
+/// What a journal held when it was opened.
+#[derive(Debug, Default)]
+pub struct Recovered {
+    /// The state as of the last compaction, if there was one.
+    pub snapshot: Option<Vec<u8>>,
+    /// The inputs since, in order.
+    pub entries: Vec<Entry>,
+}
+
+impl Recovered {
+    pub fn is_empty(&self) -> bool {
+        self.snapshot.is_none() && self.entries.is_empty()
+    }
 }
 
 /// Frames larger than this are not ours: a torn length, or garbage.
 const MAX_FRAME: u32 = 1 << 30;
 
+/// The first bytes of a snapshot file.
+const SNAPSHOT_MAGIC: &[u8; 8] = b"idmesh/1";
+
 impl Journal {
-    /// Opens (or creates) the journal and returns the entries already in
-    /// it, in order; a torn last frame is cut off.
-    pub fn open(options: &JournalOptions) -> Result<(Journal, Vec<Entry>), JournalError> {
+    /// Opens (or creates) the journal and returns the snapshot and the
+    /// entries after it, in order; a torn last frame is cut off.
+    pub fn open(options: &JournalOptions) -> Result<(Journal, Recovered), JournalError> {
         let path = options.path.clone();
         let io = |source| JournalError::Io {
             path: path.display().to_string(),
@@ -99,29 +134,92 @@ impl Journal {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(io)?;
         }
+        let (generation, snapshot) = match read_snapshot(&snapshot_path(&path))? {
+            Some((generation, bytes)) => (generation, Some(bytes)),
+            None => (0, None),
+        };
         let mut file = OpenOptions::new()
             .read(true)
             .append(true)
             .create(true)
             .open(&path)
             .map_err(io)?;
-        let (entries, whole) = read_entries(&mut file, &path)?;
+        let (mut entries, whole) = read_entries(&mut file, &path)?;
         let length = file.metadata().map_err(io)?.len();
         if whole < length {
             tracing::warn!(journal = %path.display(), torn = length - whole, "cutting a torn last entry");
             file.set_len(whole).map_err(io)?;
         }
+        let continues = match entries.first() {
+            Some(e) if e.kind == Kind::Generation => generation_of(&e.bytes),
+            _ => 0,
+        };
+        if entries.first().is_some_and(|e| e.kind == Kind::Generation) {
+            entries.remove(0);
+        }
         file.seek(SeekFrom::End(0)).map_err(io)?;
-        Ok((
-            Journal {
-                file,
-                path,
-                fsync_every: options.fsync_every,
-                synced: Instant::now(),
-                dirty: false,
-            },
-            entries,
-        ))
+        let mut journal = Journal {
+            file,
+            path: path.clone(),
+            fsync_every: options.fsync_every,
+            synced: Instant::now(),
+            dirty: false,
+            generation,
+            entries: entries.len(),
+        };
+        if continues > generation {
+            return Err(JournalError::Snapshot {
+                path: snapshot_path(&path).display().to_string(),
+                problem: format!(
+                    "the journal continues snapshot {continues}, but the snapshot is {generation}"
+                ),
+            });
+        }
+        if continues < generation || length == 0 {
+            // A crash between writing a snapshot and starting the journal
+            // again: its entries are in the snapshot. Or a new journal.
+            if continues < generation {
+                tracing::info!(journal = %path.display(), entries = entries.len(), "entries already in the snapshot are dropped");
+            }
+            entries.clear();
+            journal.restart()?;
+        }
+        Ok((journal, Recovered { snapshot, entries }))
+    }
+
+    /// Inputs appended since the last snapshot.
+    pub fn entries(&self) -> usize {
+        self.entries
+    }
+
+    /// Writes `state` (the whole leader, as of every entry appended) as
+    /// the new snapshot and starts the journal again empty.
+    pub fn compact(&mut self, state: &[u8]) -> Result<(), JournalError> {
+        let next = self.generation + 1;
+        let target = snapshot_path(&self.path);
+        let mut body = Vec::with_capacity(16 + state.len());
+        body.extend_from_slice(SNAPSHOT_MAGIC);
+        body.extend_from_slice(&next.to_le_bytes());
+        body.extend_from_slice(state);
+        write_durably(&target, &body).map_err(|e| self.io(e))?;
+        self.generation = next;
+        self.restart()
+    }
+
+    /// Replaces the journal with one that holds only its generation frame.
+    fn restart(&mut self) -> Result<(), JournalError> {
+        let mut frame = vec![Kind::Generation as u8];
+        frame.extend_from_slice(&8u32.to_le_bytes());
+        frame.extend_from_slice(&self.generation.to_le_bytes());
+        write_durably(&self.path, &frame).map_err(|e| self.io(e))?;
+        self.file = OpenOptions::new()
+            .append(true)
+            .open(&self.path)
+            .map_err(|e| self.io(e))?;
+        self.entries = 0;
+        self.dirty = false;
+        self.synced = Instant::now();
+        Ok(())
     }
 
     /// Writes one entry through to the file (fsync per the policy).
@@ -132,6 +230,7 @@ impl Journal {
         frame.extend_from_slice(bytes);
         self.file.write_all(&frame).map_err(|e| self.io(e))?;
         self.dirty = true;
+        self.entries += 1;
         if self.synced.elapsed() >= self.fsync_every {
             self.sync()?;
         }
@@ -199,6 +298,56 @@ fn read_entries(file: &mut File, path: &Path) -> Result<(Vec<Entry>, u64), Journ
     Ok((entries, whole))
 }
 
+fn snapshot_path(journal: &Path) -> PathBuf {
+    let mut name = journal.as_os_str().to_owned();
+    name.push(".snapshot");
+    PathBuf::from(name)
+}
+
+fn generation_of(bytes: &[u8]) -> u64 {
+    bytes
+        .try_into()
+        .map(u64::from_le_bytes)
+        .unwrap_or_default()
+}
+
+/// The snapshot's generation and state, if there is one.
+fn read_snapshot(path: &Path) -> Result<Option<(u64, Vec<u8>)>, JournalError> {
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => {
+            return Err(JournalError::Io {
+                path: path.display().to_string(),
+                source,
+            })
+        }
+    };
+    if bytes.len() < 16 || &bytes[..8] != SNAPSHOT_MAGIC {
+        return Err(JournalError::Snapshot {
+            path: path.display().to_string(),
+            problem: "not an idmesh snapshot (bad header)".into(),
+        });
+    }
+    Ok(Some((generation_of(&bytes[8..16]), bytes[16..].to_vec())))
+}
+
+/// Writes `body` to `path` so that a crash leaves the old file or the new
+/// one, whole: a temporary file, fsynced, renamed over, the folder fsynced.
+fn write_durably(path: &Path, body: &[u8]) -> std::io::Result<()> {
+    let mut temporary = path.as_os_str().to_owned();
+    temporary.push(".tmp");
+    let temporary = PathBuf::from(temporary);
+    let mut file = File::create(&temporary)?;
+    file.write_all(body)?;
+    file.sync_all()?;
+    std::fs::rename(&temporary, path)?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        File::open(dir)?.sync_all()?;
+    }
+    Ok(())
+}
+
 enum Filled {
     Full,
     /// The file ended first (a torn frame, or the clean end at 0 bytes).
@@ -224,6 +373,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("idmesh-journal-{}", std::process::id()));
         let path = dir.join(name);
         let _ = std::fs::remove_file(&path);
+        let _ = std::fs::remove_file(snapshot_path(&path));
         JournalOptions {
             path,
             fsync_every: Duration::from_millis(100),
@@ -235,18 +385,19 @@ mod tests {
         let options = options("order");
         let (mut journal, old) = Journal::open(&options).unwrap();
         assert!(old.is_empty());
+        let _ = std::fs::remove_file(snapshot_path(&options.path));
         journal.append(Kind::Batch, b"first").unwrap();
         journal.append(Kind::Transfer, b"").unwrap();
         journal.append(Kind::Followed, &[7; 300]).unwrap();
         drop(journal);
-        let (mut journal, entries) = Journal::open(&options).unwrap();
+        let (mut journal, Recovered { entries, .. }) = Journal::open(&options).unwrap();
         let kinds: Vec<Kind> = entries.iter().map(|e| e.kind).collect();
         assert_eq!(kinds, [Kind::Batch, Kind::Transfer, Kind::Followed]);
         assert_eq!(entries[0].bytes, b"first");
         assert_eq!(entries[2].bytes.len(), 300);
         journal.append(Kind::Batch, b"fourth").unwrap();
         drop(journal);
-        assert_eq!(Journal::open(&options).unwrap().1.len(), 4);
+        assert_eq!(Journal::open(&options).unwrap().1.entries.len(), 4);
     }
 
     #[test]
@@ -259,11 +410,11 @@ mod tests {
         let mut file = OpenOptions::new().append(true).open(&options.path).unwrap();
         file.write_all(&[1, 10, 0, 0, 0, b'h', b'a']).unwrap();
         drop(file);
-        let (mut journal, entries) = Journal::open(&options).unwrap();
+        let (mut journal, Recovered { entries, .. }) = Journal::open(&options).unwrap();
         assert_eq!(entries.len(), 1);
         journal.append(Kind::Transfer, b"next").unwrap();
         drop(journal);
-        let entries = Journal::open(&options).unwrap().1;
+        let entries = Journal::open(&options).unwrap().1.entries;
         assert_eq!(entries.len(), 2);
         assert_eq!(entries[1].bytes, b"next");
     }
@@ -275,5 +426,58 @@ mod tests {
         std::fs::write(&options.path, [9u8, 0, 0, 0, 0]).unwrap();
         let error = Journal::open(&options).err().expect("refused");
         assert!(error.to_string().contains("entry 0 at byte 0"), "{error}");
+    }
+
+    #[test]
+    fn a_snapshot_replaces_the_entries_before_it() {
+        let options = options("compact");
+        let (mut journal, _) = Journal::open(&options).unwrap();
+        journal.append(Kind::Batch, b"one").unwrap();
+        journal.append(Kind::Batch, b"two").unwrap();
+        journal.compact(b"state after two").unwrap();
+        assert_eq!(journal.entries(), 0);
+        journal.append(Kind::Transfer, b"three").unwrap();
+        drop(journal);
+        let (mut journal, recovered) = Journal::open(&options).unwrap();
+        assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after two"[..]));
+        assert_eq!(recovered.entries.len(), 1);
+        assert_eq!(recovered.entries[0].bytes, b"three");
+        // A second compaction, then more: still only what came after.
+        journal.compact(b"state after three").unwrap();
+        journal.append(Kind::Batch, b"four").unwrap();
+        drop(journal);
+        let (_, recovered) = Journal::open(&options).unwrap();
+        assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after three"[..]));
+        let bytes: Vec<&[u8]> = recovered.entries.iter().map(|e| &e.bytes[..]).collect();
+        assert_eq!(bytes, [&b"four"[..]]);
+    }
+
+    #[test]
+    fn a_crash_between_snapshot_and_new_journal_applies_nothing_twice() {
+        let options = options("between");
+        let (mut journal, _) = Journal::open(&options).unwrap();
+        journal.append(Kind::Batch, b"one").unwrap();
+        journal.append(Kind::Batch, b"two").unwrap();
+        let before = std::fs::read(&options.path).unwrap();
+        journal.compact(b"state after two").unwrap();
+        drop(journal);
+        // The journal as it was: the crash came before it started again.
+        std::fs::write(&options.path, before).unwrap();
+        let (mut journal, recovered) = Journal::open(&options).unwrap();
+        assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after two"[..]));
+        assert!(recovered.entries.is_empty(), "one and two are in the snapshot");
+        journal.append(Kind::Batch, b"three").unwrap();
+        drop(journal);
+        assert_eq!(Journal::open(&options).unwrap().1.entries.len(), 1);
+    }
+
+    #[test]
+    fn a_snapshot_that_is_not_ours_is_an_error_naming_it() {
+        let options = options("foreign");
+        std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
+        std::fs::write(snapshot_path(&options.path), b"garbage").unwrap();
+        let error = Journal::open(&options).err().expect("refused");
+        assert!(error.to_string().contains("foreign.snapshot"), "{error}");
+        assert!(error.to_string().contains("bad header"), "{error}");
     }
 }

@@ -8,12 +8,17 @@
 //!
 //! A map of the crate:
 //! - [`state`] — [`Leader`], the protocol as a pure state machine.
-//! - [`actor`] — the tokio/Zenoh process around it: [`actor::run`].
-//! - [`journal`] — the durable input log a restarted leader replays.
+//! - [`actor`] — the tokio/Zenoh actor around it, one per role:
+//!   [`actor::run`].
+//! - [`host`] — the leader process: its own role, and the roles of
+//!   processes gone for good that it adopts ([`host::run`]).
+//! - [`journal`] — the durable state: a snapshot plus the input log a
+//!   restarted (or adopted) leader replays.
 //! - [`error`] — [`LeaderError`].
 
 pub mod actor;
 pub mod error;
+pub mod host;
 pub mod journal;
 pub mod state;
 

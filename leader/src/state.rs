@@ -155,6 +155,17 @@ impl Leader {
         postcard::from_bytes(bytes).map_err(|e| LeaderError::Snapshot(e.to_string()))
     }
 
+    /// Names the process running this leader (for its counters).
+    pub fn set_host(&mut self, host: &str) {
+        self.stats.host = host.to_string();
+    }
+
+    /// How long the last recovery (restart or adoption) took to catch up.
+    pub fn note_recovered(&mut self, seconds: f64) {
+        self.stats.recoveries += 1;
+        self.stats.recovery_seconds = seconds;
+    }
+
     /// Counts a snapshot taken.
     pub fn note_snapshot(&mut self) {
         self.stats.snapshots += 1;

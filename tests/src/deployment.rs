@@ -19,6 +19,12 @@ pub struct Settings {
     pub rate: Option<f64>,
     /// Leaders journal their inputs (`state_dir`), so they can restart.
     pub journal: bool,
+    /// Inputs between a leader's snapshots (`snapshot_every`; None = the
+    /// default).
+    pub snapshot_every: Option<usize>,
+    /// How long a leader process may be gone before its role is adopted
+    /// (`takeover_after_ms`; None = the default).
+    pub takeover_after_ms: Option<u64>,
     /// The sensor's `[sensor.faults]` section, e.g. `duplicate = true`.
     pub faults: Option<String>,
 }
@@ -153,6 +159,12 @@ impl Deployment {
         if settings.journal {
             toml.insert_str(0, "state_dir = \"state\"\n");
         }
+        if let Some(every) = settings.snapshot_every {
+            toml.insert_str(0, &format!("snapshot_every = {every}\n"));
+        }
+        if let Some(ms) = settings.takeover_after_ms {
+            toml.insert_str(0, &format!("takeover_after_ms = {ms}\n"));
+        }
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
         }
@@ -284,6 +296,25 @@ impl Deployment {
                     .unwrap_or_else(|| panic!("{field} in {l}"))
             })
             .sum()
+    }
+
+    /// [`Deployment::leaders_total`] once `wanted` holds of it, or its
+    /// last value after `patience` (counters that settle after the stream,
+    /// such as what is kept for others).
+    pub fn leaders_total_when(
+        &self,
+        field: &str,
+        patience: Duration,
+        wanted: impl Fn(u64) -> bool,
+    ) -> u64 {
+        let started = Instant::now();
+        loop {
+            let total = self.leaders_total(field);
+            if wanted(total) || started.elapsed() > patience {
+                return total;
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
     }
 
     pub fn log(&self) -> String {

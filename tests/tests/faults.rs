@@ -1,5 +1,6 @@
 //! Faults, with real processes on loopback: a leader killed in the middle
-//! of a stream and started again, and a network that loses and doubles
+//! of a stream and started again, a leader killed for good (its role
+//! adopted by another process), and a network that loses and doubles
 //! batches, change no answer — the final marginals equal the centralized
 //! engine's to 1e-9 (exact conditioning, no pruning), so no event was lost
 //! and none applied twice.
@@ -57,7 +58,16 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
         leaders: 4,
         rate: Some(500.0),
         journal: true,
+        // Small, so that the killed leader comes back from a snapshot and
+        // the journal after it.
+        snapshot_every: Some(40),
+        // Restarted, not replaced: no adoption however slow the restart.
+        takeover_after_ms: Some(0),
         ..Settings::default()
+    };
+    let settings_gone = Settings {
+        takeover_after_ms: Some(1500),
+        ..settings.clone()
     };
 
     let calm = Deployment::start_each("calm", &trace, &settings);
@@ -89,6 +99,57 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     );
     assert_same_marginals(&last, &expected, "after a crash");
     assert_eq!(applied(&crashed), calm_applied);
+    assert!(
+        crashed.leaders_total("snapshots") > 0,
+        "leaders wrote snapshots"
+    );
+    // Every transfer was received and made safe: none is kept any more.
+    let kept = crashed.leaders_total_when("transfers_kept", Duration::from_secs(10), |k| k == 0);
+    assert_eq!(kept, 0, "transfers kept after every leader made them safe");
+    let back = leader_stats(&crashed, "leader-1");
+    assert_eq!(back["host"], "leader-1");
+    eprintln!(
+        "leader-1 restarted: caught up {:.3} s after it started again",
+        back["recovery_seconds"].as_f64().unwrap()
+    );
+    drop(crashed);
+
+    // Killed for good: after `takeover_after_ms` the next live leader
+    // process (leader-2) adopts the role from its snapshot and journal and
+    // fetches the rest; meanwhile answers are refused as degraded.
+    let mut gone = Deployment::start_each("gone", &trace, &settings_gone);
+    let first = gone.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    std::thread::sleep(Duration::from_millis(400));
+    gone.kill("leader-1");
+    let killed = Instant::now();
+    let error = gone
+        .query(&["marginals"])
+        .expect_err("no answer while leader-1's role has no process");
+    assert!(error.contains("degraded"), "the error says so: {error}");
+    let last = gone.final_marginals(Duration::from_secs(90));
+    assert_same_marginals(&last, &expected, "after a takeover");
+    assert_eq!(applied(&gone), calm_applied);
+    let adopted = leader_stats(&gone, "leader-1");
+    assert_eq!(adopted["host"], "leader-2", "the next live process adopted it");
+    assert!(adopted["recoveries"].as_u64().unwrap() >= 1);
+    eprintln!(
+        "leader-1 gone for good: adopted and caught up {:.3} s after recovery began; final answer {:.2} s after the kill",
+        adopted["recovery_seconds"].as_f64().unwrap(),
+        killed.elapsed().as_secs_f64()
+    );
+}
+
+/// One leader's counters.
+fn leader_stats(deployment: &Deployment, leader: &str) -> Value {
+    let stats = deployment.query(&["stats"]).expect("stats");
+    stats[0]["leaders"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|l| l["leader"] == leader)
+        .unwrap_or_else(|| panic!("{leader} in the stats"))
+        .clone()
 }
 
 /// Every batch published twice and every fifth not at all: leaders drop
@@ -120,4 +181,7 @@ fn lost_and_doubled_batches_change_no_answer() {
         "doubles were seen"
     );
     assert!(deployment.leaders_total("gaps") > 0, "gaps were seen");
+    let kept =
+        deployment.leaders_total_when("transfers_kept", Duration::from_secs(10), |k| k == 0);
+    assert_eq!(kept, 0, "transfers kept after every leader applied them");
 }

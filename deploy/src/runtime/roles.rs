@@ -7,8 +7,7 @@ use super::mesh::{self, MeshOptions};
 use super::topology::{Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::actor::CoordinatorConfig;
-use idmesh_leader::actor::LeaderConfig;
-use idmesh_leader::journal::JournalOptions;
+use idmesh_leader::host::HostConfig;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::TraceReader;
 use idmesh_sensor::gateway::actor::{Faults, GatewayConfig};
@@ -60,17 +59,20 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             mesh::answer_pings(&session, keys.ping(expected, name), name.to_string()).await?;
             let result = match role {
                 Role::Sensor => sensor(session.clone(), &topology, keys).await,
-                Role::Leader => idmesh_leader::actor::run(
+                Role::Leader => idmesh_leader::host::run(
                     session.clone(),
-                    LeaderConfig {
+                    HostConfig {
                         name: name.to_string(),
                         keys,
+                        leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
                         sensor: topology.sensor.name.clone(),
                         follow_timeout: Duration::from_millis(topology.query_timeout_ms),
-                        journal: topology.journal_path(name).map(|path| JournalOptions {
-                            path,
-                            fsync_every: Duration::from_millis(topology.fsync_ms),
-                        }),
+                        state_dir: topology.state_path(),
+                        fsync_every: Duration::from_millis(topology.fsync_ms),
+                        snapshot_every: (topology.snapshot_every > 0)
+                            .then_some(topology.snapshot_every),
+                        takeover_after: (topology.takeover_after_ms > 0)
+                            .then(|| Duration::from_millis(topology.takeover_after_ms)),
                     },
                     shutdown(),
                 )

@@ -12,6 +12,10 @@
 //!                                # absent = no journal, a leader that dies
 //!                                # cannot come back
 //! fsync_ms = 100                 # longest a journal entry waits for fsync
+//! snapshot_every = 5000          # inputs between snapshots (0 = never)
+//! takeover_after_ms = 3000       # a leader process gone this long has its
+//!                                # role adopted by a live one (0 = never;
+//!                                # needs state_dir shared by the leaders)
 //!
 //! [coordinator]
 //! name = "coordinator"
@@ -53,6 +57,14 @@ pub struct Topology {
     pub state_dir: Option<PathBuf>,
     #[serde(default = "default_fsync")]
     pub fsync_ms: u64,
+    /// A leader writes its whole state and starts its journal again after
+    /// this many inputs (0 = never: the journal grows with the stream).
+    #[serde(default = "default_snapshot_every")]
+    pub snapshot_every: usize,
+    /// How long a leader role may be without its liveliness token before a
+    /// live leader process adopts it (0 = never).
+    #[serde(default = "default_takeover_after")]
+    pub takeover_after_ms: u64,
     pub coordinator: Process,
     pub sensor: SensorProcess,
     pub leader: Vec<LeaderProcess>,
@@ -130,6 +142,14 @@ fn default_timeout() -> u64 {
 
 fn default_fsync() -> u64 {
     100
+}
+
+fn default_snapshot_every() -> usize {
+    5000
+}
+
+fn default_takeover_after() -> u64 {
+    3000
 }
 
 /// A process of the deployment, whatever its role.
@@ -218,10 +238,9 @@ impl Topology {
     }
 
     /// Where leader `name` keeps its journal, if leaders keep one.
-    pub fn journal_path(&self, name: &str) -> Option<PathBuf> {
-        self.state_dir
-            .as_ref()
-            .map(|dir| self.dir.join(dir).join(format!("{name}.journal")))
+    /// The leaders' state directory, resolved against the file's folder.
+    pub fn state_path(&self) -> Option<PathBuf> {
+        self.state_dir.as_ref().map(|dir| self.dir.join(dir))
     }
 }
 

@@ -68,5 +68,15 @@ pub struct LeaderStats {
     /// Snapshots written (each lets the journal start again empty).
     #[serde(default)]
     pub snapshots: u64,
+    /// The process running this leader: itself, or the one that adopted
+    /// the role when its own process was gone for good.
+    #[serde(default)]
+    pub host: String,
+    /// Restarts and adoptions caught up, and how long the last one took
+    /// (from start to having applied all it missed).
+    #[serde(default)]
+    pub recoveries: u64,
+    #[serde(default)]
+    pub recovery_seconds: f64,
 }
 super::versioned!(LeaderStats, "leader stats");

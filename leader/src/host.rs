@@ -1,0 +1,237 @@
+//! A leader process: hosts its own leader role and, when another role is
+//! gone for good, adopts it.
+//!
+//! Membership is Zenoh liveliness: every role's actor holds the token
+//! `P/alive/leader/<role>` while it runs. A token that disappears and does
+//! not come back within [`HostConfig::takeover_after`] means the process
+//! died for good; the role passes to the process hosting the next live
+//! role in the deployment's list (cyclically), which every process works
+//! out the same way from the same tokens. The adopter starts an actor for
+//! the role beside its own: it recovers the role's state from its snapshot
+//! and journal in the shared state directory, then fetches what those miss
+//! from the sensor (batches after the journal's last) and from the peers
+//! (transfers since) — the same catch-up a restarted leader does. The
+//! role's tracks, sets and rows are thus reassigned to a surviving process
+//! without changing the stream's routing: the keys are the role's, not the
+//! process's.
+//!
+//! Until the role is adopted nobody answers for it, and the coordinator's
+//! answer says which leaders are missing; while the adopted actor catches
+//! up it answers with a "degraded: recovering" error. Never numbers without
+//! the role's share.
+//!
+//! A process whose role was adopted while it was away does not take it
+//! back when it starts again: it stands by, and may adopt others.
+
+use crate::actor::{self, LeaderConfig};
+use crate::error::{MeshError, RunError};
+use crate::journal::JournalOptions;
+use idmesh_protocol::wire::keys::Keys;
+use std::collections::{BTreeSet, HashMap};
+use std::future::Future;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use tokio::sync::watch;
+use tokio::task::JoinSet;
+use zenoh::sample::SampleKind;
+use zenoh::Session;
+
+#[derive(Debug, Clone)]
+pub struct HostConfig {
+    /// This process (and the role it hosts first).
+    pub name: String,
+    pub keys: Keys,
+    /// Every leader role of the deployment, in the stream's order.
+    pub leaders: Vec<String>,
+    pub sensor: String,
+    pub follow_timeout: Duration,
+    /// Where every role keeps its journal; shared by the processes that
+    /// may adopt one another's roles. None = no journal, no adoption.
+    pub state_dir: Option<PathBuf>,
+    pub fsync_every: Duration,
+    pub snapshot_every: Option<usize>,
+    /// How long a role may be without its token before it is adopted;
+    /// None = never (it stays missing until its process returns).
+    pub takeover_after: Option<Duration>,
+}
+
+impl HostConfig {
+    /// The actor settings for `role`, hosted here.
+    fn role(&self, role: &str, adopted: bool) -> LeaderConfig {
+        LeaderConfig {
+            name: role.to_string(),
+            host: self.name.clone(),
+            adopted,
+            keys: self.keys.clone(),
+            sensor: self.sensor.clone(),
+            follow_timeout: self.follow_timeout,
+            journal: self.state_dir.as_ref().map(|dir| JournalOptions {
+                path: journal_path(dir, role),
+                fsync_every: self.fsync_every,
+            }),
+            snapshot_every: self.snapshot_every,
+        }
+    }
+}
+
+/// Where role `role` keeps its journal under `dir`.
+pub fn journal_path(dir: &std::path::Path, role: &str) -> PathBuf {
+    dir.join(format!("{role}.journal"))
+}
+
+/// The role that inherits `dead`: the next live one after it in `leaders`,
+/// cyclically. Every process computes the same from the same tokens.
+pub fn heir<'a>(leaders: &'a [String], dead: &str, alive: &BTreeSet<String>) -> Option<&'a str> {
+    let at = leaders.iter().position(|l| l == dead)?;
+    (1..leaders.len())
+        .map(|k| &leaders[(at + k) % leaders.len()])
+        .find(|l| alive.contains(*l))
+        .map(String::as_str)
+}
+
+/// Runs this process's roles until `shutdown`.
+pub async fn run(
+    session: Session,
+    config: HostConfig,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), RunError> {
+    let keys = &config.keys;
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stopped = move || {
+        let mut rx = stop_rx.clone();
+        async move {
+            let _ = rx.wait_for(|s| *s).await;
+        }
+    };
+    let mut hosted: JoinSet<(String, Result<(), RunError>)> = JoinSet::new();
+    let mut roles: BTreeSet<String> = BTreeSet::new();
+    let host = |role: &str, adopted: bool, hosted: &mut JoinSet<_>| {
+        let (session, role_config, stop) = (session.clone(), config.role(role, adopted), stopped());
+        let role = role.to_string();
+        hosted.spawn(async move {
+            let result = actor::run(session, role_config, stop).await;
+            (role, result)
+        });
+    };
+
+    if hosted_elsewhere(&session, keys, &config.name).await {
+        tracing::warn!(process = %config.name, "its role is hosted by another process (adopted while this one was away); standing by");
+    } else {
+        host(&config.name, false, &mut hosted);
+        roles.insert(config.name.clone());
+    }
+
+    let tokens = session
+        .liveliness()
+        .declare_subscriber(keys.alive_role("leader"))
+        .history(true)
+        .await
+        .map_err(|e| MeshError::new("declare the leader liveliness subscriber", e))?;
+    let mut alive: BTreeSet<String> = BTreeSet::new();
+    // Roles seen up and then lost, since when. A role never seen up is
+    // still starting, not dead.
+    let mut lost: HashMap<String, Instant> = HashMap::new();
+    let mut tick = tokio::time::interval(Duration::from_millis(250));
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            sample = tokens.recv_async() => {
+                let Ok(sample) = sample else { break };
+                let Some(role) = Keys::chunk(sample.key_expr().as_str(), 0) else { continue };
+                let role = role.to_string();
+                match sample.kind() {
+                    SampleKind::Put => {
+                        lost.remove(&role);
+                        alive.insert(role);
+                    }
+                    SampleKind::Delete => {
+                        tracing::warn!(process = %config.name, role = %role, "leader role lost its token");
+                        alive.remove(&role);
+                        if !roles.contains(&role) {
+                            lost.insert(role, Instant::now());
+                        }
+                    }
+                }
+            }
+            done = hosted.join_next(), if !hosted.is_empty() => {
+                if let Some(Ok((role, result))) = done {
+                    roles.remove(&role);
+                    match result {
+                        Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
+                        Err(e) => tracing::error!(process = %config.name, role = %role, error = %e, "role failed"),
+                    }
+                }
+            }
+            _ = tick.tick() => {
+                let Some(patience) = config.takeover_after else { continue };
+                let due: Vec<String> = lost
+                    .iter()
+                    .filter(|(_, since)| since.elapsed() >= patience)
+                    .map(|(role, _)| role.clone())
+                    .collect();
+                for role in due {
+                    let live: BTreeSet<String> = alive.union(&roles).cloned().collect();
+                    let Some(heir) = heir(&config.leaders, &role, &live) else { continue };
+                    if !roles.contains(heir) {
+                        // Another process adopts it; stop watching.
+                        lost.remove(&role);
+                        continue;
+                    }
+                    lost.remove(&role);
+                    if config.state_dir.is_none() {
+                        tracing::error!(process = %config.name, role = %role,
+                            "cannot adopt: no state_dir, the role's state is lost; its answers stay missing");
+                        continue;
+                    }
+                    if hosted_elsewhere(&session, keys, &role).await {
+                        continue;
+                    }
+                    tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
+                    host(&role, true, &mut hosted);
+                    roles.insert(role);
+                }
+            }
+        }
+    }
+    let _ = stop_tx.send(true);
+    while let Some(done) = hosted.join_next().await {
+        if let Ok((role, Err(e))) = done {
+            tracing::error!(process = %config.name, role = %role, error = %e, "role failed");
+        }
+    }
+    Ok(())
+}
+
+/// Whether some process holds `role`'s token now.
+async fn hosted_elsewhere(session: &Session, keys: &Keys, role: &str) -> bool {
+    let Ok(replies) = session
+        .liveliness()
+        .get(keys.alive("leader", role))
+        .timeout(Duration::from_millis(500))
+        .await
+    else {
+        return false;
+    };
+    let mut found = false;
+    while let Ok(reply) = replies.recv_async().await {
+        found |= reply.result().is_ok();
+    }
+    found
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_next_live_role_inherits_cyclically() {
+        let leaders: Vec<String> = ["l0", "l1", "l2", "l3"].map(String::from).to_vec();
+        let alive = |names: &[&str]| names.iter().map(|n| n.to_string()).collect();
+        assert_eq!(heir(&leaders, "l1", &alive(&["l0", "l2", "l3"])), Some("l2"));
+        assert_eq!(heir(&leaders, "l1", &alive(&["l0", "l3"])), Some("l3"));
+        assert_eq!(heir(&leaders, "l3", &alive(&["l1", "l2"])), Some("l1"));
+        assert_eq!(heir(&leaders, "l2", &alive(&[])), None);
+        assert_eq!(heir(&leaders, "nobody", &alive(&["l0"])), None);
+    }
+}
