@@ -93,6 +93,14 @@ impl Deployment {
         self.children.push((name.to_string(), child));
     }
 
+    /// The pid of process `name` (started with [`Deployment::start_each`]).
+    pub fn pid(&self, name: &str) -> Option<u32> {
+        self.children
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, c)| c.id())
+    }
+
     /// SIGKILL to process `name`: no chance to flush or say goodbye.
     pub fn kill(&mut self, name: &str) {
         let i = self
