@@ -20,6 +20,7 @@
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
 //! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/leader/N/**`, `P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`) |
+//! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
 
 use crate::runtime::topology::Topology;
@@ -134,10 +135,18 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
     for m in topology.members() {
         let me = vec![m.name.clone()];
         let mut served = vec![keys.ping(m.role, &m.name)];
+        // Zenoh replies on the key the asker used, wildcards included (an
+        // error reply always does): the coordinator asks every leader, and
+        // every sensor, at once.
+        let mut asked_as = Vec::new();
         match m.role {
-            "sensor" => served.push(format!("{p}/sensor/{}/**", m.name)),
+            "sensor" => {
+                served.push(format!("{p}/sensor/{}/**", m.name));
+                asked_as.push(keys.every_sensor_cut());
+            }
             "leader" => {
                 served.push(format!("{p}/leader/{}/**", m.name));
+                asked_as.extend([keys.every_leader_partial(), keys.every_leader_stats()]);
                 grants.push(grant(
                     &format!("{}-subscribes", m.name),
                     &me,
@@ -155,6 +164,15 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             SERVE,
             served,
         ));
+        if !asked_as.is_empty() {
+            grants.push(grant(
+                &format!("{}-answers", m.name),
+                &me,
+                &coordinator,
+                &["reply"],
+                asked_as,
+            ));
+        }
         grants.push(grant(
             &format!("{}-alive", m.name),
             &me,
@@ -280,6 +298,10 @@ clients = ["operator"]
         assert!(allowed(&l0, "ingress", "c", "query", "p/leader/*/partial"));
         assert!(!allowed(&l0, "ingress", "operator", "query", "p/leader/*/stats"));
         assert!(allowed(&l0, "egress", "c", "reply", "p/leader/l0/partial"));
+        // The coordinator asks every leader at once; the reply has its key.
+        assert!(allowed(&l0, "egress", "c", "reply", "p/leader/*/partial"));
+        assert!(allowed(&access_control(&t, "c"), "ingress", "l0", "reply", "p/leader/*/stats"));
+        assert!(!allowed(&l0, "egress", "c", "declare_queryable", "p/leader/*/partial"));
         // A leader serves its own keys only.
         assert!(allowed(&l0, "egress", "c", "declare_queryable", "p/leader/l0/stats"));
         assert!(!allowed(&l0, "egress", "c", "declare_queryable", "p/leader/l1/stats"));
