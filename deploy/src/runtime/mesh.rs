@@ -47,7 +47,11 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
         Ok(serde_json::to_string(&list)?)
     };
     set(&mut config, "listen/endpoints", endpoints(&options.listen)?)?;
-    set(&mut config, "connect/endpoints", endpoints(&options.connect)?)?;
+    set(
+        &mut config,
+        "connect/endpoints",
+        endpoints(&options.connect)?,
+    )?;
     set(&mut config, "scouting/multicast/enabled", "false".into())?;
     if let Some(tls) = &options.tls {
         // One certificate for both ends of a link, so a peer has the same
@@ -109,7 +113,11 @@ pub async fn open(options: &MeshOptions) -> Result<Session> {
         options.listen,
         options.connect,
         options.tls,
-        if options.access_control.is_some() { "on" } else { "off" }
+        if options.access_control.is_some() {
+            "on"
+        } else {
+            "off"
+        }
     );
     zenoh::open(config(options)?)
         .await

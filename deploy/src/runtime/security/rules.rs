@@ -268,7 +268,11 @@ clients = ["operator"]
     fn allowed(acl: &Value, flow: &str, peer: &str, message: &str, key: &str) -> bool {
         let key = keyexpr::new(key).unwrap();
         acl["policies"].as_array().unwrap().iter().any(|policy| {
-            policy["subjects"].as_array().unwrap().iter().any(|s| s == peer)
+            policy["subjects"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|s| s == peer)
                 && policy["rules"].as_array().unwrap().iter().any(|id| {
                     let rule = acl["rules"]
                         .as_array()
@@ -277,10 +281,16 @@ clients = ["operator"]
                         .find(|r| r["id"] == *id)
                         .unwrap();
                     rule["flows"][0] == flow
-                        && rule["messages"].as_array().unwrap().iter().any(|m| m == message)
-                        && rule["key_exprs"].as_array().unwrap().iter().any(|k| {
-                            keyexpr::new(k.as_str().unwrap()).unwrap().includes(key)
-                        })
+                        && rule["messages"]
+                            .as_array()
+                            .unwrap()
+                            .iter()
+                            .any(|m| m == message)
+                        && rule["key_exprs"]
+                            .as_array()
+                            .unwrap()
+                            .iter()
+                            .any(|k| keyexpr::new(k.as_str().unwrap()).unwrap().includes(key))
                 })
         })
     }
@@ -292,21 +302,69 @@ clients = ["operator"]
         assert!(allowed(&l0, "ingress", "s", "put", "p/leader/l0/events"));
         assert!(!allowed(&l0, "ingress", "c", "put", "p/leader/l0/events"));
         assert!(!allowed(&l0, "ingress", "l1", "put", "p/leader/l0/events"));
-        assert!(!allowed(&l0, "ingress", "operator", "put", "p/leader/l0/events"));
-        assert!(!allowed(&l0, "ingress", "intruder", "put", "p/leader/l0/events"));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "operator",
+            "put",
+            "p/leader/l0/events"
+        ));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "intruder",
+            "put",
+            "p/leader/l0/events"
+        ));
         assert!(allowed(&l0, "ingress", "l1", "put", "p/leader/l0/transfer"));
         assert!(allowed(&l0, "ingress", "c", "query", "p/leader/*/partial"));
-        assert!(!allowed(&l0, "ingress", "operator", "query", "p/leader/*/stats"));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "operator",
+            "query",
+            "p/leader/*/stats"
+        ));
         assert!(allowed(&l0, "egress", "c", "reply", "p/leader/l0/partial"));
         // The coordinator asks every leader at once; the reply has its key.
         assert!(allowed(&l0, "egress", "c", "reply", "p/leader/*/partial"));
-        assert!(allowed(&access_control(&t, "c"), "ingress", "l0", "reply", "p/leader/*/stats"));
-        assert!(!allowed(&l0, "egress", "c", "declare_queryable", "p/leader/*/partial"));
+        assert!(allowed(
+            &access_control(&t, "c"),
+            "ingress",
+            "l0",
+            "reply",
+            "p/leader/*/stats"
+        ));
+        assert!(!allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/leader/*/partial"
+        ));
         // A leader serves its own keys only.
-        assert!(allowed(&l0, "egress", "c", "declare_queryable", "p/leader/l0/stats"));
-        assert!(!allowed(&l0, "egress", "c", "declare_queryable", "p/leader/l1/stats"));
+        assert!(allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/leader/l0/stats"
+        ));
+        assert!(!allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/leader/l1/stats"
+        ));
         let l1 = access_control(&t, "l1");
-        assert!(!allowed(&l1, "ingress", "l0", "reply", "p/leader/l1/partial"));
+        assert!(!allowed(
+            &l1,
+            "ingress",
+            "l0",
+            "reply",
+            "p/leader/l1/partial"
+        ));
         assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
     }
 
@@ -314,13 +372,43 @@ clients = ["operator"]
     fn clients_may_only_query_the_coordinator_s_api() {
         let t = topology();
         let c = access_control(&t, "c");
-        assert!(allowed(&c, "ingress", "operator", "query", "p/query/marginals"));
-        assert!(allowed(&c, "egress", "operator", "reply", "p/query/track/3"));
-        assert!(!allowed(&c, "ingress", "operator", "query", "p/leader/*/stats"));
+        assert!(allowed(
+            &c,
+            "ingress",
+            "operator",
+            "query",
+            "p/query/marginals"
+        ));
+        assert!(allowed(
+            &c,
+            "egress",
+            "operator",
+            "reply",
+            "p/query/track/3"
+        ));
+        assert!(!allowed(
+            &c,
+            "ingress",
+            "operator",
+            "query",
+            "p/leader/*/stats"
+        ));
         assert!(!allowed(&c, "ingress", "operator", "query", "p/**"));
-        assert!(!allowed(&c, "egress", "operator", "declare_queryable", "p/leader/l0/stats"));
+        assert!(!allowed(
+            &c,
+            "egress",
+            "operator",
+            "declare_queryable",
+            "p/leader/l0/stats"
+        ));
         let s = access_control(&t, "s");
-        assert!(!allowed(&s, "ingress", "operator", "query", "p/sensor/s/cut"));
+        assert!(!allowed(
+            &s,
+            "ingress",
+            "operator",
+            "query",
+            "p/sensor/s/cut"
+        ));
         assert!(allowed(&s, "ingress", "c", "query", "p/sensor/*/cut"));
         assert!(allowed(&s, "egress", "l0", "put", "p/leader/l0/events"));
     }

@@ -113,10 +113,19 @@ mod tests {
         let junk = dir.join("junk.key");
         std::fs::write(&junk, "junk").unwrap();
         let missing = dir.join("missing.pem");
-        let e = Tls::new(missing.clone(), pem.clone(), pem.clone(), true, "[security] certs")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("CA certificate") && e.contains("missing.pem"), "{e}");
+        let e = Tls::new(
+            missing.clone(),
+            pem.clone(),
+            pem.clone(),
+            true,
+            "[security] certs",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("CA certificate") && e.contains("missing.pem"),
+            "{e}"
+        );
         let e = Tls::new(pem.clone(), pem.clone(), junk, true, "[security] certs")
             .unwrap_err()
             .to_string();
