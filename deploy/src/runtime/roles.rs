@@ -1,7 +1,8 @@
 //! `idmesh sensor|leader|coordinator --config T --name N`: one process of a
 //! deployment. Each opens its Zenoh session from the topology (listen on
-//! its endpoint, connect to everyone else's), logs under a span named after
-//! it, and stops cleanly on Ctrl-C or SIGTERM.
+//! its endpoint, connect to everyone else's; with `[security]`, over mutual
+//! TLS under the access rules generated for it), logs under a span named
+//! after it, and stops cleanly on Ctrl-C or SIGTERM.
 
 use super::mesh::{self, MeshOptions};
 use super::security::rules;

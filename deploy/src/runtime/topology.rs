@@ -269,5 +269,12 @@ listen = "tcp/127.0.0.1:3"
         std::fs::write(&path, format!("{good}\nbogus = 1\n")).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
         assert!(e.contains("bogus"), "{e}");
+        let secured = format!("{good}\n[security]\ncerts = \"certs\"\nclients = [\"l0\"]\n");
+        std::fs::write(&path, secured).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(
+            e.contains("[security] clients") && e.contains("\"l0\""),
+            "{e}"
+        );
     }
 }
