@@ -151,6 +151,16 @@ pub struct QueryArgs {
     pub at_events: Vec<u64>,
     #[arg(long, default_value_t = 1000)]
     pub interval_ms: u64,
+    /// A secured deployment: the CA certificate of its `[security] certs`.
+    #[arg(long)]
+    pub ca: Option<PathBuf>,
+    /// This client's certificate (its common name listed in `[security]
+    /// clients`); the endpoint is then reached over TLS.
+    #[arg(long)]
+    pub cert: Option<PathBuf>,
+    /// This client's private key.
+    #[arg(long)]
+    pub key: Option<PathBuf>,
 }
 
 impl QueryArgs {
@@ -184,6 +194,11 @@ impl QueryArgs {
             interval: std::time::Duration::from_millis(self.interval_ms),
             at_events: self.at_events.clone(),
             marginals: self.marginals.map(|m| m.name().to_string()),
+            tls: crate::runtime::security::Tls::from_options(
+                self.ca.as_deref(),
+                self.cert.as_deref(),
+                self.key.as_deref(),
+            )?,
         })
     }
 }

@@ -1,6 +1,7 @@
-//! A real deployment for a test: a topology on free loopback ports, `idmesh
-//! up` (or every process on its own, for tests that kill and restart one),
-//! and queries through `idmesh query`.
+//! A real deployment for a test: a topology on free loopback ports (with a
+//! `[security]` section if asked), `idmesh up` (or every process on its
+//! own, for tests that kill and restart one), and queries through `idmesh
+//! query`.
 
 use crate::idmesh;
 use serde_json::Value;
@@ -27,12 +28,28 @@ pub struct Settings {
     pub takeover_after_ms: Option<u64>,
     /// The sensor's `[sensor.faults]` section, e.g. `duplicate = true`.
     pub faults: Option<String>,
+    /// A `[security]` section: mutual TLS, and access control if asked.
+    pub security: Option<Secured>,
+}
+
+/// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
+/// for every process (`coordinator`, `sensor-0`, `leader-<i>`) and for
+/// `client`, whose certificate `idmesh query` shows.
+#[derive(Debug, Clone)]
+pub struct Secured {
+    pub certs: PathBuf,
+    pub access_control: bool,
+    /// The one client the topology lists, and the one queries are made as.
+    pub client: String,
 }
 
 pub struct Deployment {
     pub dir: PathBuf,
     pub coordinator: String,
     pub prefix: String,
+    /// Every process's name and listening endpoint, as the topology has it.
+    pub endpoints: Vec<(String, String)>,
+    security: Option<Secured>,
     config: PathBuf,
     /// `idmesh up`, or every process by its name.
     children: Vec<(String, Child)>,
@@ -139,9 +156,14 @@ impl Deployment {
         let columns = (settings.leaders as f64).sqrt().ceil() as usize;
         let rows = settings.leaders.div_ceil(columns);
         let coordinator = format!("tcp/127.0.0.1:{}", free_port());
+        let sensor = format!("tcp/127.0.0.1:{}", free_port());
+        let mut endpoints = vec![
+            ("coordinator".to_string(), coordinator.clone()),
+            ("sensor-0".to_string(), sensor.clone()),
+        ];
         let prefix = format!("idmesh/test-{name}-{}", std::process::id());
         let mut toml = format!(
-            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"{sensor}\"\ntrace = {:?}\n",
             settings.distributed_rule,
             settings.budget,
             if settings.overcomplete {
@@ -149,7 +171,6 @@ impl Deployment {
             } else {
                 "threshold"
             },
-            free_port(),
             trace.display().to_string()
         );
         if let Some(rate) = settings.rate {
@@ -159,10 +180,11 @@ impl Deployment {
             let (c, r) = (i % columns, i / columns);
             let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
             let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
+            let listen = format!("tcp/127.0.0.1:{}", free_port());
             toml.push_str(&format!(
-                "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{x}, {y}]\n",
-                free_port()
+                "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"{listen}\"\nat = [{x}, {y}]\n"
             ));
+            endpoints.push((format!("leader-{i}"), listen));
         }
         if settings.journal {
             toml.insert_str(0, "state_dir = \"state\"\n");
@@ -176,12 +198,22 @@ impl Deployment {
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
         }
+        if let Some(secured) = &settings.security {
+            toml.push_str(&format!(
+                "\n[security]\ncerts = {:?}\naccess_control = {}\nclients = [{:?}]\n",
+                secured.certs.display().to_string(),
+                secured.access_control,
+                secured.client
+            ));
+        }
         let config = dir.join("topology.toml");
         std::fs::write(&config, toml).unwrap();
         Deployment {
             dir,
             coordinator,
             prefix,
+            endpoints,
+            security: settings.security.clone(),
             config,
             children: Vec::new(),
         }
@@ -218,6 +250,17 @@ impl Deployment {
                 "--prefix",
                 &self.prefix,
             ])
+            .args(self.security.iter().flat_map(|s| {
+                let file = |name: String| s.certs.join(name).display().to_string();
+                [
+                    "--ca".to_string(),
+                    file("ca.pem".into()),
+                    "--cert".into(),
+                    file(format!("{}.pem", s.client)),
+                    "--key".into(),
+                    file(format!("{}.key", s.client)),
+                ]
+            }))
             .output()
             .expect("idmesh query runs");
         let answers = String::from_utf8_lossy(&output.stdout)

@@ -170,6 +170,7 @@ impl Deployment {
             client: false,
             listen: vec![],
             connect,
+            ..MeshOptions::default()
         })
         .await?;
         let keys = Keys::new(topology.prefix.clone());

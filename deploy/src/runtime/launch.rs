@@ -182,6 +182,7 @@ async fn watch(processes: &mut Processes, coordinator: &str) -> Result<()> {
         client: false,
         listen: vec![],
         connect: vec![coordinator.to_string()],
+        ..MeshOptions::default()
     })
     .await?;
     let keys = Keys::new(DEFAULT_PREFIX);

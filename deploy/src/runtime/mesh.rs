@@ -7,7 +7,13 @@
 //! every message through one process). Multicast scouting is off: it is
 //! unavailable in many networks and in CI; the topology file is the truth.
 //! Clients (the query CLI, Python) connect to the coordinator's endpoint.
+//!
+//! A secured deployment ([`super::security`]) adds mutual TLS — every
+//! endpoint becomes `tls/`, each side shows its certificate — and, in its
+//! processes, the access-control rules generated from the topology.
 
+use super::security::tls::over_tls;
+use super::security::Tls;
 use anyhow::{anyhow, Result};
 use zenoh::{Config, Session};
 
@@ -17,6 +23,11 @@ pub struct MeshOptions {
     pub client: bool,
     pub listen: Vec<String>,
     pub connect: Vec<String>,
+    /// Mutual TLS with these files; None = plain TCP.
+    pub tls: Option<Tls>,
+    /// Zenoh's `access_control` section (see
+    /// [`super::security::rules::access_control`]); None = no rules.
+    pub access_control: Option<serde_json::Value>,
 }
 
 pub fn config(options: &MeshOptions) -> Result<Config> {
@@ -28,18 +39,53 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
     };
     let mode = if options.client { "client" } else { "peer" };
     set(&mut config, "mode", format!("{mode:?}"))?;
-    set(
-        &mut config,
-        "listen/endpoints",
-        serde_json::to_string(&options.listen)?,
-    )?;
+    let endpoints = |list: &[String]| -> Result<String> {
+        let list = match options.tls {
+            Some(_) => list.iter().map(|e| over_tls(e)).collect::<Result<_, _>>()?,
+            None => list.to_vec(),
+        };
+        Ok(serde_json::to_string(&list)?)
+    };
+    set(&mut config, "listen/endpoints", endpoints(&options.listen)?)?;
     set(
         &mut config,
         "connect/endpoints",
-        serde_json::to_string(&options.connect)?,
+        endpoints(&options.connect)?,
     )?;
     set(&mut config, "scouting/multicast/enabled", "false".into())?;
+    if let Some(tls) = &options.tls {
+        // One certificate for both ends of a link, so a peer has the same
+        // common name whichever of the two opened it.
+        let (ca, cert, key) = (path(&tls.ca)?, path(&tls.cert)?, path(&tls.key)?);
+        for (field, value) in [
+            ("root_ca_certificate", ca),
+            ("listen_certificate", cert),
+            ("listen_private_key", key),
+            ("connect_certificate", cert),
+            ("connect_private_key", key),
+        ] {
+            set(
+                &mut config,
+                &format!("transport/link/tls/{field}"),
+                serde_json::to_string(value)?,
+            )?;
+        }
+        set(&mut config, "transport/link/tls/enable_mtls", "true".into())?;
+        set(
+            &mut config,
+            "transport/link/tls/verify_name_on_connect",
+            tls.verify_names.to_string(),
+        )?;
+    }
+    if let Some(rules) = &options.access_control {
+        set(&mut config, "access_control", rules.to_string())?;
+    }
     Ok(config)
+}
+
+fn path(p: &std::path::Path) -> Result<&str> {
+    p.to_str()
+        .ok_or_else(|| anyhow!("{}: Zenoh takes UTF-8 paths only", p.display()))
 }
 
 /// Answers `key` at once with `name`, from Zenoh's own thread: the raw
@@ -61,7 +107,19 @@ pub async fn answer_pings(session: &Session, key: String, name: String) -> Resul
 }
 
 pub async fn open(options: &MeshOptions) -> Result<Session> {
+    // The rules are long; the endpoints and files say which session failed.
+    let summary = format!(
+        "listen {:?}, connect {:?}, tls {:?}, access control {}",
+        options.listen,
+        options.connect,
+        options.tls,
+        if options.access_control.is_some() {
+            "on"
+        } else {
+            "off"
+        }
+    );
     zenoh::open(config(options)?)
         .await
-        .map_err(|e| anyhow!("cannot open a zenoh session ({options:?}): {e}"))
+        .map_err(|e| anyhow!("cannot open a zenoh session ({summary}): {e}"))
 }

@@ -1,11 +1,12 @@
 //! The distributed runtime's side of the binary: the topology file, the
 //! one function that opens a Zenoh session, one runner per role, the
 //! launcher (`up`, `demo`), the loopback topology they and the bench use,
-//! and the query client.
+//! the query client, and what secures a deployment (TLS, access control).
 
 pub mod launch;
 pub mod loopback;
 pub mod mesh;
 pub mod query;
 pub mod roles;
+pub mod security;
 pub mod topology;

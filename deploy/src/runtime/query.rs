@@ -1,8 +1,10 @@
 //! `idmesh query marginals|track T|identity [T]|stats`: a Zenoh client of
 //! the user API.
 //! Human-readable by default, `--json` prints the reply as it came.
+//! `--ca`, `--cert`, `--key` reach a secured deployment over mutual TLS.
 
 use super::mesh::{self, MeshOptions};
+use super::security::Tls;
 use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
@@ -28,6 +30,9 @@ pub struct QueryOptions {
     /// How identity marginals are computed (`?marginals=`); None = the
     /// coordinator's choice.
     pub marginals: Option<String>,
+    /// A secured deployment: the CA and this client's certificate (its
+    /// common name listed in the topology's `[security] clients`).
+    pub tls: Option<Tls>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -49,6 +54,8 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             client: true,
             listen: vec![],
             connect: vec![options.connect.clone()],
+            tls: options.tls.clone(),
+            access_control: None,
         })
         .await?;
         let keys = Keys::new(options.prefix.clone());

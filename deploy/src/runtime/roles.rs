@@ -1,9 +1,11 @@
 //! `idmesh sensor|leader|coordinator --config T --name N`: one process of a
 //! deployment. Each opens its Zenoh session from the topology (listen on
-//! its endpoint, connect to everyone else's), logs under a span named after
-//! it, and stops cleanly on Ctrl-C or SIGTERM.
+//! its endpoint, connect to everyone else's; with `[security]`, over mutual
+//! TLS under the access rules generated for it), logs under a span named
+//! after it, and stops cleanly on Ctrl-C or SIGTERM.
 
 use super::mesh::{self, MeshOptions};
+use super::security::rules;
 use super::topology::{Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::actor::CoordinatorConfig;
@@ -37,16 +39,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             member.role
         ));
     }
-    let options = MeshOptions {
-        client: false,
-        listen: vec![member.listen.clone()],
-        connect: topology
-            .members()
-            .into_iter()
-            .filter(|m| m.name != name)
-            .map(|m| m.listen)
-            .collect(),
-    };
+    let options = peer_options(&topology, name)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -95,6 +88,36 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
         }
         .instrument(span),
     )
+}
+
+/// How process `name` joins the mesh: it listens on its endpoint and
+/// connects to everyone else's; in a secured topology over mutual TLS with
+/// its own certificate, under the access rules generated for it.
+fn peer_options(topology: &Topology, name: &str) -> Result<MeshOptions> {
+    let member = topology.member(name)?;
+    let (tls, access_control) = match &topology.security {
+        Some(security) => {
+            let tls = security.tls_for(&topology.dir, name)?;
+            let rules = security
+                .access_control
+                .then(|| rules::access_control(topology, name));
+            tracing::info!(%name, access_control = rules.is_some(), "mutual TLS");
+            (Some(tls), rules)
+        }
+        None => (None, None),
+    };
+    Ok(MeshOptions {
+        client: false,
+        listen: vec![member.listen],
+        connect: topology
+            .members()
+            .into_iter()
+            .filter(|m| m.name != name)
+            .map(|m| m.listen)
+            .collect(),
+        tls,
+        access_control,
+    })
 }
 
 async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Result<()> {

@@ -34,8 +34,16 @@
 //! name = "leader-0"
 //! listen = "tcp/127.0.0.1:7448"
 //! at = [10.0, 10.0]              # tracks go to the nearest leader
+//!
+//! [security]                     # optional: mutual TLS and access control
+//! certs = "certs"                # ca.pem, <name>.pem, <name>.key
+//! clients = ["operator"]         # client certificates that may query
 //! ```
+//!
+//! With `[security]` (see [`super::security`]) every endpoint is reached
+//! over TLS: `tcp/host:port` here means `tls/host:port`.
 
+use super::security::SecuritySection;
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::DEFAULT_PREFIX;
 use serde::Deserialize;
@@ -68,6 +76,8 @@ pub struct Topology {
     pub coordinator: Process,
     pub sensor: SensorProcess,
     pub leader: Vec<LeaderProcess>,
+    /// Mutual TLS and access control; None = plain TCP, anyone may connect.
+    pub security: Option<SecuritySection>,
     /// Where the file was read from (relative paths start there).
     #[serde(skip)]
     pub dir: PathBuf,
@@ -194,6 +204,9 @@ impl Topology {
         if self.sensor.faults.drop_every.is_some_and(|n| n < 2) {
             bail!("sensor.faults.drop_every must be 2 or more (1 would drop every batch)");
         }
+        if let Some(security) = &self.security {
+            security.check(members.iter().map(|m| m.name.as_str()))?;
+        }
         if let Some(rate) = self.sensor.rate {
             if !(rate.is_finite() && rate > 0.0) {
                 bail!("sensor rate {rate} must be a positive number of events per second");
@@ -275,5 +288,12 @@ listen = "tcp/127.0.0.1:3"
         std::fs::write(&path, format!("{good}\nbogus = 1\n")).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
         assert!(e.contains("bogus"), "{e}");
+        let secured = format!("{good}\n[security]\ncerts = \"certs\"\nclients = [\"l0\"]\n");
+        std::fs::write(&path, secured).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(
+            e.contains("[security] clients") && e.contains("\"l0\""),
+            "{e}"
+        );
     }
 }

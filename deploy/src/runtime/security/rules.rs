@@ -1,0 +1,427 @@
+//! Zenoh access control generated from the topology.
+//!
+//! Zenoh checks every message on a link against the certificate common name
+//! of the process at the other end: on the way in (ingress: what that peer
+//! may send us) and on the way out (egress: what we may send it), denying
+//! whatever no rule allows. The rules here are written once, as grants —
+//! who may send what to whom — and each process takes the ones it is the
+//! receiver of as ingress rules and the ones it is the sender of as egress
+//! rules. Keys carry the sender's own name where the key names a process,
+//! so a leader serves only its own keys and a sensor only its own.
+//!
+//! | from | to | messages | keys |
+//! |---|---|---|---|
+//! | sensor S | leaders | put | `P/leader/*/events` |
+//! | sensor S | leaders | liveliness query | `P/alive/leader/*` |
+//! | leader L | leaders | put, query | `P/leader/*/transfer`, `P/leader/*/sent` |
+//! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/resend` |
+//! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
+//! | coordinator | sensor | query | `P/sensor/*/cut` |
+//! | clients | coordinator | query | `P/query/**` |
+//! | coordinator | clients | declare queryable, reply | `P/query/**` |
+//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/leader/N/**`, `P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`) |
+//! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`): Zenoh replies on the asker's key |
+//! | every process | every process | query | `P/ping/**` |
+
+use crate::runtime::topology::Topology;
+use idmesh_protocol::wire::keys::Keys;
+use serde_json::{json, Value};
+use std::collections::BTreeSet;
+
+/// Processes named `from` may send `messages` on `keys` to processes
+/// named `to` (certificate common names).
+#[derive(Debug, Clone)]
+pub struct Grant {
+    /// A short name for the rule ids, so that Zenoh's logs say which.
+    pub what: String,
+    pub from: Vec<String>,
+    pub to: Vec<String>,
+    pub messages: &'static [&'static str],
+    pub keys: Vec<String>,
+}
+
+/// Declares what a process serves and answers for it.
+const SERVE: &[&str] = &["declare_queryable", "reply"];
+
+/// Every grant of the deployment.
+pub fn grants(topology: &Topology) -> Vec<Grant> {
+    let keys = Keys::new(topology.prefix.clone());
+    let p = keys.prefix();
+    let coordinator = vec![topology.coordinator.name.clone()];
+    let sensor = vec![topology.sensor.name.clone()];
+    let leaders: Vec<String> = topology.leader.iter().map(|l| l.name.clone()).collect();
+    let members: Vec<String> = topology.members().into_iter().map(|m| m.name).collect();
+    let clients: Vec<String> = topology
+        .security
+        .as_ref()
+        .map(|s| s.clients.clone())
+        .unwrap_or_default();
+    let grant = |what: &str, from: &[String], to: &[String], messages, keys: Vec<String>| Grant {
+        what: what.to_string(),
+        from: from.to_vec(),
+        to: to.to_vec(),
+        messages,
+        keys,
+    };
+    let mut grants = vec![
+        grant(
+            "events",
+            &sensor,
+            &leaders,
+            &["put"],
+            vec![keys.leader_events("*")],
+        ),
+        // The sensor starts streaming once it sees every leader's token.
+        grant(
+            "leaders-up",
+            &sensor,
+            &leaders,
+            &["liveliness_query"],
+            vec![keys.alive_role("leader")],
+        ),
+        grant(
+            "transfers",
+            &leaders,
+            &leaders,
+            &["put", "query"],
+            vec![keys.leader_transfer("*"), keys.leader_sent("*")],
+        ),
+        grant(
+            "follow",
+            &leaders,
+            &sensor,
+            &["query"],
+            vec![keys.sensor_follow("*"), keys.sensor_resend("*")],
+        ),
+        grant(
+            "partials",
+            &coordinator,
+            &leaders,
+            &["query"],
+            vec![keys.every_leader_partial(), keys.every_leader_stats()],
+        ),
+        grant(
+            "cuts",
+            &coordinator,
+            &sensor,
+            &["query"],
+            vec![keys.every_sensor_cut()],
+        ),
+        grant(
+            "pings",
+            &members,
+            &members,
+            &["query"],
+            vec![format!("{p}/ping/**")],
+        ),
+    ];
+    if !clients.is_empty() {
+        grants.push(grant(
+            "ask",
+            &clients,
+            &coordinator,
+            &["query"],
+            vec![format!("{p}/query/**")],
+        ));
+        grants.push(grant(
+            "answer",
+            &coordinator,
+            &clients,
+            SERVE,
+            vec![format!("{p}/query/**")],
+        ));
+    }
+    // What each process serves, under its own name.
+    for m in topology.members() {
+        let me = vec![m.name.clone()];
+        let mut served = vec![keys.ping(m.role, &m.name)];
+        // Zenoh replies on the key the asker used, wildcards included (an
+        // error reply always does): the coordinator asks every leader, and
+        // every sensor, at once.
+        let mut asked_as = Vec::new();
+        match m.role {
+            "sensor" => {
+                served.push(format!("{p}/sensor/{}/**", m.name));
+                asked_as.push(keys.every_sensor_cut());
+            }
+            "leader" => {
+                served.push(format!("{p}/leader/{}/**", m.name));
+                asked_as.extend([keys.every_leader_partial(), keys.every_leader_stats()]);
+                grants.push(grant(
+                    &format!("{}-subscribes", m.name),
+                    &me,
+                    &members,
+                    &["declare_subscriber"],
+                    vec![keys.leader_events(&m.name), keys.leader_transfer(&m.name)],
+                ));
+            }
+            _ => served.push(format!("{p}/query/**")),
+        }
+        grants.push(grant(
+            &format!("{}-serves", m.name),
+            &me,
+            &members,
+            SERVE,
+            served,
+        ));
+        if !asked_as.is_empty() {
+            grants.push(grant(
+                &format!("{}-answers", m.name),
+                &me,
+                &coordinator,
+                &["reply"],
+                asked_as,
+            ));
+        }
+        grants.push(grant(
+            &format!("{}-alive", m.name),
+            &me,
+            &members,
+            &["liveliness_token"],
+            vec![keys.alive(m.role, &m.name)],
+        ));
+    }
+    grants
+}
+
+/// The `access_control` config of process `me`: default deny; the grants it
+/// receives as ingress rules for their senders, the grants it sends as
+/// egress rules for their receivers.
+pub fn access_control(topology: &Topology, me: &str) -> Value {
+    let mut rules = Vec::new();
+    let mut policies = Vec::new();
+    let mut subjects = BTreeSet::new();
+    for (i, g) in grants(topology).iter().enumerate() {
+        let me_owned = me.to_string();
+        let sides = [
+            ("ingress", g.to.contains(&me_owned).then_some(&g.from)),
+            ("egress", g.from.contains(&me_owned).then_some(&g.to)),
+        ];
+        for (flow, peers) in sides {
+            let Some(peers) = peers else { continue };
+            let peers: Vec<&String> = peers.iter().filter(|p| **p != me).collect();
+            if peers.is_empty() {
+                continue;
+            }
+            let id = format!("{i}-{}-{flow}", g.what);
+            rules.push(json!({
+                "id": id,
+                "messages": g.messages,
+                "flows": [flow],
+                "permission": "allow",
+                "key_exprs": g.keys,
+            }));
+            policies.push(json!({ "rules": [id], "subjects": peers }));
+            subjects.extend(peers.into_iter().cloned());
+        }
+    }
+    let subjects: Vec<Value> = subjects
+        .iter()
+        .map(|s| json!({ "id": s, "cert_common_names": [s] }))
+        .collect();
+    json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use zenoh::key_expr::keyexpr;
+
+    fn topology() -> Topology {
+        let dir = std::env::temp_dir().join(format!("idmesh-rules-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        std::fs::write(
+            &path,
+            r#"
+prefix = "p"
+[coordinator]
+name = "c"
+listen = "tcp/127.0.0.1:1"
+[sensor]
+name = "s"
+listen = "tcp/127.0.0.1:2"
+trace = "x.jsonl"
+[[leader]]
+name = "l0"
+listen = "tcp/127.0.0.1:3"
+[[leader]]
+name = "l1"
+listen = "tcp/127.0.0.1:4"
+[security]
+certs = "certs"
+clients = ["operator"]
+"#,
+        )
+        .unwrap();
+        Topology::load(&path).unwrap()
+    }
+
+    /// What Zenoh decides at process `me` for `message` on `key` with
+    /// `peer` at the other end of the link (default deny; any allow wins).
+    fn allowed(acl: &Value, flow: &str, peer: &str, message: &str, key: &str) -> bool {
+        let key = keyexpr::new(key).unwrap();
+        acl["policies"].as_array().unwrap().iter().any(|policy| {
+            policy["subjects"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|s| s == peer)
+                && policy["rules"].as_array().unwrap().iter().any(|id| {
+                    let rule = acl["rules"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .find(|r| r["id"] == *id)
+                        .unwrap();
+                    rule["flows"][0] == flow
+                        && rule["messages"]
+                            .as_array()
+                            .unwrap()
+                            .iter()
+                            .any(|m| m == message)
+                        && rule["key_exprs"]
+                            .as_array()
+                            .unwrap()
+                            .iter()
+                            .any(|k| keyexpr::new(k.as_str().unwrap()).unwrap().includes(key))
+                })
+        })
+    }
+
+    #[test]
+    fn only_the_sensor_may_put_events_and_only_the_coordinator_may_ask_leaders() {
+        let t = topology();
+        let l0 = access_control(&t, "l0");
+        assert!(allowed(&l0, "ingress", "s", "put", "p/leader/l0/events"));
+        assert!(!allowed(&l0, "ingress", "c", "put", "p/leader/l0/events"));
+        assert!(!allowed(&l0, "ingress", "l1", "put", "p/leader/l0/events"));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "operator",
+            "put",
+            "p/leader/l0/events"
+        ));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "intruder",
+            "put",
+            "p/leader/l0/events"
+        ));
+        assert!(allowed(&l0, "ingress", "l1", "put", "p/leader/l0/transfer"));
+        assert!(allowed(&l0, "ingress", "c", "query", "p/leader/*/partial"));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "operator",
+            "query",
+            "p/leader/*/stats"
+        ));
+        assert!(allowed(&l0, "egress", "c", "reply", "p/leader/l0/partial"));
+        // The coordinator asks every leader at once; the reply has its key.
+        assert!(allowed(&l0, "egress", "c", "reply", "p/leader/*/partial"));
+        assert!(allowed(
+            &access_control(&t, "c"),
+            "ingress",
+            "l0",
+            "reply",
+            "p/leader/*/stats"
+        ));
+        assert!(!allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/leader/*/partial"
+        ));
+        // A leader serves its own keys only.
+        assert!(allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/leader/l0/stats"
+        ));
+        assert!(!allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/leader/l1/stats"
+        ));
+        let l1 = access_control(&t, "l1");
+        assert!(!allowed(
+            &l1,
+            "ingress",
+            "l0",
+            "reply",
+            "p/leader/l1/partial"
+        ));
+        assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
+    }
+
+    #[test]
+    fn clients_may_only_query_the_coordinator_s_api() {
+        let t = topology();
+        let c = access_control(&t, "c");
+        assert!(allowed(
+            &c,
+            "ingress",
+            "operator",
+            "query",
+            "p/query/marginals"
+        ));
+        assert!(allowed(
+            &c,
+            "egress",
+            "operator",
+            "reply",
+            "p/query/track/3"
+        ));
+        assert!(!allowed(
+            &c,
+            "ingress",
+            "operator",
+            "query",
+            "p/leader/*/stats"
+        ));
+        assert!(!allowed(&c, "ingress", "operator", "query", "p/**"));
+        assert!(!allowed(
+            &c,
+            "egress",
+            "operator",
+            "declare_queryable",
+            "p/leader/l0/stats"
+        ));
+        let s = access_control(&t, "s");
+        assert!(!allowed(
+            &s,
+            "ingress",
+            "operator",
+            "query",
+            "p/sensor/s/cut"
+        ));
+        assert!(allowed(&s, "ingress", "c", "query", "p/sensor/*/cut"));
+        assert!(allowed(&s, "egress", "l0", "put", "p/leader/l0/events"));
+    }
+
+    #[test]
+    fn the_generated_rules_are_a_valid_zenoh_config() {
+        let t = topology();
+        for m in t.members() {
+            let acl = access_control(&t, &m.name);
+            let mut config = zenoh::Config::default();
+            config
+                .insert_json5("access_control", &acl.to_string())
+                .unwrap_or_else(|e| panic!("{}: {e}\n{acl:#}", m.name));
+        }
+    }
+}

@@ -1,0 +1,369 @@
+//! Security, with real processes on loopback: mutual TLS between every
+//! process and the access rules generated from the topology.
+//!
+//! Certificates are made here for the run (rcgen): a CA, one certificate
+//! per process (common name = its name), one for the client `operator`
+//! listed in the topology, one for an `intruder` signed by the same CA but
+//! listed nowhere, and one from another CA. The intruder is a Zenoh session
+//! of this test that puts a well-formed event batch — a mix of tracks 0 and
+//! 1, numbered as the next batch leader-0 expects — on leader-0's event key
+//! and asks every leader for its counters. Without access control (TLS
+//! only) the leader applies that batch and answers; with it, nothing of the
+//! intruder's is heard, the legitimate client still gets the centralized
+//! engine's answer, and a certificate from another CA cannot connect.
+
+use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
+use idmesh_protocol::wire::{encode, VERSION};
+use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Secured, Settings};
+use rcgen::{
+    BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, KeyPair,
+    KeyUsagePurpose,
+};
+use serde_json::Value;
+use std::future::Future;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use zenoh::query::{ConsolidationMode, QueryTarget};
+use zenoh::Session;
+
+const LEADERS: usize = 2;
+const CLIENT: &str = "operator";
+const INTRUDER: &str = "intruder";
+
+/// A CA named `ca` and certificates it signs for `names`, as files in
+/// `dir`: `ca.pem`, `<name>.pem`, `<name>.key`. Every certificate serves
+/// both ends of a link (server and client auth) on loopback.
+fn certificates(dir: &Path, ca: &str, names: &[String]) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let ca_key = KeyPair::generate().unwrap();
+    let mut params = CertificateParams::new(Vec::<String>::new()).unwrap();
+    params.distinguished_name.push(DnType::CommonName, ca);
+    params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
+    let ca_cert = params.self_signed(&ca_key).unwrap();
+    std::fs::write(dir.join("ca.pem"), ca_cert.pem()).unwrap();
+    for name in names {
+        let key = KeyPair::generate().unwrap();
+        let mut params =
+            CertificateParams::new(vec!["localhost".to_string(), "127.0.0.1".to_string()]).unwrap();
+        params.distinguished_name.push(DnType::CommonName, name);
+        params.extended_key_usages = vec![
+            ExtendedKeyUsagePurpose::ServerAuth,
+            ExtendedKeyUsagePurpose::ClientAuth,
+        ];
+        let cert = params.signed_by(&key, &ca_cert, &ca_key).unwrap();
+        std::fs::write(dir.join(format!("{name}.pem")), cert.pem()).unwrap();
+        std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem()).unwrap();
+    }
+    dir.to_path_buf()
+}
+
+/// Everyone the good CA signs for: the processes, the client, the intruder.
+fn names() -> Vec<String> {
+    let mut names = vec!["coordinator".to_string(), "sensor-0".to_string()];
+    names.extend((0..LEADERS).map(|i| format!("leader-{i}")));
+    names.extend([CLIENT.to_string(), INTRUDER.to_string()]);
+    names
+}
+
+/// A secured deployment of `LEADERS` leaders streaming a small crowd as
+/// fast as it goes, and the centralized engine's final marginals.
+fn deployment(name: &str, access_control: bool) -> (Deployment, PathBuf, Vec<f64>) {
+    let dir = std::env::temp_dir().join(format!("idmesh-security-{name}-{}", std::process::id()));
+    let certs = certificates(&dir.join("certs"), "idmesh test CA", &names());
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let expected = floats(&central["final_p_red"]);
+    let deployment = Deployment::start(
+        name,
+        &trace,
+        &Settings {
+            leaders: LEADERS,
+            security: Some(Secured {
+                certs: certs.clone(),
+                access_control,
+                client: CLIENT.into(),
+            }),
+            ..Settings::default()
+        },
+    );
+    (deployment, certs, expected)
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("an array: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+fn assert_same_marginals(got: &Value, expected: &[f64], what: &str) {
+    let got = floats(&got["p_red"]);
+    assert_eq!(got.len(), expected.len());
+    for (t, (g, e)) in got.iter().zip(expected).enumerate() {
+        assert!((g - e).abs() < 1e-9, "{what}, track {t}: {g} vs {e}");
+    }
+}
+
+/// Every leader's counters, as the legitimate client reads them.
+fn leader_stats(deployment: &Deployment) -> Vec<Value> {
+    let stats = deployment.query(&["stats"]).expect("stats");
+    stats[0]["leaders"].as_array().expect("leaders").clone()
+}
+
+fn counter(stats: &[Value], leader: &str, field: &str) -> u64 {
+    stats
+        .iter()
+        .find(|l| l["leader"] == leader)
+        .and_then(|l| l[field].as_u64())
+        .unwrap_or_else(|| panic!("{leader} {field} in {stats:?}"))
+}
+
+/// Runs `f` on a runtime of its own, failing after `limit`.
+fn within<T>(limit: Duration, f: impl Future<Output = T>) -> T {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(async {
+            tokio::time::timeout(limit, f)
+                .await
+                .unwrap_or_else(|_| panic!("not done within {limit:?}"))
+        })
+}
+
+/// A Zenoh session of this test's own, showing certificate `name` of
+/// `certs` over TLS to `connect` (tcp/ endpoints of the topology).
+async fn session(
+    certs: &Path,
+    name: &str,
+    client: bool,
+    connect: &[String],
+) -> zenoh::Result<Session> {
+    let mut config = zenoh::Config::default();
+    let tls: Vec<String> = connect.iter().map(|e| e.replace("tcp/", "tls/")).collect();
+    let file = |f: String| serde_json::to_string(&certs.join(f)).unwrap();
+    let mode = if client { "\"client\"" } else { "\"peer\"" };
+    for (key, value) in [
+        ("mode", mode.to_string()),
+        ("connect/endpoints", serde_json::to_string(&tls).unwrap()),
+        ("scouting/multicast/enabled", "false".into()),
+        (
+            "transport/link/tls/root_ca_certificate",
+            file("ca.pem".into()),
+        ),
+        (
+            "transport/link/tls/connect_certificate",
+            file(format!("{name}.pem")),
+        ),
+        (
+            "transport/link/tls/connect_private_key",
+            file(format!("{name}.key")),
+        ),
+        ("transport/link/tls/enable_mtls", "true".into()),
+    ] {
+        config.insert_json5(key, &value)?;
+    }
+    tokio::time::timeout(Duration::from_secs(10), zenoh::open(config))
+        .await
+        .map_err(|_| "opening the session timed out")?
+}
+
+/// How many replies a get on `key` gets (every queryable asked, none
+/// merged), waiting at most 2 s.
+async fn replies(session: &Session, key: &str) -> usize {
+    let replies = session
+        .get(key)
+        .consolidation(ConsolidationMode::None)
+        .target(QueryTarget::All)
+        .timeout(Duration::from_secs(2))
+        .await
+        .expect("the get is sent");
+    let mut answered = 0;
+    while let Ok(Ok(reply)) =
+        tokio::time::timeout(Duration::from_secs(3), replies.recv_async()).await
+    {
+        answered += reply.result().is_ok() as usize;
+    }
+    answered
+}
+
+/// Puts on leader-0's event key the batch it would apply next: a mix of
+/// tracks 0 and 1, far beyond the stream's last item, that neither leader
+/// is named to own (so it applies it alone, waiting for nobody). Whether
+/// the session saw leader-0's subscriber, within 3 s; the batch is put
+/// either way.
+async fn put_mix(session: &Session, prefix: &str, number: u64) -> bool {
+    let seq = 1 << 40;
+    let batch = Batch {
+        version: VERSION,
+        sensor: "sensor-0".into(),
+        number,
+        through: seq,
+        events: 0,
+        finished: true,
+        items: vec![Sequenced {
+            seq,
+            item: Item::Mix {
+                a: 0,
+                b: 1,
+                swap: 0.5,
+                owner_a: u16::MAX,
+                owner_b: u16::MAX,
+            },
+        }],
+    };
+    let publisher = session
+        .declare_publisher(format!("{prefix}/leader/leader-0/events"))
+        .await
+        .expect("a publisher");
+    let started = Instant::now();
+    let mut matched = false;
+    while !matched && started.elapsed() < Duration::from_secs(3) {
+        matched = publisher
+            .matching_status()
+            .await
+            .is_ok_and(|m| m.matching());
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    publisher.put(encode(&batch)).await.expect("put");
+    // Let it leave before the session closes.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    matched
+}
+
+fn endpoints(deployment: &Deployment) -> Vec<String> {
+    deployment
+        .endpoints
+        .iter()
+        .map(|(_, e)| e.clone())
+        .collect()
+}
+
+fn endpoint(deployment: &Deployment, name: &str) -> String {
+    deployment
+        .endpoints
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, e)| e.clone())
+        .unwrap_or_else(|| panic!("no endpoint for {name}"))
+}
+
+/// TLS alone keeps out whoever has no certificate from the CA, not a
+/// process that has one: the intruder reads every leader's counters and
+/// leader-0 applies its batch. This is what the next test's rules stop —
+/// and the proof that the intruder's batch would be applied if let in.
+#[test]
+fn without_access_control_a_certified_intruder_reads_leaders_and_is_applied() {
+    let (deployment, certs, expected) = deployment("tls-only", false);
+    assert_same_marginals(
+        &deployment.final_marginals(Duration::from_secs(90)),
+        &expected,
+        "over TLS",
+    );
+    let before = leader_stats(&deployment);
+    let (read, matched) = within(Duration::from_secs(30), async {
+        let intruder = session(&certs, INTRUDER, false, &endpoints(&deployment))
+            .await
+            .expect("a CA-signed certificate connects");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let read = replies(&intruder, &format!("{}/leader/*/stats", deployment.prefix)).await;
+        let number = counter(&before, "leader-0", "batches");
+        let matched = put_mix(&intruder, &deployment.prefix, number).await;
+        let _ = intruder.close().await;
+        (read, matched)
+    });
+    assert_eq!(read, LEADERS, "the intruder reads every leader's counters");
+    assert!(matched, "the intruder sees leader-0's event subscriber");
+    let started = Instant::now();
+    loop {
+        let after = leader_stats(&deployment);
+        if counter(&after, "leader-0", "mixes") == counter(&before, "leader-0", "mixes") + 1 {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "leader-0 did not apply the intruder's mix: {after:?}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// With access control, only listed identities are heard: the intruder's
+/// batch is not applied (every leader's counters stay as they were) and
+/// its gets — and the listed client's own gets on leader keys — are not
+/// answered; the client still gets the centralized engine's answer; a
+/// certificate from another CA, even one named like the sensor, cannot
+/// connect at all.
+#[test]
+fn with_access_control_only_listed_identities_are_heard() {
+    let (deployment, certs, expected) = deployment("acl", true);
+    let rogue = certificates(
+        &deployment.dir.join("rogue"),
+        "some other CA",
+        &["sensor-0".to_string()],
+    );
+    assert_same_marginals(
+        &deployment.final_marginals(Duration::from_secs(90)),
+        &expected,
+        "under access control",
+    );
+    let before = leader_stats(&deployment);
+    let prefix = deployment.prefix.clone();
+    within(Duration::from_secs(60), async {
+        let intruder = session(&certs, INTRUDER, false, &endpoints(&deployment))
+            .await
+            .expect("a CA-signed certificate still connects");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let read = replies(&intruder, &format!("{prefix}/leader/*/stats")).await;
+        assert_eq!(read, 0, "no leader answers the intruder");
+        let asked = replies(&intruder, &format!("{prefix}/query/stats")).await;
+        assert_eq!(asked, 0, "the coordinator does not answer it");
+        let number = counter(&before, "leader-0", "batches");
+        let matched = put_mix(&intruder, &prefix, number).await;
+        assert!(
+            !matched,
+            "leader-0's subscriber is hidden from the intruder"
+        );
+        let _ = intruder.close().await;
+
+        // The listed client, as a peer of leader-0, cannot put events either.
+        let leader_0 = endpoint(&deployment, "leader-0");
+        let operator = session(&certs, CLIENT, false, std::slice::from_ref(&leader_0))
+            .await
+            .expect("the client's certificate connects");
+        let matched = put_mix(&operator, &prefix, number).await;
+        assert!(!matched, "leader-0's subscriber is hidden from a client");
+        let _ = operator.close().await;
+
+        // The listed client asks the coordinator: its API, not leader keys.
+        let coordinator = std::slice::from_ref(&deployment.coordinator);
+        let client = session(&certs, CLIENT, true, coordinator)
+            .await
+            .expect("the client connects");
+        let asked = replies(&client, &format!("{prefix}/query/stats")).await;
+        assert_eq!(asked, 1, "the client's question is answered");
+        let read = replies(&client, &format!("{prefix}/leader/*/stats")).await;
+        assert_eq!(read, 0, "but not its get on leader keys");
+        let _ = client.close().await;
+
+        let rogue = session(&rogue, "sensor-0", true, coordinator).await;
+        assert!(
+            rogue.is_err(),
+            "a certificate from another CA cannot connect"
+        );
+    });
+    std::thread::sleep(Duration::from_secs(1));
+    assert_eq!(
+        leader_stats(&deployment),
+        before,
+        "no leader applied anything the intruder or the client put"
+    );
+    assert_same_marginals(
+        &deployment.final_marginals(Duration::from_secs(30)),
+        &expected,
+        "after the intrusion",
+    );
+}
