@@ -7,7 +7,9 @@
 //! who may send what to whom — and each process takes the ones it is the
 //! receiver of as ingress rules and the ones it is the sender of as egress
 //! rules. Keys carry the sender's own name where the key names a process,
-//! so a leader serves only its own keys and a sensor only its own.
+//! so a sensor serves only its own keys; a leader may serve any leader
+//! role's, because a leader process adopts the role of one gone for good
+//! (`idmesh_leader::host`) — and nothing but leader roles.
 //!
 //! | from | to | messages | keys |
 //! |---|---|---|---|
@@ -15,11 +17,14 @@
 //! | sensor S | leaders | liveliness query | `P/alive/leader/*` |
 //! | leader L | leaders | put, query | `P/leader/*/transfer`, `P/leader/*/sent` |
 //! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/resend` |
+//! | leader L | sensor, leaders | put | `P/leader/*/durable` (how far it is safe) |
+//! | sensor, leaders | leaders | declare subscriber | `P/leader/*/durable` |
+//! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership) |
 //! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
 //! | coordinator | sensor | query | `P/sensor/*/cut` |
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
-//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/leader/N/**`, `P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`) |
+//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) |
 //! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
 
@@ -94,6 +99,29 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             vec![keys.sensor_follow("*"), keys.sensor_resend("*")],
         ),
         grant(
+            "durable",
+            &leaders,
+            &[sensor.clone(), leaders.clone()].concat(),
+            &["put"],
+            vec![keys.every_leader_durable()],
+        ),
+        grant(
+            "durable-subscribers",
+            &[sensor.clone(), leaders.clone()].concat(),
+            &leaders,
+            &["declare_subscriber"],
+            vec![keys.every_leader_durable()],
+        ),
+        // Leader processes watch one another's roles, to adopt the role of
+        // one gone for good.
+        grant(
+            "membership",
+            &leaders,
+            &leaders,
+            &["declare_liveliness_subscriber", "liveliness_query"],
+            vec![keys.alive_role("leader")],
+        ),
+        grant(
             "partials",
             &coordinator,
             &leaders,
@@ -145,14 +173,15 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
                 asked_as.push(keys.every_sensor_cut());
             }
             "leader" => {
-                served.push(format!("{p}/leader/{}/**", m.name));
+                // Any leader role: its own, or one it adopts.
+                served.push(format!("{p}/leader/*/**"));
                 asked_as.extend([keys.every_leader_partial(), keys.every_leader_stats()]);
                 grants.push(grant(
                     &format!("{}-subscribes", m.name),
                     &me,
                     &members,
                     &["declare_subscriber"],
-                    vec![keys.leader_events(&m.name), keys.leader_transfer(&m.name)],
+                    vec![keys.leader_events("*"), keys.leader_transfer("*")],
                 ));
             }
             _ => served.push(format!("{p}/query/**")),
@@ -173,12 +202,16 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
                 asked_as,
             ));
         }
+        let token = match m.role {
+            "leader" => keys.alive_role("leader"),
+            role => keys.alive(role, &m.name),
+        };
         grants.push(grant(
             &format!("{}-alive", m.name),
             &me,
             &members,
             &["liveliness_token"],
-            vec![keys.alive(m.role, &m.name)],
+            vec![token],
         ));
     }
     grants
@@ -236,7 +269,11 @@ mod tests {
     fn topology() -> Topology {
         let dir = std::env::temp_dir().join(format!("idmesh-rules-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("t.toml");
+        // One file per call: the tests run at once and must not read one
+        // another's half-written file.
+        static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let path = dir.join(format!("t{call}.toml"));
         std::fs::write(
             &path,
             r#"
@@ -335,14 +372,8 @@ clients = ["operator"]
             "reply",
             "p/leader/*/stats"
         ));
-        assert!(!allowed(
-            &l0,
-            "egress",
-            "c",
-            "declare_queryable",
-            "p/leader/*/partial"
-        ));
-        // A leader serves its own keys only.
+        // A leader serves leader roles (its own, or one it adopts), and
+        // nothing else.
         assert!(allowed(
             &l0,
             "egress",
@@ -350,22 +381,48 @@ clients = ["operator"]
             "declare_queryable",
             "p/leader/l0/stats"
         ));
-        assert!(!allowed(
+        assert!(allowed(
             &l0,
             "egress",
             "c",
             "declare_queryable",
             "p/leader/l1/stats"
         ));
-        let l1 = access_control(&t, "l1");
         assert!(!allowed(
-            &l1,
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/sensor/s/cut"
+        ));
+        assert!(!allowed(
+            &l0,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/query/marginals"
+        ));
+        assert!(!allowed(
+            &access_control(&t, "s"),
+            "ingress",
+            "c",
+            "declare_queryable",
+            "p/leader/l0/stats"
+        ));
+        // Durable marks reach the sensor from leaders only.
+        let s = access_control(&t, "s");
+        assert!(allowed(&s, "ingress", "l1", "put", "p/leader/l1/durable"));
+        assert!(!allowed(&s, "ingress", "c", "put", "p/leader/l1/durable"));
+        let l1 = access_control(&t, "l1");
+        assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
+        // A leader cannot answer in the sensor's name.
+        assert!(!allowed(
+            &access_control(&t, "c"),
             "ingress",
             "l0",
             "reply",
-            "p/leader/l1/partial"
+            "p/sensor/*/cut"
         ));
-        assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
     }
 
     #[test]
