@@ -9,10 +9,12 @@
 //! A map of the crate:
 //! - [`state`] — [`Leader`], the protocol as a pure state machine.
 //! - [`actor`] — the tokio/Zenoh process around it: [`actor::run`].
+//! - [`door`] — bytes from the network to inputs, or rejected unharmed.
 //! - [`journal`] — the durable input log a restarted leader replays.
 //! - [`error`] — [`LeaderError`].
 
 pub mod actor;
+pub mod door;
 pub mod error;
 pub mod journal;
 pub mod state;
