@@ -51,3 +51,20 @@ fn every_regression_input_is_handled() {
     }
     assert!(files > 0, "the regression corpus is empty");
 }
+
+/// Writes every target's seeds to `fuzz/seeds/<target>/` (committed; the
+/// starting corpus of `scripts/fuzz-smoke`). Run it after changing a
+/// message: `cargo test -p idmesh-protocol --test fuzz_smoke -- --ignored`.
+#[test]
+#[ignore]
+fn write_the_seed_corpus() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds");
+    for (name, _) in TARGETS {
+        let folder = root.join(name);
+        let _ = std::fs::remove_dir_all(&folder);
+        std::fs::create_dir_all(&folder).expect("a seed folder");
+        for (i, seed) in idmesh_protocol::fuzzing::seeds::seeds(name).iter().enumerate() {
+            std::fs::write(folder.join(format!("seed-{i}")), seed).expect("a seed file");
+        }
+    }
+}
