@@ -10,6 +10,7 @@
 //! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
+//! | `P/sensor/<name>/stats` | sensor queryable | its counters (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
@@ -69,6 +70,14 @@ impl Keys {
 
     pub fn sensor_follow(&self, sensor: &str) -> String {
         format!("{}/sensor/{sensor}/follow", self.prefix)
+    }
+
+    pub fn sensor_stats(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/stats", self.prefix)
+    }
+
+    pub fn every_sensor_stats(&self) -> String {
+        format!("{}/sensor/*/stats", self.prefix)
     }
 
     pub fn sensor_resend(&self, sensor: &str) -> String {

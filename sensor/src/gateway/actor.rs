@@ -17,6 +17,7 @@
 use super::cuts::{place, Cuts, Placed, Request};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
@@ -95,6 +96,16 @@ pub async fn run(
         .declare_queryable(keys.sensor_resend(&config.name))
         .await
         .map_err(mesh("declare the resend queryable"))?;
+    let stats = session
+        .declare_queryable(keys.sensor_stats(&config.name))
+        .await
+        .map_err(mesh("declare the stats queryable"))?;
+    // Follow and resend requests refused: a bad one is answered with why
+    // and changes nothing.
+    let mut rejected = SensorStats {
+        sensor: config.name.clone(),
+        rejected: 0,
+    };
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -190,7 +201,7 @@ pub async fn run(
                     .and_then(|f| router.follow(&f).map_err(|e| e.to_string()))
                     .map(|items| Followed { version: VERSION, items });
                 let followed = answer.is_ok();
-                reply_to(&query, answer, "follow").await;
+                reply_to(&query, answer, "follow", &mut rejected).await;
                 if followed {
                     stream.flush(&mut router).await;
                 }
@@ -201,7 +212,16 @@ pub async fn run(
                     .map_err(|e| e.to_string())
                     .and_then(|r| stream.resend(&r))
                     .map(|batches| Resent { version: VERSION, batches });
-                reply_to(&query, answer, "resend").await;
+                reply_to(&query, answer, "resend", &mut rejected).await;
+            }
+            query = stats.recv_async() => {
+                let Ok(query) = query else { break };
+                let body = serde_json::to_vec(&rejected).unwrap_or_default();
+                if let Err(e) = query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
+                {
+                    tracing::warn!(error = %e, "could not answer a stats query");
+                }
             }
             _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
         }
@@ -217,8 +237,14 @@ fn payload(query: &Query) -> Vec<u8> {
         .unwrap_or_default()
 }
 
-/// Answers a `what` request with its reply, or with why there is none.
-async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>, what: &str) {
+/// Answers a `what` request with its reply, or with why there is none
+/// (counted in `stats`).
+async fn reply_to<R: serde::Serialize>(
+    query: &Query,
+    answer: Result<R, String>,
+    what: &str,
+    stats: &mut SensorStats,
+) {
     match answer {
         Ok(reply) => {
             tracing::debug!(what, "answered");
@@ -227,7 +253,8 @@ async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>,
             }
         }
         Err(e) => {
-            tracing::error!(what, error = %e, "bad request");
+            stats.rejected += 1;
+            tracing::warn!(what, key = %query.key_expr(), error = %e, rejected = stats.rejected, "bad request rejected");
             let _ = query.reply_err(e).await;
         }
     }
