@@ -129,7 +129,8 @@ mod tests {
 
     #[test]
     fn every_bad_parameter_is_an_error_that_names_it() {
-        let cases: [(&str, &str, &[(&str, &str)], &str); 10] = [
+        type Case<'a> = (&'a str, &'a str, &'a [(&'a str, &'a str)], &'a str);
+        let cases: [Case; 10] = [
             (
                 "marginals",
                 "p/query/marginals",

@@ -94,8 +94,11 @@ fn mix(a: u32, b: u32, swap: f64) -> Item {
     }
 }
 
+/// Bad messages, each with what is wrong with it.
+type Messages = Vec<(&'static str, Vec<u8>)>;
+
 /// The garbage for a leader's event key and its transfer key.
-fn garbage() -> (Vec<(&'static str, Vec<u8>)>, Vec<(&'static str, Vec<u8>)>) {
+fn garbage() -> (Messages, Messages) {
     let whole = encode(&batch(vec![mix(0, 1, 0.5)]));
     let mut wrong_version = batch(vec![mix(0, 1, 0.5)]);
     wrong_version.version = VERSION + 1;
