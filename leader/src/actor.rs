@@ -175,7 +175,7 @@ pub async fn run(
             }
             query = sent.recv_async() => {
                 let Ok(query) = query else { break };
-                answer_sent(&leader, query).await;
+                answer_sent(&mut leader, query).await;
                 continue;
             }
             _ = sweep.tick() => {
@@ -417,8 +417,9 @@ fn spawn_ask(
     });
 }
 
-/// A peer restarted and asks for the transfers it lost.
-async fn answer_sent(leader: &Leader, query: Query) {
+/// A peer restarted and asks for the transfers it lost. A request that
+/// does not decode is answered with why and counted as rejected.
+async fn answer_sent(leader: &mut Leader, query: Query) {
     let request = query
         .payload()
         .map(|p| p.to_bytes().into_owned())
@@ -435,7 +436,12 @@ async fn answer_sent(leader: &Leader, query: Query) {
                 )
                 .await
         }
-        Err(e) => query.reply_err(e.to_string()).await,
+        Err(e) => {
+            leader.note_rejected();
+            tracing::warn!(leader = %leader.name(), from = %query.key_expr(), problem = %e,
+                rejected = leader.stats().rejected, "request for sent transfers rejected");
+            query.reply_err(e.to_string()).await
+        }
     };
     if let Err(e) = reply {
         tracing::warn!(error = %e, "could not answer a request for sent transfers");

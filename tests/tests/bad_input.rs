@@ -2,8 +2,9 @@
 //! stream runs, a Zenoh session of the test's own puts garbage on a
 //! leader's event and transfer keys (truncated and random bytes, a batch
 //! with a NaN likelihood, a swap of 1.5, a track out of range, a wrong
-//! version), sends the sensor bad follow and resend requests and the
-//! coordinator malformed queries. Every bad message is refused and counted
+//! version), sends the leader a bad request for its sent transfers, the
+//! sensor bad follow and resend requests and the coordinator malformed
+//! queries. Every bad message is refused and counted
 //! where it landed, every bad request gets an error reply, and the final
 //! marginals still equal the centralized engine's to 1e-9: nothing bad was
 //! applied and nothing good was lost.
@@ -189,7 +190,8 @@ fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
     assert_eq!(first["finished"], false, "the stream has begun, not ended");
     let prefix = deployment.prefix.clone();
     let (events, transfers) = garbage();
-    let bad_messages = (events.len() + transfers.len()) as u64;
+    // The leader's inputs, and one bad request for its sent transfers.
+    let bad_messages = (events.len() + transfers.len()) as u64 + 1;
 
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -237,6 +239,12 @@ fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
             eprintln!("{selector}: {error}");
             assert!(!error.is_empty());
         }
+        // A peer's request for sent transfers that is not one.
+        let sent = format!("{prefix}/leader/leader-0/sent");
+        let error = get(&session, sent.clone(), Some(vec![0xff, 0xff]))
+            .await
+            .expect_err(&sent);
+        eprintln!("{sent}: {error}");
         // Malformed queries to the coordinator: an error reply each.
         let query = |q: &str| format!("{prefix}/query/{q}");
         let malformed = [
