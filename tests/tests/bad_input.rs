@@ -296,11 +296,11 @@ fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
         let fake = bounded("declare", session.declare_queryable(key.as_str()))
             .await
             .unwrap();
+        // Serves until aborted below (its receive waits for the next get).
         let fake_task = tokio::spawn(async move {
             while let Ok(query) = fake.recv_async().await {
-                let _ = query
-                    .reply(query.key_expr().clone(), vec![3u8, 0xff, 0xff])
-                    .await;
+                let reply = query.reply(query.key_expr().clone(), vec![3u8, 0xff, 0xff]);
+                let _ = bounded("the fake reply", reply).await;
             }
         });
         tokio::time::sleep(Duration::from_millis(500)).await;

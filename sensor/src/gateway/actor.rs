@@ -102,7 +102,7 @@ pub async fn run(
         .map_err(mesh("declare the stats queryable"))?;
     // Follow and resend requests refused: a bad one is answered with why
     // and changes nothing.
-    let mut rejected = SensorStats {
+    let mut counters = SensorStats {
         sensor: config.name.clone(),
         rejected: 0,
     };
@@ -201,7 +201,7 @@ pub async fn run(
                     .and_then(|f| router.follow(&f).map_err(|e| e.to_string()))
                     .map(|items| Followed { version: VERSION, items });
                 let followed = answer.is_ok();
-                reply_to(&query, answer, "follow", &mut rejected).await;
+                reply_to(&query, answer, "follow", &mut counters).await;
                 if followed {
                     stream.flush(&mut router).await;
                 }
@@ -212,11 +212,11 @@ pub async fn run(
                     .map_err(|e| e.to_string())
                     .and_then(|r| stream.resend(&r))
                     .map(|batches| Resent { version: VERSION, batches });
-                reply_to(&query, answer, "resend", &mut rejected).await;
+                reply_to(&query, answer, "resend", &mut counters).await;
             }
             query = stats.recv_async() => {
                 let Ok(query) = query else { break };
-                let body = serde_json::to_vec(&rejected).unwrap_or_default();
+                let body = serde_json::to_vec(&counters).unwrap_or_default();
                 if let Err(e) = query.reply(query.key_expr().clone(), body)
                     .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
                 {
