@@ -4,6 +4,7 @@
 
 use crate::gather::{self, At, GatherError, Memory};
 use crate::identity::{self, Method};
+use crate::request::Request;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
     IdentityAnswer, IdentityTrackAnswer, QueryError, StatsAnswer, TrackAnswer,
@@ -71,21 +72,37 @@ async fn answer(
     query: Query,
 ) {
     let keys = &config.keys;
-    let result: Result<Vec<u8>, String> = match (kind, at(&query)) {
-        (_, Err(e)) => Err(e),
-        ("marginals", Ok(at)) => gather::marginals(&session, keys, config.timeout, &memory, at)
-            .await
-            .map(|g| json(&g.answer))
-            .map_err(|e| e.to_string()),
-        ("track", Ok(at)) => track(&session, &config, &memory, &query, at).await,
-        ("identity", Ok(at)) => identities(&session, &config, &memory, &query, at)
+    let parameters = query.parameters();
+    let request = Request::parse(kind, query.key_expr().as_str(), parameters.iter());
+    let result: Result<Vec<u8>, String> = match request {
+        Err(error) => {
+            // A bad question is the asker's fault: counted, answered with
+            // why, and no leader is bothered with it.
+            memory.note_rejected();
+            tracing::warn!(%error, rejected = memory.stats().rejected, "query rejected");
+            Err(error)
+        }
+        Ok(Request::Marginals(at)) => {
+            gather::marginals(&session, keys, config.timeout, &memory, at)
+                .await
+                .map(|g| json(&g.answer))
+                .map_err(|e| e.to_string())
+        }
+        Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track).await,
+        Ok(Request::Identity(at, method)) => identities(&session, &config, &memory, at, method)
             .await
             .map(|a| json(&a)),
-        ("identity track", Ok(at)) => identity_track(&session, &config, &memory, &query, at).await,
-        _ => gather::stats(&session, keys, config.timeout)
-            .await
-            .map(|leaders| json(&StatsAnswer { leaders }))
-            .map_err(|e| e.to_string()),
+        Ok(Request::IdentityTrack(at, track, method)) => {
+            identity_track(&session, &config, &memory, at, track, method).await
+        }
+        Ok(Request::Stats) => match gather::stats(&session, keys, config.timeout).await {
+            Ok(leaders) => Ok(json(&StatsAnswer {
+                leaders,
+                sensors: gather::sensor_stats(&session, keys, config.timeout).await,
+                coordinator: memory.stats(),
+            })),
+            Err(e) => Err(e.to_string()),
+        },
     };
     let sent = match result {
         Ok(body) => {
@@ -111,10 +128,9 @@ async fn track(
     session: &Session,
     config: &CoordinatorConfig,
     memory: &Memory,
-    query: &Query,
     at: At,
+    track: u32,
 ) -> Result<Vec<u8>, String> {
-    let track = track_of(query)?;
     let gathered = gather::marginals(session, &config.keys, config.timeout, memory, at)
         .await
         .map_err(|e: GatherError| e.to_string())?;
@@ -136,11 +152,11 @@ async fn identity_track(
     session: &Session,
     config: &CoordinatorConfig,
     memory: &Memory,
-    query: &Query,
     at: At,
+    track: u32,
+    method: Method,
 ) -> Result<Vec<u8>, String> {
-    let track = track_of(query)?;
-    let answer = identities(session, config, memory, query, at).await?;
+    let answer = identities(session, config, memory, at, method).await?;
     let out_of_range = || {
         format!(
             "track {track} is out of range: there are {} tracks",
@@ -165,43 +181,18 @@ async fn identity_track(
     }))
 }
 
-/// The track in `P/query/track/<t>` or `P/query/identity/<t>`.
-fn track_of(query: &Query) -> Result<u32, String> {
-    let key = query.key_expr().as_str();
-    Keys::chunk(key, 0)
-        .and_then(|t| t.parse().ok())
-        .ok_or_else(|| format!("{key}: the last chunk must be a track number"))
-}
-
 /// Every track's identities, by the method the query names
 /// (`?marginals=<method>[;samples=S][;seed=X]`).
 async fn identities(
     session: &Session,
     config: &CoordinatorConfig,
     memory: &Memory,
-    query: &Query,
     at: At,
+    method: Method,
 ) -> Result<IdentityAnswer, String> {
-    let parameters = query.parameters();
-    let method = Method::from_parameters(
-        parameters.get("marginals"),
-        parameters.get("samples"),
-        parameters.get("seed"),
-    )?;
     identity::identity(session, &config.keys, config.timeout, memory, at, method)
         .await
         .map_err(|e| e.to_string())
-}
-
-/// `?events=N`: the answer right after the stream's N-th event.
-fn at(query: &Query) -> Result<At, String> {
-    match query.parameters().get("events") {
-        None => Ok(At::Latest),
-        Some(n) => n
-            .parse()
-            .map(At::Events)
-            .map_err(|_| format!("events={n}: expected a count of events")),
-    }
 }
 
 fn json(value: &impl Serialize) -> Vec<u8> {

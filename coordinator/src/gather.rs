@@ -3,12 +3,14 @@
 
 use idmesh_belief::predict_red;
 use idmesh_leader::combine;
+use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
-use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
+use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorStats};
 use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::{MarginalsAnswer, Watermark};
+use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 use std::time::Duration;
 use zenoh::query::{ConsolidationMode, QueryTarget};
@@ -68,13 +70,34 @@ pub enum Share {
 }
 
 /// What the coordinator keeps between queries: the last cut of a stream
-/// that was over. Nothing is pushed to it; it only remembers what it asked.
+/// that was over, and its counts of bad input. Nothing is pushed to it; it
+/// only remembers what it asked.
 #[derive(Debug, Default)]
 pub struct Memory {
     finished: Mutex<Option<CutPlaced>>,
+    rejected: AtomicU64,
+    bad_replies: AtomicU64,
 }
 
 impl Memory {
+    /// Counts a query refused for its parameters.
+    pub fn note_rejected(&self) {
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Counts a reply from another process that was no good.
+    fn note_bad_reply(&self, what: &str, problem: &str) {
+        let n = self.bad_replies.fetch_add(1, Ordering::Relaxed) + 1;
+        tracing::warn!(what, problem, bad_replies = n, "bad reply");
+    }
+
+    pub fn stats(&self) -> CoordinatorStats {
+        CoordinatorStats {
+            rejected: self.rejected.load(Ordering::Relaxed),
+            bad_replies: self.bad_replies.load(Ordering::Relaxed),
+        }
+    }
+
     fn finished(&self) -> Option<CutPlaced> {
         self.finished.lock().ok().and_then(|c| c.clone())
     }
@@ -139,11 +162,11 @@ pub async fn collect(
     share: Share,
 ) -> Result<Collected, GatherError> {
     if let (At::Latest, Some(last)) = (at, memory.finished()) {
-        if let Some(collected) = at_rest(session, keys, timeout, last, share).await {
+        if let Some(collected) = at_rest(session, keys, timeout, memory, last, share).await {
             return Ok(collected);
         }
     }
-    let collected = at_fresh_cut(session, keys, timeout, at, share).await?;
+    let collected = at_fresh_cut(session, keys, timeout, memory, at, share).await?;
     memory.remember(&collected.cut);
     Ok(collected)
 }
@@ -155,10 +178,13 @@ async fn at_rest(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
+    memory: &Memory,
     last: CutPlaced,
     share: Share,
 ) -> Option<Collected> {
-    let (parts, errors) = partials(session, keys, None, share, timeout).await.ok()?;
+    let (parts, errors) = partials(session, keys, None, share, timeout, memory)
+        .await
+        .ok()?;
     let first = parts.values().next()?;
     let agreed = errors.is_empty()
         && parts.values().all(|p| p.finished && p.cut == first.cut)
@@ -171,7 +197,7 @@ async fn at_rest(
         events: first.events,
         ..last
     };
-    check(cut, parts, Vec::new(), timeout).ok()
+    check(cut, parts, Vec::new(), timeout, memory).ok()
 }
 
 /// The marginals at a fresh cut. The sensor is asked to place the cut and
@@ -182,6 +208,7 @@ async fn at_fresh_cut(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
+    memory: &Memory,
     at: At,
     share: Share,
 ) -> Result<Collected, GatherError> {
@@ -195,10 +222,10 @@ async fn at_fresh_cut(
     }
     // No cut, no answer: an error there stops the wait for the leaders.
     let (cut, (parts, errors)) = tokio::try_join!(
-        place_cut(session, keys, &cut_parameters, timeout),
-        partials(session, keys, Some(tag), share, timeout)
+        place_cut(session, keys, &cut_parameters, timeout, memory),
+        partials(session, keys, Some(tag), share, timeout, memory)
     )?;
-    check(cut, parts, errors, timeout)
+    check(cut, parts, errors, timeout, memory)
 }
 
 /// The leaders' shares at `cut` if every leader answered there, or who is
@@ -208,9 +235,24 @@ fn check(
     parts: BTreeMap<String, Partial>,
     mut errors: Vec<String>,
     timeout: Duration,
+    memory: &Memory,
 ) -> Result<Collected, GatherError> {
     if cut.leaders.is_empty() {
         return Err(GatherError::NoLeaders);
+    }
+    // Sums of tracks or rows beyond the cut's field would be dropped or
+    // fail later without saying whose they were.
+    let bounds = Bounds {
+        tracks: cut.tracks,
+        leaders: cut.leaders.len(),
+        identities: cut.identities,
+    };
+    for p in parts.values() {
+        if let Err(e) = bounds.check_partial(p) {
+            let problem = format!("{}: {e}", p.leader);
+            memory.note_bad_reply("partial sums", &problem);
+            errors.push(problem);
+        }
     }
     for p in parts.values().filter(|p| p.cut != cut.seq) {
         errors.push(format!(
@@ -256,6 +298,7 @@ async fn partials(
     tag: Option<u64>,
     share: Share,
     timeout: Duration,
+    memory: &Memory,
 ) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
     let selector = match (tag, share) {
         (Some(tag), _) => format!("{}?tag={tag}", keys.every_leader_partial()),
@@ -272,7 +315,11 @@ async fn partials(
                     parts.insert(p.leader.clone(), p);
                 }
                 Ok(p) => errors.push(format!("{} answered tag {} for {tag:?}", p.leader, p.tag)),
-                Err(e) => errors.push(e.to_string()),
+                Err(e) => {
+                    let problem = format!("{}: {e}", sample.key_expr());
+                    memory.note_bad_reply("partial sums", &problem);
+                    errors.push(problem);
+                }
             },
             Err(e) => errors.push(String::from_utf8_lossy(&e.payload().to_bytes()).into_owned()),
         }
@@ -285,6 +332,7 @@ async fn place_cut(
     keys: &Keys,
     parameters: &str,
     timeout: Duration,
+    memory: &Memory,
 ) -> Result<CutPlaced, GatherError> {
     let selector = format!("{}?{parameters}", keys.every_sensor_cut());
     let replies = ask_everyone(session, selector, timeout, "ask for a cut").await?;
@@ -293,8 +341,11 @@ async fn place_cut(
         return Err(GatherError::NoSensor);
     };
     match reply.result() {
-        Ok(sample) => decode::<CutPlaced>(&sample.payload().to_bytes())
-            .map_err(|e| GatherError::Failed(e.to_string())),
+        Ok(sample) => decode::<CutPlaced>(&sample.payload().to_bytes()).map_err(|e| {
+            let problem = format!("{}: {e}", sample.key_expr());
+            memory.note_bad_reply("cut", &problem);
+            GatherError::Failed(problem)
+        }),
         Err(e) => Err(GatherError::Failed(format!(
             "the sensor placed no cut: {}",
             String::from_utf8_lossy(&e.payload().to_bytes())
@@ -328,6 +379,31 @@ pub async fn stats(
     }
     all.sort_by(|a, b| a.leader.cmp(&b.leader));
     Ok(all)
+}
+
+/// Every sensor gateway's counters (none when no gateway answers: the
+/// leaders' counters are still worth having).
+pub async fn sensor_stats(session: &Session, keys: &Keys, timeout: Duration) -> Vec<SensorStats> {
+    let Ok(replies) = ask_everyone(
+        session,
+        keys.every_sensor_stats(),
+        timeout,
+        "query the sensors",
+    )
+    .await
+    else {
+        return Vec::new();
+    };
+    let mut all = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.result() {
+            if let Ok(stats) = serde_json::from_slice::<SensorStats>(&sample.payload().to_bytes()) {
+                all.push(stats);
+            }
+        }
+    }
+    all.sort_by(|a, b| a.sensor.cmp(&b.sensor));
+    all
 }
 
 /// A get that every matching queryable answers on its own key (no

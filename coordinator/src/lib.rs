@@ -13,10 +13,12 @@
 //!   marginals from their partial sums.
 //! - [`identity`] — identity marginals from the leaders' rows of the
 //!   information matrix, computed only when asked.
+//! - [`request`] — a query's key and parameters, checked before any work.
 //! - [`actor`] — the Zenoh queryables of the user API: [`actor::run`].
 
 pub mod actor;
 pub mod gather;
 pub mod identity;
+pub mod request;
 
 pub use gather::{GatherError, Gathered};

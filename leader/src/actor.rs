@@ -17,13 +17,14 @@
 //! own transfers again. A gap in batch numbers, or a cut that is late, is
 //! repaired the same way. Duplicates are dropped by the state machine.
 
+use crate::door;
 use crate::error::{MeshError, RunError};
 use crate::journal::{Journal, JournalOptions, Kind};
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
 use std::future::Future;
@@ -126,7 +127,13 @@ pub async fn run(
                 leader.set_host(&config.host);
             }
             for entry in &recovered.entries {
-                if let Err(e) = feed(&mut leader, entry.kind, &entry.bytes) {
+                // Only admitted inputs are journaled: the door takes them
+                // again (counted if not, as when they first came).
+                let Some(input) = admit(&mut leader, entry.kind, &entry.bytes, "the journal")
+                else {
+                    continue;
+                };
+                if let Err(e) = door::apply(&mut leader, input, entry.bytes.len()) {
                     failure.get_or_insert(format!("replaying the journal: {e}"));
                 }
             }
@@ -150,20 +157,21 @@ pub async fn run(
     tokio::pin!(shutdown);
 
     loop {
-        // Inputs of the state machine: journaled, then applied.
-        let inputs: Vec<(Kind, Vec<u8>)> = tokio::select! {
+        // Inputs of the state machine, and where they came from: checked
+        // at the door, journaled, then applied.
+        let (origin, inputs): (String, Vec<(Kind, Vec<u8>)>) = tokio::select! {
             _ = &mut shutdown => break,
             sample = events.recv_async() => {
                 let Ok(sample) = sample else { break };
-                vec![(Kind::Batch, sample.payload().to_bytes().into_owned())]
+                (sample.key_expr().to_string(), vec![(Kind::Batch, sample.payload().to_bytes().into_owned())])
             }
             sample = transfers.recv_async() => {
                 let Ok(sample) = sample else { break };
-                vec![(Kind::Transfer, sample.payload().to_bytes().into_owned())]
+                (sample.key_expr().to_string(), vec![(Kind::Transfer, sample.payload().to_bytes().into_owned())])
             }
             reply = replies.recv() => match reply {
                 None => break,
-                Some(Reply::Followed(Ok(bytes))) => vec![(Kind::Followed, bytes)],
+                Some(Reply::Followed(Ok(bytes))) => ("the sensor's follow reply".into(), vec![(Kind::Followed, bytes)]),
                 Some(Reply::Followed(Err(e))) => {
                     failure = Some(format!("follow request failed: {e}"));
                     tracing::error!(leader = %name, error = %e, "follow request failed");
@@ -176,7 +184,7 @@ pub async fn run(
                             if let Some(r) = &mut recovery {
                                 r.batches = true;
                             }
-                            batches.iter().map(|b| (Kind::Batch, encode(b))).collect()
+                            ("the sensor's resend reply".into(), batches.iter().map(|b| (Kind::Batch, encode(b))).collect())
                         }
                         Err(e) => {
                             tracing::warn!(leader = %name, error = %e, "resend request failed; asking again");
@@ -188,7 +196,7 @@ pub async fn run(
                     if let Some(r) = &mut recovery {
                         r.peers = r.peers.saturating_sub(1);
                     }
-                    sent.iter().map(|t| (Kind::Transfer, encode(t))).collect()
+                    ("a peer's sent transfers".into(), sent.iter().map(|t| (Kind::Transfer, encode(t))).collect())
                 }
                 Some(Reply::Transfers(Err(e))) => {
                     // A peer that is down itself sends its transfers again
@@ -209,7 +217,7 @@ pub async fn run(
             }
             query = sent.recv_async() => {
                 let Ok(query) = query else { break };
-                let answer = sent_answer(&leader, &query);
+                let answer = sent_answer(&mut leader, &query);
                 answer_sent(answer, query).await;
                 continue;
             }
@@ -220,7 +228,11 @@ pub async fn run(
                         leader.forget_sent(&mark.leader, mark.position);
                     }
                     Ok(_) => {}
-                    Err(e) => tracing::warn!(leader = %name, error = %e, "bad durable mark"),
+                    Err(e) => {
+                        leader.note_rejected();
+                        tracing::warn!(leader = %name, from = %sample.key_expr(), problem = %e,
+                            rejected = leader.stats().rejected, "durable mark rejected");
+                    }
                 }
                 continue;
             }
@@ -264,17 +276,25 @@ pub async fn run(
             }
         };
         for (kind, bytes) in inputs {
+            let Some(input) = admit(&mut leader, kind, &bytes, &origin) else {
+                // A follow reply that was no use: the leader still waits
+                // for one, so it asks again.
+                if let (Kind::Followed, Some(follow)) = (kind, leader.pending_follow()) {
+                    ask_to_follow(&session, &config, follow, &reply_tx);
+                }
+                continue;
+            };
             if let Some(j) = &mut journal {
                 if let Err(e) = j.append(kind, &bytes) {
                     tracing::error!(leader = %name, error = %e, "cannot journal an input");
                     failure = Some(e.to_string());
                 }
             }
-            let actions = match feed(&mut leader, kind, &bytes) {
+            let actions = match door::apply(&mut leader, input, bytes.len()) {
                 Ok(actions) => actions,
                 Err(e) => {
                     tracing::error!(leader = %name, error = %e, "leader cannot go on applying its stream");
-                    failure = Some(e);
+                    failure = Some(e.to_string());
                     continue;
                 }
             };
@@ -323,24 +343,18 @@ pub async fn run(
     Ok(())
 }
 
-/// Decodes one input and applies it; the error says what was wrong.
-fn feed(leader: &mut Leader, kind: Kind, bytes: &[u8]) -> Result<Vec<Action>, String> {
-    let applied = match kind {
-        Kind::Batch => {
-            let batch = decode::<Batch>(bytes).map_err(|e| e.to_string())?;
-            leader.batch(batch, bytes.len())
+/// The input `bytes` are, if the door lets them in; if not, the leader
+/// logs who sent what and why, counts it and goes on as it was.
+fn admit(leader: &mut Leader, kind: Kind, bytes: &[u8], origin: &str) -> Option<door::Input> {
+    match door::admit(leader, kind, bytes) {
+        Ok(input) => Some(input),
+        Err(problem) => {
+            leader.note_rejected();
+            tracing::warn!(leader = %leader.name(), from = %origin, ?kind, bytes = bytes.len(),
+                %problem, rejected = leader.stats().rejected, "input rejected");
+            None
         }
-        Kind::Transfer => {
-            let transfer = decode::<Transfer>(bytes).map_err(|e| e.to_string())?;
-            leader.transfer(transfer, bytes.len())
-        }
-        Kind::Followed => {
-            let followed = decode::<Followed>(bytes).map_err(|e| e.to_string())?;
-            leader.followed(followed.items)
-        }
-        Kind::Generation => return Ok(Vec::new()),
-    };
-    applied.map_err(|e| e.to_string())
+    }
 }
 
 /// Carries out what the state machine asks for.
@@ -507,17 +521,25 @@ fn spawn_ask(
 }
 
 /// A peer restarted and asks for the transfers it lost.
-fn sent_answer(leader: &Leader, query: &Query) -> Result<Vec<u8>, WireError> {
+/// A request that does not decode is answered with why and counted as
+/// rejected.
+fn sent_answer(leader: &mut Leader, query: &Query) -> Result<Vec<u8>, WireError> {
     let request = query
         .payload()
         .map(|p| p.to_bytes().into_owned())
         .unwrap_or_default();
-    decode::<TransfersWanted>(&request).map(|wanted| {
+    let answer = decode::<TransfersWanted>(&request).map(|wanted| {
         encode(&TransfersSent {
             version: VERSION,
             transfers: leader.sent_to(wanted.to, wanted.after),
         })
-    })
+    });
+    if let Err(e) = &answer {
+        leader.note_rejected();
+        tracing::warn!(leader = %leader.name(), from = %query.key_expr(), problem = %e,
+            rejected = leader.stats().rejected, "request for sent transfers rejected");
+    }
+    answer
 }
 
 async fn answer_sent(answer: Result<Vec<u8>, WireError>, query: Query) {

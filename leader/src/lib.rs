@@ -10,6 +10,7 @@
 //! - [`state`] — [`Leader`], the protocol as a pure state machine.
 //! - [`actor`] — the tokio/Zenoh actor around it, one per role:
 //!   [`actor::run`].
+//! - [`door`] — bytes from the network to inputs, or rejected unharmed.
 //! - [`host`] — the leader process: its own role, and the roles of
 //!   processes gone for good that it adopts ([`host::run`]).
 //! - [`journal`] — the durable state: a snapshot plus the input log a
@@ -17,6 +18,7 @@
 //! - [`error`] — [`LeaderError`].
 
 pub mod actor;
+pub mod door;
 pub mod error;
 pub mod host;
 pub mod journal;

@@ -35,6 +35,7 @@ use idmesh_belief::radon::{
     Atom, Growth as BeliefGrowth, PartialSums, RadonOptions, RadonShare, Sparsify,
 };
 use idmesh_belief::{Field, Mix, Observe, RedCount, TrackSet};
+use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
@@ -189,6 +190,17 @@ impl Leader {
         stats
     }
 
+    /// The stream's field, once it began: what inputs must fit
+    /// ([`crate::door`]).
+    pub fn bounds(&self) -> Option<Bounds> {
+        self.started.as_ref().map(|s| Bounds::of(&s.begin))
+    }
+
+    /// Counts an input refused at the door.
+    pub fn note_rejected(&mut self) {
+        self.stats.rejected += 1;
+    }
+
     /// Counts bytes the actor sent for this leader.
     pub fn note_sent(&mut self, bytes: usize) {
         self.stats.bytes_sent += bytes as u64;
@@ -268,6 +280,14 @@ impl Leader {
                 break;
             }
             let (batch, bytes) = entry.remove();
+            // Held before the Begin, it was checked on its own only: a
+            // misfit is dropped like a lost batch (the next gap asks for
+            // it again).
+            if let Some(Err(e)) = self.bounds().map(|b| b.check_batch(&batch)) {
+                tracing::warn!(leader = %self.name, number = batch.number, error = %e, "batch rejected");
+                self.stats.rejected += 1;
+                break;
+            }
             actions.extend(self.take_batch(batch, bytes)?);
         }
         Ok(actions)
@@ -605,6 +625,13 @@ impl Leader {
         } else {
             None
         };
+        // Transfers that came before the Begin were checked on their own
+        // only ([`crate::door`]): what does not fit the field goes now.
+        let bounds = Bounds::of(&begin);
+        let before = self.transfers.len();
+        self.transfers
+            .retain(|&(_, from), (sets, rows)| bounds.check_parts(from, sets, rows, me).is_ok());
+        self.stats.rejected += (before - self.transfers.len()) as u64;
         self.started = Some(Started {
             me,
             begin,

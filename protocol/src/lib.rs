@@ -11,7 +11,10 @@
 //! - [`wire`] — the distributed runtime's messages (postcard, versioned),
 //!   its key expressions, the routing rule of the event stream and the
 //!   JSON answers of the query API.
+//! - [`fuzzing`] — the fuzz targets of every decoder above, shared by
+//!   cargo-fuzz (`fuzz/`) and the stable smoke run (`tests/fuzz_smoke.rs`).
 
+pub mod fuzzing;
 pub mod trace;
 pub mod wire;
 

@@ -52,6 +52,11 @@ pub struct LeaderStats {
     /// batch numbers (the missing batches were asked for again).
     pub duplicates: u64,
     pub gaps: u64,
+    /// Inputs refused at the door (undecodable, malformed, or not of this
+    /// stream's field): neither journaled nor applied. Counted since the
+    /// process started, plus those its journal replay met again.
+    #[serde(default)]
+    pub rejected: u64,
     /// Identity reads applied (each to a row held here, with no message).
     pub identifies: u64,
     /// Rows of the information matrix held now.

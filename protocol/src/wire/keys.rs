@@ -10,6 +10,7 @@
 //! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
+//! | `P/sensor/<name>/stats` | sensor queryable | its counters (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
@@ -70,6 +71,14 @@ impl Keys {
 
     pub fn sensor_follow(&self, sensor: &str) -> String {
         format!("{}/sensor/{sensor}/follow", self.prefix)
+    }
+
+    pub fn sensor_stats(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/stats", self.prefix)
+    }
+
+    pub fn every_sensor_stats(&self) -> String {
+        format!("{}/sensor/*/stats", self.prefix)
     }
 
     pub fn sensor_resend(&self, sensor: &str) -> String {

@@ -13,7 +13,12 @@
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
 //! - [`query`] — what a user gets back, as JSON.
+//! - [`valid`] — what every message must be on its own; [`decode`] checks
+//!   it, so a malformed message is an error, never a value.
+//! - [`bounds`] — what a message must be to fit a stream's field (tracks
+//!   below n, leader indices below L), checked where the field is known.
 
+pub mod bounds;
 pub mod coordinator_to_leader;
 pub mod coordinator_to_sensor;
 pub mod interest;
@@ -22,9 +27,11 @@ pub mod leader_to_leader;
 pub mod leader_to_sensor;
 pub mod query;
 pub mod sensor_to_leader;
+pub mod valid;
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
+pub use valid::Valid;
 
 /// The version of every postcard message below; a receiver rejects others.
 pub const VERSION: u16 = 3;
@@ -54,7 +61,12 @@ pub fn encode<T: Serialize>(message: &T) -> Vec<u8> {
     postcard::to_allocvec(message).unwrap_or_default()
 }
 
-pub fn decode<T: DeserializeOwned + Versioned>(bytes: &[u8]) -> Result<T, WireError> {
+/// Bytes from the network to a message: it must decode, carry this build's
+/// [`VERSION`] and be well formed ([`Valid`]). Length prefixes cannot make
+/// it allocate much more than `bytes` holds: serde caps what it reserves
+/// ahead of a sequence at 1 MiB, and every element then needs its own bytes
+/// (`tests/absurd_sizes.rs` measures it). Trailing bytes are ignored.
+pub fn decode<T: DeserializeOwned + Valid>(bytes: &[u8]) -> Result<T, WireError> {
     let message: T = postcard::from_bytes(bytes).map_err(|source| WireError::Decode {
         what: T::WHAT,
         source,
@@ -65,6 +77,7 @@ pub fn decode<T: DeserializeOwned + Versioned>(bytes: &[u8]) -> Result<T, WireEr
             found: message.version(),
         });
     }
+    message.validate()?;
     Ok(message)
 }
 

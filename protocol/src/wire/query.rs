@@ -4,6 +4,7 @@
 //! given is an error reply carrying [`QueryError`].
 
 use super::coordinator_to_leader::LeaderStats;
+use super::coordinator_to_sensor::SensorStats;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -60,6 +61,23 @@ pub struct IdentityTrackAnswer {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StatsAnswer {
     pub leaders: Vec<LeaderStats>,
+    /// Each sensor gateway's count of bad requests.
+    #[serde(default)]
+    pub sensors: Vec<SensorStats>,
+    #[serde(default)]
+    pub coordinator: CoordinatorStats,
+}
+
+/// The coordinator's counters of bad input.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CoordinatorStats {
+    /// Queries refused before any work: a malformed, repeated or unknown
+    /// parameter, a track that is not a number.
+    pub rejected: u64,
+    /// Replies from leaders or the sensor (partial sums, cuts) that did
+    /// not decode or did not fit the stream: the query they were for got
+    /// an error.
+    pub bad_replies: u64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -20,6 +20,7 @@ use super::batch_log::BatchLog;
 use super::cuts::{place, Cuts, Placed, Request};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
@@ -102,6 +103,16 @@ pub async fn run(
         .declare_subscriber(keys.every_leader_durable())
         .await
         .map_err(mesh("declare the durable-mark subscriber"))?;
+    let stats = session
+        .declare_queryable(keys.sensor_stats(&config.name))
+        .await
+        .map_err(mesh("declare the stats queryable"))?;
+    // Follow and resend requests refused: a bad one is answered with why
+    // and changes nothing.
+    let mut counters = SensorStats {
+        sensor: config.name.clone(),
+        rejected: 0,
+    };
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -198,7 +209,7 @@ pub async fn run(
                     .and_then(|f| router.follow(&f).map_err(|e| e.to_string()))
                     .map(|items| Followed { version: VERSION, items });
                 let followed = answer.is_ok();
-                reply_to(&query, answer, "follow").await;
+                reply_to(&query, answer, "follow", &mut counters).await;
                 if followed {
                     stream.flush(&mut router).await;
                 }
@@ -207,7 +218,11 @@ pub async fn run(
                 let Ok(sample) = sample else { break };
                 match decode::<Durable>(&sample.payload().to_bytes()) {
                     Ok(mark) => stream.forget(&mark, &mut router),
-                    Err(e) => tracing::warn!(error = %e, "bad durable mark"),
+                    Err(e) => {
+                        counters.rejected += 1;
+                        tracing::warn!(from = %sample.key_expr(), problem = %e,
+                            rejected = counters.rejected, "durable mark rejected");
+                    }
                 }
             }
             query = resends.recv_async() => {
@@ -216,7 +231,16 @@ pub async fn run(
                     .map_err(|e| e.to_string())
                     .and_then(|r| stream.resend(&r))
                     .map(|batches| Resent { version: VERSION, batches });
-                reply_to(&query, answer, "resend").await;
+                reply_to(&query, answer, "resend", &mut counters).await;
+            }
+            query = stats.recv_async() => {
+                let Ok(query) = query else { break };
+                let body = serde_json::to_vec(&counters).unwrap_or_default();
+                if let Err(e) = query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
+                {
+                    tracing::warn!(error = %e, "could not answer a stats query");
+                }
             }
             _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
         }
@@ -232,8 +256,14 @@ fn payload(query: &Query) -> Vec<u8> {
         .unwrap_or_default()
 }
 
-/// Answers a `what` request with its reply, or with why there is none.
-async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>, what: &str) {
+/// Answers a `what` request with its reply, or with why there is none
+/// (counted in `stats`).
+async fn reply_to<R: serde::Serialize>(
+    query: &Query,
+    answer: Result<R, String>,
+    what: &str,
+    stats: &mut SensorStats,
+) {
     match answer {
         Ok(reply) => {
             tracing::debug!(what, "answered");
@@ -242,7 +272,8 @@ async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>,
             }
         }
         Err(e) => {
-            tracing::error!(what, error = %e, "bad request");
+            stats.rejected += 1;
+            tracing::warn!(what, key = %query.key_expr(), error = %e, rejected = stats.rejected, "bad request rejected");
             let _ = query.reply_err(e).await;
         }
     }

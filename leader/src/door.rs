@@ -1,0 +1,100 @@
+//! The leader's door: bytes from the network become inputs of the state
+//! machine only once they decode, are well formed on their own
+//! ([`decode`] checks [`Valid`](idmesh_protocol::wire::Valid)) and fit the
+//! stream the leader knows ([`Bounds`]: tracks below n, leader indices
+//! below L). What fails is rejected before it is journaled or applied, so
+//! one bad message from the network leaves the leader's state as it was
+//! and costs it nothing but a log line and a count: it is not a failure of
+//! the leader, which keeps `failure` for its own inconsistencies (a journal
+//! it cannot write, an input it admitted but cannot apply).
+//!
+//! A batch numbered ahead of a missing one, met before the stream's Begin,
+//! can only be checked on its own here; [`Leader::batch`] checks it
+//! against the field when its turn comes, and so does the Begin for
+//! transfers that came before it.
+
+use crate::error::LeaderError;
+use crate::journal::Kind;
+use crate::state::{Action, Leader};
+use idmesh_protocol::wire::bounds::Bounds;
+use idmesh_protocol::wire::leader_to_leader::Transfer;
+use idmesh_protocol::wire::leader_to_sensor::Followed;
+use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
+use idmesh_protocol::wire::{decode, WireError};
+
+/// An input that passed the door.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    Batch(Batch),
+    Transfer(Transfer),
+    Followed(Followed),
+}
+
+/// Decodes and checks input `bytes` of `kind` against what `leader` knows.
+pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireError> {
+    match kind {
+        Kind::Batch => {
+            let batch = decode::<Batch>(bytes)?;
+            // Batch 0 carries the stream's Begin and was checked against
+            // it by `decode`; any other against the Begin the leader has.
+            match batch.items.first() {
+                Some(Sequenced {
+                    item: Item::Begin(begin),
+                    ..
+                }) => {
+                    if !begin.leaders.iter().any(|l| l == leader.name()) {
+                        return Err(WireError::Invalid {
+                            what: "event batch",
+                            problem: format!(
+                                "a Begin whose leaders {:?} do not include {}",
+                                begin.leaders,
+                                leader.name()
+                            ),
+                        });
+                    }
+                }
+                _ => {
+                    if let Some(bounds) = leader.bounds() {
+                        bounds.check_batch(&batch)?;
+                    }
+                }
+            }
+            Ok(Input::Batch(batch))
+        }
+        Kind::Transfer => {
+            let transfer = decode::<Transfer>(bytes)?;
+            if let (Some(bounds), Some(me)) = (leader.bounds(), leader.index()) {
+                bounds.check_transfer(&transfer, me)?;
+            }
+            Ok(Input::Transfer(transfer))
+        }
+        Kind::Followed => {
+            let followed = decode::<Followed>(bytes)?;
+            let bounds: Option<Bounds> = leader.bounds();
+            match bounds {
+                Some(bounds) => bounds.check_followed(&followed.items)?,
+                // Only a leader that has begun asks to follow.
+                None => {
+                    return Err(WireError::Invalid {
+                        what: "follow reply",
+                        problem: "a reply before the stream's Begin".into(),
+                    })
+                }
+            }
+            Ok(Input::Followed(followed))
+        }
+        Kind::Generation => Err(WireError::Invalid {
+            what: "journal frame",
+            problem: "a snapshot generation is not an input".into(),
+        }),
+    }
+}
+
+/// Applies an admitted input of `bytes` bytes.
+pub fn apply(leader: &mut Leader, input: Input, bytes: usize) -> Result<Vec<Action>, LeaderError> {
+    match input {
+        Input::Batch(batch) => leader.batch(batch, bytes),
+        Input::Transfer(transfer) => leader.transfer(transfer, bytes),
+        Input::Followed(followed) => leader.followed(followed.items),
+    }
+}
