@@ -317,7 +317,9 @@ pub async fn run(
             .as_ref()
             .is_some_and(|r| r.batches && r.peers == 0 && leader.missing_batches().is_none())
         {
-            let seconds = recovery.take().map_or(0.0, |r| r.since.elapsed().as_secs_f64());
+            let seconds = recovery
+                .take()
+                .map_or(0.0, |r| r.since.elapsed().as_secs_f64());
             leader.note_recovered(seconds);
             tracing::info!(leader = %name, host = %config.host, seconds, position = leader.position(), "caught up");
         }
@@ -327,7 +329,9 @@ pub async fn run(
                 let started = Instant::now();
                 leader.note_snapshot();
                 match j.compact(&leader.snapshot()) {
-                    Ok(()) => tracing::debug!(leader = %name, seconds = started.elapsed().as_secs_f64(), "snapshot written"),
+                    Ok(()) => {
+                        tracing::debug!(leader = %name, seconds = started.elapsed().as_secs_f64(), "snapshot written")
+                    }
                     Err(e) => {
                         tracing::error!(leader = %name, error = %e, "cannot write a snapshot");
                         failure = Some(e.to_string());

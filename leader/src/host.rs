@@ -228,7 +228,10 @@ mod tests {
     fn the_next_live_role_inherits_cyclically() {
         let leaders: Vec<String> = ["l0", "l1", "l2", "l3"].map(String::from).to_vec();
         let alive = |names: &[&str]| names.iter().map(|n| n.to_string()).collect();
-        assert_eq!(heir(&leaders, "l1", &alive(&["l0", "l2", "l3"])), Some("l2"));
+        assert_eq!(
+            heir(&leaders, "l1", &alive(&["l0", "l2", "l3"])),
+            Some("l2")
+        );
         assert_eq!(heir(&leaders, "l1", &alive(&["l0", "l3"])), Some("l3"));
         assert_eq!(heir(&leaders, "l3", &alive(&["l1", "l2"])), Some("l1"));
         assert_eq!(heir(&leaders, "l2", &alive(&[])), None);

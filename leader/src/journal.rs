@@ -305,10 +305,7 @@ fn snapshot_path(journal: &Path) -> PathBuf {
 }
 
 fn generation_of(bytes: &[u8]) -> u64 {
-    bytes
-        .try_into()
-        .map(u64::from_le_bytes)
-        .unwrap_or_default()
+    bytes.try_into().map(u64::from_le_bytes).unwrap_or_default()
 }
 
 /// The snapshot's generation and state, if there is one.
@@ -447,7 +444,10 @@ mod tests {
         journal.append(Kind::Batch, b"four").unwrap();
         drop(journal);
         let (_, recovered) = Journal::open(&options).unwrap();
-        assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after three"[..]));
+        assert_eq!(
+            recovered.snapshot.as_deref(),
+            Some(&b"state after three"[..])
+        );
         let bytes: Vec<&[u8]> = recovered.entries.iter().map(|e| &e.bytes[..]).collect();
         assert_eq!(bytes, [&b"four"[..]]);
     }
@@ -465,7 +465,10 @@ mod tests {
         std::fs::write(&options.path, before).unwrap();
         let (mut journal, recovered) = Journal::open(&options).unwrap();
         assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after two"[..]));
-        assert!(recovered.entries.is_empty(), "one and two are in the snapshot");
+        assert!(
+            recovered.entries.is_empty(),
+            "one and two are in the snapshot"
+        );
         journal.append(Kind::Batch, b"three").unwrap();
         drop(journal);
         assert_eq!(Journal::open(&options).unwrap().1.entries.len(), 1);

@@ -131,7 +131,10 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     assert_same_marginals(&last, &expected, "after a takeover");
     assert_eq!(applied(&gone), calm_applied);
     let adopted = leader_stats(&gone, "leader-1");
-    assert_eq!(adopted["host"], "leader-2", "the next live process adopted it");
+    assert_eq!(
+        adopted["host"], "leader-2",
+        "the next live process adopted it"
+    );
     assert!(adopted["recoveries"].as_u64().unwrap() >= 1);
     eprintln!(
         "leader-1 gone for good: adopted and caught up {:.3} s after recovery began; final answer {:.2} s after the kill",
@@ -181,7 +184,6 @@ fn lost_and_doubled_batches_change_no_answer() {
         "doubles were seen"
     );
     assert!(deployment.leaders_total("gaps") > 0, "gaps were seen");
-    let kept =
-        deployment.leaders_total_when("transfers_kept", Duration::from_secs(10), |k| k == 0);
+    let kept = deployment.leaders_total_when("transfers_kept", Duration::from_secs(10), |k| k == 0);
     assert_eq!(kept, 0, "transfers kept after every leader applied them");
 }

@@ -126,7 +126,10 @@ fn ten_minutes_at_a_steady_load_keep_memory_flat_and_sets_within_budget() {
         );
     }
     assert!(finished, "the stream ended within its time");
-    assert!(unanswered.is_empty(), "every query answered: {unanswered:?}");
+    assert!(
+        unanswered.is_empty(),
+        "every query answered: {unanswered:?}"
+    );
     // Warm-up: the first fifth of the run (allocators and caches settle).
     let warm = samples
         .iter()
@@ -148,7 +151,10 @@ fn ten_minutes_at_a_steady_load_keep_memory_flat_and_sets_within_budget() {
     }
     for s in &samples {
         for (l, &c) in s.coefficients.iter().enumerate() {
-            assert!(c <= budget as u64, "leader-{l} held {c} sets, budget {budget}");
+            assert!(
+                c <= budget as u64,
+                "leader-{l} held {c} sets, budget {budget}"
+            );
         }
         assert!(
             s.transfers_kept <= 200,
