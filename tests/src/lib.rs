@@ -1,6 +1,7 @@
 //! Shared pieces of the multi-process tests in `tests/tests/`: each starts
 //! the real `idmesh` binary and checks what a user would see.
 
+pub mod compare;
 pub mod deployment;
 
 use serde_json::Value;

@@ -13,6 +13,7 @@ use idmesh_protocol::wire::leader_to_leader::{Transfer, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Resend};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Growth, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
+use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Settings};
 use serde_json::Value;
 use std::future::IntoFuture;
@@ -26,14 +27,6 @@ async fn bounded<T>(what: &str, future: impl IntoFuture<Output = T>) -> T {
     tokio::time::timeout(PATIENCE, future.into_future())
         .await
         .unwrap_or_else(|_| panic!("{what}: no result within {PATIENCE:?}"))
-}
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("an array: {v}"))
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
 }
 
 /// A peer of the deployment's mesh: connected to every process's endpoint
@@ -271,11 +264,7 @@ fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
     let (session, malformed, bad_requests) = session;
 
     let last = deployment.final_marginals(Duration::from_secs(90));
-    let got = floats(&last["p_red"]);
-    assert_eq!(got.len(), expected.len());
-    for (t, (g, e)) in got.iter().zip(&expected).enumerate() {
-        assert!((g - e).abs() < 1e-9, "track {t}: {g} vs {e}");
-    }
+    assert_same_marginals(&last, &expected, "after garbage");
 
     let stats = &deployment.query(&["stats"]).expect("stats")[0];
     for leader in stats["leaders"].as_array().unwrap() {

@@ -5,25 +5,10 @@
 //! engine's to 1e-9 (exact conditioning, no pruning), so no event was lost
 //! and none applied twice.
 
+use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Settings};
 use serde_json::Value;
 use std::time::{Duration, Instant};
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("an array: {v}"))
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
-
-fn assert_same_marginals(got: &Value, expected: &[f64], what: &str) {
-    let got = floats(&got["p_red"]);
-    assert_eq!(got.len(), expected.len());
-    for (t, (g, e)) in got.iter().zip(expected).enumerate() {
-        assert!((g - e).abs() < 1e-9, "{what}, track {t}: {g} vs {e}");
-    }
-}
 
 /// What each leader applied, by kind (cuts excluded: queries place them).
 fn applied(deployment: &Deployment) -> Vec<(String, u64, u64, u64)> {

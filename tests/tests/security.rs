@@ -14,6 +14,7 @@
 
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
+use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Secured, Settings};
 use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, KeyPair,
@@ -88,22 +89,6 @@ fn deployment(name: &str, access_control: bool) -> (Deployment, PathBuf, Vec<f64
         },
     );
     (deployment, certs, expected)
-}
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("an array: {v}"))
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
-
-fn assert_same_marginals(got: &Value, expected: &[f64], what: &str) {
-    let got = floats(&got["p_red"]);
-    assert_eq!(got.len(), expected.len());
-    for (t, (g, e)) in got.iter().zip(expected).enumerate() {
-        assert!((g - e).abs() < 1e-9, "{what}, track {t}: {g} vs {e}");
-    }
 }
 
 /// Every leader's counters, as the legitimate client reads them.
