@@ -5,8 +5,8 @@
 //! per process (common name = its name), one for the client `operator`
 //! listed in the topology, one for an `intruder` signed by the same CA but
 //! listed nowhere, and one from another CA. The intruder is a Zenoh session
-//! of this test that puts a well-formed event batch — a mix of tracks 0 and
-//! 1, numbered as the next batch leader-0 expects — on leader-0's event key
+//! of this test that puts a well-formed event batch — a mix of tracks 1 and
+//! 3, numbered as the next batch leader-0 expects — on leader-0's event key
 //! and asks every leader for its counters. Without access control (TLS
 //! only) the leader applies that batch and answers; with it, nothing of the
 //! intruder's is heard, the legitimate client still gets the centralized
@@ -184,8 +184,8 @@ async fn replies(session: &Session, key: &str) -> usize {
 }
 
 /// Puts on leader-0's event key the batch it would apply next: a mix of
-/// tracks 0 and 1, far beyond the stream's last item, that neither leader
-/// is named to own (so it applies it alone, waiting for nobody). Whether
+/// tracks 1 and 3, far beyond the stream's last item, both owned by
+/// leader-1 (so leader-0 applies it alone, waiting for nobody). Whether
 /// the session saw leader-0's subscriber, within 3 s; the batch is put
 /// either way.
 async fn put_mix(session: &Session, prefix: &str, number: u64) -> bool {
@@ -199,12 +199,15 @@ async fn put_mix(session: &Session, prefix: &str, number: u64) -> bool {
         finished: true,
         items: vec![Sequenced {
             seq,
+            // Two tracks of leader-1 by the stream's first owners: well
+            // formed in every way leader-0's door checks, and leader-0 is
+            // no party to it, so it applies it without waiting for anyone.
             item: Item::Mix {
-                a: 0,
-                b: 1,
+                a: 1,
+                b: 3,
                 swap: 0.5,
-                owner_a: u16::MAX,
-                owner_b: u16::MAX,
+                owner_a: 1,
+                owner_b: 1,
             },
         }],
     };
