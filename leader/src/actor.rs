@@ -19,7 +19,7 @@
 
 use crate::door;
 use crate::error::{MeshError, RunError};
-use crate::journal::{Journal, JournalOptions, Kind};
+use crate::journal::{Journal, JournalOptions, Kind, Recovered};
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
@@ -112,41 +112,41 @@ pub async fn run(
         .declare_token(keys.alive("leader", &name))
         .await
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
-    let mut leader = Leader::new(name.clone());
+    let started = Instant::now();
+    let (mut journal, recovered) = match &config.journal {
+        Some(options) => {
+            let (journal, recovered) = Journal::open(options)?;
+            (Some(journal), recovered)
+        }
+        None => (None, Recovered::default()),
+    };
+    let mut leader = match &recovered.snapshot {
+        Some(snapshot) => Leader::restore(snapshot)?,
+        None => Leader::new(name.clone()),
+    };
     leader.set_host(&config.host);
     let mut failure: Option<String> = None;
-    let mut journal = None;
     let mut recovery: Option<Recovery> = None;
-    if let Some(options) = &config.journal {
-        let (opened, recovered) = Journal::open(options)?;
-        journal = Some(opened);
-        if !recovered.is_empty() || config.adopted {
-            let started = Instant::now();
-            if let Some(snapshot) = &recovered.snapshot {
-                leader = Leader::restore(snapshot)?;
-                leader.set_host(&config.host);
+    if journal.is_some() && (!recovered.is_empty() || config.adopted) {
+        for entry in &recovered.entries {
+            // Only admitted inputs are journaled: the door takes them
+            // again (counted if not, as when they first came).
+            let Some(input) = admit(&mut leader, entry.kind, &entry.bytes, "the journal") else {
+                continue;
+            };
+            if let Err(e) = door::apply(&mut leader, input, entry.bytes.len()) {
+                failure.get_or_insert(format!("replaying the journal: {e}"));
             }
-            for entry in &recovered.entries {
-                // Only admitted inputs are journaled: the door takes them
-                // again (counted if not, as when they first came).
-                let Some(input) = admit(&mut leader, entry.kind, &entry.bytes, "the journal")
-                else {
-                    continue;
-                };
-                if let Err(e) = door::apply(&mut leader, input, entry.bytes.len()) {
-                    failure.get_or_insert(format!("replaying the journal: {e}"));
-                }
-            }
-            tracing::info!(leader = %name, snapshot = recovered.snapshot.is_some(),
-                entries = recovered.entries.len(), position = leader.position(),
-                seconds = started.elapsed().as_secs_f64(), "state recovered");
-            let peers = catch_up(&session, &config, &mut leader, &reply_tx).await;
-            recovery = Some(Recovery {
-                since: started,
-                batches: false,
-                peers,
-            });
         }
+        tracing::info!(leader = %name, snapshot = recovered.snapshot.is_some(),
+            entries = recovered.entries.len(), position = leader.position(),
+            seconds = started.elapsed().as_secs_f64(), "state recovered");
+        let peers = catch_up(&session, &config, &mut leader, &reply_tx).await;
+        recovery = Some(Recovery {
+            since: started,
+            batches: false,
+            peers,
+        });
     }
     tracing::info!(leader = %name, host = %config.host, "leader up");
 
@@ -228,11 +228,7 @@ pub async fn run(
                         leader.forget_sent(&mark.leader, mark.position);
                     }
                     Ok(_) => {}
-                    Err(e) => {
-                        leader.note_rejected();
-                        tracing::warn!(leader = %name, from = %sample.key_expr(), problem = %e,
-                            rejected = leader.stats().rejected, "durable mark rejected");
-                    }
+                    Err(e) => reject(&mut leader, "a durable mark", sample.key_expr().as_str(), &e),
                 }
                 continue;
             }
@@ -353,12 +349,18 @@ fn admit(leader: &mut Leader, kind: Kind, bytes: &[u8], origin: &str) -> Option<
     match door::admit(leader, kind, bytes) {
         Ok(input) => Some(input),
         Err(problem) => {
-            leader.note_rejected();
-            tracing::warn!(leader = %leader.name(), from = %origin, ?kind, bytes = bytes.len(),
-                %problem, rejected = leader.stats().rejected, "input rejected");
+            let what = format!("{kind:?} of {} bytes", bytes.len());
+            reject(leader, &what, origin, &problem);
             None
         }
     }
+}
+
+/// Counts and logs a message from the network the leader refused: it
+/// changes nothing else.
+fn reject(leader: &mut Leader, what: &str, from: &str, problem: &WireError) {
+    let rejected = leader.note_rejected();
+    tracing::warn!(leader = %leader.name(), from, what, %problem, rejected, "input rejected");
 }
 
 /// Carries out what the state machine asks for.
@@ -539,9 +541,12 @@ fn sent_answer(leader: &mut Leader, query: &Query) -> Result<Vec<u8>, WireError>
         })
     });
     if let Err(e) = &answer {
-        leader.note_rejected();
-        tracing::warn!(leader = %leader.name(), from = %query.key_expr(), problem = %e,
-            rejected = leader.stats().rejected, "request for sent transfers rejected");
+        reject(
+            leader,
+            "a request for sent transfers",
+            query.key_expr().as_str(),
+            e,
+        );
     }
     answer
 }

@@ -173,12 +173,11 @@ pub async fn run(
                 for role in due {
                     let live: BTreeSet<String> = alive.union(&roles).cloned().collect();
                     let Some(heir) = heir(&config.leaders, &role, &live) else { continue };
+                    lost.remove(&role);
                     if !roles.contains(heir) {
-                        // Another process adopts it; stop watching.
-                        lost.remove(&role);
+                        // Another process adopts it.
                         continue;
                     }
-                    lost.remove(&role);
                     if config.state_dir.is_none() {
                         tracing::error!(process = %config.name, role = %role,
                             "cannot adopt: no state_dir, the role's state is lost; its answers stay missing");

@@ -150,13 +150,11 @@ impl Journal {
             tracing::warn!(journal = %path.display(), torn = length - whole, "cutting a torn last entry");
             file.set_len(whole).map_err(io)?;
         }
-        let continues = match entries.first() {
-            Some(e) if e.kind == Kind::Generation => generation_of(&e.bytes),
-            _ => 0,
+        let continues = if entries.first().is_some_and(|e| e.kind == Kind::Generation) {
+            generation_of(&entries.remove(0).bytes)
+        } else {
+            0
         };
-        if entries.first().is_some_and(|e| e.kind == Kind::Generation) {
-            entries.remove(0);
-        }
         file.seek(SeekFrom::End(0)).map_err(io)?;
         let mut journal = Journal {
             file,

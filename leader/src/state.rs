@@ -196,9 +196,10 @@ impl Leader {
         self.started.as_ref().map(|s| Bounds::of(&s.begin))
     }
 
-    /// Counts an input refused at the door.
-    pub fn note_rejected(&mut self) {
+    /// Counts an input refused at the door; returns the count so far.
+    pub fn note_rejected(&mut self) -> u64 {
         self.stats.rejected += 1;
+        self.stats.rejected
     }
 
     /// Counts bytes the actor sent for this leader.

@@ -334,12 +334,23 @@ impl Deployment {
             .collect()
     }
 
+    /// Every leader's counters (`idmesh query stats`).
+    pub fn leader_stats(&self) -> Vec<Value> {
+        let stats = self.query(&["stats"]).expect("stats answer");
+        stats[0]["leaders"].as_array().expect("leaders").clone()
+    }
+
+    /// Leader `name`'s counters.
+    pub fn leader(&self, name: &str) -> Value {
+        self.leader_stats()
+            .into_iter()
+            .find(|l| l["leader"] == name)
+            .unwrap_or_else(|| panic!("{name} in the stats"))
+    }
+
     /// A counter of `idmesh query stats`, summed over the leaders.
     pub fn leaders_total(&self, field: &str) -> u64 {
-        let stats = self.query(&["stats"]).expect("stats answer");
-        stats[0]["leaders"]
-            .as_array()
-            .expect("leaders")
+        self.leader_stats()
             .iter()
             .map(|l| {
                 l[field]

@@ -7,15 +7,12 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Settings};
-use serde_json::Value;
 use std::time::{Duration, Instant};
 
 /// What each leader applied, by kind (cuts excluded: queries place them).
 fn applied(deployment: &Deployment) -> Vec<(String, u64, u64, u64)> {
-    let stats = deployment.query(&["stats"]).expect("stats");
-    stats[0]["leaders"]
-        .as_array()
-        .unwrap()
+    deployment
+        .leader_stats()
         .iter()
         .map(|l| {
             (
@@ -91,7 +88,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     // Every transfer was received and made safe: none is kept any more.
     let kept = crashed.leaders_total_when("transfers_kept", Duration::from_secs(10), |k| k == 0);
     assert_eq!(kept, 0, "transfers kept after every leader made them safe");
-    let back = leader_stats(&crashed, "leader-1");
+    let back = crashed.leader("leader-1");
     assert_eq!(back["host"], "leader-1");
     eprintln!(
         "leader-1 restarted: caught up {:.3} s after it started again",
@@ -115,7 +112,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     let last = gone.final_marginals(Duration::from_secs(90));
     assert_same_marginals(&last, &expected, "after a takeover");
     assert_eq!(applied(&gone), calm_applied);
-    let adopted = leader_stats(&gone, "leader-1");
+    let adopted = gone.leader("leader-1");
     assert_eq!(
         adopted["host"], "leader-2",
         "the next live process adopted it"
@@ -126,18 +123,6 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
         adopted["recovery_seconds"].as_f64().unwrap(),
         killed.elapsed().as_secs_f64()
     );
-}
-
-/// One leader's counters.
-fn leader_stats(deployment: &Deployment, leader: &str) -> Value {
-    let stats = deployment.query(&["stats"]).expect("stats");
-    stats[0]["leaders"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|l| l["leader"] == leader)
-        .unwrap_or_else(|| panic!("{leader} in the stats"))
-        .clone()
 }
 
 /// Every batch published twice and every fifth not at all: leaders drop

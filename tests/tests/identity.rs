@@ -138,8 +138,7 @@ fn identity_reads_cost_no_messages_between_leaders() {
         deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
             a["finished"] == true
         });
-        let stats = deployment.query(&["stats"]).expect("stats");
-        let leaders = stats[0]["leaders"].as_array().unwrap().clone();
+        let leaders = deployment.leader_stats();
         let field = |l: &Value, f: &str| l[f].as_u64().unwrap();
         let messages: Vec<(String, u64, u64, u64)> = leaders
             .iter()

@@ -91,12 +91,11 @@ fn deployment(name: &str, access_control: bool) -> (Deployment, PathBuf, Vec<f64
     (deployment, certs, expected)
 }
 
-/// Every leader's counters, as the legitimate client reads them.
-/// Every leader's counters of what it received and applied (not what it
-/// keeps for others: that drops on its own as peers make their state safe).
+/// Every leader's counters of what it received and applied, as the
+/// legitimate client reads them (not what it keeps for others: that drops
+/// on its own as peers make their state safe).
 fn leader_stats(deployment: &Deployment) -> Vec<Value> {
-    let stats = deployment.query(&["stats"]).expect("stats");
-    let mut leaders = stats[0]["leaders"].as_array().expect("leaders").clone();
+    let mut leaders = deployment.leader_stats();
     for l in &mut leaders {
         if let Some(l) = l.as_object_mut() {
             l.remove("transfers_kept");

@@ -11,7 +11,6 @@
 //! docs/results.md).
 
 use idmesh_tests::deployment::{crowd, Deployment, Settings};
-use serde_json::Value;
 use std::time::{Duration, Instant};
 
 /// Resident memory of a process, in KiB (Linux).
@@ -73,8 +72,7 @@ fn ten_minutes_at_a_steady_load_keep_memory_flat_and_sets_within_budget() {
     let finished = loop {
         std::thread::sleep(Duration::from_secs(10));
         let answer = deployment.query(&["marginals"]);
-        let stats = deployment.query(&["stats"]).expect("stats");
-        let leaders: Vec<Value> = stats[0]["leaders"].as_array().unwrap().clone();
+        let leaders = deployment.leader_stats();
         let total = |f: &str| leaders.iter().map(|l| l[f].as_u64().unwrap()).sum();
         let events = match &answer {
             Ok(a) => a[0]["watermark"]["sensor-0"].as_u64().unwrap_or(0),
