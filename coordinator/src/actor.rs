@@ -35,6 +35,7 @@ pub async fn run(
     let marginals = session.declare_queryable(keys.query_marginals()).await?;
     let tracks = session.declare_queryable(keys.query_any_track()).await?;
     let stats = session.declare_queryable(keys.query_stats()).await?;
+    let positions = session.declare_queryable(keys.query_positions()).await?;
     let identities = session.declare_queryable(keys.query_identity()).await?;
     let identity_tracks = session
         .declare_queryable(keys.query_any_identity_track())
@@ -52,6 +53,7 @@ pub async fn run(
             q = marginals.recv_async() => ("marginals", q),
             q = tracks.recv_async() => ("track", q),
             q = stats.recv_async() => ("stats", q),
+            q = positions.recv_async() => ("positions", q),
             q = identities.recv_async() => ("identity", q),
             q = identity_tracks.recv_async() => ("identity track", q),
         };
@@ -95,6 +97,10 @@ async fn answer(
         Ok(Request::IdentityTrack(at, track, method)) => {
             identity_track(&session, &config, &memory, at, track, method).await
         }
+        Ok(Request::Positions) => gather::positions(&session, keys, config.timeout, &memory)
+            .await
+            .map(|a| json(&a))
+            .map_err(|e| e.to_string()),
         Ok(Request::Stats) => match gather::stats(&session, keys, config.timeout).await {
             Ok(leaders) => Ok(json(&StatsAnswer {
                 leaders,
@@ -112,6 +118,9 @@ async fn answer(
                 .await
         }
         Err(error) => {
+            if error.starts_with("degraded") {
+                memory.note_degraded();
+            }
             tracing::warn!(%error, "query not answered");
             query
                 .reply_err(json(&QueryError { error }))

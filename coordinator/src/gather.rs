@@ -5,10 +5,12 @@ use idmesh_belief::predict_red;
 use idmesh_leader::combine;
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
-use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorStats};
+use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStats};
 use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
+use idmesh_protocol::wire::query::{
+    CoordinatorStats, LeaderPlace, MarginalsAnswer, PositionsAnswer, Watermark,
+};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -77,6 +79,7 @@ pub struct Memory {
     finished: Mutex<Option<CutPlaced>>,
     rejected: AtomicU64,
     bad_replies: AtomicU64,
+    degraded: AtomicU64,
 }
 
 impl Memory {
@@ -91,10 +94,17 @@ impl Memory {
         tracing::warn!(what, problem, bad_replies = n, "bad reply");
     }
 
+    /// Counts a query answered `degraded: …` (a leader missing or not
+    /// at the cut).
+    pub fn note_degraded(&self) {
+        self.degraded.fetch_add(1, Ordering::Relaxed);
+    }
+
     pub fn stats(&self) -> CoordinatorStats {
         CoordinatorStats {
             rejected: self.rejected.load(Ordering::Relaxed),
             bad_replies: self.bad_replies.load(Ordering::Relaxed),
+            degraded: self.degraded.load(Ordering::Relaxed),
         }
     }
 
@@ -404,6 +414,56 @@ pub async fn sensor_stats(session: &Session, keys: &Keys, timeout: Duration) -> 
     }
     all.sort_by(|a, b| a.sensor.cmp(&b.sensor));
     all
+}
+
+/// Where every track was last seen and who surveils it, from the sensor
+/// gateway (only it sees `move` lines), at the point its router has
+/// reached; checked before it is passed on.
+pub async fn positions(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+    memory: &Memory,
+) -> Result<PositionsAnswer, GatherError> {
+    let replies = ask_everyone(
+        session,
+        keys.every_sensor_positions(),
+        timeout,
+        "ask the sensor for positions",
+    )
+    .await?;
+    let Ok(reply) = replies.recv_async().await else {
+        return Err(GatherError::NoSensor);
+    };
+    let sample = reply.result().map_err(|e| {
+        GatherError::Failed(format!(
+            "the sensor gave no positions: {}",
+            String::from_utf8_lossy(&e.payload().to_bytes())
+        ))
+    })?;
+    let at = serde_json::from_slice::<SensorPositions>(&sample.payload().to_bytes())
+        .map_err(|e| e.to_string())
+        .and_then(|p| p.check().map(|()| p))
+        .map_err(|problem| {
+            let problem = format!("{}: {problem}", sample.key_expr());
+            memory.note_bad_reply("positions", &problem);
+            GatherError::Failed(problem)
+        })?;
+    let mut watermark = Watermark::new();
+    watermark.insert(at.sensor, at.events);
+    Ok(PositionsAnswer {
+        watermark,
+        tracks: at.positions.len() as u32,
+        positions: at.positions,
+        owners: at.owners,
+        leaders: at
+            .leaders
+            .into_iter()
+            .zip(at.places)
+            .map(|(name, at)| LeaderPlace { name, at })
+            .collect(),
+        finished: at.finished,
+    })
 }
 
 /// A get that every matching queryable answers on its own key (no

@@ -16,6 +16,7 @@ pub enum Request {
     Track(At, u32),
     Identity(At, Method),
     IdentityTrack(At, u32, Method),
+    Positions,
     Stats,
 }
 
@@ -46,10 +47,11 @@ impl Request {
             seen.push((name, value));
         }
         let get = |name: &str| seen.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
-        if kind == "stats" {
-            return match seen.first() {
-                None => Ok(Request::Stats),
-                Some((name, _)) => Err(format!("stats takes no parameters, got {name}")),
+        if kind == "stats" || kind == "positions" {
+            return match (seen.first(), kind) {
+                (None, "stats") => Ok(Request::Stats),
+                (None, _) => Ok(Request::Positions),
+                (Some((name, _)), _) => Err(format!("{kind} takes no parameters, got {name}")),
             };
         }
         let at = match get("events") {
@@ -125,6 +127,12 @@ mod tests {
             Ok(Request::IdentityTrack(At::Latest, 3, Method::Named(_)))
         ));
         assert_eq!(parse("stats", "p/query/stats", &[]), Ok(Request::Stats));
+        assert_eq!(
+            parse("positions", "p/query/positions", &[]),
+            Ok(Request::Positions)
+        );
+        assert!(parse("positions", "p/query/positions", &[("events", "5")])
+            .is_err_and(|e| e.contains("positions takes no parameters")));
     }
 
     #[test]

@@ -43,6 +43,10 @@ pub enum Command {
     Demo(DemoArgs),
     /// Ask a running deployment: marginals, one track, or leader counters.
     Query(QueryArgs),
+    /// Serve a running deployment over HTTP: REST and Server-Sent Events
+    /// over the query API, the live map at /, Prometheus metrics at
+    /// /metrics, /healthz and /readyz.
+    Web(WebArgs),
     /// Measure the distributed runtime on loopback: events/s through 1, 2,
     /// 4 leaders, bytes per leader, and marginals latency against the raw
     /// Zenoh round trip; prints Markdown.
@@ -116,11 +120,14 @@ pub struct DemoArgs {
     /// Where the simulated trace and the topology are written.
     #[arg(long, default_value = "target/idmesh-demo")]
     pub dir: PathBuf,
+    /// Where the live map and HTTP API listen ("off": not at all).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub web: String,
 }
 
 #[derive(Debug, Clone, Args)]
 pub struct QueryArgs {
-    /// marginals | track | identity | stats
+    /// marginals | track | identity | positions | stats
     pub what: String,
     /// The track, for `track` (needed) and `identity` (optional: one track's
     /// identities instead of every track's).
@@ -169,17 +176,20 @@ impl QueryArgs {
         let what = match (self.what.as_str(), self.track) {
             ("marginals", None) => Question::Marginals,
             ("stats", None) => Question::Stats,
+            ("positions", None) => Question::Positions,
             ("track", Some(t)) => Question::Track(t),
             ("identity", track) => Question::Identity(track),
             ("track", None) => {
                 anyhow::bail!("query track needs a track number: idmesh query track 12")
             }
             (other, _) => {
-                anyhow::bail!("unknown query {other:?}: marginals, track T, identity [T] or stats")
+                anyhow::bail!(
+                    "unknown query {other:?}: marginals, track T, identity [T], positions or stats"
+                )
             }
         };
-        if what == Question::Stats && !self.at_events.is_empty() {
-            anyhow::bail!("--at-events is for marginals, track and identity, not stats");
+        if matches!(what, Question::Stats | Question::Positions) && !self.at_events.is_empty() {
+            anyhow::bail!("--at-events is for marginals, track and identity");
         }
         if self.marginals.is_some() && !matches!(what, Question::Identity(_)) {
             anyhow::bail!("--marginals is for identity queries");
@@ -194,6 +204,48 @@ impl QueryArgs {
             interval: std::time::Duration::from_millis(self.interval_ms),
             at_events: self.at_events.clone(),
             marginals: self.marginals.map(|m| m.name().to_string()),
+            tls: crate::runtime::security::Tls::from_options(
+                self.ca.as_deref(),
+                self.cert.as_deref(),
+                self.key.as_deref(),
+            )?,
+        })
+    }
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct WebArgs {
+    /// Where the HTTP server listens (port 0: any free port; the address
+    /// is printed).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub listen: String,
+    /// The coordinator's endpoint.
+    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+    pub connect: String,
+    #[arg(long, default_value = idmesh_protocol::wire::keys::DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// How long one question may wait for the coordinator.
+    #[arg(long, default_value_t = 15000)]
+    pub timeout_ms: u64,
+    /// A secured deployment: the CA certificate of its `[security] certs`.
+    #[arg(long)]
+    pub ca: Option<PathBuf>,
+    /// The gateway's client certificate (its common name listed in
+    /// `[security] clients`).
+    #[arg(long)]
+    pub cert: Option<PathBuf>,
+    /// The gateway's private key.
+    #[arg(long)]
+    pub key: Option<PathBuf>,
+}
+
+impl WebArgs {
+    pub fn options(&self) -> anyhow::Result<crate::runtime::web::WebOptions> {
+        Ok(crate::runtime::web::WebOptions {
+            listen: self.listen.clone(),
+            connect: self.connect.clone(),
+            prefix: self.prefix.clone(),
+            timeout: std::time::Duration::from_millis(self.timeout_ms),
             tls: crate::runtime::security::Tls::from_options(
                 self.ca.as_deref(),
                 self.cert.as_deref(),

@@ -71,8 +71,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             seed: args.seed,
             rate: args.rate,
             dir: args.dir,
+            web: (args.web != "off").then_some(args.web),
         }),
         Command::Query(args) => runtime::query::run(&args.options()?),
+        Command::Web(args) => runtime::web::run(&args.options()?),
         Command::Bench(args) => bench::run(&bench::BenchOptions {
             targets: args.targets,
             red: args.red,

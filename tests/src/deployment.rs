@@ -250,17 +250,7 @@ impl Deployment {
                 "--prefix",
                 &self.prefix,
             ])
-            .args(self.security.iter().flat_map(|s| {
-                let file = |name: String| s.certs.join(name).display().to_string();
-                [
-                    "--ca".to_string(),
-                    file("ca.pem".into()),
-                    "--cert".into(),
-                    file(format!("{}.pem", s.client)),
-                    "--key".into(),
-                    file(format!("{}.key", s.client)),
-                ]
-            }))
+            .args(self.client_tls_args())
             .output()
             .expect("idmesh query runs");
         let answers = String::from_utf8_lossy(&output.stdout)
@@ -272,6 +262,25 @@ impl Deployment {
             String::from_utf8_lossy(&output.stderr).into_owned(),
             output.status.success(),
         )
+    }
+
+    /// `--ca`, `--cert`, `--key` of the deployment's client, for a
+    /// secured deployment (none otherwise).
+    pub fn client_tls_args(&self) -> Vec<String> {
+        self.security
+            .iter()
+            .flat_map(|s| {
+                let file = |name: String| s.certs.join(name).display().to_string();
+                [
+                    "--ca".to_string(),
+                    file("ca.pem".into()),
+                    "--cert".into(),
+                    file(format!("{}.pem", s.client)),
+                    "--key".into(),
+                    file(format!("{}.key", s.client)),
+                ]
+            })
+            .collect()
     }
 
     /// The marginals once the whole stream is in, or panics after `patience`.

@@ -3,6 +3,7 @@
 
 pub mod compare;
 pub mod deployment;
+pub mod web;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

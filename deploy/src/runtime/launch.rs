@@ -132,6 +132,8 @@ pub struct DemoOptions {
     /// Events per second.
     pub rate: f64,
     pub dir: PathBuf,
+    /// Where the web gateway listens; None = no gateway.
+    pub web: Option<String>,
 }
 
 /// `idmesh demo`: a crowd simulated here (colours and identity reads), four
@@ -171,13 +173,13 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         .worker_threads(1)
         .enable_all()
         .build()?;
-    let result = runtime.block_on(watch(&mut processes, &coordinator));
+    let result = runtime.block_on(watch(&mut processes, &coordinator, options.web.as_deref()));
     processes.stop();
     result
 }
 
 /// Prints a live answer every second until Ctrl-C.
-async fn watch(processes: &mut Processes, coordinator: &str) -> Result<()> {
+async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) -> Result<()> {
     let session = mesh::open(&MeshOptions {
         client: false,
         listen: vec![],
@@ -186,6 +188,13 @@ async fn watch(processes: &mut Processes, coordinator: &str) -> Result<()> {
     })
     .await?;
     let keys = Keys::new(DEFAULT_PREFIX);
+    // The live map: a busy port costs the demo its map, not its answers.
+    if let Some(address) = web {
+        match super::web::spawn(session.clone(), DEFAULT_PREFIX, address).await {
+            Ok(url) => eprintln!("demo: live map and HTTP API on {url}"),
+            Err(e) => eprintln!("demo: no live map: {e:#}"),
+        }
+    }
     let ctrl_c = super::roles::shutdown();
     tokio::pin!(ctrl_c);
     loop {

@@ -1,7 +1,7 @@
 //! The distributed runtime's side of the binary: the topology file, the
 //! one function that opens a Zenoh session, one runner per role, the
 //! launcher (`up`, `demo`), the loopback topology they and the bench use,
-//! the query client, and what secures a deployment (TLS, access control).
+//! the query client, the web gateway's session (`web`), and what secures a deployment (TLS, access control).
 
 pub mod launch;
 pub mod loopback;
@@ -10,3 +10,4 @@ pub mod query;
 pub mod roles;
 pub mod security;
 pub mod topology;
+pub mod web;

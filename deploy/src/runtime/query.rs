@@ -1,4 +1,4 @@
-//! `idmesh query marginals|track T|identity [T]|stats`: a Zenoh client of
+//! `idmesh query marginals|track T|identity [T]|positions|stats`: a Zenoh client of
 //! the user API.
 //! Human-readable by default, `--json` prints the reply as it came.
 //! `--ca`, `--cert`, `--key` reach a secured deployment over mutual TLS.
@@ -8,8 +8,8 @@ use super::security::Tls;
 use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
-    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, QueryError, StatsAnswer, TrackAnswer,
-    Watermark,
+    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, PositionsAnswer, QueryError, StatsAnswer,
+    TrackAnswer, Watermark,
 };
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -41,6 +41,8 @@ pub enum Question {
     Track(u32),
     /// Every track's identities, or one track's.
     Identity(Option<u32>),
+    /// Where every track was last seen, and its leader.
+    Positions,
     Stats,
 }
 
@@ -64,6 +66,7 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             Question::Track(t) => keys.query_track(t),
             Question::Identity(None) => keys.query_identity(),
             Question::Identity(Some(t)) => keys.query_identity_track(t),
+            Question::Positions => keys.query_positions(),
             Question::Stats => keys.query_stats(),
         };
         let parameters: Vec<String> = options
@@ -224,6 +227,17 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
             let i = a.predicted_identity;
             let p = a.p_identity.get(i as usize).copied().unwrap_or(f64::NAN);
             writeln!(out, "track {}: identity {i} (P = {p:.4})", a.track)?;
+        }
+        Question::Positions => {
+            let a: PositionsAnswer = serde_json::from_slice(body)?;
+            writeln!(out, "{}", events(&a.watermark))?;
+            for (t, (at, &owner)) in a.positions.iter().zip(&a.owners).enumerate() {
+                let leader = a.leaders.get(owner as usize).map_or("?", |l| l.name.as_str());
+                match at {
+                    Some([x, y]) => writeln!(out, "  track {t:>4}  ({x:.2}, {y:.2})  {leader}")?,
+                    None => writeln!(out, "  track {t:>4}  not seen yet  {leader}")?,
+                }
+            }
         }
         Question::Stats => {
             let a: StatsAnswer = serde_json::from_slice(body)?;

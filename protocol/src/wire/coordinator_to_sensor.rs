@@ -2,7 +2,8 @@
 //! the query's tag into every leader's stream and says where (postcard reply
 //! to a get on `P/sensor/<name>/cut?tag=<tag>`, `;rows` for an identity
 //! query, whose cut asks the leaders for their rows too). Also the
-//! gateway's counters, which the coordinator's stats answer includes.
+//! gateway's counters, which the coordinator's stats answer includes, and
+//! where the tracks are (JSON, like the counters).
 
 use serde::{Deserialize, Serialize};
 
@@ -31,4 +32,60 @@ pub struct SensorStats {
     /// Follow and resend requests refused: undecodable, malformed, or
     /// naming a leader or track the stream does not have.
     pub rejected: u64,
+}
+
+/// Where every track was last seen and which leader surveils it, at the
+/// point of the stream the sensor's router has reached (JSON,
+/// `P/sensor/<name>/positions`). Only the sensor knows positions: leaders
+/// are sent the handovers they cause, never the moves.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SensorPositions {
+    pub sensor: String,
+    /// Trace events routed so far: the positions include exactly these.
+    pub events: u64,
+    pub finished: bool,
+    /// The leaders, in stream order, and where each sits (None: the
+    /// topology places no leader, tracks stay with leader t mod L).
+    pub leaders: Vec<String>,
+    pub places: Vec<Option<[f64; 2]>>,
+    /// Per track: its last `move` position (None before any), and the
+    /// index in `leaders` of the leader that surveils it.
+    pub positions: Vec<Option<[f64; 2]>>,
+    pub owners: Vec<u16>,
+}
+
+impl SensorPositions {
+    /// Checks what a reply from the network must be before it is believed:
+    /// one owner per position, owners among the leaders, finite numbers.
+    pub fn check(&self) -> Result<(), String> {
+        if self.places.len() != self.leaders.len() {
+            return Err(format!(
+                "{} places for {} leaders",
+                self.places.len(),
+                self.leaders.len()
+            ));
+        }
+        if self.owners.len() != self.positions.len() {
+            return Err(format!(
+                "{} owners for {} tracks",
+                self.owners.len(),
+                self.positions.len()
+            ));
+        }
+        if let Some(o) = self
+            .owners
+            .iter()
+            .find(|&&o| o as usize >= self.leaders.len())
+        {
+            return Err(format!(
+                "owner {o} is not one of the {} leaders",
+                self.leaders.len()
+            ));
+        }
+        let finite = |p: &Option<[f64; 2]>| p.is_none_or(|[x, y]| x.is_finite() && y.is_finite());
+        if !self.positions.iter().chain(&self.places).all(finite) {
+            return Err("a position is not a finite number".into());
+        }
+        Ok(())
+    }
 }

@@ -11,10 +11,12 @@
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
 //! | `P/sensor/<name>/stats` | sensor queryable | its counters (JSON) |
+//! | `P/sensor/<name>/positions` | sensor queryable | every track's last position and owner where the stream is (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
+//! | `P/query/positions` | coordinator queryable | where every track was last seen, and its leader (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
 //! | `P/ping/<role>/<name>` | every process | answers at once: the raw round trip, for health checks and the bench |
 
@@ -81,6 +83,14 @@ impl Keys {
         format!("{}/sensor/*/stats", self.prefix)
     }
 
+    pub fn sensor_positions(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/positions", self.prefix)
+    }
+
+    pub fn every_sensor_positions(&self) -> String {
+        format!("{}/sensor/*/positions", self.prefix)
+    }
+
     pub fn sensor_resend(&self, sensor: &str) -> String {
         format!("{}/sensor/{sensor}/resend", self.prefix)
     }
@@ -119,6 +129,10 @@ impl Keys {
 
     pub fn query_any_identity_track(&self) -> String {
         format!("{}/query/identity/*", self.prefix)
+    }
+
+    pub fn query_positions(&self) -> String {
+        format!("{}/query/positions", self.prefix)
     }
 
     pub fn query_stats(&self) -> String {

@@ -1,6 +1,6 @@
 //! The user-facing answers, JSON with Zenoh's JSON encoding.
 //! `P/query/marginals`, `P/query/track/<t>`, `P/query/identity`,
-//! `P/query/identity/<t>` and `P/query/stats`; an answer that cannot be
+//! `P/query/identity/<t>`, `P/query/positions` and `P/query/stats`; an answer that cannot be
 //! given is an error reply carrying [`QueryError`].
 
 use super::coordinator_to_leader::LeaderStats;
@@ -58,6 +58,27 @@ pub struct IdentityTrackAnswer {
     pub marginals: String,
 }
 
+/// Where every track was last seen (`positions[t]`, null before its first
+/// `move`) and the index in `leaders` of the leader that surveils it
+/// (`owners[t]`), after the watermark's events; `leaders` with where each
+/// sits (its region: the points nearer to it than to any other).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PositionsAnswer {
+    pub watermark: Watermark,
+    pub tracks: u32,
+    pub positions: Vec<Option<[f64; 2]>>,
+    pub owners: Vec<u16>,
+    pub leaders: Vec<LeaderPlace>,
+    pub finished: bool,
+}
+
+/// A leader and where it sits (null: tracks stay with leader t mod L).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LeaderPlace {
+    pub name: String,
+    pub at: Option<[f64; 2]>,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StatsAnswer {
     pub leaders: Vec<LeaderStats>,
@@ -78,6 +99,10 @@ pub struct CoordinatorStats {
     /// not decode or did not fit the stream: the query they were for got
     /// an error.
     pub bad_replies: u64,
+    /// Queries answered `degraded: …`: a leader missing, recovering, or
+    /// not at the cut (never numbers without its share).
+    #[serde(default)]
+    pub degraded: u64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -107,6 +107,10 @@ pub async fn run(
         .declare_queryable(keys.sensor_stats(&config.name))
         .await
         .map_err(mesh("declare the stats queryable"))?;
+    let positions = session
+        .declare_queryable(keys.sensor_positions(&config.name))
+        .await
+        .map_err(mesh("declare the positions queryable"))?;
     // Follow and resend requests refused: a bad one is answered with why
     // and changes nothing.
     let mut counters = SensorStats {
@@ -240,6 +244,18 @@ pub async fn run(
                     .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
                 {
                     tracing::warn!(error = %e, "could not answer a stats query");
+                }
+            }
+            query = positions.recv_async() => {
+                let Ok(query) = query else { break };
+                // Answered between chunks: the positions after exactly
+                // `events` events, a point of the stream like a cut.
+                let body = serde_json::to_vec(&router.positions(&config.name, stream.finished))
+                    .unwrap_or_default();
+                if let Err(e) = query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
+                {
+                    tracing::warn!(error = %e, "could not answer a positions query");
                 }
             }
             _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}

@@ -14,6 +14,7 @@ use super::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
 use idmesh_leader::LeaderError;
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::Follow;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
@@ -56,6 +57,8 @@ pub struct Router {
     begin: Begin,
     interests: Vec<Interest>,
     owners: Vec<u16>,
+    /// Each track's last `move` (the live map's positions query).
+    positions: Vec<Option<[f64; 2]>>,
     mixing_log: MixingLog,
     seq: u64,
     events: u64,
@@ -101,6 +104,7 @@ impl Router {
         }
         let mut router = Router {
             owners: begin.owners.clone(),
+            positions: vec![None; tracks],
             begin: begin.clone(),
             interests,
             mixing_log: MixingLog::new(tracks),
@@ -185,6 +189,7 @@ impl Router {
             }
             Line::Move(m) => {
                 self.events += 1;
+                self.positions[m.track as usize] = Some([m.x, m.y]);
                 let Some(to) = self.nearest(m.x, m.y) else {
                     return;
                 };
@@ -237,6 +242,25 @@ impl Router {
             }
         }
         self.log.push(Sequenced { seq, item });
+    }
+
+    /// Where every track was last seen and who surveils it, after the
+    /// events routed so far.
+    pub fn positions(&self, sensor: &str, finished: bool) -> SensorPositions {
+        SensorPositions {
+            sensor: sensor.to_string(),
+            events: self.events,
+            finished,
+            leaders: self.begin.leaders.clone(),
+            places: self
+                .config
+                .leaders
+                .iter()
+                .map(|l| l.at.map(|(x, y)| [x, y]))
+                .collect(),
+            positions: self.positions.clone(),
+            owners: self.owners.clone(),
+        }
     }
 
     /// Places the cut `wanted` in every leader's stream: (seq of the cut,

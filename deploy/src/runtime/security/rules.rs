@@ -21,11 +21,11 @@
 //! | sensor, leaders | leaders | declare subscriber | `P/leader/*/durable` |
 //! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership) |
 //! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
-//! | coordinator | sensor | query | `P/sensor/*/cut` |
+//! | coordinator | sensor | query | `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions` |
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
 //! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) |
-//! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`): Zenoh replies on the asker's key |
+//! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
 
 use crate::runtime::topology::Topology;
@@ -133,7 +133,11 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             &coordinator,
             &sensor,
             &["query"],
-            vec![keys.every_sensor_cut()],
+            vec![
+                keys.every_sensor_cut(),
+                keys.every_sensor_stats(),
+                keys.every_sensor_positions(),
+            ],
         ),
         grant(
             "pings",
@@ -170,7 +174,11 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
         match m.role {
             "sensor" => {
                 served.push(format!("{p}/sensor/{}/**", m.name));
-                asked_as.push(keys.every_sensor_cut());
+                asked_as.extend([
+                    keys.every_sensor_cut(),
+                    keys.every_sensor_stats(),
+                    keys.every_sensor_positions(),
+                ]);
             }
             "leader" => {
                 // Any leader role: its own, or one it adopts.

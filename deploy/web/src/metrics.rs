@@ -1,0 +1,244 @@
+//! `GET /metrics` in the OpenMetrics text format (prometheus-client).
+//!
+//! Nothing is pushed to the gateway: a scrape asks `query/stats` and
+//! `query/positions` (the stream's event count) and writes what they say,
+//! so the numbers are the deployment's own counters at that moment, with
+//! labels `role` (leader, sensor, coordinator) and `process` (the process
+//! that runs it; for a leader role adopted from a process gone for good,
+//! the adopter) and, for leaders, `leader` (the role). Beside them the
+//! gateway's own histograms of query latency, by question and outcome.
+//! `idmesh_up{role="stats"}` is 0 when the stats could not be had (then
+//! only the gateway's own metrics follow).
+
+use crate::asker::Asker;
+use axum::extract::State;
+use axum::http::{header, StatusCode};
+use axum::response::{IntoResponse, Response};
+use idmesh_protocol::wire::coordinator_to_leader::LeaderStats;
+use idmesh_protocol::wire::query::{PositionsAnswer, StatsAnswer};
+use prometheus_client::collector::Collector;
+use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
+use prometheus_client::metrics::counter::ConstCounter;
+use prometheus_client::metrics::gauge::ConstGauge;
+use prometheus_client::registry::Registry;
+use std::sync::Arc;
+
+pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+
+type Labels = Vec<(String, String)>;
+
+/// A leader counter: (metric name without `idmesh_leader_` and `_total`,
+/// help, the value).
+type LeaderField = (&'static str, &'static str, fn(&LeaderStats) -> u64);
+
+const LEADER_COUNTERS: [LeaderField; 18] = [
+    ("items", "stream items applied", |s| s.items),
+    ("mixes", "mix events applied", |s| s.mixes),
+    ("observations", "observations applied", |s| s.observations),
+    ("handovers", "handovers applied", |s| s.handovers),
+    ("identifies", "identity reads applied", |s| s.identifies),
+    ("batches", "event batches received", |s| s.batches),
+    (
+        "bytes_received",
+        "bytes of batches and transfers received",
+        |s| s.bytes_received,
+    ),
+    ("bytes_sent", "bytes of transfers sent to other leaders", |s| {
+        s.bytes_sent
+    }),
+    ("transfers_sent", "transfers sent to other leaders", |s| {
+        s.transfers_sent
+    }),
+    (
+        "transfers_received",
+        "transfers received from other leaders",
+        |s| s.transfers_received,
+    ),
+    ("sets_sent", "sets handed to other leaders", |s| s.sets_sent),
+    ("follows", "follow requests to the sensor", |s| s.follows),
+    ("omp_runs", "OMP runs on this leader's sets", |s| s.omp_runs),
+    ("duplicates", "batches and transfers that came twice", |s| {
+        s.duplicates
+    }),
+    ("gaps", "gaps in the batch numbers", |s| s.gaps),
+    ("rejected", "inputs refused at the door", |s| s.rejected),
+    ("snapshots", "snapshots written", |s| s.snapshots),
+    ("recoveries", "restarts and adoptions caught up", |s| {
+        s.recoveries
+    }),
+];
+
+const LEADER_GAUGES: [LeaderField; 6] = [
+    ("coefficients", "sets (coefficients) held", |s| s.coefficients),
+    ("rows_held", "rows of the information matrix held", |s| {
+        s.rows_held
+    }),
+    ("tracks_owned", "tracks this leader surveils", |s| {
+        s.tracks_owned
+    }),
+    ("tracks_followed", "tracks in this leader's interest", |s| {
+        s.tracks_followed
+    }),
+    ("position", "seq of the last item applied", |s| s.position),
+    (
+        "transfers_kept",
+        "transfers kept for peers not yet safe past them",
+        |s| s.transfers_kept,
+    ),
+];
+
+/// The deployment's counters at one scrape.
+#[derive(Debug)]
+struct Snapshot {
+    stats: Option<StatsAnswer>,
+    positions: Option<PositionsAnswer>,
+}
+
+fn labels(pairs: &[(&str, &str)]) -> Labels {
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
+}
+
+fn leader_labels(s: &LeaderStats) -> Labels {
+    let process = if s.host.is_empty() { &s.leader } else { &s.host };
+    labels(&[
+        ("role", "leader"),
+        ("leader", &s.leader),
+        ("process", process),
+    ])
+}
+
+impl Collector for Snapshot {
+    fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
+        let up = ConstGauge::new(i64::from(self.stats.is_some()));
+        let mut family =
+            encoder.encode_descriptor("up", "1 if query/stats answered", None, up.metric_type())?;
+        up.encode(family.encode_family(&labels(&[("role", "stats")]))?)?;
+        if let Some(positions) = &self.positions {
+            let counter = ConstCounter::new(0u64);
+            let mut family = encoder.encode_descriptor(
+                "sensor_events",
+                "trace events the sensor has routed",
+                None,
+                counter.metric_type(),
+            )?;
+            for (sensor, &events) in &positions.watermark {
+                let labels = labels(&[("role", "sensor"), ("process", sensor)]);
+                ConstCounter::new(events).encode(family.encode_family(&labels)?)?;
+            }
+        }
+        let Some(stats) = &self.stats else {
+            return Ok(());
+        };
+        for (name, help, field) in LEADER_COUNTERS {
+            let mut family = encoder.encode_descriptor(
+                &format!("leader_{name}"),
+                help,
+                None,
+                ConstCounter::new(0u64).metric_type(),
+            )?;
+            for s in &stats.leaders {
+                ConstCounter::new(field(s)).encode(family.encode_family(&leader_labels(s))?)?;
+            }
+        }
+        for (name, help, field) in LEADER_GAUGES {
+            let mut family = encoder.encode_descriptor(
+                &format!("leader_{name}"),
+                help,
+                None,
+                ConstGauge::new(0i64).metric_type(),
+            )?;
+            for s in &stats.leaders {
+                let value = i64::try_from(field(s)).unwrap_or(i64::MAX);
+                ConstGauge::new(value).encode(family.encode_family(&leader_labels(s))?)?;
+            }
+        }
+        let mut family = encoder.encode_descriptor(
+            "leader_recovery_seconds",
+            "how long the last recovery took",
+            None,
+            ConstGauge::new(0.0f64).metric_type(),
+        )?;
+        for s in &stats.leaders {
+            ConstGauge::new(s.recovery_seconds).encode(family.encode_family(&leader_labels(s))?)?;
+        }
+        // Bad input refused, by every role.
+        let mut family = encoder.encode_descriptor(
+            "rejected",
+            "bad input refused (leaders: at the door; sensors: follow and resend requests; coordinator: queries)",
+            None,
+            ConstCounter::new(0u64).metric_type(),
+        )?;
+        for s in &stats.leaders {
+            ConstCounter::new(s.rejected).encode(family.encode_family(&leader_labels(s))?)?;
+        }
+        for s in &stats.sensors {
+            let labels = labels(&[("role", "sensor"), ("process", &s.sensor)]);
+            ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
+        }
+        let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
+        ConstCounter::new(stats.coordinator.rejected).encode(family.encode_family(&coordinator)?)?;
+        for (name, help, value) in [
+            (
+                "coordinator_bad_replies",
+                "replies from leaders or the sensor that were no good",
+                stats.coordinator.bad_replies,
+            ),
+            (
+                "coordinator_degraded_answers",
+                "queries answered degraded (a leader missing or not at the cut)",
+                stats.coordinator.degraded,
+            ),
+        ] {
+            let counter = ConstCounter::new(value);
+            let family =
+                encoder.encode_descriptor(name, help, None, counter.metric_type())?;
+            let mut family = family;
+            counter.encode(family.encode_family(&coordinator)?)?;
+        }
+        Ok(())
+    }
+}
+
+/// The whole exposition at this moment.
+pub async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
+    let keys = &asker.keys;
+    let (stats, positions) = tokio::join!(
+        asker.ask(&keys.query_stats(), "stats"),
+        asker.ask(&keys.query_positions(), "positions")
+    );
+    let snapshot = Snapshot {
+        stats: stats
+            .ok()
+            .then(|| serde_json::from_slice(&stats.body).ok())
+            .flatten(),
+        positions: positions
+            .ok()
+            .then(|| serde_json::from_slice(&positions.body).ok())
+            .flatten(),
+    };
+    let mut registry = Registry::with_prefix("idmesh");
+    registry.register_collector(Box::new(snapshot));
+    registry.register_with_unit(
+        "web_query_latency",
+        "how long the gateway waited for the coordinator, by question and outcome",
+        prometheus_client::registry::Unit::Seconds,
+        asker.latency.clone(),
+    );
+    let mut text = String::new();
+    prometheus_client::encoding::text::encode(&mut text, &registry)?;
+    Ok(text)
+}
+
+pub async fn metrics(State(asker): State<Arc<Asker>>) -> Response {
+    match exposition(&asker).await {
+        Ok(text) => ([(header::CONTENT_TYPE, CONTENT_TYPE)], text).into_response(),
+        Err(_) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "the metrics could not be encoded",
+        )
+            .into_response(),
+    }
+}

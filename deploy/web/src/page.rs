@@ -1,0 +1,40 @@
+//! The live map's three files, compiled into the binary (no CDN, no
+//! internet): `index.html`, `map.js` (vanilla JavaScript drawing on a
+//! canvas, fed by Server-Sent Events from [`crate::rest`]) and `map.css`.
+//! The page learns the deployment's prefix from a `<meta>` tag filled in
+//! here.
+
+use crate::asker::Asker;
+use axum::extract::State;
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use std::sync::Arc;
+
+const INDEX: &str = include_str!("../assets/index.html");
+const SCRIPT: &str = include_str!("../assets/map.js");
+const STYLE: &str = include_str!("../assets/map.css");
+
+pub async fn index(State(asker): State<Arc<Asker>>) -> Response {
+    // A prefix is key-expression chunks: no quote or angle bracket can be
+    // in it, but escape them anyway rather than trust that.
+    let prefix: String = asker
+        .keys
+        .prefix()
+        .chars()
+        .filter(|c| !matches!(c, '"' | '<' | '>' | '&' | '\''))
+        .collect();
+    let page = INDEX.replace("{{PREFIX}}", &prefix);
+    ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], page).into_response()
+}
+
+pub async fn script() -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/javascript; charset=utf-8")],
+        SCRIPT,
+    )
+        .into_response()
+}
+
+pub async fn style() -> Response {
+    ([(header::CONTENT_TYPE, "text/css; charset=utf-8")], STYLE).into_response()
+}

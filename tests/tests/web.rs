@@ -1,0 +1,455 @@
+//! The web gateway (`idmesh web`) in front of a real deployment, seen as a
+//! person and their tools would: a real browser (Debian's headless
+//! Chromium over the DevTools protocol) opens the live map, `curl`-like
+//! REST and Server-Sent Events get the Zenoh API's answers byte for byte,
+//! and `/metrics` parses with a real OpenMetrics parser and says what
+//! `query/stats` says. Killing a leader turns the page `degraded`, naming
+//! it. Screenshots and the figures are written to the test's output
+//! directory (`target/tmp/web/`).
+
+use headless_chrome::protocol::cdp::Page::CaptureScreenshotFormatOption;
+use headless_chrome::{Browser, LaunchOptions, Tab};
+use idmesh_tests::deployment::{crowd_with_identities, Deployment, Settings};
+use idmesh_tests::web::Gateway;
+use serde_json::Value;
+use std::ffi::OsStr;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+const TRACKS: usize = 16;
+
+fn output_dir() -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// GET `url` with `accept`: (status, body).
+fn get(url: &str) -> (u16, Vec<u8>) {
+    let response = match ureq::get(url).timeout(Duration::from_secs(30)).call() {
+        Ok(r) => r,
+        Err(ureq::Error::Status(_, r)) => r,
+        Err(e) => panic!("GET {url}: {e}"),
+    };
+    let status = response.status();
+    let mut body = Vec::new();
+    std::io::Read::read_to_end(&mut response.into_reader(), &mut body).unwrap();
+    (status, body)
+}
+
+fn json(body: &[u8]) -> Value {
+    serde_json::from_slice(body)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(body)))
+}
+
+/// `idmesh query <args> --json`, the bytes it printed (one answer).
+fn zenoh_answer(deployment: &Deployment, args: &[&str]) -> Vec<u8> {
+    let output = std::process::Command::new(idmesh_tests::idmesh())
+        .arg("query")
+        .args(args)
+        .args(["--json", "--connect", &deployment.coordinator])
+        .args(["--prefix", &deployment.prefix])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let mut body = output.stdout;
+    assert_eq!(body.pop(), Some(b'\n'));
+    body
+}
+
+/// The first `count` events of a Server-Sent Events stream: (event name,
+/// data, when it came).
+fn sse(url: &str, count: usize) -> Vec<(String, String, Instant)> {
+    let response = ureq::get(url)
+        .set("Accept", "text/event-stream")
+        .timeout(Duration::from_secs(60))
+        .call()
+        .unwrap_or_else(|e| panic!("SSE {url}: {e}"));
+    assert_eq!(response.content_type(), "text/event-stream");
+    let mut events = Vec::new();
+    let (mut name, mut data) = (String::new(), String::new());
+    for line in BufReader::new(response.into_reader()).lines() {
+        let line = line.unwrap();
+        if let Some(n) = line.strip_prefix("event:") {
+            name = n.trim().to_string();
+        } else if let Some(d) = line.strip_prefix("data:") {
+            data.push_str(d.strip_prefix(' ').unwrap_or(d));
+        } else if line.is_empty() && !data.is_empty() {
+            events.push((std::mem::take(&mut name), std::mem::take(&mut data), Instant::now()));
+            if events.len() == count {
+                break;
+            }
+        }
+    }
+    events
+}
+
+fn browser(dir: &Path) -> Browser {
+    let profile = dir.join(format!("chromium-profile-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&profile);
+    let args: Vec<&OsStr> = [
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+    ]
+    .iter()
+    .map(OsStr::new)
+    .collect();
+    let options = LaunchOptions::default_builder()
+        .path(Some(PathBuf::from("/usr/bin/chromium")))
+        .headless(true)
+        .sandbox(false)
+        .window_size(Some((1400, 900)))
+        .user_data_dir(Some(profile))
+        .args(args)
+        .idle_browser_timeout(Duration::from_secs(600))
+        .build()
+        .expect("launch options");
+    Browser::new(options).expect("chromium starts (apt-get install chromium)")
+}
+
+fn snapshot(tab: &Tab) -> Value {
+    let value = tab
+        .evaluate("JSON.stringify(window.idmesh.snapshot())", false)
+        .expect("the page answers")
+        .value
+        .expect("a value");
+    serde_json::from_str(value.as_str().expect("a string")).unwrap()
+}
+
+/// Polls the page until `wanted` holds of its snapshot.
+fn page_when(tab: &Tab, patience: Duration, what: &str, wanted: impl Fn(&Value) -> bool) -> Value {
+    let started = Instant::now();
+    loop {
+        let s = snapshot(tab);
+        if wanted(&s) {
+            return s;
+        }
+        if started.elapsed() > patience {
+            let mut s = s;
+            s["tracks"] = Value::from(s["tracks"].as_array().map_or(0, Vec::len));
+            panic!("the page never showed {what} within {patience:?}; last: {s}");
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// The colour of the canvas pixel under (x, y) CSS pixels.
+fn pixel(tab: &Tab, x: f64, y: f64, ratio: f64) -> [u8; 3] {
+    let js = format!(
+        "Array.from(document.getElementById('map').getContext('2d').getImageData({}, {}, 1, 1).data).join(',')",
+        (x * ratio).round(),
+        (y * ratio).round()
+    );
+    let value = tab.evaluate(&js, false).unwrap().value.unwrap();
+    let parts: Vec<u8> = value
+        .as_str()
+        .unwrap()
+        .split(',')
+        .map(|p| p.parse().unwrap())
+        .collect();
+    [parts[0], parts[1], parts[2]]
+}
+
+/// The map's colour of P(red) = p (the page's ramp, written again here).
+fn colour_of(p: f64) -> [i32; 3] {
+    let q = p.clamp(0.0, 1.0);
+    [
+        (49.0 + 180.0 * q).round() as i32,
+        (130.0 - 68.0 * q).round() as i32,
+        (206.0 - 144.0 * q).round() as i32,
+    ]
+}
+
+fn percentile(mut xs: Vec<f64>, q: f64) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[((xs.len() - 1) as f64 * q).round() as usize]
+}
+
+#[test]
+fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
+    let out = output_dir();
+    let dir = std::env::temp_dir().join(format!("idmesh-web-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, TRACKS, 4, 120.0, 3);
+    let settings = Settings {
+        leaders: 4,
+        distributed_rule: true,
+        budget: 300,
+        rate: Some(400.0),
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_each("web", &trace, &settings);
+    let gateway = Gateway::start(&deployment);
+    let prefix = deployment.prefix.clone();
+    let api = |q: &str| gateway.at(&format!("{prefix}/query/{q}"));
+
+    // The health checks: up at once; ready once every role answers.
+    assert_eq!(get(&gateway.at("healthz")).0, 200);
+    let started = Instant::now();
+    while get(&gateway.at("readyz")).0 != 200 {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "never ready: {}",
+            String::from_utf8_lossy(&get(&gateway.at("readyz")).1)
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+
+    // The page, opened while the stream runs.
+    let chromium = browser(&out);
+    let tab = chromium.new_tab().unwrap();
+    let opened = Instant::now();
+    tab.navigate_to(&gateway.url).unwrap();
+    tab.wait_until_navigated().unwrap();
+    let first = page_when(&tab, Duration::from_secs(60), "a first map", |s| {
+        s["firstMapMs"].is_number()
+    });
+    let first_map_ms = first["firstMapMs"].as_f64().unwrap();
+    let seen_from_here = opened.elapsed();
+
+    // Once the stream is over every answer is final: the REST and Zenoh
+    // answers are the same bytes.
+    let last = deployment.final_marginals(Duration::from_secs(120));
+    let events = last["watermark"]["sensor-0"].as_u64().unwrap();
+    for (path, args) in [
+        ("marginals", vec!["marginals"]),
+        ("track/3", vec!["track", "3"]),
+        ("identity", vec!["identity"]),
+        ("identity/5", vec!["identity", "5"]),
+        ("positions", vec!["positions"]),
+    ] {
+        let (status, body) = get(&api(path));
+        assert_eq!(status, 200, "{path}: {}", String::from_utf8_lossy(&body));
+        let zenoh = zenoh_answer(&deployment, &args);
+        assert_eq!(
+            String::from_utf8_lossy(&body),
+            String::from_utf8_lossy(&zenoh),
+            "GET {path} and the Zenoh answer differ"
+        );
+    }
+    let marginals = get(&api("marginals")).1;
+    let positions = json(&get(&api("positions")).1);
+    assert_eq!(positions["tracks"], TRACKS);
+    assert_eq!(positions["watermark"]["sensor-0"], events);
+    assert_eq!(positions["leaders"].as_array().unwrap().len(), 4);
+
+    // SSE: the same answer as a stream, at the interval asked for.
+    let streamed = sse(&format!("{}?interval=200", api("marginals")), 8);
+    let answers: Vec<_> = streamed.iter().filter(|e| e.0 == "answer").collect();
+    let latencies: Vec<f64> = streamed
+        .iter()
+        .filter(|e| e.0 == "latency")
+        .map(|e| json(e.1.as_bytes())["ms"].as_f64().unwrap())
+        .collect();
+    assert_eq!(answers.len(), 4);
+    for (_, data, _) in &answers {
+        assert_eq!(data.as_bytes(), marginals.as_slice());
+    }
+    let gap = answers[3].2 - answers[1].2;
+    assert!(
+        gap >= Duration::from_millis(350),
+        "two intervals of 200 ms took {gap:?}"
+    );
+
+    // Bad questions: the coordinator's error, with a 4xx status.
+    for (path, status, says) in [
+        ("track/abc", 400, "\"abc\""),
+        ("track/999", 400, "out of range"),
+        ("marginals?events=abc", 400, "events=abc"),
+        ("marginals?event=5", 400, "unknown parameter"),
+        ("marginals?events=1", 400, "past event 1"),
+        ("stats?events=3", 400, "no parameters"),
+        ("bogus", 404, "no such question"),
+        ("marginals?interval=5", 400, "interval=5"),
+    ] {
+        let (got, body) = get(&api(path));
+        let error = json(&body)["error"].as_str().unwrap_or_default().to_string();
+        assert_eq!(got, status, "{path}: {error}");
+        assert!(error.contains(says), "{path}: {error}");
+    }
+    let (got, body) = get(&gateway.at(&format!("{prefix}/leader/leader-0/stats")));
+    assert_eq!(got, 404, "{}", String::from_utf8_lossy(&body));
+
+    // /metrics: a real OpenMetrics parser reads it, and it says what
+    // query/stats says.
+    let stats = json(&zenoh_answer(&deployment, &["stats"]));
+    let (status, text) = get(&gateway.at("metrics"));
+    assert_eq!(status, 200);
+    let text = String::from_utf8(text).unwrap();
+    std::fs::write(out.join("metrics.txt"), &text).unwrap();
+    let exposition = openmetrics_parser::openmetrics::parse_openmetrics(&text)
+        .unwrap_or_else(|e| panic!("not OpenMetrics: {e:?}\n{text}"));
+    let value = |family: &str, leader: &str| -> f64 {
+        let family = exposition
+            .families
+            .get(family)
+            .unwrap_or_else(|| panic!("no family {family}"));
+        let sample = family
+            .iter_samples()
+            .find(|s| {
+                s.get_labelset()
+                    .ok()
+                    .and_then(|l| l.get_label_value("leader").map(|v| v == leader))
+                    .unwrap_or(false)
+            })
+            .unwrap_or_else(|| panic!("{leader} in {}", family.family_name));
+        match &sample.value {
+            openmetrics_parser::OpenMetricsValue::Counter(c) => c.value.as_f64(),
+            openmetrics_parser::OpenMetricsValue::Gauge(g) => g.as_f64(),
+            other => panic!("{other:?}"),
+        }
+    };
+    for leader in stats["leaders"].as_array().unwrap() {
+        let name = leader["leader"].as_str().unwrap();
+        for (family, field) in [
+            ("idmesh_leader_items", "items"),
+            ("idmesh_leader_mixes", "mixes"),
+            ("idmesh_leader_bytes_sent", "bytes_sent"),
+            ("idmesh_leader_sets_sent", "sets_sent"),
+            ("idmesh_leader_coefficients", "coefficients"),
+            ("idmesh_leader_rows_held", "rows_held"),
+        ] {
+            assert_eq!(
+                value(family, name),
+                leader[field].as_u64().unwrap() as f64,
+                "{family} of {name}"
+            );
+        }
+    }
+    assert!(exposition
+        .families
+        .contains_key("idmesh_web_query_latency_seconds"));
+
+    // The map at the final watermark: every track, coloured by the
+    // marginals the API answers there.
+    let expected = json(&marginals);
+    let p_red: Vec<f64> = expected["p_red"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_f64().unwrap())
+        .collect();
+    let page = page_when(&tab, Duration::from_secs(30), "the final watermark", |s| {
+        s["watermark"] == events && s["positionsAt"] == events && s["finished"] == true
+    });
+    let shown = page["tracks"].as_array().unwrap();
+    assert_eq!(shown.len(), TRACKS);
+    assert_eq!(page["status"], "live", "{page}");
+    let ratio = page["ratio"].as_f64().unwrap();
+    let mut checked = 0;
+    for (t, track) in shown.iter().enumerate() {
+        assert_eq!(track["track"], t);
+        let p = track["p_red"].as_f64().unwrap();
+        assert!((p - p_red[t]).abs() < 1e-12, "track {t}: {p} vs {}", p_red[t]);
+        let (x, y) = (track["x"].as_f64().unwrap(), track["y"].as_f64().unwrap());
+        // A track drawn over by a neighbour cannot be read off the canvas.
+        let covered = shown.iter().enumerate().any(|(u, o)| {
+            u != t
+                && (o["x"].as_f64().unwrap() - x).abs() < 70.0
+                && (o["y"].as_f64().unwrap() - y).abs() < 20.0
+        });
+        if covered {
+            continue;
+        }
+        let got = pixel(&tab, x, y, ratio);
+        let want = colour_of(p_red[t]);
+        assert!(
+            (0..3).all(|i| (got[i] as i32 - want[i]).abs() <= 2),
+            "track {t} P(red) = {}: pixel {got:?}, expected {want:?}",
+            p_red[t]
+        );
+        checked += 1;
+    }
+    assert!(checked >= 3, "only {checked} tracks could be read off the map");
+    let table = tab
+        .evaluate(
+            "Array.from(document.querySelectorAll('#tracks tbody tr')).map(r => r.children[1].textContent).join(',')",
+            false,
+        )
+        .unwrap()
+        .value
+        .unwrap();
+    let rows: Vec<String> = p_red.iter().map(|p| format!("{p:.3}")).collect();
+    assert_eq!(table.as_str().unwrap(), rows.join(","));
+    let screenshot = tab
+        .capture_screenshot(CaptureScreenshotFormatOption::Png, None, None, true)
+        .unwrap();
+    std::fs::write(out.join("map.png"), screenshot).unwrap();
+
+    // Figures: a direct Zenoh query against the same through the gateway.
+    let direct: Vec<f64> = (0..30)
+        .map(|_| {
+            let started = Instant::now();
+            zenoh_answer(&deployment, &["marginals"]);
+            started.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let rest: Vec<f64> = (0..30)
+        .map(|_| {
+            let started = Instant::now();
+            assert_eq!(get(&api("marginals")).0, 200);
+            started.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let streamed = sse(&format!("{}?interval=100", api("marginals")), 60);
+    let sse_ms: Vec<f64> = streamed
+        .iter()
+        .filter(|e| e.0 == "latency")
+        .map(|e| json(e.1.as_bytes())["ms"].as_f64().unwrap())
+        .chain(latencies)
+        .collect();
+    let figures = format!(
+        "page load to first map: {first_map_ms:.0} ms in the page ({:.0} ms from navigation asked)\n\
+         marginals, stream over, {TRACKS} tracks, 4 leaders (p50 / p99 ms):\n\
+         - `idmesh query` process (Zenoh session opened each time): {:.1} / {:.1}\n\
+         - REST GET through the gateway: {:.2} / {:.2}\n\
+         - SSE update: the gateway's wait for each answer: {:.2} / {:.2}\n",
+        seen_from_here.as_secs_f64() * 1e3,
+        percentile(direct.clone(), 0.5),
+        percentile(direct, 0.99),
+        percentile(rest.clone(), 0.5),
+        percentile(rest, 0.99),
+        percentile(sse_ms.clone(), 0.5),
+        percentile(sse_ms, 0.99),
+    );
+    std::fs::write(out.join("figures.md"), &figures).unwrap();
+    eprintln!("{figures}");
+
+    // A leader killed: the page says degraded and names it, the API
+    // answers 503 with the coordinator's error, /readyz names it too.
+    deployment.kill("leader-1");
+    let degraded = page_when(&tab, Duration::from_secs(60), "degraded", |s| {
+        s["status"] == "degraded" && s["statusText"].as_str().unwrap_or("").contains("leader-1")
+    });
+    assert!(
+        degraded["problem"].as_str().unwrap().contains("leader-1"),
+        "{degraded}"
+    );
+    let screenshot = tab
+        .capture_screenshot(CaptureScreenshotFormatOption::Png, None, None, true)
+        .unwrap();
+    std::fs::write(out.join("degraded.png"), screenshot).unwrap();
+    let (status, body) = get(&api("marginals"));
+    assert_eq!(status, 503);
+    let error = json(&body)["error"].as_str().unwrap().to_string();
+    assert!(error.starts_with("degraded") && error.contains("leader-1"), "{error}");
+    let (status, body) = get(&gateway.at("readyz"));
+    assert_eq!(status, 503);
+    assert_eq!(json(&body)["missing"], serde_json::json!(["leader-1"]));
+    let (status, text) = get(&gateway.at("metrics"));
+    assert_eq!(status, 200);
+    let text = String::from_utf8(text).unwrap();
+    assert!(
+        text.lines().any(|l| l.starts_with("idmesh_coordinator_degraded_answers_total")
+            && !l.ends_with(" 0")),
+        "{text}"
+    );
+}
