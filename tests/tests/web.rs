@@ -80,7 +80,11 @@ fn sse(url: &str, count: usize) -> Vec<(String, String, Instant)> {
         } else if let Some(d) = line.strip_prefix("data:") {
             data.push_str(d.strip_prefix(' ').unwrap_or(d));
         } else if line.is_empty() && !data.is_empty() {
-            events.push((std::mem::take(&mut name), std::mem::take(&mut data), Instant::now()));
+            events.push((
+                std::mem::take(&mut name),
+                std::mem::take(&mut data),
+                Instant::now(),
+            ));
             if events.len() == count {
                 break;
             }
@@ -271,7 +275,10 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
         ("marginals?interval=5", 400, "interval=5"),
     ] {
         let (got, body) = get(&api(path));
-        let error = json(&body)["error"].as_str().unwrap_or_default().to_string();
+        let error = json(&body)["error"]
+            .as_str()
+            .unwrap_or_default()
+            .to_string();
         assert_eq!(got, status, "{path}: {error}");
         assert!(error.contains(says), "{path}: {error}");
     }
@@ -348,7 +355,11 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     for (t, track) in shown.iter().enumerate() {
         assert_eq!(track["track"], t);
         let p = track["p_red"].as_f64().unwrap();
-        assert!((p - p_red[t]).abs() < 1e-12, "track {t}: {p} vs {}", p_red[t]);
+        assert!(
+            (p - p_red[t]).abs() < 1e-12,
+            "track {t}: {p} vs {}",
+            p_red[t]
+        );
         let (x, y) = (track["x"].as_f64().unwrap(), track["y"].as_f64().unwrap());
         // A track drawn over by a neighbour cannot be read off the canvas.
         let covered = shown.iter().enumerate().any(|(u, o)| {
@@ -368,7 +379,10 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
         );
         checked += 1;
     }
-    assert!(checked >= 3, "only {checked} tracks could be read off the map");
+    assert!(
+        checked >= 3,
+        "only {checked} tracks could be read off the map"
+    );
     let table = tab
         .evaluate(
             "Array.from(document.querySelectorAll('#tracks tbody tr')).map(r => r.children[1].textContent).join(',')",
@@ -440,7 +454,10 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     let (status, body) = get(&api("marginals"));
     assert_eq!(status, 503);
     let error = json(&body)["error"].as_str().unwrap().to_string();
-    assert!(error.starts_with("degraded") && error.contains("leader-1"), "{error}");
+    assert!(
+        error.starts_with("degraded") && error.contains("leader-1"),
+        "{error}"
+    );
     let (status, body) = get(&gateway.at("readyz"));
     assert_eq!(status, 503);
     assert_eq!(json(&body)["missing"], serde_json::json!(["leader-1"]));
@@ -448,8 +465,9 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     assert_eq!(status, 200);
     let text = String::from_utf8(text).unwrap();
     assert!(
-        text.lines().any(|l| l.starts_with("idmesh_coordinator_degraded_answers_total")
-            && !l.ends_with(" 0")),
+        text.lines().any(
+            |l| l.starts_with("idmesh_coordinator_degraded_answers_total") && !l.ends_with(" 0")
+        ),
         "{text}"
     );
 }

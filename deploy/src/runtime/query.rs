@@ -232,7 +232,10 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
             let a: PositionsAnswer = serde_json::from_slice(body)?;
             writeln!(out, "{}", events(&a.watermark))?;
             for (t, (at, &owner)) in a.positions.iter().zip(&a.owners).enumerate() {
-                let leader = a.leaders.get(owner as usize).map_or("?", |l| l.name.as_str());
+                let leader = a
+                    .leaders
+                    .get(owner as usize)
+                    .map_or("?", |l| l.name.as_str());
                 match at {
                     Some([x, y]) => writeln!(out, "  track {t:>4}  ({x:.2}, {y:.2})  {leader}")?,
                     None => writeln!(out, "  track {t:>4}  not seen yet  {leader}")?,

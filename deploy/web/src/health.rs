@@ -34,9 +34,10 @@ pub struct Readiness {
 
 pub async fn readiness(asker: &Asker) -> Readiness {
     let keys = &asker.keys;
+    let (positions_key, stats_key) = (keys.query_positions(), keys.query_stats());
     let (positions, stats) = tokio::join!(
-        asker.ask(&keys.query_positions(), "positions"),
-        asker.ask(&keys.query_stats(), "stats")
+        asker.ask(&positions_key, "positions"),
+        asker.ask(&stats_key, "stats")
     );
     let not_ready = |error: String| Readiness {
         ready: false,

@@ -43,9 +43,11 @@ const LEADER_COUNTERS: [LeaderField; 18] = [
         "bytes of batches and transfers received",
         |s| s.bytes_received,
     ),
-    ("bytes_sent", "bytes of transfers sent to other leaders", |s| {
-        s.bytes_sent
-    }),
+    (
+        "bytes_sent",
+        "bytes of transfers sent to other leaders",
+        |s| s.bytes_sent,
+    ),
     ("transfers_sent", "transfers sent to other leaders", |s| {
         s.transfers_sent
     }),
@@ -69,7 +71,9 @@ const LEADER_COUNTERS: [LeaderField; 18] = [
 ];
 
 const LEADER_GAUGES: [LeaderField; 6] = [
-    ("coefficients", "sets (coefficients) held", |s| s.coefficients),
+    ("coefficients", "sets (coefficients) held", |s| {
+        s.coefficients
+    }),
     ("rows_held", "rows of the information matrix held", |s| {
         s.rows_held
     }),
@@ -102,7 +106,11 @@ fn labels(pairs: &[(&str, &str)]) -> Labels {
 }
 
 fn leader_labels(s: &LeaderStats) -> Labels {
-    let process = if s.host.is_empty() { &s.leader } else { &s.host };
+    let process = if s.host.is_empty() {
+        &s.leader
+    } else {
+        &s.host
+    };
     labels(&[
         ("role", "leader"),
         ("leader", &s.leader),
@@ -133,8 +141,9 @@ impl Collector for Snapshot {
             return Ok(());
         };
         for (name, help, field) in LEADER_COUNTERS {
+            let name = format!("leader_{name}");
             let mut family = encoder.encode_descriptor(
-                &format!("leader_{name}"),
+                &name,
                 help,
                 None,
                 ConstCounter::new(0u64).metric_type(),
@@ -144,8 +153,9 @@ impl Collector for Snapshot {
             }
         }
         for (name, help, field) in LEADER_GAUGES {
+            let name = format!("leader_{name}");
             let mut family = encoder.encode_descriptor(
-                &format!("leader_{name}"),
+                &name,
                 help,
                 None,
                 ConstGauge::new(0i64).metric_type(),
@@ -179,7 +189,8 @@ impl Collector for Snapshot {
             ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
         }
         let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
-        ConstCounter::new(stats.coordinator.rejected).encode(family.encode_family(&coordinator)?)?;
+        ConstCounter::new(stats.coordinator.rejected)
+            .encode(family.encode_family(&coordinator)?)?;
         for (name, help, value) in [
             (
                 "coordinator_bad_replies",
@@ -193,8 +204,7 @@ impl Collector for Snapshot {
             ),
         ] {
             let counter = ConstCounter::new(value);
-            let family =
-                encoder.encode_descriptor(name, help, None, counter.metric_type())?;
+            let family = encoder.encode_descriptor(name, help, None, counter.metric_type())?;
             let mut family = family;
             counter.encode(family.encode_family(&coordinator)?)?;
         }
@@ -205,9 +215,10 @@ impl Collector for Snapshot {
 /// The whole exposition at this moment.
 pub async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
     let keys = &asker.keys;
+    let (stats_key, positions_key) = (keys.query_stats(), keys.query_positions());
     let (stats, positions) = tokio::join!(
-        asker.ask(&keys.query_stats(), "stats"),
-        asker.ask(&keys.query_positions(), "positions")
+        asker.ask(&stats_key, "stats"),
+        asker.ask(&positions_key, "positions")
     );
     let snapshot = Snapshot {
         stats: stats

@@ -74,7 +74,11 @@ pub fn read(prefix: &str, path: &str, query: Option<&str>) -> Result<Asked, (u16
         })?;
     let mut parameters = Vec::new();
     let mut interval = None;
-    for pair in query.unwrap_or("").split(['&', ';']).filter(|p| !p.is_empty()) {
+    for pair in query
+        .unwrap_or("")
+        .split(['&', ';'])
+        .filter(|p| !p.is_empty())
+    {
         match pair.strip_prefix("interval=") {
             Some(ms) => {
                 if interval.is_some() {
@@ -113,8 +117,12 @@ pub fn read(prefix: &str, path: &str, query: Option<&str>) -> Result<Asked, (u16
 
 /// Whether `question` is `pattern`, chunk by chunk (`*` is any one chunk).
 fn matches(pattern: &str, question: &str) -> bool {
-    let (p, q): (Vec<&str>, Vec<&str>) = (pattern.split('/').collect(), question.split('/').collect());
-    p.len() == q.len() && p.iter().zip(&q).all(|(p, q)| *p == "*" && !q.is_empty() || p == q)
+    let (p, q): (Vec<&str>, Vec<&str>) =
+        (pattern.split('/').collect(), question.split('/').collect());
+    p.len() == q.len()
+        && p.iter()
+            .zip(&q)
+            .all(|(p, q)| *p == "*" && !q.is_empty() || p == q)
 }
 
 /// Every path the routes do not claim: a question to the coordinator.
