@@ -7,12 +7,12 @@
 //! it. Screenshots and the figures are written to the test's output
 //! directory (`target/tmp/web/`).
 
-use headless_chrome::protocol::cdp::Page::CaptureScreenshotFormatOption;
-use headless_chrome::{Browser, LaunchOptions, Tab};
+use chromiumoxide::page::ScreenshotParams;
+use chromiumoxide::{Browser, BrowserConfig, Page};
+use futures_util::StreamExt;
 use idmesh_tests::deployment::{crowd_with_identities, Deployment, Settings};
 use idmesh_tests::web::Gateway;
 use serde_json::Value;
-use std::ffi::OsStr;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -93,44 +93,98 @@ fn sse(url: &str, count: usize) -> Vec<(String, String, Instant)> {
     events
 }
 
-fn browser(dir: &Path) -> Browser {
-    let profile = dir.join(format!("chromium-profile-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&profile);
-    let args: Vec<&OsStr> = [
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-    ]
-    .iter()
-    .map(OsStr::new)
-    .collect();
-    let options = LaunchOptions::default_builder()
-        .path(Some(PathBuf::from("/usr/bin/chromium")))
-        .headless(true)
-        .sandbox(false)
-        .window_size(Some((1400, 900)))
-        .user_data_dir(Some(profile))
-        .args(args)
-        .idle_browser_timeout(Duration::from_secs(600))
-        .build()
-        .expect("launch options");
-    Browser::new(options).expect("chromium starts (apt-get install chromium)")
+/// Headless Chromium over the DevTools protocol, driven from a test
+/// thread: every call blocks on the browser's answer.
+struct Chromium {
+    runtime: tokio::runtime::Runtime,
+    browser: Browser,
+    page: Option<Page>,
 }
 
-fn snapshot(tab: &Tab) -> Value {
-    let value = tab
-        .evaluate("JSON.stringify(window.idmesh.snapshot())", false)
-        .expect("the page answers")
-        .value
-        .expect("a value");
-    serde_json::from_str(value.as_str().expect("a string")).unwrap()
+impl Chromium {
+    fn start(dir: &Path) -> Chromium {
+        let profile = dir.join(format!("chromium-profile-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&profile);
+        let config = BrowserConfig::builder()
+            .chrome_executable("/usr/bin/chromium")
+            .no_sandbox()
+            .user_data_dir(profile)
+            .window_size(1400, 900)
+            .request_timeout(Duration::from_secs(60))
+            .args([
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+            ])
+            .build()
+            .expect("browser config");
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .enable_all()
+            .build()
+            .unwrap();
+        let browser = runtime.block_on(async {
+            let (browser, mut handler) = Browser::launch(config)
+                .await
+                .expect("chromium starts (apt-get install chromium)");
+            tokio::spawn(async move { while handler.next().await.is_some() {} });
+            browser
+        });
+        Chromium {
+            runtime,
+            browser,
+            page: None,
+        }
+    }
+
+    fn open(&mut self, url: &str) {
+        let page = self
+            .runtime
+            .block_on(self.browser.new_page(url))
+            .expect("the page opens");
+        self.page = Some(page);
+    }
+
+    /// The value of a JavaScript expression that gives a string.
+    fn eval(&self, js: &str) -> String {
+        let page = self.page.as_ref().expect("a page is open");
+        self.runtime
+            .block_on(page.evaluate(js))
+            .unwrap_or_else(|e| panic!("{js}: {e}"))
+            .into_value::<String>()
+            .unwrap_or_else(|e| panic!("{js}: {e}"))
+    }
+
+    fn screenshot(&self, to: &Path) {
+        let page = self.page.as_ref().expect("a page is open");
+        let png = self
+            .runtime
+            .block_on(page.screenshot(ScreenshotParams::builder().build()))
+            .expect("a screenshot");
+        std::fs::write(to, png).unwrap();
+    }
+}
+
+impl Drop for Chromium {
+    fn drop(&mut self) {
+        let _ = self.runtime.block_on(self.browser.close());
+    }
+}
+
+fn snapshot(tab: &Chromium) -> Value {
+    serde_json::from_str(&tab.eval("JSON.stringify(window.idmesh.snapshot())")).unwrap()
 }
 
 /// Polls the page until `wanted` holds of its snapshot.
-fn page_when(tab: &Tab, patience: Duration, what: &str, wanted: impl Fn(&Value) -> bool) -> Value {
+fn page_when(
+    tab: &Chromium,
+    patience: Duration,
+    what: &str,
+    wanted: impl Fn(&Value) -> bool,
+) -> Value {
     let started = Instant::now();
     loop {
         let s = snapshot(tab);
@@ -147,16 +201,14 @@ fn page_when(tab: &Tab, patience: Duration, what: &str, wanted: impl Fn(&Value) 
 }
 
 /// The colour of the canvas pixel under (x, y) CSS pixels.
-fn pixel(tab: &Tab, x: f64, y: f64, ratio: f64) -> [u8; 3] {
+fn pixel(tab: &Chromium, x: f64, y: f64, ratio: f64) -> [u8; 3] {
     let js = format!(
         "Array.from(document.getElementById('map').getContext('2d').getImageData({}, {}, 1, 1).data).join(',')",
         (x * ratio).round(),
         (y * ratio).round()
     );
-    let value = tab.evaluate(&js, false).unwrap().value.unwrap();
-    let parts: Vec<u8> = value
-        .as_str()
-        .unwrap()
+    let parts: Vec<u8> = tab
+        .eval(&js)
         .split(',')
         .map(|p| p.parse().unwrap())
         .collect();
@@ -208,11 +260,9 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     }
 
     // The page, opened while the stream runs.
-    let chromium = browser(&out);
-    let tab = chromium.new_tab().unwrap();
+    let mut tab = Chromium::start(&out);
     let opened = Instant::now();
-    tab.navigate_to(&gateway.url).unwrap();
-    tab.wait_until_navigated().unwrap();
+    tab.open(&gateway.url);
     let first = page_when(&tab, Duration::from_secs(60), "a first map", |s| {
         s["firstMapMs"].is_number()
     });
@@ -383,20 +433,12 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
         checked >= 3,
         "only {checked} tracks could be read off the map"
     );
-    let table = tab
-        .evaluate(
-            "Array.from(document.querySelectorAll('#tracks tbody tr')).map(r => r.children[1].textContent).join(',')",
-            false,
-        )
-        .unwrap()
-        .value
-        .unwrap();
+    let table = tab.eval(
+        "Array.from(document.querySelectorAll('#tracks tbody tr')).map(r => r.children[1].textContent).join(',')",
+    );
     let rows: Vec<String> = p_red.iter().map(|p| format!("{p:.3}")).collect();
-    assert_eq!(table.as_str().unwrap(), rows.join(","));
-    let screenshot = tab
-        .capture_screenshot(CaptureScreenshotFormatOption::Png, None, None, true)
-        .unwrap();
-    std::fs::write(out.join("map.png"), screenshot).unwrap();
+    assert_eq!(table, rows.join(","));
+    tab.screenshot(&out.join("map.png"));
 
     // Figures: a direct Zenoh query against the same through the gateway.
     let direct: Vec<f64> = (0..30)
@@ -447,10 +489,7 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
         degraded["problem"].as_str().unwrap().contains("leader-1"),
         "{degraded}"
     );
-    let screenshot = tab
-        .capture_screenshot(CaptureScreenshotFormatOption::Png, None, None, true)
-        .unwrap();
-    std::fs::write(out.join("degraded.png"), screenshot).unwrap();
+    tab.screenshot(&out.join("degraded.png"));
     let (status, body) = get(&api("marginals"));
     assert_eq!(status, 503);
     let error = json(&body)["error"].as_str().unwrap().to_string();

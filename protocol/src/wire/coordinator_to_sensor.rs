@@ -89,3 +89,42 @@ impl SensorPositions {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn positions_that_do_not_fit_are_refused_naming_why() {
+        let good = SensorPositions {
+            sensor: "s".into(),
+            events: 3,
+            finished: false,
+            leaders: vec!["l0".into(), "l1".into()],
+            places: vec![Some([0.0, 0.0]), Some([5.0, 5.0])],
+            positions: vec![Some([1.0, 2.0]), None],
+            owners: vec![0, 1],
+        };
+        assert_eq!(good.check(), Ok(()));
+        let owner = SensorPositions {
+            owners: vec![0, 2],
+            ..good.clone()
+        };
+        assert!(owner.check().unwrap_err().contains("owner 2"));
+        let short = SensorPositions {
+            owners: vec![0],
+            ..good.clone()
+        };
+        assert!(short.check().unwrap_err().contains("1 owners for 2 tracks"));
+        let nan = SensorPositions {
+            positions: vec![Some([f64::NAN, 0.0]), None],
+            ..good.clone()
+        };
+        assert!(nan.check().unwrap_err().contains("finite"));
+        let places = SensorPositions {
+            places: vec![None],
+            ..good
+        };
+        assert!(places.check().unwrap_err().contains("1 places for 2 leaders"));
+    }
+}
