@@ -232,10 +232,11 @@ pub async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
     };
     let mut registry = Registry::with_prefix("idmesh");
     registry.register_collector(Box::new(snapshot));
-    registry.register_with_unit(
-        "web_query_latency",
+    // Seconds by name, not by a UNIT line: some OpenMetrics parsers
+    // refuse units on histograms.
+    registry.register(
+        "web_query_latency_seconds",
         "how long the gateway waited for the coordinator, by question and outcome",
-        prometheus_client::registry::Unit::Seconds,
         asker.latency.clone(),
     );
     let mut text = String::new();

@@ -125,6 +125,9 @@ mod tests {
             places: vec![None],
             ..good
         };
-        assert!(places.check().unwrap_err().contains("1 places for 2 leaders"));
+        assert!(places
+            .check()
+            .unwrap_err()
+            .contains("1 places for 2 leaders"));
     }
 }
