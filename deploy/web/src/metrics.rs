@@ -184,8 +184,10 @@ impl Collector for Snapshot {
         for s in &stats.leaders {
             ConstCounter::new(s.rejected).encode(family.encode_family(&leader_labels(s))?)?;
         }
+        // One label set per family (parsers insist): `leader` is empty for
+        // the roles that are not leaders.
         for s in &stats.sensors {
-            let labels = labels(&[("role", "sensor"), ("process", &s.sensor)]);
+            let labels = labels(&[("role", "sensor"), ("leader", ""), ("process", &s.sensor)]);
             ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
         }
         let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
