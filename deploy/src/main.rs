@@ -33,9 +33,10 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Replay(args) => {
+        Command::Replay(mut args) => {
             let stdout = BufWriter::new(std::io::stdout().lock());
-            match args.method.identity() {
+            args.method = Some(replay::method_for(&args.trace, args.method)?);
+            match args.method().identity() {
                 Some(method) => {
                     let options = replay_identity::IdentityReplayOptions {
                         trace: args.trace,

@@ -11,14 +11,16 @@
 
 use crate::cli::{Method, ReplayArgs};
 use anyhow::{anyhow, bail, Context, Result};
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
+use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
 use idmesh_belief::{
     predict_red, tracking_error, BeliefError, Event, FactoredBelief, Field, ParticleFilter,
     PropertyFilter, RadonBelief, RadonOptions, RedCount, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::{BufRead, Write};
+use std::path::Path;
 use std::time::{Duration, Instant};
 use tracing::{debug, info, info_span};
 
@@ -86,12 +88,51 @@ impl Stopwatch {
     }
 }
 
-/// Replays the trace named by `args` and writes the answers to `out`.
+/// The filter to replay `trace` with: `chosen`, if it fits the trace, or
+/// the default for its kind — one that answers at any size: factored for a
+/// trace with colours (or no identities), the information matrix for an
+/// identity trace that says nothing of colours (its header has
+/// `identities` but neither `red` nor `initial_red`).
+pub fn method_for(trace: &Path, chosen: Option<Method>) -> Result<Method> {
+    let mut reader = TraceReader::open(trace)
+        .with_context(|| format!("cannot open trace {}", trace.display()))?;
+    let header = reader.read_header()?;
+    let identities_only = header.identities.is_some() && header.red_count().is_none();
+    match chosen {
+        None if identities_only => Ok(Method::InformationMatrix),
+        None => Ok(Method::Factored),
+        Some(method) if identities_only && method.identity().is_none() => bail!(
+            "{}: an identity trace with no colours (its header has `identities` and no `red`): \
+             --method {} is a property method; use exact-perm, belief-matrix, \
+             information-matrix or property-bits",
+            trace.display(),
+            method.name()
+        ),
+        Some(method) => Ok(method),
+    }
+}
+
+/// Replays the trace named by `args` and writes the answers to `out`. On a
+/// terminal, a bar on stderr shows how much of the trace has been read.
 pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
     check_options(args)?;
-    let reader = TraceReader::open(&args.trace)
+    let file = std::fs::File::open(&args.trace)
         .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
-    replay(args, reader, out)
+    let bytes = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let bar = ProgressBar::with_draw_target(Some(bytes), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(
+            "replay {bar:30} {percent:>3}% of the trace · {elapsed} · ~{eta} left",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let reader = TraceReader::new(
+        std::io::BufReader::new(bar.wrap_read(file)),
+        args.trace.display().to_string(),
+    );
+    let result = replay(args, reader, out);
+    bar.finish_and_clear();
+    result
 }
 
 /// The particle count of `--method particles` when `--particles` is not given.
@@ -99,7 +140,7 @@ pub const DEFAULT_PARTICLES: usize = 1000;
 
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
-    let method = args.method;
+    let method = args.method();
     if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() {
         bail!(
             "--marginals, --bits and --samples apply to the identity methods, not to --method {}",
@@ -149,7 +190,7 @@ pub fn replay<R: BufRead>(
     let span = info_span!(
         "replay",
         trace = reader.source(),
-        method = args.method.name()
+        method = args.method().name()
     );
     let _entered = span.enter();
 
@@ -157,6 +198,7 @@ pub fn replay<R: BufRead>(
     let source = reader.source().to_string();
     let at = line_error(&source);
     let field = field_of(&header);
+    check_size(args, &field).map_err(|e| anyhow!("{source}:1: header: {e}"))?;
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
     let mut engine =
         Engine::start(|| build(args, field.clone())).map_err(|e| at(1, "header", e))?;
@@ -208,7 +250,7 @@ pub fn replay<R: BufRead>(
 
     let summary = Summary {
         kind: "summary",
-        method: args.method.name(),
+        method: args.method().name(),
         events: engine.events,
         seconds: engine.time.total.as_secs_f64(),
         error: mean_error(&errors),
@@ -240,6 +282,37 @@ pub fn field_of(header: &Header) -> Field {
     }
 }
 
+/// Refuses a Radon method without a budget where the exact belief it keeps
+/// may outgrow the machine: it can hold as many coefficients as the exact
+/// dense filter has states (C(n, k), or 2^n with k unknown), so past the
+/// dense filter's own limit it is refused with that estimate. The other
+/// methods check their own sizes when they are built.
+fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
+    if !args.method().is_radon() || args.budget.is_some() {
+        return Ok(());
+    }
+    let n = field.tracks;
+    let (sets, what) = match field.red.known() {
+        Some(k) => (binomial(n, k), format!("C({n}, {k})")),
+        None => (2f64.powi(n.min(1024) as i32), format!("2^{n}")),
+    };
+    if sets > MAX_STATES as f64 {
+        bail!(
+            "--method {} without --budget is exact, and on this trace it may hold as many \
+             coefficients as there are red sets, {what} ≈ {sets:.2e} (limit {MAX_STATES}): \
+             give --budget N (say 500), or use --method factored",
+            args.method().name()
+        );
+    }
+    Ok(())
+}
+
+/// C(n, k) as a float (infinite when it overflows).
+fn binomial(n: usize, k: usize) -> f64 {
+    let k = k.min(n - k.min(n));
+    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
+}
+
 /// The filter `args.method` names, for `field`.
 fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
     let radon = |sparsify: Option<Sparsify>| -> Result<Box<dyn PropertyFilter>, BeliefError> {
@@ -250,7 +323,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         };
         Ok(Box::new(RadonBelief::with_options(field.clone(), options)?))
     };
-    match args.method {
+    match args.method() {
         Method::Overcomplete => radon(args.budget.map(Sparsify::overcomplete)),
         // `check_options` made sure the budget is there.
         Method::Threshold => radon(args.budget.map(Sparsify::threshold)),
@@ -258,7 +331,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         // The paper's projection alone leaves the simplex on real traces and
         // then refuses observations as impossible; the repair keeps it going.
         Method::Order1 | Method::Order2 | Method::Order3 => {
-            let order = match args.method {
+            let order = match args.method() {
                 Method::Order1 => 1,
                 Method::Order2 => 2,
                 _ => 3,
@@ -333,7 +406,7 @@ mod tests {
     fn args(method: Method, budget: Option<usize>) -> ReplayArgs {
         ReplayArgs {
             trace: PathBuf::from("mem.jsonl"),
-            method,
+            method: Some(method),
             budget,
             distributed_rule: false,
             particles: None,
@@ -453,7 +526,7 @@ mod tests {
         particles.particles = None;
         particles.seed = Some(1);
         assert!(check_options(&particles).is_err());
-        particles.method = Method::Particles;
+        particles.method = Some(Method::Particles);
         assert!(check_options(&particles).is_ok());
         particles.budget = Some(3);
         assert!(check_options(&particles).is_err());

@@ -77,6 +77,22 @@ fn mesh(what: &'static str) -> impl FnOnce(zenoh::Error) -> GatewayError {
     }
 }
 
+/// How many of `lines` the stream sends, and how many events they hold:
+/// `limit` counts events, as watermarks and `?events=N` do, not lines
+/// (truth lines carry no event).
+fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
+    let mut events = 0u64;
+    for (i, line) in lines.iter().enumerate() {
+        if !matches!(line, Line::Truth(_)) {
+            if limit.is_some_and(|limit| events == limit) {
+                return (i, events);
+            }
+            events += 1;
+        }
+    }
+    (lines.len(), events)
+}
+
 /// Streams `lines` (the events of a trace, header excluded) until done,
 /// then serves queries until `shutdown`.
 pub async fn run(
@@ -132,8 +148,8 @@ pub async fn run(
     wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
     tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(), "streaming");
 
-    let limit = config.limit.unwrap_or(u64::MAX) as usize;
-    let lines = &lines[..lines.len().min(limit)];
+    let (length, end) = stream_length(&lines, config.limit);
+    let lines = &lines[..length];
     let mut stream = Stream {
         sent: (0..names.len()).map(|_| BatchLog::default()).collect(),
         durable: vec![None; names.len()],
@@ -148,7 +164,7 @@ pub async fn run(
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
     let chunk = 512usize;
-    let mut cuts = Cuts::default();
+    let mut cuts = Cuts::ending_at(end);
     tokio::pin!(shutdown);
     loop {
         // How many lines are due now, and when the next one is.
@@ -445,5 +461,38 @@ async fn wait_for_leaders(
             });
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stream_length;
+    use idmesh_protocol::trace::{Line, Mix, Truth};
+
+    fn mix() -> Line {
+        Line::Mix(Mix {
+            time: 0.0,
+            a: 0,
+            b: 1,
+            swap: 0.5,
+        })
+    }
+
+    fn truth() -> Line {
+        Line::Truth(Truth {
+            time: 0.0,
+            red: Some(vec![0]),
+            identity: None,
+        })
+    }
+
+    #[test]
+    fn an_event_limit_counts_events_not_truth_lines() {
+        let lines = [mix(), truth(), mix(), truth(), mix(), mix()];
+        assert_eq!(stream_length(&lines, Some(3)), (5, 3));
+        assert_eq!(stream_length(&lines, Some(4)), (6, 4));
+        assert_eq!(stream_length(&lines, Some(9)), (6, 4));
+        assert_eq!(stream_length(&lines, None), (6, 4));
+        assert_eq!(stream_length(&lines, Some(0)), (0, 0));
     }
 }

@@ -36,6 +36,10 @@ pub enum Request {
 pub struct Cuts {
     scheduled: BTreeMap<u64, Vec<(Wanted, Query)>>,
     held: usize,
+    /// The event count the stream will end at, when known in advance (a
+    /// trace file, or `events =` in the topology): a point beyond it is
+    /// refused at once instead of waiting out the query's timeout.
+    end: Option<u64>,
 }
 
 /// A cut placed in the stream, and the query to tell once it is sent.
@@ -45,6 +49,14 @@ pub struct Placed {
 }
 
 impl Cuts {
+    /// Cuts for a stream that will end after `end` events.
+    pub fn ending_at(end: u64) -> Self {
+        Cuts {
+            end: Some(end),
+            ..Cuts::default()
+        }
+    }
+
     /// Sorts a request: now, later, or never.
     pub fn request(&mut self, query: Query, router: &Router, finished: bool) -> Request {
         let parameters = query.parameters();
@@ -76,6 +88,8 @@ impl Cuts {
             format!("the stream is past event {at} (it is at {now}) and keeps no history")
         } else if finished {
             format!("the stream ended at {now} events, before event {at}")
+        } else if let Some(end) = self.end.filter(|&end| at > end) {
+            format!("the stream ends at {end} events, before event {at}")
         } else if self.held >= MAX_SCHEDULED {
             format!("{MAX_SCHEDULED} cuts are already waiting for their point")
         } else {
