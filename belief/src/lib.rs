@@ -42,7 +42,7 @@ pub mod workload;
 pub use baseline::{DenseFilter, LowOrderFilter};
 pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
-pub use factored::{FactoredBelief, FactoredOptions, SplitRule};
+pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,

@@ -91,12 +91,14 @@ pub enum Coupling {
     /// tracks the count makes certain): O(log #components) convolutions of
     /// the count windows per event.
     Coupled,
-    /// Q ≡ 1: the split keeps the marginals of the two components' own
-    /// tables, ignoring the rest of the belief, so it needs only what it
-    /// splits; a soft observation needs only its component. This is what
-    /// leaders can run when the factored belief is distributed. Exact
-    /// whenever the merged count is fixed (a known start, until splits
-    /// spread the counts). An observation that rules a value out
+    /// Q(s) = 1 on every count s the merged pair can hold, 0 elsewhere:
+    /// the split matches the moments of the pair's own tables as if the
+    /// rest of the belief did not care about their count, so it needs only
+    /// what it splits; a soft observation needs only its component. This
+    /// is what leaders can run when the factored belief is distributed.
+    /// The same as [`Coupled`](Coupling::Coupled) whenever the merged count
+    /// is fixed (a known start, until splits spread the counts): then the
+    /// true Q is one number on the one count. An observation that rules a value out
     /// (likelihood 0) still reads Q, to refuse one the count makes
     /// impossible.
     Local,
@@ -455,7 +457,11 @@ impl FactoredBelief {
     ) -> Result<Vec<f64>, BeliefError> {
         let width = merged_counts.len();
         if self.options.coupling == Coupling::Local {
-            return Ok(vec![1.0; width]);
+            // Every count the pair can hold weighs alike.
+            return Ok(merged_counts
+                .iter()
+                .map(|&c| if c > 0.0 { 1.0 } else { 0.0 })
+                .collect());
         }
         // Everything but the pair: the pair's leaves hold the merged
         // counts for the walk, then their own again (the caller replaces
