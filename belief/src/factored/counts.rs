@@ -61,6 +61,11 @@ impl CountPrior {
         CountPrior { ln, scaled }
     }
 
+    /// Whether π allows one count only (k known, or a known start).
+    pub(crate) fn is_point(&self) -> bool {
+        self.ln.iter().filter(|l| l.is_finite()).count() == 1
+    }
+
     /// ln π(s) for s = 0..=n (−∞ where no set of size s is admissible).
     pub(crate) fn ln_weights(&self) -> &[f64] {
         &self.ln

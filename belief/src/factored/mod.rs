@@ -104,6 +104,11 @@ pub enum Coupling {
     Local,
 }
 
+/// The most tracks at which the eager (O(n²)-memory) evaluation of the
+/// count coupling stands in for the count tree when the tree's weights
+/// underflow.
+pub const EAGER_LIMIT: usize = 4096;
+
 /// Options of [`FactoredBelief`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FactoredOptions {
@@ -264,6 +269,7 @@ impl FactoredBelief {
         let prior = CountPrior::new(&field);
         let counts: Vec<Vec<f64>> = comps.iter().map(|c| c.counts.clone()).collect();
         let tilt = tree::balancing_tilt(counts.iter().map(|c| &c[..]), prior.target());
+        let floor = if prior.is_point() { tree::TAIL } else { 0.0 };
         let mut belief = FactoredBelief {
             field,
             options,
@@ -273,7 +279,7 @@ impl FactoredBelief {
             free: Vec::new(),
             home: vec![(0, 0); n],
             last_mix: vec![0; n],
-            tree: Mutex::new(CountTree::new(counts, tilt)),
+            tree: Mutex::new(CountTree::new(counts, tilt, floor)),
             stats: FactoredStats::default(),
         };
         for slot in 0..n {
@@ -328,6 +334,9 @@ impl FactoredBelief {
         if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
             return Ok(r);
         }
+        drop(tree);
+        self.check_eager()?;
+        let tree = self.lock_tree();
         let mut counts = Vec::new();
         let mut index = 0;
         for s in 0..self.comps.len() {
@@ -344,7 +353,26 @@ impl FactoredBelief {
             .ok_or(BeliefError::Degenerate { normalizer: 0.0 })
     }
 
-    /// Re-aims the count tree's tilt at the current components.
+    /// The eager evaluation of the count coupling keeps a convolution per
+    /// component, O(n²) numbers: past [`EAGER_LIMIT`] tracks a belief the
+    /// count tree cannot evaluate safely is reported instead.
+    fn check_eager(&self) -> Result<(), BeliefError> {
+        if self.field.tracks <= EAGER_LIMIT {
+            return Ok(());
+        }
+        Err(BeliefError::Numerical {
+            step: "factored count coupling",
+            detail: format!(
+                "the count tree's weights underflow even re-tilted, and the eager \
+                 evaluation would need O(n²) memory at n = {}",
+                self.field.tracks
+            ),
+        })
+    }
+
+    /// Re-aims the count tree's tilt at the current components, and keeps
+    /// every tail of its convolutions from now on (called when a query
+    /// found the fast evaluation unsafe).
     fn retilt(&self, tree: &mut CountTree) {
         let counts = self.count_refs();
         let t = tree::balancing_tilt(counts.iter().copied(), self.prior.target());
@@ -353,7 +381,7 @@ impl FactoredBelief {
             to = t,
             "factored: re-tilting the count tree"
         );
-        tree.retilt(t);
+        tree.retilt(t, true);
     }
 
     /// ln Z, Z = Σ_x f(x) of the unnormalized belief: the prior mass times
@@ -813,7 +841,10 @@ impl PropertyFilter for FactoredBelief {
                 .filter(|&s| self.comps[s].is_some())
                 .map(|s| by_slot[s].take())
                 .collect(),
-            None => self.prior.all_leave_one_out(&self.count_refs()),
+            None => {
+                self.check_eager()?;
+                self.prior.all_leave_one_out(&self.count_refs())
+            }
         };
         let mut out = vec![0.0; self.field.tracks];
         for (c, r) in self.live().zip(all) {
