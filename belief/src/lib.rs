@@ -35,6 +35,7 @@ pub mod filter;
 pub mod identity;
 pub mod particle;
 pub mod radon;
+pub mod scoring;
 pub mod track_set;
 pub mod weights;
 pub mod workload;
@@ -44,6 +45,7 @@ pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
 pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
+pub use scoring::{brier_score, expected_tracking_error, log_loss, Reliability};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
     IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,
