@@ -45,12 +45,12 @@ pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
 pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
-pub use scoring::{brier_score, expected_tracking_error, log_loss, Reliability};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
     IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,
 };
 pub use particle::ParticleFilter;
 pub use radon::{RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
+pub use scoring::{brier_score, expected_tracking_error, log_loss, Reliability};
 pub use track_set::TrackSet;
 pub use weights::Weights;

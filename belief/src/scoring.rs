@@ -77,7 +77,12 @@ pub fn expected_tracking_error(marginals: &[f64], k: Option<usize>, truth: &[u32
     }
     let y = truth_labels(n, truth);
     let shares = red_shares(marginals, k);
-    shares.iter().zip(&y).map(|(s, y)| (s - y).abs()).sum::<f64>() / n as f64
+    shares
+        .iter()
+        .zip(&y)
+        .map(|(s, y)| (s - y).abs())
+        .sum::<f64>()
+        / n as f64
 }
 
 /// Brier score at one truth line: the mean over tracks of (p_t − [t red])².
@@ -190,7 +195,10 @@ mod tests {
         let p = [0.5; 4];
         assert_eq!(expected_tracking_error(&p, Some(2), &[0, 1]), 0.5);
         assert_eq!(expected_tracking_error(&p, Some(2), &[2, 3]), 0.5);
-        assert_eq!(expected_tracking_error(&[0.9, 0.8, 0.1, 0.2], Some(2), &[0, 2]), 0.5);
+        assert_eq!(
+            expected_tracking_error(&[0.9, 0.8, 0.1, 0.2], Some(2), &[0, 2]),
+            0.5
+        );
     }
 
     #[test]
