@@ -12,7 +12,16 @@
 //! where the components C partition the tracks, each g_C is an exact dense
 //! table over all 2^|C| subsets of C (with a log scale), and π(s) is the
 //! prior weight of one red set of size s (k known: [s = k]; k unknown:
-//! p(s)/C(n, s)). The private `counts` module evaluates the count coupling.
+//! p(s)/C(n, s)). The private `tree` module evaluates the count coupling
+//! lazily — nothing global happens until someone asks (the
+//! information-matrix paper's lazy inference): an event touches only its
+//! components' slots and marks one root path of a product tree of count
+//! vectors dirty; a query recomputes the dirty nodes and walks the tree
+//! down once. The private `counts` module keeps the eager evaluation for
+//! what is not on a hot path (normalizer fallbacks, P(set all red), the
+//! count posterior) and as the reference the tree is tested against.
+//! How splits weigh the red count is [`Coupling`]: the true weight from
+//! the rest of the belief, or only what the pair being split can hold.
 //!
 //! - Mixing tracks of one component is the exact rollup on its table.
 //! - Mixing tracks of two components merges them (outer product, then
