@@ -13,8 +13,9 @@ use crate::cli::{Method, ReplayArgs};
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
 use idmesh_belief::{
-    predict_red, tracking_error, BeliefError, Event, FactoredBelief, Field, ParticleFilter,
-    PropertyFilter, RadonBelief, RadonOptions, RedCount, Sparsify,
+    brier_score, expected_tracking_error, log_loss, predict_red, BeliefError, Event,
+    FactoredBelief, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions, RedCount,
+    Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -40,7 +41,12 @@ struct Summary {
     method: &'static str,
     events: u64,
     seconds: f64,
+    /// Mean tracking error over the truth lines, ties shared (trace spec,
+    /// Scoring).
     error: Option<f64>,
+    /// Mean Brier score and log-loss of the marginals over the truth lines.
+    brier: Option<f64>,
+    log_loss: Option<f64>,
     max_coefficients: usize,
     /// P(red) of every track after the last event (what a live deployment
     /// answers at the end of the stream).
@@ -203,7 +209,7 @@ pub fn replay<R: BufRead>(
     let mut engine =
         Engine::start(|| build(args, field.clone())).map_err(|e| at(1, "header", e))?;
 
-    let mut errors = Vec::new();
+    let (mut errors, mut briers, mut log_losses) = (Vec::new(), Vec::new(), Vec::new());
     for line in reader {
         let NumberedLine { number, line } = line?;
         match &line {
@@ -227,7 +233,9 @@ pub fn replay<R: BufRead>(
                 let p_red = engine.marginals().map_err(|e| at(number, "truth", e))?;
                 let predicted = predict_red(&p_red, field.red.known());
                 if let Some(red) = &truth.red {
-                    errors.push(tracking_error(field.tracks, &predicted, red));
+                    errors.push(expected_tracking_error(&p_red, field.red.known(), red));
+                    briers.push(brier_score(&p_red, red));
+                    log_losses.push(log_loss(&p_red, red));
                 }
                 let answer = Answer {
                     time: truth.time,
@@ -254,6 +262,8 @@ pub fn replay<R: BufRead>(
         events: engine.events,
         seconds: engine.time.total.as_secs_f64(),
         error: mean_error(&errors),
+        brier: mean_error(&briers),
+        log_loss: mean_error(&log_losses),
         max_coefficients: engine.max_coefficients,
         final_p_red: engine.marginals().ok(),
     };

@@ -335,6 +335,7 @@ fn plots_of(results: &Results) -> Vec<Plot> {
                 file,
                 title,
                 x_label: x_label.into(),
+                y_label: plots::ERROR_LABEL.into(),
                 series,
             });
         }
@@ -376,6 +377,10 @@ fn plots_of(results: &Results) -> Vec<Plot> {
             "sensor accuracy a (likelihoods a / 1 − a)",
             plots::series_of(results, Experiment::Likelihood, n),
         );
+    }
+    let reliability = plots::reliability(results);
+    if reliability.series.len() > 1 {
+        plots.push(reliability);
     }
     plots
 }
@@ -504,6 +509,16 @@ fn body(results: &Results, plots: &[Plot]) -> String {
     .unwrap();
     out.push_str(&table::sweep(results, Experiment::Likelihood, None, "a ="));
     link(&mut out, "results-likelihood.svg");
+    if plots.iter().any(|p| p.file == "results-reliability.svg") {
+        writeln!(
+            out,
+            "Calibration over every run above: each method's marginals binned by tenths \
+             against how often those tracks were red (the Brier score and log-loss per \
+             point are in the Bayes-risk table):\n"
+        )
+        .unwrap();
+    }
+    link(&mut out, "results-reliability.svg");
 
     writeln!(
         out,
