@@ -118,6 +118,8 @@ pub fn log_loss(marginals: &[f64], truth: &[u32]) -> f64 {
         })
         .sum::<f64>()
         / n as f64
+        // −ln 1 is −0: a perfect score prints as 0, not -0.
+        + 0.0
 }
 
 /// Bins of a reliability diagram: how often a track given probability p of
@@ -212,6 +214,8 @@ mod tests {
         assert!((log_loss(&p, &truth) - want).abs() < 1e-15);
         // A certain mistake costs −ln 1e-12, not infinity.
         assert!((log_loss(&[0.0], &[0]) - 1e12f64.ln()).abs() < 1e-9);
+        // Certain and right: 0, not -0 (which the JSON summaries would print).
+        assert_eq!(log_loss(&[1.0, 0.0], &[0]).to_bits(), 0f64.to_bits());
         assert!(brier_score(&[], &[]).is_nan());
     }
 
