@@ -229,15 +229,11 @@ pub fn replay<R: BufRead>(
 /// `initial_red`) or unknown with the uniform prior over counts, and the
 /// red tracks at time 0 when the header gives them.
 pub fn field_of(header: &Header) -> Field {
-    let red = match header.red_count() {
-        Some(k) => RedCount::Known(k),
-        None => RedCount::unknown_uniform(header.tracks),
-    };
-    Field {
-        tracks: header.tracks,
-        red,
-        initial_red: header.initial_red.clone(),
-    }
+    Field::with_count(
+        header.tracks,
+        header.red_count(),
+        header.initial_red.clone(),
+    )
 }
 
 /// The filter `args.method` names, for `field`.

@@ -12,7 +12,7 @@
 
 use super::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
-use idmesh_leader::LeaderError;
+use idmesh_placement::PlacementError;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::Follow;
@@ -48,7 +48,7 @@ pub enum RouterError {
     #[error("OMP at the leaders needs {0}")]
     Omp(&'static str),
     #[error(transparent)]
-    Start(#[from] LeaderError),
+    Start(#[from] PlacementError),
 }
 
 pub struct Router {
@@ -95,10 +95,7 @@ impl Router {
             identities: header.identities.is_some(),
             initial_identity: header.initial_identity.clone(),
         };
-        let mut interests = Vec::with_capacity(leaders);
-        for me in 0..leaders {
-            interests.push(idmesh_leader::start(&begin, me as u16)?.1);
-        }
+        let interests = idmesh_placement::interests(&begin)?;
         let mut router = Router {
             owners: begin.owners.clone(),
             begin: begin.clone(),
