@@ -3,7 +3,7 @@
 //! partitions, crashes and restarts from the journal, queries at random
 //! points; every answer checked against the centralized engine.
 //!
-//! `IDMESH_SIM_SEEDS=N` runs N schedules (default 1000), from
+//! `IDMESH_SIM_SEEDS=N` runs N schedules (default 5000), from
 //! `IDMESH_SIM_FIRST` (default 0); `IDMESH_SIM_SEED=s` replays schedule s
 //! alone. A failing seed is printed with the line that replays it.
 
@@ -20,7 +20,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
         Some(seed) => vec![seed],
         None => {
             let first = env("IDMESH_SIM_FIRST").unwrap_or(0);
-            (first..first + env("IDMESH_SIM_SEEDS").unwrap_or(1000)).collect()
+            (first..first + env("IDMESH_SIM_SEEDS").unwrap_or(5000)).collect()
         }
     };
     let started = Instant::now();

@@ -16,7 +16,7 @@
 //! linearly (Section 5.4 of the property-management paper).
 
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
-use idmesh_belief::{BeliefError, Field};
+use idmesh_belief::{BeliefError, Field, RedCount};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
@@ -61,7 +61,8 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
     let owners = &begin.owners;
     share.extract(|atom| atom.tracks().min().map(|t| owners[t as usize]).unwrap_or(0) != me);
     let holds_empty = share.atoms().any(|(a, _)| a.tracks().next().is_none());
-    let mut interest = Interest::new(me, tracks, holds_empty);
+    let mut interest =
+        Interest::new(me, tracks, holds_empty).saturating_at(saturation(&field_of(begin)));
     for (atom, _) in share.atoms() {
         for t in atom.tracks() {
             interest.add(t);
@@ -69,6 +70,21 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
     }
     interest.note(&Item::Begin(begin.clone()));
     Ok((share, interest))
+}
+
+/// The size of a set that fixes every track of `field`: k red tracks (the
+/// others are blue) or n − k blue ones; with a prior over counts, the
+/// largest count allowed or n − the smallest.
+pub fn saturation(field: &Field) -> usize {
+    let n = field.tracks;
+    match &field.red {
+        RedCount::Known(k) => (*k).min(n - k.min(&n)),
+        RedCount::Unknown { prior } => {
+            let most = prior.iter().rposition(|&p| p > 0.0).unwrap_or(n);
+            let least = prior.iter().position(|&p| p > 0.0).unwrap_or(0);
+            most.min(n.saturating_sub(least))
+        }
+    }
 }
 
 /// Every leader's interest at the `Begin`, in the stream's order.
@@ -105,7 +121,6 @@ pub fn combine(parts: &[Partial]) -> PartialSums {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use idmesh_belief::RedCount;
 
     fn begin(leaders: usize, owners: Vec<u16>, red: Option<u32>) -> Begin {
         Begin {

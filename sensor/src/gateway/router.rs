@@ -269,12 +269,24 @@ impl Router {
         for &t in &follow.tracks {
             grown.add(t);
         }
+        // Grown this far, the leader may hold a set that fixes every track
+        // (see `Interest::saturated`): then it needs every observation it
+        // was not sent while it followed fewer. Sending some again is
+        // harmless (the leader waits at `after`; duplicates collapse by
+        // seq).
+        let mut whole = self.interests[leader].clone();
+        for &t in &follow.tracks {
+            whole.add(t);
+        }
+        let saturated = whole.saturated();
         // Items are logged in seq order, one per seq except Begin and cuts.
         let from = self.log.partition_point(|s| s.seq <= follow.after);
         let mut missed = Vec::new();
         for sequenced in &self.log[from..] {
-            if matches!(sequenced.item, Item::Mix { .. } | Item::Observe { .. })
-                && grown.receives(&sequenced.item)
+            let observation = matches!(sequenced.item, Item::Observe { .. });
+            if (saturated && observation)
+                || matches!(sequenced.item, Item::Mix { .. } | Item::Observe { .. })
+                    && grown.receives(&sequenced.item)
             {
                 grown.note(&sequenced.item);
                 missed.push(sequenced.clone());

@@ -81,7 +81,7 @@ impl Scenario {
             };
             lines.push(line);
         }
-        let distributed_rule = rng.gen_bool(0.5) && false;
+        let distributed_rule = rng.gen_bool(0.5);
         let centralized = centralized(&header, &lines, distributed_rule)?;
         Ok(Scenario {
             header,
