@@ -19,3 +19,6 @@ pub mod cuts;
 pub mod router;
 
 pub use router::{LeaderPlace, Router, RouterConfig, RouterError};
+
+#[cfg(test)]
+mod tests;

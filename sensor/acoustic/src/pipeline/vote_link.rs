@@ -248,8 +248,8 @@ pub fn link(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::acoustic::pipeline::tiles::TileSet;
-    use crate::geometry::Vec2;
+    use crate::pipeline::tiles::TileSet;
+    use idmesh_sensor::geometry::Vec2;
 
     fn grid() -> TileGrid {
         TileGrid::new(1000.0, 5.0)

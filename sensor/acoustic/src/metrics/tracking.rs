@@ -28,12 +28,12 @@
 //! has full "coverage").
 
 use super::assign::min_cost_assignment;
-use crate::acoustic::field::TruePath;
-use crate::acoustic::pipeline::intersect::Area;
-use crate::acoustic::pipeline::prepare::Segmentation;
-use crate::acoustic::pipeline::tiles::{TileGrid, TileSet};
-use crate::acoustic::pipeline::vote_link::Fragment;
-use crate::geometry::Vec2;
+use crate::field::TruePath;
+use crate::pipeline::intersect::Area;
+use crate::pipeline::prepare::Segmentation;
+use crate::pipeline::tiles::{TileGrid, TileSet};
+use crate::pipeline::vote_link::Fragment;
+use idmesh_sensor::geometry::Vec2;
 
 /// The metrics of one run.
 #[derive(Debug, Clone, PartialEq)]

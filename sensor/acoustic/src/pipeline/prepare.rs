@@ -6,9 +6,9 @@
 //! overlapping slots (temporal) is what the clustering and selection steps
 //! recognise as real.
 
-use crate::acoustic::error::AcousticError;
-use crate::acoustic::field::SensorSignals;
-use crate::geometry::Vec2;
+use crate::error::AcousticError;
+use crate::field::SensorSignals;
+use idmesh_sensor::geometry::Vec2;
 use nalgebra::DMatrix;
 
 /// A sensor group: its members (sensor indices, ascending) and where it is.

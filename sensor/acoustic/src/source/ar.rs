@@ -37,7 +37,7 @@ pub fn ar_source(samples: usize, params: &ArParams, rng: &mut impl Rng) -> Vec<f
     // Burn in so the start is not special.
     for k in 0..samples + 200 {
         let e = if rng.gen::<f64>() < params.impulse_rate {
-            crate::acoustic::pipeline::separate::fastica::standard_normal(rng)
+            crate::pipeline::separate::fastica::standard_normal(rng)
         } else {
             0.0
         };

@@ -10,11 +10,11 @@
 use super::config::OutputConfig;
 use super::pipeline::prepare::Segmentation;
 use super::run::{AcousticResult, EstimatedPath};
-use crate::events::{MixDetector, SimEvent, TimedEvent};
-use crate::geometry::{NeighbourGrid, Vec2};
-use crate::scenario::trace_out::event_line;
 use idmesh_protocol::trace::{Header, Line};
 use idmesh_protocol::{TraceError, TraceWriter};
+use idmesh_sensor::events::{MixDetector, SimEvent, TimedEvent};
+use idmesh_sensor::geometry::{NeighbourGrid, Vec2};
+use idmesh_sensor::scenario::trace_out::event_line;
 use std::io::Write;
 
 /// Position of a path at slot `j`: its fragment there, or linear
@@ -129,7 +129,7 @@ pub fn write_trace<W: Write>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::acoustic::run::EstimatedFragment;
+    use crate::run::EstimatedFragment;
 
     fn frag(slot: usize, x: f64, y: f64) -> EstimatedFragment {
         EstimatedFragment {

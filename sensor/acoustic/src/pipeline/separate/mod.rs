@@ -18,8 +18,8 @@ pub use fastica::{Algorithm, FastIca, FastIcaConfig, FastIcaError, IcaResult, No
 pub use whitening::{whiten, Components, Whitening};
 
 use super::prepare::{segment_group, Segmentation, SensorGroup};
-use crate::acoustic::error::AcousticError;
-use crate::acoustic::field::SensorSignals;
+use crate::error::AcousticError;
+use crate::field::SensorSignals;
 
 /// How every segment group is separated.
 #[derive(Debug, Clone, PartialEq)]
@@ -230,8 +230,8 @@ pub fn estimate_noise_variance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::acoustic::field::{Field, FieldConfig};
-    use crate::acoustic::pipeline::prepare::nearest_groups;
+    use crate::field::{Field, FieldConfig};
+    use crate::pipeline::prepare::nearest_groups;
 
     #[test]
     fn noise_floor_is_found_and_groups_yield_one_segment_per_heard_source() {
@@ -300,7 +300,7 @@ mod tests {
             let best = (0..segs.len())
                 .map(|i| {
                     let s: Vec<f64> = segs.segment(i).iter().map(|&v| f64::from(v)).collect();
-                    crate::acoustic::metrics::separation::correlation(&truth, &s).abs()
+                    crate::metrics::separation::correlation(&truth, &s).abs()
                 })
                 .fold(0.0, f64::max);
             assert!(best > 0.9, "source {t}: best |corr| {best}");

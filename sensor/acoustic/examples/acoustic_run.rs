@@ -7,10 +7,10 @@
 //!
 //! `cargo run --release -p idmesh-sensor --example acoustic_run -- sensors=1000`
 
-use idmesh_sensor::acoustic::field::PathSpec;
-use idmesh_sensor::acoustic::source::{ArParams, SourceKind};
-use idmesh_sensor::acoustic::trace::write_trace;
-use idmesh_sensor::acoustic::{run, AcousticConfig};
+use idmesh_acoustic::field::PathSpec;
+use idmesh_acoustic::source::{ArParams, SourceKind};
+use idmesh_acoustic::trace::write_trace;
+use idmesh_acoustic::{run, AcousticConfig};
 use std::io::Write;
 
 fn main() {

@@ -187,7 +187,7 @@ mod tests {
         let s = generate(&kind, 10, 4000, &mut rng);
         for i in 0..s.len() {
             for j in 0..i {
-                let c = crate::acoustic::metrics::separation::correlation(&s[i], &s[j]);
+                let c = crate::metrics::separation::correlation(&s[i], &s[j]);
                 assert!(c.abs() < 0.5, "{i} {j} {c}");
             }
         }

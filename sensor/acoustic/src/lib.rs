@@ -24,7 +24,7 @@
 //! - [`config`] — every setting and its default; [`error`] — what fails.
 //!
 //! ```no_run
-//! use idmesh_sensor::acoustic::{run, AcousticConfig, trace::write_trace};
+//! use idmesh_acoustic::{run, AcousticConfig, trace::write_trace};
 //!
 //! let config = AcousticConfig::paper(1000, 10, 42); // sensors, targets, seed
 //! let result = run(&config, &mut |done, total| eprint!("\r{done}/{total}")).unwrap();

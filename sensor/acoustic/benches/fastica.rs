@@ -8,7 +8,7 @@
 //! `cargo bench -p idmesh-sensor --bench fastica`
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion};
-use idmesh_sensor::acoustic::pipeline::separate::{
+use idmesh_acoustic::pipeline::separate::{
     Algorithm, Components, FastIca, FastIcaConfig, FastIcaError,
 };
 use nalgebra::DMatrix;

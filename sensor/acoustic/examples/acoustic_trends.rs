@@ -14,9 +14,9 @@
 //! 2 cores), `only=fig9,fig13,...`, `plots=DIR` (default the workspace's
 //! `docs/`; `plots=none` writes none).
 
-use idmesh_sensor::acoustic::field::PathSpec;
-use idmesh_sensor::acoustic::resolution::{average_resolution, group_radius};
-use idmesh_sensor::acoustic::{run_variants, AcousticConfig, PipelineConfig};
+use idmesh_acoustic::field::PathSpec;
+use idmesh_acoustic::resolution::{average_resolution, group_radius};
+use idmesh_acoustic::{run_variants, AcousticConfig, PipelineConfig};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -654,7 +654,7 @@ pub(crate) fn standard_normal(rng: &mut impl Rng) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::acoustic::metrics::separation::{amari_index, max_abs_correlations};
+    use crate::metrics::separation::{amari_index, max_abs_correlations};
 
     /// Four independent, non-Gaussian sources of different kinds.
     fn sources(t: usize, seed: u64) -> DMatrix<f64> {

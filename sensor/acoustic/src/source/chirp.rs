@@ -73,7 +73,7 @@ mod tests {
         assert!((rms - 1.0).abs() < 1e-9);
         let kurt = a.iter().map(|v| v.powi(4)).sum::<f64>() / 4000.0 - 3.0;
         assert!(kurt.abs() > 0.3, "excess kurtosis {kurt}");
-        let c = crate::acoustic::metrics::separation::correlation(&a, &b);
+        let c = crate::metrics::separation::correlation(&a, &b);
         assert!(c.abs() < 0.1, "{c}");
     }
 }

@@ -7,9 +7,9 @@
 
 use super::attenuation::Attenuation;
 use super::paths::TruePath;
-use crate::acoustic::parallel::par_map;
-use crate::acoustic::pipeline::separate::fastica::standard_normal;
-use crate::geometry::Vec2;
+use crate::parallel::par_map;
+use crate::pipeline::separate::fastica::standard_normal;
+use idmesh_sensor::geometry::Vec2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
