@@ -14,7 +14,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
     predict_red, tracking_error, BeliefError, Event, FactoredBelief, Field, ParticleFilter,
-    PropertyFilter, RadonBelief, RadonOptions, RedCount, Sparsify,
+    PropertyFilter, RadonBelief, RadonOptions, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use serde::Serialize;
@@ -324,6 +324,7 @@ impl Engine {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use idmesh_belief::RedCount;
     use std::path::PathBuf;
 
     fn args(method: Method, budget: Option<usize>) -> ReplayArgs {

@@ -12,20 +12,21 @@ use idmesh_protocol::wire::{encode, VERSION};
 
 /// Two leaders, a at (0, 0) and b at (10, 0); n tracks, k red.
 fn router(tracks: usize, red: usize, distributed_rule: bool) -> Router {
+    router_of(2, tracks, red, distributed_rule)
+}
+
+/// `leaders` leaders a, b, c, … along the x axis, 10 apart.
+fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) -> Router {
     let mut header = Header::new(tracks);
     header.red = Some(red);
     let config = RouterConfig {
         sensor: "s".into(),
-        leaders: vec![
-            LeaderPlace {
-                name: "a".into(),
-                at: Some((0.0, 0.0)),
-            },
-            LeaderPlace {
-                name: "b".into(),
-                at: Some((10.0, 0.0)),
-            },
-        ],
+        leaders: (0..leaders)
+            .map(|i| LeaderPlace {
+                name: ((b'a' + i as u8) as char).to_string(),
+                at: Some((10.0 * i as f64, 0.0)),
+            })
+            .collect(),
         distributed_rule,
         budget: 0,
         omp: false,
@@ -133,21 +134,30 @@ fn a_follow_gets_the_items_missed_on_its_new_tracks_and_bad_ones_are_refused() {
 
 #[test]
 fn a_follow_that_may_bring_a_saturated_set_gets_every_observation_missed() {
-    // n = 8, k = 1: a set with one red track fixes every other as blue.
-    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 1, true), false);
+    // n = 9, k = 4, three leaders of three tracks each: a's sets cannot
+    // hold 4 tracks yet, so an observation of b's track 4 whose mixing log
+    // does not meet a's tracks is not sent to a.
+    let mut gateway: Gateway<()> = Gateway::new("s", router_of(3, 9, 4, true), false);
     gateway.flush();
-    gateway.line(&observe(5)); // seq 2: b's track, a's sets do not meet it
-    gateway.flush();
-    // a follows all of b's tracks: it may now hold {5} red, say.
+    gateway.line(&observe(4)); // seq 2
+    let [a, b, _] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();
+    assert!(seqs(&a).is_empty() && seqs(&b) == [2]);
+    // Sets with track 1 come to a: following 4 tracks it may now hold
+    // {0, 1, 3, 6} red, which says track 4 is blue. It gets the
+    // observation it missed, though 4 is not among the tracks it asks for.
     let followed = gateway
         .follow(&encode(&Follow {
             version: VERSION,
             leader: 0,
             after: 1,
-            tracks: vec![1, 3, 5, 7],
+            tracks: vec![1],
         }))
         .unwrap();
-    assert!(followed.items.iter().any(|s| s.seq == 2));
+    assert_eq!(followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(), [2]);
+    // And every observation from now on.
+    gateway.line(&observe(8)); // seq 3
+    let [a, ..] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();
+    assert_eq!(seqs(&a), [3]);
 }
 
 #[test]
