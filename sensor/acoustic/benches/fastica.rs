@@ -5,7 +5,7 @@
 //! deflation algorithm. The comparison with scikit-learn on the same
 //! mixtures is `examples/acoustic_fastica_compare.rs`.
 //!
-//! `cargo bench -p idmesh-sensor --bench fastica`
+//! `cargo bench -p idmesh-acoustic --bench fastica`
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion};
 use idmesh_acoustic::pipeline::separate::{

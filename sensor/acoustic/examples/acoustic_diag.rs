@@ -4,7 +4,7 @@
 //! target, the centroid's distance to its target and to the nearest
 //! target, and the area's mean tile distance to the target's path.
 //!
-//! `cargo run --release -p idmesh-sensor --example acoustic_diag -- sensors=400 seed=1`
+//! `cargo run --release -p idmesh-acoustic --example acoustic_diag -- sensors=400 seed=1`
 
 use idmesh_acoustic::field::PathSpec;
 use idmesh_acoustic::{run, AcousticConfig};

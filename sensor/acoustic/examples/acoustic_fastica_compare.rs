@@ -11,7 +11,7 @@
 //!
 //! Needs `python3` (or `$PYTHON`) with numpy and scikit-learn:
 //! `pip install scikit-learn numpy`, then
-//! `cargo run --release -p idmesh-sensor --example acoustic_fastica_compare`.
+//! `cargo run --release -p idmesh-acoustic --example acoustic_fastica_compare`.
 //! Option `quick` runs fewer repetitions.
 
 use idmesh_acoustic::metrics::separation::{amari_index, max_abs_correlations};
@@ -206,7 +206,10 @@ fn main() {
         eprintln!("{}: {e}", input.display());
         std::process::exit(1)
     }
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/fastica_sklearn.py");
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../scripts/fastica_sklearn.py"
+    );
     let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
     let status = Command::new(&python)
         .arg(script)

@@ -5,7 +5,7 @@
 //! `l_seg=`, `l_step=`, `n_slot=`, `hear=`, `silent=0|1`, `threads=`, `sources=chirps|ar|mixed|audio`,
 //! `out=` (write the trace there).
 //!
-//! `cargo run --release -p idmesh-sensor --example acoustic_run -- sensors=1000`
+//! `cargo run --release -p idmesh-acoustic --example acoustic_run -- sensors=1000`
 
 use idmesh_acoustic::field::PathSpec;
 use idmesh_acoustic::source::{ArParams, SourceKind};

@@ -9,7 +9,7 @@
 //! Prints one markdown table per figure and writes one SVG per figure
 //! (error distance and coverage) to `docs/acoustic-*.svg`.
 //!
-//! `cargo run --release -p idmesh-sensor --example acoustic_trends`
+//! `cargo run --release -p idmesh-acoustic --example acoustic_trends`
 //! Options: `seeds=N` (default 3, as in docs/acoustic.md; about 7 min on
 //! 2 cores), `only=fig9,fig13,...`, `plots=DIR` (default the workspace's
 //! `docs/`; `plots=none` writes none).
@@ -267,7 +267,7 @@ fn main() {
     let mut seeds = 3u64;
     let mut only: Option<Vec<String>> = None;
     let mut plots: Option<PathBuf> =
-        Some(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs"));
+        Some(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../docs"));
     for arg in std::env::args().skip(1) {
         match arg.split_once('=') {
             Some(("seeds", v)) => seeds = v.parse().unwrap_or(3),

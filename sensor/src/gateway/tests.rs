@@ -153,7 +153,10 @@ fn a_follow_that_may_bring_a_saturated_set_gets_every_observation_missed() {
             tracks: vec![1],
         }))
         .unwrap();
-    assert_eq!(followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(), [2]);
+    assert_eq!(
+        followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(),
+        [2]
+    );
     // And every observation from now on.
     gateway.line(&observe(8)); // seq 3
     let [a, ..] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();

@@ -275,7 +275,7 @@ mod tests {
 
     #[test]
     fn shared_recordings_decode_when_present() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/audio");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/audio");
         if !dir.is_dir() {
             return;
         }

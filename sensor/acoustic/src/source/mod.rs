@@ -44,7 +44,7 @@ impl SourceKind {
     /// The recordings shipped beside the repository (shared/data/audio).
     pub fn shared_recordings() -> Self {
         SourceKind::Recordings {
-            dir: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/audio"),
+            dir: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/audio"),
             rate: 22_050,
         }
     }
