@@ -245,16 +245,10 @@ impl Node {
                 kind,
                 bytes,
                 origin,
-            } => self.input(now, kind, bytes, &origin, &mut out),
+            } => self.input(kind, bytes, &origin, &mut out),
             Input::Followed(Ok(bytes)) => {
                 self.following = false;
-                self.input(
-                    now,
-                    Kind::Followed,
-                    bytes,
-                    "the sensor's follow reply",
-                    &mut out,
-                );
+                self.input(Kind::Followed, bytes, "the sensor's follow reply", &mut out);
                 // A reply that was no use: the leader still waits for one.
                 self.ask_follow(&mut out);
             }
@@ -273,13 +267,7 @@ impl Node {
                         }
                         for batch in batches {
                             let bytes = encode(&batch);
-                            self.input(
-                                now,
-                                Kind::Batch,
-                                bytes,
-                                "the sensor's resend reply",
-                                &mut out,
-                            );
+                            self.input(Kind::Batch, bytes, "the sensor's resend reply", &mut out);
                         }
                     }
                     Err(e) => {
@@ -298,13 +286,7 @@ impl Node {
                     Ok(transfers) => {
                         for t in transfers {
                             let bytes = encode(&t);
-                            self.input(
-                                now,
-                                Kind::Transfer,
-                                bytes,
-                                "a peer's sent transfers",
-                                &mut out,
-                            );
+                            self.input(Kind::Transfer, bytes, "a peer's sent transfers", &mut out);
                         }
                     }
                     Err(e) => {
@@ -345,7 +327,7 @@ impl Node {
 
     /// One input of the state machine: through the door, journaled,
     /// applied, its actions carried out.
-    fn input(&mut self, now: Now, kind: Kind, bytes: Vec<u8>, origin: &str, out: &mut Vec<Output>) {
+    fn input(&mut self, kind: Kind, bytes: Vec<u8>, origin: &str, out: &mut Vec<Output>) {
         let input = match door::admit(&self.leader, kind, &bytes) {
             Ok(input) => input,
             Err(problem) => {
@@ -360,7 +342,7 @@ impl Node {
             out.push(Output::Journal { kind, bytes });
         }
         match door::apply(&mut self.leader, input, size) {
-            Ok(actions) => self.act(now, actions, out),
+            Ok(actions) => self.act(actions, out),
             Err(e) => {
                 tracing::error!(leader = %self.leader.name(), error = %e, "leader cannot go on applying its stream");
                 self.failure = Some(e.to_string());
@@ -369,7 +351,7 @@ impl Node {
     }
 
     /// Carries out what the state machine asks for.
-    fn act(&mut self, _now: Now, actions: Vec<Action>, out: &mut Vec<Output>) {
+    fn act(&mut self, actions: Vec<Action>, out: &mut Vec<Output>) {
         for action in actions {
             match action {
                 Action::Send { to, transfer } => self.send(to, &transfer, out),
