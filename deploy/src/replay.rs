@@ -14,8 +14,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
 use idmesh_belief::{
     brier_score, expected_tracking_error, log_loss, predict_red, BeliefError, Event,
-    FactoredBelief, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions, RedCount,
-    Sparsify,
+    FactoredBelief, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -281,15 +280,11 @@ pub fn replay<R: BufRead>(
 /// `initial_red`) or unknown with the uniform prior over counts, and the
 /// red tracks at time 0 when the header gives them.
 pub fn field_of(header: &Header) -> Field {
-    let red = match header.red_count() {
-        Some(k) => RedCount::Known(k),
-        None => RedCount::unknown_uniform(header.tracks),
-    };
-    Field {
-        tracks: header.tracks,
-        red,
-        initial_red: header.initial_red.clone(),
-    }
+    Field::with_count(
+        header.tracks,
+        header.red_count(),
+        header.initial_red.clone(),
+    )
 }
 
 /// Refuses a Radon method without a budget where the exact belief it keeps
@@ -411,6 +406,7 @@ impl Engine {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use idmesh_belief::RedCount;
     use std::path::PathBuf;
 
     fn args(method: Method, budget: Option<usize>) -> ReplayArgs {

@@ -1,9 +1,12 @@
 //! Shared pieces of the multi-process tests in `tests/tests/`: each starts
-//! the real `idmesh` binary and checks what a user would see.
+//! the real `idmesh` binary and checks what a user would see; and the
+//! deterministic network simulator ([`sim`]) that searches the
+//! interleavings those tests cannot.
 
 pub mod compare;
 pub mod deployment;
 pub mod python;
+pub mod sim;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
