@@ -477,4 +477,135 @@ mod tests {
         )
         .is_err());
     }
+
+    /// A random information matrix with a known start and `mixes` random
+    /// mixes of nearby tracks, and `reads` reads: blocks of several sizes.
+    fn known_start_matrix(n: usize, seed: u64, mixes: usize, reads: usize) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut start: Vec<u32> = (0..n as u32).collect();
+        for i in (1..n).rev() {
+            start.swap(i, rng.gen_range(0..=i));
+        }
+        let mut info = InformationMatrix::from_assignment(
+            &start,
+            f64::INFINITY,
+            Default::default(),
+        )
+        .unwrap();
+        for _ in 0..mixes {
+            let a = rng.gen_range(0..n);
+            let b = (a + rng.gen_range(1..3.min(n))) % n;
+            info.mix(crate::Mix {
+                a: a as u32,
+                b: b as u32,
+                swap: rng.gen_range(0.1..0.9),
+            })
+            .unwrap();
+        }
+        for _ in 0..reads {
+            info.identify(crate::identity::Identify {
+                track: rng.gen_range(0..n) as u32,
+                identity: rng.gen_range(0..n) as u32,
+                accuracy: 0.9,
+            })
+            .unwrap();
+        }
+        info.log_likelihoods().concat()
+    }
+
+    #[test]
+    fn exact_refuses_a_block_too_large_and_names_its_size() {
+        let n = 30;
+        let l = vec![0.0; n * n];
+        let e = information_marginals(n, &l, &MarginalMethod::Exact, &Default::default())
+            .unwrap_err();
+        assert_eq!(
+            e,
+            BeliefError::TooLargeBlock {
+                method: "exact marginals (permanent)",
+                block: 30,
+                tracks: 30,
+                limit: MAX_PERMANENT_TRACKS
+            }
+        );
+        assert!(e.to_string().contains("has 30 of the 30 tracks"), "{e}");
+        // Auto answers it (half-Bethe on the one block of 30).
+        let p = by(MarginalMethod::Auto, n, &l);
+        assert!(doubly_stochastic_residual(&p) < 1e-9);
+    }
+
+    #[test]
+    fn a_thousand_tracks_in_small_blocks_answer_exactly() {
+        // n = 1000 with a known start and 600 local mixes: every method
+        // answers, exact and auto agree, and the other methods are
+        // doubly stochastic with zeros between blocks.
+        let n = 1000;
+        let l = known_start_matrix(n, 3, 600, 300);
+        let opts = SinkhornOptions::default();
+        let exact = block_marginals(n, &l, &MarginalMethod::Exact, &opts).unwrap();
+        assert!(exact.largest_block() <= MAX_PERMANENT_TRACKS);
+        assert!(exact.blocks.len() > 100, "{}", exact.blocks.len());
+        let auto = block_marginals(n, &l, &MarginalMethod::Auto, &opts).unwrap();
+        let (e, a) = (exact.dense(), auto.dense());
+        if exact.largest_block() <= AUTO_EXACT_BLOCK {
+            assert_eq!(e, a);
+        }
+        for method in [
+            MarginalMethod::Sinkhorn,
+            MarginalMethod::half_bethe(),
+            MarginalMethod::Metropolis {
+                samples: 2_000,
+                burn_in: 200,
+                seed: 1,
+            },
+        ] {
+            let m = information_marginals(n, &l, &method, &opts).unwrap();
+            for (x, y) in m.iter().zip(&e) {
+                assert!(*y > 0.0 || *x == 0.0, "{}", method.name());
+            }
+            assert!(doubly_stochastic_residual(&to_rows(n, &m)) < 1e-8);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+
+        /// Block by block equals the exact filter over all n! assignments
+        /// (exact, and auto, which is exact at these sizes); every other
+        /// method equals itself run on each block alone, i.e. blocks change
+        /// nothing but the cost.
+        #[test]
+        fn blocks_agree_with_the_exact_filter(
+            n in 2usize..=8,
+            seed in proptest::prelude::any::<u64>(),
+            mixes in 0usize..10,
+            reads in 0usize..10,
+        ) {
+            let l = known_start_matrix(n, seed, mixes, reads);
+            let want = exact(n, &l);
+            for method in [MarginalMethod::Exact, MarginalMethod::Auto] {
+                let got = by(method, n, &l);
+                proptest::prop_assert!(max_abs_difference(&got, &want) < 1e-9);
+            }
+            let opts = SinkhornOptions::default();
+            for method in [MarginalMethod::Sinkhorn, MarginalMethod::half_bethe()] {
+                let got = by(method, n, &l);
+                let blocks = block_marginals(n, &l, &method, &opts).unwrap();
+                for (block, p) in &blocks.blocks {
+                    let sub = crate::identity::blocks::sub_matrix(n, &l, block);
+                    let alone = if block.size() == 1 {
+                        vec![1.0]
+                    } else {
+                        one_block(block.size(), &sub, &method, &opts).unwrap()
+                    };
+                    proptest::prop_assert_eq!(p, &alone);
+                }
+                proptest::prop_assert!(doubly_stochastic_residual(&got) < 1e-9);
+                // Zero exactly where the exact belief is zero.
+                for (x, y) in got.iter().flatten().zip(want.iter().flatten()) {
+                    proptest::prop_assert!(*y > 0.0 || *x == 0.0);
+                }
+            }
+        }
+    }
 }
