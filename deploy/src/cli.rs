@@ -319,9 +319,10 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "FILE")]
     pub trace: PathBuf,
 
-    /// The filter to run.
-    #[arg(long, value_enum, default_value_t = Method::Overcomplete)]
-    pub method: Method,
+    /// The filter to run (default: by the trace's header — overcomplete
+    /// for a property trace, information-matrix for an identity trace).
+    #[arg(long, value_enum)]
+    pub method: Option<Method>,
 
     /// The most coefficients the Radon belief may hold after an event
     /// (overcomplete: optional, none = exact; threshold: required).
@@ -356,7 +357,22 @@ pub struct ReplayArgs {
     /// Identity methods: counted steps of --marginals metropolis.
     #[arg(long, value_name = "S")]
     pub samples: Option<usize>,
+
+    /// Run a setting replay refuses as exponential (--method property-bits
+    /// without --budget on many identities) anyway.
+    #[arg(long)]
+    pub force: bool,
 }
+
+impl ReplayArgs {
+    /// The property method asked for, or the default for property traces.
+    pub fn property_method(&self) -> Method {
+        self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
+    }
+}
+
+/// The method `replay` runs on a property trace when none is named.
+pub const DEFAULT_PROPERTY_METHOD: Method = Method::Overcomplete;
 
 /// The filters `replay` can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -482,7 +498,7 @@ mod tests {
         let Command::Replay(args) = cli.command else {
             panic!("parsed as replay")
         };
-        assert_eq!(args.method, Method::Threshold);
+        assert_eq!(args.method, Some(Method::Threshold));
         assert_eq!(args.budget, Some(64));
         assert!(args.distributed_rule);
         assert!(
@@ -508,7 +524,7 @@ mod tests {
         let Command::Replay(args) = cli.command else {
             panic!("parsed as replay")
         };
-        assert_eq!(args.method, Method::Particles);
+        assert_eq!(args.method, Some(Method::Particles));
         assert_eq!((args.particles, args.seed), (Some(5000), Some(9)));
         assert!(
             Cli::try_parse_from(["idmesh", "replay", "--trace", "t", "--particles", "0"]).is_err()

@@ -86,6 +86,37 @@ impl Stopwatch {
     }
 }
 
+/// `idmesh replay`: the identity replay ([`crate::replay_identity`]) for
+/// a trace whose header has `identities`, this property replay otherwise;
+/// with no `--method`, each kind's default. A property method on an
+/// identity trace, or an identity method on a property trace, is an error
+/// that says so.
+pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
+    let mut reader = TraceReader::open(&args.trace)
+        .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
+    let identities = reader.read_header()?.identities;
+    let source = reader.source().to_string();
+    match (identities, args.method) {
+        (Some(_), None) => crate::replay_identity::run_default(args, out),
+        (Some(_), Some(method)) if method.identity().is_some() => {
+            crate::replay_identity::run_default(args, out)
+        }
+        (Some(n), Some(method)) => bail!(
+            "{source}:1: header: an identity trace ({n} identities), and --method {} is a \
+             property method; use exact-perm, belief-matrix, information-matrix (the \
+             default) or property-bits",
+            method.name()
+        ),
+        (None, Some(method)) if method.identity().is_some() => bail!(
+            "{source}:1: header: a property trace (no `identities`), and --method {} is an \
+             identity method; use a property method (default {})",
+            method.name(),
+            crate::cli::DEFAULT_PROPERTY_METHOD.name()
+        ),
+        (None, _) => run(args, out),
+    }
+}
+
 /// Replays the trace named by `args` and writes the answers to `out`.
 pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
     check_options(args)?;
@@ -99,10 +130,10 @@ pub const DEFAULT_PARTICLES: usize = 1000;
 
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
-    let method = args.method;
-    if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() {
+    let method = args.property_method();
+    if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() || args.force {
         bail!(
-            "--marginals, --bits and --samples apply to the identity methods, not to --method {}",
+            "--marginals, --bits, --samples and --force apply to the identity methods, not to --method {}",
             method.name()
         );
     }
@@ -149,7 +180,7 @@ pub fn replay<R: BufRead>(
     let span = info_span!(
         "replay",
         trace = reader.source(),
-        method = args.method.name()
+        method = args.property_method().name()
     );
     let _entered = span.enter();
 
@@ -208,7 +239,7 @@ pub fn replay<R: BufRead>(
 
     let summary = Summary {
         kind: "summary",
-        method: args.method.name(),
+        method: args.property_method().name(),
         events: engine.events,
         seconds: engine.time.total.as_secs_f64(),
         error: mean_error(&errors),
@@ -250,7 +281,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         };
         Ok(Box::new(RadonBelief::with_options(field.clone(), options)?))
     };
-    match args.method {
+    match args.property_method() {
         Method::Overcomplete => radon(args.budget.map(Sparsify::overcomplete)),
         // `check_options` made sure the budget is there.
         Method::Threshold => radon(args.budget.map(Sparsify::threshold)),
@@ -258,7 +289,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         // The paper's projection alone leaves the simplex on real traces and
         // then refuses observations as impossible; the repair keeps it going.
         Method::Order1 | Method::Order2 | Method::Order3 => {
-            let order = match args.method {
+            let order = match args.property_method() {
                 Method::Order1 => 1,
                 Method::Order2 => 2,
                 _ => 3,
@@ -333,7 +364,7 @@ mod tests {
     fn args(method: Method, budget: Option<usize>) -> ReplayArgs {
         ReplayArgs {
             trace: PathBuf::from("mem.jsonl"),
-            method,
+            method: Some(method),
             budget,
             distributed_rule: false,
             particles: None,
@@ -341,6 +372,7 @@ mod tests {
             marginals: None,
             bits: None,
             samples: None,
+            force: false,
         }
     }
 
@@ -453,7 +485,7 @@ mod tests {
         particles.particles = None;
         particles.seed = Some(1);
         assert!(check_options(&particles).is_err());
-        particles.method = Method::Particles;
+        particles.method = Some(Method::Particles);
         assert!(check_options(&particles).is_ok());
         particles.budget = Some(3);
         assert!(check_options(&particles).is_err());
@@ -471,5 +503,58 @@ mod tests {
         assert_eq!(out[1]["method"], "particles");
         assert_eq!(out[1]["error"], 0.0);
         assert_eq!(out[1]["max_coefficients"], 200);
+    }
+
+    #[test]
+    fn dispatch_picks_the_replay_by_the_header_and_refuses_mismatches() {
+        let dir = std::env::temp_dir().join(format!("idmesh-dispatch-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let identity = dir.join("ids.jsonl");
+        std::fs::write(
+            &identity,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"identities":2,"initial_identity":[1,0]}"#,
+                "\n",
+                r#"{"kind":"truth","time":1,"identity":[1,0]}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let property = dir.join("red.jsonl");
+        std::fs::write(
+            &property,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"red":1}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let run = |trace: &std::path::Path, method: Option<Method>| {
+            let mut a = args(Method::Overcomplete, None);
+            a.trace = trace.to_path_buf();
+            a.method = method;
+            let mut out = Vec::new();
+            dispatch(&a, &mut out)
+                .map(|()| String::from_utf8(out).unwrap())
+                .map_err(|e| format!("{e:#}"))
+        };
+        let out = run(&identity, None).unwrap();
+        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
+        assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
+        let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
+        assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
+        let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
+        assert!(
+            error.ends_with("header: an identity trace (2 identities), and --method overcomplete is a property method; use exact-perm, belief-matrix, information-matrix (the default) or property-bits"),
+            "{error}"
+        );
+        let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();
+        assert!(
+            error.contains("a property trace (no `identities`), and --method information-matrix is an identity method"),
+            "{error}"
+        );
+        let out = run(&property, None).unwrap();
+        assert!(out.contains(r#""kind":"summary""#), "{out}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
