@@ -133,6 +133,9 @@ fn against_exact(
                     Ok(p) => {
                         for (x, y) in p.iter().flatten().zip(answers[q].iter().flatten()) {
                             let d = (x - y).abs();
+                            if d > 0.9 && std::env::var_os("WORST").is_some() {
+                                eprintln!("{s:?} after {} events: {p:?} vs {:?}", k + 1, answers[q]);
+                            }
                             sum += d;
                             count += 1;
                             worst = worst.max(d);
@@ -309,6 +312,11 @@ fn main() {
             encoding();
         }
         "methods" => methods(parse(2, f64::INFINITY), parse(3, 1.0)),
+        "worst" => {
+            let streams = small_streams(8);
+            let exact = exact_answers(&streams);
+            against_exact(&streams, &exact, &info(f64::INFINITY, MarginalMethod::Exact), 1.0);
+        }
         "large" => large(parse(2, f64::INFINITY), parse(3, 1.0)),
         _ => {
             let (c, w) = encoding();

@@ -89,7 +89,7 @@
 
 use super::event::{check_assignment, check_identify, check_mix, check_square, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
-use super::marginals::{information_marginals, MarginalMethod};
+use super::marginals::{block_marginals, information_marginals, BlockMarginals, MarginalMethod};
 use super::sinkhorn::SinkhornOptions;
 use super::support_mix::fit_on_support;
 use crate::error::BeliefError;
@@ -219,6 +219,12 @@ impl InformationMatrix {
     /// L\[t\]\[i\].
     pub fn get(&self, track: usize, identity: usize) -> Option<f64> {
         (track < self.n && identity < self.n).then(|| self.l[track * self.n + identity])
+    }
+
+    /// Marginals block by block (see [`crate::identity::blocks`]): what a
+    /// query at n = 10,000 should ask for — no n × n matrix is built.
+    pub fn block_marginals(&self, method: &MarginalMethod) -> Result<BlockMarginals, BeliefError> {
+        block_marginals(self.n, &self.l, method, &self.options.sinkhorn)
     }
 
     /// Marginals by a given method, whatever the configured one.

@@ -50,7 +50,9 @@
 //! [`super::permanent::MAX_PERMANENT_TRACKS`]) says so with the block's
 //! size ([`BeliefError::TooLargeBlock`]).
 
+use super::assignment::most_likely_assignment;
 use super::blocks::{blocks_of_log_likelihoods, sub_matrix, Block};
+use super::filter::to_rows;
 use super::metropolis::metropolis_marginals;
 use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
@@ -158,6 +160,19 @@ impl BlockMarginals {
             }
         }
         out
+    }
+
+    /// The most likely one-to-one assignment under these marginals,
+    /// solved block by block (`result[t]` = identity of track t).
+    pub fn most_likely(&self) -> Result<Vec<u32>, BeliefError> {
+        let mut out = vec![0u32; self.n];
+        for (block, p) in &self.blocks {
+            let local = most_likely_assignment(&to_rows(block.size(), p))?;
+            for (r, &c) in local.iter().enumerate() {
+                out[block.tracks[r]] = block.identities[c as usize] as u32;
+            }
+        }
+        Ok(out)
     }
 
     /// The number of tracks of the largest block.
