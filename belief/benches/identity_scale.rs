@@ -12,8 +12,9 @@
 //! First the bench prints, measured in this process, one line per n and
 //! method: the query time (median of 3), the identity error of the answer
 //! against the true assignment, the largest block, or the error that
-//! refused the query; and the belief matrix's whole-stream time where it is
-//! feasible. Then criterion measures the query times.
+//! refused the query; and, at n = 100, the belief matrix's whole-stream
+//! time (it renormalizes all n² entries at every read: 141 s for the
+//! n = 500 stream in a first run, so larger sizes are left out). Then criterion measures the query times.
 //!
 //! Run: `cargo bench -p idmesh-belief --bench identity_scale` (a few
 //! minutes; `-- 10000` for one size).
@@ -96,7 +97,7 @@ fn report() {
                 Err(e) => println!("{n} | {} | refused: {e}", method.name()),
             }
         }
-        if n <= 1_000 {
+        if n <= 100 {
             let clock = Instant::now();
             let mut bm = BeliefMatrix::from_assignment(&initial).expect("a permutation");
             let ok = events.iter().all(|e| bm.apply(e).is_ok());
