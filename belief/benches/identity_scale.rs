@@ -59,12 +59,8 @@ fn methods() -> Vec<MarginalMethod> {
 /// The information matrix after the stream, and the true assignment.
 fn stream(n: usize) -> (InformationMatrix, Vec<u32>, Vec<u32>, Vec<IdentityEvent>) {
     let (initial, events, truth) = generate_final(&spec(n)).expect("valid spec");
-    let mut info = InformationMatrix::from_assignment(
-        &initial,
-        f64::INFINITY,
-        Default::default(),
-    )
-    .expect("a permutation");
+    let mut info = InformationMatrix::from_assignment(&initial, f64::INFINITY, Default::default())
+        .expect("a permutation");
     for e in &events {
         info.apply(e).expect("the stream applies");
     }

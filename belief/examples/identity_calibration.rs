@@ -29,7 +29,13 @@ use std::time::Instant;
 const SEED0: u64 = 10_000;
 const EVERY: usize = 10;
 
-fn spec(n: usize, events: usize, mix_share: f64, neighbourhood: usize, seed: u64) -> IdentityWorkloadSpec {
+fn spec(
+    n: usize,
+    events: usize,
+    mix_share: f64,
+    neighbourhood: usize,
+    seed: u64,
+) -> IdentityWorkloadSpec {
     IdentityWorkloadSpec {
         tracks: n,
         events,
@@ -78,7 +84,8 @@ fn small_streams(seeds: u64) -> Vec<IdentityWorkloadSpec> {
         for (k, mix_share) in [0.25, 0.5, 0.75].into_iter().enumerate() {
             for neighbourhood in [2, n] {
                 for s in 0..seeds {
-                    let seed = SEED0 + 1000 * n as u64 + 100 * k as u64 + 10 * neighbourhood as u64 + s;
+                    let seed =
+                        SEED0 + 1000 * n as u64 + 100 * k as u64 + 10 * neighbourhood as u64 + s;
                     out.push(spec(n, 40, mix_share, neighbourhood, seed));
                 }
             }
@@ -134,7 +141,11 @@ fn against_exact(
                         for (x, y) in p.iter().flatten().zip(answers[q].iter().flatten()) {
                             let d = (x - y).abs();
                             if d > 0.9 && std::env::var_os("WORST").is_some() {
-                                eprintln!("{s:?} after {} events: {p:?} vs {:?}", k + 1, answers[q]);
+                                eprintln!(
+                                    "{s:?} after {} events: {p:?} vs {:?}",
+                                    k + 1,
+                                    answers[q]
+                                );
                             }
                             sum += d;
                             count += 1;
@@ -200,7 +211,10 @@ fn encoding() -> (f64, f64) {
 fn methods(c: f64, w: f64) {
     let streams = small_streams(8);
     let exact = exact_answers(&streams);
-    println!("### Every method against exact S_N (n = 4..9, c = {}, w = {w})\n", fmt_c(c));
+    println!(
+        "### Every method against exact S_N (n = 4..9, c = {}, w = {w})\n",
+        fmt_c(c)
+    );
     println!("| method | mean abs Δp | max abs Δp |");
     println!("|---|---|---|");
     let metropolis = MarginalMethod::Metropolis {
@@ -210,12 +224,24 @@ fn methods(c: f64, w: f64) {
     };
     let rows: Vec<(&str, Make, f64)> = vec![
         ("belief matrix", belief_matrix(), 1.0),
-        ("information matrix, c = 20, w = 1 (before)", info(20.0, MarginalMethod::Exact), 1.0),
+        (
+            "information matrix, c = 20, w = 1 (before)",
+            info(20.0, MarginalMethod::Exact),
+            1.0,
+        ),
         ("information, exact", info(c, MarginalMethod::Exact), w),
         ("information, auto", info(c, MarginalMethod::Auto), w),
         ("information, Metropolis 10^4", info(c, metropolis), w),
-        ("information, Sinkhorn", info(c, MarginalMethod::Sinkhorn), w),
-        ("information, half-Bethe", info(c, MarginalMethod::half_bethe()), w),
+        (
+            "information, Sinkhorn",
+            info(c, MarginalMethod::Sinkhorn),
+            w,
+        ),
+        (
+            "information, half-Bethe",
+            info(c, MarginalMethod::half_bethe()),
+            w,
+        ),
     ];
     for (name, make, weight) in rows {
         let (mean, max, failures) = against_exact(&streams, &exact, &make, weight);
@@ -230,7 +256,11 @@ fn methods(c: f64, w: f64) {
 }
 
 /// (Brier, log-loss, identity error) against the truth.
-fn against_truth(streams: &[IdentityWorkloadSpec], make: &Make, weight: f64) -> Option<(f64, f64, f64)> {
+fn against_truth(
+    streams: &[IdentityWorkloadSpec],
+    make: &Make,
+    weight: f64,
+) -> Option<(f64, f64, f64)> {
     let (mut brier, mut logloss, mut wrong, mut count) = (0.0, 0.0, 0.0, 0usize);
     for s in streams {
         let w = generate(s).unwrap();
@@ -279,11 +309,23 @@ fn large(c: f64, w: f64) {
         };
         let rows: Vec<(&str, Make, f64)> = vec![
             ("belief matrix", belief_matrix(), 1.0),
-            ("information, c = 20, w = 1, half-Bethe (before)", info(20.0, MarginalMethod::half_bethe()), 1.0),
+            (
+                "information, c = 20, w = 1, half-Bethe (before)",
+                info(20.0, MarginalMethod::half_bethe()),
+                1.0,
+            ),
             ("information, auto", info(c, MarginalMethod::Auto), w),
             ("information, Metropolis 10^4", info(c, metropolis), w),
-            ("information, Sinkhorn", info(c, MarginalMethod::Sinkhorn), w),
-            ("information, half-Bethe", info(c, MarginalMethod::half_bethe()), w),
+            (
+                "information, Sinkhorn",
+                info(c, MarginalMethod::Sinkhorn),
+                w,
+            ),
+            (
+                "information, half-Bethe",
+                info(c, MarginalMethod::half_bethe()),
+                w,
+            ),
         ];
         for (name, make, weight) in rows {
             let clock = Instant::now();
@@ -304,7 +346,13 @@ fn main() {
     let parse = |k: usize, default: f64| {
         std::env::args()
             .nth(k)
-            .map(|x| if x == "inf" { f64::INFINITY } else { x.parse().unwrap() })
+            .map(|x| {
+                if x == "inf" {
+                    f64::INFINITY
+                } else {
+                    x.parse().unwrap()
+                }
+            })
             .unwrap_or(default)
     };
     match which.as_str() {
@@ -315,7 +363,12 @@ fn main() {
         "worst" => {
             let streams = small_streams(8);
             let exact = exact_answers(&streams);
-            against_exact(&streams, &exact, &info(f64::INFINITY, MarginalMethod::Exact), 1.0);
+            against_exact(
+                &streams,
+                &exact,
+                &info(f64::INFINITY, MarginalMethod::Exact),
+                1.0,
+            );
         }
         "large" => large(parse(2, f64::INFINITY), parse(3, 1.0)),
         _ => {

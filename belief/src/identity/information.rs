@@ -349,7 +349,10 @@ pub fn mixed_rows(
             return Err(BeliefError::BadSwap { swap });
         }
         if row_a.len() != row_b.len()
-            || row_a.iter().chain(row_b).any(|x| x.is_nan() || *x == f64::INFINITY)
+            || row_a
+                .iter()
+                .chain(row_b)
+                .any(|x| x.is_nan() || *x == f64::INFINITY)
         {
             return Err(BeliefError::Numerical {
                 step: "information matrix mixing",

@@ -253,9 +253,7 @@ fn one_block(
     match *method {
         MarginalMethod::Exact => marginals_from_log_likelihoods(k, l),
         MarginalMethod::Auto if k <= AUTO_EXACT_BLOCK => marginals_from_log_likelihoods(k, l),
-        MarginalMethod::Auto => {
-            one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options)
-        }
+        MarginalMethod::Auto => one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options),
         MarginalMethod::Metropolis {
             samples,
             burn_in,
@@ -501,12 +499,8 @@ mod tests {
         for i in (1..n).rev() {
             start.swap(i, rng.gen_range(0..=i));
         }
-        let mut info = InformationMatrix::from_assignment(
-            &start,
-            f64::INFINITY,
-            Default::default(),
-        )
-        .unwrap();
+        let mut info =
+            InformationMatrix::from_assignment(&start, f64::INFINITY, Default::default()).unwrap();
         for _ in 0..mixes {
             let a = rng.gen_range(0..n);
             let b = (a + rng.gen_range(1..3.min(n))) % n;
@@ -532,8 +526,8 @@ mod tests {
     fn exact_refuses_a_block_too_large_and_names_its_size() {
         let n = 30;
         let l = vec![0.0; n * n];
-        let e = information_marginals(n, &l, &MarginalMethod::Exact, &Default::default())
-            .unwrap_err();
+        let e =
+            information_marginals(n, &l, &MarginalMethod::Exact, &Default::default()).unwrap_err();
         assert_eq!(
             e,
             BeliefError::TooLargeBlock {

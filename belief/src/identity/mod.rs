@@ -62,11 +62,11 @@ pub mod workload;
 
 pub use assignment::{identity_error, most_likely_assignment};
 pub use belief_matrix::BeliefMatrix;
+pub use blocks::Block;
 pub use event::{Identify, IdentityEvent};
 pub use exact::ExactPermutationFilter;
 pub use filter::{IdentityFilter, Marginals};
 pub use information::{InformationMatrix, InformationOptions, MixSolver};
-pub use blocks::Block;
 pub use marginals::{BlockMarginals, MarginalMethod};
 pub use permanent::PermanentFormula;
 pub use property_bits::{BitCode, PropertyBitsFilter};

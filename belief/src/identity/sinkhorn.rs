@@ -332,12 +332,8 @@ fn newton_cg_step(n: usize, p: &mut [f64], logs: &mut LogScaling) -> bool {
             out[i] += acc;
         }
     };
-    let precondition = |r: &[f64]| -> Vec<f64> {
-        r.iter()
-            .zip(&diag)
-            .map(|(x, d)| x / (d + ridge))
-            .collect()
-    };
+    let precondition =
+        |r: &[f64]| -> Vec<f64> { r.iter().zip(&diag).map(|(x, d)| x / (d + ridge)).collect() };
     let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
     let goal = 1e-2 * norm(&g);
     // Solve H·d = −g from d = 0.

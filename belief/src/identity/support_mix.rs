@@ -173,8 +173,7 @@ mod tests {
         // Blocks {0, 1} (mixed already) and {2}; then 1 meets 2.
         let start = [1u32, 0, 2];
         let mut info =
-            InformationMatrix::from_assignment(&start, f64::INFINITY, Default::default())
-                .unwrap();
+            InformationMatrix::from_assignment(&start, f64::INFINITY, Default::default()).unwrap();
         let mut exact = ExactPermutationFilter::from_assignment(&start).unwrap();
         for (a, b, swap) in [(0, 1, 0.3), (1, 2, 0.6), (2, 0, 0.5)] {
             let mix = Mix { a, b, swap };
