@@ -340,7 +340,7 @@ pub fn mixed_rows(
     if swap == 0.0 {
         return Ok(None);
     }
-    let ruled_out = |row: &[f64]| row.iter().any(|&x| x == f64::NEG_INFINITY);
+    let ruled_out = |row: &[f64]| row.contains(&f64::NEG_INFINITY);
     let (mut x, mut y) = if swap == 1.0 {
         // A sure swap is exact: exchange the rows.
         (row_b.to_vec(), row_a.to_vec())

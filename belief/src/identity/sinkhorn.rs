@@ -349,7 +349,8 @@ fn newton_cg_step(n: usize, p: &mut [f64], logs: &mut LogScaling) -> bool {
         }
         hess(&dir, &mut hd);
         let curvature: f64 = dir.iter().zip(&hd).map(|(a, b)| a * b).sum();
-        if !(curvature > 0.0) {
+        // Not positive, or NaN: CG cannot go on.
+        if curvature.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             break;
         }
         let alpha = rz / curvature;

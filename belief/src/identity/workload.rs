@@ -94,12 +94,13 @@ pub fn generate(spec: &IdentityWorkloadSpec) -> Result<IdentityWorkload, BeliefE
     })
 }
 
+/// The initial assignment, the events and the final assignment.
+pub type FinalWorkload = (Vec<u32>, Vec<IdentityEvent>, Vec<u32>);
+
 /// A stream too large to keep the truth after every event (n = 10,000):
 /// the true assignment at time 0, the events, and the true assignment at
 /// the end.
-pub fn generate_final(
-    spec: &IdentityWorkloadSpec,
-) -> Result<(Vec<u32>, Vec<IdentityEvent>, Vec<u32>), BeliefError> {
+pub fn generate_final(spec: &IdentityWorkloadSpec) -> Result<FinalWorkload, BeliefError> {
     let mut last = Vec::new();
     let (initial, events) = generate_with(spec, |truth| {
         last.clear();
