@@ -358,6 +358,12 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "S")]
     pub samples: Option<usize>,
 
+    /// Identity methods: the known start of --method information-matrix
+    /// as log-odds C against each other identity (default: exact, −∞ on
+    /// every other identity; docs/identity.md "Calibration").
+    #[arg(long, value_name = "C")]
+    pub known_start_confidence: Option<f64>,
+
     /// Run a setting replay refuses as exponential (--method property-bits
     /// without --budget on many identities) anyway.
     #[arg(long)]

@@ -131,9 +131,14 @@ pub const DEFAULT_PARTICLES: usize = 1000;
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
     let method = args.property_method();
-    if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() || args.force {
+    if args.marginals.is_some()
+        || args.bits.is_some()
+        || args.samples.is_some()
+        || args.force
+        || args.known_start_confidence.is_some()
+    {
         bail!(
-            "--marginals, --bits, --samples and --force apply to the identity methods, not to --method {}",
+            "--marginals, --bits, --samples, --known-start-confidence and --force apply to the identity methods, not to --method {}",
             method.name()
         );
     }
@@ -373,6 +378,7 @@ mod tests {
             bits: None,
             samples: None,
             force: false,
+            known_start_confidence: None,
         }
     }
 

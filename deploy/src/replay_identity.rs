@@ -90,6 +90,14 @@ pub struct IdentityReplayOptions {
     #[arg(long, value_name = "S", value_parser = parse_positive)]
     pub samples: Option<usize>,
 
+    /// The known start of --method information-matrix as log-odds C
+    /// against each other identity (C > 0); default exact (+∞: −∞ on
+    /// every other identity, which keeps independent blocks). On long
+    /// streams where all tracks have mixed, C = 3 is better calibrated
+    /// (docs/identity.md, "Calibration").
+    #[arg(long, value_name = "C", value_parser = parse_confidence)]
+    pub known_start_confidence: Option<f64>,
+
     /// Run --method property-bits without --budget even where its exact
     /// bit beliefs are estimated to exceed [`MAX_EXACT_BIT_STATES`].
     #[arg(long)]
@@ -133,6 +141,7 @@ pub fn run_default(args: &crate::cli::ReplayArgs, out: impl Write) -> Result<()>
         seed: args.seed.unwrap_or(0),
         samples: args.samples,
         force: args.force,
+        known_start_confidence: args.known_start_confidence,
     };
     run(&options, out)
 }
@@ -247,6 +256,12 @@ pub fn check_options(args: &IdentityReplayOptions) -> Result<()> {
                 method.name()
             );
         }
+    }
+    if args.known_start_confidence.is_some() && method != IdentityMethod::InformationMatrix {
+        bail!(
+            "--known-start-confidence applies to --method information-matrix, not to --method {}",
+            method.name()
+        );
     }
     if args.force && method != IdentityMethod::PropertyBits {
         bail!(
@@ -402,9 +417,12 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
                 ..InformationOptions::default()
             };
             Box::new(match initial {
-                Some(start) => {
-                    InformationMatrix::from_assignment(start, KNOWN_START_CONFIDENCE, options)?
-                }
+                Some(start) => InformationMatrix::from_assignment(
+                    start,
+                    args.known_start_confidence
+                        .unwrap_or(KNOWN_START_CONFIDENCE),
+                    options,
+                )?,
                 None => InformationMatrix::uniform_with(n, options)?,
             })
         }
@@ -496,6 +514,14 @@ impl Engine {
     }
 }
 
+fn parse_confidence(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(c) if c > 0.0 && !c.is_nan() => Ok(c),
+        Ok(c) => Err(format!("{c}: must be positive (inf = exact)")),
+        Err(e) => Err(format!("not a number: {e}")),
+    }
+}
+
 fn parse_positive(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
         Ok(0) => Err("must be at least 1".into()),
@@ -519,6 +545,7 @@ mod tests {
             seed: 0,
             samples: None,
             force: false,
+            known_start_confidence: None,
         }
     }
 
@@ -769,6 +796,26 @@ mod tests {
             error.starts_with("mem.jsonl:1: header: --bits 2 cannot code 5"),
             "{error}"
         );
+    }
+
+    #[test]
+    fn a_finite_known_start_is_the_old_encoding() {
+        // With log-odds 3 the known start leaves weight on every identity:
+        // track 2, never mixed, is no longer certain.
+        let mut args = options(IdentityMethod::InformationMatrix);
+        args.known_start_confidence = Some(3.0);
+        let out = replay_text(&args, SMALL).unwrap();
+        let p = matrix(&out[1]["p_identity"]);
+        assert!(p[2][2] < 1.0 && p[2][2] > 0.5, "{p:?}");
+        let exact = replay_text(&options(IdentityMethod::InformationMatrix), SMALL).unwrap();
+        assert_eq!(matrix(&exact[1]["p_identity"])[2][2], 1.0);
+        let mut wrong = options(IdentityMethod::BeliefMatrix);
+        wrong.known_start_confidence = Some(3.0);
+        assert!(check_options(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("--known-start-confidence applies"));
+        assert!(parse_confidence("0").is_err() && parse_confidence("inf").is_ok());
     }
 
     #[test]
