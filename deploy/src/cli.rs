@@ -343,8 +343,9 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "FILE")]
     pub trace: PathBuf,
 
-    /// The filter to run (default: factored for a property trace, the
-    /// information matrix for an identity trace).
+    /// The filter to run (default: by the trace's header — factored for
+    /// a trace with colours, information-matrix for an identity trace with
+    /// none).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
 
@@ -381,7 +382,28 @@ pub struct ReplayArgs {
     /// Identity methods: counted steps of --marginals metropolis.
     #[arg(long, value_name = "S")]
     pub samples: Option<usize>,
+
+    /// Identity methods: the known start of --method information-matrix
+    /// as log-odds C against each other identity (default: exact, −∞ on
+    /// every other identity; docs/identity.md "Calibration").
+    #[arg(long, value_name = "C")]
+    pub known_start_confidence: Option<f64>,
+
+    /// Run a setting replay refuses as exponential (--method property-bits
+    /// without --budget on many identities) anyway.
+    #[arg(long)]
+    pub force: bool,
 }
+
+impl ReplayArgs {
+    /// The property method asked for, or the default for property traces.
+    pub fn property_method(&self) -> Method {
+        self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
+    }
+}
+
+/// The method `replay` runs on a property trace when none is named.
+pub const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
 
 /// The filters `replay` can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -419,13 +441,6 @@ pub enum Method {
     PropertyBits,
 }
 
-impl ReplayArgs {
-    /// The filter to run: `--method`, or the default for a property trace
-    /// (identity traces get theirs in [`crate::replay::method_for`]).
-    pub fn method(&self) -> Method {
-        self.method.unwrap_or(Method::Factored)
-    }
-}
 
 impl Method {
     /// The name on the command line and in the summary.

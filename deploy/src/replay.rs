@@ -20,7 +20,6 @@ use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::{BufRead, Write};
-use std::path::Path;
 use std::time::{Duration, Instant};
 use tracing::{debug, info, info_span};
 
@@ -93,27 +92,37 @@ impl Stopwatch {
     }
 }
 
-/// The filter to replay `trace` with: `chosen`, if it fits the trace, or
-/// the default for its kind — one that answers at any size: factored for a
-/// trace with colours (or no identities), the information matrix for an
-/// identity trace that says nothing of colours (its header has
-/// `identities` but neither `red` nor `initial_red`).
-pub fn method_for(trace: &Path, chosen: Option<Method>) -> Result<Method> {
-    let mut reader = TraceReader::open(trace)
-        .with_context(|| format!("cannot open trace {}", trace.display()))?;
+/// `idmesh replay`: the identity replay ([`crate::replay_identity`]) for
+/// an identity trace, this property replay otherwise; with no `--method`,
+/// the default for the trace — one that answers at any size: factored for
+/// a trace with colours, the information matrix for an identity trace that
+/// says nothing of colours (its header has `identities` and neither `red`
+/// nor `initial_red`). A property method on such an identity trace, or an
+/// identity method on a trace without identities, is an error that says so.
+pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
+    let mut reader = TraceReader::open(&args.trace)
+        .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
     let header = reader.read_header()?;
     let identities_only = header.identities.is_some() && header.red_count().is_none();
-    match chosen {
-        None if identities_only => Ok(Method::InformationMatrix),
-        None => Ok(Method::Factored),
-        Some(method) if identities_only && method.identity().is_none() => bail!(
-            "{}: an identity trace with no colours (its header has `identities` and no `red`): \
+    let source = reader.source().to_string();
+    match (header.identities, args.method) {
+        (Some(_), None) if identities_only => crate::replay_identity::run_default(args, out),
+        (Some(_), Some(method)) if method.identity().is_some() => {
+            crate::replay_identity::run_default(args, out)
+        }
+        (Some(n), Some(method)) if identities_only => bail!(
+            "{source}:1: header: an identity trace ({n} identities) with no colours, and \
              --method {} is a property method; use exact-perm, belief-matrix, \
-             information-matrix or property-bits",
-            trace.display(),
+             information-matrix (the default) or property-bits",
             method.name()
         ),
-        Some(method) => Ok(method),
+        (None, Some(method)) if method.identity().is_some() => bail!(
+            "{source}:1: header: a property trace (no `identities`), and --method {} is an \
+             identity method; use a property method (default {})",
+            method.name(),
+            crate::cli::DEFAULT_PROPERTY_METHOD.name()
+        ),
+        _ => run(args, out),
     }
 }
 
@@ -145,10 +154,15 @@ pub const DEFAULT_PARTICLES: usize = 1000;
 
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
-    let method = args.method();
-    if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() {
+    let method = args.property_method();
+    if args.marginals.is_some()
+        || args.bits.is_some()
+        || args.samples.is_some()
+        || args.force
+        || args.known_start_confidence.is_some()
+    {
         bail!(
-            "--marginals, --bits and --samples apply to the identity methods, not to --method {}",
+            "--marginals, --bits, --samples, --known-start-confidence and --force apply to the identity methods, not to --method {}",
             method.name()
         );
     }
@@ -195,7 +209,7 @@ pub fn replay<R: BufRead>(
     let span = info_span!(
         "replay",
         trace = reader.source(),
-        method = args.method().name()
+        method = args.property_method().name()
     );
     let _entered = span.enter();
 
@@ -257,7 +271,7 @@ pub fn replay<R: BufRead>(
 
     let summary = Summary {
         kind: "summary",
-        method: args.method().name(),
+        method: args.property_method().name(),
         events: engine.events,
         seconds: engine.time.total.as_secs_f64(),
         error: mean_error(&errors),
@@ -293,7 +307,7 @@ pub fn field_of(header: &Header) -> Field {
 /// dense filter's own limit it is refused with that estimate. The other
 /// methods check their own sizes when they are built.
 fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
-    if !args.method().is_radon() || args.budget.is_some() {
+    if !args.property_method().is_radon() || args.budget.is_some() {
         return Ok(());
     }
     let n = field.tracks;
@@ -306,7 +320,7 @@ fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
             "--method {} without --budget is exact, and on this trace it may hold as many \
              coefficients as there are red sets, {what} ≈ {sets:.2e} (limit {MAX_STATES}): \
              give --budget N (say 500), or use --method factored",
-            args.method().name()
+            args.property_method().name()
         );
     }
     Ok(())
@@ -328,7 +342,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         };
         Ok(Box::new(RadonBelief::with_options(field.clone(), options)?))
     };
-    match args.method() {
+    match args.property_method() {
         Method::Overcomplete => radon(args.budget.map(Sparsify::overcomplete)),
         // `check_options` made sure the budget is there.
         Method::Threshold => radon(args.budget.map(Sparsify::threshold)),
@@ -336,7 +350,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         // The paper's projection alone leaves the simplex on real traces and
         // then refuses observations as impossible; the repair keeps it going.
         Method::Order1 | Method::Order2 | Method::Order3 => {
-            let order = match args.method() {
+            let order = match args.property_method() {
                 Method::Order1 => 1,
                 Method::Order2 => 2,
                 _ => 3,
@@ -420,6 +434,8 @@ mod tests {
             marginals: None,
             bits: None,
             samples: None,
+            force: false,
+            known_start_confidence: None,
         }
     }
 
@@ -550,5 +566,58 @@ mod tests {
         assert_eq!(out[1]["method"], "particles");
         assert_eq!(out[1]["error"], 0.0);
         assert_eq!(out[1]["max_coefficients"], 200);
+    }
+
+    #[test]
+    fn dispatch_picks_the_replay_by_the_header_and_refuses_mismatches() {
+        let dir = std::env::temp_dir().join(format!("idmesh-dispatch-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let identity = dir.join("ids.jsonl");
+        std::fs::write(
+            &identity,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"identities":2,"initial_identity":[1,0]}"#,
+                "\n",
+                r#"{"kind":"truth","time":1,"identity":[1,0]}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let property = dir.join("red.jsonl");
+        std::fs::write(
+            &property,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"red":1}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let run = |trace: &std::path::Path, method: Option<Method>| {
+            let mut a = args(Method::Overcomplete, None);
+            a.trace = trace.to_path_buf();
+            a.method = method;
+            let mut out = Vec::new();
+            dispatch(&a, &mut out)
+                .map(|()| String::from_utf8(out).unwrap())
+                .map_err(|e| format!("{e:#}"))
+        };
+        let out = run(&identity, None).unwrap();
+        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
+        assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
+        let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
+        assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
+        let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
+        assert!(
+            error.ends_with("header: an identity trace (2 identities), and --method overcomplete is a property method; use exact-perm, belief-matrix, information-matrix (the default) or property-bits"),
+            "{error}"
+        );
+        let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();
+        assert!(
+            error.contains("a property trace (no `identities`), and --method information-matrix is an identity method"),
+            "{error}"
+        );
+        let out = run(&property, None).unwrap();
+        assert!(out.contains(r#""kind":"summary""#), "{out}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
