@@ -608,7 +608,7 @@ mod tests {
         assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
         let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
         assert!(
-            error.ends_with("header: an identity trace (2 identities), and --method overcomplete is a property method; use exact-perm, belief-matrix, information-matrix (the default) or property-bits"),
+            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use exact-perm, belief-matrix, information-matrix (the default) or property-bits"),
             "{error}"
         );
         let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();
@@ -617,7 +617,22 @@ mod tests {
             "{error}"
         );
         let out = run(&property, None).unwrap();
-        assert!(out.contains(r#""kind":"summary""#), "{out}");
+        assert!(out.contains(r#""method":"factored""#), "{out}");
+        // Colours and identities (the demo's crowd): colours by default,
+        // identities on request.
+        let both = dir.join("both.jsonl");
+        std::fs::write(
+            &both,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"red":1,"identities":2}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let out = run(&both, None).unwrap();
+        assert!(out.contains(r#""method":"factored""#), "{out}");
+        let out = run(&both, Some(Method::InformationMatrix)).unwrap();
+        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }
