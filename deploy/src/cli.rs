@@ -441,7 +441,6 @@ pub enum Method {
     PropertyBits,
 }
 
-
 impl Method {
     /// The name on the command line and in the summary.
     pub fn name(self) -> &'static str {

@@ -100,6 +100,10 @@ impl Stopwatch {
 /// nor `initial_red`). A property method on such an identity trace, or an
 /// identity method on a trace without identities, is an error that says so.
 pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
+    // A property method's flags are checked before anything is read.
+    if args.method.is_some_and(|m| m.identity().is_none()) {
+        check_options(args)?;
+    }
     let mut reader = TraceReader::open(&args.trace)
         .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
     let header = reader.read_header()?;
@@ -470,6 +474,23 @@ mod tests {
         r#"{"kind":"truth","time":3,"red":[1,2]}"#,
         "\n",
     );
+
+    #[test]
+    fn an_exact_radon_belief_too_big_for_the_machine_is_refused_with_an_estimate() {
+        let header =
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":60,"red":30}"#;
+        let error = replay_text(&args(Method::Overcomplete, None), header).unwrap_err();
+        assert!(
+            error.contains("--method overcomplete without --budget is exact")
+                && error.contains("C(60, 30) ≈ 1.18e17")
+                && error.contains("use --method factored"),
+            "{error}"
+        );
+        // With a budget, or a field the dense limit allows, it runs.
+        assert!(replay_text(&args(Method::Overcomplete, Some(50)), header).is_ok());
+        let small = r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":20,"red":10}"#;
+        assert!(replay_text(&args(Method::Overcomplete, None), small).is_ok());
+    }
 
     #[test]
     fn table_one_on_the_radon_engine() {
