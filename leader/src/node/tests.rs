@@ -135,7 +135,7 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
 fn a_late_cut_asks_for_the_batches_again_once_at_a_time() {
     let mut node = started("a", &["a"]);
     node.step(
-        0 * MS,
+        Duration::ZERO,
         Input::Partial {
             id: 1,
             ask: Ask::Cut(7),
