@@ -11,10 +11,13 @@
 //! ```
 //!
 //! Methods: `exact`, `order1`, `threshold:N`, `overcomplete:N`,
-//! `factored[:max=M,rule=original|recent|loss|lossR,budget=N]` (`lossR` =
-//! LeastLoss with R rounds). For each trace and method it prints one line:
-//! the mean tracking error over the truth lines (the spec's score: the k
-//! tracks with the largest marginals are predicted red), the filter's own
+//! `particles:P`, `factored[:max=M,rule=original|recent|loss|lossR,
+//! budget=N,coupling=coupled|local]` (`lossR` = LeastLoss with R rounds).
+//! For each trace and method it prints one line: the mean tracking error
+//! over the truth lines (the spec's score: the k tracks with the largest
+//! marginals are predicted red, ties shared), the Brier score, with
+//! `--against-exact` the mean |Δp| of the marginals against the exact
+//! filter's at every truth line (n ≤ 20), the filter's own
 //! seconds (events and marginals; reading excluded), the largest number of
 //! stored numbers, how many events the filter rejected (and skipped), and
 //! the error the filter expects of itself from its marginals (for the exact
@@ -25,8 +28,9 @@
 
 use idmesh_belief::baseline::{LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
-    predict_red, tracking_error, DenseFilter, Event, FactoredBelief, FactoredOptions, Field, Mix,
-    Observe, PropertyFilter, RadonBelief, RadonOptions, Sparsify, SplitRule,
+    brier_score, expected_tracking_error, predict_red, Coupling, DenseFilter, Event,
+    FactoredBelief, FactoredOptions, Field, Mix, Observe, ParticleFilter, PropertyFilter,
+    RadonBelief, RadonOptions, Sparsify, SplitRule,
 };
 use std::time::Instant;
 
@@ -134,6 +138,13 @@ fn factored_options(spec: &str) -> Result<FactoredOptions, String> {
                     v => return Err(format!("unknown rule {v}")),
                 }
             }
+            "coupling" => {
+                options.coupling = match value {
+                    "coupled" => Coupling::Coupled,
+                    "local" => Coupling::Local,
+                    v => return Err(format!("unknown coupling {v}")),
+                }
+            }
             k => return Err(format!("unknown option {k}")),
         }
     }
@@ -162,6 +173,10 @@ fn build(method: &str, field: &Field) -> Result<Box<dyn PropertyFilter>, String>
             };
             Box::new(RadonBelief::with_options(field, options).map_err(e)?)
         }
+        "particles" => {
+            let p = arg.parse().map_err(|e| format!("{method}: {e}"))?;
+            Box::new(ParticleFilter::new(field, p, 1).map_err(e)?)
+        }
         "factored" => {
             Box::new(FactoredBelief::with_options(field, factored_options(arg)?).map_err(e)?)
         }
@@ -171,6 +186,9 @@ fn build(method: &str, field: &Field) -> Result<Box<dyn PropertyFilter>, String>
 
 struct Score {
     error: f64,
+    brier: f64,
+    /// Mean |Δp| against the exact filter (NaN without `--against-exact`).
+    delta: f64,
     /// The error the filter expects of itself: Σ_{predicted} (1 − p) +
     /// Σ_{others} p over n. For the exact filter this is the Bayes risk of
     /// the top-k rule, which no filter beats in expectation when the trace
@@ -181,10 +199,16 @@ struct Score {
     rejected: usize,
 }
 
-fn run(trace: &Trace, method: &str) -> Result<Score, String> {
+fn run(trace: &Trace, method: &str, against_exact: bool) -> Result<Score, String> {
     let mut filter = build(method, &trace.field)?;
+    let mut exact = if against_exact {
+        Some(DenseFilter::new(trace.field.clone()).map_err(|e| e.to_string())?)
+    } else {
+        None
+    };
     let k = trace.field.red.known();
     let (mut errors, mut truths, mut rejected) = (0.0, 0usize, 0usize);
+    let (mut brier, mut delta) = (0.0, 0.0);
     let mut expected = 0.0;
     let mut max_numbers = filter.coefficients();
     let mut seconds = 0.0;
@@ -194,6 +218,9 @@ fn run(trace: &Trace, method: &str) -> Result<Score, String> {
                 let start = Instant::now();
                 let result = filter.apply(event);
                 seconds += start.elapsed().as_secs_f64();
+                if let Some(exact) = &mut exact {
+                    let _ = exact.apply(event);
+                }
                 if result.is_err() {
                     rejected += 1;
                 }
@@ -204,7 +231,17 @@ fn run(trace: &Trace, method: &str) -> Result<Score, String> {
                 let marginals = filter.marginals().map_err(|e| e.to_string())?;
                 seconds += start.elapsed().as_secs_f64();
                 let predicted = predict_red(&marginals, k);
-                errors += tracking_error(trace.field.tracks, &predicted, red);
+                errors += expected_tracking_error(&marginals, k, red);
+                brier += brier_score(&marginals, red);
+                if let Some(exact) = &exact {
+                    let want = exact.marginals().map_err(|e| e.to_string())?;
+                    delta += want
+                        .iter()
+                        .zip(&marginals)
+                        .map(|(a, b)| (a - b).abs())
+                        .sum::<f64>()
+                        / want.len() as f64;
+                }
                 let mut red_label = vec![false; marginals.len()];
                 for &t in &predicted {
                     red_label[t as usize] = true;
@@ -221,6 +258,12 @@ fn run(trace: &Trace, method: &str) -> Result<Score, String> {
     }
     Ok(Score {
         error: errors / truths.max(1) as f64,
+        brier: brier / truths.max(1) as f64,
+        delta: if exact.is_some() {
+            delta / truths.max(1) as f64
+        } else {
+            f64::NAN
+        },
         expected: expected / truths.max(1) as f64,
         seconds,
         max_numbers,
@@ -231,9 +274,12 @@ fn run(trace: &Trace, method: &str) -> Result<Score, String> {
 fn main() {
     let mut methods = Vec::new();
     let mut paths = Vec::new();
+    let mut against_exact = false;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
-        if arg == "--method" {
+        if arg == "--against-exact" {
+            against_exact = true;
+        } else if arg == "--method" {
             methods.push(args.next().expect("--method needs a value"));
         } else {
             paths.push(arg);
@@ -242,7 +288,7 @@ fn main() {
     if methods.is_empty() {
         methods = vec!["factored".into()];
     }
-    println!("trace\tmethod\terror\tseconds\tmax_numbers\trejected\texpected");
+    println!("trace\tmethod\terror\tbrier\tdelta_p\tseconds\tmax_numbers\trejected\texpected");
     for path in &paths {
         let trace = match read_trace(path) {
             Ok(t) => t,
@@ -252,10 +298,18 @@ fn main() {
             }
         };
         for method in &methods {
-            match run(&trace, method) {
+            match run(&trace, method, against_exact) {
                 Ok(s) => println!(
-                    "{}\t{}\t{:.4}\t{:.4}\t{}\t{}\t{:.4}",
-                    trace.name, method, s.error, s.seconds, s.max_numbers, s.rejected, s.expected
+                    "{}\t{}\t{:.4}\t{:.4}\t{:.4}\t{:.4}\t{}\t{}\t{:.4}",
+                    trace.name,
+                    method,
+                    s.error,
+                    s.brier,
+                    s.delta,
+                    s.seconds,
+                    s.max_numbers,
+                    s.rejected,
+                    s.expected
                 ),
                 Err(e) => println!("{}\t{}\tFAILED: {}", trace.name, method, e),
             }

@@ -44,6 +44,13 @@ pub enum BeliefError {
         needed: f64,
         limit: usize,
     },
+    #[error("{method} answers blocks of at most {limit} tracks; the largest block of tracks mixed with each other here has {block} of the {tracks} tracks")]
+    TooLargeBlock {
+        method: &'static str,
+        block: usize,
+        tracks: usize,
+        limit: usize,
+    },
     #[error("{what} is not supported by {method}")]
     Unsupported {
         method: &'static str,

@@ -97,6 +97,22 @@ impl Field {
         }
     }
 
+    /// The field a trace header or a stream's `Begin` describes: k known
+    /// (`red`) or unknown with the uniform prior over counts
+    /// ([`RedCount::unknown_uniform`]), and the red tracks at time 0 when
+    /// given. The one place `idmesh replay` and the leaders turn a count
+    /// into a field, so both start from the same belief.
+    pub fn with_count(tracks: usize, red: Option<usize>, initial_red: Option<Vec<u32>>) -> Self {
+        Field {
+            tracks,
+            red: match red {
+                Some(k) => RedCount::Known(k),
+                None => RedCount::unknown_uniform(tracks),
+            },
+            initial_red,
+        }
+    }
+
     /// Checks the field is consistent; every filter calls this first.
     pub fn validate(&self) -> Result<(), BeliefError> {
         if self.tracks == 0 {

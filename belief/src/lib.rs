@@ -35,6 +35,7 @@ pub mod filter;
 pub mod identity;
 pub mod particle;
 pub mod radon;
+pub mod scoring;
 pub mod track_set;
 pub mod weights;
 pub mod workload;
@@ -42,7 +43,7 @@ pub mod workload;
 pub use baseline::{DenseFilter, LowOrderFilter};
 pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
-pub use factored::{FactoredBelief, FactoredOptions, SplitRule};
+pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
@@ -50,5 +51,6 @@ pub use identity::{
 };
 pub use particle::ParticleFilter;
 pub use radon::{RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
+pub use scoring::{brier_score, expected_tracking_error, log_loss, Reliability};
 pub use track_set::TrackSet;
 pub use weights::Weights;

@@ -7,11 +7,13 @@
 //! - the first split keeps the marginals of every track it touches (the
 //!   moment matching preserves the two marginal tables);
 //! - with splits it stays a valid belief: marginals in [0, 1] summing to k;
-//! - a rejected observation leaves the belief exactly as it was.
+//! - a rejected observation leaves the belief exactly as it was;
+//! - the last two under either coupling of the splits (`Coupling`).
 
 use idmesh_belief::baseline::DenseFilter;
 use idmesh_belief::{
-    BeliefError, Event, FactoredBelief, FactoredOptions, Observe, PropertyFilter, SplitRule,
+    BeliefError, Coupling, Event, FactoredBelief, FactoredOptions, Observe, PropertyFilter,
+    SplitRule,
 };
 use proptest::prelude::*;
 
@@ -24,6 +26,10 @@ fn rule() -> impl Strategy<Value = SplitRule> {
         Just(SplitRule::Recent),
         (0usize..3).prop_map(|rounds| SplitRule::LeastLoss { rounds }),
     ]
+}
+
+fn coupling() -> impl Strategy<Value = Coupling> {
+    prop_oneof![Just(Coupling::Coupled), Just(Coupling::Local)]
 }
 
 /// Everything observable about a belief, to check a rejected update.
@@ -101,9 +107,9 @@ proptest! {
     }
 
     #[test]
-    fn factored_with_splits_stays_a_valid_belief((n, k, start, seed, events) in case(16, 60), max in 1usize..=5, rule in rule()) {
+    fn factored_with_splits_stays_a_valid_belief((n, k, start, seed, events) in case(16, 60), max in 1usize..=5, rule in rule(), coupling in coupling()) {
         let field = field(n, k, &start, seed);
-        let options = FactoredOptions { max_component: max, split: rule, ..FactoredOptions::default() };
+        let options = FactoredOptions { max_component: max, split: rule, coupling, ..FactoredOptions::default() };
         let mut factored = FactoredBelief::with_options(field.clone(), options).unwrap();
         for event in &events {
             let before = snapshot(&factored);
@@ -125,10 +131,10 @@ proptest! {
     }
 
     #[test]
-    fn factored_rejected_observation_changes_nothing((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>()) {
+    fn factored_rejected_observation_changes_nothing((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>(), coupling in coupling()) {
         let track = track % n as u32;
         let field = field(n, k, &start, seed);
-        let options = FactoredOptions { max_component: max, ..FactoredOptions::default() };
+        let options = FactoredOptions { max_component: max, coupling, ..FactoredOptions::default() };
         let mut factored = FactoredBelief::with_options(field, options).unwrap();
         for event in &events {
             let _ = factored.apply(event);

@@ -121,7 +121,11 @@ async fn answer(
             if error.starts_with("degraded") {
                 memory.note_degraded();
             }
-            tracing::warn!(%error, "query not answered");
+            // The asker gets the reason in the error reply; the log says it
+            // only when asked (`RUST_LOG=info`): a stream that has not
+            // started yet, or a leader being restarted, is not the
+            // coordinator's fault.
+            tracing::info!(%error, "query not answered");
             query
                 .reply_err(json(&QueryError { error }))
                 .encoding(Encoding::APPLICATION_JSON)

@@ -4,13 +4,13 @@
 //! rows of the information matrix of their tracks and never normalize; the
 //! coordinator collects the rows at a consistent cut, puts the matrix back
 //! together and turns it into marginals by the method the query names
-//! (`?marginals=exact|metropolis|sinkhorn|bethe`; exact by default up to
-//! [`EXACT_BY_DEFAULT`] tracks, the Bethe estimate beyond), then the most
-//! likely one-to-one assignment under them.
+//! (`?marginals=auto|exact|metropolis|sinkhorn|bethe`; exact by default up
+//! to [`EXACT_BY_DEFAULT`] tracks, `auto` beyond: every independent block
+//! of mixed tracks exactly when small, half-Bethe when large), then the
+//! most likely one-to-one assignment under them (block by block).
 
 use crate::gather::{collect, At, Collected, GatherError, Memory, Share};
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
-use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_belief::identity::{
     most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
 };
@@ -27,7 +27,7 @@ pub const EXACT_BY_DEFAULT: usize = 16;
 /// How a query wants its marginals computed.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Method {
-    /// Exact up to [`EXACT_BY_DEFAULT`] tracks, the Bethe estimate beyond.
+    /// Exact up to [`EXACT_BY_DEFAULT`] tracks, `auto` beyond.
     BySize,
     Named(MarginalMethod),
 }
@@ -60,20 +60,18 @@ impl Method {
         MarginalMethod::named(name, samples, seed)
             .map(Method::Named)
             .ok_or_else(|| {
-                format!("marginals={name}: expected exact, metropolis, sinkhorn or bethe")
+                format!("marginals={name}: expected auto, exact, metropolis, sinkhorn or bethe")
             })
     }
 
     fn for_tracks(self, n: usize) -> Result<MarginalMethod, GatherError> {
         match self {
             Method::BySize if n <= EXACT_BY_DEFAULT => Ok(MarginalMethod::Exact),
-            Method::BySize => Ok(MarginalMethod::half_bethe()),
-            Method::Named(MarginalMethod::Exact) if n > MAX_PERMANENT_TRACKS => {
-                Err(GatherError::Failed(format!(
-                    "exact identity marginals take at most {MAX_PERMANENT_TRACKS} tracks, \
-                     this stream has {n}; ask for marginals=bethe, sinkhorn or metropolis"
-                )))
-            }
+            // Exact on each small block of mixed tracks, half-Bethe on
+            // large ones: answers at any size (belief::identity::marginals).
+            Method::BySize => Ok(MarginalMethod::Auto),
+            // Exact takes any n whose blocks are small enough; the engine
+            // names the block that is not.
             Method::Named(method) => Ok(method),
         }
     }
@@ -138,10 +136,7 @@ mod tests {
     fn a_query_names_its_method_or_gets_one_by_size() {
         let by_size = Method::from_parameters(None, None, None).unwrap();
         assert_eq!(by_size.for_tracks(12).unwrap(), MarginalMethod::Exact);
-        assert_eq!(
-            by_size.for_tracks(40).unwrap(),
-            MarginalMethod::half_bethe()
-        );
+        assert_eq!(by_size.for_tracks(40).unwrap(), MarginalMethod::Auto);
         let sampled = Method::from_parameters(Some("metropolis"), Some("500"), Some("7")).unwrap();
         assert_eq!(
             sampled.for_tracks(40).unwrap(),
@@ -151,8 +146,10 @@ mod tests {
                 seed: 7
             }
         );
+        // Exact is passed on at any size: the engine answers when every
+        // block of mixed tracks is small and names the block when not.
         let exact = Method::from_parameters(Some("exact"), None, None).unwrap();
-        assert!(exact.for_tracks(40).is_err());
+        assert_eq!(exact.for_tracks(1000).unwrap(), MarginalMethod::Exact);
         assert!(Method::from_parameters(Some("guess"), None, None).is_err());
         assert!(Method::from_parameters(Some("metropolis"), Some("0"), None).is_err());
         assert!(Method::from_parameters(Some("metropolis"), None, Some("-1")).is_err());

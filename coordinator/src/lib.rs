@@ -9,8 +9,10 @@
 //! in time makes the query fail, naming it.
 //!
 //! A map of the crate:
-//! - [`gather`] — the leaders' shares at one consistent cut; property
-//!   marginals from their partial sums.
+//! - [`gathering`] — pure: the replies to one query, whether they make a
+//!   complete answer at one consistent cut, and the marginals they add
+//!   up to.
+//! - [`gather`] — the Zenoh gets that collect those replies.
 //! - [`identity`] — identity marginals from the leaders' rows of the
 //!   information matrix, computed only when asked.
 //! - [`request`] — a query's key and parameters, checked before any work.
@@ -18,6 +20,7 @@
 
 pub mod actor;
 pub mod gather;
+pub mod gathering;
 pub mod identity;
 pub mod request;
 

@@ -1,4 +1,4 @@
-//! `idmesh acoustic`: the acoustic front end of the `sensor` crate behind a
+//! `idmesh acoustic`: the acoustic front end (the `idmesh-acoustic` crate) behind a
 //! command line — the field of the paper's Section VI, the separation and
 //! tracking pipeline, and the recovered paths written as a trace (`move`
 //! lines, and `mix` lines where two recovered paths come close), with a
@@ -6,9 +6,9 @@
 
 use crate::cli::AcousticArgs;
 use anyhow::{Context, Result};
-use idmesh_sensor::acoustic::field::PathSpec;
-use idmesh_sensor::acoustic::trace::write_trace;
-use idmesh_sensor::acoustic::{run as track, AcousticConfig};
+use idmesh_acoustic::field::PathSpec;
+use idmesh_acoustic::trace::write_trace;
+use idmesh_acoustic::{run as track, AcousticConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::fs::File;
 use std::io::BufWriter;

@@ -41,7 +41,8 @@ pub enum Command {
     /// simulated crowd, with live answers; the coordinator listens on
     /// tcp/127.0.0.1:7447.
     Demo(DemoArgs),
-    /// Ask a running deployment: marginals, one track, or leader counters.
+    /// Ask a running deployment: marginals, one track, identities, or the
+    /// processes' counters.
     Query(QueryArgs),
     /// Serve a running deployment over HTTP: REST and Server-Sent Events
     /// over the query API, the live map at /, Prometheus metrics at
@@ -54,14 +55,18 @@ pub enum Command {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct BenchArgs {
+    /// n, the targets of the simulated crowd.
     #[arg(long, default_value_t = 40)]
     pub targets: usize,
+    /// k, how many of them are red.
     #[arg(long, default_value_t = 10)]
     pub red: usize,
     /// Seconds of simulated crowd (the stream's length).
     #[arg(long, default_value_t = 3000.0)]
     pub duration: f64,
+    /// The crowd simulation's seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Leader counts to stream through, comma-separated.
@@ -85,6 +90,7 @@ pub struct BenchArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct RoleArgs {
     /// The topology file.
     #[arg(long)]
@@ -95,7 +101,10 @@ pub struct RoleArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct UpArgs {
+    /// The topology file (see deploy/examples/ and
+    /// deploy/src/runtime/topology.rs).
     #[arg(long)]
     pub config: PathBuf,
     /// Start only the processes of this host (default: all).
@@ -104,14 +113,18 @@ pub struct UpArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct DemoArgs {
     /// Stop streaming after this many events (queries go on until Ctrl-C).
     #[arg(long)]
     pub events: Option<u64>,
+    /// n, the targets of the simulated crowd.
     #[arg(long, default_value_t = 40)]
     pub targets: usize,
+    /// k, how many of them are red.
     #[arg(long, default_value_t = 10)]
     pub red: usize,
+    /// The crowd simulation's seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Events per second the sensor streams.
@@ -126,8 +139,9 @@ pub struct DemoArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct QueryArgs {
-    /// marginals | track | identity | positions | stats
+    /// What to ask: marginals | track | identity | positions | stats.
     pub what: String,
     /// The track, for `track` (needed) and `identity` (optional: one track's
     /// identities instead of every track's).
@@ -139,6 +153,7 @@ pub struct QueryArgs {
     /// The coordinator's endpoint.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub connect: String,
+    /// The deployment's key prefix (the topology's `prefix`).
     #[arg(long, default_value = idmesh_protocol::wire::keys::DEFAULT_PREFIX)]
     pub prefix: String,
     /// Print the JSON reply as it came.
@@ -156,6 +171,7 @@ pub struct QueryArgs {
     /// is an error). For marginals, track and identity.
     #[arg(long, value_delimiter = ',')]
     pub at_events: Vec<u64>,
+    /// Milliseconds between the answers of --repeat.
     #[arg(long, default_value_t = 1000)]
     pub interval_ms: u64,
     /// A secured deployment: the CA certificate of its `[security] certs`.
@@ -256,14 +272,17 @@ impl WebArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct EvalArgs {
     /// How big a grid: `quick` (a tiny grid in seconds, for tests) or
     /// `full` (the tables and figures of docs/results.md).
     #[arg(long, value_enum, default_value_t = Preset::Quick)]
     pub preset: Preset,
-    /// Where results.md and the SVG plots go (created if missing).
-    #[arg(long, value_name = "DIR", default_value = "docs")]
-    pub out_dir: PathBuf,
+    /// Where results.md and the SVG plots go (created if missing; default:
+    /// a new folder target/idmesh-eval/<preset>-<N>, so nothing is
+    /// overwritten — `--out-dir docs` regenerates the committed results).
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
     /// Worker threads for the grid.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
     pub jobs: u16,
@@ -287,6 +306,7 @@ pub enum Preset {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
     /// The motion model.
     #[arg(long, value_enum, default_value_t = Motion::Crowd)]
@@ -329,6 +349,7 @@ pub struct SimulateArgs {
     /// Accuracy of an identity read (with --identities).
     #[arg(long, default_value_t = 0.9)]
     pub identity_accuracy: f64,
+    /// The simulation's seed: the same seed, the same trace.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Where to write the trace.
@@ -337,6 +358,7 @@ pub struct SimulateArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct AcousticArgs {
     /// How many acoustic sensors are deployed at random in the field.
     #[arg(long, default_value_t = 1000)]
@@ -347,6 +369,7 @@ pub struct AcousticArgs {
     /// Zigzag paths instead of random straight legs.
     #[arg(long)]
     pub zigzag: bool,
+    /// The simulation's seed: the same seed, the same trace.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Where to write the trace.
@@ -366,14 +389,17 @@ pub enum Motion {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
 pub struct ReplayArgs {
     /// The trace to replay (JSON Lines, shared/spec/trace.md).
     #[arg(long, value_name = "FILE")]
     pub trace: PathBuf,
 
-    /// The filter to run.
-    #[arg(long, value_enum, default_value_t = Method::Overcomplete)]
-    pub method: Method,
+    /// The filter to run (default: by the trace's header — factored for
+    /// a trace with colours, information-matrix for an identity trace with
+    /// none).
+    #[arg(long, value_enum)]
+    pub method: Option<Method>,
 
     /// The most coefficients the Radon belief may hold after an event
     /// (overcomplete: optional, none = exact; threshold: required).
@@ -408,7 +434,28 @@ pub struct ReplayArgs {
     /// Identity methods: counted steps of --marginals metropolis.
     #[arg(long, value_name = "S")]
     pub samples: Option<usize>,
+
+    /// Identity methods: the known start of --method information-matrix
+    /// as log-odds C against each other identity (default: exact, −∞ on
+    /// every other identity; docs/identity.md "Calibration").
+    #[arg(long, value_name = "C")]
+    pub known_start_confidence: Option<f64>,
+
+    /// Run a setting replay refuses as exponential (--method property-bits
+    /// without --budget on many identities) anyway.
+    #[arg(long)]
+    pub force: bool,
 }
+
+impl ReplayArgs {
+    /// The property method asked for, or the default for property traces.
+    pub fn property_method(&self) -> Method {
+        self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
+    }
+}
+
+/// The method `replay` runs on a property trace when none is named.
+pub const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
 
 /// The filters `replay` can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -484,18 +531,21 @@ impl Method {
 }
 
 fn parse_particles(text: &str) -> Result<usize, String> {
-    match text.parse::<usize>() {
-        Ok(0) => Err("there must be at least 1 particle".into()),
-        Ok(n) => Ok(n),
-        Err(e) => Err(format!("not a whole number of particles: {e}")),
-    }
+    parse_count(text, "particles")
 }
 
 fn parse_budget(text: &str) -> Result<usize, String> {
+    parse_count(text, "coefficients")
+}
+
+/// A whole number of `what`, at least 1.
+fn parse_count(text: &str, what: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
-        Ok(0) => Err("the budget must be at least 1 coefficient".into()),
+        Ok(0) => Err(format!("there must be at least 1 of the {what}")),
         Ok(n) => Ok(n),
-        Err(e) => Err(format!("not a whole number of coefficients: {e}")),
+        Err(_) => Err(format!(
+            "expected a whole number of {what} (1 or more), got {text:?}"
+        )),
     }
 }
 
@@ -507,6 +557,46 @@ mod tests {
     #[test]
     fn the_command_line_is_well_formed() {
         Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn every_option_of_every_subcommand_says_what_it_is() {
+        let mut undescribed = Vec::new();
+        for sub in Cli::command().get_subcommands() {
+            if sub.get_about().is_none() {
+                undescribed.push(sub.get_name().to_string());
+            }
+            for arg in sub.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id != "help" && id != "version" && arg.get_help().is_none() {
+                    undescribed.push(format!("{} {id}", sub.get_name()));
+                }
+            }
+        }
+        assert!(undescribed.is_empty(), "no --help text: {undescribed:?}");
+    }
+
+    #[test]
+    fn a_negative_number_is_refused_by_name_not_taken_for_a_flag() {
+        for (args, wanted) in [
+            (
+                &["idmesh", "replay", "--trace", "t", "--budget", "-3"][..],
+                "expected a whole number of coefficients (1 or more), got \"-3\"",
+            ),
+            (
+                &["idmesh", "replay", "--trace", "t", "--particles", "-1"],
+                "expected a whole number of particles (1 or more), got \"-1\"",
+            ),
+            (&["idmesh", "eval", "--jobs", "-1"], "-1"),
+            (&["idmesh", "demo", "--targets", "-5"], "-5"),
+            (&["idmesh", "query", "track", "-2"], "-2"),
+        ] {
+            let error = Cli::try_parse_from(args).unwrap_err().to_string();
+            assert!(
+                !error.contains("unexpected argument") && error.contains(wanted),
+                "{args:?}: {error}"
+            );
+        }
     }
 
     #[test]
@@ -534,7 +624,7 @@ mod tests {
         let Command::Replay(args) = cli.command else {
             panic!("parsed as replay")
         };
-        assert_eq!(args.method, Method::Threshold);
+        assert_eq!(args.method, Some(Method::Threshold));
         assert_eq!(args.budget, Some(64));
         assert!(args.distributed_rule);
         assert!(
@@ -560,7 +650,7 @@ mod tests {
         let Command::Replay(args) = cli.command else {
             panic!("parsed as replay")
         };
-        assert_eq!(args.method, Method::Particles);
+        assert_eq!(args.method, Some(Method::Particles));
         assert_eq!((args.particles, args.seed), (Some(5000), Some(9)));
         assert!(
             Cli::try_parse_from(["idmesh", "replay", "--trace", "t", "--particles", "0"]).is_err()
@@ -572,7 +662,7 @@ mod tests {
             panic!("parsed as eval")
         };
         assert_eq!(args.preset, Preset::Full);
-        assert_eq!(args.out_dir, PathBuf::from("x"));
+        assert_eq!(args.out_dir, Some(PathBuf::from("x")));
         assert_eq!((args.jobs, args.seeds), (2, None));
         assert!(Cli::try_parse_from(["idmesh", "eval", "--jobs", "0"]).is_err());
     }

@@ -35,21 +35,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Replay(args) => {
             let stdout = BufWriter::new(std::io::stdout().lock());
-            match args.method.identity() {
-                Some(method) => {
-                    let options = replay_identity::IdentityReplayOptions {
-                        trace: args.trace,
-                        method,
-                        marginals: args.marginals,
-                        bits: args.bits,
-                        budget: args.budget,
-                        seed: args.seed.unwrap_or(0),
-                        samples: args.samples,
-                    };
-                    replay_identity::run(&options, stdout)
-                }
-                None => replay::run(&args, stdout),
-            }
+            replay::dispatch(&args, stdout)
         }
         Command::Simulate(args) => simulate::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),

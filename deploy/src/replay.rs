@@ -11,12 +11,13 @@
 
 use crate::cli::{Method, ReplayArgs};
 use anyhow::{anyhow, bail, Context, Result};
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
+use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
 use idmesh_belief::{
-    predict_red, tracking_error, BeliefError, Event, FactoredBelief, Field, ParticleFilter,
-    PropertyFilter, RadonBelief, RadonOptions, RedCount, Sparsify,
+    brier_score, expected_tracking_error, log_loss, predict_red, BeliefError, Event,
+    FactoredBelief, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions, Sparsify,
 };
 use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::{BufRead, Write};
 use std::time::{Duration, Instant};
@@ -38,7 +39,12 @@ struct Summary {
     method: &'static str,
     events: u64,
     seconds: f64,
+    /// Mean tracking error over the truth lines, ties shared (trace spec,
+    /// Scoring).
     error: Option<f64>,
+    /// Mean Brier score and log-loss of the marginals over the truth lines.
+    brier: Option<f64>,
+    log_loss: Option<f64>,
     max_coefficients: usize,
     /// P(red) of every track after the last event (what a live deployment
     /// answers at the end of the stream).
@@ -86,12 +92,65 @@ impl Stopwatch {
     }
 }
 
-/// Replays the trace named by `args` and writes the answers to `out`.
+/// `idmesh replay`: the identity replay ([`crate::replay_identity`]) for
+/// an identity trace, this property replay otherwise; with no `--method`,
+/// the default for the trace — one that answers at any size: factored for
+/// a trace with colours, the information matrix for an identity trace that
+/// says nothing of colours (its header has `identities` and neither `red`
+/// nor `initial_red`). A property method on such an identity trace, or an
+/// identity method on a trace without identities, is an error that says so.
+pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
+    // A property method's flags are checked before anything is read.
+    if args.method.is_some_and(|m| m.identity().is_none()) {
+        check_options(args)?;
+    }
+    let mut reader = TraceReader::open(&args.trace)
+        .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
+    let header = reader.read_header()?;
+    let identities_only = header.identities.is_some() && header.red_count().is_none();
+    let source = reader.source().to_string();
+    match (header.identities, args.method) {
+        (Some(_), None) if identities_only => crate::replay_identity::run_default(args, out),
+        (Some(_), Some(method)) if method.identity().is_some() => {
+            crate::replay_identity::run_default(args, out)
+        }
+        (Some(n), Some(method)) if identities_only => bail!(
+            "{source}:1: header: an identity trace ({n} identities) with no colours, and \
+             --method {} is a property method; use exact-perm, belief-matrix, \
+             information-matrix (the default) or property-bits",
+            method.name()
+        ),
+        (None, Some(method)) if method.identity().is_some() => bail!(
+            "{source}:1: header: a property trace (no `identities`), and --method {} is an \
+             identity method; use a property method (default {})",
+            method.name(),
+            crate::cli::DEFAULT_PROPERTY_METHOD.name()
+        ),
+        _ => run(args, out),
+    }
+}
+
+/// Replays the trace named by `args` and writes the answers to `out`. On a
+/// terminal, a bar on stderr shows how much of the trace has been read.
 pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
     check_options(args)?;
-    let reader = TraceReader::open(&args.trace)
+    let file = std::fs::File::open(&args.trace)
         .with_context(|| format!("cannot open trace {}", args.trace.display()))?;
-    replay(args, reader, out)
+    let bytes = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let bar = ProgressBar::with_draw_target(Some(bytes), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(
+            "replay {bar:30} {percent:>3}% of the trace · {elapsed} · ~{eta} left",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let reader = TraceReader::new(
+        std::io::BufReader::new(bar.wrap_read(file)),
+        args.trace.display().to_string(),
+    );
+    let result = replay(args, reader, out);
+    bar.finish_and_clear();
+    result
 }
 
 /// The particle count of `--method particles` when `--particles` is not given.
@@ -99,10 +158,15 @@ pub const DEFAULT_PARTICLES: usize = 1000;
 
 /// The flags that make no sense together, refused before anything is read.
 fn check_options(args: &ReplayArgs) -> Result<()> {
-    let method = args.method;
-    if args.marginals.is_some() || args.bits.is_some() || args.samples.is_some() {
+    let method = args.property_method();
+    if args.marginals.is_some()
+        || args.bits.is_some()
+        || args.samples.is_some()
+        || args.force
+        || args.known_start_confidence.is_some()
+    {
         bail!(
-            "--marginals, --bits and --samples apply to the identity methods, not to --method {}",
+            "--marginals, --bits, --samples, --known-start-confidence and --force apply to the identity methods, not to --method {}",
             method.name()
         );
     }
@@ -149,7 +213,7 @@ pub fn replay<R: BufRead>(
     let span = info_span!(
         "replay",
         trace = reader.source(),
-        method = args.method.name()
+        method = args.property_method().name()
     );
     let _entered = span.enter();
 
@@ -157,11 +221,12 @@ pub fn replay<R: BufRead>(
     let source = reader.source().to_string();
     let at = line_error(&source);
     let field = field_of(&header);
+    check_size(args, &field).map_err(|e| anyhow!("{source}:1: header: {e}"))?;
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
     let mut engine =
         Engine::start(|| build(args, field.clone())).map_err(|e| at(1, "header", e))?;
 
-    let mut errors = Vec::new();
+    let (mut errors, mut briers, mut log_losses) = (Vec::new(), Vec::new(), Vec::new());
     for line in reader {
         let NumberedLine { number, line } = line?;
         match &line {
@@ -185,7 +250,9 @@ pub fn replay<R: BufRead>(
                 let p_red = engine.marginals().map_err(|e| at(number, "truth", e))?;
                 let predicted = predict_red(&p_red, field.red.known());
                 if let Some(red) = &truth.red {
-                    errors.push(tracking_error(field.tracks, &predicted, red));
+                    errors.push(expected_tracking_error(&p_red, field.red.known(), red));
+                    briers.push(brier_score(&p_red, red));
+                    log_losses.push(log_loss(&p_red, red));
                 }
                 let answer = Answer {
                     time: truth.time,
@@ -208,10 +275,12 @@ pub fn replay<R: BufRead>(
 
     let summary = Summary {
         kind: "summary",
-        method: args.method.name(),
+        method: args.property_method().name(),
         events: engine.events,
         seconds: engine.time.total.as_secs_f64(),
         error: mean_error(&errors),
+        brier: mean_error(&briers),
+        log_loss: mean_error(&log_losses),
         max_coefficients: engine.max_coefficients,
         final_p_red: engine.marginals().ok(),
     };
@@ -229,15 +298,42 @@ pub fn replay<R: BufRead>(
 /// `initial_red`) or unknown with the uniform prior over counts, and the
 /// red tracks at time 0 when the header gives them.
 pub fn field_of(header: &Header) -> Field {
-    let red = match header.red_count() {
-        Some(k) => RedCount::Known(k),
-        None => RedCount::unknown_uniform(header.tracks),
-    };
-    Field {
-        tracks: header.tracks,
-        red,
-        initial_red: header.initial_red.clone(),
+    Field::with_count(
+        header.tracks,
+        header.red_count(),
+        header.initial_red.clone(),
+    )
+}
+
+/// Refuses a Radon method without a budget where the exact belief it keeps
+/// may outgrow the machine: it can hold as many coefficients as the exact
+/// dense filter has states (C(n, k), or 2^n with k unknown), so past the
+/// dense filter's own limit it is refused with that estimate. The other
+/// methods check their own sizes when they are built.
+fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
+    if !args.property_method().is_radon() || args.budget.is_some() {
+        return Ok(());
     }
+    let n = field.tracks;
+    let (sets, what) = match field.red.known() {
+        Some(k) => (binomial(n, k), format!("C({n}, {k})")),
+        None => (2f64.powi(n.min(1024) as i32), format!("2^{n}")),
+    };
+    if sets > MAX_STATES as f64 {
+        bail!(
+            "--method {} without --budget is exact, and on this trace it may hold as many \
+             coefficients as there are red sets, {what} ≈ {sets:.2e} (limit {MAX_STATES}): \
+             give --budget N (say 500), or use --method factored",
+            args.property_method().name()
+        );
+    }
+    Ok(())
+}
+
+/// C(n, k) as a float (infinite when it overflows).
+fn binomial(n: usize, k: usize) -> f64 {
+    let k = k.min(n - k.min(n));
+    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
 }
 
 /// The filter `args.method` names, for `field`.
@@ -250,7 +346,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         };
         Ok(Box::new(RadonBelief::with_options(field.clone(), options)?))
     };
-    match args.method {
+    match args.property_method() {
         Method::Overcomplete => radon(args.budget.map(Sparsify::overcomplete)),
         // `check_options` made sure the budget is there.
         Method::Threshold => radon(args.budget.map(Sparsify::threshold)),
@@ -258,7 +354,7 @@ fn build(args: &ReplayArgs, field: Field) -> Result<Box<dyn PropertyFilter>, Bel
         // The paper's projection alone leaves the simplex on real traces and
         // then refuses observations as impossible; the repair keeps it going.
         Method::Order1 | Method::Order2 | Method::Order3 => {
-            let order = match args.method {
+            let order = match args.property_method() {
                 Method::Order1 => 1,
                 Method::Order2 => 2,
                 _ => 3,
@@ -328,12 +424,13 @@ impl Engine {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use idmesh_belief::RedCount;
     use std::path::PathBuf;
 
     fn args(method: Method, budget: Option<usize>) -> ReplayArgs {
         ReplayArgs {
             trace: PathBuf::from("mem.jsonl"),
-            method,
+            method: Some(method),
             budget,
             distributed_rule: false,
             particles: None,
@@ -341,6 +438,8 @@ mod tests {
             marginals: None,
             bits: None,
             samples: None,
+            force: false,
+            known_start_confidence: None,
         }
     }
 
@@ -375,6 +474,23 @@ mod tests {
         r#"{"kind":"truth","time":3,"red":[1,2]}"#,
         "\n",
     );
+
+    #[test]
+    fn an_exact_radon_belief_too_big_for_the_machine_is_refused_with_an_estimate() {
+        let header =
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":60,"red":30}"#;
+        let error = replay_text(&args(Method::Overcomplete, None), header).unwrap_err();
+        assert!(
+            error.contains("--method overcomplete without --budget is exact")
+                && error.contains("C(60, 30) ≈ 1.18e17")
+                && error.contains("use --method factored"),
+            "{error}"
+        );
+        // With a budget, or a field the dense limit allows, it runs.
+        assert!(replay_text(&args(Method::Overcomplete, Some(50)), header).is_ok());
+        let small = r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":20,"red":10}"#;
+        assert!(replay_text(&args(Method::Overcomplete, None), small).is_ok());
+    }
 
     #[test]
     fn table_one_on_the_radon_engine() {
@@ -453,7 +569,7 @@ mod tests {
         particles.particles = None;
         particles.seed = Some(1);
         assert!(check_options(&particles).is_err());
-        particles.method = Method::Particles;
+        particles.method = Some(Method::Particles);
         assert!(check_options(&particles).is_ok());
         particles.budget = Some(3);
         assert!(check_options(&particles).is_err());
@@ -471,5 +587,73 @@ mod tests {
         assert_eq!(out[1]["method"], "particles");
         assert_eq!(out[1]["error"], 0.0);
         assert_eq!(out[1]["max_coefficients"], 200);
+    }
+
+    #[test]
+    fn dispatch_picks_the_replay_by_the_header_and_refuses_mismatches() {
+        let dir = std::env::temp_dir().join(format!("idmesh-dispatch-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let identity = dir.join("ids.jsonl");
+        std::fs::write(
+            &identity,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"identities":2,"initial_identity":[1,0]}"#,
+                "\n",
+                r#"{"kind":"truth","time":1,"identity":[1,0]}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let property = dir.join("red.jsonl");
+        std::fs::write(
+            &property,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"red":1}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let run = |trace: &std::path::Path, method: Option<Method>| {
+            let mut a = args(Method::Overcomplete, None);
+            a.trace = trace.to_path_buf();
+            a.method = method;
+            let mut out = Vec::new();
+            dispatch(&a, &mut out)
+                .map(|()| String::from_utf8(out).unwrap())
+                .map_err(|e| format!("{e:#}"))
+        };
+        let out = run(&identity, None).unwrap();
+        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
+        assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
+        let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
+        assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
+        let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
+        assert!(
+            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use exact-perm, belief-matrix, information-matrix (the default) or property-bits"),
+            "{error}"
+        );
+        let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();
+        assert!(
+            error.contains("a property trace (no `identities`), and --method information-matrix is an identity method"),
+            "{error}"
+        );
+        let out = run(&property, None).unwrap();
+        assert!(out.contains(r#""method":"factored""#), "{out}");
+        // Colours and identities (the demo's crowd): colours by default,
+        // identities on request.
+        let both = dir.join("both.jsonl");
+        std::fs::write(
+            &both,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"red":1,"identities":2}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let out = run(&both, None).unwrap();
+        assert!(out.contains(r#""method":"factored""#), "{out}");
+        let out = run(&both, Some(Method::InformationMatrix)).unwrap();
+        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -51,7 +51,7 @@ use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
 use serde::Serialize;
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
-use tracing::{debug, info, info_span};
+use tracing::{debug, info, info_span, warn};
 
 /// The options of an identity replay; a `clap` argument group, so it can be
 /// flattened into a subcommand.
@@ -86,9 +86,64 @@ pub struct IdentityReplayOptions {
     pub seed: u64,
 
     /// Counted steps of --marginals metropolis (default 10,000; a tenth as
-    /// many burn-in steps before them).
+    /// many burn-in steps before them, per block of mixed tracks).
     #[arg(long, value_name = "S", value_parser = parse_positive)]
     pub samples: Option<usize>,
+
+    /// The known start of --method information-matrix as log-odds C
+    /// against each other identity (C > 0); default exact (+∞: −∞ on
+    /// every other identity, which keeps independent blocks). On long
+    /// streams where all tracks have mixed, C = 3 is better calibrated
+    /// (docs/identity.md, "Calibration").
+    #[arg(long, value_name = "C", value_parser = parse_confidence)]
+    pub known_start_confidence: Option<f64>,
+
+    /// Run --method property-bits without --budget even where its exact
+    /// bit beliefs are estimated to exceed [`MAX_EXACT_BIT_STATES`].
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The identity method replay runs when none is named.
+pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::InformationMatrix;
+
+/// The most states an exact bit belief of --method property-bits may need
+/// (the largest C(n, identities with the bit set)) before replay refuses
+/// it without --force: C(22, 11) ≈ 7·10^5 passes, n = 23 with 12 bits set
+/// does not. At n = 30 the exact bits took more than 3 minutes and 6.6 GB.
+pub const MAX_EXACT_BIT_STATES: f64 = 1e6;
+
+/// Above this many states replay warns (in the log) before running exact
+/// bit beliefs.
+pub const WARN_EXACT_BIT_STATES: f64 = 1e4;
+
+/// `idmesh replay` on an identity trace: the identity options from the
+/// command line's, with the identity default when no method is named.
+pub fn run_default(args: &crate::cli::ReplayArgs, out: impl Write) -> Result<()> {
+    let method = match args.method {
+        None => DEFAULT_IDENTITY_METHOD,
+        Some(m) => m
+            .identity()
+            .ok_or_else(|| anyhow!("--method {} is not an identity method", m.name()))?,
+    };
+    if let Some(particles) = args.particles {
+        bail!("--particles {particles} applies to --method particles, not to an identity trace");
+    }
+    if args.distributed_rule {
+        bail!("--distributed-rule applies to the Radon property methods, not to an identity trace");
+    }
+    let options = IdentityReplayOptions {
+        trace: args.trace.clone(),
+        method,
+        marginals: args.marginals,
+        bits: args.bits,
+        budget: args.budget,
+        seed: args.seed.unwrap_or(0),
+        samples: args.samples,
+        force: args.force,
+        known_start_confidence: args.known_start_confidence,
+    };
+    run(&options, out)
 }
 
 /// The identity filters replay can run.
@@ -119,11 +174,14 @@ impl IdentityMethod {
     }
 }
 
-/// How an information matrix is turned into marginals.
+/// How an information matrix is turned into marginals (each on every
+/// independent block of mixed tracks alone).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ValueEnum)]
 pub enum MarginalChoice {
-    /// Exact, by the matrix permanent (N ≤ 22).
+    /// Exact on blocks of at most 16 tracks, half-Bethe on larger ones.
     #[default]
+    Auto,
+    /// Exact, by the matrix permanent (blocks of at most 22 tracks).
     Exact,
     /// The paper's Metropolis sampler (--samples, --seed).
     Metropolis,
@@ -137,6 +195,7 @@ impl MarginalChoice {
     /// The name on the command line.
     pub fn name(self) -> &'static str {
         match self {
+            MarginalChoice::Auto => "auto",
             MarginalChoice::Exact => "exact",
             MarginalChoice::Metropolis => "metropolis",
             MarginalChoice::Sinkhorn => "sinkhorn",
@@ -197,6 +256,18 @@ pub fn check_options(args: &IdentityReplayOptions) -> Result<()> {
                 method.name()
             );
         }
+    }
+    if args.known_start_confidence.is_some() && method != IdentityMethod::InformationMatrix {
+        bail!(
+            "--known-start-confidence applies to --method information-matrix, not to --method {}",
+            method.name()
+        );
+    }
+    if args.force && method != IdentityMethod::PropertyBits {
+        bail!(
+            "--force applies to --method property-bits, not to --method {}",
+            method.name()
+        );
     }
     if args.samples.is_some() && args.marginals != Some(MarginalChoice::Metropolis) {
         bail!("--samples applies to --marginals metropolis");
@@ -330,11 +401,15 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
         }),
         IdentityMethod::InformationMatrix => {
             let choice = args.marginals.unwrap_or_default();
-            if choice == MarginalChoice::Exact && n > MAX_PERMANENT_TRACKS {
+            // Without a known start the whole matrix is one block; with
+            // one, blocks are known only at a query, which then says which
+            // block is too large.
+            if choice == MarginalChoice::Exact && initial.is_none() && n > MAX_PERMANENT_TRACKS {
                 return Err(Built::Refused(format!(
-                    "exact marginals of an information matrix take at most \
-                     {MAX_PERMANENT_TRACKS} tracks, this trace has {n}; \
-                     use --marginals metropolis, sinkhorn or bethe"
+                    "exact marginals take blocks of at most {MAX_PERMANENT_TRACKS} \
+                     tracks, and with no known start (`initial_identity`) the {n} \
+                     tracks are one block; use --marginals auto, metropolis, sinkhorn \
+                     or bethe"
                 )));
             }
             let options = InformationOptions {
@@ -342,9 +417,12 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
                 ..InformationOptions::default()
             };
             Box::new(match initial {
-                Some(start) => {
-                    InformationMatrix::from_assignment(start, KNOWN_START_CONFIDENCE, options)?
-                }
+                Some(start) => InformationMatrix::from_assignment(
+                    start,
+                    args.known_start_confidence
+                        .unwrap_or(KNOWN_START_CONFIDENCE),
+                    options,
+                )?,
                 None => InformationMatrix::uniform_with(n, options)?,
             })
         }
@@ -356,6 +434,24 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
                     BitCode::min_bits(n)
                 ))
             })?;
+            if args.budget.is_none() {
+                let states = exact_bit_states(&code);
+                if states > MAX_EXACT_BIT_STATES && !args.force {
+                    return Err(Built::Refused(format!(
+                        "--method property-bits without --budget keeps every bit's belief \
+                         exactly, which is exponential: here up to {states:.1e} states per \
+                         bit ({bits} bits), above the limit of {MAX_EXACT_BIT_STATES:.0e} \
+                         (at n = 30, 1.6e8 states, it took more than 3 minutes and \
+                         6.6 GB); give --budget N (200 is the paper's) or --force"
+                    )));
+                }
+                if states > WARN_EXACT_BIT_STATES {
+                    warn!(
+                        states,
+                        bits, "property-bits without --budget: exact bit beliefs, exponential"
+                    );
+                }
+            }
             let options = RadonOptions {
                 sparsify: args.budget.map(Sparsify::overcomplete),
                 ..RadonOptions::default()
@@ -363,6 +459,22 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
             Box::new(PropertyBitsFilter::new(code, initial, options)?)
         }
     })
+}
+
+/// The most states an exact bit belief of `code` can hold: the largest
+/// C(n, k) over the bits, k the identities with the bit set (the red sets
+/// of that bit's property belief).
+pub fn exact_bit_states(code: &BitCode) -> f64 {
+    let n = code.identities();
+    (0..code.bits())
+        .map(|j| binomial(n, code.red_count(j)))
+        .fold(1.0, f64::max)
+}
+
+/// C(n, k) as a float (no overflow below 10^308).
+fn binomial(n: usize, k: usize) -> f64 {
+    let k = k.min(n - k.min(n));
+    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
 }
 
 /// A filter with the bookkeeping of a replay: the time spent inside the
@@ -402,6 +514,14 @@ impl Engine {
     }
 }
 
+fn parse_confidence(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(c) if c > 0.0 && !c.is_nan() => Ok(c),
+        Ok(c) => Err(format!("{c}: must be positive (inf = exact)")),
+        Err(e) => Err(format!("not a number: {e}")),
+    }
+}
+
 fn parse_positive(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
         Ok(0) => Err("must be at least 1".into()),
@@ -424,6 +544,8 @@ mod tests {
             budget: None,
             seed: 0,
             samples: None,
+            force: false,
+            known_start_confidence: None,
         }
     }
 
@@ -639,11 +761,30 @@ mod tests {
         };
         let error = replay_text(&options(IdentityMethod::ExactPerm), &big(10)).unwrap_err();
         assert!(error.starts_with("mem.jsonl:1: header: "), "{error}");
-        let error = replay_text(&options(IdentityMethod::InformationMatrix), &big(23)).unwrap_err();
+        let mut exact = options(IdentityMethod::InformationMatrix);
+        exact.marginals = Some(MarginalChoice::Exact);
+        let error = replay_text(&exact, &big(23)).unwrap_err();
         assert!(
-            error.starts_with("mem.jsonl:1: header: exact marginals"),
+            error.starts_with("mem.jsonl:1: header: exact marginals take blocks of at most 22"),
             "{error}"
         );
+        // The default (auto) answers any size.
+        let out = replay_text(&options(IdentityMethod::InformationMatrix), &big(23)).unwrap();
+        assert_eq!(out[0]["kind"], "summary");
+        // Exact bit beliefs are refused above the limit, with an estimate,
+        // unless forced or given a budget.
+        let error = replay_text(&options(IdentityMethod::PropertyBits), &big(30)).unwrap_err();
+        assert!(
+            error.contains("without --budget") && error.contains("states per bit"),
+            "{error}"
+        );
+        let mut budget = options(IdentityMethod::PropertyBits);
+        budget.budget = Some(50);
+        assert!(replay_text(&budget, &big(30)).is_ok());
+        let mut forced = options(IdentityMethod::PropertyBits);
+        forced.force = true;
+        assert!(replay_text(&forced, &big(30)).is_ok());
+        assert!(replay_text(&options(IdentityMethod::PropertyBits), &big(20)).is_ok());
         let mut sinkhorn = options(IdentityMethod::InformationMatrix);
         sinkhorn.marginals = Some(MarginalChoice::Sinkhorn);
         let out = replay_text(&sinkhorn, &big(23)).unwrap();
@@ -655,6 +796,26 @@ mod tests {
             error.starts_with("mem.jsonl:1: header: --bits 2 cannot code 5"),
             "{error}"
         );
+    }
+
+    #[test]
+    fn a_finite_known_start_is_the_old_encoding() {
+        // With log-odds 3 the known start leaves weight on every identity:
+        // track 2, never mixed, is no longer certain.
+        let mut args = options(IdentityMethod::InformationMatrix);
+        args.known_start_confidence = Some(3.0);
+        let out = replay_text(&args, SMALL).unwrap();
+        let p = matrix(&out[1]["p_identity"]);
+        assert!(p[2][2] < 1.0 && p[2][2] > 0.5, "{p:?}");
+        let exact = replay_text(&options(IdentityMethod::InformationMatrix), SMALL).unwrap();
+        assert_eq!(matrix(&exact[1]["p_identity"])[2][2], 1.0);
+        let mut wrong = options(IdentityMethod::BeliefMatrix);
+        wrong.known_start_confidence = Some(3.0);
+        assert!(check_options(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("--known-start-confidence applies"));
+        assert!(parse_confidence("0").is_err() && parse_confidence("inf").is_ok());
     }
 
     #[test]

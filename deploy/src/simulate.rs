@@ -71,6 +71,10 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         .context("simulation failed")?;
     bar.finish_and_clear();
     let path = args.out.display().to_string();
+    if let Some(folder) = args.out.parent().filter(|f| !f.as_os_str().is_empty()) {
+        std::fs::create_dir_all(folder)
+            .with_context(|| format!("{}: cannot create the folder", folder.display()))?;
+    }
     let file = File::create(&args.out).with_context(|| format!("{path}: cannot create"))?;
     write_trace(&trace, BufWriter::new(file), path.clone())?;
     let stats = trace.stats();

@@ -12,6 +12,8 @@ pub enum LeaderError {
     Unexpected(&'static str),
     #[error(transparent)]
     Belief(#[from] BeliefError),
+    #[error(transparent)]
+    Placement(#[from] idmesh_placement::PlacementError),
     #[error("unreadable snapshot: {0}")]
     Snapshot(String),
 }

@@ -7,7 +7,12 @@
 //! property-management paper; docs/architecture.md says why it converges).
 //!
 //! A map of the crate:
-//! - [`state`] — [`Leader`], the protocol as a pure state machine.
+//! - [`state`] — [`Leader`], the protocol as a pure state machine: a
+//!   file per concern (inbox and reordering, applying, transfers, cuts,
+//!   counters).
+//! - [`node`] — [`node::Node`], the leader's timers and recovery policy as
+//!   a pure state machine around [`Leader`]: inputs and time in, outputs
+//!   out (raft-rs `RawNode` style).
 //! - [`actor`] — the tokio/Zenoh actor around it, one per role:
 //!   [`actor::run`].
 //! - [`door`] — bytes from the network to inputs, or rejected unharmed.
@@ -22,7 +27,8 @@ pub mod door;
 pub mod error;
 pub mod host;
 pub mod journal;
+pub mod node;
 pub mod state;
 
 pub use error::LeaderError;
-pub use state::{combine, field_of, start, Action, Leader};
+pub use state::{Action, Leader};

@@ -1,7 +1,8 @@
 //! # idmesh-sensor — turning the world into events
 //!
-//! Simulators, real trajectory replay, the acoustic tracking front end and
-//! the sensor process that publishes events (issues 3, 4 and 6 build it).
+//! Simulators, real trajectory replay and the sensor process that
+//! publishes events (issues 3 and 4 build it). The acoustic tracking front
+//! end (issue 6) is its own crate, `idmesh-acoustic` (sensor/acoustic).
 //!
 //! The scenario generator follows the evaluation of Jiang et al. (TOSN 2013,
 //! Section 6): targets move in a field, a `mix` is logged whenever two
@@ -37,7 +38,6 @@
 //! assert!(jsonl.starts_with(br#"{"kind":"header""#));
 //! ```
 
-pub mod acoustic;
 pub mod events;
 pub mod gateway;
 pub mod geometry;

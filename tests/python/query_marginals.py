@@ -1,7 +1,8 @@
 """An external Zenoh client (eclipse-zenoh 1.10.x) asks a running idmesh
 coordinator for the marginals and checks the JSON it gets back.
 
-usage: query_marginals.py ENDPOINT PREFIX
+usage: query_marginals.py [ENDPOINT [PREFIX]]   (default: the demo's,
+tcp/127.0.0.1:7447 and idmesh/default)
 prints the parsed answer as one JSON line; exits 1 on an error reply."""
 
 import json
@@ -11,7 +12,8 @@ import zenoh
 
 
 def main() -> int:
-    endpoint, prefix = sys.argv[1], sys.argv[2]
+    endpoint = sys.argv[1] if len(sys.argv) > 1 else "tcp/127.0.0.1:7447"
+    prefix = sys.argv[2] if len(sys.argv) > 2 else "idmesh/default"
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))

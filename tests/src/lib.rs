@@ -1,14 +1,25 @@
 //! Shared pieces of the multi-process tests in `tests/tests/`: each starts
-//! the real `idmesh` binary and checks what a user would see.
+//! the real `idmesh` binary and checks what a user would see; and the
+//! deterministic network simulator ([`sim`]) that searches the
+//! interleavings those tests cannot.
 
 pub mod compare;
 pub mod deployment;
+pub mod python;
+pub mod sim;
 pub mod web;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
+
+/// Whether the long runs run at their full lengths: `IDMESH_LONG_TESTS=1`
+/// (CI sets it). Without it they run shorter, so a newcomer's `cargo test`
+/// finishes in about a quarter of an hour; what they check is the same.
+pub fn long_tests() -> bool {
+    std::env::var("IDMESH_LONG_TESTS").is_ok_and(|v| v == "1")
+}
 
 /// The `idmesh` binary, built (or found fresh) once per test process.
 ///

@@ -172,3 +172,56 @@ fn identity_reads_cost_no_messages_between_leaders() {
     assert_eq!(applied, reads as u64, "every read applied once");
     assert_eq!(none, 0);
 }
+
+/// Issue 21: a thousand people with known identities through 4 leaders.
+/// The coordinator answers identity queries at n = 1,000 — every row a
+/// distribution, every column too, the assignment a permutation, computed
+/// block by block with the `auto` method — and a one-track question agrees
+/// with the whole answer.
+#[test]
+#[ignore = "issue 21: not yet seen to pass (first run starved by an exact colour belief, second cut short); run with --ignored"]
+fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-identity-1000-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, 1000, 1, 20.0, 21);
+    // The colour side runs too: one red target and a budget keep its
+    // property belief small (exact over 1,000 tracks it would not be).
+    let colours = Settings {
+        budget: 100,
+        ..settings(4, Some(5000.0))
+    };
+    let deployment = Deployment::start("identity1000", &trace, &colours);
+    deployment.first_answer(Duration::from_secs(120));
+    let last = deployment.answer_when(&["identity"], Duration::from_secs(300), |a| {
+        a["finished"] == true
+    });
+    assert_eq!(last["marginals"], "auto");
+    assert_eq!(last["tracks"], 1000);
+    let p = matrix(&last["p_identity"]);
+    assert_eq!(p.len(), 1000);
+    for (t, row) in p.iter().enumerate() {
+        let sum: f64 = row.iter().sum();
+        assert!((sum - 1.0).abs() < 1e-6, "row {t} sums to {sum}");
+    }
+    for i in 0..1000 {
+        let sum: f64 = p.iter().map(|row| row[i]).sum();
+        assert!((sum - 1.0).abs() < 1e-6, "column {i} sums to {sum}");
+    }
+    let mut predicted: Vec<u64> = last["predicted_identity"]
+        .as_array()
+        .expect("an assignment")
+        .iter()
+        .map(|x| x.as_u64().unwrap())
+        .collect();
+    predicted.sort_unstable();
+    assert_eq!(predicted, (0..1000).collect::<Vec<u64>>());
+    let one = deployment.query(&["identity", "7"]).expect("one track");
+    let row: Vec<f64> = one[0]["p_identity"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(largest_difference(&[row], &p[7..8]) < 1e-12);
+    assert_eq!(deployment.leaders_total("rows_held"), 1000);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -5,6 +5,7 @@ use idmesh_tests::deployment::{
     crowd, replay_lines, replay_summary, truth_lines, Deployment, Settings,
 };
 use serde_json::Value;
+use std::path::Path;
 use std::time::Duration;
 
 fn floats(v: &Value) -> Vec<f64> {
@@ -205,8 +206,9 @@ fn queries_during_the_stream_sum_to_k_and_the_watermark_only_grows() {
     assert!(moved, "the stream did not advance during the queries");
 }
 
-/// Any Zenoh client can ask: Python's eclipse-zenoh (installed by .ci/run)
-/// gets the coordinator's answer as JSON with Zenoh's JSON encoding.
+/// Any Zenoh client can ask: Python's eclipse-zenoh (in a venv the test
+/// makes under target/ on first use) gets the coordinator's answer as JSON
+/// with Zenoh's JSON encoding.
 #[test]
 fn a_python_zenoh_client_gets_the_marginals_as_json() {
     let dir = std::env::temp_dir().join(format!("idmesh-python-{}", std::process::id()));
@@ -225,7 +227,8 @@ fn a_python_zenoh_client_gets_the_marginals_as_json() {
     );
     let ours = deployment.final_marginals(Duration::from_secs(60));
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python/query_marginals.py");
-    let output = std::process::Command::new("python3")
+    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let output = std::process::Command::new(python)
         .arg(script)
         .arg(&deployment.coordinator)
         .arg(&deployment.prefix)
@@ -233,7 +236,7 @@ fn a_python_zenoh_client_gets_the_marginals_as_json() {
         .expect("python3 runs");
     assert!(
         output.status.success(),
-        "the Python client failed (is eclipse-zenoh 1.10 installed? .ci/run installs it): {}",
+        "the Python client failed: {}",
         String::from_utf8_lossy(&output.stderr)
     );
     let answer: Value = serde_json::from_slice(&output.stdout).expect("the client printed JSON");

@@ -70,3 +70,26 @@ fn pedestrians_need_a_scene_and_bad_scenes_name_their_line() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("broken_obsmat.txt:2:"), "{stderr}");
 }
+
+#[test]
+fn a_missing_scene_is_named_once_with_its_os_error_once() {
+    let output = Command::new(idmesh())
+        .args([
+            "simulate",
+            "--model",
+            "pedestrians",
+            "--scene",
+            "/nonexistent/obsmat.txt",
+            "--out",
+            "/dev/null",
+        ])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(
+        stderr.trim_end(),
+        "simulation failed: /nonexistent/obsmat.txt: cannot read the scene: \
+         No such file or directory (os error 2)"
+    );
+}

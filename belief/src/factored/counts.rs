@@ -25,7 +25,7 @@ use crate::weights::ln_binomial;
 /// entries of its inputs) is recomputed in log space: anything flushed on
 /// the way is below 1e-308 of its own vector, so 1e-280 leaves 1e-28 of
 /// relative slack, far below the tolerances anyone checks.
-const FAST_FLOOR_LN: f64 = -644.7; // ln 1e-280
+pub(crate) const FAST_FLOOR_LN: f64 = -644.7; // ln 1e-280
 
 /// The prior weight π(s) of one red set of size s, s = 0..=n.
 #[derive(Debug, Clone)]
@@ -59,6 +59,27 @@ impl CountPrior {
         let ln_max = ln.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let scaled = ln.iter().map(|&l| (l - ln_max).exp()).collect();
         CountPrior { ln, scaled }
+    }
+
+    /// Whether π allows one count only (k known, or a known start).
+    pub(crate) fn is_point(&self) -> bool {
+        self.ln.iter().filter(|l| l.is_finite()).count() == 1
+    }
+
+    /// ln π(s) for s = 0..=n (−∞ where no set of size s is admissible).
+    pub(crate) fn ln_weights(&self) -> &[f64] {
+        &self.ln
+    }
+
+    /// The count the tilt of the product tree aims the bulk at: k when it
+    /// is known, else the count π and the binomial of n tracks favour most.
+    pub(crate) fn target(&self) -> f64 {
+        let n = self.ln.len() - 1;
+        let best = (0..=n).max_by(|&a, &b| {
+            let score = |s: usize| self.ln[s] + ln_binomial(n, s);
+            score(a).total_cmp(&score(b))
+        });
+        best.unwrap_or(0) as f64
     }
 }
 

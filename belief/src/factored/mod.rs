@@ -12,7 +12,16 @@
 //! where the components C partition the tracks, each g_C is an exact dense
 //! table over all 2^|C| subsets of C (with a log scale), and π(s) is the
 //! prior weight of one red set of size s (k known: [s = k]; k unknown:
-//! p(s)/C(n, s)). The private `counts` module evaluates the count coupling.
+//! p(s)/C(n, s)). The private `tree` module evaluates the count coupling
+//! lazily — nothing global happens until someone asks (the
+//! information-matrix paper's lazy inference): an event touches only its
+//! components' slots and marks one root path of a product tree of count
+//! vectors dirty; a query recomputes the dirty nodes and walks the tree
+//! down once. The private `counts` module keeps the eager evaluation for
+//! what is not on a hot path (normalizer fallbacks, P(set all red), the
+//! count posterior) and as the reference the tree is tested against.
+//! How splits weigh the red count is [`Coupling`]: the true weight from
+//! the rest of the belief, or only what the pair being split can hold.
 //!
 //! - Mixing tracks of one component is the exact rollup on its table.
 //! - Mixing tracks of two components merges them (outer product, then
@@ -41,13 +50,16 @@
 mod counts;
 mod split;
 mod table;
+mod tree;
 
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use counts::CountPrior;
 use split::Weighted;
+use std::sync::{Mutex, MutexGuard};
 use table::Component;
+use tree::CountTree;
 
 /// The largest `max_component` with [`SplitRule::Original`], which never
 /// builds a table larger than one component: 2^20 numbers (8 MiB) each.
@@ -74,6 +86,38 @@ pub enum SplitRule {
     LeastLoss { rounds: usize },
 }
 
+/// Which count weights Q(s) a split matches its moments under.
+///
+/// The moment matching keeps P(x_A) and P(x_B) of the merged component's
+/// part of the belief, P(x) ∝ g(x)·Q(|x|), where Q is the weight the rest of
+/// the belief gives to the merged red count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coupling {
+    /// Q is the true weight from every other component and π: the split
+    /// preserves the marginals of the whole belief (the M-projection of
+    /// Boyen–Koller). Each split reads Q by one walk down the count
+    /// tree's root path, and each observation does too (to split off the
+    /// tracks the count makes certain): O(log #components) convolutions of
+    /// the count windows per event.
+    Coupled,
+    /// Q(s) = 1 on every count s the merged pair can hold, 0 elsewhere:
+    /// the split matches the moments of the pair's own tables as if the
+    /// rest of the belief did not care about their count, so it needs only
+    /// what it splits; a soft observation needs only its component. This
+    /// is what leaders can run when the factored belief is distributed.
+    /// The same as [`Coupled`](Coupling::Coupled) whenever the merged count
+    /// is fixed (a known start, until splits spread the counts): then the
+    /// true Q is one number on the one count. An observation that rules a value out
+    /// (likelihood 0) still reads Q, to refuse one the count makes
+    /// impossible.
+    Local,
+}
+
+/// The most tracks at which the eager (O(n²)-memory) evaluation of the
+/// count coupling stands in for the count tree when the tree's weights
+/// underflow.
+pub const EAGER_LIMIT: usize = 4096;
+
 /// Options of [`FactoredBelief`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FactoredOptions {
@@ -85,6 +129,9 @@ pub struct FactoredOptions {
     /// limit beyond `max_component`). Must be at least 2n.
     pub max_numbers: Option<usize>,
     pub split: SplitRule,
+    /// The count weights of the splits (and of the certainty test after a
+    /// soft observation).
+    pub coupling: Coupling,
     /// L1 tolerance of the moment matching on the marginals it preserves.
     pub tolerance: f64,
     /// Sinkhorn sweeps of the moment matching before it switches to Newton
@@ -102,6 +149,7 @@ impl Default for FactoredOptions {
             max_component: 7,
             max_numbers: None,
             split: SplitRule::Original,
+            coupling: Coupling::Coupled,
             tolerance: 1e-12,
             max_sweeps: 200,
             certain: 1e-12,
@@ -159,17 +207,42 @@ pub struct FactoredStats {
 }
 
 /// The factored belief (see the module documentation).
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct FactoredBelief {
     field: Field,
     options: FactoredOptions,
     prior: CountPrior,
-    comps: Vec<Component>,
-    /// (component, local bit) of every track.
+    /// The components in stable slots (`None`: free), so that an event
+    /// touches only the slots of its components.
+    comps: Vec<Option<Component>>,
+    free: Vec<usize>,
+    /// (slot, local bit) of every track.
     home: Vec<(usize, usize)>,
+    /// Σ_C 2^|C|, kept as components come and go.
+    numbers: usize,
     /// When each track last mixed (event number), for [`SplitRule::Recent`].
     last_mix: Vec<u64>,
+    /// The count coupling, evaluated when asked (see the `tree` module);
+    /// behind a lock because a query caches its convolutions.
+    tree: Mutex<CountTree>,
     stats: FactoredStats,
+}
+
+impl Clone for FactoredBelief {
+    fn clone(&self) -> Self {
+        FactoredBelief {
+            field: self.field.clone(),
+            options: self.options.clone(),
+            prior: self.prior.clone(),
+            comps: self.comps.clone(),
+            free: self.free.clone(),
+            home: self.home.clone(),
+            numbers: self.numbers,
+            last_mix: self.last_mix.clone(),
+            tree: Mutex::new(self.lock_tree().clone()),
+            stats: self.stats.clone(),
+        }
+    }
 }
 
 impl FactoredBelief {
@@ -203,16 +276,25 @@ impl FactoredBelief {
                 .collect(),
         };
         let prior = CountPrior::new(&field);
+        let counts: Vec<Vec<f64>> = comps.iter().map(|c| c.counts.clone()).collect();
+        let tilt = tree::balancing_tilt(counts.iter().map(|c| &c[..]), prior.target());
+        let floor = if prior.is_point() { tree::TAIL } else { 0.0 };
         let mut belief = FactoredBelief {
             field,
             options,
             prior,
-            comps,
+            numbers: comps.iter().map(|c| c.table.len()).sum(),
+            comps: comps.into_iter().map(Some).collect(),
+            free: Vec::new(),
             home: vec![(0, 0); n],
             last_mix: vec![0; n],
+            tree: Mutex::new(CountTree::new(counts, tilt, floor)),
             stats: FactoredStats::default(),
         };
-        belief.rehome();
+        for slot in 0..n {
+            belief.rehome(slot);
+        }
+        belief.stats.max_component = 1;
         belief.note_size();
         Ok(belief)
     }
@@ -228,7 +310,87 @@ impl FactoredBelief {
     /// The current partition of the tracks, each component in its local
     /// order.
     pub fn components(&self) -> Vec<Vec<u32>> {
-        self.comps.iter().map(|c| c.tracks.clone()).collect()
+        self.live().map(|c| c.tracks.clone()).collect()
+    }
+
+    fn live(&self) -> impl Iterator<Item = &Component> {
+        self.comps.iter().flatten()
+    }
+
+    /// The component in `slot` (every track's home slot is live).
+    fn comp(&self, slot: usize) -> &Component {
+        self.comps[slot]
+            .as_ref()
+            .expect("a track's home slot is live")
+    }
+
+    fn lock_tree(&self) -> MutexGuard<'_, CountTree> {
+        // A panic elsewhere cannot leave the tree half-updated in a way
+        // that matters: every node it touched is still marked dirty.
+        self.tree.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// R_{−C} of the component in `slot` over the counts 0..`width` (the
+    /// tree's leaf may hold a merged count vector wider than the slot's
+    /// component): through the count tree, re-tilted once if its result is
+    /// unsafe, and by the eager log-space evaluation if it still is.
+    fn leave_one_out(&self, slot: usize, width: usize) -> Result<Vec<f64>, BeliefError> {
+        let mut tree = self.lock_tree();
+        if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
+            return Ok(r);
+        }
+        self.retilt(&mut tree);
+        if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
+            return Ok(r);
+        }
+        drop(tree);
+        self.check_eager()?;
+        let tree = self.lock_tree();
+        let mut counts = Vec::new();
+        let mut index = 0;
+        for s in 0..self.comps.len() {
+            let c = tree.counts(s);
+            if s == slot {
+                index = counts.len();
+            }
+            if !c.is_empty() {
+                counts.push(c);
+            }
+        }
+        self.prior
+            .leave_one_out(&counts, index)
+            .ok_or(BeliefError::Degenerate { normalizer: 0.0 })
+    }
+
+    /// The eager evaluation of the count coupling keeps a convolution per
+    /// component, O(n²) numbers: past [`EAGER_LIMIT`] tracks a belief the
+    /// count tree cannot evaluate safely is reported instead.
+    fn check_eager(&self) -> Result<(), BeliefError> {
+        if self.field.tracks <= EAGER_LIMIT {
+            return Ok(());
+        }
+        Err(BeliefError::Numerical {
+            step: "factored count coupling",
+            detail: format!(
+                "the count tree's weights underflow even re-tilted, and the eager \
+                 evaluation would need O(n²) memory at n = {}",
+                self.field.tracks
+            ),
+        })
+    }
+
+    /// Re-aims the count tree's tilt at the current components, and keeps
+    /// every tail of its convolutions from now on (called when a query
+    /// found the fast evaluation unsafe).
+    fn retilt(&self, tree: &mut CountTree) {
+        let counts = self.count_refs();
+        let t = tree::balancing_tilt(counts.iter().copied(), self.prior.target());
+        tracing::debug!(
+            from = tree.ln_tilt(),
+            to = t,
+            "factored: re-tilting the count tree"
+        );
+        tree.retilt(t, true);
     }
 
     /// ln Z, Z = Σ_x f(x) of the unnormalized belief: the prior mass times
@@ -237,8 +399,9 @@ impl FactoredBelief {
     /// exact until the first split, after which each split keeps the mass
     /// of what it replaces.
     pub fn log_normalizer(&self) -> f64 {
-        let scales: f64 = self.comps.iter().map(|c| c.log_scale).sum();
-        scales + self.prior.ln_total(&self.count_refs())
+        let scales: f64 = self.live().map(|c| c.log_scale).sum();
+        let fast = self.lock_tree().ln_total(&self.prior);
+        scales + fast.unwrap_or_else(|| self.prior.ln_total(&self.count_refs()))
     }
 
     /// P(every track of `tracks` is red). Repeated tracks count once.
@@ -254,11 +417,14 @@ impl FactoredBelief {
         if total == f64::NEG_INFINITY || total.is_nan() {
             return Err(BeliefError::Degenerate { normalizer: 0.0 });
         }
-        let held: Vec<Vec<f64>> = self
-            .comps
-            .iter()
-            .zip(&need)
-            .map(|(c, &m)| {
+        let live = || {
+            self.comps
+                .iter()
+                .zip(&need)
+                .filter_map(|(c, m)| Some((c.as_ref()?, *m)))
+        };
+        let held: Vec<Vec<f64>> = live()
+            .map(|(c, m)| {
                 if m == 0 {
                     Vec::new()
                 } else {
@@ -266,11 +432,9 @@ impl FactoredBelief {
                 }
             })
             .collect();
-        let restricted: Vec<&[f64]> = self
-            .comps
-            .iter()
+        let restricted: Vec<&[f64]> = live()
             .zip(&held)
-            .map(|(c, h)| if h.is_empty() { &c.counts[..] } else { &h[..] })
+            .map(|((c, _), h)| if h.is_empty() { &c.counts[..] } else { &h[..] })
             .collect();
         Ok((self.prior.ln_total(&restricted) - total).exp().min(1.0))
     }
@@ -283,32 +447,71 @@ impl FactoredBelief {
     }
 
     fn count_refs(&self) -> Vec<&[f64]> {
-        self.comps.iter().map(|c| &c.counts[..]).collect()
+        self.live().map(|c| &c.counts[..]).collect()
     }
 
-    fn rehome(&mut self) {
-        for (ci, c) in self.comps.iter().enumerate() {
-            for (bit, &t) in c.tracks.iter().enumerate() {
-                self.home[t as usize] = (ci, bit);
-            }
+    fn rehome(&mut self, slot: usize) {
+        let c = self.comps[slot].as_ref().expect("a live slot");
+        for (bit, &t) in c.tracks.iter().enumerate() {
+            self.home[t as usize] = (slot, bit);
         }
     }
 
     fn note_size(&mut self) {
-        self.stats.max_coefficients = self.stats.max_coefficients.max(self.coefficients());
-        let largest = self.comps.iter().map(|c| c.len()).max().unwrap_or(0);
-        self.stats.max_component = self.stats.max_component.max(largest);
+        self.stats.max_coefficients = self.stats.max_coefficients.max(self.numbers);
     }
 
-    /// Replaces the components at `remove` by `add`.
+    /// Replaces the components in the slots `remove` by `add`: touches only
+    /// those slots, their tracks and their leaves of the count tree.
     fn replace(&mut self, remove: &[usize], add: Vec<Component>) {
-        let mut remove = remove.to_vec();
-        remove.sort_unstable_by(|a, b| b.cmp(a));
-        for i in remove {
-            self.comps.swap_remove(i);
+        let tree = self.tree.get_mut().unwrap_or_else(|e| e.into_inner());
+        for &slot in remove {
+            if let Some(c) = self.comps[slot].take() {
+                self.numbers -= c.table.len();
+                self.free.push(slot);
+                tree.set(slot, Vec::new());
+            }
         }
-        self.comps.extend(add);
-        self.rehome();
+        for c in add {
+            let slot = self.free.pop().expect("never more components than tracks");
+            self.numbers += c.table.len();
+            self.stats.max_component = self.stats.max_component.max(c.len());
+            tree.set(slot, c.counts.clone());
+            for (bit, &t) in c.tracks.iter().enumerate() {
+                self.home[t as usize] = (slot, bit);
+            }
+            self.comps[slot] = Some(c);
+        }
+    }
+
+    /// The count weights of a merged component of `width` − 1 tracks that
+    /// replaces the ones in `ca` and `cb`, under the configured coupling.
+    fn merged_weights(
+        &mut self,
+        ca: usize,
+        cb: usize,
+        merged_counts: Vec<f64>,
+    ) -> Result<Vec<f64>, BeliefError> {
+        let width = merged_counts.len();
+        if self.options.coupling == Coupling::Local {
+            // Every count the pair can hold weighs alike.
+            return Ok(merged_counts
+                .iter()
+                .map(|&c| if c > 0.0 { 1.0 } else { 0.0 })
+                .collect());
+        }
+        // Everything but the pair: the pair's leaves hold the merged
+        // counts for the walk, then their own again (the caller replaces
+        // them if the split goes through).
+        let (c1, c2) = (self.comp(ca).counts.clone(), self.comp(cb).counts.clone());
+        let tree = self.tree.get_mut().unwrap_or_else(|e| e.into_inner());
+        tree.set(cb, Vec::new());
+        tree.set(ca, merged_counts);
+        let q = self.leave_one_out(ca, width);
+        let tree = self.tree.get_mut().unwrap_or_else(|e| e.into_inner());
+        tree.set(ca, c1);
+        tree.set(cb, c2);
+        q
     }
 
     /// The certain local bits of a component whose bit marginals are `m`.
@@ -335,12 +538,12 @@ impl FactoredBelief {
     fn mix_across(&mut self, mix: Mix) -> Result<(), BeliefError> {
         let (ca, ba) = self.home[mix.a as usize];
         let (cb, bb) = self.home[mix.b as usize];
-        let (c1, c2) = (&self.comps[ca], &self.comps[cb]);
+        let (c1, c2) = (self.comp(ca), self.comp(cb));
         if c1.len() == 1 && c2.len() == 1 && c1.table == c2.table {
             // Two interchangeable tracks: the mix changes nothing.
             return Ok(());
         }
-        let others = self.coefficients() - c1.table.len() - c2.table.len();
+        let others = self.numbers - c1.table.len() - c2.table.len();
         let (max, budget) = (self.options.max_component, self.options.max_numbers);
         let fits = |size: usize, extra: usize| {
             size <= max && budget.is_none_or(|b| others + extra + (1usize << size) <= b)
@@ -361,17 +564,8 @@ impl FactoredBelief {
                 merged_counts[r + t] += x * y;
             }
         }
-        let mut counts: Vec<&[f64]> = (self.comps.iter().enumerate())
-            .filter(|&(i, _)| i != ca && i != cb)
-            .map(|(_, c)| &c.counts[..])
-            .collect();
-        counts.push(&merged_counts);
-        let last = counts.len() - 1;
-        let q = self
-            .prior
-            .leave_one_out(&counts, last)
-            .ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
-        drop(counts);
+        let q = self.merged_weights(ca, cb, merged_counts)?;
+        let (c1, c2) = (self.comp(ca), self.comp(cb));
         let (tol, sweeps) = (self.options.tolerance, self.options.max_sweeps);
         let pieces = if self.options.split == SplitRule::Original {
             // Project onto the old pair without building the merged table.
@@ -574,11 +768,14 @@ impl PropertyFilter for FactoredBelief {
         let (cb, bb) = self.home[b];
         if mix.swap == 1.0 {
             // The targets certainly exchanged tracks: relabel.
-            self.comps[ca].tracks[ba] = mix.b;
-            self.comps[cb].tracks[bb] = mix.a;
+            for (slot, bit, track) in [(ca, ba, mix.b), (cb, bb, mix.a)] {
+                let c = self.comps[slot].as_mut().expect("a live slot");
+                c.tracks[bit] = track;
+            }
             self.home.swap(a, b);
         } else if ca == cb {
-            self.comps[ca].rollup(ba, bb, mix.swap);
+            let c = self.comps[ca].as_mut().expect("a live slot");
+            c.rollup(ba, bb, mix.swap);
         } else {
             self.mix_across(mix)?;
         }
@@ -592,13 +789,18 @@ impl PropertyFilter for FactoredBelief {
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.field.check_observe(&observe)?;
         let (c, bit) = self.home[observe.track as usize];
-        let comp = &self.comps[c];
+        let comp = self.comp(c);
         let table = comp.observed(bit, observe.red, observe.blue);
         let new_counts = table::counts_of(&table, comp.len());
-        let r = self
-            .prior
-            .leave_one_out(&self.count_refs(), c)
-            .ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
+        // A soft sighting under the local coupling needs only its
+        // component; a hard one (a likelihood 0) may contradict the count.
+        let soft = observe.red > 0.0 && observe.blue > 0.0;
+        let r = if soft && self.options.coupling == Coupling::Local {
+            vec![1.0; new_counts.len()]
+        } else {
+            self.leave_one_out(c, new_counts.len())?
+        };
+        let comp = self.comp(c);
         let dot = |v: &[f64]| v.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
         let (before, after) = (dot(&comp.counts), dot(&new_counts));
         if after.is_nan() || after <= 0.0 {
@@ -622,17 +824,39 @@ impl PropertyFilter for FactoredBelief {
             add.push(rest);
             self.replace(&[c], add);
         } else {
-            self.comps[c] = updated;
+            self.replace(&[c], vec![updated]);
         }
         self.stats.events += 1;
         self.note_size();
         Ok(())
     }
 
+    /// One downward walk of the count tree (after recomputing what the
+    /// events since the last query made dirty), then each component's
+    /// marginals under its weights.
     fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
-        let all = self.prior.all_leave_one_out(&self.count_refs());
+        let fast = {
+            let mut tree = self.lock_tree();
+            match tree.all_leave_one_out(&self.prior) {
+                Some(all) => Some(all),
+                None => {
+                    self.retilt(&mut tree);
+                    tree.all_leave_one_out(&self.prior)
+                }
+            }
+        };
+        let all: Vec<Option<Vec<f64>>> = match fast {
+            Some(mut by_slot) => (0..self.comps.len())
+                .filter(|&s| self.comps[s].is_some())
+                .map(|s| by_slot[s].take())
+                .collect(),
+            None => {
+                self.check_eager()?;
+                self.prior.all_leave_one_out(&self.count_refs())
+            }
+        };
         let mut out = vec![0.0; self.field.tracks];
-        for (c, r) in self.comps.iter().zip(all) {
+        for (c, r) in self.live().zip(all) {
             let r = r.ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
             let (m, total) = c.weighted_marginals(&r);
             if total.is_nan() || total <= 0.0 {
@@ -648,7 +872,7 @@ impl PropertyFilter for FactoredBelief {
     /// Σ_C 2^|C|: the numbers in the tables (the per-component log scales
     /// and count vectors are derived bookkeeping and not counted).
     fn coefficients(&self) -> usize {
-        self.comps.iter().map(|c| c.table.len()).sum()
+        self.numbers
     }
 }
 

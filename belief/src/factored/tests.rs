@@ -412,3 +412,97 @@ fn a_thousand_tracks() {
         assert!(f.log_normalizer().is_finite());
     }
 }
+
+/// The marginals by the eager evaluation of the count coupling (every
+/// leave-one-out weight from the whole chain of convolutions), which the
+/// count tree replaces.
+fn eager_marginals(f: &FactoredBelief) -> Vec<f64> {
+    let all = f.prior.all_leave_one_out(&f.count_refs());
+    let mut out = vec![0.0; f.field.tracks];
+    for (c, r) in f.live().zip(all) {
+        let (m, _) = c.weighted_marginals(&r.unwrap());
+        for (&t, p) in c.tracks.iter().zip(m) {
+            out[t as usize] = p.clamp(0.0, 1.0);
+        }
+    }
+    out
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+    /// With splits, certain tracks leaving and slots reused, the lazily
+    /// evaluated coupling answers what the eager one does, after every
+    /// event, under both couplings and every split rule; so does the
+    /// normalizer.
+    #[test]
+    fn the_lazy_coupling_answers_as_the_eager_one(
+        n in 3usize..24,
+        k_share in 0.0f64..1.0,
+        seed in 0u64..1_000,
+        max in 1usize..=5,
+        local in proptest::bool::ANY,
+        rule in 0usize..3,
+    ) {
+        let k = ((n as f64 * k_share) as usize).clamp(1, n - 1);
+        let (initial, events) = workload(n, k, 120, seed);
+        let options = FactoredOptions {
+            max_component: max,
+            split: [SplitRule::Original, SplitRule::Recent, SplitRule::LeastLoss { rounds: 1 }][rule],
+            coupling: if local { Coupling::Local } else { Coupling::Coupled },
+            ..FactoredOptions::default()
+        };
+        for field in fields(n, k, &initial) {
+            let mut f = FactoredBelief::with_options(field, options.clone()).unwrap();
+            for (i, event) in events.iter().enumerate() {
+                let _ = f.apply(event);
+                if i % 7 == 0 || i + 1 == events.len() {
+                    close(&f.marginals().unwrap(), &eager_marginals(&f), 1e-9, "marginals");
+                    let eager = f.live().map(|c| c.log_scale).sum::<f64>()
+                        + f.prior.ln_total(&f.count_refs());
+                    proptest::prop_assert!((f.log_normalizer() - eager).abs() < 1e-9);
+                }
+            }
+        }
+    }
+}
+
+/// The local coupling needs nothing but the components it touches, and is
+/// the coupled rule whenever the merged count is fixed: from a known start,
+/// with hard sightings only, both give the same belief up to and including
+/// the first split (whose halves then hold spread counts).
+#[test]
+fn local_and_coupled_agree_while_counts_are_fixed() {
+    let (initial, mut events) = workload(12, 5, 300, 9);
+    for e in &mut events {
+        if let Event::Observe(o) = e {
+            // Hard sightings keep every component's count fixed.
+            let red = o.red > o.blue;
+            (o.red, o.blue) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
+        }
+    }
+    let field = Field::known(12, initial);
+    let build = |coupling| {
+        let options = FactoredOptions {
+            max_component: 3,
+            coupling,
+            ..FactoredOptions::default()
+        };
+        FactoredBelief::with_options(field.clone(), options).unwrap()
+    };
+    let (mut coupled, mut local) = (build(Coupling::Coupled), build(Coupling::Local));
+    for e in &events {
+        let (a, b) = (coupled.apply(e), local.apply(e));
+        assert_eq!(a.is_ok(), b.is_ok());
+        close(
+            &coupled.marginals().unwrap(),
+            &local.marginals().unwrap(),
+            1e-9,
+            "local vs coupled",
+        );
+        if coupled.stats().splits > 0 {
+            return;
+        }
+    }
+    panic!("the workload never split");
+}

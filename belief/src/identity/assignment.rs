@@ -7,6 +7,7 @@
 //! path form of the Hungarian algorithm (Kuhn–Munkres with potentials), so
 //! the crate needs no further dependency.
 
+use super::blocks::{blocks, Block};
 use super::event::check_square;
 use crate::error::BeliefError;
 
@@ -18,7 +19,35 @@ use crate::error::BeliefError;
 /// entries alone, so an assignment through a zero is chosen only when every
 /// assignment has one. Ties go to the assignment the algorithm meets first,
 /// which is deterministic.
+///
+/// The problem splits over the blocks of positive entries
+/// ([`crate::identity::blocks`]): when every block has as many tracks as
+/// identities, each is solved on its own (O(Σ k³) instead of O(n³): at
+/// n = 10,000 with small blocks, milliseconds instead of hours).
 pub fn most_likely_assignment(p: &[Vec<f64>]) -> Result<Vec<u32>, BeliefError> {
+    let n = check_square(p)?;
+    let positive = |t: usize, i: usize| p[t][i] > 0.0 && p[t][i].is_finite();
+    let parts = blocks(n, positive);
+    if parts.len() > 1 && parts.iter().all(Block::is_balanced) {
+        let mut out = vec![0u32; n];
+        for block in &parts {
+            let sub: Vec<Vec<f64>> = block
+                .tracks
+                .iter()
+                .map(|&t| block.identities.iter().map(|&i| p[t][i]).collect())
+                .collect();
+            let local = whole_assignment(&sub)?;
+            for (r, &c) in local.iter().enumerate() {
+                out[block.tracks[r]] = block.identities[c as usize] as u32;
+            }
+        }
+        return Ok(out);
+    }
+    whole_assignment(p)
+}
+
+/// [`most_likely_assignment`] by one Hungarian run over the whole matrix.
+fn whole_assignment(p: &[Vec<f64>]) -> Result<Vec<u32>, BeliefError> {
     let n = check_square(p)?;
     // −ln of the smallest positive f64 is about 744.4, so any assignment of
     // positive entries costs less than 745·n < this.
@@ -139,6 +168,42 @@ mod tests {
                     .sum::<f64>()
             })
             .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    #[test]
+    fn block_by_block_matches_brute_force() {
+        // Random block-diagonal patterns under a random relabelling: the
+        // split solve finds an assignment as good as the best over all n!.
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        for n in 2..=7 {
+            for _ in 0..20 {
+                let group: Vec<usize> = (0..n).map(|_| rng.gen_range(0..3)).collect();
+                let mut ids: Vec<usize> = (0..n).collect();
+                for i in (1..n).rev() {
+                    ids.swap(i, rng.gen_range(0..=i));
+                }
+                let p: Vec<Vec<f64>> = (0..n)
+                    .map(|t| {
+                        (0..n)
+                            .map(|i| {
+                                if group[t] == group[ids[i]] {
+                                    rng.gen_range(0.001..1.0)
+                                } else {
+                                    0.0
+                                }
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let best = most_likely_assignment(&p).unwrap();
+                let score: f64 = best
+                    .iter()
+                    .enumerate()
+                    .map(|(t, &i)| p[t][i as usize].ln())
+                    .sum();
+                assert!((score - brute_force(&p)).abs() < 1e-9, "n={n}");
+            }
+        }
     }
 
     #[test]

@@ -89,8 +89,9 @@
 
 use super::event::{check_assignment, check_identify, check_mix, check_square, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
-use super::marginals::{information_marginals, MarginalMethod};
+use super::marginals::{block_marginals, information_marginals, BlockMarginals, MarginalMethod};
 use super::sinkhorn::SinkhornOptions;
+use super::support_mix::fit_on_support;
 use crate::error::BeliefError;
 use crate::event::Mix;
 use nalgebra::{DMatrix, DVector};
@@ -152,10 +153,14 @@ impl InformationMatrix {
         options: InformationOptions,
     ) -> Result<Self, BeliefError> {
         let n = check_square(l)?;
-        if let Some(&bad) = l.iter().flatten().find(|x| !x.is_finite()) {
+        if let Some(&bad) = l
+            .iter()
+            .flatten()
+            .find(|x| x.is_nan() || **x == f64::INFINITY)
+        {
             return Err(BeliefError::Numerical {
                 step: "information matrix",
-                detail: format!("entry {bad} is not finite"),
+                detail: format!("entry {bad} is neither finite nor −∞"),
             });
         }
         options.sinkhorn.validate()?;
@@ -168,8 +173,11 @@ impl InformationMatrix {
 
     /// Track t carries `assignment[t]` with log-odds `confidence` against
     /// each other single identity: L\[t\]\[assignment\[t\]\] = confidence, 0
-    /// elsewhere. A finite stand-in for a known assignment (see the module
-    /// docs); e.g. 20 puts e^-20 on each wrong pairing.
+    /// elsewhere; `confidence` = +∞ ([`KNOWN_START_CONFIDENCE`]) is the
+    /// exact known start, 0 on the known identity and −∞ elsewhere (see
+    /// [`crate::identity::blocks`]). A finite confidence is the paper's
+    /// stand-in (e.g. 20 puts e^-20 on each wrong pairing), kept for
+    /// comparison: docs/identity.md measures both.
     pub fn from_assignment(
         assignment: &[u32],
         confidence: f64,
@@ -180,10 +188,10 @@ impl InformationMatrix {
             return Err(BeliefError::NoTracks);
         }
         check_assignment(n, assignment)?;
-        if !confidence.is_finite() {
+        if confidence.is_nan() || confidence == f64::NEG_INFINITY {
             return Err(BeliefError::Numerical {
                 step: "information matrix",
-                detail: format!("confidence {confidence} is not finite"),
+                detail: format!("confidence {confidence} is neither finite nor +∞"),
             });
         }
         options.sinkhorn.validate()?;
@@ -211,6 +219,12 @@ impl InformationMatrix {
     /// L\[t\]\[i\].
     pub fn get(&self, track: usize, identity: usize) -> Option<f64> {
         (track < self.n && identity < self.n).then(|| self.l[track * self.n + identity])
+    }
+
+    /// Marginals block by block (see [`crate::identity::blocks`]): what a
+    /// query at n = 10,000 should ask for — no n × n matrix is built.
+    pub fn block_marginals(&self, method: &MarginalMethod) -> Result<BlockMarginals, BeliefError> {
+        block_marginals(self.n, &self.l, method, &self.options.sinkhorn)
     }
 
     /// Marginals by a given method, whatever the configured one.
@@ -251,19 +265,28 @@ impl IdentityFilter for InformationMatrix {
     }
 }
 
-/// L\[t\]\[i\] of a known initial assignment: the log-odds of the known
-/// identity against each other one. The least-squares mixing rule needs
-/// finite entries; e^-20 ≈ 2e-9 on each wrong pairing changes no printed
-/// digit.
-pub const KNOWN_START_CONFIDENCE: f64 = 20.0;
+/// The log-odds of a known initial identity against each other one: +∞,
+/// the exact known start (0 on the known identity, −∞ elsewhere). The
+/// mixing rule fits only the pairs of identities two tracks can carry
+/// ([`crate::identity::support_mix`]), so it needs no finite stand-in; the
+/// finite 20 of earlier versions made the fit spend itself on impossible
+/// pairs and the marginals confidently wrong (docs/identity.md,
+/// "Calibration").
+pub const KNOWN_START_CONFIDENCE: f64 = f64::INFINITY;
 
 /// Row t of a start: 0 everywhere (uniform), or `confidence` on the known
-/// identity.
+/// identity (+∞: 0 on it and −∞ on every other).
 pub fn start_row(n: usize, known: Option<u32>, confidence: f64) -> Vec<f64> {
-    let mut row = vec![0.0; n];
-    if let Some(slot) = known.and_then(|i| row.get_mut(i as usize)) {
-        *slot = confidence;
+    let Some(known) = known.filter(|&i| (i as usize) < n) else {
+        return vec![0.0; n];
+    };
+    if confidence == f64::INFINITY {
+        let mut row = vec![f64::NEG_INFINITY; n];
+        row[known as usize] = 0.0;
+        return row;
     }
+    let mut row = vec![0.0; n];
+    row[known as usize] = confidence;
     row
 }
 
@@ -285,6 +308,11 @@ pub fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefEr
             track: identify.track,
             identities: n,
         })?;
+    if *slot == f64::NEG_INFINITY {
+        // The track cannot carry the identity read: the read is equally
+        // likely under every possible assignment and says nothing.
+        return Ok(());
+    }
     let next = *slot + odds;
     if !next.is_finite() {
         return Err(BeliefError::Numerical {
@@ -312,9 +340,26 @@ pub fn mixed_rows(
     if swap == 0.0 {
         return Ok(None);
     }
+    let ruled_out = |row: &[f64]| row.contains(&f64::NEG_INFINITY);
     let (mut x, mut y) = if swap == 1.0 {
         // A sure swap is exact: exchange the rows.
         (row_b.to_vec(), row_a.to_vec())
+    } else if ruled_out(row_a) || ruled_out(row_b) {
+        if !(0.0..=1.0).contains(&swap) {
+            return Err(BeliefError::BadSwap { swap });
+        }
+        if row_a.len() != row_b.len()
+            || row_a
+                .iter()
+                .chain(row_b)
+                .any(|x| x.is_nan() || *x == f64::INFINITY)
+        {
+            return Err(BeliefError::Numerical {
+                step: "information matrix mixing",
+                detail: "rows must be of one length, with entries finite or −∞".into(),
+            });
+        }
+        fit_on_support(row_a, row_b, swap, solver)?
     } else {
         match solver {
             MixSolver::ClosedForm => fit_mixed_rows(row_a, row_b, swap)?,
@@ -326,10 +371,11 @@ pub fn mixed_rows(
     Ok(Some((x, y)))
 }
 
-/// Adds a constant so the largest entry is 0 (Property 1: same belief).
+/// Adds a constant so the largest entry is 0 (Property 1: same belief);
+/// −∞ entries (ruled-out identities) stay.
 fn shift_to_max_zero(row: &mut [f64]) -> Result<(), BeliefError> {
     let top = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if !top.is_finite() || row.iter().any(|x| !x.is_finite()) {
+    if !top.is_finite() || row.iter().any(|x| x.is_nan() || *x == f64::INFINITY) {
         return Err(BeliefError::Numerical {
             step: "information matrix mixing",
             detail: format!("the fitted row has non-finite entries (max {top})"),

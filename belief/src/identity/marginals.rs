@@ -36,19 +36,41 @@
 //!   permanent for N = 3..6. 1 − P_ij is computed as the sum of the other
 //!   entries of its row, so it does not round to 0 for confident entries.
 
+//!
+//! ## Block by block
+//! Every method works on the independent blocks of the belief
+//! ([`crate::identity::blocks`]: the components of the pattern of finite
+//! entries of L — with a known start, the groups of tracks that mixing has
+//! connected) one at a time, and the marginals between blocks are 0. So
+//! the cost is that of the largest block, not of n: at n = 10,000 a known
+//! start plus a crowd's mixes leaves blocks of a few tracks, each answered
+//! exactly. [`MarginalMethod::Auto`], the default, is exact on blocks of
+//! at most [`AUTO_EXACT_BLOCK`] tracks and half-Bethe beyond; a method that
+//! cannot take a block (exact beyond
+//! [`super::permanent::MAX_PERMANENT_TRACKS`]) says so with the block's
+//! size ([`BeliefError::TooLargeBlock`]).
+
+use super::assignment::most_likely_assignment;
+use super::blocks::{blocks_of_log_likelihoods, sub_matrix, Block};
+use super::filter::to_rows;
 use super::metropolis::metropolis_marginals;
-use super::permanent::{exp_rows, marginals_from_log_likelihoods};
+use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
 use crate::error::BeliefError;
 
 /// How marginals are computed from an information matrix.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum MarginalMethod {
-    /// Exact, by the permanent (N ≤ [`super::permanent::MAX_PERMANENT_TRACKS`]).
-    #[default]
+    /// Exact, by the permanent, on blocks of at most
+    /// [`super::permanent::MAX_PERMANENT_TRACKS`] tracks.
     Exact,
-    /// The paper's Metropolis sampler: `samples` counted steps after
-    /// `burn_in` uncounted ones, from a ChaCha8 generator seeded by `seed`.
+    /// Exact on blocks of at most [`AUTO_EXACT_BLOCK`] tracks, the
+    /// half-Bethe estimate on larger blocks: answers at any size.
+    #[default]
+    Auto,
+    /// The paper's Metropolis sampler, run on each block: `samples` counted
+    /// steps after `burn_in` uncounted ones per block, from a ChaCha8
+    /// generator seeded by `seed`.
     Metropolis {
         samples: usize,
         burn_in: usize,
@@ -70,12 +92,17 @@ pub enum MarginalMethod {
 /// Counted Metropolis steps when none are asked for.
 pub const DEFAULT_SAMPLES: usize = 10_000;
 
+/// The largest block [`MarginalMethod::Auto`] answers exactly (2^16
+/// Gray-code steps of 16² each: about a millisecond).
+pub const AUTO_EXACT_BLOCK: usize = 16;
+
 impl MarginalMethod {
-    /// The method a command line or a query names: `exact`, `metropolis`
-    /// (`samples` counted steps after a tenth as many burn-in steps, from
-    /// `seed`), `sinkhorn` or `bethe` (γ = ½).
+    /// The method a command line or a query names: `auto`, `exact`,
+    /// `metropolis` (`samples` counted steps after a tenth as many burn-in
+    /// steps, from `seed`), `sinkhorn` or `bethe` (γ = ½).
     pub fn named(name: &str, samples: usize, seed: u64) -> Option<Self> {
         Some(match name {
+            "auto" => MarginalMethod::Auto,
             "exact" => MarginalMethod::Exact,
             "metropolis" => MarginalMethod::Metropolis {
                 samples,
@@ -91,6 +118,7 @@ impl MarginalMethod {
     /// The name [`MarginalMethod::named`] reads.
     pub fn name(&self) -> &'static str {
         match self {
+            MarginalMethod::Auto => "auto",
             MarginalMethod::Exact => "exact",
             MarginalMethod::Metropolis { .. } => "metropolis",
             MarginalMethod::Sinkhorn => "sinkhorn",
@@ -109,30 +137,138 @@ impl MarginalMethod {
     }
 }
 
-/// Marginals (row-major) of p(π) ∝ exp(Σ_t l\[t·n + π(t)\]).
+/// Marginals block by block: for each independent block, its tracks, its
+/// identities and the block's k × k marginals (row-major). Entries between
+/// blocks are 0.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockMarginals {
+    pub n: usize,
+    pub blocks: Vec<(Block, Vec<f64>)>,
+}
+
+impl BlockMarginals {
+    /// The n × n marginals, row-major.
+    pub fn dense(&self) -> Vec<f64> {
+        let n = self.n;
+        let mut out = vec![0.0; n * n];
+        for (block, p) in &self.blocks {
+            let k = block.size();
+            for (r, &t) in block.tracks.iter().enumerate() {
+                for (c, &i) in block.identities.iter().enumerate() {
+                    out[t * n + i] = p[r * k + c];
+                }
+            }
+        }
+        out
+    }
+
+    /// The most likely one-to-one assignment under these marginals,
+    /// solved block by block (`result[t]` = identity of track t).
+    pub fn most_likely(&self) -> Result<Vec<u32>, BeliefError> {
+        let mut out = vec![0u32; self.n];
+        for (block, p) in &self.blocks {
+            let local = most_likely_assignment(&to_rows(block.size(), p))?;
+            for (r, &c) in local.iter().enumerate() {
+                out[block.tracks[r]] = block.identities[c as usize] as u32;
+            }
+        }
+        Ok(out)
+    }
+
+    /// The number of tracks of the largest block.
+    pub fn largest_block(&self) -> usize {
+        self.blocks.iter().map(|(b, _)| b.size()).max().unwrap_or(0)
+    }
+}
+
+/// Marginals (row-major) of p(π) ∝ exp(Σ_t l\[t·n + π(t)\]); entries finite
+/// or −∞ (an identity the track cannot carry).
 pub fn information_marginals(
     n: usize,
     l: &[f64],
     method: &MarginalMethod,
     sinkhorn_options: &SinkhornOptions,
 ) -> Result<Vec<f64>, BeliefError> {
+    block_marginals(n, l, method, sinkhorn_options).map(|m| m.dense())
+}
+
+/// [`information_marginals`] block by block (see the module docs).
+pub fn block_marginals(
+    n: usize,
+    l: &[f64],
+    method: &MarginalMethod,
+    sinkhorn_options: &SinkhornOptions,
+) -> Result<BlockMarginals, BeliefError> {
+    if n == 0 {
+        return Err(BeliefError::NoTracks);
+    }
+    if l.len() != n * n {
+        return Err(BeliefError::Numerical {
+            step: "information matrix",
+            detail: format!("expected {n} × {n} entries, got {}", l.len()),
+        });
+    }
+    if let Some(&bad) = l.iter().find(|x| x.is_nan() || **x == f64::INFINITY) {
+        return Err(BeliefError::Numerical {
+            step: "information matrix",
+            detail: format!("entry {bad} is neither finite nor −∞"),
+        });
+    }
+    let blocks = blocks_of_log_likelihoods(n, l);
+    if blocks.iter().any(|b| !b.is_balanced()) {
+        // Some tracks can carry fewer identities than they are: no
+        // assignment is possible at all.
+        return Err(BeliefError::Degenerate { normalizer: 0.0 });
+    }
+    let largest = blocks.iter().map(Block::size).max().unwrap_or(0);
+    if *method == MarginalMethod::Exact && largest > MAX_PERMANENT_TRACKS {
+        return Err(BeliefError::TooLargeBlock {
+            method: "exact marginals (permanent)",
+            block: largest,
+            tracks: n,
+            limit: MAX_PERMANENT_TRACKS,
+        });
+    }
+    let mut out = Vec::with_capacity(blocks.len());
+    for block in blocks {
+        let k = block.size();
+        let p = if k == 1 {
+            vec![1.0]
+        } else {
+            let sub = sub_matrix(n, l, &block);
+            one_block(k, &sub, method, sinkhorn_options)?
+        };
+        out.push((block, p));
+    }
+    Ok(BlockMarginals { n, blocks: out })
+}
+
+/// The marginals of one block (k ≥ 2) by `method`.
+fn one_block(
+    k: usize,
+    l: &[f64],
+    method: &MarginalMethod,
+    sinkhorn_options: &SinkhornOptions,
+) -> Result<Vec<f64>, BeliefError> {
     match *method {
-        MarginalMethod::Exact => marginals_from_log_likelihoods(n, l),
+        MarginalMethod::Exact => marginals_from_log_likelihoods(k, l),
+        MarginalMethod::Auto if k <= AUTO_EXACT_BLOCK => marginals_from_log_likelihoods(k, l),
+        MarginalMethod::Auto => one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options),
         MarginalMethod::Metropolis {
             samples,
             burn_in,
             seed,
-        } => metropolis_marginals(n, l, samples, burn_in, seed),
+        } => metropolis_marginals(k, l, samples, burn_in, seed),
         MarginalMethod::Sinkhorn => {
-            let mut a = exp_rows(n, l)?;
-            sinkhorn(n, &mut a, sinkhorn_options)?;
+            let mut a = exp_rows(k, l)?;
+            sinkhorn(k, &mut a, sinkhorn_options)?;
             Ok(a)
         }
         MarginalMethod::FractionalBethe {
             gamma,
             max_iterations,
             tolerance,
-        } => fractional_bethe(n, l, gamma, max_iterations, tolerance, sinkhorn_options),
+        } => fractional_bethe(k, l, gamma, max_iterations, tolerance, sinkhorn_options),
     }
 }
 
@@ -207,7 +343,7 @@ mod tests {
 
     #[test]
     fn methods_are_named_as_the_command_line_and_queries_name_them() {
-        for name in ["exact", "metropolis", "sinkhorn", "bethe"] {
+        for name in ["auto", "exact", "metropolis", "sinkhorn", "bethe"] {
             let method = MarginalMethod::named(name, 100, 1).unwrap();
             assert_eq!(method.name(), name);
         }
@@ -353,5 +489,132 @@ mod tests {
             &SinkhornOptions::default()
         )
         .is_err());
+    }
+
+    /// A random information matrix with a known start and `mixes` random
+    /// mixes of nearby tracks, and `reads` reads: blocks of several sizes.
+    fn known_start_matrix(n: usize, seed: u64, mixes: usize, reads: usize) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut start: Vec<u32> = (0..n as u32).collect();
+        for i in (1..n).rev() {
+            start.swap(i, rng.gen_range(0..=i));
+        }
+        let mut info =
+            InformationMatrix::from_assignment(&start, f64::INFINITY, Default::default()).unwrap();
+        for _ in 0..mixes {
+            let a = rng.gen_range(0..n);
+            let b = (a + rng.gen_range(1..3.min(n))) % n;
+            info.mix(crate::Mix {
+                a: a as u32,
+                b: b as u32,
+                swap: rng.gen_range(0.1..0.9),
+            })
+            .unwrap();
+        }
+        for _ in 0..reads {
+            info.identify(crate::identity::Identify {
+                track: rng.gen_range(0..n) as u32,
+                identity: rng.gen_range(0..n) as u32,
+                accuracy: 0.9,
+            })
+            .unwrap();
+        }
+        info.log_likelihoods().concat()
+    }
+
+    #[test]
+    fn exact_refuses_a_block_too_large_and_names_its_size() {
+        let n = 30;
+        let l = vec![0.0; n * n];
+        let e =
+            information_marginals(n, &l, &MarginalMethod::Exact, &Default::default()).unwrap_err();
+        assert_eq!(
+            e,
+            BeliefError::TooLargeBlock {
+                method: "exact marginals (permanent)",
+                block: 30,
+                tracks: 30,
+                limit: MAX_PERMANENT_TRACKS
+            }
+        );
+        assert!(e.to_string().contains("has 30 of the 30 tracks"), "{e}");
+        // Auto answers it (half-Bethe on the one block of 30).
+        let p = by(MarginalMethod::Auto, n, &l);
+        assert!(doubly_stochastic_residual(&p) < 1e-9);
+    }
+
+    #[test]
+    fn a_thousand_tracks_in_small_blocks_answer_exactly() {
+        // n = 1000 with a known start and 600 local mixes: every method
+        // answers, exact and auto agree, and the other methods are
+        // doubly stochastic with zeros between blocks.
+        let n = 1000;
+        let l = known_start_matrix(n, 3, 600, 300);
+        let opts = SinkhornOptions::default();
+        let exact = block_marginals(n, &l, &MarginalMethod::Exact, &opts).unwrap();
+        assert!(exact.largest_block() <= MAX_PERMANENT_TRACKS);
+        assert!(exact.blocks.len() > 100, "{}", exact.blocks.len());
+        let auto = block_marginals(n, &l, &MarginalMethod::Auto, &opts).unwrap();
+        let (e, a) = (exact.dense(), auto.dense());
+        if exact.largest_block() <= AUTO_EXACT_BLOCK {
+            assert_eq!(e, a);
+        }
+        for method in [
+            MarginalMethod::Sinkhorn,
+            MarginalMethod::half_bethe(),
+            MarginalMethod::Metropolis {
+                samples: 2_000,
+                burn_in: 200,
+                seed: 1,
+            },
+        ] {
+            let m = information_marginals(n, &l, &method, &opts).unwrap();
+            for (x, y) in m.iter().zip(&e) {
+                assert!(*y > 0.0 || *x == 0.0, "{}", method.name());
+            }
+            assert!(doubly_stochastic_residual(&to_rows(n, &m)) < 1e-8);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+
+        /// Block by block equals the exact filter over all n! assignments
+        /// (exact, and auto, which is exact at these sizes); every other
+        /// method equals itself run on each block alone, i.e. blocks change
+        /// nothing but the cost.
+        #[test]
+        fn blocks_agree_with_the_exact_filter(
+            n in 2usize..=8,
+            seed in proptest::prelude::any::<u64>(),
+            mixes in 0usize..10,
+            reads in 0usize..10,
+        ) {
+            let l = known_start_matrix(n, seed, mixes, reads);
+            let want = exact(n, &l);
+            for method in [MarginalMethod::Exact, MarginalMethod::Auto] {
+                let got = by(method, n, &l);
+                proptest::prop_assert!(max_abs_difference(&got, &want) < 1e-9);
+            }
+            let opts = SinkhornOptions::default();
+            for method in [MarginalMethod::Sinkhorn, MarginalMethod::half_bethe()] {
+                let got = by(method, n, &l);
+                let blocks = block_marginals(n, &l, &method, &opts).unwrap();
+                for (block, p) in &blocks.blocks {
+                    let sub = crate::identity::blocks::sub_matrix(n, &l, block);
+                    let alone = if block.size() == 1 {
+                        vec![1.0]
+                    } else {
+                        one_block(block.size(), &sub, &method, &opts).unwrap()
+                    };
+                    proptest::prop_assert_eq!(p, &alone);
+                }
+                proptest::prop_assert!(doubly_stochastic_residual(&got) < 1e-9);
+                // Zero exactly where the exact belief is zero.
+                for (x, y) in got.iter().flatten().zip(want.iter().flatten()) {
+                    proptest::prop_assert!(*y > 0.0 || *x == 0.0);
+                }
+            }
+        }
     }
 }

@@ -23,7 +23,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// Metropolis estimate of the marginals (row-major) of
-/// p(π) ∝ exp(Σ_t l\[t·n + π(t)\]); `l` must be finite.
+/// p(π) ∝ exp(Σ_t l\[t·n + π(t)\]); entries finite or −∞ (ruled out).
 pub fn metropolis_marginals(
     n: usize,
     l: &[f64],
@@ -31,13 +31,40 @@ pub fn metropolis_marginals(
     burn_in: usize,
     seed: u64,
 ) -> Result<Vec<f64>, BeliefError> {
+    metropolis_diagnosed(n, l, samples, burn_in, seed).map(|run| run.marginals)
+}
+
+/// A Metropolis run: the marginals and how far the chain is from having
+/// converged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MetropolisRun {
+    /// Row-major n × n.
+    pub marginals: Vec<f64>,
+    /// The largest |p₁ − p₂| between the marginals of the first and the
+    /// second half of the counted steps: a split-chain convergence
+    /// diagnostic (in the spirit of Gelman–Rubin's split R̂). A chain that
+    /// has mixed gives halves that agree up to sampling noise; one stuck
+    /// in a mode, or still drifting away from its start, does not.
+    pub half_difference: f64,
+    /// The share of proposals accepted.
+    pub acceptance: f64,
+}
+
+/// [`metropolis_marginals`] with its convergence diagnostic.
+pub fn metropolis_diagnosed(
+    n: usize,
+    l: &[f64],
+    samples: usize,
+    burn_in: usize,
+    seed: u64,
+) -> Result<MetropolisRun, BeliefError> {
     if n == 0 {
         return Err(BeliefError::NoTracks);
     }
-    if l.len() != n * n || l.iter().any(|x| !x.is_finite()) {
+    if l.len() != n * n || l.iter().any(|x| x.is_nan() || *x == f64::INFINITY) {
         return Err(BeliefError::Numerical {
             step: "metropolis",
-            detail: format!("need {n} × {n} finite log-likelihoods"),
+            detail: format!("need {n} × {n} log-likelihoods, finite or −∞"),
         });
     }
     if samples == 0 {
@@ -46,15 +73,38 @@ pub fn metropolis_marginals(
             what: "zero samples",
         });
     }
-    let cost: Vec<f64> = l.iter().map(|&x| -x).collect();
+    // Start at the best assignment; a ruled-out pairing costs more than any
+    // assignment of possible ones, so it is used only if nothing else is
+    // possible — and then the belief is empty.
+    let spread = l
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    let ruled_out_cost = (2.0 * spread + 1.0) * (n as f64 + 1.0);
+    let cost: Vec<f64> = l
+        .iter()
+        .map(|&x| if x.is_finite() { -x } else { ruled_out_cost })
+        .collect();
     let mut state: Vec<u32> = min_cost_assignment(n, &cost);
+    if state
+        .iter()
+        .enumerate()
+        .any(|(t, &i)| !l[t * n + i as usize].is_finite())
+    {
+        return Err(BeliefError::Degenerate { normalizer: 0.0 });
+    }
     if n == 1 {
-        return Ok(vec![1.0]);
+        return Ok(MetropolisRun {
+            marginals: vec![1.0],
+            half_difference: 0.0,
+            acceptance: 1.0,
+        });
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let at = |t: usize, i: u32| l[t * n + i as usize];
     // One Metropolis step; on acceptance returns the two tracks and the
-    // identities they held before.
+    // identities they held before. A swap onto a ruled-out pairing has
+    // Δ = −∞ and is never accepted.
     let step = |state: &mut Vec<u32>, rng: &mut ChaCha8Rng| -> Option<[(usize, u32); 2]> {
         let a = rng.gen_range(0..n);
         let b = (a + rng.gen_range(1..n)) % n;
@@ -74,17 +124,44 @@ pub fn metropolis_marginals(
     // track t spent on identity i, settled up to sample `since[t]`.
     let mut time = vec![0u64; n * n];
     let mut since = vec![0u64; n];
-    for k in 0..samples as u64 {
+    let total = samples as u64;
+    let half = total / 2;
+    let mut first_half: Option<Vec<u64>> = None;
+    let mut accepted = 0u64;
+    for k in 0..total {
+        if k == half && half > 0 {
+            let mut settled = time.clone();
+            for t in 0..n {
+                settled[t * n + state[t] as usize] += k - since[t];
+            }
+            first_half = Some(settled);
+        }
         if let Some(changed) = step(&mut state, &mut rng) {
+            accepted += 1;
             for (t, old) in changed {
                 time[t * n + old as usize] += k - since[t];
                 since[t] = k;
             }
         }
     }
-    let total = samples as u64;
     for t in 0..n {
         time[t * n + state[t] as usize] += total - since[t];
     }
-    Ok(time.iter().map(|&c| c as f64 / total as f64).collect())
+    let half_difference = match first_half {
+        Some(first) => first
+            .iter()
+            .zip(&time)
+            .map(|(&a, &all)| {
+                let p1 = a as f64 / half as f64;
+                let p2 = (all - a) as f64 / (total - half) as f64;
+                (p1 - p2).abs()
+            })
+            .fold(0.0, f64::max),
+        None => f64::INFINITY,
+    };
+    Ok(MetropolisRun {
+        marginals: time.iter().map(|&c| c as f64 / total as f64).collect(),
+        half_difference,
+        acceptance: accepted as f64 / total as f64,
+    })
 }

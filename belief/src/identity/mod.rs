@@ -25,6 +25,11 @@
 //!   (Section 3): O(1) reads, the least-squares mixing rule (the paper's
 //!   pseudoinverse and an O(N²) closed form), and what "exact for N ≤ 3"
 //!   really requires.
+//! - [`support_mix`] — the mixing rule for rows that rule identities out
+//!   (−∞ entries, e.g. an exact known start): exact when two blocks meet.
+//! - [`blocks`] — the independent blocks of a belief (the groups of tracks
+//!   mixing has connected since a known start), which every marginal
+//!   method answers one at a time.
 //! - [`rows`] — [`InformationRows`], one leader's rows of an information
 //!   matrix: reads applied locally, rows exchanged at a mix across leaders,
 //!   the whole matrix assembled only for a query (Section 4's distribution).
@@ -40,6 +45,7 @@
 
 pub mod assignment;
 pub mod belief_matrix;
+pub mod blocks;
 pub mod event;
 pub mod exact;
 pub mod filter;
@@ -51,15 +57,17 @@ pub mod permutation;
 pub mod property_bits;
 pub mod rows;
 pub mod sinkhorn;
+pub mod support_mix;
 pub mod workload;
 
 pub use assignment::{identity_error, most_likely_assignment};
 pub use belief_matrix::BeliefMatrix;
+pub use blocks::Block;
 pub use event::{Identify, IdentityEvent};
 pub use exact::ExactPermutationFilter;
 pub use filter::{IdentityFilter, Marginals};
 pub use information::{InformationMatrix, InformationOptions, MixSolver};
-pub use marginals::MarginalMethod;
+pub use marginals::{BlockMarginals, MarginalMethod};
 pub use permanent::PermanentFormula;
 pub use property_bits::{BitCode, PropertyBitsFilter};
 pub use rows::InformationRows;

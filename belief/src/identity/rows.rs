@@ -194,14 +194,17 @@ impl InformationRows {
     }
 
     fn check_row(&self, row: &[f64]) -> Result<(), BeliefError> {
-        if row.len() != self.n || row.iter().any(|x| !x.is_finite()) {
+        let bad = |x: &f64| x.is_nan() || *x == f64::INFINITY;
+        if row.len() != self.n || row.iter().any(bad) || row.iter().all(|&x| x == f64::NEG_INFINITY)
+        {
             return Err(BeliefError::Numerical {
                 step: "a row of an information matrix",
                 detail: format!(
-                    "a row must hold {} finite log-likelihoods, got {} ({} not finite)",
+                    "a row must hold {} log-likelihoods, finite or −∞ and not all −∞, \
+                     got {} ({} NaN or +∞)",
                     self.n,
                     row.len(),
-                    row.iter().filter(|x| !x.is_finite()).count()
+                    row.iter().filter(|x| bad(x)).count()
                 ),
             });
         }

@@ -157,11 +157,16 @@ pub(crate) fn scale_logged(
     }
     // Phase 2: damped Newton, then sweeps again if Newton is not allowed.
     let mut newton_steps = 0;
-    if n <= MAX_NEWTON_TRACKS && residual.is_finite() {
+    if residual.is_finite() {
         while iterations < options.max_iterations {
             iterations += 1;
             newton_steps += 1;
-            if !newton_step(n, matrix, &mut logs) {
+            let stepped = if n <= MAX_NEWTON_TRACKS {
+                newton_step(n, matrix, &mut logs)
+            } else {
+                newton_cg_step(n, matrix, &mut logs)
+            };
+            if !stepped {
                 break;
             }
             residual = sweep(n, matrix, &mut logs);
@@ -206,9 +211,13 @@ pub(crate) fn scale_logged(
 /// Plain sweeps tried before Newton steps.
 const SWEEPS_BEFORE_NEWTON: usize = 100;
 
-/// Newton steps solve a 2N × 2N system, O(N³); above this size only sweeps
-/// are used (and a slow case ends in the iteration-cap error).
+/// Newton steps solve a 2N × 2N system by Cholesky, O(N³), up to this
+/// size; above it the same Newton step is solved by preconditioned
+/// conjugate gradients ([`newton_cg_step`]), O(N²) per CG iteration.
 pub const MAX_NEWTON_TRACKS: usize = 400;
+
+/// The most conjugate-gradient iterations of one Newton–CG step.
+const MAX_CG_ITERATIONS: usize = 200;
 
 /// One Sinkhorn sweep: divide columns, then rows, by their sums. Returns the
 /// largest |row sum − 1| seen before the row division (columns were exact
@@ -283,6 +292,90 @@ fn newton_step(n: usize, p: &mut [f64], logs: &mut LogScaling) -> bool {
             return false;
         }
     };
+    let step: Vec<f64> = step.iter().copied().collect();
+    let g: Vec<f64> = g.iter().copied().collect();
+    line_search(n, p, logs, &g, &step)
+}
+
+/// The Newton step of [`newton_step`] for large N, without forming the
+/// Hessian: conjugate gradients on H·d = −g with H·v = (r∘v₁ + P·v₂,
+/// Pᵀ·v₁ + c∘v₂), preconditioned by the diagonal (r, c) (Jacobi), each
+/// iteration O(N²); stopped when the residual is a hundredth of ‖g‖
+/// (inexact Newton: the line search keeps every step a descent, and the
+/// next step corrects what this one left). Why: plain sweeps stall on
+/// peaked beliefs above [`MAX_NEWTON_TRACKS`] (the failure at n = 500 in
+/// issue 21), and Cholesky of a 2N × 2N matrix is O(N³).
+fn newton_cg_step(n: usize, p: &mut [f64], logs: &mut LogScaling) -> bool {
+    let dim = 2 * n;
+    let mut diag = vec![0.0; dim];
+    for i in 0..n {
+        for j in 0..n {
+            let x = p[i * n + j];
+            diag[i] += x;
+            diag[n + j] += x;
+        }
+    }
+    let g: Vec<f64> = diag.iter().map(|d| d - 1.0).collect();
+    let scale = diag.iter().copied().fold(0.0, f64::max).max(1.0);
+    let ridge = 1e-12 * scale;
+    let hess = |v: &[f64], out: &mut [f64]| {
+        for k in 0..dim {
+            out[k] = (diag[k] + ridge) * v[k];
+        }
+        for i in 0..n {
+            let row = &p[i * n..(i + 1) * n];
+            let mut acc = 0.0;
+            for (j, &x) in row.iter().enumerate() {
+                acc += x * v[n + j];
+                out[n + j] += x * v[i];
+            }
+            out[i] += acc;
+        }
+    };
+    let precondition =
+        |r: &[f64]| -> Vec<f64> { r.iter().zip(&diag).map(|(x, d)| x / (d + ridge)).collect() };
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let goal = 1e-2 * norm(&g);
+    // Solve H·d = −g from d = 0.
+    let mut d = vec![0.0; dim];
+    let mut r: Vec<f64> = g.iter().map(|x| -x).collect();
+    let mut z = precondition(&r);
+    let mut dir = z.clone();
+    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+    let mut hd = vec![0.0; dim];
+    for _ in 0..MAX_CG_ITERATIONS {
+        if norm(&r) <= goal {
+            break;
+        }
+        hess(&dir, &mut hd);
+        let curvature: f64 = dir.iter().zip(&hd).map(|(a, b)| a * b).sum();
+        // Not positive, or NaN: CG cannot go on.
+        if curvature.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            break;
+        }
+        let alpha = rz / curvature;
+        for k in 0..dim {
+            d[k] += alpha * dir[k];
+            r[k] -= alpha * hd[k];
+        }
+        z = precondition(&r);
+        let rz_next: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
+        let beta = rz_next / rz;
+        rz = rz_next;
+        for k in 0..dim {
+            dir[k] = z[k] + beta * dir[k];
+        }
+    }
+    if d.iter().all(|&x| x == 0.0) {
+        return false;
+    }
+    line_search(n, p, logs, &g, &d)
+}
+
+/// Backtracking (Armijo) along `step` from the current scaling, on the dual
+/// objective of [`newton_step`]; applies the step and returns true, or
+/// false when no step length decreases it.
+fn line_search(n: usize, p: &mut [f64], logs: &mut LogScaling, g: &[f64], step: &[f64]) -> bool {
     if step.iter().any(|x| !x.is_finite()) {
         return false;
     }
@@ -299,7 +392,7 @@ fn newton_step(n: usize, p: &mut [f64], logs: &mut LogScaling) -> bool {
         total - t * step.iter().sum::<f64>()
     };
     let f0 = f(0.0);
-    let slope = g.dot(&step);
+    let slope: f64 = g.iter().zip(step).map(|(a, b)| a * b).sum();
     let mut t = 1.0;
     while t > 1e-12 {
         let ft = f(t);
@@ -565,5 +658,27 @@ mod tests {
         }
         .validate()
         .is_err());
+    }
+
+    #[test]
+    fn peaked_matrices_above_the_cholesky_size_converge() {
+        // A permutation with pairs mixed and e^-20 elsewhere, n = 450:
+        // the shape that stalled plain sweeps (issue 21). Newton–CG
+        // converges to the default tolerance.
+        let n = MAX_NEWTON_TRACKS + 50;
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let mut m = vec![(-20f64).exp(); n * n];
+        for t in 0..n {
+            m[t * n + t] = 1.0;
+        }
+        for t in (0..n - 1).step_by(3) {
+            let x = rng.gen_range(0.01..1.0);
+            m[t * n + t + 1] = x;
+            m[(t + 1) * n + t] = x;
+        }
+        let report = sinkhorn(n, &mut m, &SinkhornOptions::default()).unwrap();
+        assert!(report.newton_steps > 0, "{report:?}");
+        assert!(report.residual <= 1e-10);
+        assert!(column_residual(n, &m) < 1e-9);
     }
 }

@@ -85,6 +85,38 @@ pub struct IdentityWorkload {
 
 /// Draws a stream; the same spec always gives the same stream.
 pub fn generate(spec: &IdentityWorkloadSpec) -> Result<IdentityWorkload, BeliefError> {
+    let mut history = Vec::with_capacity(spec.events);
+    let (initial, events) = generate_with(spec, |truth| history.push(truth.to_vec()))?;
+    Ok(IdentityWorkload {
+        initial,
+        events,
+        truth: history,
+    })
+}
+
+/// The initial assignment, the events and the final assignment.
+pub type FinalWorkload = (Vec<u32>, Vec<IdentityEvent>, Vec<u32>);
+
+/// A stream too large to keep the truth after every event (n = 10,000):
+/// the true assignment at time 0, the events, and the true assignment at
+/// the end.
+pub fn generate_final(spec: &IdentityWorkloadSpec) -> Result<FinalWorkload, BeliefError> {
+    let mut last = Vec::new();
+    let (initial, events) = generate_with(spec, |truth| {
+        last.clear();
+        last.extend_from_slice(truth)
+    })?;
+    if events.is_empty() {
+        last = initial.clone();
+    }
+    Ok((initial, events, last))
+}
+
+/// Draws the stream, calling `after` with the truth after every event.
+fn generate_with(
+    spec: &IdentityWorkloadSpec,
+    mut after: impl FnMut(&[u32]),
+) -> Result<(Vec<u32>, Vec<IdentityEvent>), BeliefError> {
     spec.validate()?;
     let mut rng = ChaCha8Rng::seed_from_u64(spec.seed);
     let n = spec.tracks;
@@ -92,7 +124,6 @@ pub fn generate(spec: &IdentityWorkloadSpec) -> Result<IdentityWorkload, BeliefE
     truth.shuffle(&mut rng);
     let initial = truth.clone();
     let mut events = Vec::with_capacity(spec.events);
-    let mut history = Vec::with_capacity(spec.events);
     for _ in 0..spec.events {
         // With one track there is nothing to mix: every event is a read.
         if n >= 2 && rng.gen::<f64>() < spec.mix_share {
@@ -126,13 +157,9 @@ pub fn generate(spec: &IdentityWorkloadSpec) -> Result<IdentityWorkload, BeliefE
                 accuracy: spec.accuracy,
             }));
         }
-        history.push(truth.clone());
+        after(&truth);
     }
-    Ok(IdentityWorkload {
-        initial,
-        events,
-        truth: history,
-    })
+    Ok((initial, events))
 }
 
 #[cfg(test)]

@@ -8,8 +8,8 @@
 use anyhow::{bail, Context, Result};
 use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
 use idmesh_belief::{
-    BeliefError, FactoredBelief, Field, ParticleFilter, PropertyFilter, RadonBelief, RadonOptions,
-    Sparsify,
+    BeliefError, Coupling, FactoredBelief, FactoredOptions, Field, ParticleFilter, PropertyFilter,
+    RadonBelief, RadonOptions, Sparsify,
 };
 use std::fmt;
 
@@ -40,6 +40,9 @@ pub enum Method {
     Particles(usize),
     /// The factored belief: exact tables over groups of tracks.
     Factored,
+    /// The factored belief with [`Coupling::Local`] splits: what a leader
+    /// can run, measured beside the coupled default.
+    FactoredLocal,
 }
 
 impl Method {
@@ -71,13 +74,14 @@ impl Method {
             "order2" => plain(Method::Order(2)),
             "order3" => plain(Method::Order(3)),
             "factored" => plain(Method::Factored),
+            "factored-local" => plain(Method::FactoredLocal),
             "threshold" => Ok(Method::Threshold(number("budget")?)),
             "overcomplete" => Ok(Method::Overcomplete(number("budget")?)),
             "distributed" => Ok(Method::Distributed(number("budget")?)),
             "particles" => Ok(Method::Particles(number("particles")?)),
             _ => bail!(
                 "unknown method `{text}`: expected exact, order1, order2, order3, threshold:B, \
-                 overcomplete:B, distributed:B, particles:P or factored"
+                 overcomplete:B, distributed:B, particles:P, factored or factored-local"
             ),
         }
     }
@@ -92,6 +96,7 @@ impl Method {
             Method::Distributed(b) => format!("overcomplete, distributed rule (B = {b})"),
             Method::Particles(p) => format!("particles (P = {p})"),
             Method::Factored => "factored".into(),
+            Method::FactoredLocal => "factored, local rule".into(),
         }
     }
 
@@ -108,7 +113,7 @@ impl Method {
                 let j = j.min(k).min(n);
                 (0..=j).map(|u| choose(n, u)).sum::<f64>() <= MAX_STATES as f64
             }
-            Method::Factored => FACTORED_AVAILABLE,
+            Method::Factored | Method::FactoredLocal => FACTORED_AVAILABLE,
             _ => true,
         }
     }
@@ -139,6 +144,13 @@ impl Method {
             Method::Distributed(b) => radon(Sparsify::overcomplete(b), true),
             Method::Particles(p) => Ok(Box::new(ParticleFilter::new(field, p, seed)?)),
             Method::Factored => Ok(Box::new(FactoredBelief::new(field)?)),
+            Method::FactoredLocal => {
+                let options = FactoredOptions {
+                    coupling: Coupling::Local,
+                    ..FactoredOptions::default()
+                };
+                Ok(Box::new(FactoredBelief::with_options(field, options)?))
+            }
         }
     }
 }
@@ -154,6 +166,7 @@ impl fmt::Display for Method {
             Method::Distributed(b) => write!(f, "distributed:{b}"),
             Method::Particles(p) => write!(f, "particles:{p}"),
             Method::Factored => write!(f, "factored"),
+            Method::FactoredLocal => write!(f, "factored-local"),
         }
     }
 }
@@ -174,6 +187,7 @@ mod tests {
             "distributed:60",
             "particles:1000",
             "factored",
+            "factored-local",
         ] {
             assert_eq!(Method::parse(name).unwrap().to_string(), name);
         }
@@ -194,6 +208,7 @@ mod tests {
             "distributed:50",
             "particles:100",
             "factored",
+            "factored-local",
         ] {
             let mut filter = Method::parse(name)
                 .unwrap()

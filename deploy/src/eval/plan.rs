@@ -88,6 +88,7 @@ fn table3_methods(n: usize) -> Vec<Method> {
     ];
     if FACTORED_AVAILABLE {
         methods.push(Method::Factored);
+        methods.push(Method::FactoredLocal);
     }
     methods
 }

@@ -1,11 +1,13 @@
 //! SVG line plots (plotters): tracking error against one parameter, one
 //! line per method, the exact filter (where n ≤ 20) drawn black as the
-//! optimum.
+//! optimum; and the reliability diagram (how often a track given
+//! probability p was red, per method, the diagonal black).
 
 use super::methods::Method;
 use super::plan::Experiment;
 use super::results::{PointResult, Results};
 use anyhow::{anyhow, Context, Result};
+use idmesh_belief::Reliability;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -24,7 +26,49 @@ pub struct Plot {
     pub file: String,
     pub title: String,
     pub x_label: String,
+    pub y_label: String,
     pub series: Vec<Series>,
+}
+
+/// The y label of the error plots.
+pub const ERROR_LABEL: &str = "tracking error (fraction mislabeled)";
+
+/// The reliability diagram over every run of the grid: per method, the
+/// mean predicted P(red) of each tenth of [0, 1] against how often those
+/// tracks were red; a calibrated belief lies on the diagonal.
+pub fn reliability(results: &Results) -> Plot {
+    let mut by_method: Vec<(String, bool, Reliability)> = Vec::new();
+    for p in &results.points {
+        for (m, s) in &p.methods {
+            let label = m.label();
+            match by_method.iter_mut().find(|(l, _, _)| *l == label) {
+                Some((_, _, r)) => r.merge(&s.reliability),
+                None => by_method.push((label, false, s.reliability.clone())),
+            }
+        }
+    }
+    let mut series = vec![Series {
+        name: "calibrated".into(),
+        exact: true,
+        points: vec![(0.0, 0.0), (1.0, 1.0)],
+    }];
+    for (name, exact, r) in by_method {
+        let points: Vec<(f64, f64)> = r.points().iter().map(|&(p, f, _)| (p, f)).collect();
+        if !points.is_empty() {
+            series.push(Series {
+                name,
+                exact,
+                points,
+            });
+        }
+    }
+    Plot {
+        file: "results-reliability.svg".into(),
+        title: "Reliability: how often a track given P(red) = p was red (all runs)".into(),
+        x_label: "predicted P(red), mean of each tenth".into(),
+        y_label: "observed share red".into(),
+        series,
+    }
 }
 
 /// The series of an experiment's points (filtered to n): one per method
@@ -119,7 +163,7 @@ pub fn draw(plot: &Plot, dir: &Path) -> Result<()> {
     chart
         .configure_mesh()
         .x_desc(plot.x_label.as_str())
-        .y_desc("tracking error (fraction mislabeled)")
+        .y_desc(plot.y_label.as_str())
         .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(|e| failed(&e))?;
@@ -167,6 +211,7 @@ mod tests {
             file: "t.svg".into(),
             title: "error vs swap".into(),
             x_label: "swap probability".into(),
+            y_label: ERROR_LABEL.into(),
             series: vec![
                 Series {
                     name: "exact".into(),

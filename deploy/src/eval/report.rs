@@ -270,7 +270,8 @@ pub fn goals_table(grid: &Grid) -> String {
 /// Each belief's own expected error beside its actual error: the exact
 /// filter (n ≤ 20) and the factored belief with both expectations (per
 /// track and of the top-k labelling scored), the overcomplete method with
-/// the per-track one.
+/// the per-track one; then each one's Brier score and log-loss (trace
+/// spec, Scoring: what its probabilities are worth).
 pub fn bayes_table(grid: &Grid) -> String {
     let kinds = [
         (Kind::Exact, true),
@@ -286,6 +287,10 @@ pub fn bayes_table(grid: &Grid) -> String {
             out.push_str(" expects, top k |");
             columns += 1;
         }
+    }
+    for (k, _) in kinds {
+        write!(out, " {}: Brier | log-loss |", k.name()).unwrap();
+        columns += 2;
     }
     out.push_str("\n|---|---:|---:|");
     out.push_str(&"---:|".repeat(columns));
@@ -309,6 +314,11 @@ pub fn bayes_table(grid: &Grid) -> String {
                     if topk {
                         write!(out, " {} |", f3(s.map(|s| s.expected_topk))).unwrap();
                     }
+                }
+                for (k, _) in kinds {
+                    let s = grid.get(start, swap, n, k);
+                    let (brier, loss) = (s.map(|s| s.brier), s.map(|s| s.log_loss));
+                    write!(out, " {} | {} |", f3(brier), f3(loss)).unwrap();
                 }
                 out.push('\n');
             }

@@ -5,6 +5,7 @@ use super::methods::Method;
 use super::plan::Point;
 use super::scenarios::TraceInfo;
 use super::score::Score;
+use idmesh_belief::Reliability;
 
 /// A method's scores on one point, over its seeds.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,6 +19,11 @@ pub struct Summary {
     pub expected_error: f64,
     /// Mean of the runs' expected error of their top-k labelling.
     pub expected_topk: f64,
+    /// Means of the runs' Brier score and log-loss.
+    pub brier: f64,
+    pub log_loss: f64,
+    /// The runs' reliability counts, added up.
+    pub reliability: Reliability,
     /// Every run's error in seed order (NaN for a failed run), to compare
     /// two methods run by run.
     pub run_errors: Vec<f64>,
@@ -59,6 +65,12 @@ impl Summary {
             error_sd,
             expected_error: mean(&|s| s.expected_error),
             expected_topk: mean(&|s| s.expected_topk),
+            brier: mean(&|s| s.brier),
+            log_loss: mean(&|s| s.log_loss),
+            reliability: ok.iter().fold(Reliability::default(), |mut r, s| {
+                r.merge(&s.reliability);
+                r
+            }),
             run_errors: scores.iter().map(|s| s.error).collect(),
             seconds: mean(&|s| s.seconds),
             mean_coefficients: mean(&|s| s.mean_coefficients),

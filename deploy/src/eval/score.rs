@@ -1,7 +1,10 @@
 //! Replaying an in-memory trace through one filter and scoring it as the
 //! trace spec says: at every truth line the k tracks with the largest
-//! marginals are predicted red, the error there is the fraction of tracks
-//! mislabeled, and a run's error is the mean over its truth lines.
+//! marginals are predicted red (ties within 1e-9 sharing the slots they
+//! compete for), the error there is the expected fraction of tracks
+//! mislabeled, and a run's error is the mean over its truth lines; beside
+//! it the Brier score and log-loss of the marginals, and the counts of a
+//! reliability diagram.
 //!
 //! Only the filter's own calls are timed (building it, every event, every
 //! marginals call), as `idmesh replay` does, but on the CPU-time clock of
@@ -26,7 +29,7 @@
 
 use super::methods::Method;
 use super::scenarios::{Step, Trace};
-use idmesh_belief::{predict_red, tracking_error};
+use idmesh_belief::{brier_score, expected_tracking_error, log_loss, predict_red, Reliability};
 use std::time::Instant;
 
 /// Seconds of CPU time this thread has used (`CLOCK_THREAD_CPUTIME_ID`), or
@@ -77,6 +80,11 @@ pub struct Score {
     /// `expected_error`, and equal to `error` in expectation when the belief
     /// is the true posterior.
     pub expected_topk: f64,
+    /// Mean Brier score and log-loss over the truth lines (NaN as `error`).
+    pub brier: f64,
+    pub log_loss: f64,
+    /// How often a track given probability p was red, over the truth lines.
+    pub reliability: Reliability,
     /// Seconds inside the filter.
     pub seconds: f64,
     /// Mean and largest coefficient count after an event.
@@ -95,6 +103,9 @@ impl Score {
             error: f64::NAN,
             expected_error: f64::NAN,
             expected_topk: f64::NAN,
+            brier: f64::NAN,
+            log_loss: f64::NAN,
+            reliability: Reliability::default(),
             seconds: 0.0,
             mean_coefficients: 0.0,
             max_coefficients: 0,
@@ -137,11 +148,15 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
     let n = trace.field.tracks;
     let k = trace.field.red.known();
     let (mut errors, mut expected, mut expected_topk) = (0.0, 0.0, 0.0);
+    let (mut brier, mut loss, mut reliability) = (0.0, 0.0, Reliability::default());
     for (m, red) in &answers {
-        let predicted = predict_red(m, k);
-        errors += tracking_error(n, &predicted, red);
+        debug_assert_eq!(m.len(), n);
+        errors += expected_tracking_error(m, k, red);
         expected += bayes_risk(m);
-        expected_topk += expected_mislabels(m, &predicted);
+        expected_topk += expected_mislabels(m, &predict_red(m, k));
+        brier += brier_score(m, red);
+        loss += log_loss(m, red);
+        reliability.add(m, red);
     }
     let mean = |total: f64| {
         if answers.is_empty() {
@@ -154,6 +169,9 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
         error: mean(errors),
         expected_error: mean(expected),
         expected_topk: mean(expected_topk),
+        brier: mean(brier),
+        log_loss: mean(loss),
+        reliability,
         seconds,
         mean_coefficients: if events > 0 {
             coefficient_sum / events as f64
@@ -253,10 +271,15 @@ mod tests {
     fn scores_the_worked_example() {
         let trace = table_one();
         let exact = score(Method::Exact, &trace, 0);
-        // After the first mix tracks 0 and 2 tie at 1/2: the tie goes to
-        // track 0, so {0, 1} is predicted against the truth {1, 2} (error
-        // 1/2); after the observation the answer is certain (error 0).
-        assert_eq!(exact.error, 0.25);
+        // After the first mix tracks 0 and 2 tie at 1/2 for the one slot
+        // track 1 leaves: half a red label each, so against the truth
+        // {1, 2} half a track is expected wrong on each (error 1/4); after
+        // the observation the answer is certain (error 0).
+        assert_eq!(exact.error, 0.125);
+        // Brier: (¼ + 0 + ¼ + 0)/4 at the first line, 0 at the second.
+        assert!((exact.brier - 0.0625).abs() < 1e-12);
+        assert!((exact.log_loss - 2f64.ln() / 4.0).abs() < 1e-12);
+        assert_eq!(exact.reliability.count.iter().sum::<u64>(), 8);
         // It expects as much: 2 of 4 tracks at 1/2, then certainty.
         assert!((exact.expected_error - 0.125).abs() < 1e-12);
         assert!((exact.expected_topk - 0.125).abs() < 1e-12);
@@ -291,7 +314,7 @@ mod tests {
         );
         let s = score(Method::Exact, &trace, 0);
         assert_eq!(s.refused, 1);
-        assert_eq!(s.error, 0.25);
+        assert_eq!(s.error, 0.125);
         trace.field = Field::uniform(4, 5);
         let s = score(Method::Exact, &trace, 0);
         assert!(s.failure.is_some() && s.error.is_nan());

@@ -10,7 +10,7 @@ use super::topology::Topology;
 use super::topology::{Member, Sparsification};
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
-use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer};
+use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer, StatsAnswer};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
@@ -100,6 +100,20 @@ impl Drop for Processes {
 /// `idmesh up`: runs until Ctrl-C or until a process fails.
 pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
     let mut processes = Processes::start(config, host)?;
+    let topology = Topology::load(config)?;
+    let names: Vec<&str> = processes.children.iter().map(|(n, _)| n.as_str()).collect();
+    eprintln!(
+        "up: started {} ({}){} · queries: idmesh query marginals --connect {}{} · Ctrl-C stops",
+        names.join(", "),
+        config.display(),
+        host.map(|h| format!(" on host {h}")).unwrap_or_default(),
+        topology.coordinator.listen,
+        if topology.prefix == DEFAULT_PREFIX {
+            String::new()
+        } else {
+            format!(" --prefix {}", topology.prefix)
+        },
+    );
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()
@@ -142,14 +156,25 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     std::fs::create_dir_all(&options.dir)
         .with_context(|| format!("cannot create {}", options.dir.display()))?;
     let trace = options.dir.join("crowd.jsonl");
-    simulate_crowd(
-        options.targets,
-        options.red,
-        600.0,
-        options.seed,
-        true,
-        &trace,
-    )?;
+    // Ten minutes of crowd, or as long as `--events` needs.
+    let mut duration = 600.0;
+    loop {
+        simulate_crowd(
+            options.targets,
+            options.red,
+            duration,
+            options.seed,
+            true,
+            &trace,
+        )?;
+        let have = count_events(&trace)?;
+        match options.events {
+            Some(wanted) if have < wanted => {
+                duration *= 1.2 * wanted as f64 / have.max(1) as f64;
+            }
+            _ => break,
+        }
+    }
     let plan = Loopback {
         prefix: DEFAULT_PREFIX.to_string(),
         leaders: 4,
@@ -215,12 +240,11 @@ async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) 
                     .iter()
                     .map(|&t| format!("{t}:{:.2}", a.p_red[t as usize]))
                     .collect();
+                let took = started.elapsed().as_secs_f64() * 1e3;
                 println!(
-                    "{events:>7} events{} · {} sets on {} leaders · {:>5.1} ms · red: {}",
+                    "{events:>7} events{} · {} · {took:>5.1} ms · red: {}",
                     if a.finished { " (all)" } else { "" },
-                    a.coefficients,
-                    a.leaders,
-                    started.elapsed().as_secs_f64() * 1e3,
+                    sets_per_leader(&session, &keys, a.coefficients).await,
                     sure.join(" ")
                 );
             }
@@ -257,6 +281,26 @@ async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) 
     Ok(())
 }
 
+/// "N sets: leader-0 n0 · leader-1 n1 · …" from the leaders' counters: the
+/// total alone would hide that one leader may hold every set (a set lives
+/// at one leader surveilling one of its tracks, and sets that grow to span
+/// the field all qualify for the first).
+async fn sets_per_leader(session: &zenoh::Session, keys: &Keys, total: u64) -> String {
+    let held = match ask(session, &keys.query_stats(), Duration::from_secs(3)).await {
+        Ok(body) => match serde_json::from_slice::<StatsAnswer>(&body) {
+            Ok(stats) => stats
+                .leaders
+                .iter()
+                .map(|l| format!("{} {}", l.leader, l.coefficients))
+                .collect::<Vec<_>>()
+                .join(" · "),
+            Err(e) => format!("counters unreadable: {e}"),
+        },
+        Err(e) => format!("no counters: {e}"),
+    };
+    format!("{total} sets: {held}")
+}
+
 /// Simulates a social-force crowd into `out` (the demo's and the bench's
 /// stream), with identity reads when `identities`.
 pub fn simulate_crowd(
@@ -279,6 +323,20 @@ pub fn simulate_crowd(
     let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
     idmesh_sensor::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;
     Ok(())
+}
+
+/// The events of a trace (every line but the header and truth lines): what
+/// a watermark counts.
+pub fn count_events(trace: &Path) -> Result<u64> {
+    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
+    reader.read_header()?;
+    let mut events = 0;
+    while let Some(n) = reader.read_line()? {
+        if !matches!(n.line, idmesh_protocol::Line::Truth(_)) {
+            events += 1;
+        }
+    }
+    Ok(events)
 }
 
 /// The bounding box of the trace's positions: (min x, min y, max x, max y).

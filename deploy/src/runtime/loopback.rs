@@ -46,9 +46,12 @@ impl Ports {
 }
 
 impl Loopback {
-    /// The topology streaming `trace`, with its coordinator's endpoint.
+    /// The topology streaming `trace`, with its coordinator's endpoint. The
+    /// trace is named by its absolute path: a topology resolves relative
+    /// paths against its own folder, not against where we were started.
     pub fn topology(&self, trace: &Path) -> Result<(String, String)> {
         let (x0, y0, x1, y1) = field_corners(trace)?;
+        let trace = std::path::absolute(trace)?;
         let columns = (self.leaders as f64).sqrt().ceil().max(1.0) as usize;
         let rows = self.leaders.div_ceil(columns);
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
@@ -88,6 +91,39 @@ impl Loopback {
 mod tests {
     use super::*;
     use crate::runtime::topology::Topology;
+    use std::path::PathBuf;
+
+    #[test]
+    fn a_trace_given_relative_to_the_working_directory_is_found_from_the_topology() {
+        // The demo's default `--dir` is relative: the topology written into
+        // it must still name the trace beside it.
+        let dir = PathBuf::from(format!("loopback-relative-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let trace = dir.join("t.jsonl");
+        std::fs::write(
+            &trace,
+            "{\"kind\":\"header\",\"format\":\"idmesh-trace\",\"version\":1,\"tracks\":2,\"red\":1}\n",
+        )
+        .unwrap();
+        let plan = Loopback {
+            prefix: "idmesh/t".into(),
+            leaders: 1,
+            distributed_rule: false,
+            budget: 0,
+            sparsify: Sparsification::Threshold,
+            rate: None,
+            events: None,
+            query_timeout_ms: 1000,
+            ports: Ports::From(9100),
+        };
+        let (toml, _) = plan.topology(&trace).unwrap();
+        let config = dir.join("topology.toml");
+        std::fs::write(&config, toml).unwrap();
+        let found = Topology::load(&config).unwrap().trace_path();
+        let exists = found.exists();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(exists, "the topology names {}", found.display());
+    }
 
     #[test]
     fn a_loopback_topology_loads_with_every_leader_placed_inside_the_field() {

@@ -119,7 +119,19 @@ pub async fn open(options: &MeshOptions) -> Result<Session> {
             "off"
         }
     );
-    zenoh::open(config(options)?)
-        .await
-        .map_err(|e| anyhow!("cannot open a zenoh session ({summary}): {e}"))
+    zenoh::open(config(options)?).await.map_err(|e| {
+        anyhow::Error::new(NoSession {
+            summary,
+            zenoh: e.to_string(),
+        })
+    })
+}
+
+/// Zenoh could not open the session: with `connect` endpoints, most often
+/// because nothing listens there (a client session needs a peer at once).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot open a zenoh session ({summary}): {zenoh}")]
+pub struct NoSession {
+    summary: String,
+    zenoh: String,
 }

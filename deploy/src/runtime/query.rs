@@ -52,14 +52,7 @@ pub fn run(options: &QueryOptions) -> Result<()> {
         .enable_all()
         .build()?;
     runtime.block_on(async {
-        let session = mesh::open(&MeshOptions {
-            client: true,
-            listen: vec![],
-            connect: vec![options.connect.clone()],
-            tls: options.tls.clone(),
-            access_control: None,
-        })
-        .await?;
+        let session = connect(options).await?;
         let keys = Keys::new(options.prefix.clone());
         let key = match options.what {
             Question::Marginals => keys.query_marginals(),
@@ -97,6 +90,31 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             bail!("{failures} of {} queries failed", options.repeat.max(1));
         }
         Ok(())
+    })
+}
+
+/// A client session to the coordinator at `--connect`. Zenoh's own error
+/// (a source location inside the zenoh crate) goes to the debug log; the
+/// user is told what is most likely wrong.
+async fn connect(options: &QueryOptions) -> Result<zenoh::Session> {
+    mesh::open(&MeshOptions {
+        client: true,
+        listen: vec![],
+        connect: vec![options.connect.clone()],
+        tls: options.tls.clone(),
+        access_control: None,
+    })
+    .await
+    .map_err(|error| {
+        if error.downcast_ref::<mesh::NoSession>().is_none() {
+            return error;
+        }
+        tracing::debug!(%error, "zenoh could not connect");
+        anyhow!(
+            "no deployment answers at {}: is `idmesh demo` or `idmesh up` running, and is \
+             that the coordinator's endpoint (`--connect`)?",
+            options.connect
+        )
     })
 }
 

@@ -26,22 +26,25 @@
 //! listen = "tcp/127.0.0.1:7452"
 //! trace = "crowd.jsonl"          # relative to this file
 //! rate = 2000                    # events/s; absent = as fast as possible
-//! [sensor.faults]                # tests only: a lossy, doubling network
-//! duplicate = true               # every batch published twice
-//! drop_every = 7                 # every 7th batch to a leader not published
+//! events = 5000                  # stop the stream after this many events
+//! # [sensor.faults]              # tests only: a lossy, doubling network
+//! # duplicate = true             # every batch published twice
+//! # drop_every = 7               # every 7th batch to a leader not published
 //!
 //! [[leader]]
 //! name = "leader-0"
 //! listen = "tcp/127.0.0.1:7448"
 //! at = [10.0, 10.0]              # tracks go to the nearest leader
 //!
-//! [security]                     # optional: mutual TLS and access control
-//! certs = "certs"                # ca.pem, <name>.pem, <name>.key
-//! clients = ["operator"]         # client certificates that may query
+//! # [security]                   # optional: mutual TLS and access control
+//! # certs = "certs"              # ca.pem, <name>.pem, <name>.key
+//! # clients = ["operator"]       # client certificates that may query
 //! ```
 //!
 //! With `[security]` (see [`super::security`]) every endpoint is reached
-//! over TLS: `tcp/host:port` here means `tls/host:port`.
+//! over TLS: `tcp/host:port` here means `tls/host:port`. Ready-made files:
+//! `deploy/examples/topology.toml` (plain) and `deploy/examples/secure.toml`
+//! (with the certificates of `deploy/examples/make-certs.sh`).
 
 use super::security::SecuritySection;
 use anyhow::{bail, Context, Result};
@@ -260,6 +263,39 @@ impl Topology {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The TOML listing of this module's documentation.
+    fn documented_example() -> String {
+        let source = include_str!("topology.rs");
+        let start = source.find("//! ```toml\n").expect("a ```toml listing");
+        source[start..]
+            .lines()
+            .skip(1)
+            .take_while(|l| *l != "//! ```")
+            .map(|l| l.strip_prefix("//!").unwrap_or(l).trim_start_matches(' '))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    #[test]
+    fn the_documented_example_and_the_shipped_examples_load_as_they_are() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-doc-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("topology.toml");
+        std::fs::write(&file, documented_example()).unwrap();
+        let documented = Topology::load(&file);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let documented = documented.unwrap();
+        assert_eq!(documented.sensor.events, Some(5000));
+        assert_eq!(documented.trace_path(), dir.join("crowd.jsonl"));
+
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+        for name in ["topology.toml", "secure.toml"] {
+            let topology = Topology::load(&examples.join(name)).unwrap();
+            assert!(topology.trace_path().exists(), "{name}: no trace");
+            assert_eq!(topology.leader.len(), 2, "{name}");
+        }
+    }
 
     #[test]
     fn a_topology_with_a_mistake_is_rejected_naming_it() {

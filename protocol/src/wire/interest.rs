@@ -22,6 +22,12 @@ pub struct Interest {
     /// This leader holds φ_∅ (k unknown under the distributed rule): every
     /// observation grows it.
     holds_empty: bool,
+    /// Following this many tracks, the leader may hold a *saturated* set:
+    /// k red tracks (the rest are then blue) or n − k blue ones. Such a
+    /// set fixes every track, so an observation of any track changes it
+    /// (conditioning multiplies it by the likelihood of its implicit
+    /// colour), whatever the distributed rule says of growth.
+    saturation: usize,
 }
 
 impl Interest {
@@ -31,7 +37,21 @@ impl Interest {
             follows: vec![false; tracks],
             count: 0,
             holds_empty,
+            saturation: usize::MAX,
         }
+    }
+
+    /// The same interest for a field where sets of `size` tracks may fix
+    /// every track: min(k, n − k) with k known; with a prior over counts,
+    /// min(largest count, n − smallest count).
+    pub fn saturating_at(mut self, size: usize) -> Self {
+        self.saturation = size;
+        self
+    }
+
+    /// Whether the leader may hold a set that fixes every track.
+    pub fn saturated(&self) -> bool {
+        self.count >= self.saturation
     }
 
     pub fn follows(&self, track: u32) -> bool {
@@ -84,6 +104,7 @@ impl Interest {
             } => {
                 *global
                     || self.holds_empty
+                    || self.saturated()
                     || self.follows(*track)
                     || matches!(growth, Growth::Meeting(p) if self.meets(p))
             }
@@ -170,5 +191,26 @@ mod tests {
         assert!(i.receives(&observe(1, vec![4])));
         i.note(&observe(1, vec![4]));
         assert!(i.follows(1));
+    }
+
+    /// With k = 2 of 6, a leader following two tracks may hold {a, b} red,
+    /// which says every other track is blue: every observation changes it.
+    #[test]
+    fn a_leader_that_may_hold_a_saturated_set_hears_every_observation() {
+        let mut i = Interest::new(0, 6, false).saturating_at(2);
+        let far = Item::Observe {
+            track: 5,
+            red: 0.8,
+            blue: 0.2,
+            growth: Growth::Meeting(vec![3]),
+            global: false,
+        };
+        i.add(0);
+        assert!(!i.saturated() && !i.receives(&far));
+        i.add(1);
+        assert!(i.saturated() && i.receives(&far));
+        // It is not grown by it: a saturated set fixes 5 already.
+        i.note(&far);
+        assert!(!i.follows(5));
     }
 }

@@ -1,6 +1,8 @@
-//! The sensor process: streams a trace through the [`Router`] over Zenoh.
+//! The sensor process: streams a trace through the [`Gateway`] over Zenoh.
+//! What to route, keep, place and answer is the gateway's (pure, see
+//! [`super::core`]); this actor paces the lines and moves the bytes.
 //!
-//! One task owns the router. It publishes each leader's items as a batch on
+//! One task owns the gateway. It publishes each leader's items as a batch on
 //! the leader's own key (congestion control Block: an event is never
 //! dropped), places cuts for the coordinator and answers follow requests
 //! between chunks, so a cut is always a point of the same global order the
@@ -10,21 +12,18 @@
 //! Every batch sent is kept, by leader and number, so that a leader that
 //! lost some (a gap in the numbers, or the time it was down and
 //! restarting) gets them again on `P/sensor/<name>/resend`, until the
-//! leader publishes a durable mark past it ([`BatchLog`]); items every
+//! leader publishes a durable mark past it ([`super::batch_log`]); items every
 //! leader has passed leave the router's log the same way. The logs live in
 //! memory: the sensor is the source of truth of the stream, not a process
 //! this design lets die. [`Faults`] drops or doubles batches on purpose,
 //! for the tests that show neither matters.
 
-use super::batch_log::BatchLog;
-use super::cuts::{place, Cuts, Placed, Request};
+use super::core::{CutOutcome, Gateway};
+use super::cuts::{CutParameters, Placed};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
-use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
+use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
-use idmesh_protocol::wire::sensor_to_leader::Batch;
-use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tracing::Instrument;
@@ -77,12 +76,28 @@ fn mesh(what: &'static str) -> impl FnOnce(zenoh::Error) -> GatewayError {
     }
 }
 
+/// How many of `lines` the stream sends, and how many events they hold:
+/// `limit` counts events, as watermarks and `?events=N` do, not lines
+/// (truth lines carry no event).
+fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
+    let mut events = 0u64;
+    for (i, line) in lines.iter().enumerate() {
+        if !matches!(line, Line::Truth(_)) {
+            if limit.is_some_and(|limit| events == limit) {
+                return (i, events);
+            }
+            events += 1;
+        }
+    }
+    (lines.len(), events)
+}
+
 /// Streams `lines` (the events of a trace, header excluded) until done,
 /// then serves queries until `shutdown`.
 pub async fn run(
     session: Session,
     config: GatewayConfig,
-    mut router: Router,
+    router: Router,
     lines: Vec<Line>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), GatewayError> {
@@ -111,12 +126,6 @@ pub async fn run(
         .declare_queryable(keys.sensor_positions(&config.name))
         .await
         .map_err(mesh("declare the positions queryable"))?;
-    // Follow and resend requests refused: a bad one is answered with why
-    // and changes nothing.
-    let mut counters = SensorStats {
-        sensor: config.name.clone(),
-        rejected: 0,
-    };
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -136,27 +145,23 @@ pub async fn run(
     wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
     tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(), "streaming");
 
-    let limit = config.limit.unwrap_or(u64::MAX) as usize;
-    let lines = &lines[..lines.len().min(limit)];
-    let mut stream = Stream {
-        sent: (0..names.len()).map(|_| BatchLog::default()).collect(),
-        durable: vec![None; names.len()],
-        names: names.clone(),
+    let (length, end) = stream_length(&lines, config.limit);
+    let lines = &lines[..length];
+    let mut gateway: Gateway<Query> =
+        Gateway::new(&config.name, router, lines.is_empty()).ending_at(end);
+    let mut wire = Wire {
         faults: config.faults,
         publishers,
-        sensor: config.name.clone(),
-        finished: lines.is_empty(),
     };
-    stream.flush(&mut router).await;
+    wire.flush(&mut gateway).await;
     let started = Instant::now();
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
     let chunk = 512usize;
-    let mut cuts = Cuts::default();
     tokio::pin!(shutdown);
     loop {
         // How many lines are due now, and when the next one is.
-        let (due, wait) = if stream.finished {
+        let (due, wait) = if gateway.finished() {
             (0, Duration::from_secs(3600))
         } else {
             due_lines(&config, lines, next, started, first_time, chunk)
@@ -164,13 +169,15 @@ pub async fn run(
         if due > 0 {
             let mut placed = Vec::new();
             for line in &lines[next..next + due] {
-                router.line(line);
-                cuts.reached(&mut router, &config.name, &mut placed);
+                placed.extend(gateway.line(line));
             }
             next += due;
-            stream.finished = next >= lines.len();
-            stream
-                .flush(&mut router)
+            let refused = if next >= lines.len() {
+                gateway.end()
+            } else {
+                Vec::new()
+            };
+            wire.flush(&mut gateway)
                 .instrument(tracing::debug_span!(
                     "chunk",
                     from = next - due,
@@ -180,9 +187,9 @@ pub async fn run(
             for p in placed {
                 reply_placed(p).await;
             }
-            if stream.finished {
-                tracing::info!(sensor = %config.name, events = router.events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
-                for (query, reason) in cuts.refuse_all(&router) {
+            if gateway.finished() {
+                tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
+                for (query, reason) in refused {
                     let _ = query.reply_err(reason).await;
                 }
             }
@@ -194,52 +201,44 @@ pub async fn run(
             _ = &mut shutdown => break,
             query = cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
-                match cuts.request(query, &router, stream.finished) {
-                    Request::Now { wanted, query } => {
-                        let p = place(&mut router, &config.name, wanted, query, stream.finished);
-                        stream.flush(&mut router).await;
+                let parameters = query.parameters();
+                let parameters = CutParameters {
+                    tag: parameters.get("tag").map(str::to_owned),
+                    rows: parameters.contains_key("rows"),
+                    events: parameters.get("events").map(str::to_owned),
+                };
+                match gateway.cut(query, &parameters) {
+                    CutOutcome::Placed(p) => {
+                        wire.flush(&mut gateway).await;
                         reply_placed(p).await;
                     }
-                    Request::Scheduled => {}
-                    Request::Refused { query, reason } => {
+                    CutOutcome::Scheduled => {}
+                    CutOutcome::Refused(query, reason) => {
                         let _ = query.reply_err(reason).await;
                     }
                 }
             }
             query = follows.recv_async() => {
                 let Ok(query) = query else { break };
-                let answer = decode::<Follow>(&payload(&query))
-                    .map_err(|e| e.to_string())
-                    .and_then(|f| router.follow(&f).map_err(|e| e.to_string()))
-                    .map(|items| Followed { version: VERSION, items });
+                let answer = gateway.follow(&payload(&query));
                 let followed = answer.is_ok();
-                reply_to(&query, answer, "follow", &mut counters).await;
+                reply_to(&query, answer, "follow").await;
                 if followed {
-                    stream.flush(&mut router).await;
+                    wire.flush(&mut gateway).await;
                 }
             }
             sample = durables.recv_async() => {
                 let Ok(sample) = sample else { break };
-                match decode::<Durable>(&sample.payload().to_bytes()) {
-                    Ok(mark) => stream.forget(&mark, &mut router),
-                    Err(e) => {
-                        counters.rejected += 1;
-                        tracing::warn!(from = %sample.key_expr(), problem = %e,
-                            rejected = counters.rejected, "durable mark rejected");
-                    }
-                }
+                gateway.durable(&sample.payload().to_bytes(), sample.key_expr().as_str());
             }
             query = resends.recv_async() => {
                 let Ok(query) = query else { break };
-                let answer = decode::<Resend>(&payload(&query))
-                    .map_err(|e| e.to_string())
-                    .and_then(|r| stream.resend(&r))
-                    .map(|batches| Resent { version: VERSION, batches });
-                reply_to(&query, answer, "resend", &mut counters).await;
+                let answer = gateway.resend(&payload(&query));
+                reply_to(&query, answer, "resend").await;
             }
             query = stats.recv_async() => {
                 let Ok(query) = query else { break };
-                let body = serde_json::to_vec(&counters).unwrap_or_default();
+                let body = serde_json::to_vec(gateway.stats()).unwrap_or_default();
                 if let Err(e) = query.reply(query.key_expr().clone(), body)
                     .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
                 {
@@ -250,7 +249,7 @@ pub async fn run(
                 let Ok(query) = query else { break };
                 // Answered between chunks: the positions after exactly
                 // `events` events, a point of the stream like a cut.
-                let body = serde_json::to_vec(&router.positions(&config.name, stream.finished))
+                let body = serde_json::to_vec(&gateway.router().positions(&config.name, gateway.finished()))
                     .unwrap_or_default();
                 if let Err(e) = query.reply(query.key_expr().clone(), body)
                     .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
@@ -273,13 +272,8 @@ fn payload(query: &Query) -> Vec<u8> {
 }
 
 /// Answers a `what` request with its reply, or with why there is none
-/// (counted in `stats`).
-async fn reply_to<R: serde::Serialize>(
-    query: &Query,
-    answer: Result<R, String>,
-    what: &str,
-    stats: &mut SensorStats,
-) {
+/// (the gateway counted it).
+async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>, what: &str) {
     match answer {
         Ok(reply) => {
             tracing::debug!(what, "answered");
@@ -288,14 +282,12 @@ async fn reply_to<R: serde::Serialize>(
             }
         }
         Err(e) => {
-            stats.rejected += 1;
-            tracing::warn!(what, key = %query.key_expr(), error = %e, rejected = stats.rejected, "bad request rejected");
             let _ = query.reply_err(e).await;
         }
     }
 }
 
-async fn reply_placed(placed: Placed) {
+async fn reply_placed(placed: Placed<Query>) {
     let query = placed.query;
     if let Err(e) = query
         .reply(query.key_expr().clone(), encode(&placed.answer))
@@ -305,36 +297,22 @@ async fn reply_placed(placed: Placed) {
     }
 }
 
-struct Stream {
-    /// The batches sent to each leader that it may still ask for.
-    sent: Vec<BatchLog>,
-    /// The last durable position each leader published.
-    durable: Vec<Option<u64>>,
-    names: Vec<String>,
+/// The event keys, and the faults injected on them.
+struct Wire {
     faults: Faults,
     publishers: Vec<Publisher<'static>>,
-    sensor: String,
-    /// The whole source has been read.
-    finished: bool,
 }
 
-impl Stream {
+impl Wire {
     /// Sends every leader its queued items, or just how far the stream got.
-    async fn flush(&mut self, router: &mut Router) {
-        let through = router.seq();
-        for (i, publisher) in self.publishers.iter().enumerate() {
-            let number = self.sent[i].next_number();
-            let batch = Batch {
-                version: VERSION,
-                sensor: self.sensor.clone(),
-                number,
-                through,
-                events: router.events(),
-                finished: self.finished,
-                items: router.take(i),
-            };
-            let body = encode(&batch);
-            self.sent[i].push(batch);
+    async fn flush(&mut self, gateway: &mut Gateway<Query>) {
+        for (i, (batch, publisher)) in gateway
+            .flush()
+            .into_iter()
+            .zip(&self.publishers)
+            .enumerate()
+        {
+            let number = batch.number;
             let dropped = self
                 .faults
                 .drop_every
@@ -343,43 +321,13 @@ impl Stream {
                 tracing::debug!(leader = i, number, "fault: batch not published");
                 continue;
             }
+            let body = encode(&batch);
             for _ in 0..if self.faults.duplicate { 2 } else { 1 } {
                 if let Err(e) = publisher.put(body.clone()).await {
                     tracing::error!(error = %e, "could not publish a batch");
                 }
             }
         }
-    }
-
-    /// The batches leader `request.leader` asks for again.
-    fn resend(&self, request: &Resend) -> Result<Vec<Batch>, String> {
-        let sent = self
-            .names
-            .iter()
-            .position(|n| *n == request.leader)
-            .map(|i| &self.sent[i])
-            .ok_or_else(|| {
-                format!(
-                    "resend request from {:?}, which is not a leader of this stream",
-                    request.leader
-                )
-            })?;
-        sent.from(&request.leader, request.from)
-    }
-
-    /// A leader's state is safe through `mark`: drop its batches below it,
-    /// and the items every leader has passed.
-    fn forget(&mut self, mark: &Durable, router: &mut Router) {
-        let Some(i) = self.names.iter().position(|n| *n == mark.leader) else {
-            tracing::warn!(leader = %mark.leader, "durable mark from a leader not of this stream");
-            return;
-        };
-        let batches = self.sent[i].forget(mark);
-        self.durable[i] = Some(self.durable[i].unwrap_or(0).max(mark.position));
-        let passed = self.durable.iter().copied().min().flatten();
-        let items = passed.map_or(0, |seq| router.forget(seq));
-        tracing::trace!(leader = %mark.leader, batches, items, kept = self.sent[i].len(),
-            logged = router.logged(), "forgot what is safe");
     }
 }
 
@@ -461,5 +409,38 @@ async fn wait_for_leaders(
             });
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stream_length;
+    use idmesh_protocol::trace::{Line, Mix, Truth};
+
+    fn mix() -> Line {
+        Line::Mix(Mix {
+            time: 0.0,
+            a: 0,
+            b: 1,
+            swap: 0.5,
+        })
+    }
+
+    fn truth() -> Line {
+        Line::Truth(Truth {
+            time: 0.0,
+            red: Some(vec![0]),
+            identity: None,
+        })
+    }
+
+    #[test]
+    fn an_event_limit_counts_events_not_truth_lines() {
+        let lines = [mix(), truth(), mix(), truth(), mix(), mix()];
+        assert_eq!(stream_length(&lines, Some(3)), (5, 3));
+        assert_eq!(stream_length(&lines, Some(4)), (6, 4));
+        assert_eq!(stream_length(&lines, Some(9)), (6, 4));
+        assert_eq!(stream_length(&lines, None), (6, 4));
+        assert_eq!(stream_length(&lines, Some(0)), (0, 0));
     }
 }

@@ -10,7 +10,6 @@ use super::router::Router;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::VERSION;
 use std::collections::BTreeMap;
-use zenoh::query::Query;
 
 /// Cuts waiting for their event count, at most this many.
 const MAX_SCHEDULED: usize = 10_000;
@@ -22,33 +21,72 @@ pub struct Wanted {
     pub rows: bool,
 }
 
-/// What to do with a cut request.
-pub enum Request {
+/// A cut request's parameters (`tag=T`, `;rows`, `;events=N`), as text.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CutParameters {
+    pub tag: Option<String>,
+    pub rows: bool,
+    pub events: Option<String>,
+}
+
+/// What to do with a cut request; `Q` is whatever the driver answers
+/// (a Zenoh query, a simulated one).
+pub enum Request<Q> {
     /// Place it now.
-    Now { wanted: Wanted, query: Query },
+    Now { wanted: Wanted, query: Q },
     /// Held until the stream reaches its point.
     Scheduled,
     /// Refused, with the reason.
-    Refused { query: Query, reason: String },
+    Refused { query: Q, reason: String },
 }
 
-#[derive(Default)]
-pub struct Cuts {
-    scheduled: BTreeMap<u64, Vec<(Wanted, Query)>>,
+pub struct Cuts<Q> {
+    scheduled: BTreeMap<u64, Vec<(Wanted, Q)>>,
     held: usize,
+    /// The event count the stream will end at, when known in advance (a
+    /// trace file, or `events =` in the topology): a point beyond it is
+    /// refused at once instead of waiting out the query's timeout.
+    end: Option<u64>,
+}
+
+impl<Q> Default for Cuts<Q> {
+    fn default() -> Self {
+        Cuts {
+            scheduled: BTreeMap::new(),
+            held: 0,
+            end: None,
+        }
+    }
 }
 
 /// A cut placed in the stream, and the query to tell once it is sent.
-pub struct Placed {
-    pub query: Query,
+pub struct Placed<Q> {
+    pub query: Q,
     pub answer: CutPlaced,
 }
 
-impl Cuts {
+impl<Q> Cuts<Q> {
+    /// Cuts for a stream that will end after `end` events.
+    pub fn ending_at(end: u64) -> Self {
+        Cuts {
+            end: Some(end),
+            ..Cuts::default()
+        }
+    }
+
     /// Sorts a request: now, later, or never.
-    pub fn request(&mut self, query: Query, router: &Router, finished: bool) -> Request {
-        let parameters = query.parameters();
-        let Some(tag) = parameters.get("tag").and_then(|t| t.parse::<u64>().ok()) else {
+    pub fn request(
+        &mut self,
+        query: Q,
+        parameters: &CutParameters,
+        router: &Router,
+        finished: bool,
+    ) -> Request<Q> {
+        let Some(tag) = parameters
+            .tag
+            .as_deref()
+            .and_then(|t| t.parse::<u64>().ok())
+        else {
             return Request::Refused {
                 query,
                 reason: "a cut needs tag=<u64>: the tag leaders will be asked for".into(),
@@ -56,9 +94,9 @@ impl Cuts {
         };
         let wanted = Wanted {
             tag,
-            rows: parameters.contains_key("rows"),
+            rows: parameters.rows,
         };
-        let at = match parameters.get("events").map(str::parse::<u64>) {
+        let at = match parameters.events.as_deref().map(str::parse::<u64>) {
             None => return Request::Now { wanted, query },
             Some(Ok(at)) => at,
             Some(Err(_)) => {
@@ -76,6 +114,8 @@ impl Cuts {
             format!("the stream is past event {at} (it is at {now}) and keeps no history")
         } else if finished {
             format!("the stream ended at {now} events, before event {at}")
+        } else if let Some(end) = self.end.filter(|&end| at > end) {
+            format!("the stream ends at {end} events, before event {at}")
         } else if self.held >= MAX_SCHEDULED {
             format!("{MAX_SCHEDULED} cuts are already waiting for their point")
         } else {
@@ -88,7 +128,7 @@ impl Cuts {
 
     /// Places the cuts whose point the router has reached (call after each
     /// line), adding them to `placed`.
-    pub fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed>) {
+    pub fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
         while let Some(entry) = self.scheduled.first_entry() {
             if *entry.key() > router.events() {
                 return;
@@ -101,7 +141,7 @@ impl Cuts {
     }
 
     /// The stream is over: every cut still waiting is refused.
-    pub fn refuse_all(&mut self, router: &Router) -> Vec<(Query, String)> {
+    pub fn refuse_all(&mut self, router: &Router) -> Vec<(Q, String)> {
         self.held = 0;
         std::mem::take(&mut self.scheduled)
             .into_iter()
@@ -121,13 +161,13 @@ impl Cuts {
 }
 
 /// Places the cut a query wants in every leader's stream now.
-pub fn place(
+pub fn place<Q>(
     router: &mut Router,
     name: &str,
     wanted: Wanted,
-    query: Query,
+    query: Q,
     finished: bool,
-) -> Placed {
+) -> Placed<Q> {
     let (seq, events) = router.cut(wanted);
     let begin = router.begin();
     Placed {

@@ -3,6 +3,9 @@
 //!
 //! - [`router`] — sequences the events, keeps the log, and routes each item
 //!   to the leaders whose sets it may change (pure, no I/O).
+//! - [`core`] — the gateway as a pure state machine: router, batch logs,
+//!   durable marks and cuts; lines and requests in, batches and answers
+//!   out.
 //! - [`actor`] — publishes the stream over Zenoh at a rate, places cuts for
 //!   queries and answers leaders' follow requests.
 //! - [`cuts`] — cut requests: now, or at a future event count.
@@ -11,7 +14,11 @@
 
 pub mod actor;
 pub mod batch_log;
+pub mod core;
 pub mod cuts;
 pub mod router;
 
 pub use router::{LeaderPlace, Router, RouterConfig, RouterError};
+
+#[cfg(test)]
+mod tests;

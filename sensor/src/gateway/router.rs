@@ -12,7 +12,7 @@
 
 use super::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
-use idmesh_leader::LeaderError;
+use idmesh_placement::PlacementError;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::interest::Interest;
@@ -49,7 +49,7 @@ pub enum RouterError {
     #[error("OMP at the leaders needs {0}")]
     Omp(&'static str),
     #[error(transparent)]
-    Start(#[from] LeaderError),
+    Start(#[from] PlacementError),
 }
 
 pub struct Router {
@@ -98,10 +98,7 @@ impl Router {
             identities: header.identities.is_some(),
             initial_identity: header.initial_identity.clone(),
         };
-        let mut interests = Vec::with_capacity(leaders);
-        for me in 0..leaders {
-            interests.push(idmesh_leader::start(&begin, me as u16)?.1);
-        }
+        let interests = idmesh_placement::interests(&begin)?;
         let mut router = Router {
             owners: begin.owners.clone(),
             positions: vec![None; tracks],
@@ -296,12 +293,24 @@ impl Router {
         for &t in &follow.tracks {
             grown.add(t);
         }
+        // Grown this far, the leader may hold a set that fixes every track
+        // (see `Interest::saturated`): then it needs every observation it
+        // was not sent while it followed fewer. Sending some again is
+        // harmless (the leader waits at `after`; duplicates collapse by
+        // seq).
+        let mut whole = self.interests[leader].clone();
+        for &t in &follow.tracks {
+            whole.add(t);
+        }
+        let saturated = whole.saturated();
         // Items are logged in seq order, one per seq except Begin and cuts.
         let from = self.log.partition_point(|s| s.seq <= follow.after);
         let mut missed = Vec::new();
         for sequenced in &self.log[from..] {
-            if matches!(sequenced.item, Item::Mix { .. } | Item::Observe { .. })
-                && grown.receives(&sequenced.item)
+            let observation = matches!(sequenced.item, Item::Observe { .. });
+            if (saturated && observation)
+                || matches!(sequenced.item, Item::Mix { .. } | Item::Observe { .. })
+                    && grown.receives(&sequenced.item)
             {
                 grown.note(&sequenced.item);
                 missed.push(sequenced.clone());

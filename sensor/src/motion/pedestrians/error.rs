@@ -7,7 +7,9 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum SceneError {
     /// The file could not be read.
-    #[error("{}: {source}", path.display())]
+    // The OS error is the source, not part of the message: a report that
+    // prints the chain (`{:#}`) would name it twice.
+    #[error("{}: cannot read the scene", path.display())]
     Io {
         path: PathBuf,
         #[source]

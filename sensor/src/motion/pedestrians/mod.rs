@@ -110,11 +110,21 @@ impl Motion for Replay {
 }
 
 /// Where the shipped scenes live: `$IDMESH_PEDESTRIANS` if set, else
+/// `../shared/data/pedestrians` if there is one, else
 /// `/work/shared/data/pedestrians`.
 pub fn data_dir() -> std::path::PathBuf {
-    std::env::var_os("IDMESH_PEDESTRIANS")
-        .map(Into::into)
-        .unwrap_or_else(|| "/work/shared/data/pedestrians".into())
+    if let Some(dir) = std::env::var_os("IDMESH_PEDESTRIANS") {
+        return dir.into();
+    }
+    // `shared/` lives beside the repository: found from the repository's
+    // root (where the README's commands run), else where this project's
+    // machines keep it.
+    let beside = std::path::PathBuf::from("../shared/data/pedestrians");
+    if beside.is_dir() {
+        beside
+    } else {
+        "/work/shared/data/pedestrians".into()
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,309 @@
+//! The coordinator's gathering and combining as pure functions: what the
+//! replies of the sensor and the leaders to one query mean, whether they
+//! make a complete answer at one consistent cut, and the property
+//! marginals they add up to. No I/O: the Zenoh gets are in
+//! [`crate::gather`], and the deterministic network simulator
+//! (`tests/src/sim`) feeds these the replies of simulated processes.
+
+use idmesh_belief::predict_red;
+use idmesh_placement::combine;
+use idmesh_protocol::wire::bounds::Bounds;
+use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
+use idmesh_protocol::wire::decode;
+use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::Duration;
+
+#[derive(Debug, thiserror::Error)]
+pub enum GatherError {
+    #[error("no sensor gateway answered: the stream has no source yet")]
+    NoSensor,
+    #[error("no leader is listed by the sensor")]
+    NoLeaders,
+    #[error("degraded: leaders {missing:?} did not answer (waited up to {timeout:?}); no partial answer is given")]
+    Missing {
+        missing: Vec<String>,
+        timeout: Duration,
+    },
+    #[error("{0}")]
+    Failed(String),
+    /// Leaders answered, but not all with their share at the cut (one is
+    /// recovering, waits for a peer that is down, …).
+    #[error("degraded: {0}; no partial answer is given")]
+    Refused(String),
+    #[error("the belief has no mass at this cut: the observations contradict each other")]
+    Degenerate,
+}
+
+/// What a marginals query found.
+#[derive(Debug, Clone)]
+pub struct Gathered {
+    pub cut: CutPlaced,
+    pub answer: MarginalsAnswer,
+}
+
+/// Every leader's share at one cut: all of them, at the same seq.
+#[derive(Debug, Clone)]
+pub struct Collected {
+    pub cut: CutPlaced,
+    pub parts: Vec<Partial>,
+}
+
+impl Collected {
+    /// What the answer includes: per sensor, its events.
+    pub fn watermark(&self) -> Watermark {
+        let mut watermark = Watermark::new();
+        watermark.insert(self.cut.sensor.clone(), self.cut.events);
+        watermark
+    }
+}
+
+/// What the leaders add to their partial sums.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Share {
+    /// The partial sums of the property belief only.
+    Sums,
+    /// Their rows of the information matrix too (identity queries).
+    Rows,
+}
+
+/// What the coordinator keeps between queries: the last cut of a stream
+/// that was over, and its counts of bad input. Nothing is pushed to it; it
+/// only remembers what it asked.
+#[derive(Debug, Default)]
+pub struct Memory {
+    finished: Mutex<Option<CutPlaced>>,
+    rejected: AtomicU64,
+    bad_replies: AtomicU64,
+    degraded: AtomicU64,
+}
+
+impl Memory {
+    /// Counts a query refused for its parameters.
+    pub fn note_rejected(&self) {
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Counts a reply from another process that was no good.
+    pub fn note_bad_reply(&self, what: &str, problem: &str) {
+        let n = self.bad_replies.fetch_add(1, Ordering::Relaxed) + 1;
+        tracing::warn!(what, problem, bad_replies = n, "bad reply");
+    }
+
+    /// Counts a query answered `degraded: …` (a leader missing or not
+    /// at the cut).
+    pub fn note_degraded(&self) {
+        self.degraded.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub fn stats(&self) -> CoordinatorStats {
+        CoordinatorStats {
+            rejected: self.rejected.load(Ordering::Relaxed),
+            bad_replies: self.bad_replies.load(Ordering::Relaxed),
+            degraded: self.degraded.load(Ordering::Relaxed),
+        }
+    }
+
+    pub fn finished(&self) -> Option<CutPlaced> {
+        self.finished.lock().ok().and_then(|c| c.clone())
+    }
+
+    pub fn remember(&self, cut: &CutPlaced) {
+        if let Ok(mut slot) = self.finished.lock() {
+            *slot = cut.finished.then(|| cut.clone());
+        }
+    }
+}
+
+/// Where in the stream an answer is wanted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum At {
+    /// As far as the stream has got.
+    Latest,
+    /// Right after the stream's n-th event (which may not have come yet:
+    /// the answer waits for it, up to the timeout).
+    Events(u64),
+}
+
+/// The parameters of the cut request of a fresh cut tagged `tag`.
+pub fn cut_parameters(tag: u64, at: At, share: Share) -> String {
+    let mut parameters = match at {
+        At::Latest => format!("tag={tag}"),
+        At::Events(n) => format!("tag={tag};events={n}"),
+    };
+    if share == Share::Rows {
+        parameters.push_str(";rows");
+    }
+    parameters
+}
+
+/// What the sensor answered a cut request (`key`: where the answer came
+/// from).
+pub fn read_cut(
+    reply: Result<Vec<u8>, String>,
+    key: &str,
+    memory: &Memory,
+) -> Result<CutPlaced, GatherError> {
+    match reply {
+        Ok(bytes) => decode::<CutPlaced>(&bytes).map_err(|e| {
+            let problem = format!("{key}: {e}");
+            memory.note_bad_reply("cut", &problem);
+            GatherError::Failed(problem)
+        }),
+        Err(e) => Err(GatherError::Failed(format!(
+            "the sensor placed no cut: {e}"
+        ))),
+    }
+}
+
+/// The leaders' replies to one partial-sums query, as they come.
+#[derive(Debug, Clone, Default)]
+pub struct Partials {
+    /// The tag asked for (None: where the leaders rest).
+    tag: Option<u64>,
+    parts: BTreeMap<String, Partial>,
+    errors: Vec<String>,
+}
+
+impl Partials {
+    pub fn new(tag: Option<u64>) -> Self {
+        Partials {
+            tag,
+            ..Partials::default()
+        }
+    }
+
+    /// One leader's reply (`key`: where it came from): its partial sums,
+    /// or an error reply, or bytes that are no good (counted).
+    pub fn reply(&mut self, reply: Result<Vec<u8>, String>, key: &str, memory: &Memory) {
+        let tag = self.tag;
+        match reply {
+            Ok(bytes) => match decode::<Partial>(&bytes) {
+                Ok(p) if tag.is_none_or(|t| t == p.tag) => {
+                    self.parts.insert(p.leader.clone(), p);
+                }
+                Ok(p) => self
+                    .errors
+                    .push(format!("{} answered tag {} for {tag:?}", p.leader, p.tag)),
+                Err(e) => {
+                    let problem = format!("{key}: {e}");
+                    memory.note_bad_reply("partial sums", &problem);
+                    self.errors.push(problem);
+                }
+            },
+            Err(e) => self.errors.push(e),
+        }
+    }
+
+    /// How many leaders answered with sums.
+    pub fn answered(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// The sums by leader, and the error replies.
+    pub fn into_parts(self) -> (BTreeMap<String, Partial>, Vec<String>) {
+        (self.parts, self.errors)
+    }
+}
+
+/// The answer where the leaders rest, if every leader of `last` (the last
+/// finished cut) rests at the same seq at the end of the stream (they then
+/// hold the final belief: every set sent has been received). None sends
+/// the query the long way.
+pub fn at_rest_of(
+    last: CutPlaced,
+    parts: BTreeMap<String, Partial>,
+    errors: Vec<String>,
+    timeout: Duration,
+    memory: &Memory,
+) -> Option<Collected> {
+    let first = parts.values().next()?;
+    let agreed = errors.is_empty()
+        && parts.values().all(|p| p.finished && p.cut == first.cut)
+        && last.leaders.iter().all(|l| parts.contains_key(l));
+    if !agreed {
+        return None;
+    }
+    let cut = CutPlaced {
+        seq: first.cut,
+        events: first.events,
+        ..last
+    };
+    check(cut, parts, Vec::new(), timeout, memory).ok()
+}
+
+/// The leaders' shares at `cut` if every leader answered there, or who is
+/// missing or what went wrong: never a partial answer dressed as complete.
+pub fn check(
+    cut: CutPlaced,
+    parts: BTreeMap<String, Partial>,
+    mut errors: Vec<String>,
+    timeout: Duration,
+    memory: &Memory,
+) -> Result<Collected, GatherError> {
+    if cut.leaders.is_empty() {
+        return Err(GatherError::NoLeaders);
+    }
+    // Sums of tracks or rows beyond the cut's field would be dropped or
+    // fail later without saying whose they were.
+    let bounds = Bounds {
+        tracks: cut.tracks,
+        leaders: cut.leaders.len(),
+        identities: cut.identities,
+    };
+    for p in parts.values() {
+        if let Err(e) = bounds.check_partial(p) {
+            let problem = format!("{}: {e}", p.leader);
+            memory.note_bad_reply("partial sums", &problem);
+            errors.push(problem);
+        }
+    }
+    for p in parts.values().filter(|p| p.cut != cut.seq) {
+        errors.push(format!(
+            "{} answered at seq {} for a cut at {}",
+            p.leader, p.cut, cut.seq
+        ));
+    }
+    if !errors.is_empty() {
+        return Err(GatherError::Refused(errors.join("; ")));
+    }
+    let missing: Vec<String> = cut
+        .leaders
+        .iter()
+        .filter(|l| !parts.contains_key(*l))
+        .cloned()
+        .collect();
+    if !missing.is_empty() {
+        return Err(GatherError::Missing { missing, timeout });
+    }
+    Ok(Collected {
+        cut,
+        parts: parts.into_values().collect(),
+    })
+}
+
+/// The property marginals the leaders' shares at one cut add up to.
+pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherError> {
+    let sums = combine(&collected.parts);
+    let cut = &collected.cut;
+    let p_red = sums
+        .marginals(cut.tracks as usize)
+        .map_err(|_| GatherError::Degenerate)?;
+    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
+    Ok(MarginalsAnswer {
+        watermark: collected.watermark(),
+        tracks: cut.tracks,
+        red: cut.red,
+        p_red,
+        predicted_red,
+        leaders: collected.parts.len() as u32,
+        coefficients: sums.coefficients,
+        finished: cut.finished,
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,173 @@
+//! The gathering of one query, fed replies by hand: good, missing, late,
+//! of another tag, that do not decode, that do not fit the field.
+
+use super::*;
+use idmesh_protocol::wire::{encode, VERSION};
+
+fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
+    CutPlaced {
+        version: VERSION,
+        sensor: "sensor-0".into(),
+        seq,
+        events: seq * 2,
+        leaders: leaders.iter().map(|l| l.to_string()).collect(),
+        tracks: 3,
+        red: Some(1),
+        finished: false,
+        identities: false,
+    }
+}
+
+/// A leader's share: `total` with track `t` fixing `inside`.
+fn part(leader: &str, cut: u64, tag: u64, total: f64, inside: Vec<(u32, f64)>) -> Partial {
+    Partial {
+        version: VERSION,
+        leader: leader.into(),
+        cut,
+        tag,
+        events: cut * 2,
+        finished: false,
+        log_scale: 0.0,
+        total,
+        outside: total / 3.0,
+        inside,
+        coefficients: 1,
+        rows: Vec::new(),
+    }
+}
+
+fn gather(tag: u64, replies: Vec<Result<Vec<u8>, String>>, memory: &Memory) -> Partials {
+    let mut partials = Partials::new(Some(tag));
+    for r in replies {
+        partials.reply(r, "P/leader/x/partial", memory);
+    }
+    partials
+}
+
+#[test]
+fn every_leader_at_the_cut_adds_up_to_marginals_summing_to_k() {
+    let memory = Memory::default();
+    let replies = vec![
+        Ok(encode(&part("a", 7, 9, 1.0, vec![(0, 0.5)]))),
+        Ok(encode(&part("b", 7, 9, 2.0, vec![(1, -0.5), (2, 0.0)]))),
+    ];
+    let (parts, errors) = gather(9, replies, &memory).into_parts();
+    let collected = check(cut(7, &["a", "b"]), parts, errors, Duration::ZERO, &memory).unwrap();
+    let answer = marginals_of(&collected).unwrap();
+    assert_eq!(answer.leaders, 2);
+    assert_eq!(answer.watermark.get("sensor-0"), Some(&14));
+    // outside = 1/3 + 2/3 = 1 over total 3, plus each track's inside.
+    let want = [1.5 / 3.0, 0.5 / 3.0, 1.0 / 3.0];
+    for (p, w) in answer.p_red.iter().zip(want) {
+        assert!((p - w).abs() < 1e-12, "{:?}", answer.p_red);
+    }
+    assert!((answer.p_red.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    assert_eq!(memory.stats().bad_replies, 0);
+}
+
+#[test]
+fn a_missing_leader_fails_the_query_by_name() {
+    let memory = Memory::default();
+    let (parts, errors) =
+        gather(9, vec![Ok(encode(&part("a", 7, 9, 1.0, vec![])))], &memory).into_parts();
+    let e = check(cut(7, &["a", "b"]), parts, errors, Duration::ZERO, &memory).unwrap_err();
+    assert!(
+        matches!(&e, GatherError::Missing { missing, .. } if missing == &["b"]),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_replies_are_counted_and_refuse_the_answer() {
+    let memory = Memory::default();
+    let replies = vec![
+        Ok(b"not postcard".to_vec()),
+        // Another tag: a reply meant for another query.
+        Ok(encode(&part("a", 7, 8, 1.0, vec![]))),
+        Err("degraded: leader b is recovering its state".into()),
+    ];
+    let partials = gather(9, replies, &memory);
+    assert_eq!(partials.answered(), 0);
+    let (parts, errors) = partials.into_parts();
+    let e = check(cut(7, &["a", "b"]), parts, errors, Duration::ZERO, &memory)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("P/leader/x/partial"), "{e}");
+    assert!(e.contains("a answered tag 8"), "{e}");
+    assert!(e.contains("recovering"), "{e}");
+    assert_eq!(memory.stats().bad_replies, 1);
+}
+
+#[test]
+fn sums_at_another_seq_or_beyond_the_field_are_refused() {
+    let memory = Memory::default();
+    let replies = vec![
+        Ok(encode(&part("a", 6, 9, 1.0, vec![]))),
+        Ok(encode(&part("b", 7, 9, 1.0, vec![(3, 0.1)]))),
+    ];
+    let (parts, errors) = gather(9, replies, &memory).into_parts();
+    let e = check(cut(7, &["a", "b"]), parts, errors, Duration::ZERO, &memory)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("a answered at seq 6 for a cut at 7"), "{e}");
+    assert!(e.contains("b:"), "{e}");
+    assert_eq!(memory.stats().bad_replies, 1);
+}
+
+#[test]
+fn the_cut_reply_decides_and_a_bad_one_is_counted() {
+    let memory = Memory::default();
+    let placed = read_cut(Ok(encode(&cut(3, &["a"]))), "P/sensor/s/cut", &memory).unwrap();
+    assert_eq!(placed.seq, 3);
+    let e = read_cut(Ok(vec![1, 2, 3]), "P/sensor/s/cut", &memory).unwrap_err();
+    assert!(e.to_string().contains("P/sensor/s/cut"), "{e}");
+    let e = read_cut(Err("the stream is past event 3".into()), "k", &memory).unwrap_err();
+    assert!(e.to_string().contains("past event 3"), "{e}");
+    assert_eq!(memory.stats().bad_replies, 1);
+    assert_eq!(
+        cut_parameters(5, At::Events(4), Share::Rows),
+        "tag=5;events=4;rows"
+    );
+}
+
+#[test]
+fn leaders_resting_at_the_same_end_answer_without_a_cut() {
+    let memory = Memory::default();
+    let mut last = cut(7, &["a", "b"]);
+    last.finished = true;
+    let rest = |leader: &str, at: u64| {
+        let mut p = part(leader, at, 0, 1.0, vec![]);
+        p.finished = true;
+        p
+    };
+    let parts =
+        |a: Partial, b: Partial| BTreeMap::from([("a".to_string(), a), ("b".to_string(), b)]);
+    let collected = at_rest_of(
+        last.clone(),
+        parts(rest("a", 9), rest("b", 9)),
+        Vec::new(),
+        Duration::ZERO,
+        &memory,
+    )
+    .expect("both rest at 9");
+    assert_eq!((collected.cut.seq, collected.cut.events), (9, 18));
+    // Resting at different points, or one not finished: the long way.
+    assert!(at_rest_of(
+        last.clone(),
+        parts(rest("a", 9), rest("b", 8)),
+        Vec::new(),
+        Duration::ZERO,
+        &memory
+    )
+    .is_none());
+    let mut unfinished = rest("b", 9);
+    unfinished.finished = false;
+    assert!(at_rest_of(
+        last,
+        parts(rest("a", 9), unfinished),
+        Vec::new(),
+        Duration::ZERO,
+        &memory
+    )
+    .is_none());
+}

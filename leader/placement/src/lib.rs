@@ -1,0 +1,179 @@
+//! # idmesh-placement — who holds what, and how the parts add up
+//!
+//! Three processes must agree on the same few facts without talking, and
+//! without depending on one another's process crates:
+//! - at the stream's `Begin`, which leader holds which coefficient set and
+//!   hence which tracks each leader follows (its [`Interest`]): the leader
+//!   starts from its share ([`start`]), the sensor gateway routes the first
+//!   items by the same interests ([`interests`]);
+//! - the field a `Begin` describes ([`field_of`]), as `idmesh replay` reads
+//!   it from a trace header (`Field::with_count`);
+//! - how the leaders' partial sums at one cut add up to the answer
+//!   ([`combine`]), which the coordinator computes.
+//!
+//! docs/architecture.md ("Who holds what", "Queries") says why the shares
+//! add up: rollup and conditioning act on the Radon masses atom by atom and
+//! linearly (Section 5.4 of the property-management paper).
+
+use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
+use idmesh_belief::{BeliefError, Field, RedCount};
+use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use idmesh_protocol::wire::interest::Interest;
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
+
+/// Why a share could not be placed.
+#[derive(Debug, thiserror::Error)]
+pub enum PlacementError {
+    #[error(
+        "a Begin whose owners ({owners}) do not match its {tracks} tracks and {leaders} leaders"
+    )]
+    Owners {
+        owners: usize,
+        tracks: u32,
+        leaders: usize,
+    },
+    #[error(transparent)]
+    Belief(#[from] BeliefError),
+}
+
+/// Leader `me`'s share of the start belief and its interest: each set
+/// starts with the leader of its first track, φ_∅ with leader 0. The sensor
+/// computes the same ([`interests`]) to route the first items.
+pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), PlacementError> {
+    let tracks = begin.tracks as usize;
+    if begin.owners.len() != tracks
+        || begin
+            .owners
+            .iter()
+            .any(|&o| o as usize >= begin.leaders.len())
+    {
+        return Err(PlacementError::Owners {
+            owners: begin.owners.len(),
+            tracks: begin.tracks,
+            leaders: begin.leaders.len(),
+        });
+    }
+    let options = RadonOptions {
+        distributed_rule: begin.distributed_rule,
+        ..RadonOptions::default()
+    };
+    let mut share = RadonShare::start(field_of(begin), &options)?;
+    let owners = &begin.owners;
+    share.extract(|atom| atom.tracks().min().map(|t| owners[t as usize]).unwrap_or(0) != me);
+    let holds_empty = share.atoms().any(|(a, _)| a.tracks().next().is_none());
+    let mut interest =
+        Interest::new(me, tracks, holds_empty).saturating_at(saturation(&field_of(begin)));
+    for (atom, _) in share.atoms() {
+        for t in atom.tracks() {
+            interest.add(t);
+        }
+    }
+    interest.note(&Item::Begin(begin.clone()));
+    Ok((share, interest))
+}
+
+/// The size of a set that fixes every track of `field`: k red tracks (the
+/// others are blue) or n − k blue ones; with a prior over counts, the
+/// largest count allowed or n − the smallest.
+pub fn saturation(field: &Field) -> usize {
+    let n = field.tracks;
+    match &field.red {
+        RedCount::Known(k) => (*k).min(n - k.min(&n)),
+        RedCount::Unknown { prior } => {
+            let most = prior.iter().rposition(|&p| p > 0.0).unwrap_or(n);
+            let least = prior.iter().position(|&p| p > 0.0).unwrap_or(0);
+            most.min(n.saturating_sub(least))
+        }
+    }
+}
+
+/// Every leader's interest at the `Begin`, in the stream's order.
+pub fn interests(begin: &Begin) -> Result<Vec<Interest>, PlacementError> {
+    (0..begin.leaders.len())
+        .map(|me| start(begin, me as u16).map(|(_, interest)| interest))
+        .collect()
+}
+
+/// The field a stream's Begin describes (as `idmesh replay` reads a header).
+pub fn field_of(begin: &Begin) -> Field {
+    Field::with_count(
+        begin.tracks as usize,
+        begin.red.map(|k| k as usize),
+        begin.initial_red.clone(),
+    )
+}
+
+/// The answer to a query from every leader's partial sums.
+pub fn combine(parts: &[Partial]) -> PartialSums {
+    let sums: Vec<PartialSums> = parts
+        .iter()
+        .map(|p| PartialSums {
+            log_scale: p.log_scale,
+            total: p.total,
+            outside: p.outside,
+            inside: p.inside.clone(),
+            coefficients: p.coefficients,
+        })
+        .collect();
+    PartialSums::combine(&sums)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn begin(leaders: usize, owners: Vec<u16>, red: Option<u32>) -> Begin {
+        Begin {
+            tracks: owners.len() as u32,
+            red,
+            initial_red: None,
+            leaders: (0..leaders).map(|l| format!("leader-{l}")).collect(),
+            owners,
+            distributed_rule: true,
+            budget: 0,
+            omp: false,
+            identities: false,
+            initial_identity: None,
+        }
+    }
+
+    /// The shares of every leader add up to the whole start belief, and
+    /// each leader follows exactly the tracks of its sets.
+    #[test]
+    fn the_start_shares_add_up_to_the_start_belief() {
+        let begin = begin(3, vec![0, 1, 2, 0, 1], Some(2));
+        let whole = RadonShare::start(field_of(&begin), &RadonOptions::default()).unwrap();
+        let mut parts = Vec::new();
+        for me in 0..3u16 {
+            let (share, interest) = start(&begin, me).unwrap();
+            for (atom, _) in share.atoms() {
+                assert!(atom.tracks().all(|t| interest.follows(t)));
+                assert_eq!(begin.owners[atom.tracks().min().unwrap() as usize], me);
+            }
+            parts.push(share.partial_sums());
+        }
+        let sum = PartialSums::combine(&parts).marginals(5).unwrap();
+        let want = whole.partial_sums().marginals(5).unwrap();
+        for (a, b) in sum.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-12, "{sum:?} vs {want:?}");
+        }
+        assert!((sum.iter().sum::<f64>() - 2.0).abs() < 1e-12);
+        assert_eq!(interests(&begin).unwrap().len(), 3);
+    }
+
+    #[test]
+    fn owners_that_do_not_fit_are_refused_by_name() {
+        let bad = begin(2, vec![0, 2], Some(1));
+        let e = start(&bad, 0).unwrap_err().to_string();
+        assert!(e.contains("2 tracks and 2 leaders"), "{e}");
+    }
+
+    #[test]
+    fn an_unknown_count_means_the_uniform_prior_over_counts() {
+        let b = begin(1, vec![0, 0, 0], None);
+        assert_eq!(field_of(&b).red, RedCount::unknown_uniform(3));
+        let (share, interest) = start(&b, 0).unwrap();
+        assert!(share.atoms().any(|(a, _)| a.tracks().next().is_none()));
+        assert_eq!(interest.len(), 3);
+    }
+}

@@ -1,0 +1,427 @@
+//! The leader's timers and recovery policy, driven by hand with a clock
+//! that only moves when the test says so.
+
+use super::*;
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Item, Sequenced};
+
+const MS: Duration = Duration::from_millis(1);
+
+fn timers() -> Timers {
+    Timers::new(Duration::from_secs(2), true, Some(4))
+}
+
+fn begin(leaders: &[&str]) -> Item {
+    Item::Begin(Begin {
+        tracks: 4,
+        red: Some(2),
+        initial_red: Some(vec![0, 1]),
+        leaders: leaders.iter().map(|l| l.to_string()).collect(),
+        // Tracks 0, 1 with the first leader, 2, 3 with the last.
+        owners: vec![0, 0, leaders.len() as u16 - 1, leaders.len() as u16 - 1],
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+        identities: false,
+        initial_identity: None,
+    })
+}
+
+fn batch(number: u64, items: Vec<(u64, Item)>, through: u64) -> Input {
+    let batch = Batch {
+        version: VERSION,
+        sensor: "s".into(),
+        number,
+        through,
+        events: through,
+        finished: false,
+        items: items
+            .into_iter()
+            .map(|(seq, item)| Sequenced { seq, item })
+            .collect(),
+    };
+    Input::Message {
+        kind: Kind::Batch,
+        bytes: encode(&batch),
+        origin: "test".into(),
+    }
+}
+
+fn cut(tag: u64) -> Item {
+    Item::Cut {
+        events: 0,
+        tag,
+        rows: false,
+    }
+}
+
+fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
+    Item::Mix {
+        a,
+        b,
+        swap: 0.5,
+        owner_a,
+        owner_b,
+    }
+}
+
+fn started(name: &str, leaders: &[&str]) -> Node {
+    let mut node = Node::new(Leader::new(name), timers());
+    node.step(Duration::ZERO, batch(0, vec![(1, begin(leaders))], 1));
+    node
+}
+
+fn resends(out: &[Output]) -> usize {
+    out.iter()
+        .filter(|o| matches!(o, Output::AskResend(_)))
+        .count()
+}
+
+fn answers(out: &[Output]) -> Vec<(u64, Result<Partial, String>)> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::Answer { id, answer } => Some((*id, answer.clone())),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_comes() {
+    let mut node = started("a", &["a"]);
+    assert!(node
+        .step(
+            10 * MS,
+            Input::Partial {
+                id: 1,
+                ask: Ask::Cut(7)
+            }
+        )
+        .is_empty());
+    assert!(node
+        .step(
+            20 * MS,
+            Input::Partial {
+                id: 2,
+                ask: Ask::Cut(8)
+            }
+        )
+        .is_empty());
+    assert_eq!(node.held(), 2);
+    let out = node.step(30 * MS, batch(1, vec![(2, cut(7))], 2));
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1);
+    assert_eq!(answered[0].0, 1);
+    assert_eq!(answered[0].1.as_ref().unwrap().cut, 2);
+    // Asked again later: answered from the cuts kept.
+    let out = node.step(
+        40 * MS,
+        Input::Partial {
+            id: 3,
+            ask: Ask::Cut(7),
+        },
+    );
+    assert!(answers(&out)[0].1.is_ok());
+    // Query 2's cut never comes: an error once it waited the timeout.
+    let out = node.step(2 * 1000 * MS, Input::Tick);
+    assert!(answers(&out).is_empty(), "not yet: {out:?}");
+    let out = node.step(2100 * MS, Input::Tick);
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1);
+    assert!(answered[0].1.as_ref().unwrap_err().contains("cut tagged 8"));
+    assert_eq!(node.held(), 0);
+}
+
+#[test]
+fn a_late_cut_asks_for_the_batches_again_once_at_a_time() {
+    let mut node = started("a", &["a"]);
+    node.step(
+        Duration::ZERO,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Cut(7),
+        },
+    );
+    assert_eq!(
+        resends(&node.step(250 * MS, Input::Tick)),
+        0,
+        "not late yet"
+    );
+    let out = node.step(600 * MS, Input::Tick);
+    assert_eq!(resends(&out), 1, "{out:?}");
+    match out.iter().find(|o| matches!(o, Output::AskResend(_))) {
+        Some(Output::AskResend(r)) => assert_eq!((r.leader.as_str(), r.from), ("a", 1)),
+        _ => unreachable!(),
+    }
+    // One request at a time, until it is answered (here: it failed).
+    assert_eq!(resends(&node.step(850 * MS, Input::Tick)), 0);
+    node.step(900 * MS, Input::Resent(Err("timeout".into())));
+    assert_eq!(resends(&node.step(1100 * MS, Input::Tick)), 1);
+    // The resent batch carries the cut: the query is answered.
+    let resent = Batch {
+        version: VERSION,
+        sensor: "s".into(),
+        number: 1,
+        through: 2,
+        events: 2,
+        finished: false,
+        items: vec![Sequenced {
+            seq: 2,
+            item: cut(7),
+        }],
+    };
+    let out = node.step(1200 * MS, Input::Resent(Ok(vec![resent])));
+    assert_eq!(answers(&out).len(), 1);
+}
+
+#[test]
+fn a_gap_in_batch_numbers_is_asked_for_at_once() {
+    let mut node = started("a", &["a"]);
+    let out = node.step(MS, batch(2, vec![(3, mix(0, 1, 0, 0))], 3));
+    assert_eq!(resends(&out), 1);
+    assert_eq!(node.leader().missing_batches(), Some(1));
+    // Still missing while the request is out: not asked twice.
+    assert_eq!(resends(&node.step(2 * MS, batch(3, vec![], 3))), 0);
+    let out = node.step(3 * MS, batch(1, vec![(2, mix(0, 2, 0, 0))], 2));
+    assert_eq!(resends(&out), 0);
+    assert_eq!(node.leader().position(), 3);
+}
+
+#[test]
+fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
+    let mut node = started("a", &["a", "b"]);
+    let out = node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::Send { to, seq: 2, .. } if to == "b")));
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+    let asked = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
+            .count()
+    };
+    assert_eq!(asked(&node.step(300 * MS, Input::Tick)), 0, "not late yet");
+    let out = node.step(600 * MS, Input::Tick);
+    assert_eq!(asked(&out), 1);
+    match out
+        .iter()
+        .find(|o| matches!(o, Output::AskTransfers { .. }))
+    {
+        Some(Output::AskTransfers { wanted, .. }) => assert_eq!((wanted.to, wanted.after), (0, 1)),
+        _ => unreachable!(),
+    }
+    assert_eq!(
+        asked(&node.step(850 * MS, Input::Tick)),
+        0,
+        "one request out"
+    );
+    let lost = Transfer {
+        version: VERSION,
+        from: 1,
+        seq: 2,
+        sets: Vec::new(),
+        rows: Vec::new(),
+    };
+    node.step(
+        900 * MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Ok(vec![lost]),
+        },
+    );
+    assert_eq!(node.leader().waiting_for_transfer(), None);
+    assert_eq!(node.leader().position(), 2);
+}
+
+#[test]
+fn a_failed_follow_request_is_made_again() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    // b's sets bring track 3, which a does not follow yet.
+    let sets = vec![idmesh_protocol::wire::leader_to_leader::WireSet {
+        red: vec![3],
+        blue: vec![],
+        ln_mass: -1.0,
+    }];
+    let transfer = Transfer {
+        version: VERSION,
+        from: 1,
+        seq: 2,
+        sets,
+        rows: Vec::new(),
+    };
+    let out = node.step(
+        20 * MS,
+        Input::Message {
+            kind: Kind::Transfer,
+            bytes: encode(&transfer),
+            origin: "b".into(),
+        },
+    );
+    let follows = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskFollow(_)))
+            .count()
+    };
+    assert_eq!(follows(&out), 1);
+    assert_eq!(
+        follows(&node.step(250 * MS, Input::Tick)),
+        0,
+        "one request out"
+    );
+    node.step(300 * MS, Input::Followed(Err("no answer in time".into())));
+    assert!(node.failure().is_none(), "a lost reply is not a failure");
+    assert_eq!(follows(&node.step(500 * MS, Input::Tick)), 1);
+}
+
+#[test]
+fn the_mark_is_published_after_a_sync_and_only_when_it_moved() {
+    let mut node = started("a", &["a"]);
+    let marks = |out: &[Output]| -> Vec<Option<Durable>> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Persist { mark } => Some(mark.clone()),
+                _ => None,
+            })
+            .collect()
+    };
+    let first = marks(&node.step(250 * MS, Input::Tick));
+    assert_eq!(first.len(), 1);
+    assert_eq!(
+        first[0].as_ref().map(|m| (m.batch, m.position)),
+        Some((1, 1))
+    );
+    assert_eq!(
+        marks(&node.step(500 * MS, Input::Tick)),
+        vec![None],
+        "synced, not republished"
+    );
+    node.step(600 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2));
+    let moved = marks(&node.step(750 * MS, Input::Tick));
+    assert_eq!(
+        moved[0].as_ref().map(|m| (m.batch, m.position)),
+        Some((2, 2))
+    );
+    // A failed leader tells nobody it is safe.
+    node.step(800 * MS, Input::Failed("disk full".into()));
+    node.step(900 * MS, batch(2, vec![], 2));
+    assert_eq!(marks(&node.step(1000 * MS, Input::Tick)), vec![None]);
+    let out = node.step(
+        1100 * MS,
+        Input::Partial {
+            id: 9,
+            ask: Ask::Quiet { rows: false },
+        },
+    );
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("disk full"));
+}
+
+#[test]
+fn inputs_are_journaled_before_their_effects_and_snapshots_come_every_n() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    let out = node.step(MS, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    assert!(matches!(
+        out[0],
+        Output::Journal {
+            kind: Kind::Batch,
+            ..
+        }
+    ));
+    let out = node.step(2 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let kinds: Vec<&str> = out
+        .iter()
+        .map(|o| match o {
+            Output::Journal { .. } => "journal",
+            Output::Send { .. } => "send",
+            _ => "other",
+        })
+        .collect();
+    assert_eq!(kinds, ["journal", "send"]);
+    // Refused at the door: neither journaled nor counted as an input.
+    let out = node.step(
+        3 * MS,
+        Input::Message {
+            kind: Kind::Batch,
+            bytes: vec![9, 9],
+            origin: "x".into(),
+        },
+    );
+    assert!(out.is_empty());
+    assert_eq!(node.leader().stats().rejected, 1);
+    node.step(4 * MS, batch(2, vec![], 2));
+    let out = node.step(5 * MS, batch(3, vec![], 2));
+    assert!(
+        out.iter().any(|o| matches!(o, Output::Snapshot(_))),
+        "the 4th journaled input: {out:?}"
+    );
+    assert_eq!(node.leader().stats().snapshots, 1);
+}
+
+#[test]
+fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
+    // Leader a's life before the crash, as its journal holds it.
+    let mut before = started("a", &["a", "b"]);
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut keep = |out: Vec<Output>| {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    };
+    let mut fresh = Node::new(Leader::new("a"), timers());
+    keep(fresh.step(MS, batch(0, vec![(1, begin(&["a", "b"]))], 1)));
+    keep(fresh.step(2 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2)));
+    before.step(2 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+
+    let entries = journal.iter().map(|(k, b)| (*k, b.as_slice()));
+    let (mut node, out) =
+        Node::recover("a", "host-a", None, entries, false, timers(), 10 * MS).unwrap();
+    assert_eq!(node.leader().position(), before.leader().position());
+    // Its transfer again, the batches after its journal, b's transfers.
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::Send { to, seq: 2, .. } if to == "b")));
+    assert_eq!(resends(&out), 1);
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b")));
+    let out = node.step(
+        20 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Quiet { rows: false },
+        },
+    );
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("recovering"));
+    // The sensor answers, then b: caught up.
+    node.step(30 * MS, Input::Resent(Ok(Vec::new())));
+    assert!(node.recovering_since().is_some());
+    let transfer = Transfer {
+        version: VERSION,
+        from: 1,
+        seq: 2,
+        sets: Vec::new(),
+        rows: Vec::new(),
+    };
+    node.step(
+        40 * MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Ok(vec![transfer]),
+        },
+    );
+    assert!(node.recovering_since().is_none());
+    assert_eq!(node.leader().stats().recoveries, 1);
+    assert!(node.leader().quiet(false).is_some());
+    // With nothing in its journal, a leader just starts.
+    let (node, out) = Node::recover("a", "h", None, [], false, timers(), MS).unwrap();
+    assert!(out.is_empty() && node.recovering_since().is_none());
+}

@@ -1,0 +1,188 @@
+//! Applying one item of the stream to the share (and the rows): the
+//! `Begin`, mixes, observations, handovers, identity reads and cuts;
+//! local sparsification after each item (Section 5.4.3).
+
+use super::transfers::{wire_row, NOT_HELD};
+use super::*;
+
+impl Leader {
+    pub(super) fn apply(
+        &mut self,
+        seq: u64,
+        item: Item,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        self.stats.items += 1;
+        if let Item::Begin(begin) = &item {
+            return self.begin(begin.clone());
+        }
+        let me = self.me()?;
+        let started = self.started()?;
+        started.interest.note(&item);
+        match item {
+            Item::Begin(_) => {}
+            Item::Mix {
+                a,
+                b,
+                swap,
+                owner_a,
+                owner_b,
+            } => {
+                self.stats.mixes += 1;
+                let mix = Mix { a, b, swap };
+                let started = self.started()?;
+                started.share.mix(mix)?;
+                // My mixed track and the other leader, for a mix across two.
+                let across = match (owner_a == me, owner_b == me) {
+                    (true, false) => Some((a, owner_b)),
+                    (false, true) => Some((b, owner_a)),
+                    (true, true) => {
+                        if let Some(rows) = &mut started.rows {
+                            rows.mix(mix)?;
+                        }
+                        None
+                    }
+                    (false, false) => None,
+                };
+                if let Some((mine, other)) = across {
+                    // Algorithm 4: both leaders of a cross-leader mix hand
+                    // over what left their tracks, and wait for the other.
+                    // The row of the mixed track goes along, unmixed: the
+                    // fit needs both, and both leaders compute it.
+                    let row = match &started.rows {
+                        Some(rows) => {
+                            started.row_mix = Some(mix);
+                            vec![wire_row(rows, mine)?]
+                        }
+                        None => Vec::new(),
+                    };
+                    self.send_homeless(seq, other, row, actions)?;
+                    self.waiting = Some(Waiting::Transfer { seq, from: other });
+                }
+            }
+            Item::Observe {
+                track,
+                red,
+                blue,
+                growth,
+                ..
+            } => {
+                self.stats.observations += 1;
+                let observe = Observe { track, red, blue };
+                let started = self.started()?;
+                match &growth {
+                    Growth::All => started.share.observe(observe, BeliefGrowth::All)?,
+                    Growth::Meeting(p) => {
+                        started.share.observe(observe, BeliefGrowth::Meeting(p))?
+                    }
+                }
+            }
+            Item::Handover { track, from, to } => {
+                self.stats.handovers += 1;
+                let started = self.started()?;
+                let slot = started
+                    .own
+                    .get_mut(track as usize)
+                    .ok_or(LeaderError::Unexpected("a handover of an unknown track"))?;
+                if from == me {
+                    *slot = false;
+                    let row = match &mut started.rows {
+                        Some(rows) => {
+                            let ln_likelihoods = rows.take(track).ok_or(NOT_HELD)?;
+                            vec![WireRow {
+                                track,
+                                ln_likelihoods,
+                            }]
+                        }
+                        None => Vec::new(),
+                    };
+                    self.send_homeless(seq, to, row, actions)?;
+                } else if to == me {
+                    *slot = true;
+                    self.waiting = Some(Waiting::Transfer { seq, from });
+                }
+            }
+            Item::Identify {
+                track,
+                identity,
+                accuracy,
+                ..
+            } => {
+                self.stats.identifies += 1;
+                let rows = self
+                    .started()?
+                    .rows
+                    .as_mut()
+                    .ok_or(LeaderError::Unexpected(
+                        "an identity read on a stream without identities",
+                    ))?;
+                rows.identify(Identify {
+                    track,
+                    identity,
+                    accuracy,
+                })?;
+            }
+            Item::Cut { events, tag, rows } => {
+                actions.push(Action::CutReady(self.reach_cut(seq, tag, events, rows)?));
+            }
+        }
+        Ok(())
+    }
+
+    pub(super) fn begin(&mut self, begin: Begin) -> Result<(), LeaderError> {
+        let me = begin
+            .leaders
+            .iter()
+            .position(|l| *l == self.name)
+            .ok_or_else(|| LeaderError::NotListed(self.name.clone()))? as u16;
+        let (share, interest) = start(&begin, me)?;
+        let own: Vec<bool> = begin.owners.iter().map(|&o| o == me).collect();
+        let rows = if begin.identities {
+            let held = (0..begin.tracks).filter(|&t| own[t as usize]);
+            Some(InformationRows::start(
+                begin.tracks as usize,
+                held,
+                begin.initial_identity.as_deref(),
+                KNOWN_START_CONFIDENCE,
+            )?)
+        } else {
+            None
+        };
+        // Transfers that came before the Begin were checked on their own
+        // only ([`crate::door`]): what does not fit the field goes now.
+        let bounds = Bounds::of(&begin);
+        let before = self.transfers.len();
+        self.transfers
+            .retain(|&(_, from), (sets, rows)| bounds.check_parts(from, sets, rows, me).is_ok());
+        self.stats.rejected += (before - self.transfers.len()) as u64;
+        self.started = Some(Started {
+            me,
+            begin,
+            share,
+            own,
+            interest,
+            rows,
+            row_mix: None,
+        });
+        Ok(())
+    }
+
+    /// Item `seq` is fully applied.
+    pub(super) fn finish(&mut self, seq: u64) {
+        self.position = seq;
+        if let Some(started) = &mut self.started {
+            let budget = started.begin.budget as usize;
+            if budget > 0 {
+                let sparsify = if started.begin.omp {
+                    Sparsify::overcomplete(budget)
+                } else {
+                    Sparsify::threshold(budget)
+                };
+                // A numerical failure of OMP leaves the share thresholded.
+                if let Err(e) = started.share.sparsify(&sparsify) {
+                    tracing::warn!(leader = %self.name, seq, error = %e, "OMP failed; thresholded instead");
+                }
+            }
+        }
+    }
+}

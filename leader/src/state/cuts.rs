@@ -1,0 +1,77 @@
+//! Answers at consistent cuts: the partial sums a leader gives when a
+//! `Cut` item reaches it in its stream (kept a while for late queries),
+//! or where it rests once it has applied all it was sent.
+
+use super::transfers::to_wire;
+use super::*;
+
+/// How many recent cuts a leader keeps answers for.
+const CUTS_KEPT: usize = 256;
+
+impl Leader {
+    /// The cut tagged `tag` (item `seq`, `events` trace events before it)
+    /// reached this leader: its partial sums there, kept for late queries.
+    pub(super) fn reach_cut(
+        &mut self,
+        seq: u64,
+        tag: u64,
+        events: u64,
+        rows: bool,
+    ) -> Result<Partial, LeaderError> {
+        let partial = self
+            .partial(seq, tag, events, rows)
+            .ok_or(LeaderError::Unexpected("a cut before the stream's Begin"))?;
+        if self.cuts.len() == CUTS_KEPT {
+            self.cuts.pop_front();
+        }
+        self.cuts.push_back(partial.clone());
+        Ok(partial)
+    }
+
+    /// The answer at the cut tagged `tag`, if this leader has passed it
+    /// recently.
+    pub fn cut(&self, tag: u64) -> Option<&Partial> {
+        self.cuts.iter().find(|p| p.tag == tag)
+    }
+
+    /// The partial sums now, if the leader is at a quiet point: it has
+    /// applied every item the sensor sent it and waits for no peer. Leaders
+    /// quiet at the same seq together hold the belief at that seq (every
+    /// set sent before it has been received), which is how the coordinator
+    /// answers a finished stream without placing a cut.
+    /// With `rows`, the leader's rows of the information matrix too.
+    pub fn quiet(&self, rows: bool) -> Option<Partial> {
+        if self.waiting.is_some() || !self.queue.is_empty() {
+            return None;
+        }
+        self.partial(self.frontier, 0, self.events, rows)
+    }
+
+    /// The partial sums of the share as it is (None before the Begin),
+    /// with the rows held when `rows` asks for them.
+    pub(super) fn partial(&self, cut: u64, tag: u64, events: u64, rows: bool) -> Option<Partial> {
+        let started = self.started.as_ref()?;
+        let sums = started.share.partial_sums();
+        let rows = match (&started.rows, rows) {
+            (Some(held), true) => held
+                .rows()
+                .map(|(track, row)| to_wire(track, row))
+                .collect(),
+            _ => Vec::new(),
+        };
+        Some(Partial {
+            version: VERSION,
+            leader: self.name.clone(),
+            cut,
+            tag,
+            events,
+            finished: self.finished,
+            log_scale: sums.log_scale,
+            total: sums.total,
+            outside: sums.outside,
+            inside: sums.inside,
+            coefficients: sums.coefficients,
+            rows,
+        })
+    }
+}

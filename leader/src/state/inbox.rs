@@ -1,0 +1,160 @@
+//! The leader's inbox: batches applied in number order (duplicates
+//! dropped, a gap held until the missing batch comes), items queued by
+//! seq and applied strictly in order, transfers and follow replies
+//! waited for where an item needs them.
+
+use super::*;
+
+impl Leader {
+    /// A batch of the event stream arrived. Batches are applied in number
+    /// order: one seen before is dropped (counted as a duplicate), one
+    /// ahead of a missing one waits for it ([`Leader::missing_batches`]
+    /// says which to ask the sensor for again).
+    pub fn batch(&mut self, batch: Batch, bytes: usize) -> Result<Vec<Action>, LeaderError> {
+        if batch.number < self.next_batch || self.ahead.contains_key(&batch.number) {
+            self.stats.duplicates += 1;
+            return Ok(Vec::new());
+        }
+        if batch.number > self.next_batch {
+            if self.ahead.is_empty() {
+                self.stats.gaps += 1;
+            }
+            self.ahead.insert(batch.number, (batch, bytes));
+            return Ok(Vec::new());
+        }
+        let mut actions = self.take_batch(batch, bytes)?;
+        while let Some(entry) = self.ahead.first_entry() {
+            if *entry.key() != self.next_batch {
+                break;
+            }
+            let (batch, bytes) = entry.remove();
+            // Held before the Begin, it was checked on its own only: a
+            // misfit is dropped like a lost batch (the next gap asks for
+            // it again).
+            if let Some(Err(e)) = self.bounds().map(|b| b.check_batch(&batch)) {
+                tracing::warn!(leader = %self.name, number = batch.number, error = %e, "batch rejected");
+                self.stats.rejected += 1;
+                break;
+            }
+            actions.extend(self.take_batch(batch, bytes)?);
+        }
+        Ok(actions)
+    }
+
+    /// The first batch number missing before one that arrived, if any.
+    pub fn missing_batches(&self) -> Option<u64> {
+        (!self.ahead.is_empty()).then_some(self.next_batch)
+    }
+
+    /// Applies the next batch in number order.
+    pub(super) fn take_batch(
+        &mut self,
+        batch: Batch,
+        bytes: usize,
+    ) -> Result<Vec<Action>, LeaderError> {
+        self.next_batch += 1;
+        self.stats.batches += 1;
+        self.stats.bytes_received += bytes as u64;
+        for Sequenced { seq, item } in batch.items {
+            if seq > self.position {
+                self.queue.insert(seq, item);
+            }
+            self.frontier = self.frontier.max(seq);
+        }
+        self.frontier = self.frontier.max(batch.through);
+        self.events = batch.events;
+        self.finished = batch.finished;
+        self.advance()
+    }
+
+    /// Sets from another leader arrived. A leader never passes an item
+    /// whose transfer it waits for, so one for an item already passed, or
+    /// already here, is a duplicate (a restarted peer resends what it
+    /// sent): dropped and counted.
+    pub fn transfer(
+        &mut self,
+        transfer: Transfer,
+        bytes: usize,
+    ) -> Result<Vec<Action>, LeaderError> {
+        if transfer.seq <= self.position
+            || self.transfers.contains_key(&(transfer.seq, transfer.from))
+        {
+            self.stats.duplicates += 1;
+            return Ok(Vec::new());
+        }
+        self.stats.transfers_received += 1;
+        self.stats.bytes_received += bytes as u64;
+        self.transfers.insert(
+            (transfer.seq, transfer.from),
+            (transfer.sets, transfer.rows),
+        );
+        self.advance()
+    }
+
+    /// The sensor answered a follow request: the items this leader missed.
+    pub fn followed(&mut self, items: Vec<Sequenced>) -> Result<Vec<Action>, LeaderError> {
+        let Some(Waiting::Follow { seq }) = self.waiting else {
+            return Err(LeaderError::Unexpected("a follow reply nobody asked for"));
+        };
+        self.asked = None;
+        for Sequenced { seq: s, item } in items {
+            if s > seq {
+                self.queue.insert(s, item);
+            }
+        }
+        self.waiting = None;
+        self.finish(seq);
+        self.advance()
+    }
+
+    /// Applies queued items in seq order until one must wait.
+    pub(super) fn advance(&mut self) -> Result<Vec<Action>, LeaderError> {
+        let mut actions = Vec::new();
+        loop {
+            match self.waiting {
+                Some(Waiting::Transfer { seq, from }) => {
+                    match self.transfers.remove(&(seq, from)) {
+                        Some((sets, rows)) => {
+                            self.waiting = None;
+                            self.receive_rows(rows)?;
+                            self.receive_sets(seq, sets, &mut actions)?;
+                            if self.waiting.is_some() {
+                                return Ok(actions);
+                            }
+                            self.finish(seq);
+                        }
+                        None => return Ok(actions),
+                    }
+                }
+                Some(Waiting::Follow { .. }) => return Ok(actions),
+                None => {}
+            }
+            let Some(next) = self.queue.first_entry() else {
+                return Ok(actions);
+            };
+            if *next.key() > self.frontier {
+                return Ok(actions);
+            }
+            let (seq, item) = next.remove_entry();
+            let _span = tracing::debug_span!("item", leader = %self.name, seq).entered();
+            self.apply(seq, item, &mut actions)?;
+            if self.waiting.is_none() {
+                self.finish(seq);
+            }
+        }
+    }
+
+    /// The follow request still waiting for the sensor's answer.
+    pub fn pending_follow(&self) -> Option<&Follow> {
+        self.asked.as_ref()
+    }
+
+    /// The item and the peer whose transfer this leader waits for, if it
+    /// is stopped for one.
+    pub fn waiting_for_transfer(&self) -> Option<(u64, u16)> {
+        match self.waiting {
+            Some(Waiting::Transfer { seq, from }) => Some((seq, from)),
+            _ => None,
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! The leader as a pure state machine: items of its event stream in, sets
+//! for other leaders and follow requests out. No I/O, so the whole protocol
+//! can be run in one process by tests (see `tests` below) and the actor in
+//! [`actor`](crate::actor) only moves bytes.
+//!
+//! Section 5.4 of the property-management paper, with one departure: a set
+//! is held by exactly one of the leaders that surveil its tracks (the paper
+//! keeps a replica at each of them). Every item is applied, in seq order, by
+//! every leader whose sets it may change ([`Interest`]), so there are no
+//! replicas to keep consistent: the belief is the sum of the leaders' shares
+//! ([`RadonShare`]), whatever the split.
+//!
+//! Sets move only at the two points where the paper moves them, always to
+//! a leader that takes part in the same item, so the receiver knows to wait:
+//! - a mix of tracks of two leaders (Algorithm 4): after the rollup each
+//!   sends the other the sets left with none of its own tracks (the image
+//!   of a set whose only own track was the mixed one);
+//! - a handover: a track leaves a leader's region; the sets left with none
+//!   of its own tracks go to the new leader.
+//!
+//! The empty set (k unknown) never moves. Thresholding is local, each
+//! leader against its own budget (Section 5.4.3: "fully distributive").
+//!
+//! On an identity stream each leader also holds the rows of the information
+//! matrix of the tracks it surveils ([`InformationRows`]; Shin et al., IPSN
+//! 2005, Section 4): a read is applied to the owner's row with no message;
+//! a cross-leader mix puts each leader's row of its mixed track, as it was
+//! before the mix, in the transfer it sends anyway, and both fit the same
+//! pair; a handover moves the track's row with its sets.
+
+use crate::error::LeaderError;
+use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_belief::identity::{Identify, InformationRows};
+use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, RadonShare, Sparsify};
+use idmesh_belief::{Mix, Observe, TrackSet};
+use idmesh_placement::start;
+use idmesh_protocol::wire::bounds::Bounds;
+use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
+use idmesh_protocol::wire::interest::Interest;
+use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow};
+use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
+use idmesh_protocol::wire::VERSION;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap, VecDeque};
+
+mod apply;
+mod cuts;
+mod inbox;
+mod stats;
+#[cfg(test)]
+mod tests;
+mod transfers;
+
+/// What the leader asks its actor to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// Send these sets to leader `to` (an index into `Begin::leaders`).
+    Send { to: u16, transfer: Transfer },
+    /// Ask the sensor to follow more tracks; answer with
+    /// [`Leader::followed`].
+    Follow(Follow),
+    /// The partial sums at a cut are ready.
+    CutReady(Partial),
+}
+
+/// Where the leader is stopped, if anywhere.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+enum Waiting {
+    /// For the sets of leader `from` at item `seq`.
+    Transfer { seq: u64, from: u16 },
+    /// For the sensor's answer to a follow request made at `seq`.
+    Follow { seq: u64 },
+}
+
+#[derive(Serialize, Deserialize)]
+struct Started {
+    /// This leader's index in `begin.leaders`.
+    me: u16,
+    begin: Begin,
+    share: RadonShare,
+    own: Vec<bool>,
+    interest: Interest,
+    /// The rows of the information matrix of the tracks owned, on an
+    /// identity stream.
+    rows: Option<InformationRows>,
+    /// A cross-leader mix whose fit waits for the partner's row.
+    row_mix: Option<Mix>,
+}
+
+/// Serialized whole as a snapshot ([`Leader::snapshot`]): the state a
+/// journal would rebuild, so that the journal can start again empty.
+#[derive(Serialize, Deserialize)]
+pub struct Leader {
+    name: String,
+    started: Option<Started>,
+    /// Items received and not yet applied, by seq (duplicates collapse).
+    queue: BTreeMap<u64, Item>,
+    /// Every item for this leader with seq ≤ frontier has been received.
+    frontier: u64,
+    /// Seq of the last item applied (0 before any).
+    position: u64,
+    /// Next batch number expected from the sensor.
+    next_batch: u64,
+    /// Batches that came ahead of a missing one, by number, with their size.
+    ahead: BTreeMap<u64, (Batch, usize)>,
+    /// Every transfer sent, with its receiver: a restarted peer asks for
+    /// the ones it lost while it was down.
+    sent: Vec<(u16, Transfer)>,
+    /// The follow request waiting for its answer (asked again after a
+    /// restart).
+    asked: Option<Follow>,
+    /// Sets and rows that arrived before the leader reached their item.
+    transfers: HashMap<(u64, u16), (Vec<WireSet>, Vec<WireRow>)>,
+    waiting: Option<Waiting>,
+    cuts: VecDeque<Partial>,
+    /// The watermark and end-of-stream flag of the last batch.
+    events: u64,
+    finished: bool,
+    stats: LeaderStats,
+}
+
+impl Leader {
+    pub fn new(name: impl Into<String>) -> Self {
+        let name = name.into();
+        Leader {
+            stats: LeaderStats {
+                version: VERSION,
+                leader: name.clone(),
+                ..LeaderStats::default()
+            },
+            name,
+            started: None,
+            queue: BTreeMap::new(),
+            frontier: 0,
+            position: 0,
+            next_batch: 0,
+            ahead: BTreeMap::new(),
+            sent: Vec::new(),
+            asked: None,
+            transfers: HashMap::new(),
+            waiting: None,
+            cuts: VecDeque::new(),
+            events: 0,
+            finished: false,
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The whole state, as bytes ([`Leader::restore`] reads them back).
+    pub fn snapshot(&self) -> Vec<u8> {
+        postcard::to_allocvec(self).unwrap_or_default()
+    }
+
+    /// The leader a snapshot was taken of.
+    pub fn restore(bytes: &[u8]) -> Result<Leader, LeaderError> {
+        postcard::from_bytes(bytes).map_err(|e| LeaderError::Snapshot(e.to_string()))
+    }
+
+    pub fn position(&self) -> u64 {
+        self.position
+    }
+
+    /// The stream's field, once it began: what inputs must fit
+    /// ([`crate::door`]).
+    pub fn bounds(&self) -> Option<Bounds> {
+        self.started.as_ref().map(|s| Bounds::of(&s.begin))
+    }
+
+    /// The share this leader holds (for tests and diagnostics).
+    pub fn share(&self) -> Option<&RadonShare> {
+        self.started.as_ref().map(|s| &s.share)
+    }
+
+    /// The leaders of the stream, once it began.
+    pub fn leaders(&self) -> &[String] {
+        self.started
+            .as_ref()
+            .map_or(&[], |s| s.begin.leaders.as_slice())
+    }
+
+    /// This leader's index in the stream's list, once it began.
+    pub fn index(&self) -> Option<u16> {
+        self.started.as_ref().map(|s| s.me)
+    }
+
+    /// The name of leader `index` of the stream's list.
+    pub fn peer(&self, index: u16) -> Option<&str> {
+        let started = self.started.as_ref()?;
+        started
+            .begin
+            .leaders
+            .get(index as usize)
+            .map(String::as_str)
+    }
+
+    fn me(&self) -> Result<u16, LeaderError> {
+        self.started
+            .as_ref()
+            .map(|s| s.me)
+            .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))
+    }
+
+    fn started(&mut self) -> Result<&mut Started, LeaderError> {
+        self.started
+            .as_mut()
+            .ok_or(LeaderError::Unexpected("an item before the stream's Begin"))
+    }
+
+    /// How far this leader is, as a mark for the others: the next batch
+    /// it expects and the last item it applied.
+    pub fn durable(&self) -> Durable {
+        Durable {
+            version: VERSION,
+            leader: self.name.clone(),
+            batch: self.next_batch,
+            position: self.position,
+        }
+    }
+
+    /// The number of the next batch this leader will apply.
+    pub fn next_batch(&self) -> u64 {
+        self.next_batch
+    }
+}

@@ -1,0 +1,47 @@
+//! The leader's counters ([`LeaderStats`]): what it applied, sent,
+//! received and refused, as the coordinator's `stats` query shows them.
+
+use super::*;
+
+impl Leader {
+    /// Names the process running this leader (for its counters).
+    pub fn set_host(&mut self, host: &str) {
+        self.stats.host = host.to_string();
+    }
+
+    /// How long the last recovery (restart or adoption) took to catch up.
+    pub fn note_recovered(&mut self, seconds: f64) {
+        self.stats.recoveries += 1;
+        self.stats.recovery_seconds = seconds;
+    }
+
+    /// Counts a snapshot taken.
+    pub fn note_snapshot(&mut self) {
+        self.stats.snapshots += 1;
+    }
+
+    pub fn stats(&self) -> LeaderStats {
+        let mut stats = self.stats.clone();
+        stats.position = self.position;
+        stats.transfers_kept = self.sent.len() as u64;
+        if let Some(s) = &self.started {
+            stats.coefficients = s.share.len() as u64;
+            stats.omp_runs = s.share.omp_runs();
+            stats.tracks_owned = s.own.iter().filter(|&&o| o).count() as u64;
+            stats.tracks_followed = s.interest.len() as u64;
+            stats.rows_held = s.rows.as_ref().map_or(0, |r| r.len() as u64);
+        }
+        stats
+    }
+
+    /// Counts an input refused at the door; returns the count so far.
+    pub fn note_rejected(&mut self) -> u64 {
+        self.stats.rejected += 1;
+        self.stats.rejected
+    }
+
+    /// Counts bytes the actor sent for this leader.
+    pub fn note_sent(&mut self, bytes: usize) {
+        self.stats.bytes_sent += bytes as u64;
+    }
+}

@@ -1,0 +1,332 @@
+//! The leader state machine driven by hand: rest points, cuts, gaps,
+//! duplicates, reordering, snapshots and identity rows.
+
+use super::*;
+
+fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
+    Item::Begin(Begin {
+        tracks: owners.len() as u32,
+        red: Some(2),
+        initial_red: Some(vec![0, 1]),
+        leaders: leaders.iter().map(|l| l.to_string()).collect(),
+        owners,
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+        identities: false,
+        initial_identity: None,
+    })
+}
+
+fn batch(number: u64, items: Vec<(u64, Item)>, through: u64, finished: bool) -> Batch {
+    Batch {
+        version: VERSION,
+        sensor: "sensor-0".into(),
+        number,
+        through,
+        events: through,
+        finished,
+        items: items
+            .into_iter()
+            .map(|(seq, item)| Sequenced { seq, item })
+            .collect(),
+    }
+}
+
+fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
+    Item::Mix {
+        a,
+        b,
+        swap: 0.5,
+        owner_a,
+        owner_b,
+    }
+}
+
+#[test]
+fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody() {
+    let mut leader = Leader::new("a");
+    assert!(leader.quiet(false).is_none(), "no Begin yet");
+    leader
+        .batch(
+            batch(0, vec![(1, begin(&["a", "b"], vec![0, 0, 1, 1]))], 1, false),
+            0,
+        )
+        .unwrap();
+    let rest = leader.quiet(false).expect("quiet after the Begin");
+    assert_eq!((rest.cut, rest.finished), (1, false));
+    // A mix with b's track: the leader must wait for b's sets.
+    let actions = leader
+        .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, true), 0)
+        .unwrap();
+    assert!(actions
+        .iter()
+        .any(|a| matches!(a, Action::Send { to: 1, .. })));
+    assert!(leader.quiet(false).is_none(), "waiting for b's sets");
+    leader
+        .transfer(
+            Transfer {
+                version: VERSION,
+                from: 1,
+                seq: 2,
+                sets: Vec::new(),
+                rows: Vec::new(),
+            },
+            0,
+        )
+        .unwrap();
+    let rest = leader.quiet(false).expect("quiet once b's sets are in");
+    assert_eq!((rest.cut, rest.events, rest.finished), (2, 2, true));
+}
+
+#[test]
+fn a_cut_is_answered_by_its_tag_and_a_gap_waits_for_the_missing_batch() {
+    let mut leader = Leader::new("a");
+    leader
+        .batch(
+            batch(0, vec![(1, begin(&["a"], vec![0, 0, 0]))], 1, false),
+            0,
+        )
+        .unwrap();
+    let cut = Item::Cut {
+        events: 7,
+        tag: 42,
+        rows: false,
+    };
+    let actions = leader
+        .batch(batch(1, vec![(2, mix(0, 2, 0, 0)), (3, cut)], 3, false), 0)
+        .unwrap();
+    assert!(actions
+        .iter()
+        .any(|a| matches!(a, Action::CutReady(p) if p.tag == 42 && p.cut == 3)));
+    let partial = leader.cut(42).expect("kept for late queries");
+    assert_eq!(partial.events, 7);
+    assert!(leader.cut(41).is_none());
+    // Batch 3 before batch 2: held, and batch 2 is asked for.
+    let ahead = batch(3, vec![(5, mix(1, 2, 0, 0))], 5, false);
+    assert!(leader.batch(ahead.clone(), 0).unwrap().is_empty());
+    assert_eq!(leader.missing_batches(), Some(2));
+    assert_eq!(leader.position(), 3);
+    leader
+        .batch(batch(2, vec![(4, mix(0, 1, 0, 0))], 4, false), 0)
+        .unwrap();
+    assert_eq!(leader.missing_batches(), None);
+    assert_eq!(leader.position(), 5);
+    // Both again: dropped, counted, nothing applied twice.
+    leader.batch(ahead, 0).unwrap();
+    leader.batch(batch(2, vec![], 4, false), 0).unwrap();
+    let stats = leader.stats();
+    assert_eq!((stats.mixes, stats.duplicates, stats.gaps), (3, 2, 1));
+}
+
+/// Delivered twice, with batches out of order, an exchange between two
+/// leaders ends in the same shares as delivered once in order.
+#[test]
+fn duplicates_and_reordered_batches_change_nothing() {
+    let begin = begin(&["a", "b"], vec![0, 0, 1, 1]);
+    let items = [
+        (2, mix(0, 2, 0, 1)),
+        (3, mix(1, 3, 0, 1)),
+        (4, mix(0, 1, 0, 0)),
+        (5, mix(2, 3, 1, 1)),
+    ];
+    let batches = |leader: &str| -> Vec<Batch> {
+        let mut out = vec![batch(0, vec![(1, begin.clone())], 1, false)];
+        for (i, (seq, item)) in items.iter().enumerate() {
+            let wanted = match item {
+                Item::Mix {
+                    owner_a, owner_b, ..
+                } => {
+                    let me = if leader == "a" { 0 } else { 1 };
+                    *owner_a == me || *owner_b == me
+                }
+                _ => true,
+            };
+            let sent = if wanted {
+                vec![(*seq, item.clone())]
+            } else {
+                vec![]
+            };
+            out.push(batch(i as u64 + 1, sent, *seq, i + 1 == items.len()));
+        }
+        out
+    };
+    // Runs both leaders to the end, delivering each one's batches in
+    // `order` (indices, repeats allowed) and every transfer twice.
+    // With `snapshots`, both leaders are replaced by what their
+    // snapshot restores before every delivery.
+    let run = |order: &[usize], snapshots: bool| {
+        let (mut a, mut b) = (Leader::new("a"), Leader::new("b"));
+        let (batches_a, batches_b) = (batches("a"), batches("b"));
+        let mut mail: Vec<(u16, Transfer)> = Vec::new();
+        for &i in order {
+            if snapshots {
+                a = Leader::restore(&a.snapshot()).unwrap();
+                b = Leader::restore(&b.snapshot()).unwrap();
+            }
+            for (leader, batches) in [(&mut a, &batches_a), (&mut b, &batches_b)] {
+                for action in leader.batch(batches[i].clone(), 0).unwrap() {
+                    if let Action::Send { to, transfer } = action {
+                        mail.push((to, transfer));
+                    }
+                }
+            }
+            while let Some((to, transfer)) = mail.pop() {
+                for _ in 0..2 {
+                    let leader = if to == 0 { &mut a } else { &mut b };
+                    for action in leader.transfer(transfer.clone(), 0).unwrap() {
+                        if let Action::Send { to, transfer } = action {
+                            mail.push((to, transfer));
+                        }
+                    }
+                }
+            }
+        }
+        let shares: Vec<Vec<(Atom, f64)>> = [&a, &b]
+            .iter()
+            .map(|l| {
+                let mut atoms: Vec<(Atom, f64)> = l
+                    .share()
+                    .unwrap()
+                    .atoms()
+                    .map(|(atom, m)| (atom.clone(), m))
+                    .collect();
+                atoms.sort_by(|x, y| format!("{:?}", x.0).cmp(&format!("{:?}", y.0)));
+                atoms
+            })
+            .collect();
+        (shares, a.position(), b.position(), a.stats().duplicates)
+    };
+    let once = run(&[0, 1, 2, 3, 4], false);
+    let shuffled = run(&[0, 3, 1, 1, 4, 2, 0, 3, 4], false);
+    // a is not sent the last mix (b's tracks only).
+    assert_eq!((once.1, once.2), (4, 5));
+    assert_eq!((shuffled.1, shuffled.2), (4, 5));
+    assert_eq!(once.0, shuffled.0);
+    assert!(shuffled.3 > once.3, "duplicates were seen and dropped");
+    // Restored from snapshots at every step, held batches, transfers
+    // waited for and all: the same shares.
+    let restored = run(&[0, 3, 1, 1, 4, 2, 0, 3, 4], true);
+    assert_eq!((restored.1, restored.2, restored.3), (4, 5, shuffled.3));
+    for (x, y) in restored.0.iter().flatten().zip(shuffled.0.iter().flatten()) {
+        assert_eq!(x.0, y.0);
+        assert!((x.1 - y.1).abs() < 1e-12, "{x:?} vs {y:?}");
+    }
+}
+
+/// Two leaders on an identity stream, driven by hand: reads cost no
+/// message, a cross-leader mix exchanges the two rows, a handover moves
+/// one; the rows put together equal the centralized information matrix.
+#[test]
+fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them() {
+    use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
+    let start = vec![2, 0, 3, 1];
+    let begin = Item::Begin(Begin {
+        tracks: 4,
+        red: None,
+        initial_red: None,
+        leaders: vec!["a".into(), "b".into()],
+        owners: vec![0, 0, 1, 1],
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+        identities: true,
+        initial_identity: Some(start.clone()),
+    });
+    let read = |track, identity, owner| Item::Identify {
+        track,
+        identity,
+        accuracy: 0.8,
+        owner,
+    };
+    let mut central = InformationMatrix::from_assignment(
+        &start,
+        KNOWN_START_CONFIDENCE,
+        InformationOptions::default(),
+    )
+    .unwrap();
+    let (mut a, mut b) = (Leader::new("a"), Leader::new("b"));
+    a.batch(batch(0, vec![(1, begin.clone())], 1, false), 0)
+        .unwrap();
+    b.batch(batch(0, vec![(1, begin)], 1, false), 0).unwrap();
+
+    // Reads: applied where the row is, nothing sent.
+    let actions = a
+        .batch(batch(1, vec![(2, read(0, 1, 0))], 2, false), 0)
+        .unwrap();
+    assert!(actions.is_empty(), "{actions:?}");
+    let actions = b
+        .batch(batch(1, vec![(3, read(3, 3, 1))], 3, false), 0)
+        .unwrap();
+    assert!(actions.is_empty(), "{actions:?}");
+    for (track, identity) in [(0, 1), (3, 3)] {
+        central
+            .identify(Identify {
+                track,
+                identity,
+                accuracy: 0.8,
+            })
+            .unwrap();
+    }
+
+    // A mix across the two: each sends its row, unmixed, and waits.
+    let mix = |seq| {
+        (
+            seq,
+            Item::Mix {
+                a: 1,
+                b: 2,
+                swap: 0.3,
+                owner_a: 0,
+                owner_b: 1,
+            },
+        )
+    };
+    let sent_by_a = a.batch(batch(2, vec![mix(4)], 4, false), 0).unwrap();
+    let sent_by_b = b.batch(batch(2, vec![mix(4)], 4, false), 0).unwrap();
+    central
+        .mix(Mix {
+            a: 1,
+            b: 2,
+            swap: 0.3,
+        })
+        .unwrap();
+    let transfer = |actions: Vec<Action>| match actions.as_slice() {
+        [Action::Send { transfer, .. }] => transfer.clone(),
+        other => panic!("one transfer expected, got {other:?}"),
+    };
+    let (to_b, to_a) = (transfer(sent_by_a), transfer(sent_by_b));
+    assert_eq!(to_b.rows.iter().map(|r| r.track).collect::<Vec<_>>(), [1]);
+    assert_eq!(to_a.rows.iter().map(|r| r.track).collect::<Vec<_>>(), [2]);
+    a.transfer(to_a, 0).unwrap();
+    b.transfer(to_b, 0).unwrap();
+
+    // Track 0 moves to b: its row goes along.
+    let handover = (
+        5,
+        Item::Handover {
+            track: 0,
+            from: 0,
+            to: 1,
+        },
+    );
+    let sent = a
+        .batch(batch(3, vec![handover.clone()], 5, true), 0)
+        .unwrap();
+    b.batch(batch(3, vec![handover], 5, true), 0).unwrap();
+    b.transfer(transfer(sent), 0).unwrap();
+    assert_eq!(a.stats().rows_held, 1);
+    assert_eq!(b.stats().rows_held, 3);
+    assert_eq!((a.stats().identifies, b.stats().identifies), (1, 1));
+
+    let rows = [a.quiet(true).unwrap(), b.quiet(true).unwrap()]
+        .into_iter()
+        .flat_map(|p| p.rows)
+        .map(|r| (r.track, r.ln_likelihoods));
+    let assembled = InformationRows::assemble(4, rows, InformationOptions::default()).unwrap();
+    assert_eq!(assembled.log_likelihoods(), central.log_likelihoods());
+    assert!(
+        a.quiet(false).unwrap().rows.is_empty(),
+        "rows only when asked"
+    );
+}

@@ -1,0 +1,189 @@
+//! Sets and rows moving between leaders: what a mix across two leaders or
+//! a handover sends (Algorithm 4), what is received (and the tracks it
+//! makes the leader follow), and the transfers kept for a restarted peer.
+
+use super::*;
+
+impl Leader {
+    /// The transfers sent to leader `to` for items after `after`.
+    pub fn sent_to(&self, to: u16, after: u64) -> Vec<Transfer> {
+        self.sent
+            .iter()
+            .filter(|(receiver, t)| *receiver == to && t.seq > after)
+            .map(|(_, t)| t.clone())
+            .collect()
+    }
+
+    /// Every transfer sent, with its receiver (resent after a restart: the
+    /// peers drop the ones they have).
+    pub fn all_sent(&self) -> &[(u16, Transfer)] {
+        &self.sent
+    }
+
+    /// Leader `name` has its state safe through item `position`: it will
+    /// never ask for the transfers of items up to there again, so they are
+    /// dropped. Returns how many were.
+    pub fn forget_sent(&mut self, name: &str, position: u64) -> usize {
+        let Some(to) = self.leaders().iter().position(|l| l == name) else {
+            return 0;
+        };
+        let before = self.sent.len();
+        self.sent
+            .retain(|(receiver, t)| *receiver as usize != to || t.seq > position);
+        before - self.sent.len()
+    }
+
+    /// Takes out the sets with none of this leader's tracks (but not φ_∅)
+    /// and sends them, with `rows`, to `to` as the transfer of item `seq`.
+    pub(super) fn send_homeless(
+        &mut self,
+        seq: u64,
+        to: u16,
+        rows: Vec<WireRow>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let own = &started.own;
+        let sets: Vec<WireSet> = started
+            .share
+            .extract(|atom| {
+                let mut tracks = atom.tracks().peekable();
+                tracks.peek().is_some() && !tracks.any(|t| own[t as usize])
+            })
+            .into_iter()
+            .map(|(atom, ln_mass)| WireSet {
+                red: atom.red.tracks().to_vec(),
+                blue: atom.blue.tracks().to_vec(),
+                ln_mass,
+            })
+            .collect();
+        self.stats.transfers_sent += 1;
+        self.stats.sets_sent += sets.len() as u64;
+        let transfer = Transfer {
+            version: VERSION,
+            from: me,
+            seq,
+            sets,
+            rows,
+        };
+        self.sent.push((to, transfer.clone()));
+        actions.push(Action::Send { to, transfer });
+        Ok(())
+    }
+
+    /// Rows received with a transfer: the partner's row of a cross-leader
+    /// mix (the fit is made now), or the row of a track handed over.
+    pub(super) fn receive_rows(&mut self, received: Vec<WireRow>) -> Result<(), LeaderError> {
+        let started = self.started()?;
+        let pending = started.row_mix.take();
+        let Some(rows) = &mut started.rows else {
+            return match received.is_empty() {
+                true => Ok(()),
+                false => Err(LeaderError::BadTransfer(
+                    "rows of an information matrix on a stream without identities".into(),
+                )),
+            };
+        };
+        match pending {
+            Some(mix) => {
+                let partner = match received.as_slice() {
+                    [row]
+                        if !rows.holds(row.track) && (row.track == mix.a || row.track == mix.b) =>
+                    {
+                        row
+                    }
+                    _ => {
+                        return Err(LeaderError::BadTransfer(format!(
+                        "a mix of tracks {} and {} needs the partner's one row, got rows of {:?}",
+                        mix.a,
+                        mix.b,
+                        received.iter().map(|r| r.track).collect::<Vec<_>>()
+                    )))
+                    }
+                };
+                rows.mix_with(mix, &partner.ln_likelihoods)
+                    .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+            }
+            None => {
+                for row in received {
+                    rows.insert(row.track, row.ln_likelihoods)
+                        .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds sets received at item `seq`; asks to follow tracks they bring.
+    pub(super) fn receive_sets(
+        &mut self,
+        seq: u64,
+        sets: Vec<WireSet>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let tracks = started.begin.tracks;
+        let mut atoms = Vec::with_capacity(sets.len());
+        for set in sets {
+            if let Some(&t) = set.red.iter().chain(&set.blue).find(|&&t| t >= tracks) {
+                return Err(LeaderError::BadTransfer(format!(
+                    "set with track {t} of {tracks}"
+                )));
+            }
+            if set.ln_mass.is_nan() || set.ln_mass == f64::INFINITY {
+                return Err(LeaderError::BadTransfer(format!(
+                    "set with log mass {}",
+                    set.ln_mass
+                )));
+            }
+            atoms.push((
+                Atom::new(
+                    TrackSet::from_tracks(set.red.iter().copied()),
+                    TrackSet::from_tracks(set.blue.iter().copied()),
+                ),
+                set.ln_mass,
+            ));
+        }
+        let mut new_tracks: Vec<u32> = Vec::new();
+        for (atom, _) in &atoms {
+            for t in atom.tracks() {
+                if started.interest.add(t) {
+                    new_tracks.push(t);
+                }
+            }
+        }
+        started.share.absorb(atoms);
+        if !new_tracks.is_empty() {
+            new_tracks.sort_unstable();
+            self.stats.follows += 1;
+            let follow = Follow {
+                version: VERSION,
+                leader: me,
+                after: seq,
+                tracks: new_tracks,
+            };
+            self.asked = Some(follow.clone());
+            actions.push(Action::Follow(follow));
+            self.waiting = Some(Waiting::Follow { seq });
+        }
+        Ok(())
+    }
+}
+
+/// An owned track's row is missing: the state is broken.
+pub(super) const NOT_HELD: LeaderError =
+    LeaderError::Unexpected("an event on an owned track whose row this leader does not hold");
+
+/// Row `track` as it goes on the wire.
+pub(super) fn wire_row(rows: &InformationRows, track: u32) -> Result<WireRow, LeaderError> {
+    Ok(to_wire(track, rows.row(track).ok_or(NOT_HELD)?))
+}
+
+pub(super) fn to_wire(track: u32, row: &[f64]) -> WireRow {
+    WireRow {
+        track,
+        ln_likelihoods: row.to_vec(),
+    }
+}

@@ -1,0 +1,228 @@
+//! The sensor gateway as a pure, synchronous state machine: trace lines
+//! and requests in, batches and answers out. No I/O and no clock, so the
+//! Zenoh actor ([`super::actor`]) only paces lines and moves bytes, and the
+//! deterministic network simulator (`tests/src/sim`) runs the very same
+//! code.
+//!
+//! It holds the [`Router`] (sequencing and routing), one [`BatchLog`] per
+//! leader (every batch sent, until the leader's durable mark passes it),
+//! the durable marks, and the [`Cuts`] waiting for their point. `Q` is the
+//! driver's handle on a cut request (a Zenoh query, a simulated one): the
+//! gateway gives it back with the answer.
+
+use super::batch_log::BatchLog;
+use super::cuts::{place, CutParameters, Cuts, Placed, Request};
+use super::router::Router;
+use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
+use idmesh_protocol::wire::sensor_to_leader::Batch;
+use idmesh_protocol::wire::{decode, VERSION};
+
+/// What became of a cut request.
+pub enum CutOutcome<Q> {
+    /// Placed now: flush, then answer the query.
+    Placed(Placed<Q>),
+    /// Held until the stream reaches its point ([`Gateway::line`] places
+    /// it).
+    Scheduled,
+    /// Refused, with why.
+    Refused(Q, String),
+}
+
+pub struct Gateway<Q> {
+    name: String,
+    router: Router,
+    /// The batches sent to each leader that it may still ask for.
+    sent: Vec<BatchLog>,
+    /// The last durable position each leader published.
+    durable: Vec<Option<u64>>,
+    cuts: Cuts<Q>,
+    /// The whole source has been read.
+    finished: bool,
+    /// Requests refused: a bad one is answered with why and changes
+    /// nothing.
+    stats: SensorStats,
+}
+
+impl<Q> Gateway<Q> {
+    /// A gateway named `name` streaming through `router`; `finished` when
+    /// the source has nothing to stream at all.
+    pub fn new(name: &str, router: Router, finished: bool) -> Self {
+        let leaders = router.leaders();
+        Gateway {
+            name: name.to_string(),
+            router,
+            sent: (0..leaders).map(|_| BatchLog::default()).collect(),
+            durable: vec![None; leaders],
+            cuts: Cuts::default(),
+            finished,
+            stats: SensorStats {
+                sensor: name.to_string(),
+                rejected: 0,
+            },
+        }
+    }
+
+    /// The stream will end after `end` events: cuts asked for beyond it
+    /// are refused at once.
+    pub fn ending_at(mut self, end: u64) -> Self {
+        self.cuts = Cuts::ending_at(end);
+        self
+    }
+
+    pub fn router(&self) -> &Router {
+        &self.router
+    }
+
+    pub fn finished(&self) -> bool {
+        self.finished
+    }
+
+    pub fn stats(&self) -> &SensorStats {
+        &self.stats
+    }
+
+    /// Batches kept for leader `i` to ask for again.
+    pub fn kept(&self, i: usize) -> usize {
+        self.sent.get(i).map_or(0, BatchLog::len)
+    }
+
+    /// Routes one trace line; returns the cuts whose point it reached
+    /// (answer them after the next [`Gateway::flush`]).
+    pub fn line(&mut self, line: &Line) -> Vec<Placed<Q>> {
+        self.router.line(line);
+        let mut placed = Vec::new();
+        self.cuts.reached(&mut self.router, &self.name, &mut placed);
+        placed
+    }
+
+    /// The source is exhausted: from the next flush on, batches say the
+    /// stream is finished; every cut still waiting is refused.
+    pub fn end(&mut self) -> Vec<(Q, String)> {
+        self.finished = true;
+        self.cuts.refuse_all(&self.router)
+    }
+
+    /// Every leader's queued items (or just how far the stream got) as
+    /// its next batch, in the stream's order of leaders; each is kept for
+    /// the leader to ask for again.
+    pub fn flush(&mut self) -> Vec<Batch> {
+        let through = self.router.seq();
+        let events = self.router.events();
+        let mut batches = Vec::with_capacity(self.sent.len());
+        for (i, log) in self.sent.iter_mut().enumerate() {
+            let batch = Batch {
+                version: VERSION,
+                sensor: self.name.clone(),
+                number: log.next_number(),
+                through,
+                events,
+                finished: self.finished,
+                items: self.router.take(i),
+            };
+            log.push(batch.clone());
+            batches.push(batch);
+        }
+        batches
+    }
+
+    /// A cut request: placed now, scheduled, or refused.
+    pub fn cut(&mut self, query: Q, parameters: &CutParameters) -> CutOutcome<Q> {
+        match self
+            .cuts
+            .request(query, parameters, &self.router, self.finished)
+        {
+            Request::Now { wanted, query } => CutOutcome::Placed(place(
+                &mut self.router,
+                &self.name,
+                wanted,
+                query,
+                self.finished,
+            )),
+            Request::Scheduled => CutOutcome::Scheduled,
+            Request::Refused { query, reason } => CutOutcome::Refused(query, reason),
+        }
+    }
+
+    /// A leader asks to follow more tracks (`Follow` bytes): the items it
+    /// missed, or why not (counted). Flush after a success: the items
+    /// routed to it from now on include the new tracks.
+    pub fn follow(&mut self, bytes: &[u8]) -> Result<Followed, String> {
+        let answer = decode::<Follow>(bytes)
+            .map_err(|e| e.to_string())
+            .and_then(|f| self.router.follow(&f).map_err(|e| e.to_string()))
+            .map(|items| Followed {
+                version: VERSION,
+                items,
+            });
+        self.count("follow", &answer);
+        answer
+    }
+
+    /// A leader asks for batches again (`Resend` bytes).
+    pub fn resend(&mut self, bytes: &[u8]) -> Result<Resent, String> {
+        let answer = decode::<Resend>(bytes)
+            .map_err(|e| e.to_string())
+            .and_then(|request| {
+                let sent = self
+                    .router
+                    .begin()
+                    .leaders
+                    .iter()
+                    .position(|n| *n == request.leader)
+                    .map(|i| &self.sent[i])
+                    .ok_or_else(|| {
+                        format!(
+                            "resend request from {:?}, which is not a leader of this stream",
+                            request.leader
+                        )
+                    })?;
+                sent.from(&request.leader, request.from)
+            })
+            .map(|batches| Resent {
+                version: VERSION,
+                batches,
+            });
+        self.count("resend", &answer);
+        answer
+    }
+
+    /// A leader published its durable mark (`Durable` bytes): drop its
+    /// batches below it, and the items every leader has passed.
+    pub fn durable(&mut self, bytes: &[u8], origin: &str) {
+        let mark = match decode::<Durable>(bytes) {
+            Ok(mark) => mark,
+            Err(e) => {
+                self.stats.rejected += 1;
+                tracing::warn!(from = %origin, problem = %e,
+                    rejected = self.stats.rejected, "durable mark rejected");
+                return;
+            }
+        };
+        let Some(i) = self
+            .router
+            .begin()
+            .leaders
+            .iter()
+            .position(|n| *n == mark.leader)
+        else {
+            tracing::warn!(leader = %mark.leader, "durable mark from a leader not of this stream");
+            return;
+        };
+        let batches = self.sent[i].forget(&mark);
+        self.durable[i] = Some(self.durable[i].unwrap_or(0).max(mark.position));
+        let passed = self.durable.iter().copied().min().flatten();
+        let items = passed.map_or(0, |seq| self.router.forget(seq));
+        tracing::trace!(leader = %mark.leader, batches, items, kept = self.sent[i].len(),
+            logged = self.router.logged(), "forgot what is safe");
+    }
+
+    /// Counts a refused request.
+    fn count<R>(&mut self, what: &str, answer: &Result<R, String>) {
+        if let Err(e) = answer {
+            self.stats.rejected += 1;
+            tracing::warn!(what, error = %e, rejected = self.stats.rejected, "bad request rejected");
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! The gateway's pure parts driven by hand: routing by interest, follows
+//! (with the saturated-set rule), resends against the batch log and the
+//! durable marks, and cuts now, later or never.
+
+use super::core::{CutOutcome, Gateway};
+use super::cuts::CutParameters;
+use super::router::{LeaderPlace, Router, RouterConfig};
+use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend};
+use idmesh_protocol::wire::sensor_to_leader::{Batch, Item};
+use idmesh_protocol::wire::{encode, VERSION};
+
+/// Two leaders, a at (0, 0) and b at (10, 0); n tracks, k red.
+fn router(tracks: usize, red: usize, distributed_rule: bool) -> Router {
+    router_of(2, tracks, red, distributed_rule)
+}
+
+/// `leaders` leaders a, b, c, … along the x axis, 10 apart.
+fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) -> Router {
+    let mut header = Header::new(tracks);
+    header.red = Some(red);
+    let config = RouterConfig {
+        sensor: "s".into(),
+        leaders: (0..leaders)
+            .map(|i| LeaderPlace {
+                name: ((b'a' + i as u8) as char).to_string(),
+                at: Some((10.0 * i as f64, 0.0)),
+            })
+            .collect(),
+        distributed_rule,
+        budget: 0,
+        omp: false,
+    };
+    Router::new(config, &header).unwrap()
+}
+
+fn mix(a: u32, b: u32) -> Line {
+    Line::Mix(Mix {
+        time: 0.0,
+        a,
+        b,
+        swap: 0.5,
+    })
+}
+
+fn observe(track: u32) -> Line {
+    Line::Observe(Observe {
+        time: 0.0,
+        track,
+        red: 0.9,
+        blue: 0.3,
+        sensor: None,
+    })
+}
+
+fn seqs(batch: &Batch) -> Vec<u64> {
+    batch.items.iter().map(|s| s.seq).collect()
+}
+
+#[test]
+fn items_go_only_to_the_leaders_whose_sets_they_may_change() {
+    // 8 tracks, k = 4: before any position, track t is with leader t mod 2.
+    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false);
+    let begin = gateway.flush();
+    assert!(begin
+        .iter()
+        .all(|b| matches!(b.items[0].item, Item::Begin(_))));
+    gateway.line(&mix(0, 2)); // a's tracks only: seq 2
+    gateway.line(&mix(1, 3)); // b's: seq 3
+    gateway.line(&mix(2, 5)); // across: seq 4
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!((seqs(&a), seqs(&b)), (vec![2, 4], vec![3, 4]));
+    assert_eq!((a.number, a.through, a.events), (1, 4, 3));
+    assert!(matches!(
+        a.items[1].item,
+        Item::Mix {
+            owner_a: 0,
+            owner_b: 1,
+            ..
+        }
+    ));
+    // Track 1 walks over to a: a handover, to both of them.
+    gateway.line(&Line::Move(Move {
+        time: 0.0,
+        track: 1,
+        x: 1.0,
+        y: 0.0,
+    }));
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert!(matches!(
+        a.items[0].item,
+        Item::Handover {
+            track: 1,
+            from: 1,
+            to: 0
+        }
+    ));
+    assert_eq!(seqs(&a), seqs(&b));
+}
+
+#[test]
+fn a_follow_gets_the_items_missed_on_its_new_tracks_and_bad_ones_are_refused() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false);
+    gateway.flush();
+    gateway.line(&mix(1, 3)); // seq 2, b only
+    gateway.line(&mix(3, 7)); // seq 3, b only
+    gateway.line(&mix(0, 2)); // seq 4, a only
+    gateway.flush();
+    let follow = |after, tracks: Vec<u32>| {
+        encode(&Follow {
+            version: VERSION,
+            leader: 0,
+            after,
+            tracks,
+        })
+    };
+    // a now follows 3 from seq 2 on: the mix of 3 and 7 at seq 3.
+    let followed = gateway.follow(&follow(2, vec![3])).unwrap();
+    assert_eq!(
+        followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(),
+        [3]
+    );
+    // And from now on a is sent what touches 3 (and 7, mixed with it).
+    gateway.line(&mix(7, 5)); // seq 5
+    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!(seqs(&a), [5]);
+    assert!(gateway
+        .follow(&follow(0, vec![8]))
+        .unwrap_err()
+        .contains("track 8"));
+    assert!(gateway.follow(b"junk").is_err());
+    assert_eq!(gateway.stats().rejected, 2);
+}
+
+#[test]
+fn a_follow_that_may_bring_a_saturated_set_gets_every_observation_missed() {
+    // n = 9, k = 4, three leaders of three tracks each: a's sets cannot
+    // hold 4 tracks yet, so an observation of b's track 4 whose mixing log
+    // does not meet a's tracks is not sent to a.
+    let mut gateway: Gateway<()> = Gateway::new("s", router_of(3, 9, 4, true), false);
+    gateway.flush();
+    gateway.line(&observe(4)); // seq 2
+    let [a, b, _] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();
+    assert!(seqs(&a).is_empty() && seqs(&b) == [2]);
+    // Sets with track 1 come to a: following 4 tracks it may now hold
+    // {0, 1, 3, 6} red, which says track 4 is blue. It gets the
+    // observation it missed, though 4 is not among the tracks it asks for.
+    let followed = gateway
+        .follow(&encode(&Follow {
+            version: VERSION,
+            leader: 0,
+            after: 1,
+            tracks: vec![1],
+        }))
+        .unwrap();
+    assert_eq!(
+        followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(),
+        [2]
+    );
+    // And every observation from now on.
+    gateway.line(&observe(8)); // seq 3
+    let [a, ..] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();
+    assert_eq!(seqs(&a), [3]);
+}
+
+#[test]
+fn batches_are_sent_again_until_the_leader_says_they_are_safe() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(4, 2, false), false);
+    for t in 0..4 {
+        gateway.line(&observe(t));
+        gateway.flush();
+    }
+    let resend = |leader: &str, from| {
+        encode(&Resend {
+            version: VERSION,
+            leader: leader.into(),
+            from,
+        })
+    };
+    let again = gateway.resend(&resend("b", 2)).unwrap();
+    assert_eq!(
+        again.batches.iter().map(|b| b.number).collect::<Vec<_>>(),
+        [2, 3]
+    );
+    let mark = Durable {
+        version: VERSION,
+        leader: "b".into(),
+        batch: 3,
+        position: 4,
+    };
+    gateway.durable(&encode(&mark), "test");
+    assert_eq!(gateway.kept(1), 1);
+    assert!(gateway
+        .resend(&resend("b", 2))
+        .unwrap_err()
+        .contains("safe through 3"));
+    assert!(gateway
+        .resend(&resend("z", 0))
+        .unwrap_err()
+        .contains("\"z\""));
+    gateway.durable(b"junk", "test");
+    assert_eq!(gateway.stats().rejected, 3);
+}
+
+#[test]
+fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
+    let mut gateway: Gateway<u32> = Gateway::new("s", router(4, 2, false), false);
+    let at = |tag: &str, events: Option<&str>| CutParameters {
+        tag: Some(tag.into()),
+        rows: false,
+        events: events.map(str::to_owned),
+    };
+    gateway.line(&observe(0));
+    match gateway.cut(1, &at("11", None)) {
+        CutOutcome::Placed(p) => {
+            assert_eq!((p.query, p.answer.seq, p.answer.events), (1, 3, 1));
+            assert_eq!(p.answer.leaders, ["a", "b"]);
+        }
+        _ => panic!("placed now"),
+    }
+    let batches = gateway.flush();
+    assert!(batches
+        .iter()
+        .all(|b| matches!(b.items.last().unwrap().item, Item::Cut { tag: 11, .. })));
+    assert!(matches!(
+        gateway.cut(2, &at("12", Some("3"))),
+        CutOutcome::Scheduled
+    ));
+    assert!(matches!(
+        gateway.cut(3, &at("13", Some("9"))),
+        CutOutcome::Scheduled
+    ));
+    assert!(gateway.line(&observe(1)).is_empty());
+    let placed = gateway.line(&observe(2));
+    assert_eq!(placed.len(), 1);
+    assert_eq!((placed[0].query, placed[0].answer.events), (2, 3));
+    let refused = |o| match o {
+        CutOutcome::Refused(_, why) => why,
+        _ => panic!("refused"),
+    };
+    assert!(refused(gateway.cut(4, &at("14", Some("1")))).contains("keeps no history"));
+    assert!(refused(gateway.cut(5, &at("x", None))).contains("tag=<u64>"));
+    // The stream ends before event 9: that cut is refused, and so is any
+    // later point.
+    let ended = gateway.end();
+    assert_eq!(ended.len(), 1);
+    assert!(ended[0].1.contains("ended at 3 events, before event 9"));
+    assert!(refused(gateway.cut(6, &at("16", Some("5")))).contains("ended"));
+    assert!(gateway.flush().iter().all(|b| b.finished));
+}

@@ -1,0 +1,65 @@
+//! A deterministic network simulator for the distributed core, in the
+//! spirit of FoundationDB's and TigerBeetle's simulation testing and of
+//! raft-rs's in-process `Network`: one sensor gateway, L leaders and the
+//! coordinator's gathering run their real pure state machines
+//! (`idmesh_sensor::gateway::core::Gateway`, `idmesh_leader::node::Node`,
+//! `idmesh_coordinator::gathering`) in one thread, on virtual time, through
+//! a seeded network that loses, doubles, delays and reorders messages,
+//! cuts leaders off and heals them, while leaders crash (killed, or losing
+//! what was not fsynced) and come back from their journal and snapshot,
+//! and queries come at random points.
+//!
+//! Every schedule checks:
+//! - every answer equals the centralized engine's at its watermark to
+//!   1e-9 (exact conditioning, no pruning), and its marginals sum to k;
+//! - watermarks only move forward: an answer is never older than one
+//!   given before the query was asked;
+//! - a leader never goes back, comes back no lower than the durable mark
+//!   it published, and a killed leader replays its journal to exactly
+//!   where it was;
+//! - no item is applied twice or lost: each leader applied exactly the
+//!   items routed to it up to its position;
+//! - once the faults stop, the final answer comes (liveness), covering the
+//!   whole stream.
+//!
+//! A seed is a schedule: [`run`] it alone to replay a failure.
+
+mod network;
+mod scenario;
+mod world;
+
+pub use world::Tally;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// A property a schedule broke.
+#[derive(Debug, Clone)]
+pub struct Violation {
+    pub what: String,
+}
+
+impl Violation {
+    fn new(what: String) -> Self {
+        Violation { what }
+    }
+
+    fn setup(what: String) -> Self {
+        Violation {
+            what: format!("could not set the world up: {what}"),
+        }
+    }
+}
+
+impl std::fmt::Display for Violation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.what)
+    }
+}
+
+/// Runs schedule `seed` to its end.
+pub fn run(seed: u64) -> Result<Tally, Violation> {
+    let mut world = world::World::new(ChaCha8Rng::seed_from_u64(seed))?;
+    world.run()?;
+    Ok(world.tally.clone())
+}

@@ -1,0 +1,146 @@
+//! A random little world for one schedule: n tracks, k red, L leaders at
+//! random places, and a trace of mixes, observations and moves (moves
+//! make handovers, mixes of tracks of two leaders make transfers, and
+//! transfers make follows). With it, what the centralized engine says
+//! after every prefix of the trace: the answer any cut must give.
+
+use idmesh_belief::radon::{RadonBelief, RadonOptions};
+use idmesh_belief::{Field, PropertyFilter};
+use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
+use idmesh_sensor::gateway::{LeaderPlace, RouterConfig};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+pub struct Scenario {
+    pub header: Header,
+    pub leaders: Vec<LeaderPlace>,
+    /// The trace's event lines.
+    pub lines: Vec<Line>,
+    /// `centralized[e]`: the marginals after the first e events.
+    pub centralized: Vec<Vec<f64>>,
+    pub red: usize,
+    /// The distributed rule of Section 5.4.2 (observations grow only the
+    /// sets meeting the observed track's mixing log), or exact
+    /// conditioning.
+    pub distributed_rule: bool,
+}
+
+impl Scenario {
+    pub fn random(rng: &mut ChaCha8Rng) -> Result<Scenario, String> {
+        let tracks = rng.gen_range(3..=7usize);
+        let red = rng.gen_range(1..tracks);
+        let mut header = Header::new(tracks);
+        header.red = Some(red);
+        if rng.gen_bool(0.5) {
+            let mut initial: Vec<u32> = (0..tracks as u32).collect();
+            for i in (1..initial.len()).rev() {
+                initial.swap(i, rng.gen_range(0..=i));
+            }
+            initial.truncate(red);
+            initial.sort_unstable();
+            header.initial_red = Some(initial);
+        }
+        let count = rng.gen_range(1..=4usize);
+        let leaders: Vec<LeaderPlace> = (0..count)
+            .map(|i| LeaderPlace {
+                name: format!("leader-{i}"),
+                at: Some((rng.gen_range(0.0..10.0), rng.gen_range(0.0..10.0))),
+            })
+            .collect();
+        let events = rng.gen_range(5..=50usize);
+        let mut lines = Vec::with_capacity(events);
+        for e in 0..events {
+            let time = e as f64 * 0.1;
+            let line = match rng.gen_range(0..10) {
+                0..=3 => {
+                    let a = rng.gen_range(0..tracks as u32);
+                    let mut b = rng.gen_range(0..tracks as u32 - 1);
+                    if b >= a {
+                        b += 1;
+                    }
+                    Line::Mix(Mix {
+                        time,
+                        a,
+                        b,
+                        swap: rng.gen_range(0.05..0.95),
+                    })
+                }
+                4..=6 => Line::Observe(Observe {
+                    time,
+                    track: rng.gen_range(0..tracks as u32),
+                    red: rng.gen_range(0.05..1.0),
+                    blue: rng.gen_range(0.05..1.0),
+                    sensor: None,
+                }),
+                _ => Line::Move(Move {
+                    time,
+                    track: rng.gen_range(0..tracks as u32),
+                    x: rng.gen_range(0.0..10.0),
+                    y: rng.gen_range(0.0..10.0),
+                }),
+            };
+            lines.push(line);
+        }
+        let distributed_rule = rng.gen_bool(0.5);
+        let centralized = centralized(&header, &lines, distributed_rule)?;
+        Ok(Scenario {
+            header,
+            leaders,
+            lines,
+            centralized,
+            red,
+            distributed_rule,
+        })
+    }
+
+    /// The router's settings: no pruning (the setting in which the
+    /// deployment must equal the centralized engine to 1e-9).
+    pub fn router(&self) -> RouterConfig {
+        RouterConfig {
+            sensor: "sensor-0".into(),
+            leaders: self.leaders.clone(),
+            distributed_rule: self.distributed_rule,
+            budget: 0,
+            omp: false,
+        }
+    }
+}
+
+/// The centralized engine (`idmesh replay --method overcomplete`, no
+/// budget, with or without `--distributed-rule`) after every prefix of
+/// `lines`.
+fn centralized(
+    header: &Header,
+    lines: &[Line],
+    distributed_rule: bool,
+) -> Result<Vec<Vec<f64>>, String> {
+    let field = Field::with_count(
+        header.tracks,
+        header.red_count(),
+        header.initial_red.clone(),
+    );
+    let options = RadonOptions {
+        distributed_rule,
+        ..RadonOptions::default()
+    };
+    let mut engine = RadonBelief::with_options(field, options).map_err(|e| e.to_string())?;
+    let mut out = vec![engine.marginals().map_err(|e| e.to_string())?];
+    for line in lines {
+        match line {
+            Line::Mix(m) => engine.mix(idmesh_belief::Mix {
+                a: m.a,
+                b: m.b,
+                swap: m.swap,
+            }),
+            Line::Observe(o) => engine.observe(idmesh_belief::Observe {
+                track: o.track,
+                red: o.red,
+                blue: o.blue,
+            }),
+            _ => Ok(()),
+        }
+        .map_err(|e| e.to_string())?;
+        out.push(engine.marginals().map_err(|e| e.to_string())?);
+    }
+    Ok(out)
+}

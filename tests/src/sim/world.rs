@@ -1,0 +1,1008 @@
+//! One schedule: the sensor gateway, L leaders and the coordinator's
+//! gathering, in one thread, exchanging messages through a [`Network`]
+//! that loses, doubles, delays (hence reorders) and cuts them off, while
+//! leaders crash and come back from their journal and snapshot. Every
+//! process runs its real pure state machine ([`Gateway`], [`Node`],
+//! [`crate::sim`]'s use of `idmesh_coordinator::gathering`); what the
+//! actors do with Zenoh — puts, gets with a timeout, subscriptions — is
+//! done here with virtual time.
+
+use super::network::{Endpoint, Network};
+use super::scenario::Scenario;
+use super::Violation;
+use idmesh_coordinator::gathering::{
+    at_rest_of, check, marginals_of, read_cut, GatherError, Memory, Partials,
+};
+use idmesh_leader::journal::Kind;
+use idmesh_leader::node::{Ask, Input, Node, Output, Timers};
+use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
+use idmesh_protocol::wire::leader_to_leader::TransfersSent;
+use idmesh_protocol::wire::leader_to_sensor::Resent;
+use idmesh_protocol::wire::query::MarginalsAnswer;
+use idmesh_protocol::wire::sensor_to_leader::Batch;
+use idmesh_protocol::wire::{decode, encode};
+use idmesh_sensor::gateway::core::{CutOutcome, Gateway};
+use idmesh_sensor::gateway::cuts::CutParameters;
+use idmesh_sensor::gateway::Router;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::time::Duration;
+
+/// Virtual milliseconds.
+pub type Ms = u64;
+
+/// How long a get waits for its answer (the leaders' `follow_timeout`).
+const ASK_TIMEOUT: Ms = 1000;
+/// How long the coordinator waits for the leaders and the sensor.
+const QUERY_TIMEOUT: Ms = 1500;
+/// After the stream and its faults are over, how long the deployment has
+/// to give the final answer.
+const FINAL_PATIENCE: Ms = 60_000;
+
+/// A message on the wire, by receiver.
+#[derive(Debug, Clone)]
+pub enum Msg {
+    /// An input of leader `to`'s node; `ask` is set on the answer to one
+    /// of its own gets.
+    Leader {
+        to: usize,
+        what: ToLeader,
+    },
+    Sensor {
+        from: usize,
+        what: ToSensor,
+    },
+    Coordinator(ToCoordinator),
+}
+
+#[derive(Debug, Clone)]
+pub enum ToLeader {
+    Batch(Vec<u8>),
+    Transfer(Vec<u8>),
+    Durable(Vec<u8>),
+    Partial {
+        id: u64,
+        ask: Ask,
+    },
+    SentWanted {
+        ask: u64,
+        bytes: Vec<u8>,
+    },
+    /// The answer to the leader's get `ask`.
+    Reply {
+        ask: u64,
+        reply: Result<Vec<u8>, String>,
+    },
+}
+
+#[derive(Debug, Clone)]
+pub enum ToSensor {
+    Follow {
+        ask: u64,
+        bytes: Vec<u8>,
+    },
+    Resend {
+        ask: u64,
+        bytes: Vec<u8>,
+    },
+    Durable(Vec<u8>),
+    /// The coordinator asks for a cut (from = usize::MAX).
+    Cut {
+        id: u64,
+        parameters: CutParameters,
+    },
+}
+
+#[derive(Debug, Clone)]
+pub enum ToCoordinator {
+    Cut {
+        id: u64,
+        reply: Result<Vec<u8>, String>,
+    },
+    Partial {
+        id: u64,
+        leader: usize,
+        reply: Result<Vec<u8>, String>,
+    },
+}
+
+/// What happens at a point of virtual time.
+#[derive(Debug, Clone)]
+pub enum Event {
+    Deliver(Msg),
+    Tick {
+        leader: usize,
+        life: u64,
+    },
+    AskTimeout(u64),
+    SensorStep,
+    QueryStart,
+    QueryTimeout(u64),
+    Crash(usize),
+    Restart(usize),
+    Isolate(usize),
+    Heal(usize),
+    /// The faults stop and the final query starts.
+    Calm,
+}
+
+/// A get a leader made, waiting for its answer.
+struct PendingAsk {
+    leader: usize,
+    life: u64,
+    kind: AskKind,
+}
+
+enum AskKind {
+    Follow,
+    Resend,
+    Transfers(String),
+}
+
+/// A leader's durable state, in memory: what survives a crash.
+#[derive(Default)]
+struct Disk {
+    snapshot: Option<Vec<u8>>,
+    entries: Vec<(Kind, Vec<u8>)>,
+    /// Entries fsynced (a power cut loses the rest).
+    synced: usize,
+}
+
+struct LeaderSlot {
+    name: String,
+    node: Option<Node>,
+    /// Incarnation: answers to the gets of an earlier life are dropped.
+    life: u64,
+    disk: Disk,
+    /// The last durable mark it published (position).
+    published: u64,
+    snapshot_every: usize,
+}
+
+/// A query of the coordinator, in one of its two phases.
+struct Query {
+    /// Answers completed before it started had at most this watermark.
+    floor: u64,
+    last: Option<CutPlaced>,
+    phase: Phase,
+    /// Ids of the current phase (messages of an earlier phase are stale).
+    id: u64,
+    replied: BTreeSet<usize>,
+    partials: Partials,
+    cut: Option<Result<CutPlaced, GatherError>>,
+    final_query: bool,
+}
+
+#[derive(PartialEq, Eq)]
+enum Phase {
+    Rest,
+    Fresh,
+}
+
+/// What a schedule did (for the report and the failure message).
+#[derive(Debug, Default, Clone)]
+pub struct Tally {
+    pub answered: u64,
+    pub failed_queries: u64,
+    pub crashes: u64,
+    pub messages: u64,
+    pub dropped: u64,
+    /// Summed over the leaders at the end: transfers received, follow
+    /// requests made, handovers applied.
+    pub transfers: u64,
+    pub follows: u64,
+    pub handovers: u64,
+}
+
+pub struct World {
+    rng: ChaCha8Rng,
+    now: Ms,
+    net: Network,
+    scenario: Scenario,
+    gateway: Gateway<u64>,
+    next_line: usize,
+    leaders: Vec<LeaderSlot>,
+    asks: HashMap<u64, PendingAsk>,
+    next_id: u64,
+    memory: Memory,
+    queries: BTreeMap<u64, Query>,
+    /// The highest watermark of an answer given so far.
+    answered_events: u64,
+    /// The items routed to each leader (batches and follow replies).
+    routed: Vec<BTreeSet<u64>>,
+    final_answer: Option<MarginalsAnswer>,
+    calm: bool,
+    pub tally: Tally,
+    last_error: String,
+}
+
+impl World {
+    pub fn new(mut rng: ChaCha8Rng) -> Result<World, Violation> {
+        let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
+        let router = Router::new(scenario.router(), &scenario.header)
+            .map_err(|e| Violation::setup(e.to_string()))?;
+        let gateway = Gateway::new("sensor-0", router, scenario.lines.is_empty());
+        let net = Network::random(&mut rng, scenario.leaders.len());
+        let leaders = scenario
+            .leaders
+            .iter()
+            .map(|l| LeaderSlot {
+                name: l.name.clone(),
+                node: None,
+                life: 0,
+                disk: Disk::default(),
+                published: 0,
+                snapshot_every: 0,
+            })
+            .collect::<Vec<_>>();
+        let count = leaders.len();
+        let mut world = World {
+            rng,
+            now: 0,
+            net,
+            scenario,
+            gateway,
+            next_line: 0,
+            leaders,
+            asks: HashMap::new(),
+            next_id: 0,
+            memory: Memory::default(),
+            queries: BTreeMap::new(),
+            answered_events: 0,
+            routed: vec![BTreeSet::new(); count],
+            final_answer: None,
+            calm: false,
+            tally: Tally::default(),
+            last_error: String::new(),
+        };
+        for i in 0..count {
+            world.leaders[i].snapshot_every = world.rng.gen_range(3..=30);
+            world.start_leader(i)?;
+        }
+        world.flush();
+        world.net.at(1, Event::SensorStep);
+        // Queries at random points of the stream, and the faults.
+        let span = 40 * world.scenario.lines.len() as Ms + 200;
+        for _ in 0..world.rng.gen_range(0..=4) {
+            let at = world.rng.gen_range(0..span);
+            world.net.at(at, Event::QueryStart);
+        }
+        world.net.schedule_faults(&mut world.rng, span, count);
+        world.net.at(span + 100, Event::Calm);
+        Ok(world)
+    }
+
+    /// Runs the schedule to its end: the final answer, checked.
+    pub fn run(&mut self) -> Result<(), Violation> {
+        while let Some((at, event)) = self.net.next() {
+            self.now = at;
+            if self.calm && self.now > self.calm_deadline() {
+                break;
+            }
+            self.handle(event)?;
+            if self.final_answer.is_some() {
+                return self.check_end();
+            }
+        }
+        Err(Violation::new(format!(
+            "no final answer within {FINAL_PATIENCE} ms of the faults ending (t = {} ms); last error: {}",
+            self.now, self.last_error
+        )))
+    }
+
+    fn calm_deadline(&self) -> Ms {
+        40 * self.scenario.lines.len() as Ms + 300 + FINAL_PATIENCE
+    }
+
+    fn fresh_id(&mut self) -> u64 {
+        self.next_id += 1;
+        self.next_id
+    }
+
+    fn handle(&mut self, event: Event) -> Result<(), Violation> {
+        match event {
+            Event::Deliver(msg) => self.deliver(msg),
+            Event::Tick { leader, life } => {
+                if self.leaders[leader].life == life && self.leaders[leader].node.is_some() {
+                    self.step(leader, Input::Tick)?;
+                    let sweep = 250;
+                    self.net.at(self.now + sweep, Event::Tick { leader, life });
+                }
+                Ok(())
+            }
+            Event::AskTimeout(ask) => {
+                if let Some(pending) = self.asks.remove(&ask) {
+                    self.answer_ask(pending, Err("no answer in time".into()))?;
+                }
+                Ok(())
+            }
+            Event::SensorStep => {
+                self.sensor_step();
+                Ok(())
+            }
+            Event::QueryStart => {
+                self.start_query(false);
+                Ok(())
+            }
+            Event::QueryTimeout(id) => self.complete_query(id),
+            Event::Crash(i) => {
+                if !self.calm {
+                    self.crash(i)?;
+                }
+                Ok(())
+            }
+            Event::Restart(i) => {
+                if self.leaders[i].node.is_none() {
+                    self.start_leader(i)?;
+                }
+                Ok(())
+            }
+            Event::Isolate(i) => {
+                if !self.calm {
+                    self.net.isolate(Endpoint::Leader(i));
+                }
+                Ok(())
+            }
+            Event::Heal(i) => {
+                self.net.heal(Endpoint::Leader(i));
+                Ok(())
+            }
+            Event::Calm => {
+                self.calm = true;
+                self.net.calm();
+                for i in 0..self.leaders.len() {
+                    if self.leaders[i].node.is_none() {
+                        self.start_leader(i)?;
+                    }
+                }
+                self.start_query(true);
+                Ok(())
+            }
+        }
+    }
+
+    // --- the sensor -----------------------------------------------------
+
+    /// Reads the next few lines, as the gateway's actor does by chunks.
+    fn sensor_step(&mut self) {
+        let lines = self.scenario.lines.len();
+        let chunk = self.rng.gen_range(1..=4usize);
+        let mut placed = Vec::new();
+        let end = (self.next_line + chunk).min(lines);
+        for line in &self.scenario.lines[self.next_line..end] {
+            placed.extend(self.gateway.line(line));
+        }
+        self.next_line = end;
+        let refused = if self.next_line >= lines && !self.gateway.finished() {
+            self.gateway.end()
+        } else {
+            Vec::new()
+        };
+        self.flush();
+        for p in placed {
+            self.reply_cut(p.query, Ok(encode(&p.answer)));
+        }
+        for (id, why) in refused {
+            self.reply_cut(id, Err(why));
+        }
+        if self.next_line < lines {
+            let wait = self.rng.gen_range(1..=40);
+            self.net.at(self.now + wait, Event::SensorStep);
+        }
+    }
+
+    /// Every leader's next batch, on its way.
+    fn flush(&mut self) {
+        for (i, batch) in self.gateway.flush().into_iter().enumerate() {
+            self.note_routed(i, &batch);
+            let bytes = encode(&batch);
+            self.send(
+                Endpoint::Sensor,
+                Endpoint::Leader(i),
+                Msg::Leader {
+                    to: i,
+                    what: ToLeader::Batch(bytes),
+                },
+            );
+        }
+    }
+
+    fn note_routed(&mut self, i: usize, batch: &Batch) {
+        self.routed[i].extend(batch.items.iter().map(|s| s.seq));
+    }
+
+    fn reply_cut(&mut self, id: u64, reply: Result<Vec<u8>, String>) {
+        self.send(
+            Endpoint::Sensor,
+            Endpoint::Coordinator,
+            Msg::Coordinator(ToCoordinator::Cut { id, reply }),
+        );
+    }
+
+    fn at_sensor(&mut self, from: usize, what: ToSensor) {
+        match what {
+            ToSensor::Follow { ask, bytes } => {
+                let answer = self.gateway.follow(&bytes);
+                if let Ok(followed) = &answer {
+                    self.routed[from].extend(followed.items.iter().map(|s| s.seq));
+                    self.flush();
+                }
+                self.reply_leader(from, ask, answer.map(|f| encode(&f)));
+            }
+            ToSensor::Resend { ask, bytes } => {
+                let answer = self.gateway.resend(&bytes).map(|r| encode(&r));
+                self.reply_leader(from, ask, answer);
+            }
+            ToSensor::Durable(bytes) => self.gateway.durable(&bytes, "sim"),
+            ToSensor::Cut { id, parameters } => match self.gateway.cut(id, &parameters) {
+                CutOutcome::Placed(p) => {
+                    self.flush();
+                    self.reply_cut(id, Ok(encode(&p.answer)));
+                }
+                CutOutcome::Scheduled => {}
+                CutOutcome::Refused(id, why) => self.reply_cut(id, Err(why)),
+            },
+        }
+    }
+
+    fn reply_leader(&mut self, to: usize, ask: u64, reply: Result<Vec<u8>, String>) {
+        self.send(
+            Endpoint::Sensor,
+            Endpoint::Leader(to),
+            Msg::Leader {
+                to,
+                what: ToLeader::Reply { ask, reply },
+            },
+        );
+    }
+
+    // --- the leaders ----------------------------------------------------
+
+    fn timers(&self, i: usize) -> Timers {
+        let mut timers = Timers::new(
+            Duration::from_millis(ASK_TIMEOUT),
+            true,
+            Some(self.leaders[i].snapshot_every),
+        );
+        timers.sweep = Duration::from_millis(250);
+        timers
+    }
+
+    /// Starts leader `i` (again): from its disk, as `Node::recover` does
+    /// for the actor.
+    fn start_leader(&mut self, i: usize) -> Result<(), Violation> {
+        let timers = self.timers(i);
+        let slot = &mut self.leaders[i];
+        slot.life += 1;
+        let disk = &slot.disk;
+        let (node, out) = Node::recover(
+            &slot.name,
+            &slot.name,
+            disk.snapshot.as_deref(),
+            disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
+            false,
+            timers,
+            Duration::from_millis(self.now),
+        )
+        .map_err(|e| Violation::new(format!("{} cannot recover: {e}", slot.name)))?;
+        if node.leader().durable().position < slot.published {
+            return Err(Violation::new(format!(
+                "{} came back at position {} below the durable mark {} it published",
+                slot.name,
+                node.leader().durable().position,
+                slot.published
+            )));
+        }
+        slot.node = Some(node);
+        let life = slot.life;
+        let phase = self.rng.gen_range(1..=250);
+        self.net
+            .at(self.now + phase, Event::Tick { leader: i, life });
+        self.carry_out(i, out)
+    }
+
+    fn crash(&mut self, i: usize) -> Result<(), Violation> {
+        let Some(node) = self.leaders[i].node.take() else {
+            return Ok(());
+        };
+        self.tally.crashes += 1;
+        let before = node.leader().position();
+        drop(node);
+        let power_cut = self.rng.gen_bool(0.5);
+        let disk = &mut self.leaders[i].disk;
+        if power_cut {
+            disk.entries.truncate(disk.synced);
+        }
+        let down = self.rng.gen_range(50..=2000);
+        self.net.at(self.now + down, Event::Restart(i));
+        if !power_cut {
+            // A killed process loses nothing it journaled: it must come
+            // back exactly where it was.
+            let timers = self.timers(i);
+            let slot = &self.leaders[i];
+            let (probe, _) = Node::recover(
+                &slot.name,
+                &slot.name,
+                slot.disk.snapshot.as_deref(),
+                slot.disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
+                false,
+                timers,
+                Duration::from_millis(self.now),
+            )
+            .map_err(|e| Violation::new(format!("{} cannot recover: {e}", slot.name)))?;
+            if probe.leader().position() != before {
+                return Err(Violation::new(format!(
+                    "{} replayed its journal to position {} but was at {before}",
+                    slot.name,
+                    probe.leader().position()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Hands leader `i` one input and carries out what it asks.
+    fn step(&mut self, i: usize, input: Input) -> Result<(), Violation> {
+        let now = Duration::from_millis(self.now);
+        let Some(node) = self.leaders[i].node.as_mut() else {
+            return Ok(());
+        };
+        let before = node.leader().position();
+        let out = node.step(now, input);
+        let after = node.leader().position();
+        if after < before {
+            return Err(Violation::new(format!(
+                "{} went back from position {before} to {after}",
+                self.leaders[i].name
+            )));
+        }
+        if let Some(failure) = node.failure() {
+            let failure = failure.to_string();
+            return Err(Violation::new(format!(
+                "{} failed: {failure}",
+                self.leaders[i].name
+            )));
+        }
+        self.carry_out(i, out)
+    }
+
+    fn carry_out(&mut self, i: usize, outputs: Vec<Output>) -> Result<(), Violation> {
+        for output in outputs {
+            match output {
+                Output::Journal { kind, bytes } => self.leaders[i].disk.entries.push((kind, bytes)),
+                Output::Send { to, body, .. } => {
+                    let Some(j) = self.leaders.iter().position(|l| l.name == to) else {
+                        return Err(Violation::new(format!("transfer to unknown {to}")));
+                    };
+                    self.send(
+                        Endpoint::Leader(i),
+                        Endpoint::Leader(j),
+                        Msg::Leader {
+                            to: j,
+                            what: ToLeader::Transfer(body),
+                        },
+                    );
+                }
+                Output::AskFollow(follow) => {
+                    let ask = self.ask(i, AskKind::Follow);
+                    self.send(
+                        Endpoint::Leader(i),
+                        Endpoint::Sensor,
+                        Msg::Sensor {
+                            from: i,
+                            what: ToSensor::Follow {
+                                ask,
+                                bytes: encode(&follow),
+                            },
+                        },
+                    );
+                }
+                Output::AskResend(resend) => {
+                    let ask = self.ask(i, AskKind::Resend);
+                    self.send(
+                        Endpoint::Leader(i),
+                        Endpoint::Sensor,
+                        Msg::Sensor {
+                            from: i,
+                            what: ToSensor::Resend {
+                                ask,
+                                bytes: encode(&resend),
+                            },
+                        },
+                    );
+                }
+                Output::AskTransfers { peer, wanted } => {
+                    let Some(j) = self.leaders.iter().position(|l| l.name == peer) else {
+                        return Err(Violation::new(format!("transfers asked of unknown {peer}")));
+                    };
+                    let ask = self.ask(i, AskKind::Transfers(peer));
+                    self.send(
+                        Endpoint::Leader(i),
+                        Endpoint::Leader(j),
+                        Msg::Leader {
+                            to: j,
+                            what: ToLeader::SentWanted {
+                                ask,
+                                bytes: encode(&wanted),
+                            },
+                        },
+                    );
+                }
+                Output::Answer { id, answer } => {
+                    let reply = answer.map(|p| encode(&p));
+                    self.send(
+                        Endpoint::Leader(i),
+                        Endpoint::Coordinator,
+                        Msg::Coordinator(ToCoordinator::Partial {
+                            id,
+                            leader: i,
+                            reply,
+                        }),
+                    );
+                }
+                Output::AnswerSent { id, answer } => {
+                    // The asker is whoever made get `id`, if it still waits.
+                    let Some(asker) = self.asks.get(&id).map(|a| a.leader) else {
+                        continue;
+                    };
+                    let reply = answer.map(|t| encode(&t));
+                    self.send(
+                        Endpoint::Leader(i),
+                        Endpoint::Leader(asker),
+                        Msg::Leader {
+                            to: asker,
+                            what: ToLeader::Reply { ask: id, reply },
+                        },
+                    );
+                }
+                Output::Persist { mark } => {
+                    let slot = &mut self.leaders[i];
+                    slot.disk.synced = slot.disk.entries.len();
+                    if let Some(mark) = mark {
+                        slot.published = slot.published.max(mark.position);
+                        let bytes = encode(&mark);
+                        self.send(
+                            Endpoint::Leader(i),
+                            Endpoint::Sensor,
+                            Msg::Sensor {
+                                from: i,
+                                what: ToSensor::Durable(bytes.clone()),
+                            },
+                        );
+                        for j in (0..self.leaders.len()).filter(|&j| j != i) {
+                            self.send(
+                                Endpoint::Leader(i),
+                                Endpoint::Leader(j),
+                                Msg::Leader {
+                                    to: j,
+                                    what: ToLeader::Durable(bytes.clone()),
+                                },
+                            );
+                        }
+                    }
+                }
+                Output::Snapshot(state) => {
+                    let disk = &mut self.leaders[i].disk;
+                    disk.snapshot = Some(state);
+                    disk.entries.clear();
+                    disk.synced = 0;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Registers a get of leader `i`; it is answered, or times out.
+    fn ask(&mut self, i: usize, kind: AskKind) -> u64 {
+        let id = self.fresh_id();
+        self.asks.insert(
+            id,
+            PendingAsk {
+                leader: i,
+                life: self.leaders[i].life,
+                kind,
+            },
+        );
+        self.net.at(self.now + ASK_TIMEOUT, Event::AskTimeout(id));
+        id
+    }
+
+    /// A get's answer (or its timeout) back in the leader that asked.
+    fn answer_ask(
+        &mut self,
+        pending: PendingAsk,
+        reply: Result<Vec<u8>, String>,
+    ) -> Result<(), Violation> {
+        let i = pending.leader;
+        if self.leaders[i].life != pending.life {
+            return Ok(());
+        }
+        let input = match pending.kind {
+            AskKind::Follow => Input::Followed(reply),
+            AskKind::Resend => Input::Resent(reply.and_then(|bytes| {
+                decode::<Resent>(&bytes)
+                    .map(|r| r.batches)
+                    .map_err(|e| e.to_string())
+            })),
+            AskKind::Transfers(peer) => Input::Transfers {
+                peer,
+                result: reply.and_then(|bytes| {
+                    decode::<TransfersSent>(&bytes)
+                        .map(|t| t.transfers)
+                        .map_err(|e| e.to_string())
+                }),
+            },
+        };
+        self.step(i, input)
+    }
+
+    fn at_leader(&mut self, i: usize, what: ToLeader) -> Result<(), Violation> {
+        if self.leaders[i].node.is_none() {
+            // Nobody subscribes or answers for a leader that is down.
+            return Ok(());
+        }
+        let origin = format!("sim/{}", self.leaders[i].name);
+        let input = match what {
+            ToLeader::Batch(bytes) => Input::Message {
+                kind: Kind::Batch,
+                bytes,
+                origin,
+            },
+            ToLeader::Transfer(bytes) => Input::Message {
+                kind: Kind::Transfer,
+                bytes,
+                origin,
+            },
+            ToLeader::Durable(bytes) => Input::Durable { bytes, origin },
+            ToLeader::Partial { id, ask } => Input::Partial { id, ask },
+            ToLeader::SentWanted { ask, bytes } => Input::SentWanted {
+                id: ask,
+                bytes,
+                origin,
+            },
+            ToLeader::Reply { ask, reply } => {
+                return match self.asks.remove(&ask) {
+                    Some(pending) => self.answer_ask(pending, reply),
+                    None => Ok(()),
+                };
+            }
+        };
+        self.step(i, input)
+    }
+
+    // --- the coordinator ------------------------------------------------
+
+    fn start_query(&mut self, final_query: bool) {
+        let id = self.fresh_id();
+        let last = self.memory.finished();
+        let mut query = Query {
+            floor: self.answered_events,
+            last: last.clone(),
+            phase: Phase::Rest,
+            id,
+            replied: BTreeSet::new(),
+            partials: Partials::new(None),
+            cut: None,
+            final_query,
+        };
+        match last {
+            Some(_) => {
+                for j in 0..self.leaders.len() {
+                    self.ask_leader(j, id, Ask::Quiet { rows: false });
+                }
+            }
+            None => self.fresh_phase(&mut query),
+        }
+        self.net
+            .at(self.now + QUERY_TIMEOUT, Event::QueryTimeout(query.id));
+        self.queries.insert(query.id, query);
+    }
+
+    fn fresh_phase(&mut self, query: &mut Query) {
+        let id = self.fresh_id();
+        let tag = self.rng.gen::<u64>();
+        query.phase = Phase::Fresh;
+        query.id = id;
+        query.replied.clear();
+        query.partials = Partials::new(Some(tag));
+        query.cut = None;
+        self.send(
+            Endpoint::Coordinator,
+            Endpoint::Sensor,
+            Msg::Sensor {
+                from: usize::MAX,
+                what: ToSensor::Cut {
+                    id,
+                    parameters: CutParameters {
+                        tag: Some(tag.to_string()),
+                        rows: false,
+                        events: None,
+                    },
+                },
+            },
+        );
+        for j in 0..self.leaders.len() {
+            self.ask_leader(j, id, Ask::Cut(tag));
+        }
+    }
+
+    fn ask_leader(&mut self, j: usize, id: u64, ask: Ask) {
+        self.send(
+            Endpoint::Coordinator,
+            Endpoint::Leader(j),
+            Msg::Leader {
+                to: j,
+                what: ToLeader::Partial { id, ask },
+            },
+        );
+    }
+
+    fn at_coordinator(&mut self, what: ToCoordinator) -> Result<(), Violation> {
+        let (id, done) = match what {
+            ToCoordinator::Cut { id, reply } => {
+                let Some(query) = self.queries.get_mut(&id) else {
+                    return Ok(());
+                };
+                if query.cut.is_none() {
+                    query.cut = Some(read_cut(reply, "sim/cut", &self.memory));
+                }
+                // No cut, no answer: an error there stops the wait.
+                let failed = matches!(query.cut, Some(Err(_)));
+                (id, failed || query.replied.len() == self.leaders.len())
+            }
+            ToCoordinator::Partial { id, leader, reply } => {
+                let Some(query) = self.queries.get_mut(&id) else {
+                    return Ok(());
+                };
+                if !query.replied.insert(leader) {
+                    // A duplicate: Zenoh would not deliver it twice.
+                    return Ok(());
+                }
+                query.partials.reply(reply, "sim/partial", &self.memory);
+                let all = query.replied.len() == self.leaders.len();
+                (
+                    id,
+                    all && (query.phase == Phase::Rest || query.cut.is_some()),
+                )
+            }
+        };
+        if done {
+            self.complete_query(id)?;
+        }
+        Ok(())
+    }
+
+    /// The phase of query `id` is over (all answered, or its time is up).
+    fn complete_query(&mut self, id: u64) -> Result<(), Violation> {
+        let Some(mut query) = self.queries.remove(&id) else {
+            return Ok(());
+        };
+        let timeout = Duration::from_millis(QUERY_TIMEOUT);
+        let partials = std::mem::take(&mut query.partials);
+        let (parts, errors) = partials.into_parts();
+        let result = match query.phase {
+            Phase::Rest => {
+                let last = query.last.clone().expect("a rest phase has a last cut");
+                match at_rest_of(last, parts, errors, timeout, &self.memory) {
+                    Some(collected) => Ok(collected),
+                    None => {
+                        self.fresh_phase(&mut query);
+                        self.net
+                            .at(self.now + QUERY_TIMEOUT, Event::QueryTimeout(query.id));
+                        self.queries.insert(query.id, query);
+                        return Ok(());
+                    }
+                }
+            }
+            Phase::Fresh => match query.cut.take() {
+                None => Err(GatherError::NoSensor),
+                Some(Err(e)) => Err(e),
+                Some(Ok(cut)) => check(cut, parts, errors, timeout, &self.memory).inspect(|c| {
+                    self.memory.remember(&c.cut);
+                }),
+            },
+        };
+        match result.and_then(|collected| marginals_of(&collected)) {
+            Ok(answer) => self.answered(&query, answer),
+            Err(e) => {
+                self.tally.failed_queries += 1;
+                self.last_error = e.to_string();
+                if query.final_query {
+                    // Ask again shortly, as a user would.
+                    self.net.at(self.now + 500, Event::Calm);
+                    self.calm = true;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Checks an answer against the centralized engine and the answers
+    /// before it.
+    fn answered(&mut self, query: &Query, answer: MarginalsAnswer) -> Result<(), Violation> {
+        self.tally.answered += 1;
+        let events = answer.watermark.values().copied().sum::<u64>();
+        let sum: f64 = answer.p_red.iter().sum();
+        if (sum - self.scenario.red as f64).abs() > 1e-9 {
+            return Err(Violation::new(format!(
+                "marginals sum to {sum}, not k = {}: {:?}",
+                self.scenario.red, answer.p_red
+            )));
+        }
+        if events < query.floor {
+            return Err(Violation::new(format!(
+                "the watermark went back: {events} after an answer at {}",
+                query.floor
+            )));
+        }
+        let Some(want) = self.scenario.centralized.get(events as usize) else {
+            return Err(Violation::new(format!(
+                "an answer at {events} events, beyond the stream's {}",
+                self.scenario.lines.len()
+            )));
+        };
+        for (t, (got, want)) in answer.p_red.iter().zip(want).enumerate() {
+            if (got - want).abs() > 1e-9 {
+                return Err(Violation::new(format!(
+                    "at {events} events track {t}: the deployment says {got}, the centralized engine {want}\n  deployment {:?}\n  centralized {want:?}",
+                    answer.p_red
+                )));
+            }
+        }
+        self.answered_events = self.answered_events.max(events);
+        if query.final_query {
+            if events != self.scenario.lines.len() as u64 || !answer.finished {
+                return Err(Violation::new(format!(
+                    "the final answer is at {events} events of {} (finished: {})",
+                    self.scenario.lines.len(),
+                    answer.finished
+                )));
+            }
+            self.final_answer = Some(answer);
+        }
+        Ok(())
+    }
+
+    /// No item applied twice or lost: every leader applied, strictly in
+    /// order, exactly the items routed to it up to where it is.
+    fn check_end(&mut self) -> Result<(), Violation> {
+        for (i, slot) in self.leaders.iter().enumerate() {
+            let Some(node) = &slot.node else {
+                return Err(Violation::new(format!("{} is down at the end", slot.name)));
+            };
+            let stats = node.leader().stats();
+            self.tally.transfers += stats.transfers_received;
+            self.tally.follows += stats.follows;
+            self.tally.handovers += stats.handovers;
+            let due = self.routed[i].range(..=stats.position).count() as u64;
+            if stats.items != due {
+                return Err(Violation::new(format!(
+                    "{} applied {} items, but {due} were routed to it up to its position {}",
+                    slot.name, stats.items, stats.position
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    // --- the wire -------------------------------------------------------
+
+    fn send(&mut self, from: Endpoint, to: Endpoint, msg: Msg) {
+        self.tally.messages += 1;
+        if !self.net.send(&mut self.rng, self.now, from, to, msg) {
+            self.tally.dropped += 1;
+        }
+    }
+
+    fn deliver(&mut self, msg: Msg) -> Result<(), Violation> {
+        match msg {
+            Msg::Leader { to, what } => self.at_leader(to, what),
+            Msg::Sensor { from, what } => {
+                self.at_sensor(from, what);
+                Ok(())
+            }
+            Msg::Coordinator(what) => self.at_coordinator(what),
+        }
+    }
+}
