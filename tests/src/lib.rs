@@ -3,6 +3,7 @@
 //! deterministic network simulator ([`sim`]) that searches the
 //! interleavings those tests cannot.
 
+pub mod browser;
 pub mod compare;
 pub mod deployment;
 pub mod python;

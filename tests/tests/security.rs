@@ -362,3 +362,51 @@ fn with_access_control_only_listed_identities_are_heard() {
         "after the intrusion",
     );
 }
+
+/// `GET url`: (status, body as text).
+fn http_get(url: &str) -> (u16, String) {
+    let response = match ureq::get(url).timeout(Duration::from_secs(30)).call() {
+        Ok(r) => r,
+        Err(ureq::Error::Status(_, r)) => r,
+        Err(e) => panic!("GET {url}: {e}"),
+    };
+    let status = response.status();
+    (status, response.into_string().expect("a text body"))
+}
+
+/// Under access control the web gateway is the listed client, with its
+/// certificate, and nothing else changes: its answers are the Zenoh API's,
+/// its metrics and readiness come through the coordinator's API.
+#[test]
+fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
+    let (deployment, _certs, expected) = deployment("web", true);
+    let zenoh = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(&zenoh, &expected, "secured, asked over Zenoh");
+    let gateway = idmesh_tests::web::Gateway::start(&deployment);
+    let prefix = &deployment.prefix;
+
+    let (status, body) = http_get(&gateway.at(&format!("{prefix}/query/marginals")));
+    assert_eq!(status, 200, "{body}");
+    let web: Value = serde_json::from_str(&body).expect("JSON");
+    assert_eq!(web, zenoh, "the gateway's answer is the Zenoh API's");
+
+    let (status, body) = http_get(&gateway.at("readyz"));
+    assert_eq!(status, 200, "every role answers the secured gateway: {body}");
+    let (status, metrics) = http_get(&gateway.at("metrics"));
+    assert_eq!(status, 200);
+    let stats = deployment.query(&["stats"]).expect("stats")[0].clone();
+    for leader in stats["leaders"].as_array().expect("leaders") {
+        let name = leader["leader"].as_str().expect("a name");
+        let label = format!("leader=\"{name}\"");
+        let value = format!(" {}", leader["items"]);
+        assert!(
+            metrics.lines().any(|l| l.starts_with("idmesh_leader_items_total{")
+                && l.contains(&label)
+                && l.ends_with(&value)),
+            "idmesh_leader_items_total of {name} is not{value} in the metrics:\n{metrics}"
+        );
+    }
+    // A leader key is not a question of the query API, secured or not.
+    let (status, _) = http_get(&gateway.at(&format!("{prefix}/leader/leader-0/stats")));
+    assert_eq!(status, 404);
+}

@@ -106,7 +106,7 @@ impl Chromium {
         let profile = dir.join(format!("chromium-profile-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&profile);
         let config = BrowserConfig::builder()
-            .chrome_executable("/usr/bin/chromium")
+            .chrome_executable(idmesh_tests::browser::chromium())
             .no_sandbox()
             .user_data_dir(profile)
             .window_size(1400, 900)

@@ -54,9 +54,32 @@ pub struct Asker {
     pub latency: LatencyFamily,
 }
 
+/// The latency family with every question's answered series present.
+pub fn latency_family() -> LatencyFamily {
+    let family = Family::new_with_constructor(latency_histogram as fn() -> Histogram);
+    for question in QUESTIONS {
+        drop(family.get_or_create(&query_labels(question, "ok")));
+    }
+    family
+}
+
 fn latency_histogram() -> Histogram {
     // 0.25 ms to 8 s.
     Histogram::new(exponential_buckets(0.000_25, 2.0, 16))
+}
+
+/// The questions of the query API, whose answered latencies are there from
+/// the first scrape (zero until asked): a series that appears only once
+/// something happened cannot be told from one that was never scraped, and
+/// an empty family is more than some parsers accept.
+pub const QUESTIONS: [&str; 5] = ["marginals", "track", "identity", "positions", "stats"];
+
+/// A latency histogram's labels.
+pub fn query_labels(what: &str, outcome: &str) -> QueryLabels {
+    vec![
+        ("query".to_string(), what.to_string()),
+        ("outcome".to_string(), outcome.to_string()),
+    ]
 }
 
 impl Asker {
@@ -65,7 +88,7 @@ impl Asker {
             session,
             keys,
             timeout,
-            latency: Family::new_with_constructor(latency_histogram as fn() -> Histogram),
+            latency: latency_family(),
         }
     }
 
@@ -77,10 +100,7 @@ impl Asker {
         let took = started.elapsed();
         let outcome = if status == 200 { "ok" } else { "error" };
         self.latency
-            .get_or_create(&vec![
-                ("query".to_string(), what.to_string()),
-                ("outcome".to_string(), outcome.to_string()),
-            ])
+            .get_or_create(&query_labels(what, outcome))
             .observe(took.as_secs_f64());
         Answer { status, body, took }
     }

@@ -10,7 +10,7 @@
 //! `idmesh_up{role="stats"}` is 0 when the stats could not be had (then
 //! only the gateway's own metrics follow).
 
-use crate::asker::Asker;
+use crate::asker::{Asker, LatencyFamily};
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -190,9 +190,14 @@ impl Collector for Snapshot {
             let labels = labels(&[("role", "sensor"), ("leader", ""), ("process", &s.sensor)]);
             ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
         }
-        let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
+        let rejected_by_coordinator = labels(&[
+            ("role", "coordinator"),
+            ("leader", ""),
+            ("process", "coordinator"),
+        ]);
         ConstCounter::new(stats.coordinator.rejected)
-            .encode(family.encode_family(&coordinator)?)?;
+            .encode(family.encode_family(&rejected_by_coordinator)?)?;
+        let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
         for (name, help, value) in [
             (
                 "coordinator_bad_replies",
@@ -232,6 +237,11 @@ pub async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
             .then(|| serde_json::from_slice(&positions.body).ok())
             .flatten(),
     };
+    render(snapshot, asker.latency.clone())
+}
+
+/// The exposition of `snapshot` and the gateway's latency histograms.
+fn render(snapshot: Snapshot, latency: LatencyFamily) -> Result<String, std::fmt::Error> {
     let mut registry = Registry::with_prefix("idmesh");
     registry.register_collector(Box::new(snapshot));
     // Seconds by name, not by a UNIT line: some OpenMetrics parsers
@@ -239,7 +249,7 @@ pub async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
     registry.register(
         "web_query_latency_seconds",
         "how long the gateway waited for the coordinator, by question and outcome",
-        asker.latency.clone(),
+        latency,
     );
     let mut text = String::new();
     prometheus_client::encoding::text::encode(&mut text, &registry)?;
@@ -254,5 +264,97 @@ pub async fn metrics(State(asker): State<Arc<Asker>>) -> Response {
             "the metrics could not be encoded",
         )
             .into_response(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
+    use idmesh_protocol::wire::query::CoordinatorStats;
+    use openmetrics_parser::openmetrics::parse_openmetrics;
+    use openmetrics_parser::OpenMetricsValue;
+    use crate::asker::{latency_family, query_labels};
+
+    fn leader(name: &str, host: &str, items: u64, rejected: u64) -> LeaderStats {
+        LeaderStats {
+            leader: name.into(),
+            host: host.into(),
+            items,
+            rejected,
+            ..LeaderStats::default()
+        }
+    }
+
+    fn value(text: &str, family: &str, label: (&str, &str)) -> f64 {
+        let exposition = parse_openmetrics(text).expect("OpenMetrics");
+        let family = &exposition.families[family];
+        let sample = family
+            .iter_samples()
+            .find(|s| {
+                s.get_labelset()
+                    .ok()
+                    .and_then(|l| l.get_label_value(label.0).map(|v| v == label.1))
+                    .unwrap_or(false)
+            })
+            .unwrap_or_else(|| panic!("{label:?} in {}", family.family_name));
+        match &sample.value {
+            OpenMetricsValue::Counter(c) => c.value.as_f64(),
+            OpenMetricsValue::Gauge(g) => g.as_f64(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Every role in one exposition: a parser that insists on one label
+    /// set per family reads it, and each number is the one the stats say
+    /// (an adopted role is labelled with the process that runs it).
+    #[test]
+    fn every_role_is_one_parseable_family_member_with_its_own_numbers() {
+        let stats = StatsAnswer {
+            leaders: vec![leader("leader-0", "", 40, 1), leader("leader-1", "leader-0", 7, 0)],
+            sensors: vec![SensorStats {
+                sensor: "sensor-0".into(),
+                rejected: 2,
+            }],
+            coordinator: CoordinatorStats {
+                rejected: 3,
+                bad_replies: 0,
+                degraded: 5,
+            },
+        };
+        let snapshot = Snapshot {
+            stats: Some(stats),
+            positions: None,
+        };
+        let latency = latency_family();
+        latency
+            .get_or_create(&query_labels("marginals", "ok"))
+            .observe(0.003);
+        let text = render(snapshot, latency).expect("encodes");
+        assert_eq!(value(&text, "idmesh_leader_items", ("leader", "leader-0")), 40.0);
+        assert_eq!(value(&text, "idmesh_leader_items", ("process", "leader-0")), 40.0);
+        assert_eq!(value(&text, "idmesh_leader_items", ("leader", "leader-1")), 7.0);
+        assert_eq!(value(&text, "idmesh_rejected", ("role", "leader")), 1.0);
+        assert_eq!(value(&text, "idmesh_rejected", ("role", "sensor")), 2.0);
+        assert_eq!(value(&text, "idmesh_rejected", ("role", "coordinator")), 3.0);
+        assert_eq!(
+            value(&text, "idmesh_coordinator_degraded_answers", ("role", "coordinator")),
+            5.0
+        );
+        assert!(text.contains("idmesh_leader_items_total{role=\"leader\",leader=\"leader-1\",process=\"leader-0\"} 7"), "{text}");
+        assert!(text.ends_with("# EOF\n"));
+    }
+
+    /// Without stats (the coordinator down) the scrape still parses: `up`
+    /// says 0 and only the gateway's own metrics follow.
+    #[test]
+    fn without_stats_up_is_zero_and_the_rest_still_parses() {
+        let snapshot = Snapshot {
+            stats: None,
+            positions: None,
+        };
+        let text = render(snapshot, latency_family()).expect("encodes");
+        assert_eq!(value(&text, "idmesh_up", ("role", "stats")), 0.0);
+        assert!(!text.contains("idmesh_leader_items"));
     }
 }
