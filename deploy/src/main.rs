@@ -7,10 +7,7 @@
 mod acoustic;
 mod bench;
 mod cli;
-mod eval;
 mod logging;
-mod replay;
-mod replay_identity;
 mod runtime;
 mod simulate;
 
@@ -35,11 +32,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Replay(args) => {
             let stdout = BufWriter::new(std::io::stdout().lock());
-            replay::dispatch(&args, stdout)
+            idmesh_eval::replay::dispatch(&args, stdout)
         }
         Command::Simulate(args) => simulate::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),
-        Command::Eval(args) => eval::run(&args),
+        Command::Eval(args) => idmesh_eval::eval::run(&args),
         Command::Sensor(args) => {
             runtime::roles::run(runtime::roles::Role::Sensor, &args.config, &args.name)
         }

@@ -17,7 +17,7 @@
 
 use super::methods::{Method, FACTORED_AVAILABLE};
 use super::scenarios::{ScenarioSpec, Sensor, Source, Start};
-use crate::cli::Preset;
+use super::args::Preset;
 
 /// The experiments, each one table or plot of results.md.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
