@@ -94,7 +94,11 @@ mod tests {
             initial_identity: None,
         };
         assert_eq!(field_of(&begin), Field::known(3, vec![2]));
-        let unknown = Begin { red: None, initial_red: None, ..begin };
+        let unknown = Begin {
+            red: None,
+            initial_red: None,
+            ..begin
+        };
         assert_eq!(field_of(&unknown).red, RedCount::unknown_uniform(3));
     }
 

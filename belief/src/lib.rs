@@ -48,8 +48,8 @@ pub use baseline::{DenseFilter, LowOrderFilter};
 pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
 pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
-pub use from_trace::{event_of, field_of, identity_event_of};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
+pub use from_trace::{event_of, field_of, identity_event_of};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
     IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,

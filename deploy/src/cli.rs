@@ -1,9 +1,10 @@
 //! The command line: one subcommand per role idmesh plays. Parsing only;
 //! what a subcommand does lives in its own module.
 
-pub use idmesh_eval::eval::{EvalArgs, Preset};
-pub use idmesh_eval::replay::{Method, ReplayArgs};
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use idmesh_eval::eval::EvalArgs;
+use idmesh_eval::replay::identity::MarginalChoice;
+use idmesh_eval::replay::ReplayArgs;
 use std::path::PathBuf;
 
 /// idmesh keeps track of who is who among moving targets: a belief over
@@ -220,7 +221,6 @@ impl QueryArgs {
     }
 }
 
-
 #[derive(Debug, Clone, Args)]
 #[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
@@ -308,6 +308,8 @@ pub enum Motion {
 mod tests {
     use super::*;
     use clap::CommandFactory;
+    use idmesh_eval::eval::Preset;
+    use idmesh_eval::replay::Method;
 
     #[test]
     fn the_command_line_is_well_formed() {

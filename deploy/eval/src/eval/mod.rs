@@ -33,8 +33,8 @@ mod scenarios;
 mod score;
 mod table;
 
-pub use args::{EvalArgs, Preset};
 use anyhow::{Context, Result};
+pub use args::{EvalArgs, Preset};
 use grid::{parallel_map, Cell};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use methods::Method;

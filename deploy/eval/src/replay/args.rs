@@ -165,4 +165,3 @@ fn parse_count(text: &str, what: &str) -> Result<usize, String> {
         )),
     }
 }
-

@@ -118,6 +118,20 @@ impl<F: ?Sized> Timed<F> {
     }
 }
 
+/// A replay's output lines, parsed, or its error as text (for tests).
+#[cfg(test)]
+pub fn output_lines(
+    replay: impl FnOnce(&mut Vec<u8>) -> Result<()>,
+) -> Result<Vec<serde_json::Value>, String> {
+    let mut out = Vec::new();
+    replay(&mut out).map_err(|e| format!("{e:#}"))?;
+    Ok(String::from_utf8(out)
+        .map_err(|e| e.to_string())?
+        .lines()
+        .map(|l| serde_json::from_str(l).map_err(|e| e.to_string()))
+        .collect::<Result<_, _>>()?)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -37,6 +37,7 @@
 
 use super::args::ReplayArgs;
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
+use super::limits::binomial;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
@@ -436,12 +437,6 @@ pub fn exact_bit_states(code: &BitCode) -> f64 {
         .fold(1.0, f64::max)
 }
 
-/// C(n, k) as a float (no overflow below 10^308).
-fn binomial(n: usize, k: usize) -> f64 {
-    let k = k.min(n - k.min(n));
-    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
-}
-
 /// An identity filter being replayed: its clock and counts, and the
 /// errors at the truth lines that carry identities.
 struct Engine {
@@ -499,6 +494,7 @@ fn parse_positive(text: &str) -> Result<usize, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::replay::driver::output_lines;
     use clap::Parser;
 
     fn new(trace: &str, method: IdentityMethod) -> IdentityReplayOptions {
@@ -524,19 +520,10 @@ mod tests {
         args: &IdentityReplayOptions,
         trace: &str,
     ) -> Result<Vec<serde_json::Value>, String> {
-        check_options(args).map_err(|e| format!("{e:#}"))?;
-        let mut out = Vec::new();
-        replay(
-            args,
-            TraceReader::new(trace.as_bytes(), "mem.jsonl"),
-            &mut out,
-        )
-        .map_err(|e| format!("{e:#}"))?;
-        Ok(String::from_utf8(out)
-            .unwrap()
-            .lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect())
+        output_lines(|out| {
+            check_options(args)?;
+            replay(args, TraceReader::new(trace.as_bytes(), "mem.jsonl"), out)
+        })
     }
 
     fn matrix(value: &serde_json::Value) -> Vec<Vec<f64>> {

@@ -7,10 +7,12 @@
 //! - [`driver`] — the shared loop, the clock and the JSON Lines output.
 //! - [`property`] — marginals of red, tracking error, Brier, log-loss.
 //! - [`identity`] — identity marginals, the most likely assignment.
+//! - [`limits`] — the size estimates that refuse exponential settings.
 
 pub mod args;
 pub mod driver;
 pub mod identity;
+pub mod limits;
 pub mod property;
 
 pub use args::{Method, ReplayArgs, DEFAULT_PROPERTY_METHOD};
@@ -38,9 +40,7 @@ pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let source = reader.source().to_string();
     match (header.identities, args.method) {
         (Some(_), None) if identities_only => identity::run_default(args, out),
-        (Some(_), Some(method)) if method.identity().is_some() => {
-            identity::run_default(args, out)
-        }
+        (Some(_), Some(method)) if method.identity().is_some() => identity::run_default(args, out),
         (Some(n), Some(method)) if identities_only => bail!(
             "{source}:1: header: an identity trace ({n} identities) with no colours, and \
              --method {} is a property method; use exact-perm, belief-matrix, \

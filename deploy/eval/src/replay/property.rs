@@ -12,6 +12,7 @@
 
 use super::args::{Method, ReplayArgs};
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
+use super::limits::binomial;
 use crate::filters::Recipe;
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::MAX_STATES;
@@ -197,12 +198,6 @@ fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
     Ok(())
 }
 
-/// C(n, k) as a float (infinite when it overflows).
-fn binomial(n: usize, k: usize) -> f64 {
-    let k = k.min(n - k.min(n));
-    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
-}
-
 /// The filter `args.method` names, for the one factory.
 fn recipe(args: &ReplayArgs) -> Recipe {
     let radon = |sparsify: fn(usize) -> Sparsify| Recipe::Radon {
@@ -296,6 +291,7 @@ impl Replay for Engine {
 #[cfg(test)]
 pub(super) mod tests {
     use super::*;
+    use crate::replay::driver::output_lines;
     use std::path::PathBuf;
 
     /// Replay arguments naming `method` and `budget`, nothing else.
@@ -317,19 +313,10 @@ pub(super) mod tests {
 
     /// The replay's output lines, parsed, or its error as text.
     fn replay_text(args: &ReplayArgs, trace: &str) -> Result<Vec<serde_json::Value>, String> {
-        check_options(args).map_err(|e| format!("{e:#}"))?;
-        let mut out = Vec::new();
-        replay(
-            args,
-            TraceReader::new(trace.as_bytes(), "mem.jsonl"),
-            &mut out,
-        )
-        .map_err(|e| format!("{e:#}"))?;
-        Ok(String::from_utf8(out)
-            .unwrap()
-            .lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect())
+        output_lines(|out| {
+            check_options(args)?;
+            replay(args, TraceReader::new(trace.as_bytes(), "mem.jsonl"), out)
+        })
     }
 
     const TABLE1: &str = concat!(
