@@ -1,4 +1,6 @@
-//! `idmesh` — one binary, one subcommand per role (see [`cli`]).
+//! `idmesh` — one binary, one subcommand per role (see [`cli`]). The
+//! offline tools, `replay` and `eval`, are the `idmesh-eval` crate; the
+//! roles of a deployment are their own crates, started by [`runtime`].
 //!
 //! Errors end the process with status 1 and one line on stderr, `FILE:LINE:
 //! reason` when a trace line is at fault; logs go to stderr too (`RUST_LOG`,

@@ -125,11 +125,11 @@ pub fn output_lines(
 ) -> Result<Vec<serde_json::Value>, String> {
     let mut out = Vec::new();
     replay(&mut out).map_err(|e| format!("{e:#}"))?;
-    Ok(String::from_utf8(out)
+    String::from_utf8(out)
         .map_err(|e| e.to_string())?
         .lines()
         .map(|l| serde_json::from_str(l).map_err(|e| e.to_string()))
-        .collect::<Result<_, _>>()?)
+        .collect()
 }
 
 #[cfg(test)]
