@@ -146,8 +146,7 @@ pub fn replay<R: BufRead>(
     let field = field_of(&header);
     check_size(args, &field).map_err(|e| anyhow!("{source}:1: header: {e}"))?;
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
-    let recipe = recipe(args);
-    let filter = Timed::start(|| recipe.build(field.clone()))
+    let filter = Timed::start(|| recipe(args)?.build(field.clone()))
         .map_err(|e| line_error(&source)(1, "header", e))?;
     let mut engine = Engine::new(filter, field.red.known());
     drive(reader, &mut engine, &mut out)?;
@@ -198,13 +197,14 @@ fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
     Ok(())
 }
 
-/// The filter `args.method` names, for the one factory.
-fn recipe(args: &ReplayArgs) -> Recipe {
+/// The filter `args.method` names, for the one factory; an identity method
+/// is not one (`replay::dispatch` sends those to `replay::identity`).
+fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
     let radon = |sparsify: fn(usize) -> Sparsify| Recipe::Radon {
         sparsify: args.budget.map(sparsify),
         distributed_rule: args.distributed_rule,
     };
-    match args.property_method() {
+    Ok(match args.property_method() {
         Method::Overcomplete => radon(Sparsify::overcomplete),
         // `check_options` made sure the budget is there.
         Method::Threshold => radon(Sparsify::threshold),
@@ -219,13 +219,16 @@ fn recipe(args: &ReplayArgs) -> Recipe {
             count: args.particles.unwrap_or(DEFAULT_PARTICLES),
             seed: args.seed.unwrap_or(0),
         },
-        // `replay::dispatch` sends identity methods to `replay::identity`;
-        // were one to come here, it would run on the exact filter.
         Method::ExactPerm
         | Method::BeliefMatrix
         | Method::InformationMatrix
-        | Method::PropertyBits => Recipe::Exact,
-    }
+        | Method::PropertyBits => {
+            return Err(BeliefError::Unsupported {
+                method: "the property replay",
+                what: "an identity method",
+            })
+        }
+    })
 }
 
 /// A property filter being replayed: its clock and counts, the largest
@@ -379,6 +382,15 @@ pub(super) mod tests {
         );
         let error = replay_text(&args(Method::Overcomplete, None), trace).unwrap_err();
         assert!(error.starts_with("mem.jsonl:2: observe: "), "{error}");
+    }
+
+    #[test]
+    fn an_identity_method_is_no_property_filter() {
+        let error = replay_text(&args(Method::InformationMatrix, None), TABLE1).unwrap_err();
+        assert!(
+            error.starts_with("mem.jsonl:1: header: ") && error.contains("identity method"),
+            "{error}"
+        );
     }
 
     #[test]
