@@ -7,6 +7,9 @@
 //! A map of the crate:
 //! - [`event`] — the `mix` and `observe` events and the [`Field`] a filter
 //!   starts from (n tracks, k red or a prior over k, initial assignment).
+//! - [`from_trace`] — the field a trace header or a stream's `Begin`
+//!   describes and the event a trace line carries: where the protocol's
+//!   types become the engine's.
 //! - [`filter`] — [`PropertyFilter`], the interface every property filter
 //!   offers, and the spec's prediction and scoring rules.
 //! - [`track_set`] — [`TrackSet`], the index α of a Radon basis function.
@@ -32,6 +35,7 @@ pub mod error;
 pub mod event;
 pub mod factored;
 pub mod filter;
+pub mod from_trace;
 pub mod identity;
 pub mod particle;
 pub mod radon;
@@ -45,6 +49,7 @@ pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
 pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
+pub use from_trace::{event_of, field_of, identity_event_of};
 pub use identity::{
     identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
     IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,

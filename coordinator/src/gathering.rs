@@ -261,6 +261,13 @@ pub fn check(
             errors.push(problem);
         }
     }
+    // Sums from a process the sensor does not list (another stream's, a
+    // stale one) would be added to the answer unnoticed.
+    for p in parts.values().filter(|p| !cut.leaders.contains(&p.leader)) {
+        let problem = format!("{} is not a leader of this stream", p.leader);
+        memory.note_bad_reply("partial sums", &problem);
+        errors.push(problem);
+    }
     for p in parts.values().filter(|p| p.cut != cut.seq) {
         errors.push(format!(
             "{} answered at seq {} for a cut at {}",

@@ -1,8 +1,10 @@
 //! The command line: one subcommand per role idmesh plays. Parsing only;
 //! what a subcommand does lives in its own module.
 
-use crate::replay_identity::{IdentityMethod, MarginalChoice};
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use idmesh_eval::eval::EvalArgs;
+use idmesh_eval::replay::identity::MarginalChoice;
+use idmesh_eval::replay::ReplayArgs;
 use std::path::PathBuf;
 
 /// idmesh keeps track of who is who among moving targets: a belief over
@@ -273,40 +275,6 @@ impl WebArgs {
 
 #[derive(Debug, Clone, Args)]
 #[command(allow_negative_numbers = true)]
-pub struct EvalArgs {
-    /// How big a grid: `quick` (a tiny grid in seconds, for tests) or
-    /// `full` (the tables and figures of docs/results.md).
-    #[arg(long, value_enum, default_value_t = Preset::Quick)]
-    pub preset: Preset,
-    /// Where results.md and the SVG plots go (created if missing; default:
-    /// a new folder target/idmesh-eval/<preset>-<N>, so nothing is
-    /// overwritten — `--out-dir docs` regenerates the committed results).
-    #[arg(long, value_name = "DIR")]
-    pub out_dir: Option<PathBuf>,
-    /// Worker threads for the grid.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
-    pub jobs: u16,
-    /// Seeds per scenario (default: 1 for quick, 5 for full).
-    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
-    pub seeds: Option<u16>,
-    /// More methods for every Table III point, by registry name
-    /// (exact, order1, order3, threshold:B, overcomplete:B, distributed:B,
-    /// particles:P, factored), comma-separated.
-    #[arg(long, value_name = "LIST", value_delimiter = ',')]
-    pub methods: Vec<String>,
-}
-
-/// Grid sizes of `eval`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Preset {
-    /// A tiny grid that runs in seconds: every table and plot, few points.
-    Quick,
-    /// The grid behind docs/results.md (under 30 minutes on 2 cores).
-    Full,
-}
-
-#[derive(Debug, Clone, Args)]
-#[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
     /// The motion model.
     #[arg(long, value_enum, default_value_t = Motion::Crowd)]
@@ -388,171 +356,12 @@ pub enum Motion {
     Pedestrians,
 }
 
-#[derive(Debug, Clone, Args)]
-#[command(allow_negative_numbers = true)]
-pub struct ReplayArgs {
-    /// The trace to replay (JSON Lines, shared/spec/trace.md).
-    #[arg(long, value_name = "FILE")]
-    pub trace: PathBuf,
-
-    /// The filter to run (default: by the trace's header — factored for
-    /// a trace with colours, information-matrix for an identity trace with
-    /// none).
-    #[arg(long, value_enum)]
-    pub method: Option<Method>,
-
-    /// The most coefficients the Radon belief may hold after an event
-    /// (overcomplete: optional, none = exact; threshold: required).
-    #[arg(long, value_name = "N", value_parser = parse_budget)]
-    pub budget: Option<usize>,
-
-    /// Condition with the distributed rule of Section 5.4 (Radon methods
-    /// only): an approximation that touches only the sets an observation's
-    /// track mixed into since it was last observed.
-    #[arg(long)]
-    pub distributed_rule: bool,
-
-    /// The number of particles of --method particles (default 1000).
-    #[arg(long, value_name = "P", value_parser = parse_particles)]
-    pub particles: Option<usize>,
-
-    /// The seed of --method particles or of --marginals metropolis
-    /// (default 0).
-    #[arg(long)]
-    pub seed: Option<u64>,
-
-    /// Identity methods: how --method information-matrix turns its
-    /// log-likelihoods into marginals (default exact, N ≤ 22).
-    #[arg(long, value_enum)]
-    pub marginals: Option<MarginalChoice>,
-
-    /// Identity methods: the number of property bits of --method
-    /// property-bits (default ⌈log₂ N⌉).
-    #[arg(long, value_name = "B")]
-    pub bits: Option<usize>,
-
-    /// Identity methods: counted steps of --marginals metropolis.
-    #[arg(long, value_name = "S")]
-    pub samples: Option<usize>,
-
-    /// Identity methods: the known start of --method information-matrix
-    /// as log-odds C against each other identity (default: exact, −∞ on
-    /// every other identity; docs/identity.md "Calibration").
-    #[arg(long, value_name = "C")]
-    pub known_start_confidence: Option<f64>,
-
-    /// Run a setting replay refuses as exponential (--method property-bits
-    /// without --budget on many identities) anyway.
-    #[arg(long)]
-    pub force: bool,
-}
-
-impl ReplayArgs {
-    /// The property method asked for, or the default for property traces.
-    pub fn property_method(&self) -> Method {
-        self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
-    }
-}
-
-/// The method `replay` runs on a property trace when none is named.
-pub const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
-
-/// The filters `replay` can run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Method {
-    /// Radon belief on the overcomplete basis; OMP then thresholding once
-    /// --budget is exceeded (exact without --budget).
-    Overcomplete,
-    /// Radon belief pruned to --budget coefficients by thresholding alone.
-    Threshold,
-    /// The exact dense filter over every red set (small fields only).
-    Exact,
-    /// First-order Radon projection (Table III baseline; shrunk towards
-    /// uniform whenever the projection leaves the probability simplex).
-    Order1,
-    /// Second-order Radon projection (as order1).
-    Order2,
-    /// Third-order Radon projection (as order1).
-    Order3,
-    /// Sequential Monte Carlo over red sets: --particles weighted
-    /// particles, resampled when the effective sample size halves.
-    Particles,
-    /// Our improvement: exact per-component beliefs over the connected
-    /// groups of mixed tracks, coupled by the red count, split by moment
-    /// matching when a group outgrows a cap.
-    Factored,
-    /// Identity traces: the exact filter over all N! assignments (N ≤ 9).
-    ExactPerm,
-    /// Identity traces: the belief matrix (doubly stochastic marginals).
-    BeliefMatrix,
-    /// Identity traces: the information matrix (lazy log-likelihoods),
-    /// marginals by --marginals.
-    InformationMatrix,
-    /// Identity traces: identities coded by --bits properties, one Radon
-    /// belief per bit.
-    PropertyBits,
-}
-
-impl Method {
-    /// The name on the command line and in the summary.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Overcomplete => "overcomplete",
-            Method::Threshold => "threshold",
-            Method::Exact => "exact",
-            Method::Order1 => "order1",
-            Method::Order2 => "order2",
-            Method::Order3 => "order3",
-            Method::Particles => "particles",
-            Method::Factored => "factored",
-            Method::ExactPerm => "exact-perm",
-            Method::BeliefMatrix => "belief-matrix",
-            Method::InformationMatrix => "information-matrix",
-            Method::PropertyBits => "property-bits",
-        }
-    }
-
-    /// The identity filter this method names, if it is one.
-    pub fn identity(self) -> Option<IdentityMethod> {
-        match self {
-            Method::ExactPerm => Some(IdentityMethod::ExactPerm),
-            Method::BeliefMatrix => Some(IdentityMethod::BeliefMatrix),
-            Method::InformationMatrix => Some(IdentityMethod::InformationMatrix),
-            Method::PropertyBits => Some(IdentityMethod::PropertyBits),
-            _ => None,
-        }
-    }
-
-    /// Whether the method is the Radon engine (and so takes --budget and
-    /// --distributed-rule).
-    pub fn is_radon(self) -> bool {
-        matches!(self, Method::Overcomplete | Method::Threshold)
-    }
-}
-
-fn parse_particles(text: &str) -> Result<usize, String> {
-    parse_count(text, "particles")
-}
-
-fn parse_budget(text: &str) -> Result<usize, String> {
-    parse_count(text, "coefficients")
-}
-
-/// A whole number of `what`, at least 1.
-fn parse_count(text: &str, what: &str) -> Result<usize, String> {
-    match text.parse::<usize>() {
-        Ok(0) => Err(format!("there must be at least 1 of the {what}")),
-        Ok(n) => Ok(n),
-        Err(_) => Err(format!(
-            "expected a whole number of {what} (1 or more), got {text:?}"
-        )),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use clap::CommandFactory;
+    use idmesh_eval::eval::Preset;
+    use idmesh_eval::replay::Method;
 
     #[test]
     fn the_command_line_is_well_formed() {

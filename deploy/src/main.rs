@@ -1,4 +1,6 @@
-//! `idmesh` — one binary, one subcommand per role (see [`cli`]).
+//! `idmesh` — one binary, one subcommand per role (see [`cli`]). The
+//! offline tools, `replay` and `eval`, are the `idmesh-eval` crate; the
+//! roles of a deployment are their own crates, started by [`runtime`].
 //!
 //! Errors end the process with status 1 and one line on stderr, `FILE:LINE:
 //! reason` when a trace line is at fault; logs go to stderr too (`RUST_LOG`,
@@ -7,10 +9,7 @@
 mod acoustic;
 mod bench;
 mod cli;
-mod eval;
 mod logging;
-mod replay;
-mod replay_identity;
 mod runtime;
 mod simulate;
 
@@ -35,11 +34,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Replay(args) => {
             let stdout = BufWriter::new(std::io::stdout().lock());
-            replay::dispatch(&args, stdout)
+            idmesh_eval::replay::dispatch(&args, stdout)
         }
         Command::Simulate(args) => simulate::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),
-        Command::Eval(args) => eval::run(&args),
+        Command::Eval(args) => idmesh_eval::eval::run(&args),
         Command::Sensor(args) => {
             runtime::roles::run(runtime::roles::Role::Sensor, &args.config, &args.name)
         }

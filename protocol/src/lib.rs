@@ -11,13 +11,17 @@
 //! - [`wire`] — the distributed runtime's messages (postcard, versioned),
 //!   its key expressions, the routing rule of the event stream and the
 //!   JSON answers of the query API.
+//! - [`start`] — [`StreamStart`]: what a trace header and a stream's
+//!   `Begin` both say of the field.
 //! - [`fuzzing`] — the fuzz targets of every decoder above, shared by
 //!   cargo-fuzz (`fuzz/`) and the stable smoke run (`tests/fuzz_smoke.rs`).
 
 pub mod fuzzing;
+pub mod start;
 pub mod trace;
 pub mod wire;
 
+pub use start::StreamStart;
 pub use trace::{
     Header, Identify, Line, Mix, Move, NumberedLine, Observe, Problem, TraceError, TraceReader,
     TraceWriter, Truth,

@@ -171,3 +171,66 @@ fn leaders_resting_at_the_same_end_answer_without_a_cut() {
     )
     .is_none());
 }
+
+#[test]
+fn sums_from_a_leader_the_cut_does_not_list_are_refused_not_added() {
+    // A process of another stream (or a stale one) answering on the same
+    // prefix with the right tag: its sums would silently change the answer.
+    let memory = Memory::default();
+    let replies = vec![
+        Ok(encode(&part("a", 7, 9, 1.0, vec![]))),
+        Ok(encode(&part("b", 7, 9, 1.0, vec![]))),
+        Ok(encode(&part("stray", 7, 9, 5.0, vec![(0, 5.0)]))),
+    ];
+    let (parts, errors) = gather(9, replies, &memory).into_parts();
+    let e = check(cut(7, &["a", "b"]), parts, errors, Duration::ZERO, &memory)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("stray") && e.contains("not a leader"), "{e}");
+    assert_eq!(memory.stats().bad_replies, 1);
+}
+
+#[test]
+fn no_leaders_or_no_mass_is_an_error_not_an_answer() {
+    let memory = Memory::default();
+    let e = check(
+        cut(7, &[]),
+        BTreeMap::new(),
+        Vec::new(),
+        Duration::ZERO,
+        &memory,
+    );
+    assert!(matches!(e, Err(GatherError::NoLeaders)), "{e:?}");
+    // Every share empty: the observations ruled out every red set.
+    let (parts, errors) =
+        gather(9, vec![Ok(encode(&part("a", 7, 9, 0.0, vec![])))], &memory).into_parts();
+    let collected = check(cut(7, &["a"]), parts, errors, Duration::ZERO, &memory).unwrap();
+    assert!(matches!(
+        marginals_of(&collected),
+        Err(GatherError::Degenerate)
+    ));
+}
+
+#[test]
+fn a_repeated_reply_counts_once_and_a_late_error_does_not_hide_it() {
+    let memory = Memory::default();
+    let replies = vec![
+        Ok(encode(&part("a", 7, 9, 1.0, vec![]))),
+        Ok(encode(&part("a", 7, 9, 1.0, vec![]))),
+    ];
+    let partials = gather(9, replies, &memory);
+    assert_eq!(partials.answered(), 1);
+    let (parts, errors) = partials.into_parts();
+    let e = check(
+        cut(7, &["a", "b"]),
+        parts,
+        errors,
+        Duration::from_secs(3),
+        &memory,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&e, GatherError::Missing { missing, timeout } if missing == &["b"] && timeout.as_secs() == 3),
+        "{e}"
+    );
+}

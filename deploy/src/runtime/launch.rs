@@ -332,7 +332,7 @@ pub fn count_events(trace: &Path) -> Result<u64> {
     reader.read_header()?;
     let mut events = 0;
     while let Some(n) = reader.read_line()? {
-        if !matches!(n.line, idmesh_protocol::Line::Truth(_)) {
+        if n.line.is_event() {
             events += 1;
         }
     }

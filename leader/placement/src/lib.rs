@@ -6,8 +6,8 @@
 //!   hence which tracks each leader follows (its [`Interest`]): the leader
 //!   starts from its share ([`start`]), the sensor gateway routes the first
 //!   items by the same interests ([`interests`]);
-//! - the field a `Begin` describes ([`field_of`]), as `idmesh replay` reads
-//!   it from a trace header (`Field::with_count`);
+//! - the field a `Begin` describes (`idmesh_belief::field_of`, the same
+//!   function `idmesh replay` reads a trace header with);
 //! - how the leaders' partial sums at one cut add up to the answer
 //!   ([`combine`]), which the coordinator computes.
 //!
@@ -16,7 +16,7 @@
 //! linearly (Section 5.4 of the property-management paper).
 
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
-use idmesh_belief::{BeliefError, Field, RedCount};
+use idmesh_belief::{field_of, BeliefError, Field, RedCount};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
@@ -92,15 +92,6 @@ pub fn interests(begin: &Begin) -> Result<Vec<Interest>, PlacementError> {
     (0..begin.leaders.len())
         .map(|me| start(begin, me as u16).map(|(_, interest)| interest))
         .collect()
-}
-
-/// The field a stream's Begin describes (as `idmesh replay` reads a header).
-pub fn field_of(begin: &Begin) -> Field {
-    Field::with_count(
-        begin.tracks as usize,
-        begin.red.map(|k| k as usize),
-        begin.initial_red.clone(),
-    )
 }
 
 /// The answer to a query from every leader's partial sums.

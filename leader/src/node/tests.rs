@@ -425,3 +425,140 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     let (node, out) = Node::recover("a", "h", None, [], false, timers(), MS).unwrap();
     assert!(out.is_empty() && node.recovering_since().is_none());
 }
+
+#[test]
+fn a_transfer_request_never_answered_is_made_again_once_it_is_stale() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let asked = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
+            .count()
+    };
+    assert_eq!(asked(&node.step(600 * MS, Input::Tick)), 1);
+    // The answer is lost: no second request while the first may still
+    // come (query timeout + late = 2.5 s) …
+    let mut again = 0;
+    let mut now = 600 * MS;
+    while now < 3100 * MS {
+        now += 250 * MS;
+        again += asked(&node.step(now, Input::Tick));
+    }
+    assert_eq!(again, 0, "asked again before the first request was stale");
+    // … then the request is given up and made again on the next tick.
+    now += 250 * MS;
+    let out = node.step(now, Input::Tick);
+    now += 250 * MS;
+    let out2 = node.step(now, Input::Tick);
+    assert_eq!(asked(&out) + asked(&out2), 1, "{out:?} {out2:?}");
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+}
+
+#[test]
+fn a_recovery_waits_for_the_sensor_through_failed_resends_but_not_for_a_peer_that_failed() {
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut fresh = Node::new(Leader::new("a"), timers());
+    for out in [
+        fresh.step(MS, batch(0, vec![(1, begin(&["a", "b"]))], 1)),
+        fresh.step(2 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2)),
+    ] {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    }
+    let entries = journal.iter().map(|(k, b)| (*k, b.as_slice()));
+    let (mut node, out) =
+        Node::recover("a", "host-a", None, entries, false, timers(), 10 * MS).unwrap();
+    assert_eq!(resends(&out), 1);
+    // The sensor's answer is lost: still recovering, and the next tick
+    // asks again (one request at a time).
+    node.step(20 * MS, Input::Resent(Err("timeout".into())));
+    assert!(node.recovering_since().is_some());
+    assert_eq!(resends(&node.step(260 * MS, Input::Tick)), 1);
+    assert_eq!(resends(&node.step(510 * MS, Input::Tick)), 0);
+    // b is down: its failure counts as its answer (it sends its transfers
+    // again when it comes back).
+    node.step(
+        520 * MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Err("no answer".into()),
+        },
+    );
+    assert!(
+        node.recovering_since().is_some(),
+        "the sensor has not answered"
+    );
+    node.step(530 * MS, Input::Resent(Ok(Vec::new())));
+    assert_eq!(node.recovering_since(), None);
+    assert_eq!(node.leader().stats().recoveries, 1);
+}
+
+#[test]
+fn a_peers_durable_mark_lets_the_leader_forget_what_it_sent_there() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let sent_to_b = |node: &mut Node, id| {
+        let wanted = TransfersWanted {
+            version: VERSION,
+            to: 1,
+            after: 0,
+        };
+        let out = node.step(
+            20 * MS,
+            Input::SentWanted {
+                id,
+                bytes: encode(&wanted),
+                origin: "b".into(),
+            },
+        );
+        match &out[..] {
+            [Output::AnswerSent { id: got, answer }] if *got == id => {
+                answer.as_ref().map(|s| s.transfers.len()).unwrap()
+            }
+            _ => panic!("one answer: {out:?}"),
+        }
+    };
+    assert_eq!(sent_to_b(&mut node, 1), 1);
+    // Its own mark, or b's below the transfer, changes nothing.
+    let mark = |leader: &str, position| Input::Durable {
+        bytes: encode(&Durable {
+            version: VERSION,
+            leader: leader.into(),
+            batch: 1,
+            position,
+        }),
+        origin: leader.into(),
+    };
+    node.step(30 * MS, mark("a", 2));
+    node.step(30 * MS, mark("b", 1));
+    assert_eq!(sent_to_b(&mut node, 2), 1);
+    node.step(40 * MS, mark("b", 2));
+    assert_eq!(sent_to_b(&mut node, 3), 0, "b is safe past it");
+    // Bytes that are no mark, or no request, are counted and answered.
+    node.step(
+        50 * MS,
+        Input::Durable {
+            bytes: vec![1],
+            origin: "x".into(),
+        },
+    );
+    let out = node.step(
+        60 * MS,
+        Input::SentWanted {
+            id: 4,
+            bytes: vec![1],
+            origin: "x".into(),
+        },
+    );
+    assert!(matches!(
+        &out[..],
+        [Output::AnswerSent {
+            id: 4,
+            answer: Err(_)
+        }]
+    ));
+    assert_eq!(node.leader().stats().rejected, 2);
+}

@@ -146,6 +146,13 @@ impl Line {
         }
     }
 
+    /// Whether the line is an event of the stream — what the sensor
+    /// gateway sequences and counts: every line but the header and the
+    /// ground truth (`mix`, `observe`, `identify`, `move`).
+    pub fn is_event(&self) -> bool {
+        !matches!(self, Line::Header(_) | Line::Truth(_))
+    }
+
     /// The time of the line; `None` for the header, which has none.
     pub fn time(&self) -> Option<f64> {
         match self {

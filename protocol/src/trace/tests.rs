@@ -779,3 +779,19 @@ fn reader_stops_after_the_first_error() {
     assert_eq!(err.problem(), Some(&Problem::SelfMix(0)));
     assert!(reader.next().is_none());
 }
+
+#[test]
+fn an_event_is_every_line_but_the_header_and_the_truth() {
+    let lines = read(&format!(
+        "{}\n{}\n{}\n{}\n{}\n{}\n",
+        header(r#","identities":4"#),
+        r#"{"kind":"mix","time":1,"a":0,"b":1,"swap":0.5}"#,
+        r#"{"kind":"observe","time":1,"track":0,"red":1,"blue":0}"#,
+        r#"{"kind":"identify","time":1,"track":0,"identity":1,"accuracy":0.9}"#,
+        r#"{"kind":"move","time":1,"track":0,"x":1,"y":2}"#,
+        r#"{"kind":"truth","time":2,"identity":[1,0,2,3]}"#,
+    ))
+    .unwrap();
+    let events: Vec<bool> = lines.iter().map(|l| l.line.is_event()).collect();
+    assert_eq!(events, [false, true, true, true, true, false]);
+}

@@ -82,7 +82,7 @@ fn mesh(what: &'static str) -> impl FnOnce(zenoh::Error) -> GatewayError {
 fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
     let mut events = 0u64;
     for (i, line) in lines.iter().enumerate() {
-        if !matches!(line, Line::Truth(_)) {
+        if line.is_event() {
             if limit.is_some_and(|limit| events == limit) {
                 return (i, events);
             }

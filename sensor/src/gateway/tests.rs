@@ -248,3 +248,172 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
     assert!(refused(gateway.cut(6, &at("16", Some("5")))).contains("ended"));
     assert!(gateway.flush().iter().all(|b| b.finished));
 }
+
+#[test]
+fn under_exact_conditioning_every_observation_reaches_every_leader_and_a_mix_only_those_it_may_touch(
+) {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, false), false);
+    gateway.flush();
+    gateway.line(&mix(0, 2)); // seq 2: a's tracks only
+    gateway.line(&observe(3)); // seq 3: every set grows, whoever holds it
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!((seqs(&a), seqs(&b)), (vec![2, 3], vec![3]));
+    // Grown by an observation of track 0, b's sets may now hold it: a mix
+    // of 0 and 2 reaches b too.
+    gateway.line(&observe(0)); // seq 4
+    gateway.line(&mix(0, 2)); // seq 5
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!((seqs(&a), seqs(&b)), (vec![4, 5], vec![4, 5]));
+    // Both learn how far the stream is, whatever they were sent.
+    assert_eq!((a.through, b.through, b.events), (5, 5, 4));
+}
+
+#[test]
+fn an_identity_read_goes_to_the_owner_of_its_track_alone() {
+    let mut header = Header::new(4);
+    header.identities = Some(4);
+    let config = RouterConfig {
+        sensor: "s".into(),
+        leaders: ["a", "b"]
+            .iter()
+            .map(|name| LeaderPlace {
+                name: name.to_string(),
+                at: None,
+            })
+            .collect(),
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+    };
+    let mut gateway: Gateway<()> = Gateway::new("s", Router::new(config, &header).unwrap(), false);
+    gateway.flush();
+    gateway.line(&Line::Identify(idmesh_protocol::trace::Identify {
+        time: 0.0,
+        track: 3,
+        identity: 1,
+        accuracy: 0.9,
+    }));
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert!(seqs(&a).is_empty());
+    assert!(matches!(
+        b.items[..],
+        [idmesh_protocol::wire::sensor_to_leader::Sequenced {
+            seq: 2,
+            item: Item::Identify {
+                track: 3,
+                owner: 1,
+                ..
+            }
+        }]
+    ));
+}
+
+#[test]
+fn follows_and_marks_from_leaders_not_of_the_stream_change_nothing() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(4, 2, true), false);
+    gateway.flush();
+    gateway.line(&mix(0, 2));
+    gateway.flush();
+    let error = gateway
+        .follow(&encode(&Follow {
+            version: VERSION,
+            leader: 5,
+            after: 0,
+            tracks: vec![1],
+        }))
+        .unwrap_err();
+    assert!(error.contains('5'), "{error}");
+    assert_eq!(gateway.stats().rejected, 1);
+    // A mark from nobody of this stream drops nothing.
+    let stranger = Durable {
+        version: VERSION,
+        leader: "z".into(),
+        batch: 2,
+        position: 2,
+    };
+    gateway.durable(&encode(&stranger), "test");
+    assert_eq!((gateway.kept(0), gateway.kept(1)), (2, 2));
+    assert_eq!(gateway.router().logged(), 1);
+    // A resend from a batch not sent yet is empty, not an error.
+    let ahead = gateway
+        .resend(&encode(&Resend {
+            version: VERSION,
+            leader: "a".into(),
+            from: 9,
+        }))
+        .unwrap();
+    assert!(ahead.batches.is_empty());
+}
+
+#[test]
+fn the_log_is_dropped_only_once_every_leader_is_safe_past_it() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(4, 2, true), false);
+    gateway.flush();
+    gateway.line(&mix(0, 2)); // seq 2
+    gateway.line(&mix(1, 3)); // seq 3
+    gateway.flush();
+    assert_eq!(gateway.router().logged(), 2);
+    let mark = |leader: &str, position| Durable {
+        version: VERSION,
+        leader: leader.into(),
+        batch: 2,
+        position,
+    };
+    gateway.durable(&encode(&mark("a", 3)), "test");
+    assert_eq!(gateway.router().logged(), 2, "b may still follow from 0");
+    gateway.durable(&encode(&mark("b", 2)), "test");
+    assert_eq!(gateway.router().logged(), 1, "both safe through seq 2");
+    // A mark that goes back does not bring anything back, nor move on.
+    gateway.durable(&encode(&mark("b", 1)), "test");
+    assert_eq!(gateway.router().logged(), 1);
+}
+
+#[test]
+fn cuts_at_one_point_are_placed_together_with_their_rows_and_none_past_the_end() {
+    let mut gateway: Gateway<u32> = Gateway::new("s", router(4, 2, false), false).ending_at(3);
+    let at = |tag: &str, rows, events: &str| CutParameters {
+        tag: Some(tag.into()),
+        rows,
+        events: Some(events.into()),
+    };
+    assert!(matches!(
+        gateway.cut(1, &at("21", true, "2")),
+        CutOutcome::Scheduled
+    ));
+    assert!(matches!(
+        gateway.cut(2, &at("22", false, "2")),
+        CutOutcome::Scheduled
+    ));
+    match gateway.cut(3, &at("23", false, "4")) {
+        CutOutcome::Refused(3, why) => assert!(why.contains("ends at 3 events"), "{why}"),
+        _ => panic!("refused at once: the stream ends at 3"),
+    }
+    match gateway.cut(
+        4,
+        &CutParameters {
+            tag: Some("24".into()),
+            rows: false,
+            events: Some("two".into()),
+        },
+    ) {
+        CutOutcome::Refused(4, why) => assert!(why.contains("count of events"), "{why}"),
+        _ => panic!("refused: not a count"),
+    }
+    gateway.flush();
+    assert!(gateway.line(&observe(0)).is_empty());
+    let placed = gateway.line(&observe(1));
+    let placed: Vec<(u32, u64)> = placed.iter().map(|p| (p.query, p.answer.seq)).collect();
+    assert_eq!(placed, [(1, 4), (2, 5)]);
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    for batch in [a, b] {
+        let cuts: Vec<(u64, bool)> = batch
+            .items
+            .iter()
+            .filter_map(|s| match s.item {
+                Item::Cut { tag, rows, .. } => Some((tag, rows)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(cuts, [(21, true), (22, false)]);
+    }
+}

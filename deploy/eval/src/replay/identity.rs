@@ -35,7 +35,9 @@
 //! demand ([`MarginalChoice`]), and identities coded by property bits (one
 //! Radon property belief per bit, `--bits`, optional `--budget`).
 
-use crate::replay::{finish, line_error, mean_error, write_line, Stopwatch};
+use super::args::ReplayArgs;
+use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
+use super::limits::binomial;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
@@ -43,11 +45,11 @@ use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_belief::identity::{
     identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
-    Identify, IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
+    IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
     PropertyBitsFilter,
 };
-use idmesh_belief::{BeliefError, Mix, RadonOptions, Sparsify};
-use idmesh_protocol::trace::{Header, Line, NumberedLine, TraceReader};
+use idmesh_belief::{identity_event_of, BeliefError, RadonOptions, Sparsify};
+use idmesh_protocol::trace::{Header, Line, TraceReader, Truth};
 use serde::Serialize;
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
@@ -119,7 +121,7 @@ pub const WARN_EXACT_BIT_STATES: f64 = 1e4;
 
 /// `idmesh replay` on an identity trace: the identity options from the
 /// command line's, with the identity default when no method is named.
-pub fn run_default(args: &crate::cli::ReplayArgs, out: impl Write) -> Result<()> {
+pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let method = match args.method {
         None => DEFAULT_IDENTITY_METHOD,
         Some(m) => m
@@ -206,10 +208,10 @@ impl MarginalChoice {
 
 /// The answers at one `truth` line.
 #[derive(Debug, Serialize)]
-struct Answer<'a> {
+pub struct Answer {
     time: f64,
-    p_identity: &'a [Vec<f64>],
-    predicted_identity: &'a [u32],
+    p_identity: Vec<Vec<f64>>,
+    predicted_identity: Vec<u32>,
 }
 
 /// The last line of a replay.
@@ -290,7 +292,6 @@ pub fn replay<R: BufRead>(
 
     let header = reader.read_header()?;
     let source = reader.source().to_string();
-    let at = line_error(&source);
     let n = match header.identities {
         Some(n) => n,
         None => bail!(
@@ -303,57 +304,22 @@ pub fn replay<R: BufRead>(
         known_start = header.initial_identity.is_some(),
         "identities"
     );
-    let mut engine = Engine::start(|| build(args, &header)).map_err(|e| match e {
-        Built::Engine(e) => at(1, "header", e),
+    let filter = Timed::start(|| build(args, &header)).map_err(|e| match e {
+        Built::Engine(e) => line_error(&source)(1, "header", e),
         Built::Refused(reason) => anyhow!("{source}:1: header: {reason}"),
     })?;
-
-    let mut errors = Vec::new();
-    for line in reader {
-        let NumberedLine { number, line } = line?;
-        match &line {
-            Line::Mix(mix) => {
-                let event = IdentityEvent::Mix(Mix {
-                    a: mix.a,
-                    b: mix.b,
-                    swap: mix.swap,
-                });
-                engine.apply(&event).map_err(|e| at(number, "mix", e))?;
-            }
-            Line::Identify(read) => {
-                let event = IdentityEvent::Identify(Identify {
-                    track: read.track,
-                    identity: read.identity,
-                    accuracy: read.accuracy,
-                });
-                engine
-                    .apply(&event)
-                    .map_err(|e| at(number, "identify", e))?;
-            }
-            Line::Truth(truth) => {
-                let (p, predicted) = engine.answer().map_err(|e| at(number, "truth", e))?;
-                if let Some(identity) = &truth.identity {
-                    errors.push(identity_error(&predicted, identity));
-                }
-                let answer = Answer {
-                    time: truth.time,
-                    p_identity: &p,
-                    predicted_identity: &predicted,
-                };
-                write_line(&mut out, &answer)?;
-            }
-            // Colour sightings and positions do not bear on identities.
-            Line::Observe(_) | Line::Move(_) | Line::Header(_) => {}
-        }
-        debug!(line = number, kind = line.kind(), "line");
-    }
+    let mut engine = Engine {
+        filter,
+        errors: Vec::new(),
+    };
+    drive(reader, &mut engine, &mut out)?;
 
     let summary = Summary {
         kind: "summary",
         method: args.method.name(),
-        events: engine.events,
-        seconds: engine.time.total.as_secs_f64(),
-        error: mean_error(&errors),
+        events: engine.filter.events,
+        seconds: engine.filter.time.as_secs_f64(),
+        error: mean_error(&engine.errors),
     };
     info!(
         events = summary.events,
@@ -471,45 +437,40 @@ pub fn exact_bit_states(code: &BitCode) -> f64 {
         .fold(1.0, f64::max)
 }
 
-/// C(n, k) as a float (no overflow below 10^308).
-fn binomial(n: usize, k: usize) -> f64 {
-    let k = k.min(n - k.min(n));
-    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
-}
-
-/// A filter with the bookkeeping of a replay: the time spent inside the
-/// filter (and nothing else) and the events applied.
+/// An identity filter being replayed: its clock and counts, and the
+/// errors at the truth lines that carry identities.
 struct Engine {
-    filter: Box<dyn IdentityFilter>,
-    time: Stopwatch,
-    events: u64,
+    filter: Timed<dyn IdentityFilter>,
+    errors: Vec<f64>,
 }
 
-impl Engine {
-    fn start<E>(build: impl FnOnce() -> Result<Box<dyn IdentityFilter>, E>) -> Result<Self, E> {
-        let mut time = Stopwatch::default();
-        let filter = time.time(build)?;
-        Ok(Engine {
-            filter,
-            time,
-            events: 0,
-        })
+impl Replay for Engine {
+    type Event = IdentityEvent;
+    type Answer = Answer;
+
+    fn event_of(line: &Line) -> Option<IdentityEvent> {
+        identity_event_of(line)
     }
 
     fn apply(&mut self, event: &IdentityEvent) -> Result<(), BeliefError> {
-        let filter = &mut self.filter;
-        self.time.time(|| filter.apply(event))?;
-        self.events += 1;
-        Ok(())
+        self.filter.apply(|f| f.apply(event))
     }
 
     /// The marginals and the most likely assignment under them.
-    fn answer(&mut self) -> Result<(Vec<Vec<f64>>, Vec<u32>), BeliefError> {
-        let filter = &self.filter;
-        self.time.time(|| {
+    fn answer(&mut self, truth: &Truth) -> Result<Answer, BeliefError> {
+        let (p_identity, predicted_identity) = self.filter.time(|filter| {
             filter
                 .marginals()
                 .and_then(|p| most_likely_assignment(&p).map(|best| (p, best)))
+        })?;
+        if let Some(identity) = &truth.identity {
+            self.errors
+                .push(identity_error(&predicted_identity, identity));
+        }
+        Ok(Answer {
+            time: truth.time,
+            p_identity,
+            predicted_identity,
         })
     }
 }
@@ -533,6 +494,7 @@ fn parse_positive(text: &str) -> Result<usize, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::replay::driver::output_lines;
     use clap::Parser;
 
     fn new(trace: &str, method: IdentityMethod) -> IdentityReplayOptions {
@@ -558,19 +520,10 @@ mod tests {
         args: &IdentityReplayOptions,
         trace: &str,
     ) -> Result<Vec<serde_json::Value>, String> {
-        check_options(args).map_err(|e| format!("{e:#}"))?;
-        let mut out = Vec::new();
-        replay(
-            args,
-            TraceReader::new(trace.as_bytes(), "mem.jsonl"),
-            &mut out,
-        )
-        .map_err(|e| format!("{e:#}"))?;
-        Ok(String::from_utf8(out)
-            .unwrap()
-            .lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect())
+        output_lines(|out| {
+            check_options(args)?;
+            replay(args, TraceReader::new(trace.as_bytes(), "mem.jsonl"), out)
+        })
     }
 
     fn matrix(value: &serde_json::Value) -> Vec<Vec<f64>> {

@@ -15,9 +15,9 @@
 //! rule has next to nothing to restrict (see the section on its cost in
 //! results.md), so its cost is measured under both starts.
 
+use super::args::Preset;
 use super::methods::{Method, FACTORED_AVAILABLE};
 use super::scenarios::{ScenarioSpec, Sensor, Source, Start};
-use crate::cli::Preset;
 
 /// The experiments, each one table or plot of results.md.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]

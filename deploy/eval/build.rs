@@ -1,5 +1,5 @@
-//! Stamps the `idmesh` binary with a digest of the sources that decide the
-//! numbers of `idmesh eval`: the property filters, the simulators, the trace
+//! Stamps the evaluation (and so the `idmesh` binary) with a digest of the
+//! sources that decide the numbers of `idmesh eval`: the property filters, the simulators, the trace
 //! format and the evaluation itself. `eval` writes the stamp into the
 //! results.md it generates, and a test checks that the committed
 //! docs/results.md carries the stamp of the code as it is, so the document
@@ -11,31 +11,40 @@
 use std::hash::Hasher;
 use std::path::{Path, PathBuf};
 
-/// Folders, relative to this crate, whose code the evaluation runs.
+/// Folders and files, relative to this crate, whose code the evaluation
+/// runs: the engine, the simulators, the trace format, the grid and the
+/// factory that builds its filters (not the replays: `idmesh eval` scores
+/// its traces with its own loop, `src/eval/score.rs`).
 const SOURCES: &[&str] = &[
-    "../belief/src",
-    "../sensor/src/scenario",
-    "../sensor/src/motion",
-    "../protocol/src/trace",
+    "../../belief/src",
+    "../../sensor/src/scenario",
+    "../../sensor/src/motion",
+    "../../protocol/src/trace",
     "src/eval",
+    "src/filters.rs",
 ];
 
 /// Inside those, code the evaluation does not run (identity beliefs have
 /// their own document, docs/identity.md).
-const LEFT_OUT: &[&str] = &["../belief/src/identity"];
+const LEFT_OUT: &[&str] = &["../../belief/src/identity"];
+
+/// Where this crate is in the workspace: file names enter the digest
+/// relative to the workspace root, so moving the crate again does not
+/// change the stamp.
+const CRATE: &str = "deploy/eval";
 
 fn main() {
     let mut files = Vec::new();
-    for dir in SOURCES {
-        println!("cargo:rerun-if-changed={dir}");
-        collect(Path::new(dir), &mut files);
+    for source in SOURCES {
+        println!("cargo:rerun-if-changed={source}");
+        collect(Path::new(source), &mut files);
     }
     files.sort();
     let mut digest = fnv::FnvHasher::default();
     for file in &files {
         let text = std::fs::read_to_string(file)
             .unwrap_or_else(|e| panic!("{}: cannot read: {e}", file.display()));
-        digest.write(file.to_string_lossy().as_bytes());
+        digest.write(workspace_name(file).as_bytes());
         for line in text.lines().map(str::trim) {
             if !line.is_empty() && !line.starts_with("//") {
                 digest.write(line.as_bytes());
@@ -49,8 +58,23 @@ fn main() {
     );
 }
 
+/// `file` named from the workspace root: `belief/src/lib.rs`,
+/// `deploy/eval/src/filters.rs`.
+fn workspace_name(file: &Path) -> String {
+    let name = file.to_string_lossy();
+    match name.strip_prefix("../../") {
+        Some(outside) => outside.to_string(),
+        None => format!("{CRATE}/{name}"),
+    }
+}
+
+/// Every `.rs` file at `dir` (a file itself, or a folder walked).
 fn collect(dir: &Path, files: &mut Vec<PathBuf>) {
     if LEFT_OUT.iter().any(|out| dir == Path::new(out)) {
+        return;
+    }
+    if dir.is_file() {
+        files.push(dir.to_path_buf());
         return;
     }
     let entries =

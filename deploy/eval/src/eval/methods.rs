@@ -5,12 +5,10 @@
 //! factored belief of `idmesh_belief::factored`, default options; see
 //! [`FACTORED_AVAILABLE`]).
 
+use crate::filters::Recipe;
 use anyhow::{bail, Context, Result};
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair, MAX_STATES};
-use idmesh_belief::{
-    BeliefError, Coupling, FactoredBelief, FactoredOptions, Field, ParticleFilter, PropertyFilter,
-    RadonBelief, RadonOptions, Sparsify,
-};
+use idmesh_belief::baseline::MAX_STATES;
+use idmesh_belief::{BeliefError, Coupling, Field, PropertyFilter, Sparsify};
 use std::fmt;
 
 /// The largest n at which the exact filter runs in the grid (C(20, 10) =
@@ -118,40 +116,28 @@ impl Method {
         }
     }
 
-    /// Builds the filter for `field`; `seed` drives the randomized ones.
-    pub fn build(&self, field: Field, seed: u64) -> Result<Box<dyn PropertyFilter>, BeliefError> {
-        let radon = |sparsify: Sparsify, distributed_rule: bool| {
-            let options = RadonOptions {
-                sparsify: Some(sparsify),
-                distributed_rule,
-                ..RadonOptions::default()
-            };
-            RadonBelief::with_options(field.clone(), options)
-                .map(|b| Box::new(b) as Box<dyn PropertyFilter>)
+    /// The filter this method names (`seed` drives the randomized ones),
+    /// for the one factory ([`Recipe`]).
+    pub fn recipe(&self, seed: u64) -> Recipe {
+        let radon = |sparsify: Sparsify, distributed_rule: bool| Recipe::Radon {
+            sparsify: Some(sparsify),
+            distributed_rule,
         };
         match *self {
-            Method::Exact => Ok(Box::new(DenseFilter::new(field)?)),
-            // Without the repair the paper's order-j projections leave the
-            // simplex on crowd traces and an observation gets "negative
-            // probability"; see `LowOrderRepair`.
-            Method::Order(j) => Ok(Box::new(LowOrderFilter::with_repair(
-                field,
-                j,
-                LowOrderRepair::ShrinkToUniform,
-            )?)),
+            Method::Exact => Recipe::Exact,
+            Method::Order(j) => Recipe::Order(j),
             Method::Threshold(b) => radon(Sparsify::threshold(b), false),
             Method::Overcomplete(b) => radon(Sparsify::overcomplete(b), false),
             Method::Distributed(b) => radon(Sparsify::overcomplete(b), true),
-            Method::Particles(p) => Ok(Box::new(ParticleFilter::new(field, p, seed)?)),
-            Method::Factored => Ok(Box::new(FactoredBelief::new(field)?)),
-            Method::FactoredLocal => {
-                let options = FactoredOptions {
-                    coupling: Coupling::Local,
-                    ..FactoredOptions::default()
-                };
-                Ok(Box::new(FactoredBelief::with_options(field, options)?))
-            }
+            Method::Particles(count) => Recipe::Particles { count, seed },
+            Method::Factored => Recipe::Factored(Coupling::Coupled),
+            Method::FactoredLocal => Recipe::Factored(Coupling::Local),
         }
+    }
+
+    /// Builds the filter for `field`; `seed` drives the randomized ones.
+    pub fn build(&self, field: Field, seed: u64) -> Result<Box<dyn PropertyFilter>, BeliefError> {
+        self.recipe(seed).build(field)
     }
 }
 

@@ -3,10 +3,12 @@
 //! threads; the tables go to stdout and, with the SVG plots, to
 //! `--out-dir` (results.md and results-*.svg).
 //!
+//! - [`args`] — the command line of `idmesh eval`.
 //! - [`plan`] — the presets: which experiments, points, seeds, methods.
 //! - [`scenarios`] — crowds (mixing share steered by the distances) and
 //!   real pedestrian scenes, as in-memory traces.
-//! - [`methods`] — the registry of filters by name.
+//! - [`methods`] — the registry of filters by name (built by the one
+//!   factory, [`crate::filters`]).
 //! - [`score`] — replaying a trace through a filter: tracking error, time
 //!   inside the filter, coefficient counts.
 //! - [`grid`] — the worker threads, results in a fixed order.
@@ -20,6 +22,7 @@
 //! scaled from the P = 1000 run of the first pass, whose time is linear in
 //! P) and the second pass runs those.
 
+pub mod args;
 mod grid;
 mod methods;
 mod plan;
@@ -30,8 +33,8 @@ mod scenarios;
 mod score;
 mod table;
 
-use crate::cli::{EvalArgs, Preset};
 use anyhow::{Context, Result};
+pub use args::{EvalArgs, Preset};
 use grid::{parallel_map, Cell};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use methods::Method;
@@ -613,7 +616,7 @@ fn preset_name(preset: Preset) -> &'static str {
 }
 
 /// The line of results.md that says which code made it: the digest of the
-/// sources the evaluation runs (deploy/build.rs) and the preset.
+/// sources the evaluation runs (deploy/eval/build.rs) and the preset.
 fn stamp_line(preset: &str) -> String {
     format!(
         "<!-- idmesh eval stamp: preset {preset}, sources {} -->",
@@ -745,7 +748,7 @@ mod tests {
         // Any change to the filters, the simulators, the trace format or the
         // evaluation changes the stamp: regenerate docs/results.md with
         // `idmesh eval --preset full --out-dir docs` and commit it.
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/results.md");
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/results.md");
         let committed = std::fs::read_to_string(path).unwrap();
         assert!(
             committed.contains(&stamp_line("full")),

@@ -1,0 +1,16 @@
+//! # idmesh-eval — the evaluation harness
+//!
+//! What the `idmesh` binary runs offline, on traces, with no network: the
+//! numbers of docs/results.md and the tools to check a filter by hand.
+//!
+//! - [`replay`] — `idmesh replay`: one filter over a recorded trace, a
+//!   JSON line of answers at every `truth` line and a summary.
+//! - [`eval`] — `idmesh eval`: the grid of methods × scenarios behind
+//!   docs/results.md, its tables and plots, stamped with the digest of the
+//!   code that decides its numbers (`build.rs`).
+//! - [`filters`] — the one factory that turns a method into a running
+//!   property filter, for both.
+
+pub mod eval;
+pub mod filters;
+pub mod replay;
