@@ -7,8 +7,8 @@ use crate::gathering::{at_rest_of, check, cut_parameters, marginals_of, read_cut
 pub use crate::gathering::{At, Collected, GatherError, Gathered, Memory, Share};
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStats};
-use idmesh_protocol::wire::query::{LeaderPlace, PositionsAnswer, Watermark};
 use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::query::{LeaderPlace, PositionsAnswer, Watermark};
 use std::collections::BTreeMap;
 use std::time::Duration;
 use zenoh::query::{ConsolidationMode, QueryTarget};

@@ -23,7 +23,10 @@ pub fn chromium() -> PathBuf {
             .env("DEBIAN_FRONTEND", "noninteractive")
             .output()
             .unwrap_or_else(|e| {
-                panic!("chromium is not installed and `{}` cannot start: {e}", step.join(" "))
+                panic!(
+                    "chromium is not installed and `{}` cannot start: {e}",
+                    step.join(" ")
+                )
             });
         assert!(
             output.status.success(),

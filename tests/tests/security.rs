@@ -391,7 +391,10 @@ fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
     assert_eq!(web, zenoh, "the gateway's answer is the Zenoh API's");
 
     let (status, body) = http_get(&gateway.at("readyz"));
-    assert_eq!(status, 200, "every role answers the secured gateway: {body}");
+    assert_eq!(
+        status, 200,
+        "every role answers the secured gateway: {body}"
+    );
     let (status, metrics) = http_get(&gateway.at("metrics"));
     assert_eq!(status, 200);
     let stats = deployment.query(&["stats"]).expect("stats")[0].clone();
@@ -400,9 +403,11 @@ fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
         let label = format!("leader=\"{name}\"");
         let value = format!(" {}", leader["items"]);
         assert!(
-            metrics.lines().any(|l| l.starts_with("idmesh_leader_items_total{")
-                && l.contains(&label)
-                && l.ends_with(&value)),
+            metrics
+                .lines()
+                .any(|l| l.starts_with("idmesh_leader_items_total{")
+                    && l.contains(&label)
+                    && l.ends_with(&value)),
             "idmesh_leader_items_total of {name} is not{value} in the metrics:\n{metrics}"
         );
     }

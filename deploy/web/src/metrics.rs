@@ -270,11 +270,11 @@ pub async fn metrics(State(asker): State<Arc<Asker>>) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::asker::{latency_family, query_labels};
     use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
     use idmesh_protocol::wire::query::CoordinatorStats;
     use openmetrics_parser::openmetrics::parse_openmetrics;
     use openmetrics_parser::OpenMetricsValue;
-    use crate::asker::{latency_family, query_labels};
 
     fn leader(name: &str, host: &str, items: u64, rejected: u64) -> LeaderStats {
         LeaderStats {
@@ -311,7 +311,10 @@ mod tests {
     #[test]
     fn every_role_is_one_parseable_family_member_with_its_own_numbers() {
         let stats = StatsAnswer {
-            leaders: vec![leader("leader-0", "", 40, 1), leader("leader-1", "leader-0", 7, 0)],
+            leaders: vec![
+                leader("leader-0", "", 40, 1),
+                leader("leader-1", "leader-0", 7, 0),
+            ],
             sensors: vec![SensorStats {
                 sensor: "sensor-0".into(),
                 rejected: 2,
@@ -331,14 +334,30 @@ mod tests {
             .get_or_create(&query_labels("marginals", "ok"))
             .observe(0.003);
         let text = render(snapshot, latency).expect("encodes");
-        assert_eq!(value(&text, "idmesh_leader_items", ("leader", "leader-0")), 40.0);
-        assert_eq!(value(&text, "idmesh_leader_items", ("process", "leader-0")), 40.0);
-        assert_eq!(value(&text, "idmesh_leader_items", ("leader", "leader-1")), 7.0);
+        assert_eq!(
+            value(&text, "idmesh_leader_items", ("leader", "leader-0")),
+            40.0
+        );
+        assert_eq!(
+            value(&text, "idmesh_leader_items", ("process", "leader-0")),
+            40.0
+        );
+        assert_eq!(
+            value(&text, "idmesh_leader_items", ("leader", "leader-1")),
+            7.0
+        );
         assert_eq!(value(&text, "idmesh_rejected", ("role", "leader")), 1.0);
         assert_eq!(value(&text, "idmesh_rejected", ("role", "sensor")), 2.0);
-        assert_eq!(value(&text, "idmesh_rejected", ("role", "coordinator")), 3.0);
         assert_eq!(
-            value(&text, "idmesh_coordinator_degraded_answers", ("role", "coordinator")),
+            value(&text, "idmesh_rejected", ("role", "coordinator")),
+            3.0
+        );
+        assert_eq!(
+            value(
+                &text,
+                "idmesh_coordinator_degraded_answers",
+                ("role", "coordinator")
+            ),
             5.0
         );
         assert!(text.contains("idmesh_leader_items_total{role=\"leader\",leader=\"leader-1\",process=\"leader-0\"} 7"), "{text}");
