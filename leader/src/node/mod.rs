@@ -20,8 +20,10 @@
 //!   network, or sent while this leader was down): ask that peer for what
 //!   it sent this leader;
 //! - a follow request that failed or came back unusable: asked again;
-//! - a query held for its cut longer than [`Timers::query_timeout`]:
-//!   answered with an error;
+//! - a query held for its cut nearly as long as
+//!   [`Timers::query_timeout`]: answered with an error naming what the
+//!   leader waits for (a peer's sets, the sensor's batches), in time for
+//!   the coordinator to say who is missing;
 //! - on every tick the journal is synced and, if that worked and it moved,
 //!   the durable mark published;
 //! - after every [`Timers::snapshot_every`] journaled inputs, a snapshot.

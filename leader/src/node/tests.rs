@@ -121,14 +121,46 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
         },
     );
     assert!(answers(&out)[0].1.is_ok());
-    // Query 2's cut never comes: an error once it waited the timeout.
-    let out = node.step(2 * 1000 * MS, Input::Tick);
+    // Query 2's cut never comes: an error once it waited the timeout
+    // less two sweeps, so that the coordinator (which waits the timeout)
+    // hears why before it gives up.
+    let out = node.step(1400 * MS, Input::Tick);
     assert!(answers(&out).is_empty(), "not yet: {out:?}");
-    let out = node.step(2100 * MS, Input::Tick);
+    let out = node.step(1600 * MS, Input::Tick);
     let answered = answers(&out);
     assert_eq!(answered.len(), 1);
-    assert!(answered[0].1.as_ref().unwrap_err().contains("cut tagged 8"));
+    let error = answered[0].1.as_ref().unwrap_err();
+    assert!(error.contains("leader a did not reach the cut tagged 8"), "{error}");
+    assert!(error.contains("no batch with the cut came"), "{error}");
     assert_eq!(node.held(), 0);
+}
+
+/// Issue 16: a leader waiting for a dead peer's sets says whose, before
+/// the coordinator's timeout, so that every degraded answer names who is
+/// missing.
+#[test]
+fn a_query_held_behind_a_peers_sets_expires_naming_the_peer() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1)), (3, cut(9))], 3));
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+    node.step(20 * MS, Input::Partial { id: 1, ask: Ask::Cut(9) });
+    assert_eq!(node.held(), 1);
+    let out = node.step(1600 * MS, Input::Tick);
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1, "{out:?}");
+    let error = answered[0].1.as_ref().unwrap_err();
+    assert!(error.contains("waits for sets from b at item 2"), "{error}");
+}
+
+/// A malformed partial-sums query is bad input: answered with why, and
+/// counted.
+#[test]
+fn a_malformed_partial_query_is_counted() {
+    let mut node = started("a", &["a"]);
+    let ask = Ask::parse(false, false, Some("abc"));
+    let out = node.step(MS, Input::Partial { id: 1, ask });
+    assert!(answers(&out)[0].1.as_ref().unwrap_err().contains("tag=<u64>"));
+    assert_eq!(node.leader().stats().rejected, 1);
 }
 
 #[test]

@@ -239,7 +239,12 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
         _ => panic!("refused"),
     };
     assert!(refused(gateway.cut(4, &at("14", Some("1")))).contains("keeps no history"));
+    // A point passed is no bad input; a malformed tag or point is, and is
+    // counted like any (issue 16: `cut?tag=abc` was answered, not counted).
+    assert_eq!(gateway.stats().rejected, 0);
     assert!(refused(gateway.cut(5, &at("x", None))).contains("tag=<u64>"));
+    assert!(refused(gateway.cut(7, &at("17", Some("abc")))).contains("events=<n>"));
+    assert_eq!(gateway.stats().rejected, 2);
     // The stream ends before event 9: that cut is refused, and so is any
     // later point.
     let ended = gateway.end();

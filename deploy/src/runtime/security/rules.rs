@@ -21,11 +21,11 @@
 //! | sensor, leaders | leaders | declare subscriber | `P/leader/*/durable` |
 //! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership) |
 //! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
-//! | coordinator | sensor | query | `P/sensor/*/cut` |
+//! | coordinator | sensor | query | `P/sensor/*/cut`, `P/sensor/*/stats` |
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
 //! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) |
-//! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`): Zenoh replies on the asker's key |
+//! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`, `P/sensor/*/stats`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
 
 use crate::runtime::topology::Topology;
@@ -133,7 +133,8 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             &coordinator,
             &sensor,
             &["query"],
-            vec![keys.every_sensor_cut()],
+            // Its counters too (`query/stats` lists the sensor's).
+            vec![keys.every_sensor_cut(), keys.every_sensor_stats()],
         ),
         grant(
             "pings",
@@ -170,7 +171,7 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
         match m.role {
             "sensor" => {
                 served.push(format!("{p}/sensor/{}/**", m.name));
-                asked_as.push(keys.every_sensor_cut());
+                asked_as.extend([keys.every_sensor_cut(), keys.every_sensor_stats()]);
             }
             "leader" => {
                 // Any leader role: its own, or one it adopts.
@@ -415,6 +416,14 @@ clients = ["operator"]
         assert!(!allowed(&s, "ingress", "c", "put", "p/leader/l1/durable"));
         let l1 = access_control(&t, "l1");
         assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
+        // The coordinator may ask the sensor for its counters (issue 16:
+        // `query/stats` had `"sensors": []` under `[security]`).
+        let c = access_control(&t, "c");
+        assert!(allowed(&c, "egress", "s", "query", "p/sensor/*/stats"));
+        assert!(allowed(&s, "ingress", "c", "query", "p/sensor/*/stats"));
+        assert!(allowed(&s, "egress", "c", "reply", "p/sensor/*/stats"));
+        assert!(allowed(&c, "ingress", "s", "reply", "p/sensor/*/stats"));
+        assert!(!allowed(&c, "ingress", "l0", "reply", "p/sensor/*/stats"));
         // A leader cannot answer in the sensor's name.
         assert!(!allowed(
             &access_control(&t, "c"),
