@@ -28,6 +28,8 @@ pub struct Settings {
     pub takeover_after_ms: Option<u64>,
     /// The sensor's `[sensor.faults]` section, e.g. `duplicate = true`.
     pub faults: Option<String>,
+    /// The leaders' `[leader_faults]` section, e.g. `drop_transfer_every = 3`.
+    pub leader_faults: Option<String>,
     /// A `[security]` section: mutual TLS, and access control if asked.
     pub security: Option<Secured>,
 }
@@ -208,6 +210,9 @@ impl Deployment {
         }
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
+        }
+        if let Some(faults) = &settings.leader_faults {
+            toml.push_str(&format!("\n[leader_faults]\n{faults}\n"));
         }
         if let Some(secured) = &settings.security {
             toml.push_str(&format!(

@@ -5,6 +5,7 @@
 
 pub mod compare;
 pub mod deployment;
+pub mod lan;
 pub mod python;
 pub mod sim;
 

@@ -457,3 +457,21 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     let (node, out) = Node::recover("a", "h", None, [], false, timers(), MS).unwrap();
     assert!(out.is_empty() && node.recovering_since().is_none());
 }
+
+/// Issue 16: a batch that came before the Begin is checked against it when
+/// the Begin comes; refused, it is asked for again at once — not at the
+/// next gap, which at the stream's end never comes.
+#[test]
+fn a_batch_held_before_the_begin_and_refused_is_asked_for_again_at_once() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    // Track 9 of a stream of 4: a misfit only the Begin can tell.
+    let out = node.step(MS, batch(1, vec![(2, mix(0, 9, 0, 0))], 2));
+    assert_eq!(resends(&out), 1, "the gap before it is asked for");
+    node.step(2 * MS, batch(0, vec![(1, begin(&["a"]))], 1));
+    assert_eq!(node.leader().stats().rejected, 1);
+    assert_eq!(node.leader().missing_batches(), Some(1));
+    // The first request comes back (batch 0 came meanwhile): batch 1 is
+    // asked for again at once.
+    let out = node.step(3 * MS, Input::Resent(Ok(vec![])));
+    assert_eq!(resends(&out), 1, "{out:?}");
+}

@@ -16,6 +16,7 @@
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
+//! | `P/alive/home/<name>` | a leader process standing by for its own role | asks the process that adopted the role to hand it back |
 //! | `P/ping/<role>/<name>` | every process | answers at once: the raw round trip, for health checks and the bench |
 
 pub const DEFAULT_PREFIX: &str = "idmesh/default";

@@ -253,3 +253,30 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
     assert!(refused(gateway.cut(6, &at("16", Some("5")))).contains("ended"));
     assert!(gateway.flush().iter().all(|b| b.finished));
 }
+
+/// Issue 16: an identity stream beyond the leaders' track limit (n × n
+/// numbers) is refused at the sensor, not streamed to leaders that drop
+/// every batch.
+#[test]
+fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
+    let limit = idmesh_protocol::wire::valid::MAX_IDENTITY_TRACKS as usize;
+    let config = |leaders: usize| RouterConfig {
+        sensor: "s".into(),
+        leaders: (0..leaders)
+            .map(|i| LeaderPlace {
+                name: format!("l{i}"),
+                at: None,
+            })
+            .collect(),
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+    };
+    let mut header = Header::new(limit + 1);
+    header.identities = Some(limit + 1);
+    let e = Router::new(config(2), &header).err().expect("refused");
+    assert!(e.to_string().contains("identity stream"), "{e}");
+    let mut header = Header::new(8);
+    header.identities = Some(8);
+    assert!(Router::new(config(2), &header).is_ok());
+}
