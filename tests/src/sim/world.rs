@@ -239,11 +239,8 @@ pub struct World {
 }
 
 impl World {
-    pub fn new(rng: ChaCha8Rng) -> Result<World, Violation> {
-        Self::aimed(rng, Aimed::default())
-    }
-
-    /// A world whose schedule adds the `aimed` faults.
+    /// A world for one seed's schedule, with the `aimed` faults added
+    /// (none: [`Aimed::default`]).
     pub fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
         let router = Router::new(scenario.router(), &scenario.header)
