@@ -179,9 +179,10 @@ impl Partials {
                 Ok(p) if tag.is_none_or(|t| t == p.tag) => {
                     self.parts.insert(p.leader.clone(), p);
                 }
-                Ok(p) => self
-                    .errors
-                    .push(format!("leader {} answered tag {} for {tag:?}", p.leader, p.tag)),
+                Ok(p) => self.errors.push(format!(
+                    "leader {} answered tag {} for {tag:?}",
+                    p.leader, p.tag
+                )),
                 Err(e) => {
                     let problem = format!("{key}: {e}");
                     memory.note_bad_reply("partial sums", &problem);

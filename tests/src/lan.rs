@@ -425,9 +425,8 @@ impl<'a> LanDeployment<'a> {
     pub fn logs(&self) -> String {
         let mut all = String::new();
         for host in &self.lan.hosts {
-            let text =
-                std::fs::read_to_string(self.dir.join(format!("{}.log", host.name)))
-                    .unwrap_or_default();
+            let text = std::fs::read_to_string(self.dir.join(format!("{}.log", host.name)))
+                .unwrap_or_default();
             let lines: Vec<&str> = text.lines().collect();
             let tail = &lines[lines.len().saturating_sub(60)..];
             all.push_str(&format!("--- {} ---\n{}\n", host.name, tail.join("\n")));

@@ -63,11 +63,7 @@ fn start<'a>(lan: &'a Lan, name: &str, trace: &Path) -> LanDeployment<'a> {
 
 /// Asks marginals until `until`; every answer must be an error saying
 /// `degraded` and naming one of `missing`. Returns the errors seen.
-fn degraded_while(
-    deployment: &LanDeployment,
-    missing: &[&str],
-    until: Instant,
-) -> Vec<String> {
+fn degraded_while(deployment: &LanDeployment, missing: &[&str], until: Instant) -> Vec<String> {
     let mut errors = Vec::new();
     while Instant::now() < until {
         match deployment.query(&["marginals"]) {

@@ -89,7 +89,14 @@ fn the_leader_that_did_not_answer_is_named_beside_what_the_others_said() {
         Err("Timeout".into()),
     ];
     let (parts, errors) = gather(9, replies, &memory).into_parts();
-    let e = check(cut(7, &["a", "b", "c"]), parts, errors, Duration::ZERO, &memory).unwrap_err();
+    let e = check(
+        cut(7, &["a", "b", "c"]),
+        parts,
+        errors,
+        Duration::ZERO,
+        &memory,
+    )
+    .unwrap_err();
     assert!(
         matches!(&e, GatherError::Missing { missing, .. } if missing == &["c"]),
         "{e}"

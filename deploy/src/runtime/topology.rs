@@ -315,13 +315,7 @@ mod tests {
         for name in ["lan.toml", "secure-lan.toml"] {
             let topology = Topology::load(&examples.join(name)).unwrap();
             assert!(topology.trace_path().exists(), "{name}: no trace");
-            let on = |host: &str| {
-                topology
-                    .members()
-                    .iter()
-                    .filter(|m| m.host == host)
-                    .count()
-            };
+            let on = |host: &str| topology.members().iter().filter(|m| m.host == host).count();
             assert_eq!((on("gateway"), on("east"), on("west")), (2, 2, 2), "{name}");
             assert_eq!(topology.security.is_some(), name.starts_with("secure"));
         }

@@ -130,7 +130,10 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
     let answered = answers(&out);
     assert_eq!(answered.len(), 1);
     let error = answered[0].1.as_ref().unwrap_err();
-    assert!(error.contains("leader a did not reach the cut tagged 8"), "{error}");
+    assert!(
+        error.contains("leader a did not reach the cut tagged 8"),
+        "{error}"
+    );
     assert!(error.contains("no batch with the cut came"), "{error}");
     assert_eq!(node.held(), 0);
 }
@@ -141,9 +144,18 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
 #[test]
 fn a_query_held_behind_a_peers_sets_expires_naming_the_peer() {
     let mut node = started("a", &["a", "b"]);
-    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1)), (3, cut(9))], 3));
+    node.step(
+        10 * MS,
+        batch(1, vec![(2, mix(0, 2, 0, 1)), (3, cut(9))], 3),
+    );
     assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
-    node.step(20 * MS, Input::Partial { id: 1, ask: Ask::Cut(9) });
+    node.step(
+        20 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Cut(9),
+        },
+    );
     assert_eq!(node.held(), 1);
     let out = node.step(1600 * MS, Input::Tick);
     let answered = answers(&out);
@@ -159,7 +171,11 @@ fn a_malformed_partial_query_is_counted() {
     let mut node = started("a", &["a"]);
     let ask = Ask::parse(false, false, Some("abc"));
     let out = node.step(MS, Input::Partial { id: 1, ask });
-    assert!(answers(&out)[0].1.as_ref().unwrap_err().contains("tag=<u64>"));
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("tag=<u64>"));
     assert_eq!(node.leader().stats().rejected, 1);
 }
 
