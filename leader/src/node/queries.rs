@@ -49,8 +49,7 @@ impl Node {
             match ask {
                 Ask::Bad(why) => {
                     // Bad input like any other: logged and counted.
-                    let rejected = self.leader.note_rejected();
-                    tracing::warn!(leader = %name, from = "a partial-sums query", problem = %why, rejected, "input rejected");
+                    self.count_rejected("a partial-sums query", "the coordinator", &why, out);
                     Err(why)
                 }
                 Ask::Quiet { rows } => self

@@ -491,3 +491,44 @@ fn a_batch_held_before_the_begin_and_refused_is_asked_for_again_at_once() {
     let out = node.step(3 * MS, Input::Resent(Ok(vec![])));
     assert_eq!(resends(&out), 1, "{out:?}");
 }
+
+/// Issue 16: `rejected` survives a restart — a refusal is journaled (as
+/// a mark, not the bytes) and counted again on replay.
+#[test]
+fn the_rejected_count_survives_a_restart() {
+    let mut node = started("a", &["a"]);
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut keep = |out: Vec<Output>| {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    };
+    keep(node.step(MS, batch(0, vec![(1, begin(&["a"]))], 1)));
+    let junk = Input::Message {
+        kind: Kind::Transfer,
+        bytes: b"junk".to_vec(),
+        origin: "test".into(),
+    };
+    keep(node.step(2 * MS, junk));
+    keep(node.step(
+        3 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::parse(false, false, Some("abc")),
+        },
+    ));
+    assert_eq!(node.leader().stats().rejected, 2);
+    let (back, _) = Node::recover(
+        "a",
+        "a",
+        None,
+        journal.iter().map(|(k, b)| (*k, b.as_slice())),
+        false,
+        timers(),
+        4 * MS,
+    )
+    .unwrap();
+    assert_eq!(back.leader().stats().rejected, 2);
+}
