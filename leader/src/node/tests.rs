@@ -388,7 +388,8 @@ fn inputs_are_journaled_before_their_effects_and_snapshots_come_every_n() {
         })
         .collect();
     assert_eq!(kinds, ["journal", "send"]);
-    // Refused at the door: neither journaled nor counted as an input.
+    // Refused at the door: only the refusal is journaled (so the count
+    // survives a restart), not its bytes, and it is no input.
     let out = node.step(
         3 * MS,
         Input::Message {
@@ -397,7 +398,13 @@ fn inputs_are_journaled_before_their_effects_and_snapshots_come_every_n() {
             origin: "x".into(),
         },
     );
-    assert!(out.is_empty());
+    assert_eq!(
+        out,
+        [Output::Journal {
+            kind: Kind::Rejected,
+            bytes: Vec::new()
+        }]
+    );
     assert_eq!(node.leader().stats().rejected, 1);
     node.step(4 * MS, batch(2, vec![], 2));
     let out = node.step(5 * MS, batch(3, vec![], 2));
