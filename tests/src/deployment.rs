@@ -279,15 +279,7 @@ impl Deployment {
             }))
             .output()
             .expect("idmesh query runs");
-        let answers = String::from_utf8_lossy(&output.stdout)
-            .lines()
-            .map(|l| serde_json::from_str(l).expect("query prints JSON"))
-            .collect();
-        (
-            answers,
-            String::from_utf8_lossy(&output.stderr).into_owned(),
-            output.status.success(),
-        )
+        query_output(&output)
     }
 
     /// The marginals once the whole stream is in, or panics after `patience`.
@@ -310,25 +302,12 @@ impl Deployment {
         patience: Duration,
         wanted: impl Fn(&Value) -> bool,
     ) -> Value {
-        let started = Instant::now();
-        let mut last = String::new();
         let args: Vec<&str> = question
             .iter()
             .copied()
             .chain(["--timeout-ms", "5000"])
             .collect();
-        while started.elapsed() < patience {
-            match self.query(&args) {
-                Ok(replies) if wanted(&replies[0]) => return replies[0].clone(),
-                Ok(replies) => last = replies[0]["watermark"].to_string(),
-                Err(e) => last = e,
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        panic!(
-            "no answer as wanted within {patience:?}; last: {last}\n{}",
-            self.log()
-        );
+        answer_until(patience, || self.query(&args), wanted, || self.log())
     }
 
     /// Asks `question` (e.g. `marginals`) right after the events before
@@ -420,6 +399,44 @@ impl Drop for Deployment {
             let _ = child.wait();
         }
     }
+}
+
+/// What `idmesh query --json` printed: its JSON lines, its stderr, and
+/// whether it succeeded.
+pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {
+    let answers = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("query prints JSON"))
+        .collect();
+    (
+        answers,
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+        output.status.success(),
+    )
+}
+
+/// Asks (`ask`) every 100 ms until the first reply satisfies `wanted`,
+/// or panics after `patience` with the last answer or error and `log()`.
+pub fn answer_until(
+    patience: Duration,
+    ask: impl Fn() -> Result<Vec<Value>, String>,
+    wanted: impl Fn(&Value) -> bool,
+    log: impl Fn() -> String,
+) -> Value {
+    let started = Instant::now();
+    let mut last = String::new();
+    while started.elapsed() < patience {
+        match ask() {
+            Ok(replies) if wanted(&replies[0]) => return replies[0].clone(),
+            Ok(replies) => last = replies[0]["watermark"].to_string(),
+            Err(e) => last = e,
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    panic!(
+        "no answer as wanted within {patience:?}; last: {last}\n{}",
+        log()
+    );
 }
 
 /// `idmesh simulate` a crowd into `dir`.

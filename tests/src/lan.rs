@@ -18,6 +18,7 @@
 //! Making namespaces needs root (CAP_SYS_ADMIN and CAP_NET_ADMIN):
 //! [`Lan::new`] says why not, and a test skips with that one line.
 
+use crate::deployment::{answer_until, query_output};
 use crate::idmesh;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -388,13 +389,9 @@ impl<'a> LanDeployment<'a> {
             ])
             .output()
             .expect("idmesh query runs");
-        if output.status.success() {
-            Ok(String::from_utf8_lossy(&output.stdout)
-                .lines()
-                .map(|l| serde_json::from_str(l).expect("query prints JSON"))
-                .collect())
-        } else {
-            Err(String::from_utf8_lossy(&output.stderr).into_owned())
+        match query_output(&output) {
+            (answers, _, true) => Ok(answers),
+            (_, errors, false) => Err(errors),
         }
     }
 
@@ -405,20 +402,13 @@ impl<'a> LanDeployment<'a> {
         patience: Duration,
         wanted: impl Fn(&Value) -> bool,
     ) -> (Value, Instant) {
-        let started = Instant::now();
-        let mut last = String::new();
-        while started.elapsed() < patience {
-            match self.query(&["marginals"]) {
-                Ok(replies) if wanted(&replies[0]) => return (replies[0].clone(), Instant::now()),
-                Ok(replies) => last = replies[0]["watermark"].to_string(),
-                Err(e) => last = e,
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        panic!(
-            "no answer as wanted within {patience:?}; last: {last}\n{}",
-            self.logs()
+        let answer = answer_until(
+            patience,
+            || self.query(&["marginals"]),
+            wanted,
+            || self.logs(),
         );
+        (answer, Instant::now())
     }
 
     /// The last lines of every host's log.
