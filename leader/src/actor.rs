@@ -242,7 +242,7 @@ impl Driver<'_> {
                     if self
                         .config
                         .drop_transfer_every
-                        .is_some_and(|n| n > 0 && self.transfers_put % n == 0)
+                        .is_some_and(|n| n > 0 && self.transfers_put.is_multiple_of(n))
                     {
                         tracing::info!(leader = %name, %to, seq, "fault injected: transfer lost");
                         continue;
