@@ -23,10 +23,12 @@ pub enum GatherError {
     NoSensor,
     #[error("no leader is listed by the sensor")]
     NoLeaders,
-    #[error("degraded: leaders {missing:?} did not answer (waited up to {timeout:?}); no partial answer is given")]
+    #[error("degraded: leaders {missing:?} did not answer (waited up to {timeout:?}){}; no partial answer is given", others.iter().map(|o| format!("; {o}")).collect::<String>())]
     Missing {
         missing: Vec<String>,
         timeout: Duration,
+        /// What the leaders that did answer said instead of their sums.
+        others: Vec<String>,
     },
     #[error("{0}")]
     Failed(String),
@@ -185,9 +187,10 @@ impl Partials {
                 Ok(p) if tag.is_none_or(|t| t == p.tag) => {
                     self.parts.insert(p.leader.clone(), p);
                 }
-                Ok(p) => self
-                    .errors
-                    .push(format!("{} answered tag {} for {tag:?}", p.leader, p.tag)),
+                Ok(p) => self.errors.push(format!(
+                    "leader {} answered tag {} for {tag:?}",
+                    p.leader, p.tag
+                )),
                 Err(e) => {
                     let problem = format!("{key}: {e}");
                     memory.note_bad_reply("partial sums", &problem);
@@ -270,26 +273,41 @@ pub fn check(
     }
     for p in parts.values().filter(|p| p.cut != cut.seq) {
         errors.push(format!(
-            "{} answered at seq {} for a cut at {}",
+            "leader {} answered at seq {} for a cut at {}",
             p.leader, p.cut, cut.seq
         ));
     }
-    if !errors.is_empty() {
-        return Err(GatherError::Refused(errors.join("; ")));
-    }
+    // Who did not answer at all is named first, every time: Zenoh's own
+    // error reply at the timeout ("Timeout") names nobody, so it is left
+    // out when the names say more.
     let missing: Vec<String> = cut
         .leaders
         .iter()
-        .filter(|l| !parts.contains_key(*l))
+        .filter(|l| !parts.contains_key(*l) && !errors.iter().any(|e| names(e, l)))
         .cloned()
         .collect();
     if !missing.is_empty() {
-        return Err(GatherError::Missing { missing, timeout });
+        errors.retain(|e| e.trim() != "Timeout");
+        return Err(GatherError::Missing {
+            missing,
+            timeout,
+            others: errors,
+        });
+    }
+    if !errors.is_empty() {
+        return Err(GatherError::Refused(errors.join("; ")));
     }
     Ok(Collected {
         cut,
         parts: parts.into_values().collect(),
     })
+}
+
+/// Whether error reply `error` speaks for leader `leader`: the leaders'
+/// own error replies say who they are ("leader leader-1 is recovering"),
+/// which a mention of a peer ("waits for sets from leader-1") does not.
+fn names(error: &str, leader: &str) -> bool {
+    error.contains(&format!("leader {leader} "))
 }
 
 /// The property marginals the leaders' shares at one cut add up to.

@@ -48,6 +48,9 @@ pub struct LeaderConfig {
     /// Write a snapshot (and start the journal again) after this many
     /// inputs; None = never (the journal grows with the stream).
     pub snapshot_every: Option<usize>,
+    /// Tests only: every n-th transfer is not put, as if the link lost it
+    /// (a TLS link that closes and reopens does).
+    pub drop_transfer_every: Option<u64>,
 }
 
 /// Replies to the gets the leader makes, back in its one task.
@@ -131,6 +134,7 @@ pub async fn run(
         queries: HashMap::new(),
         next_id: 0,
         reply_tx: &reply_tx,
+        transfers_put: 0,
     };
     driver.carry_out(&mut node, first, started).await;
     let mut sweep = tokio::time::interval(node.timers().sweep);
@@ -207,6 +211,8 @@ struct Driver<'a> {
     queries: HashMap<u64, Query>,
     next_id: u64,
     reply_tx: &'a mpsc::UnboundedSender<Reply>,
+    /// Transfers put so far (for the injected losses).
+    transfers_put: u64,
 }
 
 impl Driver<'_> {
@@ -232,6 +238,15 @@ impl Driver<'_> {
                     }
                 }
                 Output::Send { to, seq, body } => {
+                    self.transfers_put += 1;
+                    if self
+                        .config
+                        .drop_transfer_every
+                        .is_some_and(|n| n > 0 && self.transfers_put.is_multiple_of(n))
+                    {
+                        tracing::info!(leader = %name, %to, seq, "fault injected: transfer lost");
+                        continue;
+                    }
                     tracing::trace!(leader = %name, %to, seq, "put transfer");
                     if let Err(e) = self
                         .session

@@ -83,7 +83,7 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
             }
             Ok(Input::Followed(followed))
         }
-        Kind::Generation => Err(WireError::Invalid {
+        Kind::Generation | Kind::Rejected => Err(WireError::Invalid {
             what: "journal frame",
             problem: "a snapshot generation is not an input".into(),
         }),

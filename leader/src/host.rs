@@ -20,8 +20,17 @@
 //! up it answers with a "degraded: recovering" error. Never numbers without
 //! the role's share.
 //!
-//! A process whose role was adopted while it was away does not take it
-//! back when it starts again: it stands by, and may adopt others.
+//! Roles go home. A process that starts and finds its own role's token
+//! held (adopted while it was away, or its old session's token not yet
+//! expired) stands by and says so with a token of its own,
+//! `P/alive/home/<name>`. The process that adopted the role sees it and
+//! hands the role back: it stops the role's actor, which syncs the
+//! journal and then drops the role's token. The standby takes its role as
+//! soon as that token is gone — with or without takeover — and recovers
+//! it from the journal the adopter left in the shared state directory
+//! (the state moves; nothing is rebuilt from the stream's start), then
+//! fetches what that misses as any restarted leader does. Load is back in
+//! balance.
 
 use crate::actor::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
@@ -53,6 +62,8 @@ pub struct HostConfig {
     /// How long a role may be without its token before it is adopted;
     /// None = never (it stays missing until its process returns).
     pub takeover_after: Option<Duration>,
+    /// Tests only: every n-th transfer put is lost on purpose.
+    pub drop_transfer_every: Option<u64>,
 }
 
 impl HostConfig {
@@ -70,6 +81,7 @@ impl HostConfig {
                 fsync_every: self.fsync_every,
             }),
             snapshot_every: self.snapshot_every,
+            drop_transfer_every: self.drop_transfer_every,
         }
     }
 }
@@ -96,17 +108,20 @@ pub async fn run(
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), RunError> {
     let keys = &config.keys;
-    let (stop_tx, stop_rx) = watch::channel(false);
-    let stopped = move || {
-        let mut rx = stop_rx.clone();
-        async move {
-            let _ = rx.wait_for(|s| *s).await;
-        }
-    };
     let mut hosted: JoinSet<(String, Result<(), RunError>)> = JoinSet::new();
     let mut roles: BTreeSet<String> = BTreeSet::new();
-    let host = |role: &str, adopted: bool, hosted: &mut JoinSet<_>| {
-        let (session, role_config, stop) = (session.clone(), config.role(role, adopted), stopped());
+    // One stop signal per hosted role: a role is handed back alone.
+    let mut stops: HashMap<String, watch::Sender<bool>> = HashMap::new();
+    let host = |role: &str,
+                adopted: bool,
+                hosted: &mut JoinSet<_>,
+                stops: &mut HashMap<String, watch::Sender<bool>>| {
+        let (stop_tx, mut stop_rx) = watch::channel(false);
+        stops.insert(role.to_string(), stop_tx);
+        let stop = async move {
+            let _ = stop_rx.wait_for(|s| *s).await;
+        };
+        let (session, role_config) = (session.clone(), config.role(role, adopted));
         let role = role.to_string();
         hosted.spawn(async move {
             let result = actor::run(session, role_config, stop).await;
@@ -114,12 +129,21 @@ pub async fn run(
         });
     };
 
+    // Standing by for its own role: the token that asks for it back.
+    let mut home: Option<zenoh::liveliness::LivelinessToken> = None;
     if hosted_elsewhere(&session, keys, &config.name).await {
-        tracing::warn!(process = %config.name, "its role is hosted by another process (adopted while this one was away); standing by");
+        tracing::warn!(process = %config.name, "its role is hosted by another process (adopted while this one was away, or its old token not yet expired); standing by and asking for it back");
+        home = Some(declare_home(&session, keys, &config.name).await?);
     } else {
-        host(&config.name, false, &mut hosted);
+        host(&config.name, false, &mut hosted, &mut stops);
         roles.insert(config.name.clone());
     }
+    let homes = session
+        .liveliness()
+        .declare_subscriber(keys.alive_role("home"))
+        .history(true)
+        .await
+        .map_err(|e| MeshError::new("declare the home liveliness subscriber", e))?;
 
     let tokens = session
         .liveliness()
@@ -132,6 +156,7 @@ pub async fn run(
     // still starting, not dead.
     let mut lost: HashMap<String, Instant> = HashMap::new();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
+    let standing = Instant::now();
     tokio::pin!(shutdown);
     loop {
         tokio::select! {
@@ -148,15 +173,36 @@ pub async fn run(
                     SampleKind::Delete => {
                         tracing::warn!(process = %config.name, role = %role, "leader role lost its token");
                         alive.remove(&role);
-                        if !roles.contains(&role) {
+                        if role == config.name && home.is_some() && !roles.contains(&role) {
+                            // Its own role is free (handed back, or the old
+                            // token expired): take it now, takeover or not.
+                            tracing::warn!(process = %config.name, "its role is free again: taking it back");
+                            home = None;
+                            host(&role, true, &mut hosted, &mut stops);
+                            roles.insert(role);
+                        } else if !roles.contains(&role) {
                             lost.insert(role, Instant::now());
                         }
+                    }
+                }
+            }
+            sample = homes.recv_async() => {
+                let Ok(sample) = sample else { break };
+                let Some(role) = Keys::chunk(sample.key_expr().as_str(), 0) else { continue };
+                // A role adopted here whose own process is back: hand it
+                // back. Stopping the actor syncs its journal, then drops
+                // the role's token, which the home process waits for.
+                if sample.kind() == SampleKind::Put && role != config.name && roles.contains(role) {
+                    tracing::warn!(process = %config.name, role, "its process is back: handing the role back");
+                    if let Some(stop) = stops.get(role) {
+                        let _ = stop.send(true);
                     }
                 }
             }
             done = hosted.join_next(), if !hosted.is_empty() => {
                 if let Some(Ok((role, result))) = done {
                     roles.remove(&role);
+                    stops.remove(&role);
                     match result {
                         Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
                         Err(e) => tracing::error!(process = %config.name, role = %role, error = %e, "role failed"),
@@ -164,6 +210,19 @@ pub async fn run(
                 }
             }
             _ = tick.tick() => {
+                // Standing by, and the role's token went away before the
+                // subscriber was there to see it go: take it all the same.
+                if home.is_some()
+                    && !alive.contains(&config.name)
+                    && !roles.contains(&config.name)
+                    && standing.elapsed() > Duration::from_secs(1)
+                    && !hosted_elsewhere(&session, keys, &config.name).await
+                {
+                    tracing::warn!(process = %config.name, "its role is free: taking it back");
+                    home = None;
+                    host(&config.name, true, &mut hosted, &mut stops);
+                    roles.insert(config.name.clone());
+                }
                 let Some(patience) = config.takeover_after else { continue };
                 let due: Vec<String> = lost
                     .iter()
@@ -187,19 +246,35 @@ pub async fn run(
                         continue;
                     }
                     tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
-                    host(&role, true, &mut hosted);
+                    host(&role, true, &mut hosted, &mut stops);
                     roles.insert(role);
                 }
             }
         }
     }
-    let _ = stop_tx.send(true);
+    for stop in stops.values() {
+        let _ = stop.send(true);
+    }
+    drop(home);
     while let Some(done) = hosted.join_next().await {
         if let Ok((role, Err(e))) = done {
             tracing::error!(process = %config.name, role = %role, error = %e, "role failed");
         }
     }
     Ok(())
+}
+
+/// The token of a process standing by for its own role `name`.
+async fn declare_home(
+    session: &Session,
+    keys: &Keys,
+    name: &str,
+) -> Result<zenoh::liveliness::LivelinessToken, MeshError> {
+    session
+        .liveliness()
+        .declare_token(keys.alive("home", name))
+        .await
+        .map_err(|e| MeshError::new("declare the home liveliness token", e))
 }
 
 /// Whether some process holds `role`'s token now.

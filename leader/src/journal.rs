@@ -42,6 +42,9 @@ pub enum Kind {
     /// The first frame: the generation of the snapshot this journal
     /// continues (u64, little-endian). Not an input.
     Generation = 4,
+    /// An input refused at the door (empty): not applied, only counted,
+    /// so that `rejected` does not restart from 0 after a restart.
+    Rejected = 5,
 }
 
 impl Kind {
@@ -51,6 +54,7 @@ impl Kind {
             2 => Some(Kind::Transfer),
             3 => Some(Kind::Followed),
             4 => Some(Kind::Generation),
+            5 => Some(Kind::Rejected),
             _ => None,
         }
     }

@@ -28,6 +28,8 @@ pub struct Settings {
     pub takeover_after_ms: Option<u64>,
     /// The sensor's `[sensor.faults]` section, e.g. `duplicate = true`.
     pub faults: Option<String>,
+    /// The leaders' `[leader_faults]` section, e.g. `drop_transfer_every = 3`.
+    pub leader_faults: Option<String>,
     /// A `[security]` section: mutual TLS, and access control if asked.
     pub security: Option<Secured>,
 }
@@ -209,6 +211,9 @@ impl Deployment {
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
         }
+        if let Some(faults) = &settings.leader_faults {
+            toml.push_str(&format!("\n[leader_faults]\n{faults}\n"));
+        }
         if let Some(secured) = &settings.security {
             toml.push_str(&format!(
                 "\n[security]\ncerts = {:?}\naccess_control = {}\nclients = [{:?}]\n",
@@ -264,15 +269,7 @@ impl Deployment {
             .args(self.client_tls_args())
             .output()
             .expect("idmesh query runs");
-        let answers = String::from_utf8_lossy(&output.stdout)
-            .lines()
-            .map(|l| serde_json::from_str(l).expect("query prints JSON"))
-            .collect();
-        (
-            answers,
-            String::from_utf8_lossy(&output.stderr).into_owned(),
-            output.status.success(),
-        )
+        query_output(&output)
     }
 
     /// `--ca`, `--cert`, `--key` of the deployment's client, for a
@@ -314,25 +311,12 @@ impl Deployment {
         patience: Duration,
         wanted: impl Fn(&Value) -> bool,
     ) -> Value {
-        let started = Instant::now();
-        let mut last = String::new();
         let args: Vec<&str> = question
             .iter()
             .copied()
             .chain(["--timeout-ms", "5000"])
             .collect();
-        while started.elapsed() < patience {
-            match self.query(&args) {
-                Ok(replies) if wanted(&replies[0]) => return replies[0].clone(),
-                Ok(replies) => last = replies[0]["watermark"].to_string(),
-                Err(e) => last = e,
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        panic!(
-            "no answer as wanted within {patience:?}; last: {last}\n{}",
-            self.log()
-        );
+        answer_until(patience, || self.query(&args), wanted, || self.log())
     }
 
     /// Asks `question` (e.g. `marginals`) right after the events before
@@ -424,6 +408,44 @@ impl Drop for Deployment {
             let _ = child.wait();
         }
     }
+}
+
+/// What `idmesh query --json` printed: its JSON lines, its stderr, and
+/// whether it succeeded.
+pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {
+    let answers = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("query prints JSON"))
+        .collect();
+    (
+        answers,
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+        output.status.success(),
+    )
+}
+
+/// Asks (`ask`) every 100 ms until the first reply satisfies `wanted`,
+/// or panics after `patience` with the last answer or error and `log()`.
+pub fn answer_until(
+    patience: Duration,
+    ask: impl Fn() -> Result<Vec<Value>, String>,
+    wanted: impl Fn(&Value) -> bool,
+    log: impl Fn() -> String,
+) -> Value {
+    let started = Instant::now();
+    let mut last = String::new();
+    while started.elapsed() < patience {
+        match ask() {
+            Ok(replies) if wanted(&replies[0]) => return replies[0].clone(),
+            Ok(replies) => last = replies[0]["watermark"].to_string(),
+            Err(e) => last = e,
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    panic!(
+        "no answer as wanted within {patience:?}; last: {last}\n{}",
+        log()
+    );
 }
 
 /// `idmesh simulate` a crowd into `dir`.

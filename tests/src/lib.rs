@@ -6,6 +6,7 @@
 pub mod browser;
 pub mod compare;
 pub mod deployment;
+pub mod lan;
 pub mod python;
 pub mod sim;
 pub mod web;

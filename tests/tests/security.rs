@@ -306,6 +306,12 @@ fn with_access_control_only_listed_identities_are_heard() {
         "under access control",
     );
     let before = leader_stats(&deployment);
+    // The generated rules let the coordinator ask the sensor for its
+    // counters too (issue 16: `"sensors": []` under `[security]`).
+    let stats = deployment.query(&["stats"]).expect("stats answer");
+    let sensors = stats[0]["sensors"].as_array().expect("sensors");
+    assert_eq!(sensors.len(), 1, "the sensor's counters: {stats:?}");
+    assert_eq!(sensors[0]["sensor"], "sensor-0");
     let prefix = deployment.prefix.clone();
     within(Duration::from_secs(60), async {
         let intruder = session(&certs, INTRUDER, false, &endpoints(&deployment))

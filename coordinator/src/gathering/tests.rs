@@ -77,6 +77,35 @@ fn a_missing_leader_fails_the_query_by_name() {
     );
 }
 
+/// Issue 16: while leader c is down, b holds the cut waiting for c's sets
+/// and says so; Zenoh's bare "Timeout" names nobody. The answer names c
+/// as missing, every time, with what b said, and not b.
+#[test]
+fn the_leader_that_did_not_answer_is_named_beside_what_the_others_said() {
+    let memory = Memory::default();
+    let replies = vec![
+        Ok(encode(&part("a", 7, 9, 1.0, vec![]))),
+        Err("degraded: leader b did not reach the cut tagged 9 within 1.5s: it waits for sets from c at item 5".into()),
+        Err("Timeout".into()),
+    ];
+    let (parts, errors) = gather(9, replies, &memory).into_parts();
+    let e = check(
+        cut(7, &["a", "b", "c"]),
+        parts,
+        errors,
+        Duration::ZERO,
+        &memory,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&e, GatherError::Missing { missing, .. } if missing == &["c"]),
+        "{e}"
+    );
+    let text = e.to_string();
+    assert!(text.contains("waits for sets from c"), "{text}");
+    assert!(!text.contains("Timeout"), "{text}");
+}
+
 #[test]
 fn bad_replies_are_counted_and_refuse_the_answer() {
     let memory = Memory::default();

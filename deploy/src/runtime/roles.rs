@@ -66,6 +66,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                             .then_some(topology.snapshot_every),
                         takeover_after: (topology.takeover_after_ms > 0)
                             .then(|| Duration::from_millis(topology.takeover_after_ms)),
+                        drop_transfer_every: topology.leader_faults.drop_transfer_every,
                     },
                     shutdown(),
                 )

@@ -30,6 +30,8 @@
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
+//! # [leader_faults]              # tests only: a link that loses transfers
+//! # drop_transfer_every = 5      # every 5th transfer a leader sends, lost
 //!
 //! [[leader]]
 //! name = "leader-0"
@@ -44,7 +46,8 @@
 //! With `[security]` (see [`super::security`]) every endpoint is reached
 //! over TLS: `tcp/host:port` here means `tls/host:port`. Ready-made files:
 //! `deploy/examples/topology.toml` (plain) and `deploy/examples/secure.toml`
-//! (with the certificates of `deploy/examples/make-certs.sh`).
+//! (with the certificates of `deploy/examples/make-certs.sh`) on one
+//! machine; `deploy/examples/lan.toml` and `secure-lan.toml` on three.
 
 use super::security::SecuritySection;
 use anyhow::{bail, Context, Result};
@@ -79,6 +82,9 @@ pub struct Topology {
     pub coordinator: Process,
     pub sensor: SensorProcess,
     pub leader: Vec<LeaderProcess>,
+    /// Faults every leader injects on purpose (tests).
+    #[serde(default)]
+    pub leader_faults: LeaderFaultSection,
     /// Mutual TLS and access control; None = plain TCP, anyone may connect.
     pub security: Option<SecuritySection>,
     /// Where the file was read from (relative paths start there).
@@ -129,6 +135,15 @@ pub struct FaultSection {
     #[serde(default)]
     pub duplicate: bool,
     pub drop_every: Option<u64>,
+}
+
+/// Faults the leaders inject on purpose: a transfer lost on a live link,
+/// as a TLS link that closes and reopens loses one.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LeaderFaultSection {
+    /// Every n-th transfer a leader puts is not put.
+    pub drop_transfer_every: Option<u64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -294,6 +309,15 @@ mod tests {
             let topology = Topology::load(&examples.join(name)).unwrap();
             assert!(topology.trace_path().exists(), "{name}: no trace");
             assert_eq!(topology.leader.len(), 2, "{name}");
+        }
+        // Three machines on a LAN, plain and secured: the gateway runs the
+        // coordinator and the sensor, east and west two leaders each.
+        for name in ["lan.toml", "secure-lan.toml"] {
+            let topology = Topology::load(&examples.join(name)).unwrap();
+            assert!(topology.trace_path().exists(), "{name}: no trace");
+            let on = |host: &str| topology.members().iter().filter(|m| m.host == host).count();
+            assert_eq!((on("gateway"), on("east"), on("west")), (2, 2, 2), "{name}");
+            assert_eq!(topology.security.is_some(), name.starts_with("secure"));
         }
     }
 

@@ -20,8 +20,10 @@
 //!   network, or sent while this leader was down): ask that peer for what
 //!   it sent this leader;
 //! - a follow request that failed or came back unusable: asked again;
-//! - a query held for its cut longer than [`Timers::query_timeout`]:
-//!   answered with an error;
+//! - a query held for its cut nearly as long as
+//!   [`Timers::query_timeout`]: answered with an error naming what the
+//!   leader waits for (a peer's sets, the sensor's batches), in time for
+//!   the coordinator to say who is missing;
 //! - on every tick the journal is synced and, if that worked and it moved,
 //!   the durable mark published;
 //! - after every [`Timers::snapshot_every`] journaled inputs, a snapshot.
@@ -299,7 +301,7 @@ impl Node {
                     self.leader.forget_sent(&mark.leader, mark.position);
                 }
                 Ok(_) => {}
-                Err(e) => self.reject("a durable mark", &origin, &e),
+                Err(e) => self.reject("a durable mark", &origin, &e, &mut out),
             },
             Input::Partial { id, ask } => self.partial(now, id, ask, &mut out),
             Input::SentWanted { id, bytes, origin } => {
@@ -308,7 +310,7 @@ impl Node {
                     transfers: self.leader.sent_to(wanted.to, wanted.after),
                 });
                 if let Err(e) = &answer {
-                    self.reject("a request for sent transfers", &origin, e);
+                    self.reject("a request for sent transfers", &origin, e, &mut out);
                 }
                 out.push(Output::AnswerSent {
                     id,
@@ -332,7 +334,7 @@ impl Node {
             Ok(input) => input,
             Err(problem) => {
                 let what = format!("{kind:?} of {} bytes", bytes.len());
-                self.reject(&what, origin, &problem);
+                self.reject(&what, origin, &problem, out);
                 return;
             }
         };
@@ -508,9 +510,27 @@ impl Node {
 
     /// Counts and logs a message from the network the leader refused: it
     /// changes nothing else.
-    fn reject(&mut self, what: &str, from: &str, problem: &WireError) {
+    fn reject(&mut self, what: &str, from: &str, problem: &WireError, out: &mut Vec<Output>) {
+        self.count_rejected(what, from, problem, out);
+    }
+
+    /// Counts a refusal, logs it, and journals that it happened (not what
+    /// came), so the count survives a restart.
+    pub(super) fn count_rejected(
+        &mut self,
+        what: &str,
+        from: &str,
+        problem: &dyn std::fmt::Display,
+        out: &mut Vec<Output>,
+    ) {
         let rejected = self.leader.note_rejected();
         tracing::warn!(leader = %self.leader.name(), from, what, %problem, rejected, "input rejected");
+        if self.timers.journal {
+            out.push(Output::Journal {
+                kind: Kind::Rejected,
+                bytes: Vec::new(),
+            });
+        }
     }
 }
 

@@ -4,6 +4,7 @@
 //! answer at it in the same breath, so a query usually comes first).
 
 use super::{Held, Node, Now, Output};
+use std::time::Duration;
 
 /// What a partial-sums query asks for (`?tag=T`, `?quiet`, `;rows`).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -36,7 +37,7 @@ impl Ask {
 impl Node {
     /// Answers query `id`, or holds it for its cut.
     pub(super) fn partial(&mut self, now: Now, id: u64, ask: Ask, out: &mut Vec<Output>) {
-        let name = self.leader.name();
+        let name = self.leader.name().to_string();
         let answer = if let Some(failure) = &self.failure {
             Err(format!("leader {name} failed: {failure}"))
         } else if let Some(since) = self.recovering_since() {
@@ -46,7 +47,11 @@ impl Node {
             ))
         } else {
             match ask {
-                Ask::Bad(why) => Err(why),
+                Ask::Bad(why) => {
+                    // Bad input like any other: logged and counted.
+                    self.count_rejected("a partial-sums query", "the coordinator", &why, out);
+                    Err(why)
+                }
                 Ask::Quiet { rows } => self
                     .leader
                     .quiet(rows)
@@ -67,23 +72,56 @@ impl Node {
         out.push(Output::Answer { id, answer });
     }
 
-    /// Answers with an error every query that has waited longer than the
-    /// query timeout for its cut (the sensor never placed it, or the
-    /// stream is stuck).
+    /// Answers with an error every query that has waited for its cut
+    /// longer than [`Node::hold_for`], saying what the leader waits for
+    /// (a peer's transfer, the sensor's batches), so that the
+    /// coordinator can name who is missing before it gives up itself.
     pub(super) fn expire(&mut self, now: Now, out: &mut Vec<Output>) {
-        let timeout = self.timers.query_timeout;
+        let patience = self.hold_for();
         let expired: Vec<Held> = self
             .held
-            .extract_if(.., |h| now.saturating_sub(h.since) > timeout)
+            .extract_if(.., |h| now.saturating_sub(h.since) > patience)
             .collect();
+        if expired.is_empty() {
+            return;
+        }
+        let why = self.stuck_on();
+        let name = self.leader.name().to_string();
         for h in expired {
             out.push(Output::Answer {
                 id: h.id,
                 answer: Err(format!(
-                    "the cut tagged {} did not reach this leader within {timeout:?}",
+                    "degraded: leader {name} did not reach the cut tagged {} within {patience:?}: {why}",
                     h.tag
                 )),
             });
         }
+    }
+
+    /// How long a query is held for its cut: the query timeout less two
+    /// sweeps (the tick that notices it, and the way back), so the reply
+    /// naming what is missing reaches the coordinator before the
+    /// coordinator's own timeout, which would only say "Timeout"; never
+    /// less than half the timeout.
+    pub(super) fn hold_for(&self) -> Duration {
+        let timeout = self.timers.query_timeout;
+        timeout
+            .saturating_sub(2 * self.timers.sweep)
+            .max(timeout / 2)
+    }
+
+    /// What keeps this leader from its stream's head, in words.
+    pub(super) fn stuck_on(&self) -> String {
+        if let Some((seq, from)) = self.leader.waiting_for_transfer() {
+            let peer = self.leader.peer(from).unwrap_or("an unknown leader");
+            return format!("it waits for sets from {peer} at item {seq}");
+        }
+        if let Some(next) = self.leader.missing_batches() {
+            return format!("it waits for batch {next} from the sensor");
+        }
+        format!(
+            "no batch with the cut came from the sensor (its last applied item is {})",
+            self.leader.position()
+        )
     }
 }

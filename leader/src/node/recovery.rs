@@ -35,12 +35,18 @@ impl Node {
         let mut replayed = 0;
         for (kind, bytes) in entries {
             replayed += 1;
+            if kind == Kind::Rejected {
+                // A refusal, journaled so the count survives restarts.
+                node.leader.note_rejected();
+                continue;
+            }
             // Only admitted inputs are journaled: the door takes them
             // again (counted if not, as when they first came).
             let input = match door::admit(&node.leader, kind, bytes) {
                 Ok(input) => input,
                 Err(problem) => {
-                    node.reject(&format!("{kind:?}"), "the journal", &problem);
+                    let rejected = node.leader.note_rejected();
+                    tracing::warn!(leader = %name, what = ?kind, %problem, rejected, "journal entry rejected");
                     continue;
                 }
             };

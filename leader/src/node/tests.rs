@@ -121,14 +121,62 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
         },
     );
     assert!(answers(&out)[0].1.is_ok());
-    // Query 2's cut never comes: an error once it waited the timeout.
-    let out = node.step(2 * 1000 * MS, Input::Tick);
+    // Query 2's cut never comes: an error once it waited the timeout
+    // less two sweeps, so that the coordinator (which waits the timeout)
+    // hears why before it gives up.
+    let out = node.step(1400 * MS, Input::Tick);
     assert!(answers(&out).is_empty(), "not yet: {out:?}");
-    let out = node.step(2100 * MS, Input::Tick);
+    let out = node.step(1600 * MS, Input::Tick);
     let answered = answers(&out);
     assert_eq!(answered.len(), 1);
-    assert!(answered[0].1.as_ref().unwrap_err().contains("cut tagged 8"));
+    let error = answered[0].1.as_ref().unwrap_err();
+    assert!(
+        error.contains("leader a did not reach the cut tagged 8"),
+        "{error}"
+    );
+    assert!(error.contains("no batch with the cut came"), "{error}");
     assert_eq!(node.held(), 0);
+}
+
+/// Issue 16: a leader waiting for a dead peer's sets says whose, before
+/// the coordinator's timeout, so that every degraded answer names who is
+/// missing.
+#[test]
+fn a_query_held_behind_a_peers_sets_expires_naming_the_peer() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(
+        10 * MS,
+        batch(1, vec![(2, mix(0, 2, 0, 1)), (3, cut(9))], 3),
+    );
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+    node.step(
+        20 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Cut(9),
+        },
+    );
+    assert_eq!(node.held(), 1);
+    let out = node.step(1600 * MS, Input::Tick);
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1, "{out:?}");
+    let error = answered[0].1.as_ref().unwrap_err();
+    assert!(error.contains("waits for sets from b at item 2"), "{error}");
+}
+
+/// A malformed partial-sums query is bad input: answered with why, and
+/// counted.
+#[test]
+fn a_malformed_partial_query_is_counted() {
+    let mut node = started("a", &["a"]);
+    let ask = Ask::parse(false, false, Some("abc"));
+    let out = node.step(MS, Input::Partial { id: 1, ask });
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("tag=<u64>"));
+    assert_eq!(node.leader().stats().rejected, 1);
 }
 
 #[test]
@@ -340,7 +388,8 @@ fn inputs_are_journaled_before_their_effects_and_snapshots_come_every_n() {
         })
         .collect();
     assert_eq!(kinds, ["journal", "send"]);
-    // Refused at the door: neither journaled nor counted as an input.
+    // Refused at the door: only the refusal is journaled (so the count
+    // survives a restart), not its bytes, and it is no input.
     let out = node.step(
         3 * MS,
         Input::Message {
@@ -349,7 +398,13 @@ fn inputs_are_journaled_before_their_effects_and_snapshots_come_every_n() {
             origin: "x".into(),
         },
     );
-    assert!(out.is_empty());
+    assert_eq!(
+        out,
+        [Output::Journal {
+            kind: Kind::Rejected,
+            bytes: Vec::new()
+        }]
+    );
     assert_eq!(node.leader().stats().rejected, 1);
     node.step(4 * MS, batch(2, vec![], 2));
     let out = node.step(5 * MS, batch(3, vec![], 2));
@@ -424,6 +479,65 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     // With nothing in its journal, a leader just starts.
     let (node, out) = Node::recover("a", "h", None, [], false, timers(), MS).unwrap();
     assert!(out.is_empty() && node.recovering_since().is_none());
+}
+
+/// Issue 16: a batch that came before the Begin is checked against it when
+/// the Begin comes; refused, it is asked for again at once — not at the
+/// next gap, which at the stream's end never comes.
+#[test]
+fn a_batch_held_before_the_begin_and_refused_is_asked_for_again_at_once() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    // Track 9 of a stream of 4: a misfit only the Begin can tell.
+    let out = node.step(MS, batch(1, vec![(2, mix(0, 9, 0, 0))], 2));
+    assert_eq!(resends(&out), 1, "the gap before it is asked for");
+    node.step(2 * MS, batch(0, vec![(1, begin(&["a"]))], 1));
+    assert_eq!(node.leader().stats().rejected, 1);
+    assert_eq!(node.leader().missing_batches(), Some(1));
+    // The first request comes back (batch 0 came meanwhile): batch 1 is
+    // asked for again at once.
+    let out = node.step(3 * MS, Input::Resent(Ok(vec![])));
+    assert_eq!(resends(&out), 1, "{out:?}");
+}
+
+/// Issue 16: `rejected` survives a restart — a refusal is journaled (as
+/// a mark, not the bytes) and counted again on replay.
+#[test]
+fn the_rejected_count_survives_a_restart() {
+    let mut node = started("a", &["a"]);
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut keep = |out: Vec<Output>| {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    };
+    keep(node.step(MS, batch(0, vec![(1, begin(&["a"]))], 1)));
+    let junk = Input::Message {
+        kind: Kind::Transfer,
+        bytes: b"junk".to_vec(),
+        origin: "test".into(),
+    };
+    keep(node.step(2 * MS, junk));
+    keep(node.step(
+        3 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::parse(false, false, Some("abc")),
+        },
+    ));
+    assert_eq!(node.leader().stats().rejected, 2);
+    let (back, _) = Node::recover(
+        "a",
+        "a",
+        None,
+        journal.iter().map(|(k, b)| (*k, b.as_slice())),
+        false,
+        timers(),
+        4 * MS,
+    )
+    .unwrap();
+    assert_eq!(back.leader().stats().rejected, 2);
 }
 
 #[test]
@@ -553,12 +667,20 @@ fn a_peers_durable_mark_lets_the_leader_forget_what_it_sent_there() {
             origin: "x".into(),
         },
     );
-    assert!(matches!(
-        &out[..],
-        [Output::AnswerSent {
-            id: 4,
-            answer: Err(_)
-        }]
-    ));
+    // (Each refusal is journaled too, so the count survives a restart.)
+    let answers: Vec<_> = out
+        .iter()
+        .filter(|o| matches!(o, Output::AnswerSent { .. }))
+        .collect();
+    assert!(
+        matches!(
+            &answers[..],
+            [Output::AnswerSent {
+                id: 4,
+                answer: Err(_)
+            }]
+        ),
+        "{out:?}"
+    );
     assert_eq!(node.leader().stats().rejected, 2);
 }

@@ -29,11 +29,13 @@ impl Leader {
             }
             let (batch, bytes) = entry.remove();
             // Held before the Begin, it was checked on its own only: a
-            // misfit is dropped like a lost batch (the next gap asks for
-            // it again).
+            // misfit is dropped like a lost batch and asked for again at
+            // once (the real one may yet come; waiting for the next gap
+            // could wait for ever at the stream's end).
             if let Some(Err(e)) = self.bounds().map(|b| b.check_batch(&batch)) {
                 tracing::warn!(leader = %self.name, number = batch.number, error = %e, "batch rejected");
                 self.stats.rejected += 1;
+                self.refetch = true;
                 break;
             }
             actions.extend(self.take_batch(batch, bytes)?);
@@ -43,7 +45,7 @@ impl Leader {
 
     /// The first batch number missing before one that arrived, if any.
     pub fn missing_batches(&self) -> Option<u64> {
-        (!self.ahead.is_empty()).then_some(self.next_batch)
+        (!self.ahead.is_empty() || self.refetch).then_some(self.next_batch)
     }
 
     /// Applies the next batch in number order.
@@ -53,6 +55,7 @@ impl Leader {
         bytes: usize,
     ) -> Result<Vec<Action>, LeaderError> {
         self.next_batch += 1;
+        self.refetch = false;
         self.stats.batches += 1;
         self.stats.bytes_received += bytes as u64;
         for Sequenced { seq, item } in batch.items {

@@ -118,6 +118,9 @@ pub struct Leader {
     events: u64,
     finished: bool,
     stats: LeaderStats,
+    /// A batch held ahead before the Begin was refused once the Begin
+    /// came: the sensor is asked for it again at once, not at the next gap.
+    refetch: bool,
 }
 
 impl Leader {
@@ -143,6 +146,7 @@ impl Leader {
             cuts: VecDeque::new(),
             events: 0,
             finished: false,
+            refetch: false,
         }
     }
 

@@ -18,6 +18,7 @@
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
 //! | `P/query/positions` | coordinator queryable | where every track was last seen, and its leader (JSON) |
 //! | `P/alive/<role>/<name>` | every process | liveliness token |
+//! | `P/alive/home/<name>` | a leader process standing by for its own role | asks the process that adopted the role to hand it back |
 //! | `P/ping/<role>/<name>` | every process | answers at once: the raw round trip, for health checks and the bench |
 
 pub const DEFAULT_PREFIX: &str = "idmesh/default";

@@ -142,6 +142,10 @@ impl<Q> Gateway<Q> {
             )),
             Request::Scheduled => CutOutcome::Scheduled,
             Request::Refused { query, reason } => CutOutcome::Refused(query, reason),
+            Request::Malformed { query, reason } => {
+                self.count::<()>("cut", &Err(reason.clone()));
+                CutOutcome::Refused(query, reason)
+            }
         }
     }
 

@@ -36,8 +36,10 @@ pub enum Request<Q> {
     Now { wanted: Wanted, query: Q },
     /// Held until the stream reaches its point.
     Scheduled,
-    /// Refused, with the reason.
+    /// Refused, with the reason (a point the stream cannot give).
     Refused { query: Q, reason: String },
+    /// Malformed parameters: bad input, refused and counted like any.
+    Malformed { query: Q, reason: String },
 }
 
 pub struct Cuts<Q> {
@@ -87,7 +89,7 @@ impl<Q> Cuts<Q> {
             .as_deref()
             .and_then(|t| t.parse::<u64>().ok())
         else {
-            return Request::Refused {
+            return Request::Malformed {
                 query,
                 reason: "a cut needs tag=<u64>: the tag leaders will be asked for".into(),
             };
@@ -100,7 +102,7 @@ impl<Q> Cuts<Q> {
             None => return Request::Now { wanted, query },
             Some(Ok(at)) => at,
             Some(Err(_)) => {
-                return Request::Refused {
+                return Request::Malformed {
                     query,
                     reason: "events=<n> must be a count of events".into(),
                 }

@@ -50,6 +50,11 @@ pub enum RouterError {
     Omp(&'static str),
     #[error(transparent)]
     Start(#[from] PlacementError),
+    /// A stream the leaders would refuse at its Begin (say, an identity
+    /// stream beyond their track limit): refused here, before anything is
+    /// sent, rather than streamed to leaders that drop every batch.
+    #[error("the stream cannot start: {0}")]
+    Begin(String),
 }
 
 pub struct Router {
@@ -98,6 +103,7 @@ impl Router {
             identities: header.identities.is_some(),
             initial_identity: header.initial_identity.clone(),
         };
+        begin.check().map_err(RouterError::Begin)?;
         let interests = idmesh_placement::interests(&begin)?;
         let mut router = Router {
             owners: begin.owners.clone(),

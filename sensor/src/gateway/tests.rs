@@ -239,7 +239,12 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
         _ => panic!("refused"),
     };
     assert!(refused(gateway.cut(4, &at("14", Some("1")))).contains("keeps no history"));
+    // A point passed is no bad input; a malformed tag or point is, and is
+    // counted like any (issue 16: `cut?tag=abc` was answered, not counted).
+    assert_eq!(gateway.stats().rejected, 0);
     assert!(refused(gateway.cut(5, &at("x", None))).contains("tag=<u64>"));
+    assert!(refused(gateway.cut(7, &at("17", Some("abc")))).contains("events=<n>"));
+    assert_eq!(gateway.stats().rejected, 2);
     // The stream ends before event 9: that cut is refused, and so is any
     // later point.
     let ended = gateway.end();
@@ -247,6 +252,33 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
     assert!(ended[0].1.contains("ended at 3 events, before event 9"));
     assert!(refused(gateway.cut(6, &at("16", Some("5")))).contains("ended"));
     assert!(gateway.flush().iter().all(|b| b.finished));
+}
+
+/// Issue 16: an identity stream beyond the leaders' track limit (n × n
+/// numbers) is refused at the sensor, not streamed to leaders that drop
+/// every batch.
+#[test]
+fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
+    let limit = idmesh_protocol::wire::valid::MAX_IDENTITY_TRACKS as usize;
+    let config = |leaders: usize| RouterConfig {
+        sensor: "s".into(),
+        leaders: (0..leaders)
+            .map(|i| LeaderPlace {
+                name: format!("l{i}"),
+                at: None,
+            })
+            .collect(),
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+    };
+    let mut header = Header::new(limit + 1);
+    header.identities = Some(limit + 1);
+    let e = Router::new(config(2), &header).err().expect("refused");
+    assert!(e.to_string().contains("identity stream"), "{e}");
+    let mut header = Header::new(8);
+    header.identities = Some(8);
+    assert!(Router::new(config(2), &header).is_ok());
 }
 
 #[test]

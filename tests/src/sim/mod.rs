@@ -28,7 +28,7 @@ mod network;
 mod scenario;
 mod world;
 
-pub use world::Tally;
+pub use world::{Aimed, Tally};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -59,7 +59,12 @@ impl std::fmt::Display for Violation {
 
 /// Runs schedule `seed` to its end.
 pub fn run(seed: u64) -> Result<Tally, Violation> {
-    let mut world = world::World::new(ChaCha8Rng::seed_from_u64(seed))?;
+    run_aimed(seed, Aimed::default())
+}
+
+/// Runs schedule `seed` with the `aimed` faults added.
+pub fn run_aimed(seed: u64, aimed: Aimed) -> Result<Tally, Violation> {
+    let mut world = world::World::aimed(ChaCha8Rng::seed_from_u64(seed), aimed)?;
     world.run()?;
     Ok(world.tally.clone())
 }

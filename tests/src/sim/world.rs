@@ -180,6 +180,24 @@ enum Phase {
     Fresh,
 }
 
+/// Faults aimed at one kind of message, on top of a seed's random ones
+/// (issue 16: each must heal without a restart).
+#[derive(Debug, Clone, Default)]
+pub struct Aimed {
+    /// The first copy of every transfer between leaders is lost, on a
+    /// live link (no partition, no crash): as when a TLS link closes and
+    /// reopens under it. Only asking the sender again gets it through.
+    pub lose_transfers: bool,
+    /// The sensor refuses every resend request (an error reply) until
+    /// this virtual time, then answers them again.
+    pub refuse_resends_until: Ms,
+    /// One leader is cut off from everyone for this long (ms) from a
+    /// random point mid-stream, much longer than a get's timeout: its
+    /// requests fail for seconds, and must go on being made until the
+    /// partition heals.
+    pub long_partition: Ms,
+}
+
 /// What a schedule did (for the report and the failure message).
 #[derive(Debug, Default, Clone)]
 pub struct Tally {
@@ -215,10 +233,15 @@ pub struct World {
     calm: bool,
     pub tally: Tally,
     last_error: String,
+    aimed: Aimed,
+    /// Transfers lost once already (by sender, receiver and seq).
+    lost_once: BTreeSet<(usize, usize, u64)>,
 }
 
 impl World {
-    pub fn new(mut rng: ChaCha8Rng) -> Result<World, Violation> {
+    /// A world for one seed's schedule, with the `aimed` faults added
+    /// (none: [`Aimed::default`]).
+    pub fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
@@ -255,6 +278,8 @@ impl World {
             calm: false,
             tally: Tally::default(),
             last_error: String::new(),
+            aimed,
+            lost_once: BTreeSet::new(),
         };
         for i in 0..count {
             world.leaders[i].snapshot_every = world.rng.gen_range(3..=30);
@@ -269,7 +294,17 @@ impl World {
             world.net.at(at, Event::QueryStart);
         }
         world.net.schedule_faults(&mut world.rng, span, count);
-        world.net.at(span + 100, Event::Calm);
+        let mut calm = span + 100;
+        if world.aimed.long_partition > 0 {
+            let (at, leader) = (world.rng.gen_range(0..span), world.rng.gen_range(0..count));
+            world.net.at(at, Event::Isolate(leader));
+            let heal = at + world.aimed.long_partition;
+            world.net.at(heal, Event::Heal(leader));
+            // The partition heals before the faults stop: healing is the
+            // deployment's job, not the calm's.
+            calm = calm.max(heal + 100);
+        }
+        world.net.at(calm, Event::Calm);
         Ok(world)
     }
 
@@ -292,7 +327,7 @@ impl World {
     }
 
     fn calm_deadline(&self) -> Ms {
-        40 * self.scenario.lines.len() as Ms + 300 + FINAL_PATIENCE
+        40 * self.scenario.lines.len() as Ms + 300 + self.aimed.long_partition + FINAL_PATIENCE
     }
 
     fn fresh_id(&mut self) -> u64 {
@@ -431,7 +466,11 @@ impl World {
                 self.reply_leader(from, ask, answer.map(|f| encode(&f)));
             }
             ToSensor::Resend { ask, bytes } => {
-                let answer = self.gateway.resend(&bytes).map(|r| encode(&r));
+                let answer = if self.now < self.aimed.refuse_resends_until {
+                    Err("resend refused (the simulator's aimed fault)".to_string())
+                } else {
+                    self.gateway.resend(&bytes).map(|r| encode(&r))
+                };
                 self.reply_leader(from, ask, answer);
             }
             ToSensor::Durable(bytes) => self.gateway.durable(&bytes, "sim"),
@@ -571,10 +610,15 @@ impl World {
         for output in outputs {
             match output {
                 Output::Journal { kind, bytes } => self.leaders[i].disk.entries.push((kind, bytes)),
-                Output::Send { to, body, .. } => {
+                Output::Send { to, seq, body } => {
                     let Some(j) = self.leaders.iter().position(|l| l.name == to) else {
                         return Err(Violation::new(format!("transfer to unknown {to}")));
                     };
+                    if self.aimed.lose_transfers && self.lost_once.insert((i, j, seq)) {
+                        self.tally.messages += 1;
+                        self.tally.dropped += 1;
+                        continue;
+                    }
                     self.send(
                         Endpoint::Leader(i),
                         Endpoint::Leader(j),

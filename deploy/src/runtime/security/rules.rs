@@ -19,12 +19,12 @@
 //! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/resend` |
 //! | leader L | sensor, leaders | put | `P/leader/*/durable` (how far it is safe) |
 //! | sensor, leaders | leaders | declare subscriber | `P/leader/*/durable` |
-//! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership) |
+//! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership), `P/alive/home/*` (a process back for its adopted role) |
 //! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
 //! | coordinator | sensor | query | `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions` |
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
-//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) |
+//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) and its home token `P/alive/home/N` |
 //! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
 
@@ -119,7 +119,9 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             &leaders,
             &leaders,
             &["declare_liveliness_subscriber", "liveliness_query"],
-            vec![keys.alive_role("leader")],
+            // `P/alive/home/*`: a process back for its role, which the
+            // process that adopted it hands back.
+            vec![keys.alive_role("leader"), keys.alive_role("home")],
         ),
         grant(
             "partials",
@@ -133,6 +135,7 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             &coordinator,
             &sensor,
             &["query"],
+            // Its counters and positions too (`query/stats` lists the sensor's).
             vec![
                 keys.every_sensor_cut(),
                 keys.every_sensor_stats(),
@@ -210,16 +213,18 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
                 asked_as,
             ));
         }
-        let token = match m.role {
-            "leader" => keys.alive_role("leader"),
-            role => keys.alive(role, &m.name),
+        let tokens = match m.role {
+            // Any leader role's, and its own home token (standing by
+            // for its role).
+            "leader" => vec![keys.alive_role("leader"), keys.alive("home", &m.name)],
+            role => vec![keys.alive(role, &m.name)],
         };
         grants.push(grant(
             &format!("{}-alive", m.name),
             &me,
             &members,
             &["liveliness_token"],
-            vec![token],
+            tokens,
         ));
     }
     grants
@@ -423,6 +428,14 @@ clients = ["operator"]
         assert!(!allowed(&s, "ingress", "c", "put", "p/leader/l1/durable"));
         let l1 = access_control(&t, "l1");
         assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
+        // The coordinator may ask the sensor for its counters (issue 16:
+        // `query/stats` had `"sensors": []` under `[security]`).
+        let c = access_control(&t, "c");
+        assert!(allowed(&c, "egress", "s", "query", "p/sensor/*/stats"));
+        assert!(allowed(&s, "ingress", "c", "query", "p/sensor/*/stats"));
+        assert!(allowed(&s, "egress", "c", "reply", "p/sensor/*/stats"));
+        assert!(allowed(&c, "ingress", "s", "reply", "p/sensor/*/stats"));
+        assert!(!allowed(&c, "ingress", "l0", "reply", "p/sensor/*/stats"));
         // A leader cannot answer in the sensor's name.
         assert!(!allowed(
             &access_control(&t, "c"),

@@ -1,0 +1,439 @@
+//! A LAN made of Linux network namespaces, for tests that need hosts
+//! whose links fail: one namespace per host, each with one interface
+//! (`eth0`, a private address in 10.213.0.0/24) on a bridge that lives in
+//! a namespace of its own — the switch. Nothing is added to the namespace
+//! the test runs in: every address, route and packet stays inside the
+//! namespaces this module made, which [`Lan`]'s `Drop` deletes (with
+//! every process still running in them), even when the test panics.
+//!
+//! On it, [`LanDeployment`] runs a topology the way a user runs one on
+//! real machines: `idmesh up --config lan.toml --host <name>` on every
+//! host (`ip netns exec`), and `idmesh query` from the coordinator's host.
+//! The faults a LAN has: a host's switch port down then up
+//! ([`Lan::link`]), a whole host killed and started again
+//! ([`LanDeployment::kill_host`], [`LanDeployment::start_host`]), a slow
+//! link (`tc ... tbf` on both ends of one host's cable, [`Lan::slow`];
+//! netem is not available on every kernel, tbf is).
+//!
+//! Making namespaces needs root (CAP_SYS_ADMIN and CAP_NET_ADMIN):
+//! [`Lan::new`] says why not, and a test skips with that one line.
+
+use crate::deployment::{answer_until, query_output};
+use crate::idmesh;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The namespaces of every LAN this crate makes start so; the pid of the
+/// test process follows, so that a run can remove what a killed run left.
+const PREFIX: &str = "idmlan";
+
+/// The subnet every host's address is in (private, and only ever
+/// configured inside the LAN's own namespaces).
+const SUBNET: &str = "10.213.0";
+
+/// One host of the LAN.
+#[derive(Debug, Clone)]
+pub struct Host {
+    pub name: String,
+    /// Its network namespace.
+    pub netns: String,
+    /// Its address on the LAN.
+    pub addr: String,
+    /// Its cable's end on the switch (in the switch's namespace).
+    port: String,
+}
+
+/// Namespaces on a bridge; deleted, with their processes, on drop.
+pub struct Lan {
+    switch: String,
+    pub hosts: Vec<Host>,
+}
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    run("ip", args)
+}
+
+fn run(program: &str, args: &[&str]) -> Result<(), String> {
+    let output = Command::new(program)
+        .args(args)
+        .output()
+        .map_err(|e| format!("{program}: {e}"))?;
+    if output.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{program} {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&output.stderr).trim()
+        ))
+    }
+}
+
+/// The pids of every process in namespace `netns`.
+fn pids(netns: &str) -> Vec<i32> {
+    Command::new("ip")
+        .args(["netns", "pids", netns])
+        .output()
+        .map(|o| {
+            String::from_utf8_lossy(&o.stdout)
+                .split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Sends `signal` to every process in `netns`.
+fn signal_all(netns: &str, signal: i32) {
+    for pid in pids(netns) {
+        // SAFETY: kill(2) has no memory effects; a pid gone meanwhile is
+        // an error we ignore.
+        unsafe {
+            libc::kill(pid, signal);
+        }
+    }
+}
+
+/// Stops every process in `netns`: SIGTERM, then SIGKILL after `grace`.
+fn stop_all(netns: &str, grace: Duration) {
+    signal_all(netns, libc::SIGTERM);
+    let deadline = Instant::now() + grace;
+    while !pids(netns).is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    signal_all(netns, libc::SIGKILL);
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !pids(netns).is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Deletes the namespaces earlier runs of this crate left behind (their
+/// test process is gone: killed before its `Drop` ran).
+fn remove_leftovers() {
+    let Ok(out) = Command::new("ip").args(["netns", "list"]).output() else {
+        return;
+    };
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let Some(name) = line.split_whitespace().next() else {
+            continue;
+        };
+        let Some(rest) = name.strip_prefix(PREFIX) else {
+            continue;
+        };
+        let pid = rest.split('-').next().unwrap_or("");
+        let alive = !pid.is_empty() && Path::new("/proc").join(pid).exists();
+        if !alive {
+            stop_all(name, Duration::from_secs(1));
+            let _ = ip(&["netns", "del", name]);
+        }
+    }
+}
+
+impl Lan {
+    /// A switch and `hosts` hosts, each cabled to it and up; or why the
+    /// namespaces could not be made (not root, no `ip`).
+    pub fn new(hosts: &[&str]) -> Result<Lan, String> {
+        remove_leftovers();
+        let id = std::process::id();
+        let mut lan = Lan {
+            switch: format!("{PREFIX}{id}-sw"),
+            hosts: Vec::new(),
+        };
+        // Dropped on any error below: what was made is deleted.
+        ip(&["netns", "add", &lan.switch])?;
+        ip(&["-n", &lan.switch, "link", "set", "lo", "up"])?;
+        ip(&["-n", &lan.switch, "link", "add", "br0", "type", "bridge"])?;
+        ip(&["-n", &lan.switch, "link", "set", "br0", "up"])?;
+        for (i, name) in hosts.iter().enumerate() {
+            let host = Host {
+                name: name.to_string(),
+                netns: format!("{PREFIX}{id}-h{i}"),
+                addr: format!("{SUBNET}.{}", i + 1),
+                port: format!("p{i}"),
+            };
+            ip(&["netns", "add", &host.netns])?;
+            lan.hosts.push(host.clone());
+            let (sw, ns) = (lan.switch.as_str(), host.netns.as_str());
+            // Both ends are made where they live: no interface ever
+            // appears in the test's own namespace.
+            ip(&[
+                "-n", sw, "link", "add", &host.port, "type", "veth", "peer", "name", "eth0",
+                "netns", ns,
+            ])?;
+            ip(&["-n", sw, "link", "set", &host.port, "master", "br0"])?;
+            ip(&["-n", sw, "link", "set", &host.port, "up"])?;
+            ip(&["-n", ns, "link", "set", "lo", "up"])?;
+            let cidr = format!("{}/24", host.addr);
+            ip(&["-n", ns, "addr", "add", &cidr, "dev", "eth0"])?;
+            ip(&["-n", ns, "link", "set", "eth0", "up"])?;
+        }
+        Ok(lan)
+    }
+
+    pub fn host(&self, name: &str) -> &Host {
+        self.hosts
+            .iter()
+            .find(|h| h.name == name)
+            .unwrap_or_else(|| panic!("no host {name}"))
+    }
+
+    /// Host `name`'s switch port up or down: as a cable pulled out, the
+    /// host keeps running and its packets go nowhere.
+    pub fn link(&self, name: &str, up: bool) {
+        let host = self.host(name);
+        let state = if up { "up" } else { "down" };
+        ip(&["-n", &self.switch, "link", "set", &host.port, state])
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+
+    /// Host `name`'s cable limited to `rate` (tc's units, e.g. `2mbit`)
+    /// both ways, by a token bucket on each end.
+    pub fn slow(&self, name: &str, rate: &str) {
+        let host = self.host(name);
+        for (ns, dev) in [(&host.netns, "eth0"), (&self.switch, &host.port)] {
+            run(
+                "tc",
+                &[
+                    "-n", ns, "qdisc", "replace", "dev", dev, "root", "tbf", "rate", rate, "burst",
+                    "32kbit", "latency", "400ms",
+                ],
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+
+    /// Runs `program args` in host `name`'s namespace.
+    pub fn command(&self, name: &str, program: &Path) -> Command {
+        let mut command = Command::new("ip");
+        command
+            .args(["netns", "exec", &self.host(name).netns])
+            .arg(program);
+        command
+    }
+}
+
+impl Drop for Lan {
+    fn drop(&mut self) {
+        for host in &self.hosts {
+            stop_all(&host.netns, Duration::from_secs(5));
+            let _ = ip(&["netns", "del", &host.netns]);
+        }
+        let _ = ip(&["netns", "del", &self.switch]);
+    }
+}
+
+/// A process of a LAN topology: its role, name and host.
+#[derive(Debug, Clone)]
+pub struct Member {
+    pub role: &'static str,
+    pub name: String,
+    pub host: String,
+}
+
+/// A deployment across the hosts of a [`Lan`]: one topology file, `idmesh
+/// up --host` on each host.
+pub struct LanDeployment<'a> {
+    pub lan: &'a Lan,
+    pub dir: PathBuf,
+    pub prefix: String,
+    pub config: PathBuf,
+    pub coordinator_host: String,
+    pub coordinator: String,
+    /// `idmesh up` by host.
+    ups: Vec<(String, Child)>,
+}
+
+/// What a LAN topology sets beyond where its processes run.
+#[derive(Debug, Clone)]
+pub struct LanSettings {
+    /// The sensor's events per second.
+    pub rate: f64,
+    /// `takeover_after_ms` (0 = a role is never adopted: its process is
+    /// restarted).
+    pub takeover_after_ms: u64,
+    pub query_timeout_ms: u64,
+}
+
+impl<'a> LanDeployment<'a> {
+    /// Writes `lan.toml` for `members` (the coordinator and sensor on the
+    /// first host of theirs, leaders placed on a grid over the trace's
+    /// field) under a fresh directory; starts nothing.
+    pub fn configure(
+        lan: &'a Lan,
+        name: &str,
+        trace: &Path,
+        members: &[Member],
+        settings: &LanSettings,
+    ) -> LanDeployment<'a> {
+        let dir = std::env::temp_dir().join(format!("idmesh-lan-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let prefix = format!("idmesh/lan-{name}-{}", std::process::id());
+        let (x0, y0, x1, y1) = crate::deployment::corners(trace);
+        let leaders: Vec<&Member> = members.iter().filter(|m| m.role == "leader").collect();
+        let columns = (leaders.len() as f64).sqrt().ceil() as usize;
+        let rows = leaders.len().div_ceil(columns);
+        // Every process listens on its host's address; ports only need to
+        // differ on one host, but differing everywhere reads better.
+        let listen = |i: usize, host: &str| format!("tcp/{}:{}", lan.host(host).addr, 7460 + i);
+        let mut toml = format!(
+            "prefix = {prefix:?}\nquery_timeout_ms = {}\nstate_dir = \"state\"\ntakeover_after_ms = {}\nsnapshot_every = 200\n",
+            settings.query_timeout_ms, settings.takeover_after_ms
+        );
+        let mut coordinator = (String::new(), String::new());
+        for (i, m) in members.iter().enumerate() {
+            match m.role {
+                "coordinator" => {
+                    coordinator = (m.host.clone(), listen(i, &m.host));
+                    toml.push_str(&format!(
+                        "\n[coordinator]\nname = {:?}\nhost = {:?}\nlisten = {:?}\n",
+                        m.name,
+                        m.host,
+                        listen(i, &m.host)
+                    ));
+                }
+                "sensor" => toml.push_str(&format!(
+                    "\n[sensor]\nname = {:?}\nhost = {:?}\nlisten = {:?}\ntrace = {:?}\nrate = {}\n",
+                    m.name,
+                    m.host,
+                    listen(i, &m.host),
+                    trace.display().to_string(),
+                    settings.rate
+                )),
+                _ => {}
+            }
+        }
+        for (j, m) in leaders.iter().enumerate() {
+            let i = members.iter().position(|n| n.name == m.name).unwrap();
+            let (c, r) = (j % columns, j / columns);
+            let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
+            let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
+            toml.push_str(&format!(
+                "\n[[leader]]\nname = {:?}\nhost = {:?}\nlisten = {:?}\nat = [{x}, {y}]\n",
+                m.name,
+                m.host,
+                listen(i, &m.host)
+            ));
+        }
+        let config = dir.join("lan.toml");
+        std::fs::write(&config, toml).unwrap();
+        LanDeployment {
+            lan,
+            dir,
+            prefix,
+            config,
+            coordinator_host: coordinator.0,
+            coordinator: coordinator.1,
+            ups: Vec::new(),
+        }
+    }
+
+    /// `idmesh up --config lan.toml --host <host>` in the host's namespace
+    /// (its log: `<host>.log` in the deployment's directory).
+    pub fn start_host(&mut self, host: &str) {
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.dir.join(format!("{host}.log")))
+            .unwrap();
+        let child = self
+            .lan
+            .command(host, idmesh())
+            .arg("up")
+            .arg("--config")
+            .arg(&self.config)
+            .arg("--host")
+            .arg(host)
+            .env(
+                "RUST_LOG",
+                "warn,idmesh_leader=info,idmesh_sensor=info,idmesh_coordinator=info",
+            )
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("ip netns exec idmesh up starts");
+        self.ups.push((host.to_string(), child));
+    }
+
+    /// Every process on `host` killed at once (SIGKILL): a host that
+    /// lost its power.
+    pub fn kill_host(&mut self, host: &str) {
+        signal_all(&self.lan.host(host).netns, libc::SIGKILL);
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while !pids(&self.lan.host(host).netns).is_empty() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        for (_, child) in self.ups.iter_mut().filter(|(h, _)| h == host) {
+            let _ = child.wait();
+        }
+        self.ups.retain(|(h, _)| h != host);
+    }
+
+    /// `idmesh query <args> --json` from the coordinator's host: the
+    /// parsed replies, or the error text.
+    pub fn query(&self, args: &[&str]) -> Result<Vec<Value>, String> {
+        let output = self
+            .lan
+            .command(&self.coordinator_host, idmesh())
+            .arg("query")
+            .args(args)
+            .args([
+                "--json",
+                "--connect",
+                &self.coordinator,
+                "--prefix",
+                &self.prefix,
+            ])
+            .output()
+            .expect("idmesh query runs");
+        match query_output(&output) {
+            (answers, _, true) => Ok(answers),
+            (_, errors, false) => Err(errors),
+        }
+    }
+
+    /// Asks `marginals` until an answer satisfies `wanted`: the answer
+    /// and when it came, or panics after `patience` with the logs.
+    pub fn marginals_when(
+        &self,
+        patience: Duration,
+        wanted: impl Fn(&Value) -> bool,
+    ) -> (Value, Instant) {
+        let answer = answer_until(
+            patience,
+            || self.query(&["marginals"]),
+            wanted,
+            || self.logs(),
+        );
+        (answer, Instant::now())
+    }
+
+    /// The last lines of every host's log.
+    pub fn logs(&self) -> String {
+        let mut all = String::new();
+        for host in &self.lan.hosts {
+            let text = std::fs::read_to_string(self.dir.join(format!("{}.log", host.name)))
+                .unwrap_or_default();
+            let lines: Vec<&str> = text.lines().collect();
+            let tail = &lines[lines.len().saturating_sub(60)..];
+            all.push_str(&format!("--- {} ---\n{}\n", host.name, tail.join("\n")));
+        }
+        all
+    }
+}
+
+impl Drop for LanDeployment<'_> {
+    fn drop(&mut self) {
+        // Every process of every host (the `up`s and what they started,
+        // and anything an `up` left behind).
+        for host in &self.lan.hosts {
+            stop_all(&host.netns, Duration::from_secs(5));
+        }
+        for (_, child) in &mut self.ups {
+            let _ = child.wait();
+        }
+    }
+}
