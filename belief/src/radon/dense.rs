@@ -157,7 +157,10 @@ mod tests {
                 if i % 25 == 0 {
                     let (a, b) = (radon.marginals().unwrap(), dense.marginals().unwrap());
                     for (x, y) in a.iter().zip(&b) {
-                        assert!((x - y).abs() < 1e-9, "seed {seed} event {i}: {a:?} vs {b:?}");
+                        assert!(
+                            (x - y).abs() < 1e-9,
+                            "seed {seed} event {i}: {a:?} vs {b:?}"
+                        );
                     }
                 }
             }
