@@ -857,7 +857,15 @@ impl PropertyFilter for FactoredBelief {
         };
         let mut out = vec![0.0; self.field.tracks];
         for (c, r) in self.live().zip(all) {
-            let r = r.ok_or(BeliefError::Degenerate { normalizer: 0.0 })?;
+            let Some(r) = r else {
+                // A single count held (the tree skips those): the table's
+                // own marginals.
+                if c.counts.iter().filter(|&&x| x > 0.0).count() != 1 {
+                    return Err(BeliefError::Degenerate { normalizer: 0.0 });
+                }
+                c.write_marginals(&mut out);
+                continue;
+            };
             let (m, total) = c.weighted_marginals(&r);
             if total.is_nan() || total <= 0.0 {
                 return Err(BeliefError::Degenerate { normalizer: total });

@@ -108,6 +108,22 @@ impl Component {
 
     /// P(bit i set) for every local bit under the weights table[y]·w(|y|),
     /// and the total weight Σ_y table[y]·w(|y|).
+    /// Writes P(bit set) under the table alone into `out[track]` for each
+    /// of the component's tracks (no allocation: a query does this for most
+    /// of a large field).
+    pub(crate) fn write_marginals(&self, out: &mut [f64]) {
+        let total: f64 = self.table.iter().sum();
+        for (i, &t) in self.tracks.iter().enumerate() {
+            let half = 1usize << i;
+            let s: f64 = self
+                .table
+                .chunks_exact(2 * half)
+                .map(|b| b[half..].iter().sum::<f64>())
+                .sum();
+            out[t as usize] = (s / total).clamp(0.0, 1.0);
+        }
+    }
+
     pub(crate) fn weighted_marginals(&self, w: &[f64]) -> (Vec<f64>, f64) {
         let bits = self.len();
         let mut weighted: Vec<f64> = self

@@ -25,6 +25,8 @@
 //! - [`condition`](self::condition) — Algorithm 2 for likelihoods in
 //!   span{φ_∅, φ_t}, with the distributed rule of Section 5.4 as an option.
 //! - [`answer`](self::answer) — exact marginals, P(set all red), normalizer.
+//! - [`dense`](self::dense) — the unbudgeted belief never holds more
+//!   coefficients than there are red sets.
 //! - [`threshold`](self::threshold), [`omp`](self::omp) — Section 5.3.
 //! - [`sparsify`](self::sparsify) — when to run which approximation.
 //! - [`share`](self::share) — a leader's share of the belief and the partial
@@ -35,6 +37,7 @@
 mod answer;
 pub mod atom;
 mod condition;
+mod dense;
 mod mixing_log;
 pub mod omp;
 mod rollup;
@@ -44,6 +47,7 @@ mod threshold;
 
 pub use atom::Atom;
 pub use condition::Growth;
+pub use dense::DENSE_SETS_LIMIT;
 pub use mixing_log::MixingLog;
 pub use omp::OmpOptions;
 pub use share::{PartialSums, RadonShare};
@@ -278,6 +282,7 @@ impl PropertyFilter for RadonBelief {
         self.mixing_log.record(mix.a, mix.b);
         self.stats.events += 1;
         self.since_omp.mixed();
+        self.bound_by_dense();
         self.note_size();
         self.maybe_sparsify()
     }
@@ -288,6 +293,7 @@ impl PropertyFilter for RadonBelief {
         self.mixing_log.clear(observe.track);
         self.stats.events += 1;
         self.since_omp.observed();
+        self.bound_by_dense();
         self.note_size();
         self.maybe_sparsify()
     }

@@ -14,6 +14,8 @@
 //! - [`grid`] — the worker threads, results in a fixed order.
 //! - [`results`] — scores gathered per point and method.
 //! - [`table`], [`plots`] — markdown tables and SVG plots.
+//! - [`large`] — the large-field section: factored against particles at
+//!   n = 500 to 10,000.
 //! - [`report`] — the prose that carries numbers: the summary, the goals
 //!   and the belief's expected error, the distributed rule's cost.
 //!
@@ -24,6 +26,7 @@
 
 pub mod args;
 mod grid;
+mod large;
 mod methods;
 mod plan;
 mod plots;
@@ -263,7 +266,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     for plot in &plots {
         plots::draw(plot, &out_dir)?;
     }
-    let body = body(&results, &plots);
+    let mut body = body(&results, &plots);
+    let large_fields = match args.preset {
+        Preset::Full => large::LargeFields::full(),
+        Preset::Quick => large::LargeFields::quick(),
+    };
+    body.push_str(&large::section(&large_fields, workers)?);
     for start in plan::STARTS {
         for swap in table3_swaps(&results) {
             println!("Table III, swap {swap}, {}:\n", start.label());

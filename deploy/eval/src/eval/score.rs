@@ -45,20 +45,20 @@ fn thread_cpu_seconds() -> Option<f64> {
 }
 
 /// A stopwatch on the thread's CPU clock, falling back to the wall clock.
-struct Stopwatch {
+pub(super) struct Stopwatch {
     cpu: Option<f64>,
     wall: Instant,
 }
 
 impl Stopwatch {
-    fn start() -> Stopwatch {
+    pub(super) fn start() -> Stopwatch {
         Stopwatch {
             cpu: thread_cpu_seconds(),
             wall: Instant::now(),
         }
     }
 
-    fn seconds(&self) -> f64 {
+    pub(super) fn seconds(&self) -> f64 {
         match (self.cpu, thread_cpu_seconds()) {
             (Some(start), Some(now)) => now - start,
             _ => self.wall.elapsed().as_secs_f64(),
