@@ -23,6 +23,34 @@ pub fn long_tests() -> bool {
     std::env::var("IDMESH_LONG_TESTS").is_ok_and(|v| v == "1")
 }
 
+/// A `cargo` command as a person would run it from a shell: without the
+/// variables Cargo sets for the test it runs (`CARGO_MANIFEST_DIR`,
+/// `CARGO_PKG_NAME`, `OUT_DIR`, …). Build scripts ask to rerun when those
+/// change (ring's does), so a build started from a test with them set
+/// would rebuild ring, rustls and Zenoh after every `cargo test` from a
+/// shell, and the next shell build would rebuild them again.
+pub fn cargo_command(cargo: impl AsRef<std::ffi::OsStr>) -> Command {
+    let mut command = Command::new(cargo);
+    for (name, _) in std::env::vars_os() {
+        let Some(name) = name.to_str() else { continue };
+        let set_for_tests = ["CARGO_PKG_", "CARGO_MANIFEST_", "CARGO_BIN_"]
+            .iter()
+            .any(|prefix| name.starts_with(prefix))
+            || [
+                "CARGO_CRATE_NAME",
+                "CARGO_PRIMARY_PACKAGE",
+                "CARGO_TARGET_TMPDIR",
+                "CARGO_RUSTC_CURRENT_DIR",
+                "OUT_DIR",
+            ]
+            .contains(&name);
+        if set_for_tests {
+            command.env_remove(name);
+        }
+    }
+    command
+}
+
 /// The `idmesh` binary, built (or found fresh) once per test process.
 ///
 /// Cargo builds a package's binaries only for that package's own
@@ -35,7 +63,7 @@ pub fn idmesh() -> &'static Path {
     BINARY.get_or_init(|| {
         let cargo = option_env!("CARGO").unwrap_or("cargo");
         let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.toml");
-        let mut command = Command::new(cargo);
+        let mut command = cargo_command(cargo);
         command.args(["build", "--quiet", "--message-format=json"]);
         command.args(["-p", "idmesh-deploy", "--bin", "idmesh", "--manifest-path"]);
         command.arg(&manifest);

@@ -81,7 +81,8 @@ fn command(line: &str, clone: &Path, env: &Env) -> Command {
         "idmesh" => env.installed.join("bin/idmesh"),
         other => PathBuf::from(other),
     };
-    let mut command = Command::new(program);
+    // As from a shell: see `cargo_command`.
+    let mut command = idmesh_tests::cargo_command(program);
     command
         .args(&words[1..])
         .current_dir(clone)
