@@ -259,7 +259,7 @@ fn a_repeated_reply_counts_once_and_a_late_error_does_not_hide_it() {
     )
     .unwrap_err();
     assert!(
-        matches!(&e, GatherError::Missing { missing, timeout } if missing == &["b"] && timeout.as_secs() == 3),
+        matches!(&e, GatherError::Missing { missing, timeout, .. } if missing == &["b"] && timeout.as_secs() == 3),
         "{e}"
     );
 }
