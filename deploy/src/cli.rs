@@ -240,6 +240,7 @@ pub struct WebArgs {
     /// The coordinator's endpoint.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub connect: String,
+    /// The deployment's key prefix (the topology's `prefix`).
     #[arg(long, default_value = idmesh_protocol::wire::keys::DEFAULT_PREFIX)]
     pub prefix: String,
     /// How long one question may wait for the coordinator.
