@@ -176,16 +176,8 @@ pub struct QueryArgs {
     /// Milliseconds between the answers of --repeat.
     #[arg(long, default_value_t = 1000)]
     pub interval_ms: u64,
-    /// A secured deployment: the CA certificate of its `[security] certs`.
-    #[arg(long)]
-    pub ca: Option<PathBuf>,
-    /// This client's certificate (its common name listed in `[security]
-    /// clients`); the endpoint is then reached over TLS.
-    #[arg(long)]
-    pub cert: Option<PathBuf>,
-    /// This client's private key.
-    #[arg(long)]
-    pub key: Option<PathBuf>,
+    #[command(flatten)]
+    pub tls: ClientTlsArgs,
 }
 
 impl QueryArgs {
@@ -222,12 +214,34 @@ impl QueryArgs {
             interval: std::time::Duration::from_millis(self.interval_ms),
             at_events: self.at_events.clone(),
             marginals: self.marginals.map(|m| m.name().to_string()),
-            tls: crate::runtime::security::Tls::from_options(
-                self.ca.as_deref(),
-                self.cert.as_deref(),
-                self.key.as_deref(),
-            )?,
+            tls: self.tls.tls()?,
         })
+    }
+}
+
+/// How a client (`idmesh query`, `idmesh web`) shows itself to a secured
+/// deployment: none of these for a plain one.
+#[derive(Debug, Clone, Args)]
+pub struct ClientTlsArgs {
+    /// A secured deployment: the CA certificate of its `[security] certs`.
+    #[arg(long)]
+    pub ca: Option<PathBuf>,
+    /// This client's certificate (its common name listed in `[security]
+    /// clients`); the endpoint is then reached over TLS.
+    #[arg(long)]
+    pub cert: Option<PathBuf>,
+    /// This client's private key.
+    #[arg(long)]
+    pub key: Option<PathBuf>,
+}
+
+impl ClientTlsArgs {
+    pub fn tls(&self) -> anyhow::Result<Option<crate::runtime::security::Tls>> {
+        Ok(crate::runtime::security::Tls::from_options(
+            self.ca.as_deref(),
+            self.cert.as_deref(),
+            self.key.as_deref(),
+        )?)
     }
 }
 
@@ -246,16 +260,8 @@ pub struct WebArgs {
     /// How long one question may wait for the coordinator.
     #[arg(long, default_value_t = 15000)]
     pub timeout_ms: u64,
-    /// A secured deployment: the CA certificate of its `[security] certs`.
-    #[arg(long)]
-    pub ca: Option<PathBuf>,
-    /// The gateway's client certificate (its common name listed in
-    /// `[security] clients`).
-    #[arg(long)]
-    pub cert: Option<PathBuf>,
-    /// The gateway's private key.
-    #[arg(long)]
-    pub key: Option<PathBuf>,
+    #[command(flatten)]
+    pub tls: ClientTlsArgs,
 }
 
 impl WebArgs {
@@ -265,11 +271,7 @@ impl WebArgs {
             connect: self.connect.clone(),
             prefix: self.prefix.clone(),
             timeout: std::time::Duration::from_millis(self.timeout_ms),
-            tls: crate::runtime::security::Tls::from_options(
-                self.ca.as_deref(),
-                self.cert.as_deref(),
-                self.key.as_deref(),
-            )?,
+            tls: self.tls.tls()?,
         })
     }
 }
