@@ -171,7 +171,10 @@ pub async fn run(
                         alive.insert(role);
                     }
                     SampleKind::Delete => {
-                        tracing::warn!(process = %config.name, role = %role, "leader role lost its token");
+                        // Not a warning by itself: every role drops its token when
+                        // the deployment stops. A loss that lasts is warned about
+                        // when the role is adopted.
+                        tracing::info!(process = %config.name, role = %role, "leader role lost its token");
                         alive.remove(&role);
                         if role == config.name && home.is_some() && !roles.contains(&role) {
                             // Its own role is free (handed back, or the old
