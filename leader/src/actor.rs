@@ -14,6 +14,7 @@
 use crate::error::{MeshError, RunError};
 use crate::journal::{Journal, JournalOptions, Kind, Recovered};
 use crate::node::{Ask, Input, Node, Output, Timers};
+use crate::ownership::{Ownership, HANDOVER_PATIENCE};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
 use idmesh_protocol::wire::leader_to_sensor::Resent;
@@ -66,6 +67,13 @@ pub async fn run(
 ) -> Result<(), RunError> {
     let keys = &config.keys;
     let name = config.name.clone();
+    // The journal's lock before anything is declared: a role whose journal
+    // another process holds runs there (cut off, or still handing it
+    // over), and must not also run here, not even its queryables.
+    let owner = match &config.journal {
+        Some(options) => Some(own(&options.path, &config.host).await?),
+        None => None,
+    };
     let events = session
         .declare_subscriber(keys.leader_events(&name))
         .await
@@ -92,21 +100,21 @@ pub async fn run(
         .await
         .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
+    let started = Instant::now();
+    let (mut journal, recovered) = match (&config.journal, owner) {
+        (Some(options), Some(owner)) => {
+            let (journal, recovered) = Journal::open(options, owner)?;
+            (Some(journal), recovered)
+        }
+        _ => (None, Recovered::default()),
+    };
     // The token claims the role (a process coming back finds it taken);
     // queries meanwhile are told the leader is recovering.
-    let _token = session
+    let token = session
         .liveliness()
         .declare_token(keys.alive("leader", &name))
         .await
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
-    let started = Instant::now();
-    let (mut journal, recovered) = match &config.journal {
-        Some(options) => {
-            let (journal, recovered) = Journal::open(options)?;
-            (Some(journal), recovered)
-        }
-        None => (None, Recovered::default()),
-    };
     let timers = Timers::new(
         config.follow_timeout,
         journal.is_some(),
@@ -197,8 +205,27 @@ pub async fn run(
     if let Some(j) = &mut journal {
         let _ = j.sync();
     }
+    // The lock before the token: whoever waits for the token to go (a
+    // process taking its role back) finds the journal free.
+    drop(journal);
+    drop(token);
     tracing::info!(leader = %name, "leader stopped");
     Ok(())
+}
+
+/// The role's journal lock for `host`, waiting a little for a process
+/// that is letting go of it (handing the role back).
+async fn own(journal: &std::path::Path, host: &str) -> Result<Ownership, RunError> {
+    let deadline = Instant::now() + HANDOVER_PATIENCE;
+    loop {
+        if let Some(owner) = Ownership::try_take(journal, host)? {
+            return Ok(owner);
+        }
+        if Instant::now() >= deadline {
+            return Err(Ownership::refused(journal).into());
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
 }
 
 /// Carries out what the node asks: the journal, the puts and gets, the

@@ -15,6 +15,12 @@
 //! without changing the stream's routing: the keys are the role's, not the
 //! process's.
 //!
+//! A token can vanish without its process dying: a partition hides it.
+//! So a role is adopted only if its journal's lock is free
+//! ([`crate::ownership`]): a process that still runs the role, however
+//! cut off, keeps it, and the role stays missing (answers `degraded`,
+//! naming it) until the cut heals, instead of running twice.
+//!
 //! Until the role is adopted nobody answers for it, and the coordinator's
 //! answer says which leaders are missing; while the adopted actor catches
 //! up it answers with a "degraded: recovering" error. Never numbers without
@@ -34,7 +40,8 @@
 
 use crate::actor::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
-use crate::journal::JournalOptions;
+use crate::journal::{JournalError, JournalOptions};
+use crate::ownership;
 use idmesh_protocol::wire::keys::Keys;
 use std::collections::{BTreeSet, HashMap};
 use std::future::Future;
@@ -83,6 +90,15 @@ impl HostConfig {
             snapshot_every: self.snapshot_every,
             drop_transfer_every: self.drop_transfer_every,
         }
+    }
+}
+
+impl HostConfig {
+    /// Who holds `role`'s journal now, if anyone does (always None
+    /// without a state directory: nothing to fence, nothing to adopt).
+    fn journal_holder(&self, role: &str) -> Option<String> {
+        let dir = self.state_dir.as_ref()?;
+        ownership::held_by(&journal_path(dir, role))
     }
 }
 
@@ -155,6 +171,8 @@ pub async fn run(
     // Roles seen up and then lost, since when. A role never seen up is
     // still starting, not dead.
     let mut lost: HashMap<String, Instant> = HashMap::new();
+    // Lost roles found still held by their process (warned once per loss).
+    let mut fenced: BTreeSet<String> = BTreeSet::new();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
     let standing = Instant::now();
     tokio::pin!(shutdown);
@@ -168,6 +186,7 @@ pub async fn run(
                 match sample.kind() {
                     SampleKind::Put => {
                         lost.remove(&role);
+                        fenced.remove(&role);
                         alive.insert(role);
                     }
                     SampleKind::Delete => {
@@ -208,6 +227,14 @@ pub async fn run(
                     stops.remove(&role);
                     match result {
                         Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
+                        Err(RunError::Journal(JournalError::Held { holder, .. })) if role == config.name => {
+                            // Its own role runs elsewhere and no token said
+                            // so (a partition at start): stand by for it.
+                            tracing::warn!(process = %config.name, %holder, "its role is held by another process; standing by and asking for it back");
+                            if home.is_none() {
+                                home = Some(declare_home(&session, keys, &config.name).await?);
+                            }
+                        }
                         Err(e) => tracing::error!(process = %config.name, role = %role, error = %e, "role failed"),
                     }
                 }
@@ -220,6 +247,7 @@ pub async fn run(
                     && !roles.contains(&config.name)
                     && standing.elapsed() > Duration::from_secs(1)
                     && !hosted_elsewhere(&session, keys, &config.name).await
+                    && config.journal_holder(&config.name).is_none()
                 {
                     tracing::warn!(process = %config.name, "its role is free: taking it back");
                     home = None;
@@ -246,6 +274,16 @@ pub async fn run(
                         continue;
                     }
                     if hosted_elsewhere(&session, keys, &role).await {
+                        continue;
+                    }
+                    if let Some(holder) = config.journal_holder(&role) {
+                        // Its process is alive, only out of reach: the
+                        // role stays with it; look again later.
+                        if fenced.insert(role.clone()) {
+                            tracing::warn!(process = %config.name, role = %role, %holder,
+                                "not adopting: the role's journal is still held (its process runs, cut off); its answers stay missing until it is back");
+                        }
+                        lost.insert(role, Instant::now());
                         continue;
                     }
                     tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");

@@ -25,6 +25,7 @@
 //!
 //! [`Leader`]: crate::state::Leader
 
+use crate::ownership::Ownership;
 use std::fs::{File, OpenOptions};
 use std::io::{BufReader, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -83,6 +84,8 @@ pub enum JournalError {
     },
     #[error("snapshot {path}: {problem}")]
     Snapshot { path: String, problem: String },
+    #[error("journal lock {path} is held by {holder}: the role runs elsewhere")]
+    Held { path: String, holder: String },
     #[error("journal {path}: entry {entry} at byte {offset} has unknown kind {kind}")]
     Corrupt {
         path: String,
@@ -92,8 +95,10 @@ pub enum JournalError {
     },
 }
 
-/// An open journal, appending.
+/// An open journal, appending. It holds the role's [`Ownership`] for as
+/// long as it is open: one writer per journal, whatever the network says.
 pub struct Journal {
+    _owner: Ownership,
     file: File,
     path: PathBuf,
     fsync_every: Duration,
@@ -127,9 +132,13 @@ const MAX_FRAME: u32 = 1 << 30;
 const SNAPSHOT_MAGIC: &[u8; 8] = b"idmesh/1";
 
 impl Journal {
-    /// Opens (or creates) the journal and returns the snapshot and the
-    /// entries after it, in order; a torn last frame is cut off.
-    pub fn open(options: &JournalOptions) -> Result<(Journal, Recovered), JournalError> {
+    /// Opens (or creates) the journal `owner` was granted and returns the
+    /// snapshot and the entries after it, in order; a torn last frame is
+    /// cut off.
+    pub fn open(
+        options: &JournalOptions,
+        owner: Ownership,
+    ) -> Result<(Journal, Recovered), JournalError> {
         let path = options.path.clone();
         let io = |source| JournalError::Io {
             path: path.display().to_string(),
@@ -161,6 +170,7 @@ impl Journal {
         };
         file.seek(SeekFrom::End(0)).map_err(io)?;
         let mut journal = Journal {
+            _owner: owner,
             file,
             path: path.clone(),
             fsync_every: options.fsync_every,
@@ -379,41 +389,49 @@ mod tests {
         }
     }
 
+    /// Opens as the one owner (an earlier journal on the path must be
+    /// dropped first, as a process that stopped).
+    fn open(options: &JournalOptions) -> Result<(Journal, Recovered), JournalError> {
+        let owner = Ownership::try_take(&options.path, "a test")?
+            .expect("the journal's previous opener let go of it");
+        Journal::open(options, owner)
+    }
+
     #[test]
     fn entries_come_back_in_order_after_reopening() {
         let options = options("order");
-        let (mut journal, old) = Journal::open(&options).unwrap();
+        let (mut journal, old) = open(&options).unwrap();
         assert!(old.is_empty());
         let _ = std::fs::remove_file(snapshot_path(&options.path));
         journal.append(Kind::Batch, b"first").unwrap();
         journal.append(Kind::Transfer, b"").unwrap();
         journal.append(Kind::Followed, &[7; 300]).unwrap();
         drop(journal);
-        let (mut journal, Recovered { entries, .. }) = Journal::open(&options).unwrap();
+        let (mut journal, Recovered { entries, .. }) = open(&options).unwrap();
         let kinds: Vec<Kind> = entries.iter().map(|e| e.kind).collect();
         assert_eq!(kinds, [Kind::Batch, Kind::Transfer, Kind::Followed]);
         assert_eq!(entries[0].bytes, b"first");
         assert_eq!(entries[2].bytes.len(), 300);
         journal.append(Kind::Batch, b"fourth").unwrap();
         drop(journal);
-        assert_eq!(Journal::open(&options).unwrap().1.entries.len(), 4);
+        assert_eq!(open(&options).unwrap().1.entries.len(), 4);
     }
 
     #[test]
     fn a_torn_last_entry_is_cut_off_and_appending_goes_on_after_the_last_whole_one() {
         let options = options("torn");
-        let (mut journal, _) = Journal::open(&options).unwrap();
+        let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"whole").unwrap();
         drop(journal);
         // A crash in the middle of the next write: a header and half a body.
         let mut file = OpenOptions::new().append(true).open(&options.path).unwrap();
         file.write_all(&[1, 10, 0, 0, 0, b'h', b'a']).unwrap();
         drop(file);
-        let (mut journal, Recovered { entries, .. }) = Journal::open(&options).unwrap();
+        let (mut journal, Recovered { entries, .. }) = open(&options).unwrap();
         assert_eq!(entries.len(), 1);
         journal.append(Kind::Transfer, b"next").unwrap();
         drop(journal);
-        let entries = Journal::open(&options).unwrap().1.entries;
+        let entries = open(&options).unwrap().1.entries;
         assert_eq!(entries.len(), 2);
         assert_eq!(entries[1].bytes, b"next");
     }
@@ -423,21 +441,21 @@ mod tests {
         let options = options("corrupt");
         std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
         std::fs::write(&options.path, [9u8, 0, 0, 0, 0]).unwrap();
-        let error = Journal::open(&options).err().expect("refused");
+        let error = open(&options).err().expect("refused");
         assert!(error.to_string().contains("entry 0 at byte 0"), "{error}");
     }
 
     #[test]
     fn a_snapshot_replaces_the_entries_before_it() {
         let options = options("compact");
-        let (mut journal, _) = Journal::open(&options).unwrap();
+        let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"one").unwrap();
         journal.append(Kind::Batch, b"two").unwrap();
         journal.compact(b"state after two").unwrap();
         assert_eq!(journal.entries(), 0);
         journal.append(Kind::Transfer, b"three").unwrap();
         drop(journal);
-        let (mut journal, recovered) = Journal::open(&options).unwrap();
+        let (mut journal, recovered) = open(&options).unwrap();
         assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after two"[..]));
         assert_eq!(recovered.entries.len(), 1);
         assert_eq!(recovered.entries[0].bytes, b"three");
@@ -445,7 +463,7 @@ mod tests {
         journal.compact(b"state after three").unwrap();
         journal.append(Kind::Batch, b"four").unwrap();
         drop(journal);
-        let (_, recovered) = Journal::open(&options).unwrap();
+        let (_, recovered) = open(&options).unwrap();
         assert_eq!(
             recovered.snapshot.as_deref(),
             Some(&b"state after three"[..])
@@ -457,7 +475,7 @@ mod tests {
     #[test]
     fn a_crash_between_snapshot_and_new_journal_applies_nothing_twice() {
         let options = options("between");
-        let (mut journal, _) = Journal::open(&options).unwrap();
+        let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"one").unwrap();
         journal.append(Kind::Batch, b"two").unwrap();
         let before = std::fs::read(&options.path).unwrap();
@@ -465,7 +483,7 @@ mod tests {
         drop(journal);
         // The journal as it was: the crash came before it started again.
         std::fs::write(&options.path, before).unwrap();
-        let (mut journal, recovered) = Journal::open(&options).unwrap();
+        let (mut journal, recovered) = open(&options).unwrap();
         assert_eq!(recovered.snapshot.as_deref(), Some(&b"state after two"[..]));
         assert!(
             recovered.entries.is_empty(),
@@ -473,7 +491,7 @@ mod tests {
         );
         journal.append(Kind::Batch, b"three").unwrap();
         drop(journal);
-        assert_eq!(Journal::open(&options).unwrap().1.entries.len(), 1);
+        assert_eq!(open(&options).unwrap().1.entries.len(), 1);
     }
 
     #[test]
@@ -481,7 +499,7 @@ mod tests {
         let options = options("foreign");
         std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
         std::fs::write(snapshot_path(&options.path), b"garbage").unwrap();
-        let error = Journal::open(&options).err().expect("refused");
+        let error = open(&options).err().expect("refused");
         assert!(error.to_string().contains("foreign.snapshot"), "{error}");
         assert!(error.to_string().contains("bad header"), "{error}");
     }

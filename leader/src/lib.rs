@@ -20,6 +20,8 @@
 //!   processes gone for good that it adopts ([`host::run`]).
 //! - [`journal`] — the durable state: a snapshot plus the input log a
 //!   restarted (or adopted) leader replays.
+//! - [`ownership`] — the lock that lets one process at a time run a role
+//!   (a role cut off by a partition is not adopted).
 //! - [`error`] — [`LeaderError`].
 
 pub mod actor;
@@ -28,6 +30,7 @@ pub mod error;
 pub mod host;
 pub mod journal;
 pub mod node;
+pub mod ownership;
 pub mod state;
 
 pub use error::LeaderError;

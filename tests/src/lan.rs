@@ -402,13 +402,25 @@ impl<'a> LanDeployment<'a> {
         patience: Duration,
         wanted: impl Fn(&Value) -> bool,
     ) -> (Value, Instant) {
-        let answer = answer_until(
-            patience,
-            || self.query(&["marginals"]),
-            wanted,
-            || self.logs(),
-        );
+        self.answer_when(&["marginals"], patience, wanted)
+    }
+
+    /// Asks `idmesh query <args>` until an answer satisfies `wanted`: the
+    /// answer and when it came, or panics after `patience` with the logs.
+    pub fn answer_when(
+        &self,
+        args: &[&str],
+        patience: Duration,
+        wanted: impl Fn(&Value) -> bool,
+    ) -> (Value, Instant) {
+        let answer = answer_until(patience, || self.query(args), wanted, || self.logs());
         (answer, Instant::now())
+    }
+
+    /// Whether `host`'s log has a line containing `text`.
+    pub fn logged(&self, host: &str, text: &str) -> bool {
+        std::fs::read_to_string(self.dir.join(format!("{host}.log")))
+            .is_ok_and(|log| log.lines().any(|l| l.contains(text)))
     }
 
     /// The last lines of every host's log.

@@ -2,10 +2,13 @@
 //! `idmesh_tests::lan`), started as a user would — `idmesh up --config
 //! lan.toml --host <name>` on each — through the faults a LAN has:
 //!
-//! 1. a leader host's switch port down for a few seconds mid-stream, then
-//!    up (a partition that heals);
+//! 1. a leader host's switch port down mid-stream, then up (a partition
+//!    that heals), for longer than Zenoh's lease plus a takeover of 3 s:
+//!    nothing is adopted while its process still runs it;
 //! 2. a leader host killed (every process on it) and started again;
-//! 3. a slow link (a token bucket on one leader host's cable).
+//! 3. a leader host killed for good (its roles adopted by the other
+//!    leader host), then back (its roles go home);
+//! 4. a slow link (a token bucket on one leader host's cable).
 //!
 //! For each: queries during the fault either answer (the slow link) or
 //! say `degraded` naming a leader of the host at fault — never numbers
@@ -40,20 +43,24 @@ fn members() -> Vec<Member> {
     ]
 }
 
-/// Restarted, never replaced: a role is not adopted however long its
-/// host is away (adoption across a partition is its own question).
-fn settings() -> LanSettings {
+/// A role whose token is gone `takeover_after_ms` is adopted if its
+/// journal is free (0: never; its process is restarted).
+fn settings(takeover_after_ms: u64) -> LanSettings {
     LanSettings {
         rate: 150.0,
-        takeover_after_ms: 0,
+        takeover_after_ms,
         query_timeout_ms: 2000,
     }
 }
 
+/// The takeover of the first LAN report.
+const TAKEOVER_MS: u64 = 3000;
+
 /// Starts the leader hosts first, then the sensor's (which waits for the
 /// leaders' tokens); returns once an answer sees the stream begun.
-fn start<'a>(lan: &'a Lan, name: &str, trace: &Path) -> LanDeployment<'a> {
-    let mut deployment = LanDeployment::configure(lan, name, trace, &members(), &settings());
+fn start<'a>(lan: &'a Lan, name: &str, trace: &Path, takeover_after_ms: u64) -> LanDeployment<'a> {
+    let mut deployment =
+        LanDeployment::configure(lan, name, trace, &members(), &settings(takeover_after_ms));
     for host in ["h1", "h2", "h0"] {
         deployment.start_host(host);
     }
@@ -95,16 +102,41 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
 
-    // 1. h1's switch port down for 4 s mid-stream, then up.
+    // 1. h1's switch port down mid-stream, then up, for longer than
+    //    Zenoh's lease (after which each side sees the other's tokens go)
+    //    plus the takeover: a role whose process still runs it
+    //    (its journal locked) is not adopted, so nothing runs twice.
     {
-        let deployment = start(&lan, "partition", &trace);
+        let deployment = start(&lan, "partition", &trace, TAKEOVER_MS);
         std::thread::sleep(Duration::from_secs(1));
         lan.link("h1", false);
         let down = Instant::now();
-        let errors = degraded_while(
+        let cut_off = ["leader-0", "leader-1"];
+        let mut errors = Vec::new();
+        // Until the other side gives h1's roles up for lost (Zenoh's lease,
+        // 10 to 20 s here), then through the takeover and beyond.
+        let given_up = "leader role lost its token process=leader-2 role=leader-0";
+        while !deployment.logged("h2", given_up) {
+            assert!(
+                down.elapsed() < Duration::from_secs(60),
+                "h2 never gave leader-0 up during the cut:\n{}",
+                deployment.logs()
+            );
+            errors.extend(degraded_while(
+                &deployment,
+                &cut_off,
+                Instant::now() + Duration::from_millis(500),
+            ));
+        }
+        errors.extend(degraded_while(
             &deployment,
-            &["leader-0", "leader-1"],
-            down + Duration::from_secs(4),
+            &cut_off,
+            Instant::now() + Duration::from_millis(TAKEOVER_MS + 3000),
+        ));
+        assert!(
+            deployment.logged("h2", "not adopting: the role's journal is still held"),
+            "h2 was due to adopt h1's roles and did not say why it did not:\n{}",
+            deployment.logs()
         );
         lan.link("h1", true);
         let up = Instant::now();
@@ -124,7 +156,7 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
 
     // 2. h2 killed (both its leaders) mid-stream, started again 2 s later.
     {
-        let mut deployment = start(&lan, "restart", &trace);
+        let mut deployment = start(&lan, "restart", &trace, 0);
         std::thread::sleep(Duration::from_secs(1));
         deployment.kill_host("h2");
         let down = Instant::now();
@@ -146,10 +178,68 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
         );
     }
 
-    // 3. h2's cable limited to 256 kbit/s both ways from mid-stream on:
+    // 3. h2 killed for good: after the takeover its roles are adopted on
+    //    h1 (the journals are on the shared file system, their locks died
+    //    with h2's processes) and the stream finishes without h2; then h2
+    //    comes back and gets its roles home.
+    {
+        let mut deployment = start(&lan, "adopt", &trace, TAKEOVER_MS);
+        std::thread::sleep(Duration::from_secs(1));
+        deployment.kill_host("h2");
+        let killed = Instant::now();
+        // Before the takeover: missing, and said so.
+        degraded_while(
+            &deployment,
+            &["leader-2", "leader-3"],
+            killed + Duration::from_secs(2),
+        );
+        let hosted_on = |role: &str, host: &str| {
+            let (role, host) = (role.to_string(), host.to_string());
+            move |stats: &serde_json::Value| {
+                stats["leaders"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .any(|l| l["leader"] == role.as_str() && l["host"] == host.as_str())
+            }
+        };
+        // Both roles of h2 inherit to leader-0 (the next live role after
+        // leader-2 and after leader-3, cyclically).
+        deployment.answer_when(
+            &["stats"],
+            Duration::from_secs(60),
+            hosted_on("leader-2", "leader-0"),
+        );
+        deployment.answer_when(
+            &["stats"],
+            Duration::from_secs(60),
+            hosted_on("leader-3", "leader-0"),
+        );
+        let adopted = killed.elapsed();
+        let (last, _) =
+            deployment.marginals_when(Duration::from_secs(120), |a| a["finished"] == true);
+        assert_same_marginals(&last, &expected, "with h2's roles adopted");
+        deployment.start_host("h2");
+        let back = Instant::now();
+        for role in ["leader-2", "leader-3"] {
+            deployment.answer_when(&["stats"], Duration::from_secs(60), hosted_on(role, role));
+        }
+        let home = back.elapsed();
+        let (last, _) =
+            deployment.marginals_when(Duration::from_secs(60), |a| a["finished"] == true);
+        assert_same_marginals(&last, &expected, "after h2's roles went home");
+        eprintln!(
+            "host gone: both roles adopted {:.2} s after the kill (takeover {} ms); both home {:.2} s after h2 returned",
+            adopted.as_secs_f64(),
+            TAKEOVER_MS,
+            home.as_secs_f64()
+        );
+    }
+
+    // 4. h2's cable limited to 256 kbit/s both ways from mid-stream on:
     //    answers come, slower, and the final one is right.
     {
-        let deployment = start(&lan, "slow", &trace);
+        let deployment = start(&lan, "slow", &trace, 0);
         let latency = |n: usize| -> Vec<f64> {
             (0..n)
                 .filter_map(|_| {
