@@ -278,7 +278,7 @@ impl FactoredBelief {
         let prior = CountPrior::new(&field);
         let counts: Vec<Vec<f64>> = comps.iter().map(|c| c.counts.clone()).collect();
         let tilt = tree::balancing_tilt(counts.iter().map(|c| &c[..]), prior.target());
-        let floor = if prior.is_point() { tree::TAIL } else { 0.0 };
+        let tree = CountTree::new(counts, tilt, prior.is_point());
         let mut belief = FactoredBelief {
             field,
             options,
@@ -288,7 +288,7 @@ impl FactoredBelief {
             free: Vec::new(),
             home: vec![(0, 0); n],
             last_mix: vec![0; n],
-            tree: Mutex::new(CountTree::new(counts, tilt, floor)),
+            tree: Mutex::new(tree),
             stats: FactoredStats::default(),
         };
         for slot in 0..n {
@@ -332,16 +332,19 @@ impl FactoredBelief {
 
     /// R_{−C} of the component in `slot` over the counts 0..`width` (the
     /// tree's leaf may hold a merged count vector wider than the slot's
-    /// component): through the count tree, re-tilted once if its result is
-    /// unsafe, and by the eager log-space evaluation if it still is.
+    /// component): through the count tree, re-tilted if its result is
+    /// unsafe (first keeping the FFT, then without it), and by the eager
+    /// log-space evaluation if it still is.
     fn leave_one_out(&self, slot: usize, width: usize) -> Result<Vec<f64>, BeliefError> {
         let mut tree = self.lock_tree();
         if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
             return Ok(r);
         }
-        self.retilt(&mut tree);
-        if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
-            return Ok(r);
+        for exact in [false, true] {
+            self.retilt(&mut tree, exact);
+            if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
+                return Ok(r);
+            }
         }
         drop(tree);
         self.check_eager()?;
@@ -379,18 +382,21 @@ impl FactoredBelief {
         })
     }
 
-    /// Re-aims the count tree's tilt at the current components, and keeps
-    /// every tail of its convolutions from now on (called when a query
-    /// found the fast evaluation unsafe).
-    fn retilt(&self, tree: &mut CountTree) {
+    /// Re-aims the count tree's tilt at the current components (called when
+    /// a query found the fast evaluation unsafe: observations and splits
+    /// have moved the bulk of the red count away from where π puts it);
+    /// `exact` also keeps every tail of its convolutions and stops using
+    /// the FFT from now on (when re-aiming alone did not help).
+    fn retilt(&self, tree: &mut CountTree, exact: bool) {
         let counts = self.count_refs();
         let t = tree::balancing_tilt(counts.iter().copied(), self.prior.target());
         tracing::debug!(
             from = tree.ln_tilt(),
             to = t,
+            exact,
             "factored: re-tilting the count tree"
         );
-        tree.retilt(t, true);
+        tree.retilt(t, exact);
     }
 
     /// ln Z, Z = Σ_x f(x) of the unnormalized belief: the prior mass times
@@ -837,13 +843,15 @@ impl PropertyFilter for FactoredBelief {
     fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
         let fast = {
             let mut tree = self.lock_tree();
-            match tree.all_leave_one_out(&self.prior) {
-                Some(all) => Some(all),
-                None => {
-                    self.retilt(&mut tree);
-                    tree.all_leave_one_out(&self.prior)
+            let mut all = tree.all_leave_one_out(&self.prior);
+            for exact in [false, true] {
+                if all.is_some() {
+                    break;
                 }
+                self.retilt(&mut tree, exact);
+                all = tree.all_leave_one_out(&self.prior);
             }
+            all
         };
         let all: Vec<Option<Vec<f64>>> = match fast {
             Some(mut by_slot) => (0..self.comps.len())
