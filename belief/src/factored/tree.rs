@@ -761,7 +761,7 @@ impl CountTree {
     ) -> Reservoir {
         let own = self.cumulants[slot];
         let [mean, var, third] = [0, 1, 2].map(|i| self.cumulant_sums[i] - own[i]);
-        if !(var >= RESERVOIR_VARIANCE) {
+        if var.is_nan() || var < RESERVOIR_VARIANCE {
             return Reservoir::Declined;
         }
         let pi = self.tilted_prior(prior);
@@ -1051,7 +1051,7 @@ mod tests {
                     let len = rng.gen_range(2..=6);
                     (0..len)
                         .map(|r| {
-                            let lean = if lopsided { 0.5f64.powi(r as i32) } else { 1.0 };
+                            let lean = if lopsided { 0.5f64.powi(r) } else { 1.0 };
                             lean * (rng.gen::<f64>() + 0.05)
                         })
                         .collect()
