@@ -48,8 +48,9 @@
 //! at most [`AUTO_EXACT_BLOCK`] tracks, half-Bethe on blocks of at most
 //! [`AUTO_BETHE_BLOCK`], and Metropolis ([`AUTO_STEPS_PER_TRACK`] steps per
 //! track) beyond; a method that cannot take a block (exact beyond
-//! [`super::permanent::MAX_PERMANENT_TRACKS`]) says so with the block's
-//! size ([`BeliefError::TooLargeBlock`]).
+//! [`super::permanent::MAX_PERMANENT_TRACKS`], `sinkhorn` and `bethe`
+//! beyond [`MAX_SCALED_BLOCK`]) says so with the block's size
+//! ([`BeliefError::TooLargeBlock`]).
 //!
 //! Why Metropolis on the largest blocks: a crowd's mixing graph percolates.
 //! The simulated crowd of 1,000 people of the process test is one block of
@@ -58,7 +59,7 @@
 //! converges slowly on its peaked entries even by Newton–CG over the
 //! positive entries alone: a Sinkhorn query on that stream took about 2
 //! minutes at the 550-track block and did not finish the 900-track one
-//! in 5 minutes, whereas Metropolis answers the 956-track block of the
+//! in 3 minutes, whereas Metropolis answers the 956-track block of the
 //! bench's `crowd` stream in 0.16 s. Metropolis always answers in time
 //! linear in its steps; it is the least accurate method of the block
 //! (split-half diagnostic in [`super::metropolis::metropolis_diagnosed`]).
@@ -113,6 +114,14 @@ pub const AUTO_EXACT_BLOCK: usize = 16;
 /// block of 96 tracks of the bench's `crowd` stream: 0.17 s); larger ones
 /// by Metropolis (see the module docs).
 pub const AUTO_BETHE_BLOCK: usize = 100;
+
+/// The largest block the scaling methods (`sinkhorn`, `bethe`) take: the
+/// size up to which a Newton step is a Cholesky solve
+/// ([`super::sinkhorn::MAX_NEWTON_TRACKS`]). Beyond it the conjugate-
+/// gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
+/// about 2 minutes on a block of 550 tracks, and more than 3 on one of
+/// 900), so they refuse, naming the block, instead of holding the query.
+pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_NEWTON_TRACKS;
 
 /// Counted Metropolis steps per track of a block [`MarginalMethod::Auto`]
 /// samples (a tenth as many burn-in steps, seed 0): a chain of 10^4 steps
@@ -244,12 +253,20 @@ pub fn block_marginals(
         return Err(BeliefError::Degenerate { normalizer: 0.0 });
     }
     let largest = blocks.iter().map(Block::size).max().unwrap_or(0);
-    if *method == MarginalMethod::Exact && largest > MAX_PERMANENT_TRACKS {
+    let limit = match method {
+        MarginalMethod::Exact => Some(("exact marginals (permanent)", MAX_PERMANENT_TRACKS)),
+        MarginalMethod::Sinkhorn => Some(("sinkhorn marginals (scaling)", MAX_SCALED_BLOCK)),
+        MarginalMethod::FractionalBethe { .. } => {
+            Some(("bethe marginals (scaling)", MAX_SCALED_BLOCK))
+        }
+        MarginalMethod::Auto | MarginalMethod::Metropolis { .. } => None,
+    };
+    if let Some((name, limit)) = limit.filter(|&(_, limit)| largest > limit) {
         return Err(BeliefError::TooLargeBlock {
-            method: "exact marginals (permanent)",
+            method: name,
             block: largest,
             tracks: n,
-            limit: MAX_PERMANENT_TRACKS,
+            limit,
         });
     }
     let mut out = Vec::with_capacity(blocks.len());
@@ -624,6 +641,27 @@ mod tests {
                 assert!(*y > 0.0 || *x == 0.0, "{}", method.name());
             }
             assert!(doubly_stochastic_residual(&to_rows(n, &m)) < 1e-8);
+        }
+    }
+
+    #[test]
+    fn scaling_refuses_a_block_too_large_and_names_its_size() {
+        let n = MAX_SCALED_BLOCK + 1;
+        let l = vec![0.0; n * n];
+        for (method, name) in [
+            (MarginalMethod::Sinkhorn, "sinkhorn marginals (scaling)"),
+            (MarginalMethod::half_bethe(), "bethe marginals (scaling)"),
+        ] {
+            let e = block_marginals(n, &l, &method, &Default::default()).unwrap_err();
+            assert_eq!(
+                e,
+                BeliefError::TooLargeBlock {
+                    method: name,
+                    block: n,
+                    tracks: n,
+                    limit: MAX_SCALED_BLOCK
+                }
+            );
         }
     }
 
