@@ -79,8 +79,12 @@ fn spec(n: usize, kind: Kind) -> IdentityWorkloadSpec {
     }
 }
 
-/// The sizes and streams to run: all, or those whose `n` or `kind/n` is
-/// named on the command line (`-- 1000`, `-- crowd/1000`).
+/// The sizes and streams to run: all but `crowd/10000`, or those whose
+/// `n` or `kind/n` is named on the command line (`-- 1000`,
+/// `-- crowd/1000`). `crowd/10000` runs only when named: its one block of
+/// about 9,500 tracks does not answer — the most likely assignment (and
+/// Metropolis's start) is a dense Hungarian run on the block, O(k³),
+/// where it stood after minutes in issue 21's run.
 fn runs() -> Vec<(Kind, usize)> {
     let named: Vec<String> = std::env::args()
         .skip(1)
@@ -90,7 +94,7 @@ fn runs() -> Vec<(Kind, usize)> {
         .into_iter()
         .flat_map(|kind| SIZES.map(|n| (kind, n)))
         .filter(|(kind, n)| {
-            named.is_empty()
+            (named.is_empty() && (*kind, *n) != (Kind::Crowd, 10_000))
                 || named
                     .iter()
                     .any(|a| *a == n.to_string() || *a == format!("{}/{n}", kind.name()))
