@@ -675,11 +675,7 @@ mod tests {
         let l = known_start_matrix(n, 7, 1_000, 300);
         let opts = SinkhornOptions::default();
         let auto = block_marginals(n, &l, &MarginalMethod::Auto, &opts).unwrap();
-        let (block, p) = auto
-            .blocks
-            .iter()
-            .max_by_key(|(b, _)| b.size())
-            .unwrap();
+        let (block, p) = auto.blocks.iter().max_by_key(|(b, _)| b.size()).unwrap();
         let k = block.size();
         assert!(k > AUTO_BETHE_BLOCK, "the largest block has {k} tracks");
         let sub = sub_matrix(n, &l, block);
