@@ -667,10 +667,11 @@ mod tests {
 
     #[test]
     fn auto_samples_a_block_too_large_to_scale() {
-        // Enough mixes percolate into one block of most tracks (a crowd): auto is half-Bethe up to AUTO_BETHE_BLOCK tracks, and
-        // beyond it exactly Metropolis with AUTO_STEPS_PER_TRACK steps per
-        // track, seed 0 — an answer with rows and columns summing to 1 and
-        // zeros between blocks.
+        // Enough mixes percolate into one block of most tracks (a crowd):
+        // auto is half-Bethe up to AUTO_BETHE_BLOCK tracks, and beyond it
+        // exactly Metropolis with AUTO_STEPS_PER_TRACK steps per track,
+        // seed 0 — an answer with rows and columns summing to 1 and zeros
+        // between blocks.
         let n = 200;
         let l = known_start_matrix(n, 7, 1_000, 300);
         let opts = SinkhornOptions::default();
