@@ -6,7 +6,8 @@
 //! together and turns it into marginals by the method the query names
 //! (`?marginals=auto|exact|metropolis|sinkhorn|bethe`; exact by default up
 //! to [`EXACT_BY_DEFAULT`] tracks, `auto` beyond: every independent block
-//! of mixed tracks exactly when small, half-Bethe when large), then the
+//! of mixed tracks exactly when small, half-Bethe when larger, sampled
+//! when larger still — `belief::identity::marginals`), then the
 //! most likely one-to-one assignment under them (block by block).
 
 use crate::gather::{collect, At, Collected, GatherError, Memory, Share};
@@ -67,8 +68,9 @@ impl Method {
     fn for_tracks(self, n: usize) -> Result<MarginalMethod, GatherError> {
         match self {
             Method::BySize if n <= EXACT_BY_DEFAULT => Ok(MarginalMethod::Exact),
-            // Exact on each small block of mixed tracks, half-Bethe on
-            // large ones: answers at any size (belief::identity::marginals).
+            // Exact on each small block of mixed tracks, half-Bethe or
+            // Metropolis on large ones: answers at any size
+            // (belief::identity::marginals).
             Method::BySize => Ok(MarginalMethod::Auto),
             // Exact takes any n whose blocks are small enough; the engine
             // names the block that is not.

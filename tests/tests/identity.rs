@@ -177,9 +177,12 @@ fn identity_reads_cost_no_messages_between_leaders() {
 /// The coordinator answers identity queries at n = 1,000 — every row a
 /// distribution, every column too, the assignment a permutation, computed
 /// block by block with the `auto` method — and a one-track question agrees
-/// with the whole answer.
+/// with the whole answer. In 20 s the crowd's mixes join 901 of the 1,000
+/// tracks into one block (from about 10 s on): that block is sampled
+/// (Metropolis), the others are exact or half-Bethe. Before `auto` sampled
+/// large blocks this test was ignored: half-Bethe on the 901-track block
+/// kept the coordinator busy for minutes and every query timed out.
 #[test]
-#[ignore = "issue 21: not yet seen to pass (first run starved by an exact colour belief, second cut short); run with --ignored"]
 fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     let dir = std::env::temp_dir().join(format!("idmesh-identity-1000-{}", std::process::id()));
     let trace = crowd_with_identities(&dir, 1000, 1, 20.0, 21);
@@ -190,8 +193,8 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
         ..settings(4, Some(5000.0))
     };
     let deployment = Deployment::start("identity1000", &trace, &colours);
-    deployment.first_answer(Duration::from_secs(120));
-    let last = deployment.answer_when(&["identity"], Duration::from_secs(300), |a| {
+    deployment.first_answer(Duration::from_secs(60));
+    let last = deployment.answer_when(&["identity"], Duration::from_secs(90), |a| {
         a["finished"] == true
     });
     assert_eq!(last["marginals"], "auto");

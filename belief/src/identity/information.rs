@@ -216,6 +216,11 @@ impl InformationMatrix {
         to_rows(self.n, &self.l)
     }
 
+    /// L, row-major (n² entries, finite or −∞), without a copy.
+    pub fn entries(&self) -> &[f64] {
+        &self.l
+    }
+
     /// L\[t\]\[i\].
     pub fn get(&self, track: usize, identity: usize) -> Option<f64> {
         (track < self.n && identity < self.n).then(|| self.l[track * self.n + identity])

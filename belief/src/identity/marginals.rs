@@ -45,10 +45,24 @@
 //! the cost is that of the largest block, not of n: at n = 10,000 a known
 //! start plus a crowd's mixes leaves blocks of a few tracks, each answered
 //! exactly. [`MarginalMethod::Auto`], the default, is exact on blocks of
-//! at most [`AUTO_EXACT_BLOCK`] tracks and half-Bethe beyond; a method that
-//! cannot take a block (exact beyond
-//! [`super::permanent::MAX_PERMANENT_TRACKS`]) says so with the block's
-//! size ([`BeliefError::TooLargeBlock`]).
+//! at most [`AUTO_EXACT_BLOCK`] tracks, half-Bethe on blocks of at most
+//! [`AUTO_BETHE_BLOCK`], and Metropolis ([`AUTO_STEPS_PER_TRACK`] steps per
+//! track) beyond; a method that cannot take a block (exact beyond
+//! [`super::permanent::MAX_PERMANENT_TRACKS`], `sinkhorn` and `bethe`
+//! beyond [`MAX_SCALED_BLOCK`]) says so with the block's size
+//! ([`BeliefError::TooLargeBlock`]).
+//!
+//! Why Metropolis on the largest blocks: a crowd's mixing graph percolates.
+//! The simulated crowd of 1,000 people of the process test is one block of
+//! 197 tracks after 10 s and of 901 after 20 s. Scaling such a block
+//! (Sinkhorn, and half-Bethe, which scales once per fixed-point step)
+//! converges slowly on its peaked entries even by Newton–CG over the
+//! positive entries alone: a Sinkhorn query on that stream took about 2
+//! minutes at the 550-track block and did not finish the 900-track one
+//! in 3 minutes, whereas Metropolis answers the 956-track block of the
+//! bench's `crowd` stream in 0.16 s. Metropolis always answers in time
+//! linear in its steps; it is the least accurate method of the block
+//! (split-half diagnostic in [`super::metropolis::metropolis_diagnosed`]).
 
 use super::assignment::most_likely_assignment;
 use super::blocks::{blocks_of_log_likelihoods, sub_matrix, Block};
@@ -95,6 +109,24 @@ pub const DEFAULT_SAMPLES: usize = 10_000;
 /// The largest block [`MarginalMethod::Auto`] answers exactly (2^16
 /// Gray-code steps of 16² each: about a millisecond).
 pub const AUTO_EXACT_BLOCK: usize = 16;
+
+/// The largest block [`MarginalMethod::Auto`] answers by half-Bethe (a
+/// block of 96 tracks of the bench's `crowd` stream: 0.17 s); larger ones
+/// by Metropolis (see the module docs).
+pub const AUTO_BETHE_BLOCK: usize = 100;
+
+/// The largest block the scaling methods (`sinkhorn`, `bethe`) take: the
+/// size up to which a Newton step is a Cholesky solve
+/// ([`super::sinkhorn::MAX_NEWTON_TRACKS`]). Beyond it the conjugate-
+/// gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
+/// about 2 minutes on a block of 550 tracks, and more than 3 on one of
+/// 900), so they refuse, naming the block, instead of holding the query.
+pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_NEWTON_TRACKS;
+
+/// Counted Metropolis steps per track of a block [`MarginalMethod::Auto`]
+/// samples (a tenth as many burn-in steps, seed 0): a chain of 10^4 steps
+/// would barely move a 900-track block from its start.
+pub const AUTO_STEPS_PER_TRACK: usize = 1_000;
 
 impl MarginalMethod {
     /// The method a command line or a query names: `auto`, `exact`,
@@ -221,12 +253,20 @@ pub fn block_marginals(
         return Err(BeliefError::Degenerate { normalizer: 0.0 });
     }
     let largest = blocks.iter().map(Block::size).max().unwrap_or(0);
-    if *method == MarginalMethod::Exact && largest > MAX_PERMANENT_TRACKS {
+    let limit = match method {
+        MarginalMethod::Exact => Some(("exact marginals (permanent)", MAX_PERMANENT_TRACKS)),
+        MarginalMethod::Sinkhorn => Some(("sinkhorn marginals (scaling)", MAX_SCALED_BLOCK)),
+        MarginalMethod::FractionalBethe { .. } => {
+            Some(("bethe marginals (scaling)", MAX_SCALED_BLOCK))
+        }
+        MarginalMethod::Auto | MarginalMethod::Metropolis { .. } => None,
+    };
+    if let Some((name, limit)) = limit.filter(|&(_, limit)| largest > limit) {
         return Err(BeliefError::TooLargeBlock {
-            method: "exact marginals (permanent)",
+            method: name,
             block: largest,
             tracks: n,
-            limit: MAX_PERMANENT_TRACKS,
+            limit,
         });
     }
     let mut out = Vec::with_capacity(blocks.len());
@@ -253,7 +293,13 @@ fn one_block(
     match *method {
         MarginalMethod::Exact => marginals_from_log_likelihoods(k, l),
         MarginalMethod::Auto if k <= AUTO_EXACT_BLOCK => marginals_from_log_likelihoods(k, l),
-        MarginalMethod::Auto => one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options),
+        MarginalMethod::Auto if k <= AUTO_BETHE_BLOCK => {
+            one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options)
+        }
+        MarginalMethod::Auto => {
+            let samples = AUTO_STEPS_PER_TRACK * k;
+            metropolis_marginals(k, l, samples, samples / 10, 0)
+        }
         MarginalMethod::Metropolis {
             samples,
             burn_in,
@@ -273,6 +319,15 @@ fn one_block(
 }
 
 /// Iterates P ← Sinkhorn(A ⊙ (1 − P)^{−γ}) from P = Sinkhorn(A).
+///
+/// Each step scales P ⊙ R′ ⊘ R instead of A ⊙ R′ (R the weights
+/// (1 − P)^{−γ} of the step that made P, R′ the new ones): P is A ⊙ R
+/// with its rows and columns scaled (and entries on no positive diagonal
+/// zeroed), and Sinkhorn's limit does not depend on such scalings of its
+/// input, so the result is the same — but the last step's scalings nearly
+/// balance the new matrix, so Sinkhorn starts close to its answer instead
+/// of from scratch. Only the positive entries are touched (a block of a
+/// crowd's information matrix is sparse: see [`super::sinkhorn`]).
 fn fractional_bethe(
     n: usize,
     l: &[f64],
@@ -287,38 +342,51 @@ fn fractional_bethe(
             what: "gamma outside [0, 1] or a tolerance that is not positive and finite",
         });
     }
-    let a = exp_rows(n, l)?;
-    let mut p = a.clone();
+    let mut p = exp_rows(n, l)?;
     sinkhorn(n, &mut p, sinkhorn_options)?;
+    // The positive entries of Sinkhorn(A): no step makes another positive.
+    let columns: Vec<Vec<usize>> = p
+        .chunks(n)
+        .map(|row| (0..n).filter(|&j| row[j] > 0.0).collect())
+        .collect();
+    let mut w = vec![0.0; n * n];
+    // The weights of the step that made P (none for Sinkhorn(A)).
+    let mut weights = vec![1.0; n * n];
     let mut others = vec![0.0; n];
     for _ in 0..max_iterations {
-        let mut w = a.clone();
-        for (w_row, p_row) in w.chunks_mut(n).zip(p.chunks(n)) {
+        for (i, cols) in columns.iter().enumerate() {
+            let (p_row, w_row) = (&p[i * n..(i + 1) * n], &mut w[i * n..(i + 1) * n]);
             // others[j] = Σ_{k≠j} P_ik = 1 − P_ij without cancellation.
             let mut before = 0.0;
-            for j in 0..n {
+            for &j in cols {
                 others[j] = before;
                 before += p_row[j];
             }
             let mut after = 0.0;
-            for j in (0..n).rev() {
+            for &j in cols.iter().rev() {
                 others[j] += after;
                 after += p_row[j];
             }
-            for (x, &o) in w_row.iter_mut().zip(&others) {
+            let weights_row = &mut weights[i * n..(i + 1) * n];
+            for &j in cols {
                 // A row with one positive entry is fixed by scaling anyway.
-                if o > 0.0 {
-                    *x *= o.powf(-gamma);
-                }
+                let weight = if others[j] > 0.0 {
+                    others[j].powf(-gamma)
+                } else {
+                    1.0
+                };
+                w_row[j] = p_row[j] * (weight / weights_row[j]);
+                weights_row[j] = weight;
             }
         }
         sinkhorn(n, &mut w, sinkhorn_options)?;
-        let change = w
+        let change = columns
             .iter()
-            .zip(&p)
-            .map(|(x, y)| (x - y).abs())
+            .enumerate()
+            .flat_map(|(i, cols)| cols.iter().map(move |&j| i * n + j))
+            .map(|k| (w[k] - p[k]).abs())
             .fold(0.0, f64::max);
-        p = w;
+        std::mem::swap(&mut p, &mut w);
         if change <= tolerance {
             return Ok(p);
         }
@@ -573,6 +641,57 @@ mod tests {
                 assert!(*y > 0.0 || *x == 0.0, "{}", method.name());
             }
             assert!(doubly_stochastic_residual(&to_rows(n, &m)) < 1e-8);
+        }
+    }
+
+    #[test]
+    fn scaling_refuses_a_block_too_large_and_names_its_size() {
+        let n = MAX_SCALED_BLOCK + 1;
+        let l = vec![0.0; n * n];
+        for (method, name) in [
+            (MarginalMethod::Sinkhorn, "sinkhorn marginals (scaling)"),
+            (MarginalMethod::half_bethe(), "bethe marginals (scaling)"),
+        ] {
+            let e = block_marginals(n, &l, &method, &Default::default()).unwrap_err();
+            assert_eq!(
+                e,
+                BeliefError::TooLargeBlock {
+                    method: name,
+                    block: n,
+                    tracks: n,
+                    limit: MAX_SCALED_BLOCK
+                }
+            );
+        }
+    }
+
+    #[test]
+    fn auto_samples_a_block_too_large_to_scale() {
+        // Enough mixes percolate into one block of most tracks (a crowd):
+        // auto is half-Bethe up to AUTO_BETHE_BLOCK tracks, and beyond it
+        // exactly Metropolis with AUTO_STEPS_PER_TRACK steps per track,
+        // seed 0 — an answer with rows and columns summing to 1 and zeros
+        // between blocks.
+        let n = 200;
+        let l = known_start_matrix(n, 7, 1_000, 300);
+        let opts = SinkhornOptions::default();
+        let auto = block_marginals(n, &l, &MarginalMethod::Auto, &opts).unwrap();
+        let (block, p) = auto.blocks.iter().max_by_key(|(b, _)| b.size()).unwrap();
+        let k = block.size();
+        assert!(k > AUTO_BETHE_BLOCK, "the largest block has {k} tracks");
+        let sub = sub_matrix(n, &l, block);
+        let steps = AUTO_STEPS_PER_TRACK * k;
+        assert_eq!(
+            *p,
+            metropolis_marginals(k, &sub, steps, steps / 10, 0).unwrap()
+        );
+        assert!(doubly_stochastic_residual(&to_rows(n, &auto.dense())) < 1e-9);
+        for (small, q) in auto.blocks.iter().filter(|(b, _)| b.size() > 1) {
+            let j = small.size();
+            if j <= AUTO_EXACT_BLOCK {
+                let exact = marginals_from_log_likelihoods(j, &sub_matrix(n, &l, small)).unwrap();
+                assert_eq!(*q, exact);
+            }
         }
     }
 

@@ -180,7 +180,8 @@ impl IdentityMethod {
 /// independent block of mixed tracks alone).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ValueEnum)]
 pub enum MarginalChoice {
-    /// Exact on blocks of at most 16 tracks, half-Bethe on larger ones.
+    /// Exact on blocks of at most 16 tracks, half-Bethe up to 100,
+    /// Metropolis (1,000 steps per track) on larger ones.
     #[default]
     Auto,
     /// Exact, by the matrix permanent (blocks of at most 22 tracks).
