@@ -190,7 +190,7 @@ pub async fn run(
             if gateway.finished() {
                 tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
                 for (query, reason) in refused {
-                    let _ = query.reply_err(reason).await;
+                    let _ = bounded("a refusal", query.reply_err(reason)).await;
                 }
             }
             // Let queries in between chunks.
@@ -214,7 +214,7 @@ pub async fn run(
                     }
                     CutOutcome::Scheduled => {}
                     CutOutcome::Refused(query, reason) => {
-                        let _ = query.reply_err(reason).await;
+                        let _ = bounded("a refusal", query.reply_err(reason)).await;
                     }
                 }
             }
@@ -239,8 +239,8 @@ pub async fn run(
             query = stats.recv_async() => {
                 let Ok(query) = query else { break };
                 let body = serde_json::to_vec(gateway.stats()).unwrap_or_default();
-                if let Err(e) = query.reply(query.key_expr().clone(), body)
-                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
+                if let Some(Err(e)) = bounded("stats", query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)).await
                 {
                     tracing::warn!(error = %e, "could not answer a stats query");
                 }
@@ -251,8 +251,8 @@ pub async fn run(
                 // `events` events, a point of the stream like a cut.
                 let body = serde_json::to_vec(&gateway.router().positions(&config.name, gateway.finished()))
                     .unwrap_or_default();
-                if let Err(e) = query.reply(query.key_expr().clone(), body)
-                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON).await
+                if let Some(Err(e)) = bounded("positions", query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)).await
                 {
                     tracing::warn!(error = %e, "could not answer a positions query");
                 }
@@ -273,27 +273,56 @@ fn payload(query: &Query) -> Vec<u8> {
 
 /// Answers a `what` request with its reply, or with why there is none
 /// (the gateway counted it).
-async fn reply_to<R: serde::Serialize>(query: &Query, answer: Result<R, String>, what: &str) {
+async fn reply_to<R: serde::Serialize>(
+    query: &Query,
+    answer: Result<R, String>,
+    what: &'static str,
+) {
     match answer {
         Ok(reply) => {
             tracing::debug!(what, "answered");
-            if let Err(e) = query.reply(query.key_expr().clone(), encode(&reply)).await {
+            if let Some(Err(e)) =
+                bounded(what, query.reply(query.key_expr().clone(), encode(&reply))).await
+            {
                 tracing::warn!(what, error = %e, "could not answer a request");
             }
         }
         Err(e) => {
-            let _ = query.reply_err(e).await;
+            let _ = bounded(what, query.reply_err(e)).await;
         }
     }
 }
 
 async fn reply_placed(placed: Placed<Query>) {
     let query = placed.query;
-    if let Err(e) = query
-        .reply(query.key_expr().clone(), encode(&placed.answer))
-        .await
+    if let Some(Err(e)) = bounded(
+        "a cut",
+        query.reply(query.key_expr().clone(), encode(&placed.answer)),
+    )
+    .await
     {
         tracing::warn!(error = %e, "could not answer a cut");
+    }
+}
+
+/// How long one send may hold the loop. A peer cut off by a partition can
+/// hold a send until Zenoh gives its link up (seconds); given up after
+/// this, the message is lost to that peer — a leader notices the gap and
+/// asks again, a client asks again — and the stream, the cuts and every
+/// other peer go on.
+const SEND_PATIENCE: Duration = Duration::from_secs(1);
+
+/// `send`, unless it takes longer than [`SEND_PATIENCE`].
+async fn bounded<T>(
+    what: &'static str,
+    send: impl std::future::IntoFuture<Output = T>,
+) -> Option<T> {
+    match tokio::time::timeout(SEND_PATIENCE, send.into_future()).await {
+        Ok(sent) => Some(sent),
+        Err(_) => {
+            tracing::info!(what, patience = ?SEND_PATIENCE, "a send took too long: given up (it is asked for again)");
+            None
+        }
     }
 }
 
@@ -323,7 +352,7 @@ impl Wire {
             }
             let body = encode(&batch);
             for _ in 0..if self.faults.duplicate { 2 } else { 1 } {
-                if let Err(e) = publisher.put(body.clone()).await {
+                if let Some(Err(e)) = bounded("a batch", publisher.put(body.clone())).await {
                     tracing::error!(error = %e, "could not publish a batch");
                 }
             }
