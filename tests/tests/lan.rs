@@ -70,19 +70,6 @@ fn start<'a>(lan: &'a Lan, name: &str, trace: &Path, takeover_after_ms: u64) -> 
     deployment
 }
 
-/// Asks marginals until `until`; every answer must be an error (never
-/// numbers). Returns the errors seen.
-fn refused_while(deployment: &LanDeployment, until: Instant) -> Vec<String> {
-    let mut errors = Vec::new();
-    while Instant::now() < until {
-        match deployment.query(&["marginals"]) {
-            Ok(answer) => panic!("an answer while leaders are cut off: {answer:?}"),
-            Err(e) => errors.push(e),
-        }
-    }
-    errors
-}
-
 /// Asks marginals until `until`; every answer must be an error saying
 /// `degraded` and naming one of `missing`. Returns the errors seen.
 fn degraded_while(deployment: &LanDeployment, missing: &[&str], until: Instant) -> Vec<String> {
@@ -128,11 +115,10 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
         let down = Instant::now();
         let cut_off = ["leader-0", "leader-1"];
         let mut errors = Vec::new();
-        // Around the lease's end the coordinator's host stalls (see
-        // docs/lan.md): a query then times out without naming anyone. Never
-        // numbers, though; and every other answer names who is missing.
         // Until the other side gives h1's roles up for lost (Zenoh's lease,
-        // 10 to 20 s here), then through the takeover and beyond.
+        // 10 to 20 s here), then through the takeover and beyond; every
+        // answer names who is missing, also as the lease ends (Zenoh's
+        // link lingered there for 10 s: .cargo/config.toml).
         let given_up = "leader role lost its token process=leader-2 role=leader-0";
         while !deployment.logged("h2", given_up) {
             assert!(
@@ -140,23 +126,17 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
                 "h2 never gave leader-0 up during the cut:\n{}",
                 deployment.logs()
             );
-            errors.extend(refused_while(
+            errors.extend(degraded_while(
                 &deployment,
+                &cut_off,
                 Instant::now() + Duration::from_millis(500),
             ));
         }
-        errors.extend(refused_while(
+        errors.extend(degraded_while(
             &deployment,
+            &cut_off,
             Instant::now() + Duration::from_millis(TAKEOVER_MS + 3000),
         ));
-        let named = errors
-            .iter()
-            .filter(|e| e.contains("degraded") && cut_off.iter().any(|m| e.contains(m)))
-            .count();
-        assert!(
-            named > 0,
-            "no answer during the cut named who is missing: {errors:?}"
-        );
         assert!(
             deployment.logged("h2", "not adopting: the role's journal is still held"),
             "h2 was due to adopt h1's roles and did not say why it did not:\n{}",
@@ -169,7 +149,7 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
             deployment.marginals_when(Duration::from_secs(90), |a| a["finished"] == true);
         assert_same_marginals(&last, &expected, "after the partition healed");
         eprintln!(
-            "partition: {} answers refused during the {:.1} s cut, {named} of them naming both cut-off leaders (e.g. {}); first complete answer {:.2} s after link-up, final {:.2} s after",
+            "partition: {} degraded answers during the {:.1} s cut (e.g. {}); first complete answer {:.2} s after link-up, final {:.2} s after",
             errors.len(),
             up.duration_since(down).as_secs_f64(),
             errors.first().map_or("", |e| e.lines().next().unwrap_or("")),

@@ -8,6 +8,10 @@
 //! unavailable in many networks and in CI; the topology file is the truth.
 //! Clients (the query CLI, Python) connect to the coordinator's endpoint.
 //!
+//! Links close at once (Zenoh's TCP and TLS `SO_LINGER` is 0, set when
+//! Zenoh is compiled, in `.cargo/config.toml`): a lingering close to a
+//! cut-off host blocked every incoming message for 10 s (docs/lan.md).
+//!
 //! A secured deployment ([`super::security`]) adds mutual TLS — every
 //! endpoint becomes `tls/`, each side shows its certificate — and, in its
 //! processes, the access-control rules generated from the topology.
