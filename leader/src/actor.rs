@@ -70,8 +70,8 @@ pub async fn run(
     // The journal's lock before anything is declared: a role whose journal
     // another process holds runs there (cut off, or still handing it
     // over), and must not also run here, not even its queryables.
-    let owner = match &config.journal {
-        Some(options) => Some(own(&options.path, &config.host).await?),
+    let owned = match &config.journal {
+        Some(options) => Some((options, own(&options.path, &config.host).await?)),
         None => None,
     };
     let events = session
@@ -101,12 +101,12 @@ pub async fn run(
         .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
     let started = Instant::now();
-    let (mut journal, recovered) = match (&config.journal, owner) {
-        (Some(options), Some(owner)) => {
+    let (mut journal, recovered) = match owned {
+        Some((options, owner)) => {
             let (journal, recovered) = Journal::open(options, owner)?;
             (Some(journal), recovered)
         }
-        _ => (None, Recovered::default()),
+        None => (None, Recovered::default()),
     };
     // The token claims the role (a process coming back finds it taken);
     // queries meanwhile are told the leader is recovering.

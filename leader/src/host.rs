@@ -91,9 +91,7 @@ impl HostConfig {
             drop_transfer_every: self.drop_transfer_every,
         }
     }
-}
 
-impl HostConfig {
     /// Who holds `role`'s journal now, if anyone does (always None
     /// without a state directory: nothing to fence, nothing to adopt).
     fn journal_holder(&self, role: &str) -> Option<String> {

@@ -38,30 +38,18 @@ pub const HANDOVER_PATIENCE: Duration = Duration::from_secs(5);
 impl Ownership {
     /// Takes the lock of `journal` for `holder` if nobody holds it.
     pub fn try_take(journal: &Path, holder: &str) -> Result<Option<Self>, JournalError> {
-        let path = lock_path(journal);
-        let io = |source| JournalError::Io {
-            path: path.display().to_string(),
-            source,
+        let Some(mut file) = lock(journal)? else {
+            return Ok(None);
         };
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(io)?;
-        }
-        let mut file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&path)
-            .map_err(io)?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(TryLockError::WouldBlock) => return Ok(None),
-            Err(TryLockError::Error(source)) => return Err(io(source)),
-        }
         // Held now: say who holds it, for the refusals of others.
-        file.set_len(0).map_err(io)?;
-        file.rewind().map_err(io)?;
-        writeln!(file, "{holder} (pid {})", std::process::id()).map_err(io)?;
+        let named = file
+            .set_len(0)
+            .and_then(|()| file.rewind())
+            .and_then(|()| writeln!(file, "{holder} (pid {})", std::process::id()));
+        named.map_err(|source| JournalError::Io {
+            path: lock_path(journal).display().to_string(),
+            source,
+        })?;
         Ok(Some(Ownership { _file: file }))
     }
 
@@ -69,33 +57,56 @@ impl Ownership {
     pub fn refused(journal: &Path) -> JournalError {
         JournalError::Held {
             path: lock_path(journal).display().to_string(),
-            holder: holder_of(journal).unwrap_or_else(|| "an unknown process".into()),
+            holder: holder_of(journal),
         }
     }
 }
 
 /// Who holds `journal`'s lock now, or None if nobody does. Checking takes
-/// the lock for an instant, so the answer can be stale by the time it is
-/// read: [`Ownership::take`] is the decision, this only avoids starting a
-/// role that would then be refused.
+/// the lock for an instant (and writes nothing), so the answer can be
+/// stale by the time it is read: [`Ownership::try_take`] is the decision,
+/// this only avoids starting a role that would then be refused.
 pub fn held_by(journal: &Path) -> Option<String> {
-    match Ownership::try_take(journal, "a check") {
+    match lock(journal) {
         Ok(Some(_released_here)) => None,
-        Ok(None) => Some(holder_of(journal).unwrap_or_else(|| "an unknown process".into())),
+        Ok(None) => Some(holder_of(journal)),
         // Cannot even open the lock: let the role's start say why.
         Err(_) => None,
     }
 }
 
+/// The lock file of `journal`, locked here; None if another holds it.
+fn lock(journal: &Path) -> Result<Option<File>, JournalError> {
+    let path = lock_path(journal);
+    let io = |source| JournalError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(io)?;
+    }
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(io)?;
+    match file.try_lock() {
+        Ok(()) => Ok(Some(file)),
+        Err(TryLockError::WouldBlock) => Ok(None),
+        Err(TryLockError::Error(source)) => Err(io(source)),
+    }
+}
+
 /// What the holder wrote into the lock file.
-fn holder_of(journal: &Path) -> Option<String> {
+fn holder_of(journal: &Path) -> String {
     let mut text = String::new();
-    File::open(lock_path(journal))
-        .ok()?
-        .read_to_string(&mut text)
-        .ok()?;
-    let text = text.trim();
-    (!text.is_empty()).then(|| text.to_string())
+    let read = File::open(lock_path(journal)).and_then(|mut f| f.read_to_string(&mut text));
+    match text.trim() {
+        named if read.is_ok() && !named.is_empty() => named.to_string(),
+        _ => "an unknown process".into(),
+    }
 }
 
 /// `<journal>.lock`.

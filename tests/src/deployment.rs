@@ -410,6 +410,16 @@ impl Drop for Deployment {
     }
 }
 
+/// Whether a `stats` answer shows leader role `role` hosted by the
+/// process named `host` (its own, or one that adopted it).
+pub fn hosted_on(stats: &Value, role: &str, host: &str) -> bool {
+    stats["leaders"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .any(|l| l["leader"] == role && l["host"] == host)
+}
+
 /// What `idmesh query --json` printed: its JSON lines, its stderr, and
 /// whether it succeeded.
 pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {

@@ -6,7 +6,7 @@
 //! and none applied twice.
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Settings};
+use idmesh_tests::deployment::{crowd, hosted_on, replay_summary, Deployment, Settings};
 use std::time::{Duration, Instant};
 
 /// What each leader applied, by kind (cuts excluded: queries place them).
@@ -215,22 +215,14 @@ fn an_adopted_role_goes_home_when_its_process_returns() {
     let killed = Instant::now();
     // Adopted by the next live process.
     let adopted = deployment.answer_when(&["stats"], Duration::from_secs(30), |s| {
-        s["leaders"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .any(|l| l["leader"] == "leader-1" && l["host"] == "leader-2")
+        hosted_on(s, "leader-1", "leader-2")
     });
     assert!(adopted["leaders"].is_array());
     let adoption = killed.elapsed();
     deployment.launch("leader", "leader-1");
     let back = Instant::now();
     deployment.answer_when(&["stats"], Duration::from_secs(30), |s| {
-        s["leaders"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .any(|l| l["leader"] == "leader-1" && l["host"] == "leader-1")
+        hosted_on(s, "leader-1", "leader-1")
     });
     let handed_back = back.elapsed();
     let last = deployment.final_marginals(Duration::from_secs(60));

@@ -23,7 +23,7 @@
 //! line and passes (CI runs as root).
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, replay_summary};
+use idmesh_tests::deployment::{crowd, hosted_on, replay_summary};
 use idmesh_tests::lan::{Lan, LanDeployment, LanSettings, Member};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -197,28 +197,13 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
             &["leader-2", "leader-3"],
             killed + Duration::from_secs(2),
         );
-        let hosted_on = |role: &str, host: &str| {
-            let (role, host) = (role.to_string(), host.to_string());
-            move |stats: &serde_json::Value| {
-                stats["leaders"]
-                    .as_array()
-                    .into_iter()
-                    .flatten()
-                    .any(|l| l["leader"] == role.as_str() && l["host"] == host.as_str())
-            }
-        };
         // Both roles of h2 inherit to leader-0 (the next live role after
         // leader-2 and after leader-3, cyclically).
-        deployment.answer_when(
-            &["stats"],
-            Duration::from_secs(60),
-            hosted_on("leader-2", "leader-0"),
-        );
-        deployment.answer_when(
-            &["stats"],
-            Duration::from_secs(60),
-            hosted_on("leader-3", "leader-0"),
-        );
+        for role in ["leader-2", "leader-3"] {
+            deployment.answer_when(&["stats"], Duration::from_secs(60), |s| {
+                hosted_on(s, role, "leader-0")
+            });
+        }
         let adopted = killed.elapsed();
         let (last, _) =
             deployment.marginals_when(Duration::from_secs(120), |a| a["finished"] == true);
@@ -226,7 +211,9 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
         deployment.start_host("h2");
         let back = Instant::now();
         for role in ["leader-2", "leader-3"] {
-            deployment.answer_when(&["stats"], Duration::from_secs(60), hosted_on(role, role));
+            deployment.answer_when(&["stats"], Duration::from_secs(60), |s| {
+                hosted_on(s, role, role)
+            });
         }
         let home = back.elapsed();
         let (last, _) =
