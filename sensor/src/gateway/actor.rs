@@ -201,21 +201,13 @@ pub async fn run(
             _ = &mut shutdown => break,
             query = cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
-                let parameters = query.parameters();
-                let parameters = CutParameters {
-                    tag: parameters.get("tag").map(str::to_owned),
-                    rows: parameters.contains_key("rows"),
-                    events: parameters.get("events").map(str::to_owned),
-                };
-                match gateway.cut(query, &parameters) {
-                    CutOutcome::Placed(p) => {
-                        wire.flush(&mut gateway).await;
-                        reply_placed(p).await;
-                    }
-                    CutOutcome::Scheduled => {}
-                    CutOutcome::Refused(query, reason) => {
-                        let _ = bounded("a refusal", query.reply_err(reason)).await;
-                    }
+                cut(&mut gateway, &mut wire, query).await;
+                // Every cut already asked for is placed or scheduled
+                // before the stream moves on: a client asking for many
+                // points at once (`--at-events`) must not find the stream
+                // past them because its questions were let in one per chunk.
+                while let Ok(Some(query)) = cut_requests.try_recv() {
+                    cut(&mut gateway, &mut wire, query).await;
                 }
             }
             query = follows.recv_async() => {
@@ -261,6 +253,26 @@ pub async fn run(
         }
     }
     Ok(())
+}
+
+/// Places, schedules or refuses the cut `query` asks for.
+async fn cut(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
+    let parameters = query.parameters();
+    let parameters = CutParameters {
+        tag: parameters.get("tag").map(str::to_owned),
+        rows: parameters.contains_key("rows"),
+        events: parameters.get("events").map(str::to_owned),
+    };
+    match gateway.cut(query, &parameters) {
+        CutOutcome::Placed(p) => {
+            wire.flush(gateway).await;
+            reply_placed(p).await;
+        }
+        CutOutcome::Scheduled => {}
+        CutOutcome::Refused(query, reason) => {
+            let _ = bounded("a refusal", query.reply_err(reason)).await;
+        }
+    }
 }
 
 /// The postcard request a get carries.
