@@ -29,9 +29,30 @@ super::versioned!(CutPlaced, "cut");
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SensorStats {
     pub sensor: String,
-    /// Follow and resend requests refused: undecodable, malformed, or
-    /// naming a leader or track the stream does not have.
+    /// Bad input refused: follow and resend requests undecodable,
+    /// malformed, or naming a leader or track the stream does not have;
+    /// ingest requests it could not read; ingested lines refused (bad or
+    /// out of order, counted below too).
     pub rejected: u64,
+    /// Lines taken from producers (ingest key and standard input) into the
+    /// sensor's order.
+    #[serde(default)]
+    pub ingested: u64,
+    /// Ingested lines a producer sent again: acknowledged, not applied
+    /// twice.
+    #[serde(default)]
+    pub duplicates: u64,
+    /// Ingested lines refused for what they say (malformed, an unknown
+    /// track, not an event).
+    #[serde(default)]
+    pub bad_lines: u64,
+    /// Ingested lines refused because their counter skipped ahead of the
+    /// producer's next one.
+    #[serde(default)]
+    pub out_of_order: u64,
+    /// Producers heard from.
+    #[serde(default)]
+    pub producers: u64,
 }
 
 /// Where every track was last seen and which leader surveils it, at the

@@ -11,6 +11,7 @@
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
 //! | `P/sensor/<name>/stats` | sensor queryable | its counters (JSON) |
+//! | `P/sensor/<name>/ingest` | sensor queryable | trace lines from any producer, acknowledged ([`producer_to_sensor`](super::producer_to_sensor)) |
 //! | `P/sensor/<name>/positions` | sensor queryable | every track's last position and owner where the stream is (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
@@ -90,6 +91,10 @@ impl Keys {
 
     pub fn every_sensor_positions(&self) -> String {
         format!("{}/sensor/*/positions", self.prefix)
+    }
+
+    pub fn sensor_ingest(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/ingest", self.prefix)
     }
 
     pub fn sensor_resend(&self, sensor: &str) -> String {

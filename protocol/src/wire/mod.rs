@@ -10,6 +10,8 @@
 //!   a request for lost batches; how far a leader's state is safe (what
 //!   the sensor and peers may stop keeping for it).
 //! - [`coordinator_to_sensor`] — a request for a cut of the stream.
+//! - [`producer_to_sensor`] — live ingestion: trace lines from any
+//!   producer, and the acknowledgement (JSON).
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
 //! - [`query`] — what a user gets back, as JSON.
@@ -25,6 +27,7 @@ pub mod interest;
 pub mod keys;
 pub mod leader_to_leader;
 pub mod leader_to_sensor;
+pub mod producer_to_sensor;
 pub mod query;
 pub mod sensor_to_leader;
 pub mod valid;

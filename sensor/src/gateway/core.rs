@@ -12,10 +12,12 @@
 
 use super::batch_log::BatchLog;
 use super::cuts::{place, CutParameters, Cuts, Placed, Request};
+use super::ingest::{Ingest, IngestRefusal, Offer};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
+use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, VERSION};
 
@@ -38,6 +40,8 @@ pub struct Gateway<Q> {
     /// The last durable position each leader published.
     durable: Vec<Option<u64>>,
     cuts: Cuts<Q>,
+    /// Which producers' lines enter the order.
+    ingest: Ingest,
     /// The whole source has been read.
     finished: bool,
     /// Requests refused: a bad one is answered with why and changes
@@ -50,16 +54,18 @@ impl<Q> Gateway<Q> {
     /// the source has nothing to stream at all.
     pub fn new(name: &str, router: Router, finished: bool) -> Self {
         let leaders = router.leaders();
+        let ingest = Ingest::new(name, router.header());
         Gateway {
             name: name.to_string(),
             router,
             sent: (0..leaders).map(|_| BatchLog::default()).collect(),
             durable: vec![None; leaders],
             cuts: Cuts::default(),
+            ingest,
             finished,
             stats: SensorStats {
                 sensor: name.to_string(),
-                rejected: 0,
+                ..SensorStats::default()
             },
         }
     }
@@ -95,6 +101,35 @@ impl<Q> Gateway<Q> {
         let mut placed = Vec::new();
         self.cuts.reached(&mut self.router, &self.name, &mut placed);
         placed
+    }
+
+    /// An ingest request from a producer: its acknowledgement once every
+    /// line it accepted is routed (in the sensor's order, with its seq),
+    /// and the cuts those lines reached; flush, then answer both. A
+    /// request it cannot read, or one after the stream finished, is
+    /// refused whole (counted).
+    pub fn ingest(&mut self, offer: Offer<'_>) -> Result<(IngestAck, Vec<Placed<Q>>), IngestRefusal> {
+        if self.finished {
+            self.stats.rejected += 1;
+            return Err(IngestRefusal::Finished);
+        }
+        let judged = self.ingest.offer(offer, &mut self.stats)?;
+        let mut placed = Vec::new();
+        for line in &judged.accepted {
+            placed.extend(self.line(line));
+        }
+        let mut ack = judged.ack;
+        ack.events = self.router.events();
+        Ok((ack, placed))
+    }
+
+    /// Line `number` of a trace read from standard input: routed (the cuts
+    /// it reached, as [`Gateway::line`]), or why it was skipped (counted).
+    pub fn read(&mut self, number: usize, text: &str) -> Result<Vec<Placed<Q>>, String> {
+        match self.ingest.read(number, text, &mut self.stats)? {
+            Some(line) => Ok(self.line(&line)),
+            None => Ok(Vec::new()),
+        }
     }
 
     /// The source is exhausted: from the next flush on, batches say the

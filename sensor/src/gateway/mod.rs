@@ -8,6 +8,8 @@
 //!   out.
 //! - [`actor`] — publishes the stream over Zenoh at a rate, places cuts for
 //!   queries and answers leaders' follow requests.
+//! - [`ingest`] — live ingestion: which producers' lines (ingest key,
+//!   standard input) enter the order; dedup, validation, counters (pure).
 //! - [`cuts`] — cut requests: now, or at a future event count.
 //! - [`batch_log`] — the batches sent each leader, kept until it says its
 //!   state is safe past them.
@@ -16,6 +18,7 @@ pub mod actor;
 pub mod batch_log;
 pub mod core;
 pub mod cuts;
+pub mod ingest;
 pub mod router;
 
 pub use router::{LeaderPlace, Router, RouterConfig, RouterError};

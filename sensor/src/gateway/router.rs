@@ -59,6 +59,8 @@ pub enum RouterError {
 
 pub struct Router {
     config: RouterConfig,
+    /// The stream's header: what ingested lines are checked against.
+    header: Header,
     begin: Begin,
     interests: Vec<Interest>,
     owners: Vec<u16>,
@@ -109,6 +111,7 @@ impl Router {
             owners: begin.owners.clone(),
             positions: vec![None; tracks],
             begin: begin.clone(),
+            header: header.clone(),
             interests,
             mixing_log: MixingLog::new(tracks),
             seq: 0,
@@ -129,6 +132,11 @@ impl Router {
 
     pub fn begin(&self) -> &Begin {
         &self.begin
+    }
+
+    /// The header the stream started from.
+    pub fn header(&self) -> &Header {
+        &self.header
     }
 
     /// The seq of the last item.

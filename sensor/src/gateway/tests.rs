@@ -449,3 +449,54 @@ fn cuts_at_one_point_are_placed_together_with_their_rows_and_none_past_the_end()
         assert_eq!(cuts, [(21, true), (22, false)]);
     }
 }
+
+/// Live ingestion through the gateway: an acknowledgement comes only for
+/// lines already routed (their items are in the next batch, and `events`
+/// counts them), a cut waiting for a point is placed by the ingested line
+/// that reaches it, a line sent again is routed once, and a finished
+/// stream takes nothing more.
+#[test]
+fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
+    use super::ingest::{IngestRefusal, Offer};
+    let mut gateway: Gateway<u32> = Gateway::new("s", router(4, 2, false), false);
+    gateway.flush();
+    assert!(matches!(
+        gateway.cut(
+            1,
+            &CutParameters {
+                tag: Some("5".into()),
+                rows: false,
+                events: Some("2".into()),
+            }
+        ),
+        CutOutcome::Scheduled
+    ));
+    let payload = r#"{"kind":"mix","time":0,"a":0,"b":2,"swap":0.5}
+{"kind":"observe","time":0,"track":1,"red":0.9,"blue":0.3}"#;
+    let offer = |counter| Offer {
+        producer: Some("cam"),
+        counter: Some(counter),
+        payload: payload.as_bytes(),
+    };
+    let (ack, placed) = gateway.ingest(offer("0")).unwrap();
+    assert_eq!((ack.accepted.clone(), ack.events), (vec![0, 1], 2));
+    assert_eq!(placed.len(), 1);
+    assert_eq!((placed[0].query, placed[0].answer.events), (1, 2));
+    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    // The mix (seq 2) of a's tracks, the observation (seq 3) to both, the
+    // cut (seq 4) to both.
+    assert_eq!((seqs(&a), seqs(&b)), (vec![2, 3, 4], vec![3, 4]));
+    // The whole history again: acknowledged, nothing routed.
+    let (again, placed) = gateway.ingest(offer("0")).unwrap();
+    assert_eq!((again.duplicates, again.accepted.len()), (vec![0, 1], 0));
+    assert!(placed.is_empty());
+    assert!(gateway.flush().iter().all(|b| b.items.is_empty()));
+    assert_eq!(gateway.router().events(), 2);
+    gateway.end();
+    assert!(matches!(
+        gateway.ingest(offer("2")),
+        Err(IngestRefusal::Finished)
+    ));
+    let stats = gateway.stats();
+    assert_eq!((stats.ingested, stats.duplicates, stats.rejected), (2, 2, 1));
+}
