@@ -31,8 +31,9 @@ pub enum Command {
     /// Run the evaluation grid (methods × scenarios on both cores): print
     /// the tables, write results.md and the SVG plots to --out-dir.
     Eval(EvalArgs),
-    /// Run the sensor gateway of a topology: stream its trace to the leaders.
-    Sensor(RoleArgs),
+    /// Run the sensor gateway of a topology: stream its trace (or standard
+    /// input) to the leaders, with what producers send on its ingest key.
+    Sensor(SensorArgs),
     /// Run a leader of a topology.
     Leader(RoleArgs),
     /// Run the coordinator of a topology: answer queries.
@@ -100,6 +101,19 @@ pub struct RoleArgs {
     /// This process's name in it.
     #[arg(long)]
     pub name: String,
+}
+
+#[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
+pub struct SensorArgs {
+    #[command(flatten)]
+    pub role: RoleArgs,
+    /// Read the trace from standard input (a pipe, `tail -f`) instead of
+    /// the topology's `trace` file: the header first, then events as they
+    /// come; a bad line is skipped and counted. The stream ends with the
+    /// input, unless the topology's sensor is `live`.
+    #[arg(long)]
+    pub stdin: bool,
 }
 
 #[derive(Debug, Clone, Args)]

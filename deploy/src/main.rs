@@ -39,9 +39,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),
         Command::Eval(args) => idmesh_eval::eval::run(&args),
-        Command::Sensor(args) => {
-            runtime::roles::run(runtime::roles::Role::Sensor, &args.config, &args.name)
-        }
+        Command::Sensor(args) => runtime::roles::run(
+            runtime::roles::Role::Sensor { stdin: args.stdin },
+            &args.role.config,
+            &args.role.name,
+        ),
         Command::Leader(args) => {
             runtime::roles::run(runtime::roles::Role::Leader, &args.config, &args.name)
         }

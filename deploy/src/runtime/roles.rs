@@ -11,8 +11,10 @@ use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::actor::CoordinatorConfig;
 use idmesh_leader::host::HostConfig;
 use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::trace::{Header, Line, Problem};
 use idmesh_protocol::TraceReader;
 use idmesh_sensor::gateway::actor::{Faults, GatewayConfig};
+use idmesh_sensor::gateway::feed::{lines_of, InputLine, Source};
 use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
 use std::path::Path;
 use std::time::Duration;
@@ -20,7 +22,10 @@ use tracing::Instrument;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
-    Sensor,
+    /// With `stdin`: the trace comes from standard input.
+    Sensor {
+        stdin: bool,
+    },
     Leader,
     Coordinator,
 }
@@ -29,7 +34,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
     let topology = Topology::load(config)?;
     let member = topology.member(name)?;
     let expected = match role {
-        Role::Sensor => "sensor",
+        Role::Sensor { .. } => "sensor",
         Role::Leader => "leader",
         Role::Coordinator => "coordinator",
     };
@@ -51,7 +56,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             let keys = Keys::new(topology.prefix.clone());
             mesh::answer_pings(&session, keys.ping(expected, name), name.to_string()).await?;
             let result = match role {
-                Role::Sensor => sensor(session.clone(), &topology, keys).await,
+                Role::Sensor { stdin } => sensor(session.clone(), &topology, keys, stdin).await,
                 Role::Leader => idmesh_leader::host::run(
                     session.clone(),
                     HostConfig {
@@ -121,15 +126,32 @@ fn peer_options(topology: &Topology, name: &str) -> Result<MeshOptions> {
     })
 }
 
-async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Result<()> {
-    let path = topology.trace_path();
-    let mut reader = TraceReader::open(&path)
-        .with_context(|| format!("cannot open trace {}", path.display()))?;
-    let header = reader.read_header()?;
-    let mut lines = Vec::new();
-    while let Some(numbered) = reader.read_line()? {
-        lines.push(numbered.line);
-    }
+async fn sensor(
+    session: zenoh::Session,
+    topology: &Topology,
+    keys: Keys,
+    stdin: bool,
+) -> Result<()> {
+    let (header, source) = if stdin {
+        let (header, input) = stdin_trace()?;
+        (
+            header,
+            Source {
+                lines: Vec::new(),
+                input: Some(input),
+            },
+        )
+    } else {
+        let path = topology.trace_path();
+        let mut reader = TraceReader::open(&path)
+            .with_context(|| format!("cannot open trace {}", path.display()))?;
+        let header = reader.read_header()?;
+        let mut lines = Vec::new();
+        while let Some(numbered) = reader.read_line()? {
+            lines.push(numbered.line);
+        }
+        (header, Source { lines, input: None })
+    };
     let router = Router::new(
         RouterConfig {
             sensor: topology.sensor.name.clone(),
@@ -154,13 +176,40 @@ async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Res
         realtime: topology.sensor.realtime,
         limit: topology.sensor.events,
         wait_for_leaders: Duration::from_secs(60),
+        live: topology.sensor.live,
         faults: Faults {
             duplicate: topology.sensor.faults.duplicate,
             drop_every: topology.sensor.faults.drop_every,
         },
     };
-    idmesh_sensor::gateway::actor::run(session, config, router, lines, shutdown()).await?;
+    idmesh_sensor::gateway::actor::run(session, config, router, source, shutdown()).await?;
     Ok(())
+}
+
+/// The header on standard input's first line (a stream cannot start
+/// without its field), and the rest of the input, read as it comes.
+fn stdin_trace() -> Result<(Header, tokio::sync::mpsc::Receiver<InputLine>)> {
+    let mut input = std::io::BufReader::new(std::io::stdin());
+    let mut first = String::new();
+    std::io::BufRead::read_line(&mut input, &mut first).context("stdin: cannot read")?;
+    let text = first.trim_end_matches(['\n', '\r']);
+    let header = match Line::parse(text) {
+        _ if first.is_empty() => {
+            return Err(anyhow!("stdin:1: {}", Problem::Empty));
+        }
+        Ok(Line::Header(header)) => header,
+        Ok(other) => {
+            return Err(anyhow!(
+                "stdin:1: {}",
+                Problem::HeaderNotFirst { kind: other.kind() }
+            ))
+        }
+        Err(problem) => return Err(anyhow!("stdin:1: {problem}")),
+    };
+    header
+        .validate()
+        .map_err(|problem| anyhow!("stdin:1: {problem}"))?;
+    Ok((header, lines_of(input, 2)))
 }
 
 /// Ctrl-C or SIGTERM.

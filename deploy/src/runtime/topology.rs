@@ -27,6 +27,8 @@
 //! trace = "crowd.jsonl"          # relative to this file
 //! rate = 2000                    # events/s; absent = as fast as possible
 //! events = 5000                  # stop the stream after this many events
+//! live = false                   # true: stay open for producers' events
+//!                                # (P/sensor/<name>/ingest) after the trace
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
@@ -124,6 +126,11 @@ pub struct SensorProcess {
     #[serde(default)]
     pub realtime: bool,
     pub events: Option<u64>,
+    /// The stream stays open once the trace (or standard input) is done:
+    /// it takes producers' events on `P/sensor/<name>/ingest` until the
+    /// sensor stops.
+    #[serde(default)]
+    pub live: bool,
     #[serde(default)]
     pub faults: FaultSection,
 }

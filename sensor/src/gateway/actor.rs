@@ -9,6 +9,13 @@
 //! leaders apply. After the source is exhausted it keeps serving cuts and
 //! follows until shut down, so queries keep being answered.
 //!
+//! Events come from a trace file (paced), standard input (as it comes) and
+//! producers on `P/sensor/<name>/ingest` ([`super::feed`]); the same task
+//! takes all three, so they share one order. An ingest request is
+//! answered only after its accepted lines are routed and the batches
+//! holding them are published: what a producer sees acknowledged is in
+//! the sensor's order.
+//!
 //! Every batch sent is kept, by leader and number, so that a leader that
 //! lost some (a gap in the numbers, or the time it was down and
 //! restarting) gets them again on `P/sensor/<name>/resend`, until the
@@ -20,9 +27,12 @@
 
 use super::core::{CutOutcome, Gateway};
 use super::cuts::{CutParameters, Placed};
+use super::feed::{InputLine, Source};
+use super::ingest::Offer;
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
+use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
 use idmesh_protocol::wire::keys::Keys;
 use std::future::Future;
 use std::time::{Duration, Instant};
@@ -44,6 +54,9 @@ pub struct GatewayConfig {
     pub limit: Option<u64>,
     /// How long to wait for every leader to be up.
     pub wait_for_leaders: Duration,
+    /// The stream stays open for producers once its trace and input are
+    /// done: it never finishes, and takes ingested events until shut down.
+    pub live: bool,
     pub faults: Faults,
 }
 
@@ -92,13 +105,13 @@ fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
     (lines.len(), events)
 }
 
-/// Streams `lines` (the events of a trace, header excluded) until done,
-/// then serves queries until `shutdown`.
+/// Streams `source` until done (a live one until `shutdown`), then serves
+/// queries until `shutdown`.
 pub async fn run(
     session: Session,
     config: GatewayConfig,
     router: Router,
-    lines: Vec<Line>,
+    source: Source,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), GatewayError> {
     let keys = &config.keys;
@@ -126,6 +139,10 @@ pub async fn run(
         .declare_queryable(keys.sensor_positions(&config.name))
         .await
         .map_err(mesh("declare the positions queryable"))?;
+    let ingests = session
+        .declare_queryable(keys.sensor_ingest(&config.name))
+        .await
+        .map_err(mesh("declare the ingest queryable"))?;
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -143,12 +160,19 @@ pub async fn run(
         );
     }
     wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
-    tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(), "streaming");
+    let Source { lines, mut input } = source;
+    // The stream ends by itself when the trace's lines are out and there
+    // is no input to wait for; a live one only when the sensor stops.
+    let ends = input.is_none() && !config.live;
+    tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(),
+        stdin = input.is_some(), ends, "streaming");
 
     let (length, end) = stream_length(&lines, config.limit);
     let lines = &lines[..length];
-    let mut gateway: Gateway<Query> =
-        Gateway::new(&config.name, router, lines.is_empty()).ending_at(end);
+    let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
+    if ends {
+        gateway = gateway.ending_at(end);
+    }
     let mut wire = Wire {
         faults: config.faults,
         publishers,
@@ -161,7 +185,7 @@ pub async fn run(
     tokio::pin!(shutdown);
     loop {
         // How many lines are due now, and when the next one is.
-        let (due, wait) = if gateway.finished() {
+        let (due, wait) = if gateway.finished() || next >= lines.len() {
             (0, Duration::from_secs(3600))
         } else {
             due_lines(&config, lines, next, started, first_time, chunk)
@@ -172,7 +196,7 @@ pub async fn run(
                 placed.extend(gateway.line(line));
             }
             next += due;
-            let refused = if next >= lines.len() {
+            let refused = if next >= lines.len() && input.is_none() && !config.live {
                 gateway.end()
             } else {
                 Vec::new()
@@ -249,10 +273,107 @@ pub async fn run(
                     tracing::warn!(error = %e, "could not answer a positions query");
                 }
             }
+            query = ingests.recv_async() => {
+                let Ok(query) = query else { break };
+                ingest(&mut gateway, &mut wire, query).await;
+            }
+            read = next_input(&mut input), if input.is_some() => {
+                let Some(read) = read else {
+                    // The input ended: so does a stream that is not live
+                    // once the trace's own lines are out.
+                    input = None;
+                    tracing::info!(sensor = %config.name, events = gateway.router().events(), "standard input ended");
+                    if next >= lines.len() && !config.live && !gateway.finished() {
+                        let refused = gateway.end();
+                        wire.flush(&mut gateway).await;
+                        for (query, reason) in refused {
+                            let _ = bounded("a refusal", query.reply_err(reason)).await;
+                        }
+                    }
+                    continue;
+                };
+                let mut placed = Vec::new();
+                take_input(&mut gateway, read, &mut placed);
+                // What the pipe already holds goes in the same batch.
+                for _ in 1..chunk {
+                    let Some(rx) = input.as_mut() else { break };
+                    match rx.try_recv() {
+                        Ok(read) => take_input(&mut gateway, read, &mut placed),
+                        Err(_) => break,
+                    }
+                }
+                wire.flush(&mut gateway).await;
+                for p in placed {
+                    reply_placed(p).await;
+                }
+            }
             _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
         }
     }
     Ok(())
+}
+
+/// The next line of standard input; `None` at its end (or with none).
+async fn next_input(
+    input: &mut Option<tokio::sync::mpsc::Receiver<InputLine>>,
+) -> Option<InputLine> {
+    match input {
+        Some(rx) => rx.recv().await,
+        None => None,
+    }
+}
+
+/// Routes one line of standard input, or says why not: a bad line is
+/// skipped (the gateway counted it), an unreadable input is logged and
+/// read no further (the channel closes behind it).
+fn take_input(gateway: &mut Gateway<Query>, read: InputLine, placed: &mut Vec<Placed<Query>>) {
+    match read {
+        Ok((number, text)) => match gateway.read(number, &text) {
+            Ok(reached) => placed.extend(reached),
+            Err(reason) => {
+                tracing::warn!(%reason, rejected = gateway.stats().rejected, "input line skipped")
+            }
+        },
+        Err(reason) => tracing::error!(%reason, "standard input is read no further"),
+    }
+}
+
+/// An ingest request: its lines judged and the accepted ones routed and
+/// published, then the acknowledgement (JSON) — or why the whole request
+/// was refused.
+async fn ingest(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
+    let body = payload(&query);
+    let parameters = query.parameters();
+    let offer = Offer {
+        producer: parameters.get(PRODUCER),
+        counter: parameters.get(COUNTER),
+        payload: &body,
+    };
+    match gateway.ingest(offer) {
+        Ok((ack, placed)) => {
+            // Published before the acknowledgement leaves: a query asked
+            // after it places its cut after these lines.
+            wire.flush(gateway).await;
+            let body = serde_json::to_vec(&ack).unwrap_or_default();
+            if let Some(Err(e)) = bounded(
+                "an ingest acknowledgement",
+                query
+                    .reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON),
+            )
+            .await
+            {
+                tracing::warn!(error = %e, "could not acknowledge an ingest request");
+            }
+            for p in placed {
+                reply_placed(p).await;
+            }
+        }
+        Err(refusal) => {
+            tracing::warn!(error = %refusal, rejected = gateway.stats().rejected, "ingest request refused");
+            let _ = bounded("a refusal", query.reply_err(refusal.to_string())).await;
+        }
+    }
 }
 
 /// Places, schedules or refuses the cut `query` asks for.

@@ -8,6 +8,8 @@
 //!   out.
 //! - [`actor`] — publishes the stream over Zenoh at a rate, places cuts for
 //!   queries and answers leaders' follow requests.
+//! - [`feed`] — where events come from: a trace file, standard input,
+//!   producers on the ingest key.
 //! - [`ingest`] — live ingestion: which producers' lines (ingest key,
 //!   standard input) enter the order; dedup, validation, counters (pure).
 //! - [`cuts`] — cut requests: now, or at a future event count.
@@ -18,6 +20,7 @@ pub mod actor;
 pub mod batch_log;
 pub mod core;
 pub mod cuts;
+pub mod feed;
 pub mod ingest;
 pub mod router;
 

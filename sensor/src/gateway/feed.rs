@@ -1,0 +1,53 @@
+//! Where the sensor's events come from, as the actor sees them: the lines
+//! of a trace file (paced by the actor), standard input as it comes (a
+//! pipe, `tail -f`), and whatever producers send on the ingest key until
+//! the stream finishes (never, while it is `live`). Reading is I/O and lives here; what
+//! a line is worth is [`super::ingest`]'s to decide.
+
+use idmesh_protocol::trace::Line;
+use std::io::BufRead;
+use tokio::sync::mpsc;
+
+/// A line of standard input with its number in the whole input (the
+/// header is line 1), or why reading stopped.
+pub type InputLine = Result<(usize, String), String>;
+
+/// What the sensor streams, beside what producers send on the ingest key.
+#[derive(Debug, Default)]
+pub struct Source {
+    /// A trace file's events (header excluded), paced by the actor.
+    pub lines: Vec<Line>,
+    /// Lines of standard input as they come; closed at its end.
+    pub input: Option<mpsc::Receiver<InputLine>>,
+}
+
+/// Lines in flight between the reading thread and the actor: enough to
+/// keep a fast pipe busy, few enough that a producer faster than the
+/// leaders is held back by the pipe rather than by the sensor's memory.
+const IN_FLIGHT: usize = 4096;
+
+/// Reads `input` line by line on a thread of its own (a blocking read must
+/// not hold the runtime), numbering lines from `first`.
+pub fn lines_of<R: BufRead + Send + 'static>(
+    mut input: R,
+    first: usize,
+) -> mpsc::Receiver<InputLine> {
+    let (send, receive) = mpsc::channel(IN_FLIGHT);
+    std::thread::spawn(move || {
+        let mut number = first;
+        loop {
+            let mut text = String::new();
+            let read = match input.read_line(&mut text) {
+                Ok(0) => return,
+                Ok(_) => Ok((number, text)),
+                Err(e) => Err(format!("stdin:{number}: cannot read: {e}")),
+            };
+            let stop = read.is_err();
+            if send.blocking_send(read).is_err() || stop {
+                return;
+            }
+            number += 1;
+        }
+    });
+    receive
+}
