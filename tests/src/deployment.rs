@@ -6,7 +6,7 @@
 use crate::idmesh;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdin, Command, Stdio};
 use std::time::{Duration, Instant};
 
 #[derive(Debug, Clone, Default)]
@@ -32,6 +32,11 @@ pub struct Settings {
     pub leader_faults: Option<String>,
     /// A `[security]` section: mutual TLS, and access control if asked.
     pub security: Option<Secured>,
+    /// The sensor's stream stays open for producers (`live = true`).
+    pub live: bool,
+    /// The sensor's `trace`, when it is not the trace the leaders are
+    /// placed over (say, the header alone, for a live stream).
+    pub sensor_trace: Option<PathBuf>,
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -117,6 +122,28 @@ impl Deployment {
         deployment
     }
 
+    /// The coordinator and the leaders, each on its own, and no sensor
+    /// (the test starts it, e.g. with [`Deployment::launch_piped`]).
+    pub fn start_without_sensor(name: &str, trace: &Path, settings: &Settings) -> Deployment {
+        let mut deployment = Self::configure(name, trace, settings);
+        deployment.launch("coordinator", "coordinator");
+        for i in 0..settings.leaders {
+            deployment.launch("leader", &format!("leader-{i}"));
+        }
+        deployment
+    }
+
+    /// Starts process `name` in `role` with `extra` arguments (e.g.
+    /// `--stdin`) and standard input a pipe the test writes.
+    pub fn launch_piped(&mut self, role: &str, name: &str, extra: &[&str]) -> ChildStdin {
+        let mut command = self.command(&[role, "--name", name]);
+        command.args(extra).stdin(Stdio::piped());
+        let mut child = command.spawn().expect("idmesh starts");
+        let stdin = child.stdin.take().expect("a piped stdin");
+        self.children.push((name.to_string(), child));
+        stdin
+    }
+
     /// Starts process `name` in `role`.
     pub fn launch(&mut self, role: &str, name: &str) {
         let child = self.spawn(&[role, "--name", name]);
@@ -144,20 +171,34 @@ impl Deployment {
     }
 
     fn spawn(&self, args: &[&str]) -> Child {
+        self.command(args).spawn().expect("idmesh starts")
+    }
+
+    fn command(&self, args: &[&str]) -> Command {
         let log = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
             .open(self.dir.join("up.log"))
             .unwrap();
-        Command::new(idmesh())
+        let mut command = Command::new(idmesh());
+        command
             .args(args)
             .arg("--config")
             .arg(&self.config)
             .env("RUST_LOG", "warn")
             .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .expect("idmesh starts")
+            .stderr(log);
+        command
+    }
+
+    /// The sensor's listening endpoint.
+    pub fn sensor_endpoint(&self) -> &str {
+        &self
+            .endpoints
+            .iter()
+            .find(|(name, _)| name == "sensor-0")
+            .expect("a sensor")
+            .1
     }
 
     fn configure(name: &str, trace: &Path, settings: &Settings) -> Deployment {
@@ -184,8 +225,16 @@ impl Deployment {
             } else {
                 "threshold"
             },
-            trace.display().to_string()
+            settings
+                .sensor_trace
+                .as_deref()
+                .unwrap_or(trace)
+                .display()
+                .to_string()
         );
+        if settings.live {
+            toml.push_str("live = true\n");
+        }
         if let Some(rate) = settings.rate {
             toml.push_str(&format!("rate = {rate}\n"));
         }

@@ -1,0 +1,312 @@
+//! Live ingestion with real processes on loopback (issue 19): events that
+//! reach the sensor as they happen — through a pipe on its standard input,
+//! or from any producer on its ingest key — give the answer the trace file
+//! gives, which is the centralized engine's (`idmesh replay`) to 1e-9; and
+//! what a producer gets wrong (bad lines, an unknown track, counters out of
+//! order, its whole history sent again) is refused or deduplicated as
+//! `idmesh_protocol::wire::producer_to_sensor` documents, counted in
+//! `query/stats`, and changes nothing.
+
+use idmesh_tests::compare::{assert_same_marginals, floats};
+use idmesh_tests::deployment::{
+    crowd, replay_lines, replay_summary, truth_lines, Deployment, Settings,
+};
+use serde_json::Value;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+/// The events of a trace (mix, observe, move, identify lines), as text.
+fn events(trace: &Path) -> Vec<String> {
+    std::fs::read_to_string(trace)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            let v: Value = serde_json::from_str(l).unwrap();
+            matches!(
+                v["kind"].as_str(),
+                Some("mix" | "observe" | "move" | "identify")
+            )
+        })
+        .map(str::to_owned)
+        .collect()
+}
+
+/// A trace of the header of `trace` alone: a live sensor's field.
+fn header_only(trace: &Path, dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let header = text.lines().next().unwrap();
+    let path = dir.join("header.jsonl");
+    std::fs::write(&path, format!("{header}\n")).unwrap();
+    path
+}
+
+/// The answer once the sensor's watermark reaches `events`.
+fn answer_at(deployment: &Deployment, events: u64) -> Value {
+    deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+        a["watermark"]["sensor-0"].as_u64() == Some(events)
+    })
+}
+
+/// The sensor's counters in `query/stats`.
+fn sensor_stats(deployment: &Deployment) -> Value {
+    let stats = deployment.query(&["stats"]).expect("stats answer");
+    stats[0]["sensors"][0].clone()
+}
+
+/// `idmesh sensor --stdin`, the trace written into its pipe a few lines
+/// at a time (one bad line among them), gives the trace file's answer:
+/// the centralized engine's, to 1e-9, once the input ends.
+#[test]
+fn a_trace_piped_into_the_sensor_gives_the_answer_of_the_trace_file() {
+    let dir = std::env::temp_dir().join(format!("idmesh-stdin-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let settings = Settings {
+        leaders: 2,
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_without_sensor("stdin", &trace, &settings);
+    let mut pipe = deployment.launch_piped("sensor", "sensor-0", &["--stdin"]);
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let bad_at = lines.len() / 2;
+    for (i, chunk) in lines.chunks(40).enumerate() {
+        for line in chunk {
+            writeln!(pipe, "{line}").expect("the sensor reads its input");
+        }
+        if i * 40 <= bad_at && bad_at < (i + 1) * 40 {
+            writeln!(pipe, "{{\"kind\":\"mix\",\"time\":1e9,\"a\":3,\"b\":99,\"swap\":0.5}}")
+                .unwrap();
+        }
+        pipe.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    drop(pipe);
+    let answer = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(&answer, &floats(&central["final_p_red"]), "piped trace");
+    let events = events(&trace).len() as u64;
+    assert_eq!(answer["watermark"]["sensor-0"], events);
+    let sensor = sensor_stats(&deployment);
+    assert_eq!(sensor["ingested"], events, "{sensor}");
+    assert_eq!((&sensor["bad_lines"], &sensor["rejected"]), (&1.into(), &1.into()));
+    assert!(
+        deployment.log().contains("b = 99 is not a track"),
+        "the bad line is logged with why"
+    );
+}
+
+/// A Python producer (eclipse-zenoh, `examples/producer.py`) feeds a live
+/// sensor, whose trace is the header alone, through its ingest key: every
+/// event acknowledged once, and the answers at the trace's truth points
+/// (asked before the producer starts) and at the end equal `idmesh replay`
+/// to 1e-9.
+#[test]
+fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
+    let dir = std::env::temp_dir().join(format!("idmesh-ingest-py-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 6);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let central_lines = replay_lines(&trace, &["--method", "overcomplete"]);
+    let truths = truth_lines(&trace);
+    let settings = Settings {
+        leaders: 2,
+        live: true,
+        sensor_trace: Some(header_only(&trace, &dir)),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start_each("ingestpy", &trace, &settings);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    assert_eq!(first["watermark"]["sensor-0"], 0);
+    assert_eq!(first["finished"], false);
+    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/producer.py");
+    let points = std::thread::scope(|scope| {
+        let asked = scope.spawn(|| deployment.at_truth_points("marginals", &truths));
+        // The questions are placed (held at their points) before any event.
+        std::thread::sleep(Duration::from_millis(1500));
+        let output = Command::new(&python)
+            .arg(&script)
+            .arg(&trace)
+            .args([deployment.sensor_endpoint(), &deployment.prefix, "sensor-0"])
+            .args(["--producer", "camera-7", "--batch", "50"])
+            .output()
+            .expect("python runs");
+        assert!(
+            output.status.success(),
+            "the producer failed: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
+        let events = events(&trace).len() as u64;
+        assert_eq!(sent["accepted"], events, "{sent}");
+        assert_eq!((&sent["duplicates"], sent["errors"].as_array().map(Vec::len)), (&0.into(), Some(0)));
+        assert_eq!(sent["events"], events);
+        asked.join().expect("the questions")
+    });
+    assert!(
+        points.len() * 2 >= truths.len(),
+        "{} of {} truth points answered",
+        points.len(),
+        truths.len()
+    );
+    for (i, answer) in &points {
+        assert_same_marginals(
+            answer,
+            &floats(&central_lines[*i]["p_red"]),
+            &format!("truth point {i}"),
+        );
+    }
+    let events = events(&trace).len() as u64;
+    let answer = answer_at(&deployment, events);
+    assert_same_marginals(&answer, &floats(&central["final_p_red"]), "ingested");
+    let sensor = sensor_stats(&deployment);
+    assert_eq!(
+        (&sensor["ingested"], &sensor["producers"], &sensor["rejected"]),
+        (&events.into(), &1.into(), &0.into()),
+        "{sensor}"
+    );
+}
+
+/// A producer of the test's own (a Rust Zenoh client) gets everything
+/// wrong once: counters that skip ahead (refused, `next` named), a second
+/// producer's bad lines (malformed, an unknown track, a truth line: each
+/// refused naming its line and why), its whole history sent again
+/// (duplicates, acknowledged), requests that cannot be read (an error
+/// reply). The counters in `query/stats` say so, and the final answer is
+/// still `idmesh replay`'s to 1e-9.
+#[test]
+fn what_a_producer_gets_wrong_is_refused_or_deduplicated_counted_and_changes_nothing() {
+    let dir = std::env::temp_dir().join(format!("idmesh-ingest-bad-{}", std::process::id()));
+    let trace = crowd(&dir, 10, 3, 60.0, 8);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let settings = Settings {
+        leaders: 2,
+        live: true,
+        sensor_trace: Some(header_only(&trace, &dir)),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start_each("ingestbad", &trace, &settings);
+    deployment.first_answer(Duration::from_secs(30));
+    let history = events(&trace);
+    let total = history.len() as u64;
+    let half = history.len() / 2;
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let replies = runtime.block_on(async {
+        let producer = Producer::connect(deployment.sensor_endpoint(), &deployment.prefix).await;
+        let mut replies = Vec::new();
+        for (i, chunk) in history[..half].chunks(64).enumerate() {
+            replies.push(producer.send("p", (i * 64) as u64, chunk).await);
+        }
+        // Ahead of itself: refused, nothing taken.
+        let ahead = (half + 10) as u64;
+        replies.push(producer.send("p", ahead, &history[half..half + 3]).await);
+        // Another producer's bad lines.
+        let bad = [
+            "{\"kind\":\"mix\",\"time\":1,\"a\":0,".to_string(),
+            "{\"kind\":\"observe\",\"time\":1,\"track\":10,\"red\":0.9,\"blue\":0.1}".to_string(),
+            "{\"kind\":\"truth\",\"time\":1,\"red\":[0,1,2]}".to_string(),
+        ];
+        replies.push(producer.send("q", 0, &bad).await);
+        for (i, chunk) in history[half..].chunks(64).enumerate() {
+            replies.push(producer.send("p", (half + i * 64) as u64, chunk).await);
+        }
+        // The whole history again.
+        for (i, chunk) in history.chunks(64).enumerate() {
+            replies.push(producer.send("p", (i * 64) as u64, chunk).await);
+        }
+        // Requests that cannot be read: no producer, no counter.
+        let key = format!("{}/sensor/sensor-0/ingest", deployment.prefix);
+        replies.push(producer.raw(&key, &history[0]).await);
+        replies.push(producer.raw(&format!("{key}?producer=p"), &history[0]).await);
+        replies
+    });
+    let acks: Vec<&Value> = replies.iter().filter_map(|r| r.as_ref().ok()).collect();
+    let accepted: usize = acks.iter().map(|a| a["accepted"].as_array().unwrap().len()).sum();
+    let duplicates: usize = acks.iter().map(|a| a["duplicates"].as_array().unwrap().len()).sum();
+    assert_eq!((accepted as u64, duplicates as u64), (total, total));
+    let ahead = acks
+        .iter()
+        .find(|a| a["first"] == (half + 10) as u64)
+        .expect("the out-of-order request");
+    assert_eq!(ahead["next"], half as u64);
+    assert!(ahead["accepted"].as_array().unwrap().is_empty());
+    for error in ahead["errors"].as_array().unwrap() {
+        let reason = error["reason"].as_str().unwrap();
+        assert!(reason.contains("out of order") && reason.contains(&format!("send again from {half}")), "{reason}");
+    }
+    let bad = acks.iter().find(|a| a["producer"] == "q").expect("q's answer");
+    let errors = bad["errors"].as_array().unwrap();
+    let named: Vec<(u64, &str)> = errors
+        .iter()
+        .map(|e| (e["line"].as_u64().unwrap(), e["reason"].as_str().unwrap()))
+        .collect();
+    assert_eq!(named.len(), 3, "{bad}");
+    assert!(named[0].0 == 1 && named[0].1.contains("malformed JSON"), "{named:?}");
+    assert!(named[1].0 == 2 && named[1].1.contains("track = 10 is not a track"), "{named:?}");
+    assert!(named[2].0 == 3 && named[2].1.contains("not an event"), "{named:?}");
+    assert_eq!(bad["next"], 3, "a bad line uses up its counter");
+    let refused: Vec<&String> = replies.iter().filter_map(|r| r.as_ref().err()).collect();
+    assert_eq!(refused.len(), 2);
+    assert!(refused[0].contains("no producer"), "{}", refused[0]);
+    assert!(refused[1].contains("no counter"), "{}", refused[1]);
+
+    let answer = answer_at(&deployment, total);
+    assert_same_marginals(&answer, &floats(&central["final_p_red"]), "after the mistakes");
+    let sensor = sensor_stats(&deployment);
+    assert_eq!(sensor["ingested"], total, "{sensor}");
+    assert_eq!(sensor["duplicates"], total, "{sensor}");
+    assert_eq!(sensor["out_of_order"], 3, "{sensor}");
+    assert_eq!(sensor["bad_lines"], 3, "{sensor}");
+    assert_eq!(sensor["producers"], 2, "{sensor}");
+    assert_eq!(sensor["rejected"], 3 + 3 + 2, "{sensor}");
+}
+
+/// A Zenoh client that sends trace lines to a sensor's ingest key.
+struct Producer {
+    session: zenoh::Session,
+    key: String,
+}
+
+impl Producer {
+    async fn connect(endpoint: &str, prefix: &str) -> Producer {
+        let mut config = zenoh::Config::default();
+        config.insert_json5("mode", "\"client\"").unwrap();
+        config
+            .insert_json5("connect/endpoints", &serde_json::to_string(&[endpoint]).unwrap())
+            .unwrap();
+        config
+            .insert_json5("scouting/multicast/enabled", "false")
+            .unwrap();
+        let session = tokio::time::timeout(Duration::from_secs(10), zenoh::open(config))
+            .await
+            .expect("a session within 10 s")
+            .expect("a zenoh session");
+        Producer {
+            session,
+            key: format!("{prefix}/sensor/sensor-0/ingest"),
+        }
+    }
+
+    /// `lines` from `producer`, the first numbered `counter`: the
+    /// acknowledgement, or the error reply.
+    async fn send(&self, producer: &str, counter: u64, lines: &[String]) -> Result<Value, String> {
+        let selector = format!("{}?producer={producer};counter={counter}", self.key);
+        self.raw(&selector, &lines.join("\n")).await
+    }
+
+    async fn raw(&self, selector: &str, payload: &str) -> Result<Value, String> {
+        let replies = self
+            .session
+            .get(selector)
+            .payload(payload.to_string())
+            .timeout(Duration::from_secs(10))
+            .await
+            .expect("a get");
+        let reply = replies.recv_async().await.expect("a reply");
+        match reply.result() {
+            Ok(sample) => Ok(serde_json::from_slice(&sample.payload().to_bytes()).expect("JSON")),
+            Err(e) => Err(e.payload().try_to_string().unwrap_or_default().into_owned()),
+        }
+    }
+}
