@@ -90,6 +90,10 @@ pub struct BenchArgs {
     /// Also write the Markdown report here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Only the ingestion figures: one producer on a live sensor's ingest
+    /// key, against the raw round trip to the sensor.
+    #[arg(long)]
+    pub ingest: bool,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -73,6 +73,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             stream_rate: args.stream_rate,
             dir: args.dir,
             out: args.out,
+            ingest: args.ingest,
         }),
     }
 }

@@ -71,7 +71,7 @@ pub async fn measure(
     Ok(l)
 }
 
-fn percentile(samples: &[Duration], p: f64) -> Duration {
+pub fn percentile(samples: &[Duration], p: f64) -> Duration {
     let mut sorted = samples.to_vec();
     sorted.sort();
     let rank = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());

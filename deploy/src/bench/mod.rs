@@ -10,8 +10,14 @@
 //!   run: a get to one process and a get fanned out to every leader, both
 //!   answered by the processes' ping queryables, which do no work.
 //!
+//! - [`ingest`] (`--ingest`, on its own): events per second one producer
+//!   gets acknowledged on a live sensor's ingest key, by lines per
+//!   request, and a one-line ingest round trip against a raw get to the
+//!   sensor in the same run.
+//!
 //! Figures are ratios against that floor, because the machine is noisy.
 
+mod ingest;
 mod latency;
 mod throughput;
 
@@ -43,6 +49,8 @@ pub struct BenchOptions {
     pub dir: PathBuf,
     /// Also write the report here.
     pub out: Option<PathBuf>,
+    /// Only the ingestion figures.
+    pub ingest: bool,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
@@ -68,6 +76,20 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         .enable_all()
         .build()?;
     let mut report = String::new();
+    if options.ingest {
+        let header = ingest::header_only(&trace, &options.dir)?;
+        let deployment = runtime.block_on(Deployment::start(options, &header, 1, None, true))?;
+        eprintln!("bench: one producer feeding a live sensor");
+        let figures = runtime.block_on(ingest::measure(&deployment, &trace, options.queries));
+        runtime.block_on(deployment.close());
+        ingest::report(&figures?, options, &mut report)?;
+        print!("{report}");
+        if let Some(out) = &options.out {
+            std::fs::write(out, &report)
+                .with_context(|| format!("cannot write {}", out.display()))?;
+        }
+        return Ok(());
+    }
     writeln!(
         report,
         "Crowd of {} targets ({} red), {} s simulated; distributed rule, budget {} sets per leader; every process on this machine's loopback.\n",
@@ -87,7 +109,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     let mut streams = Vec::new();
     let mut rest = None;
     for &count in &options.leaders {
-        let deployment = runtime.block_on(Deployment::start(options, &trace, count, None))?;
+        let deployment = runtime.block_on(Deployment::start(options, &trace, count, None, false))?;
         eprintln!("bench: streaming through {count} leader(s)");
         streams.push(runtime.block_on(throughput::measure(&deployment))?);
         if count == leaders {
@@ -99,7 +121,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     let rest = match rest {
         Some(rest) => rest,
         None => {
-            let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None))?;
+            let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None, false))?;
             runtime.block_on(throughput::measure(&deployment))?;
             let rest = at_rest(&deployment)?;
             runtime.block_on(deployment.close());
@@ -112,7 +134,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         options.queries, options.stream_rate
     );
     let rate = Some(options.stream_rate);
-    let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, rate))?;
+    let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, rate, false))?;
     runtime.block_on(throughput::first_moving_answer(&deployment))?;
     let streaming = runtime.block_on(latency::measure(&deployment, options.queries, true))?;
     runtime.block_on(deployment.close());
@@ -139,11 +161,13 @@ pub struct Deployment {
 }
 
 impl Deployment {
+    /// `live`: the sensor stays open for producers once `trace` is out.
     async fn start(
         options: &BenchOptions,
         trace: &Path,
         leaders: usize,
         rate: Option<f64>,
+        live: bool,
     ) -> Result<Self> {
         let plan = Loopback {
             prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
@@ -156,6 +180,7 @@ impl Deployment {
             // Streaming flat out, leaders can be seconds behind the sensor.
             query_timeout_ms: 60_000,
             ports: Ports::Free,
+            live,
         };
         let (toml, _) = plan.topology(&std::fs::canonicalize(trace)?)?;
         let config = options.dir.join(format!("topology-{leaders}.toml"));

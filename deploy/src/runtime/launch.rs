@@ -185,6 +185,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         events: options.events,
         query_timeout_ms: 2000,
         ports: Ports::From(7447),
+        live: false,
     };
     let (topology, coordinator) = plan.topology(&trace)?;
     let config = options.dir.join("topology.toml");

@@ -23,6 +23,8 @@ pub struct Loopback {
     /// How long the coordinator waits for the leaders.
     pub query_timeout_ms: u64,
     pub ports: Ports,
+    /// The sensor stays open for producers after its trace (`live`).
+    pub live: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -74,6 +76,9 @@ impl Loopback {
         if let Some(events) = self.events {
             toml.push_str(&format!("events = {events}\n"));
         }
+        if self.live {
+            toml.push_str("live = true\n");
+        }
         for i in 0..self.leaders {
             let (c, r) = (i % columns, i / columns);
             let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
@@ -115,6 +120,7 @@ mod tests {
             events: None,
             query_timeout_ms: 1000,
             ports: Ports::From(9100),
+            live: false,
         };
         let (toml, _) = plan.topology(&trace).unwrap();
         let config = dir.join("topology.toml");
@@ -147,6 +153,7 @@ mod tests {
             events: None,
             query_timeout_ms: 1500,
             ports: Ports::From(9000),
+            live: true,
         };
         let (toml, coordinator) = plan.topology(&trace).unwrap();
         assert_eq!(coordinator, "tcp/127.0.0.1:9000");
@@ -162,5 +169,6 @@ mod tests {
         assert!(topology.distributed_rule && topology.budget == 100);
         assert_eq!(topology.sparsify, Sparsification::Overcomplete);
         assert_eq!(topology.query_timeout_ms, 1500);
+        assert!(topology.sensor.live);
     }
 }
