@@ -77,8 +77,11 @@ fn a_trace_piped_into_the_sensor_gives_the_answer_of_the_trace_file() {
             writeln!(pipe, "{line}").expect("the sensor reads its input");
         }
         if i * 40 <= bad_at && bad_at < (i + 1) * 40 {
-            writeln!(pipe, "{{\"kind\":\"mix\",\"time\":1e9,\"a\":3,\"b\":99,\"swap\":0.5}}")
-                .unwrap();
+            writeln!(
+                pipe,
+                "{{\"kind\":\"mix\",\"time\":1e9,\"a\":3,\"b\":99,\"swap\":0.5}}"
+            )
+            .unwrap();
         }
         pipe.flush().unwrap();
         std::thread::sleep(Duration::from_millis(5));
@@ -90,7 +93,10 @@ fn a_trace_piped_into_the_sensor_gives_the_answer_of_the_trace_file() {
     assert_eq!(answer["watermark"]["sensor-0"], events);
     let sensor = sensor_stats(&deployment);
     assert_eq!(sensor["ingested"], events, "{sensor}");
-    assert_eq!((&sensor["bad_lines"], &sensor["rejected"]), (&1.into(), &1.into()));
+    assert_eq!(
+        (&sensor["bad_lines"], &sensor["rejected"]),
+        (&1.into(), &1.into())
+    );
     assert!(
         deployment.log().contains("b = 99 is not a track"),
         "the bad line is logged with why"
@@ -140,7 +146,10 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
         let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
         let events = events(&trace).len() as u64;
         assert_eq!(sent["accepted"], events, "{sent}");
-        assert_eq!((&sent["duplicates"], sent["errors"].as_array().map(Vec::len)), (&0.into(), Some(0)));
+        assert_eq!(
+            (&sent["duplicates"], sent["errors"].as_array().map(Vec::len)),
+            (&0.into(), Some(0))
+        );
         assert_eq!(sent["events"], events);
         asked.join().expect("the questions")
     });
@@ -162,7 +171,11 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
     assert_same_marginals(&answer, &floats(&central["final_p_red"]), "ingested");
     let sensor = sensor_stats(&deployment);
     assert_eq!(
-        (&sensor["ingested"], &sensor["producers"], &sensor["rejected"]),
+        (
+            &sensor["ingested"],
+            &sensor["producers"],
+            &sensor["rejected"]
+        ),
         (&events.into(), &1.into(), &0.into()),
         "{sensor}"
     );
@@ -218,12 +231,22 @@ fn what_a_producer_gets_wrong_is_refused_or_deduplicated_counted_and_changes_not
         // Requests that cannot be read: no producer, no counter.
         let key = format!("{}/sensor/sensor-0/ingest", deployment.prefix);
         replies.push(producer.raw(&key, &history[0]).await);
-        replies.push(producer.raw(&format!("{key}?producer=p"), &history[0]).await);
+        replies.push(
+            producer
+                .raw(&format!("{key}?producer=p"), &history[0])
+                .await,
+        );
         replies
     });
     let acks: Vec<&Value> = replies.iter().filter_map(|r| r.as_ref().ok()).collect();
-    let accepted: usize = acks.iter().map(|a| a["accepted"].as_array().unwrap().len()).sum();
-    let duplicates: usize = acks.iter().map(|a| a["duplicates"].as_array().unwrap().len()).sum();
+    let accepted: usize = acks
+        .iter()
+        .map(|a| a["accepted"].as_array().unwrap().len())
+        .sum();
+    let duplicates: usize = acks
+        .iter()
+        .map(|a| a["duplicates"].as_array().unwrap().len())
+        .sum();
     assert_eq!((accepted as u64, duplicates as u64), (total, total));
     let ahead = acks
         .iter()
@@ -233,18 +256,33 @@ fn what_a_producer_gets_wrong_is_refused_or_deduplicated_counted_and_changes_not
     assert!(ahead["accepted"].as_array().unwrap().is_empty());
     for error in ahead["errors"].as_array().unwrap() {
         let reason = error["reason"].as_str().unwrap();
-        assert!(reason.contains("out of order") && reason.contains(&format!("send again from {half}")), "{reason}");
+        assert!(
+            reason.contains("out of order") && reason.contains(&format!("send again from {half}")),
+            "{reason}"
+        );
     }
-    let bad = acks.iter().find(|a| a["producer"] == "q").expect("q's answer");
+    let bad = acks
+        .iter()
+        .find(|a| a["producer"] == "q")
+        .expect("q's answer");
     let errors = bad["errors"].as_array().unwrap();
     let named: Vec<(u64, &str)> = errors
         .iter()
         .map(|e| (e["line"].as_u64().unwrap(), e["reason"].as_str().unwrap()))
         .collect();
     assert_eq!(named.len(), 3, "{bad}");
-    assert!(named[0].0 == 1 && named[0].1.contains("malformed JSON"), "{named:?}");
-    assert!(named[1].0 == 2 && named[1].1.contains("track = 10 is not a track"), "{named:?}");
-    assert!(named[2].0 == 3 && named[2].1.contains("not an event"), "{named:?}");
+    assert!(
+        named[0].0 == 1 && named[0].1.contains("malformed JSON"),
+        "{named:?}"
+    );
+    assert!(
+        named[1].0 == 2 && named[1].1.contains("track = 10 is not a track"),
+        "{named:?}"
+    );
+    assert!(
+        named[2].0 == 3 && named[2].1.contains("not an event"),
+        "{named:?}"
+    );
     assert_eq!(bad["next"], 3, "a bad line uses up its counter");
     let refused: Vec<&String> = replies.iter().filter_map(|r| r.as_ref().err()).collect();
     assert_eq!(refused.len(), 2);
@@ -252,7 +290,11 @@ fn what_a_producer_gets_wrong_is_refused_or_deduplicated_counted_and_changes_not
     assert!(refused[1].contains("no counter"), "{}", refused[1]);
 
     let answer = answer_at(&deployment, total);
-    assert_same_marginals(&answer, &floats(&central["final_p_red"]), "after the mistakes");
+    assert_same_marginals(
+        &answer,
+        &floats(&central["final_p_red"]),
+        "after the mistakes",
+    );
     let sensor = sensor_stats(&deployment);
     assert_eq!(sensor["ingested"], total, "{sensor}");
     assert_eq!(sensor["duplicates"], total, "{sensor}");
@@ -273,7 +315,10 @@ impl Producer {
         let mut config = zenoh::Config::default();
         config.insert_json5("mode", "\"client\"").unwrap();
         config
-            .insert_json5("connect/endpoints", &serde_json::to_string(&[endpoint]).unwrap())
+            .insert_json5(
+                "connect/endpoints",
+                &serde_json::to_string(&[endpoint]).unwrap(),
+            )
             .unwrap();
         config
             .insert_json5("scouting/multicast/enabled", "false")

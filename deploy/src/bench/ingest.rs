@@ -70,16 +70,15 @@ pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> R
         ingest_one: Vec::with_capacity(queries),
         ping: Vec::with_capacity(queries),
     };
-    // The sensor answers only once it sees every leader: wait for a first
-    // acknowledgement before timing anything.
+    // The first rounds (the sensor may still wait for its leaders) are a
+    // warm-up, not timed.
     let started = Instant::now();
-    let mut counter = 0u64;
     for round in 0..WARM_UP + queries {
+        let counter = round as u64;
         let line = &lines[round % lines.len()];
         let before = Instant::now();
         send(deployment, &ingest, "latency", counter, line).await?;
         let one = before.elapsed();
-        counter += 1;
         let before = Instant::now();
         deployment.ping(&ping, 1).await?;
         let raw = before.elapsed();
@@ -110,7 +109,12 @@ pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> R
             )
             .await?;
             if ack.accepted.len() != chunk.len() {
-                bail!("{producer}: {} of {} lines accepted: {:?}", ack.accepted.len(), chunk.len(), ack.errors.first());
+                bail!(
+                    "{producer}: {} of {} lines accepted: {:?}",
+                    ack.accepted.len(),
+                    chunk.len(),
+                    ack.errors.first()
+                );
             }
             accepted += ack.accepted.len() as u64;
         }
@@ -157,7 +161,10 @@ pub fn report(f: &Ingestion, options: &BenchOptions, out: &mut String) -> Result
         options.targets, options.red, options.duration
     )?;
     writeln!(out, "### Ingestion throughput, one producer, one sensor\n")?;
-    writeln!(out, "| lines per request | events acknowledged | seconds | events/s |")?;
+    writeln!(
+        out,
+        "| lines per request | events acknowledged | seconds | events/s |"
+    )?;
     writeln!(out, "|---:|---:|---:|---:|")?;
     for &(batch, events, took) in &f.throughput {
         writeln!(

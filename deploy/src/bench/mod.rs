@@ -109,7 +109,8 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     let mut streams = Vec::new();
     let mut rest = None;
     for &count in &options.leaders {
-        let deployment = runtime.block_on(Deployment::start(options, &trace, count, None, false))?;
+        let deployment =
+            runtime.block_on(Deployment::start(options, &trace, count, None, false))?;
         eprintln!("bench: streaming through {count} leader(s)");
         streams.push(runtime.block_on(throughput::measure(&deployment))?);
         if count == leaders {
@@ -121,7 +122,8 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     let rest = match rest {
         Some(rest) => rest,
         None => {
-            let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, None, false))?;
+            let deployment =
+                runtime.block_on(Deployment::start(options, &trace, leaders, None, false))?;
             runtime.block_on(throughput::measure(&deployment))?;
             let rest = at_rest(&deployment)?;
             runtime.block_on(deployment.close());

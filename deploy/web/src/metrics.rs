@@ -177,7 +177,7 @@ impl Collector for Snapshot {
         // Bad input refused, by every role.
         let mut family = encoder.encode_descriptor(
             "rejected",
-            "bad input refused (leaders: at the door; sensors: follow and resend requests; coordinator: queries)",
+            "bad input refused (leaders: at the door; sensors: follow, resend and ingest requests, ingested lines; coordinator: queries)",
             None,
             ConstCounter::new(0u64).metric_type(),
         )?;
@@ -318,6 +318,7 @@ mod tests {
             sensors: vec![SensorStats {
                 sensor: "sensor-0".into(),
                 rejected: 2,
+                ..SensorStats::default()
             }],
             coordinator: CoordinatorStats {
                 rejected: 3,

@@ -32,8 +32,8 @@ use super::ingest::Offer;
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
-use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
 use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tracing::Instrument;
@@ -352,8 +352,11 @@ async fn ingest(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
     match gateway.ingest(offer) {
         Ok((ack, placed)) => {
             // Published before the acknowledgement leaves: a query asked
-            // after it places its cut after these lines.
-            wire.flush(gateway).await;
+            // after it places its cut after these lines. (A request of
+            // duplicates alone routed nothing: no batch for it.)
+            if !ack.accepted.is_empty() || !placed.is_empty() {
+                wire.flush(gateway).await;
+            }
             let body = serde_json::to_vec(&ack).unwrap_or_default();
             if let Some(Err(e)) = bounded(
                 "an ingest acknowledgement",

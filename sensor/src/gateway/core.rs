@@ -108,7 +108,10 @@ impl<Q> Gateway<Q> {
     /// and the cuts those lines reached; flush, then answer both. A
     /// request it cannot read, or one after the stream finished, is
     /// refused whole (counted).
-    pub fn ingest(&mut self, offer: Offer<'_>) -> Result<(IngestAck, Vec<Placed<Q>>), IngestRefusal> {
+    pub fn ingest(
+        &mut self,
+        offer: Offer<'_>,
+    ) -> Result<(IngestAck, Vec<Placed<Q>>), IngestRefusal> {
         if self.finished {
             self.stats.rejected += 1;
             return Err(IngestRefusal::Finished);

@@ -292,13 +292,17 @@ mod tests {
     fn lines_in_counter_order_are_accepted_and_acknowledged() {
         let (mut ingest, mut stats) = ingest();
         let payload = format!("{}\n{}\n", mix(0, 1), mix(2, 3));
-        let judged = ingest.offer(offer("cam", "0", &payload), &mut stats).unwrap();
+        let judged = ingest
+            .offer(offer("cam", "0", &payload), &mut stats)
+            .unwrap();
         assert_eq!(judged.accepted.len(), 2);
         assert_eq!(judged.ack.accepted, vec![0, 1]);
         assert_eq!(judged.ack.next, 2);
         assert_eq!(judged.ack.lines, 2);
         assert!(judged.ack.errors.is_empty() && judged.ack.duplicates.is_empty());
-        let judged = ingest.offer(offer("cam", "2", &mix(1, 2)), &mut stats).unwrap();
+        let judged = ingest
+            .offer(offer("cam", "2", &mix(1, 2)), &mut stats)
+            .unwrap();
         assert_eq!(judged.ack.accepted, vec![2]);
         assert_eq!((stats.ingested, stats.producers, stats.rejected), (3, 1, 0));
     }
@@ -307,21 +311,30 @@ mod tests {
     fn a_line_sent_again_is_acknowledged_and_not_taken_twice() {
         let (mut ingest, mut stats) = ingest();
         let payload = format!("{}\n{}", mix(0, 1), mix(2, 3));
-        ingest.offer(offer("cam", "0", &payload), &mut stats).unwrap();
+        ingest
+            .offer(offer("cam", "0", &payload), &mut stats)
+            .unwrap();
         // The whole history again, and one line past it.
         let again = format!("{}\n{}\n{}", mix(0, 1), mix(2, 3), mix(0, 3));
         let judged = ingest.offer(offer("cam", "0", &again), &mut stats).unwrap();
         assert_eq!(judged.ack.duplicates, vec![0, 1]);
         assert_eq!(judged.ack.accepted, vec![2]);
         assert_eq!(judged.accepted.len(), 1);
-        assert_eq!((stats.ingested, stats.duplicates, stats.rejected), (3, 2, 0));
+        assert_eq!(
+            (stats.ingested, stats.duplicates, stats.rejected),
+            (3, 2, 0)
+        );
     }
 
     #[test]
     fn a_counter_ahead_of_the_producer_is_refused_naming_where_to_resend_from() {
         let (mut ingest, mut stats) = ingest();
-        ingest.offer(offer("cam", "0", &mix(0, 1)), &mut stats).unwrap();
-        let judged = ingest.offer(offer("cam", "5", &mix(0, 1)), &mut stats).unwrap();
+        ingest
+            .offer(offer("cam", "0", &mix(0, 1)), &mut stats)
+            .unwrap();
+        let judged = ingest
+            .offer(offer("cam", "5", &mix(0, 1)), &mut stats)
+            .unwrap();
         assert!(judged.accepted.is_empty());
         assert_eq!(judged.ack.next, 1);
         let error = &judged.ack.errors[0];
@@ -329,15 +342,21 @@ mod tests {
         assert!(error.reason.contains("out of order") && error.reason.contains("from 1"));
         assert_eq!((stats.out_of_order, stats.rejected), (1, 1));
         // Resent from 1, it is taken.
-        let judged = ingest.offer(offer("cam", "1", &mix(0, 1)), &mut stats).unwrap();
+        let judged = ingest
+            .offer(offer("cam", "1", &mix(0, 1)), &mut stats)
+            .unwrap();
         assert_eq!(judged.ack.accepted, vec![1]);
     }
 
     #[test]
     fn producers_count_on_their_own() {
         let (mut ingest, mut stats) = ingest();
-        ingest.offer(offer("a", "0", &mix(0, 1)), &mut stats).unwrap();
-        let judged = ingest.offer(offer("b", "0", &mix(0, 1)), &mut stats).unwrap();
+        ingest
+            .offer(offer("a", "0", &mix(0, 1)), &mut stats)
+            .unwrap();
+        let judged = ingest
+            .offer(offer("b", "0", &mix(0, 1)), &mut stats)
+            .unwrap();
         assert_eq!(judged.ack.accepted, vec![0]);
         assert_eq!(stats.producers, 2);
     }
@@ -353,11 +372,15 @@ mod tests {
             mix(2, 3),
         ]
         .join("\n");
-        let judged = ingest.offer(offer("cam", "0", &payload), &mut stats).unwrap();
+        let judged = ingest
+            .offer(offer("cam", "0", &payload), &mut stats)
+            .unwrap();
         assert_eq!(judged.ack.accepted, vec![0, 4]);
         let lines: Vec<u64> = judged.ack.errors.iter().map(|e| e.line).collect();
         assert_eq!(lines, vec![2, 3, 4]);
-        assert!(judged.ack.errors[0].reason.contains("track = 9 is not a track"));
+        assert!(judged.ack.errors[0]
+            .reason
+            .contains("track = 9 is not a track"));
         assert!(judged.ack.errors[1].reason.contains("malformed JSON"));
         assert!(judged.ack.errors[2].reason.contains("not an event"));
         assert_eq!(judged.ack.next, 5);

@@ -498,5 +498,8 @@ fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
         Err(IngestRefusal::Finished)
     ));
     let stats = gateway.stats();
-    assert_eq!((stats.ingested, stats.duplicates, stats.rejected), (2, 2, 1));
+    assert_eq!(
+        (stats.ingested, stats.duplicates, stats.rejected),
+        (2, 2, 1)
+    );
 }
