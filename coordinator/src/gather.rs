@@ -147,7 +147,7 @@ async fn place_cut(
     let replies = ask_everyone(session, selector, timeout, "ask for a cut").await?;
     // The first reply decides: one sensor places the cut.
     let Ok(reply) = replies.recv_async().await else {
-        return Err(GatherError::NoSensor);
+        return Err(memory.no_sensor());
     };
     let key = reply
         .result()
@@ -225,7 +225,7 @@ pub async fn positions(
     )
     .await?;
     let Ok(reply) = replies.recv_async().await else {
-        return Err(GatherError::NoSensor);
+        return Err(memory.no_sensor());
     };
     let sample = reply.result().map_err(|e| {
         GatherError::Failed(format!(

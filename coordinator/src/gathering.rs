@@ -21,6 +21,13 @@ use std::time::Duration;
 pub enum GatherError {
     #[error("no sensor gateway answered: the stream has no source yet")]
     NoSensor,
+    /// No sensor answered, and these had placed cuts before: they are
+    /// down or cut off, and an answer without their events would be
+    /// numbers without them.
+    #[error(
+        "degraded: sensors {0:?} did not answer (down, or cut off); no partial answer is given"
+    )]
+    SensorsDown(Vec<String>),
     #[error("no leader is listed by the sensor")]
     NoLeaders,
     #[error("degraded: leaders {missing:?} did not answer (waited up to {timeout:?}){}; no partial answer is given", others.iter().map(|o| format!("; {o}")).collect::<String>())]
@@ -78,6 +85,9 @@ pub enum Share {
 #[derive(Debug, Default)]
 pub struct Memory {
     finished: Mutex<Option<CutPlaced>>,
+    /// Every sensor that has placed a cut: who is missing when none
+    /// answers.
+    sensors: Mutex<std::collections::BTreeSet<String>>,
     rejected: AtomicU64,
     bad_replies: AtomicU64,
     degraded: AtomicU64,
@@ -111,6 +121,21 @@ impl Memory {
 
     pub fn finished(&self) -> Option<CutPlaced> {
         self.finished.lock().ok().and_then(|c| c.clone())
+    }
+
+    /// No sensor answered: degraded, naming the sensors that did before,
+    /// or a stream that has no source yet.
+    pub fn no_sensor(&self) -> GatherError {
+        let known: Vec<String> = self
+            .sensors
+            .lock()
+            .map(|s| s.iter().cloned().collect())
+            .unwrap_or_default();
+        if known.is_empty() {
+            GatherError::NoSensor
+        } else {
+            GatherError::SensorsDown(known)
+        }
     }
 
     pub fn remember(&self, cut: &CutPlaced) {
@@ -150,11 +175,17 @@ pub fn read_cut(
     memory: &Memory,
 ) -> Result<CutPlaced, GatherError> {
     match reply {
-        Ok(bytes) => decode::<CutPlaced>(&bytes).map_err(|e| {
-            let problem = format!("{key}: {e}");
-            memory.note_bad_reply("cut", &problem);
-            GatherError::Failed(problem)
-        }),
+        Ok(bytes) => decode::<CutPlaced>(&bytes)
+            .map_err(|e| {
+                let problem = format!("{key}: {e}");
+                memory.note_bad_reply("cut", &problem);
+                GatherError::Failed(problem)
+            })
+            .inspect(|cut| {
+                if let Ok(mut sensors) = memory.sensors.lock() {
+                    sensors.insert(cut.sensor.clone());
+                }
+            }),
         Err(e) => Err(GatherError::Failed(format!(
             "the sensor placed no cut: {e}"
         ))),

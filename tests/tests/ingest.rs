@@ -355,3 +355,44 @@ impl Producer {
         }
     }
 }
+
+/// A live sensor killed (SIGKILL) mid-stream: every query after says
+/// `degraded`, naming it, and gives no numbers without its events. (The
+/// sensor keeps its state in memory: it does not come back where it was.)
+#[test]
+fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
+    let dir = std::env::temp_dir().join(format!("idmesh-ingest-down-{}", std::process::id()));
+    let trace = crowd(&dir, 10, 3, 30.0, 4);
+    let settings = Settings {
+        leaders: 2,
+        live: true,
+        sensor_trace: Some(header_only(&trace, &dir)),
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_each("ingestdown", &trace, &settings);
+    deployment.first_answer(Duration::from_secs(30));
+    let history = events(&trace);
+    let half = history.len() / 2;
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let ack = runtime.block_on(async {
+        let producer = Producer::connect(deployment.sensor_endpoint(), &deployment.prefix).await;
+        producer.send("p", 0, &history[..half]).await
+    });
+    assert_eq!(ack.expect("acknowledged")["events"], half as u64);
+    answer_at(&deployment, half as u64);
+    deployment.kill("sensor-0");
+    for question in [&["marginals"][..], &["track", "3"], &["positions"]] {
+        let error = deployment
+            .query(question)
+            .expect_err("no answer without the sensor");
+        assert!(
+            error.contains("degraded") && error.contains("sensor-0"),
+            "{question:?}: {error}"
+        );
+    }
+    let stats = deployment.query(&["stats"]).expect("stats answer");
+    assert!(
+        stats[0]["coordinator"]["degraded"].as_u64().unwrap() >= 2,
+        "{stats:?}"
+    );
+}
