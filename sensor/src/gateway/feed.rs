@@ -51,3 +51,22 @@ pub fn lines_of<R: BufRead + Send + 'static>(
     });
     receive
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn input_lines_come_numbered_in_order_and_the_channel_closes_at_the_end() {
+        let input = std::io::Cursor::new(b"first\nsecond\r\nlast without newline".to_vec());
+        let mut lines = lines_of(input, 2);
+        let mut got = Vec::new();
+        while let Some(line) = lines.blocking_recv() {
+            got.push(line.expect("readable"));
+        }
+        let numbers: Vec<usize> = got.iter().map(|(n, _)| *n).collect();
+        assert_eq!(numbers, [2, 3, 4]);
+        assert_eq!(got[0].1, "first\n");
+        assert_eq!(got[2].1, "last without newline");
+    }
+}
