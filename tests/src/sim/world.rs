@@ -22,9 +22,11 @@ use idmesh_protocol::wire::query::MarginalsAnswer;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode};
 use idmesh_sensor::gateway::core::{CutOutcome, Gateway};
-use idmesh_sensor::gateway::cuts::CutParameters;
+use idmesh_sensor::gateway::cuts::{CutParameters, Placed};
+use idmesh_sensor::gateway::ingest::Offer;
 use idmesh_sensor::gateway::Router;
 use rand::Rng;
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Duration;
@@ -220,6 +222,12 @@ pub struct World {
     scenario: Scenario,
     gateway: Gateway<u64>,
     next_line: usize,
+    /// In half the schedules the lines reach the sensor from a producer
+    /// on the ingest key rather than from a trace: its own seeded choices
+    /// (a reply lost and history resent, a counter ahead of itself, a
+    /// second producer's junk), so the network's schedule is the same
+    /// either way.
+    producer: Option<ChaCha8Rng>,
     leaders: Vec<LeaderSlot>,
     asks: HashMap<u64, PendingAsk>,
     next_id: u64,
@@ -267,6 +275,7 @@ impl World {
             scenario,
             gateway,
             next_line: 0,
+            producer: None,
             leaders,
             asks: HashMap::new(),
             next_id: 0,
@@ -281,6 +290,11 @@ impl World {
             aimed,
             lost_once: BTreeSet::new(),
         };
+        // Drawn from a copy: the schedule's own draws stay as they were.
+        let mut side = world.rng.clone();
+        if side.gen_bool(0.5) {
+            world.producer = Some(ChaCha8Rng::seed_from_u64(side.gen()));
+        }
         for i in 0..count {
             world.leaders[i].snapshot_every = world.rng.gen_range(3..=30);
             world.start_leader(i)?;
@@ -352,10 +366,7 @@ impl World {
                 }
                 Ok(())
             }
-            Event::SensorStep => {
-                self.sensor_step();
-                Ok(())
-            }
+            Event::SensorStep => self.sensor_step(),
             Event::QueryStart => {
                 self.start_query(false);
                 Ok(())
@@ -400,13 +411,17 @@ impl World {
     // --- the sensor -----------------------------------------------------
 
     /// Reads the next few lines, as the gateway's actor does by chunks.
-    fn sensor_step(&mut self) {
+    fn sensor_step(&mut self) -> Result<(), Violation> {
         let lines = self.scenario.lines.len();
         let chunk = self.rng.gen_range(1..=4usize);
         let mut placed = Vec::new();
         let end = (self.next_line + chunk).min(lines);
-        for line in &self.scenario.lines[self.next_line..end] {
-            placed.extend(self.gateway.line(line));
+        if self.producer.is_some() {
+            placed = self.ingest(self.next_line, end)?;
+        } else {
+            for line in &self.scenario.lines[self.next_line..end] {
+                placed.extend(self.gateway.line(line));
+            }
         }
         self.next_line = end;
         let refused = if self.next_line >= lines && !self.gateway.finished() {
@@ -425,6 +440,80 @@ impl World {
             let wait = self.rng.gen_range(1..=40);
             self.net.at(self.now + wait, Event::SensorStep);
         }
+        Ok(())
+    }
+
+    /// Lines `from..to` sent by the producer (its counters are the line
+    /// numbers), as a producer whose replies are lost now and then does:
+    /// each mistake must be refused or deduplicated and route nothing;
+    /// the request itself must be taken whole.
+    fn ingest(&mut self, from: usize, to: usize) -> Result<Vec<Placed<u64>>, Violation> {
+        let Some(mut producer) = self.producer.take() else {
+            return Ok(Vec::new());
+        };
+        let text = |lines: &[idmesh_protocol::trace::Line]| {
+            lines
+                .iter()
+                .map(|l| serde_json::to_string(l).unwrap_or_default())
+                .collect::<Vec<_>>()
+                .join("\n")
+        };
+        let lines = &self.scenario.lines;
+        let events = self.gateway.router().events();
+        let mut placed = Vec::new();
+        let offer = |gateway: &mut Gateway<u64>, who: &str, counter: usize, payload: &str| {
+            let counter = counter.to_string();
+            gateway
+                .ingest(Offer {
+                    producer: Some(who),
+                    counter: Some(&counter),
+                    payload: payload.as_bytes(),
+                })
+                .map_err(|e| Violation::new(format!("ingest from {who} refused: {e}")))
+        };
+        if producer.gen_bool(0.2) {
+            let ahead = from + producer.gen_range(1..=3);
+            let (ack, reached) = offer(&mut self.gateway, "sim", ahead, &text(&lines[from..to]))?;
+            if !ack.accepted.is_empty() || !reached.is_empty() || ack.next != from as u64 {
+                return Err(Violation::new(format!(
+                    "counter {ahead} ahead of {from} was taken: {ack:?}"
+                )));
+            }
+        }
+        if producer.gen_bool(0.1) {
+            let (ack, _) = offer(
+                &mut self.gateway,
+                &format!("junk-{from}"),
+                0,
+                "{\"kind\":\"mix\"",
+            )?;
+            if !ack.accepted.is_empty() || ack.errors.len() != 1 {
+                return Err(Violation::new(format!(
+                    "a malformed line was taken: {ack:?}"
+                )));
+            }
+        }
+        let (ack, reached) = offer(&mut self.gateway, "sim", from, &text(&lines[from..to]))?;
+        let wanted: Vec<u64> = (from as u64..to as u64).collect();
+        if ack.accepted != wanted || ack.events != events + wanted.len() as u64 {
+            return Err(Violation::new(format!(
+                "lines {from}..{to} not taken whole: {ack:?}"
+            )));
+        }
+        placed.extend(reached);
+        if producer.gen_bool(0.3) {
+            // The reply was lost: the producer sends again, with history.
+            let back = producer.gen_range(0..=from);
+            let (ack, reached) = offer(&mut self.gateway, "sim", back, &text(&lines[back..to]))?;
+            if !ack.accepted.is_empty() || !reached.is_empty() || ack.duplicates.len() != to - back
+            {
+                return Err(Violation::new(format!(
+                    "lines {back}..{to} sent again were taken again: {ack:?}"
+                )));
+            }
+        }
+        self.producer = Some(producer);
+        Ok(placed)
     }
 
     /// Every leader's next batch, on its way.
