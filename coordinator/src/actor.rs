@@ -191,6 +191,7 @@ async fn identity_track(
         p_identity,
         predicted_identity,
         marginals: answer.marginals,
+        sampling: answer.sampling,
     }))
 }
 

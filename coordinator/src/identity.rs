@@ -16,7 +16,7 @@ use idmesh_belief::identity::{
     most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
 };
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::IdentityAnswer;
+use idmesh_protocol::wire::query::{IdentityAnswer, SamplingReport};
 use std::time::Duration;
 use zenoh::Session;
 
@@ -117,8 +117,20 @@ fn marginals(collected: Collected, method: MarginalMethod) -> Result<IdentityAns
     };
     let failed = |e: idmesh_belief::BeliefError| GatherError::Failed(e.to_string());
     let matrix = InformationRows::assemble(n, rows, options).map_err(failed)?;
-    let p_identity = matrix.marginals_with(&method).map_err(failed)?;
+    // Block by block, as `marginals_with` does, keeping what the sampler
+    // says of its convergence.
+    let blocks = matrix.block_marginals(&method).map_err(failed)?;
+    let p_identity: Vec<Vec<f64>> = blocks
+        .dense()
+        .chunks(n.max(1))
+        .map(<[f64]>::to_vec)
+        .collect();
     let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
+    let sampling = blocks.sampling.map(|s| SamplingReport {
+        blocks: s.blocks as u32,
+        half_difference: s.half_difference,
+        acceptance: s.acceptance,
+    });
     Ok(IdentityAnswer {
         watermark: collected.watermark(),
         tracks: collected.cut.tracks,
@@ -127,6 +139,7 @@ fn marginals(collected: Collected, method: MarginalMethod) -> Result<IdentityAns
         marginals: method.name().to_string(),
         leaders: collected.parts.len() as u32,
         finished: collected.cut.finished,
+        sampling,
     })
 }
 

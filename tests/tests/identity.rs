@@ -203,6 +203,11 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     });
     assert_eq!(last["marginals"], "auto");
     assert_eq!(last["tracks"], 1000);
+    // The sampled block's convergence is part of the answer.
+    let sampling = &last["sampling"];
+    assert!(sampling["blocks"].as_u64() >= Some(1), "{sampling}");
+    let half = sampling["half_difference"].as_f64().expect("a diagnostic");
+    assert!(half > 0.0 && half <= 1.0, "{sampling}");
     let p = matrix(&last["p_identity"]);
     assert_eq!(p.len(), 1000);
     for (t, row) in p.iter().enumerate() {

@@ -8,8 +8,8 @@ use super::security::Tls;
 use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
-    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, PositionsAnswer, QueryError, StatsAnswer,
-    TrackAnswer, Watermark,
+    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, PositionsAnswer, QueryError,
+    SamplingReport, StatsAnswer, TrackAnswer, Watermark,
 };
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -193,6 +193,21 @@ pub async fn ask(session: &zenoh::Session, key: &str, timeout: Duration) -> Resu
     }
 }
 
+/// What a user reads of a Metropolis answer's convergence.
+fn sampling_line(s: &SamplingReport) -> String {
+    let verdict = if s.half_difference <= 0.01 {
+        "mixed"
+    } else {
+        "not mixed: ask with more samples (?marginals=metropolis;samples=…)"
+    };
+    format!(
+        "  sampled {} block(s) by Metropolis: halves differ by up to {:.3}, {:.0} % of proposals accepted ({verdict})",
+        s.blocks,
+        s.half_difference,
+        s.acceptance * 100.0
+    )
+}
+
 fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
     let mut out = std::io::stdout().lock();
     if options.json {
@@ -235,6 +250,9 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
                 a.marginals,
                 took.as_secs_f64() * 1e3
             )?;
+            if let Some(s) = &a.sampling {
+                writeln!(out, "{}", sampling_line(s))?;
+            }
             for (t, (row, &i)) in a.p_identity.iter().zip(&a.predicted_identity).enumerate() {
                 let p = row.get(i as usize).copied().unwrap_or(f64::NAN);
                 writeln!(out, "  track {t:>4}  identity {i:>4}  P = {p:.4}")?;
@@ -245,6 +263,9 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
             let i = a.predicted_identity;
             let p = a.p_identity.get(i as usize).copied().unwrap_or(f64::NAN);
             writeln!(out, "track {}: identity {i} (P = {p:.4})", a.track)?;
+            if let Some(s) = &a.sampling {
+                writeln!(out, "{}", sampling_line(s))?;
+            }
         }
         Question::Positions => {
             let a: PositionsAnswer = serde_json::from_slice(body)?;
