@@ -67,10 +67,11 @@
 use super::assignment::most_likely_assignment;
 use super::blocks::{blocks_of_log_likelihoods, sub_matrix, Block};
 use super::filter::to_rows;
-use super::metropolis::{metropolis_diagnosed, MetropolisRun};
+use super::metropolis::{metropolis_stoppable, MetropolisRun};
 use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
 use crate::error::BeliefError;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How marginals are computed from an information matrix.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -266,6 +267,20 @@ pub fn block_marginals(
     method: &MarginalMethod,
     sinkhorn_options: &SinkhornOptions,
 ) -> Result<BlockMarginals, BeliefError> {
+    block_marginals_stoppable(n, l, method, sinkhorn_options, &AtomicBool::new(false))
+}
+
+/// [`block_marginals`] that gives up with [`BeliefError::Stopped`] soon
+/// after `stop` is set: between blocks, and within a Metropolis chain
+/// (the one method whose time the asker sets, by its samples). The other
+/// methods refuse blocks too large to finish in seconds.
+pub fn block_marginals_stoppable(
+    n: usize,
+    l: &[f64],
+    method: &MarginalMethod,
+    sinkhorn_options: &SinkhornOptions,
+    stop: &AtomicBool,
+) -> Result<BlockMarginals, BeliefError> {
     if n == 0 {
         return Err(BeliefError::NoTracks);
     }
@@ -307,12 +322,17 @@ pub fn block_marginals(
     let mut out = Vec::with_capacity(blocks.len());
     let mut sampling: Option<Sampling> = None;
     for block in blocks {
+        if stop.load(Ordering::Relaxed) {
+            return Err(BeliefError::Stopped {
+                method: method.name(),
+            });
+        }
         let k = block.size();
         let p = if k == 1 {
             vec![1.0]
         } else {
             let sub = sub_matrix(n, l, &block);
-            let (p, sampled) = one_block(k, &sub, method, sinkhorn_options)?;
+            let (p, sampled) = one_block(k, &sub, method, sinkhorn_options, stop)?;
             if let Some(run) = sampled {
                 sampling = Some(match sampling {
                     Some(before) => before.and(run),
@@ -337,6 +357,7 @@ fn one_block(
     l: &[f64],
     method: &MarginalMethod,
     sinkhorn_options: &SinkhornOptions,
+    stop: &AtomicBool,
 ) -> Result<(Vec<f64>, Option<Sampling>), BeliefError> {
     let sampled = |run: MetropolisRun| {
         let sampling = Sampling::of(&run);
@@ -348,17 +369,17 @@ fn one_block(
             (marginals_from_log_likelihoods(k, l)?, None)
         }
         MarginalMethod::Auto if k <= AUTO_BETHE_BLOCK => {
-            one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options)?
+            one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options, stop)?
         }
         MarginalMethod::Auto => {
             let samples = AUTO_STEPS_PER_TRACK * k;
-            sampled(metropolis_diagnosed(k, l, samples, samples / 10, 0)?)
+            sampled(metropolis_stoppable(k, l, samples, samples / 10, 0, stop)?)
         }
         MarginalMethod::Metropolis {
             samples,
             burn_in,
             seed,
-        } => sampled(metropolis_diagnosed(k, l, samples, burn_in, seed)?),
+        } => sampled(metropolis_stoppable(k, l, samples, burn_in, seed, stop)?),
         MarginalMethod::Sinkhorn => {
             let mut a = exp_rows(k, l)?;
             sinkhorn(k, &mut a, sinkhorn_options)?;
@@ -738,7 +759,8 @@ mod tests {
         assert!(k > AUTO_BETHE_BLOCK, "the largest block has {k} tracks");
         let sub = sub_matrix(n, &l, block);
         let steps = AUTO_STEPS_PER_TRACK * k;
-        let run = metropolis_diagnosed(k, &sub, steps, steps / 10, 0).unwrap();
+        let run = crate::identity::metropolis::metropolis_diagnosed(k, &sub, steps, steps / 10, 0)
+            .unwrap();
         assert_eq!(*p, run.marginals);
         // The answer says how far the sampled block is from converged; a
         // method that did not sample says nothing.
@@ -789,7 +811,9 @@ mod tests {
                     let alone = if block.size() == 1 {
                         vec![1.0]
                     } else {
-                        one_block(block.size(), &sub, &method, &opts).unwrap().0
+                        one_block(block.size(), &sub, &method, &opts, &AtomicBool::new(false))
+                            .unwrap()
+                            .0
                     };
                     proptest::prop_assert_eq!(p, &alone);
                 }

@@ -32,6 +32,7 @@ use super::sparse_assignment::{sparse_min_cost_assignment, SparseRow};
 use crate::error::BeliefError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Metropolis estimate of the marginals (row-major) of
 /// p(π) ∝ exp(Σ_t l\[t·n + π(t)\]); entries finite or −∞ (ruled out).
@@ -69,6 +70,31 @@ pub fn metropolis_diagnosed(
     burn_in: usize,
     seed: u64,
 ) -> Result<MetropolisRun, BeliefError> {
+    metropolis_stoppable(n, l, samples, burn_in, seed, &AtomicBool::new(false))
+}
+
+/// Steps between two looks at the stop flag.
+const STOP_EVERY: usize = 1 << 16;
+
+/// [`metropolis_diagnosed`] that gives up with [`BeliefError::Stopped`]
+/// within [`STOP_EVERY`] steps of `stop` being set.
+pub fn metropolis_stoppable(
+    n: usize,
+    l: &[f64],
+    samples: usize,
+    burn_in: usize,
+    seed: u64,
+    stop: &AtomicBool,
+) -> Result<MetropolisRun, BeliefError> {
+    let stopped = |step: usize| {
+        if step % STOP_EVERY == 0 && stop.load(Ordering::Relaxed) {
+            Err(BeliefError::Stopped {
+                method: "metropolis",
+            })
+        } else {
+            Ok(())
+        }
+    };
     if n == 0 {
         return Err(BeliefError::NoTracks);
     }
@@ -95,7 +121,8 @@ pub fn metropolis_diagnosed(
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut chain = Chain::at(state, &support, n > SUPPORT_PROPOSALS_FROM);
-    for _ in 0..burn_in {
+    for step in 0..burn_in {
+        stopped(step)?;
         chain.step(&support, &mut rng);
     }
     // Sample k is the state after counted step k. time[q] = samples the
@@ -108,6 +135,7 @@ pub fn metropolis_diagnosed(
     let mut first_half: Option<Vec<u64>> = None;
     let mut accepted = 0u64;
     for k in 0..total {
+        stopped(k as usize)?;
         if k == half && half > 0 {
             let mut settled = time.clone();
             for t in 0..n {
@@ -366,5 +394,15 @@ mod tests {
         };
         let (u, s) = (moved(&mut uniform, &mut rng), moved(&mut local, &mut rng));
         assert!(s > 20 * u.max(1), "accepted: uniform {u}, support {s}");
+    }
+
+    #[test]
+    fn a_chain_stops_when_told() {
+        let (n, l, _) = chained_triples(70, 4);
+        let stop = AtomicBool::new(true);
+        // A chain of 10^12 steps would run for hours.
+        let e = metropolis_stoppable(n, &l, 1 << 40, 0, 1, &stop).unwrap_err();
+        assert!(matches!(e, BeliefError::Stopped { .. }), "{e}");
+        assert!(metropolis_stoppable(n, &l, 1_000, 0, 1, &AtomicBool::new(false)).is_ok());
     }
 }

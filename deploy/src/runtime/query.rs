@@ -30,6 +30,8 @@ pub struct QueryOptions {
     /// How identity marginals are computed (`?marginals=`); None = the
     /// coordinator's choice.
     pub marginals: Option<String>,
+    /// Metropolis's counted steps per block (`?samples=`).
+    pub samples: Option<u64>,
     /// A secured deployment: the CA and this client's certificate (its
     /// common name listed in the topology's `[security] clients`).
     pub tls: Option<Tls>,
@@ -66,6 +68,7 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             .marginals
             .iter()
             .map(|m| format!("marginals={m}"))
+            .chain(options.samples.map(|s| format!("samples={s}")))
             .collect();
         if !options.at_events.is_empty() {
             return at_events(&session, &key, &parameters, options).await;
