@@ -117,12 +117,12 @@ pub const AUTO_EXACT_BLOCK: usize = 16;
 pub const AUTO_BETHE_BLOCK: usize = 100;
 
 /// The largest block the scaling methods (`sinkhorn`, `bethe`) take: the
-/// size up to which a Newton step is a Cholesky solve
-/// ([`super::sinkhorn::MAX_NEWTON_TRACKS`]). Beyond it the conjugate-
-/// gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
+/// size up to which a Newton step is a Cholesky solve (of the N × N Schur
+/// complement above 400 tracks: [`super::sinkhorn::MAX_SCHUR_TRACKS`]).
+/// Beyond it the conjugate-gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
 /// about 2 minutes on a block of 550 tracks, and more than 3 on one of
 /// 900), so they refuse, naming the block, instead of holding the query.
-pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_NEWTON_TRACKS;
+pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_SCHUR_TRACKS;
 
 /// Counted Metropolis steps per track of a block [`MarginalMethod::Auto`]
 /// samples (a tenth as many burn-in steps, seed 0): a chain of 10^4 steps
