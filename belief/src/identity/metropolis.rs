@@ -87,7 +87,7 @@ pub fn metropolis_stoppable(
     stop: &AtomicBool,
 ) -> Result<MetropolisRun, BeliefError> {
     let stopped = |step: usize| {
-        if step % STOP_EVERY == 0 && stop.load(Ordering::Relaxed) {
+        if step.is_multiple_of(STOP_EVERY) && stop.load(Ordering::Relaxed) {
             Err(BeliefError::Stopped {
                 method: "metropolis",
             })
