@@ -82,9 +82,9 @@ fn spec(n: usize, kind: Kind) -> IdentityWorkloadSpec {
 /// The sizes and streams to run: all but `crowd/10000`, or those whose
 /// `n` or `kind/n` is named on the command line (`-- 1000`,
 /// `-- crowd/1000`). `crowd/10000` runs only when named so: its one block
-/// of 9,590 tracks takes about 2 minutes a query — the most likely
-/// assignment (and Metropolis's start) is a dense Hungarian run on the
-/// block, O(k³).
+/// of 9,590 tracks takes seconds a query (it took about 2 minutes while the
+/// most likely assignment and Metropolis's start were dense Hungarian runs,
+/// O(k³)), and criterion would take it 10 times more.
 fn runs() -> Vec<(Kind, usize)> {
     let named: Vec<String> = std::env::args()
         .skip(1)

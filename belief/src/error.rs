@@ -58,4 +58,6 @@ pub enum BeliefError {
     },
     #[error("numerical failure in {step}: {detail}")]
     Numerical { step: &'static str, detail: String },
+    #[error("{method} was stopped before it finished")]
+    Stopped { method: &'static str },
 }

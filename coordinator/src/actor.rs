@@ -24,6 +24,9 @@ pub struct CoordinatorConfig {
     pub keys: Keys,
     /// How long a leader may take to answer.
     pub timeout: Duration,
+    /// How long one identity answer's marginals may take to compute
+    /// before the computation is stopped and the asker told why.
+    pub marginals_timeout: Duration,
 }
 
 pub async fn run(
@@ -191,6 +194,7 @@ async fn identity_track(
         p_identity,
         predicted_identity,
         marginals: answer.marginals,
+        sampling: answer.sampling,
     }))
 }
 
@@ -203,7 +207,7 @@ async fn identities(
     at: At,
     method: Method,
 ) -> Result<IdentityAnswer, String> {
-    identity::identity(session, &config.keys, config.timeout, memory, at, method)
+    identity::identity(session, config, memory, at, method)
         .await
         .map_err(|e| e.to_string())
 }

@@ -10,14 +10,15 @@
 //! when larger still — `belief::identity::marginals`), then the
 //! most likely one-to-one assignment under them (block by block).
 
+use crate::actor::CoordinatorConfig;
 use crate::gather::{collect, At, Collected, GatherError, Memory, Share};
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::{
     most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
 };
-use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::query::IdentityAnswer;
-use std::time::Duration;
+use idmesh_protocol::wire::query::{IdentityAnswer, SamplingReport};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use zenoh::Session;
 
 /// The most tracks for which a query that names no method gets exact
@@ -82,13 +83,20 @@ impl Method {
 /// The identity marginals of every track at a consistent cut.
 pub async fn identity(
     session: &Session,
-    keys: &Keys,
-    timeout: Duration,
+    config: &CoordinatorConfig,
     memory: &Memory,
     at: At,
     method: Method,
 ) -> Result<IdentityAnswer, GatherError> {
-    let collected = collect(session, keys, timeout, memory, at, Share::Rows).await?;
+    let collected = collect(
+        session,
+        &config.keys,
+        config.timeout,
+        memory,
+        at,
+        Share::Rows,
+    )
+    .await?;
     if !collected.cut.identities {
         return Err(GatherError::Failed(
             "the stream carries no identities (its trace header has no `identities`)".into(),
@@ -97,14 +105,32 @@ pub async fn identity(
     let n = collected.cut.tracks as usize;
     let method = method.for_tracks(n)?;
     // Ryser's sum for twenty tracks is a second of arithmetic: keep it off
-    // the threads that move messages.
-    tokio::task::spawn_blocking(move || marginals(collected, method))
-        .await
-        .map_err(|e| GatherError::Failed(format!("the marginals task failed: {e}")))?
+    // the threads that move messages. A computation past its deadline is
+    // stopped (its asker has long given up) instead of holding a thread.
+    let stop = Arc::new(AtomicBool::new(false));
+    let stopped = stop.clone();
+    let task = tokio::task::spawn_blocking(move || marginals(collected, method, &stopped));
+    let deadline = config.marginals_timeout;
+    match tokio::time::timeout(deadline, task).await {
+        Ok(done) => {
+            done.map_err(|e| GatherError::Failed(format!("the marginals task failed: {e}")))?
+        }
+        Err(_) => {
+            stop.store(true, Ordering::Relaxed);
+            Err(GatherError::Failed(format!(
+                "{} marginals over {n} tracks did not finish within {deadline:?} (marginals_timeout_ms) and were stopped: ask for a cheaper method (auto, sinkhorn) or fewer samples",
+                method.name()
+            )))
+        }
+    }
 }
 
 /// The marginals from the rows collected at one cut.
-fn marginals(collected: Collected, method: MarginalMethod) -> Result<IdentityAnswer, GatherError> {
+fn marginals(
+    collected: Collected,
+    method: MarginalMethod,
+    stop: &AtomicBool,
+) -> Result<IdentityAnswer, GatherError> {
     let n = collected.cut.tracks as usize;
     let rows = collected
         .parts
@@ -117,8 +143,22 @@ fn marginals(collected: Collected, method: MarginalMethod) -> Result<IdentityAns
     };
     let failed = |e: idmesh_belief::BeliefError| GatherError::Failed(e.to_string());
     let matrix = InformationRows::assemble(n, rows, options).map_err(failed)?;
-    let p_identity = matrix.marginals_with(&method).map_err(failed)?;
+    // Block by block, as `marginals_with` does, keeping what the sampler
+    // says of its convergence.
+    let blocks = matrix
+        .block_marginals_stoppable(&method, stop)
+        .map_err(failed)?;
+    let p_identity: Vec<Vec<f64>> = blocks
+        .dense()
+        .chunks(n.max(1))
+        .map(<[f64]>::to_vec)
+        .collect();
     let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
+    let sampling = blocks.sampling.map(|s| SamplingReport {
+        blocks: s.blocks as u32,
+        half_difference: s.half_difference,
+        acceptance: s.acceptance,
+    });
     Ok(IdentityAnswer {
         watermark: collected.watermark(),
         tracks: collected.cut.tracks,
@@ -127,6 +167,7 @@ fn marginals(collected: Collected, method: MarginalMethod) -> Result<IdentityAns
         marginals: method.name().to_string(),
         leaders: collected.parts.len() as u32,
         finished: collected.cut.finished,
+        sampling,
     })
 }
 

@@ -167,9 +167,14 @@ pub struct QueryArgs {
     /// identities instead of every track's).
     pub track: Option<u32>,
     /// How `identity` turns the information matrix into marginals (default:
-    /// exact up to 16 tracks, bethe beyond).
+    /// exact up to 16 tracks, auto beyond: exact, half-Bethe or Metropolis
+    /// block by block).
     #[arg(long, value_enum)]
     pub marginals: Option<MarginalChoice>,
+    /// Counted Metropolis steps per block, for `--marginals metropolis`
+    /// (default 10,000): more when the answer says the chain has not mixed.
+    #[arg(long)]
+    pub samples: Option<u64>,
     /// The coordinator's endpoint.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub connect: String,
@@ -222,6 +227,9 @@ impl QueryArgs {
         if self.marginals.is_some() && !matches!(what, Question::Identity(_)) {
             anyhow::bail!("--marginals is for identity queries");
         }
+        if self.samples.is_some() && self.marginals != Some(MarginalChoice::Metropolis) {
+            anyhow::bail!("--samples is for --marginals metropolis");
+        }
         Ok(QueryOptions {
             what,
             connect: self.connect.clone(),
@@ -232,6 +240,7 @@ impl QueryArgs {
             interval: std::time::Duration::from_millis(self.interval_ms),
             at_events: self.at_events.clone(),
             marginals: self.marginals.map(|m| m.name().to_string()),
+            samples: self.samples,
             tls: self.tls.tls()?,
         })
     }

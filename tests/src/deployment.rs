@@ -37,6 +37,9 @@ pub struct Settings {
     /// The sensor's `trace`, when it is not the trace the leaders are
     /// placed over (say, the header alone, for a live stream).
     pub sensor_trace: Option<PathBuf>,
+    /// How long the coordinator may compute one identity answer
+    /// (`marginals_timeout_ms`; None = the default).
+    pub marginals_timeout_ms: Option<u64>,
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -256,6 +259,9 @@ impl Deployment {
         }
         if let Some(ms) = settings.takeover_after_ms {
             toml.insert_str(0, &format!("takeover_after_ms = {ms}\n"));
+        }
+        if let Some(ms) = settings.marginals_timeout_ms {
+            toml.insert_str(0, &format!("marginals_timeout_ms = {ms}\n"));
         }
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));

@@ -8,7 +8,7 @@ use idmesh_tests::deployment::{
 };
 use serde_json::Value;
 use std::path::Path;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 fn matrix(v: &Value) -> Vec<Vec<f64>> {
     v.as_array()
@@ -203,6 +203,11 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     });
     assert_eq!(last["marginals"], "auto");
     assert_eq!(last["tracks"], 1000);
+    // The sampled block's convergence is part of the answer.
+    let sampling = &last["sampling"];
+    assert!(sampling["blocks"].as_u64() >= Some(1), "{sampling}");
+    let half = sampling["half_difference"].as_f64().expect("a diagnostic");
+    assert!(half > 0.0 && half <= 1.0, "{sampling}");
     let p = matrix(&last["p_identity"]);
     assert_eq!(p.len(), 1000);
     for (t, row) in p.iter().enumerate() {
@@ -230,5 +235,63 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
         .collect();
     assert!(largest_difference(&[row], &p[7..8]) < 1e-12);
     assert_eq!(deployment.leaders_total("rows_held"), 1000);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A question whose marginals would take hours (Metropolis with 10^12
+/// steps) is stopped at the coordinator's `marginals_timeout_ms` and
+/// answered with why, naming the method and the size; the coordinator is
+/// not held by it: the next question is answered at once, and so are
+/// questions asked while it runs.
+#[test]
+fn a_question_that_would_take_hours_is_stopped_at_its_deadline() {
+    let dir = std::env::temp_dir().join(format!("idmesh-deadline-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, 12, 4, 30.0, 3);
+    let deployment = Deployment::start(
+        "deadline",
+        &trace,
+        &Settings {
+            marginals_timeout_ms: Some(1500),
+            ..settings(1, None)
+        },
+    );
+    deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
+        a["finished"] == true
+    });
+    let started = Instant::now();
+    let error = deployment
+        .query(&[
+            "identity",
+            "--marginals",
+            "metropolis",
+            "--samples",
+            "1000000000000",
+        ])
+        .expect_err("stopped, not answered");
+    assert!(
+        error.contains("metropolis marginals over 12 tracks did not finish within 1.5s"),
+        "{error}"
+    );
+    assert!(
+        started.elapsed() < Duration::from_secs(12),
+        "the refusal came after {:?}",
+        started.elapsed()
+    );
+    let answer = deployment.query(&["identity"]).expect("answered after");
+    assert_eq!(answer[0]["tracks"], 12);
+    // The default Metropolis answer carries its diagnostic.
+    let sampled = deployment
+        .query(&[
+            "identity",
+            "--marginals",
+            "metropolis",
+            "--samples",
+            "20000",
+        ])
+        .expect("a sampled answer");
+    assert!(
+        sampled[0]["sampling"]["blocks"].as_u64() >= Some(1),
+        "{sampled:?}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

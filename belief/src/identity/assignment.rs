@@ -4,11 +4,13 @@
 //!
 //! Maximizing Σ_t ln p\[t\]\[π(t)\] over permutations π is the assignment
 //! problem with costs −ln p. We solve it with the O(N³) shortest augmenting
-//! path form of the Hungarian algorithm (Kuhn–Munkres with potentials), so
-//! the crate needs no further dependency.
+//! path form of the Hungarian algorithm (Kuhn–Munkres with potentials), and
+//! large sparse blocks with its sparse form
+//! ([`super::sparse_assignment`]).
 
 use super::blocks::{blocks, Block};
 use super::event::check_square;
+use super::sparse_assignment::{sparse_min_cost_assignment, SparseRow};
 use crate::error::BeliefError;
 
 /// The permutation π maximizing Σ_t ln p\[t\]\[π(t)\]: `result[t]` is the
@@ -46,9 +48,32 @@ pub fn most_likely_assignment(p: &[Vec<f64>]) -> Result<Vec<u32>, BeliefError> {
     whole_assignment(p)
 }
 
-/// [`most_likely_assignment`] by one Hungarian run over the whole matrix.
+/// The largest matrix solved by the dense Hungarian algorithm; larger ones
+/// by the sparse solver over their positive entries
+/// ([`super::sparse_assignment`]), O(k³) against about O(k · m log k): a
+/// crowd's block of 9,590 tracks took about two minutes densely.
+pub const DENSE_ASSIGNMENT_LIMIT: usize = 200;
+
+/// [`most_likely_assignment`] by one Hungarian run over the whole matrix
+/// (over its positive entries only when it is large and they hold an
+/// assignment).
 fn whole_assignment(p: &[Vec<f64>]) -> Result<Vec<u32>, BeliefError> {
     let n = check_square(p)?;
+    if n > DENSE_ASSIGNMENT_LIMIT {
+        let rows: Vec<SparseRow> = p
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .enumerate()
+                    .filter(|&(_, &x)| x > 0.0 && x.is_finite())
+                    .map(|(i, &x)| (i as u32, -x.ln()))
+                    .collect()
+            })
+            .collect();
+        if let Some(assignment) = sparse_min_cost_assignment(&rows) {
+            return Ok(assignment);
+        }
+    }
     // −ln of the smallest positive f64 is about 744.4, so any assignment of
     // positive entries costs less than 745·n < this.
     let zero_cost = 750.0 * (n as f64 + 1.0);

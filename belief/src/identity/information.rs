@@ -89,12 +89,16 @@
 
 use super::event::{check_assignment, check_identify, check_mix, check_square, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
-use super::marginals::{block_marginals, information_marginals, BlockMarginals, MarginalMethod};
+use super::marginals::{
+    block_marginals, block_marginals_stoppable, information_marginals, BlockMarginals,
+    MarginalMethod,
+};
 use super::sinkhorn::SinkhornOptions;
 use super::support_mix::fit_on_support;
 use crate::error::BeliefError;
 use crate::event::Mix;
 use nalgebra::{DMatrix, DVector};
+use std::sync::atomic::AtomicBool;
 
 /// How the mixing least-squares problem is solved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -230,6 +234,17 @@ impl InformationMatrix {
     /// query at n = 10,000 should ask for — no n × n matrix is built.
     pub fn block_marginals(&self, method: &MarginalMethod) -> Result<BlockMarginals, BeliefError> {
         block_marginals(self.n, &self.l, method, &self.options.sinkhorn)
+    }
+
+    /// [`InformationMatrix::block_marginals`] that gives up with
+    /// [`BeliefError::Stopped`] soon after `stop` is set (another thread's
+    /// deadline).
+    pub fn block_marginals_stoppable(
+        &self,
+        method: &MarginalMethod,
+        stop: &AtomicBool,
+    ) -> Result<BlockMarginals, BeliefError> {
+        block_marginals_stoppable(self.n, &self.l, method, &self.options.sinkhorn, stop)
     }
 
     /// Marginals by a given method, whatever the configured one.

@@ -67,10 +67,11 @@
 use super::assignment::most_likely_assignment;
 use super::blocks::{blocks_of_log_likelihoods, sub_matrix, Block};
 use super::filter::to_rows;
-use super::metropolis::metropolis_marginals;
+use super::metropolis::{metropolis_stoppable, MetropolisRun};
 use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
 use crate::error::BeliefError;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How marginals are computed from an information matrix.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -116,12 +117,12 @@ pub const AUTO_EXACT_BLOCK: usize = 16;
 pub const AUTO_BETHE_BLOCK: usize = 100;
 
 /// The largest block the scaling methods (`sinkhorn`, `bethe`) take: the
-/// size up to which a Newton step is a Cholesky solve
-/// ([`super::sinkhorn::MAX_NEWTON_TRACKS`]). Beyond it the conjugate-
-/// gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
+/// size up to which a Newton step is a Cholesky solve (of the N × N Schur
+/// complement above 400 tracks: [`super::sinkhorn::MAX_SCHUR_TRACKS`]).
+/// Beyond it the conjugate-gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
 /// about 2 minutes on a block of 550 tracks, and more than 3 on one of
 /// 900), so they refuse, naming the block, instead of holding the query.
-pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_NEWTON_TRACKS;
+pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_SCHUR_TRACKS;
 
 /// Counted Metropolis steps per track of a block [`MarginalMethod::Auto`]
 /// samples (a tenth as many burn-in steps, seed 0): a chain of 10^4 steps
@@ -176,6 +177,41 @@ impl MarginalMethod {
 pub struct BlockMarginals {
     pub n: usize,
     pub blocks: Vec<(Block, Vec<f64>)>,
+    /// How far the blocks answered by Metropolis are from converged; None
+    /// when no block was sampled.
+    pub sampling: Option<Sampling>,
+}
+
+/// The convergence diagnostic of the blocks answered by Metropolis
+/// ([`super::metropolis::MetropolisRun`]): what a user needs to know
+/// whether sampled marginals can be trusted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sampling {
+    /// How many blocks were sampled.
+    pub blocks: usize,
+    /// The largest split-half difference |p₁ − p₂| over them: about the
+    /// sampling error of the worst marginal (0.01 and below: mixed).
+    pub half_difference: f64,
+    /// The smallest share of proposals accepted.
+    pub acceptance: f64,
+}
+
+impl Sampling {
+    fn of(run: &MetropolisRun) -> Self {
+        Sampling {
+            blocks: 1,
+            half_difference: run.half_difference,
+            acceptance: run.acceptance,
+        }
+    }
+
+    fn and(self, other: Sampling) -> Self {
+        Sampling {
+            blocks: self.blocks + other.blocks,
+            half_difference: self.half_difference.max(other.half_difference),
+            acceptance: self.acceptance.min(other.acceptance),
+        }
+    }
 }
 
 impl BlockMarginals {
@@ -231,6 +267,20 @@ pub fn block_marginals(
     method: &MarginalMethod,
     sinkhorn_options: &SinkhornOptions,
 ) -> Result<BlockMarginals, BeliefError> {
+    block_marginals_stoppable(n, l, method, sinkhorn_options, &AtomicBool::new(false))
+}
+
+/// [`block_marginals`] that gives up with [`BeliefError::Stopped`] soon
+/// after `stop` is set: between blocks, and within a Metropolis chain
+/// (the one method whose time the asker sets, by its samples). The other
+/// methods refuse blocks too large to finish in seconds.
+pub fn block_marginals_stoppable(
+    n: usize,
+    l: &[f64],
+    method: &MarginalMethod,
+    sinkhorn_options: &SinkhornOptions,
+    stop: &AtomicBool,
+) -> Result<BlockMarginals, BeliefError> {
     if n == 0 {
         return Err(BeliefError::NoTracks);
     }
@@ -270,52 +320,80 @@ pub fn block_marginals(
         });
     }
     let mut out = Vec::with_capacity(blocks.len());
+    let mut sampling: Option<Sampling> = None;
     for block in blocks {
+        if stop.load(Ordering::Relaxed) {
+            return Err(BeliefError::Stopped {
+                method: method.name(),
+            });
+        }
         let k = block.size();
         let p = if k == 1 {
             vec![1.0]
         } else {
             let sub = sub_matrix(n, l, &block);
-            one_block(k, &sub, method, sinkhorn_options)?
+            let (p, sampled) = one_block(k, &sub, method, sinkhorn_options, stop)?;
+            if let Some(run) = sampled {
+                sampling = Some(match sampling {
+                    Some(before) => before.and(run),
+                    None => run,
+                });
+            }
+            p
         };
         out.push((block, p));
     }
-    Ok(BlockMarginals { n, blocks: out })
+    Ok(BlockMarginals {
+        n,
+        blocks: out,
+        sampling,
+    })
 }
 
-/// The marginals of one block (k ≥ 2) by `method`.
+/// The marginals of one block (k ≥ 2) by `method`, and the diagnostic of
+/// a block answered by Metropolis.
 fn one_block(
     k: usize,
     l: &[f64],
     method: &MarginalMethod,
     sinkhorn_options: &SinkhornOptions,
-) -> Result<Vec<f64>, BeliefError> {
-    match *method {
-        MarginalMethod::Exact => marginals_from_log_likelihoods(k, l),
-        MarginalMethod::Auto if k <= AUTO_EXACT_BLOCK => marginals_from_log_likelihoods(k, l),
+    stop: &AtomicBool,
+) -> Result<(Vec<f64>, Option<Sampling>), BeliefError> {
+    let sampled = |run: MetropolisRun| {
+        let sampling = Sampling::of(&run);
+        (run.marginals, Some(sampling))
+    };
+    Ok(match *method {
+        MarginalMethod::Exact => (marginals_from_log_likelihoods(k, l)?, None),
+        MarginalMethod::Auto if k <= AUTO_EXACT_BLOCK => {
+            (marginals_from_log_likelihoods(k, l)?, None)
+        }
         MarginalMethod::Auto if k <= AUTO_BETHE_BLOCK => {
-            one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options)
+            one_block(k, l, &MarginalMethod::half_bethe(), sinkhorn_options, stop)?
         }
         MarginalMethod::Auto => {
             let samples = AUTO_STEPS_PER_TRACK * k;
-            metropolis_marginals(k, l, samples, samples / 10, 0)
+            sampled(metropolis_stoppable(k, l, samples, samples / 10, 0, stop)?)
         }
         MarginalMethod::Metropolis {
             samples,
             burn_in,
             seed,
-        } => metropolis_marginals(k, l, samples, burn_in, seed),
+        } => sampled(metropolis_stoppable(k, l, samples, burn_in, seed, stop)?),
         MarginalMethod::Sinkhorn => {
             let mut a = exp_rows(k, l)?;
             sinkhorn(k, &mut a, sinkhorn_options)?;
-            Ok(a)
+            (a, None)
         }
         MarginalMethod::FractionalBethe {
             gamma,
             max_iterations,
             tolerance,
-        } => fractional_bethe(k, l, gamma, max_iterations, tolerance, sinkhorn_options),
-    }
+        } => (
+            fractional_bethe(k, l, gamma, max_iterations, tolerance, sinkhorn_options)?,
+            None,
+        ),
+    })
 }
 
 /// Iterates P ← Sinkhorn(A ⊙ (1 − P)^{−γ}) from P = Sinkhorn(A).
@@ -681,10 +759,19 @@ mod tests {
         assert!(k > AUTO_BETHE_BLOCK, "the largest block has {k} tracks");
         let sub = sub_matrix(n, &l, block);
         let steps = AUTO_STEPS_PER_TRACK * k;
-        assert_eq!(
-            *p,
-            metropolis_marginals(k, &sub, steps, steps / 10, 0).unwrap()
-        );
+        let run = crate::identity::metropolis::metropolis_diagnosed(k, &sub, steps, steps / 10, 0)
+            .unwrap();
+        assert_eq!(*p, run.marginals);
+        // The answer says how far the sampled block is from converged; a
+        // method that did not sample says nothing.
+        let sampling = auto.sampling.expect("a sampled block");
+        assert_eq!(sampling.blocks, 1);
+        assert_eq!(sampling.half_difference, run.half_difference);
+        assert!(sampling.half_difference > 0.0 && sampling.acceptance > 0.0);
+        assert!(block_marginals(n, &l, &MarginalMethod::Sinkhorn, &opts)
+            .unwrap()
+            .sampling
+            .is_none());
         assert!(doubly_stochastic_residual(&to_rows(n, &auto.dense())) < 1e-9);
         for (small, q) in auto.blocks.iter().filter(|(b, _)| b.size() > 1) {
             let j = small.size();
@@ -724,7 +811,9 @@ mod tests {
                     let alone = if block.size() == 1 {
                         vec![1.0]
                     } else {
-                        one_block(block.size(), &sub, &method, &opts).unwrap()
+                        one_block(block.size(), &sub, &method, &opts, &AtomicBool::new(false))
+                            .unwrap()
+                            .0
                     };
                     proptest::prop_assert_eq!(p, &alone);
                 }

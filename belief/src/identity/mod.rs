@@ -57,6 +57,7 @@ pub mod permutation;
 pub mod property_bits;
 pub mod rows;
 pub mod sinkhorn;
+pub mod sparse_assignment;
 pub mod support_mix;
 pub mod workload;
 

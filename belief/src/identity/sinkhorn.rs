@@ -174,6 +174,8 @@ pub(crate) fn scale_logged(
             newton_steps += 1;
             let stepped = if n <= MAX_NEWTON_TRACKS {
                 newton_step(n, &pattern, matrix, &mut logs)
+            } else if n <= MAX_SCHUR_TRACKS {
+                newton_schur_step(n, &pattern, matrix, &mut logs)
             } else {
                 newton_cg_step(n, &pattern, matrix, &mut logs)
             };
@@ -226,6 +228,13 @@ const SWEEPS_BEFORE_NEWTON: usize = 100;
 /// size; above it the same Newton step is solved by preconditioned
 /// conjugate gradients ([`newton_cg_step`]), O(N²) per CG iteration.
 pub const MAX_NEWTON_TRACKS: usize = 400;
+
+/// Above [`MAX_NEWTON_TRACKS`] and up to this size the Newton step is
+/// solved through its N × N Schur complement ([`newton_schur_step`]):
+/// a Cholesky eight times cheaper than the 2N × 2N one, about 0.1 s at
+/// N = 1,000. (The 2N × 2N form stays below, so answers there are the
+/// bits they were.)
+pub const MAX_SCHUR_TRACKS: usize = 1_200;
 
 /// The most conjugate-gradient iterations of one Newton–CG step.
 const MAX_CG_ITERATIONS: usize = 200;
@@ -330,6 +339,58 @@ fn newton_step(n: usize, pattern: &Pattern, p: &mut [f64], logs: &mut LogScaling
     };
     let step: Vec<f64> = step.iter().copied().collect();
     let g: Vec<f64> = g.iter().copied().collect();
+    line_search(n, pattern, p, logs, &g, &step)
+}
+
+/// The Newton step of [`newton_step`], solved through the Schur
+/// complement of the column block: with H = [[D_r, P], [Pᵀ, D_c]],
+/// d_c = D_c⁻¹(−g_c − Pᵀ·d_r) and (D_r − P·D_c⁻¹·Pᵀ)·d_r = −g_r +
+/// P·D_c⁻¹·g_c, an N × N system. Building it costs the sum over columns
+/// of (positive entries in the column)², small for a crowd's sparse block.
+fn newton_schur_step(n: usize, pattern: &Pattern, p: &mut [f64], logs: &mut LogScaling) -> bool {
+    use nalgebra::{DMatrix, DVector};
+    let mut diag = vec![0.0; 2 * n];
+    let mut columns: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+    for (i, j, k) in pattern.entries(n) {
+        let x = p[k];
+        diag[i] += x;
+        diag[n + j] += x;
+        columns[j].push((i, x));
+    }
+    let g: Vec<f64> = diag.iter().map(|d| d - 1.0).collect();
+    let scale = diag.iter().copied().fold(0.0, f64::max).max(1.0);
+    let mut ridge = 1e-13 * scale;
+    let step = loop {
+        let mut s = DMatrix::<f64>::zeros(n, n);
+        let mut rhs = DVector::<f64>::zeros(n);
+        for i in 0..n {
+            s[(i, i)] = diag[i] + ridge;
+            rhs[i] = -g[i];
+        }
+        for (j, column) in columns.iter().enumerate() {
+            let c = diag[n + j] + ridge;
+            for &(a, x) in column {
+                rhs[a] += x * g[n + j] / c;
+                for &(b, y) in column {
+                    s[(a, b)] -= x * y / c;
+                }
+            }
+        }
+        if let Some(chol) = s.cholesky() {
+            let d_r = chol.solve(&rhs);
+            let mut step: Vec<f64> = d_r.iter().copied().collect();
+            for (j, column) in columns.iter().enumerate() {
+                let c = diag[n + j] + ridge;
+                let through: f64 = column.iter().map(|&(i, x)| x * d_r[i]).sum();
+                step.push((-g[n + j] - through) / c);
+            }
+            break step;
+        }
+        ridge *= 100.0;
+        if ridge > scale {
+            return false;
+        }
+    };
     line_search(n, pattern, p, logs, &g, &step)
 }
 
@@ -698,9 +759,15 @@ mod tests {
     #[test]
     fn peaked_matrices_above_the_cholesky_size_converge() {
         // A permutation with pairs mixed and e^-20 elsewhere, n = 450:
-        // the shape that stalled plain sweeps (issue 21). Newton–CG
-        // converges to the default tolerance.
-        let n = MAX_NEWTON_TRACKS + 50;
+        // the shape that stalled plain sweeps (issue 21). Newton through
+        // the Schur complement, and Newton–CG beyond it, converge to the
+        // default tolerance.
+        for n in [MAX_NEWTON_TRACKS + 50, MAX_SCHUR_TRACKS + 50] {
+            peaked_converges(n);
+        }
+    }
+
+    fn peaked_converges(n: usize) {
         let mut rng = ChaCha8Rng::seed_from_u64(21);
         let mut m = vec![(-20f64).exp(); n * n];
         for t in 0..n {
@@ -715,5 +782,42 @@ mod tests {
         assert!(report.newton_steps > 0, "{report:?}");
         assert!(report.residual <= 1e-10);
         assert!(column_residual(n, &m) < 1e-9);
+    }
+
+    #[test]
+    fn the_schur_step_is_the_full_newton_step() {
+        // Both solve the same 2N × 2N system: from the same start, one
+        // step of each lands on the same scaling.
+        let n = 30;
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let mut m: Vec<f64> = (0..n * n)
+            .map(|_| {
+                if rng.gen_bool(0.3) {
+                    rng.gen_range(0.001..1.0)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for t in 0..n {
+            m[t * n + t] = 1.0; // a positive diagonal: total support
+        }
+        let start = |m: &[f64]| {
+            let mut a = m.to_vec();
+            let pattern = Pattern::of(n, &a);
+            let mut logs = LogScaling {
+                row: vec![0.0; n],
+                col: vec![0.0; n],
+            };
+            sweep(n, &pattern, &mut a, &mut logs);
+            (a, pattern, logs)
+        };
+        let (mut full, pattern, mut full_logs) = start(&m);
+        let (mut schur, _, mut schur_logs) = start(&m);
+        assert!(newton_step(n, &pattern, &mut full, &mut full_logs));
+        assert!(newton_schur_step(n, &pattern, &mut schur, &mut schur_logs));
+        for (a, b) in full.iter().zip(&schur) {
+            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        }
     }
 }

@@ -8,8 +8,8 @@ use super::security::Tls;
 use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
-    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, PositionsAnswer, QueryError, StatsAnswer,
-    TrackAnswer, Watermark,
+    IdentityAnswer, IdentityTrackAnswer, MarginalsAnswer, PositionsAnswer, QueryError,
+    SamplingReport, StatsAnswer, TrackAnswer, Watermark,
 };
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -30,6 +30,8 @@ pub struct QueryOptions {
     /// How identity marginals are computed (`?marginals=`); None = the
     /// coordinator's choice.
     pub marginals: Option<String>,
+    /// Metropolis's counted steps per block (`?samples=`).
+    pub samples: Option<u64>,
     /// A secured deployment: the CA and this client's certificate (its
     /// common name listed in the topology's `[security] clients`).
     pub tls: Option<Tls>,
@@ -66,6 +68,7 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             .marginals
             .iter()
             .map(|m| format!("marginals={m}"))
+            .chain(options.samples.map(|s| format!("samples={s}")))
             .collect();
         if !options.at_events.is_empty() {
             return at_events(&session, &key, &parameters, options).await;
@@ -193,6 +196,21 @@ pub async fn ask(session: &zenoh::Session, key: &str, timeout: Duration) -> Resu
     }
 }
 
+/// What a user reads of a Metropolis answer's convergence.
+fn sampling_line(s: &SamplingReport) -> String {
+    let verdict = if s.half_difference <= 0.01 {
+        "mixed"
+    } else {
+        "not mixed: ask with more samples (?marginals=metropolis;samples=…)"
+    };
+    format!(
+        "  sampled {} block(s) by Metropolis: halves differ by up to {:.3}, {:.0} % of proposals accepted ({verdict})",
+        s.blocks,
+        s.half_difference,
+        s.acceptance * 100.0
+    )
+}
+
 fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
     let mut out = std::io::stdout().lock();
     if options.json {
@@ -235,6 +253,9 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
                 a.marginals,
                 took.as_secs_f64() * 1e3
             )?;
+            if let Some(s) = &a.sampling {
+                writeln!(out, "{}", sampling_line(s))?;
+            }
             for (t, (row, &i)) in a.p_identity.iter().zip(&a.predicted_identity).enumerate() {
                 let p = row.get(i as usize).copied().unwrap_or(f64::NAN);
                 writeln!(out, "  track {t:>4}  identity {i:>4}  P = {p:.4}")?;
@@ -245,6 +266,9 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
             let i = a.predicted_identity;
             let p = a.p_identity.get(i as usize).copied().unwrap_or(f64::NAN);
             writeln!(out, "track {}: identity {i} (P = {p:.4})", a.track)?;
+            if let Some(s) = &a.sampling {
+                writeln!(out, "{}", sampling_line(s))?;
+            }
         }
         Question::Positions => {
             let a: PositionsAnswer = serde_json::from_slice(body)?;

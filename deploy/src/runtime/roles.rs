@@ -83,6 +83,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                         name: name.to_string(),
                         keys,
                         timeout: Duration::from_millis(topology.query_timeout_ms),
+                        marginals_timeout: Duration::from_millis(topology.marginals_timeout_ms),
                     },
                     shutdown(),
                 )

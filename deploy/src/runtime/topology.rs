@@ -8,6 +8,9 @@
 //! budget = 0                     # sets per leader (0 = no pruning)
 //! sparsify = "threshold"         # or "overcomplete": OMP, then threshold
 //! query_timeout_ms = 2000
+//! marginals_timeout_ms = 30000   # longest the coordinator computes one
+//!                                # identity answer before it stops and
+//!                                # says so (a big block, many samples)
 //! state_dir = "state"            # leaders' journals (relative to this file);
 //!                                # absent = no journal, a leader that dies
 //!                                # cannot come back
@@ -81,6 +84,10 @@ pub struct Topology {
     /// live leader process adopts it (0 = never).
     #[serde(default = "default_takeover_after")]
     pub takeover_after_ms: u64,
+    /// How long the coordinator may compute one identity answer's
+    /// marginals before it stops the computation and answers why.
+    #[serde(default = "default_marginals_timeout")]
+    pub marginals_timeout_ms: u64,
     pub coordinator: Process,
     pub sensor: SensorProcess,
     pub leader: Vec<LeaderProcess>,
@@ -173,6 +180,10 @@ fn default_host() -> String {
 
 fn default_timeout() -> u64 {
     2000
+}
+
+fn default_marginals_timeout() -> u64 {
+    30_000
 }
 
 fn default_fsync() -> u64 {

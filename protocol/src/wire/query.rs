@@ -45,6 +45,24 @@ pub struct IdentityAnswer {
     pub marginals: String,
     pub leaders: u32,
     pub finished: bool,
+    /// Present when some block was answered by Metropolis: how far the
+    /// sampled marginals can be trusted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampling: Option<SamplingReport>,
+}
+
+/// The convergence diagnostic of the blocks an identity answer sampled by
+/// Metropolis (a split-chain check, like Gelman–Rubin's split R̂).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SamplingReport {
+    /// How many independent blocks were sampled.
+    pub blocks: u32,
+    /// The largest |p₁ − p₂| between the marginals of the first and second
+    /// half of a chain: about the sampling error of the worst marginal
+    /// (0.01 or below: the chain has mixed; ask with more `samples` if not).
+    pub half_difference: f64,
+    /// The smallest share of proposals accepted.
+    pub acceptance: f64,
 }
 
 /// Who is on one track: the track's row of [`IdentityAnswer`] and the
@@ -56,6 +74,8 @@ pub struct IdentityTrackAnswer {
     pub p_identity: Vec<f64>,
     pub predicted_identity: u32,
     pub marginals: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampling: Option<SamplingReport>,
 }
 
 /// Where every track was last seen (`positions[t]`, null before its first
