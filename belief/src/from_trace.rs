@@ -81,7 +81,7 @@ mod tests {
 
     #[test]
     fn field_from_begin() {
-        let begin = Begin {
+        let begin = Begin { factored: None,
             tracks: 3,
             red: Some(1),
             initial_red: Some(vec![2]),

@@ -32,6 +32,10 @@ pub struct Settings {
     pub leader_faults: Option<String>,
     /// A `[security]` section: mutual TLS, and access control if asked.
     pub security: Option<Secured>,
+    /// Topology lines of the belief the leaders hold, e.g.
+    /// `belief = "factored"\nmax_component = 3` (None: the topology's
+    /// default belief).
+    pub belief: Option<String>,
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -207,6 +211,9 @@ impl Deployment {
         }
         if let Some(ms) = settings.takeover_after_ms {
             toml.insert_str(0, &format!("takeover_after_ms = {ms}\n"));
+        }
+        if let Some(belief) = &settings.belief {
+            toml.insert_str(0, &format!("{belief}\n"));
         }
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));

@@ -144,6 +144,7 @@ async fn sensor(session: zenoh::Session, topology: &Topology, keys: Keys) -> Res
             distributed_rule: topology.distributed_rule,
             budget: topology.budget,
             omp: topology.sparsify == Sparsification::Overcomplete,
+            factored: topology.factored(),
         },
         &header,
     )?;

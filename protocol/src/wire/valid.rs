@@ -231,6 +231,12 @@ impl Begin {
             })?;
             distinct_tracks("begin initial_identity", assignment, n)?;
         }
+        if let Some(factored) = &self.factored {
+            factored.check()?;
+            require(!self.identities, || {
+                "begin: a factored belief on an identity stream".into()
+            })?;
+        }
         Ok(())
     }
 }
@@ -269,6 +275,9 @@ impl Transfer {
         distinct("rows", &tracks)?;
         for row in &self.rows {
             row.check()?;
+        }
+        for (i, c) in self.components.iter().enumerate() {
+            c.check().map_err(|e| format!("component {i}: {e}"))?;
         }
         Ok(())
     }
@@ -400,6 +409,9 @@ impl Partial {
         for row in &self.rows {
             row.check()?;
         }
+        for (i, c) in self.components.iter().flatten().enumerate() {
+            c.check().map_err(|e| format!("component {i}: {e}"))?;
+        }
         Ok(())
     }
 }
@@ -423,7 +435,7 @@ mod tests {
     use crate::wire::{decode, encode, VERSION};
 
     fn begin() -> Begin {
-        Begin {
+        Begin { factored: None,
             tracks: 4,
             red: Some(2),
             initial_red: Some(vec![0, 1]),
@@ -637,7 +649,7 @@ mod tests {
 
     #[test]
     fn transfers_partials_and_cuts_are_checked() {
-        let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer {
+        let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer { components: Vec::new(),
             version: VERSION,
             from: 0,
             seq: 3,
@@ -674,7 +686,7 @@ mod tests {
             let e = decode::<Transfer>(&encode(&bad)).unwrap_err().to_string();
             assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
         }
-        let partial = Partial {
+        let partial = Partial { components: None,
             version: VERSION,
             leader: "a".into(),
             cut: 1,
