@@ -131,7 +131,8 @@ fn a_billion_of_anything_in_a_few_bytes_is_refused_without_allocating_for_it() {
 /// every point, never panic and never allocate much.
 #[test]
 fn every_truncation_of_a_large_message_is_refused() {
-    let transfer = Transfer { components: Vec::new(),
+    let transfer = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 7,

@@ -115,7 +115,8 @@ fn garbage() -> (Messages, Messages) {
         ("wrong version", encode(&wrong_version)),
     ];
     let transfer = |red: Vec<u32>, ln_mass: f64, version| {
-        encode(&Transfer { components: Vec::new(),
+        encode(&Transfer {
+            components: Vec::new(),
             version,
             from: 1,
             seq: 950,

@@ -49,7 +49,10 @@ fn without_start(trace: &Path) -> PathBuf {
     let text = std::fs::read_to_string(trace).unwrap();
     let mut lines = text.lines();
     let mut header: Value = serde_json::from_str(lines.next().unwrap()).unwrap();
-    assert!(header.get("initial_red").is_some(), "the crowd has a known start");
+    assert!(
+        header.get("initial_red").is_some(),
+        "the crowd has a known start"
+    );
     header.as_object_mut().unwrap().remove("initial_red");
     let mut out = serde_json::to_string(&header).unwrap();
     for line in lines {
@@ -101,7 +104,10 @@ fn settings(leaders: usize) -> Settings {
 fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
     let dir = std::env::temp_dir().join(format!("idmesh-factored-{}", std::process::id()));
     let known = crowd(&dir, 12, 4, 60.0, 5);
-    for (start, trace) in [("known start", known.clone()), ("uniform prior", without_start(&known))] {
+    for (start, trace) in [
+        ("known start", known.clone()),
+        ("uniform prior", without_start(&known)),
+    ] {
         let central = central(&trace);
         let truths = truth_lines(&trace);
         assert_eq!(central.len(), truths.len());
@@ -121,7 +127,10 @@ fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
                 // leaders; every observation reached one holder only.
                 let handovers = deployment.leaders_total("handovers");
                 let moved = deployment.leaders_total("sets_sent");
-                assert!(handovers > 0 && moved > 0, "{what}: {handovers} handovers, {moved} moved");
+                assert!(
+                    handovers > 0 && moved > 0,
+                    "{what}: {handovers} handovers, {moved} moved"
+                );
             }
             let observations = deployment.leaders_total("observations");
             let in_trace = std::fs::read_to_string(&trace)
@@ -174,6 +183,9 @@ fn a_factored_leader_killed_and_restarted_changes_no_answer() {
     for (t, (g, w)) in floats(&last["p_red"]).iter().zip(&want).enumerate() {
         assert!((g - w).abs() < 1e-9, "after a crash, track {t}: {g} vs {w}");
     }
-    assert!(crashed.leaders_total("snapshots") > 0, "leaders wrote snapshots");
+    assert!(
+        crashed.leaders_total("snapshots") > 0,
+        "leaders wrote snapshots"
+    );
     assert!(crashed.leader("leader-1")["recoveries"].as_u64().unwrap() > 0);
 }

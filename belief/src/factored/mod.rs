@@ -846,7 +846,12 @@ impl PropertyFilter for FactoredBelief {
     fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
         let all = {
             let mut tree = self.lock_tree();
-            coupling_weights(&mut tree, &self.prior, &self.count_refs(), self.field.tracks)?
+            coupling_weights(
+                &mut tree,
+                &self.prior,
+                &self.count_refs(),
+                self.field.tracks,
+            )?
         };
         let mut out = vec![0.0; self.field.tracks];
         for (c, r) in self.live().zip(all) {

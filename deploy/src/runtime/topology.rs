@@ -299,7 +299,10 @@ impl Topology {
                     self.split
                 );
             }
-            if self.budget > 0 || self.distributed_rule || self.sparsify != Sparsification::Threshold {
+            if self.budget > 0
+                || self.distributed_rule
+                || self.sparsify != Sparsification::Threshold
+            {
                 bail!(
                     "budget, distributed_rule and sparsify are settings of belief = \"radon\"; \
                      the factored belief is bounded by max_component"

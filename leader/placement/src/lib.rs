@@ -15,15 +15,11 @@
 //! add up: rollup and conditioning act on the Radon masses atom by atom and
 //! linearly (Section 5.4 of the property-management paper).
 
-use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
 use idmesh_belief::factored::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
-use idmesh_belief::{
-    field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule,
-};
-use idmesh_protocol::wire::factored::{
-    FactoredStart, WireComponent, WireCounts, WireSplit,
-};
+use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
+use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireCounts, WireSplit};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
 
@@ -218,7 +214,8 @@ mod tests {
     use super::*;
 
     fn begin(leaders: usize, owners: Vec<u16>, red: Option<u32>) -> Begin {
-        Begin { factored: None,
+        Begin {
+            factored: None,
             tracks: owners.len() as u32,
             red,
             initial_red: None,

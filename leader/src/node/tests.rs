@@ -11,7 +11,8 @@ fn timers() -> Timers {
 }
 
 fn begin(leaders: &[&str]) -> Item {
-    Item::Begin(Begin { factored: None,
+    Item::Begin(Begin {
+        factored: None,
         tracks: 4,
         red: Some(2),
         initial_red: Some(vec![0, 1]),
@@ -262,7 +263,8 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
         0,
         "one request out"
     );
-    let lost = Transfer { components: Vec::new(),
+    let lost = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 2,
@@ -290,7 +292,8 @@ fn a_failed_follow_request_is_made_again() {
         blue: vec![],
         ln_mass: -1.0,
     }];
-    let transfer = Transfer { components: Vec::new(),
+    let transfer = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 2,
@@ -459,7 +462,8 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     // The sensor answers, then b: caught up.
     node.step(30 * MS, Input::Resent(Ok(Vec::new())));
     assert!(node.recovering_since().is_some());
-    let transfer = Transfer { components: Vec::new(),
+    let transfer = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 2,

@@ -29,9 +29,9 @@
 //! pair; a handover moves the track's row with its sets.
 
 use crate::error::LeaderError;
+use idmesh_belief::factored::FactoredShare;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::{Identify, InformationRows};
-use idmesh_belief::factored::FactoredShare;
 use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe, TrackSet};
 use idmesh_placement::{start, start_factored};

@@ -4,7 +4,8 @@
 use super::*;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
-    Item::Begin(Begin { factored: None,
+    Item::Begin(Begin {
+        factored: None,
         tracks: owners.len() as u32,
         red: Some(2),
         initial_red: Some(vec![0, 1]),
@@ -65,7 +66,8 @@ fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody(
     assert!(leader.quiet(false).is_none(), "waiting for b's sets");
     leader
         .transfer(
-            Transfer { components: Vec::new(),
+            Transfer {
+                components: Vec::new(),
                 version: VERSION,
                 from: 1,
                 seq: 2,
@@ -221,7 +223,8 @@ fn duplicates_and_reordered_batches_change_nothing() {
 fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them() {
     use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
     let start = vec![2, 0, 3, 1];
-    let begin = Item::Begin(Begin { factored: None,
+    let begin = Item::Begin(Begin {
+        factored: None,
         tracks: 4,
         red: None,
         initial_red: None,

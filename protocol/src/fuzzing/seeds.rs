@@ -82,7 +82,8 @@ const IDENTITY_TRACE: &str = r#"{"kind":"header","format":"idmesh-trace","versio
 "#;
 
 fn begin(identities: bool) -> Begin {
-    Begin { factored: None,
+    Begin {
+        factored: None,
         tracks: 8,
         red: Some(3),
         initial_red: Some(vec![0, 3, 6]),
@@ -171,7 +172,8 @@ fn batches() -> Vec<Batch> {
 
 fn transfers() -> Vec<Transfer> {
     vec![
-        Transfer { components: Vec::new(),
+        Transfer {
+            components: Vec::new(),
             version: VERSION,
             from: 1,
             seq: 9,
@@ -192,7 +194,8 @@ fn transfers() -> Vec<Transfer> {
                 ln_likelihoods: vec![0.0, -1.0, -2.5, f64::NEG_INFINITY, 0.0, -0.1, -3.0, -4.0],
             }],
         },
-        Transfer { components: Vec::new(),
+        Transfer {
+            components: Vec::new(),
             version: VERSION,
             from: 2,
             seq: 11,
@@ -203,7 +206,8 @@ fn transfers() -> Vec<Transfer> {
 }
 
 fn partials() -> Vec<Partial> {
-    vec![Partial { components: None,
+    vec![Partial {
+        components: None,
         version: VERSION,
         leader: "leader-1".into(),
         cut: 14,

@@ -59,9 +59,7 @@ fn weights(what: &str, v: &[f64]) -> Result<(), String> {
 fn size(what: &str, tracks: &[u32]) -> Result<(), String> {
     let m = tracks.len();
     if m == 0 || m > MAX_COMPONENT as usize {
-        return Err(format!(
-            "{what} of {m} tracks (1..={MAX_COMPONENT})"
-        ));
+        return Err(format!("{what} of {m} tracks (1..={MAX_COMPONENT})"));
     }
     distinct_tracks(what, tracks, u32::MAX)
 }

@@ -435,7 +435,8 @@ mod tests {
     use crate::wire::{decode, encode, VERSION};
 
     fn begin() -> Begin {
-        Begin { factored: None,
+        Begin {
+            factored: None,
             tracks: 4,
             red: Some(2),
             initial_red: Some(vec![0, 1]),
@@ -649,7 +650,8 @@ mod tests {
 
     #[test]
     fn transfers_partials_and_cuts_are_checked() {
-        let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer { components: Vec::new(),
+        let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer {
+            components: Vec::new(),
             version: VERSION,
             from: 0,
             seq: 3,
@@ -686,7 +688,8 @@ mod tests {
             let e = decode::<Transfer>(&encode(&bad)).unwrap_err().to_string();
             assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
         }
-        let partial = Partial { components: None,
+        let partial = Partial {
+            components: None,
             version: VERSION,
             leader: "a".into(),
             cut: 1,

@@ -19,7 +19,8 @@ fn router(tracks: usize, red: usize, distributed_rule: bool) -> Router {
 fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) -> Router {
     let mut header = Header::new(tracks);
     header.red = Some(red);
-    let config = RouterConfig { factored: None,
+    let config = RouterConfig {
+        factored: None,
         sensor: "s".into(),
         leaders: (0..leaders)
             .map(|i| LeaderPlace {
@@ -260,7 +261,8 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
 #[test]
 fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
     let limit = idmesh_protocol::wire::valid::MAX_IDENTITY_TRACKS as usize;
-    let config = |leaders: usize| RouterConfig { factored: None,
+    let config = |leaders: usize| RouterConfig {
+        factored: None,
         sensor: "s".into(),
         leaders: (0..leaders)
             .map(|i| LeaderPlace {
@@ -304,7 +306,8 @@ fn under_exact_conditioning_every_observation_reaches_every_leader_and_a_mix_onl
 fn an_identity_read_goes_to_the_owner_of_its_track_alone() {
     let mut header = Header::new(4);
     header.identities = Some(4);
-    let config = RouterConfig { factored: None,
+    let config = RouterConfig {
+        factored: None,
         sensor: "s".into(),
         leaders: ["a", "b"]
             .iter()

@@ -7,8 +7,8 @@
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
 use idmesh_placement::factored_options;
-use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
+use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_sensor::gateway::{LeaderPlace, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;

@@ -303,7 +303,10 @@ impl FactoredShare {
         let mut sorted = c.tracks.clone();
         sorted.sort_unstable();
         if sorted.windows(2).any(|w| w[0] == w[1]) {
-            return Err(bad(format!("a component with a track twice: {:?}", c.tracks)));
+            return Err(bad(format!(
+                "a component with a track twice: {:?}",
+                c.tracks
+            )));
         }
         let total: f64 = c.table.iter().sum();
         if c.table.iter().any(|g| !(g.is_finite() && *g >= 0.0)) || total <= 0.0 {

@@ -42,12 +42,19 @@ fn workload(n: usize, events: usize, seed: u64) -> (Vec<u32>, Vec<Event>) {
 /// coordinator's coupling of their parts equals the centralized belief
 /// with the local rule after every event, to 1e-9; a snapshot of a share
 /// reads back to the same parts.
-fn shares_equal_the_whole(field: Field, options: FactoredOptions, events: &[Event], leaders: usize) {
+fn shares_equal_the_whole(
+    field: Field,
+    options: FactoredOptions,
+    events: &[Event],
+    leaders: usize,
+) {
     let mut whole = FactoredBelief::with_options(field.clone(), options.clone()).unwrap();
     let mut shares: Vec<FactoredShare> = (0..leaders)
         .map(|l| {
-            FactoredShare::start(field.clone(), options.clone(), |t| t as usize % leaders == l)
-                .unwrap()
+            FactoredShare::start(field.clone(), options.clone(), |t| {
+                t as usize % leaders == l
+            })
+            .unwrap()
         })
         .collect();
     let holder = |shares: &[FactoredShare], t: u32| shares.iter().position(|s| s.holds(t)).unwrap();
@@ -172,7 +179,17 @@ fn a_share_refuses_what_does_not_fit_by_name() {
         let e = share.put(vec![c]).unwrap_err().to_string();
         assert!(e.contains(says), "{e}");
     }
-    let e = share.mix(Mix { a: 0, b: 2, swap: 0.5 }, 1).unwrap_err().to_string();
+    let e = share
+        .mix(
+            Mix {
+                a: 0,
+                b: 2,
+                swap: 0.5,
+            },
+            1,
+        )
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("does not hold both"), "{e}");
     let parts = share.parts();
     let e = coupled_marginals(&field, &parts).unwrap_err().to_string();

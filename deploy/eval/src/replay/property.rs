@@ -228,7 +228,9 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
                 CouplingChoice::Coupled => Coupling::Coupled,
                 CouplingChoice::Local => Coupling::Local,
             },
-            max_component: args.max_component.unwrap_or(FactoredOptions::default().max_component),
+            max_component: args
+                .max_component
+                .unwrap_or(FactoredOptions::default().max_component),
             split: match args.split {
                 SplitChoice::Original => SplitRule::Original,
                 SplitChoice::Recent => SplitRule::Recent,
