@@ -56,6 +56,8 @@ pub enum BeliefError {
         method: &'static str,
         what: &'static str,
     },
+    #[error("a factored component held elsewhere does not fit: {detail}")]
+    BadComponent { detail: String },
     #[error("numerical failure in {step}: {detail}")]
     Numerical { step: &'static str, detail: String },
     #[error("{method} was stopped before it finished")]

@@ -82,6 +82,7 @@ mod tests {
     #[test]
     fn field_from_begin() {
         let begin = Begin {
+            factored: None,
             tracks: 3,
             red: Some(1),
             initial_red: Some(vec![2]),

@@ -6,7 +6,8 @@
 //! (`tests/src/sim`) feeds these the replies of simulated processes.
 
 use idmesh_belief::predict_red;
-use idmesh_placement::combine;
+use idmesh_belief::BeliefError;
+use idmesh_placement::{combine, combine_factored};
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
@@ -343,8 +344,11 @@ fn names(error: &str, leader: &str) -> bool {
 
 /// The property marginals the leaders' shares at one cut add up to.
 pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherError> {
-    let sums = combine(&collected.parts);
     let cut = &collected.cut;
+    if collected.parts.iter().any(|p| p.components.is_some()) {
+        return factored_marginals_of(collected);
+    }
+    let sums = combine(&collected.parts);
     let p_red = sums
         .marginals(cut.tracks as usize)
         .map_err(|_| GatherError::Degenerate)?;
@@ -357,6 +361,35 @@ pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherErro
         predicted_red,
         leaders: collected.parts.len() as u32,
         coefficients: sums.coefficients,
+        finished: cut.finished,
+    })
+}
+
+/// The marginals of a factored belief from every leader's components at
+/// one cut: the count coupling, evaluated here on demand (nothing global
+/// is computed between queries). Components that do not cover the field
+/// exactly once (a leader of another stream, a bug) are refused by name.
+fn factored_marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherError> {
+    let cut = &collected.cut;
+    if let Some(p) = collected.parts.iter().find(|p| p.components.is_none()) {
+        return Err(GatherError::Refused(format!(
+            "leader {} answered with Radon sums on a factored stream",
+            p.leader
+        )));
+    }
+    let p_red = combine_factored(cut.tracks, cut.red, &collected.parts).map_err(|e| match e {
+        BeliefError::Degenerate { .. } => GatherError::Degenerate,
+        e => GatherError::Refused(format!("the leaders' components: {e}")),
+    })?;
+    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
+    Ok(MarginalsAnswer {
+        watermark: collected.watermark(),
+        tracks: cut.tracks,
+        red: cut.red,
+        p_red,
+        predicted_red,
+        leaders: collected.parts.len() as u32,
+        coefficients: collected.parts.iter().map(|p| p.coefficients).sum(),
         finished: cut.finished,
     })
 }

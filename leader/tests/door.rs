@@ -14,6 +14,7 @@ use idmesh_protocol::wire::{encode, VERSION};
 
 fn begin() -> Item {
     Item::Begin(Begin {
+        factored: None,
         tracks: 4,
         red: Some(2),
         initial_red: Some(vec![0, 1]),
@@ -92,6 +93,7 @@ fn bad_inputs_are_rejected_counted_and_change_nothing() {
     wrong_version.version = VERSION + 1;
     let full = encode(&good[1]);
     let transfer = |from, red: Vec<u32>, ln_mass| Transfer {
+        components: Vec::new(),
         version: VERSION,
         from,
         seq: 2,
@@ -185,6 +187,7 @@ fn inputs_held_from_before_the_begin_are_checked_once_it_comes() {
     let mut leader = Leader::new("a");
     let outside = batch(2, vec![(4, mix(0, 9, 0.5))], 4);
     let stray = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 6,

@@ -40,6 +40,10 @@ pub struct Settings {
     /// How long the coordinator may compute one identity answer
     /// (`marginals_timeout_ms`; None = the default).
     pub marginals_timeout_ms: Option<u64>,
+    /// Topology lines of the belief the leaders hold, e.g.
+    /// `belief = "factored"\nmax_component = 3` (None: the topology's
+    /// default belief).
+    pub belief: Option<String>,
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -262,6 +266,9 @@ impl Deployment {
         }
         if let Some(ms) = settings.marginals_timeout_ms {
             toml.insert_str(0, &format!("marginals_timeout_ms = {ms}\n"));
+        }
+        if let Some(belief) = &settings.belief {
+            toml.insert_str(0, &format!("{belief}\n"));
         }
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));

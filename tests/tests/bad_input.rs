@@ -116,6 +116,7 @@ fn garbage() -> (Messages, Messages) {
     ];
     let transfer = |red: Vec<u32>, ln_mass: f64, version| {
         encode(&Transfer {
+            components: Vec::new(),
             version,
             from: 1,
             seq: 950,

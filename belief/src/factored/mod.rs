@@ -48,6 +48,7 @@
 //! belief of each connected component of the mixing graph.
 
 mod counts;
+mod share;
 mod split;
 mod table;
 mod tree;
@@ -56,6 +57,7 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use counts::CountPrior;
+pub use share::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
 use split::Weighted;
 use std::sync::{Mutex, MutexGuard};
 use table::Component;
@@ -70,7 +72,7 @@ pub const MAX_COMPONENT_LIMIT: usize = 20;
 pub const MAX_COMPONENT_MERGED: usize = 12;
 
 /// How a merged component too large to keep is cut in two.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SplitRule {
     /// The tracks stay where they were before the mix (the plain
     /// Boyen–Koller projection onto the old clusters).
@@ -91,7 +93,7 @@ pub enum SplitRule {
 /// The moment matching keeps P(x_A) and P(x_B) of the merged component's
 /// part of the belief, P(x) ∝ g(x)·Q(|x|), where Q is the weight the rest of
 /// the belief gives to the merged red count.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Coupling {
     /// Q is the true weight from every other component and π: the split
     /// preserves the marginals of the whole belief (the M-projection of
@@ -112,9 +114,12 @@ pub enum Coupling {
     /// is what leaders can run when the factored belief is distributed.
     /// The same as [`Coupled`](Coupling::Coupled) whenever the merged count
     /// is fixed (a known start, until splits spread the counts): then the
-    /// true Q is one number on the one count. An observation that rules a value out
-    /// (likelihood 0) still reads Q, to refuse one the count makes
-    /// impossible.
+    /// true Q is one number on the one count. An observation reads only its
+    /// component too, hard ones (a likelihood 0) included: one the count
+    /// makes impossible (every red count it leaves is ruled out elsewhere)
+    /// is found at the next query, as a belief without mass, not refused
+    /// at once. This is what leaders run (`FactoredShare`), so the
+    /// centralized engine with this coupling computes what they compute.
     Local,
 }
 
@@ -124,7 +129,7 @@ pub enum Coupling {
 pub const EAGER_LIMIT: usize = 4096;
 
 /// Options of [`FactoredBelief`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FactoredOptions {
     /// The most tracks one component may hold: 1..=[`MAX_COMPONENT_LIMIT`]
     /// with [`SplitRule::Original`], 1..=[`MAX_COMPONENT_MERGED`] otherwise.
@@ -384,21 +389,9 @@ impl FactoredBelief {
             .ok_or(BeliefError::Degenerate { normalizer: 0.0 })
     }
 
-    /// The eager evaluation of the count coupling keeps a convolution per
-    /// component, O(n²) numbers: past [`EAGER_LIMIT`] tracks a belief the
-    /// count tree cannot evaluate safely is reported instead.
+    /// See the free [`check_eager`].
     fn check_eager(&self) -> Result<(), BeliefError> {
-        if self.field.tracks <= EAGER_LIMIT {
-            return Ok(());
-        }
-        Err(BeliefError::Numerical {
-            step: "factored count coupling",
-            detail: format!(
-                "the count tree's weights underflow even re-tilted, and the eager \
-                 evaluation would need O(n²) memory at n = {}",
-                self.field.tracks
-            ),
-        })
+        check_eager(self.field.tracks)
     }
 
     /// Re-aims the count tree's tilt at the current components (called when
@@ -407,15 +400,7 @@ impl FactoredBelief {
     /// `exact` also keeps every tail of its convolutions and stops using
     /// the FFT from now on (when re-aiming alone did not help).
     fn retilt(&self, tree: &mut CountTree, exact: bool) {
-        let counts = self.count_refs();
-        let t = tree::balancing_tilt(counts.iter().copied(), self.prior.target());
-        tracing::debug!(
-            from = tree.ln_tilt(),
-            to = t,
-            exact,
-            "factored: re-tilting the count tree"
-        );
-        tree.retilt(t, exact);
+        retilt(tree, &self.count_refs(), &self.prior, exact);
     }
 
     /// ln Z, Z = Σ_x f(x) of the unnormalized belief: the prior mass times
@@ -817,10 +802,9 @@ impl PropertyFilter for FactoredBelief {
         let comp = self.comp(c);
         let table = comp.observed(bit, observe.red, observe.blue);
         let new_counts = table::counts_of(&table, comp.len());
-        // A soft sighting under the local coupling needs only its
-        // component; a hard one (a likelihood 0) may contradict the count.
-        let soft = observe.red > 0.0 && observe.blue > 0.0;
-        let r = if soft && self.options.coupling == Coupling::Local {
+        // Under the local coupling a sighting needs only its component,
+        // so that a leader holding the component alone computes the same.
+        let r = if self.options.coupling == Coupling::Local {
             vec![1.0; new_counts.len()]
         } else {
             self.leave_one_out(c, new_counts.len())?
@@ -860,27 +844,14 @@ impl PropertyFilter for FactoredBelief {
     /// events since the last query made dirty), then each component's
     /// marginals under its weights.
     fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
-        let fast = {
+        let all = {
             let mut tree = self.lock_tree();
-            let mut all = tree.all_leave_one_out(&self.prior);
-            for exact in [false, true] {
-                if all.is_some() {
-                    break;
-                }
-                self.retilt(&mut tree, exact);
-                all = tree.all_leave_one_out(&self.prior);
-            }
-            all
-        };
-        let all: Vec<Option<Vec<f64>>> = match fast {
-            Some(mut by_slot) => (0..self.comps.len())
-                .filter(|&s| self.comps[s].is_some())
-                .map(|s| by_slot[s].take())
-                .collect(),
-            None => {
-                self.check_eager()?;
-                self.prior.all_leave_one_out(&self.count_refs())
-            }
+            coupling_weights(
+                &mut tree,
+                &self.prior,
+                &self.count_refs(),
+                self.field.tracks,
+            )?
         };
         let mut out = vec![0.0; self.field.tracks];
         for (c, r) in self.live().zip(all) {
@@ -909,6 +880,70 @@ impl PropertyFilter for FactoredBelief {
     fn coefficients(&self) -> usize {
         self.numbers
     }
+}
+
+/// Re-aims `tree`'s tilt at the components' count vectors `counts` (see
+/// [`FactoredBelief::retilt`]).
+fn retilt(tree: &mut CountTree, counts: &[&[f64]], prior: &CountPrior, exact: bool) {
+    let t = tree::balancing_tilt(counts.iter().copied(), prior.target());
+    tracing::debug!(
+        from = tree.ln_tilt(),
+        to = t,
+        exact,
+        "factored: re-tilting the count tree"
+    );
+    tree.retilt(t, exact);
+}
+
+/// R_{−C} for every live component, in the order of `counts` (the live
+/// leaves of `tree`, in slot order): one downward walk of the count tree,
+/// re-tilted if unsafe (first keeping the FFT, then without it), and the
+/// eager log-space evaluation if it still is. `None` for a component that
+/// holds a single count (its marginals are its table's own). One code for
+/// the belief's queries and for the coordinator's
+/// ([`coupled_marginals`](share::coupled_marginals)), so both compute alike.
+fn coupling_weights(
+    tree: &mut CountTree,
+    prior: &CountPrior,
+    counts: &[&[f64]],
+    tracks: usize,
+) -> Result<Vec<Option<Vec<f64>>>, BeliefError> {
+    let mut all = tree.all_leave_one_out(prior);
+    for exact in [false, true] {
+        if all.is_some() {
+            break;
+        }
+        retilt(tree, counts, prior, exact);
+        all = tree.all_leave_one_out(prior);
+    }
+    match all {
+        Some(by_slot) => Ok(by_slot
+            .into_iter()
+            .enumerate()
+            .filter(|(s, _)| !tree.counts(*s).is_empty())
+            .map(|(_, r)| r)
+            .collect()),
+        None => {
+            check_eager(tracks)?;
+            Ok(prior.all_leave_one_out(counts))
+        }
+    }
+}
+
+/// The eager evaluation keeps a convolution per component, O(n²) numbers:
+/// past [`EAGER_LIMIT`] tracks a belief the count tree cannot evaluate
+/// safely is reported instead.
+fn check_eager(tracks: usize) -> Result<(), BeliefError> {
+    if tracks <= EAGER_LIMIT {
+        return Ok(());
+    }
+    Err(BeliefError::Numerical {
+        step: "factored count coupling",
+        detail: format!(
+            "the count tree's weights underflow even re-tilted, and the eager \
+             evaluation would need O(n²) memory at n = {tracks}"
+        ),
+    })
 }
 
 /// P(bit i set) for every bit of a normalized table.

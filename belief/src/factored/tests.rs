@@ -457,7 +457,24 @@ proptest::proptest! {
             for (i, event) in events.iter().enumerate() {
                 let _ = f.apply(event);
                 if i % 7 == 0 || i + 1 == events.len() {
-                    close(&f.marginals().unwrap(), &eager_marginals(&f), 1e-9, "marginals");
+                    let lazy = match f.marginals() {
+                        Ok(m) => m,
+                        // The local rule takes a certain sighting the count
+                        // rules out (it reads only its component): the
+                        // belief has no mass left, by both evaluations.
+                        Err(BeliefError::Degenerate { .. }) if local => {
+                            let eager = f.prior.all_leave_one_out(&f.count_refs());
+                            let total: f64 = f
+                                .live()
+                                .zip(&eager)
+                                .map(|(c, r)| r.as_ref().map_or(0.0, |r| c.weighted_marginals(r).1))
+                                .fold(f64::INFINITY, f64::min);
+                            proptest::prop_assert!(total <= 0.0 || total.is_nan(), "{total}");
+                            break;
+                        }
+                        Err(e) => panic!("{e}"),
+                    };
+                    close(&lazy, &eager_marginals(&f), 1e-9, "marginals");
                     let eager = f.live().map(|c| c.log_scale).sum::<f64>()
                         + f.prior.ln_total(&f.count_refs());
                     proptest::prop_assert!((f.log_normalizer() - eager).abs() < 1e-9);

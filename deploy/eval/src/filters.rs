@@ -26,11 +26,20 @@ pub enum Recipe {
     },
     /// Sequential Monte Carlo with `count` particles.
     Particles { count: usize, seed: u64 },
-    /// The factored belief, its groups split as `coupling` says.
-    Factored(Coupling),
+    /// The factored belief with these options (the coupling of its
+    /// splits, the largest component, the split rule).
+    Factored(FactoredOptions),
 }
 
 impl Recipe {
+    /// The factored belief with the default options but for `coupling`.
+    pub fn factored(coupling: Coupling) -> Recipe {
+        Recipe::Factored(FactoredOptions {
+            coupling,
+            ..FactoredOptions::default()
+        })
+    }
+
     /// Builds the filter for `field`.
     pub fn build(&self, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
         Ok(match self {
@@ -57,12 +66,8 @@ impl Recipe {
             Recipe::Particles { count, seed } => {
                 Box::new(ParticleFilter::new(field, *count, *seed)?)
             }
-            Recipe::Factored(coupling) => {
-                let options = FactoredOptions {
-                    coupling: *coupling,
-                    ..FactoredOptions::default()
-                };
-                Box::new(FactoredBelief::with_options(field, options)?)
+            Recipe::Factored(options) => {
+                Box::new(FactoredBelief::with_options(field, options.clone())?)
             }
         })
     }

@@ -167,6 +167,7 @@ async fn sensor(
             distributed_rule: topology.distributed_rule,
             budget: topology.budget,
             omp: topology.sparsify == Sparsification::Overcomplete,
+            factored: topology.factored(),
         },
         &header,
     )?;

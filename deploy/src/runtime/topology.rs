@@ -4,6 +4,10 @@
 //!
 //! ```toml
 //! prefix = "idmesh/default"      # key-expression prefix
+//! belief = "radon"               # or "factored": components held by
+//!                                # leaders, coupled by the coordinator
+//! max_component = 7              # factored: most tracks of a component
+//! split = "original"             # factored: or "recent", "least-loss"
 //! distributed_rule = false       # Algorithm 5 instead of exact conditioning
 //! budget = 0                     # sets per leader (0 = no pruning)
 //! sparsify = "threshold"         # or "overcomplete": OMP, then threshold
@@ -56,6 +60,7 @@
 
 use super::security::SecuritySection;
 use anyhow::{bail, Context, Result};
+use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::wire::keys::DEFAULT_PREFIX;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -65,6 +70,16 @@ use std::path::{Path, PathBuf};
 pub struct Topology {
     #[serde(default = "default_prefix")]
     pub prefix: String,
+    /// Which belief the leaders hold (property streams; identity streams
+    /// always hold the information matrix).
+    #[serde(default)]
+    pub belief: BeliefKind,
+    /// Factored: the most tracks of one component.
+    #[serde(default = "default_max_component")]
+    pub max_component: u32,
+    /// Factored: how a component too large to keep is split.
+    #[serde(default)]
+    pub split: SplitSetting,
     #[serde(default)]
     pub distributed_rule: bool,
     #[serde(default)]
@@ -99,6 +114,48 @@ pub struct Topology {
     /// Where the file was read from (relative paths start there).
     #[serde(skip)]
     pub dir: PathBuf,
+}
+
+/// The belief the leaders hold.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum BeliefKind {
+    /// The Radon belief of Section 5.4, sets shared out among leaders.
+    #[default]
+    Radon,
+    /// The factored belief: each component held by one leader, the count
+    /// coupling evaluated by the coordinator at a query.
+    Factored,
+}
+
+/// The split rule of the factored belief (`belief::SplitRule`; always
+/// the local coupling, which leaders can run).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SplitSetting {
+    #[default]
+    Original,
+    Recent,
+    /// One round of pair exchanges.
+    LeastLoss,
+}
+
+fn default_max_component() -> u32 {
+    7
+}
+
+impl Topology {
+    /// The factored settings the stream's `Begin` carries (None: Radon).
+    pub fn factored(&self) -> Option<FactoredStart> {
+        (self.belief == BeliefKind::Factored).then_some(FactoredStart {
+            max_component: self.max_component,
+            split: match self.split {
+                SplitSetting::Original => WireSplit::Original,
+                SplitSetting::Recent => WireSplit::Recent,
+                SplitSetting::LeastLoss => WireSplit::LeastLoss { rounds: 1 },
+            },
+        })
+    }
 }
 
 /// How leaders bring their sets within the budget.
@@ -246,6 +303,28 @@ impl Topology {
         if let Some(rate) = self.sensor.rate {
             if !(rate.is_finite() && rate > 0.0) {
                 bail!("sensor rate {rate} must be a positive number of events per second");
+            }
+        }
+        if let Some(factored) = self.factored() {
+            factored
+                .check()
+                .map_err(|e| anyhow::anyhow!("belief = \"factored\": {e}"))?;
+            if self.max_component > 12 && self.split != SplitSetting::Original {
+                bail!(
+                    "belief = \"factored\": max_component = {} with split = {:?} \
+                     (at most 12 unless the split is \"original\")",
+                    self.max_component,
+                    self.split
+                );
+            }
+            if self.budget > 0
+                || self.distributed_rule
+                || self.sparsify != Sparsification::Threshold
+            {
+                bail!(
+                    "budget, distributed_rule and sparsify are settings of belief = \"radon\"; \
+                     the factored belief is bounded by max_component"
+                );
             }
         }
         Ok(())

@@ -15,9 +15,11 @@
 //! add up: rollup and conditioning act on the Radon masses atom by atom and
 //! linearly (Section 5.4 of the property-management paper).
 
+use idmesh_belief::factored::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
-use idmesh_belief::{field_of, BeliefError, Field, RedCount};
+use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireCounts, WireSplit};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
 
@@ -58,6 +60,14 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
         ..RadonOptions::default()
     };
     let mut share = RadonShare::start(field_of(begin), &options)?;
+    if begin.factored.is_some() {
+        // The leader holds components instead ([`start_factored`]); it
+        // starts following its own tracks, the tracks of its components.
+        share.extract(|_| true);
+        let mut interest = Interest::new(me, tracks, false);
+        interest.note(&Item::Begin(begin.clone()));
+        return Ok((share, interest));
+    }
     let owners = &begin.owners;
     share.extract(|atom| atom.tracks().min().map(|t| owners[t as usize]).unwrap_or(0) != me);
     let holds_empty = share.atoms().any(|(a, _)| a.tracks().next().is_none());
@@ -70,6 +80,96 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
     }
     interest.note(&Item::Begin(begin.clone()));
     Ok((share, interest))
+}
+
+/// The factored belief's options a `Begin`'s settings name: the local
+/// coupling, which needs nothing beyond the components an event touches
+/// (what leaders can run, and what `idmesh replay --method factored
+/// --coupling local` runs with the same settings).
+pub fn factored_options(start: &FactoredStart) -> FactoredOptions {
+    FactoredOptions {
+        max_component: start.max_component as usize,
+        split: match start.split {
+            WireSplit::Original => SplitRule::Original,
+            WireSplit::Recent => SplitRule::Recent,
+            WireSplit::LeastLoss { rounds } => SplitRule::LeastLoss {
+                rounds: rounds as usize,
+            },
+        },
+        coupling: Coupling::Local,
+        ..FactoredOptions::default()
+    }
+}
+
+/// Leader `me`'s components at the start of a factored stream (None on a
+/// Radon stream): every track alone, each held by the leader surveilling
+/// it.
+pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, PlacementError> {
+    let Some(settings) = &begin.factored else {
+        return Ok(None);
+    };
+    let owners = &begin.owners;
+    let share = FactoredShare::start(field_of(begin), factored_options(settings), |t| {
+        owners.get(t as usize) == Some(&me)
+    })?;
+    Ok(Some(share))
+}
+
+/// A component as it goes on the wire.
+pub fn to_wire_component(c: HeldComponent) -> WireComponent {
+    WireComponent {
+        tracks: c.tracks,
+        table: c.table,
+        log_scale: c.log_scale,
+        last_mix: c.last_mix,
+    }
+}
+
+/// A component from the wire (checked again by the share that takes it).
+pub fn from_wire_component(c: WireComponent) -> HeldComponent {
+    HeldComponent {
+        tracks: c.tracks,
+        table: c.table,
+        log_scale: c.log_scale,
+        last_mix: c.last_mix,
+    }
+}
+
+/// A component's count vectors as they go to the coordinator.
+pub fn wire_counts(p: CountPart) -> WireCounts {
+    WireCounts {
+        tracks: p.tracks,
+        counts: p.counts,
+        red: p.red,
+    }
+}
+
+/// The factored marginals from every leader's components at one cut:
+/// the count coupling over all of them and the prior of a field of
+/// `tracks` tracks with `red` red (None: the uniform prior over counts).
+pub fn combine_factored(
+    tracks: u32,
+    red: Option<u32>,
+    parts: &[Partial],
+) -> Result<Vec<f64>, BeliefError> {
+    let field = Field {
+        tracks: tracks as usize,
+        red: match red {
+            Some(k) => RedCount::Known(k as usize),
+            None => RedCount::unknown_uniform(tracks as usize),
+        },
+        initial_red: None,
+    };
+    let counts: Vec<CountPart> = parts
+        .iter()
+        .flat_map(|p| p.components.iter().flatten())
+        .map(|c| CountPart {
+            tracks: c.tracks.clone(),
+            counts: c.counts.clone(),
+            red: c.red.clone(),
+        })
+        .collect();
+    coupled_marginals(&field, &counts)
 }
 
 /// The size of a set that fixes every track of `field`: k red tracks (the
@@ -115,6 +215,7 @@ mod tests {
 
     fn begin(leaders: usize, owners: Vec<u16>, red: Option<u32>) -> Begin {
         Begin {
+            factored: None,
             tracks: owners.len() as u32,
             red,
             initial_red: None,

@@ -193,6 +193,9 @@ pub struct Node {
     asking: BTreeMap<String, Now>,
     /// When the leader started waiting for the transfer it waits for.
     waiting_since: Option<((u64, u16), Now)>,
+    /// When the leader started waiting for the components of the mix at
+    /// an item (a factored stream).
+    components_since: Option<(u64, Now)>,
     published: Option<Durable>,
     /// Inputs journaled since the last snapshot.
     journaled: usize,
@@ -211,6 +214,7 @@ impl Node {
             following: false,
             asking: BTreeMap::new(),
             waiting_since: None,
+            components_since: None,
             published: None,
             journaled: 0,
         }
@@ -470,6 +474,23 @@ impl Node {
                 }
             }
         }
+        // Components waited for too long (a factored stream): their
+        // holders are not known here, so every peer is asked.
+        if let Some((_, since)) = self.components_since {
+            if now.saturating_sub(since) > self.timers.late {
+                let me = self.leader.name().to_owned();
+                let peers: Vec<String> = self
+                    .leader
+                    .leaders()
+                    .iter()
+                    .filter(|l| **l != me)
+                    .cloned()
+                    .collect();
+                for peer in peers {
+                    self.ask_transfers(now, &peer, out);
+                }
+            }
+        }
         // A transfer request that got no answer (the driver always answers,
         // if only with a timeout, but a lost one must not block forever).
         let stale = self.timers.query_timeout + self.timers.late;
@@ -487,6 +508,10 @@ impl Node {
         let waiting = self.leader.waiting_for_transfer();
         if waiting != self.waiting_since.map(|w| w.0) {
             self.waiting_since = waiting.map(|w| (w, now));
+        }
+        let components = self.leader.waiting_for_components();
+        if components != self.components_since.map(|w| w.0) {
+            self.components_since = components.map(|w| (w, now));
         }
         if self.recovery.as_ref().is_some_and(|r| {
             r.batches && r.peers.is_empty() && self.leader.missing_batches().is_none()

@@ -116,6 +116,9 @@ impl Node {
             let peer = self.leader.peer(from).unwrap_or("an unknown leader");
             return format!("it waits for sets from {peer} at item {seq}");
         }
+        if let Some(seq) = self.leader.waiting_for_components() {
+            return format!("it waits for the components of the mix at item {seq}");
+        }
         if let Some(next) = self.leader.missing_batches() {
             return format!("it waits for batch {next} from the sensor");
         }

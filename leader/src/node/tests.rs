@@ -12,6 +12,7 @@ fn timers() -> Timers {
 
 fn begin(leaders: &[&str]) -> Item {
     Item::Begin(Begin {
+        factored: None,
         tracks: 4,
         red: Some(2),
         initial_red: Some(vec![0, 1]),
@@ -263,6 +264,7 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
         "one request out"
     );
     let lost = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 2,
@@ -291,6 +293,7 @@ fn a_failed_follow_request_is_made_again() {
         ln_mass: -1.0,
     }];
     let transfer = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 2,
@@ -460,6 +463,7 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     node.step(30 * MS, Input::Resent(Ok(Vec::new())));
     assert!(node.recovering_since().is_some());
     let transfer = Transfer {
+        components: Vec::new(),
         version: VERSION,
         from: 1,
         seq: 2,

@@ -31,6 +31,9 @@ impl Leader {
                 self.stats.mixes += 1;
                 let mix = Mix { a, b, swap };
                 let started = self.started()?;
+                if started.factored.is_some() {
+                    return self.factored_mix(seq, mix, owner_a, actions);
+                }
                 started.share.mix(mix)?;
                 // My mixed track and the other leader, for a mix across two.
                 let across = match (owner_a == me, owner_b == me) {
@@ -70,6 +73,14 @@ impl Leader {
                 self.stats.observations += 1;
                 let observe = Observe { track, red, blue };
                 let started = self.started()?;
+                if let Some(held) = &mut started.factored {
+                    // Only the holder of the track's component applies it
+                    // (a leader that followed the track before hears it too).
+                    if held.holds(track) {
+                        held.observe(observe)?;
+                    }
+                    return Ok(());
+                }
                 match &growth {
                     Growth::All => started.share.observe(observe, BeliefGrowth::All)?,
                     Growth::Meeting(p) => {
@@ -136,6 +147,7 @@ impl Leader {
             .position(|l| *l == self.name)
             .ok_or_else(|| LeaderError::NotListed(self.name.clone()))? as u16;
         let (share, interest) = start(&begin, me)?;
+        let factored = start_factored(&begin, me)?;
         let own: Vec<bool> = begin.owners.iter().map(|&o| o == me).collect();
         let rows = if begin.identities {
             let held = (0..begin.tracks).filter(|&t| own[t as usize]);
@@ -153,7 +165,7 @@ impl Leader {
         let bounds = Bounds::of(&begin);
         let before = self.transfers.len();
         self.transfers
-            .retain(|&(_, from), (sets, rows)| bounds.check_parts(from, sets, rows, me).is_ok());
+            .retain(|_, transfer| bounds.check_transfer(transfer, me).is_ok());
         self.stats.rejected += (before - self.transfers.len()) as u64;
         self.started = Some(Started {
             me,
@@ -163,13 +175,60 @@ impl Leader {
             interest,
             rows,
             row_mix: None,
+            factored,
         });
+        Ok(())
+    }
+
+    /// A mix on a factored stream. A mix of two components needs both in
+    /// one place: every holder of the component of either track sends it
+    /// to the leader surveilling track `a` (`owner_a`), which waits until
+    /// it holds both and then mixes them (merge, or merge and split). The
+    /// rule needs no knowledge of who holds what: the holders know what
+    /// they hold, and the receiver knows it surveils `a`. A certain swap
+    /// (a relabelling) and a non-event move nothing.
+    fn factored_mix(
+        &mut self,
+        seq: u64,
+        mix: Mix,
+        owner_a: u16,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let held = self
+            .started()?
+            .factored
+            .as_mut()
+            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let (has_a, has_b) = (held.holds(mix.a), held.holds(mix.b));
+        if mix.swap == 0.0 {
+            return Ok(());
+        }
+        if mix.swap == 1.0 {
+            if has_a || has_b {
+                held.mix(mix, seq)?;
+            }
+            return Ok(());
+        }
+        if me == owner_a {
+            if has_a && has_b {
+                held.mix(mix, seq)?;
+            } else {
+                self.waiting = Some(Waiting::Components { seq, mix });
+            }
+            return Ok(());
+        }
+        if has_a || has_b {
+            let components = held.take(|tracks| tracks.contains(&mix.a) || tracks.contains(&mix.b));
+            self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
+        }
         Ok(())
     }
 
     /// Item `seq` is fully applied.
     pub(super) fn finish(&mut self, seq: u64) {
         self.position = seq;
+        self.taken.clear();
         if let Some(started) = &mut self.started {
             let budget = started.begin.budget as usize;
             if budget > 0 {

@@ -4,6 +4,7 @@
 
 use super::transfers::to_wire;
 use super::*;
+use idmesh_placement::wire_counts;
 
 /// How many recent cuts a leader keeps answers for.
 const CUTS_KEPT: usize = 256;
@@ -59,7 +60,16 @@ impl Leader {
                 .collect(),
             _ => Vec::new(),
         };
+        let components = started
+            .factored
+            .as_ref()
+            .map(|held| held.parts().into_iter().map(wire_counts).collect());
+        let coefficients = match &started.factored {
+            Some(held) => held.coefficients() as u64,
+            None => sums.coefficients,
+        };
         Some(Partial {
+            components,
             version: VERSION,
             leader: self.name.clone(),
             cut,
@@ -70,7 +80,7 @@ impl Leader {
             total: sums.total,
             outside: sums.outside,
             inside: sums.inside,
-            coefficients: sums.coefficients,
+            coefficients,
             rows,
         })
     }

@@ -79,18 +79,18 @@ impl Leader {
         transfer: Transfer,
         bytes: usize,
     ) -> Result<Vec<Action>, LeaderError> {
+        let key = (transfer.seq, transfer.from);
         if transfer.seq <= self.position
-            || self.transfers.contains_key(&(transfer.seq, transfer.from))
+            || self.transfers.contains_key(&key)
+            || self.taken.contains(&key)
         {
             self.stats.duplicates += 1;
             return Ok(Vec::new());
         }
         self.stats.transfers_received += 1;
         self.stats.bytes_received += bytes as u64;
-        self.transfers.insert(
-            (transfer.seq, transfer.from),
-            (transfer.sets, transfer.rows),
-        );
+        self.transfers
+            .insert((transfer.seq, transfer.from), transfer);
         self.advance()
     }
 
@@ -117,10 +117,15 @@ impl Leader {
             match self.waiting {
                 Some(Waiting::Transfer { seq, from }) => {
                     match self.transfers.remove(&(seq, from)) {
-                        Some((sets, rows)) => {
+                        Some(transfer) => {
+                            self.taken.push((seq, from));
                             self.waiting = None;
-                            self.receive_rows(rows)?;
-                            self.receive_sets(seq, sets, &mut actions)?;
+                            self.receive_rows(transfer.rows)?;
+                            self.receive_sets(seq, transfer.sets, &mut actions)?;
+                            let new_tracks = self.receive_components(transfer.components)?;
+                            if !new_tracks.is_empty() {
+                                self.follow(seq, new_tracks, &mut actions)?;
+                            }
                             if self.waiting.is_some() {
                                 return Ok(actions);
                             }
@@ -128,6 +133,38 @@ impl Leader {
                         }
                         None => return Ok(actions),
                     }
+                }
+                Some(Waiting::Components { seq, mix }) => {
+                    // Whoever held them sent them at this item.
+                    let mut here: Vec<(u64, u16)> = self
+                        .transfers
+                        .keys()
+                        .filter(|key| key.0 == seq)
+                        .copied()
+                        .collect();
+                    here.sort_unstable();
+                    let mut new_tracks = Vec::new();
+                    for key in here {
+                        if let Some(transfer) = self.transfers.remove(&key) {
+                            self.taken.push(key);
+                            new_tracks.extend(self.receive_components(transfer.components)?);
+                        }
+                    }
+                    let held = self
+                        .started()?
+                        .factored
+                        .as_mut()
+                        .ok_or(LeaderError::Unexpected("a factored wait on a Radon stream"))?;
+                    if !(held.holds(mix.a) && held.holds(mix.b)) {
+                        return Ok(actions);
+                    }
+                    held.mix(mix, seq)?;
+                    self.waiting = None;
+                    if !new_tracks.is_empty() {
+                        self.follow(seq, new_tracks, &mut actions)?;
+                        return Ok(actions);
+                    }
+                    self.finish(seq);
                 }
                 Some(Waiting::Follow { .. }) => return Ok(actions),
                 None => {}
@@ -157,6 +194,15 @@ impl Leader {
     pub fn waiting_for_transfer(&self) -> Option<(u64, u16)> {
         match self.waiting {
             Some(Waiting::Transfer { seq, from }) => Some((seq, from)),
+            _ => None,
+        }
+    }
+
+    /// The item whose components this leader waits for, from whichever
+    /// peers hold them (a factored stream), if it is stopped for them.
+    pub fn waiting_for_components(&self) -> Option<u64> {
+        match self.waiting {
+            Some(Waiting::Components { seq, .. }) => Some(seq),
             _ => None,
         }
     }

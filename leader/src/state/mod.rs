@@ -29,11 +29,12 @@
 //! pair; a handover moves the track's row with its sets.
 
 use crate::error::LeaderError;
+use idmesh_belief::factored::FactoredShare;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::{Identify, InformationRows};
 use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe, TrackSet};
-use idmesh_placement::start;
+use idmesh_placement::{start, start_factored};
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
@@ -65,10 +66,14 @@ pub enum Action {
 }
 
 /// Where the leader is stopped, if anywhere.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 enum Waiting {
     /// For the sets of leader `from` at item `seq`.
     Transfer { seq: u64, from: u16 },
+    /// For the components of both tracks of mix `mix`, item `seq`, which
+    /// their holders send this leader, the one surveilling `mix.a` (a
+    /// factored stream: whoever holds them, see [`apply`]).
+    Components { seq: u64, mix: Mix },
     /// For the sensor's answer to a follow request made at `seq`.
     Follow { seq: u64 },
 }
@@ -86,6 +91,9 @@ struct Started {
     rows: Option<InformationRows>,
     /// A cross-leader mix whose fit waits for the partner's row.
     row_mix: Option<Mix>,
+    /// The components of the factored belief held here, on a factored
+    /// stream (`share` is then empty).
+    factored: Option<FactoredShare>,
 }
 
 /// Serialized whole as a snapshot ([`Leader::snapshot`]): the state a
@@ -110,8 +118,11 @@ pub struct Leader {
     /// The follow request waiting for its answer (asked again after a
     /// restart).
     asked: Option<Follow>,
-    /// Sets and rows that arrived before the leader reached their item.
-    transfers: HashMap<(u64, u16), (Vec<WireSet>, Vec<WireRow>)>,
+    /// Transfers that arrived before the leader reached their item.
+    transfers: HashMap<(u64, u16), Transfer>,
+    /// Transfers of the item being waited for already taken (a factored
+    /// stream gathers several at one item): a second copy is a duplicate.
+    taken: Vec<(u64, u16)>,
     waiting: Option<Waiting>,
     cuts: VecDeque<Partial>,
     /// The watermark and end-of-stream flag of the last batch.
@@ -142,6 +153,7 @@ impl Leader {
             sent: Vec::new(),
             asked: None,
             transfers: HashMap::new(),
+            taken: Vec::new(),
             waiting: None,
             cuts: VecDeque::new(),
             events: 0,
@@ -177,6 +189,11 @@ impl Leader {
     /// The share this leader holds (for tests and diagnostics).
     pub fn share(&self) -> Option<&RadonShare> {
         self.started.as_ref().map(|s| &s.share)
+    }
+
+    /// The components this leader holds, on a factored stream.
+    pub fn factored(&self) -> Option<&FactoredShare> {
+        self.started.as_ref().and_then(|s| s.factored.as_ref())
     }
 
     /// The leaders of the stream, once it began.

@@ -25,7 +25,10 @@ impl Leader {
         stats.position = self.position;
         stats.transfers_kept = self.sent.len() as u64;
         if let Some(s) = &self.started {
-            stats.coefficients = s.share.len() as u64;
+            stats.coefficients = match &s.factored {
+                Some(held) => held.coefficients() as u64,
+                None => s.share.len() as u64,
+            };
             stats.omp_runs = s.share.omp_runs();
             stats.tracks_owned = s.own.iter().filter(|&&o| o).count() as u64;
             stats.tracks_followed = s.interest.len() as u64;

@@ -5,6 +5,7 @@ use super::*;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
     Item::Begin(Begin {
+        factored: None,
         tracks: owners.len() as u32,
         red: Some(2),
         initial_red: Some(vec![0, 1]),
@@ -66,6 +67,7 @@ fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody(
     leader
         .transfer(
             Transfer {
+                components: Vec::new(),
                 version: VERSION,
                 from: 1,
                 seq: 2,
@@ -222,6 +224,7 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
     use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
     let start = vec![2, 0, 3, 1];
     let begin = Item::Begin(Begin {
+        factored: None,
         tracks: 4,
         red: None,
         initial_red: None,

@@ -3,6 +3,9 @@
 //! makes the leader follow), and the transfers kept for a restarted peer.
 
 use super::*;
+use idmesh_belief::factored::HeldComponent;
+use idmesh_placement::{from_wire_component, to_wire_component};
+use idmesh_protocol::wire::factored::WireComponent;
 
 impl Leader {
     /// The transfers sent to leader `to` for items after `after`.
@@ -33,8 +36,9 @@ impl Leader {
         before - self.sent.len()
     }
 
-    /// Takes out the sets with none of this leader's tracks (but not φ_∅)
-    /// and sends them, with `rows`, to `to` as the transfer of item `seq`.
+    /// Takes out the sets with none of this leader's tracks (but not φ_∅),
+    /// or on a factored stream the components with none of them, and sends
+    /// them, with `rows`, to `to` as the transfer of item `seq`.
     pub(super) fn send_homeless(
         &mut self,
         seq: u64,
@@ -42,9 +46,12 @@ impl Leader {
         rows: Vec<WireRow>,
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
-        let me = self.me()?;
         let started = self.started()?;
         let own = &started.own;
+        if let Some(held) = &mut started.factored {
+            let components = held.take(|tracks| !tracks.iter().any(|&t| own[t as usize]));
+            return self.send(seq, to, Vec::new(), rows, components, actions);
+        }
         let sets: Vec<WireSet> = started
             .share
             .extract(|atom| {
@@ -58,14 +65,29 @@ impl Leader {
                 ln_mass,
             })
             .collect();
+        self.send(seq, to, sets, rows, Vec::new(), actions)
+    }
+
+    /// Sends `to` the transfer of item `seq` (kept for a restarted peer).
+    pub(super) fn send(
+        &mut self,
+        seq: u64,
+        to: u16,
+        sets: Vec<WireSet>,
+        rows: Vec<WireRow>,
+        components: Vec<HeldComponent>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
         self.stats.transfers_sent += 1;
-        self.stats.sets_sent += sets.len() as u64;
+        self.stats.sets_sent += (sets.len() + components.len()) as u64;
         let transfer = Transfer {
             version: VERSION,
             from: me,
             seq,
             sets,
             rows,
+            components: components.into_iter().map(to_wire_component).collect(),
         };
         self.sent.push((to, transfer.clone()));
         actions.push(Action::Send { to, transfer });
@@ -122,7 +144,6 @@ impl Leader {
         sets: Vec<WireSet>,
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
-        let me = self.me()?;
         let started = self.started()?;
         let tracks = started.begin.tracks;
         let mut atoms = Vec::with_capacity(sets.len());
@@ -156,18 +177,60 @@ impl Leader {
         }
         started.share.absorb(atoms);
         if !new_tracks.is_empty() {
-            new_tracks.sort_unstable();
-            self.stats.follows += 1;
-            let follow = Follow {
-                version: VERSION,
-                leader: me,
-                after: seq,
-                tracks: new_tracks,
-            };
-            self.asked = Some(follow.clone());
-            actions.push(Action::Follow(follow));
-            self.waiting = Some(Waiting::Follow { seq });
+            self.follow(seq, new_tracks, actions)?;
         }
+        Ok(())
+    }
+}
+
+impl Leader {
+    /// Components received at item `seq` (a factored stream): held from
+    /// now on; returns the tracks they bring beyond the interest, which the
+    /// leader must follow from `seq` on.
+    pub(super) fn receive_components(
+        &mut self,
+        components: Vec<WireComponent>,
+    ) -> Result<Vec<u32>, LeaderError> {
+        if components.is_empty() {
+            return Ok(Vec::new());
+        }
+        let started = self.started()?;
+        let held = started.factored.as_mut().ok_or_else(|| {
+            LeaderError::BadTransfer("components of a factored belief on a Radon stream".into())
+        })?;
+        let mut new_tracks = Vec::new();
+        for c in &components {
+            for &t in &c.tracks {
+                if started.interest.add(t) {
+                    new_tracks.push(t);
+                }
+            }
+        }
+        held.put(components.into_iter().map(from_wire_component).collect())
+            .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+        Ok(new_tracks)
+    }
+
+    /// Asks the sensor to follow `tracks` from item `seq` on, and waits
+    /// for its answer.
+    pub(super) fn follow(
+        &mut self,
+        seq: u64,
+        mut tracks: Vec<u32>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        tracks.sort_unstable();
+        self.stats.follows += 1;
+        let follow = Follow {
+            version: VERSION,
+            leader: me,
+            after: seq,
+            tracks,
+        };
+        self.asked = Some(follow.clone());
+        actions.push(Action::Follow(follow));
+        self.waiting = Some(Waiting::Follow { seq });
         Ok(())
     }
 }

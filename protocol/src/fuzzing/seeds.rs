@@ -83,6 +83,7 @@ const IDENTITY_TRACE: &str = r#"{"kind":"header","format":"idmesh-trace","versio
 
 fn begin(identities: bool) -> Begin {
     Begin {
+        factored: None,
         tracks: 8,
         red: Some(3),
         initial_red: Some(vec![0, 3, 6]),
@@ -172,6 +173,7 @@ fn batches() -> Vec<Batch> {
 fn transfers() -> Vec<Transfer> {
     vec![
         Transfer {
+            components: Vec::new(),
             version: VERSION,
             from: 1,
             seq: 9,
@@ -193,6 +195,7 @@ fn transfers() -> Vec<Transfer> {
             }],
         },
         Transfer {
+            components: Vec::new(),
             version: VERSION,
             from: 2,
             seq: 11,
@@ -204,6 +207,7 @@ fn transfers() -> Vec<Transfer> {
 
 fn partials() -> Vec<Partial> {
     vec![Partial {
+        components: None,
         version: VERSION,
         leader: "leader-1".into(),
         cut: 14,

@@ -227,6 +227,7 @@ mod tests {
     #[test]
     fn transfers_come_from_a_peer_with_sets_of_the_field() {
         let transfer = |from, red: Vec<u32>, rows: Vec<WireRow>| Transfer {
+            components: Vec::new(),
             version: VERSION,
             from,
             seq: 3,

@@ -4,6 +4,7 @@
 //! applied everything the sensor sent and waits for nothing), and its
 //! counters (`P/leader/*/stats`).
 
+use super::factored::WireCounts;
 use super::leader_to_leader::WireRow;
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +27,9 @@ pub struct Partial {
     /// The leader's rows of the information matrix, when the query asked
     /// for them (identity queries); empty otherwise.
     pub rows: Vec<WireRow>,
+    /// On a factored stream, every component this leader holds (the sums
+    /// above are then 0); None on a Radon stream.
+    pub components: Option<Vec<WireCounts>>,
 }
 super::versioned!(Partial, "partial sums");
 

@@ -8,6 +8,7 @@
 //! row of its mixed track as it was before the mix (both then compute the
 //! same fit); at a handover, the row of the track that changes region.
 
+use super::factored::WireComponent;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -18,6 +19,9 @@ pub struct Transfer {
     pub seq: u64,
     pub sets: Vec<WireSet>,
     pub rows: Vec<WireRow>,
+    /// Components of the factored belief (a factored stream; sets are
+    /// then empty).
+    pub components: Vec<WireComponent>,
 }
 super::versioned!(Transfer, "transfer");
 

@@ -23,6 +23,7 @@
 pub mod bounds;
 pub mod coordinator_to_leader;
 pub mod coordinator_to_sensor;
+pub mod factored;
 pub mod interest;
 pub mod keys;
 pub mod leader_to_leader;

@@ -7,6 +7,7 @@
 //! meant for it with a smaller seq. `through` says how far the stream has
 //! got even when nothing in it was for this leader.
 
+use super::factored::FactoredStart;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -105,4 +106,7 @@ pub struct Begin {
     pub identities: bool,
     /// The known identity on every track at the start; None = uniform.
     pub initial_identity: Option<Vec<u32>>,
+    /// The leaders hold the factored belief with these settings (None:
+    /// the Radon belief).
+    pub factored: Option<FactoredStart>,
 }

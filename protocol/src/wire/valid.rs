@@ -231,6 +231,12 @@ impl Begin {
             })?;
             distinct_tracks("begin initial_identity", assignment, n)?;
         }
+        if let Some(factored) = &self.factored {
+            factored.check()?;
+            require(!self.identities, || {
+                "begin: a factored belief on an identity stream".into()
+            })?;
+        }
         Ok(())
     }
 }
@@ -269,6 +275,9 @@ impl Transfer {
         distinct("rows", &tracks)?;
         for row in &self.rows {
             row.check()?;
+        }
+        for (i, c) in self.components.iter().enumerate() {
+            c.check().map_err(|e| format!("component {i}: {e}"))?;
         }
         Ok(())
     }
@@ -400,6 +409,9 @@ impl Partial {
         for row in &self.rows {
             row.check()?;
         }
+        for (i, c) in self.components.iter().flatten().enumerate() {
+            c.check().map_err(|e| format!("component {i}: {e}"))?;
+        }
         Ok(())
     }
 }
@@ -424,6 +436,7 @@ mod tests {
 
     fn begin() -> Begin {
         Begin {
+            factored: None,
             tracks: 4,
             red: Some(2),
             initial_red: Some(vec![0, 1]),
@@ -638,6 +651,7 @@ mod tests {
     #[test]
     fn transfers_partials_and_cuts_are_checked() {
         let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer {
+            components: Vec::new(),
             version: VERSION,
             from: 0,
             seq: 3,
@@ -675,6 +689,7 @@ mod tests {
             assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
         }
         let partial = Partial {
+            components: None,
             version: VERSION,
             leader: "a".into(),
             cut: 1,

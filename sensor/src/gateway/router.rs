@@ -15,6 +15,7 @@ use idmesh_belief::radon::{MixingLog, RadonShare};
 use idmesh_placement::PlacementError;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
+use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::Follow;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
@@ -36,6 +37,8 @@ pub struct RouterConfig {
     pub budget: u32,
     /// OMP before thresholding (needs k known and a budget).
     pub omp: bool,
+    /// The leaders hold the factored belief (None: the Radon belief).
+    pub factored: Option<FactoredStart>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -94,6 +97,9 @@ impl Router {
         }
         let tracks = header.tracks;
         let begin = Begin {
+            // Identity streams hold the information matrix whatever the
+            // property belief is.
+            factored: config.factored.filter(|_| header.identities.is_none()),
             tracks: tracks as u32,
             red: header.red_count().map(|k| k as u32),
             initial_red: header.initial_red.clone(),
@@ -181,7 +187,11 @@ impl Router {
                     red: observe.red,
                     blue: observe.blue,
                 };
-                let (growth, global) = if self.config.distributed_rule {
+                let (growth, global) = if self.config.factored.is_some() {
+                    // An observation changes the observed track's
+                    // component alone, held by one leader that follows it.
+                    (Growth::Meeting(Vec::new()), false)
+                } else if self.config.distributed_rule {
                     (
                         Growth::Meeting(self.mixing_log.partners(observe.track).to_vec()),
                         RadonShare::observation_is_global(&likelihood, false),

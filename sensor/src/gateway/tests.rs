@@ -20,6 +20,7 @@ fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) 
     let mut header = Header::new(tracks);
     header.red = Some(red);
     let config = RouterConfig {
+        factored: None,
         sensor: "s".into(),
         leaders: (0..leaders)
             .map(|i| LeaderPlace {
@@ -261,6 +262,7 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
 fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
     let limit = idmesh_protocol::wire::valid::MAX_IDENTITY_TRACKS as usize;
     let config = |leaders: usize| RouterConfig {
+        factored: None,
         sensor: "s".into(),
         leaders: (0..leaders)
             .map(|i| LeaderPlace {
@@ -305,6 +307,7 @@ fn an_identity_read_goes_to_the_owner_of_its_track_alone() {
     let mut header = Header::new(4);
     header.identities = Some(4);
     let config = RouterConfig {
+        factored: None,
         sensor: "s".into(),
         leaders: ["a", "b"]
             .iter()

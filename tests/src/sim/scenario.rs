@@ -5,8 +5,10 @@
 //! after every prefix of the trace: the answer any cut must give.
 
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
-use idmesh_belief::{Field, PropertyFilter};
+use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
+use idmesh_placement::factored_options;
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
+use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_sensor::gateway::{LeaderPlace, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -23,6 +25,8 @@ pub struct Scenario {
     /// sets meeting the observed track's mixing log), or exact
     /// conditioning.
     pub distributed_rule: bool,
+    /// The leaders hold the factored belief (None: the Radon belief).
+    pub factored: Option<FactoredStart>,
 }
 
 impl Scenario {
@@ -82,7 +86,26 @@ impl Scenario {
             lines.push(line);
         }
         let distributed_rule = rng.gen_bool(0.5);
-        let centralized = centralized(&header, &lines, distributed_rule)?;
+        // With IDMESH_SIM_FACTORED=1 a third of the schedules run the
+        // factored belief (small components, so that merges, splits and
+        // moves all happen). Not in CI yet: 2 of 5,000 schedules (seeds
+        // 1676 and 3440) still disagree with the centralized engine or
+        // stall (issue 18, open).
+        let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "1") {
+            1.0 / 3.0
+        } else {
+            0.0
+        };
+        let factored = rng.gen_bool(factored_share).then(|| FactoredStart {
+            max_component: rng.gen_range(1..=3),
+            split: [
+                WireSplit::Original,
+                WireSplit::Recent,
+                WireSplit::LeastLoss { rounds: 1 },
+            ][rng.gen_range(0..3)],
+        });
+        let distributed_rule = distributed_rule && factored.is_none();
+        let centralized = centralized(&header, &lines, distributed_rule, factored)?;
         Ok(Scenario {
             header,
             leaders,
@@ -90,6 +113,7 @@ impl Scenario {
             centralized,
             red,
             distributed_rule,
+            factored,
         })
     }
 
@@ -97,6 +121,7 @@ impl Scenario {
     /// deployment must equal the centralized engine to 1e-9).
     pub fn router(&self) -> RouterConfig {
         RouterConfig {
+            factored: self.factored,
             sensor: "sensor-0".into(),
             leaders: self.leaders.clone(),
             distributed_rule: self.distributed_rule,
@@ -113,6 +138,7 @@ fn centralized(
     header: &Header,
     lines: &[Line],
     distributed_rule: bool,
+    factored: Option<FactoredStart>,
 ) -> Result<Vec<Vec<f64>>, String> {
     let field = Field::with_count(
         header.tracks,
@@ -123,7 +149,15 @@ fn centralized(
         distributed_rule,
         ..RadonOptions::default()
     };
-    let mut engine = RadonBelief::with_options(field, options).map_err(|e| e.to_string())?;
+    // The centralized engine with the leaders' options: the factored
+    // belief with the local rule, or the Radon belief.
+    let mut engine: Box<dyn PropertyFilter> = match &factored {
+        Some(start) => Box::new(
+            FactoredBelief::with_options(field, factored_options(start))
+                .map_err(|e| e.to_string())?,
+        ),
+        None => Box::new(RadonBelief::with_options(field, options).map_err(|e| e.to_string())?),
+    };
     let mut out = vec![engine.marginals().map_err(|e| e.to_string())?];
     for line in lines {
         match line {

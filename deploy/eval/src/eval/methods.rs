@@ -130,8 +130,8 @@ impl Method {
             Method::Overcomplete(b) => radon(Sparsify::overcomplete(b), false),
             Method::Distributed(b) => radon(Sparsify::overcomplete(b), true),
             Method::Particles(count) => Recipe::Particles { count, seed },
-            Method::Factored => Recipe::Factored(Coupling::Coupled),
-            Method::FactoredLocal => Recipe::Factored(Coupling::Local),
+            Method::Factored => Recipe::factored(Coupling::Coupled),
+            Method::FactoredLocal => Recipe::factored(Coupling::Local),
         }
     }
 

@@ -58,6 +58,21 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "C")]
     pub known_start_confidence: Option<f64>,
 
+    /// --method factored: how splits weigh the red count: `coupled` (the
+    /// whole belief's weight) or `local` (only the pair being split, and
+    /// every sighting only its component: what the distributed runtime's
+    /// leaders run).
+    #[arg(long, value_enum, default_value_t = CouplingChoice::Coupled)]
+    pub coupling: CouplingChoice,
+
+    /// --method factored: the most tracks of one component (default 7).
+    #[arg(long, value_name = "M")]
+    pub max_component: Option<usize>,
+
+    /// --method factored: how a component too large to keep is split.
+    #[arg(long, value_enum, default_value_t = SplitChoice::Original)]
+    pub split: SplitChoice,
+
     /// Run a setting replay refuses as exponential (--method property-bits
     /// without --budget on many identities) anyway.
     #[arg(long)]
@@ -73,6 +88,22 @@ impl ReplayArgs {
 
 /// The method `replay` runs on a property trace when none is named.
 pub const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
+
+/// The coupling of the factored belief's splits (`belief::Coupling`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CouplingChoice {
+    Coupled,
+    Local,
+}
+
+/// The factored belief's split rule (`belief::SplitRule`; least-loss
+/// makes one round of exchanges, as `belief = "factored"`'s does).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SplitChoice {
+    Original,
+    Recent,
+    LeastLoss,
+}
 
 /// The filters `replay` can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

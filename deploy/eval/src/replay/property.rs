@@ -10,7 +10,7 @@
 //! Every error — a bad line, an event the engine rejects — is reported as
 //! `FILE:LINE: reason` and ends the replay.
 
-use super::args::{Method, ReplayArgs};
+use super::args::{CouplingChoice, Method, ReplayArgs, SplitChoice};
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use crate::filters::Recipe;
@@ -18,7 +18,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::MAX_STATES;
 use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, log_loss, predict_red, BeliefError,
-    Coupling, Event, Field, PropertyFilter, Sparsify,
+    Coupling, Event, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
 };
 use idmesh_protocol::trace::{Line, TraceReader, Truth};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -107,6 +107,15 @@ pub fn check_options(args: &ReplayArgs) -> Result<()> {
                 method.name()
             );
         }
+    }
+    let factored_options = args.coupling != CouplingChoice::Coupled
+        || args.max_component.is_some()
+        || args.split != SplitChoice::Original;
+    if method != Method::Factored && factored_options {
+        bail!(
+            "--coupling, --max-component and --split apply to --method factored, not to --method {}",
+            method.name()
+        );
     }
     if method == Method::Threshold && args.budget.is_none() {
         bail!("--method threshold needs --budget N: the number of coefficients to keep");
@@ -214,7 +223,21 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
         Method::Order1 => Recipe::Order(1),
         Method::Order2 => Recipe::Order(2),
         Method::Order3 => Recipe::Order(3),
-        Method::Factored => Recipe::Factored(Coupling::Coupled),
+        Method::Factored => Recipe::Factored(FactoredOptions {
+            coupling: match args.coupling {
+                CouplingChoice::Coupled => Coupling::Coupled,
+                CouplingChoice::Local => Coupling::Local,
+            },
+            max_component: args
+                .max_component
+                .unwrap_or(FactoredOptions::default().max_component),
+            split: match args.split {
+                SplitChoice::Original => SplitRule::Original,
+                SplitChoice::Recent => SplitRule::Recent,
+                SplitChoice::LeastLoss => SplitRule::LeastLoss { rounds: 1 },
+            },
+            ..FactoredOptions::default()
+        }),
         Method::Particles => Recipe::Particles {
             count: args.particles.unwrap_or(DEFAULT_PARTICLES),
             seed: args.seed.unwrap_or(0),
@@ -311,6 +334,9 @@ pub(super) mod tests {
             samples: None,
             force: false,
             known_start_confidence: None,
+            coupling: CouplingChoice::Coupled,
+            max_component: None,
+            split: SplitChoice::Original,
         }
     }
 

@@ -1,0 +1,428 @@
+//! A leader's part of a factored belief, and the count coupling the
+//! coordinator evaluates from all the parts at a query.
+//!
+//! Under [`Coupling::Local`] nothing a mix or an observation does reads
+//! anything beyond the components it touches (module documentation of
+//! [`factored`](super)), so the components can be held by different
+//! leaders: each applies the events of the components it holds, exactly as
+//! the centralized belief does, provided a mix of two components finds both
+//! in one place ([`FactoredShare::take`] and [`FactoredShare::put`] move
+//! them). The belief is global only through the red count; that coupling is
+//! evaluated where the design card puts global work, at the coordinator on
+//! demand: each leader gives, per component it holds, the count vector and
+//! one red-weight vector per track ([`CountPart`]), and
+//! [`coupled_marginals`] convolves them with the prior π by the same code
+//! the centralized belief's queries run.
+//!
+//! A share is a whole [`FactoredBelief`] whose components not held here are
+//! placeholders: never read (the local coupling reads no other component),
+//! replaced when the real component arrives.
+
+use super::table::{counts_of, Component};
+use super::tree::{balancing_tilt, CountTree};
+use super::{coupling_weights, CountPrior, Coupling, FactoredBelief, FactoredOptions};
+use crate::error::BeliefError;
+use crate::event::{Field, Mix, Observe};
+use crate::filter::PropertyFilter;
+use serde::{Deserialize, Serialize};
+
+/// The largest component a share accepts from elsewhere (the tables'
+/// own limit, [`super::MAX_COMPONENT_LIMIT`]).
+const MOST_TRACKS: usize = super::MAX_COMPONENT_LIMIT;
+
+/// One component as it moves between leaders: its table over the subsets
+/// of `tracks` (bit i ↔ `tracks[i]`), the table's log scale, and when each
+/// track last mixed (for [`SplitRule::Recent`](super::SplitRule::Recent):
+/// only the order of these clocks matters).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldComponent {
+    pub tracks: Vec<u32>,
+    pub table: Vec<f64>,
+    pub log_scale: f64,
+    pub last_mix: Vec<u64>,
+}
+
+/// What one component tells the coordinator at a cut: its count vector
+/// c[s] = Σ_{|y| = s} g(y) and, per track, w_t[s] = Σ_{|y| = s, t ∈ y} g(y).
+/// P(t red) = Σ_s w_t[s]·R(s) / Σ_s c[s]·R(s), R the weight of the
+/// component's red count from everything else.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CountPart {
+    pub tracks: Vec<u32>,
+    pub counts: Vec<f64>,
+    pub red: Vec<Vec<f64>>,
+}
+
+/// The components one leader holds (see the module documentation).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(try_from = "ShareForm", into = "ShareForm")]
+pub struct FactoredShare {
+    belief: FactoredBelief,
+    held: Vec<bool>,
+}
+
+/// A share as a snapshot writes it: the field, the options and the
+/// components held (placeholders are rebuilt).
+#[derive(Serialize, Deserialize)]
+struct ShareForm {
+    field: Field,
+    options: FactoredOptions,
+    components: Vec<HeldComponent>,
+}
+
+impl From<FactoredShare> for ShareForm {
+    fn from(share: FactoredShare) -> Self {
+        ShareForm {
+            components: share.components(),
+            field: share.belief.field.clone(),
+            options: share.belief.options.clone(),
+        }
+    }
+}
+
+impl TryFrom<ShareForm> for FactoredShare {
+    type Error = BeliefError;
+    fn try_from(form: ShareForm) -> Result<Self, BeliefError> {
+        let mut share = FactoredShare::start(form.field, form.options, |_| false)?;
+        share.put(form.components)?;
+        Ok(share)
+    }
+}
+
+impl FactoredShare {
+    /// The start belief's components of the tracks `held` says are this
+    /// leader's (every track starts alone). The options must use the local
+    /// coupling and no `max_numbers`: both would need the whole belief.
+    pub fn start(
+        field: Field,
+        options: FactoredOptions,
+        held: impl Fn(u32) -> bool,
+    ) -> Result<Self, BeliefError> {
+        let unsupported = |what| {
+            Err(BeliefError::Unsupported {
+                method: "a leader's factored belief",
+                what,
+            })
+        };
+        if options.coupling != Coupling::Local {
+            return unsupported("a split weighed by the whole belief (the coupled rule)");
+        }
+        if options.max_numbers.is_some() {
+            return unsupported("a limit on the numbers of all components together");
+        }
+        let n = field.tracks;
+        let belief = FactoredBelief::with_options(field, options)?;
+        Ok(FactoredShare {
+            belief,
+            held: (0..n as u32).map(held).collect(),
+        })
+    }
+
+    pub fn field(&self) -> &Field {
+        &self.belief.field
+    }
+
+    pub fn options(&self) -> &FactoredOptions {
+        &self.belief.options
+    }
+
+    /// Whether the component of `track` is held here.
+    pub fn holds(&self, track: u32) -> bool {
+        self.held.get(track as usize).copied().unwrap_or(false)
+    }
+
+    /// The tracks of the component of `track` (held here or not: a
+    /// placeholder's are stale).
+    pub fn component_of(&self, track: u32) -> Vec<u32> {
+        let (slot, _) = self.belief.home[track as usize];
+        self.belief.comp(slot).tracks.clone()
+    }
+
+    /// Tracks whose components are held here.
+    pub fn tracks_held(&self) -> usize {
+        self.held.iter().filter(|&&h| h).count()
+    }
+
+    /// Σ 2^|C| over the components held.
+    pub fn coefficients(&self) -> usize {
+        self.held_comps().map(|c| c.table.len()).sum()
+    }
+
+    /// The centralized belief's counters as far as this share ran them.
+    pub fn stats(&self) -> &super::FactoredStats {
+        self.belief.stats()
+    }
+
+    fn held_comps(&self) -> impl Iterator<Item = &Component> {
+        self.belief
+            .live()
+            .filter(|c| c.tracks.first().is_some_and(|&t| self.held[t as usize]))
+    }
+
+    /// Mix `mix`, the `when`-th item of the stream (any clock that grows
+    /// along the stream: only the order of the clocks matters to the
+    /// Recent split). A certain swap relabels whichever of the two
+    /// components are held here; any other mix needs both held here.
+    pub fn mix(&mut self, mix: Mix, when: u64) -> Result<(), BeliefError> {
+        self.belief.field.check_mix(&mix)?;
+        let (a, b) = (mix.a as usize, mix.b as usize);
+        if mix.swap != 1.0 && mix.swap != 0.0 && !(self.held[a] && self.held[b]) {
+            return Err(BeliefError::BadComponent {
+                detail: format!(
+                    "a mix of tracks {} and {} on a leader that does not hold both",
+                    mix.a, mix.b
+                ),
+            });
+        }
+        self.belief.mix(mix)?;
+        if mix.swap == 1.0 {
+            self.held.swap(a, b);
+        }
+        if mix.swap != 0.0 {
+            self.belief.last_mix[a] = when;
+            self.belief.last_mix[b] = when;
+        }
+        Ok(())
+    }
+
+    /// An observation of a track whose component is held here.
+    pub fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        self.belief.field.check_observe(&observe)?;
+        if !self.held[observe.track as usize] {
+            return Err(BeliefError::BadComponent {
+                detail: format!(
+                    "an observation of track {} on a leader that does not hold it",
+                    observe.track
+                ),
+            });
+        }
+        self.belief.observe(observe)
+    }
+
+    /// Takes out the components held here whose tracks `pick` chooses
+    /// (their slots stay as placeholders).
+    pub fn take(&mut self, mut pick: impl FnMut(&[u32]) -> bool) -> Vec<HeldComponent> {
+        let chosen: Vec<HeldComponent> = self
+            .held_comps()
+            .filter(|c| pick(&c.tracks))
+            .map(|c| self.held_form(c))
+            .collect();
+        for c in &chosen {
+            for &t in &c.tracks {
+                self.held[t as usize] = false;
+            }
+        }
+        chosen
+    }
+
+    /// The components held here, as they would move.
+    pub fn components(&self) -> Vec<HeldComponent> {
+        self.held_comps().map(|c| self.held_form(c)).collect()
+    }
+
+    fn held_form(&self, c: &Component) -> HeldComponent {
+        HeldComponent {
+            tracks: c.tracks.clone(),
+            table: c.table.clone(),
+            log_scale: c.log_scale,
+            last_mix: c
+                .tracks
+                .iter()
+                .map(|&t| self.belief.last_mix[t as usize])
+                .collect(),
+        }
+    }
+
+    /// Components from another leader: checked, then each replaces the
+    /// placeholders of its tracks (their other tracks become placeholders
+    /// of their own). None of their tracks may be held here already.
+    pub fn put(&mut self, components: Vec<HeldComponent>) -> Result<(), BeliefError> {
+        for c in &components {
+            self.check(c)?;
+        }
+        let mut seen = vec![false; self.held.len()];
+        for c in &components {
+            for &t in &c.tracks {
+                if std::mem::replace(&mut seen[t as usize], true) {
+                    return Err(bad(format!("track {t} comes in two components")));
+                }
+            }
+        }
+        for c in components {
+            let mut slots: Vec<usize> = c
+                .tracks
+                .iter()
+                .map(|&t| self.belief.home[t as usize].0)
+                .collect();
+            slots.sort_unstable();
+            slots.dedup();
+            let mut add: Vec<Component> = slots
+                .iter()
+                .flat_map(|&s| self.belief.comp(s).tracks.clone())
+                .filter(|t| !c.tracks.contains(t))
+                .map(|t| Component::singleton(t, 1.0, 1.0))
+                .collect();
+            for (&t, &when) in c.tracks.iter().zip(&c.last_mix) {
+                self.held[t as usize] = true;
+                self.belief.last_mix[t as usize] = when;
+            }
+            // Built as it was sent (no renormalizing): the receiver holds
+            // bit for bit what the sender held.
+            let counts = counts_of(&c.table, c.tracks.len());
+            add.push(Component {
+                tracks: c.tracks,
+                table: c.table,
+                log_scale: c.log_scale,
+                counts,
+            });
+            self.belief.replace(&slots, add);
+        }
+        Ok(())
+    }
+
+    fn check(&self, c: &HeldComponent) -> Result<(), BeliefError> {
+        let m = c.tracks.len();
+        if m == 0 || m > MOST_TRACKS {
+            return Err(bad(format!(
+                "a component of {m} tracks (1..={MOST_TRACKS})"
+            )));
+        }
+        if c.table.len() != 1 << m || c.last_mix.len() != m {
+            return Err(bad(format!(
+                "a component of {m} tracks with {} numbers and {} clocks",
+                c.table.len(),
+                c.last_mix.len()
+            )));
+        }
+        for &t in &c.tracks {
+            self.belief.field.check_track(t)?;
+            if self.held[t as usize] {
+                return Err(bad(format!("track {t}, whose component is held here")));
+            }
+        }
+        let mut sorted = c.tracks.clone();
+        sorted.sort_unstable();
+        if sorted.windows(2).any(|w| w[0] == w[1]) {
+            return Err(bad(format!(
+                "a component with a track twice: {:?}",
+                c.tracks
+            )));
+        }
+        let total: f64 = c.table.iter().sum();
+        if c.table.iter().any(|g| !(g.is_finite() && *g >= 0.0)) || total <= 0.0 {
+            return Err(bad(format!(
+                "a table with a negative, infinite or NaN weight, or none (tracks {:?})",
+                c.tracks
+            )));
+        }
+        if !c.log_scale.is_finite() {
+            return Err(bad(format!("a log scale of {}", c.log_scale)));
+        }
+        Ok(())
+    }
+
+    /// Per component held here, its count vector and per-track red-weight
+    /// vectors (what the coordinator couples at a query).
+    pub fn parts(&self) -> Vec<CountPart> {
+        self.held_comps().map(count_part).collect()
+    }
+}
+
+fn bad(detail: String) -> BeliefError {
+    BeliefError::BadComponent { detail }
+}
+
+/// The [`CountPart`] of one component.
+fn count_part(c: &Component) -> CountPart {
+    let m = c.len();
+    let mut red = vec![vec![0.0; m + 1]; m];
+    for (y, &g) in c.table.iter().enumerate() {
+        let s = y.count_ones() as usize;
+        for (i, w) in red.iter_mut().enumerate() {
+            if y & (1 << i) != 0 {
+                w[s] += g;
+            }
+        }
+    }
+    CountPart {
+        tracks: c.tracks.clone(),
+        counts: c.counts.clone(),
+        red,
+    }
+}
+
+/// The marginals of the factored belief whose components are `parts`
+/// (from every leader at one cut): the count coupling with the prior π of
+/// `field`, evaluated by the count tree as the centralized belief's query
+/// does. The parts must cover every track of the field exactly once.
+pub fn coupled_marginals(field: &Field, parts: &[CountPart]) -> Result<Vec<f64>, BeliefError> {
+    field.validate()?;
+    let n = field.tracks;
+    let mut seen = vec![false; n];
+    for p in parts {
+        let m = p.tracks.len();
+        if m == 0 || m > MOST_TRACKS || p.counts.len() != m + 1 || p.red.len() != m {
+            return Err(bad(format!(
+                "a part of {m} tracks with {} counts and {} red vectors",
+                p.counts.len(),
+                p.red.len()
+            )));
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
+        if !finite(&p.counts) || p.red.iter().any(|w| w.len() != m + 1 || !finite(w)) {
+            return Err(bad(format!(
+                "a part of tracks {:?} with a weight that is negative, not finite, or \
+                 a red vector not of {} counts",
+                p.tracks,
+                m + 1
+            )));
+        }
+        for &t in &p.tracks {
+            field.check_track(t)?;
+            if std::mem::replace(&mut seen[t as usize], true) {
+                return Err(bad(format!("track {t} is in two components")));
+            }
+        }
+    }
+    if let Some(t) = seen.iter().position(|s| !s) {
+        return Err(bad(format!("no component holds track {t}")));
+    }
+    let prior = CountPrior::new(field);
+    let counts: Vec<&[f64]> = parts.iter().map(|p| &p.counts[..]).collect();
+    let tilt = balancing_tilt(counts.iter().copied(), prior.target());
+    let mut tree = CountTree::new(
+        parts.iter().map(|p| p.counts.clone()).collect(),
+        tilt,
+        prior.is_point(),
+    );
+    let weights = coupling_weights(&mut tree, &prior, &counts, n)?;
+    let mut out = vec![0.0; n];
+    for (p, r) in parts.iter().zip(weights) {
+        let dot = |v: &[f64], r: &[f64]| v.iter().zip(r).map(|(x, y)| x * y).sum::<f64>();
+        match r {
+            Some(r) => {
+                let total = dot(&p.counts, &r);
+                if total.is_nan() || total <= 0.0 {
+                    return Err(BeliefError::Degenerate { normalizer: total });
+                }
+                for (&t, w) in p.tracks.iter().zip(&p.red) {
+                    out[t as usize] = (dot(w, &r) / total).clamp(0.0, 1.0);
+                }
+            }
+            None => {
+                // A single count held: the table's own marginals.
+                let total: f64 = p.counts.iter().sum();
+                if p.counts.iter().filter(|&&x| x > 0.0).count() != 1 || total <= 0.0 {
+                    return Err(BeliefError::Degenerate { normalizer: 0.0 });
+                }
+                for (&t, w) in p.tracks.iter().zip(&p.red) {
+                    out[t as usize] = (w.iter().sum::<f64>() / total).clamp(0.0, 1.0);
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,200 @@
+use super::*;
+use crate::event::{Event, RedCount};
+use crate::factored::SplitRule;
+use crate::workload::{generate, WorkloadSpec};
+
+/// A crowd workload with some certain sightings, certain exchanges and
+/// non-events, as the belief's own tests use.
+fn workload(n: usize, events: usize, seed: u64) -> (Vec<u32>, Vec<Event>) {
+    let mut work = generate(&WorkloadSpec {
+        tracks: n,
+        red: n / 2,
+        events,
+        mix_share: 0.55,
+        swap: 0.35,
+        neighbourhood: n,
+        ..WorkloadSpec::table3(n, seed)
+    });
+    let mut sightings = 0;
+    for (event, truth) in work.events.iter_mut().zip(&work.truth) {
+        match event {
+            Event::Observe(o) => {
+                sightings += 1;
+                if sightings % 7 == 0 {
+                    let red = truth.contains(&o.track);
+                    (o.red, o.blue) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
+                }
+            }
+            Event::Mix(m) => match seed.wrapping_add(m.a as u64) % 11 {
+                0 => m.swap = 1.0,
+                1 => m.swap = 0.0,
+                _ => {}
+            },
+        }
+    }
+    (work.initial_red, work.events)
+}
+
+/// `leaders` shares run the events the way leaders do (a mix of two
+/// components gathers both at the holder of the first track's component;
+/// a certain exchange relabels wherever the two are; now and then a
+/// component moves to another leader, as a handover moves it), and the
+/// coordinator's coupling of their parts equals the centralized belief
+/// with the local rule after every event, to 1e-9; a snapshot of a share
+/// reads back to the same parts.
+fn shares_equal_the_whole(
+    field: Field,
+    options: FactoredOptions,
+    events: &[Event],
+    leaders: usize,
+) {
+    let mut whole = FactoredBelief::with_options(field.clone(), options.clone()).unwrap();
+    let mut shares: Vec<FactoredShare> = (0..leaders)
+        .map(|l| {
+            FactoredShare::start(field.clone(), options.clone(), |t| {
+                t as usize % leaders == l
+            })
+            .unwrap()
+        })
+        .collect();
+    let holder = |shares: &[FactoredShare], t: u32| shares.iter().position(|s| s.holds(t)).unwrap();
+    let mut moved = 0;
+    for (i, event) in events.iter().enumerate() {
+        let when = i as u64 + 1;
+        let ok = whole.apply(event).is_ok();
+        match *event {
+            Event::Mix(mix) => {
+                let (ha, hb) = (holder(&shares, mix.a), holder(&shares, mix.b));
+                if mix.swap == 1.0 {
+                    for h in [ha, hb] {
+                        shares[h].mix(mix, when).unwrap();
+                    }
+                    if ha == hb {
+                        // Once is enough: undo the second relabel.
+                        shares[ha].mix(mix, when).unwrap();
+                    }
+                } else if mix.swap > 0.0 {
+                    if ha != hb {
+                        let comp = shares[hb].take(|c| c.contains(&mix.b));
+                        shares[ha].put(comp).unwrap();
+                        moved += 1;
+                    }
+                    assert_eq!(shares[ha].mix(mix, when).is_ok(), ok);
+                }
+            }
+            Event::Observe(o) => {
+                let h = holder(&shares, o.track);
+                assert_eq!(shares[h].observe(o).is_ok(), ok);
+            }
+        }
+        if i % 5 == 0 {
+            // A handover: the component of some track goes elsewhere.
+            let t = (i * 7 % field.tracks) as u32;
+            let from = holder(&shares, t);
+            let to = (from + 1) % leaders;
+            if to != from {
+                let comp = shares[from].take(|c| c.contains(&t));
+                shares[to].put(comp).unwrap();
+            }
+        }
+        if !ok {
+            continue;
+        }
+        let parts: Vec<CountPart> = shares.iter().flat_map(|s| s.parts()).collect();
+        let got = coupled_marginals(&field, &parts).unwrap();
+        let want = whole.marginals().unwrap();
+        for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!((g - w).abs() < 1e-9, "event {i}, track {t}: {g} vs {w}");
+        }
+    }
+    assert!(moved > 0 || leaders == 1);
+    let split = whole.stats().splits;
+    assert!(split > 0, "the workload never split");
+    for share in &shares {
+        let bytes = postcard::to_allocvec(share).unwrap();
+        let back: FactoredShare = postcard::from_bytes(&bytes).unwrap();
+        let sorted = |mut c: Vec<HeldComponent>| {
+            c.sort_by(|x, y| x.tracks.cmp(&y.tracks));
+            c
+        };
+        assert_eq!(sorted(back.components()), sorted(share.components()));
+    }
+}
+
+#[test]
+fn leaders_holding_the_components_answer_as_the_whole() {
+    for (seed, rule) in [
+        (1, SplitRule::Original),
+        (2, SplitRule::Recent),
+        (3, SplitRule::LeastLoss { rounds: 1 }),
+    ] {
+        let n = 14;
+        let (initial, events) = workload(n, 300, seed);
+        let options = FactoredOptions {
+            max_component: 3,
+            split: rule,
+            coupling: Coupling::Local,
+            ..FactoredOptions::default()
+        };
+        let fields = [
+            Field::known(n, initial.clone()),
+            Field::uniform(n, n / 2),
+            Field {
+                tracks: n,
+                red: RedCount::unknown_uniform(n),
+                initial_red: None,
+            },
+        ];
+        for field in fields {
+            for leaders in [1, 2, 4] {
+                shares_equal_the_whole(field.clone(), options.clone(), &events, leaders);
+            }
+        }
+    }
+}
+
+#[test]
+fn a_share_refuses_what_does_not_fit_by_name() {
+    let field = Field::uniform(4, 2);
+    let options = FactoredOptions {
+        coupling: Coupling::Local,
+        ..FactoredOptions::default()
+    };
+    let coupled = FactoredShare::start(field.clone(), FactoredOptions::default(), |_| true);
+    assert!(coupled.unwrap_err().to_string().contains("coupled rule"));
+    let mut share = FactoredShare::start(field.clone(), options, |t| t < 2).unwrap();
+    let comp = |tracks: Vec<u32>, table: Vec<f64>| HeldComponent {
+        last_mix: vec![0; tracks.len()],
+        tracks,
+        table,
+        log_scale: 0.0,
+    };
+    for (c, says) in [
+        (comp(vec![1], vec![0.5, 0.5]), "held here"),
+        (comp(vec![2, 3], vec![1.0; 3]), "3 numbers"),
+        (comp(vec![2, 2], vec![1.0; 4]), "twice"),
+        (comp(vec![9], vec![1.0; 2]), "out of range"),
+        (comp(vec![3], vec![f64::NAN, 1.0]), "NaN"),
+    ] {
+        let e = share.put(vec![c]).unwrap_err().to_string();
+        assert!(e.contains(says), "{e}");
+    }
+    let e = share
+        .mix(
+            Mix {
+                a: 0,
+                b: 2,
+                swap: 0.5,
+            },
+            1,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("does not hold both"), "{e}");
+    let parts = share.parts();
+    let e = coupled_marginals(&field, &parts).unwrap_err().to_string();
+    assert!(e.contains("no component holds track 2"), "{e}");
+    share.put(vec![comp(vec![2, 3], vec![0.25; 4])]).unwrap();
+    let p = coupled_marginals(&field, &share.parts()).unwrap();
+    assert!((p.iter().sum::<f64>() - 2.0).abs() < 1e-12, "{p:?}");
+}

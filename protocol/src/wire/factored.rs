@@ -1,0 +1,121 @@
+//! The factored belief on the wire (docs/architecture.md, "The factored
+//! belief"): the settings a `Begin` carries, a component as it moves
+//! between leaders in a [`Transfer`](super::leader_to_leader::Transfer),
+//! and what a leader tells the coordinator of each component it holds at a
+//! cut (count vector and per-track red weights), from which the
+//! coordinator evaluates the count coupling.
+
+use super::valid::distinct_tracks;
+use serde::{Deserialize, Serialize};
+
+/// The largest component on the wire: 2^20 numbers (the belief's own limit
+/// for the Original split; tables beyond it are refused unread).
+pub const MAX_COMPONENT: u32 = 20;
+
+/// The factored belief's settings, the same for every leader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FactoredStart {
+    /// The most tracks of one component.
+    pub max_component: u32,
+    pub split: WireSplit,
+}
+
+/// How a component too large to keep is split (`belief::SplitRule`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireSplit {
+    Original,
+    Recent,
+    LeastLoss { rounds: u32 },
+}
+
+/// A component moving to another leader: its table over the subsets of
+/// `tracks` (bit i ↔ `tracks[i]`), its log scale, and each track's
+/// last-mix clock.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WireComponent {
+    pub tracks: Vec<u32>,
+    pub table: Vec<f64>,
+    pub log_scale: f64,
+    pub last_mix: Vec<u64>,
+}
+
+/// A component at a cut, as the coordinator couples it: its count vector
+/// (|tracks| + 1 numbers) and per track the weight of each count with the
+/// track red.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WireCounts {
+    pub tracks: Vec<u32>,
+    pub counts: Vec<f64>,
+    pub red: Vec<Vec<f64>>,
+}
+
+fn weights(what: &str, v: &[f64]) -> Result<(), String> {
+    match v.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
+        Some(x) => Err(format!("{what}: weight {x} is not a finite number >= 0")),
+        None => Ok(()),
+    }
+}
+
+fn size(what: &str, tracks: &[u32]) -> Result<(), String> {
+    let m = tracks.len();
+    if m == 0 || m > MAX_COMPONENT as usize {
+        return Err(format!("{what} of {m} tracks (1..={MAX_COMPONENT})"));
+    }
+    distinct_tracks(what, tracks, u32::MAX)
+}
+
+impl FactoredStart {
+    pub fn check(&self) -> Result<(), String> {
+        if !(1..=MAX_COMPONENT).contains(&self.max_component) {
+            return Err(format!(
+                "begin factored max_component = {} is not in 1..={MAX_COMPONENT}",
+                self.max_component
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl WireComponent {
+    /// Distinct tracks, 2^m finite non-negative numbers, a clock per track.
+    pub fn check(&self) -> Result<(), String> {
+        size("component", &self.tracks)?;
+        let m = self.tracks.len();
+        if self.table.len() != 1 << m || self.last_mix.len() != m {
+            return Err(format!(
+                "component of {m} tracks with {} numbers and {} clocks",
+                self.table.len(),
+                self.last_mix.len()
+            ));
+        }
+        weights("component", &self.table)?;
+        if !self.log_scale.is_finite() {
+            return Err(format!("component log scale = {}", self.log_scale));
+        }
+        Ok(())
+    }
+}
+
+impl WireCounts {
+    /// Distinct tracks, m + 1 counts and m red vectors of m + 1, all finite
+    /// and non-negative.
+    pub fn check(&self) -> Result<(), String> {
+        size("counts", &self.tracks)?;
+        let m = self.tracks.len();
+        if self.counts.len() != m + 1 || self.red.len() != m {
+            return Err(format!(
+                "counts of {m} tracks with {} counts and {} red vectors",
+                self.counts.len(),
+                self.red.len()
+            ));
+        }
+        weights("counts", &self.counts)?;
+        for w in &self.red {
+            if w.len() != m + 1 {
+                return Err(format!("a red vector of {} counts for {m} tracks", w.len()));
+            }
+            weights("red weights", w)?;
+        }
+        Ok(())
+    }
+}

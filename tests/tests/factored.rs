@@ -1,0 +1,191 @@
+//! The factored belief as the live distributed belief (issue 18), as real
+//! processes on loopback: leaders hold components, a mix of components of
+//! two leaders gathers them at one, a handover moves what leaves a region,
+//! and the coordinator couples the components' count vectors at a query.
+//! Asked at every truth line of a crowd, the deployment's marginals equal
+//! `idmesh replay --method factored --coupling local` with the same
+//! options to 1e-9 through 1, 2, 4 and 8 leaders, from a known start and
+//! from the uniform prior; and a leader killed mid-stream and restarted
+//! from its journal changes no answer.
+
+use idmesh_tests::deployment::{crowd, replay_lines, truth_lines, Deployment, Settings, Truth};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The options of both sides: small components, so that splits happen.
+const MAX_COMPONENT: usize = 3;
+
+fn belief() -> String {
+    format!("belief = \"factored\"\nmax_component = {MAX_COMPONENT}\nsplit = \"original\"")
+}
+
+fn central(trace: &Path) -> Vec<Value> {
+    replay_lines(
+        trace,
+        &[
+            "--method",
+            "factored",
+            "--coupling",
+            "local",
+            "--max-component",
+            &MAX_COMPONENT.to_string(),
+            "--split",
+            "original",
+        ],
+    )
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("an array: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+/// The same crowd without its known start: the uniform prior over red sets.
+fn without_start(trace: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let mut lines = text.lines();
+    let mut header: Value = serde_json::from_str(lines.next().unwrap()).unwrap();
+    assert!(
+        header.get("initial_red").is_some(),
+        "the crowd has a known start"
+    );
+    header.as_object_mut().unwrap().remove("initial_red");
+    let mut out = serde_json::to_string(&header).unwrap();
+    for line in lines {
+        out.push('\n');
+        out.push_str(line);
+    }
+    out.push('\n');
+    let path = trace.with_extension("uniform.jsonl");
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// Every answer at a truth point equals the centralized one there, to 1e-9;
+/// at least half the points are answered (a fresh query process may come
+/// after the stream passed some, which are refused, never answered wrong).
+fn check_points(what: &str, deployment: &Deployment, truths: &[Truth], central: &[Value]) {
+    let answers = deployment.at_truth_points("marginals", truths);
+    for (i, answer) in &answers {
+        let got = floats(&answer["p_red"]);
+        let want = floats(&central[*i]["p_red"]);
+        assert_eq!(got.len(), want.len());
+        for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                (g - w).abs() < 1e-9,
+                "{what}, truth line {i}, track {t}: {g} vs {w}\n{}",
+                deployment.log()
+            );
+        }
+    }
+    assert!(
+        answers.len() * 2 >= truths.len(),
+        "{what}: only {} of {} truth points answered\n{}",
+        answers.len(),
+        truths.len(),
+        deployment.log()
+    );
+}
+
+fn settings(leaders: usize) -> Settings {
+    Settings {
+        leaders,
+        rate: Some(300.0),
+        belief: Some(belief()),
+        ..Settings::default()
+    }
+}
+
+#[test]
+fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-factored-{}", std::process::id()));
+    let known = crowd(&dir, 12, 4, 60.0, 5);
+    for (start, trace) in [
+        ("known start", known.clone()),
+        ("uniform prior", without_start(&known)),
+    ] {
+        let central = central(&trace);
+        let truths = truth_lines(&trace);
+        assert_eq!(central.len(), truths.len());
+        for leaders in [1, 2, 4, 8] {
+            let name = format!("factored{leaders}{}", start.len());
+            let deployment = Deployment::start(&name, &trace, &settings(leaders));
+            deployment.first_answer(Duration::from_secs(30));
+            let what = format!("{start}, {leaders} leaders");
+            check_points(&what, &deployment, &truths, &central);
+            let last = deployment.final_marginals(Duration::from_secs(60));
+            let want = floats(&central.last().unwrap()["p_red"]);
+            for (g, w) in floats(&last["p_red"]).iter().zip(&want) {
+                assert!((g - w).abs() < 1e-9, "{what}, final: {g} vs {w}");
+            }
+            if leaders > 1 {
+                // Tracks crossed regions and components moved between
+                // leaders; every observation reached one holder only.
+                let handovers = deployment.leaders_total("handovers");
+                let moved = deployment.leaders_total("sets_sent");
+                assert!(
+                    handovers > 0 && moved > 0,
+                    "{what}: {handovers} handovers, {moved} moved"
+                );
+            }
+            let observations = deployment.leaders_total("observations");
+            let in_trace = std::fs::read_to_string(&trace)
+                .unwrap()
+                .lines()
+                .filter(|l| l.contains("\"observe\""))
+                .count() as u64;
+            assert!(
+                observations >= in_trace,
+                "{what}: {observations} observations applied of {in_trace}"
+            );
+            eprintln!(
+                "{what}: {observations} observation items for {in_trace} observations, \
+                 coefficients {}",
+                last["coefficients"]
+            );
+        }
+    }
+}
+
+/// A leader killed mid-stream and restarted from its journal and snapshot:
+/// the final answer still equals the centralized one.
+#[test]
+fn a_factored_leader_killed_and_restarted_changes_no_answer() {
+    let dir = std::env::temp_dir().join(format!("idmesh-factored-crash-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let central = central(&trace);
+    let want = floats(&central.last().unwrap()["p_red"]);
+    let settings = Settings {
+        leaders: 4,
+        rate: Some(500.0),
+        journal: true,
+        snapshot_every: Some(40),
+        takeover_after_ms: Some(0),
+        belief: Some(belief()),
+        ..Settings::default()
+    };
+    let mut crashed = Deployment::start_each("factored-crash", &trace, &settings);
+    let first = crashed.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    std::thread::sleep(Duration::from_millis(400));
+    crashed.kill("leader-1");
+    let error = crashed
+        .query(&["marginals"])
+        .expect_err("no answer without leader-1");
+    assert!(error.contains("leader-1"), "the error names it: {error}");
+    std::thread::sleep(Duration::from_millis(600));
+    crashed.launch("leader", "leader-1");
+    let last = crashed.final_marginals(Duration::from_secs(60));
+    for (t, (g, w)) in floats(&last["p_red"]).iter().zip(&want).enumerate() {
+        assert!((g - w).abs() < 1e-9, "after a crash, track {t}: {g} vs {w}");
+    }
+    assert!(
+        crashed.leaders_total("snapshots") > 0,
+        "leaders wrote snapshots"
+    );
+    assert!(crashed.leader("leader-1")["recoveries"].as_u64().unwrap() > 0);
+}
