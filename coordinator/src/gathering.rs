@@ -345,13 +345,15 @@ fn names(error: &str, leader: &str) -> bool {
 /// The property marginals the leaders' shares at one cut add up to.
 pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherError> {
     let cut = &collected.cut;
-    if collected.parts.iter().any(|p| p.components.is_some()) {
-        return factored_marginals_of(collected);
-    }
-    let sums = combine(&collected.parts);
-    let p_red = sums
-        .marginals(cut.tracks as usize)
-        .map_err(|_| GatherError::Degenerate)?;
+    let (p_red, coefficients) = if collected.parts.iter().any(|p| p.components.is_some()) {
+        factored_marginals_of(collected)?
+    } else {
+        let sums = combine(&collected.parts);
+        let p_red = sums
+            .marginals(cut.tracks as usize)
+            .map_err(|_| GatherError::Degenerate)?;
+        (p_red, sums.coefficients)
+    };
     let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
     Ok(MarginalsAnswer {
         watermark: collected.watermark(),
@@ -360,16 +362,17 @@ pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherErro
         p_red,
         predicted_red,
         leaders: collected.parts.len() as u32,
-        coefficients: sums.coefficients,
+        coefficients,
         finished: cut.finished,
     })
 }
 
-/// The marginals of a factored belief from every leader's components at
-/// one cut: the count coupling, evaluated here on demand (nothing global
-/// is computed between queries). Components that do not cover the field
-/// exactly once (a leader of another stream, a bug) are refused by name.
-fn factored_marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherError> {
+/// P(red) of a factored belief from every leader's components at one cut,
+/// and the coefficients they hold: the count coupling, evaluated here on
+/// demand (nothing global is computed between queries). Components that
+/// do not cover the field exactly once (a leader of another stream, a bug)
+/// are refused by name.
+fn factored_marginals_of(collected: &Collected) -> Result<(Vec<f64>, u64), GatherError> {
     let cut = &collected.cut;
     if let Some(p) = collected.parts.iter().find(|p| p.components.is_none()) {
         return Err(GatherError::Refused(format!(
@@ -381,17 +384,7 @@ fn factored_marginals_of(collected: &Collected) -> Result<MarginalsAnswer, Gathe
         BeliefError::Degenerate { .. } => GatherError::Degenerate,
         e => GatherError::Refused(format!("the leaders' components: {e}")),
     })?;
-    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
-    Ok(MarginalsAnswer {
-        watermark: collected.watermark(),
-        tracks: cut.tracks,
-        red: cut.red,
-        p_red,
-        predicted_red,
-        leaders: collected.parts.len() as u32,
-        coefficients: collected.parts.iter().map(|p| p.coefficients).sum(),
-        finished: cut.finished,
-    })
+    Ok((p_red, collected.parts.iter().map(|p| p.coefficients).sum()))
 }
 
 #[cfg(test)]

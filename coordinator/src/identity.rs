@@ -12,6 +12,7 @@
 
 use crate::actor::CoordinatorConfig;
 use crate::gather::{collect, At, Collected, GatherError, Memory, Share};
+use idmesh_belief::identity::filter::to_rows;
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::{
     most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
@@ -148,11 +149,7 @@ fn marginals(
     let blocks = matrix
         .block_marginals_stoppable(&method, stop)
         .map_err(failed)?;
-    let p_identity: Vec<Vec<f64>> = blocks
-        .dense()
-        .chunks(n.max(1))
-        .map(<[f64]>::to_vec)
-        .collect();
+    let p_identity = to_rows(n, &blocks.dense());
     let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
     let sampling = blocks.sampling.map(|s| SamplingReport {
         blocks: s.blocks as u32,

@@ -77,6 +77,6 @@ pub fn max_abs_difference(p: &[Vec<f64>], q: &[Vec<f64>]) -> f64 {
 }
 
 /// Turns a row-major flat n × n matrix into rows.
-pub(crate) fn to_rows(n: usize, flat: &[f64]) -> Marginals {
+pub fn to_rows(n: usize, flat: &[f64]) -> Marginals {
     flat.chunks(n.max(1)).map(|row| row.to_vec()).collect()
 }
