@@ -127,7 +127,8 @@ fn within<T>(limit: Duration, f: impl Future<Output = T>) -> T {
 }
 
 /// A Zenoh session of this test's own, showing certificate `name` of
-/// `certs` over TLS to `connect` (tcp/ endpoints of the topology).
+/// `certs` over mutual TLS (QUIC) to `connect` (tcp/ endpoints of the
+/// topology).
 async fn session(
     certs: &Path,
     name: &str,
@@ -135,7 +136,7 @@ async fn session(
     connect: &[String],
 ) -> zenoh::Result<Session> {
     let mut config = zenoh::Config::default();
-    let tls: Vec<String> = connect.iter().map(|e| e.replace("tcp/", "tls/")).collect();
+    let tls: Vec<String> = connect.iter().map(|e| e.replace("tcp/", "quic/")).collect();
     let file = |f: String| serde_json::to_string(&certs.join(f)).unwrap();
     let mode = if client { "\"client\"" } else { "\"peer\"" };
     for (key, value) in [
@@ -256,7 +257,10 @@ fn endpoint(deployment: &Deployment, name: &str) -> String {
 /// transfer was lost on it (idmesh fetched lost transfers only on a
 /// restart). Now every run must finish with the centralized engine's
 /// answer: 3 runs here, 12 with `IDMESH_LONG_TESTS=1` (CI), each a fresh
-/// deployment. The link reopenings Zenoh logged are counted and printed.
+/// deployment. The link warnings Zenoh logged are counted and printed.
+/// Secured links are QUIC since run 11 of a CI run aborted the sensor
+/// inside Zenoh's TLS link (eclipse-zenoh/zenoh#2557, docs/lan.md): an
+/// abort fails this test, as every process must live to the answer.
 #[test]
 fn a_long_secured_stream_finishes_every_time() {
     let runs = if idmesh_tests::long_tests() { 12 } else { 3 };
@@ -299,10 +303,14 @@ fn a_long_secured_stream_finishes_every_time() {
             "run {}: transfers kept after every leader applied them",
             run + 1
         );
-        reopened += deployment.log().matches("handshake not complete").count();
+        reopened += deployment
+            .log()
+            .lines()
+            .filter(|l| l.contains("WARN") && l.to_lowercase().contains("link"))
+            .count();
     }
     eprintln!(
-        "{runs} secured runs of {} mixes and observations finished with the centralized answer; Zenoh logged {reopened} TLS link failures on the way",
+        "{runs} secured runs of {} mixes and observations finished with the centralized answer; Zenoh logged {reopened} warnings about links on the way",
         central["events"]
     );
 }

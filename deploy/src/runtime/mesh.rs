@@ -8,15 +8,17 @@
 //! unavailable in many networks and in CI; the topology file is the truth.
 //! Clients (the query CLI, Python) connect to the coordinator's endpoint.
 //!
-//! Links close at once (Zenoh's TCP and TLS `SO_LINGER` is 0, set when
-//! Zenoh is compiled, in `.cargo/config.toml`): a lingering close to a
-//! cut-off host blocked every incoming message for 10 s (docs/lan.md).
+//! Links close at once (Zenoh's TCP `SO_LINGER` is 0, set when Zenoh is
+//! compiled, in `.cargo/config.toml`): a lingering close to a cut-off host
+//! blocked every incoming message for 10 s (docs/lan.md).
 //!
 //! A secured deployment ([`super::security`]) adds mutual TLS — every
-//! endpoint becomes `tls/`, each side shows its certificate — and, in its
-//! processes, the access-control rules generated from the topology.
+//! endpoint becomes `quic/` (TLS 1.3 inside QUIC; why not Zenoh's `tls/`
+//! link: [`secured_endpoint`]), each side shows its certificate — and, in
+//! its processes, the access-control rules generated from the topology.
+//! Zenoh's QUIC link reads the same `transport/link/tls` settings.
 
-use super::security::tls::over_tls;
+use super::security::tls::secured_endpoint;
 use super::security::Tls;
 use anyhow::{anyhow, Result};
 use zenoh::{Config, Session};
@@ -45,7 +47,10 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
     set(&mut config, "mode", format!("{mode:?}"))?;
     let endpoints = |list: &[String]| -> Result<String> {
         let list = match options.tls {
-            Some(_) => list.iter().map(|e| over_tls(e)).collect::<Result<_, _>>()?,
+            Some(_) => list
+                .iter()
+                .map(|e| secured_endpoint(e))
+                .collect::<Result<_, _>>()?,
             None => list.to_vec(),
         };
         Ok(serde_json::to_string(&list)?)

@@ -53,7 +53,8 @@
 //! ```
 //!
 //! With `[security]` (see [`super::security`]) every endpoint is reached
-//! over TLS: `tcp/host:port` here means `tls/host:port`. Ready-made files:
+//! over mutual TLS in QUIC: `tcp/host:port` here means `quic/host:port`
+//! (UDP, same port). Ready-made files:
 //! `deploy/examples/topology.toml` (plain) and `deploy/examples/secure.toml`
 //! (with the certificates of `deploy/examples/make-certs.sh`) on one
 //! machine; `deploy/examples/lan.toml` and `secure-lan.toml` on three.

@@ -14,7 +14,7 @@ pub enum SecurityError {
     },
     #[error("{field}: {path} is not PEM (no \"-----BEGIN\" line)", path = path.display())]
     NotPem { field: String, path: PathBuf },
-    #[error("endpoint {endpoint:?}: TLS runs over tcp/ or tls/ endpoints only")]
+    #[error("endpoint {endpoint:?}: a secured deployment names tcp/host:port endpoints (reached as quic/host:port, mutual TLS over QUIC) or quic/ ones; not tls/, whose Zenoh link is unsound (eclipse-zenoh/zenoh#2557)")]
     Endpoint { endpoint: String },
     #[error("TLS needs --ca, --cert and --key together; {missing} is missing")]
     Incomplete { missing: &'static str },
