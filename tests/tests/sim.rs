@@ -37,6 +37,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.transfers += tally.transfers;
                 total.follows += tally.follows;
                 total.handovers += tally.handovers;
+                total.factored += tally.factored;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -46,7 +47,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} crashes, {} messages ({} lost), {} transfers, {} follows, {} handovers",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} crashes, {} messages ({} lost), {} transfers, {} follows, {} handovers; {} schedules of the factored belief",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -56,13 +57,23 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.dropped,
         total.transfers,
         total.follows,
-        total.handovers
+        total.handovers,
+        total.factored
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
         total.answered >= seeds.len() as u64,
         "every schedule gives its final answer"
     );
+    let factored_on = std::env::var("IDMESH_SIM_FACTORED").map_or(true, |v| v != "0");
+    if seeds.len() >= 5000 && factored_on {
+        // Issue 18: at least 1,000 schedules of the factored belief a run.
+        assert!(
+            total.factored >= 1000,
+            "only {} schedules of the factored belief",
+            total.factored
+        );
+    }
 }
 
 /// Runs `seeds` schedules with `aimed` faults; fails with every seed that

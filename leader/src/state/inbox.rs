@@ -122,7 +122,8 @@ impl Leader {
                             self.waiting = None;
                             self.receive_rows(transfer.rows)?;
                             self.receive_sets(seq, transfer.sets, &mut actions)?;
-                            let new_tracks = self.receive_components(transfer.components)?;
+                            self.receive_components(transfer.components)?;
+                            let new_tracks = self.follow_held()?;
                             if !new_tracks.is_empty() {
                                 self.follow(seq, new_tracks, &mut actions)?;
                             }
@@ -143,11 +144,10 @@ impl Leader {
                         .copied()
                         .collect();
                     here.sort_unstable();
-                    let mut new_tracks = Vec::new();
                     for key in here {
                         if let Some(transfer) = self.transfers.remove(&key) {
                             self.taken.push(key);
-                            new_tracks.extend(self.receive_components(transfer.components)?);
+                            self.receive_components(transfer.components)?;
                         }
                     }
                     let held = self
@@ -160,6 +160,7 @@ impl Leader {
                     }
                     held.mix(mix, seq)?;
                     self.waiting = None;
+                    let new_tracks = self.follow_held()?;
                     if !new_tracks.is_empty() {
                         self.follow(seq, new_tracks, &mut actions)?;
                         return Ok(actions);

@@ -333,3 +333,71 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
         "rows only when asked"
     );
 }
+
+/// The components of one mix coming in two transfers, at two moments: the
+/// leader follows every track they bring, not only the last transfer's.
+/// (It once followed only the last one's, and a later sighting of a track
+/// of the first never reached the component's holder: seed 1676 of the
+/// simulator, a wrong answer.)
+#[test]
+fn components_of_one_mix_in_two_transfers_have_all_their_tracks_followed() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
+    let Item::Begin(mut start) = begin(&["a", "b", "c"], vec![0, 1, 2, 1, 2]) else {
+        unreachable!()
+    };
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+    });
+    let mut leader = Leader::new("a");
+    leader
+        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
+        .unwrap();
+    // Seq 3: b gathers track 0's component (b surveils track 1); seq 5:
+    // a surveils track 0, so it gathers the components of 0 and 2, held by
+    // b ({1, 3, 0}: b had mixed 1 with 3 before) and by c ({2, 4}).
+    let actions = leader
+        .batch(
+            batch(1, vec![(3, mix(1, 0, 1, 0)), (5, mix(0, 2, 0, 2))], 5, true),
+            0,
+        )
+        .unwrap();
+    assert!(actions
+        .iter()
+        .any(|a| matches!(a, Action::Send { to: 1, .. })));
+    assert_eq!(leader.waiting_for_components(), Some(5));
+    let transfer = |from: u16, tracks: Vec<u32>| Transfer {
+        version: VERSION,
+        from,
+        seq: 5,
+        sets: Vec::new(),
+        rows: Vec::new(),
+        components: vec![WireComponent {
+            table: vec![1.0; 1 << tracks.len()],
+            last_mix: vec![3; tracks.len()],
+            log_scale: 0.0,
+            tracks,
+        }],
+    };
+    let first = leader.transfer(transfer(1, vec![1, 3, 0]), 0).unwrap();
+    assert!(
+        !first.iter().any(|a| matches!(a, Action::Follow(_))),
+        "{first:?}"
+    );
+    assert_eq!(leader.waiting_for_components(), Some(5), "c's is missing");
+    let second = leader.transfer(transfer(2, vec![2, 4]), 0).unwrap();
+    let followed: Vec<&Follow> = second
+        .iter()
+        .filter_map(|a| match a {
+            Action::Follow(f) => Some(f),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(followed.len(), 1, "{second:?}");
+    assert_eq!(
+        (followed[0].after, &followed[0].tracks[..]),
+        (5, &[3, 4][..])
+    );
+    let held = leader.factored().unwrap();
+    assert_eq!(held.held_tracks().collect::<Vec<_>>(), vec![0, 1, 2, 3, 4]);
+}

@@ -184,31 +184,40 @@ impl Leader {
 }
 
 impl Leader {
-    /// Components received at item `seq` (a factored stream): held from
-    /// now on; returns the tracks they bring beyond the interest, which the
-    /// leader must follow from `seq` on.
+    /// Components received (a factored stream): held from now on. The
+    /// tracks they bring are followed once the item's components are all
+    /// in ([`Leader::follow_held`]).
     pub(super) fn receive_components(
         &mut self,
         components: Vec<WireComponent>,
-    ) -> Result<Vec<u32>, LeaderError> {
+    ) -> Result<(), LeaderError> {
         if components.is_empty() {
-            return Ok(Vec::new());
+            return Ok(());
         }
-        let started = self.started()?;
-        let held = started.factored.as_mut().ok_or_else(|| {
+        let held = self.started()?.factored.as_mut().ok_or_else(|| {
             LeaderError::BadTransfer("components of a factored belief on a Radon stream".into())
         })?;
-        let mut new_tracks = Vec::new();
-        for c in &components {
-            for &t in &c.tracks {
-                if started.interest.add(t) {
-                    new_tracks.push(t);
-                }
-            }
-        }
         held.put(components.into_iter().map(from_wire_component).collect())
-            .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
-        Ok(new_tracks)
+            .map_err(|e| LeaderError::BadTransfer(e.to_string()))
+    }
+
+    /// The tracks of the components held here that this leader does not
+    /// follow yet, now added to its interest: it must hear every event on
+    /// them from item `seq` on, so the caller asks the sensor to follow
+    /// them from there. Read from what is held rather than from what one
+    /// transfer brought: the components of one mix can come in several
+    /// transfers, and the leader returns to waiting between them (once,
+    /// the tracks of the first were noted and never followed, and a later
+    /// sighting of one of them never reached its holder).
+    pub(super) fn follow_held(&mut self) -> Result<Vec<u32>, LeaderError> {
+        let started = self.started()?;
+        let Some(held) = &started.factored else {
+            return Ok(Vec::new());
+        };
+        Ok(held
+            .held_tracks()
+            .filter(|&t| started.interest.add(t))
+            .collect())
     }
 
     /// Asks the sensor to follow `tracks` from item `seq` on, and waits

@@ -86,15 +86,13 @@ impl Scenario {
             lines.push(line);
         }
         let distributed_rule = rng.gen_bool(0.5);
-        // With IDMESH_SIM_FACTORED=1 a third of the schedules run the
-        // factored belief (small components, so that merges, splits and
-        // moves all happen). Not in CI yet: 2 of 5,000 schedules (seeds
-        // 1676 and 3440) still disagree with the centralized engine or
-        // stall (issue 18, open).
-        let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "1") {
-            1.0 / 3.0
-        } else {
+        // A third of the schedules run the factored belief (small
+        // components, so that merges, splits and moves all happen);
+        // IDMESH_SIM_FACTORED=0 runs the Radon belief alone.
+        let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "0") {
             0.0
+        } else {
+            1.0 / 3.0
         };
         let factored = rng.gen_bool(factored_share).then(|| FactoredStart {
             max_component: rng.gen_range(1..=3),

@@ -213,6 +213,8 @@ pub struct Tally {
     pub transfers: u64,
     pub follows: u64,
     pub handovers: u64,
+    /// Schedules whose leaders held the factored belief.
+    pub factored: u64,
 }
 
 pub struct World {
@@ -251,6 +253,7 @@ impl World {
     /// (none: [`Aimed::default`]).
     pub fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
+        let scenario_factored = scenario.factored.is_some();
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
         let gateway = Gateway::new("sensor-0", router, scenario.lines.is_empty());
@@ -285,7 +288,10 @@ impl World {
             routed: vec![BTreeSet::new(); count],
             final_answer: None,
             calm: false,
-            tally: Tally::default(),
+            tally: Tally {
+                factored: scenario_factored as u64,
+                ..Tally::default()
+            },
             last_error: String::new(),
             aimed,
             lost_once: BTreeSet::new(),

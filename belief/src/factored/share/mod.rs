@@ -138,6 +138,11 @@ impl FactoredShare {
         self.belief.comp(slot).tracks.clone()
     }
 
+    /// The tracks whose components are held here, in order.
+    pub fn held_tracks(&self) -> impl Iterator<Item = u32> + '_ {
+        (0..self.held.len() as u32).filter(|&t| self.held[t as usize])
+    }
+
     /// Tracks whose components are held here.
     pub fn tracks_held(&self) -> usize {
         self.held.iter().filter(|&&h| h).count()
