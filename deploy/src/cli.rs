@@ -5,6 +5,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use idmesh_eval::eval::EvalArgs;
 use idmesh_eval::replay::identity::MarginalChoice;
 use idmesh_eval::replay::ReplayArgs;
+use crate::runtime::topology::BeliefKind;
 use std::path::PathBuf;
 
 /// idmesh keeps track of who is who among moving targets: a belief over
@@ -75,7 +76,11 @@ pub struct BenchArgs {
     /// Leader counts to stream through, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
     pub leaders: Vec<usize>,
-    /// Sets per leader.
+    /// The leaders' belief: factored (components, coupled at a query) or
+    /// radon (sets, with --budget and the distributed rule).
+    #[arg(long, value_enum, default_value = "factored")]
+    pub belief: BeliefKind,
+    /// Sets per leader (the Radon belief).
     #[arg(long, default_value_t = 400)]
     pub budget: u32,
     /// Marginals queries (and as many raw gets of each kind) for latency.
@@ -156,6 +161,10 @@ pub struct DemoArgs {
     /// Where the live map and HTTP API listen ("off": not at all).
     #[arg(long, default_value = "127.0.0.1:8080")]
     pub web: String,
+    /// The leaders' belief of the colours on a stream without identities
+    /// (the demo's reads identities: its leaders hold the Radon belief).
+    #[arg(long, value_enum, default_value = "factored")]
+    pub belief: BeliefKind,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -41,8 +41,9 @@ pub struct Settings {
     /// (`marginals_timeout_ms`; None = the default).
     pub marginals_timeout_ms: Option<u64>,
     /// Topology lines of the belief the leaders hold, e.g.
-    /// `belief = "factored"\nmax_component = 3` (None: the topology's
-    /// default belief).
+    /// `belief = "factored"\nmax_component = 3`. None: `belief =
+    /// "radon"`, which the runtime's tests compare with `idmesh replay
+    /// --method overcomplete` (the topology's own default is factored).
     pub belief: Option<String>,
 }
 
@@ -267,9 +268,8 @@ impl Deployment {
         if let Some(ms) = settings.marginals_timeout_ms {
             toml.insert_str(0, &format!("marginals_timeout_ms = {ms}\n"));
         }
-        if let Some(belief) = &settings.belief {
-            toml.insert_str(0, &format!("{belief}\n"));
-        }
+        let belief = settings.belief.as_deref().unwrap_or("belief = \"radon\"");
+        toml.insert_str(0, &format!("{belief}\n"));
         if let Some(faults) = &settings.faults {
             toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
         }

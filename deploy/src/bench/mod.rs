@@ -24,7 +24,7 @@ mod throughput;
 use crate::runtime::launch::{simulate_crowd, Processes};
 use crate::runtime::loopback::{Loopback, Ports};
 use crate::runtime::mesh::{self, MeshOptions};
-use crate::runtime::topology::{Sparsification, Topology};
+use crate::runtime::topology::{default_max_component, BeliefKind, Sparsification, Topology};
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_protocol::wire::keys::Keys;
 use std::fmt::Write as _;
@@ -40,7 +40,10 @@ pub struct BenchOptions {
     pub duration: f64,
     pub seed: u64,
     pub leaders: Vec<usize>,
-    /// Sets per leader (the distributed rule runs with it).
+    /// The leaders' belief.
+    pub belief: BeliefKind,
+    /// Sets per leader (the Radon belief; the distributed rule runs with
+    /// it).
     pub budget: u32,
     /// Queries for the latency figures.
     pub queries: usize,
@@ -92,8 +95,20 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     }
     writeln!(
         report,
-        "Crowd of {} targets ({} red), {} s simulated; distributed rule, budget {} sets per leader; every process on this machine's loopback.\n",
-        options.targets, options.red, options.duration, options.budget
+        "Crowd of {} targets ({} red), {} s simulated; {}; every process on this machine's loopback.\n",
+        options.targets,
+        options.red,
+        options.duration,
+        match options.belief {
+            BeliefKind::Factored => format!(
+                "the factored belief (components of at most {} tracks, local split rule)",
+                default_max_component()
+            ),
+            BeliefKind::Radon => format!(
+                "the Radon belief, distributed rule, budget {} sets per leader",
+                options.budget
+            ),
+        }
     )?;
     // Latency with four leaders: at rest after the stream (the leaders
     // answer where they rest), and during a paced stream (every query
@@ -174,6 +189,7 @@ impl Deployment {
         let plan = Loopback {
             prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
             leaders,
+            belief: options.belief,
             distributed_rule: true,
             budget: options.budget,
             sparsify: Sparsification::Threshold,

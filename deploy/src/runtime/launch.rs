@@ -7,7 +7,7 @@ use super::loopback::{Loopback, Ports};
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
 use super::topology::Topology;
-use super::topology::{Member, Sparsification};
+use super::topology::{BeliefKind, Member, Sparsification};
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
 use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer, StatsAnswer};
@@ -148,6 +148,10 @@ pub struct DemoOptions {
     pub dir: PathBuf,
     /// Where the web gateway listens; None = no gateway.
     pub web: Option<String>,
+    /// The leaders' belief of the colours (the demo's stream reads
+    /// identities too, so its leaders hold the Radon belief either way:
+    /// see [`BeliefKind`]).
+    pub belief: BeliefKind,
 }
 
 /// `idmesh demo`: a crowd simulated here (colours and identity reads), four
@@ -178,6 +182,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     let plan = Loopback {
         prefix: DEFAULT_PREFIX.to_string(),
         leaders: 4,
+        belief: options.belief,
         distributed_rule: true,
         budget: 400,
         sparsify: Sparsification::Overcomplete,

@@ -4,7 +4,7 @@
 //! mix across them, as in the paper's sensor grid.
 
 use super::launch::field_corners;
-use super::topology::Sparsification;
+use super::topology::{BeliefKind, Sparsification};
 use anyhow::Result;
 use std::path::Path;
 
@@ -12,6 +12,9 @@ use std::path::Path;
 pub struct Loopback {
     pub prefix: String,
     pub leaders: usize,
+    /// The leaders' belief on a property stream; the Radon settings below
+    /// serve it under "radon", and identity streams under either.
+    pub belief: BeliefKind,
     pub distributed_rule: bool,
     /// Sets per leader; 0 = no pruning.
     pub budget: u32,
@@ -58,8 +61,9 @@ impl Loopback {
         let rows = self.leaders.div_ceil(columns);
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
         let mut toml = format!(
-            "prefix = {:?}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = {:?}\nbelief = \"{}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             self.prefix,
+            self.belief.name(),
             self.distributed_rule,
             self.budget,
             match self.sparsify {
@@ -113,6 +117,7 @@ mod tests {
         let plan = Loopback {
             prefix: "idmesh/t".into(),
             leaders: 1,
+            belief: BeliefKind::Factored,
             distributed_rule: false,
             budget: 0,
             sparsify: Sparsification::Threshold,
@@ -146,6 +151,7 @@ mod tests {
         let plan = Loopback {
             prefix: "idmesh/t".into(),
             leaders: 5,
+            belief: BeliefKind::Radon,
             distributed_rule: true,
             budget: 100,
             sparsify: Sparsification::Overcomplete,
@@ -166,6 +172,7 @@ mod tests {
             let [x, y] = l.at.unwrap();
             assert!((0.0..=30.0).contains(&x) && (0.0..=20.0).contains(&y));
         }
+        assert_eq!(topology.belief, BeliefKind::Radon);
         assert!(topology.distributed_rule && topology.budget == 100);
         assert_eq!(topology.sparsify, Sparsification::Overcomplete);
         assert_eq!(topology.query_timeout_ms, 1500);

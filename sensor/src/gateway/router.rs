@@ -187,7 +187,10 @@ impl Router {
                     red: observe.red,
                     blue: observe.blue,
                 };
-                let (growth, global) = if self.config.factored.is_some() {
+                // The stream's belief, not the topology's: an identity
+                // stream's leaders hold the Radon belief even under
+                // `belief = "factored"`, and need its growth rule.
+                let (growth, global) = if self.begin.factored.is_some() {
                     // An observation changes the observed track's
                     // component alone, held by one leader that follows it.
                     (Growth::Meeting(Vec::new()), false)

@@ -506,3 +506,48 @@ fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
         (2, 2, 1)
     );
 }
+
+/// Under `belief = "factored"` an identity stream's leaders still hold the
+/// Radon belief (and the information matrix), so its observations are
+/// routed by the Radon rule: under exact conditioning, to every leader.
+/// (They were routed by the factored rule — to the track's followers,
+/// growing nothing — and the Radon leaders' colour answers went wrong.)
+#[test]
+fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    for identities in [None, Some(4)] {
+        let mut header = Header::new(4);
+        header.red = Some(2);
+        header.identities = identities;
+        let config = RouterConfig {
+            factored: Some(FactoredStart {
+                max_component: 3,
+                split: WireSplit::Original,
+            }),
+            sensor: "s".into(),
+            leaders: ["a", "b"]
+                .iter()
+                .map(|name| LeaderPlace {
+                    name: name.to_string(),
+                    at: None,
+                })
+                .collect(),
+            distributed_rule: false,
+            budget: 0,
+            omp: false,
+        };
+        let router = Router::new(config, &header).unwrap();
+        assert_eq!(router.begin().factored.is_some(), identities.is_none());
+        let mut gateway: Gateway<()> = Gateway::new("s", router, false);
+        gateway.flush();
+        gateway.line(&observe(3));
+        let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+        let expected = match identities {
+            // Radon, exact conditioning: every leader hears it.
+            Some(_) => (vec![2], vec![2]),
+            // Factored: only the follower of track 3 (b) does.
+            None => (vec![], vec![2]),
+        };
+        assert_eq!((seqs(&a), seqs(&b)), expected, "identities {identities:?}");
+    }
+}
