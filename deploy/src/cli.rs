@@ -1,11 +1,11 @@
 //! The command line: one subcommand per role idmesh plays. Parsing only;
 //! what a subcommand does lives in its own module.
 
+use crate::runtime::topology::BeliefKind;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use idmesh_eval::eval::EvalArgs;
 use idmesh_eval::replay::identity::MarginalChoice;
 use idmesh_eval::replay::ReplayArgs;
-use crate::runtime::topology::BeliefKind;
 use std::path::PathBuf;
 
 /// idmesh keeps track of who is who among moving targets: a belief over
