@@ -279,8 +279,10 @@ impl<'a> LanDeployment<'a> {
         // Every process listens on its host's address; ports only need to
         // differ on one host, but differing everywhere reads better.
         let listen = |i: usize, host: &str| format!("tcp/{}:{}", lan.host(host).addr, 7460 + i);
+        // The Radon belief: the LAN tests compare with `idmesh replay
+        // --method overcomplete` (the topology's default is factored).
         let mut toml = format!(
-            "prefix = {prefix:?}\nquery_timeout_ms = {}\nstate_dir = \"state\"\ntakeover_after_ms = {}\nsnapshot_every = 200\n",
+            "prefix = {prefix:?}\nbelief = \"radon\"\nquery_timeout_ms = {}\nstate_dir = \"state\"\ntakeover_after_ms = {}\nsnapshot_every = 200\n",
             settings.query_timeout_ms, settings.takeover_after_ms
         );
         let mut coordinator = (String::new(), String::new());
