@@ -17,6 +17,7 @@
 //!
 //! Figures are ratios against that floor, because the machine is noisy.
 
+mod cpu;
 mod ingest;
 mod latency;
 mod throughput;
@@ -174,7 +175,7 @@ pub struct Deployment {
     pub leaders: usize,
     pub topology: Topology,
     pub session: zenoh::Session,
-    _processes: [Processes; 2],
+    processes: [Processes; 2],
 }
 
 impl Deployment {
@@ -230,7 +231,7 @@ impl Deployment {
             leaders,
             topology,
             session,
-            _processes: [sensor, others],
+            processes: [sensor, others],
         })
     }
 
@@ -245,6 +246,11 @@ impl Deployment {
 
     pub fn keys(&self) -> Keys {
         Keys::new(self.topology.prefix.clone())
+    }
+
+    /// Every process's CPU seconds so far.
+    pub fn cpu_times(&self) -> Result<cpu::CpuTimes> {
+        cpu::CpuTimes::read(self.processes.iter().flat_map(Processes::pids))
     }
 }
 

@@ -27,6 +27,25 @@ pub struct Stream {
     pub seconds: f64,
     pub queries: usize,
     pub stats: Vec<LeaderStats>,
+    /// CPU seconds each process used while the stream was timed.
+    pub cpu: Cpu,
+}
+
+/// CPU seconds (user + system) used during a stream, by role.
+pub struct Cpu {
+    pub sensor: f64,
+    pub coordinator: f64,
+    /// One per leader.
+    pub leaders: Vec<f64>,
+}
+
+impl Cpu {
+    fn busiest(&self) -> f64 {
+        self.leaders
+            .iter()
+            .copied()
+            .fold(self.sensor.max(self.coordinator), f64::max)
+    }
 }
 
 impl Stream {
@@ -39,15 +58,22 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
     let mut first: Option<(Instant, u64)> = None;
     let mut last_zero: Option<Instant> = None;
     let mut queries = 0;
+    // The processes' CPU times when the clock starts (read with the last
+    // answer at zero, or with the first one that moved).
+    let mut cpu_at_start = None;
     let (since, first_seen, events) = watch(deployment, |asked, answer| {
         queries += 1;
         let events: u64 = answer.watermark.values().sum();
         if events == 0 {
             last_zero = Some(asked);
+            cpu_at_start = Some(deployment.cpu_times());
         } else if first.is_none() {
             first = Some(match last_zero {
                 Some(zero) => (zero, 0),
-                None => (asked, events),
+                None => {
+                    cpu_at_start = Some(deployment.cpu_times());
+                    (asked, events)
+                }
             });
         }
         answer
@@ -59,13 +85,25 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
     .ok_or_else(|| {
         anyhow::anyhow!("the stream was over before the bench could time it: make it longer")
     })?;
+    let seconds = since.elapsed().as_secs_f64();
+    let used = deployment.cpu_times()?.since(
+        &cpu_at_start.ok_or_else(|| anyhow::anyhow!("no CPU reading at the stream's start"))??,
+    );
+    let topology = &deployment.topology;
+    let of = |name: &str| used.get(name).copied().unwrap_or(0.0);
+    let cpu = Cpu {
+        sensor: of(&topology.sensor.name),
+        coordinator: of(&topology.coordinator.name),
+        leaders: topology.leader.iter().map(|l| of(&l.name)).collect(),
+    };
     Ok(Stream {
         leaders: deployment.leaders,
         events,
         first_seen,
-        seconds: since.elapsed().as_secs_f64(),
+        seconds,
         queries,
         stats: stats(deployment).await?,
+        cpu,
     })
 }
 
@@ -164,6 +202,31 @@ pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
                 1000.0 * l.bytes_sent as f64 / s.events as f64
             )?;
         }
+    }
+    writeln!(
+        out,
+        "\n### CPU seconds while the stream was timed (user + system, each process, from /proc)\n\nAll processes share this machine's cores, so the wall clock above cannot show scale-out; these can. *Hosts bound*: the events/s a deployment with a host per process would reach if the busiest process were the limit (timed events ÷ its CPU seconds).\n"
+    )?;
+    writeln!(
+        out,
+        "| leaders | sensor | coordinator | leaders, sum | busiest leader | leaders' sum vs 1 leader | hosts bound, events/s |"
+    )?;
+    writeln!(out, "|---:|---:|---:|---:|---:|---:|---:|")?;
+    let one = streams.first().map(|s| s.cpu.leaders.iter().sum::<f64>());
+    for s in streams {
+        let sum: f64 = s.cpu.leaders.iter().sum();
+        let busiest = s.cpu.leaders.iter().copied().fold(0.0, f64::max);
+        writeln!(
+            out,
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2}× | {:.0} |",
+            s.leaders,
+            s.cpu.sensor,
+            s.cpu.coordinator,
+            sum,
+            busiest,
+            one.map_or(1.0, |o| sum / o),
+            (s.events - s.first_seen) as f64 / s.cpu.busiest()
+        )?;
     }
     writeln!(out)?;
     Ok(())

@@ -54,6 +54,13 @@ impl Processes {
         Ok(Processes { children })
     }
 
+    /// Every child's name and process id.
+    pub fn pids(&self) -> impl Iterator<Item = (&str, u32)> {
+        self.children
+            .iter()
+            .map(|(name, child)| (name.as_str(), child.id()))
+    }
+
     /// The first child to exit, if any has.
     pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
         for (name, child) in &mut self.children {
