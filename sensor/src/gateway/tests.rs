@@ -35,6 +35,25 @@ fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) 
     Router::new(config, &header).unwrap()
 }
 
+/// Two leaders a and b with no positions (track t belongs to t % 2),
+/// exact conditioning, no pruning; the factored belief if `factored`.
+fn unplaced(factored: Option<idmesh_protocol::wire::factored::FactoredStart>) -> RouterConfig {
+    RouterConfig {
+        factored,
+        sensor: "s".into(),
+        leaders: ["a", "b"]
+            .iter()
+            .map(|name| LeaderPlace {
+                name: name.to_string(),
+                at: None,
+            })
+            .collect(),
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+    }
+}
+
 fn mix(a: u32, b: u32) -> Line {
     Line::Mix(Mix {
         time: 0.0,
@@ -306,20 +325,7 @@ fn under_exact_conditioning_every_observation_reaches_every_leader_and_a_mix_onl
 fn an_identity_read_goes_to_the_owner_of_its_track_alone() {
     let mut header = Header::new(4);
     header.identities = Some(4);
-    let config = RouterConfig {
-        factored: None,
-        sensor: "s".into(),
-        leaders: ["a", "b"]
-            .iter()
-            .map(|name| LeaderPlace {
-                name: name.to_string(),
-                at: None,
-            })
-            .collect(),
-        distributed_rule: false,
-        budget: 0,
-        omp: false,
-    };
+    let config = unplaced(None);
     let mut gateway: Gateway<()> = Gateway::new("s", Router::new(config, &header).unwrap(), false);
     gateway.flush();
     gateway.line(&Line::Identify(idmesh_protocol::trace::Identify {
@@ -519,23 +525,10 @@ fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() 
         let mut header = Header::new(4);
         header.red = Some(2);
         header.identities = identities;
-        let config = RouterConfig {
-            factored: Some(FactoredStart {
-                max_component: 3,
-                split: WireSplit::Original,
-            }),
-            sensor: "s".into(),
-            leaders: ["a", "b"]
-                .iter()
-                .map(|name| LeaderPlace {
-                    name: name.to_string(),
-                    at: None,
-                })
-                .collect(),
-            distributed_rule: false,
-            budget: 0,
-            omp: false,
-        };
+        let config = unplaced(Some(FactoredStart {
+            max_component: 3,
+            split: WireSplit::Original,
+        }));
         let router = Router::new(config, &header).unwrap();
         assert_eq!(router.begin().factored.is_some(), identities.is_none());
         let mut gateway: Gateway<()> = Gateway::new("s", router, false);
