@@ -161,10 +161,6 @@ pub struct DemoArgs {
     /// Where the live map and HTTP API listen ("off": not at all).
     #[arg(long, default_value = "127.0.0.1:8080")]
     pub web: String,
-    /// The leaders' belief of the colours on a stream without identities
-    /// (the demo's reads identities: its leaders hold the Radon belief).
-    #[arg(long, value_enum, default_value = "factored")]
-    pub belief: BeliefKind,
 }
 
 #[derive(Debug, Clone, Args)]

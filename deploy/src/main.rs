@@ -59,7 +59,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             rate: args.rate,
             dir: args.dir,
             web: (args.web != "off").then_some(args.web),
-            belief: args.belief,
         }),
         Command::Query(args) => runtime::query::run(&args.options()?),
         Command::Web(args) => runtime::web::run(&args.options()?),

@@ -155,10 +155,6 @@ pub struct DemoOptions {
     pub dir: PathBuf,
     /// Where the web gateway listens; None = no gateway.
     pub web: Option<String>,
-    /// The leaders' belief of the colours (the demo's stream reads
-    /// identities too, so its leaders hold the Radon belief either way:
-    /// see [`BeliefKind`]).
-    pub belief: BeliefKind,
 }
 
 /// `idmesh demo`: a crowd simulated here (colours and identity reads), four
@@ -189,7 +185,9 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
     let plan = Loopback {
         prefix: DEFAULT_PREFIX.to_string(),
         leaders: 4,
-        belief: options.belief,
+        // The demo's crowd reads identities, and a stream with identities
+        // holds the Radon belief (see [`BeliefKind`]): say so.
+        belief: BeliefKind::Radon,
         distributed_rule: true,
         budget: 400,
         sparsify: Sparsification::Overcomplete,
