@@ -36,6 +36,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.dropped += tally.dropped;
                 total.transfers += tally.transfers;
                 total.follows += tally.follows;
+                total.unfollows += tally.unfollows;
                 total.handovers += tally.handovers;
                 total.factored += tally.factored;
             }
@@ -47,7 +48,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} crashes, {} messages ({} lost), {} transfers, {} follows, {} handovers; {} schedules of the factored belief",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} crashes, {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers; {} schedules of the factored belief",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -57,6 +58,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.dropped,
         total.transfers,
         total.follows,
+        total.unfollows,
         total.handovers,
         total.factored
     );
@@ -73,6 +75,9 @@ fn every_schedule_answers_like_the_centralized_engine() {
             "only {} schedules of the factored belief",
             total.factored
         );
+        // Their leaders' interests shrink, and the requests saying so
+        // are dropped, duplicated and reordered like any message.
+        assert!(total.unfollows > 0, "no leader ever unfollowed a track");
     }
 }
 

@@ -31,7 +31,7 @@ type Labels = Vec<(String, String)>;
 /// help, the value).
 type LeaderField = (&'static str, &'static str, fn(&LeaderStats) -> u64);
 
-const LEADER_COUNTERS: [LeaderField; 18] = [
+const LEADER_COUNTERS: [LeaderField; 19] = [
     ("items", "stream items applied", |s| s.items),
     ("mixes", "mix events applied", |s| s.mixes),
     ("observations", "observations applied", |s| s.observations),
@@ -58,6 +58,7 @@ const LEADER_COUNTERS: [LeaderField; 18] = [
     ),
     ("sets_sent", "sets handed to other leaders", |s| s.sets_sent),
     ("follows", "follow requests to the sensor", |s| s.follows),
+    ("unfollows", "unfollow requests to the sensor", |s| s.unfollows),
     ("omp_runs", "OMP runs on this leader's sets", |s| s.omp_runs),
     ("duplicates", "batches and transfers that came twice", |s| {
         s.duplicates

@@ -64,7 +64,7 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
         // The leader holds components instead ([`start_factored`]); it
         // starts following its own tracks, the tracks of its components.
         share.extract(|_| true);
-        let mut interest = Interest::new(me, tracks, false);
+        let mut interest = Interest::new(me, tracks, false).fixed();
         interest.note(&Item::Begin(begin.clone()));
         return Ok((share, interest));
     }

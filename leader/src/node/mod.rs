@@ -44,7 +44,7 @@ use crate::journal::Kind;
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
 use std::collections::BTreeMap;
@@ -134,6 +134,9 @@ pub enum Output {
     /// Ask the sensor to follow tracks; its answer comes back as
     /// [`Input::Followed`].
     AskFollow(Follow),
+    /// Tell the sensor to stop following tracks; nothing comes back (a
+    /// lost request costs items the leader ignores).
+    Unfollow(Unfollow),
     /// Ask the sensor for batches again; [`Input::Resent`].
     AskResend(Resend),
     /// Ask a peer for the transfers it sent here; [`Input::Transfers`].
@@ -365,6 +368,7 @@ impl Node {
                     self.following = false;
                     self.ask_follow(out);
                 }
+                Action::Unfollow(unfollow) => out.push(Output::Unfollow(unfollow)),
                 Action::CutReady(partial) => {
                     let ready: Vec<Held> =
                         self.held.extract_if(.., |h| h.tag == partial.tag).collect();

@@ -2,7 +2,7 @@
 //! `Begin`, mixes, observations, handovers, identity reads and cuts;
 //! local sparsification after each item (Section 5.4.3).
 
-use super::transfers::{wire_row, NOT_HELD};
+use super::transfers::{tracks_of, wire_row, NOT_HELD};
 use super::*;
 
 impl Leader {
@@ -107,7 +107,9 @@ impl Leader {
                         }
                         None => Vec::new(),
                     };
-                    self.send_homeless(seq, to, row, actions)?;
+                    let mut gone = self.send_homeless(seq, to, row, actions)?;
+                    gone.push(track);
+                    self.unfollow(seq, gone, actions)?;
                 } else if to == me {
                     *slot = true;
                     self.waiting = Some(Waiting::Transfer { seq, from });
@@ -220,7 +222,9 @@ impl Leader {
         }
         if has_a || has_b {
             let components = held.take(|tracks| tracks.contains(&mix.a) || tracks.contains(&mix.b));
+            let gone = tracks_of(&components);
             self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
+            self.unfollow(seq, gone, actions)?;
         }
         Ok(())
     }

@@ -39,7 +39,7 @@ use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use idmesh_protocol::wire::VERSION;
 use serde::{Deserialize, Serialize};
@@ -61,6 +61,9 @@ pub enum Action {
     /// Ask the sensor to follow more tracks; answer with
     /// [`Leader::followed`].
     Follow(Follow),
+    /// Tell the sensor to stop routing these tracks here (fire and
+    /// forget: a lost request costs items, not answers).
+    Unfollow(Unfollow),
     /// The partial sums at a cut are ready.
     CutReady(Partial),
 }

@@ -394,10 +394,81 @@ fn components_of_one_mix_in_two_transfers_have_all_their_tracks_followed() {
         })
         .collect();
     assert_eq!(followed.len(), 1, "{second:?}");
+    // Every track it holds but does not surveil: no mix grows a factored
+    // interest, so 1 and 2 (the mixes' partners) are asked for too.
     assert_eq!(
         (followed[0].after, &followed[0].tracks[..]),
-        (5, &[3, 4][..])
+        (5, &[1, 2, 3, 4][..])
     );
     let held = leader.factored().unwrap();
     assert_eq!(held.held_tracks().collect::<Vec<_>>(), vec![0, 1, 2, 3, 4]);
+}
+
+/// A factored leader's interest is its own tracks and its components'
+/// tracks: once a component leaves, the tracks it neither surveils nor
+/// holds any more are unfollowed, and its interest shrinks back.
+#[test]
+fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
+    let Item::Begin(mut start) = begin(&["a", "b"], vec![0, 1, 1]) else {
+        unreachable!()
+    };
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+    });
+    let mut leader = Leader::new("a");
+    leader
+        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
+        .unwrap();
+    // Seq 3: a surveils track 0, so it gathers {0} and b's {1}.
+    leader
+        .batch(batch(1, vec![(3, mix(0, 1, 0, 1))], 3, false), 0)
+        .unwrap();
+    let actions = leader
+        .transfer(
+            Transfer {
+                version: VERSION,
+                from: 1,
+                seq: 3,
+                sets: Vec::new(),
+                rows: Vec::new(),
+                components: vec![WireComponent {
+                    table: vec![0.5, 0.5],
+                    last_mix: vec![0],
+                    log_scale: 0.0,
+                    tracks: vec![1],
+                }],
+            },
+            0,
+        )
+        .unwrap();
+    assert!(
+        matches!(&actions[..], [Action::Follow(f)] if f.tracks == [1]),
+        "{actions:?}"
+    );
+    leader.followed(Vec::new()).unwrap();
+    assert_eq!(leader.stats().tracks_followed, 2);
+    // Seq 7: b surveils track 1 and gathers {0, 1} and {2}: a keeps
+    // following its own track 0, and unfollows 1.
+    let actions = leader
+        .batch(batch(2, vec![(7, mix(1, 2, 1, 1))], 7, true), 0)
+        .unwrap();
+    let unfollows: Vec<&Unfollow> = actions
+        .iter()
+        .filter_map(|a| match a {
+            Action::Unfollow(u) => Some(u),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        actions
+            .iter()
+            .any(|a| matches!(a, Action::Send { to: 1, .. })),
+        "{actions:?}"
+    );
+    assert_eq!(unfollows.len(), 1, "{actions:?}");
+    assert_eq!((unfollows[0].after, &unfollows[0].tracks[..]), (7, &[1][..]));
+    let stats = leader.stats();
+    assert_eq!((stats.tracks_followed, stats.unfollows), (1, 1));
 }

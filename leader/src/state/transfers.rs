@@ -38,19 +38,22 @@ impl Leader {
 
     /// Takes out the sets with none of this leader's tracks (but not φ_∅),
     /// or on a factored stream the components with none of them, and sends
-    /// them, with `rows`, to `to` as the transfer of item `seq`.
+    /// them, with `rows`, to `to` as the transfer of item `seq`. Returns
+    /// the tracks of the components sent.
     pub(super) fn send_homeless(
         &mut self,
         seq: u64,
         to: u16,
         rows: Vec<WireRow>,
         actions: &mut Vec<Action>,
-    ) -> Result<(), LeaderError> {
+    ) -> Result<Vec<u32>, LeaderError> {
         let started = self.started()?;
         let own = &started.own;
         if let Some(held) = &mut started.factored {
             let components = held.take(|tracks| !tracks.iter().any(|&t| own[t as usize]));
-            return self.send(seq, to, Vec::new(), rows, components, actions);
+            let tracks = tracks_of(&components);
+            self.send(seq, to, Vec::new(), rows, components, actions)?;
+            return Ok(tracks);
         }
         let sets: Vec<WireSet> = started
             .share
@@ -65,7 +68,8 @@ impl Leader {
                 ln_mass,
             })
             .collect();
-        self.send(seq, to, sets, rows, Vec::new(), actions)
+        self.send(seq, to, sets, rows, Vec::new(), actions)?;
+        Ok(Vec::new())
     }
 
     /// Sends `to` the transfer of item `seq` (kept for a restarted peer).
@@ -220,6 +224,45 @@ impl Leader {
             .collect())
     }
 
+    /// Of `candidates`, the tracks this leader no longer needs since item
+    /// `seq` — it neither surveils them nor holds their component (it sent
+    /// it away, or the track left its region) — leave its interest, and
+    /// the sensor is told to stop routing them here. A factored stream
+    /// only: a Radon interest only grows.
+    pub(super) fn unfollow(
+        &mut self,
+        seq: u64,
+        candidates: Vec<u32>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let Some(held) = &started.factored else {
+            return Ok(());
+        };
+        let (own, interest) = (&started.own, &mut started.interest);
+        let mut tracks: Vec<u32> = candidates
+            .into_iter()
+            .filter(|&t| {
+                !own.get(t as usize).copied().unwrap_or(false)
+                    && !held.holds(t)
+                    && interest.remove(t)
+            })
+            .collect();
+        if tracks.is_empty() {
+            return Ok(());
+        }
+        tracks.sort_unstable();
+        self.stats.unfollows += 1;
+        actions.push(Action::Unfollow(Unfollow {
+            version: VERSION,
+            leader: me,
+            after: seq,
+            tracks,
+        }));
+        Ok(())
+    }
+
     /// Asks the sensor to follow `tracks` from item `seq` on, and waits
     /// for its answer.
     pub(super) fn follow(
@@ -242,6 +285,14 @@ impl Leader {
         self.waiting = Some(Waiting::Follow { seq });
         Ok(())
     }
+}
+
+/// Every track of `components`.
+pub(super) fn tracks_of(components: &[HeldComponent]) -> Vec<u32> {
+    components
+        .iter()
+        .flat_map(|c| c.tracks.iter().copied())
+        .collect()
 }
 
 /// An owned track's row is missing: the state is broken.

@@ -18,7 +18,7 @@ use crate::wire::bounds::Bounds;
 use crate::wire::coordinator_to_leader::Partial;
 use crate::wire::coordinator_to_sensor::CutPlaced;
 use crate::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use crate::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
+use crate::wire::leader_to_sensor::{Follow, Followed, Resend, Resent, Unfollow};
 use crate::wire::sensor_to_leader::{Batch, Item};
 use crate::wire::{decode, encode, Valid};
 use serde::de::DeserializeOwned;
@@ -35,6 +35,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("transfer", transfer),
     ("followed", followed),
     ("follow", follow),
+    ("unfollow", unfollow),
     ("resend", resend),
     ("resent", resent),
     ("transfers_wanted", transfers_wanted),
@@ -77,6 +78,7 @@ fn accepts(name: &str, bytes: &[u8]) -> bool {
         "transfer" => decode::<Transfer>(bytes).is_ok(),
         "followed" => decode::<Followed>(bytes).is_ok(),
         "follow" => decode::<Follow>(bytes).is_ok(),
+        "unfollow" => decode::<Unfollow>(bytes).is_ok(),
         "resend" => decode::<Resend>(bytes).is_ok(),
         "resent" => decode::<Resent>(bytes).is_ok(),
         "transfers_wanted" => decode::<TransfersWanted>(bytes).is_ok(),
@@ -145,6 +147,10 @@ pub fn followed(bytes: &[u8]) {
 
 pub fn follow(bytes: &[u8]) {
     message::<Follow>(bytes, |_| {});
+}
+
+pub fn unfollow(bytes: &[u8]) {
+    message::<Unfollow>(bytes, |_| {});
 }
 
 pub fn resend(bytes: &[u8]) {

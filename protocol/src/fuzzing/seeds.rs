@@ -8,7 +8,7 @@
 use crate::wire::coordinator_to_leader::Partial;
 use crate::wire::coordinator_to_sensor::CutPlaced;
 use crate::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted, WireRow, WireSet};
-use crate::wire::leader_to_sensor::{Follow, Followed, Resend, Resent};
+use crate::wire::leader_to_sensor::{Follow, Followed, Resend, Resent, Unfollow};
 use crate::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use crate::wire::{encode, VERSION};
 
@@ -26,6 +26,12 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
             leader: 1,
             after: 12,
             tracks: vec![2, 5, 7],
+        })],
+        "unfollow" => vec![encode(&Unfollow {
+            version: VERSION,
+            leader: 2,
+            after: 40,
+            tracks: vec![1, 6],
         })],
         "resend" => vec![encode(&Resend {
             version: VERSION,

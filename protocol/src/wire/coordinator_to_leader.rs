@@ -50,6 +50,10 @@ pub struct LeaderStats {
     pub sets_sent: u64,
     pub bytes_sent: u64,
     pub follows: u64,
+    /// Unfollow requests to the sensor (a factored stream: tracks whose
+    /// components left this leader).
+    #[serde(default)]
+    pub unfollows: u64,
     /// OMP runs on this leader's sets (the overcomplete method).
     pub omp_runs: u64,
     /// Batches and transfers that came twice (dropped), and gaps in the

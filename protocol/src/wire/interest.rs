@@ -8,9 +8,17 @@
 //! the interest (a mix moves a set from a to b; an observation of t grows
 //! sets into sets with t). Sets that arrive from another leader may carry
 //! tracks beyond it: the receiver then asks the sensor to follow them
-//! ([`leader_to_sensor`](super::leader_to_sensor)). An interest only grows;
-//! pruning can leave it larger than the sets need, which costs traffic, not
-//! correctness.
+//! ([`leader_to_sensor`](super::leader_to_sensor)). On a Radon stream an
+//! interest only grows; pruning can leave it larger than the sets need,
+//! which costs traffic, not correctness.
+//!
+//! On a factored stream ([`Interest::fixed`]) no item grows it: a leader
+//! needs exactly the tracks it surveils and the tracks of the components
+//! it holds, so its interest changes only by the `Begin`, handovers, and
+//! its own follow and unfollow requests. That is what lets it shrink: a
+//! leader that sent a component away unfollows its tracks, and a crowd
+//! that mixes everything with everything does not end with every leader
+//! following every track.
 
 use super::sensor_to_leader::{Growth, Item};
 
@@ -28,6 +36,9 @@ pub struct Interest {
     /// (conditioning multiplies it by the likelihood of its implicit
     /// colour), whatever the distributed rule says of growth.
     saturation: usize,
+    /// Whether mixes and observations grow the interest (a Radon stream),
+    /// or only the `Begin`, handovers and requests do (a factored one).
+    grows: bool,
 }
 
 impl Interest {
@@ -38,7 +49,20 @@ impl Interest {
             count: 0,
             holds_empty,
             saturation: usize::MAX,
+            grows: true,
         }
+    }
+
+    /// The same interest for a factored stream: no mix or observation
+    /// grows it (see the module docs).
+    pub fn fixed(mut self) -> Self {
+        self.grows = false;
+        self
+    }
+
+    /// Whether items grow this interest (false on a factored stream).
+    pub fn grows(&self) -> bool {
+        self.grows
     }
 
     /// The same interest for a field where sets of `size` tracks may fix
@@ -72,6 +96,18 @@ impl Interest {
             Some(slot) if !*slot => {
                 *slot = true;
                 self.count += 1;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Drops a track; false if it was not followed.
+    pub fn remove(&mut self, track: u32) -> bool {
+        match self.follows.get_mut(track as usize) {
+            Some(slot) if *slot => {
+                *slot = false;
+                self.count -= 1;
                 true
             }
             _ => false,
@@ -124,6 +160,7 @@ impl Interest {
                     }
                 }
             }
+            Item::Mix { .. } | Item::Observe { .. } if !self.grows => {}
             Item::Mix { a, b, .. } => {
                 if self.follows(*a) || self.follows(*b) {
                     self.add(*a);
@@ -191,6 +228,23 @@ mod tests {
         assert!(i.receives(&observe(1, vec![4])));
         i.note(&observe(1, vec![4]));
         assert!(i.follows(1));
+    }
+
+    #[test]
+    fn a_fixed_interest_is_not_grown_by_items_and_can_shrink() {
+        let mut i = Interest::new(0, 6, false).fixed();
+        i.add(2);
+        assert!(i.receives(&mix(2, 5)));
+        i.note(&mix(2, 5));
+        assert!(!i.follows(5) && i.len() == 1);
+        i.note(&Item::Handover {
+            track: 4,
+            from: 1,
+            to: 0,
+        });
+        assert!(i.follows(4) && i.len() == 2);
+        assert!(i.remove(2) && !i.remove(2));
+        assert!(!i.follows(2) && i.len() == 1);
     }
 
     /// With k = 2 of 6, a leader following two tracks may hold {a, b} red,

@@ -24,6 +24,24 @@ pub struct Followed {
 }
 super::versioned!(Followed, "follow reply");
 
+/// A leader of a factored stream no longer needs these tracks' events: it
+/// neither surveils them nor holds a component with them, since item
+/// `after` (it sent their components away, or a track left its region).
+/// Fire and forget (the payload of a get on `P/sensor/<name>/unfollow`,
+/// whose reply says only how many tracks were dropped): a lost request
+/// costs items the leader ignores, never an answer. The sensor drops a
+/// track only if it was last followed for this leader before `after` — a
+/// request that arrives late, after the leader followed the track again
+/// (a component came back, a handover), must not undo that.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Unfollow {
+    pub version: u16,
+    pub leader: u16,
+    pub after: u64,
+    pub tracks: Vec<u32>,
+}
+super::versioned!(Unfollow, "unfollow request");
+
 /// A leader that lost batches of its stream (a gap in their numbers, or
 /// the time it was down) asks for them again: every batch numbered `from`
 /// or later that the sensor sent it (postcard, the payload of a get on

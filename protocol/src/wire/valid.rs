@@ -12,7 +12,7 @@
 use super::coordinator_to_leader::Partial;
 use super::coordinator_to_sensor::CutPlaced;
 use super::leader_to_leader::{Transfer, TransfersSent, TransfersWanted, WireRow, WireSet};
-use super::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
+use super::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent, Unfollow};
 use super::sensor_to_leader::{Batch, Begin, Item, Sequenced};
 use super::{Versioned, WireError};
 
@@ -335,6 +335,12 @@ impl Valid for TransfersSent {
 impl Valid for Follow {
     fn problem(&self) -> Option<String> {
         distinct("follow tracks", &self.tracks).err()
+    }
+}
+
+impl Valid for Unfollow {
+    fn problem(&self) -> Option<String> {
+        distinct("unfollow tracks", &self.tracks).err()
     }
 }
 

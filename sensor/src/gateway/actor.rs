@@ -123,6 +123,10 @@ pub async fn run(
         .declare_queryable(keys.sensor_follow(&config.name))
         .await
         .map_err(mesh("declare the follow queryable"))?;
+    let unfollows = session
+        .declare_queryable(keys.sensor_unfollow(&config.name))
+        .await
+        .map_err(mesh("declare the unfollow queryable"))?;
     let resends = session
         .declare_queryable(keys.sensor_resend(&config.name))
         .await
@@ -242,6 +246,13 @@ pub async fn run(
                 if followed {
                     wire.flush(&mut gateway).await;
                 }
+            }
+            query = unfollows.recv_async() => {
+                let Ok(query) = query else { break };
+                // Dropping tracks can only mean fewer items from now on:
+                // nothing to flush, and the reply is only a count.
+                let answer = gateway.unfollow(&payload(&query)).map(|n| n as u64);
+                reply_to(&query, answer, "unfollow").await;
             }
             sample = durables.recv_async() => {
                 let Ok(sample) = sample else { break };

@@ -16,7 +16,9 @@ use super::ingest::{Ingest, IngestRefusal, Offer};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent};
+use idmesh_protocol::wire::leader_to_sensor::{
+    Durable, Follow, Followed, Resend, Resent, Unfollow,
+};
 use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, VERSION};
@@ -199,6 +201,17 @@ impl<Q> Gateway<Q> {
                 items,
             });
         self.count("follow", &answer);
+        answer
+    }
+
+    /// A leader of a factored stream stops following tracks (`Unfollow`
+    /// bytes): how many it dropped (a stale request drops none), or why
+    /// not (counted).
+    pub fn unfollow(&mut self, bytes: &[u8]) -> Result<usize, String> {
+        let answer = decode::<Unfollow>(bytes)
+            .map_err(|e| e.to_string())
+            .and_then(|u| self.router.unfollow(&u).map_err(|e| e.to_string()));
+        self.count("unfollow", &answer);
         answer
     }
 

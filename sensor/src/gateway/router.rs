@@ -17,7 +17,7 @@ use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
-use idmesh_protocol::wire::leader_to_sensor::Follow;
+use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
 use idmesh_protocol::Header;
 
@@ -45,10 +45,12 @@ pub struct RouterConfig {
 pub enum RouterError {
     #[error("a deployment needs at least one leader")]
     NoLeaders,
-    #[error("follow request from leader index {0}, which does not exist")]
+    #[error("request from leader index {0}, which does not exist")]
     UnknownLeader(u16),
-    #[error("follow request names track {track}, but there are {tracks} tracks")]
+    #[error("request names track {track}, but there are {tracks} tracks")]
     UnknownTrack { track: u32, tracks: u32 },
+    #[error("unfollow request on a Radon stream, whose leaders' interests only grow")]
+    Unfollow,
     #[error("OMP at the leaders needs {0}")]
     Omp(&'static str),
     #[error(transparent)]
@@ -66,6 +68,10 @@ pub struct Router {
     header: Header,
     begin: Begin,
     interests: Vec<Interest>,
+    /// For each leader and track, the item after which the track last
+    /// entered its interest (a handover to it, a follow request): an
+    /// unfollow request decided before then is stale.
+    followed_at: Vec<Vec<u64>>,
     owners: Vec<u16>,
     /// Each track's last `move` (the live map's positions query).
     positions: Vec<Option<[f64; 2]>>,
@@ -119,6 +125,7 @@ impl Router {
             begin: begin.clone(),
             header: header.clone(),
             interests,
+            followed_at: vec![vec![0; tracks]; leaders],
             mixing_log: MixingLog::new(tracks),
             seq: 0,
             events: 0,
@@ -256,6 +263,9 @@ impl Router {
 
     fn route(&mut self, item: Item) {
         let seq = self.next_seq();
+        if let Item::Handover { track, to, .. } = item {
+            self.followed_at[to as usize][track as usize] = seq;
+        }
         for (interest, outbox) in self.interests.iter_mut().zip(&mut self.outbox) {
             if interest.receives(&item) {
                 interest.note(&item);
@@ -317,8 +327,13 @@ impl Router {
             return Err(RouterError::UnknownTrack { track, tracks });
         }
         let mut grown = Interest::new(follow.leader, tracks as usize, false);
+        if !self.interests[leader].grows() {
+            grown = grown.fixed();
+        }
         for &t in &follow.tracks {
             grown.add(t);
+            let at = &mut self.followed_at[leader][t as usize];
+            *at = (*at).max(follow.after);
         }
         // Grown this far, the leader may hold a set that fixes every track
         // (see `Interest::saturated`): then it needs every observation it
@@ -348,6 +363,31 @@ impl Router {
             interest.add(t);
         }
         Ok(missed)
+    }
+
+    /// A leader of a factored stream no longer needs some tracks' events
+    /// since item `after`: each is dropped from its interest unless it
+    /// entered it again at or after `after` (the request is then stale;
+    /// requests are fire and forget, so they may come late or twice).
+    /// Returns how many tracks were dropped.
+    pub fn unfollow(&mut self, unfollow: &Unfollow) -> Result<usize, RouterError> {
+        let leader = unfollow.leader as usize;
+        let tracks = self.begin.tracks;
+        let Some(interest) = self.interests.get_mut(leader) else {
+            return Err(RouterError::UnknownLeader(unfollow.leader));
+        };
+        if let Some(&track) = unfollow.tracks.iter().find(|&&t| t >= tracks) {
+            return Err(RouterError::UnknownTrack { track, tracks });
+        }
+        if interest.grows() {
+            return Err(RouterError::Unfollow);
+        }
+        let since = &self.followed_at[leader];
+        Ok(unfollow
+            .tracks
+            .iter()
+            .filter(|&&t| since[t as usize] < unfollow.after && interest.remove(t))
+            .count())
     }
 
     /// Every leader has its state safe through item `seq`: no follow

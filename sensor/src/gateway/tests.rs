@@ -6,7 +6,7 @@ use super::core::{CutOutcome, Gateway};
 use super::cuts::CutParameters;
 use super::router::{LeaderPlace, Router, RouterConfig};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item};
 use idmesh_protocol::wire::{encode, VERSION};
 
@@ -543,4 +543,83 @@ fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() 
         };
         assert_eq!((seqs(&a), seqs(&b)), expected, "identities {identities:?}");
     }
+}
+
+/// A factored stream's interest changes only by requests and handovers: a
+/// mix grows nobody's; an unfollow drops a track unless the track entered
+/// the interest again at or after the request's item (a late request must
+/// not undo a later follow or handover); a Radon stream refuses one.
+#[test]
+fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let mut header = Header::new(6);
+    header.red = Some(2);
+    let factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+    });
+    // Placed as in `router`: a at (0, 0), b at (10, 0).
+    let mut config = unplaced(factored);
+    config.leaders[1].at = Some((10.0, 0.0));
+    config.leaders[0].at = Some((0.0, 0.0));
+    let routes = Router::new(config, &header).unwrap();
+    let mut gateway: Gateway<()> = Gateway::new("s", routes, false);
+    gateway.flush();
+    let follow = |after, tracks: Vec<u32>| {
+        encode(&Follow {
+            version: VERSION,
+            leader: 0,
+            after,
+            tracks,
+        })
+    };
+    let unfollow = |after, tracks: Vec<u32>| {
+        encode(&Unfollow {
+            version: VERSION,
+            leader: 0,
+            after,
+            tracks,
+        })
+    };
+    gateway.line(&mix(0, 1)); // seq 2: a (0) and b (1)
+    gateway.line(&mix(1, 3)); // seq 3: b's alone, a is not grown by seq 2
+    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!(seqs(&a), [2]);
+    // a gathered {0, 1} at seq 2 and follows 1 from there.
+    let followed = gateway.follow(&follow(2, vec![1])).unwrap();
+    assert_eq!(followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(), [3]);
+    // A request decided before that follow (seq 2) is stale.
+    assert_eq!(gateway.unfollow(&unfollow(2, vec![1])), Ok(0));
+    gateway.line(&observe(1)); // seq 4
+    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!(seqs(&a), [4]);
+    // At seq 4 a sent {0, 1} away: 1 goes, twice is harmless.
+    assert_eq!(gateway.unfollow(&unfollow(4, vec![1])), Ok(1));
+    assert_eq!(gateway.unfollow(&unfollow(4, vec![1])), Ok(0));
+    gateway.line(&observe(1)); // seq 5
+    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert!(seqs(&a).is_empty());
+    // Track 3 walks over to a (seq 6): a request from before it keeps it.
+    gateway.line(&Line::Move(Move {
+        time: 0.0,
+        track: 3,
+        x: 0.0,
+        y: 0.0,
+    }));
+    gateway.flush();
+    assert_eq!(gateway.unfollow(&unfollow(5, vec![3])), Ok(0));
+    gateway.line(&observe(3)); // seq 7
+    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    assert_eq!(seqs(&a), [7]);
+    assert!(gateway
+        .unfollow(&unfollow(9, vec![6]))
+        .unwrap_err()
+        .contains("track 6"));
+    assert_eq!(gateway.stats().rejected, 1);
+
+    let mut radon: Gateway<()> = Gateway::new("s", router(6, 2, true), false);
+    assert!(radon
+        .unfollow(&unfollow(2, vec![1]))
+        .unwrap_err()
+        .contains("Radon"));
 }

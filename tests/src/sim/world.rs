@@ -89,6 +89,8 @@ pub enum ToSensor {
         bytes: Vec<u8>,
     },
     Durable(Vec<u8>),
+    /// A leader stops following tracks (fire and forget).
+    Unfollow(Vec<u8>),
     /// The coordinator asks for a cut (from = usize::MAX).
     Cut {
         id: u64,
@@ -209,9 +211,10 @@ pub struct Tally {
     pub messages: u64,
     pub dropped: u64,
     /// Summed over the leaders at the end: transfers received, follow
-    /// requests made, handovers applied.
+    /// and unfollow requests made, handovers applied.
     pub transfers: u64,
     pub follows: u64,
+    pub unfollows: u64,
     pub handovers: u64,
     /// Schedules whose leaders held the factored belief.
     pub factored: u64,
@@ -550,7 +553,7 @@ impl World {
         );
     }
 
-    fn at_sensor(&mut self, from: usize, what: ToSensor) {
+    fn at_sensor(&mut self, from: usize, what: ToSensor) -> Result<(), Violation> {
         match what {
             ToSensor::Follow { ask, bytes } => {
                 let answer = self.gateway.follow(&bytes);
@@ -569,6 +572,12 @@ impl World {
                 self.reply_leader(from, ask, answer);
             }
             ToSensor::Durable(bytes) => self.gateway.durable(&bytes, "sim"),
+            // A leader's own request is well formed: a refusal is a bug.
+            ToSensor::Unfollow(bytes) => {
+                self.gateway.unfollow(&bytes).map_err(|e| {
+                    Violation::new(format!("the sensor refused leader {from}'s unfollow: {e}"))
+                })?;
+            }
             ToSensor::Cut { id, parameters } => match self.gateway.cut(id, &parameters) {
                 CutOutcome::Placed(p) => {
                     self.flush();
@@ -578,6 +587,7 @@ impl World {
                 CutOutcome::Refused(id, why) => self.reply_cut(id, Err(why)),
             },
         }
+        Ok(())
     }
 
     fn reply_leader(&mut self, to: usize, ask: u64, reply: Result<Vec<u8>, String>) {
@@ -737,6 +747,14 @@ impl World {
                         },
                     );
                 }
+                Output::Unfollow(unfollow) => self.send(
+                    Endpoint::Leader(i),
+                    Endpoint::Sensor,
+                    Msg::Sensor {
+                        from: i,
+                        what: ToSensor::Unfollow(encode(&unfollow)),
+                    },
+                ),
                 Output::AskResend(resend) => {
                     let ask = self.ask(i, AskKind::Resend);
                     self.send(
@@ -1113,6 +1131,7 @@ impl World {
             let stats = node.leader().stats();
             self.tally.transfers += stats.transfers_received;
             self.tally.follows += stats.follows;
+            self.tally.unfollows += stats.unfollows;
             self.tally.handovers += stats.handovers;
             let due = self.routed[i].range(..=stats.position).count() as u64;
             if stats.items != due {
@@ -1137,10 +1156,7 @@ impl World {
     fn deliver(&mut self, msg: Msg) -> Result<(), Violation> {
         match msg {
             Msg::Leader { to, what } => self.at_leader(to, what),
-            Msg::Sensor { from, what } => {
-                self.at_sensor(from, what);
-                Ok(())
-            }
+            Msg::Sensor { from, what } => self.at_sensor(from, what),
             Msg::Coordinator(what) => self.at_coordinator(what),
         }
     }
