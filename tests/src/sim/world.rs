@@ -17,7 +17,7 @@ use idmesh_leader::journal::Kind;
 use idmesh_leader::node::{Ask, Input, Node, Output, Timers};
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::leader_to_leader::TransfersSent;
-use idmesh_protocol::wire::leader_to_sensor::Resent;
+use idmesh_protocol::wire::leader_to_sensor::{Followed, Resent};
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode};
@@ -557,8 +557,10 @@ impl World {
         match what {
             ToSensor::Follow { ask, bytes } => {
                 let answer = self.gateway.follow(&bytes);
-                if let Ok(followed) = &answer {
-                    self.routed[from].extend(followed.items.iter().map(|s| s.seq));
+                // Its items count as routed once the leader takes the
+                // reply ([`World::answer_ask`]): one lost on the way, or a
+                // duplicate request's, never reaches it.
+                if answer.is_ok() {
                     self.flush();
                 }
                 self.reply_leader(from, ask, answer.map(|f| encode(&f)));
@@ -876,7 +878,13 @@ impl World {
             return Ok(());
         }
         let input = match pending.kind {
-            AskKind::Follow => Input::Followed(reply),
+            AskKind::Follow => {
+                if let Ok(followed) = reply.as_deref().map(decode::<Followed>) {
+                    let followed = followed.map_err(|e| Violation::new(e.to_string()))?;
+                    self.routed[i].extend(followed.items.iter().map(|s| s.seq));
+                }
+                Input::Followed(reply)
+            }
             AskKind::Resend => Input::Resent(reply.and_then(|bytes| {
                 decode::<Resent>(&bytes)
                     .map(|r| r.batches)
