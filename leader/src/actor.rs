@@ -289,17 +289,14 @@ impl Driver<'_> {
                     encode(&follow),
                     Input::Followed,
                 ),
+                // Fire and forget: a lost request costs items this leader
+                // ignores, never an answer.
                 Output::Unfollow(unfollow) => {
-                    let (session, timeout) = (self.session.clone(), self.config.follow_timeout);
                     let key = keys.sensor_unfollow(&self.config.sensor);
-                    tokio::spawn(async move {
-                        match ask(&session, &key, encode(&unfollow), timeout).await {
-                            Ok(_) => tracing::trace!(tracks = ?unfollow.tracks, "unfollowed"),
-                            // Only traffic: the sensor goes on routing
-                            // items this leader ignores.
-                            Err(e) => tracing::debug!(error = %e, "an unfollow request was lost"),
-                        }
-                    });
+                    let put = self.session.put(key, encode(&unfollow));
+                    if let Err(e) = put.congestion_control(CongestionControl::Drop).await {
+                        tracing::debug!(leader = %name, error = %e, "an unfollow request was lost");
+                    }
                 }
                 Output::AskResend(resend) => self.ask(
                     keys.sensor_resend(&self.config.sensor),

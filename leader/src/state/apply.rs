@@ -109,7 +109,7 @@ impl Leader {
                     };
                     let mut gone = self.send_homeless(seq, to, row, actions)?;
                     gone.push(track);
-                    self.unfollow(seq, gone, actions)?;
+                    self.unfollow(seq, gone)?;
                 } else if to == me {
                     *slot = true;
                     self.waiting = Some(Waiting::Transfer { seq, from });
@@ -224,7 +224,7 @@ impl Leader {
             let components = held.take(|tracks| tracks.contains(&mix.a) || tracks.contains(&mix.b));
             let gone = tracks_of(&components);
             self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
-            self.unfollow(seq, gone, actions)?;
+            self.unfollow(seq, gone)?;
         }
         Ok(())
     }

@@ -110,8 +110,17 @@ impl Leader {
         self.advance()
     }
 
-    /// Applies queued items in seq order until one must wait.
+    /// Applies queued items in seq order until one must wait; then asks
+    /// the sensor once to stop routing what the leader no longer needs.
     pub(super) fn advance(&mut self) -> Result<Vec<Action>, LeaderError> {
+        let mut actions = self.apply_queued()?;
+        if self.started.is_some() {
+            self.flush_unfollows(&mut actions)?;
+        }
+        Ok(actions)
+    }
+
+    fn apply_queued(&mut self) -> Result<Vec<Action>, LeaderError> {
         let mut actions = Vec::new();
         loop {
             match self.waiting {

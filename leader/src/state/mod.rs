@@ -135,6 +135,10 @@ pub struct Leader {
     /// A batch held ahead before the Begin was refused once the Begin
     /// came: the sensor is asked for it again at once, not at the next gap.
     refetch: bool,
+    /// Tracks left the interest (a factored stream) and not yet told the
+    /// sensor, and the item of the last of them.
+    unfollowing: Vec<u32>,
+    unfollow_after: u64,
 }
 
 impl Leader {
@@ -162,6 +166,8 @@ impl Leader {
             events: 0,
             finished: false,
             refetch: false,
+            unfollowing: Vec::new(),
+            unfollow_after: 0,
         }
     }
 

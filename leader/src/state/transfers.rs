@@ -227,37 +227,52 @@ impl Leader {
     /// Of `candidates`, the tracks this leader no longer needs since item
     /// `seq` — it neither surveils them nor holds their component (it sent
     /// it away, or the track left its region) — leave its interest, and
-    /// the sensor is told to stop routing them here. A factored stream
-    /// only: a Radon interest only grows.
-    pub(super) fn unfollow(
-        &mut self,
-        seq: u64,
-        candidates: Vec<u32>,
-        actions: &mut Vec<Action>,
-    ) -> Result<(), LeaderError> {
-        let me = self.me()?;
+    /// the sensor will be told to stop routing them here
+    /// ([`Leader::flush_unfollows`]). A factored stream only: a Radon
+    /// interest only grows.
+    pub(super) fn unfollow(&mut self, seq: u64, candidates: Vec<u32>) -> Result<(), LeaderError> {
+        let mut pending = std::mem::take(&mut self.unfollowing);
+        let before = pending.len();
         let started = self.started()?;
-        let Some(held) = &started.factored else {
-            return Ok(());
-        };
-        let (own, interest) = (&started.own, &mut started.interest);
-        let mut tracks: Vec<u32> = candidates
-            .into_iter()
-            .filter(|&t| {
+        if let Some(held) = &started.factored {
+            let (own, interest) = (&started.own, &mut started.interest);
+            pending.extend(candidates.into_iter().filter(|&t| {
                 !own.get(t as usize).copied().unwrap_or(false)
                     && !held.holds(t)
                     && interest.remove(t)
-            })
-            .collect();
+            }));
+        }
+        if pending.len() > before {
+            self.unfollow_after = seq;
+        }
+        self.unfollowing = pending;
+        Ok(())
+    }
+
+    /// One request for every track unfollowed since the last, made when
+    /// an input has been taken in: a crowd that moves a component at
+    /// nearly every mix would otherwise ask at nearly every item. One
+    /// request for several items says `after` the last of them; a track
+    /// followed again meanwhile (a component came back, a handover) is
+    /// left out, so the request drops only tracks unneeded since then.
+    pub(super) fn flush_unfollows(&mut self, actions: &mut Vec<Action>) -> Result<(), LeaderError> {
+        if self.unfollowing.is_empty() {
+            return Ok(());
+        }
+        let me = self.me()?;
+        let mut tracks = std::mem::take(&mut self.unfollowing);
+        let interest = &self.started()?.interest;
+        tracks.retain(|&t| !interest.follows(t));
+        tracks.sort_unstable();
+        tracks.dedup();
         if tracks.is_empty() {
             return Ok(());
         }
-        tracks.sort_unstable();
         self.stats.unfollows += 1;
         actions.push(Action::Unfollow(Unfollow {
             version: VERSION,
             leader: me,
-            after: seq,
+            after: self.unfollow_after,
             tracks,
         }));
         Ok(())

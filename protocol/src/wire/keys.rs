@@ -9,7 +9,7 @@
 //! | `P/leader/<name>/stats` | leader queryable | its counters |
 //! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |
 //! | `P/sensor/<name>/follow` | sensor queryable | follow tracks, with the events missed |
-//! | `P/sensor/<name>/unfollow` | sensor queryable | stop following tracks (factored streams; fire and forget) |
+//! | `P/sensor/<name>/unfollow` | leader puts; sensor subscribes | stop following tracks (factored streams; fire and forget) |
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
 //! | `P/sensor/<name>/stats` | sensor queryable | its counters (JSON) |
 //! | `P/sensor/<name>/ingest` | sensor queryable | trace lines from any producer, acknowledged ([`producer_to_sensor`](super::producer_to_sensor)) |

@@ -27,8 +27,7 @@ super::versioned!(Followed, "follow reply");
 /// A leader of a factored stream no longer needs these tracks' events: it
 /// neither surveils them nor holds a component with them, since item
 /// `after` (it sent their components away, or a track left its region).
-/// Fire and forget (the payload of a get on `P/sensor/<name>/unfollow`,
-/// whose reply says only how many tracks were dropped): a lost request
+/// Fire and forget (put on `P/sensor/<name>/unfollow`): a lost request
 /// costs items the leader ignores, never an answer. The sensor drops a
 /// track only if it was last followed for this leader before `after` — a
 /// request that arrives late, after the leader followed the track again

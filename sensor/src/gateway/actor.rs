@@ -107,6 +107,9 @@ fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
 
 /// Streams `source` until done (a live one until `shutdown`), then serves
 /// queries until `shutdown`.
+/// Unfollow requests waiting to be taken before the oldest are dropped.
+const UNFOLLOWS_KEPT: usize = 4096;
+
 pub async fn run(
     session: Session,
     config: GatewayConfig,
@@ -123,10 +126,15 @@ pub async fn run(
         .declare_queryable(keys.sensor_follow(&config.name))
         .await
         .map_err(mesh("declare the follow queryable"))?;
+    // A ring, not a queue: when requests come faster than the loop takes
+    // them, the oldest are dropped (each only saves traffic) rather than
+    // stalling Zenoh's receiving task, and with it every request to the
+    // sensor.
     let unfollows = session
-        .declare_queryable(keys.sensor_unfollow(&config.name))
+        .declare_subscriber(keys.sensor_unfollow(&config.name))
+        .with(zenoh::handlers::RingChannel::new(UNFOLLOWS_KEPT))
         .await
-        .map_err(mesh("declare the unfollow queryable"))?;
+        .map_err(mesh("declare the unfollow subscriber"))?;
     let resends = session
         .declare_queryable(keys.sensor_resend(&config.name))
         .await
@@ -247,12 +255,17 @@ pub async fn run(
                     wire.flush(&mut gateway).await;
                 }
             }
-            query = unfollows.recv_async() => {
-                let Ok(query) = query else { break };
+            sample = unfollows.recv_async() => {
+                let Ok(sample) = sample else { break };
                 // Dropping tracks can only mean fewer items from now on:
-                // nothing to flush, and the reply is only a count.
-                let answer = gateway.unfollow(&payload(&query)).map(|n| n as u64);
-                reply_to(&query, answer, "unfollow").await;
+                // nothing to flush. A refusal is counted and logged.
+                let mut next = Some(sample);
+                while let Some(sample) = next {
+                    if let Ok(dropped) = gateway.unfollow(&sample.payload().to_bytes()) {
+                        tracing::trace!(dropped, "unfollowed");
+                    }
+                    next = unfollows.try_recv().ok().flatten();
+                }
             }
             sample = durables.recv_async() => {
                 let Ok(sample) = sample else { break };

@@ -18,6 +18,7 @@ use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
+use std::collections::VecDeque;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
 use idmesh_protocol::Header;
 
@@ -79,6 +80,12 @@ pub struct Router {
     seq: u64,
     events: u64,
     log: Vec<Sequenced>,
+    /// On a factored stream, the seqs of the logged items on each track:
+    /// a follow there wants exactly the items on its tracks, and finds
+    /// them here without a pass over the log (a crowd makes a follow at
+    /// nearly every cross-leader mix, with the log as long as the slowest
+    /// leader's lag).
+    touching: Option<Vec<VecDeque<u64>>>,
     outbox: Vec<Vec<Sequenced>>,
 }
 
@@ -130,6 +137,7 @@ impl Router {
             seq: 0,
             events: 0,
             log: Vec::new(),
+            touching: begin.factored.is_some().then(|| vec![VecDeque::new(); tracks]),
             outbox: vec![Vec::new(); leaders],
             config,
         };
@@ -275,6 +283,16 @@ impl Router {
                 });
             }
         }
+        if let Some(touching) = &mut self.touching {
+            match item {
+                Item::Mix { a, b, .. } => {
+                    touching[a as usize].push_back(seq);
+                    touching[b as usize].push_back(seq);
+                }
+                Item::Observe { track, .. } => touching[track as usize].push_back(seq),
+                _ => {}
+            }
+        }
         self.log.push(Sequenced { seq, item });
     }
 
@@ -326,14 +344,39 @@ impl Router {
         if let Some(&track) = follow.tracks.iter().find(|&&t| t >= tracks) {
             return Err(RouterError::UnknownTrack { track, tracks });
         }
-        let mut grown = Interest::new(follow.leader, tracks as usize, false);
-        if !self.interests[leader].grows() {
-            grown = grown.fixed();
-        }
         for &t in &follow.tracks {
-            grown.add(t);
             let at = &mut self.followed_at[leader][t as usize];
             *at = (*at).max(follow.after);
+        }
+        if let Some(touching) = &self.touching {
+            // A factored stream: the items on the tracks, nothing grown.
+            let mut seqs: Vec<u64> = follow
+                .tracks
+                .iter()
+                .flat_map(|&t| {
+                    let on = &touching[t as usize];
+                    on.range(on.partition_point(|&s| s <= follow.after)..)
+                })
+                .copied()
+                .collect();
+            seqs.sort_unstable();
+            seqs.dedup();
+            let missed = seqs
+                .iter()
+                .filter_map(|&seq| {
+                    let at = self.log.binary_search_by_key(&seq, |s| s.seq).ok()?;
+                    Some(self.log[at].clone())
+                })
+                .collect();
+            let interest = &mut self.interests[leader];
+            for &t in &follow.tracks {
+                interest.add(t);
+            }
+            return Ok(missed);
+        }
+        let mut grown = Interest::new(follow.leader, tracks as usize, false);
+        for &t in &follow.tracks {
+            grown.add(t);
         }
         // Grown this far, the leader may hold a set that fixes every track
         // (see `Interest::saturated`): then it needs every observation it
@@ -396,6 +439,10 @@ impl Router {
     pub fn forget(&mut self, seq: u64) -> usize {
         let through = self.log.partition_point(|s| s.seq <= seq);
         self.log.drain(..through);
+        for on in self.touching.iter_mut().flatten() {
+            let passed = on.partition_point(|&s| s <= seq);
+            on.drain(..passed);
+        }
         through
     }
 

@@ -16,7 +16,9 @@
 //! | sensor S | leaders | put | `P/leader/*/events` |
 //! | sensor S | leaders | liveliness query | `P/alive/leader/*` |
 //! | leader L | leaders | put, query | `P/leader/*/transfer`, `P/leader/*/sent` |
-//! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/unfollow`, `P/sensor/*/resend` |
+//! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/resend` |
+//! | leader L | sensor | put | `P/sensor/*/unfollow` (tracks it no longer needs) |
+//! | sensor | leaders | declare subscriber | `P/sensor/*/unfollow` |
 //! | leader L | sensor, leaders | put | `P/leader/*/durable` (how far it is safe) |
 //! | sensor, leaders | leaders | declare subscriber | `P/leader/*/durable` |
 //! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership), `P/alive/home/*` (a process back for its adopted role) |
@@ -96,11 +98,21 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             &leaders,
             &sensor,
             &["query"],
-            vec![
-                keys.sensor_follow("*"),
-                keys.sensor_unfollow("*"),
-                keys.sensor_resend("*"),
-            ],
+            vec![keys.sensor_follow("*"), keys.sensor_resend("*")],
+        ),
+        grant(
+            "unfollow",
+            &leaders,
+            &sensor,
+            &["put"],
+            vec![keys.sensor_unfollow("*")],
+        ),
+        grant(
+            "unfollow-subscriber",
+            &sensor,
+            &leaders,
+            &["declare_subscriber"],
+            vec![keys.sensor_unfollow("*")],
         ),
         grant(
             "durable",
