@@ -80,6 +80,10 @@ pub struct BenchArgs {
     /// radon (sets, with --budget and the distributed rule).
     #[arg(long, value_enum, default_value = "factored")]
     pub belief: BeliefKind,
+    /// Factored: leaders unfollow the tracks they neither surveil nor hold
+    /// a component of (the topology's `shrink_interest`).
+    #[arg(long)]
+    pub shrink_interest: bool,
     /// Sets per leader (the Radon belief).
     #[arg(long, default_value_t = 400)]
     pub budget: u32,

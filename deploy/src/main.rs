@@ -69,6 +69,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             seed: args.seed,
             leaders: args.leaders,
             belief: args.belief,
+            shrink_interest: args.shrink_interest,
             budget: args.budget,
             queries: args.queries,
             stream_rate: args.stream_rate,

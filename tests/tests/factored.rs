@@ -5,8 +5,9 @@
 //! Asked at every truth line of a crowd, the deployment's marginals equal
 //! `idmesh replay --method factored --coupling local` with the same
 //! options to 1e-9 through 1, 2, 4 and 8 leaders, from a known start and
-//! from the uniform prior; and a leader killed mid-stream and restarted
-//! from its journal changes no answer.
+//! from the uniform prior, with leaders' interests growing in half the
+//! deployments and shrinking in the other half; and a leader killed
+//! mid-stream and restarted from its journal changes no answer.
 
 use idmesh_tests::deployment::{crowd, replay_lines, truth_lines, Deployment, Settings, Truth};
 use serde_json::Value;
@@ -16,8 +17,11 @@ use std::time::Duration;
 /// The options of both sides: small components, so that splits happen.
 const MAX_COMPONENT: usize = 3;
 
-fn belief() -> String {
-    format!("belief = \"factored\"\nmax_component = {MAX_COMPONENT}\nsplit = \"original\"")
+fn belief(shrink_interest: bool) -> String {
+    format!(
+        "belief = \"factored\"\nmax_component = {MAX_COMPONENT}\nsplit = \"original\"\n\
+         shrink_interest = {shrink_interest}"
+    )
 }
 
 fn central(trace: &Path) -> Vec<Value> {
@@ -91,11 +95,11 @@ fn check_points(what: &str, deployment: &Deployment, truths: &[Truth], central: 
     );
 }
 
-fn settings(leaders: usize) -> Settings {
+fn settings(leaders: usize, shrink_interest: bool) -> Settings {
     Settings {
         leaders,
         rate: Some(300.0),
-        belief: Some(belief()),
+        belief: Some(belief(shrink_interest)),
         ..Settings::default()
     }
 }
@@ -104,18 +108,25 @@ fn settings(leaders: usize) -> Settings {
 fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
     let dir = std::env::temp_dir().join(format!("idmesh-factored-{}", std::process::id()));
     let known = crowd(&dir, 12, 4, 60.0, 5);
-    for (start, trace) in [
+    for (s, (start, trace)) in [
         ("known start", known.clone()),
         ("uniform prior", without_start(&known)),
-    ] {
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let central = central(&trace);
         let truths = truth_lines(&trace);
         assert_eq!(central.len(), truths.len());
-        for leaders in [1, 2, 4, 8] {
+        for (l, leaders) in [1, 2, 4, 8].into_iter().enumerate() {
+            let shrink = (s + l) % 2 == 1;
             let name = format!("factored{leaders}{}", start.len());
-            let deployment = Deployment::start(&name, &trace, &settings(leaders));
+            let deployment = Deployment::start(&name, &trace, &settings(leaders, shrink));
             deployment.first_answer(Duration::from_secs(30));
-            let what = format!("{start}, {leaders} leaders");
+            let what = format!(
+                "{start}, {leaders} leaders, interests {}",
+                if shrink { "shrinking" } else { "growing" }
+            );
             check_points(&what, &deployment, &truths, &central);
             let last = deployment.final_marginals(Duration::from_secs(60));
             let want = floats(&central.last().unwrap()["p_red"]);
@@ -132,6 +143,14 @@ fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
                     "{what}: {handovers} handovers, {moved} moved"
                 );
             }
+            // Components left leaders, and with them the tracks they
+            // followed; growing interests never unfollow.
+            let unfollows = deployment.leaders_total("unfollows");
+            assert_eq!(
+                unfollows > 0,
+                shrink && leaders > 1,
+                "{what}: {unfollows} unfollow requests"
+            );
             let observations = deployment.leaders_total("observations");
             let in_trace = std::fs::read_to_string(&trace)
                 .unwrap()
@@ -151,8 +170,9 @@ fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
     }
 }
 
-/// A leader killed mid-stream and restarted from its journal and snapshot:
-/// the final answer still equals the centralized one.
+/// A leader killed mid-stream and restarted from its journal and snapshot
+/// (interests shrinking: its unfollow requests, lost or made again, change
+/// nothing): the final answer still equals the centralized one.
 #[test]
 fn a_factored_leader_killed_and_restarted_changes_no_answer() {
     let dir = std::env::temp_dir().join(format!("idmesh-factored-crash-{}", std::process::id()));
@@ -165,7 +185,7 @@ fn a_factored_leader_killed_and_restarted_changes_no_answer() {
         journal: true,
         snapshot_every: Some(40),
         takeover_after_ms: Some(0),
-        belief: Some(belief()),
+        belief: Some(belief(true)),
         ..Settings::default()
     };
     let mut crashed = Deployment::start_each("factored-crash", &trace, &settings);

@@ -43,6 +43,8 @@ pub struct BenchOptions {
     pub leaders: Vec<usize>,
     /// The leaders' belief.
     pub belief: BeliefKind,
+    /// Factored: leaders' interests shrink.
+    pub shrink_interest: bool,
     /// Sets per leader (the Radon belief; the distributed rule runs with
     /// it).
     pub budget: u32,
@@ -102,8 +104,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         options.duration,
         match options.belief {
             BeliefKind::Factored => format!(
-                "the factored belief (components of at most {} tracks, local split rule)",
-                default_max_component()
+                "the factored belief (components of at most {} tracks, local split rule, leaders' interests {})",
+                default_max_component(),
+                if options.shrink_interest { "shrinking" } else { "growing" }
             ),
             BeliefKind::Radon => format!(
                 "the Radon belief, distributed rule, budget {} sets per leader",
@@ -191,6 +194,7 @@ impl Deployment {
             prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
             leaders,
             belief: options.belief,
+            shrink_interest: options.shrink_interest,
             distributed_rule: true,
             budget: options.budget,
             sparsify: Sparsification::Threshold,

@@ -188,6 +188,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         // The demo's crowd reads identities, and a stream with identities
         // holds the Radon belief (see [`BeliefKind`]): say so.
         belief: BeliefKind::Radon,
+        shrink_interest: false,
         distributed_rule: true,
         budget: 400,
         sparsify: Sparsification::Overcomplete,

@@ -15,6 +15,8 @@ pub struct Loopback {
     /// The leaders' belief on a property stream; the Radon settings below
     /// serve it under "radon", and identity streams under either.
     pub belief: BeliefKind,
+    /// Factored: leaders' interests shrink (`shrink_interest`).
+    pub shrink_interest: bool,
     pub distributed_rule: bool,
     /// Sets per leader; 0 = no pruning.
     pub budget: u32,
@@ -61,9 +63,10 @@ impl Loopback {
         let rows = self.leaders.div_ceil(columns);
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
         let mut toml = format!(
-            "prefix = {:?}\nbelief = \"{}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             self.prefix,
             self.belief.name(),
+            self.shrink_interest,
             self.distributed_rule,
             self.budget,
             match self.sparsify {
@@ -118,6 +121,7 @@ mod tests {
             prefix: "idmesh/t".into(),
             leaders: 1,
             belief: BeliefKind::Factored,
+            shrink_interest: false,
             distributed_rule: false,
             budget: 0,
             sparsify: Sparsification::Threshold,
@@ -152,6 +156,7 @@ mod tests {
             prefix: "idmesh/t".into(),
             leaders: 5,
             belief: BeliefKind::Radon,
+            shrink_interest: false,
             distributed_rule: true,
             budget: 100,
             sparsify: Sparsification::Overcomplete,

@@ -8,6 +8,8 @@
 //!                                # the coordinator; or "radon"
 //! max_component = 7              # factored: most tracks of a component
 //! split = "original"             # factored: or "recent", "least-loss"
+//! shrink_interest = false        # factored: leaders unfollow tracks they no
+//!                                # longer surveil or hold a component of
 //! # The Radon belief's settings: of every stream under belief = "radon",
 //! # and of streams with identities under "factored" (their leaders hold
 //! # the Radon belief beside the information matrix).
@@ -84,6 +86,11 @@ pub struct Topology {
     /// Factored: how a component too large to keep is split.
     #[serde(default)]
     pub split: SplitSetting,
+    /// Factored: leaders unfollow the tracks they neither surveil nor hold
+    /// a component of (else a leader follows every track a component ever
+    /// brought it).
+    #[serde(default)]
+    pub shrink_interest: bool,
     #[serde(default)]
     pub distributed_rule: bool,
     #[serde(default)]
@@ -173,6 +180,7 @@ impl Topology {
                 SplitSetting::Recent => WireSplit::Recent,
                 SplitSetting::LeastLoss => WireSplit::LeastLoss { rounds: 1 },
             },
+            shrink: self.shrink_interest,
         })
     }
 }

@@ -60,11 +60,14 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
         ..RadonOptions::default()
     };
     let mut share = RadonShare::start(field_of(begin), &options)?;
-    if begin.factored.is_some() {
+    if let Some(factored) = &begin.factored {
         // The leader holds components instead ([`start_factored`]); it
         // starts following its own tracks, the tracks of its components.
         share.extract(|_| true);
-        let mut interest = Interest::new(me, tracks, false).fixed();
+        let mut interest = Interest::new(me, tracks, false);
+        if factored.shrink {
+            interest = interest.fixed();
+        }
         interest.note(&Item::Begin(begin.clone()));
         return Ok((share, interest));
     }

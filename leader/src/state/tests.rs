@@ -348,6 +348,7 @@ fn components_of_one_mix_in_two_transfers_have_all_their_tracks_followed() {
     start.factored = Some(FactoredStart {
         max_component: 3,
         split: WireSplit::Original,
+        shrink: true,
     });
     let mut leader = Leader::new("a");
     leader
@@ -416,6 +417,7 @@ fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
     start.factored = Some(FactoredStart {
         max_component: 3,
         split: WireSplit::Original,
+        shrink: true,
     });
     let mut leader = Leader::new("a");
     leader

@@ -228,13 +228,13 @@ impl Leader {
     /// `seq` — it neither surveils them nor holds their component (it sent
     /// it away, or the track left its region) — leave its interest, and
     /// the sensor will be told to stop routing them here
-    /// ([`Leader::flush_unfollows`]). A factored stream only: a Radon
-    /// interest only grows.
+    /// ([`Leader::flush_unfollows`]). A factored stream whose interests
+    /// shrink only: others only grow.
     pub(super) fn unfollow(&mut self, seq: u64, candidates: Vec<u32>) -> Result<(), LeaderError> {
         let mut pending = std::mem::take(&mut self.unfollowing);
         let before = pending.len();
         let started = self.started()?;
-        if let Some(held) = &started.factored {
+        if let (Some(held), false) = (&started.factored, started.interest.grows()) {
             let (own, interest) = (&started.own, &mut started.interest);
             pending.extend(candidates.into_iter().filter(|&t| {
                 !own.get(t as usize).copied().unwrap_or(false)

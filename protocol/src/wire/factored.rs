@@ -18,6 +18,11 @@ pub struct FactoredStart {
     /// The most tracks of one component.
     pub max_component: u32,
     pub split: WireSplit,
+    /// Leaders' interests shrink: a leader follows exactly the tracks it
+    /// surveils and those of the components it holds, and unfollows the
+    /// rest ([`Interest::fixed`](super::interest::Interest::fixed)).
+    /// Otherwise they grow on mixes, as on a Radon stream.
+    pub shrink: bool,
 }
 
 /// How a component too large to keep is split (`belief::SplitRule`).

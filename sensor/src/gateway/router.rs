@@ -80,8 +80,9 @@ pub struct Router {
     seq: u64,
     events: u64,
     log: Vec<Sequenced>,
-    /// On a factored stream, the seqs of the logged items on each track:
-    /// a follow there wants exactly the items on its tracks, and finds
+    /// On a factored stream whose interests shrink, the seqs of the logged
+    /// items on each track: a follow there wants exactly the items on its
+    /// tracks, and finds
     /// them here without a pass over the log (a crowd makes a follow at
     /// nearly every cross-leader mix, with the log as long as the slowest
     /// leader's lag).
@@ -137,7 +138,11 @@ impl Router {
             seq: 0,
             events: 0,
             log: Vec::new(),
-            touching: begin.factored.is_some().then(|| vec![VecDeque::new(); tracks]),
+            touching: begin
+                .factored
+                .as_ref()
+                .is_some_and(|f| f.shrink)
+                .then(|| vec![VecDeque::new(); tracks]),
             outbox: vec![Vec::new(); leaders],
             config,
         };

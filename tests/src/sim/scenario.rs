@@ -87,7 +87,8 @@ impl Scenario {
         }
         let distributed_rule = rng.gen_bool(0.5);
         // A third of the schedules run the factored belief (small
-        // components, so that merges, splits and moves all happen);
+        // components, so that merges, splits and moves all happen), half
+        // of them with leaders' interests that shrink;
         // IDMESH_SIM_FACTORED=0 runs the Radon belief alone.
         let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "0") {
             0.0
@@ -101,6 +102,7 @@ impl Scenario {
                 WireSplit::Recent,
                 WireSplit::LeastLoss { rounds: 1 },
             ][rng.gen_range(0..3)],
+            shrink: rng.gen_bool(0.5),
         });
         let distributed_rule = distributed_rule && factored.is_none();
         let centralized = centralized(&header, &lines, distributed_rule, factored)?;
