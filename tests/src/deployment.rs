@@ -414,6 +414,23 @@ impl Deployment {
             .unwrap_or_else(|| panic!("{name} in the stats"))
     }
 
+    /// What each leader applied, by kind: (leader, mixes, observations,
+    /// handovers) — cuts excluded, queries place them. Equal to an
+    /// undisturbed run's, no event was lost or applied twice.
+    pub fn applied(&self) -> Vec<(String, u64, u64, u64)> {
+        self.leader_stats()
+            .iter()
+            .map(|l| {
+                (
+                    l["leader"].as_str().unwrap().to_string(),
+                    l["mixes"].as_u64().unwrap(),
+                    l["observations"].as_u64().unwrap(),
+                    l["handovers"].as_u64().unwrap(),
+                )
+            })
+            .collect()
+    }
+
     /// A counter of `idmesh query stats`, summed over the leaders.
     pub fn leaders_total(&self, field: &str) -> u64 {
         self.leader_stats()
