@@ -527,7 +527,13 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
     assert_eq!(before["finished"], false, "killed mid-stream");
     reading.kill("sensor-0");
     down_says_degraded(&reading);
+    let relaunched = std::time::Instant::now();
     reading.launch("sensor", "sensor-0");
+    reading.first_answer(Duration::from_secs(30));
+    eprintln!(
+        "the sensor answers again {:.2} s after it was started again",
+        relaunched.elapsed().as_secs_f64()
+    );
     let last = reading.final_marginals(Duration::from_secs(60));
     assert_same_marginals(&last, &expected, "after the sensor's restart (trace)");
     assert_eq!(last["watermark"]["sensor-0"], total);

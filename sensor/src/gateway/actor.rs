@@ -87,10 +87,7 @@ pub enum GatewayError {
     #[error(transparent)]
     Journal(#[from] JournalError),
     #[error("sensor journal {path}: cannot resume from it: {source}")]
-    Restore {
-        path: String,
-        source: RestoreError,
-    },
+    Restore { path: String, source: RestoreError },
     #[error("leaders {missing:?} did not come up within {waited:?}")]
     LeadersMissing {
         missing: Vec<String>,

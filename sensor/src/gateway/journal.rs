@@ -37,7 +37,10 @@ const MAX_FRAME: u32 = 1 << 30;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Record {
     /// The trace file's next `count` lines were routed.
-    Trace { count: u64, cuts: Vec<(u32, Wanted)> },
+    Trace {
+        count: u64,
+        cuts: Vec<(u32, Wanted)>,
+    },
     /// An ingest request judged (its accepted lines routed).
     Offer {
         producer: Option<String>,
@@ -233,7 +236,10 @@ mod tests {
                 payload: b"{\"kind\":\"mix\"}".to_vec(),
                 cuts: Vec::new(),
             },
-            Record::Cut(Wanted { tag: 9, rows: false }),
+            Record::Cut(Wanted {
+                tag: 9,
+                rows: false,
+            }),
             Record::Follow(vec![1, 2, 3]),
             Record::End,
         ]
@@ -248,7 +254,8 @@ mod tests {
     }
 
     fn path(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("idmesh-sensor-journal-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-sensor-journal-{}", std::process::id()));
         let path = dir.join(name);
         let _ = std::fs::remove_file(&path);
         path

@@ -653,11 +653,18 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
         restored
             .restore(journal[..*records].to_vec(), &trace)
             .unwrap();
-        assert!(restored.unjournaled().is_empty(), "restoring records nothing");
+        assert!(
+            restored.unjournaled().is_empty(),
+            "restoring records nothing"
+        );
         assert_eq!(&state_of(&mut restored), state, "after {records} records");
         if !restored.finished() {
             let (again, _) = restored.ingest(offer("0")).unwrap();
-            assert_eq!(again.accepted.is_empty(), *offered, "after {records} records");
+            assert_eq!(
+                again.accepted.is_empty(),
+                *offered,
+                "after {records} records"
+            );
         }
     }
     // After the end both go on alike: a cut now, and the lines that touch
