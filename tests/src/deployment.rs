@@ -537,6 +537,25 @@ pub fn answer_until(
     );
 }
 
+/// What every leader applied ([`Deployment::applied`]) when `trace`
+/// streams through a deployment with `settings` left alone — its final
+/// answer checked against `expected`, the centralized engine's — for a
+/// disturbed run of the same to equal.
+pub fn undisturbed_applied(
+    name: &str,
+    trace: &Path,
+    settings: &Settings,
+    expected: &[f64],
+) -> Vec<(String, u64, u64, u64)> {
+    let calm = Deployment::start_each(name, trace, settings);
+    crate::compare::assert_same_marginals(
+        &calm.final_marginals(Duration::from_secs(60)),
+        expected,
+        "left alone",
+    );
+    calm.applied()
+}
+
 /// `idmesh simulate` a crowd into `dir`.
 pub fn crowd(dir: &Path, targets: usize, red: usize, duration: f64, seed: u64) -> PathBuf {
     simulate_crowd(dir, targets, red, duration, seed, false)

@@ -6,7 +6,9 @@
 //! and none applied twice.
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, hosted_on, replay_summary, Deployment, Settings};
+use idmesh_tests::deployment::{
+    crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, Settings,
+};
 use std::time::{Duration, Instant};
 
 /// SIGKILL to a leader while the stream runs: queries meanwhile get an
@@ -36,14 +38,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
         ..settings.clone()
     };
 
-    let calm = Deployment::start_each("calm", &trace, &settings);
-    assert_same_marginals(
-        &calm.final_marginals(Duration::from_secs(60)),
-        &expected,
-        "no crash",
-    );
-    let calm_applied = calm.applied();
-    drop(calm);
+    let calm_applied = undisturbed_applied("calm", &trace, &settings, &expected);
 
     let mut crashed = Deployment::start_each("crash", &trace, &settings);
     let first = crashed.first_answer(Duration::from_secs(30));

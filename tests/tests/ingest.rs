@@ -9,7 +9,7 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
-    crowd, replay_lines, replay_summary, truth_lines, Deployment, Settings,
+    crowd, replay_lines, replay_summary, truth_lines, undisturbed_applied, Deployment, Settings,
 };
 use serde_json::Value;
 use std::io::Write;
@@ -496,14 +496,7 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
         journal: true,
         ..Settings::default()
     };
-    let calm = Deployment::start_each("sensorcalm", &trace, &settings);
-    assert_same_marginals(
-        &calm.final_marginals(Duration::from_secs(60)),
-        &expected,
-        "no crash",
-    );
-    let calm_applied = calm.applied();
-    drop(calm);
+    let calm_applied = undisturbed_applied("sensorcalm", &trace, &settings, &expected);
 
     let down_says_degraded = |deployment: &Deployment| {
         let error = deployment
