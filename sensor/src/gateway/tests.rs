@@ -692,8 +692,7 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     // A trace shorter than the journal says is refused, naming the record.
     let error = new()
         .restore(journal, &trace[..3])
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(
         error.starts_with("journal record") && error.contains("lines of the trace, which has 3"),
