@@ -104,7 +104,14 @@ impl<Q> Gateway<Q> {
     /// [`Gateway::unjournaled`]).
     pub fn journaled(mut self) -> Self {
         self.journaling = true;
+        let stream = self.stream();
+        self.note(Record::Stream(stream));
         self
+    }
+
+    /// The stream's `Begin`, as its journal names it.
+    fn stream(&self) -> Vec<u8> {
+        postcard::to_stdvec(self.router.begin()).unwrap_or_default()
     }
 
     /// What changed since the last call, in order: append it to the
@@ -134,6 +141,13 @@ impl<Q> Gateway<Q> {
 
     fn replay(&mut self, record: Record, trace: &[Line]) -> Result<(), String> {
         match record {
+            Record::Stream(begin) => {
+                if begin != self.stream() {
+                    return Err("the journal is of another stream (its tracks, leaders or \
+                                settings differ): move it away to start this one afresh"
+                        .into());
+                }
+            }
             Record::Trace { count, cuts } => {
                 let from = self.traced as usize;
                 let lines = usize::try_from(count)

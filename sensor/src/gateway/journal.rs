@@ -36,6 +36,10 @@ const MAX_FRAME: u32 = 1 << 30;
 /// so cuts keep their place among the lines they fall between.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Record {
+    /// The stream the records are of (its `Begin`, postcard): written
+    /// each time a gateway starts journaling, so a journal is never
+    /// replayed into another stream.
+    Stream(Vec<u8>),
     /// The trace file's next `count` lines were routed.
     Trace {
         count: u64,

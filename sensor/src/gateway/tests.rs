@@ -648,8 +648,9 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
         frame(record, &mut bytes);
     }
     let journal = parse(&bytes).unwrap().records;
+    let unjournaled = || Gateway::<u32>::new("s", router(8, 4, true), false);
     for (records, state, offered) in &points {
-        let mut restored = new();
+        let mut restored = unjournaled();
         restored
             .restore(journal[..*records].to_vec(), &trace)
             .unwrap();
@@ -688,6 +689,15 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     assert!(
         matches!(last.last().unwrap().item, Item::Mix { a: 3, b: 7, .. }),
         "a follows 3: {last:?}"
+    );
+    // A journal of another stream (here: exact conditioning) is refused.
+    let error = Gateway::<u32>::new("s", router(8, 4, false), false)
+        .restore(journal.clone(), &trace)
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        error.starts_with("journal record 0: the journal is of another stream"),
+        "{error}"
     );
     // A trace shorter than the journal says is refused, naming the record.
     let error = new()
