@@ -65,6 +65,8 @@ pub struct Gateway<Q> {
     records: Vec<Record>,
     /// Lines of the trace file routed so far.
     traced: u64,
+    /// The number of the last line of standard input read.
+    stdin_read: u64,
 }
 
 /// A journal the gateway cannot be rebuilt from (a trace shorter than the
@@ -97,6 +99,7 @@ impl<Q> Gateway<Q> {
             journaling: false,
             records: Vec::new(),
             traced: 0,
+            stdin_read: 0,
         }
     }
 
@@ -181,6 +184,7 @@ impl<Q> Gateway<Q> {
                 self.replay_lines(&judged.accepted, &cuts);
             }
             Record::Read { number, text, cuts } => {
+                self.stdin_read = number;
                 if let Ok(Some(line)) = self.ingest.read(number as usize, &text, &mut self.stats) {
                     self.replay_lines(&[line], &cuts);
                 }
@@ -310,7 +314,14 @@ impl<Q> Gateway<Q> {
 
     /// Line `number` of a trace read from standard input: routed (the cuts
     /// it reached, as [`Gateway::line`]), or why it was skipped (counted).
+    /// A line numbered no later than one read before is passed over
+    /// silently: a restored sensor fed the same input again goes on after
+    /// the last line it journaled, as a trace file does.
     pub fn read(&mut self, number: usize, text: &str) -> Result<Vec<Placed<Q>>, String> {
+        if number as u64 <= self.stdin_read {
+            return Ok(Vec::new());
+        }
+        self.stdin_read = number as u64;
         let read = self.ingest.read(number, text, &mut self.stats);
         let (placed, cuts) = match &read {
             Ok(Some(line)) => self.route(std::slice::from_ref(line)),

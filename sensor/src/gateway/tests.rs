@@ -674,6 +674,18 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     restored.restore(journal.clone(), &trace).unwrap();
     assert!(restored.finished());
     assert_eq!(restored.traced(), 5);
+    // Standard input fed again from its start: the lines read before
+    // are passed over (not routed, not counted), the next one is read.
+    let (events, ingested) = (restored.router().events(), restored.stats().ingested);
+    assert!(restored.read(2, good).unwrap().is_empty());
+    assert!(restored.read(3, "{\"kind\":\"mix\"}\n").is_ok());
+    assert_eq!(
+        (restored.router().events(), restored.stats().ingested),
+        (events, ingested)
+    );
+    assert!(restored.read(4, good).is_ok());
+    assert_eq!(restored.router().events(), events + 1);
+    original.read(4, good).unwrap();
     for gateway in [&mut original, &mut restored] {
         assert!(matches!(
             gateway.cut(3, &cut("9", None)),
