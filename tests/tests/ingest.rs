@@ -573,3 +573,48 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
     assert_eq!(sensor["ingested"], total, "{sensor}");
     assert_eq!(sensor["out_of_order"], 0, "{sensor}");
 }
+
+/// A journaling sensor reading a trace on its standard input, SIGKILLed
+/// halfway through the pipe and started again with the same input piped
+/// from its start, passes over the lines it read before: the final answer
+/// is `idmesh replay`'s to 1e-9, the watermark the trace's event count,
+/// and every leader applied what it applies without the kill.
+#[test]
+fn a_sensor_killed_while_reading_standard_input_and_fed_it_again_reads_each_line_once() {
+    let dir = std::env::temp_dir().join(format!("idmesh-stdin-restart-{}", std::process::id()));
+    let trace = crowd(&dir, 10, 3, 60.0, 12);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let expected = floats(&central["final_p_red"]);
+    let total = events(&trace).len() as u64;
+    let settings = Settings {
+        leaders: 2,
+        journal: true,
+        ..Settings::default()
+    };
+    let calm_applied = undisturbed_applied("stdincalm", &trace, &settings, &expected);
+    let mut deployment = Deployment::start_without_sensor("stdinkill", &trace, &settings);
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let mut pipe = deployment.launch_piped("sensor", "sensor-0", &["--stdin"]);
+    for line in &lines[..lines.len() / 2] {
+        writeln!(pipe, "{line}").expect("the sensor reads its input");
+    }
+    pipe.flush().unwrap();
+    let before = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+        a["watermark"]["sensor-0"].as_u64() > Some(0)
+    });
+    deployment.kill("sensor-0");
+    drop(pipe);
+    let read = before["watermark"]["sensor-0"].as_u64().unwrap();
+    assert!(read < total, "killed mid-input: {read} of {total}");
+    let mut pipe = deployment.launch_piped("sensor", "sensor-0", &["--stdin"]);
+    for line in &lines {
+        writeln!(pipe, "{line}").expect("the sensor reads its input");
+    }
+    drop(pipe);
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(&last, &expected, "after the restart (stdin)");
+    assert_eq!(last["watermark"]["sensor-0"], total);
+    assert_eq!(deployment.applied(), calm_applied);
+    assert_eq!(sensor_stats(&deployment)["ingested"], total);
+}
