@@ -473,6 +473,43 @@ fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
     );
 }
 
+/// What a sensor restart test starts from: a crowd, `idmesh replay`'s
+/// final answer for it, its events, two leaders and a sensor that journal,
+/// and what each leader applies when nothing is killed.
+struct Restart {
+    dir: PathBuf,
+    trace: PathBuf,
+    expected: Vec<f64>,
+    history: Vec<String>,
+    settings: Settings,
+    calm_applied: Vec<(String, u64, u64, u64)>,
+}
+
+impl Restart {
+    fn case(name: &str, seed: u64) -> Restart {
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-{name}-restart-{}", std::process::id()));
+        let trace = crowd(&dir, 10, 3, 60.0, seed);
+        let central = replay_summary(&trace, &["--method", "overcomplete"]);
+        let expected = floats(&central["final_p_red"]);
+        let settings = Settings {
+            leaders: 2,
+            journal: true,
+            ..Settings::default()
+        };
+        let calm = format!("{name}calm");
+        let calm_applied = undisturbed_applied(&calm, &trace, &settings, &expected);
+        Restart {
+            history: events(&trace),
+            dir,
+            trace,
+            expected,
+            settings,
+            calm_applied,
+        }
+    }
+}
+
 /// A sensor that journals (`state_dir`), SIGKILLed mid-stream and started
 /// again, resumes where it was — once while it streams its trace file,
 /// once while a producer feeds it on the ingest key (resending each
@@ -485,18 +522,15 @@ fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
 /// sensor kept its counter) and the sensor's `ingested` counts each once.
 #[test]
 fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
-    let dir = std::env::temp_dir().join(format!("idmesh-sensor-restart-{}", std::process::id()));
-    let trace = crowd(&dir, 10, 3, 60.0, 11);
-    let central = replay_summary(&trace, &["--method", "overcomplete"]);
-    let expected = floats(&central["final_p_red"]);
-    let history = events(&trace);
+    let Restart {
+        dir,
+        trace,
+        expected,
+        history,
+        settings,
+        calm_applied,
+    } = Restart::case("sensor", 11);
     let total = history.len() as u64;
-    let settings = Settings {
-        leaders: 2,
-        journal: true,
-        ..Settings::default()
-    };
-    let calm_applied = undisturbed_applied("sensorcalm", &trace, &settings, &expected);
 
     let down_says_degraded = |deployment: &Deployment| {
         let error = deployment
@@ -581,17 +615,15 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
 /// and every leader applied what it applies without the kill.
 #[test]
 fn a_sensor_killed_while_reading_standard_input_and_fed_it_again_reads_each_line_once() {
-    let dir = std::env::temp_dir().join(format!("idmesh-stdin-restart-{}", std::process::id()));
-    let trace = crowd(&dir, 10, 3, 60.0, 12);
-    let central = replay_summary(&trace, &["--method", "overcomplete"]);
-    let expected = floats(&central["final_p_red"]);
-    let total = events(&trace).len() as u64;
-    let settings = Settings {
-        leaders: 2,
-        journal: true,
-        ..Settings::default()
-    };
-    let calm_applied = undisturbed_applied("stdincalm", &trace, &settings, &expected);
+    let Restart {
+        trace,
+        expected,
+        history,
+        settings,
+        calm_applied,
+        ..
+    } = Restart::case("stdin", 12);
+    let total = history.len() as u64;
     let mut deployment = Deployment::start_without_sensor("stdinkill", &trace, &settings);
     let text = std::fs::read_to_string(&trace).unwrap();
     let lines: Vec<&str> = text.lines().collect();
