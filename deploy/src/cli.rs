@@ -103,6 +103,10 @@ pub struct BenchArgs {
     /// key, against the raw round trip to the sensor.
     #[arg(long)]
     pub ingest: bool,
+    /// The sensor and the leaders journal what they take (`state_dir` in
+    /// the bench's folder), so the figures include the fsyncs.
+    #[arg(long)]
+    pub journal: bool,
 }
 
 #[derive(Debug, Clone, Args)]

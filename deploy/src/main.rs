@@ -76,6 +76,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             dir: args.dir,
             out: args.out,
             ingest: args.ingest,
+            journal: args.journal,
         }),
     }
 }

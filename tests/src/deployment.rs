@@ -414,6 +414,23 @@ impl Deployment {
             .unwrap_or_else(|| panic!("{name} in the stats"))
     }
 
+    /// What each leader applied, by kind: (leader, mixes, observations,
+    /// handovers) — cuts excluded, queries place them. Equal to an
+    /// undisturbed run's, no event was lost or applied twice.
+    pub fn applied(&self) -> Vec<(String, u64, u64, u64)> {
+        self.leader_stats()
+            .iter()
+            .map(|l| {
+                (
+                    l["leader"].as_str().unwrap().to_string(),
+                    l["mixes"].as_u64().unwrap(),
+                    l["observations"].as_u64().unwrap(),
+                    l["handovers"].as_u64().unwrap(),
+                )
+            })
+            .collect()
+    }
+
     /// A counter of `idmesh query stats`, summed over the leaders.
     pub fn leaders_total(&self, field: &str) -> u64 {
         self.leader_stats()
@@ -518,6 +535,25 @@ pub fn answer_until(
         "no answer as wanted within {patience:?}; last: {last}\n{}",
         log()
     );
+}
+
+/// What every leader applied ([`Deployment::applied`]) when `trace`
+/// streams through a deployment with `settings` left alone — its final
+/// answer checked against `expected`, the centralized engine's — for a
+/// disturbed run of the same to equal.
+pub fn undisturbed_applied(
+    name: &str,
+    trace: &Path,
+    settings: &Settings,
+    expected: &[f64],
+) -> Vec<(String, u64, u64, u64)> {
+    let calm = Deployment::start_each(name, trace, settings);
+    crate::compare::assert_same_marginals(
+        &calm.final_marginals(Duration::from_secs(60)),
+        expected,
+        "left alone",
+    );
+    calm.applied()
 }
 
 /// `idmesh simulate` a crowd into `dir`.

@@ -6,24 +6,10 @@
 //! and none applied twice.
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, hosted_on, replay_summary, Deployment, Settings};
+use idmesh_tests::deployment::{
+    crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, Settings,
+};
 use std::time::{Duration, Instant};
-
-/// What each leader applied, by kind (cuts excluded: queries place them).
-fn applied(deployment: &Deployment) -> Vec<(String, u64, u64, u64)> {
-    deployment
-        .leader_stats()
-        .iter()
-        .map(|l| {
-            (
-                l["leader"].as_str().unwrap().to_string(),
-                l["mixes"].as_u64().unwrap(),
-                l["observations"].as_u64().unwrap(),
-                l["handovers"].as_u64().unwrap(),
-            )
-        })
-        .collect()
-}
 
 /// SIGKILL to a leader while the stream runs: queries meanwhile get an
 /// error naming it (never numbers without it); started again, it replays
@@ -52,14 +38,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
         ..settings.clone()
     };
 
-    let calm = Deployment::start_each("calm", &trace, &settings);
-    assert_same_marginals(
-        &calm.final_marginals(Duration::from_secs(60)),
-        &expected,
-        "no crash",
-    );
-    let calm_applied = applied(&calm);
-    drop(calm);
+    let calm_applied = undisturbed_applied("calm", &trace, &settings, &expected);
 
     let mut crashed = Deployment::start_each("crash", &trace, &settings);
     let first = crashed.first_answer(Duration::from_secs(30));
@@ -80,7 +59,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
         down.elapsed().as_secs_f64()
     );
     assert_same_marginals(&last, &expected, "after a crash");
-    assert_eq!(applied(&crashed), calm_applied);
+    assert_eq!(crashed.applied(), calm_applied);
     assert!(
         crashed.leaders_total("snapshots") > 0,
         "leaders wrote snapshots"
@@ -111,7 +90,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     assert!(error.contains("degraded"), "the error says so: {error}");
     let last = gone.final_marginals(Duration::from_secs(90));
     assert_same_marginals(&last, &expected, "after a takeover");
-    assert_eq!(applied(&gone), calm_applied);
+    assert_eq!(gone.applied(), calm_applied);
     let adopted = gone.leader("leader-1");
     assert_eq!(
         adopted["host"], "leader-2",

@@ -57,6 +57,9 @@ pub struct BenchOptions {
     pub out: Option<PathBuf>,
     /// Only the ingestion figures.
     pub ingest: bool,
+    /// The sensor and the leaders journal (`state_dir`), as a deployment
+    /// that survives a kill does.
+    pub journal: bool,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
@@ -204,7 +207,13 @@ impl Deployment {
             query_timeout_ms: 60_000,
             ports: Ports::Free,
             live,
+            // Beside the topology; a journal of an earlier run would be
+            // resumed, so it goes first.
+            state_dir: options.journal.then(|| PathBuf::from("state")),
         };
+        if options.journal {
+            let _ = std::fs::remove_dir_all(options.dir.join("state"));
+        }
         let (toml, _) = plan.topology(&std::fs::canonicalize(trace)?)?;
         let config = options.dir.join(format!("topology-{leaders}.toml"));
         std::fs::write(&config, toml)?;

@@ -197,6 +197,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         query_timeout_ms: 2000,
         ports: Ports::From(7447),
         live: false,
+        state_dir: None,
     };
     let (topology, coordinator) = plan.topology(&trace)?;
     let config = options.dir.join("topology.toml");

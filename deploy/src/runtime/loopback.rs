@@ -30,6 +30,9 @@ pub struct Loopback {
     pub ports: Ports,
     /// The sensor stays open for producers after its trace (`live`).
     pub live: bool,
+    /// Where the leaders and the sensor journal (`state_dir`); None: no
+    /// journal.
+    pub state_dir: Option<std::path::PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -86,6 +89,9 @@ impl Loopback {
         if self.live {
             toml.push_str("live = true\n");
         }
+        if let Some(dir) = &self.state_dir {
+            toml.insert_str(0, &format!("state_dir = {:?}\n", dir.display().to_string()));
+        }
         for i in 0..self.leaders {
             let (c, r) = (i % columns, i / columns);
             let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
@@ -130,6 +136,7 @@ mod tests {
             query_timeout_ms: 1000,
             ports: Ports::From(9100),
             live: false,
+            state_dir: None,
         };
         let (toml, _) = plan.topology(&trace).unwrap();
         let config = dir.join("topology.toml");
@@ -165,6 +172,7 @@ mod tests {
             query_timeout_ms: 1500,
             ports: Ports::From(9000),
             live: true,
+            state_dir: None,
         };
         let (toml, coordinator) = plan.topology(&trace).unwrap();
         assert_eq!(coordinator, "tcp/127.0.0.1:9000");

@@ -179,6 +179,9 @@ async fn sensor(
         limit: topology.sensor.events,
         wait_for_leaders: Duration::from_secs(60),
         live: topology.sensor.live,
+        journal: topology
+            .state_path()
+            .map(|dir| dir.join(format!("{}.journal", topology.sensor.name))),
         faults: Faults {
             duplicate: topology.sensor.faults.duplicate,
             drop_every: topology.sensor.faults.drop_every,

@@ -20,9 +20,10 @@
 //! marginals_timeout_ms = 30000   # longest the coordinator computes one
 //!                                # identity answer before it stops and
 //!                                # says so (a big block, many samples)
-//! state_dir = "state"            # leaders' journals (relative to this file);
-//!                                # absent = no journal, a leader that dies
-//!                                # cannot come back
+//! state_dir = "state"            # journals of the leaders and the sensor
+//!                                # (<name>.journal, relative to this file);
+//!                                # absent = no journal, a leader or sensor
+//!                                # that dies cannot come back
 //! fsync_ms = 100                 # longest a journal entry waits for fsync
 //! snapshot_every = 5000          # inputs between snapshots (0 = never)
 //! takeover_after_ms = 3000       # a leader process gone this long has its

@@ -21,20 +21,26 @@
 //! restarting) gets them again on `P/sensor/<name>/resend`, until the
 //! leader publishes a durable mark past it ([`super::batch_log`]); items every
 //! leader has passed leave the router's log the same way. The logs live in
-//! memory: the sensor is the source of truth of the stream, not a process
-//! this design lets die. [`Faults`] drops or doubles batches on purpose,
-//! for the tests that show neither matters.
+//! memory; with a journal ([`GatewayConfig::journal`]) what changed them is
+//! appended to it and fsynced before any batch, acknowledgement or follow
+//! reply that depends on it leaves, and a sensor started again on the same
+//! journal rebuilds its state from it ([`super::journal`]), goes on with
+//! its trace after the last line it routed, and leaders that missed
+//! batches ask for them again as after their own restart. [`Faults`] drops
+//! or doubles batches on purpose, for the tests that show neither matters.
 
-use super::core::{CutOutcome, Gateway};
+use super::core::{CutOutcome, Gateway, RestoreError};
 use super::cuts::{CutParameters, Placed};
 use super::feed::{InputLine, Source};
 use super::ingest::Offer;
+use super::journal::{Journal, JournalError};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
 use std::future::Future;
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use tracing::Instrument;
 use zenoh::pubsub::Publisher;
@@ -57,6 +63,9 @@ pub struct GatewayConfig {
     /// The stream stays open for producers once its trace and input are
     /// done: it never finishes, and takes ingested events until shut down.
     pub live: bool,
+    /// Where the sensor journals what changed its state; started again on
+    /// it, it resumes where it was. None: state in memory only.
+    pub journal: Option<PathBuf>,
     pub faults: Faults,
 }
 
@@ -75,6 +84,10 @@ pub struct Faults {
 pub enum GatewayError {
     #[error("zenoh: {what}: {message}")]
     Mesh { what: &'static str, message: String },
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    #[error("sensor journal {path}: cannot resume from it: {source}")]
+    Restore { path: String, source: RestoreError },
     #[error("leaders {missing:?} did not come up within {waited:?}")]
     LeadersMissing {
         missing: Vec<String>,
@@ -185,11 +198,38 @@ pub async fn run(
     if ends {
         gateway = gateway.ending_at(end);
     }
+    let journal = match &config.journal {
+        Some(path) => {
+            let (journal, records) = Journal::open(path)?;
+            let restored = records.len();
+            gateway
+                .restore(records, lines)
+                .map_err(|source| GatewayError::Restore {
+                    path: path.display().to_string(),
+                    source,
+                })?;
+            if restored > 0 {
+                tracing::info!(sensor = %config.name, journal = %path.display(), records = restored,
+                    events = gateway.router().events(), seq = gateway.router().seq(),
+                    trace_lines = gateway.traced(), "resumed from the journal");
+            }
+            gateway = gateway.journaled();
+            Some(journal)
+        }
+        None => None,
+    };
+    // A resumed trace goes on after the last line it routed.
+    let lines = &lines[(gateway.traced() as usize).min(lines.len())..];
+    if ends && lines.is_empty() && !gateway.finished() {
+        // It died after its last line, before saying the stream is over.
+        gateway.end();
+    }
     let mut wire = Wire {
         faults: config.faults,
         publishers,
+        journal,
     };
-    wire.flush(&mut gateway).await;
+    wire.flush(&mut gateway).await?;
     let started = Instant::now();
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
@@ -219,7 +259,7 @@ pub async fn run(
                     from = next - due,
                     lines = due
                 ))
-                .await;
+                .await?;
             for p in placed {
                 reply_placed(p).await;
             }
@@ -237,22 +277,25 @@ pub async fn run(
             _ = &mut shutdown => break,
             query = cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
-                cut(&mut gateway, &mut wire, query).await;
+                cut(&mut gateway, &mut wire, query).await?;
                 // Every cut already asked for is placed or scheduled
                 // before the stream moves on: a client asking for many
                 // points at once (`--at-events`) must not find the stream
                 // past them because its questions were let in one per chunk.
                 while let Ok(Some(query)) = cut_requests.try_recv() {
-                    cut(&mut gateway, &mut wire, query).await;
+                    cut(&mut gateway, &mut wire, query).await?;
                 }
             }
             query = follows.recv_async() => {
                 let Ok(query) = query else { break };
                 let answer = gateway.follow(&payload(&query));
                 let followed = answer.is_ok();
+                // The interests it grew are on disk before the leader
+                // counts on them.
+                wire.sync(&mut gateway)?;
                 reply_to(&query, answer, "follow").await;
                 if followed {
-                    wire.flush(&mut gateway).await;
+                    wire.flush(&mut gateway).await?;
                 }
             }
             sample = unfollows.recv_async() => {
@@ -299,7 +342,7 @@ pub async fn run(
             }
             query = ingests.recv_async() => {
                 let Ok(query) = query else { break };
-                ingest(&mut gateway, &mut wire, query).await;
+                ingest(&mut gateway, &mut wire, query).await?;
             }
             read = next_input(&mut input), if input.is_some() => {
                 let Some(read) = read else {
@@ -309,7 +352,7 @@ pub async fn run(
                     tracing::info!(sensor = %config.name, events = gateway.router().events(), "standard input ended");
                     if next >= lines.len() && !config.live && !gateway.finished() {
                         let refused = gateway.end();
-                        wire.flush(&mut gateway).await;
+                        wire.flush(&mut gateway).await?;
                         for (query, reason) in refused {
                             let _ = bounded("a refusal", query.reply_err(reason)).await;
                         }
@@ -326,7 +369,7 @@ pub async fn run(
                         Err(_) => break,
                     }
                 }
-                wire.flush(&mut gateway).await;
+                wire.flush(&mut gateway).await?;
                 for p in placed {
                     reply_placed(p).await;
                 }
@@ -365,7 +408,11 @@ fn take_input(gateway: &mut Gateway<Query>, read: InputLine, placed: &mut Vec<Pl
 /// An ingest request: its lines judged and the accepted ones routed and
 /// published, then the acknowledgement (JSON) — or why the whole request
 /// was refused.
-async fn ingest(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
+async fn ingest(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    query: Query,
+) -> Result<(), GatewayError> {
     let body = payload(&query);
     let parameters = query.parameters();
     let offer = Offer {
@@ -379,8 +426,10 @@ async fn ingest(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
             // after it places its cut after these lines. (A request of
             // duplicates alone routed nothing: no batch for it.)
             if !ack.accepted.is_empty() || !placed.is_empty() {
-                wire.flush(gateway).await;
+                wire.flush(gateway).await?;
             }
+            // What it judged (counters used up) is on disk before it says so.
+            wire.sync(gateway)?;
             let body = serde_json::to_vec(&ack).unwrap_or_default();
             if let Some(Err(e)) = bounded(
                 "an ingest acknowledgement",
@@ -401,10 +450,15 @@ async fn ingest(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
             let _ = bounded("a refusal", query.reply_err(refusal.to_string())).await;
         }
     }
+    Ok(())
 }
 
 /// Places, schedules or refuses the cut `query` asks for.
-async fn cut(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
+async fn cut(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    query: Query,
+) -> Result<(), GatewayError> {
     let parameters = query.parameters();
     let parameters = CutParameters {
         tag: parameters.get("tag").map(str::to_owned),
@@ -413,7 +467,7 @@ async fn cut(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
     };
     match gateway.cut(query, &parameters) {
         CutOutcome::Placed(p) => {
-            wire.flush(gateway).await;
+            wire.flush(gateway).await?;
             reply_placed(p).await;
         }
         CutOutcome::Scheduled => {}
@@ -421,6 +475,7 @@ async fn cut(gateway: &mut Gateway<Query>, wire: &mut Wire, query: Query) {
             let _ = bounded("a refusal", query.reply_err(reason)).await;
         }
     }
+    Ok(())
 }
 
 /// The postcard request a get carries.
@@ -486,21 +541,30 @@ async fn bounded<T>(
     }
 }
 
-/// The event keys, and the faults injected on them.
+/// The event keys, the faults injected on them, and the journal.
 struct Wire {
     faults: Faults,
     publishers: Vec<Publisher<'static>>,
+    journal: Option<Journal>,
 }
 
 impl Wire {
-    /// Sends every leader its queued items, or just how far the stream got.
-    async fn flush(&mut self, gateway: &mut Gateway<Query>) {
-        for (i, (batch, publisher)) in gateway
-            .flush()
-            .into_iter()
-            .zip(&self.publishers)
-            .enumerate()
-        {
+    /// Puts what changed the gateway's state on disk (fsynced), if it
+    /// keeps a journal.
+    fn sync(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
+        let records = gateway.unjournaled();
+        if let Some(journal) = &mut self.journal {
+            journal.append(&records)?;
+        }
+        Ok(())
+    }
+
+    /// Sends every leader its queued items, or just how far the stream got
+    /// — once the journal holds them.
+    async fn flush(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
+        let batches = gateway.flush();
+        self.sync(gateway)?;
+        for (i, (batch, publisher)) in batches.into_iter().zip(&self.publishers).enumerate() {
             let number = batch.number;
             let dropped = self
                 .faults
@@ -517,6 +581,7 @@ impl Wire {
                 }
             }
         }
+        Ok(())
     }
 }
 

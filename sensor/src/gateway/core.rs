@@ -9,10 +9,22 @@
 //! the durable marks, and the [`Cuts`] waiting for their point. `Q` is the
 //! driver's handle on a cut request (a Zenoh query, a simulated one): the
 //! gateway gives it back with the answer.
+//!
+//! Journaled ([`Gateway::journaled`]), it also writes down every change of
+//! its state as a [`Record`] in the order it happened — lines routed (from
+//! the trace, an ingest request, standard input) with the cuts placed
+//! among them, cuts, granted follows, flushes, the end — for the driver to
+//! put on disk ([`Gateway::unjournaled`]) before anything that depends on
+//! them leaves. [`Gateway::restore`] feeds them through again: the same
+//! seqs, batches, batch logs, producer counters and interests. Durable
+//! marks are not journaled: they only let the gateway forget, and a
+//! restored gateway keeps everything until the leaders publish theirs
+//! again.
 
 use super::batch_log::BatchLog;
-use super::cuts::{place, CutParameters, Cuts, Placed, Request};
+use super::cuts::{place, CutParameters, Cuts, Placed, Request, Wanted};
 use super::ingest::{Ingest, IngestRefusal, Offer};
+use super::journal::Record;
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
@@ -49,6 +61,23 @@ pub struct Gateway<Q> {
     /// Requests refused: a bad one is answered with why and changes
     /// nothing.
     stats: SensorStats,
+    /// Changes of state are recorded for the journal.
+    journaling: bool,
+    /// Recorded, not yet taken by the driver.
+    records: Vec<Record>,
+    /// Lines of the trace file routed so far.
+    traced: u64,
+    /// The number of the last line of standard input read.
+    stdin_read: u64,
+}
+
+/// A journal the gateway cannot be rebuilt from (a trace shorter than the
+/// journal says, a request it held refused now).
+#[derive(Debug, thiserror::Error)]
+#[error("journal record {record}: {problem}")]
+pub struct RestoreError {
+    pub record: usize,
+    pub problem: String,
 }
 
 impl<Q> Gateway<Q> {
@@ -69,7 +98,165 @@ impl<Q> Gateway<Q> {
                 sensor: name.to_string(),
                 ..SensorStats::default()
             },
+            journaling: false,
+            records: Vec::new(),
+            traced: 0,
+            stdin_read: 0,
         }
+    }
+
+    /// Records every change of state for the journal (take them with
+    /// [`Gateway::unjournaled`]).
+    pub fn journaled(mut self) -> Self {
+        self.journaling = true;
+        let stream = self.stream();
+        self.note(Record::Stream(stream));
+        self
+    }
+
+    /// The stream's `Begin`, as its journal names it.
+    fn stream(&self) -> Vec<u8> {
+        postcard::to_stdvec(self.router.begin()).unwrap_or_default()
+    }
+
+    /// What changed since the last call, in order: append it to the
+    /// journal before sending anything.
+    pub fn unjournaled(&mut self) -> Vec<Record> {
+        std::mem::take(&mut self.records)
+    }
+
+    /// Lines of the trace file routed so far: a restored gateway's trace
+    /// goes on from there.
+    pub fn traced(&self) -> u64 {
+        self.traced
+    }
+
+    /// Rebuilds the state `records` (a journal, in order) describe, on a
+    /// new gateway over the same stream; `trace` is the trace file's
+    /// lines. Nothing is recorded again.
+    pub fn restore(&mut self, records: Vec<Record>, trace: &[Line]) -> Result<(), RestoreError> {
+        let journaling = std::mem::replace(&mut self.journaling, false);
+        for (i, record) in records.into_iter().enumerate() {
+            self.replay(record, trace)
+                .map_err(|problem| RestoreError { record: i, problem })?;
+        }
+        self.journaling = journaling;
+        Ok(())
+    }
+
+    fn replay(&mut self, record: Record, trace: &[Line]) -> Result<(), String> {
+        match record {
+            Record::Stream(begin) => {
+                if begin != self.stream() {
+                    return Err("the journal is of another stream (its tracks, leaders or \
+                                settings differ): move it away to start this one afresh"
+                        .into());
+                }
+            }
+            Record::Trace { count, cuts } => {
+                let from = self.traced as usize;
+                let lines = usize::try_from(count)
+                    .ok()
+                    .and_then(|count| trace.get(from..from.checked_add(count)?))
+                    .ok_or_else(|| {
+                        format!(
+                            "the journal routed {} lines of the trace, which has {}",
+                            self.traced.saturating_add(count),
+                            trace.len()
+                        )
+                    })?;
+                self.traced += count;
+                self.replay_lines(lines, &cuts);
+            }
+            Record::Offer {
+                producer,
+                counter,
+                payload,
+                cuts,
+            } => {
+                let offer = Offer {
+                    producer: producer.as_deref(),
+                    counter: counter.as_deref(),
+                    payload: &payload,
+                };
+                let judged = self
+                    .ingest
+                    .offer(offer, &mut self.stats)
+                    .map_err(|e| format!("an ingest request it accepted is refused now: {e}"))?;
+                self.replay_lines(&judged.accepted, &cuts);
+            }
+            Record::Read { number, text, cuts } => {
+                self.stdin_read = number;
+                if let Ok(Some(line)) = self.ingest.read(number as usize, &text, &mut self.stats) {
+                    self.replay_lines(&[line], &cuts);
+                }
+            }
+            Record::Cut(wanted) => {
+                self.router.cut(wanted);
+            }
+            Record::Follow(bytes) => {
+                self.follow(&bytes)
+                    .map_err(|e| format!("a follow it granted is refused now: {e}"))?;
+            }
+            Record::Flush => {
+                self.flush();
+            }
+            Record::End => {
+                self.end();
+            }
+            Record::Unfollow(bytes) => {
+                self.unfollow(&bytes)
+                    .map_err(|e| format!("an unfollow it took is refused now: {e}"))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Routes `lines` again, placing each cut after the line it followed.
+    fn replay_lines(&mut self, lines: &[Line], cuts: &[(u32, Wanted)]) {
+        for (i, line) in lines.iter().enumerate() {
+            self.router.line(line);
+            for (_, wanted) in cuts.iter().filter(|(after, _)| *after as usize == i) {
+                self.router.cut(*wanted);
+            }
+        }
+    }
+
+    /// Records a change of state (when journaled); consecutive trace
+    /// lines share one record.
+    fn note(&mut self, record: Record) {
+        if !self.journaling {
+            return;
+        }
+        if let (
+            Some(Record::Trace { count, cuts }),
+            Record::Trace {
+                count: more,
+                cuts: theirs,
+            },
+        ) = (self.records.last_mut(), &record)
+        {
+            if let Ok(base) = u32::try_from(*count) {
+                cuts.extend(theirs.iter().map(|&(i, w)| (base.saturating_add(i), w)));
+                *count += more;
+                return;
+            }
+        }
+        self.records.push(record);
+    }
+
+    /// Routes `lines` in order; the cuts they reached (to answer after
+    /// the next flush) and, for the journal, after which line each came.
+    fn route(&mut self, lines: &[Line]) -> (Vec<Placed<Q>>, Vec<(u32, Wanted)>) {
+        let mut placed = Vec::new();
+        let mut cuts = Vec::new();
+        for (i, line) in lines.iter().enumerate() {
+            self.router.line(line);
+            let before = placed.len();
+            self.cuts.reached(&mut self.router, &self.name, &mut placed);
+            cuts.extend(placed[before..].iter().map(|p| (i as u32, p.wanted)));
+        }
+        (placed, cuts)
     }
 
     /// The stream will end after `end` events: cuts asked for beyond it
@@ -96,12 +283,12 @@ impl<Q> Gateway<Q> {
         self.sent.get(i).map_or(0, BatchLog::len)
     }
 
-    /// Routes one trace line; returns the cuts whose point it reached
-    /// (answer them after the next [`Gateway::flush`]).
+    /// Routes the trace file's next line; returns the cuts whose point it
+    /// reached (answer them after the next [`Gateway::flush`]).
     pub fn line(&mut self, line: &Line) -> Vec<Placed<Q>> {
-        self.router.line(line);
-        let mut placed = Vec::new();
-        self.cuts.reached(&mut self.router, &self.name, &mut placed);
+        let (placed, cuts) = self.route(std::slice::from_ref(line));
+        self.traced += 1;
+        self.note(Record::Trace { count: 1, cuts });
         placed
     }
 
@@ -119,10 +306,13 @@ impl<Q> Gateway<Q> {
             return Err(IngestRefusal::Finished);
         }
         let judged = self.ingest.offer(offer, &mut self.stats)?;
-        let mut placed = Vec::new();
-        for line in &judged.accepted {
-            placed.extend(self.line(line));
-        }
+        let (placed, cuts) = self.route(&judged.accepted);
+        self.note(Record::Offer {
+            producer: offer.producer.map(str::to_owned),
+            counter: offer.counter.map(str::to_owned),
+            payload: offer.payload.to_vec(),
+            cuts,
+        });
         let mut ack = judged.ack;
         ack.events = self.router.events();
         Ok((ack, placed))
@@ -130,17 +320,32 @@ impl<Q> Gateway<Q> {
 
     /// Line `number` of a trace read from standard input: routed (the cuts
     /// it reached, as [`Gateway::line`]), or why it was skipped (counted).
+    /// A line numbered no later than one read before is passed over
+    /// silently: a restored sensor fed the same input again goes on after
+    /// the last line it journaled, as a trace file does.
     pub fn read(&mut self, number: usize, text: &str) -> Result<Vec<Placed<Q>>, String> {
-        match self.ingest.read(number, text, &mut self.stats)? {
-            Some(line) => Ok(self.line(&line)),
-            None => Ok(Vec::new()),
+        if number as u64 <= self.stdin_read {
+            return Ok(Vec::new());
         }
+        self.stdin_read = number as u64;
+        let read = self.ingest.read(number, text, &mut self.stats);
+        let (placed, cuts) = match &read {
+            Ok(Some(line)) => self.route(std::slice::from_ref(line)),
+            _ => (Vec::new(), Vec::new()),
+        };
+        self.note(Record::Read {
+            number: number as u64,
+            text: text.to_string(),
+            cuts,
+        });
+        read.map(|_| placed)
     }
 
     /// The source is exhausted: from the next flush on, batches say the
     /// stream is finished; every cut still waiting is refused.
     pub fn end(&mut self) -> Vec<(Q, String)> {
         self.finished = true;
+        self.note(Record::End);
         self.cuts.refuse_all(&self.router)
     }
 
@@ -150,6 +355,7 @@ impl<Q> Gateway<Q> {
     pub fn flush(&mut self) -> Vec<Batch> {
         let through = self.router.seq();
         let events = self.router.events();
+        self.note(Record::Flush);
         let mut batches = Vec::with_capacity(self.sent.len());
         for (i, log) in self.sent.iter_mut().enumerate() {
             let batch = Batch {
@@ -173,13 +379,16 @@ impl<Q> Gateway<Q> {
             .cuts
             .request(query, parameters, &self.router, self.finished)
         {
-            Request::Now { wanted, query } => CutOutcome::Placed(place(
-                &mut self.router,
-                &self.name,
-                wanted,
-                query,
-                self.finished,
-            )),
+            Request::Now { wanted, query } => {
+                self.note(Record::Cut(wanted));
+                CutOutcome::Placed(place(
+                    &mut self.router,
+                    &self.name,
+                    wanted,
+                    query,
+                    self.finished,
+                ))
+            }
             Request::Scheduled => CutOutcome::Scheduled,
             Request::Refused { query, reason } => CutOutcome::Refused(query, reason),
             Request::Malformed { query, reason } => {
@@ -201,6 +410,9 @@ impl<Q> Gateway<Q> {
                 items,
             });
         self.count("follow", &answer);
+        if answer.is_ok() {
+            self.note(Record::Follow(bytes.to_vec()));
+        }
         answer
     }
 
@@ -212,6 +424,9 @@ impl<Q> Gateway<Q> {
             .map_err(|e| e.to_string())
             .and_then(|u| self.router.unfollow(&u).map_err(|e| e.to_string()));
         self.count("unfollow", &answer);
+        if answer.as_ref().is_ok_and(|&dropped| dropped > 0) {
+            self.note(Record::Unfollow(bytes.to_vec()));
+        }
         answer
     }
 

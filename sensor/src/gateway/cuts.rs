@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 const MAX_SCHEDULED: usize = 10_000;
 
 /// The cut a query asks for: its tag, and whether leaders add their rows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Wanted {
     pub tag: u64,
     pub rows: bool,
@@ -64,6 +64,8 @@ impl<Q> Default for Cuts<Q> {
 /// A cut placed in the stream, and the query to tell once it is sent.
 pub struct Placed<Q> {
     pub query: Q,
+    /// The cut it placed (what the sensor journals).
+    pub wanted: Wanted,
     pub answer: CutPlaced,
 }
 
@@ -174,6 +176,7 @@ pub fn place<Q>(
     let begin = router.begin();
     Placed {
         query,
+        wanted,
         answer: CutPlaced {
             version: VERSION,
             sensor: name.to_string(),

@@ -6,9 +6,9 @@ use super::core::{CutOutcome, Gateway};
 use super::cuts::CutParameters;
 use super::router::{LeaderPlace, Router, RouterConfig};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Unfollow};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Resent, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item};
-use idmesh_protocol::wire::{encode, VERSION};
+use idmesh_protocol::wire::{decode, encode, VERSION};
 
 /// Two leaders, a at (0, 0) and b at (10, 0); n tracks, k red.
 fn router(tracks: usize, red: usize, distributed_rule: bool) -> Router {
@@ -624,4 +624,181 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
         .unfollow(&unfollow(2, vec![1]))
         .unwrap_err()
         .contains("Radon"));
+}
+
+/// Everything a gateway would say about its state: every batch it keeps
+/// for each leader (as a resend gets them), its counters, its seq and how
+/// far it read its trace.
+fn state_of(gateway: &mut Gateway<u32>) -> Vec<Vec<u8>> {
+    let mut state: Vec<Vec<u8>> = ["a", "b"]
+        .iter()
+        .map(|leader| {
+            let resend = encode(&Resend {
+                version: VERSION,
+                leader: leader.to_string(),
+                from: 0,
+            });
+            encode(&gateway.resend(&resend).unwrap())
+        })
+        .collect();
+    state.push(serde_json::to_vec(gateway.stats()).unwrap());
+    state.push(gateway.router().seq().to_le_bytes().to_vec());
+    state.push(gateway.traced().to_le_bytes().to_vec());
+    state
+}
+
+/// A journaled gateway driven through every kind of change — trace lines,
+/// an ingest request with a cut scheduled inside it, standard input (a
+/// good line and a bad one), a cut now, a follow, flushes, the end — and
+/// a new gateway restored from its records (through the journal's bytes)
+/// at each point along the way: the same batches, counters, seq and trace
+/// position; the same producer counters (its lines again are duplicates)
+/// and, after the end, the same batches for what comes next (a follow
+/// that changed the interests included).
+#[test]
+fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
+    use super::ingest::Offer;
+    use super::journal::{frame, parse, Record, MAGIC};
+    let trace = [mix(0, 2), observe(3), mix(1, 3), mix(3, 7), observe(7)];
+    let payload = "{\"kind\":\"mix\",\"time\":0,\"a\":0,\"b\":5,\"swap\":0.5}\n\
+        {\"kind\":\"observe\",\"time\":0,\"track\":2,\"red\":0.9,\"blue\":0.3}\nnot a line";
+    let offer = |counter| Offer {
+        producer: Some("cam"),
+        counter: Some(counter),
+        payload: payload.as_bytes(),
+    };
+    let cut = |tag: &str, events: Option<&str>| CutParameters {
+        tag: Some(tag.into()),
+        rows: false,
+        events: events.map(str::to_owned),
+    };
+    let new = || Gateway::<u32>::new("s", router(8, 4, true), false).journaled();
+    let mut original = new();
+    let mut journal: Vec<Record> = Vec::new();
+    // (records so far, the state they stand for, the producer's lines
+    // taken)
+    let mut points = Vec::new();
+    let mut point = |gateway: &mut Gateway<u32>, journal: &mut Vec<Record>, offered: bool| {
+        journal.extend(gateway.unjournaled());
+        points.push((journal.len(), state_of(gateway), offered));
+    };
+    original.flush();
+    point(&mut original, &mut journal, false);
+    for line in &trace[..2] {
+        original.line(line);
+    }
+    assert!(matches!(
+        original.cut(1, &cut("7", Some("3"))),
+        CutOutcome::Scheduled
+    ));
+    let (ack, placed) = original.ingest(offer("0")).unwrap();
+    assert_eq!((ack.accepted.len(), ack.next, placed.len()), (2, 3, 1));
+    original.flush();
+    point(&mut original, &mut journal, true);
+    let good = "{\"kind\":\"observe\",\"time\":0,\"track\":1,\"red\":0.8,\"blue\":0.4}\n";
+    assert!(original.read(2, good).is_ok());
+    assert!(original.read(3, "{\"kind\":\"mix\"}\n").is_err());
+    assert!(matches!(
+        original.cut(2, &cut("8", None)),
+        CutOutcome::Placed(_)
+    ));
+    original.flush();
+    point(&mut original, &mut journal, true);
+    original.line(&trace[2]);
+    original.line(&trace[3]);
+    let follow = encode(&Follow {
+        version: VERSION,
+        leader: 0,
+        after: 2,
+        tracks: vec![3],
+    });
+    assert!(!original.follow(&follow).unwrap().items.is_empty());
+    original.flush();
+    point(&mut original, &mut journal, true);
+    original.line(&trace[4]);
+    original.end();
+    original.flush();
+    point(&mut original, &mut journal, true);
+    assert!(journal
+        .iter()
+        .any(|r| matches!(r, Record::Offer { cuts, .. } if cuts.len() == 1)));
+    assert!(journal.iter().any(|r| matches!(r, Record::Follow(_))));
+    // Through the journal's bytes, as a restarted process reads them.
+    let mut bytes = MAGIC.to_vec();
+    for record in &journal {
+        frame(record, &mut bytes);
+    }
+    let journal = parse(&bytes).unwrap().records;
+    let unjournaled = || Gateway::<u32>::new("s", router(8, 4, true), false);
+    for (records, state, offered) in &points {
+        let mut restored = unjournaled();
+        restored
+            .restore(journal[..*records].to_vec(), &trace)
+            .unwrap();
+        assert!(
+            restored.unjournaled().is_empty(),
+            "restoring records nothing"
+        );
+        assert_eq!(&state_of(&mut restored), state, "after {records} records");
+        if !restored.finished() {
+            let (again, _) = restored.ingest(offer("0")).unwrap();
+            assert_eq!(
+                again.accepted.is_empty(),
+                *offered,
+                "after {records} records"
+            );
+        }
+    }
+    // After the end both go on alike: a cut now, and the lines that touch
+    // the track the follow added reach leader a in both.
+    let mut restored = new();
+    restored.restore(journal.clone(), &trace).unwrap();
+    assert!(restored.finished());
+    assert_eq!(restored.traced(), 5);
+    // Standard input fed again from its start: the lines read before
+    // are passed over (not routed, not counted), the next one is read.
+    let (events, ingested) = (restored.router().events(), restored.stats().ingested);
+    assert!(restored.read(2, good).unwrap().is_empty());
+    assert!(restored.read(3, "{\"kind\":\"mix\"}\n").is_ok());
+    assert_eq!(
+        (restored.router().events(), restored.stats().ingested),
+        (events, ingested)
+    );
+    assert!(restored.read(4, good).is_ok());
+    assert_eq!(restored.router().events(), events + 1);
+    original.read(4, good).unwrap();
+    for gateway in [&mut original, &mut restored] {
+        assert!(matches!(
+            gateway.cut(3, &cut("9", None)),
+            CutOutcome::Placed(_)
+        ));
+        gateway.line(&mix(3, 7));
+        gateway.flush();
+    }
+    let (after, restored_after) = (state_of(&mut original), state_of(&mut restored));
+    assert_eq!(after, restored_after);
+    let batches: Resent = decode(&after[0]).unwrap();
+    let last = &batches.batches.last().unwrap().items;
+    assert!(
+        matches!(last.last().unwrap().item, Item::Mix { a: 3, b: 7, .. }),
+        "a follows 3: {last:?}"
+    );
+    // A journal of another stream (here: exact conditioning) is refused.
+    let error = Gateway::<u32>::new("s", router(8, 4, false), false)
+        .restore(journal.clone(), &trace)
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        error.starts_with("journal record 0: the journal is of another stream"),
+        "{error}"
+    );
+    // A trace shorter than the journal says is refused, naming the record.
+    let error = new()
+        .restore(journal, &trace[..3])
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        error.starts_with("journal record") && error.contains("lines of the trace, which has 3"),
+        "{error}"
+    );
 }

@@ -24,6 +24,7 @@ use idmesh_protocol::wire::{decode, encode};
 use idmesh_sensor::gateway::core::{CutOutcome, Gateway};
 use idmesh_sensor::gateway::cuts::{CutParameters, Placed};
 use idmesh_sensor::gateway::ingest::Offer;
+use idmesh_sensor::gateway::journal::Record;
 use idmesh_sensor::gateway::Router;
 use rand::Rng;
 use rand::SeedableRng;
@@ -125,6 +126,8 @@ pub enum Event {
     QueryTimeout(u64),
     Crash(usize),
     Restart(usize),
+    /// The sensor is killed and started again from its journal.
+    SensorCrash,
     Isolate(usize),
     Heal(usize),
     /// The faults stop and the final query starts.
@@ -208,6 +211,8 @@ pub struct Tally {
     pub answered: u64,
     pub failed_queries: u64,
     pub crashes: u64,
+    /// Sensor kills, each restarted from its journal.
+    pub sensor_crashes: u64,
     pub messages: u64,
     pub dropped: u64,
     /// Summed over the leaders at the end: transfers received, follow
@@ -226,6 +231,10 @@ pub struct World {
     net: Network,
     scenario: Scenario,
     gateway: Gateway<u64>,
+    /// The gateway's journal: every record it made (each is on disk
+    /// before what depends on it leaves, and the sensor dies only between
+    /// two events).
+    journal: Vec<Record>,
     next_line: usize,
     /// In half the schedules the lines reach the sensor from a producer
     /// on the ingest key rather than from a trace: its own seeded choices
@@ -259,7 +268,7 @@ impl World {
         let scenario_factored = scenario.factored.is_some();
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
-        let gateway = Gateway::new("sensor-0", router, scenario.lines.is_empty());
+        let gateway = Gateway::new("sensor-0", router, scenario.lines.is_empty()).journaled();
         let net = Network::random(&mut rng, scenario.leaders.len());
         let leaders = scenario
             .leaders
@@ -280,6 +289,7 @@ impl World {
             net,
             scenario,
             gateway,
+            journal: Vec::new(),
             next_line: 0,
             producer: None,
             leaders,
@@ -303,6 +313,13 @@ impl World {
         let mut side = world.rng.clone();
         if side.gen_bool(0.5) {
             world.producer = Some(ChaCha8Rng::seed_from_u64(side.gen()));
+        }
+        // In a third of the schedules the sensor is killed once mid-stream.
+        if side.gen_bool(1.0 / 3.0) {
+            let lines = world.scenario.lines.len() as Ms;
+            world
+                .net
+                .at(side.gen_range(1..=40 * lines + 1), Event::SensorCrash);
         }
         for i in 0..count {
             world.leaders[i].snapshot_every = world.rng.gen_range(3..=30);
@@ -384,6 +401,12 @@ impl World {
             Event::Crash(i) => {
                 if !self.calm {
                     self.crash(i)?;
+                }
+                Ok(())
+            }
+            Event::SensorCrash => {
+                if !self.calm {
+                    self.sensor_crash()?;
                 }
                 Ok(())
             }
@@ -646,6 +669,40 @@ impl World {
         self.net
             .at(self.now + phase, Event::Tick { leader: i, life });
         self.carry_out(i, out)
+    }
+
+    /// The sensor killed and started again: a new gateway restored from the
+    /// journal must be where the old one was — the same seq, events and
+    /// trace position (the producer's counter is checked by its next
+    /// request, which must be taken whole). Cuts it held for a later point
+    /// die with it: their queries time out.
+    fn sensor_crash(&mut self) -> Result<(), Violation> {
+        self.tally.sensor_crashes += 1;
+        self.journal.extend(self.gateway.unjournaled());
+        let router = Router::new(self.scenario.router(), &self.scenario.header)
+            .map_err(|e| Violation::setup(e.to_string()))?;
+        let mut restored =
+            Gateway::new("sensor-0", router, self.scenario.lines.is_empty()).journaled();
+        restored
+            .restore(self.journal.clone(), &self.scenario.lines)
+            .map_err(|e| Violation::new(format!("the sensor cannot restore: {e}")))?;
+        let where_ = |g: &Gateway<u64>| {
+            (
+                g.router().seq(),
+                g.router().events(),
+                g.finished(),
+                g.traced(),
+            )
+        };
+        if where_(&restored) != where_(&self.gateway) {
+            return Err(Violation::new(format!(
+                "the sensor restored from its journal at (seq, events, finished, trace lines) {:?}, not {:?}",
+                where_(&restored),
+                where_(&self.gateway)
+            )));
+        }
+        self.gateway = restored;
+        Ok(())
     }
 
     fn crash(&mut self, i: usize) -> Result<(), Violation> {
