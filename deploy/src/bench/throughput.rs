@@ -186,7 +186,10 @@ pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
         out,
         "| leaders | leader | items applied | bytes in | bytes out | sets sent | transfers out | bytes out per 1000 events | follows | unfollows | tracks followed |"
     )?;
-    writeln!(out, "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    writeln!(
+        out,
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    )?;
     for s in streams {
         for l in &s.stats {
             writeln!(

@@ -58,7 +58,9 @@ const LEADER_COUNTERS: [LeaderField; 19] = [
     ),
     ("sets_sent", "sets handed to other leaders", |s| s.sets_sent),
     ("follows", "follow requests to the sensor", |s| s.follows),
-    ("unfollows", "unfollow requests to the sensor", |s| s.unfollows),
+    ("unfollows", "unfollow requests to the sensor", |s| {
+        s.unfollows
+    }),
     ("omp_runs", "OMP runs on this leader's sets", |s| s.omp_runs),
     ("duplicates", "batches and transfers that came twice", |s| {
         s.duplicates

@@ -470,7 +470,10 @@ fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
         "{actions:?}"
     );
     assert_eq!(unfollows.len(), 1, "{actions:?}");
-    assert_eq!((unfollows[0].after, &unfollows[0].tracks[..]), (7, &[1][..]));
+    assert_eq!(
+        (unfollows[0].after, &unfollows[0].tracks[..]),
+        (7, &[1][..])
+    );
     let stats = leader.stats();
     assert_eq!((stats.tracks_followed, stats.unfollows), (1, 1));
 }

@@ -18,9 +18,9 @@ use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
-use std::collections::VecDeque;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
 use idmesh_protocol::Header;
+use std::collections::VecDeque;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct LeaderPlace {

@@ -589,7 +589,10 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     assert_eq!(seqs(&a), [2]);
     // a gathered {0, 1} at seq 2 and follows 1 from there.
     let followed = gateway.follow(&follow(2, vec![1])).unwrap();
-    assert_eq!(followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(), [3]);
+    assert_eq!(
+        followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(),
+        [3]
+    );
     // A request decided before that follow (seq 2) is stale.
     assert_eq!(gateway.unfollow(&unfollow(2, vec![1])), Ok(0));
     gateway.line(&observe(1)); // seq 4
