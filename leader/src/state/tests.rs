@@ -44,6 +44,25 @@ fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
     }
 }
 
+/// Leader "a" of a factored stream (components of at most 3 tracks,
+/// interests that shrink), its `Begin` applied.
+fn factored_leader(leaders: &[&str], owners: Vec<u16>) -> Leader {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let Item::Begin(mut start) = begin(leaders, owners) else {
+        unreachable!()
+    };
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+        shrink: true,
+    });
+    let mut leader = Leader::new("a");
+    leader
+        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
+        .unwrap();
+    leader
+}
+
 #[test]
 fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody() {
     let mut leader = Leader::new("a");
@@ -341,19 +360,8 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
 /// simulator, a wrong answer.)
 #[test]
 fn components_of_one_mix_in_two_transfers_have_all_their_tracks_followed() {
-    use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
-    let Item::Begin(mut start) = begin(&["a", "b", "c"], vec![0, 1, 2, 1, 2]) else {
-        unreachable!()
-    };
-    start.factored = Some(FactoredStart {
-        max_component: 3,
-        split: WireSplit::Original,
-        shrink: true,
-    });
-    let mut leader = Leader::new("a");
-    leader
-        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
-        .unwrap();
+    use idmesh_protocol::wire::factored::WireComponent;
+    let mut leader = factored_leader(&["a", "b", "c"], vec![0, 1, 2, 1, 2]);
     // Seq 3: b gathers track 0's component (b surveils track 1); seq 5:
     // a surveils track 0, so it gathers the components of 0 and 2, held by
     // b ({1, 3, 0}: b had mixed 1 with 3 before) and by c ({2, 4}).
@@ -410,19 +418,8 @@ fn components_of_one_mix_in_two_transfers_have_all_their_tracks_followed() {
 /// holds any more are unfollowed, and its interest shrinks back.
 #[test]
 fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
-    use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
-    let Item::Begin(mut start) = begin(&["a", "b"], vec![0, 1, 1]) else {
-        unreachable!()
-    };
-    start.factored = Some(FactoredStart {
-        max_component: 3,
-        split: WireSplit::Original,
-        shrink: true,
-    });
-    let mut leader = Leader::new("a");
-    leader
-        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
-        .unwrap();
+    use idmesh_protocol::wire::factored::WireComponent;
+    let mut leader = factored_leader(&["a", "b"], vec![0, 1, 1]);
     // Seq 3: a surveils track 0, so it gathers {0} and b's {1}.
     leader
         .batch(batch(1, vec![(3, mix(0, 1, 0, 1))], 3, false), 0)

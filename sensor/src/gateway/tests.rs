@@ -73,6 +73,16 @@ fn observe(track: u32) -> Line {
     })
 }
 
+/// Leader a's follow request for `tracks` from item `after` on.
+fn follow_of_a(after: u64, tracks: Vec<u32>) -> Vec<u8> {
+    encode(&Follow {
+        version: VERSION,
+        leader: 0,
+        after,
+        tracks,
+    })
+}
+
 fn seqs(batch: &Batch) -> Vec<u64> {
     batch.items.iter().map(|s| s.seq).collect()
 }
@@ -126,16 +136,8 @@ fn a_follow_gets_the_items_missed_on_its_new_tracks_and_bad_ones_are_refused() {
     gateway.line(&mix(3, 7)); // seq 3, b only
     gateway.line(&mix(0, 2)); // seq 4, a only
     gateway.flush();
-    let follow = |after, tracks: Vec<u32>| {
-        encode(&Follow {
-            version: VERSION,
-            leader: 0,
-            after,
-            tracks,
-        })
-    };
     // a now follows 3 from seq 2 on: the mix of 3 and 7 at seq 3.
-    let followed = gateway.follow(&follow(2, vec![3])).unwrap();
+    let followed = gateway.follow(&follow_of_a(2, vec![3])).unwrap();
     assert_eq!(
         followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(),
         [3]
@@ -145,7 +147,7 @@ fn a_follow_gets_the_items_missed_on_its_new_tracks_and_bad_ones_are_refused() {
     let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
     assert_eq!(seqs(&a), [5]);
     assert!(gateway
-        .follow(&follow(0, vec![8]))
+        .follow(&follow_of_a(0, vec![8]))
         .unwrap_err()
         .contains("track 8"));
     assert!(gateway.follow(b"junk").is_err());
@@ -567,14 +569,6 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     let routes = Router::new(config, &header).unwrap();
     let mut gateway: Gateway<()> = Gateway::new("s", routes, false);
     gateway.flush();
-    let follow = |after, tracks: Vec<u32>| {
-        encode(&Follow {
-            version: VERSION,
-            leader: 0,
-            after,
-            tracks,
-        })
-    };
     let unfollow = |after, tracks: Vec<u32>| {
         encode(&Unfollow {
             version: VERSION,
@@ -588,7 +582,7 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
     assert_eq!(seqs(&a), [2]);
     // a gathered {0, 1} at seq 2 and follows 1 from there.
-    let followed = gateway.follow(&follow(2, vec![1])).unwrap();
+    let followed = gateway.follow(&follow_of_a(2, vec![1])).unwrap();
     assert_eq!(
         followed.items.iter().map(|s| s.seq).collect::<Vec<_>>(),
         [3]
