@@ -114,9 +114,7 @@ impl Leader {
     /// the sensor once to stop routing what the leader no longer needs.
     pub(super) fn advance(&mut self) -> Result<Vec<Action>, LeaderError> {
         let mut actions = self.apply_queued()?;
-        if self.started.is_some() {
-            self.flush_unfollows(&mut actions)?;
-        }
+        self.flush_unfollows(&mut actions)?;
         Ok(actions)
     }
 

@@ -50,7 +50,10 @@ pub enum RouterError {
     UnknownLeader(u16),
     #[error("request names track {track}, but there are {tracks} tracks")]
     UnknownTrack { track: u32, tracks: u32 },
-    #[error("unfollow request on a Radon stream, whose leaders' interests only grow")]
+    #[error(
+        "unfollow request on a stream whose leaders' interests only grow (Radon, or factored \
+         without shrink_interest)"
+    )]
     Unfollow,
     #[error("OMP at the leaders needs {0}")]
     Omp(&'static str),
@@ -82,10 +85,9 @@ pub struct Router {
     log: Vec<Sequenced>,
     /// On a factored stream whose interests shrink, the seqs of the logged
     /// items on each track: a follow there wants exactly the items on its
-    /// tracks, and finds
-    /// them here without a pass over the log (a crowd makes a follow at
-    /// nearly every cross-leader mix, with the log as long as the slowest
-    /// leader's lag).
+    /// tracks, and finds them here without a pass over the log (a crowd
+    /// makes a follow at nearly every cross-leader mix, with the log as
+    /// long as the slowest leader's lag).
     touching: Option<Vec<VecDeque<u64>>>,
     outbox: Vec<Vec<Sequenced>>,
 }
