@@ -70,9 +70,11 @@ pub struct Deployment {
     children: Vec<(String, Child)>,
 }
 
-/// A loopback port free now and never handed out before by this process:
-/// the kernel may give a just-released port again, and two processes of
-/// one topology on the same port make the topology invalid.
+/// A loopback port free now, for TCP and for UDP, and never handed out
+/// before by this process: the kernel may give a just-released port again,
+/// two processes of one topology on the same port make the topology
+/// invalid, and a secured topology listens on QUIC (UDP) at the port its
+/// `tcp/` endpoint names — a port free for TCP may be taken for UDP.
 fn free_port() -> u16 {
     static GIVEN: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
     let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
@@ -81,7 +83,8 @@ fn free_port() -> u16 {
             .and_then(|l| l.local_addr())
             .map(|a| a.port())
             .expect("a free loopback port");
-        if !given.contains(&port) {
+        let udp_free = std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok();
+        if udp_free && !given.contains(&port) {
             given.push(port);
             return port;
         }
