@@ -84,6 +84,11 @@ pub struct BenchArgs {
     /// a component of (the topology's `shrink_interest`).
     #[arg(long)]
     pub shrink_interest: bool,
+    /// The sensor routes at most this many items past the slowest
+    /// leader's progress (the topology's `[sensor] window`); absent = no
+    /// window.
+    #[arg(long)]
+    pub window: Option<u64>,
     /// Sets per leader (the Radon belief).
     #[arg(long, default_value_t = 400)]
     pub budget: u32,

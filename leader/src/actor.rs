@@ -362,6 +362,16 @@ impl Driver<'_> {
                         }
                     }
                 }
+                Output::Progress(progress) => {
+                    // Lost, it is published again at the next sweep.
+                    let put = self
+                        .session
+                        .put(keys.leader_progress(name), encode(&progress))
+                        .congestion_control(CongestionControl::Drop);
+                    if let Err(e) = put.await {
+                        tracing::debug!(leader = %name, error = %e, "a progress mark was lost");
+                    }
+                }
                 Output::Snapshot(state) => {
                     if let Some(j) = self.journal.as_mut() {
                         let at = Instant::now();

@@ -39,6 +39,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.follows += tally.follows;
                 total.unfollows += tally.unfollows;
                 total.handovers += tally.handovers;
+                total.window_waits += tally.window_waits;
                 total.factored += tally.factored;
             }
             Err(violation) => {
@@ -49,7 +50,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes, {} sensor crashes, {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers; {} schedules of the factored belief",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes, {} sensor crashes, {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -62,6 +63,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.follows,
         total.unfollows,
         total.handovers,
+        total.window_waits,
         total.factored
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
@@ -80,6 +82,10 @@ fn every_schedule_answers_like_the_centralized_engine() {
         // Their leaders' interests shrink, and the requests saying so
         // are dropped, duplicated and reordered like any message.
         assert!(total.unfollows > 0, "no leader ever unfollowed a track");
+    }
+    if seeds.len() >= 5000 {
+        // Flow control held the stream, and every schedule still finished.
+        assert!(total.window_waits > 0, "the window never held the sensor");
     }
 }
 

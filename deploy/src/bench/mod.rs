@@ -45,6 +45,8 @@ pub struct BenchOptions {
     pub belief: BeliefKind,
     /// Factored: leaders' interests shrink.
     pub shrink_interest: bool,
+    /// The sensor's flow control (`window`); None: no window.
+    pub window: Option<u64>,
     /// Sets per leader (the Radon belief; the distributed rule runs with
     /// it).
     pub budget: u32,
@@ -101,7 +103,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     }
     writeln!(
         report,
-        "Crowd of {} targets ({} red), {} s simulated; {}; every process on this machine's loopback.\n",
+        "Crowd of {} targets ({} red), {} s simulated; {}; {}; every process on this machine's loopback.\n",
         options.targets,
         options.red,
         options.duration,
@@ -115,6 +117,10 @@ pub fn run(options: &BenchOptions) -> Result<()> {
                 "the Radon belief, distributed rule, budget {} sets per leader",
                 options.budget
             ),
+        },
+        match options.window {
+            Some(w) => format!("the sensor at most {w} items past the slowest leader"),
+            None => "no flow control".to_string(),
         }
     )?;
     // Latency with four leaders: at rest after the stream (the leaders
@@ -198,6 +204,7 @@ impl Deployment {
             leaders,
             belief: options.belief,
             shrink_interest: options.shrink_interest,
+            window: options.window,
             distributed_rule: true,
             budget: options.budget,
             sparsify: Sparsification::Threshold,

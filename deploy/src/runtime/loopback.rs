@@ -17,6 +17,8 @@ pub struct Loopback {
     pub belief: BeliefKind,
     /// Factored: leaders' interests shrink (`shrink_interest`).
     pub shrink_interest: bool,
+    /// The sensor's flow control (`window`); None: no window.
+    pub window: Option<u64>,
     pub distributed_rule: bool,
     /// Sets per leader; 0 = no pruning.
     pub budget: u32,
@@ -89,6 +91,9 @@ impl Loopback {
         if self.live {
             toml.push_str("live = true\n");
         }
+        if let Some(window) = self.window {
+            toml.push_str(&format!("window = {window}\n"));
+        }
         if let Some(dir) = &self.state_dir {
             toml.insert_str(0, &format!("state_dir = {:?}\n", dir.display().to_string()));
         }
@@ -128,6 +133,7 @@ mod tests {
             leaders: 1,
             belief: BeliefKind::Factored,
             shrink_interest: false,
+            window: None,
             distributed_rule: false,
             budget: 0,
             sparsify: Sparsification::Threshold,
@@ -164,6 +170,7 @@ mod tests {
             leaders: 5,
             belief: BeliefKind::Radon,
             shrink_interest: false,
+            window: None,
             distributed_rule: true,
             budget: 100,
             sparsify: Sparsification::Overcomplete,

@@ -182,6 +182,7 @@ async fn sensor(
         journal: topology
             .state_path()
             .map(|dir| dir.join(format!("{}.journal", topology.sensor.name))),
+        window: topology.sensor.window,
         faults: Faults {
             duplicate: topology.sensor.faults.duplicate,
             drop_every: topology.sensor.faults.drop_every,

@@ -42,6 +42,9 @@
 //! events = 5000                  # stop the stream after this many events
 //! live = false                   # true: stay open for producers' events
 //!                                # (P/sensor/<name>/ingest) after the trace
+//! window = 2048                  # flow control: route at most this many
+//!                                # items past the slowest leader's progress
+//!                                # (absent = no window)
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
@@ -223,6 +226,9 @@ pub struct SensorProcess {
     /// sensor stops.
     #[serde(default)]
     pub live: bool,
+    /// Flow control: the sensor routes at most this many seqs past the
+    /// slowest leader's progress (None: as fast as the source gives).
+    pub window: Option<u64>,
     #[serde(default)]
     pub faults: FaultSection,
 }

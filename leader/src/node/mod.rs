@@ -44,7 +44,7 @@ use crate::journal::Kind;
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Unfollow};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Progress, Resend, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
 use std::collections::BTreeMap;
@@ -159,6 +159,8 @@ pub enum Output {
     Persist { mark: Option<Durable> },
     /// Replace the journal by this snapshot of the whole state.
     Snapshot(Vec<u8>),
+    /// Publish how far the leader has got (the sensor's flow control).
+    Progress(Progress),
 }
 
 /// A leader restarted (or adopted) and not yet caught up.
@@ -200,6 +202,8 @@ pub struct Node {
     /// an item (a factored stream).
     components_since: Option<(u64, Now)>,
     published: Option<Durable>,
+    /// The progress mark last published.
+    progressed: u64,
     /// Inputs journaled since the last snapshot.
     journaled: usize,
 }
@@ -219,6 +223,7 @@ impl Node {
             waiting_since: None,
             components_since: None,
             published: None,
+            progressed: 0,
             journaled: 0,
         }
     }
@@ -324,7 +329,12 @@ impl Node {
                     answer: answer.map_err(|e| e.to_string()),
                 });
             }
-            Input::Tick => self.tick(now, &mut out),
+            Input::Tick => {
+                self.tick(now, &mut out);
+                // Again at every sweep, moved or not: a put lost, or a
+                // sensor that restarted knowing nothing, is mended here.
+                self.progress(true, &mut out);
+            }
             Input::Failed(why) => {
                 tracing::error!(leader = %self.leader.name(), error = %why, "leader failed");
                 self.failure = Some(why);
@@ -527,6 +537,7 @@ impl Node {
             self.leader.note_recovered(seconds);
             tracing::info!(leader = %self.leader.name(), seconds, position = self.leader.position(), "caught up");
         }
+        self.progress(false, out);
         // Every input journaled is applied: the state can replace them.
         if let (true, Some(every)) = (self.timers.journal, self.timers.snapshot_every) {
             if self.journaled >= every {
@@ -535,6 +546,21 @@ impl Node {
                 out.push(Output::Snapshot(self.leader.snapshot()));
             }
         }
+    }
+
+    /// Publishes the leader's progress if it moved (or `again`).
+    fn progress(&mut self, again: bool, out: &mut Vec<Output>) {
+        let through = self.leader.done_through();
+        if self.failure.is_some() || !(again || through > self.progressed) {
+            return;
+        }
+        self.progressed = through;
+        out.push(Output::Progress(Progress {
+            version: VERSION,
+            leader: self.leader.name().to_string(),
+            through,
+            batch: self.leader.next_batch(),
+        }));
     }
 
     /// Counts and logs a message from the network the leader refused: it

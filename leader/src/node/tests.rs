@@ -688,3 +688,33 @@ fn a_peers_durable_mark_lets_the_leader_forget_what_it_sent_there() {
     );
     assert_eq!(node.leader().stats().rejected, 2);
 }
+
+fn progress(out: &[Output]) -> Vec<(u64, u64)> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::Progress(p) => Some((p.through, p.batch)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The sensor's flow control reads how far a leader has got: said after
+/// every input that moves it (past items for others, since a batch says
+/// how far the stream is), never past an item it waits at, and again at
+/// every sweep whether it moved or not.
+#[test]
+fn progress_is_published_when_it_moves_and_at_every_sweep() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    let out = node.step(Duration::ZERO, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    assert_eq!(progress(&out), vec![(1, 1)]);
+    // Nothing for a in items 2..=5: done through 5 all the same.
+    let out = node.step(MS, batch(1, vec![], 5));
+    assert_eq!(progress(&out), vec![(5, 2)]);
+    // A mix across a and b at 6: a waits for b's sets there.
+    let out = node.step(2 * MS, batch(2, vec![(6, mix(0, 2, 0, 1))], 8));
+    assert_eq!(node.leader().waiting_for_transfer(), Some((6, 1)));
+    assert_eq!(progress(&out), vec![], "stopped at 5, as it was");
+    assert_eq!(node.leader().done_through(), 5);
+    let out = node.step(300 * MS, Input::Tick);
+    assert_eq!(progress(&out), vec![(5, 3)], "said again at the sweep");
+}

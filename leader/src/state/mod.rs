@@ -189,6 +189,27 @@ impl Leader {
         self.position
     }
 
+    /// How far this leader has got through the stream: every item for it
+    /// at or before this seq is applied. Past the last item it applied,
+    /// up to the one it is stopped at (or, stopped at none, as far as the
+    /// stream is: every batch says so), since items for others are not
+    /// sent to it. The sensor's flow control reads it.
+    pub fn done_through(&self) -> u64 {
+        let stopped_at = match self.waiting {
+            Some(Waiting::Transfer { seq, .. })
+            | Some(Waiting::Components { seq, .. })
+            | Some(Waiting::Follow { seq }) => Some(seq),
+            None => self
+                .queue
+                .first_key_value()
+                .map(|(seq, _)| *seq)
+                .filter(|seq| *seq <= self.frontier),
+        };
+        stopped_at
+            .map_or(self.frontier, |seq| seq.saturating_sub(1))
+            .max(self.position)
+    }
+
     /// The stream's field, once it began: what inputs must fit
     /// ([`crate::door`]).
     pub fn bounds(&self) -> Option<Bounds> {

@@ -16,6 +16,7 @@
 //! | `P/sensor/<name>/positions` | sensor queryable | every track's last position and owner where the stream is (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
+//! | `P/leader/<name>/progress` | leader publishes; sensor subscribes | how far it has applied the stream: the sensor's flow control |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
 //! | `P/query/positions` | coordinator queryable | where every track was last seen, and its leader (JSON) |
@@ -116,6 +117,14 @@ impl Keys {
 
     pub fn every_leader_durable(&self) -> String {
         format!("{}/leader/*/durable", self.prefix)
+    }
+
+    pub fn leader_progress(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/progress", self.prefix)
+    }
+
+    pub fn every_leader_progress(&self) -> String {
+        format!("{}/leader/*/progress", self.prefix)
     }
 
     pub fn query_marginals(&self) -> String {

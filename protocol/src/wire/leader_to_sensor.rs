@@ -80,3 +80,22 @@ pub struct Durable {
     pub position: u64,
 }
 super::versioned!(Durable, "durable mark");
+
+/// How far a leader has got: every item numbered at or before `through`
+/// that the sensor sent it is applied (it waits for nothing before it),
+/// and `batch` is the number of the next batch it waits for. Published on
+/// `P/leader/<name>/progress` after every input that moves it, and again
+/// at every sweep (a put lost, or a sensor restarted, is mended within
+/// one). The sensor's flow control: it routes at most its window of seqs
+/// past the slowest leader's progress, so a leader that follows tracks is
+/// sent at most a window of items it missed on them; and a stream the
+/// window holds publishes again the batches a leader still waits for
+/// (with nothing sent after them, nothing else would show one was lost).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    pub version: u16,
+    pub leader: String,
+    pub through: u64,
+    pub batch: u64,
+}
+super::versioned!(Progress, "progress mark");

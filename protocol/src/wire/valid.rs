@@ -12,7 +12,7 @@
 use super::coordinator_to_leader::Partial;
 use super::coordinator_to_sensor::CutPlaced;
 use super::leader_to_leader::{Transfer, TransfersSent, TransfersWanted, WireRow, WireSet};
-use super::leader_to_sensor::{Durable, Follow, Followed, Resend, Resent, Unfollow};
+use super::leader_to_sensor::{Durable, Follow, Followed, Progress, Resend, Resent, Unfollow};
 use super::sensor_to_leader::{Batch, Begin, Item, Sequenced};
 use super::{Versioned, WireError};
 
@@ -363,6 +363,14 @@ impl Valid for Durable {
         self.leader
             .is_empty()
             .then(|| "a durable mark names no leader".into())
+    }
+}
+
+impl Valid for Progress {
+    fn problem(&self) -> Option<String> {
+        self.leader
+            .is_empty()
+            .then(|| "a progress mark names no leader".into())
     }
 }
 

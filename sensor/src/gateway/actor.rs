@@ -39,6 +39,7 @@ use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
+use idmesh_protocol::wire::sensor_to_leader::Batch;
 use std::future::Future;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -66,6 +67,9 @@ pub struct GatewayConfig {
     /// Where the sensor journals what changed its state; started again on
     /// it, it resumes where it was. None: state in memory only.
     pub journal: Option<PathBuf>,
+    /// Flow control: route at most this many seqs past the slowest
+    /// leader's progress (None: as fast as the source gives).
+    pub window: Option<u64>,
     pub faults: Faults,
 }
 
@@ -118,10 +122,23 @@ fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
     (lines.len(), events)
 }
 
-/// Streams `source` until done (a live one until `shutdown`), then serves
-/// queries until `shutdown`.
 /// Unfollow requests waiting to be taken before the oldest are dropped.
 const UNFOLLOWS_KEPT: usize = 4096;
+
+/// Progress marks waiting to be taken before the oldest are dropped.
+const PROGRESS_KEPT: usize = 1024;
+
+/// How often a stream the window holds looks again without a mark (marks
+/// wake it at once; this only bounds a wait on a lost one).
+const WINDOW_RECHECK: Duration = Duration::from_millis(50);
+
+/// How often a stream the window holds asks [`Gateway::stalled`] for
+/// batches a leader still waits for: longer than a leader's sweep, at
+/// which it publishes its mark whether it moved or not.
+const STALL_CHECK: Duration = Duration::from_millis(600);
+
+/// Streams `source` until done (a live one until `shutdown`), then serves
+/// queries until `shutdown`.
 
 pub async fn run(
     session: Session,
@@ -156,6 +173,13 @@ pub async fn run(
         .declare_subscriber(keys.every_leader_durable())
         .await
         .map_err(mesh("declare the durable-mark subscriber"))?;
+    // Only the latest mark of each leader matters: a ring, so a flood of
+    // them never stalls Zenoh's receiving task.
+    let progress = session
+        .declare_subscriber(keys.every_leader_progress())
+        .with(zenoh::handlers::RingChannel::new(PROGRESS_KEPT))
+        .await
+        .map_err(mesh("declare the progress-mark subscriber"))?;
     let stats = session
         .declare_queryable(keys.sensor_stats(&config.name))
         .await
@@ -198,6 +222,9 @@ pub async fn run(
     if ends {
         gateway = gateway.ending_at(end);
     }
+    if let Some(window) = config.window {
+        gateway = gateway.windowed(window);
+    }
     let journal = match &config.journal {
         Some(path) => {
             let (journal, records) = Journal::open(path)?;
@@ -234,14 +261,24 @@ pub async fn run(
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
     let chunk = 512usize;
+    let mut stall_check = tokio::time::interval(STALL_CHECK);
+    stall_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     tokio::pin!(shutdown);
     loop {
         // How many lines are due now, and when the next one is.
         let (due, wait) = if gateway.finished() || next >= lines.len() {
             (0, Duration::from_secs(3600))
         } else {
-            due_lines(&config, lines, next, started, first_time, chunk)
+            let (due, wait) = due_lines(&config, lines, next, started, first_time, chunk);
+            // A line takes at most a seq or two: the window holds to
+            // within a chunk. Held, the stream waits for progress marks.
+            match gateway.room() {
+                Some(0) if due > 0 => (0, wait.min(WINDOW_RECHECK)),
+                Some(room) => (due.min(room as usize), wait),
+                None => (due, wait),
+            }
         };
+        let open = gateway.room() != Some(0);
         if due > 0 {
             let mut placed = Vec::new();
             for line in &lines[next..next + due] {
@@ -314,6 +351,18 @@ pub async fn run(
                 let Ok(sample) = sample else { break };
                 gateway.durable(&sample.payload().to_bytes(), sample.key_expr().as_str());
             }
+            _ = stall_check.tick(), if !open => {
+                let again = gateway.stalled();
+                wire.again(again).await;
+            }
+            sample = progress.recv_async() => {
+                let Ok(sample) = sample else { break };
+                let mut next = Some(sample);
+                while let Some(sample) = next {
+                    gateway.progress(&sample.payload().to_bytes(), sample.key_expr().as_str());
+                    next = progress.try_recv().ok().flatten();
+                }
+            }
             query = resends.recv_async() => {
                 let Ok(query) = query else { break };
                 let answer = gateway.resend(&payload(&query));
@@ -344,7 +393,7 @@ pub async fn run(
                 let Ok(query) = query else { break };
                 ingest(&mut gateway, &mut wire, query).await?;
             }
-            read = next_input(&mut input), if input.is_some() => {
+            read = next_input(&mut input), if input.is_some() && open => {
                 let Some(read) = read else {
                     // The input ended: so does a stream that is not live
                     // once the trace's own lines are out.
@@ -361,8 +410,10 @@ pub async fn run(
                 };
                 let mut placed = Vec::new();
                 take_input(&mut gateway, read, &mut placed);
-                // What the pipe already holds goes in the same batch.
-                for _ in 1..chunk {
+                // What the pipe already holds goes in the same batch (as
+                // much of it as the window lets in).
+                let room = gateway.room().map_or(chunk, |r| (r as usize).min(chunk));
+                for _ in 1..room {
                     let Some(rx) = input.as_mut() else { break };
                     match rx.try_recv() {
                         Ok(read) => take_input(&mut gateway, read, &mut placed),
@@ -582,6 +633,24 @@ impl Wire {
             }
         }
         Ok(())
+    }
+
+    /// Publishes batches again (a stream the window holds, for a leader
+    /// that still waits for them).
+    async fn again(&mut self, batches: Vec<(usize, Batch)>) {
+        for (i, batch) in batches {
+            let Some(publisher) = self.publishers.get(i) else {
+                continue;
+            };
+            tracing::debug!(
+                leader = i,
+                number = batch.number,
+                "window held: batch published again"
+            );
+            if let Some(Err(e)) = bounded("a batch", publisher.put(encode(&batch))).await {
+                tracing::error!(error = %e, "could not publish a batch again");
+            }
+        }
     }
 }
 

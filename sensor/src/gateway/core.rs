@@ -29,7 +29,7 @@ use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
 use idmesh_protocol::wire::leader_to_sensor::{
-    Durable, Follow, Followed, Resend, Resent, Unfollow,
+    Durable, Follow, Followed, Progress, Resend, Resent, Unfollow,
 };
 use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
@@ -46,6 +46,13 @@ pub enum CutOutcome<Q> {
     Refused(Q, String),
 }
 
+/// A leader's progress as the sensor knows it ([`Progress`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Mark {
+    through: u64,
+    batch: u64,
+}
+
 pub struct Gateway<Q> {
     name: String,
     router: Router,
@@ -53,6 +60,13 @@ pub struct Gateway<Q> {
     sent: Vec<BatchLog>,
     /// The last durable position each leader published.
     durable: Vec<Option<u64>>,
+    /// How far each leader has got (its progress marks).
+    progress: Vec<Option<Mark>>,
+    /// The marks [`Gateway::stalled`] saw last.
+    stall_checked: Vec<Option<Mark>>,
+    /// Flow control: route at most this many seqs past the slowest
+    /// leader's progress (None: as fast as the source gives).
+    window: Option<u64>,
     cuts: Cuts<Q>,
     /// Which producers' lines enter the order.
     ingest: Ingest,
@@ -91,6 +105,9 @@ impl<Q> Gateway<Q> {
             router,
             sent: (0..leaders).map(|_| BatchLog::default()).collect(),
             durable: vec![None; leaders],
+            progress: vec![None; leaders],
+            stall_checked: vec![None; leaders],
+            window: None,
             cuts: Cuts::default(),
             ingest,
             finished,
@@ -102,6 +119,80 @@ impl<Q> Gateway<Q> {
             records: Vec::new(),
             traced: 0,
             stdin_read: 0,
+        }
+    }
+
+    /// Routes at most `window` seqs past the slowest leader's progress
+    /// ([`Gateway::room`]).
+    pub fn windowed(mut self, window: u64) -> Self {
+        self.window = Some(window);
+        self
+    }
+
+    /// How many more seqs the flow control lets the stream take now (None:
+    /// no window). The actor reads no more of a pulled source (trace file,
+    /// standard input) while it is 0; progress marks open it again. A
+    /// restored gateway starts from no progress at all, and leaders
+    /// publish theirs at every sweep.
+    pub fn room(&self) -> Option<u64> {
+        let slowest = self
+            .progress
+            .iter()
+            .map(|m| m.map_or(0, |m| m.through))
+            .min()
+            .unwrap_or(0);
+        self.window
+            .map(|w| (slowest + w).saturating_sub(self.router.seq()))
+    }
+
+    /// The batches to publish again while the window holds the stream:
+    /// each leader's from the one it waits for, when its progress mark
+    /// names a batch below the last sent and has not moved since the
+    /// previous call. Call it at an interval longer than a leader's sweep
+    /// (its marks come at least that often), so that a leader busy with
+    /// what is in flight is not sent it twice.
+    pub fn stalled(&mut self) -> Vec<(usize, Batch)> {
+        let mut again = Vec::new();
+        for i in 0..self.sent.len() {
+            let mark = self.progress[i];
+            let unchanged = mark.is_some() && self.stall_checked[i] == mark;
+            self.stall_checked[i] = mark;
+            let Some(mark) = mark.filter(|m| unchanged && m.batch < self.sent[i].next_number())
+            else {
+                continue;
+            };
+            let name = &self.router.begin().leaders[i];
+            if let Ok(batches) = self.sent[i].from(name, mark.batch) {
+                again.extend(batches.into_iter().map(|b| (i, b)));
+            }
+        }
+        again
+    }
+
+    /// A leader published how far it has got (`Progress` bytes).
+    pub fn progress(&mut self, bytes: &[u8], origin: &str) {
+        let mark = match decode::<Progress>(bytes) {
+            Ok(mark) => mark,
+            Err(e) => {
+                self.stats.rejected += 1;
+                tracing::warn!(from = %origin, problem = %e,
+                    rejected = self.stats.rejected, "progress mark rejected");
+                return;
+            }
+        };
+        match self.leader_index(&mark.leader) {
+            // The latest, not the highest: a leader that restarted from
+            // its journal may be behind what it said before it died.
+            // (A late old mark only holds the stream a moment longer.)
+            Some(i) => {
+                self.progress[i] = Some(Mark {
+                    through: mark.through,
+                    batch: mark.batch,
+                })
+            }
+            None => {
+                tracing::warn!(leader = %mark.leader, "progress mark from a leader not of this stream")
+            }
         }
     }
 
@@ -436,11 +527,7 @@ impl<Q> Gateway<Q> {
             .map_err(|e| e.to_string())
             .and_then(|request| {
                 let sent = self
-                    .router
-                    .begin()
-                    .leaders
-                    .iter()
-                    .position(|n| *n == request.leader)
+                    .leader_index(&request.leader)
                     .map(|i| &self.sent[i])
                     .ok_or_else(|| {
                         format!(
@@ -470,22 +557,22 @@ impl<Q> Gateway<Q> {
                 return;
             }
         };
-        let Some(i) = self
-            .router
-            .begin()
-            .leaders
-            .iter()
-            .position(|n| *n == mark.leader)
-        else {
+        let Some(i) = self.leader_index(&mark.leader) else {
             tracing::warn!(leader = %mark.leader, "durable mark from a leader not of this stream");
             return;
         };
         let batches = self.sent[i].forget(&mark);
         self.durable[i] = Some(self.durable[i].unwrap_or(0).max(mark.position));
+
         let passed = self.durable.iter().copied().min().flatten();
         let items = passed.map_or(0, |seq| self.router.forget(seq));
         tracing::trace!(leader = %mark.leader, batches, items, kept = self.sent[i].len(),
             logged = self.router.logged(), "forgot what is safe");
+    }
+
+    /// The index of the leader named `name` in the stream's order.
+    fn leader_index(&self, name: &str) -> Option<usize> {
+        self.router.begin().leaders.iter().position(|n| n == name)
     }
 
     /// Counts a refused request.

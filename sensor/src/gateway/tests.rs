@@ -6,7 +6,9 @@ use super::core::{CutOutcome, Gateway};
 use super::cuts::CutParameters;
 use super::router::{LeaderPlace, Router, RouterConfig};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Resend, Resent, Unfollow};
+use idmesh_protocol::wire::leader_to_sensor::{
+    Durable, Follow, Progress, Resend, Resent, Unfollow,
+};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item};
 use idmesh_protocol::wire::{decode, encode, VERSION};
 
@@ -798,4 +800,84 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
         error.starts_with("journal record") && error.contains("lines of the trace, which has 3"),
         "{error}"
     );
+}
+
+fn progress(leader: &str, through: u64, batch: u64) -> Vec<u8> {
+    encode(&Progress {
+        version: VERSION,
+        leader: leader.into(),
+        through,
+        batch,
+    })
+}
+
+#[test]
+fn the_window_lets_the_stream_at_most_its_width_past_the_slowest_leader() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false).windowed(3);
+    assert_eq!(
+        gateway.room(),
+        Some(2),
+        "the Begin took seq 1; no leader has said a word"
+    );
+    gateway.flush();
+    gateway.line(&mix(0, 2));
+    gateway.line(&mix(1, 3));
+    gateway.flush();
+    assert_eq!(gateway.router().seq(), 3);
+    assert_eq!(gateway.room(), Some(0), "held: nobody has got anywhere");
+    gateway.progress(&progress("a", 3, 2), "test");
+    assert_eq!(
+        gateway.room(),
+        Some(0),
+        "b is the slowest, and it has said nothing"
+    );
+    gateway.progress(&progress("b", 2, 2), "test");
+    assert_eq!(
+        gateway.room(),
+        Some(2),
+        "b done through 2: the stream may go to 5"
+    );
+    // The latest mark counts, not the highest: a leader restarted from
+    // its journal may be behind what it said before.
+    gateway.progress(&progress("b", 1, 1), "test");
+    assert_eq!(gateway.room(), Some(1));
+    // Bad marks change nothing and are counted.
+    gateway.progress(b"junk", "test");
+    gateway.progress(&progress("z", 100, 100), "test");
+    assert_eq!(gateway.room(), Some(1));
+    assert_eq!(gateway.stats().rejected, 1);
+    // No window, no limit.
+    let free: Gateway<()> = Gateway::new("s", router(8, 4, true), false);
+    assert_eq!(free.room(), None);
+}
+
+#[test]
+fn a_held_stream_sends_again_the_batches_a_leader_still_waits_for_once_its_mark_stands_still() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false).windowed(1);
+    gateway.flush(); // batch 0 to each
+    gateway.line(&mix(0, 2));
+    gateway.flush(); // batch 1 to each: lost on its way to b
+                     // a has both; b still waits for batch 1, and nothing after it will
+                     // show that it was lost while the window holds the stream.
+    gateway.progress(&progress("a", 2, 2), "test");
+    gateway.progress(&progress("b", 1, 1), "test");
+    assert_eq!(gateway.room(), Some(0));
+    assert!(
+        gateway.stalled().is_empty(),
+        "a mark seen for the first time may just be behind what is in flight"
+    );
+    let again = gateway.stalled();
+    assert_eq!(
+        again
+            .iter()
+            .map(|(i, b)| (*i, b.number))
+            .collect::<Vec<_>>(),
+        vec![(1, 1)],
+        "b's batch 1 again, and nothing for a"
+    );
+    // b moves: its mark changed since the last look, so nothing is sent
+    // until it stands still again.
+    gateway.progress(&progress("b", 2, 2), "test");
+    assert!(gateway.stalled().is_empty());
+    assert!(gateway.stalled().is_empty(), "b has everything it was sent");
 }

@@ -9,7 +9,8 @@ use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
 use idmesh_placement::factored_options;
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
-use idmesh_sensor::gateway::{LeaderPlace, RouterConfig};
+use idmesh_sensor::gateway::core::Gateway;
+use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -27,6 +28,8 @@ pub struct Scenario {
     pub distributed_rule: bool,
     /// The leaders hold the factored belief (None: the Radon belief).
     pub factored: Option<FactoredStart>,
+    /// The sensor's flow control window (None: no window).
+    pub window: Option<u64>,
 }
 
 impl Scenario {
@@ -106,6 +109,10 @@ impl Scenario {
         });
         let distributed_rule = distributed_rule && factored.is_none();
         let centralized = centralized(&header, &lines, distributed_rule, factored)?;
+        // Half the schedules stream under flow control, with windows so
+        // small that the sensor waits for progress marks again and again
+        // (which the network loses, doubles and delays like the rest).
+        let window = rng.gen_bool(0.5).then(|| rng.gen_range(1..=8));
         Ok(Scenario {
             header,
             leaders,
@@ -114,7 +121,17 @@ impl Scenario {
             red,
             distributed_rule,
             factored,
+            window,
         })
+    }
+
+    /// The sensor's gateway, empty, with the scenario's window.
+    pub fn gateway<Q>(&self, router: Router) -> Gateway<Q> {
+        let gateway = Gateway::new("sensor-0", router, self.lines.is_empty()).journaled();
+        match self.window {
+            Some(window) => gateway.windowed(window),
+            None => gateway,
+        }
     }
 
     /// The router's settings: no pruning (the setting in which the

@@ -43,6 +43,9 @@ const QUERY_TIMEOUT: Ms = 1500;
 /// to give the final answer.
 const FINAL_PATIENCE: Ms = 60_000;
 
+/// The actor's interval between looks for stalled leaders (ms).
+const STALL_CHECK: Ms = 600;
+
 /// A message on the wire, by receiver.
 #[derive(Debug, Clone)]
 pub enum Msg {
@@ -90,6 +93,8 @@ pub enum ToSensor {
         bytes: Vec<u8>,
     },
     Durable(Vec<u8>),
+    /// How far a leader has got (flow control).
+    Progress(Vec<u8>),
     /// A leader stops following tracks (fire and forget).
     Unfollow(Vec<u8>),
     /// The coordinator asks for a cut (from = usize::MAX).
@@ -221,6 +226,8 @@ pub struct Tally {
     pub follows: u64,
     pub unfollows: u64,
     pub handovers: u64,
+    /// Times the sensor found its flow-control window full.
+    pub window_waits: u64,
     /// Schedules whose leaders held the factored belief.
     pub factored: u64,
 }
@@ -258,6 +265,8 @@ pub struct World {
     aimed: Aimed,
     /// Transfers lost once already (by sender, receiver and seq).
     lost_once: BTreeSet<(usize, usize, u64)>,
+    /// When the held sensor last looked for stalled leaders.
+    stall_checked: Ms,
 }
 
 impl World {
@@ -268,7 +277,7 @@ impl World {
         let scenario_factored = scenario.factored.is_some();
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
-        let gateway = Gateway::new("sensor-0", router, scenario.lines.is_empty()).journaled();
+        let gateway = scenario.gateway(router);
         let net = Network::random(&mut rng, scenario.leaders.len());
         let leaders = scenario
             .leaders
@@ -308,6 +317,7 @@ impl World {
             last_error: String::new(),
             aimed,
             lost_once: BTreeSet::new(),
+            stall_checked: 0,
         };
         // Drawn from a copy: the schedule's own draws stay as they were.
         let mut side = world.rng.clone();
@@ -361,9 +371,43 @@ impl World {
             }
         }
         Err(Violation::new(format!(
-            "no final answer within {FINAL_PATIENCE} ms of the faults ending (t = {} ms); last error: {}",
-            self.now, self.last_error
+            "no final answer within {FINAL_PATIENCE} ms of the faults ending (t = {} ms); last error: {}; {}",
+            self.now,
+            self.last_error,
+            self.where_everyone_is()
         )))
+    }
+
+    /// Where the sensor and every leader stand: what a stuck schedule's
+    /// failure says.
+    fn where_everyone_is(&self) -> String {
+        let mut text = format!(
+            "the sensor at seq {} (room {:?}, finished {}, line {} of {})",
+            self.gateway.router().seq(),
+            self.gateway.room(),
+            self.gateway.finished(),
+            self.next_line,
+            self.scenario.lines.len()
+        );
+        for (i, slot) in self.leaders.iter().enumerate() {
+            match &slot.node {
+                Some(node) => {
+                    let l = node.leader();
+                    text.push_str(&format!(
+                        "; leader {i} at {} (done through {}, next batch {}, missing {:?}, transfer {:?}, components {:?}, follow {})",
+                        l.position(),
+                        l.done_through(),
+                        l.next_batch(),
+                        l.missing_batches(),
+                        l.waiting_for_transfer(),
+                        l.waiting_for_components(),
+                        l.pending_follow().is_some()
+                    ))
+                }
+                None => text.push_str(&format!("; leader {i} down")),
+            }
+        }
+        text
     }
 
     fn calm_deadline(&self) -> Ms {
@@ -434,6 +478,14 @@ impl World {
                         self.start_leader(i)?;
                     }
                 }
+                // Under flow control the stream may still be going (the
+                // window held it while faults lost marks and batches):
+                // the final question waits for its end, which must come
+                // before the patience runs out.
+                if !self.gateway.finished() {
+                    self.net.at(self.now + 250, Event::Calm);
+                    return Ok(());
+                }
                 self.start_query(true);
                 Ok(())
             }
@@ -445,7 +497,33 @@ impl World {
     /// Reads the next few lines, as the gateway's actor does by chunks.
     fn sensor_step(&mut self) -> Result<(), Violation> {
         let lines = self.scenario.lines.len();
-        let chunk = self.rng.gen_range(1..=4usize);
+        let mut chunk = self.rng.gen_range(1..=4usize);
+        // Flow control: held, the sensor looks again later, as the actor
+        // does when no progress mark wakes it.
+        if let Some(room) = self.gateway.room() {
+            if room == 0 && self.next_line < lines {
+                self.tally.window_waits += 1;
+                // As the actor's stall check: batches a leader still
+                // waits for, again, at an interval longer than a sweep.
+                if self.now >= self.stall_checked + STALL_CHECK {
+                    self.stall_checked = self.now;
+                    for (i, batch) in self.gateway.stalled() {
+                        self.send(
+                            Endpoint::Sensor,
+                            Endpoint::Leader(i),
+                            Msg::Leader {
+                                to: i,
+                                what: ToLeader::Batch(encode(&batch)),
+                            },
+                        );
+                    }
+                }
+                let wait = self.rng.gen_range(1..=40);
+                self.net.at(self.now + wait, Event::SensorStep);
+                return Ok(());
+            }
+            chunk = chunk.min(room as usize);
+        }
         let mut placed = Vec::new();
         let end = (self.next_line + chunk).min(lines);
         if self.producer.is_some() {
@@ -597,6 +675,7 @@ impl World {
                 self.reply_leader(from, ask, answer);
             }
             ToSensor::Durable(bytes) => self.gateway.durable(&bytes, "sim"),
+            ToSensor::Progress(bytes) => self.gateway.progress(&bytes, "sim"),
             // A leader's own request is well formed: a refusal is a bug.
             ToSensor::Unfollow(bytes) => {
                 self.gateway.unfollow(&bytes).map_err(|e| {
@@ -681,8 +760,7 @@ impl World {
         self.journal.extend(self.gateway.unjournaled());
         let router = Router::new(self.scenario.router(), &self.scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
-        let mut restored =
-            Gateway::new("sensor-0", router, self.scenario.lines.is_empty()).journaled();
+        let mut restored = self.scenario.gateway(router);
         restored
             .restore(self.journal.clone(), &self.scenario.lines)
             .map_err(|e| Violation::new(format!("the sensor cannot restore: {e}")))?;
@@ -806,6 +884,14 @@ impl World {
                         },
                     );
                 }
+                Output::Progress(progress) => self.send(
+                    Endpoint::Leader(i),
+                    Endpoint::Sensor,
+                    Msg::Sensor {
+                        from: i,
+                        what: ToSensor::Progress(encode(&progress)),
+                    },
+                ),
                 Output::Unfollow(unfollow) => self.send(
                     Endpoint::Leader(i),
                     Endpoint::Sensor,

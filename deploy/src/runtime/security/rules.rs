@@ -19,6 +19,8 @@
 //! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/resend` |
 //! | leader L | sensor | put | `P/sensor/*/unfollow` (tracks it no longer needs) |
 //! | sensor | leaders | declare subscriber | `P/sensor/*/unfollow` |
+//! | leader L | sensor | put | `P/leader/*/progress` (how far it has got: flow control) |
+//! | sensor | leaders | declare subscriber | `P/leader/*/progress` |
 //! | leader L | sensor, leaders | put | `P/leader/*/durable` (how far it is safe) |
 //! | sensor, leaders | leaders | declare subscriber | `P/leader/*/durable` |
 //! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership), `P/alive/home/*` (a process back for its adopted role) |
@@ -127,6 +129,20 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             &leaders,
             &["declare_subscriber"],
             vec![keys.every_leader_durable()],
+        ),
+        grant(
+            "progress",
+            &leaders,
+            &sensor,
+            &["put"],
+            vec![keys.every_leader_progress()],
+        ),
+        grant(
+            "progress-subscriber",
+            &sensor,
+            &leaders,
+            &["declare_subscriber"],
+            vec![keys.every_leader_progress()],
         ),
         // Leader processes watch one another's roles, to adopt the role of
         // one gone for good.
