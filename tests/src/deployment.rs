@@ -34,6 +34,8 @@ pub struct Settings {
     pub security: Option<Secured>,
     /// The sensor's stream stays open for producers (`live = true`).
     pub live: bool,
+    /// The sensor's flow control (`window = N`); None: no window.
+    pub window: Option<u64>,
     /// The sensor's `trace`, when it is not the trace the leaders are
     /// placed over (say, the header alone, for a live stream).
     pub sensor_trace: Option<PathBuf>,
@@ -243,6 +245,9 @@ impl Deployment {
                 .display()
                 .to_string()
         );
+        if let Some(window) = settings.window {
+            toml.push_str(&format!("window = {window}\n"));
+        }
         if settings.live {
             toml.push_str("live = true\n");
         }

@@ -6,8 +6,10 @@
 //! `idmesh replay --method factored --coupling local` with the same
 //! options to 1e-9 through 1, 2, 4 and 8 leaders, from a known start and
 //! from the uniform prior, with leaders' interests growing in half the
-//! deployments and shrinking in the other half; and a leader killed
-//! mid-stream and restarted from its journal changes no answer.
+//! deployments and shrinking in the other half (those under flow control:
+//! the sensor at most a small window past the slowest leader); and a
+//! leader killed mid-stream and restarted from its journal changes no
+//! answer, while the window holds the stream for it.
 
 use idmesh_tests::deployment::{crowd, replay_lines, truth_lines, Deployment, Settings, Truth};
 use serde_json::Value;
@@ -95,11 +97,16 @@ fn check_points(what: &str, deployment: &Deployment, truths: &[Truth], central: 
     );
 }
 
+/// The flow-control window of the deployments whose interests shrink:
+/// small, so that the stream is held again and again.
+const WINDOW: u64 = 8;
+
 fn settings(leaders: usize, shrink_interest: bool) -> Settings {
     Settings {
         leaders,
         rate: Some(300.0),
         belief: Some(belief(shrink_interest)),
+        window: shrink_interest.then_some(WINDOW),
         ..Settings::default()
     }
 }
@@ -186,6 +193,7 @@ fn a_factored_leader_killed_and_restarted_changes_no_answer() {
         snapshot_every: Some(40),
         takeover_after_ms: Some(0),
         belief: Some(belief(true)),
+        window: Some(WINDOW),
         ..Settings::default()
     };
     let mut crashed = Deployment::start_each("factored-crash", &trace, &settings);
@@ -203,6 +211,11 @@ fn a_factored_leader_killed_and_restarted_changes_no_answer() {
     for (t, (g, w)) in floats(&last["p_red"]).iter().zip(&want).enumerate() {
         assert!((g - w).abs() < 1e-9, "after a crash, track {t}: {g} vs {w}");
     }
+    // The window held the stream while leader-1 was away (the stream
+    // could not run more than it past it).
+    let stats = crashed.query(&["stats"]).expect("stats");
+    let holds = stats[0]["sensors"][0]["window_holds"].as_u64().unwrap();
+    assert!(holds > 0, "the window never held the stream: {stats:?}");
     assert!(
         crashed.leaders_total("snapshots") > 0,
         "leaders wrote snapshots"

@@ -53,6 +53,10 @@ pub struct SensorStats {
     /// Producers heard from.
     #[serde(default)]
     pub producers: u64,
+    /// Times flow control held the stream: the sensor found itself its
+    /// window past the slowest leader's progress.
+    #[serde(default)]
+    pub window_holds: u64,
 }
 
 /// Where every track was last seen and which leader surveils it, at the

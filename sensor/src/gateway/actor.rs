@@ -261,6 +261,8 @@ pub async fn run(
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
     let chunk = 512usize;
+    // The window had room at the last look.
+    let mut open = true;
     let mut stall_check = tokio::time::interval(STALL_CHECK);
     stall_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     tokio::pin!(shutdown);
@@ -273,12 +275,17 @@ pub async fn run(
             // A line takes at most a seq or two: the window holds to
             // within a chunk. Held, the stream waits for progress marks.
             match gateway.room() {
-                Some(0) if due > 0 => (0, wait.min(WINDOW_RECHECK)),
+                Some(0) if due > 0 => {
+                    if open {
+                        gateway.hold();
+                    }
+                    (0, wait.min(WINDOW_RECHECK))
+                }
                 Some(room) => (due.min(room as usize), wait),
                 None => (due, wait),
             }
         };
-        let open = gateway.room() != Some(0);
+        open = gateway.room() != Some(0);
         if due > 0 {
             let mut placed = Vec::new();
             for line in &lines[next..next + due] {

@@ -169,6 +169,11 @@ impl<Q> Gateway<Q> {
         again
     }
 
+    /// The stream found its window full and waits (counted in the stats).
+    pub fn hold(&mut self) {
+        self.stats.window_holds += 1;
+    }
+
     /// A leader published how far it has got (`Progress` bytes).
     pub fn progress(&mut self, bytes: &[u8], origin: &str) {
         let mark = match decode::<Progress>(bytes) {
