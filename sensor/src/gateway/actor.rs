@@ -139,7 +139,6 @@ const STALL_CHECK: Duration = Duration::from_millis(600);
 
 /// Streams `source` until done (a live one until `shutdown`), then serves
 /// queries until `shutdown`.
-
 pub async fn run(
     session: Session,
     config: GatewayConfig,
