@@ -12,9 +12,9 @@
 //! sample-level recovery do not know our batch numbers).
 
 use crate::error::{MeshError, RunError};
-use crate::journal::{Journal, JournalOptions, Kind, Recovered};
+use crate::journal::{Journal, JournalError, JournalOptions, Kind, Recovered};
 use crate::node::{Ask, Input, Node, Output, Timers};
-use crate::ownership::{Ownership, HANDOVER_PATIENCE};
+use idmesh_ownership::{Ownership, HANDOVER_PATIENCE};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
 use idmesh_protocol::wire::leader_to_sensor::Resent;
@@ -218,11 +218,11 @@ pub async fn run(
 async fn own(journal: &std::path::Path, host: &str) -> Result<Ownership, RunError> {
     let deadline = Instant::now() + HANDOVER_PATIENCE;
     loop {
-        if let Some(owner) = Ownership::try_take(journal, host)? {
+        if let Some(owner) = Ownership::try_take(journal, host).map_err(JournalError::from)? {
             return Ok(owner);
         }
         if Instant::now() >= deadline {
-            return Err(Ownership::refused(journal).into());
+            return Err(JournalError::from(Ownership::refused(journal)).into());
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
     }

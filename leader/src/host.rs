@@ -17,7 +17,7 @@
 //!
 //! A token can vanish without its process dying: a partition hides it.
 //! So a role is adopted only if its journal's lock is free
-//! ([`crate::ownership`]): a process that still runs the role, however
+//! (`idmesh_ownership`): a process that still runs the role, however
 //! cut off, keeps it, and the role stays missing (answers `degraded`,
 //! naming it) until the cut heals, instead of running twice.
 //!
@@ -41,7 +41,7 @@
 use crate::actor::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
-use crate::ownership;
+use idmesh_ownership::OwnershipError;
 use idmesh_protocol::wire::keys::Keys;
 use std::collections::{BTreeSet, HashMap};
 use std::future::Future;
@@ -96,7 +96,7 @@ impl HostConfig {
     /// without a state directory: nothing to fence, nothing to adopt).
     fn journal_holder(&self, role: &str) -> Option<String> {
         let dir = self.state_dir.as_ref()?;
-        ownership::held_by(&journal_path(dir, role))
+        idmesh_ownership::held_by(&journal_path(dir, role))
     }
 }
 
@@ -225,7 +225,7 @@ pub async fn run(
                     stops.remove(&role);
                     match result {
                         Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
-                        Err(RunError::Journal(JournalError::Held { holder, .. })) if role == config.name => {
+                        Err(RunError::Journal(JournalError::Ownership(OwnershipError::Held { holder, .. }))) if role == config.name => {
                             // Its own role runs elsewhere and no token said
                             // so (a partition at start): stand by for it.
                             tracing::warn!(process = %config.name, %holder, "its role is held by another process; standing by and asking for it back");

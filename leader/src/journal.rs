@@ -25,7 +25,7 @@
 //!
 //! [`Leader`]: crate::state::Leader
 
-use crate::ownership::Ownership;
+use idmesh_ownership::{Ownership, OwnershipError};
 use std::fs::{File, OpenOptions};
 use std::io::{BufReader, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -84,8 +84,8 @@ pub enum JournalError {
     },
     #[error("snapshot {path}: {problem}")]
     Snapshot { path: String, problem: String },
-    #[error("journal lock {path} is held by {holder}: the role runs elsewhere")]
-    Held { path: String, holder: String },
+    #[error(transparent)]
+    Ownership(#[from] OwnershipError),
     #[error("journal {path}: entry {entry} at byte {offset} has unknown kind {kind}")]
     Corrupt {
         path: String,

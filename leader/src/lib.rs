@@ -20,8 +20,9 @@
 //!   processes gone for good that it adopts ([`host::run`]).
 //! - [`journal`] — the durable state: a snapshot plus the input log a
 //!   restarted (or adopted) leader replays.
-//! - [`ownership`] — the lock that lets one process at a time run a role
-//!   (a role cut off by a partition is not adopted).
+//! - The lock that lets one process at a time run a role (a role cut off
+//!   by a partition is not adopted) is `idmesh-ownership`
+//!   (`leader/ownership/`), which the sensor shares.
 //! - [`error`] — [`LeaderError`].
 
 pub mod actor;
@@ -30,7 +31,6 @@ pub mod error;
 pub mod host;
 pub mod journal;
 pub mod node;
-pub mod ownership;
 pub mod state;
 
 pub use error::LeaderError;

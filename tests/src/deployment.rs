@@ -6,7 +6,7 @@
 use crate::idmesh;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 #[derive(Debug, Clone, Default)]
@@ -161,6 +161,25 @@ impl Deployment {
     pub fn launch(&mut self, role: &str, name: &str) {
         let child = self.spawn(&[role, "--name", name]);
         self.children.push((name.to_string(), child));
+    }
+
+    /// Runs process `name` in `role` and waits for it to end by itself (one
+    /// expected to refuse to start); its exit status, or a panic after
+    /// `patience`. What it said is in [`Deployment::log`].
+    pub fn run_to_end(&self, role: &str, name: &str, patience: Duration) -> ExitStatus {
+        let mut child = self.spawn(&[role, "--name", name]);
+        let started = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().expect("wait for it") {
+                return status;
+            }
+            if started.elapsed() > patience {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("{name} still runs after {patience:?}\n{}", self.log());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
 
     /// The pid of process `name` (started with [`Deployment::start_each`]).

@@ -473,6 +473,38 @@ fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
     );
 }
 
+/// A second sensor process started on a journal another one holds (say,
+/// `idmesh up` run twice) refuses to start, naming the lock and who holds
+/// it, and the first streams on to replay's answer: two sensors appending
+/// to one journal would interleave two streams in it.
+#[test]
+fn a_second_sensor_on_a_journal_in_use_refuses_to_start_and_the_first_goes_on() {
+    let dir = std::env::temp_dir().join(format!("idmesh-ingest-twice-{}", std::process::id()));
+    let trace = crowd(&dir, 10, 3, 60.0, 6);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let expected = floats(&central["final_p_red"]);
+    let settings = Settings {
+        leaders: 2,
+        journal: true,
+        rate: Some(300.0),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start_each("ingesttwice", &trace, &settings);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the first sensor still streams");
+    let status = deployment.run_to_end("sensor", "sensor-0", Duration::from_secs(30));
+    assert!(!status.success(), "the second sensor ran");
+    let log = deployment.log();
+    assert!(
+        log.contains("sensor-0.journal.lock is held by sensor-0 (pid"),
+        "the refusal names the lock and its holder:\n{log}"
+    );
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    for (t, (g, w)) in floats(&last["p_red"]).iter().zip(&expected).enumerate() {
+        assert!((g - w).abs() < 1e-9, "track {t}: {g} vs {w}");
+    }
+}
+
 /// What a sensor restart test starts from: a crowd, `idmesh replay`'s
 /// final answer for it, its events, two leaders and a sensor that journal,
 /// and what each leader applies when nothing is killed.

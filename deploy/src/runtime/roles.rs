@@ -15,6 +15,7 @@ use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::TraceReader;
 use idmesh_sensor::gateway::actor::{Faults, GatewayConfig};
 use idmesh_sensor::gateway::feed::{lines_of, InputLine, Source};
+use idmesh_sensor::gateway::journal::{Journal, Record};
 use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
 use std::path::Path;
 use std::time::Duration;
@@ -45,6 +46,17 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
         ));
     }
     let options = peer_options(&topology, name)?;
+    // The sensor's journal is its before it joins the mesh: a second
+    // sensor process on it (the same topology started twice, a shared
+    // state directory) is refused here, naming who holds it, before it
+    // could take a port, a key or a record.
+    let journal = match (&role, topology.state_path()) {
+        (Role::Sensor { .. }, Some(dir)) => {
+            let path = dir.join(format!("{}.journal", topology.sensor.name));
+            Some(Journal::open(&path, name)?)
+        }
+        _ => None,
+    };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -56,7 +68,9 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             let keys = Keys::new(topology.prefix.clone());
             mesh::answer_pings(&session, keys.ping(expected, name), name.to_string()).await?;
             let result = match role {
-                Role::Sensor { stdin } => sensor(session.clone(), &topology, keys, stdin).await,
+                Role::Sensor { stdin } => {
+                    sensor(session.clone(), &topology, keys, stdin, journal).await
+                }
                 Role::Leader => idmesh_leader::host::run(
                     session.clone(),
                     HostConfig {
@@ -132,6 +146,7 @@ async fn sensor(
     topology: &Topology,
     keys: Keys,
     stdin: bool,
+    journal: Option<(Journal, Vec<Record>)>,
 ) -> Result<()> {
     let (header, source) = if stdin {
         let (header, input) = stdin_trace()?;
@@ -179,16 +194,14 @@ async fn sensor(
         limit: topology.sensor.events,
         wait_for_leaders: Duration::from_secs(60),
         live: topology.sensor.live,
-        journal: topology
-            .state_path()
-            .map(|dir| dir.join(format!("{}.journal", topology.sensor.name))),
         window: topology.sensor.window,
         faults: Faults {
             duplicate: topology.sensor.faults.duplicate,
             drop_every: topology.sensor.faults.drop_every,
         },
     };
-    idmesh_sensor::gateway::actor::run(session, config, router, source, shutdown()).await?;
+    idmesh_sensor::gateway::actor::run(session, config, router, source, journal, shutdown())
+        .await?;
     Ok(())
 }
 

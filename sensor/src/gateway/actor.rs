@@ -33,7 +33,7 @@ use super::core::{CutOutcome, Gateway, RestoreError};
 use super::cuts::{CutParameters, Placed};
 use super::feed::{InputLine, Source};
 use super::ingest::Offer;
-use super::journal::{Journal, JournalError};
+use super::journal::{Journal, JournalError, Record};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
@@ -41,7 +41,6 @@ use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use std::future::Future;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use tracing::Instrument;
 use zenoh::pubsub::Publisher;
@@ -64,9 +63,6 @@ pub struct GatewayConfig {
     /// The stream stays open for producers once its trace and input are
     /// done: it never finishes, and takes ingested events until shut down.
     pub live: bool,
-    /// Where the sensor journals what changed its state; started again on
-    /// it, it resumes where it was. None: state in memory only.
-    pub journal: Option<PathBuf>,
     /// Flow control: route at most this many seqs past the slowest
     /// leader's progress (None: as fast as the source gives).
     pub window: Option<u64>,
@@ -138,12 +134,15 @@ const WINDOW_RECHECK: Duration = Duration::from_millis(50);
 const STALL_CHECK: Duration = Duration::from_millis(600);
 
 /// Streams `source` until done (a live one until `shutdown`), then serves
-/// queries until `shutdown`.
+/// queries until `shutdown`. With a `journal` (opened, and so owned, before
+/// the process joined the mesh: [`Journal::open`]) it first restores what
+/// the records say, then records every change of state in it.
 pub async fn run(
     session: Session,
     config: GatewayConfig,
     router: Router,
     source: Source,
+    journal: Option<(Journal, Vec<Record>)>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), GatewayError> {
     let keys = &config.keys;
@@ -224,9 +223,9 @@ pub async fn run(
     if let Some(window) = config.window {
         gateway = gateway.windowed(window);
     }
-    let journal = match &config.journal {
-        Some(path) => {
-            let (journal, records) = Journal::open(path)?;
+    let journal = match journal {
+        Some((journal, records)) => {
+            let path = journal.path().to_path_buf();
             let restored = records.len();
             gateway
                 .restore(records, lines)

@@ -20,6 +20,7 @@
 //! journal — is refused with an error naming the file and the byte.
 
 use super::cuts::Wanted;
+use idmesh_ownership::{Ownership, OwnershipError};
 use serde::{Deserialize, Serialize};
 use std::fs::{File, OpenOptions};
 use std::io::Write;
@@ -84,6 +85,9 @@ pub enum JournalError {
         offset: u64,
         problem: String,
     },
+    /// Another sensor process has this journal open.
+    #[error(transparent)]
+    Ownership(#[from] OwnershipError),
 }
 
 /// What a journal's bytes hold.
@@ -94,16 +98,19 @@ pub struct Parsed {
     pub whole: u64,
 }
 
-/// A journal open for appending.
+/// A journal open for appending, by the one process holding its lock
+/// (two sensors appending to one journal would interleave two streams).
 pub struct Journal {
     file: File,
     path: PathBuf,
+    _owner: Ownership,
 }
 
 impl Journal {
     /// Opens (or creates) the journal at `path` and returns the records it
     /// holds, in order; a torn last frame is cut off with a warning.
-    pub fn open(path: &Path) -> Result<(Journal, Vec<Record>), JournalError> {
+    pub fn open(path: &Path, holder: &str) -> Result<(Journal, Vec<Record>), JournalError> {
+        let owner = Ownership::try_take(path, holder)?.ok_or_else(|| Ownership::refused(path))?;
         let io = |source| JournalError::Io {
             path: path.display().to_string(),
             source,
@@ -140,6 +147,7 @@ impl Journal {
             Journal {
                 file,
                 path: path.to_path_buf(),
+                _owner: owner,
             },
             parsed.records,
         ))
@@ -271,17 +279,31 @@ mod tests {
     #[test]
     fn records_come_back_in_order_after_reopening_and_appending_goes_on() {
         let path = path("order");
-        let (mut journal, old) = Journal::open(&path).unwrap();
+        let (mut journal, old) = Journal::open(&path, "test").unwrap();
         assert!(old.is_empty());
         journal.append(&records()[..2]).unwrap();
         journal.append(&[]).unwrap();
         drop(journal);
-        let (mut journal, old) = Journal::open(&path).unwrap();
+        let (mut journal, old) = Journal::open(&path, "test").unwrap();
         assert_eq!(old, records()[..2]);
         journal.append(&records()[2..]).unwrap();
         drop(journal);
-        assert_eq!(Journal::open(&path).unwrap().1, records());
+        assert_eq!(Journal::open(&path, "test").unwrap().1, records());
         assert_eq!(std::fs::read(&path).unwrap(), bytes_of(&records()));
+    }
+
+    #[test]
+    fn one_process_at_a_time_writes_a_journal_and_a_refusal_names_the_holder() {
+        let path = path("owned");
+        let (journal, _) = Journal::open(&path, "sensor-0").unwrap();
+        let error = Journal::open(&path, "sensor-0 again")
+            .err()
+            .expect("refused while the first holds it")
+            .to_string();
+        assert!(error.contains("sensor-0 (pid"), "{error}");
+        assert!(error.contains("owned.lock"), "{error}");
+        drop(journal);
+        assert!(Journal::open(&path, "sensor-0 again").is_ok());
     }
 
     #[test]
@@ -300,7 +322,7 @@ mod tests {
         let path = path("torn");
         std::fs::create_dir_all(path.parent().unwrap()).unwrap();
         std::fs::write(&path, &full[..full.len() - 1]).unwrap();
-        let (mut journal, old) = Journal::open(&path).unwrap();
+        let (mut journal, old) = Journal::open(&path, "test").unwrap();
         assert_eq!(old, records()[..5]);
         journal.append(&[Record::End]).unwrap();
         drop(journal);
@@ -330,11 +352,17 @@ mod tests {
         let at = MAGIC.len() + 8 + postcard::to_stdvec(&Record::Flush).unwrap().len();
         bytes[at + 3] = 0x7f; // a length of gigabytes
         std::fs::write(&path, &bytes).unwrap();
-        let error = Journal::open(&path).err().expect("refused").to_string();
+        let error = Journal::open(&path, "test")
+            .err()
+            .expect("refused")
+            .to_string();
         assert!(error.contains(&path.display().to_string()), "{error}");
         assert!(error.contains(&format!("at byte {at}")), "{error}");
         std::fs::write(&path, b"not a journal at all, long enough").unwrap();
-        let error = Journal::open(&path).err().expect("refused").to_string();
+        let error = Journal::open(&path, "test")
+            .err()
+            .expect("refused")
+            .to_string();
         assert!(error.contains("at byte 0: not a sensor journal"), "{error}");
         // Refused, not cut: the file is left for whoever looks into it.
         assert_eq!(

@@ -1,4 +1,7 @@
-//! Who may run a leader role: the one process holding its journal's lock.
+//! Who may write a journal: the one process holding its lock. A leader
+//! runs a role only while it owns the role's journal, and a sensor streams
+//! only while it owns its stream's journal (two sensors on one journal
+//! would interleave two streams' records in it).
 //!
 //! A role's liveliness token says who *answers* for it, but tokens are
 //! only as good as the network: across a partition each side sees the
@@ -19,13 +22,24 @@
 //! holder that vanishes keeps it until the server's lease expires (NFSv4:
 //! about 90 s), which is then the shortest takeover.
 
-use crate::journal::JournalError;
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// The right to write a role's journal; the lock is released on drop.
+/// The lock could not be had.
+#[derive(Debug, thiserror::Error)]
+pub enum OwnershipError {
+    #[error("journal lock {path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("journal lock {path} is held by {holder}: its role runs elsewhere")]
+    Held { path: String, holder: String },
+}
+
+/// The right to write a journal; the lock is released on drop.
 #[derive(Debug)]
 pub struct Ownership {
     _file: File,
@@ -37,7 +51,7 @@ pub const HANDOVER_PATIENCE: Duration = Duration::from_secs(5);
 
 impl Ownership {
     /// Takes the lock of `journal` for `holder` if nobody holds it.
-    pub fn try_take(journal: &Path, holder: &str) -> Result<Option<Self>, JournalError> {
+    pub fn try_take(journal: &Path, holder: &str) -> Result<Option<Self>, OwnershipError> {
         let Some(mut file) = lock(journal)? else {
             return Ok(None);
         };
@@ -46,7 +60,7 @@ impl Ownership {
             .set_len(0)
             .and_then(|()| file.rewind())
             .and_then(|()| writeln!(file, "{holder} (pid {})", std::process::id()));
-        named.map_err(|source| JournalError::Io {
+        named.map_err(|source| OwnershipError::Io {
             path: lock_path(journal).display().to_string(),
             source,
         })?;
@@ -54,8 +68,8 @@ impl Ownership {
     }
 
     /// The error for a lock someone else kept: names the lock and holder.
-    pub fn refused(journal: &Path) -> JournalError {
-        JournalError::Held {
+    pub fn refused(journal: &Path) -> OwnershipError {
+        OwnershipError::Held {
             path: lock_path(journal).display().to_string(),
             holder: holder_of(journal),
         }
@@ -76,9 +90,9 @@ pub fn held_by(journal: &Path) -> Option<String> {
 }
 
 /// The lock file of `journal`, locked here; None if another holds it.
-fn lock(journal: &Path) -> Result<Option<File>, JournalError> {
+fn lock(journal: &Path) -> Result<Option<File>, OwnershipError> {
     let path = lock_path(journal);
-    let io = |source| JournalError::Io {
+    let io = |source| OwnershipError::Io {
         path: path.display().to_string(),
         source,
     };
