@@ -112,6 +112,31 @@ pub struct BenchArgs {
     /// the bench's folder), so the figures include the fsyncs.
     #[arg(long)]
     pub journal: bool,
+    /// Only the accuracy figure: the live answers' tracking error on the
+    /// Table III crowds (four leaders, factored and Radon, asked at every
+    /// truth line) against the centralized engine's.
+    #[arg(long, conflicts_with = "ingest")]
+    pub accuracy: bool,
+    /// With --accuracy: the Table III n to run, comma-separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "20,60,100",
+        requires = "accuracy"
+    )]
+    pub sizes: Vec<usize>,
+    /// With --accuracy: the starts to run, comma-separated.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "known,uniform",
+        requires = "accuracy"
+    )]
+    pub starts: Vec<idmesh_eval::eval::accuracy::Start>,
+    /// With --accuracy: seeds per point (the evaluation's seeds 0, 1, …).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..), requires = "accuracy")]
+    pub seeds: u64,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -78,6 +78,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             out: args.out,
             ingest: args.ingest,
             journal: args.journal,
+            accuracy: args.accuracy.then_some(bench::Crowds {
+                sizes: args.sizes,
+                starts: args.starts,
+                seeds: args.seeds as usize,
+            }),
         }),
     }
 }

@@ -126,7 +126,7 @@ pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> R
 }
 
 /// One ingest request, until acknowledged.
-async fn send(
+pub(super) async fn send(
     deployment: &Deployment,
     key: &str,
     producer: &str,

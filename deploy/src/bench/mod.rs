@@ -15,8 +15,14 @@
 //!   request, and a one-line ingest round trip against a raw get to the
 //!   sensor in the same run.
 //!
+//! - [`accuracy`] (`--accuracy`, on its own): the live answers' tracking
+//!   error on the Table III crowds against the centralized engine's, asked
+//!   at every truth line.
+//!
 //! Figures are ratios against that floor, because the machine is noisy.
 
+mod accuracy;
+pub use accuracy::Crowds;
 mod cpu;
 mod ingest;
 mod latency;
@@ -62,11 +68,26 @@ pub struct BenchOptions {
     /// The sensor and the leaders journal (`state_dir`), as a deployment
     /// that survives a kill does.
     pub journal: bool,
+    /// Only the accuracy figure, on these Table III crowds.
+    pub accuracy: Option<accuracy::Crowds>,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
     std::fs::create_dir_all(&options.dir)
         .with_context(|| format!("cannot create {}", options.dir.display()))?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()?;
+    if let Some(crowds) = &options.accuracy {
+        let report = accuracy::run(&runtime, crowds, &options.dir)?;
+        print!("{report}");
+        if let Some(out) = &options.out {
+            std::fs::write(out, &report)
+                .with_context(|| format!("cannot write {}", out.display()))?;
+        }
+        return Ok(());
+    }
     let trace = options.dir.join(format!(
         "crowd-{}-{}-{}.jsonl",
         options.targets, options.red, options.duration
@@ -82,10 +103,6 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             &trace,
         )?;
     }
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()?;
     let mut report = String::new();
     if options.ingest {
         let header = ingest::header_only(&trace, &options.dir)?;
@@ -221,9 +238,17 @@ impl Deployment {
         if options.journal {
             let _ = std::fs::remove_dir_all(options.dir.join("state"));
         }
-        let (toml, _) = plan.topology(&std::fs::canonicalize(trace)?)?;
         let config = options.dir.join(format!("topology-{leaders}.toml"));
-        std::fs::write(&config, toml)?;
+        Self::launch(&plan, trace, &config).await
+    }
+
+    /// Writes `plan`'s topology streaming `trace` to `config` and starts
+    /// its processes.
+    async fn launch(plan: &Loopback, trace: &Path, config: &Path) -> Result<Self> {
+        let leaders = plan.leaders;
+        let (toml, _) = plan.topology(&std::fs::canonicalize(trace)?)?;
+        std::fs::write(config, toml)?;
+        let config = config.to_path_buf();
         let topology = Topology::load(&config)?;
         // The sensor starts last, once the coordinator answers here, so
         // that the bench sees the stream from its first events even when it

@@ -47,12 +47,18 @@ pub enum Ports {
 }
 
 impl Ports {
-    fn take(self, index: u16) -> Result<u16> {
+    /// The port of process `index`. A free port stays bound in `held`
+    /// until the whole topology is written: released at once, the kernel
+    /// may hand the same port out again to the next process.
+    fn take(self, index: u16, held: &mut Vec<std::net::TcpListener>) -> Result<u16> {
         match self {
             Ports::From(first) => Ok(first + index),
-            Ports::Free => Ok(std::net::TcpListener::bind("127.0.0.1:0")?
-                .local_addr()?
-                .port()),
+            Ports::Free => {
+                let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
+                let port = listener.local_addr()?.port();
+                held.push(listener);
+                Ok(port)
+            }
         }
     }
 }
@@ -66,7 +72,8 @@ impl Loopback {
         let trace = std::path::absolute(trace)?;
         let columns = (self.leaders as f64).sqrt().ceil().max(1.0) as usize;
         let rows = self.leaders.div_ceil(columns);
-        let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0)?);
+        let mut held = Vec::new();
+        let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0, &mut held)?);
         let mut toml = format!(
             "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             self.prefix,
@@ -79,7 +86,7 @@ impl Loopback {
                 Sparsification::Overcomplete => "overcomplete",
             },
             self.query_timeout_ms,
-            self.ports.take(self.leaders as u16 + 1)?,
+            self.ports.take(self.leaders as u16 + 1, &mut held)?,
             trace.display().to_string(),
         );
         if let Some(rate) = self.rate {
@@ -103,7 +110,7 @@ impl Loopback {
             let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
             toml.push_str(&format!(
                 "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{x:.3}, {y:.3}]\n",
-                self.ports.take(i as u16 + 1)?
+                self.ports.take(i as u16 + 1, &mut held)?
             ));
         }
         Ok((toml, coordinator))

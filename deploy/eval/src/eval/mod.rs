@@ -18,12 +18,16 @@
 //!   n = 500 to 10,000.
 //! - [`report`] — the prose that carries numbers: the summary, the goals
 //!   and the belief's expected error, the distributed rule's cost.
+//! - [`accuracy`] — the Table III crowds as trace files and their
+//!   centralized answers, for scoring a live deployment
+//!   (`idmesh bench --accuracy`).
 //!
 //! Two passes: the first runs every cell; then, for each Table III point,
 //! a particle filter is sized to take as long as each other method (its P
 //! scaled from the P = 1000 run of the first pass, whose time is linear in
 //! P) and the second pass runs those.
 
+pub mod accuracy;
 pub mod args;
 mod grid;
 mod large;
@@ -583,7 +587,12 @@ fn body(results: &Results, plots: &[Plot]) -> String {
          restarted, a host gone for good and back, a rate-limited link): time from link-up \
          to the first complete answer, to adopt a role and to hand it back, query latency \
          over the slow link: [lan.md](lan.md), printed by \
-         `cargo test --release -p idmesh-tests --test lan -- --nocapture` (needs root).\n"
+         `cargo test --release -p idmesh-tests --test lan -- --nocapture` (needs root).\n\
+         - The live runtime's accuracy on the Table III crowds (four leaders on loopback, \
+         asked at every truth line): the factored belief's live tracking error against the \
+         centralized factored engine's (local split rule), beside the Radon runtime's \
+         (distributed rule): [live-accuracy.md](live-accuracy.md), written by \
+         `idmesh bench --accuracy --out docs/live-accuracy.md`.\n"
     )
     .unwrap();
     let errors: Vec<String> = results

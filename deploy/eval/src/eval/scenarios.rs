@@ -58,7 +58,7 @@ impl Sensor {
 }
 
 /// What the filters know at time 0 (k is known either way).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, clap::ValueEnum)]
 pub enum Start {
     /// The red tracks at time 0 are revealed.
     Known,
@@ -192,12 +192,25 @@ impl ScenarioSpec {
 
     /// Generates the trace (deterministic).
     pub fn generate(&self, scenes: &Scenes) -> Result<Trace> {
+        Ok(self.generated(scenes, None)?.1)
+    }
+
+    /// The trace as a file carries it, with `move` lines every `moves`
+    /// seconds (a live sensor routes tracks to leaders by them), beside
+    /// the in-memory trace the filters replay. Moves draw no randomness:
+    /// the mixes, observations and truths are those of
+    /// [`ScenarioSpec::generate`] whatever `moves` is.
+    pub fn generated(
+        &self,
+        scenes: &Scenes,
+        moves: Option<f64>,
+    ) -> Result<(GeneratedTrace, Trace)> {
         let sensor = self.sensor.model()?;
         let base = |s: Scenario| {
             s.swap(self.swap)
                 .sensor(sensor.clone())
                 .seed(self.seed)
-                .move_interval(None)
+                .move_interval(moves)
                 .reveal_initial_red(self.start == Start::Known)
         };
         match &self.source {
@@ -221,7 +234,8 @@ impl ScenarioSpec {
                     None => crowd(None)?,
                     Some(target) => steer(*target, |x| crowd(Some(x)))?,
                 };
-                Ok(convert(&trace, mix, observe))
+                let converted = convert(&trace, mix, observe);
+                Ok((trace, converted))
             }
             Source::Pedestrians {
                 scene,
@@ -239,7 +253,8 @@ impl ScenarioSpec {
                 let trace = s
                     .generate()
                     .with_context(|| format!("scene {scene} from {start:.0} s"))?;
-                Ok(convert(&trace, p.mix_distance, p.observe_distance))
+                let converted = convert(&trace, p.mix_distance, p.observe_distance);
+                Ok((trace, converted))
             }
         }
     }
@@ -380,6 +395,11 @@ mod tests {
             assert_eq!(uniform.initial_red, trace.initial_red);
             assert_eq!(trace.with_start(Start::Uniform).field, uniform.field);
             assert_eq!(uniform.with_start(Start::Known).field, trace.field);
+            // With move lines: the same trace for the filters.
+            let (file, with_moves) = spec.generated(&Scenes::default(), Some(1.0)).unwrap();
+            assert!(file.stats().moves > 0);
+            assert_eq!(with_moves.steps, trace.steps);
+            assert_eq!(with_moves.field, trace.field);
         }
     }
 

@@ -115,14 +115,28 @@ impl Score {
     }
 }
 
-/// Replays `trace` through `method` (seeded with `seed`) and scores it.
-pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
+/// One replay of a trace through a method: the marginals at every truth
+/// line (with the truth there), and what the timed loop counted.
+pub(super) struct Replayed<'a> {
+    pub answers: Vec<(Vec<f64>, &'a [u32])>,
+    /// Seconds inside the filter.
+    pub seconds: f64,
+    coefficient_sum: f64,
+    events: usize,
+    max_coefficients: usize,
+    last_coefficients: usize,
+    refused: usize,
+}
+
+/// Replays `trace` through `method` (seeded with `seed`): only the
+/// filter's own calls are inside the clock. An event the filter refuses is
+/// skipped and counted; a filter that cannot be built or cannot answer
+/// ends the run (the reason).
+pub(super) fn replay(method: Method, trace: &Trace, seed: u64) -> Result<Replayed<'_>, String> {
     let clock = Stopwatch::start();
-    let built = method.build(trace.field.clone(), seed);
-    let mut filter = match built {
-        Ok(filter) => filter,
-        Err(e) => return Score::failed(format!("{method}: {e}")),
-    };
+    let mut filter = method
+        .build(trace.field.clone(), seed)
+        .map_err(|e| format!("{method}: {e}"))?;
     let (mut coefficient_sum, mut events, mut max_coefficients) = (0.0, 0usize, 0usize);
     let mut refused = 0;
     // (marginals, truth) at every truth line, scored after the clock stops.
@@ -140,18 +154,49 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
             }
             Step::Truth(red) => match filter.marginals() {
                 Ok(m) => answers.push((m, red)),
-                Err(e) => return Score::failed(format!("{method}: marginals: {e}")),
+                Err(e) => return Err(format!("{method}: marginals: {e}")),
             },
         }
     }
-    let seconds = clock.seconds();
+    Ok(Replayed {
+        answers,
+        seconds: clock.seconds(),
+        coefficient_sum,
+        events,
+        max_coefficients,
+        last_coefficients: filter.coefficients(),
+        refused,
+    })
+}
+
+/// The trace spec's tracking error of answers at truth lines: the mean
+/// over them of the expected fraction of tracks mislabeled when the k
+/// largest marginals are called red, ties sharing the slots (NaN without
+/// a truth line).
+pub fn tracking_error(answers: &[(Vec<f64>, &[u32])], k: Option<usize>) -> f64 {
+    if answers.is_empty() {
+        return f64::NAN;
+    }
+    let total: f64 = answers
+        .iter()
+        .map(|(m, red)| expected_tracking_error(m, k, red))
+        .sum();
+    total / answers.len() as f64
+}
+
+/// Replays `trace` through `method` (seeded with `seed`) and scores it.
+pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
+    let run = match replay(method, trace, seed) {
+        Ok(run) => run,
+        Err(reason) => return Score::failed(reason),
+    };
+    let answers = &run.answers;
     let n = trace.field.tracks;
     let k = trace.field.red.known();
-    let (mut errors, mut expected, mut expected_topk) = (0.0, 0.0, 0.0);
+    let (mut expected, mut expected_topk) = (0.0, 0.0);
     let (mut brier, mut loss, mut reliability) = (0.0, 0.0, Reliability::default());
-    for (m, red) in &answers {
+    for (m, red) in answers {
         debug_assert_eq!(m.len(), n);
-        errors += expected_tracking_error(m, k, red);
         expected += bayes_risk(m);
         expected_topk += expected_mislabels(m, &predict_red(m, k));
         brier += brier_score(m, red);
@@ -166,20 +211,20 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
         }
     };
     Score {
-        error: mean(errors),
+        error: tracking_error(answers, k),
         expected_error: mean(expected),
         expected_topk: mean(expected_topk),
         brier: mean(brier),
         log_loss: mean(loss),
         reliability,
-        seconds,
-        mean_coefficients: if events > 0 {
-            coefficient_sum / events as f64
+        seconds: run.seconds,
+        mean_coefficients: if run.events > 0 {
+            run.coefficient_sum / run.events as f64
         } else {
-            filter.coefficients() as f64
+            run.last_coefficients as f64
         },
-        max_coefficients,
-        refused,
+        max_coefficients: run.max_coefficients,
+        refused: run.refused,
         failure: None,
     }
 }
