@@ -235,5 +235,126 @@ pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
         )?;
     }
     writeln!(out)?;
+    goals(streams, out)
+}
+
+/// Issue 18's scale-out goals, read off a run: at every leader count
+/// past one, the busiest leader's items against an even share of what one
+/// leader applies alone, and the leaders' CPU sum against one leader's.
+pub struct ScaleOut {
+    pub leaders: usize,
+    /// Busiest leader's items ÷ (one leader's items / L).
+    pub items: f64,
+    /// Leaders' CPU sum ÷ one leader's.
+    pub cpu: f64,
+}
+
+/// The goals' bound on both ratios.
+const SCALE_OUT_GOAL: f64 = 1.5;
+
+/// The ratios of every stream with more than one leader, against the run's
+/// one-leader stream (None without one).
+pub fn scale_out(streams: &[Stream]) -> Option<Vec<ScaleOut>> {
+    let one = streams.iter().find(|s| s.leaders == 1)?;
+    let one_items = one.stats.iter().map(|l| l.items).sum::<u64>() as f64;
+    let one_cpu: f64 = one.cpu.leaders.iter().sum();
+    Some(
+        streams
+            .iter()
+            .filter(|s| s.leaders > 1)
+            .map(|s| {
+                let busiest = s.stats.iter().map(|l| l.items).max().unwrap_or(0) as f64;
+                ScaleOut {
+                    leaders: s.leaders,
+                    items: busiest / (one_items / s.leaders as f64),
+                    cpu: s.cpu.leaders.iter().sum::<f64>() / one_cpu,
+                }
+            })
+            .collect(),
+    )
+}
+
+fn goals(streams: &[Stream], out: &mut String) -> Result<()> {
+    let Some(rows) = scale_out(streams) else {
+        return Ok(());
+    };
+    if rows.is_empty() {
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "### Scale-out goals
+
+The busiest leader's items against an even share of what one leader applies alone (its items ÷ L), and the leaders' CPU sum against one leader's; the goal is at most {SCALE_OUT_GOAL}× for both.
+"
+    )?;
+    writeln!(
+        out,
+        "| leaders | busiest leader's items ÷ even share | leaders' CPU ÷ one leader's |"
+    )?;
+    writeln!(out, "|---:|---:|---:|")?;
+    let mark = |x: f64| {
+        if x <= SCALE_OUT_GOAL {
+            "met"
+        } else {
+            "not met"
+        }
+    };
+    for r in rows {
+        writeln!(
+            out,
+            "| {} | {:.2}× ({}) | {:.2}× ({}) |",
+            r.leaders,
+            r.items,
+            mark(r.items),
+            r.cpu,
+            mark(r.cpu)
+        )?;
+    }
+    writeln!(out)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stream(items: &[u64], cpu: &[f64]) -> Stream {
+        Stream {
+            leaders: items.len(),
+            events: 1000,
+            first_seen: 0,
+            seconds: 1.0,
+            queries: 0,
+            stats: items
+                .iter()
+                .map(|&items| LeaderStats {
+                    items,
+                    ..LeaderStats::default()
+                })
+                .collect(),
+            cpu: Cpu {
+                sensor: 0.0,
+                coordinator: 0.0,
+                leaders: cpu.to_vec(),
+            },
+        }
+    }
+
+    #[test]
+    fn the_goals_compare_the_busiest_leader_and_the_cpu_sum_with_one_leader() {
+        let runs = [
+            stream(&[1000], &[0.5]),
+            stream(&[300, 700], &[0.5, 0.5]),
+            stream(&[250, 250, 250, 400], &[0.1, 0.1, 0.2, 0.3]),
+        ];
+        let rows = scale_out(&runs).expect("a one-leader run");
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0].leaders, 2);
+        assert!((rows[0].items - 1.4).abs() < 1e-12, "700 ÷ (1000 / 2)");
+        assert!((rows[0].cpu - 2.0).abs() < 1e-12);
+        assert!((rows[1].items - 1.6).abs() < 1e-12, "400 ÷ (1000 / 4)");
+        assert!((rows[1].cpu - 1.4).abs() < 1e-12);
+        assert!(scale_out(&runs[1..]).is_none(), "nothing to compare with");
+    }
 }
