@@ -33,7 +33,8 @@ use idmesh_protocol::wire::leader_to_sensor::{
 };
 use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
-use idmesh_protocol::wire::{decode, VERSION};
+
+use idmesh_protocol::wire::{decode, Valid, VERSION};
 
 /// What became of a cut request.
 pub enum CutOutcome<Q> {
@@ -176,29 +177,16 @@ impl<Q> Gateway<Q> {
 
     /// A leader published how far it has got (`Progress` bytes).
     pub fn progress(&mut self, bytes: &[u8], origin: &str) {
-        let mark = match decode::<Progress>(bytes) {
-            Ok(mark) => mark,
-            Err(e) => {
-                self.stats.rejected += 1;
-                tracing::warn!(from = %origin, problem = %e,
-                    rejected = self.stats.rejected, "progress mark rejected");
-                return;
-            }
+        let Some((i, mark)) = self.mark::<Progress>(bytes, origin, |m| &m.leader) else {
+            return;
         };
-        match self.leader_index(&mark.leader) {
-            // The latest, not the highest: a leader that restarted from
-            // its journal may be behind what it said before it died.
-            // (A late old mark only holds the stream a moment longer.)
-            Some(i) => {
-                self.progress[i] = Some(Mark {
-                    through: mark.through,
-                    batch: mark.batch,
-                })
-            }
-            None => {
-                tracing::warn!(leader = %mark.leader, "progress mark from a leader not of this stream")
-            }
-        }
+        // The latest, not the highest: a leader that restarted from its
+        // journal may be behind what it said before it died. (A late old
+        // mark only holds the stream a moment longer.)
+        self.progress[i] = Some(Mark {
+            through: mark.through,
+            batch: mark.batch,
+        });
     }
 
     /// Records every change of state for the journal (take them with
@@ -553,26 +541,41 @@ impl<Q> Gateway<Q> {
     /// A leader published its durable mark (`Durable` bytes): drop its
     /// batches below it, and the items every leader has passed.
     pub fn durable(&mut self, bytes: &[u8], origin: &str) {
-        let mark = match decode::<Durable>(bytes) {
-            Ok(mark) => mark,
-            Err(e) => {
-                self.stats.rejected += 1;
-                tracing::warn!(from = %origin, problem = %e,
-                    rejected = self.stats.rejected, "durable mark rejected");
-                return;
-            }
-        };
-        let Some(i) = self.leader_index(&mark.leader) else {
-            tracing::warn!(leader = %mark.leader, "durable mark from a leader not of this stream");
+        let Some((i, mark)) = self.mark::<Durable>(bytes, origin, |m| &m.leader) else {
             return;
         };
         let batches = self.sent[i].forget(&mark);
         self.durable[i] = Some(self.durable[i].unwrap_or(0).max(mark.position));
-
         let passed = self.durable.iter().copied().min().flatten();
         let items = passed.map_or(0, |seq| self.router.forget(seq));
         tracing::trace!(leader = %mark.leader, batches, items, kept = self.sent[i].len(),
             logged = self.router.logged(), "forgot what is safe");
+    }
+
+    /// A leader's mark (durable or progress) with the index of the leader
+    /// it names; None if it cannot be read (counted as rejected) or names a
+    /// leader not of this stream (logged). Marks are puts: nobody to
+    /// answer.
+    fn mark<M: serde::de::DeserializeOwned + Valid>(
+        &mut self,
+        bytes: &[u8],
+        origin: &str,
+        leader: impl Fn(&M) -> &String,
+    ) -> Option<(usize, M)> {
+        let mark = match decode::<M>(bytes) {
+            Ok(mark) => mark,
+            Err(e) => {
+                self.stats.rejected += 1;
+                tracing::warn!(from = %origin, problem = %e,
+                    rejected = self.stats.rejected, "{} rejected", M::WHAT);
+                return None;
+            }
+        };
+        let Some(i) = self.leader_index(leader(&mark)) else {
+            tracing::warn!(leader = %leader(&mark), "{} from a leader not of this stream", M::WHAT);
+            return None;
+        };
+        Some((i, mark))
     }
 
     /// The index of the leader named `name` in the stream's order.

@@ -508,14 +508,7 @@ impl World {
                 if self.now >= self.stall_checked + STALL_CHECK {
                     self.stall_checked = self.now;
                     for (i, batch) in self.gateway.stalled() {
-                        self.send(
-                            Endpoint::Sensor,
-                            Endpoint::Leader(i),
-                            Msg::Leader {
-                                to: i,
-                                what: ToLeader::Batch(encode(&batch)),
-                            },
-                        );
+                        self.send_batch(i, &batch);
                     }
                 }
                 let wait = self.rng.gen_range(1..=40);
@@ -630,16 +623,20 @@ impl World {
     fn flush(&mut self) {
         for (i, batch) in self.gateway.flush().into_iter().enumerate() {
             self.note_routed(i, &batch);
-            let bytes = encode(&batch);
-            self.send(
-                Endpoint::Sensor,
-                Endpoint::Leader(i),
-                Msg::Leader {
-                    to: i,
-                    what: ToLeader::Batch(bytes),
-                },
-            );
+            self.send_batch(i, &batch);
         }
+    }
+
+    /// The sensor puts `batch` on leader `i`'s event key.
+    fn send_batch(&mut self, i: usize, batch: &Batch) {
+        self.send(
+            Endpoint::Sensor,
+            Endpoint::Leader(i),
+            Msg::Leader {
+                to: i,
+                what: ToLeader::Batch(encode(batch)),
+            },
+        );
     }
 
     fn note_routed(&mut self, i: usize, batch: &Batch) {
