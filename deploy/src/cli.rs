@@ -84,6 +84,11 @@ pub struct BenchArgs {
     /// a component of (the topology's `shrink_interest`).
     #[arg(long)]
     pub shrink_interest: bool,
+    /// Factored: the regional rule (the topology's `regional`): a mix
+    /// across two leaders' regions keeps its components apart, and a track
+    /// handed over is split off its component.
+    #[arg(long)]
+    pub regional: bool,
     /// The sensor routes at most this many items past the slowest
     /// leader's progress (the topology's `[sensor] window`); absent = no
     /// window.

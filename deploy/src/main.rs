@@ -70,6 +70,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             leaders: args.leaders,
             belief: args.belief,
             shrink_interest: args.shrink_interest,
+            regional: args.regional,
             window: args.window,
             budget: args.budget,
             queries: args.queries,

@@ -46,6 +46,15 @@
 //!
 //! Until the first split the belief is exact: the tables hold the exact
 //! belief of each connected component of the mixing graph.
+//!
+//! Two more projections serve the distributed runtime's *regional rule*
+//! (docs/architecture.md, "Components that stay in their region"), which
+//! keeps every component inside one leader's region so that it seldom has
+//! to move: [`FactoredBelief::mix_apart`] projects a mix of two components
+//! back onto them even where the merge would fit, and
+//! [`FactoredBelief::split_off`] projects one track out of its component.
+//! The belief knows nothing of regions: the caller decides when (the
+//! leaders, and `idmesh_placement::Regional` for the centralized engine).
 
 mod counts;
 mod share;
@@ -207,6 +216,11 @@ pub struct FactoredStats {
     pub splits: u64,
     /// Tracks split off because they became certain.
     pub certain_splits: u64,
+    /// Mixes kept apart ([`FactoredBelief::mix_apart`]) and tracks split
+    /// off their components ([`FactoredBelief::split_off`]): the regional
+    /// rule's approximations.
+    pub kept_apart: u64,
+    pub split_off: u64,
     /// Σ KL(P‖P′) over the splits where it was computed (LeastLoss).
     pub split_loss: f64,
     /// The most iterations (Sinkhorn sweeps + Newton steps) one moment
@@ -544,8 +558,10 @@ impl FactoredBelief {
             .collect()
     }
 
-    /// The mix of two tracks in different components (0 < swap < 1).
-    fn mix_across(&mut self, mix: Mix) -> Result<(), BeliefError> {
+    /// The mix of two tracks in different components (0 < swap < 1); with
+    /// `may_merge` false the pair is projected back onto its two old
+    /// components even when the merged one would fit.
+    fn mix_across(&mut self, mix: Mix, may_merge: bool) -> Result<(), BeliefError> {
         let (ca, ba) = self.home[mix.a as usize];
         let (cb, bb) = self.home[mix.b as usize];
         let (c1, c2) = (self.comp(ca), self.comp(cb));
@@ -559,7 +575,7 @@ impl FactoredBelief {
             size <= max && budget.is_none_or(|b| others + extra + (1usize << size) <= b)
         };
         let size = c1.len() + c2.len();
-        if fits(size, 0) {
+        if may_merge && fits(size, 0) {
             let mut merged = c1.outer(c2);
             merged.rollup(ba, c1.len() + bb, mix.swap);
             self.stats.merges += 1;
@@ -577,7 +593,7 @@ impl FactoredBelief {
         let q = self.merged_weights(ca, cb, merged_counts)?;
         let (c1, c2) = (self.comp(ca), self.comp(cb));
         let (tol, sweeps) = (self.options.tolerance, self.options.max_sweeps);
-        let pieces = if self.options.split == SplitRule::Original {
+        let pieces = if self.options.split == SplitRule::Original || !may_merge {
             // Project onto the old pair without building the merged table.
             let (pa, pb, total) = split::mixed_pair_marginals(c1, ba, c2, bb, mix.swap, &q)?;
             // P(x_A), P(x_B) are the merged belief's marginals, and the
@@ -615,7 +631,11 @@ impl FactoredBelief {
             merged.rollup(ba, c1.len() + bb, mix.swap);
             self.split_materialized(merged, q, ca, others, mix)?
         };
-        self.stats.splits += 1;
+        if may_merge {
+            self.stats.splits += 1;
+        } else {
+            self.stats.kept_apart += 1;
+        }
         self.replace(&[ca, cb], pieces);
         Ok(())
     }
@@ -670,6 +690,81 @@ impl FactoredBelief {
         pieces.push(projection.a);
         pieces.push(projection.b);
         Ok(pieces)
+    }
+
+    /// A mix as [`PropertyFilter::mix`] does it, except that tracks of two
+    /// components are never merged: the mixed pair is projected back onto
+    /// the two components (the moment matching of an oversized merge), so
+    /// both keep their tracks. The regional rule runs this for a mix of
+    /// tracks in two leaders' regions, so that no component comes to span
+    /// regions (a mix inside one component, or a certain swap, is as
+    /// usual).
+    pub fn mix_apart(&mut self, mix: Mix) -> Result<(), BeliefError> {
+        self.mix_with(mix, false)
+    }
+
+    /// Splits `track` off its component by moment matching (the
+    /// M-projection onto {track} and the rest, under the configured
+    /// coupling's count weights); nothing if it is alone. The regional rule
+    /// runs this when a track is handed over to another leader's region.
+    pub fn split_off(&mut self, track: u32) -> Result<(), BeliefError> {
+        let (slot, bit) = *self
+            .home
+            .get(track as usize)
+            .ok_or(BeliefError::UnknownTrack { track, tracks: self.field.tracks })?;
+        let comp = self.comp(slot);
+        if comp.len() < 2 {
+            return Ok(());
+        }
+        let width = comp.counts.len();
+        let q = if self.options.coupling == Coupling::Local {
+            comp.counts
+                .iter()
+                .map(|&c| if c > 0.0 { 1.0 } else { 0.0 })
+                .collect()
+        } else {
+            self.leave_one_out(slot, width)?
+        };
+        let comp = self.comp(slot);
+        let projection = Weighted::new(comp, &q)?.project(
+            1 << bit,
+            self.options.tolerance,
+            self.options.max_sweeps,
+            false,
+        )?;
+        self.stats.max_sweeps = self.stats.max_sweeps.max(projection.sweeps);
+        self.stats.split_off += 1;
+        self.replace(&[slot], vec![projection.a, projection.b]);
+        Ok(())
+    }
+
+    pub(crate) fn mix_with(&mut self, mix: Mix, may_merge: bool) -> Result<(), BeliefError> {
+        self.field.check_mix(&mix)?;
+        if mix.swap == 0.0 {
+            self.stats.events += 1;
+            return Ok(());
+        }
+        let (a, b) = (mix.a as usize, mix.b as usize);
+        let (ca, ba) = self.home[a];
+        let (cb, bb) = self.home[b];
+        if mix.swap == 1.0 {
+            // The targets certainly exchanged tracks: relabel.
+            for (slot, bit, track) in [(ca, ba, mix.b), (cb, bb, mix.a)] {
+                let c = self.comps[slot].as_mut().expect("a live slot");
+                c.tracks[bit] = track;
+            }
+            self.home.swap(a, b);
+        } else if ca == cb {
+            let c = self.comps[ca].as_mut().expect("a live slot");
+            c.rollup(ba, bb, mix.swap);
+        } else {
+            self.mix_across(mix, may_merge)?;
+        }
+        self.stats.events += 1;
+        self.last_mix[a] = self.stats.events;
+        self.last_mix[b] = self.stats.events;
+        self.note_size();
+        Ok(())
     }
 
     /// The size of the first half of a split of m tracks: the largest that
@@ -768,32 +863,7 @@ impl PropertyFilter for FactoredBelief {
     }
 
     fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
-        self.field.check_mix(&mix)?;
-        if mix.swap == 0.0 {
-            self.stats.events += 1;
-            return Ok(());
-        }
-        let (a, b) = (mix.a as usize, mix.b as usize);
-        let (ca, ba) = self.home[a];
-        let (cb, bb) = self.home[b];
-        if mix.swap == 1.0 {
-            // The targets certainly exchanged tracks: relabel.
-            for (slot, bit, track) in [(ca, ba, mix.b), (cb, bb, mix.a)] {
-                let c = self.comps[slot].as_mut().expect("a live slot");
-                c.tracks[bit] = track;
-            }
-            self.home.swap(a, b);
-        } else if ca == cb {
-            let c = self.comps[ca].as_mut().expect("a live slot");
-            c.rollup(ba, bb, mix.swap);
-        } else {
-            self.mix_across(mix)?;
-        }
-        self.stats.events += 1;
-        self.last_mix[a] = self.stats.events;
-        self.last_mix[b] = self.stats.events;
-        self.note_size();
-        Ok(())
+        self.mix_with(mix, true)
     }
 
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {

@@ -523,3 +523,102 @@ fn local_and_coupled_agree_while_counts_are_fixed() {
     }
     panic!("the workload never split");
 }
+
+/// The regional rule's two steps are M-projections under the true count
+/// weights (coupled): a mix kept apart leaves every track's marginal as the
+/// merge would, and a split keeps those of the split component's tracks,
+/// while the partition changes as the rule says. Checked on every field
+/// kind and on the exact belief it starts from.
+#[test]
+fn regional_steps_keep_every_marginal_under_the_coupled_rule() {
+    for seed in 0..4u64 {
+        let (initial, events) = workload(8, 3, 60, seed);
+        for field in fields(8, 3, &initial) {
+            let mut plain = FactoredBelief::with_options(field.clone(), exact_options()).unwrap();
+            let mut apart = plain.clone();
+            for (i, event) in events.iter().enumerate() {
+                match event {
+                    Event::Mix(m) if i % 3 == 0 => {
+                        let pair: Vec<u32> = [m.a, m.b]
+                            .iter()
+                            .flat_map(|&t| apart.comp(apart.home[t as usize].0).tracks.clone())
+                            .collect();
+                        plain.mix(*m).unwrap();
+                        let before = apart.components().len();
+                        let apart_before = apart.home[m.a as usize].0 != apart.home[m.b as usize].0;
+                        apart.mix_apart(*m).unwrap();
+                        if m.swap > 0.0 && m.swap < 1.0 && apart_before {
+                            assert_eq!(apart.components().len(), before, "kept apart");
+                        }
+                        let (want, got) = (plain.marginals().unwrap(), apart.marginals().unwrap());
+                        for &t in &pair {
+                            close(
+                                &[want[t as usize]],
+                                &[got[t as usize]],
+                                1e-8,
+                                "a mix kept apart",
+                            );
+                        }
+                    }
+                    _ => {
+                        plain.apply(event).unwrap();
+                        apart.apply(event).unwrap();
+                        close(
+                            &plain.marginals().unwrap(),
+                            &apart.marginals().unwrap(),
+                            1e-12,
+                            "the same event on the same belief",
+                        );
+                    }
+                }
+                // Split a track off and check its component's tracks
+                // again (the pieces' count law is a projection too, so
+                // other components may move); then both go on from the
+                // same partition.
+                let track = (i % 8) as u32;
+                let component = apart.comp(apart.home[track as usize].0).tracks.clone();
+                let want = apart.marginals().unwrap();
+                apart.split_off(track).unwrap();
+                assert!(apart.components().iter().any(|c| c == &vec![track]));
+                let got = apart.marginals().unwrap();
+                for &t in &component {
+                    close(
+                        &[want[t as usize]],
+                        &[got[t as usize]],
+                        1e-8,
+                        "a track split off",
+                    );
+                }
+                plain = apart.clone();
+            }
+            assert!(apart.stats().split_off > 0 && apart.stats().kept_apart > 0);
+        }
+    }
+}
+
+/// Under the local rule (what leaders run) a split needs only the
+/// component, and a track alone is left as it is.
+#[test]
+fn split_off_is_local_and_leaves_a_lone_track_alone() {
+    let field = Field::known(4, vec![0, 1]);
+    let options = FactoredOptions {
+        coupling: Coupling::Local,
+        ..FactoredOptions::default()
+    };
+    let mut b = FactoredBelief::with_options(field, options).unwrap();
+    b.split_off(3).unwrap();
+    assert_eq!(b.stats().split_off, 0);
+    for (a, c) in [(0, 2), (2, 1)] {
+        b.mix(Mix { a, b: c, swap: 0.3 }).unwrap();
+    }
+    assert_eq!(b.components().iter().map(Vec::len).max(), Some(3));
+    b.split_off(2).unwrap();
+    assert_eq!(b.stats().split_off, 1);
+    assert!(b.components().iter().all(|c| c.len() <= 2));
+    let m = b.marginals().unwrap();
+    assert!((m.iter().sum::<f64>() - 2.0).abs() < 1e-9, "{m:?}");
+    assert!(matches!(
+        b.split_off(9),
+        Err(BeliefError::UnknownTrack { track: 9, .. })
+    ));
+}

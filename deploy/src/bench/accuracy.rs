@@ -160,6 +160,7 @@ async fn live_answers(
         leaders: LEADERS,
         belief,
         shrink_interest: false,
+        regional: false,
         window: None,
         // The Radon belief's settings (identity streams aside, only
         // `belief = "radon"` reads them): the distributed rule, the

@@ -51,6 +51,8 @@ pub struct BenchOptions {
     pub belief: BeliefKind,
     /// Factored: leaders' interests shrink.
     pub shrink_interest: bool,
+    /// Factored: the regional rule.
+    pub regional: bool,
     /// The sensor's flow control (`window`); None: no window.
     pub window: Option<u64>,
     /// Sets per leader (the Radon belief; the distributed rule runs with
@@ -126,8 +128,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         options.duration,
         match options.belief {
             BeliefKind::Factored => format!(
-                "the factored belief (components of at most {} tracks, local split rule, leaders' interests {})",
+                "the factored belief (components of at most {} tracks, local split rule{}, leaders' interests {})",
                 default_max_component(),
+                if options.regional { ", regional rule" } else { "" },
                 if options.shrink_interest { "shrinking" } else { "growing" }
             ),
             BeliefKind::Radon => format!(
@@ -221,6 +224,7 @@ impl Deployment {
             leaders,
             belief: options.belief,
             shrink_interest: options.shrink_interest,
+            regional: options.regional,
             window: options.window,
             distributed_rule: true,
             budget: options.budget,

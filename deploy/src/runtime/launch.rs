@@ -189,6 +189,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         // holds the Radon belief (see [`BeliefKind`]): say so.
         belief: BeliefKind::Radon,
         shrink_interest: false,
+        regional: false,
         window: None,
         distributed_rule: true,
         budget: 400,

@@ -17,6 +17,8 @@ pub struct Loopback {
     pub belief: BeliefKind,
     /// Factored: leaders' interests shrink (`shrink_interest`).
     pub shrink_interest: bool,
+    /// Factored: the regional rule (`regional`).
+    pub regional: bool,
     /// The sensor's flow control (`window`); None: no window.
     pub window: Option<u64>,
     pub distributed_rule: bool,
@@ -75,10 +77,11 @@ impl Loopback {
         let mut held = Vec::new();
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0, &mut held)?);
         let mut toml = format!(
-            "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\nregional = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
             self.prefix,
             self.belief.name(),
             self.shrink_interest,
+            self.regional,
             self.distributed_rule,
             self.budget,
             match self.sparsify {
@@ -140,6 +143,7 @@ mod tests {
             leaders: 1,
             belief: BeliefKind::Factored,
             shrink_interest: false,
+            regional: false,
             window: None,
             distributed_rule: false,
             budget: 0,
@@ -177,6 +181,7 @@ mod tests {
             leaders: 5,
             belief: BeliefKind::Radon,
             shrink_interest: false,
+            regional: false,
             window: None,
             distributed_rule: true,
             budget: 100,

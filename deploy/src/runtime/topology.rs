@@ -8,6 +8,8 @@
 //!                                # the coordinator; or "radon"
 //! max_component = 7              # factored: most tracks of a component
 //! split = "original"             # factored: or "recent", "least-loss"
+//! regional = false               # factored: components stay in their region
+//!                                # (docs/architecture.md)
 //! shrink_interest = false        # factored: leaders unfollow tracks they no
 //!                                # longer surveil or hold a component of
 //! # The Radon belief's settings: of every stream under belief = "radon",
@@ -95,6 +97,12 @@ pub struct Topology {
     /// brought it).
     #[serde(default)]
     pub shrink_interest: bool,
+    /// Factored: the regional rule (a mix across two leaders' regions
+    /// keeps its components apart; a track handed over is split off its
+    /// component), an approximation that keeps components in their
+    /// holder's region; `idmesh replay --regions` runs it too.
+    #[serde(default)]
+    pub regional: bool,
     #[serde(default)]
     pub distributed_rule: bool,
     #[serde(default)]
@@ -185,6 +193,7 @@ impl Topology {
                 SplitSetting::LeastLoss => WireSplit::LeastLoss { rounds: 1 },
             },
             shrink: self.shrink_interest,
+            regional: self.regional,
         })
     }
 }

@@ -9,11 +9,18 @@
 //! - the field a `Begin` describes (`idmesh_belief::field_of`, the same
 //!   function `idmesh replay` reads a trace header with);
 //! - how the leaders' partial sums at one cut add up to the answer
-//!   ([`combine`]), which the coordinator computes.
+//!   ([`combine`]), which the coordinator computes;
+//! - which leader surveils each track as targets move ([`Regions`]), and
+//!   the factored belief's regional rule that follows from it
+//!   ([`Regional`]), run by the gateway, the leaders and `idmesh replay`.
 //!
 //! docs/architecture.md ("Who holds what", "Queries") says why the shares
 //! add up: rollup and conditioning act on the Radon masses atom by atom and
 //! linearly (Section 5.4 of the property-management paper).
+
+mod regions;
+
+pub use regions::{Regional, Regions};
 
 use idmesh_belief::factored::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};

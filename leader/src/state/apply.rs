@@ -32,7 +32,7 @@ impl Leader {
                 let mix = Mix { a, b, swap };
                 let started = self.started()?;
                 if started.factored.is_some() {
-                    return self.factored_mix(seq, mix, owner_a, actions);
+                    return self.factored_mix(seq, mix, owner_a, owner_b, actions);
                 }
                 started.share.mix(mix)?;
                 // My mixed track and the other leader, for a mix across two.
@@ -91,6 +91,13 @@ impl Leader {
             Item::Handover { track, from, to } => {
                 self.stats.handovers += 1;
                 let started = self.started()?;
+                let regional = started.regional();
+                if let (Some(held), true) = (&mut started.factored, regional) {
+                    // The regional rule: the track leaves its component
+                    // (its holder splits it off), so that what the old
+                    // region keeps and what goes to the new one are apart.
+                    held.split_off(track)?;
+                }
                 let slot = started
                     .own
                     .get_mut(track as usize)
@@ -194,6 +201,7 @@ impl Leader {
         seq: u64,
         mix: Mix,
         owner_a: u16,
+        owner_b: u16,
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let me = self.me()?;
@@ -212,20 +220,65 @@ impl Leader {
             }
             return Ok(());
         }
+        // The regional rule keeps a mix across two regions apart, and the
+        // component of b goes back to its region's leader, which waits
+        // for it.
+        let back = (self.started()?.regional() && owner_a != owner_b).then_some(owner_b);
         if me == owner_a {
             if has_a && has_b {
-                held.mix(mix, seq)?;
+                self.factored_mix_here(seq, mix, back, actions)?;
             } else {
-                self.waiting = Some(Waiting::Components { seq, mix });
+                self.waiting = Some(Waiting::Components { seq, mix, back });
             }
             return Ok(());
         }
+        let held = self
+            .started()?
+            .factored
+            .as_mut()
+            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
         if has_a || has_b {
             let components = held.take(|tracks| tracks.contains(&mix.a) || tracks.contains(&mix.b));
             let gone = tracks_of(&components);
             self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
-            self.unfollow(seq, gone)?;
+            if back != Some(me) {
+                self.unfollow(seq, gone)?;
+            }
         }
+        if back == Some(me) {
+            self.waiting = Some(Waiting::Transfer {
+                seq,
+                from: owner_a,
+            });
+        }
+        Ok(())
+    }
+
+    /// Mix `mix` (item `seq`) of two components both held here; kept apart
+    /// when it has to go `back`, and then the component of `mix.b` (unless
+    /// it holds `mix.a` too) is sent to that leader, which waits for this
+    /// transfer even if it is empty.
+    pub(super) fn factored_mix_here(
+        &mut self,
+        seq: u64,
+        mix: Mix,
+        back: Option<u16>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let held = self
+            .started()?
+            .factored
+            .as_mut()
+            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let Some(to) = back else {
+            held.mix(mix, seq)?;
+            return Ok(());
+        };
+        held.mix_apart(mix, seq)?;
+        let components = held.take(|tracks| tracks.contains(&mix.b) && !tracks.contains(&mix.a));
+        let gone = tracks_of(&components);
+        self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
+        self.unfollow(seq, gone)?;
         Ok(())
     }
 

@@ -142,7 +142,7 @@ impl Leader {
                         None => return Ok(actions),
                     }
                 }
-                Some(Waiting::Components { seq, mix }) => {
+                Some(Waiting::Components { seq, mix, back }) => {
                     // Whoever held them sent them at this item.
                     let mut here: Vec<(u64, u16)> = self
                         .transfers
@@ -165,8 +165,8 @@ impl Leader {
                     if !(held.holds(mix.a) && held.holds(mix.b)) {
                         return Ok(actions);
                     }
-                    held.mix(mix, seq)?;
                     self.waiting = None;
+                    self.factored_mix_here(seq, mix, back, &mut actions)?;
                     let new_tracks = self.follow_held()?;
                     if !new_tracks.is_empty() {
                         self.follow(seq, new_tracks, &mut actions)?;

@@ -75,8 +75,14 @@ enum Waiting {
     Transfer { seq: u64, from: u16 },
     /// For the components of both tracks of mix `mix`, item `seq`, which
     /// their holders send this leader, the one surveilling `mix.a` (a
-    /// factored stream: whoever holds them, see [`apply`]).
-    Components { seq: u64, mix: Mix },
+    /// factored stream: whoever holds them, see [`apply`]). Under the
+    /// regional rule a mix across regions is kept apart and the component
+    /// of `mix.b` goes `back` to the leader surveilling it.
+    Components {
+        seq: u64,
+        mix: Mix,
+        back: Option<u16>,
+    },
     /// For the sensor's answer to a follow request made at `seq`.
     Follow { seq: u64 },
 }
@@ -97,6 +103,13 @@ struct Started {
     /// The components of the factored belief held here, on a factored
     /// stream (`share` is then empty).
     factored: Option<FactoredShare>,
+}
+
+impl Started {
+    /// Whether the stream runs the factored belief's regional rule.
+    fn regional(&self) -> bool {
+        self.begin.factored.is_some_and(|f| f.regional)
+    }
 }
 
 /// Serialized whole as a snapshot ([`Leader::snapshot`]): the state a

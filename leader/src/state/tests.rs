@@ -55,6 +55,7 @@ fn factored_leader(leaders: &[&str], owners: Vec<u16>) -> Leader {
         max_component: 3,
         split: WireSplit::Original,
         shrink: true,
+        regional: false,
     });
     let mut leader = Leader::new("a");
     leader

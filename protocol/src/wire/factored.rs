@@ -23,6 +23,13 @@ pub struct FactoredStart {
     /// rest ([`Interest::fixed`](super::interest::Interest::fixed)).
     /// Otherwise they grow on mixes, as on a Radon stream.
     pub shrink: bool,
+    /// The regional rule (docs/architecture.md, "Components that stay in
+    /// their region"): a mix of tracks in two leaders' regions keeps their
+    /// components apart (projected back, never merged), and a track handed
+    /// over to another region is split off its component, so a component
+    /// stays where its holder surveils it. An approximation that
+    /// `idmesh replay --regions` runs too.
+    pub regional: bool,
 }
 
 /// How a component too large to keep is split (`belief::SplitRule`).

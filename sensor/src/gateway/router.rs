@@ -12,7 +12,7 @@
 
 use super::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
-use idmesh_placement::PlacementError;
+use idmesh_placement::{PlacementError, Regions};
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
@@ -76,7 +76,9 @@ pub struct Router {
     /// entered its interest (a handover to it, a follow request): an
     /// unfollow request decided before then is stale.
     followed_at: Vec<Vec<u64>>,
-    owners: Vec<u16>,
+    /// Which leader surveils each track (shared with `idmesh replay`'s
+    /// regional rule).
+    regions: Regions,
     /// Each track's last `move` (the live map's positions query).
     positions: Vec<Option<[f64; 2]>>,
     mixing_log: MixingLog,
@@ -130,7 +132,10 @@ impl Router {
         begin.check().map_err(RouterError::Begin)?;
         let interests = idmesh_placement::interests(&begin)?;
         let mut router = Router {
-            owners: begin.owners.clone(),
+            regions: Regions::new(
+                &config.leaders.iter().map(|l| l.at).collect::<Vec<_>>(),
+                tracks,
+            ),
             positions: vec![None; tracks],
             begin: begin.clone(),
             header: header.clone(),
@@ -197,8 +202,8 @@ impl Router {
                     a: mix.a,
                     b: mix.b,
                     swap: mix.swap,
-                    owner_a: self.owners[mix.a as usize],
-                    owner_b: self.owners[mix.b as usize],
+                    owner_a: self.owner(mix.a),
+                    owner_b: self.owner(mix.b),
                 };
                 self.route(item);
             }
@@ -236,12 +241,7 @@ impl Router {
             Line::Move(m) => {
                 self.events += 1;
                 self.positions[m.track as usize] = Some([m.x, m.y]);
-                let Some(to) = self.nearest(m.x, m.y) else {
-                    return;
-                };
-                let from = self.owners[m.track as usize];
-                if from != to {
-                    self.owners[m.track as usize] = to;
+                if let Some((from, to)) = self.regions.moved(m.track, m.x, m.y) {
                     self.route(Item::Handover {
                         track: m.track,
                         from,
@@ -252,7 +252,7 @@ impl Router {
             Line::Identify(read) => {
                 self.events += 1;
                 // Only the owner holds the track's row; nobody else hears.
-                let owner = self.owners[read.track as usize];
+                let owner = self.owner(read.track);
                 self.route(Item::Identify {
                     track: read.track,
                     identity: read.identity,
@@ -264,16 +264,10 @@ impl Router {
         }
     }
 
-    fn nearest(&self, x: f64, y: f64) -> Option<u16> {
-        let mut best: Option<(f64, u16)> = None;
-        for (i, leader) in self.config.leaders.iter().enumerate() {
-            let (lx, ly) = leader.at?;
-            let d = (lx - x).powi(2) + (ly - y).powi(2);
-            if best.is_none_or(|(b, _)| d < b) {
-                best = Some((d, i as u16));
-            }
-        }
-        best.map(|b| b.1)
+    /// The leader surveilling `track` (lines were checked against the
+    /// header, so the track exists).
+    fn owner(&self, track: u32) -> u16 {
+        self.regions.owner(track).unwrap_or(0)
     }
 
     fn route(&mut self, item: Item) {
@@ -318,7 +312,7 @@ impl Router {
                 .map(|l| l.at.map(|(x, y)| [x, y]))
                 .collect(),
             positions: self.positions.clone(),
-            owners: self.owners.clone(),
+            owners: self.regions.owners().to_vec(),
         }
     }
 

@@ -533,6 +533,7 @@ fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() 
             max_component: 3,
             split: WireSplit::Original,
             shrink: true,
+            regional: false,
         }));
         let router = Router::new(config, &header).unwrap();
         assert_eq!(router.begin().factored.is_some(), identities.is_none());
@@ -563,6 +564,7 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
         max_component: 3,
         split: WireSplit::Original,
         shrink: true,
+        regional: false,
     });
     // Placed as in `router`: a at (0, 0), b at (10, 0).
     let mut config = unplaced(factored);

@@ -6,7 +6,7 @@
 
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
-use idmesh_placement::factored_options;
+use idmesh_placement::{factored_options, Regional, Regions};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_sensor::gateway::core::Gateway;
@@ -106,9 +106,11 @@ impl Scenario {
                 WireSplit::LeastLoss { rounds: 1 },
             ][rng.gen_range(0..3)],
             shrink: rng.gen_bool(0.5),
+            regional: rng.gen_bool(0.5),
         });
         let distributed_rule = distributed_rule && factored.is_none();
-        let centralized = centralized(&header, &lines, distributed_rule, factored)?;
+        let places: Vec<_> = leaders.iter().map(|l| l.at).collect();
+        let centralized = centralized(&header, &lines, distributed_rule, factored, &places)?;
         // Half the schedules stream under flow control, with windows so
         // small that the sensor waits for progress marks again and again
         // (which the network loses, doubles and delays like the rest).
@@ -156,6 +158,7 @@ fn centralized(
     lines: &[Line],
     distributed_rule: bool,
     factored: Option<FactoredStart>,
+    places: &[Option<(f64, f64)>],
 ) -> Result<Vec<Vec<f64>>, String> {
     let field = Field::with_count(
         header.tracks,
@@ -167,7 +170,19 @@ fn centralized(
         ..RadonOptions::default()
     };
     // The centralized engine with the leaders' options: the factored
-    // belief with the local rule, or the Radon belief.
+    // belief with the local rule (and the regional rule where the leaders
+    // run it), or the Radon belief.
+    if let Some(start) = factored.filter(|f| f.regional) {
+        let belief = FactoredBelief::with_options(field, factored_options(&start))
+            .map_err(|e| e.to_string())?;
+        let mut engine = Regional::new(belief, Regions::new(places, header.tracks));
+        let mut out = vec![engine.marginals().map_err(|e| e.to_string())?];
+        for line in lines {
+            engine.apply_line(line).map_err(|e| e.to_string())?;
+            out.push(engine.marginals().map_err(|e| e.to_string())?);
+        }
+        return Ok(out);
+    }
     let mut engine: Box<dyn PropertyFilter> = match &factored {
         Some(start) => Box::new(
             FactoredBelief::with_options(field, factored_options(start))

@@ -169,6 +169,25 @@ impl FactoredShare {
     /// Recent split). A certain swap relabels whichever of the two
     /// components are held here; any other mix needs both held here.
     pub fn mix(&mut self, mix: Mix, when: u64) -> Result<(), BeliefError> {
+        self.mix_with(mix, when, true)
+    }
+
+    /// [`FactoredShare::mix`] with [`FactoredBelief::mix_apart`]: the
+    /// regional rule's mix of tracks in two leaders' regions.
+    pub fn mix_apart(&mut self, mix: Mix, when: u64) -> Result<(), BeliefError> {
+        self.mix_with(mix, when, false)
+    }
+
+    /// [`FactoredBelief::split_off`] on a component held here (the regional
+    /// rule's handover); nothing for a track whose component is elsewhere.
+    pub fn split_off(&mut self, track: u32) -> Result<(), BeliefError> {
+        if !self.holds(track) {
+            return Ok(());
+        }
+        self.belief.split_off(track)
+    }
+
+    fn mix_with(&mut self, mix: Mix, when: u64, may_merge: bool) -> Result<(), BeliefError> {
         self.belief.field.check_mix(&mix)?;
         let (a, b) = (mix.a as usize, mix.b as usize);
         if mix.swap != 1.0 && mix.swap != 0.0 && !(self.held[a] && self.held[b]) {
@@ -179,7 +198,7 @@ impl FactoredShare {
                 ),
             });
         }
-        self.belief.mix(mix)?;
+        self.belief.mix_with(mix, may_merge)?;
         if mix.swap == 1.0 {
             self.held.swap(a, b);
         }

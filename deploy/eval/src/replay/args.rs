@@ -73,6 +73,14 @@ pub struct ReplayArgs {
     #[arg(long, value_enum, default_value_t = SplitChoice::Original)]
     pub split: SplitChoice,
 
+    /// --method factored: the regional rule of leaders placed at these
+    /// points, `X,Y;X,Y;…` (the topology's `at`, in its leader order): a
+    /// mix of tracks in two leaders' regions keeps their components apart,
+    /// and a track whose `move` takes it to another leader is split off its
+    /// component — what a deployment with `regional = true` computes.
+    #[arg(long, value_name = "PLACES", value_parser = parse_places)]
+    pub regions: Option<Places>,
+
     /// Run a setting replay refuses as exponential (--method property-bits
     /// without --budget on many identities) anyway.
     #[arg(long)]
@@ -84,6 +92,29 @@ impl ReplayArgs {
     pub fn property_method(&self) -> Method {
         self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
     }
+}
+
+/// Leaders' places for `--regions`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Places(pub Vec<(f64, f64)>);
+
+fn parse_places(text: &str) -> Result<Places, String> {
+    let places = text
+        .split(';')
+        .map(|point| {
+            let bad = || format!("{point:?} is not a place X,Y (finite numbers)");
+            let (x, y) = point.split_once(',').ok_or_else(bad)?;
+            let (x, y): (f64, f64) = (
+                x.trim().parse().map_err(|_| bad())?,
+                y.trim().parse().map_err(|_| bad())?,
+            );
+            if !(x.is_finite() && y.is_finite()) {
+                return Err(bad());
+            }
+            Ok((x, y))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok(Places(places))
 }
 
 /// The method `replay` runs on a property trace when none is named.

@@ -28,6 +28,12 @@ pub trait Replay {
     /// Applies one event.
     fn apply(&mut self, event: &Self::Event) -> Result<(), BeliefError>;
 
+    /// A track moved (a `move` line): nothing, unless the filter's regions
+    /// depend on where tracks are.
+    fn moved(&mut self, _track: u32, _x: f64, _y: f64) -> Result<(), BeliefError> {
+        Ok(())
+    }
+
     /// The answer at a `truth` line, scored against it where it says.
     fn answer(&mut self, truth: &Truth) -> Result<Self::Answer, BeliefError>;
 }
@@ -46,6 +52,10 @@ pub fn drive<R: BufRead, P: Replay>(
         if let Some(event) = P::event_of(&line) {
             replay
                 .apply(&event)
+                .map_err(|e| at(number, line.kind(), e))?;
+        } else if let Line::Move(m) = &line {
+            replay
+                .moved(m.track, m.x, m.y)
                 .map_err(|e| at(number, line.kind(), e))?;
         } else if let Line::Truth(truth) = &line {
             let answer = replay.answer(truth).map_err(|e| at(number, "truth", e))?;

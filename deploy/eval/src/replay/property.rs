@@ -2,15 +2,16 @@
 //! trace, offline.
 //!
 //! The header makes the `Field`; `mix` and `observe` lines are applied in
-//! order (`move` and `identify` lines mean nothing to a property filter and
-//! are skipped); at every `truth` line one JSON line is written with the
+//! order (`identify` lines mean nothing to a property filter and are
+//! skipped, and so are `move` lines except under `--regions`, the regional
+//! rule, where a track that changes region is split off its component); at every `truth` line one JSON line is written with the
 //! marginals, the predicted red tracks and the coefficient count; at the end
 //! a summary line with the mean tracking error and the engine's own time.
 //!
 //! Every error — a bad line, an event the engine rejects — is reported as
 //! `FILE:LINE: reason` and ends the replay.
 
-use super::args::{CouplingChoice, Method, ReplayArgs, SplitChoice};
+use super::args::{CouplingChoice, Method, Places, ReplayArgs, SplitChoice};
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use crate::filters::Recipe;
@@ -18,8 +19,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::baseline::MAX_STATES;
 use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, log_loss, predict_red, BeliefError,
-    Coupling, Event, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
+    Coupling, Event, FactoredBelief, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
 };
+use idmesh_placement::{Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader, Truth};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
@@ -110,10 +112,11 @@ pub fn check_options(args: &ReplayArgs) -> Result<()> {
     }
     let factored_options = args.coupling != CouplingChoice::Coupled
         || args.max_component.is_some()
-        || args.split != SplitChoice::Original;
+        || args.split != SplitChoice::Original
+        || args.regions.is_some();
     if method != Method::Factored && factored_options {
         bail!(
-            "--coupling, --max-component and --split apply to --method factored, not to --method {}",
+            "--coupling, --max-component, --split and --regions apply to --method factored, not to --method {}",
             method.name()
         );
     }
@@ -141,7 +144,7 @@ pub fn check_options(args: &ReplayArgs) -> Result<()> {
 pub fn replay<R: BufRead>(
     args: &ReplayArgs,
     mut reader: TraceReader<R>,
-    mut out: impl Write,
+    out: impl Write,
 ) -> Result<()> {
     let span = info_span!(
         "replay",
@@ -155,9 +158,35 @@ pub fn replay<R: BufRead>(
     let field = field_of(&header);
     check_size(args, &field).map_err(|e| anyhow!("{source}:1: header: {e}"))?;
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
-    let filter = Timed::start(|| recipe(args)?.build(field.clone()))
-        .map_err(|e| line_error(&source)(1, "header", e))?;
-    let mut engine = Engine::new(filter, field.red.known());
+    let red = field.red.known();
+    let built = |e| line_error(&source)(1, "header", e);
+    match (&args.regions, recipe(args).map_err(built)?) {
+        (Some(Places(places)), Recipe::Factored(options)) => {
+            let places: Vec<_> = places.iter().map(|&p| Some(p)).collect();
+            let filter = Timed::start(|| {
+                let belief = FactoredBelief::with_options(field.clone(), options)?;
+                Ok(Box::new(Regional::new(
+                    belief,
+                    Regions::new(&places, field.tracks),
+                )))
+            })
+            .map_err(built)?;
+            run_engine(args, reader, Engine::new(filter, red), out)
+        }
+        (_, recipe) => {
+            let filter = Timed::start(|| recipe.build(field.clone())).map_err(built)?;
+            run_engine(args, reader, Engine::new(filter, red), out)
+        }
+    }
+}
+
+/// Drives `engine` over the rest of the trace and writes the summary.
+fn run_engine<R: BufRead, F: PropertyFilter + Moves + ?Sized>(
+    args: &ReplayArgs,
+    reader: TraceReader<R>,
+    mut engine: Engine<F>,
+    mut out: impl Write,
+) -> Result<()> {
     drive(reader, &mut engine, &mut out)?;
 
     let summary = Summary {
@@ -179,6 +208,24 @@ pub fn replay<R: BufRead>(
         "replayed"
     );
     finish(out, &summary)
+}
+
+/// What a replayed filter does with a `move` line: nothing, except under
+/// the regional rule.
+trait Moves {
+    fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError>;
+}
+
+impl Moves for dyn PropertyFilter {
+    fn moved(&mut self, _: u32, _: f64, _: f64) -> Result<(), BeliefError> {
+        Ok(())
+    }
+}
+
+impl Moves for Regional {
+    fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError> {
+        Regional::moved(self, track, x, y)
+    }
 }
 
 /// Refuses a Radon method without a budget where the exact belief it keeps
@@ -256,8 +303,8 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
 
 /// A property filter being replayed: its clock and counts, the largest
 /// coefficient count seen, and the scores at the truth lines.
-struct Engine {
-    filter: Timed<dyn PropertyFilter>,
+struct Engine<F: ?Sized> {
+    filter: Timed<F>,
     /// k, when the trace fixes it (the prediction takes the top k).
     red: Option<usize>,
     max_coefficients: usize,
@@ -266,8 +313,8 @@ struct Engine {
     log_losses: Vec<f64>,
 }
 
-impl Engine {
-    fn new(filter: Timed<dyn PropertyFilter>, red: Option<usize>) -> Self {
+impl<F: PropertyFilter + ?Sized> Engine<F> {
+    fn new(filter: Timed<F>, red: Option<usize>) -> Self {
         let max_coefficients = filter.filter.coefficients();
         Engine {
             filter,
@@ -280,12 +327,16 @@ impl Engine {
     }
 }
 
-impl Replay for Engine {
+impl<F: PropertyFilter + Moves + ?Sized> Replay for Engine<F> {
     type Event = Event;
     type Answer = Answer;
 
     fn event_of(line: &Line) -> Option<Event> {
         event_of(line)
+    }
+
+    fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError> {
+        self.filter.time(|f| f.moved(track, x, y))
     }
 
     fn apply(&mut self, event: &Event) -> Result<(), BeliefError> {
@@ -337,6 +388,7 @@ pub(super) mod tests {
             coupling: CouplingChoice::Coupled,
             max_component: None,
             split: SplitChoice::Original,
+            regions: None,
         }
     }
 

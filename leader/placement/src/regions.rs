@@ -1,0 +1,240 @@
+//! Which leader surveils each track, and the regional rule of the factored
+//! belief that follows from it (docs/architecture.md, "Components that stay
+//! in their region").
+//!
+//! The sensor gateway routes by [`Regions`] (a track belongs to the nearest
+//! leader to its last position; to leader `track mod L` before any
+//! position, or when some leader has no position), and `idmesh replay
+//! --regions` runs the same function, so the centralized engine applies
+//! the regional rule at the same events as the leaders: a mix of tracks in
+//! two regions keeps their components apart
+//! ([`FactoredBelief::mix_apart`]), and a track that changes region is
+//! split off its component ([`FactoredBelief::split_off`]). The simulator
+//! and the accuracy bench drive [`Regional`] line by line.
+
+use idmesh_belief::{BeliefError, FactoredBelief, Field, Mix, Observe, PropertyFilter};
+use idmesh_protocol::trace::Line;
+
+/// The leaders' places and each track's surveilling leader.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Regions {
+    /// Where each leader sits (None for all: tracks never change region).
+    places: Option<Vec<(f64, f64)>>,
+    owners: Vec<u16>,
+}
+
+impl Regions {
+    /// `tracks` tracks among leaders at `places` (one per leader; a track
+    /// goes to the nearest): each track starts with leader `track mod L`.
+    pub fn new(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
+        let leaders = places.len().max(1);
+        Regions {
+            places: places.iter().copied().collect(),
+            owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
+        }
+    }
+
+    /// The leader surveilling each track now.
+    pub fn owners(&self) -> &[u16] {
+        &self.owners
+    }
+
+    pub fn owner(&self, track: u32) -> Option<u16> {
+        self.owners.get(track as usize).copied()
+    }
+
+    /// The leader nearest to (x, y) (the first of equals); None when the
+    /// leaders have no places.
+    pub fn nearest(&self, x: f64, y: f64) -> Option<u16> {
+        let mut best: Option<(f64, u16)> = None;
+        for (i, &(lx, ly)) in self.places.as_deref()?.iter().enumerate() {
+            let d = (lx - x).powi(2) + (ly - y).powi(2);
+            if best.is_none_or(|(b, _)| d < b) {
+                best = Some((d, i as u16));
+            }
+        }
+        best.map(|b| b.1)
+    }
+
+    /// `track` is now at (x, y): its (old, new) leader if that changes it
+    /// (a handover), which is then recorded.
+    pub fn moved(&mut self, track: u32, x: f64, y: f64) -> Option<(u16, u16)> {
+        let to = self.nearest(x, y)?;
+        let slot = self.owners.get_mut(track as usize)?;
+        let from = *slot;
+        (from != to).then(|| {
+            *slot = to;
+            (from, to)
+        })
+    }
+}
+
+/// A centralized factored belief under the regional rule, with the regions
+/// the sensor gateway would route by: a mix of tracks in two regions is kept
+/// apart, and a track that changes region ([`Regional::moved`], a trace's
+/// `move` line) is split off its component.
+#[derive(Debug)]
+pub struct Regional {
+    belief: FactoredBelief,
+    regions: Regions,
+}
+
+impl Regional {
+    pub fn new(belief: FactoredBelief, regions: Regions) -> Self {
+        Regional { belief, regions }
+    }
+
+    pub fn belief(&self) -> &FactoredBelief {
+        &self.belief
+    }
+
+    /// `track` is now at (x, y).
+    pub fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError> {
+        match self.regions.moved(track, x, y) {
+            Some(_) => self.belief.split_off(track),
+            None => Ok(()),
+        }
+    }
+
+    /// Applies one trace line (lines without a belief event do nothing).
+    pub fn apply_line(&mut self, line: &Line) -> Result<(), BeliefError> {
+        match line {
+            Line::Mix(m) => self.mix(Mix {
+                a: m.a,
+                b: m.b,
+                swap: m.swap,
+            }),
+            Line::Observe(o) => self.observe(Observe {
+                track: o.track,
+                red: o.red,
+                blue: o.blue,
+            }),
+            Line::Move(m) => self.moved(m.track, m.x, m.y),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl PropertyFilter for Regional {
+    fn field(&self) -> &Field {
+        self.belief.field()
+    }
+
+    fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
+        if self.regions.owner(mix.a) != self.regions.owner(mix.b) {
+            self.belief.mix_apart(mix)
+        } else {
+            self.belief.mix(mix)
+        }
+    }
+
+    fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        self.belief.observe(observe)
+    }
+
+    fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
+        self.belief.marginals()
+    }
+
+    fn coefficients(&self) -> usize {
+        self.belief.coefficients()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tracks_start_round_robin_and_go_to_the_nearest_leader() {
+        let mut r = Regions::new(&[Some((0.0, 0.0)), Some((10.0, 0.0))], 3);
+        assert_eq!(r.owners(), &[0, 1, 0]);
+        assert_eq!(r.moved(0, 9.0, 0.0), Some((0, 1)));
+        assert_eq!(r.moved(0, 8.0, 0.0), None, "still nearest to leader 1");
+        assert_eq!(r.moved(1, 1.0, 1.0), Some((1, 0)));
+        assert_eq!(r.moved(7, 1.0, 1.0), None, "an unknown track");
+        // Without places nobody moves.
+        let mut fixed = Regions::new(&[None, Some((1.0, 1.0))], 2);
+        assert_eq!(fixed.moved(0, 1.0, 1.0), None);
+        assert_eq!(fixed.owners(), &[0, 1]);
+    }
+
+    /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing with
+    /// swaps strictly between 0 and 1, observed now and then (a fixed
+    /// linear congruential sequence, so the test needs no generator).
+    fn lines() -> Vec<Line> {
+        use idmesh_protocol::trace::{Mix as MixLine, Move, Observe as ObserveLine};
+        let mut state = 7u64;
+        let mut next = |m: u64| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) % m
+        };
+        (0..400)
+            .map(|e| {
+                let time = e as f64;
+                match next(3) {
+                    0 => {
+                        let a = next(12) as u32;
+                        let b = (a + 1 + next(11) as u32) % 12;
+                        Line::Mix(MixLine { time, a, b, swap: 0.1 + next(8) as f64 / 10.0 })
+                    }
+                    1 => Line::Observe(ObserveLine {
+                        time,
+                        track: next(12) as u32,
+                        red: 0.2 + next(7) as f64 / 10.0,
+                        blue: 0.3,
+                        sensor: None,
+                    }),
+                    _ => Line::Move(Move {
+                        time,
+                        track: next(12) as u32,
+                        x: next(100) as f64 / 10.0,
+                        y: next(100) as f64 / 10.0,
+                    }),
+                }
+            })
+            .collect()
+    }
+
+    fn belief() -> FactoredBelief {
+        let field = Field::known(12, vec![0, 3, 5, 8, 11]);
+        let options = idmesh_belief::FactoredOptions {
+            coupling: idmesh_belief::Coupling::Local,
+            max_component: 5,
+            ..Default::default()
+        };
+        FactoredBelief::with_options(field, options).unwrap()
+    }
+
+    #[test]
+    fn one_region_is_the_plain_belief_and_more_keep_components_in_theirs() {
+        let mut plain = belief();
+        let mut one = Regional::new(belief(), Regions::new(&[Some((5.0, 5.0))], 12));
+        for line in &lines() {
+            one.apply_line(line).unwrap();
+            match line {
+                Line::Mix(m) => plain.mix(Mix { a: m.a, b: m.b, swap: m.swap }).unwrap(),
+                Line::Observe(o) => plain
+                    .observe(Observe { track: o.track, red: o.red, blue: o.blue })
+                    .unwrap(),
+                _ => {}
+            }
+            assert_eq!(one.marginals().unwrap(), plain.marginals().unwrap());
+        }
+        let places = [Some((2.0, 2.0)), Some((8.0, 2.0)), Some((5.0, 8.0))];
+        let mut three = Regional::new(belief(), Regions::new(&places, 12));
+        for line in &lines() {
+            three.apply_line(line).unwrap();
+            for component in three.belief().components() {
+                let owners: Vec<_> = component.iter().map(|&t| three.regions.owner(t)).collect();
+                assert!(
+                    owners.windows(2).all(|w| w[0] == w[1]),
+                    "component {component:?} spans regions {owners:?}"
+                );
+            }
+        }
+        let stats = three.belief().stats();
+        assert!(stats.kept_apart > 0 && stats.split_off > 0, "{stats:?}");
+        assert!(three.belief().components().iter().any(|c| c.len() > 1));
+    }
+}
