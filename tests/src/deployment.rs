@@ -112,6 +112,33 @@ pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     b
 }
 
+/// Where a deployment of `leaders` leaders over `trace` places them: the
+/// centres of a grid over the field its moves span (row by row).
+pub fn leader_places(trace: &Path, leaders: usize) -> Vec<(f64, f64)> {
+    let (x0, y0, x1, y1) = corners(trace);
+    let columns = (leaders as f64).sqrt().ceil() as usize;
+    let rows = leaders.div_ceil(columns);
+    (0..leaders)
+        .map(|i| {
+            let (c, r) = (i % columns, i / columns);
+            (
+                x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64,
+                y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64,
+            )
+        })
+        .collect()
+}
+
+/// [`leader_places`] as `idmesh replay --regions` takes them (each number
+/// written so that it parses back to itself).
+pub fn regions_argument(trace: &Path, leaders: usize) -> String {
+    leader_places(trace, leaders)
+        .iter()
+        .map(|(x, y)| format!("{x},{y}"))
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
 impl Deployment {
     /// Starts a deployment streaming `trace` under `idmesh up`; leaders sit
     /// on a grid over the trace's field so that tracks cross between them.
@@ -238,9 +265,7 @@ impl Deployment {
             std::env::temp_dir().join(format!("idmesh-deployment-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let (x0, y0, x1, y1) = corners(trace);
-        let columns = (settings.leaders as f64).sqrt().ceil() as usize;
-        let rows = settings.leaders.div_ceil(columns);
+        let places = leader_places(trace, settings.leaders);
         let coordinator = format!("tcp/127.0.0.1:{}", free_port());
         let sensor = format!("tcp/127.0.0.1:{}", free_port());
         let mut endpoints = vec![
@@ -273,10 +298,7 @@ impl Deployment {
         if let Some(rate) = settings.rate {
             toml.push_str(&format!("rate = {rate}\n"));
         }
-        for i in 0..settings.leaders {
-            let (c, r) = (i % columns, i / columns);
-            let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
-            let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
+        for (i, (x, y)) in places.into_iter().enumerate() {
             let listen = format!("tcp/127.0.0.1:{}", free_port());
             toml.push_str(&format!(
                 "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"{listen}\"\nat = [{x}, {y}]\n"

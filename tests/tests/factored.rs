@@ -11,7 +11,9 @@
 //! leader killed mid-stream and restarted from its journal changes no
 //! answer, while the window holds the stream for it.
 
-use idmesh_tests::deployment::{crowd, replay_lines, truth_lines, Deployment, Settings, Truth};
+use idmesh_tests::deployment::{
+    crowd, regions_argument, replay_lines, truth_lines, Deployment, Settings, Truth,
+};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -27,19 +29,23 @@ fn belief(shrink_interest: bool) -> String {
 }
 
 fn central(trace: &Path) -> Vec<Value> {
-    replay_lines(
-        trace,
-        &[
-            "--method",
-            "factored",
-            "--coupling",
-            "local",
-            "--max-component",
-            &MAX_COMPONENT.to_string(),
-            "--split",
-            "original",
-        ],
-    )
+    central_with(trace, &[])
+}
+
+fn central_with(trace: &Path, more: &[&str]) -> Vec<Value> {
+    let max = MAX_COMPONENT.to_string();
+    let mut args = vec![
+        "--method",
+        "factored",
+        "--coupling",
+        "local",
+        "--max-component",
+        &max,
+        "--split",
+        "original",
+    ];
+    args.extend_from_slice(more);
+    replay_lines(trace, &args)
 }
 
 fn floats(v: &Value) -> Vec<f64> {
@@ -182,9 +188,26 @@ fn factored_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
 /// nothing): the final answer still equals the centralized one.
 #[test]
 fn a_factored_leader_killed_and_restarted_changes_no_answer() {
-    let dir = std::env::temp_dir().join(format!("idmesh-factored-crash-{}", std::process::id()));
+    killed_and_restarted(false);
+}
+
+/// The same under the regional rule, against `idmesh replay --regions`.
+#[test]
+fn a_regional_leader_killed_and_restarted_changes_no_answer() {
+    killed_and_restarted(true);
+}
+
+fn killed_and_restarted(regional: bool) {
+    let dir = std::env::temp_dir().join(format!(
+        "idmesh-factored-crash-{regional}-{}",
+        std::process::id()
+    ));
     let trace = crowd(&dir, 12, 4, 90.0, 5);
-    let central = central(&trace);
+    let regions = regions_argument(&trace, 4);
+    let central = match regional {
+        true => central_with(&trace, &["--regions", &regions]),
+        false => central(&trace),
+    };
     let want = floats(&central.last().unwrap()["p_red"]);
     let settings = Settings {
         leaders: 4,
@@ -192,11 +215,12 @@ fn a_factored_leader_killed_and_restarted_changes_no_answer() {
         journal: true,
         snapshot_every: Some(40),
         takeover_after_ms: Some(0),
-        belief: Some(belief(true)),
+        belief: Some(format!("{}\nregional = {regional}", belief(true))),
         window: Some(WINDOW),
         ..Settings::default()
     };
-    let mut crashed = Deployment::start_each("factored-crash", &trace, &settings);
+    let name = format!("factored-crash-{regional}");
+    let mut crashed = Deployment::start_each(&name, &trace, &settings);
     let first = crashed.first_answer(Duration::from_secs(30));
     assert_eq!(first["finished"], false, "the stream has begun, not ended");
     std::thread::sleep(Duration::from_millis(400));
@@ -221,4 +245,55 @@ fn a_factored_leader_killed_and_restarted_changes_no_answer() {
         "leaders wrote snapshots"
     );
     assert!(crashed.leader("leader-1")["recoveries"].as_u64().unwrap() > 0);
+}
+
+/// The regional rule (`regional = true`): a mix across two leaders'
+/// regions keeps its components apart, a track handed over is split off its
+/// component. Through 2, 4 and 8 leaders the deployment equals `idmesh
+/// replay --regions` with the same leaders' places at every truth line, to
+/// 1e-9; that replay differs from the plain local rule's (the rule did
+/// something), and the leaders moved fewer components than without it.
+#[test]
+fn regional_leaders_equal_the_centralized_regional_rule_through_2_4_8_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-regional-{}", std::process::id()));
+    let known = crowd(&dir, 12, 4, 60.0, 5);
+    let plain = central(&known);
+    for (l, leaders) in [2usize, 4, 8].into_iter().enumerate() {
+        let (start, trace) = match l {
+            1 => ("uniform prior", without_start(&known)),
+            _ => ("known start", known.clone()),
+        };
+        let regions = regions_argument(&trace, leaders);
+        let central = central_with(&trace, &["--regions", &regions]);
+        let truths = truth_lines(&trace);
+        assert_eq!(central.len(), truths.len());
+        if l != 1 {
+            let last = |v: &[Value]| floats(&v.last().unwrap()["p_red"]);
+            let gap = last(&central)
+                .iter()
+                .zip(last(&plain))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(gap > 1e-6, "{leaders} leaders: the regional rule changed nothing");
+        }
+        let shrink = l % 2 == 0;
+        let settings = Settings {
+            belief: Some(format!("{}\nregional = true", belief(shrink))),
+            ..settings(leaders, shrink)
+        };
+        let name = format!("regional{leaders}");
+        let deployment = Deployment::start(&name, &trace, &settings);
+        deployment.first_answer(Duration::from_secs(30));
+        let what = format!("regional rule, {start}, {leaders} leaders");
+        check_points(&what, &deployment, &truths, &central);
+        let last = deployment.final_marginals(Duration::from_secs(60));
+        let want = floats(&central.last().unwrap()["p_red"]);
+        for (g, w) in floats(&last["p_red"]).iter().zip(&want) {
+            assert!((g - w).abs() < 1e-9, "{what}, final: {g} vs {w}");
+        }
+        let handovers = deployment.leaders_total("handovers");
+        let moved = deployment.leaders_total("sets_sent");
+        assert!(handovers > 0 && moved > 0, "{what}: {handovers} handovers, {moved} moved");
+        eprintln!("{what}: {handovers} handover items, {moved} components moved");
+    }
 }
