@@ -17,6 +17,10 @@
 //! - the factored belief (default options, local split rule) against
 //!   `factored, local rule`: the two must agree to 1e-9 at every truth
 //!   line, or the command fails naming the point;
+//! - the same under the regional rule against the centralized engine under
+//!   that rule with the deployment's leaders' places (to 1e-9 as well),
+//!   and, offline, that rule's cost in tracking error with the regions of
+//!   2, 4 and 8 leaders;
 //! - the Radon belief with the distributed rule, overcomplete pruning at
 //!   B = 5n sets per leader, against `overcomplete, distributed rule
 //!   (B = 5n)`: shown beside it, not claimed equal (each leader prunes its
@@ -29,7 +33,8 @@ use super::ingest::{header_only, send};
 use super::Deployment;
 use crate::runtime::loopback::{Loopback, Ports};
 use crate::runtime::query::ask;
-use crate::runtime::topology::{BeliefKind, Sparsification};
+use crate::runtime::topology::{BeliefKind, Sparsification, Topology};
+use idmesh_placement::factored_options;
 use anyhow::{bail, Context, Result};
 use idmesh_eval::eval::accuracy::{table3_budget, table3_crowds, Crowd, Engine, Start, Written};
 use idmesh_protocol::wire::query::MarginalsAnswer;
@@ -56,9 +61,46 @@ pub struct Crowds {
     pub seeds: usize,
 }
 
+/// What the deployments hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    /// The factored belief, local split rule.
+    Factored,
+    /// The same under the regional rule (`regional = true`).
+    Regional,
+    /// The Radon belief, distributed rule, overcomplete pruning.
+    Radon,
+}
+
+impl Kind {
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Factored => "factored",
+            Kind::Regional => "factored, regional rule",
+            Kind::Radon => "radon",
+        }
+    }
+
+    fn belief(self) -> BeliefKind {
+        match self {
+            Kind::Radon => BeliefKind::Radon,
+            Kind::Factored | Kind::Regional => BeliefKind::Factored,
+        }
+    }
+
+    /// Whether live and centralized must agree to [`TOLERANCE`].
+    fn exact(self) -> bool {
+        self != Kind::Radon
+    }
+}
+
+/// The leader counts whose regions the regional rule's accuracy cost is
+/// measured at (centralized, on the same traces).
+const REGIONAL_LEADERS: [usize; 3] = [2, 4, 8];
+
 /// One deployment's run on one crowd.
 struct Run {
-    belief: BeliefKind,
+    kind: Kind,
     live_error: f64,
     central_error: f64,
     /// The largest |live − centralized| marginal over all truth lines, and
@@ -81,6 +123,9 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
         );
     }
     let mut rows: Vec<(Crowd, Run)> = Vec::new();
+    // Per crowd: the local rule's error and the regional rule's at
+    // REGIONAL_LEADERS leaders' regions.
+    let mut costs: Vec<(Crowd, f64, Vec<f64>)> = Vec::new();
     let mut mismatches = Vec::new();
     for crowd in chosen {
         let name = format!(
@@ -98,23 +143,24 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
             .with_context(|| format!("cannot create {}", folder.display()))?;
         let trace = folder.join("trace.jsonl");
         let written = crowd.write(&trace)?;
-        for (belief, engine) in [
-            (BeliefKind::Factored, Engine::FactoredLocal),
-            (BeliefKind::Radon, Engine::RadonDistributed),
-        ] {
-            let what = format!("{}, {} belief", crowd.label(), belief.name());
+        for kind in [Kind::Factored, Kind::Regional, Kind::Radon] {
+            let what = format!("{}, {}", crowd.label(), kind.name());
             eprintln!(
                 "bench: {what}: {} truth lines through {LEADERS} leaders",
                 written.truth_events.len()
             );
             let clock = Instant::now();
-            let live = runtime
-                .block_on(live_answers(&crowd, &written, belief, &folder, &trace))
+            let (live, topology) = runtime
+                .block_on(live_answers(&crowd, &written, kind, &folder, &trace))
                 .with_context(|| what.clone())?;
             let seconds = clock.elapsed().as_secs_f64();
-            let central = written.centralized(engine, crowd.seed)?;
+            let central = match kind {
+                Kind::Factored => written.centralized(Engine::FactoredLocal, crowd.seed)?,
+                Kind::Radon => written.centralized(Engine::RadonDistributed, crowd.seed)?,
+                Kind::Regional => regional(&written, &trace, &topology)?,
+            };
             let largest = largest_difference(&live, &central).with_context(|| what.clone())?;
-            if belief == BeliefKind::Factored && largest.0 > TOLERANCE {
+            if kind.exact() && largest.0 > TOLERANCE {
                 mismatches.push(format!(
                     "{what}: live and centralized differ by {:e} at truth line {} (after {} \
                      events), track {}",
@@ -124,7 +170,7 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
             rows.push((
                 crowd.clone(),
                 Run {
-                    belief,
+                    kind,
                     live_error: written.tracking_error(&live)?,
                     central_error: written.tracking_error(&central)?,
                     largest,
@@ -133,8 +179,20 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
                 },
             ));
         }
+        let local = rows
+            .iter()
+            .rev()
+            .find(|(_, r)| r.kind == Kind::Factored)
+            .map(|(_, r)| r.central_error)
+            .context("the factored run of this crowd")?;
+        let mut regional_errors = Vec::new();
+        for leaders in REGIONAL_LEADERS {
+            let topology = grid_topology(leaders, &folder, &trace)?;
+            regional_errors.push(written.tracking_error(&regional(&written, &trace, &topology)?)?);
+        }
+        costs.push((crowd.clone(), local, regional_errors));
     }
-    let report = report(&rows, crowds.seeds, started.elapsed())?;
+    let report = report(&rows, &costs, crowds.seeds, started.elapsed())?;
     if !mismatches.is_empty() {
         print!("{report}");
         bail!(
@@ -151,16 +209,21 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
 async fn live_answers(
     crowd: &Crowd,
     written: &Written,
-    belief: BeliefKind,
+    kind: Kind,
     folder: &Path,
     trace: &Path,
-) -> Result<Vec<Vec<f64>>> {
+) -> Result<(Vec<Vec<f64>>, Topology)> {
+    let belief = kind.belief();
+    let tag = match kind {
+        Kind::Regional => "regional",
+        _ => belief.name(),
+    };
     let plan = Loopback {
-        prefix: format!("idmesh/accuracy-{}-{}", belief.name(), std::process::id()),
+        prefix: format!("idmesh/accuracy-{tag}-{}", std::process::id()),
         leaders: LEADERS,
         belief,
         shrink_interest: false,
-        regional: false,
+        regional: kind == Kind::Regional,
         window: None,
         // The Radon belief's settings (identity streams aside, only
         // `belief = "radon"` reads them): the distributed rule, the
@@ -176,11 +239,56 @@ async fn live_answers(
         state_dir: None,
     };
     let header = header_only(trace, folder)?;
-    let config = folder.join(format!("topology-{}.toml", belief.name()));
-    let deployment = Deployment::launch(&plan, &header, &config).await?;
+    let config = folder.join(format!("topology-{tag}.toml"));
+    // The sensor streams what the producer sends (its trace is the header
+    // alone); the leaders are placed over the crowd's field.
+    let deployment = Deployment::launch_placed(&plan, &header, trace, &config).await?;
     let answers = ask_every_truth_line(&deployment, written).await;
+    let topology = deployment.topology.clone();
     deployment.close().await;
-    answers
+    Ok((answers?, topology))
+}
+
+/// The topology of `leaders` leaders on the loopback's grid over `trace`'s
+/// field, under the regional rule (written to `folder` and read back, so
+/// the places are what a deployment reads).
+fn grid_topology(leaders: usize, folder: &Path, trace: &Path) -> Result<Topology> {
+    let plan = Loopback {
+        prefix: "idmesh/accuracy-cost".to_string(),
+        leaders,
+        belief: BeliefKind::Factored,
+        shrink_interest: false,
+        regional: true,
+        window: None,
+        distributed_rule: false,
+        budget: 0,
+        sparsify: Sparsification::Threshold,
+        rate: None,
+        events: None,
+        query_timeout_ms: ANSWER_TIMEOUT.as_millis() as u64,
+        ports: Ports::Free,
+        live: true,
+        state_dir: None,
+    };
+    let (toml, _) = plan.topology(trace)?;
+    let path = folder.join(format!("topology-regional-{leaders}.toml"));
+    std::fs::write(&path, toml).with_context(|| format!("cannot write {}", path.display()))?;
+    Topology::load(&path)
+}
+
+/// The centralized engine a regional deployment with `topology` equals:
+/// the factored belief with its settings under the regional rule of its
+/// leaders' places.
+fn regional(written: &Written, trace: &Path, topology: &Topology) -> Result<Vec<Vec<f64>>> {
+    let start = topology
+        .factored()
+        .context("a regional topology holds the factored belief")?;
+    let places: Vec<_> = topology
+        .leader
+        .iter()
+        .map(|l| l.at.map(|[x, y]| (x, y)))
+        .collect();
+    written.regional(trace, factored_options(&start), &places)
 }
 
 async fn ask_every_truth_line(deployment: &Deployment, written: &Written) -> Result<Vec<Vec<f64>>> {
@@ -276,7 +384,12 @@ fn largest_difference(live: &[Vec<f64>], central: &[Vec<f64>]) -> Result<(f64, u
 
 /// docs/live-accuracy.md: what was run, and one row per point and belief
 /// (means over the seeds, the largest difference over all of them).
-fn report(rows: &[(Crowd, Run)], seeds: usize, took: Duration) -> Result<String> {
+fn report(
+    rows: &[(Crowd, Run)],
+    costs: &[(Crowd, f64, Vec<f64>)],
+    seeds: usize,
+    took: Duration,
+) -> Result<String> {
     let mut out = String::new();
     writeln!(
         out,
@@ -299,6 +412,9 @@ fn report(rows: &[(Crowd, Run)], seeds: usize, took: Duration) -> Result<String>
          split \"original\", local split rule; the count coupling at the coordinator) against \
          `factored, local rule`. They are the same computation distributed: the command fails \
          if any marginal at any truth line differs by more than {TOLERANCE:e}.\n\
+         - **factored, regional rule**: the same under the regional rule (`regional = true`) \
+         against the centralized engine under the same rule and the deployment's leaders' \
+         places (`idmesh replay --regions`); the same check, the same tolerance.\n\
          - **radon**: the Radon belief with the distributed rule of Section 5.4, overcomplete \
          pruning to B = 5n sets **per leader**, against `overcomplete, distributed rule (B = \
          5n)`. Not claimed equal: each leader prunes its own sets to its own budget, which no \
@@ -321,16 +437,16 @@ fn report(rows: &[(Crowd, Run)], seeds: usize, took: Duration) -> Result<String>
         "| n | swap | start | belief | truth lines | live tracking error | centralized tracking error | largest \\|live − centralized\\| | live seconds |"
     )?;
     writeln!(out, "|---:|---:|---|---|---:|---:|---:|---:|---:|")?;
-    let mut done: Vec<(usize, u64, Start, BeliefKind)> = Vec::new();
+    let mut done: Vec<(usize, u64, Start, Kind)> = Vec::new();
     for (crowd, run) in rows {
-        let key = (crowd.n, crowd.swap.to_bits(), crowd.start, run.belief);
+        let key = (crowd.n, crowd.swap.to_bits(), crowd.start, run.kind);
         if done.contains(&key) {
             continue;
         }
         done.push(key);
         let same: Vec<&Run> = rows
             .iter()
-            .filter(|(c, r)| (c.n, c.swap.to_bits(), c.start, r.belief) == key)
+            .filter(|(c, r)| (c.n, c.swap.to_bits(), c.start, r.kind) == key)
             .map(|(_, r)| r)
             .collect();
         let mean = |f: fn(&Run) -> f64| same.iter().map(|r| f(r)).sum::<f64>() / same.len() as f64;
@@ -341,13 +457,57 @@ fn report(rows: &[(Crowd, Run)], seeds: usize, took: Duration) -> Result<String>
             crowd.n,
             crowd.swap,
             crowd.start.label(),
-            run.belief.name(),
+            run.kind.name(),
             same.iter().map(|r| r.truths).sum::<usize>(),
             mean(|r| r.live_error),
             mean(|r| r.central_error),
             largest,
             same.iter().map(|r| r.seconds).sum::<f64>(),
         )?;
+    }
+    writeln!(
+        out,
+        "\n## The regional rule's accuracy cost\n\n\
+         The regional rule keeps every component inside one leader's region, so that \
+         leaders seldom move components (README, \"Flow control\"): a mix of tracks in two \
+         regions is projected back onto their two components instead of merging them, and a \
+         track handed over to another region is split off its component (both by moment \
+         matching, docs/architecture.md). Its cost depends on how many regions the field is \
+         cut into. The centralized engine runs it exactly as the leaders do (the rows \
+         *factored, regional rule* above agree to {TOLERANCE:e} with {LEADERS} leaders); here \
+         it is run on the same traces with the leaders of a loopback deployment of 2, 4 and 8 \
+         leaders (a grid over the field), against the local rule alone (mean tracking error \
+         over the seeds; the difference in brackets).\n"
+    )?;
+    writeln!(
+        out,
+        "| n | swap | start | local rule | regional, 2 leaders | regional, 4 leaders | regional, 8 leaders |"
+    )?;
+    writeln!(out, "|---:|---:|---|---:|---:|---:|---:|")?;
+    let mut seen: Vec<(usize, u64, Start)> = Vec::new();
+    for (crowd, _, _) in costs {
+        let key = (crowd.n, crowd.swap.to_bits(), crowd.start);
+        if seen.contains(&key) {
+            continue;
+        }
+        seen.push(key);
+        let same: Vec<&(Crowd, f64, Vec<f64>)> = costs
+            .iter()
+            .filter(|(c, _, _)| (c.n, c.swap.to_bits(), c.start) == key)
+            .collect();
+        let count = same.len() as f64;
+        let local = same.iter().map(|c| c.1).sum::<f64>() / count;
+        let mut line = format!(
+            "| {} | {} | {} | {local:.4} |",
+            crowd.n,
+            crowd.swap,
+            crowd.start.label()
+        );
+        for i in 0..REGIONAL_LEADERS.len() {
+            let regional = same.iter().map(|c| c.2[i]).sum::<f64>() / count;
+            line.push_str(&format!(" {regional:.4} ({:+.4}) |", regional - local));
+        }
+        writeln!(out, "{line}")?;
     }
     Ok(out)
 }

@@ -249,8 +249,19 @@ impl Deployment {
     /// Writes `plan`'s topology streaming `trace` to `config` and starts
     /// its processes.
     async fn launch(plan: &Loopback, trace: &Path, config: &Path) -> Result<Self> {
+        Self::launch_placed(plan, trace, trace, config).await
+    }
+
+    /// [`Deployment::launch`] with the leaders placed over the field of
+    /// `placed_by` (see [`Loopback::topology_placed`]).
+    async fn launch_placed(
+        plan: &Loopback,
+        trace: &Path,
+        placed_by: &Path,
+        config: &Path,
+    ) -> Result<Self> {
         let leaders = plan.leaders;
-        let (toml, _) = plan.topology(&std::fs::canonicalize(trace)?)?;
+        let (toml, _) = plan.topology_placed(&std::fs::canonicalize(trace)?, placed_by)?;
         std::fs::write(config, toml)?;
         let config = config.to_path_buf();
         let topology = Topology::load(&config)?;

@@ -70,7 +70,14 @@ impl Loopback {
     /// trace is named by its absolute path: a topology resolves relative
     /// paths against its own folder, not against where we were started.
     pub fn topology(&self, trace: &Path) -> Result<(String, String)> {
-        let (x0, y0, x1, y1) = field_corners(trace)?;
+        self.topology_placed(trace, trace)
+    }
+
+    /// [`Loopback::topology`] with the leaders placed over the field of
+    /// `placed_by`'s moves: a live sensor's trace is its header alone, and
+    /// its events come from a producer later.
+    pub fn topology_placed(&self, trace: &Path, placed_by: &Path) -> Result<(String, String)> {
+        let (x0, y0, x1, y1) = field_corners(placed_by)?;
         let trace = std::path::absolute(trace)?;
         let columns = (self.leaders as f64).sqrt().ceil().max(1.0) as usize;
         let rows = self.leaders.div_ceil(columns);

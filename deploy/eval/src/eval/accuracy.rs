@@ -13,6 +13,9 @@ use super::plan::{budget, Experiment, Plan};
 use super::scenarios::{ScenarioSpec, Scenes, Step, Trace};
 use super::score::{replay, tracking_error};
 use anyhow::{bail, Context, Result};
+use idmesh_belief::{field_of, FactoredBelief, FactoredOptions, PropertyFilter};
+use idmesh_placement::{Regional, Regions};
+use idmesh_protocol::trace::{Line, TraceReader};
 use idmesh_sensor::scenario::trace_out::write_trace;
 use idmesh_sensor::SimEvent;
 use std::path::Path;
@@ -166,6 +169,35 @@ impl Written {
         let run =
             replay(engine.method(self.tracks()), &self.trace, seed).map_err(anyhow::Error::msg)?;
         Ok(run.answers.into_iter().map(|(m, _)| m).collect())
+    }
+
+    /// The centralized factored belief with `options` under the regional
+    /// rule of leaders at `places` (docs/architecture.md, "Components that
+    /// stay in their region"), replaying the file this crowd was written
+    /// to (`path`, with its `move` lines): its marginals at every truth
+    /// line, in order. What `idmesh replay --regions` computes.
+    pub fn regional(
+        &self,
+        path: &Path,
+        options: FactoredOptions,
+        places: &[Option<(f64, f64)>],
+    ) -> Result<Vec<Vec<f64>>> {
+        let mut reader = TraceReader::open(path)?;
+        let field = field_of(&reader.read_header()?);
+        let tracks = field.tracks;
+        let mut engine = Regional::new(
+            FactoredBelief::with_options(field, options)?,
+            Regions::new(places, tracks),
+        );
+        let mut answers = Vec::new();
+        while let Some(numbered) = reader.read_line()? {
+            let at = |e| anyhow::anyhow!("{}:{}: {e}", path.display(), numbered.number);
+            match &numbered.line {
+                Line::Truth(_) => answers.push(engine.marginals().map_err(at)?),
+                line => engine.apply_line(line).map_err(at)?,
+            }
+        }
+        Ok(answers)
     }
 
     /// The trace spec's tracking error of `answers`, one per truth line in
