@@ -274,7 +274,10 @@ fn regional_leaders_equal_the_centralized_regional_rule_through_2_4_8_leaders() 
                 .zip(last(&plain))
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
-            assert!(gap > 1e-6, "{leaders} leaders: the regional rule changed nothing");
+            assert!(
+                gap > 1e-6,
+                "{leaders} leaders: the regional rule changed nothing"
+            );
         }
         let shrink = l % 2 == 0;
         let settings = Settings {
@@ -293,7 +296,10 @@ fn regional_leaders_equal_the_centralized_regional_rule_through_2_4_8_leaders() 
         }
         let handovers = deployment.leaders_total("handovers");
         let moved = deployment.leaders_total("sets_sent");
-        assert!(handovers > 0 && moved > 0, "{what}: {handovers} handovers, {moved} moved");
+        assert!(
+            handovers > 0 && moved > 0,
+            "{what}: {handovers} handovers, {moved} moved"
+        );
         eprintln!("{what}: {handovers} handover items, {moved} components moved");
     }
 }

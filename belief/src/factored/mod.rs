@@ -711,7 +711,10 @@ impl FactoredBelief {
         let (slot, bit) = *self
             .home
             .get(track as usize)
-            .ok_or(BeliefError::UnknownTrack { track, tracks: self.field.tracks })?;
+            .ok_or(BeliefError::UnknownTrack {
+                track,
+                tracks: self.field.tracks,
+            })?;
         let comp = self.comp(slot);
         if comp.len() < 2 {
             return Ok(());

@@ -1,9 +1,11 @@
 //! A whole deployment on this machine's loopback, written as a topology
-//! file: the demo's and the bench's. Leaders sit at the centres of a grid of
-//! cells over the trace's field, so tracks cross between their regions and
-//! mix across them, as in the paper's sensor grid.
+//! file: the demo's and the bench's. Leaders start at the centres of a grid
+//! of cells over the trace's field and move to where the crowd is (k-means
+//! over its positions, `launch::leader_places`), so that their regions hold
+//! about as much of it each; tracks cross between the regions and mix
+//! across them, as in the paper's sensor grid.
 
-use super::launch::field_corners;
+use super::launch::leader_places;
 use super::topology::{BeliefKind, Sparsification};
 use anyhow::Result;
 use std::path::Path;
@@ -77,10 +79,8 @@ impl Loopback {
     /// `placed_by`'s moves: a live sensor's trace is its header alone, and
     /// its events come from a producer later.
     pub fn topology_placed(&self, trace: &Path, placed_by: &Path) -> Result<(String, String)> {
-        let (x0, y0, x1, y1) = field_corners(placed_by)?;
+        let places = leader_places(placed_by, self.leaders)?;
         let trace = std::path::absolute(trace)?;
-        let columns = (self.leaders as f64).sqrt().ceil().max(1.0) as usize;
-        let rows = self.leaders.div_ceil(columns);
         let mut held = Vec::new();
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0, &mut held)?);
         let mut toml = format!(
@@ -114,10 +114,7 @@ impl Loopback {
         if let Some(dir) = &self.state_dir {
             toml.insert_str(0, &format!("state_dir = {:?}\n", dir.display().to_string()));
         }
-        for i in 0..self.leaders {
-            let (c, r) = (i % columns, i / columns);
-            let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
-            let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
+        for (i, (x, y)) in places.into_iter().enumerate() {
             toml.push_str(&format!(
                 "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{x:.3}, {y:.3}]\n",
                 self.ports.take(i as u16 + 1, &mut held)?

@@ -166,7 +166,9 @@ mod tests {
         use idmesh_protocol::trace::{Mix as MixLine, Move, Observe as ObserveLine};
         let mut state = 7u64;
         let mut next = |m: u64| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 33) % m
         };
         (0..400)
@@ -176,7 +178,12 @@ mod tests {
                     0 => {
                         let a = next(12) as u32;
                         let b = (a + 1 + next(11) as u32) % 12;
-                        Line::Mix(MixLine { time, a, b, swap: 0.1 + next(8) as f64 / 10.0 })
+                        Line::Mix(MixLine {
+                            time,
+                            a,
+                            b,
+                            swap: 0.1 + next(8) as f64 / 10.0,
+                        })
                     }
                     1 => Line::Observe(ObserveLine {
                         time,
@@ -213,9 +220,19 @@ mod tests {
         for line in &lines() {
             one.apply_line(line).unwrap();
             match line {
-                Line::Mix(m) => plain.mix(Mix { a: m.a, b: m.b, swap: m.swap }).unwrap(),
+                Line::Mix(m) => plain
+                    .mix(Mix {
+                        a: m.a,
+                        b: m.b,
+                        swap: m.swap,
+                    })
+                    .unwrap(),
                 Line::Observe(o) => plain
-                    .observe(Observe { track: o.track, red: o.red, blue: o.blue })
+                    .observe(Observe {
+                        track: o.track,
+                        red: o.red,
+                        blue: o.blue,
+                    })
                     .unwrap(),
                 _ => {}
             }

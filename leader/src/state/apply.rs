@@ -195,7 +195,11 @@ impl Leader {
     /// it holds both and then mixes them (merge, or merge and split). The
     /// rule needs no knowledge of who holds what: the holders know what
     /// they hold, and the receiver knows it surveils `a`. A certain swap
-    /// (a relabelling) and a non-event move nothing.
+    /// (a relabelling) and a non-event move nothing. Under the regional
+    /// rule a mix across two regions is kept apart, and the component of
+    /// `b` goes back to `owner_b`, which waits for it
+    /// ([`Leader::factored_mix_here`]; docs/architecture.md, "Components
+    /// that stay in their region").
     fn factored_mix(
         &mut self,
         seq: u64,
@@ -246,10 +250,7 @@ impl Leader {
             }
         }
         if back == Some(me) {
-            self.waiting = Some(Waiting::Transfer {
-                seq,
-                from: owner_a,
-            });
+            self.waiting = Some(Waiting::Transfer { seq, from: owner_a });
         }
         Ok(())
     }

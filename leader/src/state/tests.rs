@@ -47,6 +47,10 @@ fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
 /// Leader "a" of a factored stream (components of at most 3 tracks,
 /// interests that shrink), its `Begin` applied.
 fn factored_leader(leaders: &[&str], owners: Vec<u16>) -> Leader {
+    factored_leader_with(leaders, owners, false)
+}
+
+fn factored_leader_with(leaders: &[&str], owners: Vec<u16>, regional: bool) -> Leader {
     use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
     let Item::Begin(mut start) = begin(leaders, owners) else {
         unreachable!()
@@ -55,7 +59,7 @@ fn factored_leader(leaders: &[&str], owners: Vec<u16>) -> Leader {
         max_component: 3,
         split: WireSplit::Original,
         shrink: true,
-        regional: false,
+        regional,
     });
     let mut leader = Leader::new("a");
     leader
@@ -474,4 +478,99 @@ fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
     );
     let stats = leader.stats();
     assert_eq!((stats.tracks_followed, stats.unfollows), (1, 1));
+}
+
+/// A component as leader `from` sends it at item `seq`.
+fn component_transfer(from: u16, seq: u64, track: u32, table: Vec<f64>) -> Transfer {
+    Transfer {
+        version: VERSION,
+        from,
+        seq,
+        sets: Vec::new(),
+        rows: Vec::new(),
+        components: vec![idmesh_protocol::wire::factored::WireComponent {
+            tracks: vec![track],
+            table,
+            log_scale: 0.0,
+            last_mix: vec![0],
+        }],
+    }
+}
+
+/// The tracks of the components a `Send` action carries to `to`.
+fn sent_tracks(actions: &[Action], to: u16) -> Vec<Vec<u32>> {
+    actions
+        .iter()
+        .filter_map(|a| match a {
+            Action::Send { to: t, transfer } if *t == to => Some(
+                transfer
+                    .components
+                    .iter()
+                    .map(|c| c.tracks.clone())
+                    .collect::<Vec<_>>(),
+            ),
+            _ => None,
+        })
+        .flatten()
+        .collect()
+}
+
+/// The regional rule, seen from each side of a mix across two regions:
+/// the leader surveilling a gathers both components, mixes them apart and
+/// sends b's back; the leader surveilling b sends its component and waits
+/// for it to come back, keeping the track in its interest meanwhile.
+#[test]
+fn a_regional_mix_across_regions_sends_b_component_back_and_its_leader_waits_for_it() {
+    // Tracks 0 (red) with a, 1 (red) and 2 (blue) with b.
+    let mut gatherer = factored_leader_with(&["a", "b"], vec![0, 1, 1], true);
+    let actions = gatherer
+        .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, false), 0)
+        .unwrap();
+    assert!(sent_tracks(&actions, 1).is_empty(), "nothing to send yet");
+    assert_eq!(gatherer.waiting_for_components(), Some(2));
+    let actions = gatherer
+        .transfer(component_transfer(1, 2, 2, vec![1.0, 0.0]), 0)
+        .unwrap();
+    assert_eq!(
+        sent_tracks(&actions, 1),
+        vec![vec![2]],
+        "b's component goes back"
+    );
+    let held = gatherer.factored().unwrap();
+    assert!(held.holds(0) && !held.holds(2));
+    assert_eq!(held.component_of(0), vec![0], "kept apart");
+    assert_eq!(held.stats().kept_apart, 1);
+    assert_eq!(gatherer.waiting_for_components(), None);
+
+    // The other side: "a" surveils b's track 0 of the mix (2, 0).
+    let mut returner = factored_leader_with(&["a", "b"], vec![0, 1, 1], true);
+    let actions = returner
+        .batch(batch(1, vec![(2, mix(2, 0, 1, 0))], 2, false), 0)
+        .unwrap();
+    assert_eq!(sent_tracks(&actions, 1), vec![vec![0]]);
+    assert_eq!(returner.waiting_for_transfer(), Some((2, 1)));
+    assert!(!returner.factored().unwrap().holds(0));
+    let actions = returner
+        .transfer(component_transfer(1, 2, 0, vec![0.5, 0.5]), 0)
+        .unwrap();
+    assert!(actions.iter().all(|a| !matches!(a, Action::Unfollow(_))));
+    assert!(returner.factored().unwrap().holds(0));
+    assert_eq!(returner.waiting_for_transfer(), None);
+    assert_eq!(returner.position(), 2);
+}
+
+/// Without the rule the same mix merges at the gatherer, which keeps both.
+#[test]
+fn without_the_regional_rule_the_gatherer_keeps_the_merged_component() {
+    let mut gatherer = factored_leader_with(&["a", "b"], vec![0, 1, 1], false);
+    gatherer
+        .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, false), 0)
+        .unwrap();
+    let actions = gatherer
+        .transfer(component_transfer(1, 2, 2, vec![1.0, 0.0]), 0)
+        .unwrap();
+    assert!(sent_tracks(&actions, 1).is_empty());
+    let held = gatherer.factored().unwrap();
+    assert!(held.holds(0) && held.holds(2));
+    assert_eq!(held.component_of(0).len(), 2);
 }
