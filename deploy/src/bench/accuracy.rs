@@ -81,6 +81,15 @@ impl Kind {
         }
     }
 
+    /// A short name for file and key names.
+    fn tag(self) -> &'static str {
+        match self {
+            Kind::Factored => "factored",
+            Kind::Regional => "regional",
+            Kind::Radon => "radon",
+        }
+    }
+
     fn belief(self) -> BeliefKind {
         match self {
             Kind::Radon => BeliefKind::Radon,
@@ -187,7 +196,7 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
             .context("the factored run of this crowd")?;
         let mut regional_errors = Vec::new();
         for leaders in REGIONAL_LEADERS {
-            let topology = grid_topology(leaders, &folder, &trace)?;
+            let topology = placed_topology(leaders, crowd.n, &folder, &trace)?;
             regional_errors.push(written.tracking_error(&regional(&written, &trace, &topology)?)?);
         }
         costs.push((crowd.clone(), local, regional_errors));
@@ -213,33 +222,9 @@ async fn live_answers(
     folder: &Path,
     trace: &Path,
 ) -> Result<(Vec<Vec<f64>>, Topology)> {
-    let belief = kind.belief();
-    let tag = match kind {
-        Kind::Regional => "regional",
-        _ => belief.name(),
-    };
-    let plan = Loopback {
-        prefix: format!("idmesh/accuracy-{tag}-{}", std::process::id()),
-        leaders: LEADERS,
-        belief,
-        shrink_interest: false,
-        regional: kind == Kind::Regional,
-        window: None,
-        // The Radon belief's settings (identity streams aside, only
-        // `belief = "radon"` reads them): the distributed rule, the
-        // overcomplete pruning at the Table III budget per leader.
-        distributed_rule: true,
-        budget: table3_budget(crowd.n) as u32,
-        sparsify: Sparsification::Overcomplete,
-        rate: None,
-        events: None,
-        query_timeout_ms: ANSWER_TIMEOUT.as_millis() as u64,
-        ports: Ports::Free,
-        live: true,
-        state_dir: None,
-    };
+    let plan = plan(kind, LEADERS, crowd.n);
     let header = header_only(trace, folder)?;
-    let config = folder.join(format!("topology-{tag}.toml"));
+    let config = folder.join(format!("topology-{}.toml", kind.tag()));
     // The sensor streams what the producer sends (its trace is the header
     // alone); the leaders are placed over the crowd's field.
     let deployment = Deployment::launch_placed(&plan, &header, trace, &config).await?;
@@ -249,28 +234,36 @@ async fn live_answers(
     Ok((answers?, topology))
 }
 
-/// The topology of `leaders` leaders on the loopback's grid over `trace`'s
-/// field, under the regional rule (written to `folder` and read back, so
-/// the places are what a deployment reads).
-fn grid_topology(leaders: usize, folder: &Path, trace: &Path) -> Result<Topology> {
-    let plan = Loopback {
-        prefix: "idmesh/accuracy-cost".to_string(),
+/// A loopback deployment of `leaders` leaders holding `kind` for a crowd
+/// of `n` targets.
+fn plan(kind: Kind, leaders: usize, n: usize) -> Loopback {
+    Loopback {
+        prefix: format!("idmesh/accuracy-{}-{}", kind.tag(), std::process::id()),
         leaders,
-        belief: BeliefKind::Factored,
+        belief: kind.belief(),
         shrink_interest: false,
-        regional: true,
+        regional: kind == Kind::Regional,
         window: None,
-        distributed_rule: false,
-        budget: 0,
-        sparsify: Sparsification::Threshold,
+        // The Radon belief's settings (identity streams aside, only
+        // `belief = "radon"` reads them): the distributed rule, the
+        // overcomplete pruning at the Table III budget per leader.
+        distributed_rule: true,
+        budget: table3_budget(n) as u32,
+        sparsify: Sparsification::Overcomplete,
         rate: None,
         events: None,
         query_timeout_ms: ANSWER_TIMEOUT.as_millis() as u64,
         ports: Ports::Free,
         live: true,
         state_dir: None,
-    };
-    let (toml, _) = plan.topology(trace)?;
+    }
+}
+
+/// The topology of a regional deployment of `leaders` leaders placed over
+/// `trace`'s crowd as the loopback places them (written to `folder` and
+/// read back, so the places are what a deployment reads).
+fn placed_topology(leaders: usize, n: usize, folder: &Path, trace: &Path) -> Result<Topology> {
+    let (toml, _) = plan(Kind::Regional, leaders, n).topology(trace)?;
     let path = folder.join(format!("topology-regional-{leaders}.toml"));
     std::fs::write(&path, toml).with_context(|| format!("cannot write {}", path.display()))?;
     Topology::load(&path)
@@ -400,7 +393,7 @@ fn report(
          The crowds of docs/results.md's Table III (k = n/2, 1000 mix + observe events, half \
          of them mixes; `move` lines added every second, which draw no randomness, so the \
          filters see the evaluation's very trace) are fed to a live deployment on loopback \
-         (a coordinator, {LEADERS} leaders on a grid over the field, a sensor) by a producer \
+         (a coordinator, {LEADERS} leaders placed over the crowd by k-means on its positions, a sensor) by a producer \
          on the sensor's ingest key, one stretch between two truth lines at a time, and \
          after each stretch the coordinator is asked the marginals right after the events \
          before that truth line (`?events=N`): every truth line is answered, or the command \
@@ -476,7 +469,7 @@ fn report(
          cut into. The centralized engine runs it exactly as the leaders do (the rows \
          *factored, regional rule* above agree to {TOLERANCE:e} with {LEADERS} leaders); here \
          it is run on the same traces with the leaders of a loopback deployment of 2, 4 and 8 \
-         leaders (a grid over the field), against the local rule alone (mean tracking error \
+         leaders (placed likewise), against the local rule alone (mean tracking error \
          over the seeds; the difference in brackets).\n"
     )?;
     writeln!(

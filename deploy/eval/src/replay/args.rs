@@ -98,7 +98,7 @@ impl ReplayArgs {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Places(pub Vec<(f64, f64)>);
 
-fn parse_places(text: &str) -> Result<Places, String> {
+pub(crate) fn parse_places(text: &str) -> Result<Places, String> {
     let places = text
         .split(';')
         .map(|point| {

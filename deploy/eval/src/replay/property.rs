@@ -368,6 +368,7 @@ impl<F: PropertyFilter + Moves + ?Sized> Replay for Engine<F> {
 #[cfg(test)]
 pub(super) mod tests {
     use super::*;
+    use crate::replay::args::parse_places;
     use crate::replay::driver::output_lines;
     use std::path::PathBuf;
 
@@ -448,6 +449,52 @@ pub(super) mod tests {
         assert_eq!(out[1]["error"], 0.0);
         assert!(out[1]["max_coefficients"].as_u64().unwrap() >= 1);
         assert!(out[1]["seconds"].as_f64().unwrap() >= 0.0);
+    }
+
+    /// `--regions`: leaders at x = 0 and x = 2 surveil tracks 0, 2 and
+    /// 1, 3 (track mod 2) until moves say otherwise. Track 3 comes to
+    /// leader 0 and mixes with 2; the mix of 1 and 3 across the regions is
+    /// kept apart, and track 2 leaving for leader 1 is split off its
+    /// component: the answer differs from the plain factored belief's. One
+    /// region is the plain belief; a bad place or a Radon method is
+    /// refused.
+    #[test]
+    fn regions_run_the_regional_rule_and_bad_places_are_refused() {
+        let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":4,"red":2,"initial_red":[0,1]}"#,
+            "\n",
+            r#"{"kind":"mix","time":1,"a":0,"b":2,"swap":0.5}"#,
+            "\n",
+            r#"{"kind":"move","time":1,"track":3,"x":0.5,"y":0}"#,
+            "\n",
+            r#"{"kind":"mix","time":2,"a":2,"b":3,"swap":0.3}"#,
+            "\n",
+            r#"{"kind":"mix","time":3,"a":1,"b":3,"swap":0.4}"#,
+            "\n",
+            r#"{"kind":"move","time":3,"track":2,"x":1.8,"y":0}"#,
+            "\n",
+            r#"{"kind":"observe","time":4,"track":2,"red":0.8,"blue":0.3}"#,
+            "\n",
+            r#"{"kind":"truth","time":4,"red":[1,2]}"#,
+            "\n",
+        );
+        let factored = |regions: Option<&str>| {
+            let mut a = args(Method::Factored, None);
+            a.regions = regions.map(|r| parse_places(r).unwrap());
+            let out = replay_text(&a, trace).unwrap();
+            out[0]["p_red"].clone()
+        };
+        let plain = factored(None);
+        assert_eq!(factored(Some("0,0")), plain);
+        assert_ne!(factored(Some("0,0;2,0")), plain);
+        for bad in ["1", "1,x", "1,2;", "inf,0"] {
+            let e = parse_places(bad).unwrap_err();
+            assert!(e.contains("is not a place"), "{bad}: {e}");
+        }
+        let mut radon = args(Method::Overcomplete, None);
+        radon.regions = Some(parse_places("0,0;1,1").unwrap());
+        let e = replay_text(&radon, TABLE1).unwrap_err();
+        assert!(e.contains("--regions"), "{e}");
     }
 
     #[test]
