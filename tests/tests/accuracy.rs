@@ -1,10 +1,12 @@
 //! `idmesh bench --accuracy` as a user runs it, on its smallest point:
 //! the n = 20 Table III crowds from the uniform prior (both swaps), each
-//! through a live factored and a live Radon deployment of four leaders.
-//! It must exit 0 with a row per swap and belief, every truth line
-//! answered, and write the same table to `--out`. (That the live factored
-//! answers equal the centralized engine's is tests/tests/factored.rs's
-//! business; the command checks it again on these crowds and would fail.)
+//! through a live factored, a live factored under the regional rule and a
+//! live Radon deployment of four leaders. It must exit 0 with a row per
+//! swap and belief, every truth line answered, a row of the regional
+//! rule's cost per swap, and write the same text to `--out`. (That the live
+//! factored answers equal the centralized engine's is
+//! tests/tests/factored.rs's business; the command checks it again on
+//! these crowds and would fail.)
 
 use idmesh_tests::idmesh;
 use std::path::Path;
@@ -36,23 +38,42 @@ fn the_accuracy_bench_answers_every_truth_line_of_the_smallest_table3_point() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stdout}\n{stderr}");
     assert_eq!(std::fs::read_to_string(&out).unwrap(), stdout);
-    let rows: Vec<Vec<&str>> = stdout
+    let all: Vec<Vec<&str>> = stdout
         .lines()
         .filter(|l| l.starts_with("| 20 |"))
         .map(|l| l.trim_matches('|').split('|').map(str::trim).collect())
         .collect();
+    // The live table's rows have 9 columns, the cost table's 7.
+    let (rows, costs): (Vec<_>, Vec<_>) = all.into_iter().partition(|r| r.len() == 9);
     let mut seen: Vec<(&str, &str)> = rows.iter().map(|r| (r[1], r[3])).collect();
     seen.sort();
     assert_eq!(
         seen,
         [
             ("0.1", "factored"),
+            ("0.1", "factored, regional rule"),
             ("0.1", "radon"),
             ("0.5", "factored"),
+            ("0.5", "factored, regional rule"),
             ("0.5", "radon")
         ],
         "{stdout}"
     );
+    assert_eq!(costs.len(), 2, "a cost row per swap: {stdout}");
+    for cost in &costs {
+        assert_eq!(cost.len(), 7, "{stdout}");
+        let local: f64 = cost[3].parse().unwrap();
+        assert!((0.0..0.5).contains(&local), "{stdout}");
+        // "0.3143 (-0.0080)": the error and its difference from the local rule.
+        for cell in &cost[4..] {
+            let (error, diff) = cell.split_once(" (").expect("error (difference)");
+            let (error, diff): (f64, f64) = (
+                error.parse().unwrap(),
+                diff.trim_end_matches(')').parse().unwrap(),
+            );
+            assert!((error - local - diff).abs() < 2e-4, "{cell}: {stdout}");
+        }
+    }
     for row in &rows {
         assert_eq!(row[2], "uniform prior", "{stdout}");
         let truths: usize = row[4].parse().unwrap();
@@ -61,7 +82,7 @@ fn the_accuracy_bench_answers_every_truth_line_of_the_smallest_table3_point() {
         let central: f64 = row[6].parse().unwrap();
         assert!((0.0..0.5).contains(&live), "{stdout}");
         assert!((0.0..0.5).contains(&central), "{stdout}");
-        if row[3] == "factored" {
+        if row[3] != "radon" {
             let largest: f64 = row[7].parse().unwrap();
             assert!(largest <= 1e-9, "{stdout}");
             assert_eq!(live, central, "{stdout}");
