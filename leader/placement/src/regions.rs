@@ -121,11 +121,17 @@ impl PropertyFilter for Regional {
     }
 
     fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
-        if self.regions.owner(mix.a) != self.regions.owner(mix.b) {
-            self.belief.mix_apart(mix)
-        } else {
-            self.belief.mix(mix)
+        if self.regions.owner(mix.a) == self.regions.owner(mix.b) {
+            return self.belief.mix(mix);
         }
+        if mix.swap == 1.0 {
+            // A certain exchange across regions: both tracks leave their
+            // components, so that the relabelled singletons can change
+            // regions with their labels.
+            self.belief.split_off(mix.a)?;
+            self.belief.split_off(mix.b)?;
+        }
+        self.belief.mix_apart(mix)
     }
 
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
@@ -159,8 +165,8 @@ mod tests {
         assert_eq!(fixed.owners(), &[0, 1]);
     }
 
-    /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing with
-    /// swaps strictly between 0 and 1, observed now and then (a fixed
+    /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of
+    /// the mixes certain exchanges), observed now and then (a fixed
     /// linear congruential sequence, so the test needs no generator).
     fn lines() -> Vec<Line> {
         use idmesh_protocol::trace::{Mix as MixLine, Move, Observe as ObserveLine};
@@ -178,12 +184,12 @@ mod tests {
                     0 => {
                         let a = next(12) as u32;
                         let b = (a + 1 + next(11) as u32) % 12;
-                        Line::Mix(MixLine {
-                            time,
-                            a,
-                            b,
-                            swap: 0.1 + next(8) as f64 / 10.0,
-                        })
+                        // 0.1..=0.8, or now and then a certain exchange.
+                        let swap = match next(10) {
+                            0 => 1.0,
+                            s => 0.1 + (s % 8) as f64 / 10.0,
+                        };
+                        Line::Mix(MixLine { time, a, b, swap })
                     }
                     1 => Line::Observe(ObserveLine {
                         time,

@@ -219,10 +219,7 @@ impl Leader {
             return Ok(());
         }
         if mix.swap == 1.0 {
-            if has_a || has_b {
-                held.mix(mix, seq)?;
-            }
-            return Ok(());
+            return self.factored_relabel(seq, mix, owner_a, owner_b, actions);
         }
         // The regional rule keeps a mix across two regions apart, and the
         // component of b goes back to its region's leader, which waits
@@ -251,6 +248,56 @@ impl Leader {
         }
         if back == Some(me) {
             self.waiting = Some(Waiting::Transfer { seq, from: owner_a });
+        }
+        Ok(())
+    }
+
+    /// A certain exchange of tracks `mix.a` and `mix.b` (item `seq`): their
+    /// holders relabel in place, and then follow the track their component
+    /// now holds from this item on (an observation of it must reach them).
+    /// Under the regional rule, across two regions, both tracks are first
+    /// split off their components and the two singletons change holders:
+    /// the leader surveilling each track sends the other's, and waits for
+    /// its own, so that every component stays in its holder's region.
+    fn factored_relabel(
+        &mut self,
+        seq: u64,
+        mix: Mix,
+        owner_a: u16,
+        owner_b: u16,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let apart = started.regional() && owner_a != owner_b;
+        let held = started
+            .factored
+            .as_mut()
+            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let (has_a, has_b) = (held.holds(mix.a), held.holds(mix.b));
+        if apart {
+            held.split_off(mix.a)?;
+            held.split_off(mix.b)?;
+        }
+        if has_a || has_b {
+            held.mix(mix, seq)?;
+        }
+        if apart && (me == owner_a || me == owner_b) {
+            // The singleton of the other leader's track goes there.
+            let (theirs, to) = match me == owner_a {
+                true => (mix.b, owner_b),
+                false => (mix.a, owner_a),
+            };
+            let components = held.take(|tracks| tracks == [theirs]);
+            let gone = tracks_of(&components);
+            self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
+            self.unfollow(seq, gone)?;
+            self.waiting = Some(Waiting::Transfer { seq, from: to });
+            return Ok(());
+        }
+        let new_tracks = self.follow_held()?;
+        if !new_tracks.is_empty() {
+            self.follow(seq, new_tracks, actions)?;
         }
         Ok(())
     }

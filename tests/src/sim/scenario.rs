@@ -65,12 +65,14 @@ impl Scenario {
                     if b >= a {
                         b += 1;
                     }
-                    Line::Mix(Mix {
-                        time,
-                        a,
-                        b,
-                        swap: rng.gen_range(0.05..0.95),
-                    })
+                    // Now and then a certain exchange (a relabelling),
+                    // which moves no component but changes whose tracks
+                    // a component holds.
+                    let swap = match rng.gen_range(0..10) {
+                        0 => 1.0,
+                        _ => rng.gen_range(0.05..0.95),
+                    };
+                    Line::Mix(Mix { time, a, b, swap })
                 }
                 4..=6 => Line::Observe(Observe {
                     time,
