@@ -12,7 +12,7 @@
 //! split off its component ([`FactoredBelief::split_off`]). The simulator
 //! and the accuracy bench drive [`Regional`] line by line.
 
-use idmesh_belief::{BeliefError, FactoredBelief, Field, Mix, Observe, PropertyFilter};
+use idmesh_belief::{event_of, BeliefError, FactoredBelief, Field, Mix, Observe, PropertyFilter};
 use idmesh_protocol::trace::Line;
 
 /// The leaders' places and each track's surveilling leader.
@@ -98,19 +98,10 @@ impl Regional {
 
     /// Applies one trace line (lines without a belief event do nothing).
     pub fn apply_line(&mut self, line: &Line) -> Result<(), BeliefError> {
-        match line {
-            Line::Mix(m) => self.mix(Mix {
-                a: m.a,
-                b: m.b,
-                swap: m.swap,
-            }),
-            Line::Observe(o) => self.observe(Observe {
-                track: o.track,
-                red: o.red,
-                blue: o.blue,
-            }),
-            Line::Move(m) => self.moved(m.track, m.x, m.y),
-            _ => Ok(()),
+        match (line, event_of(line)) {
+            (Line::Move(m), _) => self.moved(m.track, m.x, m.y),
+            (_, Some(event)) => self.apply(&event),
+            (_, None) => Ok(()),
         }
     }
 }

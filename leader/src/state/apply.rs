@@ -209,11 +209,7 @@ impl Leader {
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let me = self.me()?;
-        let held = self
-            .started()?
-            .factored
-            .as_mut()
-            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let held = self.factored_mut("a factored mix on a Radon stream")?;
         let (has_a, has_b) = (held.holds(mix.a), held.holds(mix.b));
         if mix.swap == 0.0 {
             return Ok(());
@@ -233,11 +229,7 @@ impl Leader {
             }
             return Ok(());
         }
-        let held = self
-            .started()?
-            .factored
-            .as_mut()
-            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let held = self.factored_mut("a factored mix on a Radon stream")?;
         if has_a || has_b {
             let components = held.take(|tracks| tracks.contains(&mix.a) || tracks.contains(&mix.b));
             let gone = tracks_of(&components);
@@ -268,12 +260,8 @@ impl Leader {
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let me = self.me()?;
-        let started = self.started()?;
-        let apart = started.regional() && owner_a != owner_b;
-        let held = started
-            .factored
-            .as_mut()
-            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let apart = self.started()?.regional() && owner_a != owner_b;
+        let held = self.factored_mut("a factored mix on a Radon stream")?;
         let (has_a, has_b) = (held.holds(mix.a), held.holds(mix.b));
         if apart {
             held.split_off(mix.a)?;
@@ -313,11 +301,7 @@ impl Leader {
         back: Option<u16>,
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
-        let held = self
-            .started()?
-            .factored
-            .as_mut()
-            .ok_or(LeaderError::Unexpected("a factored mix on a Radon stream"))?;
+        let held = self.factored_mut("a factored mix on a Radon stream")?;
         let Some(to) = back else {
             held.mix(mix, seq)?;
             return Ok(());
@@ -328,6 +312,18 @@ impl Leader {
         self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
         self.unfollow(seq, gone)?;
         Ok(())
+    }
+
+    /// The factored share of a started stream; `what` names the misuse
+    /// if the stream holds the Radon belief.
+    pub(super) fn factored_mut(
+        &mut self,
+        what: &'static str,
+    ) -> Result<&mut FactoredShare, LeaderError> {
+        self.started()?
+            .factored
+            .as_mut()
+            .ok_or(LeaderError::Unexpected(what))
     }
 
     /// Item `seq` is fully applied.

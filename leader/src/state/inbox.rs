@@ -157,11 +157,7 @@ impl Leader {
                             self.receive_components(transfer.components)?;
                         }
                     }
-                    let held = self
-                        .started()?
-                        .factored
-                        .as_mut()
-                        .ok_or(LeaderError::Unexpected("a factored wait on a Radon stream"))?;
+                    let held = self.factored_mut("a factored wait on a Radon stream")?;
                     if !(held.holds(mix.a) && held.holds(mix.b)) {
                         return Ok(actions);
                     }
