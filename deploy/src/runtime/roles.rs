@@ -183,6 +183,7 @@ async fn sensor(
             budget: topology.budget,
             omp: topology.sparsify == Sparsification::Overcomplete,
             factored: topology.factored(),
+            placed: idmesh_placement::leading_places(header.tracks, &source.lines),
         },
         &header,
     )?;

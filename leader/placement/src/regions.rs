@@ -4,7 +4,9 @@
 //!
 //! The sensor gateway routes by [`Regions`] (a track belongs to the nearest
 //! leader to its last position; to leader `track mod L` before any
-//! position, or when some leader has no position), and `idmesh replay
+//! position, or when some leader has no position; a stream whose first
+//! lines place its tracks starts each with the leader nearest to that
+//! place, [`Regions::starting`]), and `idmesh replay
 //! --regions` runs the same function, so the centralized engine applies
 //! the regional rule at the same events as the leaders: a mix of tracks in
 //! two regions keeps their components apart
@@ -32,6 +34,25 @@ impl Regions {
             places: places.iter().copied().collect(),
             owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
         }
+    }
+
+    /// Like [`Regions::new`], but each track placed by the stream's
+    /// leading `move` lines (those before its first other event, see
+    /// [`leading_places`]) starts with the leader nearest to that place.
+    /// Starting there rather than with leader `track mod L` spares a
+    /// handover per track at its first move (an item at two leaders, and a
+    /// component sent between them). Nothing has mixed before those moves,
+    /// so the belief is the same either way: the centralized engine, which
+    /// starts round robin, hands the tracks over at those moves by
+    /// splitting off singletons, which changes nothing.
+    pub fn starting(places: &[Option<(f64, f64)>], leading: &[Option<(f64, f64)>]) -> Self {
+        let mut regions = Regions::new(places, leading.len());
+        for (track, place) in leading.iter().enumerate() {
+            if let Some((x, y)) = *place {
+                regions.moved(track as u32, x, y);
+            }
+        }
+        regions
     }
 
     /// The leader surveilling each track now.
@@ -67,6 +88,28 @@ impl Regions {
             (from, to)
         })
     }
+}
+
+/// Where each of `tracks` tracks is before the stream's first event other
+/// than a `move`: the last of the leading `move` lines on it (None for a
+/// track they do not place, or out of range).
+pub fn leading_places<'a>(
+    tracks: usize,
+    lines: impl IntoIterator<Item = &'a Line>,
+) -> Vec<Option<(f64, f64)>> {
+    let mut places = vec![None; tracks];
+    for line in lines {
+        match line {
+            Line::Move(m) => {
+                if let Some(place) = places.get_mut(m.track as usize) {
+                    *place = Some((m.x, m.y));
+                }
+            }
+            line if line.is_event() => break,
+            _ => {}
+        }
+    }
+    places
 }
 
 /// A centralized factored belief under the regional rule, with the regions
@@ -154,6 +197,40 @@ mod tests {
         let mut fixed = Regions::new(&[None, Some((1.0, 1.0))], 2);
         assert_eq!(fixed.moved(0, 1.0, 1.0), None);
         assert_eq!(fixed.owners(), &[0, 1]);
+    }
+
+    #[test]
+    fn a_stream_that_places_its_tracks_first_starts_them_in_their_regions() {
+        use idmesh_protocol::trace::{Mix as MixLine, Move};
+        let at = |track, x| {
+            Line::Move(Move {
+                time: 0.0,
+                track,
+                x,
+                y: 0.0,
+            })
+        };
+        let mix = Line::Mix(MixLine {
+            time: 0.0,
+            a: 0,
+            b: 1,
+            swap: 0.5,
+        });
+        // Track 0 is placed twice (the last counts), track 2 only after
+        // the first mix: it is not placed.
+        let lines = [at(0, 1.0), at(1, 9.0), at(0, 8.0), mix, at(2, 9.0)];
+        let leading = leading_places(3, &lines);
+        assert_eq!(leading, vec![Some((8.0, 0.0)), Some((9.0, 0.0)), None]);
+        let places = [Some((0.0, 0.0)), Some((10.0, 0.0))];
+        let r = Regions::starting(&places, &leading);
+        assert_eq!(r.owners(), &[1, 1, 0]);
+        // The same as starting round robin and moving there.
+        let mut moved = Regions::new(&places, 3);
+        moved.moved(0, 8.0, 0.0);
+        moved.moved(1, 9.0, 0.0);
+        assert_eq!(moved, r);
+        // Without places, round robin.
+        assert_eq!(Regions::starting(&[None, None], &leading).owners(), &[0, 1, 0]);
     }
 
     /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of

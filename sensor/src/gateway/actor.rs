@@ -615,12 +615,15 @@ impl Wire {
         Ok(())
     }
 
-    /// Sends every leader its queued items, or just how far the stream got
-    /// — once the journal holds them.
+    /// Sends the leaders their queued items ([`Gateway::flush`]) — once
+    /// the journal holds them.
     async fn flush(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
         let batches = gateway.flush();
         self.sync(gateway)?;
-        for (i, (batch, publisher)) in batches.into_iter().zip(&self.publishers).enumerate() {
+        for (i, batch) in batches {
+            let Some(publisher) = self.publishers.get(i) else {
+                continue;
+            };
             let number = batch.number;
             let dropped = self
                 .faults

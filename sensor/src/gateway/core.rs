@@ -47,6 +47,13 @@ pub enum CutOutcome<Q> {
     Refused(Q, String),
 }
 
+/// A leader with nothing to be sent is sent an empty batch (only how far
+/// the stream got) once the stream is this many seqs past the last batch it
+/// was sent: it keeps the leader's position, and so what the sensor may
+/// forget (durable marks) and how stale its answers could look, within
+/// that distance, at a cost of one batch per this many seqs.
+pub const IDLE_BATCH_EVERY: u64 = 4096;
+
 /// A leader's progress as the sensor knows it ([`Progress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 struct Mark {
@@ -65,6 +72,15 @@ pub struct Gateway<Q> {
     progress: Vec<Option<Mark>>,
     /// The marks [`Gateway::stalled`] saw last.
     stall_checked: Vec<Option<Mark>>,
+    /// The `through` of the last batch sent to each leader.
+    sent_through: Vec<u64>,
+    /// Each leader is owed a batch at the next flush even with nothing
+    /// for it (it followed tracks: the items sent with the follow wait for
+    /// a batch to say the stream got that far; or it was not yet told the
+    /// stream finished).
+    owed: Vec<bool>,
+    /// An idle leader is sent a batch this many seqs past its last one.
+    idle_every: u64,
     /// Flow control: route at most this many seqs past the slowest
     /// leader's progress (None: as fast as the source gives).
     window: Option<u64>,
@@ -108,6 +124,9 @@ impl<Q> Gateway<Q> {
             durable: vec![None; leaders],
             progress: vec![None; leaders],
             stall_checked: vec![None; leaders],
+            sent_through: vec![0; leaders],
+            owed: vec![false; leaders],
+            idle_every: IDLE_BATCH_EVERY,
             window: None,
             cuts: Cuts::default(),
             ingest,
@@ -130,20 +149,44 @@ impl<Q> Gateway<Q> {
         self
     }
 
+    /// Sends a leader with nothing queued a batch once the stream is
+    /// `seqs` past its last one (default [`IDLE_BATCH_EVERY`]; the
+    /// simulator makes it small, so that its short streams take that path).
+    pub fn idle_batches_every(mut self, seqs: u64) -> Self {
+        self.idle_every = seqs.max(1);
+        self
+    }
+
     /// How many more seqs the flow control lets the stream take now (None:
-    /// no window). The actor reads no more of a pulled source (trace file,
+    /// no window): the seqs past the slowest leader's progress, or none
+    /// while that is under half the window. The actor reads no more of a pulled source (trace file,
     /// standard input) while it is 0; progress marks open it again. A
     /// restored gateway starts from no progress at all, and leaders
     /// publish theirs at every sweep.
     pub fn room(&self) -> Option<u64> {
-        let slowest = self
-            .progress
-            .iter()
-            .map(|m| m.map_or(0, |m| m.through))
+        let head = self.router.seq();
+        // A leader that applied everything it was sent, with nothing
+        // queued for it, is not behind: items for others are not sent to
+        // it, so it is as far as the stream.
+        let slowest = (0..self.progress.len())
+            .map(|i| match self.progress[i] {
+                Some(m) if m.through >= self.sent_through[i] && !self.router.queued(i) => head,
+                Some(m) => m.through,
+                None => 0,
+            })
             .min()
             .unwrap_or(0);
-        self.window
-            .map(|w| (slowest + w).saturating_sub(self.router.seq()))
+        // Less than half the window free counts as none: a stream let in
+        // a few seqs at every progress mark would send each leader a
+        // batch (and get a mark back) per few seqs.
+        self.window.map(|w| {
+            let free = (slowest + w).saturating_sub(head);
+            if free < w.div_ceil(2) {
+                0
+            } else {
+                free
+            }
+        })
     }
 
     /// The batches to publish again while the window holds the stream:
@@ -429,19 +472,32 @@ impl<Q> Gateway<Q> {
     /// stream is finished; every cut still waiting is refused.
     pub fn end(&mut self) -> Vec<(Q, String)> {
         self.finished = true;
+        self.owed.fill(true);
         self.note(Record::End);
         self.cuts.refuse_all(&self.router)
     }
 
-    /// Every leader's queued items (or just how far the stream got) as
-    /// its next batch, in the stream's order of leaders; each is kept for
-    /// the leader to ask for again.
-    pub fn flush(&mut self) -> Vec<Batch> {
+    /// Every leader's queued items as its next batch, in the stream's order
+    /// of leaders; each is kept for the leader to ask for again. A leader
+    /// with nothing queued is sent nothing — most of a crowd's events are
+    /// not its tracks' — unless it is owed a batch (it followed tracks, or
+    /// the stream finished) or the stream is [`IDLE_BATCH_EVERY`] seqs
+    /// ([`Gateway::idle_batches_every`]) past its last batch: then a batch saying only how far the stream
+    /// got. A cut is an item for every leader, so each is sent it. Each
+    /// batch comes with the index of its leader.
+    pub fn flush(&mut self) -> Vec<(usize, Batch)> {
         let through = self.router.seq();
         let events = self.router.events();
         self.note(Record::Flush);
         let mut batches = Vec::with_capacity(self.sent.len());
-        for (i, log) in self.sent.iter_mut().enumerate() {
+        for i in 0..self.sent.len() {
+            let due = self.router.queued(i)
+                || self.owed[i]
+                || through >= self.sent_through[i] + self.idle_every;
+            if !due {
+                continue;
+            }
+            let log = &mut self.sent[i];
             let batch = Batch {
                 version: VERSION,
                 sensor: self.name.clone(),
@@ -452,7 +508,9 @@ impl<Q> Gateway<Q> {
                 items: self.router.take(i),
             };
             log.push(batch.clone());
-            batches.push(batch);
+            batches.push((i, batch));
+            self.sent_through[i] = through;
+            self.owed[i] = false;
         }
         batches
     }
@@ -488,16 +546,18 @@ impl<Q> Gateway<Q> {
     pub fn follow(&mut self, bytes: &[u8]) -> Result<Followed, String> {
         let answer = decode::<Follow>(bytes)
             .map_err(|e| e.to_string())
-            .and_then(|f| self.router.follow(&f).map_err(|e| e.to_string()))
-            .map(|items| Followed {
-                version: VERSION,
-                items,
+            .and_then(|f| {
+                let items = self.router.follow(&f).map_err(|e| e.to_string())?;
+                Ok((f.leader as usize, items))
             });
         self.count("follow", &answer);
-        if answer.is_ok() {
-            self.note(Record::Follow(bytes.to_vec()));
-        }
-        answer
+        let (leader, items) = answer?;
+        self.note(Record::Follow(bytes.to_vec()));
+        self.owed[leader] = true;
+        Ok(Followed {
+            version: VERSION,
+            items,
+        })
     }
 
     /// A leader of a factored stream stops following tracks (`Unfollow`

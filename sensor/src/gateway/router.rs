@@ -40,6 +40,12 @@ pub struct RouterConfig {
     pub omp: bool,
     /// The leaders hold the factored belief (None: the Radon belief).
     pub factored: Option<FactoredStart>,
+    /// Where the stream's leading `move` lines place each track
+    /// ([`idmesh_placement::leading_places`] of the trace the sensor
+    /// streams): a track placed there starts with the leader nearest to it
+    /// (in the Begin's owners) rather than with leader `track mod L`. Empty
+    /// (a stream that is fed live) or None for a track: round robin.
+    pub placed: Vec<Option<(f64, f64)>>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -114,6 +120,12 @@ impl Router {
             ));
         }
         let tracks = header.tracks;
+        let mut placed = config.placed.clone();
+        placed.resize(tracks, None);
+        let regions = Regions::starting(
+            &config.leaders.iter().map(|l| l.at).collect::<Vec<_>>(),
+            &placed,
+        );
         let begin = Begin {
             // Identity streams hold the information matrix whatever the
             // property belief is.
@@ -122,7 +134,7 @@ impl Router {
             red: header.red_count().map(|k| k as u32),
             initial_red: header.initial_red.clone(),
             leaders: config.leaders.iter().map(|l| l.name.clone()).collect(),
-            owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
+            owners: regions.owners().to_vec(),
             distributed_rule: config.distributed_rule,
             budget: config.budget,
             omp: config.omp,
@@ -132,10 +144,7 @@ impl Router {
         begin.check().map_err(RouterError::Begin)?;
         let interests = idmesh_placement::interests(&begin)?;
         let mut router = Router {
-            regions: Regions::new(
-                &config.leaders.iter().map(|l| l.at).collect::<Vec<_>>(),
-                tracks,
-            ),
+            regions,
             positions: vec![None; tracks],
             begin: begin.clone(),
             header: header.clone(),
@@ -453,6 +462,11 @@ impl Router {
     }
 
     /// The items queued for leader `i` since the last call.
+    /// Whether items wait in leader `i`'s queue.
+    pub fn queued(&self, i: usize) -> bool {
+        self.outbox.get(i).is_some_and(|o| !o.is_empty())
+    }
+
     pub fn take(&mut self, i: usize) -> Vec<Sequenced> {
         std::mem::take(&mut self.outbox[i])
     }

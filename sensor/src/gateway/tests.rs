@@ -33,6 +33,7 @@ fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) 
         distributed_rule,
         budget: 0,
         omp: false,
+        placed: Vec::new(),
     };
     Router::new(config, &header).unwrap()
 }
@@ -53,6 +54,7 @@ fn unplaced(factored: Option<idmesh_protocol::wire::factored::FactoredStart>) ->
         distributed_rule: false,
         budget: 0,
         omp: false,
+        placed: Vec::new(),
     }
 }
 
@@ -89,18 +91,37 @@ fn seqs(batch: &Batch) -> Vec<u64> {
     batch.items.iter().map(|s| s.seq).collect()
 }
 
+/// The batch each of `N` leaders is sent at a flush; a leader sent none
+/// (nothing for it) stands as an empty batch numbered `u64::MAX`.
+fn flushed<Q, const N: usize>(gateway: &mut Gateway<Q>) -> [Batch; N] {
+    let mut each: [Batch; N] = std::array::from_fn(|_| Batch {
+        version: VERSION,
+        sensor: "none sent".into(),
+        number: u64::MAX,
+        through: 0,
+        events: 0,
+        finished: false,
+        items: Vec::new(),
+    });
+    for (i, batch) in gateway.flush() {
+        each[i] = batch;
+    }
+    each
+}
+
 #[test]
 fn items_go_only_to_the_leaders_whose_sets_they_may_change() {
     // 8 tracks, k = 4: before any position, track t is with leader t mod 2.
     let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false);
     let begin = gateway.flush();
+    assert_eq!(begin.len(), 2);
     assert!(begin
         .iter()
-        .all(|b| matches!(b.items[0].item, Item::Begin(_))));
+        .all(|(_, b)| matches!(b.items[0].item, Item::Begin(_))));
     gateway.line(&mix(0, 2)); // a's tracks only: seq 2
     gateway.line(&mix(1, 3)); // b's: seq 3
     gateway.line(&mix(2, 5)); // across: seq 4
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     assert_eq!((seqs(&a), seqs(&b)), (vec![2, 4], vec![3, 4]));
     assert_eq!((a.number, a.through, a.events), (1, 4, 3));
     assert!(matches!(
@@ -118,7 +139,7 @@ fn items_go_only_to_the_leaders_whose_sets_they_may_change() {
         x: 1.0,
         y: 0.0,
     }));
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     assert!(matches!(
         a.items[0].item,
         Item::Handover {
@@ -146,7 +167,7 @@ fn a_follow_gets_the_items_missed_on_its_new_tracks_and_bad_ones_are_refused() {
     );
     // And from now on a is sent what touches 3 (and 7, mixed with it).
     gateway.line(&mix(7, 5)); // seq 5
-    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, _] = flushed::<_, 2>(&mut gateway);
     assert_eq!(seqs(&a), [5]);
     assert!(gateway
         .follow(&follow_of_a(0, vec![8]))
@@ -164,7 +185,7 @@ fn a_follow_that_may_bring_a_saturated_set_gets_every_observation_missed() {
     let mut gateway: Gateway<()> = Gateway::new("s", router_of(3, 9, 4, true), false);
     gateway.flush();
     gateway.line(&observe(4)); // seq 2
-    let [a, b, _] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();
+    let [a, b, _] = flushed::<_, 3>(&mut gateway);
     assert!(seqs(&a).is_empty() && seqs(&b) == [2]);
     // Sets with track 1 come to a: following 4 tracks it may now hold
     // {0, 1, 3, 6} red, which says track 4 is blue. It gets the
@@ -183,7 +204,7 @@ fn a_follow_that_may_bring_a_saturated_set_gets_every_observation_missed() {
     );
     // And every observation from now on.
     gateway.line(&observe(8)); // seq 3
-    let [a, ..] = <[Batch; 3]>::try_from(gateway.flush()).unwrap();
+    let [a, ..] = flushed::<_, 3>(&mut gateway);
     assert_eq!(seqs(&a), [3]);
 }
 
@@ -243,9 +264,10 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
         _ => panic!("placed now"),
     }
     let batches = gateway.flush();
+    assert_eq!(batches.len(), 2, "a cut goes to every leader");
     assert!(batches
         .iter()
-        .all(|b| matches!(b.items.last().unwrap().item, Item::Cut { tag: 11, .. })));
+        .all(|(_, b)| matches!(b.items.last().unwrap().item, Item::Cut { tag: 11, .. })));
     assert!(matches!(
         gateway.cut(2, &at("12", Some("3"))),
         CutOutcome::Scheduled
@@ -275,7 +297,9 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
     assert_eq!(ended.len(), 1);
     assert!(ended[0].1.contains("ended at 3 events, before event 9"));
     assert!(refused(gateway.cut(6, &at("16", Some("5")))).contains("ended"));
-    assert!(gateway.flush().iter().all(|b| b.finished));
+    let last = gateway.flush();
+    assert_eq!(last.len(), 2, "every leader is told the stream finished");
+    assert!(last.iter().all(|(_, b)| b.finished));
 }
 
 /// Issue 16: an identity stream beyond the leaders' track limit (n × n
@@ -296,6 +320,7 @@ fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
         distributed_rule: false,
         budget: 0,
         omp: false,
+        placed: Vec::new(),
     };
     let mut header = Header::new(limit + 1);
     header.identities = Some(limit + 1);
@@ -313,13 +338,13 @@ fn under_exact_conditioning_every_observation_reaches_every_leader_and_a_mix_onl
     gateway.flush();
     gateway.line(&mix(0, 2)); // seq 2: a's tracks only
     gateway.line(&observe(3)); // seq 3: every set grows, whoever holds it
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     assert_eq!((seqs(&a), seqs(&b)), (vec![2, 3], vec![3]));
     // Grown by an observation of track 0, b's sets may now hold it: a mix
     // of 0 and 2 reaches b too.
     gateway.line(&observe(0)); // seq 4
     gateway.line(&mix(0, 2)); // seq 5
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     assert_eq!((seqs(&a), seqs(&b)), (vec![4, 5], vec![4, 5]));
     // Both learn how far the stream is, whatever they were sent.
     assert_eq!((a.through, b.through, b.events), (5, 5, 4));
@@ -338,7 +363,7 @@ fn an_identity_read_goes_to_the_owner_of_its_track_alone() {
         identity: 1,
         accuracy: 0.9,
     }));
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     assert!(seqs(&a).is_empty());
     assert!(matches!(
         b.items[..],
@@ -377,7 +402,8 @@ fn follows_and_marks_from_leaders_not_of_the_stream_change_nothing() {
         position: 2,
     };
     gateway.durable(&encode(&stranger), "test");
-    assert_eq!((gateway.kept(0), gateway.kept(1)), (2, 2));
+    // b was sent the Begin alone: the mix is of a's tracks.
+    assert_eq!((gateway.kept(0), gateway.kept(1)), (2, 1));
     assert_eq!(gateway.router().logged(), 1);
     // A resend from a batch not sent yet is empty, not an error.
     let ahead = gateway
@@ -449,7 +475,7 @@ fn cuts_at_one_point_are_placed_together_with_their_rows_and_none_past_the_end()
     let placed = gateway.line(&observe(1));
     let placed: Vec<(u32, u64)> = placed.iter().map(|p| (p.query, p.answer.seq)).collect();
     assert_eq!(placed, [(1, 4), (2, 5)]);
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     for batch in [a, b] {
         let cuts: Vec<(u64, bool)> = batch
             .items
@@ -495,7 +521,7 @@ fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
     assert_eq!((ack.accepted.clone(), ack.events), (vec![0, 1], 2));
     assert_eq!(placed.len(), 1);
     assert_eq!((placed[0].query, placed[0].answer.events), (1, 2));
-    let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, b] = flushed::<_, 2>(&mut gateway);
     // The mix (seq 2) of a's tracks, the observation (seq 3) to both, the
     // cut (seq 4) to both.
     assert_eq!((seqs(&a), seqs(&b)), (vec![2, 3, 4], vec![3, 4]));
@@ -503,7 +529,7 @@ fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
     let (again, placed) = gateway.ingest(offer("0")).unwrap();
     assert_eq!((again.duplicates, again.accepted.len()), (vec![0, 1], 0));
     assert!(placed.is_empty());
-    assert!(gateway.flush().iter().all(|b| b.items.is_empty()));
+    assert!(gateway.flush().is_empty(), "nothing routed, no batch");
     assert_eq!(gateway.router().events(), 2);
     gateway.end();
     assert!(matches!(
@@ -540,7 +566,7 @@ fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() 
         let mut gateway: Gateway<()> = Gateway::new("s", router, false);
         gateway.flush();
         gateway.line(&observe(3));
-        let [a, b] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+        let [a, b] = flushed::<_, 2>(&mut gateway);
         let expected = match identities {
             // Radon, exact conditioning: every leader hears it.
             Some(_) => (vec![2], vec![2]),
@@ -583,7 +609,7 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     };
     gateway.line(&mix(0, 1)); // seq 2: a (0) and b (1)
     gateway.line(&mix(1, 3)); // seq 3: b's alone, a is not grown by seq 2
-    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, _] = flushed::<_, 2>(&mut gateway);
     assert_eq!(seqs(&a), [2]);
     // a gathered {0, 1} at seq 2 and follows 1 from there.
     let followed = gateway.follow(&follow_of_a(2, vec![1])).unwrap();
@@ -594,13 +620,13 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     // A request decided before that follow (seq 2) is stale.
     assert_eq!(gateway.unfollow(&unfollow(2, vec![1])), Ok(0));
     gateway.line(&observe(1)); // seq 4
-    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, _] = flushed::<_, 2>(&mut gateway);
     assert_eq!(seqs(&a), [4]);
     // At seq 4 a sent {0, 1} away: 1 goes, twice is harmless.
     assert_eq!(gateway.unfollow(&unfollow(4, vec![1])), Ok(1));
     assert_eq!(gateway.unfollow(&unfollow(4, vec![1])), Ok(0));
     gateway.line(&observe(1)); // seq 5
-    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, _] = flushed::<_, 2>(&mut gateway);
     assert!(seqs(&a).is_empty());
     // Track 3 walks over to a (seq 6): a request from before it keeps it.
     gateway.line(&Line::Move(Move {
@@ -612,7 +638,7 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     gateway.flush();
     assert_eq!(gateway.unfollow(&unfollow(5, vec![3])), Ok(0));
     gateway.line(&observe(3)); // seq 7
-    let [a, _] = <[Batch; 2]>::try_from(gateway.flush()).unwrap();
+    let [a, _] = flushed::<_, 2>(&mut gateway);
     assert_eq!(seqs(&a), [7]);
     assert!(gateway
         .unfollow(&unfollow(9, vec![6]))
@@ -842,11 +868,13 @@ fn the_window_lets_the_stream_at_most_its_width_past_the_slowest_leader() {
     // The latest mark counts, not the highest: a leader restarted from
     // its journal may be behind what it said before.
     gateway.progress(&progress("b", 1, 1), "test");
-    assert_eq!(gateway.room(), Some(1));
+    assert_eq!(gateway.room(), Some(0), "1 free, under half the window");
     // Bad marks change nothing and are counted.
     gateway.progress(b"junk", "test");
     gateway.progress(&progress("z", 100, 100), "test");
-    assert_eq!(gateway.room(), Some(1));
+    assert_eq!(gateway.room(), Some(0));
+    gateway.progress(&progress("b", 3, 2), "test");
+    assert_eq!(gateway.room(), Some(3));
     assert_eq!(gateway.stats().rejected, 1);
     // No window, no limit.
     let free: Gateway<()> = Gateway::new("s", router(8, 4, true), false);
@@ -857,7 +885,7 @@ fn the_window_lets_the_stream_at_most_its_width_past_the_slowest_leader() {
 fn a_held_stream_sends_again_the_batches_a_leader_still_waits_for_once_its_mark_stands_still() {
     let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false).windowed(1);
     gateway.flush(); // batch 0 to each
-    gateway.line(&mix(0, 2));
+    gateway.line(&mix(0, 1));
     gateway.flush(); // batch 1 to each: lost on its way to b
                      // a has both; b still waits for batch 1, and nothing after it will
                      // show that it was lost while the window holds the stream.
@@ -882,4 +910,55 @@ fn a_held_stream_sends_again_the_batches_a_leader_still_waits_for_once_its_mark_
     gateway.progress(&progress("b", 2, 2), "test");
     assert!(gateway.stalled().is_empty());
     assert!(gateway.stalled().is_empty(), "b has everything it was sent");
+}
+
+#[test]
+fn a_leader_with_nothing_to_apply_is_sent_no_batch_until_it_is_owed_one() {
+    use super::core::IDLE_BATCH_EVERY;
+    let sent = |batches: Vec<(usize, Batch)>| -> Vec<(usize, u64, u64, usize)> {
+        batches
+            .iter()
+            .map(|(i, b)| (*i, b.number, b.through, b.items.len()))
+            .collect()
+    };
+    let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false).windowed(4);
+    assert_eq!(sent(gateway.flush()), [(0, 0, 1, 1), (1, 0, 1, 1)], "the Begin");
+    gateway.line(&mix(0, 2)); // a's tracks: seq 2
+    assert_eq!(sent(gateway.flush()), [(0, 1, 2, 1)], "nothing for b");
+    // b applied all it was sent and nothing waits for it: it is as far as
+    // the stream (2). a is the slowest until it applies the mix.
+    gateway.progress(&progress("a", 1, 1), "test");
+    gateway.progress(&progress("b", 1, 1), "test");
+    assert_eq!(gateway.room(), Some(3));
+    gateway.progress(&progress("a", 2, 2), "test");
+    assert_eq!(gateway.room(), Some(4));
+    // b's mark behind its last batch (lost, or not yet applied) holds it.
+    gateway.line(&mix(1, 3)); // b's: seq 3
+    gateway.flush();
+    assert_eq!(gateway.room(), Some(2), "b done through 1 of the 3 sent");
+    // Far enough past b's last batch, b is sent one saying so.
+    let mut to_b = Vec::new();
+    for _ in 0..IDLE_BATCH_EVERY {
+        gateway.line(&mix(0, 2));
+        to_b.extend(sent(gateway.flush()).into_iter().filter(|b| b.0 == 1));
+    }
+    assert_eq!(to_b, [(1, 2, 3 + IDLE_BATCH_EVERY, 0)]);
+    // A follow is owed a batch: the items it brings wait for the stream's
+    // position, which only a batch tells.
+    let before = gateway.router().seq();
+    gateway
+        .follow(&encode(&Follow {
+            version: VERSION,
+            leader: 1,
+            after: before,
+            tracks: vec![1],
+        }))
+        .unwrap();
+    assert_eq!(sent(gateway.flush()), [(1, 3, before, 0)]);
+    assert!(gateway.flush().is_empty(), "once");
+    // The end is told to every leader.
+    gateway.end();
+    let last = gateway.flush();
+    assert_eq!(last.len(), 2);
+    assert!(last.iter().all(|(_, b)| b.finished));
 }

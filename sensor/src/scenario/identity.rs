@@ -26,8 +26,8 @@
 //! otherwise one of the n − 1 other identities, each equally likely: the
 //! read model of the trace spec, so the filters' likelihoods are the
 //! generator's. It is written on the track that follows the target after
-//! the step's mixes; within a step the order is mixes, observations, reads,
-//! moves, truth. Reads do not count towards
+//! the step's mixes; within a step the order is moves, mixes, observations,
+//! reads, truth. Reads do not count towards
 //! [`Scenario::events`](super::Scenario::events), which counts `mix` and
 //! `observe` events.
 

@@ -14,15 +14,15 @@ use idmesh_protocol::trace::{Identify, Line};
 use std::iter::Peekable;
 use std::slice::Iter;
 
-/// Where reads go among the events of their step: after mixes (0) and
-/// observations (1), before moves (3) and truth (4).
-const READ_RANK: u8 = 2;
+/// Where reads go among the events of their step: after moves (0), mixes
+/// (1) and observations (2), before truth (4).
+const READ_RANK: u8 = 3;
 
 fn rank(event: &SimEvent) -> u8 {
     match event {
-        SimEvent::Mix { .. } => 0,
-        SimEvent::Observe { .. } => 1,
-        SimEvent::Move { .. } => 3,
+        SimEvent::Move { .. } => 0,
+        SimEvent::Mix { .. } => 1,
+        SimEvent::Observe { .. } => 2,
         SimEvent::Truth { .. } => 4,
     }
 }

@@ -19,17 +19,17 @@ enum Item<'a> {
 }
 
 /// The events and reads of `trace` in the documented order: by time, and
-/// within a time mixes, observations, reads, moves, truth (a stable sort,
+/// within a time moves, mixes, observations, reads, truth (a stable sort,
 /// independent of [`super::identity_out`]).
 fn merged(trace: &GeneratedTrace) -> Vec<Item<'_>> {
     let rank = |item: &Item| match item {
         Item::Event(e) => match e.event {
-            SimEvent::Mix { .. } => 0,
-            SimEvent::Observe { .. } => 1,
-            SimEvent::Move { .. } => 3,
+            SimEvent::Move { .. } => 0,
+            SimEvent::Mix { .. } => 1,
+            SimEvent::Observe { .. } => 2,
             SimEvent::Truth { .. } => 4,
         },
-        Item::Read(_) => 2,
+        Item::Read(_) => 3,
     };
     let time = |item: &Item| match item {
         Item::Event(e) => e.time,
@@ -315,12 +315,12 @@ fn written_identity_trace_reads_back() {
             (r.time, r.track, r.identity, 0.9)
         );
     }
-    // Within a time: mixes, observations, reads, moves, truth.
+    // Within a time: moves, mixes, observations, reads, truth.
     let rank = |l: &Line| match l {
-        Line::Mix(_) => 0,
-        Line::Observe(_) => 1,
-        Line::Identify(_) => 2,
-        Line::Move(_) => 3,
+        Line::Move(_) => 0,
+        Line::Mix(_) => 1,
+        Line::Observe(_) => 2,
+        Line::Identify(_) => 3,
         Line::Truth(_) => 4,
         Line::Header(_) => unreachable!(),
     };

@@ -168,11 +168,10 @@ impl Scenario {
         let mut step = 0u64;
         loop {
             let time = step_time(step, dt);
-            let limit = event_goal.map_or(usize::MAX, |c| c - sensing);
-            sensing += extractor.step(time, motion.positions(), &mut events, limit);
-            if let Some(reader) = &mut reader {
-                reader.step(time, motion.positions(), extractor.assignment());
-            }
+            // Where the tracks are goes before what the step's sensing
+            // saw: a stream's first lines then place every track, and a
+            // deployment starts each with the leader of its region
+            // (`idmesh_placement::Regions::starting`).
             if let Some(interval) = self.move_interval {
                 if time >= moves_done as f64 * interval - EPS {
                     let positions = motion.positions();
@@ -191,6 +190,11 @@ impl Scenario {
                     }
                     moves_done = ((time + EPS) / interval).floor() as u64 + 1;
                 }
+            }
+            let limit = event_goal.map_or(usize::MAX, |c| c - sensing);
+            sensing += extractor.step(time, motion.positions(), &mut events, limit);
+            if let Some(reader) = &mut reader {
+                reader.step(time, motion.positions(), extractor.assignment());
             }
             let goal_reached = event_goal.is_some_and(|c| sensing >= c);
             let last = goal_reached || step >= last_step;

@@ -30,6 +30,8 @@ pub struct Scenario {
     pub factored: Option<FactoredStart>,
     /// The sensor's flow control window (None: no window).
     pub window: Option<u64>,
+    /// Seqs after which a leader with nothing queued is sent a batch.
+    pub idle_every: u64,
 }
 
 impl Scenario {
@@ -90,6 +92,22 @@ impl Scenario {
             };
             lines.push(line);
         }
+        // Half the streams begin by placing some tracks (as the crowd
+        // simulator writes where everybody starts): the Begin puts those
+        // with the nearest leader at once.
+        if rng.gen_bool(0.5) {
+            let leading: Vec<Line> = (0..rng.gen_range(1..=tracks))
+                .map(|_| {
+                    Line::Move(Move {
+                        time: 0.0,
+                        track: rng.gen_range(0..tracks as u32),
+                        x: rng.gen_range(0.0..10.0),
+                        y: rng.gen_range(0.0..10.0),
+                    })
+                })
+                .collect();
+            lines.splice(0..0, leading);
+        }
         let distributed_rule = rng.gen_bool(0.5);
         // A third of the schedules run the factored belief (small
         // components, so that merges, splits and moves all happen), half
@@ -117,6 +135,10 @@ impl Scenario {
         // small that the sensor waits for progress marks again and again
         // (which the network loses, doubles and delays like the rest).
         let window = rng.gen_bool(0.5).then(|| rng.gen_range(1..=8));
+        // A leader with nothing queued is sent no batch until the stream
+        // is this far past its last one: short here, so that these short
+        // streams send such batches too.
+        let idle_every = rng.gen_range(1..=16);
         Ok(Scenario {
             header,
             leaders,
@@ -126,12 +148,15 @@ impl Scenario {
             distributed_rule,
             factored,
             window,
+            idle_every,
         })
     }
 
     /// The sensor's gateway, empty, with the scenario's window.
     pub fn gateway<Q>(&self, router: Router) -> Gateway<Q> {
-        let gateway = Gateway::new("sensor-0", router, self.lines.is_empty()).journaled();
+        let gateway = Gateway::new("sensor-0", router, self.lines.is_empty())
+            .journaled()
+            .idle_batches_every(self.idle_every);
         match self.window {
             Some(window) => gateway.windowed(window),
             None => gateway,
@@ -148,6 +173,7 @@ impl Scenario {
             distributed_rule: self.distributed_rule,
             budget: 0,
             omp: false,
+            placed: idmesh_placement::leading_places(self.header.tracks, &self.lines),
         }
     }
 }

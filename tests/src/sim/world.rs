@@ -619,9 +619,9 @@ impl World {
         Ok(placed)
     }
 
-    /// Every leader's next batch, on its way.
+    /// The leaders' next batches, on their way.
     fn flush(&mut self) {
-        for (i, batch) in self.gateway.flush().into_iter().enumerate() {
+        for (i, batch) in self.gateway.flush() {
             self.note_routed(i, &batch);
             self.send_batch(i, &batch);
         }
