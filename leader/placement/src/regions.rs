@@ -230,7 +230,10 @@ mod tests {
         moved.moved(1, 9.0, 0.0);
         assert_eq!(moved, r);
         // Without places, round robin.
-        assert_eq!(Regions::starting(&[None, None], &leading).owners(), &[0, 1, 0]);
+        assert_eq!(
+            Regions::starting(&[None, None], &leading).owners(),
+            &[0, 1, 0]
+        );
     }
 
     /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of

@@ -922,7 +922,11 @@ fn a_leader_with_nothing_to_apply_is_sent_no_batch_until_it_is_owed_one() {
             .collect()
     };
     let mut gateway: Gateway<()> = Gateway::new("s", router(8, 4, true), false).windowed(4);
-    assert_eq!(sent(gateway.flush()), [(0, 0, 1, 1), (1, 0, 1, 1)], "the Begin");
+    assert_eq!(
+        sent(gateway.flush()),
+        [(0, 0, 1, 1), (1, 0, 1, 1)],
+        "the Begin"
+    );
     gateway.line(&mix(0, 2)); // a's tracks: seq 2
     assert_eq!(sent(gateway.flush()), [(0, 1, 2, 1)], "nothing for b");
     // b applied all it was sent and nothing waits for it: it is as far as
