@@ -204,8 +204,8 @@ impl Leader {
 
     /// How far this leader has got through the stream: every item for it
     /// at or before this seq is applied. Past the last item it applied,
-    /// up to the one it is stopped at (or, stopped at none, as far as the
-    /// stream is: every batch says so), since items for others are not
+    /// up to the one it is stopped at (or, stopped at none, as far as its
+    /// last batch says the stream got), since items for others are not
     /// sent to it. The sensor's flow control reads it.
     pub fn done_through(&self) -> u64 {
         let stopped_at = match self.waiting {
