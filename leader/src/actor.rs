@@ -52,6 +52,8 @@ pub struct LeaderConfig {
     /// Tests only: every n-th transfer is not put, as if the link lost it
     /// (a TLS link that closes and reopens does).
     pub drop_transfer_every: Option<u64>,
+    /// The sensor streams under a window ([`Timers::flow_control`]).
+    pub flow_control: bool,
 }
 
 /// Replies to the gets the leader makes, back in its one task.
@@ -115,11 +117,14 @@ pub async fn run(
         .declare_token(keys.alive("leader", &name))
         .await
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
-    let timers = Timers::new(
-        config.follow_timeout,
-        journal.is_some(),
-        config.snapshot_every,
-    );
+    let timers = Timers {
+        flow_control: config.flow_control,
+        ..Timers::new(
+            config.follow_timeout,
+            journal.is_some(),
+            config.snapshot_every,
+        )
+    };
     let (mut node, first) = Node::recover(
         &name,
         &config.host,

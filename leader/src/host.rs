@@ -71,6 +71,9 @@ pub struct HostConfig {
     pub takeover_after: Option<Duration>,
     /// Tests only: every n-th transfer put is lost on purpose.
     pub drop_transfer_every: Option<u64>,
+    /// The sensor streams under a window: leaders mark their progress
+    /// after every input (else at their sweeps only).
+    pub flow_control: bool,
 }
 
 impl HostConfig {
@@ -89,6 +92,7 @@ impl HostConfig {
             }),
             snapshot_every: self.snapshot_every,
             drop_transfer_every: self.drop_transfer_every,
+            flow_control: self.flow_control,
         }
     }
 

@@ -69,6 +69,11 @@ pub struct Timers {
     pub journal: bool,
     /// Write a snapshot after this many journaled inputs.
     pub snapshot_every: Option<usize>,
+    /// The sensor streams under a window (`[sensor] window`), which its
+    /// leaders' progress marks open: a mark after every input that moves
+    /// the leader. Without one nobody waits for them, and a mark goes only
+    /// at the sweep (a message per batch saved).
+    pub flow_control: bool,
 }
 
 impl Timers {
@@ -81,6 +86,7 @@ impl Timers {
             query_timeout,
             journal,
             snapshot_every,
+            flow_control: true,
         }
     }
 }
@@ -548,10 +554,12 @@ impl Node {
         }
     }
 
-    /// Publishes the leader's progress if it moved (or `again`).
+    /// Publishes the leader's progress if it moved and a window waits for
+    /// it (or `again`, at the sweep).
     fn progress(&mut self, again: bool, out: &mut Vec<Output>) {
         let through = self.leader.done_through();
-        if self.failure.is_some() || !(again || through > self.progressed) {
+        let moved = through > self.progressed && self.timers.flow_control;
+        if self.failure.is_some() || !(again || moved) {
             return;
         }
         self.progressed = through;

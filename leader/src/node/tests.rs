@@ -718,3 +718,20 @@ fn progress_is_published_when_it_moves_and_at_every_sweep() {
     let out = node.step(300 * MS, Input::Tick);
     assert_eq!(progress(&out), vec![(5, 3)], "said again at the sweep");
 }
+
+/// Without a window nothing waits for progress marks: a leader says how
+/// far it got at its sweep only, not after every batch.
+#[test]
+fn without_flow_control_progress_is_published_at_the_sweep_only() {
+    let timers = Timers {
+        flow_control: false,
+        ..timers()
+    };
+    let mut node = Node::new(Leader::new("a"), timers);
+    let out = node.step(Duration::ZERO, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    assert_eq!(progress(&out), vec![]);
+    let out = node.step(MS, batch(1, vec![], 5));
+    assert_eq!(progress(&out), vec![]);
+    let out = node.step(300 * MS, Input::Tick);
+    assert_eq!(progress(&out), vec![(5, 2)], "at the sweep");
+}

@@ -84,8 +84,9 @@ super::versioned!(Durable, "durable mark");
 /// How far a leader has got: every item numbered at or before `through`
 /// that the sensor sent it is applied (it waits for nothing before it),
 /// and `batch` is the number of the next batch it waits for. Published on
-/// `P/leader/<name>/progress` after every input that moves it, and again
-/// at every sweep (a put lost, or a sensor restarted, is mended within
+/// `P/leader/<name>/progress` after every input that moves it when the
+/// sensor has a window (without one nothing waits for it), and again at
+/// every sweep (a put lost, or a sensor restarted, is mended within
 /// one). The sensor's flow control: it routes at most its window of seqs
 /// past the slowest leader's progress, so a leader that follows tracks is
 /// sent at most a window of items it missed on them; and a stream the

@@ -711,6 +711,7 @@ impl World {
             Some(self.leaders[i].snapshot_every),
         );
         timers.sweep = Duration::from_millis(250);
+        timers.flow_control = self.scenario.window.is_some();
         timers
     }
 
