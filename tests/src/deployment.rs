@@ -115,18 +115,7 @@ pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
 /// Where a deployment of `leaders` leaders over `trace` places them: the
 /// centres of a grid over the field its moves span (row by row).
 pub fn leader_places(trace: &Path, leaders: usize) -> Vec<(f64, f64)> {
-    let (x0, y0, x1, y1) = corners(trace);
-    let columns = (leaders as f64).sqrt().ceil() as usize;
-    let rows = leaders.div_ceil(columns);
-    (0..leaders)
-        .map(|i| {
-            let (c, r) = (i % columns, i / columns);
-            (
-                x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64,
-                y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64,
-            )
-        })
-        .collect()
+    idmesh_placement::grid_places(corners(trace), leaders)
 }
 
 /// [`leader_places`] as `idmesh replay --regions` takes them (each number

@@ -363,18 +363,7 @@ pub fn count_events(trace: &Path) -> Result<u64> {
 /// Deterministic: the same trace, the same places.
 pub fn leader_places(trace: &Path, leaders: usize) -> Result<Vec<(f64, f64)>> {
     const ROUNDS: usize = 30;
-    let (x0, y0, x1, y1) = field_corners(trace)?;
-    let columns = (leaders as f64).sqrt().ceil().max(1.0) as usize;
-    let rows = leaders.div_ceil(columns);
-    let mut places: Vec<(f64, f64)> = (0..leaders)
-        .map(|i| {
-            let (c, r) = (i % columns, i / columns);
-            (
-                x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64,
-                y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64,
-            )
-        })
-        .collect();
+    let mut places = idmesh_placement::grid_places(field_corners(trace)?, leaders);
     let mut positions = Vec::new();
     let mut reader = idmesh_protocol::TraceReader::open(trace)?;
     reader.read_header()?;

@@ -20,7 +20,7 @@
 
 mod regions;
 
-pub use regions::{leading_places, Regional, Regions};
+pub use regions::{grid_places, leading_places, Regional, Regions};
 
 use idmesh_belief::factored::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};

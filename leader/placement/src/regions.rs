@@ -90,6 +90,24 @@ impl Regions {
     }
 }
 
+/// `leaders` places on a grid over the box from (x0, y0) to (x1, y1): the
+/// centres of its cells, row by row, with as many columns as the square
+/// root of `leaders` rounded up. Where a deployment that knows nothing
+/// better puts its leaders (the loopback moves them on towards the crowd).
+pub fn grid_places((x0, y0, x1, y1): (f64, f64, f64, f64), leaders: usize) -> Vec<(f64, f64)> {
+    let columns = (leaders as f64).sqrt().ceil().max(1.0) as usize;
+    let rows = leaders.div_ceil(columns);
+    (0..leaders)
+        .map(|i| {
+            let (c, r) = (i % columns, i / columns);
+            (
+                x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64,
+                y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64,
+            )
+        })
+        .collect()
+}
+
 /// Where each of `tracks` tracks is before the stream's first event other
 /// than a `move`: the last of the leading `move` lines on it (None for a
 /// track they do not place, or out of range).
@@ -184,6 +202,15 @@ impl PropertyFilter for Regional {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_grid_puts_leaders_at_the_centres_of_its_cells_row_by_row() {
+        let box_ = (0.0, 0.0, 30.0, 20.0);
+        assert_eq!(grid_places(box_, 1), [(15.0, 10.0)]);
+        // 3 leaders: 2 columns, 2 rows, the last row half full.
+        assert_eq!(grid_places(box_, 3), [(7.5, 5.0), (22.5, 5.0), (7.5, 15.0)]);
+        assert!(grid_places(box_, 0).is_empty());
+    }
 
     #[test]
     fn tracks_start_round_robin_and_go_to_the_nearest_leader() {
