@@ -45,9 +45,14 @@ impl Regions {
     /// so the belief is the same either way: the centralized engine, which
     /// starts round robin, hands the tracks over at those moves by
     /// splitting off singletons, which changes nothing.
-    pub fn starting(places: &[Option<(f64, f64)>], leading: &[Option<(f64, f64)>]) -> Self {
-        let mut regions = Regions::new(places, leading.len());
-        for (track, place) in leading.iter().enumerate() {
+    /// Tracks beyond `leading` start round robin.
+    pub fn starting(
+        places: &[Option<(f64, f64)>],
+        tracks: usize,
+        leading: &[Option<(f64, f64)>],
+    ) -> Self {
+        let mut regions = Regions::new(places, tracks);
+        for (track, place) in leading.iter().enumerate().take(tracks) {
             if let Some((x, y)) = *place {
                 regions.moved(track as u32, x, y);
             }
@@ -249,7 +254,7 @@ mod tests {
         let leading = leading_places(3, &lines);
         assert_eq!(leading, vec![Some((8.0, 0.0)), Some((9.0, 0.0)), None]);
         let places = [Some((0.0, 0.0)), Some((10.0, 0.0))];
-        let r = Regions::starting(&places, &leading);
+        let r = Regions::starting(&places, 3, &leading);
         assert_eq!(r.owners(), &[1, 1, 0]);
         // The same as starting round robin and moving there.
         let mut moved = Regions::new(&places, 3);
@@ -258,7 +263,7 @@ mod tests {
         assert_eq!(moved, r);
         // Without places, round robin.
         assert_eq!(
-            Regions::starting(&[None, None], &leading).owners(),
+            Regions::starting(&[None, None], 3, &leading).owners(),
             &[0, 1, 0]
         );
     }

@@ -159,10 +159,10 @@ impl<Q> Gateway<Q> {
 
     /// How many more seqs the flow control lets the stream take now (None:
     /// no window): the seqs past the slowest leader's progress, or none
-    /// while that is under half the window. The actor reads no more of a pulled source (trace file,
-    /// standard input) while it is 0; progress marks open it again. A
-    /// restored gateway starts from no progress at all, and leaders
-    /// publish theirs at every sweep.
+    /// while that is under half the window. The actor reads no more of a
+    /// pulled source (trace file, standard input) while it is 0; progress
+    /// marks open it again. A restored gateway starts from no progress at
+    /// all, and leaders publish theirs at every sweep.
     pub fn room(&self) -> Option<u64> {
         let head = self.router.seq();
         // A leader that applied everything it was sent, with nothing
@@ -477,14 +477,14 @@ impl<Q> Gateway<Q> {
         self.cuts.refuse_all(&self.router)
     }
 
-    /// Every leader's queued items as its next batch, in the stream's order
-    /// of leaders; each is kept for the leader to ask for again. A leader
-    /// with nothing queued is sent nothing — most of a crowd's events are
-    /// not its tracks' — unless it is owed a batch (it followed tracks, or
-    /// the stream finished) or the stream is [`IDLE_BATCH_EVERY`] seqs
-    /// ([`Gateway::idle_batches_every`]) past its last batch: then a batch saying only how far the stream
-    /// got. A cut is an item for every leader, so each is sent it. Each
-    /// batch comes with the index of its leader.
+    /// The leaders' queued items as their next batches, in the stream's
+    /// order of leaders, each with the index of its leader and kept for it
+    /// to ask for again. A leader with nothing queued is sent nothing —
+    /// most of a crowd's events are not its tracks' — unless it is owed a
+    /// batch (it followed tracks, or the stream finished) or the stream is
+    /// [`IDLE_BATCH_EVERY`] seqs ([`Gateway::idle_batches_every`]) past its
+    /// last batch: then a batch saying only how far the stream got. A cut
+    /// is an item for every leader, so each is sent it.
     pub fn flush(&mut self) -> Vec<(usize, Batch)> {
         let through = self.router.seq();
         let events = self.router.events();

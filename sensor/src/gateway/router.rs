@@ -120,11 +120,10 @@ impl Router {
             ));
         }
         let tracks = header.tracks;
-        let mut placed = config.placed.clone();
-        placed.resize(tracks, None);
         let regions = Regions::starting(
             &config.leaders.iter().map(|l| l.at).collect::<Vec<_>>(),
-            &placed,
+            tracks,
+            &config.placed,
         );
         let begin = Begin {
             // Identity streams hold the information matrix whatever the
