@@ -23,7 +23,7 @@ pub async fn marginals(
     at: At,
 ) -> Result<Gathered, GatherError> {
     let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
-    let answer = marginals_of(&collected)?;
+    let answer = marginals_of(&collected, memory)?;
     Ok(Gathered {
         cut: collected.cut,
         answer,

@@ -5,9 +5,10 @@
 //! [`crate::gather`], and the deterministic network simulator
 //! (`tests/src/sim`) feeds these the replies of simulated processes.
 
+use idmesh_belief::factored::CouplingTree;
 use idmesh_belief::predict_red;
 use idmesh_belief::BeliefError;
-use idmesh_placement::{combine, combine_factored};
+use idmesh_placement::{combine, factored_field};
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
@@ -81,11 +82,16 @@ pub enum Share {
 }
 
 /// What the coordinator keeps between queries: the last cut of a stream
-/// that was over, and its counts of bad input. Nothing is pushed to it; it
-/// only remembers what it asked.
+/// that was over, the count coupling of the last factored answer, and its
+/// counts of bad input. Nothing is pushed to it; it only remembers what it
+/// asked.
 #[derive(Debug, Default)]
 pub struct Memory {
     finished: Mutex<Option<CutPlaced>>,
+    /// The count tree of the last factored answer: the next query redoes
+    /// only the components that changed since (none, at rest). Queries
+    /// take turns with it; computing is brief beside the gathering.
+    coupling: Mutex<Option<CouplingTree>>,
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
@@ -343,10 +349,13 @@ fn names(error: &str, leader: &str) -> bool {
 }
 
 /// The property marginals the leaders' shares at one cut add up to.
-pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherError> {
+pub fn marginals_of(
+    collected: &Collected,
+    memory: &Memory,
+) -> Result<MarginalsAnswer, GatherError> {
     let cut = &collected.cut;
     let (p_red, coefficients) = if collected.parts.iter().any(|p| p.components.is_some()) {
-        factored_marginals_of(collected)?
+        factored_marginals_of(collected, memory)?
     } else {
         let sums = combine(&collected.parts);
         let p_red = sums
@@ -369,10 +378,13 @@ pub fn marginals_of(collected: &Collected) -> Result<MarginalsAnswer, GatherErro
 
 /// P(red) of a factored belief from every leader's components at one cut,
 /// and the coefficients they hold: the count coupling, evaluated here on
-/// demand (nothing global is computed between queries). Components that
-/// do not cover the field exactly once (a leader of another stream, a bug)
-/// are refused by name.
-fn factored_marginals_of(collected: &Collected) -> Result<(Vec<f64>, u64), GatherError> {
+/// demand (nothing global is computed between queries), from the count tree
+/// the last query left in `memory`. Components that do not cover the field
+/// exactly once (a leader of another stream, a bug) are refused by name.
+fn factored_marginals_of(
+    collected: &Collected,
+    memory: &Memory,
+) -> Result<(Vec<f64>, u64), GatherError> {
     let cut = &collected.cut;
     if let Some(p) = collected.parts.iter().find(|p| p.components.is_none()) {
         return Err(GatherError::Refused(format!(
@@ -380,10 +392,21 @@ fn factored_marginals_of(collected: &Collected) -> Result<(Vec<f64>, u64), Gathe
             p.leader
         )));
     }
-    let p_red = combine_factored(cut.tracks, cut.red, &collected.parts).map_err(|e| match e {
+    let refused = |e| match e {
         BeliefError::Degenerate { .. } => GatherError::Degenerate,
         e => GatherError::Refused(format!("the leaders' components: {e}")),
-    })?;
+    };
+    let field = factored_field(cut.tracks, cut.red);
+    let mut kept = memory.coupling.lock().unwrap_or_else(|e| e.into_inner());
+    let coupling = match &mut *kept {
+        Some(tree) if *tree.field() == field => tree,
+        other => other.insert(CouplingTree::new(field).map_err(refused)?),
+    };
+    let parts = collected
+        .parts
+        .iter()
+        .flat_map(|p| p.components.iter().flatten());
+    let p_red = coupling.marginals(parts).map_err(refused)?;
     Ok((p_red, collected.parts.iter().map(|p| p.coefficients).sum()))
 }
 

@@ -66,7 +66,7 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use counts::CountPrior;
-pub use share::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
+pub use share::{coupled_marginals, CountPart, CouplingTree, FactoredShare, HeldComponent};
 use split::Weighted;
 use std::sync::{Mutex, MutexGuard};
 use table::Component;

@@ -817,34 +817,47 @@ impl CountTree {
 }
 
 /// The tilt θ = e^t under which the tilted count vectors' means add up to
-/// `target` (bisection on t; each step O(Σ|C|)). 0 when no tilt can (every
-/// count fixed, or the target outside what the counts reach).
+/// `target`. 0 when no tilt can (every count fixed, or the target outside
+/// what the counts reach), or when none is needed (within half a count).
+///
+/// The coordinator finds it afresh at every query, so it is found by
+/// safeguarded Newton steps (the mean's slope in t is the tilted variance,
+/// summed along with it): a handful of O(Σ|C|) passes where bisection took
+/// up to sixty, each with an exponential per count.
 pub(crate) fn balancing_tilt<'a>(
     counts: impl Iterator<Item = &'a [f64]> + Clone,
     target: f64,
 ) -> f64 {
-    let mean = |t: f64| -> f64 {
-        counts
-            .clone()
-            .map(|c| {
-                let logs = c.iter().enumerate().map(|(r, &x)| x.ln() + r as f64 * t);
-                let max = logs.clone().fold(f64::NEG_INFINITY, f64::max);
-                if max == f64::NEG_INFINITY {
-                    return 0.0;
-                }
-                let (mut z, mut m) = (0.0, 0.0);
-                for (r, l) in logs.enumerate() {
-                    let w = (l - max).exp();
-                    z += w;
-                    m += w * r as f64;
-                }
-                m / z
-            })
-            .sum()
+    let logs: Vec<Vec<f64>> = counts.map(|c| c.iter().map(|x| x.ln()).collect()).collect();
+    // The summed tilted mean and variance at t.
+    let moments = |t: f64| -> (f64, f64) {
+        let (mut mean, mut variance) = (0.0, 0.0);
+        for c in &logs {
+            let max = c
+                .iter()
+                .enumerate()
+                .map(|(r, l)| l + r as f64 * t)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if max == f64::NEG_INFINITY {
+                continue;
+            }
+            let (mut z, mut m1, mut m2) = (0.0, 0.0, 0.0);
+            for (r, l) in c.iter().enumerate() {
+                let w = (l + r as f64 * t - max).exp();
+                let r = r as f64;
+                z += w;
+                m1 += w * r;
+                m2 += w * r * r;
+            }
+            let m = m1 / z;
+            mean += m;
+            variance += (m2 / z - m * m).max(0.0);
+        }
+        (mean, variance)
     };
     // The mean is non-decreasing in t; within half a count of the target
     // no tilt is needed (and with every count fixed, none can help).
-    let at_zero = mean(0.0);
+    let (at_zero, slope) = moments(0.0);
     if (at_zero - target).abs() <= 0.5 {
         return 0.0;
     }
@@ -853,21 +866,31 @@ pub(crate) fn balancing_tilt<'a>(
     } else {
         (-60.0, 0.0)
     };
-    if mean(lo) > target || mean(hi) < target {
+    if moments(lo).0 > target || moments(hi).0 < target {
         return 0.0;
     }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if mean(mid) < target {
-            lo = mid;
+    let (mut t, mut mean, mut slope) = (0.0, at_zero, slope);
+    for _ in 0..100 {
+        if mean < target {
+            lo = t;
         } else {
-            hi = mid;
+            hi = t;
         }
-        if hi - lo < 1e-9 {
+        let newton = t + (target - mean) / slope;
+        // A Newton step that leaves the bracket (or a flat stretch) halves it.
+        let next = if slope > 0.0 && newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
+        let step = (next - t).abs();
+        t = next;
+        (mean, slope) = moments(t);
+        if step < 1e-9 || (mean - target).abs() < 1e-9 * target.abs().max(1.0) {
             break;
         }
     }
-    0.5 * (lo + hi)
+    t
 }
 
 #[cfg(test)]

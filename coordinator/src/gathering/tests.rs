@@ -54,7 +54,7 @@ fn every_leader_at_the_cut_adds_up_to_marginals_summing_to_k() {
     ];
     let (parts, errors) = gather(9, replies, &memory).into_parts();
     let collected = check(cut(7, &["a", "b"]), parts, errors, Duration::ZERO, &memory).unwrap();
-    let answer = marginals_of(&collected).unwrap();
+    let answer = marginals_of(&collected, &memory).unwrap();
     assert_eq!(answer.leaders, 2);
     assert_eq!(answer.watermark.get("sensor-0"), Some(&14));
     // outside = 1/3 + 2/3 = 1 over total 3, plus each track's inside.
@@ -236,7 +236,7 @@ fn no_leaders_or_no_mass_is_an_error_not_an_answer() {
         gather(9, vec![Ok(encode(&part("a", 7, 9, 0.0, vec![])))], &memory).into_parts();
     let collected = check(cut(7, &["a"]), parts, errors, Duration::ZERO, &memory).unwrap();
     assert!(matches!(
-        marginals_of(&collected),
+        marginals_of(&collected, &memory),
         Err(GatherError::Degenerate)
     ));
 }

@@ -19,6 +19,10 @@ pub struct Latencies {
     pub marginals: Vec<Duration>,
     pub ping_one: Vec<Duration>,
     pub ping_leaders: Vec<Duration>,
+    /// At rest only: every leader's partial sums where it rests, fetched
+    /// straight from the leaders (the leaders' share of a query, without
+    /// the coordinator).
+    pub partials: Vec<Duration>,
 }
 
 /// Times `queries` rounds; `streaming` checks that the stream was still
@@ -37,7 +41,9 @@ pub async fn measure(
         marginals: Vec::with_capacity(queries),
         ping_one: Vec::with_capacity(queries),
         ping_leaders: Vec::with_capacity(queries),
+        partials: Vec::with_capacity(if streaming { 0 } else { queries }),
     };
+    let partials_key = format!("{}?quiet", keys.every_leader_partial());
     // The bench's session connects to each process on its own; wait until
     // it reaches them all.
     let started = Instant::now();
@@ -59,7 +65,15 @@ pub async fn measure(
         let started = Instant::now();
         deployment.ping(&leaders, deployment.leaders).await?;
         let fan_out = started.elapsed();
+        let partials = if streaming {
+            None
+        } else {
+            let started = Instant::now();
+            deployment.ping(&partials_key, deployment.leaders).await?;
+            Some(started.elapsed())
+        };
         if round >= WARM_UP {
+            l.partials.extend(partials);
             l.marginals.push(marginals);
             l.ping_one.push(one);
             l.ping_leaders.push(fan_out);
@@ -112,6 +126,13 @@ pub fn report(l: &Latencies, when: &str, out: &mut String) -> Result<()> {
         &l.ping_leaders,
         out,
     )?;
+    if !l.partials.is_empty() {
+        row(
+            "the leaders' partial sums where they rest, fetched straight",
+            &l.partials,
+            out,
+        )?;
+    }
     writeln!(out)?;
     Ok(())
 }

@@ -22,11 +22,11 @@ mod regions;
 
 pub use regions::{grid_places, leading_places, Regional, Regions};
 
-use idmesh_belief::factored::{coupled_marginals, CountPart, FactoredShare, HeldComponent};
+use idmesh_belief::factored::{FactoredShare, HeldComponent};
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
 use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
-use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireCounts, WireSplit};
+use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
 
@@ -145,41 +145,17 @@ pub fn from_wire_component(c: WireComponent) -> HeldComponent {
     }
 }
 
-/// A component's count vectors as they go to the coordinator.
-pub fn wire_counts(p: CountPart) -> WireCounts {
-    WireCounts {
-        tracks: p.tracks,
-        counts: p.counts,
-        red: p.red,
-    }
-}
-
-/// The factored marginals from every leader's components at one cut:
-/// the count coupling over all of them and the prior of a field of
-/// `tracks` tracks with `red` red (None: the uniform prior over counts).
-pub fn combine_factored(
-    tracks: u32,
-    red: Option<u32>,
-    parts: &[Partial],
-) -> Result<Vec<f64>, BeliefError> {
-    let field = Field {
+/// The field a factored stream's cut describes: `tracks` tracks with `red`
+/// red (None: the uniform prior over counts).
+pub fn factored_field(tracks: u32, red: Option<u32>) -> Field {
+    Field {
         tracks: tracks as usize,
         red: match red {
             Some(k) => RedCount::Known(k as usize),
             None => RedCount::unknown_uniform(tracks as usize),
         },
         initial_red: None,
-    };
-    let counts: Vec<CountPart> = parts
-        .iter()
-        .flat_map(|p| p.components.iter().flatten())
-        .map(|c| CountPart {
-            tracks: c.tracks.clone(),
-            counts: c.counts.clone(),
-            red: c.red.clone(),
-        })
-        .collect();
-    coupled_marginals(&field, &counts)
+    }
 }
 
 /// The size of a set that fixes every track of `field`: k red tracks (the

@@ -4,7 +4,6 @@
 
 use super::transfers::to_wire;
 use super::*;
-use idmesh_placement::wire_counts;
 
 /// How many recent cuts a leader keeps answers for.
 const CUTS_KEPT: usize = 256;
@@ -60,10 +59,7 @@ impl Leader {
                 .collect(),
             _ => Vec::new(),
         };
-        let components = started
-            .factored
-            .as_ref()
-            .map(|held| held.parts().into_iter().map(wire_counts).collect());
+        let components = started.factored.as_ref().map(|held| held.parts());
         let coefficients = match &started.factored {
             Some(held) => held.coefficients() as u64,
             None => sums.coefficients,

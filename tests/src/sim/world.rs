@@ -1209,7 +1209,7 @@ impl World {
                 }),
             },
         };
-        match result.and_then(|collected| marginals_of(&collected)) {
+        match result.and_then(|collected| marginals_of(&collected, &self.memory)) {
             Ok(answer) => self.answered(&query, answer),
             Err(e) => {
                 self.tally.failed_queries += 1;

@@ -12,15 +12,19 @@
 //! demand: each leader gives, per component it holds, the count vector and
 //! one red-weight vector per track ([`CountPart`]), and
 //! [`coupled_marginals`] convolves them with the prior π by the same code
-//! the centralized belief's queries run.
+//! the centralized belief's queries run ([`CouplingTree`] keeps that
+//! convolution between queries, so a query redoes only what changed).
 //!
 //! A share is a whole [`FactoredBelief`] whose components not held here are
 //! placeholders: never read (the local coupling reads no other component),
 //! replaced when the real component arrives.
 
+mod coupling;
+
+pub use coupling::{coupled_marginals, CouplingTree};
+
 use super::table::{counts_of, Component};
-use super::tree::{balancing_tilt, CountTree};
-use super::{coupling_weights, CountPrior, Coupling, FactoredBelief, FactoredOptions};
+use super::{Coupling, FactoredBelief, FactoredOptions};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
@@ -45,13 +49,10 @@ pub struct HeldComponent {
 /// What one component tells the coordinator at a cut: its count vector
 /// c[s] = Σ_{|y| = s} g(y) and, per track, w_t[s] = Σ_{|y| = s, t ∈ y} g(y).
 /// P(t red) = Σ_s w_t[s]·R(s) / Σ_s c[s]·R(s), R the weight of the
-/// component's red count from everything else.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CountPart {
-    pub tracks: Vec<u32>,
-    pub counts: Vec<f64>,
-    pub red: Vec<Vec<f64>>,
-}
+/// component's red count from everything else. The wire's own type: a
+/// leader sends what its share gives, and the coordinator couples what it
+/// receives, without a copy.
+pub type CountPart = idmesh_protocol::wire::factored::WireCounts;
 
 /// The components one leader holds (see the module documentation).
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -373,79 +374,6 @@ fn count_part(c: &Component) -> CountPart {
         counts: c.counts.clone(),
         red,
     }
-}
-
-/// The marginals of the factored belief whose components are `parts`
-/// (from every leader at one cut): the count coupling with the prior π of
-/// `field`, evaluated by the count tree as the centralized belief's query
-/// does. The parts must cover every track of the field exactly once.
-pub fn coupled_marginals(field: &Field, parts: &[CountPart]) -> Result<Vec<f64>, BeliefError> {
-    field.validate()?;
-    let n = field.tracks;
-    let mut seen = vec![false; n];
-    for p in parts {
-        let m = p.tracks.len();
-        if m == 0 || m > MOST_TRACKS || p.counts.len() != m + 1 || p.red.len() != m {
-            return Err(bad(format!(
-                "a part of {m} tracks with {} counts and {} red vectors",
-                p.counts.len(),
-                p.red.len()
-            )));
-        }
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
-        if !finite(&p.counts) || p.red.iter().any(|w| w.len() != m + 1 || !finite(w)) {
-            return Err(bad(format!(
-                "a part of tracks {:?} with a weight that is negative, not finite, or \
-                 a red vector not of {} counts",
-                p.tracks,
-                m + 1
-            )));
-        }
-        for &t in &p.tracks {
-            field.check_track(t)?;
-            if std::mem::replace(&mut seen[t as usize], true) {
-                return Err(bad(format!("track {t} is in two components")));
-            }
-        }
-    }
-    if let Some(t) = seen.iter().position(|s| !s) {
-        return Err(bad(format!("no component holds track {t}")));
-    }
-    let prior = CountPrior::new(field);
-    let counts: Vec<&[f64]> = parts.iter().map(|p| &p.counts[..]).collect();
-    let tilt = balancing_tilt(counts.iter().copied(), prior.target());
-    let mut tree = CountTree::new(
-        parts.iter().map(|p| p.counts.clone()).collect(),
-        tilt,
-        prior.is_point(),
-    );
-    let weights = coupling_weights(&mut tree, &prior, &counts, n)?;
-    let mut out = vec![0.0; n];
-    for (p, r) in parts.iter().zip(weights) {
-        let dot = |v: &[f64], r: &[f64]| v.iter().zip(r).map(|(x, y)| x * y).sum::<f64>();
-        match r {
-            Some(r) => {
-                let total = dot(&p.counts, &r);
-                if total.is_nan() || total <= 0.0 {
-                    return Err(BeliefError::Degenerate { normalizer: total });
-                }
-                for (&t, w) in p.tracks.iter().zip(&p.red) {
-                    out[t as usize] = (dot(w, &r) / total).clamp(0.0, 1.0);
-                }
-            }
-            None => {
-                // A single count held: the table's own marginals.
-                let total: f64 = p.counts.iter().sum();
-                if p.counts.iter().filter(|&&x| x > 0.0).count() != 1 || total <= 0.0 {
-                    return Err(BeliefError::Degenerate { normalizer: 0.0 });
-                }
-                for (&t, w) in p.tracks.iter().zip(&p.red) {
-                    out[t as usize] = (w.iter().sum::<f64>() / total).clamp(0.0, 1.0);
-                }
-            }
-        }
-    }
-    Ok(out)
 }
 
 #[cfg(test)]

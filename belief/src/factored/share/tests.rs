@@ -40,8 +40,10 @@ fn workload(n: usize, events: usize, seed: u64) -> (Vec<u32>, Vec<Event>) {
 /// a certain exchange relabels wherever the two are; now and then a
 /// component moves to another leader, as a handover moves it), and the
 /// coordinator's coupling of their parts equals the centralized belief
-/// with the local rule after every event, to 1e-9; a snapshot of a share
-/// reads back to the same parts.
+/// with the local rule after every event, to 1e-9, evaluated afresh and by
+/// a [`CouplingTree`] kept from event to event (parts in any order, as the
+/// leaders' replies come); a snapshot of a share reads back to the same
+/// parts.
 fn shares_equal_the_whole(
     field: Field,
     options: FactoredOptions,
@@ -58,6 +60,7 @@ fn shares_equal_the_whole(
         })
         .collect();
     let holder = |shares: &[FactoredShare], t: u32| shares.iter().position(|s| s.holds(t)).unwrap();
+    let mut kept = CouplingTree::new(field.clone()).unwrap();
     let mut moved = 0;
     for (i, event) in events.iter().enumerate() {
         let when = i as u64 + 1;
@@ -100,11 +103,19 @@ fn shares_equal_the_whole(
         if !ok {
             continue;
         }
-        let parts: Vec<CountPart> = shares.iter().flat_map(|s| s.parts()).collect();
+        let mut parts: Vec<CountPart> = shares.iter().flat_map(|s| s.parts()).collect();
         let got = coupled_marginals(&field, &parts).unwrap();
+        if i % 2 == 1 {
+            parts.reverse();
+        }
+        let from_kept = kept.marginals(parts.iter()).unwrap();
         let want = whole.marginals().unwrap();
-        for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+        for (t, ((g, k), w)) in got.iter().zip(&from_kept).zip(&want).enumerate() {
             assert!((g - w).abs() < 1e-9, "event {i}, track {t}: {g} vs {w}");
+            assert!(
+                (k - w).abs() < 1e-9,
+                "event {i}, track {t}, kept: {k} vs {w}"
+            );
         }
     }
     assert!(moved > 0 || leaders == 1);
@@ -197,4 +208,39 @@ fn a_share_refuses_what_does_not_fit_by_name() {
     share.put(vec![comp(vec![2, 3], vec![0.25; 4])]).unwrap();
     let p = coupled_marginals(&field, &share.parts()).unwrap();
     assert!((p.iter().sum::<f64>() - 2.0).abs() < 1e-12, "{p:?}");
+}
+
+/// A kept coupling asked again about the same parts answers from what it
+/// computed; bad parts are refused by name and leave it as it was.
+#[test]
+fn a_kept_coupling_answers_an_unchanged_cut_from_memory() {
+    let n = 10;
+    let (initial, events) = workload(n, 120, 4);
+    let field = Field::known(n, initial);
+    let options = FactoredOptions {
+        max_component: 3,
+        coupling: Coupling::Local,
+        ..FactoredOptions::default()
+    };
+    let mut share = FactoredShare::start(field.clone(), options, |_| true).unwrap();
+    for (i, e) in events.iter().enumerate() {
+        let _ = match *e {
+            Event::Mix(m) => share.mix(m, i as u64 + 1),
+            Event::Observe(o) => share.observe(o),
+        };
+    }
+    let parts = share.parts();
+    let mut kept = CouplingTree::new(field.clone()).unwrap();
+    let first = kept.marginals(parts.iter()).unwrap();
+    assert!(kept.last.is_some());
+    assert_eq!(kept.marginals(parts.iter()).unwrap(), first);
+    let mut bad = parts.clone();
+    bad.pop();
+    let e = kept.marginals(bad.iter()).unwrap_err().to_string();
+    assert!(e.contains("no component holds track"), "{e}");
+    assert_eq!(kept.marginals(parts.iter()).unwrap(), first);
+    let fresh = coupled_marginals(&field, &parts).unwrap();
+    for (k, f) in first.iter().zip(&fresh) {
+        assert!((k - f).abs() < 1e-12, "{k} vs {f}");
+    }
 }

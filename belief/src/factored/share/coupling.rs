@@ -1,0 +1,212 @@
+//! The count coupling at the coordinator: every leader's [`CountPart`]s at
+//! one cut, convolved with the prior π into the property marginals.
+//!
+//! [`coupled_marginals`] evaluates it from nothing. A [`CouplingTree`]
+//! keeps the count tree between queries, the way the centralized belief
+//! keeps its own: between two cuts most components have not changed, so a
+//! query sets only the leaves of those that did and refreshes their paths,
+//! and a query that finds nothing changed (a deployment at rest, asked
+//! again) answers from what it computed last. The tree keeps its tilt as
+//! the centralized belief does (re-aimed only when its evaluation is
+//! unsafe), so both compute alike; nothing is computed between queries.
+
+use super::{bad, CountPart, MOST_TRACKS};
+use crate::error::BeliefError;
+use crate::event::Field;
+use crate::factored::counts::CountPrior;
+use crate::factored::coupling_weights;
+use crate::factored::tree::{balancing_tilt, CountTree};
+use std::collections::HashMap;
+
+/// The marginals of the factored belief whose components are `parts`
+/// (from every leader at one cut): the count coupling with the prior π of
+/// `field`, evaluated by the count tree as the centralized belief's query
+/// does. The parts must cover every track of the field exactly once.
+pub fn coupled_marginals(field: &Field, parts: &[CountPart]) -> Result<Vec<f64>, BeliefError> {
+    CouplingTree::new(field.clone())?.marginals(parts.iter())
+}
+
+/// The count coupling kept between queries (see the module documentation).
+#[derive(Debug)]
+pub struct CouplingTree {
+    field: Field,
+    prior: CountPrior,
+    tree: CountTree,
+    /// The part in each leaf of `tree` (None: a free leaf).
+    leaves: Vec<Option<CountPart>>,
+    /// The leaf of each part, by its tracks.
+    leaf_of: HashMap<Vec<u32>, usize>,
+    /// The tree has been tilted at the parts it holds (at the first query).
+    aimed: bool,
+    /// The last answer, while no leaf has changed since.
+    pub(super) last: Option<Vec<f64>>,
+}
+
+impl CouplingTree {
+    /// An empty coupling for `field`: one leaf per track, enough for any
+    /// set of components.
+    pub fn new(field: Field) -> Result<Self, BeliefError> {
+        field.validate()?;
+        let prior = CountPrior::new(&field);
+        let n = field.tracks;
+        Ok(CouplingTree {
+            tree: CountTree::new(vec![Vec::new(); n], 0.0, prior.is_point()),
+            prior,
+            leaves: vec![None; n],
+            leaf_of: HashMap::new(),
+            aimed: false,
+            last: None,
+            field,
+        })
+    }
+
+    pub fn field(&self) -> &Field {
+        &self.field
+    }
+
+    /// The marginals of the belief whose components are `parts`, which must
+    /// cover every track of the field exactly once; only the leaves whose
+    /// parts differ from the last query's are recomputed.
+    pub fn marginals<'a>(
+        &mut self,
+        parts: impl Iterator<Item = &'a CountPart> + Clone,
+    ) -> Result<Vec<f64>, BeliefError> {
+        check_parts(&self.field, parts.clone())?;
+        self.update(parts);
+        if let Some(last) = &self.last {
+            return Ok(last.clone());
+        }
+        if !self.aimed {
+            let counts = self.leaves.iter().flatten().map(|p| &p.counts[..]);
+            let tilt = balancing_tilt(counts, self.prior.target());
+            self.tree.retilt(tilt, false);
+            self.aimed = true;
+        }
+        let out = self.evaluate()?;
+        self.last = Some(out.clone());
+        Ok(out)
+    }
+
+    /// Puts `parts` in the leaves: a part whose tracks held a leaf keeps it
+    /// (set again only if its numbers changed), leaves of parts gone are
+    /// freed, new parts take free leaves.
+    fn update<'a>(&mut self, parts: impl Iterator<Item = &'a CountPart>) {
+        let mut kept = vec![false; self.leaves.len()];
+        let mut new = Vec::new();
+        for p in parts {
+            match self.leaf_of.get(&p.tracks) {
+                Some(&leaf) => {
+                    kept[leaf] = true;
+                    if self.leaves[leaf].as_ref() != Some(p) {
+                        self.put(leaf, p.clone());
+                    }
+                }
+                None => new.push(p),
+            }
+        }
+        let gone: Vec<usize> = self
+            .leaf_of
+            .values()
+            .copied()
+            .filter(|&l| !kept[l])
+            .collect();
+        let mut free: Vec<usize> = (0..self.leaves.len())
+            .filter(|&l| self.leaves[l].is_none())
+            .collect();
+        for leaf in gone {
+            if let Some(old) = self.leaves[leaf].take() {
+                self.leaf_of.remove(&old.tracks);
+            }
+            self.tree.set(leaf, Vec::new());
+            self.last = None;
+            free.push(leaf);
+        }
+        // Parts cover every track once, so there are never more of them
+        // than leaves.
+        for (p, leaf) in new.into_iter().zip(free) {
+            self.leaf_of.insert(p.tracks.clone(), leaf);
+            self.put(leaf, p.clone());
+        }
+    }
+
+    fn put(&mut self, leaf: usize, part: CountPart) {
+        self.tree.set(leaf, part.counts.clone());
+        self.leaves[leaf] = Some(part);
+        self.last = None;
+    }
+
+    /// One downward walk of the tree and each part's marginals.
+    fn evaluate(&mut self) -> Result<Vec<f64>, BeliefError> {
+        let counts: Vec<&[f64]> = self
+            .leaves
+            .iter()
+            .flatten()
+            .map(|p| &p.counts[..])
+            .collect();
+        let weights = coupling_weights(&mut self.tree, &self.prior, &counts, self.field.tracks)?;
+        let mut out = vec![0.0; self.field.tracks];
+        let dot = |v: &[f64], r: &[f64]| v.iter().zip(r).map(|(x, y)| x * y).sum::<f64>();
+        for (p, r) in self.leaves.iter().flatten().zip(weights) {
+            match r {
+                Some(r) => {
+                    let total = dot(&p.counts, &r);
+                    if total.is_nan() || total <= 0.0 {
+                        return Err(BeliefError::Degenerate { normalizer: total });
+                    }
+                    for (&t, w) in p.tracks.iter().zip(&p.red) {
+                        out[t as usize] = (dot(w, &r) / total).clamp(0.0, 1.0);
+                    }
+                }
+                None => {
+                    // A single count held: the table's own marginals.
+                    let total: f64 = p.counts.iter().sum();
+                    if p.counts.iter().filter(|&&x| x > 0.0).count() != 1 || total <= 0.0 {
+                        return Err(BeliefError::Degenerate { normalizer: 0.0 });
+                    }
+                    for (&t, w) in p.tracks.iter().zip(&p.red) {
+                        out[t as usize] = (w.iter().sum::<f64>() / total).clamp(0.0, 1.0);
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Every part well formed, and every track of `field` in exactly one.
+fn check_parts<'a>(
+    field: &Field,
+    parts: impl Iterator<Item = &'a CountPart>,
+) -> Result<(), BeliefError> {
+    let n = field.tracks;
+    let mut seen = vec![false; n];
+    for p in parts {
+        let m = p.tracks.len();
+        if m == 0 || m > MOST_TRACKS || p.counts.len() != m + 1 || p.red.len() != m {
+            return Err(bad(format!(
+                "a part of {m} tracks with {} counts and {} red vectors",
+                p.counts.len(),
+                p.red.len()
+            )));
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
+        if !finite(&p.counts) || p.red.iter().any(|w| w.len() != m + 1 || !finite(w)) {
+            return Err(bad(format!(
+                "a part of tracks {:?} with a weight that is negative, not finite, or \
+                 a red vector not of {} counts",
+                p.tracks,
+                m + 1
+            )));
+        }
+        for &t in &p.tracks {
+            field.check_track(t)?;
+            if std::mem::replace(&mut seen[t as usize], true) {
+                return Err(bad(format!("track {t} is in two components")));
+            }
+        }
+    }
+    if let Some(t) = seen.iter().position(|s| !s) {
+        return Err(bad(format!("no component holds track {t}")));
+    }
+    Ok(())
+}
