@@ -329,7 +329,7 @@ impl Driver<'_> {
                     let sent = match answer {
                         Ok(partial) => {
                             query
-                                .reply(query.key_expr().clone(), encode(&partial))
+                                .reply(query.key_expr().clone(), encode(&*partial))
                                 .await
                         }
                         Err(why) => query.reply_err(why).await,

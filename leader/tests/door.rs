@@ -11,6 +11,7 @@ use idmesh_protocol::wire::leader_to_leader::{Transfer, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::Followed;
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
+use std::sync::Arc;
 
 fn begin() -> Item {
     Item::Begin(Begin {
@@ -71,7 +72,11 @@ fn feed(leader: &mut Leader, kind: Kind, bytes: &[u8]) -> Vec<Action> {
 
 /// What a query would see of the leader.
 fn seen(leader: &Leader) -> (Option<Partial>, u64, u64) {
-    (leader.quiet(false), leader.position(), leader.next_batch())
+    (
+        leader.quiet(false).map(Arc::unwrap_or_clone),
+        leader.position(),
+        leader.next_batch(),
+    )
 }
 
 #[test]

@@ -48,6 +48,7 @@ use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Progress, Resend,
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// The time of an input: since an origin the driver picks (its start).
@@ -153,7 +154,7 @@ pub enum Output {
     /// The answer to [`Input::Partial`] `id`.
     Answer {
         id: u64,
-        answer: Result<Partial, String>,
+        answer: Result<Arc<Partial>, String>,
     },
     /// The answer to [`Input::SentWanted`] `id`.
     AnswerSent {

@@ -80,7 +80,9 @@ fn resends(out: &[Output]) -> usize {
 fn answers(out: &[Output]) -> Vec<(u64, Result<Partial, String>)> {
     out.iter()
         .filter_map(|o| match o {
-            Output::Answer { id, answer } => Some((*id, answer.clone())),
+            Output::Answer { id, answer } => {
+                Some((*id, answer.as_deref().cloned().map_err(Clone::clone)))
+            }
             _ => None,
         })
         .collect()

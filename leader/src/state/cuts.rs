@@ -17,10 +17,13 @@ impl Leader {
         tag: u64,
         events: u64,
         rows: bool,
-    ) -> Result<Partial, LeaderError> {
-        let partial = self
-            .partial(seq, tag, events, rows)
-            .ok_or(LeaderError::Unexpected("a cut before the stream's Begin"))?;
+    ) -> Result<Arc<Partial>, LeaderError> {
+        // Shared, not copied: the same answer goes to every query for this
+        // cut, and a factored leader's holds every component's counts.
+        let partial = Arc::new(
+            self.partial(seq, tag, events, rows)
+                .ok_or(LeaderError::Unexpected("a cut before the stream's Begin"))?,
+        );
         if self.cuts.len() == CUTS_KEPT {
             self.cuts.pop_front();
         }
@@ -30,7 +33,7 @@ impl Leader {
 
     /// The answer at the cut tagged `tag`, if this leader has passed it
     /// recently.
-    pub fn cut(&self, tag: u64) -> Option<&Partial> {
+    pub fn cut(&self, tag: u64) -> Option<&Arc<Partial>> {
         self.cuts.iter().find(|p| p.tag == tag)
     }
 
@@ -40,11 +43,12 @@ impl Leader {
     /// set sent before it has been received), which is how the coordinator
     /// answers a finished stream without placing a cut.
     /// With `rows`, the leader's rows of the information matrix too.
-    pub fn quiet(&self, rows: bool) -> Option<Partial> {
+    pub fn quiet(&self, rows: bool) -> Option<Arc<Partial>> {
         if self.waiting.is_some() || !self.queue.is_empty() {
             return None;
         }
         self.partial(self.frontier, 0, self.events, rows)
+            .map(Arc::new)
     }
 
     /// The partial sums of the share as it is (None before the Begin),
@@ -79,5 +83,26 @@ impl Leader {
             coefficients,
             rows,
         })
+    }
+}
+
+/// The answers kept, in a snapshot: each as itself (they are shared in
+/// memory, never between cuts).
+pub(super) mod kept {
+    use super::{Arc, Partial, VecDeque};
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(
+        cuts: &VecDeque<Arc<Partial>>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.collect_seq(cuts.iter().map(|c| &**c))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<VecDeque<Arc<Partial>>, D::Error> {
+        let cuts = Vec::<Partial>::deserialize(d)?;
+        Ok(cuts.into_iter().map(Arc::new).collect())
     }
 }

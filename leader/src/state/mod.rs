@@ -44,6 +44,7 @@ use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequen
 use idmesh_protocol::wire::VERSION;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::sync::Arc;
 
 mod apply;
 mod cuts;
@@ -65,7 +66,7 @@ pub enum Action {
     /// forget: a lost request costs items, not answers).
     Unfollow(Unfollow),
     /// The partial sums at a cut are ready.
-    CutReady(Partial),
+    CutReady(Arc<Partial>),
 }
 
 /// Where the leader is stopped, if anywhere.
@@ -140,7 +141,8 @@ pub struct Leader {
     /// stream gathers several at one item): a second copy is a duplicate.
     taken: Vec<(u64, u16)>,
     waiting: Option<Waiting>,
-    cuts: VecDeque<Partial>,
+    #[serde(with = "cuts::kept")]
+    cuts: VecDeque<Arc<Partial>>,
     /// The watermark and end-of-stream flag of the last batch.
     events: u64,
     finished: bool,

@@ -348,7 +348,7 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
 
     let rows = [a.quiet(true).unwrap(), b.quiet(true).unwrap()]
         .into_iter()
-        .flat_map(|p| p.rows)
+        .flat_map(|p| p.rows.clone())
         .map(|r| (r.track, r.ln_likelihoods));
     let assembled = InformationRows::assemble(4, rows, InformationOptions::default()).unwrap();
     assert_eq!(assembled.log_likelihoods(), central.log_likelihoods());

@@ -930,7 +930,7 @@ impl World {
                     );
                 }
                 Output::Answer { id, answer } => {
-                    let reply = answer.map(|p| encode(&p));
+                    let reply = answer.map(|p| encode(&*p));
                     self.send(
                         Endpoint::Leader(i),
                         Endpoint::Coordinator,

@@ -16,7 +16,6 @@ use crate::event::Field;
 use crate::factored::counts::CountPrior;
 use crate::factored::coupling_weights;
 use crate::factored::tree::{balancing_tilt, CountTree};
-use std::collections::HashMap;
 
 /// The marginals of the factored belief whose components are `parts`
 /// (from every leader at one cut): the count coupling with the prior π of
@@ -34,8 +33,11 @@ pub struct CouplingTree {
     tree: CountTree,
     /// The part in each leaf of `tree` (None: a free leaf).
     leaves: Vec<Option<CountPart>>,
-    /// The leaf of each part, by its tracks.
-    leaf_of: HashMap<Vec<u32>, usize>,
+    /// The leaf of the part whose first track is t, by t (the parts are
+    /// disjoint, so a first track names at most one).
+    leaf_of: Vec<Option<usize>>,
+    /// Leaves holding no part.
+    free: Vec<usize>,
     /// The tree has been tilted at the parts it holds (at the first query).
     aimed: bool,
     /// The last answer, while no leaf has changed since.
@@ -53,7 +55,8 @@ impl CouplingTree {
             tree: CountTree::new(vec![Vec::new(); n], 0.0, prior.is_point()),
             prior,
             leaves: vec![None; n],
-            leaf_of: HashMap::new(),
+            leaf_of: vec![None; n],
+            free: (0..n).rev().collect(),
             aimed: false,
             last: None,
             field,
@@ -94,8 +97,10 @@ impl CouplingTree {
         let mut kept = vec![false; self.leaves.len()];
         let mut new = Vec::new();
         for p in parts {
-            match self.leaf_of.get(&p.tracks) {
-                Some(&leaf) => {
+            let held = self.leaf_of[p.tracks[0] as usize]
+                .filter(|&leaf| self.leaves[leaf].as_ref().map(|h| &h.tracks) == Some(&p.tracks));
+            match held {
+                Some(leaf) => {
                     kept[leaf] = true;
                     if self.leaves[leaf].as_ref() != Some(p) {
                         self.put(leaf, p.clone());
@@ -104,27 +109,24 @@ impl CouplingTree {
                 None => new.push(p),
             }
         }
-        let gone: Vec<usize> = self
-            .leaf_of
-            .values()
-            .copied()
-            .filter(|&l| !kept[l])
-            .collect();
-        let mut free: Vec<usize> = (0..self.leaves.len())
-            .filter(|&l| self.leaves[l].is_none())
-            .collect();
-        for leaf in gone {
-            if let Some(old) = self.leaves[leaf].take() {
-                self.leaf_of.remove(&old.tracks);
+        for leaf in 0..self.leaves.len() {
+            if kept[leaf] {
+                continue;
             }
-            self.tree.set(leaf, Vec::new());
-            self.last = None;
-            free.push(leaf);
+            if let Some(old) = self.leaves[leaf].take() {
+                if self.leaf_of[old.tracks[0] as usize] == Some(leaf) {
+                    self.leaf_of[old.tracks[0] as usize] = None;
+                }
+                self.tree.set(leaf, Vec::new());
+                self.last = None;
+                self.free.push(leaf);
+            }
         }
-        // Parts cover every track once, so there are never more of them
-        // than leaves.
-        for (p, leaf) in new.into_iter().zip(free) {
-            self.leaf_of.insert(p.tracks.clone(), leaf);
+        for p in new {
+            // Parts cover every track once, so there are never more of
+            // them than leaves (one per track).
+            let Some(leaf) = self.free.pop() else { break };
+            self.leaf_of[p.tracks[0] as usize] = Some(leaf);
             self.put(leaf, p.clone());
         }
     }

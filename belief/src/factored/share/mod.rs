@@ -363,10 +363,11 @@ fn count_part(c: &Component) -> CountPart {
     let mut red = vec![vec![0.0; m + 1]; m];
     for (y, &g) in c.table.iter().enumerate() {
         let s = y.count_ones() as usize;
-        for (i, w) in red.iter_mut().enumerate() {
-            if y & (1 << i) != 0 {
-                w[s] += g;
-            }
+        // Only the tracks red in y gain its weight.
+        let mut bits = y;
+        while bits != 0 {
+            red[bits.trailing_zeros() as usize][s] += g;
+            bits &= bits - 1;
         }
     }
     CountPart {
