@@ -36,6 +36,9 @@ pub struct Settings {
     pub live: bool,
     /// The sensor's flow control (`window = N`); None: no window.
     pub window: Option<u64>,
+    /// The sensor compacts its journal after this many bytes
+    /// (`compact_journal_after`); None: the default.
+    pub compact_journal_after: Option<u64>,
     /// The sensor's `trace`, when it is not the trace the leaders are
     /// placed over (say, the header alone, for a live stream).
     pub sensor_trace: Option<PathBuf>,
@@ -280,6 +283,9 @@ impl Deployment {
         );
         if let Some(window) = settings.window {
             toml.push_str(&format!("window = {window}\n"));
+        }
+        if let Some(bytes) = settings.compact_journal_after {
+            toml.push_str(&format!("compact_journal_after = {bytes}\n"));
         }
         if settings.live {
             toml.push_str("live = true\n");

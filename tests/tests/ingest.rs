@@ -529,6 +529,9 @@ impl Restart {
         let settings = Settings {
             leaders: 2,
             journal: true,
+            // Compacted many times over a stream this short: a restart
+            // reads a snapshot and what came after it.
+            compact_journal_after: Some(2048),
             ..Settings::default()
         };
         Restart {
@@ -541,6 +544,21 @@ impl Restart {
     }
 }
 
+/// The sensor's journal was compacted: it starts with the stream and a
+/// snapshot of the sensor's state, not with the stream's first records.
+fn assert_compacted(deployment: &Deployment) {
+    use idmesh_sensor::gateway::journal::{parse, Record};
+    let path = deployment.dir.join("state").join("sensor-0.journal");
+    let bytes = std::fs::read(&path).expect("the sensor's journal");
+    let records = parse(&bytes).expect("a whole journal").records;
+    assert!(
+        matches!(records[..], [Record::Stream(_), Record::Snapshot(_), ..]),
+        "{} starts with {:?}",
+        path.display(),
+        records.iter().take(2).collect::<Vec<_>>()
+    );
+}
+
 /// A sensor that journals (`state_dir`), SIGKILLed mid-stream and started
 /// again, resumes where it was — once while it streams its trace file,
 /// once while a producer feeds it on the ingest key (resending each
@@ -551,6 +569,8 @@ impl Restart {
 /// deployment left alone: no event lost, none applied twice. The producer
 /// had every line accepted exactly once (none refused as out of order: the
 /// sensor kept its counter) and the sensor's `ingested` counts each once.
+/// The sensor compacts its journal every 2 kB, so each restart reads a
+/// snapshot of its state and the records after it.
 #[test]
 fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
     let Restart {
@@ -596,6 +616,7 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
     assert_same_marginals(&last, &expected, "after the sensor's restart (trace)");
     assert_eq!(last["watermark"]["sensor-0"], total);
     assert_eq!(reading.applied(), calm_applied, "trace");
+    assert_compacted(&reading);
     drop(reading);
 
     // Killed while a producer feeds it.
@@ -635,6 +656,7 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
     assert_same_marginals(&last, &expected, "after the sensor's restart (ingest)");
     let fed_applied = fed.applied();
     let fed_sensor = sensor_stats(&fed);
+    assert_compacted(&fed);
     drop(fed);
     // A stream fed live cannot start its tracks where its leading moves
     // place them (it has not seen them when it begins), so the reference

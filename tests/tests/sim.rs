@@ -33,6 +33,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.failed_queries += tally.failed_queries;
                 total.crashes += tally.crashes;
                 total.sensor_crashes += tally.sensor_crashes;
+                total.sensor_compactions += tally.sensor_compactions;
                 total.messages += tally.messages;
                 total.dropped += tally.dropped;
                 total.transfers += tally.transfers;
@@ -50,13 +51,14 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes, {} sensor crashes, {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes, {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
         total.failed_queries,
         total.crashes,
         total.sensor_crashes,
+        total.sensor_compactions,
         total.messages,
         total.dropped,
         total.transfers,

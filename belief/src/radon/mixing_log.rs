@@ -5,9 +5,25 @@
 
 use smallvec::SmallVec;
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(from = "Vec<Vec<u32>>", into = "Vec<Vec<u32>>")]
 pub struct MixingLog {
     partners: Vec<SmallVec<[u32; 4]>>,
+}
+
+/// A log as a snapshot writes it: each track's partners.
+impl From<MixingLog> for Vec<Vec<u32>> {
+    fn from(log: MixingLog) -> Self {
+        log.partners.into_iter().map(|p| p.to_vec()).collect()
+    }
+}
+
+impl From<Vec<Vec<u32>>> for MixingLog {
+    fn from(partners: Vec<Vec<u32>>) -> Self {
+        MixingLog {
+            partners: partners.into_iter().map(SmallVec::from_vec).collect(),
+        }
+    }
 }
 
 impl MixingLog {

@@ -53,7 +53,12 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
     let journal = match (&role, topology.state_path()) {
         (Role::Sensor { .. }, Some(dir)) => {
             let path = dir.join(format!("{}.journal", topology.sensor.name));
-            Some(Journal::open(&path, name)?)
+            let (journal, records) = Journal::open(&path, name)?;
+            let journal = match topology.sensor.compact_journal_after {
+                Some(bytes) => journal.compact_after(bytes),
+                None => journal,
+            };
+            Some((journal, records))
         }
         _ => None,
     };

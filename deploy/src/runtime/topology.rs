@@ -47,6 +47,8 @@
 //! window = 2048                  # flow control: route at most this many
 //!                                # items past the slowest leader's progress
 //!                                # (absent = no window)
+//! compact_journal_after = 16777216 # with state_dir: snapshot the sensor's
+//!                                # journal once it grew by this many bytes
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
@@ -238,6 +240,10 @@ pub struct SensorProcess {
     /// Flow control: the sensor routes at most this many seqs past the
     /// slowest leader's progress (None: as fast as the source gives).
     pub window: Option<u64>,
+    /// With `state_dir`: the sensor's journal is compacted to a snapshot
+    /// of its state once it has grown by this many bytes (and by at least
+    /// the snapshot's own size); absent: 16 MiB.
+    pub compact_journal_after: Option<u64>,
     #[serde(default)]
     pub faults: FaultSection,
 }

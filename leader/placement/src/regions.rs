@@ -18,7 +18,7 @@ use idmesh_belief::{event_of, BeliefError, FactoredBelief, Field, Mix, Observe, 
 use idmesh_protocol::trace::Line;
 
 /// The leaders' places and each track's surveilling leader.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Regions {
     /// Where each leader sits (None for all: tracks never change region).
     places: Option<Vec<(f64, f64)>>,

@@ -10,6 +10,7 @@
 //! - [`reader`](self::reader), [`writer`](self::writer) — validating
 //!   [`TraceReader`] and [`TraceWriter`].
 
+pub mod as_json;
 pub mod error;
 pub mod line;
 pub mod parse;

@@ -261,8 +261,9 @@ fn check_assignment(
 
 /// The rules about the sequence of lines: exactly one header, first, and
 /// non-decreasing times. Feed it every line in order.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Validator {
+    #[serde(with = "super::as_json")]
     header: Option<(Header, usize)>,
     last_time: Option<(f64, usize)>,
 }

@@ -597,6 +597,25 @@ async fn bounded<T>(
     }
 }
 
+/// Puts a snapshot of the gateway in its journal's place (every record
+/// has just been appended, so the two agree).
+fn compact(journal: &mut Journal, gateway: &Gateway<Query>) -> Result<(), GatewayError> {
+    let (before, started) = (journal.bytes(), std::time::Instant::now());
+    match gateway.compacted() {
+        Ok(records) => {
+            journal.compact(&records)?;
+            tracing::info!(journal = %journal.path().display(), before, after = journal.bytes(),
+                ms = started.elapsed().as_secs_f64() * 1e3, "sensor journal compacted");
+        }
+        // Not fatal: the journal stays whole, and grows.
+        Err(e) => {
+            tracing::error!(error = %e, "could not snapshot the sensor's state");
+            journal.postpone();
+        }
+    }
+    Ok(())
+}
+
 /// The event keys, the faults injected on them, and the journal.
 struct Wire {
     faults: Faults,
@@ -611,6 +630,9 @@ impl Wire {
         let records = gateway.unjournaled();
         if let Some(journal) = &mut self.journal {
             journal.append(&records)?;
+            if journal.due() {
+                compact(journal, gateway)?;
+            }
         }
         Ok(())
     }

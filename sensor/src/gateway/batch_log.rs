@@ -7,7 +7,7 @@ use idmesh_protocol::wire::leader_to_sensor::Durable;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use std::collections::VecDeque;
 
-#[derive(Debug, Default)]
+#[derive(Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct BatchLog {
     /// The number of the first batch kept.
     first: u64,

@@ -54,6 +54,34 @@ pub enum CutOutcome<Q> {
 /// that distance, at a cost of one batch per this many seqs.
 pub const IDLE_BATCH_EVERY: u64 = 4096;
 
+/// The state a journal's snapshot holds, as written ...
+type SnapshotOf<'a> = (
+    &'a Router,
+    &'a Vec<BatchLog>,
+    &'a Vec<Option<u64>>,
+    &'a Vec<u64>,
+    &'a Vec<bool>,
+    &'a Ingest,
+    bool,
+    &'a SensorStats,
+    u64,
+    u64,
+);
+
+/// … and as read back.
+type Snapshot = (
+    Router,
+    Vec<BatchLog>,
+    Vec<Option<u64>>,
+    Vec<u64>,
+    Vec<bool>,
+    Ingest,
+    bool,
+    SensorStats,
+    u64,
+    u64,
+);
+
 /// A leader's progress as the sensor knows it ([`Progress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 struct Mark {
@@ -246,6 +274,67 @@ impl<Q> Gateway<Q> {
         postcard::to_stdvec(self.router.begin()).unwrap_or_default()
     }
 
+    /// The journal compacted: the stream's record and a snapshot of the
+    /// whole state (what a replay of every record so far rebuilds, less the
+    /// progress marks, which leaders publish again). Take it once every
+    /// record has been taken ([`Gateway::unjournaled`]), and put it in the
+    /// journal's place ([`Journal::compact`](super::journal::Journal::compact)):
+    /// a restart then reads one snapshot instead of the whole stream's
+    /// records.
+    pub fn compacted(&self) -> Result<Vec<Record>, postcard::Error> {
+        let state: SnapshotOf = (
+            &self.router,
+            &self.sent,
+            &self.durable,
+            &self.sent_through,
+            &self.owed,
+            &self.ingest,
+            self.finished,
+            &self.stats,
+            self.traced,
+            self.stdin_read,
+        );
+        Ok(vec![
+            Record::Stream(self.stream()),
+            Record::Snapshot(postcard::to_stdvec(&state)?),
+        ])
+    }
+
+    /// Takes the state a [`Record::Snapshot`] holds.
+    fn restore_snapshot(&mut self, bytes: &[u8]) -> Result<(), String> {
+        let (
+            router,
+            sent,
+            durable,
+            sent_through,
+            owed,
+            ingest,
+            finished,
+            stats,
+            traced,
+            stdin_read,
+        ): Snapshot =
+            postcard::from_bytes(bytes).map_err(|e| format!("the snapshot does not read: {e}"))?;
+        let leaders = self.router.leaders();
+        if [sent.len(), durable.len(), sent_through.len(), owed.len()] != [leaders; 4] {
+            return Err(format!(
+                "the snapshot is of {} leaders, the stream has {leaders}",
+                sent.len()
+            ));
+        }
+        self.router = router;
+        self.sent = sent;
+        self.durable = durable;
+        self.sent_through = sent_through;
+        self.owed = owed;
+        self.ingest = ingest;
+        self.finished = finished;
+        self.stats = stats;
+        self.traced = traced;
+        self.stdin_read = stdin_read;
+        Ok(())
+    }
+
     /// What changed since the last call, in order: append it to the
     /// journal before sending anything.
     pub fn unjournaled(&mut self) -> Vec<Record> {
@@ -273,6 +362,7 @@ impl<Q> Gateway<Q> {
 
     fn replay(&mut self, record: Record, trace: &[Line]) -> Result<(), String> {
         match record {
+            Record::Snapshot(bytes) => self.restore_snapshot(&bytes)?,
             Record::Stream(begin) => {
                 if begin != self.stream() {
                     return Err("the journal is of another stream (its tracks, leaders or \

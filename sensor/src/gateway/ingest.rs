@@ -78,8 +78,10 @@ pub struct Judged {
     pub ack: IngestAck,
 }
 
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Ingest {
     sensor: String,
+    #[serde(with = "idmesh_protocol::trace::as_json")]
     header: Header,
     /// The next counter expected from each producer.
     next: BTreeMap<String, u64>,

@@ -70,6 +70,10 @@ pub enum Record {
     /// A leader's `Unfollow` request that dropped tracks (its bytes): it
     /// changes routing from then on, as a follow does.
     Unfollow(Vec<u8>),
+    /// The whole state the records before it rebuilt (postcard, written
+    /// by [`Gateway::compacted`](super::core::Gateway::compacted)): a
+    /// compacted journal is its stream, this, and what happened since.
+    Snapshot(Vec<u8>),
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -104,7 +108,16 @@ pub struct Journal {
     file: File,
     path: PathBuf,
     _owner: Ownership,
+    /// Bytes on disk now, and right after the last compaction (or at open).
+    length: u64,
+    base: u64,
+    /// Compact once this many bytes came since `base` (and at least as
+    /// many as `base`, so that compacting stays a fraction of appending).
+    compact_after: u64,
 }
+
+/// How much a journal grows before it is compacted, by default.
+pub const COMPACT_AFTER: u64 = 16 << 20;
 
 impl Journal {
     /// Opens (or creates) the journal at `path` and returns the records it
@@ -143,11 +156,15 @@ impl Journal {
             file.write_all(MAGIC).map_err(io)?;
             file.sync_data().map_err(io)?;
         }
+        let length = parsed.whole.max(MAGIC.len() as u64);
         Ok((
             Journal {
                 file,
                 path: path.to_path_buf(),
                 _owner: owner,
+                length,
+                base: length,
+                compact_after: COMPACT_AFTER,
             },
             parsed.records,
         ))
@@ -167,11 +184,70 @@ impl Journal {
             source,
         };
         self.file.write_all(&bytes).map_err(io)?;
-        self.file.sync_data().map_err(io)
+        self.file.sync_data().map_err(io)?;
+        self.length += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Compacts after `bytes` more bytes instead of [`COMPACT_AFTER`].
+    pub fn compact_after(mut self, bytes: u64) -> Self {
+        self.compact_after = bytes.max(1);
+        self
+    }
+
+    /// Whether it has grown enough since its last compaction to be
+    /// compacted now.
+    pub fn due(&self) -> bool {
+        self.length - self.base.min(self.length) >= self.compact_after.max(self.base)
+    }
+
+    /// Waits another [`Journal::compact_after`] before it is due again (a
+    /// snapshot could not be taken: the journal stays whole).
+    pub fn postpone(&mut self) {
+        self.base = self.length;
+    }
+
+    /// Bytes on disk.
+    pub fn bytes(&self) -> u64 {
+        self.length
     }
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Replaces the journal by `records` (a compacted journal: the
+    /// stream and a snapshot), atomically: they are written to a file
+    /// beside it, fsynced, and renamed over it, so a kill at any point
+    /// leaves either the old journal or the new one whole. Appends go to
+    /// the new one from then on.
+    pub fn compact(&mut self, records: &[Record]) -> Result<(), JournalError> {
+        let io = |source| JournalError::Io {
+            path: self.path.display().to_string(),
+            source,
+        };
+        let mut bytes = MAGIC.to_vec();
+        for record in records {
+            frame(record, &mut bytes);
+        }
+        let mut name = self.path.file_name().unwrap_or_default().to_os_string();
+        name.push(".compacting");
+        let temporary = self.path.with_file_name(name);
+        let mut file = File::create(&temporary).map_err(io)?;
+        file.write_all(&bytes).map_err(io)?;
+        file.sync_all().map_err(io)?;
+        std::fs::rename(&temporary, &self.path).map_err(io)?;
+        // The rename itself is durable once the directory is.
+        if let Some(dir) = self.path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            File::open(dir).and_then(|d| d.sync_all()).map_err(io)?;
+        }
+        self.file = OpenOptions::new()
+            .append(true)
+            .open(&self.path)
+            .map_err(io)?;
+        self.length = bytes.len() as u64;
+        self.base = self.length;
+        Ok(())
     }
 }
 

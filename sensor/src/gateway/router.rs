@@ -20,9 +20,10 @@ use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
 use idmesh_protocol::Header;
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LeaderPlace {
     pub name: String,
     /// Where the leader sits; tracks belong to the nearest leader. None for
@@ -30,7 +31,7 @@ pub struct LeaderPlace {
     pub at: Option<(f64, f64)>,
 }
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RouterConfig {
     pub sensor: String,
     pub leaders: Vec<LeaderPlace>,
@@ -72,9 +73,12 @@ pub enum RouterError {
     Begin(String),
 }
 
+/// Serde: the gateway's snapshot holds it whole.
+#[derive(Serialize, Deserialize)]
 pub struct Router {
     config: RouterConfig,
     /// The stream's header: what ingested lines are checked against.
+    #[serde(with = "idmesh_protocol::trace::as_json")]
     header: Header,
     begin: Begin,
     interests: Vec<Interest>,

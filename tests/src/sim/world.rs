@@ -218,6 +218,10 @@ pub struct Tally {
     pub crashes: u64,
     /// Sensor kills, each restarted from its journal.
     pub sensor_crashes: u64,
+    /// Of those, the kills whose journal was compacted first (to the
+    /// stream and a snapshot; a later kill's journal then holds that
+    /// snapshot and the records after it).
+    pub sensor_compactions: u64,
     pub messages: u64,
     pub dropped: u64,
     /// Summed over the leaders at the end: transfers received, follow
@@ -752,10 +756,18 @@ impl World {
     /// journal must be where the old one was — the same seq, events and
     /// trace position (the producer's counter is checked by its next
     /// request, which must be taken whole). Cuts it held for a later point
-    /// die with it: their queries time out.
+    /// die with it: their queries time out. Half the time the journal is
+    /// compacted first, as the process does once it has grown.
     fn sensor_crash(&mut self) -> Result<(), Violation> {
         self.tally.sensor_crashes += 1;
         self.journal.extend(self.gateway.unjournaled());
+        if self.rng.gen_bool(0.5) {
+            self.tally.sensor_compactions += 1;
+            self.journal = self
+                .gateway
+                .compacted()
+                .map_err(|e| Violation::new(format!("the sensor cannot snapshot: {e}")))?;
+        }
         let router = Router::new(self.scenario.router(), &self.scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
         let mut restored = self.scenario.gateway(router);

@@ -109,8 +109,8 @@ impl CouplingTree {
                 None => new.push(p),
             }
         }
-        for leaf in 0..self.leaves.len() {
-            if kept[leaf] {
+        for (leaf, kept) in kept.into_iter().enumerate() {
+            if kept {
                 continue;
             }
             if let Some(old) = self.leaves[leaf].take() {
