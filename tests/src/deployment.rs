@@ -61,6 +61,8 @@ pub struct Secured {
     pub access_control: bool,
     /// The one client the topology lists, and the one queries are made as.
     pub client: String,
+    /// The producers it lists (they may feed the sensor's ingest key).
+    pub producers: Vec<String>,
 }
 
 pub struct Deployment {
@@ -322,10 +324,11 @@ impl Deployment {
         }
         if let Some(secured) = &settings.security {
             toml.push_str(&format!(
-                "\n[security]\ncerts = {:?}\naccess_control = {}\nclients = [{:?}]\n",
+                "\n[security]\ncerts = {:?}\naccess_control = {}\nclients = [{:?}]\nproducers = {:?}\n",
                 secured.certs.display().to_string(),
                 secured.access_control,
-                secured.client
+                secured.client,
+                secured.producers
             ));
         }
         let config = dir.join("topology.toml");

@@ -10,7 +10,9 @@
 //! and asks every leader for its counters. Without access control (TLS
 //! only) the leader applies that batch and answers; with it, nothing of the
 //! intruder's is heard, the legitimate client still gets the centralized
-//! engine's answer, and a certificate from another CA cannot connect.
+//! engine's answer, and a certificate from another CA cannot connect. A
+//! producer listed in `[security] producers` (`camera-7`) feeds a live
+//! sensor; the client and the intruder cannot.
 
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
@@ -30,6 +32,7 @@ use zenoh::Session;
 const LEADERS: usize = 2;
 const CLIENT: &str = "operator";
 const INTRUDER: &str = "intruder";
+const PRODUCER: &str = "camera-7";
 
 /// A CA named `ca` and certificates it signs for `names`, as files in
 /// `dir`: `ca.pem`, `<name>.pem`, `<name>.key`. Every certificate serves
@@ -59,11 +62,16 @@ fn certificates(dir: &Path, ca: &str, names: &[String]) -> PathBuf {
     dir.to_path_buf()
 }
 
-/// Everyone the good CA signs for: the processes, the client, the intruder.
+/// Everyone the good CA signs for: the processes, the client, the
+/// producer, the intruder.
 fn names() -> Vec<String> {
     let mut names = vec!["coordinator".to_string(), "sensor-0".to_string()];
     names.extend((0..LEADERS).map(|i| format!("leader-{i}")));
-    names.extend([CLIENT.to_string(), INTRUDER.to_string()]);
+    names.extend([
+        CLIENT.to_string(),
+        PRODUCER.to_string(),
+        INTRUDER.to_string(),
+    ]);
     names
 }
 
@@ -84,6 +92,7 @@ fn deployment(name: &str, access_control: bool) -> (Deployment, PathBuf, Vec<f64
                 certs: certs.clone(),
                 access_control,
                 client: CLIENT.into(),
+                producers: Vec::new(),
             }),
             ..Settings::default()
         },
@@ -286,6 +295,7 @@ fn a_long_secured_stream_finishes_every_time() {
                     certs: certs.clone(),
                     access_control: true,
                     client: CLIENT.into(),
+                    producers: Vec::new(),
                 }),
                 ..Settings::default()
             },
@@ -485,4 +495,124 @@ fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
     // A leader key is not a question of the query API, secured or not.
     let (status, _) = http_get(&gateway.at(&format!("{prefix}/leader/leader-0/stats")));
     assert_eq!(status, 404);
+}
+
+/// The events of `trace` (every line but the header and truth lines).
+fn events_of(trace: &Path) -> Vec<String> {
+    std::fs::read_to_string(trace)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            let v: Value = serde_json::from_str(l).unwrap();
+            matches!(v["kind"].as_str(), Some("mix" | "observe" | "move"))
+        })
+        .map(str::to_owned)
+        .collect()
+}
+
+/// `lines` sent to the sensor's ingest key as producer `producer` from
+/// `counter`: the acknowledgement (JSON), the error reply, or None when
+/// no reply came within 3 s (nobody the session may ask serves the key).
+async fn ingest(
+    session: &Session,
+    prefix: &str,
+    producer: &str,
+    counter: usize,
+    lines: &[String],
+) -> Option<Result<Value, String>> {
+    let selector = format!("{prefix}/sensor/sensor-0/ingest?producer={producer};counter={counter}");
+    let replies = session
+        .get(selector)
+        .payload(lines.join("\n"))
+        .timeout(Duration::from_secs(3))
+        .await
+        .expect("the get is sent");
+    let reply = tokio::time::timeout(Duration::from_secs(4), replies.recv_async())
+        .await
+        .ok()?
+        .ok()?;
+    Some(match reply.result() {
+        Ok(sample) => Ok(serde_json::from_slice(&sample.payload().to_bytes()).expect("JSON")),
+        Err(e) => Err(e.payload().try_to_string().unwrap_or_default().into_owned()),
+    })
+}
+
+/// Under access control a producer listed in `[security] producers` feeds
+/// a live sensor over mutual TLS and the answer is the centralized
+/// engine's; the listed client and a certified intruder, sending the same
+/// lines to the same key, get no reply and nothing of theirs is taken.
+#[test]
+fn with_access_control_only_listed_producers_feed_the_sensor() {
+    let dir = std::env::temp_dir().join(format!("idmesh-security-feed-{}", std::process::id()));
+    let certs = certificates(&dir.join("certs"), "idmesh test CA", &names());
+    let trace = crowd(&dir, 12, 4, 40.0, 6);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let expected = floats(&central["final_p_red"]);
+    let header = dir.join("header.jsonl");
+    let text = std::fs::read_to_string(&trace).unwrap();
+    std::fs::write(&header, format!("{}\n", text.lines().next().unwrap())).unwrap();
+    let deployment = Deployment::start(
+        "aclfeed",
+        &trace,
+        &Settings {
+            leaders: LEADERS,
+            live: true,
+            sensor_trace: Some(header),
+            security: Some(Secured {
+                certs: certs.clone(),
+                access_control: true,
+                client: CLIENT.into(),
+                producers: vec![PRODUCER.into()],
+            }),
+            ..Settings::default()
+        },
+    );
+    deployment.first_answer(Duration::from_secs(60));
+    let events = events_of(&trace);
+    let prefix = deployment.prefix.clone();
+    let sensor = vec![endpoint(&deployment, "sensor-0")];
+    within(Duration::from_secs(120), async {
+        for stranger in [CLIENT, INTRUDER] {
+            let session = session(&certs, stranger, true, &sensor)
+                .await
+                .expect("a CA-signed certificate connects");
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let reply = ingest(&session, &prefix, stranger, 0, &events[..10]).await;
+            assert!(reply.is_none(), "{stranger} fed the sensor: {reply:?}");
+            let _ = session.close().await;
+        }
+        let producer = session(&certs, PRODUCER, true, &sensor)
+            .await
+            .expect("the producer connects");
+        let mut counter = 0;
+        for chunk in events.chunks(50) {
+            let mut reply = None;
+            // The session may take a moment to see the sensor's queryable.
+            for _ in 0..20 {
+                reply = ingest(&producer, &prefix, PRODUCER, counter, chunk).await;
+                if reply.is_some() {
+                    break;
+                }
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+            let ack = reply
+                .expect("the sensor acknowledges the listed producer")
+                .expect("lines accepted");
+            assert_eq!(ack["next"], (counter + chunk.len()) as u64, "{ack}");
+            counter += chunk.len();
+        }
+        let _ = producer.close().await;
+    });
+    let total = events.len() as u64;
+    let last = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+        a["watermark"]["sensor-0"].as_u64() == Some(total)
+    });
+    assert_same_marginals(&last, &expected, "fed by the listed producer");
+    let stats = deployment.query(&["stats"]).expect("stats answer");
+    let sensor_stats = &stats[0]["sensors"][0];
+    assert_eq!(sensor_stats["ingested"], total, "{sensor_stats}");
+    assert_eq!(
+        sensor_stats["producers"], 1,
+        "only the listed producer: {sensor_stats}"
+    );
 }

@@ -188,14 +188,22 @@ pub fn run(runtime: &tokio::runtime::Runtime, crowds: &Crowds, dir: &Path) -> Re
                 },
             ));
         }
-        let local = rows
-            .iter()
-            .rev()
-            .find(|(_, r)| r.kind == Kind::Factored)
-            .map(|(_, r)| r.central_error)
-            .context("the factored run of this crowd")?;
+        let central_of = |kind: Kind| {
+            rows.iter()
+                .rev()
+                .find(|(_, r)| r.kind == kind)
+                .map(|(_, r)| r.central_error)
+                .with_context(|| format!("the {} run of this crowd", kind.name()))
+        };
+        let local = central_of(Kind::Factored)?;
         let mut regional_errors = Vec::new();
         for leaders in REGIONAL_LEADERS {
+            // At the deployment's own leader count, the regional run above
+            // already replayed the same placement.
+            if leaders == LEADERS {
+                regional_errors.push(central_of(Kind::Regional)?);
+                continue;
+            }
             let topology = placed_topology(leaders, crowd.n, &folder, &trace)?;
             regional_errors.push(written.tracking_error(&regional(&written, &trace, &topology)?)?);
         }

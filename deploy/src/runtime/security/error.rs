@@ -18,8 +18,8 @@ pub enum SecurityError {
     Endpoint { endpoint: String },
     #[error("TLS needs --ca, --cert and --key together; {missing} is missing")]
     Incomplete { missing: &'static str },
-    #[error("[security] clients: {name:?} is also a process of the topology; give clients names of their own")]
+    #[error("[security] clients, producers: {name:?} is also a process of the topology; give clients and producers names of their own")]
     ClientIsMember { name: String },
-    #[error("[security] clients: an empty name")]
+    #[error("[security] clients, producers: an empty name")]
     EmptyClient,
 }

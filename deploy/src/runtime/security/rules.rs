@@ -28,6 +28,8 @@
 //! | coordinator | sensor | query | `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions` |
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
+//! | producers | sensor | query | `P/sensor/S/ingest` |
+//! | sensor | producers | declare queryable, reply | `P/sensor/S/ingest` |
 //! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) and its home token `P/alive/home/N` |
 //! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
@@ -64,6 +66,11 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
         .security
         .as_ref()
         .map(|s| s.clients.clone())
+        .unwrap_or_default();
+    let producers: Vec<String> = topology
+        .security
+        .as_ref()
+        .map(|s| s.producers.clone())
         .unwrap_or_default();
     let grant = |what: &str, from: &[String], to: &[String], messages, keys: Vec<String>| Grant {
         what: what.to_string(),
@@ -197,6 +204,17 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             SERVE,
             vec![format!("{p}/query/**")],
         ));
+    }
+    if !producers.is_empty() {
+        let ingest = vec![keys.sensor_ingest(&topology.sensor.name)];
+        grants.push(grant(
+            "feed",
+            &producers,
+            &sensor,
+            &["query"],
+            ingest.clone(),
+        ));
+        grants.push(grant("acknowledge", &sensor, &producers, SERVE, ingest));
     }
     // What each process serves, under its own name.
     for m in topology.members() {
@@ -339,6 +357,7 @@ listen = "tcp/127.0.0.1:4"
 [security]
 certs = "certs"
 clients = ["operator"]
+producers = ["camera"]
 "#,
         )
         .unwrap();
@@ -521,6 +540,64 @@ clients = ["operator"]
         ));
         assert!(allowed(&s, "ingress", "c", "query", "p/sensor/*/cut"));
         assert!(allowed(&s, "egress", "l0", "put", "p/leader/l0/events"));
+    }
+
+    #[test]
+    fn producers_may_only_feed_the_sensor() {
+        let t = topology();
+        let s = access_control(&t, "s");
+        assert!(allowed(
+            &s,
+            "ingress",
+            "camera",
+            "query",
+            "p/sensor/s/ingest"
+        ));
+        assert!(allowed(
+            &s,
+            "egress",
+            "camera",
+            "reply",
+            "p/sensor/s/ingest"
+        ));
+        assert!(!allowed(&s, "ingress", "camera", "query", "p/sensor/s/cut"));
+        assert!(!allowed(
+            &s,
+            "ingress",
+            "camera",
+            "query",
+            "p/sensor/*/follow"
+        ));
+        assert!(!allowed(
+            &s,
+            "ingress",
+            "operator",
+            "query",
+            "p/sensor/s/ingest"
+        ));
+        let c = access_control(&t, "c");
+        assert!(!allowed(
+            &c,
+            "ingress",
+            "camera",
+            "query",
+            "p/query/marginals"
+        ));
+        let l0 = access_control(&t, "l0");
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "camera",
+            "put",
+            "p/leader/l0/events"
+        ));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "camera",
+            "query",
+            "p/leader/l0/partial"
+        ));
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //!                          # <name>.pem + <name>.key for every process
 //! access_control = true    # generated Zenoh access rules (default true)
 //! clients = ["operator"]   # certificate common names that may query
+//! producers = ["camera-7"] # … that may feed the sensor (its ingest key)
 //! verify_names = true      # a listener's certificate must name its host
 //! ```
 //!
@@ -31,6 +32,10 @@ pub struct SecuritySection {
     /// Common names of the client certificates that may ask `P/query/**`.
     #[serde(default)]
     pub clients: Vec<String>,
+    /// Common names of the producers' certificates: they may send trace
+    /// lines to the sensor (`P/sensor/<name>/ingest`), and nothing else.
+    #[serde(default)]
+    pub producers: Vec<String>,
     /// Check the host names in a listener's certificate when connecting.
     #[serde(default = "yes")]
     pub verify_names: bool,
@@ -53,16 +58,17 @@ impl SecuritySection {
         )
     }
 
-    /// Client names must be names of their own: a client named like a
-    /// process would be let do what the process does.
+    /// Client and producer names must be names of their own: one named
+    /// like a process would be let do what the process does.
     pub fn check<'a>(
         &self,
         mut members: impl Iterator<Item = &'a str>,
     ) -> Result<(), SecurityError> {
-        if self.clients.iter().any(|c| c.trim().is_empty()) {
+        let outsiders = || self.clients.iter().chain(&self.producers);
+        if outsiders().any(|c| c.trim().is_empty()) {
             return Err(SecurityError::EmptyClient);
         }
-        match members.find(|m| self.clients.iter().any(|c| c == m)) {
+        match members.find(|m| outsiders().any(|c| c == m)) {
             Some(name) => Err(SecurityError::ClientIsMember {
                 name: name.to_string(),
             }),
