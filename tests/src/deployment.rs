@@ -603,6 +603,33 @@ pub fn undisturbed_applied(
     calm.applied()
 }
 
+/// The events of a trace (mix, observe, move, identify lines), as text:
+/// what a producer feeds a live sensor.
+pub fn trace_events(trace: &Path) -> Vec<String> {
+    std::fs::read_to_string(trace)
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            matches!(
+                v["kind"].as_str(),
+                Some("mix" | "observe" | "move" | "identify")
+            )
+        })
+        .map(str::to_owned)
+        .collect()
+}
+
+/// A trace of the header of `trace` alone, written into `dir`: a live
+/// sensor's field.
+pub fn header_only(trace: &Path, dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let header = text.lines().next().unwrap();
+    let path = dir.join("header.jsonl");
+    std::fs::write(&path, format!("{header}\n")).unwrap();
+    path
+}
+
 /// `idmesh simulate` a crowd into `dir`.
 pub fn crowd(dir: &Path, targets: usize, red: usize, duration: f64, seed: u64) -> PathBuf {
     simulate_crowd(dir, targets, red, duration, seed, false)

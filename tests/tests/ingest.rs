@@ -9,38 +9,14 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
-    crowd, replay_lines, replay_summary, truth_lines, undisturbed_applied, Deployment, Settings,
+    crowd, header_only, replay_lines, replay_summary, trace_events, truth_lines,
+    undisturbed_applied, Deployment, Settings,
 };
 use serde_json::Value;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
-
-/// The events of a trace (mix, observe, move, identify lines), as text.
-fn events(trace: &Path) -> Vec<String> {
-    std::fs::read_to_string(trace)
-        .unwrap()
-        .lines()
-        .filter(|l| {
-            let v: Value = serde_json::from_str(l).unwrap();
-            matches!(
-                v["kind"].as_str(),
-                Some("mix" | "observe" | "move" | "identify")
-            )
-        })
-        .map(str::to_owned)
-        .collect()
-}
-
-/// A trace of the header of `trace` alone: a live sensor's field.
-fn header_only(trace: &Path, dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(trace).unwrap();
-    let header = text.lines().next().unwrap();
-    let path = dir.join("header.jsonl");
-    std::fs::write(&path, format!("{header}\n")).unwrap();
-    path
-}
 
 /// The answer once the sensor's watermark reaches `events`.
 fn answer_at(deployment: &Deployment, events: u64) -> Value {
@@ -89,7 +65,7 @@ fn a_trace_piped_into_the_sensor_gives_the_answer_of_the_trace_file() {
     drop(pipe);
     let answer = deployment.final_marginals(Duration::from_secs(60));
     assert_same_marginals(&answer, &floats(&central["final_p_red"]), "piped trace");
-    let events = events(&trace).len() as u64;
+    let events = trace_events(&trace).len() as u64;
     assert_eq!(answer["watermark"]["sensor-0"], events);
     let sensor = sensor_stats(&deployment);
     assert_eq!(sensor["ingested"], events, "{sensor}");
@@ -144,7 +120,7 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
             String::from_utf8_lossy(&output.stderr)
         );
         let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
-        let events = events(&trace).len() as u64;
+        let events = trace_events(&trace).len() as u64;
         assert_eq!(sent["accepted"], events, "{sent}");
         assert_eq!(
             (&sent["duplicates"], sent["errors"].as_array().map(Vec::len)),
@@ -166,7 +142,7 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
             &format!("truth point {i}"),
         );
     }
-    let events = events(&trace).len() as u64;
+    let events = trace_events(&trace).len() as u64;
     let answer = answer_at(&deployment, events);
     assert_same_marginals(&answer, &floats(&central["final_p_red"]), "ingested");
     let sensor = sensor_stats(&deployment);
@@ -201,7 +177,7 @@ fn what_a_producer_gets_wrong_is_refused_or_deduplicated_counted_and_changes_not
     };
     let deployment = Deployment::start_each("ingestbad", &trace, &settings);
     deployment.first_answer(Duration::from_secs(30));
-    let history = events(&trace);
+    let history = trace_events(&trace);
     let total = history.len() as u64;
     let half = history.len() / 2;
     let runtime = tokio::runtime::Runtime::new().unwrap();
@@ -447,7 +423,7 @@ fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
     };
     let mut deployment = Deployment::start_each("ingestdown", &trace, &settings);
     deployment.first_answer(Duration::from_secs(30));
-    let history = events(&trace);
+    let history = trace_events(&trace);
     let half = history.len() / 2;
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let ack = runtime.block_on(async {
@@ -535,7 +511,7 @@ impl Restart {
             ..Settings::default()
         };
         Restart {
-            history: events(&trace),
+            history: trace_events(&trace),
             dir,
             trace,
             expected,

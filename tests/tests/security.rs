@@ -17,7 +17,9 @@
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
 use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Secured, Settings};
+use idmesh_tests::deployment::{
+    crowd, header_only, replay_summary, trace_events, Deployment, Secured, Settings,
+};
 use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, KeyPair,
     KeyUsagePurpose,
@@ -497,19 +499,6 @@ fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
     assert_eq!(status, 404);
 }
 
-/// The events of `trace` (every line but the header and truth lines).
-fn events_of(trace: &Path) -> Vec<String> {
-    std::fs::read_to_string(trace)
-        .unwrap()
-        .lines()
-        .filter(|l| {
-            let v: Value = serde_json::from_str(l).unwrap();
-            matches!(v["kind"].as_str(), Some("mix" | "observe" | "move"))
-        })
-        .map(str::to_owned)
-        .collect()
-}
-
 /// `lines` sent to the sensor's ingest key as producer `producer` from
 /// `counter`: the acknowledgement (JSON), the error reply, or None when
 /// no reply came within 3 s (nobody the session may ask serves the key).
@@ -548,9 +537,7 @@ fn with_access_control_only_listed_producers_feed_the_sensor() {
     let trace = crowd(&dir, 12, 4, 40.0, 6);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
-    let header = dir.join("header.jsonl");
-    let text = std::fs::read_to_string(&trace).unwrap();
-    std::fs::write(&header, format!("{}\n", text.lines().next().unwrap())).unwrap();
+    let header = header_only(&trace, &dir);
     let deployment = Deployment::start(
         "aclfeed",
         &trace,
@@ -568,7 +555,7 @@ fn with_access_control_only_listed_producers_feed_the_sensor() {
         },
     );
     deployment.first_answer(Duration::from_secs(60));
-    let events = events_of(&trace);
+    let events = trace_events(&trace);
     let prefix = deployment.prefix.clone();
     let sensor = vec![endpoint(&deployment, "sensor-0")];
     within(Duration::from_secs(120), async {
