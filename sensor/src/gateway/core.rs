@@ -33,6 +33,7 @@ use idmesh_protocol::wire::leader_to_sensor::{
 };
 use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
+use serde::{Deserialize, Serialize};
 
 use idmesh_protocol::wire::{decode, Valid, VERSION};
 
@@ -54,34 +55,6 @@ pub enum CutOutcome<Q> {
 /// that distance, at a cost of one batch per this many seqs.
 pub const IDLE_BATCH_EVERY: u64 = 4096;
 
-/// The state a journal's snapshot holds, as written ...
-type SnapshotOf<'a> = (
-    &'a Router,
-    &'a Vec<BatchLog>,
-    &'a Vec<Option<u64>>,
-    &'a Vec<u64>,
-    &'a Vec<bool>,
-    &'a Ingest,
-    bool,
-    &'a SensorStats,
-    u64,
-    u64,
-);
-
-/// … and as read back.
-type Snapshot = (
-    Router,
-    Vec<BatchLog>,
-    Vec<Option<u64>>,
-    Vec<u64>,
-    Vec<bool>,
-    Ingest,
-    bool,
-    SensorStats,
-    u64,
-    u64,
-);
-
 /// A leader's progress as the sensor knows it ([`Progress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 struct Mark {
@@ -91,15 +64,34 @@ struct Mark {
 
 pub struct Gateway<Q> {
     name: String,
+    /// Everything the journal rebuilds (and a snapshot holds).
+    state: Journaled,
+    /// How far each leader has got (its progress marks).
+    progress: Vec<Option<Mark>>,
+    /// The marks [`Gateway::stalled`] saw last.
+    stall_checked: Vec<Option<Mark>>,
+    /// An idle leader is sent a batch this many seqs past its last one.
+    idle_every: u64,
+    /// Flow control: route at most this many seqs past the slowest
+    /// leader's progress (None: as fast as the source gives).
+    window: Option<u64>,
+    cuts: Cuts<Q>,
+    /// Changes of state are recorded for the journal.
+    journaling: bool,
+    /// Recorded, not yet taken by the driver.
+    records: Vec<Record>,
+}
+
+/// The part of a gateway's state that its journal's records rebuild, and
+/// so what a compacted journal's snapshot holds whole. Progress marks are
+/// not in it: leaders publish them again.
+#[derive(Serialize, Deserialize)]
+struct Journaled {
     router: Router,
     /// The batches sent to each leader that it may still ask for.
     sent: Vec<BatchLog>,
     /// The last durable position each leader published.
     durable: Vec<Option<u64>>,
-    /// How far each leader has got (its progress marks).
-    progress: Vec<Option<Mark>>,
-    /// The marks [`Gateway::stalled`] saw last.
-    stall_checked: Vec<Option<Mark>>,
     /// The `through` of the last batch sent to each leader.
     sent_through: Vec<u64>,
     /// Each leader is owed a batch at the next flush even with nothing
@@ -107,12 +99,6 @@ pub struct Gateway<Q> {
     /// a batch to say the stream got that far; or it was not yet told the
     /// stream finished).
     owed: Vec<bool>,
-    /// An idle leader is sent a batch this many seqs past its last one.
-    idle_every: u64,
-    /// Flow control: route at most this many seqs past the slowest
-    /// leader's progress (None: as fast as the source gives).
-    window: Option<u64>,
-    cuts: Cuts<Q>,
     /// Which producers' lines enter the order.
     ingest: Ingest,
     /// The whole source has been read.
@@ -120,10 +106,6 @@ pub struct Gateway<Q> {
     /// Requests refused: a bad one is answered with why and changes
     /// nothing.
     stats: SensorStats,
-    /// Changes of state are recorded for the journal.
-    journaling: bool,
-    /// Recorded, not yet taken by the driver.
-    records: Vec<Record>,
     /// Lines of the trace file routed so far.
     traced: u64,
     /// The number of the last line of standard input read.
@@ -147,26 +129,28 @@ impl<Q> Gateway<Q> {
         let ingest = Ingest::new(name, router.header());
         Gateway {
             name: name.to_string(),
-            router,
-            sent: (0..leaders).map(|_| BatchLog::default()).collect(),
-            durable: vec![None; leaders],
+            state: Journaled {
+                router,
+                sent: (0..leaders).map(|_| BatchLog::default()).collect(),
+                durable: vec![None; leaders],
+                sent_through: vec![0; leaders],
+                owed: vec![false; leaders],
+                ingest,
+                finished,
+                stats: SensorStats {
+                    sensor: name.to_string(),
+                    ..SensorStats::default()
+                },
+                traced: 0,
+                stdin_read: 0,
+            },
             progress: vec![None; leaders],
             stall_checked: vec![None; leaders],
-            sent_through: vec![0; leaders],
-            owed: vec![false; leaders],
             idle_every: IDLE_BATCH_EVERY,
             window: None,
             cuts: Cuts::default(),
-            ingest,
-            finished,
-            stats: SensorStats {
-                sensor: name.to_string(),
-                ..SensorStats::default()
-            },
             journaling: false,
             records: Vec::new(),
-            traced: 0,
-            stdin_read: 0,
         }
     }
 
@@ -192,13 +176,17 @@ impl<Q> Gateway<Q> {
     /// marks open it again. A restored gateway starts from no progress at
     /// all, and leaders publish theirs at every sweep.
     pub fn room(&self) -> Option<u64> {
-        let head = self.router.seq();
+        let head = self.state.router.seq();
         // A leader that applied everything it was sent, with nothing
         // queued for it, is not behind: items for others are not sent to
         // it, so it is as far as the stream.
         let slowest = (0..self.progress.len())
             .map(|i| match self.progress[i] {
-                Some(m) if m.through >= self.sent_through[i] && !self.router.queued(i) => head,
+                Some(m)
+                    if m.through >= self.state.sent_through[i] && !self.state.router.queued(i) =>
+                {
+                    head
+                }
                 Some(m) => m.through,
                 None => 0,
             })
@@ -225,16 +213,17 @@ impl<Q> Gateway<Q> {
     /// what is in flight is not sent it twice.
     pub fn stalled(&mut self) -> Vec<(usize, Batch)> {
         let mut again = Vec::new();
-        for i in 0..self.sent.len() {
+        for i in 0..self.state.sent.len() {
             let mark = self.progress[i];
             let unchanged = mark.is_some() && self.stall_checked[i] == mark;
             self.stall_checked[i] = mark;
-            let Some(mark) = mark.filter(|m| unchanged && m.batch < self.sent[i].next_number())
+            let Some(mark) =
+                mark.filter(|m| unchanged && m.batch < self.state.sent[i].next_number())
             else {
                 continue;
             };
-            let name = &self.router.begin().leaders[i];
-            if let Ok(batches) = self.sent[i].from(name, mark.batch) {
+            let name = &self.state.router.begin().leaders[i];
+            if let Ok(batches) = self.state.sent[i].from(name, mark.batch) {
                 again.extend(batches.into_iter().map(|b| (i, b)));
             }
         }
@@ -243,7 +232,7 @@ impl<Q> Gateway<Q> {
 
     /// The stream found its window full and waits (counted in the stats).
     pub fn hold(&mut self) {
-        self.stats.window_holds += 1;
+        self.state.stats.window_holds += 1;
     }
 
     /// A leader published how far it has got (`Progress` bytes).
@@ -271,7 +260,7 @@ impl<Q> Gateway<Q> {
 
     /// The stream's `Begin`, as its journal names it.
     fn stream(&self) -> Vec<u8> {
-        postcard::to_stdvec(self.router.begin()).unwrap_or_default()
+        postcard::to_stdvec(self.state.router.begin()).unwrap_or_default()
     }
 
     /// The journal compacted: the stream's record and a snapshot of the
@@ -282,56 +271,30 @@ impl<Q> Gateway<Q> {
     /// a restart then reads one snapshot instead of the whole stream's
     /// records.
     pub fn compacted(&self) -> Result<Vec<Record>, postcard::Error> {
-        let state: SnapshotOf = (
-            &self.router,
-            &self.sent,
-            &self.durable,
-            &self.sent_through,
-            &self.owed,
-            &self.ingest,
-            self.finished,
-            &self.stats,
-            self.traced,
-            self.stdin_read,
-        );
         Ok(vec![
             Record::Stream(self.stream()),
-            Record::Snapshot(postcard::to_stdvec(&state)?),
+            Record::Snapshot(postcard::to_stdvec(&self.state)?),
         ])
     }
 
     /// Takes the state a [`Record::Snapshot`] holds.
     fn restore_snapshot(&mut self, bytes: &[u8]) -> Result<(), String> {
-        let (
-            router,
-            sent,
-            durable,
-            sent_through,
-            owed,
-            ingest,
-            finished,
-            stats,
-            traced,
-            stdin_read,
-        ): Snapshot =
+        let state: Journaled =
             postcard::from_bytes(bytes).map_err(|e| format!("the snapshot does not read: {e}"))?;
-        let leaders = self.router.leaders();
-        if [sent.len(), durable.len(), sent_through.len(), owed.len()] != [leaders; 4] {
+        let leaders = self.state.router.leaders();
+        let lengths = [
+            state.sent.len(),
+            state.durable.len(),
+            state.sent_through.len(),
+            state.owed.len(),
+        ];
+        if lengths != [leaders; 4] {
             return Err(format!(
                 "the snapshot is of {} leaders, the stream has {leaders}",
-                sent.len()
+                state.sent.len()
             ));
         }
-        self.router = router;
-        self.sent = sent;
-        self.durable = durable;
-        self.sent_through = sent_through;
-        self.owed = owed;
-        self.ingest = ingest;
-        self.finished = finished;
-        self.stats = stats;
-        self.traced = traced;
-        self.stdin_read = stdin_read;
+        self.state = state;
         Ok(())
     }
 
@@ -344,7 +307,7 @@ impl<Q> Gateway<Q> {
     /// Lines of the trace file routed so far: a restored gateway's trace
     /// goes on from there.
     pub fn traced(&self) -> u64 {
-        self.traced
+        self.state.traced
     }
 
     /// Rebuilds the state `records` (a journal, in order) describe, on a
@@ -371,18 +334,18 @@ impl<Q> Gateway<Q> {
                 }
             }
             Record::Trace { count, cuts } => {
-                let from = self.traced as usize;
+                let from = self.state.traced as usize;
                 let lines = usize::try_from(count)
                     .ok()
                     .and_then(|count| trace.get(from..from.checked_add(count)?))
                     .ok_or_else(|| {
                         format!(
                             "the journal routed {} lines of the trace, which has {}",
-                            self.traced.saturating_add(count),
+                            self.state.traced.saturating_add(count),
                             trace.len()
                         )
                     })?;
-                self.traced += count;
+                self.state.traced += count;
                 self.replay_lines(lines, &cuts);
             }
             Record::Offer {
@@ -397,19 +360,24 @@ impl<Q> Gateway<Q> {
                     payload: &payload,
                 };
                 let judged = self
+                    .state
                     .ingest
-                    .offer(offer, &mut self.stats)
+                    .offer(offer, &mut self.state.stats)
                     .map_err(|e| format!("an ingest request it accepted is refused now: {e}"))?;
                 self.replay_lines(&judged.accepted, &cuts);
             }
             Record::Read { number, text, cuts } => {
-                self.stdin_read = number;
-                if let Ok(Some(line)) = self.ingest.read(number as usize, &text, &mut self.stats) {
+                self.state.stdin_read = number;
+                if let Ok(Some(line)) =
+                    self.state
+                        .ingest
+                        .read(number as usize, &text, &mut self.state.stats)
+                {
                     self.replay_lines(&[line], &cuts);
                 }
             }
             Record::Cut(wanted) => {
-                self.router.cut(wanted);
+                self.state.router.cut(wanted);
             }
             Record::Follow(bytes) => {
                 self.follow(&bytes)
@@ -432,9 +400,9 @@ impl<Q> Gateway<Q> {
     /// Routes `lines` again, placing each cut after the line it followed.
     fn replay_lines(&mut self, lines: &[Line], cuts: &[(u32, Wanted)]) {
         for (i, line) in lines.iter().enumerate() {
-            self.router.line(line);
+            self.state.router.line(line);
             for (_, wanted) in cuts.iter().filter(|(after, _)| *after as usize == i) {
-                self.router.cut(*wanted);
+                self.state.router.cut(*wanted);
             }
         }
     }
@@ -468,9 +436,10 @@ impl<Q> Gateway<Q> {
         let mut placed = Vec::new();
         let mut cuts = Vec::new();
         for (i, line) in lines.iter().enumerate() {
-            self.router.line(line);
+            self.state.router.line(line);
             let before = placed.len();
-            self.cuts.reached(&mut self.router, &self.name, &mut placed);
+            self.cuts
+                .reached(&mut self.state.router, &self.name, &mut placed);
             cuts.extend(placed[before..].iter().map(|p| (i as u32, p.wanted)));
         }
         (placed, cuts)
@@ -484,27 +453,27 @@ impl<Q> Gateway<Q> {
     }
 
     pub fn router(&self) -> &Router {
-        &self.router
+        &self.state.router
     }
 
     pub fn finished(&self) -> bool {
-        self.finished
+        self.state.finished
     }
 
     pub fn stats(&self) -> &SensorStats {
-        &self.stats
+        &self.state.stats
     }
 
     /// Batches kept for leader `i` to ask for again.
     pub fn kept(&self, i: usize) -> usize {
-        self.sent.get(i).map_or(0, BatchLog::len)
+        self.state.sent.get(i).map_or(0, BatchLog::len)
     }
 
     /// Routes the trace file's next line; returns the cuts whose point it
     /// reached (answer them after the next [`Gateway::flush`]).
     pub fn line(&mut self, line: &Line) -> Vec<Placed<Q>> {
         let (placed, cuts) = self.route(std::slice::from_ref(line));
-        self.traced += 1;
+        self.state.traced += 1;
         self.note(Record::Trace { count: 1, cuts });
         placed
     }
@@ -518,11 +487,11 @@ impl<Q> Gateway<Q> {
         &mut self,
         offer: Offer<'_>,
     ) -> Result<(IngestAck, Vec<Placed<Q>>), IngestRefusal> {
-        if self.finished {
-            self.stats.rejected += 1;
+        if self.state.finished {
+            self.state.stats.rejected += 1;
             return Err(IngestRefusal::Finished);
         }
-        let judged = self.ingest.offer(offer, &mut self.stats)?;
+        let judged = self.state.ingest.offer(offer, &mut self.state.stats)?;
         let (placed, cuts) = self.route(&judged.accepted);
         self.note(Record::Offer {
             producer: offer.producer.map(str::to_owned),
@@ -531,7 +500,7 @@ impl<Q> Gateway<Q> {
             cuts,
         });
         let mut ack = judged.ack;
-        ack.events = self.router.events();
+        ack.events = self.state.router.events();
         Ok((ack, placed))
     }
 
@@ -541,11 +510,11 @@ impl<Q> Gateway<Q> {
     /// silently: a restored sensor fed the same input again goes on after
     /// the last line it journaled, as a trace file does.
     pub fn read(&mut self, number: usize, text: &str) -> Result<Vec<Placed<Q>>, String> {
-        if number as u64 <= self.stdin_read {
+        if number as u64 <= self.state.stdin_read {
             return Ok(Vec::new());
         }
-        self.stdin_read = number as u64;
-        let read = self.ingest.read(number, text, &mut self.stats);
+        self.state.stdin_read = number as u64;
+        let read = self.state.ingest.read(number, text, &mut self.state.stats);
         let (placed, cuts) = match &read {
             Ok(Some(line)) => self.route(std::slice::from_ref(line)),
             _ => (Vec::new(), Vec::new()),
@@ -561,10 +530,10 @@ impl<Q> Gateway<Q> {
     /// The source is exhausted: from the next flush on, batches say the
     /// stream is finished; every cut still waiting is refused.
     pub fn end(&mut self) -> Vec<(Q, String)> {
-        self.finished = true;
-        self.owed.fill(true);
+        self.state.finished = true;
+        self.state.owed.fill(true);
         self.note(Record::End);
-        self.cuts.refuse_all(&self.router)
+        self.cuts.refuse_all(&self.state.router)
     }
 
     /// The leaders' queued items as their next batches, in the stream's
@@ -576,31 +545,31 @@ impl<Q> Gateway<Q> {
     /// last batch: then a batch saying only how far the stream got. A cut
     /// is an item for every leader, so each is sent it.
     pub fn flush(&mut self) -> Vec<(usize, Batch)> {
-        let through = self.router.seq();
-        let events = self.router.events();
+        let through = self.state.router.seq();
+        let events = self.state.router.events();
         self.note(Record::Flush);
-        let mut batches = Vec::with_capacity(self.sent.len());
-        for i in 0..self.sent.len() {
-            let due = self.router.queued(i)
-                || self.owed[i]
-                || through >= self.sent_through[i] + self.idle_every;
+        let mut batches = Vec::with_capacity(self.state.sent.len());
+        for i in 0..self.state.sent.len() {
+            let due = self.state.router.queued(i)
+                || self.state.owed[i]
+                || through >= self.state.sent_through[i] + self.idle_every;
             if !due {
                 continue;
             }
-            let log = &mut self.sent[i];
+            let log = &mut self.state.sent[i];
             let batch = Batch {
                 version: VERSION,
                 sensor: self.name.clone(),
                 number: log.next_number(),
                 through,
                 events,
-                finished: self.finished,
-                items: self.router.take(i),
+                finished: self.state.finished,
+                items: self.state.router.take(i),
             };
             log.push(batch.clone());
             batches.push((i, batch));
-            self.sent_through[i] = through;
-            self.owed[i] = false;
+            self.state.sent_through[i] = through;
+            self.state.owed[i] = false;
         }
         batches
     }
@@ -609,16 +578,16 @@ impl<Q> Gateway<Q> {
     pub fn cut(&mut self, query: Q, parameters: &CutParameters) -> CutOutcome<Q> {
         match self
             .cuts
-            .request(query, parameters, &self.router, self.finished)
+            .request(query, parameters, &self.state.router, self.state.finished)
         {
             Request::Now { wanted, query } => {
                 self.note(Record::Cut(wanted));
                 CutOutcome::Placed(place(
-                    &mut self.router,
+                    &mut self.state.router,
                     &self.name,
                     wanted,
                     query,
-                    self.finished,
+                    self.state.finished,
                 ))
             }
             Request::Scheduled => CutOutcome::Scheduled,
@@ -637,13 +606,13 @@ impl<Q> Gateway<Q> {
         let answer = decode::<Follow>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|f| {
-                let items = self.router.follow(&f).map_err(|e| e.to_string())?;
+                let items = self.state.router.follow(&f).map_err(|e| e.to_string())?;
                 Ok((f.leader as usize, items))
             });
         self.count("follow", &answer);
         let (leader, items) = answer?;
         self.note(Record::Follow(bytes.to_vec()));
-        self.owed[leader] = true;
+        self.state.owed[leader] = true;
         Ok(Followed {
             version: VERSION,
             items,
@@ -656,7 +625,7 @@ impl<Q> Gateway<Q> {
     pub fn unfollow(&mut self, bytes: &[u8]) -> Result<usize, String> {
         let answer = decode::<Unfollow>(bytes)
             .map_err(|e| e.to_string())
-            .and_then(|u| self.router.unfollow(&u).map_err(|e| e.to_string()));
+            .and_then(|u| self.state.router.unfollow(&u).map_err(|e| e.to_string()));
         self.count("unfollow", &answer);
         if answer.as_ref().is_ok_and(|&dropped| dropped > 0) {
             self.note(Record::Unfollow(bytes.to_vec()));
@@ -671,7 +640,7 @@ impl<Q> Gateway<Q> {
             .and_then(|request| {
                 let sent = self
                     .leader_index(&request.leader)
-                    .map(|i| &self.sent[i])
+                    .map(|i| &self.state.sent[i])
                     .ok_or_else(|| {
                         format!(
                             "resend request from {:?}, which is not a leader of this stream",
@@ -694,12 +663,12 @@ impl<Q> Gateway<Q> {
         let Some((i, mark)) = self.mark::<Durable>(bytes, origin, |m| &m.leader) else {
             return;
         };
-        let batches = self.sent[i].forget(&mark);
-        self.durable[i] = Some(self.durable[i].unwrap_or(0).max(mark.position));
-        let passed = self.durable.iter().copied().min().flatten();
-        let items = passed.map_or(0, |seq| self.router.forget(seq));
-        tracing::trace!(leader = %mark.leader, batches, items, kept = self.sent[i].len(),
-            logged = self.router.logged(), "forgot what is safe");
+        let batches = self.state.sent[i].forget(&mark);
+        self.state.durable[i] = Some(self.state.durable[i].unwrap_or(0).max(mark.position));
+        let passed = self.state.durable.iter().copied().min().flatten();
+        let items = passed.map_or(0, |seq| self.state.router.forget(seq));
+        tracing::trace!(leader = %mark.leader, batches, items, kept = self.state.sent[i].len(),
+            logged = self.state.router.logged(), "forgot what is safe");
     }
 
     /// A leader's mark (durable or progress) with the index of the leader
@@ -715,9 +684,9 @@ impl<Q> Gateway<Q> {
         let mark = match decode::<M>(bytes) {
             Ok(mark) => mark,
             Err(e) => {
-                self.stats.rejected += 1;
+                self.state.stats.rejected += 1;
                 tracing::warn!(from = %origin, problem = %e,
-                    rejected = self.stats.rejected, "{} rejected", M::WHAT);
+                    rejected = self.state.stats.rejected, "{} rejected", M::WHAT);
                 return None;
             }
         };
@@ -730,14 +699,19 @@ impl<Q> Gateway<Q> {
 
     /// The index of the leader named `name` in the stream's order.
     fn leader_index(&self, name: &str) -> Option<usize> {
-        self.router.begin().leaders.iter().position(|n| n == name)
+        self.state
+            .router
+            .begin()
+            .leaders
+            .iter()
+            .position(|n| n == name)
     }
 
     /// Counts a refused request.
     fn count<R>(&mut self, what: &str, answer: &Result<R, String>) {
         if let Err(e) = answer {
-            self.stats.rejected += 1;
-            tracing::warn!(what, error = %e, rejected = self.stats.rejected, "bad request rejected");
+            self.state.stats.rejected += 1;
+            tracing::warn!(what, error = %e, rejected = self.state.stats.rejected, "bad request rejected");
         }
     }
 }
