@@ -8,7 +8,8 @@
 use idmesh_belief::factored::CouplingTree;
 use idmesh_belief::predict_red;
 use idmesh_belief::BeliefError;
-use idmesh_placement::{combine, factored_field};
+use idmesh_belief::Field;
+use idmesh_placement::combine;
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
@@ -396,7 +397,7 @@ fn factored_marginals_of(
         BeliefError::Degenerate { .. } => GatherError::Degenerate,
         e => GatherError::Refused(format!("the leaders' components: {e}")),
     };
-    let field = factored_field(cut.tracks, cut.red);
+    let field = Field::with_count(cut.tracks as usize, cut.red.map(|k| k as usize), None);
     let mut kept = memory.coupling.lock().unwrap_or_else(|e| e.into_inner());
     let coupling = match &mut *kept {
         Some(tree) if *tree.field() == field => tree,

@@ -145,19 +145,6 @@ pub fn from_wire_component(c: WireComponent) -> HeldComponent {
     }
 }
 
-/// The field a factored stream's cut describes: `tracks` tracks with `red`
-/// red (None: the uniform prior over counts).
-pub fn factored_field(tracks: u32, red: Option<u32>) -> Field {
-    Field {
-        tracks: tracks as usize,
-        red: match red {
-            Some(k) => RedCount::Known(k as usize),
-            None => RedCount::unknown_uniform(tracks as usize),
-        },
-        initial_red: None,
-    }
-}
-
 /// The size of a set that fixes every track of `field`: k red tracks (the
 /// others are blue) or n − k blue ones; with a prior over counts, the
 /// largest count allowed or n − the smallest.
