@@ -198,7 +198,7 @@ impl Journal {
     /// Whether it has grown enough since its last compaction to be
     /// compacted now.
     pub fn due(&self) -> bool {
-        self.length - self.base.min(self.length) >= self.compact_after.max(self.base)
+        self.length.saturating_sub(self.base) >= self.compact_after.max(self.base)
     }
 
     /// Waits another [`Journal::compact_after`] before it is due again (a
