@@ -67,6 +67,9 @@ pub struct Collected {
 impl Collected {
     /// What the answer includes: per sensor, its events.
     pub fn watermark(&self) -> Watermark {
+        if !self.cut.origins.is_empty() {
+            return self.cut.origins.iter().cloned().collect();
+        }
         let mut watermark = Watermark::new();
         watermark.insert(self.cut.sensor.clone(), self.cut.events);
         watermark

@@ -15,6 +15,7 @@ fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
         red: Some(1),
         finished: false,
         identities: false,
+        origins: Vec::new(),
     }
 }
 

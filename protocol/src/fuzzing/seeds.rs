@@ -62,6 +62,7 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
             red: Some(3),
             finished: false,
             identities: true,
+            origins: Vec::new(),
         })],
         "trace_line" => TRACE.lines().map(|l| l.as_bytes().to_vec()).collect(),
         "trace_reader" => vec![

@@ -22,6 +22,10 @@ pub struct CutPlaced {
     pub finished: bool,
     /// An identity stream: leaders hold rows of an information matrix.
     pub identities: bool,
+    /// Several sensors: the events of each sensor's intake the cut
+    /// includes, by sensor (the answer's watermark). Empty with one
+    /// sensor: `events` is its.
+    pub origins: Vec<(String, u64)>,
 }
 super::versioned!(CutPlaced, "cut");
 
@@ -57,6 +61,18 @@ pub struct SensorStats {
     /// window past the slowest leader's progress.
     #[serde(default)]
     pub window_holds: u64,
+    /// Several sensors: ingested lines refused as late, at or before a
+    /// position this sensor had passed (an earlier time than its last
+    /// event's, or a tick's).
+    #[serde(default)]
+    pub late: u64,
+    /// Several sensors: events merged from every sensor's intake (its own
+    /// included), and those merged twice that were applied once (one
+    /// producer's event given to two sensors).
+    #[serde(default)]
+    pub merged: u64,
+    #[serde(default)]
+    pub merged_twice: u64,
 }
 
 /// Where every track was last seen and which leader surveils it, at the

@@ -13,6 +13,7 @@
 //! | `P/sensor/<name>/resend` | sensor queryable | batches a leader lost, again |
 //! | `P/sensor/<name>/stats` | sensor queryable | its counters (JSON) |
 //! | `P/sensor/<name>/ingest` | sensor queryable | trace lines from any producer, acknowledged ([`producer_to_sensor`](super::producer_to_sensor)) |
+//! | `P/sensor/<name>/intake` | sensor queryable | its intake, for the other sensors to merge ([`sensor_to_sensor`](super::sensor_to_sensor)) |
 //! | `P/sensor/<name>/positions` | sensor queryable | every track's last position and owner where the stream is (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
@@ -105,6 +106,10 @@ impl Keys {
 
     pub fn sensor_resend(&self, sensor: &str) -> String {
         format!("{}/sensor/{sensor}/resend", self.prefix)
+    }
+
+    pub fn sensor_intake(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/intake", self.prefix)
     }
 
     pub fn leader_sent(&self, leader: &str) -> String {

@@ -12,6 +12,8 @@
 //! - [`coordinator_to_sensor`] — a request for a cut of the stream.
 //! - [`producer_to_sensor`] — live ingestion: trace lines from any
 //!   producer, and the acknowledgement (JSON).
+//! - [`sensor_to_sensor`] — several sensors: each one's intake, for the
+//!   others to merge into one order.
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
 //! - [`query`] — what a user gets back, as JSON.
@@ -31,6 +33,7 @@ pub mod leader_to_sensor;
 pub mod producer_to_sensor;
 pub mod query;
 pub mod sensor_to_leader;
+pub mod sensor_to_sensor;
 pub mod valid;
 
 use serde::de::DeserializeOwned;

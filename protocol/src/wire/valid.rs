@@ -14,6 +14,7 @@ use super::coordinator_to_sensor::CutPlaced;
 use super::leader_to_leader::{Transfer, TransfersSent, TransfersWanted, WireRow, WireSet};
 use super::leader_to_sensor::{Durable, Follow, Followed, Progress, Resend, Resent, Unfollow};
 use super::sensor_to_leader::{Batch, Begin, Item, Sequenced};
+use super::sensor_to_sensor::{Entry, IntakeSlice, IntakeWanted};
 use super::{Versioned, WireError};
 
 /// The most tracks a stream may have. A `Begin` lists an owner per track
@@ -443,6 +444,59 @@ impl Valid for CutPlaced {
     }
 }
 
+impl Valid for IntakeWanted {
+    fn problem(&self) -> Option<String> {
+        if self.sensor.is_empty() {
+            return Some("no sensor named".into());
+        }
+        self.above
+            .time
+            .is_nan()
+            .then(|| "the watermark's time is not a number".to_string())
+    }
+}
+
+impl Valid for IntakeSlice {
+    fn problem(&self) -> Option<String> {
+        let mut previous: Option<&super::sensor_to_sensor::Position> = None;
+        for (i, (position, entry)) in self.entries.iter().enumerate() {
+            let cut = matches!(entry, Entry::Cut { .. });
+            if position.time.is_nan() || (!cut && position.time.is_infinite()) {
+                return Some(format!(
+                    "entry {i}: time {} is not a finite number",
+                    position.time
+                ));
+            }
+            if cut == (position.sub == 0 || position.sensor.is_empty()) {
+                return Some(format!(
+                    "entry {i}: a position {position:?} of the wrong kind"
+                ));
+            }
+            if !cut && position.producer.is_empty() {
+                return Some(format!("entry {i}: no producer"));
+            }
+            if previous.is_some_and(|p| position <= p) {
+                return Some(format!("entry {i}: position {position:?} out of order"));
+            }
+            if *position > self.watermark {
+                return Some(format!(
+                    "entry {i}: position {position:?} past the watermark"
+                ));
+            }
+            if let Entry::Line(text) = entry {
+                if text.len() > 1 << 16 {
+                    return Some(format!("entry {i}: a line of {} bytes", text.len()));
+                }
+            }
+            previous = Some(position);
+        }
+        self.watermark
+            .time
+            .is_nan()
+            .then(|| "the watermark's time is not a number".to_string())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -738,6 +792,7 @@ mod tests {
             red: Some(5),
             finished: false,
             identities: false,
+            origins: Vec::new(),
         };
         assert!(decode::<CutPlaced>(&encode(&cut))
             .unwrap_err()

@@ -475,6 +475,8 @@ async fn ingest(
         producer: parameters.get(PRODUCER),
         counter: parameters.get(COUNTER),
         payload: &body,
+        time: None,
+        finish: false,
     };
     match gateway.ingest(offer) {
         Ok((ack, placed)) => {

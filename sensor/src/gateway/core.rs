@@ -23,8 +23,10 @@
 
 use super::batch_log::BatchLog;
 use super::cuts::{place, CutParameters, Cuts, Placed, Request, Wanted};
+use super::ingest;
 use super::ingest::{Ingest, IngestRefusal, Offer};
 use super::journal::Record;
+use super::mesh::Mesh;
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
@@ -35,7 +37,10 @@ use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use serde::{Deserialize, Serialize};
 
-use idmesh_protocol::wire::{decode, Valid, VERSION};
+use idmesh_protocol::wire::{decode, encode, Valid, VERSION};
+use std::collections::BTreeMap;
+
+mod meshed;
 
 /// What became of a cut request.
 pub enum CutOutcome<Q> {
@@ -80,6 +85,12 @@ pub struct Gateway<Q> {
     journaling: bool,
     /// Recorded, not yet taken by the driver.
     records: Vec<Record>,
+    /// One sensor of several: the queries for each cut asked, by tag,
+    /// until the merge places or refuses it ...
+    waiting: BTreeMap<u64, Vec<Q>>,
+    /// ... and then their answers and refusals, for the driver to send.
+    answers: Vec<Placed<Q>>,
+    refusals: Vec<(Q, String)>,
 }
 
 /// The part of a gateway's state that its journal's records rebuild, and
@@ -110,6 +121,8 @@ struct Journaled {
     traced: u64,
     /// The number of the last line of standard input read.
     stdin_read: u64,
+    /// One sensor of several: its intake and the merge of all.
+    mesh: Option<Mesh>,
 }
 
 /// A journal the gateway cannot be rebuilt from (a trace shorter than the
@@ -143,6 +156,7 @@ impl<Q> Gateway<Q> {
                 },
                 traced: 0,
                 stdin_read: 0,
+                mesh: None,
             },
             progress: vec![None; leaders],
             stall_checked: vec![None; leaders],
@@ -151,6 +165,9 @@ impl<Q> Gateway<Q> {
             cuts: Cuts::default(),
             journaling: false,
             records: Vec::new(),
+            waiting: BTreeMap::new(),
+            answers: Vec::new(),
+            refusals: Vec::new(),
         }
     }
 
@@ -181,6 +198,7 @@ impl<Q> Gateway<Q> {
         // queued for it, is not behind: items for others are not sent to
         // it, so it is as far as the stream.
         let slowest = (0..self.progress.len())
+            .filter(|&i| self.serves(i))
             .map(|i| match self.progress[i] {
                 Some(m)
                     if m.through >= self.state.sent_through[i] && !self.state.router.queued(i) =>
@@ -214,6 +232,9 @@ impl<Q> Gateway<Q> {
     pub fn stalled(&mut self) -> Vec<(usize, Batch)> {
         let mut again = Vec::new();
         for i in 0..self.state.sent.len() {
+            if !self.serves(i) {
+                continue;
+            }
             let mark = self.progress[i];
             let unchanged = mark.is_some() && self.stall_checked[i] == mark;
             self.stall_checked[i] = mark;
@@ -358,6 +379,8 @@ impl<Q> Gateway<Q> {
                     producer: producer.as_deref(),
                     counter: counter.as_deref(),
                     payload: &payload,
+                    time: None,
+                    finish: false,
                 };
                 let judged = self
                     .state
@@ -393,6 +416,7 @@ impl<Q> Gateway<Q> {
                 self.unfollow(&bytes)
                     .map_err(|e| format!("an unfollow it took is refused now: {e}"))?;
             }
+            Record::Mesh(record) => self.replay_mesh(record)?,
         }
         Ok(())
     }
@@ -487,9 +511,16 @@ impl<Q> Gateway<Q> {
         &mut self,
         offer: Offer<'_>,
     ) -> Result<(IngestAck, Vec<Placed<Q>>), IngestRefusal> {
+        if self.state.mesh.is_some() {
+            return Ok((self.ingest_meshed(offer)?, Vec::new()));
+        }
         if self.state.finished {
             self.state.stats.rejected += 1;
             return Err(IngestRefusal::Finished);
+        }
+        if offer.time.is_some() || offer.finish {
+            self.state.stats.rejected += 1;
+            return Err(IngestRefusal::OnlyMesh);
         }
         let judged = self.state.ingest.offer(offer, &mut self.state.stats)?;
         let (placed, cuts) = self.route(&judged.accepted);
@@ -530,6 +561,14 @@ impl<Q> Gateway<Q> {
     /// The source is exhausted: from the next flush on, batches say the
     /// stream is finished; every cut still waiting is refused.
     pub fn end(&mut self) -> Vec<(Q, String)> {
+        if let Some(mesh) = self.state.mesh.as_mut() {
+            // One sensor of several: its own part is over; the stream ends
+            // when every sensor's is, and all is merged.
+            mesh.finish();
+            self.note(Record::End);
+            self.drain();
+            return Vec::new();
+        }
         self.state.finished = true;
         self.state.owed.fill(true);
         self.note(Record::End);
@@ -550,6 +589,11 @@ impl<Q> Gateway<Q> {
         self.note(Record::Flush);
         let mut batches = Vec::with_capacity(self.state.sent.len());
         for i in 0..self.state.sent.len() {
+            if !self.serves(i) {
+                // Another sensor sends this leader the same items.
+                self.state.router.take(i);
+                continue;
+            }
             let due = self.state.router.queued(i)
                 || self.state.owed[i]
                 || through >= self.state.sent_through[i] + self.idle_every;
@@ -576,6 +620,9 @@ impl<Q> Gateway<Q> {
 
     /// A cut request: placed now, scheduled, or refused.
     pub fn cut(&mut self, query: Q, parameters: &CutParameters) -> CutOutcome<Q> {
+        if self.state.mesh.is_some() {
+            return self.cut_meshed(query, parameters);
+        }
         match self
             .cuts
             .request(query, parameters, &self.state.router, self.state.finished)
@@ -606,6 +653,12 @@ impl<Q> Gateway<Q> {
         let answer = decode::<Follow>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|f| {
+                if !self.serves(f.leader as usize) {
+                    return Err(format!(
+                        "follow request from leader index {}, which another sensor serves",
+                        f.leader
+                    ));
+                }
                 let items = self.state.router.follow(&f).map_err(|e| e.to_string())?;
                 Ok((f.leader as usize, items))
             });
@@ -640,10 +693,11 @@ impl<Q> Gateway<Q> {
             .and_then(|request| {
                 let sent = self
                     .leader_index(&request.leader)
+                    .filter(|&i| self.serves(i))
                     .map(|i| &self.state.sent[i])
                     .ok_or_else(|| {
                         format!(
-                            "resend request from {:?}, which is not a leader of this stream",
+                            "resend request from {:?}, which is not a leader this sensor serves",
                             request.leader
                         )
                     })?;
@@ -695,6 +749,12 @@ impl<Q> Gateway<Q> {
             return None;
         };
         Some((i, mark))
+    }
+
+    /// Whether this sensor sends leader `i` its batches (every leader,
+    /// unless it is one sensor of several).
+    fn serves(&self, i: usize) -> bool {
+        self.state.mesh.as_ref().is_none_or(|m| m.serves(i))
     }
 
     /// The index of the leader named `name` in the stream's order.

@@ -42,6 +42,7 @@ pub enum Request<Q> {
     Malformed { query: Q, reason: String },
 }
 
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
 pub struct Cuts<Q> {
     scheduled: BTreeMap<u64, Vec<(Wanted, Q)>>,
     held: usize,
@@ -130,6 +131,13 @@ impl<Q> Cuts<Q> {
         Request::Refused { query, reason }
     }
 
+    /// Whether a cut tagged `tag` waits for its point.
+    pub fn holds(&self, tag: u64) -> bool {
+        self.scheduled
+            .values()
+            .any(|waiting| waiting.iter().any(|(w, _)| w.tag == tag))
+    }
+
     /// Places the cuts whose point the router has reached (call after each
     /// line), adding them to `placed`.
     pub fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
@@ -187,6 +195,7 @@ pub fn place<Q>(
             red: begin.red,
             finished,
             identities: begin.identities,
+            origins: Vec::new(),
         },
     }
 }

@@ -26,7 +26,7 @@
 use idmesh_protocol::trace::{Header, Line, Validator};
 use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
 use idmesh_protocol::wire::producer_to_sensor::{IngestAck, LineRefused};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
 /// The most producers one sensor keeps a counter for: each costs a few
 /// bytes for the sensor's life, and a producer id is chosen by whoever
@@ -60,6 +60,10 @@ pub enum IngestRefusal {
     TooManyProducers(String),
     #[error("the stream is finished: it takes no more events")]
     Finished,
+    #[error("time {0:?} is not a finite number")]
+    BadTime(String),
+    #[error("`time` and `finish` are for one sensor of several: this one is the only one")]
+    OnlyMesh,
 }
 
 /// What a request was asked to do, as the actor read it off the query.
@@ -68,6 +72,12 @@ pub struct Offer<'a> {
     pub producer: Option<&'a str>,
     pub counter: Option<&'a str>,
     pub payload: &'a [u8],
+    /// One sensor of several (`;time=<t>`): the producer gives this
+    /// sensor nothing before time `t` (after the request's lines).
+    pub time: Option<&'a str>,
+    /// One sensor of several (`;finish`): the producers give this sensor
+    /// no more events (after the request's lines).
+    pub finish: bool,
 }
 
 /// An offer judged: the lines to put in the order (in order), and the
@@ -87,7 +97,23 @@ pub struct Ingest {
     next: BTreeMap<String, u64>,
     /// Standard input's trace rules (header first, times in order).
     stdin: Validator,
+    /// One sensor of several: a producer's counters are its own across
+    /// sensors (they go up, with gaps for the lines other sensors took),
+    /// and the last [`RECENT_COUNTERS`] each producer had taken here tell a
+    /// duplicate from a line that came too late.
+    #[serde(default)]
+    gapped: bool,
+    #[serde(default)]
+    recent: BTreeMap<String, VecDeque<u64>>,
 }
+
+/// The counters remembered per producer when counters have gaps.
+pub const RECENT_COUNTERS: usize = 4096;
+
+/// What decides whether a line that passed every other rule enters the
+/// order (the intake of one sensor of several: is it late?), given the
+/// line, its text, its producer and its counter; by default every line.
+pub type Admit<'a> = dyn FnMut(&Line, &str, &str, u64) -> Result<(), String> + 'a;
 
 impl Ingest {
     /// Ingestion into the stream `header` describes.
@@ -101,7 +127,14 @@ impl Ingest {
             header: header.clone(),
             next: BTreeMap::new(),
             stdin,
+            gapped: false,
+            recent: BTreeMap::new(),
         }
+    }
+
+    /// Counters with gaps: one sensor of several ([`Ingest::recent`]).
+    pub fn gapped(&mut self) {
+        self.gapped = true;
     }
 
     /// Judges one ingest request; counts what it refuses and takes in
@@ -111,7 +144,18 @@ impl Ingest {
         offer: Offer<'_>,
         stats: &mut SensorStats,
     ) -> Result<Judged, IngestRefusal> {
-        let judged = self.judge(offer, stats);
+        self.offer_admitted(offer, stats, &mut |_, _, _, _| Ok(()))
+    }
+
+    /// [`Ingest::offer`], each line that passes every rule also passing
+    /// `admit` (refused with its reason, counted as late, if it does not).
+    pub fn offer_admitted(
+        &mut self,
+        offer: Offer<'_>,
+        stats: &mut SensorStats,
+        admit: &mut Admit<'_>,
+    ) -> Result<Judged, IngestRefusal> {
+        let judged = self.judge(offer, stats, admit);
         if judged.is_err() {
             stats.rejected += 1;
         }
@@ -122,6 +166,7 @@ impl Ingest {
         &mut self,
         offer: Offer<'_>,
         stats: &mut SensorStats,
+        admit: &mut Admit<'_>,
     ) -> Result<Judged, IngestRefusal> {
         let producer = offer
             .producer
@@ -173,32 +218,54 @@ impl Ingest {
         for (i, text) in lines.iter().enumerate() {
             let counter = first + i as u64;
             let number = i as u64 + 1;
-            if counter < *next {
+            let recent = self.recent.entry(producer.to_string()).or_default();
+            if counter < *next && (!self.gapped || recent.contains(&counter)) {
                 stats.duplicates += 1;
                 judged.ack.duplicates.push(counter);
                 continue;
             }
-            if counter > *next {
+            if counter < *next || (counter > *next && !self.gapped) {
                 stats.out_of_order += 1;
                 stats.rejected += 1;
+                let reason = if counter < *next {
+                    format!(
+                        "out of order: counter {counter} from {producer:?}, which is past it \
+                         (at {next}) and never took it: a producer's counters go up"
+                    )
+                } else {
+                    format!(
+                        "out of order: counter {counter} from {producer:?}, which is at {next}: \
+                         send again from {next}"
+                    )
+                };
                 judged.ack.errors.push(LineRefused {
                     counter,
                     line: number,
-                    reason: format!(
-                        "out of order: counter {counter} from {producer:?}, which is at {next}: \
-                         send again from {next}"
-                    ),
+                    reason,
                 });
                 continue;
             }
             // This line uses up its counter, taken or refused: one bad line
             // never stalls its producer.
-            *next += 1;
-            match event(text, &self.header) {
+            *next = counter + 1;
+            let taken = event(text, &self.header).and_then(|line| {
+                admit(&line, text, producer, counter).map_err(|late| {
+                    stats.late += 1;
+                    late
+                })?;
+                Ok(line)
+            });
+            match taken {
                 Ok(line) => {
                     stats.ingested += 1;
                     judged.ack.accepted.push(counter);
                     judged.accepted.push(line);
+                    if self.gapped {
+                        if recent.len() >= RECENT_COUNTERS {
+                            recent.pop_front();
+                        }
+                        recent.push_back(counter);
+                    }
                 }
                 Err(reason) => {
                     stats.bad_lines += 1;
@@ -247,7 +314,7 @@ impl Ingest {
 }
 
 /// One ingested line: an event of this stream, or why not.
-fn event(text: &str, header: &Header) -> Result<Line, String> {
+pub(crate) fn event(text: &str, header: &Header) -> Result<Line, String> {
     let line = Line::parse(text).map_err(|p| p.to_string())?;
     if !line.is_event() {
         return Err(format!(
@@ -283,6 +350,8 @@ mod tests {
             producer: Some(producer),
             counter: Some(counter),
             payload: payload.as_bytes(),
+            time: None,
+            finish: false,
         }
     }
 
@@ -400,6 +469,8 @@ mod tests {
                     producer: None,
                     counter: Some("0"),
                     payload: line.as_bytes(),
+                    time: None,
+                    finish: false,
                 },
                 IngestRefusal::NoProducer,
             ),
@@ -408,6 +479,8 @@ mod tests {
                     producer: Some("cam"),
                     counter: None,
                     payload: line.as_bytes(),
+                    time: None,
+                    finish: false,
                 },
                 IngestRefusal::NoCounter,
             ),
@@ -421,6 +494,8 @@ mod tests {
                     producer: Some("cam"),
                     counter: Some("0"),
                     payload: &[0xff, 0xfe],
+                    time: None,
+                    finish: false,
                 },
                 IngestRefusal::NotText("invalid utf-8 sequence of 1 bytes from index 0".into()),
             ),

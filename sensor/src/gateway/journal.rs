@@ -21,6 +21,7 @@
 
 use super::cuts::Wanted;
 use idmesh_ownership::{Ownership, OwnershipError};
+use idmesh_protocol::wire::sensor_to_sensor::Position;
 use serde::{Deserialize, Serialize};
 use std::fs::{File, OpenOptions};
 use std::io::Write;
@@ -74,6 +75,33 @@ pub enum Record {
     /// by [`Gateway::compacted`](super::core::Gateway::compacted)): a
     /// compacted journal is its stream, this, and what happened since.
     Snapshot(Vec<u8>),
+    /// One sensor of several: what changed its intake or its merge.
+    Mesh(MeshRecord),
+}
+
+/// What changed the intake or the merge of one sensor of several
+/// ([`super::mesh`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum MeshRecord {
+    /// An ingest request judged, with its tick (`time`) and whether it
+    /// said the producers are finished.
+    Offer {
+        producer: Option<String>,
+        counter: Option<String>,
+        payload: Vec<u8>,
+        time: Option<String>,
+        finish: bool,
+    },
+    /// A peer's slice of its intake (its bytes) that brought something.
+    Peer(Vec<u8>),
+    /// A cut asked of this sensor, taken into its intake.
+    Cut {
+        tag: u64,
+        rows: bool,
+        events: Option<u64>,
+    },
+    /// A peer's request moved this finished sensor's watermark here.
+    Raise(Position),
 }
 
 #[derive(Debug, thiserror::Error)]

@@ -13,6 +13,8 @@
 //! - [`ingest`] — live ingestion: which producers' lines (ingest key,
 //!   standard input) enter the order; dedup, validation, counters (pure).
 //! - [`cuts`] — cut requests: now, or at a future event count.
+//! - [`mesh`] — several sensors: each one's intake, merged by all into
+//!   one order (pure).
 //! - [`journal`] — what changed the gateway's state, on disk, so a
 //!   sensor killed and restarted resumes where it was.
 //! - [`batch_log`] — the batches sent each leader, kept until it says its
@@ -25,6 +27,7 @@ pub mod cuts;
 pub mod feed;
 pub mod ingest;
 pub mod journal;
+pub mod mesh;
 pub mod router;
 
 pub use router::{LeaderPlace, Router, RouterConfig, RouterError};

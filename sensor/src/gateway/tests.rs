@@ -516,6 +516,8 @@ fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
         producer: Some("cam"),
         counter: Some(counter),
         payload: payload.as_bytes(),
+        time: None,
+        finish: false,
     };
     let (ack, placed) = gateway.ingest(offer("0")).unwrap();
     assert_eq!((ack.accepted.clone(), ack.events), (vec![0, 1], 2));
@@ -693,6 +695,8 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
         producer: Some("cam"),
         counter: Some(counter),
         payload: payload.as_bytes(),
+        time: None,
+        finish: false,
     };
     let cut = |tag: &str, events: Option<&str>| CutParameters {
         tag: Some(tag.into()),

@@ -575,6 +575,8 @@ impl World {
                     producer: Some(who),
                     counter: Some(&counter),
                     payload: payload.as_bytes(),
+                    time: None,
+                    finish: false,
                 })
                 .map_err(|e| Violation::new(format!("ingest from {who} refused: {e}")))
         };
