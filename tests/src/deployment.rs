@@ -50,6 +50,10 @@ pub struct Settings {
     /// "radon"`, which the runtime's tests compare with `idmesh replay
     /// --method overcomplete` (the topology's own default is factored).
     pub belief: Option<String>,
+    /// How many sensors (`[[sensor]]`, named `sensor-0`, `sensor-1`, …,
+    /// each with the settings above); 0 or 1: one `[sensor]`. Leaders are
+    /// served by the sensors in turn.
+    pub sensors: usize,
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -117,6 +121,14 @@ pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     b
 }
 
+/// The events an answer includes: its watermark's, summed over the
+/// sensors (one sensor of several counts the events of its intake).
+pub fn watermark_events(answer: &Value) -> u64 {
+    answer["watermark"]
+        .as_object()
+        .map_or(0, |w| w.values().filter_map(Value::as_u64).sum())
+}
+
 /// Where a deployment of `leaders` leaders over `trace` places them: the
 /// centres of a grid over the field its moves span (row by row).
 pub fn leader_places(trace: &Path, leaders: usize) -> Vec<(f64, f64)> {
@@ -152,7 +164,9 @@ impl Deployment {
         for i in 0..settings.leaders {
             deployment.launch("leader", &format!("leader-{i}"));
         }
-        deployment.launch("sensor", "sensor-0");
+        for s in 0..settings.sensors.max(1) {
+            deployment.launch("sensor", &format!("sensor-{s}"));
+        }
         deployment
     }
 
@@ -246,11 +260,16 @@ impl Deployment {
 
     /// The sensor's listening endpoint.
     pub fn sensor_endpoint(&self) -> &str {
+        self.endpoint("sensor-0")
+    }
+
+    /// Process `name`'s listening endpoint.
+    pub fn endpoint(&self, name: &str) -> &str {
         &self
             .endpoints
             .iter()
-            .find(|(name, _)| name == "sensor-0")
-            .expect("a sensor")
+            .find(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("no process {name}"))
             .1
     }
 
@@ -261,14 +280,11 @@ impl Deployment {
         std::fs::create_dir_all(&dir).unwrap();
         let places = leader_places(trace, settings.leaders);
         let coordinator = format!("tcp/127.0.0.1:{}", free_port());
-        let sensor = format!("tcp/127.0.0.1:{}", free_port());
-        let mut endpoints = vec![
-            ("coordinator".to_string(), coordinator.clone()),
-            ("sensor-0".to_string(), sensor.clone()),
-        ];
+        let sensors = settings.sensors.max(1);
+        let mut endpoints = vec![("coordinator".to_string(), coordinator.clone())];
         let prefix = format!("idmesh/test-{name}-{}", std::process::id());
         let mut toml = format!(
-            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"{sensor}\"\ntrace = {:?}\n",
+            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n",
             settings.distributed_rule,
             settings.budget,
             if settings.overcomplete {
@@ -276,24 +292,36 @@ impl Deployment {
             } else {
                 "threshold"
             },
-            settings
-                .sensor_trace
-                .as_deref()
-                .unwrap_or(trace)
-                .display()
-                .to_string()
         );
-        if let Some(window) = settings.window {
-            toml.push_str(&format!("window = {window}\n"));
-        }
-        if let Some(bytes) = settings.compact_journal_after {
-            toml.push_str(&format!("compact_journal_after = {bytes}\n"));
-        }
-        if settings.live {
-            toml.push_str("live = true\n");
-        }
-        if let Some(rate) = settings.rate {
-            toml.push_str(&format!("rate = {rate}\n"));
+        for s in 0..sensors {
+            let sensor = format!("tcp/127.0.0.1:{}", free_port());
+            let table = if sensors > 1 {
+                "[[sensor]]"
+            } else {
+                "[sensor]"
+            };
+            toml.push_str(&format!(
+                "\n{table}\nname = \"sensor-{s}\"\nlisten = \"{sensor}\"\ntrace = {:?}\n",
+                settings
+                    .sensor_trace
+                    .as_deref()
+                    .unwrap_or(trace)
+                    .display()
+                    .to_string()
+            ));
+            endpoints.push((format!("sensor-{s}"), sensor));
+            if let Some(window) = settings.window {
+                toml.push_str(&format!("window = {window}\n"));
+            }
+            if let Some(bytes) = settings.compact_journal_after {
+                toml.push_str(&format!("compact_journal_after = {bytes}\n"));
+            }
+            if settings.live {
+                toml.push_str("live = true\n");
+            }
+            if let Some(rate) = settings.rate {
+                toml.push_str(&format!("rate = {rate}\n"));
+            }
         }
         for (i, (x, y)) in places.into_iter().enumerate() {
             let listen = format!("tcp/127.0.0.1:{}", free_port());
@@ -437,7 +465,7 @@ impl Deployment {
         self.query_lenient(&[question, "--at-events", &points.join(",")])
             .into_iter()
             .map(|answer| {
-                let events = answer["watermark"]["sensor-0"].as_u64().unwrap();
+                let events = watermark_events(&answer);
                 let i = truths
                     .iter()
                     .position(|t| t.events == events)
@@ -445,6 +473,12 @@ impl Deployment {
                 (i, answer)
             })
             .collect()
+    }
+
+    /// Every sensor's counters in `query/stats`, by name.
+    pub fn sensor_stats(&self) -> Vec<Value> {
+        let stats = self.query(&["stats"]).expect("stats answer");
+        stats[0]["sensors"].as_array().expect("sensors").clone()
     }
 
     /// Every leader's counters (`idmesh query stats`).

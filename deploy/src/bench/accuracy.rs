@@ -294,7 +294,7 @@ fn regional(written: &Written, trace: &Path, topology: &Topology) -> Result<Vec<
 
 async fn ask_every_truth_line(deployment: &Deployment, written: &Written) -> Result<Vec<Vec<f64>>> {
     let keys = deployment.keys();
-    let sensor = deployment.topology.sensor.name.clone();
+    let sensor = deployment.topology.sensor().name.clone();
     let ping = keys.ping("sensor", &sensor);
     let started = Instant::now();
     while let Err(e) = deployment.ping(&ping, 1).await {

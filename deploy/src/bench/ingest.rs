@@ -54,7 +54,7 @@ fn events(trace: &Path) -> Result<Vec<String>> {
 
 pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> Result<Ingestion> {
     let keys = deployment.keys();
-    let sensor = &deployment.topology.sensor.name;
+    let sensor = &deployment.topology.sensor().name;
     let ping = keys.ping("sensor", sensor);
     let ingest = keys.sensor_ingest(sensor);
     let started = Instant::now();

@@ -92,7 +92,7 @@ pub async fn measure(deployment: &Deployment) -> Result<Stream> {
     let topology = &deployment.topology;
     let of = |name: &str| used.get(name).copied().unwrap_or(0.0);
     let cpu = Cpu {
-        sensor: of(&topology.sensor.name),
+        sensor: of(&topology.sensor().name),
         coordinator: of(&topology.coordinator.name),
         leaders: topology.leader.iter().map(|l| of(&l.name)).collect(),
     };

@@ -203,7 +203,7 @@ mod tests {
         std::fs::write(&config, toml).unwrap();
         let topology = Topology::load(&config).unwrap();
         assert_eq!(topology.leader.len(), 5);
-        assert_eq!(topology.sensor.listen, "tcp/127.0.0.1:9006");
+        assert_eq!(topology.sensor().listen, "tcp/127.0.0.1:9006");
         for l in &topology.leader {
             let [x, y] = l.at.unwrap();
             assert!((0.0..=30.0).contains(&x) && (0.0..=20.0).contains(&y));
@@ -212,6 +212,6 @@ mod tests {
         assert!(topology.distributed_rule && topology.budget == 100);
         assert_eq!(topology.sparsify, Sparsification::Overcomplete);
         assert_eq!(topology.query_timeout_ms, 1500);
-        assert!(topology.sensor.live);
+        assert!(topology.sensor().live);
     }
 }

@@ -16,6 +16,7 @@ use idmesh_protocol::TraceReader;
 use idmesh_sensor::gateway::actor::{Faults, GatewayConfig};
 use idmesh_sensor::gateway::feed::{lines_of, InputLine, Source};
 use idmesh_sensor::gateway::journal::{Journal, Record};
+use idmesh_sensor::gateway::mesh::MeshConfig;
 use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
 use std::path::Path;
 use std::time::Duration;
@@ -52,9 +53,9 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
     // could take a port, a key or a record.
     let journal = match (&role, topology.state_path()) {
         (Role::Sensor { .. }, Some(dir)) => {
-            let path = dir.join(format!("{}.journal", topology.sensor.name));
+            let path = dir.join(format!("{name}.journal"));
             let (journal, records) = Journal::open(&path, name)?;
-            let journal = match topology.sensor.compact_journal_after {
+            let journal = match topology.sensor_named(name)?.compact_journal_after {
                 Some(bytes) => journal.compact_after(bytes),
                 None => journal,
             };
@@ -74,29 +75,37 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             mesh::answer_pings(&session, keys.ping(expected, name), name.to_string()).await?;
             let result = match role {
                 Role::Sensor { stdin } => {
-                    sensor(session.clone(), &topology, keys, stdin, journal).await
+                    sensor(session.clone(), &topology, name, keys, stdin, journal).await
                 }
-                Role::Leader => idmesh_leader::host::run(
-                    session.clone(),
-                    HostConfig {
-                        name: name.to_string(),
-                        keys,
-                        leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
-                        sensor: topology.sensor.name.clone(),
-                        follow_timeout: Duration::from_millis(topology.query_timeout_ms),
-                        state_dir: topology.state_path(),
-                        fsync_every: Duration::from_millis(topology.fsync_ms),
-                        snapshot_every: (topology.snapshot_every > 0)
-                            .then_some(topology.snapshot_every),
-                        takeover_after: (topology.takeover_after_ms > 0)
-                            .then(|| Duration::from_millis(topology.takeover_after_ms)),
-                        drop_transfer_every: topology.leader_faults.drop_transfer_every,
-                        flow_control: topology.sensor.window.is_some(),
-                    },
-                    shutdown(),
-                )
-                .await
-                .map_err(anyhow::Error::from),
+                Role::Leader => {
+                    let index = topology
+                        .leader
+                        .iter()
+                        .position(|l| l.name == name)
+                        .unwrap_or_default();
+                    let sensor = topology.sensor_of_leader(index);
+                    idmesh_leader::host::run(
+                        session.clone(),
+                        HostConfig {
+                            name: name.to_string(),
+                            keys,
+                            leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
+                            sensor: sensor.name.clone(),
+                            follow_timeout: Duration::from_millis(topology.query_timeout_ms),
+                            state_dir: topology.state_path(),
+                            fsync_every: Duration::from_millis(topology.fsync_ms),
+                            snapshot_every: (topology.snapshot_every > 0)
+                                .then_some(topology.snapshot_every),
+                            takeover_after: (topology.takeover_after_ms > 0)
+                                .then(|| Duration::from_millis(topology.takeover_after_ms)),
+                            drop_transfer_every: topology.leader_faults.drop_transfer_every,
+                            flow_control: sensor.window.is_some(),
+                        },
+                        shutdown(),
+                    )
+                    .await
+                    .map_err(anyhow::Error::from)
+                }
                 Role::Coordinator => idmesh_coordinator::actor::run(
                     session.clone(),
                     CoordinatorConfig {
@@ -150,6 +159,7 @@ fn peer_options(topology: &Topology, name: &str) -> Result<MeshOptions> {
 async fn sensor(
     session: zenoh::Session,
     topology: &Topology,
+    name: &str,
     keys: Keys,
     stdin: bool,
     journal: Option<(Journal, Vec<Record>)>,
@@ -174,9 +184,10 @@ async fn sensor(
         }
         (header, Source { lines, input: None })
     };
+    let this = topology.sensor_named(name)?;
     let router = Router::new(
         RouterConfig {
-            sensor: topology.sensor.name.clone(),
+            sensor: this.name.clone(),
             leaders: topology
                 .leader
                 .iter()
@@ -193,19 +204,31 @@ async fn sensor(
         },
         &header,
     )?;
+    let mesh = (topology.sensors.len() > 1).then(|| MeshConfig {
+        sensors: topology.sensors.iter().map(|s| s.name.clone()).collect(),
+        me: topology
+            .sensors
+            .iter()
+            .position(|s| s.name == name)
+            .unwrap_or_default(),
+        serves: (0..topology.leader.len())
+            .map(|i| topology.sensor_of_leader(i).name == name)
+            .collect(),
+    });
     let config = GatewayConfig {
-        name: topology.sensor.name.clone(),
+        name: this.name.clone(),
         keys,
-        rate: topology.sensor.rate,
-        realtime: topology.sensor.realtime,
-        limit: topology.sensor.events,
+        rate: this.rate,
+        realtime: this.realtime,
+        limit: this.events,
         wait_for_leaders: Duration::from_secs(60),
-        live: topology.sensor.live,
-        window: topology.sensor.window,
+        live: this.live,
+        window: this.window,
         faults: Faults {
-            duplicate: topology.sensor.faults.duplicate,
-            drop_every: topology.sensor.faults.drop_every,
+            duplicate: this.faults.duplicate,
+            drop_every: this.faults.drop_every,
         },
+        mesh,
     };
     idmesh_sensor::gateway::actor::run(session, config, router, source, journal, shutdown())
         .await?;

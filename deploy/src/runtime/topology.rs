@@ -129,7 +129,11 @@ pub struct Topology {
     #[serde(default = "default_marginals_timeout")]
     pub marginals_timeout_ms: u64,
     pub coordinator: Process,
-    pub sensor: SensorProcess,
+    /// One `[sensor]`, or several `[[sensor]]` (docs/architecture.md,
+    /// "Several sensors"): each takes its producers' events, and every
+    /// sensor merges them all into one order.
+    #[serde(rename = "sensor", deserialize_with = "one_or_many")]
+    pub sensors: Vec<SensorProcess>,
     pub leader: Vec<LeaderProcess>,
     /// Faults every leader injects on purpose (tests).
     #[serde(default)]
@@ -274,6 +278,23 @@ pub struct LeaderProcess {
     pub host: String,
     pub listen: String,
     pub at: Option<[f64; 2]>,
+    /// With several sensors: the one that sends this leader its batches
+    /// (absent: the sensors take the leaders in turn, in the file's
+    /// order).
+    pub sensor: Option<String>,
+}
+
+/// `[sensor]` (one table) or `[[sensor]]` (several), each read as a
+/// sensor's table so that a mistake in it is named as one.
+fn one_or_many<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<Vec<SensorProcess>, D::Error> {
+    use serde::de::Error;
+    let one = |value: toml::Value| SensorProcess::deserialize(value).map_err(D::Error::custom);
+    match toml::Value::deserialize(deserializer)? {
+        toml::Value::Array(many) => many.into_iter().map(one).collect(),
+        table => Ok(vec![one(table)?]),
+    }
 }
 
 fn default_prefix() -> String {
@@ -343,16 +364,46 @@ impl Topology {
         if placed != 0 && placed != self.leader.len() {
             bail!("give every leader a position (at = [x, y]) or none");
         }
-        if self.sensor.faults.drop_every.is_some_and(|n| n < 2) {
-            bail!("sensor.faults.drop_every must be 2 or more (1 would drop every batch)");
+        if self.sensors.is_empty() {
+            bail!("a [sensor] is needed");
+        }
+        for sensor in &self.sensors {
+            if sensor.faults.drop_every.is_some_and(|n| n < 2) {
+                bail!(
+                    "sensor {}: faults.drop_every must be 2 or more (1 would drop every batch)",
+                    sensor.name
+                );
+            }
+            if let Some(rate) = sensor.rate {
+                if !(rate.is_finite() && rate > 0.0) {
+                    bail!(
+                        "sensor {}: rate {rate} must be a positive number of events per second",
+                        sensor.name
+                    );
+                }
+            }
+            if self.sensors.len() > 1 && sensor.trace != self.sensors[0].trace {
+                bail!(
+                    "sensor {}: several sensors share one stream, so one trace (its header): {} \
+                     is not {}",
+                    sensor.name,
+                    sensor.trace.display(),
+                    self.sensors[0].trace.display()
+                );
+            }
+        }
+        for leader in &self.leader {
+            if let Some(sensor) = &leader.sensor {
+                if !self.sensors.iter().any(|s| &s.name == sensor) {
+                    bail!(
+                        "leader {}: sensor {sensor:?} is not in the topology",
+                        leader.name
+                    );
+                }
+            }
         }
         if let Some(security) = &self.security {
             security.check(members.iter().map(|m| m.name.as_str()))?;
-        }
-        if let Some(rate) = self.sensor.rate {
-            if !(rate.is_finite() && rate > 0.0) {
-                bail!("sensor rate {rate} must be a positive number of events per second");
-            }
         }
         if let Some(factored) = self.factored() {
             factored
@@ -371,20 +422,18 @@ impl Topology {
     }
 
     pub fn members(&self) -> Vec<Member> {
-        let mut all = vec![
-            Member {
-                role: "coordinator",
-                name: self.coordinator.name.clone(),
-                host: self.coordinator.host.clone(),
-                listen: self.coordinator.listen.clone(),
-            },
-            Member {
-                role: "sensor",
-                name: self.sensor.name.clone(),
-                host: self.sensor.host.clone(),
-                listen: self.sensor.listen.clone(),
-            },
-        ];
+        let mut all = vec![Member {
+            role: "coordinator",
+            name: self.coordinator.name.clone(),
+            host: self.coordinator.host.clone(),
+            listen: self.coordinator.listen.clone(),
+        }];
+        all.extend(self.sensors.iter().map(|s| Member {
+            role: "sensor",
+            name: s.name.clone(),
+            host: s.host.clone(),
+            listen: s.listen.clone(),
+        }));
         all.extend(self.leader.iter().map(|l| Member {
             role: "leader",
             name: l.name.clone(),
@@ -402,7 +451,29 @@ impl Topology {
     }
 
     pub fn trace_path(&self) -> PathBuf {
-        self.dir.join(&self.sensor.trace)
+        self.dir.join(&self.sensor().trace)
+    }
+
+    /// The first sensor (the only one, mostly).
+    pub fn sensor(&self) -> &SensorProcess {
+        &self.sensors[0]
+    }
+
+    /// The sensor named `name`.
+    pub fn sensor_named(&self, name: &str) -> Result<&SensorProcess> {
+        self.sensors
+            .iter()
+            .find(|s| s.name == name)
+            .with_context(|| format!("no sensor named {name:?} in the topology"))
+    }
+
+    /// The sensor that sends leader `i` its batches.
+    pub fn sensor_of_leader(&self, i: usize) -> &SensorProcess {
+        self.leader[i]
+            .sensor
+            .as_deref()
+            .and_then(|name| self.sensors.iter().find(|s| s.name == name))
+            .unwrap_or(&self.sensors[i % self.sensors.len()])
     }
 
     /// Where leader `name` keeps its journal, if leaders keep one.
@@ -438,7 +509,7 @@ mod tests {
         let documented = Topology::load(&file);
         std::fs::remove_dir_all(&dir).unwrap();
         let documented = documented.unwrap();
-        assert_eq!(documented.sensor.events, Some(5000));
+        assert_eq!(documented.sensor().events, Some(5000));
         assert_eq!(documented.trace_path(), dir.join("crowd.jsonl"));
 
         let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");

@@ -26,6 +26,13 @@ use serde::{Deserialize, Serialize};
 pub const PRODUCER: &str = "producer";
 /// The query parameter carrying the counter of the request's first line.
 pub const COUNTER: &str = "counter";
+/// One sensor of several: `time=<t>`, the producer gives this sensor
+/// nothing before time `t` (its watermark moves there: events merge
+/// without waiting for this sensor's next one).
+pub const TIME: &str = "time";
+/// One sensor of several: `finish`, the producers give this sensor no
+/// more events (the stream ends once every sensor's have).
+pub const FINISH: &str = "finish";
 
 /// The sensor's answer to one ingest request (JSON).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

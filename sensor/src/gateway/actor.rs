@@ -34,11 +34,13 @@ use super::cuts::{CutParameters, Placed};
 use super::feed::{InputLine, Source};
 use super::ingest::Offer;
 use super::journal::{Journal, JournalError, Record};
+use super::mesh::MeshConfig;
+use super::peers::{Fetch, Peers};
 use super::router::Router;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::producer_to_sensor::{COUNTER, PRODUCER};
+use idmesh_protocol::wire::producer_to_sensor::{COUNTER, FINISH, PRODUCER, TIME};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use std::future::Future;
 use std::time::{Duration, Instant};
@@ -67,6 +69,10 @@ pub struct GatewayConfig {
     /// leader's progress (None: as fast as the source gives).
     pub window: Option<u64>,
     pub faults: Faults,
+    /// One sensor of several: which, and which leaders it serves
+    /// ([`super::mesh`]). Its events come from producers only, and its
+    /// part of the stream ends when they say `finish`.
+    pub mesh: Option<MeshConfig>,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -88,6 +94,12 @@ pub enum GatewayError {
     Journal(#[from] JournalError),
     #[error("sensor journal {path}: cannot resume from it: {source}")]
     Restore { path: String, source: RestoreError },
+    #[error(
+        "sensor {0}: one sensor of several takes events from producers only \
+         (P/sensor/<name>/ingest): its trace may hold the header alone, and it reads no \
+         standard input"
+    )]
+    MeshSource(String),
     #[error("leaders {missing:?} did not come up within {waited:?}")]
     LeadersMissing {
         missing: Vec<String>,
@@ -190,6 +202,10 @@ pub async fn run(
         .declare_queryable(keys.sensor_ingest(&config.name))
         .await
         .map_err(mesh("declare the ingest queryable"))?;
+    let intakes = session
+        .declare_queryable(keys.sensor_intake(&config.name))
+        .await
+        .map_err(mesh("declare the intake queryable"))?;
     let _token = session
         .liveliness()
         .declare_token(keys.alive("sensor", &config.name))
@@ -208,9 +224,13 @@ pub async fn run(
     }
     wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
     let Source { lines, mut input } = source;
+    if config.mesh.is_some() && (input.is_some() || lines.iter().any(Line::is_event)) {
+        return Err(GatewayError::MeshSource(config.name.clone()));
+    }
     // The stream ends by itself when the trace's lines are out and there
-    // is no input to wait for; a live one only when the sensor stops.
-    let ends = input.is_none() && !config.live;
+    // is no input to wait for; a live one only when the sensor stops (and
+    // one sensor of several when its producers say so).
+    let ends = input.is_none() && !config.live && config.mesh.is_none();
     tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(),
         stdin = input.is_some(), ends, "streaming");
 
@@ -222,6 +242,9 @@ pub async fn run(
     }
     if let Some(window) = config.window {
         gateway = gateway.windowed(window);
+    }
+    if let Some(mesh) = &config.mesh {
+        gateway = gateway.meshed(mesh);
     }
     let journal = match journal {
         Some((journal, records)) => {
@@ -255,6 +278,10 @@ pub async fn run(
         journal,
     };
     wire.flush(&mut gateway).await?;
+    let mut peers = config
+        .mesh
+        .as_ref()
+        .map(|_| Peers::start(&session, keys, gateway.wanted()));
     let started = Instant::now();
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
@@ -319,14 +346,40 @@ pub async fn run(
             _ = &mut shutdown => break,
             query = cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
-                cut(&mut gateway, &mut wire, query).await?;
+                cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
                 // Every cut already asked for is placed or scheduled
                 // before the stream moves on: a client asking for many
                 // points at once (`--at-events`) must not find the stream
                 // past them because its questions were let in one per chunk.
                 while let Ok(Some(query)) = cut_requests.try_recv() {
-                    cut(&mut gateway, &mut wire, query).await?;
+                    cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
                 }
+                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
+            }
+            fetched = next_fetched(&mut peers) => {
+                let Some((peer, fetched)) = fetched else { continue };
+                let answered = !matches!(fetched, Fetch::Silent(_));
+                match fetched {
+                    Fetch::Slice(bytes) => {
+                        if let Err(e) = gateway.peer(&bytes) {
+                            tracing::warn!(%peer, error = %e, "a peer's intake slice refused");
+                        }
+                    }
+                    Fetch::Refused(e) => tracing::warn!(%peer, error = %e, "a peer refused to give its intake"),
+                    Fetch::Silent(e) => tracing::debug!(%peer, error = %e, "a peer gave no intake"),
+                }
+                if let Some(peers) = peers.as_mut() {
+                    peers.answered(&peer, answered);
+                }
+                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
+            }
+            query = intakes.recv_async() => {
+                let Ok(query) = query else { break };
+                let answer = gateway.intake(&payload(&query));
+                // A watermark it moved is on disk before a peer merges by it.
+                wire.sync(&mut gateway)?;
+                reply_to(&query, answer, "intake").await;
+                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
             }
             query = follows.recv_async() => {
                 let Ok(query) = query else { break };
@@ -397,6 +450,7 @@ pub async fn run(
             query = ingests.recv_async() => {
                 let Ok(query) = query else { break };
                 ingest(&mut gateway, &mut wire, query).await?;
+                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
             }
             read = next_input(&mut input), if input.is_some() && open => {
                 let Some(read) = read else {
@@ -475,15 +529,15 @@ async fn ingest(
         producer: parameters.get(PRODUCER),
         counter: parameters.get(COUNTER),
         payload: &body,
-        time: None,
-        finish: false,
+        time: parameters.get(TIME),
+        finish: parameters.contains_key(FINISH),
     };
     match gateway.ingest(offer) {
         Ok((ack, placed)) => {
             // Published before the acknowledgement leaves: a query asked
             // after it places its cut after these lines. (A request of
             // duplicates alone routed nothing: no batch for it.)
-            if !ack.accepted.is_empty() || !placed.is_empty() {
+            if !ack.accepted.is_empty() || !placed.is_empty() || gateway.mesh().is_some() {
                 wire.flush(gateway).await?;
             }
             // What it judged (counters used up) is on disk before it says so.
@@ -511,12 +565,31 @@ async fn ingest(
     Ok(())
 }
 
-/// Places, schedules or refuses the cut `query` asks for.
+/// Places, schedules or refuses the cut `query` asks for. One sensor of
+/// several refuses at once a cut the merge cannot place because it waits
+/// for a peer that does not answer: degraded, naming it, never an answer
+/// without its events.
 async fn cut(
     gateway: &mut Gateway<Query>,
     wire: &mut Wire,
     query: Query,
+    peers: Option<&Peers>,
 ) -> Result<(), GatewayError> {
+    if let Some(peers) = peers {
+        let down: Vec<String> = gateway
+            .waiting_for()
+            .into_iter()
+            .filter(|s| peers.unreachable().contains(s))
+            .collect();
+        if !down.is_empty() {
+            let reason = format!(
+                "degraded: sensors {down:?} do not answer; the stream's order cannot pass their \
+                 events, so no cut is placed"
+            );
+            let _ = bounded("a refusal", query.reply_err(reason)).await;
+            return Ok(());
+        }
+    }
     let parameters = query.parameters();
     let parameters = CutParameters {
         tag: parameters.get("tag").map(str::to_owned),
@@ -534,6 +607,36 @@ async fn cut(
         }
     }
     Ok(())
+}
+
+/// One sensor of several, after anything that may have moved its merge:
+/// the batches it made, then the cut answers and refusals it made ready,
+/// then what to fetch from each peer next.
+async fn settle(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    peers: Option<&Peers>,
+) -> Result<(), GatewayError> {
+    let Some(peers) = peers else {
+        return Ok(());
+    };
+    wire.flush(gateway).await?;
+    for placed in gateway.answered() {
+        reply_placed(placed).await;
+    }
+    for (query, reason) in gateway.refused() {
+        let _ = bounded("a refusal", query.reply_err(reason)).await;
+    }
+    peers.ask(gateway.wanted());
+    Ok(())
+}
+
+/// The next fetch of a peer's intake (never, for the only sensor).
+async fn next_fetched(peers: &mut Option<Peers>) -> Option<super::peers::Fetched> {
+    match peers {
+        Some(peers) => peers.reply().await,
+        None => std::future::pending().await,
+    }
 }
 
 /// The postcard request a get carries.

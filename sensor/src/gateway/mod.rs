@@ -15,6 +15,8 @@
 //! - [`cuts`] — cut requests: now, or at a future event count.
 //! - [`mesh`] — several sensors: each one's intake, merged by all into
 //!   one order (pure).
+//! - [`peers`] — several sensors: the tasks that fetch every other
+//!   sensor's intake.
 //! - [`journal`] — what changed the gateway's state, on disk, so a
 //!   sensor killed and restarted resumes where it was.
 //! - [`batch_log`] — the batches sent each leader, kept until it says its
@@ -28,6 +30,7 @@ pub mod feed;
 pub mod ingest;
 pub mod journal;
 pub mod mesh;
+pub mod peers;
 pub mod router;
 
 pub use router::{LeaderPlace, Router, RouterConfig, RouterError};

@@ -59,7 +59,7 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
     let keys = Keys::new(topology.prefix.clone());
     let p = keys.prefix();
     let coordinator = vec![topology.coordinator.name.clone()];
-    let sensor = vec![topology.sensor.name.clone()];
+    let sensor: Vec<String> = topology.sensors.iter().map(|s| s.name.clone()).collect();
     let leaders: Vec<String> = topology.leader.iter().map(|l| l.name.clone()).collect();
     let members: Vec<String> = topology.members().into_iter().map(|m| m.name).collect();
     let clients: Vec<String> = topology
@@ -80,6 +80,14 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
         keys,
     };
     let mut grants = vec![
+        // Several sensors fetch one another's intake.
+        grant(
+            "intake",
+            &sensor,
+            &sensor,
+            &["query", "declare_queryable", "reply"],
+            vec![keys.sensor_intake("*")],
+        ),
         grant(
             "events",
             &sensor,
@@ -206,7 +214,7 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
         ));
     }
     if !producers.is_empty() {
-        let ingest = vec![keys.sensor_ingest(&topology.sensor.name)];
+        let ingest: Vec<String> = sensor.iter().map(|s| keys.sensor_ingest(s)).collect();
         grants.push(grant(
             "feed",
             &producers,

@@ -117,8 +117,8 @@ impl<Q> Gateway<Q> {
     }
 
     /// A peer asks for this sensor's intake (`IntakeWanted` bytes): the
-    /// slice (postcard), or why not (counted).
-    pub fn intake(&mut self, bytes: &[u8]) -> Result<Vec<u8>, String> {
+    /// slice, or why not (counted).
+    pub fn intake(&mut self, bytes: &[u8]) -> Result<IntakeSlice, String> {
         let answer = decode::<IntakeWanted>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|wanted| {
@@ -128,15 +128,15 @@ impl<Q> Gateway<Q> {
                     .as_mut()
                     .ok_or_else(|| "this sensor is the only one".to_string())?;
                 let (slice, moved) = mesh.slice(&wanted.sensor, wanted.from, &wanted.above)?;
-                Ok((encode(&slice), moved.then_some(wanted.above)))
+                Ok((slice, moved.then_some(wanted.above)))
             });
         self.count("intake request", &answer);
-        let (bytes, moved) = answer?;
+        let (slice, moved) = answer?;
         if let Some(above) = moved {
             self.note(Record::Mesh(MeshRecord::Raise(above)));
             self.drain();
         }
-        Ok(bytes)
+        Ok(slice)
     }
 
     /// What to ask each peer for next: its name and the request's bytes.

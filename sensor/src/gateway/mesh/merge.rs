@@ -1,6 +1,6 @@
 //! Every sensor's intake merged into one order: the entry at the lowest
 //! [`Position`] goes first, once no sensor can still take one below it
-//! (each sensor's watermark has passed it, or the sensor is finished).
+//! (each sensor's watermark has passed it).
 //! Every sensor merges the same entries by the same rule, so every sensor
 //! gets the same order, whatever the order its peers' slices came in — no
 //! sensor sequences another's events. Two entries at one position are one
@@ -112,8 +112,10 @@ impl Merge {
                 .enumerate()
                 .filter_map(|(i, q)| q.front().map(|(p, _)| (i, p)))
                 .min_by(|a, b| a.1.cmp(b.1))?;
-            let held = (0..self.sensors.len())
-                .any(|j| j != i && !self.finished[j] && self.watermarks[j] < *head);
+            // A finished sensor still takes cuts asked of it, so it holds
+            // the merge like any other until its watermark has passed
+            // (peers move it: `IntakeWanted::above`).
+            let held = (0..self.sensors.len()).any(|j| j != i && self.watermarks[j] < *head);
             if held {
                 return None;
             }
@@ -136,9 +138,9 @@ impl Merge {
         self.finished.iter().all(|&f| f) && self.queues.iter().all(VecDeque::is_empty)
     }
 
-    /// The sensors the merge waits for: not finished, with nothing queued,
-    /// and a watermark below the lowest entry queued (or, with nothing
-    /// queued at all, every unfinished sensor).
+    /// The sensors the merge waits for: nothing queued, and a watermark
+    /// below the lowest entry queued (with nothing queued at all: every
+    /// sensor not finished).
     pub fn waiting_for(&self) -> Vec<String> {
         let lowest = self
             .queues
@@ -147,9 +149,8 @@ impl Merge {
             .min();
         (0..self.sensors.len())
             .filter(|&j| {
-                !self.finished[j]
-                    && self.queues[j].is_empty()
-                    && lowest.is_none_or(|l| self.watermarks[j] < *l)
+                self.queues[j].is_empty()
+                    && lowest.map_or(!self.finished[j], |l| self.watermarks[j] < *l)
             })
             .map(|j| self.sensors[j].clone())
             .collect()
@@ -201,7 +202,12 @@ mod tests {
             .receive(1, 0, vec![line(2.0, 1)], w(2.5), false)
             .expect("in order");
         assert_eq!(drain(&mut merge), ["0", "1"]);
+        // Finished, b still holds the merge at its watermark ...
         merge.receive(1, 1, vec![], w(2.5), true).expect("in order");
+        assert!(drain(&mut merge).is_empty());
+        // ... until a peer's request moves it (a finished sensor takes
+        // only cuts, and promises none below the asker's watermark).
+        merge.receive(1, 1, vec![], w(3.5), true).expect("in order");
         assert_eq!(drain(&mut merge), ["2"]);
         assert!(!merge.complete());
         merge.receive(0, 2, vec![], w(4.0), true).expect("in order");
@@ -256,7 +262,11 @@ mod tests {
             let deliver = |merge: &mut Merge, s: usize, upto: usize, sent: &mut [usize; 3]| {
                 let from = sent[s];
                 let all = upto == intakes[s].len();
-                let watermark = if upto == 0 {
+                // A finished intake's watermark is moved past everything
+                // by its peers' requests.
+                let watermark = if all {
+                    Position::before(1e9)
+                } else if upto == 0 {
                     Position::start()
                 } else {
                     intakes[s][upto - 1].0.clone()

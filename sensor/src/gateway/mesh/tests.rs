@@ -10,6 +10,7 @@ use crate::gateway::cuts::CutParameters;
 use crate::gateway::ingest::Offer;
 use crate::gateway::router::{LeaderPlace, Router, RouterConfig};
 use idmesh_protocol::trace::{Header, Line};
+use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::sensor_to_leader::Sequenced;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -170,7 +171,7 @@ impl Mesh {
                 .iter()
                 .position(|g| g.mesh().is_some_and(|m| m.name() == peer))
                 .expect("a peer");
-            let slice = self.gateways[p].intake(&wanted).expect("a slice");
+            let slice = encode(&self.gateways[p].intake(&wanted).expect("a slice"));
             self.gateways[s].peer(&slice).expect("merged");
         }
     }

@@ -1,0 +1,150 @@
+//! Several live sensors and no single sequencer, with real processes on
+//! loopback (issue 19): a Python producer (`examples/regions_producer.py`,
+//! eclipse-zenoh) splits a trace's events by region and feeds two, then
+//! three sensors concurrently — targets cross between the sensors'
+//! regions, mixes across two regions go to both sensors — and the answers
+//! at the trace's truth points and at the end equal `idmesh replay` of the
+//! whole trace to 1e-9, for the Radon and the factored belief. Every event
+//! is counted once at the leaders' sensors (a mix given to two sensors is
+//! merged once), and each answer's watermark names every sensor.
+
+use idmesh_tests::compare::{assert_same_marginals, floats};
+use idmesh_tests::deployment::{
+    crowd, header_only, leader_places, replay_lines, replay_summary, trace_events, truth_lines,
+    watermark_events, Deployment, Settings,
+};
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+/// The factored options of both sides (small components: splits happen).
+const FACTORED: &str = "belief = \"factored\"\nmax_component = 3\nsplit = \"original\"";
+const FACTORED_REPLAY: &[&str] = &[
+    "--method",
+    "factored",
+    "--coupling",
+    "local",
+    "--max-component",
+    "3",
+    "--split",
+    "original",
+];
+const RADON_REPLAY: &[&str] = &["--method", "overcomplete"];
+
+fn fed_by_region(name: &str, sensors: usize, factored: bool, seed: u64) {
+    let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, seed);
+    let replay = if factored {
+        FACTORED_REPLAY
+    } else {
+        RADON_REPLAY
+    };
+    let central = replay_summary(&trace, replay);
+    let central_lines = replay_lines(&trace, replay);
+    let truths = truth_lines(&trace);
+    let settings = Settings {
+        leaders: 3,
+        sensors,
+        live: true,
+        sensor_trace: Some(header_only(&trace, &dir)),
+        belief: factored.then(|| FACTORED.to_string()),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start_each(name, &trace, &settings);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    for s in 0..sensors {
+        assert_eq!(first["watermark"][format!("sensor-{s}")], 0, "{first}");
+    }
+    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
+    let regions: Vec<String> = leader_places(&trace, sensors)
+        .iter()
+        .enumerate()
+        .map(|(s, (x, y))| format!("sensor-{s}@{x},{y}"))
+        .collect();
+    let events = trace_events(&trace).len() as u64;
+    let (points, sent) = std::thread::scope(|scope| {
+        let asked = scope.spawn(|| deployment.at_truth_points("marginals", &truths));
+        // The questions are placed (held at their points) before any event.
+        std::thread::sleep(Duration::from_millis(1500));
+        let mut command = Command::new(&python);
+        command
+            .arg(&script)
+            .arg(&trace)
+            .args([deployment.sensor_endpoint(), &deployment.prefix])
+            .args(["--batch", "20"]);
+        for region in &regions {
+            command.args(["--sensor", region]);
+        }
+        let output = command.output().expect("python runs");
+        assert!(
+            output.status.success(),
+            "the producer failed: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
+        (asked.join().expect("the questions"), sent)
+    });
+    assert_eq!(sent["events"], events, "{sent}");
+    let doubled = sent["doubled"].as_u64().expect("doubled");
+    let accepted: u64 = (0..sensors)
+        .map(|s| {
+            sent["sensors"][format!("sensor-{s}")]["accepted"]
+                .as_u64()
+                .unwrap_or(0)
+        })
+        .sum();
+    assert_eq!(accepted, events + doubled, "{sent}");
+    for s in 0..sensors {
+        let report = &sent["sensors"][format!("sensor-{s}")];
+        assert!(
+            report["accepted"].as_u64().unwrap_or(0) > 0,
+            "sensor-{s} took nothing: {sent}"
+        );
+        assert_eq!(report["errors"].as_array().map(Vec::len), Some(0), "{sent}");
+    }
+    assert!(
+        points.len() * 2 >= truths.len(),
+        "{} of {} truth points answered",
+        points.len(),
+        truths.len()
+    );
+    for (i, answer) in &points {
+        assert_same_marginals(
+            answer,
+            &floats(&central_lines[*i]["p_red"]),
+            &format!("{name}: truth point {i}"),
+        );
+    }
+    let answer = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+        a["finished"] == true && watermark_events(a) == events
+    });
+    assert_same_marginals(&answer, &floats(&central["final_p_red"]), name);
+    let watermark = answer["watermark"].as_object().expect("a watermark");
+    assert_eq!(watermark.len(), sensors, "{answer}");
+    let stats = deployment.sensor_stats();
+    assert_eq!(stats.len(), sensors);
+    for sensor in &stats {
+        assert_eq!(sensor["merged"], events, "{sensor}");
+        assert_eq!(sensor["merged_twice"], doubled, "{sensor}");
+        assert_eq!(sensor["rejected"], 0, "{sensor}");
+    }
+    let ingested: u64 = stats
+        .iter()
+        .map(|s| s["ingested"].as_u64().unwrap_or(0))
+        .sum();
+    assert_eq!(ingested, events + doubled);
+}
+
+#[test]
+fn two_live_sensors_fed_by_region_give_the_answer_of_replay() {
+    fed_by_region("sensors2-radon", 2, false, 6);
+    fed_by_region("sensors2-factored", 2, true, 7);
+}
+
+#[test]
+fn three_live_sensors_fed_by_region_give_the_answer_of_replay() {
+    fed_by_region("sensors3-radon", 3, false, 8);
+    fed_by_region("sensors3-factored", 3, true, 9);
+}
