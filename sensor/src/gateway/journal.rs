@@ -100,8 +100,14 @@ pub enum MeshRecord {
         rows: bool,
         events: Option<u64>,
     },
-    /// A peer's request moved this finished sensor's watermark here.
-    Raise(Position),
+    /// A peer's request for this sensor's intake that changed it (the peer
+    /// asked past entries it had not asked past before, which may be
+    /// forgotten now; or it moved this finished sensor's watermark).
+    Asked {
+        peer: String,
+        from: u64,
+        above: Position,
+    },
 }
 
 #[derive(Debug, thiserror::Error)]

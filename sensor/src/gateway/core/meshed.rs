@@ -127,13 +127,17 @@ impl<Q> Gateway<Q> {
                     .mesh
                     .as_mut()
                     .ok_or_else(|| "this sensor is the only one".to_string())?;
-                let (slice, moved) = mesh.slice(&wanted.sensor, wanted.from, &wanted.above)?;
-                Ok((slice, moved.then_some(wanted.above)))
+                let (slice, changed) = mesh.slice(&wanted.sensor, wanted.from, &wanted.above)?;
+                Ok((slice, changed.then_some(wanted)))
             });
         self.count("intake request", &answer);
-        let (slice, moved) = answer?;
-        if let Some(above) = moved {
-            self.note(Record::Mesh(MeshRecord::Raise(above)));
+        let (slice, changed) = answer?;
+        if let Some(wanted) = changed {
+            self.note(Record::Mesh(MeshRecord::Asked {
+                peer: wanted.sensor,
+                from: wanted.from,
+                above: wanted.above,
+            }));
             self.drain();
         }
         Ok(slice)
@@ -240,9 +244,9 @@ impl<Q> Gateway<Q> {
                 }
                 self.drain();
             }
-            MeshRecord::Raise(above) => {
+            MeshRecord::Asked { peer, from, above } => {
                 if let Some(mesh) = self.state.mesh.as_mut() {
-                    mesh.raise(&above);
+                    mesh.slice(&peer, from, &above)?;
                 }
                 self.drain();
             }

@@ -115,14 +115,15 @@ impl Intake {
     /// The entries from number `from` on (at most [`SLICE_ENTRIES`]), for
     /// sensor `peer`, whose watermark is `above` (a finished intake moves
     /// its own there: see `IntakeWanted`); every entry all peers have
-    /// asked past is forgotten.
+    /// asked past is forgotten. Whether the request changed the intake
+    /// (what to journal).
     pub fn slice(
         &mut self,
         sensor: &str,
         peer: &str,
         from: u64,
         above: &Position,
-    ) -> Result<IntakeSlice, String> {
+    ) -> Result<(IntakeSlice, bool), String> {
         if !self.fetched.contains_key(peer) {
             return Err(format!("{peer:?} is not a sensor of this deployment"));
         }
@@ -138,10 +139,11 @@ impl Intake {
                 self.base
             ));
         }
+        let mut changed = self.raise(above);
         if let Some(asked) = self.fetched.get_mut(peer) {
+            changed |= asked.is_none_or(|a| from > a);
             *asked = Some(asked.unwrap_or(0).max(from));
         }
-        self.raise(above);
         let skip = (from - self.base) as usize;
         let entries: Vec<_> = self
             .entries
@@ -166,7 +168,7 @@ impl Intake {
             finished: self.finished && all_sent,
         };
         self.forget();
-        Ok(slice)
+        Ok((slice, changed))
     }
 
     /// Drops the entries every peer has asked past.
@@ -217,7 +219,7 @@ mod tests {
         for i in 0..5 {
             intake.take(Position::event(i as f64, "cam", i), format!("{i}"));
         }
-        let slice = intake
+        let (slice, _) = intake
             .slice("north", "east", 3, &Position::start())
             .expect("slice");
         assert_eq!(slice.entries.len(), 2);
@@ -248,13 +250,13 @@ mod tests {
             intake.take(Position::event(i as f64, "cam", i), String::new());
         }
         intake.finish();
-        let first = intake
+        let (first, _) = intake
             .slice("north", "east", 0, &Position::start())
             .expect("slice");
         assert_eq!(first.entries.len(), SLICE_ENTRIES);
         assert!(!first.finished);
         assert_eq!(first.watermark, first.entries[SLICE_ENTRIES - 1].0);
-        let rest = intake
+        let (rest, _) = intake
             .slice("north", "east", SLICE_ENTRIES as u64, &Position::start())
             .expect("slice");
         assert_eq!(rest.entries.len(), 3);

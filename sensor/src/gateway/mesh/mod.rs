@@ -155,29 +155,20 @@ impl Mesh {
     }
 
     /// A slice of this sensor's intake for peer `peer` (whose watermark is
-    /// `above`), and whether it moved this sensor's watermark.
+    /// `above`), and whether the request changed this sensor (what to
+    /// journal: [`Intake::slice`]).
     pub fn slice(
         &mut self,
         peer: &str,
         from: u64,
         above: &Position,
     ) -> Result<(IntakeSlice, bool), String> {
-        let before = self.intake.watermark().clone();
         let name = self.name().to_string();
-        let slice = self.intake.slice(&name, peer, from, above)?;
-        let moved = *self.intake.watermark() != before;
-        if moved {
+        let (slice, changed) = self.intake.slice(&name, peer, from, above)?;
+        if changed {
             self.own(Vec::new());
         }
-        Ok((slice, moved))
-    }
-
-    /// Moves this sensor's watermark to `above` if it is finished (what
-    /// [`Mesh::slice`] did, journaled).
-    pub fn raise(&mut self, above: &Position) {
-        if self.intake.raise(above) {
-            self.own(Vec::new());
-        }
+        Ok((slice, changed))
     }
 
     /// Own entries (and the intake's watermark) to the merge.

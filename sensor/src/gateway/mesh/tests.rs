@@ -8,6 +8,7 @@ use super::MeshConfig;
 use crate::gateway::core::Gateway;
 use crate::gateway::cuts::CutParameters;
 use crate::gateway::ingest::Offer;
+use crate::gateway::journal::Record;
 use crate::gateway::router::{LeaderPlace, Router, RouterConfig};
 use idmesh_protocol::trace::{Header, Line};
 use idmesh_protocol::wire::encode;
@@ -86,6 +87,10 @@ fn routed_whole(lines: &[String], factored: bool) -> Vec<Vec<Sequenced>> {
 
 struct Mesh {
     gateways: Vec<Gateway<u32>>,
+    configs: Vec<MeshConfig>,
+    factored: bool,
+    /// Each gateway's journal so far (compacted now and then).
+    journals: Vec<Vec<Record>>,
     /// Per sensor, the counters of the lines it is given, in order.
     given: Vec<Vec<usize>>,
     next: Vec<usize>,
@@ -95,18 +100,26 @@ struct Mesh {
 impl Mesh {
     fn new(sensors: usize, factored: bool) -> Self {
         let names: Vec<String> = (0..sensors).map(|s| format!("sensor-{s}")).collect();
-        let gateways = (0..sensors)
-            .map(|me| {
-                let config = MeshConfig {
-                    sensors: names.clone(),
-                    me,
-                    serves: (0..LEADERS).map(|l| l % sensors == me).collect(),
-                };
-                Gateway::new(&names[me], router(factored), false).meshed(&config)
+        let configs: Vec<MeshConfig> = (0..sensors)
+            .map(|me| MeshConfig {
+                sensors: names.clone(),
+                me,
+                serves: (0..LEADERS).map(|l| l % sensors == me).collect(),
+            })
+            .collect();
+        let gateways = configs
+            .iter()
+            .map(|config| {
+                Gateway::new(&config.sensors[config.me], router(factored), false)
+                    .meshed(config)
+                    .journaled()
             })
             .collect();
         Mesh {
             gateways,
+            configs,
+            factored,
+            journals: vec![Vec::new(); sensors],
             given: vec![Vec::new(); sensors],
             next: vec![0; sensors],
             sent: vec![Vec::new(); LEADERS],
@@ -121,6 +134,35 @@ impl Mesh {
                 "a batch for a leader another serves"
             );
             self.sent[i].extend(batch.items);
+        }
+        self.journal();
+    }
+
+    /// What every gateway recorded, onto its journal.
+    fn journal(&mut self) {
+        for (g, journal) in self.gateways.iter_mut().zip(&mut self.journals) {
+            journal.extend(g.unjournaled());
+        }
+    }
+
+    /// Sensor `s` as its journal rebuilds it equals sensor `s`; now and
+    /// then its journal is compacted, as the actor does.
+    fn check_restore(&mut self, s: usize, compact: bool) {
+        self.journal();
+        let config = &self.configs[s];
+        let mut restored: Gateway<u32> =
+            Gateway::new(&config.sensors[config.me], router(self.factored), false).meshed(config);
+        restored
+            .restore(self.journals[s].clone(), &[])
+            .expect("the journal replays");
+        let live = self.gateways[s].compacted().expect("a snapshot");
+        assert_eq!(
+            restored.compacted().expect("a snapshot"),
+            live,
+            "sensor {s} rebuilt from its journal is another"
+        );
+        if compact {
+            self.journals[s] = live;
         }
     }
 
@@ -174,6 +216,7 @@ impl Mesh {
             let slice = encode(&self.gateways[p].intake(&wanted).expect("a slice"));
             self.gateways[s].peer(&slice).expect("merged");
         }
+        self.journal();
     }
 }
 
@@ -196,6 +239,9 @@ fn check_merge(seed: u64, sensors: usize, factored: bool) {
             0 => mesh.feed(s, rng.gen_range(1..6), &lines),
             1 => mesh.fetch(s),
             _ => mesh.flush(s),
+        }
+        if rng.gen_bool(0.03) {
+            mesh.check_restore(s, rng.gen_bool(0.5));
         }
     }
     for s in 0..sensors {
