@@ -119,11 +119,15 @@ impl Node {
         if let Some(seq) = self.leader.waiting_for_components() {
             return format!("it waits for the components of the mix at item {seq}");
         }
+        let sensor = self
+            .leader
+            .sensor()
+            .map_or_else(|| "the sensor".to_string(), |s| format!("sensor {s}"));
         if let Some(next) = self.leader.missing_batches() {
-            return format!("it waits for batch {next} from the sensor");
+            return format!("it waits for batch {next} from {sensor}");
         }
         format!(
-            "no batch with the cut came from the sensor (its last applied item is {})",
+            "no batch with the cut came from {sensor} (its last applied item is {})",
             self.leader.position()
         )
     }

@@ -43,6 +43,12 @@ impl Leader {
         Ok(actions)
     }
 
+    /// The sensor that sends this leader its batches, as it names itself
+    /// (None before the first).
+    pub fn sensor(&self) -> Option<&str> {
+        self.sensor.as_deref()
+    }
+
     /// The first batch number missing before one that arrived, if any.
     pub fn missing_batches(&self) -> Option<u64> {
         (!self.ahead.is_empty() || self.refetch).then_some(self.next_batch)
@@ -56,6 +62,9 @@ impl Leader {
     ) -> Result<Vec<Action>, LeaderError> {
         self.next_batch += 1;
         self.refetch = false;
+        if self.sensor.as_deref() != Some(batch.sensor.as_str()) {
+            self.sensor = Some(batch.sensor.clone());
+        }
         self.stats.batches += 1;
         self.stats.bytes_received += bytes as u64;
         for Sequenced { seq, item } in batch.items {

@@ -127,6 +127,8 @@ pub struct Leader {
     position: u64,
     /// Next batch number expected from the sensor.
     next_batch: u64,
+    /// The sensor that sent the batches (named in its errors).
+    sensor: Option<String>,
     /// Batches that came ahead of a missing one, by number, with their size.
     ahead: BTreeMap<u64, (Batch, usize)>,
     /// Every transfer sent, with its receiver: a restarted peer asks for
@@ -171,6 +173,7 @@ impl Leader {
             frontier: 0,
             position: 0,
             next_batch: 0,
+            sensor: None,
             ahead: BTreeMap::new(),
             sent: Vec::new(),
             asked: None,

@@ -370,6 +370,9 @@ pub async fn run(
                 }
                 if let Some(peers) = peers.as_mut() {
                     peers.answered(&peer, answered);
+                    if let Some(reason) = degraded(&gateway, peers) {
+                        gateway.refuse_waiting(&reason);
+                    }
                 }
                 settle(&mut gateway, &mut wire, peers.as_ref()).await?;
             }
@@ -575,20 +578,9 @@ async fn cut(
     query: Query,
     peers: Option<&Peers>,
 ) -> Result<(), GatewayError> {
-    if let Some(peers) = peers {
-        let down: Vec<String> = gateway
-            .waiting_for()
-            .into_iter()
-            .filter(|s| peers.unreachable().contains(s))
-            .collect();
-        if !down.is_empty() {
-            let reason = format!(
-                "degraded: sensors {down:?} do not answer; the stream's order cannot pass their \
-                 events, so no cut is placed"
-            );
-            let _ = bounded("a refusal", query.reply_err(reason)).await;
-            return Ok(());
-        }
+    if let Some(reason) = peers.and_then(|peers| degraded(gateway, peers)) {
+        let _ = bounded("a refusal", query.reply_err(reason)).await;
+        return Ok(());
     }
     let parameters = query.parameters();
     let parameters = CutParameters {
@@ -607,6 +599,22 @@ async fn cut(
         }
     }
     Ok(())
+}
+
+/// Why no cut can be placed now, if the merge waits for a peer that does
+/// not answer: degraded, naming it.
+fn degraded(gateway: &Gateway<Query>, peers: &Peers) -> Option<String> {
+    let down: Vec<String> = gateway
+        .waiting_for()
+        .into_iter()
+        .filter(|s| peers.unreachable().contains(s))
+        .collect();
+    (!down.is_empty()).then(|| {
+        format!(
+            "degraded: sensors {down:?} do not answer; the stream's order cannot pass their \
+             events, so no cut is placed"
+        )
+    })
 }
 
 /// One sensor of several, after anything that may have moved its merge:
