@@ -17,6 +17,8 @@
 pub mod intake;
 pub mod merge;
 #[cfg(test)]
+mod simulation;
+#[cfg(test)]
 mod tests;
 
 use super::cuts::Cuts;

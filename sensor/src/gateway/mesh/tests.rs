@@ -16,8 +16,8 @@ use idmesh_protocol::wire::sensor_to_leader::Sequenced;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-const TRACKS: u32 = 12;
-const LEADERS: usize = 3;
+pub(super) const TRACKS: u32 = 12;
+pub(super) const LEADERS: usize = 3;
 
 fn header() -> Header {
     let mut header = Header::new(TRACKS as usize);
@@ -25,7 +25,7 @@ fn header() -> Header {
     header
 }
 
-fn router(factored: bool) -> Router {
+pub(super) fn router(factored: bool) -> Router {
     let config = RouterConfig {
         factored: factored.then_some(idmesh_protocol::wire::factored::FactoredStart {
             max_component: 4,
@@ -50,7 +50,7 @@ fn router(factored: bool) -> Router {
 
 /// A random trace: moves across the leaders' regions, mixes (some of
 /// tracks far apart) and observations, several at each time.
-fn trace(rng: &mut ChaCha8Rng, events: usize) -> Vec<String> {
+pub(super) fn trace(rng: &mut ChaCha8Rng, events: usize) -> Vec<String> {
     (0..events)
         .map(|i| {
             let time = (i / 3) as f64;
@@ -73,7 +73,7 @@ fn trace(rng: &mut ChaCha8Rng, events: usize) -> Vec<String> {
 }
 
 /// What each leader is sent, in order, by one gateway routing it all.
-fn routed_whole(lines: &[String], factored: bool) -> Vec<Vec<Sequenced>> {
+pub(super) fn routed_whole(lines: &[String], factored: bool) -> Vec<Vec<Sequenced>> {
     let mut gateway: Gateway<()> = Gateway::new("s", router(factored), false);
     let mut sent = vec![Vec::new(); LEADERS];
     for text in lines {
