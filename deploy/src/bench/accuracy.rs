@@ -264,6 +264,7 @@ fn plan(kind: Kind, leaders: usize, n: usize) -> Loopback {
         ports: Ports::Free,
         live: true,
         state_dir: None,
+        sensors: 1,
     }
 }
 

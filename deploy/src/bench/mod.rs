@@ -10,6 +10,9 @@
 //!   run: a get to one process and a get fanned out to every leader, both
 //!   answered by the processes' ping queryables, which do no work.
 //!
+//! - [`sensors`] (with `--ingest`): one, two and three live sensors each
+//!   fed by its own producer at once: events per second acknowledged and
+//!   answered, and a put's way to the first answer that includes it.
 //! - [`ingest`] (`--ingest`, on its own): events per second one producer
 //!   gets acknowledged on a live sensor's ingest key, by lines per
 //!   request, and a one-line ingest round trip against a raw get to the
@@ -25,6 +28,7 @@ mod accuracy;
 pub use accuracy::Crowds;
 mod cpu;
 mod ingest;
+mod sensors;
 mod latency;
 mod throughput;
 
@@ -113,6 +117,22 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         let figures = runtime.block_on(ingest::measure(&deployment, &trace, options.queries));
         runtime.block_on(deployment.close());
         ingest::report(&figures?, options, &mut report)?;
+        let mut several = Vec::new();
+        for count in 1..=3 {
+            let deployment = runtime.block_on(Deployment::start_sensors(
+                options, &header, &trace, 3, None, true, count,
+            ))?;
+            eprintln!("bench: {count} live sensor(s), each fed by its own producer");
+            let figures = runtime.block_on(sensors::measure(
+                &deployment,
+                &trace,
+                count,
+                options.queries.min(200),
+            ));
+            runtime.block_on(deployment.close());
+            several.push(figures?);
+        }
+        sensors::report(&several, &mut report)?;
         print!("{report}");
         if let Some(out) = &options.out {
             std::fs::write(out, &report)
@@ -219,6 +239,20 @@ impl Deployment {
         rate: Option<f64>,
         live: bool,
     ) -> Result<Self> {
+        Self::start_sensors(options, trace, trace, leaders, rate, live, 1).await
+    }
+
+    /// [`Deployment::start`] with `sensors` sensors (their leaders' batches
+    /// sent by each in turn), the leaders placed over `placed_by`'s field.
+    async fn start_sensors(
+        options: &BenchOptions,
+        trace: &Path,
+        placed_by: &Path,
+        leaders: usize,
+        rate: Option<f64>,
+        live: bool,
+        sensors: usize,
+    ) -> Result<Self> {
         let plan = Loopback {
             prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
             leaders,
@@ -238,22 +272,20 @@ impl Deployment {
             // Beside the topology; a journal of an earlier run would be
             // resumed, so it goes first.
             state_dir: options.journal.then(|| PathBuf::from("state")),
+            sensors,
         };
         if options.journal {
             let _ = std::fs::remove_dir_all(options.dir.join("state"));
         }
-        let config = options.dir.join(format!("topology-{leaders}.toml"));
-        Self::launch(&plan, trace, &config).await
+        let config = options
+            .dir
+            .join(format!("topology-{leaders}-{sensors}.toml"));
+        Self::launch_placed(&plan, trace, placed_by, &config).await
     }
 
-    /// Writes `plan`'s topology streaming `trace` to `config` and starts
-    /// its processes.
-    async fn launch(plan: &Loopback, trace: &Path, config: &Path) -> Result<Self> {
-        Self::launch_placed(plan, trace, trace, config).await
-    }
-
-    /// [`Deployment::launch`] with the leaders placed over the field of
-    /// `placed_by` (see [`Loopback::topology_placed`]).
+    /// Writes `plan`'s topology streaming `trace` to `config`, with the
+    /// leaders placed over the field of `placed_by` (see
+    /// [`Loopback::topology_placed`]), and starts its processes.
     async fn launch_placed(
         plan: &Loopback,
         trace: &Path,

@@ -200,6 +200,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         ports: Ports::From(7447),
         live: false,
         state_dir: None,
+        sensors: 1,
     };
     let (topology, coordinator) = plan.topology(&trace)?;
     let config = options.dir.join("topology.toml");

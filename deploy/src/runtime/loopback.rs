@@ -39,6 +39,9 @@ pub struct Loopback {
     /// Where the leaders and the sensor journal (`state_dir`); None: no
     /// journal.
     pub state_dir: Option<std::path::PathBuf>,
+    /// How many sensors (`[[sensor]]`, `sensor-0`, `sensor-1`, …; their
+    /// settings alike); 0 or 1: one `[sensor]`.
+    pub sensors: usize,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -84,7 +87,7 @@ impl Loopback {
         let mut held = Vec::new();
         let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0, &mut held)?);
         let mut toml = format!(
-            "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\nregional = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n\n[sensor]\nname = \"sensor-0\"\nlisten = \"tcp/127.0.0.1:{}\"\ntrace = {:?}\n",
+            "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\nregional = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n",
             self.prefix,
             self.belief.name(),
             self.shrink_interest,
@@ -96,20 +99,29 @@ impl Loopback {
                 Sparsification::Overcomplete => "overcomplete",
             },
             self.query_timeout_ms,
-            self.ports.take(self.leaders as u16 + 1, &mut held)?,
-            trace.display().to_string(),
         );
-        if let Some(rate) = self.rate {
-            toml.push_str(&format!("rate = {rate}\n"));
-        }
-        if let Some(events) = self.events {
-            toml.push_str(&format!("events = {events}\n"));
-        }
-        if self.live {
-            toml.push_str("live = true\n");
-        }
-        if let Some(window) = self.window {
-            toml.push_str(&format!("window = {window}\n"));
+        let sensors = self.sensors.max(1);
+        for s in 0..sensors {
+            let table = if sensors > 1 { "[[sensor]]" } else { "[sensor]" };
+            let port = self
+                .ports
+                .take(self.leaders as u16 + 1 + s as u16, &mut held)?;
+            toml.push_str(&format!(
+                "\n{table}\nname = \"sensor-{s}\"\nlisten = \"tcp/127.0.0.1:{port}\"\ntrace = {:?}\n",
+                trace.display().to_string(),
+            ));
+            if let Some(rate) = self.rate {
+                toml.push_str(&format!("rate = {rate}\n"));
+            }
+            if let Some(events) = self.events {
+                toml.push_str(&format!("events = {events}\n"));
+            }
+            if self.live {
+                toml.push_str("live = true\n");
+            }
+            if let Some(window) = self.window {
+                toml.push_str(&format!("window = {window}\n"));
+            }
         }
         if let Some(dir) = &self.state_dir {
             toml.insert_str(0, &format!("state_dir = {:?}\n", dir.display().to_string()));
@@ -158,6 +170,7 @@ mod tests {
             ports: Ports::From(9100),
             live: false,
             state_dir: None,
+            sensors: 1,
         };
         let (toml, _) = plan.topology(&trace).unwrap();
         let config = dir.join("topology.toml");
@@ -196,6 +209,7 @@ mod tests {
             ports: Ports::From(9000),
             live: true,
             state_dir: None,
+            sensors: 1,
         };
         let (toml, coordinator) = plan.topology(&trace).unwrap();
         assert_eq!(coordinator, "tcp/127.0.0.1:9000");
