@@ -518,6 +518,13 @@ mod tests {
             assert!(topology.trace_path().exists(), "{name}: no trace");
             assert_eq!(topology.leader.len(), 2, "{name}");
         }
+        // Two sensors, each serving the leader of its region.
+        let sensors = Topology::load(&examples.join("sensors.toml")).unwrap();
+        assert!(sensors.trace_path().exists(), "sensors.toml: no trace");
+        let names: Vec<&str> = sensors.sensors.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["sensor-west", "sensor-east"]);
+        assert_eq!(sensors.sensor_of_leader(1).name, "sensor-east");
+        assert_eq!(sensors.members().len(), 5);
         // Three machines on a LAN, plain and secured: the gateway runs the
         // coordinator and the sensor, east and west two leaders each.
         for name in ["lan.toml", "secure-lan.toml"] {
@@ -527,6 +534,45 @@ mod tests {
             assert_eq!((on("gateway"), on("east"), on("west")), (2, 2, 2), "{name}");
             assert_eq!(topology.security.is_some(), name.starts_with("secure"));
         }
+    }
+
+    #[test]
+    fn several_sensors_share_the_leaders_in_turn_and_one_trace() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-s-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let sensor = |i: usize, trace: &str| {
+            format!("[[sensor]]\nname = \"s{i}\"\nlisten = \"tcp/127.0.0.1:2{i}\"\ntrace = \"{trace}\"\n")
+        };
+        let leader = |i: usize, extra: &str| {
+            format!("[[leader]]\nname = \"l{i}\"\nlisten = \"tcp/127.0.0.1:3{i}\"\n{extra}")
+        };
+        let coordinator = "[coordinator]\nname = \"c\"\nlisten = \"tcp/127.0.0.1:1\"\n";
+        let text = [
+            coordinator.to_string(),
+            sensor(0, "x.jsonl"),
+            sensor(1, "x.jsonl"),
+            leader(0, ""),
+            leader(1, ""),
+            leader(2, "sensor = \"s0\"\n"),
+        ]
+        .concat();
+        std::fs::write(&path, &text).unwrap();
+        let t = Topology::load(&path).unwrap();
+        let served: Vec<&str> = (0..3).map(|i| t.sensor_of_leader(i).name.as_str()).collect();
+        assert_eq!(served, ["s0", "s1", "s0"]);
+        std::fs::write(&path, text.replace("sensor = \"s0\"", "sensor = \"s9\"")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("leader l2: sensor \"s9\" is not in the topology"), "{e}");
+        let two_traces = [coordinator.to_string(), sensor(0, "x.jsonl"), sensor(1, "y.jsonl"), leader(0, "")].concat();
+        std::fs::write(&path, two_traces).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("sensor s1: several sensors share one stream"), "{e}");
+        // A mistake inside one of several sensors' tables is named.
+        std::fs::write(&path, text.replace("trace = \"x.jsonl\"\n", "trace = \"x.jsonl\"\nbogus = 1\n")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("bogus"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

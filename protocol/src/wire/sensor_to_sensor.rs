@@ -130,5 +130,12 @@ pub struct IntakeWanted {
     /// below this either, and moves its watermark there: cuts asked of the
     /// asker are merged without waiting for one asked of it.
     pub above: Position,
+    /// What the asker knows of this sensor: its watermark and whether it
+    /// is finished. A request with nothing new to answer (no entry past
+    /// `from`, and these unchanged) is held until something is, or a
+    /// while has passed: one request waits at the peer instead of many
+    /// polling it.
+    pub known: Position,
+    pub known_finished: bool,
 }
 versioned!(IntakeWanted, "intake request");

@@ -291,6 +291,8 @@ pub async fn run(
     let mut stall_check = tokio::time::interval(STALL_CHECK);
     stall_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     tokio::pin!(shutdown);
+    // Peers' intake requests with nothing new to answer yet.
+    let mut held: Vec<HeldIntake> = Vec::new();
     loop {
         // How many lines are due now, and when the next one is.
         let (due, wait) = if gateway.finished() || next >= lines.len() {
@@ -355,6 +357,9 @@ pub async fn run(
                     cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
                 }
                 settle(&mut gateway, &mut wire, peers.as_ref()).await?;
+                if !held.is_empty() {
+                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
+                }
             }
             fetched = next_fetched(&mut peers) => {
                 let Some((peer, fetched)) = fetched else { continue };
@@ -375,14 +380,21 @@ pub async fn run(
                     }
                 }
                 settle(&mut gateway, &mut wire, peers.as_ref()).await?;
+                if !held.is_empty() {
+                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
+                }
             }
             query = intakes.recv_async() => {
                 let Ok(query) = query else { break };
-                let answer = gateway.intake(&payload(&query));
-                // A watermark it moved is on disk before a peer merges by it.
-                wire.sync(&mut gateway)?;
-                reply_to(&query, answer, "intake").await;
+                held.push(HeldIntake { request: payload(&query), query, until: Instant::now() + HOLD_INTAKE });
+                answer_intakes(&mut gateway, &mut wire, &mut held).await?;
                 settle(&mut gateway, &mut wire, peers.as_ref()).await?;
+                if !held.is_empty() {
+                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
+                }
+            }
+            _ = tokio::time::sleep_until(next_release(&held)), if !held.is_empty() => {
+                answer_intakes(&mut gateway, &mut wire, &mut held).await?;
             }
             query = follows.recv_async() => {
                 let Ok(query) = query else { break };
@@ -454,6 +466,9 @@ pub async fn run(
                 let Ok(query) = query else { break };
                 ingest(&mut gateway, &mut wire, query).await?;
                 settle(&mut gateway, &mut wire, peers.as_ref()).await?;
+                if !held.is_empty() {
+                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
+                }
             }
             read = next_input(&mut input), if input.is_some() && open => {
                 let Some(read) = read else {
@@ -636,6 +651,51 @@ async fn settle(
         let _ = bounded("a refusal", query.reply_err(reason)).await;
     }
     peers.ask(gateway.wanted());
+    Ok(())
+}
+
+/// How long a peer's intake request with nothing new for it is held
+/// before it is answered anyway.
+const HOLD_INTAKE: Duration = Duration::from_millis(100);
+
+/// A peer's intake request (its bytes), held until there is something new
+/// for it or until `until`.
+struct HeldIntake {
+    query: Query,
+    request: Vec<u8>,
+    until: Instant,
+}
+
+/// When the first held intake request is due.
+fn next_release(held: &[HeldIntake]) -> tokio::time::Instant {
+    let until = held.iter().map(|h| h.until).min().unwrap_or_else(Instant::now);
+    tokio::time::Instant::from_std(until)
+}
+
+/// Answers every held intake request that has something new for its peer
+/// (or has waited long enough, or cannot be answered: an error reply);
+/// keeps the rest.
+async fn answer_intakes(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    held: &mut Vec<HeldIntake>,
+) -> Result<(), GatewayError> {
+    let now = Instant::now();
+    let mut answers = Vec::new();
+    let mut kept = Vec::with_capacity(held.len());
+    for h in held.drain(..) {
+        match gateway.intake(&h.request) {
+            Ok((_, false)) if now < h.until => kept.push(h),
+            Ok((slice, _)) => answers.push((h.query, Ok(slice))),
+            Err(e) => answers.push((h.query, Err(e))),
+        }
+    }
+    *held = kept;
+    // A watermark a request moved is on disk before a peer merges by it.
+    wire.sync(gateway)?;
+    for (query, answer) in answers {
+        reply_to(&query, answer, "intake").await;
+    }
     Ok(())
 }
 

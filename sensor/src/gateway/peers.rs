@@ -1,9 +1,11 @@
 //! One sensor of several: fetching every other sensor's intake
 //! (`P/sensor/<peer>/intake`), a task per peer. The gateway says what to
 //! ask each for ([`Gateway::wanted`](super::core::Gateway::wanted): from
-//! which entry, and its own watermark); a task asks again at once when
-//! that changes, and every [`POLL`] while it does not, so a peer's new
-//! entries arrive within a poll and a round trip. A peer that does not
+//! which entry, its own watermark, what it knows of the peer's); a task
+//! asks again as soon as that changes. The peer holds a request it has
+//! nothing new for until it has (or 100 ms passed), so a peer's new
+//! entries arrive within a round trip of being taken, with one request
+//! waiting at each peer rather than a poll. A peer that does not
 //! answer is *unreachable* until it answers again: the actor then refuses
 //! cuts the merge cannot place without it, naming it.
 
@@ -14,8 +16,12 @@ use tokio::sync::{mpsc, watch};
 use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
 
-/// How often a peer is asked again when nothing changed here.
+/// How long after an error a peer is asked again.
 pub const POLL: Duration = Duration::from_millis(5);
+
+/// After a slice that changed nothing here (the peer held the request as
+/// long as it holds one), how long before asking again.
+pub const HELD_FOR: Duration = Duration::from_millis(1);
 
 /// How long one fetch may wait for its reply.
 pub const FETCH_TIMEOUT: Duration = Duration::from_secs(1);
@@ -112,12 +118,18 @@ async fn fetch(
     loop {
         let request = requests.borrow_and_update().clone();
         let fetched = fetch_once(&session, &key, request).await;
+        let answered = matches!(fetched, Fetch::Slice(_));
         if replies.send((peer.clone(), fetched)).await.is_err() {
             return;
         }
+        // A slice changes what the gateway asks next (from where, what it
+        // knows): ask again once it has, at once. A peer holds a request
+        // it has nothing new for, so this is no busy loop; after an error
+        // (a peer down or refusing) wait a poll first.
+        let wait = if answered { HELD_FOR } else { POLL };
         tokio::select! {
             changed = requests.changed() => if changed.is_err() { return },
-            _ = tokio::time::sleep(POLL) => {}
+            _ = tokio::time::sleep(wait) => {}
         }
     }
 }

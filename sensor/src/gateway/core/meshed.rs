@@ -117,8 +117,10 @@ impl<Q> Gateway<Q> {
     }
 
     /// A peer asks for this sensor's intake (`IntakeWanted` bytes): the
-    /// slice, or why not (counted).
-    pub fn intake(&mut self, bytes: &[u8]) -> Result<IntakeSlice, String> {
+    /// slice and whether it tells the peer anything new (an entry, a
+    /// watermark or an end it did not know: else the driver may hold the
+    /// request, see `IntakeWanted::known`), or why not (counted).
+    pub fn intake(&mut self, bytes: &[u8]) -> Result<(IntakeSlice, bool), String> {
         let answer = decode::<IntakeWanted>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|wanted| {
@@ -128,7 +130,10 @@ impl<Q> Gateway<Q> {
                     .as_mut()
                     .ok_or_else(|| "this sensor is the only one".to_string())?;
                 let (slice, changed) = mesh.slice(&wanted.sensor, wanted.from, &wanted.above)?;
-                Ok((slice, changed.then_some(wanted)))
+                let news = !slice.entries.is_empty()
+                    || slice.watermark != wanted.known
+                    || slice.finished != wanted.known_finished;
+                Ok(((slice, news), changed.then_some(wanted)))
             });
         self.count("intake request", &answer);
         let (slice, changed) = answer?;
@@ -150,12 +155,14 @@ impl<Q> Gateway<Q> {
         };
         mesh.peers()
             .into_iter()
-            .map(|(peer, from)| {
+            .map(|(peer, from, known, known_finished)| {
                 let wanted = IntakeWanted {
                     version: VERSION,
                     sensor: mesh.name().to_string(),
                     from,
                     above: mesh.intake.watermark().clone(),
+                    known,
+                    known_finished,
                 };
                 (peer, encode(&wanted))
             })

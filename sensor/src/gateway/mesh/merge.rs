@@ -51,6 +51,12 @@ impl Merge {
         self.sensors.iter().position(|s| s == sensor)
     }
 
+    /// Sensor `i`'s watermark as this merge knows it, and whether it is
+    /// finished.
+    pub fn known(&self, i: usize) -> (&Position, bool) {
+        (&self.watermarks[i], self.finished[i])
+    }
+
     /// Entries received from sensor `i` so far: where to fetch from.
     pub fn received(&self, i: usize) -> u64 {
         self.received[i]

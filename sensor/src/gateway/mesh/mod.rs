@@ -88,11 +88,20 @@ impl Mesh {
         &self.merge.sensors()[self.me]
     }
 
-    /// The other sensors, and the entry to fetch each from next.
-    pub fn peers(&self) -> Vec<(String, u64)> {
+    /// The other sensors, each with the entry to fetch it from next and
+    /// what is known of its watermark.
+    pub fn peers(&self) -> Vec<(String, u64, Position, bool)> {
         (0..self.merge.sensors().len())
             .filter(|&i| i != self.me)
-            .map(|i| (self.merge.sensors()[i].clone(), self.merge.received(i)))
+            .map(|i| {
+                let (watermark, finished) = self.merge.known(i);
+                (
+                    self.merge.sensors()[i].clone(),
+                    self.merge.received(i),
+                    watermark.clone(),
+                    finished,
+                )
+            })
             .collect()
     }
 

@@ -173,7 +173,7 @@ impl Schedule {
             if faulty && self.rng.gen_bool(0.1) {
                 continue; // the request is lost
             }
-            let slice = encode(&self.sensors[p].gateway.intake(&wanted).expect("a slice"));
+            let slice = encode(&self.sensors[p].gateway.intake(&wanted).expect("a slice").0);
             self.settle(p);
             let copies = if !faulty {
                 1

@@ -213,7 +213,7 @@ impl Mesh {
                 .iter()
                 .position(|g| g.mesh().is_some_and(|m| m.name() == peer))
                 .expect("a peer");
-            let slice = encode(&self.gateways[p].intake(&wanted).expect("a slice"));
+            let slice = encode(&self.gateways[p].intake(&wanted).expect("a slice").0);
             self.gateways[s].peer(&slice).expect("merged");
         }
         self.journal();
