@@ -28,8 +28,8 @@ mod accuracy;
 pub use accuracy::Crowds;
 mod cpu;
 mod ingest;
-mod sensors;
 mod latency;
+mod sensors;
 mod throughput;
 
 use crate::runtime::launch::{simulate_crowd, Processes};

@@ -41,8 +41,11 @@ pub struct SensorsFigures {
     pub raw: Vec<Duration>,
 }
 
-/// Each sensor's lines, by region.
-fn split(trace: &Path, sensors: usize) -> Result<(Vec<Vec<(f64, String)>>, f64)> {
+/// A sensor's events: each line with its time.
+type Timed = Vec<(f64, String)>;
+
+/// Each sensor's lines, by region, and the crowd's last time.
+fn split(trace: &Path, sensors: usize) -> Result<(Vec<Timed>, f64)> {
     let places = leader_places(trace, sensors)?;
     let text = std::fs::read_to_string(trace)?;
     let mut at: Vec<Option<(f64, f64)>> = Vec::new();
@@ -221,8 +224,7 @@ pub async fn measure(
     let mut included = events;
     for i in 0..samples {
         let time = time_now();
-        let line =
-            format!(r#"{{"kind":"observe","time":{time},"track":0,"red":0.6,"blue":0.4}}"#);
+        let line = format!(r#"{{"kind":"observe","time":{time},"track":0,"red":0.6,"blue":0.4}}"#);
         let mut parameters = format!("producer=probe;counter={i}");
         if meshed {
             parameters.push_str(&format!(";time={time}"));
@@ -290,7 +292,10 @@ pub fn report(figures: &[SensorsFigures], out: &mut String) -> Result<()> {
     )?;
     writeln!(out, "|---:|---:|---:|---:|---:|---:|---:|---:|")?;
     for f in figures {
-        let (p50, p99) = (percentile(&f.to_answer, 0.5), percentile(&f.to_answer, 0.99));
+        let (p50, p99) = (
+            percentile(&f.to_answer, 0.5),
+            percentile(&f.to_answer, 0.99),
+        );
         let (r50, r99) = (percentile(&f.raw, 0.5), percentile(&f.raw, 0.99));
         writeln!(
             out,

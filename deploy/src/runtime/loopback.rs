@@ -102,7 +102,11 @@ impl Loopback {
         );
         let sensors = self.sensors.max(1);
         for s in 0..sensors {
-            let table = if sensors > 1 { "[[sensor]]" } else { "[sensor]" };
+            let table = if sensors > 1 {
+                "[[sensor]]"
+            } else {
+                "[sensor]"
+            };
             let port = self
                 .ports
                 .take(self.leaders as u16 + 1 + s as u16, &mut held)?;

@@ -559,17 +559,35 @@ mod tests {
         .concat();
         std::fs::write(&path, &text).unwrap();
         let t = Topology::load(&path).unwrap();
-        let served: Vec<&str> = (0..3).map(|i| t.sensor_of_leader(i).name.as_str()).collect();
+        let served: Vec<&str> = (0..3)
+            .map(|i| t.sensor_of_leader(i).name.as_str())
+            .collect();
         assert_eq!(served, ["s0", "s1", "s0"]);
         std::fs::write(&path, text.replace("sensor = \"s0\"", "sensor = \"s9\"")).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
-        assert!(e.contains("leader l2: sensor \"s9\" is not in the topology"), "{e}");
-        let two_traces = [coordinator.to_string(), sensor(0, "x.jsonl"), sensor(1, "y.jsonl"), leader(0, "")].concat();
+        assert!(
+            e.contains("leader l2: sensor \"s9\" is not in the topology"),
+            "{e}"
+        );
+        let two_traces = [
+            coordinator.to_string(),
+            sensor(0, "x.jsonl"),
+            sensor(1, "y.jsonl"),
+            leader(0, ""),
+        ]
+        .concat();
         std::fs::write(&path, two_traces).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
-        assert!(e.contains("sensor s1: several sensors share one stream"), "{e}");
+        assert!(
+            e.contains("sensor s1: several sensors share one stream"),
+            "{e}"
+        );
         // A mistake inside one of several sensors' tables is named.
-        std::fs::write(&path, text.replace("trace = \"x.jsonl\"\n", "trace = \"x.jsonl\"\nbogus = 1\n")).unwrap();
+        std::fs::write(
+            &path,
+            text.replace("trace = \"x.jsonl\"\n", "trace = \"x.jsonl\"\nbogus = 1\n"),
+        )
+        .unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
         assert!(e.contains("bogus"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();

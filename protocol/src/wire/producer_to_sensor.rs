@@ -19,6 +19,16 @@
 //! likelihood out of range, a `truth` or second `header` line) is refused
 //! with its reason and uses up its counter, so one bad line never stalls
 //! a producer.
+//!
+//! One sensor of several ([`sensor_to_sensor`](super::sensor_to_sensor))
+//! orders events by (time, producer, counter), so three rules change: a
+//! producer's counters are its own across every sensor it feeds, so a
+//! sensor sees them rise with gaps (a counter below the last one taken
+//! that was never taken here is refused as out of order; one taken is a
+//! duplicate, among the last 4,096); a line at or before the position the
+//! sensor has passed is refused as late; and a request may say `time=T`
+//! (nothing before T comes from this producer to this sensor) and
+//! `finish` (no more events), with or without lines.
 
 use serde::{Deserialize, Serialize};
 

@@ -668,7 +668,11 @@ struct HeldIntake {
 
 /// When the first held intake request is due.
 fn next_release(held: &[HeldIntake]) -> tokio::time::Instant {
-    let until = held.iter().map(|h| h.until).min().unwrap_or_else(Instant::now);
+    let until = held
+        .iter()
+        .map(|h| h.until)
+        .min()
+        .unwrap_or_else(Instant::now);
     tokio::time::Instant::from_std(until)
 }
 

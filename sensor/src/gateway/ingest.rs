@@ -249,10 +249,7 @@ impl Ingest {
             // never stalls its producer.
             *next = counter + 1;
             let taken = event(text, &self.header).and_then(|line| {
-                admit(&line, text, producer, counter).map_err(|late| {
-                    stats.late += 1;
-                    late
-                })?;
+                admit(&line, text, producer, counter).inspect_err(|_| stats.late += 1)?;
                 Ok(line)
             });
             match taken {

@@ -280,7 +280,7 @@ impl<Q> Gateway<Q> {
             let Some(mesh) = self.state.mesh.as_mut() else {
                 return;
             };
-            let Some((origin, entry)) = mesh.merge.next() else {
+            let Some((origin, entry)) = mesh.merge.release() else {
                 break;
             };
             match entry {

@@ -176,7 +176,7 @@ impl Intake {
         let Some(everyone) = self
             .fetched
             .values()
-            .map(|a| *a)
+            .copied()
             .collect::<Option<Vec<u64>>>()
             .and_then(|asked| asked.into_iter().min())
         else {

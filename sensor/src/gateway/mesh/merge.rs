@@ -110,7 +110,7 @@ impl Merge {
 
     /// The next entry of the merged order, and the sensor it came from;
     /// None until some sensor's watermark lets one go.
-    pub fn next(&mut self) -> Option<(usize, Entry)> {
+    pub fn release(&mut self) -> Option<(usize, Entry)> {
         loop {
             let (i, head) = self
                 .queues
@@ -186,7 +186,7 @@ mod tests {
     }
 
     fn drain(merge: &mut Merge) -> Vec<String> {
-        std::iter::from_fn(|| merge.next())
+        std::iter::from_fn(|| merge.release())
             .map(|(_, e)| match e {
                 Entry::Line(t) => t,
                 Entry::Cut { tag, .. } => format!("cut {tag}"),
@@ -287,8 +287,8 @@ mod tests {
                 deliver(&mut merge, s, upto, &mut sent);
                 out.extend(drain(&mut merge));
             }
-            for s in 0..3 {
-                deliver(&mut merge, s, intakes[s].len(), &mut sent);
+            for (s, intake) in intakes.iter().enumerate() {
+                deliver(&mut merge, s, intake.len(), &mut sent);
             }
             out.extend(drain(&mut merge));
             prop_assert!(merge.complete());

@@ -270,9 +270,9 @@ fn check_merge(seed: u64, sensors: usize, factored: bool) {
         .filter(|c| mesh.given.iter().filter(|g| g.contains(c)).count() > 1)
         .count() as u64;
     assert_eq!(twice, doubled, "seed {seed}");
-    for leader in 0..LEADERS {
+    for (leader, whole) in whole.iter().enumerate() {
         assert_eq!(
-            mesh.sent[leader], whole[leader],
+            &mesh.sent[leader], whole,
             "seed {seed}, {sensors} sensors: leader {leader} was sent another stream"
         );
     }
