@@ -121,6 +121,31 @@ pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     b
 }
 
+/// Answers at a trace's truth points (`points`: truth line index and
+/// answer) equal the centralized engine's lines there (`central`, from
+/// [`replay_lines`]) to 1e-9; at least half of the `truths` were answered
+/// (points the stream passed before the question reached it are not).
+pub fn assert_truth_points(
+    points: &[(usize, Value)],
+    truths: &[Truth],
+    central: &[Value],
+    what: &str,
+) {
+    assert!(
+        points.len() * 2 >= truths.len(),
+        "{what}: {} of {} truth points answered",
+        points.len(),
+        truths.len()
+    );
+    for (i, answer) in points {
+        crate::compare::assert_same_marginals(
+            answer,
+            &crate::compare::floats(&central[*i]["p_red"]),
+            &format!("{what}: truth point {i}"),
+        );
+    }
+}
+
 /// The events an answer includes: its watermark's, summed over the
 /// sensors (one sensor of several counts the events of its intake).
 pub fn watermark_events(answer: &Value) -> u64 {

@@ -9,8 +9,8 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
-    crowd, header_only, replay_lines, replay_summary, trace_events, truth_lines,
-    undisturbed_applied, Deployment, Settings,
+    assert_truth_points, crowd, header_only, replay_lines, replay_summary, trace_events,
+    truth_lines, undisturbed_applied, Deployment, Settings,
 };
 use serde_json::Value;
 use std::io::Write;
@@ -129,19 +129,7 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
         assert_eq!(sent["events"], events);
         asked.join().expect("the questions")
     });
-    assert!(
-        points.len() * 2 >= truths.len(),
-        "{} of {} truth points answered",
-        points.len(),
-        truths.len()
-    );
-    for (i, answer) in &points {
-        assert_same_marginals(
-            answer,
-            &floats(&central_lines[*i]["p_red"]),
-            &format!("truth point {i}"),
-        );
-    }
+    assert_truth_points(&points, &truths, &central_lines, "python producer");
     let events = trace_events(&trace).len() as u64;
     let answer = answer_at(&deployment, events);
     assert_same_marginals(&answer, &floats(&central["final_p_red"]), "ingested");

@@ -10,8 +10,8 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
-    crowd, header_only, leader_places, replay_lines, replay_summary, trace_events, truth_lines,
-    watermark_events, Deployment, Settings,
+    assert_truth_points, crowd, header_only, leader_places, replay_lines, replay_summary,
+    trace_events, truth_lines, watermark_events, Deployment, Settings,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -104,19 +104,7 @@ fn fed_by_region(name: &str, sensors: usize, factored: bool, seed: u64) {
         );
         assert_eq!(report["errors"].as_array().map(Vec::len), Some(0), "{sent}");
     }
-    assert!(
-        points.len() * 2 >= truths.len(),
-        "{} of {} truth points answered",
-        points.len(),
-        truths.len()
-    );
-    for (i, answer) in &points {
-        assert_same_marginals(
-            answer,
-            &floats(&central_lines[*i]["p_red"]),
-            &format!("{name}: truth point {i}"),
-        );
-    }
+    assert_truth_points(&points, &truths, &central_lines, name);
     let answer = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
         a["finished"] == true && watermark_events(a) == events
     });

@@ -133,10 +133,26 @@ pub(super) async fn send(
     counter: u64,
     payload: &str,
 ) -> Result<IngestAck> {
-    let replies = deployment
-        .session
-        .get(format!("{key}?producer={producer};counter={counter}"))
-        .payload(payload.to_string())
+    put(
+        &deployment.session,
+        key,
+        &format!("producer={producer};counter={counter}"),
+        payload.to_string(),
+    )
+    .await
+}
+
+/// One request to an ingest key with these `parameters`: its
+/// acknowledgement, or why there is none.
+pub(super) async fn put(
+    session: &zenoh::Session,
+    key: &str,
+    parameters: &str,
+    payload: String,
+) -> Result<IngestAck> {
+    let replies = session
+        .get(format!("{key}?{parameters}"))
+        .payload(payload)
         .timeout(TIMEOUT)
         .await
         .map_err(|e| anyhow!("ingest: {e}"))?;

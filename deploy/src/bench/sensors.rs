@@ -11,12 +11,12 @@
 //! watermark includes the event; against a raw get to sensor 0 in the
 //! same run.
 
+use super::ingest::put;
 use super::latency::percentile;
 use super::Deployment;
 use crate::runtime::launch::leader_places;
 use crate::runtime::query::ask;
 use anyhow::{anyhow, bail, Result};
-use idmesh_protocol::wire::producer_to_sensor::IngestAck;
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -81,32 +81,6 @@ fn split(trace: &Path, sensors: usize) -> Result<(Vec<Timed>, f64)> {
         given[s].push((time, line.to_string()));
     }
     Ok((given, last_time))
-}
-
-/// One request to `sensor`'s ingest key; its acknowledgement.
-async fn put(
-    session: &zenoh::Session,
-    key: &str,
-    parameters: &str,
-    payload: String,
-) -> Result<IngestAck> {
-    let replies = session
-        .get(format!("{key}?{parameters}"))
-        .payload(payload)
-        .timeout(TIMEOUT)
-        .await
-        .map_err(|e| anyhow!("ingest: {e}"))?;
-    let reply = replies
-        .recv_async()
-        .await
-        .map_err(|_| anyhow!("ingest: no reply within {TIMEOUT:?}"))?;
-    match reply.result() {
-        Ok(sample) => Ok(serde_json::from_slice(&sample.payload().to_bytes())?),
-        Err(e) => bail!(
-            "ingest refused: {}",
-            e.payload().try_to_string().unwrap_or_default()
-        ),
-    }
 }
 
 /// The events the marginals answer includes now.

@@ -9,7 +9,7 @@
 //! are the whole-deployment simulator's (`tests/src/sim`), which takes
 //! any batching the sensors make.
 
-use super::tests::{routed_whole, router, trace, LEADERS};
+use super::tests::{finish, routed_whole, router, trace, LEADERS};
 use super::MeshConfig;
 use crate::gateway::core::{CutOutcome, Gateway};
 use crate::gateway::cuts::CutParameters;
@@ -147,16 +147,7 @@ impl Schedule {
         sensor.fed = upto;
         if sensor.fed == sensor.given.len() && !sensor.told_finish {
             sensor.told_finish = true;
-            sensor
-                .gateway
-                .ingest(Offer {
-                    producer: Some("tracker"),
-                    counter: None,
-                    payload: b"",
-                    time: None,
-                    finish: true,
-                })
-                .expect("finished");
+            finish(&mut sensor.gateway);
         }
         self.settle(s);
     }

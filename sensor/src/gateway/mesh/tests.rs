@@ -72,6 +72,19 @@ pub(super) fn trace(rng: &mut ChaCha8Rng, events: usize) -> Vec<String> {
         .collect()
 }
 
+/// The producer tells `gateway` it gives it no more events.
+pub(super) fn finish(gateway: &mut Gateway<u64>) {
+    gateway
+        .ingest(Offer {
+            producer: Some("tracker"),
+            counter: None,
+            payload: b"",
+            time: None,
+            finish: true,
+        })
+        .expect("finished");
+}
+
 /// What each leader is sent, in order, by one gateway routing it all.
 pub(super) fn routed_whole(lines: &[String], factored: bool) -> Vec<Vec<Sequenced>> {
     let mut gateway: Gateway<()> = Gateway::new("s", router(factored), false);
@@ -86,7 +99,7 @@ pub(super) fn routed_whole(lines: &[String], factored: bool) -> Vec<Vec<Sequence
 }
 
 struct Mesh {
-    gateways: Vec<Gateway<u32>>,
+    gateways: Vec<Gateway<u64>>,
     configs: Vec<MeshConfig>,
     factored: bool,
     /// Each gateway's journal so far (compacted now and then).
@@ -150,7 +163,7 @@ impl Mesh {
     fn check_restore(&mut self, s: usize, compact: bool) {
         self.journal();
         let config = &self.configs[s];
-        let mut restored: Gateway<u32> =
+        let mut restored: Gateway<u64> =
             Gateway::new(&config.sensors[config.me], router(self.factored), false).meshed(config);
         restored
             .restore(self.journals[s].clone(), &[])
@@ -194,15 +207,7 @@ impl Mesh {
     }
 
     fn finish(&mut self, s: usize) {
-        self.gateways[s]
-            .ingest(Offer {
-                producer: Some("tracker"),
-                counter: None,
-                payload: b"",
-                time: None,
-                finish: true,
-            })
-            .expect("finished");
+        finish(&mut self.gateways[s]);
     }
 
     /// Sensor `s` fetches from every peer once.
@@ -302,8 +307,8 @@ fn a_cut_asked_of_every_sensor_is_placed_once_at_one_seq() {
         events: events.map(|e| e.to_string()),
     };
     for (s, g) in mesh.gateways.iter_mut().enumerate() {
-        let _ = g.cut(s as u32, &cut(5, None));
-        let _ = g.cut(10 + s as u32, &cut(6, Some(20)));
+        let _ = g.cut(s as u64, &cut(5, None));
+        let _ = g.cut(10 + s as u64, &cut(6, Some(20)));
     }
     for _ in 0..2 {
         mesh.fetch(0);
@@ -353,7 +358,7 @@ fn a_cut_asked_of_every_sensor_is_placed_once_at_one_seq() {
 fn a_late_event_is_refused_with_why_and_counted() {
     let mut mesh = Mesh::new(2, false);
     let line = |time: f64| format!(r#"{{"kind":"mix","time":{time},"a":0,"b":1,"swap":0.5}}"#);
-    let offer = |g: &mut Gateway<u32>, counter: &str, text: &str| {
+    let offer = |g: &mut Gateway<u64>, counter: &str, text: &str| {
         g.ingest(Offer {
             producer: Some("cam"),
             counter: Some(counter),
