@@ -137,11 +137,50 @@ fn three_live_sensors_fed_by_region_give_the_answer_of_replay() {
     fed_by_region("sensors3-factored", 3, true, 9);
 }
 
+/// `examples/regions_producer.py` feeding `sensors` sensors of
+/// `deployment` the regions of `trace`, `batch` lines a request, started.
+fn regions_producer(
+    deployment: &Deployment,
+    trace: &Path,
+    sensors: usize,
+    batch: usize,
+) -> std::process::Child {
+    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
+    Command::new(&python)
+        .arg(&script)
+        .arg(trace)
+        .args([deployment.sensor_endpoint(), &deployment.prefix])
+        .args(["--batch", &batch.to_string()])
+        .args(
+            leader_places(trace, sensors)
+                .iter()
+                .enumerate()
+                .flat_map(|(s, (x, y))| ["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]),
+        )
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("python runs")
+}
+
+/// The producer's report once it is done.
+fn report_of(producer: std::process::Child) -> Value {
+    let output = producer.wait_with_output().expect("the producer ends");
+    assert!(
+        output.status.success(),
+        "the producer failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).expect("the producer's JSON")
+}
+
 /// One sensor of two, journaling, SIGKILLed while the producer feeds both:
 /// queries meanwhile say `degraded`, naming it (the order cannot pass its
 /// events); started again on its journal it resumes where it was, the
 /// producer's requests to it go through again, and the final answer is
-/// replay's with every event merged exactly once at both sensors.
+/// replay's, every event merged exactly once at both sensors and every
+/// leader having applied what it applies in the same run left alone.
 #[test]
 fn a_sensor_of_two_killed_mid_stream_comes_back_and_nothing_is_lost_or_doubled() {
     let name = "sensors-kill";
@@ -156,26 +195,22 @@ fn a_sensor_of_two_killed_mid_stream_comes_back_and_nothing_is_lost_or_doubled()
         sensor_trace: Some(header_only(&trace, &dir)),
         ..Settings::default()
     };
+    let events = trace_events(&trace).len() as u64;
+    let finished = |deployment: &Deployment| {
+        deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+            a["finished"] == true && watermark_events(a) == events
+        })
+    };
+    let calm = Deployment::start_each("sensors-calm", &trace, &settings);
+    calm.first_answer(Duration::from_secs(30));
+    report_of(regions_producer(&calm, &trace, 2, 2));
+    assert_same_marginals(&finished(&calm), &floats(&central["final_p_red"]), "calm");
+    let calm_applied = calm.applied();
+    drop(calm);
+
     let mut deployment = Deployment::start_each(name, &trace, &settings);
     deployment.first_answer(Duration::from_secs(30));
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
-    let events = trace_events(&trace).len() as u64;
-    let producer = Command::new(&python)
-        .arg(&script)
-        .arg(&trace)
-        .args([deployment.sensor_endpoint(), &deployment.prefix])
-        .args(["--batch", "2"])
-        .args(
-            leader_places(&trace, 2)
-                .iter()
-                .enumerate()
-                .flat_map(|(s, (x, y))| ["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]),
-        )
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("python runs");
+    let producer = regions_producer(&deployment, &trace, 2, 2);
     // Mid-stream: some events of both sensors merged, far from all.
     deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
         watermark_events(a) > events / 5
@@ -190,17 +225,9 @@ fn a_sensor_of_two_killed_mid_stream_comes_back_and_nothing_is_lost_or_doubled()
     );
     std::thread::sleep(Duration::from_millis(500));
     deployment.launch("sensor", "sensor-1");
-    let output = producer.wait_with_output().expect("the producer ends");
-    assert!(
-        output.status.success(),
-        "the producer failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let answer = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
-        a["finished"] == true && watermark_events(a) == events
-    });
+    let sent = report_of(producer);
+    let answer = finished(&deployment);
     assert_same_marginals(&answer, &floats(&central["final_p_red"]), name);
-    let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
     let doubled = sent["doubled"].as_u64().expect("doubled");
     let stats = deployment.sensor_stats();
     for sensor in &stats {
@@ -210,9 +237,7 @@ fn a_sensor_of_two_killed_mid_stream_comes_back_and_nothing_is_lost_or_doubled()
     // Each sensor took each of its events once: what sensor-1 took before
     // it was killed came back from its journal, and a request sent again
     // after the restart is a duplicate.
-    let ingested: u64 = stats
-        .iter()
-        .map(|s| s["ingested"].as_u64().unwrap_or(0))
-        .sum();
+    let ingested: u64 = stats.iter().map(|s| s["ingested"].as_u64().unwrap_or(0)).sum();
     assert_eq!(ingested, events + doubled, "{stats:?}");
+    assert_eq!(deployment.applied(), calm_applied, "what the leaders applied");
 }
