@@ -56,34 +56,12 @@ fn fed_by_region(name: &str, sensors: usize, factored: bool, seed: u64) {
     for s in 0..sensors {
         assert_eq!(first["watermark"][format!("sensor-{s}")], 0, "{first}");
     }
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
-    let regions: Vec<String> = leader_places(&trace, sensors)
-        .iter()
-        .enumerate()
-        .map(|(s, (x, y))| format!("sensor-{s}@{x},{y}"))
-        .collect();
     let events = trace_events(&trace).len() as u64;
     let (points, sent) = std::thread::scope(|scope| {
         let asked = scope.spawn(|| deployment.at_truth_points("marginals", &truths));
         // The questions are placed (held at their points) before any event.
         std::thread::sleep(Duration::from_millis(1500));
-        let mut command = Command::new(&python);
-        command
-            .arg(&script)
-            .arg(&trace)
-            .args([deployment.sensor_endpoint(), &deployment.prefix])
-            .args(["--batch", "20"]);
-        for region in &regions {
-            command.args(["--sensor", region]);
-        }
-        let output = command.output().expect("python runs");
-        assert!(
-            output.status.success(),
-            "the producer failed: {}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-        let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
+        let sent = report_of(regions_producer(&deployment, &trace, sensors, 20));
         (asked.join().expect("the questions"), sent)
     });
     assert_eq!(sent["events"], events, "{sent}");
@@ -237,7 +215,14 @@ fn a_sensor_of_two_killed_mid_stream_comes_back_and_nothing_is_lost_or_doubled()
     // Each sensor took each of its events once: what sensor-1 took before
     // it was killed came back from its journal, and a request sent again
     // after the restart is a duplicate.
-    let ingested: u64 = stats.iter().map(|s| s["ingested"].as_u64().unwrap_or(0)).sum();
+    let ingested: u64 = stats
+        .iter()
+        .map(|s| s["ingested"].as_u64().unwrap_or(0))
+        .sum();
     assert_eq!(ingested, events + doubled, "{stats:?}");
-    assert_eq!(deployment.applied(), calm_applied, "what the leaders applied");
+    assert_eq!(
+        deployment.applied(),
+        calm_applied,
+        "what the leaders applied"
+    );
 }

@@ -108,14 +108,7 @@ pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> R
                 &chunk.join("\n"),
             )
             .await?;
-            if ack.accepted.len() != chunk.len() {
-                bail!(
-                    "{producer}: {} of {} lines accepted: {:?}",
-                    ack.accepted.len(),
-                    chunk.len(),
-                    ack.errors.first()
-                );
-            }
+            all_accepted(&producer, &ack, chunk.len())?;
             accepted += ack.accepted.len() as u64;
         }
         figures
@@ -123,6 +116,18 @@ pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> R
             .push((batch, accepted, started.elapsed()));
     }
     Ok(figures)
+}
+
+/// Every one of the `lines` a request of `producer`'s carried was taken.
+pub(super) fn all_accepted(producer: &str, ack: &IngestAck, lines: usize) -> Result<()> {
+    if ack.accepted.len() != lines {
+        bail!(
+            "{producer}: {} of {lines} lines accepted: {:?}",
+            ack.accepted.len(),
+            ack.errors.first()
+        );
+    }
+    Ok(())
 }
 
 /// One ingest request, until acknowledged.

@@ -11,7 +11,7 @@
 //! watermark includes the event; against a raw get to sensor 0 in the
 //! same run.
 
-use super::ingest::put;
+use super::ingest::{all_accepted, put};
 use super::latency::percentile;
 use super::Deployment;
 use crate::runtime::launch::leader_places;
@@ -122,7 +122,7 @@ pub async fn measure(
     let (given, last_time) = split(trace, sensors)?;
     let events: u64 = given.iter().map(|g| g.len() as u64).sum();
     let started = Instant::now();
-    let mut feeds = Vec::new();
+    let mut feeds: Vec<tokio::task::JoinHandle<Result<()>>> = Vec::new();
     for (s, lines) in given.into_iter().enumerate() {
         let session = deployment.session.clone();
         let key = keys.sensor_ingest(&names[s]);
@@ -141,14 +141,7 @@ pub async fn measure(
                     .collect::<Vec<_>>()
                     .join("\n");
                 let ack = put(&session, &key, &parameters, payload).await?;
-                if ack.accepted.len() != chunk.len() {
-                    bail!(
-                        "{producer}: {} of {} lines accepted: {:?}",
-                        ack.accepted.len(),
-                        chunk.len(),
-                        ack.errors.first()
-                    );
-                }
+                all_accepted(&producer, &ack, chunk.len())?;
                 counter += chunk.len();
             }
             if meshed {
