@@ -319,7 +319,7 @@ pub async fn run(
                 placed.extend(gateway.line(line));
             }
             next += due;
-            let refused = if next >= lines.len() && input.is_none() && !config.live {
+            let refused = if next >= lines.len() && ends {
                 gateway.end()
             } else {
                 Vec::new()
@@ -356,10 +356,7 @@ pub async fn run(
                 while let Ok(Some(query)) = cut_requests.try_recv() {
                     cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
                 }
-                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
-                if !held.is_empty() {
-                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
-                }
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
             }
             fetched = next_fetched(&mut peers) => {
                 let Some((peer, fetched)) = fetched else { continue };
@@ -379,19 +376,12 @@ pub async fn run(
                         gateway.refuse_waiting(&reason);
                     }
                 }
-                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
-                if !held.is_empty() {
-                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
-                }
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
             }
             query = intakes.recv_async() => {
                 let Ok(query) = query else { break };
                 held.push(HeldIntake { request: payload(&query), query, until: Instant::now() + HOLD_INTAKE });
-                answer_intakes(&mut gateway, &mut wire, &mut held).await?;
-                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
-                if !held.is_empty() {
-                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
-                }
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
             }
             _ = tokio::time::sleep_until(next_release(&held)), if !held.is_empty() => {
                 answer_intakes(&mut gateway, &mut wire, &mut held).await?;
@@ -465,10 +455,7 @@ pub async fn run(
             query = ingests.recv_async() => {
                 let Ok(query) = query else { break };
                 ingest(&mut gateway, &mut wire, query).await?;
-                settle(&mut gateway, &mut wire, peers.as_ref()).await?;
-                if !held.is_empty() {
-                    answer_intakes(&mut gateway, &mut wire, &mut held).await?;
-                }
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
             }
             read = next_input(&mut input), if input.is_some() && open => {
                 let Some(read) = read else {
@@ -554,8 +541,11 @@ async fn ingest(
         Ok((ack, placed)) => {
             // Published before the acknowledgement leaves: a query asked
             // after it places its cut after these lines. (A request of
-            // duplicates alone routed nothing: no batch for it.)
-            if !ack.accepted.is_empty() || !placed.is_empty() || gateway.mesh().is_some() {
+            // duplicates alone routed nothing: no batch for it.) One sensor
+            // of several acknowledges its intake; `settle` publishes what
+            // the merge lets go.
+            let routed = !ack.accepted.is_empty() || !placed.is_empty();
+            if routed && gateway.mesh().is_none() {
                 wire.flush(gateway).await?;
             }
             // What it judged (counters used up) is on disk before it says so.
@@ -632,13 +622,15 @@ fn degraded(gateway: &Gateway<Query>, peers: &Peers) -> Option<String> {
     })
 }
 
-/// One sensor of several, after anything that may have moved its merge:
-/// the batches it made, then the cut answers and refusals it made ready,
-/// then what to fetch from each peer next.
+/// One sensor of several, after anything that may have moved its merge
+/// or its intake: the batches it made, the cut answers and refusals it
+/// made ready, the held intake requests it now has something for, then
+/// what to fetch from each peer next.
 async fn settle(
     gateway: &mut Gateway<Query>,
     wire: &mut Wire,
     peers: Option<&Peers>,
+    held: &mut Vec<HeldIntake>,
 ) -> Result<(), GatewayError> {
     let Some(peers) = peers else {
         return Ok(());
@@ -649,6 +641,9 @@ async fn settle(
     }
     for (query, reason) in gateway.refused() {
         let _ = bounded("a refusal", query.reply_err(reason)).await;
+    }
+    if !held.is_empty() {
+        answer_intakes(gateway, wire, held).await?;
     }
     peers.ask(gateway.wanted());
     Ok(())

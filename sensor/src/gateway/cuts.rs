@@ -29,6 +29,31 @@ pub struct CutParameters {
     pub events: Option<String>,
 }
 
+impl CutParameters {
+    /// The cut they ask for and the event count it is wanted at (None:
+    /// now), or why they do not read.
+    pub fn parse(&self) -> Result<(Wanted, Option<u64>), String> {
+        let tag = self
+            .tag
+            .as_deref()
+            .and_then(|t| t.parse::<u64>().ok())
+            .ok_or("a cut needs tag=<u64>: the tag leaders will be asked for")?;
+        let at = self
+            .events
+            .as_deref()
+            .map(str::parse::<u64>)
+            .transpose()
+            .map_err(|_| "events=<n> must be a count of events")?;
+        Ok((
+            Wanted {
+                tag,
+                rows: self.rows,
+            },
+            at,
+        ))
+    }
+}
+
 /// What to do with a cut request; `Q` is whatever the driver answers
 /// (a Zenoh query, a simulated one).
 pub enum Request<Q> {
@@ -87,29 +112,24 @@ impl<Q> Cuts<Q> {
         router: &Router,
         finished: bool,
     ) -> Request<Q> {
-        let Some(tag) = parameters
-            .tag
-            .as_deref()
-            .and_then(|t| t.parse::<u64>().ok())
-        else {
-            return Request::Malformed {
-                query,
-                reason: "a cut needs tag=<u64>: the tag leaders will be asked for".into(),
-            };
-        };
-        let wanted = Wanted {
-            tag,
-            rows: parameters.rows,
-        };
-        let at = match parameters.events.as_deref().map(str::parse::<u64>) {
-            None => return Request::Now { wanted, query },
-            Some(Ok(at)) => at,
-            Some(Err(_)) => {
-                return Request::Malformed {
-                    query,
-                    reason: "events=<n> must be a count of events".into(),
-                }
-            }
+        match parameters.parse() {
+            Ok((wanted, at)) => self.sort(query, wanted, at, router, finished),
+            Err(reason) => Request::Malformed { query, reason },
+        }
+    }
+
+    /// Sorts the cut `wanted` at event count `at` (None: now): now, later,
+    /// or never.
+    pub fn sort(
+        &mut self,
+        query: Q,
+        wanted: Wanted,
+        at: Option<u64>,
+        router: &Router,
+        finished: bool,
+    ) -> Request<Q> {
+        let Some(at) = at else {
+            return Request::Now { wanted, query };
         };
         let now = router.events();
         if at == now {

@@ -173,17 +173,14 @@ impl<Q> Gateway<Q> {
     /// tag was merged already, else taken into the intake (unless a peer's
     /// entry with its tag is on its way) and answered once merged.
     pub(super) fn cut_meshed(&mut self, query: Q, parameters: &CutParameters) -> CutOutcome<Q> {
-        let tag = parameters
-            .tag
-            .as_deref()
-            .and_then(|t| t.parse::<u64>().ok());
-        let events = parameters.events.as_deref().map(str::parse::<u64>);
-        let (Some(tag), None | Some(Ok(_))) = (tag, &events) else {
-            let reason = "a cut needs tag=<u64>, and events=<n> a count of events".to_string();
-            self.count::<()>("cut", &Err(reason.clone()));
-            return CutOutcome::Refused(query, reason);
+        let (wanted, events) = match parameters.parse() {
+            Ok(parsed) => parsed,
+            Err(reason) => {
+                self.count::<()>("cut", &Err(reason.clone()));
+                return CutOutcome::Refused(query, reason);
+            }
         };
-        let events = events.and_then(Result::ok);
+        let tag = wanted.tag;
         let Some(mesh) = self.state.mesh.as_mut() else {
             return CutOutcome::Refused(query, "this sensor is the only one".into());
         };
@@ -191,10 +188,7 @@ impl<Q> Gateway<Q> {
             Some(Ok(answer)) => {
                 return CutOutcome::Placed(Placed {
                     query,
-                    wanted: Wanted {
-                        tag,
-                        rows: parameters.rows,
-                    },
+                    wanted,
                     answer: answer.clone(),
                 })
             }
@@ -204,10 +198,10 @@ impl<Q> Gateway<Q> {
         let asked = mesh.merged_cut(tag) || self.waiting.contains_key(&tag);
         self.waiting.entry(tag).or_default().push(query);
         if !asked {
-            mesh.cut(tag, parameters.rows, events);
+            mesh.cut(tag, wanted.rows, events);
             self.note(Record::Mesh(MeshRecord::Cut {
                 tag,
-                rows: parameters.rows,
+                rows: wanted.rows,
                 events,
             }));
             self.drain();
@@ -308,15 +302,11 @@ impl<Q> Gateway<Q> {
                     if mesh.merged_cut(tag) {
                         continue;
                     }
-                    let parameters = CutParameters {
-                        tag: Some(tag.to_string()),
-                        rows,
-                        events: events.map(|e| e.to_string()),
-                    };
                     let finished = self.state.finished;
+                    let wanted = Wanted { tag, rows };
                     match mesh
                         .cuts
-                        .request(tag, &parameters, &self.state.router, finished)
+                        .sort(tag, wanted, events, &self.state.router, finished)
                     {
                         Request::Now { wanted, query } => {
                             let placed =
