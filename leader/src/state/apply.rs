@@ -231,7 +231,7 @@ impl Leader {
         }
         let held = self.factored_mut("a factored mix on a Radon stream")?;
         if has_a || has_b {
-            let components = held.take(|tracks| tracks.contains(&mix.a) || tracks.contains(&mix.b));
+            let components = held.take_of(&[mix.a, mix.b], |_| true);
             let gone = tracks_of(&components);
             self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
             if back != Some(me) {
@@ -276,7 +276,7 @@ impl Leader {
                 true => (mix.b, owner_b),
                 false => (mix.a, owner_a),
             };
-            let components = held.take(|tracks| tracks == [theirs]);
+            let components = held.take_of(&[theirs], |tracks| tracks == [theirs]);
             let gone = tracks_of(&components);
             self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
             self.unfollow(seq, gone)?;
@@ -307,7 +307,7 @@ impl Leader {
             return Ok(());
         };
         held.mix_apart(mix, seq)?;
-        let components = held.take(|tracks| tracks.contains(&mix.b) && !tracks.contains(&mix.a));
+        let components = held.take_of(&[mix.b], |tracks| !tracks.contains(&mix.a));
         let gone = tracks_of(&components);
         self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
         self.unfollow(seq, gone)?;

@@ -29,6 +29,7 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
 
 /// The largest component a share accepts from elsewhere (the tables'
 /// own limit, [`super::MAX_COMPONENT_LIMIT`]).
@@ -60,6 +61,11 @@ pub type CountPart = idmesh_protocol::wire::factored::WireCounts;
 pub struct FactoredShare {
     belief: FactoredBelief,
     held: Vec<bool>,
+    /// The tracks held, in order: what a leader reads per transfer and per
+    /// query is what it holds (about n/L tracks), never the whole field,
+    /// or every leader would pay for all n tracks and L leaders would do
+    /// L times the work of one.
+    held_set: BTreeSet<u32>,
 }
 
 /// A share as a snapshot writes it: the field, the options and the
@@ -113,9 +119,11 @@ impl FactoredShare {
         }
         let n = field.tracks;
         let belief = FactoredBelief::with_options(field, options)?;
+        let held: Vec<bool> = (0..n as u32).map(held).collect();
         Ok(FactoredShare {
             belief,
-            held: (0..n as u32).map(held).collect(),
+            held_set: (0..n as u32).filter(|&t| held[t as usize]).collect(),
+            held,
         })
     }
 
@@ -141,12 +149,20 @@ impl FactoredShare {
 
     /// The tracks whose components are held here, in order.
     pub fn held_tracks(&self) -> impl Iterator<Item = u32> + '_ {
-        (0..self.held.len() as u32).filter(|&t| self.held[t as usize])
+        self.held_set.iter().copied()
     }
 
     /// Tracks whose components are held here.
     pub fn tracks_held(&self) -> usize {
-        self.held.iter().filter(|&&h| h).count()
+        self.held_set.len()
+    }
+
+    fn set_held(&mut self, track: u32, held: bool) {
+        self.held[track as usize] = held;
+        match held {
+            true => self.held_set.insert(track),
+            false => self.held_set.remove(&track),
+        };
     }
 
     /// Σ 2^|C| over the components held.
@@ -159,10 +175,13 @@ impl FactoredShare {
         self.belief.stats()
     }
 
+    /// The components held here, each once (at its first track), in the
+    /// order of their first tracks' positions among the held tracks.
     fn held_comps(&self) -> impl Iterator<Item = &Component> {
-        self.belief
-            .live()
-            .filter(|c| c.tracks.first().is_some_and(|&t| self.held[t as usize]))
+        self.held_set.iter().filter_map(|&t| {
+            let c = self.belief.comp(self.belief.home[t as usize].0);
+            (c.tracks.first() == Some(&t)).then_some(c)
+        })
     }
 
     /// Mix `mix`, the `when`-th item of the stream (any clock that grows
@@ -200,8 +219,10 @@ impl FactoredShare {
             });
         }
         self.belief.mix_with(mix, may_merge)?;
-        if mix.swap == 1.0 {
-            self.held.swap(a, b);
+        if mix.swap == 1.0 && self.held[a] != self.held[b] {
+            let (ha, hb) = (self.held[a], self.held[b]);
+            self.set_held(mix.a, hb);
+            self.set_held(mix.b, ha);
         }
         if mix.swap != 0.0 {
             self.belief.last_mix[a] = when;
@@ -234,7 +255,35 @@ impl FactoredShare {
             .collect();
         for c in &chosen {
             for &t in &c.tracks {
-                self.held[t as usize] = false;
+                self.set_held(t, false);
+            }
+        }
+        chosen
+    }
+
+    /// [`FactoredShare::take`] among the components of `tracks` only (the
+    /// ones a mix or a relabel touches): reads those, not all held here.
+    pub fn take_of(
+        &mut self,
+        tracks: &[u32],
+        mut pick: impl FnMut(&[u32]) -> bool,
+    ) -> Vec<HeldComponent> {
+        let mut slots: Vec<usize> = tracks
+            .iter()
+            .filter(|&&t| self.holds(t))
+            .map(|&t| self.belief.home[t as usize].0)
+            .collect();
+        slots.sort_unstable();
+        slots.dedup();
+        let chosen: Vec<HeldComponent> = slots
+            .into_iter()
+            .map(|slot| self.belief.comp(slot))
+            .filter(|c| pick(&c.tracks))
+            .map(|c| self.held_form(c))
+            .collect();
+        for c in &chosen {
+            for &t in &c.tracks {
+                self.set_held(t, false);
             }
         }
         chosen
@@ -265,13 +314,10 @@ impl FactoredShare {
         for c in &components {
             self.check(c)?;
         }
-        let mut seen = vec![false; self.held.len()];
-        for c in &components {
-            for &t in &c.tracks {
-                if std::mem::replace(&mut seen[t as usize], true) {
-                    return Err(bad(format!("track {t} comes in two components")));
-                }
-            }
+        let mut coming: Vec<u32> = components.iter().flat_map(|c| c.tracks.clone()).collect();
+        coming.sort_unstable();
+        if let Some(w) = coming.windows(2).find(|w| w[0] == w[1]) {
+            return Err(bad(format!("track {} comes in two components", w[0])));
         }
         for c in components {
             let mut slots: Vec<usize> = c
@@ -288,7 +334,7 @@ impl FactoredShare {
                 .map(|t| Component::singleton(t, 1.0, 1.0))
                 .collect();
             for (&t, &when) in c.tracks.iter().zip(&c.last_mix) {
-                self.held[t as usize] = true;
+                self.set_held(t, true);
                 self.belief.last_mix[t as usize] = when;
             }
             // Built as it was sent (no renormalizing): the receiver holds

@@ -78,7 +78,12 @@ fn shares_equal_the_whole(
                     }
                 } else if mix.swap > 0.0 {
                     if ha != hb {
-                        let comp = shares[hb].take(|c| c.contains(&mix.b));
+                        // As a leader takes them: among the mixed tracks'
+                        // components only (`take` reads all it holds).
+                        let comp = match i % 2 {
+                            0 => shares[hb].take(|c| c.contains(&mix.b)),
+                            _ => shares[hb].take_of(&[mix.a, mix.b], |c| c.contains(&mix.b)),
+                        };
                         shares[ha].put(comp).unwrap();
                         moved += 1;
                     }
@@ -99,6 +104,25 @@ fn shares_equal_the_whole(
                 let comp = shares[from].take(|c| c.contains(&t));
                 shares[to].put(comp).unwrap();
             }
+        }
+        // What each share says it holds, by its index and by its flags.
+        for share in &shares {
+            let flagged: Vec<u32> = (0..field.tracks as u32)
+                .filter(|&t| share.holds(t))
+                .collect();
+            let mut in_components: Vec<u32> = share
+                .components()
+                .into_iter()
+                .flat_map(|c| c.tracks)
+                .collect();
+            in_components.sort_unstable();
+            assert_eq!(
+                share.held_tracks().collect::<Vec<_>>(),
+                flagged,
+                "event {i}"
+            );
+            assert_eq!(in_components, flagged, "event {i}");
+            assert_eq!(share.tracks_held(), flagged.len());
         }
         if !ok {
             continue;
