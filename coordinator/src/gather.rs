@@ -23,7 +23,17 @@ pub async fn marginals(
     at: At,
 ) -> Result<Gathered, GatherError> {
     let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
-    let answer = marginals_of(&collected, memory)?;
+    let (collected, answer) = match marginals_of(&collected, memory) {
+        // Outpaced by other queries: asked again, the leaders answer whole.
+        Err(GatherError::StaleBase { leader, base }) => {
+            tracing::debug!(leader, base, "base answer no longer kept: asking again");
+            memory.forget_bases();
+            let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
+            let answer = marginals_of(&collected, memory)?;
+            (collected, answer)
+        }
+        answer => (collected, answer?),
+    };
     Ok(Gathered {
         cut: collected.cut,
         answer,
@@ -112,11 +122,16 @@ async fn partials(
     timeout: Duration,
     memory: &Memory,
 ) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
-    let selector = match (tag, share) {
+    let mut selector = match (tag, share) {
         (Some(tag), _) => format!("{}?tag={tag}", keys.every_leader_partial()),
         (None, Share::Sums) => format!("{}?quiet", keys.every_leader_partial()),
         (None, Share::Rows) => format!("{}?quiet;rows", keys.every_leader_partial()),
     };
+    // A factored leader then answers with what changed since its answer
+    // there (a Radon leader, or one that no longer keeps it, whole).
+    if let (Some(base), Share::Sums) = (memory.base(), share) {
+        selector.push_str(&format!(";base={base}"));
+    }
     let replies = ask_everyone(session, selector, timeout, "query the leaders").await?;
     let mut partials = Partials::new(tag);
     while let Ok(reply) = replies.recv_async().await {

@@ -5,7 +5,7 @@
 //! [`crate::gather`], and the deterministic network simulator
 //! (`tests/src/sim`) feeds these the replies of simulated processes.
 
-use idmesh_belief::factored::CouplingTree;
+use idmesh_belief::factored::{CountPart, CouplingTree};
 use idmesh_belief::predict_red;
 use idmesh_belief::BeliefError;
 use idmesh_belief::Field;
@@ -15,9 +15,9 @@ use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 #[derive(Debug, thiserror::Error)]
@@ -48,7 +48,20 @@ pub enum GatherError {
     Refused(String),
     #[error("the belief has no mass at this cut: the observations contradict each other")]
     Degenerate,
+    /// A leader told its answer as a change to one the coordinator no
+    /// longer keeps (many queries at once): asked again whole.
+    #[error("leader {leader} answered as a change to its answer at the cut tagged {base}, which the coordinator no longer keeps; ask again")]
+    StaleBase { leader: String, base: u64 },
 }
+
+/// How many factored answers the coordinator keeps for leaders to answer
+/// against (`;base=`): one is named per query, and the others serve the
+/// queries still out when a newer one completes.
+const BASES_KEPT: usize = 16;
+
+/// One leader's components at one cut, whole; shared between the kept
+/// answers, since most components stay as they were from one to the next.
+pub type Components = Arc<Vec<Arc<CountPart>>>;
 
 /// What a marginals query found.
 #[derive(Debug, Clone)]
@@ -96,6 +109,10 @@ pub struct Memory {
     /// only the components that changed since (none, at rest). Queries
     /// take turns with it; computing is brief beside the gathering.
     coupling: Mutex<Option<CouplingTree>>,
+    /// The last complete factored answers at fresh cuts, newest last: by
+    /// cut tag, every leader's components whole. A query names the newest
+    /// (`;base=`), and each leader answers with what changed since it.
+    bases: Mutex<VecDeque<(u64, BTreeMap<String, Components>)>>,
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
@@ -147,6 +164,56 @@ impl Memory {
         } else {
             GatherError::SensorsDown(known)
         }
+    }
+
+    /// The tag of the newest answer kept, which a query names to the
+    /// leaders as its base (`;base=`).
+    pub fn base(&self) -> Option<u64> {
+        let bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
+        bases.back().map(|(tag, _)| *tag)
+    }
+
+    /// Forgets every answer kept: the next query's leaders answer whole.
+    pub fn forget_bases(&self) {
+        let mut bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
+        bases.clear();
+    }
+
+    /// Keeps the components of the answer at the fresh cut tagged `tag`.
+    fn keep(&self, tag: u64, components: BTreeMap<String, Components>) {
+        let mut bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
+        if bases.iter().any(|(t, _)| *t == tag) {
+            return;
+        }
+        if bases.len() == BASES_KEPT {
+            bases.pop_front();
+        }
+        bases.push_back((tag, components));
+    }
+
+    /// Leader `p.leader`'s components whole: as sent, or its kept answer
+    /// at `p.base` less the components `p.gone` and those it sent again,
+    /// plus those it sent. None if that answer is no longer kept.
+    fn whole(&self, p: &Partial, sent: &[CountPart]) -> Option<Components> {
+        let Some(base) = p.base else {
+            return Some(Arc::new(sent.iter().cloned().map(Arc::new).collect()));
+        };
+        let bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
+        let (_, kept) = bases.iter().find(|(tag, _)| *tag == base)?;
+        let before = kept.get(&p.leader)?;
+        let replaced: HashSet<u32> = p
+            .gone
+            .iter()
+            .copied()
+            .chain(sent.iter().filter_map(|c| c.tracks.first().copied()))
+            .collect();
+        let mut whole: Vec<Arc<CountPart>> = before
+            .iter()
+            .filter(|c| c.tracks.first().is_none_or(|t| !replaced.contains(t)))
+            .cloned()
+            .collect();
+        whole.extend(sent.iter().cloned().map(Arc::new));
+        Some(Arc::new(whole))
     }
 
     pub fn remember(&self, cut: &CutPlaced) {
@@ -409,11 +476,25 @@ fn factored_marginals_of(
         Some(tree) if *tree.field() == field => tree,
         other => other.insert(CouplingTree::new(field).map_err(refused)?),
     };
-    let parts = collected
-        .parts
-        .iter()
-        .flat_map(|p| p.components.iter().flatten());
-    let p_red = coupling.marginals(parts).map_err(refused)?;
+    let mut whole = BTreeMap::new();
+    for p in &collected.parts {
+        let sent = p.components.as_deref().unwrap_or_default();
+        let components = memory
+            .whole(p, sent)
+            .ok_or_else(|| GatherError::StaleBase {
+                leader: p.leader.clone(),
+                base: p.base.unwrap_or_default(),
+            })?;
+        whole.insert(p.leader.clone(), components);
+    }
+    let parts = whole.values().flat_map(|c| c.iter());
+    let p_red = coupling.marginals_shared(parts).map_err(refused)?;
+    drop(kept);
+    // An answer at a fresh cut (tag ≠ 0; at rest the leaders answer with
+    // tag 0) is what later queries name as their base.
+    if let Some(tag) = collected.parts.first().map(|p| p.tag).filter(|&t| t != 0) {
+        memory.keep(tag, whole);
+    }
     Ok((p_red, collected.parts.iter().map(|p| p.coefficients).sum()))
 }
 

@@ -171,14 +171,15 @@ pub async fn run(
             query = partials.recv_async() => {
                 let Ok(query) = query else { break };
                 let parameters = query.parameters();
-                let ask = Ask::parse(
+                let (ask, base) = Ask::parse_with_base(
                     parameters.contains_key("quiet"),
                     // `;rows`: an identity query wants the rows of the
                     // information matrix.
                     parameters.contains_key("rows"),
                     parameters.get("tag"),
+                    parameters.get("base"),
                 );
-                Input::Partial { id: driver.hold(query), ask }
+                Input::Partial { id: driver.hold(query), ask, base }
             }
             query = sent.recv_async() => {
                 let Ok(query) = query else { break };

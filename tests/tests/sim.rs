@@ -42,6 +42,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.handovers += tally.handovers;
                 total.window_waits += tally.window_waits;
                 total.factored += tally.factored;
+                total.changes += tally.changes;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -51,7 +52,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes, {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes, {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -66,7 +67,8 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.unfollows,
         total.handovers,
         total.window_waits,
-        total.factored
+        total.factored,
+        total.changes
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(

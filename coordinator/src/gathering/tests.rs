@@ -2,6 +2,7 @@
 //! of another tag, that do not decode, that do not fit the field.
 
 use super::*;
+use idmesh_protocol::wire::factored::WireCounts;
 use idmesh_protocol::wire::{encode, VERSION};
 
 fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
@@ -22,6 +23,8 @@ fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
 /// A leader's share: `total` with track `t` fixing `inside`.
 fn part(leader: &str, cut: u64, tag: u64, total: f64, inside: Vec<(u32, f64)>) -> Partial {
     Partial {
+        base: None,
+        gone: Vec::new(),
         components: None,
         version: VERSION,
         leader: leader.into(),
@@ -264,4 +267,91 @@ fn a_repeated_reply_counts_once_and_a_late_error_does_not_hide_it() {
         matches!(&e, GatherError::Missing { missing, timeout, .. } if missing == &["b"] && timeout.as_secs() == 3),
         "{e}"
     );
+}
+
+/// A singleton component of track `t`, red with weight `r` (blue 1 − r).
+fn singleton(t: u32, r: f64) -> WireCounts {
+    WireCounts {
+        tracks: vec![t],
+        counts: vec![1.0 - r, r],
+        red: vec![vec![0.0, r]],
+    }
+}
+
+/// Leader `leader`'s factored answer at cut `cut` tagged `tag`.
+fn factored(leader: &str, cut: u64, tag: u64, components: Vec<WireCounts>) -> Partial {
+    Partial {
+        components: Some(components),
+        ..part(leader, cut, tag, 0.0, vec![])
+    }
+}
+
+fn marginals(parts: Vec<Partial>, seq: u64, memory: &Memory) -> Result<Vec<f64>, GatherError> {
+    let leaders: Vec<&str> = parts.iter().map(|p| p.leader.as_str()).collect();
+    let collected = Collected {
+        cut: cut(seq, &leaders),
+        parts,
+    };
+    marginals_of(&collected, memory).map(|a| a.p_red)
+}
+
+#[test]
+fn leaders_answering_with_what_changed_give_the_answer_of_their_whole_shares() {
+    let memory = Memory::default();
+    assert_eq!(memory.base(), None, "nothing kept before the first answer");
+    let first = vec![
+        factored("a", 7, 11, vec![singleton(0, 0.2), singleton(1, 0.5)]),
+        factored("b", 7, 11, vec![singleton(2, 0.7)]),
+    ];
+    marginals(first, 7, &memory).unwrap();
+    assert_eq!(memory.base(), Some(11));
+    // At cut 9: a's track 1 is now held by b, whose component of 2 changed;
+    // a's component of 0 did not. Told as changes to the answer at tag 11
+    // (a's track 1 gone, b's new component whole) and whole, alike.
+    let now_a = vec![singleton(0, 0.2)];
+    let now_b = vec![singleton(1, 0.4), singleton(2, 0.9)];
+    let whole = marginals(
+        vec![
+            factored("a", 9, 12, now_a.clone()),
+            factored("b", 9, 12, now_b.clone()),
+        ],
+        9,
+        &Memory::default(),
+    )
+    .unwrap();
+    let changes = vec![
+        Partial {
+            base: Some(11),
+            gone: vec![1],
+            ..factored("a", 9, 12, Vec::new())
+        },
+        Partial {
+            base: Some(11),
+            ..factored("b", 9, 12, now_b)
+        },
+    ];
+    let told = marginals(changes, 9, &memory).unwrap();
+    for (t, (w, c)) in whole.iter().zip(&told).enumerate() {
+        assert!(
+            (w - c).abs() < 1e-12,
+            "track {t}: whole {w}, told as changes {c}"
+        );
+    }
+    assert_eq!(memory.base(), Some(12));
+    // A change to an answer the coordinator no longer keeps is named, not
+    // guessed at; forgotten bases make the next query ask for whole shares.
+    let stale = vec![
+        Partial {
+            base: Some(99),
+            ..factored("a", 9, 13, Vec::new())
+        },
+        factored("b", 9, 13, vec![singleton(1, 0.4), singleton(2, 0.9)]),
+    ];
+    let e = marginals(stale, 9, &memory).unwrap_err();
+    assert!(
+        matches!(&e, GatherError::StaleBase { leader, base: 99 } if leader == "a"),
+        "{e}"
+    );
+    memory.forget_bases();
+    assert_eq!(memory.base(), None);
 }

@@ -116,7 +116,12 @@ pub enum Input {
     Durable { bytes: Vec<u8>, origin: String },
     /// The coordinator asks for partial sums; answered by an
     /// [`Output::Answer`] with the same `id`, now or later.
-    Partial { id: u64, ask: Ask },
+    Partial {
+        id: u64,
+        ask: Ask,
+        /// The tag of the answer the coordinator keeps, if it said one.
+        base: Option<u64>,
+    },
     /// A restarted peer asks for the transfers this leader sent it
     /// (`TransfersWanted` bytes); answered by [`Output::AnswerSent`].
     SentWanted {
@@ -185,6 +190,8 @@ struct Recovery {
 struct Held {
     id: u64,
     tag: u64,
+    /// The answer the coordinator keeps ([`Node::told`]).
+    base: Option<u64>,
     since: Now,
 }
 
@@ -322,7 +329,7 @@ impl Node {
                 Ok(_) => {}
                 Err(e) => self.reject("a durable mark", &origin, &e, &mut out),
             },
-            Input::Partial { id, ask } => self.partial(now, id, ask, &mut out),
+            Input::Partial { id, ask, base } => self.partial(now, id, ask, base, &mut out),
             Input::SentWanted { id, bytes, origin } => {
                 let answer = decode::<TransfersWanted>(&bytes).map(|wanted| TransfersSent {
                     version: VERSION,
@@ -392,7 +399,7 @@ impl Node {
                     for h in ready {
                         out.push(Output::Answer {
                             id: h.id,
-                            answer: Ok(partial.clone()),
+                            answer: Ok(self.told(&partial, h.base)),
                         });
                     }
                 }

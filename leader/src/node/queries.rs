@@ -4,6 +4,8 @@
 //! answer at it in the same breath, so a query usually comes first).
 
 use super::{Held, Node, Now, Output};
+use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// What a partial-sums query asks for (`?tag=T`, `?quiet`, `;rows`).
@@ -18,8 +20,30 @@ pub enum Ask {
 }
 
 impl Ask {
-    /// Reads a query's parameters: whether it has `quiet` and `rows`, and
-    /// its `tag` if any.
+    /// Reads a query's parameters: whether it has `quiet` and `rows`, its
+    /// `tag` if any, and its `base` if any: the tag of this leader's answer
+    /// the coordinator keeps, so a factored answer may be told as a change
+    /// to it ([`Partial::base`](idmesh_protocol::wire::coordinator_to_leader::Partial::base)).
+    pub fn parse_with_base(
+        quiet: bool,
+        rows: bool,
+        tag: Option<&str>,
+        base: Option<&str>,
+    ) -> (Ask, Option<u64>) {
+        match base.map(|b| b.parse::<u64>()) {
+            None => (Ask::parse(quiet, rows, tag), None),
+            Some(Ok(base)) => (Ask::parse(quiet, rows, tag), Some(base)),
+            Some(Err(_)) => (
+                Ask::Bad(format!(
+                    "base={} is not the tag of an answer (a u64)",
+                    base.unwrap_or_default()
+                )),
+                None,
+            ),
+        }
+    }
+
+    /// [`Ask::parse_with_base`] without a base.
     pub fn parse(quiet: bool, rows: bool, tag: Option<&str>) -> Ask {
         if quiet {
             return Ask::Quiet { rows };
@@ -35,8 +59,16 @@ impl Ask {
 }
 
 impl Node {
-    /// Answers query `id`, or holds it for its cut.
-    pub(super) fn partial(&mut self, now: Now, id: u64, ask: Ask, out: &mut Vec<Output>) {
+    /// Answers query `id` (as a change to the answer at the cut tagged
+    /// `base`, when it can), or holds it for its cut.
+    pub(super) fn partial(
+        &mut self,
+        now: Now,
+        id: u64,
+        ask: Ask,
+        base: Option<u64>,
+        out: &mut Vec<Output>,
+    ) {
         let name = self.leader.name().to_string();
         let answer = if let Some(failure) = &self.failure {
             Err(format!("leader {name} failed: {failure}"))
@@ -54,14 +86,16 @@ impl Node {
                 }
                 Ask::Quiet { rows } => self
                     .leader
-                    .quiet(rows)
+                    .quiet_kept(rows)
+                    .map(|partial| self.told(&partial, base))
                     .ok_or_else(|| format!("leader {name} is not at a quiet point")),
                 Ask::Cut(tag) => match self.leader.cut(tag) {
-                    Some(partial) => Ok(partial.clone()),
+                    Some(partial) => Ok(self.told(partial, base)),
                     None => {
                         self.held.push(Held {
                             id,
                             tag,
+                            base,
                             since: now,
                         });
                         return;
@@ -70,6 +104,15 @@ impl Node {
             }
         };
         out.push(Output::Answer { id, answer });
+    }
+
+    /// `answer` as a change to this leader's answer at the cut tagged
+    /// `base` if that answer is still kept and both are factored; whole
+    /// otherwise (the coordinator rebuilds either).
+    pub(super) fn told(&self, answer: &Arc<Partial>, base: Option<u64>) -> Arc<Partial> {
+        base.and_then(|b| self.leader.relative_to(answer, b))
+            .map(Arc::new)
+            .unwrap_or_else(|| answer.clone())
     }
 
     /// Answers with an error every query that has waited for its cut

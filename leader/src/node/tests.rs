@@ -96,7 +96,8 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
             10 * MS,
             Input::Partial {
                 id: 1,
-                ask: Ask::Cut(7)
+                ask: Ask::Cut(7),
+                base: None,
             }
         )
         .is_empty());
@@ -105,7 +106,8 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
             20 * MS,
             Input::Partial {
                 id: 2,
-                ask: Ask::Cut(8)
+                ask: Ask::Cut(8),
+                base: None,
             }
         )
         .is_empty());
@@ -121,6 +123,7 @@ fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_com
         Input::Partial {
             id: 3,
             ask: Ask::Cut(7),
+            base: None,
         },
     );
     assert!(answers(&out)[0].1.is_ok());
@@ -157,6 +160,7 @@ fn a_query_held_behind_a_peers_sets_expires_naming_the_peer() {
         Input::Partial {
             id: 1,
             ask: Ask::Cut(9),
+            base: None,
         },
     );
     assert_eq!(node.held(), 1);
@@ -173,7 +177,14 @@ fn a_query_held_behind_a_peers_sets_expires_naming_the_peer() {
 fn a_malformed_partial_query_is_counted() {
     let mut node = started("a", &["a"]);
     let ask = Ask::parse(false, false, Some("abc"));
-    let out = node.step(MS, Input::Partial { id: 1, ask });
+    let out = node.step(
+        MS,
+        Input::Partial {
+            id: 1,
+            ask,
+            base: None,
+        },
+    );
     assert!(answers(&out)[0]
         .1
         .as_ref()
@@ -190,6 +201,7 @@ fn a_late_cut_asks_for_the_batches_again_once_at_a_time() {
         Input::Partial {
             id: 1,
             ask: Ask::Cut(7),
+            base: None,
         },
     );
     assert_eq!(
@@ -363,6 +375,7 @@ fn the_mark_is_published_after_a_sync_and_only_when_it_moved() {
         Input::Partial {
             id: 9,
             ask: Ask::Quiet { rows: false },
+            base: None,
         },
     );
     assert!(answers(&out)[0]
@@ -454,6 +467,7 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
         Input::Partial {
             id: 1,
             ask: Ask::Quiet { rows: false },
+            base: None,
         },
     );
     assert!(answers(&out)[0]
@@ -530,6 +544,7 @@ fn the_rejected_count_survives_a_restart() {
         Input::Partial {
             id: 1,
             ask: Ask::parse(false, false, Some("abc")),
+            base: None,
         },
     ));
     assert_eq!(node.leader().stats().rejected, 2);

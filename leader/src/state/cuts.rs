@@ -4,6 +4,8 @@
 
 use super::transfers::to_wire;
 use super::*;
+use idmesh_protocol::wire::factored::WireCounts;
+use std::collections::{HashMap, HashSet};
 
 /// How many recent cuts a leader keeps answers for.
 const CUTS_KEPT: usize = 256;
@@ -37,6 +39,45 @@ impl Leader {
         self.cuts.iter().find(|p| p.tag == tag)
     }
 
+    /// `answer` told as a change to this leader's answer at the cut tagged
+    /// `base` ([`Partial::base`]): the components not in that answer as
+    /// they are now, and the first tracks of its components gone. None if
+    /// that answer is no longer kept or either is not factored.
+    pub fn relative_to(&self, answer: &Partial, base: u64) -> Option<Partial> {
+        let before = self.cut(base)?.components.as_ref()?;
+        let now = answer.components.as_ref()?;
+        let first = |c: &WireCounts| c.tracks.first().copied();
+        let kept: HashMap<Option<u32>, &WireCounts> =
+            before.iter().map(|c| (first(c), c)).collect();
+        let firsts: HashSet<Option<u32>> = now.iter().map(first).collect();
+        let changed = now
+            .iter()
+            .filter(|c| kept.get(&first(c)) != Some(c))
+            .cloned()
+            .collect();
+        let gone = before
+            .iter()
+            .filter_map(|c| first(c).filter(|t| !firsts.contains(&Some(*t))))
+            .collect();
+        Some(Partial {
+            components: Some(changed),
+            base: Some(base),
+            gone,
+            version: answer.version,
+            leader: answer.leader.clone(),
+            cut: answer.cut,
+            tag: answer.tag,
+            events: answer.events,
+            finished: answer.finished,
+            log_scale: answer.log_scale,
+            total: answer.total,
+            outside: answer.outside,
+            inside: answer.inside.clone(),
+            coefficients: answer.coefficients,
+            rows: answer.rows.clone(),
+        })
+    }
+
     /// The partial sums now, if the leader is at a quiet point: it has
     /// applied every item the sensor sent it and waits for no peer. Leaders
     /// quiet at the same seq together hold the belief at that seq (every
@@ -49,6 +90,18 @@ impl Leader {
         }
         self.partial(self.frontier, 0, self.events, rows)
             .map(Arc::new)
+    }
+
+    /// [`Leader::quiet`], kept until an input changes anything.
+    pub fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Partial>> {
+        if let Some((kept_rows, answer)) = &self.resting {
+            if *kept_rows == rows {
+                return Some(answer.clone());
+            }
+        }
+        let answer = self.quiet(rows)?;
+        self.resting = Some((rows, answer.clone()));
+        Some(answer)
     }
 
     /// The partial sums of the share as it is (None before the Begin),
@@ -70,6 +123,8 @@ impl Leader {
         };
         Some(Partial {
             components,
+            base: None,
+            gone: Vec::new(),
             version: VERSION,
             leader: self.name.clone(),
             cut,

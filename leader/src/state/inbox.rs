@@ -11,6 +11,7 @@ impl Leader {
     /// ahead of a missing one waits for it ([`Leader::missing_batches`]
     /// says which to ask the sensor for again).
     pub fn batch(&mut self, batch: Batch, bytes: usize) -> Result<Vec<Action>, LeaderError> {
+        self.resting = None;
         if batch.number < self.next_batch || self.ahead.contains_key(&batch.number) {
             self.stats.duplicates += 1;
             return Ok(Vec::new());
@@ -88,6 +89,7 @@ impl Leader {
         transfer: Transfer,
         bytes: usize,
     ) -> Result<Vec<Action>, LeaderError> {
+        self.resting = None;
         let key = (transfer.seq, transfer.from);
         if transfer.seq <= self.position
             || self.transfers.contains_key(&key)
@@ -105,6 +107,7 @@ impl Leader {
 
     /// The sensor answered a follow request: the items this leader missed.
     pub fn followed(&mut self, items: Vec<Sequenced>) -> Result<Vec<Action>, LeaderError> {
+        self.resting = None;
         let Some(Waiting::Follow { seq }) = self.waiting else {
             return Err(LeaderError::Unexpected("a follow reply nobody asked for"));
         };
@@ -122,6 +125,7 @@ impl Leader {
     /// Applies queued items in seq order until one must wait; then asks
     /// the sensor once to stop routing what the leader no longer needs.
     pub(super) fn advance(&mut self) -> Result<Vec<Action>, LeaderError> {
+        self.resting = None;
         let mut actions = self.apply_queued()?;
         self.flush_unfollows(&mut actions)?;
         Ok(actions)

@@ -156,6 +156,11 @@ pub struct Leader {
     /// sensor, and the item of the last of them.
     unfollowing: Vec<u32>,
     unfollow_after: u64,
+    /// The last answer where the leader rests, with whether it holds the
+    /// rows, until an input changes anything: a deployment at rest is
+    /// asked again and again, and a factored answer reads every component.
+    #[serde(skip)]
+    resting: Option<(bool, Arc<Partial>)>,
 }
 
 impl Leader {
@@ -186,6 +191,7 @@ impl Leader {
             refetch: false,
             unfollowing: Vec::new(),
             unfollow_after: 0,
+            resting: None,
         }
     }
 

@@ -574,3 +574,118 @@ fn without_the_regional_rule_the_gatherer_keeps_the_merged_component() {
     assert!(held.holds(0) && held.holds(2));
     assert_eq!(held.component_of(0).len(), 2);
 }
+
+/// The components of a factored answer, whole: `base`'s less what `change`
+/// says is gone or sent again, plus what it sent (as the coordinator
+/// rebuilds them), sorted by first track.
+fn rebuilt(base: &Partial, change: &Partial) -> Vec<Vec<u32>> {
+    let sent = change.components.as_ref().unwrap();
+    let replaced: Vec<u32> = change
+        .gone
+        .iter()
+        .copied()
+        .chain(sent.iter().map(|c| c.tracks[0]))
+        .collect();
+    let mut whole: Vec<Vec<u32>> = base
+        .components
+        .iter()
+        .flatten()
+        .filter(|c| !replaced.contains(&c.tracks[0]))
+        .chain(sent)
+        .map(|c| c.tracks.clone())
+        .collect();
+    whole.sort();
+    whole
+}
+
+#[test]
+fn an_answer_told_as_a_change_to_a_kept_one_rebuilds_the_whole() {
+    let mut leader = factored_leader(&["a"], vec![0, 0, 0, 0]);
+    let cut = |tag| Item::Cut {
+        events: 0,
+        tag,
+        rows: false,
+    };
+    leader
+        .batch(batch(1, vec![(2, cut(7))], 2, false), 0)
+        .unwrap();
+    // Red track 1 and blue track 2 merge; 0 and 3 stay as they were.
+    leader
+        .batch(
+            batch(2, vec![(3, mix(1, 2, 0, 0)), (4, cut(8))], 4, false),
+            0,
+        )
+        .unwrap();
+    let (before, now) = (
+        leader.cut(7).unwrap().clone(),
+        leader.cut(8).unwrap().clone(),
+    );
+    let change = leader
+        .relative_to(&now, 7)
+        .expect("the answer at 7 is kept");
+    assert_eq!(change.base, Some(7));
+    let sent: Vec<Vec<u32>> = change
+        .components
+        .iter()
+        .flatten()
+        .map(|c| c.tracks.clone())
+        .collect();
+    assert_eq!(sent.len(), 1, "only the merged component: {sent:?}");
+    assert_eq!(change.gone, vec![2], "track 2 no longer starts a component");
+    let whole = |p: &Partial| {
+        let mut c: Vec<Vec<u32>> = p
+            .components
+            .iter()
+            .flatten()
+            .map(|c| c.tracks.clone())
+            .collect();
+        c.sort();
+        c
+    };
+    assert_eq!(rebuilt(&before, &change), whole(&now));
+    // Against itself nothing changed; an answer not kept gives none.
+    let same = leader.relative_to(&now, 8).unwrap();
+    assert!(same.components.as_ref().unwrap().is_empty() && same.gone.is_empty());
+    assert!(leader.relative_to(&now, 6).is_none());
+}
+
+#[test]
+fn the_answer_where_a_leader_rests_is_kept_until_an_input_changes_anything() {
+    let mut leader = Leader::new("a");
+    leader
+        .batch(
+            batch(0, vec![(1, begin(&["a", "b"], vec![0, 0, 1, 1]))], 1, false),
+            0,
+        )
+        .unwrap();
+    let first = leader.quiet_kept(false).unwrap();
+    assert!(Arc::ptr_eq(&first, &leader.quiet_kept(false).unwrap()));
+    leader
+        .batch(batch(1, vec![(2, mix(0, 1, 0, 0))], 2, false), 0)
+        .unwrap();
+    let after_batch = leader.quiet_kept(false).unwrap();
+    assert_eq!(after_batch.cut, 2);
+    assert_eq!(*after_batch, *leader.quiet(false).unwrap());
+    // A mix with b's track waits for b's sets: no rest, and once they
+    // are in, the answer where it rests again is the new one.
+    leader
+        .batch(batch(2, vec![(3, mix(1, 2, 0, 1))], 3, true), 0)
+        .unwrap();
+    assert!(leader.quiet_kept(false).is_none());
+    leader
+        .transfer(
+            Transfer {
+                components: Vec::new(),
+                version: VERSION,
+                from: 1,
+                seq: 3,
+                sets: Vec::new(),
+                rows: Vec::new(),
+            },
+            0,
+        )
+        .unwrap();
+    let rest = leader.quiet_kept(false).unwrap();
+    assert_eq!((rest.cut, rest.finished), (3, true));
+    assert_eq!(*rest, *leader.quiet(false).unwrap());
+}

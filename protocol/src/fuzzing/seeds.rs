@@ -215,6 +215,8 @@ fn transfers() -> Vec<Transfer> {
 fn partials() -> Vec<Partial> {
     vec![Partial {
         components: None,
+        base: None,
+        gone: Vec::new(),
         version: VERSION,
         leader: "leader-1".into(),
         cut: 14,

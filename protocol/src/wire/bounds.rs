@@ -160,6 +160,9 @@ impl Bounds {
             for &(t, _) in &partial.inside {
                 self.track("inside track", t)?;
             }
+            for &t in &partial.gone {
+                self.track("gone component's track", t)?;
+            }
             self.check_rows(&partial.rows)
         };
         check().map_err(|problem| invalid("partial sums", problem))

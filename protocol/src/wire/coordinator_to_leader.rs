@@ -28,8 +28,18 @@ pub struct Partial {
     /// for them (identity queries); empty otherwise.
     pub rows: Vec<WireRow>,
     /// On a factored stream, every component this leader holds (the sums
-    /// above are then 0); None on a Radon stream.
+    /// above are then 0), or with `base` only what changed; None on a
+    /// Radon stream.
     pub components: Option<Vec<WireCounts>>,
+    /// A factored answer told as a change to this leader's answer at the
+    /// cut tagged `base`, which the coordinator said it keeps (`;base=`):
+    /// `components` are then only those not in that answer as they are
+    /// now, and `gone` the first tracks of that answer's components that
+    /// are no longer held here as they were. Between two queries a few
+    /// components change, so a reply is a few hundred bytes where the
+    /// whole share of a 10,000-track crowd is over 100 kB. None: whole.
+    pub base: Option<u64>,
+    pub gone: Vec<u32>,
 }
 super::versioned!(Partial, "partial sums");
 

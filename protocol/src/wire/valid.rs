@@ -427,6 +427,18 @@ impl Partial {
         for (i, c) in self.components.iter().flatten().enumerate() {
             c.check().map_err(|e| format!("component {i}: {e}"))?;
         }
+        require(self.base.is_none() || self.components.is_some(), || {
+            "a change to a base answer without components".into()
+        })?;
+        require(self.base.is_some() || self.gone.is_empty(), || {
+            "components gone without a base answer".into()
+        })?;
+        distinct("gone", &self.gone)?;
+        for &t in &self.gone {
+            require(t < MAX_TRACKS, || {
+                format!("gone: track {t} is out of range")
+            })?;
+        }
         Ok(())
     }
 }
@@ -758,6 +770,8 @@ mod tests {
         }
         let partial = Partial {
             components: None,
+            base: None,
+            gone: Vec::new(),
             version: VERSION,
             leader: "a".into(),
             cut: 1,
@@ -779,9 +793,43 @@ mod tests {
         assert!(decode::<Partial>(&encode(&bad)).is_err());
         let bad = Partial {
             total: f64::INFINITY,
-            ..partial
+            ..partial.clone()
         };
         assert!(decode::<Partial>(&encode(&bad)).is_err());
+        // A change to a base answer: only of components, each track gone once.
+        let change = Partial {
+            components: Some(Vec::new()),
+            base: Some(7),
+            gone: vec![2, 5],
+            ..partial.clone()
+        };
+        assert!(decode::<Partial>(&encode(&change)).is_ok());
+        for (bad, expected) in [
+            (
+                Partial {
+                    gone: vec![2, 2],
+                    ..change.clone()
+                },
+                "gone",
+            ),
+            (
+                Partial {
+                    components: None,
+                    ..change.clone()
+                },
+                "without components",
+            ),
+            (
+                Partial {
+                    base: None,
+                    ..change
+                },
+                "without a base",
+            ),
+        ] {
+            let e = decode::<Partial>(&encode(&bad)).unwrap_err().to_string();
+            assert!(e.contains(expected), "{e}");
+        }
         let cut = CutPlaced {
             version: VERSION,
             sensor: "s".into(),

@@ -15,6 +15,7 @@ use idmesh_coordinator::gathering::{
 };
 use idmesh_leader::journal::Kind;
 use idmesh_leader::node::{Ask, Input, Node, Output, Timers};
+use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::leader_to_leader::TransfersSent;
 use idmesh_protocol::wire::leader_to_sensor::{Followed, Resent};
@@ -70,6 +71,7 @@ pub enum ToLeader {
     Partial {
         id: u64,
         ask: Ask,
+        base: Option<u64>,
     },
     SentWanted {
         ask: u64,
@@ -234,6 +236,9 @@ pub struct Tally {
     pub window_waits: u64,
     /// Schedules whose leaders held the factored belief.
     pub factored: u64,
+    /// Factored leaders' replies told as a change to an answer the
+    /// coordinator keeps (`Partial::base`).
+    pub changes: u64,
 }
 
 pub struct World {
@@ -1075,7 +1080,7 @@ impl World {
                 origin,
             },
             ToLeader::Durable(bytes) => Input::Durable { bytes, origin },
-            ToLeader::Partial { id, ask } => Input::Partial { id, ask },
+            ToLeader::Partial { id, ask, base } => Input::Partial { id, ask, base },
             ToLeader::SentWanted { ask, bytes } => Input::SentWanted {
                 id: ask,
                 bytes,
@@ -1153,7 +1158,13 @@ impl World {
             Endpoint::Leader(j),
             Msg::Leader {
                 to: j,
-                what: ToLeader::Partial { id, ask },
+                what: ToLeader::Partial {
+                    id,
+                    ask,
+                    // As the coordinator does: the leaders answer with
+                    // what changed since the newest answer it keeps.
+                    base: self.memory.base(),
+                },
             },
         );
     }
@@ -1178,6 +1189,13 @@ impl World {
                 if !query.replied.insert(leader) {
                     // A duplicate: Zenoh would not deliver it twice.
                     return Ok(());
+                }
+                let change = reply
+                    .as_ref()
+                    .ok()
+                    .and_then(|bytes| decode::<Partial>(bytes).ok());
+                if change.is_some_and(|p| p.base.is_some()) {
+                    self.tally.changes += 1;
                 }
                 query.partials.reply(reply, "sim/partial", &self.memory);
                 let all = query.replied.len() == self.leaders.len();

@@ -16,6 +16,7 @@ use crate::event::Field;
 use crate::factored::counts::CountPrior;
 use crate::factored::coupling_weights;
 use crate::factored::tree::{balancing_tilt, CountTree};
+use std::sync::Arc;
 
 /// The marginals of the factored belief whose components are `parts`
 /// (from every leader at one cut): the count coupling with the prior π of
@@ -32,7 +33,7 @@ pub struct CouplingTree {
     prior: CountPrior,
     tree: CountTree,
     /// The part in each leaf of `tree` (None: a free leaf).
-    leaves: Vec<Option<CountPart>>,
+    leaves: Vec<Option<Arc<CountPart>>>,
     /// The leaf of the part whose first track is t, by t (the parts are
     /// disjoint, so a first track names at most one).
     leaf_of: Vec<Option<usize>>,
@@ -74,7 +75,19 @@ impl CouplingTree {
         &mut self,
         parts: impl Iterator<Item = &'a CountPart> + Clone,
     ) -> Result<Vec<f64>, BeliefError> {
-        check_parts(&self.field, parts.clone())?;
+        let shared: Vec<Arc<CountPart>> = parts.map(|p| Arc::new(p.clone())).collect();
+        self.marginals_shared(shared.iter())
+    }
+
+    /// [`CouplingTree::marginals`] of parts shared with whoever keeps them
+    /// (the coordinator keeps each leader's last answer): a part that is
+    /// the very one a leaf holds is neither checked nor compared again, so
+    /// a query where few components changed costs little more than those.
+    pub fn marginals_shared<'a>(
+        &mut self,
+        parts: impl Iterator<Item = &'a Arc<CountPart>> + Clone,
+    ) -> Result<Vec<f64>, BeliefError> {
+        self.check_parts(parts.clone())?;
         self.update(parts);
         if let Some(last) = &self.last {
             return Ok(last.clone());
@@ -90,20 +103,62 @@ impl CouplingTree {
         Ok(out)
     }
 
+    /// The leaf holding `part` itself (the same shared part), if any.
+    fn holding(&self, part: &Arc<CountPart>) -> Option<usize> {
+        let leaf = self
+            .leaf_of
+            .get(*part.tracks.first()? as usize)
+            .copied()??;
+        let held = self.leaves[leaf].as_ref()?;
+        Arc::ptr_eq(held, part).then_some(leaf)
+    }
+
+    /// Every part well formed (a part a leaf already holds was checked when
+    /// it came), and every track of the field in exactly one.
+    fn check_parts<'a>(
+        &self,
+        parts: impl Iterator<Item = &'a Arc<CountPart>>,
+    ) -> Result<(), BeliefError> {
+        let n = self.field.tracks;
+        let mut seen = vec![false; n];
+        for p in parts {
+            if self.holding(p).is_none() {
+                check_part(&self.field, p)?;
+            }
+            for &t in &p.tracks {
+                if std::mem::replace(&mut seen[t as usize], true) {
+                    return Err(bad(format!("track {t} is in two components")));
+                }
+            }
+        }
+        if let Some(t) = seen.iter().position(|s| !s) {
+            return Err(bad(format!("no component holds track {t}")));
+        }
+        Ok(())
+    }
+
     /// Puts `parts` in the leaves: a part whose tracks held a leaf keeps it
     /// (set again only if its numbers changed), leaves of parts gone are
     /// freed, new parts take free leaves.
-    fn update<'a>(&mut self, parts: impl Iterator<Item = &'a CountPart>) {
+    fn update<'a>(&mut self, parts: impl Iterator<Item = &'a Arc<CountPart>>) {
         let mut kept = vec![false; self.leaves.len()];
         let mut new = Vec::new();
         for p in parts {
+            if let Some(leaf) = self.holding(p) {
+                kept[leaf] = true;
+                continue;
+            }
             let held = self.leaf_of[p.tracks[0] as usize]
                 .filter(|&leaf| self.leaves[leaf].as_ref().map(|h| &h.tracks) == Some(&p.tracks));
             match held {
                 Some(leaf) => {
                     kept[leaf] = true;
-                    if self.leaves[leaf].as_ref() != Some(p) {
+                    if self.leaves[leaf].as_deref() != Some(&**p) {
                         self.put(leaf, p.clone());
+                    } else {
+                        // The same numbers: shared from now on, so the
+                        // next query finds it by pointer.
+                        self.leaves[leaf] = Some(p.clone());
                     }
                 }
                 None => new.push(p),
@@ -131,7 +186,7 @@ impl CouplingTree {
         }
     }
 
-    fn put(&mut self, leaf: usize, part: CountPart) {
+    fn put(&mut self, leaf: usize, part: Arc<CountPart>) {
         self.tree.set(leaf, part.counts.clone());
         self.leaves[leaf] = Some(part);
         self.last = None;
@@ -175,40 +230,27 @@ impl CouplingTree {
     }
 }
 
-/// Every part well formed, and every track of `field` in exactly one.
-fn check_parts<'a>(
-    field: &Field,
-    parts: impl Iterator<Item = &'a CountPart>,
-) -> Result<(), BeliefError> {
-    let n = field.tracks;
-    let mut seen = vec![false; n];
-    for p in parts {
-        let m = p.tracks.len();
-        if m == 0 || m > MOST_TRACKS || p.counts.len() != m + 1 || p.red.len() != m {
-            return Err(bad(format!(
-                "a part of {m} tracks with {} counts and {} red vectors",
-                p.counts.len(),
-                p.red.len()
-            )));
-        }
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
-        if !finite(&p.counts) || p.red.iter().any(|w| w.len() != m + 1 || !finite(w)) {
-            return Err(bad(format!(
-                "a part of tracks {:?} with a weight that is negative, not finite, or \
-                 a red vector not of {} counts",
-                p.tracks,
-                m + 1
-            )));
-        }
-        for &t in &p.tracks {
-            field.check_track(t)?;
-            if std::mem::replace(&mut seen[t as usize], true) {
-                return Err(bad(format!("track {t} is in two components")));
-            }
-        }
+/// One part well formed: its numbers and tracks fit the field.
+fn check_part(field: &Field, p: &CountPart) -> Result<(), BeliefError> {
+    let m = p.tracks.len();
+    if m == 0 || m > MOST_TRACKS || p.counts.len() != m + 1 || p.red.len() != m {
+        return Err(bad(format!(
+            "a part of {m} tracks with {} counts and {} red vectors",
+            p.counts.len(),
+            p.red.len()
+        )));
     }
-    if let Some(t) = seen.iter().position(|s| !s) {
-        return Err(bad(format!("no component holds track {t}")));
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
+    if !finite(&p.counts) || p.red.iter().any(|w| w.len() != m + 1 || !finite(w)) {
+        return Err(bad(format!(
+            "a part of tracks {:?} with a weight that is negative, not finite, or \
+             a red vector not of {} counts",
+            p.tracks,
+            m + 1
+        )));
+    }
+    for &t in &p.tracks {
+        field.check_track(t)?;
     }
     Ok(())
 }

@@ -2,6 +2,7 @@ use super::*;
 use crate::event::{Event, RedCount};
 use crate::factored::SplitRule;
 use crate::workload::{generate, WorkloadSpec};
+use std::sync::Arc;
 
 /// A crowd workload with some certain sightings, certain exchanges and
 /// non-events, as the belief's own tests use.
@@ -61,6 +62,8 @@ fn shares_equal_the_whole(
         .collect();
     let holder = |shares: &[FactoredShare], t: u32| shares.iter().position(|s| s.holds(t)).unwrap();
     let mut kept = CouplingTree::new(field.clone()).unwrap();
+    let mut shared = CouplingTree::new(field.clone()).unwrap();
+    let mut shared_before: Vec<Arc<CountPart>> = Vec::new();
     let mut moved = 0;
     for (i, event) in events.iter().enumerate() {
         let when = i as u64 + 1;
@@ -133,12 +136,28 @@ fn shares_equal_the_whole(
             parts.reverse();
         }
         let from_kept = kept.marginals(parts.iter()).unwrap();
+        // As the coordinator keeps them: a part unchanged since the last
+        // event is the very same shared part, a changed one is new.
+        let arcs: Vec<Arc<CountPart>> = parts
+            .iter()
+            .map(|p| match shared_before.iter().find(|q| ***q == *p) {
+                Some(same) => same.clone(),
+                None => Arc::new(p.clone()),
+            })
+            .collect();
+        let from_shared = shared.marginals_shared(arcs.iter()).unwrap();
+        shared_before = arcs;
         let want = whole.marginals().unwrap();
         for (t, ((g, k), w)) in got.iter().zip(&from_kept).zip(&want).enumerate() {
             assert!((g - w).abs() < 1e-9, "event {i}, track {t}: {g} vs {w}");
             assert!(
                 (k - w).abs() < 1e-9,
                 "event {i}, track {t}, kept: {k} vs {w}"
+            );
+            let sh = from_shared[t];
+            assert!(
+                (sh - w).abs() < 1e-9,
+                "event {i}, track {t}, shared: {sh} vs {w}"
             );
         }
     }
