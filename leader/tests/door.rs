@@ -73,7 +73,9 @@ fn feed(leader: &mut Leader, kind: Kind, bytes: &[u8]) -> Vec<Action> {
 /// What a query would see of the leader.
 fn seen(leader: &Leader) -> (Option<Partial>, u64, u64) {
     (
-        leader.quiet(false).map(Arc::unwrap_or_clone),
+        leader
+            .quiet(false)
+            .map(|answer| Arc::unwrap_or_clone(answer.whole())),
         leader.position(),
         leader.next_batch(),
     )

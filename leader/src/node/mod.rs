@@ -394,8 +394,10 @@ impl Node {
                 }
                 Action::Unfollow(unfollow) => out.push(Output::Unfollow(unfollow)),
                 Action::CutReady(partial) => {
-                    let ready: Vec<Held> =
-                        self.held.extract_if(.., |h| h.tag == partial.tag).collect();
+                    let ready: Vec<Held> = self
+                        .held
+                        .extract_if(.., |h| h.tag == partial.tag())
+                        .collect();
                     for h in ready {
                         out.push(Output::Answer {
                             id: h.id,

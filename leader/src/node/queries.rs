@@ -4,6 +4,7 @@
 //! answer at it in the same breath, so a query usually comes first).
 
 use super::{Held, Node, Now, Output};
+use crate::state::Answer;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use std::sync::Arc;
 use std::time::Duration;
@@ -109,10 +110,10 @@ impl Node {
     /// `answer` as a change to this leader's answer at the cut tagged
     /// `base` if that answer is still kept and both are factored; whole
     /// otherwise (the coordinator rebuilds either).
-    pub(super) fn told(&self, answer: &Arc<Partial>, base: Option<u64>) -> Arc<Partial> {
+    pub(super) fn told(&self, answer: &Answer, base: Option<u64>) -> Arc<Partial> {
         base.and_then(|b| self.leader.relative_to(answer, b))
             .map(Arc::new)
-            .unwrap_or_else(|| answer.clone())
+            .unwrap_or_else(|| answer.whole())
     }
 
     /// Answers with an error every query that has waited for its cut

@@ -4,11 +4,65 @@
 
 use super::transfers::to_wire;
 use super::*;
-use idmesh_protocol::wire::factored::WireCounts;
+use idmesh_belief::factored::CountPart;
 use std::collections::{HashMap, HashSet};
+use std::sync::OnceLock;
 
 /// How many recent cuts a leader keeps answers for.
 const CUTS_KEPT: usize = 256;
+
+/// A leader's answer at a cut or where it rests, as it keeps it: its sums,
+/// and on a factored stream its components' parts, each shared with the
+/// answers before it where the component did not change. The wire's
+/// [`Partial`] is made from it when asked: whole once
+/// ([`Answer::whole`]), or as the change since an answer the coordinator
+/// keeps ([`Leader::relative_to`]).
+#[derive(Debug)]
+pub struct Answer {
+    /// The sums, without the components (in `parts`).
+    pub sums: Partial,
+    pub parts: Option<Vec<Arc<CountPart>>>,
+    whole: OnceLock<Arc<Partial>>,
+}
+
+/// Equal when they say the same: the same sums and the same parts.
+impl PartialEq for Answer {
+    fn eq(&self, other: &Self) -> bool {
+        self.sums == other.sums && self.parts == other.parts
+    }
+}
+
+impl Answer {
+    fn new(sums: Partial, parts: Option<Vec<Arc<CountPart>>>) -> Self {
+        Answer {
+            sums: Partial {
+                components: None,
+                ..sums
+            },
+            parts,
+            whole: OnceLock::new(),
+        }
+    }
+
+    pub fn tag(&self) -> u64 {
+        self.sums.tag
+    }
+
+    /// The answer whole, as the wire carries it (made once, then shared).
+    pub fn whole(&self) -> Arc<Partial> {
+        self.whole
+            .get_or_init(|| {
+                Arc::new(Partial {
+                    components: self
+                        .parts
+                        .as_ref()
+                        .map(|parts| parts.iter().map(|p| (**p).clone()).collect()),
+                    ..self.sums.clone()
+                })
+            })
+            .clone()
+    }
+}
 
 impl Leader {
     /// The cut tagged `tag` (item `seq`, `events` trace events before it)
@@ -19,7 +73,7 @@ impl Leader {
         tag: u64,
         events: u64,
         rows: bool,
-    ) -> Result<Arc<Partial>, LeaderError> {
+    ) -> Result<Arc<Answer>, LeaderError> {
         // Shared, not copied: the same answer goes to every query for this
         // cut, and a factored leader's holds every component's counts.
         let partial = Arc::new(
@@ -35,25 +89,30 @@ impl Leader {
 
     /// The answer at the cut tagged `tag`, if this leader has passed it
     /// recently.
-    pub fn cut(&self, tag: u64) -> Option<&Arc<Partial>> {
-        self.cuts.iter().find(|p| p.tag == tag)
+    pub fn cut(&self, tag: u64) -> Option<&Arc<Answer>> {
+        self.cuts.iter().find(|p| p.tag() == tag)
     }
 
     /// `answer` told as a change to this leader's answer at the cut tagged
     /// `base` ([`Partial::base`]): the components not in that answer as
     /// they are now, and the first tracks of its components gone. None if
     /// that answer is no longer kept or either is not factored.
-    pub fn relative_to(&self, answer: &Partial, base: u64) -> Option<Partial> {
-        let before = self.cut(base)?.components.as_ref()?;
-        let now = answer.components.as_ref()?;
-        let first = |c: &WireCounts| c.tracks.first().copied();
-        let kept: HashMap<Option<u32>, &WireCounts> =
+    pub fn relative_to(&self, answer: &Answer, base: u64) -> Option<Partial> {
+        let before = self.cut(base)?.parts.as_ref()?;
+        let now = answer.parts.as_ref()?;
+        let first = |c: &CountPart| c.tracks.first().copied();
+        let kept: HashMap<Option<u32>, &Arc<CountPart>> =
             before.iter().map(|c| (first(c), c)).collect();
-        let firsts: HashSet<Option<u32>> = now.iter().map(first).collect();
+        let firsts: HashSet<Option<u32>> = now.iter().map(|c| first(c)).collect();
         let changed = now
             .iter()
-            .filter(|c| kept.get(&first(c)) != Some(c))
-            .cloned()
+            .filter(|c| {
+                // Shared when unchanged: the pointer says so at once.
+                !kept
+                    .get(&first(c))
+                    .is_some_and(|k| Arc::ptr_eq(k, c) || ***k == ***c)
+            })
+            .map(|c| (**c).clone())
             .collect();
         let gone = before
             .iter()
@@ -63,18 +122,7 @@ impl Leader {
             components: Some(changed),
             base: Some(base),
             gone,
-            version: answer.version,
-            leader: answer.leader.clone(),
-            cut: answer.cut,
-            tag: answer.tag,
-            events: answer.events,
-            finished: answer.finished,
-            log_scale: answer.log_scale,
-            total: answer.total,
-            outside: answer.outside,
-            inside: answer.inside.clone(),
-            coefficients: answer.coefficients,
-            rows: answer.rows.clone(),
+            ..answer.sums.clone()
         })
     }
 
@@ -84,7 +132,7 @@ impl Leader {
     /// set sent before it has been received), which is how the coordinator
     /// answers a finished stream without placing a cut.
     /// With `rows`, the leader's rows of the information matrix too.
-    pub fn quiet(&self, rows: bool) -> Option<Arc<Partial>> {
+    pub fn quiet(&self, rows: bool) -> Option<Arc<Answer>> {
         if self.waiting.is_some() || !self.queue.is_empty() {
             return None;
         }
@@ -93,7 +141,7 @@ impl Leader {
     }
 
     /// [`Leader::quiet`], kept until an input changes anything.
-    pub fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Partial>> {
+    pub fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Answer>> {
         if let Some((kept_rows, answer)) = &self.resting {
             if *kept_rows == rows {
                 return Some(answer.clone());
@@ -106,7 +154,7 @@ impl Leader {
 
     /// The partial sums of the share as it is (None before the Begin),
     /// with the rows held when `rows` asks for them.
-    pub(super) fn partial(&self, cut: u64, tag: u64, events: u64, rows: bool) -> Option<Partial> {
+    pub(super) fn partial(&self, cut: u64, tag: u64, events: u64, rows: bool) -> Option<Answer> {
         let started = self.started.as_ref()?;
         let sums = started.share.partial_sums();
         let rows = match (&started.rows, rows) {
@@ -116,13 +164,13 @@ impl Leader {
                 .collect(),
             _ => Vec::new(),
         };
-        let components = started.factored.as_ref().map(|held| held.parts());
+        let parts = started.factored.as_ref().map(|held| held.shared_parts());
         let coefficients = match &started.factored {
             Some(held) => held.coefficients() as u64,
             None => sums.coefficients,
         };
-        Some(Partial {
-            components,
+        let sums = Partial {
+            components: None,
             base: None,
             gone: Vec::new(),
             version: VERSION,
@@ -137,27 +185,33 @@ impl Leader {
             inside: sums.inside,
             coefficients,
             rows,
-        })
+        };
+        Some(Answer::new(sums, parts))
     }
 }
 
 /// The answers kept, in a snapshot: each as itself (they are shared in
 /// memory, never between cuts).
 pub(super) mod kept {
-    use super::{Arc, Partial, VecDeque};
+    use super::{Answer, Arc, Partial, VecDeque};
     use serde::{Deserialize, Deserializer, Serializer};
 
-    pub fn serialize<S: Serializer>(
-        cuts: &VecDeque<Arc<Partial>>,
-        s: S,
-    ) -> Result<S::Ok, S::Error> {
-        s.collect_seq(cuts.iter().map(|c| &**c))
+    pub fn serialize<S: Serializer>(cuts: &VecDeque<Arc<Answer>>, s: S) -> Result<S::Ok, S::Error> {
+        let wholes: Vec<Arc<Partial>> = cuts.iter().map(|c| c.whole()).collect();
+        s.collect_seq(wholes.iter().map(|w| &**w))
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(
-        d: D,
-    ) -> Result<VecDeque<Arc<Partial>>, D::Error> {
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<VecDeque<Arc<Answer>>, D::Error> {
         let cuts = Vec::<Partial>::deserialize(d)?;
-        Ok(cuts.into_iter().map(Arc::new).collect())
+        Ok(cuts
+            .into_iter()
+            .map(|mut p| {
+                let parts = p
+                    .components
+                    .take()
+                    .map(|c| c.into_iter().map(Arc::new).collect());
+                Arc::new(Answer::new(p, parts))
+            })
+            .collect())
     }
 }

@@ -48,6 +48,7 @@ use std::sync::Arc;
 
 mod apply;
 mod cuts;
+pub use cuts::Answer;
 mod inbox;
 mod stats;
 #[cfg(test)]
@@ -66,7 +67,7 @@ pub enum Action {
     /// forget: a lost request costs items, not answers).
     Unfollow(Unfollow),
     /// The partial sums at a cut are ready.
-    CutReady(Arc<Partial>),
+    CutReady(Arc<Answer>),
 }
 
 /// Where the leader is stopped, if anywhere.
@@ -144,7 +145,7 @@ pub struct Leader {
     taken: Vec<(u64, u16)>,
     waiting: Option<Waiting>,
     #[serde(with = "cuts::kept")]
-    cuts: VecDeque<Arc<Partial>>,
+    cuts: VecDeque<Arc<Answer>>,
     /// The watermark and end-of-stream flag of the last batch.
     events: u64,
     finished: bool,
@@ -160,7 +161,7 @@ pub struct Leader {
     /// rows, until an input changes anything: a deployment at rest is
     /// asked again and again, and a factored answer reads every component.
     #[serde(skip)]
-    resting: Option<(bool, Arc<Partial>)>,
+    resting: Option<(bool, Arc<Answer>)>,
 }
 
 impl Leader {

@@ -2,6 +2,7 @@
 //! duplicates, reordering, snapshots and identity rows.
 
 use super::*;
+use idmesh_belief::factored::CountPart;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
     Item::Begin(Begin {
@@ -79,7 +80,7 @@ fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody(
         )
         .unwrap();
     let rest = leader.quiet(false).expect("quiet after the Begin");
-    assert_eq!((rest.cut, rest.finished), (1, false));
+    assert_eq!((rest.sums.cut, rest.sums.finished), (1, false));
     // A mix with b's track: the leader must wait for b's sets.
     let actions = leader
         .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, true), 0)
@@ -102,7 +103,10 @@ fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody(
         )
         .unwrap();
     let rest = leader.quiet(false).expect("quiet once b's sets are in");
-    assert_eq!((rest.cut, rest.events, rest.finished), (2, 2, true));
+    assert_eq!(
+        (rest.sums.cut, rest.sums.events, rest.sums.finished),
+        (2, 2, true)
+    );
 }
 
 #[test]
@@ -124,9 +128,9 @@ fn a_cut_is_answered_by_its_tag_and_a_gap_waits_for_the_missing_batch() {
         .unwrap();
     assert!(actions
         .iter()
-        .any(|a| matches!(a, Action::CutReady(p) if p.tag == 42 && p.cut == 3)));
+        .any(|a| matches!(a, Action::CutReady(p) if p.sums.tag == 42 && p.sums.cut == 3)));
     let partial = leader.cut(42).expect("kept for late queries");
-    assert_eq!(partial.events, 7);
+    assert_eq!(partial.sums.events, 7);
     assert!(leader.cut(41).is_none());
     // Batch 3 before batch 2: held, and batch 2 is asked for.
     let ahead = batch(3, vec![(5, mix(1, 2, 0, 0))], 5, false);
@@ -348,12 +352,12 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
 
     let rows = [a.quiet(true).unwrap(), b.quiet(true).unwrap()]
         .into_iter()
-        .flat_map(|p| p.rows.clone())
+        .flat_map(|p| p.sums.rows.clone())
         .map(|r| (r.track, r.ln_likelihoods));
     let assembled = InformationRows::assemble(4, rows, InformationOptions::default()).unwrap();
     assert_eq!(assembled.log_likelihoods(), central.log_likelihoods());
     assert!(
-        a.quiet(false).unwrap().rows.is_empty(),
+        a.quiet(false).unwrap().sums.rows.is_empty(),
         "rows only when asked"
     );
 }
@@ -642,7 +646,12 @@ fn an_answer_told_as_a_change_to_a_kept_one_rebuilds_the_whole() {
         c.sort();
         c
     };
-    assert_eq!(rebuilt(&before, &change), whole(&now));
+    assert_eq!(rebuilt(&before.whole(), &change), whole(&now.whole()));
+    // Components unchanged since the answer at 7 are its very parts.
+    let (kept_before, kept_now) = (before.parts.as_ref().unwrap(), now.parts.as_ref().unwrap());
+    let zero =
+        |parts: &Vec<Arc<CountPart>>| parts.iter().find(|p| p.tracks == [0]).unwrap().clone();
+    assert!(Arc::ptr_eq(&zero(kept_before), &zero(kept_now)));
     // Against itself nothing changed; an answer not kept gives none.
     let same = leader.relative_to(&now, 8).unwrap();
     assert!(same.components.as_ref().unwrap().is_empty() && same.gone.is_empty());
@@ -664,7 +673,7 @@ fn the_answer_where_a_leader_rests_is_kept_until_an_input_changes_anything() {
         .batch(batch(1, vec![(2, mix(0, 1, 0, 0))], 2, false), 0)
         .unwrap();
     let after_batch = leader.quiet_kept(false).unwrap();
-    assert_eq!(after_batch.cut, 2);
+    assert_eq!(after_batch.sums.cut, 2);
     assert_eq!(*after_batch, *leader.quiet(false).unwrap());
     // A mix with b's track waits for b's sets: no rest, and once they
     // are in, the answer where it rests again is the new one.
@@ -686,6 +695,6 @@ fn the_answer_where_a_leader_rests_is_kept_until_an_input_changes_anything() {
         )
         .unwrap();
     let rest = leader.quiet_kept(false).unwrap();
-    assert_eq!((rest.cut, rest.finished), (3, true));
+    assert_eq!((rest.sums.cut, rest.sums.finished), (3, true));
     assert_eq!(*rest, *leader.quiet(false).unwrap());
 }

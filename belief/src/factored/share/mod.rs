@@ -29,7 +29,8 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashMap};
+use std::sync::Arc;
 
 /// The largest component a share accepts from elsewhere (the tables'
 /// own limit, [`super::MAX_COMPONENT_LIMIT`]).
@@ -66,6 +67,36 @@ pub struct FactoredShare {
     /// or every leader would pay for all n tracks and L leaders would do
     /// L times the work of one.
     held_set: BTreeSet<u32>,
+    /// Each held component's part as last given, by first track, with
+    /// the tracks and table it was computed from ([`FactoredShare::shared_parts`]).
+    parts_given: PartsGiven,
+}
+
+/// The parts a share last gave out: a component whose tracks and table are
+/// unchanged gives the very same shared part again, so consecutive answers
+/// share what did not change and a comparison of them is by pointer.
+#[derive(Debug, Default)]
+struct PartsGiven(std::sync::Mutex<HashMap<u32, GivenPart>>);
+
+#[derive(Debug, Clone)]
+struct GivenPart {
+    tracks: Vec<u32>,
+    table: Vec<f64>,
+    part: Arc<CountPart>,
+}
+
+impl Clone for PartsGiven {
+    fn clone(&self) -> Self {
+        PartsGiven(std::sync::Mutex::new(self.lock().clone()))
+    }
+}
+
+impl PartsGiven {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<u32, GivenPart>> {
+        // Only ever filled with whole entries: a panic cannot leave one
+        // half-written.
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
 }
 
 /// A share as a snapshot writes it: the field, the options and the
@@ -124,6 +155,7 @@ impl FactoredShare {
             belief,
             held_set: (0..n as u32).filter(|&t| held[t as usize]).collect(),
             held,
+            parts_given: PartsGiven::default(),
         })
     }
 
@@ -396,6 +428,34 @@ impl FactoredShare {
     /// vectors (what the coordinator couples at a query).
     pub fn parts(&self) -> Vec<CountPart> {
         self.held_comps().map(count_part).collect()
+    }
+
+    /// [`FactoredShare::parts`], each shared: a component unchanged since
+    /// the last call (same tracks, same table) gives the same part, so
+    /// only the parts of components that changed are computed, and two
+    /// answers are compared by pointer where they agree.
+    pub fn shared_parts(&self) -> Vec<Arc<CountPart>> {
+        let mut given = self.parts_given.lock();
+        let mut now = HashMap::with_capacity(given.len());
+        let parts = self
+            .held_comps()
+            .map(|c| {
+                let first = c.tracks[0];
+                let entry = match given.remove(&first) {
+                    Some(g) if g.tracks == c.tracks && g.table == c.table => g,
+                    _ => GivenPart {
+                        tracks: c.tracks.clone(),
+                        table: c.table.clone(),
+                        part: Arc::new(count_part(c)),
+                    },
+                };
+                let part = entry.part.clone();
+                now.insert(first, entry);
+                part
+            })
+            .collect();
+        *given = now;
+        parts
     }
 }
 

@@ -64,6 +64,7 @@ fn shares_equal_the_whole(
     let mut kept = CouplingTree::new(field.clone()).unwrap();
     let mut shared = CouplingTree::new(field.clone()).unwrap();
     let mut shared_before: Vec<Arc<CountPart>> = Vec::new();
+    let mut shared_reused = 0;
     let mut moved = 0;
     for (i, event) in events.iter().enumerate() {
         let when = i as u64 + 1;
@@ -136,15 +137,14 @@ fn shares_equal_the_whole(
             parts.reverse();
         }
         let from_kept = kept.marginals(parts.iter()).unwrap();
-        // As the coordinator keeps them: a part unchanged since the last
-        // event is the very same shared part, a changed one is new.
-        let arcs: Vec<Arc<CountPart>> = parts
+        // As the leaders give them: a part unchanged since the last event
+        // is the very same shared part, and only a changed one is new.
+        let arcs: Vec<Arc<CountPart>> = shares.iter().flat_map(|s| s.shared_parts()).collect();
+        let reused = arcs
             .iter()
-            .map(|p| match shared_before.iter().find(|q| ***q == *p) {
-                Some(same) => same.clone(),
-                None => Arc::new(p.clone()),
-            })
-            .collect();
+            .filter(|a| shared_before.iter().any(|b| Arc::ptr_eq(a, b)))
+            .count();
+        shared_reused += reused;
         let from_shared = shared.marginals_shared(arcs.iter()).unwrap();
         shared_before = arcs;
         let want = whole.marginals().unwrap();
@@ -162,6 +162,7 @@ fn shares_equal_the_whole(
         }
     }
     assert!(moved > 0 || leaders == 1);
+    assert!(shared_reused > 0, "no part was ever shared between events");
     let split = whole.stats().splits;
     assert!(split > 0, "the workload never split");
     for share in &shares {
