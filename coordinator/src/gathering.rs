@@ -108,7 +108,7 @@ pub struct Memory {
     /// The count tree of the last factored answer: the next query redoes
     /// only the components that changed since (none, at rest). Queries
     /// take turns with it; computing is brief beside the gathering.
-    coupling: Mutex<Option<CouplingTree>>,
+    coupling: Mutex<Option<Coupled>>,
     /// The last complete factored answers at fresh cuts, newest last: by
     /// cut tag, every leader's components whole. A query names the newest
     /// (`;base=`), and each leader answers with what changed since it.
@@ -428,16 +428,17 @@ pub fn marginals_of(
     memory: &Memory,
 ) -> Result<MarginalsAnswer, GatherError> {
     let cut = &collected.cut;
-    let (p_red, coefficients) = if collected.parts.iter().any(|p| p.components.is_some()) {
-        factored_marginals_of(collected, memory)?
-    } else {
-        let sums = combine(&collected.parts);
-        let p_red = sums
-            .marginals(cut.tracks as usize)
-            .map_err(|_| GatherError::Degenerate)?;
-        (p_red, sums.coefficients)
-    };
-    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
+    let (p_red, predicted_red, coefficients) =
+        if collected.parts.iter().any(|p| p.components.is_some()) {
+            factored_marginals_of(collected, memory)?
+        } else {
+            let sums = combine(&collected.parts);
+            let p_red = sums
+                .marginals(cut.tracks as usize)
+                .map_err(|_| GatherError::Degenerate)?;
+            let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
+            (p_red, predicted_red, sums.coefficients)
+        };
     Ok(MarginalsAnswer {
         watermark: collected.watermark(),
         tracks: cut.tracks,
@@ -458,7 +459,7 @@ pub fn marginals_of(
 fn factored_marginals_of(
     collected: &Collected,
     memory: &Memory,
-) -> Result<(Vec<f64>, u64), GatherError> {
+) -> Result<(Vec<f64>, Vec<u32>, u64), GatherError> {
     let cut = &collected.cut;
     if let Some(p) = collected.parts.iter().find(|p| p.components.is_none()) {
         return Err(GatherError::Refused(format!(
@@ -470,12 +471,25 @@ fn factored_marginals_of(
         BeliefError::Degenerate { .. } => GatherError::Degenerate,
         e => GatherError::Refused(format!("the leaders' components: {e}")),
     };
+    let coefficients = collected.parts.iter().map(|p| p.coefficients).sum();
     let field = Field::with_count(cut.tracks as usize, cut.red.map(|k| k as usize), None);
     let mut kept = memory.coupling.lock().unwrap_or_else(|e| e.into_inner());
-    let coupling = match &mut *kept {
-        Some(tree) if *tree.field() == field => tree,
-        other => other.insert(CouplingTree::new(field).map_err(refused)?),
+    // Every leader says nothing changed since the answer whose parts the
+    // tree holds (a deployment at rest, asked again): that answer stands.
+    if let Some(last) = kept
+        .as_ref()
+        .and_then(|k| k.unchanged(&field, &collected.parts))
+    {
+        return Ok((last.p_red.clone(), last.predicted_red.clone(), coefficients));
+    }
+    let coupled = match &mut *kept {
+        Some(k) if *k.tree.field() == field => k,
+        other => other.insert(Coupled {
+            tree: CouplingTree::new(field.clone()).map_err(refused)?,
+            last: None,
+        }),
     };
+    coupled.last = None;
     let mut whole = BTreeMap::new();
     for p in &collected.parts {
         let sent = p.components.as_deref().unwrap_or_default();
@@ -488,14 +502,50 @@ fn factored_marginals_of(
         whole.insert(p.leader.clone(), components);
     }
     let parts = whole.values().flat_map(|c| c.iter());
-    let p_red = coupling.marginals_shared(parts).map_err(refused)?;
-    drop(kept);
+    let p_red = coupled.tree.marginals_shared(parts).map_err(refused)?;
+    let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
     // An answer at a fresh cut (tag ≠ 0; at rest the leaders answer with
     // tag 0) is what later queries name as their base.
     if let Some(tag) = collected.parts.first().map(|p| p.tag).filter(|&t| t != 0) {
+        coupled.last = Some(LastCoupled {
+            tag,
+            p_red: p_red.clone(),
+            predicted_red: predicted_red.clone(),
+        });
+        drop(kept);
         memory.keep(tag, whole);
     }
-    Ok((p_red, collected.parts.iter().map(|p| p.coefficients).sum()))
+    Ok((p_red, predicted_red, coefficients))
+}
+
+/// The coordinator's count coupling between queries, and the answer it
+/// last gave at a fresh cut while the tree still holds that cut's parts.
+#[derive(Debug)]
+struct Coupled {
+    tree: CouplingTree,
+    last: Option<LastCoupled>,
+}
+
+#[derive(Debug)]
+struct LastCoupled {
+    /// The tag of the cut whose parts the tree holds.
+    tag: u64,
+    p_red: Vec<f64>,
+    predicted_red: Vec<u32>,
+}
+
+impl Coupled {
+    /// The last answer, if `parts` are all told as no change since it.
+    fn unchanged(&self, field: &Field, parts: &[Partial]) -> Option<&LastCoupled> {
+        let last = self.last.as_ref()?;
+        let same = self.tree.field() == field
+            && parts.iter().all(|p| {
+                p.base == Some(last.tag)
+                    && p.gone.is_empty()
+                    && p.components.as_ref().is_some_and(|c| c.is_empty())
+            });
+        same.then_some(last)
+    }
 }
 
 #[cfg(test)]

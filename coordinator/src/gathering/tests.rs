@@ -338,6 +338,30 @@ fn leaders_answering_with_what_changed_give_the_answer_of_their_whole_shares() {
         );
     }
     assert_eq!(memory.base(), Some(12));
+    // At rest (tag 0), nothing changed since 12: the answer at 12 stands;
+    // nothing changed since 11 (still kept): the answer at 11, computed.
+    let unchanged = |base: u64| {
+        ["a", "b"]
+            .map(|l| Partial {
+                base: Some(base),
+                ..factored(l, 9, 0, Vec::new())
+            })
+            .to_vec()
+    };
+    assert_eq!(marginals(unchanged(12), 9, &memory).unwrap(), told);
+    let at_11 = marginals(unchanged(11), 9, &memory).unwrap();
+    assert_ne!(at_11, told);
+    let first_again = marginals(
+        vec![
+            factored("a", 7, 11, vec![singleton(0, 0.2), singleton(1, 0.5)]),
+            factored("b", 7, 11, vec![singleton(2, 0.7)]),
+        ],
+        7,
+        &Memory::default(),
+    )
+    .unwrap();
+    assert_eq!(at_11, first_again);
+    assert_eq!(marginals(unchanged(12), 9, &memory).unwrap(), told);
     // A change to an answer the coordinator no longer keeps is named, not
     // guessed at; forgotten bases make the next query ask for whole shares.
     let stale = vec![

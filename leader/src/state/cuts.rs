@@ -100,24 +100,7 @@ impl Leader {
     pub fn relative_to(&self, answer: &Answer, base: u64) -> Option<Partial> {
         let before = self.cut(base)?.parts.as_ref()?;
         let now = answer.parts.as_ref()?;
-        let first = |c: &CountPart| c.tracks.first().copied();
-        let kept: HashMap<Option<u32>, &Arc<CountPart>> =
-            before.iter().map(|c| (first(c), c)).collect();
-        let firsts: HashSet<Option<u32>> = now.iter().map(|c| first(c)).collect();
-        let changed = now
-            .iter()
-            .filter(|c| {
-                // Shared when unchanged: the pointer says so at once.
-                !kept
-                    .get(&first(c))
-                    .is_some_and(|k| Arc::ptr_eq(k, c) || ***k == ***c)
-            })
-            .map(|c| (**c).clone())
-            .collect();
-        let gone = before
-            .iter()
-            .filter_map(|c| first(c).filter(|t| !firsts.contains(&Some(*t))))
-            .collect();
+        let (changed, gone) = changes(before, now);
         Some(Partial {
             components: Some(changed),
             base: Some(base),
@@ -188,6 +171,66 @@ impl Leader {
         };
         Some(Answer::new(sums, parts))
     }
+}
+
+/// The parts of `now` not in `before` as they are (cloned for the wire),
+/// and the first tracks of `before`'s parts that start none in `now`. A
+/// share gives its parts in the order of their first tracks, so the two
+/// are walked side by side; an unchanged part is the same shared one, so
+/// most comparisons are of pointers.
+pub(super) fn changes(
+    before: &[Arc<CountPart>],
+    now: &[Arc<CountPart>],
+) -> (Vec<CountPart>, Vec<u32>) {
+    let first = |c: &Arc<CountPart>| c.tracks.first().copied().unwrap_or(u32::MAX);
+    let ordered = |parts: &[Arc<CountPart>]| parts.windows(2).all(|w| first(&w[0]) < first(&w[1]));
+    if !(ordered(before) && ordered(now)) {
+        // Not as a share gives them: by lookup instead.
+        let kept: HashMap<u32, &Arc<CountPart>> = before.iter().map(|c| (first(c), c)).collect();
+        let firsts: HashSet<u32> = now.iter().map(first).collect();
+        let changed = now
+            .iter()
+            .filter(|c| {
+                !kept
+                    .get(&first(c))
+                    .is_some_and(|k| Arc::ptr_eq(k, c) || ***k == ***c)
+            })
+            .map(|c| (**c).clone())
+            .collect();
+        let gone = before
+            .iter()
+            .map(first)
+            .filter(|t| !firsts.contains(t))
+            .collect();
+        return (changed, gone);
+    }
+    let (mut changed, mut gone) = (Vec::new(), Vec::new());
+    let (mut i, mut j) = (0, 0);
+    loop {
+        match (before.get(i), now.get(j)) {
+            (Some(b), Some(n)) if first(b) == first(n) => {
+                if !(Arc::ptr_eq(b, n) || **b == **n) {
+                    changed.push((**n).clone());
+                }
+                i += 1;
+                j += 1;
+            }
+            (Some(b), Some(n)) if first(b) < first(n) => {
+                gone.push(first(b));
+                i += 1;
+            }
+            (Some(b), None) => {
+                gone.push(first(b));
+                i += 1;
+            }
+            (_, Some(n)) => {
+                changed.push((**n).clone());
+                j += 1;
+            }
+            (None, None) => break,
+        }
+    }
+    (changed, gone)
 }
 
 /// The answers kept, in a snapshot: each as itself (they are shared in

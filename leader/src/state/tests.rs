@@ -698,3 +698,72 @@ fn the_answer_where_a_leader_rests_is_kept_until_an_input_changes_anything() {
     assert_eq!((rest.sums.cut, rest.sums.finished), (3, true));
     assert_eq!(*rest, *leader.quiet(false).unwrap());
 }
+
+/// The change between two answers' parts, walked side by side (as a share
+/// orders them) or looked up (any other order), rebuilds the newer one.
+#[test]
+fn the_change_between_two_answers_is_the_same_walked_or_looked_up() {
+    use rand::{Rng, SeedableRng};
+    let part = |tracks: Vec<u32>, x: f64| {
+        let m = tracks.len();
+        Arc::new(CountPart {
+            tracks,
+            counts: vec![x; m + 1],
+            red: vec![vec![x; m + 1]; m],
+        })
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    for _ in 0..200 {
+        // Tracks 0..20 in runs of 1 to 3 consecutive tracks.
+        let partition = |rng: &mut rand::rngs::StdRng| {
+            let mut parts = Vec::new();
+            let mut t = 0;
+            while t < 20 {
+                let m = rng.gen_range(1..=3).min(20 - t);
+                parts.push((t..t + m).collect::<Vec<u32>>());
+                t += m;
+            }
+            parts
+        };
+        let before: Vec<Arc<CountPart>> = partition(&mut rng)
+            .into_iter()
+            .map(|t| part(t, 1.0))
+            .collect();
+        let now: Vec<Arc<CountPart>> = partition(&mut rng)
+            .into_iter()
+            .map(|t| {
+                match before.iter().find(|b| b.tracks == t) {
+                    // Kept as it was (shared), or with new numbers.
+                    Some(b) if rng.gen_bool(0.7) => b.clone(),
+                    _ => part(t, rng.gen_range(0.1..1.0)),
+                }
+            })
+            .collect();
+        let (changed, gone) = super::cuts::changes(&before, &now);
+        let mut shuffled = now.clone();
+        shuffled.reverse();
+        let (mut changed_looked_up, mut gone_looked_up) = super::cuts::changes(&before, &shuffled);
+        let mut walked = (changed.clone(), gone.clone());
+        for v in [&mut walked.0, &mut changed_looked_up] {
+            v.sort_by(|a, b| a.tracks.cmp(&b.tracks));
+        }
+        walked.1.sort_unstable();
+        gone_looked_up.sort_unstable();
+        assert_eq!(walked, (changed_looked_up, gone_looked_up));
+        // Rebuilt as the coordinator does: the newer answer's parts.
+        let replaced: Vec<u32> = gone
+            .iter()
+            .copied()
+            .chain(changed.iter().map(|c| c.tracks[0]))
+            .collect();
+        let mut rebuilt: Vec<CountPart> = before
+            .iter()
+            .filter(|b| !replaced.contains(&b.tracks[0]))
+            .map(|b| (**b).clone())
+            .chain(changed)
+            .collect();
+        rebuilt.sort_by(|a, b| a.tracks.cmp(&b.tracks));
+        let want: Vec<CountPart> = now.iter().map(|n| (**n).clone()).collect();
+        assert_eq!(rebuilt, want);
+    }
+}
