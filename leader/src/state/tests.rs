@@ -35,6 +35,18 @@ fn batch(number: u64, items: Vec<(u64, Item)>, through: u64, finished: bool) -> 
     }
 }
 
+/// Leader `from`'s transfer of item `seq` with nothing in it.
+fn nothing_from(from: u16, seq: u64) -> Transfer {
+    Transfer {
+        components: Vec::new(),
+        version: VERSION,
+        from,
+        seq,
+        sets: Vec::new(),
+        rows: Vec::new(),
+    }
+}
+
 fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
     Item::Mix {
         a,
@@ -89,19 +101,7 @@ fn a_leader_rests_only_when_it_has_applied_all_it_was_sent_and_waits_for_nobody(
         .iter()
         .any(|a| matches!(a, Action::Send { to: 1, .. })));
     assert!(leader.quiet(false).is_none(), "waiting for b's sets");
-    leader
-        .transfer(
-            Transfer {
-                components: Vec::new(),
-                version: VERSION,
-                from: 1,
-                seq: 2,
-                sets: Vec::new(),
-                rows: Vec::new(),
-            },
-            0,
-        )
-        .unwrap();
+    leader.transfer(nothing_from(1, 2), 0).unwrap();
     let rest = leader.quiet(false).expect("quiet once b's sets are in");
     assert_eq!(
         (rest.sums.cut, rest.sums.events, rest.sums.finished),
@@ -681,19 +681,7 @@ fn the_answer_where_a_leader_rests_is_kept_until_an_input_changes_anything() {
         .batch(batch(2, vec![(3, mix(1, 2, 0, 1))], 3, true), 0)
         .unwrap();
     assert!(leader.quiet_kept(false).is_none());
-    leader
-        .transfer(
-            Transfer {
-                components: Vec::new(),
-                version: VERSION,
-                from: 1,
-                seq: 3,
-                sets: Vec::new(),
-                rows: Vec::new(),
-            },
-            0,
-        )
-        .unwrap();
+    leader.transfer(nothing_from(1, 3), 0).unwrap();
     let rest = leader.quiet_kept(false).unwrap();
     assert_eq!((rest.sums.cut, rest.sums.finished), (3, true));
     assert_eq!(*rest, *leader.quiet(false).unwrap());

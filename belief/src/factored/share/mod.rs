@@ -285,12 +285,7 @@ impl FactoredShare {
             .filter(|c| pick(&c.tracks))
             .map(|c| self.held_form(c))
             .collect();
-        for c in &chosen {
-            for &t in &c.tracks {
-                self.set_held(t, false);
-            }
-        }
-        chosen
+        self.let_go(chosen)
     }
 
     /// [`FactoredShare::take`] among the components of `tracks` only (the
@@ -313,12 +308,17 @@ impl FactoredShare {
             .filter(|c| pick(&c.tracks))
             .map(|c| self.held_form(c))
             .collect();
-        for c in &chosen {
+        self.let_go(chosen)
+    }
+
+    /// `taken` are no longer held here.
+    fn let_go(&mut self, taken: Vec<HeldComponent>) -> Vec<HeldComponent> {
+        for c in &taken {
             for &t in &c.tracks {
                 self.set_held(t, false);
             }
         }
-        chosen
+        taken
     }
 
     /// The components held here, as they would move.
