@@ -24,11 +24,14 @@ pub async fn marginals(
 ) -> Result<Gathered, GatherError> {
     let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
     let (collected, answer) = match marginals_of(&collected, memory) {
-        // Outpaced by other queries: asked again, the leaders answer whole.
+        // Outpaced by other queries: the leaders are asked again at the
+        // same cut (they keep their answers there), whole.
         Err(GatherError::StaleBase { leader, base }) => {
-            tracing::debug!(leader, base, "base answer no longer kept: asking again");
-            memory.forget_bases();
-            let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
+            tracing::debug!(leader, base, "base answer no longer kept: asking whole");
+            let tag = collected.parts.first().map(|p| p.tag).filter(|&t| t != 0);
+            let (parts, errors) =
+                partials(session, keys, tag, Share::Sums, None, timeout, memory).await?;
+            let collected = check(collected.cut, parts, errors, timeout, memory)?;
             let answer = marginals_of(&collected, memory)?;
             (collected, answer)
         }
@@ -72,7 +75,7 @@ async fn at_rest(
     last: CutPlaced,
     share: Share,
 ) -> Option<Collected> {
-    let (parts, errors) = partials(session, keys, None, share, timeout, memory)
+    let (parts, errors) = partials(session, keys, None, share, memory.base(), timeout, memory)
         .await
         .ok()?;
     at_rest_of(last, parts, errors, timeout, memory)
@@ -95,7 +98,15 @@ async fn at_fresh_cut(
     // No cut, no answer: an error there stops the wait for the leaders.
     let (cut, (parts, errors)) = tokio::try_join!(
         place_cut(session, keys, &cut_parameters, timeout, memory),
-        partials(session, keys, Some(tag), share, timeout, memory)
+        partials(
+            session,
+            keys,
+            Some(tag),
+            share,
+            memory.base(),
+            timeout,
+            memory
+        )
     )?;
     check(cut, parts, errors, timeout, memory)
 }
@@ -113,12 +124,16 @@ fn fresh_tag() -> u64 {
 
 /// Every leader's partial sums (`?tag=<tag>` at the cut with that tag,
 /// `?quiet` where it rests when `tag` is None; `;rows` adds the rows
-/// where it rests, a cut says so itself), by leader, and the error replies.
+/// where it rests, a cut says so itself; `;base=` names the answer the
+/// coordinator keeps, for a factored leader to answer with what changed
+/// since), by leader, and the error replies.
+#[allow(clippy::too_many_arguments)]
 async fn partials(
     session: &Session,
     keys: &Keys,
     tag: Option<u64>,
     share: Share,
+    base: Option<u64>,
     timeout: Duration,
     memory: &Memory,
 ) -> Result<(BTreeMap<String, Partial>, Vec<String>), GatherError> {
@@ -129,7 +144,7 @@ async fn partials(
     };
     // A factored leader then answers with what changed since its answer
     // there (a Radon leader, or one that no longer keeps it, whole).
-    if let (Some(base), Share::Sums) = (memory.base(), share) {
+    if let (Some(base), Share::Sums) = (base, share) {
         selector.push_str(&format!(";base={base}"));
     }
     let replies = ask_everyone(session, selector, timeout, "query the leaders").await?;

@@ -57,7 +57,7 @@ pub enum GatherError {
 /// How many factored answers the coordinator keeps for leaders to answer
 /// against (`;base=`): one is named per query, and the others serve the
 /// queries still out when a newer one completes.
-const BASES_KEPT: usize = 16;
+const BASES_KEPT: usize = 64;
 
 /// One leader's components at one cut, whole; shared between the kept
 /// answers, since most components stay as they were from one to the next.
@@ -171,12 +171,6 @@ impl Memory {
     pub fn base(&self) -> Option<u64> {
         let bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
         bases.back().map(|(tag, _)| *tag)
-    }
-
-    /// Forgets every answer kept: the next query's leaders answer whole.
-    pub fn forget_bases(&self) {
-        let mut bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
-        bases.clear();
     }
 
     /// Keeps the components of the answer at the fresh cut tagged `tag`.
