@@ -5,7 +5,6 @@
 use super::transfers::to_wire;
 use super::*;
 use idmesh_belief::factored::CountPart;
-use std::collections::{HashMap, HashSet};
 use std::sync::OnceLock;
 
 /// How many recent cuts a leader keeps answers for.
@@ -51,16 +50,18 @@ impl Answer {
     /// The answer whole, as the wire carries it (made once, then shared).
     pub fn whole(&self) -> Arc<Partial> {
         self.whole
-            .get_or_init(|| {
-                Arc::new(Partial {
-                    components: self
-                        .parts
-                        .as_ref()
-                        .map(|parts| parts.iter().map(|p| (**p).clone()).collect()),
-                    ..self.sums.clone()
-                })
-            })
+            .get_or_init(|| Arc::new(self.made_whole()))
             .clone()
+    }
+
+    fn made_whole(&self) -> Partial {
+        Partial {
+            components: self
+                .parts
+                .as_ref()
+                .map(|parts| parts.iter().map(|p| (**p).clone()).collect()),
+            ..self.sums.clone()
+        }
     }
 }
 
@@ -183,26 +184,15 @@ pub(super) fn changes(
     now: &[Arc<CountPart>],
 ) -> (Vec<CountPart>, Vec<u32>) {
     let first = |c: &Arc<CountPart>| c.tracks.first().copied().unwrap_or(u32::MAX);
-    let ordered = |parts: &[Arc<CountPart>]| parts.windows(2).all(|w| first(&w[0]) < first(&w[1]));
+    let ordered = |parts: &[Arc<CountPart>]| parts.windows(2).all(|w| first(&w[0]) <= first(&w[1]));
     if !(ordered(before) && ordered(now)) {
-        // Not as a share gives them: by lookup instead.
-        let kept: HashMap<u32, &Arc<CountPart>> = before.iter().map(|c| (first(c), c)).collect();
-        let firsts: HashSet<u32> = now.iter().map(first).collect();
-        let changed = now
-            .iter()
-            .filter(|c| {
-                !kept
-                    .get(&first(c))
-                    .is_some_and(|k| Arc::ptr_eq(k, c) || ***k == ***c)
-            })
-            .map(|c| (**c).clone())
-            .collect();
-        let gone = before
-            .iter()
-            .map(first)
-            .filter(|t| !firsts.contains(t))
-            .collect();
-        return (changed, gone);
+        // Not as a share gives them: put in that order first.
+        let sorted = |parts: &[Arc<CountPart>]| {
+            let mut parts = parts.to_vec();
+            parts.sort_by_key(first);
+            parts
+        };
+        return changes(&sorted(before), &sorted(now));
     }
     let (mut changed, mut gone) = (Vec::new(), Vec::new());
     let (mut i, mut j) = (0, 0);
@@ -233,15 +223,33 @@ pub(super) fn changes(
     (changed, gone)
 }
 
-/// The answers kept, in a snapshot: each as itself (they are shared in
-/// memory, never between cuts).
+/// The answers kept, in a snapshot: each whole, as the wire carries it
+/// (in memory their parts are shared between answers).
 pub(super) mod kept {
     use super::{Answer, Arc, Partial, VecDeque};
-    use serde::{Deserialize, Deserializer, Serializer};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    /// An answer written whole: the copy a query already made, or one made
+    /// for the snapshot and dropped after it (not kept beside the parts).
+    enum Whole<'a> {
+        Kept(&'a Partial),
+        Made(Partial),
+    }
+
+    impl Serialize for Whole<'_> {
+        fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+            match self {
+                Whole::Kept(p) => p.serialize(s),
+                Whole::Made(p) => p.serialize(s),
+            }
+        }
+    }
 
     pub fn serialize<S: Serializer>(cuts: &VecDeque<Arc<Answer>>, s: S) -> Result<S::Ok, S::Error> {
-        let wholes: Vec<Arc<Partial>> = cuts.iter().map(|c| c.whole()).collect();
-        s.collect_seq(wholes.iter().map(|w| &**w))
+        s.collect_seq(cuts.iter().map(|c| match c.whole.get() {
+            Some(whole) => Whole::Kept(whole),
+            None => Whole::Made(c.made_whole()),
+        }))
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<VecDeque<Arc<Answer>>, D::Error> {

@@ -125,7 +125,6 @@ impl Leader {
     /// Applies queued items in seq order until one must wait; then asks
     /// the sensor once to stop routing what the leader no longer needs.
     pub(super) fn advance(&mut self) -> Result<Vec<Action>, LeaderError> {
-        self.resting = None;
         let mut actions = self.apply_queued()?;
         self.flush_unfollows(&mut actions)?;
         Ok(actions)

@@ -579,27 +579,30 @@ fn without_the_regional_rule_the_gatherer_keeps_the_merged_component() {
     assert_eq!(held.component_of(0).len(), 2);
 }
 
-/// The components of a factored answer, whole: `base`'s less what `change`
-/// says is gone or sent again, plus what it sent (as the coordinator
-/// rebuilds them), sorted by first track.
-fn rebuilt(base: &Partial, change: &Partial) -> Vec<Vec<u32>> {
-    let sent = change.components.as_ref().unwrap();
-    let replaced: Vec<u32> = change
-        .gone
+/// The parts of an answer, whole, sorted by tracks: `before`'s less the
+/// parts `gone` and those `changed` sends again, plus those it sends (as
+/// the coordinator rebuilds them).
+fn rebuilt(before: &[Arc<CountPart>], changed: &[CountPart], gone: &[u32]) -> Vec<CountPart> {
+    let replaced: Vec<u32> = gone
         .iter()
         .copied()
-        .chain(sent.iter().map(|c| c.tracks[0]))
+        .chain(changed.iter().map(|c| c.tracks[0]))
         .collect();
-    let mut whole: Vec<Vec<u32>> = base
-        .components
+    let mut whole: Vec<CountPart> = before
         .iter()
-        .flatten()
-        .filter(|c| !replaced.contains(&c.tracks[0]))
-        .chain(sent)
-        .map(|c| c.tracks.clone())
+        .filter(|b| !replaced.contains(&b.tracks[0]))
+        .map(|b| (**b).clone())
+        .chain(changed.iter().cloned())
         .collect();
-    whole.sort();
+    whole.sort_by(|a, b| a.tracks.cmp(&b.tracks));
     whole
+}
+
+/// `parts` as plain values, sorted by tracks.
+fn sorted(parts: &[Arc<CountPart>]) -> Vec<CountPart> {
+    let mut parts: Vec<CountPart> = parts.iter().map(|p| (**p).clone()).collect();
+    parts.sort_by(|a, b| a.tracks.cmp(&b.tracks));
+    parts
 }
 
 #[test]
@@ -636,22 +639,20 @@ fn an_answer_told_as_a_change_to_a_kept_one_rebuilds_the_whole() {
         .collect();
     assert_eq!(sent.len(), 1, "only the merged component: {sent:?}");
     assert_eq!(change.gone, vec![2], "track 2 no longer starts a component");
-    let whole = |p: &Partial| {
-        let mut c: Vec<Vec<u32>> = p
-            .components
-            .iter()
-            .flatten()
-            .map(|c| c.tracks.clone())
-            .collect();
-        c.sort();
-        c
-    };
-    assert_eq!(rebuilt(&before.whole(), &change), whole(&now.whole()));
-    // Components unchanged since the answer at 7 are its very parts.
     let (kept_before, kept_now) = (before.parts.as_ref().unwrap(), now.parts.as_ref().unwrap());
+    let sent = change.components.as_ref().unwrap();
+    assert_eq!(rebuilt(kept_before, sent, &change.gone), sorted(kept_now));
+    // Components unchanged since the answer at 7 are its very parts.
     let zero =
         |parts: &Vec<Arc<CountPart>>| parts.iter().find(|p| p.tracks == [0]).unwrap().clone();
     assert!(Arc::ptr_eq(&zero(kept_before), &zero(kept_now)));
+    // A snapshot writes the kept answers whole, whether a query made the
+    // whole copy already (7) or not (8), and reads them back the same.
+    before.whole();
+    let restored = Leader::restore(&leader.snapshot()).unwrap();
+    for tag in [7, 8] {
+        assert_eq!(restored.cut(tag), leader.cut(tag), "cut {tag}");
+    }
     // Against itself nothing changed; an answer not kept gives none.
     let same = leader.relative_to(&now, 8).unwrap();
     assert!(same.components.as_ref().unwrap().is_empty() && same.gone.is_empty());
@@ -739,19 +740,6 @@ fn the_change_between_two_answers_is_the_same_walked_or_looked_up() {
         gone_looked_up.sort_unstable();
         assert_eq!(walked, (changed_looked_up, gone_looked_up));
         // Rebuilt as the coordinator does: the newer answer's parts.
-        let replaced: Vec<u32> = gone
-            .iter()
-            .copied()
-            .chain(changed.iter().map(|c| c.tracks[0]))
-            .collect();
-        let mut rebuilt: Vec<CountPart> = before
-            .iter()
-            .filter(|b| !replaced.contains(&b.tracks[0]))
-            .map(|b| (**b).clone())
-            .chain(changed)
-            .collect();
-        rebuilt.sort_by(|a, b| a.tracks.cmp(&b.tracks));
-        let want: Vec<CountPart> = now.iter().map(|n| (**n).clone()).collect();
-        assert_eq!(rebuilt, want);
+        assert_eq!(rebuilt(&before, &changed, &gone), sorted(&now));
     }
 }

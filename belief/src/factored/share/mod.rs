@@ -68,7 +68,7 @@ pub struct FactoredShare {
     /// L times the work of one.
     held_set: BTreeSet<u32>,
     /// Each held component's part as last given, by first track, with
-    /// the tracks and table it was computed from ([`FactoredShare::shared_parts`]).
+    /// the table it was computed from ([`FactoredShare::shared_parts`]).
     parts_given: PartsGiven,
 }
 
@@ -80,8 +80,8 @@ struct PartsGiven(std::sync::Mutex<HashMap<u32, GivenPart>>);
 
 #[derive(Debug, Clone)]
 struct GivenPart {
-    tracks: Vec<u32>,
     table: Vec<f64>,
+    /// Its tracks are the component's.
     part: Arc<CountPart>,
 }
 
@@ -442,9 +442,8 @@ impl FactoredShare {
             .map(|c| {
                 let first = c.tracks[0];
                 let entry = match given.remove(&first) {
-                    Some(g) if g.tracks == c.tracks && g.table == c.table => g,
+                    Some(g) if g.part.tracks == c.tracks && g.table == c.table => g,
                     _ => GivenPart {
-                        tracks: c.tracks.clone(),
                         table: c.table.clone(),
                         part: Arc::new(count_part(c)),
                     },
