@@ -280,9 +280,13 @@ impl Leader {
             let gone = tracks_of(&components);
             self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
             self.unfollow(seq, gone)?;
+            // The relabel changed which tracks the components held here
+            // carry.
+            self.to_follow.extend([mix.a, mix.b]);
             self.waiting = Some(Waiting::Transfer { seq, from: to });
             return Ok(());
         }
+        self.to_follow.extend([mix.a, mix.b]);
         let new_tracks = self.follow_held()?;
         if !new_tracks.is_empty() {
             self.follow(seq, new_tracks, actions)?;

@@ -157,6 +157,12 @@ pub struct Leader {
     /// sensor, and the item of the last of them.
     unfollowing: Vec<u32>,
     unfollow_after: u64,
+    /// Tracks that may have come to be held here since the leader last
+    /// followed what it holds (a factored stream: those of the components
+    /// received, and those a relabel exchanged), checked by
+    /// [`Leader::follow_held`]: reading every track held at every transfer
+    /// cost a leader in proportion to all it holds.
+    to_follow: Vec<u32>,
     /// The last answer where the leader rests, with whether it holds the
     /// rows, until an input changes anything: a deployment at rest is
     /// asked again and again, and a factored answer reads every component.
@@ -192,6 +198,7 @@ impl Leader {
             refetch: false,
             unfollowing: Vec::new(),
             unfollow_after: 0,
+            to_follow: Vec::new(),
             resting: None,
         }
     }

@@ -201,8 +201,14 @@ impl Leader {
         let held = self.started()?.factored.as_mut().ok_or_else(|| {
             LeaderError::BadTransfer("components of a factored belief on a Radon stream".into())
         })?;
+        let tracks: Vec<u32> = components
+            .iter()
+            .flat_map(|c| c.tracks.iter().copied())
+            .collect();
         held.put(components.into_iter().map(from_wire_component).collect())
-            .map_err(|e| LeaderError::BadTransfer(e.to_string()))
+            .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+        self.to_follow.extend(tracks);
+        Ok(())
     }
 
     /// The tracks of the components held here that this leader does not
@@ -214,13 +220,16 @@ impl Leader {
     /// the tracks of the first were noted and never followed, and a later
     /// sighting of one of them never reached its holder).
     pub(super) fn follow_held(&mut self) -> Result<Vec<u32>, LeaderError> {
+        let mut candidates = std::mem::take(&mut self.to_follow);
         let started = self.started()?;
         let Some(held) = &started.factored else {
             return Ok(Vec::new());
         };
-        Ok(held
-            .held_tracks()
-            .filter(|&t| started.interest.add(t))
+        candidates.sort_unstable();
+        candidates.dedup();
+        Ok(candidates
+            .into_iter()
+            .filter(|&t| held.holds(t) && started.interest.add(t))
             .collect())
     }
 

@@ -84,6 +84,17 @@ pub struct LeaderStats {
     pub tracks_followed: u64,
     /// The seq of the last item applied.
     pub position: u64,
+    /// The stream's events as of the last batch received, whether that
+    /// batch said the stream is over, and whether the leader is quiet
+    /// (applied every item it was sent and waits for no peer): every
+    /// leader finished and quiet holds the whole stream, which is how a
+    /// bench can tell a stream is through without a query's cost.
+    #[serde(default)]
+    pub stream_events: u64,
+    #[serde(default)]
+    pub stream_finished: bool,
+    #[serde(default)]
+    pub quiet: bool,
     /// Transfers kept for peers that have not yet said their state is safe
     /// past them (bounded: peers publish durable marks).
     #[serde(default)]

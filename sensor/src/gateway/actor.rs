@@ -136,6 +136,17 @@ const UNFOLLOWS_KEPT: usize = 4096;
 /// Progress marks waiting to be taken before the oldest are dropped.
 const PROGRESS_KEPT: usize = 1024;
 
+/// A chunk of the trace (what is routed between two flushes, and between
+/// two looks at queries) ends once it has routed this many seqs (items),
+/// or the window's room if less ...
+const CHUNK_SEQS: u64 = 512;
+
+/// ... or after this many lines. Counting seqs rather than lines matters
+/// where regions are many: most of a crowd's lines are moves, which are
+/// items only at a handover, and a chunk of 512 lines sent every leader a
+/// batch (and got a progress mark back) for a few handovers each.
+const CHUNK_LINES: usize = 8192;
+
 /// How often a stream the window holds looks again without a mark (marks
 /// wake it at once; this only bounds a wait on a lost one).
 const WINDOW_RECHECK: Duration = Duration::from_millis(50);
@@ -285,7 +296,6 @@ pub async fn run(
     let started = Instant::now();
     let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
     let mut next = 0usize;
-    let chunk = 512usize;
     // The window had room at the last look.
     let mut open = true;
     let mut stall_check = tokio::time::interval(STALL_CHECK);
@@ -298,9 +308,8 @@ pub async fn run(
         let (due, wait) = if gateway.finished() || next >= lines.len() {
             (0, Duration::from_secs(3600))
         } else {
-            let (due, wait) = due_lines(&config, lines, next, started, first_time, chunk);
-            // A line takes at most a seq or two: the window holds to
-            // within a chunk. Held, the stream waits for progress marks.
+            let (due, wait) = due_lines(&config, lines, next, started, first_time, CHUNK_LINES);
+            // Held, the stream waits for progress marks.
             match gateway.room() {
                 Some(0) if due > 0 => {
                     if open {
@@ -308,16 +317,25 @@ pub async fn run(
                     }
                     (0, wait.min(WINDOW_RECHECK))
                 }
-                Some(room) => (due.min(room as usize), wait),
-                None => (due, wait),
+                _ => (due, wait),
             }
         };
         open = gateway.room() != Some(0);
         if due > 0 {
+            // A line takes at most a seq or two: the window holds to
+            // within one line.
+            let budget = gateway.room().unwrap_or(CHUNK_SEQS).min(CHUNK_SEQS);
+            let end = gateway.router().seq() + budget;
             let mut placed = Vec::new();
+            let mut taken = 0;
             for line in &lines[next..next + due] {
                 placed.extend(gateway.line(line));
+                taken += 1;
+                if gateway.router().seq() >= end {
+                    break;
+                }
             }
+            let due = taken;
             next += due;
             let refused = if next >= lines.len() && ends {
                 gateway.end()
@@ -476,7 +494,7 @@ pub async fn run(
                 take_input(&mut gateway, read, &mut placed);
                 // What the pipe already holds goes in the same batch (as
                 // much of it as the window lets in).
-                let room = gateway.room().map_or(chunk, |r| (r as usize).min(chunk));
+                let room = gateway.room().map_or(CHUNK_SEQS, |r| r.min(CHUNK_SEQS)) as usize;
                 for _ in 1..room {
                     let Some(rx) = input.as_mut() else { break };
                     match rx.try_recv() {
