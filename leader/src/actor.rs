@@ -49,8 +49,9 @@ pub struct LeaderConfig {
     /// Write a snapshot (and start the journal again) after this many
     /// inputs; None = never (the journal grows with the stream).
     pub snapshot_every: Option<usize>,
-    /// Tests only: every n-th transfer is not put, as if the link lost it
-    /// (a TLS link that closes and reopens does).
+    /// Tests only: every n-th transfer message (the transfers one step
+    /// made for a peer) is not put, as if the link lost it (a TLS link
+    /// that closes and reopens does).
     pub drop_transfer_every: Option<u64>,
     /// The sensor streams under a window ([`Timers::flow_control`]).
     pub flow_control: bool,
@@ -244,7 +245,7 @@ struct Driver<'a> {
     queries: HashMap<u64, Query>,
     next_id: u64,
     reply_tx: &'a mpsc::UnboundedSender<Reply>,
-    /// Transfers put so far (for the injected losses).
+    /// Transfer messages put so far (for the injected losses).
     transfers_put: u64,
 }
 
@@ -270,17 +271,17 @@ impl Driver<'_> {
                         }
                     }
                 }
-                Output::Send { to, seq, body } => {
+                Output::Send { to, seqs, body } => {
                     self.transfers_put += 1;
                     if self
                         .config
                         .drop_transfer_every
                         .is_some_and(|n| n > 0 && self.transfers_put.is_multiple_of(n))
                     {
-                        tracing::info!(leader = %name, %to, seq, "fault injected: transfer lost");
+                        tracing::info!(leader = %name, %to, ?seqs, "fault injected: transfers lost");
                         continue;
                     }
-                    tracing::trace!(leader = %name, %to, seq, "put transfer");
+                    tracing::trace!(leader = %name, %to, ?seqs, "put transfers");
                     if let Err(e) = self
                         .session
                         .put(keys.leader_transfer(&to), body)

@@ -17,7 +17,7 @@ use crate::error::LeaderError;
 use crate::journal::Kind;
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::bounds::Bounds;
-use idmesh_protocol::wire::leader_to_leader::Transfer;
+use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
 use idmesh_protocol::wire::leader_to_sensor::Followed;
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
 use idmesh_protocol::wire::{decode, WireError};
@@ -26,7 +26,9 @@ use idmesh_protocol::wire::{decode, WireError};
 #[derive(Debug, Clone, PartialEq)]
 pub enum Input {
     Batch(Batch),
-    Transfer(Transfer),
+    /// What a peer sent at once, in order (one step's transfers for this
+    /// leader: [`crate::node::Output::Send`]).
+    Transfers(Vec<Transfer>),
     Followed(Followed),
 }
 
@@ -62,11 +64,13 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
             Ok(Input::Batch(batch))
         }
         Kind::Transfer => {
-            let transfer = decode::<Transfer>(bytes)?;
+            let transfers = decode::<TransfersSent>(bytes)?.transfers;
             if let (Some(bounds), Some(me)) = (leader.bounds(), leader.index()) {
-                bounds.check_transfer(&transfer, me)?;
+                for transfer in &transfers {
+                    bounds.check_transfer(transfer, me)?;
+                }
             }
-            Ok(Input::Transfer(transfer))
+            Ok(Input::Transfers(transfers))
         }
         Kind::Followed => {
             let followed = decode::<Followed>(bytes)?;
@@ -94,7 +98,15 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
 pub fn apply(leader: &mut Leader, input: Input, bytes: usize) -> Result<Vec<Action>, LeaderError> {
     match input {
         Input::Batch(batch) => leader.batch(batch, bytes),
-        Input::Transfer(transfer) => leader.transfer(transfer, bytes),
+        Input::Transfers(transfers) => {
+            let mut actions = Vec::new();
+            // The message's bytes are counted once, with its first.
+            let mut size = bytes;
+            for transfer in transfers {
+                actions.extend(leader.transfer(transfer, std::mem::take(&mut size))?);
+            }
+            Ok(actions)
+        }
         Input::Followed(followed) => leader.followed(followed.items),
     }
 }

@@ -7,7 +7,7 @@ use idmesh_leader::door::{admit, apply};
 use idmesh_leader::journal::Kind;
 use idmesh_leader::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
-use idmesh_protocol::wire::leader_to_leader::{Transfer, WireSet};
+use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::Followed;
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
@@ -148,17 +148,17 @@ fn bad_inputs_are_rejected_counted_and_change_nothing() {
         (
             "transfer with a track out of range",
             Kind::Transfer,
-            encode(&transfer(1, vec![7], 0.0)),
+            bundle(transfer(1, vec![7], 0.0)),
         ),
         (
             "transfer from itself",
             Kind::Transfer,
-            encode(&transfer(0, vec![2], 0.0)),
+            bundle(transfer(0, vec![2], 0.0)),
         ),
         (
             "transfer with a NaN mass",
             Kind::Transfer,
-            encode(&transfer(1, vec![2], f64::NAN)),
+            bundle(transfer(1, vec![2], f64::NAN)),
         ),
         (
             "follow reply out of range",
@@ -207,7 +207,7 @@ fn inputs_held_from_before_the_begin_are_checked_once_it_comes() {
     };
     // Nothing to check them against yet: on their own they are fine.
     feed(&mut leader, Kind::Batch, &encode(&outside));
-    feed(&mut leader, Kind::Transfer, &encode(&stray));
+    feed(&mut leader, Kind::Transfer, &bundle(stray));
     feed(
         &mut leader,
         Kind::Batch,
@@ -241,4 +241,13 @@ fn a_begin_that_does_not_name_the_leader_is_rejected() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("do not include z"), "{e}");
+}
+
+/// A transfer as a peer puts it on the transfer key: in a message of its
+/// own.
+fn bundle(transfer: Transfer) -> Vec<u8> {
+    encode(&TransfersSent {
+        version: VERSION,
+        transfers: vec![transfer],
+    })
 }

@@ -9,7 +9,7 @@
 //! marginals still equal the centralized engine's to 1e-9: nothing bad was
 //! applied and nothing good was lost.
 
-use idmesh_protocol::wire::leader_to_leader::{Transfer, WireSet};
+use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Resend};
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Growth, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
@@ -114,18 +114,22 @@ fn garbage() -> (Messages, Messages) {
         ("track out of range", encode(&batch(vec![mix(0, 999, 0.5)]))),
         ("wrong version", encode(&wrong_version)),
     ];
+    // What a peer puts on the transfer key: its transfers in one message.
     let transfer = |red: Vec<u32>, ln_mass: f64, version| {
-        encode(&Transfer {
-            components: Vec::new(),
+        encode(&TransfersSent {
             version,
-            from: 1,
-            seq: 950,
-            sets: vec![WireSet {
-                red,
-                blue: vec![],
-                ln_mass,
+            transfers: vec![Transfer {
+                components: Vec::new(),
+                version,
+                from: 1,
+                seq: 950,
+                sets: vec![WireSet {
+                    red,
+                    blue: vec![],
+                    ln_mass,
+                }],
+                rows: vec![],
             }],
-            rows: vec![],
         })
     };
     let transfers = vec![

@@ -249,6 +249,12 @@ pub struct FactoredBelief {
     /// The count coupling, evaluated when asked (see the `tree` module);
     /// behind a lock because a query caches its convolutions.
     tree: Mutex<CountTree>,
+    /// Whether events keep the tree's leaves: a leader's share leaves
+    /// them, since the coupling is the coordinator's, and the tree is
+    /// built afresh if anything reads it ([`FactoredBelief::leave_tree`]).
+    tree_kept: bool,
+    /// Leaves changed since the tree was built (only when not kept).
+    tree_stale: std::sync::atomic::AtomicBool,
     stats: FactoredStats,
 }
 
@@ -264,6 +270,8 @@ impl Clone for FactoredBelief {
             numbers: self.numbers,
             last_mix: self.last_mix.clone(),
             tree: Mutex::new(self.lock_tree().clone()),
+            tree_kept: self.tree_kept,
+            tree_stale: std::sync::atomic::AtomicBool::new(false),
             stats: self.stats.clone(),
         }
     }
@@ -313,6 +321,8 @@ impl FactoredBelief {
             home: vec![(0, 0); n],
             last_mix: vec![0; n],
             tree: Mutex::new(tree),
+            tree_kept: true,
+            tree_stale: std::sync::atomic::AtomicBool::new(false),
             stats: FactoredStats::default(),
         };
         for slot in 0..n {
@@ -351,7 +361,44 @@ impl FactoredBelief {
     fn lock_tree(&self) -> MutexGuard<'_, CountTree> {
         // A panic elsewhere cannot leave the tree half-updated in a way
         // that matters: every node it touched is still marked dirty.
-        self.tree.lock().unwrap_or_else(|e| e.into_inner())
+        let mut tree = self.tree.lock().unwrap_or_else(|e| e.into_inner());
+        if self
+            .tree_stale
+            .swap(false, std::sync::atomic::Ordering::Relaxed)
+        {
+            *tree = self.fresh_tree();
+        }
+        tree
+    }
+
+    /// The tree for writing (built afresh if it was left).
+    fn tree_mut(&mut self) -> &mut CountTree {
+        if std::mem::take(self.tree_stale.get_mut()) {
+            let fresh = self.fresh_tree();
+            *self.tree.get_mut().unwrap_or_else(|e| e.into_inner()) = fresh;
+        }
+        self.tree.get_mut().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The count tree of the components as they are now.
+    fn fresh_tree(&self) -> CountTree {
+        let counts: Vec<Vec<f64>> = self
+            .comps
+            .iter()
+            .map(|c| c.as_ref().map_or_else(Vec::new, |c| c.counts.clone()))
+            .collect();
+        let live = self.count_refs();
+        let tilt = tree::balancing_tilt(live.iter().copied(), self.prior.target());
+        CountTree::new(counts, tilt, self.prior.is_point())
+    }
+
+    /// Events no longer keep the count tree (a leader's share: its
+    /// components are coupled at the coordinator, and the tree's upkeep,
+    /// a few logarithms and exponentials per changed component, would be
+    /// the share's alone to pay). Anything that reads the tree builds it
+    /// afresh first, so every answer stays the same.
+    pub(crate) fn leave_tree(&mut self) {
+        self.tree_kept = false;
     }
 
     /// R_{−C} of the component in `slot` over the counts 0..`width` (the
@@ -488,19 +535,27 @@ impl FactoredBelief {
     /// Replaces the components in the slots `remove` by `add`: touches only
     /// those slots, their tracks and their leaves of the count tree.
     fn replace(&mut self, remove: &[usize], add: Vec<Component>) {
+        let kept = self.tree_kept;
+        if !kept {
+            *self.tree_stale.get_mut() = true;
+        }
         let tree = self.tree.get_mut().unwrap_or_else(|e| e.into_inner());
         for &slot in remove {
             if let Some(c) = self.comps[slot].take() {
                 self.numbers -= c.table.len();
                 self.free.push(slot);
-                tree.set(slot, Vec::new());
+                if kept {
+                    tree.set(slot, Vec::new());
+                }
             }
         }
         for c in add {
             let slot = self.free.pop().expect("never more components than tracks");
             self.numbers += c.table.len();
             self.stats.max_component = self.stats.max_component.max(c.len());
-            tree.set(slot, c.counts.clone());
+            if kept {
+                tree.set(slot, c.counts.clone());
+            }
             for (bit, &t) in c.tracks.iter().enumerate() {
                 self.home[t as usize] = (slot, bit);
             }
@@ -528,11 +583,11 @@ impl FactoredBelief {
         // counts for the walk, then their own again (the caller replaces
         // them if the split goes through).
         let (c1, c2) = (self.comp(ca).counts.clone(), self.comp(cb).counts.clone());
-        let tree = self.tree.get_mut().unwrap_or_else(|e| e.into_inner());
+        let tree = self.tree_mut();
         tree.set(cb, Vec::new());
         tree.set(ca, merged_counts);
         let q = self.leave_one_out(ca, width);
-        let tree = self.tree.get_mut().unwrap_or_else(|e| e.into_inner());
+        let tree = self.tree_mut();
         tree.set(ca, c1);
         tree.set(cb, c2);
         q

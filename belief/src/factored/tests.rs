@@ -622,3 +622,47 @@ fn split_off_is_local_and_leaves_a_lone_track_alone() {
         Err(BeliefError::UnknownTrack { track: 9, .. })
     ));
 }
+
+/// A belief that leaves its count tree to be built when read (a leader's
+/// share) answers what one keeping it answers, asked now and then, under
+/// both couplings: the tree built afresh is the kept one's.
+#[test]
+fn a_belief_that_leaves_its_tree_answers_as_one_that_keeps_it() {
+    let (n, k) = (12, 5);
+    let (initial, events) = workload(n, k, 300, 4);
+    for field in fields(n, k, &initial) {
+        for coupling in [Coupling::Local, Coupling::Coupled] {
+            let options = FactoredOptions {
+                max_component: 3,
+                coupling,
+                ..FactoredOptions::default()
+            };
+            let mut kept = FactoredBelief::with_options(field.clone(), options.clone()).unwrap();
+            let mut left = FactoredBelief::with_options(field.clone(), options).unwrap();
+            left.leave_tree();
+            for (i, event) in events.iter().enumerate() {
+                assert_eq!(
+                    kept.apply(event).is_ok(),
+                    left.apply(event).is_ok(),
+                    "event {i}"
+                );
+                if i % 17 == 0 {
+                    let what = format!("{coupling:?}, event {i}");
+                    close(
+                        &left.marginals().unwrap(),
+                        &kept.marginals().unwrap(),
+                        1e-9,
+                        &what,
+                    );
+                }
+            }
+            assert!(*left.tree_stale.get_mut(), "the last events left the tree");
+            close(
+                &left.marginals().unwrap(),
+                &kept.marginals().unwrap(),
+                1e-9,
+                "at the end",
+            );
+        }
+    }
+}

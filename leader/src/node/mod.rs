@@ -141,8 +141,16 @@ pub enum Input {
 pub enum Output {
     /// Append this input to the journal before carrying out what follows.
     Journal { kind: Kind, bytes: Vec<u8> },
-    /// Put `body` (an encoded `Transfer`) on peer `to`'s transfer key.
-    Send { to: String, seq: u64, body: Vec<u8> },
+    /// Put `body` on peer `to`'s transfer key: an encoded
+    /// `TransfersSent`, every transfer one step made for that peer (of the
+    /// items `seqs`), in order. One message for all of them: a crowd's
+    /// batch hands several tracks to the same neighbour, and each message
+    /// costs both processes a wake-up.
+    Send {
+        to: String,
+        seqs: Vec<u64>,
+        body: Vec<u8>,
+    },
     /// Ask the sensor to follow tracks; its answer comes back as
     /// [`Input::Followed`].
     AskFollow(Follow),
@@ -208,6 +216,8 @@ pub struct Node {
     resending: bool,
     /// The follow request is out (None: ask again on the next tick).
     following: bool,
+    /// Transfers this step made, by peer, not yet put in messages.
+    outgoing: Vec<(String, Vec<Transfer>)>,
     /// Transfer requests out, by peer, and when they were made.
     asking: BTreeMap<String, Now>,
     /// When the leader started waiting for the transfer it waits for.
@@ -233,6 +243,7 @@ impl Node {
             held: Vec::new(),
             resending: false,
             following: false,
+            outgoing: Vec::new(),
             asking: BTreeMap::new(),
             waiting_since: None,
             components_since: None,
@@ -312,8 +323,13 @@ impl Node {
                 }
                 match result {
                     Ok(transfers) => {
+                        // One input each: one a peer got wrong is refused
+                        // alone.
                         for t in transfers {
-                            let bytes = encode(&t);
+                            let bytes = encode(&TransfersSent {
+                                version: VERSION,
+                                transfers: vec![t],
+                            });
                             self.input(Kind::Transfer, bytes, "a peer's sent transfers", &mut out);
                         }
                     }
@@ -355,6 +371,7 @@ impl Node {
             }
         }
         self.after_input(now, &mut out);
+        self.send_outgoing(&mut out);
         out
     }
 
@@ -387,7 +404,7 @@ impl Node {
     fn act(&mut self, actions: Vec<Action>, out: &mut Vec<Output>) {
         for action in actions {
             match action {
-                Action::Send { to, transfer } => self.send(to, &transfer, out),
+                Action::Send { to, transfer } => self.send(to, transfer),
                 Action::Follow(_) => {
                     self.following = false;
                     self.ask_follow(out);
@@ -409,20 +426,32 @@ impl Node {
         }
     }
 
-    /// Puts one transfer on the way to leader index `to`.
-    fn send(&mut self, to: u16, transfer: &Transfer, out: &mut Vec<Output>) {
+    /// Puts one transfer on the way to leader index `to`: it leaves with
+    /// the others this step makes for that peer ([`Node::send_outgoing`]).
+    fn send(&mut self, to: u16, transfer: Transfer) {
         let Some(peer) = self.leader.peer(to).map(str::to_owned) else {
             self.failure = Some(format!("transfer to unknown leader index {to}"));
             return;
         };
-        let body = encode(transfer);
         tracing::debug!(leader = %self.leader.name(), to = %peer, seq = transfer.seq, sets = transfer.sets.len(), "hand over sets");
-        self.leader.note_sent(body.len());
-        out.push(Output::Send {
-            to: peer,
-            seq: transfer.seq,
-            body,
-        });
+        match self.outgoing.iter_mut().find(|(p, _)| *p == peer) {
+            Some((_, transfers)) => transfers.push(transfer),
+            None => self.outgoing.push((peer, vec![transfer])),
+        }
+    }
+
+    /// One message per peer with every transfer this step made for it, in
+    /// the order they were made.
+    fn send_outgoing(&mut self, out: &mut Vec<Output>) {
+        for (to, transfers) in std::mem::take(&mut self.outgoing) {
+            let seqs = transfers.iter().map(|t| t.seq).collect();
+            let body = encode(&TransfersSent {
+                version: VERSION,
+                transfers,
+            });
+            self.leader.note_sent(body.len());
+            out.push(Output::Send { to, seqs, body });
+        }
     }
 
     /// Asks the sensor to follow the tracks the leader waits for, unless a

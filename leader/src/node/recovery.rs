@@ -64,13 +64,14 @@ impl Node {
         }
         // A gap left by the journal, a snapshot due: as after any input.
         node.after_input(now, &mut out);
+        node.send_outgoing(&mut out);
         Ok((node, out))
     }
 
     /// After a restart: everything sent and received while down, again.
     fn catch_up(&mut self, now: Now, out: &mut Vec<Output>) {
         for (to, transfer) in self.leader.all_sent().to_vec() {
-            self.send(to, &transfer, out);
+            self.send(to, transfer);
         }
         self.ask_resend(out);
         let name = self.leader.name().to_string();

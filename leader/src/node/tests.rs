@@ -255,7 +255,7 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
     let out = node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
     assert!(out
         .iter()
-        .any(|o| matches!(o, Output::Send { to, seq: 2, .. } if to == "b")));
+        .any(|o| matches!(o, Output::Send { to, seqs, .. } if to == "b" && seqs == &[2])));
     assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
     let asked = |out: &[Output]| {
         out.iter()
@@ -318,7 +318,10 @@ fn a_failed_follow_request_is_made_again() {
         20 * MS,
         Input::Message {
             kind: Kind::Transfer,
-            bytes: encode(&transfer),
+            bytes: encode(&TransfersSent {
+                version: VERSION,
+                transfers: vec![transfer],
+            }),
             origin: "b".into(),
         },
     );
@@ -457,7 +460,7 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     // Its transfer again, the batches after its journal, b's transfers.
     assert!(out
         .iter()
-        .any(|o| matches!(o, Output::Send { to, seq: 2, .. } if to == "b")));
+        .any(|o| matches!(o, Output::Send { to, seqs, .. } if to == "b" && seqs == &[2])));
     assert_eq!(resends(&out), 1);
     assert!(out
         .iter()

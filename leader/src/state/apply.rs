@@ -59,7 +59,7 @@ impl Leader {
                         }
                         None => Vec::new(),
                     };
-                    self.send_homeless(seq, other, row, actions)?;
+                    self.send_homeless(seq, other, &[], row, actions)?;
                     self.waiting = Some(Waiting::Transfer { seq, from: other });
                 }
             }
@@ -114,7 +114,7 @@ impl Leader {
                         }
                         None => Vec::new(),
                     };
-                    let mut gone = self.send_homeless(seq, to, row, actions)?;
+                    let mut gone = self.send_homeless(seq, to, &[track], row, actions)?;
                     gone.push(track);
                     self.unfollow(seq, gone)?;
                 } else if to == me {

@@ -39,18 +39,24 @@ impl Leader {
     /// Takes out the sets with none of this leader's tracks (but not φ_∅),
     /// or on a factored stream the components with none of them, and sends
     /// them, with `rows`, to `to` as the transfer of item `seq`. Returns
-    /// the tracks of the components sent.
+    /// the tracks of the components sent. `released`: the tracks this
+    /// leader stopped surveilling since the last call.
     pub(super) fn send_homeless(
         &mut self,
         seq: u64,
         to: u16,
+        released: &[u32],
         rows: Vec<WireRow>,
         actions: &mut Vec<Action>,
     ) -> Result<Vec<u32>, LeaderError> {
         let started = self.started()?;
         let own = &started.own;
         if let Some(held) = &mut started.factored {
-            let components = held.take(|tracks| !tracks.iter().any(|&t| own[t as usize]));
+            // Every call takes all the components without a track of this
+            // leader, so what the last one left has one: only components
+            // changed since, or of a track released since, can be without.
+            let components =
+                held.take_changed(released, |tracks| !tracks.iter().any(|&t| own[t as usize]));
             let tracks = tracks_of(&components);
             self.send(seq, to, Vec::new(), rows, components, actions)?;
             return Ok(tracks);

@@ -869,11 +869,18 @@ impl World {
         for output in outputs {
             match output {
                 Output::Journal { kind, bytes } => self.leaders[i].disk.entries.push((kind, bytes)),
-                Output::Send { to, seq, body } => {
+                Output::Send { to, seqs, body } => {
                     let Some(j) = self.leaders.iter().position(|l| l.name == to) else {
                         return Err(Violation::new(format!("transfer to unknown {to}")));
                     };
-                    if self.aimed.lose_transfers && self.lost_once.insert((i, j, seq)) {
+                    // Lost once: a message with a transfer not lost before.
+                    let lost = self.aimed.lose_transfers
+                        && seqs
+                            .iter()
+                            .filter(|&&seq| self.lost_once.insert((i, j, seq)))
+                            .count()
+                            > 0;
+                    if lost {
                         self.tally.messages += 1;
                         self.tally.dropped += 1;
                         continue;

@@ -67,9 +67,44 @@ pub struct FactoredShare {
     /// or every leader would pay for all n tracks and L leaders would do
     /// L times the work of one.
     held_set: BTreeSet<u32>,
+    /// The tracks of the components held here that changed since the last
+    /// [`FactoredShare::take_changed`] (made, merged, split, relabelled,
+    /// brought in): all a leader must look at to find the components left
+    /// without its tracks, rather than all it holds at every handover.
+    changed: Changed,
     /// Each held component's part as last given, by first track, with
     /// the table it was computed from ([`FactoredShare::shared_parts`]).
     parts_given: PartsGiven,
+}
+
+/// A set of tracks with O(1) insertion, drained whole.
+#[derive(Debug, Clone, Default)]
+struct Changed {
+    flagged: Vec<bool>,
+    tracks: Vec<u32>,
+}
+
+impl Changed {
+    fn new(n: usize) -> Self {
+        Changed {
+            flagged: vec![false; n],
+            tracks: Vec::new(),
+        }
+    }
+
+    fn insert(&mut self, track: u32) {
+        if !std::mem::replace(&mut self.flagged[track as usize], true) {
+            self.tracks.push(track);
+        }
+    }
+
+    fn drain(&mut self) -> Vec<u32> {
+        let tracks = std::mem::take(&mut self.tracks);
+        for &t in &tracks {
+            self.flagged[t as usize] = false;
+        }
+        tracks
+    }
 }
 
 /// The parts a share last gave out: a component whose tracks and table are
@@ -149,12 +184,21 @@ impl FactoredShare {
             return unsupported("a limit on the numbers of all components together");
         }
         let n = field.tracks;
-        let belief = FactoredBelief::with_options(field, options)?;
+        let mut belief = FactoredBelief::with_options(field, options)?;
+        // Its components are coupled at the coordinator, never here.
+        belief.leave_tree();
         let held: Vec<bool> = (0..n as u32).map(held).collect();
+        let held_set: BTreeSet<u32> = (0..n as u32).filter(|&t| held[t as usize]).collect();
+        // Nothing is known of the components yet: the first look reads all.
+        let mut changed = Changed::new(n);
+        for &t in &held_set {
+            changed.insert(t);
+        }
         Ok(FactoredShare {
             belief,
-            held_set: (0..n as u32).filter(|&t| held[t as usize]).collect(),
+            held_set,
             held,
+            changed,
             parts_given: PartsGiven::default(),
         })
     }
@@ -236,7 +280,19 @@ impl FactoredShare {
         if !self.holds(track) {
             return Ok(());
         }
+        // Its pieces are made of the tracks it has now.
+        self.note_changed(track);
         self.belief.split_off(track)
+    }
+
+    /// The component of `track`, if held here, changes (or changed).
+    fn note_changed(&mut self, track: u32) {
+        if self.holds(track) {
+            let (slot, _) = self.belief.home[track as usize];
+            for &t in &self.belief.comp(slot).tracks {
+                self.changed.insert(t);
+            }
+        }
     }
 
     fn mix_with(&mut self, mix: Mix, when: u64, may_merge: bool) -> Result<(), BeliefError> {
@@ -250,12 +306,18 @@ impl FactoredShare {
                 ),
             });
         }
+        // Before (a merge or a split makes its components of these
+        // tracks) and after (a relabel brings a track in).
+        self.note_changed(mix.a);
+        self.note_changed(mix.b);
         self.belief.mix_with(mix, may_merge)?;
         if mix.swap == 1.0 && self.held[a] != self.held[b] {
             let (ha, hb) = (self.held[a], self.held[b]);
             self.set_held(mix.a, hb);
             self.set_held(mix.b, ha);
         }
+        self.note_changed(mix.a);
+        self.note_changed(mix.b);
         if mix.swap != 0.0 {
             self.belief.last_mix[a] = when;
             self.belief.last_mix[b] = when;
@@ -274,6 +336,8 @@ impl FactoredShare {
                 ),
             });
         }
+        // Tracks it makes certain split off its component.
+        self.note_changed(observe.track);
         self.belief.observe(observe)
     }
 
@@ -309,6 +373,28 @@ impl FactoredShare {
             .map(|c| self.held_form(c))
             .collect();
         self.let_go(chosen)
+    }
+
+    /// [`FactoredShare::take`] among the components that changed since the
+    /// last call and those of `released`, the tracks whose standing with
+    /// the caller changed meanwhile. Gives what `take(pick)` gives, reading
+    /// only those, for a `pick` that depends on a component's tracks and on
+    /// what the caller knows of each track, provided `pick` refused every
+    /// component the last call left held, and what the caller knows changed
+    /// only for `released`: a component neither changed nor of a released
+    /// track is the one `pick` refused then. The first call reads every
+    /// component held.
+    pub fn take_changed(
+        &mut self,
+        released: &[u32],
+        pick: impl FnMut(&[u32]) -> bool,
+    ) -> Vec<HeldComponent> {
+        let mut tracks = self.changed.drain();
+        tracks.extend_from_slice(released);
+        let mut taken = self.take_of(&tracks, pick);
+        // In `take`'s order: by the tracks the components are found at.
+        taken.sort_unstable_by_key(|c| c.tracks[0]);
+        taken
     }
 
     /// `taken` are no longer held here.
@@ -367,6 +453,7 @@ impl FactoredShare {
                 .collect();
             for (&t, &when) in c.tracks.iter().zip(&c.last_mix) {
                 self.set_held(t, true);
+                self.changed.insert(t);
                 self.belief.last_mix[t as usize] = when;
             }
             // Built as it was sent (no renormalizing): the receiver holds

@@ -288,3 +288,88 @@ fn a_kept_coupling_answers_an_unchanged_cut_from_memory() {
         assert!((k - f).abs() < 1e-12, "{k} vs {f}");
     }
 }
+
+/// A leader looks for the components left without a track it surveils at
+/// every handover it makes, among those changed since its last look and
+/// those of the track it released (`take_changed`); what it finds is what a
+/// look at everything it holds (`take`) finds, through mixes that merge and
+/// split, relabels, sightings that split off certain tracks, components
+/// coming and going, and tracks handed over both ways, split off or not.
+/// Leader 0 is watched; leader 1 holds what leader 0 sends away.
+#[test]
+fn the_components_left_without_a_surveilled_track_are_found_among_the_changed() {
+    let mut total = 0;
+    for seed in 1..=6 {
+        let n = 30;
+        let (initial, events) = workload(n, 400, seed);
+        let options = FactoredOptions {
+            max_component: 3,
+            coupling: Coupling::Local,
+            ..FactoredOptions::default()
+        };
+        let field = Field::known(n, initial);
+        // Which leader surveils each track.
+        let mut surveils: Vec<usize> = (0..n).map(|t| t % 2).collect();
+        let mut shares: Vec<FactoredShare> = (0..2)
+            .map(|l| {
+                FactoredShare::start(field.clone(), options.clone(), |t| t as usize % 2 == l)
+                    .unwrap()
+            })
+            .collect();
+        let holder =
+            |shares: &[FactoredShare], t: u32| shares.iter().position(|s| s.holds(t)).unwrap();
+        let mut found = 0;
+        for (i, event) in events.iter().enumerate() {
+            let when = i as u64 + 1;
+            match *event {
+                Event::Mix(mix) if mix.swap == 1.0 => {
+                    let (ha, hb) = (holder(&shares, mix.a), holder(&shares, mix.b));
+                    shares[ha].mix(mix, when).unwrap();
+                    if ha != hb {
+                        shares[hb].mix(mix, when).unwrap();
+                    }
+                }
+                Event::Mix(mix) if mix.swap > 0.0 => {
+                    let (ha, hb) = (holder(&shares, mix.a), holder(&shares, mix.b));
+                    if ha != hb {
+                        let comp = shares[hb].take_of(&[mix.b], |_| true);
+                        shares[ha].put(comp).unwrap();
+                    }
+                    let _ = shares[ha].mix(mix, when);
+                }
+                Event::Mix(_) => {}
+                Event::Observe(o) => {
+                    let h = holder(&shares, o.track);
+                    let _ = shares[h].observe(o);
+                }
+            }
+            // A track changes leader: the old one (split it off its
+            // component now and then, as the regional rule does).
+            let t = (i * 7 % n) as u32;
+            let from = surveils[t as usize];
+            if i % 4 == 0 {
+                let h = holder(&shares, t);
+                shares[h].split_off(t).unwrap();
+            }
+            surveils[t as usize] = 1 - from;
+            if from != 0 {
+                continue;
+            }
+            let homeless = |tracks: &[u32]| tracks.iter().all(|&u| surveils[u as usize] != 0);
+            let want = shares[0].clone().take(homeless);
+            let got = shares[0].take_changed(&[t], homeless);
+            assert_eq!(got, want, "seed {seed}, event {i}");
+            found += got.len();
+            shares[1].put(got).unwrap();
+        }
+        assert!(
+            found > 0,
+            "seed {seed}: no component was left without a track"
+        );
+        total += found;
+    }
+    assert!(
+        total > 40,
+        "only {total} components were left without a track"
+    );
+}
