@@ -4,7 +4,7 @@
 //! | key | who declares | what |
 //! |---|---|---|
 //! | `P/leader/<name>/events` | leader subscribes | its event stream ([`sensor_to_leader`](super::sensor_to_leader)) |
-//! | `P/leader/<name>/transfer` | leader subscribes | sets handed to it ([`leader_to_leader`](super::leader_to_leader)) |
+//! | `P/leader/<name>/transfer` | leader subscribes | sets handed to it, a step's in one `TransfersSent` ([`leader_to_leader`](super::leader_to_leader)) |
 //! | `P/leader/<name>/partial` | leader queryable | partial sums at a cut |
 //! | `P/leader/<name>/stats` | leader queryable | its counters |
 //! | `P/sensor/<name>/cut` | sensor queryable | a cut of the stream |

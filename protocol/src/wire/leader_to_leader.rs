@@ -53,6 +53,10 @@ pub struct TransfersWanted {
 }
 super::versioned!(TransfersWanted, "transfers request");
 
+/// Transfers in order: every transfer one input of the sender made for
+/// this leader, put on `P/leader/<l>/transfer` as one message (a crowd's
+/// batch hands several tracks to the same neighbour, and each message costs
+/// both processes a wake-up); and the reply to a [`TransfersWanted`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TransfersSent {
     pub version: u16,

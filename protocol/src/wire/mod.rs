@@ -41,7 +41,8 @@ use serde::Serialize;
 pub use valid::Valid;
 
 /// The version of every postcard message below; a receiver rejects others.
-pub const VERSION: u16 = 3;
+/// 4: the transfer key carries a `TransfersSent`, one input's transfers.
+pub const VERSION: u16 = 4;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]
