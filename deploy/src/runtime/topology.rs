@@ -53,7 +53,7 @@
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
 //! # [leader_faults]              # tests only: a link that loses transfers
-//! # drop_transfer_every = 5      # every 5th transfer a leader sends, lost
+//! # drop_transfer_every = 5      # every 5th transfer message a leader puts, lost
 //!
 //! [[leader]]
 //! name = "leader-0"
@@ -266,7 +266,8 @@ pub struct FaultSection {
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LeaderFaultSection {
-    /// Every n-th transfer a leader puts is not put.
+    /// Every n-th transfer message a leader puts (the transfers one input
+    /// made for one peer) is not put.
     pub drop_transfer_every: Option<u64>,
 }
 
