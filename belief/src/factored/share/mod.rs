@@ -306,18 +306,21 @@ impl FactoredShare {
                 ),
             });
         }
-        // Before (a merge or a split makes its components of these
-        // tracks) and after (a relabel brings a track in).
+        // A merge, and any split after it, makes its components of the
+        // tracks these hold now.
         self.note_changed(mix.a);
         self.note_changed(mix.b);
         self.belief.mix_with(mix, may_merge)?;
-        if mix.swap == 1.0 && self.held[a] != self.held[b] {
-            let (ha, hb) = (self.held[a], self.held[b]);
-            self.set_held(mix.a, hb);
-            self.set_held(mix.b, ha);
+        if mix.swap == 1.0 {
+            if self.held[a] != self.held[b] {
+                let (ha, hb) = (self.held[a], self.held[b]);
+                self.set_held(mix.a, hb);
+                self.set_held(mix.b, ha);
+            }
+            // A relabel brings a track into a component held here.
+            self.note_changed(mix.a);
+            self.note_changed(mix.b);
         }
-        self.note_changed(mix.a);
-        self.note_changed(mix.b);
         if mix.swap != 0.0 {
             self.belief.last_mix[a] = when;
             self.belief.last_mix[b] = when;
