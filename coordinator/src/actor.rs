@@ -90,7 +90,7 @@ async fn answer(
         Ok(Request::Marginals(at)) => {
             gather::marginals(&session, keys, config.timeout, &memory, at)
                 .await
-                .map(|g| json(&g.answer))
+                .map(|g| memory.marginals_json(&g.answer).to_vec())
                 .map_err(|e| e.to_string())
         }
         Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track).await,

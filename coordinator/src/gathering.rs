@@ -113,6 +113,10 @@ pub struct Memory {
     /// cut tag, every leader's components whole. A query names the newest
     /// (`;base=`), and each leader answers with what changed since it.
     bases: Mutex<VecDeque<(u64, BTreeMap<String, Components>)>>,
+    /// The last marginals answer and its JSON: a deployment at rest asked
+    /// again gives the very same answer, and encoding 10,000 marginals
+    /// costs more than gathering what changed.
+    encoded: Mutex<Option<(MarginalsAnswer, Arc<[u8]>)>>,
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
@@ -145,6 +149,20 @@ impl Memory {
             bad_replies: self.bad_replies.load(Ordering::Relaxed),
             degraded: self.degraded.load(Ordering::Relaxed),
         }
+    }
+
+    /// `answer` as JSON: the bytes kept from the last answer if it is the
+    /// same (compared whole), else encoded now and kept.
+    pub fn marginals_json(&self, answer: &MarginalsAnswer) -> Arc<[u8]> {
+        let mut encoded = self.encoded.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((last, bytes)) = &*encoded {
+            if last == answer {
+                return bytes.clone();
+            }
+        }
+        let bytes: Arc<[u8]> = serde_json::to_vec(answer).unwrap_or_default().into();
+        *encoded = Some((answer.clone(), bytes.clone()));
+        bytes
     }
 
     pub fn finished(&self) -> Option<CutPlaced> {

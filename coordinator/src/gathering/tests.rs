@@ -377,3 +377,42 @@ fn leaders_answering_with_what_changed_give_the_answer_of_their_whole_shares() {
         "{e}"
     );
 }
+
+/// An answer asked again unchanged is the same JSON, not encoded again;
+/// any change, the smallest, encodes it anew.
+#[test]
+fn the_json_of_an_unchanged_answer_is_kept_and_a_changed_one_encoded_anew() {
+    let memory = Memory::default();
+    let answer = MarginalsAnswer {
+        watermark: [("sensor-0".to_string(), 7)].into_iter().collect(),
+        tracks: 3,
+        red: Some(1),
+        p_red: vec![0.5, 0.25, 0.25],
+        predicted_red: vec![0],
+        leaders: 2,
+        coefficients: 6,
+        finished: true,
+    };
+    let first = memory.marginals_json(&answer);
+    let again = memory.marginals_json(&answer.clone());
+    assert!(Arc::ptr_eq(&first, &again), "encoded again");
+    assert_eq!(
+        serde_json::from_slice::<MarginalsAnswer>(&first).unwrap(),
+        answer
+    );
+    let mut moved = answer.clone();
+    moved.p_red[2] = 0.25 + 1e-12;
+    let changed = memory.marginals_json(&moved);
+    assert!(!Arc::ptr_eq(&first, &changed));
+    assert_eq!(
+        serde_json::from_slice::<MarginalsAnswer>(&changed).unwrap(),
+        moved
+    );
+    let mut later = moved.clone();
+    later.watermark.insert("sensor-0".into(), 8);
+    assert_eq!(
+        serde_json::from_slice::<MarginalsAnswer>(&memory.marginals_json(&later)).unwrap(),
+        later,
+        "a new watermark is a new answer"
+    );
+}
