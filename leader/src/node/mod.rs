@@ -495,7 +495,7 @@ impl Node {
             wanted: TransfersWanted {
                 version: VERSION,
                 to: me,
-                after: self.leader.position(),
+                after: self.leader.received_through(),
             },
         });
     }

@@ -119,7 +119,11 @@ impl Leader {
                     self.unfollow(seq, gone)?;
                 } else if to == me {
                     *slot = true;
-                    self.waiting = Some(Waiting::Transfer { seq, from });
+                    if self.lazy_handovers() {
+                        self.pending.push(Pending { seq, from, track });
+                    } else {
+                        self.waiting = Some(Waiting::Transfer { seq, from });
+                    }
                 }
             }
             Item::Identify {

@@ -117,7 +117,7 @@ impl Leader {
     /// answers a finished stream without placing a cut.
     /// With `rows`, the leader's rows of the information matrix too.
     pub fn quiet(&self, rows: bool) -> Option<Arc<Answer>> {
-        if self.waiting.is_some() || !self.queue.is_empty() {
+        if self.waiting.is_some() || !self.queue.is_empty() || !self.pending.is_empty() {
             return None;
         }
         self.partial(self.frontier, 0, self.events, rows)

@@ -91,7 +91,8 @@ impl Leader {
     ) -> Result<Vec<Action>, LeaderError> {
         self.resting = None;
         let key = (transfer.seq, transfer.from);
-        if transfer.seq <= self.position
+        let pending = self.pending.iter().any(|p| (p.seq, p.from) == key);
+        if (transfer.seq <= self.position && !pending)
             || self.transfers.contains_key(&key)
             || self.taken.contains(&key)
         {
@@ -185,13 +186,16 @@ impl Leader {
                 Some(Waiting::Follow { .. }) => return Ok(actions),
                 None => {}
             }
-            let Some(next) = self.queue.first_entry() else {
+            self.take_pending()?;
+            let Some((&seq, item)) = self.queue.first_key_value() else {
                 return Ok(actions);
             };
-            if *next.key() > self.frontier {
+            if seq > self.frontier || self.needs_pending(item) {
                 return Ok(actions);
             }
-            let (seq, item) = next.remove_entry();
+            let Some(item) = self.queue.remove(&seq) else {
+                return Ok(actions);
+            };
             let _span = tracing::debug_span!("item", leader = %self.name, seq).entered();
             self.apply(seq, item, &mut actions)?;
             if self.waiting.is_none() {
@@ -205,12 +209,13 @@ impl Leader {
         self.asked.as_ref()
     }
 
-    /// The item and the peer whose transfer this leader waits for, if it
-    /// is stopped for one.
+    /// The item and the peer whose transfer this leader waits for: the
+    /// one it is stopped for, or else the first pending handover's (not
+    /// stopped for yet, but one lost on the way must be asked for again).
     pub fn waiting_for_transfer(&self) -> Option<(u64, u16)> {
         match self.waiting {
             Some(Waiting::Transfer { seq, from }) => Some((seq, from)),
-            _ => None,
+            _ => self.first_pending(),
         }
     }
 

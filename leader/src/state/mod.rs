@@ -49,6 +49,7 @@ use std::sync::Arc;
 mod apply;
 mod cuts;
 pub use cuts::Answer;
+mod handovers;
 mod inbox;
 mod stats;
 #[cfg(test)]
@@ -87,6 +88,15 @@ enum Waiting {
     },
     /// For the sensor's answer to a follow request made at `seq`.
     Follow { seq: u64 },
+}
+
+/// A handover of `track` to this leader at item `seq`, whose transfer
+/// from leader `from` is still on its way.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+struct Pending {
+    seq: u64,
+    from: u16,
+    track: u32,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -144,6 +154,12 @@ pub struct Leader {
     /// stream gathers several at one item): a second copy is a duplicate.
     taken: Vec<(u64, u16)>,
     waiting: Option<Waiting>,
+    /// Handovers to this leader whose transfer has not come yet, in seq
+    /// order (a factored stream under the regional rule, see
+    /// [`Leader::lazy_handovers`]): the leader goes on past them and takes
+    /// each transfer in when it comes, or waits for them all before an
+    /// item that could need what they bring.
+    pending: Vec<Pending>,
     #[serde(with = "cuts::kept")]
     cuts: VecDeque<Arc<Answer>>,
     /// The watermark and end-of-stream flag of the last batch.
@@ -192,6 +208,7 @@ impl Leader {
             transfers: HashMap::new(),
             taken: Vec::new(),
             waiting: None,
+            pending: Vec::new(),
             cuts: VecDeque::new(),
             events: 0,
             finished: false,
@@ -294,14 +311,24 @@ impl Leader {
     }
 
     /// How far this leader is, as a mark for the others: the next batch
-    /// it expects and the last item it applied.
+    /// it expects and the last item it has everything of, its transfers
+    /// included (the others keep what they sent after it).
     pub fn durable(&self) -> Durable {
         Durable {
             version: VERSION,
             leader: self.name.clone(),
             batch: self.next_batch,
-            position: self.position,
+            position: self.received_through(),
         }
+    }
+
+    /// The last item this leader has applied and received every transfer
+    /// of: its position, or just before the first handover whose transfer
+    /// has not come. A peer asked for what it sent is asked from here.
+    pub fn received_through(&self) -> u64 {
+        self.pending
+            .first()
+            .map_or(self.position, |p| self.position.min(p.seq - 1))
     }
 
     /// The number of the next batch this leader will apply.

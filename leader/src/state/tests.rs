@@ -743,3 +743,141 @@ fn the_change_between_two_answers_is_the_same_walked_or_looked_up() {
         assert_eq!(rebuilt(&before, &changed, &gone), sorted(&now));
     }
 }
+
+fn observe(track: u32) -> Item {
+    Item::Observe {
+        track,
+        red: 0.9,
+        blue: 0.1,
+        growth: Growth::All,
+        global: false,
+    }
+}
+
+/// Under the regional rule a leader handed a track goes on past the
+/// handover: it applies what does not touch the track, stops before what
+/// does, and takes the component in when it comes. Meanwhile it counts as
+/// having received only up to before the handover (its peers keep the
+/// transfer for it) and is not quiet. Without the rule it stops at once.
+#[test]
+fn a_handover_under_the_regional_rule_stops_only_what_touches_its_track() {
+    // Tracks 0 and 1 with "a", 2 and 3 with "b"; track 2 comes to "a".
+    let items = vec![
+        (
+            2,
+            Item::Handover {
+                track: 2,
+                from: 1,
+                to: 0,
+            },
+        ),
+        (3, mix(0, 1, 0, 0)),
+        (4, observe(2)),
+        (5, mix(1, 0, 0, 0)),
+    ];
+    let mut leader = factored_leader_with(&["a", "b"], vec![0, 0, 1, 1], true);
+    leader.batch(batch(1, items.clone(), 5, false), 0).unwrap();
+    assert_eq!(leader.position(), 3, "the mix after the handover applied");
+    assert_eq!(leader.done_through(), 3, "stopped before the observation");
+    assert_eq!(leader.received_through(), 1);
+    assert_eq!(leader.durable().position, 1);
+    assert_eq!(leader.waiting_for_transfer(), Some((2, 1)));
+    assert!(!leader.stats().quiet);
+    assert!(!leader.factored().unwrap().holds(2));
+
+    leader
+        .transfer(component_transfer(1, 2, 2, vec![0.5, 0.5]), 0)
+        .unwrap();
+    assert_eq!(leader.position(), 5, "the rest applied once it came");
+    assert_eq!(leader.received_through(), 5);
+    assert_eq!(leader.waiting_for_transfer(), None);
+    assert!(leader.stats().quiet);
+    assert!(leader.factored().unwrap().holds(2));
+    let duplicates = leader.stats().duplicates;
+    leader
+        .transfer(component_transfer(1, 2, 2, vec![0.5, 0.5]), 0)
+        .unwrap();
+    assert_eq!(
+        leader.stats().duplicates,
+        duplicates + 1,
+        "a copy is dropped"
+    );
+
+    // The same stream without the rule stops at the handover itself.
+    let mut strict = factored_leader_with(&["a", "b"], vec![0, 0, 1, 1], false);
+    strict.batch(batch(1, items, 5, false), 0).unwrap();
+    assert_eq!(strict.position(), 1);
+    assert_eq!(strict.waiting_for_transfer(), Some((2, 1)));
+}
+
+/// A transfer that comes early (before the handover) is taken in as soon
+/// as the handover is reached; a cut waits for every pending transfer, so
+/// that its answer holds the handed component.
+#[test]
+fn an_early_transfer_is_taken_in_at_its_handover_and_a_cut_waits_for_a_late_one() {
+    let mut leader = factored_leader_with(&["a", "b"], vec![0, 0, 1, 1], true);
+    leader
+        .transfer(component_transfer(1, 2, 2, vec![0.5, 0.5]), 0)
+        .unwrap();
+    let handover = |track| Item::Handover {
+        track,
+        from: 1,
+        to: 0,
+    };
+    let cut = Item::Cut {
+        events: 4,
+        tag: 9,
+        rows: false,
+    };
+    let actions = leader
+        .batch(
+            batch(
+                1,
+                vec![(2, handover(2)), (3, handover(3)), (4, cut)],
+                4,
+                false,
+            ),
+            0,
+        )
+        .unwrap();
+    assert!(leader.factored().unwrap().holds(2), "taken in at once");
+    assert_eq!(leader.position(), 3);
+    assert_eq!(leader.waiting_for_transfer(), Some((3, 1)));
+    assert!(actions.iter().all(|a| !matches!(a, Action::CutReady(_))));
+    let actions = leader
+        .transfer(component_transfer(1, 3, 3, vec![0.5, 0.5]), 0)
+        .unwrap();
+    let Some(Action::CutReady(answer)) = actions.iter().find(|a| matches!(a, Action::CutReady(_)))
+    else {
+        panic!("the cut is reached once the transfer came: {actions:?}");
+    };
+    let parts = answer.parts.as_ref().unwrap();
+    assert!(
+        parts.iter().any(|p| p.tracks == [3]),
+        "the handed component is in the answer"
+    );
+}
+
+/// Under the regional rule a handover's transfer brings the track alone;
+/// one that brings another track breaks the rule and is refused, naming
+/// both.
+#[test]
+fn a_handover_transfer_bringing_another_track_is_refused() {
+    let mut leader = factored_leader_with(&["a", "b"], vec![0, 0, 1, 1], true);
+    let handover = Item::Handover {
+        track: 2,
+        from: 1,
+        to: 0,
+    };
+    leader
+        .batch(batch(1, vec![(2, handover)], 2, false), 0)
+        .unwrap();
+    let mut transfer = component_transfer(1, 2, 2, vec![0.25, 0.25, 0.25, 0.25]);
+    transfer.components[0].tracks = vec![2, 3];
+    transfer.components[0].last_mix = vec![0, 0];
+    let error = leader.transfer(transfer, 0).unwrap_err().to_string();
+    assert!(
+        error.contains("track 2") && error.contains("track 3"),
+        "{error}"
+    );
+}
