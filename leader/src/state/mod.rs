@@ -154,12 +154,6 @@ pub struct Leader {
     /// stream gathers several at one item): a second copy is a duplicate.
     taken: Vec<(u64, u16)>,
     waiting: Option<Waiting>,
-    /// Handovers to this leader whose transfer has not come yet, in seq
-    /// order (a factored stream under the regional rule, see
-    /// [`Leader::lazy_handovers`]): the leader goes on past them and takes
-    /// each transfer in when it comes, or waits for them all before an
-    /// item that could need what they bring.
-    pending: Vec<Pending>,
     #[serde(with = "cuts::kept")]
     cuts: VecDeque<Arc<Answer>>,
     /// The watermark and end-of-stream flag of the last batch.
@@ -179,6 +173,13 @@ pub struct Leader {
     /// [`Leader::follow_held`]: reading every track held at every transfer
     /// cost a leader in proportion to all it holds.
     to_follow: Vec<u32>,
+    /// Handovers to this leader whose transfer has not come yet, in seq
+    /// order (a factored stream under the regional rule, see
+    /// [`Leader::lazy_handovers`]): the leader goes on past them and takes
+    /// each transfer in when it comes, or waits for them all before an
+    /// item that touches a pending track. Last, so that a snapshot
+    /// written before it existed fails to read rather than misreads.
+    pending: Vec<Pending>,
     /// The last answer where the leader rests, with whether it holds the
     /// rows, until an input changes anything: a deployment at rest is
     /// asked again and again, and a factored answer reads every component.
