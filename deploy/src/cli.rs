@@ -89,9 +89,10 @@ pub struct BenchArgs {
     /// handed over is split off its component.
     #[arg(long)]
     pub regional: bool,
-    /// The sensor routes at most this many items past the slowest
-    /// leader's progress (the topology's `[sensor] window`); absent = no
-    /// window.
+    /// Flow control, per leader: with L leaders the sensor routes at most
+    /// L times this many items past the slowest leader's progress (the
+    /// topology's `[sensor] window`), so that each leader has about as
+    /// many in flight whatever L; absent = no window.
     #[arg(long)]
     pub window: Option<u64>,
     /// Sets per leader (the Radon belief).

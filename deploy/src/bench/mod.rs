@@ -57,7 +57,8 @@ pub struct BenchOptions {
     pub shrink_interest: bool,
     /// Factored: the regional rule.
     pub regional: bool,
-    /// The sensor's flow control (`window`); None: no window.
+    /// The sensor's flow control per leader (the topology's `window` is
+    /// this times the leaders); None: no window.
     pub window: Option<u64>,
     /// Sets per leader (the Radon belief; the distributed rule runs with
     /// it).
@@ -159,7 +160,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             ),
         },
         match options.window {
-            Some(w) => format!("the sensor at most {w} items past the slowest leader"),
+            Some(w) => format!(
+                "the sensor at most {w} items per leader past the slowest leader (a window of {w} × L)"
+            ),
             None => "no flow control".to_string(),
         }
     )?;
@@ -259,7 +262,7 @@ impl Deployment {
             belief: options.belief,
             shrink_interest: options.shrink_interest,
             regional: options.regional,
-            window: options.window,
+            window: options.window.map(|w| w * leaders as u64),
             distributed_rule: true,
             budget: options.budget,
             sparsify: Sparsification::Threshold,

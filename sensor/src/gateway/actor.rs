@@ -137,15 +137,28 @@ const UNFOLLOWS_KEPT: usize = 4096;
 const PROGRESS_KEPT: usize = 1024;
 
 /// A chunk of the trace (what is routed between two flushes, and between
-/// two looks at queries) ends once it has routed this many seqs (items),
-/// or the window's room if less ...
+/// two looks at queries) ends once it has routed this many seqs (items)
+/// per leader, or the window's room if less ...
 const CHUNK_SEQS: u64 = 512;
 
-/// ... or after this many lines. Counting seqs rather than lines matters
-/// where regions are many: most of a crowd's lines are moves, which are
-/// items only at a handover, and a chunk of 512 lines sent every leader a
-/// batch (and got a progress mark back) for a few handovers each.
+/// ... or after this many lines per leader. Counting seqs rather than
+/// lines matters where regions are many: most of a crowd's lines are
+/// moves, which are items only at a handover, and a chunk of 512 lines
+/// sent every leader a batch (and got a progress mark back) for a few
+/// handovers each.
 const CHUNK_LINES: usize = 8192;
+
+/// The bounds of a chunk for `leaders` leaders: (seqs, lines). Per leader,
+/// because a chunk's items are shared out among the leaders: with bounds
+/// that did not grow with them, each of L leaders got a batch of about
+/// 1/L of them per chunk, so L leaders together took L times the batches
+/// (and sent back L times the progress marks and handover transfers) of
+/// one leader for the same stream. A stream paced to its times routes
+/// only what is due, so the bounds matter only to one that is behind.
+fn chunk_bounds(leaders: usize) -> (u64, usize) {
+    let leaders = leaders.max(1);
+    (CHUNK_SEQS * leaders as u64, CHUNK_LINES * leaders)
+}
 
 /// How often a stream the window holds looks again without a mark (marks
 /// wake it at once; this only bounds a wait on a lost one).
@@ -308,7 +321,8 @@ pub async fn run(
         let (due, wait) = if gateway.finished() || next >= lines.len() {
             (0, Duration::from_secs(3600))
         } else {
-            let (due, wait) = due_lines(&config, lines, next, started, first_time, CHUNK_LINES);
+            let chunk_lines = chunk_bounds(gateway.router().leaders()).1;
+            let (due, wait) = due_lines(&config, lines, next, started, first_time, chunk_lines);
             // Held, the stream waits for progress marks.
             match gateway.room() {
                 Some(0) if due > 0 => {
@@ -324,7 +338,8 @@ pub async fn run(
         if due > 0 {
             // A line takes at most a seq or two: the window holds to
             // within one line.
-            let budget = gateway.room().unwrap_or(CHUNK_SEQS).min(CHUNK_SEQS);
+            let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
+            let budget = gateway.room().unwrap_or(chunk_seqs).min(chunk_seqs);
             let end = gateway.router().seq() + budget;
             let mut placed = Vec::new();
             let mut taken = 0;
@@ -494,7 +509,8 @@ pub async fn run(
                 take_input(&mut gateway, read, &mut placed);
                 // What the pipe already holds goes in the same batch (as
                 // much of it as the window lets in).
-                let room = gateway.room().map_or(CHUNK_SEQS, |r| r.min(CHUNK_SEQS)) as usize;
+                let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
+                let room = gateway.room().map_or(chunk_seqs, |r| r.min(chunk_seqs)) as usize;
                 for _ in 1..room {
                     let Some(rx) = input.as_mut() else { break };
                     match rx.try_recv() {
