@@ -119,8 +119,12 @@ impl Leader {
                     self.unfollow(seq, gone)?;
                 } else if to == me {
                     *slot = true;
-                    if self.lazy_handovers() {
-                        self.pending.push(Pending { seq, from, track });
+                    if self.lazy_transfers() {
+                        self.pending.push(Pending {
+                            seq,
+                            from,
+                            tracks: vec![track],
+                        });
                     } else {
                         self.waiting = Some(Waiting::Transfer { seq, from });
                     }
@@ -234,16 +238,27 @@ impl Leader {
             return Ok(());
         }
         let held = self.factored_mut("a factored mix on a Radon stream")?;
+        let mut sent = Vec::new();
         if has_a || has_b {
             let components = held.take_of(&[mix.a, mix.b], |_| true);
-            let gone = tracks_of(&components);
+            sent = tracks_of(&components);
             self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
             if back != Some(me) {
-                self.unfollow(seq, gone)?;
+                self.unfollow(seq, sent.clone())?;
             }
         }
         if back == Some(me) {
-            self.waiting = Some(Waiting::Transfer { seq, from: owner_a });
+            if self.lazy_transfers() {
+                // What comes back is b's component, which went out.
+                sent.push(mix.b);
+                self.pending.push(Pending {
+                    seq,
+                    from: owner_a,
+                    tracks: sent,
+                });
+            } else {
+                self.waiting = Some(Waiting::Transfer { seq, from: owner_a });
+            }
         }
         Ok(())
     }
@@ -287,7 +302,17 @@ impl Leader {
             // The relabel changed which tracks the components held here
             // carry.
             self.to_follow.extend([mix.a, mix.b]);
-            self.waiting = Some(Waiting::Transfer { seq, from: to });
+            if self.lazy_transfers() {
+                // What comes is the singleton of this leader's track.
+                let mine = if theirs == mix.b { mix.a } else { mix.b };
+                self.pending.push(Pending {
+                    seq,
+                    from: to,
+                    tracks: vec![mine],
+                });
+            } else {
+                self.waiting = Some(Waiting::Transfer { seq, from: to });
+            }
             return Ok(());
         }
         self.to_follow.extend([mix.a, mix.b]);

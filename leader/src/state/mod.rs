@@ -49,8 +49,8 @@ use std::sync::Arc;
 mod apply;
 mod cuts;
 pub use cuts::Answer;
-mod handovers;
 mod inbox;
+mod pending;
 mod stats;
 #[cfg(test)]
 mod tests;
@@ -90,13 +90,13 @@ enum Waiting {
     Follow { seq: u64 },
 }
 
-/// A handover of `track` to this leader at item `seq`, whose transfer
-/// from leader `from` is still on its way.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// A transfer from leader `from` of item `seq` still on its way, which
+/// can bring only components of `tracks` ([`Leader::lazy_transfers`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Pending {
     seq: u64,
     from: u16,
-    track: u32,
+    tracks: Vec<u32>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -173,11 +173,11 @@ pub struct Leader {
     /// [`Leader::follow_held`]: reading every track held at every transfer
     /// cost a leader in proportion to all it holds.
     to_follow: Vec<u32>,
-    /// Handovers to this leader whose transfer has not come yet, in seq
-    /// order (a factored stream under the regional rule, see
-    /// [`Leader::lazy_handovers`]): the leader goes on past them and takes
-    /// each transfer in when it comes, or waits for them all before an
-    /// item that touches a pending track. Last, so that a snapshot
+    /// Transfers this leader has not got yet, in seq order (a factored
+    /// stream under the regional rule, see [`Leader::lazy_transfers`]):
+    /// the leader goes on past their items and takes each in when it
+    /// comes, or waits for them all before an item that touches a pending
+    /// track. Last, so that a snapshot
     /// written before it existed fails to read rather than misreads.
     pending: Vec<Pending>,
     /// The last answer where the leader rests, with whether it holds the

@@ -860,7 +860,7 @@ fn an_early_transfer_is_taken_in_at_its_handover_and_a_cut_waits_for_a_late_one(
 
 /// Under the regional rule a handover's transfer brings the track alone;
 /// one that brings another track breaks the rule and is refused, naming
-/// both.
+/// the item, the track and what it may bring.
 #[test]
 fn a_handover_transfer_bringing_another_track_is_refused() {
     let mut leader = factored_leader_with(&["a", "b"], vec![0, 0, 1, 1], true);
@@ -877,7 +877,29 @@ fn a_handover_transfer_bringing_another_track_is_refused() {
     transfer.components[0].last_mix = vec![0, 0];
     let error = leader.transfer(transfer, 0).unwrap_err().to_string();
     assert!(
-        error.contains("track 2") && error.contains("track 3"),
+        error.contains("item 2") && error.contains("track 3") && error.contains("[2]"),
         "{error}"
     );
+}
+
+/// The leader surveilling b of a mix across regions sends b's component
+/// to the leader surveilling a and, under the regional rule, goes on
+/// while it is away: it stops only before an item on b, until it comes
+/// back.
+#[test]
+fn a_component_away_for_a_mix_across_regions_stops_only_what_touches_it() {
+    // Tracks 0 and 2 with "a", 1 and 3 with "b"; "b" gathers the mix (1, 0).
+    let mut leader = factored_leader_with(&["a", "b"], vec![0, 1, 0, 1], true);
+    let items = vec![(2, mix(1, 0, 1, 0)), (3, observe(2)), (4, observe(0))];
+    let actions = leader.batch(batch(1, items, 4, false), 0).unwrap();
+    assert_eq!(sent_tracks(&actions, 1), vec![vec![0]]);
+    assert_eq!(leader.position(), 3, "the observation of track 2 applied");
+    assert_eq!(leader.waiting_for_transfer(), Some((2, 1)));
+    assert_eq!(leader.received_through(), 1);
+    leader
+        .transfer(component_transfer(1, 2, 0, vec![0.5, 0.5]), 0)
+        .unwrap();
+    assert_eq!(leader.position(), 4);
+    assert!(leader.factored().unwrap().holds(0));
+    assert!(leader.stats().quiet);
 }
