@@ -98,6 +98,11 @@ pub struct BenchArgs {
     /// Sets per leader (the Radon belief).
     #[arg(long, default_value_t = 400)]
     pub budget: u32,
+    /// Streams per leader count, in rounds (1, 2, 4, 1, 2, 4, …); the
+    /// report gives the one with the median leaders' CPU, since this
+    /// machine's CPU seconds vary by a fifth between runs.
+    #[arg(long, default_value_t = 1)]
+    pub repeat: usize,
     /// Marginals queries (and as many raw gets of each kind) for latency.
     #[arg(long, default_value_t = 2000)]
     pub queries: usize,

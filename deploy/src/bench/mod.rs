@@ -63,6 +63,8 @@ pub struct BenchOptions {
     /// Sets per leader (the Radon belief; the distributed rule runs with
     /// it).
     pub budget: u32,
+    /// Streams per leader count; the median by leaders' CPU is reported.
+    pub repeat: usize,
     /// Queries for the latency figures.
     pub queries: usize,
     /// Events per second of the stream queries are timed during.
@@ -177,18 +179,36 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         );
         runtime.block_on(latency::measure(deployment, options.queries, false))
     };
-    let mut streams = Vec::new();
+    let mut runs: Vec<Vec<throughput::Stream>> =
+        options.leaders.iter().map(|_| Vec::new()).collect();
     let mut rest = None;
-    for &count in &options.leaders {
-        let deployment =
-            runtime.block_on(Deployment::start(options, &trace, count, None, false))?;
-        eprintln!("bench: streaming through {count} leader(s)");
-        streams.push(runtime.block_on(throughput::measure(&deployment))?);
-        if count == leaders {
-            rest = Some(at_rest(&deployment)?);
+    // In rounds, so that the machine's drift spreads over every count.
+    for round in 0..options.repeat.max(1) {
+        for (i, &count) in options.leaders.iter().enumerate() {
+            let deployment =
+                runtime.block_on(Deployment::start(options, &trace, count, None, false))?;
+            eprintln!(
+                "bench: streaming through {count} leader(s), round {}",
+                round + 1
+            );
+            runs[i].push(runtime.block_on(throughput::measure(&deployment))?);
+            if count == leaders && rest.is_none() {
+                rest = Some(at_rest(&deployment)?);
+            }
+            runtime.block_on(deployment.close());
         }
-        runtime.block_on(deployment.close());
     }
+    if options.repeat > 1 {
+        writeln!(
+            report,
+            "Each leader count streamed {} times, in rounds; each row is the stream with the median leaders' CPU.\n",
+            options.repeat
+        )?;
+    }
+    let streams: Vec<throughput::Stream> = runs
+        .into_iter()
+        .filter_map(throughput::median_by_cpu)
+        .collect();
     throughput::report(&streams, &mut report)?;
     let rest = match rest {
         Some(rest) => rest,

@@ -57,6 +57,20 @@ impl Cpu {
     }
 }
 
+/// Of several streams through the same deployment, the one whose
+/// leaders' CPU sum is the median (the lower of the middle two).
+pub fn median_by_cpu(mut streams: Vec<Stream>) -> Option<Stream> {
+    streams.sort_by(|a, b| a.cpu.leaders_sum().total_cmp(&b.cpu.leaders_sum()));
+    let middle = streams.len().checked_sub(1)? / 2;
+    Some(streams.swap_remove(middle))
+}
+
+impl Cpu {
+    fn leaders_sum(&self) -> f64 {
+        self.leaders.iter().sum()
+    }
+}
+
 impl Stream {
     pub fn events_per_second(&self) -> f64 {
         (self.events - self.first_seen) as f64 / self.seconds
@@ -374,6 +388,21 @@ mod tests {
                 leaders: cpu.to_vec(),
             },
         }
+    }
+
+    #[test]
+    fn the_median_stream_is_the_middle_one_by_the_leaders_cpu() {
+        let runs = vec![
+            stream(&[10], &[0.9]),
+            stream(&[20], &[0.5]),
+            stream(&[30], &[0.7]),
+            stream(&[40], &[0.6]),
+        ];
+        let median = median_by_cpu(runs).expect("four runs");
+        assert_eq!(median.stats[0].items, 40, "0.6 is the lower middle");
+        let one = median_by_cpu(vec![stream(&[7], &[0.3])]).unwrap();
+        assert_eq!(one.stats[0].items, 7);
+        assert!(median_by_cpu(Vec::new()).is_none());
     }
 
     #[test]
