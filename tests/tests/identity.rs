@@ -121,8 +121,11 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
 /// The same trace with and without its identity reads: the leaders send
 /// each other exactly the same messages with the same sets and rows, and
 /// every read is applied once, by one leader. Evidence costs no traffic
-/// between leaders. (Bytes may differ by one per message: reads take seq
-/// numbers, so a transfer's seq, a varint, can be a byte longer.)
+/// between leaders. (Bytes may differ by a few per transfer: reads take
+/// seq numbers, so a transfer's seq, a varint, can be a byte longer; and
+/// the transfers one input makes for one peer share a message, so where
+/// the sensor's chunks end, which the reads move, changes how many
+/// messages carry them, at two bytes of framing each.)
 #[test]
 fn identity_reads_cost_no_messages_between_leaders() {
     let dir = std::env::temp_dir().join(format!("idmesh-reads-{}", std::process::id()));
@@ -169,7 +172,7 @@ fn identity_reads_cost_no_messages_between_leaders() {
         with_reads.iter().zip(bytes_with.iter().zip(&bytes_without))
     {
         assert!(
-            with >= without && with - without <= *transfers,
+            with.abs_diff(*without) <= 3 * transfers,
             "{leader}: {with} bytes with reads, {without} without, {transfers} transfers"
         );
     }
