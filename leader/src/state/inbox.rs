@@ -210,8 +210,8 @@ impl Leader {
     }
 
     /// The item and the peer whose transfer this leader waits for: the
-    /// one it is stopped for, or else the first pending handover's (not
-    /// stopped for yet, but one lost on the way must be asked for again).
+    /// one it is stopped for, or else the first pending one's (not stopped
+    /// for yet, but one lost on the way must be asked for again).
     pub fn waiting_for_transfer(&self) -> Option<(u64, u16)> {
         match self.waiting {
             Some(Waiting::Transfer { seq, from }) => Some((seq, from)),

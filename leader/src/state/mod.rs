@@ -177,8 +177,8 @@ pub struct Leader {
     /// stream under the regional rule, see [`Leader::lazy_transfers`]):
     /// the leader goes on past their items and takes each in when it
     /// comes, or waits for them all before an item that touches a pending
-    /// track. Last, so that a snapshot
-    /// written before it existed fails to read rather than misreads.
+    /// track. Last, so that a snapshot written before it existed fails to
+    /// read rather than misreads.
     pending: Vec<Pending>,
     /// The last answer where the leader rests, with whether it holds the
     /// rows, until an input changes anything: a deployment at rest is
@@ -324,12 +324,12 @@ impl Leader {
     }
 
     /// The last item this leader has applied and received every transfer
-    /// of: its position, or just before the first handover whose transfer
-    /// has not come. A peer asked for what it sent is asked from here.
+    /// of: its position, or just before the first item whose transfer has
+    /// not come. A peer asked for what it sent is asked from here.
     pub fn received_through(&self) -> u64 {
-        self.pending
-            .first()
-            .map_or(self.position, |p| self.position.min(p.seq - 1))
+        self.pending.first().map_or(self.position, |p| {
+            self.position.min(p.seq.saturating_sub(1))
+        })
     }
 
     /// The number of the next batch this leader will apply.
