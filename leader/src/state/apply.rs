@@ -119,6 +119,8 @@ impl Leader {
                     self.unfollow(seq, gone)?;
                 } else if to == me {
                     *slot = true;
+                    // Under the regional rule, taken in when it comes
+                    // (state/pending.rs).
                     if self.lazy_transfers() {
                         self.pending.push(Pending {
                             seq,

@@ -152,8 +152,8 @@ const CHUNK_LINES: usize = 8192;
 /// because a chunk's items are shared out among the leaders: with bounds
 /// that did not grow with them, each of L leaders got a batch of about
 /// 1/L of them per chunk, so L leaders together took L times the batches
-/// (and sent back L times the progress marks and handover transfers) of
-/// one leader for the same stream. A stream paced to its times routes
+/// (and sent back L times the progress marks) of one leader for the same
+/// stream. A stream paced to its times routes
 /// only what is due, so the bounds matter only to one that is behind.
 fn chunk_bounds(leaders: usize) -> (u64, usize) {
     let leaders = leaders.max(1);
