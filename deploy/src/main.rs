@@ -81,7 +81,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             regional: args.regional,
             window: args.window,
             budget: args.budget,
-            repeat: args.repeat.max(1),
+            repeat: args.repeat,
             queries: args.queries,
             stream_rate: args.stream_rate,
             dir: args.dir,

@@ -49,6 +49,10 @@ pub struct Cpu {
 }
 
 impl Cpu {
+    fn leaders_sum(&self) -> f64 {
+        self.leaders.iter().sum()
+    }
+
     fn busiest(&self) -> f64 {
         self.leaders
             .iter()
@@ -63,12 +67,6 @@ pub fn median_by_cpu(mut streams: Vec<Stream>) -> Option<Stream> {
     streams.sort_by(|a, b| a.cpu.leaders_sum().total_cmp(&b.cpu.leaders_sum()));
     let middle = streams.len().checked_sub(1)? / 2;
     Some(streams.swap_remove(middle))
-}
-
-impl Cpu {
-    fn leaders_sum(&self) -> f64 {
-        self.leaders.iter().sum()
-    }
 }
 
 impl Stream {
@@ -268,9 +266,9 @@ pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
         "| leaders | sensor | coordinator | leaders, sum | busiest leader | leaders' sum vs 1 leader | hosts bound, events/s |"
     )?;
     writeln!(out, "|---:|---:|---:|---:|---:|---:|---:|")?;
-    let one = streams.first().map(|s| s.cpu.leaders.iter().sum::<f64>());
+    let one = streams.first().map(|s| s.cpu.leaders_sum());
     for s in streams {
-        let sum: f64 = s.cpu.leaders.iter().sum();
+        let sum = s.cpu.leaders_sum();
         let busiest = s.cpu.leaders.iter().copied().fold(0.0, f64::max);
         writeln!(
             out,
@@ -307,7 +305,7 @@ const SCALE_OUT_GOAL: f64 = 1.5;
 pub fn scale_out(streams: &[Stream]) -> Option<Vec<ScaleOut>> {
     let one = streams.iter().find(|s| s.leaders == 1)?;
     let one_items = one.stats.iter().map(|l| l.items).sum::<u64>() as f64;
-    let one_cpu: f64 = one.cpu.leaders.iter().sum();
+    let one_cpu = one.cpu.leaders_sum();
     Some(
         streams
             .iter()
@@ -317,7 +315,7 @@ pub fn scale_out(streams: &[Stream]) -> Option<Vec<ScaleOut>> {
                 ScaleOut {
                     leaders: s.leaders,
                     items: busiest / (one_items / s.leaders as f64),
-                    cpu: s.cpu.leaders.iter().sum::<f64>() / one_cpu,
+                    cpu: s.cpu.leaders_sum() / one_cpu,
                 }
             })
             .collect(),

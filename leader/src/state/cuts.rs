@@ -117,11 +117,18 @@ impl Leader {
     /// answers a finished stream without placing a cut.
     /// With `rows`, the leader's rows of the information matrix too.
     pub fn quiet(&self, rows: bool) -> Option<Arc<Answer>> {
-        if self.waiting.is_some() || !self.queue.is_empty() || !self.pending.is_empty() {
+        if !self.is_quiet() {
             return None;
         }
         self.partial(self.frontier, 0, self.events, rows)
             .map(Arc::new)
+    }
+
+    /// Whether the leader is at a quiet point: it has applied every item
+    /// it was sent, and waits for no peer (stopped, or with a transfer
+    /// pending).
+    pub(super) fn is_quiet(&self) -> bool {
+        self.waiting.is_none() && self.queue.is_empty() && self.pending.is_empty()
     }
 
     /// [`Leader::quiet`], kept until an input changes anything.

@@ -25,7 +25,7 @@ impl Leader {
         stats.position = self.position;
         stats.stream_events = self.events;
         stats.stream_finished = self.finished;
-        stats.quiet = self.waiting.is_none() && self.queue.is_empty() && self.pending.is_empty();
+        stats.quiet = self.is_quiet();
         stats.transfers_kept = self.sent.len() as u64;
         if let Some(s) = &self.started {
             stats.coefficients = match &s.factored {

@@ -153,8 +153,8 @@ const CHUNK_LINES: usize = 8192;
 /// that did not grow with them, each of L leaders got a batch of about
 /// 1/L of them per chunk, so L leaders together took L times the batches
 /// (and sent back L times the progress marks) of one leader for the same
-/// stream. A stream paced to its times routes
-/// only what is due, so the bounds matter only to one that is behind.
+/// stream. A stream paced to its times routes only what is due, so the
+/// bounds matter only to one that is behind.
 fn chunk_bounds(leaders: usize) -> (u64, usize) {
     let leaders = leaders.max(1);
     (CHUNK_SEQS * leaders as u64, CHUNK_LINES * leaders)
