@@ -359,19 +359,23 @@ pub fn count_events(trace: &Path) -> Result<u64> {
 /// them: the centres of a grid over the field its moves span, moved by
 /// Lloyd's iterations (k-means) towards the centres of the positions
 /// nearest to each, so that each leader's region (the positions nearest to
-/// it) holds about as many of the crowd's positions as the others: a crowd
-/// denser in the middle would otherwise load the middle leader most.
-/// Deterministic: the same trace, the same places.
+/// it) holds about as many of the crowd's positions as the others; then
+/// moved on until each is sent about as many items
+/// ([`idmesh_placement::balanced`]): a crowd meets more often where it is
+/// denser, so even shares of its positions load the leaders in the middle
+/// of it most. Deterministic: the same trace, the same places.
 pub fn leader_places(trace: &Path, leaders: usize) -> Result<Vec<(f64, f64)>> {
     const ROUNDS: usize = 30;
     let mut places = idmesh_placement::grid_places(field_corners(trace)?, leaders);
     let mut positions = Vec::new();
     let mut reader = idmesh_protocol::TraceReader::open(trace)?;
-    reader.read_header()?;
+    let header = reader.read_header()?;
+    let mut workload = idmesh_placement::Workload::new(header.tracks);
     while let Some(n) = reader.read_line()? {
-        if let idmesh_protocol::Line::Move(m) = n.line {
+        if let idmesh_protocol::Line::Move(m) = &n.line {
             positions.push((m.x, m.y));
         }
+        workload.push(&n.line);
     }
     if positions.is_empty() || leaders < 2 {
         return Ok(places);
@@ -390,7 +394,7 @@ pub fn leader_places(trace: &Path, leaders: usize) -> Result<Vec<(f64, f64)>> {
             }
         }
     }
-    Ok(places)
+    Ok(idmesh_placement::balanced(places, &workload))
 }
 
 /// The index of the place nearest to (x, y), the first of equals (the

@@ -12,14 +12,18 @@
 //!   ([`combine`]), which the coordinator computes;
 //! - which leader surveils each track as targets move ([`Regions`]), and
 //!   the factored belief's regional rule that follows from it
-//!   ([`Regional`]), run by the gateway, the leaders and `idmesh replay`.
+//!   ([`Regional`]), run by the gateway, the leaders and `idmesh replay`;
+//!   and where to place leaders so that each is sent about as many items
+//!   ([`balanced`]).
 //!
 //! docs/architecture.md ("Who holds what", "Queries") says why the shares
 //! add up: rollup and conditioning act on the Radon masses atom by atom and
 //! linearly (Section 5.4 of the property-management paper).
 
+mod balance;
 mod regions;
 
+pub use balance::{balanced, Workload};
 pub use regions::{grid_places, leading_places, Regional, Regions};
 
 use idmesh_belief::factored::{FactoredShare, HeldComponent};

@@ -86,6 +86,15 @@ impl FactoredStart {
         }
         Ok(())
     }
+
+    /// Whether each leader follows exactly the tracks it surveils: under
+    /// the regional rule with shrinking interests every component stays in
+    /// its holder's region, so the sensor ends a leader's interest in a
+    /// track at the track's handover away, and the leader asks for no
+    /// unfollow of it.
+    pub fn follows_regions(&self) -> bool {
+        self.regional && self.shrink
+    }
 }
 
 impl WireComponent {

@@ -655,6 +655,64 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
         .contains("Radon"));
 }
 
+/// Under the regional rule with shrinking interests a leader follows
+/// exactly the tracks it surveils, so a handover ends the old leader's
+/// interest in the track at once, without waiting for its unfollow
+/// request (which then changes nothing); a track that comes back is
+/// routed to it again. Without the rule the old leader keeps the track
+/// until it asks.
+#[test]
+fn under_the_regional_rule_a_handover_ends_the_old_leaders_interest() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let walk = |track, x| {
+        Line::Move(Move {
+            time: 0.0,
+            track,
+            x,
+            y: 0.0,
+        })
+    };
+    for regional in [true, false] {
+        let mut header = Header::new(4);
+        header.red = Some(2);
+        let mut config = unplaced(Some(FactoredStart {
+            max_component: 3,
+            split: WireSplit::Original,
+            shrink: true,
+            regional,
+        }));
+        config.leaders[0].at = Some((0.0, 0.0));
+        config.leaders[1].at = Some((10.0, 0.0));
+        let mut gateway: Gateway<()> =
+            Gateway::new("s", Router::new(config, &header).unwrap(), false);
+        gateway.flush();
+        gateway.line(&walk(0, 0.0)); // track 0 placed at a (round robin put it there)
+        gateway.line(&walk(0, 10.0)); // seq 2: handed over to b
+        gateway.line(&observe(0)); // seq 3
+        let [a, b] = flushed::<_, 2>(&mut gateway);
+        let expected_a: &[u64] = if regional { &[2] } else { &[2, 3] };
+        assert_eq!(seqs(&a), expected_a, "regional {regional}");
+        assert_eq!(seqs(&b), [2, 3]);
+        let late = encode(&Unfollow {
+            version: VERSION,
+            leader: 0,
+            after: 2,
+            tracks: vec![0],
+        });
+        assert_eq!(
+            gateway.unfollow(&late),
+            Ok(usize::from(!regional)),
+            "regional {regional}"
+        );
+        gateway.line(&walk(0, 0.0)); // seq 4: back to a
+        gateway.line(&observe(0)); // seq 5
+        let [a, b] = flushed::<_, 2>(&mut gateway);
+        assert_eq!(seqs(&a), [4, 5]);
+        let expected_b: &[u64] = if regional { &[4] } else { &[4, 5] };
+        assert_eq!(seqs(&b), expected_b, "regional {regional}");
+    }
+}
+
 /// Everything a gateway would say about its state: every batch it keeps
 /// for each leader (as a resend gets them), its counters, its seq and how
 /// far it read its trace.
