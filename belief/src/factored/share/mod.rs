@@ -29,7 +29,7 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeSet, HashMap};
+use std::collections::BTreeSet;
 use std::sync::Arc;
 
 /// The largest component a share accepts from elsewhere (the tables'
@@ -107,11 +107,17 @@ impl Changed {
     }
 }
 
-/// The parts a share last gave out: a component whose tracks and table are
-/// unchanged gives the very same shared part again, so consecutive answers
-/// share what did not change and a comparison of them is by pointer.
+/// The parts a share last gave out, by the first track of their
+/// component: a component whose tracks and table are unchanged gives the
+/// very same shared part again, so consecutive answers share what did not
+/// change and a comparison of them is by pointer. Indexed by track rather
+/// than hashed, since an answer looks up every component held (thousands
+/// per leader on a large crowd) and the lookups were most of its cost; an
+/// entry whose component is gone stays until its slot is used again (a
+/// part per track at most), and is reused only if a component with its
+/// very tracks and table comes back.
 #[derive(Debug, Default)]
-struct PartsGiven(std::sync::Mutex<HashMap<u32, GivenPart>>);
+struct PartsGiven(std::sync::Mutex<Vec<Option<GivenPart>>>);
 
 #[derive(Debug, Clone)]
 struct GivenPart {
@@ -127,7 +133,7 @@ impl Clone for PartsGiven {
 }
 
 impl PartsGiven {
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<u32, GivenPart>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Option<GivenPart>>> {
         // Only ever filled with whole entries: a panic cannot leave one
         // half-written.
         self.0.lock().unwrap_or_else(|e| e.into_inner())
@@ -526,25 +532,26 @@ impl FactoredShare {
     /// answers are compared by pointer where they agree.
     pub fn shared_parts(&self) -> Vec<Arc<CountPart>> {
         let mut given = self.parts_given.lock();
-        let mut now = HashMap::with_capacity(given.len());
-        let parts = self
-            .held_comps()
+        let n = self.held.len();
+        if given.len() < n {
+            given.resize(n, None);
+        }
+        self.held_comps()
             .map(|c| {
-                let first = c.tracks[0];
-                let entry = match given.remove(&first) {
-                    Some(g) if g.part.tracks == c.tracks && g.table == c.table => g,
-                    _ => GivenPart {
-                        table: c.table.clone(),
-                        part: Arc::new(count_part(c)),
-                    },
-                };
-                let part = entry.part.clone();
-                now.insert(first, entry);
-                part
+                let slot = &mut given[c.tracks[0] as usize];
+                match slot {
+                    Some(g) if g.part.tracks == c.tracks && g.table == c.table => g.part.clone(),
+                    _ => {
+                        let part = Arc::new(count_part(c));
+                        *slot = Some(GivenPart {
+                            table: c.table.clone(),
+                            part: part.clone(),
+                        });
+                        part
+                    }
+                }
             })
-            .collect();
-        *given = now;
-        parts
+            .collect()
     }
 }
 
