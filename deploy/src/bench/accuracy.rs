@@ -304,6 +304,17 @@ async fn ask_every_truth_line(deployment: &Deployment, written: &Written) -> Res
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+    // A sensor answers pings while it still waits for its leaders, and
+    // takes ingest requests only from its stream loop, which also answers
+    // its counters: a first request sent before that could wait longer
+    // than its timeout (it did, now and then, on this machine).
+    let counters = keys.sensor_stats(&sensor);
+    while let Err(e) = ask(&deployment.session, &counters, Duration::from_secs(1)).await {
+        if started.elapsed() > Duration::from_secs(60) {
+            return Err(e.context("the sensor did not start its stream"));
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
     let ingest = keys.sensor_ingest(&sensor);
     let marginals = keys.query_marginals();
     let mut sent = 0usize;
@@ -402,7 +413,7 @@ fn report(
          The crowds of docs/results.md's Table III (k = n/2, 1000 mix + observe events, half \
          of them mixes; `move` lines added every second, which draw no randomness, so the \
          filters see the evaluation's very trace) are fed to a live deployment on loopback \
-         (a coordinator, {LEADERS} leaders placed over the crowd by k-means on its positions, a sensor) by a producer \
+         (a coordinator, {LEADERS} leaders placed over the crowd by k-means on its positions and then balanced by the items each is sent, a sensor) by a producer \
          on the sensor's ingest key, one stretch between two truth lines at a time, and \
          after each stretch the coordinator is asked the marginals right after the events \
          before that truth line (`?events=N`): every truth line is answered, or the command \

@@ -1,9 +1,9 @@
 //! A whole deployment on this machine's loopback, written as a topology
 //! file: the demo's and the bench's. Leaders start at the centres of a grid
 //! of cells over the trace's field and move to where the crowd is (k-means
-//! over its positions, `launch::leader_places`), so that their regions hold
-//! about as much of it each; tracks cross between the regions and mix
-//! across them, as in the paper's sensor grid.
+//! over its positions, `launch::leader_places`), and then on until each is
+//! sent about as many items (`idmesh_placement::balanced`); tracks cross
+//! between the regions and mix across them, as in the paper's sensor grid.
 
 use super::launch::leader_places;
 use super::topology::{BeliefKind, Sparsification};
