@@ -154,7 +154,7 @@ pub fn balanced(places: Vec<(f64, f64)>, workload: &Workload) -> Vec<(f64, f64)>
     let mut step = spread_of(&best) * FIRST_STEP;
     let mut halvings = 0;
     for _ in 0..ROUNDS {
-        if !(step > 0.0) {
+        if step.is_nan() || step <= 0.0 {
             break;
         }
         let busiest = (0..items.len()).max_by_key(|&i| (items[i], std::cmp::Reverse(i)));
