@@ -9,7 +9,7 @@
 //! often, so the leaders in the middle of it are sent most (on a
 //! 1,000-target crowd through 8 leaders the busiest was sent 1.8× an even
 //! share of what one leader applies, 1.37× the leaders' mean; after
-//! balancing, 1.39× and about 1.0×). [`balanced`]
+//! balancing, 1.39× and 1.03×). [`balanced`]
 //! moves the places until no leader is sent much more than the others,
 //! counting the handovers that moving a border makes or saves.
 //! docs/architecture.md ("Components that stay in their region") says why
