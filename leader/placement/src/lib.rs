@@ -76,7 +76,9 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
         // starts following its own tracks, the tracks of its components.
         share.extract(|_| true);
         let mut interest = Interest::new(me, tracks, false);
-        if factored.shrink {
+        if factored.follows_regions() {
+            interest = interest.of_region();
+        } else if factored.shrink {
             interest = interest.fixed();
         }
         interest.note(&Item::Begin(begin.clone()));

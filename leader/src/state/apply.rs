@@ -92,7 +92,6 @@ impl Leader {
                 self.stats.handovers += 1;
                 let started = self.started()?;
                 let regional = started.regional();
-                let region_only = started.follows_its_region();
                 if let (Some(held), true) = (&mut started.factored, regional) {
                     // The regional rule: the track leaves its component
                     // (its holder splits it off), so that what the old
@@ -116,14 +115,7 @@ impl Leader {
                         None => Vec::new(),
                     };
                     let mut gone = self.send_homeless(seq, to, &[track], row, actions)?;
-                    if region_only {
-                        // The sensor ends this interest at the handover
-                        // itself (its router's `drops_at_handover`).
-                        gone.retain(|&t| t != track);
-                        self.started()?.interest.remove(track);
-                    } else {
-                        gone.push(track);
-                    }
+                    gone.push(track);
                     self.unfollow(seq, gone)?;
                 } else if to == me {
                     *slot = true;

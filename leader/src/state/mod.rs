@@ -122,12 +122,6 @@ impl Started {
     fn regional(&self) -> bool {
         self.begin.factored.is_some_and(|f| f.regional)
     }
-
-    /// Whether this leader follows exactly the tracks it surveils
-    /// ([`FactoredStart::follows_regions`](idmesh_protocol::wire::factored::FactoredStart::follows_regions)).
-    fn follows_its_region(&self) -> bool {
-        self.begin.factored.is_some_and(|f| f.follows_regions())
-    }
 }
 
 /// Serialized whole as a snapshot ([`Leader::snapshot`]): the state a

@@ -18,7 +18,9 @@
 //! its own follow and unfollow requests. That is what lets it shrink: a
 //! leader that sent a component away unfollows its tracks, and a crowd
 //! that mixes everything with everything does not end with every leader
-//! following every track.
+//! following every track. Under the regional rule a leader follows exactly
+//! its region ([`Interest::of_region`]): a handover away ends the interest
+//! in the track, with no request.
 
 use super::sensor_to_leader::{Growth, Item};
 
@@ -39,6 +41,9 @@ pub struct Interest {
     /// Whether mixes and observations grow the interest (a Radon stream),
     /// or only the `Begin`, handovers and requests do (a factored one).
     grows: bool,
+    /// Whether the interest is the leader's region: a handover away ends
+    /// it ([`Interest::of_region`]).
+    region: bool,
 }
 
 impl Interest {
@@ -50,6 +55,7 @@ impl Interest {
             holds_empty,
             saturation: usize::MAX,
             grows: true,
+            region: false,
         }
     }
 
@@ -57,6 +63,18 @@ impl Interest {
     /// grows it (see the module docs).
     pub fn fixed(mut self) -> Self {
         self.grows = false;
+        self
+    }
+
+    /// The same fixed interest for a leader that follows exactly the
+    /// tracks it surveils
+    /// ([`FactoredStart::follows_regions`](super::factored::FactoredStart::follows_regions)):
+    /// a handover away is the last item on the track the leader needs, so
+    /// it ends the interest there, on the sensor's side and the leader's
+    /// alike, with no unfollow request.
+    pub fn of_region(mut self) -> Self {
+        self.grows = false;
+        self.region = true;
         self
     }
 
@@ -176,9 +194,11 @@ impl Interest {
                     self.add(*track);
                 }
             }
-            Item::Handover { track, to, .. } => {
+            Item::Handover { track, from, to } => {
                 if *to == self.leader {
                     self.add(*track);
+                } else if *from == self.leader && self.region {
+                    self.remove(*track);
                 }
             }
             // A read changes one row of the information matrix, no set.
@@ -245,6 +265,25 @@ mod tests {
         assert!(i.follows(4) && i.len() == 2);
         assert!(i.remove(2) && !i.remove(2));
         assert!(!i.follows(2) && i.len() == 1);
+        // A handover away leaves a fixed interest as it was (the leader
+        // asks to unfollow); an interest of a region drops the track.
+        let away = Item::Handover {
+            track: 4,
+            from: 0,
+            to: 1,
+        };
+        i.note(&away);
+        assert!(i.follows(4));
+        let mut region = Interest::new(0, 6, false).of_region();
+        region.note(&Item::Handover {
+            track: 4,
+            from: 1,
+            to: 0,
+        });
+        assert!(!region.grows() && region.follows(4));
+        assert!(region.receives(&away));
+        region.note(&away);
+        assert!(!region.follows(4) && region.is_empty());
     }
 
     /// With k = 2 of 6, a leader following two tracks may hold {a, b} red,

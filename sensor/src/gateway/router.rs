@@ -296,15 +296,6 @@ impl Router {
                 });
             }
         }
-        if let Item::Handover { track, from, .. } = item {
-            if self.drops_at_handover() {
-                // The old leader splits the track off and sends its
-                // singleton on at this item; it needs nothing of the track
-                // after it, and waiting for its unfollow request would
-                // route it every item on the track meanwhile.
-                self.interests[from as usize].remove(track);
-            }
-        }
         if let Some(touching) = &mut self.touching {
             match item {
                 Item::Mix { a, b, .. } => {
@@ -316,15 +307,6 @@ impl Router {
             }
         }
         self.log.push(Sequenced { seq, item });
-    }
-
-    /// Whether a handover ends the old leader's interest in the track at
-    /// once ([`FactoredStart::follows_regions`]).
-    fn drops_at_handover(&self) -> bool {
-        self.begin
-            .factored
-            .as_ref()
-            .is_some_and(|f| f.follows_regions())
     }
 
     /// Where every track was last seen and who surveils it, after the
