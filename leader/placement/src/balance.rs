@@ -15,19 +15,18 @@
 //! docs/architecture.md ("Components that stay in their region") says why
 //! the routing is exact.
 
+use crate::regions::Leading;
 use crate::Regions;
 use idmesh_protocol::trace::Line;
 
 /// A stream's events as they load leaders: where the leading `move` lines
 /// place each track, then every event that routes an item or may move a
 /// track to another region.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Workload {
     tracks: usize,
-    leading: Vec<Option<(f64, f64)>>,
-    /// Whether an event other than a `move` has come (the leading moves
-    /// are over).
-    started: bool,
+    /// Where the leading moves place tracks (the sensor's start).
+    leading: Leading,
     events: Vec<Load>,
 }
 
@@ -54,8 +53,8 @@ impl Workload {
     pub fn new(tracks: usize) -> Self {
         Workload {
             tracks,
-            leading: vec![None; tracks],
-            ..Workload::default()
+            leading: Leading::new(tracks),
+            events: Vec::new(),
         }
     }
 
@@ -63,14 +62,11 @@ impl Workload {
     /// lines on tracks beyond the header's are left out, as the sensor
     /// refuses them).
     pub fn push(&mut self, line: &Line) {
+        if self.leading.take(line) {
+            return;
+        }
         let known = |t: u32| (t as usize) < self.tracks;
         let load = match line {
-            Line::Move(m) if !self.started => {
-                if let Some(place) = self.leading.get_mut(m.track as usize) {
-                    *place = Some((m.x, m.y));
-                }
-                return;
-            }
             Line::Move(m) => Load::Move {
                 track: m.track,
                 x: m.x,
@@ -81,7 +77,6 @@ impl Workload {
             Line::Identify(read) => Load::One { track: read.track },
             Line::Header(_) | Line::Truth(_) => return,
         };
-        self.started = true;
         let fits = match load {
             Load::Move { track, .. } | Load::One { track } => known(track),
             Load::Pair { a, b } => known(a) && known(b),
@@ -95,7 +90,7 @@ impl Workload {
     /// cuts, which every leader gets, left out).
     pub fn items(&self, places: &[(f64, f64)]) -> Vec<u64> {
         let at: Vec<_> = places.iter().map(|&p| Some(p)).collect();
-        let mut regions = Regions::starting(&at, self.tracks, &self.leading);
+        let mut regions = Regions::starting(&at, self.tracks, &self.leading.places);
         let mut items = vec![0u64; places.len().max(1)];
         let owner = |regions: &Regions, t: u32| regions.owner(t).unwrap_or(0) as usize;
         for load in &self.events {

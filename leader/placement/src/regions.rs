@@ -120,19 +120,55 @@ pub fn leading_places<'a>(
     tracks: usize,
     lines: impl IntoIterator<Item = &'a Line>,
 ) -> Vec<Option<(f64, f64)>> {
-    let mut places = vec![None; tracks];
+    let mut leading = Leading::new(tracks);
     for line in lines {
-        match line {
-            Line::Move(m) => {
-                if let Some(place) = places.get_mut(m.track as usize) {
-                    *place = Some((m.x, m.y));
-                }
-            }
-            line if line.is_event() => break,
-            _ => {}
+        if leading.is_over() {
+            break;
+        }
+        leading.take(line);
+    }
+    leading.places
+}
+
+/// The leading `move` lines of a stream, read line by line: what
+/// [`leading_places`] returns, for a reader that goes on past them.
+#[derive(Debug, Clone)]
+pub(crate) struct Leading {
+    pub(crate) places: Vec<Option<(f64, f64)>>,
+    over: bool,
+}
+
+impl Leading {
+    pub(crate) fn new(tracks: usize) -> Self {
+        Leading {
+            places: vec![None; tracks],
+            over: false,
         }
     }
-    places
+
+    /// Whether an event other than a `move` has come.
+    pub(crate) fn is_over(&self) -> bool {
+        self.over
+    }
+
+    /// Takes `line`: true if it was a leading `move` (it then placed its
+    /// track), false once the leading moves are over.
+    pub(crate) fn take(&mut self, line: &Line) -> bool {
+        if self.over {
+            return false;
+        }
+        match line {
+            Line::Move(m) => {
+                if let Some(place) = self.places.get_mut(m.track as usize) {
+                    *place = Some((m.x, m.y));
+                }
+                return true;
+            }
+            line if line.is_event() => self.over = true,
+            _ => {}
+        }
+        false
+    }
 }
 
 /// A centralized factored belief under the regional rule, with the regions
