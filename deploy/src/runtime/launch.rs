@@ -381,9 +381,10 @@ pub fn leader_places(trace: &Path, leaders: usize) -> Result<Vec<(f64, f64)>> {
         return Ok(places);
     }
     for _ in 0..ROUNDS {
+        let regions = regions_of(&places);
         let mut sums = vec![(0.0, 0.0, 0usize); leaders];
         for &(x, y) in &positions {
-            let nearest = nearest(&places, x, y);
+            let nearest = regions.nearest(x, y).map_or(0, usize::from);
             let s = &mut sums[nearest];
             *s = (s.0 + x, s.1 + y, s.2 + 1);
         }
@@ -397,17 +398,11 @@ pub fn leader_places(trace: &Path, leaders: usize) -> Result<Vec<(f64, f64)>> {
     Ok(idmesh_placement::balanced(places, &workload))
 }
 
-/// The index of the place nearest to (x, y), the first of equals (the
-/// sensor's rule, `idmesh_placement::Regions::nearest`).
-fn nearest(places: &[(f64, f64)], x: f64, y: f64) -> usize {
-    let mut best = (f64::INFINITY, 0);
-    for (i, &(px, py)) in places.iter().enumerate() {
-        let d = (px - x).powi(2) + (py - y).powi(2);
-        if d < best.0 {
-            best = (d, i);
-        }
-    }
-    best.1
+/// The regions of leaders at `places` (the sensor's rule: a position
+/// belongs to the nearest place, the first of equals).
+fn regions_of(places: &[(f64, f64)]) -> idmesh_placement::Regions {
+    let places: Vec<_> = places.iter().map(|&p| Some(p)).collect();
+    idmesh_placement::Regions::new(&places, 0)
 }
 
 /// The bounding box of the trace's positions: (min x, min y, max x, max y).
@@ -463,8 +458,9 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
         let busiest = |places: &[(f64, f64)]| {
             let mut counts = vec![0usize; places.len()];
+            let regions = regions_of(places);
             for &(x, y) in &positions {
-                counts[nearest(places, x, y)] += 1;
+                counts[regions.nearest(x, y).map_or(0, usize::from)] += 1;
             }
             counts.into_iter().max().unwrap()
         };
