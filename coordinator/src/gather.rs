@@ -290,6 +290,8 @@ pub async fn positions(
 
 /// A get that every matching queryable answers on its own key (no
 /// consolidation: replies from several processes must not collapse).
+/// Express, so that neither the question nor its replies (which take the
+/// question's QoS) wait in a Zenoh batch for company: a query is waiting.
 async fn ask_everyone(
     session: &Session,
     selector: String,
@@ -300,6 +302,7 @@ async fn ask_everyone(
         .get(selector)
         .consolidation(ConsolidationMode::None)
         .target(QueryTarget::All)
+        .express(true)
         .timeout(timeout)
         .await
         .map_err(|e| GatherError::Failed(format!("{what}: {e}")))

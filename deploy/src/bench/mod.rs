@@ -373,12 +373,13 @@ impl Deployment {
 const STARTUP: Duration = Duration::from_secs(60);
 
 /// A get on `key` (the processes' ping queryables) that returns once
-/// `answers` replies are in.
+/// `answers` replies are in; express, as the coordinator's own gets are.
 async fn ping(session: &zenoh::Session, key: &str, answers: usize) -> Result<()> {
     let replies = session
         .get(key)
         .consolidation(ConsolidationMode::None)
         .target(QueryTarget::All)
+        .express(true)
         .timeout(Duration::from_secs(10))
         .await
         .map_err(|e| anyhow!("ping {key}: {e}"))?;

@@ -34,6 +34,12 @@ pub struct MeshOptions {
     /// Zenoh's `access_control` section (see
     /// [`super::security::rules::access_control`]); None = no rules.
     pub access_control: Option<serde_json::Value>,
+    /// Send every message the moment it is ready, never held back to share
+    /// a batch with the next. For a process that only answers questions
+    /// (the coordinator): Zenoh's adaptive batching held a 200 kB answer
+    /// back up to a millisecond more (p99 of a raw 200 kB get on loopback
+    /// 2.7 ms batched, 0.6 ms not), and there is no stream to batch.
+    pub unbatched: bool,
 }
 
 pub fn config(options: &MeshOptions) -> Result<Config> {
@@ -62,6 +68,13 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
         endpoints(&options.connect)?,
     )?;
     set(&mut config, "scouting/multicast/enabled", "false".into())?;
+    if options.unbatched {
+        set(
+            &mut config,
+            "transport/link/tx/queue/batching/enabled",
+            "false".into(),
+        )?;
+    }
     if let Some(tls) = &options.tls {
         // One certificate for both ends of a link, so a peer has the same
         // common name whichever of the two opened it.

@@ -105,7 +105,7 @@ async fn connect(options: &QueryOptions) -> Result<zenoh::Session> {
         listen: vec![],
         connect: vec![options.connect.clone()],
         tls: options.tls.clone(),
-        access_control: None,
+        ..MeshOptions::default()
     })
     .await
     .map_err(|error| {
@@ -173,10 +173,13 @@ async fn at_events(
     Ok(())
 }
 
-/// One get; the reply body, or the error reply's message.
+/// One get; the reply body, or the error reply's message. Express: the
+/// reply takes the question's QoS, and an express reply is not held back
+/// for a Zenoh batch to fill.
 pub async fn ask(session: &zenoh::Session, key: &str, timeout: Duration) -> Result<Vec<u8>> {
     let replies = session
         .get(key)
+        .express(true)
         .timeout(timeout)
         .await
         .map_err(|e| anyhow!("{e}"))?;

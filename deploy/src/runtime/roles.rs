@@ -153,6 +153,7 @@ fn peer_options(topology: &Topology, name: &str) -> Result<MeshOptions> {
             .collect(),
         tls,
         access_control,
+        unbatched: member.role == "coordinator",
     })
 }
 

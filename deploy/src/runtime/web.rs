@@ -31,7 +31,7 @@ pub fn run(options: &WebOptions) -> Result<()> {
             listen: vec![],
             connect: vec![options.connect.clone()],
             tls: options.tls.clone(),
-            access_control: None,
+            ..MeshOptions::default()
         })
         .await?;
         let listener = bind(&options.listen).await?;
