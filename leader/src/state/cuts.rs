@@ -156,8 +156,9 @@ impl Leader {
             _ => Vec::new(),
         };
         let parts = started.factored.as_ref().map(|held| held.shared_parts());
-        let coefficients = match &started.factored {
-            Some(held) => held.coefficients() as u64,
+        // Σ 2^|C| over the components: each part's table size.
+        let coefficients = match &parts {
+            Some(parts) => parts.iter().map(|p| 1u64 << p.tracks.len()).sum(),
             None => sums.coefficients,
         };
         let sums = Partial {

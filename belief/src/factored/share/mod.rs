@@ -29,7 +29,7 @@ use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 /// The largest component a share accepts from elsewhere (the tables'
@@ -72,8 +72,8 @@ pub struct FactoredShare {
     /// brought in): all a leader must look at to find the components left
     /// without its tracks, rather than all it holds at every handover.
     changed: Changed,
-    /// Each held component's part as last given, by first track, with
-    /// the table it was computed from ([`FactoredShare::shared_parts`]).
+    /// Each held component's part as last given, by first track, and the
+    /// tracks whose component changed since ([`FactoredShare::shared_parts`]).
     parts_given: PartsGiven,
 }
 
@@ -108,22 +108,24 @@ impl Changed {
 }
 
 /// The parts a share last gave out, by the first track of their
-/// component: a component whose tracks and table are unchanged gives the
-/// very same shared part again, so consecutive answers share what did not
-/// change and a comparison of them is by pointer. Indexed by track rather
-/// than hashed, since an answer looks up every component held (thousands
-/// per leader on a large crowd) and the lookups were most of its cost; an
-/// entry whose component is gone stays until its slot is used again (a
-/// part per track at most), and is reused only if a component with its
-/// very tracks and table comes back.
+/// component, and the tracks whose component changed (or stopped or
+/// started being held) since: the next answer recomputes only the parts
+/// starting at those, and gives every other one as the very same shared
+/// part, so consecutive answers are compared by pointer. An answer at a
+/// cut thus costs what changed since the last, not what is held: before,
+/// every held component's table was compared with the one its part was made
+/// from, and on the 10,000-target crowd that was most of a leader's work
+/// during a stream queried every few milliseconds.
 #[derive(Debug, Default)]
-struct PartsGiven(std::sync::Mutex<Vec<Option<GivenPart>>>);
+struct PartsGiven(std::sync::Mutex<Given>);
 
-#[derive(Debug, Clone)]
-struct GivenPart {
-    table: Vec<f64>,
-    /// Its tracks are the component's.
-    part: Arc<CountPart>,
+#[derive(Debug, Clone, Default)]
+struct Given {
+    parts: BTreeMap<u32, Arc<CountPart>>,
+    /// Tracks whose component changed since `parts` was brought up to
+    /// date: every track of a component before a change flags it, so the
+    /// first tracks of the components gone and of those made are all here.
+    changed: Changed,
 }
 
 impl Clone for PartsGiven {
@@ -133,10 +135,30 @@ impl Clone for PartsGiven {
 }
 
 impl PartsGiven {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Option<GivenPart>>> {
+    fn new(n: usize, held: &BTreeSet<u32>) -> Self {
+        let mut changed = Changed::new(n);
+        for &t in held {
+            changed.insert(t);
+        }
+        PartsGiven(std::sync::Mutex::new(Given {
+            parts: BTreeMap::new(),
+            changed,
+        }))
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Given> {
         // Only ever filled with whole entries: a panic cannot leave one
         // half-written.
         self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The component of `track` changed, or its holding did.
+    fn flag(&mut self, track: u32) {
+        self.0
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .changed
+            .insert(track);
     }
 }
 
@@ -202,10 +224,10 @@ impl FactoredShare {
         }
         Ok(FactoredShare {
             belief,
+            parts_given: PartsGiven::new(n, &held_set),
             held_set,
             held,
             changed,
-            parts_given: PartsGiven::default(),
         })
     }
 
@@ -240,6 +262,7 @@ impl FactoredShare {
     }
 
     fn set_held(&mut self, track: u32, held: bool) {
+        self.parts_given.flag(track);
         self.held[track as usize] = held;
         match held {
             true => self.held_set.insert(track),
@@ -297,6 +320,7 @@ impl FactoredShare {
             let (slot, _) = self.belief.home[track as usize];
             for &t in &self.belief.comp(slot).tracks {
                 self.changed.insert(t);
+                self.parts_given.flag(t);
             }
         }
     }
@@ -532,26 +556,21 @@ impl FactoredShare {
     /// answers are compared by pointer where they agree.
     pub fn shared_parts(&self) -> Vec<Arc<CountPart>> {
         let mut given = self.parts_given.lock();
-        let n = self.held.len();
-        if given.len() < n {
-            given.resize(n, None);
+        let given = &mut *given;
+        let changed = given.changed.drain();
+        for t in &changed {
+            given.parts.remove(t);
         }
-        self.held_comps()
-            .map(|c| {
-                let slot = &mut given[c.tracks[0] as usize];
-                match slot {
-                    Some(g) if g.part.tracks == c.tracks && g.table == c.table => g.part.clone(),
-                    _ => {
-                        let part = Arc::new(count_part(c));
-                        *slot = Some(GivenPart {
-                            table: c.table.clone(),
-                            part: part.clone(),
-                        });
-                        part
-                    }
-                }
-            })
-            .collect()
+        for &t in &changed {
+            if !self.holds(t) {
+                continue;
+            }
+            let c = self.belief.comp(self.belief.home[t as usize].0);
+            if c.tracks.first() == Some(&t) {
+                given.parts.insert(t, Arc::new(count_part(c)));
+            }
+        }
+        given.parts.values().cloned().collect()
     }
 }
 

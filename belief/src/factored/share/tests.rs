@@ -140,6 +140,11 @@ fn shares_equal_the_whole(
         // As the leaders give them: a part unchanged since the last event
         // is the very same shared part, and only a changed one is new.
         let arcs: Vec<Arc<CountPart>> = shares.iter().flat_map(|s| s.shared_parts()).collect();
+        // Brought up to date from what changed, they are what the share
+        // holds, in its order.
+        let fresh: Vec<CountPart> = shares.iter().flat_map(|s| s.parts()).collect();
+        let given: Vec<CountPart> = arcs.iter().map(|a| (**a).clone()).collect();
+        assert_eq!(given, fresh, "event {i}: the parts given are stale");
         let reused = arcs
             .iter()
             .filter(|a| shared_before.iter().any(|b| Arc::ptr_eq(a, b)))
