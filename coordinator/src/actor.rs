@@ -14,7 +14,7 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 use tracing::Instrument;
-use zenoh::bytes::Encoding;
+use zenoh::bytes::{Encoding, ZBytes};
 use zenoh::query::Query;
 use zenoh::Session;
 
@@ -79,7 +79,7 @@ async fn answer(
     let keys = &config.keys;
     let parameters = query.parameters();
     let request = Request::parse(kind, query.key_expr().as_str(), parameters.iter());
-    let result: Result<Vec<u8>, String> = match request {
+    let result: Result<ZBytes, String> = match request {
         Err(error) => {
             // A bad question is the asker's fault: counted, answered with
             // why, and no leader is bothered with it.
@@ -90,26 +90,31 @@ async fn answer(
         Ok(Request::Marginals(at)) => {
             gather::marginals(&session, keys, config.timeout, &memory, at)
                 .await
-                .map(|g| memory.marginals_json(&g.answer).to_vec())
+                .map(|g| memory.marginals_json(g.answer).into())
                 .map_err(|e| e.to_string())
         }
-        Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track).await,
+        Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track)
+            .await
+            .map(ZBytes::from),
         Ok(Request::Identity(at, method)) => identities(&session, &config, &memory, at, method)
             .await
-            .map(|a| json(&a)),
+            .map(|a| json(&a).into()),
         Ok(Request::IdentityTrack(at, track, method)) => {
-            identity_track(&session, &config, &memory, at, track, method).await
+            identity_track(&session, &config, &memory, at, track, method)
+                .await
+                .map(ZBytes::from)
         }
         Ok(Request::Positions) => gather::positions(&session, keys, config.timeout, &memory)
             .await
-            .map(|a| json(&a))
+            .map(|a| json(&a).into())
             .map_err(|e| e.to_string()),
         Ok(Request::Stats) => match gather::stats(&session, keys, config.timeout).await {
             Ok(leaders) => Ok(json(&StatsAnswer {
                 leaders,
                 sensors: gather::sensor_stats(&session, keys, config.timeout).await,
                 coordinator: memory.stats(),
-            })),
+            })
+            .into()),
             Err(e) => Err(e.to_string()),
         },
     };

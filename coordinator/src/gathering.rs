@@ -5,6 +5,7 @@
 //! [`crate::gather`], and the deterministic network simulator
 //! (`tests/src/sim`) feeds these the replies of simulated processes.
 
+use bytes::Bytes;
 use idmesh_belief::factored::{CountPart, CouplingTree};
 use idmesh_belief::predict_red;
 use idmesh_belief::BeliefError;
@@ -115,8 +116,9 @@ pub struct Memory {
     bases: Mutex<VecDeque<(u64, BTreeMap<String, Components>)>>,
     /// The last marginals answer and its JSON: a deployment at rest asked
     /// again gives the very same answer, and encoding 10,000 marginals
-    /// costs more than gathering what changed.
-    encoded: Mutex<Option<(MarginalsAnswer, Arc<[u8]>)>>,
+    /// costs more than gathering what changed. Shared bytes, so that a
+    /// reply hands them to Zenoh without copying 200 kB.
+    encoded: Mutex<Option<(MarginalsAnswer, Bytes)>>,
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
@@ -152,16 +154,22 @@ impl Memory {
     }
 
     /// `answer` as JSON: the bytes kept from the last answer if it is the
-    /// same (compared whole), else encoded now and kept.
-    pub fn marginals_json(&self, answer: &MarginalsAnswer) -> Arc<[u8]> {
+    /// same (compared whole), else encoded now and kept (with the answer,
+    /// which is taken rather than copied).
+    pub fn marginals_json(&self, answer: MarginalsAnswer) -> Bytes {
         let mut encoded = self.encoded.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((last, bytes)) = &*encoded {
-            if last == answer {
-                return bytes.clone();
-            }
+        let size = match &*encoded {
+            Some((last, bytes)) if *last == answer => return bytes.clone(),
+            Some((_, bytes)) => bytes.len(),
+            None => 0,
+        };
+        // About as long as the last: no regrowing of a 200 kB buffer.
+        let mut json = Vec::with_capacity(size + size / 8);
+        if serde_json::to_writer(&mut json, &answer).is_err() {
+            json.clear();
         }
-        let bytes: Arc<[u8]> = serde_json::to_vec(answer).unwrap_or_default().into();
-        *encoded = Some((answer.clone(), bytes.clone()));
+        let bytes = Bytes::from(json);
+        *encoded = Some((answer, bytes.clone()));
         bytes
     }
 

@@ -393,17 +393,17 @@ fn the_json_of_an_unchanged_answer_is_kept_and_a_changed_one_encoded_anew() {
         coefficients: 6,
         finished: true,
     };
-    let first = memory.marginals_json(&answer);
-    let again = memory.marginals_json(&answer.clone());
-    assert!(Arc::ptr_eq(&first, &again), "encoded again");
+    let first = memory.marginals_json(answer.clone());
+    let again = memory.marginals_json(answer.clone());
+    assert_eq!(first.as_ptr(), again.as_ptr(), "encoded again");
     assert_eq!(
         serde_json::from_slice::<MarginalsAnswer>(&first).unwrap(),
         answer
     );
     let mut moved = answer.clone();
     moved.p_red[2] = 0.25 + 1e-12;
-    let changed = memory.marginals_json(&moved);
-    assert!(!Arc::ptr_eq(&first, &changed));
+    let changed = memory.marginals_json(moved.clone());
+    assert_ne!(first.as_ptr(), changed.as_ptr());
     assert_eq!(
         serde_json::from_slice::<MarginalsAnswer>(&changed).unwrap(),
         moved
@@ -411,7 +411,7 @@ fn the_json_of_an_unchanged_answer_is_kept_and_a_changed_one_encoded_anew() {
     let mut later = moved.clone();
     later.watermark.insert("sensor-0".into(), 8);
     assert_eq!(
-        serde_json::from_slice::<MarginalsAnswer>(&memory.marginals_json(&later)).unwrap(),
+        serde_json::from_slice::<MarginalsAnswer>(&memory.marginals_json(later.clone())).unwrap(),
         later,
         "a new watermark is a new answer"
     );
