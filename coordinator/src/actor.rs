@@ -93,28 +93,23 @@ async fn answer(
                 .map(|g| memory.marginals_json(g.answer).into())
                 .map_err(|e| e.to_string())
         }
-        Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track)
-            .await
-            .map(ZBytes::from),
+        Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track).await,
         Ok(Request::Identity(at, method)) => identities(&session, &config, &memory, at, method)
             .await
-            .map(|a| json(&a).into()),
+            .map(|a| json(&a)),
         Ok(Request::IdentityTrack(at, track, method)) => {
-            identity_track(&session, &config, &memory, at, track, method)
-                .await
-                .map(ZBytes::from)
+            identity_track(&session, &config, &memory, at, track, method).await
         }
         Ok(Request::Positions) => gather::positions(&session, keys, config.timeout, &memory)
             .await
-            .map(|a| json(&a).into())
+            .map(|a| json(&a))
             .map_err(|e| e.to_string()),
         Ok(Request::Stats) => match gather::stats(&session, keys, config.timeout).await {
             Ok(leaders) => Ok(json(&StatsAnswer {
                 leaders,
                 sensors: gather::sensor_stats(&session, keys, config.timeout).await,
                 coordinator: memory.stats(),
-            })
-            .into()),
+            })),
             Err(e) => Err(e.to_string()),
         },
     };
@@ -151,7 +146,7 @@ async fn track(
     memory: &Memory,
     at: At,
     track: u32,
-) -> Result<Vec<u8>, String> {
+) -> Result<ZBytes, String> {
     let gathered = gather::marginals(session, &config.keys, config.timeout, memory, at)
         .await
         .map_err(|e: GatherError| e.to_string())?;
@@ -176,7 +171,7 @@ async fn identity_track(
     at: At,
     track: u32,
     method: Method,
-) -> Result<Vec<u8>, String> {
+) -> Result<ZBytes, String> {
     let answer = identities(session, config, memory, at, method).await?;
     let out_of_range = || {
         format!(
@@ -217,6 +212,6 @@ async fn identities(
         .map_err(|e| e.to_string())
 }
 
-fn json(value: &impl Serialize) -> Vec<u8> {
-    serde_json::to_vec(value).unwrap_or_default()
+fn json(value: &impl Serialize) -> ZBytes {
+    serde_json::to_vec(value).unwrap_or_default().into()
 }

@@ -135,11 +135,8 @@ impl Clone for PartsGiven {
 }
 
 impl PartsGiven {
-    fn new(n: usize, held: &BTreeSet<u32>) -> Self {
-        let mut changed = Changed::new(n);
-        for &t in held {
-            changed.insert(t);
-        }
+    /// None given yet, and every track of `changed` to look at first.
+    fn new(changed: Changed) -> Self {
         PartsGiven(std::sync::Mutex::new(Given {
             parts: BTreeMap::new(),
             changed,
@@ -224,7 +221,7 @@ impl FactoredShare {
         }
         Ok(FactoredShare {
             belief,
-            parts_given: PartsGiven::new(n, &held_set),
+            parts_given: PartsGiven::new(changed.clone()),
             held_set,
             held,
             changed,
@@ -557,11 +554,8 @@ impl FactoredShare {
     pub fn shared_parts(&self) -> Vec<Arc<CountPart>> {
         let mut given = self.parts_given.lock();
         let given = &mut *given;
-        let changed = given.changed.drain();
-        for t in &changed {
-            given.parts.remove(t);
-        }
-        for &t in &changed {
+        for t in given.changed.drain() {
+            given.parts.remove(&t);
             if !self.holds(t) {
                 continue;
             }
