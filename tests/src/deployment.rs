@@ -81,24 +81,54 @@ pub struct Deployment {
     children: Vec<(String, Child)>,
 }
 
-/// A loopback port free now, for TCP and for UDP, and never handed out
-/// before by this process: the kernel may give a just-released port again,
-/// two processes of one topology on the same port make the topology
-/// invalid, and a secured topology listens on QUIC (UDP) at the port its
-/// `tcp/` endpoint names — a port free for TCP may be taken for UDP.
+/// A loopback port free now, for TCP and for UDP, never handed out before
+/// by this process, and outside the kernel's ephemeral range.
+///
+/// A topology names its ports before its processes bind them, so a port
+/// must stay free in between. Every outgoing connection, and every QUIC
+/// client's socket, takes an ephemeral port from the kernel: a port the
+/// kernel once handed us (`bind(0)`) can be handed to such a socket before
+/// our process binds it. That happened in CI: a secured leader's QUIC
+/// listener found its UDP port taken and the deployment never answered.
+/// Ports below the ephemeral range are never given out that way. Two
+/// processes of one topology on the same port make it invalid, hence the
+/// list of ports given; the secured topology listens on QUIC (UDP) at the
+/// port its `tcp/` endpoint names, hence both protocols are probed.
 fn free_port() -> u16 {
     static GIVEN: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
     let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
-    loop {
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .map(|a| a.port())
-            .expect("a free loopback port");
-        let udp_free = std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok();
-        if udp_free && !given.contains(&port) {
+    let (low, high) = non_ephemeral_ports();
+    // Start where this process's id points, so that test binaries run one
+    // after the other do not walk the same ports (sockets of the last one
+    // may linger).
+    let span = u32::from(high - low);
+    let start = std::process::id() * 7919 % span;
+    for step in 0..span {
+        let port = low + ((start + step) % span) as u16;
+        let bound = std::net::TcpListener::bind(("127.0.0.1", port)).is_ok()
+            && std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok();
+        if bound && !given.contains(&port) {
             given.push(port);
             return port;
         }
+    }
+    panic!("no loopback port in {low}..{high} is free for TCP and UDP")
+}
+
+/// The ports from 10,000 up to the kernel's ephemeral range
+/// (`ip_local_port_range`, 32768 by default): nothing is given them
+/// unasked. Above it if the range starts too low to leave room.
+fn non_ephemeral_ports() -> (u16, u16) {
+    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").ok();
+    let bounds: Vec<u16> = range
+        .iter()
+        .flat_map(|r| r.split_whitespace())
+        .filter_map(|n| n.parse().ok())
+        .collect();
+    match bounds[..] {
+        [first, _] if first >= 12_000 => (10_000, first),
+        [_, last] if last <= 63_000 => (last + 1, u16::MAX),
+        _ => (10_000, 32_768),
     }
 }
 
