@@ -103,7 +103,8 @@ pub struct BenchArgs {
     /// machine's CPU seconds vary by a fifth between runs.
     #[arg(long, default_value_t = 1)]
     pub repeat: usize,
-    /// Marginals queries (and as many raw gets of each kind) for latency.
+    /// Marginals queries (and as many raw gets of each kind) for latency;
+    /// 0: no latency figures (the streams' throughput and CPU alone).
     #[arg(long, default_value_t = 2000)]
     pub queries: usize,
     /// Events per second of the stream that queries are timed during.

@@ -370,6 +370,7 @@ impl Driver<'_> {
                     }
                 }
                 Output::Progress(progress) => {
+                    tracing::trace!(leader = %name, through = progress.through, "put progress");
                     // Lost, it is published again at the next sweep.
                     let put = self
                         .session

@@ -90,12 +90,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         .build()?;
     if let Some(crowds) = &options.accuracy {
         let report = accuracy::run(&runtime, crowds, &options.dir)?;
-        print!("{report}");
-        if let Some(out) = &options.out {
-            std::fs::write(out, &report)
-                .with_context(|| format!("cannot write {}", out.display()))?;
-        }
-        return Ok(());
+        return finish(&report, options);
     }
     let trace = options.dir.join(format!(
         "crowd-{}-{}-{}.jsonl",
@@ -136,12 +131,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             several.push(figures?);
         }
         sensors::report(&several, &mut report)?;
-        print!("{report}");
-        if let Some(out) = &options.out {
-            std::fs::write(out, &report)
-                .with_context(|| format!("cannot write {}", out.display()))?;
-        }
-        return Ok(());
+        return finish(&report, options);
     }
     writeln!(
         report,
@@ -192,7 +182,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
                 round + 1
             );
             runs[i].push(runtime.block_on(throughput::measure(&deployment))?);
-            if count == leaders && rest.is_none() {
+            if count == leaders && rest.is_none() && options.queries > 0 {
                 rest = Some(at_rest(&deployment)?);
             }
             runtime.block_on(deployment.close());
@@ -210,6 +200,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         .filter_map(throughput::median_by_cpu)
         .collect();
     throughput::report(&streams, &mut report)?;
+    if options.queries == 0 {
+        return finish(&report, options);
+    }
     let rest = match rest {
         Some(rest) => rest,
         None => {
@@ -236,9 +229,14 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         &format!("during a stream at {} events/s", options.stream_rate),
         &mut report,
     )?;
+    finish(&report, options)
+}
+
+/// Prints the report, and writes it to `--out` if given.
+fn finish(report: &str, options: &BenchOptions) -> Result<()> {
     print!("{report}");
     if let Some(out) = &options.out {
-        std::fs::write(out, &report).with_context(|| format!("cannot write {}", out.display()))?;
+        std::fs::write(out, report).with_context(|| format!("cannot write {}", out.display()))?;
     }
     Ok(())
 }
