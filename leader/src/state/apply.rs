@@ -122,7 +122,7 @@ impl Leader {
                     // Under the regional rule, taken in when it comes
                     // (state/pending.rs).
                     if self.lazy_transfers() {
-                        self.pending.push(Pending {
+                        self.note_pending(Pending {
                             seq,
                             from,
                             tracks: vec![track],
@@ -253,7 +253,7 @@ impl Leader {
             if self.lazy_transfers() {
                 // What comes back is b's component, which went out.
                 sent.push(mix.b);
-                self.pending.push(Pending {
+                self.note_pending(Pending {
                     seq,
                     from: owner_a,
                     tracks: sent,
@@ -307,7 +307,7 @@ impl Leader {
             if self.lazy_transfers() {
                 // What comes is the singleton of this leader's track.
                 let mine = if theirs == mix.b { mix.a } else { mix.b };
-                self.pending.push(Pending {
+                self.note_pending(Pending {
                     seq,
                     from: to,
                     tracks: vec![mine],

@@ -103,6 +103,7 @@ impl Leader {
         self.stats.bytes_received += bytes as u64;
         self.transfers
             .insert((transfer.seq, transfer.from), transfer);
+        self.pending_checked = false;
         self.advance()
     }
 

@@ -180,6 +180,13 @@ pub struct Leader {
     /// track. Last, so that a snapshot written before it existed fails to
     /// read rather than misreads.
     pending: Vec<Pending>,
+    /// No transfer came and no pending one was noted since the pending
+    /// ones were last matched with the transfers here
+    /// ([`Leader::take_pending`]), which can then skip looking: it runs
+    /// before every item, and looked up every pending transfer each time.
+    /// False after a restore, so that the first pass looks.
+    #[serde(skip)]
+    pending_checked: bool,
     /// The last answer where the leader rests, with whether it holds the
     /// rows, until an input changes anything: a deployment at rest is
     /// asked again and again, and a factored answer reads every component.
@@ -210,6 +217,7 @@ impl Leader {
             taken: Vec::new(),
             waiting: None,
             pending: Vec::new(),
+            pending_checked: false,
             cuts: VecDeque::new(),
             events: 0,
             finished: false,

@@ -52,8 +52,18 @@ impl Leader {
             .is_some_and(|s| s.factored.is_some() && s.regional() && s.rows.is_none())
     }
 
+    /// A transfer this leader goes on without, to take in when it comes.
+    pub(super) fn note_pending(&mut self, pending: Pending) {
+        self.pending.push(pending);
+        self.pending_checked = false;
+    }
+
     /// Takes in every pending transfer that has come.
     pub(super) fn take_pending(&mut self) -> Result<(), LeaderError> {
+        if self.pending_checked {
+            return Ok(());
+        }
+        self.pending_checked = true;
         let mut i = 0;
         while i < self.pending.len() {
             let key = (self.pending[i].seq, self.pending[i].from);
