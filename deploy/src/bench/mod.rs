@@ -35,6 +35,7 @@ mod throughput;
 use crate::runtime::launch::{simulate_crowd, Processes};
 use crate::runtime::loopback::{Loopback, Ports};
 use crate::runtime::mesh::{self, MeshOptions};
+use crate::runtime::query::ask;
 use crate::runtime::topology::{default_max_component, BeliefKind, Sparsification, Topology};
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_protocol::wire::keys::Keys;
@@ -318,9 +319,10 @@ impl Deployment {
         std::fs::write(config, toml)?;
         let config = config.to_path_buf();
         let topology = Topology::load(&config)?;
-        // The sensor starts last, once the coordinator answers here, so
-        // that the bench sees the stream from its first events even when it
-        // is over in a fraction of a second.
+        // The sensor starts last, once the coordinator and every leader's
+        // counters answer here, so that the bench sees the stream from its
+        // first events even when it is over in a fraction of a second (it
+        // watches a leader's counters, [`throughput`]).
         let others = Processes::start_some(&config, |m| m.role != "sensor")?;
         let connect = topology.members().into_iter().map(|m| m.listen).collect();
         let session = mesh::open(&MeshOptions {
@@ -338,6 +340,15 @@ impl Deployment {
                 return Err(e.context("the coordinator did not come up"));
             }
             tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        for leader in &topology.leader {
+            let counters = keys.leader_stats(&leader.name);
+            while let Err(e) = ask(&session, &counters, Duration::from_secs(1)).await {
+                if started.elapsed() > STARTUP {
+                    bail!("{} did not come up: {e}", leader.name);
+                }
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
         }
         let sensor = Processes::start_some(&config, |m| m.role == "sensor")?;
         Ok(Deployment {
