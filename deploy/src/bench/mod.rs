@@ -196,11 +196,12 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             options.repeat
         )?;
     }
+    let paired = throughput::paired_cpu(&runs);
     let streams: Vec<throughput::Stream> = runs
         .into_iter()
         .filter_map(throughput::median_by_cpu)
         .collect();
-    throughput::report(&streams, &mut report)?;
+    throughput::report(&streams, &paired, &mut report)?;
     if options.queries == 0 {
         return finish(&report, options);
     }

@@ -237,7 +237,7 @@ async fn stats(deployment: &Deployment) -> Result<Vec<LeaderStats>> {
     Ok(answer.leaders)
 }
 
-pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
+pub fn report(streams: &[Stream], paired: &[PairedCpu], out: &mut String) -> Result<()> {
     writeln!(out, "### Throughput\n")?;
     writeln!(
         out,
@@ -315,7 +315,53 @@ pub fn report(streams: &[Stream], out: &mut String) -> Result<()> {
         )?;
     }
     writeln!(out)?;
-    goals(streams, out)
+    goals(streams, paired, out)
+}
+
+/// One leader count's CPU against one leader's, round by round: each
+/// round streams every leader count back to back, so a ratio within a
+/// round is taken at one speed of this machine, whose speed drifts by a
+/// fifth over minutes; the medians of the rounds' sums, taken apart, can
+/// come from rounds far apart.
+pub struct PairedCpu {
+    pub leaders: usize,
+    /// The leaders' CPU sum ÷ the same round's one leader's, by round.
+    pub rounds: Vec<f64>,
+}
+
+impl PairedCpu {
+    /// The median of the rounds' ratios (the lower of the middle two).
+    pub fn median(&self) -> Option<f64> {
+        let mut sorted = self.rounds.clone();
+        sorted.sort_by(f64::total_cmp);
+        let middle = sorted.len().checked_sub(1)? / 2;
+        Some(sorted[middle])
+    }
+}
+
+/// For every leader count past one, its rounds' CPU ratios against the
+/// one-leader streams of the same rounds. `runs`: by leader count, each
+/// by round (a count without a one-leader run pairs with nothing).
+pub fn paired_cpu(runs: &[Vec<Stream>]) -> Vec<PairedCpu> {
+    let Some(one) = runs
+        .iter()
+        .find(|r| r.first().is_some_and(|s| s.leaders == 1))
+    else {
+        return Vec::new();
+    };
+    runs.iter()
+        .filter_map(|r| {
+            let leaders = r.first()?.leaders;
+            (leaders > 1).then(|| PairedCpu {
+                leaders,
+                rounds: r
+                    .iter()
+                    .zip(one)
+                    .map(|(s, o)| s.cpu.leaders_sum() / o.cpu.leaders_sum())
+                    .collect(),
+            })
+        })
+        .collect()
 }
 
 /// Issue 18's scale-out goals, read off a run: at every leader count
@@ -354,7 +400,7 @@ pub fn scale_out(streams: &[Stream]) -> Option<Vec<ScaleOut>> {
     )
 }
 
-fn goals(streams: &[Stream], out: &mut String) -> Result<()> {
+fn goals(streams: &[Stream], paired: &[PairedCpu], out: &mut String) -> Result<()> {
     let Some(rows) = scale_out(streams) else {
         return Ok(());
     };
@@ -365,14 +411,14 @@ fn goals(streams: &[Stream], out: &mut String) -> Result<()> {
         out,
         "### Scale-out goals
 
-The busiest leader's items against an even share of what one leader applies alone (its items ÷ L), and the leaders' CPU sum against one leader's; the goal is at most {SCALE_OUT_GOAL}× for both.
+The busiest leader's items against an even share of what one leader applies alone (its items ÷ L), and the leaders' CPU sum against one leader's (the rows above); the goal is at most {SCALE_OUT_GOAL}× for both. The last column takes the CPU ratio within each round, against the same round's one leader, and gives their median (every round's in brackets).
 "
     )?;
     writeln!(
         out,
-        "| leaders | busiest leader's items ÷ even share | leaders' CPU ÷ one leader's |"
+        "| leaders | busiest leader's items ÷ even share | leaders' CPU ÷ one leader's | the same, round by round |"
     )?;
-    writeln!(out, "|---:|---:|---:|")?;
+    writeln!(out, "|---:|---:|---:|---:|")?;
     let mark = |x: f64| {
         if x <= SCALE_OUT_GOAL {
             "met"
@@ -381,9 +427,21 @@ The busiest leader's items against an even share of what one leader applies alon
         }
     };
     for r in rows {
+        let rounds = paired.iter().find(|p| p.leaders == r.leaders);
+        let by_round = match rounds.and_then(|p| Some((p.median()?, &p.rounds))) {
+            Some((median, all)) => format!(
+                "{median:.2}× ({}; {})",
+                mark(median),
+                all.iter()
+                    .map(|x| format!("{x:.2}×"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            None => "—".to_string(),
+        };
         writeln!(
             out,
-            "| {} | {:.2}× ({}) | {:.2}× ({}) |",
+            "| {} | {:.2}× ({}) | {:.2}× ({}) | {by_round} |",
             r.leaders,
             r.items,
             mark(r.items),
@@ -450,5 +508,40 @@ mod tests {
         assert!((rows[1].items - 1.6).abs() < 1e-12, "400 ÷ (1000 / 4)");
         assert!((rows[1].cpu - 1.4).abs() < 1e-12);
         assert!(scale_out(&runs[1..]).is_none(), "nothing to compare with");
+    }
+
+    /// Round by round, each ratio is against the same round's one leader:
+    /// a slow round (every stream 1.5× the CPU) reads as fast ones do.
+    #[test]
+    fn cpu_ratios_pair_each_round_with_its_own_one_leader() {
+        let runs = vec![
+            vec![
+                stream(&[9], &[0.5]),
+                stream(&[9], &[0.75]),
+                stream(&[9], &[0.4]),
+            ],
+            vec![
+                stream(&[5, 5], &[0.35, 0.35]),
+                stream(&[5, 5], &[0.5, 0.55]),
+                stream(&[5, 5], &[0.3, 0.3]),
+            ],
+        ];
+        let paired = paired_cpu(&runs);
+        assert_eq!(paired.len(), 1);
+        assert_eq!(paired[0].leaders, 2);
+        let expected = [1.4, 1.4, 1.5];
+        for (got, want) in paired[0].rounds.iter().zip(expected) {
+            assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+        }
+        let median = paired[0].median().expect("three rounds");
+        assert!((median - 1.4).abs() < 1e-12, "{median}");
+        assert!(paired_cpu(&runs[1..]).is_empty(), "no one-leader run");
+        let mut report = String::new();
+        let streams: Vec<Stream> = runs.into_iter().filter_map(median_by_cpu).collect();
+        goals(&streams, &paired, &mut report).unwrap();
+        assert!(
+            report.contains("1.40× (met; 1.40×, 1.40×, 1.50×)"),
+            "{report}"
+        );
     }
 }
