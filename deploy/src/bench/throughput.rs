@@ -69,10 +69,16 @@ impl Cpu {
 
 /// Of several streams through the same deployment, the one whose
 /// leaders' CPU sum is the median (the lower of the middle two).
-pub fn median_by_cpu(mut streams: Vec<Stream>) -> Option<Stream> {
-    streams.sort_by(|a, b| a.cpu.leaders_sum().total_cmp(&b.cpu.leaders_sum()));
-    let middle = streams.len().checked_sub(1)? / 2;
-    Some(streams.swap_remove(middle))
+pub fn median_by_cpu(streams: Vec<Stream>) -> Option<Stream> {
+    lower_median(streams, |s| s.cpu.leaders_sum())
+}
+
+/// The value whose `key` is the median of all (the lower of the middle
+/// two), None of none.
+fn lower_median<T>(mut values: Vec<T>, key: impl Fn(&T) -> f64) -> Option<T> {
+    values.sort_by(|a, b| key(a).total_cmp(&key(b)));
+    let middle = values.len().checked_sub(1)? / 2;
+    Some(values.swap_remove(middle))
 }
 
 impl Stream {
@@ -332,10 +338,7 @@ pub struct PairedCpu {
 impl PairedCpu {
     /// The median of the rounds' ratios (the lower of the middle two).
     pub fn median(&self) -> Option<f64> {
-        let mut sorted = self.rounds.clone();
-        sorted.sort_by(f64::total_cmp);
-        let middle = sorted.len().checked_sub(1)? / 2;
-        Some(sorted[middle])
+        lower_median(self.rounds.clone(), |&r| r)
     }
 }
 
