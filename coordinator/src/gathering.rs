@@ -16,7 +16,7 @@ use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
-use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -221,15 +221,26 @@ impl Memory {
         let bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
         let (_, kept) = bases.iter().find(|(tag, _)| *tag == base)?;
         let before = kept.get(&p.leader)?;
-        let replaced: HashSet<u32> = p
+        // Most leaders changed nothing since the base: their answer is it.
+        if p.gone.is_empty() && sent.is_empty() {
+            return Some(before.clone());
+        }
+        // A few first tracks against thousands of components: a sorted
+        // list searched beats hashing every component's.
+        let mut replaced: Vec<u32> = p
             .gone
             .iter()
             .copied()
             .chain(sent.iter().filter_map(|c| c.tracks.first().copied()))
             .collect();
+        replaced.sort_unstable();
         let mut whole: Vec<Arc<CountPart>> = before
             .iter()
-            .filter(|c| c.tracks.first().is_none_or(|t| !replaced.contains(t)))
+            .filter(|c| {
+                c.tracks
+                    .first()
+                    .is_none_or(|t| replaced.binary_search(t).is_err())
+            })
             .cloned()
             .collect();
         whole.extend(sent.iter().cloned().map(Arc::new));
