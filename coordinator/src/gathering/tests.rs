@@ -416,3 +416,42 @@ fn the_json_of_an_unchanged_answer_is_kept_and_a_changed_one_encoded_anew() {
         "a new watermark is a new answer"
     );
 }
+
+/// Changes that would leave a track in two components, or in none, are
+/// refused by name, and the next answer is as if they had never come.
+#[test]
+fn changes_that_do_not_cover_the_field_once_are_refused_by_name() {
+    let memory = Memory::default();
+    let first = || {
+        vec![
+            factored("a", 7, 11, vec![singleton(0, 0.2), singleton(1, 0.5)]),
+            factored("b", 7, 11, vec![singleton(2, 0.7)]),
+        ]
+    };
+    let expected = marginals(first(), 7, &memory).unwrap();
+    let changed = |tag, gone: Vec<u32>, b: Vec<WireCounts>| {
+        vec![
+            Partial {
+                base: Some(11),
+                gone,
+                ..factored("a", 9, tag, Vec::new())
+            },
+            Partial {
+                base: Some(11),
+                ..factored("b", 9, tag, b)
+            },
+        ]
+    };
+    let twice = marginals(changed(12, vec![], vec![singleton(0, 0.4)]), 9, &memory);
+    assert!(
+        matches!(&twice, Err(GatherError::Refused(e)) if e.contains("track 0 is in two components")),
+        "{twice:?}"
+    );
+    let none = marginals(changed(13, vec![1], vec![]), 9, &memory);
+    assert!(
+        matches!(&none, Err(GatherError::Refused(e)) if e.contains("no component holds track 1")),
+        "{none:?}"
+    );
+    let unchanged = marginals(changed(14, vec![], vec![]), 9, &memory).unwrap();
+    assert_eq!(unchanged, expected);
+}
