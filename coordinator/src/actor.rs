@@ -4,6 +4,7 @@
 
 use crate::gather::{self, At, GatherError, Memory};
 use crate::identity::{self, Method};
+use crate::pushed::Pushes;
 use crate::request::Request;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{
@@ -47,6 +48,19 @@ pub async fn run(
         .liveliness()
         .declare_token(keys.alive("coordinator", &config.name))
         .await?;
+    // Leaders' answers pushed at the cuts they reach, for the queries
+    // waiting for them (taken on Zenoh's thread: a lookup and a send).
+    let pushes = Arc::new(Pushes::default());
+    let taker = pushes.clone();
+    let _pushed = session
+        .declare_subscriber(keys.every_leader_pushed())
+        .callback(move |sample| {
+            taker.take(
+                sample.key_expr().as_str(),
+                sample.payload().to_bytes().into_owned(),
+            )
+        })
+        .await?;
     tracing::info!(coordinator = %config.name, "coordinator up");
     let memory = Arc::new(Memory::default());
     tokio::pin!(shutdown);
@@ -64,7 +78,9 @@ pub async fn run(
         let session = session.clone();
         let config = config.clone();
         let span = tracing::info_span!("query", kind, key = %query.key_expr());
-        tokio::spawn(answer(session, config, memory.clone(), kind, query).instrument(span));
+        tokio::spawn(
+            answer(session, config, memory.clone(), pushes.clone(), kind, query).instrument(span),
+        );
     }
     Ok(())
 }
@@ -73,6 +89,7 @@ async fn answer(
     session: Session,
     config: CoordinatorConfig,
     memory: Arc<Memory>,
+    pushes: Arc<Pushes>,
     kind: &'static str,
     query: Query,
 ) {
@@ -88,12 +105,14 @@ async fn answer(
             Err(error)
         }
         Ok(Request::Marginals(at)) => {
-            gather::marginals(&session, keys, config.timeout, &memory, at)
+            gather::marginals(&session, keys, config.timeout, &memory, &pushes, at)
                 .await
                 .map(|g| memory.marginals_json(g.answer).into())
                 .map_err(|e| e.to_string())
         }
-        Ok(Request::Track(at, track)) => self::track(&session, &config, &memory, at, track).await,
+        Ok(Request::Track(at, track)) => {
+            self::track(&session, &config, &memory, &pushes, at, track).await
+        }
         Ok(Request::Identity(at, method)) => identities(&session, &config, &memory, at, method)
             .await
             .map(|a| json(&a)),
@@ -144,10 +163,11 @@ async fn track(
     session: &Session,
     config: &CoordinatorConfig,
     memory: &Memory,
+    pushes: &Arc<Pushes>,
     at: At,
     track: u32,
 ) -> Result<ZBytes, String> {
-    let gathered = gather::marginals(session, &config.keys, config.timeout, memory, at)
+    let gathered = gather::marginals(session, &config.keys, config.timeout, memory, pushes, at)
         .await
         .map_err(|e: GatherError| e.to_string())?;
     let p_red = *gathered.answer.p_red.get(track as usize).ok_or_else(|| {

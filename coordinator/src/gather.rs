@@ -5,11 +5,13 @@
 
 use crate::gathering::{at_rest_of, check, cut_parameters, marginals_of, read_cut, Partials};
 pub use crate::gathering::{At, Collected, GatherError, Gathered, Memory, Share};
+use crate::pushed::Pushes;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStats};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{LeaderPlace, PositionsAnswer, Watermark};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::time::Duration;
 use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
@@ -20,9 +22,19 @@ pub async fn marginals(
     keys: &Keys,
     timeout: Duration,
     memory: &Memory,
+    pushes: &Arc<Pushes>,
     at: At,
 ) -> Result<Gathered, GatherError> {
-    let collected = collect(session, keys, timeout, memory, at, Share::Sums).await?;
+    let collected = collect(
+        session,
+        keys,
+        timeout,
+        memory,
+        Some(pushes),
+        at,
+        Share::Sums,
+    )
+    .await?;
     let (collected, answer) = match marginals_of(&collected, memory) {
         // Outpaced by other queries: the leaders are asked again at the
         // same cut (they keep their answers there), whole.
@@ -45,12 +57,14 @@ pub async fn marginals(
 
 /// Every leader's share at a consistent cut. Once the stream is over the
 /// leaders rest at its end, and asking them where they rest is enough;
-/// otherwise a fresh cut is placed.
+/// otherwise a fresh cut is placed, whose sums the leaders push when
+/// `pushes` is given (rows are always asked for).
 pub async fn collect(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
     memory: &Memory,
+    pushes: Option<&Arc<Pushes>>,
     at: At,
     share: Share,
 ) -> Result<Collected, GatherError> {
@@ -59,7 +73,12 @@ pub async fn collect(
             return Ok(collected);
         }
     }
-    let collected = at_fresh_cut(session, keys, timeout, memory, at, share).await?;
+    let collected = match (share, pushes) {
+        (Share::Sums, Some(pushes)) => {
+            pushed_at_fresh_cut(session, keys, timeout, memory, pushes, at).await?
+        }
+        _ => at_fresh_cut(session, keys, timeout, memory, at, share).await?,
+    };
     memory.remember(&collected.cut);
     Ok(collected)
 }
@@ -108,6 +127,62 @@ async fn at_fresh_cut(
             memory
         )
     )?;
+    check(cut, parts, errors, timeout, memory)
+}
+
+/// How long a query waits for the leaders' pushed answers (counted from
+/// the cut's placement) before it asks the leaders that have not pushed:
+/// a push lost costs this and a round trip, a leader far behind the cut
+/// is then asked and holds the question until it gets there.
+const PUSH_PATIENCE: Duration = Duration::from_millis(50);
+
+/// The sums at a fresh cut, as the leaders push them when they reach it
+/// ([`crate::pushed`]); if any has not come within [`PUSH_PATIENCE`] of
+/// the cut's placement, or one is bad, every leader is asked at the cut
+/// (they keep their answers at recent cuts), as [`at_fresh_cut`] does.
+async fn pushed_at_fresh_cut(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+    memory: &Memory,
+    pushes: &Arc<Pushes>,
+    at: At,
+) -> Result<Collected, GatherError> {
+    let tag = fresh_tag();
+    let mut waiting = pushes.wait_for(tag);
+    let cut_parameters = cut_parameters(tag, at, Share::Sums);
+    let cut = place_cut(session, keys, &cut_parameters, timeout, memory).await?;
+    let mut pushed = Partials::new(Some(tag));
+    let until = tokio::time::Instant::now() + PUSH_PATIENCE.min(timeout);
+    while !cut.leaders.iter().all(|l| pushed.answered_by(l)) {
+        match tokio::time::timeout_at(until, waiting.rx.recv()).await {
+            Ok(Some(p)) => pushed.reply(Ok(p.bytes), &p.key, memory),
+            Ok(None) | Err(_) => break,
+        }
+    }
+    drop(waiting);
+    let (parts, errors) = pushed.into_parts();
+    let all = errors.is_empty() && cut.leaders.iter().all(|l| parts.contains_key(l));
+    memory.note_cut(all);
+    if all {
+        return check(cut, parts, errors, timeout, memory);
+    }
+    tracing::debug!(
+        tag,
+        pushed = parts.len(),
+        leaders = cut.leaders.len(),
+        "not every leader pushed: asking"
+    );
+    let (parts, errors) = partials(
+        session,
+        keys,
+        Some(tag),
+        Share::Sums,
+        memory.base(),
+        timeout,
+        memory,
+    )
+    .await?;
     check(cut, parts, errors, timeout, memory)
 }
 

@@ -125,6 +125,8 @@ pub struct Memory {
     rejected: AtomicU64,
     bad_replies: AtomicU64,
     degraded: AtomicU64,
+    cuts_pushed: AtomicU64,
+    cuts_asked: AtomicU64,
 }
 
 impl Memory {
@@ -145,11 +147,24 @@ impl Memory {
         self.degraded.fetch_add(1, Ordering::Relaxed);
     }
 
+    /// Counts a fresh cut whose sums every leader pushed (`true`), or one
+    /// whose leaders had to be asked.
+    pub fn note_cut(&self, pushed: bool) {
+        let counter = if pushed {
+            &self.cuts_pushed
+        } else {
+            &self.cuts_asked
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+
     pub fn stats(&self) -> CoordinatorStats {
         CoordinatorStats {
             rejected: self.rejected.load(Ordering::Relaxed),
             bad_replies: self.bad_replies.load(Ordering::Relaxed),
             degraded: self.degraded.load(Ordering::Relaxed),
+            cuts_pushed: self.cuts_pushed.load(Ordering::Relaxed),
+            cuts_asked: self.cuts_asked.load(Ordering::Relaxed),
         }
     }
 
@@ -209,6 +224,21 @@ impl Memory {
             bases.pop_front();
         }
         bases.push_back((tag, components));
+    }
+
+    /// Keeps the components kept at tag `kept` as those of the answer at
+    /// the cut tagged `tag` too (nothing changed between the two).
+    fn keep_again(&self, kept: u64, tag: u64) {
+        let components = {
+            let bases = self.bases.lock().unwrap_or_else(|e| e.into_inner());
+            bases
+                .iter()
+                .find(|(t, _)| *t == kept)
+                .map(|(_, c)| c.clone())
+        };
+        if let Some(components) = components {
+            self.keep(tag, components);
+        }
     }
 
     /// Leader `p.leader`'s components whole: as sent, or its kept answer
@@ -347,6 +377,11 @@ impl Partials {
     /// How many leaders answered with sums.
     pub fn answered(&self) -> usize {
         self.parts.len()
+    }
+
+    /// Whether `leader` answered with sums.
+    pub fn answered_by(&self, leader: &str) -> bool {
+        self.parts.contains_key(leader)
     }
 
     /// The sums by leader, and the error replies.
@@ -507,10 +542,17 @@ fn factored_marginals_of(
     let mut kept = memory.coupling.lock().unwrap_or_else(|e| e.into_inner());
     // Every leader says nothing changed since the answer whose parts the
     // tree holds (a deployment at rest, asked again): that answer stands.
+    // At a fresh cut it is this cut's answer too, kept under its tag:
+    // leaders that push their answers tell the next one as a change to it.
+    let tag = collected.parts.first().map(|p| p.tag).filter(|&t| t != 0);
     if let Some(last) = kept
-        .as_ref()
+        .as_mut()
         .and_then(|k| k.unchanged(&field, &collected.parts))
     {
+        if let Some(tag) = tag {
+            memory.keep_again(last.tag, tag);
+            last.tag = tag;
+        }
         return Ok((last.p_red.clone(), last.predicted_red.clone(), coefficients));
     }
     let coupled = match &mut *kept {
@@ -537,7 +579,7 @@ fn factored_marginals_of(
     let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
     // An answer at a fresh cut (tag ≠ 0; at rest the leaders answer with
     // tag 0) is what later queries name as their base.
-    if let Some(tag) = collected.parts.first().map(|p| p.tag).filter(|&t| t != 0) {
+    if let Some(tag) = tag {
         coupled.last = Some(LastCoupled {
             tag,
             p_red: p_red.clone(),
@@ -567,8 +609,8 @@ struct LastCoupled {
 
 impl Coupled {
     /// The last answer, if `parts` are all told as no change since it.
-    fn unchanged(&self, field: &Field, parts: &[Partial]) -> Option<&LastCoupled> {
-        let last = self.last.as_ref()?;
+    fn unchanged(&mut self, field: &Field, parts: &[Partial]) -> Option<&mut LastCoupled> {
+        let last = self.last.as_mut()?;
         let same = self.tree.field() == field
             && parts.iter().all(|p| {
                 p.base == Some(last.tag)

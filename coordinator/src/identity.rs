@@ -94,6 +94,7 @@ pub async fn identity(
         &config.keys,
         config.timeout,
         memory,
+        None,
         at,
         Share::Rows,
     )

@@ -2,17 +2,21 @@
 //!
 //! Nothing is pushed to the coordinator between queries (like the lazy
 //! information matrix of the identity paper). A query asks the sensor
-//! gateway for a cut of the event stream, then every leader for its partial
-//! sums at that cut (Σ m, Σ m·W(|α|+1)/W(|α|) and per track the part of
-//! P(t red)·Z that its sets fix — never the sets), adds them, normalizes and
-//! answers in JSON, with the cut's watermark. A leader that does not answer
-//! in time makes the query fail, naming it.
+//! gateway for a cut of the event stream; every leader's partial sums at
+//! that cut (Σ m, Σ m·W(|α|+1)/W(|α|) and per track the part of P(t red)·Z
+//! that its sets fix — never the sets — or, factored, its components'
+//! count vectors) are put by the leader when the cut reaches it, or asked
+//! for; the coordinator adds them, normalizes and answers in JSON, with the
+//! cut's watermark. A leader that does not answer in time makes the query
+//! fail, naming it.
 //!
 //! A map of the crate:
 //! - [`gathering`] — pure: the replies to one query, whether they make a
 //!   complete answer at one consistent cut, and the marginals they add
 //!   up to.
 //! - [`gather`] — the Zenoh gets that collect those replies.
+//! - [`pushed`] — the leaders' answers put at the cuts they reach, handed
+//!   to the query waiting for each.
 //! - [`identity`] — identity marginals from the leaders' rows of the
 //!   information matrix, computed only when asked.
 //! - [`request`] — a query's key and parameters, checked before any work.
@@ -22,6 +26,7 @@ pub mod actor;
 pub mod gather;
 pub mod gathering;
 pub mod identity;
+pub mod pushed;
 pub mod request;
 
 pub use gather::{GatherError, Gathered};

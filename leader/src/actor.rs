@@ -53,6 +53,9 @@ pub struct LeaderConfig {
     /// made for a peer) is not put, as if the link lost it (a TLS link
     /// that closes and reopens does).
     pub drop_transfer_every: Option<u64>,
+    /// Tests only: every n-th answer pushed at a cut is not put (the
+    /// coordinator asks for it instead).
+    pub drop_push_every: Option<u64>,
     /// The sensor streams under a window ([`Timers::flow_control`]).
     pub flow_control: bool,
 }
@@ -149,6 +152,7 @@ pub async fn run(
         next_id: 0,
         reply_tx: &reply_tx,
         transfers_put: 0,
+        pushes: 0,
     };
     driver.carry_out(&mut node, first, started).await;
     let mut sweep = tokio::time::interval(node.timers().sweep);
@@ -247,6 +251,8 @@ struct Driver<'a> {
     reply_tx: &'a mpsc::UnboundedSender<Reply>,
     /// Transfer messages put so far (for the injected losses).
     transfers_put: u64,
+    /// Answers pushed at cuts (put or, as a fault, lost).
+    pushes: u64,
 }
 
 impl Driver<'_> {
@@ -323,6 +329,29 @@ impl Driver<'_> {
                             .and_then(|bytes| transfers_of(&bytes));
                         let _ = tx.send(Input::Transfers { peer, result });
                     });
+                }
+                Output::Push(partial) => {
+                    self.pushes += 1;
+                    if self
+                        .config
+                        .drop_push_every
+                        .is_some_and(|n| n > 0 && self.pushes.is_multiple_of(n))
+                    {
+                        tracing::info!(leader = %name, tag = partial.tag, "fault injected: pushed answer lost");
+                        continue;
+                    }
+                    let key = keys.leader_pushed(name, partial.tag);
+                    // Express: a query waits for it. Dropped rather than
+                    // waited on when the link is full: the coordinator
+                    // then asks.
+                    let put = self
+                        .session
+                        .put(key, encode(&*partial))
+                        .express(true)
+                        .congestion_control(CongestionControl::Drop);
+                    if let Err(e) = put.await {
+                        tracing::debug!(leader = %name, error = %e, "a pushed answer was lost");
+                    }
                 }
                 Output::Answer { id, answer } => {
                     let Some(query) = self.queries.remove(&id) else {

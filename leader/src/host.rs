@@ -71,6 +71,8 @@ pub struct HostConfig {
     pub takeover_after: Option<Duration>,
     /// Tests only: every n-th transfer put is lost on purpose.
     pub drop_transfer_every: Option<u64>,
+    /// Tests only: every n-th answer pushed at a cut is lost on purpose.
+    pub drop_push_every: Option<u64>,
     /// The sensor streams under a window: leaders mark their progress
     /// after every input (else at their sweeps only).
     pub flow_control: bool,
@@ -92,6 +94,7 @@ impl HostConfig {
             }),
             snapshot_every: self.snapshot_every,
             drop_transfer_every: self.drop_transfer_every,
+            drop_push_every: self.drop_push_every,
             flow_control: self.flow_control,
         }
     }

@@ -536,6 +536,14 @@ impl Deployment {
         stats[0]["sensors"].as_array().expect("sensors").clone()
     }
 
+    /// The coordinator's counter `field` (`idmesh query stats`).
+    pub fn coordinator_counter(&self, field: &str) -> u64 {
+        let stats = self.query(&["stats"]).expect("stats answer");
+        stats[0]["coordinator"][field]
+            .as_u64()
+            .unwrap_or_else(|| panic!("{field} in {}", stats[0]["coordinator"]))
+    }
+
     /// Every leader's counters (`idmesh query stats`).
     pub fn leader_stats(&self) -> Vec<Value> {
         let stats = self.query(&["stats"]).expect("stats answer");

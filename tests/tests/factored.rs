@@ -303,3 +303,44 @@ fn regional_leaders_equal_the_centralized_regional_rule_through_2_4_8_leaders() 
         eprintln!("{what}: {handovers} handover items, {moved} components moved");
     }
 }
+
+/// Leaders push their sums at each fresh cut and the coordinator answers
+/// from the pushes; with every second push lost on purpose, the queries
+/// that miss one ask the leaders instead, and every answer is still the
+/// centralized engine's to 1e-9.
+#[test]
+fn answers_pushed_at_a_cut_or_lost_and_asked_for_change_no_answer() {
+    let dir = std::env::temp_dir().join(format!("idmesh-factored-pushed-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 7);
+    let central = central(&trace);
+    let truths = truth_lines(&trace);
+    for (name, faults) in [
+        ("pushed", None),
+        ("pushes-lost", Some("drop_push_every = 2")),
+    ] {
+        let settings = Settings {
+            leader_faults: faults.map(str::to_string),
+            ..settings(4, false)
+        };
+        let deployment = Deployment::start(name, &trace, &settings);
+        deployment.first_answer(Duration::from_secs(30));
+        check_points(name, &deployment, &truths, &central);
+        let (pushed, asked) = (
+            deployment.coordinator_counter("cuts_pushed"),
+            deployment.coordinator_counter("cuts_asked"),
+        );
+        eprintln!("{name}: {pushed} cuts answered from pushes, {asked} asked for");
+        match faults {
+            None => assert!(
+                pushed > 0 && asked * 10 <= pushed,
+                "{name}: {pushed} pushed, {asked} asked\n{}",
+                deployment.log()
+            ),
+            Some(_) => assert!(
+                asked > 0,
+                "{name}: {pushed} pushed, {asked} asked\n{}",
+                deployment.log()
+            ),
+        }
+    }
+}

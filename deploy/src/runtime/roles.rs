@@ -100,6 +100,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                             takeover_after: (topology.takeover_after_ms > 0)
                                 .then(|| Duration::from_millis(topology.takeover_after_ms)),
                             drop_transfer_every: topology.leader_faults.drop_transfer_every,
+                            drop_push_every: topology.leader_faults.drop_push_every,
                             flow_control: sensor.window.is_some(),
                         },
                         shutdown(),

@@ -54,6 +54,7 @@
 //! # drop_every = 7               # every 7th batch to a leader not published
 //! # [leader_faults]              # tests only: a link that loses transfers
 //! # drop_transfer_every = 5      # every 5th transfer message a leader puts, lost
+//! # drop_push_every = 2          # every 2nd answer pushed at a cut, lost
 //!
 //! [[leader]]
 //! name = "leader-0"
@@ -269,6 +270,9 @@ pub struct LeaderFaultSection {
     /// Every n-th transfer message a leader puts (the transfers one input
     /// made for one peer) is not put.
     pub drop_transfer_every: Option<u64>,
+    /// Every n-th answer a leader pushes at a cut is not put (the
+    /// coordinator then asks for it).
+    pub drop_push_every: Option<u64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

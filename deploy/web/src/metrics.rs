@@ -212,6 +212,16 @@ impl Collector for Snapshot {
                 "queries answered degraded (a leader missing or not at the cut)",
                 stats.coordinator.degraded,
             ),
+            (
+                "coordinator_cuts_pushed",
+                "fresh cuts whose every leader pushed its sums on reaching them",
+                stats.coordinator.cuts_pushed,
+            ),
+            (
+                "coordinator_cuts_asked",
+                "fresh cuts whose leaders were asked, a push not having come in time",
+                stats.coordinator.cuts_asked,
+            ),
         ] {
             let counter = ConstCounter::new(value);
             let family = encoder.encode_descriptor(name, help, None, counter.metric_type())?;
@@ -327,6 +337,7 @@ mod tests {
                 rejected: 3,
                 bad_replies: 0,
                 degraded: 5,
+                ..CoordinatorStats::default()
             },
         };
         let snapshot = Snapshot {

@@ -164,6 +164,13 @@ pub enum Output {
         peer: String,
         wanted: TransfersWanted,
     },
+    /// This leader's partial sums at the cut it has just reached, put
+    /// unasked for the coordinator that placed it (`P/leader/L/pushed/T`):
+    /// told as a change to its answer at the cut before (`base`), which
+    /// that coordinator usually keeps. A push lost, or one the coordinator
+    /// cannot use, costs only the get it then makes, which the answers
+    /// kept at recent cuts serve.
+    Push(Arc<Partial>),
     /// The answer to [`Input::Partial`] `id`.
     Answer {
         id: u64,
@@ -228,6 +235,9 @@ pub struct Node {
     published: Option<Durable>,
     /// The progress mark last published.
     progressed: u64,
+    /// The tag of the cut whose answer this leader last pushed: the next
+    /// push is told as a change to it.
+    pushed: Option<u64>,
     /// Inputs journaled since the last snapshot.
     journaled: usize,
 }
@@ -249,6 +259,7 @@ impl Node {
             components_since: None,
             published: None,
             progressed: 0,
+            pushed: None,
             journaled: 0,
         }
     }
@@ -420,6 +431,11 @@ impl Node {
                             id: h.id,
                             answer: Ok(self.told(&partial, h.base)),
                         });
+                    }
+                    // Identity queries ask for rows: they keep asking.
+                    if partial.sums.rows.is_empty() {
+                        out.push(Output::Push(self.told(&partial, self.pushed)));
+                        self.pushed = Some(partial.tag());
                     }
                 }
             }

@@ -755,3 +755,50 @@ fn without_flow_control_progress_is_published_at_the_sweep_only() {
     let out = node.step(300 * MS, Input::Tick);
     assert_eq!(progress(&out), vec![(5, 2)], "at the sweep");
 }
+
+/// Every cut a leader reaches, it pushes its sums at unasked: whole at the
+/// first, then as a change to the cut it pushed before (on a factored
+/// stream, only the components changed since); a held query at the same
+/// cut is still answered.
+#[test]
+fn a_leader_pushes_its_sums_at_every_cut_as_a_change_to_the_last_pushed() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let Item::Begin(mut start) = begin(&["a"]) else {
+        unreachable!()
+    };
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+        shrink: false,
+        regional: false,
+    });
+    let mut node = Node::new(Leader::new("a"), timers());
+    node.step(Duration::ZERO, batch(0, vec![(1, Item::Begin(start))], 1));
+    let pushed = |out: &[Output]| -> Vec<Partial> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Push(p) => Some((**p).clone()),
+                _ => None,
+            })
+            .collect()
+    };
+    let out = node.step(MS, batch(1, vec![(2, cut(7))], 2));
+    let first = pushed(&out);
+    assert_eq!(first.len(), 1, "{out:?}");
+    assert_eq!((first[0].tag, first[0].cut, first[0].base), (7, 2, None));
+    assert_eq!(first[0].components.as_ref().map(Vec::len), Some(4));
+    let held = Input::Partial {
+        id: 1,
+        ask: Ask::Cut(9),
+        base: None,
+    };
+    assert!(node.step(2 * MS, held).is_empty());
+    let out = node.step(3 * MS, batch(2, vec![(3, mix(0, 2, 0, 0)), (4, cut(9))], 4));
+    let second = pushed(&out);
+    assert_eq!(second.len(), 1, "{out:?}");
+    assert_eq!((second[0].tag, second[0].base), (9, Some(7)));
+    let changed = second[0].components.as_ref().expect("factored");
+    assert_eq!(changed.len(), 1, "only the merged component: {changed:?}");
+    assert_eq!(changed[0].tracks, vec![0, 2]);
+    assert_eq!(answers(&out).len(), 1, "the held query answered too");
+}

@@ -60,6 +60,17 @@ impl Keys {
         format!("{}/leader/*/partial", self.prefix)
     }
 
+    /// Where a leader puts its partial sums at the cut tagged `tag` as
+    /// soon as it reaches it, unasked: the coordinator that placed the cut
+    /// takes them from here rather than asking (see `Partial`).
+    pub fn leader_pushed(&self, leader: &str, tag: u64) -> String {
+        format!("{}/leader/{leader}/pushed/{tag}", self.prefix)
+    }
+
+    pub fn every_leader_pushed(&self) -> String {
+        format!("{}/leader/*/pushed/*", self.prefix)
+    }
+
     pub fn leader_stats(&self, leader: &str) -> String {
         format!("{}/leader/{leader}/stats", self.prefix)
     }

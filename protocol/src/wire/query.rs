@@ -109,7 +109,8 @@ pub struct StatsAnswer {
     pub coordinator: CoordinatorStats,
 }
 
-/// The coordinator's counters of bad input.
+/// The coordinator's counters: of bad input, and of how fresh cuts' sums
+/// came.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct CoordinatorStats {
     /// Queries refused before any work: a malformed, repeated or unknown
@@ -123,6 +124,13 @@ pub struct CoordinatorStats {
     /// not at the cut (never numbers without its share).
     #[serde(default)]
     pub degraded: u64,
+    /// Fresh cuts whose every leader pushed its sums on reaching them.
+    #[serde(default)]
+    pub cuts_pushed: u64,
+    /// Fresh cuts where a push did not come in time (lost, or a leader far
+    /// behind) and every leader was asked instead.
+    #[serde(default)]
+    pub cuts_asked: u64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -171,6 +171,20 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
             vec![keys.alive_role("leader"), keys.alive_role("home")],
         ),
         grant(
+            "pushed",
+            &leaders,
+            &coordinator,
+            &["put"],
+            vec![keys.every_leader_pushed()],
+        ),
+        grant(
+            "pushed-subscriber",
+            &coordinator,
+            &leaders,
+            &["declare_subscriber"],
+            vec![keys.every_leader_pushed()],
+        ),
+        grant(
             "partials",
             &coordinator,
             &leaders,
@@ -437,6 +451,16 @@ producers = ["camera"]
         assert!(allowed(&l0, "egress", "c", "reply", "p/leader/l0/partial"));
         // The coordinator asks every leader at once; the reply has its key.
         assert!(allowed(&l0, "egress", "c", "reply", "p/leader/*/partial"));
+        // Answers pushed at a cut go to the coordinator, and only there.
+        assert!(allowed(&l0, "egress", "c", "put", "p/leader/*/pushed/*"));
+        assert!(!allowed(&l0, "egress", "l1", "put", "p/leader/*/pushed/*"));
+        assert!(allowed(
+            &access_control(&t, "c"),
+            "ingress",
+            "l0",
+            "put",
+            "p/leader/*/pushed/*"
+        ));
         assert!(allowed(
             &access_control(&t, "c"),
             "ingress",
