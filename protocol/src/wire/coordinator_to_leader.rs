@@ -32,7 +32,8 @@ pub struct Partial {
     /// Radon stream.
     pub components: Option<Vec<WireCounts>>,
     /// A factored answer told as a change to this leader's answer at the
-    /// cut tagged `base`, which the coordinator said it keeps (`;base=`):
+    /// cut tagged `base`, which the coordinator said it keeps (`;base=`),
+    /// or, in an answer pushed at a cut, the cut this leader pushed at before:
     /// `components` are then only those not in that answer as they are
     /// now, and `gone` the first tracks of that answer's components that
     /// are no longer held here as they were. Between two queries a few
