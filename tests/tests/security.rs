@@ -389,6 +389,11 @@ fn with_access_control_only_listed_identities_are_heard() {
     let sensors = stats[0]["sensors"].as_array().expect("sensors");
     assert_eq!(sensors.len(), 1, "the sensor's counters: {stats:?}");
     assert_eq!(sensors[0]["sensor"], "sensor-0");
+    // The leaders' sums pushed at each fresh cut reach the coordinator
+    // under the rules: no cut had to be asked for instead.
+    let cuts = &stats[0]["coordinator"];
+    eprintln!("under access control: {cuts}");
+    assert_eq!(cuts["cuts_asked"], 0, "pushes blocked: {cuts}");
     let prefix = deployment.prefix.clone();
     within(Duration::from_secs(60), async {
         let intruder = session(&certs, INTRUDER, false, &endpoints(&deployment))
