@@ -154,16 +154,17 @@ async fn pushed_at_fresh_cut(
     let cut = place_cut(session, keys, &cut_parameters, timeout, memory).await?;
     let mut pushed = Partials::new(Some(tag));
     let until = tokio::time::Instant::now() + PUSH_PATIENCE.min(timeout);
-    while !cut.leaders.iter().all(|l| pushed.answered_by(l)) {
+    // A bad push sends the query the asking way at once.
+    while !pushed.complete(&cut.leaders) && !pushed.refused_any() {
         match tokio::time::timeout_at(until, waiting.rx.recv()).await {
             Ok(Some(p)) => pushed.reply(Ok(p.bytes), &p.key, memory),
             Ok(None) | Err(_) => break,
         }
     }
     drop(waiting);
-    let (parts, errors) = pushed.into_parts();
-    let all = errors.is_empty() && cut.leaders.iter().all(|l| parts.contains_key(l));
+    let all = pushed.complete(&cut.leaders);
     memory.note_cut(all);
+    let (parts, errors) = pushed.into_parts();
     if all {
         return check(cut, parts, errors, timeout, memory);
     }

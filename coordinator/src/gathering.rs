@@ -379,9 +379,15 @@ impl Partials {
         self.parts.len()
     }
 
-    /// Whether `leader` answered with sums.
-    pub fn answered_by(&self, leader: &str) -> bool {
-        self.parts.contains_key(leader)
+    /// Whether every one of `leaders` answered with sums and no reply
+    /// was an error or bad.
+    pub fn complete(&self, leaders: &[String]) -> bool {
+        self.errors.is_empty() && leaders.iter().all(|l| self.parts.contains_key(l))
+    }
+
+    /// Whether a reply was an error or bad.
+    pub fn refused_any(&self) -> bool {
+        !self.errors.is_empty()
     }
 
     /// The sums by leader, and the error replies.

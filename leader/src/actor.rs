@@ -255,6 +255,12 @@ struct Driver<'a> {
     pushes: u64,
 }
 
+/// Tests only: whether the `count`-th message of a kind is lost on
+/// purpose, every `every`-th being lost.
+fn lost_on_purpose(every: Option<u64>, count: u64) -> bool {
+    every.is_some_and(|n| n > 0 && count.is_multiple_of(n))
+}
+
 impl Driver<'_> {
     /// Keeps `query` until the node answers it; returns its id.
     fn hold(&mut self, query: Query) -> u64 {
@@ -279,11 +285,7 @@ impl Driver<'_> {
                 }
                 Output::Send { to, seqs, body } => {
                     self.transfers_put += 1;
-                    if self
-                        .config
-                        .drop_transfer_every
-                        .is_some_and(|n| n > 0 && self.transfers_put.is_multiple_of(n))
-                    {
+                    if lost_on_purpose(self.config.drop_transfer_every, self.transfers_put) {
                         tracing::info!(leader = %name, %to, ?seqs, "fault injected: transfers lost");
                         continue;
                     }
@@ -332,11 +334,7 @@ impl Driver<'_> {
                 }
                 Output::Push(partial) => {
                     self.pushes += 1;
-                    if self
-                        .config
-                        .drop_push_every
-                        .is_some_and(|n| n > 0 && self.pushes.is_multiple_of(n))
-                    {
+                    if lost_on_purpose(self.config.drop_push_every, self.pushes) {
                         tracing::info!(leader = %name, tag = partial.tag, "fault injected: pushed answer lost");
                         continue;
                     }
