@@ -24,6 +24,7 @@ use std::collections::HashMap;
 use std::future::Future;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
+use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::query::{ConsolidationMode, Query, QueryTarget};
 use zenoh::Session;
@@ -153,6 +154,7 @@ pub async fn run(
         reply_tx: &reply_tx,
         transfers_put: 0,
         pushes: 0,
+        publishers: HashMap::new(),
     };
     driver.carry_out(&mut node, first, started).await;
     let mut sweep = tokio::time::interval(node.timers().sweep);
@@ -253,6 +255,12 @@ struct Driver<'a> {
     transfers_put: u64,
     /// Answers pushed at cuts (put or, as a fault, lost).
     pushes: u64,
+    /// The publishers of the keys this leader puts on again and again (its
+    /// peers' transfers, its progress), declared at their first put: a
+    /// declared key travels as a number and its routes are kept, where a
+    /// plain put resolves its key's matches every time (in a profile of
+    /// four leaders on the 10,000-target crowd, 3% of their CPU).
+    publishers: HashMap<String, Publisher<'static>>,
 }
 
 /// Tests only: whether the `count`-th message of a kind is lost on
@@ -290,12 +298,12 @@ impl Driver<'_> {
                         continue;
                     }
                     tracing::trace!(leader = %name, %to, ?seqs, "put transfers");
-                    if let Err(e) = self
-                        .session
-                        .put(keys.leader_transfer(&to), body)
-                        .congestion_control(CongestionControl::Block)
-                        .await
-                    {
+                    let key = keys.leader_transfer(&to);
+                    let put = match self.publisher(key, CongestionControl::Block).await {
+                        Ok(publisher) => publisher.put(body).await,
+                        Err(e) => Err(e),
+                    };
+                    if let Err(e) = put {
                         tracing::warn!(leader = %name, error = %e, "could not send sets to {to}");
                     }
                 }
@@ -399,11 +407,12 @@ impl Driver<'_> {
                 Output::Progress(progress) => {
                     tracing::trace!(leader = %name, through = progress.through, "put progress");
                     // Lost, it is published again at the next sweep.
-                    let put = self
-                        .session
-                        .put(keys.leader_progress(name), encode(&progress))
-                        .congestion_control(CongestionControl::Drop);
-                    if let Err(e) = put.await {
+                    let key = keys.leader_progress(name);
+                    let put = match self.publisher(key, CongestionControl::Drop).await {
+                        Ok(publisher) => publisher.put(encode(&progress)).await,
+                        Err(e) => Err(e),
+                    };
+                    if let Err(e) = put {
                         tracing::debug!(leader = %name, error = %e, "a progress mark was lost");
                     }
                 }
@@ -428,6 +437,23 @@ impl Driver<'_> {
             // A failed node asks for nothing more than answers.
             Box::pin(self.carry_out(node, more, started)).await;
         }
+    }
+
+    /// The publisher of `key`, declared at its first use.
+    async fn publisher(
+        &mut self,
+        key: String,
+        congestion: CongestionControl,
+    ) -> zenoh::Result<&Publisher<'static>> {
+        if !self.publishers.contains_key(&key) {
+            let publisher = self
+                .session
+                .declare_publisher(key.clone())
+                .congestion_control(congestion)
+                .await?;
+            self.publishers.insert(key.clone(), publisher);
+        }
+        Ok(&self.publishers[&key])
     }
 
     /// Makes one get in its own task; its answer comes back to the
