@@ -118,7 +118,7 @@ pub struct Memory {
     /// again gives the very same answer, and encoding 10,000 marginals
     /// costs more than gathering what changed. Shared bytes, so that a
     /// reply hands them to Zenoh without copying 200 kB.
-    encoded: Mutex<Option<(MarginalsAnswer, Bytes)>>,
+    encoded: Mutex<Option<Encoded>>,
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
@@ -169,13 +169,32 @@ impl Memory {
     }
 
     /// `answer` as JSON: the bytes kept from the last answer if it is the
-    /// same (compared whole), else encoded now and kept (with the answer,
-    /// which is taken rather than copied).
+    /// same (compared whole); if only the watermark moved (a stream asked
+    /// at every cut, where most cuts change no component), the new
+    /// watermark before the kept bytes of everything else; else encoded
+    /// now. Kept with the answer, which is taken rather than copied.
     pub fn marginals_json(&self, answer: MarginalsAnswer) -> Bytes {
         let mut encoded = self.encoded.lock().unwrap_or_else(|e| e.into_inner());
         let size = match &*encoded {
-            Some((last, bytes)) if *last == answer => return bytes.clone(),
-            Some((_, bytes)) => bytes.len(),
+            Some(last) if last.answer == answer => return last.bytes.clone(),
+            Some(last) if last.after_watermark > 0 && same_but_watermark(&last.answer, &answer) => {
+                let rest = &last.bytes[last.after_watermark..];
+                let mut json = Vec::with_capacity(last.bytes.len() + 16);
+                json.extend_from_slice(WATERMARK_OPENS);
+                if serde_json::to_writer(&mut json, &answer.watermark).is_ok() {
+                    let after_watermark = json.len();
+                    json.extend_from_slice(rest);
+                    let bytes = Bytes::from(json);
+                    *encoded = Some(Encoded {
+                        answer,
+                        bytes: bytes.clone(),
+                        after_watermark,
+                    });
+                    return bytes;
+                }
+                last.bytes.len()
+            }
+            Some(last) => last.bytes.len(),
             None => 0,
         };
         // About as long as the last: no regrowing of a 200 kB buffer.
@@ -183,8 +202,22 @@ impl Memory {
         if serde_json::to_writer(&mut json, &answer).is_err() {
             json.clear();
         }
+        // Where the watermark ends: the answer opens with it (the order of
+        // `MarginalsAnswer`'s fields), and serde_json writes a map the
+        // same alone as inside the answer.
+        let after_watermark =
+            serde_json::to_vec(&answer.watermark).map_or(0, |w| WATERMARK_OPENS.len() + w.len());
+        let after_watermark = if json.starts_with(WATERMARK_OPENS) {
+            after_watermark
+        } else {
+            0
+        };
         let bytes = Bytes::from(json);
-        *encoded = Some((answer, bytes.clone()));
+        *encoded = Some(Encoded {
+            answer,
+            bytes: bytes.clone(),
+            after_watermark,
+        });
         bytes
     }
 
@@ -492,6 +525,39 @@ pub fn check(
 /// which a mention of a peer ("waits for sets from leader-1") does not.
 fn names(error: &str, leader: &str) -> bool {
     error.contains(&format!("leader {leader} "))
+}
+
+/// The last marginals answer given, its JSON, and where in the JSON its
+/// watermark ends.
+#[derive(Debug)]
+struct Encoded {
+    answer: MarginalsAnswer,
+    bytes: Bytes,
+    after_watermark: usize,
+}
+
+/// How a marginals answer's JSON opens: its first field is the watermark.
+const WATERMARK_OPENS: &[u8] = b"{\"watermark\":";
+
+/// Whether two answers differ at most in their watermarks.
+fn same_but_watermark(a: &MarginalsAnswer, b: &MarginalsAnswer) -> bool {
+    let MarginalsAnswer {
+        watermark: _,
+        tracks,
+        red,
+        p_red,
+        predicted_red,
+        leaders,
+        coefficients,
+        finished,
+    } = a;
+    *tracks == b.tracks
+        && *red == b.red
+        && *leaders == b.leaders
+        && *coefficients == b.coefficients
+        && *finished == b.finished
+        && *predicted_red == b.predicted_red
+        && *p_red == b.p_red
 }
 
 /// The property marginals the leaders' shares at one cut add up to.

@@ -417,6 +417,44 @@ fn the_json_of_an_unchanged_answer_is_kept_and_a_changed_one_encoded_anew() {
     );
 }
 
+/// A stream asked at every cut: most answers differ from the last in the
+/// watermark alone, and their JSON is the kept bytes behind a new
+/// watermark — byte for byte what encoding the whole answer gives, through
+/// watermarks that grow, gain sensors, and answers that change between.
+#[test]
+fn an_answer_that_moved_only_its_watermark_is_the_same_json_as_encoded_whole() {
+    let memory = Memory::default();
+    let mut answer = MarginalsAnswer {
+        watermark: [("sensor-0".to_string(), 7)].into_iter().collect(),
+        tracks: 4,
+        red: Some(2),
+        p_red: vec![0.5, 0.25, 0.75, 0.5],
+        predicted_red: vec![0, 2],
+        leaders: 2,
+        coefficients: 8,
+        finished: false,
+    };
+    for step in 0..40u64 {
+        answer.watermark.insert("sensor-0".into(), 7 + step * 997);
+        if step == 10 {
+            answer.watermark.insert("sensor-1 \"quoted\"".into(), 3);
+        }
+        if step % 7 == 3 {
+            answer.p_red[1] += 1e-3;
+        }
+        if step % 11 == 5 {
+            answer.predicted_red = vec![1, 2];
+        }
+        answer.finished = step == 39;
+        let json = memory.marginals_json(answer.clone());
+        assert_eq!(
+            &json[..],
+            &serde_json::to_vec(&answer).unwrap()[..],
+            "step {step}"
+        );
+    }
+}
+
 /// Changes that would leave a track in two components, or in none, are
 /// refused by name, and the next answer is as if they had never come.
 #[test]
