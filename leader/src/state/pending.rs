@@ -18,8 +18,9 @@
 //! tracks it can bring) and goes on. Items are still applied strictly in
 //! seq order; only the arrival of the components moves later. That
 //! changes no answer, because they take part in nothing until then:
-//! - an item that touches a pending track, and a cut (an answer holds
-//!   everything up to it), wait until every pending transfer has come;
+//! - an item that touches a pending track waits until the transfers
+//!   bringing its tracks have come, and a cut (an answer holds everything
+//!   up to it) until every pending transfer has;
 //! - every component a leader holds lies in its region, and the old
 //!   holder splits a track off before it goes, so what comes is what the
 //!   pending entry names (checked when it comes: anything else is refused
@@ -97,7 +98,8 @@ impl Leader {
         Ok(())
     }
 
-    /// Whether `item` must wait until every pending transfer has come.
+    /// Whether `item` must wait for a pending transfer: one bringing a track
+    /// it touches, or, for a cut, a beginning or an identity read, any.
     pub(super) fn needs_pending(&self, item: &Item) -> bool {
         let touches = |t: u32| self.pending.iter().any(|p| p.tracks.contains(&t));
         match item {
