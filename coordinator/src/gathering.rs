@@ -204,13 +204,15 @@ impl Memory {
         }
         // Where the watermark ends: the answer opens with it (the order of
         // `MarginalsAnswer`'s fields), and serde_json writes a map the
-        // same alone as inside the answer.
-        let after_watermark =
-            serde_json::to_vec(&answer.watermark).map_or(0, |w| WATERMARK_OPENS.len() + w.len());
-        let after_watermark = if json.starts_with(WATERMARK_OPENS) {
-            after_watermark
-        } else {
-            0
+        // same alone as inside the answer; the next field follows a comma.
+        // 0: not known, the next answer is encoded whole.
+        let after_watermark = match serde_json::to_vec(&answer.watermark) {
+            Ok(w) if json.starts_with(WATERMARK_OPENS) => WATERMARK_OPENS.len() + w.len(),
+            _ => 0,
+        };
+        let after_watermark = match json.get(after_watermark) {
+            Some(b',') => after_watermark,
+            _ => 0,
         };
         let bytes = Bytes::from(json);
         *encoded = Some(Encoded {

@@ -20,6 +20,7 @@ use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
 use idmesh_protocol::wire::leader_to_sensor::Resent;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode};
+use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::future::Future;
 use std::time::{Duration, Instant};
@@ -299,11 +300,7 @@ impl Driver<'_> {
                     }
                     tracing::trace!(leader = %name, %to, ?seqs, "put transfers");
                     let key = keys.leader_transfer(&to);
-                    let put = match self.publisher(key, CongestionControl::Block).await {
-                        Ok(publisher) => publisher.put(body).await,
-                        Err(e) => Err(e),
-                    };
-                    if let Err(e) = put {
+                    if let Err(e) = self.put(key, CongestionControl::Block, body).await {
                         tracing::warn!(leader = %name, error = %e, "could not send sets to {to}");
                     }
                 }
@@ -408,11 +405,8 @@ impl Driver<'_> {
                     tracing::trace!(leader = %name, through = progress.through, "put progress");
                     // Lost, it is published again at the next sweep.
                     let key = keys.leader_progress(name);
-                    let put = match self.publisher(key, CongestionControl::Drop).await {
-                        Ok(publisher) => publisher.put(encode(&progress)).await,
-                        Err(e) => Err(e),
-                    };
-                    if let Err(e) = put {
+                    let put = self.put(key, CongestionControl::Drop, encode(&progress));
+                    if let Err(e) = put.await {
                         tracing::debug!(leader = %name, error = %e, "a progress mark was lost");
                     }
                 }
@@ -439,21 +433,26 @@ impl Driver<'_> {
         }
     }
 
-    /// The publisher of `key`, declared at its first use.
-    async fn publisher(
+    /// Puts `body` on `key` through its publisher, declared (with
+    /// `congestion`) at the key's first put.
+    async fn put(
         &mut self,
         key: String,
         congestion: CongestionControl,
-    ) -> zenoh::Result<&Publisher<'static>> {
-        if !self.publishers.contains_key(&key) {
-            let publisher = self
-                .session
-                .declare_publisher(key.clone())
-                .congestion_control(congestion)
-                .await?;
-            self.publishers.insert(key.clone(), publisher);
-        }
-        Ok(&self.publishers[&key])
+        body: Vec<u8>,
+    ) -> zenoh::Result<()> {
+        let publisher = match self.publishers.entry(key) {
+            Entry::Occupied(held) => held.into_mut(),
+            Entry::Vacant(new) => {
+                let publisher = self
+                    .session
+                    .declare_publisher(new.key().clone())
+                    .congestion_control(congestion)
+                    .await?;
+                new.insert(publisher)
+            }
+        };
+        publisher.put(body).await
     }
 
     /// Makes one get in its own task; its answer comes back to the
