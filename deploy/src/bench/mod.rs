@@ -9,6 +9,7 @@
 //!   the raw Zenoh round trips they are built from, measured in the same
 //!   run: a get to one process and a get fanned out to every leader, both
 //!   answered by the processes' ping queryables, which do no work.
+//! - [`interval`]: how sure the median of the rounds' CPU ratios is.
 //!
 //! - [`sensors`] (with `--ingest`): one, two and three live sensors each
 //!   fed by its own producer at once: events per second acknowledged and
@@ -28,6 +29,7 @@ mod accuracy;
 pub use accuracy::Crowds;
 mod cpu;
 mod ingest;
+mod interval;
 mod latency;
 mod sensors;
 mod throughput;

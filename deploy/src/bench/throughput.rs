@@ -22,6 +22,7 @@
 //! would not be those of the same work. Queries are timed on their own
 //! ([`super::latency`]).
 
+use super::interval::median_interval;
 use super::Deployment;
 use crate::runtime::query::ask;
 use anyhow::{bail, Result};
@@ -340,6 +341,12 @@ impl PairedCpu {
     pub fn median(&self) -> Option<f64> {
         lower_median(self.rounds.clone(), |&r| r)
     }
+
+    /// The interval that holds the ratio's median with 95% confidence
+    /// ([`median_interval`]); None under six rounds.
+    pub fn interval(&self) -> Option<(f64, f64, f64)> {
+        median_interval(&self.rounds)
+    }
 }
 
 /// For every leader count past one, its rounds' CPU ratios against the
@@ -414,7 +421,7 @@ fn goals(streams: &[Stream], paired: &[PairedCpu], out: &mut String) -> Result<(
         out,
         "### Scale-out goals
 
-The busiest leader's items against an even share of what one leader applies alone (its items ÷ L), and the leaders' CPU sum against one leader's (the rows above); the goal is at most {SCALE_OUT_GOAL}× for both. The last column takes the CPU ratio within each round, against the same round's one leader, and gives their median (every round's in brackets).
+The busiest leader's items against an even share of what one leader applies alone (its items ÷ L), and the leaders' CPU sum against one leader's (the rows above); the goal is at most {SCALE_OUT_GOAL}× for both. The last column takes the CPU ratio within each round, against the same round's one leader, and gives their median, the interval that holds the median with 95% confidence whatever the rounds' spread (from six rounds on: order statistics), and every round's ratio.
 "
     )?;
     writeln!(
@@ -431,11 +438,20 @@ The busiest leader's items against an even share of what one leader applies alon
     };
     for r in rows {
         let rounds = paired.iter().find(|p| p.leaders == r.leaders);
-        let by_round = match rounds.and_then(|p| Some((p.median()?, &p.rounds))) {
-            Some((median, all)) => format!(
-                "{median:.2}× ({}; {})",
+        let by_round = match rounds.and_then(|p| Some((p.median()?, p))) {
+            Some((median, p)) => format!(
+                "{median:.2}× ({}; {}{})",
                 mark(median),
-                all.iter()
+                match p.interval() {
+                    Some((low, high, sure)) => format!(
+                        "{:.0}% interval {low:.2}–{high:.2}× over {} rounds; ",
+                        sure * 100.0,
+                        p.rounds.len()
+                    ),
+                    None => String::new(),
+                },
+                p.rounds
+                    .iter()
                     .map(|x| format!("{x:.2}×"))
                     .collect::<Vec<_>>()
                     .join(", ")
@@ -544,6 +560,35 @@ mod tests {
         goals(&streams, &paired, &mut report).unwrap();
         assert!(
             report.contains("1.40× (met; 1.40×, 1.40×, 1.50×)"),
+            "{report}"
+        );
+    }
+
+    /// From six rounds on, the median comes with the interval that holds
+    /// it with 95% confidence: here every round but the extremes.
+    #[test]
+    fn enough_rounds_give_the_median_its_interval() {
+        let ones = [0.5; 9];
+        let fours = [0.8, 0.6, 0.7, 0.75, 0.65, 1.0, 0.72, 0.68, 0.55];
+        let runs = vec![
+            ones.iter().map(|&c| stream(&[9], &[c])).collect::<Vec<_>>(),
+            fours
+                .iter()
+                .map(|&c| stream(&[3, 2, 2, 2], &[c / 4.0; 4]))
+                .collect(),
+        ];
+        let paired = paired_cpu(&runs);
+        let (low, high, sure) = paired[0].interval().expect("nine rounds");
+        assert!(
+            (low - 1.2).abs() < 1e-9 && (high - 1.6).abs() < 1e-9,
+            "{low} {high}"
+        );
+        assert!(sure > 0.95);
+        let mut report = String::new();
+        let streams: Vec<Stream> = runs.into_iter().filter_map(median_by_cpu).collect();
+        goals(&streams, &paired, &mut report).unwrap();
+        assert!(
+            report.contains("1.40× (met; 96% interval 1.20–1.60× over 9 rounds; 1.60×, 1.20×"),
             "{report}"
         );
     }
