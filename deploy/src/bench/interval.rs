@@ -23,13 +23,14 @@ pub fn median_interval(samples: &[f64]) -> Option<(f64, f64, f64)> {
         return None;
     }
     sorted.sort_by(f64::total_cmp);
-    // P(B ≤ j) for j = 0, 1, …, built term by term.
+    // P(B ≤ j) for j = 0, 1, …, built term by term in logarithms: 2⁻ⁿ
+    // alone is 0 in floating point past about a thousand rounds.
     let mut below = Vec::with_capacity(n / 2 + 1);
-    let (mut term, mut sum) = (0.5f64.powi(n as i32), 0.0);
+    let (mut ln_term, mut sum) = (-(n as f64) * std::f64::consts::LN_2, 0.0);
     for j in 0..=n / 2 {
-        sum += term;
+        sum += ln_term.exp();
         below.push(sum);
-        term *= (n - j) as f64 / (j + 1) as f64;
+        ln_term += ((n - j) as f64 / (j + 1) as f64).ln();
     }
     // The largest k whose interval is still sure enough.
     let k = (1..=n / 2)
@@ -85,6 +86,20 @@ mod tests {
         }
         let rate = held as f64 / trials as f64;
         assert!((0.94..=0.99).contains(&rate), "held {rate}");
+    }
+
+    /// Thousands of rounds: the interval narrows to about ±1.96·√n/2
+    /// order statistics around the middle, as the normal law says.
+    #[test]
+    fn many_rounds_give_a_narrow_interval_around_the_middle() {
+        let n = 3000;
+        let samples: Vec<f64> = (0..n).map(f64::from).collect();
+        let (low, high, sure) = median_interval(&samples).unwrap();
+        let half_width = 1.96 * (n as f64).sqrt() / 2.0;
+        let middle = (n as f64 - 1.0) / 2.0;
+        assert!((middle - low - half_width).abs() < 3.0, "{low}");
+        assert!((high - middle - half_width).abs() < 3.0, "{high}");
+        assert!((0.95..0.96).contains(&sure), "{sure}");
     }
 
     #[test]
