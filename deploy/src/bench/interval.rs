@@ -17,11 +17,11 @@ pub const CONFIDENCE: f64 = 0.95;
 /// `(low, high, confidence)`. None for fewer than six samples: even their
 /// smallest and largest hold the median with less (5: 93.75%).
 pub fn median_interval(samples: &[f64]) -> Option<(f64, f64, f64)> {
-    let n = samples.len();
-    let mut sorted: Vec<f64> = samples.iter().copied().filter(|x| x.is_finite()).collect();
-    if sorted.len() != n {
+    if samples.iter().any(|x| !x.is_finite()) {
         return None;
     }
+    let n = samples.len();
+    let mut sorted = samples.to_vec();
     sorted.sort_by(f64::total_cmp);
     // P(B ≤ j) for j = 0, 1, …, built term by term in logarithms: 2⁻ⁿ
     // alone is 0 in floating point past about a thousand rounds.

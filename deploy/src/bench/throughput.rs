@@ -529,6 +529,15 @@ mod tests {
         assert!(scale_out(&runs[1..]).is_none(), "nothing to compare with");
     }
 
+    /// The goals section of a run's rounds, each leader count's row from
+    /// its median stream.
+    fn goals_of(runs: Vec<Vec<Stream>>, paired: &[PairedCpu]) -> String {
+        let mut report = String::new();
+        let streams: Vec<Stream> = runs.into_iter().filter_map(median_by_cpu).collect();
+        goals(&streams, paired, &mut report).unwrap();
+        report
+    }
+
     /// Round by round, each ratio is against the same round's one leader:
     /// a slow round (every stream 1.5× the CPU) reads as fast ones do.
     #[test]
@@ -555,9 +564,7 @@ mod tests {
         let median = paired[0].median().expect("three rounds");
         assert!((median - 1.4).abs() < 1e-12, "{median}");
         assert!(paired_cpu(&runs[1..]).is_empty(), "no one-leader run");
-        let mut report = String::new();
-        let streams: Vec<Stream> = runs.into_iter().filter_map(median_by_cpu).collect();
-        goals(&streams, &paired, &mut report).unwrap();
+        let report = goals_of(runs, &paired);
         assert!(
             report.contains("1.40× (met; 1.40×, 1.40×, 1.50×)"),
             "{report}"
@@ -584,9 +591,7 @@ mod tests {
             "{low} {high}"
         );
         assert!(sure > 0.95);
-        let mut report = String::new();
-        let streams: Vec<Stream> = runs.into_iter().filter_map(median_by_cpu).collect();
-        goals(&streams, &paired, &mut report).unwrap();
+        let report = goals_of(runs, &paired);
         assert!(
             report.contains("1.40× (met; 96% interval 1.20–1.60× over 9 rounds; 1.60×, 1.20×"),
             "{report}"
