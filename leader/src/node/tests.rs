@@ -737,6 +737,33 @@ fn progress_is_published_when_it_moves_and_at_every_sweep() {
     assert_eq!(node.leader().done_through(), 5);
     let out = node.step(300 * MS, Input::Tick);
     assert_eq!(progress(&out), vec![(5, 3)], "said again at the sweep");
+    // A second mix across at 10; b's sets of 6 come: a moves on to 9 and
+    // stops again. Not caught up: nothing said until it is.
+    node.step(301 * MS, batch(3, vec![(10, mix(1, 3, 0, 1))], 12));
+    let out = node.step(302 * MS, sets_from_b(6));
+    assert_eq!(node.leader().done_through(), 9);
+    assert_eq!(progress(&out), vec![], "stopped mid-batch");
+    let out = node.step(303 * MS, sets_from_b(10));
+    assert_eq!(progress(&out), vec![(12, 4)], "caught up with its batches");
+}
+
+/// b's (empty) sets of a mix across at item `seq`.
+fn sets_from_b(seq: u64) -> Input {
+    Input::Message {
+        kind: Kind::Transfer,
+        bytes: encode(&TransfersSent {
+            version: VERSION,
+            transfers: vec![Transfer {
+                components: Vec::new(),
+                version: VERSION,
+                from: 1,
+                seq,
+                sets: Vec::new(),
+                rows: Vec::new(),
+            }],
+        }),
+        origin: "b".into(),
+    }
 }
 
 /// Without a window nothing waits for progress marks: a leader says how

@@ -268,6 +268,13 @@ impl Leader {
             .max(self.position)
     }
 
+    /// Whether the leader has applied every item it was sent and is
+    /// stopped at none: [`Leader::done_through`] is as far as its batches
+    /// go.
+    pub fn caught_up(&self) -> bool {
+        self.done_through() >= self.frontier
+    }
+
     /// The stream's field, once it began: what inputs must fit
     /// ([`crate::door`]).
     pub fn bounds(&self) -> Option<Bounds> {
