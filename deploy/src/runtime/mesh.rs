@@ -40,7 +40,17 @@ pub struct MeshOptions {
     /// back up to a millisecond more (p99 of a raw 200 kB get on loopback
     /// 2.7 ms batched, 0.6 ms not), and there is no stream to batch.
     pub unbatched: bool,
+    /// A client that cannot reach its endpoint tries again for this long
+    /// before it gives up (None: it gives up at once, as a one-off command
+    /// should). For a service started beside the deployment (`idmesh
+    /// web`), which may come up before the coordinator listens.
+    pub connect_patience: Option<std::time::Duration>,
 }
+
+/// How soon a patient client tries its endpoint again, at first and at
+/// most (doubling in between).
+const RETRY_FIRST_MS: u64 = 100;
+const RETRY_MOST_MS: u64 = 1000;
 
 pub fn config(options: &MeshOptions) -> Result<Config> {
     let mut config = Config::default();
@@ -68,6 +78,18 @@ pub fn config(options: &MeshOptions) -> Result<Config> {
         endpoints(&options.connect)?,
     )?;
     set(&mut config, "scouting/multicast/enabled", "false".into())?;
+    if let Some(patience) = options.connect_patience {
+        set(
+            &mut config,
+            "connect/timeout_ms",
+            patience.as_millis().to_string(),
+        )?;
+        set(
+            &mut config,
+            "connect/retry",
+            format!("{{period_init_ms: {RETRY_FIRST_MS}, period_max_ms: {RETRY_MOST_MS}}}"),
+        )?;
+    }
     if options.unbatched {
         set(
             &mut config,
@@ -156,4 +178,54 @@ pub async fn open(options: &MeshOptions) -> Result<Session> {
 pub struct NoSession {
     summary: String,
     zenoh: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    fn free_endpoint() -> String {
+        let socket = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
+        let port = socket.local_addr().expect("its address").port();
+        format!("tcp/127.0.0.1:{port}")
+    }
+
+    /// `idmesh web` started beside a deployment may come up before the
+    /// coordinator listens: its patient session waits for it, where a
+    /// one-off client gives up at once.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_patient_client_waits_for_its_endpoint_to_listen() {
+        let endpoint = free_endpoint();
+        let impatient = MeshOptions {
+            client: true,
+            connect: vec![endpoint.clone()],
+            ..MeshOptions::default()
+        };
+        let refused = tokio::time::timeout(Duration::from_secs(10), open(&impatient))
+            .await
+            .expect("an impatient client gives up at once");
+        assert!(refused.is_err(), "nothing listens yet");
+
+        let patient = MeshOptions {
+            connect_patience: Some(Duration::from_secs(20)),
+            ..impatient
+        };
+        let waiting = tokio::spawn(async move { open(&patient).await.map(|_| ()) });
+        tokio::time::sleep(Duration::from_millis(700)).await;
+        if waiting.is_finished() {
+            panic!("gave up at once: {:?}", waiting.await);
+        }
+        let _server = open(&MeshOptions {
+            listen: vec![endpoint],
+            ..MeshOptions::default()
+        })
+        .await
+        .expect("the endpoint listens");
+        tokio::time::timeout(Duration::from_secs(15), waiting)
+            .await
+            .expect("connected soon after the endpoint listens")
+            .expect("the task ran")
+            .expect("the session opened");
+    }
 }

@@ -190,6 +190,8 @@ fn peer_options(topology: &Topology, name: &str) -> Result<MeshOptions> {
         tls,
         access_control,
         unbatched: member.role == "coordinator",
+        // Peers keep trying their peers for as long as they run.
+        connect_patience: None,
     })
 }
 

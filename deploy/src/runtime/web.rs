@@ -20,6 +20,10 @@ pub struct WebOptions {
     pub tls: Option<Tls>,
 }
 
+/// How long the gateway waits for the coordinator to listen when it
+/// starts.
+const CONNECT_PATIENCE: Duration = Duration::from_secs(30);
+
 pub fn run(options: &WebOptions) -> Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -31,6 +35,9 @@ pub fn run(options: &WebOptions) -> Result<()> {
             listen: vec![],
             connect: vec![options.connect.clone()],
             tls: options.tls.clone(),
+            // Started beside a deployment, the gateway may come up before
+            // the coordinator listens: it waits for it a while.
+            connect_patience: Some(CONNECT_PATIENCE),
             ..MeshOptions::default()
         })
         .await?;
