@@ -306,25 +306,7 @@ fn a_failed_follow_request_is_made_again() {
         blue: vec![],
         ln_mass: -1.0,
     }];
-    let transfer = Transfer {
-        components: Vec::new(),
-        version: VERSION,
-        from: 1,
-        seq: 2,
-        sets,
-        rows: Vec::new(),
-    };
-    let out = node.step(
-        20 * MS,
-        Input::Message {
-            kind: Kind::Transfer,
-            bytes: encode(&TransfersSent {
-                version: VERSION,
-                transfers: vec![transfer],
-            }),
-            origin: "b".into(),
-        },
-    );
+    let out = node.step(20 * MS, sets_from_b(2, sets));
     let follows = |out: &[Output]| {
         out.iter()
             .filter(|o| matches!(o, Output::AskFollow(_)))
@@ -740,15 +722,15 @@ fn progress_is_published_when_it_moves_and_at_every_sweep() {
     // A second mix across at 10; b's sets of 6 come: a moves on to 9 and
     // stops again. Not caught up: nothing said until it is.
     node.step(301 * MS, batch(3, vec![(10, mix(1, 3, 0, 1))], 12));
-    let out = node.step(302 * MS, sets_from_b(6));
+    let out = node.step(302 * MS, sets_from_b(6, Vec::new()));
     assert_eq!(node.leader().done_through(), 9);
     assert_eq!(progress(&out), vec![], "stopped mid-batch");
-    let out = node.step(303 * MS, sets_from_b(10));
+    let out = node.step(303 * MS, sets_from_b(10, Vec::new()));
     assert_eq!(progress(&out), vec![(12, 4)], "caught up with its batches");
 }
 
-/// b's (empty) sets of a mix across at item `seq`.
-fn sets_from_b(seq: u64) -> Input {
+/// b's sets of a mix across at item `seq`, as they come from the network.
+fn sets_from_b(seq: u64, sets: Vec<idmesh_protocol::wire::leader_to_leader::WireSet>) -> Input {
     Input::Message {
         kind: Kind::Transfer,
         bytes: encode(&TransfersSent {
@@ -758,7 +740,7 @@ fn sets_from_b(seq: u64) -> Input {
                 version: VERSION,
                 from: 1,
                 seq,
-                sets: Vec::new(),
+                sets,
                 rows: Vec::new(),
             }],
         }),
