@@ -14,6 +14,8 @@
 //! - [`grid`] — the worker threads, results in a fixed order.
 //! - [`results`] — scores gathered per point and method.
 //! - [`table`], [`plots`] — markdown tables and SVG plots.
+//! - [`live`] — the live runtime's tracking error beside the
+//!   centralized engines', copied from live-accuracy.md.
 //! - [`large`] — the large-field section: factored against particles at
 //!   n = 500 to 10,000.
 //! - [`report`] — the prose that carries numbers: the summary, the goals
@@ -31,6 +33,7 @@ pub mod accuracy;
 pub mod args;
 mod grid;
 mod large;
+mod live;
 mod methods;
 mod plan;
 mod plots;
@@ -271,6 +274,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         plots::draw(plot, &out_dir)?;
     }
     let mut body = body(&results, &plots);
+    body.push_str(&live::section(&out_dir));
     let large_fields = match args.preset {
         Preset::Full => large::LargeFields::full(),
         Preset::Quick => large::LargeFields::quick(),
