@@ -36,6 +36,7 @@ use crate::runtime::query::ask;
 use crate::runtime::topology::{BeliefKind, Sparsification, Topology};
 use anyhow::{bail, Context, Result};
 use idmesh_eval::eval::accuracy::{table3_budget, table3_crowds, Crowd, Engine, Start, Written};
+use idmesh_eval::eval::live::{LiveRow, TABLE_HEADER};
 use idmesh_placement::factored_options;
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use std::fmt::Write as _;
@@ -445,11 +446,7 @@ fn report(
         },
         took.as_secs_f64()
     )?;
-    writeln!(
-        out,
-        "| n | swap | start | belief | truth lines | live tracking error | centralized tracking error | largest \\|live − centralized\\| | live seconds |"
-    )?;
-    writeln!(out, "|---:|---:|---|---|---:|---:|---:|---:|---:|")?;
+    writeln!(out, "{TABLE_HEADER}")?;
     let mut done: Vec<(usize, u64, Start, Kind)> = Vec::new();
     for (crowd, run) in rows {
         let key = (crowd.n, crowd.swap.to_bits(), crowd.start, run.kind);
@@ -464,19 +461,18 @@ fn report(
             .collect();
         let mean = |f: fn(&Run) -> f64| same.iter().map(|r| f(r)).sum::<f64>() / same.len() as f64;
         let largest = same.iter().map(|r| r.largest.0).fold(0.0, f64::max);
-        writeln!(
-            out,
-            "| {} | {} | {} | {} | {} | {:.4} | {:.4} | {:.1e} | {:.1} |",
-            crowd.n,
-            crowd.swap,
-            crowd.start.label(),
-            run.kind.name(),
-            same.iter().map(|r| r.truths).sum::<usize>(),
-            mean(|r| r.live_error),
-            mean(|r| r.central_error),
+        let row = LiveRow {
+            n: crowd.n,
+            swap: crowd.swap,
+            start: crowd.start.label().to_string(),
+            belief: run.kind.name().to_string(),
+            truth_lines: same.iter().map(|r| r.truths).sum(),
+            live: mean(|r| r.live_error),
+            centralized: mean(|r| r.central_error),
             largest,
-            same.iter().map(|r| r.seconds).sum::<f64>(),
-        )?;
+            seconds: same.iter().map(|r| r.seconds).sum(),
+        };
+        writeln!(out, "{}", row.markdown())?;
     }
     writeln!(
         out,

@@ -5,7 +5,8 @@
 //! and sets the live factored belief, the centralized factored engine
 //! (the same rule) and the live Radon runtime side by side, one row per
 //! Table III point. A test keeps the committed copy equal to what the
-//! committed live-accuracy.md says.
+//! committed live-accuracy.md says. [`LiveRow`] is that table's row, for
+//! the bench that writes it and for this module that reads it.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -14,17 +15,73 @@ use std::path::Path;
 /// The file `idmesh bench --accuracy --out` writes, beside results.md.
 pub const FILE: &str = "live-accuracy.md";
 
-/// One row of live-accuracy.md's table: a point, a belief, its errors.
+/// The header of live-accuracy.md's table, its rows [`LiveRow`]s.
+pub const TABLE_HEADER: &str = "| n | swap | start | belief | truth lines | live tracking error | centralized tracking error | largest \\|live − centralized\\| | live seconds |\n|---:|---:|---|---|---:|---:|---:|---:|---:|";
+
+/// One row of live-accuracy.md's table: a point and a belief, over the
+/// point's seeds.
 #[derive(Debug, Clone, PartialEq)]
-struct Row {
-    n: usize,
-    swap: String,
-    start: String,
-    belief: String,
-    truth_lines: u64,
-    live: f64,
-    centralized: f64,
-    largest_difference: String,
+pub struct LiveRow {
+    pub n: usize,
+    pub swap: f64,
+    /// The start's label ("known start", "uniform prior").
+    pub start: String,
+    /// The belief's name ("factored", "factored, regional rule", "radon").
+    pub belief: String,
+    /// Truth lines answered, over the seeds.
+    pub truth_lines: usize,
+    /// Mean tracking errors over the seeds, live and centralized.
+    pub live: f64,
+    pub centralized: f64,
+    /// The largest difference of one marginal, over every truth line and seed.
+    pub largest: f64,
+    /// Wall seconds of the live runs, summed over the seeds.
+    pub seconds: f64,
+}
+
+impl LiveRow {
+    /// The row as the table holds it.
+    pub fn markdown(&self) -> String {
+        format!(
+            "| {} | {} | {} | {} | {} | {:.4} | {:.4} | {:.1e} | {:.1} |",
+            self.n,
+            self.swap,
+            self.start,
+            self.belief,
+            self.truth_lines,
+            self.live,
+            self.centralized,
+            self.largest,
+            self.seconds,
+        )
+    }
+
+    /// A line of the table read back; `None` for any other line.
+    pub fn parse(line: &str) -> Option<LiveRow> {
+        let cells: Vec<&str> = line
+            .trim()
+            .strip_prefix('|')?
+            .strip_suffix('|')?
+            .split('|')
+            .map(str::trim)
+            .collect();
+        let [n, swap, start, belief, truth_lines, live, centralized, largest, seconds] =
+            cells.as_slice()
+        else {
+            return None;
+        };
+        Some(LiveRow {
+            n: n.parse().ok()?,
+            swap: swap.parse().ok()?,
+            start: start.to_string(),
+            belief: belief.to_string(),
+            truth_lines: truth_lines.parse().ok()?,
+            live: live.parse().ok()?,
+            centralized: centralized.parse().ok()?,
+            largest: largest.parse().ok()?,
+            seconds: seconds.parse().ok()?,
+        })
+    }
 }
 
 /// The section for results.md, from `dir`/live-accuracy.md; a paragraph
@@ -48,57 +105,26 @@ pub fn section(dir: &Path) -> String {
         Err(_) => Vec::new(),
     };
     if rows.is_empty() {
-        writeln!(
-            out,
-            "Not measured yet: {} holds no table.",
-            path.file_name().unwrap_or_default().to_string_lossy()
-        )
-        .unwrap();
+        writeln!(out, "Not measured yet: {FILE} holds no table.").unwrap();
         return out;
     }
     out.push_str(&table(&rows));
     out
 }
 
-/// The rows of live-accuracy.md's table (`| n | swap | start | belief |
-/// truth lines | live | centralized | largest difference | seconds |`).
-fn rows_of(text: &str) -> Vec<Row> {
-    text.lines()
-        .filter_map(|line| {
-            let cells: Vec<&str> = line
-                .trim()
-                .strip_prefix('|')?
-                .strip_suffix('|')?
-                .split('|')
-                .map(str::trim)
-                .collect();
-            let [n, swap, start, belief, truth_lines, live, centralized, largest, _seconds] =
-                cells.as_slice()
-            else {
-                return None;
-            };
-            Some(Row {
-                n: n.parse().ok()?,
-                swap: swap.to_string(),
-                start: start.to_string(),
-                belief: belief.to_string(),
-                truth_lines: truth_lines.parse().ok()?,
-                live: live.parse().ok()?,
-                centralized: centralized.parse().ok()?,
-                largest_difference: largest.to_string(),
-            })
-        })
-        .collect()
+/// The rows of live-accuracy.md's table.
+fn rows_of(text: &str) -> Vec<LiveRow> {
+    text.lines().filter_map(LiveRow::parse).collect()
 }
 
 /// One row per point: the live factored error and the centralized
 /// engine's, the largest difference of a marginal, and the live Radon
 /// runtime's error with its centralized counterpart.
-fn table(rows: &[Row]) -> String {
-    let mut points: BTreeMap<(String, String, usize), BTreeMap<&str, &Row>> = BTreeMap::new();
+fn table(rows: &[LiveRow]) -> String {
+    let mut points: BTreeMap<(String, String, usize), BTreeMap<&str, &LiveRow>> = BTreeMap::new();
     for row in rows {
         points
-            .entry((row.start.clone(), row.swap.clone(), row.n))
+            .entry((row.start.clone(), row.swap.to_string(), row.n))
             .or_default()
             .insert(row.belief.as_str(), row);
     }
@@ -108,7 +134,7 @@ fn table(rows: &[Row]) -> String {
          (distributed rule) | centralized Radon, distributed rule |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
-    let error = |row: Option<&&Row>, of: fn(&Row) -> f64| {
+    let error = |row: Option<&&LiveRow>, of: fn(&LiveRow) -> f64| {
         row.map(|r| format!("{:.4}", of(r)))
             .unwrap_or_else(|| "—".into())
     };
@@ -122,7 +148,7 @@ fn table(rows: &[Row]) -> String {
             "| {start} | {swap} | {n} | {truth_lines} | {} | {} | {} | {} | {} | {} |",
             error(factored, |r| r.live),
             error(factored, |r| r.centralized),
-            factored.map_or("—", |r| r.largest_difference.as_str()),
+            factored.map_or("—".into(), |r| format!("{:.1e}", r.largest)),
             error(regional, |r| r.live),
             error(radon, |r| r.live),
             error(radon, |r| r.centralized),
@@ -152,7 +178,24 @@ mod tests {
         assert_eq!(rows[1].live, 0.3128);
         assert_eq!(rows[1].centralized, 0.3362);
         assert_eq!(rows[2].n, 60);
-        assert_eq!(rows[2].largest_difference, "1.4e-15");
+        assert_eq!(rows[2].largest, 1.4e-15);
+    }
+
+    #[test]
+    fn the_committed_table_reads_back_as_it_was_written() {
+        // The bench writes LiveRow::markdown; every row of the committed
+        // file must come back from LiveRow::parse as the same line.
+        let docs = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs"));
+        let text = std::fs::read_to_string(docs.join(FILE)).unwrap();
+        assert!(text.contains(TABLE_HEADER), "no table header in {FILE}");
+        let mut rows = 0;
+        for line in text.lines() {
+            if let Some(row) = LiveRow::parse(line) {
+                assert_eq!(row.markdown(), line);
+                rows += 1;
+            }
+        }
+        assert!(rows >= 36, "{rows} rows");
     }
 
     #[test]

@@ -33,7 +33,7 @@ pub mod accuracy;
 pub mod args;
 mod grid;
 mod large;
-mod live;
+pub mod live;
 mod methods;
 mod plan;
 mod plots;
