@@ -1,4 +1,4 @@
-//! The speed of information-matrix mixing (issue 5, "Speed"): one mix of
+//! The speed of information-matrix mixing ("Speed"): one mix of
 //! two tracks of an N × N information matrix, N = 100 and N = 1000, by the
 //! O(N²) closed forms against the pseudoinverse rule of Shin et al. (IPSN
 //! 2005, Section 3.3: β = P†γ with P the C(N,2) × N pair matrix, "O(N⁴)").

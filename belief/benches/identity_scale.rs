@@ -1,4 +1,4 @@
-//! Identities at scale (issue 21): the time of one identity query — all
+//! Identities at scale: the time of one identity query — all
 //! marginals and the most likely assignment — and its identity error, at
 //! n = 100, 500, 1,000 and 10,000, for every marginal method of the
 //! information matrix.

@@ -10,8 +10,8 @@
 //! when larger still — `belief::identity::marginals`), then the
 //! most likely one-to-one assignment under them (block by block).
 
-use crate::actor::CoordinatorConfig;
-use crate::gather::{collect, At, Collected, GatherError, Memory, Share};
+use crate::driver::gather::{collect, At, Collected, GatherError, Memory, Share};
+use crate::driver::CoordinatorConfig;
 use idmesh_belief::identity::filter::to_rows;
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::{

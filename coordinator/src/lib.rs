@@ -11,22 +11,22 @@
 //! fail, naming it.
 //!
 //! A map of the crate:
-//! - [`gathering`] — pure: the replies to one query, whether they make a
-//!   complete answer at one consistent cut, and the marginals they add
-//!   up to.
-//! - [`gather`] — the Zenoh gets that collect those replies.
+//! - [`machine`] — the coordinator's pure part: the replies to one query,
+//!   whether they make a complete answer at one consistent cut, and the
+//!   marginals they add up to.
+//! - [`driver`] — the Zenoh I/O: the queryables of the user API
+//!   ([`driver::run`]) and the gets that collect the replies
+//!   ([`driver::gather`]).
 //! - [`pushed`] — the leaders' answers put at the cuts they reach, handed
 //!   to the query waiting for each.
 //! - [`identity`] — identity marginals from the leaders' rows of the
 //!   information matrix, computed only when asked.
 //! - [`request`] — a query's key and parameters, checked before any work.
-//! - [`actor`] — the Zenoh queryables of the user API: [`actor::run`].
 
-pub mod actor;
-pub mod gather;
-pub mod gathering;
+pub mod driver;
 pub mod identity;
+pub mod machine;
 pub mod pushed;
 pub mod request;
 
-pub use gather::{GatherError, Gathered};
+pub use driver::gather::{GatherError, Gathered};

@@ -6,7 +6,7 @@
 //! of asking every leader in the same breath as the sensor: a leader is
 //! then woken once per query (by the cut in its stream), not twice, which
 //! on hosts shared by several processes is most of a query's wait. What
-//! does not come in time is asked for as before ([`crate::gather`]).
+//! does not come in time is asked for as before ([`crate::driver::gather`]).
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

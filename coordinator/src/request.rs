@@ -6,7 +6,7 @@
 //! question than the one asked). Parameters starting with `_` are Zenoh's
 //! own and are left to it.
 
-use crate::gather::At;
+use crate::driver::gather::At;
 use crate::identity::Method;
 
 /// A query, checked.

@@ -3,8 +3,8 @@
 
 use crate::cli::{Motion, SimulateArgs};
 use anyhow::{Context, Result};
-use idmesh_sensor::scenario::trace_out::write_trace;
-use idmesh_sensor::Scenario;
+use idmesh_sim::scenario::trace_out::write_trace;
+use idmesh_sim::Scenario;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::fs::File;
 use std::io::BufWriter;

@@ -27,7 +27,7 @@ use idmesh_protocol::wire::{decode, WireError};
 pub enum Input {
     Batch(Batch),
     /// What a peer sent at once, in order (one step's transfers for this
-    /// leader: [`crate::node::Output::Send`]).
+    /// leader: [`crate::machine::Output::Send`]).
     Transfers(Vec<Transfer>),
     Followed(Followed),
 }

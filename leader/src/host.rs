@@ -38,7 +38,7 @@
 //! fetches what that misses as any restarted leader does. Load is back in
 //! balance.
 
-use crate::actor::{self, LeaderConfig};
+use crate::driver::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
 use idmesh_ownership::OwnershipError;
@@ -145,7 +145,7 @@ pub async fn run(
         let (session, role_config) = (session.clone(), config.role(role, adopted));
         let role = role.to_string();
         hosted.spawn(async move {
-            let result = actor::run(session, role_config, stop).await;
+            let result = driver::run(session, role_config, stop).await;
             (role, result)
         });
     };

@@ -10,11 +10,11 @@
 //! - [`state`] — [`Leader`], the protocol as a pure state machine: a
 //!   file per concern (inbox and reordering, applying, transfers, cuts,
 //!   counters).
-//! - [`node`] — [`node::Node`], the leader's timers and recovery policy as
-//!   a pure state machine around [`Leader`]: inputs and time in, outputs
-//!   out (raft-rs `RawNode` style).
-//! - [`actor`] — the tokio/Zenoh actor around it, one per role:
-//!   [`actor::run`].
+//! - [`machine`] — [`machine::Node`], the leader's timers and recovery
+//!   policy as a pure state machine around [`Leader`]: inputs and time in,
+//!   outputs out (raft-rs `RawNode` style).
+//! - [`driver`] — the tokio/Zenoh I/O around it, one per role:
+//!   [`driver::run`].
 //! - [`door`] — bytes from the network to inputs, or rejected unharmed.
 //! - [`host`] — the leader process: its own role, and the roles of
 //!   processes gone for good that it adopts ([`host::run`]).
@@ -22,15 +22,15 @@
 //!   restarted (or adopted) leader replays.
 //! - The lock that lets one process at a time run a role (a role cut off
 //!   by a partition is not adopted) is `idmesh-ownership`
-//!   (`leader/ownership/`), which the sensor shares.
+//!   (`protocol/ownership/`), which the sensor shares.
 //! - [`error`] — [`LeaderError`].
 
-pub mod actor;
 pub mod door;
+pub mod driver;
 pub mod error;
 pub mod host;
 pub mod journal;
-pub mod node;
+pub mod machine;
 pub mod state;
 
 pub use error::LeaderError;

@@ -1,48 +1,49 @@
-//! # idmesh-sensor — turning the world into events
+//! # idmesh-sensor — the sensor process
 //!
-//! Simulators, real trajectory replay and the sensor process that
-//! publishes events (issues 3 and 4 build it). The acoustic tracking front
-//! end (issue 6) is its own crate, `idmesh-acoustic` (sensor/acoustic).
+//! The process that turns a trace (a file, standard input, producers on
+//! the ingest key) into the deployment's event stream: it sequences the
+//! events, routes each item to the leaders whose sets it may change, keeps
+//! every batch until the leader says its state is safe past it, and places
+//! the consistent cuts the coordinator's queries are answered at (Section
+//! 5.4 of the property-management paper; docs/design/architecture.md).
+//! What the events are made from — simulated crowds, real pedestrian
+//! scenes — is the pure crate `idmesh-sim` (`sensor/sim/`).
 //!
-//! The scenario generator follows the evaluation of Jiang et al. (TOSN 2013,
-//! Section 6): targets move in a field, a `mix` is logged whenever two
-//! targets come within a mixing distance, an `observe` whenever one target is
-//! separated from all others by an observation distance, and the share of
-//! mixing events is steered by these two distances.
-//!
-//! A map of the crate:
-//! - [`geometry`] — points, the rectangular field, a neighbour grid.
-//! - [`motion`] — ground-truth motion: a social-force crowd, random
-//!   waypoint, and replay of real pedestrian trajectories.
-//! - [`events`] — from motion to events: the sensor model, the
-//!   track-to-target assignment, mixing and observation detection.
-//! - [`scenario`] — the [`Scenario`] builder that ties them together into a
-//!   [`GeneratedTrace`], with progress reporting and trace output.
-//!
-//! ```
-//! use idmesh_sensor::Scenario;
-//! use idmesh_sensor::scenario::trace_out::write_trace;
-//!
-//! let trace = Scenario::crowd()
-//!     .targets(20)       // n
-//!     .red(10)           // k
-//!     .duration(60.0)    // seconds of motion
-//!     .mix_distance(1.0) // metres
-//!     .swap(0.5)
-//!     .seed(42)
-//!     .generate_with_progress(&mut |done, total| assert!(done <= total))
-//!     .unwrap();
-//! let stats = trace.stats();
-//! assert!(stats.mixes > 0 && stats.observations > 0);
-//! let jsonl = write_trace(&trace, Vec::new(), "crowd.jsonl").unwrap();
-//! assert!(jsonl.starts_with(br#"{"kind":"header""#));
-//! ```
+//! A map of the crate, the pure state machine first:
+//! - [`machine`] — the sensor as a pure state machine ([`Gateway`]):
+//!   router, batch logs, durable marks and cuts; lines and requests in,
+//!   batches and answers out.
+//! - [`driver`] — the tokio/Zenoh I/O around it: publishes the stream at a
+//!   rate, places cuts for queries and answers leaders' follow requests.
+//! - [`router`] — sequences the events and routes each item to the leaders
+//!   whose sets it may change (pure).
+//! - [`feed`] — where events come from: a trace file, standard input,
+//!   producers on the ingest key.
+//! - [`ingest`] — live ingestion: which producers' lines (ingest key,
+//!   standard input) enter the order; dedup, validation, counters (pure).
+//! - [`cuts`] — cut requests: now, or at a future event count.
+//! - [`mesh`] — several sensors: each one's intake, merged by all into
+//!   one order (pure).
+//! - [`peers`] — several sensors: the tasks that fetch every other
+//!   sensor's intake.
+//! - [`journal`] — what changed the sensor's state, on disk, so a sensor
+//!   killed and restarted resumes where it was.
+//! - [`batch_log`] — the batches sent each leader, kept until it says its
+//!   state is safe past them.
 
-pub mod events;
-pub mod gateway;
-pub mod geometry;
-pub mod motion;
-pub mod scenario;
+pub mod batch_log;
+pub mod cuts;
+pub mod driver;
+pub mod feed;
+pub mod ingest;
+pub mod journal;
+pub mod machine;
+pub mod mesh;
+pub mod peers;
+pub mod router;
 
-pub use events::{SensorModel, SimEvent, TimedEvent};
-pub use scenario::{GeneratedTrace, Length, Model, RedChoice, Scenario, ScenarioError};
+pub use machine::Gateway;
+pub use router::{LeaderPlace, Router, RouterConfig, RouterError};
+
+#[cfg(test)]
+mod tests;

@@ -1,4 +1,4 @@
-//! The factored belief as the live distributed belief (issue 18), as real
+//! The factored belief as the live distributed belief, as real
 //! processes on loopback: leaders hold components, a mix of components of
 //! two leaders gathers them at one, a handover moves what leaves a region,
 //! and the coordinator couples the components' count vectors at a query.

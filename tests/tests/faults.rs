@@ -137,7 +137,7 @@ fn lost_and_doubled_batches_change_no_answer() {
     assert_eq!(kept, 0, "transfers kept after every leader applied them");
 }
 
-/// Issue 16: a transfer lost on a live link — as when Zenoh's TLS link
+/// A transfer lost on a live link — as when Zenoh's TLS link
 /// between two leaders closes and reopens — is noticed and fetched again
 /// from its sender without any restart: every third transfer each leader
 /// sends is lost on purpose, and the final answer is still the centralized
@@ -169,7 +169,7 @@ fn transfers_lost_on_a_live_link_are_fetched_again() {
     assert_eq!(kept, 0, "transfers kept after every leader applied them");
 }
 
-/// Issue 16, roles go home: leader-1's process is killed, leader-2's
+/// Roles go home: leader-1's process is killed, leader-2's
 /// process adopts the role; leader-1's process comes back, stands by and
 /// asks for it; leader-2 hands it back (state moved through the shared
 /// journal) and leader-1's process hosts its own role again — load back

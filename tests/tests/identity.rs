@@ -180,7 +180,7 @@ fn identity_reads_cost_no_messages_between_leaders() {
     assert_eq!(none, 0);
 }
 
-/// Issue 21: a thousand people with known identities through 4 leaders.
+/// A thousand people with known identities through 4 leaders.
 /// The coordinator answers identity queries at n = 1,000 — every row a
 /// distribution, every column too, the assignment a permutation, computed
 /// block by block with the `auto` method — and a one-track question agrees

@@ -1,4 +1,4 @@
-//! Live ingestion with real processes on loopback (issue 19): events that
+//! Live ingestion with real processes on loopback: events that
 //! reach the sensor as they happen — through a pipe on its standard input,
 //! or from any producer on its ingest key — give the answer the trace file
 //! gives, which is the centralized engine's (`idmesh replay`) to 1e-9; and
@@ -511,7 +511,7 @@ impl Restart {
 /// The sensor's journal was compacted: it starts with the stream and a
 /// snapshot of the sensor's state, not with the stream's first records.
 fn assert_compacted(deployment: &Deployment) {
-    use idmesh_sensor::gateway::journal::{parse, Record};
+    use idmesh_sensor::journal::{parse, Record};
     let path = deployment.dir.join("state").join("sensor-0.journal");
     let bytes = std::fs::read(&path).expect("the sensor's journal");
     let records = parse(&bytes).expect("a whole journal").records;

@@ -55,7 +55,7 @@ fn settings(takeover_after_ms: u64) -> LanSettings {
     }
 }
 
-/// The takeover of the first LAN report.
+/// The takeover of the first LAN report.
 const TAKEOVER_MS: u64 = 3000;
 
 /// Starts the leader hosts first, then the sensor's (which waits for the

@@ -262,7 +262,7 @@ fn endpoint(deployment: &Deployment, name: &str) -> String {
 /// process that has one: the intruder reads every leader's counters and
 /// leader-0 applies its batch. This is what the next test's rules stop —
 /// and the proof that the intruder's batch would be applied if let in.
-/// Issue 16, the TLS stall: a secured deployment of four leaders streaming
+/// The TLS stall: a secured deployment of four leaders streaming
 /// some 2,000 events once stalled for good in 7 of 12 runs, each time after
 /// Zenoh's TLS link between two leaders closed and reopened and one
 /// transfer was lost on it (idmesh fetched lost transfers only on a
@@ -384,7 +384,7 @@ fn with_access_control_only_listed_identities_are_heard() {
     );
     let before = leader_stats(&deployment);
     // The generated rules let the coordinator ask the sensor for its
-    // counters too (issue 16: `"sensors": []` under `[security]`).
+    // counters too (`"sensors": []` under `[security]`).
     let stats = deployment.query(&["stats"]).expect("stats answer");
     let sensors = stats[0]["sensors"].as_array().expect("sensors");
     assert_eq!(sensors.len(), 1, "the sensor's counters: {stats:?}");

@@ -1,5 +1,5 @@
 //! Several live sensors and no single sequencer, with real processes on
-//! loopback (issue 19): a Python producer (`examples/regions_producer.py`,
+//! loopback: a Python producer (`examples/regions_producer.py`,
 //! eclipse-zenoh) splits a trace's events by region and feeds two, then
 //! three sensors concurrently — targets cross between the sensors'
 //! regions, mixes across two regions go to both sensors — and the answers

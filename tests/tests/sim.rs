@@ -77,7 +77,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     );
     let factored_on = std::env::var("IDMESH_SIM_FACTORED").map_or(true, |v| v != "0");
     if seeds.len() >= 5000 && factored_on {
-        // Issue 18: at least 1,000 schedules of the factored belief a run.
+        // At least 1,000 schedules of the factored belief a run.
         assert!(
             total.factored >= 1000,
             "only {} schedules of the factored belief",
@@ -119,7 +119,7 @@ fn aimed(what: &str, seeds: u64, aimed: sim::Aimed) -> sim::Tally {
     total
 }
 
-/// Issue 16: the first copy of every transfer is lost on a live link (as
+/// The first copy of every transfer is lost on a live link (as
 /// when a TLS link closes and reopens): each is noticed as late and asked
 /// of its sender again, and every answer is still the centralized one.
 #[test]
@@ -135,7 +135,7 @@ fn transfers_lost_on_a_live_link_are_asked_for_again() {
     assert!(total.transfers > 0, "transfers went through: {total:?}");
 }
 
-/// Issue 16: the sensor refuses every resend request for the first 4 s
+/// The sensor refuses every resend request for the first 4 s
 /// (longer than the whole stream), then answers: leaders go on asking
 /// for as long as it takes.
 #[test]
@@ -150,7 +150,7 @@ fn resends_refused_then_allowed_are_asked_for_until_answered() {
     );
 }
 
-/// Issue 16 (the LAN symptom): a leader cut off for 8 s — its gets fail
+/// A leader cut off for 8 s — its gets fail
 /// for many timeouts in a row — heals once the partition does, with no
 /// restart.
 #[test]

@@ -31,7 +31,7 @@
 //! ([`Pattern`]): scaling multiplies entries, so a zero stays zero. An
 //! information matrix with a known start is sparse even inside one large
 //! block of mixed tracks — a track can carry only the identities that
-//! reached it through a chain of mixes in time order (issue 21: a simulated
+//! reached it through a chain of mixes in time order (a simulated
 //! crowd of 1,000 after 20 s is one block of 901 tracks with 16,000
 //! possible pairs of its 810,000, at most 71 in a row) — so a sweep, a
 //! Hessian product and a line-search point cost O(positive entries), not
@@ -400,8 +400,8 @@ fn newton_schur_step(n: usize, pattern: &Pattern, p: &mut [f64], logs: &mut LogS
 /// iteration O(positive entries); stopped when the residual is a hundredth of ‖g‖
 /// (inexact Newton: the line search keeps every step a descent, and the
 /// next step corrects what this one left). Why: plain sweeps stall on
-/// peaked beliefs above [`MAX_NEWTON_TRACKS`] (the failure at n = 500 in
-/// issue 21), and Cholesky of a 2N × 2N matrix is O(N³).
+/// peaked beliefs above [`MAX_NEWTON_TRACKS`] (they failed at n = 500),
+/// and Cholesky of a 2N × 2N matrix is O(N³).
 fn newton_cg_step(n: usize, pattern: &Pattern, p: &mut [f64], logs: &mut LogScaling) -> bool {
     let dim = 2 * n;
     let mut diag = vec![0.0; dim];
@@ -759,7 +759,7 @@ mod tests {
     #[test]
     fn peaked_matrices_above_the_cholesky_size_converge() {
         // A permutation with pairs mixed and e^-20 elsewhere, n = 450:
-        // the shape that stalled plain sweeps (issue 21). Newton through
+        // the shape that stalled plain sweeps. Newton through
         // the Schur complement, and Newton–CG beyond it, converge to the
         // default tolerance.
         for n in [MAX_NEWTON_TRACKS + 50, MAX_SCHUR_TRACKS + 50] {

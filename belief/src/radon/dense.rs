@@ -135,7 +135,7 @@ mod tests {
         assert_eq!(x, vec![3, 4]);
     }
 
-    /// The case: the uniform prior at n = 12, k = 4, no budget. The
+    /// The case asked about: the uniform prior at n = 12, k = 4, no budget. The
     /// belief never holds more than C(12, 4) = 495 coefficients (plus the
     /// growth of the one event that crosses it), and stays exact.
     #[test]

@@ -1,5 +1,5 @@
 //! `idmesh bench --accuracy`: how well the live runtime tracks, on the
-//! Table III crowds of docs/results.md (issue 18's accuracy figure).
+//! Table III crowds of docs/results.md.
 //!
 //! Each crowd is written as a trace file (the evaluation's trace, with
 //! `move` lines so that tracks cross the leaders' regions) and fed to a

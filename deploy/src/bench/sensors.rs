@@ -1,4 +1,4 @@
-//! Several live sensors fed at once (issue 19). The crowd's events are
+//! Several live sensors fed at once. The crowd's events are
 //! split by region — a track's events go to the sensor nearest its last
 //! position, as one camera per region would see them — and each sensor is
 //! fed by its own producer (`camera-<s>`, its own counters, 100 lines a

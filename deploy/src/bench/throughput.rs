@@ -374,7 +374,7 @@ pub fn paired_cpu(runs: &[Vec<Stream>]) -> Vec<PairedCpu> {
         .collect()
 }
 
-/// Issue 18's scale-out goals, read off a run: at every leader count
+/// The scale-out goals, read off a run: at every leader count
 /// past one, the busiest leader's items against an even share of what one
 /// leader applies alone, and the leaders' CPU sum against one leader's.
 pub struct ScaleOut {

@@ -327,7 +327,7 @@ pub fn simulate_crowd(
     identities: bool,
     out: &Path,
 ) -> Result<()> {
-    let trace = idmesh_sensor::Scenario::crowd()
+    let trace = idmesh_sim::Scenario::crowd()
         .targets(targets)
         .red(red)
         .duration(duration)
@@ -337,7 +337,7 @@ pub fn simulate_crowd(
         .context("the crowd simulation failed")?;
     let path = out.display().to_string();
     let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
-    idmesh_sensor::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;
+    idmesh_sim::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;
     Ok(())
 }
 

@@ -8,16 +8,16 @@ use super::mesh::{self, MeshOptions};
 use super::security::rules;
 use super::topology::{Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
-use idmesh_coordinator::actor::CoordinatorConfig;
+use idmesh_coordinator::driver::CoordinatorConfig;
 use idmesh_leader::host::HostConfig;
 use idmesh_protocol::trace::{Header, Line, Problem};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::TraceReader;
-use idmesh_sensor::gateway::actor::{Faults, GatewayConfig};
-use idmesh_sensor::gateway::feed::{lines_of, InputLine, Source};
-use idmesh_sensor::gateway::journal::{Journal, Record};
-use idmesh_sensor::gateway::mesh::MeshConfig;
-use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
+use idmesh_sensor::driver::{Faults, GatewayConfig};
+use idmesh_sensor::feed::{lines_of, InputLine, Source};
+use idmesh_sensor::journal::{Journal, Record};
+use idmesh_sensor::mesh::MeshConfig;
+use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
 use std::path::Path;
 use std::time::Duration;
 use tracing::Instrument;
@@ -124,7 +124,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                     .await
                     .map_err(anyhow::Error::from)
                 }
-                Role::Coordinator => idmesh_coordinator::actor::run(
+                Role::Coordinator => idmesh_coordinator::driver::run(
                     session.clone(),
                     CoordinatorConfig {
                         name: name.to_string(),
@@ -269,8 +269,7 @@ async fn sensor(
         },
         mesh,
     };
-    idmesh_sensor::gateway::actor::run(session, config, router, source, journal, shutdown())
-        .await?;
+    idmesh_sensor::driver::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())
 }
 

@@ -253,7 +253,7 @@ pub struct SensorProcess {
     pub faults: FaultSection,
 }
 
-/// Faults the sensor injects on purpose (see `idmesh_sensor::gateway`).
+/// Faults the sensor injects on purpose (see `idmesh_sensor::driver`).
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FaultSection {

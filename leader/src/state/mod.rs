@@ -1,7 +1,7 @@
 //! The leader as a pure state machine: items of its event stream in, sets
 //! for other leaders and follow requests out. No I/O, so the whole protocol
 //! can be run in one process by tests (see `tests` below) and the actor in
-//! [`actor`](crate::actor) only moves bytes.
+//! [`actor`](crate::driver) only moves bytes.
 //!
 //! Section 5.4 of the property-management paper, with one departure: a set
 //! is held by exactly one of the leaders that surveil its tracks (the paper

@@ -1,6 +1,6 @@
 //! Criterion benchmark of idmesh's FastICA (the separation step's kernel)
 //! on fixed mixtures: the pipeline's typical problem (3 sources heard by a
-//! 10-sensor group over a 100-sample segment), the 10 × 10 × 100
+//! 10-sensor group over a 100-sample segment), the goal's 10 × 10 × 100
 //! case, and a larger 10 × 10 × 5000 one, each with the symmetric and the
 //! deflation algorithm. The comparison with scikit-learn on the same
 //! mixtures is `examples/acoustic_fastica_compare.rs`.

@@ -1,4 +1,4 @@
-//! # Acoustic tracking of indistinguishable targets (issue 6)
+//! # Acoustic tracking of indistinguishable targets
 //!
 //! Zhu, Vikram, Fu & Guan, *On Non-Cooperative Multiple-Target Tracking
 //! With Wireless Sensor Networks* (IEEE TMC 2014): sensors hear only the

@@ -12,9 +12,9 @@ use super::pipeline::prepare::Segmentation;
 use super::run::{AcousticResult, EstimatedPath};
 use idmesh_protocol::trace::{Header, Line};
 use idmesh_protocol::{TraceError, TraceWriter};
-use idmesh_sensor::events::{MixDetector, SimEvent, TimedEvent};
-use idmesh_sensor::geometry::{NeighbourGrid, Vec2};
-use idmesh_sensor::scenario::trace_out::event_line;
+use idmesh_sim::events::{MixDetector, SimEvent, TimedEvent};
+use idmesh_sim::geometry::{NeighbourGrid, Vec2};
+use idmesh_sim::scenario::trace_out::event_line;
 use std::io::Write;
 
 /// Position of a path at slot `j`: its fragment there, or linear

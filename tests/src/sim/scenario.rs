@@ -9,8 +9,8 @@ use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
 use idmesh_placement::{factored_options, Regional, Regions};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
-use idmesh_sensor::gateway::core::Gateway;
-use idmesh_sensor::gateway::{LeaderPlace, Router, RouterConfig};
+use idmesh_sensor::machine::Gateway;
+use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 

@@ -3,18 +3,18 @@
 //! that loses, doubles, delays (hence reorders) and cuts them off, while
 //! leaders crash and come back from their journal and snapshot. Every
 //! process runs its real pure state machine ([`Gateway`], [`Node`],
-//! [`crate::sim`]'s use of `idmesh_coordinator::gathering`); what the
+//! [`crate::sim`]'s use of `idmesh_coordinator::machine`); what the
 //! actors do with Zenoh — puts, gets with a timeout, subscriptions — is
 //! done here with virtual time.
 
 use super::network::{Endpoint, Network};
 use super::scenario::Scenario;
 use super::Violation;
-use idmesh_coordinator::gathering::{
+use idmesh_coordinator::machine::{
     at_rest_of, check, marginals_of, read_cut, GatherError, Memory, Partials,
 };
 use idmesh_leader::journal::Kind;
-use idmesh_leader::node::{Ask, Input, Node, Output, Timers};
+use idmesh_leader::machine::{Ask, Input, Node, Output, Timers};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::leader_to_leader::TransfersSent;
@@ -22,11 +22,11 @@ use idmesh_protocol::wire::leader_to_sensor::{Followed, Resent};
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode};
-use idmesh_sensor::gateway::core::{CutOutcome, Gateway};
-use idmesh_sensor::gateway::cuts::{CutParameters, Placed};
-use idmesh_sensor::gateway::ingest::Offer;
-use idmesh_sensor::gateway::journal::Record;
-use idmesh_sensor::gateway::Router;
+use idmesh_sensor::cuts::{CutParameters, Placed};
+use idmesh_sensor::ingest::Offer;
+use idmesh_sensor::journal::Record;
+use idmesh_sensor::machine::{CutOutcome, Gateway};
+use idmesh_sensor::Router;
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -195,7 +195,7 @@ enum Phase {
 }
 
 /// Faults aimed at one kind of message, on top of a seed's random ones
-/// (issue 16: each must heal without a restart).
+/// (each must heal without a restart).
 #[derive(Debug, Clone, Default)]
 pub struct Aimed {
     /// The first copy of every transfer between leaders is lost, on a

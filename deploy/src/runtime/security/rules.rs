@@ -511,7 +511,7 @@ producers = ["camera"]
         assert!(!allowed(&s, "ingress", "c", "put", "p/leader/l1/durable"));
         let l1 = access_control(&t, "l1");
         assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
-        // The coordinator may ask the sensor for its counters (issue 16:
+        // The coordinator may ask the sensor for its counters (once,
         // `query/stats` had `"sensors": []` under `[security]`).
         let c = access_control(&t, "c");
         assert!(allowed(&c, "egress", "s", "query", "p/sensor/*/stats"));

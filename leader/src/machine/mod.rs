@@ -1,0 +1,666 @@
+//! The leader's timers and recovery policy as a pure, synchronous state
+//! machine around [`Leader`], in the style of raft-rs's `RawNode`: the
+//! driver hands it inputs ([`Input`]: bytes off the network, the answers
+//! to its own requests, queries, and [`Input::Tick`] every
+//! [`Timers::sweep`]) with the time, and carries out what it asks
+//! ([`Output`]: journal this, send that, ask the sensor, answer a query,
+//! sync and publish a mark, write a snapshot). It does no I/O and reads
+//! no clock, so everything here runs the same in the Zenoh actor
+//! ([`crate::driver`]) and in the deterministic network simulator of
+//! `tests/src/sim`.
+//!
+//! The policy (docs/architecture.md, "When a leader dies"):
+//! - every input passes the door ([`crate::door`]), is journaled, then
+//!   applied; what the door refuses is counted and changes nothing;
+//! - a gap in batch numbers, a held query older than [`Timers::late`] (the
+//!   batch with its cut, or the stream's last, may be lost), or a recovery
+//!   whose resend was not answered yet: ask the sensor for every batch
+//!   from the next one expected, one request at a time;
+//! - a transfer waited for longer than [`Timers::late`] (lost in the
+//!   network, or sent while this leader was down): ask that peer for what
+//!   it sent this leader;
+//! - a follow request that failed or came back unusable: asked again;
+//! - a query held for its cut nearly as long as
+//!   [`Timers::query_timeout`]: answered with an error naming what the
+//!   leader waits for (a peer's sets, the sensor's batches), in time for
+//!   the coordinator to say who is missing;
+//! - on every tick the journal is synced and, if that worked and it moved,
+//!   the durable mark published;
+//! - after every [`Timers::snapshot_every`] journaled inputs, a snapshot.
+//!
+//! A restarted (or adopted) leader ([`Node::recover`]) replays its
+//! snapshot and journal, sends again every transfer it sent, asks the
+//! sensor for the batches after its journal's last and every peer for the
+//! transfers they sent it since, and answers queries "recovering" until
+//! all of them have answered.
+
+mod queries;
+mod recovery;
+
+pub use queries::Ask;
+
+use crate::door;
+use crate::journal::Kind;
+use crate::state::{Action, Leader};
+use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Progress, Resend, Unfollow};
+use idmesh_protocol::wire::sensor_to_leader::Batch;
+use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// The time of an input: since an origin the driver picks (its start).
+pub type Now = Duration;
+
+/// The node's clocks and limits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timers {
+    /// How often the driver ticks: journal sync, durable mark, expiry and
+    /// the checks for lost messages.
+    pub sweep: Duration,
+    /// A query held this long, or a transfer waited for this long, means a
+    /// message was probably lost: ask again.
+    pub late: Duration,
+    /// How long a query is held for its cut before it is answered with an
+    /// error.
+    pub query_timeout: Duration,
+    /// The inputs are journaled (and a restart can replay them).
+    pub journal: bool,
+    /// Write a snapshot after this many journaled inputs.
+    pub snapshot_every: Option<usize>,
+    /// The sensor streams under a window (`[sensor] window`), which its
+    /// leaders' progress marks open: a mark after every input that moves
+    /// the leader. Without one nobody waits for them, and a mark goes only
+    /// at the sweep (a message per batch saved).
+    pub flow_control: bool,
+}
+
+impl Timers {
+    /// The runtime's clocks: a 250 ms sweep, 500 ms before a message is
+    /// taken for lost.
+    pub fn new(query_timeout: Duration, journal: bool, snapshot_every: Option<usize>) -> Self {
+        Timers {
+            sweep: Duration::from_millis(250),
+            late: Duration::from_millis(500),
+            query_timeout,
+            journal,
+            snapshot_every,
+            flow_control: true,
+        }
+    }
+}
+
+/// What the driver hands the node.
+#[derive(Debug, Clone)]
+pub enum Input {
+    /// An input of the state machine from the network (a batch on the
+    /// leader's event key, a transfer on its transfer key), with where it
+    /// came from.
+    Message {
+        kind: Kind,
+        bytes: Vec<u8>,
+        origin: String,
+    },
+    /// The sensor's answer to [`Output::AskFollow`] (a `Followed`).
+    Followed(Result<Vec<u8>, String>),
+    /// The sensor's answer to [`Output::AskResend`].
+    Resent(Result<Vec<Batch>, String>),
+    /// A peer's answer to [`Output::AskTransfers`].
+    Transfers {
+        peer: String,
+        result: Result<Vec<Transfer>, String>,
+    },
+    /// A durable mark some leader published (`Durable` bytes).
+    Durable { bytes: Vec<u8>, origin: String },
+    /// The coordinator asks for partial sums; answered by an
+    /// [`Output::Answer`] with the same `id`, now or later.
+    Partial {
+        id: u64,
+        ask: Ask,
+        /// The tag of the answer the coordinator keeps, if it said one.
+        base: Option<u64>,
+    },
+    /// A restarted peer asks for the transfers this leader sent it
+    /// (`TransfersWanted` bytes); answered by [`Output::AnswerSent`].
+    SentWanted {
+        id: u64,
+        bytes: Vec<u8>,
+        origin: String,
+    },
+    /// The sweep's clock.
+    Tick,
+    /// The driver could not write the journal or the snapshot: the leader
+    /// refuses queries from now on.
+    Failed(String),
+}
+
+/// What the node asks the driver to do, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    /// Append this input to the journal before carrying out what follows.
+    Journal { kind: Kind, bytes: Vec<u8> },
+    /// Put `body` on peer `to`'s transfer key: an encoded
+    /// `TransfersSent`, every transfer one step made for that peer (of the
+    /// items `seqs`), in order. One message for all of them: a crowd's
+    /// batch hands several tracks to the same neighbour, and each message
+    /// costs both processes a wake-up.
+    Send {
+        to: String,
+        seqs: Vec<u64>,
+        body: Vec<u8>,
+    },
+    /// Ask the sensor to follow tracks; its answer comes back as
+    /// [`Input::Followed`].
+    AskFollow(Follow),
+    /// Tell the sensor to stop following tracks; nothing comes back (a
+    /// lost request costs items the leader ignores).
+    Unfollow(Unfollow),
+    /// Ask the sensor for batches again; [`Input::Resent`].
+    AskResend(Resend),
+    /// Ask a peer for the transfers it sent here; [`Input::Transfers`].
+    AskTransfers {
+        peer: String,
+        wanted: TransfersWanted,
+    },
+    /// This leader's partial sums at the cut it has just reached, put
+    /// unasked for the coordinator that placed it (`P/leader/L/pushed/T`):
+    /// told as a change to its answer at the cut before (`base`), which
+    /// that coordinator usually keeps. A push lost, or one the coordinator
+    /// cannot use, costs only the get it then makes, which the answers
+    /// kept at recent cuts serve.
+    Push(Arc<Partial>),
+    /// The answer to [`Input::Partial`] `id`.
+    Answer {
+        id: u64,
+        answer: Result<Arc<Partial>, String>,
+    },
+    /// The answer to [`Input::SentWanted`] `id`.
+    AnswerSent {
+        id: u64,
+        answer: Result<TransfersSent, String>,
+    },
+    /// Sync the journal (if there is one); if that worked, publish `mark`
+    /// on the leader's durable key (when there is one).
+    Persist { mark: Option<Durable> },
+    /// Replace the journal by this snapshot of the whole state.
+    Snapshot(Vec<u8>),
+    /// Publish how far the leader has got (the sensor's flow control).
+    Progress(Progress),
+}
+
+/// A leader restarted (or adopted) and not yet caught up.
+#[derive(Debug, Clone)]
+struct Recovery {
+    since: Now,
+    /// The sensor has answered the resend of what the journal misses.
+    batches: bool,
+    /// Peers yet to answer the request for transfers.
+    peers: Vec<String>,
+}
+
+/// A partial-sums query waiting for its cut.
+#[derive(Debug, Clone)]
+struct Held {
+    id: u64,
+    tag: u64,
+    /// The answer the coordinator keeps ([`Node::told`]).
+    base: Option<u64>,
+    since: Now,
+}
+
+/// The leader with its timers and recovery policy.
+pub struct Node {
+    leader: Leader,
+    timers: Timers,
+    /// The leader's own inconsistency (a journal it cannot write, an input
+    /// it admitted but cannot apply): every query is refused from then on.
+    failure: Option<String>,
+    recovery: Option<Recovery>,
+    held: Vec<Held>,
+    /// A resend request is out.
+    resending: bool,
+    /// The follow request is out (None: ask again on the next tick).
+    following: bool,
+    /// Transfers this step made, by peer, not yet put in messages.
+    outgoing: Vec<(String, Vec<Transfer>)>,
+    /// Transfer requests out, by peer, and when they were made.
+    asking: BTreeMap<String, Now>,
+    /// When the leader started waiting for the transfer it waits for.
+    waiting_since: Option<((u64, u16), Now)>,
+    /// When the leader started waiting for the components of the mix at
+    /// an item (a factored stream).
+    components_since: Option<(u64, Now)>,
+    published: Option<Durable>,
+    /// The progress mark last published.
+    progressed: u64,
+    /// The tag of the cut whose answer this leader last pushed: the next
+    /// push is told as a change to it.
+    pushed: Option<u64>,
+    /// Inputs journaled since the last snapshot.
+    journaled: usize,
+}
+
+impl Node {
+    /// A node for a leader that starts with nothing behind it.
+    pub fn new(leader: Leader, timers: Timers) -> Self {
+        Node {
+            leader,
+            timers,
+            failure: None,
+            recovery: None,
+            held: Vec::new(),
+            resending: false,
+            following: false,
+            outgoing: Vec::new(),
+            asking: BTreeMap::new(),
+            waiting_since: None,
+            components_since: None,
+            published: None,
+            progressed: 0,
+            pushed: None,
+            journaled: 0,
+        }
+    }
+
+    pub fn leader(&self) -> &Leader {
+        &self.leader
+    }
+
+    pub fn timers(&self) -> &Timers {
+        &self.timers
+    }
+
+    /// Why the leader refuses every query, if it does.
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
+    /// Since when the leader has been catching up, if it is.
+    pub fn recovering_since(&self) -> Option<Now> {
+        self.recovery.as_ref().map(|r| r.since)
+    }
+
+    /// Queries held for their cut.
+    pub fn held(&self) -> usize {
+        self.held.len()
+    }
+
+    /// Hands the node one input at time `now`; returns what to do, in order.
+    pub fn step(&mut self, now: Now, input: Input) -> Vec<Output> {
+        let mut out = Vec::new();
+        match input {
+            Input::Message {
+                kind,
+                bytes,
+                origin,
+            } => self.input(kind, bytes, &origin, &mut out),
+            Input::Followed(Ok(bytes)) => {
+                self.following = false;
+                self.input(Kind::Followed, bytes, "the sensor's follow reply", &mut out);
+                // A reply that was no use: the leader still waits for one.
+                self.ask_follow(&mut out);
+            }
+            Input::Followed(Err(e)) => {
+                // Lost, or the sensor was unreachable: asked again on the
+                // next tick (the sensor answers a repeated follow the same).
+                self.following = false;
+                tracing::warn!(leader = %self.leader.name(), error = %e, "follow request failed; asking again");
+            }
+            Input::Resent(result) => {
+                self.resending = false;
+                match result {
+                    Ok(batches) => {
+                        if let Some(r) = &mut self.recovery {
+                            r.batches = true;
+                        }
+                        for batch in batches {
+                            let bytes = encode(&batch);
+                            self.input(Kind::Batch, bytes, "the sensor's resend reply", &mut out);
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(leader = %self.leader.name(), error = %e, "resend request failed; asking again")
+                    }
+                }
+            }
+            Input::Transfers { peer, result } => {
+                self.asking.remove(&peer);
+                if let Some(r) = &mut self.recovery {
+                    // A peer that is down itself sends its transfers again
+                    // when it comes back.
+                    r.peers.retain(|p| *p != peer);
+                }
+                match result {
+                    Ok(transfers) => {
+                        // One input each: one a peer got wrong is refused
+                        // alone.
+                        for t in transfers {
+                            let bytes = encode(&TransfersSent {
+                                version: VERSION,
+                                transfers: vec![t],
+                            });
+                            self.input(Kind::Transfer, bytes, "a peer's sent transfers", &mut out);
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(leader = %self.leader.name(), %peer, error = %e, "a peer did not resend its transfers")
+                    }
+                }
+            }
+            Input::Durable { bytes, origin } => match decode::<Durable>(&bytes) {
+                Ok(mark) if mark.leader != self.leader.name() => {
+                    self.leader.forget_sent(&mark.leader, mark.position);
+                }
+                Ok(_) => {}
+                Err(e) => self.reject("a durable mark", &origin, &e, &mut out),
+            },
+            Input::Partial { id, ask, base } => self.partial(now, id, ask, base, &mut out),
+            Input::SentWanted { id, bytes, origin } => {
+                let answer = decode::<TransfersWanted>(&bytes).map(|wanted| TransfersSent {
+                    version: VERSION,
+                    transfers: self.leader.sent_to(wanted.to, wanted.after),
+                });
+                if let Err(e) = &answer {
+                    self.reject("a request for sent transfers", &origin, e, &mut out);
+                }
+                out.push(Output::AnswerSent {
+                    id,
+                    answer: answer.map_err(|e| e.to_string()),
+                });
+            }
+            Input::Tick => {
+                self.tick(now, &mut out);
+                // Again at every sweep, moved or not: a put lost, or a
+                // sensor that restarted knowing nothing, is mended here.
+                self.progress(true, &mut out);
+            }
+            Input::Failed(why) => {
+                tracing::error!(leader = %self.leader.name(), error = %why, "leader failed");
+                self.failure = Some(why);
+            }
+        }
+        self.after_input(now, &mut out);
+        self.send_outgoing(&mut out);
+        out
+    }
+
+    /// One input of the state machine: through the door, journaled,
+    /// applied, its actions carried out.
+    fn input(&mut self, kind: Kind, bytes: Vec<u8>, origin: &str, out: &mut Vec<Output>) {
+        let input = match door::admit(&self.leader, kind, &bytes) {
+            Ok(input) => input,
+            Err(problem) => {
+                let what = format!("{kind:?} of {} bytes", bytes.len());
+                self.reject(&what, origin, &problem, out);
+                return;
+            }
+        };
+        let size = bytes.len();
+        if self.timers.journal {
+            self.journaled += 1;
+            out.push(Output::Journal { kind, bytes });
+        }
+        match door::apply(&mut self.leader, input, size) {
+            Ok(actions) => self.act(actions, out),
+            Err(e) => {
+                tracing::error!(leader = %self.leader.name(), error = %e, "leader cannot go on applying its stream");
+                self.failure = Some(e.to_string());
+            }
+        }
+    }
+
+    /// Carries out what the state machine asks for.
+    fn act(&mut self, actions: Vec<Action>, out: &mut Vec<Output>) {
+        for action in actions {
+            match action {
+                Action::Send { to, transfer } => self.send(to, transfer),
+                Action::Follow(_) => {
+                    self.following = false;
+                    self.ask_follow(out);
+                }
+                Action::Unfollow(unfollow) => out.push(Output::Unfollow(unfollow)),
+                Action::CutReady(partial) => {
+                    let ready: Vec<Held> = self
+                        .held
+                        .extract_if(.., |h| h.tag == partial.tag())
+                        .collect();
+                    for h in ready {
+                        out.push(Output::Answer {
+                            id: h.id,
+                            answer: Ok(self.told(&partial, h.base)),
+                        });
+                    }
+                    // Identity queries ask for rows: they keep asking.
+                    if partial.sums.rows.is_empty() {
+                        out.push(Output::Push(self.told(&partial, self.pushed)));
+                        self.pushed = Some(partial.tag());
+                    }
+                }
+            }
+        }
+    }
+
+    /// Puts one transfer on the way to leader index `to`: it leaves with
+    /// the others this step makes for that peer ([`Node::send_outgoing`]).
+    fn send(&mut self, to: u16, transfer: Transfer) {
+        let Some(peer) = self.leader.peer(to).map(str::to_owned) else {
+            self.failure = Some(format!("transfer to unknown leader index {to}"));
+            return;
+        };
+        tracing::debug!(leader = %self.leader.name(), to = %peer, seq = transfer.seq, sets = transfer.sets.len(), "hand over sets");
+        match self.outgoing.iter_mut().find(|(p, _)| *p == peer) {
+            Some((_, transfers)) => transfers.push(transfer),
+            None => self.outgoing.push((peer, vec![transfer])),
+        }
+    }
+
+    /// One message per peer with every transfer this step made for it, in
+    /// the order they were made.
+    fn send_outgoing(&mut self, out: &mut Vec<Output>) {
+        for (to, transfers) in std::mem::take(&mut self.outgoing) {
+            let seqs = transfers.iter().map(|t| t.seq).collect();
+            let body = encode(&TransfersSent {
+                version: VERSION,
+                transfers,
+            });
+            self.leader.note_sent(body.len());
+            out.push(Output::Send { to, seqs, body });
+        }
+    }
+
+    /// Asks the sensor to follow the tracks the leader waits for, unless a
+    /// request is already out.
+    fn ask_follow(&mut self, out: &mut Vec<Output>) {
+        if self.following {
+            return;
+        }
+        if let Some(follow) = self.leader.pending_follow() {
+            self.following = true;
+            out.push(Output::AskFollow(follow.clone()));
+        }
+    }
+
+    /// Asks the sensor for every batch from the next one expected, unless
+    /// a request is already out.
+    fn ask_resend(&mut self, out: &mut Vec<Output>) {
+        if self.resending {
+            return;
+        }
+        self.resending = true;
+        out.push(Output::AskResend(Resend {
+            version: VERSION,
+            leader: self.leader.name().to_string(),
+            from: self.leader.next_batch(),
+        }));
+    }
+
+    /// Asks `peer` for every transfer it sent this leader after its
+    /// position, unless a request to it is already out.
+    fn ask_transfers(&mut self, now: Now, peer: &str, out: &mut Vec<Output>) {
+        let Some(me) = self.leader.index() else {
+            return;
+        };
+        if self.asking.contains_key(peer) {
+            return;
+        }
+        self.asking.insert(peer.to_string(), now);
+        out.push(Output::AskTransfers {
+            peer: peer.to_string(),
+            wanted: TransfersWanted {
+                version: VERSION,
+                to: me,
+                after: self.leader.received_through(),
+            },
+        });
+    }
+
+    /// The sweep: sync and mark, expire held queries, ask again for what
+    /// seems lost.
+    fn tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        // Everything journaled so far is on disk after the sync: the others
+        // may stop keeping it.
+        let mark = self.leader.durable();
+        let publish = self.failure.is_none() && self.published.as_ref() != Some(&mark);
+        if publish {
+            self.published = Some(mark.clone());
+        }
+        if self.timers.journal || publish {
+            out.push(Output::Persist {
+                mark: publish.then_some(mark),
+            });
+        }
+        self.expire(now, out);
+        let late = self
+            .held
+            .iter()
+            .any(|h| now.saturating_sub(h.since) > self.timers.late);
+        let unanswered = self.recovery.as_ref().is_some_and(|r| !r.batches);
+        if self.leader.missing_batches().is_some() || late || unanswered {
+            self.ask_resend(out);
+        }
+        // A transfer waited for too long: lost on the way, or sent while
+        // this leader was down. The peer keeps what it sent.
+        if let Some(((_, from), since)) = self.waiting_since {
+            if now.saturating_sub(since) > self.timers.late {
+                if let Some(peer) = self.leader.peer(from).map(str::to_owned) {
+                    self.ask_transfers(now, &peer, out);
+                }
+            }
+        }
+        // Components waited for too long (a factored stream): their
+        // holders are not known here, so every peer is asked.
+        if let Some((_, since)) = self.components_since {
+            if now.saturating_sub(since) > self.timers.late {
+                let me = self.leader.name().to_owned();
+                let peers: Vec<String> = self
+                    .leader
+                    .leaders()
+                    .iter()
+                    .filter(|l| **l != me)
+                    .cloned()
+                    .collect();
+                for peer in peers {
+                    self.ask_transfers(now, &peer, out);
+                }
+            }
+        }
+        // A transfer request that got no answer (the driver always answers,
+        // if only with a timeout, but a lost one must not block forever).
+        let stale = self.timers.query_timeout + self.timers.late;
+        self.asking.retain(|_, at| now.saturating_sub(*at) <= stale);
+        self.ask_follow(out);
+    }
+
+    /// Bookkeeping after every input: a gap asks for the missing batches,
+    /// the wait for a transfer is timed, recovery may be over, a snapshot
+    /// may be due.
+    fn after_input(&mut self, now: Now, out: &mut Vec<Output>) {
+        if self.leader.missing_batches().is_some() {
+            self.ask_resend(out);
+        }
+        let waiting = self.leader.waiting_for_transfer();
+        if waiting != self.waiting_since.map(|w| w.0) {
+            self.waiting_since = waiting.map(|w| (w, now));
+        }
+        let components = self.leader.waiting_for_components();
+        if components != self.components_since.map(|w| w.0) {
+            self.components_since = components.map(|w| (w, now));
+        }
+        if self.recovery.as_ref().is_some_and(|r| {
+            r.batches && r.peers.is_empty() && self.leader.missing_batches().is_none()
+        }) {
+            let seconds = self
+                .recovery
+                .take()
+                .map_or(0.0, |r| now.saturating_sub(r.since).as_secs_f64());
+            self.leader.note_recovered(seconds);
+            tracing::info!(leader = %self.leader.name(), seconds, position = self.leader.position(), "caught up");
+        }
+        self.progress(false, out);
+        // Every input journaled is applied: the state can replace them.
+        if let (true, Some(every)) = (self.timers.journal, self.timers.snapshot_every) {
+            if self.journaled >= every {
+                self.journaled = 0;
+                self.leader.note_snapshot();
+                out.push(Output::Snapshot(self.leader.snapshot()));
+            }
+        }
+    }
+
+    /// Publishes the leader's progress if it moved and a window waits for
+    /// it (or `again`, at the sweep).
+    ///
+    /// Between sweeps, only once the leader has caught up with what it was
+    /// sent: the sensor then counts it as no bound on its window at all.
+    /// A mark from a leader stopped mid-batch for a peer's transfer moves
+    /// the window only as far as the stop, and the transfer comes soon;
+    /// published at every pass a transfer started, such marks were three a
+    /// batch at four leaders on the 10,000-target crowd, a quarter of all
+    /// the messages a leader put. A leader stopped for long is still heard
+    /// at every sweep.
+    fn progress(&mut self, again: bool, out: &mut Vec<Output>) {
+        let through = self.leader.done_through();
+        let moved =
+            through > self.progressed && self.timers.flow_control && self.leader.caught_up();
+        if self.failure.is_some() || !(again || moved) {
+            return;
+        }
+        self.progressed = through;
+        out.push(Output::Progress(Progress {
+            version: VERSION,
+            leader: self.leader.name().to_string(),
+            through,
+            batch: self.leader.next_batch(),
+        }));
+    }
+
+    /// Counts and logs a message from the network the leader refused: it
+    /// changes nothing else.
+    fn reject(&mut self, what: &str, from: &str, problem: &WireError, out: &mut Vec<Output>) {
+        self.count_rejected(what, from, problem, out);
+    }
+
+    /// Counts a refusal, logs it, and journals that it happened (not what
+    /// came), so the count survives a restart.
+    pub(super) fn count_rejected(
+        &mut self,
+        what: &str,
+        from: &str,
+        problem: &dyn std::fmt::Display,
+        out: &mut Vec<Output>,
+    ) {
+        let rejected = self.leader.note_rejected();
+        tracing::warn!(leader = %self.leader.name(), from, what, %problem, rejected, "input rejected");
+        if self.timers.journal {
+            out.push(Output::Journal {
+                kind: Kind::Rejected,
+                bytes: Vec::new(),
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,813 @@
+//! The leader's timers and recovery policy, driven by hand with a clock
+//! that only moves when the test says so.
+
+use super::*;
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Item, Sequenced};
+
+const MS: Duration = Duration::from_millis(1);
+
+fn timers() -> Timers {
+    Timers::new(Duration::from_secs(2), true, Some(4))
+}
+
+fn begin(leaders: &[&str]) -> Item {
+    Item::Begin(Begin {
+        factored: None,
+        tracks: 4,
+        red: Some(2),
+        initial_red: Some(vec![0, 1]),
+        leaders: leaders.iter().map(|l| l.to_string()).collect(),
+        // Tracks 0, 1 with the first leader, 2, 3 with the last.
+        owners: vec![0, 0, leaders.len() as u16 - 1, leaders.len() as u16 - 1],
+        distributed_rule: false,
+        budget: 0,
+        omp: false,
+        identities: false,
+        initial_identity: None,
+    })
+}
+
+fn batch(number: u64, items: Vec<(u64, Item)>, through: u64) -> Input {
+    let batch = Batch {
+        version: VERSION,
+        sensor: "s".into(),
+        number,
+        through,
+        events: through,
+        finished: false,
+        items: items
+            .into_iter()
+            .map(|(seq, item)| Sequenced { seq, item })
+            .collect(),
+    };
+    Input::Message {
+        kind: Kind::Batch,
+        bytes: encode(&batch),
+        origin: "test".into(),
+    }
+}
+
+fn cut(tag: u64) -> Item {
+    Item::Cut {
+        events: 0,
+        tag,
+        rows: false,
+    }
+}
+
+fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
+    Item::Mix {
+        a,
+        b,
+        swap: 0.5,
+        owner_a,
+        owner_b,
+    }
+}
+
+fn started(name: &str, leaders: &[&str]) -> Node {
+    let mut node = Node::new(Leader::new(name), timers());
+    node.step(Duration::ZERO, batch(0, vec![(1, begin(leaders))], 1));
+    node
+}
+
+fn resends(out: &[Output]) -> usize {
+    out.iter()
+        .filter(|o| matches!(o, Output::AskResend(_)))
+        .count()
+}
+
+fn answers(out: &[Output]) -> Vec<(u64, Result<Partial, String>)> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::Answer { id, answer } => {
+                Some((*id, answer.as_deref().cloned().map_err(Clone::clone)))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_held_query_is_answered_at_its_cut_and_expires_with_an_error_if_it_never_comes() {
+    let mut node = started("a", &["a"]);
+    assert!(node
+        .step(
+            10 * MS,
+            Input::Partial {
+                id: 1,
+                ask: Ask::Cut(7),
+                base: None,
+            }
+        )
+        .is_empty());
+    assert!(node
+        .step(
+            20 * MS,
+            Input::Partial {
+                id: 2,
+                ask: Ask::Cut(8),
+                base: None,
+            }
+        )
+        .is_empty());
+    assert_eq!(node.held(), 2);
+    let out = node.step(30 * MS, batch(1, vec![(2, cut(7))], 2));
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1);
+    assert_eq!(answered[0].0, 1);
+    assert_eq!(answered[0].1.as_ref().unwrap().cut, 2);
+    // Asked again later: answered from the cuts kept.
+    let out = node.step(
+        40 * MS,
+        Input::Partial {
+            id: 3,
+            ask: Ask::Cut(7),
+            base: None,
+        },
+    );
+    assert!(answers(&out)[0].1.is_ok());
+    // Query 2's cut never comes: an error once it waited the timeout
+    // less two sweeps, so that the coordinator (which waits the timeout)
+    // hears why before it gives up.
+    let out = node.step(1400 * MS, Input::Tick);
+    assert!(answers(&out).is_empty(), "not yet: {out:?}");
+    let out = node.step(1600 * MS, Input::Tick);
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1);
+    let error = answered[0].1.as_ref().unwrap_err();
+    assert!(
+        error.contains("leader a did not reach the cut tagged 8"),
+        "{error}"
+    );
+    assert!(error.contains("no batch with the cut came"), "{error}");
+    assert_eq!(node.held(), 0);
+}
+
+/// A leader waiting for a dead peer's sets says whose, before
+/// the coordinator's timeout, so that every degraded answer names who is
+/// missing.
+#[test]
+fn a_query_held_behind_a_peers_sets_expires_naming_the_peer() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(
+        10 * MS,
+        batch(1, vec![(2, mix(0, 2, 0, 1)), (3, cut(9))], 3),
+    );
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+    node.step(
+        20 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Cut(9),
+            base: None,
+        },
+    );
+    assert_eq!(node.held(), 1);
+    let out = node.step(1600 * MS, Input::Tick);
+    let answered = answers(&out);
+    assert_eq!(answered.len(), 1, "{out:?}");
+    let error = answered[0].1.as_ref().unwrap_err();
+    assert!(error.contains("waits for sets from b at item 2"), "{error}");
+}
+
+/// A malformed partial-sums query is bad input: answered with why, and
+/// counted.
+#[test]
+fn a_malformed_partial_query_is_counted() {
+    let mut node = started("a", &["a"]);
+    let ask = Ask::parse(false, false, Some("abc"));
+    let out = node.step(
+        MS,
+        Input::Partial {
+            id: 1,
+            ask,
+            base: None,
+        },
+    );
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("tag=<u64>"));
+    assert_eq!(node.leader().stats().rejected, 1);
+}
+
+#[test]
+fn a_late_cut_asks_for_the_batches_again_once_at_a_time() {
+    let mut node = started("a", &["a"]);
+    node.step(
+        Duration::ZERO,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Cut(7),
+            base: None,
+        },
+    );
+    assert_eq!(
+        resends(&node.step(250 * MS, Input::Tick)),
+        0,
+        "not late yet"
+    );
+    let out = node.step(600 * MS, Input::Tick);
+    assert_eq!(resends(&out), 1, "{out:?}");
+    match out.iter().find(|o| matches!(o, Output::AskResend(_))) {
+        Some(Output::AskResend(r)) => assert_eq!((r.leader.as_str(), r.from), ("a", 1)),
+        _ => unreachable!(),
+    }
+    // One request at a time, until it is answered (here: it failed).
+    assert_eq!(resends(&node.step(850 * MS, Input::Tick)), 0);
+    node.step(900 * MS, Input::Resent(Err("timeout".into())));
+    assert_eq!(resends(&node.step(1100 * MS, Input::Tick)), 1);
+    // The resent batch carries the cut: the query is answered.
+    let resent = Batch {
+        version: VERSION,
+        sensor: "s".into(),
+        number: 1,
+        through: 2,
+        events: 2,
+        finished: false,
+        items: vec![Sequenced {
+            seq: 2,
+            item: cut(7),
+        }],
+    };
+    let out = node.step(1200 * MS, Input::Resent(Ok(vec![resent])));
+    assert_eq!(answers(&out).len(), 1);
+}
+
+#[test]
+fn a_gap_in_batch_numbers_is_asked_for_at_once() {
+    let mut node = started("a", &["a"]);
+    let out = node.step(MS, batch(2, vec![(3, mix(0, 1, 0, 0))], 3));
+    assert_eq!(resends(&out), 1);
+    assert_eq!(node.leader().missing_batches(), Some(1));
+    // Still missing while the request is out: not asked twice.
+    assert_eq!(resends(&node.step(2 * MS, batch(3, vec![], 3))), 0);
+    let out = node.step(3 * MS, batch(1, vec![(2, mix(0, 2, 0, 0))], 2));
+    assert_eq!(resends(&out), 0);
+    assert_eq!(node.leader().position(), 3);
+}
+
+#[test]
+fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
+    let mut node = started("a", &["a", "b"]);
+    let out = node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::Send { to, seqs, .. } if to == "b" && seqs == &[2])));
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+    let asked = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
+            .count()
+    };
+    assert_eq!(asked(&node.step(300 * MS, Input::Tick)), 0, "not late yet");
+    let out = node.step(600 * MS, Input::Tick);
+    assert_eq!(asked(&out), 1);
+    match out
+        .iter()
+        .find(|o| matches!(o, Output::AskTransfers { .. }))
+    {
+        Some(Output::AskTransfers { wanted, .. }) => assert_eq!((wanted.to, wanted.after), (0, 1)),
+        _ => unreachable!(),
+    }
+    assert_eq!(
+        asked(&node.step(850 * MS, Input::Tick)),
+        0,
+        "one request out"
+    );
+    let lost = Transfer {
+        components: Vec::new(),
+        version: VERSION,
+        from: 1,
+        seq: 2,
+        sets: Vec::new(),
+        rows: Vec::new(),
+    };
+    node.step(
+        900 * MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Ok(vec![lost]),
+        },
+    );
+    assert_eq!(node.leader().waiting_for_transfer(), None);
+    assert_eq!(node.leader().position(), 2);
+}
+
+#[test]
+fn a_failed_follow_request_is_made_again() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    // b's sets bring track 3, which a does not follow yet.
+    let sets = vec![idmesh_protocol::wire::leader_to_leader::WireSet {
+        red: vec![3],
+        blue: vec![],
+        ln_mass: -1.0,
+    }];
+    let out = node.step(20 * MS, sets_from_b(2, sets));
+    let follows = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskFollow(_)))
+            .count()
+    };
+    assert_eq!(follows(&out), 1);
+    assert_eq!(
+        follows(&node.step(250 * MS, Input::Tick)),
+        0,
+        "one request out"
+    );
+    node.step(300 * MS, Input::Followed(Err("no answer in time".into())));
+    assert!(node.failure().is_none(), "a lost reply is not a failure");
+    assert_eq!(follows(&node.step(500 * MS, Input::Tick)), 1);
+}
+
+#[test]
+fn the_mark_is_published_after_a_sync_and_only_when_it_moved() {
+    let mut node = started("a", &["a"]);
+    let marks = |out: &[Output]| -> Vec<Option<Durable>> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Persist { mark } => Some(mark.clone()),
+                _ => None,
+            })
+            .collect()
+    };
+    let first = marks(&node.step(250 * MS, Input::Tick));
+    assert_eq!(first.len(), 1);
+    assert_eq!(
+        first[0].as_ref().map(|m| (m.batch, m.position)),
+        Some((1, 1))
+    );
+    assert_eq!(
+        marks(&node.step(500 * MS, Input::Tick)),
+        vec![None],
+        "synced, not republished"
+    );
+    node.step(600 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2));
+    let moved = marks(&node.step(750 * MS, Input::Tick));
+    assert_eq!(
+        moved[0].as_ref().map(|m| (m.batch, m.position)),
+        Some((2, 2))
+    );
+    // A failed leader tells nobody it is safe.
+    node.step(800 * MS, Input::Failed("disk full".into()));
+    node.step(900 * MS, batch(2, vec![], 2));
+    assert_eq!(marks(&node.step(1000 * MS, Input::Tick)), vec![None]);
+    let out = node.step(
+        1100 * MS,
+        Input::Partial {
+            id: 9,
+            ask: Ask::Quiet { rows: false },
+            base: None,
+        },
+    );
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("disk full"));
+}
+
+#[test]
+fn inputs_are_journaled_before_their_effects_and_snapshots_come_every_n() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    let out = node.step(MS, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    assert!(matches!(
+        out[0],
+        Output::Journal {
+            kind: Kind::Batch,
+            ..
+        }
+    ));
+    let out = node.step(2 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let kinds: Vec<&str> = out
+        .iter()
+        .map(|o| match o {
+            Output::Journal { .. } => "journal",
+            Output::Send { .. } => "send",
+            _ => "other",
+        })
+        .collect();
+    assert_eq!(kinds, ["journal", "send"]);
+    // Refused at the door: only the refusal is journaled (so the count
+    // survives a restart), not its bytes, and it is no input.
+    let out = node.step(
+        3 * MS,
+        Input::Message {
+            kind: Kind::Batch,
+            bytes: vec![9, 9],
+            origin: "x".into(),
+        },
+    );
+    assert_eq!(
+        out,
+        [Output::Journal {
+            kind: Kind::Rejected,
+            bytes: Vec::new()
+        }]
+    );
+    assert_eq!(node.leader().stats().rejected, 1);
+    node.step(4 * MS, batch(2, vec![], 2));
+    let out = node.step(5 * MS, batch(3, vec![], 2));
+    assert!(
+        out.iter().any(|o| matches!(o, Output::Snapshot(_))),
+        "the 4th journaled input: {out:?}"
+    );
+    assert_eq!(node.leader().stats().snapshots, 1);
+}
+
+#[test]
+fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
+    // Leader a's life before the crash, as its journal holds it.
+    let mut before = started("a", &["a", "b"]);
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut keep = |out: Vec<Output>| {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    };
+    let mut fresh = Node::new(Leader::new("a"), timers());
+    keep(fresh.step(MS, batch(0, vec![(1, begin(&["a", "b"]))], 1)));
+    keep(fresh.step(2 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2)));
+    before.step(2 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+
+    let entries = journal.iter().map(|(k, b)| (*k, b.as_slice()));
+    let (mut node, out) =
+        Node::recover("a", "host-a", None, entries, false, timers(), 10 * MS).unwrap();
+    assert_eq!(node.leader().position(), before.leader().position());
+    // Its transfer again, the batches after its journal, b's transfers.
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::Send { to, seqs, .. } if to == "b" && seqs == &[2])));
+    assert_eq!(resends(&out), 1);
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b")));
+    let out = node.step(
+        20 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::Quiet { rows: false },
+            base: None,
+        },
+    );
+    assert!(answers(&out)[0]
+        .1
+        .as_ref()
+        .unwrap_err()
+        .contains("recovering"));
+    // The sensor answers, then b: caught up.
+    node.step(30 * MS, Input::Resent(Ok(Vec::new())));
+    assert!(node.recovering_since().is_some());
+    let transfer = Transfer {
+        components: Vec::new(),
+        version: VERSION,
+        from: 1,
+        seq: 2,
+        sets: Vec::new(),
+        rows: Vec::new(),
+    };
+    node.step(
+        40 * MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Ok(vec![transfer]),
+        },
+    );
+    assert!(node.recovering_since().is_none());
+    assert_eq!(node.leader().stats().recoveries, 1);
+    assert!(node.leader().quiet(false).is_some());
+    // With nothing in its journal, a leader just starts.
+    let (node, out) = Node::recover("a", "h", None, [], false, timers(), MS).unwrap();
+    assert!(out.is_empty() && node.recovering_since().is_none());
+}
+
+/// A batch that came before the Begin is checked against it when
+/// the Begin comes; refused, it is asked for again at once — not at the
+/// next gap, which at the stream's end never comes.
+#[test]
+fn a_batch_held_before_the_begin_and_refused_is_asked_for_again_at_once() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    // Track 9 of a stream of 4: a misfit only the Begin can tell.
+    let out = node.step(MS, batch(1, vec![(2, mix(0, 9, 0, 0))], 2));
+    assert_eq!(resends(&out), 1, "the gap before it is asked for");
+    node.step(2 * MS, batch(0, vec![(1, begin(&["a"]))], 1));
+    assert_eq!(node.leader().stats().rejected, 1);
+    assert_eq!(node.leader().missing_batches(), Some(1));
+    // The first request comes back (batch 0 came meanwhile): batch 1 is
+    // asked for again at once.
+    let out = node.step(3 * MS, Input::Resent(Ok(vec![])));
+    assert_eq!(resends(&out), 1, "{out:?}");
+}
+
+/// `rejected` survives a restart — a refusal is journaled (as
+/// a mark, not the bytes) and counted again on replay.
+#[test]
+fn the_rejected_count_survives_a_restart() {
+    let mut node = started("a", &["a"]);
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut keep = |out: Vec<Output>| {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    };
+    keep(node.step(MS, batch(0, vec![(1, begin(&["a"]))], 1)));
+    let junk = Input::Message {
+        kind: Kind::Transfer,
+        bytes: b"junk".to_vec(),
+        origin: "test".into(),
+    };
+    keep(node.step(2 * MS, junk));
+    keep(node.step(
+        3 * MS,
+        Input::Partial {
+            id: 1,
+            ask: Ask::parse(false, false, Some("abc")),
+            base: None,
+        },
+    ));
+    assert_eq!(node.leader().stats().rejected, 2);
+    let (back, _) = Node::recover(
+        "a",
+        "a",
+        None,
+        journal.iter().map(|(k, b)| (*k, b.as_slice())),
+        false,
+        timers(),
+        4 * MS,
+    )
+    .unwrap();
+    assert_eq!(back.leader().stats().rejected, 2);
+}
+
+#[test]
+fn a_transfer_request_never_answered_is_made_again_once_it_is_stale() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let asked = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
+            .count()
+    };
+    assert_eq!(asked(&node.step(600 * MS, Input::Tick)), 1);
+    // The answer is lost: no second request while the first may still
+    // come (query timeout + late = 2.5 s) …
+    let mut again = 0;
+    let mut now = 600 * MS;
+    while now < 3100 * MS {
+        now += 250 * MS;
+        again += asked(&node.step(now, Input::Tick));
+    }
+    assert_eq!(again, 0, "asked again before the first request was stale");
+    // … then the request is given up and made again on the next tick.
+    now += 250 * MS;
+    let out = node.step(now, Input::Tick);
+    now += 250 * MS;
+    let out2 = node.step(now, Input::Tick);
+    assert_eq!(asked(&out) + asked(&out2), 1, "{out:?} {out2:?}");
+    assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
+}
+
+#[test]
+fn a_recovery_waits_for_the_sensor_through_failed_resends_but_not_for_a_peer_that_failed() {
+    let mut journal: Vec<(Kind, Vec<u8>)> = Vec::new();
+    let mut fresh = Node::new(Leader::new("a"), timers());
+    for out in [
+        fresh.step(MS, batch(0, vec![(1, begin(&["a", "b"]))], 1)),
+        fresh.step(2 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2)),
+    ] {
+        for o in out {
+            if let Output::Journal { kind, bytes } = o {
+                journal.push((kind, bytes));
+            }
+        }
+    }
+    let entries = journal.iter().map(|(k, b)| (*k, b.as_slice()));
+    let (mut node, out) =
+        Node::recover("a", "host-a", None, entries, false, timers(), 10 * MS).unwrap();
+    assert_eq!(resends(&out), 1);
+    // The sensor's answer is lost: still recovering, and the next tick
+    // asks again (one request at a time).
+    node.step(20 * MS, Input::Resent(Err("timeout".into())));
+    assert!(node.recovering_since().is_some());
+    assert_eq!(resends(&node.step(260 * MS, Input::Tick)), 1);
+    assert_eq!(resends(&node.step(510 * MS, Input::Tick)), 0);
+    // b is down: its failure counts as its answer (it sends its transfers
+    // again when it comes back).
+    node.step(
+        520 * MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Err("no answer".into()),
+        },
+    );
+    assert!(
+        node.recovering_since().is_some(),
+        "the sensor has not answered"
+    );
+    node.step(530 * MS, Input::Resent(Ok(Vec::new())));
+    assert_eq!(node.recovering_since(), None);
+    assert_eq!(node.leader().stats().recoveries, 1);
+}
+
+#[test]
+fn a_peers_durable_mark_lets_the_leader_forget_what_it_sent_there() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let sent_to_b = |node: &mut Node, id| {
+        let wanted = TransfersWanted {
+            version: VERSION,
+            to: 1,
+            after: 0,
+        };
+        let out = node.step(
+            20 * MS,
+            Input::SentWanted {
+                id,
+                bytes: encode(&wanted),
+                origin: "b".into(),
+            },
+        );
+        match &out[..] {
+            [Output::AnswerSent { id: got, answer }] if *got == id => {
+                answer.as_ref().map(|s| s.transfers.len()).unwrap()
+            }
+            _ => panic!("one answer: {out:?}"),
+        }
+    };
+    assert_eq!(sent_to_b(&mut node, 1), 1);
+    // Its own mark, or b's below the transfer, changes nothing.
+    let mark = |leader: &str, position| Input::Durable {
+        bytes: encode(&Durable {
+            version: VERSION,
+            leader: leader.into(),
+            batch: 1,
+            position,
+        }),
+        origin: leader.into(),
+    };
+    node.step(30 * MS, mark("a", 2));
+    node.step(30 * MS, mark("b", 1));
+    assert_eq!(sent_to_b(&mut node, 2), 1);
+    node.step(40 * MS, mark("b", 2));
+    assert_eq!(sent_to_b(&mut node, 3), 0, "b is safe past it");
+    // Bytes that are no mark, or no request, are counted and answered.
+    node.step(
+        50 * MS,
+        Input::Durable {
+            bytes: vec![1],
+            origin: "x".into(),
+        },
+    );
+    let out = node.step(
+        60 * MS,
+        Input::SentWanted {
+            id: 4,
+            bytes: vec![1],
+            origin: "x".into(),
+        },
+    );
+    // (Each refusal is journaled too, so the count survives a restart.)
+    let answers: Vec<_> = out
+        .iter()
+        .filter(|o| matches!(o, Output::AnswerSent { .. }))
+        .collect();
+    assert!(
+        matches!(
+            &answers[..],
+            [Output::AnswerSent {
+                id: 4,
+                answer: Err(_)
+            }]
+        ),
+        "{out:?}"
+    );
+    assert_eq!(node.leader().stats().rejected, 2);
+}
+
+fn progress(out: &[Output]) -> Vec<(u64, u64)> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::Progress(p) => Some((p.through, p.batch)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The sensor's flow control reads how far a leader has got: said after
+/// every input that moves it (past items for others, since a batch says
+/// how far the stream is), never past an item it waits at, and again at
+/// every sweep whether it moved or not.
+#[test]
+fn progress_is_published_when_it_moves_and_at_every_sweep() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    let out = node.step(Duration::ZERO, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    assert_eq!(progress(&out), vec![(1, 1)]);
+    // Nothing for a in items 2..=5: done through 5 all the same.
+    let out = node.step(MS, batch(1, vec![], 5));
+    assert_eq!(progress(&out), vec![(5, 2)]);
+    // A mix across a and b at 6: a waits for b's sets there.
+    let out = node.step(2 * MS, batch(2, vec![(6, mix(0, 2, 0, 1))], 8));
+    assert_eq!(node.leader().waiting_for_transfer(), Some((6, 1)));
+    assert_eq!(progress(&out), vec![], "stopped at 5, as it was");
+    assert_eq!(node.leader().done_through(), 5);
+    let out = node.step(300 * MS, Input::Tick);
+    assert_eq!(progress(&out), vec![(5, 3)], "said again at the sweep");
+    // A second mix across at 10; b's sets of 6 come: a moves on to 9 and
+    // stops again. Not caught up: nothing said until it is.
+    node.step(301 * MS, batch(3, vec![(10, mix(1, 3, 0, 1))], 12));
+    let out = node.step(302 * MS, sets_from_b(6, Vec::new()));
+    assert_eq!(node.leader().done_through(), 9);
+    assert_eq!(progress(&out), vec![], "stopped mid-batch");
+    let out = node.step(303 * MS, sets_from_b(10, Vec::new()));
+    assert_eq!(progress(&out), vec![(12, 4)], "caught up with its batches");
+}
+
+/// b's sets of a mix across at item `seq`, as they come from the network.
+fn sets_from_b(seq: u64, sets: Vec<idmesh_protocol::wire::leader_to_leader::WireSet>) -> Input {
+    Input::Message {
+        kind: Kind::Transfer,
+        bytes: encode(&TransfersSent {
+            version: VERSION,
+            transfers: vec![Transfer {
+                components: Vec::new(),
+                version: VERSION,
+                from: 1,
+                seq,
+                sets,
+                rows: Vec::new(),
+            }],
+        }),
+        origin: "b".into(),
+    }
+}
+
+/// Without a window nothing waits for progress marks: a leader says how
+/// far it got at its sweep only, not after every batch.
+#[test]
+fn without_flow_control_progress_is_published_at_the_sweep_only() {
+    let timers = Timers {
+        flow_control: false,
+        ..timers()
+    };
+    let mut node = Node::new(Leader::new("a"), timers);
+    let out = node.step(Duration::ZERO, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    assert_eq!(progress(&out), vec![]);
+    let out = node.step(MS, batch(1, vec![], 5));
+    assert_eq!(progress(&out), vec![]);
+    let out = node.step(300 * MS, Input::Tick);
+    assert_eq!(progress(&out), vec![(5, 2)], "at the sweep");
+}
+
+/// Every cut a leader reaches, it pushes its sums at unasked: whole at the
+/// first, then as a change to the cut it pushed before (on a factored
+/// stream, only the components changed since); a held query at the same
+/// cut is still answered.
+#[test]
+fn a_leader_pushes_its_sums_at_every_cut_as_a_change_to_the_last_pushed() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let Item::Begin(mut start) = begin(&["a"]) else {
+        unreachable!()
+    };
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+        shrink: false,
+        regional: false,
+    });
+    let mut node = Node::new(Leader::new("a"), timers());
+    node.step(Duration::ZERO, batch(0, vec![(1, Item::Begin(start))], 1));
+    let pushed = |out: &[Output]| -> Vec<Partial> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Push(p) => Some((**p).clone()),
+                _ => None,
+            })
+            .collect()
+    };
+    let out = node.step(MS, batch(1, vec![(2, cut(7))], 2));
+    let first = pushed(&out);
+    assert_eq!(first.len(), 1, "{out:?}");
+    assert_eq!((first[0].tag, first[0].cut, first[0].base), (7, 2, None));
+    assert_eq!(first[0].components.as_ref().map(Vec::len), Some(4));
+    let held = Input::Partial {
+        id: 1,
+        ask: Ask::Cut(9),
+        base: None,
+    };
+    assert!(node.step(2 * MS, held).is_empty());
+    let out = node.step(3 * MS, batch(2, vec![(3, mix(0, 2, 0, 0)), (4, cut(9))], 4));
+    let second = pushed(&out);
+    assert_eq!(second.len(), 1, "{out:?}");
+    assert_eq!((second[0].tag, second[0].base), (9, Some(7)));
+    let changed = second[0].components.as_ref().expect("factored");
+    assert_eq!(changed.len(), 1, "only the merged component: {changed:?}");
+    assert_eq!(changed[0].tracks, vec![0, 2]);
+    assert_eq!(answers(&out).len(), 1, "the held query answered too");
+}

@@ -1,0 +1,1005 @@
+//! The sensor process: streams a trace through the [`Gateway`] over Zenoh.
+//! What to route, keep, place and answer is the gateway's (pure, see
+//! [`crate::machine`]); this actor paces the lines and moves the bytes.
+//!
+//! One task owns the gateway. It publishes each leader's items as a batch on
+//! the leader's own key (congestion control Block: an event is never
+//! dropped), places cuts for the coordinator and answers follow requests
+//! between chunks, so a cut is always a point of the same global order the
+//! leaders apply. After the source is exhausted it keeps serving cuts and
+//! follows until shut down, so queries keep being answered.
+//!
+//! Events come from a trace file (paced), standard input (as it comes) and
+//! producers on `P/sensor/<name>/ingest` ([`crate::feed`]); the same task
+//! takes all three, so they share one order. An ingest request is
+//! answered only after its accepted lines are routed and the batches
+//! holding them are published: what a producer sees acknowledged is in
+//! the sensor's order.
+//!
+//! Every batch sent is kept, by leader and number, so that a leader that
+//! lost some (a gap in the numbers, or the time it was down and
+//! restarting) gets them again on `P/sensor/<name>/resend`, until the
+//! leader publishes a durable mark past it ([`crate::batch_log`]); items every
+//! leader has passed leave the router's log the same way. The logs live in
+//! memory; with a journal ([`GatewayConfig::journal`]) what changed them is
+//! appended to it and fsynced before any batch, acknowledgement or follow
+//! reply that depends on it leaves, and a sensor started again on the same
+//! journal rebuilds its state from it ([`crate::journal`]), goes on with
+//! its trace after the last line it routed, and leaders that missed
+//! batches ask for them again as after their own restart. [`Faults`] drops
+//! or doubles batches on purpose, for the tests that show neither matters.
+
+use crate::cuts::{CutParameters, Placed};
+use crate::feed::{InputLine, Source};
+use crate::ingest::Offer;
+use crate::journal::{Journal, JournalError, Record};
+use crate::machine::{CutOutcome, Gateway, RestoreError};
+use crate::mesh::MeshConfig;
+use crate::peers::{Fetch, Peers};
+use crate::router::Router;
+use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::encode;
+use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::producer_to_sensor::{COUNTER, FINISH, PRODUCER, TIME};
+use idmesh_protocol::wire::sensor_to_leader::Batch;
+use std::future::Future;
+use std::time::{Duration, Instant};
+use tracing::Instrument;
+use zenoh::pubsub::Publisher;
+use zenoh::qos::CongestionControl;
+use zenoh::query::Query;
+use zenoh::Session;
+
+#[derive(Debug, Clone)]
+pub struct GatewayConfig {
+    pub name: String,
+    pub keys: Keys,
+    /// Events per second; None = as fast as the leaders take them.
+    pub rate: Option<f64>,
+    /// Pace by the trace's own times instead (`rate` then scales them).
+    pub realtime: bool,
+    /// Stop after this many events.
+    pub limit: Option<u64>,
+    /// How long to wait for every leader to be up.
+    pub wait_for_leaders: Duration,
+    /// The stream stays open for producers once its trace and input are
+    /// done: it never finishes, and takes ingested events until shut down.
+    pub live: bool,
+    /// Flow control: route at most this many seqs past the slowest
+    /// leader's progress (None: as fast as the source gives).
+    pub window: Option<u64>,
+    pub faults: Faults,
+    /// One sensor of several: which, and which leaders it serves
+    /// ([`crate::mesh`]). Its events come from producers only, and its
+    /// part of the stream ends when they say `finish`.
+    pub mesh: Option<MeshConfig>,
+}
+
+/// Faults injected on purpose (tests): the network losing or doubling
+/// event batches.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Faults {
+    /// Every batch is published twice.
+    pub duplicate: bool,
+    /// Every n-th batch to each leader is not published at all (it stays
+    /// in the log, for the leader to ask for again).
+    pub drop_every: Option<u64>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GatewayError {
+    #[error("zenoh: {what}: {message}")]
+    Mesh { what: &'static str, message: String },
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    #[error("sensor journal {path}: cannot resume from it: {source}")]
+    Restore { path: String, source: RestoreError },
+    #[error(
+        "sensor {0}: one sensor of several takes events from producers only \
+         (P/sensor/<name>/ingest): its trace may hold the header alone, and it reads no \
+         standard input"
+    )]
+    MeshSource(String),
+    #[error("leaders {missing:?} did not come up within {waited:?}")]
+    LeadersMissing {
+        missing: Vec<String>,
+        waited: Duration,
+    },
+}
+
+fn mesh(what: &'static str) -> impl FnOnce(zenoh::Error) -> GatewayError {
+    move |e| GatewayError::Mesh {
+        what,
+        message: e.to_string(),
+    }
+}
+
+/// How many of `lines` the stream sends, and how many events they hold:
+/// `limit` counts events, as watermarks and `?events=N` do, not lines
+/// (truth lines carry no event).
+fn stream_length(lines: &[Line], limit: Option<u64>) -> (usize, u64) {
+    let mut events = 0u64;
+    for (i, line) in lines.iter().enumerate() {
+        if line.is_event() {
+            if limit.is_some_and(|limit| events == limit) {
+                return (i, events);
+            }
+            events += 1;
+        }
+    }
+    (lines.len(), events)
+}
+
+/// Unfollow requests waiting to be taken before the oldest are dropped.
+const UNFOLLOWS_KEPT: usize = 4096;
+
+/// Progress marks waiting to be taken before the oldest are dropped.
+const PROGRESS_KEPT: usize = 1024;
+
+/// A chunk of the trace (what is routed between two flushes, and between
+/// two looks at queries) ends once it has routed this many seqs (items)
+/// per leader, or the window's room if less ...
+const CHUNK_SEQS: u64 = 512;
+
+/// ... or after this many lines per leader. Counting seqs rather than
+/// lines matters where regions are many: most of a crowd's lines are
+/// moves, which are items only at a handover, and a chunk of 512 lines
+/// sent every leader a batch (and got a progress mark back) for a few
+/// handovers each.
+const CHUNK_LINES: usize = 8192;
+
+/// The bounds of a chunk for `leaders` leaders: (seqs, lines). Per leader,
+/// because a chunk's items are shared out among the leaders: with bounds
+/// that did not grow with them, each of L leaders got a batch of about
+/// 1/L of them per chunk, so L leaders together took L times the batches
+/// (and sent back L times the progress marks) of one leader for the same
+/// stream. A stream paced to its times routes only what is due, so the
+/// bounds matter only to one that is behind.
+fn chunk_bounds(leaders: usize) -> (u64, usize) {
+    let leaders = leaders.max(1);
+    (CHUNK_SEQS * leaders as u64, CHUNK_LINES * leaders)
+}
+
+/// How often a stream the window holds looks again without a mark (marks
+/// wake it at once; this only bounds a wait on a lost one).
+const WINDOW_RECHECK: Duration = Duration::from_millis(50);
+
+/// How often a stream the window holds asks [`Gateway::stalled`] for
+/// batches a leader still waits for: longer than a leader's sweep, at
+/// which it publishes its mark whether it moved or not.
+const STALL_CHECK: Duration = Duration::from_millis(600);
+
+/// Streams `source` until done (a live one until `shutdown`), then serves
+/// queries until `shutdown`. With a `journal` (opened, and so owned, before
+/// the process joined the mesh: [`Journal::open`]) it first restores what
+/// the records say, then records every change of state in it.
+pub async fn run(
+    session: Session,
+    config: GatewayConfig,
+    router: Router,
+    source: Source,
+    journal: Option<(Journal, Vec<Record>)>,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), GatewayError> {
+    let keys = &config.keys;
+    let cut_requests = session
+        .declare_queryable(keys.sensor_cut(&config.name))
+        .await
+        .map_err(mesh("declare the cut queryable"))?;
+    let follows = session
+        .declare_queryable(keys.sensor_follow(&config.name))
+        .await
+        .map_err(mesh("declare the follow queryable"))?;
+    // A ring, not a queue: when requests come faster than the loop takes
+    // them, the oldest are dropped (each only saves traffic) rather than
+    // stalling Zenoh's receiving task, and with it every request to the
+    // sensor.
+    let unfollows = session
+        .declare_subscriber(keys.sensor_unfollow(&config.name))
+        .with(zenoh::handlers::RingChannel::new(UNFOLLOWS_KEPT))
+        .await
+        .map_err(mesh("declare the unfollow subscriber"))?;
+    let resends = session
+        .declare_queryable(keys.sensor_resend(&config.name))
+        .await
+        .map_err(mesh("declare the resend queryable"))?;
+    let durables = session
+        .declare_subscriber(keys.every_leader_durable())
+        .await
+        .map_err(mesh("declare the durable-mark subscriber"))?;
+    // Only the latest mark of each leader matters: a ring, so a flood of
+    // them never stalls Zenoh's receiving task.
+    let progress = session
+        .declare_subscriber(keys.every_leader_progress())
+        .with(zenoh::handlers::RingChannel::new(PROGRESS_KEPT))
+        .await
+        .map_err(mesh("declare the progress-mark subscriber"))?;
+    let stats = session
+        .declare_queryable(keys.sensor_stats(&config.name))
+        .await
+        .map_err(mesh("declare the stats queryable"))?;
+    let positions = session
+        .declare_queryable(keys.sensor_positions(&config.name))
+        .await
+        .map_err(mesh("declare the positions queryable"))?;
+    let ingests = session
+        .declare_queryable(keys.sensor_ingest(&config.name))
+        .await
+        .map_err(mesh("declare the ingest queryable"))?;
+    let intakes = session
+        .declare_queryable(keys.sensor_intake(&config.name))
+        .await
+        .map_err(mesh("declare the intake queryable"))?;
+    let _token = session
+        .liveliness()
+        .declare_token(keys.alive("sensor", &config.name))
+        .await
+        .map_err(mesh("declare the liveliness token"))?;
+    let names = router.begin().leaders.clone();
+    let mut publishers = Vec::with_capacity(names.len());
+    for name in &names {
+        publishers.push(
+            session
+                .declare_publisher(keys.leader_events(name))
+                .congestion_control(CongestionControl::Block)
+                .await
+                .map_err(mesh("declare an event publisher"))?,
+        );
+    }
+    wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
+    let Source { lines, mut input } = source;
+    if config.mesh.is_some() && (input.is_some() || lines.iter().any(Line::is_event)) {
+        return Err(GatewayError::MeshSource(config.name.clone()));
+    }
+    // The stream ends by itself when the trace's lines are out and there
+    // is no input to wait for; a live one only when the sensor stops (and
+    // one sensor of several when its producers say so).
+    let ends = input.is_none() && !config.live && config.mesh.is_none();
+    tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(),
+        stdin = input.is_some(), ends, "streaming");
+
+    let (length, end) = stream_length(&lines, config.limit);
+    let lines = &lines[..length];
+    let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
+    if ends {
+        gateway = gateway.ending_at(end);
+    }
+    if let Some(window) = config.window {
+        gateway = gateway.windowed(window);
+    }
+    if let Some(mesh) = &config.mesh {
+        gateway = gateway.meshed(mesh);
+    }
+    let journal = match journal {
+        Some((journal, records)) => {
+            let path = journal.path().to_path_buf();
+            let restored = records.len();
+            gateway
+                .restore(records, lines)
+                .map_err(|source| GatewayError::Restore {
+                    path: path.display().to_string(),
+                    source,
+                })?;
+            if restored > 0 {
+                tracing::info!(sensor = %config.name, journal = %path.display(), records = restored,
+                    events = gateway.router().events(), seq = gateway.router().seq(),
+                    trace_lines = gateway.traced(), "resumed from the journal");
+            }
+            gateway = gateway.journaled();
+            Some(journal)
+        }
+        None => None,
+    };
+    // A resumed trace goes on after the last line it routed.
+    let lines = &lines[(gateway.traced() as usize).min(lines.len())..];
+    if ends && lines.is_empty() && !gateway.finished() {
+        // It died after its last line, before saying the stream is over.
+        gateway.end();
+    }
+    let mut wire = Wire {
+        faults: config.faults,
+        publishers,
+        journal,
+    };
+    wire.flush(&mut gateway).await?;
+    let mut peers = config
+        .mesh
+        .as_ref()
+        .map(|_| Peers::start(&session, keys, gateway.wanted()));
+    let started = Instant::now();
+    let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
+    let mut next = 0usize;
+    // The window had room at the last look.
+    let mut open = true;
+    let mut stall_check = tokio::time::interval(STALL_CHECK);
+    stall_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    tokio::pin!(shutdown);
+    // Peers' intake requests with nothing new to answer yet.
+    let mut held: Vec<HeldIntake> = Vec::new();
+    loop {
+        // How many lines are due now, and when the next one is.
+        let (due, wait) = if gateway.finished() || next >= lines.len() {
+            (0, Duration::from_secs(3600))
+        } else {
+            let chunk_lines = chunk_bounds(gateway.router().leaders()).1;
+            let (due, wait) = due_lines(&config, lines, next, started, first_time, chunk_lines);
+            // Held, the stream waits for progress marks.
+            match gateway.room() {
+                Some(0) if due > 0 => {
+                    if open {
+                        gateway.hold();
+                    }
+                    (0, wait.min(WINDOW_RECHECK))
+                }
+                _ => (due, wait),
+            }
+        };
+        open = gateway.room() != Some(0);
+        if due > 0 {
+            // A line takes at most a seq or two: the window holds to
+            // within one line.
+            let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
+            let budget = gateway.room().unwrap_or(chunk_seqs).min(chunk_seqs);
+            let end = gateway.router().seq() + budget;
+            let mut placed = Vec::new();
+            let mut taken = 0;
+            for line in &lines[next..next + due] {
+                placed.extend(gateway.line(line));
+                taken += 1;
+                if gateway.router().seq() >= end {
+                    break;
+                }
+            }
+            let due = taken;
+            next += due;
+            let refused = if next >= lines.len() && ends {
+                gateway.end()
+            } else {
+                Vec::new()
+            };
+            wire.flush(&mut gateway)
+                .instrument(tracing::debug_span!(
+                    "chunk",
+                    from = next - due,
+                    lines = due
+                ))
+                .await?;
+            for p in placed {
+                reply_placed(p).await;
+            }
+            if gateway.finished() {
+                tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
+                for (query, reason) in refused {
+                    let _ = bounded("a refusal", query.reply_err(reason)).await;
+                }
+            }
+            // Let queries in between chunks.
+            tokio::task::yield_now().await;
+        }
+        tokio::select! {
+            biased;
+            _ = &mut shutdown => break,
+            query = cut_requests.recv_async() => {
+                let Ok(query) = query else { break };
+                cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
+                // Every cut already asked for is placed or scheduled
+                // before the stream moves on: a client asking for many
+                // points at once (`--at-events`) must not find the stream
+                // past them because its questions were let in one per chunk.
+                while let Ok(Some(query)) = cut_requests.try_recv() {
+                    cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
+                }
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+            }
+            fetched = next_fetched(&mut peers) => {
+                let Some((peer, fetched)) = fetched else { continue };
+                let answered = !matches!(fetched, Fetch::Silent(_));
+                match fetched {
+                    Fetch::Slice(bytes) => {
+                        if let Err(e) = gateway.peer(&bytes) {
+                            tracing::warn!(%peer, error = %e, "a peer's intake slice refused");
+                        }
+                    }
+                    Fetch::Refused(e) => tracing::warn!(%peer, error = %e, "a peer refused to give its intake"),
+                    Fetch::Silent(e) => tracing::debug!(%peer, error = %e, "a peer gave no intake"),
+                }
+                if let Some(peers) = peers.as_mut() {
+                    peers.answered(&peer, answered);
+                    if let Some(reason) = degraded(&gateway, peers) {
+                        gateway.refuse_waiting(&reason);
+                    }
+                }
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+            }
+            query = intakes.recv_async() => {
+                let Ok(query) = query else { break };
+                held.push(HeldIntake { request: payload(&query), query, until: Instant::now() + HOLD_INTAKE });
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+            }
+            _ = tokio::time::sleep_until(next_release(&held)), if !held.is_empty() => {
+                answer_intakes(&mut gateway, &mut wire, &mut held).await?;
+            }
+            query = follows.recv_async() => {
+                let Ok(query) = query else { break };
+                let answer = gateway.follow(&payload(&query));
+                let followed = answer.is_ok();
+                // The interests it grew are on disk before the leader
+                // counts on them.
+                wire.sync(&mut gateway)?;
+                reply_to(&query, answer, "follow").await;
+                if followed {
+                    wire.flush(&mut gateway).await?;
+                }
+            }
+            sample = unfollows.recv_async() => {
+                let Ok(sample) = sample else { break };
+                // Dropping tracks can only mean fewer items from now on:
+                // nothing to flush. A refusal is counted and logged.
+                let mut next = Some(sample);
+                while let Some(sample) = next {
+                    if let Ok(dropped) = gateway.unfollow(&sample.payload().to_bytes()) {
+                        tracing::trace!(dropped, "unfollowed");
+                    }
+                    next = unfollows.try_recv().ok().flatten();
+                }
+            }
+            sample = durables.recv_async() => {
+                let Ok(sample) = sample else { break };
+                gateway.durable(&sample.payload().to_bytes(), sample.key_expr().as_str());
+            }
+            _ = stall_check.tick(), if !open => {
+                let again = gateway.stalled();
+                wire.again(again).await;
+            }
+            sample = progress.recv_async() => {
+                let Ok(sample) = sample else { break };
+                let mut next = Some(sample);
+                while let Some(sample) = next {
+                    gateway.progress(&sample.payload().to_bytes(), sample.key_expr().as_str());
+                    next = progress.try_recv().ok().flatten();
+                }
+            }
+            query = resends.recv_async() => {
+                let Ok(query) = query else { break };
+                let answer = gateway.resend(&payload(&query));
+                reply_to(&query, answer, "resend").await;
+            }
+            query = stats.recv_async() => {
+                let Ok(query) = query else { break };
+                let body = serde_json::to_vec(gateway.stats()).unwrap_or_default();
+                if let Some(Err(e)) = bounded("stats", query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)).await
+                {
+                    tracing::warn!(error = %e, "could not answer a stats query");
+                }
+            }
+            query = positions.recv_async() => {
+                let Ok(query) = query else { break };
+                // Answered between chunks: the positions after exactly
+                // `events` events, a point of the stream like a cut.
+                let body = serde_json::to_vec(&gateway.router().positions(&config.name, gateway.finished()))
+                    .unwrap_or_default();
+                if let Some(Err(e)) = bounded("positions", query.reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)).await
+                {
+                    tracing::warn!(error = %e, "could not answer a positions query");
+                }
+            }
+            query = ingests.recv_async() => {
+                let Ok(query) = query else { break };
+                ingest(&mut gateway, &mut wire, query).await?;
+                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+            }
+            read = next_input(&mut input), if input.is_some() && open => {
+                let Some(read) = read else {
+                    // The input ended: so does a stream that is not live
+                    // once the trace's own lines are out.
+                    input = None;
+                    tracing::info!(sensor = %config.name, events = gateway.router().events(), "standard input ended");
+                    if next >= lines.len() && !config.live && !gateway.finished() {
+                        let refused = gateway.end();
+                        wire.flush(&mut gateway).await?;
+                        for (query, reason) in refused {
+                            let _ = bounded("a refusal", query.reply_err(reason)).await;
+                        }
+                    }
+                    continue;
+                };
+                let mut placed = Vec::new();
+                take_input(&mut gateway, read, &mut placed);
+                // What the pipe already holds goes in the same batch (as
+                // much of it as the window lets in).
+                let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
+                let room = gateway.room().map_or(chunk_seqs, |r| r.min(chunk_seqs)) as usize;
+                for _ in 1..room {
+                    let Some(rx) = input.as_mut() else { break };
+                    match rx.try_recv() {
+                        Ok(read) => take_input(&mut gateway, read, &mut placed),
+                        Err(_) => break,
+                    }
+                }
+                wire.flush(&mut gateway).await?;
+                for p in placed {
+                    reply_placed(p).await;
+                }
+            }
+            _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
+        }
+    }
+    Ok(())
+}
+
+/// The next line of standard input; `None` at its end (or with none).
+async fn next_input(
+    input: &mut Option<tokio::sync::mpsc::Receiver<InputLine>>,
+) -> Option<InputLine> {
+    match input {
+        Some(rx) => rx.recv().await,
+        None => None,
+    }
+}
+
+/// Routes one line of standard input, or says why not: a bad line is
+/// skipped (the gateway counted it), an unreadable input is logged and
+/// read no further (the channel closes behind it).
+fn take_input(gateway: &mut Gateway<Query>, read: InputLine, placed: &mut Vec<Placed<Query>>) {
+    match read {
+        Ok((number, text)) => match gateway.read(number, &text) {
+            Ok(reached) => placed.extend(reached),
+            Err(reason) => {
+                tracing::warn!(%reason, rejected = gateway.stats().rejected, "input line skipped")
+            }
+        },
+        Err(reason) => tracing::error!(%reason, "standard input is read no further"),
+    }
+}
+
+/// An ingest request: its lines judged and the accepted ones routed and
+/// published, then the acknowledgement (JSON) — or why the whole request
+/// was refused.
+async fn ingest(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    query: Query,
+) -> Result<(), GatewayError> {
+    let body = payload(&query);
+    let parameters = query.parameters();
+    let offer = Offer {
+        producer: parameters.get(PRODUCER),
+        counter: parameters.get(COUNTER),
+        payload: &body,
+        time: parameters.get(TIME),
+        finish: parameters.contains_key(FINISH),
+    };
+    match gateway.ingest(offer) {
+        Ok((ack, placed)) => {
+            // Published before the acknowledgement leaves: a query asked
+            // after it places its cut after these lines. (A request of
+            // duplicates alone routed nothing: no batch for it.) One sensor
+            // of several acknowledges its intake; `settle` publishes what
+            // the merge lets go.
+            let routed = !ack.accepted.is_empty() || !placed.is_empty();
+            if routed && gateway.mesh().is_none() {
+                wire.flush(gateway).await?;
+            }
+            // What it judged (counters used up) is on disk before it says so.
+            wire.sync(gateway)?;
+            let body = serde_json::to_vec(&ack).unwrap_or_default();
+            if let Some(Err(e)) = bounded(
+                "an ingest acknowledgement",
+                query
+                    .reply(query.key_expr().clone(), body)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON),
+            )
+            .await
+            {
+                tracing::warn!(error = %e, "could not acknowledge an ingest request");
+            }
+            for p in placed {
+                reply_placed(p).await;
+            }
+        }
+        Err(refusal) => {
+            tracing::warn!(error = %refusal, rejected = gateway.stats().rejected, "ingest request refused");
+            let _ = bounded("a refusal", query.reply_err(refusal.to_string())).await;
+        }
+    }
+    Ok(())
+}
+
+/// Places, schedules or refuses the cut `query` asks for. One sensor of
+/// several refuses at once a cut the merge cannot place because it waits
+/// for a peer that does not answer: degraded, naming it, never an answer
+/// without its events.
+async fn cut(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    query: Query,
+    peers: Option<&Peers>,
+) -> Result<(), GatewayError> {
+    if let Some(reason) = peers.and_then(|peers| degraded(gateway, peers)) {
+        let _ = bounded("a refusal", query.reply_err(reason)).await;
+        return Ok(());
+    }
+    let parameters = query.parameters();
+    let parameters = CutParameters {
+        tag: parameters.get("tag").map(str::to_owned),
+        rows: parameters.contains_key("rows"),
+        events: parameters.get("events").map(str::to_owned),
+    };
+    match gateway.cut(query, &parameters) {
+        CutOutcome::Placed(p) => {
+            wire.flush(gateway).await?;
+            reply_placed(p).await;
+        }
+        CutOutcome::Scheduled => {}
+        CutOutcome::Refused(query, reason) => {
+            let _ = bounded("a refusal", query.reply_err(reason)).await;
+        }
+    }
+    Ok(())
+}
+
+/// Why no cut can be placed now, if the merge waits for a peer that does
+/// not answer: degraded, naming it.
+fn degraded(gateway: &Gateway<Query>, peers: &Peers) -> Option<String> {
+    let down: Vec<String> = gateway
+        .waiting_for()
+        .into_iter()
+        .filter(|s| peers.unreachable().contains(s))
+        .collect();
+    (!down.is_empty()).then(|| {
+        format!(
+            "degraded: sensors {down:?} do not answer; the stream's order cannot pass their \
+             events, so no cut is placed"
+        )
+    })
+}
+
+/// One sensor of several, after anything that may have moved its merge
+/// or its intake: the batches it made, the cut answers and refusals it
+/// made ready, the held intake requests it now has something for, then
+/// what to fetch from each peer next.
+async fn settle(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    peers: Option<&Peers>,
+    held: &mut Vec<HeldIntake>,
+) -> Result<(), GatewayError> {
+    let Some(peers) = peers else {
+        return Ok(());
+    };
+    wire.flush(gateway).await?;
+    for placed in gateway.answered() {
+        reply_placed(placed).await;
+    }
+    for (query, reason) in gateway.refused() {
+        let _ = bounded("a refusal", query.reply_err(reason)).await;
+    }
+    if !held.is_empty() {
+        answer_intakes(gateway, wire, held).await?;
+    }
+    peers.ask(gateway.wanted());
+    Ok(())
+}
+
+/// How long a peer's intake request with nothing new for it is held
+/// before it is answered anyway.
+const HOLD_INTAKE: Duration = Duration::from_millis(100);
+
+/// A peer's intake request (its bytes), held until there is something new
+/// for it or until `until`.
+struct HeldIntake {
+    query: Query,
+    request: Vec<u8>,
+    until: Instant,
+}
+
+/// When the first held intake request is due.
+fn next_release(held: &[HeldIntake]) -> tokio::time::Instant {
+    let until = held
+        .iter()
+        .map(|h| h.until)
+        .min()
+        .unwrap_or_else(Instant::now);
+    tokio::time::Instant::from_std(until)
+}
+
+/// Answers every held intake request that has something new for its peer
+/// (or has waited long enough, or cannot be answered: an error reply);
+/// keeps the rest.
+async fn answer_intakes(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    held: &mut Vec<HeldIntake>,
+) -> Result<(), GatewayError> {
+    let now = Instant::now();
+    let mut answers = Vec::new();
+    let mut kept = Vec::with_capacity(held.len());
+    for h in held.drain(..) {
+        match gateway.intake(&h.request) {
+            Ok((_, false)) if now < h.until => kept.push(h),
+            Ok((slice, _)) => answers.push((h.query, Ok(slice))),
+            Err(e) => answers.push((h.query, Err(e))),
+        }
+    }
+    *held = kept;
+    // A watermark a request moved is on disk before a peer merges by it.
+    wire.sync(gateway)?;
+    for (query, answer) in answers {
+        reply_to(&query, answer, "intake").await;
+    }
+    Ok(())
+}
+
+/// The next fetch of a peer's intake (never, for the only sensor).
+async fn next_fetched(peers: &mut Option<Peers>) -> Option<crate::peers::Fetched> {
+    match peers {
+        Some(peers) => peers.reply().await,
+        None => std::future::pending().await,
+    }
+}
+
+/// The postcard request a get carries.
+fn payload(query: &Query) -> Vec<u8> {
+    query
+        .payload()
+        .map(|p| p.to_bytes().into_owned())
+        .unwrap_or_default()
+}
+
+/// Answers a `what` request with its reply, or with why there is none
+/// (the gateway counted it).
+async fn reply_to<R: serde::Serialize>(
+    query: &Query,
+    answer: Result<R, String>,
+    what: &'static str,
+) {
+    match answer {
+        Ok(reply) => {
+            tracing::debug!(what, "answered");
+            if let Some(Err(e)) =
+                bounded(what, query.reply(query.key_expr().clone(), encode(&reply))).await
+            {
+                tracing::warn!(what, error = %e, "could not answer a request");
+            }
+        }
+        Err(e) => {
+            let _ = bounded(what, query.reply_err(e)).await;
+        }
+    }
+}
+
+async fn reply_placed(placed: Placed<Query>) {
+    let query = placed.query;
+    if let Some(Err(e)) = bounded(
+        "a cut",
+        query.reply(query.key_expr().clone(), encode(&placed.answer)),
+    )
+    .await
+    {
+        tracing::warn!(error = %e, "could not answer a cut");
+    }
+}
+
+/// How long one send may hold the loop. A peer cut off by a partition can
+/// hold a send until Zenoh gives its link up (seconds); given up after
+/// this, the message is lost to that peer — a leader notices the gap and
+/// asks again, a client asks again — and the stream, the cuts and every
+/// other peer go on.
+const SEND_PATIENCE: Duration = Duration::from_secs(1);
+
+/// `send`, unless it takes longer than [`SEND_PATIENCE`].
+async fn bounded<T>(
+    what: &'static str,
+    send: impl std::future::IntoFuture<Output = T>,
+) -> Option<T> {
+    match tokio::time::timeout(SEND_PATIENCE, send.into_future()).await {
+        Ok(sent) => Some(sent),
+        Err(_) => {
+            tracing::info!(what, patience = ?SEND_PATIENCE, "a send took too long: given up (it is asked for again)");
+            None
+        }
+    }
+}
+
+/// Puts a snapshot of the gateway in its journal's place (every record
+/// has just been appended, so the two agree).
+fn compact(journal: &mut Journal, gateway: &Gateway<Query>) -> Result<(), GatewayError> {
+    let (before, started) = (journal.bytes(), std::time::Instant::now());
+    match gateway.compacted() {
+        Ok(records) => {
+            journal.compact(&records)?;
+            tracing::info!(journal = %journal.path().display(), before, after = journal.bytes(),
+                ms = started.elapsed().as_secs_f64() * 1e3, "sensor journal compacted");
+        }
+        // Not fatal: the journal stays whole, and grows.
+        Err(e) => {
+            tracing::error!(error = %e, "could not snapshot the sensor's state");
+            journal.postpone();
+        }
+    }
+    Ok(())
+}
+
+/// The event keys, the faults injected on them, and the journal.
+struct Wire {
+    faults: Faults,
+    publishers: Vec<Publisher<'static>>,
+    journal: Option<Journal>,
+}
+
+impl Wire {
+    /// Puts what changed the gateway's state on disk (fsynced), if it
+    /// keeps a journal.
+    fn sync(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
+        let records = gateway.unjournaled();
+        if let Some(journal) = &mut self.journal {
+            journal.append(&records)?;
+            if journal.due() {
+                compact(journal, gateway)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends the leaders their queued items ([`Gateway::flush`]) — once
+    /// the journal holds them.
+    async fn flush(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
+        let batches = gateway.flush();
+        self.sync(gateway)?;
+        for (i, batch) in batches {
+            let Some(publisher) = self.publishers.get(i) else {
+                continue;
+            };
+            let number = batch.number;
+            let dropped = self
+                .faults
+                .drop_every
+                .is_some_and(|n| n > 0 && number % n == n - 1);
+            if dropped {
+                tracing::debug!(leader = i, number, "fault: batch not published");
+                continue;
+            }
+            let body = encode(&batch);
+            for _ in 0..if self.faults.duplicate { 2 } else { 1 } {
+                if let Some(Err(e)) = bounded("a batch", publisher.put(body.clone())).await {
+                    tracing::error!(error = %e, "could not publish a batch");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Publishes batches again (a stream the window holds, for a leader
+    /// that still waits for them).
+    async fn again(&mut self, batches: Vec<(usize, Batch)>) {
+        for (i, batch) in batches {
+            let Some(publisher) = self.publishers.get(i) else {
+                continue;
+            };
+            tracing::debug!(
+                leader = i,
+                number = batch.number,
+                "window held: batch published again"
+            );
+            if let Some(Err(e)) = bounded("a batch", publisher.put(encode(&batch))).await {
+                tracing::error!(error = %e, "could not publish a batch again");
+            }
+        }
+    }
+}
+
+fn line_time(line: &Line) -> Option<f64> {
+    match line {
+        Line::Mix(m) => Some(m.time),
+        Line::Observe(o) => Some(o.time),
+        Line::Move(m) => Some(m.time),
+        Line::Identify(i) => Some(i.time),
+        Line::Truth(t) => Some(t.time),
+        Line::Header(_) => None,
+    }
+}
+
+fn due_lines(
+    config: &GatewayConfig,
+    lines: &[Line],
+    next: usize,
+    started: Instant,
+    first_time: f64,
+    chunk: usize,
+) -> (usize, Duration) {
+    let elapsed = started.elapsed().as_secs_f64();
+    let rest = lines.len() - next;
+    if config.realtime {
+        let speed = config.rate.unwrap_or(1.0);
+        let mut due = 0;
+        while due < rest.min(chunk) {
+            let t = line_time(&lines[next + due]).unwrap_or(first_time) - first_time;
+            if t / speed > elapsed {
+                let wait = (t / speed - elapsed).max(0.0);
+                return (due, Duration::from_secs_f64(wait.min(0.05)));
+            }
+            due += 1;
+        }
+        return (due, Duration::ZERO);
+    }
+    match config.rate {
+        None => (rest.min(chunk), Duration::ZERO),
+        Some(rate) => {
+            let allowed = (elapsed * rate) as usize;
+            let due = allowed.saturating_sub(next).min(rest).min(chunk);
+            (due, Duration::from_millis(if due == 0 { 2 } else { 0 }))
+        }
+    }
+}
+
+async fn wait_for_leaders(
+    session: &Session,
+    keys: &Keys,
+    names: &[String],
+    patience: Duration,
+) -> Result<(), GatewayError> {
+    let started = Instant::now();
+    loop {
+        let mut up = Vec::new();
+        if let Ok(replies) = session
+            .liveliness()
+            .get(keys.alive_role("leader"))
+            .timeout(Duration::from_secs(1))
+            .await
+        {
+            while let Ok(reply) = replies.recv_async().await {
+                if let Ok(sample) = reply.result() {
+                    if let Some(name) = Keys::chunk(sample.key_expr().as_str(), 0) {
+                        up.push(name.to_string());
+                    }
+                }
+            }
+        }
+        let missing: Vec<String> = names.iter().filter(|n| !up.contains(n)).cloned().collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        if started.elapsed() > patience {
+            return Err(GatewayError::LeadersMissing {
+                missing,
+                waited: patience,
+            });
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stream_length;
+    use idmesh_protocol::trace::{Line, Mix, Truth};
+
+    fn mix() -> Line {
+        Line::Mix(Mix {
+            time: 0.0,
+            a: 0,
+            b: 1,
+            swap: 0.5,
+        })
+    }
+
+    fn truth() -> Line {
+        Line::Truth(Truth {
+            time: 0.0,
+            red: Some(vec![0]),
+            identity: None,
+        })
+    }
+
+    #[test]
+    fn an_event_limit_counts_events_not_truth_lines() {
+        let lines = [mix(), truth(), mix(), truth(), mix(), mix()];
+        assert_eq!(stream_length(&lines, Some(3)), (5, 3));
+        assert_eq!(stream_length(&lines, Some(4)), (6, 4));
+        assert_eq!(stream_length(&lines, Some(9)), (6, 4));
+        assert_eq!(stream_length(&lines, None), (6, 4));
+        assert_eq!(stream_length(&lines, Some(0)), (0, 0));
+    }
+}
