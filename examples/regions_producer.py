@@ -2,7 +2,7 @@
 
 A deployment with several sensors has no single sequencer: each sensor takes
 the events of its part of the field, and every sensor merges all of them into
-one order by (time, producer, counter) (docs/architecture.md, "Several
+one order by (time, producer, counter) (docs/design/architecture.md, "Several
 sensors"). This producer plays a tracker that sees the whole field: it splits
 a trace by region -- a track belongs to the sensor nearest its last position,
 or to sensor (track mod S) before it has one -- and feeds each sensor from its

@@ -25,7 +25,7 @@ const SOURCES: &[&str] = &[
 ];
 
 /// Inside those, code the evaluation does not run (identity beliefs have
-/// their own document, docs/identity.md).
+/// their own document, docs/design/identity.md).
 const LEFT_OUT: &[&str] = &["../../belief/src/identity"];
 
 /// Where this crate is in the workspace: file names enter the digest

@@ -1,4 +1,4 @@
-//! Calibration of the identity engine (docs/identity.md
+//! Calibration of the identity engine (docs/design/identity.md,
 //! "Calibration"): which known-start encoding and which evidence weight
 //! make the information matrix's probabilities trustworthy, and how every
 //! marginal method then scores.

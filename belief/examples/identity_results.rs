@@ -1,4 +1,4 @@
-//! The identity results (docs/identity.md), regenerated:
+//! The identity results (docs/design/identity.md), regenerated:
 //!
 //! 1. `figs` — Shin et al., IPSN 2005, Figs. 3–4: 3 and 6 objects, 50
 //!    events from the uniform belief, reads of accuracy 0.9, mixes of any

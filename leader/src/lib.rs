@@ -4,7 +4,7 @@
 //! that touch them, applies the events that may change its sets, hands sets
 //! to peers when tracks cross regions or mix across them, and answers the
 //! coordinator with partial sums at consistent cuts (Section 5.4 of the
-//! property-management paper; docs/architecture.md says why it converges).
+//! property-management paper; docs/design/architecture.md says why it converges).
 //!
 //! A map of the crate:
 //! - [`state`] — [`Leader`], the protocol as a pure state machine: a

@@ -17,7 +17,7 @@
 //! without it; afterwards the final answer equals the centralized replay
 //! to 1e-9 (exact conditioning, no pruning: no event lost or doubled).
 //! The figures it prints (time from link-up to the first complete answer,
-//! query latency over the slow link) are in docs/lan.md.
+//! query latency over the slow link) are described in docs/guide/lan.md.
 //!
 //! Needs root for the namespaces; without it the test says why in one
 //! line and passes (CI runs as root).

@@ -1,14 +1,18 @@
 //! The README as a newcomer meets it: on a fresh clone of the repository
 //! (the tracked files as they are in the working tree, nothing else — no
-//! warm `target/`, no stray traces), its commands run as written.
+//! warm `target/`, no stray traces), its commands run as written — and so
+//! do those of the guide pages it sends a newcomer to for the rest
+//! ([`PAGES`]: replaying traces, the query API, the secure deployment).
 //!
 //! - Long-running commands (the demo, `up`) and set-up (install,
-//!   certificates) are in `sh` blocks; this test finds each in the README
-//!   verbatim, runs it in the clone, and stops the long-running ones with
-//!   Ctrl-C (SIGINT to their process group) as a user would.
-//! - Everything in `console` blocks is run and its output checked by
-//!   `trycmd` — while the demo and the two example deployments run, since
-//!   those blocks ask them questions.
+//!   certificates) are in `sh` blocks; this test finds each verbatim in
+//!   the page that now says it ([`COMMANDS`]), runs it in the clone, and
+//!   stops the long-running ones with Ctrl-C (SIGINT to their process
+//!   group) as a user would.
+//! - Everything in `console` blocks of those pages is run and its output
+//!   checked by `trycmd` — while the demo and the two example deployments
+//!   run, since those blocks ask them questions. A `console` block on any
+//!   other page of `docs/` fails the test: it would be checked by nobody.
 //!
 //! Two adaptations, and only these: `cargo` builds into this test's own
 //! target folder (`CARGO_TARGET_DIR`, so nothing is built twice), and
@@ -28,6 +32,25 @@ const CERTS: &str = "sh deploy/examples/make-certs.sh deploy/examples/certs coor
 const UP: &str = "idmesh up --config deploy/examples/topology.toml";
 const UP_SECURE: &str = "idmesh up --config deploy/examples/secure.toml";
 const TEST: &str = "cargo test --workspace --release";
+
+/// The pages whose `console` blocks this test runs: the README and the
+/// guide pages that hold commands a newcomer runs against the demo and
+/// the example deployments (relative to the repository's root).
+const README: &str = "README.md";
+const REPLAY: &str = "docs/guide/replay.md";
+const QUERY_API: &str = "docs/guide/query-api.md";
+const SECURITY: &str = "docs/guide/security.md";
+const PAGES: [&str; 4] = [README, REPLAY, QUERY_API, SECURITY];
+
+/// Each command this test runs, and the page that says it.
+const COMMANDS: [(&str, &str); 6] = [
+    (INSTALL, README),
+    (DEMO, README),
+    (CERTS, SECURITY),
+    (UP, README),
+    (UP_SECURE, SECURITY),
+    (TEST, README),
+];
 
 /// The repository this test was built from.
 fn repository() -> PathBuf {
@@ -177,6 +200,48 @@ impl Drop for Running {
     }
 }
 
+/// Every Markdown page under `dir` that trycmd would run commands of.
+fn pages_with_console_blocks(dir: &Path) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            found.extend(pages_with_console_blocks(&path));
+        } else if path.extension().is_some_and(|e| e == "md")
+            && runs_commands(&std::fs::read_to_string(&path).unwrap())
+        {
+            found.push(path);
+        }
+    }
+    found
+}
+
+/// Whether trycmd would run a block of this Markdown text: a fenced block
+/// marked `console` or `trycmd` (and not `ignore`), or with no info string
+/// at all, as trycmd reads them.
+fn runs_commands(text: &str) -> bool {
+    let mut lines = text.lines();
+    while let Some(line) = lines.next() {
+        let ticks = line.len() - line.trim_start_matches('`').len();
+        if ticks < 3 {
+            continue;
+        }
+        let mut info = line[ticks..].trim().split(',');
+        let lang = info.next().unwrap_or_default();
+        if lang.is_empty() || (matches!(lang, "console" | "trycmd") && !info.any(|i| i == "ignore"))
+        {
+            return true;
+        }
+        let fence = &line[..ticks];
+        for line in lines.by_ref() {
+            if line.starts_with(fence) {
+                break;
+            }
+        }
+    }
+    false
+}
+
 /// Waits until `idmesh query marginals` (with `extra`) gets an answer.
 fn wait_for_answer(clone: &Path, env: &Env, extra: &str, what: &Running) {
     let deadline = Instant::now() + Duration::from_secs(600);
@@ -199,9 +264,18 @@ fn wait_for_answer(clone: &Path, env: &Env, extra: &str, what: &Running) {
 #[test]
 fn the_readme_works_as_written_on_a_fresh_clone() {
     let repository = repository();
-    let readme = std::fs::read_to_string(repository.join("README.md")).unwrap();
-    for line in [INSTALL, DEMO, CERTS, UP, UP_SECURE, TEST] {
-        assert!(readme.contains(line), "the README no longer says `{line}`");
+    for (line, page) in COMMANDS {
+        let text = std::fs::read_to_string(repository.join(page))
+            .unwrap_or_else(|e| panic!("{page}: {e}"));
+        assert!(text.contains(line), "{page} no longer says `{line}`");
+    }
+    for page in pages_with_console_blocks(&repository.join("docs")) {
+        let name = page.strip_prefix(&repository).unwrap().to_string_lossy();
+        assert!(
+            PAGES.contains(&name.as_ref()),
+            "{name} has a `console` block (or a bare fence) that no test runs: add \
+             the page to PAGES in tests/tests/readme.rs, or make the block `sh` or `text`"
+        );
     }
     let work = Path::new(env!("CARGO_TARGET_TMPDIR")).join("readme");
     let clone = work.join("idmesh");
@@ -246,16 +320,18 @@ fn the_readme_works_as_written_on_a_fresh_clone() {
     );
 
     std::env::set_current_dir(&clone).unwrap();
-    trycmd::TestCases::new()
-        .case(clone.join("README.md"))
-        .register_bin("idmesh", env.installed.join("bin/idmesh"))
-        .register_bin(
-            "python3",
-            python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR"))),
-        )
-        .env("PATH", &env.path)
-        .timeout(Duration::from_secs(600))
-        .run();
+    let python = python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    // One page after another, each page's blocks in order: trycmd runs the
+    // cases it is given at once, and these share the deployments.
+    for page in PAGES {
+        trycmd::TestCases::new()
+            .case(clone.join(page))
+            .register_bin("idmesh", env.installed.join("bin/idmesh"))
+            .register_bin("python3", python.clone())
+            .env("PATH", &env.path)
+            .timeout(Duration::from_secs(600))
+            .run();
+    }
 
     for (running, says) in [
         (

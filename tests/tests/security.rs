@@ -270,7 +270,7 @@ fn endpoint(deployment: &Deployment, name: &str) -> String {
 /// answer: 3 runs here, 12 with `IDMESH_LONG_TESTS=1` (CI), each a fresh
 /// deployment. The link warnings Zenoh logged are counted and printed.
 /// Secured links are QUIC since run 11 of a CI run aborted the sensor
-/// inside Zenoh's TLS link (eclipse-zenoh/zenoh#2557, docs/lan.md): an
+/// inside Zenoh's TLS link (eclipse-zenoh/zenoh#2557, docs/guide/lan.md): an
 /// abort fails this test, as every process must live to the answer.
 #[test]
 fn a_long_secured_stream_finishes_every_time() {

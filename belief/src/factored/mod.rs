@@ -48,7 +48,7 @@
 //! belief of each connected component of the mixing graph.
 //!
 //! Two more projections serve the distributed runtime's *regional rule*
-//! (docs/architecture.md, "Components that stay in their region"), which
+//! (docs/design/architecture.md, "Components that stay in their region"), which
 //! keeps every component inside one leader's region so that it seldom has
 //! to move: [`FactoredBelief::mix_apart`] projects a mix of two components
 //! back onto them even where the merge would fit, and

@@ -181,7 +181,7 @@ impl InformationMatrix {
     /// exact known start, 0 on the known identity and −∞ elsewhere (see
     /// [`crate::identity::blocks`]). A finite confidence is the paper's
     /// stand-in (e.g. 20 puts e^-20 on each wrong pairing), kept for
-    /// comparison: docs/identity.md measures both.
+    /// comparison: docs/design/identity.md measures both.
     pub fn from_assignment(
         assignment: &[u32],
         confidence: f64,
@@ -290,7 +290,7 @@ impl IdentityFilter for InformationMatrix {
 /// mixing rule fits only the pairs of identities two tracks can carry
 /// ([`crate::identity::support_mix`]), so it needs no finite stand-in; the
 /// finite 20 of earlier versions made the fit spend itself on impossible
-/// pairs and the marginals confidently wrong (docs/identity.md,
+/// pairs and the marginals confidently wrong (docs/design/identity.md,
 /// "Calibration").
 pub const KNOWN_START_CONFIDENCE: f64 = f64::INFINITY;
 

@@ -478,10 +478,10 @@ fn report(
         out,
         "\n## The regional rule's accuracy cost\n\n\
          The regional rule keeps every component inside one leader's region, so that \
-         leaders seldom move components (README, \"Flow control\"): a mix of tracks in two \
+         leaders seldom move components ([deploying](guide/deploying.md)): a mix of tracks in two \
          regions is projected back onto their two components instead of merging them, and a \
          track handed over to another region is split off its component (both by moment \
-         matching, docs/architecture.md). Its cost depends on how many regions the field is \
+         matching, [architecture](design/architecture.md)). Its cost depends on how many regions the field is \
          cut into. The centralized engine runs it exactly as the leaders do (the rows \
          *factored, regional rule* above agree to {TOLERANCE:e} with {LEADERS} leaders); here \
          it is run on the same traces with the leaders of a loopback deployment of 2, 4 and 8 \

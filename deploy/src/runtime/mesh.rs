@@ -10,7 +10,7 @@
 //!
 //! Links close at once (Zenoh's TCP `SO_LINGER` is 0, set when Zenoh is
 //! compiled, in `.cargo/config.toml`): a lingering close to a cut-off host
-//! blocked every incoming message for 10 s (docs/lan.md).
+//! blocked every incoming message for 10 s (docs/guide/lan.md).
 //!
 //! A secured deployment ([`super::security`]) adds mutual TLS — every
 //! endpoint becomes `quic/` (TLS 1.3 inside QUIC; why not Zenoh's `tls/`

@@ -37,7 +37,7 @@ pub enum Role {
 /// woken by every batch and transfer: a second worker has nothing to run
 /// but is woken to look for work to steal all the same. With one, the
 /// leaders' CPU on the 10,000-target crowd fell by about a tenth, at one
-/// leader and at four alike (the README's scale-out section). Zenoh's own
+/// leader and at four alike (`idmesh bench`, docs/bench.md). Zenoh's own
 /// threads are apart from these.
 /// The sensor and the coordinator answer queries while they stream and
 /// couple, and keep two.

@@ -9,7 +9,7 @@
 //! max_component = 7              # factored: most tracks of a component
 //! split = "original"             # factored: or "recent", "least-loss"
 //! regional = false               # factored: components stay in their region
-//!                                # (docs/architecture.md)
+//!                                # (docs/design/architecture.md)
 //! shrink_interest = false        # factored: leaders unfollow tracks they no
 //!                                # longer surveil or hold a component of
 //! # The Radon belief's settings: of every stream under belief = "radon",
@@ -130,7 +130,7 @@ pub struct Topology {
     #[serde(default = "default_marginals_timeout")]
     pub marginals_timeout_ms: u64,
     pub coordinator: Process,
-    /// One `[sensor]`, or several `[[sensor]]` (docs/architecture.md,
+    /// One `[sensor]`, or several `[[sensor]]` (docs/design/architecture.md,
     /// "Several sensors"): each takes its producers' events, and every
     /// sensor merges them all into one order.
     #[serde(rename = "sensor", deserialize_with = "one_or_many")]

@@ -9,7 +9,7 @@
 //! ([`crate::driver`]) and in the deterministic network simulator of
 //! `tests/src/sim`.
 //!
-//! The policy (docs/architecture.md, "When a leader dies"):
+//! The policy (docs/design/architecture.md, "When a leader dies"):
 //! - every input passes the door ([`crate::door`]), is journaled, then
 //!   applied; what the door refuses is counted and changes nothing;
 //! - a gap in batch numbers, a held query older than [`Timers::late`] (the

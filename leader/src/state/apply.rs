@@ -208,7 +208,7 @@ impl Leader {
     /// (a relabelling) and a non-event move nothing. Under the regional
     /// rule a mix across two regions is kept apart, and the component of
     /// `b` goes back to `owner_b`, which waits for it
-    /// ([`Leader::factored_mix_here`]; docs/architecture.md, "Components
+    /// ([`Leader::factored_mix_here`]; docs/design/architecture.md, "Components
     /// that stay in their region").
     fn factored_mix(
         &mut self,

@@ -12,7 +12,7 @@
 //! balancing, 1.39× and 1.03×). [`balanced`]
 //! moves the places until no leader is sent much more than the others,
 //! counting the handovers that moving a border makes or saves.
-//! docs/architecture.md ("Components that stay in their region") says why
+//! docs/design/architecture.md ("Components that stay in their region") says why
 //! the routing is exact.
 
 use crate::regions::Leading;

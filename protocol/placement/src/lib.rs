@@ -16,7 +16,7 @@
 //!   and where to place leaders so that each is sent about as many items
 //!   ([`balanced`]).
 //!
-//! docs/architecture.md ("Who holds what", "Queries") says why the shares
+//! docs/design/architecture.md ("Who holds what", "Queries") says why the shares
 //! add up: rollup and conditioning act on the Radon masses atom by atom and
 //! linearly (Section 5.4 of the property-management paper).
 

@@ -1,5 +1,5 @@
 //! Which leader surveils each track, and the regional rule of the factored
-//! belief that follows from it (docs/architecture.md, "Components that stay
+//! belief that follows from it (docs/design/architecture.md, "Components that stay
 //! in their region").
 //!
 //! The sensor gateway routes by [`Regions`] (a track belongs to the nearest

@@ -1,4 +1,4 @@
-//! The factored belief on the wire (docs/architecture.md, "The factored
+//! The factored belief on the wire (docs/design/architecture.md, "The factored
 //! belief"): the settings a `Begin` carries, a component as it moves
 //! between leaders in a [`Transfer`](super::leader_to_leader::Transfer),
 //! and what a leader tells the coordinator of each component it holds at a
@@ -23,7 +23,7 @@ pub struct FactoredStart {
     /// rest ([`Interest::fixed`](super::interest::Interest::fixed)).
     /// Otherwise they grow on mixes, as on a Radon stream.
     pub shrink: bool,
-    /// The regional rule (docs/architecture.md, "Components that stay in
+    /// The regional rule (docs/design/architecture.md, "Components that stay in
     /// their region"): a mix of tracks in two leaders' regions keeps their
     /// components apart (projected back, never merged), and a track handed
     /// over to another region is split off its component, so a component

@@ -11,7 +11,7 @@
 //! sensor with no sensor ordering anyone else's events: each routes the
 //! merged stream through the same router (the same seqs, owners and
 //! interests) and sends the batches of its own leaders
-//! (docs/architecture.md, "Several sensors").
+//! (docs/design/architecture.md, "Several sensors").
 
 use super::versioned;
 use serde::{Deserialize, Serialize};

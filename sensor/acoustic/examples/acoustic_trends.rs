@@ -10,7 +10,7 @@
 //! (error distance and coverage) to `docs/acoustic-*.svg`.
 //!
 //! `cargo run --release -p idmesh-acoustic --example acoustic_trends`
-//! Options: `seeds=N` (default 3, as in docs/acoustic.md; about 7 min on
+//! Options: `seeds=N` (default 3, as in docs/design/acoustic.md; about 7 min on
 //! 2 cores), `only=fig9,fig13,...`, `plots=DIR` (default the workspace's
 //! `docs/`; `plots=none` writes none).
 

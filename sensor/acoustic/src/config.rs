@@ -60,7 +60,7 @@ impl PipelineConfig {
     /// The paper's intersection as written: the ranges of the hearing
     /// groups only. The default also removes the ranges of the groups that
     /// do not hear (`exclude_silent`, see `pipeline::intersect` and
-    /// docs/acoustic.md).
+    /// docs/design/acoustic.md).
     pub fn paper_intersection(mut self) -> Self {
         self.exclude_silent = false;
         self

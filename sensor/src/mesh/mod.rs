@@ -1,4 +1,4 @@
-//! Several sensors, no single sequencer (docs/architecture.md, "Several
+//! Several sensors, no single sequencer (docs/design/architecture.md, "Several
 //! sensors").
 //!
 //! Each sensor of a deployment with several takes its producers' events

@@ -172,7 +172,7 @@ impl Written {
     }
 
     /// The centralized factored belief with `options` under the regional
-    /// rule of leaders at `places` (docs/architecture.md, "Components that
+    /// rule of leaders at `places` (docs/design/architecture.md, "Components that
     /// stay in their region"), replaying the file this crowd was written
     /// to (`path`, with its `move` lines): its marginals at every truth
     /// line, in order. What `idmesh replay --regions` computes.

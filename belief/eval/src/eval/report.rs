@@ -1,5 +1,5 @@
 //! The prose of results.md that carries numbers: the summary at the top,
-//! the goals and whether each method meets them ("Beating the
+//! the accuracy goals and whether each method meets them ("Beating the
 //! paper"), the belief's own expected error beside its actual error, and
 //! the cost of the distributed rule under each start. Every number is read
 //! from the run, and every verdict is computed, never written in advance.
@@ -333,7 +333,7 @@ pub fn beating(grid: &Grid) -> String {
     writeln!(
         out,
         "## Beating the paper: the factored belief\n\n\
-         The goals: **the overcomplete method within {GOAL_GAP} of the exact filter's \
+         The accuracy goals: **the overcomplete method within {GOAL_GAP} of the exact filter's \
          error at n = {GOAL_N} with ≤ {GOAL_COEFFICIENTS} coefficients, and at least \
          {GOAL_MARGIN} better than order 1 on the Table III workload** (read here as: at \
          every n of Table III). Whether each method meets them, at each swap and start \
@@ -906,7 +906,7 @@ pub fn summary(results: &Results) -> String {
                 v.goal1 != Some(true) && v.goal2 != Some(true)
             });
         lines.push(format!(
-            "- **The goals** (within {GOAL_GAP} of exact at n = {GOAL_N} with ≤ \
+            "- **The accuracy goals** (within {GOAL_GAP} of exact at n = {GOAL_N} with ≤ \
              {GOAL_COEFFICIENTS} coefficients; ≥ {GOAL_MARGIN} better than order 1 at every \
              n): the factored belief meets goal 1 in {met1} of the {total} swap × start \
              cases (at most {worst_gap:+.3} from exact, ≤ {most} numbers) and goal 2 in \

@@ -54,7 +54,7 @@ pub struct ReplayArgs {
 
     /// Identity methods: the known start of --method information-matrix
     /// as log-odds C against each other identity (default: exact, −∞ on
-    /// every other identity; docs/identity.md "Calibration").
+    /// every other identity; docs/design/identity.md "Calibration").
     #[arg(long, value_name = "C")]
     pub known_start_confidence: Option<f64>,
 

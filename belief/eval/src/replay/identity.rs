@@ -96,7 +96,7 @@ pub struct IdentityReplayOptions {
     /// against each other identity (C > 0); default exact (+∞: −∞ on
     /// every other identity, which keeps independent blocks). On long
     /// streams where all tracks have mixed, C = 3 is better calibrated
-    /// (docs/identity.md, "Calibration").
+    /// (docs/design/identity.md, "Calibration").
     #[arg(long, value_name = "C", value_parser = parse_confidence)]
     pub known_start_confidence: Option<f64>,
 
