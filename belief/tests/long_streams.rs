@@ -5,15 +5,15 @@
 //! (A budget this small makes the surviving hypotheses fix hundreds of
 //! tracks each, so the 10,000-track runs are kept to 10^5 events.)
 //!
-//! These lengths run with `IDMESH_LONG_TESTS=1` (CI sets it); without it
-//! every run is a tenth as long, so a newcomer's `cargo test` stays short.
+//! These lengths run with `IDMESH_LONG_TESTS=1` (an opt-in); without it
+//! every run is a 25th as long, so a newcomer's `cargo test` stays short.
 
 use idmesh_belief::workload::{generate_with, WorkloadSpec};
 use idmesh_belief::{Field, PropertyFilter, RadonBelief, RadonOptions, Sparsify};
 
 fn run(field: Field, sparsify: Sparsify, full_length: usize) {
     let long = std::env::var("IDMESH_LONG_TESTS").is_ok_and(|v| v == "1");
-    let events = if long { full_length } else { full_length / 10 };
+    let events = if long { full_length } else { full_length / 25 };
     let n = field.tracks;
     let spec = WorkloadSpec {
         events,
