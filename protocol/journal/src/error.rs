@@ -6,6 +6,9 @@ use std::path::PathBuf;
 /// Why a record does not read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Problem {
+    /// The file's header fails its checksum (a role that can do without
+    /// the whole file reports its damage as at byte 0).
+    Header,
     /// The record's head (its length and checksum) fails its own check.
     Head,
     /// The payload fails the checksum its head gives.
@@ -17,6 +20,7 @@ pub enum Problem {
 impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
+            Problem::Header => f.write_str("the file's header fails its checksum"),
             Problem::Head => f.write_str("its head fails its checksum"),
             Problem::Checksum => f.write_str("its payload fails its checksum"),
             Problem::Length(n) => write!(f, "it claims {n} bytes"),

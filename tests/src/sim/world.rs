@@ -739,6 +739,7 @@ impl World {
             disk.snapshot.as_deref(),
             disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
             false,
+            None,
             timers,
             Duration::from_millis(self.now),
         )
@@ -825,6 +826,7 @@ impl World {
                 slot.disk.snapshot.as_deref(),
                 slot.disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
                 false,
+                None,
                 timers,
                 Duration::from_millis(self.now),
             )
