@@ -43,9 +43,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// What the journal's header says it holds.
-const JOURNAL: &str = "leader-journal";
+pub const JOURNAL: &str = "leader-journal";
 /// What the snapshot's header says it holds.
-const SNAPSHOT: &str = "leader-snapshot";
+pub const SNAPSHOT: &str = "leader-snapshot";
 
 /// What a journal entry holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

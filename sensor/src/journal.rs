@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// What the journal's header says it holds.
-const KIND: &str = "sensor-journal";
+pub const KIND: &str = "sensor-journal";
 
 /// One change of the gateway's state. Lines routed carry the cuts placed
 /// right after them (`(i, cut)`: after the record's `i`-th routed line),
