@@ -40,7 +40,8 @@ pub struct Damage {
     pub at: u64,
     pub problem: Problem,
     /// Whole records found after it (by looking for the next record that
-    /// checks), not returned.
+    /// checks), not returned. A role that reports a damaged header as
+    /// damage at byte 0 ([`Problem::Header`]) does not look: 0.
     pub after: usize,
     /// Bytes from the damaged record to the end of the file.
     pub bytes: u64,

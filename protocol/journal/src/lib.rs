@@ -53,7 +53,9 @@
 //!   content, and nothing valid follows it — a process (or a machine) died
 //!   writing it. The role cuts it off ([`Writer::resume`]) and goes on: a
 //!   record is written whole before anything that depends on it leaves the
-//!   process, so a torn one was never acted on;
+//!   process, so one torn by a crash was never acted on. (A last record
+//!   damaged later cannot be told from a torn one, so a role must be able
+//!   to lose it: the leader can, the sensor has its copy.)
 //! - **damaged**: a record that does not check, with whole records after
 //!   it — the disk, or someone, changed bytes that were written whole.
 //!   [`Damage`] names the file, the byte, why, and what follows it (how
