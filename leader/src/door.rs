@@ -87,9 +87,9 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
             }
             Ok(Input::Followed(followed))
         }
-        Kind::Generation | Kind::Rejected => Err(WireError::Invalid {
-            what: "journal frame",
-            problem: "a snapshot generation is not an input".into(),
+        Kind::Rejected => Err(WireError::Invalid {
+            what: "journal entry",
+            problem: "a refusal is not an input".into(),
         }),
     }
 }

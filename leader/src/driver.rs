@@ -140,6 +140,7 @@ pub async fn run(
             .iter()
             .map(|e| (e.kind, e.bytes.as_slice())),
         config.adopted,
+        recovered.damage.as_ref().map(|d| d.records()),
         timers,
         started.elapsed(),
     )?;
@@ -385,6 +386,11 @@ impl Driver<'_> {
                     }
                 }
                 Output::Persist { mark } => {
+                    // A snapshot that could not be written must not be
+                    // published as safe.
+                    if failed.is_some() {
+                        continue;
+                    }
                     if let Some(j) = self.journal.as_mut() {
                         if let Err(e) = j.sync() {
                             failed = Some(e.to_string());

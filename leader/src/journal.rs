@@ -5,31 +5,47 @@
 //! the snapshot plus the journal replayed in order rebuild exactly the
 //! state the process had when it died.
 //!
-//! Frame: kind (1 byte), length (u32, little-endian), the message. A crash
-//! can tear only the last frame; [`Journal::open`] reads up to the last
-//! whole frame and cuts the file there.
+//! Both files are `idmesh-journal` logs (a checksummed header, checksummed
+//! records): the journal (`leader-journal`) holds one record per input —
+//! its [`Kind`] byte, then the message — and the snapshot
+//! (`<journal>.snapshot`, `leader-snapshot`) one record, the whole state.
 //!
-//! Compaction ([`Journal::compact`]): the whole state is written to
-//! `<journal>.snapshot` (to a temporary file, fsynced, renamed over the
-//! old one), then the journal starts again empty. Both carry a generation:
-//! the journal's first frame names the snapshot it continues, so a crash
-//! between the two steps leaves a journal whose entries are already in the
-//! snapshot, and it is dropped rather than applied twice.
+//! Compaction ([`Journal::compact`]): the state is written as the new
+//! snapshot (a file beside it, fsynced, renamed over the old one), then the
+//! journal starts again empty. Both carry a generation in their header:
+//! the journal's names the snapshot it continues, so a crash between the
+//! two steps leaves a journal whose entries are already in the snapshot,
+//! and it is dropped rather than applied twice.
 //!
 //! Durability: every append is written to the file before the message is
 //! applied, so a killed process (SIGKILL, a panic) loses nothing. It is
 //! fsynced at most every [`JournalOptions::fsync_every`]: a power cut can
-//! lose that window, which the restarted leader fetches again from the
-//! sensor and its peers like anything else it missed (see the actor). The
-//! leader tells the others how far it is safe only after an fsync.
+//! lose that window.
+//!
+//! Damage ([`Journal::open`]): a torn last record (the process or the
+//! machine died writing it) is cut off. A record that does not check with
+//! whole records after it — bytes changed since they were written, a
+//! damaged header — is logged as an error with the file and the byte, the
+//! file is saved beside the journal (`<journal>.damaged`), and the journal
+//! is cut at that record: the leader comes back from its snapshot and the
+//! inputs before the damage ([`Recovered::damage`] says what was lost) and
+//! fetches the rest again from the sensor and its peers, as after a power
+//! cut. Nothing it drops can have been forgotten by them: a leader's
+//! durable mark, which lets them forget, advances only when a snapshot is
+//! written ([`crate::machine`]). A damaged snapshot is not recoverable so
+//! (the others forgot what it replaced) and is an error naming it.
 //!
 //! [`Leader`]: crate::state::Leader
 
+use idmesh_journal::{self as log, Damage, Ending, Problem, Writer};
 use idmesh_ownership::{Ownership, OwnershipError};
-use std::fs::{File, OpenOptions};
-use std::io::{BufReader, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+/// What the journal's header says it holds.
+pub const JOURNAL: &str = "leader-journal";
+/// What the snapshot's header says it holds.
+pub const SNAPSHOT: &str = "leader-snapshot";
 
 /// What a journal entry holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,9 +56,6 @@ pub enum Kind {
     Transfer = 2,
     /// The sensor's `Followed` reply.
     Followed = 3,
-    /// The first frame: the generation of the snapshot this journal
-    /// continues (u64, little-endian). Not an input.
-    Generation = 4,
     /// An input refused at the door (empty): not applied, only counted,
     /// so that `rejected` does not restart from 0 after a restart.
     Rejected = 5,
@@ -54,7 +67,6 @@ impl Kind {
             1 => Some(Kind::Batch),
             2 => Some(Kind::Transfer),
             3 => Some(Kind::Followed),
-            4 => Some(Kind::Generation),
             5 => Some(Kind::Rejected),
             _ => None,
         }
@@ -77,15 +89,13 @@ pub struct JournalOptions {
 
 #[derive(Debug, thiserror::Error)]
 pub enum JournalError {
-    #[error("journal {path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Log(#[from] log::Error),
     #[error("snapshot {path}: {problem}")]
     Snapshot { path: String, problem: String },
     #[error(transparent)]
     Ownership(#[from] OwnershipError),
+    /// A record that checks but is no input (written by something else).
     #[error("journal {path}: entry {entry} at byte {offset} has unknown kind {kind}")]
     Corrupt {
         path: String,
@@ -99,11 +109,10 @@ pub enum JournalError {
 /// long as it is open: one writer per journal, whatever the network says.
 pub struct Journal {
     _owner: Ownership,
-    file: File,
+    writer: Writer,
     path: PathBuf,
     fsync_every: Duration,
     synced: Instant,
-    dirty: bool,
     /// The generation of the snapshot the entries continue (0: none).
     generation: u64,
     /// Entries appended since the snapshot.
@@ -115,8 +124,10 @@ pub struct Journal {
 pub struct Recovered {
     /// The state as of the last compaction, if there was one.
     pub snapshot: Option<Vec<u8>>,
-    /// The inputs since, in order.
+    /// The inputs since, in order (up to the damage, if any).
     pub entries: Vec<Entry>,
+    /// The journal was damaged: what was dropped with the damaged record.
+    pub damage: Option<Damage>,
 }
 
 impl Recovered {
@@ -125,59 +136,49 @@ impl Recovered {
     }
 }
 
-/// Frames larger than this are not ours: a torn length, or garbage.
-const MAX_FRAME: u32 = 1 << 30;
-
-/// The first bytes of a snapshot file.
-const SNAPSHOT_MAGIC: &[u8; 8] = b"idmesh/1";
-
 impl Journal {
     /// Opens (or creates) the journal `owner` was granted and returns the
-    /// snapshot and the entries after it, in order; a torn last frame is
-    /// cut off.
+    /// snapshot and the entries after it, in order; a torn last record is
+    /// cut off, and so is a damaged one with everything after it (see the
+    /// module's doc).
     pub fn open(
         options: &JournalOptions,
         owner: Ownership,
     ) -> Result<(Journal, Recovered), JournalError> {
         let path = options.path.clone();
-        let io = |source| JournalError::Io {
-            path: path.display().to_string(),
-            source,
-        };
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(io)?;
-        }
         let (generation, snapshot) = match read_snapshot(&snapshot_path(&path))? {
             Some((generation, bytes)) => (generation, Some(bytes)),
             None => (0, None),
         };
-        let mut file = OpenOptions::new()
-            .read(true)
-            .append(true)
-            .create(true)
-            .open(&path)
-            .map_err(io)?;
-        let (mut entries, whole) = read_entries(&mut file, &path)?;
-        let length = file.metadata().map_err(io)?.len();
-        if whole < length {
-            tracing::warn!(journal = %path.display(), torn = length - whole, "cutting a torn last entry");
-            file.set_len(whole).map_err(io)?;
-        }
-        let continues = if entries.first().is_some_and(|e| e.kind == Kind::Generation) {
-            generation_of(&entries.remove(0).bytes)
-        } else {
-            0
-        };
-        file.seek(SeekFrom::End(0)).map_err(io)?;
-        let mut journal = Journal {
-            _owner: owner,
-            file,
-            path: path.clone(),
-            fsync_every: options.fsync_every,
-            synced: Instant::now(),
-            dirty: false,
-            generation,
-            entries: entries.len(),
+        let (continues, records, end, mut damage) = match log::read(&path, JOURNAL) {
+            Ok(None) => (generation, Vec::new(), None, None),
+            Ok(Some(contents)) => {
+                let end = contents.end();
+                let damage = match contents.ending {
+                    Ending::Clean => None,
+                    Ending::Torn { at, bytes } => {
+                        tracing::warn!(journal = %path.display(), at, torn = bytes, "cutting a torn last entry");
+                        None
+                    }
+                    Ending::Damaged(damage) => Some(damage),
+                };
+                (contents.generation, contents.records, Some(end), damage)
+            }
+            // Which snapshot the entries continue is unknown: all of them
+            // are dropped, as damaged.
+            Err(log::Error::Header { .. }) => {
+                let bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
+                let damage = Damage {
+                    path: path.clone(),
+                    copy: None,
+                    at: 0,
+                    problem: Problem::Header,
+                    after: 0,
+                    bytes,
+                };
+                (generation, Vec::new(), None, Some(damage))
+            }
+            Err(e) => return Err(e.into()),
         };
         if continues > generation {
             return Err(JournalError::Snapshot {
@@ -187,16 +188,59 @@ impl Journal {
                 ),
             });
         }
-        if continues < generation || length == 0 {
-            // A crash between writing a snapshot and starting the journal
-            // again: its entries are in the snapshot. Or a new journal.
-            if continues < generation {
-                tracing::info!(journal = %path.display(), entries = entries.len(), "entries already in the snapshot are dropped");
-            }
-            entries.clear();
-            journal.restart()?;
+        let mut entries = Vec::with_capacity(records.len());
+        for (i, record) in records.into_iter().enumerate() {
+            let mut bytes = record.payload;
+            let kind = bytes.first().copied().unwrap_or(0);
+            let Some(kind) = Kind::from_byte(kind) else {
+                return Err(JournalError::Corrupt {
+                    path: path.display().to_string(),
+                    entry: i,
+                    offset: record.offset,
+                    kind,
+                });
+            };
+            bytes.remove(0);
+            entries.push(Entry { kind, bytes });
         }
-        Ok((journal, Recovered { snapshot, entries }))
+        if continues < generation {
+            // A crash between writing a snapshot and starting the journal
+            // again: its entries, damaged or not, are in the snapshot.
+            tracing::info!(journal = %path.display(), entries = entries.len(), "entries already in the snapshot are dropped");
+            entries.clear();
+            damage = None;
+        }
+        if let Some(damage) = &damage {
+            let saved = keep_damaged(&path);
+            tracing::error!(journal = %path.display(), at = damage.at, problem = %damage.problem,
+                lost = damage.records(), kept = entries.len(), saved = %saved,
+                "the journal is damaged: replaying what comes before the damage; the rest is fetched again from the sensor and the peers");
+        }
+        let writer = match end {
+            Some(end) if continues == generation && damage.as_ref().is_none_or(|d| d.at > 0) => {
+                Writer::resume(&[&path], JOURNAL, end)?
+            }
+            // New, superseded by the snapshot, or unreadable from its
+            // header: started again.
+            _ => Writer::create::<&[u8]>(&[&path], JOURNAL, generation, &[])?,
+        };
+        let journal = Journal {
+            _owner: owner,
+            writer,
+            path,
+            fsync_every: options.fsync_every,
+            synced: Instant::now(),
+            generation,
+            entries: entries.len(),
+        };
+        Ok((
+            journal,
+            Recovered {
+                snapshot,
+                entries,
+                damage,
+            },
+        ))
     }
 
     /// Inputs appended since the last snapshot.
@@ -208,40 +252,17 @@ impl Journal {
     /// the new snapshot and starts the journal again empty.
     pub fn compact(&mut self, state: &[u8]) -> Result<(), JournalError> {
         let next = self.generation + 1;
-        let target = snapshot_path(&self.path);
-        let mut body = Vec::with_capacity(16 + state.len());
-        body.extend_from_slice(SNAPSHOT_MAGIC);
-        body.extend_from_slice(&next.to_le_bytes());
-        body.extend_from_slice(state);
-        write_durably(&target, &body).map_err(|e| self.io(e))?;
+        log::write_file(&snapshot_path(&self.path), SNAPSHOT, next, &[state])?;
         self.generation = next;
-        self.restart()
-    }
-
-    /// Replaces the journal with one that holds only its generation frame.
-    fn restart(&mut self) -> Result<(), JournalError> {
-        let mut frame = vec![Kind::Generation as u8];
-        frame.extend_from_slice(&8u32.to_le_bytes());
-        frame.extend_from_slice(&self.generation.to_le_bytes());
-        write_durably(&self.path, &frame).map_err(|e| self.io(e))?;
-        self.file = OpenOptions::new()
-            .append(true)
-            .open(&self.path)
-            .map_err(|e| self.io(e))?;
+        self.writer.replace::<&[u8]>(next, &[])?;
         self.entries = 0;
-        self.dirty = false;
         self.synced = Instant::now();
         Ok(())
     }
 
     /// Writes one entry through to the file (fsync per the policy).
     pub fn append(&mut self, kind: Kind, bytes: &[u8]) -> Result<(), JournalError> {
-        let mut frame = Vec::with_capacity(5 + bytes.len());
-        frame.push(kind as u8);
-        frame.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
-        frame.extend_from_slice(bytes);
-        self.file.write_all(&frame).map_err(|e| self.io(e))?;
-        self.dirty = true;
+        self.writer.append(&[&[kind as u8], bytes])?;
         self.entries += 1;
         if self.synced.elapsed() >= self.fsync_every {
             self.sync()?;
@@ -251,10 +272,7 @@ impl Journal {
 
     /// fsyncs what was written since the last sync.
     pub fn sync(&mut self) -> Result<(), JournalError> {
-        if self.dirty {
-            self.file.sync_data().map_err(|e| self.io(e))?;
-            self.dirty = false;
-        }
+        self.writer.sync()?;
         self.synced = Instant::now();
         Ok(())
     }
@@ -262,116 +280,63 @@ impl Journal {
     pub fn path(&self) -> &Path {
         &self.path
     }
-
-    fn io(&self, source: std::io::Error) -> JournalError {
-        JournalError::Io {
-            path: self.path.display().to_string(),
-            source,
-        }
-    }
 }
 
-/// The whole entries from the start of `file`, and the byte where they end.
-fn read_entries(file: &mut File, path: &Path) -> Result<(Vec<Entry>, u64), JournalError> {
-    let io = |source| JournalError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    file.seek(SeekFrom::Start(0)).map_err(io)?;
-    let mut reader = BufReader::new(&mut *file);
-    let mut entries = Vec::new();
-    let mut whole = 0u64;
-    loop {
-        let mut head = [0u8; 5];
-        match read_full(&mut reader, &mut head).map_err(io)? {
-            Filled::Full => {}
-            Filled::Short => break,
-        }
-        let Some(kind) = Kind::from_byte(head[0]) else {
-            return Err(JournalError::Corrupt {
-                path: path.display().to_string(),
-                entry: entries.len(),
-                offset: whole,
-                kind: head[0],
-            });
-        };
-        let length = u32::from_le_bytes([head[1], head[2], head[3], head[4]]);
-        if length > MAX_FRAME {
-            break;
-        }
-        let mut bytes = vec![0u8; length as usize];
-        match read_full(&mut reader, &mut bytes).map_err(io)? {
-            Filled::Full => {}
-            Filled::Short => break,
-        }
-        whole += 5 + length as u64;
-        entries.push(Entry { kind, bytes });
-    }
-    Ok((entries, whole))
+/// Where the snapshot of the journal at `journal` is.
+pub fn snapshot_path(journal: &Path) -> PathBuf {
+    with_suffix(journal, ".snapshot")
 }
 
-fn snapshot_path(journal: &Path) -> PathBuf {
-    let mut name = journal.as_os_str().to_owned();
-    name.push(".snapshot");
+fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(suffix);
     PathBuf::from(name)
 }
 
-fn generation_of(bytes: &[u8]) -> u64 {
-    bytes.try_into().map(u64::from_le_bytes).unwrap_or_default()
+/// Copies a damaged journal beside it, for whoever looks into it, before
+/// it is cut; says where (or why not).
+fn keep_damaged(path: &Path) -> String {
+    let saved = with_suffix(path, ".damaged");
+    match std::fs::copy(path, &saved) {
+        Ok(_) => saved.display().to_string(),
+        Err(e) => format!("not saved: {e}"),
+    }
 }
 
 /// The snapshot's generation and state, if there is one.
 fn read_snapshot(path: &Path) -> Result<Option<(u64, Vec<u8>)>, JournalError> {
-    let bytes = match std::fs::read(path) {
-        Ok(bytes) => bytes,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(source) => {
-            return Err(JournalError::Io {
-                path: path.display().to_string(),
-                source,
-            })
-        }
+    let refused = |problem: String| JournalError::Snapshot {
+        path: path.display().to_string(),
+        problem: format!(
+            "{problem}: the role's state cannot be rebuilt from it (the sensor and the peers kept \
+             only what came after it); restore it from a backup, or remove the deployment's state \
+             directory to start the stream again from its beginning"
+        ),
     };
-    if bytes.len() < 16 || &bytes[..8] != SNAPSHOT_MAGIC {
-        return Err(JournalError::Snapshot {
-            path: path.display().to_string(),
-            problem: "not an idmesh snapshot (bad header)".into(),
-        });
-    }
-    Ok(Some((generation_of(&bytes[8..16]), bytes[16..].to_vec())))
-}
-
-/// Writes `body` to `path` so that a crash leaves the old file or the new
-/// one, whole: a temporary file, fsynced, renamed over, the folder fsynced.
-fn write_durably(path: &Path, body: &[u8]) -> std::io::Result<()> {
-    let mut temporary = path.as_os_str().to_owned();
-    temporary.push(".tmp");
-    let temporary = PathBuf::from(temporary);
-    let mut file = File::create(&temporary)?;
-    file.write_all(body)?;
-    file.sync_all()?;
-    std::fs::rename(&temporary, path)?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        File::open(dir)?.sync_all()?;
-    }
-    Ok(())
-}
-
-enum Filled {
-    Full,
-    /// The file ended first (a torn frame, or the clean end at 0 bytes).
-    Short,
-}
-
-fn read_full(reader: &mut impl Read, buffer: &mut [u8]) -> std::io::Result<Filled> {
-    let mut filled = 0;
-    while filled < buffer.len() {
-        match reader.read(&mut buffer[filled..])? {
-            0 => return Ok(Filled::Short),
-            n => filled += n,
+    let contents = match log::read(path, SNAPSHOT) {
+        Ok(contents) => contents,
+        Err(log::Error::Header { .. }) => {
+            return Err(refused(
+                "damaged at byte 0 (its header fails its checksum)".into(),
+            ))
         }
+        Err(e) => return Err(e.into()),
+    };
+    let Some(contents) = contents else {
+        return Ok(None);
+    };
+    match (&contents.ending, &contents.records[..]) {
+        (Ending::Clean, [state]) => Ok(Some((contents.generation, state.payload.clone()))),
+        (Ending::Clean, records) => Err(refused(format!(
+            "{} records where a snapshot has one",
+            records.len()
+        ))),
+        (Ending::Torn { at, .. }, _) => Err(refused(format!("damaged or cut short at byte {at}"))),
+        (Ending::Damaged(damage), _) => Err(refused(format!(
+            "damaged at byte {} ({})",
+            damage.at, damage.problem
+        ))),
     }
-    Ok(Filled::Full)
 }
 
 #[cfg(test)]
@@ -383,6 +348,7 @@ mod tests {
         let path = dir.join(name);
         let _ = std::fs::remove_file(&path);
         let _ = std::fs::remove_file(snapshot_path(&path));
+        let _ = std::fs::remove_file(with_suffix(&path, ".damaged"));
         JournalOptions {
             path,
             fsync_every: Duration::from_millis(100),
@@ -395,6 +361,17 @@ mod tests {
         let owner = Ownership::try_take(&options.path, "a test")?
             .expect("the journal's previous opener let go of it");
         Journal::open(options, owner)
+    }
+
+    /// Where each entry's record starts in the journal's file.
+    fn offsets(path: &Path) -> Vec<u64> {
+        log::read(path, JOURNAL)
+            .unwrap()
+            .unwrap()
+            .records
+            .iter()
+            .map(|r| r.offset)
+            .collect()
     }
 
     #[test]
@@ -422,13 +399,19 @@ mod tests {
         let options = options("torn");
         let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"whole").unwrap();
+        journal.append(Kind::Batch, b"half written").unwrap();
         drop(journal);
-        // A crash in the middle of the next write: a header and half a body.
-        let mut file = OpenOptions::new().append(true).open(&options.path).unwrap();
-        file.write_all(&[1, 10, 0, 0, 0, b'h', b'a']).unwrap();
+        // A crash in the middle of the last write: a head and half a body.
+        let length = std::fs::metadata(&options.path).unwrap().len();
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(&options.path)
+            .unwrap();
+        file.set_len(length - 6).unwrap();
         drop(file);
-        let (mut journal, Recovered { entries, .. }) = open(&options).unwrap();
-        assert_eq!(entries.len(), 1);
+        let (mut journal, recovered) = open(&options).unwrap();
+        assert_eq!(recovered.entries.len(), 1);
+        assert!(recovered.damage.is_none(), "a torn tail is no damage");
         journal.append(Kind::Transfer, b"next").unwrap();
         drop(journal);
         let entries = open(&options).unwrap().1.entries;
@@ -437,12 +420,62 @@ mod tests {
     }
 
     #[test]
-    fn a_frame_of_unknown_kind_is_an_error_naming_where() {
+    fn a_damaged_entry_is_dropped_with_everything_after_it_and_reported() {
+        let options = options("damaged");
+        let (mut journal, _) = open(&options).unwrap();
+        for i in 0..6u8 {
+            journal.append(Kind::Batch, &[i; 40]).unwrap();
+        }
+        drop(journal);
+        let at = offsets(&options.path)[2];
+        // 32 bytes overwritten in the middle of the third entry.
+        let mut bytes = std::fs::read(&options.path).unwrap();
+        bytes[at as usize + 8..at as usize + 40].fill(0x5a);
+        std::fs::write(&options.path, &bytes).unwrap();
+        let (mut journal, recovered) = open(&options).unwrap();
+        let kept: Vec<u8> = recovered.entries.iter().map(|e| e.bytes[0]).collect();
+        assert_eq!(kept, [0, 1], "the entries before the damage, none after");
+        let damage = recovered.damage.expect("reported");
+        assert_eq!((damage.at, damage.after, damage.records()), (at, 3, 4));
+        assert!(damage.to_string().contains("damaged at byte"), "{damage}");
+        // Saved as found, then cut: the next entry goes after the kept ones.
+        assert_eq!(
+            std::fs::read(with_suffix(&options.path, ".damaged")).unwrap(),
+            bytes
+        );
+        journal.append(Kind::Transfer, b"next").unwrap();
+        drop(journal);
+        let recovered = open(&options).unwrap().1;
+        assert!(recovered.damage.is_none());
+        assert_eq!(recovered.entries.len(), 3);
+        assert_eq!(recovered.entries[2].bytes, b"next");
+
+        // A damaged header: which snapshot it continues is unknown, so
+        // everything after the snapshot is dropped.
+        let mut bytes = std::fs::read(&options.path).unwrap();
+        bytes[20] ^= 1;
+        std::fs::write(&options.path, &bytes).unwrap();
+        let (_, recovered) = open(&options).unwrap();
+        assert!(recovered.entries.is_empty());
+        let damage = recovered.damage.expect("reported");
+        assert_eq!((damage.at, damage.problem), (0, Problem::Header));
+    }
+
+    #[test]
+    fn a_record_of_unknown_kind_is_an_error_naming_where() {
         let options = options("corrupt");
-        std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
-        std::fs::write(&options.path, [9u8, 0, 0, 0, 0]).unwrap();
+        let (journal, _) = open(&options).unwrap();
+        drop(journal);
+        let mut writer = Writer::resume(
+            &[&options.path],
+            JOURNAL,
+            std::fs::metadata(&options.path).unwrap().len(),
+        )
+        .unwrap();
+        writer.append(&[&[9u8]]).unwrap();
+        drop(writer);
         let error = open(&options).err().expect("refused");
-        assert!(error.to_string().contains("entry 0 at byte 0"), "{error}");
+        assert!(error.to_string().contains("entry 0 at byte 40"), "{error}");
     }
 
     #[test]
@@ -495,12 +528,50 @@ mod tests {
     }
 
     #[test]
-    fn a_snapshot_that_is_not_ours_is_an_error_naming_it() {
+    fn a_snapshot_that_is_not_ours_or_is_damaged_is_an_error_naming_it() {
         let options = options("foreign");
         std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
-        std::fs::write(snapshot_path(&options.path), b"garbage").unwrap();
-        let error = open(&options).err().expect("refused");
-        assert!(error.to_string().contains("foreign.snapshot"), "{error}");
-        assert!(error.to_string().contains("bad header"), "{error}");
+        std::fs::write(
+            snapshot_path(&options.path),
+            b"garbage, long enough to be a header of ours",
+        )
+        .unwrap();
+        let error = open(&options).err().expect("refused").to_string();
+        assert!(error.contains("foreign.snapshot"), "{error}");
+        assert!(error.contains("not an idmesh journal"), "{error}");
+
+        let (mut journal, _) = {
+            std::fs::remove_file(snapshot_path(&options.path)).unwrap();
+            open(&options).unwrap()
+        };
+        journal.compact(&[3; 100]).unwrap();
+        drop(journal);
+        let mut bytes = std::fs::read(snapshot_path(&options.path)).unwrap();
+        bytes[80] ^= 0x04;
+        std::fs::write(snapshot_path(&options.path), bytes).unwrap();
+        let error = open(&options).err().expect("refused").to_string();
+        assert!(error.contains("foreign.snapshot"), "{error}");
+        assert!(error.contains("at byte 40"), "{error}");
+        assert!(error.contains("cannot be rebuilt"), "{error}");
+    }
+
+    #[test]
+    fn files_of_the_format_before_checksums_are_refused_saying_what_to_do() {
+        let options = options("old");
+        std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
+        // The old journal's first frame: its snapshot's generation.
+        let mut old = vec![4u8, 8, 0, 0, 0];
+        old.extend_from_slice(&0u64.to_le_bytes());
+        old.extend_from_slice(&[1, 3, 0, 0, 0, b'a', b'b', b'c']);
+        std::fs::write(&options.path, &old).unwrap();
+        let error = open(&options).err().expect("refused").to_string();
+        assert!(error.contains("old"), "{error}");
+        assert!(error.contains("earlier idmesh"), "{error}");
+        assert!(
+            error.contains("remove the deployment's state directory"),
+            "{error}"
+        );
+        // Left as it was.
+        assert_eq!(std::fs::read(&options.path).unwrap(), old);
     }
 }

@@ -280,6 +280,7 @@ pub async fn run(
                     path: path.display().to_string(),
                     source,
                 })?;
+            gateway.note_journal_repaired(journal.repaired());
             if restored > 0 {
                 tracing::info!(sensor = %config.name, journal = %path.display(), records = restored,
                     events = gateway.router().events(), seq = gateway.router().seq(),

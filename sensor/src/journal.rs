@@ -10,28 +10,37 @@
 //! leaves the process (a batch, an acknowledgement, a follow reply), one
 //! fsync per batch of work.
 //!
-//! File: [`MAGIC`], then frames — length (u32, little-endian), FNV-1a
-//! checksum of the body (u32, little-endian), the body (a postcard
-//! [`Record`]). A process killed mid-write leaves a prefix of its last
-//! frame: [`Journal::open`] drops it with a warning and cuts the file
-//! there. A last whole frame whose checksum fails (a power cut) is dropped
-//! the same way. Anything else that does not read — a bad frame with more
-//! after it, a record that does not decode, a file that is not a sensor
-//! journal — is refused with an error naming the file and the byte.
+//! File: an `idmesh-journal` log (`sensor-journal`: a checksummed header
+//! whose generation counts compactions, then checksummed records, each a
+//! postcard [`Record`]), kept twice — `<journal>` and `<journal>.copy`,
+//! the same bytes written to both before the fsync. A process killed
+//! mid-write leaves a prefix of its last record: [`Journal::open`] drops
+//! it with a warning and cuts the files there (it was never acted on).
+//!
+//! Why two copies: the journal holds what exists nowhere else whole —
+//! ingested lines the sensor acknowledged (their producer let them go),
+//! and where cuts, follows and batch boundaries fell among the lines,
+//! which the leaders have already acted on (a trace file holds its lines,
+//! not those). A sensor that came back from the records before a damaged
+//! one would go on with a different stream than the one its leaders
+//! hold. So a record that does not check in one file is taken from the
+//! other ([`idmesh_journal::read_copies`]: logged, counted in
+//! `journal_repaired`, and both files written again whole); a record
+//! damaged in both, or a damaged journal without its copy, stops the
+//! sensor with an error naming the file and the byte
+//! ([`JournalError::Damaged`]) rather than let it lose accepted input
+//! silently. A record that checks but does not decode, or a file that is
+//! not a sensor journal, is refused likewise.
 
 use crate::cuts::Wanted;
+use idmesh_journal::{self as log, Damage, Ending, Writer};
 use idmesh_ownership::{Ownership, OwnershipError};
 use idmesh_protocol::wire::sensor_to_sensor::Position;
 use serde::{Deserialize, Serialize};
-use std::fs::{File, OpenOptions};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// The first bytes of a sensor journal.
-pub const MAGIC: &[u8] = b"idmesh-sensor-journal/1\n";
-
-/// Frames larger than this are not ours.
-const MAX_FRAME: u32 = 1 << 30;
+/// What the journal's header says it holds.
+pub const KIND: &str = "sensor-journal";
 
 /// One change of the gateway's state. Lines routed carry the cuts placed
 /// right after them (`(i, cut)`: after the record's `i`-th routed line),
@@ -112,11 +121,16 @@ pub enum MeshRecord {
 
 #[derive(Debug, thiserror::Error)]
 pub enum JournalError {
-    #[error("sensor journal {path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    #[error("sensor journal: {0}")]
+    Log(#[from] log::Error),
+    #[error(
+        "sensor journal {0}: the damaged records held what this sensor accepted and did (lines \
+         routed, ingested lines acknowledged, cuts, follows, the batches it sent), which exist \
+         nowhere else in full, so it does not start rather than go on with a different stream; \
+         restore the journal or its copy from a backup, or remove the deployment's state \
+         directory to start the stream again from its beginning"
+    )]
+    Damaged(Damage),
     #[error("sensor journal {path} is corrupt at byte {offset}: {problem}")]
     Corrupt {
         path: String,
@@ -128,80 +142,88 @@ pub enum JournalError {
     Ownership(#[from] OwnershipError),
 }
 
-/// What a journal's bytes hold.
-#[derive(Debug, Default, PartialEq)]
-pub struct Parsed {
-    pub records: Vec<Record>,
-    /// Where the last whole record ends; bytes after it are a torn write.
-    pub whole: u64,
-}
-
 /// A journal open for appending, by the one process holding its lock
 /// (two sensors appending to one journal would interleave two streams).
 pub struct Journal {
-    file: File,
+    writer: Writer,
     path: PathBuf,
     _owner: Ownership,
-    /// Bytes on disk now, and right after the last compaction (or at open).
-    length: u64,
+    /// Compactions so far (the files' generation).
+    generation: u64,
+    /// Bytes on disk right after the last compaction (or at open).
     base: u64,
     /// Compact once this many bytes came since `base` (and at least as
     /// many as `base`, so that compacting stays a fraction of appending).
     compact_after: u64,
+    /// Records found damaged in one copy at open and taken from the other.
+    repaired: usize,
 }
 
 /// How much a journal grows before it is compacted, by default.
 pub const COMPACT_AFTER: u64 = 16 << 20;
 
+/// Where the copy of the journal at `path` is.
+pub fn copy_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".copy");
+    PathBuf::from(name)
+}
+
 impl Journal {
-    /// Opens (or creates) the journal at `path` and returns the records it
-    /// holds, in order; a torn last frame is cut off with a warning.
+    /// Opens (or creates) the journal at `path` and its copy and returns
+    /// the records they hold, in order; a torn last record is cut off with
+    /// a warning, a record damaged in one copy is taken from the other.
     pub fn open(path: &Path, holder: &str) -> Result<(Journal, Vec<Record>), JournalError> {
         let owner = Ownership::try_take(path, holder)?.ok_or_else(|| Ownership::refused(path))?;
-        let io = |source| JournalError::Io {
-            path: path.display().to_string(),
-            source,
+        let copy = copy_path(path);
+        let paths = [path, copy.as_path()];
+        let Some(merged) = log::read_copies(path, &copy, KIND)? else {
+            let writer = Writer::create::<&[u8]>(&paths, KIND, 0, &[])?;
+            return Ok((Journal::new(writer, path, owner, 0, 0), Vec::new()));
         };
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(io)?;
+        let contents = merged.contents;
+        let records = decode(&contents, path)?;
+        match contents.ending {
+            Ending::Clean => {}
+            Ending::Torn { at, bytes } => {
+                tracing::warn!(journal = %path.display(), at, torn = bytes,
+                    "dropping a torn last record (the process died writing it)");
+            }
+            Ending::Damaged(damage) => return Err(JournalError::Damaged(damage)),
         }
-        let bytes = match std::fs::read(path) {
-            Ok(bytes) => bytes,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-            Err(e) => return Err(io(e)),
+        for repair in &merged.repairs {
+            tracing::warn!(journal = %repair.path.display(), at = repair.at, problem = %repair.problem,
+                "a damaged record of the sensor journal, taken from its other copy");
+        }
+        let generation = contents.generation;
+        let writer = if merged.rewrite {
+            // Both copies whole again, from what was read.
+            let payloads: Vec<&[u8]> = contents.records.iter().map(|r| &r.payload[..]).collect();
+            Writer::create(&paths, KIND, generation, &payloads)?
+        } else {
+            Writer::resume(&paths, KIND, contents.end())?
         };
-        let parsed = parse(&bytes).map_err(|(offset, problem)| JournalError::Corrupt {
-            path: path.display().to_string(),
-            offset,
-            problem,
-        })?;
-        let mut file = OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(path)
-            .map_err(io)?;
-        let length = bytes.len() as u64;
-        if parsed.whole < length {
-            tracing::warn!(journal = %path.display(), at = parsed.whole, torn = length - parsed.whole,
-                "dropping a torn last record (the process died writing it)");
-            file.set_len(parsed.whole).map_err(io)?;
+        let journal = Journal::new(writer, path, owner, generation, merged.repairs.len());
+        Ok((journal, records))
+    }
+
+    fn new(
+        writer: Writer,
+        path: &Path,
+        owner: Ownership,
+        generation: u64,
+        repaired: usize,
+    ) -> Journal {
+        let base = writer.len();
+        Journal {
+            writer,
+            path: path.to_path_buf(),
+            _owner: owner,
+            generation,
+            base,
+            compact_after: COMPACT_AFTER,
+            repaired,
         }
-        if parsed.whole == 0 {
-            file.write_all(MAGIC).map_err(io)?;
-            file.sync_data().map_err(io)?;
-        }
-        let length = parsed.whole.max(MAGIC.len() as u64);
-        Ok((
-            Journal {
-                file,
-                path: path.to_path_buf(),
-                _owner: owner,
-                length,
-                base: length,
-                compact_after: COMPACT_AFTER,
-            },
-            parsed.records,
-        ))
     }
 
     /// Appends `records` and fsyncs them (nothing to do for none).
@@ -209,17 +231,9 @@ impl Journal {
         if records.is_empty() {
             return Ok(());
         }
-        let mut bytes = Vec::new();
-        for record in records {
-            frame(record, &mut bytes);
-        }
-        let io = |source| JournalError::Io {
-            path: self.path.display().to_string(),
-            source,
-        };
-        self.file.write_all(&bytes).map_err(io)?;
-        self.file.sync_data().map_err(io)?;
-        self.length += bytes.len() as u64;
+        let payloads: Vec<Vec<u8>> = records.iter().map(encode).collect();
+        self.writer.append_all(&payloads)?;
+        self.writer.sync()?;
         Ok(())
     }
 
@@ -232,116 +246,97 @@ impl Journal {
     /// Whether it has grown enough since its last compaction to be
     /// compacted now.
     pub fn due(&self) -> bool {
-        self.length.saturating_sub(self.base) >= self.compact_after.max(self.base)
+        self.bytes().saturating_sub(self.base) >= self.compact_after.max(self.base)
     }
 
     /// Waits another [`Journal::compact_after`] before it is due again (a
     /// snapshot could not be taken: the journal stays whole).
     pub fn postpone(&mut self) {
-        self.base = self.length;
+        self.base = self.bytes();
     }
 
-    /// Bytes on disk.
+    /// Bytes on disk (in each copy).
     pub fn bytes(&self) -> u64 {
-        self.length
+        self.writer.len()
     }
 
     pub fn path(&self) -> &Path {
         &self.path
     }
 
+    /// Records found damaged in one copy when it was opened, and taken
+    /// from the other.
+    pub fn repaired(&self) -> usize {
+        self.repaired
+    }
+
     /// Replaces the journal by `records` (a compacted journal: the
-    /// stream and a snapshot), atomically: they are written to a file
+    /// stream and a snapshot), atomically: each copy is written to a file
     /// beside it, fsynced, and renamed over it, so a kill at any point
-    /// leaves either the old journal or the new one whole. Appends go to
-    /// the new one from then on.
+    /// leaves either the old journal or the new one whole in each (the
+    /// newer generation wins at the next open). Appends go to the new one
+    /// from then on.
     pub fn compact(&mut self, records: &[Record]) -> Result<(), JournalError> {
-        let io = |source| JournalError::Io {
-            path: self.path.display().to_string(),
-            source,
-        };
-        let mut bytes = MAGIC.to_vec();
-        for record in records {
-            frame(record, &mut bytes);
-        }
-        let mut name = self.path.file_name().unwrap_or_default().to_os_string();
-        name.push(".compacting");
-        let temporary = self.path.with_file_name(name);
-        let mut file = File::create(&temporary).map_err(io)?;
-        file.write_all(&bytes).map_err(io)?;
-        file.sync_all().map_err(io)?;
-        std::fs::rename(&temporary, &self.path).map_err(io)?;
-        // The rename itself is durable once the directory is.
-        if let Some(dir) = self.path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            File::open(dir).and_then(|d| d.sync_all()).map_err(io)?;
-        }
-        self.file = OpenOptions::new()
-            .append(true)
-            .open(&self.path)
-            .map_err(io)?;
-        self.length = bytes.len() as u64;
-        self.base = self.length;
+        let payloads: Vec<Vec<u8>> = records.iter().map(encode).collect();
+        self.generation += 1;
+        self.writer.replace(self.generation, &payloads)?;
+        self.base = self.bytes();
         Ok(())
     }
 }
 
-/// `record` as a frame, appended to `out`.
-pub fn frame(record: &Record, out: &mut Vec<u8>) {
-    let body = postcard::to_stdvec(record).unwrap_or_default();
-    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
-    out.extend_from_slice(&checksum(&body).to_le_bytes());
-    out.extend_from_slice(&body);
+/// `record` as a journal record's payload.
+fn encode(record: &Record) -> Vec<u8> {
+    postcard::to_stdvec(record).unwrap_or_default()
 }
 
-/// The records of a journal's bytes, or where and why they do not read.
-pub fn parse(bytes: &[u8]) -> Result<Parsed, (u64, String)> {
-    if bytes.len() < MAGIC.len() {
-        return if MAGIC.starts_with(bytes) {
-            Ok(Parsed::default())
-        } else {
-            Err((0, "not a sensor journal".into()))
-        };
-    }
-    if !bytes.starts_with(MAGIC) {
-        return Err((0, "not a sensor journal".into()));
-    }
-    let mut parsed = Parsed {
-        records: Vec::new(),
-        whole: MAGIC.len() as u64,
-    };
-    let mut at = MAGIC.len();
-    while at < bytes.len() {
-        let rest = &bytes[at..];
-        let Some(head) = rest.get(..8) else { break };
-        let length = u32::from_le_bytes([head[0], head[1], head[2], head[3]]);
-        let sum = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
-        if length > MAX_FRAME {
-            return Err((at as u64, format!("a frame of {length} bytes")));
-        }
-        let end = 8 + length as usize;
-        let Some(body) = rest.get(8..end) else { break };
-        if checksum(body) != sum {
-            if at + end == bytes.len() {
-                // The last frame, whole in length but not in content: a
-                // write the disk did not finish.
-                break;
-            }
-            return Err((at as u64, "checksum mismatch".into()));
-        }
-        let record = postcard::from_bytes(body)
-            .map_err(|e| (at as u64, format!("a record that does not decode: {e}")))?;
-        parsed.records.push(record);
-        at += end;
-        parsed.whole = at as u64;
-    }
-    Ok(parsed)
+/// The records of a log's contents, or where one does not decode.
+fn decode(contents: &log::Contents, path: &Path) -> Result<Vec<Record>, JournalError> {
+    contents
+        .records
+        .iter()
+        .map(|r| {
+            postcard::from_bytes(&r.payload).map_err(|e| JournalError::Corrupt {
+                path: path.display().to_string(),
+                offset: r.offset,
+                problem: format!("a record that does not decode: {e}"),
+            })
+        })
+        .collect()
 }
 
-/// FNV-1a, 32 bits.
-fn checksum(bytes: &[u8]) -> u32 {
-    bytes.iter().fold(0x811c_9dc5u32, |h, &b| {
-        (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
-    })
+/// A whole journal file's bytes holding `records` (tests: restoring from
+/// the bytes a process would read).
+pub fn to_bytes(records: &[Record]) -> Vec<u8> {
+    let mut bytes = log::header(KIND, 0).to_vec();
+    for record in records {
+        log::encode_record(&[&encode(record)], &mut bytes);
+    }
+    bytes
+}
+
+/// The records of a journal file's bytes; damage is an error.
+pub fn from_bytes(bytes: &[u8]) -> Result<Vec<Record>, JournalError> {
+    let path = Path::new("(bytes)");
+    match log::parse(bytes, KIND, path)? {
+        None => Ok(Vec::new()),
+        Some(contents) => match &contents.ending {
+            Ending::Damaged(damage) => Err(JournalError::Damaged(damage.clone())),
+            _ => decode(&contents, path),
+        },
+    }
+}
+
+/// The records of the journal at `path` and its copy, as a restart would
+/// read them (without taking the journal or mending it).
+pub fn read(path: &Path) -> Result<Vec<Record>, JournalError> {
+    match log::read_copies(path, &copy_path(path), KIND)? {
+        None => Ok(Vec::new()),
+        Some(merged) => match &merged.contents.ending {
+            Ending::Damaged(damage) => Err(JournalError::Damaged(damage.clone())),
+            _ => decode(&merged.contents, path),
+        },
+    }
 }
 
 #[cfg(test)]
@@ -370,20 +365,24 @@ mod tests {
         ]
     }
 
-    fn bytes_of(records: &[Record]) -> Vec<u8> {
-        let mut bytes = MAGIC.to_vec();
-        for record in records {
-            frame(record, &mut bytes);
-        }
-        bytes
-    }
-
     fn path(name: &str) -> PathBuf {
         let dir =
             std::env::temp_dir().join(format!("idmesh-sensor-journal-{}", std::process::id()));
         let path = dir.join(name);
         let _ = std::fs::remove_file(&path);
+        let _ = std::fs::remove_file(copy_path(&path));
         path
+    }
+
+    /// Where each record starts in a journal holding `records`.
+    fn offsets(path: &Path) -> Vec<u64> {
+        log::read(path, KIND)
+            .unwrap()
+            .unwrap()
+            .records
+            .iter()
+            .map(|r| r.offset)
+            .collect()
     }
 
     #[test]
@@ -399,7 +398,12 @@ mod tests {
         journal.append(&records()[2..]).unwrap();
         drop(journal);
         assert_eq!(Journal::open(&path, "test").unwrap().1, records());
-        assert_eq!(std::fs::read(&path).unwrap(), bytes_of(&records()));
+        assert_eq!(std::fs::read(&path).unwrap(), to_bytes(&records()));
+        assert_eq!(
+            std::fs::read(copy_path(&path)).unwrap(),
+            to_bytes(&records())
+        );
+        assert_eq!(read(&path).unwrap(), records());
     }
 
     #[test]
@@ -417,67 +421,131 @@ mod tests {
     }
 
     #[test]
-    fn every_torn_tail_is_dropped_and_the_whole_records_before_it_kept() {
-        let whole = bytes_of(&records()[..5]);
-        let full = bytes_of(&records());
-        // Every prefix of the last frame: the process died writing it.
-        for cut in whole.len()..full.len() {
-            let parsed = parse(&full[..cut]).expect("a torn tail is not corruption");
-            assert_eq!(parsed.records, records()[..5], "cut at {cut}");
-            assert_eq!(parsed.whole, whole.len() as u64);
-        }
-        // A torn magic is an empty journal.
-        assert_eq!(parse(&MAGIC[..5]).unwrap(), Parsed::default());
-        // On disk: cut off, and the next record goes after the whole ones.
+    fn a_torn_tail_is_dropped_and_the_whole_records_before_it_kept() {
         let path = path("torn");
         std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        let full = to_bytes(&records());
+        // The process died writing the last record: in the first copy,
+        // half of it; the second not written at all.
         std::fs::write(&path, &full[..full.len() - 1]).unwrap();
+        std::fs::write(copy_path(&path), to_bytes(&records()[..5])).unwrap();
         let (mut journal, old) = Journal::open(&path, "test").unwrap();
         assert_eq!(old, records()[..5]);
+        assert_eq!(journal.repaired(), 0, "a torn tail is no damage");
         journal.append(&[Record::End]).unwrap();
         drop(journal);
         assert_eq!(std::fs::read(&path).unwrap(), full);
+        assert_eq!(std::fs::read(copy_path(&path)).unwrap(), full);
     }
 
     #[test]
-    fn a_last_frame_with_a_bad_checksum_is_torn_but_one_in_the_middle_is_corruption() {
-        let mut bytes = bytes_of(&records());
-        let last = bytes.len() - 1;
-        bytes[last] ^= 0xff;
-        assert_eq!(parse(&bytes).unwrap().records, records()[..5]);
-        let mut bytes = bytes_of(&records());
-        let second = MAGIC.len() + 8 + postcard::to_stdvec(&Record::Flush).unwrap().len();
-        bytes[second + 9] ^= 0xff;
+    fn a_record_damaged_in_one_copy_is_taken_from_the_other_and_both_made_whole() {
+        let path = path("repaired");
+        let (mut journal, _) = Journal::open(&path, "test").unwrap();
+        journal.append(&records()).unwrap();
+        drop(journal);
+        // 32 bytes overwritten, across the third record and the fourth.
+        let (third, fourth) = (offsets(&path)[2] as usize, offsets(&path)[3] as usize);
+        assert!(third + 36 > fourth);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[third + 4..third + 36].fill(0);
+        std::fs::write(&path, &bytes).unwrap();
+        let (journal, old) = Journal::open(&path, "test").unwrap();
+        assert_eq!(old, records());
+        assert_eq!(journal.repaired(), 2);
+        drop(journal);
+        assert_eq!(std::fs::read(&path).unwrap(), to_bytes(&records()));
         assert_eq!(
-            parse(&bytes).unwrap_err(),
-            (second as u64, "checksum mismatch".to_string())
+            std::fs::read(copy_path(&path)).unwrap(),
+            to_bytes(&records())
         );
     }
 
     #[test]
-    fn corruption_is_an_error_naming_the_file_and_the_byte() {
-        let path = path("corrupt");
-        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-        let mut bytes = bytes_of(&records());
-        let at = MAGIC.len() + 8 + postcard::to_stdvec(&Record::Flush).unwrap().len();
-        bytes[at + 3] = 0x7f; // a length of gigabytes
-        std::fs::write(&path, &bytes).unwrap();
+    fn a_record_damaged_in_both_copies_stops_the_sensor_naming_the_file_and_the_byte() {
+        let path = path("damaged");
+        let (mut journal, _) = Journal::open(&path, "test").unwrap();
+        journal.append(&records()).unwrap();
+        drop(journal);
+        let at = offsets(&path)[2];
+        for file in [path.clone(), copy_path(&path)] {
+            let mut bytes = std::fs::read(&file).unwrap();
+            bytes[at as usize + 13] ^= 0x08;
+            std::fs::write(&file, &bytes).unwrap();
+        }
+        let before = std::fs::read(&path).unwrap();
         let error = Journal::open(&path, "test")
             .err()
             .expect("refused")
             .to_string();
         assert!(error.contains(&path.display().to_string()), "{error}");
+        assert!(
+            error.contains(&copy_path(&path).display().to_string()),
+            "{error}"
+        );
         assert!(error.contains(&format!("at byte {at}")), "{error}");
-        std::fs::write(&path, b"not a journal at all, long enough").unwrap();
+        assert!(error.contains("does not start"), "{error}");
+        // Refused, not cut: the files are left for whoever looks into them.
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+        // Without its copy, damage in the one file is the same.
+        std::fs::remove_file(copy_path(&path)).unwrap();
         let error = Journal::open(&path, "test")
             .err()
             .expect("refused")
             .to_string();
-        assert!(error.contains("at byte 0: not a sensor journal"), "{error}");
-        // Refused, not cut: the file is left for whoever looks into it.
+        assert!(error.contains(&format!("at byte {at}")), "{error}");
+    }
+
+    #[test]
+    fn compaction_replaces_both_copies_and_a_crash_between_them_keeps_the_newer() {
+        let path = path("compacted");
+        let (mut journal, _) = Journal::open(&path, "test").unwrap();
+        journal.append(&records()).unwrap();
+        let old = std::fs::read(copy_path(&path)).unwrap();
+        journal.compact(&records()[..1]).unwrap();
+        journal.append(&records()[5..]).unwrap();
+        drop(journal);
+        let compacted = vec![Record::Flush, Record::End];
+        assert_eq!(Journal::open(&path, "test").unwrap().1, compacted);
+        // Killed after the first file was replaced, before the second.
+        std::fs::write(copy_path(&path), old).unwrap();
+        assert_eq!(Journal::open(&path, "test").unwrap().1, compacted);
+        assert_eq!(
+            std::fs::read(copy_path(&path)).unwrap(),
+            std::fs::read(&path).unwrap()
+        );
+    }
+
+    #[test]
+    fn a_journal_of_an_earlier_format_or_another_kind_is_refused_naming_it() {
+        let path = path("old");
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, b"idmesh-sensor-journal/1\n\x01\0\0\0").unwrap();
+        let error = Journal::open(&path, "test")
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(
+            error.contains("old") && error.contains("earlier idmesh"),
+            "{error}"
+        );
+        std::fs::write(&path, b"not a journal at all, long enough to be one").unwrap();
+        let error = Journal::open(&path, "test")
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(error.contains("not an idmesh journal"), "{error}");
         assert_eq!(
             std::fs::read(&path).unwrap(),
-            b"not a journal at all, long enough"
+            b"not a journal at all, long enough to be one"
         );
+        // A record that checks but is no record of ours.
+        log::write_file(&path, KIND, 0, &[[0xffu8; 3]]).unwrap();
+        let _ = std::fs::remove_file(copy_path(&path));
+        let error = Journal::open(&path, "test")
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(error.contains("corrupt at byte 40"), "{error}");
     }
 }

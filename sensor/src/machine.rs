@@ -251,6 +251,12 @@ impl<Q> Gateway<Q> {
         again
     }
 
+    /// Counts journal records that were damaged in one copy of the
+    /// journal and taken from the other when the sensor restarted.
+    pub fn note_journal_repaired(&mut self, records: usize) {
+        self.state.stats.journal_repaired += records as u64;
+    }
+
     /// The stream found its window full and waits (counted in the stats).
     pub fn hold(&mut self) {
         self.state.stats.window_holds += 1;

@@ -745,7 +745,7 @@ fn state_of(gateway: &mut Gateway<u32>) -> Vec<Vec<u8>> {
 #[test]
 fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     use crate::ingest::Offer;
-    use crate::journal::{frame, parse, Record, MAGIC};
+    use crate::journal::{from_bytes, to_bytes, Record};
     let trace = [mix(0, 2), observe(3), mix(1, 3), mix(3, 7), observe(7)];
     let payload = "{\"kind\":\"mix\",\"time\":0,\"a\":0,\"b\":5,\"swap\":0.5}\n\
         {\"kind\":\"observe\",\"time\":0,\"track\":2,\"red\":0.9,\"blue\":0.3}\nnot a line";
@@ -816,11 +816,7 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
         .any(|r| matches!(r, Record::Offer { cuts, .. } if cuts.len() == 1)));
     assert!(journal.iter().any(|r| matches!(r, Record::Follow(_))));
     // Through the journal's bytes, as a restarted process reads them.
-    let mut bytes = MAGIC.to_vec();
-    for record in &journal {
-        frame(record, &mut bytes);
-    }
-    let journal = parse(&bytes).unwrap().records;
+    let journal = from_bytes(&to_bytes(&journal)).unwrap();
     let unjournaled = || Gateway::<u32>::new("s", router(8, 4, true), false);
     for (records, state, offered) in &points {
         let mut restored = unjournaled();
@@ -846,11 +842,7 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     // (its snapshot, byte for byte, and what it says) and producer
     // counters.
     for (i, snapshot) in compacted.iter().enumerate() {
-        let mut bytes = MAGIC.to_vec();
-        for record in snapshot {
-            frame(record, &mut bytes);
-        }
-        let snapshot = parse(&bytes).unwrap().records;
+        let snapshot = from_bytes(&to_bytes(snapshot)).unwrap();
         assert!(matches!(
             snapshot[..],
             [Record::Stream(_), Record::Snapshot(_)]

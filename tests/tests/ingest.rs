@@ -511,10 +511,9 @@ impl Restart {
 /// The sensor's journal was compacted: it starts with the stream and a
 /// snapshot of the sensor's state, not with the stream's first records.
 fn assert_compacted(deployment: &Deployment) {
-    use idmesh_sensor::journal::{parse, Record};
+    use idmesh_sensor::journal::{read, Record};
     let path = deployment.dir.join("state").join("sensor-0.journal");
-    let bytes = std::fs::read(&path).expect("the sensor's journal");
-    let records = parse(&bytes).expect("a whole journal").records;
+    let records = read(&path).expect("a whole journal");
     assert!(
         matches!(records[..], [Record::Stream(_), Record::Snapshot(_), ..]),
         "{} starts with {:?}",

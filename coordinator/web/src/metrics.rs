@@ -31,7 +31,7 @@ type Labels = Vec<(String, String)>;
 /// help, the value).
 type LeaderField = (&'static str, &'static str, fn(&LeaderStats) -> u64);
 
-const LEADER_COUNTERS: [LeaderField; 19] = [
+const LEADER_COUNTERS: [LeaderField; 21] = [
     ("items", "stream items applied", |s| s.items),
     ("mixes", "mix events applied", |s| s.mixes),
     ("observations", "observations applied", |s| s.observations),
@@ -71,6 +71,16 @@ const LEADER_COUNTERS: [LeaderField; 19] = [
     ("recoveries", "restarts and adoptions caught up", |s| {
         s.recoveries
     }),
+    (
+        "journal_damage",
+        "restarts that found the journal damaged",
+        |s| s.journal_damage,
+    ),
+    (
+        "journal_dropped",
+        "journal entries dropped with damage (fetched again)",
+        |s| s.journal_dropped,
+    ),
 ];
 
 const LEADER_GAUGES: [LeaderField; 6] = [

@@ -26,13 +26,27 @@
 //!   the coordinator to say who is missing;
 //! - on every tick the journal is synced and, if that worked and it moved,
 //!   the durable mark published;
-//! - after every [`Timers::snapshot_every`] journaled inputs, a snapshot.
+//! - after every [`Timers::snapshot_every`] journaled inputs, a snapshot;
+//!   and at a tick with nothing journaled since the last one, if anything
+//!   was since the last snapshot (a leader at rest).
+//!
+//! The durable mark tells the sensor and the peers what they may forget
+//! of what they keep for this leader. With a journal it is the state of
+//! the last snapshot, not of the last fsync: a snapshot is one
+//! checksummed file written whole, while the journal after it may be
+//! found damaged at a restart, and then everything from the damaged
+//! entry on is dropped and must still be there to fetch again
+//! ([`crate::journal`]). What the others keep for a leader is thus what
+//! came since its last snapshot: at most [`Timers::snapshot_every`]
+//! inputs, and nothing once it rests.
 //!
 //! A restarted (or adopted) leader ([`Node::recover`]) replays its
 //! snapshot and journal, sends again every transfer it sent, asks the
 //! sensor for the batches after its journal's last and every peer for the
 //! transfers they sent it since, and answers queries "recovering" until
-//! all of them have answered.
+//! all of them have answered. A journal cut short by damage is one more
+//! such restart: the leader is where its journal ended, behind where it
+//! was, and fetches the rest the same way.
 
 mod queries;
 mod recovery;
@@ -233,6 +247,12 @@ pub struct Node {
     /// an item (a factored stream).
     components_since: Option<(u64, Now)>,
     published: Option<Durable>,
+    /// The durable mark of the last snapshot written (or recovered from):
+    /// the one published when there is a journal.
+    safe: Option<Durable>,
+    /// [`Node::journaled`] at the last sweep: unchanged at the next, the
+    /// leader rests.
+    journaled_at_sweep: usize,
     /// The progress mark last published.
     progressed: u64,
     /// The tag of the cut whose answer this leader last pushed: the next
@@ -258,6 +278,8 @@ impl Node {
             waiting_since: None,
             components_since: None,
             published: None,
+            safe: None,
+            journaled_at_sweep: 0,
             progressed: 0,
             pushed: None,
             journaled: 0,
@@ -519,16 +541,27 @@ impl Node {
     /// The sweep: sync and mark, expire held queries, ask again for what
     /// seems lost.
     fn tick(&mut self, now: Now, out: &mut Vec<Output>) {
-        // Everything journaled so far is on disk after the sync: the others
-        // may stop keeping it.
-        let mark = self.leader.durable();
-        let publish = self.failure.is_none() && self.published.as_ref() != Some(&mark);
+        // At rest with inputs journaled since the last snapshot: a snapshot,
+        // so that the mark below lets the others forget all they keep.
+        let resting = self.journaled > 0 && self.journaled == self.journaled_at_sweep;
+        if resting && self.failure.is_none() && self.snapshots() {
+            self.snapshot(out);
+        }
+        self.journaled_at_sweep = self.journaled;
+        // With a journal, the others may forget what the last snapshot
+        // holds (the journal after it may yet be found damaged); without
+        // one, what was applied (a leader that dies does not come back).
+        let mark = match self.timers.journal {
+            true => self.safe.clone(),
+            false => Some(self.leader.durable()),
+        };
+        let publish = self.failure.is_none() && mark.is_some() && self.published != mark;
         if publish {
-            self.published = Some(mark.clone());
+            self.published.clone_from(&mark);
         }
         if self.timers.journal || publish {
             out.push(Output::Persist {
-                mark: publish.then_some(mark),
+                mark: mark.filter(|_| publish),
             });
         }
         self.expire(now, out);
@@ -602,11 +635,24 @@ impl Node {
         // Every input journaled is applied: the state can replace them.
         if let (true, Some(every)) = (self.timers.journal, self.timers.snapshot_every) {
             if self.journaled >= every {
-                self.journaled = 0;
-                self.leader.note_snapshot();
-                out.push(Output::Snapshot(self.leader.snapshot()));
+                self.snapshot(out);
             }
         }
+    }
+
+    /// Whether this leader writes snapshots.
+    fn snapshots(&self) -> bool {
+        self.timers.journal && self.timers.snapshot_every.is_some()
+    }
+
+    /// The whole state, to replace the journal; its durable mark is
+    /// published from the next sweep on (after the driver wrote it).
+    fn snapshot(&mut self, out: &mut Vec<Output>) {
+        self.journaled = 0;
+        self.journaled_at_sweep = 0;
+        self.leader.note_snapshot();
+        self.safe = Some(self.leader.durable());
+        out.push(Output::Snapshot(self.leader.snapshot()));
     }
 
     /// Publishes the leader's progress if it moved and a window waits for

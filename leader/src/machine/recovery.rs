@@ -17,12 +17,18 @@ impl Node {
     /// it expects, every peer for what it sent here since, and the sensor
     /// again for a follow still unanswered. Until all of them answered,
     /// queries are refused as "recovering".
+    ///
+    /// `damaged`: the journal was found damaged and cut before its damaged
+    /// entry; this many entries were dropped (counted, and the leader
+    /// catches up even with nothing left to replay: it was further on).
+    #[allow(clippy::too_many_arguments)]
     pub fn recover<'a>(
         name: &str,
         host: &str,
         snapshot: Option<&[u8]>,
         entries: impl IntoIterator<Item = (Kind, &'a [u8])>,
         adopted: bool,
+        damaged: Option<u64>,
         timers: Timers,
         now: Now,
     ) -> Result<(Node, Vec<Output>), LeaderError> {
@@ -31,7 +37,14 @@ impl Node {
             None => Leader::new(name),
         };
         leader.set_host(host);
+        if let Some(dropped) = damaged {
+            leader.note_journal_damage(dropped);
+        }
         let mut node = Node::new(leader, timers);
+        // The snapshot's mark is safe whatever became of the journal.
+        if snapshot.is_some() {
+            node.safe = Some(node.leader.durable());
+        }
         let mut replayed = 0;
         for (kind, bytes) in entries {
             replayed += 1;
@@ -57,9 +70,10 @@ impl Node {
         }
         node.journaled = replayed;
         let mut out = Vec::new();
-        if node.timers.journal && (snapshot.is_some() || replayed > 0 || adopted) {
+        let behind = adopted || damaged.is_some();
+        if node.timers.journal && (snapshot.is_some() || replayed > 0 || behind) {
             tracing::info!(leader = %name, snapshot = snapshot.is_some(), entries = replayed,
-                position = node.leader.position(), "state recovered");
+                dropped = damaged, position = node.leader.position(), "state recovered");
             node.catch_up(now, &mut out);
         }
         // A gap left by the journal, a snapshot due: as after any input.

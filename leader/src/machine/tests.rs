@@ -323,40 +323,61 @@ fn a_failed_follow_request_is_made_again() {
     assert_eq!(follows(&node.step(500 * MS, Input::Tick)), 1);
 }
 
+fn marks(out: &[Output]) -> Vec<Option<(u64, u64)>> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::Persist { mark } => Some(mark.as_ref().map(|m| (m.batch, m.position))),
+            _ => None,
+        })
+        .collect()
+}
+
+fn snapshots(out: &[Output]) -> usize {
+    out.iter()
+        .filter(|o| matches!(o, Output::Snapshot(_)))
+        .count()
+}
+
 #[test]
-fn the_mark_is_published_after_a_sync_and_only_when_it_moved() {
+fn the_mark_is_the_last_snapshots_and_published_after_it_once() {
     let mut node = started("a", &["a"]);
-    let marks = |out: &[Output]| -> Vec<Option<Durable>> {
-        out.iter()
-            .filter_map(|o| match o {
-                Output::Persist { mark } => Some(mark.clone()),
-                _ => None,
-            })
-            .collect()
-    };
-    let first = marks(&node.step(250 * MS, Input::Tick));
-    assert_eq!(first.len(), 1);
+    // Nothing is safe before a snapshot: the journal after one may yet be
+    // found damaged, and then the sensor must still have what it held.
+    let out = node.step(250 * MS, Input::Tick);
+    assert_eq!((marks(&out), snapshots(&out)), (vec![None], 0));
+    // At rest (nothing journaled since the last sweep): a snapshot, and
+    // its mark, after it in the driver's order.
+    let out = node.step(500 * MS, Input::Tick);
+    assert_eq!((marks(&out), snapshots(&out)), (vec![Some((1, 1))], 1));
+    let snapshot = out
+        .iter()
+        .position(|o| matches!(o, Output::Snapshot(_)))
+        .unwrap();
+    let persist = out
+        .iter()
+        .position(|o| matches!(o, Output::Persist { .. }))
+        .unwrap();
+    assert!(snapshot < persist);
+    let out = node.step(750 * MS, Input::Tick);
     assert_eq!(
-        first[0].as_ref().map(|m| (m.batch, m.position)),
-        Some((1, 1))
+        (marks(&out), snapshots(&out)),
+        (vec![None], 0),
+        "synced, not republished, no snapshot of nothing new"
     );
+    // Moved, but not snapshotted yet: the mark stays.
+    node.step(800 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2));
+    assert_eq!(marks(&node.step(1000 * MS, Input::Tick)), vec![None]);
     assert_eq!(
-        marks(&node.step(500 * MS, Input::Tick)),
-        vec![None],
-        "synced, not republished"
-    );
-    node.step(600 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2));
-    let moved = marks(&node.step(750 * MS, Input::Tick));
-    assert_eq!(
-        moved[0].as_ref().map(|m| (m.batch, m.position)),
-        Some((2, 2))
+        marks(&node.step(1250 * MS, Input::Tick)),
+        vec![Some((2, 2))]
     );
     // A failed leader tells nobody it is safe.
-    node.step(800 * MS, Input::Failed("disk full".into()));
-    node.step(900 * MS, batch(2, vec![], 2));
-    assert_eq!(marks(&node.step(1000 * MS, Input::Tick)), vec![None]);
+    node.step(1300 * MS, Input::Failed("disk full".into()));
+    node.step(1400 * MS, batch(2, vec![], 2));
+    assert_eq!(marks(&node.step(1500 * MS, Input::Tick)), vec![None]);
+    assert_eq!(marks(&node.step(1750 * MS, Input::Tick)), vec![None]);
     let out = node.step(
-        1100 * MS,
+        1800 * MS,
         Input::Partial {
             id: 9,
             ask: Ask::Quiet { rows: false },
@@ -368,6 +389,36 @@ fn the_mark_is_published_after_a_sync_and_only_when_it_moved() {
         .as_ref()
         .unwrap_err()
         .contains("disk full"));
+
+    // Without a journal nothing can be lost to damage: what was applied is
+    // the mark, published when it moved.
+    let mut node = Node::new(
+        Leader::new("a"),
+        Timers::new(Duration::from_secs(2), false, None),
+    );
+    node.step(Duration::ZERO, batch(0, vec![(1, begin(&["a"]))], 1));
+    assert_eq!(marks(&node.step(250 * MS, Input::Tick)), vec![Some((1, 1))]);
+    assert!(marks(&node.step(500 * MS, Input::Tick)).is_empty());
+}
+
+#[test]
+fn a_leader_restored_from_a_snapshot_publishes_that_snapshots_mark_whatever_its_journal_held() {
+    let mut before = started("a", &["a"]);
+    before.step(MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2));
+    let state = before.leader().snapshot();
+    // Everything after the snapshot was lost to damage (three entries).
+    let (mut node, out) =
+        Node::recover("a", "a", Some(&state), [], false, Some(3), timers(), MS).unwrap();
+    assert_eq!(resends(&out), 1, "it catches up");
+    assert_eq!(node.leader().stats().journal_damage, 1);
+    assert_eq!(node.leader().stats().journal_dropped, 3);
+    assert_eq!(marks(&node.step(250 * MS, Input::Tick)), vec![Some((2, 2))]);
+    // Damaged before anything was replayed, with no snapshot: it still
+    // asks for what it missed, from the first batch.
+    let (_, out) = Node::recover("a", "a", None, [], false, Some(1), timers(), MS).unwrap();
+    assert!(out
+        .iter()
+        .any(|o| matches!(o, Output::AskResend(r) if r.from == 0)));
 }
 
 #[test]
@@ -437,7 +488,7 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
 
     let entries = journal.iter().map(|(k, b)| (*k, b.as_slice()));
     let (mut node, out) =
-        Node::recover("a", "host-a", None, entries, false, timers(), 10 * MS).unwrap();
+        Node::recover("a", "host-a", None, entries, false, None, timers(), 10 * MS).unwrap();
     assert_eq!(node.leader().position(), before.leader().position());
     // Its transfer again, the batches after its journal, b's transfers.
     assert!(out
@@ -482,7 +533,7 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     assert_eq!(node.leader().stats().recoveries, 1);
     assert!(node.leader().quiet(false).is_some());
     // With nothing in its journal, a leader just starts.
-    let (node, out) = Node::recover("a", "h", None, [], false, timers(), MS).unwrap();
+    let (node, out) = Node::recover("a", "h", None, [], false, None, timers(), MS).unwrap();
     assert!(out.is_empty() && node.recovering_since().is_none());
 }
 
@@ -539,6 +590,7 @@ fn the_rejected_count_survives_a_restart() {
         None,
         journal.iter().map(|(k, b)| (*k, b.as_slice())),
         false,
+        None,
         timers(),
         4 * MS,
     )
@@ -590,7 +642,7 @@ fn a_recovery_waits_for_the_sensor_through_failed_resends_but_not_for_a_peer_tha
     }
     let entries = journal.iter().map(|(k, b)| (*k, b.as_slice()));
     let (mut node, out) =
-        Node::recover("a", "host-a", None, entries, false, timers(), 10 * MS).unwrap();
+        Node::recover("a", "host-a", None, entries, false, None, timers(), 10 * MS).unwrap();
     assert_eq!(resends(&out), 1);
     // The sensor's answer is lost: still recovering, and the next tick
     // asks again (one request at a time).

@@ -15,6 +15,13 @@ impl Leader {
         self.stats.recovery_seconds = seconds;
     }
 
+    /// Counts a damaged journal found at a restart, and the entries
+    /// dropped with it (fetched again from the sensor and the peers).
+    pub fn note_journal_damage(&mut self, dropped: u64) {
+        self.stats.journal_damage += 1;
+        self.stats.journal_dropped += dropped;
+    }
+
     /// Counts a snapshot taken.
     pub fn note_snapshot(&mut self) {
         self.stats.snapshots += 1;

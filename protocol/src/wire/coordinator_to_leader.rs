@@ -113,5 +113,13 @@ pub struct LeaderStats {
     pub recoveries: u64,
     #[serde(default)]
     pub recovery_seconds: f64,
+    /// Restarts that found the journal damaged (a record that does not
+    /// check, with whole ones after it), and the journal entries dropped
+    /// with the damage: the leader came back from what preceded it and
+    /// fetched the rest again from the sensor and its peers.
+    #[serde(default)]
+    pub journal_damage: u64,
+    #[serde(default)]
+    pub journal_dropped: u64,
 }
 super::versioned!(LeaderStats, "leader stats");

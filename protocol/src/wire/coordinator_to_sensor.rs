@@ -73,6 +73,10 @@ pub struct SensorStats {
     pub merged: u64,
     #[serde(default)]
     pub merged_twice: u64,
+    /// Journal records found damaged in one copy of the sensor's journal
+    /// when it restarted, and taken from the other.
+    #[serde(default)]
+    pub journal_repaired: u64,
 }
 
 /// Where every track was last seen and which leader surveils it, at the

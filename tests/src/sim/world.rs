@@ -172,6 +172,9 @@ struct LeaderSlot {
     /// The last durable mark it published (position).
     published: u64,
     snapshot_every: usize,
+    /// Its journal was found damaged at the crash: the restart drops this
+    /// many entries (the damaged one and every one after it).
+    damaged: Option<u64>,
 }
 
 /// A query of the coordinator, in one of its two phases.
@@ -218,6 +221,9 @@ pub struct Tally {
     pub answered: u64,
     pub failed_queries: u64,
     pub crashes: u64,
+    /// Of those, the crashes whose journal was found damaged at the
+    /// restart (cut before a random entry).
+    pub journal_damages: u64,
     /// Sensor kills, each restarted from its journal.
     pub sensor_crashes: u64,
     /// Of those, the kills whose journal was compacted first (to the
@@ -276,6 +282,9 @@ pub struct World {
     lost_once: BTreeSet<(usize, usize, u64)>,
     /// When the held sensor last looked for stalled leaders.
     stall_checked: Ms,
+    /// Draws whether and where a crashed leader's journal is damaged (its
+    /// own stream: the schedule's other draws stay as they were).
+    damage: ChaCha8Rng,
 }
 
 impl World {
@@ -298,6 +307,7 @@ impl World {
                 disk: Disk::default(),
                 published: 0,
                 snapshot_every: 0,
+                damaged: None,
             })
             .collect::<Vec<_>>();
         let count = leaders.len();
@@ -327,12 +337,14 @@ impl World {
             aimed,
             lost_once: BTreeSet::new(),
             stall_checked: 0,
+            damage: ChaCha8Rng::seed_from_u64(0),
         };
         // Drawn from a copy: the schedule's own draws stay as they were.
         let mut side = world.rng.clone();
         if side.gen_bool(0.5) {
             world.producer = Some(ChaCha8Rng::seed_from_u64(side.gen()));
         }
+        world.damage = ChaCha8Rng::seed_from_u64(side.gen::<u64>() ^ 0xda3a_9ed0);
         // In a third of the schedules the sensor is killed once mid-stream.
         if side.gen_bool(1.0 / 3.0) {
             let lines = world.scenario.lines.len() as Ms;
@@ -732,6 +744,7 @@ impl World {
         let timers = self.timers(i);
         let slot = &mut self.leaders[i];
         slot.life += 1;
+        let damaged = slot.damaged.take();
         let disk = &slot.disk;
         let (node, out) = Node::recover(
             &slot.name,
@@ -739,6 +752,7 @@ impl World {
             disk.snapshot.as_deref(),
             disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
             false,
+            damaged,
             timers,
             Duration::from_millis(self.now),
         )
@@ -825,6 +839,7 @@ impl World {
                 slot.disk.snapshot.as_deref(),
                 slot.disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
                 false,
+                None,
                 timers,
                 Duration::from_millis(self.now),
             )
@@ -836,6 +851,20 @@ impl World {
                     probe.leader().position()
                 )));
             }
+        }
+        // In a quarter of the crashes the journal is found damaged at the
+        // restart: the reader returns no entry from the damaged one on, so
+        // the leader comes back from its snapshot and the entries before
+        // it, behind where it was, and must fetch the rest again. (Damage
+        // in the snapshot is an error, not a schedule.)
+        let slot = &mut self.leaders[i];
+        let entries = slot.disk.entries.len();
+        if entries > 0 && self.damage.gen_bool(0.25) {
+            let at = self.damage.gen_range(0..entries);
+            slot.disk.entries.truncate(at);
+            slot.disk.synced = slot.disk.synced.min(at);
+            slot.damaged = Some((entries - at) as u64);
+            self.tally.journal_damages += 1;
         }
         Ok(())
     }
