@@ -35,10 +35,10 @@ mod sensors;
 mod throughput;
 
 use crate::runtime::launch::{simulate_crowd, Processes};
-use crate::runtime::loopback::{Loopback, Ports};
+use crate::runtime::loopback::{self, Ports};
 use crate::runtime::mesh::{self, MeshOptions};
 use crate::runtime::query::ask;
-use crate::runtime::topology::{default_max_component, BeliefKind, Sparsification, Topology};
+use crate::runtime::topology::{default_max_component, BeliefKind, Topology};
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_protocol::wire::keys::Keys;
 use std::fmt::Write as _;
@@ -278,55 +278,48 @@ impl Deployment {
         live: bool,
         sensors: usize,
     ) -> Result<Self> {
-        let plan = Loopback {
-            prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
+        let mut topology = loopback::topology(
+            &std::fs::canonicalize(trace)?,
+            placed_by,
             leaders,
-            belief: options.belief,
-            shrink_interest: options.shrink_interest,
-            regional: options.regional,
-            window: options.window.map(|w| w * leaders as u64),
-            distributed_rule: true,
-            budget: options.budget,
-            sparsify: Sparsification::Threshold,
-            rate,
-            events: None,
-            // Streaming flat out, leaders can be seconds behind the sensor.
-            query_timeout_ms: 60_000,
-            ports: Ports::Free,
-            live,
-            // Beside the topology; a journal of an earlier run would be
-            // resumed, so it goes first.
-            state_dir: options.journal.then(|| PathBuf::from("state")),
             sensors,
-        };
+            Ports::Free,
+        )?;
+        topology.prefix = format!("idmesh/bench-{leaders}-{}", std::process::id());
+        topology.belief = options.belief;
+        topology.shrink_interest = options.shrink_interest;
+        topology.regional = options.regional;
+        topology.distributed_rule = true;
+        topology.budget = options.budget;
+        // Streaming flat out, leaders can be seconds behind the sensor.
+        topology.query_timeout_ms = 60_000;
+        // Beside the topology; a journal of an earlier run would be
+        // resumed, so it goes first.
+        topology.state_dir = options.journal.then(|| PathBuf::from("state"));
+        for sensor in &mut topology.sensors {
+            sensor.rate = rate;
+            sensor.live = live;
+            sensor.window = options.window.map(|w| w * leaders as u64);
+        }
         if options.journal {
             let _ = std::fs::remove_dir_all(options.dir.join("state"));
         }
         let config = options
             .dir
             .join(format!("topology-{leaders}-{sensors}.toml"));
-        Self::launch_placed(&plan, trace, placed_by, &config).await
+        Self::launch(&topology, &config).await
     }
 
-    /// Writes `plan`'s topology streaming `trace` to `config`, with the
-    /// leaders placed over the field of `placed_by` (see
-    /// [`Loopback::topology_placed`]), and starts its processes.
-    async fn launch_placed(
-        plan: &Loopback,
-        trace: &Path,
-        placed_by: &Path,
-        config: &Path,
-    ) -> Result<Self> {
-        let leaders = plan.leaders;
-        let (toml, _) = plan.topology_placed(&std::fs::canonicalize(trace)?, placed_by)?;
-        std::fs::write(config, toml)?;
-        let config = config.to_path_buf();
-        let topology = Topology::load(&config)?;
+    /// Writes `topology` to `config` and starts its processes.
+    async fn launch(topology: &Topology, config: &Path) -> Result<Self> {
+        topology.save(config)?;
+        let topology = Topology::load(config)?;
+        let leaders = topology.leader.len();
         // The sensor starts last, once the coordinator and every leader's
         // counters answer here, so that the bench sees the stream from its
         // first events even when it is over in a fraction of a second (it
         // watches a leader's counters, [`throughput`]).
-        let others = Processes::start_some(&config, |m| m.role != "sensor")?;
+        let others = Processes::start_some(config, |m| m.role != "sensor")?;
         let connect = topology.members().into_iter().map(|m| m.listen).collect();
         let session = mesh::open(&MeshOptions {
             client: false,
@@ -353,7 +346,7 @@ impl Deployment {
                 tokio::time::sleep(Duration::from_millis(20)).await;
             }
         }
-        let sensor = Processes::start_some(&config, |m| m.role == "sensor")?;
+        let sensor = Processes::start_some(config, |m| m.role == "sensor")?;
         Ok(Deployment {
             leaders,
             topology,

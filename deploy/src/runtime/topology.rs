@@ -84,7 +84,7 @@ use std::path::{Path, PathBuf};
 /// written by [`Topology::to_toml`] (every field it holds, those at their
 /// defaults left out), which reads back into the same value: code that
 /// makes a topology (the demo, the bench, the tests' harnesses) builds
-/// one of these ([`Topology::new`]) and writes it.
+/// one of these ([`Topology::new`], [`Topology::loopback`]) and writes it.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Topology {
