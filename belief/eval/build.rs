@@ -8,8 +8,7 @@
 //! Comment lines and indentation are left out of the digest: rewording a doc
 //! comment or reformatting does not call for a new evaluation.
 
-use std::hash::Hasher;
-use std::path::{Path, PathBuf};
+include!("digest.rs");
 
 /// Folders and files, relative to this crate, whose code the evaluation
 /// runs: the engine, the simulators, the trace format, the grid and the
@@ -34,59 +33,9 @@ const LEFT_OUT: &[&str] = &["../../belief/src/identity"];
 const CRATE: &str = "belief/eval";
 
 fn main() {
-    let mut files = Vec::new();
-    for source in SOURCES {
-        println!("cargo:rerun-if-changed={source}");
-        collect(Path::new(source), &mut files);
-    }
-    files.sort();
-    let mut digest = fnv::FnvHasher::default();
-    for file in &files {
-        let text = std::fs::read_to_string(file)
-            .unwrap_or_else(|e| panic!("{}: cannot read: {e}", file.display()));
-        digest.write(workspace_name(file).as_bytes());
-        for line in text.lines().map(str::trim) {
-            if !line.is_empty() && !line.starts_with("//") {
-                digest.write(line.as_bytes());
-                digest.write(b"\n");
-            }
-        }
-    }
+    println!("cargo:rerun-if-changed=digest.rs");
     println!(
         "cargo:rustc-env=IDMESH_RESULTS_STAMP={:016x}",
-        digest.finish()
+        sources_digest(SOURCES, LEFT_OUT, CRATE)
     );
-}
-
-/// `file` named from the workspace root: `belief/src/lib.rs`,
-/// `belief/eval/src/filters.rs`.
-fn workspace_name(file: &Path) -> String {
-    let name = file.to_string_lossy();
-    match name.strip_prefix("../../") {
-        Some(outside) => outside.to_string(),
-        None => format!("{CRATE}/{name}"),
-    }
-}
-
-/// Every `.rs` file at `dir` (a file itself, or a folder walked).
-fn collect(dir: &Path, files: &mut Vec<PathBuf>) {
-    if LEFT_OUT.iter().any(|out| dir == Path::new(out)) {
-        return;
-    }
-    if dir.is_file() {
-        files.push(dir.to_path_buf());
-        return;
-    }
-    let entries =
-        std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: cannot list: {e}", dir.display()));
-    for entry in entries {
-        let path = entry
-            .unwrap_or_else(|e| panic!("{}: cannot list: {e}", dir.display()))
-            .path();
-        if path.is_dir() {
-            collect(&path, files);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            files.push(path);
-        }
-    }
 }

@@ -113,7 +113,11 @@ pub struct BenchArgs {
     /// Where the trace and topologies are written.
     #[arg(long, default_value = "target/idmesh-bench")]
     pub dir: PathBuf,
-    /// Also write the Markdown report here.
+    /// Also write a results page here: the report as printed, after a
+    /// title, the command that regenerates it, the stamp of the code, the
+    /// machine, the date, the wall time and the settings. With
+    /// --accuracy: the accuracy report alone (docs/live-accuracy.md, which
+    /// `idmesh eval` reads back).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Only the ingestion figures: one producer on a live sensor's ingest

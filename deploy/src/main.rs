@@ -10,8 +10,11 @@ mod acoustic;
 mod bench;
 mod cli;
 mod logging;
-mod runtime;
 mod simulate;
+
+// The library's runtime, reached as `crate::runtime` from the binary's
+// own modules too.
+use idmesh_deploy::runtime;
 
 use clap::Parser;
 use cli::{Cli, Command};

@@ -4,6 +4,11 @@
 //! query`.
 
 use crate::idmesh;
+use idmesh_deploy::runtime::ports::pick_free_ports;
+pub use idmesh_deploy::runtime::security::SecuritySection;
+pub use idmesh_deploy::runtime::topology::{
+    BeliefKind, FaultSection, LeaderFaultSection, Sparsification, SplitSetting, Topology,
+};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
@@ -26,10 +31,10 @@ pub struct Settings {
     /// How long a leader process may be gone before its role is adopted
     /// (`takeover_after_ms`; None = the default).
     pub takeover_after_ms: Option<u64>,
-    /// The sensor's `[sensor.faults]` section, e.g. `duplicate = true`.
-    pub faults: Option<String>,
-    /// The leaders' `[leader_faults]` section, e.g. `drop_transfer_every = 3`.
-    pub leader_faults: Option<String>,
+    /// The sensor's `[sensor.faults]` section (every sensor's).
+    pub faults: FaultSection,
+    /// The leaders' `[leader_faults]` section.
+    pub leader_faults: LeaderFaultSection,
     /// A `[security]` section: mutual TLS, and access control if asked.
     pub security: Option<Secured>,
     /// The sensor's stream stays open for producers (`live = true`).
@@ -45,15 +50,24 @@ pub struct Settings {
     /// How long the coordinator may compute one identity answer
     /// (`marginals_timeout_ms`; None = the default).
     pub marginals_timeout_ms: Option<u64>,
-    /// Topology lines of the belief the leaders hold, e.g.
-    /// `belief = "factored"\nmax_component = 3`. None: `belief =
-    /// "radon"`, which the runtime's tests compare with `idmesh replay
-    /// --method overcomplete` (the topology's own default is factored).
-    pub belief: Option<String>,
+    /// The factored belief with these settings (`belief = "factored"`).
+    /// None: `belief = "radon"`, which the runtime's tests compare with
+    /// `idmesh replay --method overcomplete` (the topology's own default
+    /// is factored).
+    pub factored: Option<Factored>,
     /// How many sensors (`[[sensor]]`, named `sensor-0`, `sensor-1`, …,
     /// each with the settings above); 0 or 1: one `[sensor]`. Leaders are
     /// served by the sensors in turn.
     pub sensors: usize,
+}
+
+/// The factored belief's settings in a topology.
+#[derive(Debug, Clone)]
+pub struct Factored {
+    pub max_component: u32,
+    pub split: SplitSetting,
+    pub shrink_interest: bool,
+    pub regional: bool,
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -79,57 +93,6 @@ pub struct Deployment {
     config: PathBuf,
     /// `idmesh up`, or every process by its name.
     children: Vec<(String, Child)>,
-}
-
-/// A loopback port free now, for TCP and for UDP, never handed out before
-/// by this process, and outside the kernel's ephemeral range.
-///
-/// A topology names its ports before its processes bind them, so a port
-/// must stay free in between. Every outgoing connection, and every QUIC
-/// client's socket, takes an ephemeral port from the kernel: a port the
-/// kernel once handed us (`bind(0)`) can be handed to such a socket before
-/// our process binds it. That happened in CI: a secured leader's QUIC
-/// listener found its UDP port taken and the deployment never answered.
-/// Ports below the ephemeral range are never given out that way. Two
-/// processes of one topology on the same port make it invalid, hence the
-/// list of ports given; the secured topology listens on QUIC (UDP) at the
-/// port its `tcp/` endpoint names, hence both protocols are probed.
-fn free_port() -> u16 {
-    static GIVEN: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
-    let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
-    let (low, high) = non_ephemeral_ports();
-    // Start where this process's id points, so that test binaries run one
-    // after the other do not walk the same ports (sockets of the last one
-    // may linger).
-    let span = u32::from(high - low);
-    let start = std::process::id() * 7919 % span;
-    for step in 0..span {
-        let port = low + ((start + step) % span) as u16;
-        let bound = std::net::TcpListener::bind(("127.0.0.1", port)).is_ok()
-            && std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok();
-        if bound && !given.contains(&port) {
-            given.push(port);
-            return port;
-        }
-    }
-    panic!("no loopback port in {low}..{high} is free for TCP and UDP")
-}
-
-/// The ports from 10,000 up to the kernel's ephemeral range
-/// (`ip_local_port_range`, 32768 by default): nothing is given them
-/// unasked. Above it if the range starts too low to leave room.
-fn non_ephemeral_ports() -> (u16, u16) {
-    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").ok();
-    let bounds: Vec<u16> = range
-        .iter()
-        .flat_map(|r| r.split_whitespace())
-        .filter_map(|n| n.parse().ok())
-        .collect();
-    match bounds[..] {
-        [first, _] if first >= 12_000 => (10_000, first),
-        [_, last] if last <= 63_000 => (last + 1, u16::MAX),
-        _ => (10_000, 32_768),
-    }
 }
 
 /// The bounding box of a trace's positions.
@@ -198,6 +161,63 @@ pub fn regions_argument(trace: &Path, leaders: usize) -> String {
         .map(|(x, y)| format!("{x},{y}"))
         .collect::<Vec<_>>()
         .join(";")
+}
+
+/// The topology of test deployment `name` streaming `trace` with
+/// `settings`: the loopback layout ([`Topology::loopback`]) on free ports,
+/// the leaders on a grid over the trace's field ([`leader_places`]).
+pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
+    let places = leader_places(trace, settings.leaders);
+    let sensors = settings.sensors.max(1);
+    let ports = pick_free_ports(1 + places.len() + sensors).expect("free loopback ports");
+    let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
+    let mut topology = Topology::loopback(sensor_trace, &places, sensors, &ports);
+    topology.prefix = format!("idmesh/test-{name}-{}", std::process::id());
+    topology.distributed_rule = settings.distributed_rule;
+    topology.budget = settings.budget;
+    topology.sparsify = if settings.overcomplete {
+        Sparsification::Overcomplete
+    } else {
+        Sparsification::Threshold
+    };
+    topology.query_timeout_ms = 10_000;
+    match &settings.factored {
+        Some(factored) => {
+            topology.belief = BeliefKind::Factored;
+            topology.max_component = factored.max_component;
+            topology.split = factored.split;
+            topology.shrink_interest = factored.shrink_interest;
+            topology.regional = factored.regional;
+        }
+        None => topology.belief = BeliefKind::Radon,
+    }
+    if settings.journal {
+        topology.state_dir = Some(PathBuf::from("state"));
+    }
+    if let Some(every) = settings.snapshot_every {
+        topology.snapshot_every = every;
+    }
+    if let Some(ms) = settings.takeover_after_ms {
+        topology.takeover_after_ms = ms;
+    }
+    if let Some(ms) = settings.marginals_timeout_ms {
+        topology.marginals_timeout_ms = ms;
+    }
+    for sensor in &mut topology.sensors {
+        sensor.window = settings.window;
+        sensor.compact_journal_after = settings.compact_journal_after;
+        sensor.live = settings.live;
+        sensor.rate = settings.rate;
+        sensor.faults = settings.faults.clone();
+    }
+    topology.leader_faults = settings.leader_faults.clone();
+    topology.security = settings.security.as_ref().map(|secured| SecuritySection {
+        access_control: secured.access_control,
+        clients: vec![secured.client.clone()],
+        producers: secured.producers.clone(),
+        ..SecuritySection::new(&secured.certs)
+    });
+    topology
 }
 
 impl Deployment {
@@ -333,94 +353,18 @@ impl Deployment {
             std::env::temp_dir().join(format!("idmesh-deployment-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let places = leader_places(trace, settings.leaders);
-        let coordinator = format!("tcp/127.0.0.1:{}", free_port());
-        let sensors = settings.sensors.max(1);
-        let mut endpoints = vec![("coordinator".to_string(), coordinator.clone())];
-        let prefix = format!("idmesh/test-{name}-{}", std::process::id());
-        let mut toml = format!(
-            "prefix = \"{prefix}\"\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = 10000\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n",
-            settings.distributed_rule,
-            settings.budget,
-            if settings.overcomplete {
-                "overcomplete"
-            } else {
-                "threshold"
-            },
-        );
-        for s in 0..sensors {
-            let sensor = format!("tcp/127.0.0.1:{}", free_port());
-            let table = if sensors > 1 {
-                "[[sensor]]"
-            } else {
-                "[sensor]"
-            };
-            toml.push_str(&format!(
-                "\n{table}\nname = \"sensor-{s}\"\nlisten = \"{sensor}\"\ntrace = {:?}\n",
-                settings
-                    .sensor_trace
-                    .as_deref()
-                    .unwrap_or(trace)
-                    .display()
-                    .to_string()
-            ));
-            endpoints.push((format!("sensor-{s}"), sensor));
-            if let Some(window) = settings.window {
-                toml.push_str(&format!("window = {window}\n"));
-            }
-            if let Some(bytes) = settings.compact_journal_after {
-                toml.push_str(&format!("compact_journal_after = {bytes}\n"));
-            }
-            if settings.live {
-                toml.push_str("live = true\n");
-            }
-            if let Some(rate) = settings.rate {
-                toml.push_str(&format!("rate = {rate}\n"));
-            }
-        }
-        for (i, (x, y)) in places.into_iter().enumerate() {
-            let listen = format!("tcp/127.0.0.1:{}", free_port());
-            toml.push_str(&format!(
-                "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"{listen}\"\nat = [{x}, {y}]\n"
-            ));
-            endpoints.push((format!("leader-{i}"), listen));
-        }
-        if settings.journal {
-            toml.insert_str(0, "state_dir = \"state\"\n");
-        }
-        if let Some(every) = settings.snapshot_every {
-            toml.insert_str(0, &format!("snapshot_every = {every}\n"));
-        }
-        if let Some(ms) = settings.takeover_after_ms {
-            toml.insert_str(0, &format!("takeover_after_ms = {ms}\n"));
-        }
-        if let Some(ms) = settings.marginals_timeout_ms {
-            toml.insert_str(0, &format!("marginals_timeout_ms = {ms}\n"));
-        }
-        let belief = settings.belief.as_deref().unwrap_or("belief = \"radon\"");
-        toml.insert_str(0, &format!("{belief}\n"));
-        if let Some(faults) = &settings.faults {
-            toml.push_str(&format!("\n[sensor.faults]\n{faults}\n"));
-        }
-        if let Some(faults) = &settings.leader_faults {
-            toml.push_str(&format!("\n[leader_faults]\n{faults}\n"));
-        }
-        if let Some(secured) = &settings.security {
-            toml.push_str(&format!(
-                "\n[security]\ncerts = {:?}\naccess_control = {}\nclients = [{:?}]\nproducers = {:?}\n",
-                secured.certs.display().to_string(),
-                secured.access_control,
-                secured.client,
-                secured.producers
-            ));
-        }
+        let topology = topology(name, trace, settings);
         let config = dir.join("topology.toml");
-        std::fs::write(&config, toml).unwrap();
+        topology.save(&config).unwrap();
         Deployment {
             dir,
-            coordinator,
-            prefix,
-            endpoints,
+            coordinator: topology.coordinator.listen.clone(),
+            prefix: topology.prefix.clone(),
+            endpoints: topology
+                .members()
+                .into_iter()
+                .map(|m| (m.name, m.listen))
+                .collect(),
             security: settings.security.clone(),
             config,
             children: Vec::new(),

@@ -20,6 +20,9 @@
 
 use crate::deployment::{answer_until, query_output};
 use crate::idmesh;
+use idmesh_deploy::runtime::topology::{
+    BeliefKind, LeaderProcess, Process, SensorProcess, Topology,
+};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -272,56 +275,54 @@ impl<'a> LanDeployment<'a> {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let prefix = format!("idmesh/lan-{name}-{}", std::process::id());
-        let (x0, y0, x1, y1) = crate::deployment::corners(trace);
-        let leaders: Vec<&Member> = members.iter().filter(|m| m.role == "leader").collect();
-        let columns = (leaders.len() as f64).sqrt().ceil() as usize;
-        let rows = leaders.len().div_ceil(columns);
         // Every process listens on its host's address; ports only need to
         // differ on one host, but differing everywhere reads better.
         let listen = |i: usize, host: &str| format!("tcp/{}:{}", lan.host(host).addr, 7460 + i);
-        // The Radon belief: the LAN tests compare with `idmesh replay
-        // --method overcomplete` (the topology's default is factored).
-        let mut toml = format!(
-            "prefix = {prefix:?}\nbelief = \"radon\"\nquery_timeout_ms = {}\nstate_dir = \"state\"\ntakeover_after_ms = {}\nsnapshot_every = 200\n",
-            settings.query_timeout_ms, settings.takeover_after_ms
-        );
-        let mut coordinator = (String::new(), String::new());
+        let mut coordinator = None;
+        let mut sensors = Vec::new();
+        let mut leaders = Vec::new();
         for (i, m) in members.iter().enumerate() {
+            let (name, host) = (m.name.clone(), m.host.clone());
             match m.role {
                 "coordinator" => {
-                    coordinator = (m.host.clone(), listen(i, &m.host));
-                    toml.push_str(&format!(
-                        "\n[coordinator]\nname = {:?}\nhost = {:?}\nlisten = {:?}\n",
-                        m.name,
-                        m.host,
-                        listen(i, &m.host)
-                    ));
+                    coordinator = Some(Process {
+                        host,
+                        ..Process::new(name, listen(i, &m.host))
+                    })
                 }
-                "sensor" => toml.push_str(&format!(
-                    "\n[sensor]\nname = {:?}\nhost = {:?}\nlisten = {:?}\ntrace = {:?}\nrate = {}\n",
-                    m.name,
-                    m.host,
-                    listen(i, &m.host),
-                    trace.display().to_string(),
-                    settings.rate
-                )),
-                _ => {}
+                "sensor" => sensors.push(SensorProcess {
+                    host,
+                    rate: Some(settings.rate),
+                    ..SensorProcess::new(name, listen(i, &m.host), trace)
+                }),
+                "leader" => leaders.push(LeaderProcess {
+                    host,
+                    ..LeaderProcess::new(name, listen(i, &m.host))
+                }),
+                other => panic!("{}: no role {other:?}", m.name),
             }
         }
-        for (j, m) in leaders.iter().enumerate() {
-            let i = members.iter().position(|n| n.name == m.name).unwrap();
-            let (c, r) = (j % columns, j / columns);
-            let x = x0 + (x1 - x0) * (c as f64 + 0.5) / columns as f64;
-            let y = y0 + (y1 - y0) * (r as f64 + 0.5) / rows as f64;
-            toml.push_str(&format!(
-                "\n[[leader]]\nname = {:?}\nhost = {:?}\nlisten = {:?}\nat = [{x}, {y}]\n",
-                m.name,
-                m.host,
-                listen(i, &m.host)
-            ));
+        // Leaders placed on a grid over the trace's field.
+        let places = crate::deployment::leader_places(trace, leaders.len());
+        for (leader, (x, y)) in leaders.iter_mut().zip(places) {
+            leader.at = Some([x, y]);
         }
+        let coordinator = coordinator.expect("a coordinator among the members");
+        let mut topology = Topology::new(coordinator, sensors, leaders);
+        topology.prefix = prefix.clone();
+        // The Radon belief: the LAN tests compare with `idmesh replay
+        // --method overcomplete` (the topology's default is factored).
+        topology.belief = BeliefKind::Radon;
+        topology.query_timeout_ms = settings.query_timeout_ms;
+        topology.state_dir = Some(PathBuf::from("state"));
+        topology.takeover_after_ms = settings.takeover_after_ms;
+        topology.snapshot_every = 200;
         let config = dir.join("lan.toml");
-        std::fs::write(&config, toml).unwrap();
+        topology.save(&config).unwrap();
+        let coordinator = (
+            topology.coordinator.host.clone(),
+            topology.coordinator.listen.clone(),
+        );
         LanDeployment {
             lan,
             dir,

@@ -32,11 +32,10 @@ async fn bounded<T>(what: &str, future: impl IntoFuture<Output = T>) -> T {
 /// A peer of the deployment's mesh: connected to every process's endpoint
 /// (peers do not relay for one another), as any process on the LAN could.
 async fn intruder(deployment: &Deployment) -> Session {
-    let topology = std::fs::read_to_string(deployment.dir.join("topology.toml")).unwrap();
-    let endpoints: Vec<String> = topology
-        .lines()
-        .filter_map(|l| l.strip_prefix("listen = "))
-        .map(|e| e.trim_matches('"').to_string())
+    let endpoints: Vec<String> = deployment
+        .endpoints
+        .iter()
+        .map(|(_, endpoint)| endpoint.clone())
         .collect();
     let mut config = zenoh::Config::default();
     config

@@ -12,7 +12,8 @@
 //! answer, while the window holds the stream for it.
 
 use idmesh_tests::deployment::{
-    crowd, regions_argument, replay_lines, truth_lines, Deployment, Settings, Truth,
+    crowd, regions_argument, replay_lines, truth_lines, Deployment, Factored, LeaderFaultSection,
+    Settings, SplitSetting, Truth,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -21,11 +22,13 @@ use std::time::Duration;
 /// The options of both sides: small components, so that splits happen.
 const MAX_COMPONENT: usize = 3;
 
-fn belief(shrink_interest: bool) -> String {
-    format!(
-        "belief = \"factored\"\nmax_component = {MAX_COMPONENT}\nsplit = \"original\"\n\
-         shrink_interest = {shrink_interest}"
-    )
+fn belief(shrink_interest: bool) -> Factored {
+    Factored {
+        max_component: MAX_COMPONENT as u32,
+        split: SplitSetting::Original,
+        shrink_interest,
+        regional: false,
+    }
 }
 
 fn central(trace: &Path) -> Vec<Value> {
@@ -111,7 +114,7 @@ fn settings(leaders: usize, shrink_interest: bool) -> Settings {
     Settings {
         leaders,
         rate: Some(300.0),
-        belief: Some(belief(shrink_interest)),
+        factored: Some(belief(shrink_interest)),
         window: shrink_interest.then_some(WINDOW),
         ..Settings::default()
     }
@@ -215,7 +218,10 @@ fn killed_and_restarted(regional: bool) {
         journal: true,
         snapshot_every: Some(40),
         takeover_after_ms: Some(0),
-        belief: Some(format!("{}\nregional = {regional}", belief(true))),
+        factored: Some(Factored {
+            regional,
+            ..belief(true)
+        }),
         window: Some(WINDOW),
         ..Settings::default()
     };
@@ -281,7 +287,10 @@ fn regional_leaders_equal_the_centralized_regional_rule_through_2_4_8_leaders() 
         }
         let shrink = l % 2 == 0;
         let settings = Settings {
-            belief: Some(format!("{}\nregional = true", belief(shrink))),
+            factored: Some(Factored {
+                regional: true,
+                ..belief(shrink)
+            }),
             ..settings(leaders, shrink)
         };
         let name = format!("regional{leaders}");
@@ -314,12 +323,12 @@ fn answers_pushed_at_a_cut_or_lost_and_asked_for_change_no_answer() {
     let trace = crowd(&dir, 12, 4, 60.0, 7);
     let central = central(&trace);
     let truths = truth_lines(&trace);
-    for (name, faults) in [
-        ("pushed", None),
-        ("pushes-lost", Some("drop_push_every = 2")),
-    ] {
+    for (name, drop_push_every) in [("pushed", None), ("pushes-lost", Some(2))] {
         let settings = Settings {
-            leader_faults: faults.map(str::to_string),
+            leader_faults: LeaderFaultSection {
+                drop_push_every,
+                ..LeaderFaultSection::default()
+            },
             ..settings(4, false)
         };
         let deployment = Deployment::start(name, &trace, &settings);
@@ -330,7 +339,7 @@ fn answers_pushed_at_a_cut_or_lost_and_asked_for_change_no_answer() {
             deployment.coordinator_counter("cuts_asked"),
         );
         eprintln!("{name}: {pushed} cuts answered from pushes, {asked} asked for");
-        match faults {
+        match drop_push_every {
             None => assert!(
                 pushed > 0 && asked * 10 <= pushed,
                 "{name}: {pushed} pushed, {asked} asked\n{}",

@@ -7,7 +7,8 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
-    crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, Settings,
+    crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, FaultSection,
+    LeaderFaultSection, Settings,
 };
 use std::time::{Duration, Instant};
 
@@ -119,7 +120,10 @@ fn lost_and_doubled_batches_change_no_answer() {
         &Settings {
             leaders: 4,
             rate: Some(2000.0),
-            faults: Some("duplicate = true\ndrop_every = 5".into()),
+            faults: FaultSection {
+                duplicate: true,
+                drop_every: Some(5),
+            },
             ..Settings::default()
         },
     );
@@ -154,7 +158,10 @@ fn transfers_lost_on_a_live_link_are_fetched_again() {
         &Settings {
             leaders: 4,
             rate: Some(2000.0),
-            leader_faults: Some("drop_transfer_every = 3".into()),
+            leader_faults: LeaderFaultSection {
+                drop_transfer_every: Some(3),
+                ..LeaderFaultSection::default()
+            },
             ..Settings::default()
         },
     );

@@ -11,7 +11,7 @@
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
     assert_truth_points, crowd, header_only, leader_places, replay_lines, replay_summary,
-    trace_events, truth_lines, watermark_events, Deployment, Settings,
+    trace_events, truth_lines, watermark_events, Deployment, Factored, Settings, SplitSetting,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -19,7 +19,12 @@ use std::process::Command;
 use std::time::Duration;
 
 /// The factored options of both sides (small components: splits happen).
-const FACTORED: &str = "belief = \"factored\"\nmax_component = 3\nsplit = \"original\"";
+const FACTORED: Factored = Factored {
+    max_component: 3,
+    split: SplitSetting::Original,
+    shrink_interest: false,
+    regional: false,
+};
 const FACTORED_REPLAY: &[&str] = &[
     "--method",
     "factored",
@@ -48,7 +53,7 @@ fn fed_by_region(name: &str, sensors: usize, factored: bool, seed: u64) {
         sensors,
         live: true,
         sensor_trace: Some(header_only(&trace, &dir)),
-        belief: factored.then(|| FACTORED.to_string()),
+        factored: factored.then_some(FACTORED),
         ..Settings::default()
     };
     let deployment = Deployment::start_each(name, &trace, &settings);

@@ -10,7 +10,10 @@
 //!   code that decides its numbers (`build.rs`).
 //! - [`filters`] — the one factory that turns a method into a running
 //!   property filter, for both.
+//! - [`machine`] — the machine and the date a generated page names
+//!   (results.md's, and `idmesh bench --out`'s).
 
 pub mod eval;
 pub mod filters;
+pub mod machine;
 pub mod replay;

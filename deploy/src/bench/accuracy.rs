@@ -31,7 +31,7 @@
 
 use super::ingest::{header_only, send};
 use super::Deployment;
-use crate::runtime::loopback::{Loopback, Ports};
+use crate::runtime::loopback::{self, Ports};
 use crate::runtime::query::ask;
 use crate::runtime::topology::{BeliefKind, Sparsification, Topology};
 use anyhow::{bail, Context, Result};
@@ -231,12 +231,12 @@ async fn live_answers(
     folder: &Path,
     trace: &Path,
 ) -> Result<(Vec<Vec<f64>>, Topology)> {
-    let plan = plan(kind, LEADERS, crowd.n);
     let header = header_only(trace, folder)?;
-    let config = folder.join(format!("topology-{}.toml", kind.tag()));
     // The sensor streams what the producer sends (its trace is the header
     // alone); the leaders are placed over the crowd's field.
-    let deployment = Deployment::launch_placed(&plan, &header, trace, &config).await?;
+    let plan = plan(kind, LEADERS, crowd.n, &header, trace)?;
+    let config = folder.join(format!("topology-{}.toml", kind.tag()));
+    let deployment = Deployment::launch(&plan, &config).await?;
     let answers = ask_every_truth_line(&deployment, written).await;
     let topology = deployment.topology.clone();
     deployment.close().await;
@@ -244,38 +244,31 @@ async fn live_answers(
 }
 
 /// A loopback deployment of `leaders` leaders holding `kind` for a crowd
-/// of `n` targets.
-fn plan(kind: Kind, leaders: usize, n: usize) -> Loopback {
-    Loopback {
-        prefix: format!("idmesh/accuracy-{}-{}", kind.tag(), std::process::id()),
-        leaders,
-        belief: kind.belief(),
-        shrink_interest: false,
-        regional: kind == Kind::Regional,
-        window: None,
-        // The Radon belief's settings (identity streams aside, only
-        // `belief = "radon"` reads them): the distributed rule, the
-        // overcomplete pruning at the Table III budget per leader.
-        distributed_rule: true,
-        budget: table3_budget(n) as u32,
-        sparsify: Sparsification::Overcomplete,
-        rate: None,
-        events: None,
-        query_timeout_ms: ANSWER_TIMEOUT.as_millis() as u64,
-        ports: Ports::Free,
-        live: true,
-        state_dir: None,
-        sensors: 1,
-    }
+/// of `n` targets: its sensor streams `trace`, its leaders are placed over
+/// the crowd of `placed_by`.
+fn plan(kind: Kind, leaders: usize, n: usize, trace: &Path, placed_by: &Path) -> Result<Topology> {
+    let mut topology = loopback::topology(trace, placed_by, leaders, 1, Ports::Free)?;
+    topology.prefix = format!("idmesh/accuracy-{}-{}", kind.tag(), std::process::id());
+    topology.belief = kind.belief();
+    topology.regional = kind == Kind::Regional;
+    // The Radon belief's settings (identity streams aside, only
+    // `belief = "radon"` reads them): the distributed rule, the
+    // overcomplete pruning at the Table III budget per leader.
+    topology.distributed_rule = true;
+    topology.budget = table3_budget(n) as u32;
+    topology.sparsify = Sparsification::Overcomplete;
+    topology.query_timeout_ms = ANSWER_TIMEOUT.as_millis() as u64;
+    topology.sensors[0].live = true;
+    Ok(topology)
 }
 
 /// The topology of a regional deployment of `leaders` leaders placed over
 /// `trace`'s crowd as the loopback places them (written to `folder` and
 /// read back, so the places are what a deployment reads).
 fn placed_topology(leaders: usize, n: usize, folder: &Path, trace: &Path) -> Result<Topology> {
-    let (toml, _) = plan(Kind::Regional, leaders, n).topology(trace)?;
+    let topology = plan(Kind::Regional, leaders, n, trace, trace)?;
     let path = folder.join(format!("topology-regional-{leaders}.toml"));
-    std::fs::write(&path, toml).with_context(|| format!("cannot write {}", path.display()))?;
+    topology.save(&path)?;
     Topology::load(&path)
 }
 

@@ -35,10 +35,10 @@ mod sensors;
 mod throughput;
 
 use crate::runtime::launch::{simulate_crowd, Processes};
-use crate::runtime::loopback::{Loopback, Ports};
+use crate::runtime::loopback::{self, Ports};
 use crate::runtime::mesh::{self, MeshOptions};
 use crate::runtime::query::ask;
-use crate::runtime::topology::{default_max_component, BeliefKind, Sparsification, Topology};
+use crate::runtime::topology::{default_max_component, BeliefKind, Topology};
 use anyhow::{anyhow, bail, Context, Result};
 use idmesh_protocol::wire::keys::Keys;
 use std::fmt::Write as _;
@@ -73,7 +73,8 @@ pub struct BenchOptions {
     /// Events per second of the stream queries are timed during.
     pub stream_rate: f64,
     pub dir: PathBuf,
-    /// Also write the report here.
+    /// Also write a results page here ([`page`]; with `accuracy`, its
+    /// report as printed).
     pub out: Option<PathBuf>,
     /// Only the ingestion figures.
     pub ingest: bool,
@@ -85,6 +86,7 @@ pub struct BenchOptions {
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
+    let started = Instant::now();
     std::fs::create_dir_all(&options.dir)
         .with_context(|| format!("cannot create {}", options.dir.display()))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -92,8 +94,14 @@ pub fn run(options: &BenchOptions) -> Result<()> {
         .enable_all()
         .build()?;
     if let Some(crowds) = &options.accuracy {
+        // Its own page (docs/live-accuracy.md, which the evaluation reads
+        // back), written as it is printed.
         let report = accuracy::run(&runtime, crowds, &options.dir)?;
-        return finish(&report, options);
+        print!("{report}");
+        return match &options.out {
+            Some(out) => write(out, &report),
+            None => Ok(()),
+        };
     }
     let trace = options.dir.join(format!(
         "crowd-{}-{}-{}.jsonl",
@@ -110,32 +118,149 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             &trace,
         )?;
     }
-    let mut report = String::new();
-    if options.ingest {
-        let header = ingest::header_only(&trace, &options.dir)?;
-        let deployment = runtime.block_on(Deployment::start(options, &header, 1, None, true))?;
-        eprintln!("bench: one producer feeding a live sensor");
-        let figures = runtime.block_on(ingest::measure(&deployment, &trace, options.queries));
-        runtime.block_on(deployment.close());
-        ingest::report(&figures?, options, &mut report)?;
-        let mut several = Vec::new();
-        for count in 1..=3 {
-            let deployment = runtime.block_on(Deployment::start_sensors(
-                options, &header, &trace, 3, None, true, count,
-            ))?;
-            eprintln!("bench: {count} live sensor(s), each fed by its own producer");
-            let figures = runtime.block_on(sensors::measure(
-                &deployment,
-                &trace,
-                count,
-                options.queries.min(200),
-            ));
-            runtime.block_on(deployment.close());
-            several.push(figures?);
-        }
-        sensors::report(&several, &mut report)?;
-        return finish(&report, options);
+    let report = if options.ingest {
+        ingestion(&runtime, options, &trace)?
+    } else {
+        report(options, &measure(&runtime, options, &trace)?)?
+    };
+    print!("{report}");
+    if let Some(out) = &options.out {
+        let made = Made {
+            machine: idmesh_eval::machine::description(),
+            date: idmesh_eval::machine::today(),
+            seconds: started.elapsed().as_secs_f64(),
+        };
+        write(out, &page(options, &report, &made)?)?;
     }
+    Ok(())
+}
+
+/// `--ingest`: one producer on a live sensor, then one to three sensors
+/// each fed by its own; the report.
+fn ingestion(
+    runtime: &tokio::runtime::Runtime,
+    options: &BenchOptions,
+    trace: &Path,
+) -> Result<String> {
+    let mut report = String::new();
+    let header = ingest::header_only(trace, &options.dir)?;
+    let deployment = runtime.block_on(Deployment::start(options, &header, 1, None, true))?;
+    eprintln!("bench: one producer feeding a live sensor");
+    let figures = runtime.block_on(ingest::measure(&deployment, trace, options.queries));
+    runtime.block_on(deployment.close());
+    ingest::report(&figures?, options, &mut report)?;
+    let mut several = Vec::new();
+    for count in 1..=3 {
+        let deployment = runtime.block_on(Deployment::start_sensors(
+            options, &header, trace, 3, None, true, count,
+        ))?;
+        eprintln!("bench: {count} live sensor(s), each fed by its own producer");
+        let figures = runtime.block_on(sensors::measure(
+            &deployment,
+            trace,
+            count,
+            options.queries.min(200),
+        ));
+        runtime.block_on(deployment.close());
+        several.push(figures?);
+    }
+    sensors::report(&several, &mut report)?;
+    Ok(report)
+}
+
+/// What the bench measured (without `--ingest` or `--accuracy`).
+pub struct Measured {
+    /// Per leader count, the stream with the median leaders' CPU.
+    pub streams: Vec<throughput::Stream>,
+    /// Per leader count past one, its CPU against one leader's, by round.
+    pub paired: Vec<throughput::PairedCpu>,
+    /// Query latency with four leaders at rest after a stream, and during
+    /// a paced stream (None with `--queries 0`).
+    pub latency: Option<(latency::Latencies, latency::Latencies)>,
+}
+
+/// The leaders of the deployments queries are timed on.
+const LATENCY_LEADERS: usize = 4;
+
+/// Streams `trace` through every leader count, round by round, then times
+/// queries.
+fn measure(
+    runtime: &tokio::runtime::Runtime,
+    options: &BenchOptions,
+    trace: &Path,
+) -> Result<Measured> {
+    // Latency with four leaders: at rest after the stream (the leaders
+    // answer where they rest), and during a paced stream (every query
+    // places a fresh cut).
+    let leaders = LATENCY_LEADERS;
+    let at_rest = |deployment: &Deployment| {
+        eprintln!(
+            "bench: {} marginals queries with {leaders} leaders at rest",
+            options.queries
+        );
+        runtime.block_on(latency::measure(deployment, options.queries, false))
+    };
+    let mut runs: Vec<Vec<throughput::Stream>> =
+        options.leaders.iter().map(|_| Vec::new()).collect();
+    let mut rest = None;
+    // In rounds, so that the machine's drift spreads over every count.
+    for round in 0..options.repeat.max(1) {
+        for (i, &count) in options.leaders.iter().enumerate() {
+            let deployment =
+                runtime.block_on(Deployment::start(options, trace, count, None, false))?;
+            eprintln!(
+                "bench: streaming through {count} leader(s), round {}",
+                round + 1
+            );
+            runs[i].push(runtime.block_on(throughput::measure(&deployment))?);
+            if count == leaders && rest.is_none() && options.queries > 0 {
+                rest = Some(at_rest(&deployment)?);
+            }
+            runtime.block_on(deployment.close());
+        }
+    }
+    let paired = throughput::paired_cpu(&runs);
+    let streams: Vec<throughput::Stream> = runs
+        .into_iter()
+        .filter_map(throughput::median_by_cpu)
+        .collect();
+    if options.queries == 0 {
+        return Ok(Measured {
+            streams,
+            paired,
+            latency: None,
+        });
+    }
+    let rest = match rest {
+        Some(rest) => rest,
+        None => {
+            let deployment =
+                runtime.block_on(Deployment::start(options, trace, leaders, None, false))?;
+            runtime.block_on(throughput::measure(&deployment))?;
+            let rest = at_rest(&deployment)?;
+            runtime.block_on(deployment.close());
+            rest
+        }
+    };
+    eprintln!(
+        "bench: {} marginals queries with {leaders} leaders during a stream at {} events/s",
+        options.queries, options.stream_rate
+    );
+    let rate = Some(options.stream_rate);
+    let deployment = runtime.block_on(Deployment::start(options, trace, leaders, rate, false))?;
+    runtime.block_on(throughput::first_moving_answer(&deployment))?;
+    let streaming = runtime.block_on(latency::measure(&deployment, options.queries, true))?;
+    runtime.block_on(deployment.close());
+    Ok(Measured {
+        streams,
+        paired,
+        latency: Some((rest, streaming)),
+    })
+}
+
+/// What the bench prints: the settings in a sentence, then the tables.
+fn report(options: &BenchOptions, measured: &Measured) -> Result<String> {
+    let mut report = String::new();
     writeln!(
         report,
         "Crowd of {} targets ({} red), {} s simulated; {}; {}; every process on this machine's loopback.\n",
@@ -161,36 +286,6 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             None => "no flow control".to_string(),
         }
     )?;
-    // Latency with four leaders: at rest after the stream (the leaders
-    // answer where they rest), and during a paced stream (every query
-    // places a fresh cut).
-    let leaders = 4;
-    let at_rest = |deployment: &Deployment| {
-        eprintln!(
-            "bench: {} marginals queries with {leaders} leaders at rest",
-            options.queries
-        );
-        runtime.block_on(latency::measure(deployment, options.queries, false))
-    };
-    let mut runs: Vec<Vec<throughput::Stream>> =
-        options.leaders.iter().map(|_| Vec::new()).collect();
-    let mut rest = None;
-    // In rounds, so that the machine's drift spreads over every count.
-    for round in 0..options.repeat.max(1) {
-        for (i, &count) in options.leaders.iter().enumerate() {
-            let deployment =
-                runtime.block_on(Deployment::start(options, &trace, count, None, false))?;
-            eprintln!(
-                "bench: streaming through {count} leader(s), round {}",
-                round + 1
-            );
-            runs[i].push(runtime.block_on(throughput::measure(&deployment))?);
-            if count == leaders && rest.is_none() && options.queries > 0 {
-                rest = Some(at_rest(&deployment)?);
-            }
-            runtime.block_on(deployment.close());
-        }
-    }
     if options.repeat > 1 {
         writeln!(
             report,
@@ -198,51 +293,163 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             options.repeat
         )?;
     }
-    let paired = throughput::paired_cpu(&runs);
-    let streams: Vec<throughput::Stream> = runs
-        .into_iter()
-        .filter_map(throughput::median_by_cpu)
-        .collect();
-    throughput::report(&streams, &paired, &mut report)?;
-    if options.queries == 0 {
-        return finish(&report, options);
+    throughput::report(&measured.streams, &measured.paired, &mut report)?;
+    if let Some((rest, streaming)) = &measured.latency {
+        latency::report(rest, "stream over", &mut report)?;
+        latency::report(
+            streaming,
+            &format!("during a stream at {} events/s", options.stream_rate),
+            &mut report,
+        )?;
     }
-    let rest = match rest {
-        Some(rest) => rest,
-        None => {
-            let deployment =
-                runtime.block_on(Deployment::start(options, &trace, leaders, None, false))?;
-            runtime.block_on(throughput::measure(&deployment))?;
-            let rest = at_rest(&deployment)?;
-            runtime.block_on(deployment.close());
-            rest
-        }
-    };
-    latency::report(&rest, "stream over", &mut report)?;
-    eprintln!(
-        "bench: {} marginals queries with {leaders} leaders during a stream at {} events/s",
-        options.queries, options.stream_rate
-    );
-    let rate = Some(options.stream_rate);
-    let deployment = runtime.block_on(Deployment::start(options, &trace, leaders, rate, false))?;
-    runtime.block_on(throughput::first_moving_answer(&deployment))?;
-    let streaming = runtime.block_on(latency::measure(&deployment, options.queries, true))?;
-    runtime.block_on(deployment.close());
-    latency::report(
-        &streaming,
-        &format!("during a stream at {} events/s", options.stream_rate),
-        &mut report,
-    )?;
-    finish(&report, options)
+    Ok(report)
 }
 
-/// Prints the report, and writes it to `--out` if given.
-fn finish(report: &str, options: &BenchOptions) -> Result<()> {
-    print!("{report}");
-    if let Some(out) = &options.out {
-        std::fs::write(out, report).with_context(|| format!("cannot write {}", out.display()))?;
+/// Where and when a page was made.
+pub struct Made {
+    /// [`idmesh_eval::machine::description`].
+    pub machine: String,
+    /// YYYY-MM-DD.
+    pub date: String,
+    /// The whole run, wall clock.
+    pub seconds: f64,
+}
+
+/// The stamp of the code that measured: the digest of the sources that
+/// decide the bench's figures (build.rs).
+fn stamp_line() -> String {
+    format!(
+        "<!-- idmesh bench stamp: sources {} -->",
+        env!("IDMESH_BENCH_STAMP")
+    )
+}
+
+/// The arguments of `idmesh bench` that reproduce a run of `options`:
+/// every setting that decides a figure, spelled out (a changed default
+/// would not change what the command runs), and `--out`. `--dir`, where
+/// the scratch files go, is left out.
+pub fn arguments(options: &BenchOptions) -> Vec<String> {
+    let mut args: Vec<String> = vec!["bench".into()];
+    let mut set = |name: &str, value: String| {
+        args.push(format!("--{name}"));
+        if !value.is_empty() {
+            args.push(value);
+        }
+    };
+    set("targets", options.targets.to_string());
+    set("red", options.red.to_string());
+    set("duration", options.duration.to_string());
+    set("seed", options.seed.to_string());
+    if options.ingest {
+        set("ingest", String::new());
+    } else {
+        let counts: Vec<String> = options.leaders.iter().map(usize::to_string).collect();
+        set("leaders", counts.join(","));
+        set("repeat", options.repeat.to_string());
     }
-    Ok(())
+    set("belief", options.belief.name().into());
+    match options.belief {
+        BeliefKind::Factored => {
+            if options.shrink_interest {
+                set("shrink-interest", String::new());
+            }
+            if options.regional {
+                set("regional", String::new());
+            }
+        }
+        BeliefKind::Radon => set("budget", options.budget.to_string()),
+    }
+    if let Some(window) = options.window {
+        set("window", window.to_string());
+    }
+    if options.journal {
+        set("journal", String::new());
+    }
+    set("queries", options.queries.to_string());
+    if !options.ingest && options.queries > 0 {
+        set("stream-rate", options.stream_rate.to_string());
+    }
+    if let Some(out) = &options.out {
+        set("out", out.display().to_string());
+    }
+    args
+}
+
+/// The page `--out` writes: a title, the command that regenerates it, the
+/// stamp of the code, the machine, the date and the wall time, the
+/// settings, then `report` (what was printed).
+pub fn page(options: &BenchOptions, report: &str, made: &Made) -> Result<String> {
+    let args = arguments(options).join(" ");
+    let mut out = String::new();
+    writeln!(
+        out,
+        "# idmesh bench: {}\n\n\
+         Generated by `idmesh {args}` — regenerate with\n\n\
+         ```sh\ncargo run --release -p idmesh-deploy -- {args}\n```\n\n\
+         {}\n",
+        if options.ingest {
+            "ingestion, on this machine's loopback"
+        } else {
+            "throughput, traffic, CPU and query latency, on this machine's loopback"
+        },
+        stamp_line(),
+    )?;
+    writeln!(
+        out,
+        "## Setup\n\n\
+         Machine: {}. The whole run took {:.0} s (wall clock) on {}. Every process of \
+         every deployment runs on this machine, over loopback.\n",
+        made.machine, made.seconds, made.date
+    )?;
+    writeln!(out, "## Settings\n")?;
+    writeln!(out, "| setting | value |")?;
+    writeln!(out, "|---|---|")?;
+    let yes_no = |b: bool| if b { "yes" } else { "no" };
+    let mut row = |name: &str, value: String| writeln!(out, "| {name} | {value} |");
+    row("targets (n)", options.targets.to_string())?;
+    row("red (k)", options.red.to_string())?;
+    row("simulated seconds", options.duration.to_string())?;
+    row("crowd seed", options.seed.to_string())?;
+    if !options.ingest {
+        let counts: Vec<String> = options.leaders.iter().map(usize::to_string).collect();
+        row("leader counts", counts.join(", "))?;
+        row("rounds", options.repeat.max(1).to_string())?;
+    }
+    row("belief", options.belief.name().to_string())?;
+    match options.belief {
+        BeliefKind::Factored => {
+            row(
+                "largest component",
+                format!("{} tracks", default_max_component()),
+            )?;
+            row(
+                "leaders' interests shrink",
+                yes_no(options.shrink_interest).into(),
+            )?;
+            row("regional rule", yes_no(options.regional).into())?;
+        }
+        BeliefKind::Radon => row("sets per leader", options.budget.to_string())?,
+    }
+    row(
+        "flow control, items per leader",
+        options.window.map_or("none".into(), |w| w.to_string()),
+    )?;
+    row("journals", yes_no(options.journal).into())?;
+    row("queries timed", options.queries.to_string())?;
+    if !options.ingest && options.queries > 0 {
+        row(
+            "paced stream for latency, events/s",
+            options.stream_rate.to_string(),
+        )?;
+        row("leaders for latency", LATENCY_LEADERS.to_string())?;
+    }
+    writeln!(out, "\n## Figures\n")?;
+    out.push_str(report);
+    Ok(out)
+}
+
+fn write(out: &Path, text: &str) -> Result<()> {
+    std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))
 }
 
 /// One deployment for the bench: its processes, and a peer session joined
@@ -278,55 +485,48 @@ impl Deployment {
         live: bool,
         sensors: usize,
     ) -> Result<Self> {
-        let plan = Loopback {
-            prefix: format!("idmesh/bench-{leaders}-{}", std::process::id()),
+        let mut topology = loopback::topology(
+            &std::fs::canonicalize(trace)?,
+            placed_by,
             leaders,
-            belief: options.belief,
-            shrink_interest: options.shrink_interest,
-            regional: options.regional,
-            window: options.window.map(|w| w * leaders as u64),
-            distributed_rule: true,
-            budget: options.budget,
-            sparsify: Sparsification::Threshold,
-            rate,
-            events: None,
-            // Streaming flat out, leaders can be seconds behind the sensor.
-            query_timeout_ms: 60_000,
-            ports: Ports::Free,
-            live,
-            // Beside the topology; a journal of an earlier run would be
-            // resumed, so it goes first.
-            state_dir: options.journal.then(|| PathBuf::from("state")),
             sensors,
-        };
+            Ports::Free,
+        )?;
+        topology.prefix = format!("idmesh/bench-{leaders}-{}", std::process::id());
+        topology.belief = options.belief;
+        topology.shrink_interest = options.shrink_interest;
+        topology.regional = options.regional;
+        topology.distributed_rule = true;
+        topology.budget = options.budget;
+        // Streaming flat out, leaders can be seconds behind the sensor.
+        topology.query_timeout_ms = 60_000;
+        // Beside the topology; a journal of an earlier run would be
+        // resumed, so it goes first.
+        topology.state_dir = options.journal.then(|| PathBuf::from("state"));
+        for sensor in &mut topology.sensors {
+            sensor.rate = rate;
+            sensor.live = live;
+            sensor.window = options.window.map(|w| w * leaders as u64);
+        }
         if options.journal {
             let _ = std::fs::remove_dir_all(options.dir.join("state"));
         }
         let config = options
             .dir
             .join(format!("topology-{leaders}-{sensors}.toml"));
-        Self::launch_placed(&plan, trace, placed_by, &config).await
+        Self::launch(&topology, &config).await
     }
 
-    /// Writes `plan`'s topology streaming `trace` to `config`, with the
-    /// leaders placed over the field of `placed_by` (see
-    /// [`Loopback::topology_placed`]), and starts its processes.
-    async fn launch_placed(
-        plan: &Loopback,
-        trace: &Path,
-        placed_by: &Path,
-        config: &Path,
-    ) -> Result<Self> {
-        let leaders = plan.leaders;
-        let (toml, _) = plan.topology_placed(&std::fs::canonicalize(trace)?, placed_by)?;
-        std::fs::write(config, toml)?;
-        let config = config.to_path_buf();
-        let topology = Topology::load(&config)?;
+    /// Writes `topology` to `config` and starts its processes.
+    async fn launch(topology: &Topology, config: &Path) -> Result<Self> {
+        topology.save(config)?;
+        let topology = Topology::load(config)?;
+        let leaders = topology.leader.len();
         // The sensor starts last, once the coordinator and every leader's
         // counters answer here, so that the bench sees the stream from its
         // first events even when it is over in a fraction of a second (it
         // watches a leader's counters, [`throughput`]).
-        let others = Processes::start_some(&config, |m| m.role != "sensor")?;
+        let others = Processes::start_some(config, |m| m.role != "sensor")?;
         let connect = topology.members().into_iter().map(|m| m.listen).collect();
         let session = mesh::open(&MeshOptions {
             client: false,
@@ -353,7 +553,7 @@ impl Deployment {
                 tokio::time::sleep(Duration::from_millis(20)).await;
             }
         }
-        let sensor = Processes::start_some(&config, |m| m.role == "sensor")?;
+        let sensor = Processes::start_some(config, |m| m.role == "sensor")?;
         Ok(Deployment {
             leaders,
             topology,
@@ -404,4 +604,194 @@ async fn ping(session: &zenoh::Session, key: &str, answers: usize) -> Result<()>
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::latency::Latencies;
+    use super::throughput::{Cpu, PairedCpu, Stream};
+    use super::*;
+    use idmesh_protocol::wire::coordinator_to_leader::LeaderStats;
+
+    fn options() -> BenchOptions {
+        BenchOptions {
+            targets: 40,
+            red: 10,
+            duration: 3000.0,
+            seed: 1,
+            leaders: vec![1, 2, 4],
+            belief: BeliefKind::Factored,
+            shrink_interest: false,
+            regional: true,
+            window: Some(256),
+            budget: 400,
+            repeat: 6,
+            queries: 100,
+            stream_rate: 2000.0,
+            dir: PathBuf::from("target/idmesh-bench"),
+            out: Some(PathBuf::from("docs/bench.md")),
+            ingest: false,
+            journal: false,
+            accuracy: None,
+        }
+    }
+
+    /// A stream through `items.len()` leaders: each leader's items and CPU.
+    fn stream(items: &[u64], cpu: &[f64]) -> Stream {
+        Stream {
+            leaders: items.len(),
+            events: 10_000,
+            first_seen: 0,
+            seconds: 2.0 / items.len() as f64,
+            stats: items
+                .iter()
+                .enumerate()
+                .map(|(i, &items)| LeaderStats {
+                    leader: format!("leader-{i}"),
+                    items,
+                    bytes_sent: 1000 * i as u64,
+                    ..LeaderStats::default()
+                })
+                .collect(),
+            cpu: Cpu {
+                sensor: 0.5,
+                coordinator: 0.25,
+                leaders: cpu.to_vec(),
+            },
+        }
+    }
+
+    fn latencies(ms: &[u64]) -> Latencies {
+        let samples = |scale: u64| -> Vec<Duration> {
+            ms.iter()
+                .map(|&m| Duration::from_micros(m * scale))
+                .collect()
+        };
+        Latencies {
+            leaders: LATENCY_LEADERS,
+            marginals: samples(1000),
+            ping_one: samples(100),
+            ping_leaders: samples(200),
+            partials: samples(500),
+        }
+    }
+
+    /// Six rounds of 1, 2 and 4 leaders, made up, with their latencies.
+    fn measured() -> Measured {
+        let ones: Vec<Stream> = (0..6).map(|_| stream(&[1000], &[1.0])).collect();
+        let twos: Vec<Stream> = [1.1, 1.2, 1.3, 1.4, 1.5, 1.6]
+            .iter()
+            .map(|&c| stream(&[600, 400], &[c / 2.0, c / 2.0]))
+            .collect();
+        let fours: Vec<Stream> = [1.2, 1.3, 1.4, 1.5, 1.6, 1.7]
+            .iter()
+            .map(|&c| stream(&[300, 250, 250, 200], &[c / 4.0; 4]))
+            .collect();
+        let runs = vec![ones, twos, fours];
+        let paired: Vec<PairedCpu> = throughput::paired_cpu(&runs);
+        let streams = runs
+            .into_iter()
+            .filter_map(throughput::median_by_cpu)
+            .collect();
+        Measured {
+            streams,
+            paired,
+            latency: Some((latencies(&[1, 2, 3, 4]), latencies(&[2, 3, 4, 5]))),
+        }
+    }
+
+    fn made() -> Made {
+        Made {
+            machine: "Some CPU, 2 cores available, 8 GiB RAM, Linux 6.1".into(),
+            date: "2026-11-28".into(),
+            seconds: 812.4,
+        }
+    }
+
+    #[test]
+    fn the_page_says_how_to_regenerate_it_where_and_when_it_was_made_and_what_was_set() {
+        let options = options();
+        let report = report(&options, &measured()).unwrap();
+        let page = page(&options, &report, &made()).unwrap();
+        let command = "bench --targets 40 --red 10 --duration 3000 --seed 1 --leaders 1,2,4 \
+                       --repeat 6 --belief factored --regional --window 256 --queries 100 \
+                       --stream-rate 2000 --out docs/bench.md";
+        assert!(page.starts_with("# idmesh bench: "), "{page}");
+        assert!(
+            page.contains(&format!(
+                "Generated by `idmesh {command}` — regenerate with"
+            )),
+            "{page}"
+        );
+        assert!(
+            page.contains(&format!(
+                "```sh\ncargo run --release -p idmesh-deploy -- {command}\n```"
+            )),
+            "{page}"
+        );
+        assert!(page.contains(&stamp_line()), "{page}");
+        assert!(
+            page.contains(
+                "Machine: Some CPU, 2 cores available, 8 GiB RAM, Linux 6.1. The whole run \
+                 took 812 s (wall clock) on 2026-11-28."
+            ),
+            "{page}"
+        );
+        for row in [
+            "| targets (n) | 40 |",
+            "| leader counts | 1, 2, 4 |",
+            "| rounds | 6 |",
+            "| regional rule | yes |",
+            "| flow control, items per leader | 256 |",
+            "| paced stream for latency, events/s | 2000 |",
+        ] {
+            assert!(page.contains(row), "{row}\n{page}");
+        }
+        // The tables, in the order printed, after the settings: all of
+        // the report, as printed.
+        let figures = page.find("## Figures").expect("a figures section");
+        assert!(page[figures..].contains(&report));
+        let mut at = figures;
+        for title in [
+            "### Throughput",
+            "### Traffic per leader",
+            "### CPU seconds",
+            "### Scale-out goals",
+            "### Query latency, 4 leaders, stream over",
+            "### Query latency, 4 leaders, during a stream at 2000 events/s",
+        ] {
+            let found = page[at..]
+                .find(title)
+                .unwrap_or_else(|| panic!("{title} after the last\n{page}"));
+            at += found;
+        }
+        // The busiest leader's items against an even share, and the CPU
+        // ratio round by round with its interval, as computed.
+        assert!(
+            page.contains("| 2 | 1.20× (met) | 1.30× (met) | 1.30× (met; 97% interval 1.10–1.60×"),
+            "{page}"
+        );
+        assert!(page.contains("| 4 | 1.20× (met) |"), "{page}");
+        // No line of the page but the report's comes from anywhere else.
+        assert!(report.starts_with("Crowd of 40 targets (10 red), 3000 s simulated;"));
+    }
+
+    #[test]
+    fn the_ingest_page_names_its_own_command_and_leaves_out_what_it_does_not_run() {
+        let options = BenchOptions {
+            ingest: true,
+            belief: BeliefKind::Radon,
+            out: Some(PathBuf::from("ingest.md")),
+            ..options()
+        };
+        assert_eq!(
+            arguments(&options).join(" "),
+            "bench --targets 40 --red 10 --duration 3000 --seed 1 --ingest --belief radon \
+             --budget 400 --window 256 --queries 100 --out ingest.md"
+        );
+        let page = page(&options, "the figures\n", &made()).unwrap();
+        assert!(page.contains("| sets per leader | 400 |"), "{page}");
+        assert!(!page.contains("leader counts"), "{page}");
+        assert!(page.ends_with("## Figures\n\nthe figures\n"), "{page}");
+    }
 }

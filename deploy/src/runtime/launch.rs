@@ -3,7 +3,7 @@
 //! is `up` on a built-in loopback topology: it simulates a crowd, streams it
 //! through four leaders, and prints live answers.
 
-use super::loopback::{Loopback, Ports};
+use super::loopback::{self, Ports};
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
 use super::topology::Topology;
@@ -182,29 +182,18 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
             _ => break,
         }
     }
-    let plan = Loopback {
-        prefix: DEFAULT_PREFIX.to_string(),
-        leaders: 4,
-        // The demo's crowd reads identities, and a stream with identities
-        // holds the Radon belief (see [`BeliefKind`]): say so.
-        belief: BeliefKind::Radon,
-        shrink_interest: false,
-        regional: false,
-        window: None,
-        distributed_rule: true,
-        budget: 400,
-        sparsify: Sparsification::Overcomplete,
-        rate: Some(options.rate),
-        events: options.events,
-        query_timeout_ms: 2000,
-        ports: Ports::From(7447),
-        live: false,
-        state_dir: None,
-        sensors: 1,
-    };
-    let (topology, coordinator) = plan.topology(&trace)?;
+    let mut topology = loopback::topology(&trace, &trace, 4, 1, Ports::From(7447))?;
+    // The demo's crowd reads identities, and a stream with identities
+    // holds the Radon belief (see [`BeliefKind`]): say so.
+    topology.belief = BeliefKind::Radon;
+    topology.distributed_rule = true;
+    topology.budget = 400;
+    topology.sparsify = Sparsification::Overcomplete;
+    topology.sensors[0].rate = Some(options.rate);
+    topology.sensors[0].events = options.events;
     let config = options.dir.join("topology.toml");
-    std::fs::write(&config, topology)?;
+    topology.save(&config)?;
+    let coordinator = topology.coordinator.listen;
     eprintln!(
         "demo: topology {} · coordinator on {coordinator} · Ctrl-C stops",
         config.display()

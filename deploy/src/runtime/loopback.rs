@@ -1,149 +1,107 @@
-//! A whole deployment on this machine's loopback, written as a topology
-//! file: the demo's and the bench's. Leaders start at the centres of a grid
-//! of cells over the trace's field and move to where the crowd is (k-means
-//! over its positions, `launch::leader_places`), and then on until each is
-//! sent about as many items (`idmesh_placement::balanced`); tracks cross
-//! between the regions and mix across them, as in the paper's sensor grid.
+//! A whole deployment on this machine's loopback, as a typed topology:
+//! [`Topology::loopback`] lays out its processes (the demo's, the bench's
+//! and the process tests' topologies are all made by it), and
+//! [`topology`] places the demo's and the bench's leaders. They start at
+//! the centres of a grid of cells over the trace's field and move to where
+//! the crowd is (k-means over its positions, `launch::leader_places`), and
+//! then on until each is sent about as many items
+//! (`idmesh_placement::balanced`); tracks cross between the regions and
+//! mix across them, as in the paper's sensor grid.
 
 use super::launch::leader_places;
-use super::topology::{BeliefKind, Sparsification};
+use super::ports::pick_free_ports;
+use super::topology::{LeaderProcess, Process, SensorProcess, Topology};
 use anyhow::Result;
 use std::path::Path;
 
-#[derive(Debug, Clone)]
-pub struct Loopback {
-    pub prefix: String,
-    pub leaders: usize,
-    /// The leaders' belief on a property stream; the Radon settings below
-    /// serve it under "radon", and identity streams under either.
-    pub belief: BeliefKind,
-    /// Factored: leaders' interests shrink (`shrink_interest`).
-    pub shrink_interest: bool,
-    /// Factored: the regional rule (`regional`).
-    pub regional: bool,
-    /// The sensor's flow control (`window`); None: no window.
-    pub window: Option<u64>,
-    pub distributed_rule: bool,
-    /// Sets per leader; 0 = no pruning.
-    pub budget: u32,
-    pub sparsify: Sparsification,
-    /// Events per second; None = as fast as the mesh takes them.
-    pub rate: Option<f64>,
-    /// Stop the stream after this many events.
-    pub events: Option<u64>,
-    /// How long the coordinator waits for the leaders.
-    pub query_timeout_ms: u64,
-    pub ports: Ports,
-    /// The sensor stays open for producers after its trace (`live`).
-    pub live: bool,
-    /// Where the leaders and the sensor journal (`state_dir`); None: no
-    /// journal.
-    pub state_dir: Option<std::path::PathBuf>,
-    /// How many sensors (`[[sensor]]`, `sensor-0`, `sensor-1`, …; their
-    /// settings alike); 0 or 1: one `[sensor]`.
-    pub sensors: usize,
-}
-
+/// Where the processes of a loopback topology listen.
 #[derive(Debug, Clone, Copy)]
 pub enum Ports {
-    /// The coordinator on this port, leaders and the sensor on the ones after
-    /// it (the demo's well-known endpoint).
+    /// The coordinator on this port, the leaders and then the sensors on
+    /// the ones after it (the demo's well-known endpoint).
     From(u16),
-    /// Whatever the kernel has free (the bench, side by side with others).
+    /// Free ports ([`pick_free_ports`]): the bench, side by side with
+    /// others.
     Free,
 }
 
 impl Ports {
-    /// The port of process `index`. A free port stays bound in `held`
-    /// until the whole topology is written: released at once, the kernel
-    /// may hand the same port out again to the next process.
-    fn take(self, index: u16, held: &mut Vec<std::net::TcpListener>) -> Result<u16> {
+    /// `n` ports, in the order [`Topology::loopback`] takes them.
+    pub fn take(self, n: usize) -> Result<Vec<u16>> {
         match self {
-            Ports::From(first) => Ok(first + index),
-            Ports::Free => {
-                let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
-                let port = listener.local_addr()?.port();
-                held.push(listener);
-                Ok(port)
-            }
+            Ports::From(first) => Ok((0..n as u16).map(|i| first + i).collect()),
+            Ports::Free => pick_free_ports(n),
         }
     }
 }
 
-impl Loopback {
-    /// The topology streaming `trace`, with its coordinator's endpoint. The
-    /// trace is named by its absolute path: a topology resolves relative
-    /// paths against its own folder, not against where we were started.
-    pub fn topology(&self, trace: &Path) -> Result<(String, String)> {
-        self.topology_placed(trace, trace)
-    }
-
-    /// [`Loopback::topology`] with the leaders placed over the field of
-    /// `placed_by`'s moves: a live sensor's trace is its header alone, and
-    /// its events come from a producer later.
-    pub fn topology_placed(&self, trace: &Path, placed_by: &Path) -> Result<(String, String)> {
-        let places = leader_places(placed_by, self.leaders)?;
-        let trace = std::path::absolute(trace)?;
-        let mut held = Vec::new();
-        let coordinator = format!("tcp/127.0.0.1:{}", self.ports.take(0, &mut held)?);
-        let mut toml = format!(
-            "prefix = {:?}\nbelief = \"{}\"\nshrink_interest = {}\nregional = {}\ndistributed_rule = {}\nbudget = {}\nsparsify = \"{}\"\nquery_timeout_ms = {}\n\n[coordinator]\nname = \"coordinator\"\nlisten = \"{coordinator}\"\n",
-            self.prefix,
-            self.belief.name(),
-            self.shrink_interest,
-            self.regional,
-            self.distributed_rule,
-            self.budget,
-            match self.sparsify {
-                Sparsification::Threshold => "threshold",
-                Sparsification::Overcomplete => "overcomplete",
-            },
-            self.query_timeout_ms,
+impl Topology {
+    /// A deployment on this machine's loopback: the coordinator
+    /// (`coordinator`), a leader at each of `places` (`leader-0`, …) and
+    /// `sensors` sensors (`sensor-0`, …; at least one), each streaming
+    /// `trace`; each process on `127.0.0.1` at one of `ports`, in that
+    /// order (the coordinator's, the leaders', the sensors'). Every other
+    /// setting at its default: the caller sets what it needs.
+    ///
+    /// # Panics
+    ///
+    /// If `ports` is not one port per process.
+    pub fn loopback(trace: &Path, places: &[(f64, f64)], sensors: usize, ports: &[u16]) -> Self {
+        let sensors = sensors.max(1);
+        assert_eq!(
+            ports.len(),
+            1 + places.len() + sensors,
+            "one port per process of the loopback topology"
         );
-        let sensors = self.sensors.max(1);
-        for s in 0..sensors {
-            let table = if sensors > 1 {
-                "[[sensor]]"
-            } else {
-                "[sensor]"
-            };
-            let port = self
-                .ports
-                .take(self.leaders as u16 + 1 + s as u16, &mut held)?;
-            toml.push_str(&format!(
-                "\n{table}\nname = \"sensor-{s}\"\nlisten = \"tcp/127.0.0.1:{port}\"\ntrace = {:?}\n",
-                trace.display().to_string(),
-            ));
-            if let Some(rate) = self.rate {
-                toml.push_str(&format!("rate = {rate}\n"));
-            }
-            if let Some(events) = self.events {
-                toml.push_str(&format!("events = {events}\n"));
-            }
-            if self.live {
-                toml.push_str("live = true\n");
-            }
-            if let Some(window) = self.window {
-                toml.push_str(&format!("window = {window}\n"));
-            }
-        }
-        if let Some(dir) = &self.state_dir {
-            toml.insert_str(0, &format!("state_dir = {:?}\n", dir.display().to_string()));
-        }
-        for (i, (x, y)) in places.into_iter().enumerate() {
-            toml.push_str(&format!(
-                "\n[[leader]]\nname = \"leader-{i}\"\nlisten = \"tcp/127.0.0.1:{}\"\nat = [{x:.3}, {y:.3}]\n",
-                self.ports.take(i as u16 + 1, &mut held)?
-            ));
-        }
-        Ok((toml, coordinator))
+        let listen = |i: usize| format!("tcp/127.0.0.1:{}", ports[i]);
+        let leaders = places
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, y))| LeaderProcess {
+                at: Some([x, y]),
+                ..LeaderProcess::new(format!("leader-{i}"), listen(1 + i))
+            })
+            .collect();
+        let sensors = (0..sensors)
+            .map(|s| SensorProcess::new(format!("sensor-{s}"), listen(1 + places.len() + s), trace))
+            .collect();
+        Topology::new(Process::new("coordinator", listen(0)), sensors, leaders)
     }
+}
+
+/// The loopback topology of the demo and the bench: `leaders` leaders
+/// placed over the crowd of `placed_by` (k-means, then balanced:
+/// [`leader_places`]; to the millimetre, which reads better in the file)
+/// and `sensors` sensors streaming `trace` — not `placed_by` when a live
+/// sensor's trace is its header alone and its events come from a producer
+/// later. The trace is named by its absolute path: a topology resolves
+/// relative paths against its own folder, not against where we were
+/// started. Every other setting is at its default.
+pub fn topology(
+    trace: &Path,
+    placed_by: &Path,
+    leaders: usize,
+    sensors: usize,
+    ports: Ports,
+) -> Result<Topology> {
+    let millimetre = |v: f64| (v * 1000.0).round() / 1000.0;
+    let places: Vec<(f64, f64)> = leader_places(placed_by, leaders)?
+        .into_iter()
+        .map(|(x, y)| (millimetre(x), millimetre(y)))
+        .collect();
+    let ports = ports.take(1 + leaders + sensors.max(1))?;
+    Ok(Topology::loopback(
+        &std::path::absolute(trace)?,
+        &places,
+        sensors,
+        &ports,
+    ))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::runtime::topology::Topology;
+    use crate::runtime::topology::{BeliefKind, Sparsification};
     use std::path::PathBuf;
 
     #[test]
@@ -158,35 +116,19 @@ mod tests {
             "{\"kind\":\"header\",\"format\":\"idmesh-trace\",\"version\":1,\"tracks\":2,\"red\":1}\n",
         )
         .unwrap();
-        let plan = Loopback {
-            prefix: "idmesh/t".into(),
-            leaders: 1,
-            belief: BeliefKind::Factored,
-            shrink_interest: false,
-            regional: false,
-            window: None,
-            distributed_rule: false,
-            budget: 0,
-            sparsify: Sparsification::Threshold,
-            rate: None,
-            events: None,
-            query_timeout_ms: 1000,
-            ports: Ports::From(9100),
-            live: false,
-            state_dir: None,
-            sensors: 1,
-        };
-        let (toml, _) = plan.topology(&trace).unwrap();
+        let plan = topology(&trace, &trace, 1, 1, Ports::From(9100)).unwrap();
         let config = dir.join("topology.toml");
-        std::fs::write(&config, toml).unwrap();
+        plan.save(&config).unwrap();
         let found = Topology::load(&config).unwrap().trace_path();
         let exists = found.exists();
         std::fs::remove_dir_all(&dir).unwrap();
         assert!(exists, "the topology names {}", found.display());
     }
 
+    /// What the launcher writes is what it then reads: the placed leaders,
+    /// the ports, every setting it changed.
     #[test]
-    fn a_loopback_topology_loads_with_every_leader_placed_inside_the_field() {
+    fn a_loopback_topology_reads_back_as_written_with_every_leader_inside_the_field() {
         let dir = std::env::temp_dir().join(format!("idmesh-loopback-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let trace = dir.join("t.jsonl");
@@ -197,39 +139,56 @@ mod tests {
              {\"kind\":\"move\",\"time\":1.0,\"track\":1,\"x\":30.0,\"y\":20.0}\n",
         )
         .unwrap();
-        let plan = Loopback {
-            prefix: "idmesh/t".into(),
-            leaders: 5,
-            belief: BeliefKind::Radon,
-            shrink_interest: false,
-            regional: false,
-            window: None,
-            distributed_rule: true,
-            budget: 100,
-            sparsify: Sparsification::Overcomplete,
-            rate: Some(50.0),
-            events: None,
-            query_timeout_ms: 1500,
-            ports: Ports::From(9000),
-            live: true,
-            state_dir: None,
-            sensors: 1,
-        };
-        let (toml, coordinator) = plan.topology(&trace).unwrap();
-        assert_eq!(coordinator, "tcp/127.0.0.1:9000");
+        let mut plan = topology(&trace, &trace, 5, 1, Ports::From(9000)).unwrap();
+        plan.prefix = "idmesh/t".into();
+        plan.belief = BeliefKind::Radon;
+        plan.distributed_rule = true;
+        plan.budget = 100;
+        plan.sparsify = Sparsification::Overcomplete;
+        plan.query_timeout_ms = 1500;
+        plan.sensors[0].rate = Some(50.0);
+        plan.sensors[0].live = true;
+        assert_eq!(plan.coordinator.listen, "tcp/127.0.0.1:9000");
         let config = dir.join("topology.toml");
-        std::fs::write(&config, toml).unwrap();
-        let topology = Topology::load(&config).unwrap();
+        plan.save(&config).unwrap();
+        let mut topology = Topology::load(&config).unwrap();
+        assert_eq!(topology.dir, dir);
+        topology.dir = PathBuf::new();
+        assert_eq!(topology, plan);
         assert_eq!(topology.leader.len(), 5);
+        assert_eq!(topology.leader[4].listen, "tcp/127.0.0.1:9005");
         assert_eq!(topology.sensor().listen, "tcp/127.0.0.1:9006");
         for l in &topology.leader {
             let [x, y] = l.at.unwrap();
             assert!((0.0..=30.0).contains(&x) && (0.0..=20.0).contains(&y));
+            assert_eq!((x * 1000.0).round() / 1000.0, x, "to the millimetre");
         }
-        assert_eq!(topology.belief, BeliefKind::Radon);
-        assert!(topology.distributed_rule && topology.budget == 100);
-        assert_eq!(topology.sparsify, Sparsification::Overcomplete);
-        assert_eq!(topology.query_timeout_ms, 1500);
-        assert!(topology.sensor().live);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn free_ports_give_every_process_its_own() {
+        let trace = Path::new("/nowhere/t.jsonl");
+        let places = [(1.0, 1.0), (2.0, 2.0), (3.0, 3.0)];
+        let ports = Ports::Free.take(1 + places.len() + 2).unwrap();
+        let topology = Topology::loopback(trace, &places, 2, &ports);
+        let names: Vec<String> = topology.members().into_iter().map(|m| m.name).collect();
+        assert_eq!(
+            names,
+            [
+                "coordinator",
+                "sensor-0",
+                "sensor-1",
+                "leader-0",
+                "leader-1",
+                "leader-2"
+            ]
+        );
+        let mut listens: Vec<String> = topology.members().into_iter().map(|m| m.listen).collect();
+        listens.sort();
+        listens.dedup();
+        assert_eq!(listens.len(), 6, "{listens:?}");
+        assert_eq!(topology.leader[2].at, Some([3.0, 3.0]));
+        assert!(topology.sensors.iter().all(|s| s.trace == trace));
     }
 }

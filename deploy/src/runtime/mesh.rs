@@ -186,8 +186,7 @@ mod tests {
     use std::time::Duration;
 
     fn free_endpoint() -> String {
-        let socket = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
-        let port = socket.local_addr().expect("its address").port();
+        let port = crate::runtime::ports::pick_free_ports(1).expect("a free port")[0];
         format!("tcp/127.0.0.1:{port}")
     }
 

@@ -1,11 +1,13 @@
 //! The distributed runtime's side of the binary: the topology file, the
 //! one function that opens a Zenoh session, one runner per role, the
 //! launcher (`up`, `demo`), the loopback topology they and the bench use,
-//! the query client, the web gateway's session (`web`), and what secures a deployment (TLS, access control).
+//! the one picker of free ports, the query client, the web gateway's
+//! session (`web`), and what secures a deployment (TLS, access control).
 
 pub mod launch;
 pub mod loopback;
 pub mod mesh;
+pub mod ports;
 pub mod query;
 pub mod roles;
 pub mod security;

@@ -77,71 +77,100 @@ use super::security::SecuritySection;
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::wire::keys::DEFAULT_PREFIX;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-#[derive(Debug, Clone, Deserialize)]
+/// A deployment's topology. Read from TOML by [`Topology::load`] and
+/// written by [`Topology::to_toml`] (every field it holds, those at their
+/// defaults left out), which reads back into the same value: code that
+/// makes a topology (the demo, the bench, the tests' harnesses) builds
+/// one of these ([`Topology::new`], [`Topology::loopback`]) and writes it.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Topology {
-    #[serde(default = "default_prefix")]
+    #[serde(default = "default_prefix", skip_serializing_if = "is_default_prefix")]
     pub prefix: String,
     /// Which belief the leaders hold (property streams; identity streams
-    /// always hold the information matrix).
+    /// always hold the information matrix). Written even at its default:
+    /// it is what a reader of the file looks for first.
     #[serde(default)]
     pub belief: BeliefKind,
     /// Factored: the most tracks of one component.
-    #[serde(default = "default_max_component")]
+    #[serde(
+        default = "default_max_component",
+        skip_serializing_if = "is_default_max_component"
+    )]
     pub max_component: u32,
     /// Factored: how a component too large to keep is split.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub split: SplitSetting,
     /// Factored: leaders unfollow the tracks they neither surveil nor hold
     /// a component of (else a leader follows every track a component ever
     /// brought it).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub shrink_interest: bool,
     /// Factored: the regional rule (a mix across two leaders' regions
     /// keeps its components apart; a track handed over is split off its
     /// component), an approximation that keeps components in their
     /// holder's region; `idmesh replay --regions` runs it too.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub regional: bool,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub distributed_rule: bool,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub budget: u32,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub sparsify: Sparsification,
-    #[serde(default = "default_timeout")]
+    #[serde(
+        default = "default_timeout",
+        skip_serializing_if = "is_default_timeout"
+    )]
     pub query_timeout_ms: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub state_dir: Option<PathBuf>,
-    #[serde(default = "default_fsync")]
+    #[serde(default = "default_fsync", skip_serializing_if = "is_default_fsync")]
     pub fsync_ms: u64,
     /// A leader writes its whole state and starts its journal again after
     /// this many inputs (0 = never: the journal grows with the stream).
-    #[serde(default = "default_snapshot_every")]
+    #[serde(
+        default = "default_snapshot_every",
+        skip_serializing_if = "is_default_snapshot_every"
+    )]
     pub snapshot_every: usize,
     /// How long a leader role may be without its liveliness token before a
     /// live leader process adopts it (0 = never).
-    #[serde(default = "default_takeover_after")]
+    #[serde(
+        default = "default_takeover_after",
+        skip_serializing_if = "is_default_takeover_after"
+    )]
     pub takeover_after_ms: u64,
     /// How long the coordinator may compute one identity answer's
     /// marginals before it stops the computation and answers why.
-    #[serde(default = "default_marginals_timeout")]
+    #[serde(
+        default = "default_marginals_timeout",
+        skip_serializing_if = "is_default_marginals_timeout"
+    )]
     pub marginals_timeout_ms: u64,
     pub coordinator: Process,
     /// One `[sensor]`, or several `[[sensor]]` (docs/design/architecture.md,
     /// "Several sensors"): each takes its producers' events, and every
-    /// sensor merges them all into one order.
-    #[serde(rename = "sensor", deserialize_with = "one_or_many")]
+    /// sensor merges them all into one order. Written as it is read: one
+    /// table for one sensor.
+    #[serde(
+        rename = "sensor",
+        deserialize_with = "one_or_many",
+        serialize_with = "one_or_many_out"
+    )]
     pub sensors: Vec<SensorProcess>,
     pub leader: Vec<LeaderProcess>,
     /// Faults every leader injects on purpose (tests).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub leader_faults: LeaderFaultSection,
     /// Mutual TLS and access control; None = plain TCP, anyone may connect.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub security: Option<SecuritySection>,
-    /// Where the file was read from (relative paths start there).
+    /// Where the file was read from (relative paths start there); neither
+    /// read nor written.
     #[serde(skip)]
     pub dir: PathBuf,
 }
@@ -151,7 +180,7 @@ pub struct Topology {
 /// (docs/results.md). A stream with identities holds the Radon belief
 /// whatever this says: factored leaders do not yet carry the information
 /// matrix's rows through the moves of components.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum BeliefKind {
     /// The factored belief: each component held by one leader, the count
@@ -174,7 +203,7 @@ impl BeliefKind {
 
 /// The split rule of the factored belief (`belief::SplitRule`; always
 /// the local coupling, which leaders can run).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SplitSetting {
     #[default]
@@ -206,7 +235,7 @@ impl Topology {
 }
 
 /// How leaders bring their sets within the budget.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Sparsification {
     /// Drop the lightest sets (Section 5.3.2).
@@ -216,77 +245,135 @@ pub enum Sparsification {
     Overcomplete,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Process {
     pub name: String,
-    #[serde(default = "default_host")]
+    #[serde(default = "default_host", skip_serializing_if = "is_default_host")]
     pub host: String,
     pub listen: String,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+impl Process {
+    /// Process `name` listening on `listen`, on host `local`.
+    pub fn new(name: impl Into<String>, listen: impl Into<String>) -> Self {
+        Process {
+            name: name.into(),
+            host: default_host(),
+            listen: listen.into(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorProcess {
     pub name: String,
-    #[serde(default = "default_host")]
+    #[serde(default = "default_host", skip_serializing_if = "is_default_host")]
     pub host: String,
     pub listen: String,
     pub trace: PathBuf,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub rate: Option<f64>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub realtime: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub events: Option<u64>,
     /// The stream stays open once the trace (or standard input) is done:
     /// it takes producers' events on `P/sensor/<name>/ingest` until the
     /// sensor stops.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub live: bool,
     /// Flow control: the sensor routes at most this many seqs past the
     /// slowest leader's progress (None: as fast as the source gives).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub window: Option<u64>,
     /// With `state_dir`: the sensor's journal is compacted to a snapshot
     /// of its state once it has grown by this many bytes (and by at least
     /// the snapshot's own size); absent: 16 MiB.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub compact_journal_after: Option<u64>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub faults: FaultSection,
 }
 
+impl SensorProcess {
+    /// Sensor `name` listening on `listen` and streaming `trace` (relative
+    /// to the topology file), on host `local`, every setting at its
+    /// default.
+    pub fn new(
+        name: impl Into<String>,
+        listen: impl Into<String>,
+        trace: impl Into<PathBuf>,
+    ) -> Self {
+        SensorProcess {
+            name: name.into(),
+            host: default_host(),
+            listen: listen.into(),
+            trace: trace.into(),
+            rate: None,
+            realtime: false,
+            events: None,
+            live: false,
+            window: None,
+            compact_journal_after: None,
+            faults: FaultSection::default(),
+        }
+    }
+}
+
 /// Faults the sensor injects on purpose (see `idmesh_sensor::driver`).
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct FaultSection {
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "is_default")]
     pub duplicate: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub drop_every: Option<u64>,
 }
 
 /// Faults the leaders inject on purpose: a transfer lost on a live link,
 /// as a TLS link that closes and reopens loses one.
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LeaderFaultSection {
     /// Every n-th transfer message a leader puts (the transfers one input
     /// made for one peer) is not put.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub drop_transfer_every: Option<u64>,
     /// Every n-th answer a leader pushes at a cut is not put (the
     /// coordinator then asks for it).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub drop_push_every: Option<u64>,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LeaderProcess {
     pub name: String,
-    #[serde(default = "default_host")]
+    #[serde(default = "default_host", skip_serializing_if = "is_default_host")]
     pub host: String,
     pub listen: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub at: Option<[f64; 2]>,
     /// With several sensors: the one that sends this leader its batches
     /// (absent: the sensors take the leaders in turn, in the file's
     /// order).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub sensor: Option<String>,
+}
+
+impl LeaderProcess {
+    /// Leader `name` listening on `listen`, on host `local`, unplaced.
+    pub fn new(name: impl Into<String>, listen: impl Into<String>) -> Self {
+        LeaderProcess {
+            name: name.into(),
+            host: default_host(),
+            listen: listen.into(),
+            at: None,
+            sensor: None,
+        }
+    }
 }
 
 /// `[sensor]` (one table) or `[[sensor]]` (several), each read as a
@@ -299,6 +386,18 @@ fn one_or_many<'de, D: serde::Deserializer<'de>>(
     match toml::Value::deserialize(deserializer)? {
         toml::Value::Array(many) => many.into_iter().map(one).collect(),
         table => Ok(vec![one(table)?]),
+    }
+}
+
+/// `sensors` as [`one_or_many`] reads them: one table for one sensor, an
+/// array of tables for several.
+fn one_or_many_out<S: serde::Serializer>(
+    sensors: &[SensorProcess],
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    match sensors {
+        [one] => one.serialize(serializer),
+        many => many.serialize(serializer),
     }
 }
 
@@ -330,6 +429,45 @@ fn default_takeover_after() -> u64 {
     3000
 }
 
+// Whether a field holds its default, so that the written file leaves it
+// out (serde's `skip_serializing_if` takes a function of a reference).
+
+fn is_default<T: Default + PartialEq>(value: &T) -> bool {
+    *value == T::default()
+}
+
+fn is_default_prefix(prefix: &str) -> bool {
+    prefix == DEFAULT_PREFIX
+}
+
+fn is_default_host(host: &str) -> bool {
+    host == default_host()
+}
+
+fn is_default_max_component(max: &u32) -> bool {
+    *max == default_max_component()
+}
+
+fn is_default_timeout(ms: &u64) -> bool {
+    *ms == default_timeout()
+}
+
+fn is_default_marginals_timeout(ms: &u64) -> bool {
+    *ms == default_marginals_timeout()
+}
+
+fn is_default_fsync(ms: &u64) -> bool {
+    *ms == default_fsync()
+}
+
+fn is_default_snapshot_every(every: &usize) -> bool {
+    *every == default_snapshot_every()
+}
+
+fn is_default_takeover_after(ms: &u64) -> bool {
+    *ms == default_takeover_after()
+}
+
 /// A process of the deployment, whatever its role.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Member {
@@ -340,6 +478,51 @@ pub struct Member {
 }
 
 impl Topology {
+    /// A topology of these processes, every setting at its default (as a
+    /// file naming only them reads), `dir` empty.
+    pub fn new(
+        coordinator: Process,
+        sensors: Vec<SensorProcess>,
+        leader: Vec<LeaderProcess>,
+    ) -> Self {
+        Topology {
+            prefix: default_prefix(),
+            belief: BeliefKind::default(),
+            max_component: default_max_component(),
+            split: SplitSetting::default(),
+            shrink_interest: false,
+            regional: false,
+            distributed_rule: false,
+            budget: 0,
+            sparsify: Sparsification::default(),
+            query_timeout_ms: default_timeout(),
+            state_dir: None,
+            fsync_ms: default_fsync(),
+            snapshot_every: default_snapshot_every(),
+            takeover_after_ms: default_takeover_after(),
+            marginals_timeout_ms: default_marginals_timeout(),
+            coordinator,
+            sensors,
+            leader,
+            leader_faults: LeaderFaultSection::default(),
+            security: None,
+            dir: PathBuf::new(),
+        }
+    }
+
+    /// The topology as a TOML file says it, [`Topology::load`]'s input:
+    /// read back, it is this topology again (but for `dir`, which is where
+    /// the file is). Fails only on a path that is not UTF-8.
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string(self).context("the topology cannot be written as TOML")
+    }
+
+    /// Writes [`Topology::to_toml`] to `path`.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        std::fs::write(path, self.to_toml()?)
+            .with_context(|| format!("{}: cannot write the topology", path.display()))
+    }
+
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read the topology", path.display()))?;
@@ -491,6 +674,176 @@ impl Topology {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The topology `to_toml` writes, read back as `load` reads it (`dir`
+    /// aside: where a file is is not in it).
+    fn read_back(topology: &Topology) -> Topology {
+        let text = topology.to_toml().unwrap();
+        let mut back: Topology = toml::from_str(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        back.dir = topology.dir.clone();
+        back
+    }
+
+    #[test]
+    fn every_example_reads_back_from_what_it_writes() {
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+        let mut read = 0;
+        for entry in std::fs::read_dir(&examples).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_none_or(|e| e != "toml") {
+                continue;
+            }
+            let topology = Topology::load(&path).unwrap();
+            assert_eq!(read_back(&topology), topology, "{}", path.display());
+            read += 1;
+        }
+        assert!(read >= 5, "{read} examples");
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-rt-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("topology.toml");
+        std::fs::write(&file, documented_example()).unwrap();
+        let documented = Topology::load(&file);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let documented = documented.unwrap();
+        assert_eq!(read_back(&documented), documented);
+    }
+
+    /// A topology built in code with every field away from its default,
+    /// several sensors and every section: written, it reads back equal,
+    /// and `load` takes the file.
+    #[test]
+    fn a_topology_built_in_code_reads_back_as_it_was_built() {
+        let sensor = |i: usize| SensorProcess {
+            host: "gateway".into(),
+            rate: Some(2500.5),
+            realtime: true,
+            events: Some(7000),
+            live: true,
+            window: Some(4096),
+            compact_journal_after: Some(1 << 20),
+            faults: FaultSection {
+                duplicate: true,
+                drop_every: Some(7),
+            },
+            ..SensorProcess::new(
+                format!("s{i}"),
+                format!("tcp/10.0.0.1:74{i}0"),
+                "crowd.jsonl",
+            )
+        };
+        let leader = |i: usize| LeaderProcess {
+            host: "east".into(),
+            at: Some([0.1 + i as f64 / 3.0, -12.5]),
+            sensor: Some(format!("s{}", i % 2)),
+            ..LeaderProcess::new(format!("l{i}"), format!("tcp/10.0.0.2:75{i}0"))
+        };
+        let mut topology = Topology::new(
+            Process::new("c", "tcp/10.0.0.1:7447"),
+            vec![sensor(0), sensor(1)],
+            (0..3).map(leader).collect(),
+        );
+        topology.prefix = "idmesh/built".into();
+        topology.belief = BeliefKind::Radon;
+        topology.max_component = 9;
+        topology.split = SplitSetting::LeastLoss;
+        topology.shrink_interest = true;
+        topology.regional = true;
+        topology.distributed_rule = true;
+        topology.budget = 300;
+        topology.sparsify = Sparsification::Overcomplete;
+        topology.query_timeout_ms = 1234;
+        topology.state_dir = Some("state".into());
+        topology.fsync_ms = 7;
+        topology.snapshot_every = 0;
+        topology.takeover_after_ms = 0;
+        topology.marginals_timeout_ms = 5;
+        topology.leader_faults = LeaderFaultSection {
+            drop_transfer_every: Some(5),
+            drop_push_every: Some(2),
+        };
+        topology.security = Some(SecuritySection {
+            access_control: false,
+            clients: vec!["operator".into()],
+            producers: vec!["camera".into()],
+            verify_names: false,
+            ..SecuritySection::new("certs")
+        });
+        assert_eq!(read_back(&topology), topology);
+        let text = topology.to_toml().unwrap();
+        assert!(
+            text.contains("[[sensor]]") && text.contains("[sensor.faults]"),
+            "{text}"
+        );
+
+        // One sensor is one `[sensor]` table, as people write it.
+        topology.sensors.truncate(1);
+        for leader in &mut topology.leader {
+            leader.sensor = None;
+        }
+        assert_eq!(read_back(&topology), topology);
+        let text = topology.to_toml().unwrap();
+        assert!(
+            text.contains("\n[sensor]\n") && !text.contains("[[sensor]]"),
+            "{text}"
+        );
+
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-topology-built-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        topology.save(&path).unwrap();
+        let loaded = Topology::load(&path);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let mut loaded = loaded.unwrap();
+        assert_eq!(loaded.dir, dir);
+        loaded.dir = PathBuf::new();
+        assert_eq!(loaded, topology);
+    }
+
+    /// `Topology::new` is what a file naming only the processes reads
+    /// as, and it is written as little more than those processes: every
+    /// setting at its default is left out.
+    #[test]
+    fn defaults_are_those_of_a_file_that_says_nothing_and_are_not_written() {
+        let text = r#"
+[coordinator]
+name = "c"
+listen = "tcp/127.0.0.1:1"
+[sensor]
+name = "s"
+listen = "tcp/127.0.0.1:2"
+trace = "x.jsonl"
+[[leader]]
+name = "l0"
+listen = "tcp/127.0.0.1:3"
+"#;
+        let parsed: Topology = toml::from_str(text).unwrap();
+        let built = Topology::new(
+            Process::new("c", "tcp/127.0.0.1:1"),
+            vec![SensorProcess::new("s", "tcp/127.0.0.1:2", "x.jsonl")],
+            vec![LeaderProcess::new("l0", "tcp/127.0.0.1:3")],
+        );
+        assert_eq!(parsed, built);
+        let written = built.to_toml().unwrap();
+        let lines: Vec<&str> = written.lines().filter(|l| !l.is_empty()).collect();
+        assert_eq!(
+            lines,
+            [
+                "belief = \"factored\"",
+                "[coordinator]",
+                "name = \"c\"",
+                "listen = \"tcp/127.0.0.1:1\"",
+                "[sensor]",
+                "name = \"s\"",
+                "listen = \"tcp/127.0.0.1:2\"",
+                "trace = \"x.jsonl\"",
+                "[[leader]]",
+                "name = \"l0\"",
+                "listen = \"tcp/127.0.0.1:3\"",
+            ],
+            "{written}"
+        );
+    }
 
     /// The TOML listing of this module's documentation.
     fn documented_example() -> String {

@@ -15,10 +15,10 @@
 
 use super::error::SecurityError;
 use super::tls::Tls;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SecuritySection {
     /// The folder with `ca.pem` and every process's `<name>.pem` and
@@ -27,22 +27,40 @@ pub struct SecuritySection {
     pub certs: PathBuf,
     /// Zenoh access control from the topology; without it TLS still keeps
     /// out whoever has no certificate from the CA.
-    #[serde(default = "yes")]
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
     pub access_control: bool,
     /// Common names of the client certificates that may ask `P/query/**`.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub clients: Vec<String>,
     /// Common names of the producers' certificates: they may send trace
     /// lines to the sensor (`P/sensor/<name>/ingest`), and nothing else.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub producers: Vec<String>,
     /// Check the host names in a listener's certificate when connecting.
-    #[serde(default = "yes")]
+    #[serde(default = "yes", skip_serializing_if = "is_yes")]
     pub verify_names: bool,
 }
 
 fn yes() -> bool {
     true
+}
+
+fn is_yes(value: &bool) -> bool {
+    *value
+}
+
+impl SecuritySection {
+    /// Certificates in `certs`, every setting at its default: access
+    /// control on, names verified, no clients, no producers.
+    pub fn new(certs: impl Into<PathBuf>) -> Self {
+        SecuritySection {
+            certs: certs.into(),
+            access_control: true,
+            clients: Vec::new(),
+            producers: Vec::new(),
+            verify_names: true,
+        }
+    }
 }
 
 impl SecuritySection {
