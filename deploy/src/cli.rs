@@ -74,21 +74,12 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Leader counts to stream through, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
     pub leaders: Vec<usize>,
     /// The leaders' belief: factored (components, coupled at a query) or
     /// radon (sets, with --budget and the distributed rule).
     #[arg(long, value_enum, default_value = "factored")]
     pub belief: BeliefKind,
-    /// Factored: leaders unfollow the tracks they neither surveil nor hold
-    /// a component of (the topology's `shrink_interest`).
-    #[arg(long)]
-    pub shrink_interest: bool,
-    /// Factored: the regional rule (the topology's `regional`): a mix
-    /// across two leaders' regions keeps its components apart, and a track
-    /// handed over is split off its component.
-    #[arg(long)]
-    pub regional: bool,
     /// Flow control, per leader: with L leaders the sensor routes at most
     /// L times this many items past the slowest leader's progress (the
     /// topology's `[sensor] window`), so that each leader has about as

@@ -43,7 +43,10 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Replay(args) => {
+        Command::Replay(mut args) => {
+            if let Some(path) = args.topology.take() {
+                runtime::topology::Topology::load(&path)?.replay_twin(&mut args)?;
+            }
             let stdout = BufWriter::new(std::io::stdout().lock());
             idmesh_eval::replay::dispatch(&args, stdout)
         }
@@ -80,8 +83,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             seed: args.seed,
             leaders: args.leaders,
             belief: args.belief,
-            shrink_interest: args.shrink_interest,
-            regional: args.regional,
             window: args.window,
             budget: args.budget,
             repeat: args.repeat,

@@ -1,9 +1,9 @@
 //! Sequencing and routing of the event stream.
 //!
 //! Every trace event becomes an item with the next global seq. The router
-//! knows which leader surveils each track (the nearest leader to the
-//! track's last position, or track mod L before any position), turns a
-//! change of region into a `Handover`, stamps observations with the
+//! knows which leader surveils each track ([`Regions`]: cells fitted to the
+//! crowd and redrawn as it moves, or fixed places), turns a change of
+//! region into a `Handover`, stamps observations with the
 //! observed track's mixing log (the sensor network's log of Section 5.4.2),
 //! and sends each item to the leaders whose [`Interest`] it meets — routed
 //! by key expression, one key per leader, never broadcast and filtered.
@@ -12,7 +12,7 @@
 
 use crate::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
-use idmesh_placement::{PlacementError, Regions};
+use idmesh_placement::{Handover, PlacementError, RegionRule, Regions};
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
@@ -26,8 +26,9 @@ use std::collections::VecDeque;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LeaderPlace {
     pub name: String,
-    /// Where the leader sits; tracks belong to the nearest leader. None for
-    /// every leader = tracks stay with leader (track mod L).
+    /// Where the leader sits, under fixed places (tracks belong to the
+    /// nearest leader). None for every leader: regions fitted to the crowd
+    /// and redrawn as it moves (the default).
     pub at: Option<(f64, f64)>,
 }
 
@@ -47,6 +48,10 @@ pub struct RouterConfig {
     /// (in the Begin's owners) rather than with leader `track mod L`. Empty
     /// (a stream that is fed live) or None for a track: round robin.
     pub placed: Vec<Option<(f64, f64)>>,
+    /// The region rule, when not the one the leaders' places imply (fixed
+    /// places if they have them, else fitted cells): tests that want
+    /// fitted cells redrawn within a short stream.
+    pub regions: Option<RegionRule>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -124,11 +129,15 @@ impl Router {
             ));
         }
         let tracks = header.tracks;
-        let regions = Regions::starting(
-            &config.leaders.iter().map(|l| l.at).collect::<Vec<_>>(),
-            tracks,
-            &config.placed,
-        );
+        let places: Vec<_> = config.leaders.iter().map(|l| l.at).collect();
+        let rule = if let Some(rule) = &config.regions {
+            rule.clone()
+        } else if places.iter().any(Option::is_some) {
+            RegionRule::Fixed(places)
+        } else {
+            RegionRule::fitted()
+        };
+        let regions = Regions::starting(&rule, leaders, tracks, &config.placed);
         let begin = Begin {
             // Identity streams hold the information matrix whatever the
             // property belief is.
@@ -204,8 +213,28 @@ impl Router {
     }
 
     /// Routes one trace line (header and truth lines carry no event and are
-    /// skipped). An identity read goes to the track's owner alone.
+    /// skipped), with the handovers it makes before and after ([`Regions::before`],
+    /// [`Regions::after`]). An
+    /// identity read goes to the track's owner alone.
     pub fn line(&mut self, line: &Line) {
+        let before = self.regions.before(line);
+        self.route_handovers(before);
+        self.route_line(line);
+        let after = self.regions.after(line);
+        self.route_handovers(after);
+    }
+
+    fn route_handovers(&mut self, handovers: Vec<Handover>) {
+        for handover in handovers {
+            self.route(Item::Handover {
+                track: handover.track,
+                from: handover.from,
+                to: handover.to,
+            });
+        }
+    }
+
+    fn route_line(&mut self, line: &Line) {
         match line {
             Line::Mix(mix) => {
                 self.events += 1;
@@ -253,13 +282,6 @@ impl Router {
             Line::Move(m) => {
                 self.events += 1;
                 self.positions[m.track as usize] = Some([m.x, m.y]);
-                if let Some((from, to)) = self.regions.moved(m.track, m.x, m.y) {
-                    self.route(Item::Handover {
-                        track: m.track,
-                        from,
-                        to,
-                    });
-                }
             }
             Line::Identify(read) => {
                 self.events += 1;
@@ -318,10 +340,10 @@ impl Router {
             finished,
             leaders: self.begin.leaders.clone(),
             places: self
-                .config
-                .leaders
-                .iter()
-                .map(|l| l.at.map(|(x, y)| [x, y]))
+                .regions
+                .places()
+                .into_iter()
+                .map(|p| p.map(|(x, y)| [x, y]))
                 .collect(),
             positions: self.positions.clone(),
             owners: self.regions.owners().to_vec(),

@@ -34,6 +34,7 @@ fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) 
         budget: 0,
         omp: false,
         placed: Vec::new(),
+        regions: None,
     };
     Router::new(config, &header).unwrap()
 }
@@ -55,6 +56,7 @@ fn unplaced(factored: Option<idmesh_protocol::wire::factored::FactoredStart>) ->
         budget: 0,
         omp: false,
         placed: Vec::new(),
+        regions: None,
     }
 }
 
@@ -321,6 +323,7 @@ fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
         budget: 0,
         omp: false,
         placed: Vec::new(),
+        regions: None,
     };
     let mut header = Header::new(limit + 1);
     header.identities = Some(limit + 1);

@@ -66,8 +66,18 @@ pub struct Settings {
 pub struct Factored {
     pub max_component: u32,
     pub split: SplitSetting,
-    pub shrink_interest: bool,
     pub regional: bool,
+}
+
+impl Default for Factored {
+    /// A topology's defaults.
+    fn default() -> Self {
+        Factored {
+            max_component: idmesh_deploy::runtime::topology::default_max_component(),
+            split: SplitSetting::default(),
+            regional: true,
+        }
+    }
 }
 
 /// A secured deployment: `certs` holds `ca.pem` and `<name>.pem`/`.key`
@@ -147,31 +157,20 @@ pub fn watermark_events(answer: &Value) -> u64 {
         .map_or(0, |w| w.values().filter_map(Value::as_u64).sum())
 }
 
-/// Where a deployment of `leaders` leaders over `trace` places them: the
-/// centres of a grid over the field its moves span (row by row).
-pub fn leader_places(trace: &Path, leaders: usize) -> Vec<(f64, f64)> {
-    idmesh_placement::grid_places(corners(trace), leaders)
-}
-
-/// [`leader_places`] as `idmesh replay --regions` takes them (each number
-/// written so that it parses back to itself).
-pub fn regions_argument(trace: &Path, leaders: usize) -> String {
-    leader_places(trace, leaders)
-        .iter()
-        .map(|(x, y)| format!("{x},{y}"))
-        .collect::<Vec<_>>()
-        .join(";")
+/// `count` places on a grid over the field `trace`'s moves span (row by
+/// row): where the tests' producers put their sensors.
+pub fn grid_over(trace: &Path, count: usize) -> Vec<(f64, f64)> {
+    idmesh_placement::grid_places(corners(trace), count)
 }
 
 /// The topology of test deployment `name` streaming `trace` with
-/// `settings`: the loopback layout ([`Topology::loopback`]) on free ports,
-/// the leaders on a grid over the trace's field ([`leader_places`]).
+/// `settings`: the loopback layout ([`Topology::loopback`]) on free ports;
+/// its leaders' regions are fitted to the crowd (the default).
 pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
-    let places = leader_places(trace, settings.leaders);
     let sensors = settings.sensors.max(1);
-    let ports = pick_free_ports(1 + places.len() + sensors).expect("free loopback ports");
+    let ports = pick_free_ports(1 + settings.leaders + sensors).expect("free loopback ports");
     let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
-    let mut topology = Topology::loopback(sensor_trace, &places, sensors, &ports);
+    let mut topology = Topology::loopback(sensor_trace, settings.leaders, sensors, &ports);
     topology.prefix = format!("idmesh/test-{name}-{}", std::process::id());
     topology.distributed_rule = settings.distributed_rule;
     topology.budget = settings.budget;
@@ -186,7 +185,6 @@ pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
             topology.belief = BeliefKind::Factored;
             topology.max_component = factored.max_component;
             topology.split = factored.split;
-            topology.shrink_interest = factored.shrink_interest;
             topology.regional = factored.regional;
         }
         None => topology.belief = BeliefKind::Radon,
@@ -221,13 +219,19 @@ pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
 }
 
 impl Deployment {
-    /// Starts a deployment streaming `trace` under `idmesh up`; leaders sit
-    /// on a grid over the trace's field so that tracks cross between them.
+    /// Starts a deployment streaming `trace` under `idmesh up`.
     pub fn start(name: &str, trace: &Path, settings: &Settings) -> Deployment {
         let mut deployment = Self::configure(name, trace, settings);
         let child = deployment.spawn(&["up"]);
         deployment.children.push(("up".into(), child));
         deployment
+    }
+
+    /// `idmesh replay --topology` of this deployment's topology over
+    /// `trace`: the centralized twin's answers at the truth lines.
+    pub fn twin(&self, trace: &Path) -> Vec<Value> {
+        let config = self.config.to_string_lossy().into_owned();
+        replay_lines(trace, &["--topology", &config])
     }
 
     /// The same deployment with every process started on its own (the
@@ -519,6 +523,22 @@ impl Deployment {
             .collect()
     }
 
+    /// The stream's items each leader applied (mixes, observations,
+    /// handovers and identity reads; the `Begin` and the cuts that queries
+    /// place, which every leader gets, left out).
+    pub fn items_per_leader(&self) -> Vec<u64> {
+        let count = |l: &Value, field: &str| l[field].as_u64().unwrap_or(0);
+        self.leader_stats()
+            .iter()
+            .map(|l| {
+                ["mixes", "observations", "handovers", "identifies"]
+                    .iter()
+                    .map(|f| count(l, f))
+                    .sum()
+            })
+            .collect()
+    }
+
     /// A counter of `idmesh query stats`, summed over the leaders.
     pub fn leaders_total(&self, field: &str) -> u64 {
         self.leader_stats()
@@ -712,6 +732,25 @@ fn simulate_crowd(
             "--seed",
             &seed.to_string(),
         ])
+        .arg("--out")
+        .arg(&out)
+        .stderr(Stdio::null())
+        .status()
+        .expect("simulate runs");
+    assert!(status.success());
+    out
+}
+
+/// A random-waypoint crowd (`idmesh simulate --model waypoint`), denser
+/// in the middle of its field than at the edges, stopped after `events`
+/// mix and observe events.
+pub fn waypoint_crowd(dir: &Path, targets: usize, red: usize, events: u64, seed: u64) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let out = dir.join(format!("waypoint-{targets}-{red}-{seed}.jsonl"));
+    let status = Command::new(idmesh())
+        .args(["simulate", "--model", "waypoint"])
+        .args(["--targets", &targets.to_string(), "--red", &red.to_string()])
+        .args(["--events", &events.to_string(), "--seed", &seed.to_string()])
         .arg("--out")
         .arg(&out)
         .stderr(Stdio::null())

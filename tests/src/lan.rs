@@ -302,11 +302,6 @@ impl<'a> LanDeployment<'a> {
                 other => panic!("{}: no role {other:?}", m.name),
             }
         }
-        // Leaders placed on a grid over the trace's field.
-        let places = crate::deployment::leader_places(trace, leaders.len());
-        for (leader, (x, y)) in leaders.iter_mut().zip(places) {
-            leader.at = Some([x, y]);
-        }
         let coordinator = coordinator.expect("a coordinator among the members");
         let mut topology = Topology::new(coordinator, sensors, leaders);
         topology.prefix = prefix.clone();

@@ -10,8 +10,8 @@
 
 use idmesh_tests::compare::{assert_same_marginals, floats};
 use idmesh_tests::deployment::{
-    assert_truth_points, crowd, header_only, leader_places, replay_lines, replay_summary,
-    trace_events, truth_lines, watermark_events, Deployment, Factored, Settings, SplitSetting,
+    assert_truth_points, crowd, grid_over, header_only, replay_lines, replay_summary, trace_events,
+    truth_lines, watermark_events, Deployment, Factored, Settings, SplitSetting,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -22,7 +22,6 @@ use std::time::Duration;
 const FACTORED: Factored = Factored {
     max_component: 3,
     split: SplitSetting::Original,
-    shrink_interest: false,
     regional: false,
 };
 const FACTORED_REPLAY: &[&str] = &[
@@ -136,7 +135,7 @@ fn regions_producer(
         .args([deployment.sensor_endpoint(), &deployment.prefix])
         .args(["--batch", &batch.to_string()])
         .args(
-            leader_places(trace, sensors)
+            grid_over(trace, sensors)
                 .iter()
                 .enumerate()
                 .flat_map(|(s, (x, y))| ["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]),

@@ -33,11 +33,11 @@ use super::ingest::{header_only, send};
 use super::Deployment;
 use crate::runtime::loopback::{self, Ports};
 use crate::runtime::query::ask;
-use crate::runtime::topology::{BeliefKind, Sparsification, Topology};
+use crate::runtime::topology::{BeliefKind, RegionsSetting, Sparsification, Topology};
 use anyhow::{bail, Context, Result};
 use idmesh_eval::eval::accuracy::{table3_budget, table3_crowds, Crowd, Engine, Start, Written};
 use idmesh_eval::eval::live::{LiveRow, TABLE_HEADER};
-use idmesh_placement::factored_options;
+use idmesh_placement::{factored_options, RegionRule};
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -234,7 +234,7 @@ async fn live_answers(
     let header = header_only(trace, folder)?;
     // The sensor streams what the producer sends (its trace is the header
     // alone); the leaders are placed over the crowd's field.
-    let plan = plan(kind, LEADERS, crowd.n, &header, trace)?;
+    let plan = plan(kind, LEADERS, crowd.n, &header)?;
     let config = folder.join(format!("topology-{}.toml", kind.tag()));
     let deployment = Deployment::launch(&plan, &config).await?;
     let answers = ask_every_truth_line(&deployment, written).await;
@@ -244,10 +244,9 @@ async fn live_answers(
 }
 
 /// A loopback deployment of `leaders` leaders holding `kind` for a crowd
-/// of `n` targets: its sensor streams `trace`, its leaders are placed over
-/// the crowd of `placed_by`.
-fn plan(kind: Kind, leaders: usize, n: usize, trace: &Path, placed_by: &Path) -> Result<Topology> {
-    let mut topology = loopback::topology(trace, placed_by, leaders, 1, Ports::Free)?;
+/// of `n` targets: its sensor streams `trace`.
+fn plan(kind: Kind, leaders: usize, n: usize, trace: &Path) -> Result<Topology> {
+    let mut topology = loopback::topology(trace, leaders, 1, Ports::Free)?;
     topology.prefix = format!("idmesh/accuracy-{}-{}", kind.tag(), std::process::id());
     topology.belief = kind.belief();
     topology.regional = kind == Kind::Regional;
@@ -266,7 +265,7 @@ fn plan(kind: Kind, leaders: usize, n: usize, trace: &Path, placed_by: &Path) ->
 /// `trace`'s crowd as the loopback places them (written to `folder` and
 /// read back, so the places are what a deployment reads).
 fn placed_topology(leaders: usize, n: usize, folder: &Path, trace: &Path) -> Result<Topology> {
-    let topology = plan(Kind::Regional, leaders, n, trace, trace)?;
+    let topology = plan(Kind::Regional, leaders, n, trace)?;
     let path = folder.join(format!("topology-regional-{leaders}.toml"));
     topology.save(&path)?;
     Topology::load(&path)
@@ -274,17 +273,27 @@ fn placed_topology(leaders: usize, n: usize, folder: &Path, trace: &Path) -> Res
 
 /// The centralized engine a regional deployment with `topology` equals:
 /// the factored belief with its settings under the regional rule of its
-/// leaders' places.
+/// leaders' regions.
 fn regional(written: &Written, trace: &Path, topology: &Topology) -> Result<Vec<Vec<f64>>> {
     let start = topology
         .factored()
         .context("a regional topology holds the factored belief")?;
-    let places: Vec<_> = topology
-        .leader
-        .iter()
-        .map(|l| l.at.map(|[x, y]| (x, y)))
-        .collect();
-    written.regional(trace, factored_options(&start), &places)
+    let rule = match topology.regions {
+        RegionsSetting::Fitted => RegionRule::fitted(),
+        RegionsSetting::Fixed => RegionRule::Fixed(
+            topology
+                .leader
+                .iter()
+                .map(|l| l.at.map(|[x, y]| (x, y)))
+                .collect(),
+        ),
+    };
+    written.regional(
+        trace,
+        factored_options(&start),
+        &rule,
+        topology.leader.len(),
+    )
 }
 
 async fn ask_every_truth_line(deployment: &Deployment, written: &Written) -> Result<Vec<Vec<f64>>> {

@@ -56,10 +56,6 @@ pub struct BenchOptions {
     pub leaders: Vec<usize>,
     /// The leaders' belief.
     pub belief: BeliefKind,
-    /// Factored: leaders' interests shrink.
-    pub shrink_interest: bool,
-    /// Factored: the regional rule.
-    pub regional: bool,
     /// The sensor's flow control per leader (the topology's `window` is
     /// this times the leaders); None: no window.
     pub window: Option<u64>,
@@ -152,7 +148,7 @@ fn ingestion(
     let mut several = Vec::new();
     for count in 1..=3 {
         let deployment = runtime.block_on(Deployment::start_sensors(
-            options, &header, trace, 3, None, true, count,
+            options, &header, 3, None, true, count,
         ))?;
         eprintln!("bench: {count} live sensor(s), each fed by its own producer");
         let figures = runtime.block_on(sensors::measure(
@@ -269,10 +265,8 @@ fn report(options: &BenchOptions, measured: &Measured) -> Result<String> {
         options.duration,
         match options.belief {
             BeliefKind::Factored => format!(
-                "the factored belief (components of at most {} tracks, local split rule{}, leaders' interests {})",
+                "the factored belief at the default settings (components of at most {} tracks, local split rule, regional rule, regions fitted to the crowd)",
                 default_max_component(),
-                if options.regional { ", regional rule" } else { "" },
-                if options.shrink_interest { "shrinking" } else { "growing" }
             ),
             BeliefKind::Radon => format!(
                 "the Radon belief, distributed rule, budget {} sets per leader",
@@ -348,16 +342,8 @@ pub fn arguments(options: &BenchOptions) -> Vec<String> {
         set("repeat", options.repeat.to_string());
     }
     set("belief", options.belief.name().into());
-    match options.belief {
-        BeliefKind::Factored => {
-            if options.shrink_interest {
-                set("shrink-interest", String::new());
-            }
-            if options.regional {
-                set("regional", String::new());
-            }
-        }
-        BeliefKind::Radon => set("budget", options.budget.to_string()),
+    if options.belief == BeliefKind::Radon {
+        set("budget", options.budget.to_string());
     }
     if let Some(window) = options.window {
         set("window", window.to_string());
@@ -422,11 +408,7 @@ pub fn page(options: &BenchOptions, report: &str, made: &Made) -> Result<String>
                 "largest component",
                 format!("{} tracks", default_max_component()),
             )?;
-            row(
-                "leaders' interests shrink",
-                yes_no(options.shrink_interest).into(),
-            )?;
-            row("regional rule", yes_no(options.regional).into())?;
+            row("regional rule, fitted regions", "yes (the default)".into())?;
         }
         BeliefKind::Radon => row("sets per leader", options.budget.to_string())?,
     }
@@ -471,15 +453,14 @@ impl Deployment {
         rate: Option<f64>,
         live: bool,
     ) -> Result<Self> {
-        Self::start_sensors(options, trace, trace, leaders, rate, live, 1).await
+        Self::start_sensors(options, trace, leaders, rate, live, 1).await
     }
 
     /// [`Deployment::start`] with `sensors` sensors (their leaders' batches
-    /// sent by each in turn), the leaders placed over `placed_by`'s field.
+    /// sent by each in turn).
     async fn start_sensors(
         options: &BenchOptions,
         trace: &Path,
-        placed_by: &Path,
         leaders: usize,
         rate: Option<f64>,
         live: bool,
@@ -487,15 +468,12 @@ impl Deployment {
     ) -> Result<Self> {
         let mut topology = loopback::topology(
             &std::fs::canonicalize(trace)?,
-            placed_by,
             leaders,
             sensors,
             Ports::Free,
         )?;
         topology.prefix = format!("idmesh/bench-{leaders}-{}", std::process::id());
         topology.belief = options.belief;
-        topology.shrink_interest = options.shrink_interest;
-        topology.regional = options.regional;
         topology.distributed_rule = true;
         topology.budget = options.budget;
         // Streaming flat out, leaders can be seconds behind the sensor.
@@ -621,8 +599,6 @@ mod tests {
             seed: 1,
             leaders: vec![1, 2, 4],
             belief: BeliefKind::Factored,
-            shrink_interest: false,
-            regional: true,
             window: Some(256),
             budget: 400,
             repeat: 6,
@@ -714,7 +690,7 @@ mod tests {
         let report = report(&options, &measured()).unwrap();
         let page = page(&options, &report, &made()).unwrap();
         let command = "bench --targets 40 --red 10 --duration 3000 --seed 1 --leaders 1,2,4 \
-                       --repeat 6 --belief factored --regional --window 256 --queries 100 \
+                       --repeat 6 --belief factored --window 256 --queries 100 \
                        --stream-rate 2000 --out docs/bench.md";
         assert!(page.starts_with("# idmesh bench: "), "{page}");
         assert!(
@@ -741,7 +717,7 @@ mod tests {
             "| targets (n) | 40 |",
             "| leader counts | 1, 2, 4 |",
             "| rounds | 6 |",
-            "| regional rule | yes |",
+            "| regional rule, fitted regions | yes (the default) |",
             "| flow control, items per leader | 256 |",
             "| paced stream for latency, events/s | 2000 |",
         ] {

@@ -14,7 +14,7 @@
 use super::ingest::{all_accepted, put};
 use super::latency::percentile;
 use super::Deployment;
-use crate::runtime::launch::leader_places;
+use crate::runtime::launch::field_corners;
 use crate::runtime::query::ask;
 use anyhow::{anyhow, bail, Result};
 use idmesh_protocol::wire::query::MarginalsAnswer;
@@ -46,7 +46,8 @@ type Timed = Vec<(f64, String)>;
 
 /// Each sensor's lines, by region, and the crowd's last time.
 fn split(trace: &Path, sensors: usize) -> Result<(Vec<Timed>, f64)> {
-    let places = leader_places(trace, sensors)?;
+    // Each sensor sees the cell of a grid over the field.
+    let places = idmesh_placement::grid_places(field_corners(trace)?, sensors);
     let text = std::fs::read_to_string(trace)?;
     let mut at: Vec<Option<(f64, f64)>> = Vec::new();
     let mut given = vec![Vec::new(); sensors];

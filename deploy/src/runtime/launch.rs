@@ -182,7 +182,7 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
             _ => break,
         }
     }
-    let mut topology = loopback::topology(&trace, &trace, 4, 1, Ports::From(7447))?;
+    let mut topology = loopback::topology(&trace, 4, 1, Ports::From(7447))?;
     // The demo's crowd reads identities, and a stream with identities
     // holds the Radon belief (see [`BeliefKind`]): say so.
     topology.belief = BeliefKind::Radon;
@@ -344,56 +344,6 @@ pub fn count_events(trace: &Path) -> Result<u64> {
     Ok(events)
 }
 
-/// Where a loopback deployment of `leaders` leaders over `trace` places
-/// them: the centres of a grid over the field its moves span, moved by
-/// Lloyd's iterations (k-means) towards the centres of the positions
-/// nearest to each, so that each leader's region (the positions nearest to
-/// it) holds about as many of the crowd's positions as the others; then
-/// moved on until each is sent about as many items
-/// ([`idmesh_placement::balanced`]): a crowd meets more often where it is
-/// denser, so even shares of its positions load the leaders in the middle
-/// of it most. Deterministic: the same trace, the same places.
-pub fn leader_places(trace: &Path, leaders: usize) -> Result<Vec<(f64, f64)>> {
-    const ROUNDS: usize = 30;
-    let mut places = idmesh_placement::grid_places(field_corners(trace)?, leaders);
-    let mut positions = Vec::new();
-    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
-    let header = reader.read_header()?;
-    let mut workload = idmesh_placement::Workload::new(header.tracks);
-    while let Some(n) = reader.read_line()? {
-        if let idmesh_protocol::Line::Move(m) = &n.line {
-            positions.push((m.x, m.y));
-        }
-        workload.push(&n.line);
-    }
-    if positions.is_empty() || leaders < 2 {
-        return Ok(places);
-    }
-    for _ in 0..ROUNDS {
-        let regions = regions_of(&places);
-        let mut sums = vec![(0.0, 0.0, 0usize); leaders];
-        for &(x, y) in &positions {
-            let nearest = regions.nearest(x, y).map_or(0, usize::from);
-            let s = &mut sums[nearest];
-            *s = (s.0 + x, s.1 + y, s.2 + 1);
-        }
-        // A leader nearest to no position keeps its place.
-        for (place, &(sx, sy, count)) in places.iter_mut().zip(&sums) {
-            if count > 0 {
-                *place = (sx / count as f64, sy / count as f64);
-            }
-        }
-    }
-    Ok(idmesh_placement::balanced(places, &workload))
-}
-
-/// The regions of leaders at `places` (the sensor's rule: a position
-/// belongs to the nearest place, the first of equals).
-fn regions_of(places: &[(f64, f64)]) -> idmesh_placement::Regions {
-    let places: Vec<_> = places.iter().map(|&p| Some(p)).collect();
-    idmesh_placement::Regions::new(&places, 0)
-}
-
 /// The bounding box of the trace's positions: (min x, min y, max x, max y).
 pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
     let mut reader = idmesh_protocol::TraceReader::open(trace)?;
@@ -413,51 +363,4 @@ pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
         return Ok((0.0, 0.0, 1.0, 1.0));
     }
     Ok(b)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A crowd denser towards one corner (positions on a grid whose lines
-    /// crowd together there): the grid's centres give the corner's leader
-    /// most of it; the places k-means moves them to share it out better,
-    /// and the same trace gives the same places.
-    #[test]
-    fn leaders_are_placed_where_the_crowd_is() {
-        let dir = std::env::temp_dir().join(format!("idmesh-places-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let trace = dir.join("t.jsonl");
-        let mut text =
-            "{\"kind\":\"header\",\"format\":\"idmesh-trace\",\"version\":1,\"tracks\":400,\"red\":1}\n"
-                .to_string();
-        let mut positions = Vec::new();
-        for t in 0..400u32 {
-            let (i, j) = ((t % 20) as f64 / 19.0, (t / 20) as f64 / 19.0);
-            let (x, y) = (100.0 * i * i, 100.0 * j * j);
-            positions.push((x, y));
-            text.push_str(&format!(
-                "{{\"kind\":\"move\",\"time\":0,\"track\":{t},\"x\":{x},\"y\":{y}}}\n"
-            ));
-        }
-        std::fs::write(&trace, text).unwrap();
-        let places = leader_places(&trace, 4).unwrap();
-        assert_eq!(places, leader_places(&trace, 4).unwrap());
-        assert!(leader_places(&dir.join("gone.jsonl"), 2).is_err());
-        std::fs::remove_dir_all(&dir).unwrap();
-        let busiest = |places: &[(f64, f64)]| {
-            let mut counts = vec![0usize; places.len()];
-            let regions = regions_of(places);
-            for &(x, y) in &positions {
-                counts[regions.nearest(x, y).map_or(0, usize::from)] += 1;
-            }
-            counts.into_iter().max().unwrap()
-        };
-        let grid = [(25.0, 25.0), (75.0, 25.0), (25.0, 75.0), (75.0, 75.0)];
-        let (on_grid, placed) = (busiest(&grid), busiest(&places));
-        assert!(
-            placed < on_grid,
-            "{placed} vs {on_grid} on the grid, at {places:?}"
-        );
-    }
 }

@@ -12,4 +12,5 @@ pub mod query;
 pub mod roles;
 pub mod security;
 pub mod topology;
+mod twin;
 pub mod web;

@@ -240,6 +240,7 @@ async fn sensor(
             omp: topology.sparsify == Sparsification::Overcomplete,
             factored: topology.factored(),
             placed: idmesh_placement::leading_places(header.tracks, &source.lines),
+            regions: None,
         },
         &header,
     )?;

@@ -8,10 +8,11 @@
 //!                                # the coordinator; or "radon"
 //! max_component = 7              # factored: most tracks of a component
 //! split = "original"             # factored: or "recent", "least-loss"
-//! regional = false               # factored: components stay in their region
-//!                                # (docs/design/architecture.md)
-//! shrink_interest = false        # factored: leaders unfollow tracks they no
-//!                                # longer surveil or hold a component of
+//! regional = true                # factored: components stay in their
+//!                                # region (false: they span leaders, who
+//!                                # then do not scale out)
+//! regions = "fitted"             # cells fitted to the crowd and redrawn as
+//!                                # it moves; or "fixed": each leader's `at`
 //! # The Radon belief's settings: of every stream under belief = "radon",
 //! # and of streams with identities under "factored" (their leaders hold
 //! # the Radon belief beside the information matrix).
@@ -59,7 +60,8 @@
 //! [[leader]]
 //! name = "leader-0"
 //! listen = "tcp/127.0.0.1:7448"
-//! at = [10.0, 10.0]              # tracks go to the nearest leader
+//! # at = [10.0, 10.0]            # regions = "fixed" only: tracks go to the
+//!                                # nearest leader
 //!
 //! # [security]                   # optional: mutual TLS and access control
 //! # certs = "certs"              # ca.pem, <name>.pem, <name>.key
@@ -104,17 +106,21 @@ pub struct Topology {
     /// Factored: how a component too large to keep is split.
     #[serde(default, skip_serializing_if = "is_default")]
     pub split: SplitSetting,
-    /// Factored: leaders unfollow the tracks they neither surveil nor hold
-    /// a component of (else a leader follows every track a component ever
-    /// brought it).
-    #[serde(default, skip_serializing_if = "is_default")]
-    pub shrink_interest: bool,
+    /// A setting that was removed: leaders always unfollow the tracks they
+    /// neither surveil nor hold a component of. Read only to say so.
+    #[serde(rename = "shrink_interest", default, skip_serializing)]
+    pub removed_shrink_interest: Option<toml::Value>,
     /// Factored: the regional rule (a mix across two leaders' regions
     /// keeps its components apart; a track handed over is split off its
     /// component), an approximation that keeps components in their
-    /// holder's region; `idmesh replay --regions` runs it too.
-    #[serde(default, skip_serializing_if = "is_default")]
+    /// holder's region, so that leaders scale out (docs/guide/deploying.md,
+    /// "Belief settings", has its measured cost); `idmesh replay
+    /// --topology` runs it too.
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
     pub regional: bool,
+    /// How tracks are shared among leaders by where they are.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub regions: RegionsSetting,
     #[serde(default, skip_serializing_if = "is_default")]
     pub distributed_rule: bool,
     #[serde(default, skip_serializing_if = "is_default")]
@@ -175,6 +181,26 @@ pub struct Topology {
     pub dir: PathBuf,
 }
 
+/// How a deployment shares tracks among its leaders by their positions.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RegionsSetting {
+    /// Cells fitted to where the crowd's items are, redrawn as it moves
+    /// (`idmesh_placement::Fitted`): each leader is sent about as many.
+    #[default]
+    Fitted,
+    /// Each track to the leader whose `at` is nearest its last position.
+    Fixed,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
+}
+
 /// The belief the leaders hold on a property stream. The factored belief
 /// is the default: the most accurate of the project's methods
 /// (docs/results.md). A stream with identities holds the Radon belief
@@ -228,7 +254,9 @@ impl Topology {
                 SplitSetting::Recent => WireSplit::Recent,
                 SplitSetting::LeastLoss => WireSplit::LeastLoss { rounds: 1 },
             },
-            shrink: self.shrink_interest,
+            // Leaders always unfollow what they no longer need: without
+            // it they follow every track a component ever brought them.
+            shrink: true,
             regional: self.regional,
         })
     }
@@ -490,8 +518,9 @@ impl Topology {
             belief: BeliefKind::default(),
             max_component: default_max_component(),
             split: SplitSetting::default(),
-            shrink_interest: false,
-            regional: false,
+            removed_shrink_interest: None,
+            regional: true,
+            regions: RegionsSetting::default(),
             distributed_rule: false,
             budget: 0,
             sparsify: Sparsification::default(),
@@ -548,9 +577,28 @@ impl Topology {
                 bail!("two processes listen on {}", m.listen);
             }
         }
+        if self.removed_shrink_interest.is_some() {
+            bail!(
+                "shrink_interest was removed: leaders always unfollow the tracks they neither \
+                 surveil nor hold a component of; delete the line"
+            );
+        }
         let placed = self.leader.iter().filter(|l| l.at.is_some()).count();
-        if placed != 0 && placed != self.leader.len() {
-            bail!("give every leader a position (at = [x, y]) or none");
+        match self.regions {
+            RegionsSetting::Fixed if placed != self.leader.len() => {
+                bail!("regions = \"fixed\": give every leader a position (at = [x, y])")
+            }
+            RegionsSetting::Fitted if placed > 0 => {
+                let leader = self.leader.iter().find(|l| l.at.is_some()).map(|l| &l.name);
+                bail!(
+                    "leader {}: `at` places a leader only under regions = \"fixed\"; by \
+                     default regions are fitted to the crowd and redrawn as it moves \
+                     (docs/guide/deploying.md, \"Regions\"): delete `at`, or set \
+                     regions = \"fixed\"",
+                    leader.map_or("", String::as_str)
+                )
+            }
+            _ => {}
         }
         if self.sensors.is_empty() {
             bail!("a [sensor] is needed");
@@ -746,8 +794,8 @@ mod tests {
         topology.belief = BeliefKind::Radon;
         topology.max_component = 9;
         topology.split = SplitSetting::LeastLoss;
-        topology.shrink_interest = true;
-        topology.regional = true;
+        topology.regional = false;
+        topology.regions = RegionsSetting::Fixed;
         topology.distributed_rule = true;
         topology.budget = 300;
         topology.sparsify = Sparsification::Overcomplete;

@@ -10,21 +10,23 @@
 //!   function `idmesh replay` reads a trace header with);
 //! - how the leaders' partial sums at one cut add up to the answer
 //!   ([`combine`]), which the coordinator computes;
-//! - which leader surveils each track as targets move ([`Regions`]), and
-//!   the factored belief's regional rule that follows from it
-//!   ([`Regional`]), run by the gateway, the leaders and `idmesh replay`;
-//!   and where to place leaders so that each is sent about as many items
-//!   ([`balanced`]).
+//! - which leader surveils each track as targets move ([`Regions`]: by
+//!   default cells fitted to the crowd and redrawn as it moves, so that
+//!   each leader is sent about as many items, [`Fitted`]), and the
+//!   factored belief's regional rule that follows from it ([`Regional`]),
+//!   run by the sensor, the leaders and `idmesh replay`.
 //!
 //! docs/design/architecture.md ("Who holds what", "Queries") says why the shares
 //! add up: rollup and conditioning act on the Radon masses atom by atom and
 //! linearly (Section 5.4 of the property-management paper).
 
-mod balance;
+mod fitted;
+mod load;
 mod regions;
 
-pub use balance::{balanced, Workload};
-pub use regions::{grid_places, leading_places, Regional, Regions};
+pub use fitted::{Fitted, TOLERANCE, WINDOW_PER_LEADER};
+pub use load::{busiest_share, items_sent};
+pub use regions::{grid_places, leading_places, Handover, RegionRule, Regional, Regions};
 
 use idmesh_belief::factored::{FactoredShare, HeldComponent};
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};

@@ -1,63 +1,158 @@
 //! Which leader surveils each track, and the regional rule of the factored
-//! belief that follows from it (docs/design/architecture.md, "Components that stay
-//! in their region").
+//! belief that follows from it (docs/design/architecture.md, "Components
+//! that stay in their region").
 //!
-//! The sensor gateway routes by [`Regions`] (a track belongs to the nearest
-//! leader to its last position; to leader `track mod L` before any
-//! position, or when some leader has no position; a stream whose first
-//! lines place its tracks starts each with the leader nearest to that
-//! place, [`Regions::starting`]), and `idmesh replay
-//! --regions` runs the same function, so the centralized engine applies
-//! the regional rule at the same events as the leaders: a mix of tracks in
-//! two regions keeps their components apart
-//! ([`FactoredBelief::mix_apart`]), and a track that changes region is
-//! split off its component ([`FactoredBelief::split_off`]). The simulator
-//! and the accuracy bench drive [`Regional`] line by line.
+//! The sensor routes by [`Regions`]: by default cells fitted to the crowd
+//! and redrawn as it moves ([`crate::Fitted`]); as an option, fixed places
+//! (a track belongs to the leader nearest its last position). Tracks start
+//! with leader `track mod L`, or, in a stream whose first lines place
+//! them, in their regions ([`Regions::starting`]). `idmesh replay` runs the
+//! same function line by line ([`Regions::take`]), so the centralized
+//! engine applies the regional rule at the same events as the leaders: a
+//! mix of tracks in two regions keeps their components apart
+//! ([`FactoredBelief::mix_apart`]), and a track handed over is split off
+//! its component ([`FactoredBelief::split_off`]). The simulator and the
+//! accuracy evaluation drive [`Regional`] line by line too.
 
+use crate::fitted::Fitted;
 use idmesh_belief::{event_of, BeliefError, FactoredBelief, Field, Mix, Observe, PropertyFilter};
 use idmesh_protocol::trace::Line;
 
-/// The leaders' places and each track's surveilling leader.
+/// How tracks are shared among leaders by where they are.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum RegionRule {
+    /// Cells fitted to the crowd's items and redrawn as it moves
+    /// ([`Fitted`]): the default, which shares out the items evenly. A
+    /// window is `window_per_leader` items per leader
+    /// ([`crate::WINDOW_PER_LEADER`] unless a test wants redraws sooner).
+    Fitted { window_per_leader: u64 },
+    /// Each track to the leader nearest its last position, the leaders
+    /// sitting at these places (one per leader; None for every leader:
+    /// tracks stay with leader `track mod L`).
+    Fixed(Vec<Option<(f64, f64)>>),
+}
+
+impl RegionRule {
+    /// Fitted cells with the default window.
+    pub fn fitted() -> Self {
+        RegionRule::Fitted {
+            window_per_leader: crate::WINDOW_PER_LEADER,
+        }
+    }
+}
+
+/// A track changing leader: at a `move` into another region, or at a
+/// redraw of fitted cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Handover {
+    pub track: u32,
+    pub from: u16,
+    pub to: u16,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+enum Rule {
+    Fitted(Fitted),
+    /// Where each leader sits (None for all: tracks never change region).
+    Fixed(Option<Vec<(f64, f64)>>),
+}
+
+/// Which leader surveils each track, and the rule that moves them.
+///
+/// A stream often opens with `move` lines that place its tracks before
+/// anything happens (the leading moves). They only record places; at the
+/// stream's first other event ([`Regions::before`]) the tracks they placed
+/// go to their regions at once (fitted cells are first drawn then). A
+/// sensor that knows the leading moves ahead (it streams a trace file)
+/// starts there ([`Regions::starting`]) and reaches the same owners.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Regions {
-    /// Where each leader sits (None for all: tracks never change region).
-    places: Option<Vec<(f64, f64)>>,
+    rule: Rule,
     owners: Vec<u16>,
+    /// The places of the leading moves so far; None once another event
+    /// has come.
+    leading: Option<Vec<Option<(f64, f64)>>>,
+    /// Whether the tracks the leading moves place are in their regions
+    /// already ([`Regions::starting`]).
+    assigned: bool,
 }
 
 impl Regions {
-    /// `tracks` tracks among leaders at `places` (one per leader; a track
-    /// goes to the nearest): each track starts with leader `track mod L`.
-    pub fn new(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
-        let leaders = places.len().max(1);
+    /// `tracks` tracks among `leaders` leaders by `rule`: each track
+    /// starts with leader `track mod L`.
+    pub fn new(rule: &RegionRule, leaders: usize, tracks: usize) -> Self {
+        let rule = match rule {
+            RegionRule::Fitted { window_per_leader } => {
+                Rule::Fitted(Fitted::new(leaders, tracks, *window_per_leader))
+            }
+            RegionRule::Fixed(places) => Rule::Fixed(places.iter().copied().collect()),
+        };
+        let leaders = leaders.max(1);
         Regions {
-            places: places.iter().copied().collect(),
+            rule,
             owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
+            leading: Some(vec![None; tracks]),
+            assigned: false,
         }
     }
 
-    /// Like [`Regions::new`], but each track placed by the stream's
-    /// leading `move` lines (those before its first other event, see
-    /// [`leading_places`]) starts with the leader nearest to that place.
-    /// Starting there rather than with leader `track mod L` spares a
-    /// handover per track at its first move (an item at two leaders, and a
-    /// component sent between them). Nothing has mixed before those moves,
-    /// so the belief is the same either way: the centralized engine, which
-    /// starts round robin, hands the tracks over at those moves by
-    /// splitting off singletons, which changes nothing.
-    /// Tracks beyond `leading` start round robin.
+    /// Fixed places (see [`RegionRule::Fixed`]), one per leader.
+    pub fn fixed(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
+        Regions::new(&RegionRule::Fixed(places.to_vec()), places.len(), tracks)
+    }
+
+    /// Like [`Regions::new`], with the stream's leading `move` lines known
+    /// ahead ([`leading_places`]): the tracks they place start in their
+    /// regions, so that the stream's `Begin` names those owners and no
+    /// track is handed over at its first event (an item at two leaders,
+    /// and a component sent between them). The leading moves, when they
+    /// come, change nothing; the owners from then on are those
+    /// [`Regions::new`] reaches over the same lines.
     pub fn starting(
-        places: &[Option<(f64, f64)>],
+        rule: &RegionRule,
+        leaders: usize,
         tracks: usize,
         leading: &[Option<(f64, f64)>],
     ) -> Self {
-        let mut regions = Regions::new(places, tracks);
-        for (track, place) in leading.iter().enumerate().take(tracks) {
-            if let Some((x, y)) = *place {
-                regions.moved(track as u32, x, y);
+        let mut regions = Regions::new(rule, leaders, tracks);
+        if let Some(places) = &mut regions.leading {
+            for (slot, place) in places.iter_mut().zip(leading) {
+                *slot = *place;
             }
         }
+        regions.assign();
+        regions.assigned = true;
         regions
+    }
+
+    /// The tracks the leading moves placed go to their regions: the
+    /// handovers that makes (none on a stream that places nothing).
+    fn assign(&mut self) -> Vec<Handover> {
+        let Some(leading) = self.leading.clone() else {
+            return Vec::new();
+        };
+        let mut handovers = Vec::new();
+        for (track, place) in leading.iter().enumerate() {
+            if let Some((x, y)) = *place {
+                handovers.extend(self.moved(track as u32, x, y));
+            }
+        }
+        if let Rule::Fitted(fitted) = &mut self.rule {
+            if leading.iter().any(Option::is_some) && self.owners.len() > 0 {
+                for (track, to) in fitted.draw(&self.owners) {
+                    let slot = &mut self.owners[track as usize];
+                    if *slot != to {
+                        handovers.push(Handover {
+                            track,
+                            from: *slot,
+                            to,
+                        });
+                        *slot = to;
+                    }
+                }
+            }
+        }
+        handovers
     }
 
     /// The leader surveilling each track now.
@@ -69,11 +164,29 @@ impl Regions {
         self.owners.get(track as usize).copied()
     }
 
-    /// The leader nearest to (x, y) (the first of equals); None when the
-    /// leaders have no places.
-    pub fn nearest(&self, x: f64, y: f64) -> Option<u16> {
+    /// How many times fitted cells were drawn again since the first draw
+    /// (0 under fixed places).
+    pub fn redraws(&self) -> u64 {
+        match &self.rule {
+            Rule::Fitted(fitted) => fitted.redraws(),
+            Rule::Fixed(_) => 0,
+        }
+    }
+
+    /// Where each leader is, for a map: its place, or under fitted cells
+    /// the mean position of the tracks it surveils.
+    pub fn places(&self) -> Vec<Option<(f64, f64)>> {
+        match &self.rule {
+            Rule::Fitted(fitted) => fitted.places(&self.owners),
+            Rule::Fixed(Some(places)) => places.iter().map(|&p| Some(p)).collect(),
+            Rule::Fixed(None) => Vec::new(),
+        }
+    }
+
+    /// The fixed place nearest to (x, y) (the first of equals).
+    fn nearest(places: &[(f64, f64)], x: f64, y: f64) -> Option<u16> {
         let mut best: Option<(f64, u16)> = None;
-        for (i, &(lx, ly)) in self.places.as_deref()?.iter().enumerate() {
+        for (i, &(lx, ly)) in places.iter().enumerate() {
             let d = (lx - x).powi(2) + (ly - y).powi(2);
             if best.is_none_or(|(b, _)| d < b) {
                 best = Some((d, i as u16));
@@ -82,16 +195,100 @@ impl Regions {
         best.map(|b| b.1)
     }
 
-    /// `track` is now at (x, y): its (old, new) leader if that changes it
-    /// (a handover), which is then recorded.
-    pub fn moved(&mut self, track: u32, x: f64, y: f64) -> Option<(u16, u16)> {
-        let to = self.nearest(x, y)?;
+    /// `track` is now at (x, y): its handover if that changes its leader,
+    /// which is then recorded (fitted cells not drawn yet: none).
+    fn moved(&mut self, track: u32, x: f64, y: f64) -> Option<Handover> {
+        let to = match &mut self.rule {
+            Rule::Fixed(places) => Regions::nearest(places.as_deref()?, x, y)?,
+            Rule::Fitted(fitted) => fitted.place(track, x, y)?,
+        };
         let slot = self.owners.get_mut(track as usize)?;
         let from = *slot;
         (from != to).then(|| {
             *slot = to;
-            (from, to)
+            Handover { track, from, to }
         })
+    }
+
+    /// Takes one line of the stream before the item it routes (if any)
+    /// goes out: at the first event after the leading moves, the
+    /// handovers that put the tracks they placed in their regions.
+    pub fn before(&mut self, line: &Line) -> Vec<Handover> {
+        if self.leading.is_none() || !line.is_event() || matches!(line, Line::Move(_)) {
+            return Vec::new();
+        }
+        let handovers = if self.assigned {
+            Vec::new()
+        } else {
+            self.assign()
+        };
+        self.leading = None;
+        self.assigned = true;
+        handovers
+    }
+
+    /// Takes one line of the stream after the item it routes (if any) has
+    /// gone to the owners it had: the handovers it makes, in order — a
+    /// `move`'s into another region, then those of a redraw of fitted
+    /// cells when the line ends a window that calls for one. Every
+    /// process that follows owners (the sensor, `idmesh replay`, the
+    /// simulator) calls [`Regions::before`] and this on the same lines, in
+    /// the same order.
+    pub fn after(&mut self, line: &Line) -> Vec<Handover> {
+        let known = |t: u32| (t as usize) < self.owners.len();
+        let mut handovers = Vec::new();
+        match line {
+            Line::Move(m) if known(m.track) => match &mut self.leading {
+                Some(leading) => leading[m.track as usize] = Some((m.x, m.y)),
+                // A track keeps its leader between redraws of fitted
+                // cells, wherever it walks (see `crate::fitted`).
+                None => match &mut self.rule {
+                    Rule::Fitted(fitted) => fitted.record(m.track, m.x, m.y),
+                    Rule::Fixed(_) => handovers.extend(self.moved(m.track, m.x, m.y)),
+                },
+            },
+            Line::Mix(mix) if known(mix.a) && known(mix.b) => {
+                let (a, b) = (self.owners[mix.a as usize], self.owners[mix.b as usize]);
+                if let Rule::Fitted(fitted) = &mut self.rule {
+                    let leaders = if a == b { vec![a] } else { vec![a, b] };
+                    fitted.sent(&[mix.a, mix.b], &leaders);
+                }
+            }
+            Line::Observe(o) if known(o.track) => self.sent_one(o.track),
+            Line::Identify(read) if known(read.track) => self.sent_one(read.track),
+            _ => {}
+        }
+        let Rule::Fitted(fitted) = &mut self.rule else {
+            return handovers;
+        };
+        for h in &handovers {
+            fitted.sent(&[], &[h.from, h.to]);
+        }
+        if fitted.window_over() {
+            let first = handovers.len();
+            for (track, to) in fitted.draw(&self.owners) {
+                let slot = &mut self.owners[track as usize];
+                if *slot != to {
+                    handovers.push(Handover {
+                        track,
+                        from: *slot,
+                        to,
+                    });
+                    *slot = to;
+                }
+            }
+            for h in &handovers[first..] {
+                fitted.sent(&[], &[h.from, h.to]);
+            }
+        }
+        handovers
+    }
+
+    fn sent_one(&mut self, track: u32) {
+        let owner = self.owners[track as usize];
+        if let Rule::Fitted(fitted) = &mut self.rule {
+            fitted.sent(&[track], &[owner]);
+        }
     }
 }
 
@@ -190,21 +387,36 @@ impl Regional {
         &self.belief
     }
 
-    /// `track` is now at (x, y).
-    pub fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError> {
-        match self.regions.moved(track, x, y) {
-            Some(_) => self.belief.split_off(track),
-            None => Ok(()),
-        }
+    pub fn regions(&self) -> &Regions {
+        &self.regions
     }
 
-    /// Applies one trace line (lines without a belief event do nothing).
-    pub fn apply_line(&mut self, line: &Line) -> Result<(), BeliefError> {
-        match (line, event_of(line)) {
-            (Line::Move(m), _) => self.moved(m.track, m.x, m.y),
-            (_, Some(event)) => self.apply(&event),
-            (_, None) => Ok(()),
+    /// Before `line`'s event: the tracks handed over then
+    /// ([`Regions::before`]) are split off their components.
+    pub fn before(&mut self, line: &Line) -> Result<(), BeliefError> {
+        for handover in self.regions.before(line) {
+            self.belief.split_off(handover.track)?;
         }
+        Ok(())
+    }
+
+    /// After `line`'s event: the tracks it hands over ([`Regions::after`])
+    /// are split off their components.
+    pub fn after(&mut self, line: &Line) -> Result<(), BeliefError> {
+        for handover in self.regions.after(line) {
+            self.belief.split_off(handover.track)?;
+        }
+        Ok(())
+    }
+
+    /// Applies one trace line: the handovers before it, its event, the
+    /// handovers after it.
+    pub fn apply_line(&mut self, line: &Line) -> Result<(), BeliefError> {
+        self.before(line)?;
+        if let Some(event) = event_of(line) {
+            self.apply(&event)?;
+        }
+        self.after(line)
     }
 }
 
@@ -255,14 +467,15 @@ mod tests {
 
     #[test]
     fn tracks_start_round_robin_and_go_to_the_nearest_leader() {
-        let mut r = Regions::new(&[Some((0.0, 0.0)), Some((10.0, 0.0))], 3);
+        let mut r = Regions::fixed(&[Some((0.0, 0.0)), Some((10.0, 0.0))], 3);
         assert_eq!(r.owners(), &[0, 1, 0]);
-        assert_eq!(r.moved(0, 9.0, 0.0), Some((0, 1)));
+        let h = |track, from, to| Some(Handover { track, from, to });
+        assert_eq!(r.moved(0, 9.0, 0.0), h(0, 0, 1));
         assert_eq!(r.moved(0, 8.0, 0.0), None, "still nearest to leader 1");
-        assert_eq!(r.moved(1, 1.0, 1.0), Some((1, 0)));
+        assert_eq!(r.moved(1, 1.0, 1.0), h(1, 1, 0));
         assert_eq!(r.moved(7, 1.0, 1.0), None, "an unknown track");
         // Without places nobody moves.
-        let mut fixed = Regions::new(&[None, Some((1.0, 1.0))], 2);
+        let mut fixed = Regions::fixed(&[None, Some((1.0, 1.0))], 2);
         assert_eq!(fixed.moved(0, 1.0, 1.0), None);
         assert_eq!(fixed.owners(), &[0, 1]);
     }
@@ -289,25 +502,59 @@ mod tests {
         let lines = [at(0, 1.0), at(1, 9.0), at(0, 8.0), mix, at(2, 9.0)];
         let leading = leading_places(3, &lines);
         assert_eq!(leading, vec![Some((8.0, 0.0)), Some((9.0, 0.0)), None]);
-        let places = [Some((0.0, 0.0)), Some((10.0, 0.0))];
-        let r = Regions::starting(&places, 3, &leading);
+        let places = RegionRule::Fixed(vec![Some((0.0, 0.0)), Some((10.0, 0.0))]);
+        let r = Regions::starting(&places, 2, 3, &leading);
         assert_eq!(r.owners(), &[1, 1, 0]);
         // The same as starting round robin and moving there.
-        let mut moved = Regions::new(&places, 3);
+        let mut moved = Regions::new(&places, 2, 3);
         moved.moved(0, 8.0, 0.0);
         moved.moved(1, 9.0, 0.0);
-        assert_eq!(moved, r);
+        assert_eq!(moved.owners(), r.owners());
+        // And the same as taking the lines one by one: the leading moves
+        // place, the mix puts them in their regions before it.
+        let mut taken = Regions::new(&places, 2, 3);
+        let handed: Vec<_> = lines
+            .iter()
+            .flat_map(|l| {
+                let mut h = taken.before(l);
+                h.extend(taken.after(l));
+                h
+            })
+            .collect();
+        assert_eq!(taken.owners(), &[1, 1, 1], "2 moved after the mix");
+        assert_eq!(handed.len(), 2);
         // Without places, round robin.
+        let none = RegionRule::Fixed(vec![None, None]);
         assert_eq!(
-            Regions::starting(&[None, None], 3, &leading).owners(),
+            Regions::starting(&none, 2, 3, &leading).owners(),
             &[0, 1, 0]
         );
+        // Fitted cells are drawn over the placed tracks at once: one each
+        // for 0 and 1 (at 8 and 9), labelled so that neither changes
+        // hands; 2 keeps its round-robin leader.
+        let fitted = Regions::starting(&RegionRule::fitted(), 2, 3, &leading);
+        assert_eq!(fitted.owners(), &[0, 1, 0]);
+        assert!(fitted.places()[0].is_some_and(|(x, _)| x == 8.0));
+        let mut taken = Regions::new(&RegionRule::fitted(), 2, 3);
+        for line in &lines {
+            taken.before(line);
+            taken.after(line);
+        }
+        let mut started = fitted.clone();
+        for line in &lines[..4] {
+            assert!(started.before(line).is_empty() && started.after(line).is_empty());
+        }
+        // Track 2's move after the mix, into the cell of 9, only records
+        // where it is: it keeps its leader until the cells are redrawn.
+        assert_eq!(started.after(&lines[4]), vec![]);
+        assert_eq!(started.owners(), &[0, 1, 0]);
+        assert_eq!(taken, started, "the same state either way");
     }
 
     /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of
     /// the mixes certain exchanges), observed now and then (a fixed
     /// linear congruential sequence, so the test needs no generator).
-    fn lines() -> Vec<Line> {
+    fn lines(count: usize) -> Vec<Line> {
         use idmesh_protocol::trace::{Mix as MixLine, Move, Observe as ObserveLine};
         let mut state = 7u64;
         let mut next = |m: u64| {
@@ -316,7 +563,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 33) % m
         };
-        (0..400)
+        (0..count)
             .map(|e| {
                 let time = e as f64;
                 match next(3) {
@@ -361,8 +608,8 @@ mod tests {
     #[test]
     fn one_region_is_the_plain_belief_and_more_keep_components_in_theirs() {
         let mut plain = belief();
-        let mut one = Regional::new(belief(), Regions::new(&[Some((5.0, 5.0))], 12));
-        for line in &lines() {
+        let mut one = Regional::new(belief(), Regions::fixed(&[Some((5.0, 5.0))], 12));
+        for line in &lines(400) {
             one.apply_line(line).unwrap();
             match line {
                 Line::Mix(m) => plain
@@ -384,8 +631,16 @@ mod tests {
             assert_eq!(one.marginals().unwrap(), plain.marginals().unwrap());
         }
         let places = [Some((2.0, 2.0)), Some((8.0, 2.0)), Some((5.0, 8.0))];
-        let mut three = Regional::new(belief(), Regions::new(&places, 12));
-        for line in &lines() {
+        let fixed = Regional::new(belief(), Regions::fixed(&places, 12));
+        let fitted = Regional::new(belief(), Regions::new(&RegionRule::fitted(), 3, 12));
+        // The fitted cells' first window is 300 items long.
+        for (three, count) in [(fixed, 400), (fitted, 1500)] {
+            keeps_components_in_their_regions(three, count);
+        }
+    }
+
+    fn keeps_components_in_their_regions(mut three: Regional, count: usize) {
+        for line in &lines(count) {
             three.apply_line(line).unwrap();
             for component in three.belief().components() {
                 let owners: Vec<_> = component.iter().map(|&t| three.regions.owner(t)).collect();

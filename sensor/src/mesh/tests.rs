@@ -44,6 +44,7 @@ pub(super) fn router(factored: bool) -> Router {
         budget: 0,
         omp: false,
         placed: Vec::new(),
+        regions: None,
     };
     Router::new(config, &header()).expect("a router")
 }

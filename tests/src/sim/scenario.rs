@@ -1,12 +1,13 @@
-//! A random little world for one schedule: n tracks, k red, L leaders at
-//! random places, and a trace of mixes, observations and moves (moves
-//! make handovers, mixes of tracks of two leaders make transfers, and
-//! transfers make follows). With it, what the centralized engine says
+//! A random little world for one schedule: n tracks, k red, L leaders
+//! (with regions fitted to the tracks and redrawn, the default, or at
+//! random fixed places), and a trace of mixes, observations and moves
+//! (moves and redraws make handovers, mixes of tracks of two leaders make
+//! transfers, and transfers make follows). With it, what the centralized engine says
 //! after every prefix of the trace: the answer any cut must give.
 
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
-use idmesh_placement::{factored_options, Regional, Regions};
+use idmesh_placement::{factored_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_sensor::machine::Gateway;
@@ -30,6 +31,8 @@ pub struct Scenario {
     pub factored: Option<FactoredStart>,
     /// The sensor's flow control window (None: no window).
     pub window: Option<u64>,
+    /// How tracks are shared among the leaders.
+    pub regions: RegionRule,
     /// Seqs after which a leader with nothing queued is sent a batch.
     pub idle_every: u64,
 }
@@ -50,12 +53,22 @@ impl Scenario {
             header.initial_red = Some(initial);
         }
         let count = rng.gen_range(1..=4usize);
+        // Half the schedules fit the regions to the tracks, with windows of
+        // a few items so that these short streams redraw them; the other
+        // half place the leaders at random fixed places.
+        let fitted = rng.gen_bool(0.5);
         let leaders: Vec<LeaderPlace> = (0..count)
             .map(|i| LeaderPlace {
                 name: format!("leader-{i}"),
-                at: Some((rng.gen_range(0.0..10.0), rng.gen_range(0.0..10.0))),
+                at: (!fitted).then(|| (rng.gen_range(0.0..10.0), rng.gen_range(0.0..10.0))),
             })
             .collect();
+        let regions = match fitted {
+            true => RegionRule::Fitted {
+                window_per_leader: rng.gen_range(1..=4),
+            },
+            false => RegionRule::Fixed(leaders.iter().map(|l| l.at).collect()),
+        };
         let events = rng.gen_range(5..=50usize);
         let mut lines = Vec::with_capacity(events);
         for e in 0..events {
@@ -111,7 +124,7 @@ impl Scenario {
         let distributed_rule = rng.gen_bool(0.5);
         // A third of the schedules run the factored belief (small
         // components, so that merges, splits and moves all happen), half
-        // of them with leaders' interests that shrink;
+        // of them under the regional rule (the default);
         // IDMESH_SIM_FACTORED=0 runs the Radon belief alone.
         let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "0") {
             0.0
@@ -125,12 +138,17 @@ impl Scenario {
                 WireSplit::Recent,
                 WireSplit::LeastLoss { rounds: 1 },
             ][rng.gen_range(0..3)],
-            shrink: rng.gen_bool(0.5),
+            shrink: true,
             regional: rng.gen_bool(0.5),
         });
         let distributed_rule = distributed_rule && factored.is_none();
-        let places: Vec<_> = leaders.iter().map(|l| l.at).collect();
-        let centralized = centralized(&header, &lines, distributed_rule, factored, &places)?;
+        let centralized = centralized(
+            &header,
+            &lines,
+            distributed_rule,
+            factored,
+            (&regions, leaders.len()),
+        )?;
         // Half the schedules stream under flow control, with windows so
         // small that the sensor waits for progress marks again and again
         // (which the network loses, doubles and delays like the rest).
@@ -148,6 +166,7 @@ impl Scenario {
             distributed_rule,
             factored,
             window,
+            regions,
             idle_every,
         })
     }
@@ -174,6 +193,7 @@ impl Scenario {
             budget: 0,
             omp: false,
             placed: idmesh_placement::leading_places(self.header.tracks, &self.lines),
+            regions: Some(self.regions.clone()),
         }
     }
 }
@@ -186,7 +206,7 @@ fn centralized(
     lines: &[Line],
     distributed_rule: bool,
     factored: Option<FactoredStart>,
-    places: &[Option<(f64, f64)>],
+    (rule, leaders): (&RegionRule, usize),
 ) -> Result<Vec<Vec<f64>>, String> {
     let field = Field::with_count(
         header.tracks,
@@ -203,7 +223,7 @@ fn centralized(
     if let Some(start) = factored.filter(|f| f.regional) {
         let belief = FactoredBelief::with_options(field, factored_options(&start))
             .map_err(|e| e.to_string())?;
-        let mut engine = Regional::new(belief, Regions::new(places, header.tracks));
+        let mut engine = Regional::new(belief, Regions::new(rule, leaders, header.tracks));
         let mut out = vec![engine.marginals().map_err(|e| e.to_string())?];
         for line in lines {
             engine.apply_line(line).map_err(|e| e.to_string())?;

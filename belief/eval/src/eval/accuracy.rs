@@ -14,7 +14,7 @@ use super::scenarios::{ScenarioSpec, Scenes, Step, Trace};
 use super::score::{replay, tracking_error};
 use anyhow::{bail, Context, Result};
 use idmesh_belief::{field_of, FactoredBelief, FactoredOptions, PropertyFilter};
-use idmesh_placement::{Regional, Regions};
+use idmesh_placement::{RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader};
 use idmesh_sim::scenario::trace_out::write_trace;
 use idmesh_sim::SimEvent;
@@ -172,22 +172,24 @@ impl Written {
     }
 
     /// The centralized factored belief with `options` under the regional
-    /// rule of leaders at `places` (docs/design/architecture.md, "Components that
-    /// stay in their region"), replaying the file this crowd was written
-    /// to (`path`, with its `move` lines): its marginals at every truth
-    /// line, in order. What `idmesh replay --regions` computes.
+    /// rule of `leaders` leaders with regions by `rule`
+    /// (docs/design/architecture.md, "Components that stay in their
+    /// region"), replaying the file this crowd was written to (`path`, with
+    /// its `move` lines): its marginals at every truth line, in order. What
+    /// `idmesh replay --leaders` (or `--regions`) computes.
     pub fn regional(
         &self,
         path: &Path,
         options: FactoredOptions,
-        places: &[Option<(f64, f64)>],
+        rule: &RegionRule,
+        leaders: usize,
     ) -> Result<Vec<Vec<f64>>> {
         let mut reader = TraceReader::open(path)?;
         let field = field_of(&reader.read_header()?);
         let tracks = field.tracks;
         let mut engine = Regional::new(
             FactoredBelief::with_options(field, options)?,
-            Regions::new(places, tracks),
+            Regions::new(rule, leaders, tracks),
         );
         let mut answers = Vec::new();
         while let Some(numbered) = reader.read_line()? {

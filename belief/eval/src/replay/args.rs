@@ -58,11 +58,11 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "C")]
     pub known_start_confidence: Option<f64>,
 
-    /// --method factored: how splits weigh the red count: `coupled` (the
-    /// whole belief's weight) or `local` (only the pair being split, and
-    /// every sighting only its component: what the distributed runtime's
-    /// leaders run).
-    #[arg(long, value_enum, default_value_t = CouplingChoice::Coupled)]
+    /// --method factored: how splits weigh the red count: `local` (only
+    /// the pair being split, and every sighting only its component: what a
+    /// deployment's leaders run, hence the default) or `coupled` (the whole
+    /// belief's weight, which no leader can compute alone; an option).
+    #[arg(long, value_enum, default_value_t = CouplingChoice::Local)]
     pub coupling: CouplingChoice,
 
     /// --method factored: the most tracks of one component (default 7).
@@ -73,13 +73,25 @@ pub struct ReplayArgs {
     #[arg(long, value_enum, default_value_t = SplitChoice::Original)]
     pub split: SplitChoice,
 
-    /// --method factored: the regional rule of leaders placed at these
-    /// points, `X,Y;X,Y;…` (the topology's `at`, in its leader order): a
-    /// mix of tracks in two leaders' regions keeps their components apart,
-    /// and a track whose `move` takes it to another leader is split off its
-    /// component — what a deployment with `regional = true` computes.
+    /// --method factored: the regional rule of leaders at fixed places
+    /// `X,Y;X,Y;…` (the topology's `at`, in its leader order, under
+    /// `regions = "fixed"`): a track belongs to the leader nearest it.
     #[arg(long, value_name = "PLACES", value_parser = parse_places)]
     pub regions: Option<Places>,
+
+    /// --method factored: the regional rule of a deployment of this many
+    /// leaders, with regions fitted to the crowd and redrawn as it moves
+    /// (a deployment's default): a mix of tracks in two leaders' regions
+    /// keeps their components apart, and a track handed over is split off
+    /// its component. 1 (the default): one leader, no regions.
+    #[arg(long, value_name = "L", value_parser = clap::value_parser!(u16).range(1..))]
+    pub leaders: Option<u16>,
+
+    /// Compute what the deployment this topology file describes computes:
+    /// its belief settings and its leaders (`idmesh` reads the file and
+    /// sets the options above from it; they may not be given as well).
+    #[arg(long, value_name = "FILE")]
+    pub topology: Option<PathBuf>,
 
     /// Run a setting replay refuses as exponential (--method property-bits
     /// without --budget on many identities) anyway.

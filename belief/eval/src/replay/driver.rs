@@ -28,9 +28,14 @@ pub trait Replay {
     /// Applies one event.
     fn apply(&mut self, event: &Self::Event) -> Result<(), BeliefError>;
 
-    /// A track moved (a `move` line): nothing, unless the filter's regions
-    /// depend on where tracks are.
-    fn moved(&mut self, _track: u32, _x: f64, _y: f64) -> Result<(), BeliefError> {
+    /// Every line, before its event is applied: nothing, unless the
+    /// filter's regions depend on the stream (the regional rule).
+    fn before(&mut self, _line: &Line) -> Result<(), BeliefError> {
+        Ok(())
+    }
+
+    /// Every line, after its event is applied (see [`Replay::before`]).
+    fn after(&mut self, _line: &Line) -> Result<(), BeliefError> {
         Ok(())
     }
 
@@ -49,18 +54,20 @@ pub fn drive<R: BufRead, P: Replay>(
     let at = line_error(&source);
     for line in reader {
         let NumberedLine { number, line } = line?;
+        replay
+            .before(&line)
+            .map_err(|e| at(number, line.kind(), e))?;
         if let Some(event) = P::event_of(&line) {
             replay
                 .apply(&event)
-                .map_err(|e| at(number, line.kind(), e))?;
-        } else if let Line::Move(m) = &line {
-            replay
-                .moved(m.track, m.x, m.y)
                 .map_err(|e| at(number, line.kind(), e))?;
         } else if let Line::Truth(truth) = &line {
             let answer = replay.answer(truth).map_err(|e| at(number, "truth", e))?;
             write_line(out, &answer)?;
         }
+        replay
+            .after(&line)
+            .map_err(|e| at(number, line.kind(), e))?;
         debug!(line = number, kind = line.kind(), "line");
     }
     Ok(())

@@ -29,6 +29,12 @@ use std::io::Write;
 /// `initial_red`). A property method on such an identity trace, or an
 /// identity method on a trace without identities, is an error that says so.
 pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
+    if let Some(path) = &args.topology {
+        anyhow::bail!(
+            "--topology {}: the idmesh binary reads the topology and sets the options from it",
+            path.display()
+        );
+    }
     // A property method's flags are checked before anything is read.
     if args.method.is_some_and(|m| m.identity().is_none()) {
         property::check_options(args)?;

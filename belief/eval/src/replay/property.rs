@@ -3,8 +3,9 @@
 //!
 //! The header makes the `Field`; `mix` and `observe` lines are applied in
 //! order (`identify` lines mean nothing to a property filter and are
-//! skipped, and so are `move` lines except under `--regions`, the regional
-//! rule, where a track that changes region is split off its component); at every `truth` line one JSON line is written with the
+//! skipped, and so are `move` lines except under the regional rule of
+//! `--leaders` or `--regions`, where a track handed over is split off its
+//! component); at every `truth` line one JSON line is written with the
 //! marginals, the predicted red tracks and the coefficient count; at the end
 //! a summary line with the mean tracking error and the engine's own time.
 //!
@@ -21,7 +22,7 @@ use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, log_loss, predict_red, BeliefError,
     Coupling, Event, FactoredBelief, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
 };
-use idmesh_placement::{Regional, Regions};
+use idmesh_placement::{RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader, Truth};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
@@ -110,15 +111,19 @@ pub fn check_options(args: &ReplayArgs) -> Result<()> {
             );
         }
     }
-    let factored_options = args.coupling != CouplingChoice::Coupled
+    let factored_options = args.coupling != CouplingChoice::Local
         || args.max_component.is_some()
         || args.split != SplitChoice::Original
-        || args.regions.is_some();
+        || args.regions.is_some()
+        || args.leaders.is_some_and(|l| l > 1);
     if method != Method::Factored && factored_options {
         bail!(
-            "--coupling, --max-component, --split and --regions apply to --method factored, not to --method {}",
+            "--coupling, --max-component, --split, --regions and --leaders apply to --method factored, not to --method {}",
             method.name()
         );
+    }
+    if args.regions.is_some() && args.leaders.is_some() {
+        bail!("--regions places the leaders itself: give --regions or --leaders, not both");
     }
     if method == Method::Threshold && args.budget.is_none() {
         bail!("--method threshold needs --budget N: the number of coefficients to keep");
@@ -160,14 +165,13 @@ pub fn replay<R: BufRead>(
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
     let red = field.red.known();
     let built = |e| line_error(&source)(1, "header", e);
-    match (&args.regions, recipe(args).map_err(built)?) {
-        (Some(Places(places)), Recipe::Factored(options)) => {
-            let places: Vec<_> = places.iter().map(|&p| Some(p)).collect();
+    match (region_rule(args), recipe(args).map_err(built)?) {
+        (Some((rule, leaders)), Recipe::Factored(options)) => {
             let filter = Timed::start(|| {
                 let belief = FactoredBelief::with_options(field.clone(), options)?;
                 Ok(Box::new(Regional::new(
                     belief,
-                    Regions::new(&places, field.tracks),
+                    Regions::new(&rule, leaders, field.tracks),
                 )))
             })
             .map_err(built)?;
@@ -177,6 +181,19 @@ pub fn replay<R: BufRead>(
             let filter = Timed::start(|| recipe.build(field.clone())).map_err(built)?;
             run_engine(args, reader, Engine::new(filter, red), out)
         }
+    }
+}
+
+/// The regional rule `args` ask for, with its leader count: fixed places
+/// (`--regions`) or cells fitted to the crowd (`--leaders`, more than one).
+fn region_rule(args: &ReplayArgs) -> Option<(RegionRule, usize)> {
+    match (&args.regions, args.leaders) {
+        (Some(Places(places)), _) => Some((
+            RegionRule::Fixed(places.iter().map(|&p| Some(p)).collect()),
+            places.len(),
+        )),
+        (None, Some(leaders)) if leaders > 1 => Some((RegionRule::fitted(), usize::from(leaders))),
+        _ => None,
     }
 }
 
@@ -210,21 +227,29 @@ fn run_engine<R: BufRead, F: PropertyFilter + Moves + ?Sized>(
     finish(out, &summary)
 }
 
-/// What a replayed filter does with a `move` line: nothing, except under
-/// the regional rule.
+/// What a replayed filter does around each line: nothing, except under
+/// the regional rule, whose handovers come before and after a line's
+/// event ([`Regional::before`], [`Regional::after`]).
 trait Moves {
-    fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError>;
+    fn before(&mut self, line: &Line) -> Result<(), BeliefError>;
+    fn after(&mut self, line: &Line) -> Result<(), BeliefError>;
 }
 
 impl Moves for dyn PropertyFilter {
-    fn moved(&mut self, _: u32, _: f64, _: f64) -> Result<(), BeliefError> {
+    fn before(&mut self, _: &Line) -> Result<(), BeliefError> {
+        Ok(())
+    }
+    fn after(&mut self, _: &Line) -> Result<(), BeliefError> {
         Ok(())
     }
 }
 
 impl Moves for Regional {
-    fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError> {
-        Regional::moved(self, track, x, y)
+    fn before(&mut self, line: &Line) -> Result<(), BeliefError> {
+        Regional::before(self, line)
+    }
+    fn after(&mut self, line: &Line) -> Result<(), BeliefError> {
+        Regional::after(self, line)
     }
 }
 
@@ -335,8 +360,12 @@ impl<F: PropertyFilter + Moves + ?Sized> Replay for Engine<F> {
         event_of(line)
     }
 
-    fn moved(&mut self, track: u32, x: f64, y: f64) -> Result<(), BeliefError> {
-        self.filter.time(|f| f.moved(track, x, y))
+    fn before(&mut self, line: &Line) -> Result<(), BeliefError> {
+        self.filter.time(|f| f.before(line))
+    }
+
+    fn after(&mut self, line: &Line) -> Result<(), BeliefError> {
+        self.filter.time(|f| f.after(line))
     }
 
     fn apply(&mut self, event: &Event) -> Result<(), BeliefError> {
@@ -386,10 +415,12 @@ pub(super) mod tests {
             samples: None,
             force: false,
             known_start_confidence: None,
-            coupling: CouplingChoice::Coupled,
+            coupling: CouplingChoice::Local,
             max_component: None,
             split: SplitChoice::Original,
             regions: None,
+            leaders: None,
+            topology: None,
         }
     }
 

@@ -1,0 +1,42 @@
+//! How evenly a region rule shares a trace's items among leaders:
+//! `cargo run --release -p idmesh-placement --example balance -- TRACE`
+//! prints, for 2, 4 and 8 leaders, the busiest leader's items over an even
+//! share under fitted regions and under fixed places on a grid.
+
+use idmesh_placement::{busiest_share, grid_places, items_sent, RegionRule};
+use idmesh_protocol::trace::{Line, TraceReader};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let path = std::env::args().nth(1).ok_or("usage: balance TRACE")?;
+    let mut reader = TraceReader::open(std::path::Path::new(&path))?;
+    let header = reader.read_header()?;
+    let mut lines = Vec::new();
+    while let Some(n) = reader.read_line()? {
+        lines.push(n.line);
+    }
+    let tracks = header.tracks;
+    let mut b = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for line in &lines {
+        if let Line::Move(m) = line {
+            b = (b.0.min(m.x), b.1.min(m.y), b.2.max(m.x), b.3.max(m.y));
+        }
+    }
+    let single = items_sent(&RegionRule::fitted(), 1, tracks, &lines)[0];
+    println!("{path}: {tracks} tracks, {single} items through one leader");
+    for leaders in [2, 4, 8] {
+        let fitted = items_sent(&RegionRule::fitted(), leaders, tracks, &lines);
+        let grid = RegionRule::Fixed(grid_places(b, leaders).into_iter().map(Some).collect());
+        let fixed = items_sent(&grid, leaders, tracks, &lines);
+        println!(
+            "{leaders} leaders: fitted {:.2} {fitted:?}, grid {:.2} {fixed:?}",
+            busiest_share(&fitted, single),
+            busiest_share(&fixed, single)
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,414 @@
+//! Regions fitted to the crowd and redrawn as it moves: the default way a
+//! deployment shares its tracks among leaders.
+//!
+//! What a leader is sent follows from the tracks it surveils: under the
+//! factored regional rule with shrinking interests, exactly the items on
+//! them (docs/design/architecture.md, "Components that stay in their
+//! region"). Fixed places, each track going to the nearest leader, share
+//! out a field's *area*; a crowd meets most where it is densest, and real
+//! crowds gather on paths and at doors, so one leader may be sent several
+//! times an even share. Fitted regions share out the *items* instead.
+//!
+//! The cells are drawn by recursive coordinate bisection of the tracks'
+//! last positions, each track weighted by the items it took part in during
+//! the last window: a group of leaders is cut in two along the axis its
+//! tracks spread over most, at the weighted quantile that gives each side
+//! weight in proportion to its leaders. Every [`window`](Fitted::window)
+//! items the rule counts what each leader was sent; when the busiest was
+//! sent more than [`TOLERANCE`] times the mean, it draws the cells again
+//! from that window's weights and gives each new cell to the leader that
+//! already surveils most of its tracks, so that a redraw hands over as few
+//! tracks as it can.
+//!
+//! Between redraws a track keeps its leader wherever it walks; its `move`
+//! lines only record where it is. A handover costs an item at two leaders
+//! (and splits the track off its component), a mix across two leaders an
+//! item at each: on crowds whose targets cross many cells between their
+//! events, handing a track over at every crossing, or at its next event in
+//! another cell, sent the busiest leader more than keeping it, for no
+//! gain in accuracy (`cargo run --release -p idmesh-placement --example
+//! balance -- TRACE` prints the shares; docs/bench.md has the bench's).
+//!
+//! The rule is a function of the stream's lines alone: the sensor, `idmesh
+//! replay` and the simulator run it line by line and reach the same owners
+//! at the same lines, which is what makes a deployment's answer equal its
+//! centralized twin's.
+
+use serde::{Deserialize, Serialize};
+
+/// A redraw happens when the busiest leader of a window was sent more
+/// than this many times the mean (fewer redraws below it are not worth
+/// their handovers: each is an item at two leaders and a split).
+pub const TOLERANCE: f64 = 1.2;
+
+/// Items per leader in a window, by default: enough that the counts it
+/// compares are not noise (about a tenth at 100).
+pub const WINDOW_PER_LEADER: u64 = 100;
+
+/// The weight of a placed track that took part in nothing in the window,
+/// so that quiet tracks still spread over the cells.
+const QUIET_WEIGHT: f64 = 0.05;
+
+/// A cell tree: a cut of the plane, or a leader's cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+enum Cell {
+    Leaf(u16),
+    Cut {
+        /// 0: x, 1: y.
+        axis: u8,
+        /// Positions at or below go `low`.
+        at: f64,
+        low: Box<Cell>,
+        high: Box<Cell>,
+    },
+}
+
+impl Cell {
+    fn leader_at(&self, (x, y): (f64, f64)) -> u16 {
+        let mut cell = self;
+        loop {
+            match cell {
+                Cell::Leaf(leader) => return *leader,
+                Cell::Cut {
+                    axis,
+                    at,
+                    low,
+                    high,
+                } => {
+                    let v = if *axis == 0 { x } else { y };
+                    cell = if v <= *at { low } else { high };
+                }
+            }
+        }
+    }
+
+    fn relabel(&mut self, labels: &[u16]) {
+        match self {
+            Cell::Leaf(slot) => *slot = labels[*slot as usize],
+            Cell::Cut { low, high, .. } => {
+                low.relabel(labels);
+                high.relabel(labels);
+            }
+        }
+    }
+}
+
+/// A placed track as a cut sees it.
+#[derive(Debug, Clone, Copy)]
+struct Point {
+    x: f64,
+    y: f64,
+    weight: f64,
+}
+
+/// Cells for `leaders` leaders (slots `first..first + leaders`) over
+/// `points`.
+fn bisect(points: &mut [Point], first: u16, leaders: u16) -> Cell {
+    if leaders <= 1 {
+        return Cell::Leaf(first);
+    }
+    let low_leaders = leaders / 2;
+    let spread = |f: fn(&Point) -> f64| {
+        let (lo, hi) = points
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(f(p)), hi.max(f(p)))
+            });
+        hi - lo
+    };
+    let axis = if points.is_empty() || spread(|p| p.x) >= spread(|p| p.y) {
+        0
+    } else {
+        1
+    };
+    let coordinate = |p: &Point| if axis == 0 { p.x } else { p.y };
+    points.sort_by(|a, b| coordinate(a).total_cmp(&coordinate(b)));
+    let total: f64 = points.iter().map(|p| p.weight).sum();
+    let wanted = total * f64::from(low_leaders) / f64::from(leaders);
+    // The low side takes points until it holds its share of the weight;
+    // the cut lies halfway to the next point.
+    let mut held = 0.0;
+    let mut split = 0usize;
+    for p in points.iter() {
+        if held >= wanted && split > 0 {
+            break;
+        }
+        held += p.weight;
+        split += 1;
+    }
+    let at = match (split.checked_sub(1).map(|i| &points[i]), points.get(split)) {
+        (Some(last), Some(next)) => (coordinate(last) + coordinate(next)) / 2.0,
+        (Some(last), None) => coordinate(last),
+        (None, _) => f64::NEG_INFINITY,
+    };
+    let (low, high) = points.split_at_mut(split);
+    Cell::Cut {
+        axis,
+        at,
+        low: Box::new(bisect(low, first, low_leaders)),
+        high: Box::new(bisect(high, first + low_leaders, leaders - low_leaders)),
+    }
+}
+
+/// The fitted-regions rule's state: the cells, where each track was last
+/// seen, and the window's counts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fitted {
+    leaders: u16,
+    /// None until the first draw (no positions yet).
+    cells: Option<Cell>,
+    positions: Vec<Option<(f64, f64)>>,
+    /// The items each track took part in during this window.
+    activity: Vec<u32>,
+    /// The items each leader was sent during this window.
+    sent: Vec<u64>,
+    items: u64,
+    redraws: u64,
+    window_per_leader: u64,
+}
+
+impl Fitted {
+    pub fn new(leaders: usize, tracks: usize, window_per_leader: u64) -> Self {
+        let leaders = leaders.clamp(1, usize::from(u16::MAX)) as u16;
+        Fitted {
+            leaders,
+            cells: None,
+            positions: vec![None; tracks],
+            activity: vec![0; tracks],
+            sent: vec![0; usize::from(leaders)],
+            items: 0,
+            redraws: 0,
+            window_per_leader: window_per_leader.max(1),
+        }
+    }
+
+    /// Items per window.
+    pub fn window(&self) -> u64 {
+        self.window_per_leader * u64::from(self.leaders)
+    }
+
+    /// How many times the cells were drawn again after the first.
+    pub fn redraws(&self) -> u64 {
+        self.redraws.saturating_sub(1)
+    }
+
+    /// Where `track` was last seen.
+    pub fn position(&self, track: u32) -> Option<(f64, f64)> {
+        self.positions.get(track as usize).copied().flatten()
+    }
+
+    /// `track` is at (x, y) now.
+    pub(crate) fn record(&mut self, track: u32, x: f64, y: f64) {
+        if let Some(slot) = self.positions.get_mut(track as usize) {
+            *slot = Some((x, y));
+        }
+    }
+
+    /// `track` is at (x, y): the leader whose cell holds it (None before
+    /// the first draw).
+    pub(crate) fn place(&mut self, track: u32, x: f64, y: f64) -> Option<u16> {
+        self.record(track, x, y);
+        Some(self.cells.as_ref()?.leader_at((x, y)))
+    }
+
+    /// An item was sent to `leaders` on `tracks`.
+    pub(crate) fn sent(&mut self, tracks: &[u32], leaders: &[u16]) {
+        for &t in tracks {
+            if let Some(a) = self.activity.get_mut(t as usize) {
+                *a += 1;
+            }
+        }
+        for &l in leaders {
+            if let Some(s) = self.sent.get_mut(usize::from(l)) {
+                *s += 1;
+            }
+        }
+        if !tracks.is_empty() {
+            self.items += 1;
+        }
+    }
+
+    /// Whether the window is over and its counts call for new cells: the
+    /// first draw once some track is placed, then whenever the busiest
+    /// leader was sent more than [`TOLERANCE`] times the mean. Starts the
+    /// next window when it is over.
+    pub(crate) fn window_over(&mut self) -> bool {
+        if self.leaders < 2 || self.items < self.window() {
+            return false;
+        }
+        let busiest = self.sent.iter().copied().max().unwrap_or(0) as f64;
+        let mean = self.sent.iter().sum::<u64>() as f64 / f64::from(self.leaders);
+        let due = match self.cells {
+            None => self.positions.iter().any(Option::is_some),
+            Some(_) => busiest > TOLERANCE * mean,
+        };
+        if !due {
+            self.new_window();
+        }
+        due
+    }
+
+    fn new_window(&mut self) {
+        self.activity.iter_mut().for_each(|a| *a = 0);
+        self.sent.iter_mut().for_each(|s| *s = 0);
+        self.items = 0;
+    }
+
+    /// Draws the cells again from the window's weights (every placed track
+    /// alike if none took part in anything) and returns each placed
+    /// track's leader in them; `owners` are the leaders now, which the new
+    /// cells keep where they can. Starts a new window.
+    pub(crate) fn draw(&mut self, owners: &[u16]) -> Vec<(u32, u16)> {
+        let placed: Vec<(u32, (f64, f64))> = self
+            .positions
+            .iter()
+            .enumerate()
+            .filter_map(|(t, p)| p.map(|p| (t as u32, p)))
+            .collect();
+        let mut points: Vec<Point> = placed
+            .iter()
+            .map(|&(t, (x, y))| Point {
+                x,
+                y,
+                weight: f64::from(self.activity[t as usize]) + QUIET_WEIGHT,
+            })
+            .collect();
+        let mut cells = bisect(&mut points, 0, self.leaders);
+        // Slot s's tracks now surveilled by leader l, then each slot to the
+        // leader holding most of it (greedily, the largest first; ties to
+        // the lowest slot and leader, so the result is the same anywhere).
+        let leaders = usize::from(self.leaders);
+        let mut overlap = vec![vec![0u64; leaders]; leaders];
+        for &(t, p) in &placed {
+            let slot = usize::from(cells.leader_at(p));
+            if let Some(&owner) = owners.get(t as usize) {
+                if usize::from(owner) < leaders {
+                    overlap[slot][usize::from(owner)] += 1;
+                }
+            }
+        }
+        let mut pairs: Vec<(u64, usize, usize)> = (0..leaders)
+            .flat_map(|s| (0..leaders).map(move |l| (s, l)))
+            .map(|(s, l)| (overlap[s][l], s, l))
+            .collect();
+        pairs.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+        let mut labels = vec![None; leaders];
+        let mut taken = vec![false; leaders];
+        for (_, s, l) in pairs {
+            if labels[s].is_none() && !taken[l] {
+                labels[s] = Some(l as u16);
+                taken[l] = true;
+            }
+        }
+        let labels: Vec<u16> = labels
+            .into_iter()
+            .enumerate()
+            .map(|(s, l)| l.unwrap_or(s as u16))
+            .collect();
+        cells.relabel(&labels);
+        let owners = placed
+            .iter()
+            .map(|&(t, p)| (t, cells.leader_at(p)))
+            .collect();
+        self.cells = Some(cells);
+        self.redraws += 1;
+        self.new_window();
+        owners
+    }
+
+    /// Each leader's place for a map: the mean position of the placed
+    /// tracks it surveils (None for a leader surveilling none).
+    pub fn places(&self, owners: &[u16]) -> Vec<Option<(f64, f64)>> {
+        let mut sums = vec![(0.0, 0.0, 0u32); usize::from(self.leaders)];
+        for (t, p) in self.positions.iter().enumerate() {
+            if let (Some((x, y)), Some(&o)) = (p, owners.get(t)) {
+                if let Some(s) = sums.get_mut(usize::from(o)) {
+                    *s = (s.0 + x, s.1 + y, s.2 + 1);
+                }
+            }
+        }
+        sums.into_iter()
+            .map(|(x, y, n)| (n > 0).then(|| (x / f64::from(n), y / f64::from(n))))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(coords: &[(f64, f64, f64)]) -> Vec<Point> {
+        coords
+            .iter()
+            .map(|&(x, y, weight)| Point { x, y, weight })
+            .collect()
+    }
+
+    #[test]
+    fn bisection_gives_each_cell_an_equal_weight() {
+        // A dense middle: many points near (5, 5), a few far out.
+        let mut coords = Vec::new();
+        for i in 0..40 {
+            let d = f64::from(i % 10) / 10.0;
+            coords.push((5.0 + d - 0.5, 5.0 + f64::from(i / 10) / 10.0, 1.0));
+        }
+        coords.extend([
+            (0.0, 0.0, 1.0),
+            (10.0, 0.0, 1.0),
+            (0.0, 10.0, 1.0),
+            (10.0, 10.0, 1.0),
+        ]);
+        let mut pts = points(&coords);
+        let cells = bisect(&mut pts, 0, 4);
+        let mut weight = [0.0; 4];
+        for &(x, y, w) in &coords {
+            weight[usize::from(cells.leader_at((x, y)))] += w;
+        }
+        assert!(weight.iter().all(|&w| w == 11.0), "{weight:?}");
+    }
+
+    #[test]
+    fn three_leaders_cut_one_third_off() {
+        let coords: Vec<_> = (0..30).map(|i| (f64::from(i), 0.0, 1.0)).collect();
+        let cells = bisect(&mut points(&coords), 0, 3);
+        let mut count = [0; 3];
+        for &(x, y, _) in &coords {
+            count[usize::from(cells.leader_at((x, y)))] += 1;
+        }
+        assert_eq!(count, [10, 10, 10]);
+    }
+
+    #[test]
+    fn a_redraw_keeps_tracks_with_the_leaders_that_hold_them() {
+        let mut fitted = Fitted::new(2, 4, WINDOW_PER_LEADER);
+        for (t, x) in [0.0, 1.0, 8.0, 9.0].into_iter().enumerate() {
+            fitted.place(t as u32, x, 0.0);
+        }
+        // Leaders 1 and 0 hold the left and right pairs: the new cells
+        // are labelled so that nobody changes hands.
+        let owners = [1, 1, 0, 0];
+        let drawn = fitted.draw(&owners);
+        assert_eq!(drawn, vec![(0, 1), (1, 1), (2, 0), (3, 0)]);
+        assert_eq!(fitted.place(0, 9.5, 0.0), Some(0));
+    }
+
+    #[test]
+    fn a_window_redraws_only_when_a_leader_is_much_busier() {
+        let mut fitted = Fitted::new(2, 2, WINDOW_PER_LEADER);
+        fitted.place(0, 0.0, 0.0);
+        fitted.place(1, 1.0, 0.0);
+        for _ in 0..fitted.window() {
+            fitted.sent(&[0], &[0]);
+        }
+        assert!(fitted.window_over(), "the first draw is due");
+        fitted.draw(&[0, 1]);
+        for i in 0..fitted.window() {
+            fitted.sent(&[(i % 2) as u32], &[(i % 2) as u16]);
+        }
+        assert!(!fitted.window_over(), "an even window");
+        for _ in 0..fitted.window() {
+            fitted.sent(&[0], &[0]);
+        }
+        assert!(fitted.window_over(), "all on one leader");
+    }
+}
