@@ -31,6 +31,7 @@ mod cpu;
 mod ingest;
 mod interval;
 mod latency;
+mod regions;
 mod sensors;
 mod throughput;
 
@@ -117,7 +118,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     let report = if options.ingest {
         ingestion(&runtime, options, &trace)?
     } else {
-        report(options, &measure(&runtime, options, &trace)?)?
+        let mut report = report(options, &measure(&runtime, options, &trace)?)?;
+        report.push_str(&regions::report(options, &trace)?);
+        report
     };
     print!("{report}");
     if let Some(out) = &options.out {

@@ -138,7 +138,7 @@ impl Regions {
             }
         }
         if let Rule::Fitted(fitted) = &mut self.rule {
-            if leading.iter().any(Option::is_some) && self.owners.len() > 0 {
+            if leading.iter().any(Option::is_some) && !self.owners.is_empty() {
                 for (track, to) in fitted.draw(&self.owners) {
                     let slot = &mut self.owners[track as usize];
                     if *slot != to {
