@@ -347,10 +347,25 @@ fn the_readme_works_as_written_on_a_fresh_clone() {
     }
     let (stopped, out, err) = demo.interrupt();
     assert!(stopped, "{DEMO}: Ctrl-C did not end it cleanly:\n{err}");
+    // Its last live line says what each of its four leaders holds: every
+    // one holds part of the belief.
+    let live = out
+        .lines()
+        .rfind(|l| l.contains(" events") && l.contains(" held: leader-0 "))
+        .unwrap_or_else(|| panic!("the demo printed no live answer:\n{out}\n{err}"));
+    let held: Vec<u64> = live
+        .split(" held: ")
+        .nth(1)
+        .and_then(|rest| rest.split(" · red:").next())
+        .map(|list| {
+            list.split(" · ")
+                .filter_map(|part| part.rsplit(' ').next()?.parse().ok())
+                .collect()
+        })
+        .unwrap_or_default();
     assert!(
-        out.lines()
-            .any(|l| l.contains(" events") && l.contains(" sets: leader-0 ")),
-        "the demo printed no live answer:\n{out}\n{err}"
+        held.len() == 4 && held.iter().all(|&n| n > 0),
+        "every leader of the demo holds part of the belief: {live}"
     );
     assert!(!err.contains("WARN"), "the demo warned:\n{err}");
 }

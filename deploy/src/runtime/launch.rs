@@ -286,10 +286,10 @@ async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) 
     Ok(())
 }
 
-/// "N sets: leader-0 n0 · leader-1 n1 · …" from the leaders' counters: the
-/// total alone would hide that one leader may hold every set (a set lives
-/// at one leader surveilling one of its tracks, and sets that grow to span
-/// the field all qualify for the first).
+/// "N held: leader-0 n0 · leader-1 n1 · …", the coefficients (Radon sets,
+/// or the entries of factored components' tables) each leader holds, from
+/// the leaders' counters: the total alone would hide a leader that holds
+/// none.
 async fn sets_per_leader(session: &zenoh::Session, keys: &Keys, total: u64) -> String {
     let held = match ask(session, &keys.query_stats(), Duration::from_secs(3)).await {
         Ok(body) => match serde_json::from_slice::<StatsAnswer>(&body) {
@@ -303,7 +303,7 @@ async fn sets_per_leader(session: &zenoh::Session, keys: &Keys, total: u64) -> S
         },
         Err(e) => format!("no counters: {e}"),
     };
-    format!("{total} sets: {held}")
+    format!("{total} held: {held}")
 }
 
 /// Simulates a social-force crowd into `out` (the demo's and the bench's

@@ -115,6 +115,11 @@ impl Regions {
         leading: &[Option<(f64, f64)>],
     ) -> Self {
         let mut regions = Regions::new(rule, leaders, tracks);
+        // Nothing known ahead (a stream fed live): its leading moves, if
+        // any, are taken as they come, and placed at its first event.
+        if !leading.iter().take(tracks).any(Option::is_some) {
+            return regions;
+        }
         if let Some(places) = &mut regions.leading {
             for (slot, place) in places.iter_mut().zip(leading) {
                 *slot = *place;
@@ -549,6 +554,14 @@ mod tests {
         assert_eq!(started.after(&lines[4]), vec![]);
         assert_eq!(started.owners(), &[0, 1, 0]);
         assert_eq!(taken, started, "the same state either way");
+        // A sensor fed live knows no leading moves ahead: it starts as the
+        // replay does and reaches the same state over the same lines.
+        let mut live = Regions::starting(&RegionRule::fitted(), 2, 3, &[]);
+        for line in &lines {
+            live.before(line);
+            live.after(line);
+        }
+        assert_eq!(live, taken, "a live start is the replay's");
     }
 
     /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of

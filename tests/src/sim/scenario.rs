@@ -33,6 +33,9 @@ pub struct Scenario {
     pub window: Option<u64>,
     /// How tracks are shared among the leaders.
     pub regions: RegionRule,
+    /// The sensor knows the stream's leading moves ahead (it streams a
+    /// trace file), or takes them as they come (a stream fed live).
+    pub placed_ahead: bool,
     /// Seqs after which a leader with nothing queued is sent a batch.
     pub idle_every: u64,
 }
@@ -167,6 +170,7 @@ impl Scenario {
             factored,
             window,
             regions,
+            placed_ahead: rng.gen_bool(0.5),
             idle_every,
         })
     }
@@ -192,7 +196,10 @@ impl Scenario {
             distributed_rule: self.distributed_rule,
             budget: 0,
             omp: false,
-            placed: idmesh_placement::leading_places(self.header.tracks, &self.lines),
+            placed: match self.placed_ahead {
+                true => idmesh_placement::leading_places(self.header.tracks, &self.lines),
+                false => Vec::new(),
+            },
             regions: Some(self.regions.clone()),
         }
     }

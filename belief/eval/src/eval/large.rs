@@ -217,7 +217,8 @@ pub fn section(grid: &LargeFields, workers: usize) -> Result<String> {
     for &n in &grid.sizes {
         for m in fixed(n) {
             let label = match m {
-                Method::Factored => "factored, coupled splits (default)".to_string(),
+                Method::Factored => "factored, coupled splits".to_string(),
+                Method::FactoredLocal => "factored, local rule (default)".to_string(),
                 other => other.label(),
             };
             row(&mut out, n, &label, result(n, m))?;
