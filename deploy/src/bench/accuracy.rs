@@ -487,7 +487,7 @@ fn report(
          cut into. The centralized engine runs it exactly as the leaders do (the rows \
          *factored, regional rule* above agree to {TOLERANCE:e} with {LEADERS} leaders); here \
          it is run on the same traces with the leaders of a loopback deployment of 2, 4 and 8 \
-         leaders (placed likewise), against the local rule alone (mean tracking error \
+         leaders (regions fitted to the crowd, the default), against the local rule alone (mean tracking error \
          over the seeds; the difference in brackets).\n"
     )?;
     writeln!(

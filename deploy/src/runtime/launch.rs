@@ -6,8 +6,8 @@
 use super::loopback::{self, Ports};
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
+use super::topology::Member;
 use super::topology::Topology;
-use super::topology::{BeliefKind, Member, Sparsification};
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
 use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer, StatsAnswer};
@@ -182,13 +182,10 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
             _ => break,
         }
     }
+    // Every belief setting at its default: what a deployment of one's own
+    // runs (the factored belief for the colours, the information matrix's
+    // rows for the identities, regions fitted to the crowd).
     let mut topology = loopback::topology(&trace, 4, 1, Ports::From(7447))?;
-    // The demo's crowd reads identities, and a stream with identities
-    // holds the Radon belief (see [`BeliefKind`]): say so.
-    topology.belief = BeliefKind::Radon;
-    topology.distributed_rule = true;
-    topology.budget = 400;
-    topology.sparsify = Sparsification::Overcomplete;
     topology.sensors[0].rate = Some(options.rate);
     topology.sensors[0].events = options.events;
     let config = options.dir.join("topology.toml");
