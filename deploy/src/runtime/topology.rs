@@ -12,9 +12,7 @@
 //!                                # (docs/design/architecture.md)
 //! shrink_interest = false        # factored: leaders unfollow tracks they no
 //!                                # longer surveil or hold a component of
-//! # The Radon belief's settings: of every stream under belief = "radon",
-//! # and of streams with identities under "factored" (their leaders hold
-//! # the Radon belief beside the information matrix).
+//! # The Radon belief's settings: of every stream under belief = "radon".
 //! distributed_rule = false       # Algorithm 5 instead of exact conditioning
 //! budget = 0                     # sets per leader (0 = no pruning)
 //! sparsify = "threshold"         # or "overcomplete": OMP, then threshold
@@ -177,9 +175,9 @@ pub struct Topology {
 
 /// The belief the leaders hold on a property stream. The factored belief
 /// is the default: the most accurate of the project's methods
-/// (docs/results.md). A stream with identities holds the Radon belief
-/// whatever this says: factored leaders do not yet carry the information
-/// matrix's rows through the moves of components.
+/// (docs/results.md). On a stream with identities the leaders keep the
+/// information matrix's rows beside whichever belief this names, each
+/// row with the leader surveilling its track.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum BeliefKind {
