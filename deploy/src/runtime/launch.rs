@@ -183,8 +183,10 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         }
     }
     let mut topology = loopback::topology(&trace, &trace, 4, 1, Ports::From(7447))?;
-    // The demo's crowd reads identities, and a stream with identities
-    // holds the Radon belief (see [`BeliefKind`]): say so.
+    // The demo shows the Radon belief's sets per leader (the README says
+    // so), pruned by OMP to a budget, beside the identities' rows; a
+    // topology that names no belief runs the factored one on the same
+    // stream ([`BeliefKind`]).
     topology.belief = BeliefKind::Radon;
     topology.distributed_rule = true;
     topology.budget = 400;
