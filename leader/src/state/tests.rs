@@ -1095,3 +1095,153 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
         }
     }
 }
+
+/// Leader "a" of a factored stream with identities (three tracks, uniform
+/// start), its `Begin` applied.
+fn factored_identity_leader(owners: Vec<u16>, regional: bool) -> Leader {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let Item::Begin(mut start) = begin(&["a", "b"], owners) else {
+        unreachable!()
+    };
+    start.identities = true;
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+        shrink: true,
+        regional,
+    });
+    let mut leader = Leader::new("a");
+    leader
+        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
+        .unwrap();
+    leader
+}
+
+/// The transfers a leader sent leader `to`: the tracks of their rows and
+/// of their components.
+fn sent_rows_and_tracks(actions: &[Action], to: u16) -> Vec<(Vec<u32>, Vec<Vec<u32>>)> {
+    actions
+        .iter()
+        .filter_map(|a| match a {
+            Action::Send { to: t, transfer } if *t == to => Some((
+                transfer.rows.iter().map(|r| r.track).collect(),
+                transfer
+                    .components
+                    .iter()
+                    .map(|c| c.tracks.clone())
+                    .collect(),
+            )),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The leader surveilling a of a mix across two leaders on a factored
+/// identity stream waits for b's row as for b's component, then sends b's
+/// fitted row back: alone, or with b's component under the regional rule
+/// (one transfer). A row of another track, or from a leader that does not
+/// surveil b, is refused.
+#[test]
+fn the_leader_surveilling_a_fits_both_rows_and_sends_b_its_new_row() {
+    let row = |track| WireRow {
+        track,
+        ln_likelihoods: vec![0.0, -1.0, -2.0],
+    };
+    for regional in [false, true] {
+        // Track 0 with a, 1 and 2 with b.
+        let mut gatherer = factored_identity_leader(vec![0, 1, 1], regional);
+        gatherer
+            .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, false), 0)
+            .unwrap();
+        assert_eq!(gatherer.waiting_for_components(), Some(2));
+        // b's component alone is not enough: its row must come too.
+        let mut transfer = component_transfer(1, 2, 2, vec![1.0, 0.0]);
+        transfer.rows = vec![row(2)];
+        let actions = gatherer.transfer(transfer, 0).unwrap();
+        let back = match regional {
+            true => vec![(vec![2], vec![vec![2]])],
+            false => vec![(vec![2], vec![])],
+        };
+        assert_eq!(
+            sent_rows_and_tracks(&actions, 1),
+            back,
+            "regional {regional}"
+        );
+        assert_eq!(gatherer.waiting_for_components(), None);
+        assert_eq!(gatherer.stats().rows_held, 1, "b's row went back");
+
+        for (from, track) in [(1, 1), (2, 2)] {
+            let mut wrong = factored_identity_leader(vec![0, 1, 1], regional);
+            wrong
+                .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, false), 0)
+                .unwrap();
+            let mut transfer = component_transfer(1, 2, 2, vec![1.0, 0.0]);
+            transfer.from = from;
+            transfer.rows = vec![row(track)];
+            assert!(
+                matches!(
+                    wrong.transfer(transfer, 0),
+                    Err(LeaderError::BadTransfer(_))
+                ),
+                "a row of track {track} from leader {from}"
+            );
+        }
+    }
+}
+
+/// The leader surveilling b sends its row with its component (with no
+/// component if it holds none) and waits for its fitted row to come back.
+#[test]
+fn the_leader_surveilling_b_sends_its_row_and_waits_for_the_fitted_one() {
+    for holds_b in [true, false] {
+        // Track 0 with a, 1 and 2 with b; the mix (2, 0) is b's to gather.
+        let mut returner = factored_identity_leader(vec![0, 1, 1], false);
+        let mut seq = 2;
+        if !holds_b {
+            // Track 0's component goes to b first (a mix gathered there),
+            // and its fitted row comes back.
+            let actions = returner
+                .batch(batch(1, vec![(2, mix(1, 0, 1, 0))], 2, false), 0)
+                .unwrap();
+            assert_eq!(
+                sent_rows_and_tracks(&actions, 1),
+                [(vec![0], vec![vec![0]])]
+            );
+            let mut back = nothing_from(1, 2);
+            back.rows = vec![WireRow {
+                track: 0,
+                ln_likelihoods: vec![0.0, -0.5, -0.5],
+            }];
+            returner.transfer(back, 0).unwrap();
+            assert_eq!(returner.position(), 2);
+            seq = 3;
+        }
+        let actions = returner
+            .batch(
+                batch(
+                    if holds_b { 1 } else { 2 },
+                    vec![(seq, mix(2, 0, 1, 0))],
+                    seq,
+                    false,
+                ),
+                0,
+            )
+            .unwrap();
+        let components = if holds_b { vec![vec![0]] } else { vec![] };
+        assert_eq!(sent_rows_and_tracks(&actions, 1), [(vec![0], components)]);
+        assert_eq!(returner.waiting_for_transfer(), Some((seq, 1)));
+        let mut back = nothing_from(1, seq);
+        back.rows = vec![WireRow {
+            track: 0,
+            ln_likelihoods: vec![0.0, -0.25, -0.75],
+        }];
+        returner.transfer(back, 0).unwrap();
+        assert_eq!(returner.position(), seq);
+        let rows = returner.quiet(true).unwrap().sums.rows.clone();
+        let own: Vec<_> = rows
+            .iter()
+            .map(|r| (r.track, r.ln_likelihoods.clone()))
+            .collect();
+        assert_eq!(own, [(0, vec![0.0, -0.25, -0.75])], "the fitted row, kept");
+    }
+}
