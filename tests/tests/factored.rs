@@ -379,7 +379,21 @@ fn matrix(v: &Value) -> Vec<Vec<f64>> {
 /// information-matrix`, both to 1e-9; every row is held once.
 #[test]
 fn colours_and_identities_under_the_factored_belief_survive_a_leader_crash() {
-    let dir = std::env::temp_dir().join(format!("idmesh-factored-ids-{}", std::process::id()));
+    colours_and_identities_through_a_crash(false);
+}
+
+/// The same with the killed leader's role adopted by another process,
+/// from the journal and snapshot, rows included.
+#[test]
+fn colours_and_identities_under_the_factored_belief_survive_a_takeover() {
+    colours_and_identities_through_a_crash(true);
+}
+
+fn colours_and_identities_through_a_crash(adopted: bool) {
+    let dir = std::env::temp_dir().join(format!(
+        "idmesh-factored-ids-{adopted}-{}",
+        std::process::id()
+    ));
     let trace = crowd_with_identities(&dir, 12, 4, 90.0, 5);
     let colours = central(&trace);
     // The Radon belief (what such a stream held before) answers otherwise
@@ -398,18 +412,22 @@ fn colours_and_identities_under_the_factored_belief_survive_a_leader_crash() {
         rate: Some(500.0),
         journal: true,
         snapshot_every: Some(40),
-        takeover_after_ms: Some(0),
+        // Restarted (no adoption however slow), or adopted soon.
+        takeover_after_ms: Some(if adopted { 1000 } else { 0 }),
         factored: Some(belief(true)),
         window: Some(WINDOW),
         ..Settings::default()
     };
-    let mut crashed = Deployment::start_each("factored-identities", &trace, &settings);
+    let name = format!("factored-identities-{adopted}");
+    let mut crashed = Deployment::start_each(&name, &trace, &settings);
     let first = crashed.first_answer(Duration::from_secs(30));
     assert_eq!(first["finished"], false, "the stream has begun, not ended");
     std::thread::sleep(Duration::from_millis(300));
     crashed.kill("leader-1");
-    std::thread::sleep(Duration::from_millis(500));
-    crashed.launch("leader", "leader-1");
+    if !adopted {
+        std::thread::sleep(Duration::from_millis(500));
+        crashed.launch("leader", "leader-1");
+    }
 
     let last = crashed.final_marginals(Duration::from_secs(60));
     let want = floats(&colours.last().unwrap()["p_red"]);
@@ -445,5 +463,12 @@ fn colours_and_identities_under_the_factored_belief_survive_a_leader_crash() {
         handovers > 0 && moved > 0,
         "{handovers} handovers, {moved} components moved"
     );
-    assert!(crashed.leader("leader-1")["recoveries"].as_u64().unwrap() > 0);
+    let role = crashed.leader("leader-1");
+    assert!(role["recoveries"].as_u64().unwrap() > 0);
+    assert_eq!(
+        role["host"] != "leader-1",
+        adopted,
+        "leader-1's role is hosted by {}",
+        role["host"]
+    );
 }
