@@ -139,9 +139,7 @@ impl Router {
         };
         let regions = Regions::starting(&rule, leaders, tracks, &config.placed);
         let begin = Begin {
-            // Identity streams hold the information matrix whatever the
-            // property belief is.
-            factored: config.factored.filter(|_| header.identities.is_none()),
+            factored: config.factored,
             tracks: tracks as u32,
             red: header.red_count().map(|k| k as u32),
             initial_red: header.initial_red.clone(),
@@ -255,9 +253,7 @@ impl Router {
                     red: observe.red,
                     blue: observe.blue,
                 };
-                // The stream's belief, not the topology's: an identity
-                // stream's leaders hold the Radon belief even under
-                // `belief = "factored"`, and need its growth rule.
+                // The stream's belief, as its Begin says.
                 let (growth, global) = if self.begin.factored.is_some() {
                     // An observation changes the observed track's
                     // component alone, held by one leader that follows it.

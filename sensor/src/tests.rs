@@ -548,13 +548,14 @@ fn ingested_lines_are_routed_before_they_are_acknowledged_and_only_once() {
     );
 }
 
-/// Under `belief = "factored"` an identity stream's leaders still hold the
-/// Radon belief (and the information matrix), so its observations are
-/// routed by the Radon rule: under exact conditioning, to every leader.
-/// (They were routed by the factored rule — to the track's followers,
-/// growing nothing — and the Radon leaders' colour answers went wrong.)
+/// Under `belief = "factored"` a stream with identities holds the factored
+/// belief as one without does (its leaders keep the information matrix's
+/// rows beside it), so its observations are routed by the factored rule:
+/// to the followers of the track alone. (When such a stream held the Radon
+/// belief, routing it by the factored rule grew nothing, and the colour
+/// answers went wrong: the router must read the stream's belief.)
 #[test]
-fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() {
+fn an_identity_stream_under_the_factored_setting_is_factored() {
     use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
     for identities in [None, Some(4)] {
         let mut header = Header::new(4);
@@ -567,17 +568,17 @@ fn an_identity_stream_under_the_factored_setting_routes_observations_as_radon() 
             regional: false,
         }));
         let router = Router::new(config, &header).unwrap();
-        assert_eq!(router.begin().factored.is_some(), identities.is_none());
+        assert!(
+            router.begin().factored.is_some(),
+            "identities {identities:?}"
+        );
+        assert_eq!(router.begin().identities, identities.is_some());
         let mut gateway: Gateway<()> = Gateway::new("s", router, false);
         gateway.flush();
         gateway.line(&observe(3));
         let [a, b] = flushed::<_, 2>(&mut gateway);
-        let expected = match identities {
-            // Radon, exact conditioning: every leader hears it.
-            Some(_) => (vec![2], vec![2]),
-            // Factored: only the follower of track 3 (b) does.
-            None => (vec![], vec![2]),
-        };
+        // Factored: only the follower of track 3 (b) hears it.
+        let expected = (vec![], vec![2]);
         assert_eq!((seqs(&a), seqs(&b)), expected, "identities {identities:?}");
     }
 }

@@ -1,7 +1,9 @@
 //! The deterministic network simulator over many seeded schedules
 //! (`idmesh_tests::sim`): drops, duplicates, delays, reordering,
 //! partitions, crashes and restarts from the journal, queries at random
-//! points; every answer checked against the centralized engine.
+//! points; every answer checked against the centralized engine (and on
+//! the factored schedules with identities, every answer's rows against
+//! the centralized information matrix).
 //!
 //! `IDMESH_SIM_SEEDS=N` runs N schedules (default 5000), from
 //! `IDMESH_SIM_FIRST` (default 0); `IDMESH_SIM_SEED=s` replays schedule s
@@ -44,6 +46,8 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.window_waits += tally.window_waits;
                 total.factored += tally.factored;
                 total.changes += tally.changes;
+                total.identities += tally.identities;
+                total.identity_answers += tally.identity_answers;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -53,7 +57,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -70,7 +74,9 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.handovers,
         total.window_waits,
         total.factored,
-        total.changes
+        total.changes,
+        total.identities,
+        total.identity_answers
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
@@ -88,6 +94,18 @@ fn every_schedule_answers_like_the_centralized_engine() {
         // Their leaders' interests shrink, and the requests saying so
         // are dropped, duplicated and reordered like any message.
         assert!(total.unfollows > 0, "no leader ever unfollowed a track");
+        // Half of them carry identities: the rows the leaders keep beside
+        // their components made every identity answer the centralized
+        // information matrix's.
+        let identities_on = std::env::var("IDMESH_SIM_IDENTITIES").map_or(true, |v| v != "0");
+        if identities_on {
+            assert!(
+                total.identities >= 300 && total.identity_answers >= total.identities,
+                "only {} schedules with identities, {} identity answers",
+                total.identities,
+                total.identity_answers
+            );
+        }
     }
     if seeds.len() >= 5000 {
         // Leaders came back from journals cut short by damage, behind the

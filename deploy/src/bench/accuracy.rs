@@ -250,8 +250,8 @@ fn plan(kind: Kind, leaders: usize, n: usize, trace: &Path) -> Result<Topology> 
     topology.prefix = format!("idmesh/accuracy-{}-{}", kind.tag(), std::process::id());
     topology.belief = kind.belief();
     topology.regional = kind == Kind::Regional;
-    // The Radon belief's settings (identity streams aside, only
-    // `belief = "radon"` reads them): the distributed rule, the
+    // The Radon belief's settings (only `belief = "radon"` reads
+    // them): the distributed rule, the
     // overcomplete pruning at the Table III budget per leader.
     topology.distributed_rule = true;
     topology.budget = table3_budget(n) as u32;

@@ -13,9 +13,7 @@
 //!                                # then do not scale out)
 //! regions = "fitted"             # cells fitted to the crowd and redrawn as
 //!                                # it moves; or "fixed": each leader's `at`
-//! # The Radon belief's settings: of every stream under belief = "radon",
-//! # and of streams with identities under "factored" (their leaders hold
-//! # the Radon belief beside the information matrix).
+//! # The Radon belief's settings: of every stream under belief = "radon".
 //! distributed_rule = false       # Algorithm 5 instead of exact conditioning
 //! budget = 0                     # sets per leader (0 = no pruning)
 //! sparsify = "threshold"         # or "overcomplete": OMP, then threshold
@@ -203,9 +201,9 @@ fn is_true(b: &bool) -> bool {
 
 /// The belief the leaders hold on a property stream. The factored belief
 /// is the default: the most accurate of the project's methods
-/// (docs/results.md). A stream with identities holds the Radon belief
-/// whatever this says: factored leaders do not yet carry the information
-/// matrix's rows through the moves of components.
+/// (docs/results.md). On a stream with identities the leaders keep the
+/// information matrix's rows beside whichever belief this names, each
+/// row with the leader surveilling its track.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum BeliefKind {

@@ -230,26 +230,47 @@ impl Leader {
         // The regional rule keeps a mix across two regions apart, and the
         // component of b goes back to its region's leader, which waits
         // for it.
-        let back = (self.started()?.regional() && owner_a != owner_b).then_some(owner_b);
+        let started = self.started()?;
+        let back = (started.regional() && owner_a != owner_b).then_some(owner_b);
+        // On an identity stream the rows of a and b must meet too: the
+        // leader surveilling b sends its row to `owner_a` with what it
+        // sends anyway, and gets the fitted row back.
+        let partner = (started.rows.is_some() && owner_a != owner_b).then_some(owner_b);
         if me == owner_a {
-            if has_a && has_b {
-                self.factored_mix_here(seq, mix, back, actions)?;
+            if self.ready_to_mix(mix, partner)? {
+                self.factored_mix_here(seq, mix, back, partner, actions)?;
             } else {
-                self.waiting = Some(Waiting::Components { seq, mix, back });
+                self.waiting = Some(Waiting::Components {
+                    seq,
+                    mix,
+                    back,
+                    partner,
+                });
             }
             return Ok(());
         }
+        let started = self.started()?;
+        let row = match (&started.rows, partner == Some(me)) {
+            (Some(rows), true) => vec![wire_row(rows, mix.b)?],
+            _ => Vec::new(),
+        };
         let held = self.factored_mut("a factored mix on a Radon stream")?;
         let mut sent = Vec::new();
-        if has_a || has_b {
-            let components = held.take_of(&[mix.a, mix.b], |_| true);
+        if has_a || has_b || !row.is_empty() {
+            let components = match has_a || has_b {
+                true => held.take_of(&[mix.a, mix.b], |_| true),
+                false => Vec::new(),
+            };
             sent = tracks_of(&components);
-            self.send(seq, owner_a, Vec::new(), Vec::new(), components, actions)?;
+            self.send(seq, owner_a, Vec::new(), row, components, actions)?;
             if back != Some(me) {
                 self.unfollow(seq, sent.clone())?;
             }
         }
-        if back == Some(me) {
+        if partner == Some(me) && back.is_none() {
+            // The fitted row of b comes back; nothing else does.
+            self.waiting = Some(Waiting::Transfer { seq, from: owner_a });
+        } else if back == Some(me) {
             if self.lazy_transfers() {
                 // What comes back is b's component, which went out.
                 sent.push(mix.b);
@@ -281,7 +302,22 @@ impl Leader {
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let me = self.me()?;
-        let apart = self.started()?.regional() && owner_a != owner_b;
+        let started = self.started()?;
+        let apart = started.regional() && owner_a != owner_b;
+        // On an identity stream the two rows are exchanged as on a Radon
+        // stream: a leader surveilling one of two tracks of two leaders
+        // sends the other its row as it was, and fits the pair when the
+        // other's comes (`row_mix`); one surveilling both swaps them here.
+        let mut row = Vec::new();
+        if let Some(rows) = &mut started.rows {
+            if owner_a == owner_b && owner_a == me {
+                rows.mix(mix)?;
+            } else if me == owner_a || me == owner_b {
+                let mine = if me == owner_a { mix.a } else { mix.b };
+                row.push(wire_row(rows, mine)?);
+                started.row_mix = Some(mix);
+            }
+        }
         let held = self.factored_mut("a factored mix on a Radon stream")?;
         let (has_a, has_b) = (held.holds(mix.a), held.holds(mix.b));
         if apart {
@@ -299,7 +335,7 @@ impl Leader {
             };
             let components = held.take_of(&[theirs], |tracks| tracks == [theirs]);
             let gone = tracks_of(&components);
-            self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
+            self.send(seq, to, Vec::new(), row, components, actions)?;
             self.unfollow(seq, gone)?;
             // The relabel changed which tracks the components held here
             // carry.
@@ -318,6 +354,14 @@ impl Leader {
             return Ok(());
         }
         self.to_follow.extend([mix.a, mix.b]);
+        if !row.is_empty() {
+            // The rows of two leaders, exchanged: the tracks the relabel
+            // brought are followed once the other's row is in.
+            let to = if me == owner_a { owner_b } else { owner_a };
+            self.send(seq, to, Vec::new(), row, Vec::new(), actions)?;
+            self.waiting = Some(Waiting::Transfer { seq, from: to });
+            return Ok(());
+        }
         let new_tracks = self.follow_held()?;
         if !new_tracks.is_empty() {
             self.follow(seq, new_tracks, actions)?;
@@ -329,24 +373,63 @@ impl Leader {
     /// when it has to go `back`, and then the component of `mix.b` (unless
     /// it holds `mix.a` too) is sent to that leader, which waits for this
     /// transfer even if it is empty.
+    ///
+    /// On an identity stream the rows of `mix.a` and `mix.b` are both
+    /// here by then (the `partner` surveilling b sent its row, as it was
+    /// before the mix): they are fitted together, as the centralized
+    /// matrix fits them, and the new row of b goes back to the partner in
+    /// the transfer it waits for (with b's component, kept apart).
     pub(super) fn factored_mix_here(
         &mut self,
         seq: u64,
         mix: Mix,
         back: Option<u16>,
+        partner: Option<u16>,
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
+        let mut row = Vec::new();
+        if let Some(rows) = &mut self.started()?.rows {
+            rows.mix(mix)?;
+            if partner.is_some() {
+                let ln_likelihoods = rows.take(mix.b).ok_or(NOT_HELD)?;
+                row.push(WireRow {
+                    track: mix.b,
+                    ln_likelihoods,
+                });
+            }
+        }
         let held = self.factored_mut("a factored mix on a Radon stream")?;
         let Some(to) = back else {
             held.mix(mix, seq)?;
+            if let Some(to) = partner {
+                self.send(seq, to, Vec::new(), row, Vec::new(), actions)?;
+            }
             return Ok(());
         };
         held.mix_apart(mix, seq)?;
         let components = held.take_of(&[mix.b], |tracks| !tracks.contains(&mix.a));
         let gone = tracks_of(&components);
-        self.send(seq, to, Vec::new(), Vec::new(), components, actions)?;
+        // Under the regional rule `back` is the partner: one transfer.
+        self.send(seq, to, Vec::new(), row, components, actions)?;
         self.unfollow(seq, gone)?;
         Ok(())
+    }
+
+    /// Whether the leader surveilling `mix.a` holds all a mix needs: the
+    /// components of both tracks and, on an identity stream across two
+    /// leaders, the `partner`'s row of b.
+    pub(super) fn ready_to_mix(
+        &mut self,
+        mix: Mix,
+        partner: Option<u16>,
+    ) -> Result<bool, LeaderError> {
+        let started = self.started()?;
+        let row = match (&started.rows, partner) {
+            (Some(rows), Some(_)) => rows.holds(mix.b),
+            _ => true,
+        };
+        let held = self.factored_mut("a factored mix on a Radon stream")?;
+        Ok(row && held.holds(mix.a) && held.holds(mix.b))
     }
 
     /// The factored share of a started stream; `what` names the misuse

@@ -156,7 +156,12 @@ impl Leader {
                         None => return Ok(actions),
                     }
                 }
-                Some(Waiting::Components { seq, mix, back }) => {
+                Some(Waiting::Components {
+                    seq,
+                    mix,
+                    back,
+                    partner,
+                }) => {
                     // Whoever held them sent them at this item.
                     let mut here: Vec<(u64, u16)> = self
                         .transfers
@@ -168,15 +173,15 @@ impl Leader {
                     for key in here {
                         if let Some(transfer) = self.transfers.remove(&key) {
                             self.taken.push(key);
+                            self.receive_partner_row(mix, partner, key.1, transfer.rows)?;
                             self.receive_components(transfer.components)?;
                         }
                     }
-                    let held = self.factored_mut("a factored wait on a Radon stream")?;
-                    if !(held.holds(mix.a) && held.holds(mix.b)) {
+                    if !self.ready_to_mix(mix, partner)? {
                         return Ok(actions);
                     }
                     self.waiting = None;
-                    self.factored_mix_here(seq, mix, back, &mut actions)?;
+                    self.factored_mix_here(seq, mix, back, partner, &mut actions)?;
                     let new_tracks = self.follow_held()?;
                     if !new_tracks.is_empty() {
                         self.follow(seq, new_tracks, &mut actions)?;

@@ -27,6 +27,27 @@
 //! a cross-leader mix puts each leader's row of its mixed track, as it was
 //! before the mix, in the transfer it sends anyway, and both fit the same
 //! pair; a handover moves the track's row with its sets.
+//!
+//! On a factored stream the rows stay with the leader surveilling their
+//! track too, wherever the components go: a row changes only at a read, a
+//! mix of its track (exact and pairwise: only rows a and b) or a handover,
+//! all items its owner applies, so components and rows move apart.
+//! - A mix of tracks of two leaders (0 < swap < 1): the leader surveilling
+//!   b puts its row of b, as it was, in the transfer it sends the leader
+//!   surveilling a (empty of components if it holds neither) and waits for
+//!   that leader's transfer; the leader surveilling a waits for the row as
+//!   for the components, fits the pair as the centralized matrix does, and
+//!   sends b's new row back — with b's component under the regional rule,
+//!   alone otherwise. One fit, so the two leaders cannot disagree.
+//! - A certain exchange (swap 1) across two leaders: each sends the other
+//!   its row as on a Radon stream (with the singleton under the regional
+//!   rule) and the two swap (`row_mix`).
+//! - A handover moves the row with the components sent.
+//!
+//! Rows are in the snapshot with the rest of `Started`, and a journal
+//! replays the transfers that carried them. With rows no transfer is taken
+//! in without stopping ([`Leader::lazy_transfers`]): the pending rule
+//! names the components a transfer may bring, not rows.
 
 use crate::error::LeaderError;
 use idmesh_belief::factored::FactoredShare;
@@ -80,11 +101,14 @@ enum Waiting {
     /// their holders send this leader, the one surveilling `mix.a` (a
     /// factored stream: whoever holds them, see [`apply`]). Under the
     /// regional rule a mix across regions is kept apart and the component
-    /// of `mix.b` goes `back` to the leader surveilling it.
+    /// of `mix.b` goes `back` to the leader surveilling it. On an identity
+    /// stream across two leaders, the `partner` surveilling `mix.b` sends
+    /// its row of it too, and gets the fitted row back.
     Components {
         seq: u64,
         mix: Mix,
         back: Option<u16>,
+        partner: Option<u16>,
     },
     /// For the sensor's answer to a follow request made at `seq`.
     Follow { seq: u64 },

@@ -903,3 +903,345 @@ fn a_component_away_for_a_mix_across_regions_stops_only_what_touches_it() {
     assert!(leader.factored().unwrap().holds(0));
     assert!(leader.stats().quiet);
 }
+
+/// Leaders of one factored identity stream driven by hand: every item
+/// goes to every leader but an identity read, which goes to its track's
+/// owner alone (as the router sends it), and every transfer is delivered
+/// as soon as it is sent.
+struct Hand {
+    leaders: Vec<Leader>,
+    batches: Vec<u64>,
+}
+
+impl Hand {
+    fn new(begin: Item, names: &[&str]) -> Hand {
+        let mut hand = Hand {
+            leaders: names.iter().map(|n| Leader::new(*n)).collect(),
+            batches: vec![0; names.len()],
+        };
+        hand.item(1, begin, None);
+        hand
+    }
+
+    /// Item `seq` to every leader, or to `only`.
+    fn item(&mut self, seq: u64, item: Item, only: Option<usize>) {
+        for i in 0..self.leaders.len() {
+            if only.is_some_and(|o| o != i) {
+                continue;
+            }
+            let number = self.batches[i];
+            self.batches[i] += 1;
+            let actions = self.leaders[i]
+                .batch(batch(number, vec![(seq, item.clone())], seq, false), 0)
+                .unwrap();
+            self.carry_out(i, actions);
+        }
+    }
+
+    fn carry_out(&mut self, from: usize, actions: Vec<Action>) {
+        for action in actions {
+            match action {
+                Action::Send { to, transfer } => {
+                    let actions = self.leaders[to as usize].transfer(transfer, 0).unwrap();
+                    self.carry_out(to as usize, actions);
+                }
+                Action::Follow(_) => {
+                    // Every item reaches every leader here: none missed.
+                    let actions = self.leaders[from].followed(Vec::new()).unwrap();
+                    self.carry_out(from, actions);
+                }
+                Action::Unfollow(_) | Action::CutReady(_) => {}
+            }
+        }
+    }
+
+    /// The rows of every leader, put together.
+    fn matrix(&self, n: usize) -> Vec<Vec<f64>> {
+        use idmesh_belief::identity::InformationOptions;
+        let rows = self
+            .leaders
+            .iter()
+            .flat_map(|l| l.quiet(true).unwrap().sums.rows.clone())
+            .map(|r| (r.track, r.ln_likelihoods));
+        InformationRows::assemble(n, rows, InformationOptions::default())
+            .unwrap()
+            .log_likelihoods()
+    }
+}
+
+/// A factored stream with identities, under the regional rule or not:
+/// the rows stay with the leader surveilling their tracks whatever
+/// components move — a mix across two leaders sends b's row to the leader
+/// surveilling a, which fits the pair and sends b's new row back with
+/// what it sends anyway; a certain exchange swaps the two rows; a
+/// handover moves the row; a snapshot taken while a leader waits for a
+/// row restores it waiting — and the rows put together equal the
+/// centralized information matrix bit for bit after every item.
+#[test]
+fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapshots() {
+    use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    for regional in [false, true] {
+        let start = vec![2, 0, 3, 1, 4];
+        let Item::Begin(mut begin) = begin(&["a", "b", "c"], vec![0, 0, 1, 1, 2]) else {
+            unreachable!()
+        };
+        begin.tracks = 5;
+        begin.identities = true;
+        begin.initial_identity = Some(start.clone());
+        begin.factored = Some(FactoredStart {
+            max_component: 2,
+            split: WireSplit::Original,
+            shrink: true,
+            regional,
+        });
+        let mut central = InformationMatrix::from_assignment(
+            &start,
+            KNOWN_START_CONFIDENCE,
+            InformationOptions::default(),
+        )
+        .unwrap();
+        let mut hand = Hand::new(Item::Begin(begin), &["a", "b", "c"]);
+        let mut owners = vec![0usize, 0, 1, 1, 2];
+        let mix = |a: u32, b: u32, swap: f64, owners: &[usize]| Item::Mix {
+            a,
+            b,
+            swap,
+            owner_a: owners[a as usize] as u16,
+            owner_b: owners[b as usize] as u16,
+        };
+        let steps: Vec<(&str, u32, u32, f64)> = vec![
+            ("read", 0, 1, 0.8),
+            ("read", 3, 3, 0.7),
+            ("mix", 1, 2, 0.3),
+            ("snapshot", 0, 0, 0.0),
+            ("mix", 2, 4, 0.6),
+            ("mix", 1, 0, 0.45),
+            ("read", 2, 0, 0.9),
+            ("mix", 0, 3, 1.0),
+            ("handover", 0, 1, 0.0),
+            ("mix", 0, 3, 0.4),
+            ("mix", 4, 1, 0.25),
+            ("mix", 3, 4, 1.0),
+            ("read", 1, 2, 0.85),
+        ];
+        let mut seq = 1;
+        for (what, x, y, z) in steps {
+            if what == "snapshot" {
+                // Leader a is stopped at the mix (its component is
+                // wanted, or b's row is): restored, it goes on there.
+                let snapshot = hand.leaders[0].snapshot();
+                hand.leaders[0] = Leader::restore(&snapshot).unwrap();
+                continue;
+            }
+            seq += 1;
+            match what {
+                "read" => {
+                    let owner = owners[x as usize];
+                    let item = Item::Identify {
+                        track: x,
+                        identity: y,
+                        accuracy: z,
+                        owner: owner as u16,
+                    };
+                    hand.item(seq, item, Some(owner));
+                    central
+                        .identify(Identify {
+                            track: x,
+                            identity: y,
+                            accuracy: z,
+                        })
+                        .unwrap();
+                }
+                "mix" => {
+                    hand.item(seq, mix(x, y, z, &owners), None);
+                    central
+                        .mix(Mix {
+                            a: x,
+                            b: y,
+                            swap: z,
+                        })
+                        .unwrap();
+                }
+                _ => {
+                    let from = owners[x as usize] as u16;
+                    owners[x as usize] = y as usize;
+                    let handover = Item::Handover {
+                        track: x,
+                        from,
+                        to: y as u16,
+                    };
+                    hand.item(seq, handover, None);
+                }
+            }
+            for leader in &hand.leaders {
+                let stopped = (
+                    leader.waiting_for_transfer(),
+                    leader.waiting_for_components(),
+                );
+                assert_eq!(stopped, (None, None), "regional {regional}: {what} {x} {y}");
+                assert!(leader.caught_up());
+            }
+            assert_eq!(
+                hand.matrix(5),
+                central.log_likelihoods(),
+                "regional {regional}: after {what} {x} {y}"
+            );
+            let held: Vec<u64> = hand.leaders.iter().map(|l| l.stats().rows_held).collect();
+            let want: Vec<u64> = (0..3)
+                .map(|i| owners.iter().filter(|&&o| o == i).count() as u64)
+                .collect();
+            assert_eq!(held, want, "rows stay with the surveilling leader");
+        }
+    }
+}
+
+/// Leader "a" of a factored stream with identities (three tracks, uniform
+/// start), its `Begin` applied.
+fn factored_identity_leader(owners: Vec<u16>, regional: bool) -> Leader {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    let Item::Begin(mut start) = begin(&["a", "b"], owners) else {
+        unreachable!()
+    };
+    start.identities = true;
+    start.factored = Some(FactoredStart {
+        max_component: 3,
+        split: WireSplit::Original,
+        shrink: true,
+        regional,
+    });
+    let mut leader = Leader::new("a");
+    leader
+        .batch(batch(0, vec![(1, Item::Begin(start))], 1, false), 0)
+        .unwrap();
+    leader
+}
+
+/// The transfers a leader sent leader `to`: the tracks of their rows and
+/// of their components.
+fn sent_rows_and_tracks(actions: &[Action], to: u16) -> Vec<(Vec<u32>, Vec<Vec<u32>>)> {
+    actions
+        .iter()
+        .filter_map(|a| match a {
+            Action::Send { to: t, transfer } if *t == to => Some((
+                transfer.rows.iter().map(|r| r.track).collect(),
+                transfer
+                    .components
+                    .iter()
+                    .map(|c| c.tracks.clone())
+                    .collect(),
+            )),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The leader surveilling a of a mix across two leaders on a factored
+/// identity stream waits for b's row as for b's component, then sends b's
+/// fitted row back: alone, or with b's component under the regional rule
+/// (one transfer). A row of another track, or from a leader that does not
+/// surveil b, is refused.
+#[test]
+fn the_leader_surveilling_a_fits_both_rows_and_sends_b_its_new_row() {
+    let row = |track| WireRow {
+        track,
+        ln_likelihoods: vec![0.0, -1.0, -2.0],
+    };
+    for regional in [false, true] {
+        // Track 0 with a, 1 and 2 with b.
+        let mut gatherer = factored_identity_leader(vec![0, 1, 1], regional);
+        gatherer
+            .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, false), 0)
+            .unwrap();
+        assert_eq!(gatherer.waiting_for_components(), Some(2));
+        // b's component alone is not enough: its row must come too.
+        let mut transfer = component_transfer(1, 2, 2, vec![1.0, 0.0]);
+        transfer.rows = vec![row(2)];
+        let actions = gatherer.transfer(transfer, 0).unwrap();
+        let back = match regional {
+            true => vec![(vec![2], vec![vec![2]])],
+            false => vec![(vec![2], vec![])],
+        };
+        assert_eq!(
+            sent_rows_and_tracks(&actions, 1),
+            back,
+            "regional {regional}"
+        );
+        assert_eq!(gatherer.waiting_for_components(), None);
+        assert_eq!(gatherer.stats().rows_held, 1, "b's row went back");
+
+        for (from, track) in [(1, 1), (2, 2)] {
+            let mut wrong = factored_identity_leader(vec![0, 1, 1], regional);
+            wrong
+                .batch(batch(1, vec![(2, mix(0, 2, 0, 1))], 2, false), 0)
+                .unwrap();
+            let mut transfer = component_transfer(1, 2, 2, vec![1.0, 0.0]);
+            transfer.from = from;
+            transfer.rows = vec![row(track)];
+            assert!(
+                matches!(
+                    wrong.transfer(transfer, 0),
+                    Err(LeaderError::BadTransfer(_))
+                ),
+                "a row of track {track} from leader {from}"
+            );
+        }
+    }
+}
+
+/// The leader surveilling b sends its row with its component (with no
+/// component if it holds none) and waits for its fitted row to come back.
+#[test]
+fn the_leader_surveilling_b_sends_its_row_and_waits_for_the_fitted_one() {
+    for holds_b in [true, false] {
+        // Track 0 with a, 1 and 2 with b; the mix (2, 0) is b's to gather.
+        let mut returner = factored_identity_leader(vec![0, 1, 1], false);
+        let mut seq = 2;
+        if !holds_b {
+            // Track 0's component goes to b first (a mix gathered there),
+            // and its fitted row comes back.
+            let actions = returner
+                .batch(batch(1, vec![(2, mix(1, 0, 1, 0))], 2, false), 0)
+                .unwrap();
+            assert_eq!(
+                sent_rows_and_tracks(&actions, 1),
+                [(vec![0], vec![vec![0]])]
+            );
+            let mut back = nothing_from(1, 2);
+            back.rows = vec![WireRow {
+                track: 0,
+                ln_likelihoods: vec![0.0, -0.5, -0.5],
+            }];
+            returner.transfer(back, 0).unwrap();
+            assert_eq!(returner.position(), 2);
+            seq = 3;
+        }
+        let actions = returner
+            .batch(
+                batch(
+                    if holds_b { 1 } else { 2 },
+                    vec![(seq, mix(2, 0, 1, 0))],
+                    seq,
+                    false,
+                ),
+                0,
+            )
+            .unwrap();
+        let components = if holds_b { vec![vec![0]] } else { vec![] };
+        assert_eq!(sent_rows_and_tracks(&actions, 1), [(vec![0], components)]);
+        assert_eq!(returner.waiting_for_transfer(), Some((seq, 1)));
+        let mut back = nothing_from(1, seq);
+        back.rows = vec![WireRow {
+            track: 0,
+            ln_likelihoods: vec![0.0, -0.25, -0.75],
+        }];
+        returner.transfer(back, 0).unwrap();
+        assert_eq!(returner.position(), seq);
+        let rows = returner.quiet(true).unwrap().sums.rows.clone();
+        let own: Vec<_> = rows
+            .iter()
+            .map(|r| (r.track, r.ln_likelihoods.clone()))
+            .collect();
+        assert_eq!(own, [(0, vec![0.0, -0.25, -0.75])], "the fitted row, kept");
+    }
+}

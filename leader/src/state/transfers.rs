@@ -147,6 +147,39 @@ impl Leader {
         Ok(())
     }
 
+    /// Rows that came with the components of a factored mix (`mix`) from
+    /// leader `from`: only the `partner` surveilling `mix.b` sends one,
+    /// its row of `mix.b` as it was before the mix, held here until the
+    /// fit ([`Leader::factored_mix_here`]).
+    pub(super) fn receive_partner_row(
+        &mut self,
+        mix: Mix,
+        partner: Option<u16>,
+        from: u16,
+        received: Vec<WireRow>,
+    ) -> Result<(), LeaderError> {
+        if received.is_empty() {
+            return Ok(());
+        }
+        let rows = self.started()?.rows.as_mut();
+        match (rows, received.as_slice()) {
+            (Some(rows), [row])
+                if partner == Some(from) && row.track == mix.b && !rows.holds(mix.b) =>
+            {
+                rows.insert(row.track, row.ln_likelihoods.clone())
+                    .map_err(|e| LeaderError::BadTransfer(e.to_string()))
+            }
+            _ => Err(LeaderError::BadTransfer(format!(
+                "leader {from} sent rows of {:?} with the components of a mix of tracks {} and \
+                 {}, where only the partner's row of {} may come",
+                received.iter().map(|r| r.track).collect::<Vec<_>>(),
+                mix.a,
+                mix.b,
+                mix.b
+            ))),
+        }
+    }
+
     /// Adds sets received at item `seq`; asks to follow tracks they bring.
     pub(super) fn receive_sets(
         &mut self,

@@ -234,9 +234,6 @@ impl Begin {
         }
         if let Some(factored) = &self.factored {
             factored.check()?;
-            require(!self.identities, || {
-                "begin: a factored belief on an identity stream".into()
-            })?;
         }
         Ok(())
     }

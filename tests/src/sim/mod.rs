@@ -13,6 +13,10 @@
 //! Every schedule checks:
 //! - every answer equals the centralized engine's at its watermark to
 //!   1e-9 (exact conditioning, no pruning), and its marginals sum to k;
+//! - on a factored stream with identities (half the factored schedules),
+//!   the leaders' rows at every answer's cut, put together, are the
+//!   centralized information matrix at its watermark, and the exact
+//!   identity marginals made of them are the engine's;
 //! - watermarks only move forward: an answer is never older than one
 //!   given before the query was asked;
 //! - a leader never goes back, comes back no lower than the durable mark

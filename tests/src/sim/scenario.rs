@@ -3,12 +3,21 @@
 //! random fixed places), and a trace of mixes, observations and moves
 //! (moves and redraws make handovers, mixes of tracks of two leaders make
 //! transfers, and transfers make follows). With it, what the centralized engine says
-//! after every prefix of the trace: the answer any cut must give.
+//! after every prefix of the trace: the answer any cut must give. Half the
+//! factored schedules carry identities too (identity reads among the
+//! events): for them also the centralized information matrix after every
+//! prefix, which the leaders' rows at a cut must put back together.
 
+use idmesh_belief::identity::filter::to_rows;
+use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_belief::identity::{
+    Identify as IdentifyEvent, IdentityFilter, InformationMatrix, InformationOptions,
+    MarginalMethod,
+};
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
 use idmesh_placement::{factored_options, RegionRule, Regional, Regions};
-use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe};
+use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_sensor::machine::Gateway;
 use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
@@ -38,6 +47,17 @@ pub struct Scenario {
     pub placed_ahead: bool,
     /// Seqs after which a leader with nothing queued is sent a batch.
     pub idle_every: u64,
+    /// On a stream with identities, the centralized information matrix
+    /// after every prefix of the trace.
+    pub identity: Option<CentralIdentity>,
+}
+
+/// `idmesh replay --method information-matrix` after every prefix.
+pub struct CentralIdentity {
+    /// `rows[e]`: the log-likelihood rows after the first e events.
+    pub rows: Vec<Vec<Vec<f64>>>,
+    /// `marginals[e]`: their exact marginals (track × identity).
+    pub marginals: Vec<Vec<Vec<f64>>>,
 }
 
 impl Scenario {
@@ -145,6 +165,39 @@ impl Scenario {
             regional: rng.gen_bool(0.5),
         });
         let distributed_rule = distributed_rule && factored.is_none();
+        // Half the factored schedules carry identities: a few reads among
+        // the events, and a known start now and then
+        // (IDMESH_SIM_IDENTITIES=0 runs none).
+        let identities = factored.is_some()
+            && !std::env::var("IDMESH_SIM_IDENTITIES").is_ok_and(|v| v == "0")
+            && rng.gen_bool(0.5);
+        if identities {
+            header.identities = Some(tracks);
+            if rng.gen_bool(0.5) {
+                let mut start: Vec<u32> = (0..tracks as u32).collect();
+                for i in (1..start.len()).rev() {
+                    start.swap(i, rng.gen_range(0..=i));
+                }
+                header.initial_identity = Some(start);
+            }
+            for _ in 0..rng.gen_range(1..=8) {
+                let at = rng.gen_range(0..=lines.len());
+                let time = at
+                    .checked_sub(1)
+                    .and_then(|i| lines[i].time())
+                    .unwrap_or(0.0);
+                let read = Identify {
+                    time,
+                    track: rng.gen_range(0..tracks as u32),
+                    identity: rng.gen_range(0..tracks as u32),
+                    accuracy: rng.gen_range(0.5..0.95),
+                };
+                lines.insert(at, Line::Identify(read));
+            }
+        }
+        let identity = identities
+            .then(|| central_identity(&header, &lines))
+            .transpose()?;
         let centralized = centralized(
             &header,
             &lines,
@@ -172,6 +225,7 @@ impl Scenario {
             regions,
             placed_ahead: rng.gen_bool(0.5),
             idle_every,
+            identity,
         })
     }
 
@@ -264,4 +318,58 @@ fn centralized(
         out.push(engine.marginals().map_err(|e| e.to_string())?);
     }
     Ok(out)
+}
+
+/// The centralized information matrix (the identity method
+/// `idmesh replay --method information-matrix` runs) after every prefix
+/// of `lines`, with its exact marginals.
+fn central_identity(header: &Header, lines: &[Line]) -> Result<CentralIdentity, String> {
+    let n = header.tracks;
+    let failed = |e: idmesh_belief::BeliefError| e.to_string();
+    let options = InformationOptions::default();
+    let mut matrix = match &header.initial_identity {
+        Some(start) => InformationMatrix::from_assignment(start, KNOWN_START_CONFIDENCE, options)
+            .map_err(failed)?,
+        None => InformationMatrix::uniform_with(n, options).map_err(failed)?,
+    };
+    let mut central = CentralIdentity {
+        rows: Vec::with_capacity(lines.len() + 1),
+        marginals: Vec::with_capacity(lines.len() + 1),
+    };
+    let mut keep = |matrix: &InformationMatrix| -> Result<(), String> {
+        central.rows.push(matrix.log_likelihoods());
+        central.marginals.push(exact_marginals(matrix)?);
+        Ok(())
+    };
+    keep(&matrix)?;
+    for line in lines {
+        match line {
+            Line::Mix(m) => matrix
+                .mix(idmesh_belief::Mix {
+                    a: m.a,
+                    b: m.b,
+                    swap: m.swap,
+                })
+                .map_err(failed)?,
+            Line::Identify(read) => matrix
+                .identify(IdentifyEvent {
+                    track: read.track,
+                    identity: read.identity,
+                    accuracy: read.accuracy,
+                })
+                .map_err(failed)?,
+            _ => {}
+        }
+        keep(&matrix)?;
+    }
+    Ok(central)
+}
+
+/// The exact marginals of `matrix`, track by identity, as the coordinator
+/// computes them from the rows it assembles.
+pub fn exact_marginals(matrix: &InformationMatrix) -> Result<Vec<Vec<f64>>, String> {
+    let blocks = matrix
+        .block_marginals(&MarginalMethod::Exact)
+        .map_err(|e| e.to_string())?;
+    Ok(to_rows(matrix.log_likelihoods().len(), &blocks.dense()))
 }

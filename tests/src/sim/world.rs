@@ -8,8 +8,9 @@
 //! done here with virtual time.
 
 use super::network::{Endpoint, Network};
-use super::scenario::Scenario;
+use super::scenario::{exact_marginals, Scenario};
 use super::Violation;
+use idmesh_belief::identity::{InformationOptions, InformationRows};
 use idmesh_coordinator::machine::{
     at_rest_of, check, marginals_of, read_cut, GatherError, Memory, Partials,
 };
@@ -242,6 +243,9 @@ pub struct Tally {
     pub window_waits: u64,
     /// Schedules whose leaders held the factored belief.
     pub factored: u64,
+    /// Schedules with identities (factored), and identity answers checked.
+    pub identities: u64,
+    pub identity_answers: u64,
     /// Factored leaders' replies told as a change to an answer the
     /// coordinator keeps (`Partial::base`).
     pub changes: u64,
@@ -293,6 +297,7 @@ impl World {
     pub fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
         let scenario_factored = scenario.factored.is_some();
+        let scenario_identities = scenario.identity.is_some();
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
         let gateway = scenario.gateway(router);
@@ -331,6 +336,7 @@ impl World {
             calm: false,
             tally: Tally {
                 factored: scenario_factored as u64,
+                identities: scenario_identities as u64,
                 ..Tally::default()
             },
             last_error: String::new(),
@@ -1154,7 +1160,8 @@ impl World {
         match last {
             Some(_) => {
                 for j in 0..self.leaders.len() {
-                    self.ask_leader(j, id, Ask::Quiet { rows: false });
+                    let rows = self.scenario.identity.is_some();
+                    self.ask_leader(j, id, Ask::Quiet { rows });
                 }
             }
             None => self.fresh_phase(&mut query),
@@ -1181,7 +1188,9 @@ impl World {
                     id,
                     parameters: CutParameters {
                         tag: Some(tag.to_string()),
-                        rows: false,
+                        // An identity stream's cuts carry the rows too:
+                        // every answer is checked for both.
+                        rows: self.scenario.identity.is_some(),
                         events: None,
                     },
                 },
@@ -1281,8 +1290,24 @@ impl World {
                 }),
             },
         };
-        match result.and_then(|collected| marginals_of(&collected, &self.memory)) {
-            Ok(answer) => self.answered(&query, answer),
+        let answered = result.and_then(|collected| {
+            let answer = marginals_of(&collected, &self.memory)?;
+            let rows: Vec<(u32, Vec<f64>)> = collected
+                .parts
+                .iter()
+                .flat_map(|p| &p.rows)
+                .map(|r| (r.track, r.ln_likelihoods.clone()))
+                .collect();
+            Ok((answer, rows))
+        });
+        match answered {
+            Ok((answer, rows)) => {
+                if self.scenario.identity.is_some() {
+                    let events = answer.watermark.values().copied().sum::<u64>();
+                    self.answered_identity(events, rows)?;
+                }
+                self.answered(&query, answer)
+            }
             Err(e) => {
                 self.tally.failed_queries += 1;
                 self.last_error = e.to_string();
@@ -1339,6 +1364,56 @@ impl World {
             }
             self.final_answer = Some(answer);
         }
+        Ok(())
+    }
+
+    /// Checks the rows an answer at `events` events gathered against the
+    /// centralized information matrix there: put together they must be it
+    /// (the same operations on each row, in the same order), and the
+    /// identity answer made of them must be its.
+    fn answered_identity(
+        &mut self,
+        events: u64,
+        rows: Vec<(u32, Vec<f64>)>,
+    ) -> Result<(), Violation> {
+        let Some(central) = &self.scenario.identity else {
+            return Ok(());
+        };
+        let (Some(want), Some(want_marginals)) = (
+            central.rows.get(events as usize),
+            central.marginals.get(events as usize),
+        ) else {
+            return Err(Violation::new(format!(
+                "an identity answer at {events} events, beyond the stream's {}",
+                self.scenario.lines.len()
+            )));
+        };
+        let n = want.len();
+        let held: Vec<u32> = rows.iter().map(|(t, _)| *t).collect();
+        let matrix = InformationRows::assemble(n, rows, InformationOptions::default())
+            .map_err(|e| {
+                Violation::new(format!(
+                    "at {events} events the leaders' rows (of tracks {held:?}) do not make a matrix: {e}"
+                ))
+            })?;
+        let close = |got: f64, want: f64| got == want || (got - want).abs() <= 1e-9;
+        let got = matrix.log_likelihoods();
+        for (t, (got, want)) in got.iter().zip(want).enumerate() {
+            if got.len() != want.len() || !got.iter().zip(want).all(|(g, w)| close(*g, *w)) {
+                return Err(Violation::new(format!(
+                    "at {events} events the row of track {t}: the deployment has {got:?}, the centralized information matrix {want:?}"
+                )));
+            }
+        }
+        let marginals = exact_marginals(&matrix).map_err(Violation::new)?;
+        for (t, (got, want)) in marginals.iter().zip(want_marginals).enumerate() {
+            if !got.iter().zip(want).all(|(g, w)| (g - w).abs() <= 1e-9) {
+                return Err(Violation::new(format!(
+                    "at {events} events track {t}'s identities: the deployment says {got:?}, the centralized engine {want:?}"
+                )));
+            }
+        }
+        self.tally.identity_answers += 1;
         Ok(())
     }
 
