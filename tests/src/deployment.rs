@@ -7,7 +7,8 @@ use crate::idmesh;
 use idmesh_deploy::runtime::ports::pick_free_ports;
 pub use idmesh_deploy::runtime::security::SecuritySection;
 pub use idmesh_deploy::runtime::topology::{
-    BeliefKind, FaultSection, LeaderFaultSection, Sparsification, SplitSetting, Topology,
+    BeliefKind, FaultSection, LeaderFaultSection, RegionsSetting, Sparsification, SplitSetting,
+    Topology,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -59,6 +60,10 @@ pub struct Settings {
     /// each with the settings above); 0 or 1: one `[sensor]`. Leaders are
     /// served by the sensors in turn.
     pub sensors: usize,
+    /// Leaders at fixed places on a grid over the trace's field
+    /// (`regions = "fixed"`: a track is handed over at every `move` across
+    /// a border), instead of regions fitted to the crowd.
+    pub fixed_places: bool,
 }
 
 /// The factored belief's settings in a topology.
@@ -171,6 +176,16 @@ pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
     let ports = pick_free_ports(1 + settings.leaders + sensors).expect("free loopback ports");
     let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
     let mut topology = Topology::loopback(sensor_trace, settings.leaders, sensors, &ports);
+    if settings.fixed_places {
+        topology.regions = RegionsSetting::Fixed;
+        for (leader, (x, y)) in topology
+            .leader
+            .iter_mut()
+            .zip(grid_over(trace, settings.leaders))
+        {
+            leader.at = Some([x, y]);
+        }
+    }
     topology.prefix = format!("idmesh/test-{name}-{}", std::process::id());
     topology.distributed_rule = settings.distributed_rule;
     topology.budget = settings.budget;

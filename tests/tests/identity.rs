@@ -46,7 +46,8 @@ fn settings(leaders: usize, rate: Option<f64>) -> Settings {
     }
 }
 
-/// Through 1 and 4 leaders (tracks crossing regions, mixes across leaders),
+/// Through 1 and 4 leaders at fixed places (tracks crossing regions, mixes
+/// across leaders),
 /// the identity marginals asked for right after the events before every
 /// truth line equal the centralized information matrix's to 1e-9; a
 /// one-track question agrees with the whole answer.
@@ -58,10 +59,15 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
     let truths = truth_lines(&trace);
     assert_eq!(central.len(), truths.len());
     for leaders in [1, 4] {
+        // Leaders at fixed places, so that tracks are handed over (rows
+        // and all) at their moves across borders.
         let deployment = Deployment::start(
             &format!("identity{leaders}"),
             &trace,
-            &settings(leaders, Some(300.0)),
+            &Settings {
+                fixed_places: true,
+                ..settings(leaders, Some(300.0))
+            },
         );
         deployment.first_answer(Duration::from_secs(30));
         let answers = deployment.at_truth_points("identity", &truths);

@@ -26,7 +26,9 @@ fn array<T>(v: &Value, item: impl Fn(&Value) -> Option<T>) -> Vec<T> {
 
 /// Exact conditioning, no pruning: through 1, 2, 4 and 8 leaders the
 /// coordinator's marginals equal `idmesh replay --method overcomplete` to
-/// 1e-9, on a crowd whose tracks move between leaders and mix across them.
+/// 1e-9, on a crowd whose tracks move between leaders and mix across them
+/// (leaders at fixed places, so that tracks are handed over at their moves
+/// across borders; the defaults' fitted regions are tests/tests/factored.rs's).
 #[test]
 fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
     let dir = std::env::temp_dir().join(format!("idmesh-exact-{}", std::process::id()));
@@ -40,6 +42,7 @@ fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
             budget: 0,
             overcomplete: false,
             rate: None,
+            fixed_places: true,
             ..Settings::default()
         };
         let deployment = Deployment::start(&format!("exact{leaders}"), &trace, &settings);
