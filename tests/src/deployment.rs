@@ -737,22 +737,25 @@ fn simulate_crowd(
         "crowd"
     };
     let out = dir.join(format!("{kind}-{targets}-{red}-{seed}.jsonl"));
+    let (targets, red) = (targets.to_string(), red.to_string());
+    let (duration, seed) = (duration.to_string(), seed.to_string());
+    let mut args = vec!["--model", "crowd", "--targets", &targets, "--red", &red];
+    args.extend(identities.then_some("--identities"));
+    args.extend(["--duration", &duration, "--seed", &seed]);
+    simulate(&args, out)
+}
+
+/// `idmesh simulate ARGS --out OUT`, which must succeed: OUT.
+fn simulate(args: &[&str], out: PathBuf) -> PathBuf {
     let status = Command::new(idmesh())
-        .args(["simulate", "--model", "crowd"])
-        .args(identities.then_some("--identities"))
-        .args(["--targets", &targets.to_string(), "--red", &red.to_string()])
-        .args([
-            "--duration",
-            &duration.to_string(),
-            "--seed",
-            &seed.to_string(),
-        ])
+        .arg("simulate")
+        .args(args)
         .arg("--out")
         .arg(&out)
         .stderr(Stdio::null())
         .status()
         .expect("simulate runs");
-    assert!(status.success());
+    assert!(status.success(), "idmesh simulate {args:?} failed");
     out
 }
 
@@ -762,17 +765,23 @@ fn simulate_crowd(
 pub fn waypoint_crowd(dir: &Path, targets: usize, red: usize, events: u64, seed: u64) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     let out = dir.join(format!("waypoint-{targets}-{red}-{seed}.jsonl"));
-    let status = Command::new(idmesh())
-        .args(["simulate", "--model", "waypoint"])
-        .args(["--targets", &targets.to_string(), "--red", &red.to_string()])
-        .args(["--events", &events.to_string(), "--seed", &seed.to_string()])
-        .arg("--out")
-        .arg(&out)
-        .stderr(Stdio::null())
-        .status()
-        .expect("simulate runs");
-    assert!(status.success());
-    out
+    let (targets, red) = (targets.to_string(), red.to_string());
+    let (events, seed) = (events.to_string(), seed.to_string());
+    simulate(
+        &[
+            "--model",
+            "waypoint",
+            "--targets",
+            &targets,
+            "--red",
+            &red,
+            "--events",
+            &events,
+            "--seed",
+            &seed,
+        ],
+        out,
+    )
 }
 
 /// The summary line of `idmesh replay` on `trace` with `args`.

@@ -9,8 +9,8 @@
 //! show the same counts read off the leaders of the bench's crowd.
 
 use super::BenchOptions;
-use crate::runtime::launch::field_corners;
-use anyhow::{Context, Result};
+use crate::runtime::launch::{field_corners, simulate_into};
+use anyhow::Result;
 use idmesh_placement::{busiest_share, grid_places, items_sent, RegionRule};
 use idmesh_protocol::trace::Line;
 use std::fmt::Write as _;
@@ -27,20 +27,13 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
         options.targets, options.red, options.duration
     ));
     if !waypoint.exists() {
-        let generated = idmesh_sim::Scenario::waypoint()
-            .targets(options.targets)
-            .red(options.red)
-            .duration(options.duration)
-            .seed(options.seed)
-            .generate()
-            .context("the waypoint simulation failed")?;
-        let path = waypoint.display().to_string();
-        let file =
-            std::fs::File::create(&waypoint).with_context(|| format!("{path}: cannot create"))?;
-        idmesh_sim::scenario::trace_out::write_trace(
-            &generated,
-            std::io::BufWriter::new(file),
-            path,
+        simulate_into(
+            idmesh_sim::Scenario::waypoint(),
+            options.targets,
+            options.red,
+            options.duration,
+            options.seed,
+            &waypoint,
         )?;
     }
     let mut out = String::from(

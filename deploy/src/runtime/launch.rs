@@ -313,14 +313,27 @@ pub fn simulate_crowd(
     identities: bool,
     out: &Path,
 ) -> Result<()> {
-    let trace = idmesh_sim::Scenario::crowd()
+    let crowd = idmesh_sim::Scenario::crowd().identities(identities);
+    simulate_into(crowd, targets, red, duration, seed, out)
+}
+
+/// Simulates `scenario` with n = `targets`, k = `red`, `duration` seconds
+/// and `seed` into the trace file `out`.
+pub fn simulate_into(
+    scenario: idmesh_sim::Scenario,
+    targets: usize,
+    red: usize,
+    duration: f64,
+    seed: u64,
+    out: &Path,
+) -> Result<()> {
+    let trace = scenario
         .targets(targets)
         .red(red)
         .duration(duration)
         .seed(seed)
-        .identities(identities)
         .generate()
-        .context("the crowd simulation failed")?;
+        .context("the simulation failed")?;
     let path = out.display().to_string();
     let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
     idmesh_sim::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;

@@ -163,7 +163,6 @@ pub struct Fitted {
     /// The items each leader was sent during this window.
     sent: Vec<u64>,
     items: u64,
-    redraws: u64,
     window_per_leader: u64,
 }
 
@@ -177,7 +176,6 @@ impl Fitted {
             activity: vec![0; tracks],
             sent: vec![0; usize::from(leaders)],
             items: 0,
-            redraws: 0,
             window_per_leader: window_per_leader.max(1),
         }
     }
@@ -185,16 +183,6 @@ impl Fitted {
     /// Items per window.
     pub fn window(&self) -> u64 {
         self.window_per_leader * u64::from(self.leaders)
-    }
-
-    /// How many times the cells were drawn again after the first.
-    pub fn redraws(&self) -> u64 {
-        self.redraws.saturating_sub(1)
-    }
-
-    /// Where `track` was last seen.
-    pub fn position(&self, track: u32) -> Option<(f64, f64)> {
-        self.positions.get(track as usize).copied().flatten()
     }
 
     /// `track` is at (x, y) now.
@@ -311,7 +299,6 @@ impl Fitted {
             .map(|&(t, p)| (t, cells.leader_at(p)))
             .collect();
         self.cells = Some(cells);
-        self.redraws += 1;
         self.new_window();
         owners
     }

@@ -142,19 +142,28 @@ impl Regions {
                 handovers.extend(self.moved(track as u32, x, y));
             }
         }
-        if let Rule::Fitted(fitted) = &mut self.rule {
-            if leading.iter().any(Option::is_some) && !self.owners.is_empty() {
-                for (track, to) in fitted.draw(&self.owners) {
-                    let slot = &mut self.owners[track as usize];
-                    if *slot != to {
-                        handovers.push(Handover {
-                            track,
-                            from: *slot,
-                            to,
-                        });
-                        *slot = to;
-                    }
-                }
+        if leading.iter().any(Option::is_some) && !self.owners.is_empty() {
+            handovers.extend(self.draw());
+        }
+        handovers
+    }
+
+    /// Fitted cells drawn again, each placed track to the leader of its
+    /// new cell: the handovers that makes (none under fixed places).
+    fn draw(&mut self) -> Vec<Handover> {
+        let Rule::Fitted(fitted) = &mut self.rule else {
+            return Vec::new();
+        };
+        let mut handovers = Vec::new();
+        for (track, to) in fitted.draw(&self.owners) {
+            let slot = &mut self.owners[track as usize];
+            if *slot != to {
+                handovers.push(Handover {
+                    track,
+                    from: *slot,
+                    to,
+                });
+                *slot = to;
             }
         }
         handovers
@@ -167,15 +176,6 @@ impl Regions {
 
     pub fn owner(&self, track: u32) -> Option<u16> {
         self.owners.get(track as usize).copied()
-    }
-
-    /// How many times fitted cells were drawn again since the first draw
-    /// (0 under fixed places).
-    pub fn redraws(&self) -> u64 {
-        match &self.rule {
-            Rule::Fitted(fitted) => fitted.redraws(),
-            Rule::Fixed(_) => 0,
-        }
     }
 
     /// Where each leader is, for a map: its place, or under fitted cells
@@ -270,21 +270,13 @@ impl Regions {
             fitted.sent(&[], &[h.from, h.to]);
         }
         if fitted.window_over() {
-            let first = handovers.len();
-            for (track, to) in fitted.draw(&self.owners) {
-                let slot = &mut self.owners[track as usize];
-                if *slot != to {
-                    handovers.push(Handover {
-                        track,
-                        from: *slot,
-                        to,
-                    });
-                    *slot = to;
+            let redrawn = self.draw();
+            if let Rule::Fitted(fitted) = &mut self.rule {
+                for h in &redrawn {
+                    fitted.sent(&[], &[h.from, h.to]);
                 }
             }
-            for h in &handovers[first..] {
-                fitted.sent(&[], &[h.from, h.to]);
-            }
+            handovers.extend(redrawn);
         }
         handovers
     }
