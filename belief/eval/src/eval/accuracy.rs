@@ -22,9 +22,7 @@ use std::path::Path;
 
 pub use super::scenarios::Start;
 
-/// Seconds between the `move` lines of a written crowd: the sensor places
-/// every track in a leader's region by them, as `idmesh simulate` writes.
-const MOVE_INTERVAL: f64 = 1.0;
+use super::scenarios::MOVE_INTERVAL;
 
 /// One Table III crowd: a point of the full preset and one of its seeds.
 #[derive(Debug, Clone)]
@@ -211,7 +209,7 @@ impl Written {
             .iter()
             .filter_map(|s| match s {
                 Step::Truth(red) => Some(red.as_slice()),
-                Step::Event(_) => None,
+                Step::Event(_) | Step::Move { .. } => None,
             })
             .collect();
         if answers.len() != truths.len() {
@@ -260,5 +258,36 @@ mod tests {
         let scored = super::super::score::score(Method::FactoredLocal, &written.trace, 0);
         assert_eq!(error, scored.error);
         assert!(written.tracking_error(&central[1..]).is_err());
+    }
+
+    #[test]
+    fn a_deployed_row_is_the_regional_replay_of_the_written_file() {
+        let crowd = table3_crowds(1)
+            .into_iter()
+            .find(|c| c.n == 60 && c.swap == 0.5 && c.start == Start::Known)
+            .unwrap();
+        let dir = std::env::temp_dir().join(format!("idmesh-deployed-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("crowd.jsonl");
+        let written = crowd.write(&path).unwrap();
+        let options = match Method::FactoredLocal.recipe(0) {
+            crate::filters::Recipe::Factored(options) => options,
+            other => panic!("{other:?}"),
+        };
+        let scored = |leaders: usize| {
+            super::super::score::score(Method::Deployed(leaders), &written.trace, 0).error
+        };
+        for leaders in [4, 8] {
+            let regional = written
+                .regional(&path, options.clone(), &RegionRule::fitted(), leaders)
+                .unwrap();
+            assert_eq!(written.tracking_error(&regional).unwrap(), scored(leaders));
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+        // The regions matter: one leader is the local rule alone, and
+        // eight keep components apart at other events.
+        let local = super::super::score::score(Method::FactoredLocal, &written.trace, 0).error;
+        assert_eq!(scored(1), local);
+        assert_ne!(scored(8), local);
     }
 }

@@ -73,7 +73,7 @@ fn cost(cell: &Cell, traces: &[Trace]) -> f64 {
         Method::Threshold(b) => b as f64 * n * 0.5,
         Method::Overcomplete(b) | Method::Distributed(b) => b as f64 * n * 2.0,
         Method::Particles(p) => p as f64 * 2.0,
-        Method::Factored | Method::FactoredLocal => n * n,
+        Method::Factored | Method::FactoredLocal | Method::Deployed(_) => n * n,
     };
     per_event * events
 }

@@ -3,7 +3,8 @@
 //! `overcomplete:B`, `distributed:B` (overcomplete with the distributed
 //! conditioning rule of Section 5.4), `particles:P`, and `factored` (the
 //! factored belief of `idmesh_belief::factored`, default options; see
-//! [`FACTORED_AVAILABLE`]).
+//! [`FACTORED_AVAILABLE`]), `factored-local`, and `deployed:L` (what a
+//! deployment of L leaders computes at the default settings).
 
 use crate::filters::Recipe;
 use anyhow::{bail, Context, Result};
@@ -41,6 +42,11 @@ pub enum Method {
     /// The factored belief with [`Coupling::Local`] splits: what a leader
     /// can run, measured beside the coupled default.
     FactoredLocal,
+    /// What a deployment of this many leaders computes at the default
+    /// settings: the factored belief with the local rule under the
+    /// regional rule, regions fitted to the crowd from the trace's `move`
+    /// lines (`idmesh_placement::Regional`; `idmesh replay --leaders L`).
+    Deployed(usize),
 }
 
 impl Method {
@@ -77,9 +83,11 @@ impl Method {
             "overcomplete" => Ok(Method::Overcomplete(number("budget")?)),
             "distributed" => Ok(Method::Distributed(number("budget")?)),
             "particles" => Ok(Method::Particles(number("particles")?)),
+            "deployed" => Ok(Method::Deployed(number("leaders")?)),
             _ => bail!(
                 "unknown method `{text}`: expected exact, order1, order2, order3, threshold:B, \
-                 overcomplete:B, distributed:B, particles:P, factored or factored-local"
+                 overcomplete:B, distributed:B, particles:P, factored, factored-local or \
+                 deployed:L"
             ),
         }
     }
@@ -95,6 +103,7 @@ impl Method {
             Method::Particles(p) => format!("particles (P = {p})"),
             Method::Factored => "factored".into(),
             Method::FactoredLocal => "factored, local rule".into(),
+            Method::Deployed(l) => format!("factored, as deployed on {l} leaders"),
         }
     }
 
@@ -111,7 +120,7 @@ impl Method {
                 let j = j.min(k).min(n);
                 (0..=j).map(|u| choose(n, u)).sum::<f64>() <= MAX_STATES as f64
             }
-            Method::Factored | Method::FactoredLocal => FACTORED_AVAILABLE,
+            Method::Factored | Method::FactoredLocal | Method::Deployed(_) => FACTORED_AVAILABLE,
             _ => true,
         }
     }
@@ -132,6 +141,19 @@ impl Method {
             Method::Particles(count) => Recipe::Particles { count, seed },
             Method::Factored => Recipe::factored(Coupling::Coupled),
             Method::FactoredLocal => Recipe::factored(Coupling::Local),
+            // Its regions wrap the belief where the trace is replayed
+            // (`Method::leaders`).
+            Method::Deployed(_) => Recipe::factored(Coupling::Local),
+        }
+    }
+
+    /// The leaders a deployed method shares the tracks among: its replay
+    /// runs the regional rule with fitted regions over the trace's `move`
+    /// lines.
+    pub fn leaders(&self) -> Option<usize> {
+        match *self {
+            Method::Deployed(leaders) => Some(leaders),
+            _ => None,
         }
     }
 
@@ -153,6 +175,7 @@ impl fmt::Display for Method {
             Method::Particles(p) => write!(f, "particles:{p}"),
             Method::Factored => write!(f, "factored"),
             Method::FactoredLocal => write!(f, "factored-local"),
+            Method::Deployed(l) => write!(f, "deployed:{l}"),
         }
     }
 }
@@ -174,10 +197,18 @@ mod tests {
             "particles:1000",
             "factored",
             "factored-local",
+            "deployed:8",
         ] {
             assert_eq!(Method::parse(name).unwrap().to_string(), name);
         }
-        for bad in ["order4", "overcomplete", "particles:0", "exact:3", "radon"] {
+        for bad in [
+            "order4",
+            "overcomplete",
+            "particles:0",
+            "exact:3",
+            "radon",
+            "deployed",
+        ] {
             assert!(Method::parse(bad).is_err(), "{bad}");
         }
     }

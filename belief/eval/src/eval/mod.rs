@@ -437,7 +437,11 @@ fn body(results: &Results, plots: &[Plot]) -> String {
          is given at swap 0.5 and at swap 0.1 (where our exact filter lands near the paper's \
          errors), each from the known red tracks and from the uniform prior (the same \
          traces, nothing revealed at time 0). Rows marked equal memory / equal time are \
-         particle filters sized to the overcomplete method.\n",
+         particle filters sized to the overcomplete method. The rows \
+         \"factored, as deployed on L leaders\" are what a deployment of L leaders computes \
+         at the default settings (local split rule, regional rule, regions fitted to the \
+         crowd from its `move` lines, one a second): `idmesh replay --leaders L`, which \
+         tests/tests/factored.rs holds live deployments to.\n",
         results.events,
         results.seeds,
         ns.join("/")
@@ -546,7 +550,9 @@ fn body(results: &Results, plots: &[Plot]) -> String {
          window starting at an equal fraction of the scene with at most n people (the run \
          ends before the (n+1)-th arrives), colour-histogram sensor, swap 0.5, default \
          distances (mix within 1 m, observe beyond 3.5 m), known start. B = 5n. (Their \
-         uniform-prior copies run only for the distributed rule's section above.)\n"
+         uniform-prior copies run only for the distributed rule's section above.) The \
+         \"as deployed\" rows: what L leaders compute at the default settings, regions \
+         fitted to where the people walk (see Table III).\n"
     )
     .unwrap();
     out.push_str(&table::pedestrians(results));

@@ -89,9 +89,15 @@ fn table3_methods(n: usize) -> Vec<Method> {
     if FACTORED_AVAILABLE {
         methods.push(Method::Factored);
         methods.push(Method::FactoredLocal);
+        // What a deployment computes at the default settings.
+        methods.extend(DEPLOYED_LEADERS.map(Method::Deployed));
     }
     methods
 }
+
+/// The leader counts of the deployed rows: the regional rule's accuracy
+/// cost beside the centralized rows.
+pub const DEPLOYED_LEADERS: [usize; 2] = [4, 8];
 
 /// The uniform-prior copies of the pedestrian windows: enough for the
 /// cost of the distributed rule.

@@ -750,6 +750,46 @@ pub fn distributed_intro(results: &Results) -> String {
 
 /// The summary at the top of results.md: what is measured, the headline
 /// numbers, the speedups against the paper.
+/// The summary's line on what a deployment costs: the mean and the largest
+/// change of each "as deployed" row's error from the centralized local
+/// rule's, on the Table III crowds and on the scenes.
+fn deployed_cost(results: &Results) -> Option<String> {
+    let mut parts = Vec::new();
+    for (experiment, what) in [
+        (Experiment::Table3, "the Table III crowds"),
+        (Experiment::Pedestrians, "the pedestrian scenes"),
+    ] {
+        for leaders in super::plan::DEPLOYED_LEADERS {
+            let changes: Vec<f64> = results
+                .points
+                .iter()
+                .filter(|p| p.point.experiment == experiment)
+                .filter_map(|p| {
+                    let local = p.summary(&Method::FactoredLocal)?;
+                    let deployed = p.summary(&Method::Deployed(leaders))?;
+                    let change = deployed.error - local.error;
+                    change.is_finite().then_some(change)
+                })
+                .collect();
+            if changes.is_empty() {
+                continue;
+            }
+            let largest = changes.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            parts.push(format!(
+                "{leaders} leaders on {what} {:+.3} on average, at most {largest:+.3}",
+                changes.iter().sum::<f64>() / changes.len() as f64
+            ));
+        }
+    }
+    (!parts.is_empty()).then(|| {
+        format!(
+            "- **What a deployment computes** (the \"as deployed\" rows: the default settings, \
+             regions fitted to the crowd) against the centralized local rule, tracking error: {}.",
+            parts.join("; ")
+        )
+    })
+}
+
 pub fn summary(results: &Results) -> String {
     let grid = Grid::of(results);
     let mut lines: Vec<String> = Vec::new();
@@ -974,6 +1014,7 @@ pub fn summary(results: &Results) -> String {
         text.push('.');
         lines.push(text);
     }
+    lines.extend(deployed_cost(results));
     let mut out = String::from("## Summary\n\n");
     out.push_str(&lines.join("\n"));
     out.push_str("\n\n");

@@ -24,6 +24,7 @@
 
 use anyhow::{anyhow, Context, Result};
 use idmesh_belief::{Event, Field, Mix, Observe};
+use idmesh_protocol::trace::{self, Line};
 use idmesh_sim::motion::pedestrians::{data_dir, Scene, Timing};
 use idmesh_sim::{GeneratedTrace, Scenario, SensorModel, SimEvent};
 use std::collections::BTreeMap;
@@ -112,7 +113,51 @@ pub enum Step {
     Event(Event),
     /// The true red tracks now.
     Truth(Vec<u32>),
+    /// Where a track is: only the regional rule of a deployment
+    /// ([`super::methods::Method::Deployed`]) reads it.
+    Move {
+        track: u32,
+        x: f64,
+        y: f64,
+    },
 }
+
+impl Step {
+    /// The trace line this step stands for (times left at 0: nothing that
+    /// replays an in-memory trace reads them).
+    pub fn line(&self) -> Line {
+        match self {
+            Step::Event(Event::Mix(m)) => Line::Mix(trace::Mix {
+                time: 0.0,
+                a: m.a,
+                b: m.b,
+                swap: m.swap,
+            }),
+            Step::Event(Event::Observe(o)) => Line::Observe(trace::Observe {
+                time: 0.0,
+                track: o.track,
+                red: o.red,
+                blue: o.blue,
+                sensor: None,
+            }),
+            Step::Truth(red) => Line::Truth(trace::Truth {
+                time: 0.0,
+                red: Some(red.clone()),
+                identity: None,
+            }),
+            &Step::Move { track, x, y } => Line::Move(trace::Move {
+                time: 0.0,
+                track,
+                x,
+                y,
+            }),
+        }
+    }
+}
+
+/// Seconds between the `move` lines of a generated trace: where a live
+/// sensor, and a deployed method's replay, find the tracks.
+pub const MOVE_INTERVAL: f64 = 1.0;
 
 /// Facts about a trace, for the tables.
 #[derive(Debug, Clone, PartialEq)]
@@ -192,7 +237,7 @@ impl ScenarioSpec {
 
     /// Generates the trace (deterministic).
     pub fn generate(&self, scenes: &Scenes) -> Result<Trace> {
-        Ok(self.generated(scenes, None)?.1)
+        Ok(self.generated(scenes, Some(MOVE_INTERVAL))?.1)
     }
 
     /// The trace as a file carries it, with `move` lines every `moves`
@@ -324,7 +369,7 @@ pub fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64)
                 blue: *blue,
             }))),
             SimEvent::Truth { red } => Some(Step::Truth(red.clone())),
-            SimEvent::Move { .. } => None,
+            &SimEvent::Move { track, x, y } => Some(Step::Move { track, x, y }),
         })
         .collect();
     let field = match &trace.header.initial_red {

@@ -29,7 +29,12 @@
 
 use super::methods::Method;
 use super::scenarios::{Step, Trace};
-use idmesh_belief::{brier_score, expected_tracking_error, log_loss, predict_red, Reliability};
+use crate::filters::Recipe;
+use idmesh_belief::{
+    brier_score, expected_tracking_error, log_loss, predict_red, BeliefError, FactoredBelief,
+    Field, PropertyFilter, Reliability,
+};
+use idmesh_placement::{RegionRule, Regional, Regions};
 use std::time::Instant;
 
 /// Seconds of CPU time this thread has used (`CLOCK_THREAD_CPUTIME_ID`), or
@@ -134,17 +139,30 @@ pub(super) struct Replayed<'a> {
 /// ends the run (the reason).
 pub(super) fn replay(method: Method, trace: &Trace, seed: u64) -> Result<Replayed<'_>, String> {
     let clock = Stopwatch::start();
-    let mut filter = method
+    let built = method
         .build(trace.field.clone(), seed)
         .map_err(|e| format!("{method}: {e}"))?;
+    let mut filter =
+        Running::new(built, method, &trace.field).map_err(|e| format!("{method}: {e}"))?;
     let (mut coefficient_sum, mut events, mut max_coefficients) = (0.0, 0usize, 0usize);
     let mut refused = 0;
     // (marginals, truth) at every truth line, scored after the clock stops.
     let mut answers: Vec<(Vec<f64>, &[u32])> = Vec::new();
     for step in &trace.steps {
         match step {
+            Step::Move { .. } => {
+                if let Running::Deployed(regional) = &mut filter {
+                    if regional.apply_line(&step.line()).is_err() {
+                        refused += 1;
+                    }
+                }
+            }
             Step::Event(event) => {
-                if filter.apply(event).is_err() {
+                let applied = match &mut filter {
+                    Running::Plain(filter) => filter.apply(event),
+                    Running::Deployed(regional) => regional.apply_line(&step.line()),
+                };
+                if applied.is_err() {
                     refused += 1;
                 }
                 let c = filter.coefficients();
@@ -167,6 +185,52 @@ pub(super) fn replay(method: Method, trace: &Trace, seed: u64) -> Result<Replaye
         last_coefficients: filter.coefficients(),
         refused,
     })
+}
+
+/// A method's filter as the replay drives it: a plain one takes the
+/// events; a deployed one ([`Method::Deployed`]) takes every line, its
+/// regions following the `move` lines as the sensor's router does.
+pub(super) enum Running {
+    Plain(Box<dyn PropertyFilter>),
+    Deployed(Box<Regional>),
+}
+
+impl Running {
+    /// Wraps `built` (the method's belief) in the regions of `method`'s
+    /// leaders, if it names any.
+    pub(super) fn new(
+        built: Box<dyn PropertyFilter>,
+        method: Method,
+        field: &Field,
+    ) -> Result<Running, BeliefError> {
+        let Some(leaders) = method.leaders() else {
+            return Ok(Running::Plain(built));
+        };
+        let Recipe::Factored(options) = method.recipe(0) else {
+            return Err(BeliefError::Unsupported {
+                method: "deployed",
+                what: "a belief other than the factored one",
+            });
+        };
+        let belief = FactoredBelief::with_options(field.clone(), options)?;
+        let regions = Regions::new(&RegionRule::fitted(), leaders, field.tracks);
+        Ok(Running::Deployed(Box::new(Regional::new(belief, regions))))
+    }
+
+    fn filter(&self) -> &dyn PropertyFilter {
+        match self {
+            Running::Plain(filter) => filter.as_ref(),
+            Running::Deployed(regional) => regional.as_ref(),
+        }
+    }
+
+    pub(super) fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
+        self.filter().marginals()
+    }
+
+    pub(super) fn coefficients(&self) -> usize {
+        self.filter().coefficients()
+    }
 }
 
 /// The trace spec's tracking error of answers at truth lines: the mean
