@@ -51,6 +51,7 @@ fn mix(a: u32, b: u32, swap: f64) -> Item {
         swap,
         owner_a: 0,
         owner_b: 0,
+        handed: None,
     }
 }
 

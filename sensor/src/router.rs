@@ -18,7 +18,7 @@ use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
-use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Item, Sequenced};
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Handed, Item, Sequenced};
 use idmesh_protocol::Header;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -137,7 +137,11 @@ impl Router {
         } else {
             RegionRule::fitted()
         };
-        let regions = Regions::starting(&rule, leaders, tracks, &config.placed);
+        let mut regions = Regions::starting(&rule, leaders, tracks, &config.placed);
+        // Only leaders that keep regional components take a mix's track.
+        if !config.factored.as_ref().is_some_and(|f| f.regional) {
+            regions = regions.keeping_mixes_across();
+        }
         let begin = Begin {
             factored: config.factored,
             tracks: tracks as u32,
@@ -215,9 +219,15 @@ impl Router {
     /// [`Regions::after`]). An
     /// identity read goes to the track's owner alone.
     pub fn line(&mut self, line: &Line) {
-        let before = self.regions.before(line);
+        let (rides, before): (Vec<_>, Vec<_>) =
+            self.regions.before(line).into_iter().partition(|h| h.rides);
         self.route_handovers(before);
-        self.route_line(line);
+        // A handover that rides on its mix goes in the mix's item.
+        let handed = rides.first().map(|h| Handed {
+            track: h.track,
+            from: h.from,
+        });
+        self.route_line(line, handed);
         let after = self.regions.after(line);
         self.route_handovers(after);
     }
@@ -232,7 +242,7 @@ impl Router {
         }
     }
 
-    fn route_line(&mut self, line: &Line) {
+    fn route_line(&mut self, line: &Line, handed: Option<Handed>) {
         match line {
             Line::Mix(mix) => {
                 self.events += 1;
@@ -243,6 +253,7 @@ impl Router {
                     swap: mix.swap,
                     owner_a: self.owner(mix.a),
                     owner_b: self.owner(mix.b),
+                    handed,
                 };
                 self.route(item);
             }
@@ -302,8 +313,14 @@ impl Router {
 
     fn route(&mut self, item: Item) {
         let seq = self.next_seq();
-        if let Item::Handover { track, to, .. } = item {
-            self.followed_at[to as usize][track as usize] = seq;
+        match item {
+            Item::Handover { track, to, .. }
+            | Item::Mix {
+                handed: Some(Handed { track, .. }),
+                owner_a: to,
+                ..
+            } => self.followed_at[to as usize][track as usize] = seq,
+            _ => {}
         }
         for (interest, outbox) in self.interests.iter_mut().zip(&mut self.outbox) {
             if interest.receives(&item) {

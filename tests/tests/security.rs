@@ -219,6 +219,7 @@ async fn put_mix(session: &Session, prefix: &str, number: u64) -> bool {
                 swap: 0.5,
                 owner_a: 1,
                 owner_b: 1,
+                handed: None,
             },
         }],
     };

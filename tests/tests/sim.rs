@@ -43,6 +43,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.follows += tally.follows;
                 total.unfollows += tally.unfollows;
                 total.handovers += tally.handovers;
+                total.tracks_taken += tally.tracks_taken;
                 total.window_waits += tally.window_waits;
                 total.factored += tally.factored;
                 total.changes += tally.changes;
@@ -57,7 +58,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -72,6 +73,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.follows,
         total.unfollows,
         total.handovers,
+        total.tracks_taken,
         total.window_waits,
         total.factored,
         total.changes,
@@ -94,6 +96,9 @@ fn every_schedule_answers_like_the_centralized_engine() {
         // Their leaders' interests shrink, and the requests saying so
         // are dropped, duplicated and reordered like any message.
         assert!(total.unfollows > 0, "no leader ever unfollowed a track");
+        // Fitted regions take both tracks of a mix across two leaders to
+        // one of them.
+        assert!(total.tracks_taken > 0, "no mix ever took a track");
         // Half of them carry identities: the rows the leaders keep beside
         // their components made every identity answer the centralized
         // information matrix's.

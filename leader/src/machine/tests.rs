@@ -62,6 +62,7 @@ fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
         swap: 0.5,
         owner_a,
         owner_b,
+        handed: None,
     }
 }
 

@@ -2,6 +2,7 @@
 //! `Begin`, mixes, observations, handovers, identity reads and cuts;
 //! local sparsification after each item (Section 5.4.3).
 
+use super::inbox::row_from;
 use super::transfers::{tracks_of, wire_row, NOT_HELD};
 use super::*;
 
@@ -27,12 +28,21 @@ impl Leader {
                 swap,
                 owner_a,
                 owner_b,
+                handed,
             } => {
                 self.stats.mixes += 1;
                 let mix = Mix { a, b, swap };
                 let started = self.started()?;
                 if started.factored.is_some() {
+                    if let Some(handed) = handed {
+                        return self.factored_take(seq, mix, owner_a, handed, actions);
+                    }
                     return self.factored_mix(seq, mix, owner_a, owner_b, actions);
+                }
+                if handed.is_some() {
+                    return Err(LeaderError::Unexpected(
+                        "a mix that takes a track on a Radon stream",
+                    ));
                 }
                 started.share.mix(mix)?;
                 // My mixed track and the other leader, for a mix across two.
@@ -237,7 +247,7 @@ impl Leader {
         // sends anyway, and gets the fitted row back.
         let partner = (started.rows.is_some() && owner_a != owner_b).then_some(owner_b);
         if me == owner_a {
-            if self.ready_to_mix(mix, partner)? {
+            if self.ready_to_mix(mix, row_from(mix, partner, None))? {
                 self.factored_mix_here(seq, mix, back, partner, actions)?;
             } else {
                 self.waiting = Some(Waiting::Components {
@@ -245,6 +255,7 @@ impl Leader {
                     mix,
                     back,
                     partner,
+                    handed: None,
                 });
             }
             return Ok(());
@@ -283,6 +294,69 @@ impl Leader {
                 self.waiting = Some(Waiting::Transfer { seq, from: owner_a });
             }
         }
+        Ok(())
+    }
+
+    /// A mix that takes a track of another leader (`handed`, item `seq`;
+    /// docs/design/architecture.md, "Components that stay in their
+    /// region"): the handover riding on the mix, then the mix within one
+    /// region. The old leader splits the track off its component and sends
+    /// the singleton (and the track's row) to `taker`, as at a handover,
+    /// and goes on; `taker` surveils the track from here, waits for the
+    /// singleton and mixes as it mixes two tracks of its own. What the
+    /// centralized engine does at the same line: `split_off`, then `mix`
+    /// (`idmesh_placement::Regional`).
+    fn factored_take(
+        &mut self,
+        seq: u64,
+        mix: Mix,
+        taker: u16,
+        handed: Handed,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        if !(started.regional() && mix.swap > 0.0 && mix.swap < 1.0) {
+            return Err(LeaderError::Unexpected(
+                "a mix that takes a track outside the regional rule, or not uncertain",
+            ));
+        }
+        let track = handed.track;
+        let slot = started
+            .own
+            .get_mut(track as usize)
+            .ok_or(LeaderError::Unexpected("a mix taking an unknown track"))?;
+        if me == handed.from {
+            *slot = false;
+            let row = match &mut started.rows {
+                Some(rows) => vec![WireRow {
+                    track,
+                    ln_likelihoods: rows.take(track).ok_or(NOT_HELD)?,
+                }],
+                None => Vec::new(),
+            };
+            self.factored_mut("a factored mix on a Radon stream")?
+                .split_off(track)?;
+            let mut gone = self.send_homeless(seq, taker, &[track], row, actions)?;
+            gone.push(track);
+            return self.unfollow(seq, gone);
+        }
+        if me != taker {
+            return Ok(());
+        }
+        *slot = true;
+        self.stats.tracks_taken += 1;
+        let row_from = self.started()?.rows.as_ref().map(|_| (handed.from, track));
+        if self.ready_to_mix(mix, row_from)? {
+            return self.factored_mix_here(seq, mix, None, None, actions);
+        }
+        self.waiting = Some(Waiting::Components {
+            seq,
+            mix,
+            back: None,
+            partner: None,
+            handed: Some(handed),
+        });
         Ok(())
     }
 
@@ -421,11 +495,11 @@ impl Leader {
     pub(super) fn ready_to_mix(
         &mut self,
         mix: Mix,
-        partner: Option<u16>,
+        row_from: Option<(u16, u32)>,
     ) -> Result<bool, LeaderError> {
         let started = self.started()?;
-        let row = match (&started.rows, partner) {
-            (Some(rows), Some(_)) => rows.holds(mix.b),
+        let row = match (&started.rows, row_from) {
+            (Some(rows), Some((_, track))) => rows.holds(track),
             _ => true,
         };
         let held = self.factored_mut("a factored mix on a Radon stream")?;

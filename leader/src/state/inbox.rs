@@ -161,6 +161,7 @@ impl Leader {
                     mix,
                     back,
                     partner,
+                    handed,
                 }) => {
                     // Whoever held them sent them at this item.
                     let mut here: Vec<(u64, u16)> = self
@@ -173,11 +174,12 @@ impl Leader {
                     for key in here {
                         if let Some(transfer) = self.transfers.remove(&key) {
                             self.taken.push(key);
-                            self.receive_partner_row(mix, partner, key.1, transfer.rows)?;
+                            let row_from = row_from(mix, partner, handed);
+                            self.receive_partner_row(mix, row_from, key.1, transfer.rows)?;
                             self.receive_components(transfer.components)?;
                         }
                     }
-                    if !self.ready_to_mix(mix, partner)? {
+                    if !self.ready_to_mix(mix, row_from(mix, partner, handed))? {
                         return Ok(actions);
                     }
                     self.waiting = None;
@@ -233,4 +235,16 @@ impl Leader {
             _ => None,
         }
     }
+}
+
+/// Whose row of which track a mix waits for: the partner's of b across
+/// two leaders, or the row of the track the mix takes, from its old leader.
+pub(super) fn row_from(
+    mix: Mix,
+    partner: Option<u16>,
+    handed: Option<Handed>,
+) -> Option<(u16, u32)> {
+    partner
+        .map(|p| (p, mix.b))
+        .or(handed.map(|h| (h.from, h.track)))
 }

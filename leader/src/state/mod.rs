@@ -61,7 +61,7 @@ use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Unfollow};
-use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
+use idmesh_protocol::wire::sensor_to_leader::{Batch, Begin, Growth, Handed, Item, Sequenced};
 use idmesh_protocol::wire::VERSION;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap, VecDeque};
@@ -103,12 +103,15 @@ enum Waiting {
     /// regional rule a mix across regions is kept apart and the component
     /// of `mix.b` goes `back` to the leader surveilling it. On an identity
     /// stream across two leaders, the `partner` surveilling `mix.b` sends
-    /// its row of it too, and gets the fitted row back.
+    /// its row of it too, and gets the fitted row back. A mix that takes
+    /// a track (`handed`) waits for the singleton of that track, and its
+    /// row, from the leader that surveilled it, and sends nothing back.
     Components {
         seq: u64,
         mix: Mix,
         back: Option<u16>,
         partner: Option<u16>,
+        handed: Option<Handed>,
     },
     /// For the sensor's answer to a follow request made at `seq`.
     Follow { seq: u64 },

@@ -54,6 +54,7 @@ fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
         swap: 0.5,
         owner_a,
         owner_b,
+        handed: None,
     }
 }
 
@@ -310,6 +311,7 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
                 swap: 0.3,
                 owner_a: 0,
                 owner_b: 1,
+                handed: None,
             },
         )
     };
@@ -1009,6 +1011,7 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
             swap,
             owner_a: owners[a as usize] as u16,
             owner_b: owners[b as usize] as u16,
+            handed: None,
         };
         let steps: Vec<(&str, u32, u32, f64)> = vec![
             ("read", 0, 1, 0.8),

@@ -154,7 +154,7 @@ impl Leader {
     pub(super) fn receive_partner_row(
         &mut self,
         mix: Mix,
-        partner: Option<u16>,
+        row_from: Option<(u16, u32)>,
         from: u16,
         received: Vec<WireRow>,
     ) -> Result<(), LeaderError> {
@@ -164,18 +164,18 @@ impl Leader {
         let rows = self.started()?.rows.as_mut();
         match (rows, received.as_slice()) {
             (Some(rows), [row])
-                if partner == Some(from) && row.track == mix.b && !rows.holds(mix.b) =>
+                if row_from == Some((from, row.track)) && !rows.holds(row.track) =>
             {
                 rows.insert(row.track, row.ln_likelihoods.clone())
                     .map_err(|e| LeaderError::BadTransfer(e.to_string()))
             }
             _ => Err(LeaderError::BadTransfer(format!(
                 "leader {from} sent rows of {:?} with the components of a mix of tracks {} and \
-                 {}, where only the partner's row of {} may come",
+                 {}, where only the row of {:?} may come",
                 received.iter().map(|r| r.track).collect::<Vec<_>>(),
                 mix.a,
                 mix.b,
-                mix.b
+                row_from,
             ))),
         }
     }

@@ -20,8 +20,10 @@
 //! already surveils most of its tracks, so that a redraw hands over as few
 //! tracks as it can.
 //!
-//! Between redraws a track keeps its leader wherever it walks; its `move`
-//! lines only record where it is. A handover costs an item at two leaders
+//! Between redraws a track keeps its leader wherever it walks, until a mix
+//! with a track of another leader takes both to the one of the two that
+//! was sent fewer items ([`crate::Regions::before`]); its `move` lines only
+//! record where it is. A handover costs an item at two leaders
 //! (and splits the track off its component), a mix across two leaders an
 //! item at each: on crowds whose targets cross many cells between their
 //! events, handing a track over at every crossing, or at its next event in
@@ -178,6 +180,11 @@ impl Fitted {
             items: 0,
             window_per_leader: window_per_leader.max(1),
         }
+    }
+
+    /// The items `leader` was sent in this window.
+    pub(crate) fn sent_to(&self, leader: u16) -> u64 {
+        self.sent.get(usize::from(leader)).copied().unwrap_or(0)
     }
 
     /// Items per window.

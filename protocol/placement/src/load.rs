@@ -24,15 +24,19 @@ pub fn items_sent<'a>(
     let mut regions = Regions::new(rule, leaders, tracks);
     let mut items = vec![0u64; leaders.max(1)];
     let known = |t: u32| (t as usize) < tracks;
-    let handed = |items: &mut Vec<u64>, handovers: Vec<Handover>| {
-        for h in handovers {
+    let handed = |items: &mut Vec<u64>, handovers: &[Handover]| {
+        for h in handovers.iter().filter(|h| !h.rides) {
             items[usize::from(h.from)] += 1;
             items[usize::from(h.to)] += 1;
         }
     };
     for line in lines {
         let before = regions.before(line);
-        handed(&mut items, before);
+        handed(&mut items, &before);
+        // A mix that takes a track is an item at the leader it leaves too.
+        for h in before.iter().filter(|h| h.rides) {
+            items[usize::from(h.from)] += 1;
+        }
         let owner = |t: u32| usize::from(regions.owner(t).unwrap_or(0));
         match line {
             Line::Mix(m) if known(m.a) && known(m.b) => {
@@ -47,7 +51,7 @@ pub fn items_sent<'a>(
             _ => {}
         }
         let after = regions.after(line);
-        handed(&mut items, after);
+        handed(&mut items, &after);
     }
     items
 }

@@ -113,6 +113,7 @@ fn items() -> Vec<Item> {
             swap: 0.5,
             owner_a: 1,
             owner_b: 1,
+            handed: None,
         },
         Item::Observe {
             track: 4,

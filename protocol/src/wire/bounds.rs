@@ -54,11 +54,15 @@ impl Bounds {
                 b,
                 owner_a,
                 owner_b,
+                handed,
                 ..
             } => {
                 self.track("mix a", *a)?;
                 self.track("mix b", *b)?;
                 self.leader("mix owner_a", *owner_a)?;
+                if let Some(h) = handed {
+                    self.leader("mix handed from", h.from)?;
+                }
                 self.leader("mix owner_b", *owner_b)
             }
             Item::Observe { track, growth, .. } => {
@@ -195,6 +199,7 @@ mod tests {
                 swap: 0.5,
                 owner_a: 0,
                 owner_b: 1,
+                handed: None,
             })
             .unwrap_err();
         assert_eq!(e, "mix b = 4 is not a track (there are 4)");

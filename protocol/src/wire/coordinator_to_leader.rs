@@ -54,6 +54,9 @@ pub struct LeaderStats {
     pub mixes: u64,
     pub observations: u64,
     pub handovers: u64,
+    /// Of the mixes, those that took a track of another leader here.
+    #[serde(default)]
+    pub tracks_taken: u64,
     pub batches: u64,
     pub bytes_received: u64,
     pub transfers_sent: u64,

@@ -149,7 +149,15 @@ impl Interest {
     pub fn receives(&self, item: &Item) -> bool {
         match item {
             Item::Begin(_) | Item::Cut { .. } => true,
-            Item::Mix { a, b, .. } => self.follows(*a) || self.follows(*b),
+            Item::Mix {
+                a, b, handed: None, ..
+            } => self.follows(*a) || self.follows(*b),
+            Item::Mix {
+                a,
+                b,
+                handed: Some(handed),
+                ..
+            } => self.follows(*a) || self.follows(*b) || handed.from == self.leader,
             Item::Observe {
                 track,
                 growth,
@@ -176,6 +184,18 @@ impl Interest {
                     if owner == self.leader {
                         self.add(t as u32);
                     }
+                }
+            }
+            Item::Mix {
+                handed: Some(handed),
+                owner_a,
+                ..
+            } => {
+                // The handover riding on the mix, as `Item::Handover`.
+                if *owner_a == self.leader {
+                    self.add(handed.track);
+                } else if handed.from == self.leader && self.region {
+                    self.remove(handed.track);
                 }
             }
             Item::Mix { .. } | Item::Observe { .. } if !self.grows => {}
@@ -218,6 +238,7 @@ mod tests {
             swap: 0.5,
             owner_a: 0,
             owner_b: 0,
+            handed: None,
         }
     }
 

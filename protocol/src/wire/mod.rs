@@ -42,7 +42,8 @@ pub use valid::Valid;
 
 /// The version of every postcard message below; a receiver rejects others.
 /// 4: the transfer key carries a `TransfersSent`, one input's transfers.
-pub const VERSION: u16 = 4;
+/// 5: a mix may take a track from another leader (`Item::Mix::handed`).
+pub const VERSION: u16 = 5;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

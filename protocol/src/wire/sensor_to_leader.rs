@@ -49,12 +49,18 @@ pub enum Item {
     Begin(Begin),
     /// Targets on tracks a and b mixed. `owner_a`/`owner_b` are the leaders
     /// (indices into `Begin::leaders`) surveilling them at this point.
+    /// `handed`: under the regional rule with fitted regions, a mix of
+    /// tracks of two leaders takes both to one of them; the track that
+    /// changes leader rides on the mix (handed over from `from` to the
+    /// owners named, before the mix), so that the mix is one item at each
+    /// of the two leaders, as a mix kept apart is.
     Mix {
         a: u32,
         b: u32,
         swap: f64,
         owner_a: u16,
         owner_b: u16,
+        handed: Option<Handed>,
     },
     Observe {
         track: u32,
@@ -83,6 +89,14 @@ pub enum Item {
     /// which cut to wait for. `rows`: an identity query, leaders add their
     /// rows of the information matrix to their answer.
     Cut { events: u64, tag: u64, rows: bool },
+}
+
+/// The track a mix takes from another leader ([`Item::Mix`]): it was
+/// surveilled by `from` until this item.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Handed {
+    pub track: u32,
+    pub from: u16,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -131,8 +131,29 @@ impl Item {
     pub fn check(&self) -> Result<(), String> {
         match self {
             Item::Begin(begin) => begin.check(),
-            Item::Mix { a, b, swap, .. } => {
+            Item::Mix {
+                a,
+                b,
+                swap,
+                owner_a,
+                owner_b,
+                handed,
+            } => {
                 require(a != b, || format!("mix of track {a} with itself"))?;
+                if let Some(h) = handed {
+                    require(*swap > 0.0 && *swap < 1.0, || {
+                        format!("mix handing a track over with swap {swap}, not in (0, 1)")
+                    })?;
+                    require(h.track == *a || h.track == *b, || {
+                        format!("mix of tracks {a} and {b} hands over track {}", h.track)
+                    })?;
+                    require(owner_a == owner_b && h.from != *owner_a, || {
+                        format!(
+                            "mix handing track {} from leader {} must name one other owner, got {owner_a} and {owner_b}",
+                            h.track, h.from
+                        )
+                    })?;
+                }
                 probability("mix swap", *swap)
             }
             Item::Observe { red, blue, .. } => likelihoods(*red, *blue),
@@ -554,6 +575,7 @@ mod tests {
             swap,
             owner_a: 0,
             owner_b: 1,
+            handed: None,
         }
     }
 
@@ -719,6 +741,7 @@ mod tests {
                     swap: 0.5,
                     owner_a: 0,
                     owner_b: 1,
+                    handed: None,
                 },
             ],
         ));

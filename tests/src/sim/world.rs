@@ -239,6 +239,8 @@ pub struct Tally {
     pub follows: u64,
     pub unfollows: u64,
     pub handovers: u64,
+    /// Mixes that took a track of another leader.
+    pub tracks_taken: u64,
     /// Times the sensor found its flow-control window full.
     pub window_waits: u64,
     /// Schedules whose leaders held the factored belief.
@@ -1429,6 +1431,7 @@ impl World {
             self.tally.follows += stats.follows;
             self.tally.unfollows += stats.unfollows;
             self.tally.handovers += stats.handovers;
+            self.tally.tracks_taken += stats.tracks_taken;
             let due = self.routed[i].range(..=stats.position).count() as u64;
             if stats.items != due {
                 return Err(Violation::new(format!(

@@ -103,9 +103,7 @@ fn run(method: Method, spec: &WorkloadSpec, every: usize) -> Option<Run> {
     for (i, event) in work.events.iter().enumerate() {
         match &mut filter {
             Running::Plain(filter) => filter.apply(event).ok()?,
-            Running::Deployed(regional) => regional
-                .apply_line(&Step::Event(event.clone()).line())
-                .ok()?,
+            Running::Deployed(regional) => regional.apply_line(&Step::Event(*event).line()).ok()?,
         }
         if (i + 1) % every == 0 {
             let m = filter.marginals().ok()?;

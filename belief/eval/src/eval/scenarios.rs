@@ -357,19 +357,19 @@ pub fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64)
     let steps = trace
         .events
         .iter()
-        .filter_map(|e| match &e.event {
-            SimEvent::Mix { a, b, swap, .. } => Some(Step::Event(Event::Mix(Mix {
+        .map(|e| match &e.event {
+            SimEvent::Mix { a, b, swap, .. } => Step::Event(Event::Mix(Mix {
                 a: *a,
                 b: *b,
                 swap: *swap,
-            }))),
-            SimEvent::Observe { track, red, blue } => Some(Step::Event(Event::Observe(Observe {
+            })),
+            SimEvent::Observe { track, red, blue } => Step::Event(Event::Observe(Observe {
                 track: *track,
                 red: *red,
                 blue: *blue,
-            }))),
-            SimEvent::Truth { red } => Some(Step::Truth(red.clone())),
-            &SimEvent::Move { track, x, y } => Some(Step::Move { track, x, y }),
+            })),
+            SimEvent::Truth { red } => Step::Truth(red.clone()),
+            &SimEvent::Move { track, x, y } => Step::Move { track, x, y },
         })
         .collect();
     let field = match &trace.header.initial_red {
