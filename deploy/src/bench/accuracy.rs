@@ -481,8 +481,9 @@ fn report(
         "\n## The regional rule's accuracy cost\n\n\
          The regional rule keeps every component inside one leader's region, so that \
          leaders seldom move components ([deploying](guide/deploying.md)): a mix of tracks in two \
-         regions is projected back onto their two components instead of merging them, and a \
-         track handed over to another region is split off its component (both by moment \
+         regions takes both to one of the two leaders (with fitted regions; with fixed places it \
+         is projected back onto their two components instead of merging them), and a \
+         track handed over to another region is split off its component (by moment \
          matching, [architecture](design/architecture.md)). Its cost depends on how many regions the field is \
          cut into. The centralized engine runs it exactly as the leaders do (the rows \
          *factored, regional rule* above agree to {TOLERANCE:e} with {LEADERS} leaders); here \
