@@ -19,6 +19,9 @@
 //! - [`permutation`] — the N! assignments indexed by Lehmer rank.
 //! - [`exact`] — [`ExactPermutationFilter`], the exact filter (Section 2),
 //!   N ≤ 9: the yardstick.
+//! - [`factored`] — [`FactoredIdentity`], exact over the small groups of
+//!   tracks that mixed, split by the least lossy cut when a join would
+//!   outgrow a cap (split/join of Huang, Guestrin and Guibas).
 //! - [`belief_matrix`] — [`BeliefMatrix`], the doubly stochastic marginals of
 //!   Shin et al. 2003, renormalized by Sinkhorn after every read.
 //! - [`information`] — [`InformationMatrix`], accumulated log-likelihoods
@@ -48,6 +51,7 @@ pub mod belief_matrix;
 pub mod blocks;
 pub mod event;
 pub mod exact;
+pub mod factored;
 pub mod filter;
 pub mod information;
 pub mod marginals;
@@ -66,6 +70,7 @@ pub use belief_matrix::BeliefMatrix;
 pub use blocks::Block;
 pub use event::{Identify, IdentityEvent};
 pub use exact::ExactPermutationFilter;
+pub use factored::{FactoredIdentity, FactoredIdentityOptions};
 pub use filter::{IdentityFilter, Marginals};
 pub use information::{InformationMatrix, InformationOptions, MixSolver};
 pub use marginals::{BlockMarginals, MarginalMethod};
