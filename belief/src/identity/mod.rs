@@ -44,6 +44,8 @@
 //!   the belief matrix and the property-bits filter use.
 //! - [`property_bits`] — [`PropertyBitsFilter`]: identities coded by b
 //!   binary properties, one Radon property belief per bit (TOSN Sec. 5.5).
+//! - [`scoring`] — Brier, log-loss, MAP accuracy, IDF1 and reliability of
+//!   identity marginals against the truth.
 //! - [`workload`] — seeded random identity event streams with ground truth.
 
 pub mod assignment;
@@ -60,6 +62,7 @@ pub mod permanent;
 pub mod permutation;
 pub mod property_bits;
 pub mod rows;
+pub mod scoring;
 pub mod sinkhorn;
 pub mod sparse_assignment;
 pub mod support_mix;

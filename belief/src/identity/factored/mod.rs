@@ -104,6 +104,14 @@ pub struct SplitStats {
     pub lost_mass: f64,
     /// Σ I(A; B | E) over the cuts, nats.
     pub lost_information: f64,
+    /// Σ ((1 − P(E)) + √(I(A; B | E)/2)) over the cuts: a bound on the
+    /// total variation each cut adds between the belief and what it
+    /// replaces (conditioning on E moves 1 − P(E); the product of the
+    /// sides is KL = I from the conditioned belief, so by Pinsker at most
+    /// √(I/2) away). Mixes are Markov kernels and cannot increase a total
+    /// variation, so on a stream without reads every |Δp| against the
+    /// exact filter stays below this sum; a read can amplify it.
+    pub total_variation_bound: f64,
 }
 
 /// A product of independent exact groups.
@@ -346,6 +354,8 @@ impl FactoredIdentity {
         }
         self.stats.lost_mass += (1.0 - cut.mass).max(0.0);
         self.stats.lost_information += cut.mutual_information;
+        self.stats.total_variation_bound +=
+            (1.0 - cut.mass).max(0.0) + (cut.mutual_information.max(0.0) / 2.0).sqrt();
     }
 
     /// Mixes tracks of two groups, joining (parts of) them.
