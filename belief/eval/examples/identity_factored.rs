@@ -9,12 +9,12 @@
 //!
 //!     cargo run --release -p idmesh-eval --example identity_factored [SEEDS]
 
+use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::scoring::IdentityScores;
 use idmesh_belief::identity::{
     ExactPermutationFilter, FactoredIdentity, FactoredIdentityOptions, IdentityEvent,
     IdentityFilter, InformationMatrix, InformationOptions,
 };
-use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity_event_of;
 use idmesh_protocol::trace::Line;
 use idmesh_sim::scenario::trace_out::lines;
@@ -105,7 +105,9 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(6);
-    println!("| n | method | mean abs dp | max abs dp | us/event | Brier | log-loss | MAP acc | IDF1 |");
+    println!(
+        "| n | method | mean abs dp | max abs dp | us/event | Brier | log-loss | MAP acc | IDF1 |"
+    );
     println!("|---|---|---|---|---|---|---|---|---|");
     for n in [8, 9] {
         let streams: Vec<Stream> = (100..100 + seeds).map(|s| stream(n, s)).collect();

@@ -75,7 +75,11 @@ pub fn map_accuracy(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
 /// global matching of predicted labels to true identities.
 pub fn idf1(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<f64, BeliefError> {
     let (tp, total) = idf1_counts(lines)?;
-    Ok(if total == 0 { 1.0 } else { tp as f64 / total as f64 })
+    Ok(if total == 0 {
+        1.0
+    } else {
+        tp as f64 / total as f64
+    })
 }
 
 /// (IDTP, track-time) of [`idf1`], to pool streams.

@@ -49,10 +49,10 @@ use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
+use idmesh_belief::identity::factored::MAX_GROUP;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
-use idmesh_belief::identity::factored::MAX_GROUP;
 use idmesh_belief::identity::scoring::IdentityScores;
 use idmesh_belief::identity::{
     identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
@@ -137,7 +137,7 @@ pub fn default_identity_method(n: usize) -> IdentityMethod {
 }
 
 /// The default group cap of --method factored-identity in replay.
-pub const DEFAULT_REPLAY_MAX_GROUP: usize = MAX_GROUP;
+pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_belief::identity::factored::DEFAULT_MAX_GROUP;
 
 /// The most states an exact bit belief of --method property-bits may need
 /// (the largest C(n, identities with the bit set)) before replay refuses
@@ -687,7 +687,7 @@ mod tests {
         ]
         .into_iter()
         .chain(infos)
-            .enumerate()
+        .enumerate()
         {
             let out = replay_text(&args, SMALL).unwrap();
             assert_eq!(out.len(), 3, "{out:?}");
@@ -920,7 +920,10 @@ mod tests {
     fn factored_identity_is_the_default_up_to_nine_tracks() {
         assert_eq!(default_identity_method(2), IdentityMethod::FactoredIdentity);
         assert_eq!(default_identity_method(9), IdentityMethod::FactoredIdentity);
-        assert_eq!(default_identity_method(10), IdentityMethod::InformationMatrix);
+        assert_eq!(
+            default_identity_method(10),
+            IdentityMethod::InformationMatrix
+        );
         let big = |n: usize, start: bool| {
             let initial = if start {
                 format!(

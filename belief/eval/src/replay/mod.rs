@@ -106,7 +106,7 @@ mod tests {
                 .map_err(|e| format!("{e:#}"))
         };
         let out = run(&identity, None).unwrap();
-        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
+        assert!(out.contains(r#""method":"factored-identity""#), "{out}");
         assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
         let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
         assert!(out.contains(r#""method":"belief-matrix""#), "{out}");

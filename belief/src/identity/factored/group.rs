@@ -20,7 +20,8 @@ pub const MAX_GROUP: usize = MAX_ENUMERATED_TRACKS;
 
 /// The table of all permutations of 0..k, built once per k per process.
 pub(crate) fn permutations(k: usize) -> Result<&'static Permutations, BeliefError> {
-    static TABLES: [OnceLock<Permutations>; MAX_GROUP + 1] = [const { OnceLock::new() }; MAX_GROUP + 1];
+    static TABLES: [OnceLock<Permutations>; MAX_GROUP + 1] =
+        [const { OnceLock::new() }; MAX_GROUP + 1];
     let slot = TABLES.get(k).ok_or(BeliefError::TooLarge {
         method: "factored identity group",
         needed: (1..=k).map(|x| x as f64).product(),
@@ -115,7 +116,10 @@ impl Group {
         }
         let count: usize = (1..=k).product();
         if self.probs.len() != count {
-            return bad(format!("{} probabilities for {k}! assignments", self.probs.len()));
+            return bad(format!(
+                "{} probabilities for {k}! assignments",
+                self.probs.len()
+            ));
         }
         if self.probs.iter().any(|p| !(p.is_finite() && *p >= 0.0)) {
             return bad("a probability that is negative or not finite".into());

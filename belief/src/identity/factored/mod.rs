@@ -44,10 +44,13 @@ use super::filter::{IdentityFilter, Marginals};
 use crate::error::BeliefError;
 use crate::event::Mix;
 
-/// The default cap on a group's tracks: at 8 a mix within a full group
-/// costs about 40,320·8 steps and the n = 9 streams lose little (see
-/// docs/design/identity.md, "Factored identity belief").
-pub const DEFAULT_MAX_GROUP: usize = 8;
+/// The default cap on a group's tracks: the largest group we enumerate.
+/// Measured on random-waypoint traces (examples/identity_factored.rs in
+/// idmesh-eval; docs/design/identity.md, "Factored identity belief"): a
+/// cap below n leaves lossy cuts whose zeros later reads cannot undo
+/// (largest |Δp| 1.0 at n = 9, cap 8), while a cap of n is exact; a mix in
+/// a full group of 9 costs about 9!·9 steps (about 1.5 ms).
+pub const DEFAULT_MAX_GROUP: usize = MAX_GROUP;
 
 /// The default of [`FactoredIdentityOptions::certain`].
 pub const DEFAULT_CERTAIN: f64 = 1e-4;
@@ -77,7 +80,10 @@ impl FactoredIdentityOptions {
     fn validate(&self) -> Result<(), BeliefError> {
         if !(0.0..0.5).contains(&self.certain) {
             return Err(BeliefError::BadComponent {
-                detail: format!("a certainty threshold of {} (it must be in [0, ½))", self.certain),
+                detail: format!(
+                    "a certainty threshold of {} (it must be in [0, ½))",
+                    self.certain
+                ),
             });
         }
         if (2..=MAX_GROUP).contains(&self.max_group) {
@@ -294,8 +300,9 @@ impl FactoredIdentity {
             })
     }
 
-    /// The part of group `g` (holding local track `keep`) to join, of at
-    /// most `room` tracks, for each size: (size, cost, the cut or none).
+    /// The parts of group `g` holding local track `keep` that a join may
+    /// take, one per size: (size, cost, the cut — none for the whole
+    /// group, which costs nothing).
     fn options_for(&self, g: usize, keep: usize) -> Vec<(usize, f64, Option<Cut>)> {
         let group = &self.groups[g];
         let k = group.size();
@@ -320,10 +327,7 @@ impl FactoredIdentity {
             // Rounding keeps a sure track's p a few ulps below 1.
             let threshold = 1.0 - self.options.certain - 1e-12;
             let found = m.iter().enumerate().find_map(|(j, row)| {
-                let (x, &p) = row
-                    .iter()
-                    .enumerate()
-                    .max_by(|a, b| a.1.total_cmp(b.1))?;
+                let (x, &p) = row.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
                 (p >= threshold).then_some((j, x, p))
             });
             let Some((j, x, p)) = found else { break };
@@ -457,7 +461,11 @@ impl IdentityFilter for FactoredIdentity {
         let track = self.local(identify.track)?;
         let (right, wrong) = (identify.accuracy, identify.wrong_read_likelihood(self.n));
         let group = &mut self.groups[g];
-        match group.identities.iter().position(|&i| i == identify.identity) {
+        match group
+            .identities
+            .iter()
+            .position(|&i| i == identify.identity)
+        {
             Some(read) => {
                 group.read(track, read, right, wrong)?;
                 self.cut_certain(g);

@@ -223,7 +223,7 @@ fn mutual_information(group: &Group, cut: &Cut, a: &Group, b: &Group) -> f64 {
     let Ok(projector) = Projector::new(group, cut) else {
         return f64::INFINITY;
     };
-    if !(cut.mass > 0.0) {
+    if cut.mass.is_nan() || cut.mass <= 0.0 {
         return f64::INFINITY;
     }
     let table = group.table();
