@@ -19,6 +19,9 @@
 //! - [`permutation`] — the N! assignments indexed by Lehmer rank.
 //! - [`exact`] — [`ExactPermutationFilter`], the exact filter (Section 2),
 //!   N ≤ 9: the yardstick.
+//! - [`factored`] — [`FactoredIdentity`], exact over the small groups of
+//!   tracks that mixed, split by the least lossy cut when a join would
+//!   outgrow a cap (split/join of Huang, Guestrin and Guibas).
 //! - [`belief_matrix`] — [`BeliefMatrix`], the doubly stochastic marginals of
 //!   Shin et al. 2003, renormalized by Sinkhorn after every read.
 //! - [`information`] — [`InformationMatrix`], accumulated log-likelihoods
@@ -41,6 +44,8 @@
 //!   the belief matrix and the property-bits filter use.
 //! - [`property_bits`] — [`PropertyBitsFilter`]: identities coded by b
 //!   binary properties, one Radon property belief per bit (TOSN Sec. 5.5).
+//! - [`scoring`] — Brier, log-loss, MAP accuracy, IDF1 and reliability of
+//!   identity marginals against the truth.
 //! - [`workload`] — seeded random identity event streams with ground truth.
 
 pub mod assignment;
@@ -48,6 +53,7 @@ pub mod belief_matrix;
 pub mod blocks;
 pub mod event;
 pub mod exact;
+pub mod factored;
 pub mod filter;
 pub mod information;
 pub mod marginals;
@@ -56,6 +62,7 @@ pub mod permanent;
 pub mod permutation;
 pub mod property_bits;
 pub mod rows;
+pub mod scoring;
 pub mod sinkhorn;
 pub mod sparse_assignment;
 pub mod support_mix;
@@ -66,6 +73,7 @@ pub use belief_matrix::BeliefMatrix;
 pub use blocks::Block;
 pub use event::{Identify, IdentityEvent};
 pub use exact::ExactPermutationFilter;
+pub use factored::{FactoredIdentity, FactoredIdentityOptions};
 pub use filter::{IdentityFilter, Marginals};
 pub use information::{InformationMatrix, InformationOptions, MixSolver};
 pub use marginals::{BlockMarginals, MarginalMethod};

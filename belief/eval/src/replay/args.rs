@@ -13,8 +13,8 @@ pub struct ReplayArgs {
     pub trace: PathBuf,
 
     /// The filter to run (default: by the trace's header — factored for
-    /// a trace with colours, information-matrix for an identity trace with
-    /// none).
+    /// a trace with colours; for an identity trace with none,
+    /// factored-identity up to 9 tracks, information-matrix above).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
 
@@ -65,7 +65,9 @@ pub struct ReplayArgs {
     #[arg(long, value_enum, default_value_t = CouplingChoice::Local)]
     pub coupling: CouplingChoice,
 
-    /// --method factored: the most tracks of one component (default 7).
+    /// --method factored: the most tracks of one component (default 7);
+    /// --method factored-identity: the most tracks of one group (2 to 9,
+    /// default 9).
     #[arg(long, value_name = "M")]
     pub max_component: Option<usize>,
 
@@ -182,6 +184,9 @@ pub enum Method {
     /// Identity traces: identities coded by --bits properties, one Radon
     /// belief per bit.
     PropertyBits,
+    /// Identity traces: exact over the groups of tracks that mixed, cut by
+    /// the least lossy split when a group would outgrow --max-component.
+    FactoredIdentity,
 }
 
 impl Method {
@@ -200,6 +205,7 @@ impl Method {
             Method::BeliefMatrix => "belief-matrix",
             Method::InformationMatrix => "information-matrix",
             Method::PropertyBits => "property-bits",
+            Method::FactoredIdentity => "factored-identity",
         }
     }
 
@@ -210,6 +216,7 @@ impl Method {
             Method::BeliefMatrix => Some(IdentityMethod::BeliefMatrix),
             Method::InformationMatrix => Some(IdentityMethod::InformationMatrix),
             Method::PropertyBits => Some(IdentityMethod::PropertyBits),
+            Method::FactoredIdentity => Some(IdentityMethod::FactoredIdentity),
             _ => None,
         }
     }

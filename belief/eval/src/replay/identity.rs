@@ -32,21 +32,32 @@
 //! The methods ([`IdentityMethod`]) are the engine's identity filters
 //! (`idmesh_belief::identity`): the exact filter over the N! assignments
 //! (N ≤ 9), the belief matrix, the information matrix with marginals on
-//! demand ([`MarginalChoice`]), and identities coded by property bits (one
-//! Radon property belief per bit, `--bits`, optional `--budget`).
+//! demand ([`MarginalChoice`]), identities coded by property bits (one
+//! Radon property belief per bit, `--bits`, optional `--budget`), and the
+//! factored identity belief (exact over the groups of tracks that mixed,
+//! `--max-component` tracks per group at most).
+//!
+//! With no `--method` the default depends on the trace
+//! ([`default_identity_method`]): the factored identity belief up to
+//! [`MAX_GROUP`] tracks, where it is the exact posterior at any group
+//! size it may reach, and the information matrix above, where the
+//! factored belief's lossy cuts can be far off (docs/design/identity.md,
+//! "Factored identity belief").
 
 use super::args::ReplayArgs;
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
+use idmesh_belief::identity::factored::MAX_GROUP;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
+use idmesh_belief::identity::scoring::IdentityScores;
 use idmesh_belief::identity::{
     identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
-    IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
-    PropertyBitsFilter,
+    FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter, InformationMatrix,
+    InformationOptions, MarginalMethod, PropertyBitsFilter,
 };
 use idmesh_belief::{identity_event_of, BeliefError, RadonOptions, Sparsify};
 use idmesh_protocol::trace::{Header, Line, TraceReader, Truth};
@@ -64,8 +75,13 @@ pub struct IdentityReplayOptions {
     pub trace: PathBuf,
 
     /// The identity filter to run.
-    #[arg(long, value_enum, default_value_t = IdentityMethod::InformationMatrix)]
+    #[arg(long, value_enum, default_value_t = IdentityMethod::FactoredIdentity)]
     pub method: IdentityMethod,
+
+    /// The most tracks of one group of --method factored-identity (2 to 9,
+    /// default 9: the exact posterior up to 9 tracks).
+    #[arg(long = "max-component", value_name = "M")]
+    pub max_group: Option<usize>,
 
     /// How --method information-matrix turns its log-likelihoods into
     /// marginals (default exact, N ≤ 22).
@@ -106,8 +122,22 @@ pub struct IdentityReplayOptions {
     pub force: bool,
 }
 
-/// The identity method replay runs when none is named.
-pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::InformationMatrix;
+/// The identity method replay runs when none is named, for a trace of `n`
+/// tracks: the factored identity belief where its groups can always hold
+/// every track that mixed (n ≤ [`MAX_GROUP`]: then it is the exact
+/// posterior, at the cost of the groups mixing has actually formed), the
+/// information matrix above (it answers at any size, and the factored
+/// belief's lossy cuts are worse than its approximation there).
+pub fn default_identity_method(n: usize) -> IdentityMethod {
+    if n <= MAX_GROUP {
+        IdentityMethod::FactoredIdentity
+    } else {
+        IdentityMethod::InformationMatrix
+    }
+}
+
+/// The default group cap of --method factored-identity in replay.
+pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_belief::identity::factored::DEFAULT_MAX_GROUP;
 
 /// The most states an exact bit belief of --method property-bits may need
 /// (the largest C(n, identities with the bit set)) before replay refuses
@@ -121,9 +151,9 @@ pub const WARN_EXACT_BIT_STATES: f64 = 1e4;
 
 /// `idmesh replay` on an identity trace: the identity options from the
 /// command line's, with the identity default when no method is named.
-pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
+pub fn run_default(args: &ReplayArgs, tracks: usize, out: impl Write) -> Result<()> {
     let method = match args.method {
-        None => DEFAULT_IDENTITY_METHOD,
+        None => default_identity_method(tracks),
         Some(m) => m
             .identity()
             .ok_or_else(|| anyhow!("--method {} is not an identity method", m.name()))?,
@@ -144,6 +174,7 @@ pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
         samples: args.samples,
         force: args.force,
         known_start_confidence: args.known_start_confidence,
+        max_group: args.max_component,
     };
     run(&options, out)
 }
@@ -162,6 +193,9 @@ pub enum IdentityMethod {
     /// Identities coded by --bits binary properties, one Radon property
     /// belief per bit (Jiang et al., TOSN 2013, Section 5.5).
     PropertyBits,
+    /// Exact over the groups of tracks that mixed, the least lossy cut
+    /// when a group would outgrow --max-component (split/join).
+    FactoredIdentity,
 }
 
 impl IdentityMethod {
@@ -172,6 +206,7 @@ impl IdentityMethod {
             IdentityMethod::BeliefMatrix => "belief-matrix",
             IdentityMethod::InformationMatrix => "information-matrix",
             IdentityMethod::PropertyBits => "property-bits",
+            IdentityMethod::FactoredIdentity => "factored-identity",
         }
     }
 }
@@ -223,6 +258,21 @@ struct Summary {
     events: u64,
     seconds: f64,
     error: Option<f64>,
+    /// Scores of the marginals at the truth lines with `identity` (absent
+    /// when none has): Brier, log-loss, MAP accuracy, IDF1.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scores: Option<Scores>,
+}
+
+/// The tracker scores of a replay's summary.
+#[derive(Debug, Serialize)]
+struct Scores {
+    brier: f64,
+    log_loss: f64,
+    map_accuracy: f64,
+    idf1: f64,
+    /// (mean predicted p, observed frequency, count) per bin of ten.
+    reliability: Vec<(f64, f64, u64)>,
 }
 
 /// Replays the identity trace named by `args` and writes the answers to
@@ -265,6 +315,18 @@ pub fn check_options(args: &IdentityReplayOptions) -> Result<()> {
             "--known-start-confidence applies to --method information-matrix, not to --method {}",
             method.name()
         );
+    }
+    if let Some(m) = args.max_group {
+        if method != IdentityMethod::FactoredIdentity {
+            bail!(
+                "--max-component applies to --method factored-identity on an identity trace, \
+                 not to --method {}",
+                method.name()
+            );
+        }
+        if !(2..=MAX_GROUP).contains(&m) {
+            bail!("--max-component {m}: a group holds 2 to {MAX_GROUP} tracks");
+        }
     }
     if args.force && method != IdentityMethod::PropertyBits {
         bail!(
@@ -312,8 +374,25 @@ pub fn replay<R: BufRead>(
     let mut engine = Engine {
         filter,
         errors: Vec::new(),
+        scored: Vec::new(),
     };
     drive(reader, &mut engine, &mut out)?;
+    let scores = if engine.scored.is_empty() {
+        None
+    } else {
+        let mut pooled = IdentityScores::default();
+        pooled
+            .add_stream(&engine.scored)
+            .map_err(|e| anyhow!("{source}: scoring: {e}"))?;
+        let s = pooled.summary();
+        Some(Scores {
+            brier: s.brier,
+            log_loss: s.log_loss,
+            map_accuracy: s.map_accuracy,
+            idf1: s.idf1,
+            reliability: pooled.reliability.points(),
+        })
+    };
 
     let summary = Summary {
         kind: "summary",
@@ -321,6 +400,7 @@ pub fn replay<R: BufRead>(
         events: engine.filter.events,
         seconds: engine.filter.time.as_secs_f64(),
         error: mean_error(&engine.errors),
+        scores,
     };
     info!(
         events = summary.events,
@@ -393,6 +473,25 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
                 None => InformationMatrix::uniform_with(n, options)?,
             })
         }
+        IdentityMethod::FactoredIdentity => {
+            let options = FactoredIdentityOptions {
+                max_group: args.max_group.unwrap_or(DEFAULT_REPLAY_MAX_GROUP),
+                ..FactoredIdentityOptions::default()
+            };
+            match initial {
+                Some(start) => Box::new(FactoredIdentity::from_assignment(start, options)?),
+                None if n <= options.max_group => Box::new(FactoredIdentity::uniform(n, options)?),
+                None => {
+                    return Err(Built::Refused(format!(
+                        "--method factored-identity starts from a known assignment or from \
+                         one group of all tracks, and with no known start \
+                         (`initial_identity`) the {n} tracks are more than its groups hold \
+                         ({}); use information-matrix",
+                        options.max_group
+                    )))
+                }
+            }
+        }
         IdentityMethod::PropertyBits => {
             let bits = args.bits.unwrap_or_else(|| BitCode::min_bits(n));
             let code = BitCode::new(n, bits).map_err(|_| {
@@ -443,6 +542,9 @@ pub fn exact_bit_states(code: &BitCode) -> f64 {
 struct Engine {
     filter: Timed<dyn IdentityFilter>,
     errors: Vec<f64>,
+    /// The marginals and truth at every truth line with `identity`, for
+    /// the scores of the summary.
+    scored: Vec<(Vec<Vec<f64>>, Vec<u32>)>,
 }
 
 impl Replay for Engine {
@@ -467,6 +569,7 @@ impl Replay for Engine {
         if let Some(identity) = &truth.identity {
             self.errors
                 .push(identity_error(&predicted_identity, identity));
+            self.scored.push((p_identity.clone(), identity.clone()));
         }
         Ok(Answer {
             time: truth.time,
@@ -509,6 +612,7 @@ mod tests {
             samples: None,
             force: false,
             known_start_confidence: None,
+            max_group: None,
         }
     }
 
@@ -577,9 +681,13 @@ mod tests {
             o.marginals = Some(m);
             infos.push(o);
         }
-        for (k, args) in std::iter::once(options(IdentityMethod::ExactPerm))
-            .chain(infos)
-            .enumerate()
+        for (k, args) in [
+            options(IdentityMethod::ExactPerm),
+            options(IdentityMethod::FactoredIdentity),
+        ]
+        .into_iter()
+        .chain(infos)
+        .enumerate()
         {
             let out = replay_text(&args, SMALL).unwrap();
             assert_eq!(out.len(), 3, "{out:?}");
@@ -602,7 +710,14 @@ mod tests {
             assert_eq!(summary["error"], 0.0);
             assert!(summary["seconds"].as_f64().unwrap() >= 0.0);
             let keys: Vec<&String> = summary.as_object().unwrap().keys().collect();
-            assert_eq!(keys.len(), 5, "{keys:?}");
+            assert_eq!(keys.len(), 6, "{keys:?}");
+            // One scored line, predicted right with p = 18/19 on tracks 0
+            // and 1 (Metropolis: about).
+            let scores = &summary["scores"];
+            assert_eq!(scores["map_accuracy"], 1.0);
+            assert_eq!(scores["idf1"], 1.0);
+            let log_loss = -(2.0 * (18.0f64 / 19.0).ln()) / 3.0;
+            assert!((scores["log_loss"].as_f64().unwrap() - log_loss).abs() < tolerance);
         }
     }
 
@@ -648,6 +763,7 @@ mod tests {
             IdentityMethod::BeliefMatrix,
             IdentityMethod::InformationMatrix,
             IdentityMethod::PropertyBits,
+            IdentityMethod::FactoredIdentity,
         ] {
             let out = replay_text(&options(method), trace).unwrap();
             assert_eq!(out[0]["predicted_identity"], serde_json::json!([1, 0]));
@@ -798,6 +914,46 @@ mod tests {
         bits.bits = Some(5);
         bits.budget = Some(50);
         assert!(check_options(&bits).is_ok());
+    }
+
+    #[test]
+    fn factored_identity_is_the_default_up_to_nine_tracks() {
+        assert_eq!(default_identity_method(2), IdentityMethod::FactoredIdentity);
+        assert_eq!(default_identity_method(9), IdentityMethod::FactoredIdentity);
+        assert_eq!(
+            default_identity_method(10),
+            IdentityMethod::InformationMatrix
+        );
+        let big = |n: usize, start: bool| {
+            let initial = if start {
+                format!(
+                    r#","initial_identity":{:?}"#,
+                    (0..n as u32).collect::<Vec<_>>()
+                )
+            } else {
+                String::new()
+            };
+            format!(
+                r#"{{"kind":"header","format":"idmesh-trace","version":1,"tracks":{n},"identities":{n}{initial}}}"#
+            ) + "\n"
+        };
+        // A known start takes any size; a uniform one only what a group holds.
+        let factored = options(IdentityMethod::FactoredIdentity);
+        assert!(replay_text(&factored, &big(30, true)).is_ok());
+        assert!(replay_text(&factored, &big(9, false)).is_ok());
+        let error = replay_text(&factored, &big(10, false)).unwrap_err();
+        assert!(error.contains("use information-matrix"), "{error}");
+        let mut small = options(IdentityMethod::FactoredIdentity);
+        small.max_group = Some(3);
+        assert!(replay_text(&small, &big(3, false)).is_ok());
+        small.max_group = Some(1);
+        assert!(check_options(&small).is_err());
+        let mut wrong = options(IdentityMethod::InformationMatrix);
+        wrong.max_group = Some(4);
+        assert!(check_options(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("--max-component applies"));
     }
 
     #[derive(Debug, Parser)]

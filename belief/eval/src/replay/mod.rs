@@ -24,9 +24,10 @@ use std::io::Write;
 /// `idmesh replay`: the identity replay for an identity trace, the
 /// property replay otherwise; with no `--method`, the default for the
 /// trace — one that answers at any size: factored for a trace with
-/// colours, the information matrix for an identity trace that says nothing
-/// of colours (its header has `identities` and neither `red` nor
-/// `initial_red`). A property method on such an identity trace, or an
+/// colours; for an identity trace that says nothing of colours (its
+/// header has `identities` and neither `red` nor `initial_red`), the
+/// factored identity belief up to 9 tracks and the information matrix
+/// above (`identity::default_identity_method`). A property method on such an identity trace, or an
 /// identity method on a trace without identities, is an error that says so.
 pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     if let Some(path) = &args.topology {
@@ -45,12 +46,15 @@ pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let identities_only = header.identities.is_some() && header.red_count().is_none();
     let source = reader.source().to_string();
     match (header.identities, args.method) {
-        (Some(_), None) if identities_only => identity::run_default(args, out),
-        (Some(_), Some(method)) if method.identity().is_some() => identity::run_default(args, out),
+        (Some(n), None) if identities_only => identity::run_default(args, n, out),
+        (Some(n), Some(method)) if method.identity().is_some() => {
+            identity::run_default(args, n, out)
+        }
         (Some(n), Some(method)) if identities_only => bail!(
             "{source}:1: header: an identity trace ({n} identities) with no colours, and \
-             --method {} is a property method; use exact-perm, belief-matrix, \
-             information-matrix (the default) or property-bits",
+             --method {} is a property method; use factored-identity (the default up \
+             to 9 tracks), exact-perm, belief-matrix, information-matrix (the default \
+             above) or property-bits",
             method.name()
         ),
         (None, Some(method)) if method.identity().is_some() => bail!(
@@ -102,13 +106,13 @@ mod tests {
                 .map_err(|e| format!("{e:#}"))
         };
         let out = run(&identity, None).unwrap();
-        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
+        assert!(out.contains(r#""method":"factored-identity""#), "{out}");
         assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
         let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
         assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
         let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
         assert!(
-            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use exact-perm, belief-matrix, information-matrix (the default) or property-bits"),
+            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use factored-identity (the default up to 9 tracks), exact-perm, belief-matrix, information-matrix (the default above) or property-bits"),
             "{error}"
         );
         let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();

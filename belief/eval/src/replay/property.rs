@@ -317,7 +317,8 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
         Method::ExactPerm
         | Method::BeliefMatrix
         | Method::InformationMatrix
-        | Method::PropertyBits => {
+        | Method::PropertyBits
+        | Method::FactoredIdentity => {
             return Err(BeliefError::Unsupported {
                 method: "the property replay",
                 what: "an identity method",

@@ -1,0 +1,295 @@
+//! Cutting a group in two when a mix would join groups into one larger
+//! than the cap: the split step of split/join identity filters (Huang,
+//! Guestrin and Guibas, *Efficient Inference for Distributions on
+//! Permutations*, NIPS 2007, and their riffled-independence work, JMLR
+//! 2012), in its simplest form: a cut is a set A of the group's tracks
+//! together with a set I_A of as many identities, and the group is
+//! replaced by the two factors
+//!
+//!   p_A(σ) = P(σ on A | π(A) = I_A),  p_B(τ) = P(τ on B | π(A) = I_A),
+//!
+//! the marginals of the belief conditioned on the event E = {π(A) = I_A}
+//! (moment matching onto the family of products over the partition
+//! (A, I_A) ∪ (B, I_B), after conditioning). Two things are lost: the mass
+//! 1 − P(E) of the assignments that send an identity of I_A outside A, and
+//! the mutual information between the assignments on A and on B given E.
+//! A cut costs
+//!
+//!   cost = (1 − P(E)) + I(σ; τ | E)   (nats),
+//!
+//! 0 exactly when the split is exact (E is sure and the two sides are
+//! independent under it — e.g. a track whose identity is certain).
+//!
+//! For every size s the cut of largest P(E) among those whose A holds a
+//! given track of size s is found in one pass over the k! assignments,
+//! accumulating P(π(A) = I) for every A that holds the track
+//! (O(k!·2^(k−1))); the mutual information is then computed for that one
+//! cut per size.
+
+use super::group::{permutations, Group, MAX_GROUP};
+use crate::error::BeliefError;
+
+/// A cut of a group: local tracks A (bit j = local track j) and the local
+/// identities I_A (bit x) they are taken to carry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cut {
+    pub tracks: u32,
+    pub identities: u32,
+    /// P(π(A) = I_A).
+    pub mass: f64,
+    /// I(σ; τ | E), nats.
+    pub mutual_information: f64,
+}
+
+impl Cut {
+    /// What the cut loses: (1 − P(E)) + I(σ; τ | E).
+    pub fn cost(&self) -> f64 {
+        (1.0 - self.mass).max(0.0) + self.mutual_information.max(0.0)
+    }
+
+    /// |A|.
+    pub fn size(&self) -> usize {
+        self.tracks.count_ones() as usize
+    }
+}
+
+/// Assignments of probability below this are left out of the search for
+/// cuts: they cannot change which cut is best by more than their total.
+const NEGLIGIBLE: f64 = 1e-18;
+
+/// For every s in 1..k (k the group's size), the cut of largest mass whose
+/// A holds local track `keep` and has s tracks: `result[s]` (index 0 and k
+/// are `None`). Ties go to the first cut met, which is deterministic.
+pub fn best_cuts(group: &Group, keep: usize) -> Vec<Option<Cut>> {
+    let k = group.size();
+    let mut best: Vec<Option<Cut>> = vec![None; k + 1];
+    if k < 2 {
+        return best;
+    }
+    let table = group.table();
+    let others: Vec<usize> = (0..k).filter(|&j| j != keep).collect();
+    let subsets = 1usize << (k - 1);
+    let mut mass = vec![0.0f64; subsets << k];
+    let mut image = vec![0u32; subsets];
+    for (r, &p) in group.probabilities().iter().enumerate() {
+        if p < NEGLIGIBLE {
+            continue;
+        }
+        let perm = table.get(r);
+        image[0] = 1 << perm[keep];
+        mass[image[0] as usize] += p;
+        for s in 1..subsets {
+            let low = s.trailing_zeros() as usize;
+            image[s] = image[s & (s - 1)] | (1 << perm[others[low]]);
+            mass[(s << k) | image[s] as usize] += p;
+        }
+    }
+    for s in 0..subsets {
+        let size = s.count_ones() as usize + 1;
+        if size >= k {
+            continue;
+        }
+        let row = &mass[s << k..(s + 1) << k];
+        for (identities, &m) in row.iter().enumerate() {
+            if m > best[size].map_or(0.0, |c| c.mass) {
+                let tracks = others
+                    .iter()
+                    .enumerate()
+                    .filter(|&(bit, _)| s & (1 << bit) != 0)
+                    .fold(1u32 << keep, |acc, (_, &j)| acc | (1 << j));
+                best[size] = Some(Cut {
+                    tracks,
+                    identities: identities as u32,
+                    mass: m,
+                    mutual_information: 0.0,
+                });
+            }
+        }
+    }
+    for cut in best.iter_mut().flatten() {
+        // Both factors are built only to measure what the cut loses.
+        if let Ok((a, b)) = apply(group, cut) {
+            cut.mutual_information = mutual_information(group, cut, &a, &b);
+        }
+    }
+    best
+}
+
+/// Where an assignment of the group goes under a cut: the rank of its
+/// restriction to A (in A's table) and to B, or `None` outside E.
+struct Projector {
+    a_tracks: Vec<usize>,
+    b_tracks: Vec<usize>,
+    /// position[x] = index of local identity x within its side's list.
+    position: Vec<u8>,
+    identities: u32,
+    a_table: &'static crate::identity::permutation::Permutations,
+    b_table: &'static crate::identity::permutation::Permutations,
+}
+
+impl Projector {
+    fn new(group: &Group, cut: &Cut) -> Result<Self, BeliefError> {
+        let k = group.size();
+        let a_tracks: Vec<usize> = (0..k).filter(|&j| cut.tracks & (1 << j) != 0).collect();
+        let b_tracks: Vec<usize> = (0..k).filter(|&j| cut.tracks & (1 << j) == 0).collect();
+        let mut position = vec![0u8; k];
+        let (mut na, mut nb) = (0u8, 0u8);
+        for (x, slot) in position.iter_mut().enumerate() {
+            if cut.identities & (1 << x) != 0 {
+                *slot = na;
+                na += 1;
+            } else {
+                *slot = nb;
+                nb += 1;
+            }
+        }
+        if na as usize != a_tracks.len() || a_tracks.is_empty() || b_tracks.is_empty() {
+            return Err(BeliefError::BadComponent {
+                detail: format!(
+                    "a cut of {} tracks and {na} identities of a group of {k}",
+                    a_tracks.len()
+                ),
+            });
+        }
+        Ok(Projector {
+            a_table: permutations(a_tracks.len())?,
+            b_table: permutations(b_tracks.len())?,
+            a_tracks,
+            b_tracks,
+            position,
+            identities: cut.identities,
+        })
+    }
+
+    /// The ranks (on A, on B) of an assignment of the group, if it is in E.
+    fn project(&self, perm: &[u8]) -> Option<(usize, usize)> {
+        let mut a = [0u8; MAX_GROUP];
+        let mut b = [0u8; MAX_GROUP];
+        for (slot, &j) in a.iter_mut().zip(&self.a_tracks) {
+            let x = perm[j];
+            if self.identities & (1 << x) == 0 {
+                return None;
+            }
+            *slot = self.position[x as usize];
+        }
+        for (slot, &j) in b.iter_mut().zip(&self.b_tracks) {
+            *slot = self.position[perm[j] as usize];
+        }
+        Some((
+            self.a_table.rank(&a[..self.a_tracks.len()]),
+            self.b_table.rank(&b[..self.b_tracks.len()]),
+        ))
+    }
+}
+
+/// The two factors of a cut: the group on A (with I_A) and on B (with the
+/// other identities), each the marginal of the belief conditioned on E.
+pub fn apply(group: &Group, cut: &Cut) -> Result<(Group, Group), BeliefError> {
+    let projector = Projector::new(group, cut)?;
+    let table = group.table();
+    let mut pa = vec![0.0; projector.a_table.count()];
+    let mut pb = vec![0.0; projector.b_table.count()];
+    for (r, &p) in group.probabilities().iter().enumerate() {
+        if p == 0.0 {
+            continue;
+        }
+        if let Some((ra, rb)) = projector.project(table.get(r)) {
+            pa[ra] += p;
+            pb[rb] += p;
+        }
+    }
+    let mass: f64 = pa.iter().sum();
+    if !(mass.is_finite() && mass > 0.0) {
+        return Err(BeliefError::Degenerate { normalizer: mass });
+    }
+    pa.iter_mut().for_each(|p| *p /= mass);
+    pb.iter_mut().for_each(|p| *p /= mass);
+    let side = |tracks: &[usize], inside: bool, probs: Vec<f64>| Group {
+        tracks: tracks.iter().map(|&j| group.tracks[j]).collect(),
+        identities: (0..group.size())
+            .filter(|&x| (cut.identities & (1 << x) != 0) == inside)
+            .map(|x| group.identities[x])
+            .collect(),
+        probs,
+    };
+    Ok((
+        side(&projector.a_tracks, true, pa),
+        side(&projector.b_tracks, false, pb),
+    ))
+}
+
+/// I(σ; τ | E) in nats, given the two factors of the cut.
+fn mutual_information(group: &Group, cut: &Cut, a: &Group, b: &Group) -> f64 {
+    let Ok(projector) = Projector::new(group, cut) else {
+        return f64::INFINITY;
+    };
+    if cut.mass.is_nan() || cut.mass <= 0.0 {
+        return f64::INFINITY;
+    }
+    let table = group.table();
+    let (pa, pb) = (a.probabilities(), b.probabilities());
+    let mut info = 0.0;
+    for (r, &p) in group.probabilities().iter().enumerate() {
+        if p == 0.0 {
+            continue;
+        }
+        if let Some((ra, rb)) = projector.project(table.get(r)) {
+            let joint = p / cut.mass;
+            info += joint * (joint / (pa[ra] * pb[rb])).ln();
+        }
+    }
+    info.max(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_certain_track_is_cut_off_for_free() {
+        // Tracks 0, 1 mixed (swap 0.3); track 2 joined them but never mixed.
+        let mut g = Group::uniform(vec![0, 1], vec![5, 6]).unwrap();
+        g.read(0, 0, 0.9, 0.1).unwrap();
+        g.mix(0, 1, 0.3);
+        let g = g.join(&Group::certain(2, 7)).unwrap();
+        let cuts = best_cuts(&g, 2);
+        let one = cuts[1].unwrap();
+        assert_eq!((one.tracks, one.identities), (0b100, 0b100));
+        assert!(one.cost() < 1e-12, "{one:?}");
+        let (a, b) = apply(&g, &one).unwrap();
+        assert_eq!((a.tracks(), a.identities()), (&[2][..], &[7][..]));
+        assert_eq!((b.tracks(), b.identities()), (&[0, 1][..], &[5, 6][..]));
+        let m = b.local_marginals();
+        let want = 0.9 * 0.7 + 0.1 * 0.3;
+        assert!((m[0][0] - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_uncertain_cut_costs_its_lost_mass() {
+        // Two tracks swapped with probability ¼: cutting them apart keeps
+        // the more likely pairing and loses ¼ of the mass.
+        let mut g = Group::certain(0, 0).join(&Group::certain(1, 1)).unwrap();
+        g.mix(0, 1, 0.25);
+        let cut = best_cuts(&g, 0)[1].unwrap();
+        assert_eq!(cut.identities, 0b01);
+        assert!((cut.mass - 0.75).abs() < 1e-12);
+        assert!((cut.cost() - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn correlated_sides_cost_their_mutual_information() {
+        // {0,1} and {2,3} each swap together or not at all: E = {π(A) =
+        // I_A} is sure, but the sides share one bit (ln 2 nats).
+        let mut g = Group::uniform(vec![0, 1, 2, 3], vec![0, 1, 2, 3]).unwrap();
+        let table = g.table();
+        let both = table.rank(&[1, 0, 3, 2]);
+        let none = table.rank(&[0, 1, 2, 3]);
+        g.probs.iter_mut().for_each(|p| *p = 0.0);
+        g.probs[both] = 0.5;
+        g.probs[none] = 0.5;
+        let cut = best_cuts(&g, 0)[2].unwrap();
+        assert_eq!((cut.tracks, cut.identities), (0b0011, 0b0011));
+        assert!((cut.mass - 1.0).abs() < 1e-12);
+        assert!((cut.mutual_information - 2f64.ln()).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,254 @@
+//! The factored identity belief against the exact filter over all N!
+//! assignments: equal when the cap holds every group of mixed tracks,
+//! close (and still a belief) when it does not.
+
+use super::*;
+use crate::identity::exact::ExactPermutationFilter;
+use crate::identity::filter::{doubly_stochastic_residual, max_abs_difference};
+use crate::identity::workload::{generate, IdentityWorkloadSpec};
+use crate::identity::IdentityEvent;
+use proptest::prelude::*;
+
+/// A cap, and cuts of sure tracks only (exact).
+fn options(max_group: usize) -> FactoredIdentityOptions {
+    FactoredIdentityOptions {
+        max_group,
+        certain: 0.0,
+    }
+}
+
+fn spec(n: usize, events: usize, swap: f64, accuracy: f64, seed: u64) -> IdentityWorkloadSpec {
+    IdentityWorkloadSpec {
+        tracks: n,
+        events,
+        mix_share: 0.5,
+        swap,
+        accuracy,
+        neighbourhood: n,
+        seed,
+    }
+}
+
+/// The largest |Δp| against exact over a stream, checking at every event.
+fn worst_error(
+    n: usize,
+    max_group: usize,
+    mix_share: f64,
+    seed: u64,
+    events: usize,
+) -> (f64, SplitStats) {
+    let mut s = spec(n, events, 0.5, 0.9, seed);
+    s.mix_share = mix_share;
+    let w = generate(&s).unwrap();
+    let mut exact = ExactPermutationFilter::from_assignment(&w.initial).unwrap();
+    let mut factored = FactoredIdentity::from_assignment(&w.initial, options(max_group)).unwrap();
+    let mut worst: f64 = 0.0;
+    for e in &w.events {
+        exact.apply(e).unwrap();
+        factored.apply(e).unwrap();
+        let m = factored.marginals().unwrap();
+        assert!(doubly_stochastic_residual(&m) < 1e-9);
+        worst = worst.max(max_abs_difference(&m, &exact.marginals().unwrap()));
+    }
+    (worst, factored.split_stats())
+}
+
+#[test]
+fn known_start_reads_and_mixes_match_the_exact_filter() {
+    // The slides' example: 18/19 after a read on a half mix.
+    let mut f = FactoredIdentity::from_assignment(&[0, 1, 2], options(3)).unwrap();
+    f.mix(Mix {
+        a: 0,
+        b: 1,
+        swap: 0.5,
+    })
+    .unwrap();
+    f.identify(Identify {
+        track: 0,
+        identity: 0,
+        accuracy: 0.9,
+    })
+    .unwrap();
+    let m = f.marginals().unwrap();
+    assert!((m[0][0] - 18.0 / 19.0).abs() < 1e-15);
+    assert_eq!(m[2][2], 1.0);
+    assert_eq!(f.groups().len(), 2);
+    // A read of an identity outside the track's group changes nothing;
+    // a perfect one is impossible and refused.
+    let before = f.clone();
+    f.identify(Identify {
+        track: 2,
+        identity: 0,
+        accuracy: 0.9,
+    })
+    .unwrap();
+    assert_eq!(f, before);
+    assert!(matches!(
+        f.identify(Identify {
+            track: 2,
+            identity: 0,
+            accuracy: 1.0,
+        }),
+        Err(BeliefError::ImpossibleObservation { .. })
+    ));
+    assert_eq!(f, before);
+}
+
+#[test]
+fn sure_swaps_move_tracks_without_joining() {
+    let mut f = FactoredIdentity::from_assignment(&[2, 0, 1], options(2)).unwrap();
+    f.mix(Mix {
+        a: 0,
+        b: 2,
+        swap: 1.0,
+    })
+    .unwrap();
+    f.mix(Mix {
+        a: 0,
+        b: 1,
+        swap: 0.0,
+    })
+    .unwrap();
+    assert_eq!(f.largest_group(), 1);
+    assert_eq!(f.most_likely().unwrap(), vec![1, 0, 2]);
+}
+
+#[test]
+fn bad_options_and_starts_are_refused() {
+    assert!(FactoredIdentity::from_assignment(&[0, 1], options(1)).is_err());
+    assert!(FactoredIdentity::from_assignment(&[0, 1], options(MAX_GROUP + 1)).is_err());
+    assert!(FactoredIdentity::from_assignment(&[0, 0], options(4)).is_err());
+    assert!(FactoredIdentity::uniform(5, options(4)).is_err());
+    assert!(FactoredIdentity::uniform(0, options(4)).is_err());
+    let mut f = FactoredIdentity::uniform(3, options(3)).unwrap();
+    assert!(f
+        .mix(Mix {
+            a: 0,
+            b: 3,
+            swap: 0.5
+        })
+        .is_err());
+}
+
+#[test]
+fn the_belief_round_trips_and_tampering_is_refused() {
+    let w = generate(&spec(7, 60, 0.4, 0.9, 3)).unwrap();
+    let mut f = FactoredIdentity::from_assignment(&w.initial, options(4)).unwrap();
+    for e in &w.events {
+        f.apply(e).unwrap();
+    }
+    let bytes = postcard::to_allocvec(&f).unwrap();
+    let back: FactoredIdentity = postcard::from_bytes(&bytes).unwrap();
+    assert_eq!(back, f);
+    assert_eq!(back.marginals().unwrap(), f.marginals().unwrap());
+    // A group above the cap is refused on the way in.
+    let mut wide = f.clone();
+    wide.options.max_group = 2;
+    let bytes = postcard::to_allocvec(&wide).unwrap();
+    if f.largest_group() > 2 {
+        assert!(postcard::from_bytes::<FactoredIdentity>(&bytes).is_err());
+    }
+    // A track claimed twice is refused.
+    let mut twice = f.clone();
+    assert!(twice.groups.len() > 1);
+    let other = twice.groups[1].tracks[0];
+    twice.groups[0].tracks[0] = other;
+    let bytes = postcard::to_allocvec(&twice).unwrap();
+    assert!(postcard::from_bytes::<FactoredIdentity>(&bytes).is_err());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// With the cap at least n no cut is ever made and the belief is the
+    /// exact filter's, from a known start or the uniform one.
+    #[test]
+    fn with_room_for_every_group_it_is_exact(
+        n in 1usize..=6,
+        extra in 0usize..=2,
+        seed in any::<u64>(),
+        swap in prop_oneof![Just(0.0), Just(1.0), 0.05f64..0.95],
+        accuracy in 0.3f64..=0.99,
+        known in any::<bool>(),
+    ) {
+        let w = generate(&spec(n, 40, swap, accuracy, seed)).unwrap();
+        let cap = (n + extra).clamp(2, MAX_GROUP);
+        let (mut exact, mut factored) = if known {
+            (
+                ExactPermutationFilter::from_assignment(&w.initial).unwrap(),
+                FactoredIdentity::from_assignment(&w.initial, options(cap)).unwrap(),
+            )
+        } else {
+            (
+                ExactPermutationFilter::uniform(n).unwrap(),
+                FactoredIdentity::uniform(n, options(cap)).unwrap(),
+            )
+        };
+        for e in &w.events {
+            let (ra, rb) = (exact.apply(e), factored.apply(e));
+            prop_assert_eq!(ra.is_ok(), rb.is_ok());
+            let d = max_abs_difference(&exact.marginals().unwrap(), &factored.marginals().unwrap());
+            prop_assert!(d < 1e-9, "{} after {:?}", d, e);
+        }
+        prop_assert_eq!(factored.split_stats().lossy_cuts, 0);
+    }
+
+    /// Without reads, every cut adds at most (1 − P(E)) + √(I/2) of total
+    /// variation and mixes never add any: the error stays below the
+    /// belief's own running bound.
+    #[test]
+    fn on_mixes_alone_the_error_stays_below_the_cut_bound(
+        n in 3usize..=6,
+        seed in any::<u64>(),
+    ) {
+        let (worst, stats) = worst_error(n, n - 1, 1.0, seed, 30);
+        prop_assert!(worst <= stats.total_variation_bound + 1e-9, "{} > {:?}", worst, stats);
+    }
+
+    /// With a smaller cap the marginals stay a doubly stochastic matrix,
+    /// and while every cut made was exact (nothing lost) they are still
+    /// the exact filter's.
+    #[test]
+    fn with_a_smaller_cap_it_stays_a_belief(
+        n in 3usize..=6,
+        seed in any::<u64>(),
+        swap in 0.05f64..0.95,
+    ) {
+        let w = generate(&spec(n, 40, swap, 0.9, seed)).unwrap();
+        let cap = n - 1;
+        let mut exact = ExactPermutationFilter::from_assignment(&w.initial).unwrap();
+        let mut factored = FactoredIdentity::from_assignment(&w.initial, options(cap)).unwrap();
+        for e in &w.events {
+            exact.apply(e).unwrap();
+            factored.apply(e).unwrap();
+            prop_assert!(factored.largest_group() <= cap);
+            let m = factored.marginals().unwrap();
+            prop_assert!(doubly_stochastic_residual(&m) < 1e-9);
+            prop_assert!(m.iter().flatten().all(|&p| (-1e-12..=1.0 + 1e-12).contains(&p)));
+            if factored.split_stats().lossy_cuts == 0 {
+                let d = max_abs_difference(&m, &exact.marginals().unwrap());
+                prop_assert!(d < 1e-9, "{}", d);
+            }
+        }
+    }
+}
+
+#[test]
+fn events_of_every_kind_apply() {
+    // The IdentityFilter default `apply` routes to mix and identify.
+    let mut f = FactoredIdentity::from_assignment(&[1, 0], options(2)).unwrap();
+    f.apply(&IdentityEvent::Mix(Mix {
+        a: 0,
+        b: 1,
+        swap: 0.5,
+    }))
+    .unwrap();
+    f.apply(&IdentityEvent::Identify(Identify {
+        track: 1,
+        identity: 1,
+        accuracy: 0.8,
+    }))
+    .unwrap();
+    let m = f.marginals().unwrap();
+    assert!((m[1][1] - 0.8).abs() < 1e-12);
+}
