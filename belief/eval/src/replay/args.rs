@@ -14,7 +14,7 @@ pub struct ReplayArgs {
 
     /// The filter to run (default: by the trace's header — factored for
     /// a trace with colours; for an identity trace with none,
-    /// factored-identity up to 9 tracks, information-matrix above).
+    /// information-matrix, which the leaders serve).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
 

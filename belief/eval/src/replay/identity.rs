@@ -37,12 +37,12 @@
 //! factored identity belief (exact over the groups of tracks that mixed,
 //! `--max-component` tracks per group at most).
 //!
-//! With no `--method` the default depends on the trace
-//! ([`default_identity_method`]): the factored identity belief up to
-//! [`MAX_GROUP`] tracks, where it is the exact posterior at any group
-//! size it may reach, and the information matrix above, where the
-//! factored belief's lossy cuts can be far off (docs/design/identity.md,
-//! "Factored identity belief").
+//! With no `--method` replay runs [`DEFAULT_IDENTITY_METHOD`], the
+//! information matrix, because that is what a deployment's leaders carry
+//! and serve: what a user checks offline is what the deployment answers.
+//! The factored identity belief is exact up to 9 tracks (docs/design/
+//! identity.md, "Factored identity belief") and is there to be named
+//! until leaders carry it.
 
 use super::args::ReplayArgs;
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
@@ -75,7 +75,7 @@ pub struct IdentityReplayOptions {
     pub trace: PathBuf,
 
     /// The identity filter to run.
-    #[arg(long, value_enum, default_value_t = IdentityMethod::FactoredIdentity)]
+    #[arg(long, value_enum, default_value_t = DEFAULT_IDENTITY_METHOD)]
     pub method: IdentityMethod,
 
     /// The most tracks of one group of --method factored-identity (2 to 9,
@@ -122,19 +122,10 @@ pub struct IdentityReplayOptions {
     pub force: bool,
 }
 
-/// The identity method replay runs when none is named, for a trace of `n`
-/// tracks: the factored identity belief where its groups can always hold
-/// every track that mixed (n ≤ [`MAX_GROUP`]: then it is the exact
-/// posterior, at the cost of the groups mixing has actually formed), the
-/// information matrix above (it answers at any size, and the factored
-/// belief's lossy cuts are worse than its approximation there).
-pub fn default_identity_method(n: usize) -> IdentityMethod {
-    if n <= MAX_GROUP {
-        IdentityMethod::FactoredIdentity
-    } else {
-        IdentityMethod::InformationMatrix
-    }
-}
+/// The identity method replay runs when none is named: the information
+/// matrix, the rows every leader keeps, so that replay without options
+/// computes what a deployment serves.
+pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::InformationMatrix;
 
 /// The default group cap of --method factored-identity in replay.
 pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_belief::identity::factored::DEFAULT_MAX_GROUP;
@@ -151,9 +142,9 @@ pub const WARN_EXACT_BIT_STATES: f64 = 1e4;
 
 /// `idmesh replay` on an identity trace: the identity options from the
 /// command line's, with the identity default when no method is named.
-pub fn run_default(args: &ReplayArgs, tracks: usize, out: impl Write) -> Result<()> {
+pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let method = match args.method {
-        None => default_identity_method(tracks),
+        None => DEFAULT_IDENTITY_METHOD,
         Some(m) => m
             .identity()
             .ok_or_else(|| anyhow!("--method {} is not an identity method", m.name()))?,
@@ -917,13 +908,7 @@ mod tests {
     }
 
     #[test]
-    fn factored_identity_is_the_default_up_to_nine_tracks() {
-        assert_eq!(default_identity_method(2), IdentityMethod::FactoredIdentity);
-        assert_eq!(default_identity_method(9), IdentityMethod::FactoredIdentity);
-        assert_eq!(
-            default_identity_method(10),
-            IdentityMethod::InformationMatrix
-        );
+    fn factored_identity_takes_a_known_start_or_what_a_group_holds() {
         let big = |n: usize, start: bool| {
             let initial = if start {
                 format!(

@@ -26,8 +26,8 @@ use std::io::Write;
 /// trace — one that answers at any size: factored for a trace with
 /// colours; for an identity trace that says nothing of colours (its
 /// header has `identities` and neither `red` nor `initial_red`), the
-/// factored identity belief up to 9 tracks and the information matrix
-/// above (`identity::default_identity_method`). A property method on such an identity trace, or an
+/// information matrix, which the leaders serve
+/// (`identity::DEFAULT_IDENTITY_METHOD`). A property method on such an identity trace, or an
 /// identity method on a trace without identities, is an error that says so.
 pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     if let Some(path) = &args.topology {
@@ -46,15 +46,14 @@ pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let identities_only = header.identities.is_some() && header.red_count().is_none();
     let source = reader.source().to_string();
     match (header.identities, args.method) {
-        (Some(n), None) if identities_only => identity::run_default(args, n, out),
-        (Some(n), Some(method)) if method.identity().is_some() => {
-            identity::run_default(args, n, out)
+        (Some(n), None) if identities_only => identity::run_default(args, out),
+        (Some(_), Some(method)) if method.identity().is_some() => {
+            identity::run_default(args, out)
         }
         (Some(n), Some(method)) if identities_only => bail!(
             "{source}:1: header: an identity trace ({n} identities) with no colours, and \
-             --method {} is a property method; use factored-identity (the default up \
-             to 9 tracks), exact-perm, belief-matrix, information-matrix (the default \
-             above) or property-bits",
+             --method {} is a property method; use information-matrix (the default), \
+             factored-identity, exact-perm, belief-matrix or property-bits",
             method.name()
         ),
         (None, Some(method)) if method.identity().is_some() => bail!(
@@ -106,13 +105,13 @@ mod tests {
                 .map_err(|e| format!("{e:#}"))
         };
         let out = run(&identity, None).unwrap();
-        assert!(out.contains(r#""method":"factored-identity""#), "{out}");
+        assert!(out.contains(r#""method":"information-matrix""#), "{out}");
         assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
         let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
         assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
         let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
         assert!(
-            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use factored-identity (the default up to 9 tracks), exact-perm, belief-matrix, information-matrix (the default above) or property-bits"),
+            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use information-matrix (the default), factored-identity, exact-perm, belief-matrix or property-bits"),
             "{error}"
         );
         let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();
