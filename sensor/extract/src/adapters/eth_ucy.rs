@@ -11,8 +11,13 @@
 //! (`7.8000000e+02`). Blank lines are skipped; every other row must have the
 //! same number of columns as the first. Rows are returned with their 1-based
 //! line numbers so later checks can still point at the file.
+//!
+//! The simulator replays these files ([`parse_rows`], all or nothing); the
+//! extractor reads them as a tracker's reports ([`read`], every bad row
+//! counted). One parser serves both.
 
-use super::error::SceneError;
+use super::{check_fps, frame_time, Located, RowError, Rows};
+use crate::extractor::Report;
 use crate::geometry::Vec2;
 
 /// Which annotation format a file is in.
@@ -29,6 +34,21 @@ impl SceneFormat {
         match self {
             SceneFormat::Obsmat => 8,
             SceneFormat::FourColumn => 4,
+        }
+    }
+
+    /// What the format is called in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneFormat::Obsmat => "obsmat: frame ped_id pos_x pos_z pos_y v_x v_z v_y",
+            SceneFormat::FourColumn => "biwi: frame ped_id x y",
+        }
+    }
+
+    fn other(self) -> SceneFormat {
+        match self {
+            SceneFormat::Obsmat => SceneFormat::FourColumn,
+            SceneFormat::FourColumn => SceneFormat::Obsmat,
         }
     }
 
@@ -54,34 +74,98 @@ pub struct Row {
     pub pos: Vec2,
 }
 
-/// Parses the text of a scene file. `file` only names it in errors.
-pub fn parse_rows(text: &str, file: &str) -> Result<(SceneFormat, Vec<Row>), SceneError> {
-    let bad = |line: usize, reason: String| SceneError::Malformed {
-        file: file.to_string(),
-        line,
-        reason,
-    };
-    let mut format: Option<(SceneFormat, usize)> = None;
+/// Parses the text of a scene file, stopping at the first bad row (the
+/// simulator's replay wants the whole scene or nothing). `file` only names
+/// it in errors.
+pub fn parse_rows(text: &str, file: &str) -> Result<(SceneFormat, Vec<Row>), RowError> {
+    let mut reader = RowReader::default();
     let mut rows = Vec::new();
-    let mut values = Vec::with_capacity(8);
     let mut last_line = 0;
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         last_line = line;
+        match reader.row(line, raw) {
+            Ok(Some(row)) => rows.push(row),
+            Ok(None) => {}
+            Err(reason) => return Err(RowError::malformed(file, line, reason)),
+        }
+    }
+    match reader.format {
+        Some((fmt, _)) => Ok((fmt, rows)),
+        None => Err(RowError::malformed(
+            file,
+            last_line + 1,
+            "no trajectory rows in the file",
+        )),
+    }
+}
+
+/// Every row of an annotation file as a report at `fps` frames per
+/// second (frame f at time f / fps; ETH's obsmat is at 15 fps, the other
+/// scenes at 25), or an error naming its line — the extractor's reading,
+/// which counts bad rows and goes on. The file must be in `expected`
+/// format (told apart by the first row's columns).
+pub fn read(text: &str, file: &str, fps: f64, expected: SceneFormat) -> Result<Rows, RowError> {
+    check_fps(fps).map_err(|reason| RowError::malformed(file, 0, reason))?;
+    let mut reader = RowReader::default();
+    let mut rows = Vec::new();
+    for (index, raw) in text.lines().enumerate() {
+        let line = index + 1;
+        match reader.row(line, raw) {
+            Ok(Some(row)) => {
+                if row.line == reader.format.map_or(0, |(_, first)| first) {
+                    let found = reader.format.map(|(f, _)| f);
+                    if found != Some(expected) {
+                        return Err(RowError::malformed(
+                            file,
+                            line,
+                            format!(
+                                "expected {} columns ({}), got {}",
+                                expected.columns(),
+                                expected.name(),
+                                expected.other().columns()
+                            ),
+                        ));
+                    }
+                }
+                rows.push(Ok(Located {
+                    line,
+                    report: Report::at(
+                        frame_time(row.frame as f64, fps),
+                        row.id,
+                        row.pos.x,
+                        row.pos.y,
+                    ),
+                }));
+            }
+            Ok(None) => {}
+            Err(reason) => rows.push(Err(RowError::malformed(file, line, reason))),
+        }
+    }
+    Ok(rows)
+}
+
+/// The format of a file, fixed by its first row, and the rows one by one.
+#[derive(Debug, Default)]
+struct RowReader {
+    /// The format and the line that fixed it.
+    format: Option<(SceneFormat, usize)>,
+}
+
+impl RowReader {
+    /// Row `line` (1-based): `None` for a blank line.
+    fn row(&mut self, line: usize, raw: &str) -> Result<Option<Row>, String> {
         let fields: Vec<&str> = raw.split_whitespace().collect();
         if fields.is_empty() {
-            continue;
+            return Ok(None);
         }
-        let fmt = match format {
+        let fmt = match self.format {
             Some((fmt, first_line)) => {
                 if fields.len() != fmt.columns() {
-                    return Err(bad(
-                        line,
-                        format!(
-                            "expected {} columns like line {first_line}, got {}",
-                            fmt.columns(),
-                            fields.len()
-                        ),
+                    return Err(format!(
+                        "expected {} columns like line {first_line}, got {}",
+                        fmt.columns(),
+                        fields.len()
                     ));
                 }
                 fmt
@@ -91,64 +175,47 @@ pub fn parse_rows(text: &str, file: &str) -> Result<(SceneFormat, Vec<Row>), Sce
                     8 => SceneFormat::Obsmat,
                     4 => SceneFormat::FourColumn,
                     n => {
-                        return Err(bad(
-                            line,
-                            format!(
-                                "expected 4 columns (frame ped_id x y) or 8 columns \
-                                 (obsmat: frame ped_id pos_x pos_z pos_y v_x v_z v_y), got {n}"
-                            ),
+                        return Err(format!(
+                            "expected 4 columns (frame ped_id x y) or 8 columns \
+                             (obsmat: frame ped_id pos_x pos_z pos_y v_x v_z v_y), got {n}"
                         ))
                     }
                 };
-                format = Some((fmt, line));
+                self.format = Some((fmt, line));
                 fmt
             }
         };
-        values.clear();
+        let mut values = Vec::with_capacity(8);
         for (c, field) in fields.iter().enumerate() {
             match field.parse::<f64>() {
                 Ok(v) if v.is_finite() => values.push(v),
                 _ => {
-                    return Err(bad(
-                        line,
-                        format!(
-                            "column {} ({}): `{field}` is not a finite number",
-                            c + 1,
-                            fmt.column_name(c)
-                        ),
+                    return Err(format!(
+                        "column {} ({}): `{field}` is not a finite number",
+                        c + 1,
+                        fmt.column_name(c)
                     ))
                 }
             }
         }
-        let frame = whole(values[0], u64::MAX as f64).ok_or_else(|| {
-            bad(
-                line,
-                format!("frame {} is not a whole number >= 0", fields[0]),
-            )
-        })?;
+        let frame = whole(values[0], u64::MAX as f64)
+            .ok_or_else(|| format!("frame {} is not a whole number >= 0", fields[0]))?;
         let id = whole(values[1], u32::MAX as f64).ok_or_else(|| {
-            bad(
-                line,
-                format!(
-                    "pedestrian id {} is not a whole number in 0..2^32",
-                    fields[1]
-                ),
+            format!(
+                "pedestrian id {} is not a whole number in 0..2^32",
+                fields[1]
             )
         })?;
         let pos = match fmt {
             SceneFormat::Obsmat => Vec2::new(values[2], values[4]),
             SceneFormat::FourColumn => Vec2::new(values[2], values[3]),
         };
-        rows.push(Row {
+        Ok(Some(Row {
             line,
             frame,
             id: id as u32,
             pos,
-        });
-    }
-    match format {
-        Some((fmt, _)) => Ok((fmt, rows)),
-        None => Err(bad(last_line + 1, "no trajectory rows in the file".into())),
+        }))
     }
 }
 
@@ -160,6 +227,32 @@ fn whole(v: f64, max: f64) -> Option<u64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_bad_row_is_an_error_and_the_rest_are_reports() {
+        let text = "780 1 8.46 3.59\n790 1 x 3.79\n\n800 1 9.0 3.9 1\n810 2 1.0 1.0\n";
+        let rows = read(text, "b.txt", 25.0, SceneFormat::FourColumn).unwrap();
+        assert_eq!(rows.len(), 4);
+        assert_eq!(
+            rows[0].as_ref().unwrap().report,
+            Report::at(31.2, 1, 8.46, 3.59)
+        );
+        assert_eq!(
+            rows[1].as_ref().unwrap_err().to_string(),
+            "b.txt:2: column 3 (x): `x` is not a finite number"
+        );
+        assert_eq!(
+            rows[2].as_ref().unwrap_err().to_string(),
+            "b.txt:4: expected 4 columns like line 1, got 5"
+        );
+        assert_eq!(rows[3].as_ref().unwrap().line, 5);
+        assert_eq!(
+            read(text, "b.txt", 25.0, SceneFormat::Obsmat)
+                .unwrap_err()
+                .to_string(),
+            "b.txt:1: expected 8 columns (obsmat: frame ped_id pos_x pos_z pos_y v_x v_z v_y), got 4"
+        );
+    }
 
     #[test]
     fn reads_both_formats() {
