@@ -215,12 +215,13 @@ impl Extractor {
                 return Err(ReportError::BadAccuracy(read.accuracy));
             }
             // Identities are one per track; before the first frame fixes
-            // the roster, the count is the first frame's so far (plus this
-            // report's track), which only grows.
+            // the roster, the count is the first frame's tracks so far
+            // (this one included), which only grows: a read accepted now
+            // stays valid (one early in the first frame may be refused).
             let identities = match (&self.roster, known) {
                 (Some(roster), _) => roster.len(),
                 (None, Some((_, tracks))) => tracks,
-                (None, None) => usize::MAX,
+                (None, None) => same_frame.map_or(0, |f| f.reports.len()) + 1,
             };
             if read.identity as usize >= identities {
                 return Err(ReportError::UnknownIdentity {

@@ -231,6 +231,20 @@ fn every_refused_report_is_named_and_changes_nothing() {
             .to_string(),
         "identity read 2 is not one of the 2 identities (one per track)"
     );
+    // Before the first frame fixes the roster, a read must name one of
+    // the tracks seen so far.
+    let mut first = Extractor::new(
+        ExtractorConfig {
+            identities: true,
+            ..config()
+        },
+        RosterPolicy::FirstFrame,
+    )
+    .unwrap();
+    assert_eq!(
+        first.push(read(1, 0.9), &mut out).unwrap_err().to_string(),
+        "identity read 1 is not one of the 1 identities (one per track)"
+    );
     assert_eq!(
         with_ids.push(read(1, 0.0), &mut out).unwrap_err().reason(),
         "bad identity read"
