@@ -102,7 +102,8 @@ pub fn parse_rows(text: &str, file: &str) -> Result<(SceneFormat, Vec<Row>), Row
 
 /// Every row of an annotation file as a report at `fps` frames per
 /// second (frame f at time f / fps; ETH's obsmat is at 15 fps, the other
-/// scenes at 25), or an error naming its line — the extractor's reading,
+/// scenes at 25), in time order (bad rows first), or an error naming its
+/// line — the extractor's reading,
 /// which counts bad rows and goes on. The file must be in `expected`
 /// format (told apart by the first row's columns).
 pub fn read(text: &str, file: &str, fps: f64, expected: SceneFormat) -> Result<Rows, RowError> {
@@ -142,6 +143,15 @@ pub fn read(text: &str, file: &str, fps: f64, expected: SceneFormat) -> Result<R
             Err(reason) => rows.push(Err(RowError::malformed(file, line, reason))),
         }
     }
+    // Annotation files need not be in time order: the UCY obsmat files
+    // list one person after another. Reports go to the extractor by time
+    // (stably, so a frame keeps its file order); bad rows first, each
+    // still named by its line.
+    let key = |row: &Result<Located, RowError>| match row {
+        Ok(located) => located.report.time,
+        Err(_) => f64::NEG_INFINITY,
+    };
+    rows.sort_by(|a, b| key(a).total_cmp(&key(b)));
     Ok(rows)
 }
 
@@ -233,19 +243,28 @@ mod tests {
         let text = "780 1 8.46 3.59\n790 1 x 3.79\n\n800 1 9.0 3.9 1\n810 2 1.0 1.0\n";
         let rows = read(text, "b.txt", 25.0, SceneFormat::FourColumn).unwrap();
         assert_eq!(rows.len(), 4);
+        // Bad rows first, then reports by time.
         assert_eq!(
-            rows[0].as_ref().unwrap().report,
-            Report::at(31.2, 1, 8.46, 3.59)
-        );
-        assert_eq!(
-            rows[1].as_ref().unwrap_err().to_string(),
+            rows[0].as_ref().unwrap_err().to_string(),
             "b.txt:2: column 3 (x): `x` is not a finite number"
         );
         assert_eq!(
-            rows[2].as_ref().unwrap_err().to_string(),
+            rows[1].as_ref().unwrap_err().to_string(),
             "b.txt:4: expected 4 columns like line 1, got 5"
         );
+        assert_eq!(
+            rows[2].as_ref().unwrap().report,
+            Report::at(31.2, 1, 8.46, 3.59)
+        );
         assert_eq!(rows[3].as_ref().unwrap().line, 5);
+        // A file grouped by person is read in time order.
+        let by_person = "800 1 0 0\n810 1 0 0\n790 2 5 5\n";
+        let lines: Vec<usize> = read(by_person, "p.txt", 10.0, SceneFormat::FourColumn)
+            .unwrap()
+            .into_iter()
+            .map(|r| r.unwrap().line)
+            .collect();
+        assert_eq!(lines, [3, 1, 2]);
         assert_eq!(
             read(text, "b.txt", 25.0, SceneFormat::Obsmat)
                 .unwrap_err()
