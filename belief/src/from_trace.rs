@@ -32,7 +32,12 @@ pub fn event_of(line: &Line) -> Option<Event> {
             red: o.red,
             blue: o.blue,
         })),
-        Line::Identify(_) | Line::Move(_) | Line::Header(_) | Line::Truth(_) => None,
+        // A detect line is a tracker's report, not an event: the sensor
+        // stage (`idmesh extract`) turns it into mix/observe/identify
+        // lines first, and the readers that feed a belief refuse it.
+        Line::Identify(_) | Line::Move(_) | Line::Header(_) | Line::Truth(_) | Line::Detect(_) => {
+            None
+        }
     }
 }
 
@@ -47,7 +52,9 @@ pub fn identity_event_of(line: &Line) -> Option<IdentityEvent> {
             identity: read.identity,
             accuracy: read.accuracy,
         })),
-        Line::Observe(_) | Line::Move(_) | Line::Header(_) | Line::Truth(_) => None,
+        Line::Observe(_) | Line::Move(_) | Line::Header(_) | Line::Truth(_) | Line::Detect(_) => {
+            None
+        }
     }
 }
 

@@ -25,6 +25,10 @@ pub enum Command {
     /// Simulate targets moving in a field (or replay real pedestrians) and
     /// write the sensors' events as a trace.
     Simulate(SimulateArgs),
+    /// Turn what a tracker reports (positions, class scores, identity
+    /// reads) into events: read MOTChallenge, ETH/UCY or JSON-lines input
+    /// and write a version-2 trace of mix, observe, identify and move lines.
+    Extract(ExtractArgs),
     /// Track indistinguishable targets from the summed sound the sensors
     /// hear (blind source separation) and write the recovered paths and
     /// their mixes as a trace.
@@ -403,6 +407,115 @@ pub struct SimulateArgs {
     /// Where to write the trace.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+}
+
+#[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
+pub struct ExtractArgs {
+    /// The tracker's output; standard input when absent or `-`.
+    #[arg(value_name = "INPUT")]
+    pub input: Option<PathBuf>,
+    /// The input's format.
+    #[arg(long, value_enum, default_value_t = ReportFormat::Jsonl)]
+    pub format: ReportFormat,
+    /// Frames per second: frame f is at f / fps seconds (mot, obsmat,
+    /// biwi; ETH's obsmat is at 15, the other ETH/UCY files at 25).
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// mot: metres per pixel, from the box's bottom centre.
+    #[arg(long, conflicts_with = "homography")]
+    pub scale: Option<f64>,
+    /// mot: a 3x3 homography from pixels to metres (ETH/UCY H.txt format).
+    #[arg(long, value_name = "H.txt")]
+    pub homography: Option<PathBuf>,
+    /// Which tracks there are: every id of the input (read whole first), or
+    /// the ids of the first frame (default for jsonl without a header).
+    #[arg(long, value_enum)]
+    pub roster: Option<RosterChoice>,
+    /// Two tracks closer than this (metres) meet.
+    #[arg(long, default_value_t = 1.0)]
+    pub mix_distance: f64,
+    /// A pair meets again only after parting beyond this times the mixing
+    /// distance (>= 1).
+    #[arg(long, default_value_t = 1.25)]
+    pub release_factor: f64,
+    /// A track farther than this (metres) from every other is observed.
+    #[arg(long, default_value_t = 3.5)]
+    pub observe_distance: f64,
+    /// At most one observation per track per this many seconds.
+    #[arg(long, default_value_t = 3.0)]
+    pub observe_interval: f64,
+    /// The meeting model: a constant swap probability, or one from the
+    /// closest distance and relative speed of the meeting.
+    #[arg(long, value_enum, default_value_t = MeetingChoice::Constant)]
+    pub meeting_model: MeetingChoice,
+    /// constant: the swap probability of every meeting.
+    #[arg(long, default_value_t = 0.5)]
+    pub swap: f64,
+    /// approach: the swap probability of a standing, touching pair.
+    #[arg(long, default_value_t = 0.5)]
+    pub p_max: f64,
+    /// approach: metres over which confusion falls with closest distance.
+    #[arg(long, default_value_t = 0.5)]
+    pub sigma: f64,
+    /// approach: the relative speed (m/s) at which confusion halves.
+    #[arg(long, default_value_t = 1.0)]
+    pub v0: f64,
+    /// The class label of the property (its score becomes the red
+    /// likelihood).
+    #[arg(long, default_value = "red")]
+    pub label: String,
+    /// The temperature of the score mapping (1: scores are calibrated).
+    #[arg(long, default_value_t = 1.0)]
+    pub temperature: f64,
+    /// Seconds between move lines (0: every frame).
+    #[arg(long, default_value_t = 1.0)]
+    pub move_interval: f64,
+    /// Write no move lines.
+    #[arg(long)]
+    pub no_moves: bool,
+    /// Identity reads are expected: the header declares one identity per
+    /// track (a jsonl header with identities turns this on too).
+    #[arg(long)]
+    pub identities: bool,
+    /// How many bad rows to count and report before giving up; with the
+    /// default 0 the first bad row stops the run.
+    #[arg(long, default_value_t = 0)]
+    pub max_errors: usize,
+    /// Where to write the trace; standard output when absent.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+}
+
+/// Input formats of `extract`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ReportFormat {
+    /// MOTChallenge results: frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z.
+    Mot,
+    /// ETH/UCY obsmat: frame ped_id pos_x pos_z pos_y v_x v_z v_y.
+    Obsmat,
+    /// ETH/UCY four columns: frame ped_id x y.
+    Biwi,
+    /// One move or detect trace line per line, an optional header first.
+    Jsonl,
+}
+
+/// Roster policies of `extract`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RosterChoice {
+    /// Every id in the input.
+    All,
+    /// The ids of the first frame; a later newcomer is a bad row.
+    FirstFrame,
+}
+
+/// Meeting models of `extract`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MeetingChoice {
+    /// --swap for every meeting.
+    Constant,
+    /// p_max · exp(−closest² / 2σ²) · v0 / (v0 + relative speed).
+    Approach,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -9,6 +9,7 @@
 mod acoustic;
 mod bench;
 mod cli;
+mod extract;
 mod logging;
 mod simulate;
 
@@ -51,6 +52,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             idmesh_eval::replay::dispatch(&args, stdout)
         }
         Command::Simulate(args) => simulate::run(&args),
+        Command::Extract(args) => extract::run(&args),
         Command::Acoustic(args) => acoustic::run(&args),
         Command::Eval(args) => idmesh_eval::eval::run(&args),
         Command::Sensor(args) => runtime::roles::run(

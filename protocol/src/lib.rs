@@ -23,6 +23,6 @@ pub mod wire;
 
 pub use start::StreamStart;
 pub use trace::{
-    Header, Identify, Line, Mix, Move, NumberedLine, Observe, Problem, TraceError, TraceReader,
-    TraceWriter, Truth,
+    Detect, Header, Identify, Line, Mix, Move, NumberedLine, Observe, Problem, TraceError,
+    TraceReader, TraceWriter, Truth,
 };

@@ -898,6 +898,7 @@ fn line_time(line: &Line) -> Option<f64> {
         Line::Move(m) => Some(m.time),
         Line::Identify(i) => Some(i.time),
         Line::Truth(t) => Some(t.time),
+        Line::Detect(d) => Some(d.time),
         Line::Header(_) => None,
     }
 }

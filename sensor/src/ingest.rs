@@ -293,6 +293,7 @@ impl Ingest {
         let text = text.strip_suffix('\r').unwrap_or(text);
         let judged = Line::parse(text).and_then(|line| {
             self.stdin.check(&line, number)?;
+            line.require_extracted()?;
             Ok(line)
         });
         match judged {
@@ -313,6 +314,7 @@ impl Ingest {
 /// One ingested line: an event of this stream, or why not.
 pub(crate) fn event(text: &str, header: &Header) -> Result<Line, String> {
     let line = Line::parse(text).map_err(|p| p.to_string())?;
+    line.require_extracted().map_err(|p| p.to_string())?;
     if !line.is_event() {
         return Err(format!(
             "{}: not an event: the sensor takes mix, observe, move and identify lines",
@@ -373,6 +375,16 @@ mod tests {
             .unwrap();
         assert_eq!(judged.ack.accepted, vec![2]);
         assert_eq!((stats.ingested, stats.producers, stats.rejected), (3, 1, 0));
+    }
+
+    #[test]
+    fn a_detect_line_is_refused_with_where_to_go() {
+        let detect = r#"{"kind":"detect","time":1,"track":0,"x":0,"y":0}"#;
+        let error = event(detect, &header()).unwrap_err();
+        assert!(
+            error.starts_with("detect: a tracker's report, not an event"),
+            "{error}"
+        );
     }
 
     #[test]

@@ -301,7 +301,9 @@ impl Router {
                     owner,
                 });
             }
-            Line::Header(_) | Line::Truth(_) => {}
+            // Refused on the way in (`Problem::NotExtracted`): a detect
+            // line reaches no router.
+            Line::Header(_) | Line::Truth(_) | Line::Detect(_) => {}
         }
     }
 

@@ -219,6 +219,9 @@ async fn sensor(
         let header = reader.read_header()?;
         let mut lines = Vec::new();
         while let Some(numbered) = reader.read_line()? {
+            numbered.line.require_extracted().map_err(|problem| {
+                anyhow::anyhow!("{}:{}: {problem}", path.display(), numbered.number)
+            })?;
             lines.push(numbered.line);
         }
         (header, Source { lines, input: None })

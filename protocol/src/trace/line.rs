@@ -1,16 +1,30 @@
-//! One Rust type per line kind of the trace format (shared/spec/trace.md),
-//! field for field. Serializing a [`Line`] writes `kind` first and leaves
+//! One Rust type per line kind of the trace format (shared/spec/trace.md,
+//! version 2 in docs/guide/trace-format.md), field for field. Serializing a [`Line`] writes `kind` first and leaves
 //! out absent optional fields; deserializing ignores fields it does not
 //! know. These types say what a line *holds*; whether it is valid (in range,
 //! consistent with the header) is [`validate`](super::validate)'s business.
 
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
-/// The `format` every version-1 header carries.
+/// The `format` every header carries, whatever its version.
 pub const FORMAT: &str = "idmesh-trace";
 
-/// The trace format version this crate reads and writes.
+/// The version [`Header::new`] writes: 1. A trace without `detect` lines is
+/// a version-1 trace, so readers that predate version 2 still read it and
+/// what `idmesh simulate` writes is byte for byte what it wrote before.
 pub const VERSION: u32 = 1;
+
+/// Version 2 adds the `detect` line: what a tracker reports (a position,
+/// class scores, an identity read) before events are extracted from it.
+pub const VERSION_2: u32 = 2;
+
+/// Every version this crate reads.
+pub const SUPPORTED_VERSIONS: [u32; 2] = [VERSION, VERSION_2];
+
+/// How far the class scores of a `detect` line may sum from 1: scores
+/// rounded to two decimals over a handful of labels stay inside it.
+pub const SCORE_SUM_TOLERANCE: f64 = 0.01;
 
 /// One line of a trace.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -22,6 +36,8 @@ pub enum Line {
     Identify(Identify),
     Move(Move),
     Truth(Truth),
+    /// Version 2 only.
+    Detect(Detect),
 }
 
 /// `header` — exactly one, first.
@@ -67,6 +83,14 @@ impl Header {
             initial_identity: None,
             source: None,
             description: None,
+        }
+    }
+
+    /// A version-2 header (one that may be followed by `detect` lines).
+    pub fn new_v2(tracks: usize) -> Self {
+        Header {
+            version: VERSION_2,
+            ..Header::new(tracks)
         }
     }
 
@@ -120,6 +144,45 @@ pub struct Move {
     pub y: f64,
 }
 
+/// `detect` (version 2) — what a tracker reported about `track` at `time`:
+/// its position in metres, and optionally class scores and an identity
+/// read. Events (`mix`, `observe`, `identify`) are extracted from detect
+/// lines by `idmesh extract` (crate `idmesh-extract`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Detect {
+    pub time: f64,
+    pub track: u32,
+    pub x: f64,
+    pub y: f64,
+    /// The classifier's scores, label to score in [0, 1], summing to 1
+    /// (within [`SCORE_SUM_TOLERANCE`]), e.g. `{"red":0.83,"blue":0.17}`.
+    /// A map sorted by label, so a line is written the same way every time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scores: Option<BTreeMap<String, f64>>,
+    /// An identity read on this track (needs `accuracy` and a header that
+    /// declares `identities`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identity: Option<u32>,
+    /// The probability that the read is right.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<f64>,
+}
+
+impl Detect {
+    /// A detection with a position only.
+    pub fn at(time: f64, track: u32, x: f64, y: f64) -> Self {
+        Detect {
+            time,
+            track,
+            x,
+            y,
+            scores: None,
+            identity: None,
+            accuracy: None,
+        }
+    }
+}
+
 /// `truth` — ground truth at `time`: the red tracks, the identity on every
 /// track, or both.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -143,12 +206,13 @@ impl Line {
             Line::Identify(_) => "identify",
             Line::Move(_) => "move",
             Line::Truth(_) => "truth",
+            Line::Detect(_) => "detect",
         }
     }
 
     /// Whether the line is an event of the stream — what the sensor
     /// gateway sequences and counts: every line but the header and the
-    /// ground truth (`mix`, `observe`, `identify`, `move`).
+    /// ground truth (`mix`, `observe`, `identify`, `move`, `detect`).
     pub fn is_event(&self) -> bool {
         !matches!(self, Line::Header(_) | Line::Truth(_))
     }
@@ -162,6 +226,7 @@ impl Line {
             Line::Identify(l) => Some(l.time),
             Line::Move(l) => Some(l.time),
             Line::Truth(l) => Some(l.time),
+            Line::Detect(l) => Some(l.time),
         }
     }
 }
@@ -199,5 +264,11 @@ impl From<Move> for Line {
 impl From<Truth> for Line {
     fn from(line: Truth) -> Self {
         Line::Truth(line)
+    }
+}
+
+impl From<Detect> for Line {
+    fn from(line: Detect) -> Self {
+        Line::Detect(line)
     }
 }

@@ -1,5 +1,6 @@
-//! The trace format, version 1 (shared/spec/trace.md): the record of what
-//! the sensors of a field reported, plus ground truth when there is any.
+//! The trace format (shared/spec/trace.md; version 2, which adds the
+//! `detect` line, in docs/guide/trace-format.md): the record of what the
+//! sensors of a field reported, plus ground truth when there is any.
 //!
 //! - [`line`](self::line) — one type per line kind.
 //! - [`parse`](self::parse) — text to a [`Line`], with precise messages.
@@ -23,8 +24,11 @@ pub mod writer;
 mod tests;
 
 pub use error::TraceError;
-pub use line::{Header, Identify, Line, Mix, Move, Observe, Truth, FORMAT, VERSION};
+pub use line::{
+    Detect, Header, Identify, Line, Mix, Move, Observe, Truth, FORMAT, SCORE_SUM_TOLERANCE,
+    SUPPORTED_VERSIONS, VERSION, VERSION_2,
+};
 pub use problem::Problem;
 pub use reader::{NumberedLine, TraceReader};
-pub use validate::Validator;
+pub use validate::{check_scores, Validator};
 pub use writer::TraceWriter;

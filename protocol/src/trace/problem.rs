@@ -20,7 +20,7 @@ pub enum Problem {
     MissingKind,
     #[error("`kind` must be a string, got {0}")]
     KindNotAString(String),
-    #[error("unknown kind {0:?} (expected header, mix, observe, identify, move or truth)")]
+    #[error("unknown kind {0:?} (expected header, mix, observe, identify, move, truth or detect)")]
     UnknownKind(String),
     /// A field is missing or has the wrong type (serde's own words).
     #[error("{kind}: {message}")]
@@ -32,7 +32,7 @@ pub enum Problem {
     SecondHeader { first: usize },
     #[error("header: format is {0:?}, expected \"idmesh-trace\"")]
     BadFormat(String),
-    #[error("header: version {0} is not supported (this reader knows version 1)")]
+    #[error("header: version {0} is not supported (this reader knows versions 1 and 2)")]
     BadVersion(u32),
     #[error("header: tracks = 0: there must be at least one track")]
     NoTracks,
@@ -118,6 +118,26 @@ pub enum Problem {
     BadAccuracy(f64),
     #[error("move: {field} = {value} is not a finite number")]
     NonFinitePosition { field: &'static str, value: f64 },
+    #[error("detect: a version-{version} trace has no detect lines (they need version 2)")]
+    DetectNeedsVersion2 { version: u32 },
+    #[error("detect: {field} = {value} is not a finite number")]
+    DetectNonFinitePosition { field: &'static str, value: f64 },
+    #[error("detect: scores is empty: leave it out when there are no scores")]
+    EmptyScores,
+    #[error("detect: score {label:?} = {value} is not a number in [0, 1]")]
+    BadScore { label: String, value: f64 },
+    #[error("detect: scores sum to {sum}, not 1 (tolerance {tolerance})")]
+    ScoresDoNotSumToOne { sum: f64, tolerance: f64 },
+    #[error("detect: an identity read needs both identity and accuracy")]
+    HalfIdentityRead,
+    #[error("detect: an identity read needs a header that declares identities")]
+    DetectNoIdentities,
+    #[error("detect: identity = {identity} is out of range: there are {identities} identities (0..{identities})")]
+    DetectUnknownIdentity { identity: u32, identities: usize },
+    #[error("detect: accuracy = {0} is not in (0, 1]")]
+    DetectBadAccuracy(f64),
+    #[error("detect: a tracker's report, not an event: turn detect lines into events with `idmesh extract` first")]
+    NotExtracted,
     #[error("truth: carries neither red nor identity")]
     EmptyTruth,
     #[error("truth: red has {len} tracks but the header says k = {red}")]

@@ -128,7 +128,7 @@ fn kind_must_be_a_string() {
 fn unknown_kind() {
     assert_eq!(
         bad(r#"{"kind":"teleport","time":0,"track":1}"#),
-        "run.jsonl:2: unknown kind \"teleport\" (expected header, mix, observe, identify, move or truth)"
+        "run.jsonl:2: unknown kind \"teleport\" (expected header, mix, observe, identify, move, truth or detect)"
     );
 }
 
@@ -224,8 +224,8 @@ fn header_format() {
 #[test]
 fn header_version() {
     assert_eq!(
-        bad_header(r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":4}"#),
-        "run.jsonl:1: header: version 2 is not supported (this reader knows version 1)"
+        bad_header(r#"{"kind":"header","format":"idmesh-trace","version":3,"tracks":4}"#),
+        "run.jsonl:1: header: version 3 is not supported (this reader knows versions 1 and 2)"
     );
 }
 
@@ -794,4 +794,127 @@ fn an_event_is_every_line_but_the_header_and_the_truth() {
     .unwrap();
     let events: Vec<bool> = lines.iter().map(|l| l.line.is_event()).collect();
     assert_eq!(events, [false, true, true, true, true, false]);
+}
+
+// ---- version 2: the detect line ----
+
+/// 4 tracks, identities, version 2.
+const H2: &str =
+    r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":4,"identities":4}"#;
+
+fn bad2(line: &str) -> String {
+    error(&format!("{H2}\n{line}\n"))
+}
+
+#[test]
+fn a_version_1_trace_reads_unchanged() {
+    let lines = read(&format!(
+        "{H}\n{}\n{}\n",
+        r#"{"kind":"move","time":0,"track":1,"x":2.5,"y":-1}"#,
+        r#"{"kind":"mix","time":1,"a":0,"b":1,"swap":0.5}"#
+    ))
+    .unwrap();
+    assert_eq!(lines.len(), 3);
+    match &lines[0].line {
+        Line::Header(h) => assert_eq!(h.version, VERSION),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(
+        Header::new(4).version,
+        1,
+        "the default header stays version 1"
+    );
+}
+
+#[test]
+fn detect_lines_read_in_version_2() {
+    let lines = read(&format!(
+        "{H2}\n{}\n{}\n{}\n",
+        r#"{"kind":"detect","time":0,"track":1,"x":2.5,"y":-1}"#,
+        r#"{"kind":"detect","time":0.1,"track":2,"x":0,"y":0,"scores":{"red":0.83,"blue":0.17}}"#,
+        r#"{"kind":"detect","time":0.2,"track":3,"x":0,"y":0,"identity":2,"accuracy":0.9}"#
+    ))
+    .unwrap();
+    let Line::Detect(d) = &lines[2].line else {
+        panic!("{:?}", lines[2].line)
+    };
+    assert_eq!(d.scores.as_ref().unwrap()["red"], 0.83);
+    let Line::Detect(d) = &lines[3].line else {
+        panic!("{:?}", lines[3].line)
+    };
+    assert_eq!((d.identity, d.accuracy), (Some(2), Some(0.9)));
+    // Written back the same way.
+    let text = serde_json::to_string(&lines[2].line).unwrap();
+    assert_eq!(
+        text,
+        r#"{"kind":"detect","time":0.1,"track":2,"x":0.0,"y":0.0,"scores":{"blue":0.17,"red":0.83}}"#
+    );
+}
+
+#[test]
+fn detect_needs_version_2() {
+    assert_eq!(
+        bad(r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0}"#),
+        "run.jsonl:2: detect: a version-1 trace has no detect lines (they need version 2)"
+    );
+}
+
+#[test]
+fn detect_rules() {
+    let cases = [
+        (
+            r#"{"kind":"detect","time":0,"track":9,"x":0,"y":0}"#,
+            "run.jsonl:2: detect: track = 9 is not a track: there are 4 tracks (0..4)",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"scores":{}}"#,
+            "run.jsonl:2: detect: scores is empty: leave it out when there are no scores",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"scores":{"red":1.2,"blue":-0.2}}"#,
+            "run.jsonl:2: detect: score \"blue\" = -0.2 is not a number in [0, 1]",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"scores":{"red":0.5,"blue":0.4}}"#,
+            "run.jsonl:2: detect: scores sum to 0.9, not 1 (tolerance 0.01)",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"identity":1}"#,
+            "run.jsonl:2: detect: an identity read needs both identity and accuracy",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"identity":7,"accuracy":0.9}"#,
+            "run.jsonl:2: detect: identity = 7 is out of range: there are 4 identities (0..4)",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"identity":1,"accuracy":0}"#,
+            "run.jsonl:2: detect: accuracy = 0 is not in (0, 1]",
+        ),
+        (
+            r#"{"kind":"detect","time":0,"track":1,"x":"a","y":0}"#,
+            "run.jsonl:2: detect: invalid type: string \"a\", expected f64 (column 43)",
+        ),
+    ];
+    for (line, want) in cases {
+        assert_eq!(bad2(line), want, "{line}");
+    }
+    let no_identities = r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":4}"#;
+    assert_eq!(
+        error(&format!(
+            "{no_identities}\n{}\n",
+            r#"{"kind":"detect","time":0,"track":1,"x":0,"y":0,"identity":1,"accuracy":0.9}"#
+        )),
+        "run.jsonl:2: detect: an identity read needs a header that declares identities"
+    );
+}
+
+#[test]
+fn detect_positions_must_be_finite() {
+    let mut writer = TraceWriter::new(Vec::new(), "out.jsonl");
+    writer.write(&Header::new_v2(4).into()).unwrap();
+    let err = writer
+        .write(&Detect::at(0.0, 1, f64::NAN, 0.0).into())
+        .unwrap_err()
+        .to_string();
+    assert_eq!(err, "out.jsonl:2: detect: x = NaN is not a finite number");
 }

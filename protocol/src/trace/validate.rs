@@ -3,7 +3,10 @@
 //! non-decreasing times). Both the reader and the writer apply them, so a
 //! trace this crate writes is one it reads back.
 
-use super::line::{Header, Identify, Line, Mix, Move, Observe, Truth, FORMAT, VERSION};
+use super::line::{
+    Detect, Header, Identify, Line, Mix, Move, Observe, Truth, FORMAT, SCORE_SUM_TOLERANCE,
+    SUPPORTED_VERSIONS,
+};
 use super::problem::Problem;
 
 impl Header {
@@ -12,7 +15,7 @@ impl Header {
         if self.format != FORMAT {
             return Err(Problem::BadFormat(self.format.clone()));
         }
-        if self.version != VERSION {
+        if !SUPPORTED_VERSIONS.contains(&self.version) {
             return Err(Problem::BadVersion(self.version));
         }
         if self.tracks == 0 {
@@ -144,6 +147,72 @@ impl Move {
     }
 }
 
+impl Detect {
+    /// Version 2 only; the position must be finite, scores (when present)
+    /// a non-empty map of probabilities summing to 1 within
+    /// [`SCORE_SUM_TOLERANCE`], an identity read both fields or neither.
+    pub fn validate(&self, header: &Header) -> Result<(), Problem> {
+        if header.version < super::line::VERSION_2 {
+            return Err(Problem::DetectNeedsVersion2 {
+                version: header.version,
+            });
+        }
+        header.check_track("detect", "track", self.track)?;
+        for (field, value) in [("x", self.x), ("y", self.y)] {
+            if !value.is_finite() {
+                return Err(Problem::DetectNonFinitePosition { field, value });
+            }
+        }
+        if let Some(scores) = &self.scores {
+            check_scores(scores)?;
+        }
+        match (self.identity, self.accuracy) {
+            (None, None) => {}
+            (Some(identity), Some(accuracy)) => {
+                let Some(identities) = header.identities else {
+                    return Err(Problem::DetectNoIdentities);
+                };
+                if identity as usize >= identities {
+                    return Err(Problem::DetectUnknownIdentity {
+                        identity,
+                        identities,
+                    });
+                }
+                if !(accuracy > 0.0 && accuracy <= 1.0) {
+                    return Err(Problem::DetectBadAccuracy(accuracy));
+                }
+            }
+            _ => return Err(Problem::HalfIdentityRead),
+        }
+        Ok(())
+    }
+}
+
+/// Class scores: non-empty, each in [0, 1], summing to 1 within
+/// [`SCORE_SUM_TOLERANCE`]. Public so that adapters reading scores from
+/// other formats apply the same rule.
+pub fn check_scores(scores: &std::collections::BTreeMap<String, f64>) -> Result<(), Problem> {
+    if scores.is_empty() {
+        return Err(Problem::EmptyScores);
+    }
+    for (label, &value) in scores {
+        if !(value.is_finite() && (0.0..=1.0).contains(&value)) {
+            return Err(Problem::BadScore {
+                label: label.clone(),
+                value,
+            });
+        }
+    }
+    let sum: f64 = scores.values().sum();
+    if (sum - 1.0).abs() > SCORE_SUM_TOLERANCE {
+        return Err(Problem::ScoresDoNotSumToOne {
+            sum,
+            tolerance: SCORE_SUM_TOLERANCE,
+        });
+    }
+    Ok(())
+}
+
 impl Truth {
     pub fn validate(&self, header: &Header) -> Result<(), Problem> {
         if self.red.is_none() && self.identity.is_none() {
@@ -186,6 +255,20 @@ impl Line {
             Line::Identify(l) => l.validate(header),
             Line::Move(l) => l.validate(header),
             Line::Truth(l) => l.validate(header),
+            Line::Detect(l) => l.validate(header),
+        }
+    }
+}
+
+impl Line {
+    /// Refuses a `detect` line where a stream of events is expected (the
+    /// sensor gateway, a replay): detect lines are a tracker's reports,
+    /// which `idmesh extract` turns into events, and dropping them quietly
+    /// would lose every mix and observation they hold.
+    pub fn require_extracted(&self) -> Result<(), Problem> {
+        match self {
+            Line::Detect(_) => Err(Problem::NotExtracted),
+            _ => Ok(()),
         }
     }
 }

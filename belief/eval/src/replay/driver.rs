@@ -54,6 +54,10 @@ pub fn drive<R: BufRead, P: Replay>(
     let at = line_error(&source);
     for line in reader {
         let NumberedLine { number, line } = line?;
+        // A tracker's report holds no event until `idmesh extract` has
+        // derived it; replaying past it would lose its mixes silently.
+        line.require_extracted()
+            .map_err(|problem| anyhow!("{source}:{number}: {problem}"))?;
         replay
             .before(&line)
             .map_err(|e| at(number, line.kind(), e))?;
@@ -211,6 +215,22 @@ mod tests {
         ))
         .unwrap();
         assert_eq!(out, "[1.0,1]\n[3.0,2]\n");
+    }
+
+    #[test]
+    fn a_detect_line_is_refused_not_skipped() {
+        let trace = format!(
+            "{}\n{}\n",
+            r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":10}"#,
+            r#"{"kind":"detect","time":1,"track":0,"x":0,"y":0}"#
+        );
+        let mut reader = TraceReader::new(trace.as_bytes(), "t.jsonl");
+        reader.read_header().unwrap();
+        let error = drive(reader, &mut Mixes(0), &mut Vec::new()).unwrap_err();
+        assert!(
+            format!("{error:#}").starts_with("t.jsonl:2: detect: a tracker's report, not an event"),
+            "{error:#}"
+        );
     }
 
     #[test]

@@ -1,7 +1,10 @@
-//! The event extractor: fed the positions of every step, it emits the `mix`
-//! and `observe` events of that step (Section 6 of the paper) and keeps the
-//! ground truth — which tracks carry red targets — in step with the swaps
-//! it draws.
+//! The simulated sensor: fed the positions of every step, it emits the
+//! `mix` and `observe` events of that step (Section 6 of the paper) and
+//! keeps the ground truth — which tracks carry red targets — in step with
+//! the swaps it draws. Which pairs meet and which targets are isolated is
+//! `idmesh-extract`'s [`FrameSensing`], exactly as for a real tracker's
+//! reports; what is simulated is only what a real tracker would decide
+//! (the swaps) and what a real sensor would see (the outcomes).
 //!
 //! Within a step, mixes come first (pairs in ascending target order, each
 //! exchanging its two targets' tracks with probability `swap`), then
@@ -10,10 +13,10 @@
 
 use super::assignment::Assignment;
 use super::event::{SimEvent, TimedEvent};
-use super::mixing::MixDetector;
-use super::observing::ObservationScheduler;
 use super::sensor_model::SensorModel;
-use crate::geometry::{NeighbourGrid, Vec2};
+use crate::geometry::Vec2;
+use idmesh_extract::frame::FrameSensing;
+use idmesh_extract::meetings::Entering;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -94,12 +97,10 @@ pub struct Extractor {
     params: ExtractionParams,
     is_red: Vec<bool>,
     assignment: Assignment,
-    mixes: MixDetector,
-    observations: ObservationScheduler,
-    grid: NeighbourGrid,
+    sensing: FrameSensing,
     swap_rng: ChaCha8Rng,
     sensor_rng: ChaCha8Rng,
-    entering: Vec<(u32, u32)>,
+    entering: Vec<Entering>,
     due: Vec<u32>,
 }
 
@@ -118,19 +119,16 @@ impl Extractor {
         }
         let n = is_red.len();
         Extractor {
-            mixes: MixDetector::new(
+            sensing: FrameSensing::new(
+                n,
                 params.mix_distance,
                 params.mix_distance * params.release_factor,
-            ),
-            observations: ObservationScheduler::new(
-                n,
                 params.observe_distance,
                 params.observe_interval,
             ),
             params,
             is_red,
             assignment: Assignment::identity(n),
-            grid: NeighbourGrid::new(),
             swap_rng,
             sensor_rng,
             entering: Vec::new(),
@@ -150,16 +148,20 @@ impl Extractor {
         limit: usize,
     ) -> usize {
         debug_assert_eq!(positions.len(), self.is_red.len());
-        let reach = self.mixes.reach().max(self.observations.reach());
-        self.grid.rebuild(positions, reach);
         self.entering.clear();
-        self.mixes.step(&self.grid, positions, &mut self.entering);
+        self.due.clear();
+        // Every target is eligible: the simulated sensor looks at any
+        // isolated target (and may see nothing, an outcome that reports
+        // nothing). No draw happens here, so the draws below come in the
+        // order they always did.
+        self.sensing
+            .sense(time, positions, |_| true, &mut self.entering, &mut self.due);
         let mut added = 0;
-        for &(i, j) in &self.entering {
+        for e in &self.entering {
             if added == limit {
                 return added;
             }
-            let (i, j) = (i as usize, j as usize);
+            let (i, j) = (e.a as usize, e.b as usize);
             let (a, b) = (self.assignment.track_of(i), self.assignment.track_of(j));
             let exchanged = self.swap_rng.gen::<f64>() < self.params.swap;
             if exchanged {
@@ -176,9 +178,6 @@ impl Extractor {
             });
             added += 1;
         }
-        self.due.clear();
-        self.observations
-            .step(time, &self.grid, positions, &mut self.due);
         for &i in &self.due {
             if added == limit {
                 return added;

@@ -9,20 +9,25 @@
 //!   target (default: the colour-histogram model of the trace spec).
 //! - [`assignment`] — which target is on which track, and how a mix that
 //!   the tracker resolves wrongly exchanges them.
-//! - [`mixing`] — detecting pairs that come within the mixing distance.
-//! - [`observing`] — detecting isolated targets, at a limited rate.
-//! - [`extractor`] — the three above together, step by step.
+//! - [`extractor`] — the simulated sensor, step by step: the meetings and
+//!   isolated targets of each step come from `idmesh-extract` (the same
+//!   [`FrameSensing`] that extracts events from a real tracker's reports);
+//!   only the swaps and the sensor's outcomes are drawn here.
+//!
+//! Detecting mixes ([`MixDetector`]) and isolated targets
+//! ([`ObservationScheduler`]) lives in `idmesh-extract`; they are
+//! re-exported here for the simulator's users.
 
 pub mod assignment;
 pub mod event;
 pub mod extractor;
-pub mod mixing;
-pub mod observing;
 pub mod sensor_model;
+
+pub use idmesh_extract::frame::FrameSensing;
+pub use idmesh_extract::meetings::{mixing, Entering, MixDetector};
+pub use idmesh_extract::observing::{scheduler as observing, ObservationScheduler};
 
 pub use assignment::Assignment;
 pub use event::{SimEvent, TimedEvent};
 pub use extractor::{ExtractionParams, Extractor};
-pub use mixing::MixDetector;
-pub use observing::ObservationScheduler;
 pub use sensor_model::{SensorModel, SensorOutcome};

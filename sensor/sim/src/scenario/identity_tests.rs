@@ -322,7 +322,7 @@ fn written_identity_trace_reads_back() {
         Line::Observe(_) => 2,
         Line::Identify(_) => 3,
         Line::Truth(_) => 4,
-        Line::Header(_) => unreachable!(),
+        Line::Header(_) | Line::Detect(_) => unreachable!(),
     };
     for pair in read[1..].windows(2) {
         let (t0, t1) = (pair[0].time().unwrap(), pair[1].time().unwrap());

@@ -32,6 +32,8 @@ pub use run::BuiltMotion;
 pub use trace::{GeneratedTrace, TraceHeader, TraceStats};
 
 #[cfg(test)]
+mod extract_agreement_tests;
+#[cfg(test)]
 mod identity_tests;
 #[cfg(test)]
 mod tests;

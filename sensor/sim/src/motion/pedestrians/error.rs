@@ -27,3 +27,13 @@ pub enum SceneError {
     #[error("{file}: {reason}")]
     Window { file: String, reason: String },
 }
+
+impl From<idmesh_extract::adapters::RowError> for SceneError {
+    fn from(e: idmesh_extract::adapters::RowError) -> Self {
+        SceneError::Malformed {
+            file: e.file,
+            line: e.line,
+            reason: e.problem.to_string(),
+        }
+    }
+}

@@ -3,7 +3,9 @@
 //! from real crowds exactly as the paper's Section 6 extracts them from its
 //! simulated market.
 //!
-//! - [`format`](mod@format) — the obsmat (8-column) and four-column file formats.
+//! - [`format`](mod@format) — the obsmat (8-column) and four-column file
+//!   formats (`idmesh-extract`'s parser, which reads them for extraction
+//!   too).
 //! - [`scene`] — a loaded scene: timing, people, interpolated positions.
 //! - [`window`] — which people become tracks, and for how long (each person
 //!   is one track for the whole run; see there).
@@ -13,7 +15,7 @@
 //! `FILE:LINE: reason`.
 
 pub mod error;
-pub mod format;
+pub use idmesh_extract::adapters::eth_ucy as format;
 pub mod scene;
 pub mod window;
 

@@ -1,4 +1,6 @@
-//! Detecting observations: a present target that no other present target
+//! Detecting observations (the property paper, Section 6: "an observation
+//! event whenever one target is separated from all the other targets for
+//! some distance"): a present target that no other present target
 //! comes within the observation distance of is *isolated*, and a sensor can
 //! see its colour without confusing it with someone else's. Each target is
 //! looked at at most once per observation interval: an isolated target is
@@ -6,13 +8,15 @@
 //! (whether or not that look reported anything).
 
 use crate::geometry::{NeighbourGrid, Vec2};
+use serde::{Deserialize, Serialize};
 
-/// Remembers when each target may be looked at next.
-#[derive(Debug, Clone)]
+/// Remembers when each target may be looked at next. Serializes (for a
+/// sensor's journal); "any time" is `None`, since JSON has no infinities.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ObservationScheduler {
     observe_distance: f64,
     interval: f64,
-    next_allowed: Vec<f64>,
+    next_allowed: Vec<Option<f64>>,
 }
 
 impl ObservationScheduler {
@@ -29,7 +33,7 @@ impl ObservationScheduler {
         ObservationScheduler {
             observe_distance,
             interval,
-            next_allowed: vec![f64::NEG_INFINITY; targets],
+            next_allowed: vec![None; targets],
         }
     }
 
@@ -49,14 +53,30 @@ impl ObservationScheduler {
         positions: &[Option<Vec2>],
         due: &mut Vec<u32>,
     ) {
+        self.step_eligible(time, grid, positions, |_| true, due)
+    }
+
+    /// [`ObservationScheduler::step`] for the targets with `eligible(i)`
+    /// only: a tracker's detection without class scores has nothing to
+    /// observe, and must not use up the track's next look. The others
+    /// still count as neighbours.
+    pub fn step_eligible(
+        &mut self,
+        time: f64,
+        grid: &NeighbourGrid,
+        positions: &[Option<Vec2>],
+        eligible: impl Fn(usize) -> bool,
+        due: &mut Vec<u32>,
+    ) {
         for (i, p) in positions.iter().enumerate() {
-            if p.is_none() || time < self.next_allowed[i] - 1e-9 {
+            let waiting = self.next_allowed[i].is_some_and(|next| time < next - 1e-9);
+            if p.is_none() || waiting || !eligible(i) {
                 continue;
             }
             let mut isolated = true;
             grid.for_each_neighbour(positions, i, self.observe_distance, |_, _| isolated = false);
             if isolated {
-                self.next_allowed[i] = time + self.interval;
+                self.next_allowed[i] = Some(time + self.interval);
                 due.push(i as u32);
             }
         }

@@ -1,4 +1,5 @@
-//! Detecting mixes: a pair of present targets *enters* contact when they
+//! Detecting mixes (the property paper, Section 6: "we log a mixing event
+//! whenever two targets get close to each other within some distance"): a pair of present targets *enters* contact when they
 //! come within the mixing distance, and that moment is one `mix` event —
 //! not every step they stay close. The pair leaves contact when they move
 //! further apart than the release distance (≥ the mixing distance; a little
@@ -7,15 +8,30 @@
 //! mix again.
 
 use crate::geometry::{NeighbourGrid, Vec2};
+use serde::{Deserialize, Serialize};
 
-/// Remembers which pairs are in contact between steps.
-#[derive(Debug, Clone)]
+/// A pair that came within the mixing distance this step, and how far
+/// apart they were then.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Entering {
+    pub a: u32,
+    pub b: u32,
+    /// Metres between the two at this step (≤ the mixing distance).
+    pub distance: f64,
+}
+
+/// Remembers which pairs are in contact between steps. Its state (the
+/// pairs in contact) serializes, so a live sensor can journal it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MixDetector {
     mix_distance: f64,
     release_distance: f64,
     /// Pairs (i < j) in contact after the last step, sorted.
     contact: Vec<(u32, u32)>,
+    // Scratch, rebuilt every step.
+    #[serde(skip)]
     next: Vec<(u32, u32)>,
+    #[serde(skip)]
     close: Vec<(u32, u32, f64)>,
 }
 
@@ -53,6 +69,25 @@ impl MixDetector {
         positions: &[Option<Vec2>],
         entering: &mut Vec<(u32, u32)>,
     ) {
+        self.step_with(grid, positions, |e| entering.push((e.a, e.b)));
+    }
+
+    /// [`MixDetector::step`], with the distance of each entering pair.
+    pub fn step_measured(
+        &mut self,
+        grid: &NeighbourGrid,
+        positions: &[Option<Vec2>],
+        entering: &mut Vec<Entering>,
+    ) {
+        self.step_with(grid, positions, |e| entering.push(e));
+    }
+
+    fn step_with(
+        &mut self,
+        grid: &NeighbourGrid,
+        positions: &[Option<Vec2>],
+        mut enter: impl FnMut(Entering),
+    ) {
         self.close.clear();
         grid.for_each_pair_within(positions, self.release_distance, |i, j, d| {
             self.close.push((i as u32, j as u32, d));
@@ -63,7 +98,11 @@ impl MixDetector {
             let was = self.contact.binary_search(&(i, j)).is_ok();
             if d <= self.mix_distance {
                 if !was {
-                    entering.push((i, j));
+                    enter(Entering {
+                        a: i,
+                        b: j,
+                        distance: d,
+                    });
                 }
                 self.next.push((i, j));
             } else if was {
@@ -71,6 +110,14 @@ impl MixDetector {
             }
         }
         std::mem::swap(&mut self.contact, &mut self.next);
+    }
+
+    pub fn mix_distance(&self) -> f64 {
+        self.mix_distance
+    }
+
+    pub fn release_distance(&self) -> f64 {
+        self.release_distance
     }
 
     /// Pairs currently in contact, sorted.

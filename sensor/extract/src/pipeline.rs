@@ -1,0 +1,329 @@
+//! A whole extraction run, as `idmesh extract` does it: rows from an
+//! adapter into the [`Extractor`], the lines it emits through the trace
+//! format's validating writer, and a [`Tally`] of what went in and out.
+//!
+//! Bad rows: each is counted by reason and its `FILE:LINE: reason` kept.
+//! With `max_errors` = 0 the first bad row ends the run with that error;
+//! with N > 0 the run goes on past up to N bad rows and fails at the
+//! (N + 1)-th. A bad row is never skipped silently.
+
+use crate::adapters::jsonl::{parse_line, JsonlRow};
+use crate::adapters::{Located, RowError, Rows};
+use crate::extractor::{Extractor, ExtractorConfig, Roster, RosterPolicy};
+use crate::meetings::CalibrationError;
+use idmesh_protocol::trace::{Line, TraceError, TraceWriter};
+use std::collections::BTreeMap;
+use std::io::{BufRead, Write};
+use thiserror::Error;
+
+/// What a run read and wrote.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Tally {
+    /// Reports taken by the extractor.
+    pub reports: usize,
+    /// Lines written, by kind (header included).
+    pub lines: BTreeMap<&'static str, usize>,
+    /// Bad rows, by reason.
+    pub rejected: BTreeMap<&'static str, usize>,
+    /// The bad rows' messages, `FILE:LINE: reason`, in input order.
+    pub errors: Vec<String>,
+    /// How many tracks the trace has.
+    pub tracks: usize,
+}
+
+impl Tally {
+    pub fn rejected_total(&self) -> usize {
+        self.rejected.values().sum()
+    }
+
+    /// `mix`, `observe` and `identify` lines.
+    pub fn events(&self) -> usize {
+        ["mix", "observe", "identify"]
+            .iter()
+            .map(|k| self.lines.get(k).copied().unwrap_or(0))
+            .sum()
+    }
+}
+
+/// Why a run stopped.
+#[derive(Debug, Error)]
+pub enum RunError {
+    /// A bad row, with `max_errors` = 0.
+    #[error("{0}")]
+    Row(RowError),
+    /// More bad rows than allowed; the last one.
+    #[error("{last} (bad row {count}: more than --max-errors {max})")]
+    TooManyBadRows {
+        last: RowError,
+        count: usize,
+        max: usize,
+    },
+    /// The settings are unusable.
+    #[error("{0}")]
+    Config(#[from] CalibrationError),
+    /// Reading the input failed.
+    #[error("{file}:{line}: {source}")]
+    Read {
+        file: String,
+        line: usize,
+        source: std::io::Error,
+    },
+    /// Writing the trace failed (or, a bug, the extractor wrote an
+    /// invalid line).
+    #[error(transparent)]
+    Write(#[from] TraceError),
+    /// The input held no report: there is no trace to write.
+    #[error("{0}: no reports: nothing to extract")]
+    NoReports(String),
+}
+
+/// Drives one run: an extractor (made once the roster is known), the
+/// writer, the tally.
+pub struct Run<W: Write> {
+    config: ExtractorConfig,
+    extractor: Option<Extractor>,
+    writer: TraceWriter<W>,
+    tally: Tally,
+    max_errors: usize,
+    out: Vec<Line>,
+}
+
+impl<W: Write> Run<W> {
+    /// A run writing to `output` (named `sink` in errors).
+    pub fn new(
+        config: ExtractorConfig,
+        output: W,
+        sink: &str,
+        max_errors: usize,
+    ) -> Result<Self, RunError> {
+        config.validate()?;
+        Ok(Run {
+            config,
+            extractor: None,
+            writer: TraceWriter::new(output, sink.to_string()),
+            tally: Tally::default(),
+            max_errors,
+            out: Vec::new(),
+        })
+    }
+
+    /// Fixes the roster policy; call once, before the first row.
+    pub fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
+        self.extractor = Some(Extractor::new(self.config.clone(), policy)?);
+        Ok(())
+    }
+
+    pub fn config_mut(&mut self) -> &mut ExtractorConfig {
+        &mut self.config
+    }
+
+    /// One row of the input.
+    pub fn row(&mut self, file: &str, row: Result<Located, RowError>) -> Result<(), RunError> {
+        let located = match row {
+            Ok(located) => located,
+            Err(e) => return self.reject(e),
+        };
+        let extractor = match &mut self.extractor {
+            Some(x) => x,
+            None => {
+                self.start(RosterPolicy::FirstFrame)?;
+                self.extractor.as_mut().expect("just started")
+            }
+        };
+        match extractor.push(located.report, &mut self.out) {
+            Ok(()) => {
+                self.tally.reports += 1;
+                self.flush()
+            }
+            Err(e) => self.reject(RowError::report(file, located.line, e)),
+        }
+    }
+
+    fn reject(&mut self, error: RowError) -> Result<(), RunError> {
+        *self
+            .tally
+            .rejected
+            .entry(error.problem.reason())
+            .or_default() += 1;
+        let count = self.tally.rejected_total();
+        if self.max_errors == 0 {
+            return Err(RunError::Row(error));
+        }
+        if count > self.max_errors {
+            return Err(RunError::TooManyBadRows {
+                last: error,
+                count,
+                max: self.max_errors,
+            });
+        }
+        self.tally.errors.push(error.to_string());
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), RunError> {
+        for line in self.out.drain(..) {
+            self.writer.write(&line)?;
+            *self.tally.lines.entry(line.kind()).or_default() += 1;
+        }
+        Ok(())
+    }
+
+    /// Ends the run: the last frame, the tally.
+    pub fn finish(mut self, file: &str) -> Result<Tally, RunError> {
+        let Some(extractor) = &mut self.extractor else {
+            return Err(RunError::NoReports(file.to_string()));
+        };
+        extractor.finish(&mut self.out);
+        self.tally.tracks = extractor.roster().map_or(0, Roster::len);
+        self.flush()?;
+        if self.tally.reports == 0 {
+            return Err(RunError::NoReports(file.to_string()));
+        }
+        self.writer.flush()?;
+        Ok(self.tally)
+    }
+}
+
+/// Extracts from the rows of a whole file. `every_id`: the roster is
+/// every id among the good rows (else the first frame's).
+pub fn extract_rows<W: Write>(
+    rows: Rows,
+    file: &str,
+    mut run: Run<W>,
+    every_id: bool,
+) -> Result<Tally, RunError> {
+    if every_id {
+        let ids: Vec<u32> = rows
+            .iter()
+            .filter_map(|r| r.as_ref().ok().map(|l| l.report.track))
+            .collect();
+        if !ids.is_empty() {
+            run.start(RosterPolicy::Declared(ids))?;
+        }
+    } else {
+        run.start(RosterPolicy::FirstFrame)?;
+    }
+    for row in rows {
+        run.row(file, row)?;
+    }
+    run.finish(file)
+}
+
+/// Extracts from JSON lines, one at a time (a tracker may stream them).
+/// A header on line 1 declares the roster `0..tracks` (and identities);
+/// without one the roster is the first frame's.
+pub fn extract_jsonl<W: Write>(
+    input: impl BufRead,
+    file: &str,
+    mut run: Run<W>,
+) -> Result<Tally, RunError> {
+    for (index, text) in input.lines().enumerate() {
+        let line = index + 1;
+        let text = text.map_err(|source| RunError::Read {
+            file: file.to_string(),
+            line,
+            source,
+        })?;
+        match parse_line(&text, line) {
+            Ok(JsonlRow::Header(header)) => {
+                if header.identities.is_some() {
+                    run.config_mut().identities = true;
+                }
+                run.start(RosterPolicy::Declared((0..header.tracks as u32).collect()))?;
+            }
+            Ok(JsonlRow::Report(report)) => run.row(file, Ok(Located { line, report }))?,
+            Err(problem) => run.row(
+                file,
+                Err(RowError {
+                    file: file.to_string(),
+                    line,
+                    problem,
+                }),
+            )?,
+        }
+    }
+    run.finish(file)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn jsonl(text: &str, max_errors: usize) -> Result<(Tally, String), RunError> {
+        let mut out = Vec::new();
+        let run = Run::new(
+            ExtractorConfig::default(),
+            &mut out,
+            "out.jsonl",
+            max_errors,
+        )?;
+        let tally = extract_jsonl(text.as_bytes(), "in.jsonl", run)?;
+        Ok((tally, String::from_utf8(out).unwrap()))
+    }
+
+    const GOOD: &str = r#"{"kind":"move","time":0,"track":4,"x":0,"y":0}
+{"kind":"move","time":0,"track":5,"x":3,"y":0}
+{"kind":"detect","time":1,"track":4,"x":0,"y":0,"scores":{"red":0.9,"blue":0.1}}
+{"kind":"move","time":1,"track":5,"x":0.5,"y":0}
+"#;
+
+    #[test]
+    fn a_stream_becomes_a_trace() {
+        let (tally, trace) = jsonl(GOOD, 0).unwrap();
+        assert_eq!(tally.reports, 4);
+        assert_eq!(tally.tracks, 2);
+        assert_eq!(tally.lines["mix"], 1);
+        assert_eq!(tally.lines["header"], 1);
+        assert!(
+            trace.starts_with(r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":2"#)
+        );
+    }
+
+    #[test]
+    fn bad_rows_are_counted_by_reason_or_stop_the_run() {
+        let bad = format!(
+            "{GOOD}{}\n{}\n{}\n{}\n",
+            r#"{"kind":"move","time":0.5,"track":4,"x":0,"y":0}"#,
+            r#"{"kind":"move","time":2,"track":9,"x":0,"y":0}"#,
+            r#"{"kind":"detect","time":2,"track":4,"x":0,"y":0,"scores":{"red":0.9,"blue":0.3}}"#,
+            r#"{"kind":"mix","time":2,"a":0,"b":1,"swap":0.5}"#
+        );
+        let (tally, _) = jsonl(&bad, 4).unwrap();
+        assert_eq!(tally.rejected_total(), 4);
+        assert_eq!(
+            tally.rejected,
+            BTreeMap::from([
+                ("bad scores", 1),
+                ("malformed row", 1),
+                ("out of time order", 1),
+                ("unknown track", 1)
+            ])
+        );
+        assert!(tally.errors[0].starts_with("in.jsonl:5: time 0.5 is before time 1"));
+        assert!(tally.errors[1].starts_with("in.jsonl:6: track 9 is not in the roster"));
+        let first = jsonl(&bad, 0).unwrap_err().to_string();
+        assert!(first.starts_with("in.jsonl:5: time 0.5"), "{first}");
+        let too_many = jsonl(&bad, 3).unwrap_err().to_string();
+        assert!(
+            too_many.starts_with("in.jsonl:8: mix: not a report"),
+            "{too_many}"
+        );
+        assert!(
+            too_many.ends_with("(bad row 4: more than --max-errors 3)"),
+            "{too_many}"
+        );
+    }
+
+    #[test]
+    fn a_header_declares_the_roster() {
+        let text = format!(
+            "{}\n{}\n",
+            r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":3,"identities":3}"#,
+            r#"{"kind":"detect","time":0,"track":2,"x":0,"y":0,"identity":1,"accuracy":0.8}"#
+        );
+        let (tally, trace) = jsonl(&text, 0).unwrap();
+        assert_eq!((tally.tracks, tally.lines["identify"]), (3, 1));
+        assert!(trace.contains(r#""identities":3"#));
+        assert!(matches!(jsonl("", 0), Err(RunError::NoReports(_))));
+    }
+}
