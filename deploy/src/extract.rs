@@ -116,6 +116,39 @@ fn read_all(mut input: Box<dyn BufRead>, file: &str) -> Result<String> {
     Ok(text)
 }
 
+/// With `idmesh replay --topology`: when the deployment's sensors extract
+/// their events from a tracker's reports, the trace replay reads is those
+/// reports, extracted as the sensors extract them (the same settings, the
+/// same code): written to a file of its own, whose path this returns for
+/// the caller to remove once replay is done. `None` when the sensors take
+/// events as they are.
+pub fn twin_trace(
+    topology: &crate::runtime::topology::Topology,
+    trace: &std::path::Path,
+) -> Result<Option<std::path::PathBuf>> {
+    let Some(first) = topology.sensors.first() else {
+        return Ok(None);
+    };
+    if topology.sensors.iter().any(|s| s.extract != first.extract) {
+        bail!(
+            "the sensors' [sensor.extract] settings differ: every sensor extracts from the \
+             one merged order, with one set of settings"
+        );
+    }
+    let Some(config) = first.extract.clone() else {
+        return Ok(None);
+    };
+    let file = trace.display().to_string();
+    let input = BufReader::new(File::open(trace).with_context(|| format!("{file}: cannot open"))?);
+    let out = std::env::temp_dir().join(format!("idmesh-twin-{}.jsonl", std::process::id()));
+    let sink = out.display().to_string();
+    let output =
+        BufWriter::new(File::create(&out).with_context(|| format!("{sink}: cannot create"))?);
+    let run = Run::new(config, output, &sink, 0)?;
+    extract_jsonl(input, &file, run)?;
+    Ok(Some(out))
+}
+
 /// Counts of reports, lines by kind and bad rows by reason, on stderr.
 fn summary(file: &str, sink: &str, tally: &Tally) {
     let mut err = std::io::stderr().lock();

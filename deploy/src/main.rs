@@ -45,11 +45,21 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Replay(mut args) => {
+            let mut extracted = None;
             if let Some(path) = args.topology.take() {
-                runtime::topology::Topology::load(&path)?.replay_twin(&mut args)?;
+                let topology = runtime::topology::Topology::load(&path)?;
+                topology.replay_twin(&mut args)?;
+                extracted = extract::twin_trace(&topology, &args.trace)?;
+                if let Some(trace) = &extracted {
+                    args.trace = trace.clone();
+                }
             }
             let stdout = BufWriter::new(std::io::stdout().lock());
-            idmesh_eval::replay::dispatch(&args, stdout)
+            let replayed = idmesh_eval::replay::dispatch(&args, stdout);
+            if let Some(trace) = extracted {
+                let _ = std::fs::remove_file(trace);
+            }
+            replayed
         }
         Command::Simulate(args) => simulate::run(&args),
         Command::Extract(args) => extract::run(&args),

@@ -73,6 +73,9 @@ pub struct GatewayConfig {
     /// ([`crate::mesh`]). Its events come from producers only, and its
     /// part of the stream ends when they say `finish`.
     pub mesh: Option<MeshConfig>,
+    /// Extraction on: the source's lines are a tracker's reports
+    /// ([`crate::extraction`]).
+    pub extraction: Option<crate::extraction::Extraction>,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -261,8 +264,14 @@ pub async fn run(
     let (length, end) = stream_length(&lines, config.limit);
     let lines = &lines[..length];
     let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
-    if ends {
+    // How many events the reports make is known only once they are
+    // extracted: a cut asked for beyond the end waits, and is refused
+    // when the stream ends.
+    if ends && config.extraction.is_none() {
         gateway = gateway.ending_at(end);
+    }
+    if let Some(extraction) = config.extraction.clone() {
+        gateway = gateway.extracting(extraction);
     }
     if let Some(window) = config.window {
         gateway = gateway.windowed(window);

@@ -105,6 +105,10 @@ pub struct Ingest {
     gapped: bool,
     #[serde(default)]
     recent: BTreeMap<String, VecDeque<u64>>,
+    /// Extraction is on: the lines taken are a tracker's reports (`move`,
+    /// `detect`), not events ([`crate::extraction`]).
+    #[serde(default)]
+    extracting: bool,
 }
 
 /// The counters remembered per producer when counters have gaps.
@@ -129,7 +133,20 @@ impl Ingest {
             stdin,
             gapped: false,
             recent: BTreeMap::new(),
+            extracting: false,
         }
+    }
+
+    /// Lines are a tracker's reports from now on: `move` and `detect`
+    /// lines are taken, events refused.
+    pub fn extracting(&mut self) {
+        self.extracting = true;
+    }
+
+    /// One ingested line of this stream: an event (a report, with
+    /// extraction on), or why not.
+    pub(crate) fn event(&self, text: &str) -> Result<Line, String> {
+        taken(text, &self.header, self.extracting)
     }
 
     /// Counters with gaps: one sensor of several ([`Ingest::recent`]).
@@ -248,7 +265,7 @@ impl Ingest {
             // This line uses up its counter, taken or refused: one bad line
             // never stalls its producer.
             *next = counter + 1;
-            let taken = event(text, &self.header).and_then(|line| {
+            let taken = taken(text, &self.header, self.extracting).and_then(|line| {
                 admit(&line, text, producer, counter).inspect_err(|_| stats.late += 1)?;
                 Ok(line)
             });
@@ -291,11 +308,22 @@ impl Ingest {
     ) -> Result<Option<Line>, String> {
         let text = text.strip_suffix('\n').unwrap_or(text);
         let text = text.strip_suffix('\r').unwrap_or(text);
-        let judged = Line::parse(text).and_then(|line| {
-            self.stdin.check(&line, number)?;
-            line.require_extracted()?;
-            Ok(line)
-        });
+        let extracting = self.extracting;
+        let judged = Line::parse(text)
+            .and_then(|line| {
+                self.stdin.check(&line, number)?;
+                if !extracting {
+                    line.require_extracted()?;
+                }
+                Ok(line)
+            })
+            .map_err(|problem| problem.to_string())
+            .and_then(|line| {
+                if extracting {
+                    crate::extraction::Extraction::admits(&line)?;
+                }
+                Ok(line)
+            });
         match judged {
             Ok(line) if line.is_event() => {
                 stats.ingested += 1;
@@ -309,6 +337,18 @@ impl Ingest {
             }
         }
     }
+}
+
+/// One ingested line: an event of this stream (a report, with
+/// extraction on), or why not.
+fn taken(text: &str, header: &Header, extracting: bool) -> Result<Line, String> {
+    if !extracting {
+        return event(text, header);
+    }
+    let line = Line::parse(text).map_err(|p| p.to_string())?;
+    crate::extraction::Extraction::admits(&line)?;
+    line.validate(header).map_err(|p| p.to_string())?;
+    Ok(line)
 }
 
 /// One ingested line: an event of this stream, or why not.

@@ -19,6 +19,9 @@
 //!   whose sets it may change (pure).
 //! - [`feed`] — where events come from: a trace file, standard input,
 //!   producers on the ingest key.
+//! - [`extraction`] — with extraction on, a tracker's reports (positions,
+//!   class scores, identity reads) become the stream's events
+//!   (`idmesh-extract`, in the stream's one order).
 //! - [`ingest`] — live ingestion: which producers' lines (ingest key,
 //!   standard input) enter the order; dedup, validation, counters (pure).
 //! - [`cuts`] — cut requests: now, or at a future event count.
@@ -34,6 +37,7 @@
 pub mod batch_log;
 pub mod cuts;
 pub mod driver;
+pub mod extraction;
 pub mod feed;
 pub mod ingest;
 pub mod journal;

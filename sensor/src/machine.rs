@@ -23,7 +23,7 @@
 
 use crate::batch_log::BatchLog;
 use crate::cuts::{place, CutParameters, Cuts, Placed, Request, Wanted};
-use crate::ingest;
+use crate::extraction::Extraction;
 use crate::ingest::{Ingest, IngestRefusal, Offer};
 use crate::journal::Record;
 use crate::mesh::Mesh;
@@ -123,6 +123,9 @@ struct Journaled {
     stdin_read: u64,
     /// One sensor of several: its intake and the merge of all.
     mesh: Option<Mesh>,
+    /// With extraction on: the stage that turns reports into events.
+    #[serde(default)]
+    extraction: Option<Extraction>,
 }
 
 /// A journal the gateway cannot be rebuilt from (a trace shorter than the
@@ -157,6 +160,7 @@ impl<Q> Gateway<Q> {
                 traced: 0,
                 stdin_read: 0,
                 mesh: None,
+                extraction: None,
             },
             progress: vec![None; leaders],
             stall_checked: vec![None; leaders],
@@ -430,7 +434,7 @@ impl<Q> Gateway<Q> {
     /// Routes `lines` again, placing each cut after the line it followed.
     fn replay_lines(&mut self, lines: &[Line], cuts: &[(u32, Wanted)]) {
         for (i, line) in lines.iter().enumerate() {
-            self.state.router.line(line);
+            self.route_line(line);
             for (_, wanted) in cuts.iter().filter(|(after, _)| *after as usize == i) {
                 self.state.router.cut(*wanted);
             }
@@ -466,7 +470,7 @@ impl<Q> Gateway<Q> {
         let mut placed = Vec::new();
         let mut cuts = Vec::new();
         for (i, line) in lines.iter().enumerate() {
-            self.state.router.line(line);
+            self.route_line(line);
             let before = placed.len();
             self.cuts
                 .reached(&mut self.state.router, &self.name, &mut placed);
@@ -575,10 +579,52 @@ impl<Q> Gateway<Q> {
             self.drain();
             return Vec::new();
         }
+        self.finish_extraction();
         self.state.finished = true;
         self.state.owed.fill(true);
         self.note(Record::End);
         self.cuts.refuse_all(&self.state.router)
+    }
+
+    /// Turns extraction on: the stream's lines are a tracker's reports,
+    /// and what the router is given are the events derived from them
+    /// ([`crate::extraction`]).
+    pub fn extracting(mut self, extraction: Extraction) -> Self {
+        self.state.ingest.extracting();
+        self.state.extraction = Some(extraction);
+        self
+    }
+
+    /// Routes one line of the stream's order: as it is, or, with
+    /// extraction on, the events it completes. A report the extractor
+    /// refuses is counted and logged (the rules it breaks that a single
+    /// line shows were checked where it came in).
+    fn route_line(&mut self, line: &Line) {
+        let Some(extraction) = self.state.extraction.as_mut() else {
+            self.state.router.line(line);
+            return;
+        };
+        match extraction.take(line) {
+            Ok(lines) => {
+                for line in &lines {
+                    self.state.router.line(line);
+                }
+            }
+            Err(reason) => {
+                self.state.stats.rejected += 1;
+                self.state.stats.bad_lines += 1;
+                tracing::warn!(sensor = %self.name, %reason, "a report the extractor refused");
+            }
+        }
+    }
+
+    /// The reports are over: the events of the frame still open go out.
+    fn finish_extraction(&mut self) {
+        if let Some(extraction) = self.state.extraction.as_mut() {
+            for line in extraction.finish() {
+                self.state.router.line(&line);
+            }
+        }
     }
 
     /// The leaders' queued items as their next batches, in the stream's

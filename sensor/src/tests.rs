@@ -1071,3 +1071,128 @@ fn a_leader_with_nothing_to_apply_is_sent_no_batch_until_it_is_owed_one() {
     assert_eq!(last.len(), 2);
     assert!(last.iter().all(|(_, b)| b.finished));
 }
+
+/// A tracker's reports of four tracks over ten frames: tracks 0 and 1
+/// walk at each other, meet and part (a mix); tracks 2 and 3 stand apart
+/// with class scores (observations).
+fn reports() -> Vec<Line> {
+    use idmesh_protocol::trace::Detect;
+    let mut lines = Vec::new();
+    for frame in 0..10 {
+        let time = f64::from(frame) * 0.5;
+        let walk = 0.6 * f64::from(frame);
+        let places = [(walk, 0.0), (6.0 - walk, 0.2), (0.0, 20.0), (30.0, 20.0)];
+        for (track, &(x, y)) in places.iter().enumerate() {
+            let track = track as u32;
+            let line = if track < 2 {
+                Line::Move(Move { time, track, x, y })
+            } else {
+                let red = if track == 2 { 0.8 } else { 0.3 };
+                let scores = [("red".to_string(), red), ("blue".to_string(), 1.0 - red)];
+                Line::Detect(Detect {
+                    time,
+                    track,
+                    x,
+                    y,
+                    scores: Some(scores.into_iter().collect()),
+                    identity: None,
+                    accuracy: None,
+                })
+            };
+            lines.push(line);
+        }
+    }
+    lines
+}
+
+/// Two leaders at (0, 0) and (10, 0) over the stream `header` describes.
+fn router_for(header: &Header) -> Router {
+    let config = RouterConfig {
+        leaders: ["a", "b"]
+            .iter()
+            .enumerate()
+            .map(|(i, name)| LeaderPlace {
+                name: name.to_string(),
+                at: Some((10.0 * i as f64, 0.0)),
+            })
+            .collect(),
+        ..unplaced(None)
+    };
+    Router::new(config, header).unwrap()
+}
+
+/// A gateway extracting its events from a tracker's reports routes, batch
+/// for batch, what a gateway routes from `idmesh extract`'s lines of the
+/// same reports; restored from its journal compacted halfway, it goes on
+/// to the same batches.
+#[test]
+fn a_gateway_extracting_from_reports_routes_what_the_extracted_trace_routes() {
+    use crate::extraction::Extraction;
+    use crate::journal::{from_bytes, to_bytes};
+    use idmesh_extract::{Extractor, ExtractorConfig, RosterPolicy};
+    let mut header = Header::new_v2(4);
+    header.red = Some(2);
+    let config = ExtractorConfig::default();
+    let reports = reports();
+    // Offline, as `idmesh extract` does it.
+    let mut extractor = Extractor::new(config.clone(), RosterPolicy::Declared(vec![0, 1, 2, 3]))
+        .unwrap()
+        .with_prior(&header);
+    let mut extracted = Vec::new();
+    for line in &reports {
+        let report = match line {
+            Line::Move(m) => m.clone().into(),
+            Line::Detect(d) => d.clone().into(),
+            _ => unreachable!(),
+        };
+        extractor.push(report, &mut extracted).unwrap();
+    }
+    extractor.finish(&mut extracted);
+    let Some(Line::Header(written)) = extracted.first() else {
+        panic!("the extractor writes its header first");
+    };
+    assert_eq!(written.red, Some(2), "the prior is carried");
+    let count = |kind: &str| extracted.iter().filter(|l| l.kind() == kind).count();
+    assert_eq!(count("mix"), 1, "{extracted:?}");
+    assert!(count("observe") >= 2, "{extracted:?}");
+    let mut plain = Gateway::<u32>::new("s", router_for(&header), false);
+    for line in &extracted[1..] {
+        plain.line(line);
+    }
+    plain.end();
+    let want: [Batch; 2] = flushed(&mut plain);
+    assert!(want.iter().all(|b| b.finished));
+
+    let extracting = || {
+        Gateway::<u32>::new("s", router_for(&header), false)
+            .extracting(Extraction::new(config.clone(), &header).unwrap())
+    };
+    let mut live = extracting().journaled();
+    let half = reports.len() / 2;
+    for line in &reports[..half] {
+        live.line(line);
+    }
+    let snapshot = from_bytes(&to_bytes(&live.compacted().unwrap())).unwrap();
+    for line in &reports[half..] {
+        live.line(line);
+    }
+    live.end();
+    assert_eq!(flushed::<u32, 2>(&mut live), want);
+    let mut restored = extracting();
+    restored.restore(snapshot, &reports).unwrap();
+    for line in &reports[half..] {
+        restored.line(line);
+    }
+    restored.end();
+    assert_eq!(flushed::<u32, 2>(&mut restored), want);
+    // An event where reports are expected is refused by name.
+    let mut refused = extracting();
+    let error = refused.read(
+        2,
+        "{\"kind\":\"mix\",\"time\":9,\"a\":0,\"b\":1,\"swap\":0.5}\n",
+    );
+    let Err(error) = error else {
+        panic!("an event taken where reports are expected");
+    };
+    assert!(error.contains("send move and detect lines"), "{error}");
+}

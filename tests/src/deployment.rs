@@ -64,6 +64,9 @@ pub struct Settings {
     /// (`regions = "fixed"`: a track is handed over at every `move` across
     /// a border), instead of regions fitted to the crowd.
     pub fixed_places: bool,
+    /// Every sensor extracts its events from a tracker's reports with
+    /// these settings (`[sensor.extract]`).
+    pub extract: Option<idmesh_extract::ExtractorConfig>,
 }
 
 /// The factored belief's settings in a topology.
@@ -222,6 +225,7 @@ pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
         sensor.live = settings.live;
         sensor.rate = settings.rate;
         sensor.faults = settings.faults.clone();
+        sensor.extract = settings.extract.clone();
     }
     topology.leader_faults = settings.leader_faults.clone();
     topology.security = settings.security.as_ref().map(|secured| SecuritySection {
@@ -247,6 +251,13 @@ impl Deployment {
     pub fn twin(&self, trace: &Path) -> Vec<Value> {
         let config = self.config.to_string_lossy().into_owned();
         replay_lines(trace, &["--topology", &config])
+    }
+
+    /// The summary of the centralized twin (`idmesh replay --topology`)
+    /// on `trace`: its `final_p_red` is the answer once the stream is in.
+    pub fn twin_summary(&self, trace: &Path) -> Value {
+        let config = self.config.to_string_lossy().into_owned();
+        replay_summary(trace, &["--topology", &config])
     }
 
     /// The same deployment with every process started on its own (the

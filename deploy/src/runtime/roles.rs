@@ -14,6 +14,7 @@ use idmesh_protocol::trace::{Header, Line, Problem};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::TraceReader;
 use idmesh_sensor::driver::{Faults, GatewayConfig};
+use idmesh_sensor::extraction::Extraction;
 use idmesh_sensor::feed::{lines_of, InputLine, Source};
 use idmesh_sensor::journal::{Journal, Record};
 use idmesh_sensor::mesh::MeshConfig;
@@ -218,8 +219,17 @@ async fn sensor(
             .with_context(|| format!("cannot open trace {}", path.display()))?;
         let header = reader.read_header()?;
         let mut lines = Vec::new();
+        let extracting = topology.sensor_named(name)?.extract.is_some();
         while let Some(numbered) = reader.read_line()? {
-            numbered.line.require_extracted().map_err(|problem| {
+            let taken = if extracting {
+                Extraction::admits(&numbered.line)
+            } else {
+                numbered
+                    .line
+                    .require_extracted()
+                    .map_err(|problem| problem.to_string())
+            };
+            taken.map_err(|problem| {
                 anyhow::anyhow!("{}:{}: {problem}", path.display(), numbered.number)
             })?;
             lines.push(numbered.line);
@@ -227,6 +237,12 @@ async fn sensor(
         (header, Source { lines, input: None })
     };
     let this = topology.sensor_named(name)?;
+    let extraction = this
+        .extract
+        .clone()
+        .map(|config| Extraction::new(config, &header))
+        .transpose()
+        .map_err(|problem| anyhow!("sensor {name}: {problem}"))?;
     let router = Router::new(
         RouterConfig {
             sensor: this.name.clone(),
@@ -242,7 +258,12 @@ async fn sensor(
             budget: topology.budget,
             omp: topology.sparsify == Sparsification::Overcomplete,
             factored: topology.factored(),
-            placed: idmesh_placement::leading_places(header.tracks, &source.lines),
+            // With extraction the stream's moves are the extractor's,
+            // known only as they come.
+            placed: match &extraction {
+                Some(_) => idmesh_placement::leading_places(header.tracks, std::iter::empty()),
+                None => idmesh_placement::leading_places(header.tracks, &source.lines),
+            },
             regions: None,
         },
         &header,
@@ -272,6 +293,7 @@ async fn sensor(
             drop_every: this.faults.drop_every,
         },
         mesh,
+        extraction,
     };
     idmesh_sensor::driver::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())

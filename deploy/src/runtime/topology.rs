@@ -48,6 +48,9 @@
 //!                                # (absent = no window)
 //! compact_journal_after = 16777216 # with state_dir: snapshot the sensor's
 //!                                # journal once it grew by this many bytes
+//! # [sensor.extract]             # the lines are a tracker's reports (move,
+//! # mix_distance = 1.0           # detect): the sensor derives the events
+//! # meeting_model = { constant = 0.5 } # (docs/guide/extracting.md)
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
@@ -319,6 +322,12 @@ pub struct SensorProcess {
     /// the snapshot's own size); absent: 16 MiB.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub compact_journal_after: Option<u64>,
+    /// Extraction on (`[sensor.extract]`, its settings; an empty table
+    /// for the defaults): the sensor's lines are a tracker's reports —
+    /// `move` and `detect` lines — and it derives the events itself, as
+    /// `idmesh extract` does (docs/guide/extracting.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extract: Option<idmesh_extract::ExtractorConfig>,
     #[serde(default, skip_serializing_if = "is_default")]
     pub faults: FaultSection,
 }
@@ -343,6 +352,7 @@ impl SensorProcess {
             live: false,
             window: None,
             compact_journal_after: None,
+            extract: None,
             faults: FaultSection::default(),
         }
     }
@@ -767,6 +777,15 @@ mod tests {
             live: true,
             window: Some(4096),
             compact_journal_after: Some(1 << 20),
+            extract: Some(idmesh_extract::ExtractorConfig {
+                mix_distance: 1.5,
+                meeting_model: idmesh_extract::MeetingModel::Approach {
+                    p_max: 0.5,
+                    sigma: 0.4,
+                    v0: 0.8,
+                },
+                ..Default::default()
+            }),
             faults: FaultSection {
                 duplicate: true,
                 drop_every: Some(7),

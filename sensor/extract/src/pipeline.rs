@@ -11,7 +11,7 @@ use crate::adapters::jsonl::{parse_line, JsonlRow};
 use crate::adapters::{Located, RowError, Rows};
 use crate::extractor::{Extractor, ExtractorConfig, Roster, RosterPolicy};
 use crate::meetings::CalibrationError;
-use idmesh_protocol::trace::{Line, TraceError, TraceWriter};
+use idmesh_protocol::trace::{Header, Line, TraceError, TraceWriter};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use thiserror::Error;
@@ -110,6 +110,14 @@ impl<W: Write> Run<W> {
     /// Fixes the roster policy; call once, before the first row.
     pub fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
         self.extractor = Some(Extractor::new(self.config.clone(), policy)?);
+        Ok(())
+    }
+
+    /// Starts with the roster `header` declares (`0..tracks`), its prior
+    /// carried to the output header.
+    pub fn start_from(&mut self, header: &Header) -> Result<(), RunError> {
+        let policy = RosterPolicy::Declared((0..header.tracks as u32).collect());
+        self.extractor = Some(Extractor::new(self.config.clone(), policy)?.with_prior(header));
         Ok(())
     }
 
@@ -229,7 +237,7 @@ pub fn extract_jsonl<W: Write>(
                 if header.identities.is_some() {
                     run.config_mut().identities = true;
                 }
-                run.start(RosterPolicy::Declared((0..header.tracks as u32).collect()))?;
+                run.start_from(&header)?;
             }
             Ok(JsonlRow::Report(report)) => run.row(file, Ok(Located { line, report }))?,
             Err(problem) => run.row(

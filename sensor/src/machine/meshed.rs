@@ -281,9 +281,12 @@ impl<Q> Gateway<Q> {
                 Entry::Line(text) => {
                     // Checked where it was taken; a peer's bytes are
                     // checked again, and every sensor skips the same.
-                    match ingest::event(&text, self.state.router.header()) {
+                    match self.state.ingest.event(&text) {
                         Ok(line) => {
-                            self.state.router.line(&line);
+                            self.route_line(&line);
+                            let Some(mesh) = self.state.mesh.as_mut() else {
+                                return;
+                            };
                             let mut placed = Vec::new();
                             mesh.cuts
                                 .reached(&mut self.state.router, &name, &mut placed);
@@ -327,8 +330,12 @@ impl<Q> Gateway<Q> {
         self.state.stats.merged_twice = mesh.merge.twice();
         if mesh.merge.complete() && !mesh.ended {
             mesh.ended = true;
+            self.finish_extraction();
             self.state.finished = true;
             self.state.owed.fill(true);
+            let Some(mesh) = self.state.mesh.as_mut() else {
+                return;
+            };
             for (tag, reason) in mesh.cuts.refuse_all(&self.state.router) {
                 self.refuse_tag(tag, reason);
             }

@@ -46,10 +46,8 @@ pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let identities_only = header.identities.is_some() && header.red_count().is_none();
     let source = reader.source().to_string();
     match (header.identities, args.method) {
-        (Some(n), None) if identities_only => identity::run_default(args, out),
-        (Some(_), Some(method)) if method.identity().is_some() => {
-            identity::run_default(args, out)
-        }
+        (Some(_), None) if identities_only => identity::run_default(args, out),
+        (Some(_), Some(method)) if method.identity().is_some() => identity::run_default(args, out),
         (Some(n), Some(method)) if identities_only => bail!(
             "{source}:1: header: an identity trace ({n} identities) with no colours, and \
              --method {} is a property method; use information-matrix (the default), \

@@ -7,7 +7,11 @@ use crate::observing::ScoreMapping;
 use serde::{Deserialize, Serialize};
 
 /// The extractor's settings. The defaults are the simulator's.
+///
+/// Written in a topology as `[sensor.extract]`: every field may be left
+/// out (its default), an unknown one is an error.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ExtractorConfig {
     /// Two tracks closer than this meet (metres).
     pub mix_distance: f64,

@@ -73,6 +73,10 @@ pub struct Extractor {
     header_written: bool,
     /// Meetings since the last [`Extractor::take_meetings`].
     meetings: Vec<Meeting>,
+    /// The input's own header, whose prior (red count, initial colours and
+    /// identities) the output header carries ([`Extractor::with_prior`]).
+    #[serde(default)]
+    prior: Option<Header>,
 }
 
 impl Extractor {
@@ -91,6 +95,7 @@ impl Extractor {
             moves_done: 0,
             header_written: false,
             meetings: Vec::new(),
+            prior: None,
         };
         if let RosterPolicy::Declared(ids) = policy {
             if ids.is_empty() {
@@ -101,6 +106,16 @@ impl Extractor {
             extractor.fix_roster(Roster::of(ids));
         }
         Ok(extractor)
+    }
+
+    /// The output header carries `header`'s prior: its red count, initial
+    /// red tracks, identities and initial identities. A stream of reports
+    /// that opens with a header (JSON lines, a live sensor's trace) says
+    /// what is known of its targets there, and the events extracted from
+    /// it must be believed from that same start.
+    pub fn with_prior(mut self, header: &Header) -> Self {
+        self.prior = Some(header.clone());
+        self
     }
 
     pub fn config(&self) -> &ExtractorConfig {
@@ -159,7 +174,9 @@ impl Extractor {
     }
 
     /// The rules a report must meet, checked before anything changes.
-    fn check(&self, report: &Report) -> Result<(), ReportError> {
+    /// Whether [`Extractor::push`] would take `report`, without taking it:
+    /// a live sensor answers a producer before routing its lines.
+    pub fn check(&self, report: &Report) -> Result<(), ReportError> {
         if !report.time.is_finite() {
             return Err(ReportError::NonFiniteTime { time: report.time });
         }
@@ -252,6 +269,12 @@ impl Extractor {
         let c = &self.config;
         let mut header = Header::new_v2(n);
         header.identities = c.identities.then_some(n);
+        if let Some(prior) = &self.prior {
+            header.red = prior.red;
+            header.initial_red = prior.initial_red.clone();
+            header.identities = prior.identities.or(header.identities);
+            header.initial_identity = prior.initial_identity.clone();
+        }
         header.source = Some(c.source.clone());
         header.description = Some(format!(
             "extracted: mix within {} m (release at {} m), observe beyond {} m at most every {} s, \

@@ -33,6 +33,7 @@ const SCORE_FLOOR: f64 = 1e-6;
 
 /// The label that means "red" (the property) and the temperature.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ScoreMapping {
     /// The class label of the property, e.g. `red`.
     pub label: String,

@@ -1,0 +1,167 @@
+//! A sensor that extracts its events from what a tracker reports — `move`
+//! and `detect` lines (trace format version 2) — serves what `idmesh
+//! replay` computes from `idmesh extract`'s trace of the same reports: the
+//! same extractor runs in both, on the stream's one order.
+
+use idmesh_extract::ExtractorConfig;
+use idmesh_tests::compare::floats;
+use idmesh_tests::deployment::{replay_summary, waypoint_crowd, Deployment, Factored, Settings};
+use idmesh_tests::idmesh;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+/// A tracker's reports of a random-waypoint crowd: its header (tracks,
+/// red count, initial colours) as version 2, then every position of the
+/// simulated trace, one frame a second; every third frame of a track is a
+/// `detect` with class scores (a red target reads 0.7 red), the others
+/// plain `move` lines.
+fn reports_of(crowd: &Path, out: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(crowd).unwrap();
+    let mut lines = text.lines();
+    let mut header: Value = serde_json::from_str(lines.next().unwrap()).unwrap();
+    header["version"] = json!(2);
+    let red: Vec<u64> = header["initial_red"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_u64().unwrap())
+        .collect();
+    let mut written = vec![header.to_string()];
+    let mut frame = 0u64;
+    let mut last_time = None;
+    for line in lines {
+        let line: Value = serde_json::from_str(line).unwrap();
+        if line["kind"] != "move" {
+            continue;
+        }
+        let time = line["time"].as_f64().unwrap();
+        if last_time.is_some_and(|t| t != time) {
+            frame += 1;
+        }
+        last_time = Some(time);
+        let track = line["track"].as_u64().unwrap();
+        if (frame + track) % 3 == 0 {
+            let p = if red.contains(&track) { 0.7 } else { 0.3 };
+            let detect = json!({
+                "kind": "detect", "time": time, "track": track,
+                "x": line["x"], "y": line["y"],
+                "scores": {"blue": 1.0 - p, "red": p},
+            });
+            written.push(detect.to_string());
+        } else {
+            written.push(line.to_string());
+        }
+    }
+    std::fs::write(out, written.join("\n") + "\n").unwrap();
+    out.to_path_buf()
+}
+
+/// `idmesh extract --format jsonl` of `reports` into `out`.
+fn extract(reports: &Path, out: &Path) {
+    let status = Command::new(idmesh())
+        .args(["extract", "--format", "jsonl"])
+        .arg(reports)
+        .arg("--out")
+        .arg(out)
+        .status()
+        .expect("idmesh extract runs");
+    assert!(status.success(), "idmesh extract failed");
+}
+
+fn assert_close(what: &str, got: &Value, want: &Value) {
+    let (got, want) = (floats(got), floats(want));
+    assert_eq!(got.len(), want.len(), "{what}");
+    for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!((g - w).abs() < 1e-9, "{what}, track {t}: {g} vs {w}");
+    }
+}
+
+/// Reports through a sensor that extracts, two leaders at the default
+/// settings: the final answer equals the twin's (`idmesh replay
+/// --topology`, which extracts the reports as the sensor does) and
+/// replay of `idmesh extract`'s trace with the deployment's settings.
+#[test]
+fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-{}", std::process::id()));
+    let crowd = waypoint_crowd(&dir, 40, 15, 600, 4);
+    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let extracted = dir.join("extracted.jsonl");
+    extract(&reports, &extracted);
+    let text = std::fs::read_to_string(&extracted).unwrap();
+    let count = |kind: &str| text.matches(&format!("\"kind\":\"{kind}\"")).count();
+    assert!(count("mix") >= 20, "{} mixes extracted", count("mix"));
+    assert!(count("observe") >= 20, "{} observations", count("observe"));
+
+    let settings = Settings {
+        leaders: 2,
+        rate: Some(5000.0),
+        factored: Some(Factored::default()),
+        extract: Some(ExtractorConfig::default()),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start("extraction", &reports, &settings);
+    let last = deployment.final_marginals(Duration::from_secs(90));
+    let twin = deployment.twin_summary(&reports);
+    assert_close("the twin", &last["p_red"], &twin["final_p_red"]);
+    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    assert_close(
+        "replay of idmesh extract's trace",
+        &last["p_red"],
+        &replayed["final_p_red"],
+    );
+    drop(deployment);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The same reports piped into `idmesh sensor --stdin` a few lines at a
+/// time, with an event among them where reports are expected: the event
+/// is refused by name and counted, and the answer is replay's of
+/// `idmesh extract`'s trace.
+#[test]
+fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
+    use std::io::Write;
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-stdin-{}", std::process::id()));
+    let crowd = waypoint_crowd(&dir, 30, 10, 400, 6);
+    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let extracted = dir.join("extracted.jsonl");
+    extract(&reports, &extracted);
+    let settings = Settings {
+        leaders: 2,
+        factored: Some(Factored::default()),
+        extract: Some(ExtractorConfig::default()),
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_without_sensor("extraction-stdin", &reports, &settings);
+    let mut pipe = deployment.launch_piped("sensor", "sensor-0", &["--stdin"]);
+    let text = std::fs::read_to_string(&reports).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    for (i, chunk) in lines.chunks(200).enumerate() {
+        for line in chunk {
+            writeln!(pipe, "{line}").expect("the sensor reads its input");
+        }
+        if i == 3 {
+            let time = chunk
+                .last()
+                .and_then(|l| serde_json::from_str::<Value>(l).ok());
+            let time = time.map_or(0.0, |l| l["time"].as_f64().unwrap_or(0.0));
+            writeln!(
+                pipe,
+                "{{\"kind\":\"mix\",\"time\":{time},\"a\":0,\"b\":1,\"swap\":0.5}}"
+            )
+            .unwrap();
+        }
+        pipe.flush().unwrap();
+    }
+    drop(pipe);
+    let answer = deployment.final_marginals(Duration::from_secs(60));
+    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    assert_close("piped reports", &answer["p_red"], &replayed["final_p_red"]);
+    assert!(
+        deployment.log().contains("send move and detect lines"),
+        "the event is refused with why"
+    );
+    drop(deployment);
+    let _ = std::fs::remove_dir_all(&dir);
+}
