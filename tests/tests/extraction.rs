@@ -165,3 +165,68 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     drop(deployment);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The Python tracker loop (`examples/tracker.py`, eclipse-zenoh) sends
+/// each frame of the reports as `detect` lines to a live extracting
+/// sensor's ingest key: every line is accepted, and once the last frame
+/// is in (it closes the one before; a live stream's last frame waits for
+/// the next), the answer equals replay of `idmesh extract`'s trace of
+/// every frame but the last.
+#[test]
+fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
+    use idmesh_tests::deployment::{header_only, trace_events};
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-py-{}", std::process::id()));
+    let crowd = waypoint_crowd(&dir, 30, 10, 300, 7);
+    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let text = std::fs::read_to_string(&reports).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let last_time = serde_json::from_str::<Value>(lines[lines.len() - 1]).unwrap()["time"].clone();
+    let but_last: Vec<&str> = lines
+        .iter()
+        .copied()
+        .filter(|l| serde_json::from_str::<Value>(l).unwrap()["time"] != last_time)
+        .collect();
+    let closed = dir.join("closed.jsonl");
+    std::fs::write(&closed, but_last.join("\n") + "\n").unwrap();
+    let extracted = dir.join("extracted.jsonl");
+    extract(&closed, &extracted);
+    let events = trace_events(&extracted).len() as u64;
+    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+
+    let settings = Settings {
+        leaders: 2,
+        live: true,
+        factored: Some(Factored::default()),
+        extract: Some(ExtractorConfig::default()),
+        sensor_trace: Some(header_only(&reports, &dir)),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start_each("extraction-py", &reports, &settings);
+    deployment.first_answer(Duration::from_secs(30));
+    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/tracker.py");
+    let output = Command::new(&python)
+        .arg(&script)
+        .arg(&reports)
+        .args([deployment.sensor_endpoint(), &deployment.prefix, "sensor-0"])
+        .output()
+        .expect("python runs");
+    assert!(
+        output.status.success(),
+        "the tracker loop failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let sent: Value = serde_json::from_slice(&output.stdout).expect("the tracker's JSON");
+    assert_eq!(sent["accepted"], sent["sent"], "{sent}");
+    assert_eq!(
+        sent["sent"].as_u64(),
+        Some(lines.len() as u64 - 1),
+        "{sent}"
+    );
+    let answer = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+        a["watermark"]["sensor-0"].as_u64() == Some(events)
+    });
+    assert_close("python tracker", &answer["p_red"], &replayed["final_p_red"]);
+    drop(deployment);
+    let _ = std::fs::remove_dir_all(&dir);
+}
