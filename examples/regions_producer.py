@@ -30,7 +30,9 @@ import time
 
 import zenoh
 
-EVENTS = ("mix", "observe", "move", "identify")
+# With a sensor that extracts, a tracker's reports (move and detect lines)
+# are split the same way: each to the sensor of its track's region.
+EVENTS = ("mix", "observe", "move", "identify", "detect")
 
 
 def events_of(path):
@@ -58,7 +60,7 @@ def split(events, places):
     doubled = 0
     for counter, (text, event) in enumerate(events):
         kind = event["kind"]
-        if kind == "move":
+        if kind in ("move", "detect"):
             where[event["track"]] = (event["x"], event["y"])
             targets = {sensor_of(event["track"])}
         elif kind == "mix":

@@ -230,3 +230,62 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     drop(deployment);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Two live sensors, each fed the reports of its own region by
+/// `examples/regions_producer.py`: the extractor runs on the merged
+/// order at both, so a meeting of tracks reported to two sensors is one
+/// mix, and the final answer equals replay of `idmesh extract`'s trace
+/// of all the reports.
+#[test]
+fn two_extracting_sensors_fed_by_region_give_replays_answer() {
+    use idmesh_tests::deployment::{grid_over, header_only};
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-2s-{}", std::process::id()));
+    let crowd = waypoint_crowd(&dir, 30, 10, 300, 8);
+    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let extracted = dir.join("extracted.jsonl");
+    extract(&reports, &extracted);
+    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    let settings = Settings {
+        leaders: 2,
+        sensors: 2,
+        live: true,
+        factored: Some(Factored::default()),
+        extract: Some(ExtractorConfig::default()),
+        sensor_trace: Some(header_only(&reports, &dir)),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start_each("extraction-2s", &reports, &settings);
+    deployment.first_answer(Duration::from_secs(30));
+    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
+    let output = Command::new(&python)
+        .arg(&script)
+        .arg(&reports)
+        .args([deployment.sensor_endpoint(), &deployment.prefix])
+        .args(["--batch", "100"])
+        .args(
+            grid_over(&crowd, 2)
+                .iter()
+                .enumerate()
+                .flat_map(|(s, (x, y))| ["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]),
+        )
+        .output()
+        .expect("python runs");
+    assert!(
+        output.status.success(),
+        "the producer failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
+    for s in 0..2 {
+        let report = &sent["sensors"][format!("sensor-{s}")];
+        assert!(report["accepted"].as_u64().unwrap_or(0) > 0, "{sent}");
+        assert_eq!(report["errors"].as_array().map(Vec::len), Some(0), "{sent}");
+    }
+    let answer = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
+        a["finished"] == true
+    });
+    assert_close("two sensors", &answer["p_red"], &replayed["final_p_red"]);
+    drop(deployment);
+    let _ = std::fs::remove_dir_all(&dir);
+}
