@@ -67,7 +67,7 @@ impl Extraction {
     pub fn take(&mut self, line: &Line) -> Result<Vec<Line>, String> {
         Self::admits(line)?;
         let report: Report = match line {
-            Line::Move(m) => m.clone().into(),
+            Line::Move(m) => (*m).into(),
             Line::Detect(d) => d.clone().into(),
             _ => return Ok(Vec::new()),
         };

@@ -1141,7 +1141,7 @@ fn a_gateway_extracting_from_reports_routes_what_the_extracted_trace_routes() {
     let mut extracted = Vec::new();
     for line in &reports {
         let report = match line {
-            Line::Move(m) => m.clone().into(),
+            Line::Move(m) => (*m).into(),
             Line::Detect(d) => d.clone().into(),
             _ => unreachable!(),
         };

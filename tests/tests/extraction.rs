@@ -42,7 +42,7 @@ fn reports_of(crowd: &Path, out: &Path) -> PathBuf {
         }
         last_time = Some(time);
         let track = line["track"].as_u64().unwrap();
-        if (frame + track) % 3 == 0 {
+        if (frame + track).is_multiple_of(3) {
             let p = if red.contains(&track) { 0.7 } else { 0.3 };
             let detect = json!({
                 "kind": "detect", "time": time, "track": track,
