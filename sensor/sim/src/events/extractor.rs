@@ -17,6 +17,7 @@ use super::sensor_model::SensorModel;
 use crate::geometry::Vec2;
 use idmesh_extract::frame::FrameSensing;
 use idmesh_extract::meetings::Entering;
+use idmesh_extract::ExtractorConfig;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -57,30 +58,17 @@ impl Default for ExtractionParams {
 impl ExtractionParams {
     /// Checks that every parameter is usable; returns what is wrong.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.mix_distance.is_finite() && self.mix_distance > 0.0) {
-            return Err(format!(
-                "mixing distance must be finite and > 0, got {}",
-                self.mix_distance
-            ));
+        // The distances and the interval are the extractor's settings:
+        // checked by it, with its words.
+        ExtractorConfig {
+            mix_distance: self.mix_distance,
+            release_factor: self.release_factor,
+            observe_distance: self.observe_distance,
+            observe_interval: self.observe_interval,
+            ..ExtractorConfig::default()
         }
-        if !(self.release_factor.is_finite() && self.release_factor >= 1.0) {
-            return Err(format!(
-                "release factor must be finite and >= 1, got {}",
-                self.release_factor
-            ));
-        }
-        if !(self.observe_distance.is_finite() && self.observe_distance > 0.0) {
-            return Err(format!(
-                "observation distance must be finite and > 0, got {}",
-                self.observe_distance
-            ));
-        }
-        if !(self.observe_interval.is_finite() && self.observe_interval >= 0.0) {
-            return Err(format!(
-                "observation interval must be finite and >= 0, got {}",
-                self.observe_interval
-            ));
-        }
+        .validate()
+        .map_err(|e| e.to_string())?;
         if !(0.0..=1.0).contains(&self.swap) {
             return Err(format!(
                 "swap probability must be in [0, 1], got {}",
