@@ -175,28 +175,8 @@ impl IdentityFilter for ExactPermutationFilter {
         check_identify(n, &identify)?;
         let (t, read) = (identify.track as usize, identify.identity as u8);
         let (right, wrong) = (identify.accuracy, identify.wrong_read_likelihood(n));
-        let posterior: Vec<f64> = self
-            .probs
-            .iter()
-            .enumerate()
-            .map(|(r, &p)| {
-                p * if self.perms.get(r)[t] == read {
-                    right
-                } else {
-                    wrong
-                }
-            })
-            .collect();
-        // The evidence's probability under the prior belief.
-        let evidence: f64 = posterior.iter().sum();
-        if !(evidence.is_finite() && evidence > 0.0) {
-            return Err(BeliefError::ImpossibleObservation {
-                probability: evidence,
-            });
-        }
-        self.probs = posterior;
-        self.probs.iter_mut().for_each(|p| *p /= evidence);
-        Ok(())
+        self.perms
+            .condition_on_read(&mut self.probs, t, read, right, wrong)
     }
 
     fn marginals(&self) -> Result<Marginals, BeliefError> {

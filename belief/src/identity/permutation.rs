@@ -73,6 +73,42 @@ impl Permutations {
         &self.table[rank * self.n..(rank + 1) * self.n]
     }
 
+    /// Bayes' rule for an identity read over `probs`, a distribution
+    /// indexed by rank: each assignment weighed by `right` if it puts
+    /// identity `read` on track `track`, `wrong` if not, then normalised.
+    /// All-or-nothing: a read of probability zero (or not finite) is
+    /// refused and changes nothing.
+    pub fn condition_on_read(
+        &self,
+        probs: &mut Vec<f64>,
+        track: usize,
+        read: u8,
+        right: f64,
+        wrong: f64,
+    ) -> Result<(), BeliefError> {
+        let posterior: Vec<f64> = probs
+            .iter()
+            .enumerate()
+            .map(|(r, &p)| {
+                p * if self.get(r)[track] == read {
+                    right
+                } else {
+                    wrong
+                }
+            })
+            .collect();
+        // The evidence's probability under the prior belief.
+        let evidence: f64 = posterior.iter().sum();
+        if !(evidence.is_finite() && evidence > 0.0) {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: evidence,
+            });
+        }
+        *probs = posterior;
+        probs.iter_mut().for_each(|p| *p /= evidence);
+        Ok(())
+    }
+
     /// The rank of a permutation of 0..n (not checked: callers pass
     /// permutations they built).
     pub fn rank(&self, perm: &[u8]) -> usize {

@@ -191,28 +191,11 @@ impl Group {
         right: f64,
         wrong: f64,
     ) -> Result<(), BeliefError> {
-        let table = self.table();
-        let posterior: Vec<f64> = self
-            .probs
-            .iter()
-            .enumerate()
-            .map(|(r, &p)| {
-                p * if table.get(r)[track] as usize == read {
-                    right
-                } else {
-                    wrong
-                }
-            })
-            .collect();
-        let evidence: f64 = posterior.iter().sum();
-        if !(evidence.is_finite() && evidence > 0.0) {
-            return Err(BeliefError::ImpossibleObservation {
-                probability: evidence,
-            });
-        }
-        self.probs = posterior;
-        self.probs.iter_mut().for_each(|p| *p /= evidence);
-        Ok(())
+        // Local identities are below the group's size (at most 9): one that
+        // does not fit a u8 is carried by no assignment, as u8::MAX is.
+        let read = u8::try_from(read).unwrap_or(u8::MAX);
+        self.table()
+            .condition_on_read(&mut self.probs, track, read, right, wrong)
     }
 
     /// m\[j\]\[x\] = P(local track j carries local identity x): one pass over
