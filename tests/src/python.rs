@@ -67,3 +67,29 @@ fn run(command: &mut Command, what: &str) {
         String::from_utf8_lossy(&output.stderr)
     );
 }
+
+/// Runs the project's Python example `examples/SCRIPT` with `args` under
+/// [`python_with_zenoh`] (its venv in `target_tmp`) and waits for it: the
+/// one JSON line it prints. Panics with what it said if it fails.
+pub fn run_example<I, S>(target_tmp: &Path, script: &str, args: I) -> serde_json::Value
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let python = python_with_zenoh(target_tmp);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../examples")
+        .join(script);
+    let output = Command::new(&python)
+        .arg(&path)
+        .args(args)
+        .output()
+        .expect("python runs");
+    assert!(
+        output.status.success(),
+        "examples/{script} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout)
+        .unwrap_or_else(|e| panic!("examples/{script} printed no JSON line: {e}"))
+}

@@ -7,6 +7,7 @@ use idmesh_extract::ExtractorConfig;
 use idmesh_tests::compare::floats;
 use idmesh_tests::deployment::{replay_summary, waypoint_crowd, Deployment, Factored, Settings};
 use idmesh_tests::idmesh;
+use idmesh_tests::python::run_example;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -203,20 +204,17 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     };
     let deployment = Deployment::start_each("extraction-py", &reports, &settings);
     deployment.first_answer(Duration::from_secs(30));
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/tracker.py");
-    let output = Command::new(&python)
-        .arg(&script)
-        .arg(&reports)
-        .args([deployment.sensor_endpoint(), &deployment.prefix, "sensor-0"])
-        .output()
-        .expect("python runs");
-    assert!(
-        output.status.success(),
-        "the tracker loop failed: {}",
-        String::from_utf8_lossy(&output.stderr)
+    let reports_arg = reports.display().to_string();
+    let sent = run_example(
+        Path::new(env!("CARGO_TARGET_TMPDIR")),
+        "tracker.py",
+        [
+            reports_arg.as_str(),
+            deployment.sensor_endpoint(),
+            &deployment.prefix,
+            "sensor-0",
+        ],
     );
-    let sent: Value = serde_json::from_slice(&output.stdout).expect("the tracker's JSON");
     assert_eq!(sent["accepted"], sent["sent"], "{sent}");
     assert_eq!(
         sent["sent"].as_u64(),
@@ -256,27 +254,21 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     };
     let deployment = Deployment::start_each("extraction-2s", &reports, &settings);
     deployment.first_answer(Duration::from_secs(30));
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
-    let output = Command::new(&python)
-        .arg(&script)
-        .arg(&reports)
-        .args([deployment.sensor_endpoint(), &deployment.prefix])
-        .args(["--batch", "100"])
-        .args(
-            grid_over(&crowd, 2)
-                .iter()
-                .enumerate()
-                .flat_map(|(s, (x, y))| ["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]),
-        )
-        .output()
-        .expect("python runs");
-    assert!(
-        output.status.success(),
-        "the producer failed: {}",
-        String::from_utf8_lossy(&output.stderr)
+    let mut args = vec![
+        reports.display().to_string(),
+        deployment.sensor_endpoint().to_string(),
+        deployment.prefix.clone(),
+        "--batch".into(),
+        "100".into(),
+    ];
+    for (s, (x, y)) in grid_over(&crowd, 2).iter().enumerate() {
+        args.extend(["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]);
+    }
+    let sent = run_example(
+        Path::new(env!("CARGO_TARGET_TMPDIR")),
+        "regions_producer.py",
+        &args,
     );
-    let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
     for s in 0..2 {
         let report = &sent["sensors"][format!("sensor-{s}")];
         assert!(report["accepted"].as_u64().unwrap_or(0) > 0, "{sent}");

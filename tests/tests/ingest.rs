@@ -15,7 +15,6 @@ use idmesh_tests::deployment::{
 use serde_json::Value;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 /// The answer once the sensor's watermark reaches `events`.
@@ -101,25 +100,27 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
     let first = deployment.first_answer(Duration::from_secs(30));
     assert_eq!(first["watermark"]["sensor-0"], 0);
     assert_eq!(first["finished"], false);
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/producer.py");
+    // The venv is made (or found) before the questions wait on the events.
+    idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let trace_arg = trace.display().to_string();
     let points = std::thread::scope(|scope| {
         let asked = scope.spawn(|| deployment.at_truth_points("marginals", &truths));
         // The questions are placed (held at their points) before any event.
         std::thread::sleep(Duration::from_millis(1500));
-        let output = Command::new(&python)
-            .arg(&script)
-            .arg(&trace)
-            .args([deployment.sensor_endpoint(), &deployment.prefix, "sensor-0"])
-            .args(["--producer", "camera-7", "--batch", "50"])
-            .output()
-            .expect("python runs");
-        assert!(
-            output.status.success(),
-            "the producer failed: {}",
-            String::from_utf8_lossy(&output.stderr)
+        let sent = idmesh_tests::python::run_example(
+            Path::new(env!("CARGO_TARGET_TMPDIR")),
+            "producer.py",
+            [
+                trace_arg.as_str(),
+                deployment.sensor_endpoint(),
+                &deployment.prefix,
+                "sensor-0",
+                "--producer",
+                "camera-7",
+                "--batch",
+                "50",
+            ],
         );
-        let sent: Value = serde_json::from_slice(&output.stdout).expect("the producer's JSON");
         let events = trace_events(&trace).len() as u64;
         assert_eq!(sent["accepted"], events, "{sent}");
         assert_eq!(
