@@ -1,5 +1,6 @@
 //! Stamps the evaluation (and so the `idmesh` binary) with a digest of the
-//! sources that decide the numbers of `idmesh eval`: the property filters, the simulators, the trace
+//! sources that decide the numbers of `idmesh eval`: the property filters, the simulators and the
+//! event extractor, the trace
 //! format and the evaluation itself. `eval` writes the stamp into the
 //! results.md it generates, and a test checks that the committed
 //! docs/results.md carries the stamp of the code as it is, so the document
@@ -18,6 +19,8 @@ const SOURCES: &[&str] = &[
     "../../belief/src",
     "../../sensor/sim/src/scenario",
     "../../sensor/sim/src/motion",
+    "../../sensor/sim/src/events",
+    "../../sensor/extract/src",
     "../../protocol/src/trace",
     "src/eval",
     "src/filters.rs",

@@ -385,9 +385,9 @@ pub struct SimulateArgs {
     /// A target farther than this (metres) from every other is observed.
     #[arg(long)]
     pub observe_distance: Option<f64>,
-    /// Probability that a mix exchanges the two targets' tracks.
-    #[arg(long)]
-    pub swap: Option<f64>,
+    /// How likely a meeting is to exchange the two targets' tracks.
+    #[command(flatten)]
+    pub meetings: MeetingArgs,
     /// Seconds between `truth` lines.
     #[arg(long)]
     pub truth_interval: Option<f64>,
@@ -407,6 +407,49 @@ pub struct SimulateArgs {
     /// Where to write the trace.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// Also write what the simulated tracker reported (a version-2 trace
+    /// of `detect` lines: every track's position each step, class scores
+    /// where the sensor saw a colour): `idmesh extract` with the same
+    /// distances and meeting model turns it into this trace's events.
+    #[arg(long, value_name = "FILE")]
+    pub tracker_output: Option<PathBuf>,
+}
+
+/// The meeting model, shared by `simulate` (which draws swaps with it)
+/// and `extract` (which writes its probability on each mix).
+#[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
+pub struct MeetingArgs {
+    /// The meeting model: a constant swap probability, or one from the
+    /// closest distance and relative speed of the meeting.
+    #[arg(long, value_enum, default_value_t = MeetingChoice::Constant)]
+    pub meeting_model: MeetingChoice,
+    /// constant: the swap probability of every meeting.
+    #[arg(long, default_value_t = 0.5)]
+    pub swap: f64,
+    /// approach: the swap probability of a standing, touching pair.
+    #[arg(long, default_value_t = 0.5)]
+    pub p_max: f64,
+    /// approach: metres over which confusion falls with closest distance.
+    #[arg(long, default_value_t = 0.5)]
+    pub sigma: f64,
+    /// approach: the relative speed (m/s) at which confusion halves.
+    #[arg(long, default_value_t = 1.0)]
+    pub v0: f64,
+}
+
+impl MeetingArgs {
+    pub fn model(&self) -> idmesh_extract::MeetingModel {
+        use idmesh_extract::MeetingModel;
+        match self.meeting_model {
+            MeetingChoice::Constant => MeetingModel::Constant(self.swap),
+            MeetingChoice::Approach => MeetingModel::Approach {
+                p_max: self.p_max,
+                sigma: self.sigma,
+                v0: self.v0,
+            },
+        }
+    }
 }
 
 #[derive(Debug, Clone, Args)]
@@ -445,22 +488,8 @@ pub struct ExtractArgs {
     /// At most one observation per track per this many seconds.
     #[arg(long, default_value_t = 3.0)]
     pub observe_interval: f64,
-    /// The meeting model: a constant swap probability, or one from the
-    /// closest distance and relative speed of the meeting.
-    #[arg(long, value_enum, default_value_t = MeetingChoice::Constant)]
-    pub meeting_model: MeetingChoice,
-    /// constant: the swap probability of every meeting.
-    #[arg(long, default_value_t = 0.5)]
-    pub swap: f64,
-    /// approach: the swap probability of a standing, touching pair.
-    #[arg(long, default_value_t = 0.5)]
-    pub p_max: f64,
-    /// approach: metres over which confusion falls with closest distance.
-    #[arg(long, default_value_t = 0.5)]
-    pub sigma: f64,
-    /// approach: the relative speed (m/s) at which confusion halves.
-    #[arg(long, default_value_t = 1.0)]
-    pub v0: f64,
+    #[command(flatten)]
+    pub meetings: MeetingArgs,
     /// The class label of the property (its score becomes the red
     /// likelihood).
     #[arg(long, default_value = "red")]

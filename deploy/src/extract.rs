@@ -3,13 +3,13 @@
 //! Bad rows end the run with `FILE:LINE: reason` (exit status 1), unless
 //! `--max-errors N` lets up to N of them be counted and reported.
 
-use crate::cli::{ExtractArgs, MeetingChoice, ReportFormat, RosterChoice};
+use crate::cli::{ExtractArgs, ReportFormat, RosterChoice};
 use anyhow::{bail, Context, Result};
 use idmesh_extract::adapters::homography::Homography;
 use idmesh_extract::adapters::mot::Ground;
 use idmesh_extract::adapters::{eth_ucy, mot};
 use idmesh_extract::pipeline::{extract_jsonl, extract_rows, Run, Tally};
-use idmesh_extract::{ExtractorConfig, MeetingModel, ScoreMapping};
+use idmesh_extract::{ExtractorConfig, ScoreMapping};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 
@@ -20,14 +20,7 @@ pub fn config(args: &ExtractArgs) -> ExtractorConfig {
         release_factor: args.release_factor,
         observe_distance: args.observe_distance,
         observe_interval: args.observe_interval,
-        meeting_model: match args.meeting_model {
-            MeetingChoice::Constant => MeetingModel::Constant(args.swap),
-            MeetingChoice::Approach => MeetingModel::Approach {
-                p_max: args.p_max,
-                sigma: args.sigma,
-                v0: args.v0,
-            },
-        },
+        meeting_model: args.meetings.model(),
         scores: ScoreMapping {
             label: args.label.clone(),
             temperature: args.temperature,

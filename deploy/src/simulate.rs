@@ -3,7 +3,7 @@
 
 use crate::cli::{Motion, SimulateArgs};
 use anyhow::{Context, Result};
-use idmesh_sim::scenario::trace_out::write_trace;
+use idmesh_sim::scenario::trace_out::{write_trace, write_tracker_output};
 use idmesh_sim::Scenario;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::fs::File;
@@ -40,9 +40,7 @@ pub fn scenario(args: &SimulateArgs) -> Result<Scenario> {
     if let Some(d) = args.observe_distance {
         s = s.observe_distance(d);
     }
-    if let Some(p) = args.swap {
-        s = s.swap(p);
-    }
+    s = s.meetings(args.meetings.model());
     if let Some(t) = args.truth_interval {
         s = s.truth_interval(t);
     }
@@ -52,7 +50,9 @@ pub fn scenario(args: &SimulateArgs) -> Result<Scenario> {
             .identity_accuracy(args.identity_accuracy)
             .reveal_initial_identity(!args.hide_initial);
     }
-    Ok(s.reveal_initial_red(!args.hide_initial).seed(args.seed))
+    Ok(s.reveal_initial_red(!args.hide_initial)
+        .tracker_reports(args.tracker_output.is_some())
+        .seed(args.seed))
 }
 
 pub fn run(args: &SimulateArgs) -> Result<()> {
@@ -77,6 +77,14 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     }
     let file = File::create(&args.out).with_context(|| format!("{path}: cannot create"))?;
     write_trace(&trace, BufWriter::new(file), path.clone())?;
+    if let Some(out) = &args.tracker_output {
+        let path = out.display().to_string();
+        let file = File::create(out).with_context(|| format!("{path}: cannot create"))?;
+        if let Some(written) = write_tracker_output(&trace, BufWriter::new(file), path.clone()) {
+            written?;
+            eprintln!("{path}: what the simulated tracker reported");
+        }
+    }
     let stats = trace.stats();
     eprintln!(
         "{path}: {} tracks, {} mixes, {} observations ({:.0}% mixing)",

@@ -281,3 +281,64 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     drop(deployment);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A real scene, as a tracker that confuses close, slow meetings would
+/// report it (`idmesh simulate --model pedestrians --tracker-output`),
+/// fed to a sensor that extracts: the deployment serves what replay of
+/// the *simulator's* trace computes — positions in, the simulator's
+/// events and answers out.
+#[test]
+fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = idmesh_sim::motion::pedestrians::data_dir().join("zara01/obsmat/obsmat.txt");
+    let (simulated, reports) = (dir.join("simulated.jsonl"), dir.join("reports.jsonl"));
+    let model = [
+        "--meeting-model",
+        "approach",
+        "--p-max",
+        "0.8",
+        "--sigma",
+        "0.35",
+    ];
+    let status = Command::new(idmesh())
+        .args(["simulate", "--model", "pedestrians", "--scene"])
+        .arg(&scene)
+        .args(["--duration", "150", "--seed", "2"])
+        .args(model)
+        .arg("--out")
+        .arg(&simulated)
+        .arg("--tracker-output")
+        .arg(&reports)
+        .status()
+        .expect("idmesh simulate runs");
+    assert!(status.success(), "idmesh simulate failed");
+    let text = std::fs::read_to_string(&simulated).unwrap();
+    assert!(text.matches("\"kind\":\"mix\"").count() >= 20);
+
+    let extract = ExtractorConfig {
+        meeting_model: idmesh_extract::MeetingModel::Approach {
+            p_max: 0.8,
+            sigma: 0.35,
+            v0: 1.0,
+        },
+        ..ExtractorConfig::default()
+    };
+    let settings = Settings {
+        leaders: 2,
+        rate: Some(5000.0),
+        factored: Some(Factored::default()),
+        extract: Some(extract),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start("extraction-scene", &reports, &settings);
+    let last = deployment.final_marginals(Duration::from_secs(90));
+    let simulator = replay_summary(&simulated, &["--leaders", "2"]);
+    assert_close(
+        "replay of the simulator's trace",
+        &last["p_red"],
+        &simulator["final_p_red"],
+    );
+    drop(deployment);
+    let _ = std::fs::remove_dir_all(&dir);
+}

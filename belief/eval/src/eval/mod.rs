@@ -31,6 +31,7 @@
 
 pub mod accuracy;
 pub mod args;
+mod extracted;
 mod grid;
 mod large;
 pub mod live;
@@ -280,6 +281,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         Preset::Quick => large::LargeFields::quick(),
     };
     body.push_str(&large::section(&large_fields, workers)?);
+    body.push_str(&extracted::section(1)?);
     for start in plan::STARTS {
         for swap in table3_swaps(&results) {
             println!("Table III, swap {swap}, {}:\n", start.label());

@@ -97,6 +97,15 @@ impl MeetingModel {
         p_max: f64,
         samples: &[(Meeting, bool)],
     ) -> Result<MeetingModel, CalibrationError> {
+        MeetingModel::fit_approach_on_grid(p_max, samples, 48)
+    }
+
+    /// [`MeetingModel::fit_approach`] with `steps` grid steps a side.
+    fn fit_approach_on_grid(
+        p_max: f64,
+        samples: &[(Meeting, bool)],
+        steps: usize,
+    ) -> Result<MeetingModel, CalibrationError> {
         MeetingModel::Approach {
             p_max,
             sigma: 1.0,
@@ -112,22 +121,10 @@ impl MeetingModel {
             ));
         }
         let log_likelihood = |sigma: f64, v0: f64| -> f64 {
-            samples
-                .iter()
-                .map(|(m, swapped)| {
-                    let p = approach(p_max, sigma, v0, m.closest, m.relative_speed)
-                        .clamp(1e-12, 1.0 - 1e-12);
-                    if *swapped {
-                        p.ln()
-                    } else {
-                        (1.0 - p).ln()
-                    }
-                })
-                .sum()
+            MeetingModel::Approach { p_max, sigma, v0 }.log_likelihood(samples)
         };
         let (mut lo_s, mut hi_s) = (0.02f64.ln(), 10f64.ln());
         let (mut lo_v, mut hi_v) = (0.02f64.ln(), 20f64.ln());
-        let steps = 48;
         let mut best = (f64::NEG_INFINITY, 1.0, 1.0);
         for _round in 0..2 {
             let (ds, dv) = ((hi_s - lo_s) / steps as f64, (hi_v - lo_v) / steps as f64);
@@ -151,6 +148,53 @@ impl MeetingModel {
             sigma: best.1,
             v0: best.2,
         })
+    }
+}
+
+impl MeetingModel {
+    /// The Bernoulli log-likelihood of meetings labelled with whether the
+    /// tracker swapped them (probabilities clamped to [1e-12, 1 − 1e-12]).
+    pub fn log_likelihood(&self, samples: &[(Meeting, bool)]) -> f64 {
+        samples
+            .iter()
+            .map(|(m, swapped)| {
+                let p = self.swap(m).clamp(1e-12, 1.0 - 1e-12);
+                if *swapped {
+                    p.ln()
+                } else {
+                    (1.0 - p).ln()
+                }
+            })
+            .sum()
+    }
+
+    /// Fits all three parameters of [`MeetingModel::Approach`]: p_max on
+    /// a grid of 0.05 steps, each with σ and v₀ fitted on a coarse grid;
+    /// then σ and v₀ of the most likely p_max as
+    /// [`MeetingModel::fit_approach`] does.
+    pub fn fit_approach_all(samples: &[(Meeting, bool)]) -> Result<MeetingModel, CalibrationError> {
+        let mut best: Option<(f64, f64)> = None;
+        for step in 1..=20 {
+            let p_max = step as f64 * 0.05;
+            let ll =
+                MeetingModel::fit_approach_on_grid(p_max, samples, 16)?.log_likelihood(samples);
+            if best.is_none_or(|(b, _)| ll > b) {
+                best = Some((ll, p_max));
+            }
+        }
+        MeetingModel::fit_approach(best.expect("twenty candidates").1, samples)
+    }
+
+    /// The maximum-likelihood [`MeetingModel::Constant`]: the share of
+    /// meetings that swapped.
+    pub fn fit_constant(samples: &[(Meeting, bool)]) -> Result<MeetingModel, CalibrationError> {
+        if samples.is_empty() {
+            return Err(CalibrationError::NoSamples);
+        }
+        let swapped = samples.iter().filter(|(_, s)| *s).count();
+        Ok(MeetingModel::Constant(
+            swapped as f64 / samples.len() as f64,
+        ))
     }
 }
 
@@ -243,5 +287,18 @@ mod tests {
             MeetingModel::fit_approach(0.6, &[]),
             Err(CalibrationError::NoSamples)
         );
+        // All three at once: p_max too.
+        let MeetingModel::Approach { p_max, sigma, .. } =
+            MeetingModel::fit_approach_all(&samples).unwrap()
+        else {
+            panic!("not an approach model")
+        };
+        assert!((p_max - 0.6).abs() < 0.1, "p_max {p_max}");
+        assert!((sigma - 0.4).abs() < 0.08, "sigma {sigma}");
+        let MeetingModel::Constant(rate) = MeetingModel::fit_constant(&samples).unwrap() else {
+            panic!("not a constant")
+        };
+        let swapped = samples.iter().filter(|(_, s)| *s).count() as f64;
+        assert_eq!(rate, swapped / 6000.0);
     }
 }

@@ -1,15 +1,21 @@
-//! The simulated sensor: fed the positions of every step, it emits the
-//! `mix` and `observe` events of that step (Section 6 of the paper) and
-//! keeps the ground truth — which tracks carry red targets — in step with
-//! the swaps it draws. Which pairs meet and which targets are isolated is
-//! `idmesh-extract`'s [`FrameSensing`], exactly as for a real tracker's
-//! reports; what is simulated is only what a real tracker would decide
-//! (the swaps) and what a real sensor would see (the outcomes).
+//! The simulated sensor and tracker: fed the positions of every step, it
+//! emits the `mix` and `observe` events of that step (Section 6 of the
+//! paper) and keeps the ground truth — which target each track follows —
+//! in step with the swaps it draws. It works as a tracker does, on
+//! *tracks*: each step it places every track at the position of the target
+//! it follows, and which pairs meet and which tracks are isolated is
+//! `idmesh-extract`'s [`FrameSensing`] on those track positions, the swap
+//! probability of a meeting is the extractor's [`MeetingModel`] of the
+//! [`Meeting`] predicted from the tracks' last two positions. So the
+//! positions it reports ([`Extractor::reports`]) fed to `idmesh-extract`'s
+//! extractor give exactly its events: the simulator is the extractor plus
+//! drawn swaps and sensor outcomes.
 //!
-//! Within a step, mixes come first (pairs in ascending target order, each
-//! exchanging its two targets' tracks with probability `swap`), then
-//! observations (isolated targets in ascending order, on the track each
-//! follows after this step's mixes).
+//! Within a step, mixes come first (pairs in ascending track order, each
+//! exchanging the targets of its two tracks with the meeting's swap
+//! probability), then observations (isolated tracks in ascending order).
+//! A swap shows from the next step on: at the step of a meeting, the
+//! tracks are still where their targets were before it.
 
 use super::assignment::Assignment;
 use super::event::{SimEvent, TimedEvent};
@@ -17,9 +23,10 @@ use super::sensor_model::SensorModel;
 use crate::geometry::Vec2;
 use idmesh_extract::frame::FrameSensing;
 use idmesh_extract::meetings::Entering;
-use idmesh_extract::ExtractorConfig;
+use idmesh_extract::{ExtractorConfig, Meeting, MeetingModel, Report};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeMap;
 
 /// How events are extracted from motion.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,8 +41,8 @@ pub struct ExtractionParams {
     pub observe_distance: f64,
     /// At most one observation per target per this many seconds.
     pub observe_interval: f64,
-    /// Probability that the tracker exchanges two mixing targets.
-    pub swap: f64,
+    /// How likely the tracker exchanges two meeting targets.
+    pub meetings: MeetingModel,
     /// What an observation reports.
     pub sensor: SensorModel,
 }
@@ -49,7 +56,7 @@ impl Default for ExtractionParams {
             release_factor: 1.25,
             observe_distance: 3.5,
             observe_interval: 3.0,
-            swap: 0.5,
+            meetings: MeetingModel::Constant(0.5),
             sensor: SensorModel::colour_histogram(),
         }
     }
@@ -58,24 +65,25 @@ impl Default for ExtractionParams {
 impl ExtractionParams {
     /// Checks that every parameter is usable; returns what is wrong.
     pub fn validate(&self) -> Result<(), String> {
-        // The distances and the interval are the extractor's settings:
-        // checked by it, with its words.
+        // These are the extractor's settings: checked by it, with its words.
+        self.extractor_config()
+            .validate()
+            .map_err(|e| e.to_string())
+    }
+
+    /// The settings of `idmesh-extract`'s extractor that finds this
+    /// simulator's events in the positions it reports (class scores read
+    /// at temperature 1: the sensor's likelihoods as they are).
+    pub fn extractor_config(&self) -> ExtractorConfig {
         ExtractorConfig {
             mix_distance: self.mix_distance,
             release_factor: self.release_factor,
             observe_distance: self.observe_distance,
             observe_interval: self.observe_interval,
+            meeting_model: self.meetings,
+            move_interval: None,
             ..ExtractorConfig::default()
         }
-        .validate()
-        .map_err(|e| e.to_string())?;
-        if !(0.0..=1.0).contains(&self.swap) {
-            return Err(format!(
-                "swap probability must be in [0, 1], got {}",
-                self.swap
-            ));
-        }
-        Ok(())
     }
 }
 
@@ -88,6 +96,14 @@ pub struct Extractor {
     sensing: FrameSensing,
     swap_rng: ChaCha8Rng,
     sensor_rng: ChaCha8Rng,
+    /// Each track's position at the last step with anyone present, and
+    /// that step's time: the velocities of a meeting, as the extractor
+    /// takes them from its previous frame.
+    previous: Vec<Option<Vec2>>,
+    previous_time: Option<f64>,
+    /// What the tracker reported, when asked to keep it.
+    reports: Option<Vec<Report>>,
+    tracks: Vec<Option<Vec2>>,
     entering: Vec<Entering>,
     due: Vec<u32>,
 }
@@ -119,15 +135,38 @@ impl Extractor {
             assignment: Assignment::identity(n),
             swap_rng,
             sensor_rng,
+            previous: vec![None; n],
+            previous_time: None,
+            reports: None,
+            tracks: vec![None; n],
             entering: Vec::new(),
             due: Vec::new(),
         }
     }
 
-    /// Extracts the events of the step at `time` from `positions`, appending
-    /// at most `limit` of them to `out`; returns how many it appended. When
-    /// the limit cuts a step short, the rest of that step is dropped
-    /// (including its swaps), so the truth matches the events kept.
+    /// Keeps what the simulated tracker reports each step — every present
+    /// track's position, with class scores `{"red": s, "blue": 1 − s}`
+    /// where the sensor saw a colour (s the sensor's red likelihood,
+    /// normalised) — for [`Extractor::take_reports`].
+    pub fn keep_reports(mut self) -> Self {
+        self.reports = Some(Vec::new());
+        self
+    }
+
+    /// The reports kept since the last call (empty unless
+    /// [`Extractor::keep_reports`]).
+    pub fn take_reports(&mut self) -> Vec<Report> {
+        self.reports
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
+    /// Extracts the events of the step at `time` from the targets'
+    /// `positions`, appending at most `limit` of them to `out`; returns how
+    /// many it appended. When the limit cuts a step short, the rest of
+    /// that step is dropped (including its swaps), so the truth matches
+    /// the events kept.
     pub fn step(
         &mut self,
         time: f64,
@@ -136,56 +175,96 @@ impl Extractor {
         limit: usize,
     ) -> usize {
         debug_assert_eq!(positions.len(), self.is_red.len());
+        for (track, slot) in self.tracks.iter_mut().enumerate() {
+            *slot = positions[self.assignment.target_on(track) as usize];
+        }
         self.entering.clear();
         self.due.clear();
-        // Every target is eligible: the simulated sensor looks at any
-        // isolated target (and may see nothing, an outcome that reports
-        // nothing). No draw happens here, so the draws below come in the
-        // order they always did.
-        self.sensing
-            .sense(time, positions, |_| true, &mut self.entering, &mut self.due);
+        // Every track is eligible: the simulated sensor looks at any
+        // isolated track (and may see nothing, an outcome that reports
+        // nothing).
+        self.sensing.sense(
+            time,
+            &self.tracks,
+            |_| true,
+            &mut self.entering,
+            &mut self.due,
+        );
+        let first_report = self.reports.as_ref().map_or(0, Vec::len);
+        if let Some(reports) = &mut self.reports {
+            for (track, p) in self.tracks.iter().enumerate() {
+                if let Some(p) = p {
+                    reports.push(Report::at(time, track as u32, p.x, p.y));
+                }
+            }
+        }
+        let dt = self.previous_time.map(|t| time - t).filter(|&dt| dt > 0.0);
         let mut added = 0;
         for e in &self.entering {
             if added == limit {
-                return added;
+                break;
             }
-            let (i, j) = (e.a as usize, e.b as usize);
-            let (a, b) = (self.assignment.track_of(i), self.assignment.track_of(j));
-            let exchanged = self.swap_rng.gen::<f64>() < self.params.swap;
+            let (a, b) = (e.a as usize, e.b as usize);
+            let (Some(pa), Some(pb)) = (self.tracks[a], self.tracks[b]) else {
+                continue;
+            };
+            let velocity = |i: usize, now: Vec2| -> Option<Vec2> {
+                let before = self.previous[i]?;
+                dt.map(|dt| (now - before) * (1.0 / dt))
+            };
+            let meeting =
+                Meeting::predict(time, (e.a, pa, velocity(a, pa)), (e.b, pb, velocity(b, pb)));
+            let swap = self.params.meetings.swap(&meeting);
+            let exchanged = self.swap_rng.gen::<f64>() < swap;
             if exchanged {
-                self.assignment.exchange_targets(i, j);
+                let (i, j) = (self.assignment.target_on(a), self.assignment.target_on(b));
+                self.assignment.exchange_targets(i as usize, j as usize);
             }
             out.push(TimedEvent {
                 time,
                 event: SimEvent::Mix {
-                    a,
-                    b,
-                    swap: self.params.swap,
+                    a: e.a,
+                    b: e.b,
+                    swap,
                     exchanged,
                 },
             });
             added += 1;
         }
-        for &i in &self.due {
+        for &track in &self.due {
             if added == limit {
-                return added;
+                break;
             }
-            let i = i as usize;
+            // An isolated track met nobody this step: it still follows the
+            // target it followed when the step began.
+            let target = self.assignment.target_on(track as usize) as usize;
             if let Some((red, blue)) = self
                 .params
                 .sensor
-                .observe(&mut self.sensor_rng, self.is_red[i])
+                .observe(&mut self.sensor_rng, self.is_red[target])
             {
+                if let Some(reports) = &mut self.reports {
+                    let s = red / (red + blue);
+                    // This step's reports are in ascending track order.
+                    let step_reports = &mut reports[first_report..];
+                    let at = step_reports
+                        .binary_search_by_key(&track, |r| r.track)
+                        .expect("an isolated track is present");
+                    step_reports[at].scores = Some(BTreeMap::from([
+                        ("red".to_string(), s),
+                        ("blue".to_string(), 1.0 - s),
+                    ]));
+                }
                 out.push(TimedEvent {
                     time,
-                    event: SimEvent::Observe {
-                        track: self.assignment.track_of(i),
-                        red,
-                        blue,
-                    },
+                    event: SimEvent::Observe { track, red, blue },
                 });
                 added += 1;
             }
+        }
+        if self.tracks.iter().any(Option::is_some) {
+            self.previous.clone_from(&self.tracks);
+            self.previous_time = Some(time);
         }
         added
     }
@@ -218,7 +297,7 @@ mod tests {
     #[test]
     fn a_certain_swap_moves_the_colour_to_the_other_track() {
         let params = ExtractionParams {
-            swap: 1.0,
+            meetings: MeetingModel::Constant(1.0),
             ..Default::default()
         };
         let rng = || ChaCha8Rng::seed_from_u64(1);
@@ -256,7 +335,7 @@ mod tests {
     #[test]
     fn a_limit_cuts_the_step() {
         let params = ExtractionParams {
-            swap: 1.0,
+            meetings: MeetingModel::Constant(1.0),
             ..Default::default()
         };
         let rng = || ChaCha8Rng::seed_from_u64(1);

@@ -11,6 +11,7 @@ use crate::geometry::Rect;
 use crate::motion::crowd::CrowdParams;
 use crate::motion::pedestrians::{Timing, WindowSpec};
 use crate::motion::waypoint::WaypointParams;
+use idmesh_extract::MeetingModel;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -64,6 +65,7 @@ pub struct Scenario {
     pub(super) move_interval: Option<f64>,
     pub(super) reveal_initial_red: bool,
     pub(super) identity: IdentityOptions,
+    pub(super) keep_reports: bool,
     pub(super) seed: u64,
 }
 
@@ -83,6 +85,7 @@ impl Scenario {
             move_interval: Some(1.0),
             reveal_initial_red: true,
             identity: IdentityOptions::default(),
+            keep_reports: false,
             seed: 0,
         }
     }
@@ -217,7 +220,22 @@ impl Scenario {
 
     /// Probability that a mix exchanges its two targets' tracks.
     pub fn swap(mut self, probability: f64) -> Self {
-        self.extraction.swap = probability;
+        self.extraction.meetings = MeetingModel::Constant(probability);
+        self
+    }
+
+    /// How likely a meeting is to exchange its two targets' tracks (a
+    /// constant, or from the meeting's closest distance and speed).
+    pub fn meetings(mut self, model: MeetingModel) -> Self {
+        self.extraction.meetings = model;
+        self
+    }
+
+    /// Keep what the simulated tracker reports (every track's position
+    /// each step, class scores where the sensor saw a colour) in
+    /// [`GeneratedTrace::reports`](super::GeneratedTrace::reports).
+    pub fn tracker_reports(mut self, keep: bool) -> Self {
+        self.keep_reports = keep;
         self
     }
 

@@ -1,89 +1,162 @@
 //! The simulator is the extractor plus drawn swaps: on the positions of a
-//! real pedestrian scene, `simulate --model pedestrians` and
-//! `idmesh-extract`'s [`Extractor`] fed those positions as a tracker's
-//! reports find the same mixes — same pairs, same times — and the
-//! extractor's meeting distances are the distances of those positions.
+//! real pedestrian scene, what `simulate --model pedestrians` says its
+//! tracker reported (each track where the target it follows is, class
+//! scores where the sensor saw a colour), fed to `idmesh-extract`'s
+//! [`Extractor`], gives the simulator's mixes — same pairs, times, swap
+//! probabilities — and its observations, also when swaps are drawn and
+//! the swap probability comes from the meeting's geometry.
 
 use super::Scenario;
 use crate::events::SimEvent;
-use crate::geometry::Vec2;
 use crate::motion::pedestrians::{data_dir, Scene, Timing};
-use idmesh_extract::{Extractor, ExtractorConfig, MeetingModel, Report, RosterPolicy};
+use idmesh_extract::{Extractor, MeetingModel, RosterPolicy};
 use idmesh_protocol::trace::Line;
 use std::sync::Arc;
 
-#[test]
-fn simulate_pedestrians_and_extract_agree_on_every_mix() {
-    let scene = Scene::load(data_dir().join("zara01/obsmat/obsmat.txt"), Timing::Auto).unwrap();
-    // Swap 0: every track keeps its target, so the simulator's tracks are
-    // the targets the extractor is told about.
-    let scenario = Scenario::pedestrians_loaded(Arc::new(scene))
-        .duration(90.0)
-        .swap(0.0)
-        .seed(4);
-    let trace = scenario.generate().unwrap();
-    let simulated: Vec<(f64, u32, u32)> = trace
-        .events
-        .iter()
-        .filter_map(|e| match e.event {
-            SimEvent::Mix { a, b, .. } => Some((e.time, a, b)),
-            _ => None,
-        })
-        .collect();
-    assert!(simulated.len() > 10, "the scene should mix: {simulated:?}");
+/// A mix or an observation, comparable across the two: an observation by
+/// its likelihood ratio (the extractor's likelihoods sum to 1, the
+/// sensor's need not).
+#[derive(Debug, Clone, PartialEq)]
+enum Sensed {
+    Mix {
+        time: f64,
+        a: u32,
+        b: u32,
+        swap: f64,
+    },
+    Observe {
+        time: f64,
+        track: u32,
+        red_share: f64,
+    },
+}
 
-    let params = scenario.extraction_params().clone();
-    let config = ExtractorConfig {
-        mix_distance: params.mix_distance,
-        release_factor: params.release_factor,
-        observe_distance: params.observe_distance,
-        observe_interval: params.observe_interval,
-        meeting_model: MeetingModel::Constant(0.0),
-        move_interval: None,
-        ..Default::default()
-    };
-    let mut motion = scenario.motion().unwrap().motion;
-    let n = motion.targets() as u32;
-    let mut extractor = Extractor::new(config, RosterPolicy::Declared((0..n).collect())).unwrap();
-    let mut out = Vec::new();
-    let mut frames: Vec<(f64, Vec<Option<Vec2>>)> = Vec::new();
-    let dt = motion.dt();
-    let mut step = 0u64;
-    loop {
-        // The simulator's step times (rounded to the nanosecond).
-        let time = (step as f64 * dt * 1e9).round() / 1e9;
-        for (target, p) in motion.positions().iter().enumerate() {
-            if let Some(p) = p {
-                extractor
-                    .push(Report::at(time, target as u32, p.x, p.y), &mut out)
-                    .unwrap();
+fn close(x: &[Sensed], y: &[Sensed]) -> Result<(), String> {
+    if x.len() != y.len() {
+        return Err(format!("{} events against {}", x.len(), y.len()));
+    }
+    for (i, (p, q)) in x.iter().zip(y).enumerate() {
+        let same = match (p, q) {
+            (
+                Sensed::Mix {
+                    time: t1,
+                    a: a1,
+                    b: b1,
+                    swap: s1,
+                },
+                Sensed::Mix {
+                    time: t2,
+                    a: a2,
+                    b: b2,
+                    swap: s2,
+                },
+            ) => (t1, a1, b1) == (t2, a2, b2) && (s1 - s2).abs() < 1e-12,
+            (
+                Sensed::Observe {
+                    time: t1,
+                    track: k1,
+                    red_share: r1,
+                },
+                Sensed::Observe {
+                    time: t2,
+                    track: k2,
+                    red_share: r2,
+                },
+            ) => t1 == t2 && k1 == k2 && (r1 - r2).abs() < 1e-9,
+            _ => false,
+        };
+        if !same {
+            return Err(format!("event {i}: {p:?} against {q:?}"));
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn the_simulated_trackers_reports_extract_to_the_simulators_events() {
+    let meetings = [
+        MeetingModel::Constant(0.0),
+        MeetingModel::Constant(0.5),
+        MeetingModel::Approach {
+            p_max: 0.9,
+            sigma: 0.4,
+            v0: 0.8,
+        },
+    ];
+    for (file, seed) in [
+        ("zara01/obsmat/obsmat.txt", 4),
+        ("univ/students001.txt", 5),
+        ("hotel/obsmat/obsmat.txt", 6),
+    ] {
+        let scene = Arc::new(Scene::load(data_dir().join(file), Timing::Auto).unwrap());
+        for model in meetings {
+            let scenario = Scenario::pedestrians_loaded(scene.clone())
+                .duration(120.0)
+                .mix_distance(1.0)
+                .meetings(model)
+                .tracker_reports(true)
+                .seed(seed);
+            let trace = scenario.generate().unwrap();
+            let simulated: Vec<Sensed> = trace
+                .events
+                .iter()
+                .filter_map(|e| match e.event {
+                    SimEvent::Mix { a, b, swap, .. } => Some(Sensed::Mix {
+                        time: e.time,
+                        a,
+                        b,
+                        swap,
+                    }),
+                    SimEvent::Observe { track, red, blue } => Some(Sensed::Observe {
+                        time: e.time,
+                        track,
+                        red_share: red / (red + blue),
+                    }),
+                    _ => None,
+                })
+                .collect();
+            let stats = trace.stats();
+            assert!(stats.mixes > 10, "{file}: the scene should mix");
+            assert!(stats.observations > 10, "{file}: the scene should be seen");
+            if model != MeetingModel::Constant(0.0) {
+                assert!(
+                    stats.exchanges > 0,
+                    "{file} {model:?}: swaps should be drawn"
+                );
+            }
+
+            let n = trace.header.tracks as u32;
+            let config = scenario.extraction_params().extractor_config();
+            let mut extractor =
+                Extractor::new(config, RosterPolicy::Declared((0..n).collect())).unwrap();
+            let mut out = Vec::new();
+            for report in trace.reports.clone().unwrap() {
+                extractor.push(report, &mut out).unwrap();
+            }
+            extractor.finish(&mut out);
+            let extracted: Vec<Sensed> = out
+                .iter()
+                .filter_map(|l| match l {
+                    Line::Mix(m) => Some(Sensed::Mix {
+                        time: m.time,
+                        a: m.a,
+                        b: m.b,
+                        swap: m.swap,
+                    }),
+                    Line::Observe(o) => Some(Sensed::Observe {
+                        time: o.time,
+                        track: o.track,
+                        red_share: o.red / (o.red + o.blue),
+                    }),
+                    _ => None,
+                })
+                .collect();
+            if let Err(e) = close(&extracted, &simulated) {
+                panic!("{file} with {model:?}: {e}");
+            }
+            for m in extractor.take_meetings() {
+                assert!(m.distance <= scenario.extraction_params().mix_distance);
             }
         }
-        frames.push((time, motion.positions().to_vec()));
-        if time >= trace.duration - 1e-9 || !motion.advance() {
-            break;
-        }
-        step += 1;
-    }
-    extractor.finish(&mut out);
-    let extracted: Vec<(f64, u32, u32)> = out
-        .iter()
-        .filter_map(|l| match l {
-            Line::Mix(m) => Some((m.time, m.a, m.b)),
-            _ => None,
-        })
-        .collect();
-    assert_eq!(extracted, simulated);
-    let meetings = extractor.take_meetings();
-    assert_eq!(meetings.len(), simulated.len());
-    for m in meetings {
-        let (_, positions) = frames.iter().find(|(t, _)| *t == m.time).unwrap();
-        let (pa, pb) = (
-            positions[m.a as usize].unwrap(),
-            positions[m.b as usize].unwrap(),
-        );
-        let distance = (pb - pa).norm();
-        assert!((m.distance - distance).abs() < 1e-12);
-        assert!(m.distance <= params.mix_distance);
     }
 }

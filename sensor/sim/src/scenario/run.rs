@@ -19,7 +19,7 @@
 
 use super::builder::{Scenario, DEFAULT_TARGETS};
 use super::error::ScenarioError;
-use super::identity::IdentityReader;
+use super::identity::{IdentityReader, IdentityTrace};
 use super::options::{Length, Model, RedChoice, SceneSource};
 use super::progress::{Progress, Throttle};
 use super::trace::{GeneratedTrace, TraceHeader};
@@ -28,6 +28,7 @@ use crate::motion::crowd::Crowd;
 use crate::motion::pedestrians::{Replay, Scene, Window};
 use crate::motion::waypoint::Waypoint;
 use crate::motion::Motion;
+use idmesh_extract::MeetingModel;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -134,6 +135,9 @@ impl Scenario {
             stream(self.seed, STREAM_SWAPS),
             stream(self.seed, STREAM_SENSOR),
         );
+        if self.keep_reports {
+            extractor = extractor.keep_reports();
+        }
         let true_initial_red = extractor.red_tracks();
         let mut reader = self.identity.enabled.then(|| {
             IdentityReader::new(
@@ -243,8 +247,12 @@ impl Scenario {
         let x = &self.extraction;
         let mut description = format!(
             "{motion_description}; {n} tracks, {k} red; dt {dt} s; mix within {} m \
-             (swap {}), observe beyond {} m at most every {} s; seed {}",
-            x.mix_distance, x.swap, x.observe_distance, x.observe_interval, self.seed
+             ({}), observe beyond {} m at most every {} s; seed {}",
+            x.mix_distance,
+            describe_meetings(&x.meetings),
+            x.observe_distance,
+            x.observe_interval,
+            self.seed
         );
         if reader.is_some() {
             description.push_str(&format!(
@@ -252,6 +260,14 @@ impl Scenario {
                 self.identity.accuracy
             ));
         }
+        let identity = reader.map(|r| r.finish(self.identity.reveal_initial));
+        let reports = self.keep_reports.then(|| {
+            let mut reports = extractor.take_reports();
+            if let Some(identity) = &identity {
+                with_reads(&mut reports, identity);
+            }
+            reports
+        });
         Ok(GeneratedTrace {
             header: TraceHeader {
                 tracks: n,
@@ -263,7 +279,8 @@ impl Scenario {
             events,
             true_initial_red,
             duration,
-            identity: reader.map(|r| r.finish(self.identity.reveal_initial)),
+            identity,
+            reports,
         })
     }
 
@@ -301,6 +318,46 @@ impl Scenario {
             is_red[i] = true;
         }
         Ok(is_red)
+    }
+}
+
+/// Puts each identity read on the report of its track at its time: the
+/// tracker reports the badge it read with the position.
+fn with_reads(reports: &mut [idmesh_extract::Report], identity: &IdentityTrace) {
+    // Reports are in time order, a step's in track order; a step's reads
+    // are in target order, so sorted first.
+    let mut reads: Vec<_> = identity.reads.iter().collect();
+    reads.sort_by(|a, b| {
+        (a.time, a.track)
+            .partial_cmp(&(b.time, b.track))
+            .expect("finite times")
+    });
+    let mut at = 0;
+    for read in reads {
+        while at < reports.len() && (reports[at].time, reports[at].track) < (read.time, read.track)
+        {
+            at += 1;
+        }
+        if let Some(report) = reports
+            .get_mut(at)
+            .filter(|r| (r.time, r.track) == (read.time, read.track))
+        {
+            report.identity = Some(idmesh_extract::IdentityRead {
+                identity: read.identity,
+                accuracy: identity.accuracy,
+            });
+        }
+    }
+}
+
+/// How the trace's description names the meeting model: `swap 0.5` for a
+/// constant (as traces always said), the formula's parameters otherwise.
+fn describe_meetings(model: &MeetingModel) -> String {
+    match *model {
+        MeetingModel::Constant(p) => format!("swap {p}"),
+        MeetingModel::Approach { p_max, sigma, v0 } => {
+            format!("swap by approach: p_max {p_max}, sigma {sigma} m, v0 {v0} m/s")
+        }
     }
 }
 

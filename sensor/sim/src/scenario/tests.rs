@@ -5,14 +5,16 @@ use super::*;
 use crate::events::{Assignment, SensorModel, SimEvent};
 use crate::geometry::Vec2;
 use crate::motion::pedestrians::{data_dir, Scene, Timing};
+use idmesh_extract::MeetingModel;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 /// Replays `scenario`'s motion step by step next to `trace` and checks every
-/// event: mixes are pairs of present targets within the mixing distance that
-/// were apart (beyond the release distance, or one absent) since their last
-/// mix; observed targets are present, isolated by the observation distance
-/// and not observed twice within the interval; moves are the positions of
+/// event, as a tracker sees it — each track where the target it follows was
+/// at the start of the step: mixes are pairs of present tracks within the
+/// mixing distance that were apart (beyond the release distance, or one
+/// absent) since their last mix; observed tracks are present, isolated by
+/// the observation distance and not observed twice within the interval; moves are the positions of
 /// the targets the tracks follow; truth lines equal the initial red set
 /// with every exchange applied. Returns how many observations reported
 /// "red" for red and for blue targets: (red seen red, red total, blue seen
@@ -41,6 +43,12 @@ fn check_against_motion(scenario: &Scenario, trace: &GeneratedTrace) -> [usize; 
     let mut prev_time = 0.0;
     let mut truths = 0;
 
+    let on_tracks = |assignment: &Assignment, pos: &[Option<Vec2>]| -> Vec<Option<Vec2>> {
+        (0..pos.len())
+            .map(|t| pos[assignment.target_on(t) as usize])
+            .collect()
+    };
+    let mut tracks = on_tracks(&assignment, &positions);
     let update_armed = |armed: &mut BTreeMap<(usize, usize), bool>, pos: &[Option<Vec2>]| {
         for ((i, j), a) in armed.iter_mut() {
             let apart = match (pos[*i], pos[*j]) {
@@ -60,7 +68,8 @@ fn check_against_motion(scenario: &Scenario, trace: &GeneratedTrace) -> [usize; 
             assert!(motion.advance(), "trace runs past the motion");
             step += 1;
             positions.copy_from_slice(motion.positions());
-            update_armed(&mut armed, &positions);
+            tracks = on_tracks(&assignment, &positions);
+            update_armed(&mut armed, &tracks);
         }
         match &e.event {
             SimEvent::Mix {
@@ -70,21 +79,21 @@ fn check_against_motion(scenario: &Scenario, trace: &GeneratedTrace) -> [usize; 
                 exchanged,
             } => {
                 assert_ne!(a, b);
-                assert_eq!(*swap, params.swap);
+                assert_eq!(MeetingModel::Constant(*swap), params.meetings);
                 let i = assignment.target_on(*a as usize) as usize;
                 let j = assignment.target_on(*b as usize) as usize;
-                let (p, q) = (positions[i].unwrap(), positions[j].unwrap());
+                let (p, q) = (tracks[*a as usize].unwrap(), tracks[*b as usize].unwrap());
                 let d = p.distance(q);
                 assert!(
                     d <= params.mix_distance + 1e-12,
-                    "mix of tracks {a},{b} at {}: targets {i},{j} are {d} m apart",
+                    "mix of tracks {a},{b} at {} is {d} m apart",
                     e.time
                 );
-                let key = (i.min(j), i.max(j));
+                let key = (*a.min(b) as usize, *a.max(b) as usize);
                 let was_armed = armed.insert(key, false).unwrap_or(true);
                 assert!(
                     was_armed,
-                    "targets {i},{j} mixed again at {} without separating",
+                    "tracks {a},{b} mixed again at {} without separating",
                     e.time
                 );
                 if *exchanged {
@@ -94,23 +103,24 @@ fn check_against_motion(scenario: &Scenario, trace: &GeneratedTrace) -> [usize; 
             }
             SimEvent::Observe { track, red, blue } => {
                 let i = assignment.target_on(*track as usize) as usize;
-                let p = positions[i].expect("observed target is present");
-                for (j, q) in positions.iter().enumerate() {
-                    if let (true, Some(q)) = (j != i, q) {
+                let t = *track as usize;
+                let p = tracks[t].expect("observed track is present");
+                for (u, q) in tracks.iter().enumerate() {
+                    if let (true, Some(q)) = (u != t, q) {
                         assert!(
                             p.distance(*q) > params.observe_distance,
-                            "observed target {i} at {} has target {j} at {} m",
+                            "observed track {t} at {} has track {u} at {} m",
                             e.time,
                             p.distance(*q)
                         );
                     }
                 }
                 assert!(
-                    e.time >= last_observed[i] + params.observe_interval - 1e-9,
-                    "target {i} observed twice within the interval at {}",
+                    e.time >= last_observed[t] + params.observe_interval - 1e-9,
+                    "track {t} observed twice within the interval at {}",
                     e.time
                 );
-                last_observed[i] = e.time;
+                last_observed[t] = e.time;
                 assert!(*red >= 0.0 && *blue >= 0.0 && red + blue > 0.0);
                 let seen_red = red > blue;
                 if target_red[i] {

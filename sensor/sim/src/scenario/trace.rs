@@ -3,6 +3,7 @@
 
 use super::identity::IdentityTrace;
 use crate::events::{SimEvent, TimedEvent};
+use idmesh_extract::Report;
 
 /// The facts of the trace's `header` line.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,6 +34,12 @@ pub struct GeneratedTrace {
     /// The identities and their reads, for a scenario with
     /// [`identities`](super::Scenario::identities) on.
     pub identity: Option<IdentityTrace>,
+    /// What the simulated tracker reported, for a scenario with
+    /// [`tracker_reports`](super::Scenario::tracker_reports) on: fed to
+    /// `idmesh-extract`'s extractor with
+    /// [`ExtractionParams::extractor_config`](crate::events::ExtractionParams::extractor_config),
+    /// they give this trace's mixes and observations.
+    pub reports: Option<Vec<Report>>,
 }
 
 /// Counts of a trace's events.

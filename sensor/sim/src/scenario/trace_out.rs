@@ -13,7 +13,7 @@
 
 use super::trace::GeneratedTrace;
 use crate::events::{SimEvent, TimedEvent};
-use idmesh_protocol::trace::{Header, Line, Mix, Move, Observe, Truth};
+use idmesh_protocol::trace::{Detect, Header, Line, Mix, Move, Observe, Truth};
 use idmesh_protocol::{TraceError, TraceWriter};
 use std::io::Write;
 
@@ -80,6 +80,50 @@ pub fn write_trace<W: Write>(
     let mut writer = TraceWriter::new(output, sink);
     for line in lines(trace) {
         writer.write(&line)?;
+    }
+    writer.finish()
+}
+
+/// Writes what the simulated tracker reported (a scenario with
+/// [`tracker_reports`](super::Scenario::tracker_reports) on) as a
+/// version-2 trace: the trace's header (tracks, red count, what the prior
+/// reveals) and one `detect` line per report, positions unrounded so that
+/// `idmesh extract` measures the distances the simulator measured. `None`
+/// when the scenario kept no reports.
+pub fn write_tracker_output<W: Write>(
+    trace: &GeneratedTrace,
+    output: W,
+    sink: impl Into<String>,
+) -> Option<Result<W, TraceError>> {
+    let reports = trace.reports.as_ref()?;
+    Some(write_reports(
+        trace,
+        reports,
+        TraceWriter::new(output, sink),
+    ))
+}
+
+fn write_reports<W: Write>(
+    trace: &GeneratedTrace,
+    reports: &[idmesh_extract::Report],
+    mut writer: TraceWriter<W>,
+) -> Result<W, TraceError> {
+    let Line::Header(mut header) = header_line(trace) else {
+        unreachable!("header_line makes a header");
+    };
+    header.version = idmesh_protocol::trace::VERSION_2;
+    header.source = Some(format!("{} (tracker output)", trace.header.source));
+    writer.write(&Line::Header(header))?;
+    for r in reports {
+        writer.write(&Line::Detect(Detect {
+            time: r.time,
+            track: r.track,
+            x: r.x,
+            y: r.y,
+            scores: r.scores.clone(),
+            identity: r.identity.map(|i| i.identity),
+            accuracy: r.identity.map(|i| i.accuracy),
+        }))?;
     }
     writer.finish()
 }
