@@ -128,6 +128,11 @@ pub struct BenchArgs {
     /// truth line) against the centralized engine's.
     #[arg(long, conflicts_with = "ingest")]
     pub accuracy: bool,
+    /// Only the extraction figures: reports a sensor turns into events per
+    /// second (1,000 to 100,000 tracks), and the latency from a position
+    /// to the first answer with its mix, against the raw round trip.
+    #[arg(long, conflicts_with_all = ["ingest", "accuracy"])]
+    pub extraction: bool,
     /// With --accuracy: the Table III n to run, comma-separated.
     #[arg(
         long,

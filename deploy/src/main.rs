@@ -109,6 +109,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 starts: args.starts,
                 seeds: args.seeds as usize,
             }),
+            extraction: args.extraction,
         }),
     }
 }

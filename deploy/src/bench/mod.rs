@@ -28,6 +28,7 @@
 mod accuracy;
 pub use accuracy::Crowds;
 mod cpu;
+mod extraction;
 mod ingest;
 mod interval;
 mod latency;
@@ -80,6 +81,9 @@ pub struct BenchOptions {
     pub journal: bool,
     /// Only the accuracy figure, on these Table III crowds.
     pub accuracy: Option<accuracy::Crowds>,
+    /// Only the extraction figures (`extraction`): events from positions
+    /// per second, and latency from a position to the answer.
+    pub extraction: bool,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
@@ -99,6 +103,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             Some(out) => write(out, &report),
             None => Ok(()),
         };
+    }
+    if options.extraction {
+        return extraction::run(&runtime, options);
     }
     let trace = options.dir.join(format!(
         "crowd-{}-{}-{}.jsonl",
@@ -498,6 +505,25 @@ impl Deployment {
         Self::launch(&topology, &config).await
     }
 
+    /// A deployment whose one sensor extracts its events with `extract`
+    /// from what producers send to its ingest key, after `header`.
+    async fn start_extracting(
+        options: &BenchOptions,
+        header: &Path,
+        leaders: usize,
+        extract: idmesh_extract::ExtractorConfig,
+    ) -> Result<Self> {
+        let mut topology =
+            loopback::topology(&std::fs::canonicalize(header)?, leaders, 1, Ports::Free)?;
+        topology.prefix = format!("idmesh/bench-extract-{leaders}-{}", std::process::id());
+        for sensor in &mut topology.sensors {
+            sensor.live = true;
+            sensor.extract = Some(extract.clone());
+        }
+        let config = options.dir.join(format!("topology-extract-{leaders}.toml"));
+        Self::launch(&topology, &config).await
+    }
+
     /// Writes `topology` to `config` and starts its processes.
     async fn launch(topology: &Topology, config: &Path) -> Result<Self> {
         topology.save(config)?;
@@ -612,6 +638,7 @@ mod tests {
             ingest: false,
             journal: false,
             accuracy: None,
+            extraction: false,
         }
     }
 
