@@ -33,11 +33,15 @@ use idmesh_protocol::wire::coordinator_to_sensor::SensorStats;
 use idmesh_protocol::wire::leader_to_sensor::{
     Durable, Follow, Followed, Progress, Resend, Resent, Unfollow,
 };
-use idmesh_protocol::wire::producer_to_sensor::IngestAck;
+use idmesh_protocol::wire::producer_to_sensor::{IngestAck, LineRefused};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use serde::{Deserialize, Serialize};
 
 use idmesh_protocol::wire::{decode, encode, Valid, VERSION};
+
+/// What routing lines gives: the cuts they reached, for the journal the
+/// line each came after, and the lines the extractor refused (index, why).
+type Routed<Q> = (Vec<Placed<Q>>, Vec<(u32, Wanted)>, Vec<(usize, String)>);
 use std::collections::BTreeMap;
 
 mod meshed;
@@ -434,7 +438,8 @@ impl<Q> Gateway<Q> {
     /// Routes `lines` again, placing each cut after the line it followed.
     fn replay_lines(&mut self, lines: &[Line], cuts: &[(u32, Wanted)]) {
         for (i, line) in lines.iter().enumerate() {
-            self.route_line(line);
+            // Refused again as it was then, and counted again.
+            let _ = self.route_line(line);
             for (_, wanted) in cuts.iter().filter(|(after, _)| *after as usize == i) {
                 self.state.router.cut(*wanted);
             }
@@ -467,16 +472,26 @@ impl<Q> Gateway<Q> {
     /// Routes `lines` in order; the cuts they reached (to answer after
     /// the next flush) and, for the journal, after which line each came.
     fn route(&mut self, lines: &[Line]) -> (Vec<Placed<Q>>, Vec<(u32, Wanted)>) {
+        let (placed, cuts, _) = self.route_judged(lines);
+        (placed, cuts)
+    }
+
+    /// [`Gateway::route`], and the lines the extractor refused: (index
+    /// in `lines`, why).
+    fn route_judged(&mut self, lines: &[Line]) -> Routed<Q> {
         let mut placed = Vec::new();
         let mut cuts = Vec::new();
+        let mut refused = Vec::new();
         for (i, line) in lines.iter().enumerate() {
-            self.route_line(line);
+            if let Err(reason) = self.route_line(line) {
+                refused.push((i, reason));
+            }
             let before = placed.len();
             self.cuts
                 .reached(&mut self.state.router, &self.name, &mut placed);
             cuts.extend(placed[before..].iter().map(|p| (i as u32, p.wanted)));
         }
-        (placed, cuts)
+        (placed, cuts, refused)
     }
 
     /// The stream will end after `end` events: cuts asked for beyond it
@@ -533,7 +548,7 @@ impl<Q> Gateway<Q> {
             return Err(IngestRefusal::OnlyMesh);
         }
         let judged = self.state.ingest.offer(offer, &mut self.state.stats)?;
-        let (placed, cuts) = self.route(&judged.accepted);
+        let (placed, cuts, refused) = self.route_judged(&judged.accepted);
         self.note(Record::Offer {
             producer: offer.producer.map(str::to_owned),
             counter: offer.counter.map(str::to_owned),
@@ -541,6 +556,18 @@ impl<Q> Gateway<Q> {
             cuts,
         });
         let mut ack = judged.ack;
+        // Reports the extractor refused in the stream's order (out of
+        // time order after another producer's later frame): taken off the
+        // accepted counters, answered with why.
+        for (i, reason) in refused.into_iter().rev() {
+            let counter = ack.accepted.remove(i);
+            ack.errors.push(LineRefused {
+                counter,
+                line: counter - ack.first + 1,
+                reason,
+            });
+        }
+        ack.errors.sort_by_key(|e| e.counter);
         ack.events = self.state.router.events();
         Ok((ack, placed))
     }
@@ -597,23 +624,27 @@ impl<Q> Gateway<Q> {
 
     /// Routes one line of the stream's order: as it is, or, with
     /// extraction on, the events it completes. A report the extractor
-    /// refuses is counted and logged (the rules it breaks that a single
-    /// line shows were checked where it came in).
-    fn route_line(&mut self, line: &Line) {
+    /// refuses (a rule that depends on the stream so far, such as time
+    /// order across producers; what a single line shows was checked where
+    /// it came in) is counted and logged, and its reason returned so that
+    /// a producer still waiting for its acknowledgement is told.
+    fn route_line(&mut self, line: &Line) -> Result<(), String> {
         let Some(extraction) = self.state.extraction.as_mut() else {
             self.state.router.line(line);
-            return;
+            return Ok(());
         };
         match extraction.take(line) {
             Ok(lines) => {
                 for line in &lines {
                     self.state.router.line(line);
                 }
+                Ok(())
             }
             Err(reason) => {
                 self.state.stats.rejected += 1;
                 self.state.stats.bad_lines += 1;
                 tracing::warn!(sensor = %self.name, %reason, "a report the extractor refused");
+                Err(reason)
             }
         }
     }

@@ -1196,3 +1196,48 @@ fn a_gateway_extracting_from_reports_routes_what_the_extracted_trace_routes() {
     };
     assert!(error.contains("send move and detect lines"), "{error}");
 }
+
+/// Two producers feeding one extracting sensor: a report older than a
+/// frame the other producer already sent cannot go into the stream's one
+/// order. The extractor refuses it where the stream is merged, and the
+/// producer, still waiting for its acknowledgement, is told which line and
+/// why; its other lines are taken.
+#[test]
+fn a_report_behind_another_producers_frame_is_refused_to_its_producer() {
+    use crate::extraction::Extraction;
+    use crate::ingest::Offer;
+    use idmesh_extract::ExtractorConfig;
+    let mut header = Header::new_v2(4);
+    header.red = Some(2);
+    let mut gateway = Gateway::<u32>::new("s", router_for(&header), false)
+        .extracting(Extraction::new(ExtractorConfig::default(), &header).unwrap());
+    let offer = |producer, payload: &'static str| Offer {
+        producer: Some(producer),
+        counter: Some("0"),
+        payload: payload.as_bytes(),
+        time: None,
+        finish: false,
+    };
+    let (ack, _) = gateway
+        .ingest(offer(
+            "left",
+            "{\"kind\":\"move\",\"time\":2,\"track\":0,\"x\":0,\"y\":0}\n\
+             {\"kind\":\"move\",\"time\":2,\"track\":1,\"x\":9,\"y\":0}",
+        ))
+        .unwrap();
+    assert_eq!((ack.accepted, ack.errors.len()), (vec![0, 1], 0));
+    let (ack, _) = gateway
+        .ingest(offer(
+            "right",
+            "{\"kind\":\"move\",\"time\":2,\"track\":2,\"x\":20,\"y\":0}\n\
+             {\"kind\":\"move\",\"time\":1,\"track\":3,\"x\":30,\"y\":0}\n\
+             {\"kind\":\"move\",\"time\":2,\"track\":3,\"x\":30,\"y\":0}",
+        ))
+        .unwrap();
+    assert_eq!(ack.accepted, vec![0, 2]);
+    assert_eq!(ack.errors.len(), 1, "{:?}", ack.errors);
+    let refused = &ack.errors[0];
+    assert_eq!((refused.counter, refused.line), (1, 2));
+    assert!(refused.reason.contains("before"), "{}", refused.reason);
+    assert_eq!(gateway.stats().rejected, 1);
+}

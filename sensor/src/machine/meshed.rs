@@ -283,7 +283,9 @@ impl<Q> Gateway<Q> {
                     // checked again, and every sensor skips the same.
                     match self.state.ingest.event(&text) {
                         Ok(line) => {
-                            self.route_line(&line);
+                            // Acknowledged before the merge: a refusal
+                            // here is counted and logged, not answered.
+                            let _ = self.route_line(&line);
                             let Some(mesh) = self.state.mesh.as_mut() else {
                                 return;
                             };
