@@ -21,6 +21,7 @@ const SOURCES: &[&str] = &[
     "../../sensor/sim/src/motion",
     "../../sensor/sim/src/events",
     "../../sensor/extract/src",
+    "../../protocol/placement/src",
     "../../protocol/src/trace",
     "src/eval",
     "src/filters.rs",
