@@ -395,11 +395,7 @@ pub fn run(runtime: &tokio::runtime::Runtime, options: &BenchOptions) -> Result<
     )?;
     print!("{report}");
     if let Some(out) = &options.out {
-        let made = Made {
-            machine: idmesh_eval::machine::description(),
-            date: idmesh_eval::machine::today(),
-            seconds: started.elapsed().as_secs_f64(),
-        };
+        let made = Made::since(started);
         write(out, &page(out, &report, &made))?;
     }
     Ok(())

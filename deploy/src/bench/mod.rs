@@ -131,11 +131,7 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     };
     print!("{report}");
     if let Some(out) = &options.out {
-        let made = Made {
-            machine: idmesh_eval::machine::description(),
-            date: idmesh_eval::machine::today(),
-            seconds: started.elapsed().as_secs_f64(),
-        };
+        let made = Made::since(started);
         write(out, &page(options, &report, &made)?)?;
     }
     Ok(())
@@ -317,6 +313,17 @@ pub struct Made {
     pub date: String,
     /// The whole run, wall clock.
     pub seconds: f64,
+}
+
+impl Made {
+    /// This machine, today, a run that began at `started`.
+    pub fn since(started: Instant) -> Made {
+        Made {
+            machine: idmesh_eval::machine::description(),
+            date: idmesh_eval::machine::today(),
+            seconds: started.elapsed().as_secs_f64(),
+        }
+    }
 }
 
 /// The stamp of the code that measured: the digest of the sources that
