@@ -14,6 +14,15 @@ fn options(max_group: usize) -> FactoredIdentityOptions {
     FactoredIdentityOptions {
         max_group,
         certain: 0.0,
+        linked: true,
+    }
+}
+
+/// A cap, and hard cuts only (the split step without links).
+fn hard(max_group: usize) -> FactoredIdentityOptions {
+    FactoredIdentityOptions {
+        linked: false,
+        ..options(max_group)
     }
 }
 
