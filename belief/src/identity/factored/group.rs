@@ -231,10 +231,9 @@ pub(crate) struct Port {
 /// Bit i of the result: port i's phantom does not carry its star, i.e. an
 /// identity crossed the link (its exchange flag).
 pub(crate) fn flags_of(perm: &[u8], ports: &[Port]) -> usize {
-    ports
-        .iter()
-        .enumerate()
-        .fold(0, |acc, (i, p)| acc | (usize::from(perm[p.phantom] as usize != p.star) << i))
+    ports.iter().enumerate().fold(0, |acc, (i, p)| {
+        acc | (usize::from(perm[p.phantom] as usize != p.star) << i)
+    })
 }
 
 impl Group {
@@ -247,7 +246,11 @@ impl Group {
             .map(|(j, &t)| Port {
                 id: t,
                 phantom: j,
-                star: self.identities.iter().position(|&i| i == t).unwrap_or(usize::MAX),
+                star: self
+                    .identities
+                    .iter()
+                    .position(|&i| i == t)
+                    .unwrap_or(usize::MAX),
             })
             .collect()
     }
@@ -314,7 +317,13 @@ impl Group {
             .probs
             .iter()
             .enumerate()
-            .map(|(r, &p)| if p == 0.0 { 0.0 } else { p * weight(table.get(r)) })
+            .map(|(r, &p)| {
+                if p == 0.0 {
+                    0.0
+                } else {
+                    p * weight(table.get(r))
+                }
+            })
             .collect();
         let total: f64 = posterior.iter().sum();
         if !(total.is_finite() && total > 0.0) {

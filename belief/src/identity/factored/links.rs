@@ -276,7 +276,9 @@ impl FactoredIdentity {
                 return Ok((group, freed));
             };
             let k = group.size();
-            let keep_t: Vec<usize> = (0..k).filter(|&j| j != p.phantom && j != q.phantom).collect();
+            let keep_t: Vec<usize> = (0..k)
+                .filter(|&j| j != p.phantom && j != q.phantom)
+                .collect();
             let keep_x: Vec<usize> = (0..k).filter(|&x| x != p.star && x != q.star).collect();
             let mut new_x = vec![u8::MAX; k];
             for (i, &x) in keep_x.iter().enumerate() {

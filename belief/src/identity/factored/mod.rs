@@ -189,7 +189,10 @@ impl TryFrom<Stored> for FactoredIdentity {
                     return Err(bad(format!("port {} without its star", port.id)));
                 }
             }
-            if g.identities.iter().any(|&i| i as usize >= s.n && g.local_track(i).is_none()) {
+            if g.identities
+                .iter()
+                .any(|&i| i as usize >= s.n && g.local_track(i).is_none())
+            {
                 return Err(bad("a star without its phantom track".into()));
             }
         }
@@ -200,7 +203,9 @@ impl TryFrom<Stored> for FactoredIdentity {
         for (&id, &gi) in &groups_of {
             let partner = (s.n + ((id as usize - s.n) ^ 1)) as u32;
             if groups_of.get(&partner).is_none_or(|&h| h == gi) {
-                return Err(bad(format!("port {id} without its partner in another group")));
+                return Err(bad(format!(
+                    "port {id} without its partner in another group"
+                )));
             }
         }
         for g in &s.groups {
@@ -397,12 +402,18 @@ impl FactoredIdentity {
     /// take: (slots in the cap, cost, what to do) — the whole group costs
     /// nothing; a hard cut costs (1 − P(E)) + I; a linked cut takes one
     /// more slot and costs what it cannot keep.
-    fn options_for(&self, g: usize, keep: usize) -> Vec<(usize, f64, Part)> {
+    fn options_for(&self, g: usize, keep: usize, must: Option<u32>) -> Vec<(usize, f64, Part)> {
         let group = &self.groups[g];
         let k = group.size();
         let ports = group.ports(self.n);
         let mut out = vec![(k, 0.0, Part::Whole)];
-        for cut in split::best_cuts(group, keep, &ports).into_iter().flatten() {
+        let must = must
+            .and_then(|p| group.local_track(p))
+            .map_or(0, |j| 1u32 << j);
+        for cut in split::best_cuts(group, keep, must, &ports)
+            .into_iter()
+            .flatten()
+        {
             out.push((cut.size(), cut.cost(), Part::Hard(cut)));
             if self.options.linked && cut.cost() > self.options.certain {
                 let placeholder = (self.n + 2 * self.link_used.len()) as u32;
@@ -497,36 +508,62 @@ impl FactoredIdentity {
         let (la, lb) = (self.local(a)?, self.local(b)?);
         let (ka, kb) = (self.groups[ga].size(), self.groups[gb].size());
         let cap = self.options.max_group;
-        if ka + kb > cap {
+        let too_big = self.groups[ga].size() + self.groups[gb].size() > MAX_GROUP;
+        // Groups of one tree of links: the parts keep the ends of the path
+        // between them, so that a direct link collapses on the join.
+        let path = self.path(ga, gb);
+        let ends = path
+            .as_ref()
+            .and_then(|p| Some((*p.first()?, self.partner(*p.last()?))));
+        let collapses = path.as_ref().is_some_and(|p| p.len() == 1);
+        let freed = if collapses { 2 } else { 0 };
+        if ka + kb > cap + freed || too_big {
             // The pair of parts with the least total loss that fits the
             // cap; on (near) ties the smaller join, which is cheaper and
             // keeps more of the rest exact.
-            let (oa, ob) = (self.options_for(ga, la), self.options_for(gb, lb));
-            let mut best: Option<(f64, usize, usize, usize)> = None;
-            for (i, &(sa, ca, _)) in oa.iter().enumerate() {
-                for (j, &(sb, cb, _)) in ob.iter().enumerate() {
-                    if sa + sb > cap {
-                        continue;
-                    }
-                    let cost = ca + cb;
-                    let better = match best {
-                        None => true,
-                        Some((c, size, _, _)) => {
-                            cost < c - 1e-12 || (cost <= c + 1e-12 && sa + sb < size)
+            let choose = |oa: &[(usize, f64, Part)], ob: &[(usize, f64, Part)], room: usize| {
+                let mut best: Option<(f64, usize, usize, usize)> = None;
+                for (i, &(sa, ca, pa)) in oa.iter().enumerate() {
+                    for (j, &(sb, cb, pb)) in ob.iter().enumerate() {
+                        if sa + sb > room || !self.fits(&pa, ga, &pb, gb) {
+                            continue;
                         }
-                    };
-                    if better {
-                        best = Some((cost, sa + sb, i, j));
+                        let cost = ca + cb;
+                        let better = match best {
+                            None => true,
+                            Some((c, size, _, _)) => {
+                                cost < c - 1e-12 || (cost <= c + 1e-12 && sa + sb < size)
+                            }
+                        };
+                        if better {
+                            best = Some((cost, sa + sb, i, j));
+                        }
                     }
                 }
-            }
-            // Sizes 1 and 1 always fit a cap of at least 2.
-            let (_, _, i, j) = best.ok_or(BeliefError::BadComponent {
-                detail: format!("no parts of {ka} and {kb} tracks fit a cap of {cap}"),
-            })?;
+                best.map(|(_, _, i, j)| (oa[i].2, ob[j].2))
+            };
+            let kept_ends = choose(
+                &self.options_for(ga, la, ends.map(|e| e.0)),
+                &self.options_for(gb, lb, ends.map(|e| e.1)),
+                cap + freed,
+            );
+            // Without room for the path's ends the parts are cut freely
+            // (the cycle is then broken below). Sizes 1 and 1 always fit a
+            // cap of at least 2.
+            let (pa, pb) = match kept_ends {
+                Some(parts) => parts,
+                None => choose(
+                    &self.options_for(ga, la, None),
+                    &self.options_for(gb, lb, None),
+                    cap,
+                )
+                .ok_or(BeliefError::BadComponent {
+                    detail: format!("no parts of {ka} and {kb} tracks fit a cap of {cap}"),
+                })?,
+            };
             let mut old = Vec::new();
             let mut new = Vec::new();
-            for (g, part) in [(ga, oa[i].2), (gb, ob[j].2)] {
+            for (g, part) in [(ga, pa), (gb, pb)] {
                 match part {
                     Part::Whole => {}
                     Part::Hard(cut) => {
@@ -599,6 +636,19 @@ impl FactoredIdentity {
     }
 }
 
+impl FactoredIdentity {
+    /// Whether the join of two parts stays within the largest table (the
+    /// product is built before its links collapse).
+    fn fits(&self, a: &Part, ga: usize, b: &Part, gb: usize) -> bool {
+        let size = |p: &Part, g: usize| match p {
+            Part::Whole => self.groups[g].size(),
+            Part::Hard(c) => c.size(),
+            Part::Linked(c) => c.size() + 1,
+        };
+        size(a, ga) + size(b, gb) <= MAX_GROUP
+    }
+}
+
 /// What a join takes of a group.
 #[derive(Debug, Clone, Copy)]
 enum Part {
@@ -658,7 +708,10 @@ impl IdentityFilter for FactoredIdentity {
             .into_iter()
             .find(|p| self.group_of[self.partner(p.id) as usize] == h);
         if let Some(port) = link {
-            let real = self.groups[h].tracks.iter().find(|&&x| (x as usize) < self.n);
+            let real = self.groups[h]
+                .tracks
+                .iter()
+                .find(|&&x| (x as usize) < self.n);
             let other = real.copied().unwrap_or(t);
             self.read_across(g, track, port.id, identify.identity, right, wrong)?;
             self.settle(t)?;

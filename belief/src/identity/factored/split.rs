@@ -61,7 +61,7 @@ const NEGLIGIBLE: f64 = 1e-18;
 /// A holds local track `keep` and has s tracks: `result[s]` (index 0 and k
 /// are `None`). Ties go to the first cut met, which is deterministic. A
 /// cut keeps each port's phantom track and star identity on one side.
-pub(crate) fn best_cuts(group: &Group, keep: usize, ports: &[Port]) -> Vec<Option<Cut>> {
+pub(crate) fn best_cuts(group: &Group, keep: usize, must: u32, ports: &[Port]) -> Vec<Option<Cut>> {
     let k = group.size();
     let mut best: Vec<Option<Cut>> = vec![None; k + 1];
     if k < 2 {
@@ -91,15 +91,23 @@ pub(crate) fn best_cuts(group: &Group, keep: usize, ports: &[Port]) -> Vec<Optio
             continue;
         }
         let row = &mass[s << k..(s + 1) << k];
+        let holds = others
+            .iter()
+            .enumerate()
+            .filter(|&(bit, _)| s & (1 << bit) != 0)
+            .fold(1u32 << keep, |acc, (_, &j)| acc | (1 << j));
+        if holds & must != must {
+            continue;
+        }
         let tracks = others
             .iter()
             .enumerate()
             .filter(|&(bit, _)| s & (1 << bit) != 0)
             .fold(1u32 << keep, |acc, (_, &j)| acc | (1 << j));
         for (identities, &m) in row.iter().enumerate() {
-            let whole_ports = ports.iter().all(|p| {
-                (tracks >> p.phantom) & 1 == ((identities as u32) >> p.star) & 1
-            });
+            let whole_ports = ports
+                .iter()
+                .all(|p| (tracks >> p.phantom) & 1 == ((identities as u32) >> p.star) & 1);
             if whole_ports && m > best[size].map_or(0.0, |c| c.mass) {
                 best[size] = Some(Cut {
                     tracks,
@@ -450,7 +458,7 @@ mod tests {
         g.read(0, 0, 0.9, 0.1).unwrap();
         g.mix(0, 1, 0.3);
         let g = g.join(&Group::certain(2, 7)).unwrap();
-        let cuts = best_cuts(&g, 2, &[]);
+        let cuts = best_cuts(&g, 2, 0, &[]);
         let one = cuts[1].unwrap();
         assert_eq!((one.tracks, one.identities), (0b100, 0b100));
         assert!(one.cost() < 1e-12, "{one:?}");
@@ -468,7 +476,7 @@ mod tests {
         // the more likely pairing and loses ¼ of the mass.
         let mut g = Group::certain(0, 0).join(&Group::certain(1, 1)).unwrap();
         g.mix(0, 1, 0.25);
-        let cut = best_cuts(&g, 0, &[])[1].unwrap();
+        let cut = best_cuts(&g, 0, 0, &[])[1].unwrap();
         assert_eq!(cut.identities, 0b01);
         assert!((cut.mass - 0.75).abs() < 1e-12);
         assert!((cut.cost() - 0.25).abs() < 1e-12);
@@ -485,7 +493,7 @@ mod tests {
         g.probs.iter_mut().for_each(|p| *p = 0.0);
         g.probs[both] = 0.5;
         g.probs[none] = 0.5;
-        let cut = best_cuts(&g, 0, &[])[2].unwrap();
+        let cut = best_cuts(&g, 0, 0, &[])[2].unwrap();
         assert_eq!((cut.tracks, cut.identities), (0b0011, 0b0011));
         assert!((cut.mass - 1.0).abs() < 1e-12);
         assert!((cut.mutual_information - 2f64.ln()).abs() < 1e-12);

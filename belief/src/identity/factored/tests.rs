@@ -261,3 +261,82 @@ fn events_of_every_kind_apply() {
     let m = f.marginals().unwrap();
     assert!((m[1][1] - 0.8).abs() < 1e-12);
 }
+
+/// The joint over the n! assignments of real identities to real tracks
+/// that the groups and their links stand for, by brute force: every
+/// combination of the groups' assignments whose links agree, a track on a
+/// star given what the partner's phantom carries.
+fn joint(f: &FactoredIdentity) -> Vec<Vec<f64>> {
+    let n = f.n;
+    let mut m = vec![vec![0.0; n]; n];
+    let mut total = 0.0;
+    let groups = &f.groups;
+    let mut ranks = vec![0usize; groups.len()];
+    loop {
+        let mut p = 1.0;
+        for (g, &r) in groups.iter().zip(&ranks) {
+            p *= g.probs[r];
+        }
+        if p > 0.0 {
+            // carried[id] = global identity on global track id.
+            let mut carried = std::collections::HashMap::new();
+            for (g, &r) in groups.iter().zip(&ranks) {
+                for (j, &x) in g.table().get(r).iter().enumerate() {
+                    carried.insert(g.tracks[j], g.identities[x as usize]);
+                }
+            }
+            let consistent = carried.iter().all(|(&t, &i)| {
+                if (t as usize) < n {
+                    return true;
+                }
+                let q = f.partner(t);
+                (i == t) == (carried[&q] == q)
+            });
+            if consistent {
+                total += p;
+                for t in 0..n as u32 {
+                    let mut i = carried[&t];
+                    if i as usize >= n {
+                        i = carried[&f.partner(i)];
+                    }
+                    assert!((i as usize) < n, "an identity crossing two links");
+                    m[t as usize][i as usize] += p;
+                }
+            }
+        }
+        // Next combination.
+        let mut g = 0;
+        loop {
+            if g == groups.len() {
+                m.iter_mut().flatten().for_each(|x| *x /= total);
+                return m;
+            }
+            ranks[g] += 1;
+            if ranks[g] < groups[g].probs.len() {
+                break;
+            }
+            ranks[g] = 0;
+            g += 1;
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// The marginals (belief propagation over the links) are those of the
+    /// joint the groups and links stand for.
+    #[test]
+    fn linked_marginals_are_those_of_the_joint(
+        n in 4usize..=6,
+        seed in any::<u64>(),
+    ) {
+        let w = generate(&spec(n, 30, 0.5, 0.9, seed)).unwrap();
+        let mut f = FactoredIdentity::from_assignment(&w.initial, options(n - 2)).unwrap();
+        for e in &w.events {
+            f.apply(e).unwrap();
+            let d = max_abs_difference(&f.marginals().unwrap(), &joint(&f));
+            prop_assert!(d < 1e-9, "{} after {:?}", d, e);
+        }
+    }
+}
