@@ -204,17 +204,6 @@ fn replay(
                 row.query_time += clock.elapsed();
                 row.queries += 1;
                 if let Some(want) = exact {
-                    if std::env::var("DEBUG_WORST").is_ok() {
-                        for (t, (ra, rb)) in p.iter().zip(&want[at]).enumerate() {
-                            for (i, (a, b)) in ra.iter().zip(rb).enumerate() {
-                                if (a - b).abs() > 0.5 {
-                                    eprintln!("{} line {at}: t{t} i{i} {a:.3} vs exact {b:.3}; row {:?} exact {:?}", method.name(),
-                                        ra.iter().map(|x| (x * 100.0).round() / 100.0).collect::<Vec<_>>(),
-                                        rb.iter().map(|x| (x * 100.0).round() / 100.0).collect::<Vec<_>>());
-                                }
-                            }
-                        }
-                    }
                     for (a, b) in p.iter().flatten().zip(want[at].iter().flatten()) {
                         let d = (a - b).abs();
                         row.dp_sum += d;
@@ -284,7 +273,7 @@ fn main() {
          Large n: 3n events, seeds 300..{}, against the truth. \"rel. gap\" = largest |observed − predicted| over the reliability bins \
          holding ≥ 200 predictions (every entry p[t][i] of every truth line, pooled over seeds).\n",
         200 + seeds,
-        300 + seeds.min(3)
+        300 + seeds.min(4)
     );
     let _ = writeln!(md, "## Against the exact filter (n = 8, 9)\n");
     let _ = writeln!(
@@ -337,7 +326,7 @@ fn main() {
             );
         }
     }
-    let large_seeds = seeds.min(3);
+    let large_seeds = seeds.min(4);
     let mut bins_md: Vec<String> = Vec::new();
     let _ = writeln!(md, "\n## Against the truth (n = 100, 1,000)\n");
     let _ = writeln!(
