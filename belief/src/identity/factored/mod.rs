@@ -13,22 +13,39 @@
 //!
 //! - A read multiplies the likelihood into the group of its track and
 //!   renormalizes that group: exact. A read of an identity the group does
-//!   not hold has the same likelihood under every assignment the belief
-//!   allows and changes nothing.
+//!   not hold, nor a group linked to it, has the same likelihood under
+//!   every assignment the belief allows and changes nothing.
 //! - A mix of two tracks of one group is the exact mixing rule on that
 //!   group; a mix across groups joins them (their product) and then mixes;
 //!   a sure swap (probability 1) only exchanges the two tracks' places,
 //!   and a mix of probability 0 does nothing.
 //! - When the join would hold more than [`FactoredIdentityOptions::max_group`]
-//!   tracks, each of the two groups first gives up the part the mix needs
-//!   ([`split`]): the cut (tracks A holding the mixed track, identities
-//!   I_A) with the least loss, (1 − P(π(A) = I_A)) + I(A; B | E), the split
-//!   step of Huang, Guestrin and Guibas's split/join filters. A cut of a
-//!   track whose identity is certain is exact.
+//!   slots, each of the two groups first gives up the part the mix needs
+//!   ([`split`]): among the cuts (tracks A holding the mixed track,
+//!   identities I_A) of largest P(π(A) = I_A) for each size, the one of
+//!   least loss — the split step of Huang, Guestrin and Guibas's
+//!   split/join filters. A *hard* cut conditions on E = {π(A) = I_A} and
+//!   loses (1 − P(E)) + I(A; B | E). A *linked* cut ([`links`],
+//!   `linked`, the default) keeps the assignments that send one identity
+//!   across: each side gets a port (one more slot) and the two sides agree
+//!   on whether something crossed — riffled independence (Huang and
+//!   Guestrin, *Riffled Independence for Ranked Data*, NIPS 2009, Section
+//!   3) restricted to interleavings one exchange from the cut; it loses
+//!   the mass of two or more exchanges and I(A; B | e). The join picks,
+//!   among the whole groups, hard and linked parts that fit the cap, the
+//!   pair of least loss. A cut of a track whose identity is certain is
+//!   exact.
 //!
 //! Without splits (every group of mixed tracks within the cap) the belief
-//! equals the exact filter; marginals cost O(k!·k) per group. The belief is
-//! plain data (serde), pure, synchronous and deterministic.
+//! equals the exact filter; marginals cost O(k!·k) per group plus belief
+//! propagation over the trees of linked groups (2-vector messages). The
+//! belief is plain data (serde), pure, synchronous and deterministic.
+//!
+//! Loss (measured by examples/identity_factored.rs in idmesh-eval, the
+//! table in docs/identity-results.md): linked cuts lower the mean |Δp|
+//! against the exact filter at caps 6 and 7 on n = 9 but do not remove
+//! the largest errors: an identity two links away, or behind a dropped
+//! link, still cannot come back.
 
 pub mod group;
 pub mod links;
@@ -45,12 +62,12 @@ use super::filter::{IdentityFilter, Marginals};
 use crate::error::BeliefError;
 use crate::event::Mix;
 
-/// The default cap on a group's tracks: the largest group we enumerate.
-/// Measured on random-waypoint traces (examples/identity_factored.rs in
-/// idmesh-eval; docs/design/identity.md, "Factored identity belief"): a
-/// cap below n leaves lossy cuts whose zeros later reads cannot undo
-/// (largest |Δp| 1.0 at n = 9, cap 8), while a cap of n is exact; a mix in
-/// a full group of 9 costs about 9!·9 steps (about 1.5 ms).
+/// The default cap on a group's slots (tracks and ports): the largest
+/// group we enumerate. Measured on random-waypoint traces
+/// (examples/identity_factored.rs in idmesh-eval; docs/identity-results.md):
+/// a cap below n leaves lossy cuts, and even linked ones leave errors of
+/// up to 1.0 at n = 9, while a cap of n is exact; a mix in a full group of
+/// 9 costs about 9!·9 steps (about 1.5 ms).
 pub const DEFAULT_MAX_GROUP: usize = MAX_GROUP;
 
 /// The default of [`FactoredIdentityOptions::certain`].
@@ -59,7 +76,8 @@ pub const DEFAULT_CERTAIN: f64 = 1e-4;
 /// Options of a factored identity belief.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FactoredIdentityOptions {
-    /// The most tracks one group may hold, 2 ..= [`MAX_GROUP`].
+    /// The most slots one group may hold — its tracks and its ports (one
+    /// per link) — 2 ..= [`MAX_GROUP`]: the size of its table.
     pub max_group: usize,
     /// After a read, a track of its group whose identity has probability
     /// at least 1 − `certain` is cut off into a group of its own (losing
@@ -621,11 +639,7 @@ impl FactoredIdentity {
         let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
         let joined = self.groups[ga].join(&self.groups[gb])?;
         let (mut joined, freed) = Self::collapse(&joined, self.n)?;
-        for id in freed {
-            self.link_used[(id as usize - self.n) / 2] = false;
-            self.group_of[id as usize] = usize::MAX;
-            self.group_of[id as usize + 1] = usize::MAX;
-        }
+        self.release(freed);
         let (ja, jb) = (
             joined.local_track(a).unwrap_or(0),
             joined.local_track(b).unwrap_or(0),
@@ -637,6 +651,15 @@ impl FactoredIdentity {
 }
 
 impl FactoredIdentity {
+    /// Frees the links collapsed on a join (named by their lower port).
+    fn release(&mut self, freed: Vec<u32>) {
+        for id in freed {
+            self.link_used[(id as usize - self.n) / 2] = false;
+            self.group_of[id as usize] = usize::MAX;
+            self.group_of[id as usize + 1] = usize::MAX;
+        }
+    }
+
     /// Whether the join of two parts stays within the largest table (the
     /// product is built before its links collapse).
     fn fits(&self, a: &Part, ga: usize, b: &Part, gb: usize) -> bool {
@@ -708,6 +731,31 @@ impl IdentityFilter for FactoredIdentity {
             .into_iter()
             .find(|p| self.group_of[self.partner(p.id) as usize] == h);
         if let Some(port) = link {
+            // Room to re-join the two sides: the link collapses, exactly,
+            // and the read applies to the joined group.
+            let (kg, kh) = (self.groups[g].size(), self.groups[h].size());
+            if kg + kh <= MAX_GROUP && kg + kh - 2 <= self.options.max_group {
+                let joined = self.groups[g].join(&self.groups[h])?;
+                let (mut joined, freed) = Self::collapse(&joined, self.n)?;
+                let (Some(j), Some(x)) = (
+                    joined.local_track(t),
+                    joined
+                        .identities
+                        .iter()
+                        .position(|&i| i == identify.identity),
+                ) else {
+                    return Err(BeliefError::BadComponent {
+                        detail: format!(
+                            "track {t} or identity {} lost on a join",
+                            identify.identity
+                        ),
+                    });
+                };
+                joined.read(j, x, right, wrong)?;
+                self.release(freed);
+                self.replace(vec![g, h], vec![joined]);
+                return self.settle(t);
+            }
             let real = self.groups[h]
                 .tracks
                 .iter()
