@@ -234,6 +234,24 @@ fn replay(
     }
 }
 
+/// One row of the bins table: mean predicted / observed / count per bin.
+fn bins_line(n: usize, method: Method, row: &Row) -> String {
+    let r = &row.reliability;
+    let bins: Vec<String> = (0..10)
+        .filter(|&b| r.count[b] > 0)
+        .map(|b| {
+            let c = r.count[b] as f64;
+            format!(
+                "{:.2}/{:.2}/{}",
+                r.sum_p[b] / c,
+                r.red[b] as f64 / c,
+                r.count[b]
+            )
+        })
+        .collect();
+    format!("| {n} | {} | {} |", method.name(), bins.join(" · "))
+}
+
 fn exact_marginals(s: &Stream) -> Vec<Vec<Vec<f64>>> {
     let mut f = ExactPermutationFilter::from_assignment(&s.initial).expect("start");
     let mut out = Vec::new();
@@ -288,6 +306,7 @@ fn main() {
     } else {
         (200, 300)
     };
+    let mut bins_md: Vec<String> = Vec::new();
     let small: Vec<usize> = std::env::var("SMALL")
         .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
         .unwrap_or(vec![8, 9]);
@@ -331,10 +350,10 @@ fn main() {
                     .map(|l| format!("{l}\n"))
                     .unwrap_or_default()
             );
+            bins_md.push(bins_line(n, method, &row));
         }
     }
     let large_seeds = seeds.min(4);
-    let mut bins_md: Vec<String> = Vec::new();
     let _ = writeln!(md, "\n## Against the truth (n = 100, 1,000)\n");
     let _ = writeln!(
         md,
@@ -381,24 +400,7 @@ fn main() {
                     .map(|l| format!("{l}\n"))
                     .unwrap_or_default()
             );
-            let r = &row.reliability;
-            let bins: Vec<String> = (0..10)
-                .filter(|&b| r.count[b] > 0)
-                .map(|b| {
-                    let c = r.count[b] as f64;
-                    format!(
-                        "{:.2}/{:.2}/{}",
-                        r.sum_p[b] / c,
-                        r.red[b] as f64 / c,
-                        r.count[b]
-                    )
-                })
-                .collect();
-            bins_md.push(format!(
-                "| {n} | {} | {} |",
-                method.name(),
-                bins.join(" · ")
-            ));
+            bins_md.push(bins_line(n, method, &row));
         }
     }
     let _ = writeln!(

@@ -76,7 +76,7 @@ impl<'a> Messages<'a> {
 
     /// The message into port p's group from across p's link: the partner
     /// side's mass by flag, with the messages of its other links.
-    pub(crate) fn into_port(&mut self, p: u32) -> [f64; 2] {
+    pub(crate) fn toward_port(&mut self, p: u32) -> [f64; 2] {
         if let Some(&m) = self.into.get(&p) {
             return m;
         }
@@ -91,7 +91,7 @@ impl<'a> Messages<'a> {
                 if port.id == q {
                     [1.0, 1.0]
                 } else {
-                    self.into_port(port.id)
+                    self.toward_port(port.id)
                 }
             })
             .collect();
@@ -111,16 +111,16 @@ impl<'a> Messages<'a> {
     }
 
     /// The messages into group g, one per port in local order.
-    pub(crate) fn into_group(&mut self, g: usize) -> (Vec<Port>, Vec<[f64; 2]>) {
+    pub(crate) fn toward_group(&mut self, g: usize) -> (Vec<Port>, Vec<[f64; 2]>) {
         let ports = self.belief.groups[g].ports(self.belief.n);
-        let messages = ports.iter().map(|p| self.into_port(p.id)).collect();
+        let messages = ports.iter().map(|p| self.toward_port(p.id)).collect();
         (ports, messages)
     }
 
     /// The local marginals of group g's belief (its factor times the
     /// messages): rows of phantoms and columns of stars included.
     pub(crate) fn group_marginals(&mut self, g: usize) -> Result<Vec<Vec<f64>>, BeliefError> {
-        let (ports, messages) = self.into_group(g);
+        let (ports, messages) = self.toward_group(g);
         self.belief.groups[g]
             .weighted_marginals(&ports, &messages)
             .ok_or(BeliefError::Degenerate { normalizer: 0.0 })

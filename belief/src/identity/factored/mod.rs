@@ -449,7 +449,7 @@ impl FactoredIdentity {
     /// off into a group of its own, one at a time (each cut conditions the
     /// rest on the track's likeliest identity, losing 1 − p of the mass).
     fn cut_certain(&mut self, g: usize) -> Result<(), BeliefError> {
-        let (ports, messages) = links::Messages::new(self).into_group(g);
+        let (ports, messages) = links::Messages::new(self).toward_group(g);
         let by_id: std::collections::HashMap<u32, [f64; 2]> =
             ports.iter().map(|p| p.id).zip(messages).collect();
         let mut rest = self.groups[g].clone();

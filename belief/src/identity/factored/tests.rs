@@ -404,7 +404,7 @@ proptest! {
         for e in &w.events {
             exact.apply(e).unwrap();
             f.apply(e).unwrap();
-            prop_assert!(f.largest_group() <= n - 1);
+            prop_assert!(f.largest_group() < n);
             if f.split_stats().lost_mass > 1e-12 {
                 break;
             }
