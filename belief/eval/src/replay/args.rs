@@ -185,7 +185,8 @@ pub enum Method {
     /// belief per bit.
     PropertyBits,
     /// Identity traces: exact over the groups of tracks that mixed, cut by
-    /// the least lossy split when a group would outgrow --max-component.
+    /// the least lossy (linked) split when a group would outgrow
+    /// --max-component slots.
     FactoredIdentity,
 }
 

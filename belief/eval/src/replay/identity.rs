@@ -35,7 +35,8 @@
 //! demand ([`MarginalChoice`]), identities coded by property bits (one
 //! Radon property belief per bit, `--bits`, optional `--budget`), and the
 //! factored identity belief (exact over the groups of tracks that mixed,
-//! `--max-component` tracks per group at most).
+//! `--max-component` slots — tracks and link ports — per group at most,
+//! linked cuts above it).
 //!
 //! With no `--method` replay runs [`DEFAULT_IDENTITY_METHOD`], the
 //! information matrix, because that is what a deployment's leaders carry
@@ -184,8 +185,9 @@ pub enum IdentityMethod {
     /// Identities coded by --bits binary properties, one Radon property
     /// belief per bit (Jiang et al., TOSN 2013, Section 5.5).
     PropertyBits,
-    /// Exact over the groups of tracks that mixed, the least lossy cut
-    /// when a group would outgrow --max-component (split/join).
+    /// Exact over the groups of tracks that mixed, the least lossy cut —
+    /// linked: one exchange kept across it — when a group would outgrow
+    /// --max-component slots (split/join).
     FactoredIdentity,
 }
 

@@ -215,6 +215,174 @@ impl Group {
     }
 }
 
+/// A port of a group: one end of a link between two groups (see
+/// [`super::links`]). Its phantom track and its star identity share the
+/// port's global id (≥ n); the group's table holds both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Port {
+    /// The port's global id (phantom track = star identity = `id`).
+    pub id: u32,
+    /// The local index of the phantom track.
+    pub phantom: usize,
+    /// The local index of the star identity.
+    pub star: usize,
+}
+
+/// Bit i of the result: port i's phantom does not carry its star, i.e. an
+/// identity crossed the link (its exchange flag).
+pub(crate) fn flags_of(perm: &[u8], ports: &[Port]) -> usize {
+    ports.iter().enumerate().fold(0, |acc, (i, p)| {
+        acc | (usize::from(perm[p.phantom] as usize != p.star) << i)
+    })
+}
+
+impl Group {
+    /// The group's ports: tracks with a global id ≥ `n`, in local order.
+    pub(crate) fn ports(&self, n: usize) -> Vec<Port> {
+        self.tracks
+            .iter()
+            .enumerate()
+            .filter(|&(_, &t)| t as usize >= n)
+            .map(|(j, &t)| Port {
+                id: t,
+                phantom: j,
+                star: self
+                    .identities
+                    .iter()
+                    .position(|&i| i == t)
+                    .unwrap_or(usize::MAX),
+            })
+            .collect()
+    }
+
+    /// The number of real tracks (ids below `n`).
+    pub(crate) fn real_size(&self, n: usize) -> usize {
+        self.tracks.iter().filter(|&&t| (t as usize) < n).count()
+    }
+
+    /// F\[c\] = the factor's mass on the assignments whose exchange flags
+    /// ([`flags_of`]) are c: 2^|ports| entries.
+    pub(crate) fn flag_table(&self, ports: &[Port]) -> Vec<f64> {
+        let table = self.table();
+        let mut out = vec![0.0; 1 << ports.len()];
+        for (r, &p) in self.probs.iter().enumerate() {
+            if p != 0.0 {
+                out[flags_of(table.get(r), ports)] += p;
+            }
+        }
+        out
+    }
+
+    /// The local marginals of the factor weighed by `messages[i][flag of
+    /// port i]` (the belief of the group inside its tree of links),
+    /// normalized; none when the weights vanish.
+    pub(crate) fn weighted_marginals(
+        &self,
+        ports: &[Port],
+        messages: &[[f64; 2]],
+    ) -> Option<Vec<Vec<f64>>> {
+        if ports.is_empty() {
+            return Some(self.local_marginals());
+        }
+        let k = self.size();
+        let table = self.table();
+        let weights = config_weights(ports.len(), messages);
+        let mut m = vec![vec![0.0; k]; k];
+        let mut total = 0.0;
+        for (r, &p) in self.probs.iter().enumerate() {
+            if p != 0.0 {
+                let perm = table.get(r);
+                let w = p * weights[flags_of(perm, ports)];
+                if w == 0.0 {
+                    continue;
+                }
+                total += w;
+                for (j, &x) in perm.iter().enumerate() {
+                    m[j][x as usize] += w;
+                }
+            }
+        }
+        if !(total.is_finite() && total > 0.0) {
+            return None;
+        }
+        m.iter_mut().flatten().for_each(|p| *p /= total);
+        Some(m)
+    }
+
+    /// Multiplies every assignment's probability by `weight(assignment)`
+    /// and renormalizes; all-or-nothing.
+    pub(crate) fn reweight(&mut self, weight: impl Fn(&[u8]) -> f64) -> Result<(), BeliefError> {
+        let table = self.table();
+        let posterior: Vec<f64> = self
+            .probs
+            .iter()
+            .enumerate()
+            .map(|(r, &p)| {
+                if p == 0.0 {
+                    0.0
+                } else {
+                    p * weight(table.get(r))
+                }
+            })
+            .collect();
+        let total: f64 = posterior.iter().sum();
+        if !(total.is_finite() && total > 0.0) {
+            return Err(BeliefError::ImpossibleObservation { probability: total });
+        }
+        self.probs = posterior;
+        self.probs.iter_mut().for_each(|p| *p /= total);
+        Ok(())
+    }
+
+    /// A group on `tracks` and `identities` whose assignment of rank r is
+    /// the sum of the probabilities of the assignments of `self` that
+    /// `map` sends to it (`map` writes the new local assignment and says
+    /// whether the old one is kept), normalized; with the kept mass.
+    pub(crate) fn relabel(
+        &self,
+        tracks: Vec<u32>,
+        identities: Vec<u32>,
+        mut map: impl FnMut(&[u8], &mut [u8]) -> bool,
+    ) -> Result<(Group, f64), BeliefError> {
+        let k = tracks.len();
+        let target = permutations(k)?;
+        let table = self.table();
+        let mut probs = vec![0.0; target.count()];
+        let mut buf = [0u8; MAX_GROUP];
+        for (r, &p) in self.probs.iter().enumerate() {
+            if p != 0.0 && map(table.get(r), &mut buf[..k]) {
+                probs[target.rank(&buf[..k])] += p;
+            }
+        }
+        let mass: f64 = probs.iter().sum();
+        if !(mass.is_finite() && mass > 0.0) {
+            return Err(BeliefError::Degenerate { normalizer: mass });
+        }
+        probs.iter_mut().for_each(|p| *p /= mass);
+        Ok((
+            Group {
+                tracks,
+                identities,
+                probs,
+            },
+            mass,
+        ))
+    }
+}
+
+/// w\[c\] = Π_i messages\[i\]\[bit i of c\], for every flag configuration c.
+pub(crate) fn config_weights(ports: usize, messages: &[[f64; 2]]) -> Vec<f64> {
+    (0..1usize << ports)
+        .map(|c| {
+            messages
+                .iter()
+                .enumerate()
+                .map(|(i, m)| m[(c >> i) & 1])
+                .product()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,24 +13,42 @@
 //!
 //! - A read multiplies the likelihood into the group of its track and
 //!   renormalizes that group: exact. A read of an identity the group does
-//!   not hold has the same likelihood under every assignment the belief
-//!   allows and changes nothing.
+//!   not hold, nor a group linked to it, has the same likelihood under
+//!   every assignment the belief allows and changes nothing.
 //! - A mix of two tracks of one group is the exact mixing rule on that
 //!   group; a mix across groups joins them (their product) and then mixes;
 //!   a sure swap (probability 1) only exchanges the two tracks' places,
 //!   and a mix of probability 0 does nothing.
 //! - When the join would hold more than [`FactoredIdentityOptions::max_group`]
-//!   tracks, each of the two groups first gives up the part the mix needs
-//!   ([`split`]): the cut (tracks A holding the mixed track, identities
-//!   I_A) with the least loss, (1 − P(π(A) = I_A)) + I(A; B | E), the split
-//!   step of Huang, Guestrin and Guibas's split/join filters. A cut of a
-//!   track whose identity is certain is exact.
+//!   slots, each of the two groups first gives up the part the mix needs
+//!   ([`split`]): among the cuts (tracks A holding the mixed track,
+//!   identities I_A) of largest P(π(A) = I_A) for each size, the one of
+//!   least loss — the split step of Huang, Guestrin and Guibas's
+//!   split/join filters. A *hard* cut conditions on E = {π(A) = I_A} and
+//!   loses (1 − P(E)) + I(A; B | E). A *linked* cut ([`links`],
+//!   `linked`, the default) keeps the assignments that send one identity
+//!   across: each side gets a port (one more slot) and the two sides agree
+//!   on whether something crossed — riffled independence (Huang and
+//!   Guestrin, *Riffled Independence for Ranked Data*, NIPS 2009, Section
+//!   3) restricted to interleavings one exchange from the cut; it loses
+//!   the mass of two or more exchanges and I(A; B | e). The join picks,
+//!   among the whole groups, hard and linked parts that fit the cap, the
+//!   pair of least loss. A cut of a track whose identity is certain is
+//!   exact.
 //!
 //! Without splits (every group of mixed tracks within the cap) the belief
-//! equals the exact filter; marginals cost O(k!·k) per group. The belief is
-//! plain data (serde), pure, synchronous and deterministic.
+//! equals the exact filter; marginals cost O(k!·k) per group plus belief
+//! propagation over the trees of linked groups (2-vector messages). The
+//! belief is plain data (serde), pure, synchronous and deterministic.
+//!
+//! Loss (measured by examples/identity_factored.rs in idmesh-eval, the
+//! table in docs/identity-results.md): linked cuts lower the mean |Δp|
+//! against the exact filter at caps 6 and 7 on n = 9 but do not remove
+//! the largest errors: an identity two links away, or behind a dropped
+//! link, still cannot come back.
 
 pub mod group;
+pub mod links;
 pub mod split;
 
 #[cfg(test)]
@@ -44,12 +62,12 @@ use super::filter::{IdentityFilter, Marginals};
 use crate::error::BeliefError;
 use crate::event::Mix;
 
-/// The default cap on a group's tracks: the largest group we enumerate.
-/// Measured on random-waypoint traces (examples/identity_factored.rs in
-/// idmesh-eval; docs/design/identity.md, "Factored identity belief"): a
-/// cap below n leaves lossy cuts whose zeros later reads cannot undo
-/// (largest |Δp| 1.0 at n = 9, cap 8), while a cap of n is exact; a mix in
-/// a full group of 9 costs about 9!·9 steps (about 1.5 ms).
+/// The default cap on a group's slots (tracks and ports): the largest
+/// group we enumerate. Measured on random-waypoint traces
+/// (examples/identity_factored.rs in idmesh-eval; docs/identity-results.md):
+/// a cap below n leaves lossy cuts, and even linked ones leave errors of
+/// up to 1.0 at n = 9, while a cap of n is exact; a mix in a full group of
+/// 9 costs about 9!·9 steps (about 1.5 ms).
 pub const DEFAULT_MAX_GROUP: usize = MAX_GROUP;
 
 /// The default of [`FactoredIdentityOptions::certain`].
@@ -58,13 +76,21 @@ pub const DEFAULT_CERTAIN: f64 = 1e-4;
 /// Options of a factored identity belief.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FactoredIdentityOptions {
-    /// The most tracks one group may hold, 2 ..= [`MAX_GROUP`].
+    /// The most slots one group may hold — its tracks and its ports (one
+    /// per link) — 2 ..= [`MAX_GROUP`]: the size of its table.
     pub max_group: usize,
     /// After a read, a track of its group whose identity has probability
     /// at least 1 − `certain` is cut off into a group of its own (losing
     /// at most `certain` of the mass), so that groups shrink as reads come
-    /// in and later joins need no lossy cut. 0 = only sure tracks.
+    /// in and later joins need no lossy cut. 0 = only sure tracks. A link
+    /// (see `linked`) whose exchange probability falls to `certain` or
+    /// below is dropped the same way.
     pub certain: f64,
+    /// Lossy cuts keep a link between the two sides (one port, i.e. one
+    /// more slot of the cap, on each) so that the assignments one exchange
+    /// away from the cut stay possible and later reads can move mass back
+    /// ([`links`]); false = hard cuts only (the split step alone).
+    pub linked: bool,
 }
 
 impl Default for FactoredIdentityOptions {
@@ -72,6 +98,7 @@ impl Default for FactoredIdentityOptions {
         FactoredIdentityOptions {
             max_group: DEFAULT_MAX_GROUP,
             certain: DEFAULT_CERTAIN,
+            linked: true,
         }
     }
 }
@@ -106,7 +133,12 @@ pub struct SplitStats {
     pub cuts: u64,
     /// Cuts that lost something (cost above 1e-12).
     pub lossy_cuts: u64,
-    /// Σ (1 − P(E)) over the cuts.
+    /// Lossy cuts that kept a link.
+    pub linked_cuts: u64,
+    /// Links dropped (conditioned on nothing having crossed).
+    pub dropped_links: u64,
+    /// Σ (1 − P(E)) over the cuts (a linked cut: the mass of two or more
+    /// exchanges), plus P(e = 1) of every dropped link.
     pub lost_mass: f64,
     /// Σ I(A; B | E) over the cuts, nats.
     pub lost_information: f64,
@@ -120,17 +152,33 @@ pub struct SplitStats {
     pub total_variation_bound: f64,
 }
 
-/// A product of independent exact groups.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+/// A product of exact groups, independent or linked in trees.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "Stored")]
 pub struct FactoredIdentity {
     n: usize,
     options: FactoredIdentityOptions,
     groups: Vec<Group>,
     stats: SplitStats,
-    /// group_of[t] = index in `groups` of the group of track t (derived).
+    /// group_of[t] = index in `groups` of the group of track t, ports
+    /// (ids ≥ n) included; `usize::MAX` for a free port id (derived).
     #[serde(skip)]
     group_of: Vec<usize>,
+    /// holder[i] = index in `groups` of the group holding identity i < n
+    /// (derived).
+    #[serde(skip)]
+    holder: Vec<usize>,
+    /// link_used[l]: ports n + 2l and n + 2l + 1 are in use (derived).
+    #[serde(skip)]
+    link_used: Vec<bool>,
+}
+
+impl PartialEq for FactoredIdentity {
+    /// The stored state; the derived indices are a function of it.
+    fn eq(&self, other: &Self) -> bool {
+        (self.n, self.options, &self.groups, self.stats)
+            == (other.n, other.options, &other.groups, other.stats)
+    }
 }
 
 /// The serialized form, checked on the way in.
@@ -150,6 +198,34 @@ impl TryFrom<Stored> for FactoredIdentity {
         let bad = |detail: String| BeliefError::BadComponent { detail };
         let mut track_seen = vec![false; s.n];
         let mut identity_seen = vec![false; s.n];
+        let mut ports = std::collections::BTreeSet::new();
+        let slots: usize = s.groups.iter().map(Group::size).sum();
+        for (gi, g) in s.groups.iter().enumerate() {
+            g.check()?;
+            for port in g.ports(s.n) {
+                if port.star == usize::MAX || !ports.insert((port.id, gi)) {
+                    return Err(bad(format!("port {} without its star", port.id)));
+                }
+            }
+            if g.identities
+                .iter()
+                .any(|&i| i as usize >= s.n && g.local_track(i).is_none())
+            {
+                return Err(bad("a star without its phantom track".into()));
+            }
+        }
+        let groups_of: std::collections::BTreeMap<u32, usize> = ports.iter().copied().collect();
+        if groups_of.len() != ports.len() {
+            return Err(bad("a port in two groups".into()));
+        }
+        for (&id, &gi) in &groups_of {
+            let partner = (s.n + ((id as usize - s.n) ^ 1)) as u32;
+            if groups_of.get(&partner).is_none_or(|&h| h == gi) {
+                return Err(bad(format!(
+                    "port {id} without its partner in another group"
+                )));
+            }
+        }
         for g in &s.groups {
             g.check()?;
             if g.size() > s.options.max_group {
@@ -159,22 +235,29 @@ impl TryFrom<Stored> for FactoredIdentity {
                     s.options.max_group
                 )));
             }
-            for (&t, &i) in g.tracks.iter().zip(&g.identities) {
-                for (seen, x, what) in [
-                    (&mut track_seen, t, "track"),
-                    (&mut identity_seen, i, "identity"),
-                ] {
-                    let slot = seen
-                        .get_mut(x as usize)
-                        .ok_or_else(|| bad(format!("{what} {x} of {} out of range", s.n)))?;
-                    if *slot {
+            for (list, what) in [(&g.tracks, "track"), (&g.identities, "identity")] {
+                for &x in list {
+                    if x as usize >= s.n {
+                        // A port: ids beyond n + 2 per slot of the groups
+                        // are out of range.
+                        if x as usize >= s.n + 2 * slots {
+                            return Err(bad(format!("{what} {x} of {} out of range", s.n)));
+                        }
+                        continue;
+                    }
+                    let seen = if what == "track" {
+                        &mut track_seen
+                    } else {
+                        &mut identity_seen
+                    };
+                    if seen[x as usize] {
                         return Err(bad(format!("{what} {x} in two groups")));
                     }
-                    *slot = true;
+                    seen[x as usize] = true;
                 }
             }
         }
-        if s.n == 0 || track_seen.iter().any(|&x| !x) {
+        if s.n == 0 || track_seen.iter().chain(&identity_seen).any(|&x| !x) {
             return Err(bad(format!("groups that do not cover the {} tracks", s.n)));
         }
         let mut belief = FactoredIdentity {
@@ -183,6 +266,8 @@ impl TryFrom<Stored> for FactoredIdentity {
             groups: s.groups,
             stats: s.stats,
             group_of: Vec::new(),
+            holder: Vec::new(),
+            link_used: Vec::new(),
         };
         belief.reindex();
         Ok(belief)
@@ -236,6 +321,8 @@ impl FactoredIdentity {
             groups,
             stats: SplitStats::default(),
             group_of: Vec::new(),
+            holder: Vec::new(),
+            link_used: Vec::new(),
         };
         belief.reindex();
         belief
@@ -246,12 +333,14 @@ impl FactoredIdentity {
         self.options
     }
 
-    /// The groups, in no particular order.
+    /// The groups, in no particular order. Tracks and identities with ids
+    /// ≥ n are ports ([`links`]): a link's two ports are n + 2l and
+    /// n + 2l + 1.
     pub fn groups(&self) -> &[Group] {
         &self.groups
     }
 
-    /// The most tracks in one group.
+    /// The most tracks in one group, ports included.
     pub fn largest_group(&self) -> usize {
         self.groups.iter().map(Group::size).max().unwrap_or(0)
     }
@@ -263,10 +352,42 @@ impl FactoredIdentity {
 
     /// Recomputes `group_of` from the groups.
     fn reindex(&mut self) {
-        self.group_of = vec![0; self.n];
+        let top = self
+            .groups
+            .iter()
+            .flat_map(|g| g.tracks.iter())
+            .map(|&t| t as usize + 1)
+            .max()
+            .unwrap_or(0)
+            .max(self.n);
+        let links = (top - self.n).div_ceil(2);
+        self.group_of = vec![usize::MAX; self.n + 2 * links];
+        self.holder = vec![0; self.n];
+        self.link_used = vec![false; links];
         for (g, group) in self.groups.iter().enumerate() {
             for &t in &group.tracks {
                 self.group_of[t as usize] = g;
+                if t as usize >= self.n {
+                    self.link_used[(t as usize - self.n) / 2] = true;
+                }
+            }
+            for &i in &group.identities {
+                if (i as usize) < self.n {
+                    self.holder[i as usize] = g;
+                }
+            }
+        }
+    }
+
+    /// Points the indices at group g's tracks and identities.
+    fn point_at(&mut self, g: usize) {
+        let group = &self.groups[g];
+        for &t in &group.tracks {
+            self.group_of[t as usize] = g;
+        }
+        for &i in &group.identities {
+            if (i as usize) < self.n {
+                self.holder[i as usize] = g;
             }
         }
     }
@@ -276,18 +397,13 @@ impl FactoredIdentity {
         old.sort_unstable_by(|a, b| b.cmp(a));
         for g in old {
             self.groups.swap_remove(g);
-            if let Some(moved) = self.groups.get(g) {
-                for &t in &moved.tracks {
-                    self.group_of[t as usize] = g;
-                }
+            if g < self.groups.len() {
+                self.point_at(g);
             }
         }
         for group in new {
-            let g = self.groups.len();
-            for &t in &group.tracks {
-                self.group_of[t as usize] = g;
-            }
             self.groups.push(group);
+            self.point_at(self.groups.len() - 1);
         }
     }
 
@@ -301,33 +417,61 @@ impl FactoredIdentity {
     }
 
     /// The parts of group `g` holding local track `keep` that a join may
-    /// take, one per size: (size, cost, the cut — none for the whole
-    /// group, which costs nothing).
-    fn options_for(&self, g: usize, keep: usize) -> Vec<(usize, f64, Option<Cut>)> {
+    /// take: (slots in the cap, cost, what to do) — the whole group costs
+    /// nothing; a hard cut costs (1 − P(E)) + I; a linked cut takes one
+    /// more slot and costs what it cannot keep.
+    fn options_for(&self, g: usize, keep: usize, must: Option<u32>) -> Vec<(usize, f64, Part)> {
         let group = &self.groups[g];
         let k = group.size();
-        let cuts = split::best_cuts(group, keep);
-        let mut out: Vec<(usize, f64, Option<Cut>)> = cuts
+        let ports = group.ports(self.n);
+        let mut out = vec![(k, 0.0, Part::Whole)];
+        let must = must
+            .and_then(|p| group.local_track(p))
+            .map_or(0, |j| 1u32 << j);
+        for cut in split::best_cuts(group, keep, must, &ports)
             .into_iter()
-            .enumerate()
-            .filter_map(|(s, c)| c.map(|c| (s, c.cost(), Some(c))))
-            .collect();
-        out.push((k, 0.0, None));
+            .flatten()
+        {
+            out.push((cut.size(), cut.cost(), Part::Hard(cut)));
+            if self.options.linked && cut.cost() > self.options.certain {
+                let placeholder = (self.n + 2 * self.link_used.len()) as u32;
+                if let Ok(linked) =
+                    split::apply_linked(group, &cut, &ports, placeholder, placeholder + 1)
+                {
+                    out.push((cut.size() + 1, linked.cost(), Part::Linked(cut)));
+                }
+            }
+        }
         out
     }
 
-    /// Cuts every track of group `g` whose identity is (near) certain off
-    /// into a group of its own, one at a time (each cut conditions the
+    /// Cuts every real track of group `g` whose identity is (near) certain
+    /// off into a group of its own, one at a time (each cut conditions the
     /// rest on the track's likeliest identity, losing 1 − p of the mass).
-    fn cut_certain(&mut self, g: usize) {
+    fn cut_certain(&mut self, g: usize) -> Result<(), BeliefError> {
+        let (ports, messages) = links::Messages::new(self).toward_group(g);
+        let by_id: std::collections::HashMap<u32, [f64; 2]> =
+            ports.iter().map(|p| p.id).zip(messages).collect();
         let mut rest = self.groups[g].clone();
         let mut pieces = Vec::new();
-        while rest.size() >= 2 {
-            let m = rest.local_marginals();
+        while rest.real_size(self.n) >= 2 {
+            let ports = rest.ports(self.n);
+            let messages: Vec<[f64; 2]> = ports.iter().map(|p| by_id[&p.id]).collect();
+            let Some(m) = rest.weighted_marginals(&ports, &messages) else {
+                break;
+            };
             // Rounding keeps a sure track's p a few ulps below 1.
             let threshold = 1.0 - self.options.certain - 1e-12;
+            let n = self.n as u32;
             let found = m.iter().enumerate().find_map(|(j, row)| {
-                let (x, &p) = row.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
+                if rest.tracks[j] >= n {
+                    return None;
+                }
+                let (x, &p) = row
+                    .iter()
+                    .enumerate()
+                    .filter(|&(x, _)| rest.identities[x] < n)
+                    .max_by(|a, b| a.1.total_cmp(b.1))?;
                 (p >= threshold).then_some((j, x, p))
             });
             let Some((j, x, p)) = found else { break };
@@ -348,6 +492,7 @@ impl FactoredIdentity {
             pieces.push(rest);
             self.replace(vec![g], pieces);
         }
+        Ok(())
     }
 
     /// Counts a cut made and what it lost.
@@ -356,10 +501,23 @@ impl FactoredIdentity {
         if cut.cost() > 1e-12 {
             self.stats.lossy_cuts += 1;
         }
-        self.stats.lost_mass += (1.0 - cut.mass).max(0.0);
-        self.stats.lost_information += cut.mutual_information;
-        self.stats.total_variation_bound +=
-            (1.0 - cut.mass).max(0.0) + (cut.mutual_information.max(0.0) / 2.0).sqrt();
+        self.add_loss(1.0 - cut.mass, cut.mutual_information);
+    }
+
+    /// Adds a lost mass and a lost information to the running totals.
+    pub(crate) fn add_loss(&mut self, mass: f64, information: f64) {
+        let (mass, information) = (mass.max(0.0), information.max(0.0));
+        self.stats.lost_mass += mass;
+        self.stats.lost_information += information;
+        self.stats.total_variation_bound += mass + (information / 2.0).sqrt();
+    }
+
+    /// After a change to the group of `track`: its links too unlikely to
+    /// matter are dropped and its certain tracks cut off.
+    fn settle(&mut self, track: u32) -> Result<(), BeliefError> {
+        self.prune_links(track)?;
+        let g = self.group_of[track as usize];
+        self.cut_certain(g)
     }
 
     /// Mixes tracks of two groups, joining (parts of) them.
@@ -368,63 +526,158 @@ impl FactoredIdentity {
         let (la, lb) = (self.local(a)?, self.local(b)?);
         let (ka, kb) = (self.groups[ga].size(), self.groups[gb].size());
         let cap = self.options.max_group;
-        let (mut parts, mut rests) = (Vec::new(), Vec::new());
-        let mut cuts = Vec::new();
-        if ka + kb <= cap {
-            parts.push(self.groups[ga].clone());
-            parts.push(self.groups[gb].clone());
-        } else {
+        let too_big = self.groups[ga].size() + self.groups[gb].size() > MAX_GROUP;
+        // Groups of one tree of links: the parts keep the ends of the path
+        // between them, so that a direct link collapses on the join.
+        let path = self.path(ga, gb);
+        let ends = path
+            .as_ref()
+            .and_then(|p| Some((*p.first()?, self.partner(*p.last()?))));
+        let collapses = path.as_ref().is_some_and(|p| p.len() == 1);
+        let freed = if collapses { 2 } else { 0 };
+        if ka + kb > cap + freed || too_big {
             // The pair of parts with the least total loss that fits the
             // cap; on (near) ties the smaller join, which is cheaper and
             // keeps more of the rest exact.
-            let (oa, ob) = (self.options_for(ga, la), self.options_for(gb, lb));
-            let mut best: Option<(f64, usize, usize, usize)> = None;
-            for (i, &(sa, ca, _)) in oa.iter().enumerate() {
-                for (j, &(sb, cb, _)) in ob.iter().enumerate() {
-                    if sa + sb > cap {
-                        continue;
-                    }
-                    let cost = ca + cb;
-                    let better = match best {
-                        None => true,
-                        Some((c, size, _, _)) => {
-                            cost < c - 1e-12 || (cost <= c + 1e-12 && sa + sb < size)
+            let choose = |oa: &[(usize, f64, Part)], ob: &[(usize, f64, Part)], room: usize| {
+                let mut best: Option<(f64, usize, usize, usize)> = None;
+                for (i, &(sa, ca, pa)) in oa.iter().enumerate() {
+                    for (j, &(sb, cb, pb)) in ob.iter().enumerate() {
+                        if sa + sb > room || !self.fits(&pa, ga, &pb, gb) {
+                            continue;
                         }
-                    };
-                    if better {
-                        best = Some((cost, sa + sb, i, j));
+                        let cost = ca + cb;
+                        let better = match best {
+                            None => true,
+                            Some((c, size, _, _)) => {
+                                cost < c - 1e-12 || (cost <= c + 1e-12 && sa + sb < size)
+                            }
+                        };
+                        if better {
+                            best = Some((cost, sa + sb, i, j));
+                        }
+                    }
+                }
+                best.map(|(_, _, i, j)| (oa[i].2, ob[j].2))
+            };
+            let kept_ends = choose(
+                &self.options_for(ga, la, ends.map(|e| e.0)),
+                &self.options_for(gb, lb, ends.map(|e| e.1)),
+                cap + freed,
+            );
+            // Without room for the path's ends the parts are cut freely
+            // (the cycle is then broken below). Sizes 1 and 1 always fit a
+            // cap of at least 2.
+            let (pa, pb) = match kept_ends {
+                Some(parts) => parts,
+                None => choose(
+                    &self.options_for(ga, la, None),
+                    &self.options_for(gb, lb, None),
+                    cap,
+                )
+                .ok_or(BeliefError::BadComponent {
+                    detail: format!("no parts of {ka} and {kb} tracks fit a cap of {cap}"),
+                })?,
+            };
+            let mut old = Vec::new();
+            let mut new = Vec::new();
+            for (g, part) in [(ga, pa), (gb, pb)] {
+                match part {
+                    Part::Whole => {}
+                    Part::Hard(cut) => {
+                        let (part, rest) = split::apply(&self.groups[g], &cut)?;
+                        self.record(&cut);
+                        old.push(g);
+                        new.extend([part, rest]);
+                    }
+                    Part::Linked(cut) => {
+                        let (pa, pb) = self.new_link();
+                        let ports = self.groups[g].ports(self.n);
+                        let linked = split::apply_linked(&self.groups[g], &cut, &ports, pa, pb)?;
+                        self.stats.cuts += 1;
+                        self.stats.lossy_cuts += 1;
+                        self.stats.linked_cuts += 1;
+                        self.add_loss(1.0 - linked.mass, linked.mutual_information);
+                        old.push(g);
+                        new.extend([linked.a, linked.b]);
                     }
                 }
             }
-            // Sizes 1 and 1 always fit a cap of at least 2.
-            let (_, _, i, j) = best.ok_or(BeliefError::BadComponent {
-                detail: format!("no parts of {ka} and {kb} tracks fit a cap of {cap}"),
-            })?;
-            for (g, cut) in [(ga, oa[i].2), (gb, ob[j].2)] {
-                match cut {
-                    None => parts.push(self.groups[g].clone()),
-                    Some(cut) => {
-                        let (part, rest) = split::apply(&self.groups[g], &cut)?;
-                        parts.push(part);
-                        rests.push(rest);
-                        cuts.push(cut);
-                    }
+            // A rest holding ports alone pins their links to "nothing
+            // crossed": they are dropped, exactly.
+            let orphans: Vec<u32> = new
+                .iter()
+                .filter(|g| g.real_size(self.n) == 0)
+                .flat_map(|g| g.ports(self.n))
+                .map(|p| p.id)
+                .collect();
+            self.replace(old, new);
+            for p in orphans {
+                if self.group_of[p as usize] != usize::MAX {
+                    let e = self.exchange(p)?;
+                    self.drop_link(p, e)?;
                 }
             }
         }
-        let mut joined = parts[0].join(&parts[1])?;
+        let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
+        if let Some(path) = self.path(ga, gb) {
+            if path.len() > 1 {
+                // Joining would close a cycle of links: the least likely
+                // exchange on the path is ruled out first.
+                let mut weakest: Option<(f64, u32)> = None;
+                for &p in &path {
+                    let e = self.exchange(p)?;
+                    if weakest.is_none_or(|(w, _)| e < w) {
+                        weakest = Some((e, p));
+                    }
+                }
+                if let Some((e, p)) = weakest {
+                    self.drop_link(p, e)?;
+                }
+            }
+        }
+        let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
+        let joined = self.groups[ga].join(&self.groups[gb])?;
+        let (mut joined, freed) = Self::collapse(&joined, self.n)?;
+        self.release(freed);
         let (ja, jb) = (
             joined.local_track(a).unwrap_or(0),
             joined.local_track(b).unwrap_or(0),
         );
         joined.mix(ja, jb, swap);
-        for cut in &cuts {
-            self.record(cut);
-        }
-        rests.push(joined);
-        self.replace(vec![ga, gb], rests);
+        self.replace(vec![ga, gb], vec![joined]);
         Ok(())
     }
+}
+
+impl FactoredIdentity {
+    /// Frees the links collapsed on a join (named by their lower port).
+    fn release(&mut self, freed: Vec<u32>) {
+        for id in freed {
+            self.link_used[(id as usize - self.n) / 2] = false;
+            self.group_of[id as usize] = usize::MAX;
+            self.group_of[id as usize + 1] = usize::MAX;
+        }
+    }
+
+    /// Whether the join of two parts stays within the largest table (the
+    /// product is built before its links collapse).
+    fn fits(&self, a: &Part, ga: usize, b: &Part, gb: usize) -> bool {
+        let size = |p: &Part, g: usize| match p {
+            Part::Whole => self.groups[g].size(),
+            Part::Hard(c) => c.size(),
+            Part::Linked(c) => c.size() + 1,
+        };
+        size(a, ga) + size(b, gb) <= MAX_GROUP
+    }
+}
+
+/// What a join takes of a group.
+#[derive(Debug, Clone, Copy)]
+enum Part {
+    Whole,
+    Hard(Cut),
+    Linked(Cut),
 }
 
 impl IdentityFilter for FactoredIdentity {
@@ -457,35 +710,111 @@ impl IdentityFilter for FactoredIdentity {
 
     fn identify(&mut self, identify: Identify) -> Result<(), BeliefError> {
         check_identify(self.n, &identify)?;
-        let g = self.group_of[identify.track as usize];
-        let track = self.local(identify.track)?;
+        let t = identify.track;
+        let g = self.group_of[t as usize];
+        let track = self.local(t)?;
         let (right, wrong) = (identify.accuracy, identify.wrong_read_likelihood(self.n));
         let group = &mut self.groups[g];
-        match group
+        if let Some(read) = group
             .identities
             .iter()
             .position(|&i| i == identify.identity)
         {
-            Some(read) => {
-                group.read(track, read, right, wrong)?;
-                self.cut_certain(g);
-                Ok(())
+            group.read(track, read, right, wrong)?;
+            return self.settle(t);
+        }
+        // An identity of a linked group: the track may carry it through the
+        // link's star.
+        let h = self.holder[identify.identity as usize];
+        let link = self.groups[g]
+            .ports(self.n)
+            .into_iter()
+            .find(|p| self.group_of[self.partner(p.id) as usize] == h);
+        if let Some(port) = link {
+            // Room to re-join the two sides: the link collapses, exactly,
+            // and the read applies to the joined group.
+            let (kg, kh) = (self.groups[g].size(), self.groups[h].size());
+            if kg + kh <= MAX_GROUP && kg + kh - 2 <= self.options.max_group {
+                let joined = self.groups[g].join(&self.groups[h])?;
+                let (mut joined, freed) = Self::collapse(&joined, self.n)?;
+                let (Some(j), Some(x)) = (
+                    joined.local_track(t),
+                    joined
+                        .identities
+                        .iter()
+                        .position(|&i| i == identify.identity),
+                ) else {
+                    return Err(BeliefError::BadComponent {
+                        detail: format!(
+                            "track {t} or identity {} lost on a join",
+                            identify.identity
+                        ),
+                    });
+                };
+                joined.read(j, x, right, wrong)?;
+                self.release(freed);
+                self.replace(vec![g, h], vec![joined]);
+                return self.settle(t);
             }
-            // Every assignment the belief allows puts another identity on
-            // the track: the likelihood is `wrong` throughout.
-            None if wrong > 0.0 => Ok(()),
-            None => Err(BeliefError::ImpossibleObservation { probability: 0.0 }),
+            let real = self.groups[h]
+                .tracks
+                .iter()
+                .find(|&&x| (x as usize) < self.n);
+            let other = real.copied().unwrap_or(t);
+            self.read_across(g, track, port.id, identify.identity, right, wrong)?;
+            self.settle(t)?;
+            return self.settle(other);
+        }
+        // Every assignment the belief allows puts another identity on the
+        // track: the likelihood is `wrong` throughout.
+        if wrong > 0.0 {
+            Ok(())
+        } else {
+            Err(BeliefError::ImpossibleObservation { probability: 0.0 })
         }
     }
 
     fn marginals(&self) -> Result<Marginals, BeliefError> {
-        let mut m = vec![vec![0.0; self.n]; self.n];
-        for group in &self.groups {
-            let local = group.local_marginals();
-            for (j, row) in local.iter().enumerate() {
+        let n = self.n;
+        let mut bp = links::Messages::new(self);
+        let local: Vec<Vec<Vec<f64>>> = (0..self.groups.len())
+            .map(|g| bp.group_marginals(g))
+            .collect::<Result<_, _>>()?;
+        let mut m = vec![vec![0.0; n]; n];
+        for (group, lm) in self.groups.iter().zip(&local) {
+            for (j, row) in lm.iter().enumerate() {
                 let t = group.tracks[j] as usize;
+                if t >= n {
+                    continue;
+                }
                 for (x, &p) in row.iter().enumerate() {
-                    m[t][group.identities[x] as usize] = p;
+                    let i = group.identities[x] as usize;
+                    if i < n {
+                        m[t][i] += p;
+                    } else if p > 0.0 {
+                        // The star of port i: spread over what the partner's
+                        // phantom carries when something crossed.
+                        let q = self.partner(i as u32);
+                        let h = self.group_of[q as usize];
+                        let other = &self.groups[h];
+                        let (Some(jq), Some(xq)) = (
+                            other.local_track(q),
+                            other.identities.iter().position(|&y| y == q),
+                        ) else {
+                            continue;
+                        };
+                        let row = &local[h][jq];
+                        let crossed = 1.0 - row[xq];
+                        if crossed <= 0.0 {
+                            continue;
+                        }
+                        for (y, &r) in row.iter().enumerate() {
+                            let id = other.identities[y] as usize;
+                            if id < n {
+                                m[t][id] += p * r / crossed;
+                            }
+                        }
+                    }
                 }
             }
         }

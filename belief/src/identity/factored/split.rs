@@ -26,7 +26,7 @@
 //! (O(k!·2^(k−1))); the mutual information is then computed for that one
 //! cut per size.
 
-use super::group::{permutations, Group, MAX_GROUP};
+use super::group::{permutations, Group, Port, MAX_GROUP};
 use crate::error::BeliefError;
 
 /// A cut of a group: local tracks A (bit j = local track j) and the local
@@ -59,8 +59,9 @@ const NEGLIGIBLE: f64 = 1e-18;
 
 /// For every s in 1..k (k the group's size), the cut of largest mass whose
 /// A holds local track `keep` and has s tracks: `result[s]` (index 0 and k
-/// are `None`). Ties go to the first cut met, which is deterministic.
-pub fn best_cuts(group: &Group, keep: usize) -> Vec<Option<Cut>> {
+/// are `None`). Ties go to the first cut met, which is deterministic. A
+/// cut keeps each port's phantom track and star identity on one side.
+pub(crate) fn best_cuts(group: &Group, keep: usize, must: u32, ports: &[Port]) -> Vec<Option<Cut>> {
     let k = group.size();
     let mut best: Vec<Option<Cut>> = vec![None; k + 1];
     if k < 2 {
@@ -90,13 +91,24 @@ pub fn best_cuts(group: &Group, keep: usize) -> Vec<Option<Cut>> {
             continue;
         }
         let row = &mass[s << k..(s + 1) << k];
+        let holds = others
+            .iter()
+            .enumerate()
+            .filter(|&(bit, _)| s & (1 << bit) != 0)
+            .fold(1u32 << keep, |acc, (_, &j)| acc | (1 << j));
+        if holds & must != must {
+            continue;
+        }
+        let tracks = others
+            .iter()
+            .enumerate()
+            .filter(|&(bit, _)| s & (1 << bit) != 0)
+            .fold(1u32 << keep, |acc, (_, &j)| acc | (1 << j));
         for (identities, &m) in row.iter().enumerate() {
-            if m > best[size].map_or(0.0, |c| c.mass) {
-                let tracks = others
-                    .iter()
-                    .enumerate()
-                    .filter(|&(bit, _)| s & (1 << bit) != 0)
-                    .fold(1u32 << keep, |acc, (_, &j)| acc | (1 << j));
+            let whole_ports = ports
+                .iter()
+                .all(|p| (tracks >> p.phantom) & 1 == ((identities as u32) >> p.star) & 1);
+            if whole_ports && m > best[size].map_or(0.0, |c| c.mass) {
                 best[size] = Some(Cut {
                     tracks,
                     identities: identities as u32,
@@ -241,6 +253,200 @@ fn mutual_information(group: &Group, cut: &Cut, a: &Group, b: &Group) -> f64 {
     info.max(0.0)
 }
 
+/// A linked cut of a group (see [`super::links`]): the two factors, each
+/// with a new port, and what the cut loses.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct LinkedCut {
+    /// The factor on A and I_A, with port `pa`.
+    pub a: Group,
+    /// The factor on B and I_B, with port `pb`.
+    pub b: Group,
+    /// The mass kept: assignments with at most one identity across the
+    /// cut, neither a port's.
+    pub mass: f64,
+    /// I(σ_A; σ_B | e) of the kept part, nats.
+    pub mutual_information: f64,
+}
+
+impl LinkedCut {
+    /// (1 − kept mass) + I(σ_A; σ_B | e).
+    pub fn cost(&self) -> f64 {
+        (1.0 - self.mass).max(0.0) + self.mutual_information.max(0.0)
+    }
+}
+
+/// Where an assignment of the group goes under a linked cut.
+struct LinkedProjector {
+    a_tracks: Vec<usize>,
+    b_tracks: Vec<usize>,
+    position: Vec<u8>,
+    identities: u32,
+    /// Bit j: local track j is a phantom; bit x: local identity x a star.
+    phantom_tracks: u32,
+    star_identities: u32,
+    a_table: &'static crate::identity::permutation::Permutations,
+    b_table: &'static crate::identity::permutation::Permutations,
+}
+
+impl LinkedProjector {
+    fn new(group: &Group, cut: &Cut, ports: &[Port]) -> Result<Self, BeliefError> {
+        let plain = Projector::new(group, cut)?;
+        let (na, nb) = (plain.a_tracks.len(), plain.b_tracks.len());
+        if na + 1 > MAX_GROUP || nb + 1 > MAX_GROUP {
+            return Err(BeliefError::BadComponent {
+                detail: format!("a linked cut into {na} and {nb} tracks"),
+            });
+        }
+        Ok(LinkedProjector {
+            a_table: permutations(na + 1)?,
+            b_table: permutations(nb + 1)?,
+            phantom_tracks: ports.iter().fold(0, |m, p| m | (1 << p.phantom)),
+            star_identities: ports.iter().fold(0, |m, p| m | (1 << p.star)),
+            a_tracks: plain.a_tracks,
+            b_tracks: plain.b_tracks,
+            position: plain.position,
+            identities: plain.identities,
+        })
+    }
+
+    /// The ranks (on A + port, on B + port) and the exchange flag of an
+    /// assignment, or `None` if the linked cut drops it.
+    fn project(&self, perm: &[u8]) -> Option<(usize, usize, bool)> {
+        let in_a = |x: u8| self.identities & (1 << x) != 0;
+        let (na, nb) = (self.a_tracks.len(), self.b_tracks.len());
+        let mut a = [0u8; MAX_GROUP];
+        let mut b = [0u8; MAX_GROUP];
+        // The A track carrying an identity of B, and the B track carrying
+        // one of A: at most one each (then both or neither).
+        let mut across_a: Option<(usize, u8)> = None;
+        for (slot, &j) in a.iter_mut().zip(&self.a_tracks) {
+            let x = perm[j];
+            if in_a(x) {
+                *slot = self.position[x as usize];
+            } else if across_a.is_none() {
+                across_a = Some((j, x));
+                *slot = na as u8;
+            } else {
+                return None;
+            }
+        }
+        let mut across_b: Option<(usize, u8)> = None;
+        for (slot, &j) in b.iter_mut().zip(&self.b_tracks) {
+            let x = perm[j];
+            if !in_a(x) {
+                *slot = self.position[x as usize];
+            } else {
+                // Only one A identity can be on B when only one B identity
+                // is on A.
+                across_b = Some((j, x));
+                *slot = nb as u8;
+            }
+        }
+        let exchanged = match (across_a, across_b) {
+            (None, None) => {
+                a[na] = na as u8;
+                b[nb] = nb as u8;
+                false
+            }
+            (Some((ja, y)), Some((jb, x))) => {
+                // An identity crossing two links at once, or a phantom
+                // crossing, is beyond one exchange: dropped.
+                let chained = (self.phantom_tracks >> ja) & 1 != 0
+                    || (self.phantom_tracks >> jb) & 1 != 0
+                    || (self.star_identities >> x) & 1 != 0
+                    || (self.star_identities >> y) & 1 != 0;
+                if chained {
+                    return None;
+                }
+                a[na] = self.position[x as usize];
+                b[nb] = self.position[y as usize];
+                true
+            }
+            _ => return None,
+        };
+        Some((
+            self.a_table.rank(&a[..na + 1]),
+            self.b_table.rank(&b[..nb + 1]),
+            exchanged,
+        ))
+    }
+}
+
+/// The linked cut of `group` along `cut`: A gets a new port `pa` and B a
+/// new port `pb` (global ids ≥ n, partners of each other), each factor a
+/// projection of the group conditioned on at most one identity crossing.
+/// With e the exchange flag, the joint f_A(σ_A)·f_B(σ_B)·[e_A = e_B] is
+/// P(e)·P(σ_A | e)·P(σ_B | e): f_A(σ_A) = P(σ_A, e), f_B(σ_B) = P(σ_B | e).
+pub(crate) fn apply_linked(
+    group: &Group,
+    cut: &Cut,
+    ports: &[Port],
+    pa: u32,
+    pb: u32,
+) -> Result<LinkedCut, BeliefError> {
+    let projector = LinkedProjector::new(group, cut, ports)?;
+    let table = group.table();
+    let mut fa = vec![0.0; projector.a_table.count()];
+    let mut fb = vec![0.0; projector.b_table.count()];
+    let mut by_flag = [0.0f64; 2];
+    for (r, &p) in group.probabilities().iter().enumerate() {
+        if p == 0.0 {
+            continue;
+        }
+        if let Some((ra, rb, e)) = projector.project(table.get(r)) {
+            fa[ra] += p;
+            fb[rb] += p;
+            by_flag[usize::from(e)] += p;
+        }
+    }
+    let mass = by_flag[0] + by_flag[1];
+    if !(mass.is_finite() && mass > 0.0) {
+        return Err(BeliefError::Degenerate { normalizer: mass });
+    }
+    fa.iter_mut().for_each(|p| *p /= mass);
+    let (nb, b_table) = (projector.b_tracks.len(), projector.b_table);
+    for (r, p) in fb.iter_mut().enumerate() {
+        let e = usize::from(b_table.get(r)[nb] as usize != nb);
+        if *p != 0.0 {
+            *p /= by_flag[e];
+        }
+    }
+    let mut info = 0.0;
+    for (r, &p) in group.probabilities().iter().enumerate() {
+        if p == 0.0 {
+            continue;
+        }
+        if let Some((ra, rb, _)) = projector.project(table.get(r)) {
+            let joint = p / mass;
+            info += joint * (joint / (fa[ra] * fb[rb])).ln();
+        }
+    }
+    // f_B = P(σ_B | e) sums to one per flag: scaled to sum to one (a
+    // factor's scale does not change the joint).
+    let total: f64 = fb.iter().sum();
+    fb.iter_mut().for_each(|p| *p /= total);
+    let side = |tracks: &[usize], inside: bool, port: u32, probs: Vec<f64>| {
+        let mut t: Vec<u32> = tracks.iter().map(|&j| group.tracks[j]).collect();
+        t.push(port);
+        let mut ids: Vec<u32> = (0..group.size())
+            .filter(|&x| (cut.identities & (1 << x) != 0) == inside)
+            .map(|x| group.identities[x])
+            .collect();
+        ids.push(port);
+        Group {
+            tracks: t,
+            identities: ids,
+            probs,
+        }
+    };
+    Ok(LinkedCut {
+        a: side(&projector.a_tracks, true, pa, fa),
+        b: side(&projector.b_tracks, false, pb, fb),
+        mass,
+        mutual_information: info.max(0.0),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -252,7 +458,7 @@ mod tests {
         g.read(0, 0, 0.9, 0.1).unwrap();
         g.mix(0, 1, 0.3);
         let g = g.join(&Group::certain(2, 7)).unwrap();
-        let cuts = best_cuts(&g, 2);
+        let cuts = best_cuts(&g, 2, 0, &[]);
         let one = cuts[1].unwrap();
         assert_eq!((one.tracks, one.identities), (0b100, 0b100));
         assert!(one.cost() < 1e-12, "{one:?}");
@@ -270,7 +476,7 @@ mod tests {
         // the more likely pairing and loses ¼ of the mass.
         let mut g = Group::certain(0, 0).join(&Group::certain(1, 1)).unwrap();
         g.mix(0, 1, 0.25);
-        let cut = best_cuts(&g, 0)[1].unwrap();
+        let cut = best_cuts(&g, 0, 0, &[])[1].unwrap();
         assert_eq!(cut.identities, 0b01);
         assert!((cut.mass - 0.75).abs() < 1e-12);
         assert!((cut.cost() - 0.25).abs() < 1e-12);
@@ -287,7 +493,7 @@ mod tests {
         g.probs.iter_mut().for_each(|p| *p = 0.0);
         g.probs[both] = 0.5;
         g.probs[none] = 0.5;
-        let cut = best_cuts(&g, 0)[2].unwrap();
+        let cut = best_cuts(&g, 0, 0, &[])[2].unwrap();
         assert_eq!((cut.tracks, cut.identities), (0b0011, 0b0011));
         assert!((cut.mass - 1.0).abs() < 1e-12);
         assert!((cut.mutual_information - 2f64.ln()).abs() < 1e-12);
