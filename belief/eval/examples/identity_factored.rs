@@ -343,13 +343,7 @@ fn main() {
                 row.idf1_pooled.0 / row.idf1_pooled.1.max(1) as f64,
                 row.reliability_gap(),
             );
-            print!(
-                "{}",
-                md.lines()
-                    .last()
-                    .map(|l| format!("{l}\n"))
-                    .unwrap_or_default()
-            );
+            print_last_line(&md);
             bins_md.push(bins_line(n, method, &row));
         }
     }
@@ -393,13 +387,7 @@ fn main() {
                 row.query_time.as_secs_f64() * 1e6 / row.queries.max(1) as f64,
                 row.bytes as f64 / 1024.0,
             );
-            print!(
-                "{}",
-                md.lines()
-                    .last()
-                    .map(|l| format!("{l}\n"))
-                    .unwrap_or_default()
-            );
+            print_last_line(&md);
             bins_md.push(bins_line(n, method, &row));
         }
     }
@@ -414,4 +402,11 @@ fn main() {
     }
     std::fs::write(&out, md).expect("write the results");
     println!("wrote {out}");
+}
+
+/// Echoes the table row just written.
+fn print_last_line(md: &str) {
+    if let Some(line) = md.lines().last() {
+        println!("{line}");
+    }
 }

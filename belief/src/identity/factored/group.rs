@@ -255,6 +255,16 @@ impl Group {
             .collect()
     }
 
+    /// The port with global id `id` (≥ `n`), or an error naming it.
+    pub(crate) fn port(&self, n: usize, id: u32) -> Result<Port, BeliefError> {
+        self.ports(n)
+            .into_iter()
+            .find(|x| x.id == id)
+            .ok_or(BeliefError::BadComponent {
+                detail: format!("port {id} is not in its group"),
+            })
+    }
+
     /// The number of real tracks (ids below `n`).
     pub(crate) fn real_size(&self, n: usize) -> usize {
         self.tracks.iter().filter(|&&t| (t as usize) < n).count()

@@ -192,13 +192,7 @@ impl FactoredIdentity {
     pub(crate) fn exchange(&self, p: u32) -> Result<f64, BeliefError> {
         let g = self.group_of[p as usize];
         let m = Messages::new(self).group_marginals(g)?;
-        let port = self.groups[g]
-            .ports(self.n)
-            .into_iter()
-            .find(|x| x.id == p)
-            .ok_or(BeliefError::BadComponent {
-                detail: format!("port {p} is not in its group"),
-            })?;
+        let port = self.groups[g].port(self.n, p)?;
         Ok(exchange_probability(&m, &port))
     }
 
@@ -330,20 +324,8 @@ impl FactoredIdentity {
             let mut bp = Messages::new(self);
             (bp.group_marginals(g)?, bp.group_marginals(h)?)
         };
-        let port_g = self.groups[g]
-            .ports(self.n)
-            .into_iter()
-            .find(|x| x.id == p)
-            .ok_or(BeliefError::BadComponent {
-                detail: format!("port {p} is not in its group"),
-            })?;
-        let port_h = self.groups[h]
-            .ports(self.n)
-            .into_iter()
-            .find(|x| x.id == q)
-            .ok_or(BeliefError::BadComponent {
-                detail: format!("port {q} is not in its group"),
-            })?;
+        let port_g = self.groups[g].port(self.n, p)?;
+        let port_h = self.groups[h].port(self.n, q)?;
         let yl = self.groups[h]
             .identities
             .iter()
