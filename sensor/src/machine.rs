@@ -38,11 +38,11 @@ use idmesh_protocol::wire::sensor_to_leader::Batch;
 use serde::{Deserialize, Serialize};
 
 use idmesh_protocol::wire::{decode, encode, Valid, VERSION};
+use std::collections::BTreeMap;
 
 /// What routing lines gives: the cuts they reached, for the journal the
 /// line each came after, and the lines the extractor refused (index, why).
 type Routed<Q> = (Vec<Placed<Q>>, Vec<(u32, Wanted)>, Vec<(usize, String)>);
-use std::collections::BTreeMap;
 
 mod meshed;
 

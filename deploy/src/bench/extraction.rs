@@ -218,13 +218,10 @@ async fn latency(deployment: &Deployment, pairs: usize) -> Result<Latency> {
     let ping_sensor = keys.ping("sensor", sensor);
     let ping_coordinator = keys.ping("coordinator", &deployment.topology.coordinator.name);
     let marginals = keys.query_marginals();
-    let started = Instant::now();
-    while let Err(e) = deployment.ping(&ping_sensor, 1).await {
-        if started.elapsed() > TIMEOUT {
-            return Err(e.context("the sensor did not come up"));
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    deployment
+        .wait_for(&ping_sensor, 1, TIMEOUT)
+        .await
+        .context("the sensor did not come up")?;
     let mut l = Latency {
         to_answer: Vec::with_capacity(pairs),
         ingested: Vec::with_capacity(pairs),

@@ -57,13 +57,10 @@ pub async fn measure(deployment: &Deployment, trace: &Path, queries: usize) -> R
     let sensor = &deployment.topology.sensor().name;
     let ping = keys.ping("sensor", sensor);
     let ingest = keys.sensor_ingest(sensor);
-    let started = Instant::now();
-    while let Err(e) = deployment.ping(&ping, 1).await {
-        if started.elapsed() > TIMEOUT {
-            return Err(e.context("the sensor did not come up"));
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    deployment
+        .wait_for(&ping, 1, TIMEOUT)
+        .await
+        .context("the sensor did not come up")?;
     let lines = events(trace)?;
     let mut figures = Ingestion {
         throughput: Vec::new(),

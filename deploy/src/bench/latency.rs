@@ -46,13 +46,9 @@ pub async fn measure(
     let partials_key = format!("{}?quiet", keys.every_leader_partial());
     // The bench's session connects to each process on its own; wait until
     // it reaches them all.
-    let started = Instant::now();
-    while let Err(e) = deployment.ping(&leaders, deployment.leaders).await {
-        if started.elapsed() > TIMEOUT {
-            return Err(e);
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    deployment
+        .wait_for(&leaders, deployment.leaders, TIMEOUT)
+        .await?;
     let mut finished = false;
     for round in 0..WARM_UP + queries {
         let started = Instant::now();

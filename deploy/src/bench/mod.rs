@@ -581,6 +581,19 @@ impl Deployment {
         ping(&self.session, key, answers).await
     }
 
+    /// Pings `key` until `answers` replies come in (the bench's session
+    /// reaches each process on its own), or fails after `within`.
+    pub async fn wait_for(&self, key: &str, answers: usize, within: Duration) -> Result<()> {
+        let started = Instant::now();
+        while let Err(e) = self.ping(key, answers).await {
+            if started.elapsed() > within {
+                return Err(e);
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        Ok(())
+    }
+
     async fn close(self) {
         let _ = self.session.close().await;
     }
