@@ -7,9 +7,7 @@
 //! it. Screenshots and the figures are written to the test's output
 //! directory (`target/tmp/web/`).
 
-use chromiumoxide::page::ScreenshotParams;
-use chromiumoxide::{Browser, BrowserConfig, Page};
-use futures_util::StreamExt;
+use idmesh_tests::browser::Chromium;
 use idmesh_tests::deployment::{crowd_with_identities, Deployment, Settings};
 use idmesh_tests::web::Gateway;
 use serde_json::Value;
@@ -93,94 +91,13 @@ fn sse(url: &str, count: usize) -> Vec<(String, String, Instant)> {
     events
 }
 
-/// Headless Chromium over the DevTools protocol, driven from a test
-/// thread: every call blocks on the browser's answer.
-struct Chromium {
-    runtime: tokio::runtime::Runtime,
-    browser: Browser,
-    page: Option<Page>,
-}
-
-impl Chromium {
-    fn start(dir: &Path) -> Chromium {
-        let profile = dir.join(format!("chromium-profile-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&profile);
-        let config = BrowserConfig::builder()
-            .chrome_executable(idmesh_tests::browser::chromium())
-            .no_sandbox()
-            .user_data_dir(profile)
-            .window_size(1400, 900)
-            .request_timeout(Duration::from_secs(60))
-            .args([
-                "--disable-gpu",
-                "--disable-quic",
-                "--no-first-run",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-            ])
-            .build()
-            .expect("browser config");
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(1)
-            .enable_all()
-            .build()
-            .unwrap();
-        let browser = runtime.block_on(async {
-            let (browser, mut handler) = Browser::launch(config)
-                .await
-                .expect("chromium starts (apt-get install chromium)");
-            tokio::spawn(async move { while handler.next().await.is_some() {} });
-            browser
-        });
-        Chromium {
-            runtime,
-            browser,
-            page: None,
-        }
-    }
-
-    fn open(&mut self, url: &str) {
-        let page = self
-            .runtime
-            .block_on(self.browser.new_page(url))
-            .expect("the page opens");
-        self.page = Some(page);
-    }
-
-    /// The value of a JavaScript expression that gives a string.
-    fn eval(&self, js: &str) -> String {
-        let page = self.page.as_ref().expect("a page is open");
-        self.runtime
-            .block_on(page.evaluate(js))
-            .unwrap_or_else(|e| panic!("{js}: {e}"))
-            .into_value::<String>()
-            .unwrap_or_else(|e| panic!("{js}: {e}"))
-    }
-
-    fn screenshot(&self, to: &Path) {
-        let page = self.page.as_ref().expect("a page is open");
-        let png = self
-            .runtime
-            .block_on(page.screenshot(ScreenshotParams::builder().build()))
-            .expect("a screenshot");
-        std::fs::write(to, png).unwrap();
-    }
-}
-
-impl Drop for Chromium {
-    fn drop(&mut self) {
-        let _ = self.runtime.block_on(self.browser.close());
-    }
-}
-
-fn snapshot(tab: &Chromium) -> Value {
+fn snapshot(tab: &mut Chromium) -> Value {
     serde_json::from_str(&tab.eval("JSON.stringify(window.idmesh.snapshot())")).unwrap()
 }
 
 /// Polls the page until `wanted` holds of its snapshot.
 fn page_when(
-    tab: &Chromium,
+    tab: &mut Chromium,
     patience: Duration,
     what: &str,
     wanted: impl Fn(&Value) -> bool,
@@ -201,7 +118,7 @@ fn page_when(
 }
 
 /// The colour of the canvas pixel under (x, y) CSS pixels.
-fn pixel(tab: &Chromium, x: f64, y: f64, ratio: f64) -> [u8; 3] {
+fn pixel(tab: &mut Chromium, x: f64, y: f64, ratio: f64) -> [u8; 3] {
     let js = format!(
         "Array.from(document.getElementById('map').getContext('2d').getImageData({}, {}, 1, 1).data).join(',')",
         (x * ratio).round(),
@@ -260,10 +177,10 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     }
 
     // The page, opened while the stream runs.
-    let mut tab = Chromium::start(&out);
+    let mut tab = Chromium::start(&out, 1400, 900);
     let opened = Instant::now();
     tab.open(&gateway.url);
-    let first = page_when(&tab, Duration::from_secs(60), "a first map", |s| {
+    let first = page_when(&mut tab, Duration::from_secs(60), "a first map", |s| {
         s["firstMapMs"].is_number()
     });
     let first_map_ms = first["firstMapMs"].as_f64().unwrap();
@@ -394,9 +311,12 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
         .iter()
         .map(|p| p.as_f64().unwrap())
         .collect();
-    let page = page_when(&tab, Duration::from_secs(30), "the final watermark", |s| {
-        s["watermark"] == events && s["positionsAt"] == events && s["finished"] == true
-    });
+    let page = page_when(
+        &mut tab,
+        Duration::from_secs(30),
+        "the final watermark",
+        |s| s["watermark"] == events && s["positionsAt"] == events && s["finished"] == true,
+    );
     let shown = page["tracks"].as_array().unwrap();
     assert_eq!(shown.len(), TRACKS);
     assert_eq!(page["status"], "live", "{page}");
@@ -420,7 +340,7 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
         if covered {
             continue;
         }
-        let got = pixel(&tab, x, y, ratio);
+        let got = pixel(&mut tab, x, y, ratio);
         let want = colour_of(p_red[t]);
         assert!(
             (0..3).all(|i| (got[i] as i32 - want[i]).abs() <= 2),
@@ -438,7 +358,7 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     );
     let rows: Vec<String> = p_red.iter().map(|p| format!("{p:.3}")).collect();
     assert_eq!(table, rows.join(","));
-    tab.screenshot(&out.join("map.png"));
+    std::fs::write(out.join("map.png"), tab.screenshot()).unwrap();
 
     // Figures: a direct Zenoh query against the same through the gateway.
     let direct: Vec<f64> = (0..30)
@@ -482,14 +402,14 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     // A leader killed: the page says degraded and names it, the API
     // answers 503 with the coordinator's error, /readyz names it too.
     deployment.kill("leader-1");
-    let degraded = page_when(&tab, Duration::from_secs(60), "degraded", |s| {
+    let degraded = page_when(&mut tab, Duration::from_secs(60), "degraded", |s| {
         s["status"] == "degraded" && s["statusText"].as_str().unwrap_or("").contains("leader-1")
     });
     assert!(
         degraded["problem"].as_str().unwrap().contains("leader-1"),
         "{degraded}"
     );
-    tab.screenshot(&out.join("degraded.png"));
+    std::fs::write(out.join("degraded.png"), tab.screenshot()).unwrap();
     let (status, body) = get(&api("marginals"));
     assert_eq!(status, 503);
     let error = json(&body)["error"].as_str().unwrap().to_string();
