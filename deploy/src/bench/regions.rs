@@ -2,16 +2,18 @@
 //! each leader of a deployment at the default settings is sent
 //! (`idmesh_placement::items_sent`, the items the router sends under the
 //! regional rule) against an even share of what one leader alone applies,
-//! at 2, 4 and 8 leaders, on the bench's crowd and on a random-waypoint
-//! crowd (denser in the middle of its field), under fitted regions (the
-//! default) and under leaders at fixed places on a grid over the field.
+//! at 2, 4 and 8 leaders, on the bench's crowd, on a random-waypoint
+//! crowd of as many targets (denser in the middle of its field) and on
+//! one of five times as many, under fitted regions (the default) — with
+//! the share taken apart into its two causes — and under leaders at fixed
+//! places on a grid over the field.
 //! Computed from the streams, not timed: the throughput tables above
 //! show the same counts read off the leaders of the bench's crowd.
 
 use super::BenchOptions;
 use crate::runtime::launch::{field_corners, simulate_into};
 use anyhow::Result;
-use idmesh_placement::{busiest_share, grid_places, items_sent, RegionRule};
+use idmesh_placement::{busiest_share, grid_places, items_sent, share_causes, RegionRule};
 use idmesh_protocol::trace::Line;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -19,35 +21,43 @@ use std::path::Path;
 /// The leader counts of the table.
 const LEADERS: [usize; 3] = [2, 4, 8];
 
-/// The table, over the bench's crowd `trace` and a waypoint crowd of as
-/// many targets, simulated (and kept) beside it.
+/// The table, over the bench's crowd `trace` and waypoint crowds of as
+/// many and five times as many targets, simulated (and kept) beside it.
 pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
-    let waypoint = options.dir.join(format!(
-        "waypoint-{}-{}-{}.jsonl",
-        options.targets, options.red, options.duration
-    ));
-    if !waypoint.exists() {
-        simulate_into(
-            idmesh_sim::Scenario::waypoint(),
-            options.targets,
-            options.red,
-            options.duration,
-            options.seed,
-            &waypoint,
-        )?;
-    }
+    let waypoint = |targets: usize, red: usize| -> Result<std::path::PathBuf> {
+        let path = options.dir.join(format!(
+            "waypoint-{targets}-{red}-{}.jsonl",
+            options.duration
+        ));
+        if !path.exists() {
+            simulate_into(
+                idmesh_sim::Scenario::waypoint(),
+                targets,
+                red,
+                options.duration,
+                options.seed,
+                &path,
+            )?;
+        }
+        Ok(path)
+    };
+    let same = waypoint(options.targets, options.red)?;
+    let larger = waypoint(5 * options.targets, 5 * options.red)?;
     let mut out = String::from(
-        "\n### Items per leader by region rule\n\nThe busiest leader's items ÷ an even share of what one leader alone applies, at the default settings (regions fitted to the crowd and redrawn) and with leaders at fixed places on a grid over the field (`regions = \"fixed\"`); computed from each stream by the router's own rule (`idmesh_placement::items_sent`).\n\n| crowd | leaders | fitted regions (default) | fixed places on a grid |\n|---|---|---|---|\n",
+        "\n### Items per leader by region rule\n\nThe busiest leader's items ÷ an even share of what one leader alone applies, at the default settings (regions fitted to the crowd and redrawn) and with leaders at fixed places on a grid over the field (`regions = \"fixed\"`); computed from each stream by the router's own rule (`idmesh_placement::items_sent`). Under fitted regions the share is the product of two causes, shown beside it: all the leaders' items ÷ one leader's alone (a mix across two leaders is an item at each, a handover too: the fewer tracks a leader holds, the more mixes cross) and the busiest leader's items ÷ the leaders' mean (what placement decides).\n\n| crowd | leaders | fitted regions (default) | all items ÷ one leader's | busiest ÷ mean | fixed places on a grid |\n|---|---|---|---|---|---|\n",
     );
+    let larger_name = format!("random waypoint, {} targets", 5 * options.targets);
     for (name, path) in [
         ("the bench's crowd", trace),
-        ("random waypoint (dense middle)", &waypoint),
+        ("random waypoint (dense middle)", same.as_path()),
+        (larger_name.as_str(), larger.as_path()),
     ] {
         let (tracks, lines) = read(path)?;
         let single = items_sent(&RegionRule::fitted(), 1, tracks, &lines)[0];
         let corners = field_corners(path)?;
         for leaders in LEADERS {
             let fitted = items_sent(&RegionRule::fitted(), leaders, tracks, &lines);
+            let causes = share_causes(&fitted, single);
             let grid = RegionRule::Fixed(
                 grid_places(corners, leaders)
                     .into_iter()
@@ -57,8 +67,10 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
             let fixed = items_sent(&grid, leaders, tracks, &lines);
             writeln!(
                 out,
-                "| {name} | {leaders} | {:.2}× | {:.2}× |",
+                "| {name} | {leaders} | {:.2}× | {:.2}× | {:.2}× | {:.2}× |",
                 busiest_share(&fitted, single),
+                causes.duplication,
+                causes.unevenness,
                 busiest_share(&fixed, single)
             )?;
         }

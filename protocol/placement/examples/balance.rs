@@ -6,7 +6,7 @@
 //! two leaders is an item at each, a handover too) and the busiest over
 //! the mean.
 
-use idmesh_placement::{busiest_share, grid_places, items_sent, RegionRule};
+use idmesh_placement::{busiest_share, grid_places, items_sent, share_causes, RegionRule};
 use idmesh_protocol::trace::{Line, TraceReader};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -35,16 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let fitted = items_sent(&RegionRule::fitted(), leaders, tracks, &lines);
         let grid = RegionRule::Fixed(grid_places(b, leaders).into_iter().map(Some).collect());
         let fixed = items_sent(&grid, leaders, tracks, &lines);
-        let spread = |items: &[u64]| {
-            let total: u64 = items.iter().sum();
-            let busiest = items.iter().copied().max().unwrap_or(0) as f64;
-            (
-                total as f64 / single.max(1) as f64,
-                busiest * items.len() as f64 / total.max(1) as f64,
-            )
-        };
-        let (f_total, f_even) = spread(&fitted);
-        let (g_total, g_even) = spread(&fixed);
+        let (f, g) = (share_causes(&fitted, single), share_causes(&fixed, single));
+        let (f_total, f_even, g_total, g_even) =
+            (f.duplication, f.unevenness, g.duplication, g.unevenness);
         println!(
             "{leaders} leaders: fitted {:.2} (all items {f_total:.2}x one leader's, busiest {f_even:.2}x the mean), grid {:.2} ({g_total:.2}x, {g_even:.2}x)",
             busiest_share(&fitted, single),

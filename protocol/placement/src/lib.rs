@@ -25,7 +25,7 @@ mod load;
 mod regions;
 
 pub use fitted::{Fitted, TOLERANCE, WINDOW_PER_LEADER};
-pub use load::{busiest_share, items_sent};
+pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
 pub use regions::{grid_places, leading_places, Handover, RegionRule, Regional, Regions};
 
 use idmesh_belief::factored::{FactoredShare, HeldComponent};

@@ -62,3 +62,44 @@ pub fn busiest_share(items: &[u64], single: u64) -> f64 {
     let busiest = items.iter().copied().max().unwrap_or(0) as f64;
     busiest * items.len() as f64 / single.max(1) as f64
 }
+
+/// A busiest share taken apart into its two causes, whose product it is:
+/// how many items there are in all, and how unevenly they fall.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShareCauses {
+    /// All the leaders' items over one leader's alone: above 1 by every
+    /// mix across two leaders (an item at each) and every handover (an
+    /// item at two), which no placement of few tracks a leader avoids.
+    pub duplication: f64,
+    /// The busiest leader's items over the leaders' mean: what placement
+    /// decides.
+    pub unevenness: f64,
+}
+
+/// The causes of [`busiest_share`]`(items, single)`.
+pub fn share_causes(items: &[u64], single: u64) -> ShareCauses {
+    let total: u64 = items.iter().sum();
+    let busiest = items.iter().copied().max().unwrap_or(0) as f64;
+    ShareCauses {
+        duplication: total as f64 / single.max(1) as f64,
+        unevenness: busiest * items.len() as f64 / total.max(1) as f64,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_busiest_share_is_its_duplication_times_its_unevenness() {
+        // Two leaders sent 6 and 4 items of a stream one leader alone is
+        // sent 8 of: two items went to both.
+        let causes = share_causes(&[6, 4], 8);
+        assert_eq!(causes.duplication, 10.0 / 8.0);
+        assert_eq!(causes.unevenness, 12.0 / 10.0);
+        assert!((causes.duplication * causes.unevenness - busiest_share(&[6, 4], 8)).abs() < 1e-12);
+        // Nothing sent: no division by zero.
+        let none = share_causes(&[0, 0], 0);
+        assert_eq!((none.duplication, none.unevenness), (0.0, 0.0));
+    }
+}
