@@ -122,14 +122,13 @@ impl Chromium {
 
     /// Opens `url` in a new tab and waits until it has loaded.
     pub fn open(&mut self, url: &str) {
-        let id = self.next();
-        let target = call(
-            &mut self.browser,
-            id,
-            "Target.createTarget",
-            serde_json::json!({ "url": url }),
-        )
-        .unwrap_or_else(|e| panic!("opening {url}: {e}"));
+        let target = self
+            .call(
+                false,
+                "Target.createTarget",
+                serde_json::json!({ "url": url }),
+            )
+            .unwrap_or_else(|e| panic!("opening {url}: {e}"));
         let target = target["targetId"].as_str().expect("a target id");
         self.page = Some(connect(&format!(
             "ws://127.0.0.1:{}/devtools/page/{target}",
@@ -149,15 +148,13 @@ impl Chromium {
 
     /// The value of a JavaScript expression that gives a string.
     pub fn eval(&mut self, js: &str) -> String {
-        let id = self.next();
-        let page = self.page.as_mut().expect("a page is open");
-        let answer = call(
-            page,
-            id,
-            "Runtime.evaluate",
-            serde_json::json!({ "expression": js, "returnByValue": true, "awaitPromise": true }),
-        )
-        .unwrap_or_else(|e| panic!("{js}: {e}"));
+        let answer = self
+            .call(
+                true,
+                "Runtime.evaluate",
+                serde_json::json!({ "expression": js, "returnByValue": true, "awaitPromise": true }),
+            )
+            .unwrap_or_else(|e| panic!("{js}: {e}"));
         if let Some(thrown) = answer.get("exceptionDetails") {
             panic!("{js} threw: {thrown}");
         }
@@ -170,36 +167,40 @@ impl Chromium {
     /// A PNG of the open page.
     pub fn screenshot(&mut self) -> Vec<u8> {
         use base64::Engine;
-        let id = self.next();
-        let page = self.page.as_mut().expect("a page is open");
-        let answer = call(
-            page,
-            id,
-            "Page.captureScreenshot",
-            serde_json::json!({ "format": "png" }),
-        )
-        .unwrap_or_else(|e| panic!("a screenshot: {e}"));
+        let answer = self
+            .call(
+                true,
+                "Page.captureScreenshot",
+                serde_json::json!({ "format": "png" }),
+            )
+            .unwrap_or_else(|e| panic!("a screenshot: {e}"));
         let data = answer["data"].as_str().expect("the screenshot's data");
         base64::engine::general_purpose::STANDARD
             .decode(data)
             .expect("the screenshot is base64")
     }
 
-    fn next(&mut self) -> u64 {
+    /// One call to the open page (`on_page`) or to the browser, under
+    /// the next message id.
+    fn call(
+        &mut self,
+        on_page: bool,
+        method: &str,
+        params: serde_json::Value,
+    ) -> Result<serde_json::Value, String> {
         self.next_id += 1;
-        self.next_id
+        let socket = if on_page {
+            self.page.as_mut().expect("a page is open")
+        } else {
+            &mut self.browser
+        };
+        call(socket, self.next_id, method, params)
     }
 }
 
 impl Drop for Chromium {
     fn drop(&mut self) {
-        let id = self.next();
-        let _ = call(
-            &mut self.browser,
-            id,
-            "Browser.close",
-            serde_json::Value::Null,
-        );
+        let _ = self.call(false, "Browser.close", serde_json::Value::Null);
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
