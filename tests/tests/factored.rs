@@ -17,6 +17,8 @@
 //! information matrix's rows beside it, and answers both as replay does
 //! through a leader's crash.
 
+use idmesh_placement::{items_sent, RegionRule};
+use idmesh_protocol::trace::TraceReader;
 use idmesh_tests::deployment::{
     crowd, crowd_with_identities, replay_lines, truth_lines, waypoint_crowd, Deployment, Factored,
     LeaderFaultSection, Settings, SplitSetting, Truth,
@@ -141,6 +143,12 @@ fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders(
     let dir = std::env::temp_dir().join(format!("idmesh-defaults-{}", std::process::id()));
     let trace = waypoint_crowd(&dir, 200, 100, 3000, 1);
     let truths = truth_lines(&trace);
+    let mut reader = TraceReader::open(&trace).expect("the crowd's trace");
+    let header = reader.read_header().expect("its header");
+    let mut lines = Vec::new();
+    while let Some(numbered) = reader.read_line().expect("its lines") {
+        lines.push(numbered.line);
+    }
     let mut alone = 0;
     for leaders in [1usize, 2, 4, 8] {
         let settings = Settings {
@@ -158,6 +166,12 @@ fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders(
         check_points(&what, &deployment, &truths, &twin);
         assert_final(&what, &deployment, &twin);
         let items = deployment.items_per_leader();
+        // The counters are what the bench computes from the stream alone.
+        assert_eq!(
+            items,
+            items_sent(&RegionRule::fitted(), leaders, header.tracks, &lines),
+            "{what}: the leaders' counters against the router's rule"
+        );
         let busiest = items.iter().copied().max().unwrap_or(0);
         if leaders == 1 {
             alone = busiest;

@@ -14,14 +14,20 @@ use idmesh_protocol::trace::Line;
 
 /// The items each of `leaders` leaders is sent by a stream of `lines` over
 /// `tracks` tracks with regions by `rule` (the `Begin` and cuts, which
-/// every leader gets, left out).
+/// every leader gets, left out), as a sensor streaming them from a file
+/// routes them: knowing the leading `move` lines ahead, so that the tracks
+/// they place start with the leaders of their regions
+/// ([`Regions::starting`]) rather than being handed over at the first
+/// event.
 pub fn items_sent<'a>(
     rule: &RegionRule,
     leaders: usize,
     tracks: usize,
     lines: impl IntoIterator<Item = &'a Line>,
 ) -> Vec<u64> {
-    let mut regions = Regions::new(rule, leaders, tracks);
+    let lines: Vec<&Line> = lines.into_iter().collect();
+    let leading = crate::leading_places(tracks, lines.iter().copied());
+    let mut regions = Regions::starting(rule, leaders, tracks, &leading);
     let mut items = vec![0u64; leaders.max(1)];
     let known = |t: u32| (t as usize) < tracks;
     let handed = |items: &mut Vec<u64>, handovers: &[Handover]| {
@@ -101,5 +107,38 @@ mod tests {
         // Nothing sent: no division by zero.
         let none = share_causes(&[0, 0], 0);
         assert_eq!((none.duplication, none.unevenness), (0.0, 0.0));
+    }
+
+    #[test]
+    fn tracks_placed_before_the_first_event_start_with_their_leaders() {
+        use idmesh_protocol::trace::{Move, Observe};
+        let at = |track, x| {
+            Line::Move(Move {
+                time: 0.0,
+                track,
+                x,
+                y: 0.0,
+            })
+        };
+        let seen = |track| {
+            Line::Observe(Observe {
+                time: 0.0,
+                track,
+                red: 0.8,
+                blue: 0.2,
+                sensor: None,
+            })
+        };
+        // Tracks 0 and 1 start round robin with leaders 0 and 1 but stand
+        // the other way round: a sensor that streams the file starts them
+        // in their regions, so the two reads are one item each and no
+        // handover is counted.
+        let places = RegionRule::Fixed(vec![Some((0.0, 0.0)), Some((10.0, 0.0))]);
+        let lines = [at(0, 9.0), at(1, 1.0), seen(0), seen(1)];
+        assert_eq!(items_sent(&places, 2, 2, &lines), vec![1, 1]);
+        // Placed only after the first event, track 0 is handed over (an
+        // item at both leaders) and then read.
+        let late = [seen(1), at(0, 9.0), seen(0)];
+        assert_eq!(items_sent(&places, 2, 2, &late), vec![1, 3]);
     }
 }
