@@ -3,18 +3,23 @@
 //! (`idmesh_placement::items_sent`, the items the router sends under the
 //! regional rule) against an even share of what one leader alone applies,
 //! at 2, 4 and 8 leaders, on the bench's crowd, on a random-waypoint
-//! crowd of as many targets (denser in the middle of its field) and on
-//! one of five times as many, under fitted regions (the default) — with
-//! the share taken apart into its two causes — and under leaders at fixed
-//! places on a grid over the field.
+//! crowd of as many targets (denser in the middle of its field), on one of
+//! five times as many and on the real pedestrian scenes of
+//! shared/data/pedestrians (people crowding paths and doors, entering and
+//! leaving), under fitted regions (the default) — with the share taken
+//! apart into its two causes — and under leaders at fixed places on a
+//! grid over the field.
 //! Computed from the streams, not timed: the throughput tables above
 //! show the same counts read off the leaders of the bench's crowd.
 
 use super::BenchOptions;
 use crate::runtime::launch::{field_corners, simulate_into};
-use anyhow::Result;
+use anyhow::{Context, Result};
 use idmesh_placement::{busiest_share, grid_places, items_sent, share_causes, RegionRule};
 use idmesh_protocol::trace::Line;
+use idmesh_sim::motion::pedestrians::data_dir;
+use idmesh_sim::scenario::trace_out::write_trace;
+use idmesh_sim::Scenario;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -46,12 +51,38 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
     let mut out = String::from(
         "\n### Items per leader by region rule\n\nThe busiest leader's items ÷ an even share of what one leader alone applies, at the default settings (regions fitted to the crowd and redrawn) and with leaders at fixed places on a grid over the field (`regions = \"fixed\"`); computed from each stream by the router's own rule (`idmesh_placement::items_sent`). Under fitted regions the share is the product of two causes, shown beside it: all the leaders' items ÷ one leader's alone (a mix across two leaders is an item at each, a handover too: the fewer tracks a leader holds, the more mixes cross) and the busiest leader's items ÷ the leaders' mean (what placement decides).\n\n| crowd | leaders | fitted regions (default) | all items ÷ one leader's | busiest ÷ mean | fixed places on a grid |\n|---|---|---|---|---|---|\n",
     );
-    let larger_name = format!("random waypoint, {} targets", 5 * options.targets);
-    for (name, path) in [
-        ("the bench's crowd", trace),
-        ("random waypoint (dense middle)", same.as_path()),
-        (larger_name.as_str(), larger.as_path()),
-    ] {
+    let mut crowds = vec![
+        ("the bench's crowd".to_string(), trace.to_path_buf()),
+        ("random waypoint (dense middle)".to_string(), same),
+        (
+            format!("random waypoint, {} targets", 5 * options.targets),
+            larger,
+        ),
+    ];
+    let mut missing = Vec::new();
+    for (scene, file) in idmesh_eval::eval::SCENES {
+        let source = data_dir().join(file);
+        if !source.is_file() {
+            missing.push(source.display().to_string());
+            continue;
+        }
+        let path = options
+            .dir
+            .join(format!("scene-{scene}-{}.jsonl", options.seed));
+        if !path.exists() {
+            let trace = Scenario::pedestrians(&source)
+                .seed(options.seed)
+                .generate()
+                .with_context(|| format!("{}: the scene's simulation failed", source.display()))?;
+            let name = path.display().to_string();
+            let file =
+                std::fs::File::create(&path).with_context(|| format!("{name}: cannot create"))?;
+            write_trace(&trace, std::io::BufWriter::new(file), name)?;
+        }
+        crowds.push((format!("real scene `{scene}`"), path));
+    }
+    for (name, path) in &crowds {
+        let (name, path) = (name.as_str(), path.as_path());
         let (tracks, lines) = read(path)?;
         let single = items_sent(&RegionRule::fitted(), 1, tracks, &lines)[0];
         let corners = field_corners(path)?;
@@ -74,6 +105,13 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
                 busiest_share(&fixed, single)
             )?;
         }
+    }
+    if !missing.is_empty() {
+        writeln!(
+            out,
+            "\nScenes not found (set `IDMESH_PEDESTRIANS` to the folder of shared/data/pedestrians): {}.",
+            missing.join(", ")
+        )?;
     }
     Ok(out)
 }

@@ -52,6 +52,7 @@ use methods::Method;
 use plan::{Experiment, Plan, PARTICLES};
 use plots::{Plot, Series};
 use results::{EqualTime, PointResult, Results, Summary};
+pub use scenarios::SCENES;
 use scenarios::{Scenes, Start, Trace};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
