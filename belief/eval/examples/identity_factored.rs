@@ -32,6 +32,7 @@ use idmesh_belief::identity::{
 };
 use idmesh_belief::identity_event_of;
 use idmesh_belief::scoring::Reliability;
+use idmesh_eval::eval::plots::{draw, Plot, Series};
 use idmesh_protocol::trace::Line;
 use idmesh_sim::scenario::trace_out::lines;
 use idmesh_sim::scenario::Scenario;
@@ -379,6 +380,8 @@ fn main() {
         (200, 300)
     };
     let mut bins_md: Vec<String> = Vec::new();
+    // Reliability diagrams drawn beside the page: (n, method, diagram).
+    let mut diagrams: Vec<(usize, String, Reliability)> = Vec::new();
     let small: Vec<usize> = std::env::var("SMALL")
         .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
         .unwrap_or(vec![8, 9]);
@@ -472,6 +475,7 @@ fn main() {
         );
         print_last_line(&md);
         bins_md.push(bins_line(yard_n, method, &row));
+        diagrams.push((yard_n, method.name(), row.reliability.clone()));
     }
     let large_seeds = seeds.min(4);
     let _ = writeln!(md, "\n## Against the truth (n = 100, 1,000, 10,000)\n");
@@ -526,6 +530,7 @@ fn main() {
             );
             print_last_line(&md);
             bins_md.push(bins_line(n, method, &row));
+            diagrams.push((n, method.name(), row.reliability.clone()));
         }
     }
     let _ = writeln!(
@@ -536,6 +541,49 @@ fn main() {
     let _ = writeln!(md, "|---|---|---|");
     for line in bins_md {
         let _ = writeln!(md, "{line}");
+    }
+    let folder = std::path::Path::new(&out)
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let _ = writeln!(
+        md,
+        "\nReliability diagrams (bins holding ≥ 200 predictions; a calibrated belief lies on the black diagonal):\n"
+    );
+    for n in [yard_n, 100, 1000] {
+        let file = format!("identity-reliability-n{n}.svg");
+        let mut series = vec![Series {
+            name: "calibrated".into(),
+            exact: true,
+            points: vec![(0.0, 0.0), (1.0, 1.0)],
+        }];
+        for (_, name, r) in diagrams.iter().filter(|(m, _, _)| *m == n) {
+            let points: Vec<(f64, f64)> = r
+                .points()
+                .into_iter()
+                .filter(|&(_, _, count)| count >= 200)
+                .map(|(p, f, _)| (p, f))
+                .collect();
+            if !points.is_empty() {
+                series.push(Series {
+                    name: name.clone(),
+                    exact: false,
+                    points,
+                });
+            }
+        }
+        if series.len() < 2 {
+            continue;
+        }
+        let plot = Plot {
+            file: file.clone(),
+            title: format!("Identity reliability, n = {n}: how often p[t][i] = p was the truth"),
+            x_label: "predicted p, mean of each tenth".into(),
+            y_label: "observed share true".into(),
+            series,
+        };
+        draw(&plot, folder).expect("draw the reliability diagram");
+        let _ = writeln!(md, "- n = {n}: [{file}]({file})");
     }
     std::fs::write(&out, md).expect("write the results");
     println!("wrote {out}");

@@ -37,7 +37,7 @@ mod large;
 pub mod live;
 mod methods;
 mod plan;
-mod plots;
+pub mod plots;
 mod report;
 mod results;
 mod scenarios;
