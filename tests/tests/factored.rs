@@ -143,12 +143,10 @@ fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders(
     let dir = std::env::temp_dir().join(format!("idmesh-defaults-{}", std::process::id()));
     let trace = waypoint_crowd(&dir, 200, 100, 3000, 1);
     let truths = truth_lines(&trace);
-    let mut reader = TraceReader::open(&trace).expect("the crowd's trace");
-    let header = reader.read_header().expect("its header");
-    let mut lines = Vec::new();
-    while let Some(numbered) = reader.read_line().expect("its lines") {
-        lines.push(numbered.line);
-    }
+    let (header, lines) = TraceReader::open(&trace)
+        .expect("the crowd's trace")
+        .read_all()
+        .expect("its lines");
     let mut alone = 0;
     for leaders in [1usize, 2, 4, 8] {
         let settings = Settings {

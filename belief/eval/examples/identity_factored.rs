@@ -32,7 +32,7 @@ use idmesh_belief::identity::{
 };
 use idmesh_belief::identity_event_of;
 use idmesh_belief::scoring::Reliability;
-use idmesh_eval::eval::plots::{draw, Plot, Series};
+use idmesh_eval::eval::plots::{draw, reliability_series, Plot};
 use idmesh_protocol::trace::Line;
 use idmesh_sim::scenario::trace_out::lines;
 use idmesh_sim::scenario::Scenario;
@@ -552,26 +552,12 @@ fn main() {
     );
     for n in [yard_n, 100, 1000] {
         let file = format!("identity-reliability-n{n}.svg");
-        let mut series = vec![Series {
-            name: "calibrated".into(),
-            exact: true,
-            points: vec![(0.0, 0.0), (1.0, 1.0)],
-        }];
-        for (_, name, r) in diagrams.iter().filter(|(m, _, _)| *m == n) {
-            let points: Vec<(f64, f64)> = r
-                .points()
-                .into_iter()
-                .filter(|&(_, _, count)| count >= 200)
-                .map(|(p, f, _)| (p, f))
-                .collect();
-            if !points.is_empty() {
-                series.push(Series {
-                    name: name.clone(),
-                    exact: false,
-                    points,
-                });
-            }
-        }
+        let methods: Vec<(String, Reliability)> = diagrams
+            .iter()
+            .filter(|(m, _, _)| *m == n)
+            .map(|(_, name, r)| (name.clone(), r.clone()))
+            .collect();
+        let series = reliability_series(&methods, 200);
         if series.len() < 2 {
             continue;
         }

@@ -13,12 +13,11 @@
 //! show the same counts read off the leaders of the bench's crowd.
 
 use super::BenchOptions;
-use crate::runtime::launch::{field_corners, simulate_into};
+use crate::runtime::launch::{field_corners, simulate_into, write_simulation};
 use anyhow::{Context, Result};
 use idmesh_placement::{busiest_share, grid_places, items_sent, share_causes, RegionRule};
 use idmesh_protocol::trace::Line;
 use idmesh_sim::motion::pedestrians::data_dir;
-use idmesh_sim::scenario::trace_out::write_trace;
 use idmesh_sim::Scenario;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -70,14 +69,8 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
             .dir
             .join(format!("scene-{scene}-{}.jsonl", options.seed));
         if !path.exists() {
-            let trace = Scenario::pedestrians(&source)
-                .seed(options.seed)
-                .generate()
-                .with_context(|| format!("{}: the scene's simulation failed", source.display()))?;
-            let name = path.display().to_string();
-            let file =
-                std::fs::File::create(&path).with_context(|| format!("{name}: cannot create"))?;
-            write_trace(&trace, std::io::BufWriter::new(file), name)?;
+            write_simulation(Scenario::pedestrians(&source).seed(options.seed), &path)
+                .with_context(|| format!("the scene {}", source.display()))?;
         }
         crowds.push((format!("real scene `{scene}`"), path));
     }
@@ -118,11 +111,6 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
 
 /// A trace's track count and lines.
 fn read(path: &Path) -> Result<(usize, Vec<Line>)> {
-    let mut reader = idmesh_protocol::TraceReader::open(path)?;
-    let header = reader.read_header()?;
-    let mut lines = Vec::new();
-    while let Some(n) = reader.read_line()? {
-        lines.push(n.line);
-    }
+    let (header, lines) = idmesh_protocol::TraceReader::open(path)?.read_all()?;
     Ok((header.tracks, lines))
 }

@@ -327,13 +327,19 @@ pub fn simulate_into(
     seed: u64,
     out: &Path,
 ) -> Result<()> {
-    let trace = scenario
-        .targets(targets)
-        .red(red)
-        .duration(duration)
-        .seed(seed)
-        .generate()
-        .context("the simulation failed")?;
+    write_simulation(
+        scenario
+            .targets(targets)
+            .red(red)
+            .duration(duration)
+            .seed(seed),
+        out,
+    )
+}
+
+/// Generates `scenario` as it is set and writes its trace to `out`.
+pub fn write_simulation(scenario: idmesh_sim::Scenario, out: &Path) -> Result<()> {
+    let trace = scenario.generate().context("the simulation failed")?;
     let path = out.display().to_string();
     let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
     idmesh_sim::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;

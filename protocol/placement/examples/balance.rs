@@ -11,12 +11,7 @@ use idmesh_protocol::trace::{Line, TraceReader};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args().nth(1).ok_or("usage: balance TRACE")?;
-    let mut reader = TraceReader::open(std::path::Path::new(&path))?;
-    let header = reader.read_header()?;
-    let mut lines = Vec::new();
-    while let Some(n) = reader.read_line()? {
-        lines.push(n.line);
-    }
+    let (header, lines) = TraceReader::open(std::path::Path::new(&path))?.read_all()?;
     let tracks = header.tracks;
     let mut b = (
         f64::INFINITY,

@@ -91,6 +91,17 @@ impl<R: BufRead> TraceReader<R> {
         }
     }
 
+    /// The header and every line after it, for a reader that wants the
+    /// whole trace in memory (the lines without their numbers).
+    pub fn read_all(mut self) -> Result<(Header, Vec<Line>), TraceError> {
+        let header = self.read_header()?;
+        let mut lines = Vec::new();
+        while let Some(numbered) = self.read_line()? {
+            lines.push(numbered.line);
+        }
+        Ok((header, lines))
+    }
+
     /// The next valid line, `Ok(None)` at the end of the trace.
     pub fn read_line(&mut self) -> Result<Option<NumberedLine>, TraceError> {
         if self.done {

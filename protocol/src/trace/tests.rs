@@ -765,6 +765,28 @@ fn round_trip_writer_to_reader() {
 }
 
 #[test]
+fn read_all_gives_the_header_and_the_lines_after_it_or_the_first_error() {
+    let trace = format!(
+        "{H}\n{}\n{}\n",
+        r#"{"kind":"mix","time":1,"a":0,"b":1,"swap":0.5}"#,
+        r#"{"kind":"observe","time":2,"track":2,"red":0.8,"blue":0.2}"#
+    );
+    let (header, lines) = TraceReader::new(trace.as_bytes(), "run.jsonl")
+        .read_all()
+        .unwrap();
+    assert_eq!(header.tracks, 4);
+    assert_eq!(
+        lines.iter().map(Line::kind).collect::<Vec<_>>(),
+        ["mix", "observe"]
+    );
+    let broken = format!("{H}\n{{\n");
+    let err = TraceReader::new(broken.as_bytes(), "run.jsonl")
+        .read_all()
+        .unwrap_err();
+    assert!(err.to_string().starts_with("run.jsonl:2: "), "{err}");
+}
+
+#[test]
 fn reader_stops_after_the_first_error() {
     let trace = format!(
         "{H}\n{}\n{}\n",

@@ -37,29 +37,14 @@ pub const ERROR_LABEL: &str = "tracking error (fraction mislabeled)";
 /// mean predicted P(red) of each tenth of [0, 1] against how often those
 /// tracks were red; a calibrated belief lies on the diagonal.
 pub fn reliability(results: &Results) -> Plot {
-    let mut by_method: Vec<(String, bool, Reliability)> = Vec::new();
+    let mut by_method: Vec<(String, Reliability)> = Vec::new();
     for p in &results.points {
         for (m, s) in &p.methods {
             let label = m.label();
-            match by_method.iter_mut().find(|(l, _, _)| *l == label) {
-                Some((_, _, r)) => r.merge(&s.reliability),
-                None => by_method.push((label, false, s.reliability.clone())),
+            match by_method.iter_mut().find(|(l, _)| *l == label) {
+                Some((_, r)) => r.merge(&s.reliability),
+                None => by_method.push((label, s.reliability.clone())),
             }
-        }
-    }
-    let mut series = vec![Series {
-        name: "calibrated".into(),
-        exact: true,
-        points: vec![(0.0, 0.0), (1.0, 1.0)],
-    }];
-    for (name, exact, r) in by_method {
-        let points: Vec<(f64, f64)> = r.points().iter().map(|&(p, f, _)| (p, f)).collect();
-        if !points.is_empty() {
-            series.push(Series {
-                name,
-                exact,
-                points,
-            });
         }
     }
     Plot {
@@ -67,8 +52,35 @@ pub fn reliability(results: &Results) -> Plot {
         title: "Reliability: how often a track given P(red) = p was red (all runs)".into(),
         x_label: "predicted P(red), mean of each tenth".into(),
         y_label: "observed share red".into(),
-        series,
+        series: reliability_series(&by_method, 1),
     }
+}
+
+/// The lines of a reliability diagram: the diagonal (black), then one per
+/// method of its bins holding at least `min_count` predictions, mean
+/// predicted against observed (a method with no such bin draws none).
+pub fn reliability_series(methods: &[(String, Reliability)], min_count: u64) -> Vec<Series> {
+    let mut series = vec![Series {
+        name: "calibrated".into(),
+        exact: true,
+        points: vec![(0.0, 0.0), (1.0, 1.0)],
+    }];
+    for (name, r) in methods {
+        let points: Vec<(f64, f64)> = r
+            .points()
+            .into_iter()
+            .filter(|&(_, _, count)| count >= min_count)
+            .map(|(p, f, _)| (p, f))
+            .collect();
+        if !points.is_empty() {
+            series.push(Series {
+                name: name.clone(),
+                exact: false,
+                points,
+            });
+        }
+    }
+    series
 }
 
 /// The series of an experiment's points (filtered to n): one per method
