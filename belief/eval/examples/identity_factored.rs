@@ -10,8 +10,9 @@
 //! - n = 100, 1,000 and 10,000, 3n events, seeds 300..: no exact filter; the
 //!   reliability of every marginal entry against the truth pooled over
 //!   seeds (largest |observed − predicted| over the bins holding ≥ 200
-//!   predictions), Brier, log-loss, memory of the belief (its tables; the
-//!   matrices' n² entries) and time per event and per marginal query.
+//!   predictions), Brier, log-loss, memory of the belief (its tables and
+//!   background rows; the matrices' n² entries) and time per event and
+//!   per marginal query.
 //! - The yardstick: n = 7, 300 events, 100 seeds (700.., development
 //!   600..), the exact filter's own reliability beside the others': with
 //!   that many seeds the bins are measured, not guessed, and the exact
@@ -98,11 +99,16 @@ impl Filter {
     /// Bytes of the belief's numbers and labels.
     fn bytes(&mut self) -> usize {
         match self {
-            Filter::Factored(f) => f
-                .groups()
-                .iter()
-                .map(|g| 8 * g.probabilities().len() + 4 * 2 * g.size())
-                .sum(),
+            // The tables, and the background rows: a shared probability
+            // each and 12 bytes an identity listed.
+            Filter::Factored(f) => {
+                f.groups()
+                    .iter()
+                    .map(|g| 8 * g.probabilities().len() + 4 * 2 * g.size() + 8)
+                    .sum::<usize>()
+                    + 8 * f.size()
+                    + 12 * f.background_entries()
+            }
             Filter::Matrix(f) => 8 * f.size() * f.size(),
         }
     }

@@ -41,12 +41,30 @@
 //! propagation over the trees of linked groups (2-vector messages). The
 //! belief is plain data (serde), pure, synchronous and deterministic.
 //!
-//! Loss (measured by examples/identity_factored.rs in idmesh-eval, the
-//! table in docs/identity-results.md): linked cuts lower the mean |Δp|
-//! against the exact filter at caps 6 and 7 on n = 9 but do not remove
-//! the largest errors: an identity two links away, or behind a dropped
-//! link, still cannot come back.
+//! ## What cuts lose
+//! A cut conditions on the event it keeps, and a dropped link on nothing
+//! having crossed: the assignments they rule out are gone from the
+//! tables, and on long streams the truth is often among them (random
+//! waypoint, 100 tracks, cap 8: the true identity at probability 0 on 7%
+//! of a truth line's tracks), which made the belief over-confident. So
+//! every group keeps the mass it lost as a *leak* λ (a cut's sides both
+//! get 1 − (1 − λ)·P(E); a join 1 − (1 − λ₁)(1 − λ₂)), and the belief on
+//! its tracks is the mixture (1 − λ)·table + λ·background, the background
+//! one independent row per track ([`background`]) that follows every mix
+//! and read. A read reweighs λ by Bayes' rule: how likely it was under
+//! the table (through the links) against under the track's background
+//! row. Nothing lost, λ stays 0 and the belief is the tables'
+//! ([`FactoredIdentity::table_marginals`], doubly stochastic); with a
+//! leak, rows still sum to one but columns only nearly.
+//!
+//! Measured by examples/identity_factored.rs in idmesh-eval (the tables
+//! in docs/identity-results.md): without leaks the belief was
+//! over-confident on every large trace and its log-loss two to three
+//! times the information matrix's; the reliability and log-loss with
+//! leaks are in the page. At n ≤ 9 and the default cap nothing is cut
+//! and the belief is exact.
 
+pub mod background;
 pub mod group;
 pub mod links;
 pub mod split;
@@ -54,6 +72,7 @@ pub mod split;
 #[cfg(test)]
 mod tests;
 
+pub use background::Background;
 pub use group::{Group, MAX_GROUP};
 pub use split::Cut;
 
@@ -160,6 +179,9 @@ pub struct FactoredIdentity {
     options: FactoredIdentityOptions,
     groups: Vec<Group>,
     stats: SplitStats,
+    /// Each track's background row, what it carries under its group's
+    /// leak ([`background`]).
+    backgrounds: Vec<Background>,
     /// group_of[t] = index in `groups` of the group of track t, ports
     /// (ids ≥ n) included; `usize::MAX` for a free port id (derived).
     #[serde(skip)]
@@ -176,8 +198,19 @@ pub struct FactoredIdentity {
 impl PartialEq for FactoredIdentity {
     /// The stored state; the derived indices are a function of it.
     fn eq(&self, other: &Self) -> bool {
-        (self.n, self.options, &self.groups, self.stats)
-            == (other.n, other.options, &other.groups, other.stats)
+        (
+            self.n,
+            self.options,
+            &self.groups,
+            self.stats,
+            &self.backgrounds,
+        ) == (
+            other.n,
+            other.options,
+            &other.groups,
+            other.stats,
+            &other.backgrounds,
+        )
     }
 }
 
@@ -188,6 +221,7 @@ struct Stored {
     options: FactoredIdentityOptions,
     groups: Vec<Group>,
     stats: SplitStats,
+    backgrounds: Vec<Background>,
 }
 
 impl TryFrom<Stored> for FactoredIdentity {
@@ -260,11 +294,19 @@ impl TryFrom<Stored> for FactoredIdentity {
         if s.n == 0 || track_seen.iter().chain(&identity_seen).any(|&x| !x) {
             return Err(bad(format!("groups that do not cover the {} tracks", s.n)));
         }
+        if s.backgrounds.len() != s.n {
+            return Err(bad(format!(
+                "{} background rows for {} tracks",
+                s.backgrounds.len(),
+                s.n
+            )));
+        }
         let mut belief = FactoredIdentity {
             n: s.n,
             options: s.options,
             groups: s.groups,
             stats: s.stats,
+            backgrounds: s.backgrounds,
             group_of: Vec::new(),
             holder: Vec::new(),
             link_used: Vec::new(),
@@ -291,7 +333,8 @@ impl FactoredIdentity {
             .enumerate()
             .map(|(t, &i)| Group::certain(t as u32, i))
             .collect();
-        Ok(Self::new(n, options, groups))
+        let backgrounds = assignment.iter().map(|&i| Background::certain(i)).collect();
+        Ok(Self::new(n, options, groups, backgrounds))
     }
 
     /// Every assignment equally likely: one group of all N tracks, so N
@@ -311,21 +354,35 @@ impl FactoredIdentity {
         }
         let all: Vec<u32> = (0..n as u32).collect();
         let group = Group::uniform(all.clone(), all)?;
-        Ok(Self::new(n, options, vec![group]))
+        let backgrounds = vec![Background::uniform(n); n];
+        Ok(Self::new(n, options, vec![group], backgrounds))
     }
 
-    fn new(n: usize, options: FactoredIdentityOptions, groups: Vec<Group>) -> Self {
+    fn new(
+        n: usize,
+        options: FactoredIdentityOptions,
+        groups: Vec<Group>,
+        backgrounds: Vec<Background>,
+    ) -> Self {
         let mut belief = FactoredIdentity {
             n,
             options,
             groups,
             stats: SplitStats::default(),
+            backgrounds,
             group_of: Vec::new(),
             holder: Vec::new(),
             link_used: Vec::new(),
         };
         belief.reindex();
         belief
+    }
+
+    /// Identities listed in the background rows (each row stores only
+    /// those that differ from its shared probability): with the tables,
+    /// what the belief's memory grows with.
+    pub fn background_entries(&self) -> usize {
+        self.backgrounds.iter().map(Background::listed).sum()
     }
 
     /// The options.
@@ -493,6 +550,58 @@ impl FactoredIdentity {
             self.replace(vec![g], pieces);
         }
         Ok(())
+    }
+
+    /// The table's probability (links included, the leak left out) that
+    /// track `t` carries identity `i`: one row of [`IdentityFilter::marginals`].
+    fn table_probability(&self, t: u32, i: u32) -> Result<f64, BeliefError> {
+        let g = self.group_of[t as usize];
+        let j = self.local(t)?;
+        let mut bp = links::Messages::new(self);
+        let row = bp.group_marginals(g)?.swap_remove(j);
+        let group = &self.groups[g];
+        let mut p = 0.0;
+        for (x, &q) in row.iter().enumerate() {
+            let id = group.identities[x];
+            if id == i {
+                p += q;
+            } else if id as usize >= self.n && q > 0.0 {
+                // A star: what the partner's phantom carries when
+                // something crossed.
+                let partner = self.partner(id);
+                let other = &self.groups[self.group_of[partner as usize]];
+                let (Some(jq), Some(xq), Some(y)) = (
+                    other.local_track(partner),
+                    other.identities.iter().position(|&z| z == partner),
+                    other.identities.iter().position(|&z| z == i),
+                ) else {
+                    continue;
+                };
+                let far = bp.group_marginals(self.group_of[partner as usize])?;
+                let crossed = 1.0 - far[jq][xq];
+                if crossed > 0.0 {
+                    p += q * far[jq][y] / crossed;
+                }
+            }
+        }
+        Ok(p)
+    }
+
+    /// After a read on track `t` whose likelihood under the table was
+    /// `evidence`: the read on t's background row, and Bayes' rule on its
+    /// group's leak, weighed by how well each explained it.
+    fn after_read(&mut self, t: u32, read: &Identify, evidence: f64) {
+        let background = self.backgrounds[t as usize].read(
+            read.identity,
+            read.accuracy,
+            read.wrong_read_likelihood(self.n),
+        );
+        let g = self.group_of[t as usize];
+        let leak = self.groups[g].leak;
+        let total = leak * background + (1.0 - leak) * evidence;
+        if leak > 0.0 && total > 0.0 && total.is_finite() {
+            self.groups[g].leak = leak * background / total;
+        }
     }
 
     /// Counts a cut made and what it lost.
@@ -691,6 +800,11 @@ impl IdentityFilter for FactoredIdentity {
         if swap == 0.0 {
             return Ok(());
         }
+        let (low, high) = (a.min(b) as usize, a.max(b) as usize);
+        if low != high {
+            let (left, right) = self.backgrounds.split_at_mut(high);
+            Background::mix(&mut left[low], &mut right[0], swap);
+        }
         let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
         if ga == gb {
             let (la, lb) = (self.local(a)?, self.local(b)?);
@@ -714,6 +828,10 @@ impl IdentityFilter for FactoredIdentity {
         let g = self.group_of[t as usize];
         let track = self.local(t)?;
         let (right, wrong) = (identify.accuracy, identify.wrong_read_likelihood(self.n));
+        // The read's likelihood under the table and under the leak (a
+        // track carrying any identity alike), which weigh the two.
+        let m = self.table_probability(t, identify.identity)?;
+        let evidence = right * m + wrong * (1.0 - m);
         let group = &mut self.groups[g];
         if let Some(read) = group
             .identities
@@ -721,6 +839,7 @@ impl IdentityFilter for FactoredIdentity {
             .position(|&i| i == identify.identity)
         {
             group.read(track, read, right, wrong)?;
+            self.after_read(t, &identify, evidence);
             return self.settle(t);
         }
         // An identity of a linked group: the track may carry it through the
@@ -754,6 +873,7 @@ impl IdentityFilter for FactoredIdentity {
                 joined.read(j, x, right, wrong)?;
                 self.release(freed);
                 self.replace(vec![g, h], vec![joined]);
+                self.after_read(t, &identify, evidence);
                 return self.settle(t);
             }
             let real = self.groups[h]
@@ -762,19 +882,51 @@ impl IdentityFilter for FactoredIdentity {
                 .find(|&&x| (x as usize) < self.n);
             let other = real.copied().unwrap_or(t);
             self.read_across(g, track, port.id, identify.identity, right, wrong)?;
+            self.after_read(t, &identify, evidence);
             self.settle(t)?;
             return self.settle(other);
         }
-        // Every assignment the belief allows puts another identity on the
-        // track: the likelihood is `wrong` throughout.
+        // Every assignment the table allows puts another identity on the
+        // track: the likelihood is `wrong` throughout, and only the leak
+        // can explain the read better.
         if wrong > 0.0 {
+            self.after_read(t, &identify, evidence);
             Ok(())
         } else {
             Err(BeliefError::ImpossibleObservation { probability: 0.0 })
         }
     }
 
+    /// The tables' marginals mixed with each group's leak: track t
+    /// carries identity i with (1 − λ)·table + λ·background. Rows sum to
+    /// one; a column sums to one when no group leaks (what cuts lost is
+    /// spread by rows that ignore exclusivity).
     fn marginals(&self) -> Result<Marginals, BeliefError> {
+        let mut m = self.table_marginals()?;
+        // Each group's leak: its tracks carry what their background rows
+        // say.
+        for group in &self.groups {
+            let leak = group.leak;
+            if leak <= 0.0 {
+                continue;
+            }
+            for &t in &group.tracks {
+                if let (Some(row), Some(background)) =
+                    (m.get_mut(t as usize), self.backgrounds.get(t as usize))
+                {
+                    row.iter_mut().for_each(|p| *p *= 1.0 - leak);
+                    background.add_to(row, leak);
+                }
+            }
+        }
+        Ok(m)
+    }
+}
+
+impl FactoredIdentity {
+    /// The marginals of the groups and links alone, leaks left out: a
+    /// doubly stochastic matrix, the belief's when nothing was lost.
+    pub fn table_marginals(&self) -> Result<Marginals, BeliefError> {
         let n = self.n;
         let mut bp = links::Messages::new(self);
         let local: Vec<Vec<Vec<f64>>> = (0..self.groups.len())
