@@ -1,21 +1,15 @@
-//! What a track carries if the truth lies outside its group's table: one
-//! independent distribution over identities per track, the fallback of a
-//! group's leak ([`crate::identity::factored`], "What cuts lose").
+//! What a track carries if the truth lies outside its group's table: its
+//! leak λ (how likely that is) and one independent distribution over
+//! identities ([`crate::identity::factored`], "What cuts lose").
 //!
-//! A cut conditions its group on the event E it keeps and so rules out the
-//! assignments outside E; a dropped link rules out what crossed it. Left
-//! out, that mass makes the belief certain of tables that are sometimes
-//! wrong (on random-waypoint traces of 100 tracks, a twelfth of the truth
-//! lines put the true identity at probability 0). Instead each group keeps
-//! the mass it lost as a leak λ and the belief on its tracks is the
-//! mixture (1 − λ)·table + λ·background, the background a product of one
-//! distribution per track. Both components follow every event as Bayes'
-//! rule and the mixing kernel say: a read multiplies its likelihood into
-//! both and reweighs λ by how well each explained it; a mix mixes the two
-//! tracks' background rows, (1 − s)·r_a + s·r_b, the kernel's effect on a
-//! product's marginals (the product forgets the pair's correlation, as the
-//! belief matrix's rows do). The background thus ignores that identities
-//! are exclusive, which makes it diffuse rather than confident.
+//! The track's marginals are (1 − λ)·table + λ·row. Both components follow
+//! every event as Bayes' rule and the mixing kernel say: a read
+//! multiplies its likelihood into the row and reweighs λ by how well the
+//! table and the row explained it; a mix mixes the two tracks' rows and
+//! leaks, (1 − s)·a + s·b, the kernel's effect on a product's marginals
+//! (the product forgets the pair's correlation, as the belief matrix's
+//! rows do). The row ignores that identities are exclusive, which makes
+//! it diffuse rather than confident.
 //!
 //! A row is stored sparsely: one probability shared by every identity not
 //! listed, and the listed ones, so memory grows with the reads and mixes a
@@ -27,9 +21,12 @@ use std::collections::BTreeMap;
 /// Listed entries closer than this to the shared probability are dropped.
 const NEGLIGIBLE: f64 = 1e-12;
 
-/// One track's background distribution over `n` identities.
+/// One track's leak and background distribution over `n` identities.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Background {
+    /// The probability that the track's identity lies outside its group's
+    /// table: the weight of this row in the track's marginals.
+    leak: f64,
     /// The probability of each identity not in `listed`.
     shared: f64,
     listed: BTreeMap<u32, f64>,
@@ -39,6 +36,7 @@ impl Background {
     /// Every one of `n` identities alike.
     pub fn uniform(n: usize) -> Self {
         Background {
+            leak: 0.0,
             shared: 1.0 / n.max(1) as f64,
             listed: BTreeMap::new(),
         }
@@ -47,6 +45,7 @@ impl Background {
     /// Surely identity `i`.
     pub fn certain(i: u32) -> Self {
         Background {
+            leak: 0.0,
             shared: 0.0,
             listed: BTreeMap::from([(i, 1.0)]),
         }
@@ -57,23 +56,39 @@ impl Background {
         self.listed.get(&i).copied().unwrap_or(self.shared)
     }
 
+    /// The probability that the track's identity lies outside its
+    /// group's table.
+    pub fn leak(&self) -> f64 {
+        self.leak
+    }
+
+    /// A cut or a dropped link ruled out assignments that put an identity
+    /// from elsewhere on this track with probability `q`: that mass leaks.
+    pub fn lose(&mut self, q: f64) {
+        let q = q.clamp(0.0, 1.0);
+        self.leak = 1.0 - (1.0 - self.leak) * (1.0 - q);
+    }
+
     /// Bayes' rule for a read of `i` with likelihood `right` if the track
-    /// carries i, `wrong` otherwise; returns the read's likelihood under
-    /// the row before it (what [`crate::identity::factored`] weighs the
-    /// leak by). A read the row cannot explain (likelihood 0) changes
-    /// nothing.
-    pub fn read(&mut self, i: u32, right: f64, wrong: f64) -> f64 {
+    /// carries i, `wrong` otherwise, on the row and on the leak: the read
+    /// was `table` likely under the group's table, and under this row as
+    /// likely as the row says. A read the row cannot explain (likelihood
+    /// 0) leaves the row alone.
+    pub fn read(&mut self, i: u32, right: f64, wrong: f64, table: f64) {
         let p = self.probability(i);
         let evidence = right * p + wrong * (1.0 - p);
         if !(evidence > 0.0 && evidence.is_finite()) {
-            return evidence;
+            return;
+        }
+        let total = self.leak * evidence + (1.0 - self.leak) * table;
+        if self.leak > 0.0 && total > 0.0 && total.is_finite() {
+            self.leak = self.leak * evidence / total;
         }
         let scale = wrong / evidence;
         self.shared *= scale;
         self.listed.values_mut().for_each(|q| *q *= scale);
         self.listed.insert(i, p * right / evidence);
         self.prune();
-        evidence
     }
 
     /// The mix of rows `a` and `b` with swap `s`: a gets (1 − s)·a + s·b,
@@ -84,7 +99,10 @@ impl Background {
             for &i in x.listed.keys().chain(y.listed.keys()) {
                 listed.insert(i, (1.0 - s) * x.probability(i) + s * y.probability(i));
             }
+            // The target on the track was x's with 1 − s, y's with s:
+            // its leak comes along.
             Background {
+                leak: (1.0 - s) * x.leak + s * y.leak,
                 shared: (1.0 - s) * x.shared + s * y.shared,
                 listed,
             }
@@ -94,6 +112,15 @@ impl Background {
         *b = new_b;
         a.prune();
         b.prune();
+    }
+
+    /// A dense row of the table's marginals for this track becomes the
+    /// track's: (1 − leak)·row + leak·this row.
+    pub fn mix_into(&self, row: &mut [f64]) {
+        if self.leak > 0.0 {
+            row.iter_mut().for_each(|p| *p *= 1.0 - self.leak);
+            self.add_to(row, self.leak);
+        }
     }
 
     /// Adds `weight` × this row to a dense row of n identities.
@@ -137,8 +164,8 @@ mod tests {
         let (mut a, mut b) = (Background::uniform(n), Background::certain(3));
         // A read of 2 at accuracy 0.9 on a uniform row: 0.9 against
         // 0.025 for each of the four others.
-        let evidence = a.read(2, 0.9, 0.025);
-        assert!((evidence - (0.9 + 4.0 * 0.025) / 5.0).abs() < 1e-15);
+        a.read(2, 0.9, 0.025, 0.5);
+        assert_eq!(a.leak(), 0.0, "nothing leaked, nothing to weigh");
         let want: Vec<f64> = (0..n).map(|i| if i == 2 { 0.9 } else { 0.025 }).collect();
         for (p, q) in dense(&a, n).iter().zip(&want) {
             assert!((p - q).abs() < 1e-12);
@@ -155,9 +182,33 @@ mod tests {
     }
 
     #[test]
+    fn a_read_weighs_the_leak_by_how_well_each_side_explained_it() {
+        let mut r = Background::uniform(4);
+        r.lose(0.2);
+        assert!((r.leak() - 0.2).abs() < 1e-15);
+        // A read of 0 at 0.7 (wrong reads 0.1 each): the row explains it
+        // with 0.7/4 + 3·0.1/4 = 0.25, the table (which rules 0 out) with
+        // 0.1.
+        r.read(0, 0.7, 0.1, 0.1);
+        let want = 0.2 * 0.25 / (0.2 * 0.25 + 0.8 * 0.1);
+        assert!((r.leak() - want).abs() < 1e-15);
+        // Mixing carries the leak with the target.
+        let mut other = Background::certain(3);
+        Background::mix(&mut r, &mut other, 0.25);
+        assert!((r.leak() - 0.75 * want).abs() < 1e-15);
+        assert!((other.leak() - 0.25 * want).abs() < 1e-15);
+        // The track's marginals: (1 − leak)·table + leak·row.
+        let mut row = vec![0.0, 1.0, 0.0, 0.0];
+        other.mix_into(&mut row);
+        let leak = other.leak();
+        assert!((row[1] - ((1.0 - leak) + leak * other.probability(1))).abs() < 1e-15);
+        assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
     fn a_read_no_identity_explains_changes_nothing_and_rows_stay_sparse() {
         let mut r = Background::certain(1);
-        assert_eq!(r.read(0, 0.9, 0.0), 0.0);
+        r.read(0, 0.9, 0.0, 0.5);
         assert_eq!(r, Background::certain(1));
         // Mixing two uniform rows lists nothing.
         let (mut a, mut b) = (Background::uniform(1000), Background::uniform(1000));

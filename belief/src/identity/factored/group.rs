@@ -45,11 +45,6 @@ pub struct Group {
     pub(crate) tracks: Vec<u32>,
     pub(crate) identities: Vec<u32>,
     pub(crate) probs: Vec<f64>,
-    /// The probability that the truth on these tracks lies outside the
-    /// table: the mass cuts and dropped links conditioned away, updated
-    /// by reads ([`crate::identity::factored`], "What cuts lose").
-    #[serde(default)]
-    pub(crate) leak: f64,
 }
 
 impl Group {
@@ -59,7 +54,6 @@ impl Group {
             tracks: vec![track],
             identities: vec![identity],
             probs: vec![1.0],
-            leak: 0.0,
         }
     }
 
@@ -76,7 +70,6 @@ impl Group {
             tracks,
             identities,
             probs: vec![1.0 / count as f64; count],
-            leak: 0.0,
         })
     }
 
@@ -171,15 +164,7 @@ impl Group {
             tracks,
             identities,
             probs,
-            // Either side's truth outside its table puts the joint's
-            // outside the product.
-            leak: 1.0 - (1.0 - self.leak) * (1.0 - other.leak),
         })
-    }
-
-    /// The probability that the truth lies outside the table.
-    pub fn leak(&self) -> f64 {
-        self.leak
     }
 
     /// Mixes local tracks `a` and `b` (Definition 2, eq. 1): q(π) =
@@ -389,7 +374,6 @@ impl Group {
                 tracks,
                 identities,
                 probs,
-                leak: self.leak,
             },
             mass,
         ))
@@ -442,7 +426,6 @@ mod tests {
             tracks: vec![0, 1],
             identities: vec![0, 1],
             probs: vec![0.5, 0.6],
-            leak: 0.0,
         };
         assert!(bad.check().is_err());
         assert!(Group::uniform(vec![0], vec![]).is_err());

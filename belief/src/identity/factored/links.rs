@@ -219,9 +219,21 @@ impl FactoredIdentity {
                 mutual_information: 0.0,
             };
             old.push(g);
+            // Ruled out: the assignments in which a real track carries the
+            // star (something crossed).
+            let m = group.local_marginals();
+            let lost: Vec<(usize, f64)> = (0..group.size())
+                .filter(|&k| k != j)
+                .map(|k| (group.tracks[k] as usize, m[k][x]))
+                .collect();
             if group.size() > 1 {
                 let (_, rest) = split::apply(group, &cut)?;
                 new.push(rest);
+            }
+            for (t, q) in lost {
+                if let Some(background) = self.backgrounds.get_mut(t) {
+                    background.lose(q);
+                }
             }
         }
         self.replace(old, new);

@@ -47,22 +47,28 @@
 //! tables, and on long streams the truth is often among them (random
 //! waypoint, 100 tracks, cap 8: the true identity at probability 0 on 7%
 //! of a truth line's tracks), which made the belief over-confident. So
-//! every group keeps the mass it lost as a *leak* λ (a cut's sides both
-//! get 1 − (1 − λ)·P(E); a join 1 − (1 − λ₁)(1 − λ₂)), and the belief on
-//! its tracks is the mixture (1 − λ)·table + λ·background, the background
-//! one independent row per track ([`background`]) that follows every mix
-//! and read. A read reweighs λ by Bayes' rule: how likely it was under
-//! the table (through the links) against under the track's background
-//! row. Nothing lost, λ stays 0 and the belief is the tables'
+//! every track keeps a *leak* λ_t, the probability that its identity lies
+//! outside its group's table, and its marginals are (1 − λ_t)·table +
+//! λ_t·background, the background one independent row per track
+//! ([`background`]):
+//! - a cut adds to each of its tracks the probability, under the table
+//!   it cuts, that the track carried an identity of the other side (for a
+//!   linked cut, the share of that which two or more exchanges make); a
+//!   dropped link, that a track carried its star;
+//! - a mix mixes the two tracks' rows and leaks as the kernel moves their
+//!   targets ((1 − s)·a + s·b, after the cuts the join made);
+//! - a read applies Bayes' rule to the row, and to λ_t by how likely the
+//!   read was under the table (through the links) and under the row.
+//!
+//! Nothing lost, every λ is 0 and the belief is the tables'
 //! ([`FactoredIdentity::table_marginals`], doubly stochastic); with a
 //! leak, rows still sum to one but columns only nearly.
 //!
 //! Measured by examples/identity_factored.rs in idmesh-eval (the tables
 //! in docs/identity-results.md): without leaks the belief was
-//! over-confident on every large trace and its log-loss two to three
-//! times the information matrix's; the reliability and log-loss with
-//! leaks are in the page. At n ≤ 9 and the default cap nothing is cut
-//! and the belief is exact.
+//! over-confident on every large trace, and its log-loss two to three
+//! times the information matrix's. At n ≤ 9 and the default cap nothing
+//! is cut and the belief is exact.
 
 pub mod background;
 pub mod group;
@@ -179,8 +185,7 @@ pub struct FactoredIdentity {
     options: FactoredIdentityOptions,
     groups: Vec<Group>,
     stats: SplitStats,
-    /// Each track's background row, what it carries under its group's
-    /// leak ([`background`]).
+    /// Each track's leak and background row ([`background`]).
     backgrounds: Vec<Background>,
     /// group_of[t] = index in `groups` of the group of track t, ports
     /// (ids ≥ n) included; `usize::MAX` for a free port id (derived).
@@ -541,6 +546,7 @@ impl FactoredIdentity {
             let Ok((single, remaining)) = split::apply(&rest, &cut) else {
                 break;
             };
+            self.leak_cut(&rest, &cut, 1.0);
             self.record(&cut);
             pieces.push(single);
             rest = remaining;
@@ -588,19 +594,33 @@ impl FactoredIdentity {
     }
 
     /// After a read on track `t` whose likelihood under the table was
-    /// `evidence`: the read on t's background row, and Bayes' rule on its
-    /// group's leak, weighed by how well each explained it.
-    fn after_read(&mut self, t: u32, read: &Identify, evidence: f64) {
-        let background = self.backgrounds[t as usize].read(
-            read.identity,
-            read.accuracy,
-            read.wrong_read_likelihood(self.n),
-        );
-        let g = self.group_of[t as usize];
-        let leak = self.groups[g].leak;
-        let total = leak * background + (1.0 - leak) * evidence;
-        if leak > 0.0 && total > 0.0 && total.is_finite() {
-            self.groups[g].leak = leak * background / total;
+    /// `table`: the read on t's background row and leak.
+    fn after_read(&mut self, t: u32, read: &Identify, table: f64) {
+        let wrong = read.wrong_read_likelihood(self.n);
+        self.backgrounds[t as usize].read(read.identity, read.accuracy, wrong, table);
+    }
+
+    /// Before `cut` of `group` (a hard one, or the excluded part `share`
+    /// of a linked one): each real track leaks the probability that it
+    /// carries an identity of the other side, which the cut rules out.
+    fn leak_cut(&mut self, group: &Group, cut: &Cut, share: f64) {
+        if share <= 0.0 {
+            return;
+        }
+        let m = group.local_marginals();
+        for (j, row) in m.iter().enumerate() {
+            let t = group.tracks[j] as usize;
+            let Some(background) = self.backgrounds.get_mut(t) else {
+                continue;
+            };
+            let inside = cut.tracks & (1 << j) != 0;
+            let crossing: f64 = row
+                .iter()
+                .enumerate()
+                .filter(|&(x, _)| (cut.identities & (1 << x) != 0) != inside)
+                .map(|(_, &p)| p)
+                .sum();
+            background.lose(share * crossing);
         }
     }
 
@@ -694,7 +714,9 @@ impl FactoredIdentity {
                 match part {
                     Part::Whole => {}
                     Part::Hard(cut) => {
-                        let (part, rest) = split::apply(&self.groups[g], &cut)?;
+                        let group = self.groups[g].clone();
+                        self.leak_cut(&group, &cut, 1.0);
+                        let (part, rest) = split::apply(&group, &cut)?;
                         self.record(&cut);
                         old.push(g);
                         new.extend([part, rest]);
@@ -702,7 +724,15 @@ impl FactoredIdentity {
                     Part::Linked(cut) => {
                         let (pa, pb) = self.new_link();
                         let ports = self.groups[g].ports(self.n);
-                        let linked = split::apply_linked(&self.groups[g], &cut, &ports, pa, pb)?;
+                        let group = self.groups[g].clone();
+                        let linked = split::apply_linked(&group, &cut, &ports, pa, pb)?;
+                        // It keeps the assignments with at most one
+                        // exchange: of those with any (1 − P(E)), it loses
+                        // the ones with two or more.
+                        let any = 1.0 - cut.mass;
+                        if any > 0.0 {
+                            self.leak_cut(&group, &cut, ((1.0 - linked.mass) / any).min(1.0));
+                        }
                         self.stats.cuts += 1;
                         self.stats.lossy_cuts += 1;
                         self.stats.linked_cuts += 1;
@@ -800,26 +830,27 @@ impl IdentityFilter for FactoredIdentity {
         if swap == 0.0 {
             return Ok(());
         }
-        let (low, high) = (a.min(b) as usize, a.max(b) as usize);
-        if low != high {
-            let (left, right) = self.backgrounds.split_at_mut(high);
-            Background::mix(&mut left[low], &mut right[0], swap);
-        }
         let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
         if ga == gb {
             let (la, lb) = (self.local(a)?, self.local(b)?);
             self.groups[ga].mix(la, lb, swap);
-            return Ok(());
-        }
-        if swap == 1.0 {
+        } else if swap == 1.0 {
             // A sure swap: the two targets exchanged tracks, nothing mixed.
             let (la, lb) = (self.local(a)?, self.local(b)?);
             self.groups[ga].tracks[la] = b;
             self.groups[gb].tracks[lb] = a;
             self.group_of.swap(a as usize, b as usize);
-            return Ok(());
+        } else {
+            self.mix_across(a, b, swap)?;
         }
-        self.mix_across(a, b, swap)
+        // After the cuts the join made (what they leaked is the targets'
+        // before they mix).
+        let (low, high) = (a.min(b) as usize, a.max(b) as usize);
+        if low != high {
+            let (left, right) = self.backgrounds.split_at_mut(high);
+            Background::mix(&mut left[low], &mut right[0], swap);
+        }
+        Ok(())
     }
 
     fn identify(&mut self, identify: Identify) -> Result<(), BeliefError> {
@@ -897,27 +928,14 @@ impl IdentityFilter for FactoredIdentity {
         }
     }
 
-    /// The tables' marginals mixed with each group's leak: track t
-    /// carries identity i with (1 − λ)·table + λ·background. Rows sum to
-    /// one; a column sums to one when no group leaks (what cuts lost is
+    /// The tables' marginals mixed with each track's leak: track t
+    /// carries identity i with (1 − λ_t)·table + λ_t·background. Rows sum
+    /// to one; a column sums to one when nothing leaked (what cuts lost is
     /// spread by rows that ignore exclusivity).
     fn marginals(&self) -> Result<Marginals, BeliefError> {
         let mut m = self.table_marginals()?;
-        // Each group's leak: its tracks carry what their background rows
-        // say.
-        for group in &self.groups {
-            let leak = group.leak;
-            if leak <= 0.0 {
-                continue;
-            }
-            for &t in &group.tracks {
-                if let (Some(row), Some(background)) =
-                    (m.get_mut(t as usize), self.backgrounds.get(t as usize))
-                {
-                    row.iter_mut().for_each(|p| *p *= 1.0 - leak);
-                    background.add_to(row, leak);
-                }
-            }
+        for (row, background) in m.iter_mut().zip(&self.backgrounds) {
+            background.mix_into(row);
         }
         Ok(m)
     }

@@ -216,8 +216,6 @@ pub fn apply(group: &Group, cut: &Cut) -> Result<(Group, Group), BeliefError> {
     }
     pa.iter_mut().for_each(|p| *p /= mass);
     pb.iter_mut().for_each(|p| *p /= mass);
-    // What conditioning on E drops, 1 − P(E), leaks out of both sides.
-    let leak = 1.0 - (1.0 - group.leak) * mass.min(1.0);
     let side = |tracks: &[usize], inside: bool, probs: Vec<f64>| Group {
         tracks: tracks.iter().map(|&j| group.tracks[j]).collect(),
         identities: (0..group.size())
@@ -225,7 +223,6 @@ pub fn apply(group: &Group, cut: &Cut) -> Result<(Group, Group), BeliefError> {
             .map(|x| group.identities[x])
             .collect(),
         probs,
-        leak,
     };
     Ok((
         side(&projector.a_tracks, true, pa),
@@ -440,7 +437,6 @@ pub(crate) fn apply_linked(
             tracks: t,
             identities: ids,
             probs,
-            leak: 1.0 - (1.0 - group.leak) * mass.min(1.0),
         }
     };
     Ok(LinkedCut {

@@ -457,8 +457,11 @@ proptest! {
 #[test]
 fn a_cut_leaks_the_mass_it_conditions_away() {
     // Tracks 0 and 1 swap with ½, then 1 and 2 with ½: one group of three.
-    // A cap of 2 makes the mix of 2 and 3 cut a track off first; whatever
-    // the cut keeps, both its sides leak exactly the mass it lost.
+    // A cap of 3 makes the mix of 2 and 3 cut the group first. Each track
+    // leaks the probability that it carried an identity of the other
+    // side: at most the mass the cut lost, and, since every assignment it
+    // rules out moves at least two tracks across, at least twice that
+    // mass over all of them.
     let mut f = FactoredIdentity::from_assignment(&[0, 1, 2, 3], hard(3)).unwrap();
     for (a, b) in [(0, 1), (1, 2)] {
         f.mix(Mix { a, b, swap: 0.5 }).unwrap();
@@ -472,11 +475,15 @@ fn a_cut_leaks_the_mass_it_conditions_away() {
     .unwrap();
     let lost = f.split_stats().lost_mass;
     assert!(lost > 0.1, "{:?}", f.split_stats());
-    let leaks: Vec<f64> = f.groups().iter().map(Group::leak).collect();
-    assert_eq!(leaks.len(), 2, "{:?}", f.groups());
-    for leak in leaks {
-        assert!((leak - lost).abs() < 1e-12, "{leak} against {lost}");
-    }
+    let leaks: Vec<f64> = f.backgrounds.iter().map(Background::leak).collect();
+    assert!(
+        leaks.iter().all(|&l| l <= lost + 1e-12),
+        "{leaks:?} against {lost}"
+    );
+    assert!(
+        leaks.iter().sum::<f64>() >= 2.0 * lost - 1e-12,
+        "{leaks:?} against {lost}"
+    );
     // Rows still sum to one, and nothing the exact filter allows is
     // ruled out.
     let mut exact = ExactPermutationFilter::from_assignment(&[0, 1, 2, 3]).unwrap();
