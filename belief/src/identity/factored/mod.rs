@@ -73,6 +73,7 @@
 pub mod background;
 pub mod group;
 pub mod links;
+pub mod share;
 pub mod split;
 
 #[cfg(test)]
@@ -80,6 +81,7 @@ mod tests;
 
 pub use background::Background;
 pub use group::{Group, MAX_GROUP};
+pub use share::{assemble, HeldTree, IdentityShare};
 pub use split::Cut;
 
 use super::event::{check_assignment, check_identify, check_mix, Identify};

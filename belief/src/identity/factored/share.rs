@@ -1,0 +1,464 @@
+//! A leader's part of a factored identity belief, and the whole put back
+//! together from the parts at a query.
+//!
+//! Nothing an identity event does reads beyond the linked tree of groups
+//! of the tracks it touches ([`crate::identity::factored`]): a read acts on
+//! its track's group and the groups linked to it, a mix on the trees of its
+//! two tracks, and the leak and row of a track go with its group. So whole
+//! trees can be held by different leaders, each applying the events of the
+//! trees it holds exactly as the centralized belief does, provided a mix
+//! finds both trees in one place ([`IdentityShare::take`] and
+//! [`IdentityShare::put`] move them). At a query the coordinator puts the
+//! trees of every leader together ([`assemble`]) and computes the
+//! marginals the centralized belief would.
+//!
+//! A share is a whole [`FactoredIdentity`] whose groups not held here are
+//! placeholders: singletons pairing the tracks and identities of the trees
+//! held elsewhere, never read (no held tree links to them), replaced when
+//! a tree arrives. Link ports are numbered per share; a tree that arrives
+//! is renumbered into free slots, which changes no number (ports are only
+//! names of separators).
+
+use super::{Background, FactoredIdentity, FactoredIdentityOptions, Group, SplitStats, Stored};
+use crate::error::BeliefError;
+use crate::identity::event::IdentityEvent;
+use crate::identity::filter::IdentityFilter;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// One linked tree of groups as it moves between leaders, with the leak
+/// and row of each of its real tracks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldTree {
+    pub groups: Vec<Group>,
+    pub backgrounds: Vec<(u32, Background)>,
+}
+
+impl HeldTree {
+    /// Its real tracks (below n), in order.
+    pub fn tracks(&self, n: usize) -> BTreeSet<u32> {
+        self.groups
+            .iter()
+            .flat_map(|g| g.tracks.iter().copied())
+            .filter(|&t| (t as usize) < n)
+            .collect()
+    }
+
+    /// Its real identities (below n), in order.
+    fn identities(&self, n: usize) -> BTreeSet<u32> {
+        self.groups
+            .iter()
+            .flat_map(|g| g.identities.iter().copied())
+            .filter(|&i| (i as usize) < n)
+            .collect()
+    }
+}
+
+/// The trees of a factored identity belief one leader holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IdentityShare {
+    belief: FactoredIdentity,
+    held: Vec<bool>,
+}
+
+impl IdentityShare {
+    /// The share of a known start (track t surely carries `initial[t]`)
+    /// holding the tracks `held` says.
+    pub fn start(
+        initial: &[u32],
+        options: FactoredIdentityOptions,
+        held: impl Fn(u32) -> bool,
+    ) -> Result<Self, BeliefError> {
+        let belief = FactoredIdentity::from_assignment(initial, options)?;
+        let held = (0..initial.len() as u32).map(held).collect();
+        Ok(IdentityShare { belief, held })
+    }
+
+    pub fn size(&self) -> usize {
+        self.belief.n
+    }
+
+    /// Whether this share holds track `t`'s tree.
+    pub fn holds(&self, t: u32) -> bool {
+        self.held.get(t as usize).copied().unwrap_or(false)
+    }
+
+    /// What this share's splits have cost (its own cuts only).
+    pub fn split_stats(&self) -> SplitStats {
+        self.belief.split_stats()
+    }
+
+    /// Applies an event whose tracks this share holds (a mix's two trees
+    /// gathered here first), as the centralized belief does.
+    pub fn apply(&mut self, event: &IdentityEvent) -> Result<(), BeliefError> {
+        let tracks = match event {
+            IdentityEvent::Mix(m) => vec![m.a, m.b],
+            IdentityEvent::Identify(r) => vec![r.track],
+        };
+        if let Some(&t) = tracks.iter().find(|&&t| !self.holds(t)) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("an identity event on track {t}, whose tree is held elsewhere"),
+            });
+        }
+        self.belief.apply(event)
+    }
+
+    /// The groups linked (directly or not) to the group of track `t`,
+    /// by index, in the order a breadth-first walk meets them.
+    fn tree_of(&self, t: u32) -> Vec<usize> {
+        let b = &self.belief;
+        let first = b.group_of[t as usize];
+        let mut tree = vec![first];
+        let mut seen = BTreeSet::from([first]);
+        let mut at = 0;
+        while at < tree.len() {
+            for port in b.groups[tree[at]].ports(b.n) {
+                let h = b.group_of[b.partner(port.id) as usize];
+                if h != usize::MAX && seen.insert(h) {
+                    tree.push(h);
+                }
+            }
+            at += 1;
+        }
+        tree
+    }
+
+    /// Gives up the tree of track `t` (which must be held here): its
+    /// groups and their tracks' leaks and rows, for [`IdentityShare::put`]
+    /// elsewhere. Placeholders take its place.
+    pub fn take(&mut self, t: u32) -> Result<HeldTree, BeliefError> {
+        if !self.holds(t) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("track {t}'s tree is not held here"),
+            });
+        }
+        let n = self.belief.n;
+        let indices = self.tree_of(t);
+        let groups: Vec<Group> = indices
+            .iter()
+            .map(|&g| self.belief.groups[g].clone())
+            .collect();
+        let tree = HeldTree {
+            backgrounds: Vec::new(),
+            groups,
+        };
+        let tracks = tree.tracks(n);
+        let identities = tree.identities(n);
+        let tree = HeldTree {
+            backgrounds: tracks
+                .iter()
+                .map(|&t| (t, self.belief.backgrounds[t as usize].clone()))
+                .collect(),
+            ..tree
+        };
+        let placeholders = pair(&tracks, &identities);
+        for &t in &tracks {
+            self.held[t as usize] = false;
+        }
+        self.swap_groups(indices, placeholders);
+        Ok(tree)
+    }
+
+    /// Takes a tree in: the placeholders of its tracks and identities give
+    /// way (what else they paired is paired again), its ports are
+    /// renumbered into free link slots, and its tracks are held here.
+    pub fn put(&mut self, tree: HeldTree) -> Result<(), BeliefError> {
+        let n = self.belief.n;
+        let tracks = tree.tracks(n);
+        let identities = tree.identities(n);
+        if let Some(&t) = tracks.iter().find(|&&t| self.holds(t)) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("a tree with track {t}, which is held here already"),
+            });
+        }
+        let b = &self.belief;
+        let mut displaced: BTreeSet<usize> = BTreeSet::new();
+        for &t in &tracks {
+            displaced.insert(b.group_of[t as usize]);
+        }
+        for &i in &identities {
+            displaced.insert(b.holder[i as usize]);
+        }
+        let (mut left_tracks, mut left_identities) = (BTreeSet::new(), BTreeSet::new());
+        for &g in &displaced {
+            let group = &b.groups[g];
+            if group.size() != 1 || group.tracks.iter().any(|&t| self.holds(t)) {
+                return Err(BeliefError::BadComponent {
+                    detail: "a tree that overlaps a tree held here".into(),
+                });
+            }
+            left_tracks.extend(group.tracks.iter().filter(|t| !tracks.contains(t)));
+            left_identities.extend(group.identities.iter().filter(|i| !identities.contains(i)));
+        }
+        let mut new = pair(&left_tracks, &left_identities);
+        let used: BTreeSet<usize> = b
+            .groups
+            .iter()
+            .enumerate()
+            .filter(|(g, _)| !displaced.contains(g))
+            .flat_map(|(_, g)| g.ports(n))
+            .map(|p| (p.id as usize - n) / 2)
+            .collect();
+        new.extend(renumber(tree.groups, n, &used));
+        for (t, background) in tree.backgrounds {
+            let slot =
+                self.belief
+                    .backgrounds
+                    .get_mut(t as usize)
+                    .ok_or(BeliefError::UnknownTrack {
+                        track: t,
+                        tracks: n,
+                    })?;
+            *slot = background;
+        }
+        for &t in &tracks {
+            self.held[t as usize] = true;
+        }
+        self.swap_groups(displaced.into_iter().collect(), new);
+        Ok(())
+    }
+
+    /// Groups `old` (by index) give way to `new`, and the indices are
+    /// rebuilt (new ports may lie beyond the old link slots).
+    fn swap_groups(&mut self, mut old: Vec<usize>, new: Vec<Group>) {
+        old.sort_unstable_by(|a, b| b.cmp(a));
+        for g in old {
+            self.belief.groups.swap_remove(g);
+        }
+        self.belief.groups.extend(new);
+        self.belief.reindex();
+    }
+
+    /// Every tree held here, for the coordinator's [`assemble`].
+    pub fn held_trees(&self) -> Vec<HeldTree> {
+        let mut done = vec![false; self.belief.groups.len()];
+        let mut trees = Vec::new();
+        for t in 0..self.belief.n as u32 {
+            let g = self.belief.group_of[t as usize];
+            if !self.holds(t) || done[g] {
+                continue;
+            }
+            let indices = self.tree_of(t);
+            let groups: Vec<Group> = indices
+                .iter()
+                .map(|&g| {
+                    done[g] = true;
+                    self.belief.groups[g].clone()
+                })
+                .collect();
+            let tree = HeldTree {
+                groups,
+                backgrounds: Vec::new(),
+            };
+            let backgrounds = tree
+                .tracks(self.belief.n)
+                .into_iter()
+                .map(|t| (t, self.belief.backgrounds[t as usize].clone()))
+                .collect();
+            trees.push(HeldTree {
+                backgrounds,
+                ..tree
+            });
+        }
+        trees
+    }
+}
+
+/// Singletons pairing `tracks` with `identities` in order (placeholders).
+fn pair(tracks: &BTreeSet<u32>, identities: &BTreeSet<u32>) -> Vec<Group> {
+    tracks
+        .iter()
+        .zip(identities)
+        .map(|(&t, &i)| Group::certain(t, i))
+        .collect()
+}
+
+/// `groups` with their links moved to the lowest link slots not in
+/// `used`, each link's two ports together (side A keeps the even id).
+fn renumber(mut groups: Vec<Group>, n: usize, used: &BTreeSet<usize>) -> Vec<Group> {
+    let mut slots: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut free = (0..).filter(|s| !used.contains(s));
+    for group in &groups {
+        for port in group.ports(n) {
+            let slot = (port.id as usize - n) / 2;
+            if let std::collections::btree_map::Entry::Vacant(entry) = slots.entry(slot) {
+                if let Some(to) = free.next() {
+                    entry.insert(to);
+                }
+            }
+        }
+    }
+    let map = |id: &mut u32| {
+        if *id as usize >= n {
+            let local = *id as usize - n;
+            if let Some(&to) = slots.get(&(local / 2)) {
+                *id = (n + 2 * to + local % 2) as u32;
+            }
+        }
+    };
+    for group in &mut groups {
+        group.tracks.iter_mut().for_each(map);
+        group.identities.iter_mut().for_each(map);
+    }
+    groups
+}
+
+/// The whole belief from every leader's trees (each tree held by one
+/// leader, every track in one): checked as a stored belief is, its ports
+/// renumbered into one set of link slots.
+pub fn assemble(
+    n: usize,
+    options: FactoredIdentityOptions,
+    trees: Vec<HeldTree>,
+) -> Result<FactoredIdentity, BeliefError> {
+    let mut groups = Vec::new();
+    let mut used = BTreeSet::new();
+    let mut backgrounds: Vec<Option<Background>> = vec![None; n];
+    for tree in trees {
+        let renumbered = renumber(tree.groups, n, &used);
+        used.extend(
+            renumbered
+                .iter()
+                .flat_map(|g| g.ports(n))
+                .map(|p| (p.id as usize - n) / 2),
+        );
+        groups.extend(renumbered);
+        for (t, background) in tree.backgrounds {
+            let slot = backgrounds
+                .get_mut(t as usize)
+                .ok_or(BeliefError::UnknownTrack {
+                    track: t,
+                    tracks: n,
+                })?;
+            if slot.replace(background).is_some() {
+                return Err(BeliefError::BadComponent {
+                    detail: format!("track {t} in two trees"),
+                });
+            }
+        }
+    }
+    let backgrounds = backgrounds
+        .into_iter()
+        .enumerate()
+        .map(|(t, b)| {
+            b.ok_or_else(|| BeliefError::BadComponent {
+                detail: format!("track {t} in no tree"),
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    FactoredIdentity::try_from(Stored {
+        n,
+        options,
+        groups,
+        stats: SplitStats::default(),
+        backgrounds,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identity::filter::max_abs_difference;
+    use crate::identity::workload::{generate, IdentityWorkloadSpec};
+    use proptest::prelude::*;
+    use rand::{Rng, SeedableRng};
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(40))]
+
+        /// Leaders that each hold whole trees, gather a mix's two trees
+        /// before applying it and now and then hand a tree to another,
+        /// hold between them the centralized belief: put back together,
+        /// its marginals are the centralized ones after every event.
+        #[test]
+        fn shares_that_gather_trees_hold_the_centralized_belief(
+            n in 5usize..=9,
+            cap in 3usize..=6,
+            linked in any::<bool>(),
+            leaders in 2usize..=3,
+            seed in any::<u64>(),
+            moves in any::<u64>(),
+        ) {
+            let w = generate(&IdentityWorkloadSpec {
+                tracks: n,
+                events: 60,
+                mix_share: 0.6,
+                swap: 0.5,
+                accuracy: 0.9,
+                neighbourhood: n,
+                seed,
+            })
+            .unwrap();
+            let options = FactoredIdentityOptions {
+                max_group: cap,
+                linked,
+                ..FactoredIdentityOptions::default()
+            };
+            let mut central = FactoredIdentity::from_assignment(&w.initial, options).unwrap();
+            let mut shares: Vec<IdentityShare> = (0..leaders)
+                .map(|l| {
+                    IdentityShare::start(&w.initial, options, |t| t as usize % leaders == l)
+                        .unwrap()
+                })
+                .collect();
+            let mut rng = rand::rngs::StdRng::seed_from_u64(moves);
+            let holder = |shares: &[IdentityShare], t: u32| {
+                shares.iter().position(|s| s.holds(t)).expect("a holder")
+            };
+            for e in &w.events {
+                central.apply(e).unwrap();
+                let at = match e {
+                    IdentityEvent::Mix(m) => {
+                        let (la, lb) = (holder(&shares, m.a), holder(&shares, m.b));
+                        if la != lb {
+                            let tree = shares[lb].take(m.b).unwrap();
+                            shares[la].put(tree).unwrap();
+                        }
+                        la
+                    }
+                    IdentityEvent::Identify(r) => holder(&shares, r.track),
+                };
+                shares[at].apply(e).unwrap();
+                if rng.gen_bool(0.3) {
+                    let t = rng.gen_range(0..n as u32);
+                    let (from, to) = (holder(&shares, t), rng.gen_range(0..leaders));
+                    if from != to {
+                        let tree = shares[from].take(t).unwrap();
+                        shares[to].put(tree).unwrap();
+                    }
+                }
+                let trees = shares.iter().flat_map(IdentityShare::held_trees).collect();
+                let whole = assemble(n, options, trees).unwrap();
+                let d = max_abs_difference(&whole.marginals().unwrap(), &central.marginals().unwrap());
+                prop_assert!(d < 1e-12, "{} after {:?}", d, e);
+            }
+        }
+    }
+
+    #[test]
+    fn a_share_refuses_what_it_does_not_hold() {
+        let options = FactoredIdentityOptions::default();
+        let mut a = IdentityShare::start(&[0, 1, 2], options, |t| t < 2).unwrap();
+        let mut b = IdentityShare::start(&[0, 1, 2], options, |t| t == 2).unwrap();
+        let mix = IdentityEvent::Mix(crate::event::Mix {
+            a: 1,
+            b: 2,
+            swap: 0.5,
+        });
+        assert!(a.apply(&mix).is_err(), "track 2 is b's");
+        assert!(a.take(2).is_err());
+        let tree = b.take(2).unwrap();
+        assert!(!b.holds(2));
+        a.put(tree.clone()).unwrap();
+        assert!(a.put(tree).is_err(), "held here already");
+        a.apply(&mix).unwrap();
+        // Every track in one tree: the whole belief; a track twice or in
+        // none is refused.
+        let trees = a.held_trees();
+        assert!(assemble(3, options, trees.clone()).is_ok());
+        assert!(assemble(3, options, trees[..trees.len() - 1].to_vec()).is_err());
+        let mut twice = trees.clone();
+        twice.push(trees[0].clone());
+        assert!(assemble(3, options, twice).is_err());
+    }
+}
