@@ -28,11 +28,13 @@ use idmesh_belief::identity::scoring::{
     add_identity_reliability, identity_brier, identity_log_loss, idf1,
 };
 use idmesh_belief::identity::{
-    most_likely_assignment, BeliefMatrix, ExactPermutationFilter, FactoredIdentity,
+    most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter, FactoredIdentity,
     FactoredIdentityOptions, IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions,
+    PropertyBitsFilter,
 };
 use idmesh_belief::identity_event_of;
 use idmesh_belief::scoring::Reliability;
+use idmesh_belief::{RadonOptions, Sparsify};
 use idmesh_eval::eval::plots::{draw, reliability_series, Plot};
 use idmesh_protocol::trace::Line;
 use idmesh_sim::scenario::trace_out::lines;
@@ -119,7 +121,15 @@ enum Method {
     Exact,
     Information,
     BeliefMatrix,
-    Factored { cap: usize, linked: bool },
+    Factored {
+        cap: usize,
+        linked: bool,
+    },
+    /// Identities coded by the fewest bits, one Radon property belief
+    /// per bit, exact or within a coefficient budget per bit.
+    PropertyBits {
+        budget: Option<usize>,
+    },
 }
 
 impl Method {
@@ -128,6 +138,10 @@ impl Method {
             Method::Exact => "exact".into(),
             Method::Information => "information matrix".into(),
             Method::BeliefMatrix => "belief matrix".into(),
+            Method::PropertyBits { budget: None } => "property bits, exact".into(),
+            Method::PropertyBits {
+                budget: Some(budget),
+            } => format!("property bits, budget {budget}"),
             Method::Factored { cap, linked } => {
                 format!(
                     "factored, {}, cap {cap}",
@@ -153,6 +167,17 @@ impl Method {
             Method::BeliefMatrix => Filter::Matrix(Box::new(
                 BeliefMatrix::from_assignment(start).expect("a start"),
             )),
+            Method::PropertyBits { budget } => {
+                let n = start.len();
+                let code = BitCode::new(n, BitCode::min_bits(n)).expect("a code");
+                let options = RadonOptions {
+                    sparsify: budget.map(Sparsify::overcomplete),
+                    ..RadonOptions::default()
+                };
+                Filter::Matrix(Box::new(
+                    PropertyBitsFilter::new(code, Some(start), options).expect("a start"),
+                ))
+            }
             Method::Factored { cap, linked } => {
                 let options = FactoredIdentityOptions {
                     max_group: cap,
@@ -428,7 +453,11 @@ fn main() {
     for n in small {
         let streams: Vec<Stream> = (base..base + seeds).map(|s| stream(n, 300, s)).collect();
         let exact: Vec<_> = streams.iter().map(exact_marginals).collect();
-        let mut methods = vec![Method::Information, Method::BeliefMatrix];
+        let mut methods = vec![
+            Method::Information,
+            Method::BeliefMatrix,
+            Method::PropertyBits { budget: None },
+        ];
         for linked in [false, true] {
             for cap in [6, 7, 8, n]
                 .into_iter()
