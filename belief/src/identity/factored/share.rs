@@ -123,6 +123,27 @@ impl IdentityShare {
         tree
     }
 
+    /// The groups at `indices` as a tree, with their tracks' leaks and
+    /// rows.
+    fn tree_at(&self, indices: &[usize]) -> HeldTree {
+        let groups: Vec<Group> = indices
+            .iter()
+            .map(|&g| self.belief.groups[g].clone())
+            .collect();
+        let backgrounds = groups
+            .iter()
+            .flat_map(|g| g.tracks.iter().copied())
+            .filter(|&t| (t as usize) < self.belief.n)
+            .collect::<BTreeSet<u32>>()
+            .into_iter()
+            .map(|t| (t, self.belief.backgrounds[t as usize].clone()))
+            .collect();
+        HeldTree {
+            groups,
+            backgrounds,
+        }
+    }
+
     /// Gives up the tree of track `t` (which must be held here): its
     /// groups and their tracks' leaks and rows, for [`IdentityShare::put`]
     /// elsewhere. Placeholders take its place.
@@ -134,23 +155,9 @@ impl IdentityShare {
         }
         let n = self.belief.n;
         let indices = self.tree_of(t);
-        let groups: Vec<Group> = indices
-            .iter()
-            .map(|&g| self.belief.groups[g].clone())
-            .collect();
-        let tree = HeldTree {
-            backgrounds: Vec::new(),
-            groups,
-        };
+        let tree = self.tree_at(&indices);
         let tracks = tree.tracks(n);
         let identities = tree.identities(n);
-        let tree = HeldTree {
-            backgrounds: tracks
-                .iter()
-                .map(|&t| (t, self.belief.backgrounds[t as usize].clone()))
-                .collect(),
-            ..tree
-        };
         let placeholders = pair(&tracks, &identities);
         for &t in &tracks {
             self.held[t as usize] = false;
@@ -239,26 +246,10 @@ impl IdentityShare {
                 continue;
             }
             let indices = self.tree_of(t);
-            let groups: Vec<Group> = indices
-                .iter()
-                .map(|&g| {
-                    done[g] = true;
-                    self.belief.groups[g].clone()
-                })
-                .collect();
-            let tree = HeldTree {
-                groups,
-                backgrounds: Vec::new(),
-            };
-            let backgrounds = tree
-                .tracks(self.belief.n)
-                .into_iter()
-                .map(|t| (t, self.belief.backgrounds[t as usize].clone()))
-                .collect();
-            trees.push(HeldTree {
-                backgrounds,
-                ..tree
-            });
+            for &g in &indices {
+                done[g] = true;
+            }
+            trees.push(self.tree_at(&indices));
         }
         trees
     }
