@@ -71,18 +71,20 @@ impl Background {
 
     /// Bayes' rule for a read of `i` with likelihood `right` if the track
     /// carries i, `wrong` otherwise, on the row and on the leak: the read
-    /// was `table` likely under the group's table, and under this row as
-    /// likely as the row says. A read the row cannot explain (likelihood
-    /// 0) leaves the row alone.
-    pub fn read(&mut self, i: u32, right: f64, wrong: f64, table: f64) {
+    /// was `table` likely under the group's table (needed only while the
+    /// track leaks), and under this row as likely as the row says. A read
+    /// the row cannot explain (likelihood 0) leaves the row alone.
+    pub fn read(&mut self, i: u32, right: f64, wrong: f64, table: Option<f64>) {
         let p = self.probability(i);
         let evidence = right * p + wrong * (1.0 - p);
         if !(evidence > 0.0 && evidence.is_finite()) {
             return;
         }
-        let total = self.leak * evidence + (1.0 - self.leak) * table;
-        if self.leak > 0.0 && total > 0.0 && total.is_finite() {
-            self.leak = self.leak * evidence / total;
+        if let Some(table) = table.filter(|_| self.leak > 0.0) {
+            let total = self.leak * evidence + (1.0 - self.leak) * table;
+            if total > 0.0 && total.is_finite() {
+                self.leak = self.leak * evidence / total;
+            }
         }
         let scale = wrong / evidence;
         self.shared *= scale;
@@ -164,7 +166,7 @@ mod tests {
         let (mut a, mut b) = (Background::uniform(n), Background::certain(3));
         // A read of 2 at accuracy 0.9 on a uniform row: 0.9 against
         // 0.025 for each of the four others.
-        a.read(2, 0.9, 0.025, 0.5);
+        a.read(2, 0.9, 0.025, None);
         assert_eq!(a.leak(), 0.0, "nothing leaked, nothing to weigh");
         let want: Vec<f64> = (0..n).map(|i| if i == 2 { 0.9 } else { 0.025 }).collect();
         for (p, q) in dense(&a, n).iter().zip(&want) {
@@ -189,7 +191,7 @@ mod tests {
         // A read of 0 at 0.7 (wrong reads 0.1 each): the row explains it
         // with 0.7/4 + 3·0.1/4 = 0.25, the table (which rules 0 out) with
         // 0.1.
-        r.read(0, 0.7, 0.1, 0.1);
+        r.read(0, 0.7, 0.1, Some(0.1));
         let want = 0.2 * 0.25 / (0.2 * 0.25 + 0.8 * 0.1);
         assert!((r.leak() - want).abs() < 1e-15);
         // Mixing carries the leak with the target.
@@ -208,7 +210,7 @@ mod tests {
     #[test]
     fn a_read_no_identity_explains_changes_nothing_and_rows_stay_sparse() {
         let mut r = Background::certain(1);
-        r.read(0, 0.9, 0.0, 0.5);
+        r.read(0, 0.9, 0.0, Some(0.5));
         assert_eq!(r, Background::certain(1));
         // Mixing two uniform rows lists nothing.
         let (mut a, mut b) = (Background::uniform(1000), Background::uniform(1000));

@@ -561,43 +561,79 @@ impl FactoredIdentity {
     }
 
     /// The table's probability (links included, the leak left out) that
-    /// track `t` carries identity `i`: one row of [`IdentityFilter::marginals`].
+    /// track `t` carries identity `i`: one entry of [`Self::table_marginals`].
     fn table_probability(&self, t: u32, i: u32) -> Result<f64, BeliefError> {
         let g = self.group_of[t as usize];
         let j = self.local(t)?;
         let mut bp = links::Messages::new(self);
-        let row = bp.group_marginals(g)?.swap_remove(j);
-        let group = &self.groups[g];
-        let mut p = 0.0;
-        for (x, &q) in row.iter().enumerate() {
-            let id = group.identities[x];
-            if id == i {
-                p += q;
-            } else if id as usize >= self.n && q > 0.0 {
-                // A star: what the partner's phantom carries when
-                // something crossed.
-                let partner = self.partner(id);
-                let other = &self.groups[self.group_of[partner as usize]];
-                let (Some(jq), Some(xq), Some(y)) = (
-                    other.local_track(partner),
-                    other.identities.iter().position(|&z| z == partner),
-                    other.identities.iter().position(|&z| z == i),
-                ) else {
-                    continue;
-                };
-                let far = bp.group_marginals(self.group_of[partner as usize])?;
-                let crossed = 1.0 - far[jq][xq];
-                if crossed > 0.0 {
-                    p += q * far[jq][y] / crossed;
-                }
+        let local = bp.group_marginals(g)?;
+        // The groups across g's links, whose phantoms say what a star is.
+        let mut far = std::collections::BTreeMap::new();
+        for port in self.groups[g].ports(self.n) {
+            let h = self.group_of[self.partner(port.id) as usize];
+            if let std::collections::btree_map::Entry::Vacant(entry) = far.entry(h) {
+                entry.insert(bp.group_marginals(h)?);
             }
         }
+        let mut p = 0.0;
+        self.spread_row(
+            &self.groups[g],
+            &local[j],
+            |h| far.get(&h).map(Vec::as_slice),
+            |id, q| {
+                if id == i as usize {
+                    p += q;
+                }
+            },
+        );
         Ok(p)
     }
 
+    /// Hands `add` the mass of one track's row of local marginals of
+    /// `group` on each identity: a real identity's directly, a star's
+    /// spread over what the partner's phantom carries when something
+    /// crossed (`far(h)`: group h's local marginals).
+    fn spread_row<'a>(
+        &self,
+        group: &Group,
+        row: &[f64],
+        far: impl Fn(usize) -> Option<&'a [Vec<f64>]>,
+        mut add: impl FnMut(usize, f64),
+    ) {
+        let n = self.n;
+        for (x, &p) in row.iter().enumerate() {
+            let i = group.identities[x] as usize;
+            if i < n {
+                add(i, p);
+            } else if p > 0.0 {
+                let q = self.partner(i as u32);
+                let h = self.group_of[q as usize];
+                let other = &self.groups[h];
+                let (Some(jq), Some(xq), Some(local)) = (
+                    other.local_track(q),
+                    other.identities.iter().position(|&y| y == q),
+                    far(h),
+                ) else {
+                    continue;
+                };
+                let row = &local[jq];
+                let crossed = 1.0 - row[xq];
+                if crossed <= 0.0 {
+                    continue;
+                }
+                for (y, &r) in row.iter().enumerate() {
+                    let id = other.identities[y] as usize;
+                    if id < n {
+                        add(id, p * r / crossed);
+                    }
+                }
+            }
+        }
+    }
+
     /// After a read on track `t` whose likelihood under the table was
-    /// `table`: the read on t's background row and leak.
-    fn after_read(&mut self, t: u32, read: &Identify, table: f64) {
+    /// `table` (None: t does not leak): the read on t's row and leak.
+    fn after_read(&mut self, t: u32, read: &Identify, table: Option<f64>) {
         let wrong = read.wrong_read_likelihood(self.n);
         self.backgrounds[t as usize].read(read.identity, read.accuracy, wrong, table);
     }
@@ -861,10 +897,15 @@ impl IdentityFilter for FactoredIdentity {
         let g = self.group_of[t as usize];
         let track = self.local(t)?;
         let (right, wrong) = (identify.accuracy, identify.wrong_read_likelihood(self.n));
-        // The read's likelihood under the table and under the leak (a
-        // track carrying any identity alike), which weigh the two.
-        let m = self.table_probability(t, identify.identity)?;
-        let evidence = right * m + wrong * (1.0 - m);
+        // The read's likelihood under the table, which weighs a leak
+        // against the row (a belief propagation over t's tree: only for a
+        // track that leaks).
+        let evidence = if self.backgrounds[t as usize].leak() > 0.0 {
+            let m = self.table_probability(t, identify.identity)?;
+            Some(right * m + wrong * (1.0 - m))
+        } else {
+            None
+        };
         let group = &mut self.groups[g];
         if let Some(read) = group
             .identities
@@ -959,35 +1000,13 @@ impl FactoredIdentity {
                 if t >= n {
                     continue;
                 }
-                for (x, &p) in row.iter().enumerate() {
-                    let i = group.identities[x] as usize;
-                    if i < n {
-                        m[t][i] += p;
-                    } else if p > 0.0 {
-                        // The star of port i: spread over what the partner's
-                        // phantom carries when something crossed.
-                        let q = self.partner(i as u32);
-                        let h = self.group_of[q as usize];
-                        let other = &self.groups[h];
-                        let (Some(jq), Some(xq)) = (
-                            other.local_track(q),
-                            other.identities.iter().position(|&y| y == q),
-                        ) else {
-                            continue;
-                        };
-                        let row = &local[h][jq];
-                        let crossed = 1.0 - row[xq];
-                        if crossed <= 0.0 {
-                            continue;
-                        }
-                        for (y, &r) in row.iter().enumerate() {
-                            let id = other.identities[y] as usize;
-                            if id < n {
-                                m[t][id] += p * r / crossed;
-                            }
-                        }
-                    }
-                }
+                let answer = &mut m[t];
+                self.spread_row(
+                    group,
+                    row,
+                    |h| local.get(h).map(Vec::as_slice),
+                    |i, p| answer[i] += p,
+                );
             }
         }
         Ok(m)

@@ -74,18 +74,9 @@ impl IdentityShare {
         Ok(IdentityShare { belief, held })
     }
 
-    pub fn size(&self) -> usize {
-        self.belief.n
-    }
-
     /// Whether this share holds track `t`'s tree.
     pub fn holds(&self, t: u32) -> bool {
         self.held.get(t as usize).copied().unwrap_or(false)
-    }
-
-    /// What this share's splits have cost (its own cuts only).
-    pub fn split_stats(&self) -> SplitStats {
-        self.belief.split_stats()
     }
 
     /// Applies an event whose tracks this share holds (a mix's two trees
@@ -126,22 +117,19 @@ impl IdentityShare {
     /// The groups at `indices` as a tree, with their tracks' leaks and
     /// rows.
     fn tree_at(&self, indices: &[usize]) -> HeldTree {
-        let groups: Vec<Group> = indices
-            .iter()
-            .map(|&g| self.belief.groups[g].clone())
-            .collect();
-        let backgrounds = groups
-            .iter()
-            .flat_map(|g| g.tracks.iter().copied())
-            .filter(|&t| (t as usize) < self.belief.n)
-            .collect::<BTreeSet<u32>>()
+        let mut tree = HeldTree {
+            groups: indices
+                .iter()
+                .map(|&g| self.belief.groups[g].clone())
+                .collect(),
+            backgrounds: Vec::new(),
+        };
+        tree.backgrounds = tree
+            .tracks(self.belief.n)
             .into_iter()
             .map(|t| (t, self.belief.backgrounds[t as usize].clone()))
             .collect();
-        HeldTree {
-            groups,
-            backgrounds,
-        }
+        tree
     }
 
     /// Gives up the tree of track `t` (which must be held here): its
@@ -198,14 +186,12 @@ impl IdentityShare {
             left_identities.extend(group.identities.iter().filter(|i| !identities.contains(i)));
         }
         let mut new = pair(&left_tracks, &left_identities);
-        let used: BTreeSet<usize> = b
+        let kept = b
             .groups
             .iter()
             .enumerate()
-            .filter(|(g, _)| !displaced.contains(g))
-            .flat_map(|(_, g)| g.ports(n))
-            .map(|p| (p.id as usize - n) / 2)
-            .collect();
+            .filter(|(g, _)| !displaced.contains(g));
+        let used = link_slots(kept.map(|(_, g)| g), n).collect();
         new.extend(renumber(tree.groups, n, &used));
         for (t, background) in tree.backgrounds {
             let slot =
@@ -264,18 +250,26 @@ fn pair(tracks: &BTreeSet<u32>, identities: &BTreeSet<u32>) -> Vec<Group> {
         .collect()
 }
 
+/// The link slot of every port of `groups` (ports n + 2l and n + 2l + 1
+/// are link l's two ends).
+fn link_slots<'a>(
+    groups: impl Iterator<Item = &'a Group> + 'a,
+    n: usize,
+) -> impl Iterator<Item = usize> + 'a {
+    groups
+        .flat_map(move |g| g.ports(n))
+        .map(move |p| (p.id as usize - n) / 2)
+}
+
 /// `groups` with their links moved to the lowest link slots not in
 /// `used`, each link's two ports together (side A keeps the even id).
 fn renumber(mut groups: Vec<Group>, n: usize, used: &BTreeSet<usize>) -> Vec<Group> {
     let mut slots: BTreeMap<usize, usize> = BTreeMap::new();
     let mut free = (0..).filter(|s| !used.contains(s));
-    for group in &groups {
-        for port in group.ports(n) {
-            let slot = (port.id as usize - n) / 2;
-            if let std::collections::btree_map::Entry::Vacant(entry) = slots.entry(slot) {
-                if let Some(to) = free.next() {
-                    entry.insert(to);
-                }
+    for slot in link_slots(groups.iter(), n) {
+        if let std::collections::btree_map::Entry::Vacant(entry) = slots.entry(slot) {
+            if let Some(to) = free.next() {
+                entry.insert(to);
             }
         }
     }
@@ -307,12 +301,7 @@ pub fn assemble(
     let mut backgrounds: Vec<Option<Background>> = vec![None; n];
     for tree in trees {
         let renumbered = renumber(tree.groups, n, &used);
-        used.extend(
-            renumbered
-                .iter()
-                .flat_map(|g| g.ports(n))
-                .map(|p| (p.id as usize - n) / 2),
-        );
+        used.extend(link_slots(renumbered.iter(), n));
         groups.extend(renumbered);
         for (t, background) in tree.backgrounds {
             let slot = backgrounds
