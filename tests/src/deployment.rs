@@ -113,7 +113,7 @@ pub struct Deployment {
     children: Vec<(String, Child)>,
 }
 
-/// The bounding box of a trace's positions.
+/// The bounding box of a trace's positions (`move` and `detect` lines).
 pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     let text = std::fs::read_to_string(trace).expect("trace readable");
     let mut b = (
@@ -124,7 +124,7 @@ pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     );
     for line in text.lines() {
         let v: Value = serde_json::from_str(line).expect("trace line is JSON");
-        if v["kind"] == "move" {
+        if v["kind"] == "move" || v["kind"] == "detect" {
             let (x, y) = (v["x"].as_f64().unwrap(), v["y"].as_f64().unwrap());
             b = (b.0.min(x), b.1.min(y), b.2.max(x), b.3.max(y));
         }

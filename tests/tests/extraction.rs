@@ -1,11 +1,16 @@
 //! A sensor that extracts its events from what a tracker reports — `move`
 //! and `detect` lines (trace format version 2) — serves what `idmesh
 //! replay` computes from `idmesh extract`'s trace of the same reports: the
-//! same extractor runs in both, on the stream's one order.
+//! same extractor runs in both, on the stream's one order. The reports are
+//! the real pedestrian scenes' positions; every deployment serves exactly
+//! the events `idmesh extract` writes (its answer's watermark counts them)
+//! and replay's answer of that trace to 1e-9.
 
 use idmesh_extract::ExtractorConfig;
 use idmesh_tests::compare::floats;
-use idmesh_tests::deployment::{replay_summary, waypoint_crowd, Deployment, Factored, Settings};
+use idmesh_tests::deployment::{
+    replay_summary, trace_events, watermark_events, Deployment, Factored, Settings,
+};
 use idmesh_tests::idmesh;
 use idmesh_tests::python::run_example;
 use serde_json::{json, Value};
@@ -13,50 +18,45 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-/// A tracker's reports of a random-waypoint crowd: its header (tracks,
-/// red count, initial colours) as version 2, then every position of the
-/// simulated trace, one frame a second; every third frame of a track is a
-/// `detect` with class scores (a red target reads 0.7 red), the others
-/// plain `move` lines.
-fn reports_of(crowd: &Path, out: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(crowd).unwrap();
-    let mut lines = text.lines();
-    let mut header: Value = serde_json::from_str(lines.next().unwrap()).unwrap();
-    header["version"] = json!(2);
-    let red: Vec<u64> = header["initial_red"]
-        .as_array()
-        .unwrap()
+/// A real scene's positions as a tracker reports them: `idmesh simulate
+/// --model pedestrians` on the ETH/UCY `scene` (its first `duration`
+/// seconds) writes what its simulated tracker reported
+/// (`--tracker-output`: a version-2 trace of `detect` lines, every track's
+/// position each step, class scores where the colour sensor saw one).
+fn scene_reports(dir: &Path, scene: &str, duration: u32, seed: u64) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let obsmat =
+        idmesh_sim::motion::pedestrians::data_dir().join(format!("{scene}/obsmat/obsmat.txt"));
+    let reports = dir.join(format!("{scene}-reports.jsonl"));
+    let status = Command::new(idmesh())
+        .args(["simulate", "--model", "pedestrians", "--scene"])
+        .arg(&obsmat)
+        .args([
+            "--duration",
+            &duration.to_string(),
+            "--seed",
+            &seed.to_string(),
+        ])
+        .arg("--out")
+        .arg(dir.join(format!("{scene}-simulated.jsonl")))
+        .arg("--tracker-output")
+        .arg(&reports)
+        .status()
+        .expect("idmesh simulate runs");
+    assert!(status.success(), "idmesh simulate of {scene} failed");
+    reports
+}
+
+/// The events of `idmesh extract`'s trace of `reports` (mix, observe,
+/// identify and move lines), and how many are mixes.
+fn extracted_events(reports: &Path, out: &Path) -> (u64, usize) {
+    extract(reports, out);
+    let events = trace_events(out);
+    let mixes = events
         .iter()
-        .map(|t| t.as_u64().unwrap())
-        .collect();
-    let mut written = vec![header.to_string()];
-    let mut frame = 0u64;
-    let mut last_time = None;
-    for line in lines {
-        let line: Value = serde_json::from_str(line).unwrap();
-        if line["kind"] != "move" {
-            continue;
-        }
-        let time = line["time"].as_f64().unwrap();
-        if last_time.is_some_and(|t| t != time) {
-            frame += 1;
-        }
-        last_time = Some(time);
-        let track = line["track"].as_u64().unwrap();
-        if (frame + track).is_multiple_of(3) {
-            let p = if red.contains(&track) { 0.7 } else { 0.3 };
-            let detect = json!({
-                "kind": "detect", "time": time, "track": track,
-                "x": line["x"], "y": line["y"],
-                "scores": {"blue": 1.0 - p, "red": p},
-            });
-            written.push(detect.to_string());
-        } else {
-            written.push(line.to_string());
-        }
-    }
-    std::fs::write(out, written.join("\n") + "\n").unwrap();
-    out.to_path_buf()
+        .filter(|l| l.contains("\"kind\":\"mix\""))
+        .count();
+    (events.len() as u64, mixes)
 }
 
 /// `idmesh extract --format jsonl` of `reports` into `out`.
@@ -79,21 +79,21 @@ fn assert_close(what: &str, got: &Value, want: &Value) {
     }
 }
 
-/// Reports through a sensor that extracts, two leaders at the default
+/// A scene's reports (zara01) from a trace file through a sensor that
+/// extracts, two leaders at the default
 /// settings: the final answer equals the twin's (`idmesh replay
 /// --topology`, which extracts the reports as the sensor does) and
 /// replay of `idmesh extract`'s trace with the deployment's settings.
 #[test]
 fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-{}", std::process::id()));
-    let crowd = waypoint_crowd(&dir, 40, 15, 600, 4);
-    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let reports = scene_reports(&dir, "zara01", 150, 4);
     let extracted = dir.join("extracted.jsonl");
-    extract(&reports, &extracted);
+    let (events, mixes) = extracted_events(&reports, &extracted);
+    assert!(mixes >= 20, "{mixes} mixes extracted");
     let text = std::fs::read_to_string(&extracted).unwrap();
-    let count = |kind: &str| text.matches(&format!("\"kind\":\"{kind}\"")).count();
-    assert!(count("mix") >= 20, "{} mixes extracted", count("mix"));
-    assert!(count("observe") >= 20, "{} observations", count("observe"));
+    let observations = text.matches("\"kind\":\"observe\"").count();
+    assert!(observations >= 20, "{observations} observations");
 
     let settings = Settings {
         leaders: 2,
@@ -104,6 +104,7 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
     };
     let deployment = Deployment::start("extraction", &reports, &settings);
     let last = deployment.final_marginals(Duration::from_secs(90));
+    assert_eq!(watermark_events(&last), events, "the sensor's events");
     let twin = deployment.twin_summary(&reports);
     assert_close("the twin", &last["p_red"], &twin["final_p_red"]);
     let replayed = replay_summary(&extracted, &["--leaders", "2"]);
@@ -116,7 +117,7 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The same reports piped into `idmesh sensor --stdin` a few lines at a
+/// A scene's reports (hotel) piped into `idmesh sensor --stdin` a few lines at a
 /// time, with an event among them where reports are expected: the event
 /// is refused by name and counted, and the answer is replay's of
 /// `idmesh extract`'s trace.
@@ -124,10 +125,9 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
 fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     use std::io::Write;
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-stdin-{}", std::process::id()));
-    let crowd = waypoint_crowd(&dir, 30, 10, 400, 6);
-    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let reports = scene_reports(&dir, "hotel", 150, 6);
     let extracted = dir.join("extracted.jsonl");
-    extract(&reports, &extracted);
+    let (events, _) = extracted_events(&reports, &extracted);
     let settings = Settings {
         leaders: 2,
         factored: Some(Factored::default()),
@@ -157,6 +157,7 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     }
     drop(pipe);
     let answer = deployment.final_marginals(Duration::from_secs(60));
+    assert_eq!(watermark_events(&answer), events, "the sensor's events");
     let replayed = replay_summary(&extracted, &["--leaders", "2"]);
     assert_close("piped reports", &answer["p_red"], &replayed["final_p_red"]);
     assert!(
@@ -168,17 +169,16 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
 }
 
 /// The Python tracker loop (`examples/tracker.py`, eclipse-zenoh) sends
-/// each frame of the reports as `detect` lines to a live extracting
+/// each frame of a scene's reports (eth) as `detect` lines to a live extracting
 /// sensor's ingest key: every line is accepted, and once the last frame
 /// is in (it closes the one before; a live stream's last frame waits for
 /// the next), the answer equals replay of `idmesh extract`'s trace of
 /// every frame but the last.
 #[test]
 fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
-    use idmesh_tests::deployment::{header_only, trace_events};
+    use idmesh_tests::deployment::header_only;
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-py-{}", std::process::id()));
-    let crowd = waypoint_crowd(&dir, 30, 10, 300, 7);
-    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let reports = scene_reports(&dir, "eth", 120, 7);
     let text = std::fs::read_to_string(&reports).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     let last_time = serde_json::from_str::<Value>(lines[lines.len() - 1]).unwrap()["time"].clone();
@@ -229,7 +229,7 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Two live sensors, each fed the reports of its own region by
+/// Two live sensors, each fed the reports of a scene (zara02) in its own region by
 /// `examples/regions_producer.py`: the extractor runs on the merged
 /// order at both, so a meeting of tracks reported to two sensors is one
 /// mix, and the final answer equals replay of `idmesh extract`'s trace
@@ -238,10 +238,10 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
 fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     use idmesh_tests::deployment::{grid_over, header_only};
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-2s-{}", std::process::id()));
-    let crowd = waypoint_crowd(&dir, 30, 10, 300, 8);
-    let reports = reports_of(&crowd, &dir.join("reports.jsonl"));
+    let reports = scene_reports(&dir, "zara02", 120, 8);
     let extracted = dir.join("extracted.jsonl");
-    extract(&reports, &extracted);
+    let (_, mixes) = extracted_events(&reports, &extracted);
+    assert!(mixes >= 20, "{mixes} mixes extracted");
     let replayed = replay_summary(&extracted, &["--leaders", "2"]);
     let settings = Settings {
         leaders: 2,
@@ -261,7 +261,7 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
         "--batch".into(),
         "100".into(),
     ];
-    for (s, (x, y)) in grid_over(&crowd, 2).iter().enumerate() {
+    for (s, (x, y)) in grid_over(&reports, 2).iter().enumerate() {
         args.extend(["--sensor".to_string(), format!("sensor-{s}@{x},{y}")]);
     }
     let sent = run_example(
@@ -277,6 +277,14 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     let answer = deployment.answer_when(&["marginals"], Duration::from_secs(60), |a| {
         a["finished"] == true
     });
+    // Several sensors count their intake, the reports, in the order they
+    // merge; the extraction runs after the merge.
+    let lines = std::fs::read_to_string(&reports).unwrap().lines().count() as u64;
+    assert_eq!(
+        watermark_events(&answer),
+        lines - 1,
+        "the two sensors' reports"
+    );
     assert_close("two sensors", &answer["p_red"], &replayed["final_p_red"]);
     drop(deployment);
     let _ = std::fs::remove_dir_all(&dir);
