@@ -247,8 +247,8 @@ impl Regions {
     /// goes out: at the first event after the leading moves, the
     /// handovers that put the tracks they placed in their regions; at a
     /// mix of tracks of two leaders (0 < swap < 1) under fitted cells, the
-    /// handover that takes both to the leader that was sent fewer items in
-    /// this window (a's on a tie), riding on the mix.
+    /// handover that takes both to the leader that was sent fewer items
+    /// since the stream began (a's on a tie), riding on the mix.
     ///
     /// Why take them: a mix across two leaders is an item at each either
     /// way, but kept apart it leaves the two tracks, which have just met
@@ -287,7 +287,7 @@ impl Regions {
         if owner_a == owner_b {
             return None;
         }
-        let (track, from, to) = if fitted.sent_to(owner_a) <= fitted.sent_to(owner_b) {
+        let (track, from, to) = if fitted.sent_so_far(owner_a) <= fitted.sent_so_far(owner_b) {
             (b, owner_b, owner_a)
         } else {
             (a, owner_a, owner_b)
@@ -651,6 +651,44 @@ mod tests {
             live.after(line);
         }
         assert_eq!(live, taken, "a live start is the replay's");
+    }
+
+    #[test]
+    fn a_mix_across_two_leaders_goes_to_the_one_sent_fewer_items_so_far() {
+        use idmesh_protocol::trace::{Mix as MixLine, Observe as ObserveLine};
+        let leading = [Some((0.0, 0.0)), Some((10.0, 0.0))];
+        let mut r = Regions::starting(&RegionRule::fitted(), 2, 2, &leading);
+        let (busy, quiet) = (r.owner(0).unwrap(), r.owner(1).unwrap());
+        assert_ne!(busy, quiet);
+        // Track 0's leader is sent a whole window of items (100 a leader):
+        // the window's end starts its counts again, so they are even at
+        // the mix; the stream's are not.
+        let seen = Line::Observe(ObserveLine {
+            time: 0.0,
+            track: 0,
+            red: 0.8,
+            blue: 0.2,
+            sensor: None,
+        });
+        for _ in 0..200 {
+            r.before(&seen);
+            r.after(&seen);
+        }
+        let mix = Line::Mix(MixLine {
+            time: 1.0,
+            a: 0,
+            b: 1,
+            swap: 0.5,
+        });
+        let (busy, quiet) = (r.owner(0).unwrap(), r.owner(1).unwrap());
+        assert_ne!(busy, quiet, "a redraw keeps them apart");
+        let ride = Handover {
+            track: 0,
+            from: busy,
+            to: quiet,
+            rides: true,
+        };
+        assert_eq!(r.before(&mix), vec![ride]);
     }
 
     /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of
