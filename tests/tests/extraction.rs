@@ -13,7 +13,7 @@ use idmesh_tests::deployment::{
 };
 use idmesh_tests::idmesh;
 use idmesh_tests::python::run_example;
-use serde_json::{json, Value};
+use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
