@@ -222,6 +222,21 @@ impl IdentityShare {
         self.belief.reindex();
     }
 
+    /// The table entries of the tree of track `t` (held here): what moving
+    /// it would send, for a rule that moves the smaller of two trees.
+    pub fn tree_entries(&self, t: u32) -> Result<usize, BeliefError> {
+        if !self.holds(t) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("track {t}'s tree is not held here"),
+            });
+        }
+        Ok(self
+            .tree_of(t)
+            .iter()
+            .map(|&g| self.belief.groups[g].probabilities().len())
+            .sum())
+    }
+
     /// Every tree held here, for the coordinator's [`assemble`].
     pub fn held_trees(&self) -> Vec<HeldTree> {
         let mut done = vec![false; self.belief.groups.len()];
@@ -427,11 +442,26 @@ mod tests {
         });
         assert!(a.apply(&mix).is_err(), "track 2 is b's");
         assert!(a.take(2).is_err());
+        assert!(a.tree_entries(2).is_err());
+        // Alone, a track's tree is one group of one assignment.
+        assert_eq!(b.tree_entries(2).unwrap(), 1);
         let tree = b.take(2).unwrap();
         assert!(!b.holds(2));
         a.put(tree.clone()).unwrap();
         assert!(a.put(tree).is_err(), "held here already");
         a.apply(&mix).unwrap();
+        // Mixed, 1 and 2 share a group of 2! assignments: what the tree
+        // moved sends.
+        assert_eq!(a.tree_entries(2).unwrap(), 2);
+        let sent: usize = a
+            .clone()
+            .take(1)
+            .unwrap()
+            .groups
+            .iter()
+            .map(|g| g.probabilities().len())
+            .sum();
+        assert_eq!(sent, 2);
         // Every track in one tree: the whole belief; a track twice or in
         // none is refused.
         let trees = a.held_trees();
