@@ -20,13 +20,22 @@ use std::time::Duration;
 
 /// A real scene's positions as a tracker reports them: `idmesh simulate
 /// --model pedestrians` on the ETH/UCY `scene` (its first `duration`
-/// seconds) writes what its simulated tracker reported
-/// (`--tracker-output`: a version-2 trace of `detect` lines, every track's
-/// position each step, class scores where the colour sensor saw one).
-fn scene_reports(dir: &Path, scene: &str, duration: u32, seed: u64) -> PathBuf {
+/// seconds, the tracker's swaps drawn by the meeting model `model` names,
+/// the default without) writes its own trace and what its simulated
+/// tracker reported (`--tracker-output`: a version-2 trace of `detect`
+/// lines, every track's position each step, class scores where the colour
+/// sensor saw one): (simulated, reports).
+fn scene_reports(
+    dir: &Path,
+    scene: &str,
+    duration: u32,
+    seed: u64,
+    model: &[&str],
+) -> (PathBuf, PathBuf) {
     std::fs::create_dir_all(dir).unwrap();
     let obsmat =
         idmesh_sim::motion::pedestrians::data_dir().join(format!("{scene}/obsmat/obsmat.txt"));
+    let simulated = dir.join(format!("{scene}-simulated.jsonl"));
     let reports = dir.join(format!("{scene}-reports.jsonl"));
     let status = Command::new(idmesh())
         .args(["simulate", "--model", "pedestrians", "--scene"])
@@ -37,26 +46,28 @@ fn scene_reports(dir: &Path, scene: &str, duration: u32, seed: u64) -> PathBuf {
             "--seed",
             &seed.to_string(),
         ])
+        .args(model)
         .arg("--out")
-        .arg(dir.join(format!("{scene}-simulated.jsonl")))
+        .arg(&simulated)
         .arg("--tracker-output")
         .arg(&reports)
         .status()
         .expect("idmesh simulate runs");
     assert!(status.success(), "idmesh simulate of {scene} failed");
-    reports
+    (simulated, reports)
 }
 
-/// The events of `idmesh extract`'s trace of `reports` (mix, observe,
-/// identify and move lines), and how many are mixes.
-fn extracted_events(reports: &Path, out: &Path) -> (u64, usize) {
+/// How many lines of `kind` the trace at `path` holds.
+fn lines_of_kind(path: &Path, kind: &str) -> usize {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.matches(&format!("\"kind\":\"{kind}\"")).count()
+}
+
+/// `idmesh extract` of `reports` into `out`: how many events its trace
+/// holds (mix, observe, identify and move lines).
+fn extracted_events(reports: &Path, out: &Path) -> u64 {
     extract(reports, out);
-    let events = trace_events(out);
-    let mixes = events
-        .iter()
-        .filter(|l| l.contains("\"kind\":\"mix\""))
-        .count();
-    (events.len() as u64, mixes)
+    trace_events(out).len() as u64
 }
 
 /// `idmesh extract --format jsonl` of `reports` into `out`.
@@ -87,13 +98,12 @@ fn assert_close(what: &str, got: &Value, want: &Value) {
 #[test]
 fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-{}", std::process::id()));
-    let reports = scene_reports(&dir, "zara01", 150, 4);
+    let (_, reports) = scene_reports(&dir, "zara01", 150, 4, &[]);
     let extracted = dir.join("extracted.jsonl");
-    let (events, mixes) = extracted_events(&reports, &extracted);
-    assert!(mixes >= 20, "{mixes} mixes extracted");
-    let text = std::fs::read_to_string(&extracted).unwrap();
-    let observations = text.matches("\"kind\":\"observe\"").count();
-    assert!(observations >= 20, "{observations} observations");
+    let events = extracted_events(&reports, &extracted);
+    let count = |kind| lines_of_kind(&extracted, kind);
+    assert!(count("mix") >= 20, "{} mixes extracted", count("mix"));
+    assert!(count("observe") >= 20, "{} observations", count("observe"));
 
     let settings = Settings {
         leaders: 2,
@@ -125,9 +135,9 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
 fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     use std::io::Write;
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-stdin-{}", std::process::id()));
-    let reports = scene_reports(&dir, "hotel", 150, 6);
+    let (_, reports) = scene_reports(&dir, "hotel", 150, 6, &[]);
     let extracted = dir.join("extracted.jsonl");
-    let (events, _) = extracted_events(&reports, &extracted);
+    let events = extracted_events(&reports, &extracted);
     let settings = Settings {
         leaders: 2,
         factored: Some(Factored::default()),
@@ -178,7 +188,7 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
 fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     use idmesh_tests::deployment::header_only;
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-py-{}", std::process::id()));
-    let reports = scene_reports(&dir, "eth", 120, 7);
+    let (_, reports) = scene_reports(&dir, "eth", 120, 7, &[]);
     let text = std::fs::read_to_string(&reports).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     let last_time = serde_json::from_str::<Value>(lines[lines.len() - 1]).unwrap()["time"].clone();
@@ -238,9 +248,10 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
 fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     use idmesh_tests::deployment::{grid_over, header_only};
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-2s-{}", std::process::id()));
-    let reports = scene_reports(&dir, "zara02", 120, 8);
+    let (_, reports) = scene_reports(&dir, "zara02", 120, 8, &[]);
     let extracted = dir.join("extracted.jsonl");
-    let (_, mixes) = extracted_events(&reports, &extracted);
+    extracted_events(&reports, &extracted);
+    let mixes = lines_of_kind(&extracted, "mix");
     assert!(mixes >= 20, "{mixes} mixes extracted");
     let replayed = replay_summary(&extracted, &["--leaders", "2"]);
     let settings = Settings {
@@ -298,9 +309,6 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
 #[test]
 fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-scene-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let scene = idmesh_sim::motion::pedestrians::data_dir().join("zara01/obsmat/obsmat.txt");
-    let (simulated, reports) = (dir.join("simulated.jsonl"), dir.join("reports.jsonl"));
     let model = [
         "--meeting-model",
         "approach",
@@ -309,20 +317,8 @@ fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
         "--sigma",
         "0.35",
     ];
-    let status = Command::new(idmesh())
-        .args(["simulate", "--model", "pedestrians", "--scene"])
-        .arg(&scene)
-        .args(["--duration", "150", "--seed", "2"])
-        .args(model)
-        .arg("--out")
-        .arg(&simulated)
-        .arg("--tracker-output")
-        .arg(&reports)
-        .status()
-        .expect("idmesh simulate runs");
-    assert!(status.success(), "idmesh simulate failed");
-    let text = std::fs::read_to_string(&simulated).unwrap();
-    assert!(text.matches("\"kind\":\"mix\"").count() >= 20);
+    let (simulated, reports) = scene_reports(&dir, "zara01", 150, 2, &model);
+    assert!(lines_of_kind(&simulated, "mix") >= 20);
 
     let extract = ExtractorConfig {
         meeting_model: idmesh_extract::MeetingModel::Approach {
