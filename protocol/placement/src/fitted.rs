@@ -31,13 +31,15 @@
 //! ([`crate::Regions::before`]); its `move` lines only record where it is.
 //! Counts of the whole stream, not of the window: a window's counts start
 //! again at every redraw, and right after one they said nothing, so that
-//! the first mixes of a window went to whichever leader came first. A handover costs an item at two leaders
-//! (and splits the track off its component), a mix across two leaders an
-//! item at each: on crowds whose targets cross many cells between their
-//! events, handing a track over at every crossing, or at its next event in
-//! another cell, sent the busiest leader more than keeping it, for no
-//! gain in accuracy (`cargo run --release -p idmesh-placement --example
-//! balance -- TRACE` prints the shares; docs/bench.md has the bench's).
+//! the first mixes of a window went to whichever leader came first.
+//!
+//! A handover costs an item at two leaders (and splits the track off its
+//! component), a mix across two leaders an item at each: on crowds whose
+//! targets cross many cells between their events, handing a track over at
+//! every crossing, or at its next event in another cell, sent the busiest
+//! leader more than keeping it, for no gain in accuracy (`cargo run
+//! --release -p idmesh-placement --example balance -- TRACE` prints the
+//! shares; docs/bench.md has the bench's).
 //!
 //! The rule is a function of the stream's lines alone: the sensor, `idmesh
 //! replay` and the simulator run it line by line and reach the same owners
