@@ -135,9 +135,8 @@ fn marginals(
 ) -> Result<IdentityAnswer, GatherError> {
     let n = collected.cut.tracks as usize;
     let rows = collected
-        .parts
-        .iter()
-        .flat_map(|p| p.rows.iter())
+        .rows()
+        .into_iter()
         .map(|r| (r.track, r.ln_likelihoods.clone()));
     let options = InformationOptions {
         marginals: method,

@@ -15,8 +15,9 @@ use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::decode;
+use idmesh_protocol::wire::leader_to_leader::WireRow;
 use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -79,6 +80,28 @@ pub struct Collected {
 }
 
 impl Collected {
+    /// Every leader's rows of the information matrix, less the passive
+    /// ones ([`Partial::passive`]) of tracks another leader's answer
+    /// holds.
+    pub fn rows(&self) -> Vec<&WireRow> {
+        let passive = |p: &Partial, t: u32| p.passive.binary_search(&t).is_ok();
+        let held: BTreeSet<u32> = self
+            .parts
+            .iter()
+            .flat_map(|p| p.rows.iter().filter(|r| !passive(p, r.track)))
+            .map(|r| r.track)
+            .collect();
+        let held = &held;
+        self.parts
+            .iter()
+            .flat_map(|p| {
+                p.rows
+                    .iter()
+                    .filter(move |r| !(passive(p, r.track) && held.contains(&r.track)))
+            })
+            .collect()
+    }
+
     /// What the answer includes: per sensor, its events.
     pub fn watermark(&self) -> Watermark {
         if !self.cut.origins.is_empty() {
@@ -475,6 +498,8 @@ pub fn check(
         tracks: cut.tracks,
         leaders: cut.leaders.len(),
         identities: cut.identities,
+        // A cut's answers carry no items.
+        adopts: false,
     };
     for p in parts.values() {
         if let Err(e) = bounds.check_partial(p) {
@@ -648,8 +673,10 @@ fn factored_marginals_of(
             })?;
         whole.insert(p.leader.clone(), components);
     }
-    let parts = whole.values().flat_map(|c| c.iter());
-    let p_red = coupled.tree.marginals_shared(parts).map_err(refused)?;
+    let p_red = coupled
+        .tree
+        .marginals_shared(held_parts(&whole, &collected.parts).into_iter())
+        .map_err(refused)?;
     let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
     // An answer at a fresh cut (tag ≠ 0; at rest the leaders answer with
     // tag 0) is what later queries name as their base.
@@ -663,6 +690,42 @@ fn factored_marginals_of(
         memory.keep(tag, whole);
     }
     Ok((p_red, predicted_red, coefficients))
+}
+
+/// Every leader's parts, less the passive ones ([`Partial::passive`]) of
+/// tracks another leader's answer holds: a keeper is not told that a
+/// track it keeps was adopted elsewhere.
+fn held_parts<'a>(
+    whole: &'a BTreeMap<String, Components>,
+    answers: &[Partial],
+) -> Vec<&'a Arc<CountPart>> {
+    let passive: BTreeMap<&str, BTreeSet<u32>> = answers
+        .iter()
+        .filter(|p| !p.passive.is_empty())
+        .map(|p| (p.leader.as_str(), p.passive.iter().copied().collect()))
+        .collect();
+    let is_passive = |leader: &str, part: &CountPart| {
+        part.tracks.len() == 1
+            && passive
+                .get(leader)
+                .is_some_and(|kept| kept.contains(&part.tracks[0]))
+    };
+    let all = || {
+        whole
+            .iter()
+            .flat_map(|(l, c)| c.iter().map(move |c| (l, c)))
+    };
+    if passive.is_empty() {
+        return all().map(|(_, c)| c).collect();
+    }
+    let held: BTreeSet<u32> = all()
+        .filter(|(l, c)| !is_passive(l, c))
+        .flat_map(|(_, c)| c.tracks.iter().copied())
+        .collect();
+    all()
+        .filter(|(l, c)| !(is_passive(l, c) && held.contains(&c.tracks[0])))
+        .map(|(_, c)| c)
+        .collect()
 }
 
 /// The coordinator's count coupling between queries, and the answer it

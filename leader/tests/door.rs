@@ -46,6 +46,7 @@ fn batch(number: u64, items: Vec<(u64, Item)>, through: u64) -> Batch {
 
 fn mix(a: u32, b: u32, swap: f64) -> Item {
     Item::Mix {
+        adopted: Vec::new(),
         a,
         b,
         swap,
@@ -57,6 +58,7 @@ fn mix(a: u32, b: u32, swap: f64) -> Item {
 
 fn observe(track: u32, red: f64, blue: f64) -> Item {
     Item::Observe {
+        adopted_by: None,
         track,
         red,
         blue,

@@ -18,7 +18,7 @@ use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
-use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Handed, Item, Sequenced};
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Handed, Item, Sequenced, UNHELD};
 use idmesh_protocol::Header;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -222,12 +222,15 @@ impl Router {
         let (rides, before): (Vec<_>, Vec<_>) =
             self.regions.before(line).into_iter().partition(|h| h.rides);
         self.route_handovers(before);
-        // A handover that rides on its mix goes in the mix's item.
+        // A handover that rides on its mix goes in the mix's item; an
+        // adoption, in the adopted track's first item.
+        let (adopted, rides): (Vec<_>, Vec<_>) = rides.into_iter().partition(|h| h.from == UNHELD);
         let handed = rides.first().map(|h| Handed {
             track: h.track,
             from: h.from,
         });
-        self.route_line(line, handed);
+        let adopted: Vec<u32> = adopted.iter().map(|h| h.track).collect();
+        self.route_line(line, handed, adopted);
         let after = self.regions.after(line);
         self.route_handovers(after);
     }
@@ -242,7 +245,8 @@ impl Router {
         }
     }
 
-    fn route_line(&mut self, line: &Line, handed: Option<Handed>) {
+    fn route_line(&mut self, line: &Line, handed: Option<Handed>, adopted: Vec<u32>) {
+        let adopts = |track: u32| adopted.contains(&track);
         match line {
             Line::Mix(mix) => {
                 self.events += 1;
@@ -254,6 +258,7 @@ impl Router {
                     owner_a: self.owner(mix.a),
                     owner_b: self.owner(mix.b),
                     handed,
+                    adopted,
                 };
                 self.route(item);
             }
@@ -284,6 +289,7 @@ impl Router {
                     blue: observe.blue,
                     growth,
                     global,
+                    adopted_by: adopts(observe.track).then(|| self.owner(observe.track)),
                 });
             }
             Line::Move(m) => {
@@ -299,6 +305,7 @@ impl Router {
                     identity: read.identity,
                     accuracy: read.accuracy,
                     owner,
+                    adopted: adopts(read.track),
                 });
             }
             // Refused on the way in (`Problem::NotExtracted`): a detect
@@ -323,6 +330,9 @@ impl Router {
                 ..
             } => self.followed_at[to as usize][track as usize] = seq,
             _ => {}
+        }
+        for (track, to) in item.adoptions() {
+            self.followed_at[to as usize][track as usize] = seq;
         }
         for (interest, outbox) in self.interests.iter_mut().zip(&mut self.outbox) {
             if interest.receives(&item) {

@@ -79,6 +79,7 @@ fn batch(items: Vec<Item>) -> Batch {
 
 fn mix(a: u32, b: u32, swap: f64) -> Item {
     Item::Mix {
+        adopted: Vec::new(),
         a,
         b,
         swap,
@@ -103,6 +104,7 @@ fn garbage() -> (Messages, Messages) {
         (
             "NaN likelihood",
             encode(&batch(vec![Item::Observe {
+                adopted_by: None,
                 track: 2,
                 red: f64::NAN,
                 blue: 0.5,

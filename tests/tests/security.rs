@@ -214,6 +214,7 @@ async fn put_mix(session: &Session, prefix: &str, number: u64) -> bool {
             // formed in every way leader-0's door checks, and leader-0 is
             // no party to it, so it applies it without waiting for anyone.
             item: Item::Mix {
+                adopted: Vec::new(),
                 a: 1,
                 b: 3,
                 swap: 0.5,

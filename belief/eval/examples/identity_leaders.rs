@@ -29,6 +29,7 @@ use idmesh_belief::identity::{
 use idmesh_belief::identity_event_of;
 use idmesh_placement::{leading_places, RegionRule, Regions};
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::sensor_to_leader::UNHELD;
 use idmesh_sim::scenario::trace_out::lines;
 use idmesh_sim::scenario::Scenario;
 
@@ -76,7 +77,12 @@ fn run(n: usize, seed: u64, leaders: usize, cap: usize, gather: Gather) -> Cost 
     let owners = regions.owners();
     let mut shares: Vec<IdentityShare> = (0..leaders as u16)
         .map(|me| {
-            IdentityShare::start(&initial, options, |t| owners[t as usize] == me).expect("a share")
+            // A track nobody surveils yet is kept by leader t mod L.
+            IdentityShare::start(&initial, options, |t| match owners[t as usize] {
+                UNHELD => t as usize % leaders == usize::from(me),
+                owner => owner == me,
+            })
+            .expect("a share")
         })
         .collect();
     let mut cost = Cost {

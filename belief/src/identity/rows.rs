@@ -131,6 +131,25 @@ impl InformationRows {
         Ok(())
     }
 
+    /// Takes in the start row of `track` (as [`InformationRows::start`]
+    /// gives it), for a track no item touched yet and no share held (a
+    /// deployment's newcomer, adopted at its first item).
+    pub fn adopt(
+        &mut self,
+        track: u32,
+        initial: Option<&[u32]>,
+        confidence: f64,
+    ) -> Result<(), BeliefError> {
+        check_track(self.n, track)?;
+        if self.holds(track) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("track {track} to adopt, whose row is held here"),
+            });
+        }
+        let known = initial.and_then(|start| start.get(track as usize).copied());
+        self.insert(track, start_row(self.n, known, confidence))
+    }
+
     /// Gives up the row of a track that leaves this share.
     pub fn take(&mut self, track: u32) -> Option<Vec<f64>> {
         self.rows.remove(&track)

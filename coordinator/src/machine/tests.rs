@@ -25,6 +25,7 @@ fn part(leader: &str, cut: u64, tag: u64, total: f64, inside: Vec<(u32, f64)>) -
     Partial {
         base: None,
         gone: Vec::new(),
+        passive: Vec::new(),
         components: None,
         version: VERSION,
         leader: leader.into(),
@@ -492,4 +493,66 @@ fn changes_that_do_not_cover_the_field_once_are_refused_by_name() {
     );
     let unchanged = marginals(changed(14, vec![], vec![]), 9, &memory).unwrap();
     assert_eq!(unchanged, expected);
+}
+
+/// A keeper's passive part of a track (its start component, `Partial::passive`)
+/// counts only where no other leader holds the track: it was not told of
+/// the adoption. Rows alike.
+#[test]
+fn a_passive_part_gives_way_to_the_track_held_elsewhere() {
+    let passive = |p: Partial, tracks: Vec<u32>| Partial {
+        passive: tracks,
+        ..p
+    };
+    // a keeps 0 and 2 passive; b adopted 2 (and 1) and read it.
+    let parts = vec![
+        passive(
+            factored(
+                "a",
+                7,
+                0,
+                vec![singleton(0, 1.0 / 3.0), singleton(2, 1.0 / 3.0)],
+            ),
+            vec![0, 2],
+        ),
+        factored("b", 7, 0, vec![singleton(1, 0.5), singleton(2, 0.9)]),
+    ];
+    let held = vec![
+        factored("a", 7, 0, vec![singleton(0, 1.0 / 3.0)]),
+        factored("b", 7, 0, vec![singleton(1, 0.5), singleton(2, 0.9)]),
+    ];
+    let memory = Memory::default();
+    let got = marginals(parts.clone(), 7, &memory).unwrap();
+    assert_eq!(got, marginals(held, 7, &Memory::default()).unwrap());
+    // Not passive, the same parts hold track 2 twice: refused.
+    let twice: Vec<Partial> = parts.into_iter().map(|p| passive(p, Vec::new())).collect();
+    assert!(matches!(
+        marginals(twice, 7, &Memory::default()),
+        Err(GatherError::Refused(e)) if e.contains("two components")
+    ));
+    // Rows: a's passive row of 2 gives way to b's; its row of 0 stays.
+    let row = |track, x| WireRow {
+        track,
+        ln_likelihoods: vec![x; 3],
+    };
+    let collected = Collected {
+        cut: cut(7, &["a", "b"]),
+        parts: vec![
+            Partial {
+                rows: vec![row(0, 0.0), row(2, 0.0)],
+                passive: vec![0, 2],
+                ..part("a", 7, 0, 0.0, vec![])
+            },
+            Partial {
+                rows: vec![row(1, 1.0), row(2, 2.0)],
+                ..part("b", 7, 0, 0.0, vec![])
+            },
+        ],
+    };
+    let rows: Vec<(u32, f64)> = collected
+        .rows()
+        .iter()
+        .map(|r| (r.track, r.ln_likelihoods[0]))
+        .collect();
+    assert_eq!(rows, vec![(0, 0.0), (1, 1.0), (2, 2.0)]);
 }

@@ -33,7 +33,10 @@ function colourOf(p) {
 }
 const rgb = (c) => `rgb(${c[0]},${c[1]},${c[2]})`;
 const eventsOf = (w) => Object.values(w || {}).reduce((a, b) => a + b, 0);
-const leaderColour = (i) => LEADER_COLOURS[i % LEADER_COLOURS.length];
+// The owner of a track no leader surveils yet (before its first event).
+const UNHELD = 65535;
+const leaderColour = (i) => (i === UNHELD ? "#cbd5e0" : LEADER_COLOURS[i % LEADER_COLOURS.length]);
+const leaderName = (p, i) => (i === UNHELD ? "none yet" : p.leaders[i].name);
 const escape = (s) => String(s).replace(/[&<>"']/g, (c) => "&#" + c.charCodeAt(0) + ";");
 
 function push(series, value) {
@@ -209,7 +212,7 @@ function drawMap(missing) {
       label += ` · id ${i} ${ident.p_identity[t][i].toFixed(2)}`;
     }
     ctx.fillStyle = "#1a202c"; ctx.fillText(label, x + RADIUS + 4, y - RADIUS + 2);
-    state.drawn.push({ track: t, x, y, p_red: value, colour, owner: p.leaders[p.owners[t]].name,
+    state.drawn.push({ track: t, x, y, p_red: value, colour, owner: leaderName(p, p.owners[t]),
       identity: ident ? ident.predicted_identity[t] : null });
   }
   if (values && state.firstMapMs === null) {

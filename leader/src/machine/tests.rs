@@ -57,6 +57,7 @@ fn cut(tag: u64) -> Item {
 
 fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
     Item::Mix {
+        adopted: Vec::new(),
         a,
         b,
         swap: 0.5,

@@ -18,6 +18,13 @@ impl Leader {
             return self.begin(begin.clone());
         }
         let me = self.me()?;
+        self.settle_passive(&item)?;
+        // Tracks this item is the first of, adopted here: theirs from now.
+        for (track, leader) in item.adoptions() {
+            if leader == me {
+                self.adopt_here(track)?;
+            }
+        }
         let started = self.started()?;
         started.interest.note(&item);
         match item {
@@ -29,6 +36,7 @@ impl Leader {
                 owner_a,
                 owner_b,
                 handed,
+                ..
             } => {
                 self.stats.mixes += 1;
                 let mix = Mix { a, b, swap };
@@ -178,8 +186,11 @@ impl Leader {
         let (share, interest) = start(&begin, me)?;
         let factored = start_factored(&begin, me)?;
         let own: Vec<bool> = begin.owners.iter().map(|&o| o == me).collect();
+        let passive = (0..begin.tracks)
+            .filter(|&t| begin.starts_unheld(t) && begin.keeper(t) == me)
+            .collect();
         let rows = if begin.identities {
-            let held = (0..begin.tracks).filter(|&t| own[t as usize]);
+            let held = (0..begin.tracks).filter(|&t| begin.holds_at_start(t, me));
             Some(InformationRows::start(
                 begin.tracks as usize,
                 held,
@@ -205,7 +216,66 @@ impl Leader {
             rows,
             row_mix: None,
             factored,
+            passive,
         });
+        Ok(())
+    }
+
+    /// Before an item that names tracks this leader keeps passive: the
+    /// item adopts the track here (its start component and row stay, and
+    /// are the adopted track's), or it comes after the track's adoption
+    /// elsewhere, of which a keeper is not told (what it kept is stale,
+    /// and goes).
+    fn settle_passive(&mut self, item: &Item) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        if started.passive.is_empty() {
+            return Ok(());
+        }
+        let named = match *item {
+            Item::Mix { a, b, .. } => [Some(a), Some(b)],
+            Item::Observe { track, .. }
+            | Item::Identify { track, .. }
+            | Item::Handover { track, .. } => [Some(track), None],
+            Item::Begin(_) | Item::Cut { .. } => [None, None],
+        };
+        let adoptions = item.adoptions();
+        for track in named.into_iter().flatten() {
+            if !started.passive.remove(&track) || adoptions.contains(&(track, me)) {
+                continue;
+            }
+            if let Some(held) = &mut started.factored {
+                held.drop_start(track)?;
+            }
+            if let Some(rows) = &mut started.rows {
+                rows.take(track);
+            }
+        }
+        Ok(())
+    }
+
+    /// Track `track`, which no leader surveilled, is this leader's from
+    /// this item on: with the start component and row it kept as the
+    /// track's keeper, or made here (an untouched track's are the start
+    /// belief's, so nobody sends them).
+    fn adopt_here(&mut self, track: u32) -> Result<(), LeaderError> {
+        let started = self.started()?;
+        let slot = started
+            .own
+            .get_mut(track as usize)
+            .ok_or(LeaderError::Unexpected("an adoption of an unknown track"))?;
+        *slot = true;
+        if let Some(held) = &mut started.factored {
+            if !held.holds(track) {
+                held.adopt(track)?;
+            }
+        }
+        let initial = started.begin.initial_identity.as_deref();
+        if let Some(rows) = &mut started.rows {
+            if !rows.holds(track) {
+                rows.adopt(track, initial, KNOWN_START_CONFIDENCE)?;
+            }
+        }
         Ok(())
     }
 

@@ -165,6 +165,7 @@ impl Leader {
             components: None,
             base: None,
             gone: Vec::new(),
+            passive: started.passive.iter().copied().collect(),
             version: VERSION,
             leader: self.name.clone(),
             cut,
@@ -241,7 +242,7 @@ pub(super) mod kept {
     /// for the snapshot and dropped after it (not kept beside the parts).
     enum Whole<'a> {
         Kept(&'a Partial),
-        Made(Partial),
+        Made(Box<Partial>),
     }
 
     impl Serialize for Whole<'_> {
@@ -256,7 +257,7 @@ pub(super) mod kept {
     pub fn serialize<S: Serializer>(cuts: &VecDeque<Arc<Answer>>, s: S) -> Result<S::Ok, S::Error> {
         s.collect_seq(cuts.iter().map(|c| match c.whole.get() {
             Some(whole) => Whole::Kept(whole),
-            None => Whole::Made(c.made_whole()),
+            None => Whole::Made(Box::new(c.made_whole())),
         }))
     }
 

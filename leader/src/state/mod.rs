@@ -142,6 +142,11 @@ struct Started {
     /// The components of the factored belief held here, on a factored
     /// stream (`share` is then empty).
     factored: Option<FactoredShare>,
+    /// The tracks whose start component and row this leader keeps while,
+    /// as far as it knows, no leader surveils them (`Begin::owners`):
+    /// given as passive parts in its answers.
+    #[serde(default)]
+    passive: std::collections::BTreeSet<u32>,
 }
 
 impl Started {

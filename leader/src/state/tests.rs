@@ -49,6 +49,7 @@ fn nothing_from(from: u16, seq: u64) -> Transfer {
 
 fn mix(a: u32, b: u32, owner_a: u16, owner_b: u16) -> Item {
     Item::Mix {
+        adopted: Vec::new(),
         a,
         b,
         swap: 0.5,
@@ -266,6 +267,7 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
         initial_identity: Some(start.clone()),
     });
     let read = |track, identity, owner| Item::Identify {
+        adopted: false,
         track,
         identity,
         accuracy: 0.8,
@@ -306,6 +308,7 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
         (
             seq,
             Item::Mix {
+                adopted: Vec::new(),
                 a: 1,
                 b: 2,
                 swap: 0.3,
@@ -748,6 +751,7 @@ fn the_change_between_two_answers_is_the_same_walked_or_looked_up() {
 
 fn observe(track: u32) -> Item {
     Item::Observe {
+        adopted_by: None,
         track,
         red: 0.9,
         blue: 0.1,
@@ -1006,6 +1010,7 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
         let mut hand = Hand::new(Item::Begin(begin), &["a", "b", "c"]);
         let mut owners = vec![0usize, 0, 1, 1, 2];
         let mix = |a: u32, b: u32, swap: f64, owners: &[usize]| Item::Mix {
+            adopted: Vec::new(),
             a,
             b,
             swap,
@@ -1042,6 +1047,7 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
                 "read" => {
                     let owner = owners[x as usize];
                     let item = Item::Identify {
+                        adopted: false,
                         track: x,
                         identity: y,
                         accuracy: z,
@@ -1247,4 +1253,122 @@ fn the_leader_surveilling_b_sends_its_row_and_waits_for_the_fitted_one() {
             .collect();
         assert_eq!(own, [(0, vec![0.0, -0.25, -0.75])], "the fitted row, kept");
     }
+}
+
+/// Tracks that start unheld: each leader keeps its start components of the
+/// tracks `t mod L` names it as a passive part; a track's first item
+/// adopts it with no transfer (made here, or the kept one becoming the
+/// leader's own); a keeper drops what it kept at the first item it hears
+/// after the track's adoption elsewhere.
+#[test]
+fn a_track_no_leader_surveilled_is_adopted_at_its_first_item() {
+    use idmesh_protocol::wire::sensor_to_leader::UNHELD;
+    let mut a = factored_leader_with(&["a", "b"], vec![UNHELD; 4], true);
+    let rest = a.quiet(false).expect("quiet after the Begin");
+    assert_eq!(rest.sums.passive, vec![0, 2], "a keeps tracks 0 and 2");
+    let tracks = |parts: &[Arc<CountPart>]| -> Vec<Vec<u32>> {
+        sorted(parts).iter().map(|p| p.tracks.clone()).collect()
+    };
+    assert_eq!(
+        tracks(rest.parts.as_ref().expect("factored")),
+        vec![vec![0], vec![2]]
+    );
+    // Track 1 (kept by b) first seen, adopted here: made here, no
+    // transfer waited for.
+    let first_seen = Item::Observe {
+        track: 1,
+        red: 0.9,
+        blue: 0.1,
+        growth: Growth::All,
+        global: false,
+        adopted_by: Some(0),
+    };
+    let actions = a
+        .batch(batch(1, vec![(2, first_seen)], 2, false), 0)
+        .unwrap();
+    assert!(sent_tracks(&actions, 1).is_empty());
+    assert!(a.factored().unwrap().holds(1));
+    assert!(a.quiet(false).is_some(), "nothing to wait for");
+    // Track 2, kept here, meets 1 at its first item and is adopted here.
+    let first_mix = Item::Mix {
+        a: 2,
+        b: 1,
+        swap: 0.5,
+        owner_a: 0,
+        owner_b: 0,
+        handed: None,
+        adopted: vec![2],
+    };
+    a.batch(batch(2, vec![(3, first_mix)], 3, false), 0)
+        .unwrap();
+    assert_eq!(
+        a.factored().unwrap().component_of(2),
+        vec![2, 1],
+        "mixed here"
+    );
+    let rest = a.quiet(false).expect("nothing to wait for");
+    assert_eq!(rest.sums.passive, vec![0], "2 is a's own now");
+    // Track 0 was adopted by b meanwhile (a was not told); b hands it
+    // over: a drops the start component it kept and takes b's.
+    let handover = Item::Handover {
+        track: 0,
+        from: 1,
+        to: 0,
+    };
+    a.batch(batch(3, vec![(4, handover)], 4, false), 0).unwrap();
+    assert!(!a.factored().unwrap().holds(0), "the kept one is gone");
+    a.transfer(component_transfer(1, 4, 0, vec![0.0, 1.0]), 0)
+        .unwrap();
+    assert!(a.factored().unwrap().holds(0));
+    let rest = a.quiet(false).expect("the transfer is in");
+    assert!(rest.sums.passive.is_empty());
+    assert_eq!(
+        a.stats().items,
+        4,
+        "the Begin and three items: adoptions are none"
+    );
+}
+
+/// On an identity stream an adopted track's row is the start row, made
+/// where it is adopted; a keeper's kept row goes with its start component.
+#[test]
+fn an_adopted_track_takes_its_start_row() {
+    use idmesh_protocol::wire::sensor_to_leader::UNHELD;
+    let mut a = factored_identity_leader(vec![UNHELD; 4], true);
+    let rows = |leader: &Leader| -> Vec<u32> {
+        leader
+            .quiet(true)
+            .expect("quiet")
+            .sums
+            .rows
+            .iter()
+            .map(|r| r.track)
+            .collect()
+    };
+    assert_eq!(rows(&a), vec![0, 2], "the rows a keeps");
+    let first_read = Item::Identify {
+        track: 3,
+        identity: 1,
+        accuracy: 0.9,
+        owner: 0,
+        adopted: true,
+    };
+    a.batch(batch(1, vec![(2, first_read)], 2, false), 0)
+        .unwrap();
+    assert_eq!(rows(&a), vec![0, 2, 3]);
+    // Track 2 was adopted by b (a was not told); b hands it over riding
+    // on a mix with a's track 3: a drops its kept row and component first,
+    // then waits for b's.
+    let ride = Item::Mix {
+        a: 3,
+        b: 2,
+        swap: 0.5,
+        owner_a: 0,
+        owner_b: 0,
+        handed: Some(Handed { track: 2, from: 1 }),
+        adopted: Vec::new(),
+    };
+    a.batch(batch(2, vec![(3, ride)], 3, false), 0).unwrap();
+    assert_eq!(a.waiting_for_components(), Some(3), "waits for b's");
+    assert!(!a.factored().unwrap().holds(2));
 }

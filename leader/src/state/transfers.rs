@@ -50,13 +50,16 @@ impl Leader {
         actions: &mut Vec<Action>,
     ) -> Result<Vec<u32>, LeaderError> {
         let started = self.started()?;
-        let own = &started.own;
+        let (own, passive) = (&started.own, &started.passive);
         if let Some(held) = &mut started.factored {
             // Every call takes all the components without a track of this
             // leader, so what the last one left has one: only components
             // changed since, or of a track released since, can be without.
-            let components =
-                held.take_changed(released, |tracks| !tracks.iter().any(|&t| own[t as usize]));
+            let components = held.take_changed(released, |tracks| {
+                !tracks
+                    .iter()
+                    .any(|&t| own[t as usize] || passive.contains(&t))
+            });
             let tracks = tracks_of(&components);
             self.send(seq, to, Vec::new(), rows, components, actions)?;
             return Ok(tracks);

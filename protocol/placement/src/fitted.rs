@@ -25,6 +25,12 @@
 //! keep their leaders. On a real scene most tracks are people who have
 //! left; handing them over cost two items each and gained nothing.
 //!
+//! A track is surveilled from its first item on, not before
+//! ([`crate::Regions::before`]): on a real scene people keep entering, take
+//! part in two or three items each and leave, and a newcomer that started
+//! with some leader was taken to its partner's at its first mix, an item
+//! at the leader it left.
+//!
 //! Between redraws a track keeps its leader wherever it walks, until a mix
 //! with a track of another leader takes both to the one of the two that
 //! was sent fewer items since the stream began
@@ -72,6 +78,10 @@ pub const WINDOW_PER_LEADER: u64 = 100;
 /// (univ, 1,000 walkers), 20 and 50 up to 0.15 more; on the sparse real
 /// scenes it makes no difference.
 pub const RECENT_PER_LEADER: u64 = 5;
+
+/// Items with tracks before which no leader counts as busy
+/// ([`Fitted::busy`]): the first few items' counts say nothing.
+const BUSY_AFTER: u64 = 20;
 
 /// The weight of a placed track that took part in nothing in the window,
 /// so that quiet tracks still spread over the cells.
@@ -223,6 +233,24 @@ impl Fitted {
             .get(usize::from(leader))
             .copied()
             .unwrap_or(0)
+    }
+
+    pub(crate) fn leaders(&self) -> usize {
+        usize::from(self.leaders)
+    }
+
+    /// The leader sent fewest items so far (the lowest of equals).
+    pub(crate) fn least_sent(&self) -> u16 {
+        (0..self.leaders)
+            .min_by_key(|&l| (self.sent_so_far(l), l))
+            .unwrap_or(0)
+    }
+
+    /// Whether `leader` was sent more than [`TOLERANCE`] times the
+    /// leaders' mean so far (never over the first [`BUSY_AFTER`] items).
+    pub(crate) fn busy(&self, leader: u16) -> bool {
+        let mean = self.sent_so_far.iter().sum::<u64>() as f64 / f64::from(self.leaders);
+        self.clock >= BUSY_AFTER && self.sent_so_far(leader) as f64 > TOLERANCE * mean
     }
 
     /// Items per window.

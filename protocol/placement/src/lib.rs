@@ -34,7 +34,7 @@ use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, Red
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
 use idmesh_protocol::wire::interest::Interest;
-use idmesh_protocol::wire::sensor_to_leader::{Begin, Item};
+use idmesh_protocol::wire::sensor_to_leader::{Begin, Item, UNHELD};
 
 /// Why a share could not be placed.
 #[derive(Debug, thiserror::Error)]
@@ -60,7 +60,8 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
         || begin
             .owners
             .iter()
-            .any(|&o| o as usize >= begin.leaders.len())
+            .any(|&o| o as usize >= begin.leaders.len() && o != UNHELD)
+        || (begin.owners.contains(&UNHELD) && !begin.factored.is_some_and(|f| f.regional))
     {
         return Err(PlacementError::Owners {
             owners: begin.owners.len(),
@@ -121,14 +122,13 @@ pub fn factored_options(start: &FactoredStart) -> FactoredOptions {
 
 /// Leader `me`'s components at the start of a factored stream (None on a
 /// Radon stream): every track alone, each held by the leader surveilling
-/// it.
+/// it, or, unheld, by its keeper ([`Begin::keeper`]) as a passive one.
 pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, PlacementError> {
     let Some(settings) = &begin.factored else {
         return Ok(None);
     };
-    let owners = &begin.owners;
     let share = FactoredShare::start(field_of(begin), factored_options(settings), |t| {
-        owners.get(t as usize) == Some(&me)
+        begin.holds_at_start(t, me)
     })?;
     Ok(Some(share))
 }

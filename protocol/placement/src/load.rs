@@ -11,6 +11,7 @@
 
 use crate::regions::{Handover, RegionRule, Regions};
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::sensor_to_leader::UNHELD;
 
 /// The items each of `leaders` leaders is sent by a stream of `lines` over
 /// `tracks` tracks with regions by `rule` (the `Begin` and cuts, which
@@ -39,8 +40,9 @@ pub fn items_sent<'a>(
     for line in lines {
         let before = regions.before(line);
         handed(&mut items, &before);
-        // A mix that takes a track is an item at the leader it leaves too.
-        for h in before.iter().filter(|h| h.rides) {
+        // A mix that takes a track is an item at the leader it leaves too
+        // (an adoption leaves none).
+        for h in before.iter().filter(|h| h.rides && h.from != UNHELD) {
             items[usize::from(h.from)] += 1;
         }
         let owner = |t: u32| usize::from(regions.owner(t).unwrap_or(0));

@@ -4,9 +4,13 @@
 //!
 //! The sensor routes by [`Regions`]: by default cells fitted to the crowd
 //! and redrawn as it moves ([`crate::Fitted`]); as an option, fixed places
-//! (a track belongs to the leader nearest its last position). Tracks start
-//! with leader `track mod L`, or, in a stream whose first lines place
-//! them, in their regions ([`Regions::starting`]). `idmesh replay` runs the
+//! (a track belongs to the leader nearest its last position). Under fitted
+//! cells with mixes taken (a factored stream's regional rule) no leader
+//! surveils a track before its first item, which adopts it
+//! ([`Regions::before`]: docs/design/architecture.md, "Newcomers");
+//! otherwise tracks start with leader `track mod L`, or, in a stream whose
+//! first lines place them, in their regions ([`Regions::starting`]).
+//! `idmesh replay` runs the
 //! same function line by line, so the centralized engine applies the
 //! regional rule at the same events as the leaders: a track handed over
 //! is split off its component ([`FactoredBelief::split_off`]), a mix of
@@ -18,6 +22,7 @@
 use crate::fitted::Fitted;
 use idmesh_belief::{event_of, BeliefError, FactoredBelief, Field, Mix, Observe, PropertyFilter};
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::sensor_to_leader::UNHELD;
 
 /// How tracks are shared among leaders by where they are.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -50,8 +55,9 @@ pub struct Handover {
     pub track: u32,
     pub from: u16,
     pub to: u16,
-    /// It rides on the mix it comes before (`Item::Mix::handed`) rather
-    /// than being an item of its own.
+    /// It rides on the item it comes before rather than being an item of
+    /// its own: a mix's (`Item::Mix::handed`), or, from [`UNHELD`], the
+    /// first item of the track it adopts (`Item::adoptions`).
     pub rides: bool,
 }
 
@@ -86,11 +92,16 @@ pub struct Regions {
     /// The leader a mix took a track from, until [`Regions::after`] counts
     /// the mix at it.
     ridden_from: Option<u16>,
+    /// Whether each track is still unheld: no item has named it yet, and
+    /// under fitted cells with mixes taken (a factored stream's regional
+    /// rule) no leader surveils it before one does (see [`Regions::before`]).
+    unheld: Vec<bool>,
 }
 
 impl Regions {
-    /// `tracks` tracks among `leaders` leaders by `rule`: each track
-    /// starts with leader `track mod L`.
+    /// `tracks` tracks among `leaders` leaders by `rule`: under fitted
+    /// cells each track starts unheld ([`UNHELD`], until its first item),
+    /// under fixed places with leader `track mod L`.
     pub fn new(rule: &RegionRule, leaders: usize, tracks: usize) -> Self {
         let rule = match rule {
             RegionRule::Fitted { window_per_leader } => {
@@ -99,14 +110,29 @@ impl Regions {
             RegionRule::Fixed(places) => Rule::Fixed(places.iter().copied().collect()),
         };
         let leaders = leaders.max(1);
+        let fitted = matches!(rule, Rule::Fitted(_));
         Regions {
-            takes_mixes: matches!(rule, Rule::Fitted(_)),
+            takes_mixes: fitted,
             rule,
-            owners: (0..tracks).map(|t| (t % leaders) as u16).collect(),
+            owners: vec![UNHELD; tracks],
             leading: Some(vec![None; tracks]),
             assigned: false,
             ridden_from: None,
+            unheld: vec![true; tracks],
         }
+        .held_from_the_start_unless(fitted, leaders)
+    }
+
+    /// Unless `adopting`, every track held from the start, by leader
+    /// `track mod L`.
+    fn held_from_the_start_unless(mut self, adopting: bool, leaders: usize) -> Self {
+        if !adopting {
+            for (t, owner) in self.owners.iter_mut().enumerate() {
+                *owner = (t % leaders) as u16;
+            }
+            self.unheld.iter_mut().for_each(|u| *u = false);
+        }
+        self
     }
 
     /// The same regions, with every mix of tracks of two leaders left to
@@ -115,7 +141,13 @@ impl Regions {
     /// know no mix that hands a track over.
     pub fn keeping_mixes_across(mut self) -> Self {
         self.takes_mixes = false;
-        self
+        match &self.rule {
+            Rule::Fitted(fitted) => {
+                let leaders = fitted.leaders();
+                self.held_from_the_start_unless(false, leaders)
+            }
+            Rule::Fixed(_) => self,
+        }
     }
 
     /// Fixed places (see [`RegionRule::Fixed`]), one per leader.
@@ -129,7 +161,9 @@ impl Regions {
     /// track is handed over at its first event (an item at two leaders,
     /// and a component sent between them). The leading moves, when they
     /// come, change nothing; the owners from then on are those
-    /// [`Regions::new`] reaches over the same lines.
+    /// [`Regions::new`] reaches over the same lines. Under fitted cells
+    /// with tracks unheld until their first item, the leading moves only
+    /// draw the first cells.
     pub fn starting(
         rule: &RegionRule,
         leaders: usize,
@@ -178,6 +212,10 @@ impl Regions {
         };
         let mut handovers = Vec::new();
         for (track, to) in fitted.draw(&self.owners) {
+            if self.unheld[track as usize] {
+                // Nobody surveils it to hand it over: its first item will.
+                continue;
+            }
             let slot = &mut self.owners[track as usize];
             if *slot != to {
                 handovers.push(Handover {
@@ -230,6 +268,9 @@ impl Regions {
             Rule::Fixed(places) => Regions::nearest(places.as_deref()?, x, y)?,
             Rule::Fitted(fitted) => fitted.place(track, x, y)?,
         };
+        if self.unheld.get(track as usize).copied().unwrap_or(false) {
+            return None;
+        }
         let slot = self.owners.get_mut(track as usize)?;
         let from = *slot;
         (from != to).then(|| {
@@ -248,7 +289,17 @@ impl Regions {
     /// handovers that put the tracks they placed in their regions; at a
     /// mix of tracks of two leaders (0 < swap < 1) under fitted cells, the
     /// handover that takes both to the leader that was sent fewer items
-    /// since the stream began (a's on a tie), riding on the mix.
+    /// since the stream began (a's on a tie), riding on the mix; at the
+    /// first item on a track nobody surveils yet, its adoption.
+    ///
+    /// Adoption (a handover from [`UNHELD`] riding on the track's first
+    /// item, which names the adopter: no item of its own): a newcomer
+    /// meeting a track joins that track's leader unless that leader was
+    /// sent more than [`crate::TOLERANCE`] times the mean so far; alone
+    /// (a first observation or read), with another newcomer, or when the
+    /// partner's leader is busy, it goes to the leader sent fewest items
+    /// so far. Not to the leader of its cell: people enter a real scene
+    /// through a few doors, and the doors' leaders became the busiest.
     ///
     /// Why take them: a mix across two leaders is an item at each either
     /// way, but kept apart it leaves the two tracks, which have just met
@@ -268,10 +319,68 @@ impl Regions {
             self.leading = None;
             self.assigned = true;
         }
-        if let Line::Mix(mix) = line {
-            handovers.extend(self.take(mix.a, mix.b, mix.swap));
+        let unheld = |t: u32| self.unheld.get(t as usize).copied().unwrap_or(false);
+        match line {
+            Line::Mix(mix) => match (unheld(mix.a), unheld(mix.b)) {
+                (false, false) => handovers.extend(self.take(mix.a, mix.b, mix.swap)),
+                (true, true) => {
+                    let to = self.least_sent();
+                    handovers.extend(self.adopt(mix.a, to));
+                    handovers.extend(self.adopt(mix.b, to));
+                }
+                (true, false) => handovers.extend(self.join(mix.a, mix.b)),
+                (false, true) => handovers.extend(self.join(mix.b, mix.a)),
+            },
+            Line::Observe(o) if unheld(o.track) => {
+                let to = self.least_sent();
+                handovers.extend(self.adopt(o.track, to));
+            }
+            Line::Identify(read) if unheld(read.track) => {
+                let to = self.least_sent();
+                handovers.extend(self.adopt(read.track, to));
+            }
+            _ => {}
         }
         handovers
+    }
+
+    /// The leader sent fewest items so far (the lowest of equals), where a
+    /// newcomer goes that joins nobody's leader.
+    fn least_sent(&self) -> u16 {
+        match &self.rule {
+            Rule::Fitted(fitted) => fitted.least_sent(),
+            Rule::Fixed(_) => 0,
+        }
+    }
+
+    /// Newcomer `track` meets `partner` at its first item: it joins the
+    /// partner's leader, unless that leader was sent more than
+    /// [`crate::TOLERANCE`] times the mean so far (then the least sent).
+    fn join(&mut self, track: u32, partner: u32) -> Option<Handover> {
+        let Rule::Fitted(fitted) = &self.rule else {
+            return None;
+        };
+        let theirs = self.owners[partner as usize];
+        let to = match fitted.busy(theirs) {
+            true => fitted.least_sent(),
+            false => theirs,
+        };
+        self.adopt(track, to)
+    }
+
+    /// `track`, which nobody surveilled, goes to leader `to`: a handover
+    /// from [`UNHELD`] riding on the item it comes before, its first (the
+    /// item adopts it: `Item::adoptions`), so no item of its own.
+    fn adopt(&mut self, track: u32, to: u16) -> Option<Handover> {
+        let slot = self.unheld.get_mut(track as usize)?;
+        *slot = false;
+        self.owners[track as usize] = to;
+        Some(Handover {
+            track,
+            from: UNHELD,
+            to,
+            rides: true,
+        })
     }
 
     /// The handover a mix of `a` and `b` makes, if it takes them both to
@@ -280,7 +389,7 @@ impl Regions {
         let Rule::Fitted(fitted) = &self.rule else {
             return None;
         };
-        if !(self.takes_mixes && swap > 0.0 && swap < 1.0) {
+        if !(self.takes_mixes && uncertain(swap)) {
             return None;
         }
         let (owner_a, owner_b) = (self.owner(a)?, self.owner(b)?);
@@ -361,6 +470,12 @@ impl Regions {
             fitted.sent(&[track], &[owner]);
         }
     }
+}
+
+/// Whether a mix's swap is uncertain: only such a mix can carry a track
+/// that changes leader (a certain one relabels, a swap of 0 is no event).
+fn uncertain(swap: f64) -> bool {
+    swap > 0.0 && swap < 1.0
 }
 
 /// `leaders` places on a grid over the box from (x0, y0) to (x1, y1): the
@@ -465,8 +580,11 @@ impl Regional {
     /// Before `line`'s event: the tracks handed over then
     /// ([`Regions::before`]) are split off their components.
     pub fn before(&mut self, line: &Line) -> Result<(), BeliefError> {
+        // An adopted track was alone already.
         for handover in self.regions.before(line) {
-            self.belief.split_off(handover.track)?;
+            if handover.from != UNHELD {
+                self.belief.split_off(handover.track)?;
+            }
         }
         Ok(())
     }
@@ -607,12 +725,10 @@ mod tests {
             Regions::starting(&none, 2, 3, &leading).owners(),
             &[0, 1, 0]
         );
-        // Fitted cells are drawn over the placed tracks at once: one each
-        // for 0 and 1 (at 8 and 9), labelled so that neither changes
-        // hands; 2 keeps its round-robin leader.
+        // Under fitted cells nobody surveils a track before its first
+        // item: the leading moves only draw the cells.
         let fitted = Regions::starting(&RegionRule::fitted(), 2, 3, &leading);
-        assert_eq!(fitted.owners(), &[0, 1, 0]);
-        assert!(fitted.places()[0].is_some_and(|(x, _)| x == 8.0));
+        assert_eq!(fitted.owners(), &[UNHELD; 3]);
         let mut taken = Regions::new(&RegionRule::fitted(), 2, 3);
         for line in &lines {
             taken.before(line);
@@ -622,26 +738,27 @@ mod tests {
         for line in &lines[..3] {
             assert!(started.before(line).is_empty() && started.after(line).is_empty());
         }
-        // The mix of 0 and 1, of two leaders, takes 1 to 0's leader (both
-        // were sent nothing yet: a's wins the tie), riding on the mix.
-        let ride = Handover {
-            track: 1,
-            from: 1,
+        // The mix of 0 and 1, both new, adopts both: to the leader sent
+        // fewest items (both none: the lowest).
+        let adopt = |track| Handover {
+            track,
+            from: UNHELD,
             to: 0,
             rides: true,
         };
-        assert_eq!(started.before(&lines[3]), vec![ride]);
+        assert_eq!(started.before(&lines[3]), vec![adopt(0), adopt(1)]);
         assert!(started.after(&lines[3]).is_empty());
-        // Without the take, the mix is left to both.
+        // A stream that keeps mixes across (no regional components) holds
+        // every track from the start, round robin, and takes nothing.
         let mut across = fitted.clone().keeping_mixes_across();
         for line in &lines[..4] {
             assert!(across.before(line).is_empty() && across.after(line).is_empty());
         }
         assert_eq!(across.owners(), &[0, 1, 0]);
-        // Track 2's move after the mix, into the cell of 9, only records
-        // where it is: it keeps its leader until the cells are redrawn.
+        // Track 2's move after the mix only records where it is: it is
+        // still new.
         assert_eq!(started.after(&lines[4]), vec![]);
-        assert_eq!(started.owners(), &[0, 0, 0]);
+        assert_eq!(started.owners(), &[0, 0, UNHELD]);
         assert_eq!(taken, started, "the same state either way");
         // A sensor fed live knows no leading moves ahead: it starts as the
         // replay does and reaches the same state over the same lines.
@@ -658,21 +775,28 @@ mod tests {
         use idmesh_protocol::trace::{Mix as MixLine, Observe as ObserveLine};
         let leading = [Some((0.0, 0.0)), Some((10.0, 0.0))];
         let mut r = Regions::starting(&RegionRule::fitted(), 2, 2, &leading);
+        let seen = |track| {
+            Line::Observe(ObserveLine {
+                time: 0.0,
+                track,
+                red: 0.8,
+                blue: 0.2,
+                sensor: None,
+            })
+        };
+        // Each first seen alone: adopted by the leader sent fewest items.
+        for track in [0, 1] {
+            r.before(&seen(track));
+            r.after(&seen(track));
+        }
         let (busy, quiet) = (r.owner(0).unwrap(), r.owner(1).unwrap());
-        assert_ne!(busy, quiet);
+        assert_eq!((busy, quiet), (0, 1));
         // Track 0's leader is sent a whole window of items (100 a leader):
         // the window's end starts its counts again, so they are even at
         // the mix; the stream's are not.
-        let seen = Line::Observe(ObserveLine {
-            time: 0.0,
-            track: 0,
-            red: 0.8,
-            blue: 0.2,
-            sensor: None,
-        });
         for _ in 0..200 {
-            r.before(&seen);
-            r.after(&seen);
+            r.before(&seen(0));
+            r.after(&seen(0));
         }
         let mix = Line::Mix(MixLine {
             time: 1.0,
@@ -689,6 +813,70 @@ mod tests {
             rides: true,
         };
         assert_eq!(r.before(&mix), vec![ride]);
+    }
+
+    /// Under fitted cells a track is surveilled from its first item on,
+    /// which adopts it (no item of its own): alone, by the leader sent
+    /// fewest items so far; meeting a track, by that track's leader,
+    /// unless that leader is busy.
+    #[test]
+    fn a_newcomer_joins_the_track_it_meets_unless_its_leader_is_busy() {
+        use idmesh_protocol::trace::{Mix as MixLine, Observe as ObserveLine};
+        let seen = |track| {
+            Line::Observe(ObserveLine {
+                time: 0.0,
+                track,
+                red: 0.8,
+                blue: 0.2,
+                sensor: None,
+            })
+        };
+        let mix = |a, b, swap| {
+            Line::Mix(MixLine {
+                time: 0.0,
+                a,
+                b,
+                swap,
+            })
+        };
+        let adopt = |track, to| Handover {
+            track,
+            from: UNHELD,
+            to,
+            rides: true,
+        };
+        let mut r = Regions::new(&RegionRule::fitted(), 3, 7);
+        assert_eq!(r.owners(), &[UNHELD; 7]);
+        let mut step = |line: &Line| {
+            let mut handovers = r.before(line);
+            handovers.extend(r.after(line));
+            handovers
+        };
+        assert_eq!(step(&seen(0)), vec![adopt(0, 0)]);
+        assert_eq!(step(&seen(1)), vec![adopt(1, 1)]);
+        // Meeting 1: to 1's leader, whatever the swap.
+        assert_eq!(step(&mix(2, 1, 0.5)), vec![adopt(2, 1)]);
+        assert_eq!(step(&mix(3, 1, 1.0)), vec![adopt(3, 1)]);
+        // Leader 1 is sent far more than the mean: a newcomer meeting its
+        // track goes to the least sent instead, and the mix is across.
+        for _ in 0..30 {
+            assert!(step(&seen(1)).is_empty());
+        }
+        assert_eq!(step(&mix(4, 1, 0.5)), vec![adopt(4, 2)]);
+        // Two newcomers: both to the least sent (of equals the lowest).
+        assert_eq!(step(&mix(5, 6, 0.5)), vec![adopt(5, 0), adopt(6, 0)]);
+        assert_eq!(r.owners(), &[0, 1, 1, 1, 2, 0, 0]);
+        // What each leader was sent, as `items_sent` counts it: the items
+        // on its tracks, the mix across at both, adoptions nothing.
+        let lines: Vec<Line> = [seen(0), seen(1), mix(2, 1, 0.5), mix(3, 1, 1.0)]
+            .into_iter()
+            .chain((0..30).map(|_| seen(1)))
+            .chain([mix(4, 1, 0.5), mix(5, 6, 0.5)])
+            .collect();
+        assert_eq!(
+            crate::items_sent(&RegionRule::fitted(), 3, 7, &lines),
+            vec![2, 34, 1]
+        );
     }
 
     /// A little crowd: 12 tracks moving on a 10 × 10 field, mixing (some of

@@ -97,6 +97,7 @@ const FIELD: Bounds = Bounds {
     tracks: 8,
     leaders: 3,
     identities: true,
+    adopts: true,
 };
 
 /// Decodes `bytes` as a `T`; what decodes must be valid, re-encode to a

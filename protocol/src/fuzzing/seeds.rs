@@ -108,6 +108,7 @@ fn begin(identities: bool) -> Begin {
 fn items() -> Vec<Item> {
     vec![
         Item::Mix {
+            adopted: Vec::new(),
             a: 1,
             b: 4,
             swap: 0.5,
@@ -116,6 +117,7 @@ fn items() -> Vec<Item> {
             handed: None,
         },
         Item::Observe {
+            adopted_by: None,
             track: 4,
             red: 0.8,
             blue: 0.2,
@@ -123,6 +125,7 @@ fn items() -> Vec<Item> {
             global: false,
         },
         Item::Observe {
+            adopted_by: None,
             track: 0,
             red: 0.1,
             blue: 0.7,
@@ -130,6 +133,7 @@ fn items() -> Vec<Item> {
             global: true,
         },
         Item::Identify {
+            adopted: false,
             track: 2,
             identity: 5,
             accuracy: 0.9,
@@ -218,6 +222,7 @@ fn partials() -> Vec<Partial> {
         components: None,
         base: None,
         gone: Vec::new(),
+        passive: Vec::new(),
         version: VERSION,
         leader: "leader-1".into(),
         cut: 14,

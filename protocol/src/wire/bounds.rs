@@ -19,6 +19,9 @@ pub struct Bounds {
     /// L: leader indices are `0..leaders`.
     pub leaders: usize,
     pub identities: bool,
+    /// Tracks may start unheld and be adopted ([`super::sensor_to_leader::UNHELD`]): a factored
+    /// stream under the regional rule.
+    pub adopts: bool,
 }
 
 impl Bounds {
@@ -27,6 +30,7 @@ impl Bounds {
             tracks: begin.tracks,
             leaders: begin.leaders.len(),
             identities: begin.identities,
+            adopts: begin.factored.as_ref().is_some_and(|f| f.regional),
         }
     }
 
@@ -46,6 +50,13 @@ impl Bounds {
 
     /// One item of the stream against the field.
     pub fn check_item(&self, item: &Item) -> Result<(), String> {
+        let adoptions = item.adoptions();
+        require(adoptions.is_empty() || self.adopts, || {
+            "an adoption on a stream whose tracks start held".into()
+        })?;
+        for (track, leader) in adoptions {
+            self.leader(&format!("the adopter of track {track}"), leader)?;
+        }
         match item {
             // Checked on its own; a second one is refused by the batch rules.
             Item::Begin(_) | Item::Cut { .. } => Ok(()),
@@ -187,6 +198,7 @@ mod tests {
             tracks: 4,
             leaders: 2,
             identities: false,
+            adopts: false,
         }
     }
 
@@ -194,6 +206,7 @@ mod tests {
     fn tracks_and_leaders_beyond_the_stream_are_named() {
         let e = bounds()
             .check_item(&Item::Mix {
+                adopted: Vec::new(),
                 a: 0,
                 b: 4,
                 swap: 0.5,
@@ -213,6 +226,7 @@ mod tests {
         assert_eq!(e, "handover to = 7 is not a leader (there are 2)");
         let e = bounds()
             .check_item(&Item::Observe {
+                adopted_by: None,
                 track: 1,
                 red: 0.5,
                 blue: 0.5,
@@ -223,6 +237,7 @@ mod tests {
         assert!(e.contains("growth track = 40"), "{e}");
         let e = bounds()
             .check_item(&Item::Identify {
+                adopted: false,
                 track: 1,
                 identity: 1,
                 accuracy: 0.9,

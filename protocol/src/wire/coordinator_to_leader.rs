@@ -41,6 +41,14 @@ pub struct Partial {
     /// whole share of a 10,000-track crowd is over 100 kB. None: whole.
     pub base: Option<u64>,
     pub gone: Vec<u32>,
+    /// The tracks whose start component (a part of one track) and row
+    /// this leader gives only as their keeper ([`Begin::owners`]): no
+    /// leader surveilled them when it last heard of them, so where another
+    /// leader's answer holds one, that one is the track's (the keeper is
+    /// not told of an adoption elsewhere).
+    ///
+    /// [`Begin::owners`]: super::sensor_to_leader::Begin::owners
+    pub passive: Vec<u32>,
 }
 super::versioned!(Partial, "partial sums");
 

@@ -145,8 +145,12 @@ impl Interest {
         tracks.iter().any(|&t| self.follows(t))
     }
 
-    /// Whether this leader is sent `item`.
+    /// Whether this leader is sent `item`: the item may change one of its
+    /// sets, or adopts a track here.
     pub fn receives(&self, item: &Item) -> bool {
+        if item.adoptions().iter().any(|&(_, l)| l == self.leader) {
+            return true;
+        }
         match item {
             Item::Begin(_) | Item::Cut { .. } => true,
             Item::Mix {
@@ -178,6 +182,12 @@ impl Interest {
     /// Grows the interest by what `item` may add to this leader's sets.
     /// Call for every item this leader receives, in seq order.
     pub fn note(&mut self, item: &Item) {
+        // A track adopted here is this leader's from now on.
+        for (track, leader) in item.adoptions() {
+            if leader == self.leader {
+                self.add(track);
+            }
+        }
         match item {
             Item::Begin(begin) => {
                 for (t, &owner) in begin.owners.iter().enumerate() {
@@ -233,6 +243,7 @@ mod tests {
 
     fn mix(a: u32, b: u32) -> Item {
         Item::Mix {
+            adopted: Vec::new(),
             a,
             b,
             swap: 0.5,
@@ -259,6 +270,7 @@ mod tests {
         let mut i = Interest::new(0, 6, false);
         i.add(4);
         let observe = |track, partners: Vec<u32>| Item::Observe {
+            adopted_by: None,
             track,
             red: 0.8,
             blue: 0.2,
@@ -313,6 +325,7 @@ mod tests {
     fn a_leader_that_may_hold_a_saturated_set_hears_every_observation() {
         let mut i = Interest::new(0, 6, false).saturating_at(2);
         let far = Item::Observe {
+            adopted_by: None,
             track: 5,
             red: 0.8,
             blue: 0.2,

@@ -43,7 +43,10 @@ pub use valid::Valid;
 /// The version of every postcard message below; a receiver rejects others.
 /// 4: the transfer key carries a `TransfersSent`, one input's transfers.
 /// 5: a mix may take a track from another leader (`Item::Mix::handed`).
-pub const VERSION: u16 = 5;
+/// 6: tracks may start unheld and be adopted at their first item
+/// (`sensor_to_leader::UNHELD`); answers list their passive parts
+/// (`Partial::passive`).
+pub const VERSION: u16 = 6;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

@@ -80,7 +80,8 @@ pub struct IdentityTrackAnswer {
 
 /// Where every track was last seen (`positions[t]`, null before its first
 /// `move`) and the index in `leaders` of the leader that surveils it
-/// (`owners[t]`), after the watermark's events; `leaders` with where each
+/// (`owners[t]`; 65535 while none does, before its first event on a
+/// factored stream: `sensor_to_leader::UNHELD`), after the watermark's events; `leaders` with where each
 /// sits (its region: the points nearer to it than to any other).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PositionsAnswer {

@@ -53,7 +53,10 @@ pub enum Item {
     /// tracks of two leaders takes both to one of them; the track that
     /// changes leader rides on the mix (handed over from `from` to the
     /// owners named, before the mix), so that the mix is one item at each
-    /// of the two leaders, as a mix kept apart is.
+    /// of the two leaders, as a mix kept apart is. `adopted`: the tracks
+    /// of the two (none, one or both) that no leader surveilled before
+    /// this item, their first: each is adopted here by the owner named for
+    /// it ([`Begin::owners`]).
     Mix {
         a: u32,
         b: u32,
@@ -61,6 +64,7 @@ pub enum Item {
         owner_a: u16,
         owner_b: u16,
         handed: Option<Handed>,
+        adopted: Vec<u32>,
     },
     Observe {
         track: u32,
@@ -70,6 +74,9 @@ pub enum Item {
         /// Every leader must apply it: exact conditioning, or a certain
         /// sighting, which removes the sets that do not fix the track.
         global: bool,
+        /// The track's first item: no leader surveilled it, and this one
+        /// adopts it ([`Begin::owners`]).
+        adopted_by: Option<u16>,
     },
     /// A sensor read `identity` on track `track` (identity streams), sent
     /// only to `owner`, the leader surveilling the track, which holds the
@@ -80,6 +87,8 @@ pub enum Item {
         identity: u32,
         accuracy: f64,
         owner: u16,
+        /// The track's first item: `owner` adopts it ([`Begin::owners`]).
+        adopted: bool,
     },
     /// Track `track` left the region of leader `from` for that of `to`.
     Handover { track: u32, from: u16, to: u16 },
@@ -99,6 +108,9 @@ pub struct Handed {
     pub from: u16,
 }
 
+/// The owner of a track no leader surveils yet ([`Begin::owners`]).
+pub const UNHELD: u16 = u16::MAX;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Begin {
     pub tracks: u32,
@@ -107,7 +119,12 @@ pub struct Begin {
     pub initial_red: Option<Vec<u32>>,
     /// The leaders' names, in the order the indices refer to.
     pub leaders: Vec<String>,
-    /// The owner (leader index) of every track at the start.
+    /// The owner (leader index) of every track at the start, or
+    /// [`UNHELD`]: on a factored stream under the regional rule a track
+    /// is surveilled from its first item on, which adopts it
+    /// ([`Item::adoptions`]; docs/design/architecture.md, "Newcomers"). Until then its start component is kept, followed by
+    /// nobody, by its *keeper* ([`Begin::keeper`]), which gives it as a
+    /// passive part in its answers ([`Partial::passive`](super::coordinator_to_leader::Partial::passive)).
     pub owners: Vec<u16>,
     pub distributed_rule: bool,
     /// Each leader's coefficient budget (0 = no pruning).
@@ -123,4 +140,62 @@ pub struct Begin {
     /// The leaders hold the factored belief with these settings (None:
     /// the Radon belief).
     pub factored: Option<FactoredStart>,
+}
+
+impl Begin {
+    /// The leader that keeps the start component (and row) of `track` while
+    /// no leader surveils it ([`Begin::owners`]): `track mod L`.
+    pub fn keeper(&self, track: u32) -> u16 {
+        (track as usize % self.leaders.len().max(1)) as u16
+    }
+
+    /// Whether `track` starts unheld ([`UNHELD`]).
+    pub fn starts_unheld(&self, track: u32) -> bool {
+        self.owners.get(track as usize) == Some(&UNHELD)
+    }
+
+    /// Whether leader `me` holds the start component (and row) of `track`:
+    /// it surveils the track, or keeps it unheld.
+    pub fn holds_at_start(&self, track: u32, me: u16) -> bool {
+        match self.owners.get(track as usize) {
+            Some(&UNHELD) => self.keeper(track) == me,
+            Some(&owner) => owner == me,
+            None => false,
+        }
+    }
+}
+
+impl Item {
+    /// The tracks this item adopts, each with the leader adopting it: the
+    /// tracks it is the first item of on a stream whose tracks start
+    /// unheld ([`Begin::owners`]). The adopting leader takes the track's
+    /// start component and row before applying the item.
+    pub fn adoptions(&self) -> Vec<(u32, u16)> {
+        match self {
+            Item::Mix {
+                a,
+                b,
+                owner_a,
+                owner_b,
+                adopted,
+                ..
+            } => adopted
+                .iter()
+                .map(|&t| (t, if t == *a { *owner_a } else { *owner_b }))
+                .filter(|&(t, _)| t == *a || t == *b)
+                .collect(),
+            Item::Observe {
+                track,
+                adopted_by: Some(leader),
+                ..
+            } => vec![(*track, *leader)],
+            Item::Identify {
+                track,
+                owner,
+                adopted: true,
+                ..
+            } => vec![(*track, *owner)],
+            _ => Vec::new(),
+        }
+    }
 }

@@ -13,7 +13,7 @@ use super::coordinator_to_leader::Partial;
 use super::coordinator_to_sensor::CutPlaced;
 use super::leader_to_leader::{Transfer, TransfersSent, TransfersWanted, WireRow, WireSet};
 use super::leader_to_sensor::{Durable, Follow, Followed, Progress, Resend, Resent, Unfollow};
-use super::sensor_to_leader::{Batch, Begin, Item, Sequenced};
+use super::sensor_to_leader::{Batch, Begin, Item, Sequenced, UNHELD};
 use super::sensor_to_sensor::{Entry, IntakeSlice, IntakeWanted};
 use super::{Versioned, WireError};
 
@@ -138,8 +138,21 @@ impl Item {
                 owner_a,
                 owner_b,
                 handed,
+                adopted,
             } => {
                 require(a != b, || format!("mix of track {a} with itself"))?;
+                let named = |t: &u32| t == a || t == b;
+                require(adopted.len() <= 2 && adopted.iter().all(named), || {
+                    format!("mix of tracks {a} and {b} adopts tracks {adopted:?}")
+                })?;
+                require(adopted.len() < 2 || adopted[0] != adopted[1], || {
+                    format!("mix adopts track {} twice", adopted[0])
+                })?;
+                if let Some(h) = handed {
+                    require(!adopted.contains(&h.track), || {
+                        format!("mix both hands over and adopts track {}", h.track)
+                    })?;
+                }
                 if let Some(h) = handed {
                     require(*swap > 0.0 && *swap < 1.0, || {
                         format!("mix handing a track over with swap {swap}, not in (0, 1)")
@@ -234,15 +247,20 @@ impl Begin {
                 self.owners.len()
             )
         })?;
+        // Unheld tracks only where a first item can adopt them.
+        let adopts = self.factored.as_ref().is_some_and(|f| f.regional);
         if let Some((t, o)) = self
             .owners
             .iter()
             .enumerate()
-            .find(|(_, &o)| o as usize >= leaders)
+            .find(|(_, &o)| o as usize >= leaders && !(o == UNHELD && adopts))
         {
-            return Err(format!(
-                "begin owners[{t}] = {o} is not a leader (there are {leaders})"
-            ));
+            return Err(match *o {
+                UNHELD => format!(
+                    "begin owners[{t}] is unheld, which only a factored stream under the regional rule allows"
+                ),
+                _ => format!("begin owners[{t}] = {o} is not a leader (there are {leaders})"),
+            });
         }
         if let Some(assignment) = &self.initial_identity {
             require(assignment.len() == n as usize, || {
@@ -452,10 +470,13 @@ impl Partial {
             "components gone without a base answer".into()
         })?;
         distinct("gone", &self.gone)?;
-        for &t in &self.gone {
-            require(t < MAX_TRACKS, || {
-                format!("gone: track {t} is out of range")
-            })?;
+        require(self.passive.windows(2).all(|w| w[0] < w[1]), || {
+            "passive: tracks out of order or repeated".into()
+        })?;
+        for (what, tracks) in [("gone", &self.gone), ("passive", &self.passive)] {
+            if let Some(t) = tracks.iter().find(|&&t| t >= MAX_TRACKS) {
+                return Err(format!("{what}: track {t} is out of range"));
+            }
         }
         Ok(())
     }
@@ -570,6 +591,7 @@ mod tests {
 
     fn mix(swap: f64) -> Item {
         Item::Mix {
+            adopted: Vec::new(),
             a: 0,
             b: 2,
             swap,
@@ -581,6 +603,7 @@ mod tests {
 
     fn observe(red: f64, blue: f64) -> Item {
         Item::Observe {
+            adopted_by: None,
             track: 1,
             red,
             blue,
@@ -628,6 +651,7 @@ mod tests {
         let e = rejected(&batch(
             2,
             vec![Item::Identify {
+                adopted: false,
                 track: 0,
                 identity: 0,
                 accuracy: 0.0,
@@ -736,6 +760,7 @@ mod tests {
             vec![
                 Item::Begin(begin()),
                 Item::Mix {
+                    adopted: Vec::new(),
                     a: 0,
                     b: 9,
                     swap: 0.5,
@@ -792,6 +817,7 @@ mod tests {
             components: None,
             base: None,
             gone: Vec::new(),
+            passive: Vec::new(),
             version: VERSION,
             leader: "a".into(),
             cut: 1,

@@ -1295,9 +1295,8 @@ impl World {
         let answered = result.and_then(|collected| {
             let answer = marginals_of(&collected, &self.memory)?;
             let rows: Vec<(u32, Vec<f64>)> = collected
-                .parts
-                .iter()
-                .flat_map(|p| &p.rows)
+                .rows()
+                .into_iter()
                 .map(|r| (r.track, r.ln_likelihoods.clone()))
                 .collect();
             Ok((answer, rows))

@@ -355,6 +355,42 @@ impl FactoredShare {
         Ok(())
     }
 
+    /// Takes in the start component of `track`, which no item has touched
+    /// yet and no leader held (a deployment's newcomer, adopted at its
+    /// first item: docs/design/architecture.md, "Newcomers"). Nobody sends
+    /// it: an untouched track is alone with its start table, and so is its
+    /// placeholder here, which only this share's own events could change.
+    pub fn adopt(&mut self, track: u32) -> Result<(), BeliefError> {
+        self.belief.field.check_track(track)?;
+        if self.holds(track) {
+            return Err(bad(format!("track {track}, whose component is held here")));
+        }
+        let (slot, _) = self.belief.home[track as usize];
+        if self.belief.comp(slot).tracks != [track] {
+            return Err(bad(format!(
+                "track {track} to adopt is not alone: it has met another track"
+            )));
+        }
+        self.set_held(track, true);
+        self.changed.insert(track);
+        Ok(())
+    }
+
+    /// Drops the start component of `track`, kept here for a track no
+    /// leader surveilled and adopted elsewhere since (a keeper's passive
+    /// component, [`FactoredShare::adopt`]). Refused for a track that met
+    /// another here.
+    pub fn drop_start(&mut self, track: u32) -> Result<(), BeliefError> {
+        let (slot, _) = self.belief.home[track as usize];
+        if !self.holds(track) || self.belief.comp(slot).tracks != [track] {
+            return Err(bad(format!(
+                "track {track} is not held here alone, as a start component is"
+            )));
+        }
+        self.set_held(track, false);
+        Ok(())
+    }
+
     /// An observation of a track whose component is held here.
     pub fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.belief.field.check_observe(&observe)?;
