@@ -644,6 +644,18 @@ impl PropertyFilter for Regional {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use idmesh_protocol::trace::{Mix as MixLine, Observe as ObserveLine};
+
+    /// An observation of `track`.
+    fn seen(track: u32) -> Line {
+        Line::Observe(ObserveLine {
+            time: 0.0,
+            track,
+            red: 0.8,
+            blue: 0.2,
+            sensor: None,
+        })
+    }
 
     #[test]
     fn a_grid_puts_leaders_at_the_centres_of_its_cells_row_by_row() {
@@ -772,18 +784,8 @@ mod tests {
 
     #[test]
     fn a_mix_across_two_leaders_goes_to_the_one_sent_fewer_items_so_far() {
-        use idmesh_protocol::trace::{Mix as MixLine, Observe as ObserveLine};
         let leading = [Some((0.0, 0.0)), Some((10.0, 0.0))];
         let mut r = Regions::starting(&RegionRule::fitted(), 2, 2, &leading);
-        let seen = |track| {
-            Line::Observe(ObserveLine {
-                time: 0.0,
-                track,
-                red: 0.8,
-                blue: 0.2,
-                sensor: None,
-            })
-        };
         // Each first seen alone: adopted by the leader sent fewest items.
         for track in [0, 1] {
             r.before(&seen(track));
@@ -821,16 +823,6 @@ mod tests {
     /// unless that leader is busy.
     #[test]
     fn a_newcomer_joins_the_track_it_meets_unless_its_leader_is_busy() {
-        use idmesh_protocol::trace::{Mix as MixLine, Observe as ObserveLine};
-        let seen = |track| {
-            Line::Observe(ObserveLine {
-                time: 0.0,
-                track,
-                red: 0.8,
-                blue: 0.2,
-                sensor: None,
-            })
-        };
         let mix = |a, b, swap| {
             Line::Mix(MixLine {
                 time: 0.0,
