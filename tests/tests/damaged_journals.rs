@@ -63,6 +63,15 @@ struct Damaged {
 /// 32 bytes overwritten in the middle record of the journal.
 fn overwrite(path: &Path, kind: &'static str) -> Damaged {
     let whole = records(path, kind);
+    if whole.is_empty() {
+        // Killed just after a snapshot started the journal again: there
+        // is nothing to damage, and the restart must still answer right.
+        println!("{}: an empty journal, nothing to overwrite", path.display());
+        return Damaged {
+            at: None,
+            records: 0,
+        };
+    }
     let middle = &whole[whole.len() / 2];
     let mut bytes = std::fs::read(path).unwrap();
     let from = middle.offset as usize + 5;
@@ -166,7 +175,7 @@ fn leader_case(
     match (damaged.at, &read.ending) {
         (Some(at), Ending::Damaged(d)) => assert_eq!(d.at, at, "{name}: {d}"),
         (None, Ending::Torn { .. }) => {}
-        (None, _) if superseded => {}
+        (None, _) if superseded || damaged.records == 0 => {}
         (_, ending) => panic!("{name}: the journal reads as {ending:?}"),
     }
     deployment.launch("leader", "leader-1");
