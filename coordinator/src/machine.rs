@@ -84,22 +84,16 @@ impl Collected {
     /// ones ([`Partial::passive`]) of tracks another leader's answer
     /// holds.
     pub fn rows(&self) -> Vec<&WireRow> {
-        let passive = |p: &Partial, t: u32| p.passive.binary_search(&t).is_ok();
-        let held: BTreeSet<u32> = self
+        let rows: Vec<_> = self
             .parts
-            .iter()
-            .flat_map(|p| p.rows.iter().filter(|r| !passive(p, r.track)))
-            .map(|r| r.track)
-            .collect();
-        let held = &held;
-        self.parts
             .iter()
             .flat_map(|p| {
                 p.rows
                     .iter()
-                    .filter(move |r| !(passive(p, r.track) && held.contains(&r.track)))
+                    .map(|r| (p.passive.as_slice(), std::slice::from_ref(&r.track), r))
             })
-            .collect()
+            .collect();
+        without_passive(&rows)
     }
 
     /// What the answer includes: per sensor, its events.
@@ -693,38 +687,45 @@ fn factored_marginals_of(
 }
 
 /// Every leader's parts, less the passive ones ([`Partial::passive`]) of
-/// tracks another leader's answer holds: a keeper is not told that a
-/// track it keeps was adopted elsewhere.
+/// tracks another leader's answer holds.
 fn held_parts<'a>(
     whole: &'a BTreeMap<String, Components>,
-    answers: &[Partial],
+    answers: &'a [Partial],
 ) -> Vec<&'a Arc<CountPart>> {
-    let passive: BTreeMap<&str, BTreeSet<u32>> = answers
-        .iter()
-        .filter(|p| !p.passive.is_empty())
-        .map(|p| (p.leader.as_str(), p.passive.iter().copied().collect()))
-        .collect();
-    let is_passive = |leader: &str, part: &CountPart| {
-        part.tracks.len() == 1
-            && passive
-                .get(leader)
-                .is_some_and(|kept| kept.contains(&part.tracks[0]))
-    };
-    let all = || {
-        whole
+    let passive = |leader: &str| {
+        answers
             .iter()
-            .flat_map(|(l, c)| c.iter().map(move |c| (l, c)))
+            .find(|p| p.leader == leader)
+            .map_or(&[][..], |p| p.passive.as_slice())
     };
-    if passive.is_empty() {
-        return all().map(|(_, c)| c).collect();
-    }
-    let held: BTreeSet<u32> = all()
-        .filter(|(l, c)| !is_passive(l, c))
-        .flat_map(|(_, c)| c.tracks.iter().copied())
+    let parts: Vec<_> = whole
+        .iter()
+        .flat_map(|(l, c)| {
+            let kept = passive(l);
+            c.iter().map(move |c| (kept, c.tracks.as_slice(), c))
+        })
         .collect();
-    all()
-        .filter(|(l, c)| !(is_passive(l, c) && held.contains(&c.tracks[0])))
-        .map(|(_, c)| c)
+    without_passive(&parts)
+}
+
+/// Of `items` (parts or rows, each with the passive tracks of the answer
+/// it came in and the tracks it holds), all but the passive ones — a part
+/// or row of one track its answer lists as passive — of tracks another
+/// item holds: a keeper is not told that a track it keeps was adopted
+/// elsewhere.
+fn without_passive<T: Copy>(items: &[(&[u32], &[u32], T)]) -> Vec<T> {
+    let is_passive = |passive: &[u32], tracks: &[u32]| {
+        tracks.len() == 1 && passive.binary_search(&tracks[0]).is_ok()
+    };
+    let held: BTreeSet<u32> = items
+        .iter()
+        .filter(|(passive, tracks, _)| !is_passive(passive, tracks))
+        .flat_map(|(_, tracks, _)| tracks.iter().copied())
+        .collect();
+    items
+        .iter()
+        .filter(|(passive, tracks, _)| !(is_passive(passive, tracks) && held.contains(&tracks[0])))
+        .map(|&(_, _, item)| item)
         .collect()
 }
 

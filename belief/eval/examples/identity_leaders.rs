@@ -29,7 +29,7 @@ use idmesh_belief::identity::{
 use idmesh_belief::identity_event_of;
 use idmesh_placement::{leading_places, RegionRule, Regions};
 use idmesh_protocol::trace::Line;
-use idmesh_protocol::wire::sensor_to_leader::UNHELD;
+use idmesh_protocol::wire::sensor_to_leader::{keeper, UNHELD};
 use idmesh_sim::scenario::trace_out::lines;
 use idmesh_sim::scenario::Scenario;
 
@@ -77,9 +77,9 @@ fn run(n: usize, seed: u64, leaders: usize, cap: usize, gather: Gather) -> Cost 
     let owners = regions.owners();
     let mut shares: Vec<IdentityShare> = (0..leaders as u16)
         .map(|me| {
-            // A track nobody surveils yet is kept by leader t mod L.
+            // A track nobody surveils yet is kept by its keeper.
             IdentityShare::start(&initial, options, |t| match owners[t as usize] {
-                UNHELD => t as usize % leaders == usize::from(me),
+                UNHELD => keeper(t, leaders) == me,
                 owner => owner == me,
             })
             .expect("a share")

@@ -22,7 +22,7 @@
 use crate::fitted::Fitted;
 use idmesh_belief::{event_of, BeliefError, FactoredBelief, Field, Mix, Observe, PropertyFilter};
 use idmesh_protocol::trace::Line;
-use idmesh_protocol::wire::sensor_to_leader::UNHELD;
+use idmesh_protocol::wire::sensor_to_leader::{keeper, UNHELD};
 
 /// How tracks are shared among leaders by where they are.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -111,7 +111,7 @@ impl Regions {
         };
         let leaders = leaders.max(1);
         let fitted = matches!(rule, Rule::Fitted(_));
-        Regions {
+        let regions = Regions {
             takes_mixes: fitted,
             rule,
             owners: vec![UNHELD; tracks],
@@ -119,19 +119,20 @@ impl Regions {
             assigned: false,
             ridden_from: None,
             unheld: vec![true; tracks],
+        };
+        match fitted {
+            true => regions,
+            false => regions.held_round_robin(leaders),
         }
-        .held_from_the_start_unless(fitted, leaders)
     }
 
-    /// Unless `adopting`, every track held from the start, by leader
-    /// `track mod L`.
-    fn held_from_the_start_unless(mut self, adopting: bool, leaders: usize) -> Self {
-        if !adopting {
-            for (t, owner) in self.owners.iter_mut().enumerate() {
-                *owner = (t % leaders) as u16;
-            }
-            self.unheld.iter_mut().for_each(|u| *u = false);
+    /// Every track held from the start, by leader `track mod L` (the one
+    /// that would keep it unheld).
+    fn held_round_robin(mut self, leaders: usize) -> Self {
+        for (t, owner) in self.owners.iter_mut().enumerate() {
+            *owner = keeper(t as u32, leaders);
         }
+        self.unheld.iter_mut().for_each(|u| *u = false);
         self
     }
 
@@ -144,7 +145,7 @@ impl Regions {
         match &self.rule {
             Rule::Fitted(fitted) => {
                 let leaders = fitted.leaders();
-                self.held_from_the_start_unless(false, leaders)
+                self.held_round_robin(leaders)
             }
             Rule::Fixed(_) => self,
         }

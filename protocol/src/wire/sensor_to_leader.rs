@@ -111,6 +111,12 @@ pub struct Handed {
 /// The owner of a track no leader surveils yet ([`Begin::owners`]).
 pub const UNHELD: u16 = u16::MAX;
 
+/// Of `leaders` leaders, the one that keeps an unheld `track`'s start
+/// component and row ([`Begin::owners`]): `track mod L`.
+pub fn keeper(track: u32, leaders: usize) -> u16 {
+    (track as usize % leaders.max(1)) as u16
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Begin {
     pub tracks: u32,
@@ -144,9 +150,9 @@ pub struct Begin {
 
 impl Begin {
     /// The leader that keeps the start component (and row) of `track` while
-    /// no leader surveils it ([`Begin::owners`]): `track mod L`.
+    /// no leader surveils it ([`Begin::owners`]): [`keeper`].
     pub fn keeper(&self, track: u32) -> u16 {
-        (track as usize % self.leaders.len().max(1)) as u16
+        keeper(track, self.leaders.len())
     }
 
     /// Whether `track` starts unheld ([`UNHELD`]).
