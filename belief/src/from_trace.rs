@@ -89,6 +89,7 @@ mod tests {
     #[test]
     fn field_from_begin() {
         let begin = Begin {
+            factored_identity: None,
             factored: None,
             tracks: 3,
             red: Some(1),

@@ -15,6 +15,7 @@ use std::sync::Arc;
 
 fn begin() -> Item {
     Item::Begin(Begin {
+        factored_identity: None,
         factored: None,
         tracks: 4,
         red: Some(2),
@@ -103,6 +104,7 @@ fn bad_inputs_are_rejected_counted_and_change_nothing() {
     wrong_version.version = VERSION + 1;
     let full = encode(&good[1]);
     let transfer = |from, red: Vec<u32>, ln_mass| Transfer {
+        trees: Vec::new(),
         components: Vec::new(),
         version: VERSION,
         from,
@@ -197,6 +199,7 @@ fn inputs_held_from_before_the_begin_are_checked_once_it_comes() {
     let mut leader = Leader::new("a");
     let outside = batch(2, vec![(4, mix(0, 9, 0.5))], 4);
     let stray = Transfer {
+        trees: Vec::new(),
         components: Vec::new(),
         version: VERSION,
         from: 1,

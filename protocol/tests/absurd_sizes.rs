@@ -132,6 +132,7 @@ fn a_billion_of_anything_in_a_few_bytes_is_refused_without_allocating_for_it() {
 #[test]
 fn every_truncation_of_a_large_message_is_refused() {
     let transfer = Transfer {
+        trees: Vec::new(),
         components: Vec::new(),
         version: VERSION,
         from: 1,

@@ -143,6 +143,7 @@ impl Router {
             regions = regions.keeping_mixes_across();
         }
         let begin = Begin {
+            factored_identity: None,
             factored: config.factored,
             tracks: tracks as u32,
             red: header.red_count().map(|k| k as u32),

@@ -121,6 +121,7 @@ fn garbage() -> (Messages, Messages) {
         encode(&TransfersSent {
             version,
             transfers: vec![Transfer {
+                trees: Vec::new(),
                 components: Vec::new(),
                 version,
                 from: 1,

@@ -23,6 +23,7 @@ fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
 /// A leader's share: `total` with track `t` fixing `inside`.
 fn part(leader: &str, cut: u64, tag: u64, total: f64, inside: Vec<(u32, f64)>) -> Partial {
     Partial {
+        trees: Vec::new(),
         base: None,
         gone: Vec::new(),
         passive: Vec::new(),

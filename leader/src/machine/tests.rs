@@ -12,6 +12,7 @@ fn timers() -> Timers {
 
 fn begin(leaders: &[&str]) -> Item {
     Item::Begin(Begin {
+        factored_identity: None,
         factored: None,
         tracks: 4,
         red: Some(2),
@@ -280,6 +281,7 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
         "one request out"
     );
     let lost = Transfer {
+        trees: Vec::new(),
         components: Vec::new(),
         version: VERSION,
         from: 1,
@@ -517,6 +519,7 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
     node.step(30 * MS, Input::Resent(Ok(Vec::new())));
     assert!(node.recovering_since().is_some());
     let transfer = Transfer {
+        trees: Vec::new(),
         components: Vec::new(),
         version: VERSION,
         from: 1,
@@ -790,6 +793,7 @@ fn sets_from_b(seq: u64, sets: Vec<idmesh_protocol::wire::leader_to_leader::Wire
         bytes: encode(&TransfersSent {
             version: VERSION,
             transfers: vec![Transfer {
+                trees: Vec::new(),
                 components: Vec::new(),
                 version: VERSION,
                 from: 1,

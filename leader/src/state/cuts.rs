@@ -162,6 +162,7 @@ impl Leader {
             None => sums.coefficients,
         };
         let sums = Partial {
+            trees: Vec::new(),
             components: None,
             base: None,
             gone: Vec::new(),

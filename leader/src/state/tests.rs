@@ -6,6 +6,7 @@ use idmesh_belief::factored::CountPart;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
     Item::Begin(Begin {
+        factored_identity: None,
         factored: None,
         tracks: owners.len() as u32,
         red: Some(2),
@@ -38,6 +39,7 @@ fn batch(number: u64, items: Vec<(u64, Item)>, through: u64, finished: bool) -> 
 /// Leader `from`'s transfer of item `seq` with nothing in it.
 fn nothing_from(from: u16, seq: u64) -> Transfer {
     Transfer {
+        trees: Vec::new(),
         components: Vec::new(),
         version: VERSION,
         from,
@@ -254,6 +256,7 @@ fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them()
     use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
     let start = vec![2, 0, 3, 1];
     let begin = Item::Begin(Begin {
+        factored_identity: None,
         factored: None,
         tracks: 4,
         red: None,
@@ -390,6 +393,7 @@ fn components_of_one_mix_in_two_transfers_have_all_their_tracks_followed() {
         .any(|a| matches!(a, Action::Send { to: 1, .. })));
     assert_eq!(leader.waiting_for_components(), Some(5));
     let transfer = |from: u16, tracks: Vec<u32>| Transfer {
+        trees: Vec::new(),
         version: VERSION,
         from,
         seq: 5,
@@ -441,6 +445,7 @@ fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
     let actions = leader
         .transfer(
             Transfer {
+                trees: Vec::new(),
                 version: VERSION,
                 from: 1,
                 seq: 3,
@@ -492,6 +497,7 @@ fn a_leader_that_sends_a_component_away_unfollows_its_tracks() {
 /// A component as leader `from` sends it at item `seq`.
 fn component_transfer(from: u16, seq: u64, track: u32, table: Vec<f64>) -> Transfer {
     Transfer {
+        trees: Vec::new(),
         version: VERSION,
         from,
         seq,

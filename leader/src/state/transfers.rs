@@ -95,6 +95,7 @@ impl Leader {
         self.stats.transfers_sent += 1;
         self.stats.sets_sent += (sets.len() + components.len()) as u64;
         let transfer = Transfer {
+            trees: Vec::new(),
             version: VERSION,
             from: me,
             seq,

@@ -21,10 +21,12 @@
 //! linearly (Section 5.4 of the property-management paper).
 
 mod fitted;
+mod identity;
 mod load;
 mod regions;
 
 pub use fitted::{Fitted, TOLERANCE, WINDOW_PER_LEADER};
+pub use identity::{from_wire_tree, identity_options, start_identity, to_wire_tree};
 pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
 pub use regions::{grid_places, leading_places, Handover, RegionRule, Regional, Regions};
 
@@ -196,6 +198,7 @@ mod tests {
 
     fn begin(leaders: usize, owners: Vec<u16>, red: Option<u32>) -> Begin {
         Begin {
+            factored_identity: None,
             factored: None,
             tracks: owners.len() as u32,
             red,

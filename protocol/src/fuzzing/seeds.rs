@@ -90,6 +90,7 @@ const IDENTITY_TRACE: &str = r#"{"kind":"header","format":"idmesh-trace","versio
 
 fn begin(identities: bool) -> Begin {
     Begin {
+        factored_identity: None,
         factored: None,
         tracks: 8,
         red: Some(3),
@@ -185,6 +186,7 @@ fn batches() -> Vec<Batch> {
 fn transfers() -> Vec<Transfer> {
     vec![
         Transfer {
+            trees: Vec::new(),
             components: Vec::new(),
             version: VERSION,
             from: 1,
@@ -207,6 +209,7 @@ fn transfers() -> Vec<Transfer> {
             }],
         },
         Transfer {
+            trees: Vec::new(),
             components: Vec::new(),
             version: VERSION,
             from: 2,
@@ -219,6 +222,7 @@ fn transfers() -> Vec<Transfer> {
 
 fn partials() -> Vec<Partial> {
     vec![Partial {
+        trees: Vec::new(),
         components: None,
         base: None,
         gone: Vec::new(),

@@ -6,6 +6,7 @@
 //! The rules a message obeys on its own are [`valid`](super::valid)'s.
 
 use super::coordinator_to_leader::Partial;
+use super::identity::WireTree;
 use super::leader_to_leader::{Transfer, WireRow, WireSet};
 use super::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use super::valid::require;
@@ -130,6 +131,7 @@ impl Bounds {
     /// of its tracks, rows of n numbers only on an identity stream.
     pub fn check_transfer(&self, transfer: &Transfer, me: u16) -> Result<(), WireError> {
         self.check_parts(transfer.from, &transfer.sets, &transfer.rows, me)
+            .and_then(|()| self.check_trees(&transfer.trees))
             .map_err(|problem| invalid("transfer", problem))
     }
 
@@ -152,6 +154,18 @@ impl Bounds {
             "rows of an information matrix on a stream without identities".into()
         })?;
         self.check_rows(rows)
+    }
+
+    /// Trees of the factored identity belief, on an identity stream only.
+    fn check_trees(&self, trees: &[WireTree]) -> Result<(), String> {
+        require(trees.is_empty() || self.identities, || {
+            "trees of a factored identity belief on a stream without identities".into()
+        })?;
+        for (i, tree) in trees.iter().enumerate() {
+            tree.check(self.tracks)
+                .map_err(|e| format!("tree {i}: {e}"))?;
+        }
+        Ok(())
     }
 
     fn check_rows(&self, rows: &[WireRow]) -> Result<(), String> {
@@ -178,7 +192,8 @@ impl Bounds {
             for &t in &partial.gone {
                 self.track("gone component's track", t)?;
             }
-            self.check_rows(&partial.rows)
+            self.check_rows(&partial.rows)?;
+            self.check_trees(&partial.trees)
         };
         check().map_err(|problem| invalid("partial sums", problem))
     }
@@ -250,6 +265,7 @@ mod tests {
     #[test]
     fn transfers_come_from_a_peer_with_sets_of_the_field() {
         let transfer = |from, red: Vec<u32>, rows: Vec<WireRow>| Transfer {
+            trees: Vec::new(),
             components: Vec::new(),
             version: VERSION,
             from,

@@ -5,6 +5,7 @@
 //! counters (`P/leader/*/stats`).
 
 use super::factored::WireCounts;
+use super::identity::WireTree;
 use super::leader_to_leader::WireRow;
 use serde::{Deserialize, Serialize};
 
@@ -49,6 +50,10 @@ pub struct Partial {
     ///
     /// [`Begin::owners`]: super::sensor_to_leader::Begin::owners
     pub passive: Vec<u32>,
+    /// The trees of the factored identity belief this leader holds, when
+    /// the query asked for rows on a stream whose leaders hold that
+    /// belief; passive ones (a start kept) for the tracks in `passive`.
+    pub trees: Vec<WireTree>,
 }
 super::versioned!(Partial, "partial sums");
 

@@ -9,6 +9,7 @@
 //! same fit); at a handover, the row of the track that changes region.
 
 use super::factored::WireComponent;
+use super::identity::WireTree;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -22,6 +23,11 @@ pub struct Transfer {
     /// Components of the factored belief (a factored stream; sets are
     /// then empty).
     pub components: Vec<WireComponent>,
+    /// Trees of the factored identity belief, sent to the leader that
+    /// mixes them (`Begin::factored_identity`).
+    ///
+    /// [`Begin::factored_identity`]: super::sensor_to_leader::Begin::factored_identity
+    pub trees: Vec<WireTree>,
 }
 super::versioned!(Transfer, "transfer");
 

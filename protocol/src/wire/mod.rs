@@ -26,6 +26,7 @@ pub mod bounds;
 pub mod coordinator_to_leader;
 pub mod coordinator_to_sensor;
 pub mod factored;
+pub mod identity;
 pub mod interest;
 pub mod keys;
 pub mod leader_to_leader;
@@ -46,7 +47,9 @@ pub use valid::Valid;
 /// 6: tracks may start unheld and be adopted at their first item
 /// (`sensor_to_leader::UNHELD`); answers list their passive parts
 /// (`Partial::passive`).
-pub const VERSION: u16 = 6;
+/// 7: leaders may hold the factored identity belief
+/// (`Begin::factored_identity`); transfers and answers carry its trees.
+pub const VERSION: u16 = 7;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

@@ -146,6 +146,12 @@ pub struct Begin {
     /// The leaders hold the factored belief with these settings (None:
     /// the Radon belief).
     pub factored: Option<FactoredStart>,
+    /// On an identity stream with a known start and the factored belief,
+    /// the leaders hold the factored identity belief (docs/design/identity.md)
+    /// with groups of at most this many slots (2..=9) instead of the rows
+    /// of the information matrix: each linked tree of groups whole, at one
+    /// leader. None: the rows.
+    pub factored_identity: Option<u32>,
 }
 
 impl Begin {

@@ -11,6 +11,7 @@
 
 use super::coordinator_to_leader::Partial;
 use super::coordinator_to_sensor::CutPlaced;
+use super::identity::MAX_GROUP as IDENTITY_GROUP;
 use super::leader_to_leader::{Transfer, TransfersSent, TransfersWanted, WireRow, WireSet};
 use super::leader_to_sensor::{Durable, Follow, Followed, Progress, Resend, Resent, Unfollow};
 use super::sensor_to_leader::{Batch, Begin, Item, Sequenced, UNHELD};
@@ -273,6 +274,19 @@ impl Begin {
         }
         if let Some(factored) = &self.factored {
             factored.check()?;
+        }
+        if let Some(cap) = self.factored_identity {
+            require((2..=IDENTITY_GROUP).contains(&cap), || {
+                format!("begin factored_identity = {cap} is not in 2..={IDENTITY_GROUP}")
+            })?;
+            require(
+                self.identities && self.initial_identity.is_some() && self.factored.is_some(),
+                || {
+                    "begin factored_identity needs an identity stream with a known start \
+                     (initial_identity) on the factored belief"
+                        .into()
+                },
+            )?;
         }
         Ok(())
     }
@@ -555,6 +569,7 @@ mod tests {
 
     fn begin() -> Begin {
         Begin {
+            factored_identity: None,
             factored: None,
             tracks: 4,
             red: Some(2),
@@ -776,6 +791,7 @@ mod tests {
     #[test]
     fn transfers_partials_and_cuts_are_checked() {
         let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer {
+            trees: Vec::new(),
             components: Vec::new(),
             version: VERSION,
             from: 0,
@@ -814,6 +830,7 @@ mod tests {
             assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
         }
         let partial = Partial {
+            trees: Vec::new(),
             components: None,
             base: None,
             gone: Vec::new(),

@@ -15,6 +15,7 @@
 //! listed, and the listed ones, so memory grows with the reads and mixes a
 //! track took part in, not with N.
 
+use crate::error::BeliefError;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -40,6 +41,41 @@ impl Background {
             shared: 1.0 / n.max(1) as f64,
             listed: BTreeMap::new(),
         }
+    }
+
+    /// A row read from outside the process (a leader's transfer): its
+    /// leak, the probability shared by unlisted identities, and the
+    /// listed ones; every number a probability.
+    pub fn from_parts(
+        leak: f64,
+        shared: f64,
+        listed: impl IntoIterator<Item = (u32, f64)>,
+    ) -> Result<Self, BeliefError> {
+        let listed: BTreeMap<u32, f64> = listed.into_iter().collect();
+        let bad = [leak, shared]
+            .into_iter()
+            .chain(listed.values().copied())
+            .find(|p| !(0.0..=1.0).contains(p));
+        if let Some(p) = bad {
+            return Err(BeliefError::BadComponent {
+                detail: format!("a background row with a probability of {p}"),
+            });
+        }
+        Ok(Background {
+            leak,
+            shared,
+            listed,
+        })
+    }
+
+    /// The probability of each identity not listed.
+    pub fn shared(&self) -> f64 {
+        self.shared
+    }
+
+    /// The identities listed, with their probabilities, in order.
+    pub fn listed_entries(&self) -> impl Iterator<Item = (u32, f64)> + '_ {
+        self.listed.iter().map(|(&i, &p)| (i, p))
     }
 
     /// Surely identity `i`.

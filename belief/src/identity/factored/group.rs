@@ -57,6 +57,23 @@ impl Group {
         }
     }
 
+    /// A group read from outside the process (a leader's transfer): its
+    /// tracks, identities and the probability of each assignment by rank,
+    /// checked as [`Group::check`] does.
+    pub fn from_parts(
+        tracks: Vec<u32>,
+        identities: Vec<u32>,
+        probs: Vec<f64>,
+    ) -> Result<Self, BeliefError> {
+        let group = Group {
+            tracks,
+            identities,
+            probs,
+        };
+        group.check()?;
+        Ok(group)
+    }
+
     /// Every assignment of `identities` to `tracks` equally likely.
     pub fn uniform(tracks: Vec<u32>, identities: Vec<u32>) -> Result<Self, BeliefError> {
         let k = tracks.len();

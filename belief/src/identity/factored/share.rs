@@ -94,6 +94,108 @@ impl IdentityShare {
         self.belief.apply(event)
     }
 
+    /// The number of tracks (and identities) of the whole belief.
+    pub fn tracks(&self) -> usize {
+        self.belief.n
+    }
+
+    /// A sure swap of `mix.a` and `mix.b` (swap 1), held here apart or
+    /// together: the two targets exchanged tracks and nothing mixed, so
+    /// the holder of each tree relabels it where it is — the track it held
+    /// is the other's now, with its leak and row — and holds the other
+    /// track instead. What the centralized belief does at a sure swap of
+    /// two groups, done by each holder on its own.
+    pub fn relabel(&mut self, mix: crate::event::Mix) -> Result<(), BeliefError> {
+        let (a, b) = (mix.a, mix.b);
+        if mix.swap != 1.0 {
+            return Err(BeliefError::BadComponent {
+                detail: format!("a relabel of tracks {a} and {b} with swap {}", mix.swap),
+            });
+        }
+        let (ha, hb) = (self.holds(a), self.holds(b));
+        if !(ha || hb) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("a relabel of tracks {a} and {b}, neither held here"),
+            });
+        }
+        self.belief.apply(&IdentityEvent::Mix(mix))?;
+        self.held.swap(a as usize, b as usize);
+        Ok(())
+    }
+
+    /// Track `t`, which no item has named yet, is held here from now on:
+    /// its tree is its start, the certain singleton of `identity` (its
+    /// initial identity, which no tree held anywhere carries), which takes
+    /// the place of its placeholder.
+    pub fn adopt(&mut self, t: u32, identity: u32) -> Result<(), BeliefError> {
+        let n = self.belief.n;
+        if t as usize >= n || identity as usize >= n {
+            return Err(BeliefError::UnknownTrack {
+                track: t.max(identity),
+                tracks: n,
+            });
+        }
+        if self.holds(t) {
+            return Err(BeliefError::BadComponent {
+                detail: format!("an adoption of track {t}, held here already"),
+            });
+        }
+        let b = &self.belief;
+        let (g, h) = (b.group_of[t as usize], b.holder[identity as usize]);
+        let placeholder = |g: usize| {
+            b.groups[g].size() == 1 && b.groups[g].tracks.iter().all(|&x| !self.holds(x))
+        };
+        if !(placeholder(g) && placeholder(h)) {
+            return Err(BeliefError::BadComponent {
+                detail: format!(
+                    "an adoption of track {t} with identity {identity}, which a held tree carries"
+                ),
+            });
+        }
+        let mut new = vec![Group::certain(t, identity)];
+        if g != h {
+            // What the two placeholders paired besides, paired again.
+            new.push(Group::certain(
+                b.groups[h].tracks[0],
+                b.groups[g].identities[0],
+            ));
+        }
+        self.belief.backgrounds[t as usize] = Background::certain(identity);
+        self.held[t as usize] = true;
+        let mut old = vec![g];
+        if g != h {
+            old.push(h);
+        }
+        self.swap_groups(old, new);
+        Ok(())
+    }
+
+    /// Track `t`'s start, kept here while no leader surveilled it, is no
+    /// longer this share's (the track was adopted elsewhere): its
+    /// singleton stays as a placeholder.
+    pub fn drop_start(&mut self, t: u32) -> Result<(), BeliefError> {
+        let b = &self.belief;
+        let alone = self.holds(t) && b.groups[b.group_of[t as usize]].size() == 1;
+        if !alone {
+            return Err(BeliefError::BadComponent {
+                detail: format!("track {t}'s start is not kept here alone"),
+            });
+        }
+        self.held[t as usize] = false;
+        Ok(())
+    }
+
+    /// Gives up the trees of those of `tracks` held here, each once.
+    pub fn take_of(&mut self, tracks: &[u32]) -> Result<Vec<HeldTree>, BeliefError> {
+        let mut trees = Vec::new();
+        for &t in tracks {
+            if self.holds(t) {
+                trees.push(self.take(t)?);
+            }
+        }
+        Ok(trees)
+    }
+
     /// The groups linked (directly or not) to the group of track `t`,
     /// by index, in the order a breadth-first walk meets them.
     fn tree_of(&self, t: u32) -> Vec<usize> {
@@ -353,6 +455,7 @@ pub fn assemble(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::identity::event::Identify;
     use crate::identity::filter::max_abs_difference;
     use crate::identity::workload::{generate, IdentityWorkloadSpec};
     use proptest::prelude::*;
@@ -428,6 +531,61 @@ mod tests {
                 prop_assert!(d < 1e-12, "{} after {:?}", d, e);
             }
         }
+    }
+
+    /// A sure swap of two tracks held apart is relabelled by each holder
+    /// where it is; adopting an untouched track there makes its start;
+    /// put back together, the centralized belief.
+    #[test]
+    fn holders_relabel_sure_swaps_and_adopt_untouched_tracks_apart() {
+        let options = FactoredIdentityOptions::default();
+        let initial = [3, 1, 4, 0, 2];
+        let mut central = FactoredIdentity::from_assignment(&initial, options).unwrap();
+        let mut a = IdentityShare::start(&initial, options, |t| t < 2).unwrap();
+        let mut b = IdentityShare::start(&initial, options, |t| (2..4).contains(&t)).unwrap();
+        let mix = |a, b, swap| crate::event::Mix { a, b, swap };
+        let read = |track, identity| {
+            IdentityEvent::Identify(Identify {
+                track,
+                identity,
+                accuracy: 0.8,
+            })
+        };
+        // A mix inside each share, then a sure swap across them.
+        for e in [
+            IdentityEvent::Mix(mix(0, 1, 0.3)),
+            IdentityEvent::Mix(mix(2, 3, 0.4)),
+        ] {
+            central.apply(&e).unwrap();
+        }
+        a.apply(&IdentityEvent::Mix(mix(0, 1, 0.3))).unwrap();
+        b.apply(&IdentityEvent::Mix(mix(2, 3, 0.4))).unwrap();
+        central.apply(&IdentityEvent::Mix(mix(1, 2, 1.0))).unwrap();
+        a.relabel(mix(1, 2, 1.0)).unwrap();
+        b.relabel(mix(1, 2, 1.0)).unwrap();
+        assert!(a.holds(2) && !a.holds(1) && b.holds(1) && !b.holds(2));
+        assert!(a.relabel(mix(1, 4, 0.5)).is_err(), "only sure swaps");
+        // Reads where the tracks are held now.
+        central.apply(&read(2, 4)).unwrap();
+        a.apply(&read(2, 4)).unwrap();
+        central.apply(&read(1, 3)).unwrap();
+        b.apply(&read(1, 3)).unwrap();
+        // Track 4, untouched, is adopted by b (neither kept it) and mixed.
+        assert!(a.adopt(4, 3).is_err(), "identity 3 is in a held tree");
+        b.adopt(4, initial[4]).unwrap();
+        assert!(b.adopt(4, initial[4]).is_err(), "held already");
+        let e = IdentityEvent::Mix(mix(4, 1, 0.5));
+        central.apply(&e).unwrap();
+        b.apply(&e).unwrap();
+        let trees = a.held_trees().into_iter().chain(b.held_trees()).collect();
+        let whole = assemble(5, options, trees).unwrap();
+        let d = max_abs_difference(&whole.marginals().unwrap(), &central.marginals().unwrap());
+        assert!(d < 1e-12, "{d}");
+        // A start kept for nobody gives way.
+        let mut keeper = IdentityShare::start(&initial, options, |t| t == 4).unwrap();
+        keeper.drop_start(4).unwrap();
+        assert!(!keeper.holds(4));
+        assert!(keeper.drop_start(4).is_err());
     }
 
     #[test]
