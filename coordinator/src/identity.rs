@@ -12,11 +12,15 @@
 
 use crate::driver::gather::{collect, At, Collected, GatherError, Memory, Share};
 use crate::driver::CoordinatorConfig;
+use idmesh_belief::identity::factored::assemble;
 use idmesh_belief::identity::filter::to_rows;
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
+use idmesh_belief::identity::IdentityFilter;
 use idmesh_belief::identity::{
     most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
 };
+use idmesh_placement::{from_wire_tree, identity_options};
+use idmesh_protocol::wire::identity::MAX_GROUP;
 use idmesh_protocol::wire::query::{IdentityAnswer, SamplingReport};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -26,6 +30,10 @@ use zenoh::Session;
 /// marginals (the permanent of an N × N matrix: 2^16 Gray-code steps of
 /// N² each, milliseconds; at 22 it is seconds).
 pub const EXACT_BY_DEFAULT: usize = 16;
+
+/// The `marginals` an answer of the factored identity belief names: its
+/// marginals are the belief's own, exact per group.
+pub const FACTORED: &str = "factored-identity";
 
 /// How a query wants its marginals computed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -105,6 +113,15 @@ pub async fn identity(
         ));
     }
     let n = collected.cut.tracks as usize;
+    if let (Method::Named(named), true) =
+        (method, collected.parts.iter().any(|p| !p.trees.is_empty()))
+    {
+        return Err(GatherError::Failed(format!(
+            "marginals={}: a method of the information matrix, and this stream's leaders hold \
+             the factored identity belief, whose marginals are its own (ask without marginals=)",
+            named.name()
+        )));
+    }
     let method = method.for_tracks(n)?;
     // Ryser's sum for twenty tracks is a second of arithmetic: keep it off
     // the threads that move messages. A computation past its deadline is
@@ -127,12 +144,45 @@ pub async fn identity(
     }
 }
 
+/// The marginals from the trees collected at one cut: the factored
+/// identity belief put back together (`IdentityShare`'s `assemble`), its
+/// marginals and the most likely assignment under them, as `idmesh
+/// replay` computes them.
+fn factored_marginals(collected: &Collected) -> Result<IdentityAnswer, GatherError> {
+    let n = collected.cut.tracks as usize;
+    let failed = |e: idmesh_belief::BeliefError| GatherError::Failed(e.to_string());
+    let trees = collected
+        .trees()
+        .into_iter()
+        .map(|t| from_wire_tree(t.clone()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(failed)?;
+    // The cap matters only to events to come: the largest one reads any
+    // tree the leaders hold.
+    let belief = assemble(n, identity_options(MAX_GROUP), trees).map_err(failed)?;
+    let p_identity = belief.marginals().map_err(failed)?;
+    let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
+    Ok(IdentityAnswer {
+        watermark: collected.watermark(),
+        tracks: collected.cut.tracks,
+        p_identity,
+        predicted_identity,
+        marginals: FACTORED.to_string(),
+        leaders: collected.parts.len() as u32,
+        finished: collected.cut.finished,
+        sampling: None,
+    })
+}
+
 /// The marginals from the rows collected at one cut.
 fn marginals(
     collected: Collected,
     method: MarginalMethod,
     stop: &AtomicBool,
 ) -> Result<IdentityAnswer, GatherError> {
+    if collected.parts.iter().any(|p| !p.trees.is_empty()) {
+        return factored_marginals(&collected);
+    }
     let n = collected.cut.tracks as usize;
     let rows = collected
         .rows()

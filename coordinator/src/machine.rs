@@ -15,6 +15,7 @@ use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::decode;
+use idmesh_protocol::wire::identity::WireTree;
 use idmesh_protocol::wire::leader_to_leader::WireRow;
 use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -94,6 +95,25 @@ impl Collected {
             })
             .collect();
         without_passive(&rows)
+    }
+
+    /// Every leader's trees of the factored identity belief, less the
+    /// passive ones (a start kept, [`Partial::passive`]) of tracks another
+    /// leader's answer holds.
+    pub fn trees(&self) -> Vec<&WireTree> {
+        let n = self.cut.tracks;
+        let trees: Vec<(&[u32], &WireTree)> = self
+            .parts
+            .iter()
+            .flat_map(|p| p.trees.iter().map(|t| (p.passive.as_slice(), t)))
+            .collect();
+        let tracks: Vec<Vec<u32>> = trees.iter().map(|(_, t)| t.tracks(n).collect()).collect();
+        let items: Vec<_> = trees
+            .iter()
+            .zip(&tracks)
+            .map(|(&(passive, tree), tracks)| (passive, tracks.as_slice(), tree))
+            .collect();
+        without_passive(&items)
     }
 
     /// What the answer includes: per sensor, its events.

@@ -42,6 +42,11 @@ pub struct RouterConfig {
     pub omp: bool,
     /// The leaders hold the factored belief (None: the Radon belief).
     pub factored: Option<FactoredStart>,
+    /// On an identity stream with a known start and the factored belief,
+    /// the leaders hold the factored identity belief with groups of at
+    /// most this many slots (`Begin::factored_identity`); None, or a
+    /// stream without a known start: the information matrix's rows.
+    pub factored_identity: Option<u32>,
     /// Where the stream's leading `move` lines place each track
     /// ([`idmesh_placement::leading_places`] of the trace the sensor
     /// streams): a track placed there starts with the leader nearest to it
@@ -143,7 +148,6 @@ impl Router {
             regions = regions.keeping_mixes_across();
         }
         let begin = Begin {
-            factored_identity: None,
             factored: config.factored,
             tracks: tracks as u32,
             red: header.red_count().map(|k| k as u32),
@@ -155,6 +159,11 @@ impl Router {
             omp: config.omp,
             identities: header.identities.is_some(),
             initial_identity: header.initial_identity.clone(),
+            factored_identity: config.factored_identity.filter(|_| {
+                header.identities.is_some()
+                    && header.initial_identity.is_some()
+                    && config.factored.is_some()
+            }),
         };
         begin.check().map_err(RouterError::Begin)?;
         let interests = idmesh_placement::interests(&begin)?;
@@ -351,6 +360,10 @@ impl Router {
                     touching[b as usize].push_back(seq);
                 }
                 Item::Observe { track, .. } => touching[track as usize].push_back(seq),
+                // A read changes the tree of its track, wherever it lies.
+                Item::Identify { track, .. } if self.begin.factored_identity.is_some() => {
+                    touching[track as usize].push_back(seq)
+                }
                 _ => {}
             }
         }
@@ -436,6 +449,9 @@ impl Router {
             return Ok(missed);
         }
         let mut grown = Interest::new(follow.leader, tracks as usize, false);
+        if self.begin.factored_identity.is_some() {
+            grown = grown.reading_trees();
+        }
         for &t in &follow.tracks {
             grown.add(t);
         }
@@ -455,8 +471,10 @@ impl Router {
         for sequenced in &self.log[from..] {
             let observation = matches!(sequenced.item, Item::Observe { .. });
             if (saturated && observation)
-                || matches!(sequenced.item, Item::Mix { .. } | Item::Observe { .. })
-                    && grown.receives(&sequenced.item)
+                || matches!(
+                    sequenced.item,
+                    Item::Mix { .. } | Item::Observe { .. } | Item::Identify { .. }
+                ) && grown.receives(&sequenced.item)
             {
                 grown.note(&sequenced.item);
                 missed.push(sequenced.clone());

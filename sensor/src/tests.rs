@@ -22,6 +22,7 @@ fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) 
     let mut header = Header::new(tracks);
     header.red = Some(red);
     let config = RouterConfig {
+        factored_identity: Some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP),
         factored: None,
         sensor: "s".into(),
         leaders: (0..leaders)
@@ -43,6 +44,7 @@ fn router_of(leaders: usize, tracks: usize, red: usize, distributed_rule: bool) 
 /// exact conditioning, no pruning; the factored belief if `factored`.
 fn unplaced(factored: Option<idmesh_protocol::wire::factored::FactoredStart>) -> RouterConfig {
     RouterConfig {
+        factored_identity: Some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP),
         factored,
         sensor: "s".into(),
         leaders: ["a", "b"]
@@ -311,6 +313,7 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
 fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
     let limit = idmesh_protocol::wire::valid::MAX_IDENTITY_TRACKS as usize;
     let config = |leaders: usize| RouterConfig {
+        factored_identity: Some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP),
         factored: None,
         sensor: "s".into(),
         leaders: (0..leaders)

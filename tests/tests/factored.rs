@@ -357,10 +357,12 @@ fn matrix(v: &Value) -> Vec<Vec<f64>> {
 /// A stream of colours and identities under the factored belief, through
 /// three leaders, one of them killed mid-stream and restarted from its
 /// journal and snapshot: the leaders hold components for the colours and
-/// the information matrix's rows for the identities, side by side. The
-/// final colour answer equals `idmesh replay --topology` of the
-/// deployment (its twin, at the default settings), the final identity answer `idmesh replay --method
-/// information-matrix`, both to 1e-9; every row is held once.
+/// the trees of the factored identity belief for the identities (a known
+/// start), side by side. The final colour answer equals `idmesh replay
+/// --topology` of the deployment (its twin, at the default settings), the
+/// final identity answer `idmesh replay --method factored-identity`
+/// (replay's default on a trace of identities alone), both to 1e-9; every
+/// track's tree is held once.
 #[test]
 fn colours_and_identities_under_the_factored_belief_survive_a_leader_crash() {
     colours_and_identities_through_a_crash(false);
@@ -404,7 +406,7 @@ fn colours_and_identities_through_a_crash(adopted: bool) {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(gap > 1e-6, "the factored and Radon replays agree: {gap}");
-    let identities = replay_lines(&trace, &["--method", "information-matrix"]);
+    let identities = replay_lines(&trace, &["--method", "factored-identity"]);
     let first = crashed.first_answer(Duration::from_secs(30));
     assert_eq!(first["finished"], false, "the stream has begun, not ended");
     std::thread::sleep(Duration::from_millis(300));
@@ -434,13 +436,15 @@ fn colours_and_identities_through_a_crash(adopted: bool) {
         assert!(off < 1e-9, "identities, track {t}: off by {off}");
     }
     assert_eq!(answer["predicted_identity"], want["predicted_identity"]);
+    assert_eq!(answer["marginals"], "factored-identity");
 
-    // Components moved between leaders, and leader-1 came back from its
-    // journal with its rows (the simulator moves rows with handovers).
+    // Components and trees moved between leaders, and leader-1 came back
+    // from its journal with its trees.
+    assert_eq!(crashed.leaders_total("rows_held"), 0, "no rows");
     assert_eq!(
-        crashed.leaders_total("rows_held"),
+        crashed.leaders_total("tree_tracks"),
         12,
-        "every row held once"
+        "every track's tree held once"
     );
     let moved = crashed.leaders_total("sets_sent");
     assert!(moved > 0, "{moved} components moved");

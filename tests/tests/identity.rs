@@ -1,10 +1,13 @@
-//! Identities in the distributed runtime, as real processes on loopback:
-//! each leader holds the rows of the information matrix of its tracks, the
-//! coordinator computes marginals only when asked, and the answer equals
-//! the centralized `idmesh replay --method information-matrix`.
+//! Identities in the distributed runtime, as real processes on loopback.
+//! At the default settings (the factored belief, a known start) the
+//! leaders hold the trees of the factored identity belief and the answer
+//! equals `idmesh replay`'s default; on the Radon belief each leader holds
+//! the rows of the information matrix of its tracks and the answer equals
+//! `idmesh replay --method information-matrix`. Either way the coordinator
+//! computes marginals only when asked.
 
 use idmesh_tests::deployment::{
-    crowd_with_identities, replay_lines, truth_lines, Deployment, Settings,
+    crowd_with_identities, replay_lines, truth_lines, Deployment, Factored, Settings,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -46,7 +49,105 @@ fn settings(leaders: usize, rate: Option<f64>) -> Settings {
     }
 }
 
-/// Through 1 and 4 leaders at fixed places (tracks crossing regions, mixes
+/// At the default settings, through 1 and 4 leaders in fitted regions: the
+/// leaders hold the factored identity belief's trees — a mix across
+/// leaders gathers its two trees at one, reads go to the holder of the
+/// track's tree — and the identity marginals asked for right after the
+/// events before every truth line equal `idmesh replay --method
+/// factored-identity` (replay's default on a trace of identities alone) to
+/// 1e-9, with the same most likely
+/// assignment; every read is applied once, every track's tree is held
+/// once, and a one-track question agrees with the whole answer.
+#[test]
+fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders() {
+    let dir = std::env::temp_dir().join(format!("idmesh-identity-trees-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, 12, 4, 90.0, 7);
+    // The trace has colours too, so replay's default is the colours';
+    // its identity default (a trace of identities alone) is named.
+    let central = replay_lines(&trace, &["--method", "factored-identity"]);
+    let truths = truth_lines(&trace);
+    assert_eq!(central.len(), truths.len());
+    let reads = std::fs::read_to_string(&trace)
+        .unwrap()
+        .lines()
+        .filter(|l| l.contains("\"kind\":\"identify\""))
+        .count() as u64;
+    assert!(reads > 20, "the trace has {reads} reads");
+    for leaders in [1, 4] {
+        let deployment = Deployment::start(
+            &format!("identity-trees{leaders}"),
+            &trace,
+            &Settings {
+                factored: Some(Factored::default()),
+                ..settings(leaders, Some(300.0))
+            },
+        );
+        deployment.first_answer(Duration::from_secs(30));
+        let answers = deployment.at_truth_points("identity", &truths);
+        for (i, answer) in &answers {
+            let (i, events) = (*i, &answer["watermark"]["sensor-0"]);
+            let difference = largest_difference(
+                &matrix(&answer["p_identity"]),
+                &matrix(&central[i]["p_identity"]),
+            );
+            assert!(
+                difference < 1e-9,
+                "{leaders} leaders, {events} events: off by {difference}"
+            );
+            assert_eq!(
+                answer["predicted_identity"],
+                central[i]["predicted_identity"]
+            );
+            assert_eq!(answer["marginals"], "factored-identity");
+        }
+        assert!(
+            answers.len() * 2 >= truths.len(),
+            "{leaders} leaders: only {} of {} truth points answered\n{}",
+            answers.len(),
+            truths.len(),
+            deployment.log()
+        );
+        let last = deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
+            a["finished"] == true
+        });
+        let final_difference = largest_difference(
+            &matrix(&last["p_identity"]),
+            &matrix(&central.last().unwrap()["p_identity"]),
+        );
+        assert!(
+            final_difference < 1e-9,
+            "{leaders} leaders, the end: {final_difference}"
+        );
+        let one = deployment.query(&["identity", "7"]).expect("one track");
+        let row: Vec<f64> = one[0]["p_identity"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert!(largest_difference(&[row], &matrix(&last["p_identity"])[7..8]) < 1e-12);
+        assert_eq!(
+            deployment.leaders_total("identifies"),
+            reads,
+            "every read applied once"
+        );
+        assert_eq!(
+            deployment.leaders_total("tree_tracks"),
+            12,
+            "every tree held once"
+        );
+        assert_eq!(deployment.leaders_total("rows_held"), 0, "no rows");
+        if leaders > 1 {
+            assert!(
+                deployment.leaders_total("transfers_sent") > 0,
+                "trees and components moved between leaders"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// On the Radon belief, through 1 and 4 leaders at fixed places (tracks crossing regions, mixes
 /// across leaders),
 /// the identity marginals asked for right after the events before every
 /// truth line equal the centralized information matrix's to 1e-9; a

@@ -49,6 +49,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.changes += tally.changes;
                 total.identities += tally.identities;
                 total.identity_answers += tally.identity_answers;
+                total.tree_answers += tally.tree_answers;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -58,7 +59,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees)",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -78,7 +79,8 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.factored,
         total.changes,
         total.identities,
-        total.identity_answers
+        total.identity_answers,
+        total.tree_answers
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
@@ -99,13 +101,15 @@ fn every_schedule_answers_like_the_centralized_engine() {
         // Fitted regions take both tracks of a mix across two leaders to
         // one of them.
         assert!(total.tracks_taken > 0, "no mix ever took a track");
-        // Half of them carry identities: the rows the leaders keep beside
-        // their components made every identity answer the centralized
-        // information matrix's.
+        // Half of them carry identities: the trees (a known start) or
+        // rows the leaders keep beside their components made every
+        // identity answer the centralized belief's.
         let identities_on = std::env::var("IDMESH_SIM_IDENTITIES").map_or(true, |v| v != "0");
         if identities_on {
             assert!(
-                total.identities >= 300 && total.identity_answers >= total.identities,
+                total.identities >= 300
+                    && total.identity_answers >= total.identities
+                    && total.tree_answers >= total.identities / 3,
                 "only {} schedules with identities, {} identity answers",
                 total.identities,
                 total.identity_answers

@@ -83,13 +83,18 @@ const LEADER_COUNTERS: [LeaderField; 21] = [
     ),
 ];
 
-const LEADER_GAUGES: [LeaderField; 6] = [
+const LEADER_GAUGES: [LeaderField; 7] = [
     ("coefficients", "sets (coefficients) held", |s| {
         s.coefficients
     }),
     ("rows_held", "rows of the information matrix held", |s| {
         s.rows_held
     }),
+    (
+        "tree_tracks",
+        "tracks whose factored identity tree is held",
+        |s| s.tree_tracks,
+    ),
     ("tracks_owned", "tracks this leader surveils", |s| {
         s.tracks_owned
     }),

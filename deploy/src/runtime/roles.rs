@@ -245,6 +245,7 @@ async fn sensor(
         .map_err(|problem| anyhow!("sensor {name}: {problem}"))?;
     let router = Router::new(
         RouterConfig {
+            factored_identity: topology.factored_identity(),
             sensor: this.name.clone(),
             leaders: topology
                 .leader

@@ -6,6 +6,9 @@
 //! prefix = "idmesh/default"      # key-expression prefix
 //! belief = "factored"            # components held by leaders, coupled by
 //!                                # the coordinator; or "radon"
+//! identity = "factored"          # identity streams with a known start on
+//!                                # the factored belief: the factored
+//!                                # identity belief; or "information-matrix"
 //! max_component = 7              # factored: most tracks of a component
 //! split = "original"             # factored: or "recent", "least-loss"
 //! regional = true                # factored: components stay in their
@@ -93,11 +96,13 @@ use std::path::{Path, PathBuf};
 pub struct Topology {
     #[serde(default = "default_prefix", skip_serializing_if = "is_default_prefix")]
     pub prefix: String,
-    /// Which belief the leaders hold (property streams; identity streams
-    /// always hold the information matrix). Written even at its default:
-    /// it is what a reader of the file looks for first.
+    /// Which belief the leaders hold (property streams). Written even at
+    /// its default: it is what a reader of the file looks for first.
     #[serde(default)]
     pub belief: BeliefKind,
+    /// Which identity belief the leaders hold on an identity stream.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub identity: IdentityKind,
     /// Factored: the most tracks of one component.
     #[serde(
         default = "default_max_component",
@@ -218,6 +223,21 @@ pub enum BeliefKind {
     Radon,
 }
 
+/// The identity belief the leaders hold on an identity stream. The
+/// factored identity belief is the default wherever it can be held — a
+/// known start (`initial_identity`) and `belief = "factored"` — being
+/// exact up to 9 mixed tracks and calibrated beyond
+/// (docs/identity-results.md); elsewhere, and when asked, the rows of the
+/// information matrix (Shin et al., Section 4), each with the leader
+/// surveilling its track.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum IdentityKind {
+    #[default]
+    Factored,
+    InformationMatrix,
+}
+
 impl BeliefKind {
     /// As the topology file writes it.
     pub fn name(self) -> &'static str {
@@ -246,6 +266,13 @@ pub fn default_max_component() -> u32 {
 }
 
 impl Topology {
+    /// The group cap of the factored identity belief the stream's `Begin`
+    /// asks for (None: the information matrix's rows).
+    pub fn factored_identity(&self) -> Option<u32> {
+        (self.identity == IdentityKind::Factored)
+            .then_some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP)
+    }
+
     /// The factored settings the stream's `Begin` carries (None: Radon).
     pub fn factored(&self) -> Option<FactoredStart> {
         (self.belief == BeliefKind::Factored).then_some(FactoredStart {
@@ -522,6 +549,7 @@ impl Topology {
         leader: Vec<LeaderProcess>,
     ) -> Self {
         Topology {
+            identity: IdentityKind::default(),
             prefix: default_prefix(),
             belief: BeliefKind::default(),
             max_component: default_max_component(),

@@ -42,10 +42,12 @@ impl Leader {
                 let mix = Mix { a, b, swap };
                 let started = self.started()?;
                 if started.factored.is_some() {
-                    if let Some(handed) = handed {
-                        return self.factored_take(seq, mix, owner_a, handed, actions);
+                    self.trees_leave(seq, mix, owner_a)?;
+                    match handed {
+                        Some(handed) => self.factored_take(seq, mix, owner_a, handed, actions)?,
+                        None => self.factored_mix(seq, mix, owner_a, owner_b, actions)?,
                     }
-                    return self.factored_mix(seq, mix, owner_a, owner_b, actions);
+                    return self.send_trees_left(seq, actions);
                 }
                 if handed.is_some() {
                     return Err(LeaderError::Unexpected(
@@ -156,19 +158,26 @@ impl Leader {
                 accuracy,
                 ..
             } => {
-                self.stats.identifies += 1;
-                let rows = self
-                    .started()?
-                    .rows
-                    .as_mut()
-                    .ok_or(LeaderError::Unexpected(
-                        "an identity read on a stream without identities",
-                    ))?;
-                rows.identify(Identify {
+                let read = Identify {
                     track,
                     identity,
                     accuracy,
-                })?;
+                };
+                let started = self.started()?;
+                if let Some(trees) = &mut started.trees {
+                    // Only the holder of the track's tree applies it (a
+                    // leader that held it before may hear it too).
+                    if trees.holds(track) {
+                        trees.apply(&IdentityEvent::Identify(read))?;
+                        self.stats.identifies += 1;
+                    }
+                    return Ok(());
+                }
+                let rows = started.rows.as_mut().ok_or(LeaderError::Unexpected(
+                    "an identity read on a stream without identities",
+                ))?;
+                rows.identify(read)?;
+                self.stats.identifies += 1;
             }
             Item::Cut { events, tag, rows } => {
                 actions.push(Action::CutReady(self.reach_cut(seq, tag, events, rows)?));
@@ -185,11 +194,12 @@ impl Leader {
             .ok_or_else(|| LeaderError::NotListed(self.name.clone()))? as u16;
         let (share, interest) = start(&begin, me)?;
         let factored = start_factored(&begin, me)?;
+        let trees = start_identity(&begin, me)?;
         let own: Vec<bool> = begin.owners.iter().map(|&o| o == me).collect();
-        let passive = (0..begin.tracks)
+        let passive: std::collections::BTreeSet<u32> = (0..begin.tracks)
             .filter(|&t| begin.starts_unheld(t) && begin.keeper(t) == me)
             .collect();
-        let rows = if begin.identities {
+        let rows = if begin.identities && trees.is_none() {
             let held = (0..begin.tracks).filter(|&t| begin.holds_at_start(t, me));
             Some(InformationRows::start(
                 begin.tracks as usize,
@@ -215,7 +225,9 @@ impl Leader {
             interest,
             rows,
             row_mix: None,
+            trees,
             factored,
+            passive_trees: passive.clone(),
             passive,
         });
         Ok(())
@@ -241,6 +253,7 @@ impl Leader {
         };
         let adoptions = item.adoptions();
         for track in named.into_iter().flatten() {
+            let kept_tree = started.passive_trees.remove(&track);
             if !started.passive.remove(&track) || adoptions.contains(&(track, me)) {
                 continue;
             }
@@ -249,6 +262,9 @@ impl Leader {
             }
             if let Some(rows) = &mut started.rows {
                 rows.take(track);
+            }
+            if let (Some(trees), true) = (&mut started.trees, kept_tree) {
+                trees.drop_start(track)?;
             }
         }
         Ok(())
@@ -275,6 +291,14 @@ impl Leader {
             if !rows.holds(track) {
                 rows.adopt(track, initial, KNOWN_START_CONFIDENCE)?;
             }
+        }
+        if let Some(trees) = started.trees.as_mut().filter(|s| !s.holds(track)) {
+            let identity = initial.and_then(|i| i.get(track as usize)).copied().ok_or(
+                LeaderError::Unexpected(
+                    "an adopted track without a known start on a stream of identity trees",
+                ),
+            )?;
+            trees.adopt(track, identity)?;
         }
         Ok(())
     }
@@ -448,6 +472,12 @@ impl Leader {
         let me = self.me()?;
         let started = self.started()?;
         let apart = started.regional() && owner_a != owner_b;
+        // A sure swap moves no tree: each holder relabels its own.
+        if let Some(trees) = started.trees.as_mut() {
+            if trees.holds(mix.a) || trees.holds(mix.b) {
+                trees.relabel(mix)?;
+            }
+        }
         // On an identity stream the two rows are exchanged as on a Radon
         // stream: a leader surveilling one of two tracks of two leaders
         // sends the other its row as it was, and fits the pair when the
@@ -485,6 +515,18 @@ impl Leader {
             // carry.
             self.to_follow.extend([mix.a, mix.b]);
             if self.lazy_transfers() {
+                // A tree relabelled here may hold the other leader's
+                // track now (trees are not kept in regions): followed
+                // from here, before the singleton comes.
+                let started = self.started()?;
+                let trees = started.trees.as_ref();
+                let outside: Vec<u32> = [mix.a, mix.b]
+                    .into_iter()
+                    .filter(|&t| trees.is_some_and(|s| s.holds(t)) && started.interest.add(t))
+                    .collect();
+                if !outside.is_empty() {
+                    self.follow(seq, outside, actions)?;
+                }
                 // What comes is the singleton of this leader's track.
                 let mine = if theirs == mix.b { mix.a } else { mix.b };
                 self.note_pending(Pending {
@@ -532,6 +574,10 @@ impl Leader {
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let mut row = Vec::new();
+        if let Some(trees) = &mut self.started()?.trees {
+            // Both trees are here (they came with the components).
+            trees.apply(&IdentityEvent::Mix(mix))?;
+        }
         if let Some(rows) = &mut self.started()?.rows {
             rows.mix(mix)?;
             if partner.is_some() {
@@ -572,8 +618,12 @@ impl Leader {
             (Some(rows), Some((_, track))) => rows.holds(track),
             _ => true,
         };
+        let trees = started
+            .trees
+            .as_ref()
+            .is_none_or(|s| s.holds(mix.a) && s.holds(mix.b));
         let held = self.factored_mut("a factored mix on a Radon stream")?;
-        Ok(row && held.holds(mix.a) && held.holds(mix.b))
+        Ok(row && trees && held.holds(mix.a) && held.holds(mix.b))
     }
 
     /// The factored share of a started stream; `what` names the misuse

@@ -5,6 +5,7 @@
 use super::transfers::to_wire;
 use super::*;
 use idmesh_belief::factored::CountPart;
+use idmesh_placement::to_wire_tree;
 use std::sync::OnceLock;
 
 /// How many recent cuts a leader keeps answers for.
@@ -148,11 +149,16 @@ impl Leader {
     pub(super) fn partial(&self, cut: u64, tag: u64, events: u64, rows: bool) -> Option<Answer> {
         let started = self.started.as_ref()?;
         let sums = started.share.partial_sums();
+        let asked = rows;
         let rows = match (&started.rows, rows) {
             (Some(held), true) => held
                 .rows()
                 .map(|(track, row)| to_wire(track, row))
                 .collect(),
+            _ => Vec::new(),
+        };
+        let trees = match &started.trees {
+            Some(held) if asked => held.held_trees().into_iter().map(to_wire_tree).collect(),
             _ => Vec::new(),
         };
         let parts = started.factored.as_ref().map(|held| held.shared_parts());
@@ -162,7 +168,7 @@ impl Leader {
             None => sums.coefficients,
         };
         let sums = Partial {
-            trees: Vec::new(),
+            trees,
             components: None,
             base: None,
             gone: Vec::new(),

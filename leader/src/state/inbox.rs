@@ -144,6 +144,7 @@ impl Leader {
                             self.receive_rows(transfer.rows)?;
                             self.receive_sets(seq, transfer.sets, &mut actions)?;
                             self.receive_components(transfer.components)?;
+                            self.receive_trees(transfer.trees)?;
                             let new_tracks = self.follow_held()?;
                             if !new_tracks.is_empty() {
                                 self.follow(seq, new_tracks, &mut actions)?;
@@ -177,6 +178,7 @@ impl Leader {
                             let row_from = row_from(mix, partner, handed);
                             self.receive_partner_row(mix, row_from, key.1, transfer.rows)?;
                             self.receive_components(transfer.components)?;
+                            self.receive_trees(transfer.trees)?;
                         }
                     }
                     if !self.ready_to_mix(mix, row_from(mix, partner, handed))? {

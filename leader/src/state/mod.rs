@@ -44,6 +44,17 @@
 //!   rule) and the two swap (`row_mix`).
 //! - A handover moves the row with the components sent.
 //!
+//! On a stream whose leaders hold the factored identity belief instead
+//! (`Begin::factored_identity`, the default on a factored stream with a
+//! known start) there are no rows: each linked tree of groups
+//! ([`IdentityShare`]) lies whole with one leader, which follows its
+//! tracks and applies their reads. A mix (0 < swap < 1) needs its two
+//! trees in one place: every holder of either sends it, with what it
+//! sends anyway, to the leader surveilling `a`, which waits for both as it
+//! waits for components and mixes them there. A sure swap is relabelled
+//! by each holder where it is. Trees stay where they were mixed; a
+//! handover moves none.
+//!
 //! Rows are in the snapshot with the rest of `Started`, and a journal
 //! replays the transfers that carried them. With rows no transfer is taken
 //! in without stopping ([`Leader::lazy_transfers`]): the pending rule
@@ -51,13 +62,15 @@
 
 use crate::error::LeaderError;
 use idmesh_belief::factored::FactoredShare;
+use idmesh_belief::identity::factored::IdentityShare;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_belief::identity::{Identify, InformationRows};
+use idmesh_belief::identity::{Identify, IdentityEvent, InformationRows};
 use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe, TrackSet};
-use idmesh_placement::{start, start_factored};
+use idmesh_placement::{start, start_factored, start_identity};
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
+use idmesh_protocol::wire::identity::WireTree;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, WireRow, WireSet};
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Unfollow};
@@ -139,6 +152,10 @@ struct Started {
     rows: Option<InformationRows>,
     /// A cross-leader mix whose fit waits for the partner's row.
     row_mix: Option<Mix>,
+    /// The trees of the factored identity belief held here, on a stream
+    /// whose leaders hold that belief (`Begin::factored_identity`; `rows`
+    /// is then None).
+    trees: Option<IdentityShare>,
     /// The components of the factored belief held here, on a factored
     /// stream (`share` is then empty).
     factored: Option<FactoredShare>,
@@ -147,6 +164,12 @@ struct Started {
     /// given as passive parts in its answers.
     #[serde(default)]
     passive: std::collections::BTreeSet<u32>,
+    /// Of those, the tracks whose start tree is still kept here: a tree
+    /// that brings one (its track was adopted and mixed elsewhere) makes
+    /// the start give way, while the track's start component may stay
+    /// passive.
+    #[serde(default)]
+    passive_trees: std::collections::BTreeSet<u32>,
 }
 
 impl Started {
@@ -224,6 +247,12 @@ pub struct Leader {
     /// asked again and again, and a factored answer reads every component.
     #[serde(skip)]
     resting: Option<(bool, Arc<Answer>)>,
+    /// Trees of the factored identity belief taken out for the leader
+    /// that mixes them at the item being applied: they go in the transfer
+    /// this leader sends that leader at the item, or alone
+    /// ([`Leader::send_trees_left`]).
+    #[serde(skip)]
+    trees_out: Option<(u16, Vec<WireTree>)>,
 }
 
 impl Leader {
@@ -258,6 +287,7 @@ impl Leader {
             unfollow_after: 0,
             to_follow: Vec::new(),
             resting: None,
+            trees_out: None,
         }
     }
 

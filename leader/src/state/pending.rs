@@ -88,6 +88,7 @@ impl Leader {
                 return Err(broken(format!("track {other}")));
             }
             self.receive_components(transfer.components)?;
+            self.receive_trees(transfer.trees)?;
             // Its tracks are followed: surveilled here, or kept followed
             // while their component was away.
             let unfollowed = self.follow_held()?;

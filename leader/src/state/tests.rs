@@ -1378,3 +1378,156 @@ fn an_adopted_track_takes_its_start_row() {
     assert_eq!(a.waiting_for_components(), Some(3), "waits for b's");
     assert!(!a.factored().unwrap().holds(2));
 }
+
+/// A factored stream whose leaders hold the factored identity belief,
+/// under the regional rule or not, at a cap that cuts groups or not: a
+/// mix gathers its two trees at the leader surveilling a, a sure swap is
+/// relabelled where the trees lie, a handover moves no tree, every read
+/// is applied once, by the holder of its track's tree, and a snapshot
+/// taken while a leader waits restores it waiting — and the trees put
+/// together equal the centralized belief after every item.
+#[test]
+fn factored_leaders_carry_identity_trees_through_mixes_swaps_handovers_and_snapshots() {
+    use idmesh_belief::identity::factored::assemble;
+    use idmesh_belief::identity::filter::max_abs_difference;
+    use idmesh_belief::identity::{FactoredIdentity, IdentityFilter};
+    use idmesh_placement::{from_wire_tree, identity_options};
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+    for (regional, cap) in [(false, 9), (true, 9), (true, 3)] {
+        let start = vec![2, 0, 3, 1, 4, 5];
+        let n = start.len();
+        let Item::Begin(mut begin) = begin(&["a", "b", "c"], vec![0, 0, 1, 1, 2, 2]) else {
+            unreachable!()
+        };
+        begin.tracks = n as u32;
+        begin.identities = true;
+        begin.initial_identity = Some(start.clone());
+        begin.factored_identity = Some(cap);
+        begin.factored = Some(FactoredStart {
+            max_component: 2,
+            split: WireSplit::Original,
+            shrink: true,
+            regional,
+        });
+        let mut central = FactoredIdentity::from_assignment(&start, identity_options(cap)).unwrap();
+        let mut hand = Hand::new(Item::Begin(begin), &["a", "b", "c"]);
+        let mut owners = vec![0usize, 0, 1, 1, 2, 2];
+        let mix = |a: u32, b: u32, swap: f64, owners: &[usize]| Item::Mix {
+            adopted: Vec::new(),
+            a,
+            b,
+            swap,
+            owner_a: owners[a as usize] as u16,
+            owner_b: owners[b as usize] as u16,
+            handed: None,
+        };
+        let steps: Vec<(&str, u32, u32, f64)> = vec![
+            ("read", 0, 1, 0.8),
+            ("mix", 1, 2, 0.3),
+            ("snapshot", 0, 0, 0.0),
+            ("mix", 4, 1, 0.6),
+            ("read", 2, 0, 0.9),
+            ("mix", 5, 3, 0.45),
+            ("mix", 0, 3, 1.0),
+            ("handover", 0, 1, 0.0),
+            ("mix", 2, 5, 0.4),
+            ("read", 3, 2, 0.7),
+            ("mix", 0, 4, 0.25),
+            ("mix", 3, 4, 1.0),
+            ("read", 1, 3, 0.85),
+            ("mix", 5, 0, 0.5),
+            ("read", 4, 4, 0.9),
+        ];
+        let (mut seq, mut reads, mut moved) = (1, 0, 0);
+        for (what, x, y, z) in steps {
+            if what == "snapshot" {
+                let snapshot = hand.leaders[0].snapshot();
+                hand.leaders[0] = Leader::restore(&snapshot).unwrap();
+                continue;
+            }
+            seq += 1;
+            let received: u64 = hand
+                .leaders
+                .iter()
+                .map(|l| l.stats().transfers_received)
+                .sum();
+            match what {
+                "read" => {
+                    let item = Item::Identify {
+                        adopted: false,
+                        track: x,
+                        identity: y,
+                        accuracy: z,
+                        owner: owners[x as usize] as u16,
+                    };
+                    // Every leader hears it (as a holder following the
+                    // track would); only the holder applies it.
+                    hand.item(seq, item, None);
+                    reads += 1;
+                    central
+                        .identify(Identify {
+                            track: x,
+                            identity: y,
+                            accuracy: z,
+                        })
+                        .unwrap();
+                }
+                "mix" => {
+                    hand.item(seq, mix(x, y, z, &owners), None);
+                    central
+                        .mix(Mix {
+                            a: x,
+                            b: y,
+                            swap: z,
+                        })
+                        .unwrap();
+                }
+                _ => {
+                    let from = owners[x as usize] as u16;
+                    owners[x as usize] = y as usize;
+                    let handover = Item::Handover {
+                        track: x,
+                        from,
+                        to: y as u16,
+                    };
+                    hand.item(seq, handover, None);
+                }
+            }
+            let after: u64 = hand
+                .leaders
+                .iter()
+                .map(|l| l.stats().transfers_received)
+                .sum();
+            moved += after - received;
+            for leader in &hand.leaders {
+                let stopped = (
+                    leader.waiting_for_transfer(),
+                    leader.waiting_for_components(),
+                );
+                assert_eq!(stopped, (None, None), "regional {regional}: {what} {x} {y}");
+                assert!(leader.caught_up());
+            }
+            let trees: Vec<_> = hand
+                .leaders
+                .iter()
+                .flat_map(|l| l.quiet(true).unwrap().sums.trees.clone())
+                .map(|t| from_wire_tree(t).unwrap())
+                .collect();
+            let holders: usize = trees.iter().map(|t| t.tracks(n).len()).sum();
+            assert_eq!(holders, n, "every track in one tree, at one leader");
+            let whole = assemble(n, identity_options(cap), trees).unwrap();
+            let d = max_abs_difference(&whole.marginals().unwrap(), &central.marginals().unwrap());
+            assert!(
+                d < 1e-12,
+                "regional {regional}, cap {cap}: {d} after {what} {x} {y}"
+            );
+            assert!(hand
+                .leaders
+                .iter()
+                .all(|l| l.quiet(true).unwrap().sums.rows.is_empty()));
+        }
+        let applied: u64 = hand.leaders.iter().map(|l| l.stats().identifies).sum();
+        assert_eq!(applied, reads, "each read applied once");
+        assert!(moved > 0, "mixes across leaders moved trees");
+    }
+}

@@ -4,7 +4,7 @@
 
 use super::*;
 use idmesh_belief::factored::HeldComponent;
-use idmesh_placement::{from_wire_component, to_wire_component};
+use idmesh_placement::{from_wire_component, from_wire_tree, to_wire_component, to_wire_tree};
 use idmesh_protocol::wire::factored::WireComponent;
 
 impl Leader {
@@ -92,10 +92,18 @@ impl Leader {
         actions: &mut Vec<Action>,
     ) -> Result<(), LeaderError> {
         let me = self.me()?;
+        // Trees on their way to `to` at this item go with the rest.
+        let trees = match self.trees_out.take() {
+            Some((receiver, trees)) if receiver == to => trees,
+            other => {
+                self.trees_out = other;
+                Vec::new()
+            }
+        };
         self.stats.transfers_sent += 1;
-        self.stats.sets_sent += (sets.len() + components.len()) as u64;
+        self.stats.sets_sent += (sets.len() + components.len() + trees.len()) as u64;
         let transfer = Transfer {
-            trees: Vec::new(),
+            trees,
             version: VERSION,
             from: me,
             seq,
@@ -231,6 +239,93 @@ impl Leader {
 }
 
 impl Leader {
+    /// At a mix (0 < swap < 1) on a stream of identity trees, a leader
+    /// other than `mixer` (the one surveilling `mix.a`) takes out the
+    /// trees it holds of either track: they go to `mixer` in the transfer
+    /// this leader sends it at the item, or alone
+    /// ([`Leader::send_trees_left`]), and their tracks leave its interest
+    /// unless it needs them for another reason.
+    pub(super) fn trees_leave(
+        &mut self,
+        seq: u64,
+        mix: Mix,
+        mixer: u16,
+    ) -> Result<(), LeaderError> {
+        let me = self.me()?;
+        let started = self.started()?;
+        let Some(trees) = started.trees.as_mut() else {
+            return Ok(());
+        };
+        if me == mixer || !(mix.swap > 0.0 && mix.swap < 1.0) {
+            return Ok(());
+        }
+        let n = trees.tracks() as u32;
+        let taken: Vec<WireTree> = trees
+            .take_of(&[mix.a, mix.b])?
+            .into_iter()
+            .map(to_wire_tree)
+            .collect();
+        if taken.is_empty() {
+            return Ok(());
+        }
+        let tracks: Vec<u32> = taken.iter().flat_map(|t| t.tracks(n)).collect();
+        self.trees_out = Some((mixer, taken));
+        self.unfollow(seq, tracks)
+    }
+
+    /// The trees taken out at item `seq` that no transfer took along:
+    /// sent alone to the leader that mixes them, which waits for them.
+    pub(super) fn send_trees_left(
+        &mut self,
+        seq: u64,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        let Some((to, trees)) = self.trees_out.take() else {
+            return Ok(());
+        };
+        self.trees_out = Some((to, trees));
+        self.send(seq, to, Vec::new(), Vec::new(), Vec::new(), actions)
+    }
+
+    /// Trees of the factored identity belief received: held from now on,
+    /// their tracks followed ([`Leader::follow_held`]). A start this
+    /// leader kept for nobody that is in the way is stale (its track was
+    /// adopted elsewhere, and the keeper is not told) and gives way; any
+    /// other overlap is a bad transfer.
+    pub(super) fn receive_trees(&mut self, trees: Vec<WireTree>) -> Result<(), LeaderError> {
+        if trees.is_empty() {
+            return Ok(());
+        }
+        let started = self.started()?;
+        let (held, passive) = match started.trees.as_mut() {
+            Some(held) => (held, &mut started.passive_trees),
+            None => {
+                return Err(LeaderError::BadTransfer(
+                    "trees of a factored identity belief on a stream without them".into(),
+                ))
+            }
+        };
+        let n = held.tracks() as u32;
+        let mut arrived = Vec::new();
+        for wire in trees {
+            let tracks: Vec<u32> = wire.tracks(n).collect();
+            let tree = from_wire_tree(wire).map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+            for t in held.in_the_way(&tree) {
+                if !passive.remove(&t) {
+                    return Err(LeaderError::BadTransfer(format!(
+                        "a tree that overlaps the tree of track {t}, held here"
+                    )));
+                }
+                held.drop_start(t)?;
+            }
+            held.put(tree)
+                .map_err(|e| LeaderError::BadTransfer(e.to_string()))?;
+            arrived.extend(tracks);
+        }
+        self.to_follow.extend(arrived);
+        Ok(())
+    }
+
     /// Components received (a factored stream): held from now on. The
     /// tracks they bring are followed once the item's components are all
     /// in ([`Leader::follow_held`]).
@@ -270,9 +365,12 @@ impl Leader {
         };
         candidates.sort_unstable();
         candidates.dedup();
+        let trees = started.trees.as_ref();
         Ok(candidates
             .into_iter()
-            .filter(|&t| held.holds(t) && started.interest.add(t))
+            .filter(|&t| {
+                (held.holds(t) || trees.is_some_and(|s| s.holds(t))) && started.interest.add(t)
+            })
             .collect())
     }
 
@@ -288,9 +386,11 @@ impl Leader {
         let started = self.started()?;
         if let (Some(held), false) = (&started.factored, started.interest.grows()) {
             let (own, interest) = (&started.own, &mut started.interest);
+            let trees = started.trees.as_ref();
             pending.extend(candidates.into_iter().filter(|&t| {
                 !own.get(t as usize).copied().unwrap_or(false)
                     && !held.holds(t)
+                    && !trees.is_some_and(|s| s.holds(t))
                     && interest.remove(t)
             }));
         }

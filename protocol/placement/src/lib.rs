@@ -86,6 +86,9 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
         } else if factored.shrink {
             interest = interest.fixed();
         }
+        if begin.factored_identity.is_some() {
+            interest = interest.reading_trees();
+        }
         interest.note(&Item::Begin(begin.clone()));
         return Ok((share, interest));
     }

@@ -96,6 +96,11 @@ pub struct LeaderStats {
     pub identifies: u64,
     /// Rows of the information matrix held now.
     pub rows_held: u64,
+    /// Tracks whose tree of the factored identity belief is held here
+    /// now (each tree whole at one leader; starts kept for nobody left
+    /// out).
+    #[serde(default)]
+    pub tree_tracks: u64,
     pub coefficients: u64,
     pub tracks_owned: u64,
     pub tracks_followed: u64,

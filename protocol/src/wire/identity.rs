@@ -11,6 +11,11 @@ use serde::{Deserialize, Serialize};
 /// belief's largest table (9! assignments).
 pub const MAX_GROUP: u32 = 9;
 
+/// The group cap of a deployment's factored identity belief: the
+/// largest, the belief's own default (`FactoredIdentityOptions`), which is
+/// exact below it.
+pub const DEFAULT_MAX_GROUP: u32 = MAX_GROUP;
+
 /// One group: k tracks (real ones below n, link ports from n on), the k
 /// identities they carry between them (stars of ports from n on), and
 /// the probability of each of the k! assignments, by rank.

@@ -44,6 +44,11 @@ pub struct Interest {
     /// Whether the interest is the leader's region: a handover away ends
     /// it ([`Interest::of_region`]).
     region: bool,
+    /// Whether a read reaches every leader following its track, not only
+    /// the track's owner: the leaders hold the factored identity belief,
+    /// whose trees lie with the leader that last mixed them
+    /// ([`Interest::reading_trees`]).
+    reads_follow: bool,
 }
 
 impl Interest {
@@ -56,6 +61,7 @@ impl Interest {
             saturation: usize::MAX,
             grows: true,
             region: false,
+            reads_follow: false,
         }
     }
 
@@ -75,6 +81,14 @@ impl Interest {
     pub fn of_region(mut self) -> Self {
         self.grows = false;
         self.region = true;
+        self
+    }
+
+    /// The same interest on a stream whose leaders hold the factored
+    /// identity belief: the holder of a track's tree follows the track,
+    /// wherever it is surveilled, and must hear its reads.
+    pub fn reading_trees(mut self) -> Self {
+        self.reads_follow = true;
         self
     }
 
@@ -175,7 +189,9 @@ impl Interest {
                     || matches!(growth, Growth::Meeting(p) if self.meets(p))
             }
             Item::Handover { from, to, .. } => *from == self.leader || *to == self.leader,
-            Item::Identify { owner, .. } => *owner == self.leader,
+            Item::Identify { owner, track, .. } => {
+                *owner == self.leader || (self.reads_follow && self.follows(*track))
+            }
         }
     }
 
@@ -204,7 +220,7 @@ impl Interest {
                 // The handover riding on the mix, as `Item::Handover`.
                 if *owner_a == self.leader {
                     self.add(handed.track);
-                } else if handed.from == self.leader && self.region {
+                } else if handed.from == self.leader && self.region && !self.reads_follow {
                     self.remove(handed.track);
                 }
             }
@@ -227,7 +243,7 @@ impl Interest {
             Item::Handover { track, from, to } => {
                 if *to == self.leader {
                     self.add(*track);
-                } else if *from == self.leader && self.region {
+                } else if *from == self.leader && self.region && !self.reads_follow {
                     self.remove(*track);
                 }
             }

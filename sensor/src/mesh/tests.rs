@@ -27,6 +27,7 @@ fn header() -> Header {
 
 pub(super) fn router(factored: bool) -> Router {
     let config = RouterConfig {
+        factored_identity: Some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP),
         factored: factored.then_some(idmesh_protocol::wire::factored::FactoredStart {
             max_component: 4,
             split: idmesh_protocol::wire::factored::WireSplit::Original,

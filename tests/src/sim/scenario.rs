@@ -11,12 +11,12 @@
 use idmesh_belief::identity::filter::to_rows;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::{
-    Identify as IdentifyEvent, IdentityFilter, InformationMatrix, InformationOptions,
-    MarginalMethod,
+    FactoredIdentity, Identify as IdentifyEvent, IdentityFilter, InformationMatrix,
+    InformationOptions, MarginalMethod,
 };
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
-use idmesh_placement::{factored_options, RegionRule, Regional, Regions};
+use idmesh_placement::{factored_options, identity_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_sensor::machine::Gateway;
@@ -52,10 +52,13 @@ pub struct Scenario {
     pub identity: Option<CentralIdentity>,
 }
 
-/// `idmesh replay --method information-matrix` after every prefix.
+/// What `idmesh replay` runs by default after every prefix: the factored
+/// identity belief on a stream with a known start (what the leaders hold
+/// there), the information matrix without one.
 pub struct CentralIdentity {
-    /// `rows[e]`: the log-likelihood rows after the first e events.
-    pub rows: Vec<Vec<Vec<f64>>>,
+    /// `rows[e]`: the information matrix's log-likelihood rows after the
+    /// first e events (None: the factored identity belief).
+    pub rows: Option<Vec<Vec<Vec<f64>>>>,
     /// `marginals[e]`: their exact marginals (track × identity).
     pub marginals: Vec<Vec<Vec<f64>>>,
 }
@@ -244,6 +247,7 @@ impl Scenario {
     /// deployment must equal the centralized engine to 1e-9).
     pub fn router(&self) -> RouterConfig {
         RouterConfig {
+            factored_identity: Some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP),
             factored: self.factored,
             sensor: "sensor-0".into(),
             leaders: self.leaders.clone(),
@@ -320,25 +324,54 @@ fn centralized(
     Ok(out)
 }
 
-/// The centralized information matrix (the identity method
-/// `idmesh replay --method information-matrix` runs) after every prefix
-/// of `lines`, with its exact marginals.
+/// The centralized identity belief `idmesh replay` runs by default after
+/// every prefix of `lines`, with its marginals: the factored identity
+/// belief with a known start, else the information matrix (with exact
+/// marginals).
 fn central_identity(header: &Header, lines: &[Line]) -> Result<CentralIdentity, String> {
     let n = header.tracks;
     let failed = |e: idmesh_belief::BeliefError| e.to_string();
+    if let Some(start) = &header.initial_identity {
+        let cap = idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP;
+        let mut belief =
+            FactoredIdentity::from_assignment(start, identity_options(cap)).map_err(failed)?;
+        let mut marginals = vec![belief.marginals().map_err(failed)?];
+        for line in lines {
+            match line {
+                Line::Mix(m) => belief
+                    .mix(idmesh_belief::Mix {
+                        a: m.a,
+                        b: m.b,
+                        swap: m.swap,
+                    })
+                    .map_err(failed)?,
+                Line::Identify(read) => belief
+                    .identify(IdentifyEvent {
+                        track: read.track,
+                        identity: read.identity,
+                        accuracy: read.accuracy,
+                    })
+                    .map_err(failed)?,
+                _ => {}
+            }
+            marginals.push(belief.marginals().map_err(failed)?);
+        }
+        return Ok(CentralIdentity {
+            rows: None,
+            marginals,
+        });
+    }
     let options = InformationOptions::default();
     let mut matrix = match &header.initial_identity {
         Some(start) => InformationMatrix::from_assignment(start, KNOWN_START_CONFIDENCE, options)
             .map_err(failed)?,
         None => InformationMatrix::uniform_with(n, options).map_err(failed)?,
     };
-    let mut central = CentralIdentity {
-        rows: Vec::with_capacity(lines.len() + 1),
-        marginals: Vec::with_capacity(lines.len() + 1),
-    };
+    let mut rows = Vec::with_capacity(lines.len() + 1);
+    let mut marginals = Vec::with_capacity(lines.len() + 1);
     let mut keep = |matrix: &InformationMatrix| -> Result<(), String> {
-        central.rows.push(matrix.log_likelihoods());
-        central.marginals.push(exact_marginals(matrix)?);
+        rows.push(matrix.log_likelihoods());
+        marginals.push(exact_marginals(matrix)?);
         Ok(())
     };
     keep(&matrix)?;
@@ -362,7 +395,10 @@ fn central_identity(header: &Header, lines: &[Line]) -> Result<CentralIdentity, 
         }
         keep(&matrix)?;
     }
-    Ok(central)
+    Ok(CentralIdentity {
+        rows: Some(rows),
+        marginals,
+    })
 }
 
 /// The exact marginals of `matrix`, track by identity, as the coordinator

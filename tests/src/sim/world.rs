@@ -10,14 +10,17 @@
 use super::network::{Endpoint, Network};
 use super::scenario::{exact_marginals, Scenario};
 use super::Violation;
-use idmesh_belief::identity::{InformationOptions, InformationRows};
+use idmesh_belief::identity::factored::assemble;
+use idmesh_belief::identity::{IdentityFilter, InformationOptions, InformationRows};
 use idmesh_coordinator::machine::{
     at_rest_of, check, marginals_of, read_cut, GatherError, Memory, Partials,
 };
 use idmesh_leader::journal::Kind;
 use idmesh_leader::machine::{Ask, Input, Node, Output, Timers};
+use idmesh_placement::{from_wire_tree, identity_options};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
+use idmesh_protocol::wire::identity::WireTree;
 use idmesh_protocol::wire::leader_to_leader::TransfersSent;
 use idmesh_protocol::wire::leader_to_sensor::{Followed, Resent};
 use idmesh_protocol::wire::query::MarginalsAnswer;
@@ -248,6 +251,9 @@ pub struct Tally {
     /// Schedules with identities (factored), and identity answers checked.
     pub identities: u64,
     pub identity_answers: u64,
+    /// Of them, answers made of the leaders' trees of the factored
+    /// identity belief (a known start).
+    pub tree_answers: u64,
     /// Factored leaders' replies told as a change to an answer the
     /// coordinator keeps (`Partial::base`).
     pub changes: u64,
@@ -1299,13 +1305,14 @@ impl World {
                 .into_iter()
                 .map(|r| (r.track, r.ln_likelihoods.clone()))
                 .collect();
-            Ok((answer, rows))
+            let trees: Vec<WireTree> = collected.trees().into_iter().cloned().collect();
+            Ok((answer, (rows, trees)))
         });
         match answered {
-            Ok((answer, rows)) => {
+            Ok((answer, (rows, trees))) => {
                 if self.scenario.identity.is_some() {
                     let events = answer.watermark.values().copied().sum::<u64>();
-                    self.answered_identity(events, rows)?;
+                    self.answered_identity(events, rows, trees)?;
                 }
                 self.answered(&query, answer)
             }
@@ -1368,22 +1375,59 @@ impl World {
         Ok(())
     }
 
-    /// Checks the rows an answer at `events` events gathered against the
-    /// centralized information matrix there: put together they must be it
-    /// (the same operations on each row, in the same order), and the
-    /// identity answer made of them must be its.
+    /// Checks the rows or trees an answer at `events` events gathered
+    /// against the centralized identity belief there: rows put together
+    /// must be the information matrix (the same operations on each row, in
+    /// the same order), trees put together the factored identity belief,
+    /// and the identity answer made of them must be its.
     fn answered_identity(
         &mut self,
         events: u64,
         rows: Vec<(u32, Vec<f64>)>,
+        trees: Vec<WireTree>,
     ) -> Result<(), Violation> {
         let Some(central) = &self.scenario.identity else {
             return Ok(());
         };
-        let (Some(want), Some(want_marginals)) = (
-            central.rows.get(events as usize),
-            central.marginals.get(events as usize),
-        ) else {
+        let Some(want_marginals) = central.marginals.get(events as usize) else {
+            return Err(Violation::new(format!(
+                "an identity answer at {events} events, beyond the stream's {}",
+                self.scenario.lines.len()
+            )));
+        };
+        let Some(all_rows) = &central.rows else {
+            if !rows.is_empty() {
+                return Err(Violation::new(format!(
+                    "at {events} events rows of an information matrix where the leaders hold trees"
+                )));
+            }
+            let n = want_marginals.len();
+            let held = trees
+                .into_iter()
+                .map(from_wire_tree)
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| Violation::new(format!("at {events} events a tree: {e}")))?;
+            let cap = idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP;
+            let whole = assemble(n, identity_options(cap), held).map_err(|e| {
+                Violation::new(format!(
+                    "at {events} events the leaders' trees do not make a belief: {e}"
+                ))
+            })?;
+            let marginals = whole
+                .marginals()
+                .map_err(|e| Violation::new(e.to_string()))?;
+            for (t, (got, want)) in marginals.iter().zip(want_marginals).enumerate() {
+                if !got.iter().zip(want).all(|(g, w)| (g - w).abs() <= 1e-9) {
+                    return Err(Violation::new(format!(
+                        "at {events} events track {t}'s identities: the deployment's trees say {got:?}, the centralized factored identity belief {want:?}"
+                    )));
+                }
+            }
+            self.tally.identity_answers += 1;
+            self.tally.tree_answers += 1;
+            return Ok(());
+        };
+        let Some(want) = all_rows.get(events as usize) else {
             return Err(Violation::new(format!(
                 "an identity answer at {events} events, beyond the stream's {}",
                 self.scenario.lines.len()

@@ -38,12 +38,14 @@
 //! `--max-component` slots — tracks and link ports — per group at most,
 //! linked cuts above it).
 //!
-//! With no `--method` replay runs [`DEFAULT_IDENTITY_METHOD`], the
-//! information matrix, because that is what a deployment's leaders carry
-//! and serve: what a user checks offline is what the deployment answers.
-//! The factored identity belief is exact up to 9 tracks (docs/design/
-//! identity.md, "Factored identity belief") and is there to be named
-//! until leaders carry it.
+//! With no `--method` replay runs what a deployment's leaders hold at
+//! their defaults, so that what a user checks offline is what the
+//! deployment answers: on a trace with a known start
+//! ([`DEFAULT_IDENTITY_METHOD`]) the factored identity belief, exact up to
+//! 9 mixed tracks and calibrated beyond (docs/design/identity.md,
+//! "Factored identity belief"); without one
+//! ([`IDENTITY_METHOD_WITHOUT_START`]) the information matrix, since the
+//! factored belief of an unknown start is one group of all n tracks.
 
 use super::args::ReplayArgs;
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
@@ -123,10 +125,16 @@ pub struct IdentityReplayOptions {
     pub force: bool,
 }
 
-/// The identity method replay runs when none is named: the information
-/// matrix, the rows every leader keeps, so that replay without options
+/// The identity method replay runs when none is named on a trace with a
+/// known start: the factored identity belief, which a deployment's
+/// leaders hold there by default, so that replay without options
 /// computes what a deployment serves.
-pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::InformationMatrix;
+pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::FactoredIdentity;
+
+/// The identity method replay runs when none is named on a trace without
+/// a known start: the information matrix, whose rows the leaders keep
+/// there.
+pub const IDENTITY_METHOD_WITHOUT_START: IdentityMethod = IdentityMethod::InformationMatrix;
 
 /// The default group cap of --method factored-identity in replay.
 pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_belief::identity::factored::DEFAULT_MAX_GROUP;
@@ -145,7 +153,15 @@ pub const WARN_EXACT_BIT_STATES: f64 = 1e4;
 /// command line's, with the identity default when no method is named.
 pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let method = match args.method {
-        None => DEFAULT_IDENTITY_METHOD,
+        None => {
+            let header = TraceReader::open(&args.trace)
+                .with_context(|| format!("cannot open trace {}", args.trace.display()))?
+                .read_header()?;
+            match header.initial_identity {
+                Some(_) => DEFAULT_IDENTITY_METHOD,
+                None => IDENTITY_METHOD_WITHOUT_START,
+            }
+        }
         Some(m) => m
             .identity()
             .ok_or_else(|| anyhow!("--method {} is not an identity method", m.name()))?,

@@ -25,9 +25,9 @@ use std::io::Write;
 /// property replay otherwise; with no `--method`, the default for the
 /// trace — one that answers at any size: factored for a trace with
 /// colours; for an identity trace that says nothing of colours (its
-/// header has `identities` and neither `red` nor `initial_red`), the
-/// information matrix, which the leaders serve
-/// (`identity::DEFAULT_IDENTITY_METHOD`). A property method on such an identity trace, or an
+/// header has `identities` and neither `red` nor `initial_red`), what the
+/// leaders serve: the factored identity belief with a known start
+/// (`identity::DEFAULT_IDENTITY_METHOD`), the information matrix without. A property method on such an identity trace, or an
 /// identity method on a trace without identities, is an error that says so.
 pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
     if let Some(path) = &args.topology {
@@ -50,8 +50,9 @@ pub fn dispatch(args: &ReplayArgs, out: impl Write) -> Result<()> {
         (Some(_), Some(method)) if method.identity().is_some() => identity::run_default(args, out),
         (Some(n), Some(method)) if identities_only => bail!(
             "{source}:1: header: an identity trace ({n} identities) with no colours, and \
-             --method {} is a property method; use information-matrix (the default), \
-             factored-identity, exact-perm, belief-matrix or property-bits",
+             --method {} is a property method; use factored-identity (the default with a known \
+             start), information-matrix (the default without), exact-perm, belief-matrix or \
+             property-bits",
             method.name()
         ),
         (None, Some(method)) if method.identity().is_some() => bail!(
@@ -102,14 +103,30 @@ mod tests {
                 .map(|()| String::from_utf8(out).unwrap())
                 .map_err(|e| format!("{e:#}"))
         };
+        // A known start: what the leaders hold there by default.
         let out = run(&identity, None).unwrap();
+        assert!(out.contains(r#""method":"factored-identity""#), "{out}");
+        let unknown = dir.join("ids-unknown.jsonl");
+        std::fs::write(
+            &unknown,
+            concat!(
+                r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"identities":2}"#,
+                "\n",
+                r#"{"kind":"identify","time":0.5,"track":0,"identity":1,"accuracy":0.9}"#,
+                "\n",
+                r#"{"kind":"truth","time":1,"identity":[1,0]}"#,
+                "\n"
+            ),
+        )
+        .unwrap();
+        let out = run(&unknown, None).unwrap();
         assert!(out.contains(r#""method":"information-matrix""#), "{out}");
         assert!(out.contains(r#""predicted_identity":[1,0]"#), "{out}");
         let out = run(&identity, Some(Method::BeliefMatrix)).unwrap();
         assert!(out.contains(r#""method":"belief-matrix""#), "{out}");
         let error = run(&identity, Some(Method::Overcomplete)).unwrap_err();
         assert!(
-            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use information-matrix (the default), factored-identity, exact-perm, belief-matrix or property-bits"),
+            error.ends_with("header: an identity trace (2 identities) with no colours, and --method overcomplete is a property method; use factored-identity (the default with a known start), information-matrix (the default without), exact-perm, belief-matrix or property-bits"),
             "{error}"
         );
         let error = run(&property, Some(Method::InformationMatrix)).unwrap_err();

@@ -94,6 +94,15 @@ impl IdentityShare {
         self.belief.apply(event)
     }
 
+    /// The tracks whose trees this share holds, in order.
+    pub fn held_tracks(&self) -> impl Iterator<Item = u32> + '_ {
+        self.held
+            .iter()
+            .enumerate()
+            .filter(|(_, h)| **h)
+            .map(|(t, _)| t as u32)
+    }
+
     /// The number of tracks (and identities) of the whole belief.
     pub fn tracks(&self) -> usize {
         self.belief.n
@@ -183,6 +192,30 @@ impl IdentityShare {
         }
         self.held[t as usize] = false;
         Ok(())
+    }
+
+    /// The tracks held here that taking `tree` in would displace: its own
+    /// tracks, or the tracks of the groups here that carry its
+    /// identities. [`IdentityShare::put`] refuses a tree while any is
+    /// left; a start kept for nobody, stale since its track was adopted
+    /// elsewhere, can give way first ([`IdentityShare::drop_start`]).
+    pub fn in_the_way(&self, tree: &HeldTree) -> Vec<u32> {
+        let b = &self.belief;
+        let n = b.n;
+        let mut groups: BTreeSet<usize> = tree
+            .tracks(n)
+            .iter()
+            .map(|&t| b.group_of[t as usize])
+            .collect();
+        groups.extend(tree.identities(n).iter().map(|&i| b.holder[i as usize]));
+        let mut tracks: Vec<u32> = groups
+            .into_iter()
+            .flat_map(|g| b.groups[g].tracks.iter().copied())
+            .filter(|&t| self.holds(t))
+            .collect();
+        tracks.sort_unstable();
+        tracks.dedup();
+        tracks
     }
 
     /// Gives up the trees of those of `tracks` held here, each once.
