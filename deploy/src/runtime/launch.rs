@@ -183,8 +183,8 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         }
     }
     // Every belief setting at its default: what a deployment of one's own
-    // runs (the factored belief for the colours, the information matrix's
-    // rows for the identities, regions fitted to the crowd).
+    // runs (the factored belief for the colours, the factored identity
+    // belief's trees for the identities, regions fitted to the crowd).
     let mut topology = loopback::topology(&trace, 4, 1, Ports::From(7447))?;
     topology.sensors[0].rate = Some(options.rate);
     topology.sensors[0].events = options.events;

@@ -37,10 +37,20 @@ pub fn to_wire_tree(tree: HeldTree) -> WireTree {
         groups: tree
             .groups
             .iter()
-            .map(|g| WireGroup {
-                tracks: g.tracks().to_vec(),
-                identities: g.identities().to_vec(),
-                probs: g.probabilities().to_vec(),
+            .map(|g| {
+                let (ranks, probs) = g
+                    .probabilities()
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &p)| p != 0.0)
+                    .map(|(r, &p)| (r as u32, p))
+                    .unzip();
+                WireGroup {
+                    tracks: g.tracks().to_vec(),
+                    identities: g.identities().to_vec(),
+                    ranks,
+                    probs,
+                }
             })
             .collect(),
         backgrounds: tree
@@ -62,7 +72,19 @@ pub fn from_wire_tree(tree: WireTree) -> Result<HeldTree, BeliefError> {
     let groups = tree
         .groups
         .into_iter()
-        .map(|g| Group::from_parts(g.tracks, g.identities, g.probs))
+        .map(|g| {
+            let count: usize = (1..=g.tracks.len()).product();
+            let mut probs = vec![0.0; count];
+            for (&r, &p) in g.ranks.iter().zip(&g.probs) {
+                let slot = probs
+                    .get_mut(r as usize)
+                    .ok_or_else(|| BeliefError::BadComponent {
+                        detail: format!("an assignment of rank {r} among {count}"),
+                    })?;
+                *slot = p;
+            }
+            Group::from_parts(g.tracks, g.identities, probs)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let backgrounds = tree
         .backgrounds
@@ -95,6 +117,15 @@ mod tests {
         assert_eq!(wire.check(4), Ok(()));
         assert_eq!(wire.tracks(4).collect::<Vec<_>>(), vec![0, 1, 2]);
         assert_eq!(from_wire_tree(wire.clone()).unwrap(), tree);
+        // Only the assignments of non-zero probability travel.
+        let dense: usize = tree.groups.iter().map(|g| g.probabilities().len()).sum();
+        let nonzero: usize = tree
+            .groups
+            .iter()
+            .map(|g| g.probabilities().iter().filter(|&&p| p != 0.0).count())
+            .sum();
+        // Mixes of 0 with 1, then of 1 with 2: 4 of the 3! assignments.
+        assert_eq!((wire.entries(), nonzero, dense), (4, 4, 6));
         let mut bad = wire;
         bad.groups[0].probs[0] += 0.5;
         assert!(from_wire_tree(bad).is_err(), "probabilities summing to 1.5");
