@@ -7,7 +7,7 @@
 //! computes marginals only when asked.
 
 use idmesh_tests::deployment::{
-    crowd_with_identities, replay_lines, truth_lines, Deployment, Factored, Settings,
+    crowd_with_identities, replay_lines, truth_lines, Deployment, Factored, Settings, Truth,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -36,6 +36,58 @@ fn largest_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
             x.iter().zip(y).map(|(p, q)| (p - q).abs())
         })
         .fold(0.0, f64::max)
+}
+
+/// Every identity answer asked for at a truth point equals the central
+/// replay's there to 1e-9, with the same most likely assignment and its
+/// marginals named `marginals`; at least half of the points are answered
+/// (the question leaves a fresh `idmesh query` process once the first
+/// answer is in, and the stream may pass some points before it arrives:
+/// those are refused, never answered wrong).
+fn assert_truth_points(
+    deployment: &Deployment,
+    truths: &[Truth],
+    central: &[Value],
+    leaders: usize,
+    marginals: &str,
+) {
+    let answers = deployment.at_truth_points("identity", truths);
+    for (i, answer) in &answers {
+        let (i, events) = (*i, &answer["watermark"]["sensor-0"]);
+        let difference = largest_difference(
+            &matrix(&answer["p_identity"]),
+            &matrix(&central[i]["p_identity"]),
+        );
+        assert!(
+            difference < 1e-9,
+            "{leaders} leaders, {events} events: off by {difference}"
+        );
+        assert_eq!(
+            answer["predicted_identity"],
+            central[i]["predicted_identity"]
+        );
+        assert_eq!(answer["marginals"], marginals);
+    }
+    assert!(
+        answers.len() * 2 >= truths.len(),
+        "{leaders} leaders: only {} of {} truth points answered\n{}",
+        answers.len(),
+        truths.len(),
+        deployment.log()
+    );
+}
+
+/// The one-track question for track 7 agrees with the whole answer `last`.
+fn assert_one_track_agrees(deployment: &Deployment, last: &Value) {
+    let one = deployment.query(&["identity", "7"]).expect("one track");
+    let row: Vec<f64> = one[0]["p_identity"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(largest_difference(&[row], &matrix(&last["p_identity"])[7..8]) < 1e-12);
+    assert_eq!(one[0]["predicted_identity"], last["predicted_identity"][7]);
 }
 
 fn settings(leaders: usize, rate: Option<f64>) -> Settings {
@@ -83,30 +135,7 @@ fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders
             },
         );
         deployment.first_answer(Duration::from_secs(30));
-        let answers = deployment.at_truth_points("identity", &truths);
-        for (i, answer) in &answers {
-            let (i, events) = (*i, &answer["watermark"]["sensor-0"]);
-            let difference = largest_difference(
-                &matrix(&answer["p_identity"]),
-                &matrix(&central[i]["p_identity"]),
-            );
-            assert!(
-                difference < 1e-9,
-                "{leaders} leaders, {events} events: off by {difference}"
-            );
-            assert_eq!(
-                answer["predicted_identity"],
-                central[i]["predicted_identity"]
-            );
-            assert_eq!(answer["marginals"], "factored-identity");
-        }
-        assert!(
-            answers.len() * 2 >= truths.len(),
-            "{leaders} leaders: only {} of {} truth points answered\n{}",
-            answers.len(),
-            truths.len(),
-            deployment.log()
-        );
+        assert_truth_points(&deployment, &truths, &central, leaders, "factored-identity");
         let last = deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
             a["finished"] == true
         });
@@ -118,14 +147,7 @@ fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders
             final_difference < 1e-9,
             "{leaders} leaders, the end: {final_difference}"
         );
-        let one = deployment.query(&["identity", "7"]).expect("one track");
-        let row: Vec<f64> = one[0]["p_identity"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap())
-            .collect();
-        assert!(largest_difference(&[row], &matrix(&last["p_identity"])[7..8]) < 1e-12);
+        assert_one_track_agrees(&deployment, &last);
         assert_eq!(
             deployment.leaders_total("identifies"),
             reads,
@@ -171,48 +193,11 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
             },
         );
         deployment.first_answer(Duration::from_secs(30));
-        let answers = deployment.at_truth_points("identity", &truths);
-        for (i, answer) in &answers {
-            let (i, events) = (*i, &answer["watermark"]["sensor-0"]);
-            let difference = largest_difference(
-                &matrix(&answer["p_identity"]),
-                &matrix(&central[i]["p_identity"]),
-            );
-            assert!(
-                difference < 1e-9,
-                "{leaders} leaders, {events} events: off by {difference}"
-            );
-            assert_eq!(
-                answer["predicted_identity"],
-                central[i]["predicted_identity"]
-            );
-            assert_eq!(answer["marginals"], "exact");
-        }
-        // The question leaves a fresh `idmesh query` process once the
-        // first answer is in; on a loaded 2-core machine the stream (about
-        // 3 s at 300 events/s) can pass a second's worth of points before
-        // it arrives. Those are refused, never answered wrong.
-        assert!(
-            answers.len() * 2 >= truths.len(),
-            "{leaders} leaders: only {} of {} truth points answered\n{}",
-            answers.len(),
-            truths.len(),
-            deployment.log()
-        );
-
+        assert_truth_points(&deployment, &truths, &central, leaders, "exact");
         let last = deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
             a["finished"] == true
         });
-        let one = deployment.query(&["identity", "7"]).expect("one track");
-        let whole = matrix(&last["p_identity"]);
-        let row: Vec<f64> = one[0]["p_identity"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap())
-            .collect();
-        assert!(largest_difference(&[row], &whole[7..8]) < 1e-12);
-        assert_eq!(one[0]["predicted_identity"], last["predicted_identity"][7]);
+        assert_one_track_agrees(&deployment, &last);
         if leaders > 1 {
             let stats = deployment.query(&["stats"]).expect("stats");
             let held = deployment.leaders_total("rows_held");

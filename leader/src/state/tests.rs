@@ -967,6 +967,70 @@ impl Hand {
         }
     }
 
+    /// One step of an identity stream, item `seq`, to the leaders and the
+    /// centralized belief: a read of identity y on track x at accuracy z
+    /// (to every leader when `reads_to_all`, as leaders holding trees
+    /// hear them, else to the track's owner alone), a mix of x and y with
+    /// swap z, or a handover of x to leader y. `owners` follows the
+    /// handovers.
+    fn step(
+        &mut self,
+        seq: u64,
+        (what, x, y, z): (&str, u32, u32, f64),
+        owners: &mut [usize],
+        central: &mut impl idmesh_belief::identity::IdentityFilter,
+        reads_to_all: bool,
+    ) {
+        match what {
+            "read" => {
+                let owner = owners[x as usize];
+                let item = Item::Identify {
+                    adopted: false,
+                    track: x,
+                    identity: y,
+                    accuracy: z,
+                    owner: owner as u16,
+                };
+                self.item(seq, item, (!reads_to_all).then_some(owner));
+                let read = Identify {
+                    track: x,
+                    identity: y,
+                    accuracy: z,
+                };
+                central.identify(read).unwrap();
+            }
+            "mix" => {
+                let item = Item::Mix {
+                    adopted: Vec::new(),
+                    a: x,
+                    b: y,
+                    swap: z,
+                    owner_a: owners[x as usize] as u16,
+                    owner_b: owners[y as usize] as u16,
+                    handed: None,
+                };
+                self.item(seq, item, None);
+                central
+                    .mix(Mix {
+                        a: x,
+                        b: y,
+                        swap: z,
+                    })
+                    .unwrap();
+            }
+            _ => {
+                let from = owners[x as usize] as u16;
+                owners[x as usize] = y as usize;
+                let handover = Item::Handover {
+                    track: x,
+                    from,
+                    to: y as u16,
+                };
+                self.item(seq, handover, None);
+            }
+        }
+    }
+
     /// The rows of every leader, put together.
     fn matrix(&self, n: usize) -> Vec<Vec<f64>> {
         use idmesh_belief::identity::InformationOptions;
@@ -991,7 +1055,7 @@ impl Hand {
 /// centralized information matrix bit for bit after every item.
 #[test]
 fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapshots() {
-    use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
+    use idmesh_belief::identity::{InformationMatrix, InformationOptions};
     use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
     for regional in [false, true] {
         let start = vec![2, 0, 3, 1, 4];
@@ -1015,15 +1079,6 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
         .unwrap();
         let mut hand = Hand::new(Item::Begin(begin), &["a", "b", "c"]);
         let mut owners = vec![0usize, 0, 1, 1, 2];
-        let mix = |a: u32, b: u32, swap: f64, owners: &[usize]| Item::Mix {
-            adopted: Vec::new(),
-            a,
-            b,
-            swap,
-            owner_a: owners[a as usize] as u16,
-            owner_b: owners[b as usize] as u16,
-            handed: None,
-        };
         let steps: Vec<(&str, u32, u32, f64)> = vec![
             ("read", 0, 1, 0.8),
             ("read", 3, 3, 0.7),
@@ -1049,46 +1104,7 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
                 continue;
             }
             seq += 1;
-            match what {
-                "read" => {
-                    let owner = owners[x as usize];
-                    let item = Item::Identify {
-                        adopted: false,
-                        track: x,
-                        identity: y,
-                        accuracy: z,
-                        owner: owner as u16,
-                    };
-                    hand.item(seq, item, Some(owner));
-                    central
-                        .identify(Identify {
-                            track: x,
-                            identity: y,
-                            accuracy: z,
-                        })
-                        .unwrap();
-                }
-                "mix" => {
-                    hand.item(seq, mix(x, y, z, &owners), None);
-                    central
-                        .mix(Mix {
-                            a: x,
-                            b: y,
-                            swap: z,
-                        })
-                        .unwrap();
-                }
-                _ => {
-                    let from = owners[x as usize] as u16;
-                    owners[x as usize] = y as usize;
-                    let handover = Item::Handover {
-                        track: x,
-                        from,
-                        to: y as u16,
-                    };
-                    hand.item(seq, handover, None);
-                }
-            }
+            hand.step(seq, (what, x, y, z), &mut owners, &mut central, false);
             for leader in &hand.leaders {
                 let stopped = (
                     leader.waiting_for_transfer(),
@@ -1412,15 +1428,6 @@ fn factored_leaders_carry_identity_trees_through_mixes_swaps_handovers_and_snaps
         let mut central = FactoredIdentity::from_assignment(&start, identity_options(cap)).unwrap();
         let mut hand = Hand::new(Item::Begin(begin), &["a", "b", "c"]);
         let mut owners = vec![0usize, 0, 1, 1, 2, 2];
-        let mix = |a: u32, b: u32, swap: f64, owners: &[usize]| Item::Mix {
-            adopted: Vec::new(),
-            a,
-            b,
-            swap,
-            owner_a: owners[a as usize] as u16,
-            owner_b: owners[b as usize] as u16,
-            handed: None,
-        };
         let steps: Vec<(&str, u32, u32, f64)> = vec![
             ("read", 0, 1, 0.8),
             ("mix", 1, 2, 0.3),
@@ -1451,48 +1458,8 @@ fn factored_leaders_carry_identity_trees_through_mixes_swaps_handovers_and_snaps
                 .iter()
                 .map(|l| l.stats().transfers_received)
                 .sum();
-            match what {
-                "read" => {
-                    let item = Item::Identify {
-                        adopted: false,
-                        track: x,
-                        identity: y,
-                        accuracy: z,
-                        owner: owners[x as usize] as u16,
-                    };
-                    // Every leader hears it (as a holder following the
-                    // track would); only the holder applies it.
-                    hand.item(seq, item, None);
-                    reads += 1;
-                    central
-                        .identify(Identify {
-                            track: x,
-                            identity: y,
-                            accuracy: z,
-                        })
-                        .unwrap();
-                }
-                "mix" => {
-                    hand.item(seq, mix(x, y, z, &owners), None);
-                    central
-                        .mix(Mix {
-                            a: x,
-                            b: y,
-                            swap: z,
-                        })
-                        .unwrap();
-                }
-                _ => {
-                    let from = owners[x as usize] as u16;
-                    owners[x as usize] = y as usize;
-                    let handover = Item::Handover {
-                        track: x,
-                        from,
-                        to: y as u16,
-                    };
-                    hand.item(seq, handover, None);
-                }
-            }
+            reads += u64::from(what == "read");
+            hand.step(seq, (what, x, y, z), &mut owners, &mut central, true);
             let after: u64 = hand
                 .leaders
                 .iter()

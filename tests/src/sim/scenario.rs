@@ -11,11 +11,10 @@
 use idmesh_belief::identity::filter::to_rows;
 use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_belief::identity::{
-    FactoredIdentity, Identify as IdentifyEvent, IdentityFilter, InformationMatrix,
-    InformationOptions, MarginalMethod,
+    FactoredIdentity, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
 };
 use idmesh_belief::radon::{RadonBelief, RadonOptions};
-use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
+use idmesh_belief::{identity_event_of, FactoredBelief, Field, PropertyFilter};
 use idmesh_placement::{factored_options, identity_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
@@ -337,22 +336,8 @@ fn central_identity(header: &Header, lines: &[Line]) -> Result<CentralIdentity, 
             FactoredIdentity::from_assignment(start, identity_options(cap)).map_err(failed)?;
         let mut marginals = vec![belief.marginals().map_err(failed)?];
         for line in lines {
-            match line {
-                Line::Mix(m) => belief
-                    .mix(idmesh_belief::Mix {
-                        a: m.a,
-                        b: m.b,
-                        swap: m.swap,
-                    })
-                    .map_err(failed)?,
-                Line::Identify(read) => belief
-                    .identify(IdentifyEvent {
-                        track: read.track,
-                        identity: read.identity,
-                        accuracy: read.accuracy,
-                    })
-                    .map_err(failed)?,
-                _ => {}
+            if let Some(event) = identity_event_of(line) {
+                belief.apply(&event).map_err(failed)?;
             }
             marginals.push(belief.marginals().map_err(failed)?);
         }
@@ -376,22 +361,8 @@ fn central_identity(header: &Header, lines: &[Line]) -> Result<CentralIdentity, 
     };
     keep(&matrix)?;
     for line in lines {
-        match line {
-            Line::Mix(m) => matrix
-                .mix(idmesh_belief::Mix {
-                    a: m.a,
-                    b: m.b,
-                    swap: m.swap,
-                })
-                .map_err(failed)?,
-            Line::Identify(read) => matrix
-                .identify(IdentifyEvent {
-                    track: read.track,
-                    identity: read.identity,
-                    accuracy: read.accuracy,
-                })
-                .map_err(failed)?,
-            _ => {}
+        if let Some(event) = identity_event_of(line) {
+            matrix.apply(&event).map_err(failed)?;
         }
         keep(&matrix)?;
     }
