@@ -1,12 +1,16 @@
 //! The centralized twin of a deployment: `idmesh replay --topology FILE`
 //! sets replay's options from the topology so that it computes what the
 //! deployment computes, to 1e-9 (docs/guide/replay.md, "A deployment's
-//! twin").
+//! twin"). On a trace of identities alone the twin is the identity
+//! belief the leaders hold: the factored identity belief with a known
+//! start on the factored belief (`identity = "factored"`), the
+//! information matrix otherwise.
 
 use super::topology::{BeliefKind, RegionsSetting, Sparsification, SplitSetting, Topology};
 use anyhow::{bail, Result};
 use idmesh_eval::replay::args::{CouplingChoice, Places, SplitChoice};
 use idmesh_eval::replay::{Method, ReplayArgs};
+use idmesh_protocol::trace::TraceReader;
 
 impl Topology {
     /// Sets `args` to the replay that equals this deployment. Refuses
@@ -26,6 +30,23 @@ impl Topology {
         ];
         if let Some((_, option)) = given.iter().find(|(set, _)| *set) {
             bail!("--topology sets the belief's options itself: give it without {option}");
+        }
+        // A trace of identities alone: the identity belief its leaders
+        // hold (an unreadable header is left to replay, which names it).
+        let header = TraceReader::open(&args.trace)
+            .ok()
+            .and_then(|mut r| r.read_header().ok());
+        if let Some(header) = header {
+            if header.identities.is_some() && header.red_count().is_none() {
+                let trees = self.belief == BeliefKind::Factored
+                    && header.initial_identity.is_some()
+                    && self.factored_identity().is_some();
+                args.method = Some(match trees {
+                    true => Method::FactoredIdentity,
+                    false => Method::InformationMatrix,
+                });
+                return Ok(());
+            }
         }
         match self.belief {
             BeliefKind::Factored => {
@@ -70,5 +91,52 @@ impl Topology {
             ),
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::runtime::topology::IdentityKind;
+    use clap::Parser;
+
+    /// `idmesh replay`'s arguments alone.
+    #[derive(Parser)]
+    struct Replay {
+        #[command(flatten)]
+        args: ReplayArgs,
+    }
+
+    /// The twin of a trace of identities alone is the identity belief the
+    /// leaders hold: trees with a known start on the factored belief at
+    /// the defaults, rows without a known start or when the topology asks
+    /// for the information matrix.
+    #[test]
+    fn an_identity_trace_gets_the_identity_belief_its_leaders_hold() {
+        let dir = std::env::temp_dir().join(format!("idmesh-twin-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let trace = |name: &str, start: &str| {
+            let path = dir.join(name);
+            let header = format!(
+                r#"{{"kind":"header","format":"idmesh-trace","version":1,"tracks":2,"identities":2{start}}}"#
+            );
+            std::fs::write(&path, header + "\n").unwrap();
+            path
+        };
+        let known = trace("known.jsonl", r#","initial_identity":[1,0]"#);
+        let unknown = trace("unknown.jsonl", "");
+        let twin = |topology: &Topology, path: &std::path::Path| {
+            let mut args = Replay::try_parse_from(["replay", "--trace", path.to_str().unwrap()])
+                .unwrap()
+                .args;
+            topology.replay_twin(&mut args).unwrap();
+            args.method
+        };
+        let mut topology = Topology::loopback(&known, 2, 1, &[7000, 7001, 7002, 7003]);
+        assert_eq!(twin(&topology, &known), Some(Method::FactoredIdentity));
+        assert_eq!(twin(&topology, &unknown), Some(Method::InformationMatrix));
+        topology.identity = IdentityKind::InformationMatrix;
+        assert_eq!(twin(&topology, &known), Some(Method::InformationMatrix));
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
