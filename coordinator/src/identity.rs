@@ -113,9 +113,9 @@ pub async fn identity(
         ));
     }
     let n = collected.cut.tracks as usize;
-    if let (Method::Named(named), true) =
-        (method, collected.parts.iter().any(|p| !p.trees.is_empty()))
-    {
+    // Leaders that hold the factored identity belief answer with trees.
+    let trees = collected.parts.iter().any(|p| !p.trees.is_empty());
+    if let (Method::Named(named), true) = (method, trees) {
         return Err(GatherError::Failed(format!(
             "marginals={}: a method of the information matrix, and this stream's leaders hold \
              the factored identity belief, whose marginals are its own (ask without marginals=)",
@@ -128,7 +128,10 @@ pub async fn identity(
     // stopped (its asker has long given up) instead of holding a thread.
     let stop = Arc::new(AtomicBool::new(false));
     let stopped = stop.clone();
-    let task = tokio::task::spawn_blocking(move || marginals(collected, method, &stopped));
+    let task = tokio::task::spawn_blocking(move || match trees {
+        true => factored_marginals(&collected),
+        false => marginals(collected, method, &stopped),
+    });
     let deadline = config.marginals_timeout;
     match tokio::time::timeout(deadline, task).await {
         Ok(done) => {
@@ -180,9 +183,6 @@ fn marginals(
     method: MarginalMethod,
     stop: &AtomicBool,
 ) -> Result<IdentityAnswer, GatherError> {
-    if collected.parts.iter().any(|p| !p.trees.is_empty()) {
-        return factored_marginals(&collected);
-    }
     let n = collected.cut.tracks as usize;
     let rows = collected
         .rows()

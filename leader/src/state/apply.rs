@@ -517,13 +517,9 @@ impl Leader {
             if self.lazy_transfers() {
                 // A tree relabelled here may hold the other leader's
                 // track now (trees are not kept in regions): followed
-                // from here, before the singleton comes.
-                let started = self.started()?;
-                let trees = started.trees.as_ref();
-                let outside: Vec<u32> = [mix.a, mix.b]
-                    .into_iter()
-                    .filter(|&t| trees.is_some_and(|s| s.holds(t)) && started.interest.add(t))
-                    .collect();
+                // from here, before the singleton comes (no component of
+                // either track is held here until then).
+                let outside = self.follow_held()?;
                 if !outside.is_empty() {
                     self.follow(seq, outside, actions)?;
                 }
