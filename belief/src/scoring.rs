@@ -145,6 +145,18 @@ impl Reliability {
         }
     }
 
+    /// Adds `count` predictions of probability `p`, `right` of them right.
+    pub fn add_many(&mut self, p: f64, count: u64, right: u64) {
+        if count == 0 {
+            return;
+        }
+        let p = p.clamp(0.0, 1.0);
+        let bin = ((p * 10.0) as usize).min(9);
+        self.count[bin] += count;
+        self.sum_p[bin] += p * count as f64;
+        self.red[bin] += right.min(count);
+    }
+
     /// Adds another diagram's counts.
     pub fn merge(&mut self, other: &Reliability) {
         for b in 0..10 {

@@ -5,6 +5,7 @@
 
 use super::assignment::most_likely_assignment;
 use super::event::{check_identify, check_mix, Identify, IdentityEvent};
+use super::sparse_marginals::SparseMarginals;
 use crate::error::BeliefError;
 use crate::event::Mix;
 
@@ -28,6 +29,13 @@ pub trait IdentityFilter {
 
     /// p\[t\]\[i\] = P(track t carries identity i).
     fn marginals(&self) -> Result<Marginals, BeliefError>;
+
+    /// The marginals by row ([`SparseMarginals`]): the dense ones, their
+    /// zeros left out, unless the belief knows them row by row (the
+    /// factored identity belief does, without ever forming N²).
+    fn sparse_marginals(&self) -> Result<SparseMarginals, BeliefError> {
+        SparseMarginals::from_dense(&self.marginals()?)
+    }
 
     /// Applies one event (checked against the size first).
     fn apply(&mut self, event: &IdentityEvent) -> Result<(), BeliefError> {

@@ -70,6 +70,7 @@ use super::filter::to_rows;
 use super::metropolis::{metropolis_stoppable, MetropolisRun};
 use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
+use super::sparse_marginals::{IdentityRow, SparseMarginals};
 use crate::error::BeliefError;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -228,6 +229,28 @@ impl BlockMarginals {
             }
         }
         out
+    }
+
+    /// The marginals by row: each track lists the identities of its
+    /// block that it may carry; nothing else (rest 0).
+    pub fn sparse(&self) -> Result<SparseMarginals, BeliefError> {
+        let mut rows = vec![IdentityRow::default(); self.n];
+        for (block, p) in &self.blocks {
+            let k = block.size();
+            for (r, &t) in block.tracks.iter().enumerate() {
+                let entries = block
+                    .identities
+                    .iter()
+                    .enumerate()
+                    .map(|(c, &i)| (i as u32, p[r * k + c]))
+                    .filter(|&(_, q)| q != 0.0)
+                    .collect();
+                if let Some(row) = rows.get_mut(t) {
+                    *row = IdentityRow::collect(0.0, entries);
+                }
+            }
+        }
+        SparseMarginals::new(rows)
     }
 
     /// The most likely one-to-one assignment under these marginals,

@@ -44,6 +44,10 @@
 //!   the belief matrix and the property-bits filter use.
 //! - [`property_bits`] — [`PropertyBitsFilter`]: identities coded by b
 //!   binary properties, one Radon property belief per bit (TOSN Sec. 5.5).
+//! - [`sparse_marginals`] — [`SparseMarginals`], marginals by row: the
+//!   identities a track may carry and one probability for all others; the
+//!   form answers take, and the most likely assignment over it at any N
+//!   ([`sparse_assignment`]).
 //! - [`scoring`] — Brier, log-loss, MAP accuracy, IDF1 and reliability of
 //!   identity marginals against the truth.
 //! - [`workload`] — seeded random identity event streams with ground truth.
@@ -65,6 +69,7 @@ pub mod rows;
 pub mod scoring;
 pub mod sinkhorn;
 pub mod sparse_assignment;
+pub mod sparse_marginals;
 pub mod support_mix;
 pub mod workload;
 
@@ -81,4 +86,5 @@ pub use permanent::PermanentFormula;
 pub use property_bits::{BitCode, PropertyBitsFilter};
 pub use rows::InformationRows;
 pub use sinkhorn::{SinkhornOptions, SinkhornReport};
+pub use sparse_marginals::{IdentityRow, SparseMarginals};
 pub use workload::{IdentityWorkload, IdentityWorkloadSpec};

@@ -15,13 +15,14 @@
 //! IDP = IDR = IDF1; it is never below the MAP accuracy (the identity
 //! matching is one candidate) and forgives a consistent relabelling.
 
-use super::assignment::{min_cost_assignment, most_likely_assignment};
-use super::event::check_square;
+use super::sparse_assignment::{sparse_min_cost_assignment_with_rest, SparseRow};
+use super::sparse_marginals::SparseMarginals;
 use crate::error::BeliefError;
 use crate::scoring::{Reliability, LOG_LOSS_FLOOR};
+use std::collections::BTreeMap;
 
-fn check_truth(p: &[Vec<f64>], truth: &[u32]) -> Result<usize, BeliefError> {
-    let n = check_square(p)?;
+fn check_truth(p: &SparseMarginals, truth: &[u32]) -> Result<usize, BeliefError> {
+    let n = p.size();
     if truth.len() != n || truth.iter().any(|&i| i as usize >= n) {
         return Err(BeliefError::BadInitialIdentity {
             tracks: n,
@@ -32,30 +33,42 @@ fn check_truth(p: &[Vec<f64>], truth: &[u32]) -> Result<usize, BeliefError> {
 }
 
 /// Brier score at one truth line: the mean over tracks of
-/// Σ_i (p\[t\]\[i\] − 1{truth\[t\] = i})².
-pub fn identity_brier(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+/// Σ_i (p\[t\]\[i\] − 1{truth\[t\] = i})², over the listed entries and
+/// each row's rest (as many times as it stands for).
+pub fn brier(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
     let n = check_truth(p, truth)?;
     let total: f64 = p
+        .rows()
         .iter()
         .zip(truth)
         .map(|(row, &y)| {
-            row.iter()
-                .enumerate()
-                .map(|(i, &q)| (q.clamp(0.0, 1.0) - f64::from(i == y as usize)).powi(2))
-                .sum::<f64>()
+            let listed: f64 = row
+                .listed
+                .iter()
+                .map(|&(i, q)| (q.clamp(0.0, 1.0) - f64::from(i == y)).powi(2))
+                .sum();
+            let rest = row.rest.clamp(0.0, 1.0);
+            let unlisted = (n - row.listed.len()) as f64;
+            let mut sum = listed + unlisted * rest * rest;
+            if row.listed.binary_search_by_key(&y, |x| x.0).is_err() {
+                // The truth is one of the unlisted: (rest − 1)² instead.
+                sum += 1.0 - 2.0 * rest;
+            }
+            sum
         })
         .sum();
     Ok(total / n as f64)
 }
 
-/// Log-loss at one truth line: the mean over tracks of −ln p\[t\]\[truth\[t\]\],
-/// p clipped to [1e-12, 1].
-pub fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+/// Log-loss at one truth line: the mean over tracks of
+/// −ln p\[t\]\[truth\[t\]\], p clipped to \[1e-12, 1\].
+pub fn log_loss(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
     let n = check_truth(p, truth)?;
     let total: f64 = p
+        .rows()
         .iter()
         .zip(truth)
-        .map(|(row, &y)| -row[y as usize].clamp(LOG_LOSS_FLOOR, 1.0).ln())
+        .map(|(row, &y)| -row.probability(y).clamp(LOG_LOSS_FLOOR, 1.0).ln())
         .sum();
     // −ln 1 is −0: a perfect score prints as 0.
     Ok(total / n as f64 + 0.0)
@@ -63,11 +76,51 @@ pub fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefErr
 
 /// The share of tracks whose identity in the most likely one-to-one
 /// assignment under `p` is the true one.
-pub fn map_accuracy(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+pub fn map_accuracy(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
     let n = check_truth(p, truth)?;
-    let best = most_likely_assignment(p)?;
+    let best = p.most_likely()?;
     let right = best.iter().zip(truth).filter(|(a, b)| a == b).count();
     Ok(right as f64 / n as f64)
+}
+
+/// Adds one truth line of identity marginals to a reliability diagram:
+/// every entry p\[t\]\[i\] is one prediction, right when track t carries
+/// i (a row's rest counts once for each identity it stands for).
+pub fn add_reliability(
+    diagram: &mut Reliability,
+    p: &SparseMarginals,
+    truth: &[u32],
+) -> Result<(), BeliefError> {
+    let n = check_truth(p, truth)?;
+    for (row, &y) in p.rows().iter().zip(truth) {
+        let mut truth_listed = false;
+        for &(i, q) in &row.listed {
+            truth_listed |= i == y;
+            diagram.add_many(q, 1, u64::from(i == y));
+        }
+        let unlisted = (n - row.listed.len()) as u64;
+        diagram.add_many(row.rest, unlisted, u64::from(!truth_listed));
+    }
+    Ok(())
+}
+
+/// [`brier`] of a dense matrix.
+pub fn identity_brier(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+    brier(&SparseMarginals::from_dense(p)?, truth)
+}
+
+/// [`log_loss`] of a dense matrix.
+pub fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+    log_loss(&SparseMarginals::from_dense(p)?, truth)
+}
+
+/// [`add_reliability`] of a dense matrix.
+pub fn add_identity_reliability(
+    diagram: &mut Reliability,
+    p: &[Vec<f64>],
+    truth: &[u32],
+) -> Result<(), BeliefError> {
+    add_reliability(diagram, &SparseMarginals::from_dense(p)?, truth)
 }
 
 /// IDF1 of a stream of (predicted, true) assignments over the same n
@@ -88,7 +141,9 @@ pub fn idf1_counts(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<(u64, u64), BeliefE
         return Ok((0, 0));
     };
     let n = first.len();
-    let mut counts = vec![0u64; n * n];
+    // counts[label][identity]: few labels meet many identities, so the
+    // matching runs over the pairs seen (a pair never seen counts 0).
+    let mut counts: Vec<BTreeMap<u32, u64>> = vec![BTreeMap::new(); n];
     for (predicted, truth) in lines {
         if predicted.len() != n || truth.len() != n {
             return Err(BeliefError::BadInitialIdentity {
@@ -97,41 +152,34 @@ pub fn idf1_counts(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<(u64, u64), BeliefE
             });
         }
         for (&label, &identity) in predicted.iter().zip(truth) {
-            let (l, i) = (label as usize, identity as usize);
-            if l >= n || i >= n {
+            if label as usize >= n || identity as usize >= n {
                 return Err(BeliefError::UnknownIdentity {
                     identity: label.max(identity),
                     track: 0,
                     identities: n,
                 });
             }
-            counts[l * n + i] += 1;
+            *counts[label as usize].entry(identity).or_default() += 1;
         }
     }
-    let cost: Vec<f64> = counts.iter().map(|&c| -(c as f64)).collect();
-    let matching = min_cost_assignment(n, &cost);
+    let rows: Vec<SparseRow> = counts
+        .iter()
+        .map(|row| row.iter().map(|(&i, &c)| (i, -(c as f64))).collect())
+        .collect();
+    // Each line's labels are one-to-one with its identities, so the pairs
+    // seen hold a perfect matching.
+    let matching = sparse_min_cost_assignment_with_rest(&rows, &vec![0.0; n]).ok_or(
+        BeliefError::Numerical {
+            step: "IDF1",
+            detail: "predicted labels that are not one-to-one with the identities".into(),
+        },
+    )?;
     let tp = matching
         .iter()
         .enumerate()
-        .map(|(l, &i)| counts[l * n + i as usize])
+        .map(|(l, &i)| counts[l].get(&i).copied().unwrap_or(0))
         .sum();
     Ok((tp, (lines.len() * n) as u64))
-}
-
-/// Adds one truth line of identity marginals to a reliability diagram:
-/// every entry p\[t\]\[i\] is one prediction, right when track t carries i.
-pub fn add_identity_reliability(
-    diagram: &mut Reliability,
-    p: &[Vec<f64>],
-    truth: &[u32],
-) -> Result<(), BeliefError> {
-    let n = check_truth(p, truth)?;
-    for (i, track) in (0..n).map(|i| (i, truth.iter().position(|&x| x as usize == i))) {
-        let column: Vec<f64> = p.iter().map(|row| row[i]).collect();
-        let carrier: Vec<u32> = track.map(|t| vec![t as u32]).unwrap_or_default();
-        diagram.add(&column, &carrier);
-    }
-    Ok(())
 }
 
 /// The scores of [`IdentityScores`], averaged.
@@ -161,15 +209,15 @@ pub struct IdentityScores {
 
 impl IdentityScores {
     /// Adds one stream: its marginals and truth at every truth line.
-    pub fn add_stream(&mut self, lines: &[(Vec<Vec<f64>>, Vec<u32>)]) -> Result<(), BeliefError> {
+    pub fn add_stream(&mut self, lines: &[(SparseMarginals, Vec<u32>)]) -> Result<(), BeliefError> {
         let mut assignments = Vec::with_capacity(lines.len());
         for (p, truth) in lines {
-            self.brier += identity_brier(p, truth)?;
-            self.log_loss += identity_log_loss(p, truth)?;
-            let best = most_likely_assignment(p)?;
+            self.brier += brier(p, truth)?;
+            self.log_loss += log_loss(p, truth)?;
+            let best = p.most_likely()?;
             let right = best.iter().zip(truth).filter(|(a, b)| a == b).count();
             self.map_right += right as f64 / truth.len().max(1) as f64;
-            add_identity_reliability(&mut self.reliability, p, truth)?;
+            add_reliability(&mut self.reliability, p, truth)?;
             self.lines += 1;
             assignments.push((best, truth.clone()));
         }
@@ -230,6 +278,37 @@ mod tests {
     }
 
     #[test]
+    fn a_rest_scores_as_the_entries_it_stands_for() {
+        use crate::identity::sparse_marginals::IdentityRow;
+        // Track 0 lists identity 1; identities 0, 2, 3 share 0.1 each.
+        let rows = vec![
+            IdentityRow::collect(0.1, vec![(1, 0.7)]),
+            IdentityRow::collect(0.0, vec![(0, 0.5), (2, 0.5)]),
+            IdentityRow::collect(0.25, vec![]),
+            IdentityRow::collect(0.0, vec![(3, 1.0)]),
+        ];
+        let sparse = SparseMarginals::new(rows).unwrap();
+        let dense = sparse.dense();
+        for truth in [[1, 0, 2, 3], [0, 2, 1, 3], [2, 0, 3, 1]] {
+            let want = identity_brier(&dense, &truth).unwrap();
+            assert!((brier(&sparse, &truth).unwrap() - want).abs() < 1e-12);
+            let want = identity_log_loss(&dense, &truth).unwrap();
+            assert!((log_loss(&sparse, &truth).unwrap() - want).abs() < 1e-12);
+            let (mut a, mut b) = (Reliability::default(), Reliability::default());
+            add_reliability(&mut a, &sparse, &truth).unwrap();
+            for (i, column) in (0..4).map(|i| (i, dense.iter().map(|r| r[i]).collect::<Vec<_>>())) {
+                let carrier: Vec<u32> = truth
+                    .iter()
+                    .position(|&x| x == i as u32)
+                    .map(|t| vec![t as u32])
+                    .unwrap_or_default();
+                b.add(&column, &carrier);
+            }
+            assert_eq!((a.count, a.red), (b.count, b.red));
+        }
+    }
+
+    #[test]
     fn map_accuracy_takes_the_one_to_one_assignment() {
         // Row-wise argmax would give identity 0 twice; the assignment
         // maximizes the product: 0.9·0.4 > 0.1·0.6, so track 1 gets 1.
@@ -238,6 +317,7 @@ mod tests {
             vec![0.6, 0.4, 0.0],
             vec![0.0, 0.0, 1.0],
         ];
+        let p = SparseMarginals::from_dense(&p).unwrap();
         assert!((map_accuracy(&p, &[0, 1, 2]).unwrap() - 1.0).abs() < 1e-12);
         assert!((map_accuracy(&p, &[1, 0, 2]).unwrap() - 1.0 / 3.0).abs() < 1e-12);
     }
@@ -261,7 +341,7 @@ mod tests {
 
     #[test]
     fn scores_pool_lines_and_reliability_counts_every_entry() {
-        let p = vec![vec![0.75, 0.25], vec![0.25, 0.75]];
+        let p = SparseMarginals::from_dense(&[vec![0.75, 0.25], vec![0.25, 0.75]]).unwrap();
         let mut scores = IdentityScores::default();
         scores
             .add_stream(&[(p.clone(), vec![0, 1]), (p, vec![1, 0])])

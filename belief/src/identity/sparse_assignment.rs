@@ -26,32 +26,146 @@ pub type SparseRow = Vec<(u32, f64)>;
 /// r may go only to a column it lists): `result[r]` = the column of row r.
 /// `None` when no perfect matching uses listed entries only.
 pub fn sparse_min_cost_assignment(rows: &[SparseRow]) -> Option<Vec<u32>> {
+    Matching::solve(rows).map(|m| m.assignment())
+}
+
+/// The least-cost perfect matching of a k × k matrix whose row r costs
+/// `rest[r]` at every column it does not list (∞: row r may take only the
+/// columns it lists) — a marginal matrix stored sparsely, one probability
+/// shared by every identity a track does not list.
+///
+/// Exact, by column generation: solve over the listed entries, then check
+/// the duals against the unlisted ones — row r's cheapest unlisted column
+/// in reduced cost is the one of largest potential v\[c\] it does not list,
+/// found by walking the columns in order of v. A violated one joins the
+/// row's entries and the matching is repaired: the row is unmatched, its
+/// potential lowered until every entry of it is feasible, and one
+/// augmentation matches it again. When nothing is violated the duals are
+/// feasible for the whole matrix, so the matching is optimal on it.
+/// `None` when the listed entries hold no perfect matching (a marginal
+/// matrix's positive entries always do: a doubly stochastic matrix's
+/// support holds a permutation).
+pub fn sparse_min_cost_assignment_with_rest(rows: &[SparseRow], rest: &[f64]) -> Option<Vec<u32>> {
     let k = rows.len();
-    if rows
-        .iter()
-        .flatten()
-        .any(|&(c, x)| c as usize >= k || !x.is_finite())
-    {
+    if rest.len() != k || rest.iter().any(|x| x.is_nan() || *x == f64::NEG_INFINITY) {
         return None;
     }
-    // Column reduction makes u = 0 feasible: v[c] = the least cost in c.
-    let mut v = vec![f64::INFINITY; k];
-    for &(c, x) in rows.iter().flatten() {
-        v[c as usize] = v[c as usize].min(x);
+    let mut rows: Vec<SparseRow> = rows.to_vec();
+    for row in &mut rows {
+        row.sort_by_key(|&(c, _)| c);
+        row.dedup_by_key(|&mut (c, _)| c);
     }
-    if v.iter().any(|x| !x.is_finite()) {
-        return None; // a column nobody can take
-    }
-    let mut u = vec![0.0f64; k];
-    let mut row_of = vec![NONE; k]; // column → row
-    let mut col_of = vec![NONE; k]; // row → column
-    let mut search = Search::new(k);
-    for start in 0..k {
-        if !search.augment(start, rows, &mut u, &mut v, &mut row_of, &mut col_of) {
-            return None;
+    let mut matching = Matching::solve(&rows)?;
+    let mut by_potential: Vec<usize> = (0..k).collect();
+    loop {
+        by_potential.sort_by(|&a, &b| matching.v[b].total_cmp(&matching.v[a]).then(a.cmp(&b)));
+        let mut violated = Vec::new();
+        for (r, row) in rows.iter_mut().enumerate() {
+            if !rest[r].is_finite() {
+                continue;
+            }
+            let unlisted = by_potential
+                .iter()
+                .copied()
+                .find(|&c| row.binary_search_by_key(&(c as u32), |&(x, _)| x).is_err());
+            let Some(c) = unlisted else { continue };
+            let reduced = rest[r] - matching.u[r] - matching.v[c];
+            // Rounding leaves reduced costs a hair below 0 on ties.
+            if reduced < -1e-12 * (1.0 + rest[r].abs()) {
+                let at = row.partition_point(|&(x, _)| (x as usize) < c);
+                row.insert(at, (c as u32, rest[r]));
+                violated.push(r);
+            }
+        }
+        if violated.is_empty() {
+            return Some(matching.assignment());
+        }
+        for &r in &violated {
+            matching.release(r, &rows);
+        }
+        for &r in &violated {
+            if !matching.rematch(r, &rows) {
+                return None;
+            }
         }
     }
-    Some(col_of.iter().map(|&c| c as u32).collect())
+}
+
+/// A perfect matching with its dual potentials: c − u\[r\] − v\[c\] ≥ 0 on
+/// every listed entry, = 0 on the matched ones.
+struct Matching {
+    u: Vec<f64>,
+    v: Vec<f64>,
+    /// column → row
+    row_of: Vec<usize>,
+    /// row → column
+    col_of: Vec<usize>,
+    search: Search,
+}
+
+impl Matching {
+    fn solve(rows: &[SparseRow]) -> Option<Self> {
+        let k = rows.len();
+        if rows
+            .iter()
+            .flatten()
+            .any(|&(c, x)| c as usize >= k || !x.is_finite())
+        {
+            return None;
+        }
+        // Column reduction makes u = 0 feasible: v[c] = the least cost in c.
+        let mut v = vec![f64::INFINITY; k];
+        for &(c, x) in rows.iter().flatten() {
+            v[c as usize] = v[c as usize].min(x);
+        }
+        if v.iter().any(|x| !x.is_finite()) {
+            return None; // a column nobody can take
+        }
+        let mut matching = Matching {
+            u: vec![0.0; k],
+            v,
+            row_of: vec![NONE; k],
+            col_of: vec![NONE; k],
+            search: Search::new(k),
+        };
+        for start in 0..k {
+            if !matching.rematch(start, rows) {
+                return None;
+            }
+        }
+        Some(matching)
+    }
+
+    /// Matches the free row `start` by one shortest augmenting path.
+    fn rematch(&mut self, start: usize, rows: &[SparseRow]) -> bool {
+        let Matching {
+            u,
+            v,
+            row_of,
+            col_of,
+            search,
+        } = self;
+        search.augment(start, rows, u, v, row_of, col_of)
+    }
+
+    /// Unmatches row `r` and lowers its potential until every entry of it
+    /// (new ones included) has a reduced cost ≥ 0.
+    fn release(&mut self, r: usize, rows: &[SparseRow]) {
+        let c = self.col_of[r];
+        if c != NONE {
+            self.row_of[c] = NONE;
+            self.col_of[r] = NONE;
+        }
+        let least = rows[r]
+            .iter()
+            .map(|&(c, x)| x - self.v[c as usize])
+            .fold(f64::INFINITY, f64::min);
+        self.u[r] = self.u[r].min(least);
+    }
+
+    fn assignment(&self) -> Vec<u32> {
+        self.col_of.iter().map(|&c| c as u32).collect()
+    }
 }
 
 const NONE: usize = usize::MAX;
@@ -268,6 +382,53 @@ mod tests {
                     (total(&rows, &sparse) - dense_total).abs() < 1e-9,
                     "k = {k}: sparse {} dense {dense_total}",
                     total(&rows, &sparse)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn with_rest_equals_the_dense_hungarian_on_the_whole_matrix() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for k in 1..30 {
+            for _ in 0..20 {
+                let per_row = 1 + rng.gen_range(0..4);
+                let rows = random_rows(&mut rng, k, per_row);
+                // Rests around the listed costs, so that some unlisted
+                // entries beat listed ones; some rows take listed only.
+                let rest: Vec<f64> = (0..k)
+                    .map(|_| match rng.gen_range(0..4) {
+                        0 => f64::INFINITY,
+                        _ => rng.gen_range(0.0..12.0),
+                    })
+                    .collect();
+                let got = sparse_min_cost_assignment_with_rest(&rows, &rest)
+                    .expect("the listed entries hold a matching");
+                let big = 1e6;
+                let mut cost = vec![0.0; k * k];
+                for r in 0..k {
+                    let fill = if rest[r].is_finite() { rest[r] } else { big };
+                    cost[r * k..(r + 1) * k].fill(fill);
+                    for &(c, x) in &rows[r] {
+                        cost[r * k + c as usize] = x;
+                    }
+                }
+                let total = |a: &[u32]| -> f64 {
+                    a.iter()
+                        .enumerate()
+                        .map(|(r, &c)| cost[r * k + c as usize])
+                        .sum()
+                };
+                let mut seen = vec![false; k];
+                for &c in &got {
+                    assert!(!std::mem::replace(&mut seen[c as usize], true));
+                }
+                let dense = min_cost_assignment(k, &cost);
+                assert!(
+                    (total(&got) - total(&dense)).abs() < 1e-9,
+                    "k = {k}: with rest {} dense {}",
+                    total(&got),
+                    total(&dense)
                 );
             }
         }

@@ -70,6 +70,7 @@
 //! times the information matrix's. At n ≤ 9 and the default cap nothing
 //! is cut and the belief is exact.
 
+mod answer;
 pub mod background;
 pub mod group;
 pub mod links;
@@ -86,6 +87,7 @@ pub use split::Cut;
 
 use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{IdentityFilter, Marginals};
+use super::sparse_marginals::SparseMarginals;
 use crate::error::BeliefError;
 use crate::event::Mix;
 
@@ -976,11 +978,12 @@ impl IdentityFilter for FactoredIdentity {
     /// to one; a column sums to one when nothing leaked (what cuts lost is
     /// spread by rows that ignore exclusivity).
     fn marginals(&self) -> Result<Marginals, BeliefError> {
-        let mut m = self.table_marginals()?;
-        for (row, background) in m.iter_mut().zip(&self.backgrounds) {
-            background.mix_into(row);
-        }
-        Ok(m)
+        // One path for both forms, so that they agree to the last bit.
+        Ok(FactoredIdentity::sparse_marginals(self)?.dense())
+    }
+
+    fn sparse_marginals(&self) -> Result<SparseMarginals, BeliefError> {
+        FactoredIdentity::sparse_marginals(self)
     }
 }
 
