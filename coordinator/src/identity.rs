@@ -13,12 +13,8 @@
 use crate::driver::gather::{collect, At, Collected, GatherError, Memory, Share};
 use crate::driver::CoordinatorConfig;
 use idmesh_belief::identity::factored::assemble;
-use idmesh_belief::identity::filter::to_rows;
 use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
-use idmesh_belief::identity::IdentityFilter;
-use idmesh_belief::identity::{
-    most_likely_assignment, InformationOptions, InformationRows, MarginalMethod,
-};
+use idmesh_belief::identity::{InformationOptions, InformationRows, MarginalMethod};
 use idmesh_placement::{from_wire_tree, identity_options};
 use idmesh_protocol::wire::identity::MAX_GROUP;
 use idmesh_protocol::wire::query::{IdentityAnswer, SamplingReport};
@@ -163,8 +159,9 @@ fn factored_marginals(collected: &Collected) -> Result<IdentityAnswer, GatherErr
     // The cap matters only to events to come: the largest one reads any
     // tree the leaders hold.
     let belief = assemble(n, identity_options(MAX_GROUP), trees).map_err(failed)?;
-    let p_identity = belief.marginals().map_err(failed)?;
-    let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
+    let p_identity = belief.sparse_marginals().map_err(failed)?;
+    let predicted_identity = p_identity.most_likely().map_err(failed)?;
+    let p_identity = p_identity.into_rows();
     Ok(IdentityAnswer {
         watermark: collected.watermark(),
         tracks: collected.cut.tracks,
@@ -199,8 +196,8 @@ fn marginals(
     let blocks = matrix
         .block_marginals_stoppable(&method, stop)
         .map_err(failed)?;
-    let p_identity = to_rows(n, &blocks.dense());
-    let predicted_identity = most_likely_assignment(&p_identity).map_err(failed)?;
+    let predicted_identity = blocks.most_likely().map_err(failed)?;
+    let p_identity = blocks.sparse().map_err(failed)?.into_rows();
     let sampling = blocks.sampling.map(|s| SamplingReport {
         blocks: s.blocks as u32,
         half_difference: s.half_difference,

@@ -347,11 +347,7 @@ fn answers_pushed_at_a_cut_or_lost_and_asked_for_change_no_answer() {
 }
 
 fn matrix(v: &Value) -> Vec<Vec<f64>> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("a matrix: {v}"))
-        .iter()
-        .map(floats)
-        .collect()
+    idmesh_tests::compare::identity_matrix(v)
 }
 
 /// A stream of colours and identities under the factored belief, through

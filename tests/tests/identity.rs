@@ -6,6 +6,7 @@
 //! `idmesh replay --method information-matrix`. Either way the coordinator
 //! computes marginals only when asked.
 
+use idmesh_tests::compare::{identity_matrix, identity_row};
 use idmesh_tests::deployment::{
     crowd_with_identities, replay_lines, truth_lines, Deployment, Factored, Settings, Truth,
 };
@@ -14,17 +15,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 fn matrix(v: &Value) -> Vec<Vec<f64>> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("a matrix: {v}"))
-        .iter()
-        .map(|row| {
-            row.as_array()
-                .unwrap_or_else(|| panic!("a row: {row}"))
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect()
-        })
-        .collect()
+    identity_matrix(v)
 }
 
 fn largest_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
@@ -80,13 +71,9 @@ fn assert_truth_points(
 /// The one-track question for track 7 agrees with the whole answer `last`.
 fn assert_one_track_agrees(deployment: &Deployment, last: &Value) {
     let one = deployment.query(&["identity", "7"]).expect("one track");
-    let row: Vec<f64> = one[0]["p_identity"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
-    assert!(largest_difference(&[row], &matrix(&last["p_identity"])[7..8]) < 1e-12);
+    let whole = matrix(&last["p_identity"]);
+    let row = identity_row(&one[0]["p_identity"], whole.len());
+    assert!(largest_difference(&[row], &whole[7..8]) < 1e-12);
     assert_eq!(one[0]["predicted_identity"], last["predicted_identity"][7]);
 }
 
@@ -322,12 +309,7 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     predicted.sort_unstable();
     assert_eq!(predicted, (0..1000).collect::<Vec<u64>>());
     let one = deployment.query(&["identity", "7"]).expect("one track");
-    let row: Vec<f64> = one[0]["p_identity"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let row = identity_row(&one[0]["p_identity"], p.len());
     assert!(largest_difference(&[row], &p[7..8]) < 1e-12);
     assert_eq!(deployment.leaders_total("rows_held"), 1000);
     std::fs::remove_dir_all(&dir).ok();

@@ -64,15 +64,10 @@ fn every_identity_method_replays_a_simulated_trace() {
         assert!((0.0..=1.0).contains(&error));
         assert!(!answers.is_empty());
         for answer in answers {
-            let p = answer["p_identity"].as_array().unwrap();
+            let p = idmesh_tests::compare::identity_matrix(&answer["p_identity"]);
             assert_eq!(p.len(), 6);
             for row in p {
-                let sum: f64 = row
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_f64().unwrap())
-                    .sum();
+                let sum: f64 = row.iter().sum();
                 assert!((sum - 1.0).abs() < 1e-6, "{method:?}: row sums to {sum}");
             }
             let mut assignment: Vec<u64> = answer["predicted_identity"]

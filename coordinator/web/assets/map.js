@@ -209,7 +209,7 @@ function drawMap(missing) {
     let label = String(t);
     if (ident) {
       const i = ident.predicted_identity[t];
-      label += ` · id ${i} ${ident.p_identity[t][i].toFixed(2)}`;
+      label += ` · id ${i} ${probabilityOf(ident.p_identity[t], i).toFixed(2)}`;
     }
     ctx.fillStyle = "#1a202c"; ctx.fillText(label, x + RADIUS + 4, y - RADIUS + 2);
     state.drawn.push({ track: t, x, y, p_red: value, colour, owner: leaderName(p, p.owners[t]),
@@ -287,9 +287,16 @@ function renderSensors() {
   }).join("");
 }
 
+// P(the track of `row` carries identity i): an answer lists a track's
+// likely identities and gives one probability (`rest`) for all others.
+function probabilityOf(row, i) {
+  const hit = row.listed.find(([j]) => j === i);
+  return hit ? hit[1] : row.rest;
+}
+
 function renderTracks() {
   document.querySelector("#tracks tbody").innerHTML = state.drawn.map((d) => {
-    const ident = d.identity === null ? "" : `${d.identity} (${state.identity.p_identity[d.track][d.identity].toFixed(2)})`;
+    const ident = d.identity === null ? "" : `${d.identity} (${probabilityOf(state.identity.p_identity[d.track], d.identity).toFixed(2)})`;
     return `<tr data-track="${d.track}"><td>${d.track}</td><td style="color:${rgb(d.colour)}">${d.p_red === null ? "–" : d.p_red.toFixed(3)}</td>
       <td>${escape(d.owner)}</td><td>${ident}</td></tr>`;
   }).join("");

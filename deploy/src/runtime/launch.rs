@@ -259,7 +259,7 @@ async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) 
                     .p_identity
                     .iter()
                     .zip(&a.predicted_identity)
-                    .filter(|(row, &i)| row.get(i as usize).is_some_and(|&p| p >= 0.9))
+                    .filter(|(row, &i)| row.probability(i) >= 0.9)
                     .count();
                 let first: Vec<String> = a
                     .predicted_identity

@@ -260,14 +260,14 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
                 writeln!(out, "{}", sampling_line(s))?;
             }
             for (t, (row, &i)) in a.p_identity.iter().zip(&a.predicted_identity).enumerate() {
-                let p = row.get(i as usize).copied().unwrap_or(f64::NAN);
+                let p = row.probability(i);
                 writeln!(out, "  track {t:>4}  identity {i:>4}  P = {p:.4}")?;
             }
         }
         Question::Identity(Some(_)) => {
             let a: IdentityTrackAnswer = serde_json::from_slice(body)?;
             let i = a.predicted_identity;
-            let p = a.p_identity.get(i as usize).copied().unwrap_or(f64::NAN);
+            let p = a.p_identity.probability(i);
             writeln!(out, "track {}: identity {i} (P = {p:.4})", a.track)?;
             if let Some(s) = &a.sampling {
                 writeln!(out, "{}", sampling_line(s))?;

@@ -31,16 +31,80 @@ pub struct TrackAnswer {
     pub p_red: f64,
 }
 
-/// Who is on which track: `p_identity[t][i]` = P(track t carries identity
-/// i), computed by the coordinator from the leaders' rows of the
-/// information matrix when asked, by `marginals` (exact, metropolis,
-/// sinkhorn, bethe); `predicted_identity` is the most likely one-to-one
-/// assignment under them.
+/// One track's identity marginals, sparsely: `listed` (identity,
+/// probability), identities ascending; every identity not listed has
+/// probability `rest`. P(track carries i) = [`IdentityRow::probability`].
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct IdentityRow {
+    pub rest: f64,
+    pub listed: Vec<(u32, f64)>,
+}
+
+impl IdentityRow {
+    /// The row of a dense vector: its non-zero entries, the rest 0.
+    pub fn from_dense(row: &[f64]) -> Self {
+        IdentityRow {
+            rest: 0.0,
+            listed: row
+                .iter()
+                .enumerate()
+                .filter(|&(_, &p)| p != 0.0)
+                .map(|(i, &p)| (i as u32, p))
+                .collect(),
+        }
+    }
+
+    /// A row from (identity, probability) pairs in any order, repeated
+    /// identities summed; every other identity at `rest`.
+    pub fn collect(rest: f64, mut entries: Vec<(u32, f64)>) -> Self {
+        entries.sort_by_key(|&(i, _)| i);
+        let mut listed: Vec<(u32, f64)> = Vec::with_capacity(entries.len());
+        for (i, p) in entries {
+            match listed.last_mut() {
+                Some((j, q)) if *j == i => *q += p,
+                _ => listed.push((i, p)),
+            }
+        }
+        IdentityRow { rest, listed }
+    }
+
+    /// P(the track carries identity `i`).
+    pub fn probability(&self, i: u32) -> f64 {
+        match self.listed.binary_search_by_key(&i, |&(j, _)| j) {
+            Ok(at) => self.listed[at].1,
+            Err(_) => self.rest,
+        }
+    }
+
+    /// The row as n numbers.
+    pub fn dense(&self, n: usize) -> Vec<f64> {
+        let mut row = vec![self.rest; n];
+        for &(i, p) in &self.listed {
+            if let Some(x) = row.get_mut(i as usize) {
+                *x = p;
+            }
+        }
+        row
+    }
+
+    /// Σ_i p\[i\] over n identities.
+    pub fn total(&self, n: usize) -> f64 {
+        let listed: f64 = self.listed.iter().map(|&(_, p)| p).sum();
+        listed + self.rest * n.saturating_sub(self.listed.len()) as f64
+    }
+}
+
+/// Who is on which track: `p_identity[t]` = track t's marginals by row
+/// ([`IdentityRow`]), computed by the coordinator when asked — from the
+/// leaders' trees of the factored identity belief, or from their rows of
+/// the information matrix by `marginals` (exact, metropolis, sinkhorn,
+/// bethe); `predicted_identity` is the most likely one-to-one assignment
+/// under them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct IdentityAnswer {
     pub watermark: Watermark,
     pub tracks: u32,
-    pub p_identity: Vec<Vec<f64>>,
+    pub p_identity: Vec<IdentityRow>,
     pub predicted_identity: Vec<u32>,
     pub marginals: String,
     pub leaders: u32,
@@ -71,7 +135,7 @@ pub struct SamplingReport {
 pub struct IdentityTrackAnswer {
     pub watermark: Watermark,
     pub track: u32,
-    pub p_identity: Vec<f64>,
+    pub p_identity: IdentityRow,
     pub predicted_identity: u32,
     pub marginals: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -8,10 +8,12 @@
 //! are skipped); at every `truth` line one JSON line is written,
 //!
 //! ```text
-//! {"time":T,"p_identity":[[…],…],"predicted_identity":[…]}
+//! {"time":T,"p_identity":[{"rest":r,"listed":[[i,p],…]},…],"predicted_identity":[…]}
 //! ```
 //!
-//! with `p_identity[t][i]` = P(track t carries identity i) and
+//! with `p_identity[t]` track t's marginals by row
+//! ([`idmesh_belief::identity::SparseMarginals`]: P(track t carries
+//! identity i) = p where `listed` holds \[i, p\], `rest` otherwise) and
 //! `predicted_identity[t]` the identity of track t in the most likely
 //! one-to-one assignment under those marginals (Hungarian algorithm on
 //! −ln p); at the end a summary line
@@ -58,9 +60,9 @@ use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
 use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_belief::identity::scoring::IdentityScores;
 use idmesh_belief::identity::{
-    identity_error, most_likely_assignment, BeliefMatrix, BitCode, ExactPermutationFilter,
-    FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter, InformationMatrix,
-    InformationOptions, MarginalMethod, PropertyBitsFilter,
+    identity_error, BeliefMatrix, BitCode, ExactPermutationFilter, FactoredIdentity,
+    FactoredIdentityOptions, IdentityEvent, IdentityFilter, IdentityRow, InformationMatrix,
+    InformationOptions, MarginalMethod, PropertyBitsFilter, SparseMarginals,
 };
 use idmesh_belief::{identity_event_of, BeliefError, RadonOptions, Sparsify};
 use idmesh_protocol::trace::{Header, Line, TraceReader, Truth};
@@ -255,7 +257,7 @@ impl MarginalChoice {
 #[derive(Debug, Serialize)]
 pub struct Answer {
     time: f64,
-    p_identity: Vec<Vec<f64>>,
+    p_identity: Vec<IdentityRow>,
     predicted_identity: Vec<u32>,
 }
 
@@ -553,7 +555,7 @@ struct Engine {
     errors: Vec<f64>,
     /// The marginals and truth at every truth line with `identity`, for
     /// the scores of the summary.
-    scored: Vec<(Vec<Vec<f64>>, Vec<u32>)>,
+    scored: Vec<(SparseMarginals, Vec<u32>)>,
 }
 
 impl Replay for Engine {
@@ -572,8 +574,8 @@ impl Replay for Engine {
     fn answer(&mut self, truth: &Truth) -> Result<Answer, BeliefError> {
         let (p_identity, predicted_identity) = self.filter.time(|filter| {
             filter
-                .marginals()
-                .and_then(|p| most_likely_assignment(&p).map(|best| (p, best)))
+                .sparse_marginals()
+                .and_then(|p| p.most_likely().map(|best| (p, best)))
         })?;
         if let Some(identity) = &truth.identity {
             self.errors
@@ -582,7 +584,7 @@ impl Replay for Engine {
         }
         Ok(Answer {
             time: truth.time,
-            p_identity,
+            p_identity: p_identity.into_rows(),
             predicted_identity,
         })
     }
@@ -640,8 +642,10 @@ mod tests {
         })
     }
 
+    /// The dense matrix of an answer's rows.
     fn matrix(value: &serde_json::Value) -> Vec<Vec<f64>> {
-        serde_json::from_value(value.clone()).unwrap()
+        let rows: Vec<IdentityRow> = serde_json::from_value(value.clone()).unwrap();
+        SparseMarginals::new(rows).unwrap().dense()
     }
 
     /// Three people with known identities; tracks 0 and 1 mix with
