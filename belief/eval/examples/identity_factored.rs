@@ -98,16 +98,9 @@ impl Filter {
     /// Bytes of the belief's numbers and labels.
     fn bytes(&mut self) -> usize {
         match self {
-            // The tables, and the background rows: a shared probability
-            // each and 12 bytes an identity listed.
-            Filter::Factored(f) => {
-                f.groups()
-                    .iter()
-                    .map(|g| 8 * g.probabilities().len() + 4 * 2 * g.size() + 8)
-                    .sum::<usize>()
-                    + 8 * f.size()
-                    + 12 * f.background_entries()
-            }
+            // The tables as stored (sparse or dense), their labels and
+            // the background rows.
+            Filter::Factored(f) => f.memory_bytes(),
             Filter::Matrix(f) => 8 * f.size() * f.size(),
         }
     }

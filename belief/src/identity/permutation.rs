@@ -109,6 +109,49 @@ impl Permutations {
         Ok(())
     }
 
+    /// [`Permutations::condition_on_read`] over a sparse distribution:
+    /// `probs[i]` is the probability of the assignment of rank `ranks[i]`,
+    /// every other assignment has probability 0 (and keeps it). The same
+    /// numbers as the dense rule (zeros add nothing to the evidence);
+    /// all-or-nothing, and a likelihood that is not finite is refused (the
+    /// dense rule meets it as 0·∞ on an assignment of probability 0).
+    pub fn condition_entries_on_read(
+        &self,
+        ranks: &[u32],
+        probs: &mut [f64],
+        track: usize,
+        read: u8,
+        right: f64,
+        wrong: f64,
+    ) -> Result<(), BeliefError> {
+        if !(right.is_finite() && wrong.is_finite()) {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: f64::NAN,
+            });
+        }
+        let posterior: Vec<f64> = ranks
+            .iter()
+            .zip(probs.iter())
+            .map(|(&r, &p)| {
+                p * if self.get(r as usize)[track] == read {
+                    right
+                } else {
+                    wrong
+                }
+            })
+            .collect();
+        let evidence: f64 = posterior.iter().sum();
+        if !(evidence.is_finite() && evidence > 0.0) {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: evidence,
+            });
+        }
+        for (slot, p) in probs.iter_mut().zip(posterior) {
+            *slot = p / evidence;
+        }
+        Ok(())
+    }
+
     /// The rank of a permutation of 0..n (not checked: callers pass
     /// permutations they built).
     pub fn rank(&self, perm: &[u8]) -> usize {

@@ -38,13 +38,7 @@ pub fn to_wire_tree(tree: HeldTree) -> WireTree {
             .groups
             .iter()
             .map(|g| {
-                let (ranks, probs) = g
-                    .probabilities()
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, &p)| p != 0.0)
-                    .map(|(r, &p)| (r as u32, p))
-                    .unzip();
+                let (ranks, probs) = g.entries().unzip();
                 WireGroup {
                     tracks: g.tracks().to_vec(),
                     identities: g.identities().to_vec(),
@@ -73,17 +67,17 @@ pub fn from_wire_tree(tree: WireTree) -> Result<HeldTree, BeliefError> {
         .groups
         .into_iter()
         .map(|g| {
-            let count: usize = (1..=g.tracks.len()).product();
-            let mut probs = vec![0.0; count];
-            for (&r, &p) in g.ranks.iter().zip(&g.probs) {
-                let slot = probs
-                    .get_mut(r as usize)
-                    .ok_or_else(|| BeliefError::BadComponent {
-                        detail: format!("an assignment of rank {r} among {count}"),
-                    })?;
-                *slot = p;
+            if g.ranks.len() != g.probs.len() {
+                return Err(BeliefError::BadComponent {
+                    detail: format!(
+                        "{} ranks and {} probabilities",
+                        g.ranks.len(),
+                        g.probs.len()
+                    ),
+                });
             }
-            Group::from_parts(g.tracks, g.identities, probs)
+            let entries = g.ranks.into_iter().zip(g.probs).collect();
+            Group::from_parts(g.tracks, g.identities, entries)
         })
         .collect::<Result<Vec<_>, _>>()?;
     let backgrounds = tree
@@ -118,12 +112,8 @@ mod tests {
         assert_eq!(wire.tracks(4).collect::<Vec<_>>(), vec![0, 1, 2]);
         assert_eq!(from_wire_tree(wire.clone()).unwrap(), tree);
         // Only the assignments of non-zero probability travel.
-        let dense: usize = tree.groups.iter().map(|g| g.probabilities().len()).sum();
-        let nonzero: usize = tree
-            .groups
-            .iter()
-            .map(|g| g.probabilities().iter().filter(|&&p| p != 0.0).count())
-            .sum();
+        let dense: usize = tree.groups.iter().map(Group::assignments).sum();
+        let nonzero: usize = tree.groups.iter().map(Group::support).sum();
         // Mixes of 0 with 1, then of 1 with 2: 4 of the 3! assignments.
         assert_eq!((wire.entries(), nonzero, dense), (4, 4, 6));
         let mut bad = wire;

@@ -37,9 +37,13 @@
 //!   exact.
 //!
 //! Without splits (every group of mixed tracks within the cap) the belief
-//! equals the exact filter; marginals cost O(k!·k) per group plus belief
-//! propagation over the trees of linked groups (2-vector messages). The
-//! belief is plain data (serde), pure, synchronous and deterministic.
+//! equals the exact filter; marginals cost O(support·k) per group (its
+//! assignments of non-zero probability, at most k!) plus belief
+//! propagation over the trees of linked groups (2-vector messages). A
+//! group's table is stored sparsely unless most of its assignments are
+//! possible ([`assignments`]), so memory grows with the tracks and the
+//! mixes, not with k! per group. The belief is plain data (serde), pure,
+//! synchronous and deterministic.
 //!
 //! ## What cuts lose
 //! A cut conditions on the event it keeps, and a dropped link on nothing
@@ -71,6 +75,7 @@
 //! is cut and the belief is exact.
 
 mod answer;
+mod assignments;
 pub mod background;
 pub mod group;
 pub mod links;
@@ -95,8 +100,9 @@ use crate::event::Mix;
 /// group we enumerate. Measured on random-waypoint traces
 /// (examples/identity_factored.rs in idmesh-eval; docs/identity-results.md):
 /// a cap below n leaves lossy cuts, and even linked ones leave errors of
-/// up to 1.0 at n = 9, while a cap of n is exact; a mix in a full group of
-/// 9 costs about 9!·9 steps (about 1.5 ms).
+/// up to 1.0 at n = 9, while a cap of n is exact; a mix in a full, dense
+/// group of 9 costs about 9!·9 steps (about 1.5 ms), in a sparse one
+/// about its support times a rank and a sort.
 pub const DEFAULT_MAX_GROUP: usize = MAX_GROUP;
 
 /// The default of [`FactoredIdentityOptions::certain`].
@@ -392,6 +398,23 @@ impl FactoredIdentity {
     /// what the belief's memory grows with.
     pub fn background_entries(&self) -> usize {
         self.backgrounds.iter().map(Background::listed).sum()
+    }
+
+    /// An estimate of the bytes the belief holds on the heap: every
+    /// group's table as stored (by capacity: 8 bytes an assignment when
+    /// dense, 12 an entry when sparse) and its labels (4 bytes a track and
+    /// an identity), the groups' own slots, the background rows (8 bytes a
+    /// row for its leak and shared probability, 12 an identity listed) and
+    /// the derived indices. Allocator overhead and the rows' tree nodes are
+    /// left out: a figure to compare representations and sizes with, not
+    /// the process's resident memory.
+    pub fn memory_bytes(&self) -> usize {
+        let groups: usize = self.groups.iter().map(Group::heap_bytes).sum::<usize>()
+            + self.groups.capacity() * std::mem::size_of::<Group>();
+        let backgrounds = 8 * self.backgrounds.len() + 12 * self.background_entries();
+        let indices = std::mem::size_of::<usize>() * (self.group_of.len() + self.holder.len())
+            + self.link_used.len();
+        groups + backgrounds + indices
     }
 
     /// The options.

@@ -358,7 +358,8 @@ impl IdentityShare {
     }
 
     /// The table entries of the tree of track `t` (held here): what moving
-    /// it would send, for a rule that moves the smaller of two trees.
+    /// it would send (the assignments of non-zero probability: trees
+    /// travel sparse), for a rule that moves the smaller of two trees.
     pub fn tree_entries(&self, t: u32) -> Result<usize, BeliefError> {
         if !self.holds(t) {
             return Err(BeliefError::BadComponent {
@@ -368,7 +369,7 @@ impl IdentityShare {
         Ok(self
             .tree_of(t)
             .iter()
-            .map(|&g| self.belief.groups[g].probabilities().len())
+            .map(|&g| self.belief.groups[g].support())
             .sum())
     }
 
@@ -650,7 +651,7 @@ mod tests {
             .unwrap()
             .groups
             .iter()
-            .map(|g| g.probabilities().len())
+            .map(|g| g.support())
             .sum();
         assert_eq!(sent, 2);
         // Every track in one tree: the whole belief; a track twice or in

@@ -21,11 +21,14 @@
 //! independent under it — e.g. a track whose identity is certain).
 //!
 //! For every size s the cut of largest P(E) among those whose A holds a
-//! given track of size s is found in one pass over the k! assignments,
-//! accumulating P(π(A) = I) for every A that holds the track
-//! (O(k!·2^(k−1))); the mutual information is then computed for that one
-//! cut per size.
+//! given track of size s is found in one pass over the assignments of
+//! non-zero probability (at most k!), accumulating P(π(A) = I) for every
+//! A that holds the track (O(k!·2^(k−1)) at most); the mutual information
+//! is then computed for that one cut per size. The factors are built from
+//! (rank, probability) entries summed by rank in the order the dense code
+//! added them, and stored sparsely or densely ([`super::assignments`]).
 
+use super::assignments::{accumulate, lookup, Assignments};
 use super::group::{permutations, Group, Port, MAX_GROUP};
 use crate::error::BeliefError;
 
@@ -72,11 +75,11 @@ pub(crate) fn best_cuts(group: &Group, keep: usize, must: u32, ports: &[Port]) -
     let subsets = 1usize << (k - 1);
     let mut mass = vec![0.0f64; subsets << k];
     let mut image = vec![0u32; subsets];
-    for (r, &p) in group.probabilities().iter().enumerate() {
+    for (r, p) in group.entries() {
         if p < NEGLIGIBLE {
             continue;
         }
-        let perm = table.get(r);
+        let perm = table.get(r as usize);
         image[0] = 1 << perm[keep];
         mass[image[0] as usize] += p;
         for s in 1..subsets {
@@ -199,34 +202,31 @@ impl Projector {
 pub fn apply(group: &Group, cut: &Cut) -> Result<(Group, Group), BeliefError> {
     let projector = Projector::new(group, cut)?;
     let table = group.table();
-    let mut pa = vec![0.0; projector.a_table.count()];
-    let mut pb = vec![0.0; projector.b_table.count()];
-    for (r, &p) in group.probabilities().iter().enumerate() {
-        if p == 0.0 {
-            continue;
-        }
-        if let Some((ra, rb)) = projector.project(table.get(r)) {
-            pa[ra] += p;
-            pb[rb] += p;
+    let (mut pa, mut pb) = (Vec::new(), Vec::new());
+    for (r, p) in group.entries() {
+        if let Some((ra, rb)) = projector.project(table.get(r as usize)) {
+            pa.push((ra as u32, p));
+            pb.push((rb as u32, p));
         }
     }
-    let mass: f64 = pa.iter().sum();
+    let (mut pa, mut pb) = (accumulate(pa), accumulate(pb));
+    let mass: f64 = pa.iter().map(|e| e.1).sum();
     if !(mass.is_finite() && mass > 0.0) {
         return Err(BeliefError::Degenerate { normalizer: mass });
     }
-    pa.iter_mut().for_each(|p| *p /= mass);
-    pb.iter_mut().for_each(|p| *p /= mass);
-    let side = |tracks: &[usize], inside: bool, probs: Vec<f64>| Group {
+    pa.iter_mut().for_each(|e| e.1 /= mass);
+    pb.iter_mut().for_each(|e| e.1 /= mass);
+    let side = |tracks: &[usize], inside: bool, count: usize, probs| Group {
         tracks: tracks.iter().map(|&j| group.tracks[j]).collect(),
         identities: (0..group.size())
             .filter(|&x| (cut.identities & (1 << x) != 0) == inside)
             .map(|x| group.identities[x])
             .collect(),
-        probs,
+        probs: Assignments::from_sorted(count, probs),
     };
     Ok((
-        side(&projector.a_tracks, true, pa),
-        side(&projector.b_tracks, false, pb),
+        side(&projector.a_tracks, true, projector.a_table.count(), pa),
+        side(&projector.b_tracks, false, projector.b_table.count(), pb),
     ))
 }
 
@@ -239,15 +239,11 @@ fn mutual_information(group: &Group, cut: &Cut, a: &Group, b: &Group) -> f64 {
         return f64::INFINITY;
     }
     let table = group.table();
-    let (pa, pb) = (a.probabilities(), b.probabilities());
     let mut info = 0.0;
-    for (r, &p) in group.probabilities().iter().enumerate() {
-        if p == 0.0 {
-            continue;
-        }
-        if let Some((ra, rb)) = projector.project(table.get(r)) {
+    for (r, p) in group.entries() {
+        if let Some((ra, rb)) = projector.project(table.get(r as usize)) {
             let joint = p / cut.mass;
-            info += joint * (joint / (pa[ra] * pb[rb])).ln();
+            info += joint * (joint / (a.probability(ra as u32) * b.probability(rb as u32))).ln();
         }
     }
     info.max(0.0)
@@ -386,46 +382,41 @@ pub(crate) fn apply_linked(
 ) -> Result<LinkedCut, BeliefError> {
     let projector = LinkedProjector::new(group, cut, ports)?;
     let table = group.table();
-    let mut fa = vec![0.0; projector.a_table.count()];
-    let mut fb = vec![0.0; projector.b_table.count()];
+    let (mut fa, mut fb) = (Vec::new(), Vec::new());
     let mut by_flag = [0.0f64; 2];
-    for (r, &p) in group.probabilities().iter().enumerate() {
-        if p == 0.0 {
-            continue;
-        }
-        if let Some((ra, rb, e)) = projector.project(table.get(r)) {
-            fa[ra] += p;
-            fb[rb] += p;
+    for (r, p) in group.entries() {
+        if let Some((ra, rb, e)) = projector.project(table.get(r as usize)) {
+            fa.push((ra as u32, p));
+            fb.push((rb as u32, p));
             by_flag[usize::from(e)] += p;
         }
     }
+    let (mut fa, mut fb) = (accumulate(fa), accumulate(fb));
     let mass = by_flag[0] + by_flag[1];
     if !(mass.is_finite() && mass > 0.0) {
         return Err(BeliefError::Degenerate { normalizer: mass });
     }
-    fa.iter_mut().for_each(|p| *p /= mass);
+    fa.iter_mut().for_each(|e| e.1 /= mass);
     let (nb, b_table) = (projector.b_tracks.len(), projector.b_table);
-    for (r, p) in fb.iter_mut().enumerate() {
-        let e = usize::from(b_table.get(r)[nb] as usize != nb);
+    for (r, p) in fb.iter_mut() {
+        let e = usize::from(b_table.get(*r as usize)[nb] as usize != nb);
         if *p != 0.0 {
             *p /= by_flag[e];
         }
     }
     let mut info = 0.0;
-    for (r, &p) in group.probabilities().iter().enumerate() {
-        if p == 0.0 {
-            continue;
-        }
-        if let Some((ra, rb, _)) = projector.project(table.get(r)) {
+    for (r, p) in group.entries() {
+        if let Some((ra, rb, _)) = projector.project(table.get(r as usize)) {
             let joint = p / mass;
-            info += joint * (joint / (fa[ra] * fb[rb])).ln();
+            info += joint * (joint / (lookup(&fa, ra as u32) * lookup(&fb, rb as u32))).ln();
         }
     }
     // f_B = P(σ_B | e) sums to one per flag: scaled to sum to one (a
     // factor's scale does not change the joint).
-    let total: f64 = fb.iter().sum();
-    fb.iter_mut().for_each(|p| *p /= total);
-    let side = |tracks: &[usize], inside: bool, port: u32, probs: Vec<f64>| {
+    let total: f64 = fb.iter().map(|e| e.1).sum();
+    fb.iter_mut().for_each(|e| e.1 /= total);
+    let (a_count, b_count) = (projector.a_table.count(), b_table.count());
+    let side = |tracks: &[usize], inside: bool, port: u32, probs: Vec<(u32, f64)>| {
         let mut t: Vec<u32> = tracks.iter().map(|&j| group.tracks[j]).collect();
         t.push(port);
         let mut ids: Vec<u32> = (0..group.size())
@@ -433,10 +424,11 @@ pub(crate) fn apply_linked(
             .map(|x| group.identities[x])
             .collect();
         ids.push(port);
+        let count = if inside { a_count } else { b_count };
         Group {
             tracks: t,
             identities: ids,
-            probs,
+            probs: Assignments::from_sorted(count, probs),
         }
     };
     Ok(LinkedCut {
@@ -486,13 +478,15 @@ mod tests {
     fn correlated_sides_cost_their_mutual_information() {
         // {0,1} and {2,3} each swap together or not at all: E = {π(A) =
         // I_A} is sure, but the sides share one bit (ln 2 nats).
-        let mut g = Group::uniform(vec![0, 1, 2, 3], vec![0, 1, 2, 3]).unwrap();
-        let table = g.table();
-        let both = table.rank(&[1, 0, 3, 2]);
-        let none = table.rank(&[0, 1, 2, 3]);
-        g.probs.iter_mut().for_each(|p| *p = 0.0);
-        g.probs[both] = 0.5;
-        g.probs[none] = 0.5;
+        let table = permutations(4).unwrap();
+        let both = table.rank(&[1, 0, 3, 2]) as u32;
+        let none = table.rank(&[0, 1, 2, 3]) as u32;
+        let g = Group::from_parts(
+            vec![0, 1, 2, 3],
+            vec![0, 1, 2, 3],
+            vec![(none, 0.5), (both, 0.5)],
+        )
+        .unwrap();
         let cut = best_cuts(&g, 0, 0, &[])[2].unwrap();
         assert_eq!((cut.tracks, cut.identities), (0b0011, 0b0011));
         assert!((cut.mass - 1.0).abs() < 1e-12);

@@ -286,7 +286,7 @@ fn joint(f: &FactoredIdentity) -> Vec<Vec<f64>> {
     loop {
         let mut p = 1.0;
         for (g, &r) in groups.iter().zip(&ranks) {
-            p *= g.probs[r];
+            p *= g.probability(r as u32);
         }
         if p > 0.0 {
             // carried[id] = global identity on global track id.
@@ -323,7 +323,7 @@ fn joint(f: &FactoredIdentity) -> Vec<Vec<f64>> {
                 return m;
             }
             ranks[g] += 1;
-            if ranks[g] < groups[g].probs.len() {
+            if ranks[g] < groups[g].assignments() {
                 break;
             }
             ranks[g] = 0;
