@@ -136,6 +136,12 @@ pub struct BenchArgs {
     /// to the first answer with its mix, against the raw round trip.
     #[arg(long, conflicts_with_all = ["ingest", "accuracy"])]
     pub extraction: bool,
+    /// Only the identity figures: the default identity belief on crowds of
+    /// 1,000 and 10,000 people with identities, offline (as `idmesh
+    /// replay`) and through four leaders: memory, query time, the answer's
+    /// size, and the live answer against the offline one.
+    #[arg(long, conflicts_with_all = ["ingest", "accuracy", "extraction"])]
+    pub identity: bool,
     /// With --accuracy: the Table III n to run, comma-separated.
     #[arg(
         long,

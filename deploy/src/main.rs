@@ -110,6 +110,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 seeds: args.seeds as usize,
             }),
             extraction: args.extraction,
+            identity: args.identity,
         }),
     }
 }

@@ -306,9 +306,10 @@ fn cuts_are_placed_now_at_their_point_or_refused_with_why() {
     assert!(last.iter().all(|(_, b)| b.finished));
 }
 
-/// An identity stream beyond the leaders' track limit (n × n
+/// An identity stream beyond the information matrix's track limit (n × n
 /// numbers) is refused at the sensor, not streamed to leaders that drop
-/// every batch.
+/// every batch; with a known start the leaders hold the factored identity
+/// belief, which takes it.
 #[test]
 fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
     let limit = idmesh_protocol::wire::valid::MAX_IDENTITY_TRACKS as usize;
@@ -332,6 +333,17 @@ fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
     header.identities = Some(limit + 1);
     let e = Router::new(config(2), &header).err().expect("refused");
     assert!(e.to_string().contains("identity stream"), "{e}");
+    header.initial_identity = Some((0..=limit as u32).collect());
+    let mut factored = config(2);
+    factored.factored = Some(idmesh_protocol::wire::factored::FactoredStart {
+        max_component: 3,
+        split: idmesh_protocol::wire::factored::WireSplit::Original,
+        shrink: true,
+        regional: false,
+    });
+    if let Err(e) = Router::new(factored, &header) {
+        panic!("a known start of {} tracks: {e}", limit + 1);
+    }
     let mut header = Header::new(8);
     header.identities = Some(8);
     assert!(Router::new(config(2), &header).is_ok());

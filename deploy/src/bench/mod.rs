@@ -19,6 +19,10 @@
 //!   request, and a one-line ingest round trip against a raw get to the
 //!   sensor in the same run.
 //!
+//! - [`identity`] (`--identity`, on its own): the identity belief at
+//!   1,000 and 10,000 tracks, offline and through four leaders: memory,
+//!   query time, the answer's size, live against offline.
+//!
 //! - [`accuracy`] (`--accuracy`, on its own): the live answers' tracking
 //!   error on the Table III crowds against the centralized engine's, asked
 //!   at every truth line.
@@ -29,6 +33,7 @@ mod accuracy;
 pub use accuracy::Crowds;
 mod cpu;
 mod extraction;
+mod identity;
 mod ingest;
 mod interval;
 mod latency;
@@ -84,6 +89,9 @@ pub struct BenchOptions {
     /// Only the extraction figures (`extraction`): events from positions
     /// per second, and latency from a position to the answer.
     pub extraction: bool,
+    /// Only the identity figures (`identity`): memory and query time of
+    /// the identity belief at 1,000 and 10,000 tracks, offline and live.
+    pub identity: bool,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
@@ -106,6 +114,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
     }
     if options.extraction {
         return extraction::run(&runtime, options);
+    }
+    if options.identity {
+        return identity::run(&runtime, options);
     }
     let trace = options.dir.join(format!(
         "crowd-{}-{}-{}.jsonl",
@@ -602,6 +613,16 @@ impl Deployment {
         Keys::new(self.topology.prefix.clone())
     }
 
+    /// The first process to have exited, if any has.
+    pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
+        self.processes.iter_mut().find_map(Processes::exited)
+    }
+
+    /// Every process's name and pid.
+    pub fn pids(&self) -> impl Iterator<Item = (&str, u32)> {
+        self.processes.iter().flat_map(Processes::pids)
+    }
+
     /// Every process's CPU seconds so far.
     pub fn cpu_times(&self) -> Result<cpu::CpuTimes> {
         cpu::CpuTimes::read(self.processes.iter().flat_map(Processes::pids))
@@ -659,6 +680,7 @@ mod tests {
             journal: false,
             accuracy: None,
             extraction: false,
+            identity: false,
         }
     }
 

@@ -24,8 +24,10 @@ use super::{Versioned, WireError};
 /// magnitude beyond anything the engine has been run on.
 pub const MAX_TRACKS: u32 = 1 << 20;
 
-/// The most tracks of an identity stream: its information matrix is n × n
-/// numbers (4096² f64 = 128 MiB), spread over the leaders.
+/// The most tracks of an identity stream whose leaders hold the
+/// information matrix: n × n numbers (4096² f64 = 128 MiB), spread over
+/// the leaders. The factored identity belief (`Begin::factored_identity`)
+/// grows with the mixes, not n², and takes streams up to [`MAX_TRACKS`].
 pub const MAX_IDENTITY_TRACKS: u32 = 1 << 12;
 
 /// The most leaders a stream may name: indices are `u16`.
@@ -210,10 +212,12 @@ impl Begin {
         require((1..=MAX_TRACKS).contains(&n), || {
             format!("begin tracks = {n} is not in 1..={MAX_TRACKS}")
         })?;
-        if self.identities {
+        if self.identities && self.factored_identity.is_none() {
             require(n <= MAX_IDENTITY_TRACKS, || {
                 format!(
-                    "begin: an identity stream of {n} tracks (at most {MAX_IDENTITY_TRACKS}: n × n numbers)"
+                    "begin: an identity stream of {n} tracks held as an information matrix (at \
+                     most {MAX_IDENTITY_TRACKS}: n × n numbers; with a known start the factored \
+                     identity belief takes any size)"
                 )
             })?;
         }

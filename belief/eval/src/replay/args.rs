@@ -14,7 +14,8 @@ pub struct ReplayArgs {
 
     /// The filter to run (default: by the trace's header — factored for
     /// a trace with colours; for an identity trace with none,
-    /// information-matrix, which the leaders serve).
+    /// factored-identity from a known start (`initial_identity`),
+    /// information-matrix without one: what the leaders hold).
     #[arg(long, value_enum)]
     pub method: Option<Method>,
 
