@@ -10,9 +10,10 @@
 //! - n = 100, 1,000 and 10,000, 3n events, seeds 300..: no exact filter; the
 //!   reliability of every marginal entry against the truth pooled over
 //!   seeds (largest |observed − predicted| over the bins holding ≥ 200
-//!   predictions), Brier, log-loss, memory of the belief (its tables and
-//!   background rows; the matrices' n² entries) and time per event and
-//!   per marginal query.
+//!   predictions), Brier, log-loss, IDF1, memory of the belief (its tables
+//!   and background rows; the matrices' n² entries) and time per event and
+//!   per query (the marginals by row and the most likely assignment).
+//! - By method: each method's figures from those tables in one row.
 //! - The yardstick: n = 7, 300 events, 100 seeds (700.., development
 //!   600..), the exact filter's own reliability beside the others': with
 //!   that many seeds the bins are measured, not guessed, and the exact
@@ -347,13 +348,63 @@ fn prefix_row(n: usize, method: Method, s: &Stream, events: usize) -> String {
     }
     let event_us = clock.elapsed().as_secs_f64() * 1e6 / applied.max(1) as f64;
     let clock = Instant::now();
-    let _ = filter.get().marginals().expect("marginals");
+    let p = filter.get().sparse_marginals().expect("marginals");
+    let _ = p.most_likely().expect("assignment");
     let query_us = clock.elapsed().as_secs_f64() * 1e6;
     format!(
-        "| {n} | {} (first {applied} events) | — | — | — | — | {event_us:.0} | {query_us:.0} | {:.0} |",
+        "| {n} | {} (first {applied} events) | — | — | — | — | — | {event_us:.0} | {query_us:.0} | {:.0} |",
         method.name(),
         filter.bytes() as f64 / 1024.0
     )
+}
+
+/// One method's figures across the page, for the table by method.
+#[derive(Default)]
+struct ByMethod {
+    /// Mean and largest |Δp| against the exact filter at the largest
+    /// small n.
+    dp: Option<(f64, f64)>,
+    /// Brier, log-loss, IDF1 against the truth at n = 1,000.
+    scores: Option<(f64, f64, f64)>,
+    /// Reliability gap at n = 1,000 (and how far beyond noise).
+    gap: Option<String>,
+    /// µs a query and KiB of the belief, at n = 1,000 and 10,000.
+    at_1000: Option<(f64, f64)>,
+    at_10000: Option<(f64, f64)>,
+}
+
+impl ByMethod {
+    fn line(&self, name: &str, small: usize) -> String {
+        let dash = || "—".to_string();
+        let cost = |c: Option<(f64, f64)>| {
+            c.map_or(dash(), |(us, kib)| {
+                format!("{:.3} s, {:.1} MB", us / 1e6, kib * 1024.0 / 1e6)
+            })
+        };
+        format!(
+            "| {name} | {} | {} | {} | {} | {} |",
+            self.dp.map_or(dash(), |(mean, max)| format!(
+                "{mean:.4} / {max:.3} (n = {small})"
+            )),
+            self.scores
+                .map_or(dash(), |(b, l, i)| format!("{b:.4} / {l:.4} / {i:.4}")),
+            self.gap.clone().unwrap_or_else(dash),
+            cost(self.at_1000),
+            cost(self.at_10000),
+        )
+    }
+}
+
+/// The figures of method `name`, made on first use.
+fn slot<'a>(by_method: &'a mut Vec<(String, ByMethod)>, name: &str) -> &'a mut ByMethod {
+    let at = match by_method.iter().position(|(m, _)| m == name) {
+        Some(at) => at,
+        None => {
+            by_method.push((name.to_string(), ByMethod::default()));
+            by_method.len() - 1
+        }
+    };
+    &mut by_method[at].1
 }
 
 /// One row of the bins table: mean predicted / observed / count per bin.
@@ -432,6 +483,8 @@ fn main() {
         (200, 300)
     };
     let mut bins_md: Vec<String> = Vec::new();
+    // Each method's figures from the tables, in the order first met.
+    let mut by_method: Vec<(String, ByMethod)> = Vec::new();
     // Reliability diagrams drawn beside the page: (n, method, diagram).
     let mut diagrams: Vec<(usize, String, Reliability)> = Vec::new();
     let small: Vec<usize> = std::env::var("SMALL")
@@ -440,6 +493,7 @@ fn main() {
     let large: Vec<usize> = std::env::var("LARGE")
         .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
         .unwrap_or(vec![100, 1000, 10_000]);
+    let small_largest = small.iter().copied().max().unwrap_or(0);
     for n in small {
         let streams: Vec<Stream> = (base..base + seeds).map(|s| stream(n, 300, s)).collect();
         let exact: Vec<_> = streams.iter().map(exact_marginals).collect();
@@ -477,6 +531,10 @@ fn main() {
             );
             print_last_line(&md);
             bins_md.push(bins_line(n, method, &row));
+            if n == small_largest {
+                slot(&mut by_method, &method.name()).dp =
+                    Some((row.dp_sum / row.dp_count.max(1) as f64, row.dp_max));
+            }
         }
     }
     // The yardstick: with enough seeds the exact filter's reliability is
@@ -590,6 +648,26 @@ fn main() {
             print_last_line(&md);
             bins_md.push(bins_line(n, method, &row));
             diagrams.push((n, method.name(), row.reliability.clone()));
+            let figures = slot(&mut by_method, &method.name());
+            let cost = Some((
+                row.query_time.as_secs_f64() * 1e6 / row.queries.max(1) as f64,
+                row.bytes as f64 / 1024.0,
+            ));
+            if n == 1000 {
+                figures.scores = Some((
+                    row.brier / row.queries.max(1) as f64,
+                    row.log_loss / row.queries.max(1) as f64,
+                    row.idf1_pooled.0 / row.idf1_pooled.1.max(1) as f64,
+                ));
+                figures.gap = Some(format!(
+                    "{:.3} ({})",
+                    row.reliability_gap(),
+                    row.gap_beyond_noise()
+                ));
+                figures.at_1000 = cost;
+            } else if n == 10_000 {
+                figures.at_10000 = cost;
+            }
         }
         if n >= 1000 {
             if let Some(s) = streams.first() {
@@ -597,6 +675,23 @@ fn main() {
                 print_last_line(&md);
             }
         }
+    }
+    let _ = writeln!(
+        md,
+        "\n## By method\n\n\
+         Each method's figures from the tables above: against the exact filter at n = {small_largest} \
+         (mean / largest |Δp|), against the truth at n = 1,000 (Brier / log-loss / IDF1, and the \
+         reliability gap with how far beyond noise), and one query's time (marginals by row and the \
+         assignment) with the belief's memory at n = 1,000 and 10,000. The reliability diagrams \
+         are drawn below. — : not run at that size.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| method | abs dp mean / max | Brier / log-loss / IDF1, n = 1,000 | rel. gap, n = 1,000 | query, memory at n = 1,000 | query, memory at n = 10,000 |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|");
+    for (name, figures) in &by_method {
+        let _ = writeln!(md, "{}", figures.line(name, small_largest));
     }
     let _ = writeln!(
         md,
