@@ -76,48 +76,42 @@ impl Permutations {
     /// Bayes' rule for an identity read over `probs`, a distribution
     /// indexed by rank: each assignment weighed by `right` if it puts
     /// identity `read` on track `track`, `wrong` if not, then normalised.
-    /// All-or-nothing: a read of probability zero (or not finite) is
-    /// refused and changes nothing.
+    /// All-or-nothing: a read of probability zero (or not finite), or a
+    /// likelihood that is not finite, is refused and changes nothing.
     pub fn condition_on_read(
         &self,
-        probs: &mut Vec<f64>,
+        probs: &mut [f64],
         track: usize,
         read: u8,
         right: f64,
         wrong: f64,
     ) -> Result<(), BeliefError> {
-        let posterior: Vec<f64> = probs
-            .iter()
-            .enumerate()
-            .map(|(r, &p)| {
-                p * if self.get(r)[track] == read {
-                    right
-                } else {
-                    wrong
-                }
-            })
-            .collect();
-        // The evidence's probability under the prior belief.
-        let evidence: f64 = posterior.iter().sum();
-        if !(evidence.is_finite() && evidence > 0.0) {
-            return Err(BeliefError::ImpossibleObservation {
-                probability: evidence,
-            });
-        }
-        *probs = posterior;
-        probs.iter_mut().for_each(|p| *p /= evidence);
-        Ok(())
+        self.condition(|r| r, probs, track, read, right, wrong)
     }
 
     /// [`Permutations::condition_on_read`] over a sparse distribution:
     /// `probs[i]` is the probability of the assignment of rank `ranks[i]`,
     /// every other assignment has probability 0 (and keeps it). The same
-    /// numbers as the dense rule (zeros add nothing to the evidence);
-    /// all-or-nothing, and a likelihood that is not finite is refused (the
-    /// dense rule meets it as 0·∞ on an assignment of probability 0).
+    /// numbers as the dense rule (zeros add nothing to the evidence).
     pub fn condition_entries_on_read(
         &self,
         ranks: &[u32],
+        probs: &mut [f64],
+        track: usize,
+        read: u8,
+        right: f64,
+        wrong: f64,
+    ) -> Result<(), BeliefError> {
+        self.condition(|i| ranks[i] as usize, probs, track, read, right, wrong)
+    }
+
+    /// Bayes' rule over `probs`, entry i the probability of the
+    /// assignment of rank `rank_of(i)`; all-or-nothing, a likelihood that
+    /// is not finite refused (0·∞ on an assignment of probability 0 would
+    /// otherwise decide the evidence).
+    fn condition(
+        &self,
+        rank_of: impl Fn(usize) -> usize,
         probs: &mut [f64],
         track: usize,
         read: u8,
@@ -129,17 +123,18 @@ impl Permutations {
                 probability: f64::NAN,
             });
         }
-        let posterior: Vec<f64> = ranks
+        let posterior: Vec<f64> = probs
             .iter()
-            .zip(probs.iter())
-            .map(|(&r, &p)| {
-                p * if self.get(r as usize)[track] == read {
+            .enumerate()
+            .map(|(i, &p)| {
+                p * if self.get(rank_of(i))[track] == read {
                     right
                 } else {
                     wrong
                 }
             })
             .collect();
+        // The evidence's probability under the prior belief.
         let evidence: f64 = posterior.iter().sum();
         if !(evidence.is_finite() && evidence > 0.0) {
             return Err(BeliefError::ImpossibleObservation {

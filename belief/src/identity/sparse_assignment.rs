@@ -315,20 +315,6 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    fn total(rows: &[SparseRow], assignment: &[u32]) -> f64 {
-        assignment
-            .iter()
-            .enumerate()
-            .map(|(r, &c)| {
-                rows[r]
-                    .iter()
-                    .find(|&&(col, _)| col == c)
-                    .map(|&(_, x)| x)
-                    .expect("a listed entry")
-            })
-            .sum()
-    }
-
     /// A random sparse k × k matrix with a hidden perfect matching, so
     /// one always exists.
     fn random_rows(rng: &mut ChaCha8Rng, k: usize, per_row: usize) -> Vec<SparseRow> {
@@ -351,6 +337,46 @@ mod tests {
             .collect()
     }
 
+    /// The k × k matrix of `rows` with row r's unlisted entries at
+    /// `rest[r]`, or far above any listed path where that is ∞.
+    fn dense_cost(rows: &[SparseRow], rest: &[f64]) -> Vec<f64> {
+        let k = rows.len();
+        let mut cost = vec![0.0; k * k];
+        for r in 0..k {
+            let fill = if rest[r].is_finite() { rest[r] } else { 1e6 };
+            cost[r * k..(r + 1) * k].fill(fill);
+            for &(c, x) in &rows[r] {
+                cost[r * k + c as usize] = x;
+            }
+        }
+        cost
+    }
+
+    /// `got` is a permutation as cheap as the dense Hungarian's on `cost`.
+    fn assert_least_cost(got: &[u32], cost: &[f64], what: &str) {
+        let k = got.len();
+        let total = |a: &[u32]| -> f64 {
+            a.iter()
+                .enumerate()
+                .map(|(r, &c)| cost[r * k + c as usize])
+                .sum()
+        };
+        let mut seen = vec![false; k];
+        for &c in got {
+            assert!(
+                !std::mem::replace(&mut seen[c as usize], true),
+                "{what}: a permutation"
+            );
+        }
+        let dense = min_cost_assignment(k, cost);
+        assert!(
+            (total(got) - total(&dense)).abs() < 1e-9,
+            "{what}: {} against the dense {}",
+            total(got),
+            total(&dense)
+        );
+    }
+
     #[test]
     fn equals_the_dense_hungarian_on_random_sparse_matrices() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -359,30 +385,8 @@ mod tests {
                 let per_row = 1 + rng.gen_range(0..5);
                 let rows = random_rows(&mut rng, k, per_row);
                 let sparse = sparse_min_cost_assignment(&rows).expect("a matching exists");
-                // Dense: unlisted entries cost more than any listed path.
-                let big = 1e6;
-                let mut cost = vec![big; k * k];
-                for (r, row) in rows.iter().enumerate() {
-                    for &(c, x) in row {
-                        cost[r * k + c as usize] = x;
-                    }
-                }
-                let dense = min_cost_assignment(k, &cost);
-                let mut seen = vec![false; k];
-                for &c in &sparse {
-                    assert!(!seen[c as usize], "a permutation");
-                    seen[c as usize] = true;
-                }
-                let dense_total: f64 = dense
-                    .iter()
-                    .enumerate()
-                    .map(|(r, &c)| cost[r * k + c as usize])
-                    .sum();
-                assert!(
-                    (total(&rows, &sparse) - dense_total).abs() < 1e-9,
-                    "k = {k}: sparse {} dense {dense_total}",
-                    total(&rows, &sparse)
-                );
+                let cost = dense_cost(&rows, &vec![f64::INFINITY; k]);
+                assert_least_cost(&sparse, &cost, &format!("k = {k}"));
             }
         }
     }
@@ -404,32 +408,7 @@ mod tests {
                     .collect();
                 let got = sparse_min_cost_assignment_with_rest(&rows, &rest)
                     .expect("the listed entries hold a matching");
-                let big = 1e6;
-                let mut cost = vec![0.0; k * k];
-                for r in 0..k {
-                    let fill = if rest[r].is_finite() { rest[r] } else { big };
-                    cost[r * k..(r + 1) * k].fill(fill);
-                    for &(c, x) in &rows[r] {
-                        cost[r * k + c as usize] = x;
-                    }
-                }
-                let total = |a: &[u32]| -> f64 {
-                    a.iter()
-                        .enumerate()
-                        .map(|(r, &c)| cost[r * k + c as usize])
-                        .sum()
-                };
-                let mut seen = vec![false; k];
-                for &c in &got {
-                    assert!(!std::mem::replace(&mut seen[c as usize], true));
-                }
-                let dense = min_cost_assignment(k, &cost);
-                assert!(
-                    (total(&got) - total(&dense)).abs() < 1e-9,
-                    "k = {k}: with rest {} dense {}",
-                    total(&got),
-                    total(&dense)
-                );
+                assert_least_cost(&got, &dense_cost(&rows, &rest), &format!("k = {k}"));
             }
         }
     }

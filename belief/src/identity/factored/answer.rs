@@ -9,12 +9,25 @@
 
 use super::{links, FactoredIdentity};
 use crate::error::BeliefError;
+use crate::identity::filter::Marginals;
 use crate::identity::sparse_marginals::{IdentityRow, SparseMarginals};
 
 impl FactoredIdentity {
-    /// Track t carries identity i with (1 − λ_t)·table + λ_t·background
-    /// (see the module docs of [`super`]).
-    pub fn sparse_marginals(&self) -> Result<SparseMarginals, BeliefError> {
+    /// The marginals of the groups and links alone, leaks left out: a
+    /// doubly stochastic matrix, the belief's when nothing was lost.
+    pub fn table_marginals(&self) -> Result<Marginals, BeliefError> {
+        let n = self.n;
+        Ok(self
+            .table_entries()?
+            .into_iter()
+            .map(|entries| IdentityRow::collect(0.0, entries).dense(n))
+            .collect())
+    }
+
+    /// Each real track's (identity, probability) under the tables and
+    /// links, an identity possibly more than once (a star spread over
+    /// what its partner carries).
+    fn table_entries(&self) -> Result<Vec<Vec<(u32, f64)>>, BeliefError> {
         let n = self.n;
         let mut bp = links::Messages::new(self);
         let local: Vec<Vec<Vec<f64>>> = (0..self.groups.len())
@@ -40,6 +53,13 @@ impl FactoredIdentity {
                 );
             }
         }
+        Ok(table)
+    }
+
+    /// Track t carries identity i with (1 − λ_t)·table + λ_t·background
+    /// (see the module docs of [`super`]).
+    pub fn sparse_marginals(&self) -> Result<SparseMarginals, BeliefError> {
+        let table = self.table_entries()?;
         let rows = table
             .into_iter()
             .zip(&self.backgrounds)

@@ -1009,32 +1009,3 @@ impl IdentityFilter for FactoredIdentity {
         FactoredIdentity::sparse_marginals(self)
     }
 }
-
-impl FactoredIdentity {
-    /// The marginals of the groups and links alone, leaks left out: a
-    /// doubly stochastic matrix, the belief's when nothing was lost.
-    pub fn table_marginals(&self) -> Result<Marginals, BeliefError> {
-        let n = self.n;
-        let mut bp = links::Messages::new(self);
-        let local: Vec<Vec<Vec<f64>>> = (0..self.groups.len())
-            .map(|g| bp.group_marginals(g))
-            .collect::<Result<_, _>>()?;
-        let mut m = vec![vec![0.0; n]; n];
-        for (group, lm) in self.groups.iter().zip(&local) {
-            for (j, row) in lm.iter().enumerate() {
-                let t = group.tracks[j] as usize;
-                if t >= n {
-                    continue;
-                }
-                let answer = &mut m[t];
-                self.spread_row(
-                    group,
-                    row,
-                    |h| local.get(h).map(Vec::as_slice),
-                    |i, p| answer[i] += p,
-                );
-            }
-        }
-        Ok(m)
-    }
-}
