@@ -196,8 +196,10 @@ fn marginals(
     let blocks = matrix
         .block_marginals_stoppable(&method, stop)
         .map_err(failed)?;
-    let predicted_identity = blocks.most_likely().map_err(failed)?;
-    let p_identity = blocks.sparse().map_err(failed)?.into_rows();
+    // The assignment over the rows, as `idmesh replay` solves it.
+    let p_identity = blocks.sparse().map_err(failed)?;
+    let predicted_identity = p_identity.most_likely().map_err(failed)?;
+    let p_identity = p_identity.into_rows();
     let sampling = blocks.sampling.map(|s| SamplingReport {
         blocks: s.blocks as u32,
         half_difference: s.half_difference,

@@ -3,7 +3,6 @@
 //! matrix and the property-bits filter — so tests, replay and benchmarks
 //! treat them alike; plus small checks on marginal matrices.
 
-use super::assignment::most_likely_assignment;
 use super::event::{check_identify, check_mix, Identify, IdentityEvent};
 use super::sparse_marginals::SparseMarginals;
 use crate::error::BeliefError;
@@ -54,7 +53,7 @@ pub trait IdentityFilter {
     /// The one-to-one assignment with the largest Σ_t ln p\[t\]\[π(t)\]
     /// under the marginals: `result[t]` is the identity of track t.
     fn most_likely(&self) -> Result<Vec<u32>, BeliefError> {
-        most_likely_assignment(&self.marginals()?)
+        self.sparse_marginals()?.most_likely()
     }
 }
 
