@@ -47,6 +47,12 @@ fn rules_out(m: &[Vec<f64>], x: &[Vec<f64>], above: f64) -> bool {
         .any(|(&p, &q)| q > above && p <= 0.0)
 }
 
+/// Σ_t λ_t: how far the leaks can take the marginals' columns from
+/// summing to one (each row mixes λ_t of itself out of the tables).
+fn leaked(f: &FactoredIdentity) -> f64 {
+    f.backgrounds.iter().map(|b| b.leak()).sum()
+}
+
 /// The largest |Δp| against exact over a stream, checking at every event.
 fn worst_error(
     n: usize,
@@ -423,7 +429,10 @@ proptest! {
                 break;
             }
             let (m, x) = (f.marginals().unwrap(), exact.marginals().unwrap());
-            prop_assert!(doubly_stochastic_residual(&m) < 1e-9);
+            // Losses below 1e-12 still leak, and reads that contradict
+            // the tables can raise a leak by orders of magnitude; a row's
+            // leak is the only part of it that can unbalance a column.
+            prop_assert!(doubly_stochastic_residual(&m) < 1e-9 + 2.0 * leaked(&f));
             prop_assert!(!rules_out(&m, &x, 0.1), "{:?} against {:?} after {:?}", m, x, e);
         }
     }
