@@ -63,27 +63,7 @@ impl FactoredIdentity {
         let rows = table
             .into_iter()
             .zip(&self.backgrounds)
-            .map(|(entries, background)| {
-                let row = IdentityRow::collect(0.0, entries);
-                let leak = background.leak();
-                if leak <= 0.0 {
-                    return row;
-                }
-                // (1 − λ)·table + λ·row over the identities either lists;
-                // every other one has the row's shared probability.
-                let mut mixed: Vec<(u32, f64)> = row
-                    .listed
-                    .iter()
-                    .map(|&(i, p)| (i, (1.0 - leak) * p + leak * background.probability(i)))
-                    .collect();
-                mixed.extend(
-                    background
-                        .listed_entries()
-                        .filter(|&(i, _)| row.listed.binary_search_by_key(&i, |x| x.0).is_err())
-                        .map(|(i, q)| (i, leak * q)),
-                );
-                IdentityRow::collect(leak * background.shared(), mixed)
-            })
+            .map(|(entries, background)| background.mix_into(IdentityRow::collect(0.0, entries)))
             .collect();
         SparseMarginals::new(rows)
     }
@@ -133,9 +113,13 @@ mod tests {
         }
         assert!(belief.split_stats().lossy_cuts > 0, "the stream must cut");
         let rows = belief.sparse_marginals().unwrap();
+        // (1 − λ)·table + λ·row, entry by entry.
         let mut dense = belief.table_marginals().unwrap();
         for (row, background) in dense.iter_mut().zip(&belief.backgrounds) {
-            background.mix_into(row);
+            let leak = background.leak();
+            for (i, p) in row.iter_mut().enumerate() {
+                *p = (1.0 - leak) * *p + leak * background.probability(i as u32);
+            }
         }
         let leaking = belief.backgrounds.iter().filter(|b| b.leak() > 0.0).count();
         assert!(leaking > 0);

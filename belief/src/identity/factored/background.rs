@@ -16,6 +16,7 @@
 //! track took part in, not with N.
 
 use crate::error::BeliefError;
+use crate::identity::sparse_marginals::IdentityRow;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -152,25 +153,25 @@ impl Background {
         b.prune();
     }
 
-    /// A dense row of the table's marginals for this track becomes the
-    /// track's: (1 − leak)·row + leak·this row.
-    pub fn mix_into(&self, row: &mut [f64]) {
-        if self.leak > 0.0 {
-            row.iter_mut().for_each(|p| *p *= 1.0 - self.leak);
-            self.add_to(row, self.leak);
+    /// The track's row of the table's marginals becomes the track's:
+    /// (1 − leak)·table + leak·this row, over the identities either lists;
+    /// every other one has this row's shared probability times the leak.
+    pub fn mix_into(&self, table: IdentityRow) -> IdentityRow {
+        let leak = self.leak;
+        if leak <= 0.0 {
+            return table;
         }
-    }
-
-    /// Adds `weight` × this row to a dense row of n identities.
-    pub fn add_to(&self, row: &mut [f64], weight: f64) {
-        if self.shared != 0.0 {
-            row.iter_mut().for_each(|p| *p += weight * self.shared);
-        }
-        for (&i, &q) in &self.listed {
-            if let Some(p) = row.get_mut(i as usize) {
-                *p += weight * (q - self.shared);
-            }
-        }
+        let mut mixed: Vec<(u32, f64)> = table
+            .listed
+            .iter()
+            .map(|&(i, p)| (i, (1.0 - leak) * p + leak * self.probability(i)))
+            .collect();
+        mixed.extend(
+            self.listed_entries()
+                .filter(|&(i, _)| table.listed.binary_search_by_key(&i, |x| x.0).is_err())
+                .map(|(i, q)| (i, leak * q)),
+        );
+        IdentityRow::collect(leak * self.shared, mixed)
     }
 
     /// Listed entries within [`NEGLIGIBLE`] of the shared probability need
@@ -191,9 +192,7 @@ mod tests {
     use super::*;
 
     fn dense(r: &Background, n: usize) -> Vec<f64> {
-        let mut row = vec![0.0; n];
-        r.add_to(&mut row, 1.0);
-        row
+        (0..n as u32).map(|i| r.probability(i)).collect()
     }
 
     #[test]
@@ -236,11 +235,13 @@ mod tests {
         assert!((r.leak() - 0.75 * want).abs() < 1e-15);
         assert!((other.leak() - 0.25 * want).abs() < 1e-15);
         // The track's marginals: (1 − leak)·table + leak·row.
-        let mut row = vec![0.0, 1.0, 0.0, 0.0];
-        other.mix_into(&mut row);
+        let row = other.mix_into(IdentityRow::from_dense(&[0.0, 1.0, 0.0, 0.0]));
         let leak = other.leak();
-        assert!((row[1] - ((1.0 - leak) + leak * other.probability(1))).abs() < 1e-15);
-        assert!((row.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let want = |i: u32| f64::from(i == 1) * (1.0 - leak) + leak * other.probability(i);
+        for i in 0..4 {
+            assert!((row.probability(i) - want(i)).abs() < 1e-15, "identity {i}");
+        }
+        assert!((row.total(4) - 1.0).abs() < 1e-12);
     }
 
     #[test]
