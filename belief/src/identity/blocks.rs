@@ -52,13 +52,6 @@ impl Block {
 pub fn blocks(n: usize, positive: impl Fn(usize, usize) -> bool) -> Vec<Block> {
     // Union–find over 2n nodes: tracks 0..n, identities n..2n.
     let mut parent: Vec<usize> = (0..2 * n).collect();
-    fn root(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
     for t in 0..n {
         for i in 0..n {
             if positive(t, i) {
@@ -88,6 +81,36 @@ pub fn blocks(n: usize, positive: impl Fn(usize, usize) -> bool) -> Vec<Block> {
         }
     }
     out
+}
+
+/// The root of `x` in a union–find forest, halving paths.
+fn root(parent: &mut [usize], mut x: usize) -> usize {
+    while parent[x] != x {
+        parent[x] = parent[parent[x]];
+        x = parent[x];
+    }
+    x
+}
+
+/// The sizes of the blocks a known start and `mixes` (pairs of tracks
+/// that mixed with a positive swap) make among `n` tracks: the connected
+/// components of the mixing graph (see the module docs), largest first.
+pub fn mixing_block_sizes(n: usize, mixes: impl IntoIterator<Item = (usize, usize)>) -> Vec<usize> {
+    let mut parent: Vec<usize> = (0..n).collect();
+    for (a, b) in mixes {
+        let (a, b) = (root(&mut parent, a), root(&mut parent, b));
+        if a != b {
+            parent[a.max(b)] = a.min(b);
+        }
+    }
+    let mut sizes = vec![0usize; n];
+    for t in 0..n {
+        let r = root(&mut parent, t);
+        sizes[r] += 1;
+    }
+    sizes.retain(|&s| s > 0);
+    sizes.sort_unstable_by(|a, b| b.cmp(a));
+    sizes
 }
 
 /// The blocks of an information matrix (row-major, entries finite or −∞).
@@ -141,6 +164,16 @@ mod tests {
         );
         assert!(b.iter().all(Block::is_balanced));
         assert_eq!(sub_matrix(4, &l, &b[0]), vec![0.0, -1.0, -2.0, 0.0]);
+    }
+
+    #[test]
+    fn mixes_join_blocks_and_nothing_else() {
+        // 0–1–2 chained, 3 alone, 4–5.
+        assert_eq!(
+            mixing_block_sizes(6, [(0, 1), (4, 5), (2, 1)]),
+            vec![3, 2, 1]
+        );
+        assert_eq!(mixing_block_sizes(3, []), vec![1, 1, 1]);
     }
 
     #[test]

@@ -17,7 +17,7 @@
 //!   round trip to the sensor and to the coordinator.
 
 use super::ingest::{all_accepted, send};
-use super::interval::median_interval;
+use super::interval::{median, median_interval};
 use super::latency::percentile;
 use super::{write, BenchOptions, Deployment, Made};
 use crate::runtime::query::ask;
@@ -317,11 +317,7 @@ pub fn run(runtime: &tokio::runtime::Runtime, options: &BenchOptions) -> Result<
     for tracks in SIZES {
         eprintln!("bench: extracting frames of {tracks} tracks");
         let t = throughput(tracks)?;
-        let median = {
-            let mut sorted = t.per_frame.clone();
-            sorted.sort_by(f64::total_cmp);
-            sorted[sorted.len() / 2]
-        };
+        let median = median(&t.per_frame);
         let interval = median_interval(&t.per_frame).map_or("—".into(), |(lo, hi, _)| {
             format!("[{:.2}, {:.2}]", lo * 1e3, hi * 1e3)
         });

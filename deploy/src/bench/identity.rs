@@ -13,13 +13,16 @@
 //!   belief's, and each process's peak memory is read from the operating
 //!   system.
 
-use super::interval::median_interval;
+use super::interval::{median, median_interval};
 use super::{write, BenchOptions, Deployment, Made};
 use crate::runtime::launch::simulate_crowd;
 use crate::runtime::query::ask;
 use anyhow::{anyhow, bail, Context, Result};
+use idmesh_belief::identity::blocks::mixing_block_sizes;
 use idmesh_belief::identity::sparse_marginals::SparseMarginals;
-use idmesh_belief::identity::{FactoredIdentity, FactoredIdentityOptions, IdentityFilter};
+use idmesh_belief::identity::{
+    FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter,
+};
 use idmesh_belief::identity_event_of;
 use idmesh_protocol::trace::{Line, NumberedLine, TraceReader};
 use idmesh_protocol::wire::query::IdentityAnswer;
@@ -45,8 +48,14 @@ struct Measured {
     offline_events_seconds: f64,
     offline_bytes: usize,
     offline_query: Vec<f64>,
-    live_stream_seconds: f64,
-    live_query: Vec<f64>,
+    live: Live,
+}
+
+/// What the live deployment measured.
+struct Live {
+    /// From starting the deployment to the answer that covers the stream.
+    stream_seconds: f64,
+    query: Vec<f64>,
     answer_bytes: usize,
     listed: usize,
     /// Largest |live − offline| over every marginal.
@@ -72,7 +81,7 @@ fn offline(trace: &Path) -> Result<Offline> {
     let reader = TraceReader::new(std::io::BufReader::new(file), path.clone());
     let mut belief: Option<FactoredIdentity> = None;
     let (mut events, mut seconds) = (0u64, 0.0);
-    let mut parent: Vec<usize> = Vec::new();
+    let mut mixes: Vec<(usize, usize)> = Vec::new();
     for numbered in reader {
         let NumberedLine { number, line } = numbered.map_err(|e| anyhow!("{e}"))?;
         if let Line::Header(header) = &line {
@@ -84,7 +93,6 @@ fn offline(trace: &Path) -> Result<Offline> {
                 start,
                 FactoredIdentityOptions::default(),
             )?);
-            parent = (0..start.len()).collect();
             continue;
         }
         let Some(event) = identity_event_of(&line) else {
@@ -99,37 +107,23 @@ fn offline(trace: &Path) -> Result<Offline> {
             .map_err(|e| anyhow!("{path}:{number}: {e}"))?;
         seconds += clock.elapsed().as_secs_f64();
         events += 1;
-        if let idmesh_belief::identity::IdentityEvent::Mix(mix) = event {
+        if let IdentityEvent::Mix(mix) = event {
             if mix.swap > 0.0 {
-                let (a, b) = (
-                    root(&mut parent, mix.a as usize),
-                    root(&mut parent, mix.b as usize),
-                );
-                parent[a] = b;
+                mixes.push((mix.a as usize, mix.b as usize));
             }
         }
     }
     let belief = belief.ok_or_else(|| anyhow!("{path}: no header"))?;
-    let mut sizes = vec![0usize; parent.len()];
-    for t in 0..parent.len() {
-        let r = root(&mut parent, t);
-        sizes[r] += 1;
-    }
+    let largest_block = mixing_block_sizes(belief.size(), mixes)
+        .first()
+        .copied()
+        .unwrap_or(0);
     Ok(Offline {
         belief,
         events,
         seconds,
-        largest_block: sizes.into_iter().max().unwrap_or(0),
+        largest_block,
     })
-}
-
-/// The root of `x` in a union-find forest, halving paths.
-fn root(parent: &mut [usize], mut x: usize) -> usize {
-    while parent[x] != x {
-        parent[x] = parent[parent[x]];
-        x = parent[x];
-    }
-    x
 }
 
 /// One offline query: the marginals by row and the assignment under them.
@@ -155,7 +149,7 @@ async fn live(
     options: &BenchOptions,
     trace: &Path,
     offline: &(SparseMarginals, Vec<u32>),
-) -> Result<(f64, Vec<f64>, usize, usize, f64, bool, u64, u64)> {
+) -> Result<Live> {
     let started = Instant::now();
     let mut deployment = Deployment::start(options, trace, LEADERS, None, false).await?;
     let key = deployment.keys().query_identity();
@@ -180,44 +174,35 @@ async fn live(
         tokio::time::sleep(Duration::from_secs(2)).await;
     };
     let stream_seconds = started.elapsed().as_secs_f64();
-    let mut times = Vec::with_capacity(QUERIES);
-    let mut bytes = 0;
+    let mut query = Vec::with_capacity(QUERIES);
+    let mut answer_bytes = 0;
     for _ in 0..QUERIES {
         let clock = Instant::now();
         let body = ask(&deployment.session, &key, timeout).await?;
-        times.push(clock.elapsed().as_secs_f64());
-        bytes = body.len();
+        query.push(clock.elapsed().as_secs_f64());
+        answer_bytes = body.len();
     }
     let got = SparseMarginals::new(answer.p_identity)?;
-    let difference = got.max_abs_difference(&offline.0);
-    let same = answer.predicted_identity == offline.1;
-    let (mut coordinator, mut leader) = (0, 0);
+    let (mut coordinator_peak, mut leader_peak) = (0, 0);
     for (name, pid) in deployment.pids() {
         let peak = peak_memory(name, pid)?;
         if name.contains("coordinator") {
-            coordinator = coordinator.max(peak);
+            coordinator_peak = coordinator_peak.max(peak);
         } else if name.contains("leader") {
-            leader = leader.max(peak);
+            leader_peak = leader_peak.max(peak);
         }
     }
-    let listed = got.listed();
     deployment.close().await;
-    Ok((
+    Ok(Live {
         stream_seconds,
-        times,
-        bytes,
-        listed,
-        difference,
-        same,
-        coordinator,
-        leader,
-    ))
-}
-
-fn median(values: &[f64]) -> f64 {
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN)
+        query,
+        answer_bytes,
+        listed: got.listed(),
+        difference: got.max_abs_difference(&offline.0),
+        same_assignment: answer.predicted_identity == offline.1,
+        coordinator_peak,
+        leader_peak,
+    })
 }
 
 fn measure(
@@ -251,8 +236,7 @@ fn measure(
     }
     let answer = answer.ok_or_else(|| anyhow!("no offline query"))?;
     eprintln!("bench: {tracks} tracks through {LEADERS} leaders");
-    let (stream, live_query, answer_bytes, listed, difference, same, coordinator, leader) =
-        runtime.block_on(live(options, &trace, &answer))?;
+    let live = runtime.block_on(live(options, &trace, &answer))?;
     Ok(Measured {
         tracks,
         events: o.events,
@@ -260,14 +244,7 @@ fn measure(
         offline_events_seconds: o.seconds,
         offline_bytes: o.belief.memory_bytes(),
         offline_query: offline_query_times,
-        live_stream_seconds: stream,
-        live_query,
-        answer_bytes,
-        listed,
-        difference,
-        same_assignment: same,
-        coordinator_peak: coordinator,
-        leader_peak: leader,
+        live,
     })
 }
 
@@ -326,14 +303,14 @@ pub fn run(runtime: &tokio::runtime::Runtime, options: &BenchOptions) -> Result<
             m.offline_events_seconds * 1e6 / m.events.max(1) as f64,
             mb(m.offline_bytes as f64),
             seconds(&m.offline_query),
-            m.live_stream_seconds,
-            seconds(&m.live_query),
-            mb(m.answer_bytes as f64),
-            m.listed,
-            m.difference,
-            if m.same_assignment { "yes" } else { "no" },
-            mb(m.coordinator_peak as f64),
-            mb(m.leader_peak as f64),
+            m.live.stream_seconds,
+            seconds(&m.live.query),
+            mb(m.live.answer_bytes as f64),
+            m.live.listed,
+            m.live.difference,
+            if m.live.same_assignment { "yes" } else { "no" },
+            mb(m.live.coordinator_peak as f64),
+            mb(m.live.leader_peak as f64),
         )?;
     }
     print!("{report}");

@@ -12,6 +12,14 @@
 /// The interval's confidence.
 pub const CONFIDENCE: f64 = 0.95;
 
+/// The middle sample (the upper of the two middle ones for an even count);
+/// NaN for none.
+pub fn median(samples: &[f64]) -> f64 {
+    let mut sorted = samples.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
 /// The narrowest interval of order statistics of `samples` that holds
 /// their law's median with probability at least [`CONFIDENCE`]:
 /// `(low, high, confidence)`. None for fewer than six samples: even their
