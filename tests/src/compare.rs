@@ -35,6 +35,12 @@ pub fn identity_marginals(v: &Value) -> SparseMarginals {
     SparseMarginals::new(rows).unwrap_or_else(|e| panic!("identity rows: {e}"))
 }
 
+/// The largest difference between two answers' `p_identity`, entry by
+/// entry (∞ when their sizes differ).
+pub fn identity_difference(a: &Value, b: &Value) -> f64 {
+    identity_marginals(a).max_abs_difference(&identity_marginals(b))
+}
+
 /// One track's `p_identity` row of a per-track answer, over n identities.
 pub fn identity_row(v: &Value, n: usize) -> Vec<f64> {
     let row: IdentityRow =

@@ -19,6 +19,7 @@
 
 use idmesh_placement::{items_sent, RegionRule};
 use idmesh_protocol::trace::TraceReader;
+use idmesh_tests::compare::identity_matrix;
 use idmesh_tests::deployment::{
     crowd, crowd_with_identities, replay_lines, truth_lines, waypoint_crowd, Deployment, Factored,
     LeaderFaultSection, Settings, SplitSetting, Truth,
@@ -346,10 +347,6 @@ fn answers_pushed_at_a_cut_or_lost_and_asked_for_change_no_answer() {
     }
 }
 
-fn matrix(v: &Value) -> Vec<Vec<f64>> {
-    idmesh_tests::compare::identity_matrix(v)
-}
-
 /// A stream of colours and identities under the factored belief, through
 /// three leaders, one of them killed mid-stream and restarted from its
 /// journal and snapshot: the leaders hold components for the colours and
@@ -421,7 +418,10 @@ fn colours_and_identities_through_a_crash(adopted: bool) {
         a["finished"] == true
     });
     let want = identities.last().unwrap();
-    let (got, wanted) = (matrix(&answer["p_identity"]), matrix(&want["p_identity"]));
+    let (got, wanted) = (
+        identity_matrix(&answer["p_identity"]),
+        identity_matrix(&want["p_identity"]),
+    );
     assert_eq!(got.len(), wanted.len());
     for (t, (g, w)) in got.iter().zip(&wanted).enumerate() {
         let off = g

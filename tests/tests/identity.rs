@@ -6,28 +6,16 @@
 //! `idmesh replay --method information-matrix`. Either way the coordinator
 //! computes marginals only when asked.
 
-use idmesh_tests::compare::{identity_marginals, identity_matrix, identity_row};
+use idmesh_belief::identity::filter::max_abs_difference;
+use idmesh_tests::compare::{
+    identity_difference, identity_marginals, identity_matrix, identity_row,
+};
 use idmesh_tests::deployment::{
     crowd_with_identities, replay_lines, truth_lines, Deployment, Factored, Settings, Truth,
 };
 use serde_json::Value;
 use std::path::Path;
 use std::time::{Duration, Instant};
-
-fn matrix(v: &Value) -> Vec<Vec<f64>> {
-    identity_matrix(v)
-}
-
-fn largest_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    a.iter()
-        .zip(b)
-        .flat_map(|(x, y)| {
-            assert_eq!(x.len(), y.len());
-            x.iter().zip(y).map(|(p, q)| (p - q).abs())
-        })
-        .fold(0.0, f64::max)
-}
 
 /// Every identity answer asked for at a truth point equals the central
 /// replay's there to 1e-9, with the same most likely assignment and its
@@ -45,10 +33,7 @@ fn assert_truth_points(
     let answers = deployment.at_truth_points("identity", truths);
     for (i, answer) in &answers {
         let (i, events) = (*i, &answer["watermark"]["sensor-0"]);
-        let difference = largest_difference(
-            &matrix(&answer["p_identity"]),
-            &matrix(&central[i]["p_identity"]),
-        );
+        let difference = identity_difference(&answer["p_identity"], &central[i]["p_identity"]);
         assert!(
             difference < 1e-9,
             "{leaders} leaders, {events} events: off by {difference}"
@@ -71,9 +56,9 @@ fn assert_truth_points(
 /// The one-track question for track 7 agrees with the whole answer `last`.
 fn assert_one_track_agrees(deployment: &Deployment, last: &Value) {
     let one = deployment.query(&["identity", "7"]).expect("one track");
-    let whole = matrix(&last["p_identity"]);
+    let whole = identity_matrix(&last["p_identity"]);
     let row = identity_row(&one[0]["p_identity"], whole.len());
-    assert!(largest_difference(&[row], &whole[7..8]) < 1e-12);
+    assert!(max_abs_difference(&[row], &whole[7..8]) < 1e-12);
     assert_eq!(one[0]["predicted_identity"], last["predicted_identity"][7]);
 }
 
@@ -126,10 +111,8 @@ fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders
         let last = deployment.answer_when(&["identity"], Duration::from_secs(60), |a| {
             a["finished"] == true
         });
-        let final_difference = largest_difference(
-            &matrix(&last["p_identity"]),
-            &matrix(&central.last().unwrap()["p_identity"]),
-        );
+        let final_difference =
+            identity_difference(&last["p_identity"], &central.last().unwrap()["p_identity"]);
         assert!(
             final_difference < 1e-9,
             "{leaders} leaders, the end: {final_difference}"
@@ -329,7 +312,7 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     assert!(sampling["blocks"].as_u64() >= Some(1), "{sampling}");
     let half = sampling["half_difference"].as_f64().expect("a diagnostic");
     assert!(half > 0.0 && half <= 1.0, "{sampling}");
-    let p = matrix(&last["p_identity"]);
+    let p = identity_matrix(&last["p_identity"]);
     assert_eq!(p.len(), 1000);
     for (t, row) in p.iter().enumerate() {
         let sum: f64 = row.iter().sum();
@@ -349,7 +332,7 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     assert_eq!(predicted, (0..1000).collect::<Vec<u64>>());
     let one = deployment.query(&["identity", "7"]).expect("one track");
     let row = identity_row(&one[0]["p_identity"], p.len());
-    assert!(largest_difference(&[row], &p[7..8]) < 1e-12);
+    assert!(max_abs_difference(&[row], &p[7..8]) < 1e-12);
     assert_eq!(deployment.leaders_total("rows_held"), 1000);
     std::fs::remove_dir_all(&dir).ok();
 }
