@@ -9,6 +9,7 @@ fn main() {
     let n: usize = args.next().map_or(100_000, |a| a.parse().expect("n"));
     let coupling = match args.next().as_deref() {
         Some("coupled") => Coupling::Coupled,
+        Some("flat") => Coupling::Flat,
         _ => Coupling::Local,
     };
     let queries: usize = args.next().map_or(20, |a| a.parse().expect("queries"));
@@ -29,7 +30,11 @@ fn main() {
     for e in warm {
         let _ = belief.apply(e);
     }
-    eprintln!("warm-up: {:.3} s", start.elapsed().as_secs_f64());
+    eprintln!(
+        "warm-up: {:.3} s ({:.2} µs an event)",
+        start.elapsed().as_secs_f64(),
+        1e6 * start.elapsed().as_secs_f64() / warm.len() as f64
+    );
     belief.marginals().expect("a belief");
     let start = Instant::now();
     for e in rest.iter().take(1000) {

@@ -29,7 +29,11 @@ fn rule() -> impl Strategy<Value = SplitRule> {
 }
 
 fn coupling() -> impl Strategy<Value = Coupling> {
-    prop_oneof![Just(Coupling::Coupled), Just(Coupling::Local)]
+    prop_oneof![
+        Just(Coupling::Coupled),
+        Just(Coupling::Local),
+        Just(Coupling::Flat)
+    ]
 }
 
 /// Everything observable about a belief, to check a rejected update.
@@ -125,7 +129,7 @@ proptest! {
                 // The local rule reads only the observed component: a
                 // certain sighting the red count rules out is taken, and
                 // the belief is left without mass (documented on Local).
-                Err(BeliefError::Degenerate { .. }) if coupling == Coupling::Local => break,
+                Err(BeliefError::Degenerate { .. }) if coupling.is_local() => break,
                 Err(e) => panic!("{e} after {event:?}"),
             };
             prop_assert!(p.iter().all(|x| (0.0..=1.0).contains(x)), "{:?}", p);
@@ -148,7 +152,7 @@ proptest! {
         }
         let (r, b) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
         let (want, other) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
-        let local = coupling == Coupling::Local;
+        let local = coupling.is_local();
         if local && factored.marginals().is_err() {
             // A sighting the count ruled out was taken (see above).
             return Ok(());

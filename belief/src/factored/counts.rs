@@ -75,6 +75,43 @@ impl CountPrior {
         &self.ln
     }
 
+    /// The weight Q(s), s = 0..=m, that an *uninformed* rest of n − m
+    /// tracks gives to a red count s of m tracks: Σ_K π(K)·C(n − m, K − s),
+    /// the prior mass of the rest's completions (every rest set alike,
+    /// as under the uniform start). Scaled to a largest entry of 1; all
+    /// zero where π leaves no completion. A function of (n, π, m) alone,
+    /// so every leader and every replay compute the same numbers.
+    /// O(n·m): callers keep it per m.
+    pub(crate) fn uninformed_rest(&self, m: usize) -> Vec<f64> {
+        let n = self.ln.len() - 1;
+        let rest = n.saturating_sub(m);
+        // ln C(rest, j) for j = 0..=rest, term by term.
+        let mut ln_choose = Vec::with_capacity(rest + 1);
+        let mut acc = 0.0;
+        for j in 0..=rest {
+            ln_choose.push(acc);
+            if j < rest {
+                acc += ((rest - j) as f64 / (j + 1) as f64).ln();
+            }
+        }
+        let ln_q: Vec<f64> = (0..=m)
+            .map(|s| {
+                ln_sum_exp(
+                    self.ln
+                        .iter()
+                        .enumerate()
+                        .filter(|&(k, l)| l.is_finite() && k >= s && k - s <= rest)
+                        .map(|(k, l)| l + ln_choose[k - s]),
+                )
+            })
+            .collect();
+        let max = ln_q.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if max == f64::NEG_INFINITY {
+            return vec![0.0; m + 1];
+        }
+        ln_q.iter().map(|&l| (l - max).exp()).collect()
+    }
+
     /// The count the tilt of the product tree aims the bulk at: k when it
     /// is known, else the count π and the binomial of n tracks favour most.
     pub(crate) fn target(&self) -> f64 {

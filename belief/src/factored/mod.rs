@@ -21,7 +21,9 @@
 //! what is not on a hot path (normalizer fallbacks, P(set all red), the
 //! count posterior) and as the reference the tree is tested against.
 //! How splits weigh the red count is [`Coupling`]: the true weight from
-//! the rest of the belief, or only what the pair being split can hold.
+//! the rest of the belief, or the weight an uninformed rest of the field
+//! would give (what leaders can compute; docs/design/beliefs.md, "The local
+//! rule").
 //!
 //! - Mixing tracks of one component is the exact rollup on its table.
 //! - Mixing tracks of two components merges them (outer product, then
@@ -116,20 +118,47 @@ pub enum Coupling {
     /// within about 2·10⁻⁴ of the exact weights there, and closer as n
     /// grows.
     Coupled,
-    /// Q(s) = 1 on every count s the merged pair can hold, 0 elsewhere:
-    /// the split matches the moments of the pair's own tables as if the
-    /// rest of the belief did not care about their count, so it needs only
-    /// what it splits; a soft observation needs only its component. This
-    /// is what leaders can run when the factored belief is distributed.
+    /// Q(s) = Σ_K π(K)·C(n − m, K − s) on every count s the merged pair
+    /// of m tracks can hold, 0 elsewhere: the weight an *uninformed* rest
+    /// (every completion of the other n − m tracks alike under the prior)
+    /// gives to the pair's count. A function of (n, π, m) and of the pair's
+    /// own support only, so the split needs only what it splits and a soft
+    /// observation only its component, and events on disjoint components
+    /// commute. This is what leaders run when the factored belief is
+    /// distributed (`FactoredShare`), so the centralized engine with this
+    /// coupling computes what they compute.
+    ///
     /// The same as [`Coupled`](Coupling::Coupled) whenever the merged count
     /// is fixed (a known start, until splits spread the counts): then the
-    /// true Q is one number on the one count. An observation reads only its
-    /// component too, hard ones (a likelihood 0) included: one the count
-    /// makes impossible (every red count it leaves is ruled out elsewhere)
-    /// is found at the next query, as a belief without mass, not refused
-    /// at once. This is what leaders run (`FactoredShare`), so the
-    /// centralized engine with this coupling computes what they compute.
+    /// true Q is one number on the one count; and from the uniform prior
+    /// until the first sighting, when the rest *is* uninformed. Against
+    /// [`Flat`](Coupling::Flat) it keeps the prior's pull on the pair's
+    /// count: a pair of m tracks among n holds s of the k red ones in
+    /// C(m, s)·C(n − m, k − s) of the k-sets, and weighing every s alike
+    /// lets the halves of a split believe in extreme counts more than the
+    /// rest allows (most on small crowds, where m is a large share of n).
+    /// What sightings taught the rest it cannot know: docs/design/beliefs.md,
+    /// "The local rule", and docs/coupling-accuracy.md for what that costs.
+    /// An observation reads only its component too, hard ones (a likelihood
+    /// 0) included: one the prior alone rules out (it leaves more red
+    /// tracks than π allows, or fewer) is refused at once; one that only
+    /// other components rule out is found at the next query, as a belief
+    /// without mass.
     Local,
+    /// Q(s) = 1 on every count s the merged pair can hold, 0 elsewhere: the
+    /// split matches the moments of the pair's own tables as if the rest of
+    /// the belief did not care about their count. Local as
+    /// [`Local`](Coupling::Local) is, and what leaders ran before it; kept
+    /// to measure against.
+    Flat,
+}
+
+impl Coupling {
+    /// Whether a split and an observation read only the components they
+    /// touch (what a leader's share can run).
+    pub fn is_local(self) -> bool {
+        matches!(self, Coupling::Local | Coupling::Flat)
+    }
 }
 
 /// The most tracks at which the eager (O(n²)-memory) evaluation of the
@@ -157,8 +186,13 @@ pub struct FactoredOptions {
     /// steps (which reach solutions at infinity quickly); if those fail too
     /// the mix reports [`BeliefError::Numerical`].
     pub max_sweeps: usize,
-    /// A track whose marginal is within this of 0 or 1 after an observation
-    /// or a split is split off as certain.
+    /// A track whose other colour has odds of at most this (against its
+    /// likely one) after an observation or a split is split off as certain,
+    /// keeping those odds on its own. 0 (the default): only a track
+    /// certain outright. Anything more drops the correlation between the
+    /// unlikely colour and the rest of the component: a stream the world
+    /// produced (a sighting that makes the truth a 10^-200 chance, then a
+    /// certain one of it) can then leave no mass anywhere.
     pub certain: f64,
 }
 
@@ -171,7 +205,7 @@ impl Default for FactoredOptions {
             coupling: Coupling::Coupled,
             tolerance: 1e-12,
             max_sweeps: 200,
-            certain: 1e-12,
+            certain: 0.0,
         }
     }
 }
@@ -246,6 +280,9 @@ pub struct FactoredBelief {
     numbers: usize,
     /// When each track last mixed (event number), for [`SplitRule::Recent`].
     last_mix: Vec<u64>,
+    /// [`CountPrior::uninformed_rest`] by m, made when first needed (empty:
+    /// not yet): the count weights of [`Coupling::Local`].
+    uninformed: Vec<Vec<f64>>,
     /// The count coupling, evaluated when asked (see the `tree` module);
     /// behind a lock because a query caches its convolutions.
     tree: Mutex<CountTree>,
@@ -269,6 +306,7 @@ impl Clone for FactoredBelief {
             home: self.home.clone(),
             numbers: self.numbers,
             last_mix: self.last_mix.clone(),
+            uninformed: self.uninformed.clone(),
             tree: Mutex::new(self.lock_tree().clone()),
             tree_kept: self.tree_kept,
             tree_stale: std::sync::atomic::AtomicBool::new(false),
@@ -320,6 +358,7 @@ impl FactoredBelief {
             free: Vec::new(),
             home: vec![(0, 0); n],
             last_mix: vec![0; n],
+            uninformed: Vec::new(),
             tree: Mutex::new(tree),
             tree_kept: true,
             tree_stale: std::sync::atomic::AtomicBool::new(false),
@@ -572,12 +611,8 @@ impl FactoredBelief {
         merged_counts: Vec<f64>,
     ) -> Result<Vec<f64>, BeliefError> {
         let width = merged_counts.len();
-        if self.options.coupling == Coupling::Local {
-            // Every count the pair can hold weighs alike.
-            return Ok(merged_counts
-                .iter()
-                .map(|&c| if c > 0.0 { 1.0 } else { 0.0 })
-                .collect());
+        if self.options.coupling.is_local() {
+            return Ok(self.local_weights(&merged_counts, true));
         }
         // Everything but the pair: the pair's leaves hold the merged
         // counts for the walk, then their own again (the caller replaces
@@ -593,21 +628,32 @@ impl FactoredBelief {
         q
     }
 
-    /// The certain local bits of a component whose bit marginals are `m`.
-    fn certain_bits(&self, m: &[f64]) -> Vec<(usize, bool)> {
-        if m.len() < 2 {
-            return Vec::new();
-        }
-        let eps = self.options.certain;
-        m.iter()
+    /// The count weights of a local coupling for a component (or merged
+    /// pair) whose count vector is `counts`: the uninformed rest's weight
+    /// ([`Coupling::Local`]) or 1 ([`Coupling::Flat`]), zero on the counts
+    /// it cannot hold when `support` (a split must not move mass to a count
+    /// the merged table rules out: that keeps a fixed count fixed).
+    fn local_weights(&mut self, counts: &[f64], support: bool) -> Vec<f64> {
+        let m = counts.len() - 1;
+        let prior: &[f64] = if self.options.coupling == Coupling::Local {
+            if self.uninformed.len() <= m {
+                self.uninformed.resize(m + 1, Vec::new());
+            }
+            if self.uninformed[m].is_empty() {
+                self.uninformed[m] = self.prior.uninformed_rest(m);
+            }
+            &self.uninformed[m]
+        } else {
+            &[]
+        };
+        counts
+            .iter()
             .enumerate()
-            .filter_map(|(b, &p)| {
-                if p <= eps {
-                    Some((b, false))
-                } else if p >= 1.0 - eps {
-                    Some((b, true))
+            .map(|(s, &c)| {
+                if support && c <= 0.0 {
+                    0.0
                 } else {
-                    None
+                    prior.get(s).copied().unwrap_or(1.0)
                 }
             })
             .collect()
@@ -650,12 +696,19 @@ impl FactoredBelief {
         let (tol, sweeps) = (self.options.tolerance, self.options.max_sweeps);
         let pieces = if self.options.split == SplitRule::Original || !may_merge {
             // Project onto the old pair without building the merged table.
-            let (pa, pb, total) = split::mixed_pair_marginals(c1, ba, c2, bb, mix.swap, &q)?;
+            let (pa, pb, ln_total) = split::mixed_pair_marginals(c1, ba, c2, bb, mix.swap, &q)?;
             // P(x_A), P(x_B) are the merged belief's marginals, and the
             // split keeps them: tracks certain there are certain after.
-            let certain_a = self.certain_bits(&bit_marginals(&pa, c1.len()));
-            let certain_b = self.certain_bits(&bit_marginals(&pb, c2.len()));
-            let log_mass = c1.log_scale + c2.log_scale + total.ln();
+            // Keep at least one track in each half.
+            let margin = self.options.certain;
+            let certain = |p: &[f64], bits: usize| {
+                let mut fixed = table::certain_odds(p, None, bits, margin);
+                fixed.truncate(bits.saturating_sub(1));
+                fixed
+            };
+            let certain_a = certain(&pa, c1.len());
+            let certain_b = certain(&pb, c2.len());
+            let log_mass = c1.log_scale + c2.log_scale + ln_total;
             let (a, b, used) = split::fit(
                 pa,
                 pb,
@@ -672,9 +725,7 @@ impl FactoredBelief {
                 if fixed.is_empty() {
                     pieces.push(half);
                 } else {
-                    // Keep at least one track in the half.
-                    let keep = fixed.len().min(half.len() - 1);
-                    let (rest, singles) = half.restrict(&fixed[..keep])?;
+                    let (rest, singles) = half.restrict(&fixed)?;
                     self.stats.certain_splits += singles.len() as u64;
                     pieces.extend(singles);
                     pieces.push(rest);
@@ -707,10 +758,10 @@ impl FactoredBelief {
         mix: Mix,
     ) -> Result<Vec<Component>, BeliefError> {
         let mut pieces = Vec::new();
-        let fixed = {
-            let weighted = Weighted::new(&merged, &q)?;
-            self.certain_bits(&weighted.marginals())
-        };
+        // The merged belief must have mass under Q (Weighted::new checks).
+        Weighted::new(&merged, &q)?;
+        let fixed =
+            table::certain_odds(&merged.table, Some(&q), merged.len(), self.options.certain);
         if !fixed.is_empty() && fixed.len() < merged.len() {
             let (rest, singles) = merged.restrict(&fixed)?;
             let shift = fixed.iter().filter(|f| f.1).count();
@@ -775,11 +826,9 @@ impl FactoredBelief {
             return Ok(());
         }
         let width = comp.counts.len();
-        let q = if self.options.coupling == Coupling::Local {
-            comp.counts
-                .iter()
-                .map(|&c| if c > 0.0 { 1.0 } else { 0.0 })
-                .collect()
+        let q = if self.options.coupling.is_local() {
+            let counts = comp.counts.clone();
+            self.local_weights(&counts, true)
         } else {
             self.leave_one_out(slot, width)?
         };
@@ -932,8 +981,8 @@ impl PropertyFilter for FactoredBelief {
         let new_counts = table::counts_of(&table, comp.len());
         // Under the local coupling a sighting needs only its component,
         // so that a leader holding the component alone computes the same.
-        let r = if self.options.coupling == Coupling::Local {
-            vec![1.0; new_counts.len()]
+        let r = if self.options.coupling.is_local() {
+            self.local_weights(&new_counts, false)
         } else {
             self.leave_one_out(c, new_counts.len())?
         };
@@ -946,13 +995,16 @@ impl PropertyFilter for FactoredBelief {
             });
         }
         let updated = Component::from_table(comp.tracks.clone(), table, comp.log_scale)?;
-        let (m, _) = updated.weighted_marginals(&r);
-        let fixed = self.certain_bits(&m);
+        let fixed = table::certain_odds(
+            &updated.table,
+            Some(&r),
+            updated.len(),
+            self.options.certain,
+        );
         if !fixed.is_empty() {
             let (rest, singles) = if fixed.len() == updated.len() {
                 // Everything certain: keep one track as the rest.
-                let (rest, singles) = updated.restrict(&fixed[1..])?;
-                (rest, singles)
+                updated.restrict(&fixed[1..])?
             } else {
                 updated.restrict(&fixed)?
             };
@@ -1072,19 +1124,6 @@ fn check_eager(tracks: usize) -> Result<(), BeliefError> {
              evaluation would need O(n²) memory at n = {tracks}"
         ),
     })
-}
-
-/// P(bit i set) for every bit of a normalized table.
-fn bit_marginals(table: &[f64], bits: usize) -> Vec<f64> {
-    (0..bits)
-        .map(|i| {
-            let half = 1usize << i;
-            table
-                .chunks_exact(2 * half)
-                .map(|b| b[half..].iter().sum::<f64>())
-                .sum()
-        })
-        .collect()
 }
 
 #[cfg(test)]

@@ -116,21 +116,6 @@ impl<'a> Weighted<'a> {
         })
     }
 
-    /// P(bit i set) for every local bit of the merged table.
-    pub(crate) fn marginals(&self) -> Vec<f64> {
-        (0..self.merged.len())
-            .map(|i| {
-                let half = 1usize << i;
-                let s: f64 = self
-                    .w
-                    .chunks_exact(2 * half)
-                    .map(|b| b[half..].iter().sum::<f64>())
-                    .sum();
-                s / self.total
-            })
-            .collect()
-    }
-
     /// The M-projection onto A = the local bits in `part_a` and B = the
     /// rest: at most `max_sweeps` Sinkhorn sweeps, then Newton steps. Fails
     /// with [`BeliefError::Numerical`] if the marginals are not matched to
@@ -175,8 +160,7 @@ impl<'a> Weighted<'a> {
         )?;
         let kl = if want_kl {
             // P′(x) = g_A·g_B·Q / S′ over the normalized tables.
-            let s_prime = pair_mass(&a.counts, &b.counts, self.q);
-            let (ln_t, ln_s) = (self.total.ln(), s_prime.ln());
+            let (ln_t, ln_s) = (self.total.ln(), ln_pair_mass(&a.counts, &b.counts, self.q));
             let mut kl = 0.0;
             for_each_split(bits, part_a, |x, ia, ib| {
                 let w = self.w[x];
@@ -195,15 +179,17 @@ impl<'a> Weighted<'a> {
     }
 }
 
-/// Σ_{r,q} c_A[r]·c_B[q]·Q(r + q).
-fn pair_mass(ca: &[f64], cb: &[f64], q: &[f64]) -> f64 {
-    let mut total = 0.0;
-    for (r, &x) in ca.iter().enumerate() {
-        for (s, &y) in cb.iter().enumerate() {
-            total += x * y * q[r + s];
-        }
-    }
-    total
+/// ln Σ_{r,q} c_A[r]·c_B[q]·Q(r + q), summed in log space: each factor is
+/// scaled to its own vector, and their products can underflow where the
+/// sum's terms do not all.
+fn ln_pair_mass(ca: &[f64], cb: &[f64], q: &[f64]) -> f64 {
+    let terms = ca.iter().enumerate().flat_map(|(r, &x)| {
+        cb.iter()
+            .enumerate()
+            .filter(move |(s, &y)| x > 0.0 && y > 0.0 && q[r + s] > 0.0)
+            .map(move |(s, &y)| x.ln() + y.ln() + q[r + s].ln())
+    });
+    ln_sum_exp(terms)
 }
 
 /// The two tables of the projection whose marginals are `pa` over
@@ -232,12 +218,12 @@ pub(crate) fn fit(
     for (y, g) in gb.iter_mut().enumerate() {
         *g *= beta[y.count_ones() as usize];
     }
-    let s_prime = pair_mass(
+    let ln_s_prime = ln_pair_mass(
         &super::table::counts_of(&ga, na),
         &super::table::counts_of(&gb, nb),
         q,
     );
-    let a = Component::from_table(tracks_a, ga, log_mass - s_prime.ln())?;
+    let a = Component::from_table(tracks_a, ga, log_mass - ln_s_prime)?;
     let b = Component::from_table(tracks_b, gb, 0.0)?;
     Ok((a, b, sweeps))
 }
@@ -245,7 +231,8 @@ pub(crate) fn fit(
 /// One side of [`mixed_pair_marginals`]: P(x_1) (unnormalized) for the
 /// table `g1` whose bit `i1` mixed with a bit of the other component, whose
 /// count vectors split by that bit are `other[0]` (bit clear) and
-/// `other[1]` (bit set).
+/// `other[1]` (bit set), as (p, ln s): P(x_1) = p[x_1]·s, p's largest
+/// entry about 1.
 fn mixed_side(
     g1: &[f64],
     bits: usize,
@@ -253,23 +240,30 @@ fn mixed_side(
     other: &[Vec<f64>; 2],
     swap: f64,
     q: &[f64],
-) -> Vec<f64> {
+) -> (Vec<f64>, f64) {
     let top = q.len() as isize;
-    let at = |s: isize| {
+    // ln Q(s), −∞ outside the counts the pair can hold.
+    let ln_at = |s: isize| {
         if (0..top).contains(&s) {
-            q[s as usize]
+            q[s as usize].ln()
         } else {
-            0.0
+            f64::NEG_INFINITY
         }
     };
-    // h[r] = Σ_q c[q]·Q(r + q + shift) for a count vector c.
+    // ln h[r], h[r] = Σ_q c[q]·Q(r + q + shift) for a count vector c, summed
+    // in log space: the two tables and Q are each scaled to their own
+    // largest entry, and where Q favours counts the tables hold only
+    // faintly (both 10^-200 apart, after contradicting sightings) the
+    // products of three would underflow to 0 though their ratios are fine.
     let weigh = |c: &[f64], shift: isize| -> Vec<f64> {
         (0..=bits)
             .map(|r| {
-                c.iter()
-                    .enumerate()
-                    .map(|(s, &x)| x * at(r as isize + s as isize + shift))
-                    .sum()
+                ln_sum_exp(
+                    c.iter()
+                        .enumerate()
+                        .filter(|(_, &x)| x > 0.0)
+                        .map(|(s, &x)| x.ln() + ln_at(r as isize + s as isize + shift)),
+                )
             })
             .collect()
     };
@@ -280,14 +274,54 @@ fn mixed_side(
     // other side with bit α, one red track more (α = 0) or fewer.
     let trade = [weigh(&other[1], 0), weigh(&other[0], 0)];
     let image = [weigh(&other[0], 1), weigh(&other[1], -1)];
+    // One scale per count r for all five, so that h − swap·trade subtracts
+    // numbers of one scale, as before.
+    let scale: Vec<f64> = (0..=bits)
+        .map(|r| {
+            let m = [h[r], trade[0][r], trade[1][r], image[0][r], image[1][r]]
+                .into_iter()
+                .fold(f64::NEG_INFINITY, f64::max);
+            if m.is_finite() {
+                m
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let scaled = |v: &[f64], r: usize| (v[r] - scale[r]).exp();
     let e = 1usize << i1;
-    (0..g1.len())
+    let bracket: Vec<f64> = (0..g1.len())
         .map(|x| {
             let r = x.count_ones() as usize;
             let alpha = usize::from(x & e != 0);
-            g1[x] * (h[r] - swap * trade[alpha][r]) + swap * g1[x ^ e] * image[alpha][r]
+            g1[x] * (scaled(&h, r) - swap * scaled(&trade[alpha], r))
+                + swap * g1[x ^ e] * scaled(&image[alpha], r)
         })
-        .collect()
+        .collect();
+    // P(x_1) = bracket·e^{scale[r]}: brought to a largest entry of about 1.
+    let top = bracket
+        .iter()
+        .enumerate()
+        .filter(|(_, &b)| b > 0.0)
+        .map(|(x, &b)| b.ln() + scale[x.count_ones() as usize])
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !top.is_finite() {
+        return (vec![0.0; g1.len()], 0.0);
+    }
+    let p = bracket
+        .iter()
+        .enumerate()
+        .map(|(x, &b)| b * (scale[x.count_ones() as usize] - top).exp())
+        .collect();
+    (p, top)
+}
+
+fn ln_sum_exp(terms: impl Iterator<Item = f64> + Clone) -> f64 {
+    let max = terms.clone().fold(f64::NEG_INFINITY, f64::max);
+    if max == f64::NEG_INFINITY {
+        return max;
+    }
+    max + terms.map(|t| (t - max).exp()).sum::<f64>().ln()
 }
 
 /// Count vectors of a table split by one bit: [bit clear, bit set].
@@ -299,7 +333,7 @@ fn split_counts(table: &[f64], bits: usize, bit: usize) -> [Vec<f64>; 2] {
     out
 }
 
-/// The marginal tables P(x_1), P(x_2) (normalized) and the mass T = Σ g′·Q
+/// The marginal tables P(x_1), P(x_2) (normalized) and ln T, T = Σ g′·Q the mass
 /// of the merged model right after a mix of bit `i1` of `c1` with bit `i2`
 /// of `c2`, without building the 2^(|C1|+|C2|) table: the rolled-up table
 /// is g1·g2 except where the two bits differ, where a share `swap` of the
@@ -316,8 +350,8 @@ pub(crate) fn mixed_pair_marginals(
 ) -> Result<(Vec<f64>, Vec<f64>, f64), BeliefError> {
     let split1 = split_counts(&c1.table, c1.len(), i1);
     let split2 = split_counts(&c2.table, c2.len(), i2);
-    let mut p1 = mixed_side(&c1.table, c1.len(), i1, &split2, swap, q);
-    let mut p2 = mixed_side(&c2.table, c2.len(), i2, &split1, swap, q);
+    let (mut p1, ln_scale) = mixed_side(&c1.table, c1.len(), i1, &split2, swap, q);
+    let (mut p2, _) = mixed_side(&c2.table, c2.len(), i2, &split1, swap, q);
     let total: f64 = p1.iter().sum();
     if !(total > 0.0 && total.is_finite()) {
         return Err(BeliefError::Degenerate { normalizer: total });
@@ -329,7 +363,7 @@ pub(crate) fn mixed_pair_marginals(
     for p in &mut p2 {
         *p = (*p / total2).max(0.0);
     }
-    Ok((p1, p2, total))
+    Ok((p1, p2, total.ln() + ln_scale))
 }
 
 /// Count-space IPF: α_r, β_q such that J[r][q] = p_A[r]·α_r·K[r][q]·β_q·p_B[q],
@@ -688,7 +722,8 @@ mod tests {
                 assert!(mixed_pair_marginals(&c1, i1, &c2, i2, swap, &q).is_err());
                 continue;
             };
-            let (p1, p2, total) = mixed_pair_marginals(&c1, i1, &c2, i2, swap, &q).unwrap();
+            let (p1, p2, ln_total) = mixed_pair_marginals(&c1, i1, &c2, i2, swap, &q).unwrap();
+            let total = ln_total.exp();
             let low = (1usize << n1) - 1;
             let (want1, want2) = (
                 marginal(&merged.table, &q, n1 + n2, low),
@@ -721,7 +756,7 @@ mod tests {
             }
             // Both keep the mass e^L·Σ g·Q of the merged table.
             let mass = |a: &Component, b: &Component| {
-                a.log_scale + b.log_scale + pair_mass(&a.counts, &b.counts, &q).ln()
+                a.log_scale + b.log_scale + ln_pair_mass(&a.counts, &b.counts, &q)
             };
             assert!((mass(&a, &b) - log_mass).abs() < 1e-9, "case {case}");
             assert!(

@@ -13,6 +13,60 @@ pub(crate) struct Component {
     pub(crate) counts: Vec<f64>,
 }
 
+/// The bits of `table` all but certain under table[y]·w(|y|) (w = 1 if
+/// None): (bit, red?, odds of the other colour against that one), for the
+/// bits whose odds are at most `margin`. The two colours' weights are
+/// summed apart: 1 − P(red) would round odds of 10^-200 to 0, and odds of 0
+/// split a track off as exactly certain.
+pub(crate) fn certain_odds(
+    table: &[f64],
+    weights: Option<&[f64]>,
+    bits: usize,
+    margin: f64,
+) -> Vec<(usize, bool, f64)> {
+    if bits < 2 {
+        return Vec::new();
+    }
+    let mut set = vec![0.0; bits];
+    let mut total = 0.0;
+    for (y, &g) in table.iter().enumerate() {
+        let x = g * weights.map_or(1.0, |w| w[y.count_ones() as usize]);
+        if x == 0.0 {
+            continue;
+        }
+        total += x;
+        let mut b = y;
+        while b != 0 {
+            set[b.trailing_zeros() as usize] += x;
+            b &= b - 1;
+        }
+    }
+    if !(total > 0.0 && total.is_finite()) {
+        return Vec::new();
+    }
+    let mut clear = vec![0.0; bits];
+    for (y, &g) in table.iter().enumerate() {
+        let x = g * weights.map_or(1.0, |w| w[y.count_ones() as usize]);
+        for (b, c) in clear.iter_mut().enumerate() {
+            if y & (1 << b) == 0 {
+                *c += x;
+            }
+        }
+    }
+    (0..bits)
+        .filter_map(|b| {
+            let (red, blue) = (set[b], clear[b]);
+            if red <= margin * blue {
+                Some((b, false, red / blue))
+            } else if blue <= margin * red {
+                Some((b, true, blue / red))
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
 /// Σ_{|y| = r} table[y] for r = 0..=bits.
 pub(crate) fn counts_of(table: &[f64], bits: usize) -> Vec<f64> {
     let mut counts = vec![0.0; bits + 1];
@@ -158,20 +212,23 @@ impl Component {
         counts
     }
 
-    /// Splits off the local bits in `fixed` (bit, red?), each assumed
-    /// certain: the rest keeps the slice of the table where those bits take
-    /// their fixed values, and each fixed track becomes a certain singleton.
-    /// Exact when the sets outside the slice have no weight; drops their
-    /// weight otherwise.
+    /// Splits off the local bits in `fixed` (bit, red?, odds of the other
+    /// colour; see [`certain_odds`]), each all but certain: the rest keeps the
+    /// slice of the table where those bits take their fixed values, and
+    /// each fixed track becomes a singleton with those odds. Exact when the sets outside
+    /// the slice have no weight (the singleton is then certain); otherwise
+    /// the rest forgets how they differ, but the other colour keeps its
+    /// weight: a later certain sighting of it, which a stream the world
+    /// produced may hold, still finds mass.
     pub(crate) fn restrict(
         &self,
-        fixed: &[(usize, bool)],
+        fixed: &[(usize, bool, f64)],
     ) -> Result<(Component, Vec<Component>), BeliefError> {
-        let fixed_mask: usize = fixed.iter().map(|&(b, _)| 1usize << b).sum();
+        let fixed_mask: usize = fixed.iter().map(|&(b, _, _)| 1usize << b).sum();
         let value: usize = fixed
             .iter()
-            .filter(|&&(_, red)| red)
-            .map(|&(b, _)| 1usize << b)
+            .filter(|&&(_, red, _)| red)
+            .map(|&(b, _, _)| 1usize << b)
             .sum();
         let keep: Vec<usize> = (0..self.len())
             .filter(|b| fixed_mask & (1 << b) == 0)
@@ -191,12 +248,14 @@ impl Component {
         let rest = Component::from_table(tracks, table, self.log_scale)?;
         let singles = fixed
             .iter()
-            .map(|&(b, red)| {
+            .map(|&(b, red, odds)| {
                 let t = self.tracks[b];
+                // The likely colour weighs 1, so a certain track stays
+                // exactly certain.
                 if red {
-                    Component::singleton(t, 0.0, 1.0)
+                    Component::singleton(t, odds, 1.0)
                 } else {
-                    Component::singleton(t, 1.0, 0.0)
+                    Component::singleton(t, 1.0, odds)
                 }
             })
             .collect();
@@ -228,7 +287,7 @@ mod tests {
         let m = a.outer(&b);
         assert_eq!(m.tracks, vec![0, 1, 2]);
         assert_eq!(m.counts, counts_of(&m.table, 3));
-        let (rest, singles) = m.restrict(&[(2, true)]).unwrap();
+        let (rest, singles) = m.restrict(&[(2, true, 0.0)]).unwrap();
         assert_eq!(rest.tracks, a.tracks);
         for (x, y) in rest.table.iter().zip(&a.table) {
             assert!((x - y).abs() < 1e-15);

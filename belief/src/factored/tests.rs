@@ -666,3 +666,43 @@ fn a_belief_that_leaves_its_tree_answers_as_one_that_keeps_it() {
         }
     }
 }
+
+/// The local rule's weight is the true leave-one-out weight of a pair of m
+/// tracks when the other n − m tracks are uninformed (uniform tables: the
+/// uniform start before any sighting), under a known count and under an
+/// unknown one with a lopsided prior: Σ_K π(K)·C(n − m, K − s).
+#[test]
+fn the_local_weight_is_the_weight_of_an_uninformed_rest() {
+    for n in [1usize, 2, 5, 13, 40] {
+        let priors: Vec<RedCount> = (0..=n)
+            .map(RedCount::Known)
+            .chain([RedCount::Unknown {
+                prior: (0..=n).map(|j| 1.0 + (j % 3) as f64).collect(),
+            }])
+            .collect();
+        for red in priors {
+            let field = Field {
+                tracks: n,
+                red,
+                initial_red: None,
+            };
+            let prior = CountPrior::new(&field);
+            for m in 1..=n.min(8) {
+                // The pair: any count vector with full support will do.
+                let pair: Vec<f64> = (0..=m).map(|s| 1.0 + s as f64).collect();
+                let single = [1.0, 1.0];
+                let mut counts: Vec<&[f64]> = vec![&pair];
+                counts.extend(std::iter::repeat_n(&single[..], n - m));
+                let want = prior.leave_one_out(&counts, 0).unwrap_or_default();
+                let got = prior.uninformed_rest(m);
+                let top = want.iter().copied().fold(0.0, f64::max);
+                if top == 0.0 {
+                    assert!(got.iter().all(|&x| x == 0.0), "n {n} m {m}: {got:?}");
+                    continue;
+                }
+                let want: Vec<f64> = want.iter().map(|x| x / top).collect();
+                close(&got, &want[..=m], 1e-12, "uninformed rest");
+            }
+        }
+    }
+}

@@ -59,10 +59,13 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "C")]
     pub known_start_confidence: Option<f64>,
 
-    /// --method factored: how splits weigh the red count: `local` (only
-    /// the pair being split, and every sighting only its component: what a
-    /// deployment's leaders run, hence the default) or `coupled` (the whole
-    /// belief's weight, which no leader can compute alone; an option).
+    /// --method factored: how splits weigh the red count: `local` (the
+    /// weight an uninformed rest of the field gives the pair being split,
+    /// and every sighting reads only its component: what a deployment's
+    /// leaders run, hence the default), `coupled` (the whole belief's
+    /// weight, which no leader can compute alone; an option) or `flat`
+    /// (every count the pair can hold alike: the local rule leaders ran
+    /// before, kept to compare).
     #[arg(long, value_enum, default_value_t = CouplingChoice::Local)]
     pub coupling: CouplingChoice,
 
@@ -140,6 +143,7 @@ pub const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
 pub enum CouplingChoice {
     Coupled,
     Local,
+    Flat,
 }
 
 /// The factored belief's split rule (`belief::SplitRule`; least-loss

@@ -299,6 +299,7 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
             coupling: match args.coupling {
                 CouplingChoice::Coupled => Coupling::Coupled,
                 CouplingChoice::Local => Coupling::Local,
+                CouplingChoice::Flat => Coupling::Flat,
             },
             max_component: args
                 .max_component

@@ -1,7 +1,7 @@
 //! A leader's part of a factored belief, and the count coupling the
 //! coordinator evaluates from all the parts at a query.
 //!
-//! Under [`Coupling::Local`] nothing a mix or an observation does reads
+//! Under [`Coupling::Local`](super::Coupling::Local) nothing a mix or an observation does reads
 //! anything beyond the components it touches (module documentation of
 //! [`factored`](super)), so the components can be held by different
 //! leaders: each applies the events of the components it holds, exactly as
@@ -24,7 +24,7 @@ mod coupling;
 pub use coupling::{coupled_marginals, CouplingTree};
 
 use super::table::{counts_of, Component};
-use super::{Coupling, FactoredBelief, FactoredOptions};
+use super::{FactoredBelief, FactoredOptions};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
@@ -202,7 +202,7 @@ impl FactoredShare {
                 what,
             })
         };
-        if options.coupling != Coupling::Local {
+        if !options.coupling.is_local() {
             return unsupported("a split weighed by the whole belief (the coupled rule)");
         }
         if options.max_numbers.is_some() {

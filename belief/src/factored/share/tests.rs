@@ -1,6 +1,6 @@
 use super::*;
 use crate::event::{Event, RedCount};
-use crate::factored::SplitRule;
+use crate::factored::{Coupling, SplitRule};
 use crate::workload::{generate, WorkloadSpec};
 use std::sync::Arc;
 
