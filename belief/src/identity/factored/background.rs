@@ -110,10 +110,15 @@ impl Background {
     /// carries i, `wrong` otherwise, on the row and on the leak: the read
     /// was `table` likely under the group's table (needed only while the
     /// track leaks), and under this row as likely as the row says. A read
-    /// the row cannot explain (likelihood 0) leaves the row alone.
-    pub fn read(&mut self, i: u32, right: f64, wrong: f64, table: Option<f64>) {
+    /// the row cannot explain (likelihood 0) leaves the row alone. The
+    /// row is renormalized over its `n` identities as it goes: a read of
+    /// small likelihood divides by it, and would otherwise magnify the
+    /// rounding of earlier steps until the row no longer summed to one.
+    pub fn read(&mut self, n: usize, i: u32, right: f64, wrong: f64, table: Option<f64>) {
         let p = self.probability(i);
-        let evidence = right * p + wrong * (1.0 - p);
+        let total = self.total(n);
+        let weighed = right * p + wrong * (total - p).max(0.0);
+        let evidence = weighed / total;
         if !(evidence > 0.0 && evidence.is_finite()) {
             return;
         }
@@ -123,11 +128,33 @@ impl Background {
                 self.leak = self.leak * evidence / total;
             }
         }
-        let scale = wrong / evidence;
+        let scale = wrong / weighed;
         self.shared *= scale;
         self.listed.values_mut().for_each(|q| *q *= scale);
-        self.listed.insert(i, p * right / evidence);
+        self.listed.insert(i, p * right / weighed);
         self.prune();
+    }
+
+    /// Σ_i P(i) over `n` identities: one, up to rounding.
+    fn total(&self, n: usize) -> f64 {
+        let listed: f64 = self.listed.values().sum();
+        listed + self.shared * n.saturating_sub(self.listed.len()) as f64
+    }
+
+    /// A read on the row alone ([`Self::read`] without a table), and where
+    /// the row rules the read out and the read is sure (no wrong read has
+    /// any likelihood), the row believes it: identity `i` with
+    /// certainty. The last resort of [`super::repair`].
+    pub fn read_or_believe(&mut self, n: usize, i: u32, right: f64, wrong: f64) {
+        let p = self.probability(i);
+        let evidence = right * p + wrong * (self.total(n) - p).max(0.0);
+        if evidence > 0.0 && evidence.is_finite() {
+            self.read(n, i, right, wrong, None);
+        } else {
+            let leak = self.leak;
+            *self = Background::certain(i);
+            self.leak = leak;
+        }
     }
 
     /// The mix of rows `a` and `b` with swap `s`: a gets (1 − s)·a + s·b,
@@ -201,7 +228,7 @@ mod tests {
         let (mut a, mut b) = (Background::uniform(n), Background::certain(3));
         // A read of 2 at accuracy 0.9 on a uniform row: 0.9 against
         // 0.025 for each of the four others.
-        a.read(2, 0.9, 0.025, None);
+        a.read(n, 2, 0.9, 0.025, None);
         assert_eq!(a.leak(), 0.0, "nothing leaked, nothing to weigh");
         let want: Vec<f64> = (0..n).map(|i| if i == 2 { 0.9 } else { 0.025 }).collect();
         for (p, q) in dense(&a, n).iter().zip(&want) {
@@ -226,7 +253,7 @@ mod tests {
         // A read of 0 at 0.7 (wrong reads 0.1 each): the row explains it
         // with 0.7/4 + 3·0.1/4 = 0.25, the table (which rules 0 out) with
         // 0.1.
-        r.read(0, 0.7, 0.1, Some(0.1));
+        r.read(4, 0, 0.7, 0.1, Some(0.1));
         let want = 0.2 * 0.25 / (0.2 * 0.25 + 0.8 * 0.1);
         assert!((r.leak() - want).abs() < 1e-15);
         // Mixing carries the leak with the target.
@@ -247,7 +274,7 @@ mod tests {
     #[test]
     fn a_read_no_identity_explains_changes_nothing_and_rows_stay_sparse() {
         let mut r = Background::certain(1);
-        r.read(0, 0.9, 0.0, Some(0.5));
+        r.read(4, 0, 0.9, 0.0, Some(0.5));
         assert_eq!(r, Background::certain(1));
         // Mixing two uniform rows lists nothing.
         let (mut a, mut b) = (Background::uniform(1000), Background::uniform(1000));

@@ -14,6 +14,7 @@
 //! exactly 0.
 
 use super::assignments::{self, Assignments};
+use super::split::Cut;
 use crate::error::BeliefError;
 use crate::identity::permutation::{Permutations, MAX_ENUMERATED_TRACKS};
 use std::sync::OnceLock;
@@ -423,6 +424,74 @@ impl Group {
         }
         m.iter_mut().flatten().for_each(|p| *p /= total);
         Some(m)
+    }
+
+    /// Spreads `share` of the group's mass evenly over its well-formed
+    /// assignments ((1 − share)·table + share·uniform; well-formed: no
+    /// port's phantom carries another port's star, an identity crossing
+    /// two links, which no cut builds and no answer can read): every such
+    /// assignment and every flag of a link possible again
+    /// ([`super::repair`]). `n` tells ports from tracks.
+    pub(crate) fn smooth(&mut self, share: f64, n: usize) {
+        let table = self.table();
+        let count = table.count();
+        let ports = self.ports(n);
+        let stars: u32 = ports.iter().fold(0, |acc, p| acc | (1 << p.star));
+        let well_formed = |perm: &[u8]| {
+            ports.iter().all(|p| {
+                let x = perm[p.phantom] as usize;
+                x == p.star || stars & (1 << x) == 0
+            })
+        };
+        let formed: Vec<bool> = (0..count).map(|r| well_formed(table.get(r))).collect();
+        let even = share / formed.iter().filter(|&&f| f).count().max(1) as f64;
+        let mut probs: Vec<f64> = formed.iter().map(|&f| if f { even } else { 0.0 }).collect();
+        for (r, p) in self.entries() {
+            probs[r as usize] += (1.0 - share) * p;
+        }
+        let total: f64 = probs.iter().sum();
+        let entries = probs
+            .into_iter()
+            .enumerate()
+            .filter(|&(_, p)| p > 0.0)
+            .map(|(r, p)| (r as u32, p / total))
+            .collect();
+        self.probs = Assignments::from_sorted(count, entries);
+    }
+
+    /// The mass, weighed by `messages[i][flag of port i]` (the group's
+    /// belief inside its tree of links), of the assignments that send at
+    /// most `exchanges` identities across `cut` (0: a hard cut keeps them,
+    /// 1: a linked one).
+    pub(crate) fn kept_tree_mass(
+        &self,
+        ports: &[Port],
+        messages: &[[f64; 2]],
+        cut: &Cut,
+        exchanges: u32,
+    ) -> f64 {
+        let table = self.table();
+        let weights = config_weights(ports.len(), messages);
+        // A linked cut keeps one exchange only between real tracks and
+        // real identities: a port's phantom or star never crosses.
+        let of_port = ports
+            .iter()
+            .fold(0u32, |acc, p| acc | (1 << p.phantom) | (1 << (16 + p.star)));
+        self.entries()
+            .filter_map(|(r, p)| {
+                let perm = table.get(r as usize);
+                let (mut crossing, mut by_port) = (0u32, false);
+                for (j, &x) in perm.iter().enumerate() {
+                    let inside = cut.tracks & (1 << j) != 0;
+                    if inside != (cut.identities & (1 << x) != 0) {
+                        crossing += u32::from(inside);
+                        by_port |= of_port & ((1 << j) | (1 << (16 + x as u32))) != 0;
+                    }
+                }
+                (crossing == 0 || (crossing <= exchanges && !by_port))
+                    .then(|| p * weights[flags_of(perm, ports)])
+            })
+            .sum()
     }
 
     /// Multiplies every assignment's probability by `weight(assignment)`

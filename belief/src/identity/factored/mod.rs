@@ -79,6 +79,7 @@ mod assignments;
 pub mod background;
 pub mod group;
 pub mod links;
+pub mod repair;
 pub mod share;
 pub mod split;
 
@@ -90,7 +91,7 @@ pub use group::{Group, MAX_GROUP};
 pub use share::{assemble, HeldTree, IdentityShare};
 pub use split::Cut;
 
-use super::event::{check_assignment, check_identify, check_mix, Identify};
+use super::event::{check_assignment, check_identify, check_mix, Identify, IdentityEvent};
 use super::filter::{IdentityFilter, Marginals};
 use super::sparse_marginals::SparseMarginals;
 use crate::error::BeliefError;
@@ -208,6 +209,10 @@ pub struct FactoredIdentity {
     /// link_used[l]: ports n + 2l and n + 2l + 1 are in use (derived).
     #[serde(skip)]
     link_used: Vec<bool>,
+    /// Valid events the tables could not take as they stood ([`repair`]):
+    /// a count of this process's, not part of the belief.
+    #[serde(skip)]
+    repairs: u64,
 }
 
 impl PartialEq for FactoredIdentity {
@@ -325,6 +330,7 @@ impl TryFrom<Stored> for FactoredIdentity {
             group_of: Vec::new(),
             holder: Vec::new(),
             link_used: Vec::new(),
+            repairs: 0,
         };
         belief.reindex();
         Ok(belief)
@@ -388,6 +394,7 @@ impl FactoredIdentity {
             group_of: Vec::new(),
             holder: Vec::new(),
             link_used: Vec::new(),
+            repairs: 0,
         };
         belief.reindex();
         belief
@@ -517,12 +524,23 @@ impl FactoredIdentity {
         let must = must
             .and_then(|p| group.local_track(p))
             .map_or(0, |j| 1u32 << j);
+        // The cuts are found on the group's own table, but the group sits
+        // in a tree: where the rest of the tree rules a flag value out (a
+        // message with a zero), a cut may keep only assignments the tree
+        // gives no mass, and the belief would be left without any.
+        let (_, messages) = links::Messages::new(self).toward_group(g);
+        let tree_rules_out = messages.iter().any(|m| m[0] <= 0.0 || m[1] <= 0.0);
+        let keeps_mass = |cut: &Cut, exchanges: u32| {
+            !tree_rules_out || group.kept_tree_mass(&ports, &messages, cut, exchanges) > 0.0
+        };
         for cut in split::best_cuts(group, keep, must, &ports)
             .into_iter()
             .flatten()
         {
-            out.push((cut.size(), cut.cost(), Part::Hard(cut)));
-            if self.options.linked && cut.cost() > self.options.certain {
+            if keeps_mass(&cut, 0) {
+                out.push((cut.size(), cut.cost(), Part::Hard(cut)));
+            }
+            if self.options.linked && cut.cost() > self.options.certain && keeps_mass(&cut, 1) {
                 let placeholder = (self.n + 2 * self.link_used.len()) as u32;
                 if let Ok(linked) =
                     split::apply_linked(group, &cut, &ports, placeholder, placeholder + 1)
@@ -660,7 +678,7 @@ impl FactoredIdentity {
     /// `table` (None: t does not leak): the read on t's row and leak.
     fn after_read(&mut self, t: u32, read: &Identify, table: Option<f64>) {
         let wrong = read.wrong_read_likelihood(self.n);
-        self.backgrounds[t as usize].read(read.identity, read.accuracy, wrong, table);
+        self.backgrounds[t as usize].read(self.n, read.identity, read.accuracy, wrong, table);
     }
 
     /// Before `cut` of `group` (a hard one, or the excluded part `share`
@@ -889,6 +907,37 @@ impl IdentityFilter for FactoredIdentity {
 
     fn mix(&mut self, mix: Mix) -> Result<(), BeliefError> {
         check_mix(self.n, &mix)?;
+        self.guarded(IdentityEvent::Mix(mix), &[mix.a, mix.b], |belief| {
+            belief.mix_tables(mix)
+        })
+    }
+
+    fn identify(&mut self, identify: Identify) -> Result<(), BeliefError> {
+        check_identify(self.n, &identify)?;
+        self.guarded(
+            IdentityEvent::Identify(identify),
+            &[identify.track],
+            |belief| belief.identify_tables(identify),
+        )
+    }
+
+    /// The tables' marginals mixed with each track's leak: track t
+    /// carries identity i with (1 − λ_t)·table + λ_t·background. Rows sum
+    /// to one; a column sums to one when nothing leaked (what cuts lost is
+    /// spread by rows that ignore exclusivity).
+    fn marginals(&self) -> Result<Marginals, BeliefError> {
+        // One path for both forms, so that they agree to the last bit.
+        Ok(FactoredIdentity::sparse_marginals(self)?.dense())
+    }
+
+    fn sparse_marginals(&self) -> Result<SparseMarginals, BeliefError> {
+        FactoredIdentity::sparse_marginals(self)
+    }
+}
+
+impl FactoredIdentity {
+    /// A checked mix on the tables and rows, unguarded (see [`repair`]).
+    fn mix_tables(&mut self, mix: Mix) -> Result<(), BeliefError> {
         let (a, b, swap) = (mix.a, mix.b, mix.swap);
         if swap == 0.0 {
             return Ok(());
@@ -916,8 +965,8 @@ impl IdentityFilter for FactoredIdentity {
         Ok(())
     }
 
-    fn identify(&mut self, identify: Identify) -> Result<(), BeliefError> {
-        check_identify(self.n, &identify)?;
+    /// A checked read on the tables and rows, unguarded (see [`repair`]).
+    fn identify_tables(&mut self, identify: Identify) -> Result<(), BeliefError> {
         let t = identify.track;
         let g = self.group_of[t as usize];
         let track = self.local(t)?;
@@ -994,18 +1043,5 @@ impl IdentityFilter for FactoredIdentity {
         } else {
             Err(BeliefError::ImpossibleObservation { probability: 0.0 })
         }
-    }
-
-    /// The tables' marginals mixed with each track's leak: track t
-    /// carries identity i with (1 − λ_t)·table + λ_t·background. Rows sum
-    /// to one; a column sums to one when nothing leaked (what cuts lost is
-    /// spread by rows that ignore exclusivity).
-    fn marginals(&self) -> Result<Marginals, BeliefError> {
-        // One path for both forms, so that they agree to the last bit.
-        Ok(FactoredIdentity::sparse_marginals(self)?.dense())
-    }
-
-    fn sparse_marginals(&self) -> Result<SparseMarginals, BeliefError> {
-        FactoredIdentity::sparse_marginals(self)
     }
 }

@@ -98,8 +98,7 @@ fn known_start_reads_and_mixes_match_the_exact_filter() {
     assert!((m[0][0] - 18.0 / 19.0).abs() < 1e-15);
     assert_eq!(m[2][2], 1.0);
     assert_eq!(f.groups().len(), 2);
-    // A read of an identity outside the track's group changes nothing;
-    // a perfect one is impossible and refused.
+    // A read of an identity outside the track's group changes nothing.
     let before = f.clone();
     f.identify(Identify {
         track: 2,
@@ -108,15 +107,53 @@ fn known_start_reads_and_mixes_match_the_exact_filter() {
     })
     .unwrap();
     assert_eq!(f, before);
-    assert!(matches!(
-        f.identify(Identify {
-            track: 2,
-            identity: 0,
-            accuracy: 1.0,
-        }),
-        Err(BeliefError::ImpossibleObservation { .. })
-    ));
-    assert_eq!(f, before);
+    assert_eq!(f.repairs(), 0);
+    // A sure one contradicts every assignment the tables allow: it is
+    // taken by the repair rule as a swap the belief missed, with track 0,
+    // the likeliest carrier of identity 0. Given the read, the swap
+    // happened and track 0 carried identity 0, so track 1 carries 1.
+    f.identify(Identify {
+        track: 2,
+        identity: 0,
+        accuracy: 1.0,
+    })
+    .unwrap();
+    assert_eq!(f.repairs(), 1);
+    let m = f.marginals().unwrap();
+    for (t, i) in [(2, 0), (0, 2), (1, 1)] {
+        assert!((m[t][i] - 1.0).abs() < 1e-12, "track {t}: {:?}", m[t]);
+    }
+}
+
+/// A sure read of an identity the track's group holds at probability 0
+/// (ruled out by the group's table, not by the structure): the group is
+/// smoothed and takes the read, which then holds for sure.
+#[test]
+fn a_sure_read_the_table_rules_out_moves_the_group_to_it() {
+    let mut f = FactoredIdentity::from_assignment(&[0, 1], options(2)).unwrap();
+    f.mix(Mix {
+        a: 0,
+        b: 1,
+        swap: 0.5,
+    })
+    .unwrap();
+    f.identify(Identify {
+        track: 0,
+        identity: 0,
+        accuracy: 1.0,
+    })
+    .unwrap();
+    assert_eq!(f.repairs(), 0);
+    assert_eq!(f.marginals().unwrap()[0][0], 1.0);
+    f.identify(Identify {
+        track: 0,
+        identity: 1,
+        accuracy: 1.0,
+    })
+    .unwrap();
+    assert_eq!(f.repairs(), 1);
+    let m = f.marginals().unwrap();
+    assert!((m[0][1] - 1.0).abs() < 1e-12 && (m[1][0] - 1.0).abs() < 1e-12);
 }
 
 #[test]
