@@ -236,3 +236,36 @@ fn a_truth_made_unlikely_then_seen_for_certain_is_taken() {
         );
     }
 }
+
+/// With no red target, sets holding a red track weigh nothing, but a
+/// component's table kept them; sightings that favour red 10^200 to 1
+/// (valid: blue keeps a positive likelihood) then underflowed the one set
+/// that matters under their scale, and the next sighting was refused.
+#[test]
+fn sets_the_count_rules_out_do_not_hold_a_table_s_scale() {
+    for coupling in [Coupling::Coupled, Coupling::Local, Coupling::Flat] {
+        let options = FactoredOptions {
+            coupling,
+            ..FactoredOptions::default()
+        };
+        let mut belief = FactoredBelief::with_options(Field::uniform(3, 0), options).unwrap();
+        belief
+            .apply(&Event::Mix(Mix {
+                a: 0,
+                b: 1,
+                swap: 0.5,
+            }))
+            .unwrap();
+        for _ in 0..3 {
+            let seen = Event::Observe(Observe {
+                track: 0,
+                red: 1.0,
+                blue: 1e-200,
+            });
+            belief
+                .apply(&seen)
+                .unwrap_or_else(|err| panic!("{coupling:?}: {err}"));
+        }
+        assert_eq!(belief.marginals().unwrap(), vec![0.0; 3], "{coupling:?}");
+    }
+}

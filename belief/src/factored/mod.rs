@@ -628,6 +628,27 @@ impl FactoredBelief {
         q
     }
 
+    /// [`FactoredBelief::local_weights`] of `coupling` (Local or Flat) on
+    /// the counts a merged pair can hold, whatever the configured coupling.
+    fn local_weights_as(&mut self, coupling: Coupling, counts: &[f64]) -> Vec<f64> {
+        let configured = std::mem::replace(&mut self.options.coupling, coupling);
+        let q = self.local_weights(counts, true);
+        self.options.coupling = configured;
+        q
+    }
+
+    /// Which red counts of m tracks some completion of the rest allows
+    /// under π (whatever the coupling: a fact of the prior).
+    fn uninformed_support(&mut self, m: usize) -> Vec<bool> {
+        if self.uninformed.len() <= m {
+            self.uninformed.resize(m + 1, Vec::new());
+        }
+        if self.uninformed[m].is_empty() {
+            self.uninformed[m] = self.prior.uninformed_rest(m);
+        }
+        self.uninformed[m].iter().map(|&w| w > 0.0).collect()
+    }
+
     /// The count weights of a local coupling for a component (or merged
     /// pair) whose count vector is `counts`: the uninformed rest's weight
     /// ([`Coupling::Local`]) or 1 ([`Coupling::Flat`]), zero on the counts
@@ -691,12 +712,60 @@ impl FactoredBelief {
                 merged_counts[r + t] += x * y;
             }
         }
-        let q = self.merged_weights(ca, cb, merged_counts)?;
+        let q = self.merged_weights(ca, cb, merged_counts.clone())?;
+        let pieces = match self.project_pair(mix, may_merge, others, &q) {
+            Ok(pieces) => pieces,
+            Err(e @ (BeliefError::Numerical { .. } | BeliefError::Degenerate { .. })) => {
+                // Q spans more than f64 holds (sightings that contradict
+                // the truth again and again make the rest's count weights
+                // differ by 10^300 and more between adjacent counts): the
+                // split retries under the local weights, then the flat
+                // ones, which the pair's own tables keep in range. Both
+                // read only the pair, so leaders and replay retry alike.
+                let mut retried = Err(e);
+                for fallback in [Coupling::Local, Coupling::Flat] {
+                    if retried.is_ok() || fallback == self.options.coupling {
+                        continue;
+                    }
+                    if fallback == Coupling::Local && self.options.coupling == Coupling::Flat {
+                        continue;
+                    }
+                    let q = self.local_weights_as(fallback, &merged_counts);
+                    tracing::debug!(
+                        ?fallback,
+                        "factored: split retried under other count weights"
+                    );
+                    retried = self.project_pair(mix, may_merge, others, &q);
+                }
+                retried?
+            }
+            Err(e) => return Err(e),
+        };
+        if may_merge {
+            self.stats.splits += 1;
+        } else {
+            self.stats.kept_apart += 1;
+        }
+        self.replace(&[ca, cb], pieces);
+        Ok(())
+    }
+
+    /// The pieces that replace the components of `mix.a` and `mix.b` when
+    /// they are projected apart under the count weights `q`.
+    fn project_pair(
+        &mut self,
+        mix: Mix,
+        may_merge: bool,
+        others: usize,
+        q: &[f64],
+    ) -> Result<Vec<Component>, BeliefError> {
+        let (ca, ba) = self.home[mix.a as usize];
+        let (cb, bb) = self.home[mix.b as usize];
         let (c1, c2) = (self.comp(ca), self.comp(cb));
         let (tol, sweeps) = (self.options.tolerance, self.options.max_sweeps);
-        let pieces = if self.options.split == SplitRule::Original || !may_merge {
+        Ok(if self.options.split == SplitRule::Original || !may_merge {
             // Project onto the old pair without building the merged table.
-            let (pa, pb, ln_total) = split::mixed_pair_marginals(c1, ba, c2, bb, mix.swap, &q)?;
+            let (pa, pb, ln_total) = split::mixed_pair_marginals(c1, ba, c2, bb, mix.swap, q)?;
             // P(x_A), P(x_B) are the merged belief's marginals, and the
             // split keeps them: tracks certain there are certain after.
             // Keep at least one track in each half.
@@ -714,7 +783,7 @@ impl FactoredBelief {
                 pb,
                 c1.tracks.clone(),
                 c2.tracks.clone(),
-                &q,
+                q,
                 log_mass,
                 tol,
                 sweeps,
@@ -735,15 +804,8 @@ impl FactoredBelief {
         } else {
             let mut merged = c1.outer(c2);
             merged.rollup(ba, c1.len() + bb, mix.swap);
-            self.split_materialized(merged, q, ca, others, mix)?
-        };
-        if may_merge {
-            self.stats.splits += 1;
-        } else {
-            self.stats.kept_apart += 1;
-        }
-        self.replace(&[ca, cb], pieces);
-        Ok(())
+            self.split_materialized(merged, q.to_vec(), ca, others, mix)?
+        })
     }
 
     /// Splits a merged table by the configured rule, after splitting off
@@ -977,7 +1039,20 @@ impl PropertyFilter for FactoredBelief {
         self.field.check_observe(&observe)?;
         let (c, bit) = self.home[observe.track as usize];
         let comp = self.comp(c);
-        let table = comp.observed(bit, observe.red, observe.blue);
+        let mut table = comp.observed(bit, observe.red, observe.blue);
+        // Sets whose red count no completion of the rest allows (more red
+        // tracks than π admits, or fewer) weigh nothing in the belief:
+        // dropping them is exact, and keeps them from holding the table's
+        // scale while the sets that matter underflow (with k = 0, every
+        // set with a red track, against a 10^-200 sighting of blue).
+        let m = comp.len();
+        let open = self.uninformed_support(m);
+        for (y, g) in table.iter_mut().enumerate() {
+            if !open[y.count_ones() as usize] {
+                *g = 0.0;
+            }
+        }
+        let comp = self.comp(c);
         let new_counts = table::counts_of(&table, comp.len());
         // Under the local coupling a sighting needs only its component,
         // so that a leader holding the component alone computes the same.
