@@ -106,6 +106,28 @@ fn check_marginals(p: &[f64], k: usize, at: usize) -> Result<(), TestCaseError> 
     Ok(())
 }
 
+/// k, the field (known start or uniform prior) and a valid stream on it:
+/// up to 300 tracks, 200 to 3000 events.
+fn valid_case() -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
+    (
+        2usize..=300,
+        0.0f64..=1.0,
+        any::<bool>(),
+        any::<u64>(),
+        200usize..=3000,
+    )
+        .prop_map(|(n, k_share, known, seed, len)| {
+            let k = ((n as f64 * k_share).round() as usize).min(n);
+            let (initial, events) = valid_stream(n, k, len, seed);
+            let field = if known {
+                Field::known(n, initial)
+            } else {
+                Field::uniform(n, k)
+            };
+            (k, field, events)
+        })
+}
+
 fn coupling() -> impl Strategy<Value = Coupling> {
     prop_oneof![
         Just(Coupling::Coupled),
@@ -127,18 +149,11 @@ proptest! {
 
     #[test]
     fn factored_takes_every_valid_stream(
-        n in 2usize..=300,
-        k_share in 0.0f64..=1.0,
-        known in any::<bool>(),
-        seed in any::<u64>(),
-        len in 200usize..=3000,
+        (k, field, events) in valid_case(),
         max in 1usize..=8,
         split in split(),
         coupling in coupling(),
     ) {
-        let k = ((n as f64 * k_share).round() as usize).min(n);
-        let (initial, events) = valid_stream(n, k, len, seed);
-        let field = if known { Field::known(n, initial) } else { Field::uniform(n, k) };
         let options = FactoredOptions { max_component: max, split, coupling, ..FactoredOptions::default() };
         let mut belief = FactoredBelief::with_options(field, options).unwrap();
         for (i, e) in events.iter().enumerate() {
@@ -158,17 +173,10 @@ proptest! {
 
     #[test]
     fn a_share_takes_every_valid_stream(
-        n in 2usize..=300,
-        k_share in 0.0f64..=1.0,
-        known in any::<bool>(),
-        seed in any::<u64>(),
-        len in 200usize..=3000,
+        (k, field, events) in valid_case(),
         max in 1usize..=8,
         flat in any::<bool>(),
     ) {
-        let k = ((n as f64 * k_share).round() as usize).min(n);
-        let (initial, events) = valid_stream(n, k, len, seed);
-        let field = if known { Field::known(n, initial) } else { Field::uniform(n, k) };
         let coupling = if flat { Coupling::Flat } else { Coupling::Local };
         let options = FactoredOptions { max_component: max, coupling, ..FactoredOptions::default() };
         let mut share = FactoredShare::start(field.clone(), options, |_| true).unwrap();
