@@ -50,6 +50,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.identities += tally.identities;
                 total.identity_answers += tally.identity_answers;
                 total.tree_answers += tally.tree_answers;
+                total.identity_repairs += tally.identity_repairs;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -59,7 +60,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees)",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -80,7 +81,8 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.changes,
         total.identities,
         total.identity_answers,
-        total.tree_answers
+        total.tree_answers,
+        total.identity_repairs
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
@@ -113,6 +115,13 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 "only {} schedules with identities, {} identity answers",
                 total.identities,
                 total.identity_answers
+            );
+            // Sure reads the trees had ruled out were repaired by the
+            // leaders holding them, and the answers still equalled the
+            // centralized belief's.
+            assert!(
+                total.identity_repairs > 0,
+                "no leader ever repaired an identity event"
             );
         }
     }

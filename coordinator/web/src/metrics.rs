@@ -31,8 +31,13 @@ type Labels = Vec<(String, String)>;
 /// help, the value).
 type LeaderField = (&'static str, &'static str, fn(&LeaderStats) -> u64);
 
-const LEADER_COUNTERS: [LeaderField; 21] = [
+const LEADER_COUNTERS: [LeaderField; 22] = [
     ("items", "stream items applied", |s| s.items),
+    (
+        "identity_repairs",
+        "valid identity events the trees could not take as they stood (repaired)",
+        |s| s.identity_repairs,
+    ),
     ("mixes", "mix events applied", |s| s.mixes),
     ("observations", "observations applied", |s| s.observations),
     ("handovers", "handovers applied", |s| s.handovers),

@@ -43,6 +43,7 @@ impl Leader {
             stats.tracks_owned = s.own.iter().filter(|&&o| o).count() as u64;
             stats.tracks_followed = s.interest.len() as u64;
             stats.rows_held = s.rows.as_ref().map_or(0, |r| r.len() as u64);
+            stats.identity_repairs = s.trees.as_ref().map_or(0, |trees| trees.repairs());
             // Starts kept for nobody are not the track's tree (yet).
             stats.tree_tracks = s.trees.as_ref().map_or(0, |trees| {
                 trees

@@ -101,6 +101,12 @@ pub struct LeaderStats {
     /// out).
     #[serde(default)]
     pub tree_tracks: u64,
+    /// Valid identity events the trees held here could not take as they
+    /// stood, taken by the factored identity belief's repair rule
+    /// (counted since the process started, plus those its journal replay
+    /// met again).
+    #[serde(default)]
+    pub identity_repairs: u64,
     pub coefficients: u64,
     pub tracks_owned: u64,
     pub tracks_followed: u64,

@@ -49,6 +49,10 @@ pub struct Scenario {
     /// On a stream with identities, the centralized information matrix
     /// after every prefix of the trace.
     pub identity: Option<CentralIdentity>,
+    /// The factored identity belief's cap on a group's slots, small in
+    /// most schedules so that these few tracks are cut, linked and
+    /// repaired as crowds are.
+    pub identity_cap: u32,
 }
 
 /// What `idmesh replay` runs by default after every prefix: the factored
@@ -173,32 +177,23 @@ impl Scenario {
         let identities = factored.is_some()
             && !std::env::var("IDMESH_SIM_IDENTITIES").is_ok_and(|v| v == "0")
             && rng.gen_bool(0.5);
+        let identity_cap = match rng.gen_range(0..4) {
+            0 => idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP,
+            _ => rng.gen_range(2..=4),
+        };
         if identities {
             header.identities = Some(tracks);
+            let mut truth: Vec<u32> = (0..tracks as u32).collect();
+            for i in (1..truth.len()).rev() {
+                truth.swap(i, rng.gen_range(0..=i));
+            }
             if rng.gen_bool(0.5) {
-                let mut start: Vec<u32> = (0..tracks as u32).collect();
-                for i in (1..start.len()).rev() {
-                    start.swap(i, rng.gen_range(0..=i));
-                }
-                header.initial_identity = Some(start);
+                header.initial_identity = Some(truth.clone());
             }
-            for _ in 0..rng.gen_range(1..=8) {
-                let at = rng.gen_range(0..=lines.len());
-                let time = at
-                    .checked_sub(1)
-                    .and_then(|i| lines[i].time())
-                    .unwrap_or(0.0);
-                let read = Identify {
-                    time,
-                    track: rng.gen_range(0..tracks as u32),
-                    identity: rng.gen_range(0..tracks as u32),
-                    accuracy: rng.gen_range(0.5..0.95),
-                };
-                lines.insert(at, Line::Identify(read));
-            }
+            lines = valid_reads(rng, lines, truth);
         }
         let identity = identities
-            .then(|| central_identity(&header, &lines))
+            .then(|| central_identity(&header, &lines, identity_cap))
             .transpose()?;
         let centralized = centralized(
             &header,
@@ -228,6 +223,7 @@ impl Scenario {
             placed_ahead: rng.gen_bool(0.5),
             idle_every,
             identity,
+            identity_cap,
         })
     }
 
@@ -246,7 +242,7 @@ impl Scenario {
     /// deployment must equal the centralized engine to 1e-9).
     pub fn router(&self) -> RouterConfig {
         RouterConfig {
-            factored_identity: Some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP),
+            factored_identity: Some(self.identity_cap),
             factored: self.factored,
             sensor: "sensor-0".into(),
             leaders: self.leaders.clone(),
@@ -327,11 +323,58 @@ fn centralized(
 /// every prefix of `lines`, with its marginals: the factored identity
 /// belief with a known start, else the information matrix (with exact
 /// marginals).
-fn central_identity(header: &Header, lines: &[Line]) -> Result<CentralIdentity, String> {
+/// `lines` with reads among them that the world could have produced: a
+/// hidden truth (`truth[t]`, the identity on track t) follows the mixes,
+/// each swapping it with its probability, and each read is of the true
+/// identity with its accuracy, of another one otherwise; accuracies span
+/// what the trace format allows, sure reads (accuracy 1, always true)
+/// included, which the factored identity belief's cuts may have ruled out.
+fn valid_reads(rng: &mut ChaCha8Rng, lines: Vec<Line>, mut truth: Vec<u32>) -> Vec<Line> {
+    let n = truth.len() as u32;
+    let reads = rng.gen_range(1..=12usize);
+    let mut at: Vec<usize> = (0..reads).map(|_| rng.gen_range(0..=lines.len())).collect();
+    at.sort_unstable();
+    let mut out = Vec::with_capacity(lines.len() + reads);
+    let mut next = at.into_iter().peekable();
+    let mut time = 0.0;
+    for (i, line) in lines.into_iter().enumerate() {
+        while next.next_if(|&a| a == i).is_some() {
+            out.push(Line::Identify(read_of(rng, &truth, time, n)));
+        }
+        if let Line::Mix(mix) = &line {
+            if rng.gen_bool(mix.swap) {
+                truth.swap(mix.a as usize, mix.b as usize);
+            }
+        }
+        time = line.time().unwrap_or(time);
+        out.push(line);
+    }
+    for _ in next {
+        out.push(Line::Identify(read_of(rng, &truth, time, n)));
+    }
+    out
+}
+
+fn read_of(rng: &mut ChaCha8Rng, truth: &[u32], time: f64, n: u32) -> Identify {
+    let track = rng.gen_range(0..n);
+    let accuracy = [1.0, 1.0, 0.99, 0.9, 0.6, 1e-3][rng.gen_range(0..6)];
+    let right = accuracy >= 1.0 || rng.gen_bool(accuracy);
+    let identity = match right {
+        true => truth[track as usize],
+        false => (truth[track as usize] + rng.gen_range(1..n)) % n,
+    };
+    Identify {
+        time,
+        track,
+        identity,
+        accuracy,
+    }
+}
+
+fn central_identity(header: &Header, lines: &[Line], cap: u32) -> Result<CentralIdentity, String> {
     let n = header.tracks;
     let failed = |e: idmesh_belief::BeliefError| e.to_string();
     if let Some(start) = &header.initial_identity {
-        let cap = idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP;
         let mut belief =
             FactoredIdentity::from_assignment(start, identity_options(cap)).map_err(failed)?;
         let mut marginals = vec![belief.marginals().map_err(failed)?];

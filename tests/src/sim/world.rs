@@ -254,6 +254,10 @@ pub struct Tally {
     /// Of them, answers made of the leaders' trees of the factored
     /// identity belief (a known start).
     pub tree_answers: u64,
+    /// Valid identity events the leaders' trees could not take as they
+    /// stood, taken by the repair rule (summed over the leaders at the
+    /// end, journal replays counted again).
+    pub identity_repairs: u64,
     /// Factored leaders' replies told as a change to an answer the
     /// coordinator keeps (`Partial::base`).
     pub changes: u64,
@@ -1407,7 +1411,7 @@ impl World {
                 .map(from_wire_tree)
                 .collect::<Result<Vec<_>, _>>()
                 .map_err(|e| Violation::new(format!("at {events} events a tree: {e}")))?;
-            let cap = idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP;
+            let cap = self.scenario.identity_cap;
             let whole = assemble(n, identity_options(cap), held).map_err(|e| {
                 Violation::new(format!(
                     "at {events} events the leaders' trees do not make a belief: {e}"
@@ -1475,6 +1479,7 @@ impl World {
             self.tally.unfollows += stats.unfollows;
             self.tally.handovers += stats.handovers;
             self.tally.tracks_taken += stats.tracks_taken;
+            self.tally.identity_repairs += stats.identity_repairs;
             let due = self.routed[i].range(..=stats.position).count() as u64;
             if stats.items != due {
                 return Err(Violation::new(format!(

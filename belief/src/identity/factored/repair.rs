@@ -14,11 +14,13 @@
 //!    touch: [`super::share`] relies on the same bound) and the event is
 //!    applied. Almost always it succeeds and that is all.
 //! 2. If it fails and the event is a sure read (accuracy 1) of identity y
-//!    on track t, the belief missed a swap: the real track u ≠ t most
-//!    likely to carry y within the group that holds y is mixed with t at
-//!    probability [`SMOOTHING`], and the read applied once more. The read
-//!    then keeps the swapped branch alone: t carries y and u what t
-//!    carried, everything else as it was.
+//!    on track t, and y is held within t's own tree, the belief missed a
+//!    swap: the real track u ≠ t most likely to carry y within the group
+//!    that holds y is mixed with t at probability [`SMOOTHING`], and the
+//!    read applied once more. The read then keeps the swapped branch
+//!    alone: t carries y and u what t carried, everything else as it
+//!    was. (Not across trees: another tree may be held by another leader,
+//!    and an event reads its own trees only.)
 //! 3. If the event still fails, the trees are put back as they were and
 //!    each of their groups is *smoothed*: [`SMOOTHING`] of its mass is
 //!    spread evenly over its well-formed assignments, the rest keeps its
@@ -126,6 +128,12 @@ impl FactoredIdentity {
             return false;
         };
         if read.wrong_read_likelihood(self.n) > 0.0 {
+            return false;
+        }
+        if !self
+            .trees_of(&[read.track])
+            .contains(&self.holder[read.identity as usize])
+        {
             return false;
         }
         let Some(u) = self.likeliest_carrier(read.identity, read.track) else {

@@ -94,6 +94,12 @@ impl IdentityShare {
         self.belief.apply(event)
     }
 
+    /// Valid events the trees held here could not take as they stood
+    /// ([`super::repair`]), since this share was built or read back.
+    pub fn repairs(&self) -> u64 {
+        self.belief.repairs()
+    }
+
     /// The tracks whose trees this share holds, in order.
     pub fn held_tracks(&self) -> impl Iterator<Item = u32> + '_ {
         self.held

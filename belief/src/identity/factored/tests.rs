@@ -108,10 +108,9 @@ fn known_start_reads_and_mixes_match_the_exact_filter() {
     .unwrap();
     assert_eq!(f, before);
     assert_eq!(f.repairs(), 0);
-    // A sure one contradicts every assignment the tables allow: it is
-    // taken by the repair rule as a swap the belief missed, with track 0,
-    // the likeliest carrier of identity 0. Given the read, the swap
-    // happened and track 0 carried identity 0, so track 1 carries 1.
+    // A sure one contradicts every assignment the tables allow, and the
+    // identity is in another tree: the track answers by its row, which
+    // believes the read; the tables and the other tracks are as they were.
     f.identify(Identify {
         track: 2,
         identity: 0,
@@ -119,41 +118,53 @@ fn known_start_reads_and_mixes_match_the_exact_filter() {
     })
     .unwrap();
     assert_eq!(f.repairs(), 1);
+    assert_eq!(f.groups().len(), before.groups().len());
+    assert!(before.groups().iter().all(|g| f.groups().contains(g)));
     let m = f.marginals().unwrap();
-    for (t, i) in [(2, 0), (0, 2), (1, 1)] {
-        assert!((m[t][i] - 1.0).abs() < 1e-12, "track {t}: {:?}", m[t]);
-    }
+    assert_eq!(m[2][0], 1.0);
+    assert!(
+        (m[0][0] - 18.0 / 19.0).abs() < 1e-15,
+        "other tracks unchanged"
+    );
 }
 
-/// A sure read of an identity the track's group holds at probability 0
-/// (ruled out by the group's table, not by the structure): the group is
-/// smoothed and takes the read, which then holds for sure.
+/// A sure read of an identity the track's group holds, at probability 0
+/// for that track: a swap the belief missed, with the likeliest other
+/// carrier of the identity — what the exact filter gives had that swap
+/// been in the stream (at probability ε).
 #[test]
-fn a_sure_read_the_table_rules_out_moves_the_group_to_it() {
-    let mut f = FactoredIdentity::from_assignment(&[0, 1], options(2)).unwrap();
-    f.mix(Mix {
-        a: 0,
-        b: 1,
-        swap: 0.5,
-    })
-    .unwrap();
-    f.identify(Identify {
+fn a_sure_read_the_table_rules_out_is_a_swap_the_belief_missed() {
+    let start = [0, 1, 2, 3];
+    let mut f = FactoredIdentity::from_assignment(&start, options(4)).unwrap();
+    let mut exact = ExactPermutationFilter::from_assignment(&start).unwrap();
+    let mixes = [(0, 1, 0.5), (1, 2, 0.5), (2, 3, 0.1)];
+    for (a, b, swap) in mixes {
+        f.mix(Mix { a, b, swap }).unwrap();
+        exact.mix(Mix { a, b, swap }).unwrap();
+    }
+    // Identity 3 is on track 3 (0.9) or 2, never on track 0.
+    assert_eq!(f.marginals().unwrap()[0][3], 0.0);
+    let read = Identify {
         track: 0,
-        identity: 0,
+        identity: 3,
         accuracy: 1.0,
-    })
-    .unwrap();
-    assert_eq!(f.repairs(), 0);
-    assert_eq!(f.marginals().unwrap()[0][0], 1.0);
-    f.identify(Identify {
-        track: 0,
-        identity: 1,
-        accuracy: 1.0,
-    })
-    .unwrap();
+    };
+    f.identify(read).unwrap();
     assert_eq!(f.repairs(), 1);
-    let m = f.marginals().unwrap();
-    assert!((m[0][1] - 1.0).abs() < 1e-12 && (m[1][0] - 1.0).abs() < 1e-12);
+    exact
+        .mix(Mix {
+            a: 0,
+            b: 3,
+            swap: repair::SMOOTHING,
+        })
+        .unwrap();
+    exact.identify(read).unwrap();
+    let (got, want) = (f.marginals().unwrap(), exact.marginals().unwrap());
+    assert!(
+        max_abs_difference(&got, &want) < 1e-9,
+        "{got:?} vs {want:?}"
+    );
+    assert!((got[0][3] - 1.0).abs() < 1e-9);
 }
 
 #[test]
