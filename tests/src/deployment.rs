@@ -733,6 +733,62 @@ pub fn crowd_with_identities(
     simulate_crowd(dir, targets, red, duration, seed, true)
 }
 
+/// A valid identity trace (version 1) of `tracks` walkers from the known
+/// start "track t carries identity t": mixes mostly of neighbours in a
+/// ring (as crowds mix), each swapping a hidden truth with its
+/// probability; reads of the true identity with their accuracy, of
+/// another one otherwise, sure reads (accuracy 1, always true) among
+/// them; a truth line every 100 events. Long enough that the factored
+/// identity belief cuts groups, and sure reads land on identities its
+/// cuts sent elsewhere.
+pub fn valid_identity_trace(dir: &Path, tracks: usize, events: usize, seed: u64) -> PathBuf {
+    use rand::{Rng, SeedableRng};
+    use std::fmt::Write as _;
+    std::fs::create_dir_all(dir).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let n = tracks as u32;
+    let mut truth: Vec<u32> = (0..n).collect();
+    let mut text = serde_json::json!({
+        "kind": "header", "format": "idmesh-trace", "version": 1,
+        "tracks": tracks, "identities": tracks, "initial_identity": truth,
+    })
+    .to_string();
+    text.push('\n');
+    for e in 0..events {
+        let time = (e / 10) as f64;
+        if e % 100 == 0 {
+            let line = serde_json::json!({"kind": "truth", "time": time, "identity": truth});
+            writeln!(text, "{line}").unwrap();
+        }
+        let line = if rng.gen_bool(0.7) {
+            let a = rng.gen_range(0..n);
+            let b = (a + rng.gen_range(1..4)) % n;
+            let swap = [0.5, 0.5, 0.3, 0.9, 1.0][rng.gen_range(0..5)];
+            if rng.gen_bool(swap) {
+                truth.swap(a as usize, b as usize);
+            }
+            serde_json::json!({"kind": "mix", "time": time, "a": a, "b": b, "swap": swap})
+        } else {
+            let track = rng.gen_range(0..n);
+            let accuracy = [1.0, 1.0, 0.9, 0.7][rng.gen_range(0..4)];
+            let identity = if accuracy >= 1.0 || rng.gen_bool(accuracy) {
+                truth[track as usize]
+            } else {
+                (truth[track as usize] + rng.gen_range(1..n)) % n
+            };
+            serde_json::json!({"kind": "identify", "time": time, "track": track,
+                "identity": identity, "accuracy": accuracy})
+        };
+        writeln!(text, "{line}").unwrap();
+    }
+    let line =
+        serde_json::json!({"kind": "truth", "time": (events / 10) as f64, "identity": truth});
+    writeln!(text, "{line}").unwrap();
+    let out = dir.join(format!("valid-identities-{tracks}-{events}-{seed}.jsonl"));
+    std::fs::write(&out, text).unwrap();
+    out
+}
+
 fn simulate_crowd(
     dir: &Path,
     targets: usize,

@@ -11,7 +11,8 @@ use idmesh_tests::compare::{
     identity_difference, identity_marginals, identity_matrix, identity_row,
 };
 use idmesh_tests::deployment::{
-    crowd_with_identities, replay_lines, truth_lines, Deployment, Factored, Settings, Truth,
+    crowd_with_identities, replay_lines, truth_lines, valid_identity_trace, Deployment, Factored,
+    Settings, Truth,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -135,6 +136,61 @@ fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders
                 "trees and components moved between leaders"
             );
         }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Valid identity streams that the trees cannot take as they stand (sure
+/// reads of identities that cuts sent elsewhere), and the trace from
+/// outside that once stopped every leader ("no positive mass left",
+/// `shared/repro/`, when `shared/` is beside the repository): at the
+/// default settings through 2 leaders the stream goes through, the
+/// leaders repair what replay repairs, and every answer equals replay's
+/// default to 1e-9, to the end.
+#[test]
+fn valid_identity_streams_never_stop_a_leader_and_repairs_equal_replay() {
+    let dir = std::env::temp_dir().join(format!("idmesh-identity-repairs-{}", std::process::id()));
+    let generated = valid_identity_trace(&dir, 60, 1500, 11);
+    let outside = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/repro/identity-n200-no-mass.jsonl");
+    let mut traces = vec![(generated, true)];
+    match outside.exists() {
+        true => traces.push((outside, false)),
+        false => eprintln!(
+            "{} is not there: only the generated trace runs",
+            outside.display()
+        ),
+    }
+    for (trace, must_repair) in traces {
+        let central = replay_lines(&trace, &[]);
+        let truths = truth_lines(&trace);
+        assert_eq!(central.len(), truths.len());
+        let deployment = Deployment::start(
+            "identity-repairs",
+            &trace,
+            &Settings {
+                factored: Some(Factored::default()),
+                ..settings(2, Some(300.0))
+            },
+        );
+        deployment.first_answer(Duration::from_secs(30));
+        assert_truth_points(&deployment, &truths, &central, 2, "factored-identity");
+        let last = deployment.answer_when(&["identity"], Duration::from_secs(90), |a| {
+            a["finished"] == true
+        });
+        let difference =
+            identity_difference(&last["p_identity"], &central.last().unwrap()["p_identity"]);
+        assert!(
+            difference < 1e-9,
+            "{}: the end off by {difference}",
+            trace.display()
+        );
+        let repairs = deployment.leaders_total("identity_repairs");
+        assert!(
+            !must_repair || repairs > 0,
+            "{}: no repair was needed; the trace tests nothing",
+            trace.display()
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }
