@@ -202,15 +202,10 @@ pub fn twin_trace(
     let sink = out.path().display().to_string();
     let mut run = Run::new(config, BufWriter::new(out.as_file()), &sink, 0)?;
     run.start_from(&reports.header)?;
-    for (i, line) in reports.lines.into_iter().enumerate() {
-        if let Some(report) = report_of(&line) {
-            run.row(
-                &file,
-                Ok(Located {
-                    line: i + 2,
-                    report,
-                }),
-            )?;
+    // The reader ran the extractor over them: each is taken.
+    for (line, text) in reports.lines {
+        if let Some(report) = report_of(&text) {
+            run.row(&file, Ok(Located { line, report }))?;
         }
     }
     run.finish(&file)?;

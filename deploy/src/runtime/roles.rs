@@ -246,7 +246,7 @@ async fn sensor(
         (
             reports.header,
             Source {
-                lines: reports.lines,
+                lines: reports.lines.into_iter().map(|(_, line)| line).collect(),
                 input: None,
             },
         )

@@ -263,8 +263,9 @@ pub fn extract_jsonl<W: Write>(
 pub struct Reports {
     /// The stream's header: its tracks, its prior.
     pub header: Header,
-    /// The reports the stream's extractor takes, in order.
-    pub lines: Vec<Line>,
+    /// The reports the stream's extractor takes, in order, with their
+    /// line numbers.
+    pub lines: Vec<(usize, Line)>,
     /// The bad lines skipped within `--max-errors`, `FILE:LINE: reason`.
     pub skipped: Vec<String>,
 }
@@ -324,7 +325,7 @@ pub fn read_reports(
                 match extractor.push(report, &mut out) {
                     Ok(()) => {
                         out.clear();
-                        lines.push(line);
+                        lines.push((number, line));
                         continue;
                     }
                     Err(e) => RowProblem::Report(e),

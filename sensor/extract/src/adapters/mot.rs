@@ -39,6 +39,7 @@ use super::homography::Homography;
 use super::{check_fps, frame_time, Located, RowError};
 use crate::extractor::{IdentityRead, Report};
 use idmesh_protocol::trace::check_scores;
+use std::collections::btree_map::Entry;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::io::BufRead;
 
@@ -345,14 +346,17 @@ impl Reads {
             for (line, read) in rows {
                 if at < frame {
                     errors.push_back(self.no_box(line, &read));
-                } else if reads.contains_key(&read.id) {
-                    errors.push_back(RowError::malformed(
+                    continue;
+                }
+                match reads.entry(read.id) {
+                    Entry::Occupied(_) => errors.push_back(RowError::malformed(
                         &self.file,
                         line,
                         format!("a second read of track {} in frame {at}", read.id),
-                    ));
-                } else {
-                    reads.insert(read.id, (line, read));
+                    )),
+                    Entry::Vacant(slot) => {
+                        slot.insert((line, read));
+                    }
                 }
             }
         }
