@@ -17,8 +17,15 @@
 //!   belief does not read times).
 //! - **standard input** ([`Ingest::read`]): a trace piped in, checked line
 //!   by line by the trace format's own [`Validator`] (header first, times
-//!   non-decreasing), exactly as a trace file is; a bad line is skipped and
-//!   counted instead of ending the stream.
+//!   non-decreasing), exactly as a trace file is; a bad line is refused
+//!   with its line and counted, and the driver skips it or stops the
+//!   sensor (`--max-errors`).
+//!
+//! With extraction on, both doors read a line of reports with the one
+//! reader `idmesh extract` and `idmesh replay --topology` use
+//! ([`report_line`](idmesh_extract::adapters::jsonl::report_line)): the
+//! same lines taken, passed over and refused, in the same words; time
+//! order is then the extractor's to decide, when the line is routed.
 //!
 //! Nothing here is lost on purpose: a line accepted is handed back to the
 //! gateway, which routes it (gives it its seq) before the answer leaves.
