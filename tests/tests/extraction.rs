@@ -526,6 +526,25 @@ fn the_twin_and_the_deployment_take_and_refuse_the_same_reports() {
     );
     assert!(!ok, "the twin took detect lines under a version-1 header");
     assert_eq!(reason_at(&twin_err, 2), v1_reason);
+    // The sensor streaming the same file as its trace.
+    let v1_topology = dir.join("v1.toml");
+    let toml = std::fs::read_to_string(strict.config()).unwrap();
+    assert!(toml.contains(&path(&mixed_path)), "{toml}");
+    std::fs::write(
+        &v1_topology,
+        toml.replace(&path(&mixed_path), &path(&v1_path)),
+    )
+    .unwrap();
+    let sensor = [
+        "sensor",
+        "--config",
+        &path(&v1_topology),
+        "--name",
+        "sensor-0",
+    ];
+    let (ok, _, sensor_err) = idmesh_in(&tmp, &sensor);
+    assert!(!ok, "the sensor took detect lines under a version-1 header");
+    assert_eq!(reason_at(&sensor_err, 2), v1_reason, "the sensor's words");
     let mut pipe = strict.launch_piped("sensor", "sensor-0", &["--stdin"]);
     for line in &v1 {
         let _ = writeln!(pipe, "{line}");
