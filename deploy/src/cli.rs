@@ -21,7 +21,7 @@ pub struct Cli {
 pub enum Command {
     /// Replay a trace through one filter offline: one JSON line with the
     /// answers at every `truth` line, then a summary line.
-    Replay(ReplayArgs),
+    Replay(ReplayCommand),
     /// Simulate targets moving in a field (or replay real pedestrians) and
     /// write the sensors' events as a trace.
     Simulate(SimulateArgs),
@@ -60,6 +60,21 @@ pub enum Command {
     /// 4 leaders, bytes per leader, and marginals latency against the raw
     /// Zenoh round trip; prints Markdown.
     Bench(BenchArgs),
+}
+
+/// `idmesh replay`: the offline tools' arguments, and what only a
+/// deployment's twin reads.
+#[derive(Debug, Clone, Args)]
+#[command(allow_negative_numbers = true)]
+pub struct ReplayCommand {
+    #[command(flatten)]
+    pub args: ReplayArgs,
+    /// With --topology of sensors that extract: bad lines of the reports
+    /// skipped (each named on stderr and counted) before the next one
+    /// stops the replay, as the sensor counts them; default: the
+    /// topology's `max_errors` (0: the first bad line stops it).
+    #[arg(long, value_name = "N", requires = "topology")]
+    pub max_errors: Option<usize>,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -186,6 +201,13 @@ pub struct SensorArgs {
     /// input, unless the topology's sensor is `live`.
     #[arg(long)]
     pub stdin: bool,
+    /// Bad lines of its input (standard input, or a trace of reports)
+    /// skipped, each named in the log and counted, before the next one
+    /// stops the sensor; default: the topology's `max_errors` (0: the
+    /// first bad line stops it). Producers on the ingest key are answered
+    /// line by line instead.
+    #[arg(long, value_name = "N")]
+    pub max_errors: Option<usize>,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -485,10 +507,31 @@ pub struct ExtractArgs {
     /// mot: a 3x3 homography from pixels to metres (ETH/UCY H.txt format).
     #[arg(long, value_name = "H.txt")]
     pub homography: Option<PathBuf>,
-    /// Which tracks there are: every id of the input (read whole first), or
-    /// the ids of the first frame (default for jsonl without a header).
+    /// Which tracks there are: every id of the input (a first pass over the
+    /// file), or the ids of the first frame (default for jsonl without a
+    /// header, and for mot on standard input).
     #[arg(long, value_enum)]
     pub roster: Option<RosterChoice>,
+    /// k, the number of red targets: the trace's header declares it, and
+    /// the belief starts from k/n (a tracker's output does not say it;
+    /// without it replay starts every track at one half).
+    #[arg(long, value_name = "K")]
+    pub red: Option<usize>,
+    /// mot: class scores and identity reads of the boxes, from a file of
+    /// JSON lines keyed by frame and track id, in frame order
+    /// (`{"frame":12,"id":3,"scores":{"red":0.8,"blue":0.2}}`,
+    /// `"identity":2,"accuracy":0.9`).
+    #[arg(long, value_name = "FILE")]
+    pub reads: Option<PathBuf>,
+    /// mot, nine-column rows (`…,conf,class,visibility`): the label of a
+    /// MOTChallenge class id, `ID=LABEL` (repeatable, or comma-separated);
+    /// its boxes score (1 + visibility) / 2 for it.
+    #[arg(long, value_name = "ID=LABEL", value_delimiter = ',', value_parser = parse_class_label)]
+    pub class_label: Vec<(u32, String)>,
+    /// mot: how many frames a row may come behind the latest frame read
+    /// (rows are read in frame order, never the whole file at once).
+    #[arg(long, value_name = "FRAMES", default_value_t = idmesh_extract::adapters::mot::DEFAULT_WINDOW)]
+    pub reorder_window: u64,
     /// Two tracks closer than this (metres) meet.
     #[arg(long, default_value_t = 1.0)]
     pub mix_distance: f64,
@@ -521,13 +564,30 @@ pub struct ExtractArgs {
     /// track (a jsonl header with identities turns this on too).
     #[arg(long)]
     pub identities: bool,
-    /// How many bad rows to count and report before giving up; with the
-    /// default 0 the first bad row stops the run.
-    #[arg(long, default_value_t = 0)]
+    /// Bad rows skipped, each named on stderr and counted, before the next
+    /// one stops the run; with the default 0 the first bad row stops it
+    /// (as a sensor and `idmesh replay --topology` count theirs).
+    #[arg(long, value_name = "N", default_value_t = 0)]
     pub max_errors: usize,
     /// Where to write the trace; standard output when absent.
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
+}
+
+/// `ID=LABEL`: a MOTChallenge class id and its label.
+fn parse_class_label(text: &str) -> Result<(u32, String), String> {
+    let (id, label) = text
+        .split_once('=')
+        .ok_or_else(|| format!("expected ID=LABEL (e.g. 1=red), got {text:?}"))?;
+    let id = id
+        .trim()
+        .parse()
+        .map_err(|_| format!("class id {id:?} is not a whole number"))?;
+    let label = label.trim();
+    if label.is_empty() {
+        return Err(format!("no label for class {id}"));
+    }
+    Ok((id, label.to_string()))
 }
 
 /// Input formats of `extract`.
@@ -666,7 +726,7 @@ mod tests {
             "--distributed-rule",
         ])
         .unwrap();
-        let Command::Replay(args) = cli.command else {
+        let Command::Replay(ReplayCommand { args, .. }) = cli.command else {
             panic!("parsed as replay")
         };
         assert_eq!(args.method, Some(Method::Threshold));
@@ -692,7 +752,7 @@ mod tests {
             "9",
         ])
         .unwrap();
-        let Command::Replay(args) = cli.command else {
+        let Command::Replay(ReplayCommand { args, .. }) = cli.command else {
             panic!("parsed as replay")
         };
         assert_eq!(args.method, Some(Method::Particles));

@@ -6,10 +6,12 @@
 use crate::cli::{ExtractArgs, ReportFormat, RosterChoice};
 use anyhow::{bail, Context, Result};
 use idmesh_extract::adapters::homography::Homography;
-use idmesh_extract::adapters::mot::Ground;
+use idmesh_extract::adapters::jsonl::report_of;
+use idmesh_extract::adapters::mot::{Ground, MotOptions, MotReader, Reads};
+use idmesh_extract::adapters::Located;
 use idmesh_extract::adapters::{eth_ucy, mot};
-use idmesh_extract::pipeline::{extract_jsonl, extract_rows, Run, Tally};
-use idmesh_extract::{ExtractorConfig, ScoreMapping};
+use idmesh_extract::pipeline::{every_id, extract_jsonl, extract_rows, read_reports, Run, Tally};
+use idmesh_extract::{ExtractorConfig, RosterPolicy, ScoreMapping};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 
@@ -37,13 +39,10 @@ pub fn run(args: &ExtractArgs) -> Result<()> {
         Some(path) if !from_stdin => path.display().to_string(),
         _ => "stdin".to_string(),
     };
-    let input: Box<dyn BufRead> = if from_stdin {
-        Box::new(BufReader::new(std::io::stdin().lock()))
-    } else {
-        Box::new(BufReader::new(
-            File::open(&file).with_context(|| format!("{file}: cannot open"))?,
-        ))
-    };
+    let input = open(args.input.as_deref().filter(|_| !from_stdin), &file)?;
+    if args.format != ReportFormat::Mot && (args.reads.is_some() || !args.class_label.is_empty()) {
+        bail!("--reads and --class-label are for --format mot (jsonl carries scores and reads in its detect lines)");
+    }
     let (sink, output): (String, Box<dyn Write>) = match &args.out {
         Some(path) => (
             path.display().to_string(),
@@ -56,7 +55,7 @@ pub fn run(args: &ExtractArgs) -> Result<()> {
             Box::new(BufWriter::new(std::io::stdout().lock())),
         ),
     };
-    let run = Run::new(config(args), output, &sink, args.max_errors)?;
+    let run = Run::new(config(args), output, &sink, args.max_errors)?.with_red(args.red);
     let tally = match args.format {
         ReportFormat::Jsonl => {
             if args.roster == Some(RosterChoice::All) {
@@ -64,24 +63,71 @@ pub fn run(args: &ExtractArgs) -> Result<()> {
             }
             extract_jsonl(input, &file, run)?
         }
+        ReportFormat::Mot => {
+            let options = MotOptions {
+                classes: args.class_label.iter().cloned().collect(),
+                label: args.label.clone(),
+                window: args.reorder_window,
+                ..MotOptions::new(fps(args)?, ground(args)?)
+            };
+            let policy = match (args.roster, &args.input) {
+                (Some(RosterChoice::FirstFrame), _) => RosterPolicy::FirstFrame,
+                (None, _) if from_stdin => RosterPolicy::FirstFrame,
+                (_, Some(path)) if !from_stdin => {
+                    // A first pass for the ids alone: the roster of every
+                    // id, in memory flat in the file's length.
+                    let ids = mot::ids(open(Some(path), &file)?, &options)
+                        .with_context(|| format!("{file}: cannot read"))?;
+                    RosterPolicy::Declared(ids)
+                }
+                _ => bail!(
+                    "--roster all reads the input twice: give a file, or --roster first-frame"
+                ),
+            };
+            let reads = match &args.reads {
+                Some(path) => {
+                    let name = path.display().to_string();
+                    Some(Reads::new(open(Some(path), &name)?, &name, options.window))
+                }
+                None => None,
+            };
+            let rows = MotReader::new(input, &file, options, reads)?;
+            extract_rows(rows, &file, run, policy)?
+        }
         format => {
             let text = read_all(input, &file)?;
-            let fps = args.fps.context(
-                "this --format needs --fps (frames per second; ETH obsmat 15, other ETH/UCY files 25)",
-            )?;
+            let fps = fps(args)?;
             let rows = match format {
-                ReportFormat::Mot => mot::read(&text, &file, fps, ground(args)?)?,
                 ReportFormat::Obsmat => {
                     eth_ucy::read(&text, &file, fps, eth_ucy::SceneFormat::Obsmat)?
                 }
                 _ => eth_ucy::read(&text, &file, fps, eth_ucy::SceneFormat::FourColumn)?,
             };
-            let every_id = args.roster != Some(RosterChoice::FirstFrame);
-            extract_rows(rows, &file, run, every_id)?
+            let policy = match args.roster {
+                Some(RosterChoice::FirstFrame) => RosterPolicy::FirstFrame,
+                _ => RosterPolicy::Declared(every_id(&rows)),
+            };
+            extract_rows(rows, &file, run, policy)?
         }
     };
     summary(&file, &sink, &tally);
     Ok(())
+}
+
+/// A file, or standard input (`None`), read line by line.
+fn open(path: Option<&std::path::Path>, file: &str) -> Result<Box<dyn BufRead>> {
+    Ok(match path {
+        Some(path) => Box::new(BufReader::new(
+            File::open(path).with_context(|| format!("{file}: cannot open"))?,
+        )),
+        None => Box::new(BufReader::new(std::io::stdin().lock())),
+    })
+}
+
+fn fps(args: &ExtractArgs) -> Result<f64> {
+    args.fps.context(
+        "this --format needs --fps (frames per second; ETH obsmat 15, other ETH/UCY files 25)",
+    )
 }
 
 fn ground(args: &ExtractArgs) -> Result<Ground> {
@@ -111,14 +157,17 @@ fn read_all(mut input: Box<dyn BufRead>, file: &str) -> Result<String> {
 
 /// With `idmesh replay --topology`: when the deployment's sensors extract
 /// their events from a tracker's reports, the trace replay reads is those
-/// reports, extracted as the sensors extract them (the same settings, the
-/// same code): written to a file of its own, whose path this returns for
-/// the caller to remove once replay is done. `None` when the sensors take
-/// events as they are.
+/// reports read as a sensor reads its trace ([`read_reports`]: the same
+/// reader, the same `max_errors`, the same messages) and extracted as the
+/// sensors extract them (the same settings, the same code), written to a
+/// temporary file that is removed when it is dropped, on every path out.
+/// `None` when the sensors take events as they are. `max_errors`:
+/// `--max-errors`, else the topology's sensor's.
 pub fn twin_trace(
     topology: &crate::runtime::topology::Topology,
     trace: &std::path::Path,
-) -> Result<Option<std::path::PathBuf>> {
+    max_errors: Option<usize>,
+) -> Result<Option<tempfile::NamedTempFile>> {
     let Some(first) = topology.sensors.first() else {
         return Ok(None);
     };
@@ -129,16 +178,41 @@ pub fn twin_trace(
         );
     }
     let Some(config) = first.extract.clone() else {
+        if max_errors.is_some() {
+            bail!(
+                "--max-errors counts bad lines of reports: this topology's sensors take events \
+                 as they are, which replay reads as a trace (its first bad line stops it)"
+            );
+        }
         return Ok(None);
     };
     let file = trace.display().to_string();
     let input = BufReader::new(File::open(trace).with_context(|| format!("{file}: cannot open"))?);
-    let out = std::env::temp_dir().join(format!("idmesh-twin-{}.jsonl", std::process::id()));
-    let sink = out.display().to_string();
-    let output =
-        BufWriter::new(File::create(&out).with_context(|| format!("{sink}: cannot create"))?);
-    let run = Run::new(config, output, &sink, 0)?;
-    extract_jsonl(input, &file, run)?;
+    let reports = read_reports(
+        input,
+        &file,
+        &config,
+        max_errors.unwrap_or(first.max_errors),
+    )?;
+    let out = tempfile::Builder::new()
+        .prefix("idmesh-twin-")
+        .suffix(".jsonl")
+        .tempfile()
+        .context("cannot create the twin's trace in the temporary folder")?;
+    let sink = out.path().display().to_string();
+    let mut run = Run::new(config, BufWriter::new(out.as_file()), &sink, 0)?;
+    run.start_from(&reports.header)?;
+    // The reader ran the extractor over them: each is taken.
+    for (line, text) in reports.lines {
+        if let Some(report) = report_of(&text) {
+            run.row(&file, Ok(Located { line, report }))?;
+        }
+    }
+    run.finish(&file)?;
+    let mut err = std::io::stderr().lock();
+    for message in &reports.skipped {
+        let _ = writeln!(err, "{message}");
+    }
     Ok(Some(out))
 }
 
@@ -163,5 +237,13 @@ fn summary(file: &str, sink: &str, tally: &Tally) {
     );
     for (reason, n) in &tally.rejected {
         let _ = writeln!(err, "  rejected, {reason}: {n}");
+    }
+    if count("observe") + count("identify") == 0 {
+        let warning = "the trace holds no observation (no observe or identify line): replay \
+                       answers the prior, k/n (one half without --red), for every track; give \
+                       class scores or identity reads (detect lines, --reads, or a MOT class \
+                       column with --class-label)";
+        // On stderr, as every log line (RUST_LOG, default warn).
+        tracing::warn!("{file}: {warning}");
     }
 }

@@ -44,21 +44,25 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Replay(mut args) => {
+        Command::Replay(cli::ReplayCommand {
+            mut args,
+            max_errors,
+        }) => {
+            // The twin of sensors that extract replays the reports'
+            // events, extracted into a file of its own that is removed
+            // whatever happens (dropped on every path out).
             let mut extracted = None;
             if let Some(path) = args.topology.take() {
                 let topology = runtime::topology::Topology::load(&path)?;
                 topology.replay_twin(&mut args)?;
-                extracted = extract::twin_trace(&topology, &args.trace)?;
+                extracted = extract::twin_trace(&topology, &args.trace, max_errors)?;
                 if let Some(trace) = &extracted {
-                    args.trace = trace.clone();
+                    args.trace = trace.path().to_path_buf();
                 }
             }
             let stdout = BufWriter::new(std::io::stdout().lock());
             let replayed = idmesh_eval::replay::dispatch(&args, stdout);
-            if let Some(trace) = extracted {
-                let _ = std::fs::remove_file(trace);
-            }
+            drop(extracted);
             replayed
         }
         Command::Simulate(args) => simulate::run(&args),
@@ -66,7 +70,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Acoustic(args) => acoustic::run(&args),
         Command::Eval(args) => idmesh_eval::eval::run(&args),
         Command::Sensor(args) => runtime::roles::run(
-            runtime::roles::Role::Sensor { stdin: args.stdin },
+            runtime::roles::Role::Sensor {
+                stdin: args.stdin,
+                max_errors: args.max_errors,
+            },
             &args.role.config,
             &args.role.name,
         ),

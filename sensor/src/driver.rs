@@ -37,6 +37,7 @@ use crate::machine::{CutOutcome, Gateway, RestoreError};
 use crate::mesh::MeshConfig;
 use crate::peers::{Fetch, Peers};
 use crate::router::Router;
+use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
@@ -76,6 +77,11 @@ pub struct GatewayConfig {
     /// Extraction on: the source's lines are a tracker's reports
     /// ([`crate::extraction`]).
     pub extraction: Option<crate::extraction::Extraction>,
+    /// Bad lines of standard input skipped (each named in the log and
+    /// counted) before the next one stops the sensor (`--max-errors`, as
+    /// `idmesh extract` and `idmesh replay --topology` count theirs); 0:
+    /// the first one does.
+    pub max_errors: usize,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -103,6 +109,9 @@ pub enum GatewayError {
          standard input"
     )]
     MeshSource(String),
+    /// A bad line of standard input past `--max-errors`.
+    #[error("{0}")]
+    Input(String),
     #[error("leaders {missing:?} did not come up within {waited:?}")]
     LeadersMissing {
         missing: Vec<String>,
@@ -263,6 +272,7 @@ pub async fn run(
 
     let (length, end) = stream_length(&lines, config.limit);
     let lines = &lines[..length];
+    let mut budget = ErrorBudget::new(config.max_errors);
     let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
     // How many events the reports make is known only once they are
     // extracted: a cut asked for beyond the end waits, and is refused
@@ -516,7 +526,7 @@ pub async fn run(
                     continue;
                 };
                 let mut placed = Vec::new();
-                take_input(&mut gateway, read, &mut placed);
+                take_input(&mut gateway, read, &mut placed, &mut budget)?;
                 // What the pipe already holds goes in the same batch (as
                 // much of it as the window lets in).
                 let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
@@ -524,7 +534,7 @@ pub async fn run(
                 for _ in 1..room {
                     let Some(rx) = input.as_mut() else { break };
                     match rx.try_recv() {
-                        Ok(read) => take_input(&mut gateway, read, &mut placed),
+                        Ok(read) => take_input(&mut gateway, read, &mut placed, &mut budget)?,
                         Err(_) => break,
                     }
                 }
@@ -550,18 +560,28 @@ async fn next_input(
 }
 
 /// Routes one line of standard input, or says why not: a bad line is
-/// skipped (the gateway counted it), an unreadable input is logged and
-/// read no further (the channel closes behind it).
-fn take_input(gateway: &mut Gateway<Query>, read: InputLine, placed: &mut Vec<Placed<Query>>) {
+/// skipped (the gateway counted it) while `budget` lasts, and stops the
+/// sensor past it; an unreadable input is logged and read no further (the
+/// channel closes behind it).
+fn take_input(
+    gateway: &mut Gateway<Query>,
+    read: InputLine,
+    placed: &mut Vec<Placed<Query>>,
+    budget: &mut ErrorBudget,
+) -> Result<(), GatewayError> {
     match read {
         Ok((number, text)) => match gateway.read(number, &text) {
             Ok(reached) => placed.extend(reached),
             Err(reason) => {
+                let reason = budget
+                    .spend(reason)
+                    .map_err(|stop| GatewayError::Input(stop.to_string()))?;
                 tracing::warn!(%reason, rejected = gateway.stats().rejected, "input line skipped")
             }
         },
         Err(reason) => tracing::error!(%reason, "standard input is read no further"),
     }
+    Ok(())
 }
 
 /// An ingest request: its lines judged and the accepted ones routed and

@@ -15,7 +15,8 @@
 //! Its state is part of the gateway's journaled state: a restored sensor
 //! feeds the same reports through again and reaches the same extractor.
 
-use idmesh_extract::{Extractor, ExtractorConfig, Report, RosterPolicy};
+use idmesh_extract::adapters::jsonl::{report_line, report_of, ReportLine};
+use idmesh_extract::{Extractor, ExtractorConfig};
 use idmesh_protocol::trace::{Header, Line};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
@@ -39,42 +40,40 @@ fn from_snapshot<'de, D: Deserializer<'de>>(d: D) -> Result<Extractor, D::Error>
 
 impl Extraction {
     /// Extraction by `config` for the stream `header` describes: its
-    /// tracks `0..n` are the roster, its prior carried.
+    /// tracks `0..n` are the roster, its identities and prior carried
+    /// ([`Extractor::for_stream`], as `idmesh extract` and `idmesh replay
+    /// --topology` make theirs).
     pub fn new(config: ExtractorConfig, header: &Header) -> Result<Self, String> {
-        let roster = RosterPolicy::Declared((0..header.tracks as u32).collect());
-        let extractor = Extractor::new(config, roster)
-            .map_err(|e| format!("extraction settings: {e}"))?
-            .with_prior(header);
+        let extractor = Extractor::for_stream(config, header)
+            .map_err(|e| format!("extraction settings: {e}"))?;
         Ok(Extraction { extractor })
     }
 
-    /// Whether `line` is something this stage takes: a report, or a
-    /// `truth` line (which carries no event and is passed over).
-    pub fn admits(line: &Line) -> Result<(), String> {
-        match line {
-            Line::Move(_) | Line::Detect(_) | Line::Truth(_) => Ok(()),
-            other => Err(format!(
-                "{}: this sensor extracts its events from what a tracker reports \
-                 (extraction is on in its topology): send move and detect lines",
-                other.kind()
-            )),
+    /// One line of reports, read as every path reads it
+    /// ([`report_line`], the reader `idmesh extract` uses): the line to
+    /// put in the order (a report, or a `truth` line that carries
+    /// nothing), or why not. `number` is its line in the input.
+    pub fn read(text: &str, number: usize, header: &Header) -> Result<Line, String> {
+        match report_line(text, number, Some(header)) {
+            Ok(ReportLine::Report(line) | ReportLine::Skip(line)) => Ok(line),
+            // Under a header the reader refuses another; kept total.
+            Ok(ReportLine::Header(_)) => Err("header: the stream has its header".into()),
+            Err(problem) => Err(problem.to_string()),
         }
     }
 
     /// Takes one line; the stream lines it completes (a frame closes when
     /// a report of a later time arrives), or why the report is refused
-    /// (nothing changed).
+    /// (nothing changed). A line that is no report (`truth`) completes
+    /// nothing.
     pub fn take(&mut self, line: &Line) -> Result<Vec<Line>, String> {
-        Self::admits(line)?;
-        let report: Report = match line {
-            Line::Move(m) => (*m).into(),
-            Line::Detect(d) => d.clone().into(),
-            _ => return Ok(Vec::new()),
+        let Some(report) = report_of(line) else {
+            return Ok(Vec::new());
         };
         let mut out = Vec::new();
         self.extractor
             .push(report, &mut out)
-            .map_err(|e| format!("{}: {e}", line.kind()))?;
+            .map_err(|e| e.to_string())?;
         Ok(events_only(out))
     }
 

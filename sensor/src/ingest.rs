@@ -17,8 +17,15 @@
 //!   belief does not read times).
 //! - **standard input** ([`Ingest::read`]): a trace piped in, checked line
 //!   by line by the trace format's own [`Validator`] (header first, times
-//!   non-decreasing), exactly as a trace file is; a bad line is skipped and
-//!   counted instead of ending the stream.
+//!   non-decreasing), exactly as a trace file is; a bad line is refused
+//!   with its line and counted, and the driver skips it or stops the
+//!   sensor (`--max-errors`).
+//!
+//! With extraction on, both doors read a line of reports with the one
+//! reader `idmesh extract` and `idmesh replay --topology` use
+//! ([`report_line`](idmesh_extract::adapters::jsonl::report_line)): the
+//! same lines taken, passed over and refused, in the same words; time
+//! order is then the extractor's to decide, when the line is routed.
 //!
 //! Nothing here is lost on purpose: a line accepted is handed back to the
 //! gateway, which routes it (gives it its seq) before the answer leaves.
@@ -308,24 +315,22 @@ impl Ingest {
     ) -> Result<Option<Line>, String> {
         let text = text.strip_suffix('\n').unwrap_or(text);
         let text = text.strip_suffix('\r').unwrap_or(text);
-        let extracting = self.extracting;
-        let judged = Line::parse(text)
-            .and_then(|line| {
-                self.stdin.check(&line, number)?;
-                if !extracting {
+        let judged = if self.extracting {
+            // Reports: read as every path reads them; time order is the
+            // extractor's rule, decided when the line is routed.
+            crate::extraction::Extraction::read(text, number, &self.header)
+        } else {
+            Line::parse(text)
+                .and_then(|line| {
+                    self.stdin.check(&line, number)?;
                     line.require_extracted()?;
-                }
-                Ok(line)
-            })
-            .map_err(|problem| problem.to_string())
-            .and_then(|line| {
-                if extracting {
-                    crate::extraction::Extraction::admits(&line)?;
-                }
-                Ok(line)
-            });
+                    Ok(line)
+                })
+                .map_err(|problem| problem.to_string())
+        };
         match judged {
-            Ok(line) if line.is_event() => {
+            Ok(Line::Truth(_)) => Ok(None),
+            Ok(line) if self.extracting || line.is_event() => {
                 stats.ingested += 1;
                 Ok(Some(line))
             }
@@ -345,10 +350,7 @@ fn taken(text: &str, header: &Header, extracting: bool) -> Result<Line, String> 
     if !extracting {
         return event(text, header);
     }
-    let line = Line::parse(text).map_err(|p| p.to_string())?;
-    crate::extraction::Extraction::admits(&line)?;
-    line.validate(header).map_err(|p| p.to_string())?;
-    Ok(line)
+    crate::extraction::Extraction::read(text, 0, header)
 }
 
 /// One ingested line: an event of this stream, or why not.
@@ -577,5 +579,37 @@ mod tests {
         let truth = r#"{"kind":"truth","time":6,"red":[0,1]}"#;
         assert_eq!(ingest.read(4, truth, &mut stats), Ok(None));
         assert_eq!((stats.ingested, stats.bad_lines, stats.rejected), (1, 1, 1));
+    }
+
+    /// With extraction on, the ingest key and standard input read a line
+    /// of reports as `idmesh extract` reads it: the same refusals, in the
+    /// same words, and a `truth` line passed over.
+    #[test]
+    fn reports_are_read_as_idmesh_extract_reads_them_on_both_doors() {
+        let header = header();
+        let lines = [
+            r#"{"kind":"detect","time":1,"track":0,"x":0,"y":0}"#,
+            r#"{"kind":"move","time":1,"track":9,"x":0,"y":0}"#,
+            r#"{"kind":"move","time":1,"#,
+            r#"{"kind":"mix","time":1,"a":0,"b":1,"swap":0.5}"#,
+            r#"{"kind":"detect","time":1,"track":0,"x":0,"y":0,"scores":{"red":0.9}}"#,
+        ];
+        for (i, text) in lines.iter().enumerate() {
+            let want = idmesh_extract::adapters::jsonl::parse_line(text, i + 2, Some(&header))
+                .unwrap_err()
+                .to_string();
+            let (mut ingest, mut stats) = ingest();
+            ingest.extracting();
+            let judged = ingest.offer(offer("cam", "0", text), &mut stats).unwrap();
+            assert_eq!(judged.ack.errors[0].reason, want, "the ingest key");
+            let read = ingest.read(i + 2, text, &mut stats).unwrap_err();
+            assert_eq!(read, format!("stdin:{}: {want}", i + 2), "standard input");
+        }
+        let (mut ingest, mut stats) = ingest();
+        ingest.extracting();
+        let truth = r#"{"kind":"truth","time":6,"red":[0,1]}"#;
+        assert_eq!(ingest.read(2, truth, &mut stats), Ok(None));
+        let r#move = r#"{"kind":"move","time":1,"track":1,"x":0,"y":0}"#;
+        assert!(ingest.read(3, r#move, &mut stats).unwrap().is_some());
     }
 }

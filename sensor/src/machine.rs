@@ -583,15 +583,20 @@ impl<Q> Gateway<Q> {
         }
         self.state.stdin_read = number as u64;
         let read = self.state.ingest.read(number, text, &mut self.state.stats);
-        let (placed, cuts) = match &read {
-            Ok(Some(line)) => self.route(std::slice::from_ref(line)),
-            _ => (Vec::new(), Vec::new()),
+        let (placed, cuts, refused) = match &read {
+            Ok(Some(line)) => self.route_judged(std::slice::from_ref(line)),
+            _ => (Vec::new(), Vec::new(), Vec::new()),
         };
         self.note(Record::Read {
             number: number as u64,
             text: text.to_string(),
             cuts,
         });
+        // A report the extractor refused (time order, a track twice in a
+        // frame) is a bad line of the input like any other.
+        if let Some((_, reason)) = refused.into_iter().next() {
+            return Err(format!("stdin:{number}: {reason}"));
+        }
         read.map(|_| placed)
     }
 

@@ -67,6 +67,8 @@ pub struct Settings {
     /// Every sensor extracts its events from a tracker's reports with
     /// these settings (`[sensor.extract]`).
     pub extract: Option<idmesh_extract::ExtractorConfig>,
+    /// Bad lines of a sensor's own input it goes past (`max_errors`).
+    pub max_errors: usize,
 }
 
 /// The factored belief's settings in a topology.
@@ -226,6 +228,7 @@ pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
         sensor.rate = settings.rate;
         sensor.faults = settings.faults.clone();
         sensor.extract = settings.extract.clone();
+        sensor.max_errors = settings.max_errors;
     }
     topology.leader_faults = settings.leader_faults.clone();
     topology.security = settings.security.as_ref().map(|secured| SecuritySection {
@@ -295,6 +298,33 @@ impl Deployment {
         let stdin = child.stdin.take().expect("a piped stdin");
         self.children.push((name.to_string(), child));
         stdin
+    }
+
+    /// The topology file.
+    pub fn config(&self) -> &Path {
+        &self.config
+    }
+
+    /// Waits for process `name` (started with [`Deployment::launch`] or
+    /// [`Deployment::launch_piped`]) to end by itself: its exit status, or
+    /// a panic after `patience`.
+    pub fn wait_for(&mut self, name: &str, patience: Duration) -> ExitStatus {
+        let started = Instant::now();
+        let (_, child) = self
+            .children
+            .iter_mut()
+            .find(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("no process {name}"));
+        loop {
+            if let Some(status) = child.try_wait().expect("wait for it") {
+                return status;
+            }
+            assert!(
+                started.elapsed() < patience,
+                "{name} still runs after {patience:?}"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
 
     /// Starts process `name` in `role`.

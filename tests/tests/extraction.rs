@@ -127,10 +127,10 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A scene's reports (hotel) piped into `idmesh sensor --stdin` a few lines at a
-/// time, with an event among them where reports are expected: the event
-/// is refused by name and counted, and the answer is replay's of
-/// `idmesh extract`'s trace.
+/// A scene's reports (hotel) piped into `idmesh sensor --stdin
+/// --max-errors 1` a few lines at a time, with an event among them where
+/// reports are expected: the event is refused by name and counted, and the
+/// answer is replay's of `idmesh extract`'s trace.
 #[test]
 fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     use std::io::Write;
@@ -145,7 +145,7 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
         ..Settings::default()
     };
     let mut deployment = Deployment::start_without_sensor("extraction-stdin", &reports, &settings);
-    let mut pipe = deployment.launch_piped("sensor", "sensor-0", &["--stdin"]);
+    let mut pipe = deployment.launch_piped("sensor", "sensor-0", &["--stdin", "--max-errors", "1"]);
     let text = std::fs::read_to_string(&reports).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     for (i, chunk) in lines.chunks(200).enumerate() {
@@ -344,5 +344,381 @@ fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
         &simulator["final_p_red"],
     );
     drop(deployment);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `idmesh <args>` with the temporary folder `tmp`: its exit status and
+/// what it wrote on stderr.
+fn idmesh_in(tmp: &Path, args: &[&str]) -> (bool, String, String) {
+    let output = Command::new(idmesh())
+        .args(args)
+        .env("TMPDIR", tmp)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("idmesh runs");
+    (
+        output.status.success(),
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}
+
+/// The reason of a `FILE:LINE: reason` message for line `line` in `text`
+/// (a process's stderr or log), whatever names the file.
+fn reason_at(text: &str, line: usize) -> String {
+    let mark = format!(":{line}: ");
+    let found = text
+        .lines()
+        .find_map(|l| l.split_once(&mark).map(|(_, reason)| reason.to_string()))
+        .unwrap_or_else(|| panic!("no message for line {line} in:\n{text}"));
+    // A log line may go on with its fields.
+    found
+        .split(" rejected=")
+        .next()
+        .unwrap_or(&found)
+        .trim()
+        .to_string()
+}
+
+/// What a tracker got wrong, fed both ways: to the offline twin (`idmesh
+/// extract`, `idmesh replay --topology`) and to a deployment (its sensor's
+/// trace file, standard input). Every case has the same outcome both ways,
+/// with the same words: `truth` lines among the reports are passed over; a
+/// malformed line stops every reader at the default `--max-errors 0`,
+/// naming its line, and is skipped and counted by every reader given
+/// `--max-errors 1` (the answers then equal to 1e-9); `detect` lines under
+/// a version-1 header are refused by every reader at their first line; and
+/// no run leaves a file in the temporary folder, failed or not.
+#[test]
+fn the_twin_and_the_deployment_take_and_refuse_the_same_reports() {
+    use std::io::Write;
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-agree-{}", std::process::id()));
+    let tmp = dir.join("tmp");
+    let (_, reports) = scene_reports(&dir, "zara01", 40, 3, &[]);
+    std::fs::create_dir_all(&tmp).unwrap();
+    let text = std::fs::read_to_string(&reports).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let header: Value = serde_json::from_str(lines[0]).unwrap();
+    let k = header["red"].as_u64().unwrap_or(1);
+    let red: Vec<u64> = (0..k).collect();
+    // Truth lines every 100 reports, and one malformed line.
+    let mut mixed = vec![lines[0].to_string()];
+    let mut bad_line = 0;
+    for (i, line) in lines[1..].iter().enumerate() {
+        mixed.push(line.to_string());
+        if i % 100 == 99 {
+            let time = serde_json::from_str::<Value>(line).unwrap()["time"].clone();
+            mixed.push(format!(r#"{{"kind":"truth","time":{time},"red":{red:?}}}"#));
+        }
+        if i == lines.len() / 2 {
+            mixed.push("{\"kind\":\"move\",".into());
+            bad_line = mixed.len();
+        }
+    }
+    let mixed_path = dir.join("mixed.jsonl");
+    std::fs::write(&mixed_path, mixed.join("\n") + "\n").unwrap();
+    let without_bad: Vec<&str> = mixed
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| i + 1 != bad_line)
+        .map(|(_, l)| l.as_str())
+        .collect();
+    let truth_path = dir.join("truth.jsonl");
+    std::fs::write(&truth_path, without_bad.join("\n") + "\n").unwrap();
+    let v1_path = dir.join("v1.jsonl");
+    let v1: Vec<String> = std::iter::once(lines[0].replace("\"version\":2", "\"version\":1"))
+        .chain(lines[1..20].iter().map(|l| l.to_string()))
+        .collect();
+    assert!(v1[0].contains("\"version\":1") && v1[1].contains("\"detect\""));
+    std::fs::write(&v1_path, v1.join("\n") + "\n").unwrap();
+    let path = |p: &Path| p.display().to_string();
+    let extract = |trace: &Path, extra: &[&str]| {
+        let out = dir.join("out.jsonl");
+        let mut args = vec![
+            "extract".to_string(),
+            path(trace),
+            "--out".into(),
+            path(&out),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        idmesh_in(&tmp, &args)
+    };
+    let empty_tmp = |what: &str| {
+        let left: Vec<_> = std::fs::read_dir(&tmp)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        assert!(
+            left.is_empty(),
+            "{what} left {left:?} in the temporary folder"
+        );
+    };
+
+    // Truth lines: taken (passed over) by extract; the same trace as
+    // without them.
+    let (ok, _, err) = extract(&truth_path, &[]);
+    assert!(ok, "extract refused truth lines: {err}");
+    let with_truth = std::fs::read_to_string(dir.join("out.jsonl")).unwrap();
+    let (ok, _, _) = extract(&reports, &[]);
+    assert!(ok);
+    assert_eq!(
+        with_truth,
+        std::fs::read_to_string(dir.join("out.jsonl")).unwrap()
+    );
+
+    // A deployment whose sensors stop at the first bad line (the default).
+    let settings = Settings {
+        leaders: 1,
+        factored: Some(Factored::default()),
+        extract: Some(ExtractorConfig::default()),
+        sensor_trace: Some(mixed_path.clone()),
+        ..Settings::default()
+    };
+    let mut strict = Deployment::start_without_sensor("extraction-strict", &reports, &settings);
+    let topology = path(strict.config());
+    // The malformed line: extract, the twin and the sensor's trace file
+    // stop at it, with one message.
+    let (ok, _, extract_err) = extract(&mixed_path, &[]);
+    assert!(!ok, "extract went past a malformed line");
+    let malformed = reason_at(&extract_err, bad_line);
+    assert!(malformed.starts_with("malformed JSON"), "{malformed}");
+    let twin = [
+        "replay",
+        "--trace",
+        &path(&mixed_path),
+        "--topology",
+        &topology,
+    ];
+    let (ok, _, twin_err) = idmesh_in(&tmp, &twin);
+    assert!(!ok, "the twin went past a malformed line");
+    assert_eq!(
+        reason_at(&twin_err, bad_line),
+        malformed,
+        "the twin's words"
+    );
+    empty_tmp("a failed replay --topology");
+    let status = strict.run_to_end("sensor", "sensor-0", Duration::from_secs(30));
+    assert!(!status.success(), "the sensor went past a malformed line");
+    assert_eq!(
+        reason_at(&strict.log(), bad_line),
+        malformed,
+        "the sensor's words"
+    );
+    // Detect lines under a version-1 header: refused at line 2 by every
+    // reader, standard input included.
+    let (ok, _, extract_err) = extract(&v1_path, &[]);
+    assert!(!ok, "extract took detect lines under a version-1 header");
+    let v1_reason = reason_at(&extract_err, 2);
+    assert!(
+        v1_reason.starts_with("detect: a version-1 trace"),
+        "{v1_reason}"
+    );
+    let (ok, _, twin_err) = idmesh_in(
+        &tmp,
+        &[
+            "replay",
+            "--trace",
+            &path(&v1_path),
+            "--topology",
+            &topology,
+        ],
+    );
+    assert!(!ok, "the twin took detect lines under a version-1 header");
+    assert_eq!(reason_at(&twin_err, 2), v1_reason);
+    // The sensor streaming the same file as its trace.
+    let v1_topology = dir.join("v1.toml");
+    let toml = std::fs::read_to_string(strict.config()).unwrap();
+    assert!(toml.contains(&path(&mixed_path)), "{toml}");
+    std::fs::write(
+        &v1_topology,
+        toml.replace(&path(&mixed_path), &path(&v1_path)),
+    )
+    .unwrap();
+    let sensor = [
+        "sensor",
+        "--config",
+        &path(&v1_topology),
+        "--name",
+        "sensor-0",
+    ];
+    let (ok, _, sensor_err) = idmesh_in(&tmp, &sensor);
+    assert!(!ok, "the sensor took detect lines under a version-1 header");
+    assert_eq!(reason_at(&sensor_err, 2), v1_reason, "the sensor's words");
+    let mut pipe = strict.launch_piped("sensor", "sensor-0", &["--stdin"]);
+    for line in &v1 {
+        let _ = writeln!(pipe, "{line}");
+    }
+    drop(pipe);
+    let status = strict.wait_for("sensor-0", Duration::from_secs(60));
+    assert!(
+        !status.success(),
+        "the sensor on stdin took detect lines under a version-1 header"
+    );
+    let log = strict.log();
+    assert!(log.contains(&format!("stdin:2: {v1_reason}")), "{log}");
+    drop(strict);
+
+    // With --max-errors 1: every reader skips the malformed line (and
+    // passes over the truth lines), and the answers agree.
+    let (ok, _, extract_err) = extract(&mixed_path, &["--max-errors", "1"]);
+    assert!(ok, "{extract_err}");
+    assert_eq!(reason_at(&extract_err, bad_line), malformed);
+    let extracted = std::fs::read_to_string(dir.join("out.jsonl")).unwrap();
+    assert_eq!(
+        extracted, with_truth,
+        "the bad line skipped, the rest taken"
+    );
+    let forgiving = Settings {
+        max_errors: 1,
+        rate: Some(5000.0),
+        ..settings.clone()
+    };
+    let deployment = Deployment::start("extraction-forgiving", &reports, &forgiving);
+    let last = deployment.final_marginals(Duration::from_secs(90));
+    assert_eq!(
+        reason_at(&deployment.log(), bad_line),
+        malformed,
+        "the sensor's words"
+    );
+    let twin = [
+        "replay",
+        "--trace",
+        &path(&mixed_path),
+        "--topology",
+        &path(deployment.config()),
+    ];
+    let (ok, out, twin_err) = idmesh_in(&tmp, &twin);
+    assert!(ok, "{twin_err}");
+    assert_eq!(
+        reason_at(&twin_err, bad_line),
+        malformed,
+        "the twin's words"
+    );
+    empty_tmp("replay --topology");
+    let summary: Value = serde_json::from_str(out.lines().last().unwrap()).unwrap();
+    assert_close(
+        "the trace file, bad line skipped",
+        &last["p_red"],
+        &summary["final_p_red"],
+    );
+    drop(deployment);
+    // Standard input: the same line skipped and counted, the same answer.
+    let mut piped = Deployment::start_without_sensor("extraction-piped", &reports, &settings);
+    let mut pipe = piped.launch_piped("sensor", "sensor-0", &["--stdin", "--max-errors", "1"]);
+    for line in &mixed {
+        writeln!(pipe, "{line}").expect("the sensor reads its input");
+    }
+    drop(pipe);
+    let answer = piped.final_marginals(Duration::from_secs(60));
+    assert_close(
+        "standard input, bad line skipped",
+        &answer["p_red"],
+        &summary["final_p_red"],
+    );
+    assert!(piped
+        .log()
+        .contains(&format!("stdin:{bad_line}: {malformed}")));
+    let stats = piped.sensor_stats();
+    assert_eq!(stats[0]["bad_lines"], 1, "{stats:?}");
+    drop(piped);
+    empty_tmp("every run");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A MOTChallenge file teaches the belief only with what comes beside
+/// it: alone (positions, k) it gives a trace without one observation,
+/// which `idmesh extract` warns about and whose answer is k/n for every
+/// track; with the reads file of `examples/mot/`, or with its class
+/// column, the answer moves. On standard input the file reads the same.
+#[test]
+fn a_mot_file_with_class_scores_moves_the_answer_and_one_without_is_warned_about() {
+    let dir = std::env::temp_dir().join(format!("idmesh-extraction-mot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/mot");
+    let results = examples.join("results.txt");
+    let extract = |name: &str, input: &Path, extra: &[&str]| {
+        let out = dir.join(name);
+        let output = Command::new(idmesh())
+            .args([
+                "extract", "--format", "mot", "--fps", "25", "--scale", "0.02", "--red", "2",
+            ])
+            .args(extra)
+            .arg(input)
+            .arg("--out")
+            .arg(&out)
+            .env("RUST_LOG", "warn")
+            .output()
+            .expect("idmesh extract runs");
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert!(output.status.success(), "{stderr}");
+        (out, stderr)
+    };
+    let answer = |trace: &Path| floats(&replay_summary(trace, &[])["final_p_red"]);
+
+    let (alone, warned) = extract("alone.jsonl", &results, &[]);
+    assert!(
+        warned.contains("the trace holds no observation"),
+        "{warned}"
+    );
+    assert_eq!(lines_of_kind(&alone, "observe"), 0);
+    assert!(std::fs::read_to_string(&alone)
+        .unwrap()
+        .contains("\"red\":2"));
+    for p in answer(&alone) {
+        assert!((p - 0.5).abs() < 1e-9, "k/n with nothing seen: {p}");
+    }
+
+    let reads = examples.join("reads.jsonl");
+    let reads = reads.to_str().unwrap();
+    let (taught, quiet) = extract("taught.jsonl", &results, &["--reads", reads]);
+    assert!(!quiet.contains("no observation"), "{quiet}");
+    assert!(lines_of_kind(&taught, "observe") >= 4);
+    let moved = answer(&taught);
+    assert!(moved.iter().all(|p| (p - 0.5).abs() > 0.1), "{moved:?}");
+
+    // The same file on standard input (the first frame's roster: every
+    // walker is in it) gives the same trace.
+    let piped = dir.join("piped.jsonl");
+    let status = Command::new(idmesh())
+        .args([
+            "extract", "--format", "mot", "--fps", "25", "--scale", "0.02", "--red", "2",
+        ])
+        .args(["--reads", reads, "--out"])
+        .arg(&piped)
+        .stdin(std::fs::File::open(&results).unwrap())
+        .status()
+        .expect("idmesh extract runs");
+    assert!(status.success());
+    assert_eq!(
+        std::fs::read_to_string(&piped).unwrap(),
+        std::fs::read_to_string(&taught).unwrap()
+    );
+
+    // MOT16's class and visibility columns: walkers 1 and 3 of class 1
+    // (red), 2 and 4 of class 2, every box fully visible.
+    let text = std::fs::read_to_string(&results).unwrap();
+    let classed: String = text
+        .lines()
+        .map(|l| {
+            let fields: Vec<&str> = l.split(',').collect();
+            let class = if fields[1] == "1" || fields[1] == "3" {
+                1
+            } else {
+                2
+            };
+            format!("{},{class},1\n", fields[..7].join(","))
+        })
+        .collect();
+    let classed_path = dir.join("classed.txt");
+    std::fs::write(&classed_path, classed).unwrap();
+    let (by_class, _) = extract(
+        "classed.jsonl",
+        &classed_path,
+        &["--class-label", "1=red,2=blue"],
+    );
+    assert!(lines_of_kind(&by_class, "observe") >= 4);
+    let p = answer(&by_class);
+    assert!(p[2] > 0.9 && p[3] < 0.1, "{p:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -38,6 +38,22 @@ pub const MAX_STATES: usize = 1 << 26;
 /// The most tracks a [`DenseFilter`] handles: sets are u64 bit masks.
 pub const MAX_TRACKS: usize = 64;
 
+/// The least probability a state the events allow is stored with: the
+/// smallest normal f64, so that a later sighting of likelihood ratio up to
+/// 10^300 against it still finds a normal, positive predicted probability.
+pub const SUPPORT_FLOOR: f64 = f64::MIN_POSITIVE;
+
+/// `x`, or [`SUPPORT_FLOOR`] when its exact value is positive but rounded
+/// below it (`positive` says whether the exact value is positive).
+#[inline]
+fn floored(x: f64, positive: bool) -> f64 {
+    if positive && x < SUPPORT_FLOOR {
+        SUPPORT_FLOOR
+    } else {
+        x
+    }
+}
+
 /// Regions over the tracks below this are walked by precomputed patterns.
 const LOW: usize = 8;
 
@@ -159,6 +175,14 @@ enum Piece<'a> {
 /// exactly one of its tracks, an observation touches every state once to
 /// sum and once to scale. The belief is kept normalized; the normalizer is
 /// kept in log space (see [`DenseFilter::log_normalizer`]).
+///
+/// A state the events allow never becomes 0: an update whose exact result
+/// is positive stores at least [`SUPPORT_FLOOR`]. Sightings 10^200 times
+/// likelier for the wrong colour take the truth below the smallest f64 in
+/// two steps, and a later certain sighting may leave only it; flushed to 0,
+/// the filter would have found no mass for a valid stream. The floor moves
+/// a probability by at most 2.2·10^-308, so the belief is exact to that,
+/// and its support (which sets have positive probability) is exact.
 #[derive(Debug, Clone)]
 pub struct DenseFilter {
     field: Field,
@@ -349,10 +373,13 @@ impl DenseFilter {
                     }
                     Piece::Pattern(at, holds) => {
                         let slice = &probs[at..at + holds.len()];
-                        let all = sum(slice);
-                        let with = masked_sum(slice, holds);
+                        // Both sides summed, not one as the difference
+                        // from the whole: that cancels a side 10^-16 of
+                        // the other to 0, and a certain sighting of it
+                        // then finds no mass.
+                        let (with, without) = masked_sums(slice, holds);
                         with_t += with;
-                        without_t += all - with;
+                        without_t += without;
                     }
                 });
             }
@@ -388,8 +415,15 @@ impl PropertyFilter for DenseFilter {
         let probs = &mut self.probs;
         let blend = |fx: &mut f64, fy: &mut f64| {
             let (x, y) = (*fx, *fy);
+            // Positive exactly when either state was (stay, swap > 0 here
+            // unless swap = 1, which moves values exactly).
+            let either = x > 0.0 || y > 0.0;
             *fx = stay * x + swap * y;
             *fy = stay * y + swap * x;
+            if either && stay > 0.0 {
+                *fx = floored(*fx, true);
+                *fy = floored(*fy, true);
+            }
         };
         // x holds lo but not hi, y = x △ {lo, hi}; x always ranks below y.
         let mut visit = |pairs: Pairs| match pairs {
@@ -440,13 +474,23 @@ impl PropertyFilter for DenseFilter {
         let t = observe.track as usize;
         let (with_t, without_t) = self.split_mass(t);
         let total = with_t + without_t;
-        let evidence = observe.red * with_t + observe.blue * without_t;
+        // Likelihoods scaled to a largest of 1, so that the predicted
+        // probability of a sighting likelier than 1 for one colour does not
+        // overflow, nor one of a floored state underflow.
+        let top = observe.red.max(observe.blue);
+        let (red, blue) = (observe.red / top, observe.blue / top);
+        let evidence = red * with_t + blue * without_t;
         if !(evidence.is_finite() && evidence > 0.0) {
             return Err(BeliefError::ImpossibleObservation {
-                probability: evidence / total,
+                probability: top * evidence / total,
             });
         }
-        let (red, blue) = (observe.red / evidence, observe.blue / evidence);
+        let (red, blue) = (red / evidence, blue / evidence);
+        // Exactly 0 only for a likelihood of 0 (see `SUPPORT_FLOOR`).
+        let scale = |p: &mut f64, factor: f64| {
+            let positive = *p > 0.0 && factor > 0.0;
+            *p = floored(*p * factor, positive);
+        };
         let probs = &mut self.probs;
         match &self.space {
             Space::KSets { k, binom, low } => {
@@ -455,23 +499,23 @@ impl PropertyFilter for DenseFilter {
                     Piece::Run(run, holds) => {
                         let factor = if holds { red } else { blue };
                         for p in &mut probs[run] {
-                            *p *= factor;
+                            scale(p, factor);
                         }
                     }
                     Piece::Pattern(at, holds) => {
                         for (p, &h) in probs[at..at + holds.len()].iter_mut().zip(holds) {
-                            *p *= if h { red } else { blue };
+                            scale(p, if h { red } else { blue });
                         }
                     }
                 });
             }
             Space::Subsets => {
                 for (mask, p) in probs.iter_mut().enumerate() {
-                    *p *= if mask >> t & 1 == 1 { red } else { blue };
+                    scale(p, if mask >> t & 1 == 1 { red } else { blue });
                 }
             }
         }
-        self.log_norm += (evidence / total).ln();
+        self.log_norm += top.ln() + (evidence / total).ln();
         Ok(())
     }
 
@@ -486,7 +530,8 @@ impl PropertyFilter for DenseFilter {
             }
         });
         for m in &mut marginals {
-            *m /= total;
+            // A sum of most of the mass may round an ulp above the total.
+            *m = (*m / total).min(1.0);
         }
         Ok(marginals)
     }
@@ -510,22 +555,30 @@ fn sum(xs: &[f64]) -> f64 {
     acc.iter().sum::<f64>() + rest
 }
 
-/// Σ xs[i] over the i with flags[i], as [`sum`] does it.
-fn masked_sum(xs: &[f64], flags: &[bool]) -> f64 {
-    let mut acc = [0.0f64; 8];
+/// (Σ xs[i] over the i with flags[i], Σ over the others), each in eight
+/// interleaved partial sums as [`sum`] does it.
+fn masked_sums(xs: &[f64], flags: &[bool]) -> (f64, f64) {
+    let (mut with, mut without) = ([0.0f64; 8], [0.0f64; 8]);
     let chunks = xs.chunks_exact(8).zip(flags.chunks_exact(8));
     let tail = xs.len() - xs.len() % 8;
-    let rest: f64 = xs[tail..]
-        .iter()
-        .zip(&flags[tail..])
-        .map(|(x, &f)| if f { *x } else { 0.0 })
-        .sum();
-    for (chunk, flag) in chunks {
-        for ((a, x), &f) in acc.iter_mut().zip(chunk).zip(flag) {
-            *a += if f { *x } else { 0.0 };
+    let (mut rest_with, mut rest_without) = (0.0, 0.0);
+    for (x, &f) in xs[tail..].iter().zip(&flags[tail..]) {
+        if f {
+            rest_with += x;
+        } else {
+            rest_without += x;
         }
     }
-    acc.iter().sum::<f64>() + rest
+    for (chunk, flag) in chunks {
+        for (i, (x, &f)) in chunk.iter().zip(flag).enumerate() {
+            with[i] += if f { *x } else { 0.0 };
+            without[i] += if f { 0.0 } else { *x };
+        }
+    }
+    (
+        with.iter().sum::<f64>() + rest_with,
+        without.iter().sum::<f64>() + rest_without,
+    )
 }
 
 /// The bit mask of a set of (checked) track ids.

@@ -17,12 +17,18 @@
 //! (factor)·m·W(i, o+1)/W(i, o) (blue).
 
 use super::atom::Atom;
+use super::sparsify::restore_uniform;
 use super::RadonBelief;
 use crate::error::BeliefError;
 use crate::event::Observe;
 use crate::weights::Weights;
 use rustc_hash::FxHashMap;
 use std::collections::hash_map::Entry;
+
+/// The least red/blue likelihood ratio the signed form writes in the
+/// paper's dictionary (see [`Update::new`]): below it the difference
+/// b − (b − a) keeps fewer than about 6 of the 16 digits of a.
+pub const SIGNED_CANCELLATION: f64 = 1e-10;
 
 /// The likelihood, rescaled, as the engine applies it.
 pub(super) struct Update {
@@ -41,7 +47,12 @@ pub(super) struct Update {
 impl Update {
     pub(super) fn new(observe: &Observe, signed: bool) -> Self {
         let (a, b) = (observe.red, observe.blue);
-        let grow_red = signed || a >= b;
+        // In the signed form a sighting that favours blue by more than
+        // `SIGNED_CANCELLATION` is written in positive atoms all the same:
+        // b·φ_∅ + (a − b)·φ_t leaves a on the sets holding t as the
+        // difference b − (b − a), which rounding makes 0 (a certain red
+        // sighting then finds no mass on a valid stream) or noise.
+        let grow_red = (signed && a >= b * SIGNED_CANCELLATION) || a >= b;
         let keep_raw = if grow_red { b } else { a };
         // Scale so the untouched atoms keep their value when possible.
         let scale = if keep_raw > 0.0 { keep_raw } else { a.max(b) };
@@ -144,8 +155,8 @@ impl Conditioning<'_> {
         let mut added: FxHashMap<Atom, f64> = FxHashMap::default();
         masses.retain(|atom, m| {
             match self.role(atom) {
-                Some(true) => *m *= update.red,
-                Some(false) => *m *= update.blue,
+                Some(true) => *m = floored(*m, update.red),
+                Some(false) => *m = floored(*m, update.blue),
                 None => {
                     if update.grow != 0.0 && self.growth.grows(atom) {
                         let ratio = self.growth_ratio(atom);
@@ -154,9 +165,10 @@ impl Conditioning<'_> {
                         } else {
                             atom.with_blue(t)
                         };
-                        *added.entry(grown).or_insert(0.0) += update.grow * *m * ratio;
+                        *added.entry(grown).or_insert(0.0) +=
+                            floored(floored(update.grow, *m), ratio);
                     }
-                    *m *= update.keep;
+                    *m = floored(*m, update.keep);
                 }
             }
             *m != 0.0
@@ -179,6 +191,38 @@ impl Conditioning<'_> {
     }
 }
 
+/// The least magnitude a mass the events allow is stored with: the
+/// smallest normal f64. Masses are renormalized to sum 1 after every
+/// conditioning, and sightings 10^200 times likelier for the wrong colour
+/// take an atom below the smallest f64 in two steps; flushed to 0, a later
+/// certain sighting could find no mass on a valid stream. The floor moves
+/// a mass by at most 2.2·10^-308 and keeps the support exact.
+pub(super) const SUPPORT_FLOOR: f64 = f64::MIN_POSITIVE;
+
+/// m·factor, its magnitude raised to [`SUPPORT_FLOOR`] when the exact
+/// product is not 0 but rounds below it.
+#[inline]
+pub(super) fn floored(m: f64, factor: f64) -> f64 {
+    let x = m * factor;
+    if x.abs() < SUPPORT_FLOOR && m != 0.0 && factor != 0.0 {
+        SUPPORT_FLOOR.copysign(x)
+    } else {
+        x
+    }
+}
+
+/// m/total, floored as [`floored`] is: the renormalization of the whole
+/// belief and of a leader's share, bit for bit the same.
+#[inline]
+pub(super) fn floored_div(m: f64, total: f64) -> f64 {
+    let x = m / total;
+    if x.abs() < SUPPORT_FLOOR && m != 0.0 {
+        SUPPORT_FLOOR.copysign(x)
+    } else {
+        x
+    }
+}
+
 impl RadonBelief {
     pub(super) fn condition(&mut self, observe: Observe) -> Result<(), BeliefError> {
         let partners: Option<Vec<u32>> = self
@@ -196,14 +240,29 @@ impl RadonBelief {
         };
         // A read-only pass for the new total first, so that an impossible
         // observation leaves the belief untouched.
-        let (total, size) = conditioning.totals(&self.masses);
+        let (mut total, mut size) = conditioning.totals(&self.masses);
         let old_total = self.total_mass();
         // A signed expansion can cancel to rounding noise where the true
         // probability is 0: below that noise the observation is impossible.
-        if !(total.is_finite() && total > 1e-12 * size) {
+        let possible = |total: f64, size: f64| total.is_finite() && total > 1e-12 * size;
+        let mut restored = None;
+        if !possible(total, size) && self.approximate() {
+            // The approximation may have dropped the sets the observation
+            // allows: the rule of `sparsify`, on a copy until it is known
+            // to help.
+            let mut masses = self.masses.clone();
+            restore_uniform(&mut masses);
+            (total, size) = conditioning.totals(&masses);
+            restored = Some(masses);
+        }
+        if !possible(total, size) {
             return Err(BeliefError::ImpossibleObservation {
                 probability: conditioning.update.scale * total / old_total,
             });
+        }
+        if let Some(masses) = restored {
+            self.masses = masses;
+            self.stats.restorations += 1;
         }
         conditioning.apply(&mut self.masses);
         self.log_scale += conditioning.update.scale.ln();

@@ -65,7 +65,8 @@ impl RadonBelief {
             .iter()
             .map(|(a, &m)| {
                 let (i, o) = a.sizes();
-                let per_set = m * (-self.weights.ln2(i, o)).exp();
+                // Floored: a possible set never rounds to 0 here either.
+                let per_set = super::condition::floored(m, (-self.weights.ln2(i, o)).exp());
                 (a.red.tracks().to_vec(), a.blue.tracks().to_vec(), per_set)
             })
             .collect();

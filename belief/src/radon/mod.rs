@@ -46,7 +46,7 @@ mod sparsify;
 mod threshold;
 
 pub use atom::Atom;
-pub use condition::Growth;
+pub use condition::{Growth, SIGNED_CANCELLATION};
 pub use dense::DENSE_SETS_LIMIT;
 pub use mixing_log::MixingLog;
 pub use omp::OmpOptions;
@@ -72,7 +72,10 @@ pub struct RadonOptions {
     pub distributed_rule: bool,
     /// Stay in the paper's dictionary (Radon atoms only): a sighting that
     /// favours blue then adds negative coefficients. Off = such a sighting
-    /// fixes the track blue in a positive atom instead (see `atom`).
+    /// fixes the track blue in a positive atom instead (see `atom`). A
+    /// sighting favouring blue by more than
+    /// [`SIGNED_CANCELLATION`] takes the
+    /// positive atom in either form: the signed one would cancel it away.
     pub signed: bool,
 }
 
@@ -83,6 +86,9 @@ pub struct RadonStats {
     pub max_coefficients: usize,
     pub thresholdings: u64,
     pub omp_runs: u64,
+    /// Sightings the approximation had ruled out, taken after moving a
+    /// share of the belief to the uniform one (see `sparsify`).
+    pub restorations: u64,
 }
 
 /// A belief over red sets on the overcomplete Radon dictionary.
@@ -152,7 +158,9 @@ impl RadonBelief {
     /// identity does not hold (Σ_t φ_t = |x|·φ_∅), and the rule grows the
     /// empty atom on every observation instead (see `condition`).
     fn expand_empty(&mut self) {
-        if !self.options.distributed_rule || self.field.red.known().is_none() {
+        // With k = 0 the identity has no 1-sets to spread over: the belief
+        // is the empty set, φ_∅ alone.
+        if !self.options.distributed_rule || self.field.red.known().is_none_or(|k| k == 0) {
             return;
         }
         let Some(mass) = self.masses.remove(&Atom::default()) else {
@@ -249,7 +257,9 @@ impl RadonBelief {
             return Err(BeliefError::Degenerate { normalizer: total });
         }
         for m in self.masses.values_mut() {
-            *m /= total;
+            // Floored as conditioning is (`condition::SUPPORT_FLOOR`): an
+            // atom 10^-300 of a total above 1 stays possible.
+            *m = condition::floored_div(*m, total);
         }
         self.log_scale += total.ln();
         Ok(())

@@ -7,6 +7,7 @@
 //! Radon atom). Sizes are preserved, so masses transform like coefficients.
 
 use super::atom::Atom;
+use super::condition::floored;
 use super::RadonBelief;
 use crate::event::Mix;
 use rustc_hash::FxHashMap;
@@ -32,12 +33,16 @@ pub(super) fn rollup_masses(masses: &mut FxHashMap<Atom, f64>, mix: Mix) {
         // New value of α: p·m_α + (1 − p)·m_{σα}, computed directly (not
         // as a difference) so that swap = 0 or 1 moves values exactly.
         let image_mass = moved.get(&image).copied();
-        let value = keep * mass + mix.swap * image_mass.unwrap_or(0.0);
+        // Floored like conditioning (`condition::SUPPORT_FLOOR`): a mass
+        // the mix keeps possible never rounds to 0. The sum of a kept and
+        // a swapped-in mass is not floored: in the signed form it may
+        // cancel exactly.
+        let value = floored(mass, keep) + floored(image_mass.unwrap_or(0.0), mix.swap);
         if value != 0.0 {
             masses.insert(atom.clone(), value);
         }
         if image_mass.is_none() {
-            let value = mix.swap * mass;
+            let value = floored(mass, mix.swap);
             if value != 0.0 {
                 masses.insert(image, value);
             }

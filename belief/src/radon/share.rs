@@ -17,7 +17,7 @@
 //! shares by [`PartialSums::combine`].
 
 use super::atom::Atom;
-use super::condition::{Conditioning, Growth, Update};
+use super::condition::{floored_div, Conditioning, Growth, Update};
 use super::omp::{heaviest, kept_by_pursuit, pursue, OmpOptions};
 use super::rollup::rollup_masses;
 use super::threshold::split_off_lightest;
@@ -264,7 +264,8 @@ impl RadonShare {
         let total: f64 = self.masses.values().map(|m| m.abs()).sum();
         if total.is_finite() && total > 0.0 {
             for m in self.masses.values_mut() {
-                *m /= total;
+                // Floored as the whole belief is: a possible atom stays.
+                *m = floored_div(*m, total);
             }
             self.log_scale += total.ln();
         }
@@ -356,7 +357,10 @@ impl PartialSums {
                 *slot += x;
             }
         }
-        Ok(p.into_iter().map(|x| x / self.total).collect())
+        // A sum of most of the mass may round an ulp outside [0, 1].
+        Ok(p.into_iter()
+            .map(|x| (x / self.total).clamp(0.0, 1.0))
+            .collect())
     }
 }
 

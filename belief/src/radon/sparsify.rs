@@ -11,10 +11,43 @@
 //!   mixing (at least `every` events since its last run, at least half of
 //!   them mixes); after observations the belief is peaky and thresholding
 //!   suits it (Section 5.5).
+//!
+//! ## An observation the approximation has ruled out
+//! Dropping sets (and the distributed rule, which grows only some) can
+//! leave the belief without the sets a later certain sighting allows,
+//! although the world could have produced it: the dropped sets held the
+//! truth. Such a belief cannot tell a valid sighting from an impossible
+//! one, so it answers on by one rule, not Bayes' rule: when a sighting has
+//! no mass left, a share [`RESTORE_SHARE`] of the belief is moved to the
+//! uniform one (φ_∅, every admissible set as likely as under the prior,
+//! which the distributed rule grows on every sighting), and the sighting is
+//! conditioned on as usual. Counted in
+//! [`RadonStats::restorations`](super::RadonStats::restorations). Only a sighting the uniform belief rules out
+//! too (e.g. a certain red one with k = 0) is refused. The exact belief
+//! (no budget, exact conditioning) drops nothing and keeps refusing an
+//! impossible sighting.
 
+use super::atom::Atom;
 use super::omp::OmpOptions;
 use super::RadonBelief;
 use crate::error::BeliefError;
+use rustc_hash::FxHashMap;
+
+/// The share of the belief moved to the uniform one when an approximation
+/// has ruled out a sighting (see the module documentation): small, so that
+/// the belief keeps what it knew about everything else.
+pub const RESTORE_SHARE: f64 = 1e-6;
+
+/// Moves [`RESTORE_SHARE`] of the masses to the uniform belief φ_∅.
+pub(super) fn restore_uniform(masses: &mut FxHashMap<Atom, f64>) {
+    let total: f64 = masses.values().sum();
+    let share = RESTORE_SHARE * total;
+    masses.values_mut().for_each(|m| *m *= 1.0 - RESTORE_SHARE);
+    // φ_∅ even under the distributed rule, which grows it on every
+    // sighting (its 1-sets grow only when they meet the mixing log, and a
+    // certain sighting of a track that has not mixed would find nothing).
+    *masses.entry(Atom::default()).or_insert(0.0) += share;
+}
 
 /// A coefficient budget and the approximation that enforces it.
 #[derive(Debug, Clone, PartialEq)]
@@ -89,6 +122,12 @@ impl OmpSchedule {
 }
 
 impl RadonBelief {
+    /// Whether the belief may have dropped sets the events allow: a budget
+    /// or the distributed rule.
+    pub(super) fn approximate(&self) -> bool {
+        self.options.sparsify.is_some() || self.options.distributed_rule
+    }
+
     pub(super) fn sparsify_now(&mut self, sparsify: &Sparsify) -> Result<(), BeliefError> {
         match &sparsify.method {
             SparsifyMethod::Threshold => {

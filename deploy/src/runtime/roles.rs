@@ -9,6 +9,7 @@ use super::security::rules;
 use super::topology::{Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::driver::CoordinatorConfig;
+use idmesh_extract::pipeline::read_reports;
 use idmesh_leader::host::HostConfig;
 use idmesh_protocol::trace::{Header, Line, Problem};
 use idmesh_protocol::wire::keys::Keys;
@@ -19,15 +20,19 @@ use idmesh_sensor::feed::{lines_of, InputLine, Source};
 use idmesh_sensor::journal::{Journal, Record};
 use idmesh_sensor::mesh::MeshConfig;
 use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
+use std::fs::File;
+use std::io::BufReader;
 use std::path::Path;
 use std::time::Duration;
 use tracing::Instrument;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
-    /// With `stdin`: the trace comes from standard input.
+    /// With `stdin`: the trace comes from standard input. `max_errors`:
+    /// `--max-errors`, which overrides the topology's.
     Sensor {
         stdin: bool,
+        max_errors: Option<usize>,
     },
     Leader,
     Coordinator,
@@ -92,8 +97,9 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             let keys = Keys::new(topology.prefix.clone());
             mesh::answer_pings(&session, keys.ping(expected, name), name.to_string()).await?;
             let result = match role {
-                Role::Sensor { stdin } => {
-                    sensor(session.clone(), &topology, name, keys, stdin, journal).await
+                Role::Sensor { stdin, max_errors } => {
+                    let input = Input { stdin, max_errors };
+                    sensor(session.clone(), &topology, name, keys, input, journal).await
                 }
                 Role::Leader => {
                     let index = topology
@@ -196,15 +202,24 @@ fn peer_options(topology: &Topology, name: &str) -> Result<MeshOptions> {
     })
 }
 
+/// What the sensor reads besides its ingest key: standard input or its
+/// trace, and how many bad lines it goes past.
+struct Input {
+    stdin: bool,
+    max_errors: Option<usize>,
+}
+
 async fn sensor(
     session: zenoh::Session,
     topology: &Topology,
     name: &str,
     keys: Keys,
-    stdin: bool,
+    input: Input,
     journal: Option<(Journal, Vec<Record>)>,
 ) -> Result<()> {
-    let (header, source) = if stdin {
+    let this = topology.sensor_named(name)?;
+    let max_errors = input.max_errors.unwrap_or(this.max_errors);
+    let (header, source) = if input.stdin {
         let (header, input) = stdin_trace()?;
         (
             header,
@@ -213,30 +228,42 @@ async fn sensor(
                 input: Some(input),
             },
         )
+    } else if let Some(config) = &this.extract {
+        // Reports: read as `idmesh replay --topology` and `idmesh extract`
+        // read them.
+        let path = topology.trace_path();
+        let file =
+            File::open(&path).with_context(|| format!("cannot open trace {}", path.display()))?;
+        let reports = read_reports(
+            BufReader::new(file),
+            &path.display().to_string(),
+            config,
+            max_errors,
+        )?;
+        for reason in &reports.skipped {
+            tracing::warn!(%reason, "trace line skipped");
+        }
+        (
+            reports.header,
+            Source {
+                lines: reports.lines.into_iter().map(|(_, line)| line).collect(),
+                input: None,
+            },
+        )
     } else {
         let path = topology.trace_path();
         let mut reader = TraceReader::open(&path)
             .with_context(|| format!("cannot open trace {}", path.display()))?;
         let header = reader.read_header()?;
         let mut lines = Vec::new();
-        let extracting = topology.sensor_named(name)?.extract.is_some();
         while let Some(numbered) = reader.read_line()? {
-            let taken = if extracting {
-                Extraction::admits(&numbered.line)
-            } else {
-                numbered
-                    .line
-                    .require_extracted()
-                    .map_err(|problem| problem.to_string())
-            };
-            taken.map_err(|problem| {
+            numbered.line.require_extracted().map_err(|problem| {
                 anyhow::anyhow!("{}:{}: {problem}", path.display(), numbered.number)
             })?;
             lines.push(numbered.line);
         }
         (header, Source { lines, input: None })
     };
-    let this = topology.sensor_named(name)?;
     let extraction = this
         .extract
         .clone()
@@ -295,6 +322,7 @@ async fn sensor(
         },
         mesh,
         extraction,
+        max_errors,
     };
     idmesh_sensor::driver::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())

@@ -51,6 +51,8 @@
 //!                                # (absent = no window)
 //! compact_journal_after = 16777216 # with state_dir: snapshot the sensor's
 //!                                # journal once it grew by this many bytes
+//! max_errors = 0                 # bad input lines skipped (named, counted)
+//!                                # before the next stops the sensor
 //! # [sensor.extract]             # the lines are a tracker's reports (move,
 //! # mix_distance = 1.0           # detect): the sensor derives the events
 //! # meeting_model = { constant = 0.5 } # (docs/guide/extracting.md)
@@ -355,6 +357,13 @@ pub struct SensorProcess {
     /// `idmesh extract` does (docs/guide/extracting.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub extract: Option<idmesh_extract::ExtractorConfig>,
+    /// Bad lines of the sensor's own input (its trace of reports,
+    /// standard input) skipped, each named and counted, before the next
+    /// one stops it; 0 (the default): the first one does. `idmesh sensor
+    /// --max-errors` overrides it; `idmesh replay --topology` counts the
+    /// same (docs/guide/extracting.md, "Bad rows").
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub max_errors: usize,
     #[serde(default, skip_serializing_if = "is_default")]
     pub faults: FaultSection,
 }
@@ -380,6 +389,7 @@ impl SensorProcess {
             window: None,
             compact_journal_after: None,
             extract: None,
+            max_errors: 0,
             faults: FaultSection::default(),
         }
     }

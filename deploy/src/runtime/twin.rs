@@ -113,8 +113,8 @@ mod tests {
     /// for the information matrix.
     #[test]
     fn an_identity_trace_gets_the_identity_belief_its_leaders_hold() {
-        let dir = std::env::temp_dir().join(format!("idmesh-twin-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let temporary = tempfile::tempdir().unwrap();
+        let dir = temporary.path();
         let trace = |name: &str, start: &str| {
             let path = dir.join(name);
             let header = format!(
@@ -137,6 +137,5 @@ mod tests {
         assert_eq!(twin(&topology, &unknown), Some(Method::InformationMatrix));
         topology.identity = IdentityKind::InformationMatrix;
         assert_eq!(twin(&topology, &known), Some(Method::InformationMatrix));
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

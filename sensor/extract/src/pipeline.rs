@@ -5,13 +5,14 @@
 //! Bad rows: each is counted by reason and its `FILE:LINE: reason` kept.
 //! With `max_errors` = 0 the first bad row ends the run with that error;
 //! with N > 0 the run goes on past up to N bad rows and fails at the
-//! (N + 1)-th. A bad row is never skipped silently.
+//! (N + 1)-th ([`ErrorBudget`], as a sensor reading its own input). A bad
+//! row is never skipped silently.
 
-use crate::adapters::jsonl::{parse_line, JsonlRow};
-use crate::adapters::{Located, RowError, Rows};
-use crate::extractor::{Extractor, ExtractorConfig, Roster, RosterPolicy};
+use crate::adapters::jsonl::{parse_line, report_line, report_of, JsonlRow, ReportLine};
+use crate::adapters::{ErrorBudget, Located, RowError, RowProblem, Rows, Stopped};
+use crate::extractor::{Extractor, ExtractorConfig, RosterPolicy};
 use crate::meetings::CalibrationError;
-use idmesh_protocol::trace::{Header, Line, TraceError, TraceWriter};
+use idmesh_protocol::trace::{Header, Line, Problem, TraceError, TraceWriter};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use thiserror::Error;
@@ -48,19 +49,15 @@ impl Tally {
 /// Why a run stopped.
 #[derive(Debug, Error)]
 pub enum RunError {
-    /// A bad row, with `max_errors` = 0.
-    #[error("{0}")]
-    Row(RowError),
-    /// More bad rows than allowed; the last one.
-    #[error("{last} (bad row {count}: more than --max-errors {max})")]
-    TooManyBadRows {
-        last: RowError,
-        count: usize,
-        max: usize,
-    },
+    /// A bad row: the first, or the first past `--max-errors`.
+    #[error(transparent)]
+    Bad(#[from] Stopped<RowError>),
     /// The settings are unusable.
     #[error("{0}")]
     Config(#[from] CalibrationError),
+    /// The stream's first line is not a valid header.
+    #[error("{0}")]
+    Header(RowError),
     /// Reading the input failed.
     #[error("{file}:{line}: {source}")]
     Read {
@@ -72,8 +69,9 @@ pub enum RunError {
     /// invalid line).
     #[error(transparent)]
     Write(#[from] TraceError),
-    /// The input held no report: there is no trace to write.
-    #[error("{0}: no reports: nothing to extract")]
+    /// The input held no report and no header: there is no trace to
+    /// write.
+    #[error("{0}: no reports and no header: nothing to extract")]
     NoReports(String),
 }
 
@@ -84,8 +82,9 @@ pub struct Run<W: Write> {
     extractor: Option<Extractor>,
     writer: TraceWriter<W>,
     tally: Tally,
-    max_errors: usize,
+    budget: ErrorBudget,
     out: Vec<Line>,
+    red: Option<usize>,
 }
 
 impl<W: Write> Run<W> {
@@ -102,22 +101,30 @@ impl<W: Write> Run<W> {
             extractor: None,
             writer: TraceWriter::new(output, sink.to_string()),
             tally: Tally::default(),
-            max_errors,
+            budget: ErrorBudget::new(max_errors),
             out: Vec::new(),
+            red: None,
         })
+    }
+
+    /// The trace's header declares `red` red targets (`--red`).
+    pub fn with_red(mut self, red: Option<usize>) -> Self {
+        self.red = red;
+        self
     }
 
     /// Fixes the roster policy; call once, before the first row.
     pub fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
-        self.extractor = Some(Extractor::new(self.config.clone(), policy)?);
+        self.extractor = Some(Extractor::new(self.config.clone(), policy)?.with_red(self.red));
         Ok(())
     }
 
-    /// Starts with the roster `header` declares (`0..tracks`), its prior
-    /// carried to the output header.
+    /// Starts with the roster `header` declares (`0..tracks`), its
+    /// identities and its prior carried to the output header
+    /// ([`Extractor::for_stream`]).
     pub fn start_from(&mut self, header: &Header) -> Result<(), RunError> {
-        let policy = RosterPolicy::Declared((0..header.tracks as u32).collect());
-        self.extractor = Some(Extractor::new(self.config.clone(), policy)?.with_prior(header));
+        self.extractor =
+            Some(Extractor::for_stream(self.config.clone(), header)?.with_red(self.red));
         Ok(())
     }
 
@@ -153,17 +160,7 @@ impl<W: Write> Run<W> {
             .rejected
             .entry(error.problem.reason())
             .or_default() += 1;
-        let count = self.tally.rejected_total();
-        if self.max_errors == 0 {
-            return Err(RunError::Row(error));
-        }
-        if count > self.max_errors {
-            return Err(RunError::TooManyBadRows {
-                last: error,
-                count,
-                max: self.max_errors,
-            });
-        }
+        let error = self.budget.spend(error)?;
         self.tally.errors.push(error.to_string());
         Ok(())
     }
@@ -182,34 +179,31 @@ impl<W: Write> Run<W> {
             return Err(RunError::NoReports(file.to_string()));
         };
         extractor.finish(&mut self.out);
-        self.tally.tracks = extractor.roster().map_or(0, Roster::len);
-        self.flush()?;
-        if self.tally.reports == 0 {
+        // A roster a header declared makes a trace of its own (the prior
+        // alone when no report was taken); without one, no report is no
+        // trace.
+        let Some(roster) = extractor.roster() else {
             return Err(RunError::NoReports(file.to_string()));
-        }
+        };
+        self.tally.tracks = roster.len();
+        self.flush()?;
         self.writer.flush()?;
         Ok(self.tally)
     }
 }
 
-/// Extracts from the rows of a whole file. `every_id`: the roster is
-/// every id among the good rows (else the first frame's).
+/// Extracts from rows in time order (a file's, or a stream's), under the
+/// roster `policy`: declared ids (an empty list declares nothing: the
+/// rows' errors say why there are none), or the first frame's.
 pub fn extract_rows<W: Write>(
-    rows: Rows,
+    rows: impl IntoIterator<Item = Result<Located, RowError>>,
     file: &str,
     mut run: Run<W>,
-    every_id: bool,
+    policy: RosterPolicy,
 ) -> Result<Tally, RunError> {
-    if every_id {
-        let ids: Vec<u32> = rows
-            .iter()
-            .filter_map(|r| r.as_ref().ok().map(|l| l.report.track))
-            .collect();
-        if !ids.is_empty() {
-            run.start(RosterPolicy::Declared(ids))?;
-        }
-    } else {
-        run.start(RosterPolicy::FirstFrame)?;
+    match policy {
+        RosterPolicy::Declared(ids) if ids.is_empty() => {}
+        policy => run.start(policy)?,
     }
     for row in rows {
         run.row(file, row)?;
@@ -217,14 +211,24 @@ pub fn extract_rows<W: Write>(
     run.finish(file)
 }
 
-/// Extracts from JSON lines, one at a time (a tracker may stream them).
-/// A header on line 1 declares the roster `0..tracks` (and identities);
-/// without one the roster is the first frame's.
+/// Every track id among the good rows of a file read whole.
+pub fn every_id(rows: &Rows) -> Vec<u32> {
+    rows.iter()
+        .filter_map(|r| r.as_ref().ok().map(|l| l.report.track))
+        .collect()
+}
+
+/// Extracts from JSON lines, one at a time (a tracker may stream them),
+/// each read by [`report_line`](crate::adapters::jsonl::report_line), the
+/// reader a sensor that extracts uses too. A header on line 1 declares
+/// the roster `0..tracks` (and identities), and each report is checked
+/// against it; without one the roster is the first frame's.
 pub fn extract_jsonl<W: Write>(
     input: impl BufRead,
     file: &str,
     mut run: Run<W>,
 ) -> Result<Tally, RunError> {
+    let mut header: Option<Header> = None;
     for (index, text) in input.lines().enumerate() {
         let line = index + 1;
         let text = text.map_err(|source| RunError::Read {
@@ -232,14 +236,13 @@ pub fn extract_jsonl<W: Write>(
             line,
             source,
         })?;
-        match parse_line(&text, line) {
-            Ok(JsonlRow::Header(header)) => {
-                if header.identities.is_some() {
-                    run.config_mut().identities = true;
-                }
-                run.start_from(&header)?;
+        match parse_line(&text, line, header.as_ref()) {
+            Ok(JsonlRow::Header(h)) => {
+                run.start_from(&h)?;
+                header = Some(h);
             }
             Ok(JsonlRow::Report(report)) => run.row(file, Ok(Located { line, report }))?,
+            Ok(JsonlRow::Skip) => {}
             Err(problem) => run.row(
                 file,
                 Err(RowError {
@@ -251,6 +254,96 @@ pub fn extract_jsonl<W: Write>(
         }
     }
     run.finish(file)
+}
+
+/// A stream of reports as a sensor that extracts reads its trace file,
+/// and `idmesh replay --topology` the same file: what it keeps, and the
+/// bad lines it went past.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reports {
+    /// The stream's header: its tracks, its prior.
+    pub header: Header,
+    /// The reports the stream's extractor takes, in order, with their
+    /// line numbers.
+    pub lines: Vec<(usize, Line)>,
+    /// The bad lines skipped within `--max-errors`, `FILE:LINE: reason`.
+    pub skipped: Vec<String>,
+}
+
+/// Reads a stream of reports that opens with its header: each line by
+/// [`report_line`](crate::adapters::jsonl::report_line), each report
+/// through an extractor for the stream ([`Extractor::for_stream`]), so
+/// that a report the extractor refuses (out of time order, a track twice
+/// in a frame) is a bad line here, named by its line, as on standard
+/// input. A `truth` line is passed over. Bad lines: as [`Run`]'s, up to
+/// `max_errors` skipped and named, the next one stops the reading.
+pub fn read_reports(
+    input: impl BufRead,
+    file: &str,
+    config: &ExtractorConfig,
+    max_errors: usize,
+) -> Result<Reports, RunError> {
+    let at = |line: usize, problem: RowProblem| RowError {
+        file: file.to_string(),
+        line,
+        problem,
+    };
+    let read = |line: usize| {
+        move |source| RunError::Read {
+            file: file.to_string(),
+            line,
+            source,
+        }
+    };
+    let mut input = input.lines();
+    let first = match input.next() {
+        None => return Err(RunError::Header(at(1, RowProblem::Line(Problem::Empty)))),
+        Some(text) => text.map_err(read(1))?,
+    };
+    let header = match report_line(&first, 1, None) {
+        Ok(ReportLine::Header(header)) => header,
+        Ok(ReportLine::Report(line) | ReportLine::Skip(line)) => {
+            let kind = line.kind();
+            return Err(RunError::Header(at(
+                1,
+                RowProblem::Line(Problem::HeaderNotFirst { kind }),
+            )));
+        }
+        Err(problem) => return Err(RunError::Header(at(1, problem))),
+    };
+    let mut extractor = Extractor::for_stream(config.clone(), &header)?;
+    let mut budget = ErrorBudget::new(max_errors);
+    let (mut lines, mut skipped, mut out) = (Vec::new(), Vec::new(), Vec::new());
+    for (index, text) in input.enumerate() {
+        let number = index + 2;
+        let text = text.map_err(read(number))?;
+        let problem = match report_line(&text, number, Some(&header)) {
+            Ok(ReportLine::Report(line)) => {
+                let Some(report) = report_of(&line) else {
+                    continue;
+                };
+                match extractor.push(report, &mut out) {
+                    Ok(()) => {
+                        out.clear();
+                        lines.push((number, line));
+                        continue;
+                    }
+                    Err(e) => RowProblem::Report(e),
+                }
+            }
+            Ok(ReportLine::Skip(_)) => continue,
+            // The reader takes a header on line 1 only.
+            Ok(ReportLine::Header(_)) => continue,
+            Err(problem) => problem,
+        };
+        let error = budget.spend(at(number, problem))?;
+        skipped.push(error.to_string());
+    }
+    Ok(Reports {
+        header,
+        lines,
+        skipped,
+    })
 }
 
 #[cfg(test)]
@@ -317,7 +410,7 @@ mod tests {
             "{too_many}"
         );
         assert!(
-            too_many.ends_with("(bad row 4: more than --max-errors 3)"),
+            too_many.ends_with("(bad line 4: more than --max-errors 3)"),
             "{too_many}"
         );
     }
@@ -333,5 +426,12 @@ mod tests {
         assert_eq!((tally.tracks, tally.lines["identify"]), (3, 1));
         assert!(trace.contains(r#""identities":3"#));
         assert!(matches!(jsonl("", 0), Err(RunError::NoReports(_))));
+        // A header alone is the prior alone.
+        let header = r#"{"kind":"header","format":"idmesh-trace","version":2,"tracks":3,"red":1}"#;
+        let (tally, trace) = jsonl(header, 0).unwrap();
+        assert_eq!(
+            (tally.reports, tally.tracks, trace.lines().count()),
+            (0, 3, 1)
+        );
     }
 }

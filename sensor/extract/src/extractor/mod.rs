@@ -82,6 +82,10 @@ pub struct Extractor {
     /// identities) the output header carries ([`Extractor::with_prior`]).
     #[serde(default)]
     prior: Option<Header>,
+    /// The red count the output header declares, over the prior's
+    /// ([`Extractor::with_red`]).
+    #[serde(default)]
+    red: Option<usize>,
 }
 
 impl Extractor {
@@ -101,6 +105,7 @@ impl Extractor {
             header_written: false,
             meetings: Vec::new(),
             prior: None,
+            red: None,
         };
         if let RosterPolicy::Declared(ids) = policy {
             if ids.is_empty() {
@@ -113,6 +118,19 @@ impl Extractor {
         Ok(extractor)
     }
 
+    /// The extractor of a stream of reports that opens with `header` (JSON
+    /// lines with a header, a sensor's stream, `idmesh replay --topology`):
+    /// its tracks `0..tracks` are the roster, its identities turn identity
+    /// reads on, its prior is carried ([`Extractor::with_prior`]).
+    pub fn for_stream(
+        mut config: ExtractorConfig,
+        header: &Header,
+    ) -> Result<Self, CalibrationError> {
+        config.identities |= header.identities.is_some();
+        let roster = RosterPolicy::Declared((0..header.tracks as u32).collect());
+        Ok(Extractor::new(config, roster)?.with_prior(header))
+    }
+
     /// The output header carries `header`'s prior: its red count, initial
     /// red tracks, identities and initial identities. A stream of reports
     /// that opens with a header (JSON lines, a live sensor's trace) says
@@ -120,6 +138,14 @@ impl Extractor {
     /// it must be believed from that same start.
     pub fn with_prior(mut self, header: &Header) -> Self {
         self.prior = Some(header.clone());
+        self
+    }
+
+    /// The output header declares `red` red targets (k) when given: a
+    /// tracker's output says nothing of the property, and without k the
+    /// belief has no prior to start from but one half.
+    pub fn with_red(mut self, red: Option<usize>) -> Self {
+        self.red = red.or(self.red);
         self
     }
 
@@ -282,6 +308,9 @@ impl Extractor {
             header.initial_red = prior.initial_red.clone();
             header.identities = prior.identities.or(header.identities);
             header.initial_identity = prior.initial_identity.clone();
+        }
+        if self.red.is_some() {
+            header.red = self.red;
         }
         header.source = Some(c.source.clone());
         header.description = Some(format!(
