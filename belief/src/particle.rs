@@ -23,8 +23,23 @@
 //! All randomness comes from one ChaCha8 stream seeded by the caller, so a
 //! seed and an event stream determine every answer. The filter converges to
 //! the exact one as P grows, but the error is Monte Carlo error, O(1/√P)
-//! per marginal, and an observation that every particle rules out fails
-//! (`ImpossibleObservation`) even when the exact belief would allow it.
+//! per marginal.
+//!
+//! ## A sighting every particle rules out
+//! A certain sighting (likelihood 0 for one colour) may rule out every
+//! particle although the exact belief allows it: the particles are a
+//! sample, and they missed the sets the sighting asks for. The filter then
+//! cannot tell a valid stream from an impossible one, and it answers on by
+//! one rule, not Bayes' rule: every particle of positive weight is moved to
+//! a nearest set the sighting allows — track t exchanges its colour with a
+//! uniformly drawn track of the colour the sighting asks for, as if the
+//! two had swapped unseen, so the particle keeps its red count; a particle
+//! with no such track (all red or all blue) flips t alone if the prior
+//! over the count allows the new count. The weights are kept, the moves
+//! are counted ([`ParticleFilter::moves`]), and the sighting is then
+//! conditioned on as usual. Only when no particle can be moved (no set of
+//! an allowed count has t in the sighted colour, e.g. k = 0 and a certain
+//! red sighting) is the sighting refused (`ImpossibleObservation`).
 //!
 //! [`coefficients`](PropertyFilter::coefficients) reports P: a particle is
 //! one stored set, as a Radon coefficient is one stored set with a number.
@@ -62,6 +77,8 @@ pub struct ParticleFilter {
     /// observation so far (the particle estimate of the evidence).
     log_evidence: f64,
     resamples: u64,
+    /// Particles moved by the rule for a sighting every particle rules out.
+    moves: u64,
 }
 
 impl ParticleFilter {
@@ -116,6 +133,7 @@ impl ParticleFilter {
             seed,
             log_evidence: 0.0,
             resamples: 0,
+            moves: 0,
         })
     }
 
@@ -157,6 +175,64 @@ impl ParticleFilter {
     /// probabilities under the particles).
     pub fn log_evidence(&self) -> f64 {
         self.log_evidence
+    }
+
+    /// How many particles were moved because a sighting ruled out every
+    /// one (see the module documentation).
+    pub fn moves(&self) -> u64 {
+        self.moves
+    }
+
+    /// The rule for a certain sighting of `t` as `red` (or blue) that every
+    /// particle rules out: moves each particle of positive weight to a
+    /// nearest set with t of that colour. False, and nothing changed, when
+    /// no particle can be moved.
+    fn move_to_allowed(&mut self, t: usize, red: bool) -> bool {
+        let n = self.field.tracks;
+        let w = self.words;
+        let allowed_count = |count: usize| match &self.field.red {
+            RedCount::Known(k) => count == *k,
+            RedCount::Unknown { prior } => prior.get(count).is_some_and(|p| *p > 0.0),
+        };
+        // Per particle: the track t exchanges with (Some), t alone flips
+        // (None), or the particle stays (not listed).
+        let mut plan: Vec<(usize, Option<usize>)> = Vec::new();
+        for p in 0..self.count {
+            if self.weights[p] == 0.0 || self.holds(p, t) == red {
+                continue;
+            }
+            let set = &self.sets[p * w..(p + 1) * w];
+            let reds: usize = set.iter().map(|x| x.count_ones() as usize).sum();
+            // Tracks of the sighted colour (t has the other one).
+            let candidates = if red { reds } else { n - reds };
+            if candidates > 0 {
+                let mut pick = self.rng.gen_range(0..candidates);
+                let partner = (0..n)
+                    .filter(|&u| u != t && (set[u / 64] >> (u % 64) & 1 == 1) == red)
+                    .find(|_| {
+                        let hit = pick == 0;
+                        pick = pick.wrapping_sub(1);
+                        hit
+                    });
+                if let Some(u) = partner {
+                    plan.push((p, Some(u)));
+                }
+            } else if allowed_count(if red { reds + 1 } else { reds - 1 }) {
+                plan.push((p, None));
+            }
+        }
+        if plan.is_empty() {
+            return false;
+        }
+        for &(p, partner) in &plan {
+            let set = &mut self.sets[p * w..(p + 1) * w];
+            set[t / 64] ^= 1 << (t % 64);
+            if let Some(u) = partner {
+                set[u / 64] ^= 1 << (u % 64);
+            }
+        }
+        self.moves += plan.len() as u64;
+        true
     }
 
     fn holds(&self, p: usize, t: usize) -> bool {
@@ -219,14 +295,24 @@ impl PropertyFilter for ParticleFilter {
         let t = observe.track as usize;
         // The predicted probability of the sighting; nothing changes unless
         // it is positive.
-        let mut evidence = 0.0;
-        for p in 0..self.count {
-            let likelihood = if self.holds(p, t) {
-                observe.red
-            } else {
-                observe.blue
-            };
-            evidence += self.weights[p] * likelihood;
+        let predicted = |filter: &Self| {
+            (0..filter.count)
+                .map(|p| {
+                    let likelihood = if filter.holds(p, t) {
+                        observe.red
+                    } else {
+                        observe.blue
+                    };
+                    filter.weights[p] * likelihood
+                })
+                .sum::<f64>()
+        };
+        let mut evidence = predicted(self);
+        // Only a certain sighting can rule out every particle (the weights
+        // sum to 1 and the likelihoods are finite, one of them positive);
+        // the particles missed its sets, see the module documentation.
+        if evidence == 0.0 && self.move_to_allowed(t, observe.red > 0.0) {
+            evidence = predicted(self);
         }
         if !(evidence.is_finite() && evidence > 0.0) {
             return Err(BeliefError::ImpossibleObservation {
@@ -507,10 +593,31 @@ mod tests {
         assert!((total - 35.0).abs() < 1e-9, "{total}");
     }
 
+    /// A certain sighting no particle allows moves every particle: track 2
+    /// takes the red of track 0 or 1 (as if they had swapped unseen), the
+    /// count stays 2, and the sighting is believed.
     #[test]
-    fn an_impossible_observation_changes_nothing() {
+    fn a_sighting_every_particle_rules_out_moves_them() {
         let mut pf = ParticleFilter::new(Field::known(4, vec![0, 1]), 64, 0).unwrap();
         pf.apply(&mix(0, 1, 0.5)).unwrap();
+        pf.apply(&observe(2, 1.0, 0.0)).unwrap();
+        assert_eq!(pf.moves(), 64);
+        let p = pf.marginals().unwrap();
+        assert_eq!(p[2], 1.0);
+        assert_eq!(p[3], 0.0);
+        assert!(
+            (p[0] + p[1] - 1.0).abs() < 1e-12 && p[0] > 0.2 && p[1] > 0.2,
+            "{p:?}"
+        );
+        for i in 0..64 {
+            assert_eq!(pf.particle(i).len(), 2);
+        }
+    }
+
+    /// No set of the count has the sighted colour: refused, nothing moved.
+    #[test]
+    fn an_impossible_observation_changes_nothing() {
+        let mut pf = ParticleFilter::new(Field::known(4, vec![]), 64, 0).unwrap();
         let before = (pf.sets.clone(), pf.weights.clone(), pf.log_evidence());
         let error = pf.apply(&observe(2, 1.0, 0.0)).unwrap_err();
         assert!(
@@ -520,7 +627,7 @@ mod tests {
             (pf.sets.clone(), pf.weights.clone(), pf.log_evidence()),
             before
         );
-        assert_eq!(pf.marginals().unwrap()[2], 0.0);
+        assert_eq!(pf.moves(), 0);
     }
 
     #[test]
