@@ -8,8 +8,13 @@
 //! A read of identity i on track t with accuracy a multiplies p(π) by a if
 //! π(t) = i and by w = (1 − a)/(N − 1) otherwise. By Property 1 (adding a
 //! constant to a row changes nothing) it is enough to add ln a − ln w to
-//! the one entry L\[t\]\[i\]. A perfect read (a = 1) would add +∞ and is
-//! refused ([`BeliefError::Unsupported`]); use accuracy 1 − ε.
+//! the one entry L\[t\]\[i\]. A perfect read (a = 1, so w = 0) would add
+//! +∞; it is taken as what it says instead, exactly: every other identity
+//! is ruled out on the row (−∞, the form an exact known start takes, see
+//! [`crate::identity::support_mix`]). A perfect read of an identity the
+//! row already rules out is refused ([`BeliefError::ImpossibleObservation`]):
+//! the mixing rule keeps every pairing the exact belief allows, so no
+//! assignment of positive probability is left.
 //!
 //! ## Mixing (Section 3.3)
 //! Exact mixing gives q(π) = (1 − s)·p(π) + s·p(π∘(a b)). Fix the identity
@@ -315,19 +320,23 @@ pub fn start_row(n: usize, known: Option<u32>, confidence: f64) -> Vec<f64> {
 pub fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefError> {
     let n = row.len();
     let odds = identify.log_odds(n);
-    if !odds.is_finite() {
-        return Err(BeliefError::Unsupported {
-            method: "information matrix",
-            what: "a perfect read (accuracy 1): its log-likelihood ratio is infinite",
-        });
+    let read = identify.identity as usize;
+    let slot = row.get_mut(read).ok_or(BeliefError::UnknownIdentity {
+        identity: identify.identity,
+        track: identify.track,
+        identities: n,
+    })?;
+    if odds == f64::INFINITY {
+        // A perfect read: likelihood 1 for the identity read, 0 for every
+        // other, so exactly the row that rules the others out.
+        if *slot == f64::NEG_INFINITY {
+            return Err(BeliefError::ImpossibleObservation { probability: 0.0 });
+        }
+        for (i, x) in row.iter_mut().enumerate() {
+            *x = if i == read { 0.0 } else { f64::NEG_INFINITY };
+        }
+        return Ok(());
     }
-    let slot = row
-        .get_mut(identify.identity as usize)
-        .ok_or(BeliefError::UnknownIdentity {
-            identity: identify.identity,
-            track: identify.track,
-            identities: n,
-        })?;
     if *slot == f64::NEG_INFINITY {
         // The track cannot carry the identity read: the read is equally
         // likely under every possible assignment and says nothing.
@@ -885,7 +894,7 @@ mod tests {
     }
 
     #[test]
-    fn evidence_touches_one_entry_and_refuses_perfect_reads() {
+    fn evidence_touches_one_entry_and_perfect_reads_rule_out_the_rest() {
         let mut info = InformationMatrix::uniform(4).unwrap();
         info.identify(Identify {
             track: 2,
@@ -896,14 +905,28 @@ mod tests {
         let l = info.log_likelihoods();
         assert!((l[2][1] - (0.9f64 / (0.1 / 3.0)).ln()).abs() < 1e-12);
         assert_eq!(l.iter().flatten().filter(|&&x| x != 0.0).count(), 1);
+        info.identify(Identify {
+            track: 0,
+            identity: 0,
+            accuracy: 1.0,
+        })
+        .unwrap();
+        let l = info.log_likelihoods();
+        assert_eq!(l[0][0], 0.0);
+        assert!(l[0][1..].iter().all(|&x| x == f64::NEG_INFINITY));
+        let p = info.marginals().unwrap();
+        assert_eq!(p[0][0], 1.0);
+        assert!(p[1..].iter().all(|row| row[0] == 0.0));
         let before = info.clone();
+        // Identity 1 is ruled out on track 0 now: a perfect read of it is
+        // impossible, and refused without a change.
         assert!(matches!(
             info.identify(Identify {
                 track: 0,
-                identity: 0,
+                identity: 1,
                 accuracy: 1.0
             }),
-            Err(BeliefError::Unsupported { .. })
+            Err(BeliefError::ImpossibleObservation { .. })
         ));
         assert!(info
             .mix(Mix {
