@@ -528,7 +528,10 @@ impl FactoredIdentity {
         // in a tree: where the rest of the tree rules a flag value out (a
         // message with a zero), a cut may keep only assignments the tree
         // gives no mass, and the belief would be left without any.
-        let (_, messages) = links::Messages::new(self).toward_group(g);
+        let messages = match ports.is_empty() {
+            true => Vec::new(),
+            false => links::Messages::new(self).toward_group(g).1,
+        };
         let tree_rules_out = messages.iter().any(|m| m[0] <= 0.0 || m[1] <= 0.0);
         let keeps_mass = |cut: &Cut, exchanges: u32| {
             !tree_rules_out || group.kept_tree_mass(&ports, &messages, cut, exchanges) > 0.0
