@@ -238,21 +238,7 @@ impl IdentityShare {
     /// The groups linked (directly or not) to the group of track `t`,
     /// by index, in the order a breadth-first walk meets them.
     fn tree_of(&self, t: u32) -> Vec<usize> {
-        let b = &self.belief;
-        let first = b.group_of[t as usize];
-        let mut tree = vec![first];
-        let mut seen = BTreeSet::from([first]);
-        let mut at = 0;
-        while at < tree.len() {
-            for port in b.groups[tree[at]].ports(b.n) {
-                let h = b.group_of[b.partner(port.id) as usize];
-                if h != usize::MAX && seen.insert(h) {
-                    tree.push(h);
-                }
-            }
-            at += 1;
-        }
-        tree
+        self.belief.trees_of(&[t])
     }
 
     /// The groups at `indices` as a tree, with their tracks' leaks and
