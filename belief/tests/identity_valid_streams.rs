@@ -17,84 +17,11 @@
 //! the exact filter, but it may not halt on a stream the world could have
 //! produced.
 
-use idmesh_belief::identity::{
-    FactoredIdentity, FactoredIdentityOptions, Identify, IdentityEvent, IdentityFilter,
-};
-use idmesh_belief::Mix;
+use idmesh_belief::identity::{FactoredIdentity, FactoredIdentityOptions, IdentityFilter};
 use proptest::prelude::*;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
-/// A valid stream of `len` events on `n` tracks, from the known start
-/// "track t carries identity t".
-fn valid_stream(n: usize, len: usize, seed: u64) -> Vec<IdentityEvent> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut truth: Vec<u32> = (0..n as u32).collect();
-    // Each stream favours a few accuracies, so that long runs of sure or of
-    // poor reads happen, as they do in one deployment.
-    let accuracies = [
-        1.0,
-        0.999_999,
-        0.99,
-        0.9,
-        0.7,
-        0.5,
-        0.2,
-        1.0 / n as f64,
-        1e-6,
-    ];
-    let favoured: Vec<f64> = (0..3)
-        .map(|_| accuracies[rng.gen_range(0..accuracies.len())])
-        .collect();
-    let reads = rng.gen_range(0.05..0.6);
-    let mut events = Vec::with_capacity(len);
-    for _ in 0..len {
-        if n >= 2 && !rng.gen_bool(reads) {
-            let a = rng.gen_range(0..n);
-            let b = if rng.gen_bool(0.8) {
-                (a + rng.gen_range(1..n.min(6))) % n
-            } else {
-                (a + rng.gen_range(1..n)) % n
-            };
-            let swap = match rng.gen_range(0..8) {
-                0 => 0.0,
-                1 => 1.0,
-                2 => 1e-9,
-                3 => 1.0 - 1e-9,
-                4 => 0.5,
-                _ => rng.gen_range(0.0..=1.0),
-            };
-            if rng.gen_bool(swap) {
-                truth.swap(a, b);
-            }
-            events.push(IdentityEvent::Mix(Mix {
-                a: a as u32,
-                b: b as u32,
-                swap,
-            }));
-        } else {
-            let track = rng.gen_range(0..n);
-            let accuracy = if rng.gen_bool(0.8) {
-                favoured[rng.gen_range(0..favoured.len())]
-            } else {
-                rng.gen_range(1e-9..=1.0)
-            };
-            // A read is right with its accuracy; a sure read always is.
-            let right = accuracy >= 1.0 || n == 1 || rng.gen_bool(accuracy);
-            let identity = if right {
-                truth[track]
-            } else {
-                (truth[track] + rng.gen_range(1..n as u32)) % n as u32
-            };
-            events.push(IdentityEvent::Identify(Identify {
-                track: track as u32,
-                identity,
-                accuracy,
-            }));
-        }
-    }
-    events
-}
+mod common;
+use common::valid::identity_stream;
 
 /// Every row of the answer sums to one and holds probabilities.
 fn check_rows(belief: &FactoredIdentity, n: usize, at: usize) -> Result<(), TestCaseError> {
@@ -145,7 +72,7 @@ fn run(n: usize, len: usize, seed: u64, choice: u8) -> Result<(), TestCaseError>
     let start: Vec<u32> = (0..n as u32).collect();
     let mut belief = FactoredIdentity::from_assignment(&start, options(choice))
         .map_err(|e| TestCaseError::fail(e.to_string()))?;
-    let events = valid_stream(n, len, seed);
+    let events = identity_stream(n, len, seed);
     let every = (len / 8).max(1);
     for (at, event) in events.into_iter().enumerate() {
         if let Err(e) = belief.apply(&event) {

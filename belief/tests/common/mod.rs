@@ -5,6 +5,8 @@
 
 #![allow(dead_code)] // each test file uses its own part
 
+pub mod valid;
+
 use idmesh_belief::{Event, Field, Mix, Observe, RedCount};
 use proptest::prelude::*;
 
