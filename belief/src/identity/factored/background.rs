@@ -110,17 +110,18 @@ impl Background {
     /// carries i, `wrong` otherwise, on the row and on the leak: the read
     /// was `table` likely under the group's table (needed only while the
     /// track leaks), and under this row as likely as the row says. A read
-    /// the row cannot explain (likelihood 0) leaves the row alone. The
+    /// the row cannot explain (likelihood 0) leaves the row alone, and says
+    /// so (false). The
     /// row is renormalized over its `n` identities as it goes: a read of
     /// small likelihood divides by it, and would otherwise magnify the
     /// rounding of earlier steps until the row no longer summed to one.
-    pub fn read(&mut self, n: usize, i: u32, right: f64, wrong: f64, table: Option<f64>) {
+    pub fn read(&mut self, n: usize, i: u32, right: f64, wrong: f64, table: Option<f64>) -> bool {
         let p = self.probability(i);
         let total = self.total(n);
         let weighed = right * p + wrong * (total - p).max(0.0);
         let evidence = weighed / total;
         if !(evidence > 0.0 && evidence.is_finite()) {
-            return;
+            return false;
         }
         if let Some(table) = table.filter(|_| self.leak > 0.0) {
             let total = self.leak * evidence + (1.0 - self.leak) * table;
@@ -133,6 +134,7 @@ impl Background {
         self.listed.values_mut().for_each(|q| *q *= scale);
         self.listed.insert(i, p * right / weighed);
         self.prune();
+        true
     }
 
     /// Σ_i P(i) over `n` identities: one, up to rounding.
@@ -146,11 +148,7 @@ impl Background {
     /// any likelihood), the row believes it: identity `i` with
     /// certainty. The last resort of [`super::repair`].
     pub fn read_or_believe(&mut self, n: usize, i: u32, right: f64, wrong: f64) {
-        let p = self.probability(i);
-        let evidence = right * p + wrong * (self.total(n) - p).max(0.0);
-        if evidence > 0.0 && evidence.is_finite() {
-            self.read(n, i, right, wrong, None);
-        } else {
+        if !self.read(n, i, right, wrong, None) {
             let leak = self.leak;
             *self = Background::certain(i);
             self.leak = leak;

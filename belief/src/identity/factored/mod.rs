@@ -960,12 +960,16 @@ impl FactoredIdentity {
         }
         // After the cuts the join made (what they leaked is the targets'
         // before they mix).
-        let (low, high) = (a.min(b) as usize, a.max(b) as usize);
-        if low != high {
-            let (left, right) = self.backgrounds.split_at_mut(high);
-            Background::mix(&mut left[low], &mut right[0], swap);
-        }
+        let (row_a, row_b) = self.rows_of(a, b);
+        Background::mix(row_a, row_b, swap);
         Ok(())
+    }
+
+    /// The background rows of two distinct tracks (a checked mix's).
+    fn rows_of(&mut self, a: u32, b: u32) -> (&mut Background, &mut Background) {
+        let (low, high) = (a.min(b) as usize, a.max(b) as usize);
+        let (left, right) = self.backgrounds.split_at_mut(high);
+        (&mut left[low], &mut right[0])
     }
 
     /// A checked read on the tables and rows, unguarded (see [`repair`]).

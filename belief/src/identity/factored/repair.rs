@@ -45,7 +45,7 @@ use super::background::Background;
 use super::group::Group;
 use super::{FactoredIdentity, SplitStats};
 use crate::error::BeliefError;
-use crate::identity::event::{Identify, IdentityEvent};
+use crate::identity::event::IdentityEvent;
 use std::collections::BTreeSet;
 
 /// The share of a group's mass a repair spreads evenly over its
@@ -259,27 +259,16 @@ impl FactoredIdentity {
     fn fall_back_to_rows(&mut self, event: &IdentityEvent) {
         match *event {
             IdentityEvent::Mix(mix) => {
-                let (low, high) = (mix.a.min(mix.b) as usize, mix.a.max(mix.b) as usize);
-                let (left, right) = self.backgrounds.split_at_mut(high);
-                left[low].lose(1.0);
-                right[0].lose(1.0);
-                Background::mix(&mut left[low], &mut right[0], mix.swap);
+                let (a, b) = self.rows_of(mix.a, mix.b);
+                a.lose(1.0);
+                b.lose(1.0);
+                Background::mix(a, b, mix.swap);
             }
-            IdentityEvent::Identify(Identify {
-                track,
-                identity,
-                accuracy,
-            }) => {
-                let wrong = Identify {
-                    track,
-                    identity,
-                    accuracy,
-                }
-                .wrong_read_likelihood(self.n);
-                let n = self.n;
-                let row = &mut self.backgrounds[track as usize];
+            IdentityEvent::Identify(read) => {
+                let (n, wrong) = (self.n, read.wrong_read_likelihood(self.n));
+                let row = &mut self.backgrounds[read.track as usize];
                 row.lose(1.0);
-                row.read_or_believe(n, identity, accuracy, wrong);
+                row.read_or_believe(n, read.identity, read.accuracy, wrong);
             }
         }
     }
