@@ -19,7 +19,7 @@
 //! Run: `cargo run --release -p idmesh-belief --example coupling_accuracy
 //! -- [--seeds S] [--out docs/coupling-accuracy.md] [--extra]` (S = 20 by
 //! default: 20 seeds × 5 sizes × 4 cases = 400 streams, a few minutes on
-//! one core; `--extra` adds larger components and the least-loss split,
+//! one core; `--extra` adds other component sizes and two exchange rounds,
 //! about ten times as long).
 //! Every stream is seeded: the numbers are the same on every run, except the
 //! time per event.
@@ -81,26 +81,33 @@ fn main() {
     let out = value("--out").cloned();
     let extra = args.iter().any(|a| a == "--extra");
 
-    let original = SplitRule::Original;
+    let defaults = FactoredOptions::default();
+    let (max, split) = (defaults.max_component, defaults.split);
+    let (original, least) = (SplitRule::Original, SplitRule::LeastLoss { rounds: 1 });
     let mut configs = vec![
-        config("local (the default)", Coupling::Local, 7, original),
-        config("flat (the old local rule)", Coupling::Flat, 7, original),
-        config("coupled", Coupling::Coupled, 7, original),
+        config("local (the default)", Coupling::Local, max, split),
+        config("coupled", Coupling::Coupled, max, split),
+        config("flat (an older local rule)", Coupling::Flat, max, split),
+        config(
+            "local, max 7, original (the former default)",
+            Coupling::Local,
+            7,
+            original,
+        ),
+        config("coupled, max 7, original", Coupling::Coupled, 7, original),
     ];
     if extra {
-        // What larger components and choosing the cut buy, and at what
-        // cost per event (least loss with no exchange rounds: the better
-        // of the original and the recent partition).
-        let least = SplitRule::LeastLoss { rounds: 0 };
+        // What larger components and more exchange rounds buy, and at
+        // what cost per event.
         configs.extend([
-            config("local, max 9", Coupling::Local, 9, original),
-            config("coupled, max 9", Coupling::Coupled, 9, original),
-            config("local, least loss (0 rounds)", Coupling::Local, 7, least),
+            config("local, max 5", Coupling::Local, 5, split),
+            config("local, max 7", Coupling::Local, 7, least),
+            config("coupled, max 7", Coupling::Coupled, 7, least),
             config(
-                "coupled, least loss (0 rounds)",
-                Coupling::Coupled,
-                7,
-                least,
+                "local, two exchange rounds",
+                Coupling::Local,
+                max,
+                SplitRule::LeastLoss { rounds: 2 },
             ),
         ]);
     }
@@ -160,10 +167,11 @@ fn main() {
          trace spec's tracking error). A stream's score is its mean over those points; a cell is \
          the mean over the {} streams of a case ± 1.96 standard errors. \"− coupled\" is the mean \
          paired difference from the coupled rule on the same streams (± 1.96 standard errors): \
-         negative is closer to the exact filter. Components of at most 7 tracks and the \
-         `Original` split unless the row says otherwise; µs/event is the time per event of the \
+         negative is closer to the exact filter. The defaults (components of at most {max} \
+         tracks, least-loss splits: the old cut or, where one loses less, the best cut one \
+         exchange of tracks away from it) unless the row says otherwise; µs/event is the time per event of the \
          whole run (CPU, this machine, shared with other work: compare rows, not runs). \
-         \"local\" is what leaders run (and `idmesh replay` by default), \"flat\" the local \
+         \"local\" is what leaders run (and `idmesh replay` by default), \"flat\" a local \
          rule they ran before, \"coupled\" the rule that needs the whole belief at every \
          split.\n",
         if extra { " --extra" } else { "" },

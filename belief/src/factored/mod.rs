@@ -32,16 +32,13 @@
 //!   Otherwise the pair is split back into two by moment matching (an
 //!   M-projection, the assumed-density step of Boyen and Koller; see the
 //!   private `split` module), along a partition chosen by [`SplitRule`].
-//!   With the default [`SplitRule::Original`] the 2^(|C1|+|C2|) merged
-//!   table is never built: the two marginal tables it needs have a closed
-//!   form.
-//!
-//! Measured on the crowd simulator's traces (seeds 1–3, 1000 events; the
-//! `factored_eval` example): at n = 20 the default stays within 0.005 of the
-//! exact filter's tracking error with at most 320 numbers, about 100 times
-//! faster; at n = 60 and 100 it beats the first-order baseline by 0.03–0.05
-//! and the thresholded Radon belief (500 coefficients) by 0.08–0.11. The
-//! error hardly moves between max_component 4 and 16.
+//!   The default, [`SplitRule::LeastLoss`] with one round on components of
+//!   at most 6 tracks, ranks the old cut and every exchange of one track
+//!   between its halves by the information each split loses, from the
+//!   marginal tables alone; [`SplitRule::Original`]
+//!   never builds the 2^(|C1|+|C2|) merged table (the two marginal tables
+//!   it needs have a closed form) and is cheaper, further from the exact
+//!   filter (docs/coupling-accuracy.md measures both).
 //! - An observation multiplies the observed track's component table by the
 //!   likelihood. Tracks it leaves certain (marginal within
 //!   [`FactoredOptions::certain`] of 0 or 1) are split off exactly.
@@ -92,10 +89,12 @@ pub enum SplitRule {
     /// together; the ones that have gone longest without mixing are pushed
     /// out.
     Recent,
-    /// Start from [`Recent`](SplitRule::Recent) and the original partition,
-    /// then greedily exchange pairs of tracks between the halves while that
-    /// lowers KL(P‖P′), the information the split loses; at most `rounds`
-    /// exchanges.
+    /// Start from the original partition, then exchange one track of one
+    /// half with one of the other while the best such exchange lowers
+    /// KL(P‖P′), the information the split loses; at most `rounds`
+    /// exchanges. The default, with one round. It reads no clock (unlike
+    /// [`Recent`](SplitRule::Recent)), so events on disjoint components
+    /// commute.
     LeastLoss { rounds: usize },
 }
 
@@ -199,9 +198,9 @@ pub struct FactoredOptions {
 impl Default for FactoredOptions {
     fn default() -> Self {
         FactoredOptions {
-            max_component: 7,
+            max_component: 6,
             max_numbers: None,
-            split: SplitRule::Original,
+            split: SplitRule::LeastLoss { rounds: 1 },
             coupling: Coupling::Coupled,
             tolerance: 1e-12,
             max_sweeps: 200,
@@ -255,8 +254,10 @@ pub struct FactoredStats {
     /// rule's approximations.
     pub kept_apart: u64,
     pub split_off: u64,
-    /// Σ KL(P‖P′) over the splits where it was computed (LeastLoss).
-    pub split_loss: f64,
+    /// Splits whose count scaling failed under their weights and were
+    /// retried under the local or the flat ones (valid streams whose
+    /// sightings contradict the truth again and again).
+    pub retried_splits: u64,
     /// The most iterations (Sinkhorn sweeps + Newton steps) one moment
     /// matching needed.
     pub max_sweeps: usize,
@@ -731,12 +732,17 @@ impl FactoredBelief {
                         continue;
                     }
                     let q = self.local_weights_as(fallback, &merged_counts);
-                    tracing::debug!(
-                        ?fallback,
-                        "factored: split retried under other count weights"
-                    );
+                    if self.stats.retried_splits == 0 {
+                        tracing::warn!(
+                            ?fallback,
+                            ?mix,
+                            "factored: a split retried under other count weights \
+                             (counted as a belief repair; logged once)"
+                        );
+                    }
                     retried = self.project_pair(mix, may_merge, others, &q);
                 }
+                self.stats.retried_splits += 1;
                 retried?
             }
             Err(e) => return Err(e),
@@ -852,9 +858,6 @@ impl FactoredBelief {
             .sum();
         let projection = self.choose_split(&weighted, &merged, side_a, others + extra, mix)?;
         self.stats.max_sweeps = self.stats.max_sweeps.max(projection.sweeps);
-        if projection.kl.is_finite() {
-            self.stats.split_loss += projection.kl;
-        }
         pieces.push(projection.a);
         pieces.push(projection.b);
         Ok(pieces)
@@ -899,7 +902,6 @@ impl FactoredBelief {
             1 << bit,
             self.options.tolerance,
             self.options.max_sweeps,
-            false,
         )?;
         self.stats.max_sweeps = self.stats.max_sweeps.max(projection.sweeps);
         self.stats.split_off += 1;
@@ -983,44 +985,35 @@ impl FactoredBelief {
             });
             order[..size].iter().map(|&b| 1usize << b).sum::<usize>()
         };
+        let paired = || {
+            let size = self.split_size(m, others);
+            let mut order: Vec<usize> = (0..m).collect();
+            order.sort_by_key(|&b| {
+                let t = merged.tracks[b];
+                (t != mix.a && t != mix.b, t)
+            });
+            order[..size].iter().map(|&b| 1usize << b).sum::<usize>()
+        };
         match self.options.split {
-            SplitRule::Original if original_ok => weighted.project(original, tol, sweeps, false),
-            SplitRule::Original | SplitRule::Recent => {
-                weighted.project(recent(), tol, sweeps, false)
-            }
+            SplitRule::Original if original_ok => weighted.project(original, tol, sweeps),
+            SplitRule::Original | SplitRule::Recent => weighted.project(recent(), tol, sweeps),
             SplitRule::LeastLoss { rounds } => {
-                let start = recent();
-                let mut best = weighted.project(start, tol, sweeps, true)?;
-                let mut best_part = start;
-                if original_ok && original != start && (!original & ((1 << m) - 1)) != start {
-                    let p = weighted.project(original, tol, sweeps, true)?;
-                    if p.kl < best.kl {
-                        best = p;
-                        best_part = original;
-                    }
-                }
+                // From the old cut (or, where certain tracks emptied a
+                // side, the mixed pair and the lowest track numbers: no
+                // clock, so that events on disjoint components commute),
+                // exchanges ranked by the loss up to the merged table's
+                // constant; only the chosen partition is projected.
+                let mut best_part = if original_ok { original } else { paired() };
+                let mut best = weighted.loss(best_part, tol, sweeps)?;
                 for _ in 0..rounds {
-                    let mut improved = None;
-                    let mut improved_kl = best.kl;
-                    for i in (0..m).filter(|i| best_part & (1 << i) != 0) {
-                        for j in (0..m).filter(|j| best_part & (1 << j) == 0) {
-                            let part = best_part ^ (1 << i) ^ (1 << j);
-                            let p = weighted.project(part, tol, sweeps, true)?;
-                            if p.kl < improved_kl - 1e-12 {
-                                improved_kl = p.kl;
-                                improved = Some((part, p));
-                            }
+                    match weighted.best_exchange(best_part, tol, sweeps)? {
+                        Some((part, loss)) if loss < best - 1e-12 => {
+                            (best_part, best) = (part, loss);
                         }
-                    }
-                    match improved {
-                        Some((part, p)) => {
-                            best_part = part;
-                            best = p;
-                        }
-                        None => break,
+                        _ => break,
                     }
                 }
-                Ok(best)
+                weighted.project(best_part, tol, sweeps)
             }
         }
     }

@@ -38,8 +38,6 @@ pub(crate) struct Weighted<'a> {
 pub(crate) struct Projection {
     pub(crate) a: Component,
     pub(crate) b: Component,
-    /// KL(P‖P′) in nats when asked for, else NaN.
-    pub(crate) kl: f64,
     pub(crate) sweeps: usize,
 }
 
@@ -125,7 +123,6 @@ impl<'a> Weighted<'a> {
         part_a: usize,
         tolerance: f64,
         max_sweeps: usize,
-        want_kl: bool,
     ) -> Result<Projection, BeliefError> {
         let bits = self.merged.len();
         let part_b = ((1usize << bits) - 1) & !part_a;
@@ -158,25 +155,168 @@ impl<'a> Weighted<'a> {
             tolerance,
             max_sweeps,
         )?;
-        let kl = if want_kl {
-            // P′(x) = g_A·g_B·Q / S′ over the normalized tables.
-            let (ln_t, ln_s) = (self.total.ln(), ln_pair_mass(&a.counts, &b.counts, self.q));
-            let mut kl = 0.0;
-            for_each_split(bits, part_a, |x, ia, ib| {
-                let w = self.w[x];
-                if w > 0.0 {
-                    let p = w.ln() - ln_t;
-                    let p_prime =
-                        (a.table[ia] * b.table[ib] * self.q[x.count_ones() as usize]).ln() - ln_s;
-                    kl += (w / self.total) * (p - p_prime);
-                }
-            });
-            kl.max(0.0)
-        } else {
-            f64::NAN
-        };
-        Ok(Projection { a, b, kl, sweeps })
+        Ok(Projection { a, b, sweeps })
     }
+}
+
+impl Weighted<'_> {
+    /// KL(P‖P′) in nats of a projection along `part_a` (the reference the
+    /// ranking by [`loss`](Weighted::loss) is tested against).
+    #[cfg(test)]
+    pub(crate) fn kl(&self, projection: &Projection, part_a: usize) -> f64 {
+        let (a, b) = (&projection.a, &projection.b);
+        let bits = self.merged.len();
+        let (ln_t, ln_s) = (self.total.ln(), ln_pair_mass(&a.counts, &b.counts, self.q));
+        let mut kl = 0.0;
+        for_each_split(bits, part_a, |x, ia, ib| {
+            let w = self.w[x];
+            if w > 0.0 {
+                let p = w.ln() - ln_t;
+                let p_prime =
+                    (a.table[ia] * b.table[ib] * self.q[x.count_ones() as usize]).ln() - ln_s;
+                kl += (w / self.total) * (p - p_prime);
+            }
+        });
+        kl.max(0.0)
+    }
+    /// The marginal tables of P on x_A (A = the bits of `part_a`) and on
+    /// x_B (the rest), normalized.
+    fn marginals(&self, part_a: usize) -> (Vec<f64>, Vec<f64>) {
+        let bits = self.merged.len();
+        let na = part_a.count_ones() as usize;
+        let mut pa = vec![0.0; 1 << na];
+        let mut pb = vec![0.0; 1 << (bits - na)];
+        for_each_split(bits, part_a, |x, ia, ib| {
+            pa[ia] += self.w[x];
+            pb[ib] += self.w[x];
+        });
+        for p in pa.iter_mut().chain(pb.iter_mut()) {
+            *p /= self.total;
+        }
+        (pa, pb)
+    }
+
+    /// What the split along `part_a` loses: KL(P‖P′) less a constant of
+    /// the merged table (−H(P) − E_P[ln Q], the same for every partition),
+    /// so that partitions rank as their KL does. P′ keeps P's marginals on
+    /// x_A and x_B, so E_P[ln P′] needs only those two tables:
+    /// Σ p_A·ln g_A + Σ p_B·ln g_B − ln S′. No pass over the merged table
+    /// beyond the marginals, and none of its logarithms.
+    pub(crate) fn loss(
+        &self,
+        part_a: usize,
+        tolerance: f64,
+        max_sweeps: usize,
+    ) -> Result<f64, BeliefError> {
+        let (pa, pb) = self.marginals(part_a);
+        loss_of(&pa, &pb, self.q, tolerance, max_sweeps)
+    }
+
+    /// The exchange of one track of A = `part_a` with one of the rest that
+    /// loses least, as (the new A, its [`loss`](Weighted::loss)). Every
+    /// exchange's marginals come from the tables P(x_A, x_j) for j outside
+    /// A and P(x_B, x_i) for i in A, all gathered in one pass over the
+    /// merged table: |M| additions per entry instead of a pass per
+    /// exchange.
+    pub(crate) fn best_exchange(
+        &self,
+        part_a: usize,
+        tolerance: f64,
+        max_sweeps: usize,
+    ) -> Result<Option<(usize, f64)>, BeliefError> {
+        let bits = self.merged.len();
+        let all = (1usize << bits) - 1;
+        let part_b = all & !part_a;
+        let in_a: Vec<usize> = (0..bits).filter(|b| part_a & (1 << b) != 0).collect();
+        let in_b: Vec<usize> = (0..bits).filter(|b| part_b & (1 << b) != 0).collect();
+        let (na, nb) = (in_a.len(), in_b.len());
+        let mut with_b = vec![vec![0.0; 2 << na]; nb];
+        let mut with_a = vec![vec![0.0; 2 << nb]; na];
+        for_each_split(bits, part_a, |x, ia, ib| {
+            let w = self.w[x];
+            if w == 0.0 {
+                return;
+            }
+            for (joint, &j) in with_b.iter_mut().zip(&in_b) {
+                joint[ia | ((x >> j) & 1) << na] += w;
+            }
+            for (joint, &i) in with_a.iter_mut().zip(&in_a) {
+                joint[ib | ((x >> i) & 1) << nb] += w;
+            }
+        });
+        let mut best: Option<(usize, f64)> = None;
+        for (joint_b, &i) in with_a.iter().zip(&in_a) {
+            for (joint_a, &j) in with_b.iter().zip(&in_b) {
+                let new_a = part_a ^ (1 << i) ^ (1 << j);
+                let pa = regroup(joint_a, part_a, i, j, self.total);
+                let pb = regroup(joint_b, part_b, j, i, self.total);
+                let loss = loss_of(&pa, &pb, self.q, tolerance, max_sweeps)?;
+                if best.is_none_or(|(_, l)| loss < l) {
+                    best = Some((new_a, loss));
+                }
+            }
+        }
+        Ok(best)
+    }
+}
+
+/// [`Weighted::loss`] from the two marginal tables.
+fn loss_of(
+    pa: &[f64],
+    pb: &[f64],
+    q: &[f64],
+    tolerance: f64,
+    max_sweeps: usize,
+) -> Result<f64, BeliefError> {
+    let (na, nb) = (
+        pa.len().trailing_zeros() as usize,
+        pb.len().trailing_zeros() as usize,
+    );
+    let count_a = super::table::counts_of(pa, na);
+    let count_b = super::table::counts_of(pb, nb);
+    let (alpha, beta, _) = scale_counts(q, &count_a, &count_b, tolerance, max_sweeps)?;
+    let entropy: f64 = pa
+        .iter()
+        .chain(pb)
+        .filter(|&&p| p > 0.0)
+        .map(|&p| p * p.ln())
+        .sum();
+    let scaled = |c: &[f64], s: &[f64]| -> (f64, Vec<f64>) {
+        let terms = c
+            .iter()
+            .zip(s)
+            .filter(|(&c, _)| c > 0.0)
+            .map(|(&c, &s)| c * s.ln())
+            .sum();
+        (terms, c.iter().zip(s).map(|(c, s)| c * s).collect())
+    };
+    let (terms_a, weighed_a) = scaled(&count_a, &alpha);
+    let (terms_b, weighed_b) = scaled(&count_b, &beta);
+    let loss = ln_pair_mass(&weighed_a, &weighed_b, q) - entropy - terms_a - terms_b;
+    // A split whose scaling ran off to infinity ranks last.
+    Ok(if loss.is_nan() { f64::INFINITY } else { loss })
+}
+
+/// A joint table over (x_S, x_t) — the bits of `set` packed low in their
+/// order, the bit `extra` on top — summed over the bit `leaving` of S onto
+/// the table of S − {leaving} + {extra} in its own bit order, divided by
+/// `total`.
+fn regroup(joint: &[f64], set: usize, leaving: usize, extra: usize, total: f64) -> Vec<f64> {
+    let n = set.count_ones() as usize;
+    let below = |bit: usize| (set & ((1usize << bit) - 1)).count_ones() as usize;
+    // Where the leaving bit sits among S's, and where the new one lands
+    // among the bits that stay.
+    let out_at = below(leaving);
+    let in_at = below(extra) - usize::from(leaving < extra);
+    let low_mask = (1usize << n) - 1;
+    let mut out = vec![0.0; joint.len() / 2];
+    for (z, &p) in joint.iter().enumerate() {
+        let (low, top) = (z & low_mask, z >> n);
+        let kept = (low & ((1 << out_at) - 1)) | ((low >> (out_at + 1)) << out_at);
+        let y = (kept & ((1 << in_at) - 1)) | (top << in_at) | ((kept >> in_at) << (in_at + 1));
+        out[y] += p / total;
+    }
+    out
 }
 
 /// ln Σ_{r,q} c_A[r]·c_B[q]·Q(r + q), summed in log space: each factor is
@@ -398,15 +538,19 @@ fn scale_counts(
     };
     let mut sweeps = 0;
     let mut err = f64::INFINITY;
+    let times_v =
+        |v: &[f64], r: usize| -> f64 { v.iter().enumerate().map(|(s, &vs)| k(r, s) * vs).sum() };
+    // K·v of the current v: the next u's denominator and this sweep's
+    // error on the rows, computed once for both.
+    let mut kv: Vec<f64> = (0..pa.len()).map(|r| times_v(&v, r)).collect();
     while sweeps < max_sweeps {
         sweeps += 1;
         for (r, ur) in u.iter_mut().enumerate() {
-            let kv: f64 = v.iter().enumerate().map(|(s, &vs)| k(r, s) * vs).sum();
             *ur = if pa[r] > 0.0 {
-                if !(kv > 0.0 && kv.is_finite()) {
+                if !(kv[r] > 0.0 && kv[r].is_finite()) {
                     return Err(infeasible("A"));
                 }
-                pa[r] / kv
+                pa[r] / kv[r]
             } else {
                 0.0
             };
@@ -423,13 +567,14 @@ fn scale_counts(
                 0.0
             };
         }
+        for (r, kr) in kv.iter_mut().enumerate() {
+            *kr = times_v(&v, r);
+        }
         err = u
             .iter()
-            .enumerate()
-            .map(|(r, &ur)| {
-                let kv: f64 = v.iter().enumerate().map(|(s, &vs)| k(r, s) * vs).sum();
-                (ur * kv - pa[r]).abs()
-            })
+            .zip(&kv)
+            .zip(pa)
+            .map(|((&ur, &kr), &p)| (ur * kr - p).abs())
             .sum();
         if err <= tolerance {
             break;
@@ -644,7 +789,7 @@ mod tests {
             };
             let part_a = rng.gen_range(1..(1usize << bits) - 1);
             let part_b = ((1 << bits) - 1) & !part_a;
-            let p = weighted.project(part_a, 1e-12, 100_000, true).unwrap();
+            let p = weighted.project(part_a, 1e-12, 100_000).unwrap();
             // Rebuild P′ over the merged order.
             let mut prime = vec![0.0; 1 << bits];
             for (x, v) in prime.iter_mut().enumerate() {
@@ -664,7 +809,7 @@ mod tests {
                     assert!((x - y).abs() < 1e-9, "case {case}: {want:?} vs {got:?}");
                 }
             }
-            assert!(p.kl >= 0.0);
+            assert!(weighted.kl(&p, part_a) >= 0.0);
             // The mass the component contributes is kept.
             let mass = |t: &[f64], ln: f64| {
                 ln + t
@@ -733,7 +878,7 @@ mod tests {
                 assert!((x - y).abs() < 1e-12, "case {case}: {p1:?} vs {want1:?}");
             }
             assert!((total - weighted.total).abs() < 1e-12 * weighted.total);
-            let Ok(slow) = weighted.project(low, 1e-12, 200, false) else {
+            let Ok(slow) = weighted.project(low, 1e-12, 200) else {
                 continue;
             };
             let log_mass = c1.log_scale + c2.log_scale + total.ln();
@@ -766,6 +911,80 @@ mod tests {
         }
     }
 
+    /// The loss ranks partitions as KL(P‖P′) does: it differs from the KL
+    /// by one constant of the merged table, and the best exchange found
+    /// from the joint tables is the best of trying each exchange.
+    #[test]
+    fn loss_ranks_partitions_as_their_kl_and_finds_the_best_exchange() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for case in 0..120 {
+            let bits = rng.gen_range(3..=9);
+            let table: Vec<f64> = (0..1 << bits)
+                .map(|_| {
+                    if rng.gen::<f64>() < 0.1 {
+                        0.0
+                    } else {
+                        rng.gen()
+                    }
+                })
+                .collect();
+            let q: Vec<f64> = if case % 2 == 0 {
+                (0..=bits).map(|_| rng.gen::<f64>() + 0.01).collect()
+            } else {
+                // k known: one count, as a window of the field's counts.
+                let k = rng.gen_range(1..bits);
+                (0..=bits).map(|s| f64::from(u8::from(s == k))).collect()
+            };
+            let tracks: Vec<u32> = (0..bits as u32).collect();
+            let Ok(merged) = Component::from_table(tracks, table, 0.0) else {
+                continue;
+            };
+            let Ok(weighted) = Weighted::new(&merged, &q) else {
+                continue;
+            };
+            let all = (1usize << bits) - 1;
+            let a_size = rng.gen_range(1..bits);
+            let part_a =
+                (0..a_size).fold(0usize, |m, b| m | 1 << b) << rng.gen_range(0..=bits - a_size);
+            let both = |part: usize| -> Option<(f64, f64)> {
+                let p = weighted.project(part, 1e-12, 100_000).ok()?;
+                let loss = weighted.loss(part, 1e-12, 100_000).ok()?;
+                Some((weighted.kl(&p, part), loss))
+            };
+            let Some((kl0, loss0)) = both(part_a) else {
+                continue;
+            };
+            let constant = kl0 - loss0;
+            let mut brute: Option<(usize, f64)> = None;
+            for i in (0..bits).filter(|i| part_a & (1 << i) != 0) {
+                for j in (0..bits).filter(|j| part_a & (1 << j) == 0) {
+                    let part = part_a ^ (1 << i) ^ (1 << j);
+                    let Some((kl, loss)) = both(part) else {
+                        continue;
+                    };
+                    assert!(
+                        (kl - loss - constant).abs() < 1e-8,
+                        "case {case}: part {part:b}: KL {kl} vs loss {loss} + {constant}"
+                    );
+                    if brute.is_none_or(|(_, l)| kl < l) {
+                        brute = Some((part, kl));
+                    }
+                }
+            }
+            let (part, loss) = weighted
+                .best_exchange(part_a, 1e-12, 100_000)
+                .unwrap()
+                .unwrap();
+            let (_, kl) = brute.unwrap();
+            assert!(part & !all == 0 && part.count_ones() as usize == a_size);
+            assert!(
+                (loss + constant - kl).abs() < 1e-8,
+                "case {case}: best exchange loses {} against {kl}",
+                loss + constant
+            );
+        }
+    }
+
     /// A product table is its own projection, with KL 0.
     #[test]
     fn a_product_is_a_fixed_point() {
@@ -774,8 +993,8 @@ mod tests {
         let merged = a.outer(&b);
         let q = [0.0, 0.5, 1.0, 0.7, 0.0];
         let weighted = Weighted::new(&merged, &q).unwrap();
-        let p = weighted.project(0b0011, 1e-12, 1000, true).unwrap();
-        assert!(p.kl.abs() < 1e-12);
+        let p = weighted.project(0b0011, 1e-12, 1000).unwrap();
+        assert!(weighted.kl(&p, 0b0011).abs() < 1e-12);
         for (x, y) in p.a.table.iter().zip(&a.table) {
             assert!((x - y).abs() < 1e-9);
         }

@@ -27,30 +27,26 @@ pub(crate) fn certain_odds(
     if bits < 2 {
         return Vec::new();
     }
-    let mut set = vec![0.0; bits];
-    let mut total = 0.0;
-    for (y, &g) in table.iter().enumerate() {
-        let x = g * weights.map_or(1.0, |w| w[y.count_ones() as usize]);
-        if x == 0.0 {
-            continue;
-        }
-        total += x;
-        let mut b = y;
-        while b != 0 {
-            set[b.trailing_zeros() as usize] += x;
-            b &= b - 1;
-        }
-    }
+    let weighed: Vec<f64> = match weights {
+        Some(w) => table
+            .iter()
+            .enumerate()
+            .map(|(y, &g)| g * w[y.count_ones() as usize])
+            .collect(),
+        None => table.to_vec(),
+    };
+    let total: f64 = weighed.iter().sum();
     if !(total > 0.0 && total.is_finite()) {
         return Vec::new();
     }
-    let mut clear = vec![0.0; bits];
-    for (y, &g) in table.iter().enumerate() {
-        let x = g * weights.map_or(1.0, |w| w[y.count_ones() as usize]);
-        for (b, c) in clear.iter_mut().enumerate() {
-            if y & (1 << b) == 0 {
-                *c += x;
-            }
+    // Per bit, the blocks where it is clear and where it is set lie side
+    // by side: contiguous sums, not a walk over each entry's bits.
+    let (mut set, mut clear) = (vec![0.0; bits], vec![0.0; bits]);
+    for b in 0..bits {
+        let half = 1usize << b;
+        for block in weighed.chunks_exact(2 * half) {
+            clear[b] += block[..half].iter().sum::<f64>();
+            set[b] += block[half..].iter().sum::<f64>();
         }
     }
     (0..bits)

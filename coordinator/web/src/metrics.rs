@@ -31,8 +31,13 @@ type Labels = Vec<(String, String)>;
 /// help, the value).
 type LeaderField = (&'static str, &'static str, fn(&LeaderStats) -> u64);
 
-const LEADER_COUNTERS: [LeaderField; 22] = [
+const LEADER_COUNTERS: [LeaderField; 23] = [
     ("items", "stream items applied", |s| s.items),
+    (
+        "belief_repairs",
+        "valid colour events the factored belief could not take as they stood (splits retried)",
+        |s| s.belief_repairs,
+    ),
     (
         "identity_repairs",
         "valid identity events the trees could not take as they stood (repaired)",

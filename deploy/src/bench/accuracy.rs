@@ -424,8 +424,9 @@ fn report(
          tracking error: the k largest marginals called red, ties sharing the slots, the \
          fraction of tracks mislabeled, averaged over the truth lines), beside the \
          centralized engine replaying the same trace:\n\n\
-         - **factored**: the leaders' factored belief (components of at most 7 tracks, \
-         split \"original\", local split rule; the count coupling at the coordinator) against \
+         - **factored**: the leaders' factored belief at its defaults (components of at most \
+         {max} tracks, split \"least-loss\", local split rule; the count coupling at the \
+         coordinator) against \
          `factored, local rule`. They are the same computation distributed: the command fails \
          if any marginal at any truth line differs by more than {TOLERANCE:e}.\n\
          - **factored, regional rule**: the same under the regional rule (`regional = true`) \
@@ -446,7 +447,8 @@ fn report(
         } else {
             String::new()
         },
-        took.as_secs_f64()
+        took.as_secs_f64(),
+        max = idmesh_belief::FactoredOptions::default().max_component,
     )?;
     writeln!(out, "{TABLE_HEADER}")?;
     let mut done: Vec<(usize, u64, Start, Kind)> = Vec::new();

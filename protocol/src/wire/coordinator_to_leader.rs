@@ -107,6 +107,12 @@ pub struct LeaderStats {
     /// met again).
     #[serde(default)]
     pub identity_repairs: u64,
+    /// Valid colour events the factored belief held here could not take
+    /// as they stood: splits retried under other count weights (counted
+    /// since the process started, plus those its journal replay met
+    /// again).
+    #[serde(default)]
+    pub belief_repairs: u64,
     pub coefficients: u64,
     pub tracks_owned: u64,
     pub tracks_followed: u64,
