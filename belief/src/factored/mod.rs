@@ -32,13 +32,13 @@
 //!   Otherwise the pair is split back into two by moment matching (an
 //!   M-projection, the assumed-density step of Boyen and Koller; see the
 //!   private `split` module), along a partition chosen by [`SplitRule`].
-//!   The default, [`SplitRule::Original`], never builds the 2^(|C1|+|C2|)
-//!   merged table (the two marginal tables it needs have a closed form);
-//!   [`SplitRule::LeastLoss`] ranks the old cut and every exchange of one
-//!   track between its halves by the information each split loses, from
-//!   the marginal tables alone: closer to the exact filter, at several
-//!   times the cost (docs/coupling-accuracy.md measures both; why it is
-//!   not the default: docs/design/beliefs.md).
+//!   The default, [`SplitRule::LeastLoss`] with one round on components of
+//!   at most 6 tracks, ranks the old cut and every exchange of one track
+//!   between its halves by the information each split loses, from the
+//!   marginal tables alone; [`SplitRule::Original`]
+//!   never builds the 2^(|C1|+|C2|) merged table (the two marginal tables
+//!   it needs have a closed form) and is cheaper, further from the exact
+//!   filter (docs/coupling-accuracy.md measures both).
 //! - An observation multiplies the observed track's component table by the
 //!   likelihood. Tracks it leaves certain (marginal within
 //!   [`FactoredOptions::certain`] of 0 or 1) are split off exactly.
@@ -92,7 +92,7 @@ pub enum SplitRule {
     /// Start from the original partition, then exchange one track of one
     /// half with one of the other while the best such exchange lowers
     /// KL(P‖P′), the information the split loses; at most `rounds`
-    /// exchanges. It reads no clock (unlike
+    /// exchanges. The default, with one round. It reads no clock (unlike
     /// [`Recent`](SplitRule::Recent)), so events on disjoint components
     /// commute.
     LeastLoss { rounds: usize },
@@ -198,9 +198,9 @@ pub struct FactoredOptions {
 impl Default for FactoredOptions {
     fn default() -> Self {
         FactoredOptions {
-            max_component: 7,
+            max_component: 6,
             max_numbers: None,
-            split: SplitRule::Original,
+            split: SplitRule::LeastLoss { rounds: 1 },
             coupling: Coupling::Coupled,
             tolerance: 1e-12,
             max_sweeps: 200,

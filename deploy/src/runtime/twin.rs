@@ -22,7 +22,7 @@ impl Topology {
             (args.method.is_some(), "--method"),
             (args.coupling != CouplingChoice::Local, "--coupling"),
             (args.max_component.is_some(), "--max-component"),
-            (args.split != SplitChoice::Original, "--split"),
+            (args.split != SplitChoice::LeastLoss, "--split"),
             (args.regions.is_some(), "--regions"),
             (args.leaders.is_some(), "--leaders"),
             (args.budget.is_some(), "--budget"),

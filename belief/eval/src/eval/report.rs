@@ -479,7 +479,9 @@ pub fn beating(grid: &Grid) -> String {
          merged component would exceed the size cap (max_component = {max} tracks, 2^{max} \
          numbers; the default) is it split back into two parts by moment matching — an \
          assumed-density projection (Boyen–Koller) that keeps both parts' marginals exactly \
-         and forgets only the correlation between them. Until the first such split the \
+         and forgets only the correlation between them; by default along the old cut or, \
+         where one loses less, the best cut one exchange of tracks away from it. Until the \
+         first such split the \
          belief is exact. The Radon overcomplete method instead holds its budget by dropping \
          sets or re-fitting them by OMP, and its pruned belief comes out overconfident (see \
          its \"expects\" column below).\n",

@@ -69,7 +69,7 @@ pub struct ReplayArgs {
     #[arg(long, value_enum, default_value_t = CouplingChoice::Local)]
     pub coupling: CouplingChoice,
 
-    /// --method factored: the most tracks of one component (default 7);
+    /// --method factored: the most tracks of one component (default 6);
     /// --method factored-identity: the most tracks of one group (2 to 9,
     /// default 9).
     #[arg(long, value_name = "M")]
@@ -78,7 +78,7 @@ pub struct ReplayArgs {
     /// --method factored: how a component too large to keep is split
     /// (least-loss: the old cut or, if it loses less, the best cut one
     /// exchange of tracks away from it).
-    #[arg(long, value_enum, default_value_t = SplitChoice::Original)]
+    #[arg(long, value_enum, default_value_t = SplitChoice::LeastLoss)]
     pub split: SplitChoice,
 
     /// --method factored: the regional rule of leaders at fixed places

@@ -113,7 +113,7 @@ pub fn check_options(args: &ReplayArgs) -> Result<()> {
     }
     let factored_options = args.coupling != CouplingChoice::Local
         || args.max_component.is_some()
-        || args.split != SplitChoice::Original
+        || args.split != SplitChoice::LeastLoss
         || args.regions.is_some()
         || args.leaders.is_some_and(|l| l > 1);
     if method != Method::Factored && factored_options {
@@ -419,7 +419,7 @@ pub(super) mod tests {
             known_start_confidence: None,
             coupling: CouplingChoice::Local,
             max_component: None,
-            split: SplitChoice::Original,
+            split: SplitChoice::LeastLoss,
             regions: None,
             leaders: None,
             topology: None,
