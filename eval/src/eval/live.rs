@@ -185,7 +185,7 @@ mod tests {
     fn the_committed_table_reads_back_as_it_was_written() {
         // The bench writes LiveRow::markdown; every row of the committed
         // file must come back from LiveRow::parse as the same line.
-        let docs = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs"));
+        let docs = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs"));
         let text = std::fs::read_to_string(docs.join(FILE)).unwrap();
         assert!(text.contains(TABLE_HEADER), "no table header in {FILE}");
         let mut rows = 0;
@@ -228,7 +228,7 @@ mod tests {
         // Regenerating live-accuracy.md (`idmesh bench --accuracy`) means
         // regenerating results.md (`idmesh eval --preset full --out-dir
         // docs`), which copies it.
-        let docs = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs"));
+        let docs = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs"));
         let committed = std::fs::read_to_string(docs.join("results.md")).unwrap();
         let section = section(docs);
         assert!(!section.contains("Not measured yet"), "{section}");

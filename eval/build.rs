@@ -16,25 +16,25 @@ include!("digest.rs");
 /// factory that builds its filters (not the replays: `idmesh eval` scores
 /// its traces with its own loop, `src/eval/score.rs`).
 const SOURCES: &[&str] = &[
-    "../../belief/src",
-    "../../sensor/sim/src/scenario",
-    "../../sensor/sim/src/motion",
-    "../../sensor/sim/src/events",
-    "../../sensor/extract/src",
-    "../../protocol/placement/src",
-    "../../protocol/src/trace",
+    "../belief/src",
+    "../world/sim/src/scenario",
+    "../world/sim/src/motion",
+    "../world/sim/src/events",
+    "../world/extract/src",
+    "../placement/src",
+    "../protocol/src/trace",
     "src/eval",
     "src/filters.rs",
 ];
 
 /// Inside those, code the evaluation does not run (identity beliefs have
 /// their own document, docs/design/identity.md).
-const LEFT_OUT: &[&str] = &["../../belief/src/identity"];
+const LEFT_OUT: &[&str] = &["../belief/src/identity"];
 
 /// Where this crate is in the workspace: file names enter the digest
 /// relative to the workspace root, so moving the crate again does not
 /// change the stamp.
-const CRATE: &str = "belief/eval";
+const CRATE: &str = "eval";
 
 fn main() {
     println!("cargo:rerun-if-changed=digest.rs");

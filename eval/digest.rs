@@ -37,7 +37,7 @@ fn sources_digest(sources: &[&str], left_out: &[&str], crate_dir: &str) -> u64 {
 }
 
 /// `file` named from the workspace root: `belief/src/lib.rs`,
-/// `belief/eval/src/filters.rs`.
+/// `eval/src/filters.rs`.
 fn workspace_name(file: &std::path::Path, crate_dir: &str) -> String {
     let name = file.to_string_lossy();
     let mut outside = name.as_ref();

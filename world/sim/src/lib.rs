@@ -5,7 +5,7 @@
 //! so the evaluation and the acoustic front end use it without the
 //! runtime. The sensor process that streams events to the leaders is
 //! `idmesh-sensor` (`sensor/`); the acoustic tracking front end is
-//! `idmesh-acoustic` (`sensor/acoustic/`).
+//! `idmesh-acoustic` (`world/acoustic/`).
 //!
 //! The scenario generator follows the evaluation of Jiang et al. (TOSN 2013,
 //! Section 6): targets move in a field, a `mix` is logged whenever two

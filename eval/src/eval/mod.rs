@@ -651,7 +651,7 @@ fn preset_name(preset: Preset) -> &'static str {
 }
 
 /// The line of results.md that says which code made it: the digest of the
-/// sources the evaluation runs (belief/eval/build.rs) and the preset.
+/// sources the evaluation runs (eval/build.rs) and the preset.
 fn stamp_line(preset: &str) -> String {
     format!(
         "<!-- idmesh eval stamp: preset {preset}, sources {} -->",
@@ -739,7 +739,7 @@ mod tests {
         // Any change to the filters, the simulators, the trace format or the
         // evaluation changes the stamp: regenerate docs/results.md with
         // `idmesh eval --preset full --out-dir docs` and commit it.
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/results.md");
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/results.md");
         let committed = std::fs::read_to_string(path).unwrap();
         assert!(
             committed.contains(&stamp_line("full")),
