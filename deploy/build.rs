@@ -17,6 +17,7 @@ const SOURCES: &[&str] = &[
     "../placement/src",
     "../protocol/ownership/src",
     "../belief/src",
+    "../identity/src",
     "../sensor/src",
     "../world/sim/src",
     "../leader/src",

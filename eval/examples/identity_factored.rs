@@ -24,16 +24,16 @@
 //!
 //!     cargo run --release -p idmesh-eval --example identity_factored [SEEDS] [OUT]
 
-use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_belief::identity::scoring::{add_reliability, brier, idf1, log_loss};
-use idmesh_belief::identity::{
-    BeliefMatrix, BitCode, ExactPermutationFilter, FactoredIdentity, FactoredIdentityOptions,
-    IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, PropertyBitsFilter,
-};
-use idmesh_belief::identity_event_of;
 use idmesh_belief::scoring::Reliability;
 use idmesh_belief::{RadonOptions, Sparsify};
 use idmesh_eval::eval::plots::{draw, reliability_series, Plot};
+use idmesh_identity::identity_event_of;
+use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::scoring::{add_reliability, brier, idf1, log_loss};
+use idmesh_identity::{
+    BeliefMatrix, BitCode, ExactPermutationFilter, FactoredIdentity, FactoredIdentityOptions,
+    IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, PropertyBitsFilter,
+};
 use idmesh_protocol::trace::Line;
 use idmesh_sim::scenario::trace_out::lines;
 use idmesh_sim::scenario::Scenario;

@@ -3,9 +3,9 @@
 //! the leaders and the coordinator must agree on about it.
 
 use crate::PlacementError;
-use idmesh_belief::identity::factored::{Background, Group, HeldTree, IdentityShare};
-use idmesh_belief::identity::FactoredIdentityOptions;
 use idmesh_belief::BeliefError;
+use idmesh_identity::factored::{Background, Group, HeldTree, IdentityShare};
+use idmesh_identity::FactoredIdentityOptions;
 use idmesh_protocol::wire::identity::{WireBackground, WireGroup, WireTree};
 use idmesh_protocol::wire::sensor_to_leader::Begin;
 
@@ -95,7 +95,7 @@ pub fn from_wire_tree(tree: WireTree) -> Result<HeldTree, BeliefError> {
 mod tests {
     use super::*;
     use idmesh_belief::event::Mix;
-    use idmesh_belief::identity::IdentityEvent;
+    use idmesh_identity::IdentityEvent;
 
     #[test]
     fn a_tree_crosses_the_wire_unchanged() {

@@ -12,7 +12,7 @@
 //! ```
 //!
 //! with `p_identity[t]` track t's marginals by row
-//! ([`idmesh_belief::identity::SparseMarginals`]: P(track t carries
+//! ([`idmesh_identity::SparseMarginals`]: P(track t carries
 //! identity i) = p where `listed` holds \[i, p\], `rest` otherwise) and
 //! `predicted_identity[t]` the identity of track t in the most likely
 //! one-to-one assignment under those marginals (Hungarian algorithm on
@@ -32,7 +32,7 @@
 //! cannot take — is reported as `FILE:LINE: reason` and ends the replay.
 //!
 //! The methods ([`IdentityMethod`]) are the engine's identity filters
-//! (`idmesh_belief::identity`): the exact filter over the N! assignments
+//! (`idmesh_identity`): the exact filter over the N! assignments
 //! (N ≤ 9), the belief matrix, the information matrix with marginals on
 //! demand ([`MarginalChoice`]), identities coded by property bits (one
 //! Radon property belief per bit, `--bits`, optional `--budget`), and the
@@ -54,17 +54,17 @@ use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
-use idmesh_belief::identity::factored::MAX_GROUP;
-use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
-use idmesh_belief::identity::permanent::MAX_PERMANENT_TRACKS;
-use idmesh_belief::identity::scoring::IdentityScores;
-use idmesh_belief::identity::{
-    identity_error, BeliefMatrix, BitCode, ExactPermutationFilter, FactoredIdentity,
-    FactoredIdentityOptions, IdentityEvent, IdentityFilter, IdentityRow, InformationMatrix,
-    InformationOptions, MarginalMethod, PropertyBitsFilter, SparseMarginals,
+use idmesh_belief::{BeliefError, RadonOptions, Sparsify};
+use idmesh_identity::factored::MAX_GROUP;
+use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::marginals::DEFAULT_SAMPLES;
+use idmesh_identity::permanent::MAX_PERMANENT_TRACKS;
+use idmesh_identity::scoring::IdentityScores;
+use idmesh_identity::{
+    identity_error, identity_event_of, BeliefMatrix, BitCode, ExactPermutationFilter,
+    FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter, IdentityRow,
+    InformationMatrix, InformationOptions, MarginalMethod, PropertyBitsFilter, SparseMarginals,
 };
-use idmesh_belief::{identity_event_of, BeliefError, RadonOptions, Sparsify};
 use idmesh_protocol::trace::{Header, Line, TraceReader, Truth};
 use serde::Serialize;
 use std::io::{BufRead, Write};
@@ -139,7 +139,7 @@ pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::FactoredIden
 pub const IDENTITY_METHOD_WITHOUT_START: IdentityMethod = IdentityMethod::InformationMatrix;
 
 /// The default group cap of --method factored-identity in replay.
-pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_belief::identity::factored::DEFAULT_MAX_GROUP;
+pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_identity::factored::DEFAULT_MAX_GROUP;
 
 /// The most states an exact bit belief of --method property-bits may need
 /// (the largest C(n, identities with the bit set)) before replay refuses
