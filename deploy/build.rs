@@ -5,20 +5,21 @@
 //! them). `idmesh bench --out` writes the stamp into the page it
 //! generates, so a page says which code measured it.
 //!
-//! The digest is idmesh-eval's (`belief/eval/digest.rs`): comment lines
+//! The digest is idmesh-eval's (`eval/digest.rs`): comment lines
 //! and indentation are left out.
 
-include!("../belief/eval/digest.rs");
+include!("../eval/digest.rs");
 
 /// Folders and files, relative to this crate.
 const SOURCES: &[&str] = &[
     "src",
     "../protocol/src",
-    "../protocol/placement/src",
+    "../placement/src",
     "../protocol/ownership/src",
     "../belief/src",
+    "../identity/src",
     "../sensor/src",
-    "../sensor/sim/src",
+    "../world/sim/src",
     "../leader/src",
     "../coordinator/src",
     "../Cargo.lock",
@@ -31,7 +32,7 @@ const LEFT_OUT: &[&str] = &["src/acoustic.rs", "src/simulate.rs"];
 const CRATE: &str = "deploy";
 
 fn main() {
-    println!("cargo:rerun-if-changed=../belief/eval/digest.rs");
+    println!("cargo:rerun-if-changed=../eval/digest.rs");
     println!(
         "cargo:rustc-env=IDMESH_BENCH_STAMP={:016x}",
         sources_digest(SOURCES, LEFT_OUT, CRATE)

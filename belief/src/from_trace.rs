@@ -1,12 +1,12 @@
 //! The engine's reading of a stream, in the protocol's terms: the field a
 //! trace header or a stream's `Begin` describes ([`field_of`]), and the
-//! event a trace line carries for a property filter ([`event_of`]) or an
-//! identity filter ([`identity_event_of`]). The one place where trace lines
-//! become engine events, so `idmesh replay`, the evaluation and the leaders
-//! start from the same belief and apply the same events.
+//! event a trace line carries for a property filter ([`event_of`]; an
+//! identity filter's is `idmesh_identity::identity_event_of`, over the
+//! same [`mix_of`]). The one place where trace lines become engine events,
+//! so `idmesh replay`, the evaluation and the leaders start from the same
+//! belief and apply the same events.
 
 use crate::event::{Event, Field, Mix, Observe};
-use crate::identity::{Identify, IdentityEvent};
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::StreamStart;
 
@@ -41,24 +41,9 @@ pub fn event_of(line: &Line) -> Option<Event> {
     }
 }
 
-/// The identity event a line carries: `mix` and `identify`; `None` for the
-/// lines that mean nothing to an identity belief (`observe`, `move`) and
-/// for those that are not events.
-pub fn identity_event_of(line: &Line) -> Option<IdentityEvent> {
-    match line {
-        Line::Mix(mix) => Some(IdentityEvent::Mix(mix_of(mix))),
-        Line::Identify(read) => Some(IdentityEvent::Identify(Identify {
-            track: read.track,
-            identity: read.identity,
-            accuracy: read.accuracy,
-        })),
-        Line::Observe(_) | Line::Move(_) | Line::Header(_) | Line::Truth(_) | Line::Detect(_) => {
-            None
-        }
-    }
-}
-
-fn mix_of(mix: &idmesh_protocol::trace::Mix) -> Mix {
+/// The engine's mix of a trace line's: the same for a property and an
+/// identity belief (`idmesh_identity::identity_event_of` reads it too).
+pub fn mix_of(mix: &idmesh_protocol::trace::Mix) -> Mix {
     Mix {
         a: mix.a,
         b: mix.b,
@@ -70,7 +55,7 @@ fn mix_of(mix: &idmesh_protocol::trace::Mix) -> Mix {
 mod tests {
     use super::*;
     use crate::event::RedCount;
-    use idmesh_protocol::trace::{self, Header};
+    use idmesh_protocol::trace::Header;
     use idmesh_protocol::wire::sensor_to_leader::Begin;
 
     #[test]
@@ -109,60 +94,5 @@ mod tests {
             ..begin
         };
         assert_eq!(field_of(&unknown).red, RedCount::unknown_uniform(3));
-    }
-
-    #[test]
-    fn each_filter_takes_the_lines_that_bear_on_it() {
-        let mix = Line::Mix(trace::Mix {
-            time: 1.0,
-            a: 0,
-            b: 2,
-            swap: 0.25,
-        });
-        let observe = Line::Observe(trace::Observe {
-            time: 1.0,
-            track: 1,
-            red: 0.8,
-            blue: 0.2,
-            sensor: None,
-        });
-        let identify = Line::Identify(trace::Identify {
-            time: 1.0,
-            track: 2,
-            identity: 0,
-            accuracy: 0.9,
-        });
-        let moved = Line::Move(trace::Move {
-            time: 1.0,
-            track: 0,
-            x: 0.0,
-            y: 0.0,
-        });
-        let want_mix = Mix {
-            a: 0,
-            b: 2,
-            swap: 0.25,
-        };
-        assert_eq!(event_of(&mix), Some(Event::Mix(want_mix)));
-        assert_eq!(identity_event_of(&mix), Some(IdentityEvent::Mix(want_mix)));
-        assert_eq!(
-            event_of(&observe),
-            Some(Event::Observe(Observe {
-                track: 1,
-                red: 0.8,
-                blue: 0.2
-            }))
-        );
-        assert_eq!(identity_event_of(&observe), None);
-        assert_eq!(event_of(&identify), None);
-        assert_eq!(
-            identity_event_of(&identify),
-            Some(IdentityEvent::Identify(Identify {
-                track: 2,
-                identity: 0,
-                accuracy: 0.9
-            }))
-        );
-        assert_eq!((event_of(&moved), identity_event_of(&moved)), (None, None));
     }
 }

@@ -26,9 +26,10 @@
 //! - [`particle`] — [`ParticleFilter`], sequential Monte Carlo over red
 //!   sets: the yardstick a practitioner would reach for.
 //! - [`workload`] — seeded random event streams for tests and benchmarks.
-//! - [`identity`] — identity management (Shin et al., IPSN 2005): the exact
-//!   filter over N! assignments, the belief matrix, the information matrix
-//!   with marginals on demand, and identities coded by property bits.
+//!
+//! Identity beliefs (who is on which track; Shin et al., IPSN 2005) are
+//! the crate beside this one, `idmesh-identity`, which builds on the
+//! events, errors, scores and Radon belief here.
 
 pub mod baseline;
 pub mod error;
@@ -36,7 +37,6 @@ pub mod event;
 pub mod factored;
 pub mod filter;
 pub mod from_trace;
-pub mod identity;
 pub mod particle;
 pub mod radon;
 pub mod scoring;
@@ -49,11 +49,7 @@ pub use error::BeliefError;
 pub use event::{Event, Field, Mix, Observe, RedCount};
 pub use factored::{Coupling, FactoredBelief, FactoredOptions, SplitRule};
 pub use filter::{predict_red, tracking_error, PropertyFilter};
-pub use from_trace::{event_of, field_of, identity_event_of};
-pub use identity::{
-    identity_error, most_likely_assignment, BeliefMatrix, ExactPermutationFilter, Identify,
-    IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod, PropertyBitsFilter,
-};
+pub use from_trace::{event_of, field_of};
 pub use particle::ParticleFilter;
 pub use radon::{RadonBelief, RadonOptions, Sparsify, SparsifyMethod};
 pub use scoring::{brier_score, expected_tracking_error, log_loss, Reliability};

@@ -7,14 +7,14 @@
 //! (`?marginals=auto|exact|metropolis|sinkhorn|bethe`; exact by default up
 //! to [`EXACT_BY_DEFAULT`] tracks, `auto` beyond: every independent block
 //! of mixed tracks exactly when small, half-Bethe when larger, sampled
-//! when larger still — `belief::identity::marginals`), then the
+//! when larger still — `idmesh_identity::marginals`), then the
 //! most likely one-to-one assignment under them (block by block).
 
 use crate::driver::gather::{collect, At, Collected, GatherError, Memory, Share};
 use crate::driver::CoordinatorConfig;
-use idmesh_belief::identity::factored::assemble;
-use idmesh_belief::identity::marginals::DEFAULT_SAMPLES;
-use idmesh_belief::identity::{InformationOptions, InformationRows, MarginalMethod};
+use idmesh_identity::factored::assemble;
+use idmesh_identity::marginals::DEFAULT_SAMPLES;
+use idmesh_identity::{InformationOptions, InformationRows, MarginalMethod};
 use idmesh_placement::{from_wire_tree, identity_options};
 use idmesh_protocol::wire::identity::MAX_GROUP;
 use idmesh_protocol::wire::query::{IdentityAnswer, SamplingReport};
@@ -76,7 +76,7 @@ impl Method {
             Method::BySize if n <= EXACT_BY_DEFAULT => Ok(MarginalMethod::Exact),
             // Exact on each small block of mixed tracks, half-Bethe or
             // Metropolis on large ones: answers at any size
-            // (belief::identity::marginals).
+            // (idmesh_identity::marginals).
             Method::BySize => Ok(MarginalMethod::Auto),
             // Exact takes any n whose blocks are small enough; the engine
             // names the block that is not.

@@ -7,7 +7,7 @@
 //! the consistent cuts the coordinator's queries are answered at (Section
 //! 5.4 of the property-management paper; docs/design/architecture.md).
 //! What the events are made from — simulated crowds, real pedestrian
-//! scenes — is the pure crate `idmesh-sim` (`sensor/sim/`).
+//! scenes — is the pure crate `idmesh-sim` (`world/sim/`).
 //!
 //! A map of the crate, the pure state machine first:
 //! - [`machine`] — the sensor as a pure state machine ([`Gateway`]):

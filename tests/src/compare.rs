@@ -1,7 +1,7 @@
 //! What the process tests compare: marginals in a JSON answer against the
 //! centralized engine's.
 
-use idmesh_belief::identity::{IdentityRow, SparseMarginals};
+use idmesh_identity::{IdentityRow, SparseMarginals};
 use serde_json::Value;
 
 /// The numbers of a JSON array.

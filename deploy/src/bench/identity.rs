@@ -18,12 +18,10 @@ use super::{write, BenchOptions, Deployment, Made};
 use crate::runtime::launch::simulate_crowd;
 use crate::runtime::query::ask;
 use anyhow::{anyhow, bail, Context, Result};
-use idmesh_belief::identity::blocks::mixing_block_sizes;
-use idmesh_belief::identity::sparse_marginals::SparseMarginals;
-use idmesh_belief::identity::{
-    FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter,
-};
-use idmesh_belief::identity_event_of;
+use idmesh_identity::blocks::mixing_block_sizes;
+use idmesh_identity::identity_event_of;
+use idmesh_identity::sparse_marginals::SparseMarginals;
+use idmesh_identity::{FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter};
 use idmesh_protocol::trace::{Line, NumberedLine, TraceReader};
 use idmesh_protocol::wire::query::IdentityAnswer;
 use std::fmt::Write as _;

@@ -62,11 +62,11 @@
 
 use crate::error::LeaderError;
 use idmesh_belief::factored::FactoredShare;
-use idmesh_belief::identity::factored::IdentityShare;
-use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_belief::identity::{Identify, IdentityEvent, InformationRows};
 use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe, TrackSet};
+use idmesh_identity::factored::IdentityShare;
+use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::{Identify, IdentityEvent, InformationRows};
 use idmesh_placement::{start, start_factored, start_identity};
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};

@@ -253,7 +253,7 @@ fn duplicates_and_reordered_batches_change_nothing() {
 /// one; the rows put together equal the centralized information matrix.
 #[test]
 fn identity_rows_live_with_their_tracks_and_only_mixes_and_handovers_move_them() {
-    use idmesh_belief::identity::{IdentityFilter, InformationMatrix, InformationOptions};
+    use idmesh_identity::{IdentityFilter, InformationMatrix, InformationOptions};
     let start = vec![2, 0, 3, 1];
     let begin = Item::Begin(Begin {
         factored_identity: None,
@@ -978,7 +978,7 @@ impl Hand {
         seq: u64,
         (what, x, y, z): (&str, u32, u32, f64),
         owners: &mut [usize],
-        central: &mut impl idmesh_belief::identity::IdentityFilter,
+        central: &mut impl idmesh_identity::IdentityFilter,
         reads_to_all: bool,
     ) {
         match what {
@@ -1033,7 +1033,7 @@ impl Hand {
 
     /// The rows of every leader, put together.
     fn matrix(&self, n: usize) -> Vec<Vec<f64>> {
-        use idmesh_belief::identity::InformationOptions;
+        use idmesh_identity::InformationOptions;
         let rows = self
             .leaders
             .iter()
@@ -1055,7 +1055,7 @@ impl Hand {
 /// centralized information matrix bit for bit after every item.
 #[test]
 fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapshots() {
-    use idmesh_belief::identity::{InformationMatrix, InformationOptions};
+    use idmesh_identity::{InformationMatrix, InformationOptions};
     use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
     for regional in [false, true] {
         let start = vec![2, 0, 3, 1, 4];
@@ -1404,9 +1404,9 @@ fn an_adopted_track_takes_its_start_row() {
 /// together equal the centralized belief after every item.
 #[test]
 fn factored_leaders_carry_identity_trees_through_mixes_swaps_handovers_and_snapshots() {
-    use idmesh_belief::identity::factored::assemble;
-    use idmesh_belief::identity::filter::max_abs_difference;
-    use idmesh_belief::identity::{FactoredIdentity, IdentityFilter};
+    use idmesh_identity::factored::assemble;
+    use idmesh_identity::filter::max_abs_difference;
+    use idmesh_identity::{FactoredIdentity, IdentityFilter};
     use idmesh_placement::{from_wire_tree, identity_options};
     use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
     for (regional, cap) in [(false, 9), (true, 9), (true, 3)] {

@@ -8,13 +8,14 @@
 //! events): for them also the centralized information matrix after every
 //! prefix, which the leaders' rows at a cut must put back together.
 
-use idmesh_belief::identity::filter::to_rows;
-use idmesh_belief::identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_belief::identity::{
+use idmesh_belief::radon::{RadonBelief, RadonOptions};
+use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
+use idmesh_identity::filter::to_rows;
+use idmesh_identity::identity_event_of;
+use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::{
     FactoredIdentity, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
 };
-use idmesh_belief::radon::{RadonBelief, RadonOptions};
-use idmesh_belief::{identity_event_of, FactoredBelief, Field, PropertyFilter};
 use idmesh_placement::{factored_options, identity_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};

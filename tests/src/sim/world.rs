@@ -10,11 +10,11 @@
 use super::network::{Endpoint, Network};
 use super::scenario::{exact_marginals, Scenario};
 use super::Violation;
-use idmesh_belief::identity::factored::assemble;
-use idmesh_belief::identity::{IdentityFilter, InformationOptions, InformationRows};
 use idmesh_coordinator::machine::{
     at_rest_of, check, marginals_of, read_cut, GatherError, Memory, Partials,
 };
+use idmesh_identity::factored::assemble;
+use idmesh_identity::{IdentityFilter, InformationOptions, InformationRows};
 use idmesh_leader::journal::Kind;
 use idmesh_leader::machine::{Ask, Input, Node, Output, Timers};
 use idmesh_placement::{from_wire_tree, identity_options};
