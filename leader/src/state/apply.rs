@@ -253,19 +253,37 @@ impl Leader {
         };
         let adoptions = item.adoptions();
         for track in named.into_iter().flatten() {
-            let kept_tree = started.passive_trees.remove(&track);
-            if !started.passive.remove(&track) || adoptions.contains(&(track, me)) {
-                continue;
+            if !adoptions.contains(&(track, me)) {
+                self.drop_passive(track)?;
+            } else {
+                let started = self.started()?;
+                started.passive_trees.remove(&track);
+                started.passive.remove(&track);
             }
-            if let Some(held) = &mut started.factored {
-                held.drop_start(track)?;
-            }
-            if let Some(rows) = &mut started.rows {
-                rows.take(track);
-            }
-            if let (Some(trees), true) = (&mut started.trees, kept_tree) {
-                trees.drop_start(track)?;
-            }
+        }
+        Ok(())
+    }
+
+    /// Drops what this leader kept of `track` as its keeper, if it still
+    /// keeps it: the track was adopted elsewhere, of which a keeper is not
+    /// told, so what it kept is stale. Before an item that names the
+    /// track, and before a transfer brings the track's component (which
+    /// can come first: a mix of two other tracks sends the component the
+    /// adopter made of it).
+    pub(super) fn drop_passive(&mut self, track: u32) -> Result<(), LeaderError> {
+        let started = self.started()?;
+        let kept_tree = started.passive_trees.remove(&track);
+        if !started.passive.remove(&track) {
+            return Ok(());
+        }
+        if let Some(held) = &mut started.factored {
+            held.drop_start(track)?;
+        }
+        if let Some(rows) = &mut started.rows {
+            rows.take(track);
+        }
+        if let (Some(trees), true) = (&mut started.trees, kept_tree) {
+            trees.drop_start(track)?;
         }
         Ok(())
     }

@@ -1351,6 +1351,59 @@ fn a_track_no_leader_surveilled_is_adopted_at_its_first_item() {
     );
 }
 
+/// A keeper is not told of an adoption elsewhere, and the adopter's
+/// component of the track can reach it before any item that names the
+/// track: a mix of two other tracks brings it. The keeper drops what it
+/// kept and takes the component, where it refused the transfer before
+/// (found by `idmesh bench --accuracy`: every leader stopped).
+#[test]
+fn a_kept_track_adopted_elsewhere_can_come_in_a_component() {
+    use idmesh_protocol::wire::factored::WireComponent;
+    use idmesh_protocol::wire::sensor_to_leader::UNHELD;
+    let mut a = factored_leader_with(&["a", "b"], vec![UNHELD; 4], true);
+    let rest = a.quiet(false).expect("quiet after the Begin");
+    assert_eq!(rest.sums.passive, vec![0, 2], "a keeps tracks 0 and 2");
+    // b adopted 0 and 3 and mixed them (a heard nothing of it); now 2,
+    // adopted here, meets 3 across the two regions: a waits for the
+    // component of 3, which holds 0.
+    let mix = Item::Mix {
+        a: 2,
+        b: 3,
+        swap: 0.5,
+        owner_a: 0,
+        owner_b: 1,
+        handed: None,
+        adopted: vec![2],
+    };
+    a.batch(batch(1, vec![(2, mix)], 2, false), 0).unwrap();
+    assert!(
+        a.factored().unwrap().holds(0),
+        "still kept: nothing named 0"
+    );
+    let transfer = Transfer {
+        trees: Vec::new(),
+        version: VERSION,
+        from: 1,
+        seq: 2,
+        sets: Vec::new(),
+        rows: Vec::new(),
+        components: vec![WireComponent {
+            tracks: vec![3, 0],
+            table: vec![0.0, 0.5, 0.5, 0.0],
+            log_scale: 0.0,
+            last_mix: vec![1, 1],
+        }],
+    };
+    let actions = a.transfer(transfer, 0).expect("the component is taken in");
+    assert_eq!(
+        sent_tracks(&actions, 1),
+        vec![vec![3, 0]],
+        "kept apart, 3's component goes back whole"
+    );
+    let rest = a.quiet(false).expect("nothing left to wait for");
+    assert!(rest.sums.passive.is_empty(), "the kept 0 is gone");
+}
+
 /// On an identity stream an adopted track's row is the start row, made
 /// where it is adopted; a keeper's kept row goes with its start component.
 #[test]

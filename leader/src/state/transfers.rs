@@ -336,6 +336,13 @@ impl Leader {
         if components.is_empty() {
             return Ok(());
         }
+        // A track kept here as its keeper, adopted elsewhere since: its
+        // component comes, and the stale start component goes.
+        for c in &components {
+            for &t in &c.tracks {
+                self.drop_passive(t)?;
+            }
+        }
         let held = self.started()?.factored.as_mut().ok_or_else(|| {
             LeaderError::BadTransfer("components of a factored belief on a Radon stream".into())
         })?;
