@@ -29,7 +29,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 mod common;
-use common::valid::{partner, swap_probability};
+use common::valid::{check_marginals, partner, swap_probability};
 
 /// A stream and the truth behind it: `n` tracks, `k` red, `len` events;
 /// returns the red tracks at time 0 and the events.
@@ -97,24 +97,6 @@ fn colour_stream(n: usize, k: usize, len: usize, seed: u64) -> (Vec<u32>, Vec<Ev
     (initial, events)
 }
 
-fn check_colours(p: &[f64], k: usize, at: usize) -> Result<(), TestCaseError> {
-    prop_assert!(
-        p.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)),
-        "marginals out of [0, 1] after event {}: {:?}",
-        at,
-        p
-    );
-    let sum: f64 = p.iter().sum();
-    prop_assert!(
-        (sum - k as f64).abs() < 1e-6 * (1.0 + k as f64),
-        "marginals sum to {} ≠ k = {} after event {}",
-        sum,
-        k,
-        at
-    );
-    Ok(())
-}
-
 /// Runs a colour stream through `filter`, checking the marginals `checks`
 /// times along the way and at the end.
 fn run_colours(
@@ -134,7 +116,7 @@ fn run_colours(
             let p = filter.marginals().map_err(|err| {
                 TestCaseError::fail(format!("no marginals after event {i} ({e:?}): {err}"))
             })?;
-            check_colours(&p, k, i)?;
+            check_marginals(&p, k, i)?;
         }
     }
     Ok(())

@@ -22,6 +22,9 @@ use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+mod common;
+use common::valid::check_marginals;
+
 /// A stream and the truth behind it: `n` tracks, `k` red, `len` events.
 fn valid_stream(n: usize, k: usize, len: usize, seed: u64) -> (Vec<u32>, Vec<Event>) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -86,24 +89,6 @@ fn valid_stream(n: usize, k: usize, len: usize, seed: u64) -> (Vec<u32>, Vec<Eve
         }
     }
     (initial, events)
-}
-
-fn check_marginals(p: &[f64], k: usize, at: usize) -> Result<(), TestCaseError> {
-    prop_assert!(
-        p.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)),
-        "marginals out of [0, 1] after event {}: {:?}",
-        at,
-        p
-    );
-    let sum: f64 = p.iter().sum();
-    prop_assert!(
-        (sum - k as f64).abs() < 1e-6 * (1.0 + k as f64),
-        "marginals sum to {} ≠ k = {} after event {}",
-        sum,
-        k,
-        at
-    );
-    Ok(())
 }
 
 /// k, the field (known start or uniform prior) and a valid stream on it:

@@ -971,7 +971,10 @@ impl FactoredBelief {
             let a = original.count_ones() as usize;
             a > 0 && a < m && a <= self.options.max_component && m - a <= self.options.max_component
         };
-        let recent = || {
+        // The first half of a cut: the `split_size` tracks that come first
+        // by (their clock, latest first; then their number), the mixed
+        // pair before all.
+        let first_by = |clock: &dyn Fn(u32) -> u64| {
             let size = self.split_size(m, others);
             let mut order: Vec<usize> = (0..m).collect();
             order.sort_by_key(|&b| {
@@ -979,21 +982,15 @@ impl FactoredBelief {
                 let when = if t == mix.a || t == mix.b {
                     u64::MAX
                 } else {
-                    self.last_mix[t as usize]
+                    clock(t)
                 };
                 (std::cmp::Reverse(when), t)
             });
             order[..size].iter().map(|&b| 1usize << b).sum::<usize>()
         };
-        let paired = || {
-            let size = self.split_size(m, others);
-            let mut order: Vec<usize> = (0..m).collect();
-            order.sort_by_key(|&b| {
-                let t = merged.tracks[b];
-                (t != mix.a && t != mix.b, t)
-            });
-            order[..size].iter().map(|&b| 1usize << b).sum::<usize>()
-        };
+        let recent = || first_by(&|t| self.last_mix[t as usize]);
+        // No clock, so that events on disjoint components commute.
+        let paired = || first_by(&|_| 0);
         match self.options.split {
             SplitRule::Original if original_ok => weighted.project(original, tol, sweeps),
             SplitRule::Original | SplitRule::Recent => weighted.project(recent(), tol, sweeps),

@@ -126,18 +126,8 @@ impl<'a> Weighted<'a> {
     ) -> Result<Projection, BeliefError> {
         let bits = self.merged.len();
         let part_b = ((1usize << bits) - 1) & !part_a;
-        let (na, nb) = (part_a.count_ones() as usize, part_b.count_ones() as usize);
-        debug_assert!(na > 0 && nb > 0);
-        // Marginal tables of P on x_A and x_B.
-        let mut pa = vec![0.0; 1 << na];
-        let mut pb = vec![0.0; 1 << nb];
-        for_each_split(bits, part_a, |x, ia, ib| {
-            pa[ia] += self.w[x];
-            pb[ib] += self.w[x];
-        });
-        for p in pa.iter_mut().chain(pb.iter_mut()) {
-            *p /= self.total;
-        }
+        debug_assert!(part_a.count_ones() > 0 && part_b.count_ones() > 0);
+        let (pa, pb) = self.marginals(part_a);
         let tracks_of = |mask: usize| -> Vec<u32> {
             (0..bits)
                 .filter(|b| mask & (1 << b) != 0)

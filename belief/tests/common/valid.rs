@@ -4,6 +4,7 @@
 //! identity beliefs' (idmesh-identity's `tests/common`) include this file
 //! for the partners and swap probabilities of their mixes.
 
+use proptest::prelude::{prop_assert, TestCaseError};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -28,4 +29,24 @@ pub fn swap_probability(rng: &mut ChaCha8Rng) -> f64 {
         4 => 1.0 - rng.gen_range(1e-12..1e-3),
         _ => rng.gen_range(0.0..1.0),
     }
+}
+
+/// A colour belief's marginals after event `at` of a valid stream: each
+/// in [0, 1], summing to the red count k.
+pub fn check_marginals(p: &[f64], k: usize, at: usize) -> Result<(), TestCaseError> {
+    prop_assert!(
+        p.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)),
+        "marginals out of [0, 1] after event {}: {:?}",
+        at,
+        p
+    );
+    let sum: f64 = p.iter().sum();
+    prop_assert!(
+        (sum - k as f64).abs() < 1e-6 * (1.0 + k as f64),
+        "marginals sum to {} ≠ k = {} after event {}",
+        sum,
+        k,
+        at
+    );
+    Ok(())
 }
