@@ -33,6 +33,9 @@ pub(crate) struct CountPrior {
     ln: Vec<f64>,
     /// π(s)/max π.
     scaled: Vec<f64>,
+    /// How many counts below s π allows (s = 0..=n + 1), to ask in O(1)
+    /// whether it allows any count in a range.
+    allowed_below: Vec<usize>,
 }
 
 impl CountPrior {
@@ -62,12 +65,40 @@ impl CountPrior {
         }
         let ln_max = ln.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let scaled = ln.iter().map(|&l| (l - ln_max).exp()).collect();
-        CountPrior { ln, scaled }
+        let mut allowed_below = vec![0];
+        for l in &ln {
+            let before = allowed_below[allowed_below.len() - 1];
+            allowed_below.push(before + usize::from(l.is_finite()));
+        }
+        CountPrior {
+            ln,
+            scaled,
+            allowed_below,
+        }
     }
 
     /// Whether π allows one count only (k known, or a known start).
     pub(crate) fn is_point(&self) -> bool {
         self.ln.iter().filter(|l| l.is_finite()).count() == 1
+    }
+
+    /// Whether π allows some count in `from..=to`.
+    pub(crate) fn allows_any(&self, from: usize, to: usize) -> bool {
+        let n = self.ln.len() - 1;
+        from <= to.min(n) && self.allowed_below[to.min(n) + 1] > self.allowed_below[from]
+    }
+
+    /// Whether `r`, weights computed for a component holding the count
+    /// vector `own`, is zero at a count the component holds while the rest
+    /// (whose components hold counts `rest.0..=rest.1` between them) could
+    /// complete it: a zero that is not a fact of the belief but an entry
+    /// flushed on the way, where the component's own table may weigh
+    /// 10^300 times more. Such weights would cut support the reads allow.
+    pub(crate) fn flushed(&self, own: &[f64], rest: (usize, usize), r: &[f64]) -> bool {
+        own.iter()
+            .zip(r)
+            .enumerate()
+            .any(|(s, (&c, &w))| c > 0.0 && w == 0.0 && self.allows_any(s + rest.0, s + rest.1))
     }
 
     /// ln π(s) for s = 0..=n (−∞ where no set of size s is admissible).
@@ -131,6 +162,22 @@ impl CountPrior {
         }
         best as f64
     }
+}
+
+/// The lowest and the highest count `counts` holds with positive weight;
+/// `None` for an empty vector or one of zeros.
+pub(crate) fn support(counts: &[f64]) -> Option<(usize, usize)> {
+    let lo = counts.iter().position(|&x| x > 0.0)?;
+    let hi = counts.iter().rposition(|&x| x > 0.0)?;
+    Some((lo, hi))
+}
+
+/// The sums of the lowest and of the highest held counts of `counts`.
+fn support_sums(counts: &[&[f64]]) -> (usize, usize) {
+    counts
+        .iter()
+        .filter_map(|c| support(c))
+        .fold((0, 0), |(lo, hi), (l, h)| (lo + l, hi + h))
 }
 
 /// a ⊛ b into `out` (resized).
@@ -198,17 +245,26 @@ impl CountPrior {
     /// from all the others and π, scaled to a largest entry of 1. `None`
     /// when every count of j is ruled out (the belief has no mass).
     pub(crate) fn leave_one_out(&self, counts: &[&[f64]], j: usize) -> Option<Vec<f64>> {
+        let (lo, hi) = support_sums(counts);
+        let (own_lo, own_hi) = support(counts[j]).unwrap_or((0, 0));
         match self.fast_leave_one_out(counts, j) {
-            Some(r) => Some(r),
-            None => self.ln_leave_one_out(counts, j),
+            Some(r) if !self.flushed(counts[j], (lo - own_lo, hi - own_hi), &r) => Some(r),
+            _ => self.ln_leave_one_out(counts, j),
         }
     }
 
     /// R_{−j} for every component j (see [`leave_one_out`](Self::leave_one_out)).
     pub(crate) fn all_leave_one_out(&self, counts: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
+        let (lo, hi) = support_sums(counts);
+        let trusted = |all: &Vec<Vec<f64>>| {
+            all.iter().zip(counts).all(|(r, c)| {
+                let (own_lo, own_hi) = support(c).unwrap_or((0, 0));
+                !self.flushed(c, (lo - own_lo, hi - own_hi), r)
+            })
+        };
         match self.fast_all(counts) {
-            Some(all) => all.into_iter().map(Some).collect(),
-            None => self.ln_all(counts),
+            Some(all) if trusted(&all) => all.into_iter().map(Some).collect(),
+            _ => self.ln_all(counts),
         }
     }
 
@@ -431,5 +487,33 @@ mod tests {
         let one = prior.leave_one_out(&counts, 10).unwrap();
         close(&one, all[10].as_ref().unwrap(), 1e-9);
         assert!(prior.ln_total(&counts).is_finite());
+    }
+
+    /// A zero where the component holds mass and the rest could complete
+    /// the count is flushed; a zero the rest's supports explain (the rest
+    /// holds at least one red track) or a count the component does not
+    /// hold is a fact.
+    #[test]
+    fn only_zeros_nothing_explains_are_flushed() {
+        let field = Field::uniform(6, 2);
+        let prior = CountPrior::new(&field);
+        let own = [1e-200, 1.0, 0.0];
+        // The rest can hold 0 to 3 red: counts 0, 1 of the component are
+        // completed (k = 2), so a zero weight there is flushed.
+        assert!(prior.flushed(&own, (0, 3), &[1.0, 0.0, 0.0]));
+        assert!(prior.flushed(&own, (0, 3), &[0.0, 1.0, 0.0]));
+        // The rest holds exactly 2 red: only count 0 is completed.
+        assert!(!prior.flushed(&own, (2, 2), &[1.0, 0.0, 0.0]));
+        // Count 2 is not held: its zero says nothing.
+        assert!(!prior.flushed(&own, (0, 3), &[1.0, 1.0, 0.0]));
+        // Both other tracks red is 10^-400 (0 in the fast path's product)
+        // against 10^-200 for one of them: the weight of the component's
+        // count 0 is 10^-200 of its count 1's, not 0.
+        let a = [1.0, 1e-200];
+        let b = [1.0, 1e-200];
+        let c = [1.0, 1.0];
+        assert_eq!(prior.fast_leave_one_out(&[&a, &b, &c], 2).unwrap()[0], 0.0);
+        let r = prior.leave_one_out(&[&a, &b, &c], 2).unwrap();
+        assert!(r[1] == 1.0 && r[0] > 1e-202 && r[0] < 1e-199, "{r:?}");
     }
 }

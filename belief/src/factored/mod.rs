@@ -450,25 +450,38 @@ impl FactoredBelief {
     /// without it), and by the eager log-space evaluation if it still is.
     fn leave_one_out(&self, slot: usize, width: usize) -> Result<Vec<f64>, BeliefError> {
         let mut tree = self.lock_tree();
-        match tree.reservoir_leave_one_out(&self.prior, slot, width) {
-            Reservoir::Weights(r) => return Ok(r),
+        // Every fast answer is checked for entries flushed to zero where
+        // the component holds mass: taken as they are, they would cut
+        // support the reads allow (and the next sighting could find none).
+        let prior = &self.prior;
+        let trusted = |tree: &CountTree, r: Vec<f64>| (!tree.flushed(prior, slot, &r)).then_some(r);
+        match tree.reservoir_leave_one_out(prior, slot, width) {
+            Reservoir::Weights(r) => {
+                if let Some(r) = trusted(&tree, r) {
+                    return Ok(r);
+                }
+            }
             Reservoir::OffCentre => {
                 self.retilt(&mut tree, false);
-                if let Reservoir::Weights(r) =
-                    tree.reservoir_leave_one_out(&self.prior, slot, width)
-                {
-                    return Ok(r);
+                if let Reservoir::Weights(r) = tree.reservoir_leave_one_out(prior, slot, width) {
+                    if let Some(r) = trusted(&tree, r) {
+                        return Ok(r);
+                    }
                 }
             }
             Reservoir::Declined => {}
         }
-        if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
-            return Ok(r);
+        if let Some(r) = tree.leave_one_out(prior, slot, width) {
+            if let Some(r) = trusted(&tree, r) {
+                return Ok(r);
+            }
         }
         for exact in [false, true] {
             self.retilt(&mut tree, exact);
-            if let Some(r) = tree.leave_one_out(&self.prior, slot, width) {
-                return Ok(r);
+            if let Some(r) = tree.leave_one_out(prior, slot, width) {
+                if let Some(r) = trusted(&tree, r) {
+                    return Ok(r);
+                }
             }
         }
         drop(tree);
@@ -575,6 +588,13 @@ impl FactoredBelief {
     /// Replaces the components in the slots `remove` by `add`: touches only
     /// those slots, their tracks and their leaves of the count tree.
     fn replace(&mut self, remove: &[usize], add: Vec<Component>) {
+        let add: Vec<Component> = if self.options.coupling.is_local() {
+            add
+        } else {
+            add.into_iter()
+                .map(|c| self.without_excluded_counts(c))
+                .collect()
+        };
         let kept = self.tree_kept;
         if !kept {
             *self.tree_stale.get_mut() = true;
@@ -601,6 +621,35 @@ impl FactoredBelief {
             }
             self.comps[slot] = Some(c);
         }
+    }
+
+    /// `c` without the sets whose red count no completion of the rest
+    /// allows (they weigh nothing in the belief, so dropping them is exact;
+    /// see the same step in `observe`). Under the coupled weights a merge
+    /// (the outer product of two tables) or a split (tables fitted where Q
+    /// is zero are free there) can leave such sets holding most of a
+    /// table's scale: with a known count of one red target, a 3-track table
+    /// ended up all red at 1 and the one set that matters at 10^-252, and
+    /// the next sightings underflowed it to 0. Unchanged if nothing else
+    /// would be left (the caller's checks then report it).
+    fn without_excluded_counts(&mut self, c: Component) -> Component {
+        let open = self.uninformed_support(c.len());
+        let excluded = |y: usize| !open[y.count_ones() as usize];
+        if !c
+            .table
+            .iter()
+            .enumerate()
+            .any(|(y, &g)| g > 0.0 && excluded(y))
+        {
+            return c;
+        }
+        let mut table = c.table.clone();
+        for (y, g) in table.iter_mut().enumerate() {
+            if excluded(y) {
+                *g = 0.0;
+            }
+        }
+        Component::from_table(c.tracks.clone(), table, c.log_scale).unwrap_or(c)
     }
 
     /// The count weights of a merged component of `width` − 1 tracks that
@@ -1051,14 +1100,15 @@ impl PropertyFilter for FactoredBelief {
         } else {
             self.leave_one_out(c, new_counts.len())?
         };
-        let comp = self.comp(c);
+        let r = table::balanced(&new_counts, &r);
         let dot = |v: &[f64]| v.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
-        let (before, after) = (dot(&comp.counts), dot(&new_counts));
+        let (before, after) = (dot(&self.comp(c).counts), dot(&new_counts));
         if after.is_nan() || after <= 0.0 {
             return Err(BeliefError::ImpossibleObservation {
                 probability: if before > 0.0 { after / before } else { 0.0 },
             });
         }
+        let comp = self.comp(c);
         let updated = Component::from_table(comp.tracks.clone(), table, comp.log_scale)?;
         let fixed = table::certain_odds(
             &updated.table,
@@ -1153,13 +1203,21 @@ fn coupling_weights(
     counts: &[&[f64]],
     tracks: usize,
 ) -> Result<Vec<Option<Vec<f64>>>, BeliefError> {
-    let mut all = tree.all_leave_one_out(prior);
+    // Checked as one slot's weights are (see `leave_one_out`).
+    let trusted = |tree: &CountTree, all: Vec<Option<Vec<f64>>>| {
+        let flushed = all
+            .iter()
+            .enumerate()
+            .any(|(slot, r)| r.as_ref().is_some_and(|r| tree.flushed(prior, slot, r)));
+        (!flushed).then_some(all)
+    };
+    let mut all = tree.all_leave_one_out(prior).and_then(|a| trusted(tree, a));
     for exact in [false, true] {
         if all.is_some() {
             break;
         }
         retilt(tree, counts, prior, exact);
-        all = tree.all_leave_one_out(prior);
+        all = tree.all_leave_one_out(prior).and_then(|a| trusted(tree, a));
     }
     match all {
         Some(by_slot) => Ok(by_slot

@@ -27,7 +27,8 @@ use crate::error::BeliefError;
 #[derive(Debug, Clone)]
 pub(crate) struct Weighted<'a> {
     merged: &'a Component,
-    q: &'a [f64],
+    /// Q scaled against the merged counts (see [`balanced`](super::table::balanced)).
+    q: Vec<f64>,
     /// g(x)·Q(|x|).
     w: Vec<f64>,
     total: f64,
@@ -94,8 +95,9 @@ fn for_each_split(bits: usize, part_a: usize, mut visit: impl FnMut(usize, usize
 
 impl<'a> Weighted<'a> {
     /// `q[s]` for s = 0..=|M|, the weight of the merged red count.
-    pub(crate) fn new(merged: &'a Component, q: &'a [f64]) -> Result<Self, BeliefError> {
+    pub(crate) fn new(merged: &'a Component, q: &[f64]) -> Result<Self, BeliefError> {
         debug_assert_eq!(q.len(), merged.len() + 1);
+        let q = super::table::balanced(&merged.counts, q);
         let w: Vec<f64> = merged
             .table
             .iter()
@@ -140,7 +142,7 @@ impl<'a> Weighted<'a> {
             pb,
             tracks_of(part_a),
             tracks_of(part_b),
-            self.q,
+            &self.q,
             log_mass,
             tolerance,
             max_sweeps,
@@ -156,7 +158,7 @@ impl Weighted<'_> {
     pub(crate) fn kl(&self, projection: &Projection, part_a: usize) -> f64 {
         let (a, b) = (&projection.a, &projection.b);
         let bits = self.merged.len();
-        let (ln_t, ln_s) = (self.total.ln(), ln_pair_mass(&a.counts, &b.counts, self.q));
+        let (ln_t, ln_s) = (self.total.ln(), ln_pair_mass(&a.counts, &b.counts, &self.q));
         let mut kl = 0.0;
         for_each_split(bits, part_a, |x, ia, ib| {
             let w = self.w[x];
@@ -199,7 +201,7 @@ impl Weighted<'_> {
         max_sweeps: usize,
     ) -> Result<f64, BeliefError> {
         let (pa, pb) = self.marginals(part_a);
-        loss_of(&pa, &pb, self.q, tolerance, max_sweeps)
+        loss_of(&pa, &pb, &self.q, tolerance, max_sweeps)
     }
 
     /// The exchange of one track of A = `part_a` with one of the rest that
@@ -240,7 +242,7 @@ impl Weighted<'_> {
                 let new_a = part_a ^ (1 << i) ^ (1 << j);
                 let pa = regroup(joint_a, part_a, i, j, self.total);
                 let pb = regroup(joint_b, part_b, j, i, self.total);
-                let loss = loss_of(&pa, &pb, self.q, tolerance, max_sweeps)?;
+                let loss = loss_of(&pa, &pb, &self.q, tolerance, max_sweeps)?;
                 if best.is_none_or(|(_, l)| loss < l) {
                     best = Some((new_a, loss));
                 }

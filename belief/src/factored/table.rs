@@ -28,11 +28,14 @@ pub(crate) fn certain_odds(
         return Vec::new();
     }
     let weighed: Vec<f64> = match weights {
-        Some(w) => table
-            .iter()
-            .enumerate()
-            .map(|(y, &g)| g * w[y.count_ones() as usize])
-            .collect(),
+        Some(w) => {
+            let w = balanced(&counts_of(table, bits), w);
+            table
+                .iter()
+                .enumerate()
+                .map(|(y, &g)| g * w[y.count_ones() as usize])
+                .collect()
+        }
         None => table.to_vec(),
     };
     let total: f64 = weighed.iter().sum();
@@ -58,6 +61,50 @@ pub(crate) fn certain_odds(
                 Some((b, true, blue / red))
             } else {
                 None
+            }
+        })
+        .collect()
+}
+
+/// The largest factor [`balanced`] puts on a weight: a count the table
+/// holds below 10^-300 of its mass gets no more, so that no product
+/// overflows (such a count's share is below the doubles' precision there
+/// anyway).
+const BALANCE_CAP_LN: f64 = 690.8; // ln 10^300
+
+/// How far from 1 (in nats) the largest product may sit before
+/// [`balanced`] rescales: products 10^-100 and smaller leave too little
+/// room for the rest of the table below them.
+const BALANCE_NEEDED_LN: f64 = 230.0; // ln 10^100
+
+/// `w` times the one constant that puts the largest of counts[s]·w[s] at 1
+/// (found in log space), capped at 10^300; `w` itself while that largest
+/// product is within 10^±100 of 1. Every use of count weights
+/// compares them within one component, so the constant changes nothing;
+/// but a component's table and its weights can each span 10^200 in
+/// opposite directions (a field that every sighting calls red, under a
+/// known count, makes every table lean red and the rest's weights lean the
+/// other way), and products table[y]·w(|y|) taken as they come underflow
+/// to 0 though their ratios are fine: a split would then cut support the
+/// reads allow, and the next sighting could find no mass.
+pub(crate) fn balanced(counts: &[f64], w: &[f64]) -> Vec<f64> {
+    let ln_max = counts
+        .iter()
+        .zip(w)
+        .filter(|(c, w)| **c > 0.0 && **w > 0.0)
+        .map(|(c, w)| c.ln() + w.ln())
+        .fold(f64::NEG_INFINITY, f64::max);
+    // In range already (every case but drifted tables): left bit for bit
+    // as it was, so that the usual answers do not move in their last digit.
+    if !ln_max.is_finite() || ln_max.abs() < BALANCE_NEEDED_LN {
+        return w.to_vec();
+    }
+    w.iter()
+        .map(|&x| {
+            if x > 0.0 {
+                (x.ln() - ln_max).min(BALANCE_CAP_LN).exp()
+            } else {
+                0.0
             }
         })
         .collect()
@@ -176,6 +223,7 @@ impl Component {
 
     pub(crate) fn weighted_marginals(&self, w: &[f64]) -> (Vec<f64>, f64) {
         let bits = self.len();
+        let w = balanced(&self.counts, w);
         let mut weighted: Vec<f64> = self
             .table
             .iter()

@@ -706,3 +706,28 @@ fn the_local_weight_is_the_weight_of_an_uninformed_rest() {
         }
     }
 }
+
+/// A table leaning red 10^40 a track and weights leaning 10^40 a red
+/// track the other way (as a known count makes them, when every sighting
+/// calls the targets red): every product table·weight taken as it comes
+/// is below the normal doubles, where the next factor flushes it to 0; the
+/// balanced weights keep every count's share in range.
+#[test]
+fn weights_balanced_against_a_table_keep_its_support() {
+    let bits = 8;
+    let lean = |r: usize| 1e-40f64.powi((bits - r) as i32);
+    let table: Vec<f64> = (0..1usize << bits)
+        .map(|y| lean(y.count_ones() as usize))
+        .collect();
+    let counts = table::counts_of(&table, bits);
+    let q: Vec<f64> = (0..=bits).map(|r| 1e-40f64.powi(r as i32)).collect();
+    let naive: Vec<f64> = counts.iter().zip(&q).map(|(c, w)| c * w).collect();
+    assert!(naive.iter().all(|&x| x < f64::MIN_POSITIVE), "{naive:?}");
+    let w = table::balanced(&counts, &q);
+    let held: Vec<f64> = counts.iter().zip(&w).map(|(c, w)| c * w).collect();
+    assert!(
+        held.iter().all(|&x| x >= f64::MIN_POSITIVE && x <= 1.0),
+        "{held:?}"
+    );
+    assert!(table::certain_odds(&table, Some(&q), bits, 0.0).is_empty());
+}

@@ -66,7 +66,7 @@
 //! rest's variance is at least [`RESERVOIR_VARIANCE`], where the terms it
 //! leaves out are O(1/variance) of each weight.
 
-use super::counts::{CountPrior, FAST_FLOOR_LN};
+use super::counts::{support, CountPrior, FAST_FLOOR_LN};
 
 /// A vector stored on its support: entry s is `v[s − offset]`, zero outside.
 #[derive(Debug, Clone, PartialEq)]
@@ -346,6 +346,12 @@ pub(crate) struct CountTree {
     /// reservoir in the module documentation).
     cumulants: Vec<[f64; 3]>,
     cumulant_sums: [f64; 3],
+    /// The lowest and highest count each leaf holds with positive weight,
+    /// and their sums: what the rest of a leaf can hold, to tell a weight
+    /// flushed to zero on the way from one that is a fact (see
+    /// [`CountTree::flushed`]).
+    supports: Vec<(usize, usize)>,
+    support_sums: (usize, usize),
     ln_tilt: f64,
     /// The tails of an inner node below this share of its largest entry
     /// are dropped: [`TAIL`] until a query finds that unsafe, then 0.
@@ -443,10 +449,13 @@ impl CountTree {
             counts: vec![Vec::new(); leaves],
             cumulants: vec![[0.0; 3]; leaves],
             cumulant_sums: [0.0; 3],
+            supports: vec![(0, 0); leaves],
+            support_sums: (0, 0),
             ln_tilt,
             floor: if point { TAIL } else { 0.0 },
         };
         for (slot, c) in counts.into_iter().enumerate() {
+            tree.set_support(slot, &c);
             tree.counts[slot] = c;
         }
         tree.retilt(ln_tilt, false);
@@ -522,6 +531,7 @@ impl CountTree {
             *sum += new - old;
         }
         self.cumulants[slot] = c;
+        self.set_support(slot, &counts);
         self.counts[slot] = counts;
         let (w, s) = self.tilted(slot);
         let mut node = self.leaves + slot;
@@ -532,6 +542,25 @@ impl CountTree {
             self.dirty[node] = true;
             node /= 2;
         }
+    }
+
+    fn set_support(&mut self, slot: usize, counts: &[f64]) {
+        let (lo, hi) = support(counts).unwrap_or((0, 0));
+        let (old_lo, old_hi) = self.supports[slot];
+        self.support_sums = (
+            self.support_sums.0 - old_lo + lo,
+            self.support_sums.1 - old_hi + hi,
+        );
+        self.supports[slot] = (lo, hi);
+    }
+
+    /// Whether `r`, weights this tree gave `slot`, has an entry flushed to
+    /// zero on the way where the rest could complete the slot's count (see
+    /// [`CountPrior::flushed`]): O(|C|).
+    pub(crate) fn flushed(&self, prior: &CountPrior, slot: usize, r: &[f64]) -> bool {
+        let (lo, hi) = self.supports[slot];
+        let rest = (self.support_sums.0 - lo, self.support_sums.1 - hi);
+        prior.flushed(&self.counts[slot], rest, r)
     }
 
     /// Recomputes the dirty nodes under `node`.
