@@ -22,16 +22,14 @@
 //! stored numbers, how many events the filter rejected (and skipped), and
 //! the error the filter expects of itself from its marginals (for the exact
 //! filter, the Bayes risk of the prediction rule).
-//!
-//! The reader handles the flat objects of the trace format only; it is not
-//! a JSON parser, just enough for traces this workspace writes.
 
 use idmesh_belief::baseline::{LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
-    brier_score, expected_tracking_error, predict_red, Coupling, DenseFilter, Event,
-    FactoredBelief, FactoredOptions, Field, Mix, Observe, ParticleFilter, PropertyFilter,
-    RadonBelief, RadonOptions, Sparsify, SplitRule,
+    brier_score, event_of, expected_tracking_error, field_of, predict_red, Coupling, DenseFilter,
+    Event, FactoredBelief, FactoredOptions, Field, ParticleFilter, PropertyFilter, RadonBelief,
+    RadonOptions, Sparsify, SplitRule,
 };
+use idmesh_protocol::trace::{Line as TraceLine, TraceReader};
 use std::time::Instant;
 
 enum Line {
@@ -45,78 +43,25 @@ struct Trace {
     lines: Vec<Line>,
 }
 
-/// The raw text after `"key":` up to the next top-level `,` or `}`.
-fn raw<'a>(line: &'a str, key: &str) -> Option<&'a str> {
-    let pat = format!("\"{key}\":");
-    let at = line.find(&pat)? + pat.len();
-    let rest = line[at..].trim_start();
-    if rest.starts_with('[') {
-        let end = rest.find(']')?;
-        return Some(&rest[..=end]);
-    }
-    let end = rest.find([',', '}']).unwrap_or(rest.len());
-    Some(rest[..end].trim())
-}
-
-fn num(line: &str, key: &str) -> Result<f64, String> {
-    raw(line, key)
-        .ok_or_else(|| format!("no {key}"))?
-        .parse()
-        .map_err(|e| format!("{key}: {e}"))
-}
-
-fn ids(line: &str, key: &str) -> Result<Option<Vec<u32>>, String> {
-    let Some(text) = raw(line, key) else {
-        return Ok(None);
-    };
-    let inner = text.trim_start_matches('[').trim_end_matches(']').trim();
-    if inner.is_empty() {
-        return Ok(Some(Vec::new()));
-    }
-    inner
-        .split(',')
-        .map(|x| x.trim().parse().map_err(|e| format!("{key}: {e}")))
-        .collect::<Result<Vec<u32>, String>>()
-        .map(Some)
-}
-
+/// The trace at `path`, read and checked by the workspace's one trace
+/// reader, its events turned into the engine's as `idmesh replay` does.
 fn read_trace(path: &str) -> Result<Trace, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-    let mut field = None;
+    let mut reader = TraceReader::open(path).map_err(|e| format!("{path}: {e}"))?;
+    let header = reader.read_header().map_err(|e| e.to_string())?;
     let mut lines = Vec::new();
-    for (no, line) in text.lines().enumerate() {
-        let at = |e: String| format!("{path}:{}: {e}", no + 1);
-        let kind = raw(line, "kind").ok_or_else(|| at("no kind".into()))?;
-        match kind.trim_matches('"') {
-            "header" => {
-                let n = num(line, "tracks").map_err(at)? as usize;
-                let k = num(line, "red").map_err(at)? as usize;
-                field = Some(match ids(line, "initial_red").map_err(at)? {
-                    Some(red) => Field::known(n, red),
-                    None => Field::uniform(n, k),
-                });
+    for numbered in reader {
+        let line = numbered.map_err(|e| e.to_string())?.line;
+        if let TraceLine::Truth(truth) = &line {
+            if let Some(red) = &truth.red {
+                lines.push(Line::Truth(red.clone()));
             }
-            "mix" => lines.push(Line::Event(Event::Mix(Mix {
-                a: num(line, "a").map_err(at)? as u32,
-                b: num(line, "b").map_err(at)? as u32,
-                swap: num(line, "swap").map_err(at)?,
-            }))),
-            "observe" => lines.push(Line::Event(Event::Observe(Observe {
-                track: num(line, "track").map_err(at)? as u32,
-                red: num(line, "red").map_err(at)?,
-                blue: num(line, "blue").map_err(at)?,
-            }))),
-            "truth" => {
-                if let Some(red) = ids(line, "red").map_err(at)? {
-                    lines.push(Line::Truth(red));
-                }
-            }
-            _ => {}
+        } else if let Some(event) = event_of(&line) {
+            lines.push(Line::Event(event));
         }
     }
     Ok(Trace {
         name: path.rsplit('/').next().unwrap_or(path).to_string(),
-        field: field.ok_or_else(|| format!("{path}: no header"))?,
+        field: field_of(&header),
         lines,
     })
 }

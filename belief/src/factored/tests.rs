@@ -726,7 +726,7 @@ fn weights_balanced_against_a_table_keep_its_support() {
     let w = table::balanced(&counts, &q);
     let held: Vec<f64> = counts.iter().zip(&w).map(|(c, w)| c * w).collect();
     assert!(
-        held.iter().all(|&x| x >= f64::MIN_POSITIVE && x <= 1.0),
+        held.iter().all(|x| (f64::MIN_POSITIVE..=1.0).contains(x)),
         "{held:?}"
     );
     assert!(table::certain_odds(&table, Some(&q), bits, 0.0).is_empty());
