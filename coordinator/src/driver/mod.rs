@@ -3,8 +3,9 @@
 //! other users.
 
 pub mod gather;
+mod identity;
 
-use crate::identity::{self, Method};
+use crate::identity::Method;
 use crate::pushed::Pushes;
 use crate::request::Request;
 use gather::{At, GatherError, Memory};
