@@ -10,6 +10,10 @@
 //!   function `idmesh replay` reads a trace header with);
 //! - how the leaders' partial sums at one cut add up to the answer
 //!   ([`combine`]), which the coordinator computes;
+//! - how the engines' values go on the wire and come back (`wire`): a
+//!   factored component, an identity tree, a Radon set, an information
+//!   row, the same for the leader that sends and the one (or the
+//!   coordinator) that receives;
 //! - which leader surveils each track as targets move ([`Regions`]: by
 //!   default cells fitted to the crowd and redrawn as it moves, so that
 //!   each leader is sent about as many items, [`Fitted`]), and the
@@ -24,17 +28,22 @@ mod fitted;
 mod identity;
 mod load;
 mod regions;
+mod wire;
 
 pub use fitted::{Fitted, TOLERANCE, WINDOW_PER_LEADER};
-pub use identity::{from_wire_tree, identity_options, start_identity, to_wire_tree};
+pub use identity::{identity_options, start_identity};
 pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
 pub use regions::{grid_places, leading_places, Handover, RegionRule, Regional, Regions};
+pub use wire::{
+    from_wire_component, from_wire_set, from_wire_tree, to_wire_component, to_wire_row,
+    to_wire_set, to_wire_tree,
+};
 
-use idmesh_belief::factored::{FactoredShare, HeldComponent};
+use idmesh_belief::factored::FactoredShare;
 use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
 use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
-use idmesh_protocol::wire::factored::{FactoredStart, WireComponent, WireSplit};
+use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Item, UNHELD};
 
@@ -136,26 +145,6 @@ pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, P
         begin.holds_at_start(t, me)
     })?;
     Ok(Some(share))
-}
-
-/// A component as it goes on the wire.
-pub fn to_wire_component(c: HeldComponent) -> WireComponent {
-    WireComponent {
-        tracks: c.tracks,
-        table: c.table,
-        log_scale: c.log_scale,
-        last_mix: c.last_mix,
-    }
-}
-
-/// A component from the wire (checked again by the share that takes it).
-pub fn from_wire_component(c: WireComponent) -> HeldComponent {
-    HeldComponent {
-        tracks: c.tracks,
-        table: c.table,
-        log_scale: c.log_scale,
-        last_mix: c.last_mix,
-    }
 }
 
 /// The size of a set that fixes every track of `field`: k red tracks (the

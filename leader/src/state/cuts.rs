@@ -2,10 +2,9 @@
 //! `Cut` item reaches it in its stream (kept a while for late queries),
 //! or where it rests once it has applied all it was sent.
 
-use super::transfers::to_wire;
 use super::*;
 use idmesh_belief::factored::CountPart;
-use idmesh_placement::to_wire_tree;
+use idmesh_placement::{to_wire_row, to_wire_tree};
 use std::sync::OnceLock;
 
 /// How many recent cuts a leader keeps answers for.
@@ -153,7 +152,7 @@ impl Leader {
         let rows = match (&started.rows, rows) {
             (Some(held), true) => held
                 .rows()
-                .map(|(track, row)| to_wire(track, row))
+                .map(|(track, row)| to_wire_row(track, row))
                 .collect(),
             _ => Vec::new(),
         };

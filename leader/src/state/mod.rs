@@ -62,8 +62,8 @@
 
 use crate::error::LeaderError;
 use idmesh_belief::factored::FactoredShare;
-use idmesh_belief::radon::{Atom, Growth as BeliefGrowth, RadonShare, Sparsify};
-use idmesh_belief::{Mix, Observe, TrackSet};
+use idmesh_belief::radon::{Growth as BeliefGrowth, RadonShare, Sparsify};
+use idmesh_belief::{Mix, Observe};
 use idmesh_identity::factored::IdentityShare;
 use idmesh_identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{Identify, IdentityEvent, InformationRows};

@@ -2,6 +2,7 @@
 //! duplicates, reordering, snapshots and identity rows.
 
 use super::*;
+use idmesh_belief::radon::Atom;
 use idmesh_belief::factored::CountPart;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {

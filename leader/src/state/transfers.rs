@@ -4,7 +4,10 @@
 
 use super::*;
 use idmesh_belief::factored::HeldComponent;
-use idmesh_placement::{from_wire_component, from_wire_tree, to_wire_component, to_wire_tree};
+use idmesh_placement::{
+    from_wire_component, from_wire_set, from_wire_tree, to_wire_component, to_wire_row,
+    to_wire_set, to_wire_tree,
+};
 use idmesh_protocol::wire::factored::WireComponent;
 
 impl Leader {
@@ -71,11 +74,7 @@ impl Leader {
                 tracks.peek().is_some() && !tracks.any(|t| own[t as usize])
             })
             .into_iter()
-            .map(|(atom, ln_mass)| WireSet {
-                red: atom.red.tracks().to_vec(),
-                blue: atom.blue.tracks().to_vec(),
-                ln_mass,
-            })
+            .map(|(atom, ln_mass)| to_wire_set(&atom, ln_mass))
             .collect();
         self.send(seq, to, sets, rows, Vec::new(), actions)?;
         Ok(Vec::new())
@@ -202,25 +201,8 @@ impl Leader {
         let started = self.started()?;
         let tracks = started.begin.tracks;
         let mut atoms = Vec::with_capacity(sets.len());
-        for set in sets {
-            if let Some(&t) = set.red.iter().chain(&set.blue).find(|&&t| t >= tracks) {
-                return Err(LeaderError::BadTransfer(format!(
-                    "set with track {t} of {tracks}"
-                )));
-            }
-            if set.ln_mass.is_nan() || set.ln_mass == f64::INFINITY {
-                return Err(LeaderError::BadTransfer(format!(
-                    "set with log mass {}",
-                    set.ln_mass
-                )));
-            }
-            atoms.push((
-                Atom::new(
-                    TrackSet::from_tracks(set.red.iter().copied()),
-                    TrackSet::from_tracks(set.blue.iter().copied()),
-                ),
-                set.ln_mass,
-            ));
+        for set in &sets {
+            atoms.push(from_wire_set(set, tracks).map_err(LeaderError::BadTransfer)?);
         }
         let mut new_tracks: Vec<u32> = Vec::new();
         for (atom, _) in &atoms {
@@ -475,12 +457,5 @@ pub(super) const NOT_HELD: LeaderError =
 
 /// Row `track` as it goes on the wire.
 pub(super) fn wire_row(rows: &InformationRows, track: u32) -> Result<WireRow, LeaderError> {
-    Ok(to_wire(track, rows.row(track).ok_or(NOT_HELD)?))
-}
-
-pub(super) fn to_wire(track: u32, row: &[f64]) -> WireRow {
-    WireRow {
-        track,
-        ln_likelihoods: row.to_vec(),
-    }
+    Ok(to_wire_row(track, rows.row(track).ok_or(NOT_HELD)?))
 }
