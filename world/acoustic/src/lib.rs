@@ -34,6 +34,16 @@
 //! write_trace(&result, file, "acoustic.jsonl").unwrap();
 //! ```
 
+/// The line of docs/acoustic-trends.md that says which code made it: the
+/// digest of the tracker's sources and the `acoustic_trends` example
+/// (build.rs).
+pub fn trends_stamp_line() -> String {
+    format!(
+        "<!-- idmesh acoustic stamp: sources {} -->",
+        env!("IDMESH_ACOUSTIC_STAMP")
+    )
+}
+
 pub mod config;
 pub mod error;
 pub mod field;
@@ -49,3 +59,20 @@ pub use config::{AcousticConfig, OutputConfig, PipelineConfig};
 pub use error::AcousticError;
 pub use field::FieldConfig;
 pub use run::{run, run_variants, AcousticResult, EstimatedFragment, EstimatedPath};
+
+#[cfg(test)]
+mod stamp_tests {
+    #[test]
+    fn the_committed_trends_were_generated_by_the_code_as_it_is() {
+        // Any change to the tracker or to the trends program changes the
+        // stamp: regenerate docs/acoustic-trends.md and commit it.
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/acoustic-trends.md");
+        let committed = std::fs::read_to_string(path).unwrap_or_default();
+        assert!(
+            committed.contains(&super::trends_stamp_line()),
+            "docs/acoustic-trends.md is stale: it does not carry {:?}; regenerate it with \
+             `cargo run --release -p idmesh-acoustic --example acoustic_trends`",
+            super::trends_stamp_line()
+        );
+    }
+}
