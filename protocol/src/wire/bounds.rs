@@ -8,7 +8,6 @@
 use super::coordinator_to_leader::Partial;
 use super::identity::WireTree;
 use super::leader_to_leader::{Transfer, WireRow, WireSet};
-use super::sensor_to_leader::{Batch, Begin, Growth, Item, Sequenced};
 use super::valid::require;
 use super::WireError;
 
@@ -26,105 +25,18 @@ pub struct Bounds {
 }
 
 impl Bounds {
-    pub fn of(begin: &Begin) -> Self {
-        Bounds {
-            tracks: begin.tracks,
-            leaders: begin.leaders.len(),
-            identities: begin.identities,
-            adopts: begin.factored.as_ref().is_some_and(|f| f.regional),
-        }
-    }
-
-    fn track(&self, what: &str, track: u32) -> Result<(), String> {
+    pub(crate) fn track(&self, what: &str, track: u32) -> Result<(), String> {
         let n = self.tracks;
         require(track < n, || {
             format!("{what} = {track} is not a track (there are {n})")
         })
     }
 
-    fn leader(&self, what: &str, index: u16) -> Result<(), String> {
+    pub(crate) fn leader(&self, what: &str, index: u16) -> Result<(), String> {
         let l = self.leaders;
         require((index as usize) < l, || {
             format!("{what} = {index} is not a leader (there are {l})")
         })
-    }
-
-    /// One item of the stream against the field.
-    pub fn check_item(&self, item: &Item) -> Result<(), String> {
-        let adoptions = item.adoptions();
-        require(adoptions.is_empty() || self.adopts, || {
-            "an adoption on a stream whose tracks start held".into()
-        })?;
-        for (track, leader) in adoptions {
-            self.leader(&format!("the adopter of track {track}"), leader)?;
-        }
-        match item {
-            // Checked on its own; a second one is refused by the batch rules.
-            Item::Begin(_) | Item::Cut { .. } => Ok(()),
-            Item::Mix {
-                a,
-                b,
-                owner_a,
-                owner_b,
-                handed,
-                ..
-            } => {
-                self.track("mix a", *a)?;
-                self.track("mix b", *b)?;
-                self.leader("mix owner_a", *owner_a)?;
-                if let Some(h) = handed {
-                    self.leader("mix handed from", h.from)?;
-                }
-                self.leader("mix owner_b", *owner_b)
-            }
-            Item::Observe { track, growth, .. } => {
-                self.track("observe track", *track)?;
-                if let Growth::Meeting(tracks) = growth {
-                    for &t in tracks {
-                        self.track("observe growth track", t)?;
-                    }
-                }
-                Ok(())
-            }
-            Item::Identify {
-                track,
-                identity,
-                owner,
-                ..
-            } => {
-                require(self.identities, || {
-                    "an identity read on a stream without identities".into()
-                })?;
-                self.track("identify track", *track)?;
-                self.track("identify identity", *identity)?;
-                self.leader("identify owner", *owner)
-            }
-            Item::Handover { track, from, to } => {
-                self.track("handover track", *track)?;
-                self.leader("handover from", *from)?;
-                self.leader("handover to", *to)
-            }
-        }
-    }
-
-    fn check_items(&self, items: &[Sequenced]) -> Result<(), String> {
-        for (i, Sequenced { seq, item }) in items.iter().enumerate() {
-            self.check_item(item)
-                .map_err(|e| format!("item {i} (seq {seq}): {e}"))?;
-        }
-        Ok(())
-    }
-
-    /// A batch of this stream (a Begin it carries is the stream's own).
-    pub fn check_batch(&self, batch: &Batch) -> Result<(), WireError> {
-        self.check_items(&batch.items)
-            .map_err(|problem| invalid("event batch", problem))
-    }
-
-    /// The items of a follow reply.
-    pub fn check_followed(&self, items: &[Sequenced]) -> Result<(), WireError> {
-        self.check_items(items)
-            .map_err(|problem| invalid("follow reply", problem))
     }
 
     /// A transfer to leader `me`: from another leader of the stream, sets
@@ -199,16 +111,15 @@ impl Bounds {
     }
 }
 
-fn invalid(what: &'static str, problem: String) -> WireError {
+pub(crate) fn invalid(what: &'static str, problem: String) -> WireError {
     WireError::Invalid { what, problem }
 }
 
+/// The field the tests of every message's bounds share: 4 tracks, 2
+/// leaders, no identities, tracks held from the start.
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::wire::VERSION;
-
-    fn bounds() -> Bounds {
+impl Bounds {
+    pub(crate) fn of_tests() -> Self {
         Bounds {
             tracks: 4,
             leaders: 2,
@@ -216,51 +127,12 @@ mod tests {
             adopts: false,
         }
     }
+}
 
-    #[test]
-    fn tracks_and_leaders_beyond_the_stream_are_named() {
-        let e = bounds()
-            .check_item(&Item::Mix {
-                adopted: Vec::new(),
-                a: 0,
-                b: 4,
-                swap: 0.5,
-                owner_a: 0,
-                owner_b: 1,
-                handed: None,
-            })
-            .unwrap_err();
-        assert_eq!(e, "mix b = 4 is not a track (there are 4)");
-        let e = bounds()
-            .check_item(&Item::Handover {
-                track: 1,
-                from: 0,
-                to: 7,
-            })
-            .unwrap_err();
-        assert_eq!(e, "handover to = 7 is not a leader (there are 2)");
-        let e = bounds()
-            .check_item(&Item::Observe {
-                adopted_by: None,
-                track: 1,
-                red: 0.5,
-                blue: 0.5,
-                growth: Growth::Meeting(vec![2, 40]),
-                global: false,
-            })
-            .unwrap_err();
-        assert!(e.contains("growth track = 40"), "{e}");
-        let e = bounds()
-            .check_item(&Item::Identify {
-                adopted: false,
-                track: 1,
-                identity: 1,
-                accuracy: 0.9,
-                owner: 0,
-            })
-            .unwrap_err();
-        assert!(e.contains("without identities"), "{e}");
-    }
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::VERSION;
 
     #[test]
     fn transfers_come_from_a_peer_with_sets_of_the_field() {
@@ -277,7 +149,7 @@ mod tests {
             }],
             rows,
         };
-        assert!(bounds()
+        assert!(Bounds::of_tests()
             .check_transfer(&transfer(1, vec![3], vec![]), 0)
             .is_ok());
         for (t, expected) in [
@@ -296,12 +168,15 @@ mod tests {
                 "without identities",
             ),
         ] {
-            let e = bounds().check_transfer(&t, 0).unwrap_err().to_string();
+            let e = Bounds::of_tests()
+                .check_transfer(&t, 0)
+                .unwrap_err()
+                .to_string();
             assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
         }
         let identities = Bounds {
             identities: true,
-            ..bounds()
+            ..Bounds::of_tests()
         };
         let short_row = transfer(
             1,

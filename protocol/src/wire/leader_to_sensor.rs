@@ -2,8 +2,14 @@
 //! sensor to route those tracks' events to it from now on, and gets back the
 //! items it was not sent since `after` (postcard, as the payload of a get on
 //! `P/sensor/<name>/follow`).
+//!
+//! Each message's rules ([`Valid`], and [`Bounds`] for a follow reply)
+//! sit below the types.
 
-use super::sensor_to_leader::{Batch, Sequenced};
+use super::bounds::{invalid, Bounds};
+use super::sensor_to_leader::{check_items, Batch, Sequenced};
+use super::valid::{distinct, Valid};
+use super::WireError;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -100,3 +106,69 @@ pub struct Progress {
     pub batch: u64,
 }
 super::versioned!(Progress, "progress mark");
+
+impl Valid for Follow {
+    fn problem(&self) -> Option<String> {
+        distinct("follow tracks", &self.tracks).err()
+    }
+}
+
+impl Valid for Unfollow {
+    fn problem(&self) -> Option<String> {
+        distinct("unfollow tracks", &self.tracks).err()
+    }
+}
+
+impl Valid for Followed {
+    fn problem(&self) -> Option<String> {
+        check_items(&self.items, false).err()
+    }
+}
+
+impl Valid for Resend {
+    fn problem(&self) -> Option<String> {
+        self.leader
+            .is_empty()
+            .then(|| "a resend request names no leader".into())
+    }
+}
+
+impl Valid for Durable {
+    fn problem(&self) -> Option<String> {
+        self.leader
+            .is_empty()
+            .then(|| "a durable mark names no leader".into())
+    }
+}
+
+impl Valid for Progress {
+    fn problem(&self) -> Option<String> {
+        self.leader
+            .is_empty()
+            .then(|| "a progress mark names no leader".into())
+    }
+}
+
+impl Valid for Resent {
+    fn problem(&self) -> Option<String> {
+        let mut previous: Option<u64> = None;
+        for (i, batch) in self.batches.iter().enumerate() {
+            if previous.is_some_and(|p| batch.number <= p) {
+                return Some(format!("batch {i}: number {} out of order", batch.number));
+            }
+            previous = Some(batch.number);
+            if let Some(e) = batch.problem() {
+                return Some(format!("batch {i} (number {}): {e}", batch.number));
+            }
+        }
+        None
+    }
+}
+
+impl Bounds {
+    /// The items of a follow reply.
+    pub fn check_followed(&self, items: &[Sequenced]) -> Result<(), WireError> {
+        self.check_items(items)
+            .map_err(|problem| invalid("follow reply", problem))
+    }
+}
