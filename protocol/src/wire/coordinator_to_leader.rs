@@ -3,10 +3,16 @@
 //! reached the leader), or at the quiet point it rests at (`?quiet`: it has
 //! applied everything the sensor sent and waits for nothing), and its
 //! counters (`P/leader/*/stats`).
+//!
+//! The partial sums' rules ([`Valid`], and [`Bounds`] against the field of
+//! the query) sit below the types.
 
+use super::bounds::{invalid, Bounds};
 use super::factored::WireCounts;
 use super::identity::WireTree;
 use super::leader_to_leader::WireRow;
+use super::valid::{distinct, require, Valid, MAX_TRACKS};
+use super::WireError;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -156,3 +162,149 @@ pub struct LeaderStats {
     pub journal_dropped: u64,
 }
 super::versioned!(LeaderStats, "leader stats");
+
+impl Valid for Partial {
+    fn problem(&self) -> Option<String> {
+        self.check().err()
+    }
+}
+
+impl Partial {
+    fn check(&self) -> Result<(), String> {
+        // The scale of an empty share is whatever it was left at; its sums
+        // are 0. Anything not a number would poison the coordinator's sum.
+        require(
+            !self.log_scale.is_nan() && self.log_scale != f64::INFINITY,
+            || format!("log scale = {}", self.log_scale),
+        )?;
+        for (what, value) in [("total", self.total), ("outside", self.outside)] {
+            require(value.is_finite(), || format!("{what} = {value}"))?;
+        }
+        let mut previous: Option<u32> = None;
+        for &(t, x) in &self.inside {
+            require(previous.is_none_or(|p| t > p), || {
+                format!("inside: track {t} out of order or repeated")
+            })?;
+            require(t < MAX_TRACKS, || {
+                format!("inside: track {t} is out of range")
+            })?;
+            require(x.is_finite(), || format!("inside: track {t} = {x}"))?;
+            previous = Some(t);
+        }
+        let tracks: Vec<u32> = self.rows.iter().map(|r| r.track).collect();
+        distinct("rows", &tracks)?;
+        for row in &self.rows {
+            row.check()?;
+        }
+        for (i, c) in self.components.iter().flatten().enumerate() {
+            c.check().map_err(|e| format!("component {i}: {e}"))?;
+        }
+        require(self.base.is_none() || self.components.is_some(), || {
+            "a change to a base answer without components".into()
+        })?;
+        require(self.base.is_some() || self.gone.is_empty(), || {
+            "components gone without a base answer".into()
+        })?;
+        distinct("gone", &self.gone)?;
+        require(self.passive.windows(2).all(|w| w[0] < w[1]), || {
+            "passive: tracks out of order or repeated".into()
+        })?;
+        for (what, tracks) in [("gone", &self.gone), ("passive", &self.passive)] {
+            if let Some(t) = tracks.iter().find(|&&t| t >= MAX_TRACKS) {
+                return Err(format!("{what}: track {t} is out of range"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Bounds {
+    /// A leader's partial sums for a query about this field.
+    pub fn check_partial(&self, partial: &Partial) -> Result<(), WireError> {
+        let check = || -> Result<(), String> {
+            for &(t, _) in &partial.inside {
+                self.track("inside track", t)?;
+            }
+            for &t in &partial.gone {
+                self.track("gone component's track", t)?;
+            }
+            self.check_rows(&partial.rows)?;
+            self.check_trees(&partial.trees)
+        };
+        check().map_err(|problem| invalid("partial sums", problem))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::{decode, encode, VERSION};
+
+    #[test]
+    fn partials_are_checked() {
+        let partial = Partial {
+            trees: Vec::new(),
+            components: None,
+            base: None,
+            gone: Vec::new(),
+            passive: Vec::new(),
+            version: VERSION,
+            leader: "a".into(),
+            cut: 1,
+            tag: 0,
+            events: 0,
+            finished: false,
+            log_scale: 0.0,
+            total: 1.0,
+            outside: 0.25,
+            inside: vec![(0, 0.5), (3, 0.25)],
+            coefficients: 2,
+            rows: vec![],
+        };
+        assert!(decode::<Partial>(&encode(&partial)).is_ok());
+        let bad = Partial {
+            inside: vec![(3, 0.5), (0, 0.25)],
+            ..partial.clone()
+        };
+        assert!(decode::<Partial>(&encode(&bad)).is_err());
+        let bad = Partial {
+            total: f64::INFINITY,
+            ..partial.clone()
+        };
+        assert!(decode::<Partial>(&encode(&bad)).is_err());
+        // A change to a base answer: only of components, each track gone once.
+        let change = Partial {
+            components: Some(Vec::new()),
+            base: Some(7),
+            gone: vec![2, 5],
+            ..partial.clone()
+        };
+        assert!(decode::<Partial>(&encode(&change)).is_ok());
+        for (bad, expected) in [
+            (
+                Partial {
+                    gone: vec![2, 2],
+                    ..change.clone()
+                },
+                "gone",
+            ),
+            (
+                Partial {
+                    components: None,
+                    ..change.clone()
+                },
+                "without components",
+            ),
+            (
+                Partial {
+                    base: None,
+                    ..change
+                },
+                "without a base",
+            ),
+        ] {
+            let e = decode::<Partial>(&encode(&bad)).unwrap_err().to_string();
+            assert!(e.contains(expected), "{e}");
+        }
+    }
+}

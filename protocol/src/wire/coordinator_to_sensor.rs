@@ -4,7 +4,10 @@
 //! query, whose cut asks the leaders for their rows too). Also the
 //! gateway's counters, which the coordinator's stats answer includes, and
 //! where the tracks are (JSON, like the counters).
+//!
+//! What a cut must be ([`Valid`]) sits below the types.
 
+use super::valid::{Valid, MAX_TRACKS};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -135,9 +138,23 @@ impl SensorPositions {
     }
 }
 
+impl Valid for CutPlaced {
+    fn problem(&self) -> Option<String> {
+        let n = self.tracks;
+        if !(1..=MAX_TRACKS).contains(&n) {
+            return Some(format!("tracks = {n} is not in 1..={MAX_TRACKS}"));
+        }
+        match self.red {
+            Some(k) if k > n => Some(format!("red = {k} > tracks = {n}")),
+            _ => None,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::wire::{decode, encode, VERSION};
 
     #[test]
     fn positions_that_do_not_fit_are_refused_naming_why() {
@@ -174,5 +191,25 @@ mod tests {
             .check()
             .unwrap_err()
             .contains("1 places for 2 leaders"));
+    }
+
+    #[test]
+    fn cuts_are_checked() {
+        let cut = CutPlaced {
+            version: VERSION,
+            sensor: "s".into(),
+            seq: 1,
+            events: 0,
+            leaders: vec!["a".into()],
+            tracks: 4,
+            red: Some(5),
+            finished: false,
+            identities: false,
+            origins: Vec::new(),
+        };
+        assert!(decode::<CutPlaced>(&encode(&cut))
+            .unwrap_err()
+            .to_string()
+            .contains("red = 5"));
     }
 }

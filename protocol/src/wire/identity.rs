@@ -4,7 +4,8 @@
 //! needs the trees of its two tracks in one place — and as a leader gives
 //! the trees it holds in its answer to an identity query.
 
-use super::valid::distinct_tracks;
+use super::bounds::Bounds;
+use super::valid::{distinct_tracks, require};
 use serde::{Deserialize, Serialize};
 
 /// The most tracks and ports of one group: the factored identity
@@ -125,6 +126,20 @@ impl WireTree {
     /// The probabilities it carries (what moving it costs).
     pub fn entries(&self) -> usize {
         self.groups.iter().map(|g| g.probs.len()).sum()
+    }
+}
+
+impl Bounds {
+    /// Trees of the factored identity belief, on an identity stream only.
+    pub(crate) fn check_trees(&self, trees: &[WireTree]) -> Result<(), String> {
+        require(trees.is_empty() || self.identities, || {
+            "trees of a factored identity belief on a stream without identities".into()
+        })?;
+        for (i, tree) in trees.iter().enumerate() {
+            tree.check(self.tracks)
+                .map_err(|e| format!("tree {i}: {e}"))?;
+        }
+        Ok(())
     }
 }
 

@@ -7,9 +7,15 @@
 //! matrix (Shin et al., Section 4): at a cross-leader mix, each leader's
 //! row of its mixed track as it was before the mix (both then compute the
 //! same fit); at a handover, the row of the track that changes region.
+//!
+//! Each message's rules ([`Valid`], and [`Bounds`] for a transfer) sit
+//! below the types.
 
+use super::bounds::{invalid, Bounds};
 use super::factored::WireComponent;
 use super::identity::WireTree;
+use super::valid::{distinct, require, Valid};
+use super::WireError;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -69,3 +75,227 @@ pub struct TransfersSent {
     pub transfers: Vec<Transfer>,
 }
 super::versioned!(TransfersSent, "transfers reply");
+
+impl Valid for Transfer {
+    fn problem(&self) -> Option<String> {
+        self.check().err()
+    }
+}
+
+impl Transfer {
+    fn check(&self) -> Result<(), String> {
+        for (i, set) in self.sets.iter().enumerate() {
+            set.check().map_err(|e| format!("set {i}: {e}"))?;
+        }
+        let tracks: Vec<u32> = self.rows.iter().map(|r| r.track).collect();
+        distinct("rows", &tracks)?;
+        for row in &self.rows {
+            row.check()?;
+        }
+        for (i, c) in self.components.iter().enumerate() {
+            c.check().map_err(|e| format!("component {i}: {e}"))?;
+        }
+        Ok(())
+    }
+}
+
+impl WireSet {
+    /// φ_{red|blue}: each list without repeats, no track both red and
+    /// blue, a log mass that is a number below +∞ (−∞ is a zero mass).
+    pub fn check(&self) -> Result<(), String> {
+        distinct("red", &self.red)?;
+        distinct("blue", &self.blue)?;
+        if let Some(t) = self.red.iter().find(|t| self.blue.contains(t)) {
+            return Err(format!("track {t} is both red and blue"));
+        }
+        require(
+            !self.ln_mass.is_nan() && self.ln_mass != f64::INFINITY,
+            || format!("log mass = {}", self.ln_mass),
+        )
+    }
+}
+
+impl WireRow {
+    /// Accumulated log-likelihoods: numbers below +∞ (−∞ is an identity
+    /// ruled out by a certain read).
+    pub fn check(&self) -> Result<(), String> {
+        match self
+            .ln_likelihoods
+            .iter()
+            .position(|x| x.is_nan() || *x == f64::INFINITY)
+        {
+            Some(i) => Err(format!(
+                "row of track {}: log-likelihood [{i}] = {}",
+                self.track, self.ln_likelihoods[i]
+            )),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Valid for TransfersWanted {
+    fn problem(&self) -> Option<String> {
+        None
+    }
+}
+
+impl Valid for TransfersSent {
+    fn problem(&self) -> Option<String> {
+        self.transfers
+            .iter()
+            .enumerate()
+            .find_map(|(i, t)| t.problem().map(|e| format!("transfer {i}: {e}")))
+    }
+}
+
+impl Bounds {
+    /// A transfer to leader `me`: from another leader of the stream, sets
+    /// of its tracks, rows of n numbers only on an identity stream.
+    pub fn check_transfer(&self, transfer: &Transfer, me: u16) -> Result<(), WireError> {
+        self.check_parts(transfer.from, &transfer.sets, &transfer.rows, me)
+            .and_then(|()| self.check_trees(&transfer.trees))
+            .map_err(|problem| invalid("transfer", problem))
+    }
+
+    /// [`Bounds::check_transfer`] on a transfer kept in parts.
+    pub fn check_parts(
+        &self,
+        from: u16,
+        sets: &[WireSet],
+        rows: &[WireRow],
+        me: u16,
+    ) -> Result<(), String> {
+        self.leader("from", from)?;
+        require(from != me, || format!("from = {from}, the receiver itself"))?;
+        for (i, set) in sets.iter().enumerate() {
+            for &t in set.red.iter().chain(&set.blue) {
+                self.track(&format!("set {i} track"), t)?;
+            }
+        }
+        require(rows.is_empty() || self.identities, || {
+            "rows of an information matrix on a stream without identities".into()
+        })?;
+        self.check_rows(rows)
+    }
+
+    /// Rows of the information matrix: of tracks of the field, n numbers each.
+    pub(crate) fn check_rows(&self, rows: &[WireRow]) -> Result<(), String> {
+        for row in rows {
+            self.track("row track", row.track)?;
+            require(row.ln_likelihoods.len() == self.tracks as usize, || {
+                format!(
+                    "row of track {} has {} numbers for {} identities",
+                    row.track,
+                    row.ln_likelihoods.len(),
+                    self.tracks
+                )
+            })?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::{decode, encode, VERSION};
+
+    #[test]
+    fn transfers_are_checked() {
+        let transfer = |set: WireSet, rows: Vec<WireRow>| Transfer {
+            trees: Vec::new(),
+            components: Vec::new(),
+            version: VERSION,
+            from: 0,
+            seq: 3,
+            sets: vec![set],
+            rows,
+        };
+        let set = |red: Vec<u32>, blue: Vec<u32>, ln_mass: f64| WireSet { red, blue, ln_mass };
+        let ok = transfer(set(vec![1], vec![2], f64::NEG_INFINITY), vec![]);
+        assert_eq!(decode::<Transfer>(&encode(&ok)).unwrap(), ok);
+        for (bad, expected) in [
+            (
+                transfer(set(vec![1, 1], vec![], 0.0), vec![]),
+                "red lists 1 twice",
+            ),
+            (
+                transfer(set(vec![1], vec![1], 0.0), vec![]),
+                "both red and blue",
+            ),
+            (
+                transfer(set(vec![1], vec![], f64::NAN), vec![]),
+                "log mass = NaN",
+            ),
+            (
+                transfer(
+                    set(vec![], vec![], 0.0),
+                    vec![WireRow {
+                        track: 0,
+                        ln_likelihoods: vec![0.0, f64::NAN],
+                    }],
+                ),
+                "log-likelihood [1] = NaN",
+            ),
+        ] {
+            let e = decode::<Transfer>(&encode(&bad)).unwrap_err().to_string();
+            assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
+        }
+    }
+
+    #[test]
+    fn transfers_come_from_a_peer_with_sets_of_the_field() {
+        let transfer = |from, red: Vec<u32>, rows: Vec<WireRow>| Transfer {
+            trees: Vec::new(),
+            components: Vec::new(),
+            version: VERSION,
+            from,
+            seq: 3,
+            sets: vec![WireSet {
+                red,
+                blue: vec![],
+                ln_mass: 0.0,
+            }],
+            rows,
+        };
+        assert!(Bounds::of_tests()
+            .check_transfer(&transfer(1, vec![3], vec![]), 0)
+            .is_ok());
+        for (t, expected) in [
+            (transfer(0, vec![3], vec![]), "the receiver itself"),
+            (transfer(5, vec![3], vec![]), "from = 5"),
+            (transfer(1, vec![4], vec![]), "set 0 track = 4"),
+            (
+                transfer(
+                    1,
+                    vec![],
+                    vec![WireRow {
+                        track: 0,
+                        ln_likelihoods: vec![0.0; 4],
+                    }],
+                ),
+                "without identities",
+            ),
+        ] {
+            let e = Bounds::of_tests()
+                .check_transfer(&t, 0)
+                .unwrap_err()
+                .to_string();
+            assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
+        }
+        let identities = Bounds {
+            identities: true,
+            ..Bounds::of_tests()
+        };
+        let short_row = transfer(
+            1,
+            vec![],
+            vec![WireRow {
+                track: 2,
+                ln_likelihoods: vec![0.0; 3],
+            }],
+        );
+        let e = identities.check_transfer(&short_row, 0).unwrap_err();
+        assert!(e.to_string().contains("3 numbers for 4 identities"), "{e}");
+    }
+}

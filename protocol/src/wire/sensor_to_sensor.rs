@@ -12,7 +12,10 @@
 //! merged stream through the same router (the same seqs, owners and
 //! interests) and sends the batches of its own leaders
 //! (docs/design/architecture.md, "Several sensors").
+//!
+//! What the intake's messages must be ([`Valid`]) sits below the types.
 
+use super::valid::Valid;
 use super::versioned;
 use serde::{Deserialize, Serialize};
 use std::cmp::Ordering;
@@ -139,3 +142,56 @@ pub struct IntakeWanted {
     pub known_finished: bool,
 }
 versioned!(IntakeWanted, "intake request");
+
+impl Valid for IntakeWanted {
+    fn problem(&self) -> Option<String> {
+        if self.sensor.is_empty() {
+            return Some("no sensor named".into());
+        }
+        self.above
+            .time
+            .is_nan()
+            .then(|| "the watermark's time is not a number".to_string())
+    }
+}
+
+impl Valid for IntakeSlice {
+    fn problem(&self) -> Option<String> {
+        let mut previous: Option<&Position> = None;
+        for (i, (position, entry)) in self.entries.iter().enumerate() {
+            let cut = matches!(entry, Entry::Cut { .. });
+            if position.time.is_nan() || (!cut && position.time.is_infinite()) {
+                return Some(format!(
+                    "entry {i}: time {} is not a finite number",
+                    position.time
+                ));
+            }
+            if cut == (position.sub == 0 || position.sensor.is_empty()) {
+                return Some(format!(
+                    "entry {i}: a position {position:?} of the wrong kind"
+                ));
+            }
+            if !cut && position.producer.is_empty() {
+                return Some(format!("entry {i}: no producer"));
+            }
+            if previous.is_some_and(|p| position <= p) {
+                return Some(format!("entry {i}: position {position:?} out of order"));
+            }
+            if *position > self.watermark {
+                return Some(format!(
+                    "entry {i}: position {position:?} past the watermark"
+                ));
+            }
+            if let Entry::Line(text) = entry {
+                if text.len() > 1 << 16 {
+                    return Some(format!("entry {i}: a line of {} bytes", text.len()));
+                }
+            }
+            previous = Some(position);
+        }
+        self.watermark
+            .time
+            .is_nan()
+            .then(|| "the watermark's time is not a number".to_string())
+    }
+}
