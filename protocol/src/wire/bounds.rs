@@ -10,7 +10,7 @@
 //! module beside its type (`Bounds::check_batch` in `sensor_to_leader`,
 //! `Bounds::check_transfer` in `leader_to_leader`, ...), so this module
 //! imports no message. The rules a message obeys on its own are
-//! [`Valid`](super::valid::Valid)'s.
+//! [`Valid`](super::Valid)'s.
 
 use super::valid::require;
 use super::WireError;
@@ -46,7 +46,7 @@ impl Bounds {
     }
 }
 
-/// A broken bound as the error of message `what`, as [`Valid`](super::valid::Valid)'s
+/// A broken bound as the error of message `what`, as [`Valid`](super::Valid)'s
 /// errors are.
 pub(crate) fn invalid(what: &'static str, problem: String) -> WireError {
     WireError::Invalid { what, problem }

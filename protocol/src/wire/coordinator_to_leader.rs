@@ -11,8 +11,8 @@ use super::bounds::{invalid, Bounds};
 use super::factored::WireCounts;
 use super::identity::WireTree;
 use super::leader_to_leader::WireRow;
-use super::valid::{distinct, require, Valid, MAX_TRACKS};
-use super::WireError;
+use super::valid::{distinct, require, MAX_TRACKS};
+use super::{Valid, WireError};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -7,7 +7,8 @@
 //!
 //! What a cut must be ([`Valid`]) sits below the types.
 
-use super::valid::{Valid, MAX_TRACKS};
+use super::valid::MAX_TRACKS;
+use super::Valid;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

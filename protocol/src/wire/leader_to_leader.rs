@@ -14,8 +14,8 @@
 use super::bounds::{invalid, Bounds};
 use super::factored::WireComponent;
 use super::identity::WireTree;
-use super::valid::{distinct, require, Valid};
-use super::WireError;
+use super::valid::{distinct, require};
+use super::{Valid, WireError};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -8,8 +8,8 @@
 
 use super::bounds::{invalid, Bounds};
 use super::sensor_to_leader::{check_items, Batch, Sequenced};
-use super::valid::{distinct, Valid};
-use super::WireError;
+use super::valid::distinct;
+use super::{Valid, WireError};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -17,10 +17,18 @@
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
 //! - [`query`] — what a user gets back, as JSON.
-//! - [`valid`] — what every message must be on its own; [`decode`] checks
-//!   it, so a malformed message is an error, never a value.
-//! - [`bounds`] — what a message must be to fit a stream's field (tracks
-//!   below n, leader indices below L), checked where the field is known.
+//!
+//! Each message module also holds its messages' rules, beside their
+//! types: what the message must be on its own (its [`Valid`] impl, which
+//! [`decode`] checks, so a malformed message is an error, never a value)
+//! and what it must be to fit a stream's field (its `check_*` method on
+//! [`bounds::Bounds`]: tracks below n, leader indices below L, checked
+//! where the field is known). What those rules share sits in two small
+//! modules that import no message:
+//! - [`valid`] — the size limits every message shares, and the helpers
+//!   the rules are written with.
+//! - [`bounds`] — the field ([`bounds::Bounds`]) and its two checks (a
+//!   track, a leader index).
 
 pub mod bounds;
 pub mod coordinator_to_leader;
@@ -39,7 +47,6 @@ pub mod valid;
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
-pub use valid::Valid;
 
 /// The version of every postcard message below; a receiver rejects others.
 /// 4: the transfer key carries a `TransfersSent`, one input's transfers.
@@ -69,6 +76,23 @@ pub enum WireError {
 pub trait Versioned {
     const WHAT: &'static str;
     fn version(&self) -> u16;
+}
+
+/// A message that can say whether it is well formed on its own.
+pub trait Valid: Versioned {
+    /// The first rule the message breaks, as a sentence that says where.
+    fn problem(&self) -> Option<String>;
+
+    /// [`Valid::problem`] as a [`WireError`] naming the message.
+    fn validate(&self) -> Result<(), WireError> {
+        match self.problem() {
+            None => Ok(()),
+            Some(problem) => Err(WireError::Invalid {
+                what: Self::WHAT,
+                problem,
+            }),
+        }
+    }
 }
 
 pub fn encode<T: Serialize>(message: &T) -> Vec<u8> {

@@ -15,8 +15,8 @@
 use super::bounds::{invalid, Bounds};
 use super::factored::FactoredStart;
 use super::identity::MAX_GROUP as IDENTITY_GROUP;
-use super::valid::{distinct_tracks, require, Valid, MAX_IDENTITY_TRACKS, MAX_LEADERS, MAX_TRACKS};
-use super::WireError;
+use super::valid::{distinct_tracks, require, MAX_IDENTITY_TRACKS, MAX_LEADERS, MAX_TRACKS};
+use super::{Valid, WireError};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -15,8 +15,8 @@
 //!
 //! What the intake's messages must be ([`Valid`]) sits below the types.
 
-use super::valid::Valid;
 use super::versioned;
+use super::Valid;
 use serde::{Deserialize, Serialize};
 use std::cmp::Ordering;
 

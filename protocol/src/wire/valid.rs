@@ -1,18 +1,19 @@
-//! What a message must be on its own, whoever receives it, in general:
-//! the [`Valid`] trait that [`decode`](super::decode) applies, so no
-//! process ever holds a message that breaks a rule, the size limits every
-//! message shares ([`MAX_TRACKS`] and the others) and the helpers the rules
-//! are written with. Each message's own rules (finite, non-negative
-//! likelihoods, probabilities in [0, 1], k ≤ n, distinct tracks, items in
-//! seq order) are its `impl Valid`, in the message's module beside its
-//! type; this module imports no message, so every message module can
-//! import it. The rules that need the stream's field (a track below n, a
-//! leader index below L) are [`Bounds`](super::bounds::Bounds)'.
+//! What every message must be on its own, whoever receives it: the size
+//! limits all messages share ([`MAX_TRACKS`] and the others) and the
+//! helpers their rules are written with. Each message's own rules (finite,
+//! non-negative likelihoods, probabilities in [0, 1], k ≤ n, distinct
+//! tracks, items in seq order) are its [`Valid`] impl, in the message's
+//! module beside its type, and [`decode`](super::decode) applies them, so
+//! no process ever holds a message that breaks one. This module imports
+//! nothing of the wire, so every message module can import it. The rules
+//! that need the stream's field (a track below n, a leader index below L)
+//! are [`Bounds`](super::bounds::Bounds)'.
 //!
-//! Every error names the message ([`Versioned::WHAT`]) and says where in it
-//! the fault is and what the value was.
+//! Every error names the message ([`Versioned::WHAT`](super::Versioned::WHAT))
+//! and says where in it the fault is and what the value was.
 
-use super::{Versioned, WireError};
+#[doc(inline)]
+pub use super::Valid;
 
 /// The most tracks a stream may have. A `Begin` lists an owner per track
 /// and every leader keeps a flag per track, so a stream of 10^9 tracks
@@ -28,23 +29,6 @@ pub const MAX_IDENTITY_TRACKS: u32 = 1 << 12;
 
 /// The most leaders a stream may name: indices are `u16`.
 pub const MAX_LEADERS: usize = 1 << 16;
-
-/// A message that can say whether it is well formed on its own.
-pub trait Valid: Versioned {
-    /// The first rule the message breaks, as a sentence that says where.
-    fn problem(&self) -> Option<String>;
-
-    /// [`Valid::problem`] as a [`WireError`] naming the message.
-    fn validate(&self) -> Result<(), WireError> {
-        match self.problem() {
-            None => Ok(()),
-            Some(problem) => Err(WireError::Invalid {
-                what: Self::WHAT,
-                problem,
-            }),
-        }
-    }
-}
 
 /// `Err(sentence)` when `condition` fails: the rules read as a list.
 pub(crate) fn require(condition: bool, problem: impl FnOnce() -> String) -> Result<(), String> {
