@@ -1,8 +1,10 @@
 //! The leader's door: bytes from the network become inputs of the state
 //! machine only once they decode, are well formed on their own
 //! ([`decode`] checks [`Valid`](idmesh_protocol::wire::Valid)) and fit the
-//! stream the leader knows ([`Bounds`]: tracks below n, leader indices
-//! below L). What fails is rejected before it is journaled or applied, so
+//! stream the leader knows ([`Bounds`](idmesh_protocol::wire::bounds::Bounds):
+//! tracks below n, leader indices below L). Both kinds of rule of a
+//! message sit beside its type in idmesh-protocol (a batch's in
+//! `wire::sensor_to_leader`), so a check here is one call away from them. What fails is rejected before it is journaled or applied, so
 //! one bad message from the network leaves the leader's state as it was
 //! and costs it nothing but a log line and a count: it is not a failure of
 //! the leader, which keeps `failure` for its own inconsistencies (a journal
@@ -16,7 +18,6 @@
 use crate::error::LeaderError;
 use crate::journal::Kind;
 use crate::state::{Action, Leader};
-use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
 use idmesh_protocol::wire::leader_to_sensor::Followed;
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
@@ -74,17 +75,12 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
         }
         Kind::Followed => {
             let followed = decode::<Followed>(bytes)?;
-            let bounds: Option<Bounds> = leader.bounds();
-            match bounds {
-                Some(bounds) => bounds.check_followed(&followed.items)?,
-                // Only a leader that has begun asks to follow.
-                None => {
-                    return Err(WireError::Invalid {
-                        what: "follow reply",
-                        problem: "a reply before the stream's Begin".into(),
-                    })
-                }
-            }
+            // Only a leader that has begun asks to follow.
+            let bounds = leader.bounds().ok_or_else(|| WireError::Invalid {
+                what: "follow reply",
+                problem: "a reply before the stream's Begin".into(),
+            })?;
+            bounds.check_followed(&followed.items)?;
             Ok(Input::Followed(followed))
         }
         Kind::Rejected => Err(WireError::Invalid {
