@@ -116,31 +116,12 @@ pub(crate) fn scale_logged(
     options: &SinkhornOptions,
 ) -> Result<(SinkhornReport, LogScaling), BeliefError> {
     options.validate()?;
-    if n == 0 || matrix.len() != n * n {
-        return Err(BeliefError::Numerical {
-            step: "sinkhorn",
-            detail: format!("expected {n} × {n} entries, got {}", matrix.len()),
-        });
-    }
-    if let Some(&bad) = matrix.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
-        return Err(BeliefError::Numerical {
-            step: "sinkhorn",
-            detail: format!("entry {bad} is negative or not finite"),
-        });
-    }
+    check_entries(n, matrix)?;
     let mut logs = LogScaling {
         row: vec![0.0; n],
         col: vec![0.0; n],
     };
-    // Scale every row to max 1 first, so sums neither overflow nor vanish.
-    for (row, ln_row) in matrix.chunks_mut(n).zip(logs.row.iter_mut()) {
-        let top = row.iter().copied().fold(0.0, f64::max);
-        if top == 0.0 {
-            return Err(BeliefError::Degenerate { normalizer: 0.0 });
-        }
-        row.iter_mut().for_each(|x| *x /= top);
-        *ln_row -= top.ln();
-    }
+    scale_rows_to_max_one(n, matrix, &mut logs)?;
     let pruned = prune_to_total_support(n, matrix)?;
     let pattern = Pattern::of(n, matrix);
 
@@ -219,6 +200,42 @@ pub(crate) fn scale_logged(
             options.tolerance, options.max_iterations
         ),
     })
+}
+
+/// Refuses a matrix that is not n × n, or has a negative or non-finite
+/// entry.
+fn check_entries(n: usize, matrix: &[f64]) -> Result<(), BeliefError> {
+    if n == 0 || matrix.len() != n * n {
+        return Err(BeliefError::Numerical {
+            step: "sinkhorn",
+            detail: format!("expected {n} × {n} entries, got {}", matrix.len()),
+        });
+    }
+    if let Some(&bad) = matrix.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
+        return Err(BeliefError::Numerical {
+            step: "sinkhorn",
+            detail: format!("entry {bad} is negative or not finite"),
+        });
+    }
+    Ok(())
+}
+
+/// Scales every row to max 1 before any sweep, so sums neither overflow
+/// nor vanish; an all-zero row is a matrix with no positive diagonal.
+fn scale_rows_to_max_one(
+    n: usize,
+    matrix: &mut [f64],
+    logs: &mut LogScaling,
+) -> Result<(), BeliefError> {
+    for (row, ln_row) in matrix.chunks_mut(n).zip(logs.row.iter_mut()) {
+        let top = row.iter().copied().fold(0.0, f64::max);
+        if top == 0.0 {
+            return Err(BeliefError::Degenerate { normalizer: 0.0 });
+        }
+        row.iter_mut().for_each(|x| *x /= top);
+        *ln_row -= top.ln();
+    }
+    Ok(())
 }
 
 /// Plain sweeps tried before Newton steps.

@@ -792,56 +792,80 @@ impl FactoredIdentity {
                     detail: format!("no parts of {ka} and {kb} tracks fit a cap of {cap}"),
                 })?,
             };
-            let mut old = Vec::new();
-            let mut new = Vec::new();
-            for (g, part) in [(ga, pa), (gb, pb)] {
-                match part {
-                    Part::Whole => {}
-                    Part::Hard(cut) => {
-                        let group = self.groups[g].clone();
-                        self.leak_cut(&group, &cut, 1.0);
-                        let (part, rest) = split::apply(&group, &cut)?;
-                        self.record(&cut);
-                        old.push(g);
-                        new.extend([part, rest]);
-                    }
-                    Part::Linked(cut) => {
-                        let (pa, pb) = self.new_link();
-                        let ports = self.groups[g].ports(self.n);
-                        let group = self.groups[g].clone();
-                        let linked = split::apply_linked(&group, &cut, &ports, pa, pb)?;
-                        // It keeps the assignments with at most one
-                        // exchange: of those with any (1 − P(E)), it loses
-                        // the ones with two or more.
-                        let any = 1.0 - cut.mass;
-                        if any > 0.0 {
-                            self.leak_cut(&group, &cut, ((1.0 - linked.mass) / any).min(1.0));
-                        }
-                        self.stats.cuts += 1;
-                        self.stats.lossy_cuts += 1;
-                        self.stats.linked_cuts += 1;
-                        self.add_loss(1.0 - linked.mass, linked.mutual_information);
-                        old.push(g);
-                        new.extend([linked.a, linked.b]);
-                    }
+            self.cut_to_parts([(ga, pa), (gb, pb)])?;
+        }
+        self.break_cycle_between(a, b)?;
+        let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
+        let joined = self.groups[ga].join(&self.groups[gb])?;
+        let (mut joined, freed) = Self::collapse(&joined, self.n)?;
+        self.release(freed);
+        let (ja, jb) = (
+            joined.local_track(a).unwrap_or(0),
+            joined.local_track(b).unwrap_or(0),
+        );
+        joined.mix(ja, jb, swap);
+        self.replace(vec![ga, gb], vec![joined]);
+        Ok(())
+    }
+
+    /// Cuts each of two groups to its chosen part (a whole group is left
+    /// as it is), and drops the links a rest of ports alone pins.
+    fn cut_to_parts(&mut self, parts: [(usize, Part); 2]) -> Result<(), BeliefError> {
+        let mut old = Vec::new();
+        let mut new = Vec::new();
+        for (g, part) in parts {
+            match part {
+                Part::Whole => {}
+                Part::Hard(cut) => {
+                    let group = self.groups[g].clone();
+                    self.leak_cut(&group, &cut, 1.0);
+                    let (part, rest) = split::apply(&group, &cut)?;
+                    self.record(&cut);
+                    old.push(g);
+                    new.extend([part, rest]);
                 }
-            }
-            // A rest holding ports alone pins their links to "nothing
-            // crossed": they are dropped, exactly.
-            let orphans: Vec<u32> = new
-                .iter()
-                .filter(|g| g.real_size(self.n) == 0)
-                .flat_map(|g| g.ports(self.n))
-                .map(|p| p.id)
-                .collect();
-            self.replace(old, new);
-            for p in orphans {
-                if self.group_of[p as usize] != usize::MAX {
-                    let e = self.exchange(p)?;
-                    self.drop_link(p, e)?;
+                Part::Linked(cut) => {
+                    let (pa, pb) = self.new_link();
+                    let ports = self.groups[g].ports(self.n);
+                    let group = self.groups[g].clone();
+                    let linked = split::apply_linked(&group, &cut, &ports, pa, pb)?;
+                    // It keeps the assignments with at most one
+                    // exchange: of those with any (1 − P(E)), it loses
+                    // the ones with two or more.
+                    let any = 1.0 - cut.mass;
+                    if any > 0.0 {
+                        self.leak_cut(&group, &cut, ((1.0 - linked.mass) / any).min(1.0));
+                    }
+                    self.stats.cuts += 1;
+                    self.stats.lossy_cuts += 1;
+                    self.stats.linked_cuts += 1;
+                    self.add_loss(1.0 - linked.mass, linked.mutual_information);
+                    old.push(g);
+                    new.extend([linked.a, linked.b]);
                 }
             }
         }
+        // A rest holding ports alone pins their links to "nothing
+        // crossed": they are dropped, exactly.
+        let orphans: Vec<u32> = new
+            .iter()
+            .filter(|g| g.real_size(self.n) == 0)
+            .flat_map(|g| g.ports(self.n))
+            .map(|p| p.id)
+            .collect();
+        self.replace(old, new);
+        for p in orphans {
+            if self.group_of[p as usize] != usize::MAX {
+                let e = self.exchange(p)?;
+                self.drop_link(p, e)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Before tracks `a` and `b` are joined: if their groups are linked
+    /// through others, the join would close a cycle of links.
+    fn break_cycle_between(&mut self, a: u32, b: u32) -> Result<(), BeliefError> {
         let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
         if let Some(path) = self.path(ga, gb) {
             if path.len() > 1 {
@@ -859,16 +883,6 @@ impl FactoredIdentity {
                 }
             }
         }
-        let (ga, gb) = (self.group_of[a as usize], self.group_of[b as usize]);
-        let joined = self.groups[ga].join(&self.groups[gb])?;
-        let (mut joined, freed) = Self::collapse(&joined, self.n)?;
-        self.release(freed);
-        let (ja, jb) = (
-            joined.local_track(a).unwrap_or(0),
-            joined.local_track(b).unwrap_or(0),
-        );
-        joined.mix(ja, jb, swap);
-        self.replace(vec![ga, gb], vec![joined]);
         Ok(())
     }
 }
