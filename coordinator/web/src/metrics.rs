@@ -153,108 +153,134 @@ impl Collector for Snapshot {
             encoder.encode_descriptor("up", "1 if query/stats answered", None, up.metric_type())?;
         up.encode(family.encode_family(&labels(&[("role", "stats")]))?)?;
         if let Some(positions) = &self.positions {
-            let counter = ConstCounter::new(0u64);
-            let mut family = encoder.encode_descriptor(
-                "sensor_events",
-                "trace events the sensor has routed",
-                None,
-                counter.metric_type(),
-            )?;
-            for (sensor, &events) in &positions.watermark {
-                let labels = labels(&[("role", "sensor"), ("process", sensor)]);
-                ConstCounter::new(events).encode(family.encode_family(&labels)?)?;
-            }
+            encode_sensor_events(&mut encoder, positions)?;
         }
         let Some(stats) = &self.stats else {
             return Ok(());
         };
-        for (name, help, field) in LEADER_COUNTERS {
-            let name = format!("leader_{name}");
-            let mut family = encoder.encode_descriptor(
-                &name,
-                help,
-                None,
-                ConstCounter::new(0u64).metric_type(),
-            )?;
-            for s in &stats.leaders {
-                ConstCounter::new(field(s)).encode(family.encode_family(&leader_labels(s))?)?;
-            }
-        }
-        for (name, help, field) in LEADER_GAUGES {
-            let name = format!("leader_{name}");
-            let mut family = encoder.encode_descriptor(
-                &name,
-                help,
-                None,
-                ConstGauge::new(0i64).metric_type(),
-            )?;
-            for s in &stats.leaders {
-                let value = i64::try_from(field(s)).unwrap_or(i64::MAX);
-                ConstGauge::new(value).encode(family.encode_family(&leader_labels(s))?)?;
-            }
-        }
-        let mut family = encoder.encode_descriptor(
-            "leader_recovery_seconds",
-            "how long the last recovery took",
-            None,
-            ConstGauge::new(0.0f64).metric_type(),
-        )?;
-        for s in &stats.leaders {
-            ConstGauge::new(s.recovery_seconds).encode(family.encode_family(&leader_labels(s))?)?;
-        }
-        // Bad input refused, by every role.
-        let mut family = encoder.encode_descriptor(
-            "rejected",
-            "bad input refused (leaders: at the door; sensors: follow, resend and ingest requests, ingested lines; coordinator: queries)",
-            None,
-            ConstCounter::new(0u64).metric_type(),
-        )?;
-        for s in &stats.leaders {
-            ConstCounter::new(s.rejected).encode(family.encode_family(&leader_labels(s))?)?;
-        }
-        // One label set per family (parsers insist): `leader` is empty for
-        // the roles that are not leaders.
-        for s in &stats.sensors {
-            let labels = labels(&[("role", "sensor"), ("leader", ""), ("process", &s.sensor)]);
-            ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
-        }
-        let rejected_by_coordinator = labels(&[
-            ("role", "coordinator"),
-            ("leader", ""),
-            ("process", "coordinator"),
-        ]);
-        ConstCounter::new(stats.coordinator.rejected)
-            .encode(family.encode_family(&rejected_by_coordinator)?)?;
-        let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
-        for (name, help, value) in [
-            (
-                "coordinator_bad_replies",
-                "replies from leaders or the sensor that were no good",
-                stats.coordinator.bad_replies,
-            ),
-            (
-                "coordinator_degraded_answers",
-                "queries answered degraded (a leader missing or not at the cut)",
-                stats.coordinator.degraded,
-            ),
-            (
-                "coordinator_cuts_pushed",
-                "fresh cuts whose every leader pushed its sums on reaching them",
-                stats.coordinator.cuts_pushed,
-            ),
-            (
-                "coordinator_cuts_asked",
-                "fresh cuts whose leaders were asked, a push not having come in time",
-                stats.coordinator.cuts_asked,
-            ),
-        ] {
-            let counter = ConstCounter::new(value);
-            let family = encoder.encode_descriptor(name, help, None, counter.metric_type())?;
-            let mut family = family;
-            counter.encode(family.encode_family(&coordinator)?)?;
-        }
-        Ok(())
+        encode_leaders(&mut encoder, &stats.leaders)?;
+        encode_rejected(&mut encoder, stats)?;
+        encode_coordinator(&mut encoder, stats)
     }
+}
+
+/// The trace events the sensor has routed, by sensor.
+fn encode_sensor_events(
+    encoder: &mut DescriptorEncoder<'_>,
+    positions: &PositionsAnswer,
+) -> Result<(), std::fmt::Error> {
+    let counter = ConstCounter::new(0u64);
+    let mut family = encoder.encode_descriptor(
+        "sensor_events",
+        "trace events the sensor has routed",
+        None,
+        counter.metric_type(),
+    )?;
+    for (sensor, &events) in &positions.watermark {
+        let labels = labels(&[("role", "sensor"), ("process", sensor)]);
+        ConstCounter::new(events).encode(family.encode_family(&labels)?)?;
+    }
+    Ok(())
+}
+
+/// Every leader's counters and gauges, and how long its last recovery took.
+fn encode_leaders(
+    encoder: &mut DescriptorEncoder<'_>,
+    leaders: &[LeaderStats],
+) -> Result<(), std::fmt::Error> {
+    for (name, help, field) in LEADER_COUNTERS {
+        let name = format!("leader_{name}");
+        let mut family =
+            encoder.encode_descriptor(&name, help, None, ConstCounter::new(0u64).metric_type())?;
+        for s in leaders {
+            ConstCounter::new(field(s)).encode(family.encode_family(&leader_labels(s))?)?;
+        }
+    }
+    for (name, help, field) in LEADER_GAUGES {
+        let name = format!("leader_{name}");
+        let mut family =
+            encoder.encode_descriptor(&name, help, None, ConstGauge::new(0i64).metric_type())?;
+        for s in leaders {
+            let value = i64::try_from(field(s)).unwrap_or(i64::MAX);
+            ConstGauge::new(value).encode(family.encode_family(&leader_labels(s))?)?;
+        }
+    }
+    let mut family = encoder.encode_descriptor(
+        "leader_recovery_seconds",
+        "how long the last recovery took",
+        None,
+        ConstGauge::new(0.0f64).metric_type(),
+    )?;
+    for s in leaders {
+        ConstGauge::new(s.recovery_seconds).encode(family.encode_family(&leader_labels(s))?)?;
+    }
+    Ok(())
+}
+
+/// Bad input refused, by every role.
+fn encode_rejected(
+    encoder: &mut DescriptorEncoder<'_>,
+    stats: &StatsAnswer,
+) -> Result<(), std::fmt::Error> {
+    let mut family = encoder.encode_descriptor(
+        "rejected",
+        "bad input refused (leaders: at the door; sensors: follow, resend and ingest requests, ingested lines; coordinator: queries)",
+        None,
+        ConstCounter::new(0u64).metric_type(),
+    )?;
+    for s in &stats.leaders {
+        ConstCounter::new(s.rejected).encode(family.encode_family(&leader_labels(s))?)?;
+    }
+    // One label set per family (parsers insist): `leader` is empty for
+    // the roles that are not leaders.
+    for s in &stats.sensors {
+        let labels = labels(&[("role", "sensor"), ("leader", ""), ("process", &s.sensor)]);
+        ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
+    }
+    let rejected_by_coordinator = labels(&[
+        ("role", "coordinator"),
+        ("leader", ""),
+        ("process", "coordinator"),
+    ]);
+    ConstCounter::new(stats.coordinator.rejected)
+        .encode(family.encode_family(&rejected_by_coordinator)?)?;
+    Ok(())
+}
+
+/// The coordinator's own counters.
+fn encode_coordinator(
+    encoder: &mut DescriptorEncoder<'_>,
+    stats: &StatsAnswer,
+) -> Result<(), std::fmt::Error> {
+    let coordinator = labels(&[("role", "coordinator"), ("process", "coordinator")]);
+    for (name, help, value) in [
+        (
+            "coordinator_bad_replies",
+            "replies from leaders or the sensor that were no good",
+            stats.coordinator.bad_replies,
+        ),
+        (
+            "coordinator_degraded_answers",
+            "queries answered degraded (a leader missing or not at the cut)",
+            stats.coordinator.degraded,
+        ),
+        (
+            "coordinator_cuts_pushed",
+            "fresh cuts whose every leader pushed its sums on reaching them",
+            stats.coordinator.cuts_pushed,
+        ),
+        (
+            "coordinator_cuts_asked",
+            "fresh cuts whose leaders were asked, a push not having come in time",
+            stats.coordinator.cuts_asked,
+        ),
+    ] {
+        let counter = ConstCounter::new(value);
+        let family = encoder.encode_descriptor(name, help, None, counter.metric_type())?;
+        let mut family = family;
+        counter.encode(family.encode_family(&coordinator)?)?;
+    }
+    Ok(())
 }
 
 /// The whole exposition at this moment.
