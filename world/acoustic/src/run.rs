@@ -177,123 +177,43 @@ pub fn run_variants(
     variants: &[PipelineConfig],
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Vec<AcousticResult>, AcousticError> {
-    config.validate()?;
-    for variant in variants {
-        if !same_front(&config.pipeline, variant) {
-            return Err(AcousticError::Config(
-                "a variant differs from the run before the intersection step".into(),
-            ));
-        }
-        AcousticConfig {
-            pipeline: variant.clone(),
-            ..config.clone()
-        }
-        .validate()?;
-    }
+    check_variants(config, variants)?;
     let start = Instant::now();
     let p = &config.pipeline;
-    let k = config.field.targets;
-    let threads = config.threads;
     let seg = Segmentation::new(p.l_seg, p.l_step, config.field.samples)?;
     let v = seg.slots();
     // Progress units: 1 for the field, v for separation, v for links and
     // selection, v per variant for intersection, 1 for the rest.
     let total = (2 + variants.len() as u64) * v as u64 + 2;
-    let mut done = 0u64;
-    let mut report = |d: u64, progress: &mut dyn FnMut(u64, u64)| {
-        if d > done {
-            done = d.min(total);
-            progress(done, total);
-        }
+    let mut progress = Progress {
+        done: 0,
+        total,
+        callback: progress,
     };
-    progress(0, total);
+    (progress.callback)(0, total);
 
     let t = Instant::now();
-    let field = Field::generate(&config.field, config.seed, threads)?;
+    let field = Field::generate(&config.field, config.seed, config.threads)?;
     let groups = nearest_groups(&field.sensors, p.n_group)?;
     let noise_variance = estimate_noise_variance(&field.signals, &groups, &seg, p.noise_probes);
     let mut times = StageTimes {
         field: t.elapsed().as_secs_f64(),
         ..StageTimes::default()
     };
-    report(1, progress);
+    progress.report(1);
 
     // (2) separation and (3) clustering, per slot.
     let t = Instant::now();
-    let slot_ids: Vec<usize> = (0..v).collect();
-    let clusters = p.clusters_per_target * k;
-    let separated = par_map_progress(
-        &slot_ids,
-        threads,
-        |&j| {
-            separate_slot(
-                &field.signals,
-                &groups,
-                &seg,
-                j,
-                &p.separation,
-                noise_variance,
-                config.seed,
-            )
-            .map(|(segs, rep)| {
-                let labels = cluster_slot(&segs, clusters, p.linkage, p.same_source as f32);
-                (segs, labels, rep)
-            })
-        },
-        &mut |d| report(1 + d as u64, progress),
-    );
-    let mut slots: Vec<SlotSegments> = Vec::with_capacity(v);
-    let mut labels: Vec<SlotClusters> = Vec::with_capacity(v);
-    let mut separation = SeparationReport::default();
-    for r in separated {
-        let (s, l, rep) = r?;
-        separation.add(&rep);
-        slots.push(s);
-        labels.push(l);
-    }
+    let (slots, labels, separation) =
+        separate_and_cluster(config, &field, &groups, seg, noise_variance, &mut progress)?;
     times.separate_cluster = t.elapsed().as_secs_f64();
-    report(1 + v as u64, progress);
+    progress.report(1 + v as u64);
 
     // (4) selection: link layers, then K chains per CTS.
     let t = Instant::now();
-    let pairs: Vec<usize> = (0..v.saturating_sub(1)).collect();
-    let layers: Vec<LinkLayer> = par_map_progress(
-        &pairs,
-        threads,
-        |&j| link_layer(&slots[j], &slots[j + 1], seg.l_step, p.link_candidates),
-        &mut |d| report(1 + v as u64 + d as u64, progress),
-    );
-    let n_cts = v + 1 - p.n_slot.min(v);
-    let select = SelectSettings {
-        k,
-        min_link: p.min_link as f32,
-        min_support: p.min_support,
-        aggregate_r2: p.aggregate_r2 as f32,
-    };
-    let chains: Vec<Vec<Chain>> = (0..n_cts)
-        .map(|u| {
-            let span = p.n_slot.min(v);
-            let refs: Vec<&LinkLayer> = layers[u..u + span - 1].iter().collect();
-            let slot = &slots[u];
-            let corr = |a: u32, b: u32| -> f32 {
-                slot.segment(a as usize)
-                    .iter()
-                    .zip(slot.segment(b as usize))
-                    .map(|(x, y)| x * y)
-                    .sum()
-            };
-            select_cts(
-                &refs,
-                &labels[u].labels,
-                &labels[u].support,
-                slots[u + span - 1].len(),
-                &select,
-                &corr,
-            )
-        })
-        .collect();
+    let chains = select_chains(config, seg, &slots, &labels, &mut progress);
     times.link_select = t.elapsed().as_secs_f64();
-    report(1 + 2 * v as u64, progress);
+    progress.report(1 + 2 * v as u64);
 
     let front_secs = start.elapsed().as_secs_f64();
     let mut results = Vec::with_capacity(variants.len());
@@ -315,13 +235,147 @@ pub fn run_variants(
                 separation,
                 times,
             },
-            &mut |d| report(base + d, progress),
+            &mut |d| progress.report(base + d),
         );
         result.stats.times.total += front_secs;
         results.push(result);
     }
-    report(total, progress);
+    progress.report(total);
     Ok(results)
+}
+
+/// Refuses variants that differ from the run before the intersection
+/// step, or are not valid configs themselves.
+fn check_variants(
+    config: &AcousticConfig,
+    variants: &[PipelineConfig],
+) -> Result<(), AcousticError> {
+    config.validate()?;
+    for variant in variants {
+        if !same_front(&config.pipeline, variant) {
+            return Err(AcousticError::Config(
+                "a variant differs from the run before the intersection step".into(),
+            ));
+        }
+        AcousticConfig {
+            pipeline: variant.clone(),
+            ..config.clone()
+        }
+        .validate()?;
+    }
+    Ok(())
+}
+
+/// Reports (done, total) to a caller's callback: never decreasing, never
+/// past the total.
+struct Progress<'a> {
+    done: u64,
+    total: u64,
+    callback: &'a mut dyn FnMut(u64, u64),
+}
+
+impl Progress<'_> {
+    fn report(&mut self, d: u64) {
+        if d > self.done {
+            self.done = d.min(self.total);
+            (self.callback)(self.done, self.total);
+        }
+    }
+}
+
+/// Steps (2) and (3): every slot's segments separated and clustered, in
+/// parallel over slots; with what separation reported over them all.
+fn separate_and_cluster(
+    config: &AcousticConfig,
+    field: &Field,
+    groups: &[SensorGroup],
+    seg: Segmentation,
+    noise_variance: f64,
+    progress: &mut Progress<'_>,
+) -> Result<(Vec<SlotSegments>, Vec<SlotClusters>, SeparationReport), AcousticError> {
+    let p = &config.pipeline;
+    let v = seg.slots();
+    let slot_ids: Vec<usize> = (0..v).collect();
+    let clusters = p.clusters_per_target * config.field.targets;
+    let separated = par_map_progress(
+        &slot_ids,
+        config.threads,
+        |&j| {
+            separate_slot(
+                &field.signals,
+                groups,
+                &seg,
+                j,
+                &p.separation,
+                noise_variance,
+                config.seed,
+            )
+            .map(|(segs, rep)| {
+                let labels = cluster_slot(&segs, clusters, p.linkage, p.same_source as f32);
+                (segs, labels, rep)
+            })
+        },
+        &mut |d| progress.report(1 + d as u64),
+    );
+    let mut slots: Vec<SlotSegments> = Vec::with_capacity(v);
+    let mut labels: Vec<SlotClusters> = Vec::with_capacity(v);
+    let mut separation = SeparationReport::default();
+    for r in separated {
+        let (s, l, rep) = r?;
+        separation.add(&rep);
+        slots.push(s);
+        labels.push(l);
+    }
+    Ok((slots, labels, separation))
+}
+
+/// Step (4): the link layers between successive slots (in parallel),
+/// then K chains per CTS.
+fn select_chains(
+    config: &AcousticConfig,
+    seg: Segmentation,
+    slots: &[SlotSegments],
+    labels: &[SlotClusters],
+    progress: &mut Progress<'_>,
+) -> Vec<Vec<Chain>> {
+    let p = &config.pipeline;
+    let v = seg.slots();
+    let pairs: Vec<usize> = (0..v.saturating_sub(1)).collect();
+    let layers: Vec<LinkLayer> = par_map_progress(
+        &pairs,
+        config.threads,
+        |&j| link_layer(&slots[j], &slots[j + 1], seg.l_step, p.link_candidates),
+        &mut |d| progress.report(1 + v as u64 + d as u64),
+    );
+    let n_cts = v + 1 - p.n_slot.min(v);
+    let select = SelectSettings {
+        k: config.field.targets,
+        min_link: p.min_link as f32,
+        min_support: p.min_support,
+        aggregate_r2: p.aggregate_r2 as f32,
+    };
+    (0..n_cts)
+        .map(|u| {
+            let span = p.n_slot.min(v);
+            let refs: Vec<&LinkLayer> = layers[u..u + span - 1].iter().collect();
+            let slot = &slots[u];
+            let corr = |a: u32, b: u32| -> f32 {
+                slot.segment(a as usize)
+                    .iter()
+                    .zip(slot.segment(b as usize))
+                    .map(|(x, y)| x * y)
+                    .sum()
+            };
+            select_cts(
+                &refs,
+                &labels[u].labels,
+                &labels[u].support,
+                slots[u + span - 1].len(),
+                &select,
+                &corr,
+            )
+        })
+        .collect()
 }
 
 /// What the front end (up to selection) hands to [`finish`].
@@ -344,25 +398,82 @@ fn finish(
     progress: &mut dyn FnMut(u64),
 ) -> AcousticResult {
     let start = Instant::now();
-    let Front {
-        field,
-        groups,
-        seg,
-        noise_variance,
-        slots,
-        chains,
-        separation,
-        mut times,
-    } = front;
     let p = &config.pipeline;
-    let k = config.field.targets;
-    let threads = config.threads;
+    let seg = front.seg;
     let v = seg.slots();
+    let mut times = front.times;
     // (5) intersection, once per distinct (slot, segment).
     let t = Instant::now();
     let grid = TileGrid::new(config.field.size, p.tile);
-    let ranges = GroupRanges::new(grid, groups, &field.sensors, config.field.range);
-    let mut wanted: Vec<(u32, u32)> = chains
+    let Located {
+        areas,
+        area_source_corr,
+        area_of,
+    } = locate(config, &front, grid, progress);
+    times.intersect = t.elapsed().as_secs_f64();
+    progress(v as u64);
+
+    // (6) voting and linking.
+    let t = Instant::now();
+    let (linked, kept, dropped) = vote_and_link(config, &front, &areas, &grid, &area_of);
+    times.vote_link = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let metrics = evaluate(&linked, &areas, &grid, &front.field.paths, &seg);
+    let paths = estimated_paths(&linked, &areas, &seg);
+    let events = path_events(&paths, &seg, &config.output);
+    let resolution = resolution_summary(config, front.field);
+    times.metrics = t.elapsed().as_secs_f64();
+    times.total = start.elapsed().as_secs_f64();
+    AcousticResult {
+        config: config.clone(),
+        stats: RunStats {
+            groups: front.groups.len(),
+            slots: v,
+            noise_variance: front.noise_variance,
+            separation: front.separation,
+            areas: areas.len(),
+            kept,
+            dropped,
+            times,
+        },
+        field: front.field.clone(),
+        groups: front.groups.to_vec(),
+        segmentation: seg,
+        areas,
+        area_source_corr,
+        grid,
+        paths,
+        metrics,
+        resolution,
+        events,
+    }
+}
+
+/// The intersection areas the selected chains refer to.
+struct Located {
+    areas: Vec<Area>,
+    /// Per area, |corr| of its segment with each target's source.
+    area_source_corr: Vec<Vec<f32>>,
+    /// The area of each (slot, segment) that has one.
+    area_of: FxHashMap<(u32, u32), u32>,
+}
+
+/// Step (5): intersects the hearing groups of every distinct (slot,
+/// segment) the chains selected, once each. `progress(d)` reports d of v
+/// slots' worth done.
+fn locate(
+    config: &AcousticConfig,
+    front: &Front<'_>,
+    grid: TileGrid,
+    progress: &mut dyn FnMut(u64),
+) -> Located {
+    let p = &config.pipeline;
+    let (field, slots, seg) = (front.field, front.slots, front.seg);
+    let v = seg.slots();
+    let ranges = GroupRanges::new(grid, front.groups, &field.sensors, config.field.range);
+    let mut wanted: Vec<(u32, u32)> = front
+        .chains
         .iter()
         .enumerate()
         .flat_map(|(u, cs)| {
@@ -380,7 +491,7 @@ fn finish(
     let area_total = wanted.len().max(1) as u64;
     let computed: Vec<Option<Area>> = par_map_progress(
         &wanted,
-        threads,
+        config.threads,
         |&(j, s)| {
             let hearing = hearing_groups(&slots[j as usize], s as usize, threshold);
             intersect(
@@ -391,17 +502,19 @@ fn finish(
         },
         &mut |d| progress(d as u64 * v as u64 / area_total),
     );
-    let mut areas: Vec<Area> = Vec::new();
-    let mut area_source_corr: Vec<Vec<f32>> = Vec::new();
-    let mut area_of: FxHashMap<(u32, u32), u32> = FxHashMap::default();
+    let mut located = Located {
+        areas: Vec::new(),
+        area_source_corr: Vec::new(),
+        area_of: FxHashMap::default(),
+    };
     for (key, area) in wanted.iter().zip(computed) {
         if let Some(a) = area {
-            area_of.insert(*key, areas.len() as u32);
-            areas.push(a);
+            located.area_of.insert(*key, located.areas.len() as u32);
+            located.areas.push(a);
             let (j, s) = (key.0 as usize, key.1 as usize);
             let x: Vec<f32> = slots[j].segment(s).to_vec();
             let from = seg.start(j);
-            area_source_corr.push(
+            located.area_source_corr.push(
                 field
                     .sources
                     .iter()
@@ -416,12 +529,24 @@ fn finish(
             );
         }
     }
-    times.intersect = t.elapsed().as_secs_f64();
-    progress(v as u64);
+    located
+}
 
-    // (6) voting and linking.
-    let t = Instant::now();
-    let estimates: Vec<CtsEstimate> = chains
+/// Step (6): votes on the chains' areas per CTS and links the fragments
+/// kept into K paths; returns the paths, the fragments kept by the vote
+/// and those dropped by linking.
+fn vote_and_link(
+    config: &AcousticConfig,
+    front: &Front<'_>,
+    areas: &[Area],
+    grid: &TileGrid,
+    area_of: &FxHashMap<(u32, u32), u32>,
+) -> (Vec<Vec<Fragment>>, usize, usize) {
+    let p = &config.pipeline;
+    let (slots, seg) = (front.slots, front.seg);
+    let v = seg.slots();
+    let estimates: Vec<CtsEstimate> = front
+        .chains
         .iter()
         .enumerate()
         .map(|(u, cs)| CtsEstimate {
@@ -458,7 +583,7 @@ fn finish(
             .sum();
         c.abs() >= same
     };
-    let pseg = vote(&estimates, v, &areas, &grid, &settings, &same_source);
+    let pseg = vote(&estimates, v, areas, grid, &settings, &same_source);
     let kept = pseg.iter().map(Vec::len).sum();
     let continuity = |ja: usize, a: u32, jb: usize, b: u32| -> Option<f64> {
         let shift = (jb - ja) * seg.l_step;
@@ -470,12 +595,25 @@ fn finish(
         let y = &slots[jb].segment(b as usize)[..seg.l_seg - shift];
         Some(overlap_correlation(x, y))
     };
-    let (linked, dropped) = link(&pseg, k, &areas, &grid, &settings, &continuity);
-    times.vote_link = t.elapsed().as_secs_f64();
+    let (linked, dropped) = link(
+        &pseg,
+        config.field.targets,
+        areas,
+        grid,
+        &settings,
+        &continuity,
+    );
+    (linked, kept, dropped)
+}
 
-    let t = Instant::now();
-    let metrics = evaluate(&linked, &areas, &grid, &field.paths, &seg);
-    let paths: Vec<EstimatedPath> = linked
+/// The linked fragments as reported: each at the middle of its slot, at
+/// its area's centroid.
+fn estimated_paths(
+    linked: &[Vec<Fragment>],
+    areas: &[Area],
+    seg: &Segmentation,
+) -> Vec<EstimatedPath> {
+    linked
         .iter()
         .map(|fr| EstimatedPath {
             fragments: fr
@@ -488,8 +626,13 @@ fn finish(
                 })
                 .collect(),
         })
-        .collect();
-    let events = path_events(&paths, &seg, &config.output);
+        .collect()
+}
+
+/// The resolutions Theorems 5.3 and 5.5 predict for this field.
+fn resolution_summary(config: &AcousticConfig, field: &Field) -> ResolutionSummary {
+    let p = &config.pipeline;
+    let k = config.field.targets;
     let mean_speed = field.paths.iter().map(|p| p.mean_speed()).sum::<f64>() / k as f64;
     let r = resolution::group_radius(
         p.n_group,
@@ -498,36 +641,11 @@ fn finish(
         config.field.sensors,
     );
     let l = mean_speed * p.l_seg as f64;
-    let resolution = ResolutionSummary {
+    ResolutionSummary {
         group_radius: r,
         fragment_length: l,
         finest: resolution::finest_resolution(config.field.range, r, l),
         average: resolution::average_resolution(config.field.range, r, l),
-    };
-    times.metrics = t.elapsed().as_secs_f64();
-    times.total = start.elapsed().as_secs_f64();
-    AcousticResult {
-        config: config.clone(),
-        stats: RunStats {
-            groups: groups.len(),
-            slots: v,
-            noise_variance,
-            separation,
-            areas: areas.len(),
-            kept,
-            dropped,
-            times,
-        },
-        field: field.clone(),
-        groups: groups.to_vec(),
-        segmentation: seg,
-        areas,
-        area_source_corr,
-        grid,
-        paths,
-        metrics,
-        resolution,
-        events,
     }
 }
 

@@ -103,20 +103,23 @@ fn distance_to_polyline(p: Vec2, line: &[Vec2]) -> f64 {
     }
 }
 
-/// Evaluates estimated paths (fragments over `areas`) against the truth.
-pub fn evaluate(
+/// Target `t`'s position at the middle of `slot`.
+fn true_position(truth: &[TruePath], seg: &Segmentation, t: usize, slot: usize) -> Vec2 {
+    let pos = &truth[t].positions;
+    let i = (seg.middle(slot).round() as usize).min(pos.len() - 1);
+    pos[i]
+}
+
+/// The target each estimated path is paired with (`None` for an empty
+/// path, or one left over when there are more paths than targets).
+fn pair_with_targets(
     paths: &[Vec<Fragment>],
     areas: &[Area],
-    grid: &TileGrid,
     truth: &[TruePath],
     seg: &Segmentation,
-) -> TrackingMetrics {
+) -> Vec<Option<usize>> {
     let k = truth.len();
-    let position_at = |t: usize, slot: usize| -> Vec2 {
-        let pos = &truth[t].positions;
-        let i = (seg.middle(slot).round() as usize).min(pos.len() - 1);
-        pos[i]
-    };
+    let position_at = |t: usize, slot: usize| true_position(truth, seg, t, slot);
     // Pair estimated paths with targets: cost = the aligned distances
     // summed over the path's fragments, so that a long path goes to the
     // target it follows and a stray path of two fragments cannot take its
@@ -156,6 +159,20 @@ pub fn evaluate(
             target_of[nonempty[row]] = Some(t);
         }
     }
+    target_of
+}
+
+/// Evaluates estimated paths (fragments over `areas`) against the truth.
+pub fn evaluate(
+    paths: &[Vec<Fragment>],
+    areas: &[Area],
+    grid: &TileGrid,
+    truth: &[TruePath],
+    seg: &Segmentation,
+) -> TrackingMetrics {
+    let k = truth.len();
+    let position_at = |t: usize, slot: usize| true_position(truth, seg, t, slot);
+    let target_of = pair_with_targets(paths, areas, truth, seg);
     let (mut sum, mut sum2, mut points) = (0.0, 0.0, 0usize);
     let (mut usum, mut usum2, mut upoints) = (0.0, 0.0, 0usize);
     let (mut aligned, mut fragments) = (0.0, 0usize);
