@@ -49,6 +49,7 @@ use tracing::Instrument;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::query::Query;
+use zenoh::sample::Sample;
 use zenoh::Session;
 
 #[derive(Debug, Clone)]
@@ -181,75 +182,108 @@ const WINDOW_RECHECK: Duration = Duration::from_millis(50);
 /// which it publishes its mark whether it moved or not.
 const STALL_CHECK: Duration = Duration::from_millis(600);
 
-/// Streams `source` until done (a live one until `shutdown`), then serves
-/// queries until `shutdown`. With a `journal` (opened, and so owned, before
-/// the process joined the mesh: [`Journal::open`]) it first restores what
-/// the records say, then records every change of state in it.
-pub async fn run(
-    session: Session,
-    config: GatewayConfig,
-    router: Router,
-    source: Source,
-    journal: Option<(Journal, Vec<Record>)>,
-    shutdown: impl Future<Output = ()>,
-) -> Result<(), GatewayError> {
-    let keys = &config.keys;
-    let cut_requests = session
-        .declare_queryable(keys.sensor_cut(&config.name))
-        .await
-        .map_err(mesh("declare the cut queryable"))?;
-    let follows = session
-        .declare_queryable(keys.sensor_follow(&config.name))
-        .await
-        .map_err(mesh("declare the follow queryable"))?;
-    // A ring, not a queue: when requests come faster than the loop takes
-    // them, the oldest are dropped (each only saves traffic) rather than
-    // stalling Zenoh's receiving task, and with it every request to the
-    // sensor.
-    let unfollows = session
-        .declare_subscriber(keys.sensor_unfollow(&config.name))
-        .with(zenoh::handlers::RingChannel::new(UNFOLLOWS_KEPT))
-        .await
-        .map_err(mesh("declare the unfollow subscriber"))?;
-    let resends = session
-        .declare_queryable(keys.sensor_resend(&config.name))
-        .await
-        .map_err(mesh("declare the resend queryable"))?;
-    let durables = session
-        .declare_subscriber(keys.every_leader_durable())
-        .await
-        .map_err(mesh("declare the durable-mark subscriber"))?;
-    // Only the latest mark of each leader matters: a ring, so a flood of
-    // them never stalls Zenoh's receiving task.
-    let progress = session
-        .declare_subscriber(keys.every_leader_progress())
-        .with(zenoh::handlers::RingChannel::new(PROGRESS_KEPT))
-        .await
-        .map_err(mesh("declare the progress-mark subscriber"))?;
-    let stats = session
-        .declare_queryable(keys.sensor_stats(&config.name))
-        .await
-        .map_err(mesh("declare the stats queryable"))?;
-    let positions = session
-        .declare_queryable(keys.sensor_positions(&config.name))
-        .await
-        .map_err(mesh("declare the positions queryable"))?;
-    let ingests = session
-        .declare_queryable(keys.sensor_ingest(&config.name))
-        .await
-        .map_err(mesh("declare the ingest queryable"))?;
-    let intakes = session
-        .declare_queryable(keys.sensor_intake(&config.name))
-        .await
-        .map_err(mesh("declare the intake queryable"))?;
-    let _token = session
-        .liveliness()
-        .declare_token(keys.alive("sensor", &config.name))
-        .await
-        .map_err(mesh("declare the liveliness token"))?;
-    let names = router.begin().leaders.clone();
+type Queries = zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<Query>>;
+type Samples =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+type LatestSamples = zenoh::pubsub::Subscriber<zenoh::handlers::RingChannelHandler<Sample>>;
+
+/// What the sensor declares on the mesh: the queries it answers, the
+/// leaders' requests and marks it hears, and its liveliness token.
+struct Endpoints {
+    cut_requests: Queries,
+    follows: Queries,
+    unfollows: LatestSamples,
+    resends: Queries,
+    durables: Samples,
+    progress: LatestSamples,
+    stats: Queries,
+    positions: Queries,
+    ingests: Queries,
+    intakes: Queries,
+    /// Held for as long as the sensor runs.
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl Endpoints {
+    /// Declares the endpoints of sensor `name`.
+    async fn declare(session: &Session, keys: &Keys, name: &str) -> Result<Self, GatewayError> {
+        let cut_requests = session
+            .declare_queryable(keys.sensor_cut(name))
+            .await
+            .map_err(mesh("declare the cut queryable"))?;
+        let follows = session
+            .declare_queryable(keys.sensor_follow(name))
+            .await
+            .map_err(mesh("declare the follow queryable"))?;
+        // A ring, not a queue: when requests come faster than the loop takes
+        // them, the oldest are dropped (each only saves traffic) rather than
+        // stalling Zenoh's receiving task, and with it every request to the
+        // sensor.
+        let unfollows = session
+            .declare_subscriber(keys.sensor_unfollow(name))
+            .with(zenoh::handlers::RingChannel::new(UNFOLLOWS_KEPT))
+            .await
+            .map_err(mesh("declare the unfollow subscriber"))?;
+        let resends = session
+            .declare_queryable(keys.sensor_resend(name))
+            .await
+            .map_err(mesh("declare the resend queryable"))?;
+        let durables = session
+            .declare_subscriber(keys.every_leader_durable())
+            .await
+            .map_err(mesh("declare the durable-mark subscriber"))?;
+        // Only the latest mark of each leader matters: a ring, so a flood of
+        // them never stalls Zenoh's receiving task.
+        let progress = session
+            .declare_subscriber(keys.every_leader_progress())
+            .with(zenoh::handlers::RingChannel::new(PROGRESS_KEPT))
+            .await
+            .map_err(mesh("declare the progress-mark subscriber"))?;
+        let stats = session
+            .declare_queryable(keys.sensor_stats(name))
+            .await
+            .map_err(mesh("declare the stats queryable"))?;
+        let positions = session
+            .declare_queryable(keys.sensor_positions(name))
+            .await
+            .map_err(mesh("declare the positions queryable"))?;
+        let ingests = session
+            .declare_queryable(keys.sensor_ingest(name))
+            .await
+            .map_err(mesh("declare the ingest queryable"))?;
+        let intakes = session
+            .declare_queryable(keys.sensor_intake(name))
+            .await
+            .map_err(mesh("declare the intake queryable"))?;
+        let _token = session
+            .liveliness()
+            .declare_token(keys.alive("sensor", name))
+            .await
+            .map_err(mesh("declare the liveliness token"))?;
+        Ok(Endpoints {
+            cut_requests,
+            follows,
+            unfollows,
+            resends,
+            durables,
+            progress,
+            stats,
+            positions,
+            ingests,
+            intakes,
+            _token,
+        })
+    }
+}
+
+/// One event publisher per leader, in the stream's order of leaders.
+async fn declare_publishers(
+    session: &Session,
+    keys: &Keys,
+    names: &[String],
+) -> Result<Vec<Publisher<'static>>, GatewayError> {
     let mut publishers = Vec::with_capacity(names.len());
-    for name in &names {
+    for name in names {
         publishers.push(
             session
                 .declare_publisher(keys.leader_events(name))
@@ -258,21 +292,18 @@ pub async fn run(
                 .map_err(mesh("declare an event publisher"))?,
         );
     }
-    wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
-    let Source { lines, mut input } = source;
-    if config.mesh.is_some() && (input.is_some() || lines.iter().any(Line::is_event)) {
-        return Err(GatewayError::MeshSource(config.name.clone()));
-    }
-    // The stream ends by itself when the trace's lines are out and there
-    // is no input to wait for; a live one only when the sensor stops (and
-    // one sensor of several when its producers say so).
-    let ends = input.is_none() && !config.live && config.mesh.is_none();
-    tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(),
-        stdin = input.is_some(), ends, "streaming");
+    Ok(publishers)
+}
 
-    let (length, end) = stream_length(&lines, config.limit);
-    let lines = &lines[..length];
-    let mut budget = ErrorBudget::new(config.max_errors);
+/// The gateway for the stream as `config` describes it: `lines` from
+/// the trace, ending (`ends`) after `end` events or not.
+fn start_gateway(
+    config: &GatewayConfig,
+    router: Router,
+    lines: &[Line],
+    ends: bool,
+    end: u64,
+) -> Gateway<Query> {
     let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
     // How many events the reports make is known only once they are
     // extracted: a cut asked for beyond the end waits, and is refused
@@ -289,27 +320,168 @@ pub async fn run(
     if let Some(mesh) = &config.mesh {
         gateway = gateway.meshed(mesh);
     }
-    let journal = match journal {
-        Some((journal, records)) => {
-            let path = journal.path().to_path_buf();
-            let restored = records.len();
-            gateway
-                .restore(records, lines)
-                .map_err(|source| GatewayError::Restore {
-                    path: path.display().to_string(),
-                    source,
-                })?;
-            gateway.note_journal_repaired(journal.repaired());
-            if restored > 0 {
-                tracing::info!(sensor = %config.name, journal = %path.display(), records = restored,
-                    events = gateway.router().events(), seq = gateway.router().seq(),
-                    trace_lines = gateway.traced(), "resumed from the journal");
-            }
-            gateway = gateway.journaled();
-            Some(journal)
-        }
-        None => None,
+    gateway
+}
+
+/// With a journal: the gateway as its records leave it (the trace's
+/// `lines` it routed included), recording every change of state from now
+/// on.
+fn resume(
+    mut gateway: Gateway<Query>,
+    journal: Option<(Journal, Vec<Record>)>,
+    lines: &[Line],
+    name: &str,
+) -> Result<(Gateway<Query>, Option<Journal>), GatewayError> {
+    let Some((journal, records)) = journal else {
+        return Ok((gateway, None));
     };
+    let path = journal.path().to_path_buf();
+    let restored = records.len();
+    gateway
+        .restore(records, lines)
+        .map_err(|source| GatewayError::Restore {
+            path: path.display().to_string(),
+            source,
+        })?;
+    gateway.note_journal_repaired(journal.repaired());
+    if restored > 0 {
+        tracing::info!(sensor = %name, journal = %path.display(), records = restored,
+            events = gateway.router().events(), seq = gateway.router().seq(),
+            trace_lines = gateway.traced(), "resumed from the journal");
+    }
+    Ok((gateway.journaled(), Some(journal)))
+}
+
+/// Where the stream is in the trace's own lines, and how it is paced.
+struct TraceCursor<'a> {
+    lines: &'a [Line],
+    /// The next line to route.
+    next: usize,
+    /// The stream ends when the lines are out.
+    ends: bool,
+    started: Instant,
+    /// The time of the first timed line.
+    first_time: f64,
+    /// The window had room at the last look.
+    open: bool,
+}
+
+impl TraceCursor<'_> {
+    /// How many lines are due now, and when the next one is.
+    fn due(&mut self, config: &GatewayConfig, gateway: &mut Gateway<Query>) -> (usize, Duration) {
+        let (due, wait) = if gateway.finished() || self.next >= self.lines.len() {
+            (0, Duration::from_secs(3600))
+        } else {
+            let chunk_lines = chunk_bounds(gateway.router().leaders()).1;
+            let (due, wait) = due_lines(
+                config,
+                self.lines,
+                self.next,
+                self.started,
+                self.first_time,
+                chunk_lines,
+            );
+            // Held, the stream waits for progress marks.
+            match gateway.room() {
+                Some(0) if due > 0 => {
+                    if self.open {
+                        gateway.hold();
+                    }
+                    (0, wait.min(WINDOW_RECHECK))
+                }
+                _ => (due, wait),
+            }
+        };
+        self.open = gateway.room() != Some(0);
+        (due, wait)
+    }
+
+    /// Routes a chunk of at most `due` lines (as many as the window lets
+    /// in), publishes it and answers the cuts it reached.
+    async fn route(
+        &mut self,
+        due: usize,
+        config: &GatewayConfig,
+        gateway: &mut Gateway<Query>,
+        wire: &mut Wire,
+    ) -> Result<(), GatewayError> {
+        let lines = self.lines;
+        // A line takes at most a seq or two: the window holds to
+        // within one line.
+        let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
+        let budget = gateway.room().unwrap_or(chunk_seqs).min(chunk_seqs);
+        let end = gateway.router().seq() + budget;
+        let mut placed = Vec::new();
+        let mut taken = 0;
+        for line in &lines[self.next..self.next + due] {
+            placed.extend(gateway.line(line));
+            taken += 1;
+            if gateway.router().seq() >= end {
+                break;
+            }
+        }
+        let due = taken;
+        self.next += due;
+        let refused = if self.next >= lines.len() && self.ends {
+            gateway.end()
+        } else {
+            Vec::new()
+        };
+        wire.flush(gateway)
+            .instrument(tracing::debug_span!(
+                "chunk",
+                from = self.next - due,
+                lines = due
+            ))
+            .await?;
+        for p in placed {
+            reply_placed(p).await;
+        }
+        if gateway.finished() {
+            tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = self.started.elapsed().as_secs_f64(), "source exhausted");
+            for (query, reason) in refused {
+                let _ = bounded("a refusal", query.reply_err(reason)).await;
+            }
+        }
+        // Let queries in between chunks.
+        tokio::task::yield_now().await;
+        Ok(())
+    }
+}
+
+/// Streams `source` until done (a live one until `shutdown`), then serves
+/// queries until `shutdown`. With a `journal` (opened, and so owned, before
+/// the process joined the mesh: [`Journal::open`]) it first restores what
+/// the records say, then records every change of state in it.
+pub async fn run(
+    session: Session,
+    config: GatewayConfig,
+    router: Router,
+    source: Source,
+    journal: Option<(Journal, Vec<Record>)>,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), GatewayError> {
+    let keys = &config.keys;
+    let endpoints = Endpoints::declare(&session, keys, &config.name).await?;
+    let names = router.begin().leaders.clone();
+    let publishers = declare_publishers(&session, keys, &names).await?;
+    wait_for_leaders(&session, keys, &names, config.wait_for_leaders).await?;
+    let Source { lines, input } = source;
+    if config.mesh.is_some() && (input.is_some() || lines.iter().any(Line::is_event)) {
+        return Err(GatewayError::MeshSource(config.name.clone()));
+    }
+    // The stream ends by itself when the trace's lines are out and there
+    // is no input to wait for; a live one only when the sensor stops (and
+    // one sensor of several when its producers say so).
+    let ends = input.is_none() && !config.live && config.mesh.is_none();
+    tracing::info!(sensor = %config.name, leaders = names.len(), events = lines.len(),
+        stdin = input.is_some(), ends, "streaming");
+
+    let (length, end) = stream_length(&lines, config.limit);
+    let lines = &lines[..length];
+    let budget = ErrorBudget::new(config.max_errors);
+    let gateway = start_gateway(&config, router, lines, ends, end);
+    let (mut gateway, journal) = resume(gateway, journal, lines, &config.name)?;
     // A resumed trace goes on after the last line it routed.
     let lines = &lines[(gateway.traced() as usize).min(lines.len())..];
     if ends && lines.is_empty() && !gateway.finished() {
@@ -322,229 +494,297 @@ pub async fn run(
         journal,
     };
     wire.flush(&mut gateway).await?;
-    let mut peers = config
+    let peers = config
         .mesh
         .as_ref()
         .map(|_| Peers::start(&session, keys, gateway.wanted()));
-    let started = Instant::now();
-    let first_time = lines.iter().find_map(line_time).unwrap_or(0.0);
-    let mut next = 0usize;
-    // The window had room at the last look.
-    let mut open = true;
+    let trace = TraceCursor {
+        lines,
+        next: 0,
+        ends,
+        started: Instant::now(),
+        first_time: lines.iter().find_map(line_time).unwrap_or(0.0),
+        open: true,
+    };
+    let sensor = Sensor {
+        config: &config,
+        gateway,
+        wire,
+        peers,
+        trace,
+        budget,
+        held: Vec::new(),
+    };
+    serve(sensor, endpoints, input, shutdown).await
+}
+
+/// The sensor as it streams and serves: its gateway, what it publishes
+/// and records with, its peers (one sensor of several), where it is in
+/// its trace, and the intake requests it holds.
+struct Sensor<'a> {
+    config: &'a GatewayConfig,
+    gateway: Gateway<Query>,
+    wire: Wire,
+    peers: Option<Peers>,
+    trace: TraceCursor<'a>,
+    /// What is left of `--max-errors` for standard input.
+    budget: ErrorBudget,
+    /// Peers' intake requests with nothing new to answer yet.
+    held: Vec<HeldIntake>,
+}
+
+impl Sensor<'_> {
+    /// [`settle`], for one sensor of several.
+    async fn settle(&mut self) -> Result<(), GatewayError> {
+        settle(
+            &mut self.gateway,
+            &mut self.wire,
+            self.peers.as_ref(),
+            &mut self.held,
+        )
+        .await
+    }
+
+    /// Standard input ended: so does a stream that is not live once the
+    /// trace's own lines are out.
+    async fn input_ended(&mut self) -> Result<(), GatewayError> {
+        let gateway = &mut self.gateway;
+        tracing::info!(sensor = %self.config.name, events = gateway.router().events(), "standard input ended");
+        if self.trace.next >= self.trace.lines.len() && !self.config.live && !gateway.finished() {
+            let refused = gateway.end();
+            self.wire.flush(gateway).await?;
+            for (query, reason) in refused {
+                let _ = bounded("a refusal", query.reply_err(reason)).await;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Streams the trace's lines and standard input `input`, and serves what
+/// comes on `endpoints`, until `shutdown`.
+async fn serve(
+    mut sensor: Sensor<'_>,
+    endpoints: Endpoints,
+    mut input: Option<tokio::sync::mpsc::Receiver<InputLine>>,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), GatewayError> {
+    let (s, ep) = (&mut sensor, &endpoints);
     let mut stall_check = tokio::time::interval(STALL_CHECK);
     stall_check.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     tokio::pin!(shutdown);
-    // Peers' intake requests with nothing new to answer yet.
-    let mut held: Vec<HeldIntake> = Vec::new();
     loop {
-        // How many lines are due now, and when the next one is.
-        let (due, wait) = if gateway.finished() || next >= lines.len() {
-            (0, Duration::from_secs(3600))
-        } else {
-            let chunk_lines = chunk_bounds(gateway.router().leaders()).1;
-            let (due, wait) = due_lines(&config, lines, next, started, first_time, chunk_lines);
-            // Held, the stream waits for progress marks.
-            match gateway.room() {
-                Some(0) if due > 0 => {
-                    if open {
-                        gateway.hold();
-                    }
-                    (0, wait.min(WINDOW_RECHECK))
-                }
-                _ => (due, wait),
-            }
-        };
-        open = gateway.room() != Some(0);
+        let (due, wait) = s.trace.due(s.config, &mut s.gateway);
         if due > 0 {
-            // A line takes at most a seq or two: the window holds to
-            // within one line.
-            let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
-            let budget = gateway.room().unwrap_or(chunk_seqs).min(chunk_seqs);
-            let end = gateway.router().seq() + budget;
-            let mut placed = Vec::new();
-            let mut taken = 0;
-            for line in &lines[next..next + due] {
-                placed.extend(gateway.line(line));
-                taken += 1;
-                if gateway.router().seq() >= end {
-                    break;
-                }
-            }
-            let due = taken;
-            next += due;
-            let refused = if next >= lines.len() && ends {
-                gateway.end()
-            } else {
-                Vec::new()
-            };
-            wire.flush(&mut gateway)
-                .instrument(tracing::debug_span!(
-                    "chunk",
-                    from = next - due,
-                    lines = due
-                ))
+            s.trace
+                .route(due, s.config, &mut s.gateway, &mut s.wire)
                 .await?;
-            for p in placed {
-                reply_placed(p).await;
-            }
-            if gateway.finished() {
-                tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = started.elapsed().as_secs_f64(), "source exhausted");
-                for (query, reason) in refused {
-                    let _ = bounded("a refusal", query.reply_err(reason)).await;
-                }
-            }
-            // Let queries in between chunks.
-            tokio::task::yield_now().await;
         }
         tokio::select! {
             biased;
             _ = &mut shutdown => break,
-            query = cut_requests.recv_async() => {
+            query = ep.cut_requests.recv_async() => {
                 let Ok(query) = query else { break };
-                cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
+                cut(&mut s.gateway, &mut s.wire, query, s.peers.as_ref()).await?;
                 // Every cut already asked for is placed or scheduled
                 // before the stream moves on: a client asking for many
                 // points at once (`--at-events`) must not find the stream
                 // past them because its questions were let in one per chunk.
-                while let Ok(Some(query)) = cut_requests.try_recv() {
-                    cut(&mut gateway, &mut wire, query, peers.as_ref()).await?;
+                while let Ok(Some(query)) = ep.cut_requests.try_recv() {
+                    cut(&mut s.gateway, &mut s.wire, query, s.peers.as_ref()).await?;
                 }
-                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+                s.settle().await?;
             }
-            fetched = next_fetched(&mut peers) => {
+            fetched = next_fetched(&mut s.peers) => {
                 let Some((peer, fetched)) = fetched else { continue };
-                let answered = !matches!(fetched, Fetch::Silent(_));
-                match fetched {
-                    Fetch::Slice(bytes) => {
-                        if let Err(e) = gateway.peer(&bytes) {
-                            tracing::warn!(%peer, error = %e, "a peer's intake slice refused");
-                        }
-                    }
-                    Fetch::Refused(e) => tracing::warn!(%peer, error = %e, "a peer refused to give its intake"),
-                    Fetch::Silent(e) => tracing::debug!(%peer, error = %e, "a peer gave no intake"),
-                }
-                if let Some(peers) = peers.as_mut() {
-                    peers.answered(&peer, answered);
-                    if let Some(reason) = degraded(&gateway, peers) {
-                        gateway.refuse_waiting(&reason);
-                    }
-                }
-                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+                take_fetched(&mut s.gateway, s.peers.as_mut(), &peer, fetched);
+                s.settle().await?;
             }
-            query = intakes.recv_async() => {
+            query = ep.intakes.recv_async() => {
                 let Ok(query) = query else { break };
-                held.push(HeldIntake { request: payload(&query), query, until: Instant::now() + HOLD_INTAKE });
-                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+                s.held.push(HeldIntake { request: payload(&query), query, until: Instant::now() + HOLD_INTAKE });
+                s.settle().await?;
             }
-            _ = tokio::time::sleep_until(next_release(&held)), if !held.is_empty() => {
-                answer_intakes(&mut gateway, &mut wire, &mut held).await?;
+            _ = tokio::time::sleep_until(next_release(&s.held)), if !s.held.is_empty() => {
+                answer_intakes(&mut s.gateway, &mut s.wire, &mut s.held).await?;
             }
-            query = follows.recv_async() => {
+            query = ep.follows.recv_async() => {
                 let Ok(query) = query else { break };
-                let answer = gateway.follow(&payload(&query));
-                let followed = answer.is_ok();
-                // The interests it grew are on disk before the leader
-                // counts on them.
-                wire.sync(&mut gateway)?;
-                reply_to(&query, answer, "follow").await;
-                if followed {
-                    wire.flush(&mut gateway).await?;
-                }
+                follow(&mut s.gateway, &mut s.wire, &query).await?;
             }
-            sample = unfollows.recv_async() => {
+            sample = ep.unfollows.recv_async() => {
                 let Ok(sample) = sample else { break };
-                // Dropping tracks can only mean fewer items from now on:
-                // nothing to flush. A refusal is counted and logged.
-                let mut next = Some(sample);
-                while let Some(sample) = next {
-                    if let Ok(dropped) = gateway.unfollow(&sample.payload().to_bytes()) {
-                        tracing::trace!(dropped, "unfollowed");
-                    }
-                    next = unfollows.try_recv().ok().flatten();
-                }
+                take_unfollows(&mut s.gateway, sample, &ep.unfollows);
             }
-            sample = durables.recv_async() => {
+            sample = ep.durables.recv_async() => {
                 let Ok(sample) = sample else { break };
-                gateway.durable(&sample.payload().to_bytes(), sample.key_expr().as_str());
+                s.gateway.durable(&sample.payload().to_bytes(), sample.key_expr().as_str());
             }
-            _ = stall_check.tick(), if !open => {
-                let again = gateway.stalled();
-                wire.again(again).await;
+            _ = stall_check.tick(), if !s.trace.open => {
+                let again = s.gateway.stalled();
+                s.wire.again(again).await;
             }
-            sample = progress.recv_async() => {
+            sample = ep.progress.recv_async() => {
                 let Ok(sample) = sample else { break };
-                let mut next = Some(sample);
-                while let Some(sample) = next {
-                    gateway.progress(&sample.payload().to_bytes(), sample.key_expr().as_str());
-                    next = progress.try_recv().ok().flatten();
-                }
+                take_progress(&mut s.gateway, sample, &ep.progress);
             }
-            query = resends.recv_async() => {
+            query = ep.resends.recv_async() => {
                 let Ok(query) = query else { break };
-                let answer = gateway.resend(&payload(&query));
+                let answer = s.gateway.resend(&payload(&query));
                 reply_to(&query, answer, "resend").await;
             }
-            query = stats.recv_async() => {
+            query = ep.stats.recv_async() => {
                 let Ok(query) = query else { break };
-                let body = serde_json::to_vec(gateway.stats()).unwrap_or_default();
-                if let Some(Err(e)) = bounded("stats", query.reply(query.key_expr().clone(), body)
-                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)).await
-                {
-                    tracing::warn!(error = %e, "could not answer a stats query");
-                }
+                answer_stats(&s.gateway, &query).await;
             }
-            query = positions.recv_async() => {
+            query = ep.positions.recv_async() => {
                 let Ok(query) = query else { break };
-                // Answered between chunks: the positions after exactly
-                // `events` events, a point of the stream like a cut.
-                let body = serde_json::to_vec(&gateway.router().positions(&config.name, gateway.finished()))
-                    .unwrap_or_default();
-                if let Some(Err(e)) = bounded("positions", query.reply(query.key_expr().clone(), body)
-                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)).await
-                {
-                    tracing::warn!(error = %e, "could not answer a positions query");
-                }
+                answer_positions(&s.gateway, &query, &s.config.name).await;
             }
-            query = ingests.recv_async() => {
+            query = ep.ingests.recv_async() => {
                 let Ok(query) = query else { break };
-                ingest(&mut gateway, &mut wire, query).await?;
-                settle(&mut gateway, &mut wire, peers.as_ref(), &mut held).await?;
+                ingest(&mut s.gateway, &mut s.wire, query).await?;
+                s.settle().await?;
             }
-            read = next_input(&mut input), if input.is_some() && open => {
+            read = next_input(&mut input), if input.is_some() && s.trace.open => {
                 let Some(read) = read else {
-                    // The input ended: so does a stream that is not live
-                    // once the trace's own lines are out.
                     input = None;
-                    tracing::info!(sensor = %config.name, events = gateway.router().events(), "standard input ended");
-                    if next >= lines.len() && !config.live && !gateway.finished() {
-                        let refused = gateway.end();
-                        wire.flush(&mut gateway).await?;
-                        for (query, reason) in refused {
-                            let _ = bounded("a refusal", query.reply_err(reason)).await;
-                        }
-                    }
+                    s.input_ended().await?;
                     continue;
                 };
-                let mut placed = Vec::new();
-                take_input(&mut gateway, read, &mut placed, &mut budget)?;
-                // What the pipe already holds goes in the same batch (as
-                // much of it as the window lets in).
-                let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
-                let room = gateway.room().map_or(chunk_seqs, |r| r.min(chunk_seqs)) as usize;
-                for _ in 1..room {
-                    let Some(rx) = input.as_mut() else { break };
-                    match rx.try_recv() {
-                        Ok(read) => take_input(&mut gateway, read, &mut placed, &mut budget)?,
-                        Err(_) => break,
-                    }
-                }
-                wire.flush(&mut gateway).await?;
-                for p in placed {
-                    reply_placed(p).await;
-                }
+                take_stdin(&mut s.gateway, &mut s.wire, read, &mut input, &mut s.budget).await?;
             }
-            _ = tokio::time::sleep(wait), if due == 0 || next < lines.len() => {}
+            _ = tokio::time::sleep(wait), if due == 0 || s.trace.next < s.trace.lines.len() => {}
         }
+    }
+    Ok(())
+}
+
+/// Unfollow requests: `first` and whatever else has come since. Dropping
+/// tracks can only mean fewer items from now on: nothing to flush. A
+/// refusal is counted and logged.
+fn take_unfollows(gateway: &mut Gateway<Query>, first: Sample, unfollows: &LatestSamples) {
+    let mut next = Some(first);
+    while let Some(sample) = next {
+        if let Ok(dropped) = gateway.unfollow(&sample.payload().to_bytes()) {
+            tracing::trace!(dropped, "unfollowed");
+        }
+        next = unfollows.try_recv().ok().flatten();
+    }
+}
+
+/// Progress marks: `first` and whatever else has come since.
+fn take_progress(gateway: &mut Gateway<Query>, first: Sample, progress: &LatestSamples) {
+    let mut next = Some(first);
+    while let Some(sample) = next {
+        gateway.progress(&sample.payload().to_bytes(), sample.key_expr().as_str());
+        next = progress.try_recv().ok().flatten();
+    }
+}
+
+/// A peer's intake slice fetched (or its refusal, or its silence), and
+/// whether the peer answered: a merge waiting for peers that do not
+/// answer refuses its waiting cuts, degraded.
+fn take_fetched(
+    gateway: &mut Gateway<Query>,
+    peers: Option<&mut Peers>,
+    peer: &str,
+    fetched: Fetch,
+) {
+    let answered = !matches!(fetched, Fetch::Silent(_));
+    match fetched {
+        Fetch::Slice(bytes) => {
+            if let Err(e) = gateway.peer(&bytes) {
+                tracing::warn!(%peer, error = %e, "a peer's intake slice refused");
+            }
+        }
+        Fetch::Refused(e) => tracing::warn!(%peer, error = %e, "a peer refused to give its intake"),
+        Fetch::Silent(e) => tracing::debug!(%peer, error = %e, "a peer gave no intake"),
+    }
+    if let Some(peers) = peers {
+        peers.answered(peer, answered);
+        if let Some(reason) = degraded(gateway, peers) {
+            gateway.refuse_waiting(&reason);
+        }
+    }
+}
+
+/// A leader's follow request: answered once the interests it grew are
+/// on disk, then what they route is published.
+async fn follow(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    query: &Query,
+) -> Result<(), GatewayError> {
+    let answer = gateway.follow(&payload(query));
+    let followed = answer.is_ok();
+    // The interests it grew are on disk before the leader
+    // counts on them.
+    wire.sync(gateway)?;
+    reply_to(query, answer, "follow").await;
+    if followed {
+        wire.flush(gateway).await?;
+    }
+    Ok(())
+}
+
+/// Answers a stats query with the sensor's counters.
+async fn answer_stats(gateway: &Gateway<Query>, query: &Query) {
+    let body = serde_json::to_vec(gateway.stats()).unwrap_or_default();
+    if let Some(Err(e)) = bounded(
+        "stats",
+        query
+            .reply(query.key_expr().clone(), body)
+            .encoding(zenoh::bytes::Encoding::APPLICATION_JSON),
+    )
+    .await
+    {
+        tracing::warn!(error = %e, "could not answer a stats query");
+    }
+}
+
+/// Answers a positions query. Answered between chunks: the positions
+/// after exactly `events` events, a point of the stream like a cut.
+async fn answer_positions(gateway: &Gateway<Query>, query: &Query, name: &str) {
+    let body = serde_json::to_vec(&gateway.router().positions(name, gateway.finished()))
+        .unwrap_or_default();
+    if let Some(Err(e)) = bounded(
+        "positions",
+        query
+            .reply(query.key_expr().clone(), body)
+            .encoding(zenoh::bytes::Encoding::APPLICATION_JSON),
+    )
+    .await
+    {
+        tracing::warn!(error = %e, "could not answer a positions query");
+    }
+}
+
+/// Routes a line of standard input and what the pipe already holds
+/// behind it (as much of it as the window lets in), in one batch.
+async fn take_stdin(
+    gateway: &mut Gateway<Query>,
+    wire: &mut Wire,
+    read: InputLine,
+    input: &mut Option<tokio::sync::mpsc::Receiver<InputLine>>,
+    budget: &mut ErrorBudget,
+) -> Result<(), GatewayError> {
+    let mut placed = Vec::new();
+    take_input(gateway, read, &mut placed, budget)?;
+    // What the pipe already holds goes in the same batch (as
+    // much of it as the window lets in).
+    let chunk_seqs = chunk_bounds(gateway.router().leaders()).0;
+    let room = gateway.room().map_or(chunk_seqs, |r| r.min(chunk_seqs)) as usize;
+    for _ in 1..room {
+        let Some(rx) = input.as_mut() else { break };
+        match rx.try_recv() {
+            Ok(read) => take_input(gateway, read, &mut placed, budget)?,
+            Err(_) => break,
+        }
+    }
+    wire.flush(gateway).await?;
+    for p in placed {
+        reply_placed(p).await;
     }
     Ok(())
 }

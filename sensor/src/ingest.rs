@@ -192,36 +192,11 @@ impl Ingest {
         stats: &mut SensorStats,
         admit: &mut Admit<'_>,
     ) -> Result<Judged, IngestRefusal> {
-        let producer = offer
-            .producer
-            .filter(|p| !p.is_empty())
-            .ok_or(IngestRefusal::NoProducer)?;
-        if producer.len() > MAX_PRODUCER_ID {
-            return Err(IngestRefusal::LongProducer(producer.len()));
-        }
-        let counter = offer.counter.ok_or(IngestRefusal::NoCounter)?;
-        let first: u64 = counter
-            .parse()
-            .map_err(|_| IngestRefusal::BadCounter(counter.to_string()))?;
-        let text = std::str::from_utf8(offer.payload)
-            .map_err(|e| IngestRefusal::NotText(e.to_string()))?;
-        let text = text.strip_suffix('\n').unwrap_or(text);
-        if text.is_empty() {
-            return Err(IngestRefusal::Empty);
-        }
-        let lines: Vec<&str> = text
-            .split('\n')
-            .map(|l| l.strip_suffix('\r').unwrap_or(l))
-            .collect();
-        if lines.len() > MAX_LINES {
-            return Err(IngestRefusal::TooManyLines(lines.len()));
-        }
-        if first.checked_add(lines.len() as u64).is_none() {
-            return Err(IngestRefusal::CounterOverflow {
-                first,
-                lines: lines.len(),
-            });
-        }
+        let Request {
+            producer,
+            first,
+            lines,
+        } = Request::read(&offer)?;
         if !self.next.contains_key(producer) && self.next.len() >= MAX_PRODUCERS {
             return Err(IngestRefusal::TooManyProducers(producer.to_string()));
         }
@@ -341,6 +316,55 @@ impl Ingest {
                 Err(format!("stdin:{number}: {problem}"))
             }
         }
+    }
+}
+
+/// An ingest request's envelope, read and checked before any of its
+/// lines is judged: who sent it, the counter of its first line, and its
+/// lines (without their line ends).
+struct Request<'a> {
+    producer: &'a str,
+    first: u64,
+    lines: Vec<&'a str>,
+}
+
+impl<'a> Request<'a> {
+    fn read(offer: &Offer<'a>) -> Result<Self, IngestRefusal> {
+        let producer = offer
+            .producer
+            .filter(|p| !p.is_empty())
+            .ok_or(IngestRefusal::NoProducer)?;
+        if producer.len() > MAX_PRODUCER_ID {
+            return Err(IngestRefusal::LongProducer(producer.len()));
+        }
+        let counter = offer.counter.ok_or(IngestRefusal::NoCounter)?;
+        let first: u64 = counter
+            .parse()
+            .map_err(|_| IngestRefusal::BadCounter(counter.to_string()))?;
+        let text = std::str::from_utf8(offer.payload)
+            .map_err(|e| IngestRefusal::NotText(e.to_string()))?;
+        let text = text.strip_suffix('\n').unwrap_or(text);
+        if text.is_empty() {
+            return Err(IngestRefusal::Empty);
+        }
+        let lines: Vec<&str> = text
+            .split('\n')
+            .map(|l| l.strip_suffix('\r').unwrap_or(l))
+            .collect();
+        if lines.len() > MAX_LINES {
+            return Err(IngestRefusal::TooManyLines(lines.len()));
+        }
+        if first.checked_add(lines.len() as u64).is_none() {
+            return Err(IngestRefusal::CounterOverflow {
+                first,
+                lines: lines.len(),
+            });
+        }
+        Ok(Request {
+            producer,
+            first,
+            lines,
+        })
     }
 }
 
