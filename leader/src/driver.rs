@@ -15,14 +15,16 @@ use crate::error::{MeshError, RunError};
 use crate::journal::{Journal, JournalError, JournalOptions, Kind, Recovered};
 use crate::machine::{Ask, Input, Node, Output, Timers};
 use idmesh_ownership::{Ownership, HANDOVER_PATIENCE};
+use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
-use idmesh_protocol::wire::leader_to_sensor::Resent;
+use idmesh_protocol::wire::leader_to_sensor::{Durable, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode};
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::future::Future;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 use zenoh::pubsub::Publisher;
@@ -82,31 +84,14 @@ pub async fn run(
         Some(options) => Some((options, own(&options.path, &config.host).await?)),
         None => None,
     };
-    let events = session
-        .declare_subscriber(keys.leader_events(&name))
-        .await
-        .map_err(|e| MeshError::new("declare the event subscriber", e))?;
-    let transfers = session
-        .declare_subscriber(keys.leader_transfer(&name))
-        .await
-        .map_err(|e| MeshError::new("declare the transfer subscriber", e))?;
-    let partials = session
-        .declare_queryable(keys.leader_partial(&name))
-        .await
-        .map_err(|e| MeshError::new("declare the partial-sums queryable", e))?;
-    let stats = session
-        .declare_queryable(keys.leader_stats(&name))
-        .await
-        .map_err(|e| MeshError::new("declare the stats queryable", e))?;
-    let sent = session
-        .declare_queryable(keys.leader_sent(&name))
-        .await
-        .map_err(|e| MeshError::new("declare the sent-transfers queryable", e))?;
-
-    let durables = session
-        .declare_subscriber(keys.every_leader_durable())
-        .await
-        .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
+    let Inbox {
+        events,
+        transfers,
+        partials,
+        stats,
+        sent,
+        durables,
+    } = Inbox::declare(&session, keys, &name).await?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
     let started = Instant::now();
     let (mut journal, recovered) = match owned {
@@ -123,28 +108,7 @@ pub async fn run(
         .declare_token(keys.alive("leader", &name))
         .await
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
-    let timers = Timers {
-        flow_control: config.flow_control,
-        ..Timers::new(
-            config.follow_timeout,
-            journal.is_some(),
-            config.snapshot_every,
-        )
-    };
-    let (mut node, first) = Node::recover(
-        &name,
-        &config.host,
-        recovered.snapshot.as_deref(),
-        recovered
-            .entries
-            .iter()
-            .map(|e| (e.kind, e.bytes.as_slice())),
-        config.adopted,
-        recovered.damage.as_ref().map(|d| d.records()),
-        timers,
-        started.elapsed(),
-    )?;
-    drop(recovered);
+    let (mut node, first) = start_node(&config, recovered, journal.is_some(), started)?;
     tracing::info!(leader = %name, host = %config.host, "leader up");
 
     let mut driver = Driver {
@@ -179,15 +143,7 @@ pub async fn run(
             },
             query = partials.recv_async() => {
                 let Ok(query) = query else { break };
-                let parameters = query.parameters();
-                let (ask, base) = Ask::parse_with_base(
-                    parameters.contains_key("quiet"),
-                    // `;rows`: an identity query wants the rows of the
-                    // information matrix.
-                    parameters.contains_key("rows"),
-                    parameters.get("tag"),
-                    parameters.get("base"),
-                );
+                let (ask, base) = partial_ask(&query);
                 Input::Partial { id: driver.hold(query), ask, base }
             }
             query = sent.recv_async() => {
@@ -204,13 +160,7 @@ pub async fn run(
             query = stats.recv_async() => {
                 let Ok(query) = query else { break };
                 let body = serde_json::to_vec(&node.leader().stats()).unwrap_or_default();
-                if let Err(e) = query
-                    .reply(keys.leader_stats(&name), body)
-                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
-                    .await
-                {
-                    tracing::warn!(leader = %name, error = %e, "could not answer a stats query");
-                }
+                answer_stats(&query, keys, &name, body).await;
                 continue;
             }
         };
@@ -226,6 +176,114 @@ pub async fn run(
     drop(token);
     tracing::info!(leader = %name, "leader stopped");
     Ok(())
+}
+
+type Samples =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+type Queries = zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<Query>>;
+
+/// What reaches a leader from the mesh: the stream's batches, its peers'
+/// transfers and durable marks, and the queries it answers.
+struct Inbox {
+    events: Samples,
+    transfers: Samples,
+    partials: Queries,
+    stats: Queries,
+    sent: Queries,
+    durables: Samples,
+}
+
+impl Inbox {
+    /// Declares the leader `name`'s subscribers and queryables.
+    async fn declare(session: &Session, keys: &Keys, name: &str) -> Result<Self, MeshError> {
+        let events = session
+            .declare_subscriber(keys.leader_events(name))
+            .await
+            .map_err(|e| MeshError::new("declare the event subscriber", e))?;
+        let transfers = session
+            .declare_subscriber(keys.leader_transfer(name))
+            .await
+            .map_err(|e| MeshError::new("declare the transfer subscriber", e))?;
+        let partials = session
+            .declare_queryable(keys.leader_partial(name))
+            .await
+            .map_err(|e| MeshError::new("declare the partial-sums queryable", e))?;
+        let stats = session
+            .declare_queryable(keys.leader_stats(name))
+            .await
+            .map_err(|e| MeshError::new("declare the stats queryable", e))?;
+        let sent = session
+            .declare_queryable(keys.leader_sent(name))
+            .await
+            .map_err(|e| MeshError::new("declare the sent-transfers queryable", e))?;
+
+        let durables = session
+            .declare_subscriber(keys.every_leader_durable())
+            .await
+            .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
+        Ok(Inbox {
+            events,
+            transfers,
+            partials,
+            stats,
+            sent,
+            durables,
+        })
+    }
+}
+
+/// The node as the journal leaves it: `recovered` replayed (rebuilding
+/// the state it had when it died), and what it asks to do first to catch
+/// up.
+fn start_node(
+    config: &LeaderConfig,
+    recovered: Recovered,
+    journaled: bool,
+    started: Instant,
+) -> Result<(Node, Vec<Output>), RunError> {
+    let timers = Timers {
+        flow_control: config.flow_control,
+        ..Timers::new(config.follow_timeout, journaled, config.snapshot_every)
+    };
+    let (node, first) = Node::recover(
+        &config.name,
+        &config.host,
+        recovered.snapshot.as_deref(),
+        recovered
+            .entries
+            .iter()
+            .map(|e| (e.kind, e.bytes.as_slice())),
+        config.adopted,
+        recovered.damage.as_ref().map(|d| d.records()),
+        timers,
+        started.elapsed(),
+    )?;
+    Ok((node, first))
+}
+
+/// What a partial-sums query asks, and the tag of the answer the
+/// coordinator keeps, if it said one.
+fn partial_ask(query: &Query) -> (Ask, Option<u64>) {
+    let parameters = query.parameters();
+    Ask::parse_with_base(
+        parameters.contains_key("quiet"),
+        // `;rows`: an identity query wants the rows of the
+        // information matrix.
+        parameters.contains_key("rows"),
+        parameters.get("tag"),
+        parameters.get("base"),
+    )
+}
+
+/// Answers a stats query with `body`, the leader's counters.
+async fn answer_stats(query: &Query, keys: &Keys, name: &str, body: Vec<u8>) {
+    if let Err(e) = query
+        .reply(keys.leader_stats(name), body)
+        .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+        .await
+    {
+        tracing::warn!(leader = %name, error = %e, "could not answer a stats query");
+    }
 }
 
 /// The role's journal lock for `host`, waiting a little for a process
@@ -338,73 +396,14 @@ impl Driver<'_> {
                         let _ = tx.send(Input::Transfers { peer, result });
                     });
                 }
-                Output::Push(partial) => {
-                    self.pushes += 1;
-                    if lost_on_purpose(self.config.drop_push_every, self.pushes) {
-                        tracing::info!(leader = %name, tag = partial.tag, "fault injected: pushed answer lost");
-                        continue;
-                    }
-                    let key = keys.leader_pushed(name, partial.tag);
-                    // Express: a query waits for it. Dropped rather than
-                    // waited on when the link is full: the coordinator
-                    // then asks.
-                    let put = self
-                        .session
-                        .put(key, encode(&*partial))
-                        .express(true)
-                        .congestion_control(CongestionControl::Drop);
-                    if let Err(e) = put.await {
-                        tracing::debug!(leader = %name, error = %e, "a pushed answer was lost");
-                    }
-                }
-                Output::Answer { id, answer } => {
-                    let Some(query) = self.queries.remove(&id) else {
-                        continue;
-                    };
-                    let sent = match answer {
-                        Ok(partial) => {
-                            query
-                                .reply(query.key_expr().clone(), encode(&*partial))
-                                .await
-                        }
-                        Err(why) => query.reply_err(why).await,
-                    };
-                    if let Err(e) = sent {
-                        tracing::warn!(error = %e, "could not answer a partial-sums query");
-                    }
-                }
-                Output::AnswerSent { id, answer } => {
-                    let Some(query) = self.queries.remove(&id) else {
-                        continue;
-                    };
-                    let sent = match answer {
-                        Ok(body) => query.reply(query.key_expr().clone(), encode(&body)).await,
-                        Err(why) => query.reply_err(why).await,
-                    };
-                    if let Err(e) = sent {
-                        tracing::warn!(error = %e, "could not answer a request for sent transfers");
-                    }
-                }
+                Output::Push(partial) => self.push(partial).await,
+                Output::Answer { id, answer } => self.answer_partial(id, answer).await,
+                Output::AnswerSent { id, answer } => self.answer_sent(id, answer).await,
                 Output::Persist { mark } => {
                     // A snapshot that could not be written must not be
                     // published as safe.
-                    if failed.is_some() {
-                        continue;
-                    }
-                    if let Some(j) = self.journal.as_mut() {
-                        if let Err(e) = j.sync() {
-                            failed = Some(e.to_string());
-                            continue;
-                        }
-                    }
-                    if let Some(mark) = mark {
-                        if let Err(e) = self
-                            .session
-                            .put(keys.leader_durable(name), encode(&mark))
-                            .await
-                        {
-                            tracing::warn!(leader = %name, error = %e, "could not publish the durable mark");
-                        }
+                    if failed.is_none() {
+                        failed = self.persist(mark).await.err();
                     }
                 }
                 Output::Progress(progress) => {
@@ -417,17 +416,8 @@ impl Driver<'_> {
                     }
                 }
                 Output::Snapshot(state) => {
-                    if let Some(j) = self.journal.as_mut() {
-                        let at = Instant::now();
-                        match j.compact(&state) {
-                            Ok(()) => {
-                                tracing::debug!(leader = %name, seconds = at.elapsed().as_secs_f64(), "snapshot written")
-                            }
-                            Err(e) => {
-                                tracing::error!(leader = %name, error = %e, "cannot write a snapshot");
-                                failed = Some(e.to_string());
-                            }
-                        }
+                    if let Err(why) = self.snapshot(&state) {
+                        failed = Some(why);
                     }
                 }
             }
@@ -437,6 +427,101 @@ impl Driver<'_> {
             // A failed node asks for nothing more than answers.
             Box::pin(self.carry_out(node, more, started)).await;
         }
+    }
+
+    /// Puts the answer the node computed at a cut, for the coordinator
+    /// (unless a fault is injected).
+    async fn push(&mut self, partial: Arc<Partial>) {
+        let keys = &self.config.keys;
+        let name = &self.config.name;
+        self.pushes += 1;
+        if lost_on_purpose(self.config.drop_push_every, self.pushes) {
+            tracing::info!(leader = %name, tag = partial.tag, "fault injected: pushed answer lost");
+            return;
+        }
+        let key = keys.leader_pushed(name, partial.tag);
+        // Express: a query waits for it. Dropped rather than
+        // waited on when the link is full: the coordinator
+        // then asks.
+        let put = self
+            .session
+            .put(key, encode(&*partial))
+            .express(true)
+            .congestion_control(CongestionControl::Drop);
+        if let Err(e) = put.await {
+            tracing::debug!(leader = %name, error = %e, "a pushed answer was lost");
+        }
+    }
+
+    /// Answers the partial-sums query held as `id`.
+    async fn answer_partial(&mut self, id: u64, answer: Result<Arc<Partial>, String>) {
+        let Some(query) = self.queries.remove(&id) else {
+            return;
+        };
+        let sent = match answer {
+            Ok(partial) => {
+                query
+                    .reply(query.key_expr().clone(), encode(&*partial))
+                    .await
+            }
+            Err(why) => query.reply_err(why).await,
+        };
+        if let Err(e) = sent {
+            tracing::warn!(error = %e, "could not answer a partial-sums query");
+        }
+    }
+
+    /// Answers the request for sent transfers held as `id`.
+    async fn answer_sent(&mut self, id: u64, answer: Result<TransfersSent, String>) {
+        let Some(query) = self.queries.remove(&id) else {
+            return;
+        };
+        let sent = match answer {
+            Ok(body) => query.reply(query.key_expr().clone(), encode(&body)).await,
+            Err(why) => query.reply_err(why).await,
+        };
+        if let Err(e) = sent {
+            tracing::warn!(error = %e, "could not answer a request for sent transfers");
+        }
+    }
+
+    /// Syncs the journal, then publishes `mark` as safe; why not, if the
+    /// journal could not be synced.
+    async fn persist(&mut self, mark: Option<Durable>) -> Result<(), String> {
+        let keys = &self.config.keys;
+        let name = &self.config.name;
+        if let Some(j) = self.journal.as_mut() {
+            j.sync().map_err(|e| e.to_string())?;
+        }
+        if let Some(mark) = mark {
+            if let Err(e) = self
+                .session
+                .put(keys.leader_durable(name), encode(&mark))
+                .await
+            {
+                tracing::warn!(leader = %name, error = %e, "could not publish the durable mark");
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the snapshot `state` and starts the journal again; why not,
+    /// if it could not be written.
+    fn snapshot(&mut self, state: &[u8]) -> Result<(), String> {
+        let name = &self.config.name;
+        if let Some(j) = self.journal.as_mut() {
+            let at = Instant::now();
+            match j.compact(state) {
+                Ok(()) => {
+                    tracing::debug!(leader = %name, seconds = at.elapsed().as_secs_f64(), "snapshot written")
+                }
+                Err(e) => {
+                    tracing::error!(leader = %name, error = %e, "cannot write a snapshot");
+                    return Err(e.to_string());
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Puts `body` on `key` through its publisher, declared (with

@@ -122,6 +122,46 @@ pub fn heir<'a>(leaders: &'a [String], dead: &str, alive: &BTreeSet<String>) -> 
         .map(String::as_str)
 }
 
+/// The roles this process hosts, each an actor with its own stop signal.
+struct Hosted<'a> {
+    session: &'a Session,
+    config: &'a HostConfig,
+    tasks: JoinSet<(String, Result<(), RunError>)>,
+    roles: BTreeSet<String>,
+    /// One stop signal per hosted role: a role is handed back alone.
+    stops: HashMap<String, watch::Sender<bool>>,
+}
+
+impl Hosted<'_> {
+    /// Starts hosting `role` here (`adopted`: from a process gone for
+    /// good, or taken back).
+    fn host(&mut self, role: &str, adopted: bool) {
+        let (stop_tx, mut stop_rx) = watch::channel(false);
+        self.stops.insert(role.to_string(), stop_tx);
+        let stop = async move {
+            let _ = stop_rx.wait_for(|s| *s).await;
+        };
+        let (session, role_config) = (self.session.clone(), self.config.role(role, adopted));
+        let owned = role.to_string();
+        self.tasks.spawn(async move {
+            let result = driver::run(session, role_config, stop).await;
+            (owned, result)
+        });
+        self.roles.insert(role.to_string());
+    }
+}
+
+/// What this process has seen of the leader roles' tokens.
+#[derive(Default)]
+struct Tokens {
+    alive: BTreeSet<String>,
+    /// Roles seen up and then lost, since when. A role never seen up is
+    /// still starting, not dead.
+    lost: HashMap<String, Instant>,
+    /// Lost roles found still held by their process (warned once per loss).
+    fenced: BTreeSet<String>,
+}
+
 /// Runs this process's roles until `shutdown`.
 pub async fn run(
     session: Session,
@@ -129,25 +169,12 @@ pub async fn run(
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), RunError> {
     let keys = &config.keys;
-    let mut hosted: JoinSet<(String, Result<(), RunError>)> = JoinSet::new();
-    let mut roles: BTreeSet<String> = BTreeSet::new();
-    // One stop signal per hosted role: a role is handed back alone.
-    let mut stops: HashMap<String, watch::Sender<bool>> = HashMap::new();
-    let host = |role: &str,
-                adopted: bool,
-                hosted: &mut JoinSet<_>,
-                stops: &mut HashMap<String, watch::Sender<bool>>| {
-        let (stop_tx, mut stop_rx) = watch::channel(false);
-        stops.insert(role.to_string(), stop_tx);
-        let stop = async move {
-            let _ = stop_rx.wait_for(|s| *s).await;
-        };
-        let (session, role_config) = (session.clone(), config.role(role, adopted));
-        let role = role.to_string();
-        hosted.spawn(async move {
-            let result = driver::run(session, role_config, stop).await;
-            (role, result)
-        });
+    let mut hosted = Hosted {
+        session: &session,
+        config: &config,
+        tasks: JoinSet::new(),
+        roles: BTreeSet::new(),
+        stops: HashMap::new(),
     };
 
     // Standing by for its own role: the token that asks for it back.
@@ -156,8 +183,7 @@ pub async fn run(
         tracing::warn!(process = %config.name, "its role is hosted by another process (adopted while this one was away, or its old token not yet expired); standing by and asking for it back");
         home = Some(declare_home(&session, keys, &config.name).await?);
     } else {
-        host(&config.name, false, &mut hosted, &mut stops);
-        roles.insert(config.name.clone());
+        hosted.host(&config.name, false);
     }
     let homes = session
         .liveliness()
@@ -166,52 +192,22 @@ pub async fn run(
         .await
         .map_err(|e| MeshError::new("declare the home liveliness subscriber", e))?;
 
-    let tokens = session
+    let token_samples = session
         .liveliness()
         .declare_subscriber(keys.alive_role("leader"))
         .history(true)
         .await
         .map_err(|e| MeshError::new("declare the leader liveliness subscriber", e))?;
-    let mut alive: BTreeSet<String> = BTreeSet::new();
-    // Roles seen up and then lost, since when. A role never seen up is
-    // still starting, not dead.
-    let mut lost: HashMap<String, Instant> = HashMap::new();
-    // Lost roles found still held by their process (warned once per loss).
-    let mut fenced: BTreeSet<String> = BTreeSet::new();
+    let mut tokens = Tokens::default();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
     let standing = Instant::now();
     tokio::pin!(shutdown);
     loop {
         tokio::select! {
             _ = &mut shutdown => break,
-            sample = tokens.recv_async() => {
+            sample = token_samples.recv_async() => {
                 let Ok(sample) = sample else { break };
-                let Some(role) = Keys::chunk(sample.key_expr().as_str(), 0) else { continue };
-                let role = role.to_string();
-                match sample.kind() {
-                    SampleKind::Put => {
-                        lost.remove(&role);
-                        fenced.remove(&role);
-                        alive.insert(role);
-                    }
-                    SampleKind::Delete => {
-                        // Not a warning by itself: every role drops its token when
-                        // the deployment stops. A loss that lasts is warned about
-                        // when the role is adopted.
-                        tracing::info!(process = %config.name, role = %role, "leader role lost its token");
-                        alive.remove(&role);
-                        if role == config.name && home.is_some() && !roles.contains(&role) {
-                            // Its own role is free (handed back, or the old
-                            // token expired): take it now, takeover or not.
-                            tracing::warn!(process = %config.name, "its role is free again: taking it back");
-                            home = None;
-                            host(&role, true, &mut hosted, &mut stops);
-                            roles.insert(role);
-                        } else if !roles.contains(&role) {
-                            lost.insert(role, Instant::now());
-                        }
-                    }
-                }
+                on_token(&sample, &mut hosted, &mut tokens, &mut home);
             }
             sample = homes.recv_async() => {
                 let Ok(sample) = sample else { break };
@@ -219,17 +215,17 @@ pub async fn run(
                 // A role adopted here whose own process is back: hand it
                 // back. Stopping the actor syncs its journal, then drops
                 // the role's token, which the home process waits for.
-                if sample.kind() == SampleKind::Put && role != config.name && roles.contains(role) {
+                if sample.kind() == SampleKind::Put && role != config.name && hosted.roles.contains(role) {
                     tracing::warn!(process = %config.name, role, "its process is back: handing the role back");
-                    if let Some(stop) = stops.get(role) {
+                    if let Some(stop) = hosted.stops.get(role) {
                         let _ = stop.send(true);
                     }
                 }
             }
-            done = hosted.join_next(), if !hosted.is_empty() => {
+            done = hosted.tasks.join_next(), if !hosted.tasks.is_empty() => {
                 if let Some(Ok((role, result))) = done {
-                    roles.remove(&role);
-                    stops.remove(&role);
+                    hosted.roles.remove(&role);
+                    hosted.stops.remove(&role);
                     match result {
                         Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
                         Err(RunError::Journal(JournalError::Ownership(OwnershipError::Held { holder, .. }))) if role == config.name => {
@@ -248,66 +244,114 @@ pub async fn run(
                 // Standing by, and the role's token went away before the
                 // subscriber was there to see it go: take it all the same.
                 if home.is_some()
-                    && !alive.contains(&config.name)
-                    && !roles.contains(&config.name)
+                    && !tokens.alive.contains(&config.name)
+                    && !hosted.roles.contains(&config.name)
                     && standing.elapsed() > Duration::from_secs(1)
                     && !hosted_elsewhere(&session, keys, &config.name).await
                     && config.journal_holder(&config.name).is_none()
                 {
                     tracing::warn!(process = %config.name, "its role is free: taking it back");
                     home = None;
-                    host(&config.name, true, &mut hosted, &mut stops);
-                    roles.insert(config.name.clone());
+                    hosted.host(&config.name, true);
                 }
                 let Some(patience) = config.takeover_after else { continue };
-                let due: Vec<String> = lost
-                    .iter()
-                    .filter(|(_, since)| since.elapsed() >= patience)
-                    .map(|(role, _)| role.clone())
-                    .collect();
-                for role in due {
-                    let live: BTreeSet<String> = alive.union(&roles).cloned().collect();
-                    let Some(heir) = heir(&config.leaders, &role, &live) else { continue };
-                    lost.remove(&role);
-                    if !roles.contains(heir) {
-                        // Another process adopts it.
-                        continue;
-                    }
-                    if config.state_dir.is_none() {
-                        tracing::error!(process = %config.name, role = %role,
-                            "cannot adopt: no state_dir, the role's state is lost; its answers stay missing");
-                        continue;
-                    }
-                    if hosted_elsewhere(&session, keys, &role).await {
-                        continue;
-                    }
-                    if let Some(holder) = config.journal_holder(&role) {
-                        // Its process is alive, only out of reach: the
-                        // role stays with it; look again later.
-                        if fenced.insert(role.clone()) {
-                            tracing::warn!(process = %config.name, role = %role, %holder,
-                                "not adopting: the role's journal is still held (its process runs, cut off); its answers stay missing until it is back");
-                        }
-                        lost.insert(role, Instant::now());
-                        continue;
-                    }
-                    tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
-                    host(&role, true, &mut hosted, &mut stops);
-                    roles.insert(role);
-                }
+                adopt_lost_roles(&mut hosted, &mut tokens, patience).await;
             }
         }
     }
-    for stop in stops.values() {
+    for stop in hosted.stops.values() {
         let _ = stop.send(true);
     }
     drop(home);
-    while let Some(done) = hosted.join_next().await {
+    while let Some(done) = hosted.tasks.join_next().await {
         if let Ok((role, Err(e))) = done {
             tracing::error!(process = %config.name, role = %role, error = %e, "role failed");
         }
     }
     Ok(())
+}
+
+/// A leader role's token came or went. Its own role free again while
+/// standing by for it is taken back at once; another role lost starts
+/// its wait for adoption.
+fn on_token(
+    sample: &zenoh::sample::Sample,
+    hosted: &mut Hosted<'_>,
+    tokens: &mut Tokens,
+    home: &mut Option<zenoh::liveliness::LivelinessToken>,
+) {
+    let config = hosted.config;
+    let Some(role) = Keys::chunk(sample.key_expr().as_str(), 0) else {
+        return;
+    };
+    let role = role.to_string();
+    match sample.kind() {
+        SampleKind::Put => {
+            tokens.lost.remove(&role);
+            tokens.fenced.remove(&role);
+            tokens.alive.insert(role);
+        }
+        SampleKind::Delete => {
+            // Not a warning by itself: every role drops its token when
+            // the deployment stops. A loss that lasts is warned about
+            // when the role is adopted.
+            tracing::info!(process = %config.name, role = %role, "leader role lost its token");
+            tokens.alive.remove(&role);
+            if role == config.name && home.is_some() && !hosted.roles.contains(&role) {
+                // Its own role is free (handed back, or the old
+                // token expired): take it now, takeover or not.
+                tracing::warn!(process = %config.name, "its role is free again: taking it back");
+                *home = None;
+                hosted.host(&role, true);
+            } else if !hosted.roles.contains(&role) {
+                tokens.lost.insert(role, Instant::now());
+            }
+        }
+    }
+}
+
+/// Adopts the roles lost for `patience` or longer whose heir is this
+/// process, unless another process still hosts them or holds their
+/// journal (then they are looked at again later).
+async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience: Duration) {
+    let config = hosted.config;
+    let due: Vec<String> = tokens
+        .lost
+        .iter()
+        .filter(|(_, since)| since.elapsed() >= patience)
+        .map(|(role, _)| role.clone())
+        .collect();
+    for role in due {
+        let live: BTreeSet<String> = tokens.alive.union(&hosted.roles).cloned().collect();
+        let Some(heir) = heir(&config.leaders, &role, &live) else {
+            continue;
+        };
+        tokens.lost.remove(&role);
+        if !hosted.roles.contains(heir) {
+            // Another process adopts it.
+            continue;
+        }
+        if config.state_dir.is_none() {
+            tracing::error!(process = %config.name, role = %role,
+                "cannot adopt: no state_dir, the role's state is lost; its answers stay missing");
+            continue;
+        }
+        if hosted_elsewhere(hosted.session, &config.keys, &role).await {
+            continue;
+        }
+        if let Some(holder) = config.journal_holder(&role) {
+            // Its process is alive, only out of reach: the
+            // role stays with it; look again later.
+            if tokens.fenced.insert(role.clone()) {
+                tracing::warn!(process = %config.name, role = %role, %holder,
+                    "not adopting: the role's journal is still held (its process runs, cut off); its answers stay missing until it is back");
+            }
+            tokens.lost.insert(role, Instant::now());
+            continue;
+        }
+        tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
+        hosted.host(&role, true);
+    }
 }
 
 /// The token of a process standing by for its own role `name`.

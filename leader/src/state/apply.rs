@@ -37,152 +37,187 @@ impl Leader {
                 owner_b,
                 handed,
                 ..
-            } => {
-                self.stats.mixes += 1;
-                let mix = Mix { a, b, swap };
-                let started = self.started()?;
-                if started.factored.is_some() {
-                    self.trees_leave(seq, mix, owner_a)?;
-                    match handed {
-                        Some(handed) => self.factored_take(seq, mix, owner_a, handed, actions)?,
-                        None => self.factored_mix(seq, mix, owner_a, owner_b, actions)?,
-                    }
-                    return self.send_trees_left(seq, actions);
-                }
-                if handed.is_some() {
-                    return Err(LeaderError::Unexpected(
-                        "a mix that takes a track on a Radon stream",
-                    ));
-                }
-                started.share.mix(mix)?;
-                // My mixed track and the other leader, for a mix across two.
-                let across = match (owner_a == me, owner_b == me) {
-                    (true, false) => Some((a, owner_b)),
-                    (false, true) => Some((b, owner_a)),
-                    (true, true) => {
-                        if let Some(rows) = &mut started.rows {
-                            rows.mix(mix)?;
-                        }
-                        None
-                    }
-                    (false, false) => None,
-                };
-                if let Some((mine, other)) = across {
-                    // Algorithm 4: both leaders of a cross-leader mix hand
-                    // over what left their tracks, and wait for the other.
-                    // The row of the mixed track goes along, unmixed: the
-                    // fit needs both, and both leaders compute it.
-                    let row = match &started.rows {
-                        Some(rows) => {
-                            started.row_mix = Some(mix);
-                            vec![wire_row(rows, mine)?]
-                        }
-                        None => Vec::new(),
-                    };
-                    self.send_homeless(seq, other, &[], row, actions)?;
-                    self.waiting = Some(Waiting::Transfer { seq, from: other });
-                }
-            }
+            } => self.apply_mix(seq, Mix { a, b, swap }, (owner_a, owner_b), handed, actions)?,
             Item::Observe {
                 track,
                 red,
                 blue,
                 growth,
                 ..
-            } => {
-                self.stats.observations += 1;
-                let observe = Observe { track, red, blue };
-                let started = self.started()?;
-                if let Some(held) = &mut started.factored {
-                    // Only the holder of the track's component applies it
-                    // (a leader that followed the track before hears it too).
-                    if held.holds(track) {
-                        held.observe(observe)?;
-                    }
-                    return Ok(());
-                }
-                match &growth {
-                    Growth::All => started.share.observe(observe, BeliefGrowth::All)?,
-                    Growth::Meeting(p) => {
-                        started.share.observe(observe, BeliefGrowth::Meeting(p))?
-                    }
-                }
-            }
+            } => self.apply_observe(Observe { track, red, blue }, &growth)?,
             Item::Handover { track, from, to } => {
-                self.stats.handovers += 1;
-                let started = self.started()?;
-                let regional = started.regional();
-                if let (Some(held), true) = (&mut started.factored, regional) {
-                    // The regional rule: the track leaves its component
-                    // (its holder splits it off), so that what the old
-                    // region keeps and what goes to the new one are apart.
-                    held.split_off(track)?;
-                }
-                let slot = started
-                    .own
-                    .get_mut(track as usize)
-                    .ok_or(LeaderError::Unexpected("a handover of an unknown track"))?;
-                if from == me {
-                    *slot = false;
-                    let row = match &mut started.rows {
-                        Some(rows) => {
-                            let ln_likelihoods = rows.take(track).ok_or(NOT_HELD)?;
-                            vec![WireRow {
-                                track,
-                                ln_likelihoods,
-                            }]
-                        }
-                        None => Vec::new(),
-                    };
-                    let mut gone = self.send_homeless(seq, to, &[track], row, actions)?;
-                    gone.push(track);
-                    self.unfollow(seq, gone)?;
-                } else if to == me {
-                    *slot = true;
-                    // Under the regional rule, taken in when it comes
-                    // (state/pending.rs).
-                    if self.lazy_transfers() {
-                        self.note_pending(Pending {
-                            seq,
-                            from,
-                            tracks: vec![track],
-                        });
-                    } else {
-                        self.waiting = Some(Waiting::Transfer { seq, from });
-                    }
-                }
+                self.apply_handover(seq, track, (from, to), me, actions)?
             }
             Item::Identify {
                 track,
                 identity,
                 accuracy,
                 ..
-            } => {
-                let read = Identify {
-                    track,
-                    identity,
-                    accuracy,
-                };
-                let started = self.started()?;
-                if let Some(trees) = &mut started.trees {
-                    // Only the holder of the track's tree applies it (a
-                    // leader that held it before may hear it too).
-                    if trees.holds(track) {
-                        trees.apply(&IdentityEvent::Identify(read))?;
-                        self.stats.identifies += 1;
-                    }
-                    return Ok(());
-                }
-                let rows = started.rows.as_mut().ok_or(LeaderError::Unexpected(
-                    "an identity read on a stream without identities",
-                ))?;
-                rows.identify(read)?;
-                self.stats.identifies += 1;
-            }
+            } => self.apply_identify(Identify {
+                track,
+                identity,
+                accuracy,
+            })?,
             Item::Cut { events, tag, rows } => {
                 actions.push(Action::CutReady(self.reach_cut(seq, tag, events, rows)?));
             }
         }
+        Ok(())
+    }
+
+    /// A mix: into the factored belief and the trees, or the Radon share
+    /// (and rows), handing over what leaves this leader's tracks when
+    /// the mix is across two leaders.
+    fn apply_mix(
+        &mut self,
+        seq: u64,
+        mix: Mix,
+        (owner_a, owner_b): (u16, u16),
+        handed: Option<Handed>,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        self.stats.mixes += 1;
+        let (a, b) = (mix.a, mix.b);
+        let me = self.me()?;
+        let started = self.started()?;
+        if started.factored.is_some() {
+            self.trees_leave(seq, mix, owner_a)?;
+            match handed {
+                Some(handed) => self.factored_take(seq, mix, owner_a, handed, actions)?,
+                None => self.factored_mix(seq, mix, owner_a, owner_b, actions)?,
+            }
+            return self.send_trees_left(seq, actions);
+        }
+        if handed.is_some() {
+            return Err(LeaderError::Unexpected(
+                "a mix that takes a track on a Radon stream",
+            ));
+        }
+        started.share.mix(mix)?;
+        // My mixed track and the other leader, for a mix across two.
+        let across = match (owner_a == me, owner_b == me) {
+            (true, false) => Some((a, owner_b)),
+            (false, true) => Some((b, owner_a)),
+            (true, true) => {
+                if let Some(rows) = &mut started.rows {
+                    rows.mix(mix)?;
+                }
+                None
+            }
+            (false, false) => None,
+        };
+        if let Some((mine, other)) = across {
+            // Algorithm 4: both leaders of a cross-leader mix hand
+            // over what left their tracks, and wait for the other.
+            // The row of the mixed track goes along, unmixed: the
+            // fit needs both, and both leaders compute it.
+            let row = match &started.rows {
+                Some(rows) => {
+                    started.row_mix = Some(mix);
+                    vec![wire_row(rows, mine)?]
+                }
+                None => Vec::new(),
+            };
+            self.send_homeless(seq, other, &[], row, actions)?;
+            self.waiting = Some(Waiting::Transfer { seq, from: other });
+        }
+        Ok(())
+    }
+
+    /// An observation, applied by whoever holds the track's belief.
+    fn apply_observe(&mut self, observe: Observe, growth: &Growth) -> Result<(), LeaderError> {
+        self.stats.observations += 1;
+        let track = observe.track;
+        let started = self.started()?;
+        if let Some(held) = &mut started.factored {
+            // Only the holder of the track's component applies it
+            // (a leader that followed the track before hears it too).
+            if held.holds(track) {
+                held.observe(observe)?;
+            }
+            return Ok(());
+        }
+        match growth {
+            Growth::All => started.share.observe(observe, BeliefGrowth::All)?,
+            Growth::Meeting(p) => started.share.observe(observe, BeliefGrowth::Meeting(p))?,
+        }
+        Ok(())
+    }
+
+    /// A handover of `track` from leader `from` to leader `to`: the
+    /// track's belief and row go with it.
+    fn apply_handover(
+        &mut self,
+        seq: u64,
+        track: u32,
+        (from, to): (u16, u16),
+        me: u16,
+        actions: &mut Vec<Action>,
+    ) -> Result<(), LeaderError> {
+        self.stats.handovers += 1;
+        let started = self.started()?;
+        let regional = started.regional();
+        if let (Some(held), true) = (&mut started.factored, regional) {
+            // The regional rule: the track leaves its component
+            // (its holder splits it off), so that what the old
+            // region keeps and what goes to the new one are apart.
+            held.split_off(track)?;
+        }
+        let slot = started
+            .own
+            .get_mut(track as usize)
+            .ok_or(LeaderError::Unexpected("a handover of an unknown track"))?;
+        if from == me {
+            *slot = false;
+            let row = match &mut started.rows {
+                Some(rows) => {
+                    let ln_likelihoods = rows.take(track).ok_or(NOT_HELD)?;
+                    vec![WireRow {
+                        track,
+                        ln_likelihoods,
+                    }]
+                }
+                None => Vec::new(),
+            };
+            let mut gone = self.send_homeless(seq, to, &[track], row, actions)?;
+            gone.push(track);
+            self.unfollow(seq, gone)?;
+        } else if to == me {
+            *slot = true;
+            // Under the regional rule, taken in when it comes
+            // (state/pending.rs).
+            if self.lazy_transfers() {
+                self.note_pending(Pending {
+                    seq,
+                    from,
+                    tracks: vec![track],
+                });
+            } else {
+                self.waiting = Some(Waiting::Transfer { seq, from });
+            }
+        }
+        Ok(())
+    }
+
+    /// An identity read, applied by whoever holds the track's tree (or
+    /// the rows, on a Radon stream).
+    fn apply_identify(&mut self, read: Identify) -> Result<(), LeaderError> {
+        let track = read.track;
+        let started = self.started()?;
+        if let Some(trees) = &mut started.trees {
+            // Only the holder of the track's tree applies it (a
+            // leader that held it before may hear it too).
+            if trees.holds(track) {
+                trees.apply(&IdentityEvent::Identify(read))?;
+                self.stats.identifies += 1;
+            }
+            return Ok(());
+        }
+        let rows = started.rows.as_mut().ok_or(LeaderError::Unexpected(
+            "an identity read on a stream without identities",
+        ))?;
+        rows.identify(read)?;
+        self.stats.identifies += 1;
         Ok(())
     }
 
