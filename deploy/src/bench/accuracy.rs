@@ -450,6 +450,14 @@ fn report(
         took.as_secs_f64(),
         max = idmesh_belief::FactoredOptions::default().max_component,
     )?;
+    write_live_rows(&mut out, rows)?;
+    write_regional_cost(&mut out, costs)?;
+    Ok(out)
+}
+
+/// The table of live against centralized accuracy: one row per crowd and
+/// belief, its seeds pooled.
+fn write_live_rows(out: &mut String, rows: &[(Crowd, Run)]) -> std::fmt::Result {
     writeln!(out, "{TABLE_HEADER}")?;
     let mut done: Vec<(usize, u64, Start, Kind)> = Vec::new();
     for (crowd, run) in rows {
@@ -478,6 +486,12 @@ fn report(
         };
         writeln!(out, "{}", row.markdown())?;
     }
+    Ok(())
+}
+
+/// The section on the regional rule's cost: the local rule against the
+/// regional one with 2, 4 and 8 leaders, one row per crowd.
+fn write_regional_cost(out: &mut String, costs: &[(Crowd, f64, Vec<f64>)]) -> std::fmt::Result {
     writeln!(
         out,
         "\n## The regional rule's accuracy cost\n\n\
@@ -523,5 +537,5 @@ fn report(
         }
         writeln!(out, "{line}")?;
     }
-    Ok(out)
+    Ok(())
 }

@@ -96,16 +96,12 @@ async fn answered(deployment: &Deployment) -> Result<u64> {
     Ok(answer.watermark.values().sum())
 }
 
-pub async fn measure(
-    deployment: &Deployment,
-    trace: &Path,
-    sensors: usize,
-    samples: usize,
-) -> Result<SensorsFigures> {
+/// Waits for every sensor to answer a ping and the deployment to answer
+/// a marginals query.
+async fn wait_until_up(deployment: &Deployment, names: &[String]) -> Result<()> {
     let keys = deployment.keys();
-    let names: Vec<String> = (0..sensors).map(|s| format!("sensor-{s}")).collect();
     let started = Instant::now();
-    for name in &names {
+    for name in names {
         while let Err(e) = deployment.ping(&keys.ping("sensor", name), 1).await {
             if started.elapsed() > TIMEOUT {
                 return Err(e.context(format!("{name} did not come up")));
@@ -119,10 +115,21 @@ pub async fn measure(
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
-    let meshed = sensors > 1;
-    let (given, last_time) = split(trace, sensors)?;
-    let events: u64 = given.iter().map(|g| g.len() as u64).sum();
-    let started = Instant::now();
+    Ok(())
+}
+
+/// Puts each sensor's lines on its ingest key, [`BATCH`] at a time, one
+/// producer per sensor, all at once; returns when every line was
+/// acknowledged. With several sensors each producer also says how far its
+/// time is, and at the end that its clock goes on past the crowd.
+async fn feed(
+    deployment: &Deployment,
+    names: &[String],
+    given: Vec<Timed>,
+    meshed: bool,
+    last_time: f64,
+) -> Result<()> {
+    let keys = deployment.keys();
     let mut feeds: Vec<tokio::task::JoinHandle<Result<()>>> = Vec::new();
     for (s, lines) in given.into_iter().enumerate() {
         let session = deployment.session.clone();
@@ -156,6 +163,23 @@ pub async fn measure(
     for feed in feeds {
         feed.await??;
     }
+    Ok(())
+}
+
+pub async fn measure(
+    deployment: &Deployment,
+    trace: &Path,
+    sensors: usize,
+    samples: usize,
+) -> Result<SensorsFigures> {
+    let keys = deployment.keys();
+    let names: Vec<String> = (0..sensors).map(|s| format!("sensor-{s}")).collect();
+    wait_until_up(deployment, &names).await?;
+    let meshed = sensors > 1;
+    let (given, last_time) = split(trace, sensors)?;
+    let events: u64 = given.iter().map(|g| g.len() as u64).sum();
+    let started = Instant::now();
+    feed(deployment, &names, given, meshed, last_time).await?;
     let acknowledged = started.elapsed();
     while answered(deployment).await? < events {
         if started.elapsed() > Duration::from_secs(600) {

@@ -6,7 +6,7 @@
 
 use super::mesh::{self, MeshOptions};
 use super::security::rules;
-use super::topology::{Sparsification, Topology};
+use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::driver::CoordinatorConfig;
 use idmesh_extract::pipeline::read_reports;
@@ -219,51 +219,7 @@ async fn sensor(
 ) -> Result<()> {
     let this = topology.sensor_named(name)?;
     let max_errors = input.max_errors.unwrap_or(this.max_errors);
-    let (header, source) = if input.stdin {
-        let (header, input) = stdin_trace()?;
-        (
-            header,
-            Source {
-                lines: Vec::new(),
-                input: Some(input),
-            },
-        )
-    } else if let Some(config) = &this.extract {
-        // Reports: read as `idmesh replay --topology` and `idmesh extract`
-        // read them.
-        let path = topology.trace_path();
-        let file =
-            File::open(&path).with_context(|| format!("cannot open trace {}", path.display()))?;
-        let reports = read_reports(
-            BufReader::new(file),
-            &path.display().to_string(),
-            config,
-            max_errors,
-        )?;
-        for reason in &reports.skipped {
-            tracing::warn!(%reason, "trace line skipped");
-        }
-        (
-            reports.header,
-            Source {
-                lines: reports.lines.into_iter().map(|(_, line)| line).collect(),
-                input: None,
-            },
-        )
-    } else {
-        let path = topology.trace_path();
-        let mut reader = TraceReader::open(&path)
-            .with_context(|| format!("cannot open trace {}", path.display()))?;
-        let header = reader.read_header()?;
-        let mut lines = Vec::new();
-        while let Some(numbered) = reader.read_line()? {
-            numbered.line.require_extracted().map_err(|problem| {
-                anyhow::anyhow!("{}:{}: {problem}", path.display(), numbered.number)
-            })?;
-            lines.push(numbered.line);
-        }
-        (header, Source { lines, input: None })
-    };
+    let (header, source) = sensor_source(topology, this, input.stdin, max_errors)?;
     let extraction = this
         .extract
         .clone()
@@ -326,6 +282,61 @@ async fn sensor(
     };
     idmesh_sensor::driver::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())
+}
+
+/// The sensor's trace: its header and lines, from standard input as they
+/// come, or from the trace file (reports to extract, or extracted lines).
+fn sensor_source(
+    topology: &Topology,
+    this: &SensorProcess,
+    input_is_stdin: bool,
+    max_errors: usize,
+) -> Result<(Header, Source)> {
+    if input_is_stdin {
+        let (header, input) = stdin_trace()?;
+        Ok((
+            header,
+            Source {
+                lines: Vec::new(),
+                input: Some(input),
+            },
+        ))
+    } else if let Some(config) = &this.extract {
+        // Reports: read as `idmesh replay --topology` and `idmesh extract`
+        // read them.
+        let path = topology.trace_path();
+        let file =
+            File::open(&path).with_context(|| format!("cannot open trace {}", path.display()))?;
+        let reports = read_reports(
+            BufReader::new(file),
+            &path.display().to_string(),
+            config,
+            max_errors,
+        )?;
+        for reason in &reports.skipped {
+            tracing::warn!(%reason, "trace line skipped");
+        }
+        Ok((
+            reports.header,
+            Source {
+                lines: reports.lines.into_iter().map(|(_, line)| line).collect(),
+                input: None,
+            },
+        ))
+    } else {
+        let path = topology.trace_path();
+        let mut reader = TraceReader::open(&path)
+            .with_context(|| format!("cannot open trace {}", path.display()))?;
+        let header = reader.read_header()?;
+        let mut lines = Vec::new();
+        while let Some(numbered) = reader.read_line()? {
+            numbered.line.require_extracted().map_err(|problem| {
+                anyhow::anyhow!("{}:{}: {problem}", path.display(), numbered.number)
+            })?;
+            lines.push(numbered.line);
+        }
+        Ok((header, Source { lines, input: None }))
+    }
 }
 
 /// The header on standard input's first line (a stream cannot start

@@ -34,7 +34,7 @@
 //! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions`): Zenoh replies on the asker's key |
 //! | every process | every process | query | `P/ping/**` |
 
-use crate::runtime::topology::Topology;
+use crate::runtime::topology::{Member, Topology};
 use idmesh_protocol::wire::keys::Keys;
 use serde_json::{json, Value};
 use std::collections::BTreeSet;
@@ -54,108 +54,156 @@ pub struct Grant {
 /// Declares what a process serves and answers for it.
 const SERVE: &[&str] = &["declare_queryable", "reply"];
 
-/// Every grant of the deployment.
-pub fn grants(topology: &Topology) -> Vec<Grant> {
-    let keys = Keys::new(topology.prefix.clone());
-    let p = keys.prefix();
-    let coordinator = vec![topology.coordinator.name.clone()];
-    let sensor: Vec<String> = topology.sensors.iter().map(|s| s.name.clone()).collect();
-    let leaders: Vec<String> = topology.leader.iter().map(|l| l.name.clone()).collect();
-    let members: Vec<String> = topology.members().into_iter().map(|m| m.name).collect();
-    let clients: Vec<String> = topology
-        .security
-        .as_ref()
-        .map(|s| s.clients.clone())
-        .unwrap_or_default();
-    let producers: Vec<String> = topology
-        .security
-        .as_ref()
-        .map(|s| s.producers.clone())
-        .unwrap_or_default();
-    let grant = |what: &str, from: &[String], to: &[String], messages, keys: Vec<String>| Grant {
+/// Who takes part, by certificate common name.
+struct Parties {
+    coordinator: Vec<String>,
+    sensor: Vec<String>,
+    leaders: Vec<String>,
+    members: Vec<String>,
+    /// Those who may ask the coordinator (none without `[security]`).
+    clients: Vec<String>,
+    /// Those who may feed the sensors (none without `[security]`).
+    producers: Vec<String>,
+}
+
+impl Parties {
+    fn of(topology: &Topology) -> Self {
+        Parties {
+            coordinator: vec![topology.coordinator.name.clone()],
+            sensor: topology.sensors.iter().map(|s| s.name.clone()).collect(),
+            leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
+            members: topology.members().into_iter().map(|m| m.name).collect(),
+            clients: topology
+                .security
+                .as_ref()
+                .map(|s| s.clients.clone())
+                .unwrap_or_default(),
+            producers: topology
+                .security
+                .as_ref()
+                .map(|s| s.producers.clone())
+                .unwrap_or_default(),
+        }
+    }
+}
+
+/// Processes `from` may send `messages` on `keys` to processes `to`.
+fn grant(
+    what: &str,
+    from: &[String],
+    to: &[String],
+    messages: &'static [&'static str],
+    keys: Vec<String>,
+) -> Grant {
+    Grant {
         what: what.to_string(),
         from: from.to_vec(),
         to: to.to_vec(),
         messages,
         keys,
-    };
-    let mut grants = vec![
+    }
+}
+
+/// Every grant of the deployment.
+pub fn grants(topology: &Topology) -> Vec<Grant> {
+    let keys = Keys::new(topology.prefix.clone());
+    let parties = Parties::of(topology);
+    let mut grants = stream_grants(&keys, &parties);
+    grants.extend(coordinator_grants(&keys, &parties));
+    grants.push(grant(
+        "pings",
+        &parties.members,
+        &parties.members,
+        &["query"],
+        vec![format!("{}/ping/**", keys.prefix())],
+    ));
+    grants.extend(outside_grants(&keys, &parties));
+    // What each process serves, under its own name.
+    for m in topology.members() {
+        grants.extend(member_grants(&keys, &parties, &m));
+    }
+    grants
+}
+
+/// What the sensors and the leaders send one another as the stream runs.
+fn stream_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
+    vec![
         // Several sensors fetch one another's intake.
         grant(
             "intake",
-            &sensor,
-            &sensor,
+            &parties.sensor,
+            &parties.sensor,
             &["query", "declare_queryable", "reply"],
             vec![keys.sensor_intake("*")],
         ),
         grant(
             "events",
-            &sensor,
-            &leaders,
+            &parties.sensor,
+            &parties.leaders,
             &["put"],
             vec![keys.leader_events("*")],
         ),
         // The sensor starts streaming once it sees every leader's token.
         grant(
             "leaders-up",
-            &sensor,
-            &leaders,
+            &parties.sensor,
+            &parties.leaders,
             &["liveliness_query"],
             vec![keys.alive_role("leader")],
         ),
         grant(
             "transfers",
-            &leaders,
-            &leaders,
+            &parties.leaders,
+            &parties.leaders,
             &["put", "query"],
             vec![keys.leader_transfer("*"), keys.leader_sent("*")],
         ),
         grant(
             "follow",
-            &leaders,
-            &sensor,
+            &parties.leaders,
+            &parties.sensor,
             &["query"],
             vec![keys.sensor_follow("*"), keys.sensor_resend("*")],
         ),
         grant(
             "unfollow",
-            &leaders,
-            &sensor,
+            &parties.leaders,
+            &parties.sensor,
             &["put"],
             vec![keys.sensor_unfollow("*")],
         ),
         grant(
             "unfollow-subscriber",
-            &sensor,
-            &leaders,
+            &parties.sensor,
+            &parties.leaders,
             &["declare_subscriber"],
             vec![keys.sensor_unfollow("*")],
         ),
         grant(
             "durable",
-            &leaders,
-            &[sensor.clone(), leaders.clone()].concat(),
+            &parties.leaders,
+            &[parties.sensor.clone(), parties.leaders.clone()].concat(),
             &["put"],
             vec![keys.every_leader_durable()],
         ),
         grant(
             "durable-subscribers",
-            &[sensor.clone(), leaders.clone()].concat(),
-            &leaders,
+            &[parties.sensor.clone(), parties.leaders.clone()].concat(),
+            &parties.leaders,
             &["declare_subscriber"],
             vec![keys.every_leader_durable()],
         ),
         grant(
             "progress",
-            &leaders,
-            &sensor,
+            &parties.leaders,
+            &parties.sensor,
             &["put"],
             vec![keys.every_leader_progress()],
         ),
         grant(
             "progress-subscriber",
-            &sensor,
-            &leaders,
+            &parties.sensor,
+            &parties.leaders,
             &["declare_subscriber"],
             vec![keys.every_leader_progress()],
         ),
@@ -163,38 +211,45 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
         // one gone for good.
         grant(
             "membership",
-            &leaders,
-            &leaders,
+            &parties.leaders,
+            &parties.leaders,
             &["declare_liveliness_subscriber", "liveliness_query"],
             // `P/alive/home/*`: a process back for its role, which the
             // process that adopted it hands back.
             vec![keys.alive_role("leader"), keys.alive_role("home")],
         ),
+    ]
+}
+
+/// What the coordinator asks the leaders and the sensors, and what the
+/// leaders push to it.
+fn coordinator_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
+    vec![
         grant(
             "pushed",
-            &leaders,
-            &coordinator,
+            &parties.leaders,
+            &parties.coordinator,
             &["put"],
             vec![keys.every_leader_pushed()],
         ),
         grant(
             "pushed-subscriber",
-            &coordinator,
-            &leaders,
+            &parties.coordinator,
+            &parties.leaders,
             &["declare_subscriber"],
             vec![keys.every_leader_pushed()],
         ),
         grant(
             "partials",
-            &coordinator,
-            &leaders,
+            &parties.coordinator,
+            &parties.leaders,
             &["query"],
             vec![keys.every_leader_partial(), keys.every_leader_stats()],
         ),
         grant(
             "cuts",
-            &coordinator,
-            &sensor,
+            &parties.coordinator,
+            &parties.sensor,
             &["query"],
             // Its counters and positions too (`query/stats` lists the sensor's).
             vec![
@@ -203,102 +258,117 @@ pub fn grants(topology: &Topology) -> Vec<Grant> {
                 keys.every_sensor_positions(),
             ],
         ),
-        grant(
-            "pings",
-            &members,
-            &members,
-            &["query"],
-            vec![format!("{p}/ping/**")],
-        ),
-    ];
-    if !clients.is_empty() {
+    ]
+}
+
+/// What clients and producers outside the deployment may ask and send,
+/// and the answers they get.
+fn outside_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
+    let p = keys.prefix();
+    let mut grants = Vec::new();
+    if !parties.clients.is_empty() {
         grants.push(grant(
             "ask",
-            &clients,
-            &coordinator,
+            &parties.clients,
+            &parties.coordinator,
             &["query"],
             vec![format!("{p}/query/**")],
         ));
         grants.push(grant(
             "answer",
-            &coordinator,
-            &clients,
+            &parties.coordinator,
+            &parties.clients,
             SERVE,
             vec![format!("{p}/query/**")],
         ));
     }
-    if !producers.is_empty() {
-        let ingest: Vec<String> = sensor.iter().map(|s| keys.sensor_ingest(s)).collect();
+    if !parties.producers.is_empty() {
+        let ingest: Vec<String> = parties
+            .sensor
+            .iter()
+            .map(|s| keys.sensor_ingest(s))
+            .collect();
         grants.push(grant(
             "feed",
-            &producers,
-            &sensor,
+            &parties.producers,
+            &parties.sensor,
             &["query"],
             ingest.clone(),
         ));
-        grants.push(grant("acknowledge", &sensor, &producers, SERVE, ingest));
-    }
-    // What each process serves, under its own name.
-    for m in topology.members() {
-        let me = vec![m.name.clone()];
-        let mut served = vec![keys.ping(m.role, &m.name)];
-        // Zenoh replies on the key the asker used, wildcards included (an
-        // error reply always does): the coordinator asks every leader, and
-        // every sensor, at once.
-        let mut asked_as = Vec::new();
-        match m.role {
-            "sensor" => {
-                served.push(format!("{p}/sensor/{}/**", m.name));
-                asked_as.extend([
-                    keys.every_sensor_cut(),
-                    keys.every_sensor_stats(),
-                    keys.every_sensor_positions(),
-                ]);
-            }
-            "leader" => {
-                // Any leader role: its own, or one it adopts.
-                served.push(format!("{p}/leader/*/**"));
-                asked_as.extend([keys.every_leader_partial(), keys.every_leader_stats()]);
-                grants.push(grant(
-                    &format!("{}-subscribes", m.name),
-                    &me,
-                    &members,
-                    &["declare_subscriber"],
-                    vec![keys.leader_events("*"), keys.leader_transfer("*")],
-                ));
-            }
-            _ => served.push(format!("{p}/query/**")),
-        }
         grants.push(grant(
-            &format!("{}-serves", m.name),
-            &me,
-            &members,
+            "acknowledge",
+            &parties.sensor,
+            &parties.producers,
             SERVE,
-            served,
+            ingest,
         ));
-        if !asked_as.is_empty() {
+    }
+    grants
+}
+
+/// What process `m` serves under its own name, answers on the keys it is
+/// asked on, and its liveliness tokens.
+fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
+    let p = keys.prefix();
+    let mut grants = Vec::new();
+    let me = vec![m.name.clone()];
+    let mut served = vec![keys.ping(m.role, &m.name)];
+    // Zenoh replies on the key the asker used, wildcards included (an
+    // error reply always does): the coordinator asks every leader, and
+    // every sensor, at once.
+    let mut asked_as = Vec::new();
+    match m.role {
+        "sensor" => {
+            served.push(format!("{p}/sensor/{}/**", m.name));
+            asked_as.extend([
+                keys.every_sensor_cut(),
+                keys.every_sensor_stats(),
+                keys.every_sensor_positions(),
+            ]);
+        }
+        "leader" => {
+            // Any leader role: its own, or one it adopts.
+            served.push(format!("{p}/leader/*/**"));
+            asked_as.extend([keys.every_leader_partial(), keys.every_leader_stats()]);
             grants.push(grant(
-                &format!("{}-answers", m.name),
+                &format!("{}-subscribes", m.name),
                 &me,
-                &coordinator,
-                &["reply"],
-                asked_as,
+                &parties.members,
+                &["declare_subscriber"],
+                vec![keys.leader_events("*"), keys.leader_transfer("*")],
             ));
         }
-        let tokens = match m.role {
-            // Any leader role's, and its own home token (standing by
-            // for its role).
-            "leader" => vec![keys.alive_role("leader"), keys.alive("home", &m.name)],
-            role => vec![keys.alive(role, &m.name)],
-        };
+        _ => served.push(format!("{p}/query/**")),
+    }
+    grants.push(grant(
+        &format!("{}-serves", m.name),
+        &me,
+        &parties.members,
+        SERVE,
+        served,
+    ));
+    if !asked_as.is_empty() {
         grants.push(grant(
-            &format!("{}-alive", m.name),
+            &format!("{}-answers", m.name),
             &me,
-            &members,
-            &["liveliness_token"],
-            tokens,
+            &parties.coordinator,
+            &["reply"],
+            asked_as,
         ));
     }
+    let tokens = match m.role {
+        // Any leader role's, and its own home token (standing by
+        // for its role).
+        "leader" => vec![keys.alive_role("leader"), keys.alive("home", &m.name)],
+        role => vec![keys.alive(role, &m.name)],
+    };
+    grants.push(grant(
+        &format!("{}-alive", m.name),
+        &me,
+        &parties.members,
+        &["liveliness_token"],
+        tokens,
+    ));
     grants
 }
 
