@@ -82,95 +82,10 @@ impl Scenario {
             initial.sort_unstable();
             header.initial_red = Some(initial);
         }
-        let count = rng.gen_range(1..=4usize);
-        // Half the schedules fit the regions to the tracks, with windows of
-        // a few items so that these short streams redraw them; the other
-        // half place the leaders at random fixed places.
-        let fitted = rng.gen_bool(0.5);
-        let leaders: Vec<LeaderPlace> = (0..count)
-            .map(|i| LeaderPlace {
-                name: format!("leader-{i}"),
-                at: (!fitted).then(|| (rng.gen_range(0.0..10.0), rng.gen_range(0.0..10.0))),
-            })
-            .collect();
-        let regions = match fitted {
-            true => RegionRule::Fitted {
-                window_per_leader: rng.gen_range(1..=4),
-            },
-            false => RegionRule::Fixed(leaders.iter().map(|l| l.at).collect()),
-        };
-        let events = rng.gen_range(5..=50usize);
-        let mut lines = Vec::with_capacity(events);
-        for e in 0..events {
-            let time = e as f64 * 0.1;
-            let line = match rng.gen_range(0..10) {
-                0..=3 => {
-                    let a = rng.gen_range(0..tracks as u32);
-                    let mut b = rng.gen_range(0..tracks as u32 - 1);
-                    if b >= a {
-                        b += 1;
-                    }
-                    // Now and then a certain exchange (a relabelling),
-                    // which moves no component but changes whose tracks
-                    // a component holds.
-                    let swap = match rng.gen_range(0..10) {
-                        0 => 1.0,
-                        _ => rng.gen_range(0.05..0.95),
-                    };
-                    Line::Mix(Mix { time, a, b, swap })
-                }
-                4..=6 => Line::Observe(Observe {
-                    time,
-                    track: rng.gen_range(0..tracks as u32),
-                    red: rng.gen_range(0.05..1.0),
-                    blue: rng.gen_range(0.05..1.0),
-                    sensor: None,
-                }),
-                _ => Line::Move(Move {
-                    time,
-                    track: rng.gen_range(0..tracks as u32),
-                    x: rng.gen_range(0.0..10.0),
-                    y: rng.gen_range(0.0..10.0),
-                }),
-            };
-            lines.push(line);
-        }
-        // Half the streams begin by placing some tracks (as the crowd
-        // simulator writes where everybody starts): the Begin puts those
-        // with the nearest leader at once.
-        if rng.gen_bool(0.5) {
-            let leading: Vec<Line> = (0..rng.gen_range(1..=tracks))
-                .map(|_| {
-                    Line::Move(Move {
-                        time: 0.0,
-                        track: rng.gen_range(0..tracks as u32),
-                        x: rng.gen_range(0.0..10.0),
-                        y: rng.gen_range(0.0..10.0),
-                    })
-                })
-                .collect();
-            lines.splice(0..0, leading);
-        }
+        let (leaders, regions) = random_leaders(rng);
+        let mut lines = random_lines(rng, tracks);
         let distributed_rule = rng.gen_bool(0.5);
-        // A third of the schedules run the factored belief (small
-        // components, so that merges, splits and moves all happen), half
-        // of them under the regional rule (the default);
-        // IDMESH_SIM_FACTORED=0 runs the Radon belief alone.
-        let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "0") {
-            0.0
-        } else {
-            1.0 / 3.0
-        };
-        let factored = rng.gen_bool(factored_share).then(|| FactoredStart {
-            max_component: rng.gen_range(1..=3),
-            split: [
-                WireSplit::Original,
-                WireSplit::Recent,
-                WireSplit::LeastLoss { rounds: 1 },
-            ][rng.gen_range(0..3)],
-            shrink: true,
-            regional: rng.gen_bool(0.5),
-        });
+        let factored = random_factored(rng);
         let distributed_rule = distributed_rule && factored.is_none();
         // Half the factored schedules carry identities: a few reads among
         // the events, and a known start now and then
@@ -257,6 +172,108 @@ impl Scenario {
             regions: Some(self.regions.clone()),
         }
     }
+}
+
+/// One to four leaders, and how the tracks are shared among them. Half
+/// the schedules fit the regions to the tracks, with windows of a few
+/// items so that these short streams redraw them; the other half place
+/// the leaders at random fixed places.
+fn random_leaders(rng: &mut ChaCha8Rng) -> (Vec<LeaderPlace>, RegionRule) {
+    let count = rng.gen_range(1..=4usize);
+    let fitted = rng.gen_bool(0.5);
+    let leaders: Vec<LeaderPlace> = (0..count)
+        .map(|i| LeaderPlace {
+            name: format!("leader-{i}"),
+            at: (!fitted).then(|| (rng.gen_range(0.0..10.0), rng.gen_range(0.0..10.0))),
+        })
+        .collect();
+    let regions = match fitted {
+        true => RegionRule::Fitted {
+            window_per_leader: rng.gen_range(1..=4),
+        },
+        false => RegionRule::Fixed(leaders.iter().map(|l| l.at).collect()),
+    };
+    (leaders, regions)
+}
+
+/// A trace of 5 to 50 mixes, observations and moves of `tracks` tracks,
+/// one every 0.1 s.
+fn random_lines(rng: &mut ChaCha8Rng, tracks: usize) -> Vec<Line> {
+    let events = rng.gen_range(5..=50usize);
+    let mut lines = Vec::with_capacity(events);
+    for e in 0..events {
+        let time = e as f64 * 0.1;
+        let line = match rng.gen_range(0..10) {
+            0..=3 => {
+                let a = rng.gen_range(0..tracks as u32);
+                let mut b = rng.gen_range(0..tracks as u32 - 1);
+                if b >= a {
+                    b += 1;
+                }
+                // Now and then a certain exchange (a relabelling),
+                // which moves no component but changes whose tracks
+                // a component holds.
+                let swap = match rng.gen_range(0..10) {
+                    0 => 1.0,
+                    _ => rng.gen_range(0.05..0.95),
+                };
+                Line::Mix(Mix { time, a, b, swap })
+            }
+            4..=6 => Line::Observe(Observe {
+                time,
+                track: rng.gen_range(0..tracks as u32),
+                red: rng.gen_range(0.05..1.0),
+                blue: rng.gen_range(0.05..1.0),
+                sensor: None,
+            }),
+            _ => Line::Move(Move {
+                time,
+                track: rng.gen_range(0..tracks as u32),
+                x: rng.gen_range(0.0..10.0),
+                y: rng.gen_range(0.0..10.0),
+            }),
+        };
+        lines.push(line);
+    }
+    // Half the streams begin by placing some tracks (as the crowd
+    // simulator writes where everybody starts): the Begin puts those
+    // with the nearest leader at once.
+    if rng.gen_bool(0.5) {
+        let leading: Vec<Line> = (0..rng.gen_range(1..=tracks))
+            .map(|_| {
+                Line::Move(Move {
+                    time: 0.0,
+                    track: rng.gen_range(0..tracks as u32),
+                    x: rng.gen_range(0.0..10.0),
+                    y: rng.gen_range(0.0..10.0),
+                })
+            })
+            .collect();
+        lines.splice(0..0, leading);
+    }
+    lines
+}
+
+/// A third of the schedules run the factored belief (small components,
+/// so that merges, splits and moves all happen), half of them under the
+/// regional rule (the default); IDMESH_SIM_FACTORED=0 runs the Radon
+/// belief alone.
+fn random_factored(rng: &mut ChaCha8Rng) -> Option<FactoredStart> {
+    let factored_share = if std::env::var("IDMESH_SIM_FACTORED").is_ok_and(|v| v == "0") {
+        0.0
+    } else {
+        1.0 / 3.0
+    };
+    rng.gen_bool(factored_share).then(|| FactoredStart {
+        max_component: rng.gen_range(1..=3),
+        split: [
+            WireSplit::Original,
+            WireSplit::Recent,
+            WireSplit::LeastLoss { rounds: 1 },
+        ][rng.gen_range(0..3)],
+        shrink: true,
+        regional: rng.gen_bool(0.5),
+    })
 }
 
 /// The centralized engine (`idmesh replay --method overcomplete`, no
