@@ -18,6 +18,10 @@
 //! read model of a different accuracy, so the filters take it as such.
 //!
 //!     cargo run --release -p idmesh-identity --example identity_calibration [encoding|methods|large]
+//!
+//! A whole run (no argument) writes docs/identity-calibration.md, stamped
+//! with the digest of the identity engine's sources and this program; a
+//! run of one part only prints.
 
 use idmesh_identity::workload::{generate, IdentityWorkloadSpec};
 use idmesh_identity::{
@@ -25,6 +29,24 @@ use idmesh_identity::{
     InformationMatrix, InformationOptions, MarginalMethod,
 };
 use std::time::Instant;
+
+/// Everything the program prints also goes into the document it writes
+/// (docs/identity-calibration.md), so that the page's numbers are the
+/// program's.
+static DOC: std::sync::Mutex<String> = std::sync::Mutex::new(String::new());
+
+macro_rules! out {
+    ($($t:tt)*) => {{
+        let text = format!($($t)*);
+        print!("{text}");
+        DOC.lock().unwrap_or_else(|e| e.into_inner()).push_str(&text);
+    }};
+}
+
+macro_rules! outln {
+    () => { out!("\n") };
+    ($($t:tt)*) => {{ out!($($t)*); out!("\n"); }};
+}
 
 const SEED0: u64 = 10_000;
 const EVERY: usize = 10;
@@ -179,10 +201,10 @@ fn encoding() -> (f64, f64) {
         clock.elapsed().as_secs_f64()
     );
     let (bm, bm_max, _) = against_exact(&streams, &exact, &belief_matrix(), 1.0);
-    println!("### Known-start encoding and evidence weight (n = 4..9, information matrix, exact marginals)\n");
-    println!("belief matrix for comparison: mean |Δp| {bm:.4}, max {bm_max:.3}\n");
-    println!("| known-start log-odds c | evidence weight w | mean abs Δp | max abs Δp |");
-    println!("|---|---|---|---|");
+    outln!("### Known-start encoding and evidence weight (n = 4..9, information matrix, exact marginals)\n");
+    outln!("belief matrix for comparison: mean |Δp| {bm:.4}, max {bm_max:.3}\n");
+    outln!("| known-start log-odds c | evidence weight w | mean abs Δp | max abs Δp |");
+    outln!("|---|---|---|---|");
     let mut best = (f64::INFINITY, 0.0, 0.0);
     for c in [1.0, 2.0, 3.0, 5.0, 10.0, 20.0, f64::INFINITY] {
         for w in [0.5, 0.7, 0.85, 1.0] {
@@ -193,13 +215,13 @@ fn encoding() -> (f64, f64) {
             } else {
                 String::new()
             };
-            println!("| {} | {w} | {mean:.4} | {max:.3}{note} |", fmt_c(c));
+            outln!("| {} | {w} | {mean:.4} | {max:.3}{note} |", fmt_c(c));
             if mean < best.0 {
                 best = (mean, c, w);
             }
         }
     }
-    println!(
+    outln!(
         "\nbest: c = {}, w = {} (mean |Δp| {:.4})\n",
         fmt_c(best.1),
         best.2,
@@ -211,12 +233,12 @@ fn encoding() -> (f64, f64) {
 fn methods(c: f64, w: f64) {
     let streams = small_streams(8);
     let exact = exact_answers(&streams);
-    println!(
+    outln!(
         "### Every method against exact S_N (n = 4..9, c = {}, w = {w})\n",
         fmt_c(c)
     );
-    println!("| method | mean abs Δp | max abs Δp |");
-    println!("|---|---|---|");
+    outln!("| method | mean abs Δp | max abs Δp |");
+    outln!("|---|---|---|");
     let metropolis = MarginalMethod::Metropolis {
         samples: 10_000,
         burn_in: 1_000,
@@ -250,9 +272,9 @@ fn methods(c: f64, w: f64) {
         } else {
             String::new()
         };
-        println!("| {name} | {mean:.4} | {max:.3}{note} |");
+        outln!("| {name} | {mean:.4} | {max:.3}{note} |");
     }
-    println!();
+    outln!();
 }
 
 /// (Brier, log-loss, identity error) against the truth.
@@ -295,9 +317,9 @@ fn against_truth(
 }
 
 fn large(c: f64, w: f64) {
-    println!("### Against the truth (n = 30, 100; 20n events, half mixes of tracks ≤ 3 apart)\n");
-    println!("| n | method | Brier | log-loss | identity error | seconds |");
-    println!("|---|---|---|---|---|---|");
+    outln!("### Against the truth (n = 30, 100; 20n events, half mixes of tracks ≤ 3 apart)\n");
+    outln!("| n | method | Brier | log-loss | identity error | seconds |");
+    outln!("|---|---|---|---|---|---|");
     for n in [30, 100] {
         let streams: Vec<_> = (0..5)
             .map(|s| spec(n, 20 * n, 0.5, 3, SEED0 + 50_000 + 100 * n as u64 + s))
@@ -334,15 +356,15 @@ fn large(c: f64, w: f64) {
             }
             let clock = Instant::now();
             match against_truth(&streams, &make, weight) {
-                Some((b, l, e)) => println!(
+                Some((b, l, e)) => outln!(
                     "| {n} | {name} | {b:.4} | {l:.3} | {e:.3} | {:.1} |",
                     clock.elapsed().as_secs_f64()
                 ),
-                None => println!("| {n} | {name} | failed | | | |"),
+                None => outln!("| {n} | {name} | failed | | | |"),
             }
         }
     }
-    println!();
+    outln!();
 }
 
 fn main() {
@@ -379,6 +401,41 @@ fn main() {
             let (c, w) = encoding();
             methods(c, w);
             large(c, w);
+            write_document();
+        }
+    }
+}
+
+/// The line of docs/identity-calibration.md that says which code made it
+/// (build.rs; tests/calibration_stamp.rs checks the committed file).
+fn calibration_stamp_line() -> String {
+    format!(
+        "<!-- idmesh identity calibration stamp: sources {} -->",
+        env!("IDMESH_IDENTITY_CALIBRATION_STAMP")
+    )
+}
+
+/// docs/identity-calibration.md: what a whole run printed, stamped with
+/// the digest of the identity engine's sources and this program (a test
+/// fails when the committed file is stale).
+fn write_document() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../docs/identity-calibration.md"
+    );
+    let body = DOC.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    let doc = format!(
+        "# Calibration of the identity engine\n\n\
+         Generated by `cargo run --release -p idmesh-identity --example identity_calibration` \
+         (about 15 minutes; every stream seeded, only the timings vary); do not edit by hand. \
+         docs/design/identity.md (\"Calibration\") says what it means.\n\n{}\n\n{body}",
+        calibration_stamp_line()
+    );
+    match std::fs::write(path, doc) {
+        Ok(()) => eprintln!("wrote {path}"),
+        Err(e) => {
+            eprintln!("{path}: {e}");
+            std::process::exit(1)
         }
     }
 }

@@ -64,6 +64,16 @@
 //!   identity marginals against the truth.
 //! - [`workload`] — seeded random identity event streams with ground truth.
 
+/// The line of docs/identity-paper.md that says which code made it: the
+/// digest of the identity engine's sources and the `identity_results`
+/// example (build.rs).
+pub fn paper_stamp_line() -> String {
+    format!(
+        "<!-- idmesh identity stamp: sources {} -->",
+        env!("IDMESH_IDENTITY_PAPER_STAMP")
+    )
+}
+
 pub mod assignment;
 pub mod belief_matrix;
 pub mod blocks;
@@ -102,3 +112,20 @@ pub use rows::InformationRows;
 pub use sinkhorn::{SinkhornOptions, SinkhornReport};
 pub use sparse_marginals::{IdentityRow, SparseMarginals};
 pub use workload::{IdentityWorkload, IdentityWorkloadSpec};
+
+#[cfg(test)]
+mod stamp_tests {
+    #[test]
+    fn the_committed_paper_results_were_generated_by_the_code_as_it_is() {
+        // Any change to the identity engine or to the results program
+        // changes the stamp: regenerate docs/identity-paper.md and commit it.
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/identity-paper.md");
+        let committed = std::fs::read_to_string(path).unwrap_or_default();
+        assert!(
+            committed.contains(&super::paper_stamp_line()),
+            "docs/identity-paper.md is stale: it does not carry {:?}; regenerate it with \
+             `cargo run --release -p idmesh-identity --example identity_results`",
+            super::paper_stamp_line()
+        );
+    }
+}
