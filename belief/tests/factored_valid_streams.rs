@@ -92,16 +92,14 @@ fn valid_stream(n: usize, k: usize, len: usize, seed: u64) -> (Vec<u32>, Vec<Eve
 }
 
 /// k, the field (known start or uniform prior) and a valid stream on it:
-/// up to 300 tracks, 200 to 3000 events.
-fn valid_case() -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
-    (
-        2usize..=300,
-        0.0f64..=1.0,
-        any::<bool>(),
-        any::<u64>(),
-        200usize..=3000,
-    )
-        .prop_map(|(n, k_share, known, seed, len)| {
+/// n tracks in `tracks`, a red share in `share`, `events` events.
+fn case(
+    tracks: std::ops::RangeInclusive<usize>,
+    share: std::ops::RangeInclusive<f64>,
+    events: std::ops::RangeInclusive<usize>,
+) -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
+    (tracks, share, any::<bool>(), any::<u64>(), events).prop_map(
+        |(n, k_share, known, seed, len)| {
             let k = ((n as f64 * k_share).round() as usize).min(n);
             let (initial, events) = valid_stream(n, k, len, seed);
             let field = if known {
@@ -110,7 +108,23 @@ fn valid_case() -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
                 Field::uniform(n, k)
             };
             (k, field, events)
-        })
+        },
+    )
+}
+
+/// Up to 300 tracks, 200 to 3000 events.
+fn valid_case() -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
+    case(2..=300, 0.0..=1.0, 200..=3000)
+}
+
+/// Long valid streams on fields to 80 tracks: 5,000 to 20,000 events.
+/// Sightings that contradict the truth favour red for a blue target, so
+/// over a long stream every table leans red by hundreds of nats a track
+/// while a known count holds the total down: the tables and the count
+/// weights drift apart, and whatever is computed from their products must
+/// not underflow.
+fn long_case() -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
+    case(2..=80, 0.0..=0.5, 5000..=20000)
 }
 
 fn coupling() -> impl Strategy<Value = Coupling> {
@@ -152,32 +166,6 @@ fn takes_every_event(
         }
     }
     Ok(())
-}
-
-/// Long valid streams on fields to 80 tracks: 5,000 to 20,000 events.
-/// Sightings that contradict the truth favour red for a blue target, so
-/// over a long stream every table leans red by hundreds of nats a track
-/// while a known count holds the total down: the tables and the count
-/// weights drift apart, and whatever is computed from their products must
-/// not underflow.
-fn long_case() -> impl Strategy<Value = (usize, Field, Vec<Event>)> {
-    (
-        2usize..=80,
-        0.0f64..=0.5,
-        any::<bool>(),
-        any::<u64>(),
-        5000usize..=20000,
-    )
-        .prop_map(|(n, k_share, known, seed, len)| {
-            let k = ((n as f64 * k_share).round() as usize).min(n);
-            let (initial, events) = valid_stream(n, k, len, seed);
-            let field = if known {
-                Field::known(n, initial)
-            } else {
-                Field::uniform(n, k)
-            };
-            (k, field, events)
-        })
 }
 
 proptest! {
