@@ -90,11 +90,14 @@ impl CountPrior {
 
     /// Whether `r`, weights computed for a component holding the count
     /// vector `own`, is zero at a count the component holds while the rest
-    /// (whose components hold counts `rest.0..=rest.1` between them) could
-    /// complete it: a zero that is not a fact of the belief but an entry
-    /// flushed on the way, where the component's own table may weigh
+    /// could complete it: a zero that is not a fact of the belief but an
+    /// entry flushed on the way, where the component's own table may weigh
     /// 10^300 times more. Such weights would cut support the reads allow.
-    pub(crate) fn flushed(&self, own: &[f64], rest: (usize, usize), r: &[f64]) -> bool {
+    /// `sums` are [`support_sums`] over every component, `own` included:
+    /// the rest holds between their lowest and highest counts less own's.
+    pub(crate) fn flushed(&self, own: &[f64], sums: (usize, usize), r: &[f64]) -> bool {
+        let (own_lo, own_hi) = support(own).unwrap_or((0, 0));
+        let rest = (sums.0 - own_lo, sums.1 - own_hi);
         own.iter()
             .zip(r)
             .enumerate()
@@ -173,7 +176,7 @@ pub(crate) fn support(counts: &[f64]) -> Option<(usize, usize)> {
 }
 
 /// The sums of the lowest and of the highest held counts of `counts`.
-fn support_sums(counts: &[&[f64]]) -> (usize, usize) {
+pub(crate) fn support_sums(counts: &[&[f64]]) -> (usize, usize) {
     counts
         .iter()
         .filter_map(|c| support(c))
@@ -245,22 +248,20 @@ impl CountPrior {
     /// from all the others and π, scaled to a largest entry of 1. `None`
     /// when every count of j is ruled out (the belief has no mass).
     pub(crate) fn leave_one_out(&self, counts: &[&[f64]], j: usize) -> Option<Vec<f64>> {
-        let (lo, hi) = support_sums(counts);
-        let (own_lo, own_hi) = support(counts[j]).unwrap_or((0, 0));
+        let sums = support_sums(counts);
         match self.fast_leave_one_out(counts, j) {
-            Some(r) if !self.flushed(counts[j], (lo - own_lo, hi - own_hi), &r) => Some(r),
+            Some(r) if !self.flushed(counts[j], sums, &r) => Some(r),
             _ => self.ln_leave_one_out(counts, j),
         }
     }
 
     /// R_{−j} for every component j (see [`leave_one_out`](Self::leave_one_out)).
     pub(crate) fn all_leave_one_out(&self, counts: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
-        let (lo, hi) = support_sums(counts);
+        let sums = support_sums(counts);
         let trusted = |all: &Vec<Vec<f64>>| {
-            all.iter().zip(counts).all(|(r, c)| {
-                let (own_lo, own_hi) = support(c).unwrap_or((0, 0));
-                !self.flushed(c, (lo - own_lo, hi - own_hi), r)
-            })
+            all.iter()
+                .zip(counts)
+                .all(|(r, c)| !self.flushed(c, sums, r))
         };
         match self.fast_all(counts) {
             Some(all) if trusted(&all) => all.into_iter().map(Some).collect(),
@@ -500,12 +501,13 @@ mod tests {
         let own = [1e-200, 1.0, 0.0];
         // The rest can hold 0 to 3 red: counts 0, 1 of the component are
         // completed (k = 2), so a zero weight there is flushed.
-        assert!(prior.flushed(&own, (0, 3), &[1.0, 0.0, 0.0]));
-        assert!(prior.flushed(&own, (0, 3), &[0.0, 1.0, 0.0]));
+        // (The sums count the component's own 0..=1 too.)
+        assert!(prior.flushed(&own, (0, 4), &[1.0, 0.0, 0.0]));
+        assert!(prior.flushed(&own, (0, 4), &[0.0, 1.0, 0.0]));
         // The rest holds exactly 2 red: only count 0 is completed.
-        assert!(!prior.flushed(&own, (2, 2), &[1.0, 0.0, 0.0]));
+        assert!(!prior.flushed(&own, (2, 3), &[1.0, 0.0, 0.0]));
         // Count 2 is not held: its zero says nothing.
-        assert!(!prior.flushed(&own, (0, 3), &[1.0, 1.0, 0.0]));
+        assert!(!prior.flushed(&own, (0, 4), &[1.0, 1.0, 0.0]));
         // Both other tracks red is 10^-400 (0 in the fast path's product)
         // against 10^-200 for one of them: the weight of the component's
         // count 0 is 10^-200 of its count 1's, not 0.

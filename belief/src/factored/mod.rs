@@ -633,23 +633,25 @@ impl FactoredBelief {
     /// the next sightings underflowed it to 0. Unchanged if nothing else
     /// would be left (the caller's checks then report it).
     fn without_excluded_counts(&mut self, c: Component) -> Component {
-        let open = self.uninformed_support(c.len());
-        let excluded = |y: usize| !open[y.count_ones() as usize];
-        if !c
-            .table
-            .iter()
-            .enumerate()
-            .any(|(y, &g)| g > 0.0 && excluded(y))
-        {
+        let mut table = c.table.clone();
+        if !self.drop_excluded_counts(&mut table, c.len()) {
             return c;
         }
-        let mut table = c.table.clone();
+        Component::from_table(c.tracks.clone(), table, c.log_scale).unwrap_or(c)
+    }
+
+    /// Zeroes the sets of a table over `m` tracks whose red count no
+    /// completion of the rest allows; whether any of them had weight.
+    fn drop_excluded_counts(&mut self, table: &mut [f64], m: usize) -> bool {
+        let open = self.uninformed_support(m);
+        let mut dropped = false;
         for (y, g) in table.iter_mut().enumerate() {
-            if excluded(y) {
+            if !open[y.count_ones() as usize] {
+                dropped |= *g > 0.0;
                 *g = 0.0;
             }
         }
-        Component::from_table(c.tracks.clone(), table, c.log_scale).unwrap_or(c)
+        dropped
     }
 
     /// The count weights of a merged component of `width` − 1 tracks that
@@ -1085,12 +1087,7 @@ impl PropertyFilter for FactoredBelief {
         // scale while the sets that matter underflow (with k = 0, every
         // set with a red track, against a 10^-200 sighting of blue).
         let m = comp.len();
-        let open = self.uninformed_support(m);
-        for (y, g) in table.iter_mut().enumerate() {
-            if !open[y.count_ones() as usize] {
-                *g = 0.0;
-            }
-        }
+        self.drop_excluded_counts(&mut table, m);
         let comp = self.comp(c);
         let new_counts = table::counts_of(&table, comp.len());
         // Under the local coupling a sighting needs only its component,

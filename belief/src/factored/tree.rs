@@ -346,11 +346,10 @@ pub(crate) struct CountTree {
     /// reservoir in the module documentation).
     cumulants: Vec<[f64; 3]>,
     cumulant_sums: [f64; 3],
-    /// The lowest and highest count each leaf holds with positive weight,
-    /// and their sums: what the rest of a leaf can hold, to tell a weight
-    /// flushed to zero on the way from one that is a fact (see
-    /// [`CountTree::flushed`]).
-    supports: Vec<(usize, usize)>,
+    /// The sums over the leaves of the lowest and the highest count each
+    /// holds with positive weight: what the rest of a leaf can hold, to
+    /// tell a weight flushed to zero on the way from one that is a fact
+    /// (see [`CountTree::flushed`]).
     support_sums: (usize, usize),
     ln_tilt: f64,
     /// The tails of an inner node below this share of its largest entry
@@ -449,7 +448,6 @@ impl CountTree {
             counts: vec![Vec::new(); leaves],
             cumulants: vec![[0.0; 3]; leaves],
             cumulant_sums: [0.0; 3],
-            supports: vec![(0, 0); leaves],
             support_sums: (0, 0),
             ln_tilt,
             floor: if point { TAIL } else { 0.0 },
@@ -544,23 +542,22 @@ impl CountTree {
         }
     }
 
+    /// Moves `support_sums` from the slot's current counts to `counts`
+    /// (called before they replace them).
     fn set_support(&mut self, slot: usize, counts: &[f64]) {
         let (lo, hi) = support(counts).unwrap_or((0, 0));
-        let (old_lo, old_hi) = self.supports[slot];
+        let (old_lo, old_hi) = support(&self.counts[slot]).unwrap_or((0, 0));
         self.support_sums = (
             self.support_sums.0 - old_lo + lo,
             self.support_sums.1 - old_hi + hi,
         );
-        self.supports[slot] = (lo, hi);
     }
 
     /// Whether `r`, weights this tree gave `slot`, has an entry flushed to
     /// zero on the way where the rest could complete the slot's count (see
     /// [`CountPrior::flushed`]): O(|C|).
     pub(crate) fn flushed(&self, prior: &CountPrior, slot: usize, r: &[f64]) -> bool {
-        let (lo, hi) = self.supports[slot];
-        let rest = (self.support_sums.0 - lo, self.support_sums.1 - hi);
-        prior.flushed(&self.counts[slot], rest, r)
+        prior.flushed(&self.counts[slot], self.support_sums, r)
     }
 
     /// Recomputes the dirty nodes under `node`.
