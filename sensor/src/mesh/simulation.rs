@@ -1,5 +1,7 @@
-//! The sensors of a mesh under a seeded, deterministic network: intake
-//! slices lost, doubled, delayed (hence reordered); sensors killed and
+//! The sensors of a mesh under a seeded, deterministic network (the
+//! simulations' one fault model, `idmesh_faults`, at this seed's rates):
+//! intake requests and slices lost, doubled, delayed (hence reordered)
+//! until the faults stop; sensors killed and
 //! started again from their journals (whole or compacted); producers'
 //! events and cut requests coming at random moments to random sensors.
 //! Each schedule checks that every leader is sent the stream one gateway
@@ -15,6 +17,7 @@ use crate::cuts::CutParameters;
 use crate::ingest::Offer;
 use crate::journal::Record;
 use crate::machine::{CutOutcome, Gateway};
+use idmesh_faults::{Faults, Wire};
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::sensor_to_leader::{Item, Sequenced};
@@ -34,11 +37,19 @@ struct Sensor {
     told_finish: bool,
 }
 
-/// A slice on its way: when it arrives, to whom.
-struct Flight {
-    at: u64,
-    to: usize,
-    bytes: Vec<u8>,
+/// What travels between sensors: a sensor's request for what a peer has
+/// taken in, and the slice the peer answers with.
+#[derive(Clone)]
+enum Delivery {
+    Want {
+        from: usize,
+        to: usize,
+        wanted: Vec<u8>,
+    },
+    Slice {
+        to: usize,
+        bytes: Vec<u8>,
+    },
 }
 
 struct Schedule {
@@ -46,7 +57,7 @@ struct Schedule {
     factored: bool,
     lines: Vec<String>,
     sensors: Vec<Sensor>,
-    flights: Vec<Flight>,
+    wire: Wire<usize, Delivery>,
     now: u64,
     /// What each leader was sent, in order.
     sent: Vec<Vec<Sequenced>>,
@@ -54,6 +65,8 @@ struct Schedule {
     answers: BTreeMap<u64, Vec<CutPlaced>>,
     refusals: u64,
     crashes: u64,
+    /// Requests that came after what they asked for was let go.
+    stale_wants: u64,
 }
 
 impl Schedule {
@@ -93,12 +106,13 @@ impl Schedule {
             factored,
             lines,
             sensors: all,
-            flights: Vec::new(),
+            wire: Wire::new(Faults::NONE),
             now: 0,
             sent: vec![Vec::new(); LEADERS],
             answers: BTreeMap::new(),
             refusals: 0,
             crashes: 0,
+            stale_wants: 0,
         }
     }
 
@@ -152,50 +166,55 @@ impl Schedule {
         self.settle(s);
     }
 
-    /// Sensor `s` asks each peer for its intake; the replies fly, or are
-    /// lost, or doubled (only while `faulty`).
-    fn fetch(&mut self, s: usize, faulty: bool) {
+    /// Sensor `s` asks each peer for its intake, over the wire.
+    fn fetch(&mut self, s: usize) {
         for (peer, wanted) in self.sensors[s].gateway.wanted() {
             let p = self
                 .sensors
                 .iter()
                 .position(|o| o.config.sensors[o.config.me] == peer)
                 .expect("a peer");
-            if faulty && self.rng.gen_bool(0.1) {
-                continue; // the request is lost
-            }
-            let slice = encode(&self.sensors[p].gateway.intake(&wanted).expect("a slice").0);
-            self.settle(p);
-            let copies = if !faulty {
-                1
-            } else if self.rng.gen_bool(0.1) {
-                0
-            } else if self.rng.gen_bool(0.1) {
-                2
-            } else {
-                1
+            let want = Delivery::Want {
+                from: s,
+                to: p,
+                wanted,
             };
-            for _ in 0..copies {
-                let delay = if faulty { self.rng.gen_range(0..30) } else { 0 };
-                self.flights.push(Flight {
-                    at: self.now + delay,
-                    to: s,
-                    bytes: slice.clone(),
-                });
-            }
+            self.wire.send(&mut self.rng, self.now, s, p, want);
         }
     }
 
-    /// Slices whose time has come arrive (in time order).
+    /// What the wire holds for now arrives (in time order): a request is
+    /// answered with a slice, over the wire again; a slice is merged.
     fn deliver(&mut self) {
-        self.flights.sort_by_key(|f| f.at);
-        while self.flights.first().is_some_and(|f| f.at <= self.now) {
-            let flight = self.flights.remove(0);
-            self.sensors[flight.to]
-                .gateway
-                .peer(&flight.bytes)
-                .expect("a slice merges or is skipped");
-            self.settle(flight.to);
+        while let Some((_, delivery)) = self.wire.pop_due(self.now) {
+            match delivery {
+                Delivery::Want { from, to, wanted } => {
+                    // A request that comes late or twice may ask for
+                    // what every sensor has since let go: the driver
+                    // answers that with an error, and the asker asks
+                    // again from where it is.
+                    let answer = self.sensors[to].gateway.intake(&wanted);
+                    self.settle(to);
+                    match answer {
+                        Ok((slice, _)) => {
+                            let bytes = encode(&slice);
+                            let slice = Delivery::Slice { to: from, bytes };
+                            self.wire.send(&mut self.rng, self.now, to, from, slice);
+                        }
+                        Err(e) => {
+                            assert!(e.contains("forgotten"), "an intake refused: {e}");
+                            self.stale_wants += 1;
+                        }
+                    }
+                }
+                Delivery::Slice { to, bytes } => {
+                    self.sensors[to]
+                        .gateway
+                        .peer(&bytes)
+                        .expect("a slice merges or is skipped");
+                    self.settle(to);
+                }
+            }
         }
     }
 
@@ -250,6 +269,7 @@ impl Schedule {
 
     fn run(&mut self) {
         let sensors = self.sensors.len();
+        self.wire.set_faults(Faults::random(&mut self.rng));
         let mut tag = 0u64;
         for _ in 0..600 {
             self.now += 1;
@@ -259,7 +279,7 @@ impl Schedule {
                     let n = self.rng.gen_range(1..5);
                     self.feed(s, n);
                 }
-                3..=6 => self.fetch(s, true),
+                3..=6 => self.fetch(s),
                 7 => {
                     tag += 1;
                     self.ask_cut(tag);
@@ -270,17 +290,18 @@ impl Schedule {
             self.deliver();
         }
         // Calm: everything given, nothing lost, until every sensor ends.
+        self.wire.calm();
+        let round_trip = 2 * self.wire.faults().delay.1 + 1;
         for s in 0..sensors {
             self.feed(s, usize::MAX / 2);
         }
-        self.now += 100;
         for _ in 0..10 {
-            self.deliver();
             for s in 0..sensors {
-                self.fetch(s, false);
+                self.fetch(s);
             }
+            self.now += round_trip;
+            self.deliver();
         }
-        self.deliver();
     }
 
     fn check(&self, what: &str) {
@@ -350,7 +371,7 @@ fn seeds() -> u64 {
 
 #[test]
 fn every_schedule_of_lost_doubled_late_slices_and_killed_sensors_routes_one_stream() {
-    let (mut crashes, mut answers, mut refusals) = (0, 0, 0);
+    let (mut crashes, mut answers, mut refusals, mut stale) = (0, 0, 0, 0);
     for seed in 0..seeds() {
         let sensors = 2 + (seed % 2) as usize;
         let factored = seed % 3 != 0;
@@ -362,12 +383,14 @@ fn every_schedule_of_lost_doubled_late_slices_and_killed_sensors_routes_one_stre
         crashes += schedule.crashes;
         answers += schedule.answers.values().map(Vec::len).sum::<usize>();
         refusals += schedule.refusals;
+        stale += schedule.stale_wants;
     }
     // The schedules did what they are for.
     assert!(crashes > seeds() / 4, "{crashes} crashes");
     assert!(answers as u64 > seeds(), "{answers} cut answers");
     println!(
-        "{} schedules: {crashes} sensor kills, {answers} cut answers, {refusals} refused",
+        "{} schedules: {crashes} sensor kills, {answers} cut answers, {refusals} refused, \
+         {stale} stale intake requests",
         seeds()
     );
 }

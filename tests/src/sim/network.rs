@@ -1,11 +1,12 @@
-//! The simulated network: a queue of events in virtual time, and a wire
-//! that loses, doubles and delays messages (random delays reorder them),
-//! and cuts a leader off for a while. Seeded: one seed, one schedule.
+//! The simulated deployment's network: the wire of the one fault model
+//! the sensor mesh's schedules use too (`idmesh_faults`), between the
+//! sensor, the leaders and the coordinator, with this seed's fault rates,
+//! and the crashes and partitions a schedule adds on the same clock.
 
-use super::world::{Event, Ms, Msg};
+use super::world::{Event, Ms};
+use idmesh_faults::{Faults, Wire};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use std::collections::{BTreeMap, BTreeSet};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Endpoint {
@@ -14,96 +15,24 @@ pub enum Endpoint {
     Coordinator,
 }
 
-pub struct Network {
-    /// Events by (time, order of scheduling): ties keep their order.
-    queue: BTreeMap<(Ms, u64), Event>,
-    order: u64,
-    drop: f64,
-    duplicate: f64,
-    delay: (Ms, Ms),
-    isolated: BTreeSet<Endpoint>,
+/// The queue of the simulation's events, and the wire deliveries take.
+pub type Network = Wire<Endpoint, Event>;
+
+/// A wire with this seed's fault rates.
+pub fn random(rng: &mut ChaCha8Rng) -> Network {
+    Wire::new(Faults::random(rng))
 }
 
-impl Network {
-    /// A wire with this seed's fault rates.
-    pub fn random(rng: &mut ChaCha8Rng, _leaders: usize) -> Network {
-        let drop = [0.0, 0.01, 0.05, 0.15][rng.gen_range(0..4)];
-        let duplicate = [0.0, 0.05, 0.2][rng.gen_range(0..3)];
-        let delay = [(1, 2), (1, 20), (5, 100)][rng.gen_range(0..3)];
-        Network {
-            queue: BTreeMap::new(),
-            order: 0,
-            drop,
-            duplicate,
-            delay,
-            isolated: BTreeSet::new(),
-        }
+/// Crashes and partitions of leaders at random points before `span`.
+pub fn schedule_faults(net: &mut Network, rng: &mut ChaCha8Rng, span: Ms, leaders: usize) {
+    for _ in 0..rng.gen_range(0..=2) {
+        let at = rng.gen_range(0..span);
+        net.at(at, Event::Crash(rng.gen_range(0..leaders)));
     }
-
-    /// Crashes and partitions at random points before `span`.
-    pub fn schedule_faults(&mut self, rng: &mut ChaCha8Rng, span: Ms, leaders: usize) {
-        for _ in 0..rng.gen_range(0..=2) {
-            let at = rng.gen_range(0..span);
-            self.at(at, Event::Crash(rng.gen_range(0..leaders)));
-        }
-        for _ in 0..rng.gen_range(0..=2) {
-            let at = rng.gen_range(0..span);
-            let leader = rng.gen_range(0..leaders);
-            self.at(at, Event::Isolate(leader));
-            self.at(at + rng.gen_range(50..=1500), Event::Heal(leader));
-        }
-    }
-
-    pub fn at(&mut self, time: Ms, event: Event) {
-        self.order += 1;
-        self.queue.insert((time, self.order), event);
-    }
-
-    pub fn next(&mut self) -> Option<(Ms, Event)> {
-        self.queue
-            .pop_first()
-            .map(|((time, _), event)| (time, event))
-    }
-
-    /// Puts `msg` on the wire; false if it is lost.
-    pub fn send(
-        &mut self,
-        rng: &mut ChaCha8Rng,
-        now: Ms,
-        from: Endpoint,
-        to: Endpoint,
-        msg: Msg,
-    ) -> bool {
-        if self.isolated.contains(&from) || self.isolated.contains(&to) {
-            return false;
-        }
-        if self.drop > 0.0 && rng.gen_bool(self.drop) {
-            return false;
-        }
-        let copies = if self.duplicate > 0.0 && rng.gen_bool(self.duplicate) {
-            2
-        } else {
-            1
-        };
-        for _ in 0..copies {
-            let delay = rng.gen_range(self.delay.0..=self.delay.1);
-            self.at(now + delay, Event::Deliver(msg.clone()));
-        }
-        true
-    }
-
-    pub fn isolate(&mut self, endpoint: Endpoint) {
-        self.isolated.insert(endpoint);
-    }
-
-    pub fn heal(&mut self, endpoint: Endpoint) {
-        self.isolated.remove(&endpoint);
-    }
-
-    /// The faults are over: nothing is lost or doubled from now on.
-    pub fn calm(&mut self) {
-        self.drop = 0.0;
-        self.duplicate = 0.0;
-        self.isolated.clear();
+    for _ in 0..rng.gen_range(0..=2) {
+        let at = rng.gen_range(0..span);
+        let leader = rng.gen_range(0..leaders);
+        net.at(at, Event::Isolate(leader));
+        net.at(at + rng.gen_range(50..=1500), Event::Heal(leader));
     }
 }

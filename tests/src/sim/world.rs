@@ -7,7 +7,7 @@
 //! actors do with Zenoh — puts, gets with a timeout, subscriptions — is
 //! done here with virtual time.
 
-use super::network::{Endpoint, Network};
+use super::network::{self, Endpoint, Network};
 use super::scenario::{exact_marginals, Scenario};
 use super::Violation;
 use idmesh_coordinator::machine::{
@@ -313,7 +313,7 @@ impl World {
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
         let gateway = scenario.gateway(router);
-        let net = Network::random(&mut rng, scenario.leaders.len());
+        let net = network::random(&mut rng);
         let leaders = scenario
             .leaders
             .iter()
@@ -382,7 +382,7 @@ impl World {
             let at = world.rng.gen_range(0..span);
             world.net.at(at, Event::QueryStart);
         }
-        world.net.schedule_faults(&mut world.rng, span, count);
+        network::schedule_faults(&mut world.net, &mut world.rng, span, count);
         let mut calm = span + 100;
         if world.aimed.long_partition > 0 {
             let (at, leader) = (world.rng.gen_range(0..span), world.rng.gen_range(0..count));
@@ -1495,7 +1495,10 @@ impl World {
 
     fn send(&mut self, from: Endpoint, to: Endpoint, msg: Msg) {
         self.tally.messages += 1;
-        if !self.net.send(&mut self.rng, self.now, from, to, msg) {
+        if !self
+            .net
+            .send(&mut self.rng, self.now, from, to, Event::Deliver(msg))
+        {
             self.tally.dropped += 1;
         }
     }
