@@ -70,7 +70,11 @@ proptest! {
         let k = ((n as f64 * k_share) as usize).min(n);
         let field = field(n, k, &common::Start::Known, seed);
         let mut coupled = FactoredBelief::with_options(field.clone(), options(Coupling::Coupled, max)).unwrap();
-        let mut local = FactoredBelief::with_options(field, options(Coupling::Local, max)).unwrap();
+        let mut local = FactoredBelief::with_options(field.clone(), options(Coupling::Local, max)).unwrap();
+        // Only the sightings the exact filter takes: a hard sighting of
+        // the wrong colour would be repaired, and the repairs differ by
+        // rule.
+        let mut exact = DenseFilter::new(field).unwrap();
         for e in &events {
             // Tracks of this field, and hard sightings only: every
             // component's count stays fixed until a split spreads it.
@@ -90,9 +94,12 @@ proptest! {
                     continue;
                 }
             }
+            if exact.apply(&e).is_err() {
+                continue;
+            }
             let splits = coupled.stats().splits;
-            let (a, b) = (coupled.apply(&e), local.apply(&e));
-            prop_assert_eq!(a.is_ok(), b.is_ok(), "{:?} vs {:?} on {:?}", a, b, e);
+            coupled.apply(&e).unwrap();
+            local.apply(&e).unwrap();
             close(&coupled.marginals().unwrap(), &local.marginals().unwrap(), 1e-9)?;
             if coupled.stats().splits > splits {
                 // This split spread the counts of its halves.

@@ -140,9 +140,10 @@ pub enum Coupling {
     /// "The local rule", and docs/coupling-accuracy.md for what that costs.
     /// An observation reads only its component too, hard ones (a likelihood
     /// 0) included: one the prior alone rules out (it leaves more red
-    /// tracks than π allows, or fewer) is refused at once; one that only
-    /// other components rule out is found at the next query, as a belief
-    /// without mass.
+    /// tracks than π allows, or fewer) is refused at once; one its own
+    /// component rules out is taken by the repair rule (the component
+    /// smoothed); one that only other components rule out is found at the
+    /// next query, as a belief without mass.
     Local,
     /// Q(s) = 1 on every count s the merged pair can hold, 0 elsewhere: the
     /// split matches the moments of the pair's own tables as if the rest of
@@ -164,6 +165,10 @@ impl Coupling {
 /// count coupling stands in for the count tree when the tree's weights
 /// underflow.
 pub const EAGER_LIMIT: usize = 4096;
+
+/// The share of a component's (normalized) mass a repair gives to the
+/// sets the prior allows.
+const REPAIR_MASS: f64 = 1e-9;
 
 /// Options of [`FactoredBelief`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -258,6 +263,9 @@ pub struct FactoredStats {
     /// retried under the local or the flat ones (valid streams whose
     /// sightings contradict the truth again and again).
     pub retried_splits: u64,
+    /// Sightings the belief held impossible that π allows, taken by
+    /// smoothing their component (see `observe_repaired`).
+    pub repairs: u64,
     /// The most iterations (Sinkhorn sweeps + Newton steps) one moment
     /// matching needed.
     pub max_sweeps: usize,
@@ -914,6 +922,129 @@ impl FactoredBelief {
         Ok(pieces)
     }
 
+    /// A sighting the belief holds impossible although π allows it (a
+    /// sure read of a colour the belief ruled out — on a valid stream only
+    /// rounding in the tables and count weights can have ruled it out):
+    /// the documented repair, as the identity belief's. The sighting's
+    /// component takes 10⁻⁹ of its mass on the sets the prior allows
+    /// (every set whose count some completion allows, alike) and the
+    /// sighting is applied again; if the count weights of the rest still
+    /// rule it out (the coupled weights: other components hold the count
+    /// as certain), every component is smoothed so. Counted in
+    /// [`FactoredStats::repairs`] and logged once. A sighting the prior
+    /// alone rules out is refused as before, and the belief is left as it
+    /// was.
+    fn observe_repaired(&mut self, observe: Observe, probability: f64) -> Result<(), BeliefError> {
+        let saved = self.clone();
+        let (c, _) = self.home[observe.track as usize];
+        self.smooth(&[c])?;
+        let mut done = self.observe_in_component(observe);
+        if matches!(done, Err(BeliefError::ImpossibleObservation { .. }))
+            && !self.options.coupling.is_local()
+        {
+            let every: Vec<usize> = (0..self.comps.len())
+                .filter(|&slot| self.comps[slot].is_some())
+                .collect();
+            self.smooth(&every)?;
+            done = self.observe_in_component(observe);
+        }
+        match done {
+            Ok(()) => {
+                if self.stats.repairs == 0 {
+                    tracing::warn!(
+                        ?observe,
+                        probability,
+                        "factored: a sighting the belief held impossible was taken by \
+                         smoothing (counted as a belief repair; logged once)"
+                    );
+                }
+                self.stats.repairs += 1;
+                Ok(())
+            }
+            Err(e) => {
+                *self = saved;
+                Err(e)
+            }
+        }
+    }
+
+    /// Gives each component in `slots` [`REPAIR_MASS`] of its mass on
+    /// every set whose count some completion of the rest allows.
+    fn smooth(&mut self, slots: &[usize]) -> Result<(), BeliefError> {
+        for &slot in slots {
+            let c = self.comp(slot);
+            let (tracks, log_scale) = (c.tracks.clone(), c.log_scale);
+            let mut table = c.table.clone();
+            let open = self.uninformed_support(tracks.len());
+            for (y, g) in table.iter_mut().enumerate() {
+                if open[y.count_ones() as usize] {
+                    *g += REPAIR_MASS;
+                }
+            }
+            let smoothed = Component::from_table(tracks, table, log_scale)?;
+            self.replace(&[slot], vec![smoothed]);
+        }
+        Ok(())
+    }
+
+    /// A sighting applied to its component: the component's table times
+    /// the likelihood, refused as impossible when no set the count weights
+    /// allow is left.
+    fn observe_in_component(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        let (c, bit) = self.home[observe.track as usize];
+        let comp = self.comp(c);
+        let mut table = comp.observed(bit, observe.red, observe.blue);
+        // Sets whose red count no completion of the rest allows (more red
+        // tracks than π admits, or fewer) weigh nothing in the belief:
+        // dropping them is exact, and keeps them from holding the table's
+        // scale while the sets that matter underflow (with k = 0, every
+        // set with a red track, against a 10^-200 sighting of blue).
+        let m = comp.len();
+        self.drop_excluded_counts(&mut table, m);
+        let comp = self.comp(c);
+        let new_counts = table::counts_of(&table, comp.len());
+        // Under the local coupling a sighting needs only its component,
+        // so that a leader holding the component alone computes the same.
+        let r = if self.options.coupling.is_local() {
+            self.local_weights(&new_counts, false)
+        } else {
+            self.leave_one_out(c, new_counts.len())?
+        };
+        let r = table::balanced(&new_counts, &r);
+        let dot = |v: &[f64]| v.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
+        let (before, after) = (dot(&self.comp(c).counts), dot(&new_counts));
+        if after.is_nan() || after <= 0.0 {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: if before > 0.0 { after / before } else { 0.0 },
+            });
+        }
+        let comp = self.comp(c);
+        let updated = Component::from_table(comp.tracks.clone(), table, comp.log_scale)?;
+        let fixed = table::certain_odds(
+            &updated.table,
+            Some(&r),
+            updated.len(),
+            self.options.certain,
+        );
+        if !fixed.is_empty() {
+            let (rest, singles) = if fixed.len() == updated.len() {
+                // Everything certain: keep one track as the rest.
+                updated.restrict(&fixed[1..])?
+            } else {
+                updated.restrict(&fixed)?
+            };
+            self.stats.certain_splits += singles.len() as u64;
+            let mut add = singles;
+            add.push(rest);
+            self.replace(&[c], add);
+        } else {
+            self.replace(&[c], vec![updated]);
+        }
+        self.stats.events += 1;
+        self.note_size();
+        Ok(())
+    }
+
     /// A mix as [`PropertyFilter::mix`] does it, except that tracks of two
     /// components are never merged: the mixed pair is projected back onto
     /// the two components (the moment matching of an oversized merge), so
@@ -1078,58 +1209,12 @@ impl PropertyFilter for FactoredBelief {
 
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.field.check_observe(&observe)?;
-        let (c, bit) = self.home[observe.track as usize];
-        let comp = self.comp(c);
-        let mut table = comp.observed(bit, observe.red, observe.blue);
-        // Sets whose red count no completion of the rest allows (more red
-        // tracks than π admits, or fewer) weigh nothing in the belief:
-        // dropping them is exact, and keeps them from holding the table's
-        // scale while the sets that matter underflow (with k = 0, every
-        // set with a red track, against a 10^-200 sighting of blue).
-        let m = comp.len();
-        self.drop_excluded_counts(&mut table, m);
-        let comp = self.comp(c);
-        let new_counts = table::counts_of(&table, comp.len());
-        // Under the local coupling a sighting needs only its component,
-        // so that a leader holding the component alone computes the same.
-        let r = if self.options.coupling.is_local() {
-            self.local_weights(&new_counts, false)
-        } else {
-            self.leave_one_out(c, new_counts.len())?
-        };
-        let r = table::balanced(&new_counts, &r);
-        let dot = |v: &[f64]| v.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
-        let (before, after) = (dot(&self.comp(c).counts), dot(&new_counts));
-        if after.is_nan() || after <= 0.0 {
-            return Err(BeliefError::ImpossibleObservation {
-                probability: if before > 0.0 { after / before } else { 0.0 },
-            });
+        match self.observe_in_component(observe) {
+            Err(BeliefError::ImpossibleObservation { probability }) => {
+                self.observe_repaired(observe, probability)
+            }
+            done => done,
         }
-        let comp = self.comp(c);
-        let updated = Component::from_table(comp.tracks.clone(), table, comp.log_scale)?;
-        let fixed = table::certain_odds(
-            &updated.table,
-            Some(&r),
-            updated.len(),
-            self.options.certain,
-        );
-        if !fixed.is_empty() {
-            let (rest, singles) = if fixed.len() == updated.len() {
-                // Everything certain: keep one track as the rest.
-                updated.restrict(&fixed[1..])?
-            } else {
-                updated.restrict(&fixed)?
-            };
-            self.stats.certain_splits += singles.len() as u64;
-            let mut add = singles;
-            add.push(rest);
-            self.replace(&[c], add);
-        } else {
-            self.replace(&[c], vec![updated]);
-        }
-        self.stats.events += 1;
-        self.note_size();
-        Ok(())
     }
 
     /// One downward walk of the count tree (after recomputing what the
@@ -1145,6 +1230,20 @@ impl PropertyFilter for FactoredBelief {
                 self.field.tracks,
             )?
         };
+        self.marginals_under(all)
+    }
+
+    /// Σ_C 2^|C|: the numbers in the tables (the per-component log scales
+    /// and count vectors are derived bookkeeping and not counted).
+    fn coefficients(&self) -> usize {
+        self.numbers
+    }
+}
+
+impl FactoredBelief {
+    /// Each component's marginals under its count weights `all` (by live
+    /// component, `None` where it holds a single count).
+    fn marginals_under(&self, all: Vec<Option<Vec<f64>>>) -> Result<Vec<f64>, BeliefError> {
         let mut out = vec![0.0; self.field.tracks];
         for (c, r) in self.live().zip(all) {
             let Some(r) = r else {
@@ -1165,12 +1264,6 @@ impl PropertyFilter for FactoredBelief {
             }
         }
         Ok(out)
-    }
-
-    /// Σ_C 2^|C|: the numbers in the tables (the per-component log scales
-    /// and count vectors are derived bookkeeping and not counted).
-    fn coefficients(&self) -> usize {
-        self.numbers
     }
 }
 

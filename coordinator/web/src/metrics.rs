@@ -35,7 +35,7 @@ const LEADER_COUNTERS: [LeaderField; 23] = [
     ("items", "stream items applied", |s| s.items),
     (
         "belief_repairs",
-        "valid colour events the factored belief could not take as they stood (splits retried)",
+        "colour events the factored belief could not take as they stood (splits retried, sightings smoothed)",
         |s| s.belief_repairs,
     ),
     (

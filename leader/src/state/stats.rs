@@ -44,10 +44,10 @@ impl Leader {
             stats.tracks_followed = s.interest.len() as u64;
             stats.rows_held = s.rows.as_ref().map_or(0, |r| r.len() as u64);
             stats.identity_repairs = s.trees.as_ref().map_or(0, |trees| trees.repairs());
-            stats.belief_repairs = s
-                .factored
-                .as_ref()
-                .map_or(0, |held| held.stats().retried_splits);
+            stats.belief_repairs = s.factored.as_ref().map_or(0, |held| {
+                let belief = held.stats();
+                belief.retried_splits + belief.repairs
+            });
             // Starts kept for nobody are not the track's tree (yet).
             stats.tree_tracks = s.trees.as_ref().map_or(0, |trees| {
                 trees

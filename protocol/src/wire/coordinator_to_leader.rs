@@ -113,10 +113,11 @@ pub struct LeaderStats {
     /// met again).
     #[serde(default)]
     pub identity_repairs: u64,
-    /// Valid colour events the factored belief held here could not take
-    /// as they stood: splits retried under other count weights (counted
-    /// since the process started, plus those its journal replay met
-    /// again).
+    /// Colour events the factored belief held here could not take as
+    /// they stood: splits retried under other count weights, and sightings
+    /// of a colour the belief had ruled out, taken by smoothing their
+    /// component (counted since the process started, plus those its
+    /// journal replay met again).
     #[serde(default)]
     pub belief_repairs: u64,
     pub coefficients: u64,
