@@ -360,6 +360,32 @@ impl Deployment {
             .map(|(_, c)| c.id())
     }
 
+    /// The pids of the role processes `idmesh up` started for this
+    /// deployment, by name (read from /proc: they are `up`'s children).
+    pub fn supervised(&self) -> std::collections::BTreeMap<String, u32> {
+        let config = self.config.to_string_lossy().into_owned();
+        let mut out = std::collections::BTreeMap::new();
+        for entry in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+            let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+                continue;
+            };
+            let Ok(raw) = std::fs::read(entry.path().join("cmdline")) else {
+                continue;
+            };
+            let args: Vec<String> = raw
+                .split(|&b| b == 0)
+                .map(|a| String::from_utf8_lossy(a).into_owned())
+                .collect();
+            let ours = args.iter().any(|a| *a == config) && !args.iter().any(|a| a == "up");
+            if let (true, Some(i)) = (ours, args.iter().position(|a| a == "--name")) {
+                if let Some(name) = args.get(i + 1) {
+                    out.insert(name.clone(), pid);
+                }
+            }
+        }
+        out
+    }
+
     /// SIGKILL to process `name`: no chance to flush or say goodbye.
     pub fn kill(&mut self, name: &str) {
         let i = self

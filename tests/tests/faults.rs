@@ -105,6 +105,63 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     );
 }
 
+/// `idmesh up` supervises: a leader killed under it (kill -9) is started
+/// again after its backoff while its neighbours run on, and the answer is
+/// the centralized engine's.
+#[test]
+fn up_starts_a_killed_process_again_and_leaves_its_neighbours() {
+    let dir = std::env::temp_dir().join(format!("idmesh-supervised-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 8);
+    let central = replay_summary(&trace, &["--method", "overcomplete"]);
+    let expected = floats(&central["final_p_red"]);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(500.0),
+        journal: true,
+        takeover_after_ms: Some(0),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start("supervised", &trace, &settings);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    let before = deployment.supervised();
+    assert_eq!(
+        before.len(),
+        5,
+        "coordinator, sensor, three leaders: {before:?}"
+    );
+    // SAFETY: kill(2) on a process of this test's deployment.
+    unsafe {
+        libc::kill(before["leader-1"] as i32, libc::SIGKILL);
+    }
+    let killed = Instant::now();
+    let after = loop {
+        let now = deployment.supervised();
+        if now
+            .get("leader-1")
+            .is_some_and(|&pid| pid != before["leader-1"])
+        {
+            break now;
+        }
+        assert!(
+            killed.elapsed() < Duration::from_secs(10),
+            "leader-1 was not started again: {now:?}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    for (name, pid) in &before {
+        if name != "leader-1" {
+            assert_eq!(after.get(name), Some(pid), "{name} was left alone");
+        }
+    }
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(&last, &expected, "after a supervised restart");
+    eprintln!(
+        "leader-1 started again by up {:.2} s after the kill",
+        killed.elapsed().as_secs_f64()
+    );
+}
+
 /// Every batch published twice and every fifth not at all: leaders drop
 /// the doubles, notice the gaps and ask the sensor again; the answer is the
 /// centralized engine's.

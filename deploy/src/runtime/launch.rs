@@ -1,11 +1,13 @@
 //! `idmesh up` starts the processes of a topology that run on this host,
-//! each as its own OS process, and stops them all on Ctrl-C. `idmesh demo`
+//! each as its own OS process, starts again one that fails (with a backoff:
+//! `supervise`), and stops them all on Ctrl-C. `idmesh demo`
 //! is `up` on a built-in loopback topology: it simulates a crowd, streams it
 //! through four leaders, and prints live answers.
 
 use super::loopback::{self, Ports};
 use super::mesh::{self, MeshOptions};
 use super::query::ask;
+use super::supervise::{Supervisor, Verdict};
 use super::topology::Member;
 use super::topology::Topology;
 use anyhow::{bail, Context, Result};
@@ -16,7 +18,9 @@ use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 pub struct Processes {
-    children: Vec<(String, Child)>,
+    config: PathBuf,
+    /// (name, role, the running process).
+    children: Vec<(String, &'static str, Child)>,
 }
 
 impl Processes {
@@ -40,47 +44,59 @@ impl Processes {
         let mut children = Vec::new();
         let members: Vec<_> = topology.members().into_iter().filter(keep).collect();
         for m in members {
-            let child = Command::new(&exe)
-                .arg(m.role)
-                .arg("--config")
-                .arg(config)
-                .arg("--name")
-                .arg(&m.name)
-                .spawn()
-                .with_context(|| format!("cannot start {} {}", m.role, m.name))?;
-            tracing::info!(role = m.role, name = %m.name, pid = child.id(), "started");
-            children.push((m.name, child));
+            let child = spawn(&exe, config, m.role, &m.name)?;
+            children.push((m.name, m.role, child));
         }
-        Ok(Processes { children })
+        Ok(Processes {
+            config: config.to_path_buf(),
+            children,
+        })
+    }
+
+    /// Starts process `name` again, as it was started first.
+    fn restart(&mut self, name: &str) -> Result<()> {
+        let exe = std::env::current_exe().context("cannot find the idmesh binary")?;
+        let Some((_, role, child)) = self.children.iter_mut().find(|(n, ..)| n == name) else {
+            bail!("no process {name} to start again");
+        };
+        *child = spawn(&exe, &self.config, role, name)?;
+        Ok(())
     }
 
     /// Every child's name and process id.
     pub fn pids(&self) -> impl Iterator<Item = (&str, u32)> {
         self.children
             .iter()
-            .map(|(name, child)| (name.as_str(), child.id()))
+            .map(|(name, _, child)| (name.as_str(), child.id()))
     }
 
     /// The first child to exit, if any has.
     pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
-        for (name, child) in &mut self.children {
+        self.all_exited().into_iter().next()
+    }
+
+    /// Every child that has exited since it was last started (each
+    /// reported until it is started again).
+    fn all_exited(&mut self) -> Vec<(String, std::process::ExitStatus)> {
+        let mut out = Vec::new();
+        for (name, _, child) in &mut self.children {
             if let Ok(Some(status)) = child.try_wait() {
-                return Some((name.clone(), status));
+                out.push((name.clone(), status));
             }
         }
-        None
+        out
     }
 
     /// SIGTERM to all, then SIGKILL to whoever is still there after 5 s.
     pub fn stop(&mut self) {
-        for (_, child) in &mut self.children {
+        for (_, _, child) in &mut self.children {
             // SAFETY: kill(2) on a pid we spawned and have not reaped.
             unsafe {
                 libc::kill(child.id() as i32, libc::SIGTERM);
             }
         }
         let deadline = Instant::now() + Duration::from_secs(5);
-        for (name, child) in &mut self.children {
+        for (name, _, child) in &mut self.children {
             loop {
                 match child.try_wait() {
                     Ok(Some(_)) => break,
@@ -98,17 +114,32 @@ impl Processes {
     }
 }
 
+/// `idmesh <role> --config <config> --name <name>` as a child.
+fn spawn(exe: &Path, config: &Path, role: &str, name: &str) -> Result<Child> {
+    let child = Command::new(exe)
+        .arg(role)
+        .arg("--config")
+        .arg(config)
+        .arg("--name")
+        .arg(name)
+        .spawn()
+        .with_context(|| format!("cannot start {role} {name}"))?;
+    tracing::info!(role, %name, pid = child.id(), "started");
+    Ok(child)
+}
+
 impl Drop for Processes {
     fn drop(&mut self) {
         self.stop();
     }
 }
 
-/// `idmesh up`: runs until Ctrl-C or until a process fails.
+/// `idmesh up`: runs until Ctrl-C, starting again each process that fails
+/// (its neighbours untouched), or until every process has ended of itself.
 pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
     let mut processes = Processes::start(config, host)?;
     let topology = Topology::load(config)?;
-    let names: Vec<&str> = processes.children.iter().map(|(n, _)| n.as_str()).collect();
+    let names: Vec<String> = processes.children.iter().map(|(n, ..)| n.clone()).collect();
     eprintln!(
         "up: started {} ({}){} · queries: idmesh query marginals --connect {}{} · Ctrl-C stops",
         names.join(", "),
@@ -125,22 +156,46 @@ pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
         .worker_threads(1)
         .enable_all()
         .build()?;
-    let failed = runtime.block_on(async {
+    let mut supervisor = Supervisor::new(names.iter().map(String::as_str), Instant::now());
+    runtime.block_on(async {
         loop {
             tokio::select! {
-                _ = super::roles::shutdown() => return None,
-                _ = tokio::time::sleep(Duration::from_millis(200)) => {
-                    if let Some(exit) = processes.exited() {
-                        return Some(exit);
-                    }
-                }
+                _ = super::roles::shutdown() => return,
+                _ = tokio::time::sleep(Duration::from_millis(200)) => {}
+            }
+            supervise(&mut processes, &mut supervisor);
+            if supervisor.all_ended() {
+                eprintln!("up: every process has ended");
+                return;
             }
         }
     });
     processes.stop();
-    match failed {
-        Some((name, status)) if !status.success() => bail!("{name} exited with {status}"),
-        _ => Ok(()),
+    Ok(())
+}
+
+/// One look at the children: exits judged, due restarts made.
+fn supervise(processes: &mut Processes, supervisor: &mut Supervisor) {
+    let now = Instant::now();
+    for (name, status) in processes.all_exited() {
+        match supervisor.exited(&name, status.success(), now) {
+            Some(Verdict::Restart { after, failures }) => tracing::warn!(
+                %name,
+                %status,
+                failures,
+                restart_in_ms = after.as_millis() as u64,
+                "a process failed; starting it again after a backoff"
+            ),
+            Some(Verdict::Ended) => tracing::info!(%name, "a process ended"),
+            None => {}
+        }
+    }
+    for name in supervisor.due(now) {
+        if let Err(e) = processes.restart(&name) {
+            // Counted as a failure: the next try waits longer.
+            tracing::warn!(%name, "cannot start it again: {e:#}");
+            supervisor.exited(&name, false, now);
+        }
     }
 }
 

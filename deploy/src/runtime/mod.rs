@@ -11,6 +11,7 @@ pub mod ports;
 pub mod query;
 pub mod roles;
 pub mod security;
+mod supervise;
 pub mod topology;
 mod twin;
 pub mod web;
