@@ -376,7 +376,7 @@ impl Deployment {
                 .split(|&b| b == 0)
                 .map(|a| String::from_utf8_lossy(a).into_owned())
                 .collect();
-            let ours = args.iter().any(|a| *a == config) && !args.iter().any(|a| a == "up");
+            let ours = args.contains(&config) && !args.iter().any(|a| a == "up");
             if let (true, Some(i)) = (ours, args.iter().position(|a| a == "--name")) {
                 if let Some(name) = args.get(i + 1) {
                     out.insert(name.clone(), pid);
