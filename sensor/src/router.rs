@@ -13,13 +13,12 @@
 use crate::cuts::Wanted;
 use idmesh_belief::radon::{MixingLog, RadonShare};
 use idmesh_placement::{Handover, PlacementError, RegionRule, Regions};
-use idmesh_protocol::trace::Line;
+use idmesh_protocol::trace::{Header, Line};
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Handed, Item, Sequenced, UNHELD};
-use idmesh_protocol::Header;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 

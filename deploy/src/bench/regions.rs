@@ -111,6 +111,6 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
 
 /// A trace's track count and lines.
 fn read(path: &Path) -> Result<(usize, Vec<Line>)> {
-    let (header, lines) = idmesh_protocol::TraceReader::open(path)?.read_all()?;
+    let (header, lines) = idmesh_protocol::trace::TraceReader::open(path)?.read_all()?;
     Ok((header.tracks, lines))
 }

@@ -349,7 +349,7 @@ pub fn write_simulation(scenario: idmesh_sim::Scenario, out: &Path) -> Result<()
 /// The events of a trace (every line but the header and truth lines): what
 /// a watermark counts.
 pub fn count_events(trace: &Path) -> Result<u64> {
-    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
+    let mut reader = idmesh_protocol::trace::TraceReader::open(trace)?;
     reader.read_header()?;
     let mut events = 0;
     while let Some(n) = reader.read_line()? {
@@ -362,7 +362,7 @@ pub fn count_events(trace: &Path) -> Result<u64> {
 
 /// The bounding box of the trace's positions: (min x, min y, max x, max y).
 pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
-    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
+    let mut reader = idmesh_protocol::trace::TraceReader::open(trace)?;
     reader.read_header()?;
     let mut b = (
         f64::INFINITY,
@@ -371,7 +371,7 @@ pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
         f64::NEG_INFINITY,
     );
     while let Some(n) = reader.read_line()? {
-        if let idmesh_protocol::Line::Move(m) = n.line {
+        if let idmesh_protocol::trace::Line::Move(m) = n.line {
             b = (b.0.min(m.x), b.1.min(m.y), b.2.max(m.x), b.3.max(m.y));
         }
     }

@@ -10,8 +10,11 @@
 //! - [`seeds`] — well-formed inputs of every target, to start from.
 //! - [`mutate`] — a seeded generator of bad inputs from the seeds.
 
-pub mod mutate;
-pub mod seeds;
+mod mutate;
+mod seeds;
+
+// Well-formed inputs of every target, to start from.
+pub use seeds::seeds;
 
 use crate::trace::{Header, Line, TraceReader, TraceWriter};
 use crate::wire::bounds::Bounds;

@@ -8,7 +8,7 @@
 //! (cargo-fuzz brings its own, coverage-guided mutations.)
 
 /// SplitMix64: tiny, fast and good enough to pick mutations.
-pub struct Mutator {
+pub(crate) struct Mutator {
     state: u64,
 }
 
@@ -45,7 +45,7 @@ impl Mutator {
         Mutator { state: seed }
     }
 
-    pub fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.state;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);

@@ -474,7 +474,7 @@ impl Bounds {
     }
 
     /// One item of the stream against the field.
-    pub fn check_item(&self, item: &Item) -> Result<(), String> {
+    pub(crate) fn check_item(&self, item: &Item) -> Result<(), String> {
         let adoptions = item.adoptions();
         require(adoptions.is_empty() || self.adopts, || {
             "an adoption on a stream whose tracks start held".into()

@@ -28,7 +28,7 @@ pub const MAX_TRACKS: u32 = 1 << 20;
 pub const MAX_IDENTITY_TRACKS: u32 = 1 << 12;
 
 /// The most leaders a stream may name: indices are `u16`.
-pub const MAX_LEADERS: usize = 1 << 16;
+pub(crate) const MAX_LEADERS: usize = 1 << 16;
 
 /// `Err(sentence)` when `condition` fails: the rules read as a list.
 pub(crate) fn require(condition: bool, problem: impl FnOnce() -> String) -> Result<(), String> {

@@ -10,8 +10,7 @@
 use super::config::OutputConfig;
 use super::pipeline::prepare::Segmentation;
 use super::run::{AcousticResult, EstimatedPath};
-use idmesh_protocol::trace::{Header, Line};
-use idmesh_protocol::{TraceError, TraceWriter};
+use idmesh_protocol::trace::{Header, Line, TraceError, TraceWriter};
 use idmesh_sim::events::{MixDetector, SimEvent, TimedEvent};
 use idmesh_sim::geometry::{NeighbourGrid, Vec2};
 use idmesh_sim::scenario::trace_out::event_line;

@@ -7,8 +7,7 @@ use super::*;
 use crate::events::{Assignment, SimEvent, TimedEvent};
 use crate::geometry::Vec2;
 use crate::motion::pedestrians::{data_dir, Scene, Timing};
-use idmesh_protocol::trace::Line;
-use idmesh_protocol::TraceReader;
+use idmesh_protocol::trace::{Line, TraceReader};
 use std::sync::Arc;
 
 /// One event of a generated identity trace, in trace order.

@@ -13,8 +13,9 @@
 
 use super::trace::GeneratedTrace;
 use crate::events::{SimEvent, TimedEvent};
-use idmesh_protocol::trace::{Detect, Header, Line, Mix, Move, Observe, Truth};
-use idmesh_protocol::{TraceError, TraceWriter};
+use idmesh_protocol::trace::{
+    Detect, Header, Line, Mix, Move, Observe, TraceError, TraceWriter, Truth,
+};
 use std::io::Write;
 
 /// The `header` line of a generated trace.
@@ -136,7 +137,7 @@ fn round_position(v: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::scenario::Scenario;
-    use idmesh_protocol::TraceReader;
+    use idmesh_protocol::trace::TraceReader;
 
     #[test]
     fn a_written_trace_reads_back_line_for_line() {
