@@ -51,14 +51,6 @@ impl RedCount {
         }
     }
 
-    /// The largest number of red targets the prior allows.
-    pub fn max_red(&self) -> usize {
-        match self {
-            RedCount::Known(k) => *k,
-            RedCount::Unknown { prior } => prior.iter().rposition(|&p| p > 0.0).unwrap_or(0),
-        }
-    }
-
     /// The known count, if any.
     pub fn known(&self) -> Option<usize> {
         match self {
@@ -178,7 +170,7 @@ impl Field {
         Ok(())
     }
 
-    pub fn check_observe(&self, observe: &Observe) -> Result<(), BeliefError> {
+    pub(crate) fn check_observe(&self, observe: &Observe) -> Result<(), BeliefError> {
         self.check_track(observe.track)?;
         let valid = |x: f64| x.is_finite() && x >= 0.0;
         if !valid(observe.red)

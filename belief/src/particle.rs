@@ -54,7 +54,7 @@ use rand_chacha::ChaCha8Rng;
 const METHOD: &str = "particle filter";
 
 /// Resample when the effective sample size falls below this share of P.
-pub const RESAMPLE_BELOW: f64 = 0.5;
+pub(crate) const RESAMPLE_BELOW: f64 = 0.5;
 
 /// A belief over red sets held by P weighted particles. See the module
 /// documentation.
@@ -161,19 +161,21 @@ impl ParticleFilter {
     }
 
     /// The effective sample size 1/Σw² (P right after resampling).
-    pub fn ess(&self) -> f64 {
+    pub(crate) fn ess(&self) -> f64 {
         1.0 / self.weights.iter().map(|w| w * w).sum::<f64>()
     }
 
     /// How many times the particles were resampled.
-    pub fn resamples(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn resamples(&self) -> u64 {
         self.resamples
     }
 
     /// ln of the estimated probability of every observation so far, each
     /// given the ones before (the product of the observations' predicted
     /// probabilities under the particles).
-    pub fn log_evidence(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn log_evidence(&self) -> f64 {
         self.log_evidence
     }
 

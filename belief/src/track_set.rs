@@ -71,7 +71,7 @@ impl TrackSet {
     }
 
     /// The Zobrist hash (0 for the empty set).
-    pub fn zobrist(&self) -> u64 {
+    pub(crate) fn zobrist(&self) -> u64 {
         self.hash
     }
 
@@ -147,7 +147,7 @@ impl TrackSet {
     }
 
     /// |α ∩ β| by a linear merge.
-    pub fn intersection_len(&self, other: &TrackSet) -> usize {
+    pub(crate) fn intersection_len(&self, other: &TrackSet) -> usize {
         let (a, b) = (&self.tracks, &other.tracks);
         let (mut i, mut j, mut common) = (0, 0, 0);
         while i < a.len() && j < b.len() {
@@ -165,7 +165,7 @@ impl TrackSet {
     }
 
     /// |α ∪ β|.
-    pub fn union_len(&self, other: &TrackSet) -> usize {
+    pub(crate) fn union_len(&self, other: &TrackSet) -> usize {
         self.len() + other.len() - self.intersection_len(other)
     }
 
@@ -174,7 +174,8 @@ impl TrackSet {
         TrackSet::from_tracks(self.tracks.iter().chain(other.tracks.iter()).copied())
     }
 
-    pub fn is_subset(&self, other: &TrackSet) -> bool {
+    #[cfg(test)]
+    pub(crate) fn is_subset(&self, other: &TrackSet) -> bool {
         self.intersection_len(other) == self.len()
     }
 

@@ -6,10 +6,10 @@
 //! (`tests/src/sim`) feeds these the replies of simulated processes.
 
 use bytes::Bytes;
-use idmesh_belief::factored::{CountPart, CouplingTree};
 use idmesh_belief::predict_red;
 use idmesh_belief::BeliefError;
 use idmesh_belief::Field;
+use idmesh_belief::{CountPart, CouplingTree};
 use idmesh_placement::combine;
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;

@@ -24,7 +24,7 @@
 //!
 //!     cargo run --release -p idmesh-eval --example identity_factored [SEEDS] [OUT]
 
-use idmesh_belief::scoring::Reliability;
+use idmesh_belief::Reliability;
 use idmesh_belief::{RadonOptions, Sparsify};
 use idmesh_eval::eval::plots::{draw, reliability_series, Plot};
 use idmesh_identity::identity_event_of;

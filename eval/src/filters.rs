@@ -4,11 +4,11 @@
 //! [`Recipe::build`] knows how each filter is put together (the repair of
 //! the low-order projections, the Radon options, the factored coupling).
 
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
     BeliefError, Coupling, FactoredBelief, FactoredOptions, Field, ParticleFilter, PropertyFilter,
     RadonBelief, RadonOptions, Sparsify,
 };
+use idmesh_belief::{DenseFilter, LowOrderFilter, LowOrderRepair};
 
 /// A property filter and its settings, before it meets a field.
 #[derive(Debug, Clone, PartialEq)]

@@ -11,7 +11,7 @@
 use super::blocks::{blocks, Block};
 use super::event::check_square;
 use super::sparse_assignment::{sparse_min_cost_assignment, SparseRow};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The permutation π maximizing Σ_t ln p\[t\]\[π(t)\]: `result[t]` is the
 /// identity assigned to track t.

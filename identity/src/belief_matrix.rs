@@ -20,8 +20,8 @@
 use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// A doubly stochastic N × N matrix of marginals.
 #[derive(Debug, Clone, PartialEq)]

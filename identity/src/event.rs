@@ -1,5 +1,5 @@
 //! The identity events: a [`Mix`] of two tracks (reused from the property
-//! engine, [`idmesh_belief::event::Mix`]) and an [`Identify`] reading, with the read
+//! engine, [`idmesh_belief::Mix`]) and an [`Identify`] reading, with the read
 //! model of Shin et al., *Lazy Inference on Object Identities in Wireless
 //! Sensor Networks* (IPSN 2005), Definition 3, generalized from the paper's
 //! 0.9 / 0.1/(N − 1) to any accuracy.
@@ -9,8 +9,8 @@
 //! i). The paper writes its matrices the other way round (column = object);
 //! our row t is the paper's column t.
 
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// A sensor read identity `identity` on the target of track `track`.
 ///

@@ -14,8 +14,8 @@
 use super::event::{check_assignment, check_identify, check_mix, check_square, Identify};
 use super::filter::{IdentityFilter, Marginals};
 use super::permutation::Permutations;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use std::sync::Arc;
 
 /// The exact distribution over the N! assignments.

@@ -5,8 +5,8 @@
 
 use super::event::{check_identify, check_mix, Identify, IdentityEvent};
 use super::sparse_marginals::SparseMarginals;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// p\[t\]\[i\] = P(track t carries identity i), N rows of N entries.
 pub type Marginals = Vec<Vec<f64>>;

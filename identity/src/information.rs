@@ -100,8 +100,8 @@ use super::marginals::{
 };
 use super::sinkhorn::SinkhornOptions;
 use super::support_mix::fit_on_support;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::AtomicBool;
 

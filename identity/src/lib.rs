@@ -13,7 +13,7 @@
 //!
 //! N tracks carry N targets with distinct identities; p\[t\]\[i\] = P(track
 //! t carries identity i). Targets that come close may swap tracks (a
-//! [`Mix`](idmesh_belief::event::Mix)); sensors now and then read an identity on a
+//! [`Mix`](idmesh_belief::Mix)); sensors now and then read an identity on a
 //! track ([`Identify`]). This crate keeps beliefs over the N! assignments
 //! under those two events. Pure, synchronous, no I/O; every update is
 //! all-or-nothing. From `idmesh-belief` it takes the mix event, the

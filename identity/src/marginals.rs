@@ -71,7 +71,7 @@ use super::metropolis::{metropolis_stoppable, MetropolisRun};
 use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
 use super::sparse_marginals::{IdentityRow, SparseMarginals};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How marginals are computed from an information matrix.

@@ -29,7 +29,7 @@
 
 use super::assignment::{min_cost_assignment, DENSE_ASSIGNMENT_LIMIT};
 use super::sparse_assignment::{sparse_min_cost_assignment, SparseRow};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::atomic::{AtomicBool, Ordering};

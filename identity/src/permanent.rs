@@ -44,7 +44,7 @@
 //! failed at 3e-5.
 
 use super::sinkhorn::{scale_logged, SinkhornOptions};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The most tracks the permanent method accepts (2^22·22 ≈ 10^8 steps).
 pub const MAX_PERMANENT_TRACKS: usize = 22;

@@ -10,7 +10,7 @@
 //! O(N). Rank order is lexicographic order, so the table is built with
 //! next-permutation steps and `get(rank(π)) == π`.
 
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The most tracks we enumerate: 9! = 362,880 assignments (3.3 MB of table).
 pub const MAX_ENUMERATED_TRACKS: usize = 9;

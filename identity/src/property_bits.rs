@@ -55,15 +55,15 @@
 //! ## Cost
 //! Without a budget every bit belief is exact, and exact Radon beliefs can
 //! grow exponentially with mixing; for more than a few dozen tracks give
-//! [`RadonOptions`] a [`idmesh_belief::radon::Sparsify`] budget.
+//! [`RadonOptions`] a [`idmesh_belief::Sparsify`] budget.
 
 use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::{Field, Mix, Observe};
-use idmesh_belief::filter::PropertyFilter;
-use idmesh_belief::radon::{RadonBelief, RadonOptions};
+use idmesh_belief::BeliefError;
+use idmesh_belief::PropertyFilter;
+use idmesh_belief::{Field, Mix, Observe};
+use idmesh_belief::{RadonBelief, RadonOptions};
 
 /// Bit probabilities are clamped to [this, 1 − this] before they are
 /// combined. Under a coefficient budget a bit belief can become spuriously
@@ -361,7 +361,7 @@ mod tests {
     use crate::filter::doubly_stochastic_residual;
     use crate::workload::{generate, IdentityWorkloadSpec};
     use crate::IdentityEvent;
-    use idmesh_belief::radon::Sparsify;
+    use idmesh_belief::Sparsify;
 
     #[test]
     fn codes_are_distinct_and_spread() {

@@ -4,7 +4,8 @@
 //! one-to-one assignment under the marginals), IDF1 over a stream
 //! (Ristani et al., *Performance Measures and a Data Set for Multi-Target,
 //! Multi-Camera Tracking*, ECCV 2016 workshops) and a reliability diagram.
-//! The property scores of the trace spec are [`idmesh_belief::scoring`].
+//! The property scores of the trace spec are [`idmesh_belief::brier_score`]
+//! and its neighbours.
 //!
 //! IDF1 with given tracks: every (track, truth line) is one unit of
 //! track-time, labelled by the identity the tracker predicts there and
@@ -17,8 +18,8 @@
 
 use super::sparse_assignment::{sparse_min_cost_assignment_with_rest, SparseRow};
 use super::sparse_marginals::SparseMarginals;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::scoring::{Reliability, LOG_LOSS_FLOOR};
+use idmesh_belief::BeliefError;
+use idmesh_belief::{Reliability, LOG_LOSS_FLOOR};
 use std::collections::BTreeMap;
 
 fn check_truth(p: &SparseMarginals, truth: &[u32]) -> Result<usize, BeliefError> {

@@ -37,7 +37,7 @@
 //! Hessian product and a line-search point cost O(positive entries), not
 //! O(N²).
 
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// When Sinkhorn scaling stops.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -16,7 +16,7 @@
 use super::assignment::{most_likely_assignment, DENSE_ASSIGNMENT_LIMIT};
 use super::filter::Marginals;
 use super::sparse_assignment::{sparse_min_cost_assignment_with_rest, SparseRow};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 pub use idmesh_protocol::wire::query::IdentityRow;
 use serde::{Deserialize, Serialize};
 

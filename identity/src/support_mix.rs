@@ -27,7 +27,7 @@
 //!   entry moves more than 1e-11 or after [`MAX_SWEEPS`] sweeps.
 
 use super::information::{fit_mixed_rows, fit_mixed_rows_pinv, MixSolver, RowPair};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The most alternating sweeps of the general case.
 pub const MAX_SWEEPS: usize = 2_000;

@@ -11,8 +11,8 @@
 //! the exact filter is the exact posterior of these streams.
 
 use super::event::{Identify, IdentityEvent};
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -39,9 +39,9 @@ pub use wire::{
     to_wire_set, to_wire_tree,
 };
 
-use idmesh_belief::factored::FactoredShare;
-use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
+use idmesh_belief::FactoredShare;
 use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule};
+use idmesh_belief::{PartialSums, RadonOptions, RadonShare};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::wire::interest::Interest;

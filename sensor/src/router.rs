@@ -11,7 +11,7 @@
 //! track can be sent what it missed.
 
 use crate::cuts::Wanted;
-use idmesh_belief::radon::{MixingLog, RadonShare};
+use idmesh_belief::{MixingLog, RadonShare};
 use idmesh_placement::{Handover, PlacementError, RegionRule, Regions};
 use idmesh_protocol::trace::{Header, Line};
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;

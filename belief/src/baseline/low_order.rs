@@ -75,7 +75,7 @@ const SIMPLEX_SLACK: f64 = 1e-9;
 /// projection gives probability ≤ 0 gets back before it is conditioned on
 /// (see the module documentation): small, so that the belief moves no
 /// further from the projection than the observation forces.
-pub const OBSERVATION_FLOOR: f64 = 1e-6;
+pub(crate) const OBSERVATION_FLOOR: f64 = 1e-6;
 
 /// What the filter does when a conditioning leaves a marginal outside [0, 1].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -690,7 +690,11 @@ impl PropertyFilter for LowOrderFilter {
 /// equilibrated, and the system is solved by SVD: it is consistent, but
 /// rank-deficient when j > n − k (then any solution serves, as M_j only
 /// ranges over a subspace).
-pub fn lift_coefficients(n: usize, k: usize, j: usize) -> Result<(Vec<f64>, f64), BeliefError> {
+pub(crate) fn lift_coefficients(
+    n: usize,
+    k: usize,
+    j: usize,
+) -> Result<(Vec<f64>, f64), BeliefError> {
     if j > k || k > n {
         return Err(BeliefError::Unsupported {
             method: METHOD,

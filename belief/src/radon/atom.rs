@@ -71,7 +71,7 @@ impl Atom {
     }
 
     /// The atom with t also fixed blue.
-    pub fn with_blue(&self, t: u32) -> Self {
+    pub(crate) fn with_blue(&self, t: u32) -> Self {
         Atom {
             red: self.red.clone(),
             blue: self.blue.with(t),
@@ -92,7 +92,7 @@ impl Atom {
     }
 
     /// Whether the transposition of a and b leaves the atom unchanged.
-    pub fn invariant_under(&self, a: u32, b: u32) -> bool {
+    pub(crate) fn invariant_under(&self, a: u32, b: u32) -> bool {
         self.fixes(a) == self.fixes(b)
     }
 

@@ -8,7 +8,7 @@
 
 use crate::filters::Recipe;
 use anyhow::{bail, Context, Result};
-use idmesh_belief::baseline::MAX_STATES;
+use idmesh_belief::MAX_STATES;
 use idmesh_belief::{BeliefError, Coupling, Field, PropertyFilter, Sparsify};
 use std::fmt;
 

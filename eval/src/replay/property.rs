@@ -17,7 +17,7 @@ use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use crate::filters::Recipe;
 use anyhow::{anyhow, bail, Context, Result};
-use idmesh_belief::baseline::MAX_STATES;
+use idmesh_belief::MAX_STATES;
 use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, log_loss, predict_red, BeliefError,
     Coupling, Event, FactoredBelief, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,

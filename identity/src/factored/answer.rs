@@ -10,7 +10,7 @@
 use super::{links, FactoredIdentity};
 use crate::filter::Marginals;
 use crate::sparse_marginals::{IdentityRow, SparseMarginals};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 impl FactoredIdentity {
     /// The marginals of the groups and links alone, leaks left out: a

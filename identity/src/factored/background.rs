@@ -16,7 +16,7 @@
 //! track took part in, not with N.
 
 use crate::sparse_marginals::IdentityRow;
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 

@@ -16,7 +16,7 @@
 use super::assignments::{self, Assignments};
 use super::split::Cut;
 use crate::permutation::{Permutations, MAX_ENUMERATED_TRACKS};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::sync::OnceLock;
 
 /// The most tracks one group may hold: the largest table of assignments

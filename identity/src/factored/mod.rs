@@ -7,7 +7,7 @@
 //! on Object Identities in Wireless Sensor Networks* (IPSN 2005, Section
 //! 2), on the blocks that mixing has connected since a known start (the
 //! blocks of [`crate::blocks`]) instead of on all N tracks. It
-//! mirrors the factored property belief ([`idmesh_belief::factored`]): exact
+//! mirrors the factored property belief ([`idmesh_belief::FactoredBelief`]): exact
 //! components that join when their tracks mix and are split, by a
 //! projection, when they would outgrow a cap.
 //!
@@ -94,8 +94,8 @@ pub use split::Cut;
 use super::event::{check_assignment, check_identify, check_mix, Identify, IdentityEvent};
 use super::filter::{IdentityFilter, Marginals};
 use super::sparse_marginals::SparseMarginals;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// The default cap on a group's slots (tracks and ports): the largest
 /// group we enumerate. Measured on random-waypoint traces

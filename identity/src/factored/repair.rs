@@ -45,7 +45,7 @@ use super::background::Background;
 use super::group::Group;
 use super::{FactoredIdentity, SplitStats};
 use crate::event::IdentityEvent;
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::collections::BTreeSet;
 
 /// The share of a group's mass a repair spreads evenly over its
@@ -139,7 +139,7 @@ impl FactoredIdentity {
         let Some(u) = self.likeliest_carrier(read.identity, read.track) else {
             return false;
         };
-        let swap = idmesh_belief::event::Mix {
+        let swap = idmesh_belief::Mix {
             a: read.track,
             b: u,
             swap: SMOOTHING,

@@ -30,7 +30,7 @@
 
 use super::assignments::{accumulate, lookup, Assignments};
 use super::group::{permutations, Group, Port, MAX_GROUP};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// A cut of a group: local tracks A (bit j = local track j) and the local
 /// identities I_A (bit x) they are taken to carry.

@@ -3,7 +3,7 @@
 //! or where it rests once it has applied all it was sent.
 
 use super::*;
-use idmesh_belief::factored::CountPart;
+use idmesh_belief::CountPart;
 use idmesh_placement::{to_wire_row, to_wire_tree};
 use std::sync::OnceLock;
 

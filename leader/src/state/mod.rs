@@ -61,8 +61,8 @@
 //! names the components a transfer may bring, not rows.
 
 use crate::error::LeaderError;
-use idmesh_belief::factored::FactoredShare;
-use idmesh_belief::radon::{Growth as BeliefGrowth, RadonShare, Sparsify};
+use idmesh_belief::FactoredShare;
+use idmesh_belief::{Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe};
 use idmesh_identity::factored::IdentityShare;
 use idmesh_identity::information::KNOWN_START_CONFIDENCE;

@@ -2,8 +2,8 @@
 //! duplicates, reordering, snapshots and identity rows.
 
 use super::*;
-use idmesh_belief::factored::CountPart;
-use idmesh_belief::radon::Atom;
+use idmesh_belief::Atom;
+use idmesh_belief::CountPart;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
     Item::Begin(Begin {

@@ -3,7 +3,7 @@
 //! makes the leader follow), and the transfers kept for a restarted peer.
 
 use super::*;
-use idmesh_belief::factored::HeldComponent;
+use idmesh_belief::HeldComponent;
 use idmesh_placement::{
     from_wire_component, from_wire_set, from_wire_tree, to_wire_component, to_wire_row,
     to_wire_set, to_wire_tree,

@@ -8,8 +8,8 @@
 //! events): for them also the centralized information matrix after every
 //! prefix, which the leaders' rows at a cut must put back together.
 
-use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
+use idmesh_belief::{RadonBelief, RadonOptions};
 use idmesh_identity::filter::to_rows;
 use idmesh_identity::identity_event_of;
 use idmesh_identity::information::KNOWN_START_CONFIDENCE;

@@ -254,7 +254,8 @@ impl FactoredShare {
     }
 
     /// Tracks whose components are held here.
-    pub fn tracks_held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn tracks_held(&self) -> usize {
         self.held_set.len()
     }
 
