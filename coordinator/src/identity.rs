@@ -6,8 +6,8 @@
 //! answers it (`driver::identity`).
 
 use crate::driver::gather::GatherError;
-use idmesh_identity::marginals::DEFAULT_SAMPLES;
 use idmesh_identity::MarginalMethod;
+use idmesh_identity::DEFAULT_SAMPLES;
 
 /// The most tracks for which a query that names no method gets exact
 /// marginals (the permanent of an N × N matrix: 2^16 Gray-code steps of

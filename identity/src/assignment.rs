@@ -52,7 +52,7 @@ pub fn most_likely_assignment(p: &[Vec<f64>]) -> Result<Vec<u32>, BeliefError> {
 /// by the sparse solver over their positive entries
 /// ([`super::sparse_assignment`]), O(k³) against about O(k · m log k): a
 /// crowd's block of 9,590 tracks took about two minutes densely.
-pub const DENSE_ASSIGNMENT_LIMIT: usize = 200;
+pub(crate) const DENSE_ASSIGNMENT_LIMIT: usize = 200;
 
 /// [`most_likely_assignment`] by one Hungarian run over the whole matrix
 /// (over its positive entries only when it is large and they hold an

@@ -39,7 +39,7 @@ impl Identify {
     /// P(this read | the track carries one given identity other than the
     /// one read): (1 − accuracy)/(N − 1). With one identity there is no
     /// other identity, and the value is never used; we return 0.
-    pub fn wrong_read_likelihood(&self, n: usize) -> f64 {
+    pub(crate) fn wrong_read_likelihood(&self, n: usize) -> f64 {
         if n > 1 {
             (1.0 - self.accuracy) / (n as f64 - 1.0)
         } else {
@@ -83,7 +83,7 @@ pub fn check_mix(n: usize, mix: &Mix) -> Result<(), BeliefError> {
 }
 
 /// Checks a read against `n` tracks and identities.
-pub fn check_identify(n: usize, identify: &Identify) -> Result<(), BeliefError> {
+pub(crate) fn check_identify(n: usize, identify: &Identify) -> Result<(), BeliefError> {
     check_track(n, identify.track)?;
     if identify.identity as usize >= n {
         return Err(BeliefError::UnknownIdentity {
@@ -131,7 +131,7 @@ pub fn check_assignment(n: usize, assignment: &[u32]) -> Result<(), BeliefError>
 }
 
 /// Checks that `matrix` is n × n with n ≥ 1 and returns n.
-pub fn check_square(matrix: &[Vec<f64>]) -> Result<usize, BeliefError> {
+pub(crate) fn check_square(matrix: &[Vec<f64>]) -> Result<usize, BeliefError> {
     let n = matrix.len();
     if n == 0 {
         return Err(BeliefError::NoTracks);

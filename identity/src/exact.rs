@@ -93,11 +93,6 @@ impl ExactPermutationFilter {
         })
     }
 
-    /// The assignments and their ranks.
-    pub fn permutations(&self) -> &Permutations {
-        &self.perms
-    }
-
     /// P(assignment) for every assignment, indexed by Lehmer rank.
     pub fn probabilities(&self) -> &[f64] {
         &self.probs
@@ -111,7 +106,8 @@ impl ExactPermutationFilter {
     }
 
     /// The single most probable joint assignment (lowest rank on ties).
-    pub fn most_probable(&self) -> Vec<u32> {
+    #[cfg(test)]
+    pub(crate) fn most_probable(&self) -> Vec<u32> {
         let best = self
             .probs
             .iter()

@@ -59,7 +59,8 @@ pub trait IdentityFilter {
 
 /// The largest |row sum − 1| or |column sum − 1| of `p`: 0 for a doubly
 /// stochastic matrix.
-pub fn doubly_stochastic_residual(p: &[Vec<f64>]) -> f64 {
+#[cfg(test)]
+pub(crate) fn doubly_stochastic_residual(p: &[Vec<f64>]) -> f64 {
     let n = p.len();
     let mut worst: f64 = 0.0;
     for row in p {

@@ -70,10 +70,10 @@ use idmesh_belief::{RadonBelief, RadonOptions};
 /// certain; a hard 0 would then rule out the true assignment and can leave
 /// the score matrix with no positive diagonal (seen at n = 100, 9 bits,
 /// budget 200). The floor changes exact answers by ~1e-12.
-pub const BIT_FLOOR: f64 = 1e-12;
+pub(crate) const BIT_FLOOR: f64 = 1e-12;
 
 /// The longest code [`BitCode::new`] searches (it scans up to 2^b words).
-pub const MAX_CODE_BITS: usize = 16;
+pub(crate) const MAX_CODE_BITS: usize = 16;
 
 /// n distinct b-bit codewords, one per identity.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -226,20 +226,8 @@ impl PropertyBitsFilter {
         })
     }
 
-    /// Changes the Sinkhorn options of the final combination.
-    pub fn with_sinkhorn(mut self, options: SinkhornOptions) -> Result<Self, BeliefError> {
-        options.validate()?;
-        self.sinkhorn = options;
-        Ok(self)
-    }
-
     pub fn code(&self) -> &BitCode {
         &self.code
-    }
-
-    /// The bit beliefs (None for a constant bit).
-    pub fn bit_beliefs(&self) -> &[Option<RadonBelief>] {
-        &self.beliefs
     }
 
     /// Radon coefficients held over all bits.
@@ -252,7 +240,7 @@ impl PropertyBitsFilter {
     }
 
     /// `result[j][t]` = P(bit j of track t's identity is 1).
-    pub fn bit_marginals(&self) -> Result<Vec<Vec<f64>>, BeliefError> {
+    pub(crate) fn bit_marginals(&self) -> Result<Vec<Vec<f64>>, BeliefError> {
         let n = self.code.identities();
         (0..self.code.bits())
             .map(|j| match &self.beliefs[j] {

@@ -106,22 +106,15 @@ pub fn add_reliability(
 }
 
 /// [`brier`] of a dense matrix.
-pub fn identity_brier(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+#[cfg(test)]
+pub(crate) fn identity_brier(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
     brier(&SparseMarginals::from_dense(p)?, truth)
 }
 
 /// [`log_loss`] of a dense matrix.
-pub fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+#[cfg(test)]
+pub(crate) fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
     log_loss(&SparseMarginals::from_dense(p)?, truth)
-}
-
-/// [`add_reliability`] of a dense matrix.
-pub fn add_identity_reliability(
-    diagram: &mut Reliability,
-    p: &[Vec<f64>],
-    truth: &[u32],
-) -> Result<(), BeliefError> {
-    add_reliability(diagram, &SparseMarginals::from_dense(p)?, truth)
 }
 
 /// IDF1 of a stream of (predicted, true) assignments over the same n
@@ -137,7 +130,7 @@ pub fn idf1(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<f64, BeliefError> {
 }
 
 /// (IDTP, track-time) of [`idf1`], to pool streams.
-pub fn idf1_counts(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<(u64, u64), BeliefError> {
+pub(crate) fn idf1_counts(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<(u64, u64), BeliefError> {
     let Some((first, _)) = lines.first() else {
         return Ok((0, 0));
     };

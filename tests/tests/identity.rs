@@ -6,7 +6,7 @@
 //! `idmesh replay --method information-matrix`. Either way the coordinator
 //! computes marginals only when asked.
 
-use idmesh_identity::filter::max_abs_difference;
+use idmesh_identity::max_abs_difference;
 use idmesh_tests::compare::{
     identity_difference, identity_marginals, identity_matrix, identity_row,
 };

@@ -56,10 +56,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::{BeliefError, RadonOptions, Sparsify};
 use idmesh_identity::factored::MAX_GROUP;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_identity::marginals::DEFAULT_SAMPLES;
-use idmesh_identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_identity::scoring::IdentityScores;
+use idmesh_identity::DEFAULT_SAMPLES;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
+use idmesh_identity::MAX_PERMANENT_TRACKS;
 use idmesh_identity::{
     identity_error, identity_event_of, BeliefMatrix, BitCode, ExactPermutationFilter,
     FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter, IdentityRow,

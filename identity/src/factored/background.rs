@@ -147,7 +147,7 @@ impl Background {
     /// the row rules the read out and the read is sure (no wrong read has
     /// any likelihood), the row believes it: identity `i` with
     /// certainty. The last resort of [`super::repair`].
-    pub fn read_or_believe(&mut self, n: usize, i: u32, right: f64, wrong: f64) {
+    pub(crate) fn read_or_believe(&mut self, n: usize, i: u32, right: f64, wrong: f64) {
         if !self.read(n, i, right, wrong, None) {
             let leak = self.leak;
             *self = Background::certain(i);
@@ -181,7 +181,7 @@ impl Background {
     /// The track's row of the table's marginals becomes the track's:
     /// (1 − leak)·table + leak·this row, over the identities either lists;
     /// every other one has this row's shared probability times the leak.
-    pub fn mix_into(&self, table: IdentityRow) -> IdentityRow {
+    pub(crate) fn mix_into(&self, table: IdentityRow) -> IdentityRow {
         let leak = self.leak;
         if leak <= 0.0 {
             return table;

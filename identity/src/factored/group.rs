@@ -302,7 +302,7 @@ impl Group {
 
     /// m\[j\]\[x\] = P(local track j carries local identity x): one pass over
     /// the assignments of non-zero probability.
-    pub fn local_marginals(&self) -> Vec<Vec<f64>> {
+    pub(crate) fn local_marginals(&self) -> Vec<Vec<f64>> {
         let k = self.size();
         let table = self.table();
         let mut m = vec![vec![0.0; k]; k];

@@ -76,12 +76,12 @@
 
 mod answer;
 mod assignments;
-pub mod background;
-pub mod group;
-pub mod links;
-pub mod repair;
-pub mod share;
-pub mod split;
+mod background;
+mod group;
+mod links;
+mod repair;
+mod share;
+mod split;
 
 #[cfg(test)]
 mod tests;
@@ -107,7 +107,7 @@ use idmesh_belief::Mix;
 pub const DEFAULT_MAX_GROUP: usize = MAX_GROUP;
 
 /// The default of [`FactoredIdentityOptions::certain`].
-pub const DEFAULT_CERTAIN: f64 = 1e-4;
+pub(crate) const DEFAULT_CERTAIN: f64 = 1e-4;
 
 /// Options of a factored identity belief.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -164,7 +164,7 @@ impl FactoredIdentityOptions {
 
 /// What the splits have cost so far.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
-pub struct SplitStats {
+pub(crate) struct SplitStats {
     /// Cuts made.
     pub cuts: u64,
     /// Cuts that lost something (cost above 1e-12).
@@ -403,7 +403,7 @@ impl FactoredIdentity {
     /// Identities listed in the background rows (each row stores only
     /// those that differ from its shared probability): with the tables,
     /// what the belief's memory grows with.
-    pub fn background_entries(&self) -> usize {
+    pub(crate) fn background_entries(&self) -> usize {
         self.backgrounds.iter().map(Background::listed).sum()
     }
 
@@ -437,12 +437,14 @@ impl FactoredIdentity {
     }
 
     /// The most tracks in one group, ports included.
-    pub fn largest_group(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn largest_group(&self) -> usize {
         self.groups.iter().map(Group::size).max().unwrap_or(0)
     }
 
     /// What the splits have cost so far.
-    pub fn split_stats(&self) -> SplitStats {
+    #[cfg(test)]
+    pub(crate) fn split_stats(&self) -> SplitStats {
         self.stats
     }
 

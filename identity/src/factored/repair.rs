@@ -52,7 +52,7 @@ use std::collections::BTreeSet;
 /// assignments: small enough to change no answer beyond 10⁻⁹, large enough
 /// to stay far above the smallest normal number through the products and
 /// messages of a tree.
-pub const SMOOTHING: f64 = 1e-9;
+pub(crate) const SMOOTHING: f64 = 1e-9;
 
 /// How a repaired event was finally taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

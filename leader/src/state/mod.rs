@@ -65,7 +65,7 @@ use idmesh_belief::FactoredShare;
 use idmesh_belief::{Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe};
 use idmesh_identity::factored::IdentityShare;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{Identify, IdentityEvent, InformationRows};
 use idmesh_placement::{start, start_factored, start_identity};
 use idmesh_protocol::wire::bounds::Bounds;

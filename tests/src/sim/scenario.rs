@@ -10,9 +10,9 @@
 
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
 use idmesh_belief::{RadonBelief, RadonOptions};
-use idmesh_identity::filter::to_rows;
 use idmesh_identity::identity_event_of;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::to_rows;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{
     FactoredIdentity, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
 };
