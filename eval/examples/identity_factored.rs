@@ -35,8 +35,8 @@ use idmesh_identity::{
     IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, PropertyBitsFilter,
 };
 use idmesh_protocol::trace::Line;
-use idmesh_sim::scenario::trace_out::lines;
-use idmesh_sim::scenario::Scenario;
+use idmesh_sim::lines;
+use idmesh_sim::Scenario;
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 

@@ -28,8 +28,8 @@ use idmesh_identity::{FactoredIdentity, FactoredIdentityOptions, IdentityEvent, 
 use idmesh_placement::{leading_places, RegionRule, Regions};
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::sensor_to_leader::{keeper, UNHELD};
-use idmesh_sim::scenario::trace_out::lines;
-use idmesh_sim::scenario::Scenario;
+use idmesh_sim::lines;
+use idmesh_sim::Scenario;
 
 #[derive(Default)]
 struct Cost {

@@ -33,8 +33,7 @@ fn scene_reports(
     model: &[&str],
 ) -> (PathBuf, PathBuf) {
     std::fs::create_dir_all(dir).unwrap();
-    let obsmat =
-        idmesh_sim::motion::pedestrians::data_dir().join(format!("{scene}/obsmat/obsmat.txt"));
+    let obsmat = idmesh_sim::data_dir().join(format!("{scene}/obsmat/obsmat.txt"));
     let simulated = dir.join(format!("{scene}-simulated.jsonl"));
     let reports = dir.join(format!("{scene}-reports.jsonl"));
     let status = Command::new(idmesh())

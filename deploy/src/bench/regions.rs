@@ -17,7 +17,7 @@ use crate::runtime::launch::{field_corners, simulate_into, write_simulation};
 use anyhow::{Context, Result};
 use idmesh_placement::{busiest_share, grid_places, items_sent, share_causes, RegionRule};
 use idmesh_protocol::trace::Line;
-use idmesh_sim::motion::pedestrians::data_dir;
+use idmesh_sim::data_dir;
 use idmesh_sim::Scenario;
 use std::fmt::Write as _;
 use std::path::Path;

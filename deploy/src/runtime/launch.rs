@@ -342,7 +342,7 @@ pub fn write_simulation(scenario: idmesh_sim::Scenario, out: &Path) -> Result<()
     let trace = scenario.generate().context("the simulation failed")?;
     let path = out.display().to_string();
     let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
-    idmesh_sim::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;
+    idmesh_sim::write_trace(&trace, std::io::BufWriter::new(file), path)?;
     Ok(())
 }
 

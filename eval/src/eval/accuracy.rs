@@ -16,7 +16,7 @@ use anyhow::{bail, Context, Result};
 use idmesh_belief::{field_of, FactoredBelief, FactoredOptions, PropertyFilter};
 use idmesh_placement::{RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader};
-use idmesh_sim::scenario::trace_out::write_trace;
+use idmesh_sim::write_trace;
 use idmesh_sim::SimEvent;
 use std::path::Path;
 

@@ -25,7 +25,7 @@
 use anyhow::{anyhow, Context, Result};
 use idmesh_belief::{Event, Field, Mix, Observe};
 use idmesh_protocol::trace::{self, Line};
-use idmesh_sim::motion::pedestrians::{data_dir, Scene, Timing};
+use idmesh_sim::{data_dir, Scene, Timing};
 use idmesh_sim::{GeneratedTrace, Scenario, SensorModel, SimEvent};
 use std::collections::BTreeMap;
 use std::sync::Arc;

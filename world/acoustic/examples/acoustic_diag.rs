@@ -8,7 +8,7 @@
 
 use idmesh_acoustic::field::PathSpec;
 use idmesh_acoustic::{run, AcousticConfig};
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 fn quantiles(mut v: Vec<f64>) -> String {
     if v.is_empty() {

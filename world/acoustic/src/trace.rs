@@ -11,9 +11,9 @@ use super::config::OutputConfig;
 use super::pipeline::prepare::Segmentation;
 use super::run::{AcousticResult, EstimatedPath};
 use idmesh_protocol::trace::{Header, Line, TraceError, TraceWriter};
-use idmesh_sim::events::{MixDetector, SimEvent, TimedEvent};
-use idmesh_sim::geometry::{NeighbourGrid, Vec2};
-use idmesh_sim::scenario::trace_out::event_line;
+use idmesh_sim::event_line;
+use idmesh_sim::{MixDetector, SimEvent, TimedEvent};
+use idmesh_sim::{NeighbourGrid, Vec2};
 use std::io::Write;
 
 /// Position of a path at slot `j`: its fragment there, or linear

@@ -1,7 +1,7 @@
 //! Sensor deployment (Section II and VI-A): N sensors dropped uniformly at
 //! random over the field; their positions are known to the tracker.
 
-use idmesh_sim::geometry::{Rect, Vec2};
+use idmesh_sim::{Rect, Vec2};
 use rand::Rng;
 
 /// `n` sensor positions drawn uniformly from `field`.

@@ -14,7 +14,7 @@ pub mod signals;
 
 use super::error::AcousticError;
 use super::source::{self, SourceKind};
-use idmesh_sim::geometry::{Rect, Vec2};
+use idmesh_sim::{Rect, Vec2};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

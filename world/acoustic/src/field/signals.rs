@@ -9,7 +9,7 @@ use super::attenuation::Attenuation;
 use super::paths::TruePath;
 use crate::parallel::par_map;
 use crate::pipeline::separate::fastica::standard_normal;
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

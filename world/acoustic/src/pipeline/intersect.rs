@@ -23,7 +23,7 @@
 use super::prepare::SensorGroup;
 use super::separate::SlotSegments;
 use super::tiles::{TileGrid, TileSet};
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 /// The sensing range of every group, on the tile grid.
 #[derive(Debug, Clone)]

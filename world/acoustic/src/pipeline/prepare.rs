@@ -8,7 +8,7 @@
 
 use crate::error::AcousticError;
 use crate::field::SensorSignals;
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 use nalgebra::DMatrix;
 
 /// A sensor group: its members (sensor indices, ascending) and where it is.

@@ -5,7 +5,7 @@
 //! as one bit per point in full-width rows over the rows it spans, so that
 //! intersecting two sensing ranges is a word-wise AND.
 
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 /// The grid points (c·spacing, r·spacing), 0 ≤ r, c < `side`.
 #[derive(Debug, Clone, Copy, PartialEq)]

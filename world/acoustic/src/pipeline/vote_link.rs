@@ -249,7 +249,7 @@ pub fn link(
 mod tests {
     use super::*;
     use crate::pipeline::tiles::TileSet;
-    use idmesh_sim::geometry::Vec2;
+    use idmesh_sim::Vec2;
 
     fn grid() -> TileGrid {
         TileGrid::new(1000.0, 5.0)

@@ -148,14 +148,14 @@ impl Extractor {
     /// track's position, with class scores `{"red": s, "blue": 1 − s}`
     /// where the sensor saw a colour (s the sensor's red likelihood,
     /// normalised) — for [`Extractor::take_reports`].
-    pub fn keep_reports(mut self) -> Self {
+    pub(crate) fn keep_reports(mut self) -> Self {
         self.reports = Some(Vec::new());
         self
     }
 
     /// The reports kept since the last call (empty unless
     /// [`Extractor::keep_reports`]).
-    pub fn take_reports(&mut self) -> Vec<Report> {
+    pub(crate) fn take_reports(&mut self) -> Vec<Report> {
         self.reports
             .as_mut()
             .map(std::mem::take)
@@ -269,18 +269,9 @@ impl Extractor {
         added
     }
 
-    pub fn params(&self) -> &ExtractionParams {
-        &self.params
-    }
-
     /// Which target is on which track now.
     pub fn assignment(&self) -> &Assignment {
         &self.assignment
-    }
-
-    /// The colours of the targets.
-    pub fn target_is_red(&self) -> &[bool] {
-        &self.is_red
     }
 
     /// The tracks carrying red targets now, ascending.

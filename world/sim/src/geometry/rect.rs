@@ -32,7 +32,7 @@ impl Rect {
     }
 
     /// Width and height finite and positive.
-    pub fn is_valid(&self) -> bool {
+    pub(crate) fn is_valid(&self) -> bool {
         self.min.is_finite() && self.max.is_finite() && self.width() > 0.0 && self.height() > 0.0
     }
 

@@ -38,11 +38,11 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 /// The paper's read accuracy: P(read = true identity).
-pub const DEFAULT_IDENTITY_ACCURACY: f64 = 0.9;
+pub(crate) const DEFAULT_IDENTITY_ACCURACY: f64 = 0.9;
 
 /// The identity options of a scenario.
 #[derive(Debug, Clone, PartialEq)]
-pub struct IdentityOptions {
+pub(crate) struct IdentityOptions {
     /// Whether the scenario writes an identity trace at all.
     pub enabled: bool,
     /// P(a read returns the true identity), in (0, 1].
@@ -107,14 +107,15 @@ pub struct IdentityTrace {
 
 impl IdentityTrace {
     /// How many reads returned the true identity.
-    pub fn correct_reads(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn correct_reads(&self) -> usize {
         self.reads.iter().filter(|r| r.correct).count()
     }
 }
 
 /// The RFID reader model of the module docs, stepped with the motion.
 #[derive(Debug, Clone)]
-pub struct IdentityReader {
+pub(crate) struct IdentityReader {
     accuracy: f64,
     target_identity: Vec<u32>,
     scheduler: ObservationScheduler,
@@ -155,11 +156,6 @@ impl IdentityReader {
             due: Vec::new(),
             reads: Vec::new(),
         }
-    }
-
-    /// `target_identity[i]` = identity of target i.
-    pub fn target_identity(&self) -> &[u32] {
-        &self.target_identity
     }
 
     /// Reads every isolated target that is due at `time`; `assignment` says

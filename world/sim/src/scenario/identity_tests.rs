@@ -2,6 +2,7 @@
 //! replay of the ground-truth motion, truth identities against the swaps,
 //! the read model's frequencies, and the written trace.
 
+use super::identity::IdentityRead;
 use super::trace_out::{lines, write_trace};
 use super::*;
 use crate::events::{Assignment, SimEvent, TimedEvent};

@@ -39,7 +39,7 @@ pub enum SceneSource {
 
 /// Which targets are red.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub enum RedChoice {
+pub(crate) enum RedChoice {
     /// k = ⌊n/2⌋ targets drawn by the seed (the paper's "half of them are
     /// red").
     #[default]

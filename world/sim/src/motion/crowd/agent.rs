@@ -36,7 +36,7 @@ impl Agent {
 
     /// The velocity the walker would like to have: v0 towards the goal, or
     /// standing still during a pause.
-    pub fn desired_velocity(&self) -> Vec2 {
+    pub(crate) fn desired_velocity(&self) -> Vec2 {
         if self.dwell_left > 0.0 {
             Vec2::ZERO
         } else {
@@ -56,7 +56,7 @@ impl Agent {
 
     /// After a move: start a pause at a reached goal, count a pause down,
     /// and pick the next goal when it is over.
-    pub fn update_goal(
+    pub(crate) fn update_goal(
         &mut self,
         dt: f64,
         p: &CrowdParams,

@@ -194,7 +194,7 @@ impl Crowd {
 
     /// Runs the crowd for `seconds` (so that the random start settles into
     /// walking), then counts steps from 0 again.
-    pub fn warm_up(&mut self, seconds: f64) {
+    pub(crate) fn warm_up(&mut self, seconds: f64) {
         let steps = (seconds / self.dt).round().max(0.0) as u64;
         for _ in 0..steps {
             self.advance();
@@ -202,17 +202,9 @@ impl Crowd {
         self.step = 0;
     }
 
-    pub fn params(&self) -> &CrowdParams {
-        &self.params
-    }
-
+    #[cfg(test)]
     pub fn field(&self) -> Rect {
         self.field
-    }
-
-    /// Current velocities, m/s, indexed by target.
-    pub fn velocities(&self) -> impl Iterator<Item = Vec2> + '_ {
-        self.agents.iter().map(|a| a.vel)
     }
 }
 

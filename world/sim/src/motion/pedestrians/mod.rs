@@ -14,15 +14,15 @@
 //! Malformed files are rejected with a [`SceneError`] that reads
 //! `FILE:LINE: reason`.
 
-pub mod error;
+pub(crate) mod error;
 pub use idmesh_extract::adapters::eth_ucy as format;
-pub mod scene;
-pub mod window;
+pub(crate) mod scene;
+pub(crate) mod window;
 
 pub use error::SceneError;
-pub use format::SceneFormat;
-pub use scene::{Person, Sample, Scene, Timing};
-pub use window::{Window, WindowSpec};
+pub use scene::{Scene, Timing};
+pub use window::Window;
+pub(crate) use window::WindowSpec;
 
 use super::Motion;
 use crate::geometry::Vec2;
@@ -62,14 +62,6 @@ impl Replay {
         };
         replay.sample();
         replay
-    }
-
-    pub fn scene(&self) -> &Scene {
-        &self.scene
-    }
-
-    pub fn window(&self) -> &Window {
-        &self.window
     }
 
     fn sample(&mut self) {
@@ -132,6 +124,7 @@ pub fn data_dir() -> std::path::PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use format::SceneFormat;
 
     #[test]
     fn loads_the_real_eth_obsmat_scene() {

@@ -40,7 +40,7 @@ pub struct Sample {
 
 /// One person's trajectory, samples in time order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Person {
+pub(crate) struct Person {
     /// The pedestrian id in the file.
     pub id: u32,
     pub samples: Vec<Sample>,
@@ -67,7 +67,7 @@ pub struct Scene {
     /// Seconds between two annotations of a person.
     pub annotation_step: f64,
     /// Everyone in the scene, ordered by first appearance, then id.
-    pub people: Vec<Person>,
+    pub(crate) people: Vec<Person>,
 }
 
 /// Two annotations of a person further apart than this many annotation
@@ -90,7 +90,7 @@ impl Scene {
 
     /// Parses the text of a scene file; `file` names it in errors (and is
     /// used to recognise `biwi_eth.txt` under [`Timing::Auto`]).
-    pub fn parse(text: &str, file: &str, timing: Timing) -> Result<Scene, SceneError> {
+    pub(crate) fn parse(text: &str, file: &str, timing: Timing) -> Result<Scene, SceneError> {
         let (format, rows) = parse_rows(text, file)?;
         // Per person, frame -> row; a second row for the same frame is an error.
         let mut by_person: BTreeMap<u32, BTreeMap<u64, (usize, Vec2)>> = BTreeMap::new();
