@@ -9,7 +9,7 @@ use super::security::rules;
 use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::driver::CoordinatorConfig;
-use idmesh_extract::pipeline::read_reports;
+use idmesh_extract::read_reports;
 use idmesh_leader::host::HostConfig;
 use idmesh_protocol::trace::{Header, Line, Problem, TraceReader};
 use idmesh_protocol::wire::keys::Keys;

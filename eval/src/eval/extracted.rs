@@ -4,7 +4,7 @@
 //!
 //! On each scene the simulator plays a tracker that confuses people the
 //! way [`TRACKER`] says (closer, slower meetings swap more: the approach
-//! model of `idmesh_extract::meetings::meeting_model`) and a colour sensor
+//! model of `idmesh_extract::MeetingModel`) and a colour sensor
 //! that sees isolated people; it also writes what that tracker reported —
 //! positions, class scores. Then:
 //!

@@ -128,10 +128,6 @@ impl<W: Write> Run<W> {
         Ok(())
     }
 
-    pub fn config_mut(&mut self) -> &mut ExtractorConfig {
-        &mut self.config
-    }
-
     /// One row of the input.
     pub fn row(&mut self, file: &str, row: Result<Located, RowError>) -> Result<(), RunError> {
         let located = match row {

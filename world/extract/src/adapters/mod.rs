@@ -151,7 +151,7 @@ pub(crate) fn frame_time(frame: f64, fps: f64) -> f64 {
 }
 
 /// Checks a frame rate (frames per second).
-pub fn check_fps(fps: f64) -> Result<(), String> {
+pub(crate) fn check_fps(fps: f64) -> Result<(), String> {
     if fps.is_finite() && fps > 0.0 {
         Ok(())
     } else {

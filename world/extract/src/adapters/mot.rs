@@ -206,7 +206,7 @@ fn class_scores(
 /// read is complete. Holds the rows of at most `window + 1` frames (and a
 /// frame's rows), whatever came before.
 #[derive(Debug)]
-pub struct FrameWindow<T> {
+pub(crate) struct FrameWindow<T> {
     window: u64,
     held: BTreeMap<u64, Vec<T>>,
     /// The latest frame read.
@@ -275,7 +275,8 @@ impl<T> FrameWindow<T> {
     }
 
     /// The most rows held at once.
-    pub fn most_held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn most_held(&self) -> usize {
         self.most
     }
 
@@ -471,7 +472,8 @@ impl MotReader {
     }
 
     /// The most box rows held at once.
-    pub fn most_held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn most_held(&self) -> usize {
         self.window.most_held()
     }
 

@@ -26,10 +26,10 @@
 //! leaves the state as it was; the caller counts it. The roster policy
 //! (see [`roster`]) says what happens to a track that appears mid-stream.
 
-pub mod config;
-pub mod error;
-pub mod report;
-pub mod roster;
+pub(crate) mod config;
+pub(crate) mod error;
+pub(crate) mod report;
+pub(crate) mod roster;
 
 #[cfg(test)]
 mod tests;

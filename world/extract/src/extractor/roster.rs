@@ -55,11 +55,6 @@ impl Roster {
         self.track_of.get(&id).copied()
     }
 
-    /// The tracker id of trace track `track`.
-    pub fn id_of(&self, track: u32) -> Option<u32> {
-        self.ids.get(track as usize).copied()
-    }
-
     pub fn len(&self) -> usize {
         self.ids.len()
     }

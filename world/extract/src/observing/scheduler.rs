@@ -60,7 +60,7 @@ impl ObservationScheduler {
     /// only: a tracker's detection without class scores has nothing to
     /// observe, and must not use up the track's next look. The others
     /// still count as neighbours.
-    pub fn step_eligible(
+    pub(crate) fn step_eligible(
         &mut self,
         time: f64,
         grid: &NeighbourGrid,

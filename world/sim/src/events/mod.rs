@@ -23,8 +23,8 @@ pub(crate) mod event;
 pub(crate) mod extractor;
 pub(crate) mod sensor_model;
 
-pub use idmesh_extract::meetings::MixDetector;
-pub use idmesh_extract::observing::ObservationScheduler;
+pub use idmesh_extract::MixDetector;
+pub use idmesh_extract::ObservationScheduler;
 
 pub(crate) use assignment::Assignment;
 pub use event::{SimEvent, TimedEvent};
