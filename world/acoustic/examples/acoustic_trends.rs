@@ -18,8 +18,8 @@
 //! docs/acoustic-trends.md; `out=none` only prints; a partial run with
 //! `only=` only prints).
 
-use idmesh_acoustic::field::PathSpec;
-use idmesh_acoustic::resolution::{average_resolution, group_radius};
+use idmesh_acoustic::PathSpec;
+use idmesh_acoustic::{average_resolution, group_radius};
 use idmesh_acoustic::{run_variants, AcousticConfig, PipelineConfig};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};

@@ -34,7 +34,7 @@ fn position_at(path: &EstimatedPath, j: usize) -> Option<Vec2> {
 
 /// The `mix` and `move` events of estimated paths, in time order (mixes
 /// before moves at one time).
-pub fn path_events(
+pub(crate) fn path_events(
     paths: &[EstimatedPath],
     seg: &Segmentation,
     output: &OutputConfig,

@@ -51,7 +51,7 @@ impl Attenuation {
 /// Pure-tone atmospheric absorption coefficient, dB/m (ISO 9613-1:1993,
 /// equations 3–5): frequency in Hz, temperature in °C, relative humidity
 /// in %, pressure in kPa.
-pub fn iso9613_absorption(frequency: f64, celsius: f64, humidity: f64, kpa: f64) -> f64 {
+pub(crate) fn iso9613_absorption(frequency: f64, celsius: f64, humidity: f64, kpa: f64) -> f64 {
     let t = celsius + 273.15;
     let t0 = 293.15;
     let t01 = 273.16;

@@ -7,10 +7,10 @@
 //! - [`attenuation`] — spherical spreading and atmospheric absorption.
 //! - [`signals`] — the aggregate signal at every sensor.
 
-pub mod attenuation;
-pub mod deploy;
-pub mod paths;
-pub mod signals;
+pub(crate) mod attenuation;
+pub(crate) mod deploy;
+pub(crate) mod paths;
+pub(crate) mod signals;
 
 use super::error::AcousticError;
 use super::source::{self, SourceKind};
@@ -19,7 +19,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 pub use attenuation::Attenuation;
-pub use paths::{PathSpec, TruePath};
+pub use paths::PathSpec;
+pub use paths::TruePath;
 pub use signals::SensorSignals;
 
 /// Everything that makes a field. Defaults are the paper's (Section VI-A)
@@ -82,7 +83,7 @@ impl FieldConfig {
     }
 
     /// The central square the targets stay in.
-    pub fn target_bounds(&self) -> Rect {
+    pub(crate) fn target_bounds(&self) -> Rect {
         self.bounds().shrink((self.size - self.target_area) / 2.0)
     }
 

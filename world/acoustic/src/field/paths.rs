@@ -85,20 +85,8 @@ impl TruePath {
         self.positions.windows(2).map(|w| w[0].distance(w[1])).sum()
     }
 
-    /// Length walked between samples `from` and `to`.
-    pub fn length_between(&self, from: usize, to: usize) -> f64 {
-        let to = to.min(self.positions.len().saturating_sub(1));
-        if from >= to {
-            return 0.0;
-        }
-        self.positions[from..=to]
-            .windows(2)
-            .map(|w| w[0].distance(w[1]))
-            .sum()
-    }
-
     /// Mean speed, metres per sample.
-    pub fn mean_speed(&self) -> f64 {
+    pub(crate) fn mean_speed(&self) -> f64 {
         self.length() / (self.positions.len().saturating_sub(1)).max(1) as f64
     }
 }

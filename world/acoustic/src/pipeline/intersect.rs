@@ -27,7 +27,7 @@ use idmesh_sim::Vec2;
 
 /// The sensing range of every group, on the tile grid.
 #[derive(Debug, Clone)]
-pub struct GroupRanges {
+pub(crate) struct GroupRanges {
     pub grid: TileGrid,
     pub ranges: Vec<TileSet>,
 }
@@ -64,7 +64,7 @@ pub struct Area {
 /// The groups that hear segment `c` of slot `segs`: for each group its
 /// largest |corr| with `c`, kept when ≥ `threshold`, strongest first
 /// (ties by group index).
-pub fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> Vec<(u32, f32)> {
+pub(crate) fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> Vec<(u32, f32)> {
     let target = segs.segment(c);
     let mut best: Vec<(u32, f32)> = Vec::new();
     for i in 0..segs.len() {

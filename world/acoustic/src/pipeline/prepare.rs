@@ -119,7 +119,7 @@ impl Segmentation {
 
 /// The segment group OG_{i,j}: the recordings of `group`'s members during
 /// slot `slot`, one row per member (n_group × l_seg).
-pub fn segment_group(
+pub(crate) fn segment_group(
     signals: &SensorSignals,
     group: &SensorGroup,
     seg: &Segmentation,

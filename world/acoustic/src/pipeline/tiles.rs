@@ -62,7 +62,7 @@ impl TileSet {
     /// The grid points within `radius` of any of `centers` (the sensing
     /// range of a sensor group: the union of its members' disks). A disk
     /// meets each row in one run of columns, so this is a few range fills.
-    pub fn disk_union(grid: &TileGrid, centers: &[Vec2], radius: f64) -> Self {
+    pub(crate) fn disk_union(grid: &TileGrid, centers: &[Vec2], radius: f64) -> Self {
         if centers.is_empty() {
             return TileSet::empty(grid);
         }
@@ -108,7 +108,10 @@ impl TileSet {
     }
 
     /// The set of the given (row, col) points, which must be in the grid.
-    pub fn from_points(grid: &TileGrid, points: impl IntoIterator<Item = (usize, usize)>) -> Self {
+    pub(crate) fn from_points(
+        grid: &TileGrid,
+        points: impl IntoIterator<Item = (usize, usize)>,
+    ) -> Self {
         let pts: Vec<(usize, usize)> = points.into_iter().collect();
         let (Some(lo), Some(hi)) = (pts.iter().map(|p| p.0).min(), pts.iter().map(|p| p.0).max())
         else {
@@ -163,7 +166,7 @@ impl TileSet {
     }
 
     /// Rows spanned, as a half-open range (empty set: `0..0`).
-    pub fn row_range(&self) -> std::ops::Range<usize> {
+    pub(crate) fn row_range(&self) -> std::ops::Range<usize> {
         self.row0..self.row0 + self.rows()
     }
 
@@ -209,7 +212,7 @@ impl TileSet {
     }
 
     /// Adds every point of `other`.
-    pub fn union_with(&mut self, other: &TileSet) {
+    pub(crate) fn union_with(&mut self, other: &TileSet) {
         if other.bits.is_empty() {
             return;
         }

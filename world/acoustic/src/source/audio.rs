@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 /// Why one recording could not be used.
 #[derive(Debug, thiserror::Error)]
-pub enum AudioError {
+pub(crate) enum AudioError {
     #[error("{path}: cannot open: {cause}")]
     Open {
         path: PathBuf,
@@ -39,7 +39,7 @@ pub enum AudioError {
 
 /// One decoded recording, mono.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Recording {
+pub(crate) struct Recording {
     pub path: PathBuf,
     pub sample_rate: u32,
     pub samples: Vec<f64>,
@@ -182,7 +182,7 @@ pub fn resample(samples: &[f64], from: u32, to: u32) -> Vec<f64> {
 /// reproducible), decoded and resampled to `rate` Hz. Unreadable files are
 /// skipped with a warning; a missing directory gives an empty list (and a
 /// warning).
-pub fn load_dir(dir: &Path, rate: u32) -> Vec<Recording> {
+pub(crate) fn load_dir(dir: &Path, rate: u32) -> Vec<Recording> {
     let entries = match std::fs::read_dir(dir) {
         Ok(entries) => entries,
         Err(e) => {

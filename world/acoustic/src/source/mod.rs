@@ -6,9 +6,9 @@
 //! - [`ar`] — autoregressive resonators driven by sparse impulses.
 //! - [`audio`] — real recordings (WAV, Ogg Vorbis), e.g. shared/data/audio.
 
-pub mod ar;
-pub mod audio;
-pub mod chirp;
+pub(crate) mod ar;
+pub(crate) mod audio;
+pub(crate) mod chirp;
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;

@@ -11,11 +11,12 @@
 //! yields two segments. The noise variance is estimated blindly from the
 //! data ([`estimate_noise_variance`]).
 
-pub mod fastica;
-pub mod whitening;
+pub(crate) mod fastica;
+pub(crate) mod whitening;
 
-pub use fastica::{Algorithm, FastIca, FastIcaConfig, FastIcaError, IcaResult, Nonlinearity};
-pub use whitening::{whiten, Components, Whitening};
+pub use fastica::{Algorithm, FastIca, FastIcaConfig, FastIcaError};
+pub(crate) use whitening::whiten;
+pub use whitening::Components;
 
 use super::prepare::{segment_group, Segmentation, SensorGroup};
 use crate::error::AcousticError;

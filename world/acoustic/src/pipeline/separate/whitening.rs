@@ -68,7 +68,7 @@ impl Whitening {
 
 /// Checks `x` (m × T) and returns its whitening and the whitened data
 /// (n × T, identity covariance with the 1/T convention).
-pub fn whiten(
+pub(crate) fn whiten(
     x: &DMatrix<f64>,
     components: &Components,
 ) -> Result<(Whitening, DMatrix<f64>), FastIcaError> {
