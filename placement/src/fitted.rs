@@ -68,7 +68,7 @@ pub const TOLERANCE: f64 = 1.35;
 
 /// Items per leader in a window, by default: enough that the counts it
 /// compares are not noise (about a tenth at 100).
-pub const WINDOW_PER_LEADER: u64 = 100;
+pub(crate) const WINDOW_PER_LEADER: u64 = 100;
 
 /// A redraw hands over only the tracks seen (moved, or took part in an
 /// item) within the last this many items per leader. Measured with the
@@ -77,7 +77,7 @@ pub const WINDOW_PER_LEADER: u64 = 100;
 /// 1,000): 5 gave the lowest busiest share at 8 leaders on the dense ones
 /// (univ, 1,000 walkers), 20 and 50 up to 0.15 more; on the sparse real
 /// scenes it makes no difference.
-pub const RECENT_PER_LEADER: u64 = 5;
+pub(crate) const RECENT_PER_LEADER: u64 = 5;
 
 /// Items with tracks before which no leader counts as busy
 /// ([`Fitted::busy`]): the first few items' counts say nothing.

@@ -30,10 +30,14 @@ mod load;
 mod regions;
 mod wire;
 
-pub use fitted::{Fitted, TOLERANCE, WINDOW_PER_LEADER};
-pub use identity::{identity_options, start_identity};
-pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
+// Which leader surveils each track: the regions, fitted to the crowd.
+pub use fitted::{Fitted, TOLERANCE};
 pub use regions::{grid_places, leading_places, Handover, RegionRule, Regional, Regions};
+// The identity belief a deployment starts from.
+pub use identity::{identity_options, start_identity};
+// How evenly the leaders are loaded.
+pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
+// Shares of the beliefs to and from their wire form.
 pub use wire::{
     from_wire_component, from_wire_set, from_wire_tree, to_wire_component, to_wire_row,
     to_wire_set, to_wire_tree,
