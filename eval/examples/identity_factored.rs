@@ -26,7 +26,7 @@
 
 use idmesh_belief::Reliability;
 use idmesh_belief::{RadonOptions, Sparsify};
-use idmesh_eval::eval::plots::{draw, reliability_series, Plot};
+use idmesh_eval::eval::{draw, reliability_series, Plot};
 use idmesh_identity::identity_event_of;
 use idmesh_identity::scoring::{add_reliability, brier, idf1, log_loss};
 use idmesh_identity::KNOWN_START_CONFIDENCE;

@@ -12,7 +12,7 @@ use idmesh_belief::{DenseFilter, LowOrderFilter, LowOrderRepair};
 
 /// A property filter and its settings, before it meets a field.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Recipe {
+pub(crate) enum Recipe {
     /// The dense filter over every red set: the optimum.
     Exact,
     /// The low-order Radon projection of this order, shrunk towards uniform

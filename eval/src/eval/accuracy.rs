@@ -20,7 +20,7 @@ use idmesh_sim::write_trace;
 use idmesh_sim::SimEvent;
 use std::path::Path;
 
-pub use super::scenarios::Start;
+use super::scenarios::Start;
 
 use super::scenarios::MOVE_INTERVAL;
 

@@ -37,7 +37,7 @@ use std::sync::Arc;
 /// The simulated tracker: a touching, standing pair swaps with 0.8; the
 /// chance falls with the closest distance (σ = 0.35 m) and with the
 /// relative speed (halved at 0.7 m/s).
-pub const TRACKER: MeetingModel = MeetingModel::Approach {
+pub(crate) const TRACKER: MeetingModel = MeetingModel::Approach {
     p_max: 0.8,
     sigma: 0.35,
     v0: 0.7,
@@ -50,7 +50,7 @@ const SECONDS: f64 = 300.0;
 const METHOD: Method = Method::Deployed(1);
 
 /// One scene's simulation and what its tracker reported.
-pub struct SceneRun {
+pub(crate) struct SceneRun {
     pub scene: &'static str,
     pub people: usize,
     pub generated: GeneratedTrace,
@@ -191,7 +191,7 @@ impl SceneRun {
 }
 
 /// Every scene, simulated with `seed`.
-pub fn scene_runs(seed: u64) -> Result<Vec<SceneRun>> {
+pub(crate) fn scene_runs(seed: u64) -> Result<Vec<SceneRun>> {
     SCENES
         .iter()
         .map(|&(name, file)| {

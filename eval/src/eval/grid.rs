@@ -23,7 +23,7 @@ pub struct Cell {
 /// order. Items are taken in the order `visit` gives (longest first balances
 /// the load), each by the first idle worker. `done(finished, total)` is
 /// called after each item.
-pub fn parallel_map<T, R, F>(
+pub(crate) fn parallel_map<T, R, F>(
     items: &[T],
     visit: &[usize],
     workers: usize,

@@ -25,7 +25,7 @@ use std::fmt::Write as _;
 
 /// The sizes and event count of a run of the section.
 #[derive(Debug, Clone)]
-pub struct LargeFields {
+pub(crate) struct LargeFields {
     pub sizes: Vec<usize>,
     pub events: usize,
     /// Score every this many events.

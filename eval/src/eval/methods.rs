@@ -14,12 +14,12 @@ use std::fmt;
 
 /// The largest n at which the exact filter runs in the grid (C(20, 10) =
 /// 184,756 states): "where n ≤ 20 the exact filter is in every table".
-pub const EXACT_UP_TO: usize = 20;
+pub(crate) const EXACT_UP_TO: usize = 20;
 
 /// Whether `factored` (`idmesh_belief::FactoredBelief` with its default
 /// options) joins the grids (see `plan.rs`). Set it to `false` to run the
 /// grids without it; the name still parses.
-pub const FACTORED_AVAILABLE: bool = true;
+pub(crate) const FACTORED_AVAILABLE: bool = true;
 
 /// One method of the evaluation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -127,7 +127,7 @@ impl Method {
 
     /// The filter this method names (`seed` drives the randomized ones),
     /// for the one factory ([`Recipe`]).
-    pub fn recipe(&self, seed: u64) -> Recipe {
+    pub(crate) fn recipe(&self, seed: u64) -> Recipe {
         let radon = |sparsify: Sparsify, distributed_rule: bool| Recipe::Radon {
             sparsify: Some(sparsify),
             distributed_rule,

@@ -87,7 +87,7 @@ impl Summary {
 
 /// A particle filter sized to take as long as another method.
 #[derive(Debug, Clone, PartialEq)]
-pub struct EqualTime {
+pub(crate) struct EqualTime {
     /// The method whose time it matches.
     pub base: Method,
     /// The particle count chosen.
@@ -97,7 +97,7 @@ pub struct EqualTime {
 
 /// Everything measured at one point.
 #[derive(Debug, Clone)]
-pub struct PointResult {
+pub(crate) struct PointResult {
     pub point: Point,
     /// The traces of its seeds that could be made.
     pub traces: Vec<TraceInfo>,
@@ -117,7 +117,7 @@ impl PointResult {
     }
 
     /// Mean over the traces of a trace fact.
-    pub fn mean_info(&self, f: impl Fn(&TraceInfo) -> f64) -> f64 {
+    pub(crate) fn mean_info(&self, f: impl Fn(&TraceInfo) -> f64) -> f64 {
         if self.traces.is_empty() {
             return f64::NAN;
         }

@@ -99,7 +99,7 @@ pub enum Source {
 
 /// Everything that makes one trace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ScenarioSpec {
+pub(crate) struct ScenarioSpec {
     pub source: Source,
     pub swap: f64,
     pub sensor: Sensor,
@@ -157,11 +157,11 @@ impl Step {
 
 /// Seconds between the `move` lines of a generated trace: where a live
 /// sensor, and a deployed method's replay, find the tracks.
-pub const MOVE_INTERVAL: f64 = 1.0;
+pub(crate) const MOVE_INTERVAL: f64 = 1.0;
 
 /// Facts about a trace, for the tables.
 #[derive(Debug, Clone, PartialEq)]
-pub struct TraceInfo {
+pub(crate) struct TraceInfo {
     pub tracks: usize,
     pub red: usize,
     pub mixes: usize,
@@ -186,13 +186,13 @@ pub struct Trace {
 
 /// The pedestrian scenes, each parsed once and shared.
 #[derive(Debug, Default)]
-pub struct Scenes {
+pub(crate) struct Scenes {
     loaded: BTreeMap<&'static str, Arc<Scene>>,
 }
 
 impl Scenes {
     /// Loads the scenes `specs` use (none when they use none).
-    pub fn load_for(specs: &[ScenarioSpec]) -> Result<Scenes> {
+    pub(crate) fn load_for(specs: &[ScenarioSpec]) -> Result<Scenes> {
         let mut scenes = Scenes::default();
         for spec in specs {
             if let Source::Pedestrians { scene, .. } = spec.source {
@@ -228,7 +228,7 @@ pub fn distances(x: f64) -> (f64, f64) {
 
 impl ScenarioSpec {
     /// The same scenario with another start.
-    pub fn with_start(&self, start: Start) -> ScenarioSpec {
+    pub(crate) fn with_start(&self, start: Start) -> ScenarioSpec {
         ScenarioSpec {
             start,
             ..self.clone()
@@ -338,7 +338,7 @@ fn steer(
 
 impl Trace {
     /// The same trace told another start: the field only.
-    pub fn with_start(&self, start: Start) -> Trace {
+    pub(crate) fn with_start(&self, start: Start) -> Trace {
         let (n, k) = (self.field.tracks, self.info.red);
         Trace {
             field: match start {

@@ -295,7 +295,7 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
 
 /// The error a belief with these marginals expects of the best per-track
 /// labelling: Σ_t min(p_t, 1 − p_t)/n.
-pub fn bayes_risk(marginals: &[f64]) -> f64 {
+pub(crate) fn bayes_risk(marginals: &[f64]) -> f64 {
     if marginals.is_empty() {
         return f64::NAN;
     }
@@ -308,7 +308,7 @@ pub fn bayes_risk(marginals: &[f64]) -> f64 {
 
 /// The error a belief with these marginals expects of labelling exactly
 /// `predicted` red: (Σ_{t ∈ predicted} (1 − p_t) + Σ_{t ∉ predicted} p_t)/n.
-pub fn expected_mislabels(marginals: &[f64], predicted: &[u32]) -> f64 {
+pub(crate) fn expected_mislabels(marginals: &[f64], predicted: &[u32]) -> f64 {
     if marginals.is_empty() {
         return f64::NAN;
     }

@@ -301,7 +301,7 @@ pub fn distributed(results: &Results) -> String {
 
 /// The overcomplete method's summaries at a point, conditioning exactly
 /// and with the distributed rule.
-pub fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
+pub(crate) fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
     let find = |f: &dyn Fn(&Method) -> bool| p.methods.iter().find(|(m, _)| f(m)).map(|(_, s)| s);
     Some((
         find(&|m| matches!(m, Method::Overcomplete(_)))?,
@@ -311,7 +311,7 @@ pub fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
 
 /// (runs whose error differs at all, runs compared): the same seeds, run
 /// by run.
-pub fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
+pub(crate) fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
     let pairs: Vec<(f64, f64)> = a
         .run_errors
         .iter()
@@ -323,7 +323,7 @@ pub fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
 }
 
 /// Every method against a particle filter given the same time.
-pub fn equal_time(results: &Results) -> String {
+pub(crate) fn equal_time(results: &Results) -> String {
     let mut out = String::from(
         "| start | n | swap | method | tracking error | seconds | P at equal time | particle error | particle seconds | method − particles |\n\
          |---|---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
@@ -358,7 +358,7 @@ pub fn equal_time(results: &Results) -> String {
 }
 
 /// The Radon methods against a particle filter holding as many sets.
-pub fn equal_memory(results: &Results) -> String {
+pub(crate) fn equal_memory(results: &Results) -> String {
     let mut out = String::from(
         "| start | n | swap | B = P | exact | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",

@@ -78,7 +78,7 @@ pub fn drive<R: BufRead, P: Replay>(
 }
 
 /// Writes one JSON Lines record.
-pub fn write_line(out: &mut impl Write, value: &impl Serialize) -> Result<()> {
+pub(crate) fn write_line(out: &mut impl Write, value: &impl Serialize) -> Result<()> {
     serde_json::to_writer(&mut *out, value)
         .map_err(std::io::Error::from)
         .and_then(|()| out.write_all(b"\n"))
@@ -86,7 +86,7 @@ pub fn write_line(out: &mut impl Write, value: &impl Serialize) -> Result<()> {
 }
 
 /// The `FILE:LINE: kind: reason` error of the replays, for trace `source`.
-pub fn line_error(source: &str) -> impl Fn(usize, &str, BeliefError) -> anyhow::Error + '_ {
+pub(crate) fn line_error(source: &str) -> impl Fn(usize, &str, BeliefError) -> anyhow::Error + '_ {
     move |line, kind, error| anyhow!("{source}:{line}: {kind}: {error}")
 }
 
@@ -141,7 +141,7 @@ impl<F: ?Sized> Timed<F> {
 
 /// A replay's output lines, parsed, or its error as text (for tests).
 #[cfg(test)]
-pub fn output_lines(
+pub(crate) fn output_lines(
     replay: impl FnOnce(&mut Vec<u8>) -> Result<()>,
 ) -> Result<Vec<serde_json::Value>, String> {
     let mut out = Vec::new();

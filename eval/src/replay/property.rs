@@ -81,10 +81,10 @@ pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
 }
 
 /// The particle count of `--method particles` when `--particles` is not given.
-pub const DEFAULT_PARTICLES: usize = 1000;
+pub(crate) const DEFAULT_PARTICLES: usize = 1000;
 
 /// The flags that make no sense together, refused before anything is read.
-pub fn check_options(args: &ReplayArgs) -> Result<()> {
+pub(crate) fn check_options(args: &ReplayArgs) -> Result<()> {
     let method = args.property_method();
     if args.marginals.is_some()
         || args.bits.is_some()
