@@ -8,7 +8,7 @@ use idmesh_protocol::wire::sensor_to_leader::Batch;
 use std::collections::VecDeque;
 
 #[derive(Debug, Default, serde::Serialize, serde::Deserialize)]
-pub struct BatchLog {
+pub(crate) struct BatchLog {
     /// The number of the first batch kept.
     first: u64,
     batches: VecDeque<Batch>,
@@ -16,7 +16,7 @@ pub struct BatchLog {
 
 impl BatchLog {
     /// The number the next batch gets.
-    pub fn next_number(&self) -> u64 {
+    pub(crate) fn next_number(&self) -> u64 {
         self.first + self.batches.len() as u64
     }
 
@@ -49,10 +49,6 @@ impl BatchLog {
 
     pub fn len(&self) -> usize {
         self.batches.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.batches.is_empty()
     }
 }
 

@@ -173,7 +173,7 @@ impl<Q> Cuts<Q> {
     }
 
     /// The stream is over: every cut still waiting is refused.
-    pub fn refuse_all(&mut self, router: &Router) -> Vec<(Q, String)> {
+    pub(crate) fn refuse_all(&mut self, router: &Router) -> Vec<(Q, String)> {
         self.held = 0;
         std::mem::take(&mut self.scheduled)
             .into_iter()

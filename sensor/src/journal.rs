@@ -160,7 +160,7 @@ pub struct Journal {
 }
 
 /// How much a journal grows before it is compacted, by default.
-pub const COMPACT_AFTER: u64 = 16 << 20;
+pub(crate) const COMPACT_AFTER: u64 = 16 << 20;
 
 /// Where the copy of the journal at `path` is.
 pub fn copy_path(path: &Path) -> PathBuf {
@@ -251,7 +251,7 @@ impl Journal {
 
     /// Waits another [`Journal::compact_after`] before it is due again (a
     /// snapshot could not be taken: the journal stays whole).
-    pub fn postpone(&mut self) {
+    pub(crate) fn postpone(&mut self) {
         self.base = self.bytes();
     }
 

@@ -62,7 +62,7 @@ pub enum CutOutcome<Q> {
 /// was sent: it keeps the leader's position, and so what the sensor may
 /// forget (durable marks) and how stale its answers could look, within
 /// that distance, at a cost of one batch per this many seqs.
-pub const IDLE_BATCH_EVERY: u64 = 4096;
+pub(crate) const IDLE_BATCH_EVERY: u64 = 4096;
 
 /// A leader's progress as the sensor knows it ([`Progress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -261,7 +261,7 @@ impl<Q> Gateway<Q> {
 
     /// Counts journal records that were damaged in one copy of the
     /// journal and taken from the other when the sensor restarted.
-    pub fn note_journal_repaired(&mut self, records: usize) {
+    pub(crate) fn note_journal_repaired(&mut self, records: usize) {
         self.state.stats.journal_repaired += records as u64;
     }
 

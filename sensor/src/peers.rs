@@ -21,14 +21,14 @@ pub const POLL: Duration = Duration::from_millis(5);
 
 /// After a slice that changed nothing here (the peer held the request as
 /// long as it holds one), how long before asking again.
-pub const HELD_FOR: Duration = Duration::from_millis(1);
+pub(crate) const HELD_FOR: Duration = Duration::from_millis(1);
 
 /// How long one fetch may wait for its reply.
-pub const FETCH_TIMEOUT: Duration = Duration::from_secs(1);
+pub(crate) const FETCH_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// What one fetch of a peer's intake got.
 #[derive(Debug)]
-pub enum Fetch {
+pub(crate) enum Fetch {
     /// The slice's bytes.
     Slice(Vec<u8>),
     /// The peer answered with an error.
@@ -38,7 +38,7 @@ pub enum Fetch {
 }
 
 /// A peer's name and what fetching from it got.
-pub type Fetched = (String, Fetch);
+pub(crate) type Fetched = (String, Fetch);
 
 pub struct Peers {
     requests: Vec<(String, watch::Sender<Vec<u8>>)>,

@@ -13,12 +13,11 @@ use idmesh_extract::read_reports;
 use idmesh_leader::host::HostConfig;
 use idmesh_protocol::trace::{Header, Line, Problem, TraceReader};
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_sensor::driver::{Faults, GatewayConfig};
-use idmesh_sensor::extraction::Extraction;
-use idmesh_sensor::feed::{lines_of, InputLine, Source};
 use idmesh_sensor::journal::{Journal, Record};
-use idmesh_sensor::mesh::MeshConfig;
-use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
+use idmesh_sensor::{
+    lines_of, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace, MeshConfig, Router,
+    RouterConfig, Source,
+};
 use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
@@ -279,7 +278,7 @@ async fn sensor(
         extraction,
         max_errors,
     };
-    idmesh_sensor::driver::run(session, config, router, source, journal, shutdown()).await?;
+    idmesh_sensor::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())
 }
 

@@ -212,7 +212,7 @@ impl<Q> Gateway<Q> {
     /// Every cut query waiting for the merge is refused with `reason` (a
     /// peer it waits for does not answer). The cuts stay in the order: a
     /// query asked again once the peer is back is answered.
-    pub fn refuse_waiting(&mut self, reason: &str) {
+    pub(crate) fn refuse_waiting(&mut self, reason: &str) {
         for (_, queries) in std::mem::take(&mut self.waiting) {
             self.refusals
                 .extend(queries.into_iter().map(|q| (q, reason.to_string())));
@@ -221,7 +221,7 @@ impl<Q> Gateway<Q> {
 
     /// The sensors the merge waits for (to name them when it cannot go
     /// on: a cut then cannot be placed).
-    pub fn waiting_for(&self) -> Vec<String> {
+    pub(crate) fn waiting_for(&self) -> Vec<String> {
         self.state
             .mesh
             .as_ref()

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, VecDeque};
 
 /// The most entries one slice carries.
-pub const SLICE_ENTRIES: usize = 4096;
+pub(crate) const SLICE_ENTRIES: usize = 4096;
 
 #[derive(Debug, Serialize, Deserialize)]
 pub struct Intake {

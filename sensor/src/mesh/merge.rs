@@ -147,7 +147,7 @@ impl Merge {
     /// The sensors the merge waits for: nothing queued, and a watermark
     /// below the lowest entry queued (with nothing queued at all: every
     /// sensor not finished).
-    pub fn waiting_for(&self) -> Vec<String> {
+    pub(crate) fn waiting_for(&self) -> Vec<String> {
         let lowest = self
             .queues
             .iter()

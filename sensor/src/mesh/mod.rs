@@ -14,8 +14,8 @@
 //! journal records what changed it (peers' slices, ticks, cuts asked), so
 //! a restarted sensor merges the same order again.
 
-pub mod intake;
-pub mod merge;
+pub(crate) mod intake;
+pub(crate) mod merge;
 #[cfg(test)]
 mod simulation;
 #[cfg(test)]
@@ -120,7 +120,7 @@ impl Mesh {
 
     /// Events this sensor took itself: an answer whose watermark for it
     /// is at least this includes them all.
-    pub fn taken_events(&self) -> u64 {
+    pub(crate) fn taken_events(&self) -> u64 {
         self.taken_events
     }
 
@@ -195,7 +195,7 @@ impl Mesh {
 
     /// The outcome of the cut tagged `tag`, if it was placed or refused
     /// lately.
-    pub fn recalled(&self, tag: u64) -> Option<&Result<CutPlaced, String>> {
+    pub(crate) fn recalled(&self, tag: u64) -> Option<&Result<CutPlaced, String>> {
         self.recent.iter().find(|(t, _)| *t == tag).map(|(_, r)| r)
     }
 
@@ -209,7 +209,7 @@ impl Mesh {
 
     /// Whether a cut tagged `tag` was merged already (placed, refused, or
     /// waiting for its event count).
-    pub fn merged_cut(&self, tag: u64) -> bool {
+    pub(crate) fn merged_cut(&self, tag: u64) -> bool {
         self.recalled(tag).is_some() || self.cuts.holds(tag)
     }
 

@@ -19,8 +19,7 @@ use idmesh_identity::{
 use idmesh_placement::{factored_options, identity_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
-use idmesh_sensor::machine::Gateway;
-use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
+use idmesh_sensor::{Gateway, LeaderPlace, Router, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
