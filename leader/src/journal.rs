@@ -283,7 +283,7 @@ impl Journal {
 }
 
 /// Where the snapshot of the journal at `journal` is.
-pub fn snapshot_path(journal: &Path) -> PathBuf {
+pub(crate) fn snapshot_path(journal: &Path) -> PathBuf {
     with_suffix(journal, ".snapshot")
 }
 

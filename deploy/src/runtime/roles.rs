@@ -10,7 +10,7 @@ use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
 use idmesh_coordinator::driver::CoordinatorConfig;
 use idmesh_extract::read_reports;
-use idmesh_leader::host::HostConfig;
+use idmesh_leader::HostConfig;
 use idmesh_protocol::trace::{Header, Line, Problem, TraceReader};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_sensor::journal::{Journal, Record};
@@ -106,7 +106,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                         .position(|l| l.name == name)
                         .unwrap_or_default();
                     let sensor = topology.sensor_of_leader(index);
-                    idmesh_leader::host::run(
+                    idmesh_leader::run(
                         session.clone(),
                         HostConfig {
                             name: name.to_string(),

@@ -300,7 +300,7 @@ impl Node {
     }
 
     /// Since when the leader has been catching up, if it is.
-    pub fn recovering_since(&self) -> Option<Now> {
+    pub(crate) fn recovering_since(&self) -> Option<Now> {
         self.recovery.as_ref().map(|r| r.since)
     }
 

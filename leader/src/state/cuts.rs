@@ -98,7 +98,7 @@ impl Leader {
     /// `base` ([`Partial::base`]): the components not in that answer as
     /// they are now, and the first tracks of its components gone. None if
     /// that answer is no longer kept or either is not factored.
-    pub fn relative_to(&self, answer: &Answer, base: u64) -> Option<Partial> {
+    pub(crate) fn relative_to(&self, answer: &Answer, base: u64) -> Option<Partial> {
         let before = self.cut(base)?.parts.as_ref()?;
         let now = answer.parts.as_ref()?;
         let (changed, gone) = changes(before, now);
@@ -132,7 +132,7 @@ impl Leader {
     }
 
     /// [`Leader::quiet`], kept until an input changes anything.
-    pub fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Answer>> {
+    pub(crate) fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Answer>> {
         if let Some((kept_rows, answer)) = &self.resting {
             if *kept_rows == rows {
                 return Some(answer.clone());

@@ -333,7 +333,7 @@ impl Leader {
     /// Whether the leader has applied every item it was sent and is
     /// stopped at none: [`Leader::done_through`] is as far as its batches
     /// go.
-    pub fn caught_up(&self) -> bool {
+    pub(crate) fn caught_up(&self) -> bool {
         self.done_through() >= self.frontier
     }
 
@@ -403,7 +403,7 @@ impl Leader {
     /// The last item this leader has applied and received every transfer
     /// of: its position, or just before the first item whose transfer has
     /// not come. A peer asked for what it sent is asked from here.
-    pub fn received_through(&self) -> u64 {
+    pub(crate) fn received_through(&self) -> u64 {
         self.pending.first().map_or(self.position, |p| {
             self.position.min(p.seq.saturating_sub(1))
         })

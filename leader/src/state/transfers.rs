@@ -12,7 +12,7 @@ use idmesh_protocol::wire::factored::WireComponent;
 
 impl Leader {
     /// The transfers sent to leader `to` for items after `after`.
-    pub fn sent_to(&self, to: u16, after: u64) -> Vec<Transfer> {
+    pub(crate) fn sent_to(&self, to: u16, after: u64) -> Vec<Transfer> {
         self.sent
             .iter()
             .filter(|(receiver, t)| *receiver == to && t.seq > after)
@@ -29,7 +29,7 @@ impl Leader {
     /// Leader `name` has its state safe through item `position`: it will
     /// never ask for the transfers of items up to there again, so they are
     /// dropped. Returns how many were.
-    pub fn forget_sent(&mut self, name: &str, position: u64) -> usize {
+    pub(crate) fn forget_sent(&mut self, name: &str, position: u64) -> usize {
         let Some(to) = self.leaders().iter().position(|l| l == name) else {
             return 0;
         };

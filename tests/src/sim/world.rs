@@ -16,7 +16,7 @@ use idmesh_coordinator::machine::{
 use idmesh_identity::factored::assemble;
 use idmesh_identity::{IdentityFilter, InformationOptions, InformationRows};
 use idmesh_leader::journal::Kind;
-use idmesh_leader::machine::{Ask, Input, Node, Output, Timers};
+use idmesh_leader::{Ask, Input, Node, Output, Timers};
 use idmesh_placement::{from_wire_tree, identity_options};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
