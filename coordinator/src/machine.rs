@@ -68,8 +68,7 @@ pub type Components = Arc<Vec<Arc<CountPart>>>;
 
 /// What a marginals query found.
 #[derive(Debug, Clone)]
-pub struct Gathered {
-    pub cut: CutPlaced,
+pub(crate) struct Gathered {
     pub answer: MarginalsAnswer,
 }
 
@@ -173,20 +172,20 @@ impl Memory {
     }
 
     /// Counts a reply from another process that was no good.
-    pub fn note_bad_reply(&self, what: &str, problem: &str) {
+    pub(crate) fn note_bad_reply(&self, what: &str, problem: &str) {
         let n = self.bad_replies.fetch_add(1, Ordering::Relaxed) + 1;
         tracing::warn!(what, problem, bad_replies = n, "bad reply");
     }
 
     /// Counts a query answered `degraded: …` (a leader missing or not
     /// at the cut).
-    pub fn note_degraded(&self) {
+    pub(crate) fn note_degraded(&self) {
         self.degraded.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Counts a fresh cut whose sums every leader pushed (`true`), or one
     /// whose leaders had to be asked.
-    pub fn note_cut(&self, pushed: bool) {
+    pub(crate) fn note_cut(&self, pushed: bool) {
         let counter = if pushed {
             &self.cuts_pushed
         } else {
@@ -210,7 +209,7 @@ impl Memory {
     /// at every cut, where most cuts change no component), the new
     /// watermark before the kept bytes of everything else; else encoded
     /// now. Kept with the answer, which is taken rather than copied.
-    pub fn marginals_json(&self, answer: MarginalsAnswer) -> Bytes {
+    pub(crate) fn marginals_json(&self, answer: MarginalsAnswer) -> Bytes {
         let mut encoded = self.encoded.lock().unwrap_or_else(|e| e.into_inner());
         let size = match &*encoded {
             Some(last) if last.answer == answer => return last.bytes.clone(),
@@ -266,7 +265,7 @@ impl Memory {
 
     /// No sensor answered: degraded, naming the sensors that did before,
     /// or a stream that has no source yet.
-    pub fn no_sensor(&self) -> GatherError {
+    pub(crate) fn no_sensor(&self) -> GatherError {
         let known: Vec<String> = self
             .sensors
             .lock()
@@ -367,7 +366,7 @@ pub enum At {
 }
 
 /// The parameters of the cut request of a fresh cut tagged `tag`.
-pub fn cut_parameters(tag: u64, at: At, share: Share) -> String {
+pub(crate) fn cut_parameters(tag: u64, at: At, share: Share) -> String {
     let mut parameters = match at {
         At::Latest => format!("tag={tag}"),
         At::Events(n) => format!("tag={tag};events={n}"),
@@ -458,7 +457,7 @@ impl Partials {
     }
 
     /// Whether a reply was an error or bad.
-    pub fn refused_any(&self) -> bool {
+    pub(crate) fn refused_any(&self) -> bool {
         !self.errors.is_empty()
     }
 

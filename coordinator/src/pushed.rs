@@ -14,14 +14,14 @@ use tokio::sync::mpsc;
 
 /// One pushed answer: the key it came on (naming the leader) and its bytes.
 #[derive(Debug)]
-pub struct Pushed {
+pub(crate) struct Pushed {
     pub key: String,
     pub bytes: Vec<u8>,
 }
 
 /// The queries waiting for pushed answers, by the tag of their cut.
 #[derive(Debug, Default)]
-pub struct Pushes {
+pub(crate) struct Pushes {
     waiting: Mutex<HashMap<u64, mpsc::UnboundedSender<Pushed>>>,
 }
 

@@ -22,7 +22,7 @@ pub async fn healthz() -> Response {
 
 /// What `/readyz` says.
 #[derive(Debug, Serialize)]
-pub struct Readiness {
+pub(crate) struct Readiness {
     pub ready: bool,
     /// The leader roles of the stream, and those that did not answer.
     pub leaders: Vec<String>,

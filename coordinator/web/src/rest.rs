@@ -27,9 +27,9 @@ use std::convert::Infallible;
 use std::sync::Arc;
 use std::time::Duration;
 
-pub const DEFAULT_INTERVAL: Duration = Duration::from_millis(1000);
-pub const MIN_INTERVAL: Duration = Duration::from_millis(100);
-pub const MAX_INTERVAL: Duration = Duration::from_secs(60);
+pub(crate) const DEFAULT_INTERVAL: Duration = Duration::from_millis(1000);
+pub(crate) const MIN_INTERVAL: Duration = Duration::from_millis(100);
+pub(crate) const MAX_INTERVAL: Duration = Duration::from_secs(60);
 
 /// The questions of the query API, by their key under `<prefix>/query/`:
 /// (pattern, name in the latency histograms); `*` is one chunk.

@@ -8,7 +8,7 @@ use super::mesh::{self, MeshOptions};
 use super::security::rules;
 use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
-use idmesh_coordinator::driver::CoordinatorConfig;
+use idmesh_coordinator::CoordinatorConfig;
 use idmesh_extract::read_reports;
 use idmesh_leader::HostConfig;
 use idmesh_protocol::trace::{Header, Line, Problem, TraceReader};
@@ -129,7 +129,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                     .await
                     .map_err(anyhow::Error::from)
                 }
-                Role::Coordinator => idmesh_coordinator::driver::run(
+                Role::Coordinator => idmesh_coordinator::run(
                     session.clone(),
                     CoordinatorConfig {
                         name: name.to_string(),
