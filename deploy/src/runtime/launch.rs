@@ -348,7 +348,7 @@ pub fn write_simulation(scenario: idmesh_sim::Scenario, out: &Path) -> Result<()
 
 /// The events of a trace (every line but the header and truth lines): what
 /// a watermark counts.
-pub fn count_events(trace: &Path) -> Result<u64> {
+pub(crate) fn count_events(trace: &Path) -> Result<u64> {
     let mut reader = idmesh_protocol::trace::TraceReader::open(trace)?;
     reader.read_header()?;
     let mut events = 0;

@@ -54,7 +54,7 @@ pub fn run(options: &WebOptions) -> Result<()> {
 }
 
 /// The HTTP listener, or an error naming the address.
-pub async fn bind(address: &str) -> Result<tokio::net::TcpListener> {
+pub(crate) async fn bind(address: &str) -> Result<tokio::net::TcpListener> {
     tokio::net::TcpListener::bind(address)
         .await
         .with_context(|| format!("the web gateway cannot listen on {address}"))

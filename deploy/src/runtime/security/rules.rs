@@ -42,7 +42,7 @@ use std::collections::BTreeSet;
 /// Processes named `from` may send `messages` on `keys` to processes
 /// named `to` (certificate common names).
 #[derive(Debug, Clone)]
-pub struct Grant {
+pub(crate) struct Grant {
     /// A short name for the rule ids, so that Zenoh's logs say which.
     pub what: String,
     pub from: Vec<String>,
@@ -105,7 +105,7 @@ fn grant(
 }
 
 /// Every grant of the deployment.
-pub fn grants(topology: &Topology) -> Vec<Grant> {
+pub(crate) fn grants(topology: &Topology) -> Vec<Grant> {
     let keys = Keys::new(topology.prefix.clone());
     let parties = Parties::of(topology);
     let mut grants = stream_grants(&keys, &parties);

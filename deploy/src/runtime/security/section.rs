@@ -65,7 +65,7 @@ impl SecuritySection {
 
 impl SecuritySection {
     /// The TLS files of process `name`; `dir` is the topology file's folder.
-    pub fn tls_for(&self, dir: &Path, name: &str) -> Result<Tls, SecurityError> {
+    pub(crate) fn tls_for(&self, dir: &Path, name: &str) -> Result<Tls, SecurityError> {
         let certs = dir.join(&self.certs);
         Tls::new(
             certs.join("ca.pem"),
