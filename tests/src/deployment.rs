@@ -443,7 +443,7 @@ impl Deployment {
 
     /// Like [`Deployment::query`], but takes what was answered when some
     /// questions were refused.
-    pub fn query_lenient(&self, args: &[&str]) -> Vec<Value> {
+    pub(crate) fn query_lenient(&self, args: &[&str]) -> Vec<Value> {
         let (answers, errors, _) = self.run_query(args);
         eprintln!("{errors}");
         answers
@@ -470,7 +470,7 @@ impl Deployment {
 
     /// `--ca`, `--cert`, `--key` of the deployment's client, for a
     /// secured deployment (none otherwise).
-    pub fn client_tls_args(&self) -> Vec<String> {
+    pub(crate) fn client_tls_args(&self) -> Vec<String> {
         self.security
             .iter()
             .flat_map(|s| {
@@ -665,7 +665,7 @@ pub fn hosted_on(stats: &Value, role: &str, host: &str) -> bool {
 
 /// What `idmesh query --json` printed: its JSON lines, its stderr, and
 /// whether it succeeded.
-pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {
+pub(crate) fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {
     let answers = String::from_utf8_lossy(&output.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).expect("query prints JSON"))
@@ -679,7 +679,7 @@ pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool)
 
 /// Asks (`ask`) every 100 ms until the first reply satisfies `wanted`,
 /// or panics after `patience` with the last answer or error and `log()`.
-pub fn answer_until(
+pub(crate) fn answer_until(
     patience: Duration,
     ask: impl Fn() -> Result<Vec<Value>, String>,
     wanted: impl Fn(&Value) -> bool,

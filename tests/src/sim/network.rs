@@ -14,7 +14,7 @@ pub enum Endpoint {
     Coordinator,
 }
 
-pub struct Network {
+pub(crate) struct Network {
     /// Events by (time, order of scheduling): ties keep their order.
     queue: BTreeMap<(Ms, u64), Event>,
     order: u64,
@@ -41,7 +41,7 @@ impl Network {
     }
 
     /// Crashes and partitions at random points before `span`.
-    pub fn schedule_faults(&mut self, rng: &mut ChaCha8Rng, span: Ms, leaders: usize) {
+    pub(crate) fn schedule_faults(&mut self, rng: &mut ChaCha8Rng, span: Ms, leaders: usize) {
         for _ in 0..rng.gen_range(0..=2) {
             let at = rng.gen_range(0..span);
             self.at(at, Event::Crash(rng.gen_range(0..leaders)));
@@ -92,11 +92,11 @@ impl Network {
         true
     }
 
-    pub fn isolate(&mut self, endpoint: Endpoint) {
+    pub(crate) fn isolate(&mut self, endpoint: Endpoint) {
         self.isolated.insert(endpoint);
     }
 
-    pub fn heal(&mut self, endpoint: Endpoint) {
+    pub(crate) fn heal(&mut self, endpoint: Endpoint) {
         self.isolated.remove(&endpoint);
     }
 

@@ -58,7 +58,7 @@ pub struct Scenario {
 /// What `idmesh replay` runs by default after every prefix: the factored
 /// identity belief on a stream with a known start (what the leaders hold
 /// there), the information matrix without one.
-pub struct CentralIdentity {
+pub(crate) struct CentralIdentity {
     /// `rows[e]`: the information matrix's log-likelihood rows after the
     /// first e events (None: the factored identity belief).
     pub rows: Option<Vec<Vec<Vec<f64>>>>,

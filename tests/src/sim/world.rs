@@ -35,7 +35,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::Duration;
 
 /// Virtual milliseconds.
-pub type Ms = u64;
+pub(crate) type Ms = u64;
 
 /// How long a get waits for its answer (the leaders' `follow_timeout`).
 const ASK_TIMEOUT: Ms = 1000;
@@ -50,7 +50,7 @@ const STALL_CHECK: Ms = 600;
 
 /// A message on the wire, by receiver.
 #[derive(Debug, Clone)]
-pub enum Msg {
+pub(crate) enum Msg {
     /// An input of leader `to`'s node; `ask` is set on the answer to one
     /// of its own gets.
     Leader {
@@ -65,7 +65,7 @@ pub enum Msg {
 }
 
 #[derive(Debug, Clone)]
-pub enum ToLeader {
+pub(crate) enum ToLeader {
     Batch(Vec<u8>),
     Transfer(Vec<u8>),
     Durable(Vec<u8>),
@@ -86,7 +86,7 @@ pub enum ToLeader {
 }
 
 #[derive(Debug, Clone)]
-pub enum ToSensor {
+pub(crate) enum ToSensor {
     Follow {
         ask: u64,
         bytes: Vec<u8>,
@@ -108,7 +108,7 @@ pub enum ToSensor {
 }
 
 #[derive(Debug, Clone)]
-pub enum ToCoordinator {
+pub(crate) enum ToCoordinator {
     Cut {
         id: u64,
         reply: Result<Vec<u8>, String>,
@@ -260,7 +260,7 @@ pub struct Tally {
     pub changes: u64,
 }
 
-pub struct World {
+pub(crate) struct World {
     rng: ChaCha8Rng,
     now: Ms,
     net: Network,
