@@ -170,7 +170,8 @@ pub struct Detect {
 
 impl Detect {
     /// A detection with a position only.
-    pub fn at(time: f64, track: u32, x: f64, y: f64) -> Self {
+    #[cfg(test)]
+    pub(crate) fn at(time: f64, track: u32, x: f64, y: f64) -> Self {
         Detect {
             time,
             track,

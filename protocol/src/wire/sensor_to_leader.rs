@@ -295,7 +295,7 @@ pub(crate) fn check_items(items: &[Sequenced], begin_allowed: bool) -> Result<()
 
 impl Item {
     /// The rules of one item on its own.
-    pub fn check(&self) -> Result<(), String> {
+    pub(crate) fn check(&self) -> Result<(), String> {
         match self {
             Item::Begin(begin) => begin.check(),
             Item::Mix {
