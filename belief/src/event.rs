@@ -151,14 +151,14 @@ impl Field {
     }
 
     /// Checks one event against this field.
-    pub fn check(&self, event: &Event) -> Result<(), BeliefError> {
+    pub(crate) fn check(&self, event: &Event) -> Result<(), BeliefError> {
         match *event {
             Event::Mix(mix) => self.check_mix(&mix),
             Event::Observe(observe) => self.check_observe(&observe),
         }
     }
 
-    pub fn check_mix(&self, mix: &Mix) -> Result<(), BeliefError> {
+    pub(crate) fn check_mix(&self, mix: &Mix) -> Result<(), BeliefError> {
         self.check_track(mix.a)?;
         self.check_track(mix.b)?;
         if mix.a == mix.b {
@@ -185,7 +185,7 @@ impl Field {
         Ok(())
     }
 
-    pub fn check_track(&self, track: u32) -> Result<(), BeliefError> {
+    pub(crate) fn check_track(&self, track: u32) -> Result<(), BeliefError> {
         if (track as usize) < self.tracks {
             Ok(())
         } else {

@@ -60,7 +60,7 @@ pub(crate) struct Weights {
 }
 
 impl Weights {
-    pub fn new(tracks: usize, red: &RedCount) -> Self {
+    pub(crate) fn new(tracks: usize, red: &RedCount) -> Self {
         let mut ln_factorial = Vec::with_capacity(tracks + 1);
         let mut acc = 0.0;
         ln_factorial.push(0.0);
@@ -135,7 +135,7 @@ impl Weights {
 
     /// ln W(j) = ln W(j, 0), the Radon atom of j tracks.
     #[cfg(test)]
-    pub fn ln(&self, j: usize) -> f64 {
+    pub(crate) fn ln(&self, j: usize) -> f64 {
         self.ln2(j, 0)
     }
 
@@ -172,7 +172,7 @@ impl Weights {
 
     /// W(j + 1)/W(j) for Radon atoms.
     #[cfg(test)]
-    pub fn ratio(&self, j: usize) -> f64 {
+    pub(crate) fn ratio(&self, j: usize) -> f64 {
         self.ratio_red(j, 0)
     }
 

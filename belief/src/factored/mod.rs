@@ -318,7 +318,8 @@ impl Clone for FactoredBelief {
 
 impl FactoredBelief {
     /// Every track its own component, with the default options.
-    pub fn new(field: Field) -> Result<Self, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn new(field: Field) -> Result<Self, BeliefError> {
         Self::with_options(field, FactoredOptions::default())
     }
 
@@ -371,10 +372,6 @@ impl FactoredBelief {
         belief.stats.max_component = 1;
         belief.note_size();
         Ok(belief)
-    }
-
-    pub fn options(&self) -> &FactoredOptions {
-        &self.options
     }
 
     pub fn stats(&self) -> &FactoredStats {

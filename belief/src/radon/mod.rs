@@ -202,21 +202,19 @@ impl RadonBelief {
         Ok(belief)
     }
 
-    pub fn options(&self) -> &RadonOptions {
-        &self.options
-    }
-
     pub fn stats(&self) -> &RadonStats {
         &self.stats
     }
 
     /// The Radon coefficient c_α of φ_α in the paper's units (f = Σ c_α φ_α),
     /// 0 for a set not held. Finite only while c_α fits an f64.
-    pub fn coefficient(&self, set: &TrackSet) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn coefficient(&self, set: &TrackSet) -> f64 {
         self.coefficient_of(&Atom::radon(set.clone()))
     }
 
     /// The coefficient of any atom, in the paper's units.
+    #[cfg(test)]
     pub(crate) fn coefficient_of(&self, atom: &Atom) -> f64 {
         match self.masses.get(atom) {
             Some(&m) => m * (self.log_scale - self.ln_weight(atom)).exp(),
@@ -232,7 +230,8 @@ impl RadonBelief {
     }
 
     /// Every held atom with its share of the total mass (sums to 1).
-    pub fn masses(&self) -> impl Iterator<Item = (&Atom, f64)> + '_ {
+    #[cfg(test)]
+    pub(crate) fn masses(&self) -> impl Iterator<Item = (&Atom, f64)> + '_ {
         let total = self.total_mass();
         self.masses.iter().map(move |(a, &m)| (a, m / total))
     }

@@ -102,21 +102,21 @@ pub(crate) struct OmpSchedule {
 }
 
 impl OmpSchedule {
-    pub fn mixed(&mut self) {
+    pub(crate) fn mixed(&mut self) {
         self.mixes += 1;
     }
 
-    pub fn observed(&mut self) {
+    pub(crate) fn observed(&mut self) {
         self.observations += 1;
     }
 
     /// At least `every` events since the last run, at least half of them
     /// mixes.
-    pub fn due(&self, omp: &OmpOptions) -> bool {
+    pub(crate) fn due(&self, omp: &OmpOptions) -> bool {
         self.mixes + self.observations >= omp.every && self.mixes >= self.observations
     }
 
-    pub fn ran(&mut self) {
+    pub(crate) fn ran(&mut self) {
         *self = OmpSchedule::default();
     }
 }
