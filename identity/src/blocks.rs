@@ -49,7 +49,7 @@ impl Block {
 /// The blocks of the n × n row-major pattern `positive(t, i)`, in the order
 /// of their smallest track; tracks or identities with no positive entry at
 /// all form blocks with an empty other side.
-pub fn blocks(n: usize, positive: impl Fn(usize, usize) -> bool) -> Vec<Block> {
+pub(crate) fn blocks(n: usize, positive: impl Fn(usize, usize) -> bool) -> Vec<Block> {
     // Union–find over 2n nodes: tracks 0..n, identities n..2n.
     let mut parent: Vec<usize> = (0..2 * n).collect();
     for t in 0..n {

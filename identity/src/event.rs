@@ -28,7 +28,7 @@ pub struct Identify {
 
 impl Identify {
     /// P(this read | track carries `truth`) among `n` identities.
-    pub fn likelihood(&self, n: usize, truth: usize) -> f64 {
+    pub(crate) fn likelihood(&self, n: usize, truth: usize) -> f64 {
         if truth == self.identity as usize {
             self.accuracy
         } else {
@@ -69,7 +69,7 @@ pub enum IdentityEvent {
 
 /// Checks a mix against `n` tracks: two distinct tracks in range and a swap
 /// probability in [0, 1].
-pub fn check_mix(n: usize, mix: &Mix) -> Result<(), BeliefError> {
+pub(crate) fn check_mix(n: usize, mix: &Mix) -> Result<(), BeliefError> {
     check_track(n, mix.a)?;
     check_track(n, mix.b)?;
     if mix.a == mix.b {
@@ -101,7 +101,7 @@ pub(crate) fn check_identify(n: usize, identify: &Identify) -> Result<(), Belief
 }
 
 /// Checks a track id against `n` tracks.
-pub fn check_track(n: usize, track: u32) -> Result<(), BeliefError> {
+pub(crate) fn check_track(n: usize, track: u32) -> Result<(), BeliefError> {
     if (track as usize) < n {
         Ok(())
     } else {
@@ -111,7 +111,7 @@ pub fn check_track(n: usize, track: u32) -> Result<(), BeliefError> {
 
 /// Checks that `assignment` (track t carries identity `assignment[t]`) is a
 /// permutation of 0..n.
-pub fn check_assignment(n: usize, assignment: &[u32]) -> Result<(), BeliefError> {
+pub(crate) fn check_assignment(n: usize, assignment: &[u32]) -> Result<(), BeliefError> {
     let bad = || BeliefError::BadInitialIdentity {
         tracks: n,
         got: assignment.to_vec(),

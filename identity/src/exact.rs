@@ -11,7 +11,7 @@
 //! - Evidence (Definition 3, Bayes' rule) multiplies p(π) by
 //!   P(read | π(track)) of the [`Identify`] read model and renormalizes.
 
-use super::event::{check_assignment, check_identify, check_mix, check_square, Identify};
+use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{IdentityFilter, Marginals};
 use super::permutation::Permutations;
 use idmesh_belief::BeliefError;
@@ -58,8 +58,9 @@ impl ExactPermutationFilter {
     /// p(π) ∝ exp(Σ_t l\[t\]\[π(t)\]): the distribution an information matrix
     /// L encodes (Shin et al., Section 3.1). Entries may be −∞ (impossible
     /// pairings) but not +∞ or NaN, and some assignment must stay possible.
-    pub fn from_log_likelihoods(l: &[Vec<f64>]) -> Result<Self, BeliefError> {
-        let n = check_square(l)?;
+    #[cfg(test)]
+    pub(crate) fn from_log_likelihoods(l: &[Vec<f64>]) -> Result<Self, BeliefError> {
+        let n = super::event::check_square(l)?;
         if let Some(&bad) = l
             .iter()
             .flatten()
@@ -94,12 +95,14 @@ impl ExactPermutationFilter {
     }
 
     /// P(assignment) for every assignment, indexed by Lehmer rank.
-    pub fn probabilities(&self) -> &[f64] {
+    #[cfg(test)]
+    pub(crate) fn probabilities(&self) -> &[f64] {
         &self.probs
     }
 
     /// P(track t carries `assignment[t]` for every t).
-    pub fn probability(&self, assignment: &[u32]) -> Result<f64, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn probability(&self, assignment: &[u32]) -> Result<f64, BeliefError> {
         check_assignment(self.size(), assignment)?;
         let perm: Vec<u8> = assignment.iter().map(|&i| i as u8).collect();
         Ok(self.probs[self.perms.rank(&perm)])
@@ -124,7 +127,8 @@ impl ExactPermutationFilter {
     }
 
     /// The entropy of the joint distribution, in nats.
-    pub fn entropy(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn entropy(&self) -> f64 {
         -self
             .probs
             .iter()
@@ -135,6 +139,7 @@ impl ExactPermutationFilter {
 }
 
 /// Divides by the sum; refuses a sum that is 0 or not finite.
+#[cfg(test)]
 fn normalize(probs: &mut [f64]) -> Result<(), BeliefError> {
     let total: f64 = probs.iter().sum();
     if !(total.is_finite() && total > 0.0) {

@@ -139,7 +139,8 @@ pub struct InformationMatrix {
 
 impl InformationMatrix {
     /// L = 0: the uniform belief, as in the paper.
-    pub fn uniform(n: usize) -> Result<Self, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn uniform(n: usize) -> Result<Self, BeliefError> {
         Self::uniform_with(n, InformationOptions::default())
     }
 
@@ -209,10 +210,6 @@ impl InformationMatrix {
             .flat_map(|&i| start_row(n, Some(i), confidence))
             .collect();
         Ok(InformationMatrix { n, l, options })
-    }
-
-    pub fn options(&self) -> &InformationOptions {
-        &self.options
     }
 
     /// Changes how [`IdentityFilter::marginals`] answers.

@@ -284,7 +284,7 @@ pub(crate) fn information_marginals(
 }
 
 /// [`information_marginals`] block by block (see the module docs).
-pub fn block_marginals(
+pub(crate) fn block_marginals(
     n: usize,
     l: &[f64],
     method: &MarginalMethod,
@@ -297,7 +297,7 @@ pub fn block_marginals(
 /// after `stop` is set: between blocks, and within a Metropolis chain
 /// (the one method whose time the asker sets, by its samples). The other
 /// methods refuse blocks too large to finish in seconds.
-pub fn block_marginals_stoppable(
+pub(crate) fn block_marginals_stoppable(
     n: usize,
     l: &[f64],
     method: &MarginalMethod,

@@ -27,7 +27,7 @@ pub(crate) struct Permutations {
 
 impl Permutations {
     /// Enumerates the permutations of 0..n, 1 ≤ n ≤ [`MAX_ENUMERATED_TRACKS`].
-    pub fn new(n: usize) -> Result<Self, BeliefError> {
+    pub(crate) fn new(n: usize) -> Result<Self, BeliefError> {
         if n == 0 {
             return Err(BeliefError::NoTracks);
         }
@@ -149,7 +149,7 @@ impl Permutations {
 
     /// The rank of a permutation of 0..n (not checked: callers pass
     /// permutations they built).
-    pub fn rank(&self, perm: &[u8]) -> usize {
+    pub(crate) fn rank(&self, perm: &[u8]) -> usize {
         let mut unused: u32 = (1u32 << self.n) - 1;
         let mut rank = 0;
         for (k, &v) in perm.iter().enumerate() {

@@ -151,12 +151,13 @@ impl BitCode {
     }
 
     /// The codeword of `identity` (< identities).
-    pub fn word(&self, identity: usize) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn word(&self, identity: usize) -> u64 {
         self.words[identity]
     }
 
     /// Bit j of identity i's codeword.
-    pub fn bit(&self, identity: usize, j: usize) -> bool {
+    pub(crate) fn bit(&self, identity: usize, j: usize) -> bool {
         self.words[identity] >> j & 1 == 1
     }
 
@@ -224,10 +225,6 @@ impl PropertyBitsFilter {
             beliefs,
             sinkhorn: SinkhornOptions::default(),
         })
-    }
-
-    pub fn code(&self) -> &BitCode {
-        &self.code
     }
 
     /// Radon coefficients held over all bits.

@@ -77,7 +77,8 @@ pub fn log_loss(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> 
 
 /// The share of tracks whose identity in the most likely one-to-one
 /// assignment under `p` is the true one.
-pub fn map_accuracy(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
+#[cfg(test)]
+pub(crate) fn map_accuracy(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
     let n = check_truth(p, truth)?;
     let best = p.most_likely()?;
     let right = best.iter().zip(truth).filter(|(a, b)| a == b).count();

@@ -92,7 +92,7 @@ pub(crate) struct SinkhornReport {
 /// negative or non-finite entries ([`BeliefError::Numerical`]); no positive
 /// diagonal ([`BeliefError::Degenerate`] with normalizer 0 — the permanent
 /// is 0); no convergence within the cap ([`BeliefError::Numerical`]).
-pub fn sinkhorn(
+pub(crate) fn sinkhorn(
     n: usize,
     matrix: &mut [f64],
     options: &SinkhornOptions,

@@ -36,7 +36,7 @@ pub struct Background {
 
 impl Background {
     /// Every one of `n` identities alike.
-    pub fn uniform(n: usize) -> Self {
+    pub(crate) fn uniform(n: usize) -> Self {
         Background {
             leak: 0.0,
             shared: 1.0 / n.max(1) as f64,
@@ -80,7 +80,7 @@ impl Background {
     }
 
     /// Surely identity `i`.
-    pub fn certain(i: u32) -> Self {
+    pub(crate) fn certain(i: u32) -> Self {
         Background {
             leak: 0.0,
             shared: 0.0,
@@ -89,7 +89,7 @@ impl Background {
     }
 
     /// P(the track carries identity `i`).
-    pub fn probability(&self, i: u32) -> f64 {
+    pub(crate) fn probability(&self, i: u32) -> f64 {
         self.listed.get(&i).copied().unwrap_or(self.shared)
     }
 
@@ -101,7 +101,7 @@ impl Background {
 
     /// A cut or a dropped link ruled out assignments that put an identity
     /// from elsewhere on this track with probability `q`: that mass leaks.
-    pub fn lose(&mut self, q: f64) {
+    pub(crate) fn lose(&mut self, q: f64) {
         let q = q.clamp(0.0, 1.0);
         self.leak = 1.0 - (1.0 - self.leak) * (1.0 - q);
     }
@@ -207,7 +207,7 @@ impl Background {
     }
 
     /// Identities listed (the row's memory).
-    pub fn listed(&self) -> usize {
+    pub(crate) fn listed(&self) -> usize {
         self.listed.len()
     }
 }

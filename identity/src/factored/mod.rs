@@ -424,15 +424,11 @@ impl FactoredIdentity {
         groups + backgrounds + indices
     }
 
-    /// The options.
-    pub fn options(&self) -> FactoredIdentityOptions {
-        self.options
-    }
-
     /// The groups, in no particular order. Tracks and identities with ids
     /// ≥ n are ports ([`links`]): a link's two ports are n + 2l and
     /// n + 2l + 1.
-    pub fn groups(&self) -> &[Group] {
+    #[cfg(test)]
+    pub(crate) fn groups(&self) -> &[Group] {
         &self.groups
     }
 
