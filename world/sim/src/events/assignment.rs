@@ -16,7 +16,7 @@ pub(crate) struct Assignment {
 }
 
 impl Assignment {
-    pub fn identity(n: usize) -> Self {
+    pub(crate) fn identity(n: usize) -> Self {
         let ids: Vec<u32> = (0..n as u32).collect();
         Assignment {
             target_on_track: ids.clone(),
@@ -25,7 +25,7 @@ impl Assignment {
     }
 
     /// The track following `target`.
-    pub fn track_of(&self, target: usize) -> u32 {
+    pub(crate) fn track_of(&self, target: usize) -> u32 {
         self.track_of_target[target]
     }
 
@@ -43,7 +43,7 @@ impl Assignment {
     }
 
     /// The tracks following the targets with `is_red[target]`, ascending.
-    pub fn red_tracks(&self, is_red: &[bool]) -> Vec<u32> {
+    pub(crate) fn red_tracks(&self, is_red: &[bool]) -> Vec<u32> {
         let mut red: Vec<u32> = is_red
             .iter()
             .enumerate()

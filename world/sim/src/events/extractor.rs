@@ -112,7 +112,7 @@ impl Extractor {
     /// `is_red[i]` is the colour of target i; track t starts on target t.
     /// Swap draws come from `swap_rng`, sensor draws from `sensor_rng`.
     /// Panics on invalid parameters (the scenario builder checks them).
-    pub fn new(
+    pub(crate) fn new(
         params: ExtractionParams,
         is_red: Vec<bool>,
         swap_rng: ChaCha8Rng,
@@ -167,7 +167,7 @@ impl Extractor {
     /// many it appended. When the limit cuts a step short, the rest of
     /// that step is dropped (including its swaps), so the truth matches
     /// the events kept.
-    pub fn step(
+    pub(crate) fn step(
         &mut self,
         time: f64,
         positions: &[Option<Vec2>],
@@ -270,12 +270,12 @@ impl Extractor {
     }
 
     /// Which target is on which track now.
-    pub fn assignment(&self) -> &Assignment {
+    pub(crate) fn assignment(&self) -> &Assignment {
         &self.assignment
     }
 
     /// The tracks carrying red targets now, ascending.
-    pub fn red_tracks(&self) -> Vec<u32> {
+    pub(crate) fn red_tracks(&self) -> Vec<u32> {
         self.assignment.red_tracks(&self.is_red)
     }
 }

@@ -27,7 +27,8 @@ impl Rect {
         self.max.y - self.min.y
     }
 
-    pub fn area(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn area(&self) -> f64 {
         self.width() * self.height()
     }
 

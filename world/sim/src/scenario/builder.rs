@@ -71,7 +71,7 @@ pub struct Scenario {
 
 impl Scenario {
     /// A scenario on `model` with every default.
-    pub fn new(model: Model) -> Self {
+    pub(crate) fn new(model: Model) -> Self {
         Scenario {
             model,
             targets: None,
@@ -140,7 +140,8 @@ impl Scenario {
     }
 
     /// Exactly these tracks carry red targets at time 0.
-    pub fn red_tracks(mut self, tracks: Vec<u32>) -> Self {
+    #[cfg(test)]
+    pub(crate) fn red_tracks(mut self, tracks: Vec<u32>) -> Self {
         self.red = RedChoice::Tracks(tracks);
         self
     }
@@ -160,11 +161,6 @@ impl Scenario {
         self
     }
 
-    pub fn length(mut self, length: Length) -> Self {
-        self.length = Some(length);
-        self
-    }
-
     /// The field of the synthetic models: `[0, width] × [0, height]` metres.
     pub fn field(mut self, width: f64, height: f64) -> Self {
         self.field = Some(Rect::with_size(width, height));
@@ -180,13 +176,6 @@ impl Scenario {
     /// Two targets closer than this (metres) mix.
     pub fn mix_distance(mut self, metres: f64) -> Self {
         self.extraction.mix_distance = metres;
-        self
-    }
-
-    /// A mixed pair mixes again only after separating beyond
-    /// `factor × mix_distance` (≥ 1).
-    pub fn release_factor(mut self, factor: f64) -> Self {
-        self.extraction.release_factor = factor;
         self
     }
 
@@ -225,11 +214,6 @@ impl Scenario {
 
     pub fn sensor(mut self, model: SensorModel) -> Self {
         self.extraction.sensor = model;
-        self
-    }
-
-    pub fn extraction(mut self, params: ExtractionParams) -> Self {
-        self.extraction = params;
         self
     }
 

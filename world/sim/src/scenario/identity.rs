@@ -130,7 +130,7 @@ impl IdentityReader {
     /// A reader for `n` targets: identities drawn from `identity_rng`, reads
     /// from `read_rng`, isolation and rate from `params`. Panics on an
     /// invalid accuracy or parameters (the scenario builder checks them).
-    pub fn new(
+    pub(crate) fn new(
         options: &IdentityOptions,
         params: &ExtractionParams,
         n: usize,
@@ -161,7 +161,7 @@ impl IdentityReader {
     /// Reads every isolated target that is due at `time`; `assignment` says
     /// which track follows which target (after this step's mixes). Returns
     /// how many reads it made.
-    pub fn step(
+    pub(crate) fn step(
         &mut self,
         time: f64,
         positions: &[Option<Vec2>],
@@ -200,7 +200,7 @@ impl IdentityReader {
 
     /// The identity part of the trace; `reveal_initial` says whether the
     /// header shows the identities at time 0.
-    pub fn finish(self, reveal_initial: bool) -> IdentityTrace {
+    pub(crate) fn finish(self, reveal_initial: bool) -> IdentityTrace {
         IdentityTrace {
             accuracy: self.accuracy,
             // Track t follows target t at time 0.

@@ -52,7 +52,7 @@ pub(crate) struct EventLines<'a> {
 }
 
 impl<'a> EventLines<'a> {
-    pub fn new(trace: &'a GeneratedTrace) -> Self {
+    pub(crate) fn new(trace: &'a GeneratedTrace) -> Self {
         EventLines {
             events: trace.events.iter().peekable(),
             identity: trace

@@ -20,7 +20,7 @@ pub enum Model {
 }
 
 impl Model {
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match self {
             Model::Crowd(_) => "crowd",
             Model::Waypoint(_) => "waypoint",
@@ -46,7 +46,8 @@ pub(crate) enum RedChoice {
     Half,
     /// k targets drawn by the seed.
     Count(usize),
-    /// Exactly these tracks are red at time 0.
+    /// Exactly these tracks are red at time 0 (only the tests choose them).
+    #[cfg(test)]
     Tracks(Vec<u32>),
 }
 

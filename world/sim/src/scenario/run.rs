@@ -290,6 +290,7 @@ impl Scenario {
         let k = match &self.red {
             RedChoice::Half => n / 2,
             RedChoice::Count(k) => *k,
+            #[cfg(test)]
             RedChoice::Tracks(tracks) => {
                 for &t in tracks {
                     let slot = is_red.get_mut(t as usize).ok_or_else(|| {

@@ -19,7 +19,7 @@ use idmesh_protocol::trace::{
 use std::io::Write;
 
 /// The `header` line of a generated trace.
-pub fn header_line(trace: &GeneratedTrace) -> Line {
+pub(crate) fn header_line(trace: &GeneratedTrace) -> Line {
     let h = &trace.header;
     let mut header = Header::new(h.tracks);
     header.red = Some(h.red);

@@ -20,7 +20,12 @@ pub(super) struct Agent {
 
 impl Agent {
     /// A walker at `pos` with a fresh goal, already at its desired speed.
-    pub fn new(pos: Vec2, p: &CrowdParams, goals: &GoalSampler, rng: &mut ChaCha8Rng) -> Self {
+    pub(crate) fn new(
+        pos: Vec2,
+        p: &CrowdParams,
+        goals: &GoalSampler,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
         let (mean, sd) = p.desired_speed;
         let desired_speed = (mean + sd * standard_normal(rng)).clamp(0.5, 2.5);
         let goal = goals.sample(rng);
@@ -46,7 +51,7 @@ impl Agent {
 
     /// The direction the walker looks in (for the anisotropy of the
     /// repulsion): towards its goal, or along its velocity while pausing.
-    pub fn heading(&self) -> Vec2 {
+    pub(crate) fn heading(&self) -> Vec2 {
         if self.dwell_left > 0.0 {
             self.vel.normalized()
         } else {

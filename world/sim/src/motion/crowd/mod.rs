@@ -157,7 +157,13 @@ impl Crowd {
     ///
     /// Panics if `params` do not validate, `dt` is not positive or the field
     /// is empty; the scenario builder checks all three first.
-    pub fn new(n: usize, field: Rect, dt: f64, params: CrowdParams, mut rng: ChaCha8Rng) -> Self {
+    pub(crate) fn new(
+        n: usize,
+        field: Rect,
+        dt: f64,
+        params: CrowdParams,
+        mut rng: ChaCha8Rng,
+    ) -> Self {
         if let Err(e) = params.validate() {
             panic!("{e}");
         }

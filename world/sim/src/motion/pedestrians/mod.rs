@@ -44,7 +44,7 @@ pub struct Replay {
 
 impl Replay {
     /// Panics if `dt` is not finite and positive (the builder checks it).
-    pub fn new(scene: Arc<Scene>, window: Window, dt: f64) -> Self {
+    pub(crate) fn new(scene: Arc<Scene>, window: Window, dt: f64) -> Self {
         assert!(
             dt.is_finite() && dt > 0.0,
             "replay dt must be > 0, got {dt}"

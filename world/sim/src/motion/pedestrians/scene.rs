@@ -47,11 +47,11 @@ pub(crate) struct Person {
 }
 
 impl Person {
-    pub fn first_time(&self) -> f64 {
+    pub(crate) fn first_time(&self) -> f64 {
         self.samples[0].time
     }
 
-    pub fn last_time(&self) -> f64 {
+    pub(crate) fn last_time(&self) -> f64 {
         self.samples[self.samples.len() - 1].time
     }
 }
@@ -165,7 +165,8 @@ impl Scene {
     }
 
     /// Number of rows (annotated positions).
-    pub fn rows(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn rows(&self) -> usize {
         self.people.iter().map(|p| p.samples.len()).sum()
     }
 
@@ -173,7 +174,7 @@ impl Scene {
     /// interpolation between annotations; `hint` is a cursor into the
     /// person's samples that only moves forward, making a replay in time
     /// order O(1) per call (pass 0 for a one-off look-up).
-    pub fn position_at(&self, person: usize, time: f64, hint: &mut usize) -> Option<Vec2> {
+    pub(crate) fn position_at(&self, person: usize, time: f64, hint: &mut usize) -> Option<Vec2> {
         let s = &self.people[person].samples;
         if time < s[0].time - TIME_EPS || time > s[s.len() - 1].time + TIME_EPS {
             return None;

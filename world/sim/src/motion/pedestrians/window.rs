@@ -46,7 +46,7 @@ pub struct Window {
 
 impl Window {
     /// Chooses the people and the time span of a run.
-    pub fn choose(scene: &Scene, spec: &WindowSpec) -> Result<Window, SceneError> {
+    pub(crate) fn choose(scene: &Scene, spec: &WindowSpec) -> Result<Window, SceneError> {
         let fail = |reason: String| SceneError::Window {
             file: scene.source.clone(),
             reason,
