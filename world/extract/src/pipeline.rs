@@ -114,7 +114,7 @@ impl<W: Write> Run<W> {
     }
 
     /// Fixes the roster policy; call once, before the first row.
-    pub fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
+    pub(crate) fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
         self.extractor = Some(Extractor::new(self.config.clone(), policy)?.with_red(self.red));
         Ok(())
     }

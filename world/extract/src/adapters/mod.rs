@@ -42,7 +42,7 @@ pub enum RowProblem {
 
 impl RowProblem {
     /// A short, stable name of the reason, for counting rejected rows.
-    pub fn reason(&self) -> &'static str {
+    pub(crate) fn reason(&self) -> &'static str {
         match self {
             RowProblem::Malformed(_) => "malformed row",
             RowProblem::Line(problem) => match problem {
@@ -75,7 +75,7 @@ pub struct RowError {
 }
 
 impl RowError {
-    pub fn malformed(file: &str, line: usize, reason: impl Into<String>) -> Self {
+    pub(crate) fn malformed(file: &str, line: usize, reason: impl Into<String>) -> Self {
         RowError {
             file: file.to_string(),
             line,
@@ -83,7 +83,7 @@ impl RowError {
         }
     }
 
-    pub fn report(file: &str, line: usize, error: ReportError) -> Self {
+    pub(crate) fn report(file: &str, line: usize, error: ReportError) -> Self {
         RowError {
             file: file.to_string(),
             line,

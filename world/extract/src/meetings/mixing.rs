@@ -112,10 +112,6 @@ impl MixDetector {
         std::mem::swap(&mut self.contact, &mut self.next);
     }
 
-    pub fn mix_distance(&self) -> f64 {
-        self.mix_distance
-    }
-
     /// Pairs currently in contact, sorted.
     #[cfg(test)]
     pub(crate) fn in_contact(&self) -> &[(u32, u32)] {

@@ -38,7 +38,7 @@ impl ObservationScheduler {
     }
 
     /// The largest radius this scheduler queries the grid with.
-    pub fn reach(&self) -> f64 {
+    pub(crate) fn reach(&self) -> f64 {
         self.observe_distance
     }
 
