@@ -90,7 +90,7 @@ pub(crate) fn path_events(
 }
 
 /// The header line of a run's trace.
-pub fn header_line(result: &AcousticResult) -> Line {
+pub(crate) fn header_line(result: &AcousticResult) -> Line {
     let c = &result.config;
     let mut header = Header::new(result.paths.len().max(1));
     header.source = Some("idmesh acoustic (Zhu et al., TMC 2014)".into());

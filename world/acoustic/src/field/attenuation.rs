@@ -26,7 +26,7 @@ impl Default for Attenuation {
 impl Attenuation {
     /// The amplitude gain at distance `d` metres.
     #[inline]
-    pub fn gain(&self, d: f64) -> f64 {
+    pub(crate) fn gain(&self, d: f64) -> f64 {
         let spreading = self.reference_distance / d.max(self.reference_distance);
         spreading * 10f64.powf(-self.absorption_db_per_m * d / 20.0)
     }

@@ -78,7 +78,7 @@ impl Default for FieldConfig {
 
 impl FieldConfig {
     /// The whole field, `[0, size]²`.
-    pub fn bounds(&self) -> Rect {
+    pub(crate) fn bounds(&self) -> Rect {
         Rect::with_size(self.size, self.size)
     }
 

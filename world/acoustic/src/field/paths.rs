@@ -81,7 +81,7 @@ pub struct TruePath {
 
 impl TruePath {
     /// Length walked, metres.
-    pub fn length(&self) -> f64 {
+    pub(crate) fn length(&self) -> f64 {
         self.positions.windows(2).map(|w| w[0].distance(w[1])).sum()
     }
 
@@ -92,7 +92,7 @@ impl TruePath {
 }
 
 /// `count` paths of `samples` positions inside `area`.
-pub fn generate(
+pub(crate) fn generate(
     spec: &PathSpec,
     count: usize,
     samples: usize,

@@ -163,7 +163,7 @@ fn pair_with_targets(
 }
 
 /// Evaluates estimated paths (fragments over `areas`) against the truth.
-pub fn evaluate(
+pub(crate) fn evaluate(
     paths: &[Vec<Fragment>],
     areas: &[Area],
     grid: &TileGrid,

@@ -34,7 +34,12 @@ pub(crate) struct GroupRanges {
 
 impl GroupRanges {
     /// The union of the members' disks of radius `range`, per group.
-    pub fn new(grid: TileGrid, groups: &[SensorGroup], sensors: &[Vec2], range: f64) -> Self {
+    pub(crate) fn new(
+        grid: TileGrid,
+        groups: &[SensorGroup],
+        sensors: &[Vec2],
+        range: f64,
+    ) -> Self {
         let ranges = groups
             .iter()
             .map(|g| {
@@ -92,7 +97,7 @@ pub(crate) fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> V
 /// that would leave nothing; then, if `exclude_silent`, keeps only the
 /// points covered by the fewest ranges of groups that did *not* hear the
 /// segment (see [`exclude_silent`]). `None` if nobody hears.
-pub fn intersect(
+pub(crate) fn intersect(
     ranges: &GroupRanges,
     hearing: &[(u32, f32)],
     exclude: Option<u32>,
@@ -130,7 +135,7 @@ pub fn intersect(
 /// hear then costs precision, never the whole area), and return the
 /// fewest. The paper (Section IV-E) intersects only the ranges of the
 /// groups that hear.
-pub fn exclude_silent(
+pub(crate) fn exclude_silent(
     ranges: &GroupRanges,
     hearing: &[(u32, f32)],
     area: &TileSet,

@@ -97,7 +97,7 @@ impl Segmentation {
     }
 
     /// Number of time slots v.
-    pub fn slots(&self) -> usize {
+    pub(crate) fn slots(&self) -> usize {
         (self.samples - self.l_seg) / self.l_step + 1
     }
 
@@ -112,7 +112,8 @@ impl Segmentation {
     }
 
     /// Length of the common part of two successive slots.
-    pub fn overlap(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn overlap(&self) -> usize {
         self.l_seg - self.l_step
     }
 }

@@ -19,7 +19,7 @@ pub struct TileGrid {
 
 impl TileGrid {
     /// A grid covering `[0, size]²`.
-    pub fn new(size: f64, spacing: f64) -> Self {
+    pub(crate) fn new(size: f64, spacing: f64) -> Self {
         let side = (size / spacing).floor() as usize + 1;
         TileGrid {
             spacing,
@@ -47,7 +47,7 @@ pub struct TileSet {
 
 impl TileSet {
     /// The empty set.
-    pub fn empty(grid: &TileGrid) -> Self {
+    pub(crate) fn empty(grid: &TileGrid) -> Self {
         TileSet {
             row0: 0,
             words: grid.words,
@@ -180,7 +180,7 @@ impl TileSet {
     }
 
     /// The intersection.
-    pub fn intersect(&self, other: &TileSet) -> TileSet {
+    pub(crate) fn intersect(&self, other: &TileSet) -> TileSet {
         let w = self.words;
         let Some((lo, n)) = self.common_rows(other) else {
             return TileSet {
@@ -201,7 +201,7 @@ impl TileSet {
     }
 
     /// Whether the two sets share a point.
-    pub fn overlaps(&self, other: &TileSet) -> bool {
+    pub(crate) fn overlaps(&self, other: &TileSet) -> bool {
         let w = self.words;
         let Some((lo, n)) = self.common_rows(other) else {
             return false;
@@ -260,7 +260,7 @@ impl TileSet {
     }
 
     /// The mean position of the points (`None` when empty).
-    pub fn centroid(&self, grid: &TileGrid) -> Option<Vec2> {
+    pub(crate) fn centroid(&self, grid: &TileGrid) -> Option<Vec2> {
         let (mut sr, mut sc, mut n) = (0.0, 0.0, 0usize);
         for (r, c) in self.points() {
             sr += r as f64;
@@ -272,7 +272,7 @@ impl TileSet {
 
     /// Points with a 4-neighbour outside the set: the closest point of the
     /// set to anything outside it is always one of them.
-    pub fn boundary(&self) -> Vec<(usize, usize)> {
+    pub(crate) fn boundary(&self) -> Vec<(usize, usize)> {
         self.points()
             .filter(|&(r, c)| {
                 r == 0
@@ -287,7 +287,7 @@ impl TileSet {
 
     /// d_area of Section IV-F: the smallest distance between a point of
     /// each set, 0 when they overlap, infinite if either is empty.
-    pub fn distance(&self, other: &TileSet, grid: &TileGrid) -> f64 {
+    pub(crate) fn distance(&self, other: &TileSet, grid: &TileGrid) -> f64 {
         if self.is_empty() || other.is_empty() {
             return f64::INFINITY;
         }

@@ -81,7 +81,7 @@ pub(crate) type Continuity<'a> = &'a dyn Fn(usize, u32, usize, u32) -> Option<f6
 /// The vote: for each of the `slots` slots, the fragments kept (Pseg).
 /// `estimates[u]` is CTS_u's. `same_source(slot, s1, s2)` tells whether two
 /// segments of a slot are the same source.
-pub fn vote(
+pub(crate) fn vote(
     estimates: &[CtsEstimate],
     slots: usize,
     areas: &[Area],
@@ -175,7 +175,7 @@ pub(crate) struct Fragment {
 
 /// Links the kept fragments into `k` paths (some may stay empty).
 /// Returns the paths and the number of fragments dropped.
-pub fn link(
+pub(crate) fn link(
     pseg: &[Vec<Kept>],
     k: usize,
     areas: &[Area],

@@ -46,7 +46,7 @@ pub(crate) struct Recording {
 }
 
 /// Decodes a `.wav` or `.ogg` file by its extension.
-pub fn load(path: &Path) -> Result<Recording, AudioError> {
+pub(crate) fn load(path: &Path) -> Result<Recording, AudioError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -145,7 +145,7 @@ fn mix_down(interleaved: &[f64], channels: usize) -> Vec<f64> {
 /// downsampling, then linear interpolation. Crude next to a polyphase
 /// filter, but the tracker only needs the recordings to stay independent
 /// and non-Gaussian, not hi-fi.
-pub fn resample(samples: &[f64], from: u32, to: u32) -> Vec<f64> {
+pub(crate) fn resample(samples: &[f64], from: u32, to: u32) -> Vec<f64> {
     if from == to || samples.is_empty() || from == 0 || to == 0 {
         return samples.to_vec();
     }

@@ -79,7 +79,7 @@ impl SlotSegments {
 
     /// Appends a segment, centring and normalising it; a constant segment
     /// is dropped.
-    pub fn push(&mut self, group: u32, samples: impl Iterator<Item = f64>) {
+    pub(crate) fn push(&mut self, group: u32, samples: impl Iterator<Item = f64>) {
         let v: Vec<f64> = samples.collect();
         debug_assert_eq!(v.len(), self.l_seg);
         let mean = v.iter().sum::<f64>() / v.len() as f64;

@@ -61,7 +61,7 @@ pub struct Whitening {
 
 impl Whitening {
     /// Number of kept directions (n).
-    pub fn components(&self) -> usize {
+    pub(crate) fn components(&self) -> usize {
         self.whitener.nrows()
     }
 }
