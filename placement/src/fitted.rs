@@ -211,7 +211,7 @@ pub struct Fitted {
 }
 
 impl Fitted {
-    pub fn new(leaders: usize, tracks: usize, window_per_leader: u64) -> Self {
+    pub(crate) fn new(leaders: usize, tracks: usize, window_per_leader: u64) -> Self {
         let leaders = leaders.clamp(1, usize::from(u16::MAX)) as u16;
         Fitted {
             leaders,
@@ -254,7 +254,7 @@ impl Fitted {
     }
 
     /// Items per window.
-    pub fn window(&self) -> u64 {
+    pub(crate) fn window(&self) -> u64 {
         self.window_per_leader * u64::from(self.leaders)
     }
 
@@ -385,7 +385,7 @@ impl Fitted {
 
     /// Each leader's place for a map: the mean position of the placed
     /// tracks it surveils (None for a leader surveilling none).
-    pub fn places(&self, owners: &[u16]) -> Vec<Option<(f64, f64)>> {
+    pub(crate) fn places(&self, owners: &[u16]) -> Vec<Option<(f64, f64)>> {
         let mut sums = vec![(0.0, 0.0, 0u32); usize::from(self.leaders)];
         for (t, p) in self.positions.iter().enumerate() {
             if let (Some((x, y)), Some(&o)) = (p, owners.get(t)) {

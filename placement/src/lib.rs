@@ -154,7 +154,7 @@ pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, P
 /// The size of a set that fixes every track of `field`: k red tracks (the
 /// others are blue) or n − k blue ones; with a prior over counts, the
 /// largest count allowed or n − the smallest.
-pub fn saturation(field: &Field) -> usize {
+pub(crate) fn saturation(field: &Field) -> usize {
     let n = field.tracks;
     match &field.red {
         RedCount::Known(k) => (*k).min(n - k.min(&n)),

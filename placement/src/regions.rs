@@ -152,7 +152,8 @@ impl Regions {
     }
 
     /// Fixed places (see [`RegionRule::Fixed`]), one per leader.
-    pub fn fixed(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
+    #[cfg(test)]
+    pub(crate) fn fixed(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
         Regions::new(&RegionRule::Fixed(places.to_vec()), places.len(), tracks)
     }
 
@@ -570,12 +571,9 @@ impl Regional {
         Regional { belief, regions }
     }
 
-    pub fn belief(&self) -> &FactoredBelief {
+    #[cfg(test)]
+    pub(crate) fn belief(&self) -> &FactoredBelief {
         &self.belief
-    }
-
-    pub fn regions(&self) -> &Regions {
-        &self.regions
     }
 
     /// Before `line`'s event: the tracks handed over then
