@@ -33,7 +33,7 @@ pub(crate) enum Recipe {
 
 impl Recipe {
     /// The factored belief with the default options but for `coupling`.
-    pub fn factored(coupling: Coupling) -> Recipe {
+    pub(crate) fn factored(coupling: Coupling) -> Recipe {
         Recipe::Factored(FactoredOptions {
             coupling,
             ..FactoredOptions::default()
@@ -41,7 +41,7 @@ impl Recipe {
     }
 
     /// Builds the filter for `field`.
-    pub fn build(&self, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
+    pub(crate) fn build(&self, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
         Ok(match self {
             Recipe::Exact => Box::new(DenseFilter::new(field)?),
             // Without the repair the paper's order-j projections leave the

@@ -71,11 +71,6 @@ impl Engine {
             Engine::RadonDistributed => Method::Distributed(budget(n)),
         }
     }
-
-    /// As the evaluation's tables name it.
-    pub fn label(self, n: usize) -> String {
-        self.method(n).label()
-    }
 }
 
 /// The Table III budget at n tracks (B = 5n).

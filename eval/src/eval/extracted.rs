@@ -61,7 +61,7 @@ pub(crate) struct SceneRun {
 
 impl SceneRun {
     /// Simulates `SECONDS` of `scene` with the [`TRACKER`] model.
-    pub fn simulate(scene: &'static str, loaded: Arc<Scene>, seed: u64) -> Result<SceneRun> {
+    pub(crate) fn simulate(scene: &'static str, loaded: Arc<Scene>, seed: u64) -> Result<SceneRun> {
         let scenario = Scenario::pedestrians_loaded(loaded)
             .duration(SECONDS)
             .meetings(TRACKER)
@@ -102,7 +102,7 @@ impl SceneRun {
     }
 
     /// The trace the belief replays: the simulator's own events.
-    pub fn simulated(&self) -> Trace {
+    pub(crate) fn simulated(&self) -> Trace {
         convert(
             &self.generated,
             self.params.mix_distance,
@@ -112,7 +112,7 @@ impl SceneRun {
 
     /// The trace of the events `idmesh-extract` finds in the reports with
     /// `model`, with the simulator's truth lines; and the meetings.
-    pub fn extract(&self, model: MeetingModel) -> Result<(Trace, Vec<Meeting>)> {
+    pub(crate) fn extract(&self, model: MeetingModel) -> Result<(Trace, Vec<Meeting>)> {
         let config = ExtractionParams {
             meetings: model,
             ..self.params.clone()
@@ -205,7 +205,7 @@ pub(crate) fn scene_runs(seed: u64) -> Result<Vec<SceneRun>> {
 
 /// The largest difference between two traces' answers at their truth
 /// lines, under the default belief.
-pub fn largest_difference(x: &Trace, y: &Trace) -> Result<f64> {
+pub(crate) fn largest_difference(x: &Trace, y: &Trace) -> Result<f64> {
     let answers = |t: &Trace| -> Result<Vec<Vec<f64>>> {
         let run = super::score::replay(METHOD, t, 0).map_err(|e| anyhow::anyhow!(e))?;
         Ok(run.answers.into_iter().map(|(m, _)| m).collect())
@@ -230,7 +230,7 @@ fn describe(model: &MeetingModel) -> String {
 }
 
 /// The results.md section.
-pub fn section(seed: u64) -> Result<String> {
+pub(crate) fn section(seed: u64) -> Result<String> {
     let runs = scene_runs(seed)?;
     let mut out = String::new();
     let MeetingModel::Approach { p_max, sigma, v0 } = TRACKER else {

@@ -86,7 +86,7 @@ impl LiveRow {
 
 /// The section for results.md, from `dir`/live-accuracy.md; a paragraph
 /// saying how to make it when the file is not there or holds no table.
-pub fn section(dir: &Path) -> String {
+pub(crate) fn section(dir: &Path) -> String {
     let mut out = String::from(
         "\n## The live runtime on the Table III crowds\n\n\
          The crowds of Table III fed to a live deployment (a coordinator, four leaders placed \

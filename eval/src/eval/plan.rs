@@ -65,7 +65,7 @@ pub(crate) struct Plan {
 }
 
 /// The Radon budget at n tracks.
-pub fn budget(n: usize) -> usize {
+pub(crate) fn budget(n: usize) -> usize {
     5 * n
 }
 
@@ -165,7 +165,7 @@ pub(crate) const STARTS: [Start; 2] = [Start::Known, Start::Uniform];
 impl Plan {
     /// The grid of `preset` with `seeds` seeds per point (default: 1 for
     /// quick, 5 for full).
-    pub fn new(preset: Preset, seeds: Option<usize>) -> Plan {
+    pub(crate) fn new(preset: Preset, seeds: Option<usize>) -> Plan {
         let (seeds, sizes) = match preset {
             Preset::Quick => (
                 seeds.unwrap_or(1),
@@ -329,7 +329,7 @@ impl Plan {
     }
 
     /// The crowd events per trace.
-    pub fn events(&self) -> usize {
+    pub(crate) fn events(&self) -> usize {
         self.points
             .iter()
             .flat_map(|p| &p.specs)

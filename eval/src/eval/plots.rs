@@ -36,7 +36,7 @@ pub(crate) const ERROR_LABEL: &str = "tracking error (fraction mislabeled)";
 /// The reliability diagram over every run of the grid: per method, the
 /// mean predicted P(red) of each tenth of [0, 1] against how often those
 /// tracks were red; a calibrated belief lies on the diagonal.
-pub fn reliability(results: &Results) -> Plot {
+pub(crate) fn reliability(results: &Results) -> Plot {
     let mut by_method: Vec<(String, Reliability)> = Vec::new();
     for p in &results.points {
         for (m, s) in &p.methods {

@@ -34,7 +34,7 @@ pub enum Kind {
 }
 
 impl Kind {
-    pub fn at(&self, n: usize) -> Method {
+    pub(crate) fn at(&self, n: usize) -> Method {
         let b = budget(n);
         match *self {
             Kind::Exact => Method::Exact,
@@ -48,7 +48,7 @@ impl Kind {
         }
     }
 
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match *self {
             Kind::Exact => "exact",
             Kind::Order(1) => "order 1",
@@ -83,7 +83,7 @@ pub(crate) struct Grid<'a> {
 }
 
 impl<'a> Grid<'a> {
-    pub fn of(results: &'a Results) -> Grid<'a> {
+    pub(crate) fn of(results: &'a Results) -> Grid<'a> {
         let (mut swaps, mut ns) = (Vec::new(), Vec::new());
         for p in results
             .points
@@ -100,7 +100,7 @@ impl<'a> Grid<'a> {
         Grid { results, swaps, ns }
     }
 
-    pub fn point(&self, start: Start, swap: f64, n: usize) -> Option<&'a PointResult> {
+    pub(crate) fn point(&self, start: Start, swap: f64, n: usize) -> Option<&'a PointResult> {
         self.results.points.iter().find(|p| {
             p.point.experiment == Experiment::Table3
                 && p.point.start == start
@@ -116,12 +116,12 @@ impl<'a> Grid<'a> {
             .filter(|s| s.ok())
     }
 
-    pub fn error(&self, start: Start, swap: f64, n: usize, kind: Kind) -> Option<f64> {
+    pub(crate) fn error(&self, start: Start, swap: f64, n: usize, kind: Kind) -> Option<f64> {
         self.get(start, swap, n, kind).map(|s| s.error)
     }
 
     /// The lowest-error method short of the exact filter at a point.
-    pub fn best(&self, start: Start, swap: f64, n: usize) -> Option<(Kind, f64)> {
+    pub(crate) fn best(&self, start: Start, swap: f64, n: usize) -> Option<(Kind, f64)> {
         Kind::APPROXIMATE
             .iter()
             .filter_map(|&k| self.error(start, swap, n, k).map(|e| (k, e)))
@@ -129,7 +129,7 @@ impl<'a> Grid<'a> {
     }
 
     /// The largest n of the grid.
-    pub fn largest(&self) -> Option<usize> {
+    pub(crate) fn largest(&self) -> Option<usize> {
         self.ns.iter().copied().max()
     }
 }
@@ -145,7 +145,7 @@ pub(crate) struct Verdict {
     pub goal2: Option<bool>,
 }
 
-pub fn verdict(grid: &Grid, start: Start, swap: f64, kind: Kind) -> Verdict {
+pub(crate) fn verdict(grid: &Grid, start: Start, swap: f64, kind: Kind) -> Verdict {
     let gap = match (
         grid.get(start, swap, GOAL_N, kind),
         grid.error(start, swap, GOAL_N, Kind::Exact),
@@ -793,7 +793,7 @@ fn deployed_cost(results: &Results) -> Option<String> {
     })
 }
 
-pub fn summary(results: &Results) -> String {
+pub(crate) fn summary(results: &Results) -> String {
     let grid = Grid::of(results);
     let mut lines: Vec<String> = Vec::new();
     let ns = grid

@@ -39,7 +39,7 @@ pub struct Summary {
 }
 
 impl Summary {
-    pub fn of(scores: &[&Score]) -> Summary {
+    pub(crate) fn of(scores: &[&Score]) -> Summary {
         let ok: Vec<&Score> = scores
             .iter()
             .copied()
@@ -80,7 +80,7 @@ impl Summary {
         }
     }
 
-    pub fn ok(&self) -> bool {
+    pub(crate) fn ok(&self) -> bool {
         self.runs > 0
     }
 }
@@ -109,7 +109,7 @@ pub(crate) struct PointResult {
 }
 
 impl PointResult {
-    pub fn summary(&self, method: &Method) -> Option<&Summary> {
+    pub(crate) fn summary(&self, method: &Method) -> Option<&Summary> {
         self.methods
             .iter()
             .find(|(m, _)| m == method)
@@ -125,7 +125,7 @@ impl PointResult {
     }
 
     /// Mean mixing share of the traces.
-    pub fn mix_share(&self) -> f64 {
+    pub(crate) fn mix_share(&self) -> f64 {
         self.mean_info(|t| t.mix_share)
     }
 }

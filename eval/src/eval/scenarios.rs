@@ -125,7 +125,7 @@ pub enum Step {
 impl Step {
     /// The trace line this step stands for (times left at 0: nothing that
     /// replays an in-memory trace reads them).
-    pub fn line(&self) -> Line {
+    pub(crate) fn line(&self) -> Line {
         match self {
             Step::Event(Event::Mix(m)) => Line::Mix(trace::Mix {
                 time: 0.0,
@@ -222,7 +222,7 @@ impl Scenes {
 }
 
 /// Mixing and observation distances (metres) for the steering knob x.
-pub fn distances(x: f64) -> (f64, f64) {
+pub(crate) fn distances(x: f64) -> (f64, f64) {
     (0.25 + 2.75 * x, 2.5 + 3.5 * x)
 }
 
@@ -236,7 +236,7 @@ impl ScenarioSpec {
     }
 
     /// Generates the trace (deterministic).
-    pub fn generate(&self, scenes: &Scenes) -> Result<Trace> {
+    pub(crate) fn generate(&self, scenes: &Scenes) -> Result<Trace> {
         Ok(self.generated(scenes, Some(MOVE_INTERVAL))?.1)
     }
 
@@ -245,7 +245,7 @@ impl ScenarioSpec {
     /// the in-memory trace the filters replay. Moves draw no randomness:
     /// the mixes, observations and truths are those of
     /// [`ScenarioSpec::generate`] whatever `moves` is.
-    pub fn generated(
+    pub(crate) fn generated(
         &self,
         scenes: &Scenes,
         moves: Option<f64>,
@@ -352,7 +352,7 @@ impl Trace {
 
 /// A generated trace as `belief` events and truth lines; the field is
 /// known or uniform as the trace's header reveals the red tracks or not.
-pub fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64) -> Trace {
+pub(crate) fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64) -> Trace {
     let stats = trace.stats();
     let steps = trace
         .events

@@ -249,7 +249,7 @@ pub fn tracking_error(answers: &[(Vec<f64>, &[u32])], k: Option<usize>) -> f64 {
 }
 
 /// Replays `trace` through `method` (seeded with `seed`) and scores it.
-pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
+pub(crate) fn score(method: Method, trace: &Trace, seed: u64) -> Score {
     let run = match replay(method, trace, seed) {
         Ok(run) => run,
         Err(reason) => return Score::failed(reason),

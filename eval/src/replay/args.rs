@@ -218,7 +218,7 @@ impl Method {
     }
 
     /// The identity filter this method names, if it is one.
-    pub fn identity(self) -> Option<IdentityMethod> {
+    pub(crate) fn identity(self) -> Option<IdentityMethod> {
         match self {
             Method::ExactPerm => Some(IdentityMethod::ExactPerm),
             Method::BeliefMatrix => Some(IdentityMethod::BeliefMatrix),

@@ -45,7 +45,7 @@ pub trait Replay {
 
 /// Replays every line after the header of `reader` through `replay`,
 /// writing its answers to `out`.
-pub fn drive<R: BufRead, P: Replay>(
+pub(crate) fn drive<R: BufRead, P: Replay>(
     reader: TraceReader<R>,
     replay: &mut P,
     out: &mut impl Write,
@@ -91,12 +91,12 @@ pub(crate) fn line_error(source: &str) -> impl Fn(usize, &str, BeliefError) -> a
 }
 
 /// The mean error over the truth lines (None when there were none).
-pub fn mean_error(errors: &[f64]) -> Option<f64> {
+pub(crate) fn mean_error(errors: &[f64]) -> Option<f64> {
     (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
 }
 
 /// Writes the summary line and flushes: the end of every replay.
-pub fn finish(mut out: impl Write, summary: &impl Serialize) -> Result<()> {
+pub(crate) fn finish(mut out: impl Write, summary: &impl Serialize) -> Result<()> {
     write_line(&mut out, summary)?;
     out.flush()
         .map_err(|e| anyhow!("cannot write the output: {e}"))
@@ -113,7 +113,7 @@ pub struct Timed<F: ?Sized> {
 
 impl<F: ?Sized> Timed<F> {
     /// Builds the filter, on the clock.
-    pub fn start<E>(build: impl FnOnce() -> Result<Box<F>, E>) -> Result<Self, E> {
+    pub(crate) fn start<E>(build: impl FnOnce() -> Result<Box<F>, E>) -> Result<Self, E> {
         let clock = Instant::now();
         let filter = build()?;
         Ok(Timed {

@@ -211,7 +211,7 @@ pub enum IdentityMethod {
 
 impl IdentityMethod {
     /// The name on the command line and in the summary.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             IdentityMethod::ExactPerm => "exact-perm",
             IdentityMethod::BeliefMatrix => "belief-matrix",
@@ -352,7 +352,7 @@ pub(crate) fn check_options(args: &IdentityReplayOptions) -> Result<()> {
 }
 
 /// Replays a trace from any reader (the testable core of [`run`]).
-pub fn replay<R: BufRead>(
+pub(crate) fn replay<R: BufRead>(
     args: &IdentityReplayOptions,
     mut reader: TraceReader<R>,
     mut out: impl Write,

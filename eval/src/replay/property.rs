@@ -146,7 +146,7 @@ pub(crate) fn check_options(args: &ReplayArgs) -> Result<()> {
 }
 
 /// Replays a trace from any reader (the testable core of [`run`]).
-pub fn replay<R: BufRead>(
+pub(crate) fn replay<R: BufRead>(
     args: &ReplayArgs,
     mut reader: TraceReader<R>,
     out: impl Write,
