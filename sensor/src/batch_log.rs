@@ -20,7 +20,7 @@ impl BatchLog {
         self.first + self.batches.len() as u64
     }
 
-    pub fn push(&mut self, batch: Batch) {
+    pub(crate) fn push(&mut self, batch: Batch) {
         debug_assert_eq!(batch.number, self.next_number());
         self.batches.push_back(batch);
     }
@@ -39,7 +39,7 @@ impl BatchLog {
     }
 
     /// Drops the batches the leader will never ask for again.
-    pub fn forget(&mut self, mark: &Durable) -> usize {
+    pub(crate) fn forget(&mut self, mark: &Durable) -> usize {
         let below = mark.batch.min(self.next_number());
         let drop = below.saturating_sub(self.first) as usize;
         self.batches.drain(..drop);

@@ -97,7 +97,7 @@ pub struct Placed<Q> {
 
 impl<Q> Cuts<Q> {
     /// Cuts for a stream that will end after `end` events.
-    pub fn ending_at(end: u64) -> Self {
+    pub(crate) fn ending_at(end: u64) -> Self {
         Cuts {
             end: Some(end),
             ..Cuts::default()
@@ -105,7 +105,7 @@ impl<Q> Cuts<Q> {
     }
 
     /// Sorts a request: now, later, or never.
-    pub fn request(
+    pub(crate) fn request(
         &mut self,
         query: Q,
         parameters: &CutParameters,
@@ -152,7 +152,7 @@ impl<Q> Cuts<Q> {
     }
 
     /// Whether a cut tagged `tag` waits for its point.
-    pub fn holds(&self, tag: u64) -> bool {
+    pub(crate) fn holds(&self, tag: u64) -> bool {
         self.scheduled
             .values()
             .any(|waiting| waiting.iter().any(|(w, _)| w.tag == tag))
@@ -160,7 +160,7 @@ impl<Q> Cuts<Q> {
 
     /// Places the cuts whose point the router has reached (call after each
     /// line), adding them to `placed`.
-    pub fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
+    pub(crate) fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
         while let Some(entry) = self.scheduled.first_entry() {
             if *entry.key() > router.events() {
                 return;
@@ -193,7 +193,7 @@ impl<Q> Cuts<Q> {
 }
 
 /// Places the cut a query wants in every leader's stream now.
-pub fn place<Q>(
+pub(crate) fn place<Q>(
     router: &mut Router,
     name: &str,
     wanted: Wanted,

@@ -128,7 +128,7 @@ pub(crate) type Admit<'a> = dyn FnMut(&Line, &str, &str, u64) -> Result<(), Stri
 
 impl Ingest {
     /// Ingestion into the stream `header` describes.
-    pub fn new(sensor: &str, header: &Header) -> Self {
+    pub(crate) fn new(sensor: &str, header: &Header) -> Self {
         let mut stdin = Validator::new();
         // The header was checked when the stream started; a header that
         // failed here would fail the router first.
@@ -146,7 +146,7 @@ impl Ingest {
 
     /// Lines are a tracker's reports from now on: `move` and `detect`
     /// lines are taken, events refused.
-    pub fn extracting(&mut self) {
+    pub(crate) fn extracting(&mut self) {
         self.extracting = true;
     }
 
@@ -163,7 +163,7 @@ impl Ingest {
 
     /// Judges one ingest request; counts what it refuses and takes in
     /// `stats`.
-    pub fn offer(
+    pub(crate) fn offer(
         &mut self,
         offer: Offer<'_>,
         stats: &mut SensorStats,

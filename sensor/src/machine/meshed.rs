@@ -15,7 +15,7 @@ impl<Q> Gateway<Q> {
     /// its intake, the stream routed in the merged order, batches sent
     /// only to the leaders it serves. The stream finishes once every
     /// sensor has finished and everything is merged.
-    pub fn meshed(mut self, config: &MeshConfig) -> Self {
+    pub(crate) fn meshed(mut self, config: &MeshConfig) -> Self {
         self.state.mesh = Some(Mesh::new(config));
         self.state.ingest.gapped();
         self.state.finished = false;
@@ -23,17 +23,17 @@ impl<Q> Gateway<Q> {
     }
 
     /// One sensor of several.
-    pub fn mesh(&self) -> Option<&Mesh> {
+    pub(crate) fn mesh(&self) -> Option<&Mesh> {
         self.state.mesh.as_ref()
     }
 
     /// Cut answers the merge made ready: send them after the next flush.
-    pub fn answered(&mut self) -> Vec<Placed<Q>> {
+    pub(crate) fn answered(&mut self) -> Vec<Placed<Q>> {
         std::mem::take(&mut self.answers)
     }
 
     /// Cut requests refused since the last call, with why.
-    pub fn refused(&mut self) -> Vec<(Q, String)> {
+    pub(crate) fn refused(&mut self) -> Vec<(Q, String)> {
         std::mem::take(&mut self.refusals)
     }
 
@@ -98,7 +98,7 @@ impl<Q> Gateway<Q> {
     }
 
     /// A peer's slice of its intake (`IntakeSlice` bytes): merged.
-    pub fn peer(&mut self, bytes: &[u8]) -> Result<(), String> {
+    pub(crate) fn peer(&mut self, bytes: &[u8]) -> Result<(), String> {
         let answer = decode::<IntakeSlice>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|slice| {
@@ -120,7 +120,7 @@ impl<Q> Gateway<Q> {
     /// slice and whether it tells the peer anything new (an entry, a
     /// watermark or an end it did not know: else the driver may hold the
     /// request, see `IntakeWanted::known`), or why not (counted).
-    pub fn intake(&mut self, bytes: &[u8]) -> Result<(IntakeSlice, bool), String> {
+    pub(crate) fn intake(&mut self, bytes: &[u8]) -> Result<(IntakeSlice, bool), String> {
         let answer = decode::<IntakeWanted>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|wanted| {
@@ -149,7 +149,7 @@ impl<Q> Gateway<Q> {
     }
 
     /// What to ask each peer for next: its name and the request's bytes.
-    pub fn wanted(&self) -> Vec<(String, Vec<u8>)> {
+    pub(crate) fn wanted(&self) -> Vec<(String, Vec<u8>)> {
         let Some(mesh) = &self.state.mesh else {
             return Vec::new();
         };
