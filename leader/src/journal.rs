@@ -141,7 +141,7 @@ impl Journal {
     /// snapshot and the entries after it, in order; a torn last record is
     /// cut off, and so is a damaged one with everything after it (see the
     /// module's doc).
-    pub fn open(
+    pub(crate) fn open(
         options: &JournalOptions,
         owner: Ownership,
     ) -> Result<(Journal, Recovered), JournalError> {
@@ -244,13 +244,14 @@ impl Journal {
     }
 
     /// Inputs appended since the last snapshot.
-    pub fn entries(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn entries(&self) -> usize {
         self.entries
     }
 
     /// Writes `state` (the whole leader, as of every entry appended) as
     /// the new snapshot and starts the journal again empty.
-    pub fn compact(&mut self, state: &[u8]) -> Result<(), JournalError> {
+    pub(crate) fn compact(&mut self, state: &[u8]) -> Result<(), JournalError> {
         let next = self.generation + 1;
         log::write_file(&snapshot_path(&self.path), SNAPSHOT, next, &[state])?;
         self.generation = next;
@@ -261,7 +262,7 @@ impl Journal {
     }
 
     /// Writes one entry through to the file (fsync per the policy).
-    pub fn append(&mut self, kind: Kind, bytes: &[u8]) -> Result<(), JournalError> {
+    pub(crate) fn append(&mut self, kind: Kind, bytes: &[u8]) -> Result<(), JournalError> {
         self.writer.append(&[&[kind as u8], bytes])?;
         self.entries += 1;
         if self.synced.elapsed() >= self.fsync_every {
@@ -271,14 +272,10 @@ impl Journal {
     }
 
     /// fsyncs what was written since the last sync.
-    pub fn sync(&mut self) -> Result<(), JournalError> {
+    pub(crate) fn sync(&mut self) -> Result<(), JournalError> {
         self.writer.sync()?;
         self.synced = Instant::now();
         Ok(())
-    }
-
-    pub fn path(&self) -> &Path {
-        &self.path
     }
 }
 

@@ -264,7 +264,7 @@ pub struct Node {
 
 impl Node {
     /// A node for a leader that starts with nothing behind it.
-    pub fn new(leader: Leader, timers: Timers) -> Self {
+    pub(crate) fn new(leader: Leader, timers: Timers) -> Self {
         Node {
             leader,
             timers,
@@ -290,7 +290,7 @@ impl Node {
         &self.leader
     }
 
-    pub fn timers(&self) -> &Timers {
+    pub(crate) fn timers(&self) -> &Timers {
         &self.timers
     }
 
@@ -305,7 +305,8 @@ impl Node {
     }
 
     /// Queries held for their cut.
-    pub fn held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn held(&self) -> usize {
         self.held.len()
     }
 

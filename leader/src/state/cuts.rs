@@ -43,7 +43,7 @@ impl Answer {
         }
     }
 
-    pub fn tag(&self) -> u64 {
+    pub(crate) fn tag(&self) -> u64 {
         self.sums.tag
     }
 
@@ -90,7 +90,7 @@ impl Leader {
 
     /// The answer at the cut tagged `tag`, if this leader has passed it
     /// recently.
-    pub fn cut(&self, tag: u64) -> Option<&Arc<Answer>> {
+    pub(crate) fn cut(&self, tag: u64) -> Option<&Arc<Answer>> {
         self.cuts.iter().find(|p| p.tag() == tag)
     }
 

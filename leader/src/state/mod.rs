@@ -291,17 +291,17 @@ impl Leader {
         }
     }
 
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         &self.name
     }
 
     /// The whole state, as bytes ([`Leader::restore`] reads them back).
-    pub fn snapshot(&self) -> Vec<u8> {
+    pub(crate) fn snapshot(&self) -> Vec<u8> {
         postcard::to_allocvec(self).unwrap_or_default()
     }
 
     /// The leader a snapshot was taken of.
-    pub fn restore(bytes: &[u8]) -> Result<Leader, LeaderError> {
+    pub(crate) fn restore(bytes: &[u8]) -> Result<Leader, LeaderError> {
         postcard::from_bytes(bytes).map_err(|e| LeaderError::Snapshot(e.to_string()))
     }
 
@@ -339,22 +339,24 @@ impl Leader {
 
     /// The stream's field, once it began: what inputs must fit
     /// ([`crate::door`]).
-    pub fn bounds(&self) -> Option<Bounds> {
+    pub(crate) fn bounds(&self) -> Option<Bounds> {
         self.started.as_ref().map(|s| Bounds::of(&s.begin))
     }
 
     /// The share this leader holds (for tests and diagnostics).
-    pub fn share(&self) -> Option<&RadonShare> {
+    #[cfg(test)]
+    pub(crate) fn share(&self) -> Option<&RadonShare> {
         self.started.as_ref().map(|s| &s.share)
     }
 
     /// The components this leader holds, on a factored stream.
-    pub fn factored(&self) -> Option<&FactoredShare> {
+    #[cfg(test)]
+    pub(crate) fn factored(&self) -> Option<&FactoredShare> {
         self.started.as_ref().and_then(|s| s.factored.as_ref())
     }
 
     /// The leaders of the stream, once it began.
-    pub fn leaders(&self) -> &[String] {
+    pub(crate) fn leaders(&self) -> &[String] {
         self.started
             .as_ref()
             .map_or(&[], |s| s.begin.leaders.as_slice())
@@ -366,7 +368,7 @@ impl Leader {
     }
 
     /// The name of leader `index` of the stream's list.
-    pub fn peer(&self, index: u16) -> Option<&str> {
+    pub(crate) fn peer(&self, index: u16) -> Option<&str> {
         let started = self.started.as_ref()?;
         started
             .begin

@@ -22,7 +22,7 @@ impl Leader {
 
     /// Every transfer sent, with its receiver (resent after a restart: the
     /// peers drop the ones they have).
-    pub fn all_sent(&self) -> &[(u16, Transfer)] {
+    pub(crate) fn all_sent(&self) -> &[(u16, Transfer)] {
         &self.sent
     }
 
