@@ -116,7 +116,7 @@ impl Collected {
     }
 
     /// What the answer includes: per sensor, its events.
-    pub fn watermark(&self) -> Watermark {
+    pub(crate) fn watermark(&self) -> Watermark {
         if !self.cut.origins.is_empty() {
             return self.cut.origins.iter().cloned().collect();
         }
@@ -167,7 +167,7 @@ pub struct Memory {
 
 impl Memory {
     /// Counts a query refused for its parameters.
-    pub fn note_rejected(&self) {
+    pub(crate) fn note_rejected(&self) {
         self.rejected.fetch_add(1, Ordering::Relaxed);
     }
 
@@ -194,7 +194,7 @@ impl Memory {
         counter.fetch_add(1, Ordering::Relaxed);
     }
 
-    pub fn stats(&self) -> CoordinatorStats {
+    pub(crate) fn stats(&self) -> CoordinatorStats {
         CoordinatorStats {
             rejected: self.rejected.load(Ordering::Relaxed),
             bad_replies: self.bad_replies.load(Ordering::Relaxed),
@@ -446,13 +446,14 @@ impl Partials {
     }
 
     /// How many leaders answered with sums.
-    pub fn answered(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn answered(&self) -> usize {
         self.parts.len()
     }
 
     /// Whether every one of `leaders` answered with sums and no reply
     /// was an error or bad.
-    pub fn complete(&self, leaders: &[String]) -> bool {
+    pub(crate) fn complete(&self, leaders: &[String]) -> bool {
         self.errors.is_empty() && leaders.iter().all(|l| self.parts.contains_key(l))
     }
 

@@ -45,7 +45,7 @@ impl Pushes {
     /// Starts waiting for the answers pushed at the cut tagged `tag`
     /// (before the cut is asked for: they may come before its placement
     /// does); the wait ends when the returned guard is dropped.
-    pub fn wait_for(self: &Arc<Self>, tag: u64) -> Waiting {
+    pub(crate) fn wait_for(self: &Arc<Self>, tag: u64) -> Waiting {
         let (tx, rx) = mpsc::unbounded_channel();
         self.waiting
             .lock()

@@ -260,7 +260,7 @@ async fn place_cut(
 }
 
 /// Every leader's counters.
-pub async fn stats(
+pub(crate) async fn stats(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
@@ -289,7 +289,11 @@ pub async fn stats(
 
 /// Every sensor gateway's counters (none when no gateway answers: the
 /// leaders' counters are still worth having).
-pub async fn sensor_stats(session: &Session, keys: &Keys, timeout: Duration) -> Vec<SensorStats> {
+pub(crate) async fn sensor_stats(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+) -> Vec<SensorStats> {
     let Ok(replies) = ask_everyone(
         session,
         keys.every_sensor_stats(),

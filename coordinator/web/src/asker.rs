@@ -31,12 +31,12 @@ pub struct Answer {
 }
 
 impl Answer {
-    pub fn ok(&self) -> bool {
+    pub(crate) fn ok(&self) -> bool {
         self.status == 200
     }
 
     /// The error message of a failed answer.
-    pub fn error(&self) -> Option<String> {
+    pub(crate) fn error(&self) -> Option<String> {
         (!self.ok()).then(|| {
             serde_json::from_slice::<QueryError>(&self.body)
                 .map(|e| e.error)
@@ -83,7 +83,7 @@ pub(crate) fn query_labels(what: &str, outcome: &str) -> QueryLabels {
 }
 
 impl Asker {
-    pub fn new(session: Session, keys: Keys, timeout: Duration) -> Self {
+    pub(crate) fn new(session: Session, keys: Keys, timeout: Duration) -> Self {
         Asker {
             session,
             keys,
@@ -94,7 +94,7 @@ impl Asker {
 
     /// Asks `selector` (a key under the prefix, with `?parameters`); `what`
     /// names the question in the latency histograms.
-    pub async fn ask(&self, selector: &str, what: &str) -> Answer {
+    pub(crate) async fn ask(&self, selector: &str, what: &str) -> Answer {
         let started = Instant::now();
         let (status, body) = self.get(selector).await;
         let took = started.elapsed();

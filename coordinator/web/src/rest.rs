@@ -126,7 +126,7 @@ fn matches(pattern: &str, question: &str) -> bool {
 }
 
 /// Every path the routes do not claim: a question to the coordinator.
-pub async fn rest(
+pub(crate) async fn rest(
     State(asker): State<Arc<Asker>>,
     method: Method,
     uri: Uri,
