@@ -21,7 +21,7 @@ pub struct Processes {
 
 impl Processes {
     /// Starts every process of `config` whose host is `host` (all if None).
-    pub fn start(config: &Path, host: Option<&str>) -> Result<Self> {
+    pub(crate) fn start(config: &Path, host: Option<&str>) -> Result<Self> {
         let processes = Self::start_some(config, |m| host.is_none_or(|h| m.host == h))?;
         if processes.children.is_empty() {
             bail!(
@@ -72,7 +72,7 @@ impl Processes {
     }
 
     /// SIGTERM to all, then SIGKILL to whoever is still there after 5 s.
-    pub fn stop(&mut self) {
+    pub(crate) fn stop(&mut self) {
         for (_, child) in &mut self.children {
             // SAFETY: kill(2) on a pid we spawned and have not reaped.
             unsafe {

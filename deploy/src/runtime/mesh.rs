@@ -52,7 +52,7 @@ pub struct MeshOptions {
 const RETRY_FIRST_MS: u64 = 100;
 const RETRY_MOST_MS: u64 = 1000;
 
-pub fn config(options: &MeshOptions) -> Result<Config> {
+pub(crate) fn config(options: &MeshOptions) -> Result<Config> {
     let mut config = Config::default();
     let set = |config: &mut Config, key: &str, value: String| {
         config

@@ -364,7 +364,7 @@ fn stdin_trace() -> Result<(Header, tokio::sync::mpsc::Receiver<InputLine>)> {
 }
 
 /// Ctrl-C or SIGTERM.
-pub async fn shutdown() {
+pub(crate) async fn shutdown() {
     let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
         Ok(term) => term,
         Err(_) => {

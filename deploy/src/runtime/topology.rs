@@ -271,7 +271,7 @@ pub fn default_max_component() -> u32 {
 impl Topology {
     /// The group cap of the factored identity belief the stream's `Begin`
     /// asks for (None: the information matrix's rows).
-    pub fn factored_identity(&self) -> Option<u32> {
+    pub(crate) fn factored_identity(&self) -> Option<u32> {
         (self.identity == IdentityKind::Factored)
             .then_some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP)
     }
@@ -726,7 +726,7 @@ impl Topology {
         all
     }
 
-    pub fn member(&self, name: &str) -> Result<Member> {
+    pub(crate) fn member(&self, name: &str) -> Result<Member> {
         self.members()
             .into_iter()
             .find(|m| m.name == name)

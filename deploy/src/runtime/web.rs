@@ -62,7 +62,7 @@ pub(crate) async fn bind(address: &str) -> Result<tokio::net::TcpListener> {
 
 /// The gateway inside another command (`idmesh demo`), on its session,
 /// until the runtime stops; its address, or why it could not start.
-pub async fn spawn(session: zenoh::Session, prefix: &str, address: &str) -> Result<String> {
+pub(crate) async fn spawn(session: zenoh::Session, prefix: &str, address: &str) -> Result<String> {
     let listener = bind(address).await?;
     let url = format!("http://{}/", listener.local_addr()?);
     let config = idmesh_web::WebConfig {

@@ -375,7 +375,7 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
 /// The `access_control` config of process `me`: default deny; the grants it
 /// receives as ingress rules for their senders, the grants it sends as
 /// egress rules for their receivers.
-pub fn access_control(topology: &Topology, me: &str) -> Value {
+pub(crate) fn access_control(topology: &Topology, me: &str) -> Value {
     let mut rules = Vec::new();
     let mut policies = Vec::new();
     let mut subjects = BTreeSet::new();

@@ -78,7 +78,7 @@ impl SecuritySection {
 
     /// Client and producer names must be names of their own: one named
     /// like a process would be let do what the process does.
-    pub fn check<'a>(
+    pub(crate) fn check<'a>(
         &self,
         mut members: impl Iterator<Item = &'a str>,
     ) -> Result<(), SecurityError> {

@@ -22,7 +22,7 @@ impl Tls {
     /// Checks that every file is there and is PEM, so that a mistake is
     /// reported naming the file rather than as a failed handshake.
     /// `field` says where the paths came from (`[security] certs`, `--ca`).
-    pub fn new(
+    pub(crate) fn new(
         ca: PathBuf,
         cert: PathBuf,
         key: PathBuf,
