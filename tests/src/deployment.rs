@@ -116,7 +116,7 @@ pub struct Deployment {
 }
 
 /// The bounding box of a trace's positions (`move` and `detect` lines).
-pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
+pub(crate) fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     let text = std::fs::read_to_string(trace).expect("trace readable");
     let mut b = (
         f64::INFINITY,
@@ -176,7 +176,7 @@ pub fn grid_over(trace: &Path, count: usize) -> Vec<(f64, f64)> {
 /// The topology of test deployment `name` streaming `trace` with
 /// `settings`: the loopback layout ([`Topology::loopback`]) on free ports;
 /// its leaders' regions are fitted to the crowd (the default).
-pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
+pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
     let sensors = settings.sensors.max(1);
     let ports = pick_free_ports(1 + settings.leaders + sensors).expect("free loopback ports");
     let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
@@ -399,7 +399,7 @@ impl Deployment {
     }
 
     /// Process `name`'s listening endpoint.
-    pub fn endpoint(&self, name: &str) -> &str {
+    pub(crate) fn endpoint(&self, name: &str) -> &str {
         &self
             .endpoints
             .iter()

@@ -26,7 +26,7 @@ pub(crate) struct Network {
 
 impl Network {
     /// A wire with this seed's fault rates.
-    pub fn random(rng: &mut ChaCha8Rng, _leaders: usize) -> Network {
+    pub(crate) fn random(rng: &mut ChaCha8Rng, _leaders: usize) -> Network {
         let drop = [0.0, 0.01, 0.05, 0.15][rng.gen_range(0..4)];
         let duplicate = [0.0, 0.05, 0.2][rng.gen_range(0..3)];
         let delay = [(1, 2), (1, 20), (5, 100)][rng.gen_range(0..3)];
@@ -54,7 +54,7 @@ impl Network {
         }
     }
 
-    pub fn at(&mut self, time: Ms, event: Event) {
+    pub(crate) fn at(&mut self, time: Ms, event: Event) {
         self.order += 1;
         self.queue.insert((time, self.order), event);
     }
@@ -66,7 +66,7 @@ impl Network {
     }
 
     /// Puts `msg` on the wire; false if it is lost.
-    pub fn send(
+    pub(crate) fn send(
         &mut self,
         rng: &mut ChaCha8Rng,
         now: Ms,
@@ -101,7 +101,7 @@ impl Network {
     }
 
     /// The faults are over: nothing is lost or doubled from now on.
-    pub fn calm(&mut self) {
+    pub(crate) fn calm(&mut self) {
         self.drop = 0.0;
         self.duplicate = 0.0;
         self.isolated.clear();

@@ -67,7 +67,7 @@ pub(crate) struct CentralIdentity {
 }
 
 impl Scenario {
-    pub fn random(rng: &mut ChaCha8Rng) -> Result<Scenario, String> {
+    pub(crate) fn random(rng: &mut ChaCha8Rng) -> Result<Scenario, String> {
         let tracks = rng.gen_range(3..=7usize);
         let red = rng.gen_range(1..tracks);
         let mut header = Header::new(tracks);
@@ -143,7 +143,7 @@ impl Scenario {
     }
 
     /// The sensor's gateway, empty, with the scenario's window.
-    pub fn gateway<Q>(&self, router: Router) -> Gateway<Q> {
+    pub(crate) fn gateway<Q>(&self, router: Router) -> Gateway<Q> {
         let gateway = Gateway::new("sensor-0", router, self.lines.is_empty())
             .journaled()
             .idle_batches_every(self.idle_every);
@@ -155,7 +155,7 @@ impl Scenario {
 
     /// The router's settings: no pruning (the setting in which the
     /// deployment must equal the centralized engine to 1e-9).
-    pub fn router(&self) -> RouterConfig {
+    pub(crate) fn router(&self) -> RouterConfig {
         RouterConfig {
             factored_identity: Some(self.identity_cap),
             factored: self.factored,
@@ -434,7 +434,7 @@ fn central_identity(header: &Header, lines: &[Line], cap: u32) -> Result<Central
 
 /// The exact marginals of `matrix`, track by identity, as the coordinator
 /// computes them from the rows it assembles.
-pub fn exact_marginals(matrix: &InformationMatrix) -> Result<Vec<Vec<f64>>, String> {
+pub(crate) fn exact_marginals(matrix: &InformationMatrix) -> Result<Vec<Vec<f64>>, String> {
     let blocks = matrix
         .block_marginals(&MarginalMethod::Exact)
         .map_err(|e| e.to_string())?;

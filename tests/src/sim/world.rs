@@ -303,7 +303,7 @@ pub(crate) struct World {
 impl World {
     /// A world for one seed's schedule, with the `aimed` faults added
     /// (none: [`Aimed::default`]).
-    pub fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
+    pub(crate) fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
         let scenario_factored = scenario.factored.is_some();
         let scenario_identities = scenario.identity.is_some();
