@@ -29,7 +29,7 @@ use serde::Serialize;
 use std::fmt::Debug;
 
 /// A fuzz target: any bytes in, a panic on a broken promise.
-pub type Target = fn(&[u8]);
+pub(crate) type Target = fn(&[u8]);
 
 /// Every target by name (the names of `fuzz/fuzz_targets/*.rs` and of the
 /// folders of `fuzz/regressions/`).

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 /// The largest component on the wire: 2^20 numbers (the belief's own limit
 /// for the Original split; tables beyond it are refused unread).
-pub const MAX_COMPONENT: u32 = 20;
+pub(crate) const MAX_COMPONENT: u32 = 20;
 
 /// The factored belief's settings, the same for every leader.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

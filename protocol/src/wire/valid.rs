@@ -19,7 +19,7 @@ pub use super::Valid;
 /// and every leader keeps a flag per track, so a stream of 10^9 tracks
 /// would cost gigabytes before the first event; a million is two orders of
 /// magnitude beyond anything the engine has been run on.
-pub const MAX_TRACKS: u32 = 1 << 20;
+pub(crate) const MAX_TRACKS: u32 = 1 << 20;
 
 /// The most tracks of an identity stream whose leaders hold the
 /// information matrix: n × n numbers (4096² f64 = 128 MiB), spread over
