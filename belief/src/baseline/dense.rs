@@ -36,7 +36,7 @@ use std::ops::Range;
 pub const MAX_STATES: usize = 1 << 26;
 
 /// The most tracks a [`DenseFilter`] handles: sets are u64 bit masks.
-pub const MAX_TRACKS: usize = 64;
+pub(crate) const MAX_TRACKS: usize = 64;
 
 /// The least probability a state the events allow is stored with: the
 /// smallest normal f64, so that a later sighting of likelihood ratio up to
