@@ -9,7 +9,7 @@ use idmesh_belief::BeliefError;
 use idmesh_belief::Mix;
 
 /// p\[t\]\[i\] = P(track t carries identity i), N rows of N entries.
-pub type Marginals = Vec<Vec<f64>>;
+pub(crate) type Marginals = Vec<Vec<f64>>;
 
 /// A belief over which track carries which identity, updated event by event.
 ///
