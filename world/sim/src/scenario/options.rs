@@ -53,7 +53,7 @@ pub(crate) enum RedChoice {
 
 /// When a run stops.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Length {
+pub(crate) enum Length {
     /// After this many seconds of motion.
     Duration(f64),
     /// After this many `mix` + `observe` events; an error if the motion

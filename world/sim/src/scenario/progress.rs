@@ -6,7 +6,7 @@
 //! simulation steps; for a run of a fixed number of events it is events.
 
 /// The progress hook: `(done, total)`.
-pub type Progress<'a> = &'a mut dyn FnMut(u64, u64);
+pub(crate) type Progress<'a> = &'a mut dyn FnMut(u64, u64);
 
 /// Calls a hook only when at least 1/1000 of the work has been done since
 /// the last call (and always for the final value), keeping the cost of a

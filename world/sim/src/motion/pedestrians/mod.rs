@@ -32,7 +32,7 @@ use std::sync::Arc;
 /// `window.people[t]`, sampled every `dt` seconds from the window start
 /// (linear interpolation between annotations; `None` while absent).
 #[derive(Debug, Clone)]
-pub struct Replay {
+pub(crate) struct Replay {
     scene: Arc<Scene>,
     window: Window,
     dt: f64,

@@ -32,7 +32,7 @@ pub enum Timing {
 
 /// One annotated position of a person.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Sample {
+pub(crate) struct Sample {
     /// Seconds from the scene's first annotated frame.
     pub time: f64,
     pub pos: Vec2,
