@@ -93,7 +93,7 @@ impl RowError {
 }
 
 /// Every row of a file: a report or why not.
-pub type Rows = Vec<Result<Located, RowError>>;
+pub(crate) type Rows = Vec<Result<Located, RowError>>;
 
 /// How many bad lines a reader of reports goes on past (`--max-errors`,
 /// the same on `idmesh extract`, `idmesh replay --topology` and a sensor's
