@@ -52,7 +52,7 @@ pub(crate) struct CtsEstimate {
 
 /// A fragment kept by the vote.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Kept {
+pub(crate) struct Kept {
     pub area: u32,
     pub segment: u32,
 }
