@@ -11,7 +11,7 @@ use std::sync::Mutex;
 
 /// One cell of the grid: a method on a trace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Cell {
+pub(crate) struct Cell {
     /// Index into the traces.
     pub trace: usize,
     pub method: Method,

@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// The file `idmesh bench --accuracy --out` writes, beside results.md.
-pub const FILE: &str = "live-accuracy.md";
+pub(crate) const FILE: &str = "live-accuracy.md";
 
 /// The header of live-accuracy.md's table, its rows [`LiveRow`]s.
 pub const TABLE_HEADER: &str = "| n | swap | start | belief | truth lines | live tracking error | centralized tracking error | largest \\|live − centralized\\| | live seconds |\n|---:|---:|---|---|---:|---:|---:|---:|---:|";

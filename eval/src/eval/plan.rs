@@ -39,7 +39,7 @@ pub(crate) enum Experiment {
 /// One point of an experiment: a scenario over several seeds, and the
 /// methods to run on it.
 #[derive(Debug, Clone)]
-pub struct Point {
+pub(crate) struct Point {
     pub experiment: Experiment,
     /// The nominal n (a pedestrian window's cap).
     pub n: usize,

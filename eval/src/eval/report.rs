@@ -22,7 +22,7 @@ pub(crate) const GOAL_MARGIN: f64 = 0.08;
 
 /// A Table III method with its budget scaled to n.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Kind {
+pub(crate) enum Kind {
     Exact,
     Order(usize),
     Threshold,

@@ -9,7 +9,7 @@ use idmesh_belief::Reliability;
 
 /// A method's scores on one point, over its seeds.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Summary {
+pub(crate) struct Summary {
     /// Runs scored (failures excluded).
     pub runs: usize,
     /// Mean and standard deviation (over seeds) of the tracking error.
@@ -132,7 +132,7 @@ impl PointResult {
 
 /// The whole evaluation.
 #[derive(Debug, Clone)]
-pub struct Results {
+pub(crate) struct Results {
     pub points: Vec<PointResult>,
     /// Seconds the whole run took, wall clock.
     pub wall_seconds: f64,

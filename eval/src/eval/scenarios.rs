@@ -42,7 +42,7 @@ pub const SCENES: [(&str, &str); 5] = [
 
 /// What an observation reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Sensor {
+pub(crate) enum Sensor {
     /// The colour histogram of the trace spec (0.8/0.2 or 0.1/0.7).
     Histogram,
     /// Names the right colour with this probability.
@@ -109,7 +109,7 @@ pub(crate) struct ScenarioSpec {
 
 /// One line of an in-memory trace.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Event(Event),
     /// The true red tracks now.
     Truth(Vec<u32>),
@@ -175,7 +175,7 @@ pub(crate) struct TraceInfo {
 
 /// A generated trace as the filters consume it.
 #[derive(Debug, Clone)]
-pub struct Trace {
+pub(crate) struct Trace {
     /// n, k and, with a known start, the red tracks at time 0.
     pub field: Field,
     /// The red tracks at time 0, whether or not the field reveals them.

@@ -73,7 +73,7 @@ impl Stopwatch {
 
 /// How one method did on one trace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Score {
+pub(crate) struct Score {
     /// Mean tracking error over the truth lines (NaN if the run failed or
     /// had no truth line).
     pub error: f64,

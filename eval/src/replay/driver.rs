@@ -15,7 +15,7 @@ use tracing::debug;
 
 /// One kind of replay: which lines are its events, how its filter takes
 /// them, and what it answers at a `truth` line.
-pub trait Replay {
+pub(crate) trait Replay {
     /// The engine event a line may carry.
     type Event;
     /// The JSON line written at a `truth` line.
@@ -105,7 +105,7 @@ pub(crate) fn finish(mut out: impl Write, summary: &impl Serialize) -> Result<()
 /// A filter with the bookkeeping of a replay: the time spent inside it
 /// (building it, every event, every answer — and nothing else: reading and
 /// printing excluded), and the events applied.
-pub struct Timed<F: ?Sized> {
+pub(crate) struct Timed<F: ?Sized> {
     pub filter: Box<F>,
     pub time: Duration,
     pub events: u64,

@@ -191,7 +191,7 @@ pub(crate) fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
 
 /// The identity filters replay can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum IdentityMethod {
+pub(crate) enum IdentityMethod {
     /// The exact filter over all N! assignments (N ≤ 9).
     ExactPerm,
     /// The belief matrix: doubly stochastic marginals, renormalized after
