@@ -56,7 +56,7 @@ impl CutParameters {
 
 /// What to do with a cut request; `Q` is whatever the driver answers
 /// (a Zenoh query, a simulated one).
-pub enum Request<Q> {
+pub(crate) enum Request<Q> {
     /// Place it now.
     Now { wanted: Wanted, query: Q },
     /// Held until the stream reaches its point.
@@ -68,7 +68,7 @@ pub enum Request<Q> {
 }
 
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
-pub struct Cuts<Q> {
+pub(crate) struct Cuts<Q> {
     scheduled: BTreeMap<u64, Vec<(Wanted, Q)>>,
     held: usize,
     /// The event count the stream will end at, when known in advance (a

@@ -17,7 +17,7 @@ use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
 
 /// How long after an error a peer is asked again.
-pub const POLL: Duration = Duration::from_millis(5);
+pub(crate) const POLL: Duration = Duration::from_millis(5);
 
 /// After a slice that changed nothing here (the peer held the request as
 /// long as it holds one), how long before asking again.
@@ -40,7 +40,7 @@ pub(crate) enum Fetch {
 /// A peer's name and what fetching from it got.
 pub(crate) type Fetched = (String, Fetch);
 
-pub struct Peers {
+pub(crate) struct Peers {
     requests: Vec<(String, watch::Sender<Vec<u8>>)>,
     replies: mpsc::Receiver<Fetched>,
     unreachable: BTreeSet<String>,

@@ -13,7 +13,7 @@ use std::collections::{BTreeMap, VecDeque};
 pub(crate) const SLICE_ENTRIES: usize = 4096;
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Intake {
+pub(crate) struct Intake {
     /// The number of the first entry still kept.
     base: u64,
     entries: VecDeque<(Position, Entry)>,

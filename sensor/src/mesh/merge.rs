@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Merge {
+pub(crate) struct Merge {
     /// Every sensor, in the topology's order.
     sensors: Vec<String>,
     /// Entries received from each and not merged yet.

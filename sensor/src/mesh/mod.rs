@@ -46,7 +46,7 @@ pub struct MeshConfig {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Mesh {
+pub(crate) struct Mesh {
     me: usize,
     serves: Vec<bool>,
     pub intake: Intake,
