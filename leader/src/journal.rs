@@ -75,13 +75,13 @@ impl Kind {
 
 /// One input, as it came off the wire.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Entry {
+pub(crate) struct Entry {
     pub kind: Kind,
     pub bytes: Vec<u8>,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct JournalOptions {
+pub(crate) struct JournalOptions {
     pub path: PathBuf,
     /// The longest a written entry waits for fsync.
     pub fsync_every: Duration,
@@ -107,7 +107,7 @@ pub enum JournalError {
 
 /// An open journal, appending. It holds the role's [`Ownership`] for as
 /// long as it is open: one writer per journal, whatever the network says.
-pub struct Journal {
+pub(crate) struct Journal {
     _owner: Ownership,
     writer: Writer,
     path: PathBuf,
@@ -121,7 +121,7 @@ pub struct Journal {
 
 /// What a journal held when it was opened.
 #[derive(Debug, Default)]
-pub struct Recovered {
+pub(crate) struct Recovered {
     /// The state as of the last compaction, if there was one.
     pub snapshot: Option<Vec<u8>>,
     /// The inputs since, in order (up to the damage, if any).
@@ -131,6 +131,7 @@ pub struct Recovered {
 }
 
 impl Recovered {
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.snapshot.is_none() && self.entries.is_empty()
     }

@@ -66,7 +66,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 /// The time of an input: since an origin the driver picks (its start).
-pub type Now = Duration;
+pub(crate) type Now = Duration;
 
 /// The node's clocks and limits.
 #[derive(Debug, Clone, PartialEq)]
