@@ -16,7 +16,7 @@ pub(crate) const EXACT_BY_DEFAULT: usize = 16;
 
 /// The `marginals` an answer of the factored identity belief names: its
 /// marginals are the belief's own, exact per group.
-pub const FACTORED: &str = "factored-identity";
+pub(crate) const FACTORED: &str = "factored-identity";
 
 /// How a query wants its marginals computed.
 #[derive(Debug, Clone, Copy, PartialEq)]

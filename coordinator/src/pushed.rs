@@ -60,7 +60,7 @@ impl Pushes {
 }
 
 /// A query's wait for the answers pushed at its cut.
-pub struct Waiting {
+pub(crate) struct Waiting {
     pushes: Arc<Pushes>,
     tag: u64,
     pub rx: mpsc::UnboundedReceiver<Pushed>,

@@ -44,7 +44,7 @@ const QUESTIONS: [(&str, &str); 6] = [
 
 /// A request, read: the selector to ask, and for a stream its interval.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Asked {
+pub(crate) struct Asked {
     pub selector: String,
     pub what: &'static str,
     pub interval: Duration,
