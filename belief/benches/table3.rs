@@ -11,8 +11,8 @@
 //! Run: `cargo bench -p idmesh-belief --bench table3`.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::workload::{generate, Workload, WorkloadSpec};
+use idmesh_belief::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{Field, PropertyFilter, RadonBelief, RadonOptions, Sparsify};
 use std::time::Duration;
 

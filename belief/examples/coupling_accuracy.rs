@@ -24,7 +24,7 @@
 //! Every stream is seeded: the numbers are the same on every run, except the
 //! time per event.
 
-use idmesh_belief::scoring::expected_tracking_error;
+use idmesh_belief::expected_tracking_error;
 use idmesh_belief::workload::{generate, WorkloadSpec};
 use idmesh_belief::{
     Coupling, DenseFilter, FactoredBelief, FactoredOptions, Field, PropertyFilter, SplitRule,

@@ -23,12 +23,12 @@
 //! the error the filter expects of itself from its marginals (for the exact
 //! filter, the Bayes risk of the prediction rule).
 
-use idmesh_belief::baseline::{LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, predict_red, Coupling, DenseFilter,
     Event, FactoredBelief, FactoredOptions, Field, ParticleFilter, PropertyFilter, RadonBelief,
     RadonOptions, Sparsify, SplitRule,
 };
+use idmesh_belief::{LowOrderFilter, LowOrderRepair};
 use idmesh_protocol::trace::{Line as TraceLine, TraceReader};
 use std::time::Instant;
 

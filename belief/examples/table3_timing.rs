@@ -1,5 +1,5 @@
-use idmesh_belief::baseline::LowOrderFilter;
 use idmesh_belief::workload::{generate, WorkloadSpec};
+use idmesh_belief::LowOrderFilter;
 use idmesh_belief::*;
 use std::time::Instant;
 
@@ -33,7 +33,7 @@ fn main() {
                     if n > 24 {
                         continue;
                     }
-                    Box::new(idmesh_belief::baseline::DenseFilter::new(field).unwrap())
+                    Box::new(idmesh_belief::DenseFilter::new(field).unwrap())
                 } else if method == "order1" {
                     Box::new(LowOrderFilter::new(field, 1).unwrap())
                 } else {

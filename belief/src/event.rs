@@ -51,14 +51,6 @@ impl RedCount {
         }
     }
 
-    /// The largest number of red targets the prior allows.
-    pub fn max_red(&self) -> usize {
-        match self {
-            RedCount::Known(k) => *k,
-            RedCount::Unknown { prior } => prior.iter().rposition(|&p| p > 0.0).unwrap_or(0),
-        }
-    }
-
     /// The known count, if any.
     pub fn known(&self) -> Option<usize> {
         match self {
@@ -159,14 +151,14 @@ impl Field {
     }
 
     /// Checks one event against this field.
-    pub fn check(&self, event: &Event) -> Result<(), BeliefError> {
+    pub(crate) fn check(&self, event: &Event) -> Result<(), BeliefError> {
         match *event {
             Event::Mix(mix) => self.check_mix(&mix),
             Event::Observe(observe) => self.check_observe(&observe),
         }
     }
 
-    pub fn check_mix(&self, mix: &Mix) -> Result<(), BeliefError> {
+    pub(crate) fn check_mix(&self, mix: &Mix) -> Result<(), BeliefError> {
         self.check_track(mix.a)?;
         self.check_track(mix.b)?;
         if mix.a == mix.b {
@@ -178,7 +170,7 @@ impl Field {
         Ok(())
     }
 
-    pub fn check_observe(&self, observe: &Observe) -> Result<(), BeliefError> {
+    pub(crate) fn check_observe(&self, observe: &Observe) -> Result<(), BeliefError> {
         self.check_track(observe.track)?;
         let valid = |x: f64| x.is_finite() && x >= 0.0;
         if !valid(observe.red)
@@ -193,7 +185,7 @@ impl Field {
         Ok(())
     }
 
-    pub fn check_track(&self, track: u32) -> Result<(), BeliefError> {
+    pub(crate) fn check_track(&self, track: u32) -> Result<(), BeliefError> {
         if (track as usize) < self.tracks {
             Ok(())
         } else {

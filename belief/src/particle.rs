@@ -54,7 +54,7 @@ use rand_chacha::ChaCha8Rng;
 const METHOD: &str = "particle filter";
 
 /// Resample when the effective sample size falls below this share of P.
-pub const RESAMPLE_BELOW: f64 = 0.5;
+pub(crate) const RESAMPLE_BELOW: f64 = 0.5;
 
 /// A belief over red sets held by P weighted particles. See the module
 /// documentation.
@@ -72,7 +72,6 @@ pub struct ParticleFilter {
     /// The other buffer of the resampling step, the shape of `sets`.
     spare: Vec<u64>,
     rng: ChaCha8Rng,
-    seed: u64,
     /// ln of the product of the predicted probabilities of every
     /// observation so far (the particle estimate of the evidence).
     log_evidence: f64,
@@ -130,7 +129,6 @@ impl ParticleFilter {
             sets,
             weights: vec![1.0 / particles as f64; particles],
             rng,
-            seed,
             log_evidence: 0.0,
             resamples: 0,
             moves: 0,
@@ -138,22 +136,20 @@ impl ParticleFilter {
     }
 
     /// P, the number of particles (constant: resampling keeps it).
-    pub fn particles(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn particles(&self) -> usize {
         self.count
     }
 
-    /// The seed the filter was built with.
-    pub fn seed(&self) -> u64 {
-        self.seed
-    }
-
     /// The normalized weights, one per particle.
-    pub fn weights(&self) -> &[f64] {
+    #[cfg(test)]
+    pub(crate) fn weights(&self) -> &[f64] {
         &self.weights
     }
 
     /// The red tracks of particle `p`, ascending.
-    pub fn particle(&self, p: usize) -> Vec<u32> {
+    #[cfg(test)]
+    pub(crate) fn particle(&self, p: usize) -> Vec<u32> {
         let set = &self.sets[p * self.words..(p + 1) * self.words];
         let mut tracks = Vec::new();
         for_each_bit(set, |t| tracks.push(t as u32));
@@ -161,25 +157,28 @@ impl ParticleFilter {
     }
 
     /// The effective sample size 1/Σw² (P right after resampling).
-    pub fn ess(&self) -> f64 {
+    pub(crate) fn ess(&self) -> f64 {
         1.0 / self.weights.iter().map(|w| w * w).sum::<f64>()
     }
 
     /// How many times the particles were resampled.
-    pub fn resamples(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn resamples(&self) -> u64 {
         self.resamples
     }
 
     /// ln of the estimated probability of every observation so far, each
     /// given the ones before (the product of the observations' predicted
     /// probabilities under the particles).
-    pub fn log_evidence(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn log_evidence(&self) -> f64 {
         self.log_evidence
     }
 
     /// How many particles were moved because a sighting ruled out every
     /// one (see the module documentation).
-    pub fn moves(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn moves(&self) -> u64 {
         self.moves
     }
 

@@ -9,7 +9,7 @@
 //! is the expected error of a uniformly random tie-break.
 
 /// Marginals this close are tied.
-pub const TIE: f64 = 1e-9;
+pub(crate) const TIE: f64 = 1e-9;
 
 /// Probabilities are clipped to [`LOG_LOSS_FLOOR`, 1] in the log-loss.
 pub const LOG_LOSS_FLOOR: f64 = 1e-12;
@@ -18,7 +18,7 @@ pub const LOG_LOSS_FLOOR: f64 = 1e-12;
 /// marginals, tied groups (chains of marginals within [`TIE`] of the next)
 /// sharing the slots they compete for equally; with k unknown, the tracks at
 /// ½ or more, those within [`TIE`] of ½ getting half a label.
-pub fn red_shares(marginals: &[f64], k: Option<usize>) -> Vec<f64> {
+pub(crate) fn red_shares(marginals: &[f64], k: Option<usize>) -> Vec<f64> {
     let n = marginals.len();
     let mut share = vec![0.0; n];
     let Some(k) = k else {

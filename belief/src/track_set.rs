@@ -47,7 +47,7 @@ impl Hash for TrackSet {
 }
 
 impl TrackSet {
-    pub fn empty() -> Self {
+    pub(crate) fn empty() -> Self {
         TrackSet::default()
     }
 
@@ -64,14 +64,14 @@ impl TrackSet {
         TrackSet::sorted(v)
     }
 
-    pub fn singleton(t: u32) -> Self {
+    pub(crate) fn singleton(t: u32) -> Self {
         let mut v = SmallVec::new();
         v.push(t);
         TrackSet::sorted(v)
     }
 
     /// The Zobrist hash (0 for the empty set).
-    pub fn zobrist(&self) -> u64 {
+    pub(crate) fn zobrist(&self) -> u64 {
         self.hash
     }
 
@@ -96,7 +96,7 @@ impl TrackSet {
     }
 
     /// α ∪ {t}.
-    pub fn with(&self, t: u32) -> Self {
+    pub(crate) fn with(&self, t: u32) -> Self {
         let mut out = self.clone();
         if let Err(at) = out.tracks.binary_search(&t) {
             out.tracks.insert(at, t);
@@ -106,7 +106,7 @@ impl TrackSet {
     }
 
     /// α − {t}.
-    pub fn without(&self, t: u32) -> Self {
+    pub(crate) fn without(&self, t: u32) -> Self {
         let mut out = self.clone();
         if let Ok(at) = out.tracks.binary_search(&t) {
             out.tracks.remove(at);
@@ -117,7 +117,7 @@ impl TrackSet {
 
     /// α △ {from, to} for a set holding `from` and not `to`: the set the
     /// rollup moves mass to when the targets on `from` and `to` swap.
-    pub fn replace(&self, from: u32, to: u32) -> Self {
+    pub(crate) fn replace(&self, from: u32, to: u32) -> Self {
         let mut out = self.clone();
         let v = &mut out.tracks;
         if let Ok(at) = v.binary_search(&from) {
@@ -147,7 +147,7 @@ impl TrackSet {
     }
 
     /// |α ∩ β| by a linear merge.
-    pub fn intersection_len(&self, other: &TrackSet) -> usize {
+    pub(crate) fn intersection_len(&self, other: &TrackSet) -> usize {
         let (a, b) = (&self.tracks, &other.tracks);
         let (mut i, mut j, mut common) = (0, 0, 0);
         while i < a.len() && j < b.len() {
@@ -165,21 +165,23 @@ impl TrackSet {
     }
 
     /// |α ∪ β|.
-    pub fn union_len(&self, other: &TrackSet) -> usize {
+    pub(crate) fn union_len(&self, other: &TrackSet) -> usize {
         self.len() + other.len() - self.intersection_len(other)
     }
 
     /// α ∪ β.
-    pub fn union(&self, other: &TrackSet) -> TrackSet {
+    #[cfg(test)]
+    pub(crate) fn union(&self, other: &TrackSet) -> TrackSet {
         TrackSet::from_tracks(self.tracks.iter().chain(other.tracks.iter()).copied())
     }
 
-    pub fn is_subset(&self, other: &TrackSet) -> bool {
+    #[cfg(test)]
+    pub(crate) fn is_subset(&self, other: &TrackSet) -> bool {
         self.intersection_len(other) == self.len()
     }
 
     /// Whether α and the sorted slice share an element.
-    pub fn meets(&self, others: &[u32]) -> bool {
+    pub(crate) fn meets(&self, others: &[u32]) -> bool {
         others.iter().any(|&t| self.contains(t))
     }
 }

@@ -21,7 +21,7 @@ use rustc_hash::FxHashMap;
 use std::cell::RefCell;
 
 /// ln C(n, r) by a sum of logs: exact to ~1e-13 relative, no tables.
-pub fn ln_binomial(n: usize, r: usize) -> f64 {
+pub(crate) fn ln_binomial(n: usize, r: usize) -> f64 {
     if r > n {
         return f64::NEG_INFINITY;
     }
@@ -50,10 +50,9 @@ enum Count {
 
 /// The weights of one field.
 #[derive(Debug, Clone)]
-pub struct Weights {
+pub(crate) struct Weights {
     tracks: usize,
     count: Count,
-    max_red: usize,
     /// ln n! for n = 0..=tracks, so that ln C is three lookups.
     ln_factorial: Vec<f64>,
     /// ln W(i, o) for unknown k, computed on first use (O(n) each).
@@ -61,7 +60,7 @@ pub struct Weights {
 }
 
 impl Weights {
-    pub fn new(tracks: usize, red: &RedCount) -> Self {
+    pub(crate) fn new(tracks: usize, red: &RedCount) -> Self {
         let mut ln_factorial = Vec::with_capacity(tracks + 1);
         let mut acc = 0.0;
         ln_factorial.push(0.0);
@@ -86,7 +85,6 @@ impl Weights {
         Weights {
             tracks,
             count,
-            max_red: red.max_red(),
             ln_factorial,
             cache: RefCell::new(FxHashMap::default()),
         }
@@ -94,12 +92,6 @@ impl Weights {
 
     pub fn tracks(&self) -> usize {
         self.tracks
-    }
-
-    /// The largest number of red tracks an atom can fix and still cover an
-    /// admissible red set.
-    pub fn max_size(&self) -> usize {
-        self.max_red
     }
 
     fn ln_c(&self, n: usize, r: usize) -> f64 {
@@ -112,7 +104,7 @@ impl Weights {
 
     /// ln W(i, o); −∞ when no admissible red set has i red tracks and o
     /// other tracks blue.
-    pub fn ln2(&self, red: usize, blue: usize) -> f64 {
+    pub(crate) fn ln2(&self, red: usize, blue: usize) -> f64 {
         if red + blue > self.tracks {
             return f64::NEG_INFINITY;
         }
@@ -142,13 +134,14 @@ impl Weights {
     }
 
     /// ln W(j) = ln W(j, 0), the Radon atom of j tracks.
-    pub fn ln(&self, j: usize) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn ln(&self, j: usize) -> f64 {
         self.ln2(j, 0)
     }
 
     /// W(i + 1, o)/W(i, o): the share of the sets an atom covers in which one
     /// given free track is red.
-    pub fn ratio_red(&self, red: usize, blue: usize) -> f64 {
+    pub(crate) fn ratio_red(&self, red: usize, blue: usize) -> f64 {
         match &self.count {
             Count::Known(k) => {
                 let free = self.tracks.saturating_sub(red + blue);
@@ -163,7 +156,7 @@ impl Weights {
     }
 
     /// W(i, o + 1)/W(i, o): the share in which one given free track is blue.
-    pub fn ratio_blue(&self, red: usize, blue: usize) -> f64 {
+    pub(crate) fn ratio_blue(&self, red: usize, blue: usize) -> f64 {
         match &self.count {
             Count::Known(k) => {
                 let free = self.tracks.saturating_sub(red + blue);
@@ -178,12 +171,13 @@ impl Weights {
     }
 
     /// W(j + 1)/W(j) for Radon atoms.
-    pub fn ratio(&self, j: usize) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn ratio(&self, j: usize) -> f64 {
         self.ratio_red(j, 0)
     }
 
     /// W(to)/W(from) for (red, blue) sizes; 0 when `to` covers nothing.
-    pub fn ratio_between(&self, from: (usize, usize), to: (usize, usize)) -> f64 {
+    pub(crate) fn ratio_between(&self, from: (usize, usize), to: (usize, usize)) -> f64 {
         let hi = self.ln2(to.0, to.1);
         if hi == f64::NEG_INFINITY {
             0.0

@@ -54,7 +54,7 @@ pub struct Workload {
 /// The colour-histogram sensor of the trace spec: a red target shows 80 %
 /// red, 10 % blue and 10 % other pixels; a blue one 20 % red, 70 % blue, 10 %
 /// other. A pixel of "other" colour says nothing, so the sensor draws again.
-pub fn colour_histogram(rng: &mut impl Rng, is_red: bool) -> (f64, f64) {
+pub(crate) fn colour_histogram(rng: &mut impl Rng, is_red: bool) -> (f64, f64) {
     let u: f64 = rng.gen();
     let sees_red = if is_red { u < 0.8 / 0.9 } else { u < 0.2 / 0.9 };
     if sees_red {

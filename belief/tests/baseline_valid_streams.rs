@@ -19,7 +19,7 @@
 //! approximation may be far from the exact filter, but it may not halt on
 //! a stream the world could have produced.
 
-use idmesh_belief::baseline::LowOrderRepair;
+use idmesh_belief::LowOrderRepair;
 use idmesh_belief::{
     DenseFilter, Event, Field, LowOrderFilter, Mix, Observe, ParticleFilter, PropertyFilter,
     RadonBelief, RadonOptions, Sparsify,

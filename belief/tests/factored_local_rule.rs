@@ -9,7 +9,7 @@
 //! That its weight is the true one when the rest is uninformed is a unit
 //! test beside the code (`the_local_weight_is_the_weight_of_an_uninformed_rest`).
 
-use idmesh_belief::baseline::DenseFilter;
+use idmesh_belief::DenseFilter;
 use idmesh_belief::{
     BeliefError, Coupling, Event, FactoredBelief, FactoredOptions, Mix, Observe, PropertyFilter,
 };

@@ -13,7 +13,7 @@
 //! finite normalizer: an approximation may be far from the exact filter,
 //! but it may not halt on a stream the world could have produced.
 
-use idmesh_belief::factored::{coupled_marginals, FactoredShare};
+use idmesh_belief::{coupled_marginals, FactoredShare};
 use idmesh_belief::{
     Coupling, Event, FactoredBelief, FactoredOptions, Field, Mix, Observe, PropertyFilter,
     SplitRule,

@@ -10,7 +10,7 @@
 //! - a rejected observation leaves the belief exactly as it was;
 //! - the last two under either coupling of the splits (`Coupling`).
 
-use idmesh_belief::baseline::DenseFilter;
+use idmesh_belief::DenseFilter;
 use idmesh_belief::{
     BeliefError, Coupling, Event, FactoredBelief, FactoredOptions, Observe, PropertyFilter,
     SplitRule,

@@ -7,7 +7,7 @@
 //! checked against the same exact filter: they stay valid beliefs and are
 //! exact whenever their budget is never reached.
 
-use idmesh_belief::baseline::DenseFilter;
+use idmesh_belief::DenseFilter;
 use idmesh_belief::{
     BeliefError, Event, Field, Mix, Observe, PropertyFilter, RadonBelief, RadonOptions, RedCount,
     Sparsify, TrackSet,

@@ -6,17 +6,17 @@
 //! answers it (`driver::identity`).
 
 use crate::driver::gather::GatherError;
-use idmesh_identity::marginals::DEFAULT_SAMPLES;
 use idmesh_identity::MarginalMethod;
+use idmesh_identity::DEFAULT_SAMPLES;
 
 /// The most tracks for which a query that names no method gets exact
 /// marginals (the permanent of an N × N matrix: 2^16 Gray-code steps of
 /// N² each, milliseconds; at 22 it is seconds).
-pub const EXACT_BY_DEFAULT: usize = 16;
+pub(crate) const EXACT_BY_DEFAULT: usize = 16;
 
 /// The `marginals` an answer of the factored identity belief names: its
 /// marginals are the belief's own, exact per group.
-pub const FACTORED: &str = "factored-identity";
+pub(crate) const FACTORED: &str = "factored-identity";
 
 /// How a query wants its marginals computed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -29,7 +29,7 @@ pub enum Method {
 impl Method {
     /// `marginals=<name>` (and `samples=`, `seed=` for metropolis) from a
     /// query's parameters.
-    pub fn from_parameters(
+    pub(crate) fn from_parameters(
         marginals: Option<&str>,
         samples: Option<&str>,
         seed: Option<&str>,

@@ -10,23 +10,27 @@
 //! cut's watermark. A leader that does not answer in time makes the query
 //! fail, naming it.
 //!
-//! A map of the crate:
+//! A map of the crate (private modules behind the re-exports below;
+//! `machine` stays a public namespace: the pure functions the simulation
+//! tests drive one query through):
 //! - [`machine`] — the coordinator's pure part: the replies to one query,
 //!   whether they make a complete answer at one consistent cut, and the
 //!   marginals they add up to.
-//! - [`driver`] — the Zenoh I/O: the queryables of the user API
-//!   ([`driver::run`]) and the gets that collect the replies
-//!   ([`driver::gather`]).
-//! - [`pushed`] — the leaders' answers put at the cuts they reach, handed
+//! - `driver` — the Zenoh I/O: the queryables of the user API
+//!   ([`run`]) and the gets that collect the replies
+//!   (`driver::gather`).
+//! - `pushed` — the leaders' answers put at the cuts they reach, handed
 //!   to the query waiting for each.
-//! - [`identity`] — identity marginals from the leaders' rows of the
+//! - `identity` — identity marginals from the leaders' rows of the
 //!   information matrix, computed only when asked.
-//! - [`request`] — a query's key and parameters, checked before any work.
+//! - `request` — a query's key and parameters, checked before any work.
 
-pub mod driver;
-pub mod identity;
+mod driver;
+mod identity;
 pub mod machine;
-pub mod pushed;
-pub mod request;
+mod pushed;
+mod request;
 
-pub use driver::gather::{GatherError, Gathered};
+// The coordinator process, its settings, and why a query failed.
+pub use driver::gather::GatherError;
+pub use driver::{run, CoordinatorConfig};

@@ -6,10 +6,10 @@
 //! (`tests/src/sim`) feeds these the replies of simulated processes.
 
 use bytes::Bytes;
-use idmesh_belief::factored::{CountPart, CouplingTree};
 use idmesh_belief::predict_red;
 use idmesh_belief::BeliefError;
 use idmesh_belief::Field;
+use idmesh_belief::{CountPart, CouplingTree};
 use idmesh_placement::combine;
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
@@ -68,8 +68,7 @@ pub type Components = Arc<Vec<Arc<CountPart>>>;
 
 /// What a marginals query found.
 #[derive(Debug, Clone)]
-pub struct Gathered {
-    pub cut: CutPlaced,
+pub(crate) struct Gathered {
     pub answer: MarginalsAnswer,
 }
 
@@ -117,7 +116,7 @@ impl Collected {
     }
 
     /// What the answer includes: per sensor, its events.
-    pub fn watermark(&self) -> Watermark {
+    pub(crate) fn watermark(&self) -> Watermark {
         if !self.cut.origins.is_empty() {
             return self.cut.origins.iter().cloned().collect();
         }
@@ -168,25 +167,25 @@ pub struct Memory {
 
 impl Memory {
     /// Counts a query refused for its parameters.
-    pub fn note_rejected(&self) {
+    pub(crate) fn note_rejected(&self) {
         self.rejected.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Counts a reply from another process that was no good.
-    pub fn note_bad_reply(&self, what: &str, problem: &str) {
+    pub(crate) fn note_bad_reply(&self, what: &str, problem: &str) {
         let n = self.bad_replies.fetch_add(1, Ordering::Relaxed) + 1;
         tracing::warn!(what, problem, bad_replies = n, "bad reply");
     }
 
     /// Counts a query answered `degraded: …` (a leader missing or not
     /// at the cut).
-    pub fn note_degraded(&self) {
+    pub(crate) fn note_degraded(&self) {
         self.degraded.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Counts a fresh cut whose sums every leader pushed (`true`), or one
     /// whose leaders had to be asked.
-    pub fn note_cut(&self, pushed: bool) {
+    pub(crate) fn note_cut(&self, pushed: bool) {
         let counter = if pushed {
             &self.cuts_pushed
         } else {
@@ -195,7 +194,7 @@ impl Memory {
         counter.fetch_add(1, Ordering::Relaxed);
     }
 
-    pub fn stats(&self) -> CoordinatorStats {
+    pub(crate) fn stats(&self) -> CoordinatorStats {
         CoordinatorStats {
             rejected: self.rejected.load(Ordering::Relaxed),
             bad_replies: self.bad_replies.load(Ordering::Relaxed),
@@ -210,7 +209,7 @@ impl Memory {
     /// at every cut, where most cuts change no component), the new
     /// watermark before the kept bytes of everything else; else encoded
     /// now. Kept with the answer, which is taken rather than copied.
-    pub fn marginals_json(&self, answer: MarginalsAnswer) -> Bytes {
+    pub(crate) fn marginals_json(&self, answer: MarginalsAnswer) -> Bytes {
         let mut encoded = self.encoded.lock().unwrap_or_else(|e| e.into_inner());
         let size = match &*encoded {
             Some(last) if last.answer == answer => return last.bytes.clone(),
@@ -266,7 +265,7 @@ impl Memory {
 
     /// No sensor answered: degraded, naming the sensors that did before,
     /// or a stream that has no source yet.
-    pub fn no_sensor(&self) -> GatherError {
+    pub(crate) fn no_sensor(&self) -> GatherError {
         let known: Vec<String> = self
             .sensors
             .lock()
@@ -367,7 +366,7 @@ pub enum At {
 }
 
 /// The parameters of the cut request of a fresh cut tagged `tag`.
-pub fn cut_parameters(tag: u64, at: At, share: Share) -> String {
+pub(crate) fn cut_parameters(tag: u64, at: At, share: Share) -> String {
     let mut parameters = match at {
         At::Latest => format!("tag={tag}"),
         At::Events(n) => format!("tag={tag};events={n}"),
@@ -447,18 +446,19 @@ impl Partials {
     }
 
     /// How many leaders answered with sums.
-    pub fn answered(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn answered(&self) -> usize {
         self.parts.len()
     }
 
     /// Whether every one of `leaders` answered with sums and no reply
     /// was an error or bad.
-    pub fn complete(&self, leaders: &[String]) -> bool {
+    pub(crate) fn complete(&self, leaders: &[String]) -> bool {
         self.errors.is_empty() && leaders.iter().all(|l| self.parts.contains_key(l))
     }
 
     /// Whether a reply was an error or bad.
-    pub fn refused_any(&self) -> bool {
+    pub(crate) fn refused_any(&self) -> bool {
         !self.errors.is_empty()
     }
 

@@ -14,14 +14,14 @@ use tokio::sync::mpsc;
 
 /// One pushed answer: the key it came on (naming the leader) and its bytes.
 #[derive(Debug)]
-pub struct Pushed {
+pub(crate) struct Pushed {
     pub key: String,
     pub bytes: Vec<u8>,
 }
 
 /// The queries waiting for pushed answers, by the tag of their cut.
 #[derive(Debug, Default)]
-pub struct Pushes {
+pub(crate) struct Pushes {
     waiting: Mutex<HashMap<u64, mpsc::UnboundedSender<Pushed>>>,
 }
 
@@ -45,7 +45,7 @@ impl Pushes {
     /// Starts waiting for the answers pushed at the cut tagged `tag`
     /// (before the cut is asked for: they may come before its placement
     /// does); the wait ends when the returned guard is dropped.
-    pub fn wait_for(self: &Arc<Self>, tag: u64) -> Waiting {
+    pub(crate) fn wait_for(self: &Arc<Self>, tag: u64) -> Waiting {
         let (tx, rx) = mpsc::unbounded_channel();
         self.waiting
             .lock()
@@ -60,7 +60,7 @@ impl Pushes {
 }
 
 /// A query's wait for the answers pushed at its cut.
-pub struct Waiting {
+pub(crate) struct Waiting {
     pushes: Arc<Pushes>,
     tag: u64,
     pub rx: mpsc::UnboundedReceiver<Pushed>,

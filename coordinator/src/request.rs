@@ -11,7 +11,7 @@ use crate::identity::Method;
 
 /// A query, checked.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Request {
+pub(crate) enum Request {
     Marginals(At),
     Track(At, u32),
     Identity(At, Method),

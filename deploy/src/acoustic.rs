@@ -6,8 +6,8 @@
 
 use crate::cli::AcousticArgs;
 use anyhow::{Context, Result};
-use idmesh_acoustic::field::PathSpec;
-use idmesh_acoustic::trace::write_trace;
+use idmesh_acoustic::write_trace;
+use idmesh_acoustic::PathSpec;
 use idmesh_acoustic::{run as track, AcousticConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::fs::File;

@@ -4,7 +4,7 @@
 use crate::runtime::topology::BeliefKind;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use idmesh_eval::eval::EvalArgs;
-use idmesh_eval::replay::identity::MarginalChoice;
+use idmesh_eval::replay::MarginalChoice;
 use idmesh_eval::replay::ReplayArgs;
 use std::path::PathBuf;
 
@@ -173,7 +173,7 @@ pub struct BenchArgs {
         default_value = "known,uniform",
         requires = "accuracy"
     )]
-    pub starts: Vec<idmesh_eval::eval::accuracy::Start>,
+    pub starts: Vec<idmesh_eval::eval::Start>,
     /// With --accuracy: seeds per point (the evaluation's seeds 0, 1, …).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..), requires = "accuracy")]
     pub seeds: u64,

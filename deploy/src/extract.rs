@@ -10,7 +10,7 @@ use idmesh_extract::adapters::jsonl::report_of;
 use idmesh_extract::adapters::mot::{Ground, MotOptions, MotReader, Reads};
 use idmesh_extract::adapters::Located;
 use idmesh_extract::adapters::{eth_ucy, mot};
-use idmesh_extract::pipeline::{every_id, extract_jsonl, extract_rows, read_reports, Run, Tally};
+use idmesh_extract::{every_id, extract_jsonl, extract_rows, read_reports, Run, Tally};
 use idmesh_extract::{ExtractorConfig, RosterPolicy, ScoreMapping};
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};

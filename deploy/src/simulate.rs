@@ -3,8 +3,8 @@
 
 use crate::cli::{Motion, SimulateArgs};
 use anyhow::{Context, Result};
-use idmesh_sim::scenario::trace_out::{write_trace, write_tracker_output};
 use idmesh_sim::Scenario;
+use idmesh_sim::{write_trace, write_tracker_output};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::fs::File;
 use std::io::BufWriter;

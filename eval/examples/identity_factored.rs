@@ -24,19 +24,19 @@
 //!
 //!     cargo run --release -p idmesh-eval --example identity_factored [SEEDS] [OUT]
 
-use idmesh_belief::scoring::Reliability;
+use idmesh_belief::Reliability;
 use idmesh_belief::{RadonOptions, Sparsify};
-use idmesh_eval::eval::plots::{draw, reliability_series, Plot};
+use idmesh_eval::eval::{draw, reliability_series, Plot};
 use idmesh_identity::identity_event_of;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
 use idmesh_identity::scoring::{add_reliability, brier, idf1, log_loss};
+use idmesh_identity::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{
     BeliefMatrix, BitCode, ExactPermutationFilter, FactoredIdentity, FactoredIdentityOptions,
     IdentityEvent, IdentityFilter, InformationMatrix, InformationOptions, PropertyBitsFilter,
 };
 use idmesh_protocol::trace::Line;
-use idmesh_sim::scenario::trace_out::lines;
-use idmesh_sim::scenario::Scenario;
+use idmesh_sim::lines;
+use idmesh_sim::Scenario;
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 

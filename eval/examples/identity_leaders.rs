@@ -22,14 +22,14 @@
 //!     cargo run --release -p idmesh-eval --example identity_leaders [SEEDS] [CAP]
 
 use idmesh_identity::factored::{assemble, IdentityShare};
-use idmesh_identity::filter::max_abs_difference;
 use idmesh_identity::identity_event_of;
+use idmesh_identity::max_abs_difference;
 use idmesh_identity::{FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter};
 use idmesh_placement::{leading_places, RegionRule, Regions};
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::sensor_to_leader::{keeper, UNHELD};
-use idmesh_sim::scenario::trace_out::lines;
-use idmesh_sim::scenario::Scenario;
+use idmesh_sim::lines;
+use idmesh_sim::Scenario;
 
 #[derive(Default)]
 struct Cost {

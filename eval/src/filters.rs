@@ -4,15 +4,15 @@
 //! [`Recipe::build`] knows how each filter is put together (the repair of
 //! the low-order projections, the Radon options, the factored coupling).
 
-use idmesh_belief::baseline::{DenseFilter, LowOrderFilter, LowOrderRepair};
 use idmesh_belief::{
     BeliefError, Coupling, FactoredBelief, FactoredOptions, Field, ParticleFilter, PropertyFilter,
     RadonBelief, RadonOptions, Sparsify,
 };
+use idmesh_belief::{DenseFilter, LowOrderFilter, LowOrderRepair};
 
 /// A property filter and its settings, before it meets a field.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Recipe {
+pub(crate) enum Recipe {
     /// The dense filter over every red set: the optimum.
     Exact,
     /// The low-order Radon projection of this order, shrunk towards uniform
@@ -33,7 +33,7 @@ pub enum Recipe {
 
 impl Recipe {
     /// The factored belief with the default options but for `coupling`.
-    pub fn factored(coupling: Coupling) -> Recipe {
+    pub(crate) fn factored(coupling: Coupling) -> Recipe {
         Recipe::Factored(FactoredOptions {
             coupling,
             ..FactoredOptions::default()
@@ -41,7 +41,7 @@ impl Recipe {
     }
 
     /// Builds the filter for `field`.
-    pub fn build(&self, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
+    pub(crate) fn build(&self, field: Field) -> Result<Box<dyn PropertyFilter>, BeliefError> {
         Ok(match self {
             Recipe::Exact => Box::new(DenseFilter::new(field)?),
             // Without the repair the paper's order-j projections leave the

@@ -25,7 +25,7 @@
 
 use criterion::{BenchmarkId, Criterion};
 use idmesh_belief::Mix;
-use idmesh_identity::information::{paper_merge, paper_merge_pinv, InformationOptions, MixSolver};
+use idmesh_identity::{paper_merge, paper_merge_pinv, InformationOptions, MixSolver};
 use idmesh_identity::{IdentityFilter, InformationMatrix};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -35,10 +35,9 @@
 //! minutes; `-- 10000` for one size).
 
 use criterion::{BenchmarkId, Criterion};
-use idmesh_identity::workload::generate_final;
+use idmesh_identity::workload::{generate_final, IdentityWorkloadSpec};
 use idmesh_identity::{
-    identity_error, BeliefMatrix, IdentityEvent, IdentityFilter, IdentityWorkloadSpec,
-    InformationMatrix, MarginalMethod,
+    identity_error, BeliefMatrix, IdentityEvent, IdentityFilter, InformationMatrix, MarginalMethod,
 };
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -11,7 +11,7 @@
 use super::blocks::{blocks, Block};
 use super::event::check_square;
 use super::sparse_assignment::{sparse_min_cost_assignment, SparseRow};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The permutation π maximizing Σ_t ln p\[t\]\[π(t)\]: `result[t]` is the
 /// identity assigned to track t.
@@ -52,7 +52,7 @@ pub fn most_likely_assignment(p: &[Vec<f64>]) -> Result<Vec<u32>, BeliefError> {
 /// by the sparse solver over their positive entries
 /// ([`super::sparse_assignment`]), O(k³) against about O(k · m log k): a
 /// crowd's block of 9,590 tracks took about two minutes densely.
-pub const DENSE_ASSIGNMENT_LIMIT: usize = 200;
+pub(crate) const DENSE_ASSIGNMENT_LIMIT: usize = 200;
 
 /// [`most_likely_assignment`] by one Hungarian run over the whole matrix
 /// (over its positive entries only when it is large and they hold an

@@ -20,8 +20,8 @@
 use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// A doubly stochastic N × N matrix of marginals.
 #[derive(Debug, Clone, PartialEq)]
@@ -39,7 +39,7 @@ impl BeliefMatrix {
     }
 
     /// [`BeliefMatrix::uniform`] with explicit Sinkhorn options.
-    pub fn uniform_with(n: usize, options: SinkhornOptions) -> Result<Self, BeliefError> {
+    pub(crate) fn uniform_with(n: usize, options: SinkhornOptions) -> Result<Self, BeliefError> {
         if n == 0 {
             return Err(BeliefError::NoTracks);
         }
@@ -57,7 +57,7 @@ impl BeliefMatrix {
     }
 
     /// [`BeliefMatrix::from_assignment`] with explicit Sinkhorn options.
-    pub fn from_assignment_with(
+    pub(crate) fn from_assignment_with(
         assignment: &[u32],
         options: SinkhornOptions,
     ) -> Result<Self, BeliefError> {
@@ -72,10 +72,6 @@ impl BeliefMatrix {
             b[t * n + i as usize] = 1.0;
         }
         Ok(BeliefMatrix { n, b, options })
-    }
-
-    pub fn options(&self) -> &SinkhornOptions {
-        &self.options
     }
 
     /// B\[t\]\[i\].

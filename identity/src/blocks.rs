@@ -41,7 +41,7 @@ impl Block {
 
     /// Whether the block has as many tracks as identities (else no
     /// assignment has positive weight).
-    pub fn is_balanced(&self) -> bool {
+    pub(crate) fn is_balanced(&self) -> bool {
         self.tracks.len() == self.identities.len()
     }
 }
@@ -49,7 +49,7 @@ impl Block {
 /// The blocks of the n × n row-major pattern `positive(t, i)`, in the order
 /// of their smallest track; tracks or identities with no positive entry at
 /// all form blocks with an empty other side.
-pub fn blocks(n: usize, positive: impl Fn(usize, usize) -> bool) -> Vec<Block> {
+pub(crate) fn blocks(n: usize, positive: impl Fn(usize, usize) -> bool) -> Vec<Block> {
     // Union–find over 2n nodes: tracks 0..n, identities n..2n.
     let mut parent: Vec<usize> = (0..2 * n).collect();
     for t in 0..n {
@@ -114,13 +114,13 @@ pub fn mixing_block_sizes(n: usize, mixes: impl IntoIterator<Item = (usize, usiz
 }
 
 /// The blocks of an information matrix (row-major, entries finite or −∞).
-pub fn blocks_of_log_likelihoods(n: usize, l: &[f64]) -> Vec<Block> {
+pub(crate) fn blocks_of_log_likelihoods(n: usize, l: &[f64]) -> Vec<Block> {
     blocks(n, |t, i| l[t * n + i] > f64::NEG_INFINITY)
 }
 
 /// The k × k sub-matrix of a row-major n × n matrix on a block's tracks and
 /// identities, row-major.
-pub fn sub_matrix(n: usize, m: &[f64], block: &Block) -> Vec<f64> {
+pub(crate) fn sub_matrix(n: usize, m: &[f64], block: &Block) -> Vec<f64> {
     let mut out = Vec::with_capacity(block.tracks.len() * block.identities.len());
     for &t in &block.tracks {
         let row = &m[t * n..(t + 1) * n];

@@ -1,5 +1,5 @@
 //! The identity events: a [`Mix`] of two tracks (reused from the property
-//! engine, [`idmesh_belief::event::Mix`]) and an [`Identify`] reading, with the read
+//! engine, [`idmesh_belief::Mix`]) and an [`Identify`] reading, with the read
 //! model of Shin et al., *Lazy Inference on Object Identities in Wireless
 //! Sensor Networks* (IPSN 2005), Definition 3, generalized from the paper's
 //! 0.9 / 0.1/(N − 1) to any accuracy.
@@ -9,8 +9,8 @@
 //! i). The paper writes its matrices the other way round (column = object);
 //! our row t is the paper's column t.
 
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// A sensor read identity `identity` on the target of track `track`.
 ///
@@ -28,7 +28,7 @@ pub struct Identify {
 
 impl Identify {
     /// P(this read | track carries `truth`) among `n` identities.
-    pub fn likelihood(&self, n: usize, truth: usize) -> f64 {
+    pub(crate) fn likelihood(&self, n: usize, truth: usize) -> f64 {
         if truth == self.identity as usize {
             self.accuracy
         } else {
@@ -39,7 +39,7 @@ impl Identify {
     /// P(this read | the track carries one given identity other than the
     /// one read): (1 − accuracy)/(N − 1). With one identity there is no
     /// other identity, and the value is never used; we return 0.
-    pub fn wrong_read_likelihood(&self, n: usize) -> f64 {
+    pub(crate) fn wrong_read_likelihood(&self, n: usize) -> f64 {
         if n > 1 {
             (1.0 - self.accuracy) / (n as f64 - 1.0)
         } else {
@@ -69,7 +69,7 @@ pub enum IdentityEvent {
 
 /// Checks a mix against `n` tracks: two distinct tracks in range and a swap
 /// probability in [0, 1].
-pub fn check_mix(n: usize, mix: &Mix) -> Result<(), BeliefError> {
+pub(crate) fn check_mix(n: usize, mix: &Mix) -> Result<(), BeliefError> {
     check_track(n, mix.a)?;
     check_track(n, mix.b)?;
     if mix.a == mix.b {
@@ -83,7 +83,7 @@ pub fn check_mix(n: usize, mix: &Mix) -> Result<(), BeliefError> {
 }
 
 /// Checks a read against `n` tracks and identities.
-pub fn check_identify(n: usize, identify: &Identify) -> Result<(), BeliefError> {
+pub(crate) fn check_identify(n: usize, identify: &Identify) -> Result<(), BeliefError> {
     check_track(n, identify.track)?;
     if identify.identity as usize >= n {
         return Err(BeliefError::UnknownIdentity {
@@ -101,7 +101,7 @@ pub fn check_identify(n: usize, identify: &Identify) -> Result<(), BeliefError> 
 }
 
 /// Checks a track id against `n` tracks.
-pub fn check_track(n: usize, track: u32) -> Result<(), BeliefError> {
+pub(crate) fn check_track(n: usize, track: u32) -> Result<(), BeliefError> {
     if (track as usize) < n {
         Ok(())
     } else {
@@ -111,7 +111,7 @@ pub fn check_track(n: usize, track: u32) -> Result<(), BeliefError> {
 
 /// Checks that `assignment` (track t carries identity `assignment[t]`) is a
 /// permutation of 0..n.
-pub fn check_assignment(n: usize, assignment: &[u32]) -> Result<(), BeliefError> {
+pub(crate) fn check_assignment(n: usize, assignment: &[u32]) -> Result<(), BeliefError> {
     let bad = || BeliefError::BadInitialIdentity {
         tracks: n,
         got: assignment.to_vec(),
@@ -131,7 +131,7 @@ pub fn check_assignment(n: usize, assignment: &[u32]) -> Result<(), BeliefError>
 }
 
 /// Checks that `matrix` is n × n with n ≥ 1 and returns n.
-pub fn check_square(matrix: &[Vec<f64>]) -> Result<usize, BeliefError> {
+pub(crate) fn check_square(matrix: &[Vec<f64>]) -> Result<usize, BeliefError> {
     let n = matrix.len();
     if n == 0 {
         return Err(BeliefError::NoTracks);

@@ -11,11 +11,11 @@
 //! - Evidence (Definition 3, Bayes' rule) multiplies p(π) by
 //!   P(read | π(track)) of the [`Identify`] read model and renormalizes.
 
-use super::event::{check_assignment, check_identify, check_mix, check_square, Identify};
+use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{IdentityFilter, Marginals};
 use super::permutation::Permutations;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use std::sync::Arc;
 
 /// The exact distribution over the N! assignments.
@@ -58,8 +58,9 @@ impl ExactPermutationFilter {
     /// p(π) ∝ exp(Σ_t l\[t\]\[π(t)\]): the distribution an information matrix
     /// L encodes (Shin et al., Section 3.1). Entries may be −∞ (impossible
     /// pairings) but not +∞ or NaN, and some assignment must stay possible.
-    pub fn from_log_likelihoods(l: &[Vec<f64>]) -> Result<Self, BeliefError> {
-        let n = check_square(l)?;
+    #[cfg(test)]
+    pub(crate) fn from_log_likelihoods(l: &[Vec<f64>]) -> Result<Self, BeliefError> {
+        let n = super::event::check_square(l)?;
         if let Some(&bad) = l
             .iter()
             .flatten()
@@ -93,25 +94,23 @@ impl ExactPermutationFilter {
         })
     }
 
-    /// The assignments and their ranks.
-    pub fn permutations(&self) -> &Permutations {
-        &self.perms
-    }
-
     /// P(assignment) for every assignment, indexed by Lehmer rank.
-    pub fn probabilities(&self) -> &[f64] {
+    #[cfg(test)]
+    pub(crate) fn probabilities(&self) -> &[f64] {
         &self.probs
     }
 
     /// P(track t carries `assignment[t]` for every t).
-    pub fn probability(&self, assignment: &[u32]) -> Result<f64, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn probability(&self, assignment: &[u32]) -> Result<f64, BeliefError> {
         check_assignment(self.size(), assignment)?;
         let perm: Vec<u8> = assignment.iter().map(|&i| i as u8).collect();
         Ok(self.probs[self.perms.rank(&perm)])
     }
 
     /// The single most probable joint assignment (lowest rank on ties).
-    pub fn most_probable(&self) -> Vec<u32> {
+    #[cfg(test)]
+    pub(crate) fn most_probable(&self) -> Vec<u32> {
         let best = self
             .probs
             .iter()
@@ -128,7 +127,8 @@ impl ExactPermutationFilter {
     }
 
     /// The entropy of the joint distribution, in nats.
-    pub fn entropy(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn entropy(&self) -> f64 {
         -self
             .probs
             .iter()
@@ -139,6 +139,7 @@ impl ExactPermutationFilter {
 }
 
 /// Divides by the sum; refuses a sum that is 0 or not finite.
+#[cfg(test)]
 fn normalize(probs: &mut [f64]) -> Result<(), BeliefError> {
     let total: f64 = probs.iter().sum();
     if !(total.is_finite() && total > 0.0) {

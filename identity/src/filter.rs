@@ -5,11 +5,11 @@
 
 use super::event::{check_identify, check_mix, Identify, IdentityEvent};
 use super::sparse_marginals::SparseMarginals;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// p\[t\]\[i\] = P(track t carries identity i), N rows of N entries.
-pub type Marginals = Vec<Vec<f64>>;
+pub(crate) type Marginals = Vec<Vec<f64>>;
 
 /// A belief over which track carries which identity, updated event by event.
 ///
@@ -59,7 +59,8 @@ pub trait IdentityFilter {
 
 /// The largest |row sum − 1| or |column sum − 1| of `p`: 0 for a doubly
 /// stochastic matrix.
-pub fn doubly_stochastic_residual(p: &[Vec<f64>]) -> f64 {
+#[cfg(test)]
+pub(crate) fn doubly_stochastic_residual(p: &[Vec<f64>]) -> f64 {
     let n = p.len();
     let mut worst: f64 = 0.0;
     for row in p {

@@ -4,7 +4,7 @@
 //! replay`, the evaluation and the leaders apply the same events.
 
 use crate::event::{Identify, IdentityEvent};
-use idmesh_belief::from_trace::mix_of;
+use idmesh_belief::mix_of;
 use idmesh_protocol::trace::Line;
 
 /// The identity event a line carries: `mix` and `identify`; `None` for the
@@ -27,8 +27,8 @@ pub fn identity_event_of(line: &Line) -> Option<IdentityEvent> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use idmesh_belief::event::{Event, Mix, Observe};
     use idmesh_belief::event_of;
+    use idmesh_belief::{Event, Mix, Observe};
     use idmesh_protocol::trace;
 
     #[test]

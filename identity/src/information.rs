@@ -100,8 +100,8 @@ use super::marginals::{
 };
 use super::sinkhorn::SinkhornOptions;
 use super::support_mix::fit_on_support;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::AtomicBool;
 
@@ -139,7 +139,8 @@ pub struct InformationMatrix {
 
 impl InformationMatrix {
     /// L = 0: the uniform belief, as in the paper.
-    pub fn uniform(n: usize) -> Result<Self, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn uniform(n: usize) -> Result<Self, BeliefError> {
         Self::uniform_with(n, InformationOptions::default())
     }
 
@@ -211,12 +212,9 @@ impl InformationMatrix {
         Ok(InformationMatrix { n, l, options })
     }
 
-    pub fn options(&self) -> &InformationOptions {
-        &self.options
-    }
-
     /// Changes how [`IdentityFilter::marginals`] answers.
-    pub fn set_marginal_method(&mut self, method: MarginalMethod) {
+    #[cfg(test)]
+    pub(crate) fn set_marginal_method(&mut self, method: MarginalMethod) {
         self.options.marginals = method;
     }
 
@@ -301,7 +299,7 @@ pub const KNOWN_START_CONFIDENCE: f64 = f64::INFINITY;
 
 /// Row t of a start: 0 everywhere (uniform), or `confidence` on the known
 /// identity (+∞: 0 on it and −∞ on every other).
-pub fn start_row(n: usize, known: Option<u32>, confidence: f64) -> Vec<f64> {
+pub(crate) fn start_row(n: usize, known: Option<u32>, confidence: f64) -> Vec<f64> {
     let Some(known) = known.filter(|&i| (i as usize) < n) else {
         return vec![0.0; n];
     };
@@ -317,7 +315,7 @@ pub fn start_row(n: usize, known: Option<u32>, confidence: f64) -> Vec<f64> {
 
 /// Evidence on the row of the read track (checked by the caller): adds
 /// the read's log-odds to the one entry it names, the O(1) lazy update.
-pub fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefError> {
+pub(crate) fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefError> {
     let n = row.len();
     let odds = identify.log_odds(n);
     let read = identify.identity as usize;
@@ -354,13 +352,13 @@ pub fn add_evidence(row: &mut [f64], identify: &Identify) -> Result<(), BeliefEr
 }
 
 /// Two rows of an information matrix: tracks a's and b's.
-pub type RowPair = (Vec<f64>, Vec<f64>);
+pub(crate) type RowPair = (Vec<f64>, Vec<f64>);
 
 /// The rows of tracks a and b after a mix with swap probability `swap`,
 /// each shifted to max 0; None when the mix changes nothing (s = 0). A
 /// pure function of its inputs: two leaders that each hold one of the rows
 /// and exchange them compute the same pair, bit for bit.
-pub fn mixed_rows(
+pub(crate) fn mixed_rows(
     row_a: &[f64],
     row_b: &[f64],
     swap: f64,
@@ -507,7 +505,7 @@ pub fn paper_merge_pinv(a: &[f64], b: &[f64]) -> Result<Vec<f64>, BeliefError> {
 /// The two new rows (x, y) of L after tracks with rows a, b mix with swap
 /// probability `swap`: the minimum-norm least-squares fit of
 /// x_m + y_n ≈ G(m, n), by the O(N²) closed form of the module docs.
-pub fn fit_mixed_rows(
+pub(crate) fn fit_mixed_rows(
     a: &[f64],
     b: &[f64],
     swap: f64,
@@ -542,7 +540,7 @@ pub fn fit_mixed_rows(
 
 /// [`fit_mixed_rows`] by the SVD pseudoinverse of the N(N − 1) × 2N design
 /// matrix: the reference implementation.
-pub fn fit_mixed_rows_pinv(
+pub(crate) fn fit_mixed_rows_pinv(
     a: &[f64],
     b: &[f64],
     swap: f64,

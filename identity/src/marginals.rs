@@ -71,7 +71,7 @@ use super::metropolis::{metropolis_stoppable, MetropolisRun};
 use super::permanent::{exp_rows, marginals_from_log_likelihoods, MAX_PERMANENT_TRACKS};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
 use super::sparse_marginals::{IdentityRow, SparseMarginals};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How marginals are computed from an information matrix.
@@ -110,12 +110,12 @@ pub const DEFAULT_SAMPLES: usize = 10_000;
 
 /// The largest block [`MarginalMethod::Auto`] answers exactly (2^16
 /// Gray-code steps of 16² each: about a millisecond).
-pub const AUTO_EXACT_BLOCK: usize = 16;
+pub(crate) const AUTO_EXACT_BLOCK: usize = 16;
 
 /// The largest block [`MarginalMethod::Auto`] answers by half-Bethe (a
 /// block of 96 tracks of the bench's `crowd` stream: 0.17 s); larger ones
 /// by Metropolis (see the module docs).
-pub const AUTO_BETHE_BLOCK: usize = 100;
+pub(crate) const AUTO_BETHE_BLOCK: usize = 100;
 
 /// The largest block the scaling methods (`sinkhorn`, `bethe`) take: the
 /// size up to which a Newton step is a Cholesky solve (of the N × N Schur
@@ -123,12 +123,12 @@ pub const AUTO_BETHE_BLOCK: usize = 100;
 /// Beyond it the conjugate-gradient steps crawl on a crowd's peaked block (a Sinkhorn query took
 /// about 2 minutes on a block of 550 tracks, and more than 3 on one of
 /// 900), so they refuse, naming the block, instead of holding the query.
-pub const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_SCHUR_TRACKS;
+pub(crate) const MAX_SCALED_BLOCK: usize = super::sinkhorn::MAX_SCHUR_TRACKS;
 
 /// Counted Metropolis steps per track of a block [`MarginalMethod::Auto`]
 /// samples (a tenth as many burn-in steps, seed 0): a chain of 10^4 steps
 /// would barely move a 900-track block from its start.
-pub const AUTO_STEPS_PER_TRACK: usize = 1_000;
+pub(crate) const AUTO_STEPS_PER_TRACK: usize = 1_000;
 
 impl MarginalMethod {
     /// The method a command line or a query names: `auto`, `exact`,
@@ -274,7 +274,7 @@ impl BlockMarginals {
 
 /// Marginals (row-major) of p(π) ∝ exp(Σ_t l\[t·n + π(t)\]); entries finite
 /// or −∞ (an identity the track cannot carry).
-pub fn information_marginals(
+pub(crate) fn information_marginals(
     n: usize,
     l: &[f64],
     method: &MarginalMethod,
@@ -284,7 +284,7 @@ pub fn information_marginals(
 }
 
 /// [`information_marginals`] block by block (see the module docs).
-pub fn block_marginals(
+pub(crate) fn block_marginals(
     n: usize,
     l: &[f64],
     method: &MarginalMethod,
@@ -297,7 +297,7 @@ pub fn block_marginals(
 /// after `stop` is set: between blocks, and within a Metropolis chain
 /// (the one method whose time the asker sets, by its samples). The other
 /// methods refuse blocks too large to finish in seconds.
-pub fn block_marginals_stoppable(
+pub(crate) fn block_marginals_stoppable(
     n: usize,
     l: &[f64],
     method: &MarginalMethod,

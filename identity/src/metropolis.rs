@@ -29,27 +29,15 @@
 
 use super::assignment::{min_cost_assignment, DENSE_ASSIGNMENT_LIMIT};
 use super::sparse_assignment::{sparse_min_cost_assignment, SparseRow};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Metropolis estimate of the marginals (row-major) of
-/// p(π) ∝ exp(Σ_t l\[t·n + π(t)\]); entries finite or −∞ (ruled out).
-pub fn metropolis_marginals(
-    n: usize,
-    l: &[f64],
-    samples: usize,
-    burn_in: usize,
-    seed: u64,
-) -> Result<Vec<f64>, BeliefError> {
-    metropolis_diagnosed(n, l, samples, burn_in, seed).map(|run| run.marginals)
-}
-
 /// A Metropolis run: the marginals and how far the chain is from having
 /// converged.
 #[derive(Debug, Clone, PartialEq)]
-pub struct MetropolisRun {
+pub(crate) struct MetropolisRun {
     /// Row-major n × n.
     pub marginals: Vec<f64>,
     /// The largest |p₁ − p₂| between the marginals of the first and the
@@ -63,7 +51,8 @@ pub struct MetropolisRun {
 }
 
 /// [`metropolis_marginals`] with its convergence diagnostic.
-pub fn metropolis_diagnosed(
+#[cfg(test)]
+pub(crate) fn metropolis_diagnosed(
     n: usize,
     l: &[f64],
     samples: usize,
@@ -78,7 +67,7 @@ const STOP_EVERY: usize = 1 << 16;
 
 /// [`metropolis_diagnosed`] that gives up with [`BeliefError::Stopped`]
 /// within [`STOP_EVERY`] steps of `stop` being set.
-pub fn metropolis_stoppable(
+pub(crate) fn metropolis_stoppable(
     n: usize,
     l: &[f64],
     samples: usize,
@@ -249,7 +238,7 @@ impl Chain {
 
 /// Blocks larger than this propose swaps within a track's support (see
 /// the module docs); smaller ones propose any pair, as the paper does.
-pub const SUPPORT_PROPOSALS_FROM: usize = 100;
+pub(crate) const SUPPORT_PROPOSALS_FROM: usize = 100;
 
 /// The chain's start: the most likely assignment. A ruled-out pairing
 /// costs more than any assignment of possible ones, so it is used only if

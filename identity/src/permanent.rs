@@ -44,15 +44,17 @@
 //! failed at 3e-5.
 
 use super::sinkhorn::{scale_logged, SinkhornOptions};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The most tracks the permanent method accepts (2^22·22 ≈ 10^8 steps).
 pub const MAX_PERMANENT_TRACKS: usize = 22;
 
 /// Which inclusion–exclusion formula computes the permanent.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum PermanentFormula {
-    /// Ryser's formula, Gray-code order, O(2^N·N).
+pub(crate) enum PermanentFormula {
+    /// Ryser's formula, Gray-code order, O(2^N·N). Only the tests use it,
+    /// to check Glynn against it.
+    #[cfg(test)]
     Ryser,
     /// Glynn's formula, Gray-code order, O(2^{N−1}·N); more accurate on
     /// doubly stochastic matrices (see the module docs). The default.
@@ -63,12 +65,12 @@ pub enum PermanentFormula {
 /// ln perm(A) and the marginals p\[t\]\[i\] (row-major) of the distribution
 /// p(π) ∝ Π_t A\[t\]\[π(t)\], for a non-negative row-major n × n matrix, by
 /// Glynn's formula.
-pub fn permanent_marginals(n: usize, a: &[f64]) -> Result<(f64, Vec<f64>), BeliefError> {
+pub(crate) fn permanent_marginals(n: usize, a: &[f64]) -> Result<(f64, Vec<f64>), BeliefError> {
     permanent_marginals_with(n, a, PermanentFormula::Glynn)
 }
 
 /// [`permanent_marginals`] with a chosen formula.
-pub fn permanent_marginals_with(
+pub(crate) fn permanent_marginals_with(
     n: usize,
     a: &[f64],
     formula: PermanentFormula,
@@ -105,6 +107,7 @@ pub fn permanent_marginals_with(
     let ln_scale: f64 = logs.row.iter().chain(&logs.col).sum();
     // Glynn's sums carry a factor 2^{N−1}; it cancels in the marginals.
     let (perm, grad, ln_factor) = match formula {
+        #[cfg(test)]
         PermanentFormula::Ryser => {
             let (perm, grad) = ryser_with_gradient(n, &scaled);
             (perm, grad, 0.0)
@@ -126,15 +129,9 @@ pub fn permanent_marginals_with(
     Ok((perm.ln() - ln_factor - ln_scale, marginals))
 }
 
-/// ln perm(A) of a non-negative row-major n × n matrix (a permanent of 0 is
-/// reported as [`BeliefError::Degenerate`]).
-pub fn ln_permanent(n: usize, a: &[f64]) -> Result<f64, BeliefError> {
-    permanent_marginals(n, a).map(|(ln_perm, _)| ln_perm)
-}
-
 /// Marginals of p(π) ∝ exp(Σ_t l\[t·n + π(t)\]) (row-major; entries finite
 /// or −∞).
-pub fn marginals_from_log_likelihoods(n: usize, l: &[f64]) -> Result<Vec<f64>, BeliefError> {
+pub(crate) fn marginals_from_log_likelihoods(n: usize, l: &[f64]) -> Result<Vec<f64>, BeliefError> {
     let a = exp_rows(n, l)?;
     permanent_marginals(n, &a).map(|(_, m)| m)
 }
@@ -187,6 +184,7 @@ fn products(v: &[f64], prefix: &mut [f64], excl: &mut [f64]) -> f64 {
 
 /// Ryser's formula in Gray-code order, with the gradient: returns perm(A)
 /// and d\[t·n + i\] = ∂perm/∂A\[t\]\[i\].
+#[cfg(test)]
 fn ryser_with_gradient(n: usize, a: &[f64]) -> (f64, Vec<f64>) {
     let mut sums = vec![0.0f64; n]; // s_r(S)
     let mut running = vec![0.0f64; n]; // R_t: Σ over steps so far

@@ -10,14 +10,14 @@
 //! O(N). Rank order is lexicographic order, so the table is built with
 //! next-permutation steps and `get(rank(π)) == π`.
 
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The most tracks we enumerate: 9! = 362,880 assignments (3.3 MB of table).
-pub const MAX_ENUMERATED_TRACKS: usize = 9;
+pub(crate) const MAX_ENUMERATED_TRACKS: usize = 9;
 
 /// All permutations of 0..n, in lexicographic (= Lehmer rank) order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Permutations {
+pub(crate) struct Permutations {
     n: usize,
     count: usize,
     /// Row-major: permutation r is table[r·n .. (r + 1)·n].
@@ -27,7 +27,7 @@ pub struct Permutations {
 
 impl Permutations {
     /// Enumerates the permutations of 0..n, 1 ≤ n ≤ [`MAX_ENUMERATED_TRACKS`].
-    pub fn new(n: usize) -> Result<Self, BeliefError> {
+    pub(crate) fn new(n: usize) -> Result<Self, BeliefError> {
         if n == 0 {
             return Err(BeliefError::NoTracks);
         }
@@ -78,7 +78,7 @@ impl Permutations {
     /// identity `read` on track `track`, `wrong` if not, then normalised.
     /// All-or-nothing: a read of probability zero (or not finite), or a
     /// likelihood that is not finite, is refused and changes nothing.
-    pub fn condition_on_read(
+    pub(crate) fn condition_on_read(
         &self,
         probs: &mut [f64],
         track: usize,
@@ -93,7 +93,7 @@ impl Permutations {
     /// `probs[i]` is the probability of the assignment of rank `ranks[i]`,
     /// every other assignment has probability 0 (and keeps it). The same
     /// numbers as the dense rule (zeros add nothing to the evidence).
-    pub fn condition_entries_on_read(
+    pub(crate) fn condition_entries_on_read(
         &self,
         ranks: &[u32],
         probs: &mut [f64],
@@ -149,7 +149,7 @@ impl Permutations {
 
     /// The rank of a permutation of 0..n (not checked: callers pass
     /// permutations they built).
-    pub fn rank(&self, perm: &[u8]) -> usize {
+    pub(crate) fn rank(&self, perm: &[u8]) -> usize {
         let mut unused: u32 = (1u32 << self.n) - 1;
         let mut rank = 0;
         for (k, &v) in perm.iter().enumerate() {
@@ -162,7 +162,7 @@ impl Permutations {
 
     /// The rank of permutation `rank` with the identities on tracks `a` and
     /// `b` exchanged: π ∘ (a b).
-    pub fn rank_swapped(&self, rank: usize, a: usize, b: usize) -> usize {
+    pub(crate) fn rank_swapped(&self, rank: usize, a: usize, b: usize) -> usize {
         let mut perm = [0u8; MAX_ENUMERATED_TRACKS];
         perm[..self.n].copy_from_slice(self.get(rank));
         perm.swap(a, b);

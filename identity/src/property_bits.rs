@@ -55,25 +55,25 @@
 //! ## Cost
 //! Without a budget every bit belief is exact, and exact Radon beliefs can
 //! grow exponentially with mixing; for more than a few dozen tracks give
-//! [`RadonOptions`] a [`idmesh_belief::radon::Sparsify`] budget.
+//! [`RadonOptions`] a [`idmesh_belief::Sparsify`] budget.
 
 use super::event::{check_assignment, check_identify, check_mix, Identify};
 use super::filter::{to_rows, IdentityFilter, Marginals};
 use super::sinkhorn::{sinkhorn, SinkhornOptions};
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::{Field, Mix, Observe};
-use idmesh_belief::filter::PropertyFilter;
-use idmesh_belief::radon::{RadonBelief, RadonOptions};
+use idmesh_belief::BeliefError;
+use idmesh_belief::PropertyFilter;
+use idmesh_belief::{Field, Mix, Observe};
+use idmesh_belief::{RadonBelief, RadonOptions};
 
 /// Bit probabilities are clamped to [this, 1 − this] before they are
 /// combined. Under a coefficient budget a bit belief can become spuriously
 /// certain; a hard 0 would then rule out the true assignment and can leave
 /// the score matrix with no positive diagonal (seen at n = 100, 9 bits,
 /// budget 200). The floor changes exact answers by ~1e-12.
-pub const BIT_FLOOR: f64 = 1e-12;
+pub(crate) const BIT_FLOOR: f64 = 1e-12;
 
 /// The longest code [`BitCode::new`] searches (it scans up to 2^b words).
-pub const MAX_CODE_BITS: usize = 16;
+pub(crate) const MAX_CODE_BITS: usize = 16;
 
 /// n distinct b-bit codewords, one per identity.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -151,12 +151,13 @@ impl BitCode {
     }
 
     /// The codeword of `identity` (< identities).
-    pub fn word(&self, identity: usize) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn word(&self, identity: usize) -> u64 {
         self.words[identity]
     }
 
     /// Bit j of identity i's codeword.
-    pub fn bit(&self, identity: usize, j: usize) -> bool {
+    pub(crate) fn bit(&self, identity: usize, j: usize) -> bool {
         self.words[identity] >> j & 1 == 1
     }
 
@@ -226,22 +227,6 @@ impl PropertyBitsFilter {
         })
     }
 
-    /// Changes the Sinkhorn options of the final combination.
-    pub fn with_sinkhorn(mut self, options: SinkhornOptions) -> Result<Self, BeliefError> {
-        options.validate()?;
-        self.sinkhorn = options;
-        Ok(self)
-    }
-
-    pub fn code(&self) -> &BitCode {
-        &self.code
-    }
-
-    /// The bit beliefs (None for a constant bit).
-    pub fn bit_beliefs(&self) -> &[Option<RadonBelief>] {
-        &self.beliefs
-    }
-
     /// Radon coefficients held over all bits.
     pub fn coefficients(&self) -> usize {
         self.beliefs
@@ -252,7 +237,7 @@ impl PropertyBitsFilter {
     }
 
     /// `result[j][t]` = P(bit j of track t's identity is 1).
-    pub fn bit_marginals(&self) -> Result<Vec<Vec<f64>>, BeliefError> {
+    pub(crate) fn bit_marginals(&self) -> Result<Vec<Vec<f64>>, BeliefError> {
         let n = self.code.identities();
         (0..self.code.bits())
             .map(|j| match &self.beliefs[j] {
@@ -361,7 +346,7 @@ mod tests {
     use crate::filter::doubly_stochastic_residual;
     use crate::workload::{generate, IdentityWorkloadSpec};
     use crate::IdentityEvent;
-    use idmesh_belief::radon::Sparsify;
+    use idmesh_belief::Sparsify;
 
     #[test]
     fn codes_are_distinct_and_spread() {

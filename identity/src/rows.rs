@@ -18,8 +18,8 @@ use super::event::{check_assignment, check_identify, check_mix, check_track, Ide
 use super::information::{
     add_evidence, mixed_rows, start_row, InformationMatrix, InformationOptions, MixSolver,
 };
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use std::collections::BTreeMap;
 
 /// The rows of some tracks of an N × N information matrix.

@@ -4,7 +4,8 @@
 //! one-to-one assignment under the marginals), IDF1 over a stream
 //! (Ristani et al., *Performance Measures and a Data Set for Multi-Target,
 //! Multi-Camera Tracking*, ECCV 2016 workshops) and a reliability diagram.
-//! The property scores of the trace spec are [`idmesh_belief::scoring`].
+//! The property scores of the trace spec are [`idmesh_belief::brier_score`]
+//! and its neighbours.
 //!
 //! IDF1 with given tracks: every (track, truth line) is one unit of
 //! track-time, labelled by the identity the tracker predicts there and
@@ -17,8 +18,8 @@
 
 use super::sparse_assignment::{sparse_min_cost_assignment_with_rest, SparseRow};
 use super::sparse_marginals::SparseMarginals;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::scoring::{Reliability, LOG_LOSS_FLOOR};
+use idmesh_belief::BeliefError;
+use idmesh_belief::{Reliability, LOG_LOSS_FLOOR};
 use std::collections::BTreeMap;
 
 fn check_truth(p: &SparseMarginals, truth: &[u32]) -> Result<usize, BeliefError> {
@@ -76,7 +77,8 @@ pub fn log_loss(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> 
 
 /// The share of tracks whose identity in the most likely one-to-one
 /// assignment under `p` is the true one.
-pub fn map_accuracy(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
+#[cfg(test)]
+pub(crate) fn map_accuracy(p: &SparseMarginals, truth: &[u32]) -> Result<f64, BeliefError> {
     let n = check_truth(p, truth)?;
     let best = p.most_likely()?;
     let right = best.iter().zip(truth).filter(|(a, b)| a == b).count();
@@ -105,22 +107,15 @@ pub fn add_reliability(
 }
 
 /// [`brier`] of a dense matrix.
-pub fn identity_brier(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+#[cfg(test)]
+pub(crate) fn identity_brier(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
     brier(&SparseMarginals::from_dense(p)?, truth)
 }
 
 /// [`log_loss`] of a dense matrix.
-pub fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
+#[cfg(test)]
+pub(crate) fn identity_log_loss(p: &[Vec<f64>], truth: &[u32]) -> Result<f64, BeliefError> {
     log_loss(&SparseMarginals::from_dense(p)?, truth)
-}
-
-/// [`add_reliability`] of a dense matrix.
-pub fn add_identity_reliability(
-    diagram: &mut Reliability,
-    p: &[Vec<f64>],
-    truth: &[u32],
-) -> Result<(), BeliefError> {
-    add_reliability(diagram, &SparseMarginals::from_dense(p)?, truth)
 }
 
 /// IDF1 of a stream of (predicted, true) assignments over the same n
@@ -136,7 +131,7 @@ pub fn idf1(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<f64, BeliefError> {
 }
 
 /// (IDTP, track-time) of [`idf1`], to pool streams.
-pub fn idf1_counts(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<(u64, u64), BeliefError> {
+pub(crate) fn idf1_counts(lines: &[(Vec<u32>, Vec<u32>)]) -> Result<(u64, u64), BeliefError> {
     let Some((first, _)) = lines.first() else {
         return Ok((0, 0));
     };

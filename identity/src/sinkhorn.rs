@@ -37,7 +37,7 @@
 //! Hessian product and a line-search point cost O(positive entries), not
 //! O(N²).
 
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// When Sinkhorn scaling stops.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,7 +75,7 @@ impl SinkhornOptions {
 
 /// How a scaling went.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SinkhornReport {
+pub(crate) struct SinkhornReport {
     /// Sweeps plus Newton steps done.
     pub iterations: usize,
     /// How many of them were Newton steps.
@@ -92,7 +92,7 @@ pub struct SinkhornReport {
 /// negative or non-finite entries ([`BeliefError::Numerical`]); no positive
 /// diagonal ([`BeliefError::Degenerate`] with normalizer 0 — the permanent
 /// is 0); no convergence within the cap ([`BeliefError::Numerical`]).
-pub fn sinkhorn(
+pub(crate) fn sinkhorn(
     n: usize,
     matrix: &mut [f64],
     options: &SinkhornOptions,
@@ -244,14 +244,14 @@ const SWEEPS_BEFORE_NEWTON: usize = 100;
 /// Newton steps solve a 2N × 2N system by Cholesky, O(N³), up to this
 /// size; above it the same Newton step is solved by preconditioned
 /// conjugate gradients ([`newton_cg_step`]), O(N²) per CG iteration.
-pub const MAX_NEWTON_TRACKS: usize = 400;
+pub(crate) const MAX_NEWTON_TRACKS: usize = 400;
 
 /// Above [`MAX_NEWTON_TRACKS`] and up to this size the Newton step is
 /// solved through its N × N Schur complement ([`newton_schur_step`]):
 /// a Cholesky eight times cheaper than the 2N × 2N one, about 0.1 s at
 /// N = 1,000. (The 2N × 2N form stays below, so answers there are the
 /// bits they were.)
-pub const MAX_SCHUR_TRACKS: usize = 1_200;
+pub(crate) const MAX_SCHUR_TRACKS: usize = 1_200;
 
 /// The most conjugate-gradient iterations of one Newton–CG step.
 const MAX_CG_ITERATIONS: usize = 200;
@@ -532,7 +532,8 @@ fn row_residual(n: usize, matrix: &[f64]) -> f64 {
 }
 
 /// Sinkhorn scaling of a matrix given by rows.
-pub fn sinkhorn_rows(
+#[cfg(test)]
+pub(crate) fn sinkhorn_rows(
     matrix: &[Vec<f64>],
     options: &SinkhornOptions,
 ) -> Result<(Vec<Vec<f64>>, SinkhornReport), BeliefError> {

@@ -20,12 +20,12 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 /// A row's listed entries: (column, cost), costs finite.
-pub type SparseRow = Vec<(u32, f64)>;
+pub(crate) type SparseRow = Vec<(u32, f64)>;
 
 /// The least-cost perfect matching of the k × k sparse matrix `rows` (row
 /// r may go only to a column it lists): `result[r]` = the column of row r.
 /// `None` when no perfect matching uses listed entries only.
-pub fn sparse_min_cost_assignment(rows: &[SparseRow]) -> Option<Vec<u32>> {
+pub(crate) fn sparse_min_cost_assignment(rows: &[SparseRow]) -> Option<Vec<u32>> {
     Matching::solve(rows).map(|m| m.assignment())
 }
 
@@ -45,7 +45,10 @@ pub fn sparse_min_cost_assignment(rows: &[SparseRow]) -> Option<Vec<u32>> {
 /// `None` when the listed entries hold no perfect matching (a marginal
 /// matrix's positive entries always do: a doubly stochastic matrix's
 /// support holds a permutation).
-pub fn sparse_min_cost_assignment_with_rest(rows: &[SparseRow], rest: &[f64]) -> Option<Vec<u32>> {
+pub(crate) fn sparse_min_cost_assignment_with_rest(
+    rows: &[SparseRow],
+    rest: &[f64],
+) -> Option<Vec<u32>> {
     let k = rows.len();
     if rest.len() != k || rest.iter().any(|x| x.is_nan() || *x == f64::NEG_INFINITY) {
         return None;

@@ -16,7 +16,7 @@
 use super::assignment::{most_likely_assignment, DENSE_ASSIGNMENT_LIMIT};
 use super::filter::Marginals;
 use super::sparse_assignment::{sparse_min_cost_assignment_with_rest, SparseRow};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 pub use idmesh_protocol::wire::query::IdentityRow;
 use serde::{Deserialize, Serialize};
 
@@ -57,7 +57,7 @@ impl SparseMarginals {
     }
 
     /// The rows of a dense matrix (non-zero entries listed).
-    pub fn from_dense(p: &[Vec<f64>]) -> Result<Self, BeliefError> {
+    pub(crate) fn from_dense(p: &[Vec<f64>]) -> Result<Self, BeliefError> {
         super::event::check_square(p)?;
         Self::new(p.iter().map(|row| IdentityRow::from_dense(row)).collect())
     }
@@ -75,11 +75,6 @@ impl SparseMarginals {
     /// The rows, taken.
     pub fn into_rows(self) -> Vec<IdentityRow> {
         self.rows
-    }
-
-    /// P(track `t` carries identity `i`); 0 out of range.
-    pub fn probability(&self, t: usize, i: u32) -> f64 {
-        self.rows.get(t).map_or(0.0, |row| row.probability(i))
     }
 
     /// The entries listed, over all rows.

@@ -27,10 +27,10 @@
 //!   entry moves more than 1e-11 or after [`MAX_SWEEPS`] sweeps.
 
 use super::information::{fit_mixed_rows, fit_mixed_rows_pinv, MixSolver, RowPair};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// The most alternating sweeps of the general case.
-pub const MAX_SWEEPS: usize = 2_000;
+pub(crate) const MAX_SWEEPS: usize = 2_000;
 
 /// ln((1 − s)·e^u + s·e^v) without overflow, −∞ allowed; s ∈ (0, 1).
 fn ln_mix(u: f64, v: f64, s: f64) -> f64 {

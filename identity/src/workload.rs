@@ -11,8 +11,8 @@
 //! the exact filter is the exact posterior of these streams.
 
 use super::event::{Identify, IdentityEvent};
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -95,7 +95,7 @@ pub fn generate(spec: &IdentityWorkloadSpec) -> Result<IdentityWorkload, BeliefE
 }
 
 /// The initial assignment, the events and the final assignment.
-pub type FinalWorkload = (Vec<u32>, Vec<IdentityEvent>, Vec<u32>);
+pub(crate) type FinalWorkload = (Vec<u32>, Vec<IdentityEvent>, Vec<u32>);
 
 /// A stream too large to keep the truth after every event (n = 10,000):
 /// the true assignment at time 0, the events, and the true assignment at

@@ -20,7 +20,7 @@
 //! a stream the world could have produced.
 
 use idmesh_belief::{RadonOptions, Sparsify};
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{
     BeliefMatrix, BitCode, ExactPermutationFilter, IdentityEvent, IdentityFilter,
     InformationMatrix, InformationOptions, MarginalMethod, PropertyBitsFilter,

@@ -33,7 +33,7 @@ use zenoh::query::{ConsolidationMode, Query, QueryTarget};
 use zenoh::Session;
 
 #[derive(Debug, Clone)]
-pub struct LeaderConfig {
+pub(crate) struct LeaderConfig {
     /// The role: the leader's name in the stream and on its keys.
     pub name: String,
     /// The process running it (itself, or the one that adopted the role).

@@ -27,7 +27,7 @@ pub struct MeshError {
 }
 
 impl MeshError {
-    pub fn new(what: &'static str, error: impl std::fmt::Display) -> Self {
+    pub(crate) fn new(what: &'static str, error: impl std::fmt::Display) -> Self {
         MeshError {
             what,
             message: error.to_string(),

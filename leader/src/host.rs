@@ -108,13 +108,17 @@ impl HostConfig {
 }
 
 /// Where role `role` keeps its journal under `dir`.
-pub fn journal_path(dir: &std::path::Path, role: &str) -> PathBuf {
+pub(crate) fn journal_path(dir: &std::path::Path, role: &str) -> PathBuf {
     dir.join(format!("{role}.journal"))
 }
 
 /// The role that inherits `dead`: the next live one after it in `leaders`,
 /// cyclically. Every process computes the same from the same tokens.
-pub fn heir<'a>(leaders: &'a [String], dead: &str, alive: &BTreeSet<String>) -> Option<&'a str> {
+pub(crate) fn heir<'a>(
+    leaders: &'a [String],
+    dead: &str,
+    alive: &BTreeSet<String>,
+) -> Option<&'a str> {
     let at = leaders.iter().position(|l| l == dead)?;
     (1..leaders.len())
         .map(|k| &leaders[(at + k) % leaders.len()])

@@ -75,13 +75,13 @@ impl Kind {
 
 /// One input, as it came off the wire.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Entry {
+pub(crate) struct Entry {
     pub kind: Kind,
     pub bytes: Vec<u8>,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct JournalOptions {
+pub(crate) struct JournalOptions {
     pub path: PathBuf,
     /// The longest a written entry waits for fsync.
     pub fsync_every: Duration,
@@ -107,7 +107,7 @@ pub enum JournalError {
 
 /// An open journal, appending. It holds the role's [`Ownership`] for as
 /// long as it is open: one writer per journal, whatever the network says.
-pub struct Journal {
+pub(crate) struct Journal {
     _owner: Ownership,
     writer: Writer,
     path: PathBuf,
@@ -121,7 +121,7 @@ pub struct Journal {
 
 /// What a journal held when it was opened.
 #[derive(Debug, Default)]
-pub struct Recovered {
+pub(crate) struct Recovered {
     /// The state as of the last compaction, if there was one.
     pub snapshot: Option<Vec<u8>>,
     /// The inputs since, in order (up to the damage, if any).
@@ -131,6 +131,7 @@ pub struct Recovered {
 }
 
 impl Recovered {
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.snapshot.is_none() && self.entries.is_empty()
     }
@@ -141,7 +142,7 @@ impl Journal {
     /// snapshot and the entries after it, in order; a torn last record is
     /// cut off, and so is a damaged one with everything after it (see the
     /// module's doc).
-    pub fn open(
+    pub(crate) fn open(
         options: &JournalOptions,
         owner: Ownership,
     ) -> Result<(Journal, Recovered), JournalError> {
@@ -244,13 +245,14 @@ impl Journal {
     }
 
     /// Inputs appended since the last snapshot.
-    pub fn entries(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn entries(&self) -> usize {
         self.entries
     }
 
     /// Writes `state` (the whole leader, as of every entry appended) as
     /// the new snapshot and starts the journal again empty.
-    pub fn compact(&mut self, state: &[u8]) -> Result<(), JournalError> {
+    pub(crate) fn compact(&mut self, state: &[u8]) -> Result<(), JournalError> {
         let next = self.generation + 1;
         log::write_file(&snapshot_path(&self.path), SNAPSHOT, next, &[state])?;
         self.generation = next;
@@ -261,7 +263,7 @@ impl Journal {
     }
 
     /// Writes one entry through to the file (fsync per the policy).
-    pub fn append(&mut self, kind: Kind, bytes: &[u8]) -> Result<(), JournalError> {
+    pub(crate) fn append(&mut self, kind: Kind, bytes: &[u8]) -> Result<(), JournalError> {
         self.writer.append(&[&[kind as u8], bytes])?;
         self.entries += 1;
         if self.synced.elapsed() >= self.fsync_every {
@@ -271,19 +273,15 @@ impl Journal {
     }
 
     /// fsyncs what was written since the last sync.
-    pub fn sync(&mut self) -> Result<(), JournalError> {
+    pub(crate) fn sync(&mut self) -> Result<(), JournalError> {
         self.writer.sync()?;
         self.synced = Instant::now();
         Ok(())
     }
-
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
 }
 
 /// Where the snapshot of the journal at `journal` is.
-pub fn snapshot_path(journal: &Path) -> PathBuf {
+pub(crate) fn snapshot_path(journal: &Path) -> PathBuf {
     with_suffix(journal, ".snapshot")
 }
 

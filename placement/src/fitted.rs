@@ -68,7 +68,7 @@ pub const TOLERANCE: f64 = 1.35;
 
 /// Items per leader in a window, by default: enough that the counts it
 /// compares are not noise (about a tenth at 100).
-pub const WINDOW_PER_LEADER: u64 = 100;
+pub(crate) const WINDOW_PER_LEADER: u64 = 100;
 
 /// A redraw hands over only the tracks seen (moved, or took part in an
 /// item) within the last this many items per leader. Measured with the
@@ -77,7 +77,7 @@ pub const WINDOW_PER_LEADER: u64 = 100;
 /// 1,000): 5 gave the lowest busiest share at 8 leaders on the dense ones
 /// (univ, 1,000 walkers), 20 and 50 up to 0.15 more; on the sparse real
 /// scenes it makes no difference.
-pub const RECENT_PER_LEADER: u64 = 5;
+pub(crate) const RECENT_PER_LEADER: u64 = 5;
 
 /// Items with tracks before which no leader counts as busy
 /// ([`Fitted::busy`]): the first few items' counts say nothing.
@@ -211,7 +211,7 @@ pub struct Fitted {
 }
 
 impl Fitted {
-    pub fn new(leaders: usize, tracks: usize, window_per_leader: u64) -> Self {
+    pub(crate) fn new(leaders: usize, tracks: usize, window_per_leader: u64) -> Self {
         let leaders = leaders.clamp(1, usize::from(u16::MAX)) as u16;
         Fitted {
             leaders,
@@ -254,7 +254,7 @@ impl Fitted {
     }
 
     /// Items per window.
-    pub fn window(&self) -> u64 {
+    pub(crate) fn window(&self) -> u64 {
         self.window_per_leader * u64::from(self.leaders)
     }
 
@@ -385,7 +385,7 @@ impl Fitted {
 
     /// Each leader's place for a map: the mean position of the placed
     /// tracks it surveils (None for a leader surveilling none).
-    pub fn places(&self, owners: &[u16]) -> Vec<Option<(f64, f64)>> {
+    pub(crate) fn places(&self, owners: &[u16]) -> Vec<Option<(f64, f64)>> {
         let mut sums = vec![(0.0, 0.0, 0u32); usize::from(self.leaders)];
         for (t, p) in self.positions.iter().enumerate() {
             if let (Some((x, y)), Some(&o)) = (p, owners.get(t)) {

@@ -30,18 +30,22 @@ mod load;
 mod regions;
 mod wire;
 
-pub use fitted::{Fitted, TOLERANCE, WINDOW_PER_LEADER};
-pub use identity::{identity_options, start_identity};
-pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
+// Which leader surveils each track: the regions, fitted to the crowd.
+pub use fitted::{Fitted, TOLERANCE};
 pub use regions::{grid_places, leading_places, Handover, RegionRule, Regional, Regions};
+// The identity belief a deployment starts from.
+pub use identity::{identity_options, start_identity};
+// How evenly the leaders are loaded.
+pub use load::{busiest_share, items_sent, share_causes, ShareCauses};
+// Shares of the beliefs to and from their wire form.
 pub use wire::{
     from_wire_component, from_wire_set, from_wire_tree, to_wire_component, to_wire_row,
     to_wire_set, to_wire_tree,
 };
 
-use idmesh_belief::factored::FactoredShare;
-use idmesh_belief::radon::{PartialSums, RadonOptions, RadonShare};
+use idmesh_belief::FactoredShare;
 use idmesh_belief::{field_of, BeliefError, Coupling, FactoredOptions, Field, RedCount, SplitRule};
+use idmesh_belief::{PartialSums, RadonOptions, RadonShare};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::wire::interest::Interest;
@@ -150,7 +154,7 @@ pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, P
 /// The size of a set that fixes every track of `field`: k red tracks (the
 /// others are blue) or n − k blue ones; with a prior over counts, the
 /// largest count allowed or n − the smallest.
-pub fn saturation(field: &Field) -> usize {
+pub(crate) fn saturation(field: &Field) -> usize {
     let n = field.tracks;
     match &field.red {
         RedCount::Known(k) => (*k).min(n - k.min(&n)),

@@ -30,7 +30,7 @@ pub enum RegionRule {
     /// Cells fitted to the crowd's items and redrawn as it moves
     /// ([`Fitted`]): the default, which shares out the items evenly. A
     /// window is `window_per_leader` items per leader
-    /// ([`crate::WINDOW_PER_LEADER`] unless a test wants redraws sooner).
+    /// ([`crate::fitted::WINDOW_PER_LEADER`] unless a test wants redraws sooner).
     Fitted { window_per_leader: u64 },
     /// Each track to the leader nearest its last position, the leaders
     /// sitting at these places (one per leader; None for every leader:
@@ -42,7 +42,7 @@ impl RegionRule {
     /// Fitted cells with the default window.
     pub fn fitted() -> Self {
         RegionRule::Fitted {
-            window_per_leader: crate::WINDOW_PER_LEADER,
+            window_per_leader: crate::fitted::WINDOW_PER_LEADER,
         }
     }
 }
@@ -152,7 +152,8 @@ impl Regions {
     }
 
     /// Fixed places (see [`RegionRule::Fixed`]), one per leader.
-    pub fn fixed(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
+    #[cfg(test)]
+    pub(crate) fn fixed(places: &[Option<(f64, f64)>], tracks: usize) -> Self {
         Regions::new(&RegionRule::Fixed(places.to_vec()), places.len(), tracks)
     }
 
@@ -570,12 +571,9 @@ impl Regional {
         Regional { belief, regions }
     }
 
-    pub fn belief(&self) -> &FactoredBelief {
+    #[cfg(test)]
+    pub(crate) fn belief(&self) -> &FactoredBelief {
         &self.belief
-    }
-
-    pub fn regions(&self) -> &Regions {
-        &self.regions
     }
 
     /// Before `line`'s event: the tracks handed over then

@@ -5,8 +5,8 @@
 //! its own shape goes (its ranks and probabilities pair up, its tracks
 //! exist); the share that takes it checks that it fits what it holds.
 
-use idmesh_belief::factored::HeldComponent;
-use idmesh_belief::radon::Atom;
+use idmesh_belief::Atom;
+use idmesh_belief::HeldComponent;
 use idmesh_belief::{BeliefError, TrackSet};
 use idmesh_identity::factored::{Background, Group, HeldTree};
 use idmesh_protocol::wire::factored::WireComponent;
@@ -131,7 +131,7 @@ pub fn from_wire_tree(tree: WireTree) -> Result<HeldTree, BeliefError> {
 mod tests {
     use super::*;
     use crate::identity_options;
-    use idmesh_belief::event::Mix;
+    use idmesh_belief::Mix;
     use idmesh_identity::factored::IdentityShare;
     use idmesh_identity::IdentityEvent;
 

@@ -4,10 +4,11 @@
 //! (shared/spec/trace.md) that simulators write, sensors publish and replay
 //! and scoring read. Types and their decoding only: no inference logic.
 //!
-//! A map of the crate:
+//! A map of the crate (three public namespaces, each a vocabulary its
+//! users navigate by name; the rest is private behind the facade below):
 //! - [`trace`] — the trace format, version 1: one type per line kind
 //!   ([`trace::Line`]), the spec's validity rules, a validating
-//!   [`TraceReader`] and a validating [`TraceWriter`].
+//!   [`trace::TraceReader`] and a validating [`trace::TraceWriter`].
 //! - [`wire`] — the distributed runtime's messages (postcard, versioned),
 //!   its key expressions, the routing rule of the event stream and the
 //!   JSON answers of the query API.
@@ -17,12 +18,9 @@
 //!   cargo-fuzz (`fuzz/`) and the stable smoke run (`tests/fuzz_smoke.rs`).
 
 pub mod fuzzing;
-pub mod start;
+mod start;
 pub mod trace;
 pub mod wire;
 
+// What a trace header and a stream's `Begin` share.
 pub use start::StreamStart;
-pub use trace::{
-    Detect, Header, Identify, Line, Mix, Move, NumberedLine, Observe, Problem, TraceError,
-    TraceReader, TraceWriter, Truth,
-};

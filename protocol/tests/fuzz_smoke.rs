@@ -63,10 +63,7 @@ fn write_the_seed_corpus() {
         let folder = root.join(name);
         let _ = std::fs::remove_dir_all(&folder);
         std::fs::create_dir_all(&folder).expect("a seed folder");
-        for (i, seed) in idmesh_protocol::fuzzing::seeds::seeds(name)
-            .iter()
-            .enumerate()
-        {
+        for (i, seed) in idmesh_protocol::fuzzing::seeds(name).iter().enumerate() {
             std::fs::write(folder.join(format!("seed-{i}")), seed).expect("a seed file");
         }
     }

@@ -8,7 +8,7 @@ use idmesh_protocol::wire::sensor_to_leader::Batch;
 use std::collections::VecDeque;
 
 #[derive(Debug, Default, serde::Serialize, serde::Deserialize)]
-pub struct BatchLog {
+pub(crate) struct BatchLog {
     /// The number of the first batch kept.
     first: u64,
     batches: VecDeque<Batch>,
@@ -16,11 +16,11 @@ pub struct BatchLog {
 
 impl BatchLog {
     /// The number the next batch gets.
-    pub fn next_number(&self) -> u64 {
+    pub(crate) fn next_number(&self) -> u64 {
         self.first + self.batches.len() as u64
     }
 
-    pub fn push(&mut self, batch: Batch) {
+    pub(crate) fn push(&mut self, batch: Batch) {
         debug_assert_eq!(batch.number, self.next_number());
         self.batches.push_back(batch);
     }
@@ -39,7 +39,7 @@ impl BatchLog {
     }
 
     /// Drops the batches the leader will never ask for again.
-    pub fn forget(&mut self, mark: &Durable) -> usize {
+    pub(crate) fn forget(&mut self, mark: &Durable) -> usize {
         let below = mark.batch.min(self.next_number());
         let drop = below.saturating_sub(self.first) as usize;
         self.batches.drain(..drop);
@@ -49,10 +49,6 @@ impl BatchLog {
 
     pub fn len(&self) -> usize {
         self.batches.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.batches.is_empty()
     }
 }
 

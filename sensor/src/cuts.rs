@@ -56,7 +56,7 @@ impl CutParameters {
 
 /// What to do with a cut request; `Q` is whatever the driver answers
 /// (a Zenoh query, a simulated one).
-pub enum Request<Q> {
+pub(crate) enum Request<Q> {
     /// Place it now.
     Now { wanted: Wanted, query: Q },
     /// Held until the stream reaches its point.
@@ -68,7 +68,7 @@ pub enum Request<Q> {
 }
 
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
-pub struct Cuts<Q> {
+pub(crate) struct Cuts<Q> {
     scheduled: BTreeMap<u64, Vec<(Wanted, Q)>>,
     held: usize,
     /// The event count the stream will end at, when known in advance (a
@@ -97,7 +97,7 @@ pub struct Placed<Q> {
 
 impl<Q> Cuts<Q> {
     /// Cuts for a stream that will end after `end` events.
-    pub fn ending_at(end: u64) -> Self {
+    pub(crate) fn ending_at(end: u64) -> Self {
         Cuts {
             end: Some(end),
             ..Cuts::default()
@@ -105,7 +105,7 @@ impl<Q> Cuts<Q> {
     }
 
     /// Sorts a request: now, later, or never.
-    pub fn request(
+    pub(crate) fn request(
         &mut self,
         query: Q,
         parameters: &CutParameters,
@@ -152,7 +152,7 @@ impl<Q> Cuts<Q> {
     }
 
     /// Whether a cut tagged `tag` waits for its point.
-    pub fn holds(&self, tag: u64) -> bool {
+    pub(crate) fn holds(&self, tag: u64) -> bool {
         self.scheduled
             .values()
             .any(|waiting| waiting.iter().any(|(w, _)| w.tag == tag))
@@ -160,7 +160,7 @@ impl<Q> Cuts<Q> {
 
     /// Places the cuts whose point the router has reached (call after each
     /// line), adding them to `placed`.
-    pub fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
+    pub(crate) fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
         while let Some(entry) = self.scheduled.first_entry() {
             if *entry.key() > router.events() {
                 return;
@@ -173,7 +173,7 @@ impl<Q> Cuts<Q> {
     }
 
     /// The stream is over: every cut still waiting is refused.
-    pub fn refuse_all(&mut self, router: &Router) -> Vec<(Q, String)> {
+    pub(crate) fn refuse_all(&mut self, router: &Router) -> Vec<(Q, String)> {
         self.held = 0;
         std::mem::take(&mut self.scheduled)
             .into_iter()
@@ -193,7 +193,7 @@ impl<Q> Cuts<Q> {
 }
 
 /// Places the cut a query wants in every leader's stream now.
-pub fn place<Q>(
+pub(crate) fn place<Q>(
     router: &mut Router,
     name: &str,
     wanted: Wanted,

@@ -78,7 +78,7 @@ impl Extraction {
     }
 
     /// The reports are over: the lines of the frame still open.
-    pub fn finish(&mut self) -> Vec<Line> {
+    pub(crate) fn finish(&mut self) -> Vec<Line> {
         let mut out = Vec::new();
         self.extractor.finish(&mut out);
         events_only(out)

@@ -38,11 +38,11 @@ use std::collections::{BTreeMap, VecDeque};
 /// The most producers one sensor keeps a counter for: each costs a few
 /// bytes for the sensor's life, and a producer id is chosen by whoever
 /// connects.
-pub const MAX_PRODUCERS: usize = 65_536;
+pub(crate) const MAX_PRODUCERS: usize = 65_536;
 /// The longest producer id.
-pub const MAX_PRODUCER_ID: usize = 128;
+pub(crate) const MAX_PRODUCER_ID: usize = 128;
 /// The most lines one request may carry (a reply lists each).
-pub const MAX_LINES: usize = 65_536;
+pub(crate) const MAX_LINES: usize = 65_536;
 
 /// Why a whole request was refused (an error reply; counted).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -90,13 +90,13 @@ pub struct Offer<'a> {
 /// An offer judged: the lines to put in the order (in order), and the
 /// answer once they are in (its `events` is set by the gateway).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Judged {
+pub(crate) struct Judged {
     pub accepted: Vec<Line>,
     pub ack: IngestAck,
 }
 
 #[derive(serde::Serialize, serde::Deserialize)]
-pub struct Ingest {
+pub(crate) struct Ingest {
     sensor: String,
     #[serde(with = "idmesh_protocol::trace::as_json")]
     header: Header,
@@ -119,16 +119,16 @@ pub struct Ingest {
 }
 
 /// The counters remembered per producer when counters have gaps.
-pub const RECENT_COUNTERS: usize = 4096;
+pub(crate) const RECENT_COUNTERS: usize = 4096;
 
 /// What decides whether a line that passed every other rule enters the
 /// order (the intake of one sensor of several: is it late?), given the
 /// line, its text, its producer and its counter; by default every line.
-pub type Admit<'a> = dyn FnMut(&Line, &str, &str, u64) -> Result<(), String> + 'a;
+pub(crate) type Admit<'a> = dyn FnMut(&Line, &str, &str, u64) -> Result<(), String> + 'a;
 
 impl Ingest {
     /// Ingestion into the stream `header` describes.
-    pub fn new(sensor: &str, header: &Header) -> Self {
+    pub(crate) fn new(sensor: &str, header: &Header) -> Self {
         let mut stdin = Validator::new();
         // The header was checked when the stream started; a header that
         // failed here would fail the router first.
@@ -146,7 +146,7 @@ impl Ingest {
 
     /// Lines are a tracker's reports from now on: `move` and `detect`
     /// lines are taken, events refused.
-    pub fn extracting(&mut self) {
+    pub(crate) fn extracting(&mut self) {
         self.extracting = true;
     }
 
@@ -157,13 +157,13 @@ impl Ingest {
     }
 
     /// Counters with gaps: one sensor of several ([`Ingest::recent`]).
-    pub fn gapped(&mut self) {
+    pub(crate) fn gapped(&mut self) {
         self.gapped = true;
     }
 
     /// Judges one ingest request; counts what it refuses and takes in
     /// `stats`.
-    pub fn offer(
+    pub(crate) fn offer(
         &mut self,
         offer: Offer<'_>,
         stats: &mut SensorStats,
@@ -173,7 +173,7 @@ impl Ingest {
 
     /// [`Ingest::offer`], each line that passes every rule also passing
     /// `admit` (refused with its reason, counted as late, if it does not).
-    pub fn offer_admitted(
+    pub(crate) fn offer_admitted(
         &mut self,
         offer: Offer<'_>,
         stats: &mut SensorStats,

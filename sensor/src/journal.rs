@@ -160,7 +160,7 @@ pub struct Journal {
 }
 
 /// How much a journal grows before it is compacted, by default.
-pub const COMPACT_AFTER: u64 = 16 << 20;
+pub(crate) const COMPACT_AFTER: u64 = 16 << 20;
 
 /// Where the copy of the journal at `path` is.
 pub fn copy_path(path: &Path) -> PathBuf {
@@ -227,7 +227,7 @@ impl Journal {
     }
 
     /// Appends `records` and fsyncs them (nothing to do for none).
-    pub fn append(&mut self, records: &[Record]) -> Result<(), JournalError> {
+    pub(crate) fn append(&mut self, records: &[Record]) -> Result<(), JournalError> {
         if records.is_empty() {
             return Ok(());
         }
@@ -245,28 +245,28 @@ impl Journal {
 
     /// Whether it has grown enough since its last compaction to be
     /// compacted now.
-    pub fn due(&self) -> bool {
+    pub(crate) fn due(&self) -> bool {
         self.bytes().saturating_sub(self.base) >= self.compact_after.max(self.base)
     }
 
     /// Waits another [`Journal::compact_after`] before it is due again (a
     /// snapshot could not be taken: the journal stays whole).
-    pub fn postpone(&mut self) {
+    pub(crate) fn postpone(&mut self) {
         self.base = self.bytes();
     }
 
     /// Bytes on disk (in each copy).
-    pub fn bytes(&self) -> u64 {
+    pub(crate) fn bytes(&self) -> u64 {
         self.writer.len()
     }
 
-    pub fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         &self.path
     }
 
     /// Records found damaged in one copy when it was opened, and taken
     /// from the other.
-    pub fn repaired(&self) -> usize {
+    pub(crate) fn repaired(&self) -> usize {
         self.repaired
     }
 
@@ -276,7 +276,7 @@ impl Journal {
     /// leaves either the old journal or the new one whole in each (the
     /// newer generation wins at the next open). Appends go to the new one
     /// from then on.
-    pub fn compact(&mut self, records: &[Record]) -> Result<(), JournalError> {
+    pub(crate) fn compact(&mut self, records: &[Record]) -> Result<(), JournalError> {
         let payloads: Vec<Vec<u8>> = records.iter().map(encode).collect();
         self.generation += 1;
         self.writer.replace(self.generation, &payloads)?;
@@ -307,7 +307,8 @@ fn decode(contents: &log::Contents, path: &Path) -> Result<Vec<Record>, JournalE
 
 /// A whole journal file's bytes holding `records` (tests: restoring from
 /// the bytes a process would read).
-pub fn to_bytes(records: &[Record]) -> Vec<u8> {
+#[cfg(test)]
+pub(crate) fn to_bytes(records: &[Record]) -> Vec<u8> {
     let mut bytes = log::header(KIND, 0).to_vec();
     for record in records {
         log::encode_record(&[&encode(record)], &mut bytes);
@@ -316,7 +317,8 @@ pub fn to_bytes(records: &[Record]) -> Vec<u8> {
 }
 
 /// The records of a journal file's bytes; damage is an error.
-pub fn from_bytes(bytes: &[u8]) -> Result<Vec<Record>, JournalError> {
+#[cfg(test)]
+pub(crate) fn from_bytes(bytes: &[u8]) -> Result<Vec<Record>, JournalError> {
     let path = Path::new("(bytes)");
     match log::parse(bytes, KIND, path)? {
         None => Ok(Vec::new()),

@@ -62,7 +62,7 @@ pub enum CutOutcome<Q> {
 /// was sent: it keeps the leader's position, and so what the sensor may
 /// forget (durable marks) and how stale its answers could look, within
 /// that distance, at a cost of one batch per this many seqs.
-pub const IDLE_BATCH_EVERY: u64 = 4096;
+pub(crate) const IDLE_BATCH_EVERY: u64 = 4096;
 
 /// A leader's progress as the sensor knows it ([`Progress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -261,12 +261,12 @@ impl<Q> Gateway<Q> {
 
     /// Counts journal records that were damaged in one copy of the
     /// journal and taken from the other when the sensor restarted.
-    pub fn note_journal_repaired(&mut self, records: usize) {
+    pub(crate) fn note_journal_repaired(&mut self, records: usize) {
         self.state.stats.journal_repaired += records as u64;
     }
 
     /// The stream found its window full and waits (counted in the stats).
-    pub fn hold(&mut self) {
+    pub(crate) fn hold(&mut self) {
         self.state.stats.window_holds += 1;
     }
 
@@ -496,7 +496,7 @@ impl<Q> Gateway<Q> {
 
     /// The stream will end after `end` events: cuts asked for beyond it
     /// are refused at once.
-    pub fn ending_at(mut self, end: u64) -> Self {
+    pub(crate) fn ending_at(mut self, end: u64) -> Self {
         self.cuts = Cuts::ending_at(end);
         self
     }
@@ -509,12 +509,13 @@ impl<Q> Gateway<Q> {
         self.state.finished
     }
 
-    pub fn stats(&self) -> &SensorStats {
+    pub(crate) fn stats(&self) -> &SensorStats {
         &self.state.stats
     }
 
     /// Batches kept for leader `i` to ask for again.
-    pub fn kept(&self, i: usize) -> usize {
+    #[cfg(test)]
+    pub(crate) fn kept(&self, i: usize) -> usize {
         self.state.sent.get(i).map_or(0, BatchLog::len)
     }
 
@@ -621,7 +622,7 @@ impl<Q> Gateway<Q> {
     /// Turns extraction on: the stream's lines are a tracker's reports,
     /// and what the router is given are the events derived from them
     /// ([`crate::extraction`]).
-    pub fn extracting(mut self, extraction: Extraction) -> Self {
+    pub(crate) fn extracting(mut self, extraction: Extraction) -> Self {
         self.state.ingest.extracting();
         self.state.extraction = Some(extraction);
         self

@@ -17,18 +17,18 @@ use zenoh::query::{ConsolidationMode, QueryTarget};
 use zenoh::Session;
 
 /// How long after an error a peer is asked again.
-pub const POLL: Duration = Duration::from_millis(5);
+pub(crate) const POLL: Duration = Duration::from_millis(5);
 
 /// After a slice that changed nothing here (the peer held the request as
 /// long as it holds one), how long before asking again.
-pub const HELD_FOR: Duration = Duration::from_millis(1);
+pub(crate) const HELD_FOR: Duration = Duration::from_millis(1);
 
 /// How long one fetch may wait for its reply.
-pub const FETCH_TIMEOUT: Duration = Duration::from_secs(1);
+pub(crate) const FETCH_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// What one fetch of a peer's intake got.
 #[derive(Debug)]
-pub enum Fetch {
+pub(crate) enum Fetch {
     /// The slice's bytes.
     Slice(Vec<u8>),
     /// The peer answered with an error.
@@ -38,9 +38,9 @@ pub enum Fetch {
 }
 
 /// A peer's name and what fetching from it got.
-pub type Fetched = (String, Fetch);
+pub(crate) type Fetched = (String, Fetch);
 
-pub struct Peers {
+pub(crate) struct Peers {
     requests: Vec<(String, watch::Sender<Vec<u8>>)>,
     replies: mpsc::Receiver<Fetched>,
     unreachable: BTreeSet<String>,
@@ -49,7 +49,7 @@ pub struct Peers {
 impl Peers {
     /// A fetching task for each peer of `wanted` (its name and first
     /// request's bytes).
-    pub fn start(session: &Session, keys: &Keys, wanted: Vec<(String, Vec<u8>)>) -> Self {
+    pub(crate) fn start(session: &Session, keys: &Keys, wanted: Vec<(String, Vec<u8>)>) -> Self {
         let (tx, replies) = mpsc::channel(64);
         let mut requests = Vec::with_capacity(wanted.len());
         for (peer, request) in wanted {
@@ -72,7 +72,7 @@ impl Peers {
 
     /// What to ask each peer now (a request that did not change wakes
     /// nobody).
-    pub fn ask(&self, wanted: Vec<(String, Vec<u8>)>) {
+    pub(crate) fn ask(&self, wanted: Vec<(String, Vec<u8>)>) {
         for (peer, request) in wanted {
             if let Some((_, sender)) = self.requests.iter().find(|(p, _)| *p == peer) {
                 sender.send_if_modified(|current| {
@@ -87,12 +87,12 @@ impl Peers {
     }
 
     /// The next reply of any peer.
-    pub async fn reply(&mut self) -> Option<Fetched> {
+    pub(crate) async fn reply(&mut self) -> Option<Fetched> {
         self.replies.recv().await
     }
 
     /// Whether `peer` answered its last fetch.
-    pub fn answered(&mut self, peer: &str, answered: bool) {
+    pub(crate) fn answered(&mut self, peer: &str, answered: bool) {
         if answered {
             if self.unreachable.remove(peer) {
                 tracing::info!(%peer, "peer sensor reachable again");
@@ -102,7 +102,7 @@ impl Peers {
         }
     }
 
-    pub fn unreachable(&self) -> &BTreeSet<String> {
+    pub(crate) fn unreachable(&self) -> &BTreeSet<String> {
         &self.unreachable
     }
 }

@@ -11,15 +11,14 @@
 //! track can be sent what it missed.
 
 use crate::cuts::Wanted;
-use idmesh_belief::radon::{MixingLog, RadonShare};
+use idmesh_belief::{MixingLog, RadonShare};
 use idmesh_placement::{Handover, PlacementError, RegionRule, Regions};
-use idmesh_protocol::trace::Line;
+use idmesh_protocol::trace::{Header, Line};
 use idmesh_protocol::wire::coordinator_to_sensor::SensorPositions;
 use idmesh_protocol::wire::factored::FactoredStart;
 use idmesh_protocol::wire::interest::Interest;
 use idmesh_protocol::wire::leader_to_sensor::{Follow, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::{Begin, Growth, Handed, Item, Sequenced, UNHELD};
-use idmesh_protocol::Header;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -196,7 +195,7 @@ impl Router {
         Ok(router)
     }
 
-    pub fn begin(&self) -> &Begin {
+    pub(crate) fn begin(&self) -> &Begin {
         &self.begin
     }
 
@@ -215,7 +214,7 @@ impl Router {
         self.events
     }
 
-    pub fn leaders(&self) -> usize {
+    pub(crate) fn leaders(&self) -> usize {
         self.outbox.len()
     }
 
@@ -228,7 +227,7 @@ impl Router {
     /// skipped), with the handovers it makes before and after ([`Regions::before`],
     /// [`Regions::after`]). An
     /// identity read goes to the track's owner alone.
-    pub fn line(&mut self, line: &Line) {
+    pub(crate) fn line(&mut self, line: &Line) {
         let (rides, before): (Vec<_>, Vec<_>) =
             self.regions.before(line).into_iter().partition(|h| h.rides);
         self.route_handovers(before);
@@ -391,7 +390,7 @@ impl Router {
 
     /// Places the cut `wanted` in every leader's stream: (seq of the cut,
     /// events in it).
-    pub fn cut(&mut self, wanted: Wanted) -> (u64, u64) {
+    pub(crate) fn cut(&mut self, wanted: Wanted) -> (u64, u64) {
         let seq = self.next_seq();
         let item = Item::Cut {
             events: self.events,
@@ -515,7 +514,7 @@ impl Router {
     /// Every leader has its state safe through item `seq`: no follow
     /// request will ask for items at or before it again, so the log drops
     /// them. Returns how many it dropped.
-    pub fn forget(&mut self, seq: u64) -> usize {
+    pub(crate) fn forget(&mut self, seq: u64) -> usize {
         let through = self.log.partition_point(|s| s.seq <= seq);
         self.log.drain(..through);
         for on in self.touching.iter_mut().flatten() {
@@ -526,13 +525,13 @@ impl Router {
     }
 
     /// Items kept for follow requests.
-    pub fn logged(&self) -> usize {
+    pub(crate) fn logged(&self) -> usize {
         self.log.len()
     }
 
     /// The items queued for leader `i` since the last call.
     /// Whether items wait in leader `i`'s queue.
-    pub fn queued(&self, i: usize) -> bool {
+    pub(crate) fn queued(&self, i: usize) -> bool {
         self.outbox.get(i).is_some_and(|o| !o.is_empty())
     }
 

@@ -8,7 +8,7 @@ use std::sync::Mutex;
 
 /// Where Chromium's executable is, installing it when it is missing.
 /// Panics, saying what failed and how to fix it, when it cannot be had.
-pub fn chromium() -> PathBuf {
+pub(crate) fn chromium() -> PathBuf {
     static INSTALLING: Mutex<()> = Mutex::new(());
     let _installing = INSTALLING.lock().unwrap_or_else(|e| e.into_inner());
     if let Some(found) = on_path() {

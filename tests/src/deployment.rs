@@ -116,7 +116,7 @@ pub struct Deployment {
 }
 
 /// The bounding box of a trace's positions (`move` and `detect` lines).
-pub fn corners(trace: &Path) -> (f64, f64, f64, f64) {
+pub(crate) fn corners(trace: &Path) -> (f64, f64, f64, f64) {
     let text = std::fs::read_to_string(trace).expect("trace readable");
     let mut b = (
         f64::INFINITY,
@@ -176,7 +176,7 @@ pub fn grid_over(trace: &Path, count: usize) -> Vec<(f64, f64)> {
 /// The topology of test deployment `name` streaming `trace` with
 /// `settings`: the loopback layout ([`Topology::loopback`]) on free ports;
 /// its leaders' regions are fitted to the crowd (the default).
-pub fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
+pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topology {
     let sensors = settings.sensors.max(1);
     let ports = pick_free_ports(1 + settings.leaders + sensors).expect("free loopback ports");
     let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
@@ -425,7 +425,7 @@ impl Deployment {
     }
 
     /// Process `name`'s listening endpoint.
-    pub fn endpoint(&self, name: &str) -> &str {
+    pub(crate) fn endpoint(&self, name: &str) -> &str {
         &self
             .endpoints
             .iter()
@@ -469,7 +469,7 @@ impl Deployment {
 
     /// Like [`Deployment::query`], but takes what was answered when some
     /// questions were refused.
-    pub fn query_lenient(&self, args: &[&str]) -> Vec<Value> {
+    pub(crate) fn query_lenient(&self, args: &[&str]) -> Vec<Value> {
         let (answers, errors, _) = self.run_query(args);
         eprintln!("{errors}");
         answers
@@ -496,7 +496,7 @@ impl Deployment {
 
     /// `--ca`, `--cert`, `--key` of the deployment's client, for a
     /// secured deployment (none otherwise).
-    pub fn client_tls_args(&self) -> Vec<String> {
+    pub(crate) fn client_tls_args(&self) -> Vec<String> {
         self.security
             .iter()
             .flat_map(|s| {
@@ -691,7 +691,7 @@ pub fn hosted_on(stats: &Value, role: &str, host: &str) -> bool {
 
 /// What `idmesh query --json` printed: its JSON lines, its stderr, and
 /// whether it succeeded.
-pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {
+pub(crate) fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool) {
     let answers = String::from_utf8_lossy(&output.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).expect("query prints JSON"))
@@ -705,7 +705,7 @@ pub fn query_output(output: &std::process::Output) -> (Vec<Value>, String, bool)
 
 /// Asks (`ask`) every 100 ms until the first reply satisfies `wanted`,
 /// or panics after `patience` with the last answer or error and `log()`.
-pub fn answer_until(
+pub(crate) fn answer_until(
     patience: Duration,
     ask: impl Fn() -> Result<Vec<Value>, String>,
     wanted: impl Fn(&Value) -> bool,

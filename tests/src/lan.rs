@@ -176,7 +176,7 @@ impl Lan {
         Ok(lan)
     }
 
-    pub fn host(&self, name: &str) -> &Host {
+    pub(crate) fn host(&self, name: &str) -> &Host {
         self.hosts
             .iter()
             .find(|h| h.name == name)
@@ -209,7 +209,7 @@ impl Lan {
     }
 
     /// Runs `program args` in host `name`'s namespace.
-    pub fn command(&self, name: &str, program: &Path) -> Command {
+    pub(crate) fn command(&self, name: &str, program: &Path) -> Command {
         let mut command = Command::new("ip");
         command
             .args(["netns", "exec", &self.host(name).netns])

@@ -1,15 +1,36 @@
 //! Shared pieces of the multi-process tests in `tests/tests/`: each starts
 //! the real `idmesh` binary and checks what a user would see; and the
 //! deterministic network simulator ([`sim`]) that searches the
-//! interleavings those tests cannot.
+//! interleavings those tests cannot (a public namespace: `sim::run`,
+//! `sim::run_aimed`). The other modules are private behind the
+//! re-exports below.
 
-pub mod browser;
-pub mod compare;
-pub mod deployment;
-pub mod lan;
-pub mod python;
+mod browser;
+mod compare;
+mod deployment;
+mod lan;
+mod python;
 pub mod sim;
-pub mod web;
+mod web;
+
+// Deployments on loopback: settings, traces to feed them, what to check.
+pub use deployment::{
+    assert_truth_points, crowd, crowd_with_identities, grid_over, header_only, hosted_on,
+    replay_lines, replay_summary, trace_events, truth_lines, undisturbed_applied,
+    valid_identity_trace, watermark_events, waypoint_crowd, Deployment, Factored, FaultSection,
+    LeaderFaultSection, Secured, Settings, SplitSetting, Truth,
+};
+// A deployment over several hosts' worth of processes, as a LAN runs it.
+pub use lan::{Lan, LanDeployment, LanSettings, Member};
+// Comparing answers: marginals, identity matrices, floats.
+pub use compare::{
+    assert_same_marginals, floats, identity_difference, identity_marginals, identity_matrix,
+    identity_row,
+};
+// The web gateway, a headless browser, and the Python examples.
+pub use browser::Chromium;
+pub use python::{python_with_zenoh, run_example};
+pub use web::Gateway;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

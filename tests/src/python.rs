@@ -9,7 +9,7 @@ use std::process::Command;
 use std::sync::Mutex;
 
 /// The pip requirement: the client's minor version must match the mesh's.
-pub const ZENOH_CLIENT: &str = "eclipse-zenoh>=1.10,<1.11";
+pub(crate) const ZENOH_CLIENT: &str = "eclipse-zenoh>=1.10,<1.11";
 
 /// The venv's `python`, made (or found ready) in `target_tmp/python-venv`.
 /// Panics, saying what failed and how to fix it, when it cannot be made.

@@ -10,8 +10,7 @@
 //! 2,023-event crowd at 200 events/s, journals and snapshots).
 
 use idmesh_journal::{Ending, Record, RECORD_HEAD};
-use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, replay_summary, Deployment, Settings};
+use idmesh_tests::{assert_same_marginals, crowd, floats, replay_summary, Deployment, Settings};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};

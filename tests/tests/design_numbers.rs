@@ -132,10 +132,8 @@ fn occurs(text: &str, number: &str) -> bool {
         let before = text[..at].chars().next_back();
         let after = text[at + number.len()..].chars().next();
         let digit = |c: Option<char>| c.is_some_and(|c| c.is_ascii_digit());
-        !digit(before)
-            && before != Some('.')
-            && !digit(after)
-            && !(after == Some('.') && digit(text[at + number.len() + 1..].chars().next()))
+        let continued = after == Some('.') && digit(text[at + number.len() + 1..].chars().next());
+        !(digit(before) || before == Some('.') || digit(after) || continued)
     })
 }
 

@@ -7,12 +7,10 @@
 //! and replay's answer of that trace to 1e-9.
 
 use idmesh_extract::ExtractorConfig;
-use idmesh_tests::compare::floats;
-use idmesh_tests::deployment::{
+use idmesh_tests::{floats, idmesh, run_example};
+use idmesh_tests::{
     replay_summary, trace_events, watermark_events, Deployment, Factored, Settings,
 };
-use idmesh_tests::idmesh;
-use idmesh_tests::python::run_example;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -33,8 +31,7 @@ fn scene_reports(
     model: &[&str],
 ) -> (PathBuf, PathBuf) {
     std::fs::create_dir_all(dir).unwrap();
-    let obsmat =
-        idmesh_sim::motion::pedestrians::data_dir().join(format!("{scene}/obsmat/obsmat.txt"));
+    let obsmat = idmesh_sim::data_dir().join(format!("{scene}/obsmat/obsmat.txt"));
     let simulated = dir.join(format!("{scene}-simulated.jsonl"));
     let reports = dir.join(format!("{scene}-reports.jsonl"));
     let status = Command::new(idmesh())
@@ -186,7 +183,7 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
 /// every frame but the last.
 #[test]
 fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
-    use idmesh_tests::deployment::header_only;
+    use idmesh_tests::header_only;
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-py-{}", std::process::id()));
     let (_, reports) = scene_reports(&dir, "eth", 120, 7, &[]);
     let text = std::fs::read_to_string(&reports).unwrap();
@@ -246,7 +243,7 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
 /// of all the reports.
 #[test]
 fn two_extracting_sensors_fed_by_region_give_replays_answer() {
-    use idmesh_tests::deployment::{grid_over, header_only};
+    use idmesh_tests::{grid_over, header_only};
     let dir = std::env::temp_dir().join(format!("idmesh-extraction-2s-{}", std::process::id()));
     let (_, reports) = scene_reports(&dir, "zara02", 120, 8, &[]);
     let extracted = dir.join("extracted.jsonl");

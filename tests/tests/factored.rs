@@ -19,8 +19,8 @@
 
 use idmesh_placement::{items_sent, RegionRule};
 use idmesh_protocol::trace::TraceReader;
-use idmesh_tests::compare::identity_matrix;
-use idmesh_tests::deployment::{
+use idmesh_tests::identity_matrix;
+use idmesh_tests::{
     crowd, crowd_with_identities, replay_lines, truth_lines, waypoint_crowd, Deployment, Factored,
     LeaderFaultSection, Settings, SplitSetting, Truth,
 };

@@ -5,8 +5,8 @@
 //! engine's to 1e-9 (exact conditioning, no pruning), so no event was lost
 //! and none applied twice.
 
-use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{
+use idmesh_tests::{assert_same_marginals, floats};
+use idmesh_tests::{
     crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, FaultSection,
     LeaderFaultSection, Settings,
 };

@@ -6,14 +6,12 @@
 //! `idmesh replay --method information-matrix`. Either way the coordinator
 //! computes marginals only when asked.
 
-use idmesh_identity::filter::max_abs_difference;
-use idmesh_tests::compare::{
-    identity_difference, identity_marginals, identity_matrix, identity_row,
-};
-use idmesh_tests::deployment::{
+use idmesh_identity::max_abs_difference;
+use idmesh_tests::{
     crowd_with_identities, replay_lines, truth_lines, valid_identity_trace, Deployment, Factored,
     Settings, Truth,
 };
+use idmesh_tests::{identity_difference, identity_marginals, identity_matrix, identity_row};
 use serde_json::Value;
 use std::path::Path;
 use std::time::{Duration, Instant};

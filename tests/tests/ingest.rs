@@ -7,8 +7,8 @@
 //! `idmesh_protocol::wire::producer_to_sensor` documents, counted in
 //! `query/stats`, and changes nothing.
 
-use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{
+use idmesh_tests::{assert_same_marginals, floats};
+use idmesh_tests::{
     assert_truth_points, crowd, header_only, replay_lines, replay_summary, trace_events,
     truth_lines, undisturbed_applied, Deployment, Settings,
 };
@@ -102,13 +102,13 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
     assert_eq!(first["watermark"]["sensor-0"], 0);
     assert_eq!(first["finished"], false);
     // The venv is made (or found) before the questions wait on the events.
-    idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    idmesh_tests::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
     let trace_arg = trace.display().to_string();
     let points = std::thread::scope(|scope| {
         let asked = scope.spawn(|| deployment.at_truth_points("marginals", &truths));
         // The questions are placed (held at their points) before any event.
         std::thread::sleep(Duration::from_millis(1500));
-        let sent = idmesh_tests::python::run_example(
+        let sent = idmesh_tests::run_example(
             Path::new(env!("CARGO_TARGET_TMPDIR")),
             "producer.py",
             [

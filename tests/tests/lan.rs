@@ -22,9 +22,10 @@
 //! Needs root for the namespaces; without it the test says why in one
 //! line and passes (CI runs as root).
 
-use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{crowd, hosted_on, replay_summary};
-use idmesh_tests::lan::{Lan, LanDeployment, LanSettings, Member};
+use idmesh_tests::{
+    assert_same_marginals, crowd, floats, hosted_on, replay_summary, Lan, LanDeployment,
+    LanSettings, Member,
+};
 use std::path::Path;
 use std::time::{Duration, Instant};
 

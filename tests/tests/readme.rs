@@ -19,7 +19,7 @@
 //! `cargo install` installs into a folder of this test (`--root`) rather
 //! than `~/.cargo/bin`; `idmesh` then resolves to that installed binary.
 
-use idmesh_tests::python::python_with_zenoh;
+use idmesh_tests::python_with_zenoh;
 use std::io::Read;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};

@@ -64,7 +64,7 @@ fn every_identity_method_replays_a_simulated_trace() {
         assert!((0.0..=1.0).contains(&error));
         assert!(!answers.is_empty());
         for answer in answers {
-            let p = idmesh_tests::compare::identity_matrix(&answer["p_identity"]);
+            let p = idmesh_tests::identity_matrix(&answer["p_identity"]);
             assert_eq!(p.len(), 6);
             for row in p {
                 let sum: f64 = row.iter().sum();

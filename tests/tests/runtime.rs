@@ -1,9 +1,7 @@
 //! The distributed runtime, as real processes on loopback: the answer of a
 //! deployment equals the centralized engine's.
 
-use idmesh_tests::deployment::{
-    crowd, replay_lines, replay_summary, truth_lines, Deployment, Settings,
-};
+use idmesh_tests::{crowd, replay_lines, replay_summary, truth_lines, Deployment, Settings};
 use serde_json::Value;
 use std::path::Path;
 use std::time::Duration;
@@ -230,7 +228,7 @@ fn a_python_zenoh_client_gets_the_marginals_as_json() {
     );
     let ours = deployment.final_marginals(Duration::from_secs(60));
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python/query_marginals.py");
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let python = idmesh_tests::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
     let output = std::process::Command::new(python)
         .arg(script)
         .arg(&deployment.coordinator)

@@ -16,8 +16,8 @@
 
 use idmesh_protocol::wire::sensor_to_leader::{Batch, Item, Sequenced};
 use idmesh_protocol::wire::{encode, VERSION};
-use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{
+use idmesh_tests::{assert_same_marginals, floats};
+use idmesh_tests::{
     crowd, header_only, replay_summary, trace_events, Deployment, Secured, Settings,
 };
 use rcgen::{
@@ -472,7 +472,7 @@ fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
     let (deployment, _certs, expected) = deployment("web", true);
     let zenoh = deployment.final_marginals(Duration::from_secs(60));
     assert_same_marginals(&zenoh, &expected, "secured, asked over Zenoh");
-    let gateway = idmesh_tests::web::Gateway::start(&deployment);
+    let gateway = idmesh_tests::Gateway::start(&deployment);
     let prefix = &deployment.prefix;
 
     let (status, body) = http_get(&gateway.at(&format!("{prefix}/query/marginals")));

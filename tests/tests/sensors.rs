@@ -8,8 +8,8 @@
 //! is counted once at the leaders' sensors (a mix given to two sensors is
 //! merged once), and each answer's watermark names every sensor.
 
-use idmesh_tests::compare::{assert_same_marginals, floats};
-use idmesh_tests::deployment::{
+use idmesh_tests::{assert_same_marginals, floats};
+use idmesh_tests::{
     assert_truth_points, crowd, grid_over, header_only, replay_lines, replay_summary, trace_events,
     truth_lines, watermark_events, Deployment, Factored, Settings, SplitSetting,
 };
@@ -127,7 +127,7 @@ fn regions_producer(
     sensors: usize,
     batch: usize,
 ) -> std::process::Child {
-    let python = idmesh_tests::python::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
+    let python = idmesh_tests::python_with_zenoh(Path::new(env!("CARGO_TARGET_TMPDIR")));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/regions_producer.py");
     Command::new(&python)
         .arg(&script)

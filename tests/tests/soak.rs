@@ -12,7 +12,7 @@
 //! answered, the stream's end reached. The figures are printed (see
 //! docs/results.md).
 
-use idmesh_tests::deployment::{crowd, Deployment, Settings};
+use idmesh_tests::{crowd, Deployment, Settings};
 use std::time::{Duration, Instant};
 
 /// Resident memory of a process, in KiB (Linux).

@@ -7,9 +7,7 @@
 //! it. Screenshots and the figures are written to the test's output
 //! directory (`target/tmp/web/`).
 
-use idmesh_tests::browser::Chromium;
-use idmesh_tests::deployment::{crowd_with_identities, Deployment, Settings};
-use idmesh_tests::web::Gateway;
+use idmesh_tests::{crowd_with_identities, Chromium, Deployment, Gateway, Settings};
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -36,12 +36,12 @@ use std::ops::Range;
 pub const MAX_STATES: usize = 1 << 26;
 
 /// The most tracks a [`DenseFilter`] handles: sets are u64 bit masks.
-pub const MAX_TRACKS: usize = 64;
+pub(crate) const MAX_TRACKS: usize = 64;
 
 /// The least probability a state the events allow is stored with: the
 /// smallest normal f64, so that a later sighting of likelihood ratio up to
 /// 10^300 against it still finds a normal, positive predicted probability.
-pub const SUPPORT_FLOOR: f64 = f64::MIN_POSITIVE;
+pub(crate) const SUPPORT_FLOOR: f64 = f64::MIN_POSITIVE;
 
 /// `x`, or [`SUPPORT_FLOOR`] when its exact value is positive but rounded
 /// below it (`positive` says whether the exact value is positive).
@@ -293,7 +293,8 @@ impl DenseFilter {
 
     /// P(the red tracks are exactly `tracks`); 0 for a set the field does not
     /// admit. Repeated tracks count once.
-    pub fn prob_red_set(&self, tracks: &[u32]) -> Result<f64, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn prob_red_set(&self, tracks: &[u32]) -> Result<f64, BeliefError> {
         for &t in tracks {
             self.field.check_track(t)?;
         }

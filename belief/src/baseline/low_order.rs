@@ -75,7 +75,7 @@ const SIMPLEX_SLACK: f64 = 1e-9;
 /// projection gives probability ≤ 0 gets back before it is conditioned on
 /// (see the module documentation): small, so that the belief moves no
 /// further from the projection than the observation forces.
-pub const OBSERVATION_FLOOR: f64 = 1e-6;
+pub(crate) const OBSERVATION_FLOOR: f64 = 1e-6;
 
 /// What the filter does when a conditioning leaves a marginal outside [0, 1].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -212,17 +212,14 @@ impl LowOrderFilter {
     }
 
     /// The order actually used: min(requested, k).
-    pub fn order(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn order(&self) -> usize {
         self.order
     }
 
-    /// The fitted λ_0, …, λ_order of M_{j+1} = Σ_u λ_u Σ_{U ⊆ T} M_u(U).
-    pub fn lift(&self) -> &[f64] {
-        &self.lift
-    }
-
     /// How many conditionings so far needed a [`LowOrderRepair`].
-    pub fn repairs(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn repairs(&self) -> u64 {
         self.repairs
     }
 
@@ -280,13 +277,15 @@ impl LowOrderFilter {
     /// ln Z, Z = Σ_x f(x) of the unnormalized (projected) belief: C(n, k) for
     /// the uniform prior, 1 for a known initial set, times the likelihood of
     /// every observation so far as the projected belief predicts it.
-    pub fn log_normalizer(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn log_normalizer(&self) -> f64 {
         self.log_norm + self.levels[0][0].ln()
     }
 
     /// P(every track of `tracks` is red) = M_{|S|}(S)/M_0, clamped to [0, 1];
     /// only for sets of at most `order()` distinct tracks.
-    pub fn prob_all_red(&self, tracks: &[u32]) -> Result<f64, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn prob_all_red(&self, tracks: &[u32]) -> Result<f64, BeliefError> {
         for &t in tracks {
             self.field.check_track(t)?;
         }
@@ -690,7 +689,11 @@ impl PropertyFilter for LowOrderFilter {
 /// equilibrated, and the system is solved by SVD: it is consistent, but
 /// rank-deficient when j > n − k (then any solution serves, as M_j only
 /// ranges over a subspace).
-pub fn lift_coefficients(n: usize, k: usize, j: usize) -> Result<(Vec<f64>, f64), BeliefError> {
+pub(crate) fn lift_coefficients(
+    n: usize,
+    k: usize,
+    j: usize,
+) -> Result<(Vec<f64>, f64), BeliefError> {
     if j > k || k > n {
         return Err(BeliefError::Unsupported {
             method: METHOD,

@@ -17,11 +17,11 @@
 //! Both store their numbers densely, indexed by the colex rank of a set (the
 //! combinatorial number system), whose binomial table lives here.
 
-pub mod dense;
-pub mod low_order;
+mod dense;
+mod low_order;
 
-pub use dense::{DenseFilter, MAX_STATES, MAX_TRACKS};
-pub use low_order::{lift_coefficients, LowOrderFilter, LowOrderRepair};
+pub use dense::{DenseFilter, MAX_STATES};
+pub use low_order::{LowOrderFilter, LowOrderRepair};
 
 /// Binomial coefficients C(c, i) for c ≤ `top`, i ≤ `width`, saturating at
 /// `usize::MAX` so that size checks can run before anything is allocated.

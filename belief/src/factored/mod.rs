@@ -73,11 +73,11 @@ use tree::{CountTree, Reservoir};
 
 /// The largest `max_component` with [`SplitRule::Original`], which never
 /// builds a table larger than one component: 2^20 numbers (8 MiB) each.
-pub const MAX_COMPONENT_LIMIT: usize = 20;
+pub(crate) const MAX_COMPONENT_LIMIT: usize = 20;
 
 /// The largest `max_component` with the other rules, which build the merged
 /// table of two components before splitting it: 2^24 numbers (128 MiB).
-pub const MAX_COMPONENT_MERGED: usize = 12;
+pub(crate) const MAX_COMPONENT_MERGED: usize = 12;
 
 /// How a merged component too large to keep is cut in two.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -164,7 +164,7 @@ impl Coupling {
 /// The most tracks at which the eager (O(n²)-memory) evaluation of the
 /// count coupling stands in for the count tree when the tree's weights
 /// underflow.
-pub const EAGER_LIMIT: usize = 4096;
+pub(crate) const EAGER_LIMIT: usize = 4096;
 
 /// The share of a component's (normalized) mass a repair gives to the
 /// sets the prior allows.
@@ -326,7 +326,8 @@ impl Clone for FactoredBelief {
 
 impl FactoredBelief {
     /// Every track its own component, with the default options.
-    pub fn new(field: Field) -> Result<Self, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn new(field: Field) -> Result<Self, BeliefError> {
         Self::with_options(field, FactoredOptions::default())
     }
 
@@ -379,10 +380,6 @@ impl FactoredBelief {
         belief.stats.max_component = 1;
         belief.note_size();
         Ok(belief)
-    }
-
-    pub fn options(&self) -> &FactoredOptions {
-        &self.options
     }
 
     pub fn stats(&self) -> &FactoredStats {

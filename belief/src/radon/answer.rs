@@ -28,7 +28,7 @@ impl RadonBelief {
     }
 
     /// P(track t is red) for every track.
-    pub fn exact_marginals(&self) -> Result<Vec<f64>, BeliefError> {
+    pub(crate) fn exact_marginals(&self) -> Result<Vec<f64>, BeliefError> {
         self.checked_total()?;
         PartialSums::of(&self.masses, &self.weights, self.log_scale).marginals(self.field.tracks)
     }

@@ -35,7 +35,7 @@ impl Hash for Atom {
 
 impl Atom {
     /// The Radon atom φ_α.
-    pub fn radon(red: TrackSet) -> Self {
+    pub(crate) fn radon(red: TrackSet) -> Self {
         Atom {
             red,
             blue: TrackSet::empty(),
@@ -47,12 +47,12 @@ impl Atom {
     }
 
     /// (|α|, |β|): what the weights depend on.
-    pub fn sizes(&self) -> (usize, usize) {
+    pub(crate) fn sizes(&self) -> (usize, usize) {
         (self.red.len(), self.blue.len())
     }
 
     /// Some(true) if t is fixed red, Some(false) if fixed blue.
-    pub fn fixes(&self, t: u32) -> Option<bool> {
+    pub(crate) fn fixes(&self, t: u32) -> Option<bool> {
         if self.red.contains(t) {
             Some(true)
         } else if self.blue.contains(t) {
@@ -63,7 +63,7 @@ impl Atom {
     }
 
     /// The atom with t also fixed red.
-    pub fn with_red(&self, t: u32) -> Self {
+    pub(crate) fn with_red(&self, t: u32) -> Self {
         Atom {
             red: self.red.with(t),
             blue: self.blue.clone(),
@@ -71,7 +71,7 @@ impl Atom {
     }
 
     /// The atom with t also fixed blue.
-    pub fn with_blue(&self, t: u32) -> Self {
+    pub(crate) fn with_blue(&self, t: u32) -> Self {
         Atom {
             red: self.red.clone(),
             blue: self.blue.with(t),
@@ -79,7 +79,7 @@ impl Atom {
     }
 
     /// The image of the atom under the transposition of tracks a and b.
-    pub fn swapped(&self, a: u32, b: u32) -> Self {
+    pub(crate) fn swapped(&self, a: u32, b: u32) -> Self {
         let swap = |set: &TrackSet| match (set.contains(a), set.contains(b)) {
             (true, false) => set.replace(a, b),
             (false, true) => set.replace(b, a),
@@ -92,12 +92,12 @@ impl Atom {
     }
 
     /// Whether the transposition of a and b leaves the atom unchanged.
-    pub fn invariant_under(&self, a: u32, b: u32) -> bool {
+    pub(crate) fn invariant_under(&self, a: u32, b: u32) -> bool {
         self.fixes(a) == self.fixes(b)
     }
 
     /// Whether some track of `tracks` is fixed (red or blue) by the atom.
-    pub fn meets(&self, tracks: &[u32]) -> bool {
+    pub(crate) fn meets(&self, tracks: &[u32]) -> bool {
         self.red.meets(tracks) || self.blue.meets(tracks)
     }
 

@@ -28,7 +28,7 @@ use std::collections::hash_map::Entry;
 /// The least red/blue likelihood ratio the signed form writes in the
 /// paper's dictionary (see [`Update::new`]): below it the difference
 /// b − (b − a) keeps fewer than about 6 of the 16 digits of a.
-pub const SIGNED_CANCELLATION: f64 = 1e-10;
+pub(crate) const SIGNED_CANCELLATION: f64 = 1e-10;
 
 /// The likelihood, rescaled, as the engine applies it.
 pub(super) struct Update {

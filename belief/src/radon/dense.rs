@@ -21,7 +21,7 @@ use rustc_hash::FxHashMap;
 
 /// The most red sets for which the belief is rewritten densely: the rewrite
 /// costs (sets × atoms), about 2·10⁸ steps at this size.
-pub const DENSE_SETS_LIMIT: usize = 10_000;
+pub(crate) const DENSE_SETS_LIMIT: usize = 10_000;
 
 impl RadonBelief {
     /// C(n, k) with k known, when at most [`DENSE_SETS_LIMIT`]; `None` with

@@ -35,23 +35,22 @@
 //!   last observation, for the distributed rule.
 
 mod answer;
-pub mod atom;
+mod atom;
 mod condition;
 mod dense;
 mod mixing_log;
-pub mod omp;
+mod omp;
 mod rollup;
-pub mod share;
+mod share;
 mod sparsify;
 mod threshold;
 
 pub use atom::Atom;
-pub use condition::{Growth, SIGNED_CANCELLATION};
-pub use dense::DENSE_SETS_LIMIT;
+pub use condition::Growth;
 pub use mixing_log::MixingLog;
-pub use omp::OmpOptions;
 pub use share::{PartialSums, RadonShare};
-pub use sparsify::{OmpSchedule, Sparsify, SparsifyMethod};
+pub use sparsify::Sparsify;
+pub(crate) use sparsify::{OmpSchedule, SparsifyMethod};
 
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
@@ -180,7 +179,8 @@ impl RadonBelief {
 
     /// A belief given directly by Radon coefficients c_α (the paper's
     /// notation), e.g. to start from a worked example.
-    pub fn from_coefficients(
+    #[cfg(test)]
+    pub(crate) fn from_coefficients(
         field: Field,
         options: RadonOptions,
         coefficients: impl IntoIterator<Item = (TrackSet, f64)>,
@@ -202,26 +202,20 @@ impl RadonBelief {
         Ok(belief)
     }
 
-    pub fn options(&self) -> &RadonOptions {
-        &self.options
-    }
-
     pub fn stats(&self) -> &RadonStats {
         &self.stats
     }
 
-    pub fn weights(&self) -> &Weights {
-        &self.weights
-    }
-
     /// The Radon coefficient c_α of φ_α in the paper's units (f = Σ c_α φ_α),
     /// 0 for a set not held. Finite only while c_α fits an f64.
-    pub fn coefficient(&self, set: &TrackSet) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn coefficient(&self, set: &TrackSet) -> f64 {
         self.coefficient_of(&Atom::radon(set.clone()))
     }
 
     /// The coefficient of any atom, in the paper's units.
-    pub fn coefficient_of(&self, atom: &Atom) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn coefficient_of(&self, atom: &Atom) -> f64 {
         match self.masses.get(atom) {
             Some(&m) => m * (self.log_scale - self.ln_weight(atom)).exp(),
             None => 0.0,
@@ -236,7 +230,8 @@ impl RadonBelief {
     }
 
     /// Every held atom with its share of the total mass (sums to 1).
-    pub fn masses(&self) -> impl Iterator<Item = (&Atom, f64)> + '_ {
+    #[cfg(test)]
+    pub(crate) fn masses(&self) -> impl Iterator<Item = (&Atom, f64)> + '_ {
         let total = self.total_mass();
         self.masses.iter().map(move |(a, &m)| (a, m / total))
     }

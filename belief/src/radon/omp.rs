@@ -28,7 +28,7 @@ use rustc_hash::FxHashSet;
 
 /// Knobs of one OMP run.
 #[derive(Debug, Clone, PartialEq)]
-pub struct OmpOptions {
+pub(crate) struct OmpOptions {
     /// s: how many elements smaller than a target set a candidate may be.
     pub depth: usize,
     /// The most atoms one run may add.
@@ -46,7 +46,7 @@ pub struct OmpOptions {
 
 impl OmpOptions {
     /// Defaults scaled to a coefficient budget.
-    pub fn for_budget(budget: usize) -> Self {
+    pub(crate) fn for_budget(budget: usize) -> Self {
         let atoms = (budget / 16).clamp(2, 64).min(budget);
         OmpOptions {
             depth: 1,
@@ -250,7 +250,7 @@ pub(super) fn heaviest(removed: &mut [(Atom, f64)], count: usize) -> &[(Atom, f6
 /// OMP on a target given by masses m (m = c·W): returns at most
 /// `options.atoms` atoms with non-negative masses whose sum best fits the
 /// target in l2 over the admissible red sets.
-pub fn pursue(
+pub(crate) fn pursue(
     weights: &Weights,
     target: &[(Atom, f64)],
     options: &OmpOptions,

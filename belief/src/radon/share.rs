@@ -103,7 +103,8 @@ impl RadonShare {
     }
 
     /// A share with no atoms.
-    pub fn empty(field: Field, signed: bool) -> Self {
+    #[cfg(test)]
+    pub(crate) fn empty(field: Field, signed: bool) -> Self {
         RadonShare {
             weights: Weights::new(field.tracks, &field.red),
             field,
@@ -130,10 +131,6 @@ impl RadonShare {
 
     pub fn is_empty(&self) -> bool {
         self.masses.is_empty()
-    }
-
-    pub fn log_scale(&self) -> f64 {
-        self.log_scale
     }
 
     /// Every held atom with its mass relative to the share's scale.
@@ -206,7 +203,7 @@ impl RadonShare {
     }
 
     /// Keeps the `budget` heaviest atoms (Section 5.3.2): fully local.
-    pub fn threshold(&mut self, budget: usize) -> usize {
+    pub(crate) fn threshold(&mut self, budget: usize) -> usize {
         split_off_lightest(&mut self.masses, budget.max(1)).len()
     }
 

@@ -36,7 +36,7 @@ use rustc_hash::FxHashMap;
 /// The share of the belief moved to the uniform one when an approximation
 /// has ruled out a sighting (see the module documentation): small, so that
 /// the belief keeps what it knew about everything else.
-pub const RESTORE_SHARE: f64 = 1e-6;
+pub(crate) const RESTORE_SHARE: f64 = 1e-6;
 
 /// Moves [`RESTORE_SHARE`] of the masses to the uniform belief φ_∅.
 pub(super) fn restore_uniform(masses: &mut FxHashMap<Atom, f64>) {
@@ -54,11 +54,11 @@ pub(super) fn restore_uniform(masses: &mut FxHashMap<Atom, f64>) {
 pub struct Sparsify {
     /// The most sets the belief may hold after an event.
     pub budget: usize,
-    pub method: SparsifyMethod,
+    pub(crate) method: SparsifyMethod,
 }
 
 #[derive(Debug, Clone, PartialEq)]
-pub enum SparsifyMethod {
+pub(crate) enum SparsifyMethod {
     Threshold,
     Overcomplete(OmpOptions),
 }
@@ -96,27 +96,27 @@ impl Sparsify {
 /// mixing (Section 5.5, "Timing for Sparsification"). The whole belief and
 /// each leader's share keep one.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct OmpSchedule {
+pub(crate) struct OmpSchedule {
     mixes: u32,
     observations: u32,
 }
 
 impl OmpSchedule {
-    pub fn mixed(&mut self) {
+    pub(crate) fn mixed(&mut self) {
         self.mixes += 1;
     }
 
-    pub fn observed(&mut self) {
+    pub(crate) fn observed(&mut self) {
         self.observations += 1;
     }
 
     /// At least `every` events since the last run, at least half of them
     /// mixes.
-    pub fn due(&self, omp: &OmpOptions) -> bool {
+    pub(crate) fn due(&self, omp: &OmpOptions) -> bool {
         self.mixes + self.observations >= omp.every && self.mixes >= self.observations
     }
 
-    pub fn ran(&mut self) {
+    pub(crate) fn ran(&mut self) {
         *self = OmpSchedule::default();
     }
 }

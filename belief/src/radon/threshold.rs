@@ -63,7 +63,7 @@ impl RadonBelief {
     }
 
     /// Thresholds down to `budget` atoms and renormalizes.
-    pub fn threshold(&mut self, budget: usize) -> Result<(), BeliefError> {
+    pub(crate) fn threshold(&mut self, budget: usize) -> Result<(), BeliefError> {
         let removed = self.split_off_lightest(budget.max(1));
         if let Err(e) = self.renormalize() {
             // Only a signed expansion can get here; put everything back.

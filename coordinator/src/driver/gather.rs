@@ -3,8 +3,10 @@
 //! What the replies mean — which are good, whether they make a complete
 //! answer, how they add up — is pure ([`crate::machine`]).
 
+pub use crate::machine::Collected;
+pub(crate) use crate::machine::Gathered;
 use crate::machine::{at_rest_of, check, cut_parameters, marginals_of, read_cut, Partials};
-pub use crate::machine::{At, Collected, GatherError, Gathered, Memory, Share};
+pub use crate::machine::{At, GatherError, Memory, Share};
 use crate::pushed::Pushes;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStats};
@@ -35,7 +37,7 @@ pub async fn marginals(
         Share::Sums,
     )
     .await?;
-    let (collected, answer) = match marginals_of(&collected, memory) {
+    let answer = match marginals_of(&collected, memory) {
         // Outpaced by other queries: the leaders are asked again at the
         // same cut (they keep their answers there), whole.
         Err(GatherError::StaleBase { leader, base }) => {
@@ -44,15 +46,11 @@ pub async fn marginals(
             let (parts, errors) =
                 partials(session, keys, tag, Share::Sums, None, timeout, memory).await?;
             let collected = check(collected.cut, parts, errors, timeout, memory)?;
-            let answer = marginals_of(&collected, memory)?;
-            (collected, answer)
+            marginals_of(&collected, memory)?
         }
-        answer => (collected, answer?),
+        answer => answer?,
     };
-    Ok(Gathered {
-        cut: collected.cut,
-        answer,
-    })
+    Ok(Gathered { answer })
 }
 
 /// Every leader's share at a consistent cut. Once the stream is over the
@@ -262,7 +260,7 @@ async fn place_cut(
 }
 
 /// Every leader's counters.
-pub async fn stats(
+pub(crate) async fn stats(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
@@ -291,7 +289,11 @@ pub async fn stats(
 
 /// Every sensor gateway's counters (none when no gateway answers: the
 /// leaders' counters are still worth having).
-pub async fn sensor_stats(session: &Session, keys: &Keys, timeout: Duration) -> Vec<SensorStats> {
+pub(crate) async fn sensor_stats(
+    session: &Session,
+    keys: &Keys,
+    timeout: Duration,
+) -> Vec<SensorStats> {
     let Ok(replies) = ask_everyone(
         session,
         keys.every_sensor_stats(),

@@ -21,7 +21,7 @@ use std::sync::Arc;
 use zenoh::Session;
 
 /// The identity marginals of every track at a consistent cut.
-pub async fn identity(
+pub(crate) async fn identity(
     session: &Session,
     config: &CoordinatorConfig,
     memory: &Memory,

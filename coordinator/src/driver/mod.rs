@@ -2,7 +2,7 @@
 //! answered in its own task, with a span, so slow leaders do not hold up
 //! other users.
 
-pub mod gather;
+pub(crate) mod gather;
 mod identity;
 
 use crate::identity::Method;

@@ -19,8 +19,8 @@ use zenoh::Session;
 
 /// A query's labels in the latency histograms: which question, and
 /// whether it was answered.
-pub type QueryLabels = Vec<(String, String)>;
-pub type LatencyFamily = Family<QueryLabels, Histogram, fn() -> Histogram>;
+pub(crate) type QueryLabels = Vec<(String, String)>;
+pub(crate) type LatencyFamily = Family<QueryLabels, Histogram, fn() -> Histogram>;
 
 /// The answer to one get: an HTTP status and the JSON body.
 #[derive(Debug, Clone)]
@@ -31,12 +31,12 @@ pub struct Answer {
 }
 
 impl Answer {
-    pub fn ok(&self) -> bool {
+    pub(crate) fn ok(&self) -> bool {
         self.status == 200
     }
 
     /// The error message of a failed answer.
-    pub fn error(&self) -> Option<String> {
+    pub(crate) fn error(&self) -> Option<String> {
         (!self.ok()).then(|| {
             serde_json::from_slice::<QueryError>(&self.body)
                 .map(|e| e.error)
@@ -46,7 +46,7 @@ impl Answer {
 }
 
 /// The gateway's Zenoh client side.
-pub struct Asker {
+pub(crate) struct Asker {
     pub session: Session,
     pub keys: Keys,
     pub timeout: Duration,
@@ -55,7 +55,7 @@ pub struct Asker {
 }
 
 /// The latency family with every question's answered series present.
-pub fn latency_family() -> LatencyFamily {
+pub(crate) fn latency_family() -> LatencyFamily {
     let family = Family::new_with_constructor(latency_histogram as fn() -> Histogram);
     for question in QUESTIONS {
         drop(family.get_or_create(&query_labels(question, "ok")));
@@ -72,10 +72,10 @@ fn latency_histogram() -> Histogram {
 /// the first scrape (zero until asked): a series that appears only once
 /// something happened cannot be told from one that was never scraped, and
 /// an empty family is more than some parsers accept.
-pub const QUESTIONS: [&str; 5] = ["marginals", "track", "identity", "positions", "stats"];
+pub(crate) const QUESTIONS: [&str; 5] = ["marginals", "track", "identity", "positions", "stats"];
 
 /// A latency histogram's labels.
-pub fn query_labels(what: &str, outcome: &str) -> QueryLabels {
+pub(crate) fn query_labels(what: &str, outcome: &str) -> QueryLabels {
     vec![
         ("query".to_string(), what.to_string()),
         ("outcome".to_string(), outcome.to_string()),
@@ -83,7 +83,7 @@ pub fn query_labels(what: &str, outcome: &str) -> QueryLabels {
 }
 
 impl Asker {
-    pub fn new(session: Session, keys: Keys, timeout: Duration) -> Self {
+    pub(crate) fn new(session: Session, keys: Keys, timeout: Duration) -> Self {
         Asker {
             session,
             keys,
@@ -94,7 +94,7 @@ impl Asker {
 
     /// Asks `selector` (a key under the prefix, with `?parameters`); `what`
     /// names the question in the latency histograms.
-    pub async fn ask(&self, selector: &str, what: &str) -> Answer {
+    pub(crate) async fn ask(&self, selector: &str, what: &str) -> Answer {
         let started = Instant::now();
         let (status, body) = self.get(selector).await;
         let took = started.elapsed();
@@ -140,7 +140,7 @@ impl Asker {
 }
 
 /// The HTTP status of an error the coordinator answered with.
-pub fn status_of(error: &str) -> u16 {
+pub(crate) fn status_of(error: &str) -> u16 {
     let unavailable = ["degraded", "no sensor", "no leader"];
     if unavailable.iter().any(|p| error.starts_with(p)) {
         503
@@ -150,7 +150,7 @@ pub fn status_of(error: &str) -> u16 {
 }
 
 /// `{"error":"…"}`, the coordinator's own error shape.
-pub fn error_body(error: &str) -> Vec<u8> {
+pub(crate) fn error_body(error: &str) -> Vec<u8> {
     serde_json::to_vec(&QueryError {
         error: error.to_string(),
     })

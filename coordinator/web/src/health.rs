@@ -12,7 +12,7 @@ use idmesh_protocol::wire::query::{PositionsAnswer, StatsAnswer};
 use serde::Serialize;
 use std::sync::Arc;
 
-pub async fn healthz() -> Response {
+pub(crate) async fn healthz() -> Response {
     (
         [(header::CONTENT_TYPE, "application/json")],
         "{\"up\":true}",
@@ -22,7 +22,7 @@ pub async fn healthz() -> Response {
 
 /// What `/readyz` says.
 #[derive(Debug, Serialize)]
-pub struct Readiness {
+pub(crate) struct Readiness {
     pub ready: bool,
     /// The leader roles of the stream, and those that did not answer.
     pub leaders: Vec<String>,
@@ -32,7 +32,7 @@ pub struct Readiness {
     pub error: Option<String>,
 }
 
-pub async fn readiness(asker: &Asker) -> Readiness {
+pub(crate) async fn readiness(asker: &Asker) -> Readiness {
     let keys = &asker.keys;
     let (positions_key, stats_key) = (keys.query_positions(), keys.query_stats());
     let (positions, stats) = tokio::join!(
@@ -72,7 +72,7 @@ pub async fn readiness(asker: &Asker) -> Readiness {
     }
 }
 
-pub async fn readyz(State(asker): State<Arc<Asker>>) -> Response {
+pub(crate) async fn readyz(State(asker): State<Arc<Asker>>) -> Response {
     let readiness = readiness(&asker).await;
     let status = if readiness.ready {
         StatusCode::OK

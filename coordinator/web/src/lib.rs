@@ -5,25 +5,25 @@
 //! does, holds no belief and has no rights of its own (under `[security]`
 //! it shows a client certificate listed in `clients`).
 //!
-//! - [`rest`] — `GET /<key expression>` answers with the coordinator's JSON
+//! - `rest` — `GET /<key expression>` answers with the coordinator's JSON
 //!   (Zenoh's REST-plugin convention); `Accept: text/event-stream` streams a
 //!   fresh answer every `interval=` ms instead (Server-Sent Events).
-//! - [`page`] — the live map at `/`: tracks at their last position coloured
+//! - `page` — the live map at `/`: tracks at their last position coloured
 //!   by P(red), leaders and their regions, counters, the degraded state.
 //!   Every asset is compiled into the binary: no CDN, no internet.
-//! - [`metrics`] — `GET /metrics` in the OpenMetrics text format: every
+//! - `metrics` — `GET /metrics` in the OpenMetrics text format: every
 //!   process's counters from `query/stats`, the gateway's own query
 //!   latency histograms.
-//! - [`health`] — `/healthz` (the gateway is up) and `/readyz` (every role
+//! - `health` — `/healthz` (the gateway is up) and `/readyz` (every role
 //!   of the deployment answers).
-//! - [`asker`] — one get to the coordinator, timed, its outcome turned into
+//! - `asker` — one get to the coordinator, timed, its outcome turned into
 //!   an HTTP status.
 
-pub mod asker;
-pub mod health;
-pub mod metrics;
-pub mod page;
-pub mod rest;
+mod asker;
+mod health;
+mod metrics;
+mod page;
+mod rest;
 
 use asker::Asker;
 use axum::routing::get;
@@ -65,7 +65,7 @@ pub async fn serve(
 }
 
 /// Every route of the gateway.
-pub fn app(session: zenoh::Session, config: WebConfig) -> Router {
+pub(crate) fn app(session: zenoh::Session, config: WebConfig) -> Router {
     let asker = Arc::new(Asker::new(session, config.keys.clone(), config.timeout));
     Router::new()
         .route("/", get(page::index))

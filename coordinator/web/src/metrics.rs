@@ -23,7 +23,7 @@ use prometheus_client::metrics::gauge::ConstGauge;
 use prometheus_client::registry::Registry;
 use std::sync::Arc;
 
-pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+pub(crate) const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
 
 type Labels = Vec<(String, String)>;
 
@@ -284,7 +284,7 @@ fn encode_coordinator(
 }
 
 /// The whole exposition at this moment.
-pub async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
+pub(crate) async fn exposition(asker: &Asker) -> Result<String, std::fmt::Error> {
     let keys = &asker.keys;
     let (stats_key, positions_key) = (keys.query_stats(), keys.query_positions());
     let (stats, positions) = tokio::join!(
@@ -320,7 +320,7 @@ fn render(snapshot: Snapshot, latency: LatencyFamily) -> Result<String, std::fmt
     Ok(text)
 }
 
-pub async fn metrics(State(asker): State<Arc<Asker>>) -> Response {
+pub(crate) async fn metrics(State(asker): State<Arc<Asker>>) -> Response {
     match exposition(&asker).await {
         Ok(text) => ([(header::CONTENT_TYPE, CONTENT_TYPE)], text).into_response(),
         Err(_) => (

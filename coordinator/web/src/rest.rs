@@ -27,9 +27,9 @@ use std::convert::Infallible;
 use std::sync::Arc;
 use std::time::Duration;
 
-pub const DEFAULT_INTERVAL: Duration = Duration::from_millis(1000);
-pub const MIN_INTERVAL: Duration = Duration::from_millis(100);
-pub const MAX_INTERVAL: Duration = Duration::from_secs(60);
+pub(crate) const DEFAULT_INTERVAL: Duration = Duration::from_millis(1000);
+pub(crate) const MIN_INTERVAL: Duration = Duration::from_millis(100);
+pub(crate) const MAX_INTERVAL: Duration = Duration::from_secs(60);
 
 /// The questions of the query API, by their key under `<prefix>/query/`:
 /// (pattern, name in the latency histograms); `*` is one chunk.
@@ -44,7 +44,7 @@ const QUESTIONS: [(&str, &str); 6] = [
 
 /// A request, read: the selector to ask, and for a stream its interval.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Asked {
+pub(crate) struct Asked {
     pub selector: String,
     pub what: &'static str,
     pub interval: Duration,
@@ -126,7 +126,7 @@ fn matches(pattern: &str, question: &str) -> bool {
 }
 
 /// Every path the routes do not claim: a question to the coordinator.
-pub async fn rest(
+pub(crate) async fn rest(
     State(asker): State<Arc<Asker>>,
     method: Method,
     uri: Uri,

@@ -318,7 +318,7 @@ fn report(options: &BenchOptions, measured: &Measured) -> Result<String> {
 
 /// Where and when a page was made.
 pub struct Made {
-    /// [`idmesh_eval::machine::description`].
+    /// [`idmesh_eval::description`].
     pub machine: String,
     /// YYYY-MM-DD.
     pub date: String,
@@ -330,8 +330,8 @@ impl Made {
     /// This machine, today, a run that began at `started`.
     pub fn since(started: Instant) -> Made {
         Made {
-            machine: idmesh_eval::machine::description(),
-            date: idmesh_eval::machine::today(),
+            machine: idmesh_eval::description(),
+            date: idmesh_eval::today(),
             seconds: started.elapsed().as_secs_f64(),
         }
     }

@@ -17,7 +17,7 @@ use crate::runtime::launch::{field_corners, simulate_into, write_simulation};
 use anyhow::{Context, Result};
 use idmesh_placement::{busiest_share, grid_places, items_sent, share_causes, RegionRule};
 use idmesh_protocol::trace::Line;
-use idmesh_sim::motion::pedestrians::data_dir;
+use idmesh_sim::data_dir;
 use idmesh_sim::Scenario;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -111,6 +111,6 @@ pub fn report(options: &BenchOptions, trace: &Path) -> Result<String> {
 
 /// A trace's track count and lines.
 fn read(path: &Path) -> Result<(usize, Vec<Line>)> {
-    let (header, lines) = idmesh_protocol::TraceReader::open(path)?.read_all()?;
+    let (header, lines) = idmesh_protocol::trace::TraceReader::open(path)?.read_all()?;
     Ok((header.tracks, lines))
 }

@@ -25,7 +25,7 @@ pub struct Processes {
 
 impl Processes {
     /// Starts every process of `config` whose host is `host` (all if None).
-    pub fn start(config: &Path, host: Option<&str>) -> Result<Self> {
+    pub(crate) fn start(config: &Path, host: Option<&str>) -> Result<Self> {
         let processes = Self::start_some(config, |m| host.is_none_or(|h| m.host == h))?;
         if processes.children.is_empty() {
             bail!(
@@ -88,7 +88,7 @@ impl Processes {
     }
 
     /// SIGTERM to all, then SIGKILL to whoever is still there after 5 s.
-    pub fn stop(&mut self) {
+    pub(crate) fn stop(&mut self) {
         for (_, _, child) in &mut self.children {
             // SAFETY: kill(2) on a pid we spawned and have not reaped.
             unsafe {
@@ -397,14 +397,14 @@ pub fn write_simulation(scenario: idmesh_sim::Scenario, out: &Path) -> Result<()
     let trace = scenario.generate().context("the simulation failed")?;
     let path = out.display().to_string();
     let file = std::fs::File::create(out).with_context(|| format!("{path}: cannot create"))?;
-    idmesh_sim::scenario::trace_out::write_trace(&trace, std::io::BufWriter::new(file), path)?;
+    idmesh_sim::write_trace(&trace, std::io::BufWriter::new(file), path)?;
     Ok(())
 }
 
 /// The events of a trace (every line but the header and truth lines): what
 /// a watermark counts.
-pub fn count_events(trace: &Path) -> Result<u64> {
-    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
+pub(crate) fn count_events(trace: &Path) -> Result<u64> {
+    let mut reader = idmesh_protocol::trace::TraceReader::open(trace)?;
     reader.read_header()?;
     let mut events = 0;
     while let Some(n) = reader.read_line()? {
@@ -417,7 +417,7 @@ pub fn count_events(trace: &Path) -> Result<u64> {
 
 /// The bounding box of the trace's positions: (min x, min y, max x, max y).
 pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
-    let mut reader = idmesh_protocol::TraceReader::open(trace)?;
+    let mut reader = idmesh_protocol::trace::TraceReader::open(trace)?;
     reader.read_header()?;
     let mut b = (
         f64::INFINITY,
@@ -426,7 +426,7 @@ pub fn field_corners(trace: &Path) -> Result<(f64, f64, f64, f64)> {
         f64::NEG_INFINITY,
     );
     while let Some(n) = reader.read_line()? {
-        if let idmesh_protocol::Line::Move(m) = n.line {
+        if let idmesh_protocol::trace::Line::Move(m) = n.line {
             b = (b.0.min(m.x), b.1.min(m.y), b.2.max(m.x), b.3.max(m.y));
         }
     }

@@ -52,7 +52,7 @@ pub struct MeshOptions {
 const RETRY_FIRST_MS: u64 = 100;
 const RETRY_MOST_MS: u64 = 1000;
 
-pub fn config(options: &MeshOptions) -> Result<Config> {
+pub(crate) fn config(options: &MeshOptions) -> Result<Config> {
     let mut config = Config::default();
     let set = |config: &mut Config, key: &str, value: String| {
         config
@@ -135,7 +135,7 @@ fn path(p: &std::path::Path) -> Result<&str> {
 /// Answers `key` at once with `name`, from Zenoh's own thread: the raw
 /// round trip to this process, with none of its work in it. Health checks
 /// and the bench (the floor a query is compared with) use it.
-pub async fn answer_pings(session: &Session, key: String, name: String) -> Result<()> {
+pub(crate) async fn answer_pings(session: &Session, key: String, name: String) -> Result<()> {
     use zenoh::Wait;
     let reply_key = key.clone();
     session
@@ -175,7 +175,7 @@ pub async fn open(options: &MeshOptions) -> Result<Session> {
 /// because nothing listens there (a client session needs a peer at once).
 #[derive(Debug, thiserror::Error)]
 #[error("cannot open a zenoh session ({summary}): {zenoh}")]
-pub struct NoSession {
+pub(crate) struct NoSession {
     summary: String,
     zenoh: String,
 }

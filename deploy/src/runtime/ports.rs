@@ -73,7 +73,7 @@ fn pick_in(n: usize, (low, high): (u16, u16), seed: u32) -> Result<Vec<u16>> {
 /// The ports from 10,000 up to the kernel's ephemeral range
 /// (`ip_local_port_range`, 32768 by default): nothing is given them
 /// unasked. Above it if the range starts too low to leave room.
-pub fn non_ephemeral_ports() -> (u16, u16) {
+pub(crate) fn non_ephemeral_ports() -> (u16, u16) {
     let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").ok();
     outside_of(range.as_deref())
 }

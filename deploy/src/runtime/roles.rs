@@ -8,18 +8,16 @@ use super::mesh::{self, MeshOptions};
 use super::security::rules;
 use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
-use idmesh_coordinator::driver::CoordinatorConfig;
-use idmesh_extract::pipeline::read_reports;
-use idmesh_leader::host::HostConfig;
-use idmesh_protocol::trace::{Header, Line, Problem};
+use idmesh_coordinator::CoordinatorConfig;
+use idmesh_extract::read_reports;
+use idmesh_leader::HostConfig;
+use idmesh_protocol::trace::{Header, Line, Problem, TraceReader};
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::TraceReader;
-use idmesh_sensor::driver::{Faults, GatewayConfig};
-use idmesh_sensor::extraction::Extraction;
-use idmesh_sensor::feed::{lines_of, InputLine, Source};
 use idmesh_sensor::journal::{Journal, Record};
-use idmesh_sensor::mesh::MeshConfig;
-use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
+use idmesh_sensor::{
+    lines_of, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace, MeshConfig, Router,
+    RouterConfig, Source,
+};
 use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
@@ -108,7 +106,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                         .position(|l| l.name == name)
                         .unwrap_or_default();
                     let sensor = topology.sensor_of_leader(index);
-                    idmesh_leader::host::run(
+                    idmesh_leader::run(
                         session.clone(),
                         HostConfig {
                             name: name.to_string(),
@@ -131,7 +129,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                     .await
                     .map_err(anyhow::Error::from)
                 }
-                Role::Coordinator => idmesh_coordinator::driver::run(
+                Role::Coordinator => idmesh_coordinator::run(
                     session.clone(),
                     CoordinatorConfig {
                         name: name.to_string(),
@@ -280,7 +278,7 @@ async fn sensor(
         extraction,
         max_errors,
     };
-    idmesh_sensor::driver::run(session, config, router, source, journal, shutdown()).await?;
+    idmesh_sensor::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())
 }
 
@@ -366,7 +364,7 @@ fn stdin_trace() -> Result<(Header, tokio::sync::mpsc::Receiver<InputLine>)> {
 }
 
 /// Ctrl-C or SIGTERM.
-pub async fn shutdown() {
+pub(crate) async fn shutdown() {
     let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
         Ok(term) => term,
         Err(_) => {

@@ -271,7 +271,7 @@ pub fn default_max_component() -> u32 {
 impl Topology {
     /// The group cap of the factored identity belief the stream's `Begin`
     /// asks for (None: the information matrix's rows).
-    pub fn factored_identity(&self) -> Option<u32> {
+    pub(crate) fn factored_identity(&self) -> Option<u32> {
         (self.identity == IdentityKind::Factored)
             .then_some(idmesh_protocol::wire::identity::DEFAULT_MAX_GROUP)
     }
@@ -589,7 +589,7 @@ impl Topology {
     /// The topology as a TOML file says it, [`Topology::load`]'s input:
     /// read back, it is this topology again (but for `dir`, which is where
     /// the file is). Fails only on a path that is not UTF-8.
-    pub fn to_toml(&self) -> Result<String> {
+    pub(crate) fn to_toml(&self) -> Result<String> {
         toml::to_string(self).context("the topology cannot be written as TOML")
     }
 
@@ -726,14 +726,14 @@ impl Topology {
         all
     }
 
-    pub fn member(&self, name: &str) -> Result<Member> {
+    pub(crate) fn member(&self, name: &str) -> Result<Member> {
         self.members()
             .into_iter()
             .find(|m| m.name == name)
             .with_context(|| format!("no process named {name:?} in the topology"))
     }
 
-    pub fn trace_path(&self) -> PathBuf {
+    pub(crate) fn trace_path(&self) -> PathBuf {
         self.dir.join(&self.sensor().trace)
     }
 
@@ -743,7 +743,7 @@ impl Topology {
     }
 
     /// The sensor named `name`.
-    pub fn sensor_named(&self, name: &str) -> Result<&SensorProcess> {
+    pub(crate) fn sensor_named(&self, name: &str) -> Result<&SensorProcess> {
         self.sensors
             .iter()
             .find(|s| s.name == name)
@@ -751,7 +751,7 @@ impl Topology {
     }
 
     /// The sensor that sends leader `i` its batches.
-    pub fn sensor_of_leader(&self, i: usize) -> &SensorProcess {
+    pub(crate) fn sensor_of_leader(&self, i: usize) -> &SensorProcess {
         self.leader[i]
             .sensor
             .as_deref()
@@ -761,7 +761,7 @@ impl Topology {
 
     /// Where leader `name` keeps its journal, if leaders keep one.
     /// The leaders' state directory, resolved against the file's folder.
-    pub fn state_path(&self) -> Option<PathBuf> {
+    pub(crate) fn state_path(&self) -> Option<PathBuf> {
         self.state_dir.as_ref().map(|dir| self.dir.join(dir))
     }
 }

@@ -8,7 +8,7 @@
 
 use super::topology::{BeliefKind, RegionsSetting, Sparsification, SplitSetting, Topology};
 use anyhow::{bail, Result};
-use idmesh_eval::replay::args::{CouplingChoice, Places, SplitChoice};
+use idmesh_eval::replay::{CouplingChoice, Places, SplitChoice};
 use idmesh_eval::replay::{Method, ReplayArgs};
 use idmesh_protocol::trace::TraceReader;
 

@@ -54,7 +54,7 @@ pub fn run(options: &WebOptions) -> Result<()> {
 }
 
 /// The HTTP listener, or an error naming the address.
-pub async fn bind(address: &str) -> Result<tokio::net::TcpListener> {
+pub(crate) async fn bind(address: &str) -> Result<tokio::net::TcpListener> {
     tokio::net::TcpListener::bind(address)
         .await
         .with_context(|| format!("the web gateway cannot listen on {address}"))
@@ -62,7 +62,7 @@ pub async fn bind(address: &str) -> Result<tokio::net::TcpListener> {
 
 /// The gateway inside another command (`idmesh demo`), on its session,
 /// until the runtime stops; its address, or why it could not start.
-pub async fn spawn(session: zenoh::Session, prefix: &str, address: &str) -> Result<String> {
+pub(crate) async fn spawn(session: zenoh::Session, prefix: &str, address: &str) -> Result<String> {
     let listener = bind(address).await?;
     let url = format!("http://{}/", listener.local_addr()?);
     let config = idmesh_web::WebConfig {

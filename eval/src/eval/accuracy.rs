@@ -16,11 +16,11 @@ use anyhow::{bail, Context, Result};
 use idmesh_belief::{field_of, FactoredBelief, FactoredOptions, PropertyFilter};
 use idmesh_placement::{RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader};
-use idmesh_sim::scenario::trace_out::write_trace;
+use idmesh_sim::write_trace;
 use idmesh_sim::SimEvent;
 use std::path::Path;
 
-pub use super::scenarios::Start;
+use super::scenarios::Start;
 
 use super::scenarios::MOVE_INTERVAL;
 
@@ -70,11 +70,6 @@ impl Engine {
             Engine::FactoredLocal => Method::FactoredLocal,
             Engine::RadonDistributed => Method::Distributed(budget(n)),
         }
-    }
-
-    /// As the evaluation's tables name it.
-    pub fn label(self, n: usize) -> String {
-        self.method(n).label()
     }
 }
 

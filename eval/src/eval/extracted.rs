@@ -4,7 +4,7 @@
 //!
 //! On each scene the simulator plays a tracker that confuses people the
 //! way [`TRACKER`] says (closer, slower meetings swap more: the approach
-//! model of `idmesh_extract::meetings::meeting_model`) and a colour sensor
+//! model of `idmesh_extract::MeetingModel`) and a colour sensor
 //! that sees isolated people; it also writes what that tracker reported —
 //! positions, class scores. Then:
 //!
@@ -28,8 +28,8 @@ use super::score::score;
 use anyhow::{bail, Context, Result};
 use idmesh_extract::{Extractor, Meeting, MeetingModel, RosterPolicy};
 use idmesh_protocol::trace::Line;
-use idmesh_sim::events::ExtractionParams;
-use idmesh_sim::motion::pedestrians::{data_dir, Scene, Timing};
+use idmesh_sim::ExtractionParams;
+use idmesh_sim::{data_dir, Scene, Timing};
 use idmesh_sim::{GeneratedTrace, Scenario, SimEvent, TimedEvent};
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -37,7 +37,7 @@ use std::sync::Arc;
 /// The simulated tracker: a touching, standing pair swaps with 0.8; the
 /// chance falls with the closest distance (σ = 0.35 m) and with the
 /// relative speed (halved at 0.7 m/s).
-pub const TRACKER: MeetingModel = MeetingModel::Approach {
+pub(crate) const TRACKER: MeetingModel = MeetingModel::Approach {
     p_max: 0.8,
     sigma: 0.35,
     v0: 0.7,
@@ -50,7 +50,7 @@ const SECONDS: f64 = 300.0;
 const METHOD: Method = Method::Deployed(1);
 
 /// One scene's simulation and what its tracker reported.
-pub struct SceneRun {
+pub(crate) struct SceneRun {
     pub scene: &'static str,
     pub people: usize,
     pub generated: GeneratedTrace,
@@ -61,7 +61,7 @@ pub struct SceneRun {
 
 impl SceneRun {
     /// Simulates `SECONDS` of `scene` with the [`TRACKER`] model.
-    pub fn simulate(scene: &'static str, loaded: Arc<Scene>, seed: u64) -> Result<SceneRun> {
+    pub(crate) fn simulate(scene: &'static str, loaded: Arc<Scene>, seed: u64) -> Result<SceneRun> {
         let scenario = Scenario::pedestrians_loaded(loaded)
             .duration(SECONDS)
             .meetings(TRACKER)
@@ -102,7 +102,7 @@ impl SceneRun {
     }
 
     /// The trace the belief replays: the simulator's own events.
-    pub fn simulated(&self) -> Trace {
+    pub(crate) fn simulated(&self) -> Trace {
         convert(
             &self.generated,
             self.params.mix_distance,
@@ -112,7 +112,7 @@ impl SceneRun {
 
     /// The trace of the events `idmesh-extract` finds in the reports with
     /// `model`, with the simulator's truth lines; and the meetings.
-    pub fn extract(&self, model: MeetingModel) -> Result<(Trace, Vec<Meeting>)> {
+    pub(crate) fn extract(&self, model: MeetingModel) -> Result<(Trace, Vec<Meeting>)> {
         let config = ExtractionParams {
             meetings: model,
             ..self.params.clone()
@@ -191,7 +191,7 @@ impl SceneRun {
 }
 
 /// Every scene, simulated with `seed`.
-pub fn scene_runs(seed: u64) -> Result<Vec<SceneRun>> {
+pub(crate) fn scene_runs(seed: u64) -> Result<Vec<SceneRun>> {
     SCENES
         .iter()
         .map(|&(name, file)| {
@@ -205,7 +205,7 @@ pub fn scene_runs(seed: u64) -> Result<Vec<SceneRun>> {
 
 /// The largest difference between two traces' answers at their truth
 /// lines, under the default belief.
-pub fn largest_difference(x: &Trace, y: &Trace) -> Result<f64> {
+pub(crate) fn largest_difference(x: &Trace, y: &Trace) -> Result<f64> {
     let answers = |t: &Trace| -> Result<Vec<Vec<f64>>> {
         let run = super::score::replay(METHOD, t, 0).map_err(|e| anyhow::anyhow!(e))?;
         Ok(run.answers.into_iter().map(|(m, _)| m).collect())
@@ -230,7 +230,7 @@ fn describe(model: &MeetingModel) -> String {
 }
 
 /// The results.md section.
-pub fn section(seed: u64) -> Result<String> {
+pub(crate) fn section(seed: u64) -> Result<String> {
     let runs = scene_runs(seed)?;
     let mut out = String::new();
     let MeetingModel::Approach { p_max, sigma, v0 } = TRACKER else {

@@ -11,7 +11,7 @@ use std::sync::Mutex;
 
 /// One cell of the grid: a method on a trace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Cell {
+pub(crate) struct Cell {
     /// Index into the traces.
     pub trace: usize,
     pub method: Method,
@@ -23,7 +23,7 @@ pub struct Cell {
 /// order. Items are taken in the order `visit` gives (longest first balances
 /// the load), each by the first idle worker. `done(finished, total)` is
 /// called after each item.
-pub fn parallel_map<T, R, F>(
+pub(crate) fn parallel_map<T, R, F>(
     items: &[T],
     visit: &[usize],
     workers: usize,

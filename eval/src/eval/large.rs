@@ -25,7 +25,7 @@ use std::fmt::Write as _;
 
 /// The sizes and event count of a run of the section.
 #[derive(Debug, Clone)]
-pub struct LargeFields {
+pub(crate) struct LargeFields {
     pub sizes: Vec<usize>,
     pub events: usize,
     /// Score every this many events.
@@ -34,7 +34,7 @@ pub struct LargeFields {
 
 impl LargeFields {
     /// The grid asked for.
-    pub fn full() -> Self {
+    pub(crate) fn full() -> Self {
         LargeFields {
             sizes: vec![500, 2_000, 10_000],
             events: 5_000,
@@ -43,7 +43,7 @@ impl LargeFields {
     }
 
     /// A small grid for the quick preset (and tests).
-    pub fn quick() -> Self {
+    pub(crate) fn quick() -> Self {
         LargeFields {
             sizes: vec![200],
             events: 1_000,
@@ -139,7 +139,7 @@ fn parallel(jobs: &[(Method, WorkloadSpec)], every: usize, workers: usize) -> Ve
 }
 
 /// The section's markdown, run on `workers` threads.
-pub fn section(grid: &LargeFields, workers: usize) -> Result<String> {
+pub(crate) fn section(grid: &LargeFields, workers: usize) -> Result<String> {
     let spec = |n: usize| WorkloadSpec {
         events: grid.events,
         ..WorkloadSpec::table3(n, 1)

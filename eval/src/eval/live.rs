@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// The file `idmesh bench --accuracy --out` writes, beside results.md.
-pub const FILE: &str = "live-accuracy.md";
+pub(crate) const FILE: &str = "live-accuracy.md";
 
 /// The header of live-accuracy.md's table, its rows [`LiveRow`]s.
 pub const TABLE_HEADER: &str = "| n | swap | start | belief | truth lines | live tracking error | centralized tracking error | largest \\|live − centralized\\| | live seconds |\n|---:|---:|---|---|---:|---:|---:|---:|---:|";
@@ -86,7 +86,7 @@ impl LiveRow {
 
 /// The section for results.md, from `dir`/live-accuracy.md; a paragraph
 /// saying how to make it when the file is not there or holds no table.
-pub fn section(dir: &Path) -> String {
+pub(crate) fn section(dir: &Path) -> String {
     let mut out = String::from(
         "\n## The live runtime on the Table III crowds\n\n\
          The crowds of Table III fed to a live deployment (a coordinator, four leaders placed \

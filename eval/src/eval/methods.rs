@@ -8,18 +8,18 @@
 
 use crate::filters::Recipe;
 use anyhow::{bail, Context, Result};
-use idmesh_belief::baseline::MAX_STATES;
+use idmesh_belief::MAX_STATES;
 use idmesh_belief::{BeliefError, Coupling, Field, PropertyFilter, Sparsify};
 use std::fmt;
 
 /// The largest n at which the exact filter runs in the grid (C(20, 10) =
 /// 184,756 states): "where n ≤ 20 the exact filter is in every table".
-pub const EXACT_UP_TO: usize = 20;
+pub(crate) const EXACT_UP_TO: usize = 20;
 
 /// Whether `factored` (`idmesh_belief::FactoredBelief` with its default
 /// options) joins the grids (see `plan.rs`). Set it to `false` to run the
 /// grids without it; the name still parses.
-pub const FACTORED_AVAILABLE: bool = true;
+pub(crate) const FACTORED_AVAILABLE: bool = true;
 
 /// One method of the evaluation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -93,7 +93,7 @@ impl Method {
     }
 
     /// A readable label for tables: `overcomplete (B = 500)`.
-    pub fn label(&self) -> String {
+    pub(crate) fn label(&self) -> String {
         match self {
             Method::Exact => "exact".into(),
             Method::Order(j) => format!("order {j}"),
@@ -110,7 +110,7 @@ impl Method {
     /// Whether the method runs at n tracks with k red: the exact filter up
     /// to [`EXACT_UP_TO`] tracks, the low-order ones while their tables fit,
     /// the factored one only once it exists.
-    pub fn fits(&self, n: usize, k: usize) -> bool {
+    pub(crate) fn fits(&self, n: usize, k: usize) -> bool {
         let choose = |n: usize, r: usize| -> f64 {
             (0..r).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
         };
@@ -127,7 +127,7 @@ impl Method {
 
     /// The filter this method names (`seed` drives the randomized ones),
     /// for the one factory ([`Recipe`]).
-    pub fn recipe(&self, seed: u64) -> Recipe {
+    pub(crate) fn recipe(&self, seed: u64) -> Recipe {
         let radon = |sparsify: Sparsify, distributed_rule: bool| Recipe::Radon {
             sparsify: Some(sparsify),
             distributed_rule,
@@ -150,7 +150,7 @@ impl Method {
     /// The leaders a deployed method shares the tracks among: its replay
     /// runs the regional rule with fitted regions over the trace's `move`
     /// lines.
-    pub fn leaders(&self) -> Option<usize> {
+    pub(crate) fn leaders(&self) -> Option<usize> {
         match *self {
             Method::Deployed(leaders) => Some(leaders),
             _ => None,
@@ -158,7 +158,11 @@ impl Method {
     }
 
     /// Builds the filter for `field`; `seed` drives the randomized ones.
-    pub fn build(&self, field: Field, seed: u64) -> Result<Box<dyn PropertyFilter>, BeliefError> {
+    pub(crate) fn build(
+        &self,
+        field: Field,
+        seed: u64,
+    ) -> Result<Box<dyn PropertyFilter>, BeliefError> {
         self.recipe(seed).build(field)
     }
 }

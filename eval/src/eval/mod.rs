@@ -3,24 +3,24 @@
 //! threads; the tables go to stdout and, with the SVG plots, to
 //! `--out-dir` (results.md and results-*.svg).
 //!
-//! - [`args`] — the command line of `idmesh eval`.
-//! - [`plan`] — the presets: which experiments, points, seeds, methods.
-//! - [`scenarios`] — crowds (mixing share steered by the distances) and
+//! - `args` — the command line of `idmesh eval`.
+//! - `plan` — the presets: which experiments, points, seeds, methods.
+//! - `scenarios` — crowds (mixing share steered by the distances) and
 //!   real pedestrian scenes, as in-memory traces.
-//! - [`methods`] — the registry of filters by name (built by the one
+//! - `methods` — the registry of filters by name (built by the one
 //!   factory, [`crate::filters`]).
-//! - [`score`] — replaying a trace through a filter: tracking error, time
+//! - `score` — replaying a trace through a filter: tracking error, time
 //!   inside the filter, coefficient counts.
-//! - [`grid`] — the worker threads, results in a fixed order.
-//! - [`results`] — scores gathered per point and method.
-//! - [`table`], [`plots`] — markdown tables and SVG plots.
-//! - [`live`] — the live runtime's tracking error beside the
+//! - `grid` — the worker threads, results in a fixed order.
+//! - `results` — scores gathered per point and method.
+//! - `table`, `plots` — markdown tables and SVG plots.
+//! - `live` — the live runtime's tracking error beside the
 //!   centralized engines', copied from live-accuracy.md.
-//! - [`large`] — the large-field section: factored against particles at
+//! - `large` — the large-field section: factored against particles at
 //!   n = 500 to 10,000.
-//! - [`report`] — the prose that carries numbers: the summary, the goals
+//! - `report` — the prose that carries numbers: the summary, the goals
 //!   and the belief's expected error, the distributed rule's cost.
-//! - [`accuracy`] — the Table III crowds as trace files and their
+//! - `accuracy` — the Table III crowds as trace files and their
 //!   centralized answers, for scoring a live deployment
 //!   (`idmesh bench --accuracy`).
 //!
@@ -29,15 +29,15 @@
 //! scaled from the P = 1000 run of the first pass, whose time is linear in
 //! P) and the second pass runs those.
 
-pub mod accuracy;
-pub mod args;
+mod accuracy;
+mod args;
 mod extracted;
 mod grid;
 mod large;
-pub mod live;
+mod live;
 mod methods;
 mod plan;
-pub mod plots;
+mod plots;
 mod report;
 mod results;
 mod scenarios;
@@ -45,18 +45,25 @@ mod score;
 mod table;
 
 use anyhow::{Context, Result};
-pub use args::{EvalArgs, Preset};
 use grid::{parallel_map, Cell};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use methods::Method;
 use plan::{Experiment, Plan, PARTICLES};
-use plots::{Plot, Series};
+use plots::Series;
 use results::{EqualTime, PointResult, Results, Summary};
-pub use scenarios::SCENES;
-use scenarios::{Scenes, Start, Trace};
+use scenarios::{Scenes, Trace};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+// The command's arguments, and the scenes and starts of its grid.
+pub use args::{EvalArgs, Preset};
+pub use scenarios::{Start, SCENES};
+// Table III's accuracy runs and the live table (`idmesh bench`).
+pub use accuracy::{table3_budget, table3_crowds, Crowd, Engine, Written};
+pub use live::{LiveRow, TABLE_HEADER};
+// The plots of the report.
+pub use plots::{draw, reliability_series, Plot};
 
 /// The equal-time particle counts are kept within these bounds.
 const EQUAL_TIME_PARTICLES: (usize, usize) = (10, 2_000_000);

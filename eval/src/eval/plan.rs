@@ -21,7 +21,7 @@ use super::scenarios::{ScenarioSpec, Sensor, Source, Start};
 
 /// The experiments, each one table or plot of results.md.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Experiment {
+pub(crate) enum Experiment {
     /// n = 10, k = 5 at four mixing shares (Fig. 5b).
     SmallScale,
     /// Table III: n = 20, 60, 100, half of the events mixes.
@@ -39,7 +39,7 @@ pub enum Experiment {
 /// One point of an experiment: a scenario over several seeds, and the
 /// methods to run on it.
 #[derive(Debug, Clone)]
-pub struct Point {
+pub(crate) struct Point {
     pub experiment: Experiment,
     /// The nominal n (a pedestrian window's cap).
     pub n: usize,
@@ -59,18 +59,18 @@ pub struct Point {
 
 /// The whole grid of a preset.
 #[derive(Debug, Clone)]
-pub struct Plan {
+pub(crate) struct Plan {
     pub seeds: usize,
     pub points: Vec<Point>,
 }
 
 /// The Radon budget at n tracks.
-pub fn budget(n: usize) -> usize {
+pub(crate) fn budget(n: usize) -> usize {
     5 * n
 }
 
 /// The particle count every grid runs besides P = B.
-pub const PARTICLES: usize = 1000;
+pub(crate) const PARTICLES: usize = 1000;
 
 /// The Table III rows at n (and the exact filter, which `Method::fits`
 /// drops above n = 20).
@@ -97,7 +97,7 @@ fn table3_methods(n: usize) -> Vec<Method> {
 
 /// The leader counts of the deployed rows: the regional rule's accuracy
 /// cost beside the centralized rows.
-pub const DEPLOYED_LEADERS: [usize; 2] = [4, 8];
+pub(crate) const DEPLOYED_LEADERS: [usize; 2] = [4, 8];
 
 /// The uniform-prior copies of the pedestrian windows: enough for the
 /// cost of the distributed rule.
@@ -160,12 +160,12 @@ struct Sizes {
 }
 
 /// The starts of the Table III and pedestrian points, in table order.
-pub const STARTS: [Start; 2] = [Start::Known, Start::Uniform];
+pub(crate) const STARTS: [Start; 2] = [Start::Known, Start::Uniform];
 
 impl Plan {
     /// The grid of `preset` with `seeds` seeds per point (default: 1 for
     /// quick, 5 for full).
-    pub fn new(preset: Preset, seeds: Option<usize>) -> Plan {
+    pub(crate) fn new(preset: Preset, seeds: Option<usize>) -> Plan {
         let (seeds, sizes) = match preset {
             Preset::Quick => (
                 seeds.unwrap_or(1),
@@ -329,7 +329,7 @@ impl Plan {
     }
 
     /// The crowd events per trace.
-    pub fn events(&self) -> usize {
+    pub(crate) fn events(&self) -> usize {
         self.points
             .iter()
             .flat_map(|p| &p.specs)
@@ -343,7 +343,7 @@ impl Plan {
 
 /// The paper's Table III (TOSN 2013): (method, n) → (tracking error,
 /// seconds). Its overcomplete budgets were "up to hundreds of bases".
-pub fn paper_table3(method: &Method, n: usize) -> Option<(f64, f64)> {
+pub(crate) fn paper_table3(method: &Method, n: usize) -> Option<(f64, f64)> {
     let row = match method {
         Method::Order(1) => [(20, 0.3167, 0.02), (60, 0.2804, 0.17), (100, 0.2836, 0.46)],
         Method::Order(3) => [

@@ -31,12 +31,12 @@ pub struct Plot {
 }
 
 /// The y label of the error plots.
-pub const ERROR_LABEL: &str = "tracking error (fraction mislabeled)";
+pub(crate) const ERROR_LABEL: &str = "tracking error (fraction mislabeled)";
 
 /// The reliability diagram over every run of the grid: per method, the
 /// mean predicted P(red) of each tenth of [0, 1] against how often those
 /// tracks were red; a calibrated belief lies on the diagonal.
-pub fn reliability(results: &Results) -> Plot {
+pub(crate) fn reliability(results: &Results) -> Plot {
     let mut by_method: Vec<(String, Reliability)> = Vec::new();
     for p in &results.points {
         for (m, s) in &p.methods {
@@ -85,7 +85,7 @@ pub fn reliability_series(methods: &[(String, Reliability)], min_count: u64) -> 
 
 /// The series of an experiment's points (filtered to n): one per method
 /// slot, x = the point's x, or its measured mixing share.
-pub fn series_of(results: &Results, experiment: Experiment, n: usize) -> Vec<Series> {
+pub(crate) fn series_of(results: &Results, experiment: Experiment, n: usize) -> Vec<Series> {
     let points: Vec<&PointResult> = results
         .points
         .iter()

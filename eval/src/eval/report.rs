@@ -12,17 +12,17 @@ use super::table::{coefficients, distributed_pair, runs_changed, seconds};
 use std::fmt::Write;
 
 /// Goal 1: within this of the exact filter's error at [`GOAL_N`] tracks…
-pub const GOAL_GAP: f64 = 0.02;
+pub(crate) const GOAL_GAP: f64 = 0.02;
 /// …with at most this many coefficients.
-pub const GOAL_COEFFICIENTS: usize = 500;
+pub(crate) const GOAL_COEFFICIENTS: usize = 500;
 /// The n of goal 1 (the largest n the exact filter runs at).
-pub const GOAL_N: usize = 20;
+pub(crate) const GOAL_N: usize = 20;
 /// Goal 2: at least this much better than order 1 on Table III.
-pub const GOAL_MARGIN: f64 = 0.08;
+pub(crate) const GOAL_MARGIN: f64 = 0.08;
 
 /// A Table III method with its budget scaled to n.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Kind {
+pub(crate) enum Kind {
     Exact,
     Order(usize),
     Threshold,
@@ -34,7 +34,7 @@ pub enum Kind {
 }
 
 impl Kind {
-    pub fn at(&self, n: usize) -> Method {
+    pub(crate) fn at(&self, n: usize) -> Method {
         let b = budget(n);
         match *self {
             Kind::Exact => Method::Exact,
@@ -48,7 +48,7 @@ impl Kind {
         }
     }
 
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match *self {
             Kind::Exact => "exact",
             Kind::Order(1) => "order 1",
@@ -76,14 +76,14 @@ impl Kind {
 }
 
 /// The Table III grid of a run: its swaps and n, in plan order.
-pub struct Grid<'a> {
+pub(crate) struct Grid<'a> {
     results: &'a Results,
     pub swaps: Vec<f64>,
     pub ns: Vec<usize>,
 }
 
 impl<'a> Grid<'a> {
-    pub fn of(results: &'a Results) -> Grid<'a> {
+    pub(crate) fn of(results: &'a Results) -> Grid<'a> {
         let (mut swaps, mut ns) = (Vec::new(), Vec::new());
         for p in results
             .points
@@ -100,7 +100,7 @@ impl<'a> Grid<'a> {
         Grid { results, swaps, ns }
     }
 
-    pub fn point(&self, start: Start, swap: f64, n: usize) -> Option<&'a PointResult> {
+    pub(crate) fn point(&self, start: Start, swap: f64, n: usize) -> Option<&'a PointResult> {
         self.results.points.iter().find(|p| {
             p.point.experiment == Experiment::Table3
                 && p.point.start == start
@@ -116,12 +116,12 @@ impl<'a> Grid<'a> {
             .filter(|s| s.ok())
     }
 
-    pub fn error(&self, start: Start, swap: f64, n: usize, kind: Kind) -> Option<f64> {
+    pub(crate) fn error(&self, start: Start, swap: f64, n: usize, kind: Kind) -> Option<f64> {
         self.get(start, swap, n, kind).map(|s| s.error)
     }
 
     /// The lowest-error method short of the exact filter at a point.
-    pub fn best(&self, start: Start, swap: f64, n: usize) -> Option<(Kind, f64)> {
+    pub(crate) fn best(&self, start: Start, swap: f64, n: usize) -> Option<(Kind, f64)> {
         Kind::APPROXIMATE
             .iter()
             .filter_map(|&k| self.error(start, swap, n, k).map(|e| (k, e)))
@@ -129,13 +129,13 @@ impl<'a> Grid<'a> {
     }
 
     /// The largest n of the grid.
-    pub fn largest(&self) -> Option<usize> {
+    pub(crate) fn largest(&self) -> Option<usize> {
         self.ns.iter().copied().max()
     }
 }
 
 /// How one method does against the two goals at one (start, swap).
-pub struct Verdict {
+pub(crate) struct Verdict {
     /// Error above the exact filter's at [`GOAL_N`], and the most
     /// coefficients held there.
     pub gap: Option<(f64, usize)>,
@@ -145,7 +145,7 @@ pub struct Verdict {
     pub goal2: Option<bool>,
 }
 
-pub fn verdict(grid: &Grid, start: Start, swap: f64, kind: Kind) -> Verdict {
+pub(crate) fn verdict(grid: &Grid, start: Start, swap: f64, kind: Kind) -> Verdict {
     let gap = match (
         grid.get(start, swap, GOAL_N, kind),
         grid.error(start, swap, GOAL_N, Kind::Exact),
@@ -225,7 +225,7 @@ fn where_met(v: &Verdict) -> String {
 
 /// The goals table: per start and swap, the exact filter (for reference),
 /// the Radon overcomplete method and the factored belief.
-pub fn goals_table(grid: &Grid) -> String {
+pub(crate) fn goals_table(grid: &Grid) -> String {
     let ns: Vec<String> = grid.ns.iter().map(|n| n.to_string()).collect();
     let mut out = String::new();
     writeln!(
@@ -272,7 +272,7 @@ pub fn goals_table(grid: &Grid) -> String {
 /// track and of the top-k labelling scored), the overcomplete method with
 /// the per-track one; then each one's Brier score and log-loss (trace
 /// spec, Scoring: what its probabilities are worth).
-pub fn bayes_table(grid: &Grid) -> String {
+pub(crate) fn bayes_table(grid: &Grid) -> String {
     let kinds = [
         (Kind::Exact, true),
         (Kind::Factored, true),
@@ -328,7 +328,7 @@ pub fn bayes_table(grid: &Grid) -> String {
 }
 
 /// The prose of "Beating the paper", around the two tables.
-pub fn beating(grid: &Grid) -> String {
+pub(crate) fn beating(grid: &Grid) -> String {
     let mut out = String::new();
     writeln!(
         out,
@@ -634,7 +634,7 @@ fn capitalize(s: &str) -> String {
 }
 
 /// The prose of the distributed rule's section, above its table.
-pub fn distributed_intro(results: &Results) -> String {
+pub(crate) fn distributed_intro(results: &Results) -> String {
     let mut out = String::new();
     // Per start: runs changed, compared, costs (Table III and scenes).
     let mut changed = [0usize; 2];
@@ -793,7 +793,7 @@ fn deployed_cost(results: &Results) -> Option<String> {
     })
 }
 
-pub fn summary(results: &Results) -> String {
+pub(crate) fn summary(results: &Results) -> String {
     let grid = Grid::of(results);
     let mut lines: Vec<String> = Vec::new();
     let ns = grid

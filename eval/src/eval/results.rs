@@ -9,7 +9,7 @@ use idmesh_belief::Reliability;
 
 /// A method's scores on one point, over its seeds.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Summary {
+pub(crate) struct Summary {
     /// Runs scored (failures excluded).
     pub runs: usize,
     /// Mean and standard deviation (over seeds) of the tracking error.
@@ -39,7 +39,7 @@ pub struct Summary {
 }
 
 impl Summary {
-    pub fn of(scores: &[&Score]) -> Summary {
+    pub(crate) fn of(scores: &[&Score]) -> Summary {
         let ok: Vec<&Score> = scores
             .iter()
             .copied()
@@ -80,14 +80,14 @@ impl Summary {
         }
     }
 
-    pub fn ok(&self) -> bool {
+    pub(crate) fn ok(&self) -> bool {
         self.runs > 0
     }
 }
 
 /// A particle filter sized to take as long as another method.
 #[derive(Debug, Clone, PartialEq)]
-pub struct EqualTime {
+pub(crate) struct EqualTime {
     /// The method whose time it matches.
     pub base: Method,
     /// The particle count chosen.
@@ -97,7 +97,7 @@ pub struct EqualTime {
 
 /// Everything measured at one point.
 #[derive(Debug, Clone)]
-pub struct PointResult {
+pub(crate) struct PointResult {
     pub point: Point,
     /// The traces of its seeds that could be made.
     pub traces: Vec<TraceInfo>,
@@ -109,7 +109,7 @@ pub struct PointResult {
 }
 
 impl PointResult {
-    pub fn summary(&self, method: &Method) -> Option<&Summary> {
+    pub(crate) fn summary(&self, method: &Method) -> Option<&Summary> {
         self.methods
             .iter()
             .find(|(m, _)| m == method)
@@ -117,7 +117,7 @@ impl PointResult {
     }
 
     /// Mean over the traces of a trace fact.
-    pub fn mean_info(&self, f: impl Fn(&TraceInfo) -> f64) -> f64 {
+    pub(crate) fn mean_info(&self, f: impl Fn(&TraceInfo) -> f64) -> f64 {
         if self.traces.is_empty() {
             return f64::NAN;
         }
@@ -125,14 +125,14 @@ impl PointResult {
     }
 
     /// Mean mixing share of the traces.
-    pub fn mix_share(&self) -> f64 {
+    pub(crate) fn mix_share(&self) -> f64 {
         self.mean_info(|t| t.mix_share)
     }
 }
 
 /// The whole evaluation.
 #[derive(Debug, Clone)]
-pub struct Results {
+pub(crate) struct Results {
     pub points: Vec<PointResult>,
     /// Seconds the whole run took, wall clock.
     pub wall_seconds: f64,

@@ -25,7 +25,7 @@
 use anyhow::{anyhow, Context, Result};
 use idmesh_belief::{Event, Field, Mix, Observe};
 use idmesh_protocol::trace::{self, Line};
-use idmesh_sim::motion::pedestrians::{data_dir, Scene, Timing};
+use idmesh_sim::{data_dir, Scene, Timing};
 use idmesh_sim::{GeneratedTrace, Scenario, SensorModel, SimEvent};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -42,7 +42,7 @@ pub const SCENES: [(&str, &str); 5] = [
 
 /// What an observation reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Sensor {
+pub(crate) enum Sensor {
     /// The colour histogram of the trace spec (0.8/0.2 or 0.1/0.7).
     Histogram,
     /// Names the right colour with this probability.
@@ -99,7 +99,7 @@ pub enum Source {
 
 /// Everything that makes one trace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ScenarioSpec {
+pub(crate) struct ScenarioSpec {
     pub source: Source,
     pub swap: f64,
     pub sensor: Sensor,
@@ -109,7 +109,7 @@ pub struct ScenarioSpec {
 
 /// One line of an in-memory trace.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Step {
+pub(crate) enum Step {
     Event(Event),
     /// The true red tracks now.
     Truth(Vec<u32>),
@@ -125,7 +125,7 @@ pub enum Step {
 impl Step {
     /// The trace line this step stands for (times left at 0: nothing that
     /// replays an in-memory trace reads them).
-    pub fn line(&self) -> Line {
+    pub(crate) fn line(&self) -> Line {
         match self {
             Step::Event(Event::Mix(m)) => Line::Mix(trace::Mix {
                 time: 0.0,
@@ -157,11 +157,11 @@ impl Step {
 
 /// Seconds between the `move` lines of a generated trace: where a live
 /// sensor, and a deployed method's replay, find the tracks.
-pub const MOVE_INTERVAL: f64 = 1.0;
+pub(crate) const MOVE_INTERVAL: f64 = 1.0;
 
 /// Facts about a trace, for the tables.
 #[derive(Debug, Clone, PartialEq)]
-pub struct TraceInfo {
+pub(crate) struct TraceInfo {
     pub tracks: usize,
     pub red: usize,
     pub mixes: usize,
@@ -175,7 +175,7 @@ pub struct TraceInfo {
 
 /// A generated trace as the filters consume it.
 #[derive(Debug, Clone)]
-pub struct Trace {
+pub(crate) struct Trace {
     /// n, k and, with a known start, the red tracks at time 0.
     pub field: Field,
     /// The red tracks at time 0, whether or not the field reveals them.
@@ -186,13 +186,13 @@ pub struct Trace {
 
 /// The pedestrian scenes, each parsed once and shared.
 #[derive(Debug, Default)]
-pub struct Scenes {
+pub(crate) struct Scenes {
     loaded: BTreeMap<&'static str, Arc<Scene>>,
 }
 
 impl Scenes {
     /// Loads the scenes `specs` use (none when they use none).
-    pub fn load_for(specs: &[ScenarioSpec]) -> Result<Scenes> {
+    pub(crate) fn load_for(specs: &[ScenarioSpec]) -> Result<Scenes> {
         let mut scenes = Scenes::default();
         for spec in specs {
             if let Source::Pedestrians { scene, .. } = spec.source {
@@ -222,13 +222,13 @@ impl Scenes {
 }
 
 /// Mixing and observation distances (metres) for the steering knob x.
-pub fn distances(x: f64) -> (f64, f64) {
+pub(crate) fn distances(x: f64) -> (f64, f64) {
     (0.25 + 2.75 * x, 2.5 + 3.5 * x)
 }
 
 impl ScenarioSpec {
     /// The same scenario with another start.
-    pub fn with_start(&self, start: Start) -> ScenarioSpec {
+    pub(crate) fn with_start(&self, start: Start) -> ScenarioSpec {
         ScenarioSpec {
             start,
             ..self.clone()
@@ -236,7 +236,7 @@ impl ScenarioSpec {
     }
 
     /// Generates the trace (deterministic).
-    pub fn generate(&self, scenes: &Scenes) -> Result<Trace> {
+    pub(crate) fn generate(&self, scenes: &Scenes) -> Result<Trace> {
         Ok(self.generated(scenes, Some(MOVE_INTERVAL))?.1)
     }
 
@@ -245,7 +245,7 @@ impl ScenarioSpec {
     /// the in-memory trace the filters replay. Moves draw no randomness:
     /// the mixes, observations and truths are those of
     /// [`ScenarioSpec::generate`] whatever `moves` is.
-    pub fn generated(
+    pub(crate) fn generated(
         &self,
         scenes: &Scenes,
         moves: Option<f64>,
@@ -338,7 +338,7 @@ fn steer(
 
 impl Trace {
     /// The same trace told another start: the field only.
-    pub fn with_start(&self, start: Start) -> Trace {
+    pub(crate) fn with_start(&self, start: Start) -> Trace {
         let (n, k) = (self.field.tracks, self.info.red);
         Trace {
             field: match start {
@@ -352,7 +352,7 @@ impl Trace {
 
 /// A generated trace as `belief` events and truth lines; the field is
 /// known or uniform as the trace's header reveals the red tracks or not.
-pub fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64) -> Trace {
+pub(crate) fn convert(trace: &GeneratedTrace, mix_distance: f64, observe_distance: f64) -> Trace {
     let stats = trace.stats();
     let steps = trace
         .events

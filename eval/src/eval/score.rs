@@ -73,7 +73,7 @@ impl Stopwatch {
 
 /// How one method did on one trace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Score {
+pub(crate) struct Score {
     /// Mean tracking error over the truth lines (NaN if the run failed or
     /// had no truth line).
     pub error: f64,
@@ -249,7 +249,7 @@ pub fn tracking_error(answers: &[(Vec<f64>, &[u32])], k: Option<usize>) -> f64 {
 }
 
 /// Replays `trace` through `method` (seeded with `seed`) and scores it.
-pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
+pub(crate) fn score(method: Method, trace: &Trace, seed: u64) -> Score {
     let run = match replay(method, trace, seed) {
         Ok(run) => run,
         Err(reason) => return Score::failed(reason),
@@ -295,7 +295,7 @@ pub fn score(method: Method, trace: &Trace, seed: u64) -> Score {
 
 /// The error a belief with these marginals expects of the best per-track
 /// labelling: Σ_t min(p_t, 1 − p_t)/n.
-pub fn bayes_risk(marginals: &[f64]) -> f64 {
+pub(crate) fn bayes_risk(marginals: &[f64]) -> f64 {
     if marginals.is_empty() {
         return f64::NAN;
     }
@@ -308,7 +308,7 @@ pub fn bayes_risk(marginals: &[f64]) -> f64 {
 
 /// The error a belief with these marginals expects of labelling exactly
 /// `predicted` red: (Σ_{t ∈ predicted} (1 − p_t) + Σ_{t ∉ predicted} p_t)/n.
-pub fn expected_mislabels(marginals: &[f64], predicted: &[u32]) -> f64 {
+pub(crate) fn expected_mislabels(marginals: &[f64], predicted: &[u32]) -> f64 {
     if marginals.is_empty() {
         return f64::NAN;
     }

@@ -11,7 +11,7 @@ use std::fmt::Write;
 
 /// A tracking error with its spread over seeds: `0.173 ± 0.012`; `—` when
 /// nothing was scored.
-pub fn error(s: &Summary) -> String {
+pub(crate) fn error(s: &Summary) -> String {
     if !s.ok() {
         return "—".into();
     }
@@ -30,7 +30,7 @@ pub fn error(s: &Summary) -> String {
 }
 
 /// Seconds to three significant digits (at least whole seconds).
-pub fn seconds(s: f64) -> String {
+pub(crate) fn seconds(s: f64) -> String {
     if !s.is_finite() {
         return "—".into();
     }
@@ -72,7 +72,7 @@ fn slots(points: &[&PointResult]) -> usize {
 
 /// Table III: method, n, error, seconds, mean and max coefficients, and
 /// the paper's error and seconds where it has them.
-pub fn table3(results: &Results, swap: f64, start: Start) -> String {
+pub(crate) fn table3(results: &Results, swap: f64, start: Start) -> String {
     let points: Vec<&PointResult> = points(results, Experiment::Table3)
         .into_iter()
         .filter(|p| p.point.swap == swap && p.point.start == start)
@@ -151,7 +151,12 @@ pub fn table3(results: &Results, swap: f64, start: Start) -> String {
 /// A sweep: one row per method, one column per point (the x value and,
 /// for mixing, the measured share), then the mean coefficients and
 /// seconds over the points.
-pub fn sweep(results: &Results, experiment: Experiment, n: Option<usize>, x_name: &str) -> String {
+pub(crate) fn sweep(
+    results: &Results,
+    experiment: Experiment,
+    n: Option<usize>,
+    x_name: &str,
+) -> String {
     let points: Vec<&PointResult> = points(results, experiment)
         .into_iter()
         .filter(|p| n.is_none_or(|n| p.point.n == n))
@@ -204,7 +209,7 @@ pub fn sweep(results: &Results, experiment: Experiment, n: Option<usize>, x_name
 
 /// Table III on the pedestrian scenes (known start): per scene window, its
 /// facts and every method.
-pub fn pedestrians(results: &Results) -> String {
+pub(crate) fn pedestrians(results: &Results) -> String {
     let points: Vec<&PointResult> = points(results, Experiment::Pedestrians)
         .into_iter()
         .filter(|p| p.point.start == Start::Known)
@@ -257,7 +262,7 @@ pub fn pedestrians(results: &Results) -> String {
 /// same budget (and the exact filter where it runs), known-start rows
 /// first: how many runs the rule changed at all, the cost in error, and
 /// the coefficients each keeps.
-pub fn distributed(results: &Results) -> String {
+pub(crate) fn distributed(results: &Results) -> String {
     let mut out = String::from(
         "| scenario | n | start | exact filter | overcomplete, exact conditioning | overcomplete, distributed rule | cost of the rule | runs changed | mean coeff. (exact cond. / distributed) | seconds (exact cond. / distributed) |\n\
          |---|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
@@ -301,7 +306,7 @@ pub fn distributed(results: &Results) -> String {
 
 /// The overcomplete method's summaries at a point, conditioning exactly
 /// and with the distributed rule.
-pub fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
+pub(crate) fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
     let find = |f: &dyn Fn(&Method) -> bool| p.methods.iter().find(|(m, _)| f(m)).map(|(_, s)| s);
     Some((
         find(&|m| matches!(m, Method::Overcomplete(_)))?,
@@ -311,7 +316,7 @@ pub fn distributed_pair(p: &PointResult) -> Option<(&Summary, &Summary)> {
 
 /// (runs whose error differs at all, runs compared): the same seeds, run
 /// by run.
-pub fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
+pub(crate) fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
     let pairs: Vec<(f64, f64)> = a
         .run_errors
         .iter()
@@ -323,7 +328,7 @@ pub fn runs_changed(a: &Summary, b: &Summary) -> (usize, usize) {
 }
 
 /// Every method against a particle filter given the same time.
-pub fn equal_time(results: &Results) -> String {
+pub(crate) fn equal_time(results: &Results) -> String {
     let mut out = String::from(
         "| start | n | swap | method | tracking error | seconds | P at equal time | particle error | particle seconds | method − particles |\n\
          |---|---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
@@ -358,7 +363,7 @@ pub fn equal_time(results: &Results) -> String {
 }
 
 /// The Radon methods against a particle filter holding as many sets.
-pub fn equal_memory(results: &Results) -> String {
+pub(crate) fn equal_memory(results: &Results) -> String {
     let mut out = String::from(
         "| start | n | swap | B = P | exact | threshold | overcomplete | particles (P = B) | particles (P = 1000) |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
@@ -386,7 +391,7 @@ pub fn equal_memory(results: &Results) -> String {
 /// The headline of Table III: at each swap and n, the paper's three
 /// methods ranked by our error and by the paper's, whether the order
 /// matches, and how much faster our overcomplete method is.
-pub fn ordering(results: &Results) -> String {
+pub(crate) fn ordering(results: &Results) -> String {
     let mut out = String::from(
         "| start | swap | n | our ranking | paper's ranking | same best | same order | overcomplete: ours vs paper seconds |\n\
          |---|---:|---:|---|---|---|---|---|\n",
@@ -452,7 +457,7 @@ pub fn ordering(results: &Results) -> String {
 /// The facts of the traces of every point: how the scenarios came out (a
 /// uniform-prior point runs the traces of its known-start twin, so only
 /// the known-start points are listed).
-pub fn traces(results: &Results) -> String {
+pub(crate) fn traces(results: &Results) -> String {
     let mut out = String::from(
         "| experiment | point | traces | n | events | mixing share | truth lines | mix / observe distance (m) |\n\
          |---|---|---:|---:|---:|---:|---:|---|\n",

@@ -109,7 +109,7 @@ pub struct ReplayArgs {
 
 impl ReplayArgs {
     /// The property method asked for, or the default for property traces.
-    pub fn property_method(&self) -> Method {
+    pub(crate) fn property_method(&self) -> Method {
         self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
     }
 }
@@ -138,7 +138,7 @@ pub(crate) fn parse_places(text: &str) -> Result<Places, String> {
 }
 
 /// The method `replay` runs on a property trace when none is named.
-pub const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
+pub(crate) const DEFAULT_PROPERTY_METHOD: Method = Method::Factored;
 
 /// The coupling of the factored belief's splits (`belief::Coupling`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -218,7 +218,7 @@ impl Method {
     }
 
     /// The identity filter this method names, if it is one.
-    pub fn identity(self) -> Option<IdentityMethod> {
+    pub(crate) fn identity(self) -> Option<IdentityMethod> {
         match self {
             Method::ExactPerm => Some(IdentityMethod::ExactPerm),
             Method::BeliefMatrix => Some(IdentityMethod::BeliefMatrix),
@@ -231,7 +231,7 @@ impl Method {
 
     /// Whether the method is the Radon engine (and so takes --budget and
     /// --distributed-rule).
-    pub fn is_radon(self) -> bool {
+    pub(crate) fn is_radon(self) -> bool {
         matches!(self, Method::Overcomplete | Method::Threshold)
     }
 }

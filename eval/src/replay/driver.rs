@@ -15,7 +15,7 @@ use tracing::debug;
 
 /// One kind of replay: which lines are its events, how its filter takes
 /// them, and what it answers at a `truth` line.
-pub trait Replay {
+pub(crate) trait Replay {
     /// The engine event a line may carry.
     type Event;
     /// The JSON line written at a `truth` line.
@@ -45,7 +45,7 @@ pub trait Replay {
 
 /// Replays every line after the header of `reader` through `replay`,
 /// writing its answers to `out`.
-pub fn drive<R: BufRead, P: Replay>(
+pub(crate) fn drive<R: BufRead, P: Replay>(
     reader: TraceReader<R>,
     replay: &mut P,
     out: &mut impl Write,
@@ -78,7 +78,7 @@ pub fn drive<R: BufRead, P: Replay>(
 }
 
 /// Writes one JSON Lines record.
-pub fn write_line(out: &mut impl Write, value: &impl Serialize) -> Result<()> {
+pub(crate) fn write_line(out: &mut impl Write, value: &impl Serialize) -> Result<()> {
     serde_json::to_writer(&mut *out, value)
         .map_err(std::io::Error::from)
         .and_then(|()| out.write_all(b"\n"))
@@ -86,17 +86,17 @@ pub fn write_line(out: &mut impl Write, value: &impl Serialize) -> Result<()> {
 }
 
 /// The `FILE:LINE: kind: reason` error of the replays, for trace `source`.
-pub fn line_error(source: &str) -> impl Fn(usize, &str, BeliefError) -> anyhow::Error + '_ {
+pub(crate) fn line_error(source: &str) -> impl Fn(usize, &str, BeliefError) -> anyhow::Error + '_ {
     move |line, kind, error| anyhow!("{source}:{line}: {kind}: {error}")
 }
 
 /// The mean error over the truth lines (None when there were none).
-pub fn mean_error(errors: &[f64]) -> Option<f64> {
+pub(crate) fn mean_error(errors: &[f64]) -> Option<f64> {
     (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
 }
 
 /// Writes the summary line and flushes: the end of every replay.
-pub fn finish(mut out: impl Write, summary: &impl Serialize) -> Result<()> {
+pub(crate) fn finish(mut out: impl Write, summary: &impl Serialize) -> Result<()> {
     write_line(&mut out, summary)?;
     out.flush()
         .map_err(|e| anyhow!("cannot write the output: {e}"))
@@ -105,7 +105,7 @@ pub fn finish(mut out: impl Write, summary: &impl Serialize) -> Result<()> {
 /// A filter with the bookkeeping of a replay: the time spent inside it
 /// (building it, every event, every answer — and nothing else: reading and
 /// printing excluded), and the events applied.
-pub struct Timed<F: ?Sized> {
+pub(crate) struct Timed<F: ?Sized> {
     pub filter: Box<F>,
     pub time: Duration,
     pub events: u64,
@@ -113,7 +113,7 @@ pub struct Timed<F: ?Sized> {
 
 impl<F: ?Sized> Timed<F> {
     /// Builds the filter, on the clock.
-    pub fn start<E>(build: impl FnOnce() -> Result<Box<F>, E>) -> Result<Self, E> {
+    pub(crate) fn start<E>(build: impl FnOnce() -> Result<Box<F>, E>) -> Result<Self, E> {
         let clock = Instant::now();
         let filter = build()?;
         Ok(Timed {
@@ -141,7 +141,7 @@ impl<F: ?Sized> Timed<F> {
 
 /// A replay's output lines, parsed, or its error as text (for tests).
 #[cfg(test)]
-pub fn output_lines(
+pub(crate) fn output_lines(
     replay: impl FnOnce(&mut Vec<u8>) -> Result<()>,
 ) -> Result<Vec<serde_json::Value>, String> {
     let mut out = Vec::new();

@@ -56,10 +56,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, ValueEnum};
 use idmesh_belief::{BeliefError, RadonOptions, Sparsify};
 use idmesh_identity::factored::MAX_GROUP;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
-use idmesh_identity::marginals::DEFAULT_SAMPLES;
-use idmesh_identity::permanent::MAX_PERMANENT_TRACKS;
 use idmesh_identity::scoring::IdentityScores;
+use idmesh_identity::DEFAULT_SAMPLES;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
+use idmesh_identity::MAX_PERMANENT_TRACKS;
 use idmesh_identity::{
     identity_error, identity_event_of, BeliefMatrix, BitCode, ExactPermutationFilter,
     FactoredIdentity, FactoredIdentityOptions, IdentityEvent, IdentityFilter, IdentityRow,
@@ -74,7 +74,7 @@ use tracing::{debug, info, info_span, warn};
 /// The options of an identity replay; a `clap` argument group, so it can be
 /// flattened into a subcommand.
 #[derive(Debug, Clone, PartialEq, Args)]
-pub struct IdentityReplayOptions {
+pub(crate) struct IdentityReplayOptions {
     /// The identity trace to replay (JSON Lines, shared/spec/trace.md).
     #[arg(long, value_name = "FILE")]
     pub trace: PathBuf,
@@ -131,29 +131,29 @@ pub struct IdentityReplayOptions {
 /// known start: the factored identity belief, which a deployment's
 /// leaders hold there by default, so that replay without options
 /// computes what a deployment serves.
-pub const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::FactoredIdentity;
+pub(crate) const DEFAULT_IDENTITY_METHOD: IdentityMethod = IdentityMethod::FactoredIdentity;
 
 /// The identity method replay runs when none is named on a trace without
 /// a known start: the information matrix, whose rows the leaders keep
 /// there.
-pub const IDENTITY_METHOD_WITHOUT_START: IdentityMethod = IdentityMethod::InformationMatrix;
+pub(crate) const IDENTITY_METHOD_WITHOUT_START: IdentityMethod = IdentityMethod::InformationMatrix;
 
 /// The default group cap of --method factored-identity in replay.
-pub const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_identity::factored::DEFAULT_MAX_GROUP;
+pub(crate) const DEFAULT_REPLAY_MAX_GROUP: usize = idmesh_identity::factored::DEFAULT_MAX_GROUP;
 
 /// The most states an exact bit belief of --method property-bits may need
 /// (the largest C(n, identities with the bit set)) before replay refuses
 /// it without --force: C(22, 11) ≈ 7·10^5 passes, n = 23 with 12 bits set
 /// does not. At n = 30 the exact bits took more than 3 minutes and 6.6 GB.
-pub const MAX_EXACT_BIT_STATES: f64 = 1e6;
+pub(crate) const MAX_EXACT_BIT_STATES: f64 = 1e6;
 
 /// Above this many states replay warns (in the log) before running exact
 /// bit beliefs.
-pub const WARN_EXACT_BIT_STATES: f64 = 1e4;
+pub(crate) const WARN_EXACT_BIT_STATES: f64 = 1e4;
 
 /// `idmesh replay` on an identity trace: the identity options from the
 /// command line's, with the identity default when no method is named.
-pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
+pub(crate) fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
     let method = match args.method {
         None => {
             let header = TraceReader::open(&args.trace)
@@ -191,7 +191,7 @@ pub fn run_default(args: &ReplayArgs, out: impl Write) -> Result<()> {
 
 /// The identity filters replay can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum IdentityMethod {
+pub(crate) enum IdentityMethod {
     /// The exact filter over all N! assignments (N ≤ 9).
     ExactPerm,
     /// The belief matrix: doubly stochastic marginals, renormalized after
@@ -211,7 +211,7 @@ pub enum IdentityMethod {
 
 impl IdentityMethod {
     /// The name on the command line and in the summary.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             IdentityMethod::ExactPerm => "exact-perm",
             IdentityMethod::BeliefMatrix => "belief-matrix",
@@ -296,7 +296,7 @@ pub fn run(args: &IdentityReplayOptions, out: impl Write) -> Result<()> {
 }
 
 /// Refuses flags that make no sense together, before anything is read.
-pub fn check_options(args: &IdentityReplayOptions) -> Result<()> {
+pub(crate) fn check_options(args: &IdentityReplayOptions) -> Result<()> {
     let method = args.method;
     if method != IdentityMethod::PropertyBits {
         if args.bits.is_some() {
@@ -352,7 +352,7 @@ pub fn check_options(args: &IdentityReplayOptions) -> Result<()> {
 }
 
 /// Replays a trace from any reader (the testable core of [`run`]).
-pub fn replay<R: BufRead>(
+pub(crate) fn replay<R: BufRead>(
     args: &IdentityReplayOptions,
     mut reader: TraceReader<R>,
     mut out: impl Write,
@@ -541,7 +541,7 @@ fn build(args: &IdentityReplayOptions, header: &Header) -> Result<Box<dyn Identi
 /// The most states an exact bit belief of `code` can hold: the largest
 /// C(n, k) over the bits, k the identities with the bit set (the red sets
 /// of that bit's property belief).
-pub fn exact_bit_states(code: &BitCode) -> f64 {
+pub(crate) fn exact_bit_states(code: &BitCode) -> f64 {
     let n = code.identities();
     (0..code.bits())
         .map(|j| binomial(n, code.red_count(j)))

@@ -3,7 +3,7 @@
 //! of C(n, k) sets, exact bit beliefs of property bits) before building it.
 
 /// C(n, k) as a float (infinite when it overflows; 1 when k > n).
-pub fn binomial(n: usize, k: usize) -> f64 {
+pub(crate) fn binomial(n: usize, k: usize) -> f64 {
     let k = k.min(n - k.min(n));
     (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
 }

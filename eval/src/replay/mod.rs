@@ -1,21 +1,25 @@
 //! `idmesh replay`: one filter over a recorded trace, offline — a property
-//! filter ([`property`]) or an identity filter ([`identity`]), both through
-//! one driver loop ([`driver`]) that turns trace lines into engine events
+//! filter (`property`) or an identity filter (`identity`), both through
+//! one driver loop (`driver`) that turns trace lines into engine events
 //! the one way the engine knows (`idmesh_belief::from_trace`).
 //!
-//! - [`args`] — the command line of `idmesh replay`.
-//! - [`driver`] — the shared loop, the clock and the JSON Lines output.
-//! - [`property`] — marginals of red, tracking error, Brier, log-loss.
-//! - [`identity`] — identity marginals, the most likely assignment.
-//! - [`limits`] — the size estimates that refuse exponential settings.
+//! - `args` — the command line of `idmesh replay`.
+//! - `driver` — the shared loop, the clock and the JSON Lines output.
+//! - `property` — marginals of red, tracking error, Brier, log-loss.
+//! - `identity` — identity marginals, the most likely assignment.
+//! - `limits` — the size estimates that refuse exponential settings.
 
-pub mod args;
-pub mod driver;
-pub mod identity;
-pub mod limits;
-pub mod property;
+mod args;
+mod driver;
+mod identity;
+mod limits;
+mod property;
 
-pub use args::{Method, ReplayArgs, DEFAULT_PROPERTY_METHOD};
+// The command's arguments and the choices they name.
+pub use args::{CouplingChoice, Method, Places, ReplayArgs, SplitChoice};
+pub use identity::MarginalChoice;
+
+pub(crate) use args::DEFAULT_PROPERTY_METHOD;
 
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::trace::TraceReader;

@@ -17,7 +17,7 @@ use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use crate::filters::Recipe;
 use anyhow::{anyhow, bail, Context, Result};
-use idmesh_belief::baseline::MAX_STATES;
+use idmesh_belief::MAX_STATES;
 use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, log_loss, predict_red, BeliefError,
     Coupling, Event, FactoredBelief, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
@@ -81,10 +81,10 @@ pub fn run(args: &ReplayArgs, out: impl Write) -> Result<()> {
 }
 
 /// The particle count of `--method particles` when `--particles` is not given.
-pub const DEFAULT_PARTICLES: usize = 1000;
+pub(crate) const DEFAULT_PARTICLES: usize = 1000;
 
 /// The flags that make no sense together, refused before anything is read.
-pub fn check_options(args: &ReplayArgs) -> Result<()> {
+pub(crate) fn check_options(args: &ReplayArgs) -> Result<()> {
     let method = args.property_method();
     if args.marginals.is_some()
         || args.bits.is_some()
@@ -146,7 +146,7 @@ pub fn check_options(args: &ReplayArgs) -> Result<()> {
 }
 
 /// Replays a trace from any reader (the testable core of [`run`]).
-pub fn replay<R: BufRead>(
+pub(crate) fn replay<R: BufRead>(
     args: &ReplayArgs,
     mut reader: TraceReader<R>,
     out: impl Write,

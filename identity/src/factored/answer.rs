@@ -8,14 +8,14 @@
 //! work is the groups' tables and the rows' listed entries, never N².
 
 use super::{links, FactoredIdentity};
-use crate::filter::Marginals;
 use crate::sparse_marginals::{IdentityRow, SparseMarginals};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 impl FactoredIdentity {
     /// The marginals of the groups and links alone, leaks left out: a
     /// doubly stochastic matrix, the belief's when nothing was lost.
-    pub fn table_marginals(&self) -> Result<Marginals, BeliefError> {
+    #[cfg(test)]
+    pub(crate) fn table_marginals(&self) -> Result<crate::filter::Marginals, BeliefError> {
         let n = self.n;
         Ok(self
             .table_entries()?

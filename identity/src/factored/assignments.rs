@@ -20,7 +20,7 @@
 //! numbers are those of the dense code: sums are taken in the same order
 //! (by source rank into a target rank, then by target rank), bit for bit.
 
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// A distribution over the assignments of a group, by Lehmer rank.
 ///

@@ -16,7 +16,7 @@
 //! track took part in, not with N.
 
 use crate::sparse_marginals::IdentityRow;
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -36,7 +36,7 @@ pub struct Background {
 
 impl Background {
     /// Every one of `n` identities alike.
-    pub fn uniform(n: usize) -> Self {
+    pub(crate) fn uniform(n: usize) -> Self {
         Background {
             leak: 0.0,
             shared: 1.0 / n.max(1) as f64,
@@ -80,7 +80,7 @@ impl Background {
     }
 
     /// Surely identity `i`.
-    pub fn certain(i: u32) -> Self {
+    pub(crate) fn certain(i: u32) -> Self {
         Background {
             leak: 0.0,
             shared: 0.0,
@@ -89,7 +89,7 @@ impl Background {
     }
 
     /// P(the track carries identity `i`).
-    pub fn probability(&self, i: u32) -> f64 {
+    pub(crate) fn probability(&self, i: u32) -> f64 {
         self.listed.get(&i).copied().unwrap_or(self.shared)
     }
 
@@ -101,7 +101,7 @@ impl Background {
 
     /// A cut or a dropped link ruled out assignments that put an identity
     /// from elsewhere on this track with probability `q`: that mass leaks.
-    pub fn lose(&mut self, q: f64) {
+    pub(crate) fn lose(&mut self, q: f64) {
         let q = q.clamp(0.0, 1.0);
         self.leak = 1.0 - (1.0 - self.leak) * (1.0 - q);
     }
@@ -147,7 +147,7 @@ impl Background {
     /// the row rules the read out and the read is sure (no wrong read has
     /// any likelihood), the row believes it: identity `i` with
     /// certainty. The last resort of [`super::repair`].
-    pub fn read_or_believe(&mut self, n: usize, i: u32, right: f64, wrong: f64) {
+    pub(crate) fn read_or_believe(&mut self, n: usize, i: u32, right: f64, wrong: f64) {
         if !self.read(n, i, right, wrong, None) {
             let leak = self.leak;
             *self = Background::certain(i);
@@ -181,7 +181,7 @@ impl Background {
     /// The track's row of the table's marginals becomes the track's:
     /// (1 − leak)·table + leak·this row, over the identities either lists;
     /// every other one has this row's shared probability times the leak.
-    pub fn mix_into(&self, table: IdentityRow) -> IdentityRow {
+    pub(crate) fn mix_into(&self, table: IdentityRow) -> IdentityRow {
         let leak = self.leak;
         if leak <= 0.0 {
             return table;
@@ -207,7 +207,7 @@ impl Background {
     }
 
     /// Identities listed (the row's memory).
-    pub fn listed(&self) -> usize {
+    pub(crate) fn listed(&self) -> usize {
         self.listed.len()
     }
 }

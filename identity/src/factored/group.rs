@@ -16,7 +16,7 @@
 use super::assignments::{self, Assignments};
 use super::split::Cut;
 use crate::permutation::{Permutations, MAX_ENUMERATED_TRACKS};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::sync::OnceLock;
 
 /// The most tracks one group may hold: the largest table of assignments
@@ -54,7 +54,7 @@ pub struct Group {
 
 impl Group {
     /// One track that surely carries one identity.
-    pub fn certain(track: u32, identity: u32) -> Self {
+    pub(crate) fn certain(track: u32, identity: u32) -> Self {
         Group {
             tracks: vec![track],
             identities: vec![identity],
@@ -83,7 +83,7 @@ impl Group {
     }
 
     /// Every assignment of `identities` to `tracks` equally likely.
-    pub fn uniform(tracks: Vec<u32>, identities: Vec<u32>) -> Result<Self, BeliefError> {
+    pub(crate) fn uniform(tracks: Vec<u32>, identities: Vec<u32>) -> Result<Self, BeliefError> {
         let k = tracks.len();
         if k == 0 || identities.len() != k {
             return Err(BeliefError::BadComponent {
@@ -130,7 +130,7 @@ impl Group {
     }
 
     /// P(assignment) of local Lehmer rank `rank` (0 out of range).
-    pub fn probability(&self, rank: u32) -> f64 {
+    pub(crate) fn probability(&self, rank: u32) -> f64 {
         self.probs.get(rank)
     }
 
@@ -159,7 +159,7 @@ impl Group {
     }
 
     /// Checks the invariants of a group read from outside the process.
-    pub fn check(&self) -> Result<(), BeliefError> {
+    pub(crate) fn check(&self) -> Result<(), BeliefError> {
         let count = check_sizes(self.size(), self.identities.len())?;
         self.probs.check(count)
     }
@@ -167,7 +167,7 @@ impl Group {
     /// The group of `self` and `other` together, independent: the product
     /// of the two distributions. Local tracks and identities of `other`
     /// follow those of `self`.
-    pub fn join(&self, other: &Group) -> Result<Group, BeliefError> {
+    pub(crate) fn join(&self, other: &Group) -> Result<Group, BeliefError> {
         let (k1, k2) = (self.size(), other.size());
         let k = k1 + k2;
         let table = permutations(k)?;
@@ -302,7 +302,7 @@ impl Group {
 
     /// m\[j\]\[x\] = P(local track j carries local identity x): one pass over
     /// the assignments of non-zero probability.
-    pub fn local_marginals(&self) -> Vec<Vec<f64>> {
+    pub(crate) fn local_marginals(&self) -> Vec<Vec<f64>> {
         let k = self.size();
         let table = self.table();
         let mut m = vec![vec![0.0; k]; k];
@@ -571,7 +571,7 @@ mod tests {
     mod reference {
         use super::*;
 
-        pub fn join(p1: &[f64], k1: usize, p2: &[f64], k2: usize) -> Vec<f64> {
+        pub(crate) fn join(p1: &[f64], k1: usize, p2: &[f64], k2: usize) -> Vec<f64> {
             let k = k1 + k2;
             let table = permutations(k).unwrap();
             let (t1, t2) = (permutations(k1).unwrap(), permutations(k2).unwrap());

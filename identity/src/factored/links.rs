@@ -55,7 +55,7 @@
 use super::group::{config_weights, Group, Port};
 use super::split::{self, Cut};
 use super::FactoredIdentity;
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::collections::HashMap;
 
 /// Belief propagation over the trees of linked groups, with its messages

@@ -7,7 +7,7 @@
 //! on Object Identities in Wireless Sensor Networks* (IPSN 2005, Section
 //! 2), on the blocks that mixing has connected since a known start (the
 //! blocks of [`crate::blocks`]) instead of on all N tracks. It
-//! mirrors the factored property belief ([`idmesh_belief::factored`]): exact
+//! mirrors the factored property belief ([`idmesh_belief::FactoredBelief`]): exact
 //! components that join when their tracks mix and are split, by a
 //! projection, when they would outgrow a cap.
 //!
@@ -76,12 +76,12 @@
 
 mod answer;
 mod assignments;
-pub mod background;
-pub mod group;
-pub mod links;
-pub mod repair;
-pub mod share;
-pub mod split;
+mod background;
+mod group;
+mod links;
+mod repair;
+mod share;
+mod split;
 
 #[cfg(test)]
 mod tests;
@@ -94,8 +94,8 @@ pub use split::Cut;
 use super::event::{check_assignment, check_identify, check_mix, Identify, IdentityEvent};
 use super::filter::{IdentityFilter, Marginals};
 use super::sparse_marginals::SparseMarginals;
-use idmesh_belief::error::BeliefError;
-use idmesh_belief::event::Mix;
+use idmesh_belief::BeliefError;
+use idmesh_belief::Mix;
 
 /// The default cap on a group's slots (tracks and ports): the largest
 /// group we enumerate. Measured on random-waypoint traces
@@ -107,7 +107,7 @@ use idmesh_belief::event::Mix;
 pub const DEFAULT_MAX_GROUP: usize = MAX_GROUP;
 
 /// The default of [`FactoredIdentityOptions::certain`].
-pub const DEFAULT_CERTAIN: f64 = 1e-4;
+pub(crate) const DEFAULT_CERTAIN: f64 = 1e-4;
 
 /// Options of a factored identity belief.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -164,7 +164,7 @@ impl FactoredIdentityOptions {
 
 /// What the splits have cost so far.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
-pub struct SplitStats {
+pub(crate) struct SplitStats {
     /// Cuts made.
     pub cuts: u64,
     /// Cuts that lost something (cost above 1e-12).
@@ -403,7 +403,7 @@ impl FactoredIdentity {
     /// Identities listed in the background rows (each row stores only
     /// those that differ from its shared probability): with the tables,
     /// what the belief's memory grows with.
-    pub fn background_entries(&self) -> usize {
+    pub(crate) fn background_entries(&self) -> usize {
         self.backgrounds.iter().map(Background::listed).sum()
     }
 
@@ -424,25 +424,23 @@ impl FactoredIdentity {
         groups + backgrounds + indices
     }
 
-    /// The options.
-    pub fn options(&self) -> FactoredIdentityOptions {
-        self.options
-    }
-
     /// The groups, in no particular order. Tracks and identities with ids
     /// ≥ n are ports ([`links`]): a link's two ports are n + 2l and
     /// n + 2l + 1.
-    pub fn groups(&self) -> &[Group] {
+    #[cfg(test)]
+    pub(crate) fn groups(&self) -> &[Group] {
         &self.groups
     }
 
     /// The most tracks in one group, ports included.
-    pub fn largest_group(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn largest_group(&self) -> usize {
         self.groups.iter().map(Group::size).max().unwrap_or(0)
     }
 
     /// What the splits have cost so far.
-    pub fn split_stats(&self) -> SplitStats {
+    #[cfg(test)]
+    pub(crate) fn split_stats(&self) -> SplitStats {
         self.stats
     }
 

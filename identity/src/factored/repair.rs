@@ -45,14 +45,14 @@ use super::background::Background;
 use super::group::Group;
 use super::{FactoredIdentity, SplitStats};
 use crate::event::IdentityEvent;
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use std::collections::BTreeSet;
 
 /// The share of a group's mass a repair spreads evenly over its
 /// assignments: small enough to change no answer beyond 10⁻⁹, large enough
 /// to stay far above the smallest normal number through the products and
 /// messages of a tree.
-pub const SMOOTHING: f64 = 1e-9;
+pub(crate) const SMOOTHING: f64 = 1e-9;
 
 /// How a repaired event was finally taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -139,7 +139,7 @@ impl FactoredIdentity {
         let Some(u) = self.likeliest_carrier(read.identity, read.track) else {
             return false;
         };
-        let swap = idmesh_belief::event::Mix {
+        let swap = idmesh_belief::Mix {
             a: read.track,
             b: u,
             swap: SMOOTHING,

@@ -22,7 +22,7 @@
 use super::{Background, FactoredIdentity, FactoredIdentityOptions, Group, SplitStats, Stored};
 use crate::event::IdentityEvent;
 use crate::filter::IdentityFilter;
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -120,7 +120,7 @@ impl IdentityShare {
     /// is the other's now, with its leak and row — and holds the other
     /// track instead. What the centralized belief does at a sure swap of
     /// two groups, done by each holder on its own.
-    pub fn relabel(&mut self, mix: idmesh_belief::event::Mix) -> Result<(), BeliefError> {
+    pub fn relabel(&mut self, mix: idmesh_belief::Mix) -> Result<(), BeliefError> {
         let (a, b) = (mix.a, mix.b);
         if mix.swap != 1.0 {
             return Err(BeliefError::BadComponent {
@@ -569,7 +569,7 @@ mod tests {
         let mut central = FactoredIdentity::from_assignment(&initial, options).unwrap();
         let mut a = IdentityShare::start(&initial, options, |t| t < 2).unwrap();
         let mut b = IdentityShare::start(&initial, options, |t| (2..4).contains(&t)).unwrap();
-        let mix = |a, b, swap| idmesh_belief::event::Mix { a, b, swap };
+        let mix = |a, b, swap| idmesh_belief::Mix { a, b, swap };
         let read = |track, identity| {
             IdentityEvent::Identify(Identify {
                 track,
@@ -619,7 +619,7 @@ mod tests {
         let options = FactoredIdentityOptions::default();
         let mut a = IdentityShare::start(&[0, 1, 2], options, |t| t < 2).unwrap();
         let mut b = IdentityShare::start(&[0, 1, 2], options, |t| t == 2).unwrap();
-        let mix = IdentityEvent::Mix(idmesh_belief::event::Mix {
+        let mix = IdentityEvent::Mix(idmesh_belief::Mix {
             a: 1,
             b: 2,
             swap: 0.5,

@@ -30,7 +30,7 @@
 
 use super::assignments::{accumulate, lookup, Assignments};
 use super::group::{permutations, Group, Port, MAX_GROUP};
-use idmesh_belief::error::BeliefError;
+use idmesh_belief::BeliefError;
 
 /// A cut of a group: local tracks A (bit j = local track j) and the local
 /// identities I_A (bit x) they are taken to carry.
@@ -46,7 +46,7 @@ pub struct Cut {
 
 impl Cut {
     /// What the cut loses: (1 − P(E)) + I(σ; τ | E).
-    pub fn cost(&self) -> f64 {
+    pub(crate) fn cost(&self) -> f64 {
         (1.0 - self.mass).max(0.0) + self.mutual_information.max(0.0)
     }
 
@@ -266,7 +266,7 @@ pub(crate) struct LinkedCut {
 
 impl LinkedCut {
     /// (1 − kept mass) + I(σ_A; σ_B | e).
-    pub fn cost(&self) -> f64 {
+    pub(crate) fn cost(&self) -> f64 {
         (1.0 - self.mass).max(0.0) + self.mutual_information.max(0.0)
     }
 }

@@ -66,7 +66,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 /// The time of an input: since an origin the driver picks (its start).
-pub type Now = Duration;
+pub(crate) type Now = Duration;
 
 /// The node's clocks and limits.
 #[derive(Debug, Clone, PartialEq)]
@@ -264,7 +264,7 @@ pub struct Node {
 
 impl Node {
     /// A node for a leader that starts with nothing behind it.
-    pub fn new(leader: Leader, timers: Timers) -> Self {
+    pub(crate) fn new(leader: Leader, timers: Timers) -> Self {
         Node {
             leader,
             timers,
@@ -290,7 +290,7 @@ impl Node {
         &self.leader
     }
 
-    pub fn timers(&self) -> &Timers {
+    pub(crate) fn timers(&self) -> &Timers {
         &self.timers
     }
 
@@ -300,12 +300,13 @@ impl Node {
     }
 
     /// Since when the leader has been catching up, if it is.
-    pub fn recovering_since(&self) -> Option<Now> {
+    pub(crate) fn recovering_since(&self) -> Option<Now> {
         self.recovery.as_ref().map(|r| r.since)
     }
 
     /// Queries held for their cut.
-    pub fn held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn held(&self) -> usize {
         self.held.len()
     }
 

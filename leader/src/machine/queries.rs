@@ -25,7 +25,7 @@ impl Ask {
     /// `tag` if any, and its `base` if any: the tag of this leader's answer
     /// the coordinator keeps, so a factored answer may be told as a change
     /// to it ([`Partial::base`](idmesh_protocol::wire::coordinator_to_leader::Partial::base)).
-    pub fn parse_with_base(
+    pub(crate) fn parse_with_base(
         quiet: bool,
         rows: bool,
         tag: Option<&str>,

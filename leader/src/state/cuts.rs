@@ -3,7 +3,7 @@
 //! or where it rests once it has applied all it was sent.
 
 use super::*;
-use idmesh_belief::factored::CountPart;
+use idmesh_belief::CountPart;
 use idmesh_placement::{to_wire_row, to_wire_tree};
 use std::sync::OnceLock;
 
@@ -43,7 +43,7 @@ impl Answer {
         }
     }
 
-    pub fn tag(&self) -> u64 {
+    pub(crate) fn tag(&self) -> u64 {
         self.sums.tag
     }
 
@@ -90,7 +90,7 @@ impl Leader {
 
     /// The answer at the cut tagged `tag`, if this leader has passed it
     /// recently.
-    pub fn cut(&self, tag: u64) -> Option<&Arc<Answer>> {
+    pub(crate) fn cut(&self, tag: u64) -> Option<&Arc<Answer>> {
         self.cuts.iter().find(|p| p.tag() == tag)
     }
 
@@ -98,7 +98,7 @@ impl Leader {
     /// `base` ([`Partial::base`]): the components not in that answer as
     /// they are now, and the first tracks of its components gone. None if
     /// that answer is no longer kept or either is not factored.
-    pub fn relative_to(&self, answer: &Answer, base: u64) -> Option<Partial> {
+    pub(crate) fn relative_to(&self, answer: &Answer, base: u64) -> Option<Partial> {
         let before = self.cut(base)?.parts.as_ref()?;
         let now = answer.parts.as_ref()?;
         let (changed, gone) = changes(before, now);
@@ -132,7 +132,7 @@ impl Leader {
     }
 
     /// [`Leader::quiet`], kept until an input changes anything.
-    pub fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Answer>> {
+    pub(crate) fn quiet_kept(&mut self, rows: bool) -> Option<Arc<Answer>> {
         if let Some((kept_rows, answer)) = &self.resting {
             if *kept_rows == rows {
                 return Some(answer.clone());

@@ -46,7 +46,7 @@ impl Leader {
 
     /// The sensor that sends this leader its batches, as it names itself
     /// (None before the first).
-    pub fn sensor(&self) -> Option<&str> {
+    pub(crate) fn sensor(&self) -> Option<&str> {
         self.sensor.as_deref()
     }
 

@@ -61,11 +61,11 @@
 //! names the components a transfer may bring, not rows.
 
 use crate::error::LeaderError;
-use idmesh_belief::factored::FactoredShare;
-use idmesh_belief::radon::{Growth as BeliefGrowth, RadonShare, Sparsify};
+use idmesh_belief::FactoredShare;
+use idmesh_belief::{Growth as BeliefGrowth, RadonShare, Sparsify};
 use idmesh_belief::{Mix, Observe};
 use idmesh_identity::factored::IdentityShare;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{Identify, IdentityEvent, InformationRows};
 use idmesh_placement::{start, start_factored, start_identity};
 use idmesh_protocol::wire::bounds::Bounds;
@@ -291,17 +291,17 @@ impl Leader {
         }
     }
 
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         &self.name
     }
 
     /// The whole state, as bytes ([`Leader::restore`] reads them back).
-    pub fn snapshot(&self) -> Vec<u8> {
+    pub(crate) fn snapshot(&self) -> Vec<u8> {
         postcard::to_allocvec(self).unwrap_or_default()
     }
 
     /// The leader a snapshot was taken of.
-    pub fn restore(bytes: &[u8]) -> Result<Leader, LeaderError> {
+    pub(crate) fn restore(bytes: &[u8]) -> Result<Leader, LeaderError> {
         postcard::from_bytes(bytes).map_err(|e| LeaderError::Snapshot(e.to_string()))
     }
 
@@ -333,28 +333,30 @@ impl Leader {
     /// Whether the leader has applied every item it was sent and is
     /// stopped at none: [`Leader::done_through`] is as far as its batches
     /// go.
-    pub fn caught_up(&self) -> bool {
+    pub(crate) fn caught_up(&self) -> bool {
         self.done_through() >= self.frontier
     }
 
     /// The stream's field, once it began: what inputs must fit
     /// ([`crate::door`]).
-    pub fn bounds(&self) -> Option<Bounds> {
+    pub(crate) fn bounds(&self) -> Option<Bounds> {
         self.started.as_ref().map(|s| Bounds::of(&s.begin))
     }
 
     /// The share this leader holds (for tests and diagnostics).
-    pub fn share(&self) -> Option<&RadonShare> {
+    #[cfg(test)]
+    pub(crate) fn share(&self) -> Option<&RadonShare> {
         self.started.as_ref().map(|s| &s.share)
     }
 
     /// The components this leader holds, on a factored stream.
-    pub fn factored(&self) -> Option<&FactoredShare> {
+    #[cfg(test)]
+    pub(crate) fn factored(&self) -> Option<&FactoredShare> {
         self.started.as_ref().and_then(|s| s.factored.as_ref())
     }
 
     /// The leaders of the stream, once it began.
-    pub fn leaders(&self) -> &[String] {
+    pub(crate) fn leaders(&self) -> &[String] {
         self.started
             .as_ref()
             .map_or(&[], |s| s.begin.leaders.as_slice())
@@ -366,7 +368,7 @@ impl Leader {
     }
 
     /// The name of leader `index` of the stream's list.
-    pub fn peer(&self, index: u16) -> Option<&str> {
+    pub(crate) fn peer(&self, index: u16) -> Option<&str> {
         let started = self.started.as_ref()?;
         started
             .begin
@@ -403,7 +405,7 @@ impl Leader {
     /// The last item this leader has applied and received every transfer
     /// of: its position, or just before the first item whose transfer has
     /// not come. A peer asked for what it sent is asked from here.
-    pub fn received_through(&self) -> u64 {
+    pub(crate) fn received_through(&self) -> u64 {
         self.pending.first().map_or(self.position, |p| {
             self.position.min(p.seq.saturating_sub(1))
         })

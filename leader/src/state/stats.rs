@@ -5,25 +5,25 @@ use super::*;
 
 impl Leader {
     /// Names the process running this leader (for its counters).
-    pub fn set_host(&mut self, host: &str) {
+    pub(crate) fn set_host(&mut self, host: &str) {
         self.stats.host = host.to_string();
     }
 
     /// How long the last recovery (restart or adoption) took to catch up.
-    pub fn note_recovered(&mut self, seconds: f64) {
+    pub(crate) fn note_recovered(&mut self, seconds: f64) {
         self.stats.recoveries += 1;
         self.stats.recovery_seconds = seconds;
     }
 
     /// Counts a damaged journal found at a restart, and the entries
     /// dropped with it (fetched again from the sensor and the peers).
-    pub fn note_journal_damage(&mut self, dropped: u64) {
+    pub(crate) fn note_journal_damage(&mut self, dropped: u64) {
         self.stats.journal_damage += 1;
         self.stats.journal_dropped += dropped;
     }
 
     /// Counts a snapshot taken.
-    pub fn note_snapshot(&mut self) {
+    pub(crate) fn note_snapshot(&mut self) {
         self.stats.snapshots += 1;
     }
 
@@ -66,7 +66,7 @@ impl Leader {
     }
 
     /// Counts bytes the actor sent for this leader.
-    pub fn note_sent(&mut self, bytes: usize) {
+    pub(crate) fn note_sent(&mut self, bytes: usize) {
         self.stats.bytes_sent += bytes as u64;
     }
 }

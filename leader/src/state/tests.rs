@@ -2,8 +2,8 @@
 //! duplicates, reordering, snapshots and identity rows.
 
 use super::*;
-use idmesh_belief::factored::CountPart;
-use idmesh_belief::radon::Atom;
+use idmesh_belief::Atom;
+use idmesh_belief::CountPart;
 
 fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
     Item::Begin(Begin {
@@ -1459,7 +1459,7 @@ fn an_adopted_track_takes_its_start_row() {
 #[test]
 fn factored_leaders_carry_identity_trees_through_mixes_swaps_handovers_and_snapshots() {
     use idmesh_identity::factored::assemble;
-    use idmesh_identity::filter::max_abs_difference;
+    use idmesh_identity::max_abs_difference;
     use idmesh_identity::{FactoredIdentity, IdentityFilter};
     use idmesh_placement::{from_wire_tree, identity_options};
     use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};

@@ -3,7 +3,7 @@
 //! makes the leader follow), and the transfers kept for a restarted peer.
 
 use super::*;
-use idmesh_belief::factored::HeldComponent;
+use idmesh_belief::HeldComponent;
 use idmesh_placement::{
     from_wire_component, from_wire_set, from_wire_tree, to_wire_component, to_wire_row,
     to_wire_set, to_wire_tree,
@@ -12,7 +12,7 @@ use idmesh_protocol::wire::factored::WireComponent;
 
 impl Leader {
     /// The transfers sent to leader `to` for items after `after`.
-    pub fn sent_to(&self, to: u16, after: u64) -> Vec<Transfer> {
+    pub(crate) fn sent_to(&self, to: u16, after: u64) -> Vec<Transfer> {
         self.sent
             .iter()
             .filter(|(receiver, t)| *receiver == to && t.seq > after)
@@ -22,14 +22,14 @@ impl Leader {
 
     /// Every transfer sent, with its receiver (resent after a restart: the
     /// peers drop the ones they have).
-    pub fn all_sent(&self) -> &[(u16, Transfer)] {
+    pub(crate) fn all_sent(&self) -> &[(u16, Transfer)] {
         &self.sent
     }
 
     /// Leader `name` has its state safe through item `position`: it will
     /// never ask for the transfers of items up to there again, so they are
     /// dropped. Returns how many were.
-    pub fn forget_sent(&mut self, name: &str, position: u64) -> usize {
+    pub(crate) fn forget_sent(&mut self, name: &str, position: u64) -> usize {
         let Some(to) = self.leaders().iter().position(|l| l == name) else {
             return 0;
         };

@@ -50,7 +50,7 @@ impl Contents {
     }
 
     /// The damage, if the file is damaged.
-    pub fn damage(&self) -> Option<&Damage> {
+    pub(crate) fn damage(&self) -> Option<&Damage> {
         match &self.ending {
             Ending::Damaged(damage) => Some(damage),
             _ => None,

@@ -169,7 +169,7 @@ impl Writer {
     }
 
     /// The (first) file's path.
-    pub fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         self.files.first().map_or(Path::new(""), |(_, p)| p)
     }
 }

@@ -123,7 +123,7 @@ fn holder_of(journal: &Path) -> String {
 }
 
 /// `<journal>.lock`.
-pub fn lock_path(journal: &Path) -> PathBuf {
+pub(crate) fn lock_path(journal: &Path) -> PathBuf {
     let mut name = journal.as_os_str().to_owned();
     name.push(".lock");
     PathBuf::from(name)

@@ -10,8 +10,11 @@
 //! - [`seeds`] — well-formed inputs of every target, to start from.
 //! - [`mutate`] — a seeded generator of bad inputs from the seeds.
 
-pub mod mutate;
-pub mod seeds;
+mod mutate;
+mod seeds;
+
+// Well-formed inputs of every target, to start from.
+pub use seeds::seeds;
 
 use crate::trace::{Header, Line, TraceReader, TraceWriter};
 use crate::wire::bounds::Bounds;
@@ -26,7 +29,7 @@ use serde::Serialize;
 use std::fmt::Debug;
 
 /// A fuzz target: any bytes in, a panic on a broken promise.
-pub type Target = fn(&[u8]);
+pub(crate) type Target = fn(&[u8]);
 
 /// Every target by name (the names of `fuzz/fuzz_targets/*.rs` and of the
 /// folders of `fuzz/regressions/`).

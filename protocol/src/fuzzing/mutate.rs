@@ -8,7 +8,7 @@
 //! (cargo-fuzz brings its own, coverage-guided mutations.)
 
 /// SplitMix64: tiny, fast and good enough to pick mutations.
-pub struct Mutator {
+pub(crate) struct Mutator {
     state: u64,
 }
 
@@ -41,11 +41,11 @@ const EDGE_NUMBERS: [&str; 10] = [
 ];
 
 impl Mutator {
-    pub fn new(seed: u64) -> Self {
+    pub(crate) fn new(seed: u64) -> Self {
         Mutator { state: seed }
     }
 
-    pub fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.state;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
@@ -54,7 +54,7 @@ impl Mutator {
     }
 
     /// A number in `0..n` (0 when n is 0).
-    pub fn below(&mut self, n: usize) -> usize {
+    pub(crate) fn below(&mut self, n: usize) -> usize {
         if n == 0 {
             0
         } else {
@@ -64,7 +64,7 @@ impl Mutator {
 
     /// The next input: from `seeds` mostly, random bytes one time in eight
     /// (always when there are no seeds).
-    pub fn input(&mut self, seeds: &[Vec<u8>]) -> Vec<u8> {
+    pub(crate) fn input(&mut self, seeds: &[Vec<u8>]) -> Vec<u8> {
         if seeds.is_empty() || self.below(8) == 0 {
             let len = self.below(300);
             return (0..len).map(|_| self.next_u64() as u8).collect();

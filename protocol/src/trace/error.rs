@@ -25,14 +25,15 @@ pub enum TraceError {
 
 impl TraceError {
     /// The name of the trace (e.g. its path).
-    pub fn file(&self) -> &str {
+    #[cfg(test)]
+    pub(crate) fn file(&self) -> &str {
         match self {
             TraceError::Invalid { file, .. } | TraceError::Io { file, .. } => file,
         }
     }
 
     /// The 1-based line number.
-    pub fn line(&self) -> usize {
+    pub(crate) fn line(&self) -> usize {
         match self {
             TraceError::Invalid { line, .. } | TraceError::Io { line, .. } => *line,
         }

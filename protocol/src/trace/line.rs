@@ -20,11 +20,11 @@ pub const VERSION: u32 = 1;
 pub const VERSION_2: u32 = 2;
 
 /// Every version this crate reads.
-pub const SUPPORTED_VERSIONS: [u32; 2] = [VERSION, VERSION_2];
+pub(crate) const SUPPORTED_VERSIONS: [u32; 2] = [VERSION, VERSION_2];
 
 /// How far the class scores of a `detect` line may sum from 1: scores
 /// rounded to two decimals over a handful of labels stay inside it.
-pub const SCORE_SUM_TOLERANCE: f64 = 0.01;
+pub(crate) const SCORE_SUM_TOLERANCE: f64 = 0.01;
 
 /// One line of a trace.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -170,7 +170,8 @@ pub struct Detect {
 
 impl Detect {
     /// A detection with a position only.
-    pub fn at(time: f64, track: u32, x: f64, y: f64) -> Self {
+    #[cfg(test)]
+    pub(crate) fn at(time: f64, track: u32, x: f64, y: f64) -> Self {
         Detect {
             time,
             track,

@@ -62,11 +62,6 @@ impl<R: BufRead> TraceReader<R> {
         &self.source
     }
 
-    /// The number of the last line read (0 before the first).
-    pub fn line_number(&self) -> usize {
-        self.number
-    }
-
     /// The header, once it has been read.
     pub fn header(&self) -> Option<&Header> {
         self.validator.header()

@@ -65,7 +65,7 @@ impl Header {
     }
 
     /// Checks `track` is one of this trace's tracks.
-    pub fn check_track(
+    pub(crate) fn check_track(
         &self,
         kind: &'static str,
         field: &'static str,
@@ -393,7 +393,7 @@ impl Validator {
     }
 
     /// Checks the trace may end here (it had its header).
-    pub fn finish(&self) -> Result<(), Problem> {
+    pub(crate) fn finish(&self) -> Result<(), Problem> {
         match self.header {
             Some(_) => Ok(()),
             None => Err(Problem::Empty),

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 /// The largest component on the wire: 2^20 numbers (the belief's own limit
 /// for the Original split; tables beyond it are refused unread).
-pub const MAX_COMPONENT: u32 = 20;
+pub(crate) const MAX_COMPONENT: u32 = 20;
 
 /// The factored belief's settings, the same for every leader.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -99,7 +99,7 @@ impl FactoredStart {
 
 impl WireComponent {
     /// Distinct tracks, 2^m finite non-negative numbers, a clock per track.
-    pub fn check(&self) -> Result<(), String> {
+    pub(crate) fn check(&self) -> Result<(), String> {
         size("component", &self.tracks)?;
         let m = self.tracks.len();
         if self.table.len() != 1 << m || self.last_mix.len() != m {
@@ -120,7 +120,7 @@ impl WireComponent {
 impl WireCounts {
     /// Distinct tracks, m + 1 counts and m red vectors of m + 1, all finite
     /// and non-negative.
-    pub fn check(&self) -> Result<(), String> {
+    pub(crate) fn check(&self) -> Result<(), String> {
         size("counts", &self.tracks)?;
         let m = self.tracks.len();
         if self.counts.len() != m + 1 || self.red.len() != m {

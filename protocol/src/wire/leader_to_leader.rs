@@ -102,7 +102,7 @@ impl Transfer {
 impl WireSet {
     /// φ_{red|blue}: each list without repeats, no track both red and
     /// blue, a log mass that is a number below +∞ (−∞ is a zero mass).
-    pub fn check(&self) -> Result<(), String> {
+    pub(crate) fn check(&self) -> Result<(), String> {
         distinct("red", &self.red)?;
         distinct("blue", &self.blue)?;
         if let Some(t) = self.red.iter().find(|t| self.blue.contains(t)) {
@@ -118,7 +118,7 @@ impl WireSet {
 impl WireRow {
     /// Accumulated log-likelihoods: numbers below +∞ (−∞ is an identity
     /// ruled out by a certain read).
-    pub fn check(&self) -> Result<(), String> {
+    pub(crate) fn check(&self) -> Result<(), String> {
         match self
             .ln_likelihoods
             .iter()
@@ -158,7 +158,7 @@ impl Bounds {
     }
 
     /// [`Bounds::check_transfer`] on a transfer kept in parts.
-    pub fn check_parts(
+    pub(crate) fn check_parts(
         &self,
         from: u16,
         sets: &[WireSet],

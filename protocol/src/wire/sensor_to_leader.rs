@@ -295,7 +295,7 @@ pub(crate) fn check_items(items: &[Sequenced], begin_allowed: bool) -> Result<()
 
 impl Item {
     /// The rules of one item on its own.
-    pub fn check(&self) -> Result<(), String> {
+    pub(crate) fn check(&self) -> Result<(), String> {
         match self {
             Item::Begin(begin) => begin.check(),
             Item::Mix {
@@ -474,7 +474,7 @@ impl Bounds {
     }
 
     /// One item of the stream against the field.
-    pub fn check_item(&self, item: &Item) -> Result<(), String> {
+    pub(crate) fn check_item(&self, item: &Item) -> Result<(), String> {
         let adoptions = item.adoptions();
         require(adoptions.is_empty() || self.adopts, || {
             "an adoption on a stream whose tracks start held".into()

@@ -19,7 +19,7 @@ pub use super::Valid;
 /// and every leader keeps a flag per track, so a stream of 10^9 tracks
 /// would cost gigabytes before the first event; a million is two orders of
 /// magnitude beyond anything the engine has been run on.
-pub const MAX_TRACKS: u32 = 1 << 20;
+pub(crate) const MAX_TRACKS: u32 = 1 << 20;
 
 /// The most tracks of an identity stream whose leaders hold the
 /// information matrix: n × n numbers (4096² f64 = 128 MiB), spread over
@@ -28,7 +28,7 @@ pub const MAX_TRACKS: u32 = 1 << 20;
 pub const MAX_IDENTITY_TRACKS: u32 = 1 << 12;
 
 /// The most leaders a stream may name: indices are `u16`.
-pub const MAX_LEADERS: usize = 1 << 16;
+pub(crate) const MAX_LEADERS: usize = 1 << 16;
 
 /// `Err(sentence)` when `condition` fails: the rules read as a list.
 pub(crate) fn require(condition: bool, problem: impl FnOnce() -> String) -> Result<(), String> {

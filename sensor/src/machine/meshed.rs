@@ -15,7 +15,7 @@ impl<Q> Gateway<Q> {
     /// its intake, the stream routed in the merged order, batches sent
     /// only to the leaders it serves. The stream finishes once every
     /// sensor has finished and everything is merged.
-    pub fn meshed(mut self, config: &MeshConfig) -> Self {
+    pub(crate) fn meshed(mut self, config: &MeshConfig) -> Self {
         self.state.mesh = Some(Mesh::new(config));
         self.state.ingest.gapped();
         self.state.finished = false;
@@ -23,17 +23,17 @@ impl<Q> Gateway<Q> {
     }
 
     /// One sensor of several.
-    pub fn mesh(&self) -> Option<&Mesh> {
+    pub(crate) fn mesh(&self) -> Option<&Mesh> {
         self.state.mesh.as_ref()
     }
 
     /// Cut answers the merge made ready: send them after the next flush.
-    pub fn answered(&mut self) -> Vec<Placed<Q>> {
+    pub(crate) fn answered(&mut self) -> Vec<Placed<Q>> {
         std::mem::take(&mut self.answers)
     }
 
     /// Cut requests refused since the last call, with why.
-    pub fn refused(&mut self) -> Vec<(Q, String)> {
+    pub(crate) fn refused(&mut self) -> Vec<(Q, String)> {
         std::mem::take(&mut self.refusals)
     }
 
@@ -98,7 +98,7 @@ impl<Q> Gateway<Q> {
     }
 
     /// A peer's slice of its intake (`IntakeSlice` bytes): merged.
-    pub fn peer(&mut self, bytes: &[u8]) -> Result<(), String> {
+    pub(crate) fn peer(&mut self, bytes: &[u8]) -> Result<(), String> {
         let answer = decode::<IntakeSlice>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|slice| {
@@ -120,7 +120,7 @@ impl<Q> Gateway<Q> {
     /// slice and whether it tells the peer anything new (an entry, a
     /// watermark or an end it did not know: else the driver may hold the
     /// request, see `IntakeWanted::known`), or why not (counted).
-    pub fn intake(&mut self, bytes: &[u8]) -> Result<(IntakeSlice, bool), String> {
+    pub(crate) fn intake(&mut self, bytes: &[u8]) -> Result<(IntakeSlice, bool), String> {
         let answer = decode::<IntakeWanted>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|wanted| {
@@ -149,7 +149,7 @@ impl<Q> Gateway<Q> {
     }
 
     /// What to ask each peer for next: its name and the request's bytes.
-    pub fn wanted(&self) -> Vec<(String, Vec<u8>)> {
+    pub(crate) fn wanted(&self) -> Vec<(String, Vec<u8>)> {
         let Some(mesh) = &self.state.mesh else {
             return Vec::new();
         };
@@ -212,7 +212,7 @@ impl<Q> Gateway<Q> {
     /// Every cut query waiting for the merge is refused with `reason` (a
     /// peer it waits for does not answer). The cuts stay in the order: a
     /// query asked again once the peer is back is answered.
-    pub fn refuse_waiting(&mut self, reason: &str) {
+    pub(crate) fn refuse_waiting(&mut self, reason: &str) {
         for (_, queries) in std::mem::take(&mut self.waiting) {
             self.refusals
                 .extend(queries.into_iter().map(|q| (q, reason.to_string())));
@@ -221,7 +221,7 @@ impl<Q> Gateway<Q> {
 
     /// The sensors the merge waits for (to name them when it cannot go
     /// on: a cut then cannot be placed).
-    pub fn waiting_for(&self) -> Vec<String> {
+    pub(crate) fn waiting_for(&self) -> Vec<String> {
         self.state
             .mesh
             .as_ref()

@@ -10,10 +10,10 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, VecDeque};
 
 /// The most entries one slice carries.
-pub const SLICE_ENTRIES: usize = 4096;
+pub(crate) const SLICE_ENTRIES: usize = 4096;
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Intake {
+pub(crate) struct Intake {
     /// The number of the first entry still kept.
     base: u64,
     entries: VecDeque<(Position, Entry)>,
@@ -26,7 +26,7 @@ pub struct Intake {
 
 impl Intake {
     /// An empty intake that the sensors `peers` fetch.
-    pub fn new(peers: &[String]) -> Self {
+    pub(crate) fn new(peers: &[String]) -> Self {
         Intake {
             base: 0,
             entries: VecDeque::new(),
@@ -37,20 +37,20 @@ impl Intake {
     }
 
     /// Entries taken so far.
-    pub fn taken(&self) -> u64 {
+    pub(crate) fn taken(&self) -> u64 {
         self.base + self.entries.len() as u64
     }
 
-    pub fn watermark(&self) -> &Position {
+    pub(crate) fn watermark(&self) -> &Position {
         &self.watermark
     }
 
-    pub fn finished(&self) -> bool {
+    pub(crate) fn finished(&self) -> bool {
         self.finished
     }
 
     /// Why an event at `position` cannot be taken, if it cannot.
-    pub fn refuses(&self, position: &Position) -> Option<String> {
+    pub(crate) fn refuses(&self, position: &Position) -> Option<String> {
         if self.finished {
             return Some("this sensor's intake is finished: it takes no more events".into());
         }
@@ -78,7 +78,13 @@ impl Intake {
 
     /// Takes a cut asked of sensor `sensor`, just after the last position:
     /// its position.
-    pub fn cut(&mut self, sensor: &str, tag: u64, rows: bool, events: Option<u64>) -> Position {
+    pub(crate) fn cut(
+        &mut self,
+        sensor: &str,
+        tag: u64,
+        rows: bool,
+        events: Option<u64>,
+    ) -> Position {
         let position = self.watermark.cut_after(sensor);
         self.watermark = position.clone();
         self.entries
@@ -88,7 +94,7 @@ impl Intake {
 
     /// A producer will give nothing before `time`: the watermark moves
     /// there if that is ahead. Whether it moved.
-    pub fn tick(&mut self, time: f64) -> bool {
+    pub(crate) fn tick(&mut self, time: f64) -> bool {
         let to = Position::before(time);
         let ahead = time.is_finite() && to > self.watermark && !self.finished;
         if ahead {
@@ -99,7 +105,7 @@ impl Intake {
 
     /// A finished intake moves its watermark to `above`, if that is ahead
     /// (see `IntakeWanted::above`). Whether it moved.
-    pub fn raise(&mut self, above: &Position) -> bool {
+    pub(crate) fn raise(&mut self, above: &Position) -> bool {
         let ahead = self.finished && *above > self.watermark;
         if ahead {
             self.watermark = above.clone();
@@ -108,7 +114,7 @@ impl Intake {
     }
 
     /// The producers say no more events come.
-    pub fn finish(&mut self) {
+    pub(crate) fn finish(&mut self) {
         self.finished = true;
     }
 
@@ -117,7 +123,7 @@ impl Intake {
     /// its own there: see `IntakeWanted`); every entry all peers have
     /// asked past is forgotten. Whether the request changed the intake
     /// (what to journal).
-    pub fn slice(
+    pub(crate) fn slice(
         &mut self,
         sensor: &str,
         peer: &str,

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Merge {
+pub(crate) struct Merge {
     /// Every sensor, in the topology's order.
     sensors: Vec<String>,
     /// Entries received from each and not merged yet.
@@ -29,7 +29,7 @@ pub struct Merge {
 }
 
 impl Merge {
-    pub fn new(sensors: &[String]) -> Self {
+    pub(crate) fn new(sensors: &[String]) -> Self {
         let n = sensors.len();
         Merge {
             sensors: sensors.to_vec(),
@@ -43,7 +43,7 @@ impl Merge {
         }
     }
 
-    pub fn sensors(&self) -> &[String] {
+    pub(crate) fn sensors(&self) -> &[String] {
         &self.sensors
     }
 
@@ -53,12 +53,12 @@ impl Merge {
 
     /// Sensor `i`'s watermark as this merge knows it, and whether it is
     /// finished.
-    pub fn known(&self, i: usize) -> (&Position, bool) {
+    pub(crate) fn known(&self, i: usize) -> (&Position, bool) {
         (&self.watermarks[i], self.finished[i])
     }
 
     /// Entries received from sensor `i` so far: where to fetch from.
-    pub fn received(&self, i: usize) -> u64 {
+    pub(crate) fn received(&self, i: usize) -> u64 {
         self.received[i]
     }
 
@@ -67,7 +67,7 @@ impl Merge {
     /// slice asked for twice); a slice that starts past the next number is
     /// refused (entries between would be missing). Whether anything new
     /// came.
-    pub fn receive(
+    pub(crate) fn receive(
         &mut self,
         i: usize,
         from: u64,
@@ -110,7 +110,7 @@ impl Merge {
 
     /// The next entry of the merged order, and the sensor it came from;
     /// None until some sensor's watermark lets one go.
-    pub fn release(&mut self) -> Option<(usize, Entry)> {
+    pub(crate) fn release(&mut self) -> Option<(usize, Entry)> {
         loop {
             let (i, head) = self
                 .queues
@@ -140,14 +140,14 @@ impl Merge {
 
     /// Every sensor is finished and everything it took is merged: the
     /// stream is over.
-    pub fn complete(&self) -> bool {
+    pub(crate) fn complete(&self) -> bool {
         self.finished.iter().all(|&f| f) && self.queues.iter().all(VecDeque::is_empty)
     }
 
     /// The sensors the merge waits for: nothing queued, and a watermark
     /// below the lowest entry queued (with nothing queued at all: every
     /// sensor not finished).
-    pub fn waiting_for(&self) -> Vec<String> {
+    pub(crate) fn waiting_for(&self) -> Vec<String> {
         let lowest = self
             .queues
             .iter()
@@ -163,12 +163,12 @@ impl Merge {
     }
 
     /// Events merged from each sensor, in the topology's order.
-    pub fn merged(&self) -> &[u64] {
+    pub(crate) fn merged(&self) -> &[u64] {
         &self.merged
     }
 
     /// Events merged twice and applied once.
-    pub fn twice(&self) -> u64 {
+    pub(crate) fn twice(&self) -> u64 {
         self.twice
     }
 }

@@ -14,8 +14,8 @@
 //! journal records what changed it (peers' slices, ticks, cuts asked), so
 //! a restarted sensor merges the same order again.
 
-pub mod intake;
-pub mod merge;
+pub(crate) mod intake;
+pub(crate) mod merge;
 #[cfg(test)]
 mod simulation;
 #[cfg(test)]
@@ -46,7 +46,7 @@ pub struct MeshConfig {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Mesh {
+pub(crate) struct Mesh {
     me: usize,
     serves: Vec<bool>,
     pub intake: Intake,
@@ -63,7 +63,7 @@ pub struct Mesh {
 }
 
 impl Mesh {
-    pub fn new(config: &MeshConfig) -> Self {
+    pub(crate) fn new(config: &MeshConfig) -> Self {
         let peers: Vec<String> = config
             .sensors
             .iter()
@@ -84,13 +84,13 @@ impl Mesh {
     }
 
     /// This sensor's name.
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         &self.merge.sensors()[self.me]
     }
 
     /// The other sensors, each with the entry to fetch it from next and
     /// what is known of its watermark.
-    pub fn peers(&self) -> Vec<(String, u64, Position, bool)> {
+    pub(crate) fn peers(&self) -> Vec<(String, u64, Position, bool)> {
         (0..self.merge.sensors().len())
             .filter(|&i| i != self.me)
             .map(|i| {
@@ -106,7 +106,7 @@ impl Mesh {
     }
 
     /// Whether this sensor sends leader `i` its batches.
-    pub fn serves(&self, i: usize) -> bool {
+    pub(crate) fn serves(&self, i: usize) -> bool {
         self.serves.get(i).copied().unwrap_or(false)
     }
 
@@ -120,32 +120,32 @@ impl Mesh {
 
     /// Events this sensor took itself: an answer whose watermark for it
     /// is at least this includes them all.
-    pub fn taken_events(&self) -> u64 {
+    pub(crate) fn taken_events(&self) -> u64 {
         self.taken_events
     }
 
     /// Takes a cut asked of this sensor.
-    pub fn cut(&mut self, tag: u64, rows: bool, events: Option<u64>) {
+    pub(crate) fn cut(&mut self, tag: u64, rows: bool, events: Option<u64>) {
         let name = self.name().to_string();
         let position = self.intake.cut(&name, tag, rows, events);
         self.own(vec![(position, Entry::Cut { tag, rows, events })]);
     }
 
     /// A producer says nothing comes before `time`.
-    pub fn tick(&mut self, time: f64) -> bool {
+    pub(crate) fn tick(&mut self, time: f64) -> bool {
         let moved = self.intake.tick(time);
         self.own(Vec::new());
         moved
     }
 
     /// The producers say no more events come.
-    pub fn finish(&mut self) {
+    pub(crate) fn finish(&mut self) {
         self.intake.finish();
         self.own(Vec::new());
     }
 
     /// A peer's slice of its intake.
-    pub fn peer(&mut self, slice: IntakeSlice) -> Result<bool, String> {
+    pub(crate) fn peer(&mut self, slice: IntakeSlice) -> Result<bool, String> {
         let i = self
             .merge
             .index(&slice.sensor)
@@ -168,7 +168,7 @@ impl Mesh {
     /// A slice of this sensor's intake for peer `peer` (whose watermark is
     /// `above`), and whether the request changed this sensor (what to
     /// journal: [`Intake::slice`]).
-    pub fn slice(
+    pub(crate) fn slice(
         &mut self,
         peer: &str,
         from: u64,
@@ -195,12 +195,12 @@ impl Mesh {
 
     /// The outcome of the cut tagged `tag`, if it was placed or refused
     /// lately.
-    pub fn recalled(&self, tag: u64) -> Option<&Result<CutPlaced, String>> {
+    pub(crate) fn recalled(&self, tag: u64) -> Option<&Result<CutPlaced, String>> {
         self.recent.iter().find(|(t, _)| *t == tag).map(|(_, r)| r)
     }
 
     /// Remembers how the cut tagged `tag` ended.
-    pub fn remember(&mut self, tag: u64, outcome: Result<CutPlaced, String>) {
+    pub(crate) fn remember(&mut self, tag: u64, outcome: Result<CutPlaced, String>) {
         if self.recent.len() >= RECENT_CUTS {
             self.recent.pop_front();
         }
@@ -209,12 +209,12 @@ impl Mesh {
 
     /// Whether a cut tagged `tag` was merged already (placed, refused, or
     /// waiting for its event count).
-    pub fn merged_cut(&self, tag: u64) -> bool {
+    pub(crate) fn merged_cut(&self, tag: u64) -> bool {
         self.recalled(tag).is_some() || self.cuts.holds(tag)
     }
 
     /// Events merged from each sensor, by name: what an answer includes.
-    pub fn origins(&self) -> Vec<(String, u64)> {
+    pub(crate) fn origins(&self) -> Vec<(String, u64)> {
         self.merge
             .sensors()
             .iter()

@@ -2,7 +2,7 @@
 //! spirit of FoundationDB's and TigerBeetle's simulation testing and of
 //! raft-rs's in-process `Network`: one sensor gateway, L leaders and the
 //! coordinator's gathering run their real pure state machines
-//! (`idmesh_sensor::machine::Gateway`, `idmesh_leader::machine::Node`,
+//! (`idmesh_sensor::Gateway`, `idmesh_leader::Node`,
 //! `idmesh_coordinator::machine`) in one thread, on virtual time, through
 //! a seeded network that loses, doubles, delays and reorders messages,
 //! cuts leaders off and heals them, while leaders crash (killed, or losing

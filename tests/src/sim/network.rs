@@ -9,22 +9,22 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Endpoint {
+pub(crate) enum Endpoint {
     Sensor,
     Leader(usize),
     Coordinator,
 }
 
 /// The queue of the simulation's events, and the wire deliveries take.
-pub type Network = Wire<Endpoint, Event>;
+pub(crate) type Network = Wire<Endpoint, Event>;
 
 /// A wire with this seed's fault rates.
-pub fn random(rng: &mut ChaCha8Rng) -> Network {
+pub(crate) fn random(rng: &mut ChaCha8Rng) -> Network {
     Wire::new(Faults::random(rng))
 }
 
 /// Crashes and partitions of leaders at random points before `span`.
-pub fn schedule_faults(net: &mut Network, rng: &mut ChaCha8Rng, span: Ms, leaders: usize) {
+pub(crate) fn schedule_faults(net: &mut Network, rng: &mut ChaCha8Rng, span: Ms, leaders: usize) {
     for _ in 0..rng.gen_range(0..=2) {
         let at = rng.gen_range(0..span);
         net.at(at, Event::Crash(rng.gen_range(0..leaders)));

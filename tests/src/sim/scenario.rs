@@ -8,19 +8,18 @@
 //! events): for them also the centralized information matrix after every
 //! prefix, which the leaders' rows at a cut must put back together.
 
-use idmesh_belief::radon::{RadonBelief, RadonOptions};
 use idmesh_belief::{FactoredBelief, Field, PropertyFilter};
-use idmesh_identity::filter::to_rows;
+use idmesh_belief::{RadonBelief, RadonOptions};
 use idmesh_identity::identity_event_of;
-use idmesh_identity::information::KNOWN_START_CONFIDENCE;
+use idmesh_identity::to_rows;
+use idmesh_identity::KNOWN_START_CONFIDENCE;
 use idmesh_identity::{
     FactoredIdentity, IdentityFilter, InformationMatrix, InformationOptions, MarginalMethod,
 };
 use idmesh_placement::{factored_options, identity_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
-use idmesh_sensor::machine::Gateway;
-use idmesh_sensor::{LeaderPlace, Router, RouterConfig};
+use idmesh_sensor::{Gateway, LeaderPlace, Router, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -59,7 +58,7 @@ pub struct Scenario {
 /// What `idmesh replay` runs by default after every prefix: the factored
 /// identity belief on a stream with a known start (what the leaders hold
 /// there), the information matrix without one.
-pub struct CentralIdentity {
+pub(crate) struct CentralIdentity {
     /// `rows[e]`: the information matrix's log-likelihood rows after the
     /// first e events (None: the factored identity belief).
     pub rows: Option<Vec<Vec<Vec<f64>>>>,
@@ -68,7 +67,7 @@ pub struct CentralIdentity {
 }
 
 impl Scenario {
-    pub fn random(rng: &mut ChaCha8Rng) -> Result<Scenario, String> {
+    pub(crate) fn random(rng: &mut ChaCha8Rng) -> Result<Scenario, String> {
         let tracks = rng.gen_range(3..=7usize);
         let red = rng.gen_range(1..tracks);
         let mut header = Header::new(tracks);
@@ -144,7 +143,7 @@ impl Scenario {
     }
 
     /// The sensor's gateway, empty, with the scenario's window.
-    pub fn gateway<Q>(&self, router: Router) -> Gateway<Q> {
+    pub(crate) fn gateway<Q>(&self, router: Router) -> Gateway<Q> {
         let gateway = Gateway::new("sensor-0", router, self.lines.is_empty())
             .journaled()
             .idle_batches_every(self.idle_every);
@@ -156,7 +155,7 @@ impl Scenario {
 
     /// The router's settings: no pruning (the setting in which the
     /// deployment must equal the centralized engine to 1e-9).
-    pub fn router(&self) -> RouterConfig {
+    pub(crate) fn router(&self) -> RouterConfig {
         RouterConfig {
             factored_identity: Some(self.identity_cap),
             factored: self.factored,
@@ -435,7 +434,7 @@ fn central_identity(header: &Header, lines: &[Line], cap: u32) -> Result<Central
 
 /// The exact marginals of `matrix`, track by identity, as the coordinator
 /// computes them from the rows it assembles.
-pub fn exact_marginals(matrix: &InformationMatrix) -> Result<Vec<Vec<f64>>, String> {
+pub(crate) fn exact_marginals(matrix: &InformationMatrix) -> Result<Vec<Vec<f64>>, String> {
     let blocks = matrix
         .block_marginals(&MarginalMethod::Exact)
         .map_err(|e| e.to_string())?;

@@ -8,9 +8,7 @@
 //! `cargo bench -p idmesh-acoustic --bench fastica`
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion};
-use idmesh_acoustic::pipeline::separate::{
-    Algorithm, Components, FastIca, FastIcaConfig, FastIcaError,
-};
+use idmesh_acoustic::{Algorithm, Components, FastIca, FastIcaConfig, FastIcaError};
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -6,9 +6,9 @@
 //!
 //! `cargo run --release -p idmesh-acoustic --example acoustic_diag -- sensors=400 seed=1`
 
-use idmesh_acoustic::field::PathSpec;
+use idmesh_acoustic::PathSpec;
 use idmesh_acoustic::{run, AcousticConfig};
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 fn quantiles(mut v: Vec<f64>) -> String {
     if v.is_empty() {
@@ -31,11 +31,11 @@ fn quantiles(mut v: Vec<f64>) -> String {
 /// per cluster, its size and its best candidate, and per true source the
 /// best-matching segment of slot u.
 fn slot_report(c: &AcousticConfig, u: usize) {
-    use idmesh_acoustic::field::Field;
-    use idmesh_acoustic::pipeline::cluster::cluster_slot;
-    use idmesh_acoustic::pipeline::prepare::{nearest_groups, Segmentation};
-    use idmesh_acoustic::pipeline::select::{link_layer, select_cts, SelectSettings};
-    use idmesh_acoustic::pipeline::separate::{estimate_noise_variance, separate_slot};
+    use idmesh_acoustic::cluster_slot;
+    use idmesh_acoustic::Field;
+    use idmesh_acoustic::{estimate_noise_variance, separate_slot};
+    use idmesh_acoustic::{link_layer, select_cts, SelectSettings};
+    use idmesh_acoustic::{nearest_groups, Segmentation};
     let p = &c.pipeline;
     let field = Field::generate(&c.field, c.seed, 2).unwrap();
     let groups = nearest_groups(&field.sensors, p.n_group).unwrap();
@@ -197,7 +197,7 @@ fn main() {
         }
     }
     if std::env::var("DIAG_SOURCES").is_ok() {
-        use idmesh_acoustic::field::Field;
+        use idmesh_acoustic::Field;
         let field = Field::generate(&c.field, c.seed, 2).unwrap();
         let l = c.pipeline.l_seg;
         let k = field.sources.len();

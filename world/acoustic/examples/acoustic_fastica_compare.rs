@@ -14,9 +14,9 @@
 //! `cargo run --release -p idmesh-acoustic --example acoustic_fastica_compare`.
 //! Option `quick` runs fewer repetitions.
 
-use idmesh_acoustic::metrics::separation::{amari_index, max_abs_correlations};
-use idmesh_acoustic::pipeline::separate::{FastIca, FastIcaConfig, FastIcaError};
-use idmesh_acoustic::source::{ar::ar_source, chirp::chirp_song, ArParams, ChirpParams};
+use idmesh_acoustic::{amari_index, max_abs_correlations};
+use idmesh_acoustic::{ar_source, chirp_song, ArParams, ChirpParams};
+use idmesh_acoustic::{FastIca, FastIcaConfig, FastIcaError};
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -163,7 +163,7 @@ fn main() {
         let mut sum = Summary::default();
         for (i, rep) in reps.iter().enumerate() {
             let ica = FastIca::new(FastIcaConfig {
-                components: idmesh_acoustic::pipeline::separate::Components::Fixed(case.sources),
+                components: idmesh_acoustic::Components::Fixed(case.sources),
                 seed: i as u64,
                 ..FastIcaConfig::default()
             });

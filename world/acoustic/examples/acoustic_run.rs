@@ -7,10 +7,10 @@
 //!
 //! `cargo run --release -p idmesh-acoustic --example acoustic_run -- sensors=1000`
 
-use idmesh_acoustic::field::PathSpec;
-use idmesh_acoustic::source::{ArParams, SourceKind};
-use idmesh_acoustic::trace::write_trace;
+use idmesh_acoustic::write_trace;
+use idmesh_acoustic::PathSpec;
 use idmesh_acoustic::{run, AcousticConfig};
+use idmesh_acoustic::{ArParams, SourceKind};
 use std::io::Write;
 
 fn main() {

@@ -19,8 +19,8 @@
 //! docs/acoustic-trends.md; `out=none` only prints; a partial run with
 //! `only=` only prints).
 
-use idmesh_acoustic::field::PathSpec;
-use idmesh_acoustic::resolution::{average_resolution, group_radius};
+use idmesh_acoustic::PathSpec;
+use idmesh_acoustic::{average_resolution, group_radius};
 use idmesh_acoustic::{run_variants, AcousticConfig, PipelineConfig};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -273,6 +273,9 @@ fn plot(
     Ok(())
 }
 
+/// A variant of the pipeline's settings.
+type Rule = fn(PipelineConfig) -> PipelineConfig;
+
 /// The intersection and vote rules at the Fig. 9 setup (speed 0.03
 /// m/sample, 400 / 700 / 1000 sensors), each on the same separation: the
 /// paper's intersection, the silent groups' ranges excluded (the fewest
@@ -281,7 +284,7 @@ fn plot(
 fn departures(seeds: u64) -> String {
     use std::fmt::Write;
     let densities = [400usize, 700, 1000];
-    let rules: [(&str, fn(PipelineConfig) -> PipelineConfig); 5] = [
+    let rules: [(&str, Rule); 5] = [
         ("the paper's intersection", |p| p.paper_intersection()),
         ("silent groups' ranges excluded, the fewest only", |p| {
             PipelineConfig {

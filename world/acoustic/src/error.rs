@@ -1,7 +1,7 @@
 //! What can go wrong in an acoustic tracking run.
 
 use super::pipeline::separate::FastIcaError;
-use idmesh_protocol::TraceError;
+use idmesh_protocol::trace::TraceError;
 
 /// An acoustic run's error: which setting is wrong, or which step failed
 /// where.

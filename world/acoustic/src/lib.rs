@@ -9,22 +9,23 @@
 //! close — indistinguishable targets in, tracks and "who is who" events
 //! out, for the property and identity beliefs.
 //!
-//! A map:
-//! - [`field`] — the simulated field of Section VI-A: sensors, target
+//! A map (private modules; what the examples, benches and `idmesh-deploy`
+//! use is re-exported below, by concern):
+//! - `field` — the simulated field of Section VI-A: sensors, target
 //!   paths, attenuation, the aggregate signal at every sensor.
-//! - [`source`] — what the targets emit: synthetic chirps, AR sources,
+//! - `source` — what the targets emit: synthetic chirps, AR sources,
 //!   real recordings (WAV/Ogg).
-//! - [`pipeline`] — the six steps of Section IV: prepare, separate
+//! - `pipeline` — the six steps of Section IV: prepare, separate
 //!   (FastICA), cluster, select, intersect, vote and link.
-//! - [`metrics`] — error distance and coverage (Section VI-B), separation
+//! - `metrics` — error distance and coverage (Section VI-B), separation
 //!   quality (Amari index).
-//! - [`resolution`] — Theorems 5.3 and 5.5.
-//! - [`run`] — the whole pipeline: [`run()`] → [`AcousticResult`].
-//! - [`trace`] — the result as an idmesh trace (`move` and `mix` lines).
-//! - [`config`] — every setting and its default; [`error`] — what fails.
+//! - `resolution` — Theorems 5.3 and 5.5.
+//! - `run` — the whole pipeline: [`run()`] → [`AcousticResult`].
+//! - `trace` — the result as an idmesh trace (`move` and `mix` lines).
+//! - `config` — every setting and its default; `error` — what fails.
 //!
 //! ```no_run
-//! use idmesh_acoustic::{run, AcousticConfig, trace::write_trace};
+//! use idmesh_acoustic::{run, write_trace, AcousticConfig};
 //!
 //! let config = AcousticConfig::paper(1000, 10, 42); // sensors, targets, seed
 //! let result = run(&config, &mut |done, total| eprint!("\r{done}/{total}")).unwrap();
@@ -44,21 +45,36 @@ pub fn trends_stamp_line() -> String {
     )
 }
 
-pub mod config;
-pub mod error;
-pub mod field;
-pub mod metrics;
-pub mod parallel;
-pub mod pipeline;
-pub mod resolution;
-pub mod run;
-pub mod source;
-pub mod trace;
+mod config;
+mod error;
+mod field;
+mod metrics;
+mod parallel;
+mod pipeline;
+mod resolution;
+mod run;
+mod source;
+mod trace;
 
-pub use config::{AcousticConfig, OutputConfig, PipelineConfig};
+// Settings, the whole run, and its result as an idmesh trace.
+pub use config::{AcousticConfig, PipelineConfig};
 pub use error::AcousticError;
-pub use field::FieldConfig;
-pub use run::{run, run_variants, AcousticResult, EstimatedFragment, EstimatedPath};
+pub use run::{run, run_variants, AcousticResult};
+pub use trace::write_trace;
+// The simulated field and what its targets emit.
+pub use field::{Field, PathSpec};
+pub use source::{ar::ar_source, chirp::chirp_song, ArParams, ChirpParams, SourceKind};
+// The pipeline's steps one at a time, for diagnostics and benches.
+pub use pipeline::cluster::cluster_slot;
+pub use pipeline::prepare::{nearest_groups, Segmentation};
+pub use pipeline::select::{link_layer, select_cts, SelectSettings};
+pub use pipeline::separate::{
+    estimate_noise_variance, separate_slot, Algorithm, Components, FastIca, FastIcaConfig,
+    FastIcaError,
+};
+// Separation quality, and the resolution theorems (Section V).
+pub use metrics::separation::{amari_index, max_abs_correlations};
+pub use resolution::{average_resolution, group_radius};
 
 #[cfg(test)]
 mod stamp_tests {

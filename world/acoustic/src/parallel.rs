@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// `f` over `items` on up to `threads` threads (the caller's thread is one
 /// of them), results in input order.
-pub fn par_map<T: Sync, R: Send>(
+pub(crate) fn par_map<T: Sync, R: Send>(
     items: &[T],
     threads: usize,
     f: impl Fn(&T) -> R + Sync,
@@ -20,7 +20,7 @@ pub fn par_map<T: Sync, R: Send>(
 /// As [`par_map`], calling `progress(done)` on the caller's thread (which
 /// is the only one allowed to touch a `&mut dyn FnMut` hook) after each
 /// item it finishes, with the number of items finished by all threads.
-pub fn par_map_progress<T: Sync, R: Send>(
+pub(crate) fn par_map_progress<T: Sync, R: Send>(
     items: &[T],
     threads: usize,
     f: impl Fn(&T) -> R + Sync,

@@ -26,7 +26,7 @@ pub fn group_radius(n_group: usize, a: f64, b: f64, sensors: usize) -> f64 {
 
 /// Theorem 5.3, the finest tracking resolution, metres. `None` unless
 /// 0 < l ≤ 2(R + r).
-pub fn finest_resolution(range: f64, r: f64, l: f64) -> Option<f64> {
+pub(crate) fn finest_resolution(range: f64, r: f64, l: f64) -> Option<f64> {
     let p = range + r;
     if !(l > 0.0 && l <= 2.0 * p) {
         return None;
@@ -49,6 +49,7 @@ pub fn average_resolution(range: f64, r: f64, l: f64) -> Option<f64> {
 }
 
 /// Simpson's rule with `n` (even) intervals.
+#[cfg(test)]
 fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
     let n = n.max(2) & !1;
     let h = (b - a) / n as f64;
@@ -61,7 +62,8 @@ fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
 
 /// Appendix B's integral, (1/2)∫₀^{l/2} ((R+r)cos θ₂ − x)/l dy with
 /// sin θ₂ = y/(R+r) and x = √((R+r)² − (l/2)²).
-pub fn finest_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
+#[cfg(test)]
+pub(crate) fn finest_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
     let p = range + r;
     if !(l > 0.0 && l <= 2.0 * p) {
         return None;
@@ -79,7 +81,8 @@ pub fn finest_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
 
 /// Appendix C's integral, (1/2)∫_Z^{R+r}∫₀^{l/2} ((R+r)cos θ₂ − x)/l² dy dx
 /// with Z = 2√((R+r)² − (l/2)²), as printed.
-pub fn average_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
+#[cfg(test)]
+pub(crate) fn average_resolution_integral(range: f64, r: f64, l: f64) -> Option<f64> {
     let p = range + r;
     if !(l > 0.0 && l <= 2.0 * p) {
         return None;

@@ -26,8 +26,8 @@ use super::pipeline::tiles::TileGrid;
 use super::pipeline::vote_link::{link, vote, CtsEstimate, Fragment, VoteSettings};
 use super::resolution;
 use super::trace::path_events;
-use idmesh_sim::events::TimedEvent;
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::TimedEvent;
+use idmesh_sim::Vec2;
 use rustc_hash::FxHashMap;
 use std::time::Instant;
 

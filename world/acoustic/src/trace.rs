@@ -10,11 +10,10 @@
 use super::config::OutputConfig;
 use super::pipeline::prepare::Segmentation;
 use super::run::{AcousticResult, EstimatedPath};
-use idmesh_protocol::trace::{Header, Line};
-use idmesh_protocol::{TraceError, TraceWriter};
-use idmesh_sim::events::{MixDetector, SimEvent, TimedEvent};
-use idmesh_sim::geometry::{NeighbourGrid, Vec2};
-use idmesh_sim::scenario::trace_out::event_line;
+use idmesh_protocol::trace::{Header, Line, TraceError, TraceWriter};
+use idmesh_sim::event_line;
+use idmesh_sim::{MixDetector, SimEvent, TimedEvent};
+use idmesh_sim::{NeighbourGrid, Vec2};
 use std::io::Write;
 
 /// Position of a path at slot `j`: its fragment there, or linear
@@ -35,7 +34,7 @@ fn position_at(path: &EstimatedPath, j: usize) -> Option<Vec2> {
 
 /// The `mix` and `move` events of estimated paths, in time order (mixes
 /// before moves at one time).
-pub fn path_events(
+pub(crate) fn path_events(
     paths: &[EstimatedPath],
     seg: &Segmentation,
     output: &OutputConfig,
@@ -91,7 +90,7 @@ pub fn path_events(
 }
 
 /// The header line of a run's trace.
-pub fn header_line(result: &AcousticResult) -> Line {
+pub(crate) fn header_line(result: &AcousticResult) -> Line {
     let c = &result.config;
     let mut header = Header::new(result.paths.len().max(1));
     header.source = Some("idmesh acoustic (Zhu et al., TMC 2014)".into());

@@ -58,8 +58,4 @@ impl FrameSensing {
         self.observations
             .step_eligible(time, &self.grid, positions, eligible, due);
     }
-
-    pub fn mix_detector(&self) -> &MixDetector {
-        &self.mixes
-    }
 }

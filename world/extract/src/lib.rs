@@ -16,32 +16,38 @@
 //! plus drawn swaps: it uses the same [`FrameSensing`] on the positions it
 //! simulates.
 //!
-//! A map of the crate:
-//! - [`geometry`] — points in metres, a neighbour grid.
-//! - [`meetings`] — which pairs meet ([`MixDetector`], one meeting, one
+//! A map of the crate (private modules, what other crates use re-exported
+//! below by concern; `adapters` stays a public namespace, one module per
+//! outside format):
+//! - `geometry` — points in metres, a neighbour grid.
+//! - `meetings` — which pairs meet ([`MixDetector`], one meeting, one
 //!   mix) and how likely a meeting swaps them ([`MeetingModel`]).
-//! - [`observing`] — which tracks are isolated enough to observe
+//! - `observing` — which tracks are isolated enough to observe
 //!   ([`ObservationScheduler`]) and what class scores say
 //!   ([`ScoreMapping`], with its calibration).
-//! - [`frame`] — meetings and observations of one frame of positions.
-//! - [`extractor`] — reports in, trace lines out: roster, time order,
+//! - `frame` — meetings and observations of one frame of positions.
+//! - `extractor` — reports in, trace lines out: roster, time order,
 //!   snapshot and restore.
-//! - [`pipeline`] — a whole run: rows in, a validated trace out, a tally
+//! - `pipeline` — a whole run: rows in, a validated trace out, a tally
 //!   of reports, events and bad rows by reason.
 //! - [`adapters`] — MOTChallenge, ETH/UCY obsmat and four-column files,
 //!   JSON lines; each row an error `FILE:LINE: reason` or a report.
 
 pub mod adapters;
-pub mod extractor;
-pub mod frame;
-pub mod geometry;
-pub mod meetings;
-pub mod observing;
-pub mod pipeline;
+mod extractor;
+mod frame;
+mod geometry;
+mod meetings;
+mod observing;
+mod pipeline;
 
-pub use extractor::{
-    Extractor, ExtractorConfig, IdentityRead, Report, ReportError, Roster, RosterPolicy,
-};
+// Points in metres, a neighbour grid.
+pub use geometry::{NeighbourGrid, Vec2};
+// Meetings and observations, and the models that weigh them.
 pub use frame::FrameSensing;
-pub use meetings::{Meeting, MeetingModel, MixDetector};
+pub use meetings::{CalibrationError, Entering, Meeting, MeetingModel, MixDetector};
 pub use observing::{ObservationScheduler, ScoreMapping};
+// Reports in, trace lines out.
+pub use extractor::{Extractor, ExtractorConfig, IdentityRead, Report, ReportError, RosterPolicy};
+// A whole run: rows in, a validated trace and a tally out.
+pub use pipeline::{every_id, extract_jsonl, extract_rows, read_reports, Run, Tally};

@@ -114,7 +114,7 @@ impl<W: Write> Run<W> {
     }
 
     /// Fixes the roster policy; call once, before the first row.
-    pub fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
+    pub(crate) fn start(&mut self, policy: RosterPolicy) -> Result<(), RunError> {
         self.extractor = Some(Extractor::new(self.config.clone(), policy)?.with_red(self.red));
         Ok(())
     }
@@ -126,10 +126,6 @@ impl<W: Write> Run<W> {
         self.extractor =
             Some(Extractor::for_stream(self.config.clone(), header)?.with_red(self.red));
         Ok(())
-    }
-
-    pub fn config_mut(&mut self) -> &mut ExtractorConfig {
-        &mut self.config
     }
 
     /// One row of the input.

@@ -6,8 +6,8 @@
 //!
 //! `cargo run --release -p idmesh-sensor --example scenario_stats -- n=100`
 
-use idmesh_sim::motion::crowd::{CrowdParams, Goals};
-use idmesh_sim::scenario::trace_out::write_trace;
+use idmesh_sim::write_trace;
+use idmesh_sim::{CrowdParams, Goals};
 use idmesh_sim::{Model, Scenario};
 use std::time::Instant;
 

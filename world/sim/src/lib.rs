@@ -13,18 +13,18 @@
 //! separated from all others by an observation distance, and the share of
 //! mixing events is steered by these two distances.
 //!
-//! A map of the crate:
-//! - [`geometry`] — points, the rectangular field, a neighbour grid.
-//! - [`motion`] — ground-truth motion: a social-force crowd, random
+//! A map of the crate (private modules; what other crates use is
+//! re-exported below, by concern):
+//! - `geometry` — points, the rectangular field, a neighbour grid.
+//! - `motion` — ground-truth motion: a social-force crowd, random
 //!   waypoint, and replay of real pedestrian trajectories.
-//! - [`events`] — from motion to events: the sensor model, the
+//! - `events` — from motion to events: the sensor model, the
 //!   track-to-target assignment, mixing and observation detection.
-//! - [`scenario`] — the [`Scenario`] builder that ties them together into a
+//! - `scenario` — the [`Scenario`] builder that ties them together into a
 //!   [`GeneratedTrace`], with progress reporting and trace output.
 //!
 //! ```
-//! use idmesh_sim::Scenario;
-//! use idmesh_sim::scenario::trace_out::write_trace;
+//! use idmesh_sim::{write_trace, Scenario};
 //!
 //! let trace = Scenario::crowd()
 //!     .targets(20)       // n
@@ -41,10 +41,25 @@
 //! assert!(jsonl.starts_with(br#"{"kind":"header""#));
 //! ```
 
-pub mod events;
-pub mod geometry;
-pub mod motion;
-pub mod scenario;
+mod events;
+mod geometry;
+mod motion;
+mod scenario;
 
-pub use events::{SensorModel, SimEvent, TimedEvent};
-pub use scenario::{GeneratedTrace, Length, Model, RedChoice, Scenario, ScenarioError};
+// Points, the rectangular field, a neighbour grid.
+pub use geometry::{NeighbourGrid, Rect, Vec2};
+// Ground-truth motion: a social-force crowd, random waypoint, and the
+// recorded pedestrians (their scenes, timing and data folder).
+pub use motion::crowd::{CrowdParams, Goals};
+pub use motion::pedestrians::{data_dir, Scene, SceneError, Timing};
+pub use motion::waypoint::{Waypoint, WaypointParams};
+pub use motion::Motion;
+// From motion to events: the sensor model, mixing and observation.
+pub use events::{ExtractionParams, MixDetector, SensorModel, SimEvent, TimedEvent};
+// The scenario builder and what it generates.
+pub use scenario::{
+    GeneratedTrace, IdentityTrace, Model, Scenario, ScenarioError, SceneSource, TraceHeader,
+    TraceStats,
+};
+// Trace output: a generated trace as lines, a file, tracker output.
+pub use scenario::trace_out::{event_line, lines, write_trace, write_tracker_output};

@@ -232,10 +232,6 @@ impl FactoredShare {
         &self.belief.field
     }
 
-    pub fn options(&self) -> &FactoredOptions {
-        &self.belief.options
-    }
-
     /// Whether the component of `track` is held here.
     pub fn holds(&self, track: u32) -> bool {
         self.held.get(track as usize).copied().unwrap_or(false)
@@ -254,7 +250,8 @@ impl FactoredShare {
     }
 
     /// Tracks whose components are held here.
-    pub fn tracks_held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn tracks_held(&self) -> usize {
         self.held_set.len()
     }
 
@@ -474,7 +471,7 @@ impl FactoredShare {
     }
 
     /// The components held here, as they would move.
-    pub fn components(&self) -> Vec<HeldComponent> {
+    pub(crate) fn components(&self) -> Vec<HeldComponent> {
         self.held_comps().map(|c| self.held_form(c)).collect()
     }
 

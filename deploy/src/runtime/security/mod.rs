@@ -13,10 +13,10 @@
 //! certificate files and its endpoints, [`rules`] the access-control config
 //! generated from the topology.
 
-pub mod error;
-pub mod rules;
-pub mod section;
-pub mod tls;
+pub(crate) mod error;
+pub(crate) mod rules;
+pub(crate) mod section;
+pub(crate) mod tls;
 
 pub use section::SecuritySection;
 pub use tls::Tls;

@@ -42,7 +42,7 @@ use std::collections::BTreeSet;
 /// Processes named `from` may send `messages` on `keys` to processes
 /// named `to` (certificate common names).
 #[derive(Debug, Clone)]
-pub struct Grant {
+pub(crate) struct Grant {
     /// A short name for the rule ids, so that Zenoh's logs say which.
     pub what: String,
     pub from: Vec<String>,
@@ -105,7 +105,7 @@ fn grant(
 }
 
 /// Every grant of the deployment.
-pub fn grants(topology: &Topology) -> Vec<Grant> {
+pub(crate) fn grants(topology: &Topology) -> Vec<Grant> {
     let keys = Keys::new(topology.prefix.clone());
     let parties = Parties::of(topology);
     let mut grants = stream_grants(&keys, &parties);
@@ -375,7 +375,7 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
 /// The `access_control` config of process `me`: default deny; the grants it
 /// receives as ingress rules for their senders, the grants it sends as
 /// egress rules for their receivers.
-pub fn access_control(topology: &Topology, me: &str) -> Value {
+pub(crate) fn access_control(topology: &Topology, me: &str) -> Value {
     let mut rules = Vec::new();
     let mut policies = Vec::new();
     let mut subjects = BTreeSet::new();

@@ -65,7 +65,7 @@ impl SecuritySection {
 
 impl SecuritySection {
     /// The TLS files of process `name`; `dir` is the topology file's folder.
-    pub fn tls_for(&self, dir: &Path, name: &str) -> Result<Tls, SecurityError> {
+    pub(crate) fn tls_for(&self, dir: &Path, name: &str) -> Result<Tls, SecurityError> {
         let certs = dir.join(&self.certs);
         Tls::new(
             certs.join("ca.pem"),
@@ -78,7 +78,7 @@ impl SecuritySection {
 
     /// Client and producer names must be names of their own: one named
     /// like a process would be let do what the process does.
-    pub fn check<'a>(
+    pub(crate) fn check<'a>(
         &self,
         mut members: impl Iterator<Item = &'a str>,
     ) -> Result<(), SecurityError> {

@@ -22,7 +22,7 @@ impl Tls {
     /// Checks that every file is there and is PEM, so that a mistake is
     /// reported naming the file rather than as a failed handshake.
     /// `field` says where the paths came from (`[security] certs`, `--ca`).
-    pub fn new(
+    pub(crate) fn new(
         ca: PathBuf,
         cert: PathBuf,
         key: PathBuf,
@@ -88,7 +88,7 @@ fn check_pem(path: &Path, field: &str) -> Result<(), SecurityError> {
 /// (eclipse-zenoh/zenoh#2557). Under load its links failed and reopened
 /// by themselves, and once a sensor aborted inside rustls on a corrupted
 /// error value. Zenoh's QUIC link gives each direction its own stream.
-pub fn secured_endpoint(endpoint: &str) -> Result<String, SecurityError> {
+pub(crate) fn secured_endpoint(endpoint: &str) -> Result<String, SecurityError> {
     if let Some(address) = endpoint.strip_prefix("tcp/") {
         Ok(format!("quic/{address}"))
     } else if endpoint.starts_with("quic/") {

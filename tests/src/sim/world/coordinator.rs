@@ -14,20 +14,20 @@ use idmesh_coordinator::machine::{
 };
 use idmesh_identity::factored::assemble;
 use idmesh_identity::{IdentityFilter, InformationOptions, InformationRows};
-use idmesh_leader::machine::Ask;
+use idmesh_leader::Ask;
 use idmesh_placement::{from_wire_tree, identity_options};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::decode;
 use idmesh_protocol::wire::identity::WireTree;
 use idmesh_protocol::wire::query::MarginalsAnswer;
-use idmesh_sensor::cuts::CutParameters;
+use idmesh_sensor::CutParameters;
 use rand::Rng;
 use std::collections::BTreeSet;
 use std::time::Duration;
 
 #[derive(Debug, Clone)]
-pub enum ToCoordinator {
+pub(crate) enum ToCoordinator {
     Cut {
         id: u64,
         reply: Result<Vec<u8>, String>,

@@ -10,7 +10,7 @@ use super::{Event, Msg, World, ASK_TIMEOUT};
 use crate::sim::network::Endpoint;
 use crate::sim::Violation;
 use idmesh_leader::journal::Kind;
-use idmesh_leader::machine::{Ask, Input, Node, Output, Timers};
+use idmesh_leader::{Ask, Input, Node, Output, Timers};
 use idmesh_protocol::wire::leader_to_leader::TransfersSent;
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Followed, Resent};
 use idmesh_protocol::wire::{decode, encode};
@@ -18,7 +18,7 @@ use rand::Rng;
 use std::time::Duration;
 
 #[derive(Debug, Clone)]
-pub enum ToLeader {
+pub(crate) enum ToLeader {
     Batch(Vec<u8>),
     Transfer(Vec<u8>),
     Durable(Vec<u8>),

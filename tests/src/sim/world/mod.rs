@@ -22,10 +22,10 @@ use super::scenario::Scenario;
 use super::Violation;
 use coordinator::{Query, ToCoordinator};
 use idmesh_coordinator::machine::Memory;
-use idmesh_leader::machine::Input;
+use idmesh_leader::Input;
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use idmesh_sensor::journal::Record;
-use idmesh_sensor::machine::Gateway;
+use idmesh_sensor::Gateway;
 use idmesh_sensor::Router;
 use leader::{Disk, LeaderSlot, PendingAsk, ToLeader};
 use rand::Rng;
@@ -35,7 +35,7 @@ use sensor::ToSensor;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 /// Virtual milliseconds.
-pub type Ms = u64;
+pub(crate) type Ms = u64;
 
 /// How long a get waits for its answer (the leaders' `follow_timeout`).
 const ASK_TIMEOUT: Ms = 1000;
@@ -50,7 +50,7 @@ const STALL_CHECK: Ms = 600;
 
 /// A message on the wire, by receiver.
 #[derive(Debug, Clone)]
-pub enum Msg {
+pub(crate) enum Msg {
     /// An input of leader `to`'s node; `ask` is set on the answer to one
     /// of its own gets.
     Leader {
@@ -66,7 +66,7 @@ pub enum Msg {
 
 /// What happens at a point of virtual time.
 #[derive(Debug, Clone)]
-pub enum Event {
+pub(crate) enum Event {
     Deliver(Msg),
     Tick {
         leader: usize,
@@ -148,7 +148,7 @@ pub struct Tally {
     pub changes: u64,
 }
 
-pub struct World {
+pub(crate) struct World {
     rng: ChaCha8Rng,
     now: Ms,
     net: Network,
@@ -191,7 +191,7 @@ pub struct World {
 impl World {
     /// A world for one seed's schedule, with the `aimed` faults added
     /// (none: [`Aimed::default`]).
-    pub fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
+    pub(crate) fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
         let scenario_factored = scenario.factored.is_some();
         let scenario_identities = scenario.identity.is_some();

@@ -11,14 +11,14 @@ use crate::sim::network::Endpoint;
 use crate::sim::Violation;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::sensor_to_leader::Batch;
-use idmesh_sensor::cuts::{CutParameters, Placed};
-use idmesh_sensor::ingest::Offer;
-use idmesh_sensor::machine::{CutOutcome, Gateway};
+use idmesh_sensor::Offer;
 use idmesh_sensor::Router;
+use idmesh_sensor::{CutOutcome, Gateway};
+use idmesh_sensor::{CutParameters, Placed};
 use rand::Rng;
 
 #[derive(Debug, Clone)]
-pub enum ToSensor {
+pub(crate) enum ToSensor {
     Follow {
         ask: u64,
         bytes: Vec<u8>,

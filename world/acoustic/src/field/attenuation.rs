@@ -26,7 +26,7 @@ impl Default for Attenuation {
 impl Attenuation {
     /// The amplitude gain at distance `d` metres.
     #[inline]
-    pub fn gain(&self, d: f64) -> f64 {
+    pub(crate) fn gain(&self, d: f64) -> f64 {
         let spreading = self.reference_distance / d.max(self.reference_distance);
         spreading * 10f64.powf(-self.absorption_db_per_m * d / 20.0)
     }
@@ -51,7 +51,7 @@ impl Attenuation {
 /// Pure-tone atmospheric absorption coefficient, dB/m (ISO 9613-1:1993,
 /// equations 3–5): frequency in Hz, temperature in °C, relative humidity
 /// in %, pressure in kPa.
-pub fn iso9613_absorption(frequency: f64, celsius: f64, humidity: f64, kpa: f64) -> f64 {
+pub(crate) fn iso9613_absorption(frequency: f64, celsius: f64, humidity: f64, kpa: f64) -> f64 {
     let t = celsius + 273.15;
     let t0 = 293.15;
     let t01 = 273.16;

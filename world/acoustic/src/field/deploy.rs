@@ -1,11 +1,11 @@
 //! Sensor deployment (Section II and VI-A): N sensors dropped uniformly at
 //! random over the field; their positions are known to the tracker.
 
-use idmesh_sim::geometry::{Rect, Vec2};
+use idmesh_sim::{Rect, Vec2};
 use rand::Rng;
 
 /// `n` sensor positions drawn uniformly from `field`.
-pub fn deploy_uniform(n: usize, field: Rect, rng: &mut impl Rng) -> Vec<Vec2> {
+pub(crate) fn deploy_uniform(n: usize, field: Rect, rng: &mut impl Rng) -> Vec<Vec2> {
     (0..n).map(|_| field.sample(rng)).collect()
 }
 

@@ -7,19 +7,20 @@
 //! - [`attenuation`] — spherical spreading and atmospheric absorption.
 //! - [`signals`] — the aggregate signal at every sensor.
 
-pub mod attenuation;
-pub mod deploy;
-pub mod paths;
-pub mod signals;
+pub(crate) mod attenuation;
+pub(crate) mod deploy;
+pub(crate) mod paths;
+pub(crate) mod signals;
 
 use super::error::AcousticError;
 use super::source::{self, SourceKind};
-use idmesh_sim::geometry::{Rect, Vec2};
+use idmesh_sim::{Rect, Vec2};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 pub use attenuation::Attenuation;
-pub use paths::{PathSpec, TruePath};
+pub use paths::PathSpec;
+pub use paths::TruePath;
 pub use signals::SensorSignals;
 
 /// Everything that makes a field. Defaults are the paper's (Section VI-A)
@@ -77,12 +78,12 @@ impl Default for FieldConfig {
 
 impl FieldConfig {
     /// The whole field, `[0, size]²`.
-    pub fn bounds(&self) -> Rect {
+    pub(crate) fn bounds(&self) -> Rect {
         Rect::with_size(self.size, self.size)
     }
 
     /// The central square the targets stay in.
-    pub fn target_bounds(&self) -> Rect {
+    pub(crate) fn target_bounds(&self) -> Rect {
         self.bounds().shrink((self.size - self.target_area) / 2.0)
     }
 

@@ -2,7 +2,7 @@
 //!
 //! - Random paths (Section VI-A, "paths followed by targets are generated
 //!   randomly") come from the scenario generator's random-waypoint model
-//!   (`idmesh_sim::motion::waypoint`) stepped once per sample, with speeds in
+//!   (`idmesh_sim::waypoint`) stepped once per sample, with speeds in
 //!   metres per sample (the paper's "below 0.15 m per sample interval") and
 //!   no pauses, inside the central target area.
 //! - Zigzag paths (Section VI-J, Fig. 15): from A to B, 300 m apart, a
@@ -10,9 +10,9 @@
 //!   constant speed that finishes it within the run — so more periods mean
 //!   a longer path and a faster target, as in the paper.
 
-use idmesh_sim::geometry::{Rect, Vec2};
-use idmesh_sim::motion::waypoint::{Waypoint, WaypointParams};
-use idmesh_sim::motion::Motion;
+use idmesh_sim::Motion;
+use idmesh_sim::{Rect, Vec2};
+use idmesh_sim::{Waypoint, WaypointParams};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -81,30 +81,18 @@ pub struct TruePath {
 
 impl TruePath {
     /// Length walked, metres.
-    pub fn length(&self) -> f64 {
+    pub(crate) fn length(&self) -> f64 {
         self.positions.windows(2).map(|w| w[0].distance(w[1])).sum()
     }
 
-    /// Length walked between samples `from` and `to`.
-    pub fn length_between(&self, from: usize, to: usize) -> f64 {
-        let to = to.min(self.positions.len().saturating_sub(1));
-        if from >= to {
-            return 0.0;
-        }
-        self.positions[from..=to]
-            .windows(2)
-            .map(|w| w[0].distance(w[1]))
-            .sum()
-    }
-
     /// Mean speed, metres per sample.
-    pub fn mean_speed(&self) -> f64 {
+    pub(crate) fn mean_speed(&self) -> f64 {
         self.length() / (self.positions.len().saturating_sub(1)).max(1) as f64
     }
 }
 
 /// `count` paths of `samples` positions inside `area`.
-pub fn generate(
+pub(crate) fn generate(
     spec: &PathSpec,
     count: usize,
     samples: usize,

@@ -9,7 +9,7 @@ use super::attenuation::Attenuation;
 use super::paths::TruePath;
 use crate::parallel::par_map;
 use crate::pipeline::separate::fastica::standard_normal;
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -24,7 +24,7 @@ pub struct SensorSignals {
 
 impl SensorSignals {
     /// The recording of sensor `i`.
-    pub fn sensor(&self, i: usize) -> &[f64] {
+    pub(crate) fn sensor(&self, i: usize) -> &[f64] {
         &self.data[i * self.samples..(i + 1) * self.samples]
     }
 }
@@ -34,7 +34,7 @@ impl SensorSignals {
 /// from a stream per sensor (seeded by `seed` and the sensor index), so the
 /// result does not depend on how many threads compute it.
 #[allow(clippy::too_many_arguments)]
-pub fn record(
+pub(crate) fn record(
     sensors: &[Vec2],
     paths: &[TruePath],
     sources: &[Vec<f64>],

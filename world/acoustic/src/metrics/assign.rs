@@ -4,7 +4,7 @@
 
 /// For an n × m cost matrix with n ≤ m, the column assigned to every row,
 /// minimising the total cost. Non-finite costs are treated as very large.
-pub fn min_cost_assignment(cost: &[Vec<f64>]) -> Vec<usize> {
+pub(crate) fn min_cost_assignment(cost: &[Vec<f64>]) -> Vec<usize> {
     let n = cost.len();
     if n == 0 {
         return Vec::new();

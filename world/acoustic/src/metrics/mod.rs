@@ -5,8 +5,6 @@
 //!   VI-B).
 //! - [`assign`] — pairing estimated paths with targets.
 
-pub mod assign;
-pub mod separation;
-pub mod tracking;
-
-pub use tracking::TrackingMetrics;
+pub(crate) mod assign;
+pub(crate) mod separation;
+pub(crate) mod tracking;

@@ -37,7 +37,7 @@ pub fn amari_index(p: &DMatrix<f64>) -> f64 {
 
 /// The Pearson correlation of two equally long series (0 if either is
 /// constant).
-pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn correlation(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     if n == 0 {
         return 0.0;

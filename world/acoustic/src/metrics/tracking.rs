@@ -33,7 +33,7 @@ use crate::pipeline::intersect::Area;
 use crate::pipeline::prepare::Segmentation;
 use crate::pipeline::tiles::{TileGrid, TileSet};
 use crate::pipeline::vote_link::Fragment;
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 /// The metrics of one run.
 #[derive(Debug, Clone, PartialEq)]
@@ -163,7 +163,7 @@ fn pair_with_targets(
 }
 
 /// Evaluates estimated paths (fragments over `areas`) against the truth.
-pub fn evaluate(
+pub(crate) fn evaluate(
     paths: &[Vec<Fragment>],
     areas: &[Area],
     grid: &TileGrid,

@@ -39,7 +39,7 @@ impl Linkage {
 
 /// The distance matrix of equation (2), D = 1 − |corr|, of a slot's
 /// segments (unit norm, so corr is a dot product: one matrix product).
-pub fn correlation_distances(segs: &SlotSegments) -> DMatrix<f32> {
+pub(crate) fn correlation_distances(segs: &SlotSegments) -> DMatrix<f32> {
     let n = segs.len();
     let s = DMatrix::from_row_slice(n, segs.l_seg, &segs.data);
     let mut d = &s * s.transpose();
@@ -51,7 +51,7 @@ pub fn correlation_distances(segs: &SlotSegments) -> DMatrix<f32> {
 /// Cuts the dendrogram of `dist` (symmetric, consumed) at `clusters`
 /// clusters. Returns a label per item, 0-based in order of first
 /// appearance.
-pub fn agglomerate(mut dist: DMatrix<f32>, clusters: usize, linkage: Linkage) -> Vec<u32> {
+pub(crate) fn agglomerate(mut dist: DMatrix<f32>, clusters: usize, linkage: Linkage) -> Vec<u32> {
     let n = dist.nrows();
     if n == 0 {
         return Vec::new();

@@ -23,18 +23,23 @@
 use super::prepare::SensorGroup;
 use super::separate::SlotSegments;
 use super::tiles::{TileGrid, TileSet};
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 /// The sensing range of every group, on the tile grid.
 #[derive(Debug, Clone)]
-pub struct GroupRanges {
+pub(crate) struct GroupRanges {
     pub grid: TileGrid,
     pub ranges: Vec<TileSet>,
 }
 
 impl GroupRanges {
     /// The union of the members' disks of radius `range`, per group.
-    pub fn new(grid: TileGrid, groups: &[SensorGroup], sensors: &[Vec2], range: f64) -> Self {
+    pub(crate) fn new(
+        grid: TileGrid,
+        groups: &[SensorGroup],
+        sensors: &[Vec2],
+        range: f64,
+    ) -> Self {
         let ranges = groups
             .iter()
             .map(|g| {
@@ -64,7 +69,7 @@ pub struct Area {
 /// The groups that hear segment `c` of slot `segs`: for each group its
 /// largest |corr| with `c`, kept when ≥ `threshold`, strongest first
 /// (ties by group index).
-pub fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> Vec<(u32, f32)> {
+pub(crate) fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> Vec<(u32, f32)> {
     let target = segs.segment(c);
     let mut best: Vec<(u32, f32)> = Vec::new();
     for i in 0..segs.len() {
@@ -92,7 +97,7 @@ pub fn hearing_groups(segs: &SlotSegments, c: usize, threshold: f32) -> Vec<(u32
 /// that would leave nothing; then, if `exclude_silent`, keeps only the
 /// points covered by the fewest ranges of groups that did *not* hear the
 /// segment (see [`exclude_silent`]). `None` if nobody hears.
-pub fn intersect(
+pub(crate) fn intersect(
     ranges: &GroupRanges,
     hearing: &[(u32, f32)],
     exclude: Option<u32>,
@@ -130,7 +135,7 @@ pub fn intersect(
 /// hear then costs precision, never the whole area), and return the
 /// fewest. The paper (Section IV-E) intersects only the ranges of the
 /// groups that hear.
-pub fn exclude_silent(
+pub(crate) fn exclude_silent(
     ranges: &GroupRanges,
     hearing: &[(u32, f32)],
     area: &TileSet,

@@ -8,10 +8,10 @@
 //!   the 5 m tiles of [`tiles`].
 //! - [`vote_link`] — (6) voting and path linking (Appendix A).
 
-pub mod cluster;
-pub mod intersect;
-pub mod prepare;
-pub mod select;
-pub mod separate;
-pub mod tiles;
-pub mod vote_link;
+pub(crate) mod cluster;
+pub(crate) mod intersect;
+pub(crate) mod prepare;
+pub(crate) mod select;
+pub(crate) mod separate;
+pub(crate) mod tiles;
+pub(crate) mod vote_link;

@@ -8,7 +8,7 @@
 
 use crate::error::AcousticError;
 use crate::field::SensorSignals;
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 use nalgebra::DMatrix;
 
 /// A sensor group: its members (sensor indices, ascending) and where it is.
@@ -97,7 +97,7 @@ impl Segmentation {
     }
 
     /// Number of time slots v.
-    pub fn slots(&self) -> usize {
+    pub(crate) fn slots(&self) -> usize {
         (self.samples - self.l_seg) / self.l_step + 1
     }
 
@@ -112,14 +112,15 @@ impl Segmentation {
     }
 
     /// Length of the common part of two successive slots.
-    pub fn overlap(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn overlap(&self) -> usize {
         self.l_seg - self.l_step
     }
 }
 
 /// The segment group OG_{i,j}: the recordings of `group`'s members during
 /// slot `slot`, one row per member (n_group × l_seg).
-pub fn segment_group(
+pub(crate) fn segment_group(
     signals: &SensorSignals,
     group: &SensorGroup,
     seg: &Segmentation,

@@ -5,7 +5,7 @@
 //! as one bit per point in full-width rows over the rows it spans, so that
 //! intersecting two sensing ranges is a word-wise AND.
 
-use idmesh_sim::geometry::Vec2;
+use idmesh_sim::Vec2;
 
 /// The grid points (c·spacing, r·spacing), 0 ≤ r, c < `side`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -19,7 +19,7 @@ pub struct TileGrid {
 
 impl TileGrid {
     /// A grid covering `[0, size]²`.
-    pub fn new(size: f64, spacing: f64) -> Self {
+    pub(crate) fn new(size: f64, spacing: f64) -> Self {
         let side = (size / spacing).floor() as usize + 1;
         TileGrid {
             spacing,
@@ -47,7 +47,7 @@ pub struct TileSet {
 
 impl TileSet {
     /// The empty set.
-    pub fn empty(grid: &TileGrid) -> Self {
+    pub(crate) fn empty(grid: &TileGrid) -> Self {
         TileSet {
             row0: 0,
             words: grid.words,
@@ -62,7 +62,7 @@ impl TileSet {
     /// The grid points within `radius` of any of `centers` (the sensing
     /// range of a sensor group: the union of its members' disks). A disk
     /// meets each row in one run of columns, so this is a few range fills.
-    pub fn disk_union(grid: &TileGrid, centers: &[Vec2], radius: f64) -> Self {
+    pub(crate) fn disk_union(grid: &TileGrid, centers: &[Vec2], radius: f64) -> Self {
         if centers.is_empty() {
             return TileSet::empty(grid);
         }
@@ -108,7 +108,10 @@ impl TileSet {
     }
 
     /// The set of the given (row, col) points, which must be in the grid.
-    pub fn from_points(grid: &TileGrid, points: impl IntoIterator<Item = (usize, usize)>) -> Self {
+    pub(crate) fn from_points(
+        grid: &TileGrid,
+        points: impl IntoIterator<Item = (usize, usize)>,
+    ) -> Self {
         let pts: Vec<(usize, usize)> = points.into_iter().collect();
         let (Some(lo), Some(hi)) = (pts.iter().map(|p| p.0).min(), pts.iter().map(|p| p.0).max())
         else {
@@ -163,7 +166,7 @@ impl TileSet {
     }
 
     /// Rows spanned, as a half-open range (empty set: `0..0`).
-    pub fn row_range(&self) -> std::ops::Range<usize> {
+    pub(crate) fn row_range(&self) -> std::ops::Range<usize> {
         self.row0..self.row0 + self.rows()
     }
 
@@ -177,7 +180,7 @@ impl TileSet {
     }
 
     /// The intersection.
-    pub fn intersect(&self, other: &TileSet) -> TileSet {
+    pub(crate) fn intersect(&self, other: &TileSet) -> TileSet {
         let w = self.words;
         let Some((lo, n)) = self.common_rows(other) else {
             return TileSet {
@@ -198,7 +201,7 @@ impl TileSet {
     }
 
     /// Whether the two sets share a point.
-    pub fn overlaps(&self, other: &TileSet) -> bool {
+    pub(crate) fn overlaps(&self, other: &TileSet) -> bool {
         let w = self.words;
         let Some((lo, n)) = self.common_rows(other) else {
             return false;
@@ -209,7 +212,7 @@ impl TileSet {
     }
 
     /// Adds every point of `other`.
-    pub fn union_with(&mut self, other: &TileSet) {
+    pub(crate) fn union_with(&mut self, other: &TileSet) {
         if other.bits.is_empty() {
             return;
         }
@@ -257,7 +260,7 @@ impl TileSet {
     }
 
     /// The mean position of the points (`None` when empty).
-    pub fn centroid(&self, grid: &TileGrid) -> Option<Vec2> {
+    pub(crate) fn centroid(&self, grid: &TileGrid) -> Option<Vec2> {
         let (mut sr, mut sc, mut n) = (0.0, 0.0, 0usize);
         for (r, c) in self.points() {
             sr += r as f64;
@@ -269,7 +272,7 @@ impl TileSet {
 
     /// Points with a 4-neighbour outside the set: the closest point of the
     /// set to anything outside it is always one of them.
-    pub fn boundary(&self) -> Vec<(usize, usize)> {
+    pub(crate) fn boundary(&self) -> Vec<(usize, usize)> {
         self.points()
             .filter(|&(r, c)| {
                 r == 0
@@ -284,7 +287,7 @@ impl TileSet {
 
     /// d_area of Section IV-F: the smallest distance between a point of
     /// each set, 0 when they overlap, infinite if either is empty.
-    pub fn distance(&self, other: &TileSet, grid: &TileGrid) -> f64 {
+    pub(crate) fn distance(&self, other: &TileSet, grid: &TileGrid) -> f64 {
         if self.is_empty() || other.is_empty() {
             return f64::INFINITY;
         }

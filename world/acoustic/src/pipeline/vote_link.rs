@@ -45,21 +45,21 @@ use super::tiles::TileGrid;
 /// One CTS's estimate: per chain, per slot of the CTS, the fragment's area
 /// id and the segment it was computed from.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct CtsEstimate {
+pub(crate) struct CtsEstimate {
     /// `chains[k][i]` = (area id, segment) of chain k in slot u + i.
     pub chains: Vec<Vec<Option<(u32, u32)>>>,
 }
 
 /// A fragment kept by the vote.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Kept {
+pub(crate) struct Kept {
     pub area: u32,
     pub segment: u32,
 }
 
 /// Settings of voting and linking.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct VoteSettings {
+pub(crate) struct VoteSettings {
     pub n_slot: usize,
     /// d_area values up to this many metres count as 0 (paper: 0).
     pub tolerance: f64,
@@ -76,12 +76,12 @@ pub struct VoteSettings {
 
 /// `continuity(slot_a, seg_a, slot_b, seg_b)`: the link correlation of two
 /// segments over their common samples, `None` if they share too few.
-pub type Continuity<'a> = &'a dyn Fn(usize, u32, usize, u32) -> Option<f64>;
+pub(crate) type Continuity<'a> = &'a dyn Fn(usize, u32, usize, u32) -> Option<f64>;
 
 /// The vote: for each of the `slots` slots, the fragments kept (Pseg).
 /// `estimates[u]` is CTS_u's. `same_source(slot, s1, s2)` tells whether two
 /// segments of a slot are the same source.
-pub fn vote(
+pub(crate) fn vote(
     estimates: &[CtsEstimate],
     slots: usize,
     areas: &[Area],
@@ -166,7 +166,7 @@ pub fn vote(
 
 /// A fragment of an estimated path.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Fragment {
+pub(crate) struct Fragment {
     pub slot: usize,
     pub area: u32,
     /// The segment (of its slot) it was located from.
@@ -175,7 +175,7 @@ pub struct Fragment {
 
 /// Links the kept fragments into `k` paths (some may stay empty).
 /// Returns the paths and the number of fragments dropped.
-pub fn link(
+pub(crate) fn link(
     pseg: &[Vec<Kept>],
     k: usize,
     areas: &[Area],
@@ -249,7 +249,7 @@ pub fn link(
 mod tests {
     use super::*;
     use crate::pipeline::tiles::TileSet;
-    use idmesh_sim::geometry::Vec2;
+    use idmesh_sim::Vec2;
 
     fn grid() -> TileGrid {
         TileGrid::new(1000.0, 5.0)

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 /// Why one recording could not be used.
 #[derive(Debug, thiserror::Error)]
-pub enum AudioError {
+pub(crate) enum AudioError {
     #[error("{path}: cannot open: {cause}")]
     Open {
         path: PathBuf,
@@ -39,14 +39,14 @@ pub enum AudioError {
 
 /// One decoded recording, mono.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Recording {
+pub(crate) struct Recording {
     pub path: PathBuf,
     pub sample_rate: u32,
     pub samples: Vec<f64>,
 }
 
 /// Decodes a `.wav` or `.ogg` file by its extension.
-pub fn load(path: &Path) -> Result<Recording, AudioError> {
+pub(crate) fn load(path: &Path) -> Result<Recording, AudioError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -145,7 +145,7 @@ fn mix_down(interleaved: &[f64], channels: usize) -> Vec<f64> {
 /// downsampling, then linear interpolation. Crude next to a polyphase
 /// filter, but the tracker only needs the recordings to stay independent
 /// and non-Gaussian, not hi-fi.
-pub fn resample(samples: &[f64], from: u32, to: u32) -> Vec<f64> {
+pub(crate) fn resample(samples: &[f64], from: u32, to: u32) -> Vec<f64> {
     if from == to || samples.is_empty() || from == 0 || to == 0 {
         return samples.to_vec();
     }
@@ -182,7 +182,7 @@ pub fn resample(samples: &[f64], from: u32, to: u32) -> Vec<f64> {
 /// reproducible), decoded and resampled to `rate` Hz. Unreadable files are
 /// skipped with a warning; a missing directory gives an empty list (and a
 /// warning).
-pub fn load_dir(dir: &Path, rate: u32) -> Vec<Recording> {
+pub(crate) fn load_dir(dir: &Path, rate: u32) -> Vec<Recording> {
     let entries = match std::fs::read_dir(dir) {
         Ok(entries) => entries,
         Err(e) => {

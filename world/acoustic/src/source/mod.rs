@@ -6,9 +6,9 @@
 //! - [`ar`] — autoregressive resonators driven by sparse impulses.
 //! - [`audio`] — real recordings (WAV, Ogg Vorbis), e.g. shared/data/audio.
 
-pub mod ar;
-pub mod audio;
-pub mod chirp;
+pub(crate) mod ar;
+pub(crate) mod audio;
+pub(crate) mod chirp;
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -50,7 +50,7 @@ impl SourceKind {
     }
 
     /// A short name for tables and trace headers.
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match self {
             SourceKind::Chirps(_) => "chirps",
             SourceKind::Ar(_) => "ar",
@@ -75,7 +75,7 @@ pub(crate) fn normalize(x: &mut [f64]) {
 
 /// `count` independent source signals of `samples` samples each, zero mean
 /// and unit RMS, drawn from `rng`.
-pub fn generate(
+pub(crate) fn generate(
     kind: &SourceKind,
     count: usize,
     samples: usize,

@@ -30,7 +30,7 @@ pub enum SceneFormat {
 }
 
 impl SceneFormat {
-    pub fn columns(self) -> usize {
+    pub(crate) fn columns(self) -> usize {
         match self {
             SceneFormat::Obsmat => 8,
             SceneFormat::FourColumn => 4,
@@ -38,7 +38,7 @@ impl SceneFormat {
     }
 
     /// What the format is called in messages.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             SceneFormat::Obsmat => "obsmat: frame ped_id pos_x pos_z pos_y v_x v_z v_y",
             SceneFormat::FourColumn => "biwi: frame ped_id x y",

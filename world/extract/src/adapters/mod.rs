@@ -42,7 +42,7 @@ pub enum RowProblem {
 
 impl RowProblem {
     /// A short, stable name of the reason, for counting rejected rows.
-    pub fn reason(&self) -> &'static str {
+    pub(crate) fn reason(&self) -> &'static str {
         match self {
             RowProblem::Malformed(_) => "malformed row",
             RowProblem::Line(problem) => match problem {
@@ -75,7 +75,7 @@ pub struct RowError {
 }
 
 impl RowError {
-    pub fn malformed(file: &str, line: usize, reason: impl Into<String>) -> Self {
+    pub(crate) fn malformed(file: &str, line: usize, reason: impl Into<String>) -> Self {
         RowError {
             file: file.to_string(),
             line,
@@ -83,7 +83,7 @@ impl RowError {
         }
     }
 
-    pub fn report(file: &str, line: usize, error: ReportError) -> Self {
+    pub(crate) fn report(file: &str, line: usize, error: ReportError) -> Self {
         RowError {
             file: file.to_string(),
             line,
@@ -93,7 +93,7 @@ impl RowError {
 }
 
 /// Every row of a file: a report or why not.
-pub type Rows = Vec<Result<Located, RowError>>;
+pub(crate) type Rows = Vec<Result<Located, RowError>>;
 
 /// How many bad lines a reader of reports goes on past (`--max-errors`,
 /// the same on `idmesh extract`, `idmesh replay --topology` and a sensor's
@@ -151,7 +151,7 @@ pub(crate) fn frame_time(frame: f64, fps: f64) -> f64 {
 }
 
 /// Checks a frame rate (frames per second).
-pub fn check_fps(fps: f64) -> Result<(), String> {
+pub(crate) fn check_fps(fps: f64) -> Result<(), String> {
     if fps.is_finite() && fps > 0.0 {
         Ok(())
     } else {

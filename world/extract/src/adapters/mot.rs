@@ -94,7 +94,7 @@ impl MotOptions {
     }
 
     /// Checks the frame rate and the scale, before any row is read.
-    pub fn check(&self, file: &str) -> Result<(), RowError> {
+    pub(crate) fn check(&self, file: &str) -> Result<(), RowError> {
         check_fps(self.fps).map_err(|reason| RowError::malformed(file, 0, reason))?;
         if let Ground::Scale(s) = self.ground {
             if !(s.is_finite() && s > 0.0) {
@@ -206,7 +206,7 @@ fn class_scores(
 /// read is complete. Holds the rows of at most `window + 1` frames (and a
 /// frame's rows), whatever came before.
 #[derive(Debug)]
-pub struct FrameWindow<T> {
+pub(crate) struct FrameWindow<T> {
     window: u64,
     held: BTreeMap<u64, Vec<T>>,
     /// The latest frame read.
@@ -218,7 +218,7 @@ pub struct FrameWindow<T> {
 }
 
 impl<T> FrameWindow<T> {
-    pub fn new(window: u64) -> Self {
+    pub(crate) fn new(window: u64) -> Self {
         FrameWindow {
             window,
             held: BTreeMap::new(),
@@ -230,7 +230,7 @@ impl<T> FrameWindow<T> {
     }
 
     /// Holds a row of `frame`, or says why it comes too late.
-    pub fn push(&mut self, frame: u64, item: T) -> Result<(), String> {
+    pub(crate) fn push(&mut self, frame: u64, item: T) -> Result<(), String> {
         if let (Some(out), Some(latest)) = (self.out, self.latest) {
             if frame <= out {
                 return Err(format!(
@@ -249,7 +249,7 @@ impl<T> FrameWindow<T> {
 
     /// The earliest held frame that is complete (more than `window` frames
     /// behind the latest), let out.
-    pub fn complete(&mut self) -> Option<(u64, Vec<T>)> {
+    pub(crate) fn complete(&mut self) -> Option<(u64, Vec<T>)> {
         let latest = self.latest?;
         let (&frame, _) = self.held.first_key_value()?;
         if frame.saturating_add(self.window) < latest {
@@ -260,7 +260,7 @@ impl<T> FrameWindow<T> {
     }
 
     /// The earliest held frame if it is no later than `frame`, let out.
-    pub fn through(&mut self, frame: u64) -> Option<(u64, Vec<T>)> {
+    pub(crate) fn through(&mut self, frame: u64) -> Option<(u64, Vec<T>)> {
         let (&first, _) = self.held.first_key_value()?;
         if first <= frame {
             self.let_out()
@@ -270,12 +270,13 @@ impl<T> FrameWindow<T> {
     }
 
     /// The latest frame read.
-    pub fn latest(&self) -> Option<u64> {
+    pub(crate) fn latest(&self) -> Option<u64> {
         self.latest
     }
 
     /// The most rows held at once.
-    pub fn most_held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn most_held(&self) -> usize {
         self.most
     }
 
@@ -471,7 +472,8 @@ impl MotReader {
     }
 
     /// The most box rows held at once.
-    pub fn most_held(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn most_held(&self) -> usize {
         self.window.most_held()
     }
 

@@ -92,7 +92,7 @@ impl ExtractorConfig {
     }
 
     /// `release_factor × mix_distance`.
-    pub fn release_distance(&self) -> f64 {
+    pub(crate) fn release_distance(&self) -> f64 {
         self.mix_distance * self.release_factor
     }
 }

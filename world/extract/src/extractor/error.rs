@@ -35,7 +35,7 @@ pub enum ReportError {
 
 impl ReportError {
     /// A short, stable name of the reason, for counting rejected rows.
-    pub fn reason(&self) -> &'static str {
+    pub(crate) fn reason(&self) -> &'static str {
         match self {
             ReportError::NonFiniteTime { .. } => "non-finite time",
             ReportError::NonFinitePosition { .. } => "non-finite position",

@@ -26,10 +26,10 @@
 //! leaves the state as it was; the caller counts it. The roster policy
 //! (see [`roster`]) says what happens to a track that appears mid-stream.
 
-pub mod config;
-pub mod error;
-pub mod report;
-pub mod roster;
+pub(crate) mod config;
+pub(crate) mod error;
+pub(crate) mod report;
+pub(crate) mod roster;
 
 #[cfg(test)]
 mod tests;
@@ -144,17 +144,13 @@ impl Extractor {
     /// The output header declares `red` red targets (k) when given: a
     /// tracker's output says nothing of the property, and without k the
     /// belief has no prior to start from but one half.
-    pub fn with_red(mut self, red: Option<usize>) -> Self {
+    pub(crate) fn with_red(mut self, red: Option<usize>) -> Self {
         self.red = red.or(self.red);
         self
     }
 
-    pub fn config(&self) -> &ExtractorConfig {
-        &self.config
-    }
-
     /// The roster, once fixed.
-    pub fn roster(&self) -> Option<&Roster> {
+    pub(crate) fn roster(&self) -> Option<&Roster> {
         self.roster.as_ref()
     }
 
@@ -211,7 +207,7 @@ impl Extractor {
     /// The rules a report must meet, checked before anything changes.
     /// Whether [`Extractor::push`] would take `report`, without taking it:
     /// a live sensor answers a producer before routing its lines.
-    pub fn check(&self, report: &Report) -> Result<(), ReportError> {
+    pub(crate) fn check(&self, report: &Report) -> Result<(), ReportError> {
         if !report.time.is_finite() {
             return Err(ReportError::NonFiniteTime { time: report.time });
         }

@@ -38,7 +38,7 @@ pub struct Roster {
 
 impl Roster {
     /// The roster of these ids (duplicates collapse).
-    pub fn of(ids: impl IntoIterator<Item = u32>) -> Roster {
+    pub(crate) fn of(ids: impl IntoIterator<Item = u32>) -> Roster {
         let mut ids: Vec<u32> = ids.into_iter().collect();
         ids.sort_unstable();
         ids.dedup();
@@ -51,20 +51,11 @@ impl Roster {
     }
 
     /// The trace track of tracker id `id`.
-    pub fn track_of(&self, id: u32) -> Option<u32> {
+    pub(crate) fn track_of(&self, id: u32) -> Option<u32> {
         self.track_of.get(&id).copied()
-    }
-
-    /// The tracker id of trace track `track`.
-    pub fn id_of(&self, track: u32) -> Option<u32> {
-        self.ids.get(track as usize).copied()
     }
 
     pub fn len(&self) -> usize {
         self.ids.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.ids.is_empty()
     }
 }

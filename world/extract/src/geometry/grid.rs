@@ -137,7 +137,7 @@ impl NeighbourGrid {
 
     /// Calls `f(i, j, distance)` once for every pair `i < j` of present
     /// targets within `radius` of each other, in a fixed order.
-    pub fn for_each_pair_within(
+    pub(crate) fn for_each_pair_within(
         &self,
         positions: &[Option<Vec2>],
         radius: f64,

@@ -93,7 +93,7 @@ impl MeetingModel {
     /// that maximises the Bernoulli log-likelihood on a log grid (σ from
     /// 2 cm to 10 m, v₀ from 2 cm/s to 20 m/s), refined once around the
     /// best cell.
-    pub fn fit_approach(
+    pub(crate) fn fit_approach(
         p_max: f64,
         samples: &[(Meeting, bool)],
     ) -> Result<MeetingModel, CalibrationError> {
@@ -154,7 +154,7 @@ impl MeetingModel {
 impl MeetingModel {
     /// The Bernoulli log-likelihood of meetings labelled with whether the
     /// tracker swapped them (probabilities clamped to [1e-12, 1 − 1e-12]).
-    pub fn log_likelihood(&self, samples: &[(Meeting, bool)]) -> f64 {
+    pub(crate) fn log_likelihood(&self, samples: &[(Meeting, bool)]) -> f64 {
         samples
             .iter()
             .map(|(m, swapped)| {

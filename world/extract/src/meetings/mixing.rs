@@ -73,7 +73,7 @@ impl MixDetector {
     }
 
     /// [`MixDetector::step`], with the distance of each entering pair.
-    pub fn step_measured(
+    pub(crate) fn step_measured(
         &mut self,
         grid: &NeighbourGrid,
         positions: &[Option<Vec2>],
@@ -112,16 +112,9 @@ impl MixDetector {
         std::mem::swap(&mut self.contact, &mut self.next);
     }
 
-    pub fn mix_distance(&self) -> f64 {
-        self.mix_distance
-    }
-
-    pub fn release_distance(&self) -> f64 {
-        self.release_distance
-    }
-
     /// Pairs currently in contact, sorted.
-    pub fn in_contact(&self) -> &[(u32, u32)] {
+    #[cfg(test)]
+    pub(crate) fn in_contact(&self) -> &[(u32, u32)] {
         &self.contact
     }
 }

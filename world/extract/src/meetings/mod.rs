@@ -7,10 +7,11 @@
 //!   predicted closest approach, relative speed.
 //! - [`meeting_model`] — the swap probability of a meeting, and its fit.
 
-pub mod meeting;
-pub mod meeting_model;
-pub mod mixing;
+pub(crate) mod meeting;
+pub(crate) mod meeting_model;
+pub(crate) mod mixing;
 
 pub use meeting::Meeting;
-pub use meeting_model::{CalibrationError, MeetingModel};
+pub use meeting_model::CalibrationError;
+pub use meeting_model::MeetingModel;
 pub use mixing::{Entering, MixDetector};

@@ -6,8 +6,8 @@
 //! - [`score_mapping`] — class scores to `observe` likelihoods, and the
 //!   temperature fit that calibrates them.
 
-pub mod scheduler;
-pub mod score_mapping;
+pub(crate) mod scheduler;
+pub(crate) mod score_mapping;
 
 pub use scheduler::ObservationScheduler;
 pub use score_mapping::ScoreMapping;

@@ -38,7 +38,7 @@ impl ObservationScheduler {
     }
 
     /// The largest radius this scheduler queries the grid with.
-    pub fn reach(&self) -> f64 {
+    pub(crate) fn reach(&self) -> f64 {
         self.observe_distance
     }
 
@@ -60,7 +60,7 @@ impl ObservationScheduler {
     /// only: a tracker's detection without class scores has nothing to
     /// observe, and must not use up the track's next look. The others
     /// still count as neighbours.
-    pub fn step_eligible(
+    pub(crate) fn step_eligible(
         &mut self,
         time: f64,
         grid: &NeighbourGrid,

@@ -67,13 +67,13 @@ impl ScoreMapping {
     }
 
     /// The property's score in `scores` (0 when the label is absent).
-    pub fn score(&self, scores: &BTreeMap<String, f64>) -> f64 {
+    pub(crate) fn score(&self, scores: &BTreeMap<String, f64>) -> f64 {
         scores.get(&self.label).copied().unwrap_or(0.0)
     }
 
     /// The (red, blue) likelihoods of an observation with these scores,
     /// summing to 1, both > 0.
-    pub fn likelihoods(&self, scores: &BTreeMap<String, f64>) -> (f64, f64) {
+    pub(crate) fn likelihoods(&self, scores: &BTreeMap<String, f64>) -> (f64, f64) {
         let s = self.score(scores).clamp(SCORE_FLOOR, 1.0 - SCORE_FLOOR);
         // Through the logit, so a high temperature cannot underflow both.
         let z = (s / (1.0 - s)).ln() / self.temperature;
@@ -85,7 +85,11 @@ impl ScoreMapping {
     /// (score of the label, whether the target truly had the property)
     /// pairs. Fails without samples, or when the scores carry no
     /// information or point the wrong way (no positive temperature fits).
-    pub fn fit(label: &str, samples: &[(f64, bool)]) -> Result<ScoreMapping, CalibrationError> {
+    #[cfg(test)]
+    pub(crate) fn fit(
+        label: &str,
+        samples: &[(f64, bool)],
+    ) -> Result<ScoreMapping, CalibrationError> {
         if samples.is_empty() {
             return Err(CalibrationError::NoSamples);
         }

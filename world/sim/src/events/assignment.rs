@@ -10,13 +10,13 @@
 /// A bijection between targets (the things that move) and tracks (the
 /// tracker's labels). Starts as the identity: track t follows target t.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Assignment {
+pub(crate) struct Assignment {
     target_on_track: Vec<u32>,
     track_of_target: Vec<u32>,
 }
 
 impl Assignment {
-    pub fn identity(n: usize) -> Self {
+    pub(crate) fn identity(n: usize) -> Self {
         let ids: Vec<u32> = (0..n as u32).collect();
         Assignment {
             target_on_track: ids.clone(),
@@ -24,26 +24,18 @@ impl Assignment {
         }
     }
 
-    pub fn len(&self) -> usize {
-        self.target_on_track.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.target_on_track.is_empty()
-    }
-
     /// The track following `target`.
-    pub fn track_of(&self, target: usize) -> u32 {
+    pub(crate) fn track_of(&self, target: usize) -> u32 {
         self.track_of_target[target]
     }
 
     /// The target `track` follows.
-    pub fn target_on(&self, track: usize) -> u32 {
+    pub(crate) fn target_on(&self, track: usize) -> u32 {
         self.target_on_track[track]
     }
 
     /// The tracks of targets `i` and `j` are exchanged.
-    pub fn exchange_targets(&mut self, i: usize, j: usize) {
+    pub(crate) fn exchange_targets(&mut self, i: usize, j: usize) {
         let (ti, tj) = (self.track_of_target[i], self.track_of_target[j]);
         self.track_of_target.swap(i, j);
         self.target_on_track[ti as usize] = j as u32;
@@ -51,7 +43,7 @@ impl Assignment {
     }
 
     /// The tracks following the targets with `is_red[target]`, ascending.
-    pub fn red_tracks(&self, is_red: &[bool]) -> Vec<u32> {
+    pub(crate) fn red_tracks(&self, is_red: &[bool]) -> Vec<u32> {
         let mut red: Vec<u32> = is_red
             .iter()
             .enumerate()

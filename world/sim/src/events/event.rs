@@ -37,7 +37,8 @@ impl SimEvent {
     }
 
     /// `mix` and `observe` are the events a property filter consumes.
-    pub fn is_sensing(&self) -> bool {
+    #[cfg(test)]
+    pub(crate) fn is_sensing(&self) -> bool {
         matches!(self, SimEvent::Mix { .. } | SimEvent::Observe { .. })
     }
 }

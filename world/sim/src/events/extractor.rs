@@ -21,8 +21,8 @@ use super::assignment::Assignment;
 use super::event::{SimEvent, TimedEvent};
 use super::sensor_model::SensorModel;
 use crate::geometry::Vec2;
-use idmesh_extract::frame::FrameSensing;
-use idmesh_extract::meetings::Entering;
+use idmesh_extract::Entering;
+use idmesh_extract::FrameSensing;
 use idmesh_extract::{ExtractorConfig, Meeting, MeetingModel, Report};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -112,7 +112,7 @@ impl Extractor {
     /// `is_red[i]` is the colour of target i; track t starts on target t.
     /// Swap draws come from `swap_rng`, sensor draws from `sensor_rng`.
     /// Panics on invalid parameters (the scenario builder checks them).
-    pub fn new(
+    pub(crate) fn new(
         params: ExtractionParams,
         is_red: Vec<bool>,
         swap_rng: ChaCha8Rng,
@@ -148,14 +148,14 @@ impl Extractor {
     /// track's position, with class scores `{"red": s, "blue": 1 − s}`
     /// where the sensor saw a colour (s the sensor's red likelihood,
     /// normalised) — for [`Extractor::take_reports`].
-    pub fn keep_reports(mut self) -> Self {
+    pub(crate) fn keep_reports(mut self) -> Self {
         self.reports = Some(Vec::new());
         self
     }
 
     /// The reports kept since the last call (empty unless
     /// [`Extractor::keep_reports`]).
-    pub fn take_reports(&mut self) -> Vec<Report> {
+    pub(crate) fn take_reports(&mut self) -> Vec<Report> {
         self.reports
             .as_mut()
             .map(std::mem::take)
@@ -167,7 +167,7 @@ impl Extractor {
     /// many it appended. When the limit cuts a step short, the rest of
     /// that step is dropped (including its swaps), so the truth matches
     /// the events kept.
-    pub fn step(
+    pub(crate) fn step(
         &mut self,
         time: f64,
         positions: &[Option<Vec2>],
@@ -269,22 +269,13 @@ impl Extractor {
         added
     }
 
-    pub fn params(&self) -> &ExtractionParams {
-        &self.params
-    }
-
     /// Which target is on which track now.
-    pub fn assignment(&self) -> &Assignment {
+    pub(crate) fn assignment(&self) -> &Assignment {
         &self.assignment
     }
 
-    /// The colours of the targets.
-    pub fn target_is_red(&self) -> &[bool] {
-        &self.is_red
-    }
-
     /// The tracks carrying red targets now, ascending.
-    pub fn red_tracks(&self) -> Vec<u32> {
+    pub(crate) fn red_tracks(&self) -> Vec<u32> {
         self.assignment.red_tracks(&self.is_red)
     }
 }

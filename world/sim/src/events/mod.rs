@@ -18,16 +18,15 @@
 //! ([`ObservationScheduler`]) lives in `idmesh-extract`; they are
 //! re-exported here for the simulator's users.
 
-pub mod assignment;
-pub mod event;
-pub mod extractor;
-pub mod sensor_model;
+pub(crate) mod assignment;
+pub(crate) mod event;
+pub(crate) mod extractor;
+pub(crate) mod sensor_model;
 
-pub use idmesh_extract::frame::FrameSensing;
-pub use idmesh_extract::meetings::{mixing, Entering, MixDetector};
-pub use idmesh_extract::observing::{scheduler as observing, ObservationScheduler};
+pub use idmesh_extract::MixDetector;
+pub use idmesh_extract::ObservationScheduler;
 
-pub use assignment::Assignment;
+pub(crate) use assignment::Assignment;
 pub use event::{SimEvent, TimedEvent};
 pub use extractor::{ExtractionParams, Extractor};
-pub use sensor_model::{SensorModel, SensorOutcome};
+pub use sensor_model::SensorModel;

@@ -12,7 +12,7 @@ use rand::Rng;
 
 /// One possible result of looking at a target.
 #[derive(Debug, Clone, PartialEq)]
-pub struct SensorOutcome {
+pub(crate) struct SensorOutcome {
     /// A short name, for messages ("sees red").
     pub name: String,
     /// Probability of this outcome when the target is red ...
@@ -68,7 +68,7 @@ impl SensorModel {
     /// A model from its outcome table. Every probability must be in
     /// [0, 1], each colour's must sum to 1 (within 1e-9), and every
     /// reporting outcome must have a positive probability for some colour.
-    pub fn new(outcomes: Vec<SensorOutcome>) -> Result<Self, String> {
+    pub(crate) fn new(outcomes: Vec<SensorOutcome>) -> Result<Self, String> {
         if outcomes.is_empty() {
             return Err("a sensor model needs at least one outcome".into());
         }
@@ -96,10 +96,6 @@ impl SensorModel {
             ));
         }
         Ok(SensorModel { outcomes })
-    }
-
-    pub fn outcomes(&self) -> &[SensorOutcome] {
-        &self.outcomes
     }
 
     /// Looks at a target of the given colour: the reported (red, blue)

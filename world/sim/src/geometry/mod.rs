@@ -6,5 +6,5 @@
 
 mod rect;
 
-pub use idmesh_extract::geometry::{NeighbourGrid, Vec2};
+pub use idmesh_extract::{NeighbourGrid, Vec2};
 pub use rect::Rect;

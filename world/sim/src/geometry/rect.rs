@@ -27,12 +27,13 @@ impl Rect {
         self.max.y - self.min.y
     }
 
-    pub fn area(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn area(&self) -> f64 {
         self.width() * self.height()
     }
 
     /// Width and height finite and positive.
-    pub fn is_valid(&self) -> bool {
+    pub(crate) fn is_valid(&self) -> bool {
         self.min.is_finite() && self.max.is_finite() && self.width() > 0.0 && self.height() > 0.0
     }
 

@@ -15,9 +15,9 @@
 //! Every model is deterministic: the synthetic ones draw only from the
 //! `ChaCha8Rng` they are given, the replay draws nothing.
 
-pub mod crowd;
-pub mod pedestrians;
-pub mod waypoint;
+pub(crate) mod crowd;
+pub(crate) mod pedestrians;
+pub(crate) mod waypoint;
 
 use crate::geometry::Vec2;
 

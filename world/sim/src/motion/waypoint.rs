@@ -116,7 +116,7 @@ impl Waypoint {
 
     /// Runs the model for `seconds` (so that the start, where nobody is
     /// paused, settles), then counts steps from 0 again.
-    pub fn warm_up(&mut self, seconds: f64) {
+    pub(crate) fn warm_up(&mut self, seconds: f64) {
         let steps = (seconds / self.dt).round().max(0.0) as u64;
         for _ in 0..steps {
             self.advance();

@@ -16,17 +16,17 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 /// Default number of targets of the synthetic models.
-pub const DEFAULT_TARGETS: usize = 20;
+pub(crate) const DEFAULT_TARGETS: usize = 20;
 /// Default run length of the synthetic models, seconds.
-pub const DEFAULT_DURATION: f64 = 300.0;
+pub(crate) const DEFAULT_DURATION: f64 = 300.0;
 /// Default field area per target, m² (a 50 m × 50 m square for 100).
-pub const DEFAULT_AREA_PER_TARGET: f64 = 25.0;
+pub(crate) const DEFAULT_AREA_PER_TARGET: f64 = 25.0;
 /// Default simulation step, seconds.
-pub const DEFAULT_DT: f64 = 0.1;
+pub(crate) const DEFAULT_DT: f64 = 0.1;
 /// Default warm-up of the synthetic models before time 0, seconds.
-pub const DEFAULT_WARMUP: f64 = 10.0;
+pub(crate) const DEFAULT_WARMUP: f64 = 10.0;
 /// Default time limit of a run asked for a number of events, seconds.
-pub const DEFAULT_EVENTS_WITHIN: f64 = 3600.0;
+pub(crate) const DEFAULT_EVENTS_WITHIN: f64 = 3600.0;
 
 /// Everything that determines a generated trace. Build with one of the
 /// model constructors and the option setters, then call
@@ -71,7 +71,7 @@ pub struct Scenario {
 
 impl Scenario {
     /// A scenario on `model` with every default.
-    pub fn new(model: Model) -> Self {
+    pub(crate) fn new(model: Model) -> Self {
         Scenario {
             model,
             targets: None,
@@ -140,13 +140,9 @@ impl Scenario {
     }
 
     /// Exactly these tracks carry red targets at time 0.
-    pub fn red_tracks(mut self, tracks: Vec<u32>) -> Self {
+    #[cfg(test)]
+    pub(crate) fn red_tracks(mut self, tracks: Vec<u32>) -> Self {
         self.red = RedChoice::Tracks(tracks);
-        self
-    }
-
-    pub fn red_choice(mut self, red: RedChoice) -> Self {
-        self.red = red;
         self
     }
 
@@ -165,19 +161,9 @@ impl Scenario {
         self
     }
 
-    pub fn length(mut self, length: Length) -> Self {
-        self.length = Some(length);
-        self
-    }
-
     /// The field of the synthetic models: `[0, width] × [0, height]` metres.
     pub fn field(mut self, width: f64, height: f64) -> Self {
         self.field = Some(Rect::with_size(width, height));
-        self
-    }
-
-    pub fn field_rect(mut self, field: Rect) -> Self {
-        self.field = Some(field);
         self
     }
 
@@ -187,22 +173,9 @@ impl Scenario {
         self
     }
 
-    /// Seconds the synthetic models run before time 0.
-    pub fn warmup(mut self, seconds: f64) -> Self {
-        self.warmup = seconds;
-        self
-    }
-
     /// Two targets closer than this (metres) mix.
     pub fn mix_distance(mut self, metres: f64) -> Self {
         self.extraction.mix_distance = metres;
-        self
-    }
-
-    /// A mixed pair mixes again only after separating beyond
-    /// `factor × mix_distance` (≥ 1).
-    pub fn release_factor(mut self, factor: f64) -> Self {
-        self.extraction.release_factor = factor;
         self
     }
 
@@ -241,11 +214,6 @@ impl Scenario {
 
     pub fn sensor(mut self, model: SensorModel) -> Self {
         self.extraction.sensor = model;
-        self
-    }
-
-    pub fn extraction(mut self, params: ExtractionParams) -> Self {
-        self.extraction = params;
         self
     }
 
@@ -291,10 +259,6 @@ impl Scenario {
         self
     }
 
-    pub fn identity_options(&self) -> &IdentityOptions {
-        &self.identity
-    }
-
     /// For a pedestrian scene: start this many seconds after its first
     /// annotation. Ignored by the synthetic models.
     pub fn start(mut self, seconds: f64) -> Self {
@@ -317,16 +281,8 @@ impl Scenario {
         &self.extraction
     }
 
-    pub fn seed_value(&self) -> u64 {
-        self.seed
-    }
-
-    pub fn dt_value(&self) -> f64 {
-        self.dt
-    }
-
     /// The field the synthetic models use for `n` targets.
-    pub fn field_for(&self, n: usize) -> Rect {
+    pub(crate) fn field_for(&self, n: usize) -> Rect {
         self.field.unwrap_or_else(|| {
             let side = (n.max(1) as f64 * DEFAULT_AREA_PER_TARGET).sqrt();
             Rect::with_size(side, side)
@@ -334,7 +290,7 @@ impl Scenario {
     }
 
     /// The run length, defaults resolved (`None` = a replay to its end).
-    pub fn length_value(&self) -> Option<Length> {
+    pub(crate) fn length_value(&self) -> Option<Length> {
         match (&self.length, &self.model) {
             (Some(l), _) => Some(*l),
             (None, Model::Pedestrians { .. }) => None,

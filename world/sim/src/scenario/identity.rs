@@ -38,11 +38,11 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 /// The paper's read accuracy: P(read = true identity).
-pub const DEFAULT_IDENTITY_ACCURACY: f64 = 0.9;
+pub(crate) const DEFAULT_IDENTITY_ACCURACY: f64 = 0.9;
 
 /// The identity options of a scenario.
 #[derive(Debug, Clone, PartialEq)]
-pub struct IdentityOptions {
+pub(crate) struct IdentityOptions {
     /// Whether the scenario writes an identity trace at all.
     pub enabled: bool,
     /// P(a read returns the true identity), in (0, 1].
@@ -107,14 +107,15 @@ pub struct IdentityTrace {
 
 impl IdentityTrace {
     /// How many reads returned the true identity.
-    pub fn correct_reads(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn correct_reads(&self) -> usize {
         self.reads.iter().filter(|r| r.correct).count()
     }
 }
 
 /// The RFID reader model of the module docs, stepped with the motion.
 #[derive(Debug, Clone)]
-pub struct IdentityReader {
+pub(crate) struct IdentityReader {
     accuracy: f64,
     target_identity: Vec<u32>,
     scheduler: ObservationScheduler,
@@ -129,7 +130,7 @@ impl IdentityReader {
     /// A reader for `n` targets: identities drawn from `identity_rng`, reads
     /// from `read_rng`, isolation and rate from `params`. Panics on an
     /// invalid accuracy or parameters (the scenario builder checks them).
-    pub fn new(
+    pub(crate) fn new(
         options: &IdentityOptions,
         params: &ExtractionParams,
         n: usize,
@@ -157,15 +158,10 @@ impl IdentityReader {
         }
     }
 
-    /// `target_identity[i]` = identity of target i.
-    pub fn target_identity(&self) -> &[u32] {
-        &self.target_identity
-    }
-
     /// Reads every isolated target that is due at `time`; `assignment` says
     /// which track follows which target (after this step's mixes). Returns
     /// how many reads it made.
-    pub fn step(
+    pub(crate) fn step(
         &mut self,
         time: f64,
         positions: &[Option<Vec2>],
@@ -204,7 +200,7 @@ impl IdentityReader {
 
     /// The identity part of the trace; `reveal_initial` says whether the
     /// header shows the identities at time 0.
-    pub fn finish(self, reveal_initial: bool) -> IdentityTrace {
+    pub(crate) fn finish(self, reveal_initial: bool) -> IdentityTrace {
         IdentityTrace {
             accuracy: self.accuracy,
             // Track t follows target t at time 0.

@@ -28,7 +28,7 @@ fn rank(event: &SimEvent) -> u8 {
 }
 
 /// The `identify` line of a read.
-pub fn identify_line(read: &IdentityRead, accuracy: f64) -> Line {
+pub(crate) fn identify_line(read: &IdentityRead, accuracy: f64) -> Line {
     Line::Identify(Identify {
         time: read.time,
         track: read.track,
@@ -46,13 +46,13 @@ struct IdentityState<'a> {
 }
 
 /// Iterator over the non-header lines of a generated trace.
-pub struct EventLines<'a> {
+pub(crate) struct EventLines<'a> {
     events: Peekable<Iter<'a, TimedEvent>>,
     identity: Option<IdentityState<'a>>,
 }
 
 impl<'a> EventLines<'a> {
-    pub fn new(trace: &'a GeneratedTrace) -> Self {
+    pub(crate) fn new(trace: &'a GeneratedTrace) -> Self {
         EventLines {
             events: trace.events.iter().peekable(),
             identity: trace

@@ -2,13 +2,13 @@
 //! replay of the ground-truth motion, truth identities against the swaps,
 //! the read model's frequencies, and the written trace.
 
+use super::identity::IdentityRead;
 use super::trace_out::{lines, write_trace};
 use super::*;
 use crate::events::{Assignment, SimEvent, TimedEvent};
 use crate::geometry::Vec2;
 use crate::motion::pedestrians::{data_dir, Scene, Timing};
-use idmesh_protocol::trace::Line;
-use idmesh_protocol::TraceReader;
+use idmesh_protocol::trace::{Line, TraceReader};
 use std::sync::Arc;
 
 /// One event of a generated identity trace, in trace order.

@@ -13,23 +13,23 @@
 //! - [`identity`] — identity traces: identities, the RFID reader model;
 //!   [`identity_out`] weaves them into the trace lines.
 
-pub mod builder;
-pub mod error;
-pub mod identity;
-pub mod identity_out;
-pub mod options;
-pub mod progress;
-pub mod run;
-pub mod trace;
-pub mod trace_out;
+pub(crate) mod builder;
+pub(crate) mod error;
+pub(crate) mod identity;
+pub(crate) mod identity_out;
+pub(crate) mod options;
+pub(crate) mod progress;
+pub(crate) mod run;
+pub(crate) mod trace;
+pub(crate) mod trace_out;
 
 pub use builder::Scenario;
 pub use error::ScenarioError;
-pub use identity::{IdentityOptions, IdentityRead, IdentityTrace};
-pub use options::{Length, Model, RedChoice, SceneSource};
-pub use progress::Progress;
-pub use run::BuiltMotion;
-pub use trace::{GeneratedTrace, TraceHeader, TraceStats};
+pub use identity::IdentityTrace;
+pub use options::Model;
+pub use options::SceneSource;
+pub use trace::GeneratedTrace;
+pub use trace::{TraceHeader, TraceStats};
 
 #[cfg(test)]
 mod extract_agreement_tests;

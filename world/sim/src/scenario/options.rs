@@ -20,7 +20,7 @@ pub enum Model {
 }
 
 impl Model {
-    pub fn name(&self) -> &'static str {
+    pub(crate) fn name(&self) -> &'static str {
         match self {
             Model::Crowd(_) => "crowd",
             Model::Waypoint(_) => "waypoint",
@@ -39,20 +39,21 @@ pub enum SceneSource {
 
 /// Which targets are red.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub enum RedChoice {
+pub(crate) enum RedChoice {
     /// k = ⌊n/2⌋ targets drawn by the seed (the paper's "half of them are
     /// red").
     #[default]
     Half,
     /// k targets drawn by the seed.
     Count(usize),
-    /// Exactly these tracks are red at time 0.
+    /// Exactly these tracks are red at time 0 (only the tests choose them).
+    #[cfg(test)]
     Tracks(Vec<u32>),
 }
 
 /// When a run stops.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Length {
+pub(crate) enum Length {
     /// After this many seconds of motion.
     Duration(f64),
     /// After this many `mix` + `observe` events; an error if the motion

@@ -6,7 +6,7 @@
 //! simulation steps; for a run of a fixed number of events it is events.
 
 /// The progress hook: `(done, total)`.
-pub type Progress<'a> = &'a mut dyn FnMut(u64, u64);
+pub(crate) type Progress<'a> = &'a mut dyn FnMut(u64, u64);
 
 /// Calls a hook only when at least 1/1000 of the work has been done since
 /// the last call (and always for the final value), keeping the cost of a
@@ -19,7 +19,7 @@ pub(crate) struct Throttle<'a> {
 }
 
 impl<'a> Throttle<'a> {
-    pub fn new(hook: Progress<'a>, total: u64) -> Self {
+    pub(crate) fn new(hook: Progress<'a>, total: u64) -> Self {
         Throttle {
             hook,
             total,
@@ -28,7 +28,7 @@ impl<'a> Throttle<'a> {
         }
     }
 
-    pub fn report(&mut self, done: u64) {
+    pub(crate) fn report(&mut self, done: u64) {
         let done = done.min(self.total);
         let due = match self.last {
             None => true,
@@ -41,7 +41,7 @@ impl<'a> Throttle<'a> {
     }
 
     /// Reports completion (`total, total`) if it was not reported yet.
-    pub fn finish(&mut self) {
+    pub(crate) fn finish(&mut self) {
         self.report(self.total);
     }
 }

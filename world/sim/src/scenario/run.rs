@@ -49,7 +49,7 @@ fn stream(seed: u64, stream: u64) -> ChaCha8Rng {
 }
 
 /// The motion of a scenario, ready at time 0, and a line describing it.
-pub struct BuiltMotion {
+pub(crate) struct BuiltMotion {
     pub motion: Box<dyn Motion>,
     pub description: String,
 }
@@ -58,7 +58,7 @@ impl Scenario {
     /// The ground-truth motion of this scenario at time 0 (warm-up done,
     /// replay window chosen): stepping it reproduces exactly the positions
     /// the trace was extracted from. Useful to check or draw a trace.
-    pub fn motion(&self) -> Result<BuiltMotion, ScenarioError> {
+    pub(crate) fn motion(&self) -> Result<BuiltMotion, ScenarioError> {
         self.validate()?;
         let rng = stream(self.seed, STREAM_MOTION);
         Ok(match &self.model {
@@ -290,6 +290,7 @@ impl Scenario {
         let k = match &self.red {
             RedChoice::Half => n / 2,
             RedChoice::Count(k) => *k,
+            #[cfg(test)]
             RedChoice::Tracks(tracks) => {
                 for &t in tracks {
                     let slot = is_red.get_mut(t as usize).ok_or_else(|| {

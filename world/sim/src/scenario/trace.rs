@@ -84,7 +84,8 @@ impl GeneratedTrace {
     }
 
     /// The `mix` and `observe` events only, in order.
-    pub fn sensing_events(&self) -> impl Iterator<Item = &TimedEvent> {
+    #[cfg(test)]
+    pub(crate) fn sensing_events(&self) -> impl Iterator<Item = &TimedEvent> {
         self.events.iter().filter(|e| e.event.is_sensing())
     }
 }

@@ -13,12 +13,13 @@
 
 use super::trace::GeneratedTrace;
 use crate::events::{SimEvent, TimedEvent};
-use idmesh_protocol::trace::{Detect, Header, Line, Mix, Move, Observe, Truth};
-use idmesh_protocol::{TraceError, TraceWriter};
+use idmesh_protocol::trace::{
+    Detect, Header, Line, Mix, Move, Observe, TraceError, TraceWriter, Truth,
+};
 use std::io::Write;
 
 /// The `header` line of a generated trace.
-pub fn header_line(trace: &GeneratedTrace) -> Line {
+pub(crate) fn header_line(trace: &GeneratedTrace) -> Line {
     let h = &trace.header;
     let mut header = Header::new(h.tracks);
     header.red = Some(h.red);
@@ -136,7 +137,7 @@ fn round_position(v: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::scenario::Scenario;
-    use idmesh_protocol::TraceReader;
+    use idmesh_protocol::trace::TraceReader;
 
     #[test]
     fn a_written_trace_reads_back_line_for_line() {

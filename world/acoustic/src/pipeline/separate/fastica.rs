@@ -383,7 +383,7 @@ impl FastIca {
     /// Separates data already whitened by [`whiten`]: `z` is n × T with
     /// identity covariance. Lets a caller look at the eigenvalues (and skip
     /// silent data) before paying for the iterations.
-    pub fn fit_whitened(
+    pub(crate) fn fit_whitened(
         &self,
         whitening: Whitening,
         z: DMatrix<f64>,

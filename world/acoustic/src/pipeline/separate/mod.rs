@@ -11,11 +11,12 @@
 //! yields two segments. The noise variance is estimated blindly from the
 //! data ([`estimate_noise_variance`]).
 
-pub mod fastica;
-pub mod whitening;
+pub(crate) mod fastica;
+pub(crate) mod whitening;
 
-pub use fastica::{Algorithm, FastIca, FastIcaConfig, FastIcaError, IcaResult, Nonlinearity};
-pub use whitening::{whiten, Components, Whitening};
+pub use fastica::{Algorithm, FastIca, FastIcaConfig, FastIcaError};
+pub(crate) use whitening::whiten;
+pub use whitening::Components;
 
 use super::prepare::{segment_group, Segmentation, SensorGroup};
 use crate::error::AcousticError;
@@ -78,7 +79,7 @@ impl SlotSegments {
 
     /// Appends a segment, centring and normalising it; a constant segment
     /// is dropped.
-    pub fn push(&mut self, group: u32, samples: impl Iterator<Item = f64>) {
+    pub(crate) fn push(&mut self, group: u32, samples: impl Iterator<Item = f64>) {
         let v: Vec<f64> = samples.collect();
         debug_assert_eq!(v.len(), self.l_seg);
         let mean = v.iter().sum::<f64>() / v.len() as f64;

@@ -61,14 +61,14 @@ pub struct Whitening {
 
 impl Whitening {
     /// Number of kept directions (n).
-    pub fn components(&self) -> usize {
+    pub(crate) fn components(&self) -> usize {
         self.whitener.nrows()
     }
 }
 
 /// Checks `x` (m × T) and returns its whitening and the whitened data
 /// (n × T, identity covariance with the 1/T convention).
-pub fn whiten(
+pub(crate) fn whiten(
     x: &DMatrix<f64>,
     components: &Components,
 ) -> Result<(Whitening, DMatrix<f64>), FastIcaError> {

@@ -20,7 +20,12 @@ pub(super) struct Agent {
 
 impl Agent {
     /// A walker at `pos` with a fresh goal, already at its desired speed.
-    pub fn new(pos: Vec2, p: &CrowdParams, goals: &GoalSampler, rng: &mut ChaCha8Rng) -> Self {
+    pub(crate) fn new(
+        pos: Vec2,
+        p: &CrowdParams,
+        goals: &GoalSampler,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
         let (mean, sd) = p.desired_speed;
         let desired_speed = (mean + sd * standard_normal(rng)).clamp(0.5, 2.5);
         let goal = goals.sample(rng);
@@ -36,7 +41,7 @@ impl Agent {
 
     /// The velocity the walker would like to have: v0 towards the goal, or
     /// standing still during a pause.
-    pub fn desired_velocity(&self) -> Vec2 {
+    pub(crate) fn desired_velocity(&self) -> Vec2 {
         if self.dwell_left > 0.0 {
             Vec2::ZERO
         } else {
@@ -46,7 +51,7 @@ impl Agent {
 
     /// The direction the walker looks in (for the anisotropy of the
     /// repulsion): towards its goal, or along its velocity while pausing.
-    pub fn heading(&self) -> Vec2 {
+    pub(crate) fn heading(&self) -> Vec2 {
         if self.dwell_left > 0.0 {
             self.vel.normalized()
         } else {
@@ -56,7 +61,7 @@ impl Agent {
 
     /// After a move: start a pause at a reached goal, count a pause down,
     /// and pick the next goal when it is over.
-    pub fn update_goal(
+    pub(crate) fn update_goal(
         &mut self,
         dt: f64,
         p: &CrowdParams,

@@ -44,7 +44,7 @@ pub(super) struct GoalSampler {
 }
 
 impl GoalSampler {
-    pub fn new(goals: &Goals, field: Rect, rng: &mut ChaCha8Rng) -> Self {
+    pub(crate) fn new(goals: &Goals, field: Rect, rng: &mut ChaCha8Rng) -> Self {
         let area = field.shrink(1.0);
         match goals {
             Goals::Uniform => GoalSampler {
@@ -60,7 +60,7 @@ impl GoalSampler {
         }
     }
 
-    pub fn sample(&self, rng: &mut ChaCha8Rng) -> Vec2 {
+    pub(crate) fn sample(&self, rng: &mut ChaCha8Rng) -> Vec2 {
         if self.stalls.is_empty() {
             return self.area.sample(rng);
         }

@@ -157,7 +157,13 @@ impl Crowd {
     ///
     /// Panics if `params` do not validate, `dt` is not positive or the field
     /// is empty; the scenario builder checks all three first.
-    pub fn new(n: usize, field: Rect, dt: f64, params: CrowdParams, mut rng: ChaCha8Rng) -> Self {
+    pub(crate) fn new(
+        n: usize,
+        field: Rect,
+        dt: f64,
+        params: CrowdParams,
+        mut rng: ChaCha8Rng,
+    ) -> Self {
         if let Err(e) = params.validate() {
             panic!("{e}");
         }
@@ -194,7 +200,7 @@ impl Crowd {
 
     /// Runs the crowd for `seconds` (so that the random start settles into
     /// walking), then counts steps from 0 again.
-    pub fn warm_up(&mut self, seconds: f64) {
+    pub(crate) fn warm_up(&mut self, seconds: f64) {
         let steps = (seconds / self.dt).round().max(0.0) as u64;
         for _ in 0..steps {
             self.advance();
@@ -202,17 +208,9 @@ impl Crowd {
         self.step = 0;
     }
 
-    pub fn params(&self) -> &CrowdParams {
-        &self.params
-    }
-
+    #[cfg(test)]
     pub fn field(&self) -> Rect {
         self.field
-    }
-
-    /// Current velocities, m/s, indexed by target.
-    pub fn velocities(&self) -> impl Iterator<Item = Vec2> + '_ {
-        self.agents.iter().map(|a| a.vel)
     }
 }
 

@@ -14,15 +14,15 @@
 //! Malformed files are rejected with a [`SceneError`] that reads
 //! `FILE:LINE: reason`.
 
-pub mod error;
+pub(crate) mod error;
 pub use idmesh_extract::adapters::eth_ucy as format;
-pub mod scene;
-pub mod window;
+pub(crate) mod scene;
+pub(crate) mod window;
 
 pub use error::SceneError;
-pub use format::SceneFormat;
-pub use scene::{Person, Sample, Scene, Timing};
-pub use window::{Window, WindowSpec};
+pub use scene::{Scene, Timing};
+pub use window::Window;
+pub(crate) use window::WindowSpec;
 
 use super::Motion;
 use crate::geometry::Vec2;
@@ -32,7 +32,7 @@ use std::sync::Arc;
 /// `window.people[t]`, sampled every `dt` seconds from the window start
 /// (linear interpolation between annotations; `None` while absent).
 #[derive(Debug, Clone)]
-pub struct Replay {
+pub(crate) struct Replay {
     scene: Arc<Scene>,
     window: Window,
     dt: f64,
@@ -44,7 +44,7 @@ pub struct Replay {
 
 impl Replay {
     /// Panics if `dt` is not finite and positive (the builder checks it).
-    pub fn new(scene: Arc<Scene>, window: Window, dt: f64) -> Self {
+    pub(crate) fn new(scene: Arc<Scene>, window: Window, dt: f64) -> Self {
         assert!(
             dt.is_finite() && dt > 0.0,
             "replay dt must be > 0, got {dt}"
@@ -62,14 +62,6 @@ impl Replay {
         };
         replay.sample();
         replay
-    }
-
-    pub fn scene(&self) -> &Scene {
-        &self.scene
-    }
-
-    pub fn window(&self) -> &Window {
-        &self.window
     }
 
     fn sample(&mut self) {
@@ -132,6 +124,7 @@ pub fn data_dir() -> std::path::PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use format::SceneFormat;
 
     #[test]
     fn loads_the_real_eth_obsmat_scene() {

@@ -32,7 +32,7 @@ pub enum Timing {
 
 /// One annotated position of a person.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Sample {
+pub(crate) struct Sample {
     /// Seconds from the scene's first annotated frame.
     pub time: f64,
     pub pos: Vec2,
@@ -40,18 +40,18 @@ pub struct Sample {
 
 /// One person's trajectory, samples in time order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Person {
+pub(crate) struct Person {
     /// The pedestrian id in the file.
     pub id: u32,
     pub samples: Vec<Sample>,
 }
 
 impl Person {
-    pub fn first_time(&self) -> f64 {
+    pub(crate) fn first_time(&self) -> f64 {
         self.samples[0].time
     }
 
-    pub fn last_time(&self) -> f64 {
+    pub(crate) fn last_time(&self) -> f64 {
         self.samples[self.samples.len() - 1].time
     }
 }
@@ -67,7 +67,7 @@ pub struct Scene {
     /// Seconds between two annotations of a person.
     pub annotation_step: f64,
     /// Everyone in the scene, ordered by first appearance, then id.
-    pub people: Vec<Person>,
+    pub(crate) people: Vec<Person>,
 }
 
 /// Two annotations of a person further apart than this many annotation
@@ -90,7 +90,7 @@ impl Scene {
 
     /// Parses the text of a scene file; `file` names it in errors (and is
     /// used to recognise `biwi_eth.txt` under [`Timing::Auto`]).
-    pub fn parse(text: &str, file: &str, timing: Timing) -> Result<Scene, SceneError> {
+    pub(crate) fn parse(text: &str, file: &str, timing: Timing) -> Result<Scene, SceneError> {
         let (format, rows) = parse_rows(text, file)?;
         // Per person, frame -> row; a second row for the same frame is an error.
         let mut by_person: BTreeMap<u32, BTreeMap<u64, (usize, Vec2)>> = BTreeMap::new();
@@ -165,7 +165,8 @@ impl Scene {
     }
 
     /// Number of rows (annotated positions).
-    pub fn rows(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn rows(&self) -> usize {
         self.people.iter().map(|p| p.samples.len()).sum()
     }
 
@@ -173,7 +174,7 @@ impl Scene {
     /// interpolation between annotations; `hint` is a cursor into the
     /// person's samples that only moves forward, making a replay in time
     /// order O(1) per call (pass 0 for a one-off look-up).
-    pub fn position_at(&self, person: usize, time: f64, hint: &mut usize) -> Option<Vec2> {
+    pub(crate) fn position_at(&self, person: usize, time: f64, hint: &mut usize) -> Option<Vec2> {
         let s = &self.people[person].samples;
         if time < s[0].time - TIME_EPS || time > s[s.len() - 1].time + TIME_EPS {
             return None;

@@ -22,7 +22,7 @@ use super::scene::{Scene, TIME_EPS};
 
 /// What part of a scene to replay.
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct WindowSpec {
+pub(crate) struct WindowSpec {
     /// Seconds from the scene's first annotation (default 0).
     pub start: f64,
     /// At most this many people (default: everyone in the window).
@@ -46,7 +46,7 @@ pub struct Window {
 
 impl Window {
     /// Chooses the people and the time span of a run.
-    pub fn choose(scene: &Scene, spec: &WindowSpec) -> Result<Window, SceneError> {
+    pub(crate) fn choose(scene: &Scene, spec: &WindowSpec) -> Result<Window, SceneError> {
         let fail = |reason: String| SceneError::Window {
             file: scene.source.clone(),
             reason,
@@ -109,10 +109,6 @@ impl Window {
             end,
             people: arrivals.into_iter().map(|(_, i)| i).collect(),
         })
-    }
-
-    pub fn duration(&self) -> f64 {
-        self.end - self.start
     }
 }
 
