@@ -235,6 +235,13 @@ pub struct Node {
     held: Vec<Held>,
     /// A resend request is out.
     resending: bool,
+    /// Resend requests the sensor refused in a row, and the time before
+    /// which none is asked again ([`resend_backoff`]).
+    resend_refusals: u32,
+    resend_not_before: Now,
+    /// Whether the node has said that the sensor no longer holds what it
+    /// needs (said once).
+    said_unrebuildable: bool,
     /// The follow request is out (None: ask again on the next tick).
     following: bool,
     /// Transfers this step made, by peer, not yet put in messages.
@@ -272,6 +279,9 @@ impl Node {
             recovery: None,
             held: Vec::new(),
             resending: false,
+            resend_refusals: 0,
+            resend_not_before: Duration::ZERO,
+            said_unrebuildable: false,
             following: false,
             outgoing: Vec::new(),
             asking: BTreeMap::new(),
@@ -335,6 +345,8 @@ impl Node {
                 self.resending = false;
                 match result {
                     Ok(batches) => {
+                        self.resend_refusals = 0;
+                        self.resend_not_before = Duration::ZERO;
                         if let Some(r) = &mut self.recovery {
                             r.batches = true;
                         }
@@ -343,9 +355,7 @@ impl Node {
                             self.input(Kind::Batch, bytes, "the sensor's resend reply", &mut out);
                         }
                     }
-                    Err(e) => {
-                        tracing::warn!(leader = %self.leader.name(), error = %e, "resend request failed; asking again")
-                    }
+                    Err(e) => self.resend_refused(now, &e),
                 }
             }
             Input::Transfers { peer, result } => {
@@ -505,10 +515,32 @@ impl Node {
         }
     }
 
+    /// A resend request failed: asked again at once the first time (a
+    /// lost reply), then only after a backoff that doubles with each
+    /// refusal in a row, so that a sensor that cannot answer is not
+    /// flooded. A sensor that dropped the batches this leader needs (its
+    /// durable mark was passed by a holder whose state is gone) is said
+    /// once, as an error: the role cannot be rebuilt from the stream.
+    fn resend_refused(&mut self, now: Now, error: &str) {
+        self.resend_refusals += 1;
+        let wait = resend_backoff(self.resend_refusals, self.timers.late);
+        self.resend_not_before = now + wait;
+        let name = self.leader.name().to_string();
+        if error.contains("were dropped") && !self.said_unrebuildable {
+            self.said_unrebuildable = true;
+            tracing::error!(leader = %name, %error,
+                "the sensor no longer holds the batches this role needs: it cannot be rebuilt \
+                 from the stream, and its answers stay degraded; asking again with a backoff");
+        } else if self.resend_refusals.is_power_of_two() {
+            tracing::warn!(leader = %name, %error, refusals = self.resend_refusals,
+                retry_in_ms = wait.as_millis() as u64, "resend request failed; asking again");
+        }
+    }
+
     /// Asks the sensor for every batch from the next one expected, unless
-    /// a request is already out.
-    fn ask_resend(&mut self, out: &mut Vec<Output>) {
-        if self.resending {
+    /// a request is already out or a refusal's backoff still runs.
+    fn ask_resend(&mut self, now: Now, out: &mut Vec<Output>) {
+        if self.resending || now < self.resend_not_before {
             return;
         }
         self.resending = true;
@@ -572,7 +604,7 @@ impl Node {
             .any(|h| now.saturating_sub(h.since) > self.timers.late);
         let unanswered = self.recovery.as_ref().is_some_and(|r| !r.batches);
         if self.leader.missing_batches().is_some() || late || unanswered {
-            self.ask_resend(out);
+            self.ask_resend(now, out);
         }
         // A transfer waited for too long: lost on the way, or sent while
         // this leader was down. The peer keeps what it sent.
@@ -612,7 +644,7 @@ impl Node {
     /// may be due.
     fn after_input(&mut self, now: Now, out: &mut Vec<Output>) {
         if self.leader.missing_batches().is_some() {
-            self.ask_resend(out);
+            self.ask_resend(now, out);
         }
         let waiting = self.leader.waiting_for_transfer();
         if waiting != self.waiting_since.map(|w| w.0) {
@@ -709,5 +741,20 @@ impl Node {
     }
 }
 
+/// The most a refused resend request waits before it is asked again.
+pub const MAX_RESEND_BACKOFF: Duration = Duration::from_secs(30);
+
+/// The wait before asking again after `refusals` refused resend requests
+/// in a row: none after one (a reply lost on the way), then `late`,
+/// doubling with each refusal, at most [`MAX_RESEND_BACKOFF`].
+pub(crate) fn resend_backoff(refusals: u32, late: Duration) -> Duration {
+    if refusals <= 1 {
+        return Duration::ZERO;
+    }
+    let doublings = (refusals - 2).min(16);
+    (late * 2u32.pow(doublings)).min(MAX_RESEND_BACKOFF)
+}
+
 #[cfg(test)]
 mod tests;
+

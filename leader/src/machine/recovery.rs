@@ -87,7 +87,7 @@ impl Node {
         for (to, transfer) in self.leader.all_sent().to_vec() {
             self.send(to, transfer);
         }
-        self.ask_resend(out);
+        self.ask_resend(now, out);
         let name = self.leader.name().to_string();
         let peers: Vec<String> = self
             .leader

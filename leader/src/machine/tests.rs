@@ -239,6 +239,47 @@ fn a_late_cut_asks_for_the_batches_again_once_at_a_time() {
     assert_eq!(answers(&out).len(), 1);
 }
 
+/// A sensor that refuses resend requests again and again (it dropped the
+/// batches a role needs) is asked again only after a backoff that doubles,
+/// not at every input and tick; an answer starts the backoff over.
+#[test]
+fn refused_resend_requests_back_off() {
+    let mut node = started("a", &["a"]);
+    // Batch 1 is missing: asked for at once.
+    let mut now = MS;
+    let mut out = node.step(now, batch(2, vec![(3, mix(0, 1, 0, 0))], 3));
+    let mut asked_at = Vec::new();
+    // Ten minutes of ticks and inputs: every request refused as soon as
+    // it is made.
+    while now < 600_000 * MS {
+        if resends(&out) > 0 {
+            asked_at.push(now.as_millis() as u64);
+            let refusal = Err("a asks for batches from 1, but ... were dropped".to_string());
+            out = node.step(now, Input::Resent(refusal));
+            continue;
+        }
+        now += 50 * MS;
+        out = if (now.as_millis() / 50).is_multiple_of(2) {
+            node.step(now, Input::Tick)
+        } else {
+            node.step(now, batch(3, vec![], 3))
+        };
+    }
+    // The first refusal is asked again at once; then 0.5 s, 1 s, 2 s, …
+    // up to 30 s between requests.
+    let gaps: Vec<u64> = asked_at.windows(2).map(|w| w[1] - w[0]).collect();
+    assert_eq!(gaps[0], 0, "{gaps:?}");
+    assert!((500..=600).contains(&gaps[1]), "{gaps:?}");
+    assert!(gaps.windows(2).all(|g| g[1] + 100 >= g[0]), "never shorter: {gaps:?}");
+    assert!(gaps.iter().all(|&g| g <= 30_100), "{gaps:?}");
+    assert!(gaps.iter().rev().take(5).all(|&g| g >= 30_000), "{gaps:?}");
+    assert!(asked_at.len() < 40, "{} requests in ten minutes", asked_at.len());
+    // An answer (here with nothing in it) starts it over: the batch still
+    // missing is asked for again at once.
+    let out = node.step(now, Input::Resent(Ok(Vec::new())));
+    assert_eq!(resends(&out), 1);
+}
+
 #[test]
 fn a_gap_in_batch_numbers_is_asked_for_at_once() {
     let mut node = started("a", &["a"]);
@@ -869,3 +910,4 @@ fn a_leader_pushes_its_sums_at_every_cut_as_a_change_to_the_last_pushed() {
     assert_eq!(changed[0].tracks, vec![0, 2]);
     assert_eq!(answers(&out).len(), 1, "the held query answered too");
 }
+
