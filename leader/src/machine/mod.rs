@@ -239,9 +239,9 @@ pub struct Node {
     /// which none is asked again ([`resend_backoff`]).
     resend_refusals: u32,
     resend_not_before: Now,
-    /// Whether the node has said that the sensor no longer holds what it
-    /// needs (said once).
-    said_unrebuildable: bool,
+    /// The sensor's word that it no longer holds the batches this role
+    /// needs (said once in the log; in every answer while it holds).
+    unrebuildable: Option<String>,
     /// The follow request is out (None: ask again on the next tick).
     following: bool,
     /// Transfers this step made, by peer, not yet put in messages.
@@ -281,7 +281,7 @@ impl Node {
             resending: false,
             resend_refusals: 0,
             resend_not_before: Duration::ZERO,
-            said_unrebuildable: false,
+            unrebuildable: None,
             following: false,
             outgoing: Vec::new(),
             asking: BTreeMap::new(),
@@ -310,6 +310,12 @@ impl Node {
     }
 
     /// Since when the leader has been catching up, if it is.
+    /// Why this role cannot be rebuilt from the stream, if the sensor
+    /// said so.
+    pub(crate) fn unrebuildable(&self) -> Option<&str> {
+        self.unrebuildable.as_deref()
+    }
+
     pub(crate) fn recovering_since(&self) -> Option<Now> {
         self.recovery.as_ref().map(|r| r.since)
     }
@@ -347,6 +353,7 @@ impl Node {
                     Ok(batches) => {
                         self.resend_refusals = 0;
                         self.resend_not_before = Duration::ZERO;
+                        self.unrebuildable = None;
                         if let Some(r) = &mut self.recovery {
                             r.batches = true;
                         }
@@ -520,17 +527,21 @@ impl Node {
     /// refusal in a row, so that a sensor that cannot answer is not
     /// flooded. A sensor that dropped the batches this leader needs (its
     /// durable mark was passed by a holder whose state is gone) is said
-    /// once, as an error: the role cannot be rebuilt from the stream.
+    /// once, as an error, and by every answer while it lasts: the role
+    /// cannot be rebuilt from the stream.
     fn resend_refused(&mut self, now: Now, error: &str) {
         self.resend_refusals += 1;
         let wait = resend_backoff(self.resend_refusals, self.timers.late);
         self.resend_not_before = now + wait;
         let name = self.leader.name().to_string();
-        if error.contains("were dropped") && !self.said_unrebuildable {
-            self.said_unrebuildable = true;
-            tracing::error!(leader = %name, %error,
-                "the sensor no longer holds the batches this role needs: it cannot be rebuilt \
-                 from the stream, and its answers stay degraded; asking again with a backoff");
+        if error.contains("were dropped") {
+            if self.unrebuildable.is_none() {
+                tracing::error!(leader = %name, %error,
+                    "the sensor no longer holds the batches this role needs: it cannot be \
+                     rebuilt from the stream, and its answers stay degraded; asking again \
+                     with a backoff");
+            }
+            self.unrebuildable = Some(error.to_string());
         } else if self.resend_refusals.is_power_of_two() {
             tracing::warn!(leader = %name, %error, refusals = self.resend_refusals,
                 retry_in_ms = wait.as_millis() as u64, "resend request failed; asking again");
@@ -757,4 +768,3 @@ pub(crate) fn resend_backoff(refusals: u32, late: Duration) -> Duration {
 
 #[cfg(test)]
 mod tests;
-

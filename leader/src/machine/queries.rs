@@ -73,6 +73,12 @@ impl Node {
         let name = self.leader.name().to_string();
         let answer = if let Some(failure) = &self.failure {
             Err(format!("leader {name} failed: {failure}"))
+        } else if let (Some(since), Some(why)) = (self.recovering_since(), self.unrebuildable()) {
+            Err(format!(
+                "degraded: leader {name} has been recovering its state for {:.1} s and cannot \
+                 be rebuilt from the stream: {why}",
+                now.saturating_sub(since).as_secs_f64()
+            ))
         } else if let Some(since) = self.recovering_since() {
             Err(format!(
                 "degraded: leader {name} is recovering its state (for {:.1} s); ask again shortly",

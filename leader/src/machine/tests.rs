@@ -270,10 +270,17 @@ fn refused_resend_requests_back_off() {
     let gaps: Vec<u64> = asked_at.windows(2).map(|w| w[1] - w[0]).collect();
     assert_eq!(gaps[0], 0, "{gaps:?}");
     assert!((500..=600).contains(&gaps[1]), "{gaps:?}");
-    assert!(gaps.windows(2).all(|g| g[1] + 100 >= g[0]), "never shorter: {gaps:?}");
+    assert!(
+        gaps.windows(2).all(|g| g[1] + 100 >= g[0]),
+        "never shorter: {gaps:?}"
+    );
     assert!(gaps.iter().all(|&g| g <= 30_100), "{gaps:?}");
     assert!(gaps.iter().rev().take(5).all(|&g| g >= 30_000), "{gaps:?}");
-    assert!(asked_at.len() < 40, "{} requests in ten minutes", asked_at.len());
+    assert!(
+        asked_at.len() < 40,
+        "{} requests in ten minutes",
+        asked_at.len()
+    );
     // An answer (here with nothing in it) starts it over: the batch still
     // missing is asked for again at once.
     let out = node.step(now, Input::Resent(Ok(Vec::new())));
@@ -556,6 +563,24 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
         .as_ref()
         .unwrap_err()
         .contains("recovering"));
+    // The sensor refuses: it dropped what the role needs. Answers say so
+    // (not "ask again shortly") until the sensor answers.
+    let dropped = "a asks for batches from 2, but it said its state was safe through 5 \
+                   and those before were dropped";
+    node.step(25 * MS, Input::Resent(Err(dropped.into())));
+    let out = node.step(
+        26 * MS,
+        Input::Partial {
+            id: 2,
+            ask: Ask::Quiet { rows: false },
+            base: None,
+        },
+    );
+    let said = answers(&out)[0].1.clone().unwrap_err();
+    assert!(
+        said.contains("cannot be rebuilt") && said.contains("were dropped"),
+        "{said}"
+    );
     // The sensor answers, then b: caught up.
     node.step(30 * MS, Input::Resent(Ok(Vec::new())));
     assert!(node.recovering_since().is_some());
@@ -910,4 +935,3 @@ fn a_leader_pushes_its_sums_at_every_cut_as_a_change_to_the_last_pushed() {
     assert_eq!(changed[0].tracks, vec![0, 2]);
     assert_eq!(answers(&out).len(), 1, "the held query answered too");
 }
-
