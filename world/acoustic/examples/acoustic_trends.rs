@@ -57,9 +57,18 @@ struct Row {
     extra: String,
 }
 
-fn measure(label: String, x: f64, config: &AcousticConfig, seeds: u64, extra: String) -> Row {
-    let mut sum = [Stats::default(); 2];
-    let mut finite = [0.0f64; 2];
+/// Each of `variants` (of one seed's pipeline) run on the same separation
+/// for seeds 1..=`seeds`: their means over the seeds (the errors over the
+/// seeds where they are finite), and the seconds a seed took.
+fn mean_over_seeds(
+    label: &str,
+    config: &AcousticConfig,
+    seeds: u64,
+    variants: impl Fn(&AcousticConfig) -> Vec<PipelineConfig>,
+) -> (Vec<Stats>, f64) {
+    let count = variants(config).len();
+    let mut sum = vec![Stats::default(); count];
+    let mut finite = vec![0.0f64; count];
     let mut secs = 0.0;
     for seed in 1..=seeds {
         let mut cfg = config.clone();
@@ -84,25 +93,36 @@ fn measure(label: String, x: f64, config: &AcousticConfig, seeds: u64, extra: St
         secs += start.elapsed().as_secs_f64();
     }
     let k = seeds as f64;
-    let stats = [0, 1].map(|i| {
-        let n = if finite[i] > 0.0 { finite[i] } else { f64::NAN };
-        Stats {
-            mean: sum[i].mean / n,
-            std: sum[i].std / n,
-            aligned: sum[i].aligned / n,
-            coverage: 100.0 * sum[i].coverage / k,
-            tracked: 100.0 * sum[i].tracked / k,
-        }
-    });
+    let stats = sum
+        .iter()
+        .zip(&finite)
+        .map(|(s, &f)| {
+            let n = if f > 0.0 { f } else { f64::NAN };
+            Stats {
+                mean: s.mean / n,
+                std: s.std / n,
+                aligned: s.aligned / n,
+                coverage: 100.0 * s.coverage / k,
+                tracked: 100.0 * s.tracked / k,
+            }
+        })
+        .collect();
+    (stats, secs / k)
+}
+
+fn measure(label: String, x: f64, config: &AcousticConfig, seeds: u64, extra: String) -> Row {
+    let (stats, seconds) = mean_over_seeds(&label, config, seeds, |c| variants(c).to_vec());
     eprintln!(
         "  {label}: {:.1} m / {:.1} m ({:.0} s)",
-        stats[0].mean, stats[1].mean, secs
+        stats[0].mean,
+        stats[1].mean,
+        seconds * seeds as f64
     );
     Row {
         label,
         x,
-        stats,
-        seconds: secs / k,
+        stats: [stats[0], stats[1]],
+        seconds,
         extra,
     }
 }
@@ -306,38 +326,23 @@ fn departures(seeds: u64) -> String {
             ..p
         }),
     ];
-    // sums[rule][density]: mean error, coverage, aligned error, slots
-    // tracked, and how many seeds gave a finite error.
-    let mut sums = [[[0.0f64; 5]; 3]; 5];
-    for (d, &n) in densities.iter().enumerate() {
-        for seed in 1..=seeds {
+    // By density, each rule's means over the seeds.
+    let by_density: Vec<Vec<Stats>> = densities
+        .iter()
+        .map(|&n| {
             let mut c = base();
             c.field.sensors = n;
             c.field.paths = PathSpec::Random {
                 speed: (0.03, 0.03),
             };
-            c.seed = seed;
-            let variants: Vec<PipelineConfig> =
-                rules.iter().map(|(_, f)| f(c.pipeline.clone())).collect();
-            match run_variants(&c, &variants, &mut |_, _| {}) {
-                Ok(results) => {
-                    for (r, result) in results.iter().enumerate() {
-                        let m = &result.metrics;
-                        let cell = &mut sums[r][d];
-                        if m.mean_error.is_finite() {
-                            cell[0] += m.mean_error;
-                            cell[2] += m.aligned_error;
-                            cell[4] += 1.0;
-                        }
-                        cell[1] += 100.0 * m.coverage / seeds as f64;
-                        cell[3] += 100.0 * m.slot_share / seeds as f64;
-                    }
-                }
-                Err(e) => eprintln!("departures, {n} sensors, seed {seed}: {e}"),
-            }
-        }
-        eprintln!("  departures: {n} sensors");
-    }
+            let label = format!("departures, {n} sensors");
+            let (stats, _) = mean_over_seeds(&label, &c, seeds, |c| {
+                rules.iter().map(|(_, f)| f(c.pipeline.clone())).collect()
+            });
+            eprintln!("  {label}");
+            stats
+        })
+        .collect();
     let mut out = String::new();
     writeln!(
         out,
@@ -349,24 +354,20 @@ fn departures(seeds: u64) -> String {
     writeln!(out, "| rule | mean error (m) 400 / 700 / 1000 | coverage (%) | aligned error (m) | slots tracked (%) |").unwrap();
     writeln!(out, "|---|---|---|---|---|").unwrap();
     for (r, (name, _)) in rules.iter().enumerate() {
-        let cells = sums[r];
-        let per = |i: usize, finite: bool| {
-            cells
+        let per = |pick: fn(&Stats) -> f64| {
+            by_density
                 .iter()
-                .map(|c| {
-                    let v = if finite { c[i] / c[4] } else { c[i] };
-                    format!("{v:.1}")
-                })
+                .map(|stats| format!("{:.1}", pick(&stats[r])))
                 .collect::<Vec<_>>()
                 .join(" / ")
         };
         writeln!(
             out,
             "| {name} | {} | {} | {} | {} |",
-            per(0, true),
-            per(1, false),
-            per(2, true),
-            per(3, false)
+            per(|s| s.mean),
+            per(|s| s.coverage),
+            per(|s| s.aligned),
+            per(|s| s.tracked)
         )
         .unwrap();
     }
