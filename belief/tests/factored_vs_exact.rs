@@ -133,33 +133,26 @@ proptest! {
         let options = FactoredOptions { max_component: max, split: rule, coupling, ..FactoredOptions::default() };
         let mut factored = FactoredBelief::with_options(field.clone(), options).unwrap();
         for event in &events {
-            let before = snapshot(&factored);
-            match factored.apply(event) {
-                Ok(()) => {}
-                Err(BeliefError::ImpossibleObservation { .. }) => {
-                    prop_assert_eq!(&snapshot(&factored), &before);
-                }
-                Err(e) => panic!("{e} on {event:?}"),
-            }
-            let p = match factored.marginals() {
-                Ok(p) => p,
-                // The local rule reads only the observed component: a
-                // certain sighting the red count rules out is taken, and
-                // the belief is left without mass (documented on Local).
-                Err(BeliefError::Degenerate { .. }) if coupling.is_local() => break,
-                Err(e) => panic!("{e} after {event:?}"),
-            };
+            // Every event is taken: a sure sighting the belief ruled out
+            // by the repair rule, one the prior rules out set aside.
+            factored.apply(event).map_err(|e| TestCaseError::fail(format!("{e} on {event:?}")))?;
+            // The local rule reads only the observed component: a certain
+            // sighting only the red count rules out is taken, and the
+            // query answers by the contradiction rule.
+            let p = factored.marginals().map_err(|e| TestCaseError::fail(format!("{e} after {event:?}")))?;
             prop_assert!(p.iter().all(|x| (0.0..=1.0).contains(x)), "{:?}", p);
             if let Some(k) = field.red.known() {
                 prop_assert!((p.iter().sum::<f64>() - k as f64).abs() < 1e-9, "{:?}", p);
             }
             prop_assert!(factored.components().iter().all(|c| c.len() <= max));
-            prop_assert!(factored.log_normalizer().is_finite());
+            // Under the contradiction rule the evidence is truly nil.
+            let contradicted = factored.query_repairs() > 0;
+            prop_assert!(contradicted || factored.log_normalizer().is_finite());
         }
     }
 
     #[test]
-    fn factored_rejected_observation_changes_nothing((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>(), coupling in coupling()) {
+    fn factored_takes_or_sets_aside_every_sure_sighting((n, k, start, seed, events) in case(8, 30), max in 1usize..=12, track in 0u32..8, red in any::<bool>(), coupling in coupling()) {
         let track = track % n as u32;
         let field = field(n, k, &start, seed);
         let options = FactoredOptions { max_component: max, coupling, ..FactoredOptions::default() };
@@ -169,32 +162,36 @@ proptest! {
         }
         let (r, b) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
         let (want, other) = if red { (1.0, 0.0) } else { (0.0, 1.0) };
-        let local = coupling.is_local();
-        if local && factored.marginals().is_err() {
-            // A sighting the count ruled out was taken (see above).
+        let contradicted = factored.query_repairs();
+        let before = snapshot(&factored);
+        if factored.query_repairs() > contradicted {
+            // Sightings the count ruled out were taken and the belief is
+            // answered by the contradiction rule already.
             return Ok(());
         }
-        let before = snapshot(&factored);
         let p = before.0[track as usize];
-        match factored.observe(Observe { track, red: r, blue: b }) {
-            Ok(()) => match factored.marginals() {
-                Ok(now) => {
-                    prop_assert!((now[track as usize] - want).abs() < 1e-9, "now {:?}", now);
-                }
-                Err(BeliefError::Degenerate { .. }) if local => {
-                    // Only the count rules it out, which the local rule
-                    // does not read: the track was certainly the other
-                    // colour under the whole belief.
-                    prop_assert!((p - other).abs() < 1e-9, "p = {}", p);
-                }
-                Err(e) => panic!("{e}"),
-            },
-            Err(BeliefError::ImpossibleObservation { probability }) => {
-                prop_assert_eq!(probability, 0.0);
-                prop_assert!((p - other).abs() < 1e-9, "p = {}", p);
-                prop_assert_eq!(snapshot(&factored), before);
-            }
-            Err(e) => panic!("{e}"),
+        let repairs = factored.stats().repairs;
+        // A sure sighting is never refused.
+        factored.observe(Observe { track, red: r, blue: b }).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let now = factored.marginals().map_err(|e| TestCaseError::fail(e.to_string()))?;
+        if factored.stats().repairs > repairs {
+            // The belief held it impossible: the track was certainly the
+            // other colour. Smoothed, the sighting wins; set aside (the
+            // prior rules it out), nothing moves.
+            prop_assert!((p - other).abs() < 1e-9, "p = {}", p);
+            // (Under the local rule the smoothed component may now
+            // contradict others, which the query answers by its rule.)
+            let moved = (now[track as usize] - want).abs() < 1e-9;
+            let contradicts = factored.query_repairs() > contradicted;
+            prop_assert!(moved || contradicts || snapshot(&factored) == before, "now {:?}", now);
+        } else if factored.query_repairs() > contradicted {
+            // Only the count rules it out, which the local rule does not
+            // read: the track was certainly the other colour under the
+            // whole belief.
+            prop_assert!(coupling.is_local());
+            prop_assert!((p - other).abs() < 1e-9, "p = {}", p);
+        } else {
+            prop_assert!((now[track as usize] - want).abs() < 1e-9, "now {:?}", now);
         }
     }
 }

@@ -163,6 +163,7 @@ pub struct Memory {
     degraded: AtomicU64,
     cuts_pushed: AtomicU64,
     cuts_asked: AtomicU64,
+    query_repairs: AtomicU64,
 }
 
 impl Memory {
@@ -201,6 +202,7 @@ impl Memory {
             degraded: self.degraded.load(Ordering::Relaxed),
             cuts_pushed: self.cuts_pushed.load(Ordering::Relaxed),
             cuts_asked: self.cuts_asked.load(Ordering::Relaxed),
+            query_repairs: self.query_repairs.load(Ordering::Relaxed),
         }
     }
 
@@ -687,10 +689,13 @@ fn factored_marginals_of(
             })?;
         whole.insert(p.leader.clone(), components);
     }
+    let repairs = coupled.tree.repairs();
     let p_red = coupled
         .tree
         .marginals_shared(held_parts(&whole, &collected.parts).into_iter())
         .map_err(refused)?;
+    let repaired = coupled.tree.repairs() - repairs;
+    memory.query_repairs.fetch_add(repaired, Ordering::Relaxed);
     let predicted_red = predict_red(&p_red, cut.red.map(|k| k as usize));
     // An answer at a fresh cut (tag ≠ 0; at rest the leaders answer with
     // tag 0) is what later queries name as their base.

@@ -55,6 +55,7 @@
 //! The belief knows nothing of regions: the caller decides when (the
 //! leaders, and `idmesh_placement::Regional` for the centralized engine).
 
+mod contradiction;
 mod counts;
 mod share;
 mod split;
@@ -67,6 +68,7 @@ use crate::filter::PropertyFilter;
 use counts::CountPrior;
 pub use share::{coupled_marginals, CountPart, CouplingTree, FactoredShare, HeldComponent};
 use split::Weighted;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard};
 use table::Component;
 use tree::{CountTree, Reservoir};
@@ -140,10 +142,11 @@ pub enum Coupling {
     /// "The local rule", and docs/coupling-accuracy.md for what that costs.
     /// An observation reads only its component too, hard ones (a likelihood
     /// 0) included: one the prior alone rules out (it leaves more red
-    /// tracks than π allows, or fewer) is refused at once; one its own
+    /// tracks than π allows, or fewer) is set aside; one its own
     /// component rules out is taken by the repair rule (the component
     /// smoothed); one that only other components rule out is found at the
-    /// next query, as a belief without mass.
+    /// next query, which answers by the contradiction rule (the
+    /// `contradiction` module).
     Local,
     /// Q(s) = 1 on every count s the merged pair can hold, 0 elsewhere: the
     /// split matches the moments of the pair's own tables as if the rest of
@@ -263,8 +266,9 @@ pub struct FactoredStats {
     /// retried under the local or the flat ones (valid streams whose
     /// sightings contradict the truth again and again).
     pub retried_splits: u64,
-    /// Sightings the belief held impossible that π allows, taken by
-    /// smoothing their component (see `observe_repaired`).
+    /// Sightings the belief held impossible: taken by smoothing their
+    /// component where π allows them (see `observe_repaired`), set aside
+    /// where it does not (see `set_aside`).
     pub repairs: u64,
     /// The most iterations (Sinkhorn sweeps + Newton steps) one moment
     /// matching needed.
@@ -302,6 +306,9 @@ pub struct FactoredBelief {
     /// Leaves changed since the tree was built (only when not kept).
     tree_stale: std::sync::atomic::AtomicBool,
     stats: FactoredStats,
+    /// Queries answered by the contradiction rule (a query reads the
+    /// belief through `&self`).
+    query_repairs: AtomicU64,
 }
 
 impl Clone for FactoredBelief {
@@ -320,6 +327,7 @@ impl Clone for FactoredBelief {
             tree_kept: self.tree_kept,
             tree_stale: std::sync::atomic::AtomicBool::new(false),
             stats: self.stats.clone(),
+            query_repairs: AtomicU64::new(self.query_repairs()),
         }
     }
 }
@@ -373,6 +381,7 @@ impl FactoredBelief {
             tree_kept: true,
             tree_stale: std::sync::atomic::AtomicBool::new(false),
             stats: FactoredStats::default(),
+            query_repairs: AtomicU64::new(0),
         };
         for slot in 0..n {
             belief.rehome(slot);
@@ -384,6 +393,12 @@ impl FactoredBelief {
 
     pub fn stats(&self) -> &FactoredStats {
         &self.stats
+    }
+
+    /// Queries the contradiction rule answered: the components together
+    /// admitted no red count the prior allows.
+    pub fn query_repairs(&self) -> u64 {
+        self.query_repairs.load(Ordering::Relaxed)
     }
 
     /// The current partition of the tracks, each component in its local
@@ -929,8 +944,8 @@ impl FactoredBelief {
     /// rule it out (the coupled weights: other components hold the count
     /// as certain), every component is smoothed so. Counted in
     /// [`FactoredStats::repairs`] and logged once. A sighting the prior
-    /// alone rules out is refused as before, and the belief is left as it
-    /// was.
+    /// alone rules out is refused here, the belief left as it was (the
+    /// caller sets it aside).
     fn observe_repaired(&mut self, observe: Observe, probability: f64) -> Result<(), BeliefError> {
         let saved = self.clone();
         let (c, _) = self.home[observe.track as usize];
@@ -963,6 +978,23 @@ impl FactoredBelief {
                 Err(e)
             }
         }
+    }
+
+    /// A sighting the prior alone rules out (a sure red where no target
+    /// is red, a sure blue where all are): no set the belief could ever
+    /// hold explains it, so it teaches nothing the belief can keep. It is
+    /// set aside, the belief left as it was; counted in
+    /// [`FactoredStats::repairs`] and logged once, so that a leader fed
+    /// such a stream answers on.
+    fn set_aside(&mut self, observe: Observe) {
+        if self.stats.repairs == 0 {
+            tracing::warn!(
+                ?observe,
+                "factored: a sighting the prior rules out was set aside \
+                 (counted as a belief repair; logged once)"
+            );
+        }
+        self.stats.repairs += 1;
     }
 
     /// Gives each component in `slots` [`REPAIR_MASS`] of its mass on
@@ -1208,7 +1240,13 @@ impl PropertyFilter for FactoredBelief {
         self.field.check_observe(&observe)?;
         match self.observe_in_component(observe) {
             Err(BeliefError::ImpossibleObservation { probability }) => {
-                self.observe_repaired(observe, probability)
+                match self.observe_repaired(observe, probability) {
+                    Err(BeliefError::ImpossibleObservation { .. }) => {
+                        self.set_aside(observe);
+                        Ok(())
+                    }
+                    done => done,
+                }
             }
             done => done,
         }
@@ -1217,6 +1255,10 @@ impl PropertyFilter for FactoredBelief {
     /// One downward walk of the count tree (after recomputing what the
     /// events since the last query made dirty), then each component's
     /// marginals under its weights.
+    /// A belief whose components together admit no count π allows (a
+    /// stream that contradicts itself across components) is answered by
+    /// the contradiction rule (the `contradiction` module), counted in
+    /// [`FactoredBelief::query_repairs`] and logged once.
     fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
         let all = {
             let mut tree = self.lock_tree();
@@ -1225,9 +1267,24 @@ impl PropertyFilter for FactoredBelief {
                 &self.prior,
                 &self.count_refs(),
                 self.field.tracks,
-            )?
+            )
         };
-        self.marginals_under(all)
+        match all.and_then(|all| self.marginals_under(all)) {
+            Err(BeliefError::Degenerate { .. }) => {
+                let parts: Vec<CountPart> = self.live().map(share::count_part).collect();
+                let out =
+                    contradiction::repaired_marginals(&self.prior, &parts, self.field.tracks)?;
+                if self.query_repairs.fetch_add(1, Ordering::Relaxed) == 0 {
+                    tracing::warn!(
+                        "factored: the components together admit no red count the prior \
+                         allows; answered by the contradiction rule (counted as a query \
+                         repair; logged once)"
+                    );
+                }
+                Ok(out)
+            }
+            done => done,
+        }
     }
 
     /// Σ_C 2^|C|: the numbers in the tables (the per-component log scales
@@ -1306,18 +1363,34 @@ fn coupling_weights(
         retilt(tree, counts, prior, exact);
         all = tree.all_leave_one_out(prior).and_then(|a| trusted(tree, a));
     }
-    match all {
-        Some(by_slot) => Ok(by_slot
+    let by_live: Vec<Option<Vec<f64>>> = match all {
+        Some(by_slot) => by_slot
             .into_iter()
             .enumerate()
             .filter(|(s, _)| !tree.counts(*s).is_empty())
             .map(|(_, r)| r)
-            .collect()),
+            .collect(),
         None => {
             check_eager(tracks)?;
-            Ok(prior.all_leave_one_out(counts))
+            prior.all_leave_one_out(counts)
         }
+    };
+    // Where every component holds a single count no weight was computed,
+    // so nothing above has checked their sum against π.
+    if by_live.iter().all(Option::is_none) && !fixed_total_allowed(prior, counts) {
+        return Err(BeliefError::Degenerate { normalizer: 0.0 });
     }
+    Ok(by_live)
+}
+
+/// Whether π allows the red count of components that each hold a single
+/// count (the sum of those counts).
+fn fixed_total_allowed(prior: &CountPrior, counts: &[&[f64]]) -> bool {
+    let total: usize = counts
+        .iter()
+        .map(|c| c.iter().position(|&x| x > 0.0).unwrap_or(0))
+        .sum();
+    prior.ln_weights().get(total).is_some_and(|l| l.is_finite())
 }
 
 /// The eager evaluation keeps a convolution per component, O(n²) numbers:

@@ -263,28 +263,26 @@ fn a_sighting_the_belief_rules_out_is_repaired_one_the_prior_rules_out_refused()
         assert!((p[4] - 1.0).abs() < 1e-12, "{p:?}");
         assert!((p.iter().sum::<f64>() - field_k(&field)).abs() < 1e-9);
         // With no red target at all, a red sighting is ruled out by the
-        // prior: refused, the belief as it was.
+        // prior: set aside, the belief as it was, counted.
         let mut none = FactoredBelief::new(Field::uniform(5, 0)).unwrap();
         let before = (
             none.marginals().unwrap(),
             none.log_normalizer(),
             none.components(),
         );
-        let err = none
-            .observe(Observe {
-                track: 4,
-                red: 1.0,
-                blue: 0.0,
-            })
-            .unwrap_err();
-        assert!(matches!(err, BeliefError::ImpossibleObservation { .. }));
+        none.observe(Observe {
+            track: 4,
+            red: 1.0,
+            blue: 0.0,
+        })
+        .unwrap();
         let after = (
             none.marginals().unwrap(),
             none.log_normalizer(),
             none.components(),
         );
         assert_eq!(before, after);
-        assert_eq!(none.stats().repairs, 0);
+        assert_eq!(none.stats().repairs, 1);
         assert_eq!(f.marginals().unwrap(), marginals);
         assert_eq!(f.log_normalizer(), ln_z);
         assert_eq!(f.components(), parts);
@@ -294,7 +292,7 @@ fn a_sighting_the_belief_rules_out_is_repaired_one_the_prior_rules_out_refused()
     // so track 3 (its own component) cannot be red too. The coupled
     // weights of the rest rule it out, so every component is smoothed:
     // the later sighting wins. (The local rule reads only the component,
-    // which allows it; the next query finds the belief without mass.)
+    // which allows it; see the test below.)
     {
         let options = FactoredOptions {
             coupling: Coupling::Coupled,
@@ -316,6 +314,56 @@ fn a_sighting_the_belief_rules_out_is_repaired_one_the_prior_rules_out_refused()
         let p = f.marginals().unwrap();
         assert!((p[3] - 1.0).abs() < 1e-6 && p[0] < 1e-6, "{p:?}");
         assert_eq!(f.stats().repairs, 1);
+    }
+}
+
+/// Under the local rule two sure red sightings in two components with
+/// k = 1 are each taken; the query finds that no k-set explains both and
+/// answers by the contradiction rule: one half each, the rest untouched,
+/// counted. A leader's share answers the same through the coordinator's
+/// coupling.
+#[test]
+fn a_contradiction_across_components_is_answered() {
+    for coupling in [Coupling::Local, Coupling::Flat] {
+        let options = FactoredOptions {
+            coupling,
+            ..FactoredOptions::default()
+        };
+        let field = Field::uniform(5, 1);
+        let mut f = FactoredBelief::with_options(field.clone(), options.clone()).unwrap();
+        let mut share = FactoredShare::start(field.clone(), options, |_| true).unwrap();
+        for track in [0, 3] {
+            let sure_red = Observe {
+                track,
+                red: 1.0,
+                blue: 0.0,
+            };
+            f.observe(sure_red).unwrap();
+            share.observe(sure_red).unwrap();
+        }
+        let p = f.marginals().unwrap();
+        assert_eq!(f.query_repairs(), 1, "{coupling:?}");
+        assert!(
+            (p[0] - 0.5).abs() < 1e-6 && (p[3] - 0.5).abs() < 1e-6,
+            "{p:?}"
+        );
+        assert!(p[1] < 1e-6 && p[2] < 1e-6 && p[4] < 1e-6, "{p:?}");
+        assert!((p.iter().sum::<f64>() - 1.0).abs() < 1e-9, "{p:?}");
+        let mut coordinator = CouplingTree::new(field).unwrap();
+        let live = coordinator.marginals(share.parts().iter()).unwrap();
+        assert_eq!(coordinator.repairs(), 1);
+        for (a, b) in p.iter().zip(&live) {
+            assert!((a - b).abs() < 1e-12, "{p:?} vs {live:?}");
+        }
+        // A sighting that settles it is taken as any other.
+        f.observe(Observe {
+            track: 3,
+            red: 0.0,
+            blue: 1.0,
+        })
+        .unwrap();
+        let p = f.marginals().unwrap();
+        assert!((p[0] - 1.0).abs() < 1e-6 && p[3] < 1e-6, "{p:?}");
     }
 }
 
@@ -502,23 +550,23 @@ proptest::proptest! {
             for (i, event) in events.iter().enumerate() {
                 let _ = f.apply(event);
                 if i % 7 == 0 || i + 1 == events.len() {
-                    let lazy = match f.marginals() {
-                        Ok(m) => m,
+                    let contradicted = f.query_repairs();
+                    let lazy = f.marginals().unwrap();
+                    if f.query_repairs() > contradicted {
                         // The local rule takes a certain sighting the count
                         // rules out (it reads only its component): the
-                        // belief has no mass left, by both evaluations.
-                        Err(BeliefError::Degenerate { .. }) if local => {
-                            let eager = f.prior.all_leave_one_out(&f.count_refs());
-                            let total: f64 = f
-                                .live()
-                                .zip(&eager)
-                                .map(|(c, r)| r.as_ref().map_or(0.0, |r| c.weighted_marginals(r).1))
-                                .fold(f64::INFINITY, f64::min);
-                            proptest::prop_assert!(total <= 0.0 || total.is_nan(), "{total}");
-                            break;
-                        }
-                        Err(e) => panic!("{e}"),
-                    };
+                        // belief has no mass left, by both evaluations, and
+                        // the query answered by the contradiction rule.
+                        proptest::prop_assert!(local);
+                        let eager = f.prior.all_leave_one_out(&f.count_refs());
+                        let total: f64 = f
+                            .live()
+                            .zip(&eager)
+                            .map(|(c, r)| r.as_ref().map_or(0.0, |r| c.weighted_marginals(r).1))
+                            .fold(f64::INFINITY, f64::min);
+                        proptest::prop_assert!(total <= 0.0 || total.is_nan(), "{total}");
+                        break;
+                    }
                     close(&lazy, &eager_marginals(&f), 1e-9, "marginals");
                     let eager = f.live().map(|c| c.log_scale).sum::<f64>()
                         + f.prior.ln_total(&f.count_refs());

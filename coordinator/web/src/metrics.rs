@@ -35,7 +35,7 @@ const LEADER_COUNTERS: [LeaderField; 23] = [
     ("items", "stream items applied", |s| s.items),
     (
         "belief_repairs",
-        "colour events the factored belief could not take as they stood (splits retried, sightings smoothed)",
+        "colour events the factored belief could not take as they stood (splits retried, sightings smoothed or set aside)",
         |s| s.belief_repairs,
     ),
     (
@@ -273,6 +273,11 @@ fn encode_coordinator(
             "coordinator_cuts_asked",
             "fresh cuts whose leaders were asked, a push not having come in time",
             stats.coordinator.cuts_asked,
+        ),
+        (
+            "coordinator_query_repairs",
+            "factored answers the contradiction rule gave (the leaders' components held no count the prior allows)",
+            stats.coordinator.query_repairs,
         ),
     ] {
         let counter = ConstCounter::new(value);

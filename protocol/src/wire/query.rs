@@ -196,6 +196,11 @@ pub struct CoordinatorStats {
     /// behind) and every leader was asked instead.
     #[serde(default)]
     pub cuts_asked: u64,
+    /// Factored answers computed by the contradiction rule: the leaders'
+    /// components together held no red count the prior allows (sure
+    /// sightings that contradict each other across components).
+    #[serde(default)]
+    pub query_repairs: u64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

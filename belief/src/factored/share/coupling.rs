@@ -13,6 +13,7 @@
 use super::{bad, CountPart, MOST_TRACKS};
 use crate::error::BeliefError;
 use crate::event::Field;
+use crate::factored::contradiction::repaired_marginals;
 use crate::factored::counts::CountPrior;
 use crate::factored::coupling_weights;
 use crate::factored::tree::{balancing_tilt, CountTree};
@@ -43,6 +44,8 @@ pub struct CouplingTree {
     aimed: bool,
     /// The last answer, while no leaf has changed since.
     pub(super) last: Option<Vec<f64>>,
+    /// Queries the contradiction rule answered.
+    repairs: u64,
 }
 
 impl CouplingTree {
@@ -60,6 +63,7 @@ impl CouplingTree {
             free: (0..n).rev().collect(),
             aimed: false,
             last: None,
+            repairs: 0,
             field,
         })
     }
@@ -98,7 +102,10 @@ impl CouplingTree {
             self.tree.retilt(tilt, false);
             self.aimed = true;
         }
-        let out = self.evaluate()?;
+        let out = match self.evaluate() {
+            Err(BeliefError::Degenerate { .. }) => self.repaired()?,
+            done => done?,
+        };
         self.last = Some(out.clone());
         Ok(out)
     }
@@ -190,6 +197,33 @@ impl CouplingTree {
         self.tree.set(leaf, part.counts.clone());
         self.leaves[leaf] = Some(part);
         self.last = None;
+    }
+
+    /// Queries the contradiction rule answered (see the module of that
+    /// name): the parts together admitted no red count π allows.
+    pub fn repairs(&self) -> u64 {
+        self.repairs
+    }
+
+    /// The answer of the contradiction rule, as the centralized belief's
+    /// query gives it on the same parts; counted and logged once.
+    fn repaired(&mut self) -> Result<Vec<f64>, BeliefError> {
+        let parts: Vec<CountPart> = self
+            .leaves
+            .iter()
+            .flatten()
+            .map(|p| (**p).clone())
+            .collect();
+        let out = repaired_marginals(&self.prior, &parts, self.field.tracks)?;
+        if self.repairs == 0 {
+            tracing::warn!(
+                "coordinator: the leaders' components together admit no red count the \
+                 prior allows; answered by the contradiction rule (counted as a query \
+                 repair; logged once)"
+            );
+        }
+        self.repairs += 1;
+        Ok(out)
     }
 
     /// One downward walk of the tree and each part's marginals.

@@ -606,7 +606,7 @@ fn bad(detail: String) -> BeliefError {
 }
 
 /// The [`CountPart`] of one component.
-fn count_part(c: &Component) -> CountPart {
+pub(super) fn count_part(c: &Component) -> CountPart {
     let m = c.len();
     let mut red = vec![vec![0.0; m + 1]; m];
     for (y, &g) in c.table.iter().enumerate() {
