@@ -15,7 +15,9 @@
 //! while the flow-control window holds the stream for it. A stream of
 //! colours and identities runs the factored belief too, with the
 //! information matrix's rows beside it, and answers both as replay does
-//! through a leader's crash.
+//! through a leader's crash. A colour stream that contradicts itself
+//! (sure reds on more tracks than there are red targets) stops no leader
+//! and is answered as the twin answers it.
 
 use idmesh_placement::{items_sent, RegionRule};
 use idmesh_protocol::trace::TraceReader;
@@ -452,4 +454,69 @@ fn colours_and_identities_through_a_crash(adopted: bool) {
         "leader-1's role is hosted by {}",
         role["host"]
     );
+}
+
+/// A colour stream that contradicts itself: a random-waypoint crowd with
+/// sure sightings of red on tracks drawn at random every 25 lines, far
+/// more tracks "certainly red" than there are red targets, and a sure red
+/// on a crowd with none. At the default settings through 2 leaders no
+/// leader stops, every answer equals the twin's (the contradiction rule
+/// at the coordinator is the centralized belief's), the coordinator
+/// counts its repaired answers, and the stream finishes.
+#[test]
+fn a_colour_stream_that_contradicts_itself_never_stops_a_leader() {
+    let dir = std::env::temp_dir().join(format!("idmesh-contradicting-{}", std::process::id()));
+    let crowd = waypoint_crowd(&dir, 40, 3, 1200, 5);
+    let trace = with_sure_reds(&crowd, 25);
+    let truths = truth_lines(&trace);
+    let settings = Settings {
+        leaders: 2,
+        rate: Some(1000.0),
+        factored: Some(Factored::default()),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start("contradicting", &trace, &settings);
+    let twin = deployment.twin(&trace);
+    assert_eq!(twin.len(), truths.len());
+    deployment.first_answer(Duration::from_secs(30));
+    check_points("contradicting", &deployment, &truths, &twin);
+    assert_final("contradicting", &deployment, &twin);
+    let stats = deployment.query(&["stats"]).expect("stats");
+    let repaired = stats[0]["coordinator"]["query_repairs"].as_u64();
+    assert!(
+        repaired.is_some_and(|n| n > 0),
+        "no answer needed the contradiction rule: the trace tests nothing: {}",
+        stats[0]["coordinator"]
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `trace` with a sure red sighting of a track drawn from a fixed
+/// sequence after every `every`-th line.
+fn with_sure_reds(trace: &Path, every: usize) -> PathBuf {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let header: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    let tracks = header["tracks"].as_u64().unwrap();
+    let mut out = String::new();
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    for (i, line) in text.lines().enumerate() {
+        out.push_str(line);
+        out.push('\n');
+        let time = serde_json::from_str::<Value>(line)
+            .ok()
+            .and_then(|v| v["time"].as_f64());
+        if let (Some(time), true) = (time, i > 0 && i % every == 0) {
+            // xorshift: a fixed sequence, no dependency.
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let track = state % tracks;
+            out.push_str(&format!(
+                "{{\"kind\":\"observe\",\"time\":{time},\"track\":{track},\"red\":1,\"blue\":0}}\n"
+            ));
+        }
+    }
+    let path = trace.with_extension("contradicting.jsonl");
+    std::fs::write(&path, out).unwrap();
+    path
 }
