@@ -217,9 +217,26 @@ pub struct UpArgs {
     /// deploy/src/runtime/topology.rs).
     #[arg(long)]
     pub config: PathBuf,
-    /// Start only the processes of this host (default: all).
+    /// Start only the processes of this host (default: all); with --emit,
+    /// write only this host's units.
     #[arg(long)]
     pub host: Option<String>,
+    /// Start nothing: write what runs the processes instead. `--emit
+    /// systemd DIR` writes, for each host of the topology, DIR/<host>/ with
+    /// an idmesh-<name>.service per process (the command line `up` runs it
+    /// with; restarted on failure), an idmesh.target that groups them, and
+    /// config/, the folder to copy to --config-dir (docs/guide/lan.md).
+    #[arg(long, num_args = 2, value_names = ["KIND", "DIR"])]
+    pub emit: Option<Vec<String>>,
+    /// With --emit: the idmesh binary the units run, an absolute path as
+    /// the hosts have it (default /usr/local/bin/idmesh).
+    #[arg(long, value_name = "PATH", requires = "emit")]
+    pub binary: Option<PathBuf>,
+    /// With --emit: the folder, an absolute path, where each host keeps
+    /// the topology file and what it names, which the units read (default
+    /// /etc/idmesh).
+    #[arg(long, value_name = "DIR", requires = "emit")]
+    pub config_dir: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -9,6 +9,7 @@
 mod acoustic;
 mod bench;
 mod cli;
+mod emit;
 mod extract;
 mod logging;
 mod simulate;
@@ -83,6 +84,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Coordinator(args) => {
             runtime::roles::run(runtime::roles::Role::Coordinator, &args.config, &args.name)
         }
+        Command::Up(args) if args.emit.is_some() => emit::run(&args),
         Command::Up(args) => runtime::launch::up(&args.config, args.host.as_deref()),
         Command::Demo(args) => runtime::launch::demo(&runtime::launch::DemoOptions {
             events: args.events,

@@ -13,6 +13,7 @@ use super::topology::Topology;
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
 use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer, StatsAnswer};
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
@@ -114,14 +115,24 @@ impl Processes {
     }
 }
 
+/// The arguments, after the binary, that run process `name` of the
+/// topology `config` as `role`: what `up` starts each child with, and
+/// what a systemd unit's `ExecStart` runs (`super::systemd`), so that the
+/// two start a process the same way.
+pub(crate) fn role_command(role: &str, config: &Path, name: &str) -> Vec<OsString> {
+    vec![
+        role.into(),
+        "--config".into(),
+        config.into(),
+        "--name".into(),
+        name.into(),
+    ]
+}
+
 /// `idmesh <role> --config <config> --name <name>` as a child.
 fn spawn(exe: &Path, config: &Path, role: &str, name: &str) -> Result<Child> {
     let child = Command::new(exe)
-        .arg(role)
-        .arg("--config")
-        .arg(config)
-        .arg("--name")
-        .arg(name)
+        .args(role_command(role, config, name))
         .spawn()
         .with_context(|| format!("cannot start {role} {name}"))?;
     tracing::info!(role, %name, pid = child.id(), "started");

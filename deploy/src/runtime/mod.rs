@@ -2,7 +2,8 @@
 //! one function that opens a Zenoh session, one runner per role, the
 //! launcher (`up`, `demo`), the loopback topology they and the bench use,
 //! the one picker of free ports, the query client, the web gateway's
-//! session (`web`), and what secures a deployment (TLS, access control).
+//! session (`web`), what secures a deployment (TLS, access control), and
+//! the systemd units that run a topology's processes in `up`'s place.
 
 pub mod launch;
 pub mod loopback;
@@ -12,6 +13,7 @@ pub mod query;
 pub mod roles;
 pub mod security;
 mod supervise;
+pub mod systemd;
 pub mod topology;
 mod twin;
 pub mod web;
