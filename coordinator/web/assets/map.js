@@ -515,7 +515,9 @@ window.idmesh = {
       ratio: window.devicePixelRatio || 1,
       firstMapMs: state.firstMapMs,
       tracks: state.drawn,
+      // The charts: points plotted, and the highest rate among them.
       rates: state.rates.filter((s) => s.v !== null).length,
+      peakRate: Math.max(0, ...state.rates.map((s) => s.v ?? 0)),
       rate: document.getElementById("rate").textContent,
     };
   },

@@ -150,10 +150,7 @@ pub(crate) async fn sample(asker: Arc<Asker>, history: Arc<History>) {
                 None
             }
             None => match serde_json::from_slice::<Watermarked>(&answer.body) {
-                Ok(w) => Some((
-                    w.watermark.values().sum(),
-                    answer.took.as_secs_f64() * 1e3,
-                )),
+                Ok(w) => Some((w.watermark.values().sum(), answer.took.as_secs_f64() * 1e3)),
                 Err(error) => {
                     tracing::warn!(%error, "a marginals answer without a watermark");
                     None
