@@ -120,6 +120,35 @@ impl Cell {
         }
     }
 
+    /// Each leader's rectangle `[x0, y0, x1, y1]` within `bounds`: the
+    /// cuts above a leaf narrow the bounds down to its cell. Indexed by
+    /// leader; a leader with no leaf keeps None.
+    fn rectangles(&self, bounds: [f64; 4], out: &mut [Option<[f64; 4]>]) {
+        match self {
+            Cell::Leaf(leader) => {
+                if let Some(slot) = out.get_mut(usize::from(*leader)) {
+                    *slot = Some(bounds);
+                }
+            }
+            Cell::Cut {
+                axis,
+                at,
+                low,
+                high,
+            } => {
+                // A cut outside the bounds (the first cut of an empty
+                // side lies at -inf) leaves one side empty, of no width.
+                let a = usize::from(*axis).min(1);
+                let at = at.clamp(bounds[a], bounds[a + 2]);
+                let (mut below, mut above) = (bounds, bounds);
+                below[a + 2] = at;
+                above[a] = at;
+                low.rectangles(below, out);
+                high.rectangles(above, out);
+            }
+        }
+    }
+
     fn relabel(&mut self, labels: &[u16]) {
         match self {
             Cell::Leaf(slot) => *slot = labels[*slot as usize],
@@ -208,6 +237,11 @@ pub struct Fitted {
     clock: u64,
     /// When each track was last seen (moved or in an item), by `clock`.
     seen: Vec<u64>,
+    /// The box `[x0, y0, x1, y1]` of every position seen since the stream
+    /// began (only ever growing): what a map's cells are cut to. Absent
+    /// from snapshots taken before it was kept.
+    #[serde(default)]
+    extent: Option<[f64; 4]>,
 }
 
 impl Fitted {
@@ -224,6 +258,7 @@ impl Fitted {
             sent_so_far: vec![0; usize::from(leaders)],
             clock: 0,
             seen: vec![0; tracks],
+            extent: None,
         }
     }
 
@@ -263,6 +298,8 @@ impl Fitted {
         if let Some(slot) = self.positions.get_mut(track as usize) {
             *slot = Some((x, y));
             self.seen[track as usize] = self.clock;
+            let [x0, y0, x1, y1] = self.extent.unwrap_or([x, y, x, y]);
+            self.extent = Some([x0.min(x), y0.min(y), x1.max(x), y1.max(y)]);
         }
     }
 
@@ -383,9 +420,18 @@ impl Fitted {
         owners
     }
 
-    /// Each leader's place for a map: the mean position of the placed
-    /// tracks it surveils (None for a leader surveilling none).
+    /// Each leader's place for a map: the centre of its cell (within the
+    /// box of every track seen so far), or before the first draw the mean
+    /// position of the placed tracks it surveils (None for a leader
+    /// surveilling none). Not the mean after a draw: tracks keep their
+    /// leader wherever they walk until the next draw, so the means of
+    /// leaders drift together to the middle of the crowd and say nothing
+    /// of where each one's region is.
     pub(crate) fn places(&self, owners: &[u16]) -> Vec<Option<(f64, f64)>> {
+        if let Some(cells) = self.cells() {
+            let centre = |r: [f64; 4]| ((r[0] + r[2]) / 2.0, (r[1] + r[3]) / 2.0);
+            return cells.into_iter().map(|c| c.map(centre)).collect();
+        }
         let mut sums = vec![(0.0, 0.0, 0u32); usize::from(self.leaders)];
         for (t, p) in self.positions.iter().enumerate() {
             if let (Some((x, y)), Some(&o)) = (p, owners.get(t)) {
@@ -397,6 +443,16 @@ impl Fitted {
         sums.into_iter()
             .map(|(x, y, n)| (n > 0).then(|| (x / f64::from(n), y / f64::from(n))))
             .collect()
+    }
+
+    /// Each leader's cell `[x0, y0, x1, y1]`, cut to the box of every
+    /// position seen since the stream began (cells reach to infinity; a
+    /// map shows the field). None before the first draw.
+    pub(crate) fn cells(&self) -> Option<Vec<Option<[f64; 4]>>> {
+        let (tree, extent) = (self.cells.as_ref()?, self.extent?);
+        let mut out = vec![None; usize::from(self.leaders)];
+        tree.rectangles(extent, &mut out);
+        Some(out)
     }
 }
 
@@ -432,6 +488,34 @@ mod tests {
             weight[usize::from(cells.leader_at((x, y)))] += w;
         }
         assert!(weight.iter().all(|&w| w == 11.0), "{weight:?}");
+    }
+
+    #[test]
+    fn a_leaders_place_is_the_centre_of_its_cell_not_of_its_tracks() {
+        // Four tracks in the corners of a 10 × 4 field, two leaders: the
+        // cut falls at x = 5 between the pairs.
+        let mut fitted = Fitted::new(2, 4, WINDOW_PER_LEADER);
+        for (t, (x, y)) in [(0.0, 0.0), (1.0, 4.0), (9.0, 0.0), (10.0, 4.0)]
+            .into_iter()
+            .enumerate()
+        {
+            fitted.place(t as u32, x, y);
+        }
+        assert_eq!(fitted.cells(), None);
+        fitted.draw(&[0, 0, 1, 1]);
+        let cells = fitted.cells().unwrap();
+        assert_eq!(
+            cells,
+            vec![Some([0.0, 0.0, 5.0, 4.0]), Some([5.0, 0.0, 10.0, 4.0])]
+        );
+        // Both of leader 0's tracks walk into leader 1's cell and stay
+        // with leader 0 until the next draw: its place stays in its cell.
+        fitted.place(0, 9.5, 1.0);
+        fitted.place(1, 9.5, 3.0);
+        assert_eq!(
+            fitted.places(&[0, 0, 1, 1]),
+            vec![Some((2.5, 2.0)), Some((7.5, 2.0))]
+        );
     }
 
     #[test]

@@ -242,12 +242,23 @@ impl Regions {
     }
 
     /// Where each leader is, for a map: its place, or under fitted cells
-    /// the mean position of the tracks it surveils.
+    /// the centre of its cell (see [`Regions::cells`]).
     pub fn places(&self) -> Vec<Option<(f64, f64)>> {
         match &self.rule {
             Rule::Fitted(fitted) => fitted.places(&self.owners),
             Rule::Fixed(Some(places)) => places.iter().map(|&p| Some(p)).collect(),
             Rule::Fixed(None) => Vec::new(),
+        }
+    }
+
+    /// Each leader's region as a rectangle `[x0, y0, x1, y1]` for a map,
+    /// under fitted cells once drawn (cut to the box of the tracks seen so
+    /// far); empty otherwise (fixed places: a leader's region is the
+    /// points nearer to it than to any other, which a map draws itself).
+    pub fn cells(&self) -> Vec<Option<[f64; 4]>> {
+        match &self.rule {
+            Rule::Fitted(fitted) => fitted.cells().unwrap_or_default(),
+            Rule::Fixed(_) => Vec::new(),
         }
     }
 

@@ -383,6 +383,7 @@ impl Router {
                 .into_iter()
                 .map(|p| p.map(|(x, y)| [x, y]))
                 .collect(),
+            regions: self.regions.cells(),
             positions: self.positions.clone(),
             owners: self.regions.owners().to_vec(),
         }

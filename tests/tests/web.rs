@@ -7,7 +7,7 @@
 //! it. Screenshots and the figures are written to the test's output
 //! directory (`target/tmp/web/`).
 
-use idmesh_tests::{crowd_with_identities, Chromium, Deployment, Gateway, Settings};
+use idmesh_tests::{crowd_with_identities, Chromium, Deployment, Factored, Gateway, Settings};
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -426,5 +426,157 @@ fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
             |l| l.starts_with("idmesh_coordinator_degraded_answers_total") && !l.ends_with(" 0")
         ),
         "{text}"
+    );
+}
+
+/// A box of the page's map (CSS pixels from the canvas's corner): a
+/// label as the browser laid it out, or a marker.
+#[derive(Debug)]
+struct Drawn {
+    key: String,
+    left: f64,
+    top: f64,
+    width: f64,
+    height: f64,
+    selected: bool,
+}
+
+impl Drawn {
+    fn read(v: &Value) -> Drawn {
+        let number = |f: &str| v[f].as_f64().unwrap_or_else(|| panic!("{f} of {v}"));
+        Drawn {
+            key: v["key"].as_str().unwrap_or_default().to_string(),
+            left: number("left"),
+            top: number("top"),
+            width: number("width"),
+            height: number("height"),
+            selected: v["selected"] == true,
+        }
+    }
+
+    /// Whether two boxes share more than a sliver (sub-pixel rounding of
+    /// boxes that touch is not an overlap).
+    fn covers(&self, other: &Drawn) -> bool {
+        let across =
+            (self.left + self.width).min(other.left + other.width) - self.left.max(other.left);
+        let down = (self.top + self.height).min(other.top + other.height) - self.top.max(other.top);
+        across > 0.5 && down > 0.5
+    }
+}
+
+/// The page's labels as laid out, its markers, and every pair where a
+/// label covers another label or a marker (the selected track's label
+/// may cover a marker: it is shown whatever is there).
+fn label_overlaps(tab: &mut Chromium) -> (Vec<Drawn>, Vec<String>) {
+    let shown: Value = serde_json::from_str(&tab.eval("JSON.stringify(window.idmesh.labels())"))
+        .expect("the page's labels");
+    let read = |what: &str| -> Vec<Drawn> {
+        let all = shown[what].as_array();
+        all.unwrap_or_else(|| panic!("no {what}: {shown}"))
+            .iter()
+            .map(Drawn::read)
+            .collect()
+    };
+    let (labels, markers) = (read("labels"), read("markers"));
+    let mut overlaps = Vec::new();
+    for (i, a) in labels.iter().enumerate() {
+        for b in &labels[i + 1..] {
+            if a.covers(b) {
+                overlaps.push(format!("label {} covers label {}", a.key, b.key));
+            }
+        }
+        for m in markers.iter().filter(|_| !a.selected) {
+            if a.covers(m) {
+                overlaps.push(format!("label {} covers marker {}", a.key, m.key));
+            }
+        }
+    }
+    (labels, overlaps)
+}
+
+/// The demo's scene — a simulated crowd of forty with identity reads, four
+/// leaders on fitted regions — opened once its stream is over: the charts
+/// show the stream that was (from the gateway's history), the leaders sit
+/// inside their regions, and no label covers another label or a marker.
+/// The same measurement on the same scene with placement turned off
+/// finds overlaps, so it would see them.
+#[test]
+fn the_map_of_a_crowd_places_labels_apart_and_remembers_the_charts() {
+    let out = output_dir();
+    let dir = std::env::temp_dir().join(format!("idmesh-web-map-{}", std::process::id()));
+    let trace = crowd_with_identities(&dir, 40, 10, 60.0, 1);
+    // The demo's settings: the factored belief, regions fitted.
+    let settings = Settings {
+        leaders: 4,
+        rate: Some(500.0),
+        factored: Some(Factored::default()),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start("web-map", &trace, &settings);
+    let gateway = Gateway::start(&deployment);
+    let last = deployment.final_marginals(Duration::from_secs(120));
+    let events = idmesh_tests::watermark_events(&last);
+
+    // The history outlives the stream: rates of the stream that was.
+    let started = Instant::now();
+    let history = loop {
+        let history = json(&get(&gateway.at("history")).1);
+        let samples = history["samples"].as_array().cloned().unwrap_or_default();
+        let at_end = samples.iter().any(|s| s["events"] == events);
+        if at_end || started.elapsed() > Duration::from_secs(30) {
+            break samples;
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    };
+    let peak = history
+        .iter()
+        .filter_map(|s| s["rate"].as_f64())
+        .fold(0.0, f64::max);
+    assert!(peak > 0.0, "no rate in the history: {history:?}");
+    assert!(history.iter().any(|s| s["events"] == events));
+
+    // The page, opened after the stream: its charts start from the past.
+    let mut tab = Chromium::start(&out, 1400, 900);
+    tab.open(&gateway.url);
+    let page = page_when(&mut tab, Duration::from_secs(30), "the final map", |s| {
+        s["positionsAt"] == events && s["finished"] == true && s["peakRate"].as_f64() > Some(0.0)
+    });
+    assert_ne!(page["rate"], "–", "{page}");
+    let positions = json(&get(&gateway.at(&format!("{}/query/positions", deployment.prefix))).1);
+    for leader in positions["leaders"].as_array().unwrap() {
+        let (at, region) = (&leader["at"], &leader["region"]);
+        let centre =
+            |i: usize| (region[i].as_f64().unwrap() + region[i + 2].as_f64().unwrap()) / 2.0;
+        assert_eq!(
+            (at[0].as_f64(), at[1].as_f64()),
+            (Some(centre(0)), Some(centre(1))),
+            "{leader}"
+        );
+    }
+
+    // A selected track's label is always shown; no label covers another.
+    tab.eval("window.idmesh.select(0), 'ok'");
+    let (labels, overlaps) = label_overlaps(&mut tab);
+    std::fs::write(out.join("labels.png"), tab.screenshot()).unwrap();
+    assert!(overlaps.is_empty(), "{overlaps:#?}");
+    assert!(labels.iter().any(|l| l.key == "track 0" && l.selected));
+    let leaders = labels
+        .iter()
+        .filter(|l| l.key.starts_with("leader"))
+        .count();
+    assert_eq!(leaders, 4, "{labels:?}");
+    assert!(labels.len() >= 20, "only {} labels shown", labels.len());
+
+    // Without placement, the same scene measured the same way overlaps.
+    tab.open(&format!("{}/?placement=off", gateway.url));
+    page_when(&mut tab, Duration::from_secs(30), "the final map", |s| {
+        s["positionsAt"] == events
+    });
+    let (crowded, overlaps) = label_overlaps(&mut tab);
+    std::fs::write(out.join("labels-unplaced.png"), tab.screenshot()).unwrap();
+    assert_eq!(crowded.len(), 40 + 4);
+    assert!(
+        overlaps.len() >= 3,
+        "the unplaced map should overlap: {overlaps:?}"
     );
 }

@@ -360,7 +360,12 @@ pub async fn positions(
             .leaders
             .into_iter()
             .zip(at.places)
-            .map(|(name, at)| LeaderPlace { name, at })
+            .enumerate()
+            .map(|(i, (name, place))| LeaderPlace {
+                name,
+                at: place,
+                region: at.regions.get(i).copied().flatten(),
+            })
             .collect(),
         finished: at.finished,
     })

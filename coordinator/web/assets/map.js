@@ -6,24 +6,39 @@
 // Tracks sit at their last known position (query/positions) coloured by
 // P(red) from query/marginals, ringed in the colour of the leader that
 // surveils them; on identity streams each is labelled with its most likely
-// identity and that probability (query/identity). Leaders are diamonds,
-// their regions (points nearer to them than to any other leader) shaded.
+// identity and that probability (query/identity). Leaders are diamonds at
+// the centre of their regions, the regions shaded (the rectangles the
+// answer gives under fitted cells; otherwise the points nearer to a
+// leader than to any other). Labels are elements over the canvas, placed
+// by labels.js so that none covers another or a marker; a track whose
+// label finds no room shows it while the pointer is on it, and the
+// selected track (click it, or its row) always shows its own.
 // `degraded` names who is missing: the coordinator's own error, and the
 // leaders of the stream that query/stats did not hear from.
+//
+// The charts plot the last minutes: the gateway's own history (/history)
+// on load, then what the streams say.
 "use strict";
 
 const PREFIX = document.querySelector('meta[name="idmesh-prefix"]').content;
 const API = "/" + PREFIX + "/query/";
 const LEADER_COLOURS = ["#d69e2e", "#38a169", "#805ad5", "#dd6b20", "#319795", "#d53f8c", "#2c5282", "#718096"];
 const RADIUS = 8;
-const HISTORY = 120;
+// Half-sizes of the markers' boxes, which no label may cover: a track's
+// ring, a leader's diamond with the cross of a missing one.
+const TRACK_BOX = RADIUS + 2, LEADER_BOX = 13;
+// `?placement=off` draws every label at its first spot, overlaps and all:
+// the map before placement, for the tests that prove overlaps are seen.
+const PLACEMENT = new URLSearchParams(location.search).get("placement") !== "off";
 
 const state = {
   marginals: null, identity: null, positions: null, stats: null,
   identityStream: null, // unknown until the coordinator says
   failures: {}, connected: false,
-  rates: [], latencies: [], last: null,
+  // Chart series: {t: ms on this page's clock, v: value or null (a gap)}.
+  rates: [], latencies: [], span: 300000, last: null,
   bounds: null, regions: null, drawn: [], firstMapMs: null,
+  selected: null, hover: null, spots: new Map(), markers: [],
 };
 
 // P(red) 0 → blue, 1 → red, linear in RGB (the legend's ramp).
@@ -39,9 +54,10 @@ const leaderColour = (i) => (i === UNHELD ? "#cbd5e0" : LEADER_COLOURS[i % LEADE
 const leaderName = (p, i) => (i === UNHELD ? "none yet" : p.leaders[i].name);
 const escape = (s) => String(s).replace(/[&<>"']/g, (c) => "&#" + c.charCodeAt(0) + ";");
 
-function push(series, value) {
-  series.push(value);
-  if (series.length > HISTORY) series.shift();
+// A point of a chart, and the points older than the chart's span dropped.
+function push(series, t, v) {
+  series.push({ t, v });
+  while (series.length && series[0].t < t - state.span) series.shift();
 }
 
 function listen(question, interval, onAnswer, onFailure) {
@@ -62,29 +78,56 @@ function listen(question, interval, onAnswer, onFailure) {
   if (question === "marginals") {
     source.addEventListener("latency", (e) => {
       const l = JSON.parse(e.data);
-      if (l.status === 200) push(state.latencies, l.ms);
+      push(state.latencies, Date.now(), l.status === 200 ? l.ms : null);
     });
   }
   source.onerror = () => { state.connected = false; schedule(); };
   return source;
 }
 
-listen("marginals", 500, (a) => {
-  const now = performance.now(), events = eventsOf(a.watermark);
-  if (state.last && now > state.last.t) push(state.rates, Math.max(0, (events - state.last.events) / ((now - state.last.t) / 1000)));
-  state.last = { t: now, events };
-  state.marginals = a;
-});
-listen("positions", 500, (a) => { state.positions = a; });
-listen("stats", 1000, (a) => { state.stats = a; });
-listen("identity", 1000, (a) => { state.identityStream = true; state.identity = a; }, (message, source) => {
-  if (message.includes("carries no identities")) {
-    state.identityStream = false;
-    source.close();
-    return true;
+// The gateway's last minutes, before the streams' first answers: its
+// clock shifted onto this page's, each sample a point of both charts.
+async function loadHistory() {
+  try {
+    const h = await (await fetch("/history")).json();
+    const shift = Date.now() - h.now_ms;
+    state.span = Math.max(state.span, h.every_ms * h.capacity);
+    const rates = [], latencies = [];
+    for (const s of h.samples) {
+      rates.push({ t: s.at_ms + shift, v: s.rate });
+      latencies.push({ t: s.at_ms + shift, v: s.latency_ms });
+    }
+    // Whatever the streams said meanwhile comes after.
+    state.rates = rates.concat(state.rates);
+    state.latencies = latencies.concat(state.latencies);
+    schedule();
+  } catch (e) {
+    console.warn("no history from the gateway:", e);
   }
-  return false;
-});
+}
+
+function start() {
+  loadHistory();
+  listen("marginals", 500, (a) => {
+    const now = performance.now(), events = eventsOf(a.watermark);
+    if (state.last && now > state.last.t && events >= state.last.events) {
+      push(state.rates, Date.now(), (events - state.last.events) / ((now - state.last.t) / 1000));
+    }
+    state.last = { t: now, events };
+    state.marginals = a;
+  });
+  listen("positions", 500, (a) => { state.positions = a; });
+  listen("stats", 1000, (a) => { state.stats = a; });
+  listen("identity", 1000, (a) => { state.identityStream = true; state.identity = a; }, (message, source) => {
+    if (message.includes("carries no identities")) {
+      state.identityStream = false;
+      source.close();
+      return true;
+    }
+    return false;
+  });
+  listenToPointer();
+}
 
 let pending = false;
 function schedule() {
@@ -100,6 +143,17 @@ function missingLeaders() {
 
 function render() {
   const missing = missingLeaders();
+  renderStatus(missing);
+  renderFigures();
+  drawMap(missing);
+  drawChart("chart-rate", state.rates, "#2c5282");
+  drawChart("chart-latency", state.latencies, "#c05621");
+  renderLeaders(missing);
+  renderSensors();
+  renderTracks();
+}
+
+function renderStatus(missing) {
   const problems = Object.entries(state.failures).filter(([, m]) => m).map(([q, m]) => `${q}: ${m}`);
   const degraded = missing.length > 0 || problems.some((p) => p.includes("degraded"));
   const status = document.getElementById("status");
@@ -118,22 +172,22 @@ function render() {
   if (missing.length) lines.unshift(`leaders not answering: ${missing.join(", ")}`);
   banner.hidden = lines.length === 0;
   banner.innerHTML = lines.map(escape).join("<br>");
+}
+
+// The last value of a series that is not a gap.
+const latest = (series) => { for (let i = series.length - 1; i >= 0; i--) if (series[i].v !== null) return series[i].v; };
+
+function renderFigures() {
   const m = state.marginals;
   document.getElementById("watermark").textContent = m ? `${eventsOf(m.watermark)} events` : "–";
   document.getElementById("watermark").dataset.events = m ? eventsOf(m.watermark) : "";
-  const rate = state.rates[state.rates.length - 1];
+  const rate = latest(state.rates);
   document.getElementById("rate").textContent = rate === undefined ? "–" : rate.toFixed(0);
-  const latency = state.latencies[state.latencies.length - 1];
+  const latency = latest(state.latencies);
   document.getElementById("latency").textContent = latency === undefined ? "–" : latency.toFixed(1) + " ms";
   document.getElementById("sets").textContent = m ? `${m.coefficients} on ${m.leaders} leaders` : "–";
   const p = state.positions;
   document.getElementById("positions-at").textContent = p ? `positions at ${eventsOf(p.watermark)} events` : "";
-  drawMap(missing);
-  drawChart("chart-rate", state.rates, "#2c5282");
-  drawChart("chart-latency", state.latencies, "#c05621");
-  renderLeaders(missing);
-  renderSensors();
-  renderTracks();
 }
 
 // A canvas sized for the screen's pixel ratio, drawn in CSS pixels.
@@ -151,9 +205,11 @@ function context(id) {
   return { ctx, w: Number(canvas.dataset.w), h: Number(canvas.dataset.h) };
 }
 
-// The field's extent, only ever growing (so the map does not jump).
+// The field's extent, only ever growing (so the map does not jump): the
+// tracks, the leaders and their regions.
 function bounds(p) {
   const points = p.positions.filter(Boolean).concat(p.leaders.map((l) => l.at).filter(Boolean));
+  for (const l of p.leaders) if (l.region) points.push([l.region[0], l.region[1]], [l.region[2], l.region[3]]);
   if (points.length === 0) return null;
   let b = state.bounds ? state.bounds.slice() : [Infinity, Infinity, -Infinity, -Infinity];
   for (const [x, y] of points) b = [Math.min(b[0], x), Math.min(b[1], y), Math.max(b[2], x), Math.max(b[3], y)];
@@ -163,68 +219,153 @@ function bounds(p) {
   return b;
 }
 
-function drawMap(missing) {
-  const { ctx, w, h } = context("map");
-  ctx.clearRect(0, 0, w, h);
-  const p = state.positions, m = state.marginals;
-  state.drawn = [];
-  if (!p) { ctx.fillStyle = "#718096"; ctx.fillText("waiting for positions…", 20, 24); return; }
+// How the field maps onto the canvas: `at` takes a field point to canvas
+// pixels (y grows upwards in the field, downwards on the canvas).
+function view(p, w, h) {
   const b = bounds(p);
   const strip = 34; // unplaced tracks wait in a strip along the bottom
   const pad = 24, fw = w - 2 * pad, fh = h - 2 * pad - strip;
   const scale = b ? Math.min(fw / (b[2] - b[0]), fh / (b[3] - b[1])) : 1;
   const ox = b ? pad + (fw - scale * (b[2] - b[0])) / 2 : pad, oy = b ? pad + (fh - scale * (b[3] - b[1])) / 2 : pad;
-  // y grows upwards in the field, downwards on the canvas.
   const at = ([x, y]) => [ox + (x - b[0]) * scale, oy + (b[3] - y) * scale];
-  const placed = p.leaders.every((l) => l.at);
-  if (b && placed) drawRegions(ctx, w, h - strip, p.leaders, at, b, scale, ox, oy);
-  ctx.strokeStyle = "#cbd5e0"; ctx.strokeRect(pad - 6, pad - 6, fw + 12, fh + 12);
+  return { b, strip, pad, fw, fh, scale, ox, oy, at, w, h };
+}
+
+function drawMap(missing) {
+  const { ctx, w, h } = context("map");
+  ctx.clearRect(0, 0, w, h);
+  const p = state.positions;
+  state.drawn = [];
+  if (!p) {
+    ctx.fillStyle = "#718096"; ctx.fillText("waiting for positions…", 20, 24);
+    renderLabels([], []);
+    return;
+  }
+  const v = view(p, w, h);
+  if (v.b && p.leaders.every((l) => l.at)) drawRegions(ctx, v, p.leaders);
+  ctx.strokeStyle = "#cbd5e0"; ctx.lineWidth = 1; ctx.strokeRect(v.pad - 6, v.pad - 6, v.fw + 12, v.fh + 12);
+  const leaders = drawLeaders(ctx, v, p, missing);
+  const tracks = drawTracks(ctx, v, p);
+  const markers = leaders.markers.concat(tracks.markers);
+  state.markers = markers;
+  renderLabels(labelOrder(leaders.items, tracks.items), markers);
+  if (state.drawn.some((d) => d.p_red !== null) && state.firstMapMs === null) {
+    state.firstMapMs = performance.now();
+    document.body.dataset.firstMapMs = state.firstMapMs.toFixed(1);
+  }
+}
+
+// The most wanted labels first: the selected track's, the leaders', then
+// the tracks' in order.
+function labelOrder(leaders, tracks) {
+  const selected = tracks.filter((i) => i.forced);
+  return selected.concat(leaders, tracks.filter((i) => !i.forced));
+}
+
+function drawLeaders(ctx, v, p, missing) {
+  const markers = [], items = [];
   p.leaders.forEach((l, i) => {
-    if (!l.at) return;
-    const [x, y] = at(l.at);
+    if (!l.at || !v.b) return;
+    const [x, y] = v.at(l.at);
     ctx.beginPath(); ctx.moveTo(x, y - 11); ctx.lineTo(x + 11, y); ctx.lineTo(x, y + 11); ctx.lineTo(x - 11, y); ctx.closePath();
     ctx.fillStyle = leaderColour(i); ctx.fill(); ctx.strokeStyle = "#1a202c"; ctx.lineWidth = 1.5; ctx.stroke();
-    ctx.font = "bold 12px system-ui, sans-serif"; ctx.fillStyle = "#1a202c";
-    ctx.fillText(l.name, x + 14, y + 4);
-    if (missing.includes(l.name)) {
+    const gone = missing.includes(l.name);
+    if (gone) {
       ctx.strokeStyle = "#c53030"; ctx.lineWidth = 3;
       ctx.beginPath(); ctx.moveTo(x - 13, y - 13); ctx.lineTo(x + 13, y + 13); ctx.moveTo(x + 13, y - 13); ctx.lineTo(x - 13, y + 13); ctx.stroke();
-      ctx.fillStyle = "#c53030"; ctx.fillText("missing", x + 14, y + 18);
     }
+    markers.push({ key: "leader " + l.name, ...Labels.markerBox(x, y, LEADER_BOX) });
+    items.push({ key: "leader " + l.name, kind: "leader", x, y, r: LEADER_BOX,
+      text: gone ? `${l.name} · missing` : l.name, missing: gone });
   });
+  return { markers, items };
+}
+
+function drawTracks(ctx, v, p) {
+  const m = state.marginals;
   const ident = state.identityStream && state.identity && state.identity.tracks === p.tracks ? state.identity : null;
   const values = m && m.tracks === p.tracks ? m.p_red : null;
+  const markers = [], items = [];
   let unplaced = 0;
-  ctx.font = "11px system-ui, sans-serif";
   for (let t = 0; t < p.tracks; t++) {
     let x, y;
-    if (p.positions[t] && b) [x, y] = at(p.positions[t]);
-    else { x = pad + RADIUS + (unplaced++) * 2.5 * RADIUS; y = h - strip / 2; }
+    if (p.positions[t] && v.b) [x, y] = v.at(p.positions[t]);
+    else { x = v.pad + RADIUS + (unplaced++) * 2.5 * RADIUS; y = v.h - v.strip / 2; }
     const value = values ? values[t] : null;
     const colour = value === null ? [160, 174, 192] : colourOf(value);
     ctx.beginPath(); ctx.arc(x, y, RADIUS + 2, 0, 2 * Math.PI);
     ctx.fillStyle = leaderColour(p.owners[t]); ctx.fill();
     ctx.beginPath(); ctx.arc(x, y, RADIUS - 1, 0, 2 * Math.PI);
     ctx.fillStyle = rgb(colour); ctx.fill();
-    let label = String(t);
+    if (t === state.selected) {
+      ctx.beginPath(); ctx.arc(x, y, RADIUS + 4, 0, 2 * Math.PI);
+      ctx.strokeStyle = "#1a202c"; ctx.lineWidth = 2; ctx.stroke();
+    }
+    let text = String(t);
     if (ident) {
       const i = ident.predicted_identity[t];
-      label += ` · id ${i} ${probabilityOf(ident.p_identity[t], i).toFixed(2)}`;
+      text += ` · id ${i} ${probabilityOf(ident.p_identity[t], i).toFixed(2)}`;
     }
-    ctx.fillStyle = "#1a202c"; ctx.fillText(label, x + RADIUS + 4, y - RADIUS + 2);
+    markers.push({ key: "track " + t, ...Labels.markerBox(x, y, TRACK_BOX) });
+    items.push({ key: "track " + t, kind: "track", track: t, x, y, r: TRACK_BOX, text, forced: t === state.selected });
     state.drawn.push({ track: t, x, y, p_red: value, colour, owner: leaderName(p, p.owners[t]),
       identity: ident ? ident.predicted_identity[t] : null });
   }
-  if (values && state.firstMapMs === null) {
-    state.firstMapMs = performance.now();
-    document.body.dataset.firstMapMs = state.firstMapMs.toFixed(1);
-  }
+  return { markers, items };
 }
 
-// Shades each leader's region: cells of the canvas coloured by their
-// nearest leader, computed once per extent and kept.
-function drawRegions(ctx, w, h, leaders, at, b, scale, ox, oy) {
-  const key = [w, h, ...b].join(",");
+// The labels as elements over the canvas: written hidden, measured in one
+// layout, placed, then shown where they found room.
+function renderLabels(items, markers) {
+  const layer = document.getElementById("labels");
+  layer.innerHTML = items.map((i) =>
+    `<span class="label ${i.kind}${i.missing ? " missing" : ""}${i.forced ? " selected" : ""}" data-key="${escape(i.key)}">${escape(i.text)}</span>`).join("");
+  const spans = Array.from(layer.children);
+  spans.forEach((span, n) => {
+    const r = span.getBoundingClientRect();
+    items[n].width = r.width; items[n].height = r.height;
+  });
+  const canvas = document.getElementById("map");
+  const area = { left: 0, top: 0, width: Number(canvas.dataset.w), height: Number(canvas.dataset.h) };
+  const where = PLACEMENT ? Labels.place(items, markers, area, state.spots) : Labels.unplaced(items);
+  state.spots = new Map([...where].filter(([, s]) => s).map(([k, s]) => [k, s.spot]));
+  spans.forEach((span, n) => {
+    const item = items[n], spot = where.get(item.key);
+    // A hidden label shows while the pointer is on its marker, at its
+    // first spot, over whatever is there.
+    const hovered = item.key === "track " + state.hover;
+    const box = spot ? spot.box : hovered ? Labels.spots(item.x, item.y, item.r, item.width, item.height)[0] : null;
+    if (!box) { span.hidden = true; return; }
+    if (!spot) span.classList.add("hover");
+    span.style.left = box.left + "px"; span.style.top = box.top + "px";
+    span.style.visibility = "visible";
+  });
+}
+
+// Shades each leader's region: the rectangle its answer gives (fitted
+// cells), or else the canvas cells coloured by their nearest leader,
+// computed once per extent and kept.
+function drawRegions(ctx, v, leaders) {
+  ctx.save(); ctx.globalAlpha = 0.13;
+  if (leaders.every((l) => l.region)) {
+    leaders.forEach((l, i) => {
+      const [x0, y0] = v.at([l.region[0], l.region[3]]), [x1, y1] = v.at([l.region[2], l.region[1]]);
+      ctx.fillStyle = leaderColour(i); ctx.fillRect(x0, y0, x1 - x0, y1 - y0);
+    });
+    ctx.globalAlpha = 0.5; ctx.strokeStyle = "#718096"; ctx.lineWidth = 1;
+    leaders.forEach((l) => {
+      const [x0, y0] = v.at([l.region[0], l.region[3]]), [x1, y1] = v.at([l.region[2], l.region[1]]);
+      ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
+    });
+  } else {
+    ctx.drawImage(nearestCells(v, leaders), 0, 0, v.w, v.h - v.strip);
+  }
+  ctx.restore();
+}
+
+function nearestCells(v, leaders) {
+  const { w, b, scale, ox, oy } = v, h = v.h - v.strip;
+  const key = [w, h, ...b, ...leaders.flatMap((l) => l.at)].join(",");
   if (!state.regions || state.regions.key !== key) {
     const off = document.createElement("canvas");
     off.width = w; off.height = h;
@@ -240,22 +381,27 @@ function drawRegions(ctx, w, h, leaders, at, b, scale, ox, oy) {
     }
     state.regions = { key, canvas: off };
   }
-  ctx.save(); ctx.globalAlpha = 0.13; ctx.drawImage(state.regions.canvas, 0, 0, w, h); ctx.restore();
+  return state.regions.canvas;
 }
 
+// A chart of the last `state.span` ms: time along, gaps left open.
 function drawChart(id, series, colour) {
   const { ctx, w, h } = context(id);
   ctx.clearRect(0, 0, w, h);
-  if (series.length < 2) return;
-  const top = Math.max(...series) * 1.1 || 1;
+  const values = series.filter((s) => s.v !== null).map((s) => s.v);
+  if (values.length < 2) return;
+  const top = Math.max(...values) * 1.1 || 1, now = Date.now();
   ctx.strokeStyle = colour; ctx.lineWidth = 1.5; ctx.beginPath();
-  series.forEach((v, i) => {
-    const x = 4 + (w - 8) * i / (HISTORY - 1), y = h - 4 - (h - 16) * v / top;
-    if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
-  });
+  let drawing = false;
+  for (const s of series) {
+    if (s.v === null) { drawing = false; continue; }
+    const x = w - 4 - (w - 8) * (now - s.t) / state.span, y = h - 4 - (h - 16) * s.v / top;
+    if (drawing) ctx.lineTo(x, y); else ctx.moveTo(x, y);
+    drawing = true;
+  }
   ctx.stroke();
   ctx.fillStyle = "#4a5568"; ctx.font = "10px system-ui, sans-serif";
-  ctx.fillText(`max ${(top / 1.1).toFixed(top < 10 ? 1 : 0)}`, 6, 11);
+  ctx.fillText(`max ${(top / 1.1).toFixed(top < 10 ? 1 : 0)} · last ${Math.round(state.span / 60000)} min`, 6, 11);
 }
 
 function renderLeaders(missing) {
@@ -297,14 +443,67 @@ function probabilityOf(row, i) {
 function renderTracks() {
   document.querySelector("#tracks tbody").innerHTML = state.drawn.map((d) => {
     const ident = d.identity === null ? "" : `${d.identity} (${probabilityOf(state.identity.p_identity[d.track], d.identity).toFixed(2)})`;
-    return `<tr data-track="${d.track}"><td>${d.track}</td><td style="color:${rgb(d.colour)}">${d.p_red === null ? "–" : d.p_red.toFixed(3)}</td>
+    const selected = d.track === state.selected ? ' class="selected"' : "";
+    return `<tr data-track="${d.track}"${selected}><td>${d.track}</td><td style="color:${rgb(d.colour)}">${d.p_red === null ? "–" : d.p_red.toFixed(3)}</td>
       <td>${escape(d.owner)}</td><td>${ident}</td></tr>`;
   }).join("");
+}
+
+// The track under the pointer (within its ring), or null.
+function trackAt(event) {
+  const canvas = document.getElementById("map");
+  const r = canvas.getBoundingClientRect();
+  const x = event.clientX - r.left - canvas.clientLeft, y = event.clientY - r.top - canvas.clientTop;
+  let best = null, bd = TRACK_BOX * TRACK_BOX;
+  for (const d of state.drawn) {
+    const dd = (d.x - x) ** 2 + (d.y - y) ** 2;
+    if (dd <= bd) { bd = dd; best = d.track; }
+  }
+  return best;
+}
+
+function select(track) {
+  state.selected = track === state.selected ? null : track;
+  schedule();
+}
+
+// Hover shows a hidden label; a click on a track or its row selects it.
+function listenToPointer() {
+  const canvas = document.getElementById("map");
+  canvas.addEventListener("mousemove", (e) => {
+    const t = trackAt(e);
+    if (t !== state.hover) { state.hover = t; schedule(); }
+  });
+  canvas.addEventListener("mouseleave", () => { state.hover = null; schedule(); });
+  canvas.addEventListener("click", (e) => { const t = trackAt(e); if (t !== null) select(t); });
+  document.querySelector("#tracks tbody").addEventListener("click", (e) => {
+    const row = e.target.closest("tr");
+    if (row) select(Number(row.dataset.track));
+  });
+}
+
+// Every label shown and its box relative to the map's canvas, read from
+// the elements themselves (what the eye sees, not what placement meant);
+// the markers' boxes beside them.
+function shownLabels() {
+  const map = document.getElementById("map"), canvas = map.getBoundingClientRect();
+  const x0 = canvas.left + map.clientLeft, y0 = canvas.top + map.clientTop;
+  const labels = Array.from(document.querySelectorAll("#labels .label"))
+    .filter((s) => !s.hidden && !s.classList.contains("hover"))
+    .map((s) => {
+      const r = s.getBoundingClientRect();
+      return { key: s.dataset.key, text: s.textContent, selected: s.classList.contains("selected"),
+        left: r.left - x0, top: r.top - y0, width: r.width, height: r.height };
+    });
+  return { labels, markers: state.markers, hidden: document.querySelectorAll("#labels .label[hidden]").length,
+    placement: PLACEMENT };
 }
 
 // What the page shows, for tests and for anyone curious in the console.
 window.idmesh = {
   colourOf,
+  labels: shownLabels,
+  select(track) { state.selected = track; render(); },
   snapshot() {
     return {
       watermark: state.marginals ? eventsOf(state.marginals.watermark) : null,
@@ -316,6 +515,12 @@ window.idmesh = {
       ratio: window.devicePixelRatio || 1,
       firstMapMs: state.firstMapMs,
       tracks: state.drawn,
+      // The charts: points plotted, and the highest rate among them.
+      rates: state.rates.filter((s) => s.v !== null).length,
+      peakRate: Math.max(0, ...state.rates.map((s) => s.v ?? 0)),
+      rate: document.getElementById("rate").textContent,
     };
   },
 };
+
+start();

@@ -14,6 +14,9 @@
 //! - `metrics` — `GET /metrics` in the OpenMetrics text format: every
 //!   process's counters from `query/stats`, the gateway's own query
 //!   latency histograms.
+//! - `history` — `GET /history`: the last minutes of the charts' figures
+//!   (events/s, query latency), sampled by the gateway whether or not a
+//!   page is open, so a page opened late starts with the recent past.
 //! - `health` — `/healthz` (the gateway is up) and `/readyz` (every role
 //!   of the deployment answers).
 //! - `asker` — one get to the coordinator, timed, its outcome turned into
@@ -21,13 +24,16 @@
 
 mod asker;
 mod health;
+mod history;
 mod metrics;
 mod page;
 mod rest;
 
 use asker::Asker;
+use axum::extract::FromRef;
 use axum::routing::get;
 use axum::Router;
+use history::History;
 use idmesh_protocol::wire::keys::Keys;
 use std::future::Future;
 use std::sync::Arc;
@@ -57,23 +63,58 @@ pub async fn serve(
     listener: tokio::net::TcpListener,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), WebError> {
-    let app = app(session, config);
-    axum::serve(listener, app)
+    let gateway = Gateway::new(session, config);
+    let sampler = tokio::spawn(history::sample(
+        gateway.asker.clone(),
+        gateway.history.clone(),
+    ));
+    let served = axum::serve(listener, app(gateway))
         .with_graceful_shutdown(shutdown)
-        .await?;
-    Ok(())
+        .await;
+    sampler.abort();
+    Ok(served?)
+}
+
+/// What the routes share: the client side to the deployment, and the
+/// history the gateway keeps.
+#[derive(Clone)]
+pub(crate) struct Gateway {
+    asker: Arc<Asker>,
+    history: Arc<History>,
+}
+
+impl Gateway {
+    fn new(session: zenoh::Session, config: WebConfig) -> Self {
+        Gateway {
+            asker: Arc::new(Asker::new(session, config.keys, config.timeout)),
+            history: Arc::new(History::new(history::CAPACITY)),
+        }
+    }
+}
+
+impl FromRef<Gateway> for Arc<Asker> {
+    fn from_ref(gateway: &Gateway) -> Self {
+        gateway.asker.clone()
+    }
+}
+
+impl FromRef<Gateway> for Arc<History> {
+    fn from_ref(gateway: &Gateway) -> Self {
+        gateway.history.clone()
+    }
 }
 
 /// Every route of the gateway.
-pub(crate) fn app(session: zenoh::Session, config: WebConfig) -> Router {
-    let asker = Arc::new(Asker::new(session, config.keys.clone(), config.timeout));
+pub(crate) fn app(gateway: Gateway) -> Router {
     Router::new()
         .route("/", get(page::index))
         .route("/map.js", get(page::script))
+        .route("/labels.js", get(page::labels))
         .route("/map.css", get(page::style))
+        .route("/history", get(history::history))
         .route("/metrics", get(metrics::metrics))
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .fallback(rest::rest)
-        .with_state(asker)
+        .with_state(gateway)
 }

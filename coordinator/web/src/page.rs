@@ -1,6 +1,8 @@
-//! The live map's three files, compiled into the binary (no CDN, no
+//! The live map's four files, compiled into the binary (no CDN, no
 //! internet): `index.html`, `map.js` (vanilla JavaScript drawing on a
-//! canvas, fed by Server-Sent Events from [`crate::rest`]) and `map.css`.
+//! canvas, fed by Server-Sent Events from [`crate::rest`] and by the
+//! gateway's [`crate::history`]), `labels.js` (where the map's labels go,
+//! so that none covers another) and `map.css`.
 //! The page learns the deployment's prefix from a `<meta>` tag filled in
 //! here.
 
@@ -12,6 +14,7 @@ use std::sync::Arc;
 
 const INDEX: &str = include_str!("../assets/index.html");
 const SCRIPT: &str = include_str!("../assets/map.js");
+const LABELS: &str = include_str!("../assets/labels.js");
 const STYLE: &str = include_str!("../assets/map.css");
 
 pub async fn index(State(asker): State<Arc<Asker>>) -> Response {
@@ -28,9 +31,17 @@ pub async fn index(State(asker): State<Arc<Asker>>) -> Response {
 }
 
 pub(crate) async fn script() -> Response {
+    javascript(SCRIPT)
+}
+
+pub(crate) async fn labels() -> Response {
+    javascript(LABELS)
+}
+
+fn javascript(source: &'static str) -> Response {
     (
         [(header::CONTENT_TYPE, "text/javascript; charset=utf-8")],
-        SCRIPT,
+        source,
     )
         .into_response()
 }

@@ -97,6 +97,12 @@ pub struct SensorPositions {
     /// topology places no leader, tracks stay with leader t mod L).
     pub leaders: Vec<String>,
     pub places: Vec<Option<[f64; 2]>>,
+    /// Each leader's region as a rectangle `[x0, y0, x1, y1]` when the
+    /// regions are rectangles (fitted cells, cut to the box of the tracks
+    /// seen); empty when they are not (fixed places: the points nearest
+    /// each place) or not drawn yet. A leader's place is its centre.
+    #[serde(default)]
+    pub regions: Vec<Option<[f64; 4]>>,
     /// Per track: its last `move` position (None before any), and the
     /// index in `leaders` of the leader that surveils it.
     pub positions: Vec<Option<[f64; 2]>>,
@@ -111,6 +117,13 @@ impl SensorPositions {
             return Err(format!(
                 "{} places for {} leaders",
                 self.places.len(),
+                self.leaders.len()
+            ));
+        }
+        if !self.regions.is_empty() && self.regions.len() != self.leaders.len() {
+            return Err(format!(
+                "{} regions for {} leaders",
+                self.regions.len(),
                 self.leaders.len()
             ));
         }
@@ -134,6 +147,12 @@ impl SensorPositions {
         let finite = |p: &Option<[f64; 2]>| p.is_none_or(|[x, y]| x.is_finite() && y.is_finite());
         if !self.positions.iter().chain(&self.places).all(finite) {
             return Err("a position is not a finite number".into());
+        }
+        let box_ok = |r: &Option<[f64; 4]>| {
+            r.is_none_or(|r| r.iter().all(|v| v.is_finite()) && r[0] <= r[2] && r[1] <= r[3])
+        };
+        if !self.regions.iter().all(box_ok) {
+            return Err("a region is not a rectangle of finite numbers".into());
         }
         Ok(())
     }
@@ -165,6 +184,7 @@ mod tests {
             finished: false,
             leaders: vec!["l0".into(), "l1".into()],
             places: vec![Some([0.0, 0.0]), Some([5.0, 5.0])],
+            regions: vec![Some([0.0, 0.0, 2.5, 5.0]), None],
             positions: vec![Some([1.0, 2.0]), None],
             owners: vec![0, 1],
         };
@@ -184,6 +204,16 @@ mod tests {
             ..good.clone()
         };
         assert!(nan.check().unwrap_err().contains("finite"));
+        let regions = SensorPositions {
+            regions: vec![None],
+            ..good.clone()
+        };
+        assert!(regions.check().unwrap_err().contains("1 regions"));
+        let inside_out = SensorPositions {
+            regions: vec![Some([3.0, 0.0, 1.0, 5.0]), None],
+            ..good.clone()
+        };
+        assert!(inside_out.check().unwrap_err().contains("rectangle"));
         let places = SensorPositions {
             places: vec![None],
             ..good

@@ -161,7 +161,14 @@ pub struct PositionsAnswer {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LeaderPlace {
     pub name: String,
+    /// Under fitted cells the centre of its region; under fixed places
+    /// the place itself.
     pub at: Option<[f64; 2]>,
+    /// Its region `[x0, y0, x1, y1]` when regions are rectangles (fitted
+    /// cells, cut to the box of the tracks seen); absent under fixed
+    /// places, whose regions are the points nearest each place.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<[f64; 4]>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
