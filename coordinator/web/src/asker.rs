@@ -52,6 +52,10 @@ pub(crate) struct Asker {
     pub timeout: Duration,
     /// Seconds per get, by question and outcome (`/metrics`).
     pub latency: LatencyFamily,
+    /// The latency of the last marginals question answered since the
+    /// history last took it (the charts' latency is that of questions
+    /// someone asked, never of one asked only to draw it).
+    answered_marginals: std::sync::Mutex<Option<Duration>>,
 }
 
 /// The latency family with every question's answered series present.
@@ -89,7 +93,17 @@ impl Asker {
             keys,
             timeout,
             latency: latency_family(),
+            answered_marginals: std::sync::Mutex::new(None),
         }
+    }
+
+    /// The latency of the last marginals question answered since the
+    /// last call, if any.
+    pub(crate) fn take_marginals_latency(&self) -> Option<Duration> {
+        self.answered_marginals
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
     }
 
     /// Asks `selector` (a key under the prefix, with `?parameters`); `what`
@@ -99,6 +113,12 @@ impl Asker {
         let (status, body) = self.get(selector).await;
         let took = started.elapsed();
         let outcome = if status == 200 { "ok" } else { "error" };
+        if status == 200 && what == "marginals" {
+            *self
+                .answered_marginals
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = Some(took);
+        }
         self.latency
             .get_or_create(&query_labels(what, outcome))
             .observe(took.as_secs_f64());

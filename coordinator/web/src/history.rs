@@ -3,10 +3,14 @@
 //! gateway, so that a page opened late in a stream or between two streams
 //! starts with the last few minutes rather than with empty charts.
 //!
-//! A background task asks `query/marginals` every [`SAMPLE_EVERY`] for as
-//! long as the gateway serves (whether or not a page is open: the past is
-//! wanted exactly when nobody was looking) and keeps the last [`CAPACITY`]
-//! samples in a ring buffer, a bounded memory whatever the uptime.
+//! A background task asks `query/positions` (the sensors' event counts:
+//! no leader is asked, nothing global is computed) every [`SAMPLE_EVERY`]
+//! for as long as the gateway serves (whether or not a page is open: the
+//! past is wanted exactly when nobody was looking) and keeps the last
+//! [`CAPACITY`] samples in a ring buffer, a bounded memory whatever the
+//! uptime. The latency is that of the last marginals question someone
+//! asked through the gateway in that second (none asked: null), so that
+//! keeping the history never makes the leaders work.
 //! `GET /history` serves them as JSON:
 //!
 //! ```text
@@ -16,8 +20,8 @@
 //!
 //! `at_ms` and `now_ms` are the gateway's clock (milliseconds since the
 //! Unix epoch), so a page on another machine can shift them onto its own.
-//! A question the coordinator did not answer leaves `events`, `rate` and
-//! `latency_ms` null: a gap in the charts. `rate` is null too at the
+//! A look the coordinator did not answer leaves `events` and `rate` null:
+//! a gap in the charts. `rate` is null too at the
 //! first answer after a gap and when the watermark went back (a new
 //! stream began).
 
@@ -73,7 +77,7 @@ struct Ring {
     last: Option<(Instant, u64)>,
 }
 
-/// The one field of a marginals answer the history needs.
+/// The one field of a positions answer the history needs.
 #[derive(Deserialize)]
 struct Watermarked {
     watermark: BTreeMap<String, u64>,
@@ -94,24 +98,31 @@ impl History {
     }
 
     /// Records one look taken `at` (`at_ms` on the wall clock): the
-    /// events and the latency when the coordinator answered.
-    pub(crate) fn record(&self, at: Instant, at_ms: u64, answered: Option<(u64, f64)>) {
+    /// events when the coordinator answered, and the latency of the last
+    /// marginals question asked since the look before.
+    pub(crate) fn record(
+        &self,
+        at: Instant,
+        at_ms: u64,
+        answered: Option<u64>,
+        latency_ms: Option<f64>,
+    ) {
         let mut ring = self.ring();
         let rate = match (ring.last, answered) {
-            (Some((then, before)), Some((events, _))) if events >= before && at > then => {
+            (Some((then, before)), Some(events)) if events >= before && at > then => {
                 Some((events - before) as f64 / (at - then).as_secs_f64())
             }
             _ => None,
         };
-        ring.last = answered.map(|(events, _)| (at, events));
+        ring.last = answered.map(|events| (at, events));
         if ring.samples.len() == self.capacity {
             ring.samples.pop_front();
         }
         ring.samples.push_back(Sample {
             at_ms,
-            events: answered.map(|a| a.0),
+            events: answered,
             rate,
-            latency_ms: answered.map(|a| a.1),
+            latency_ms,
         });
     }
 
@@ -137,27 +148,28 @@ fn now_ms() -> u64 {
 /// Asks for the watermark every [`SAMPLE_EVERY`], for ever (the caller
 /// aborts the task when the gateway stops).
 pub(crate) async fn sample(asker: Arc<Asker>, history: Arc<History>) {
-    let selector = asker.keys.query_marginals();
+    let selector = asker.keys.query_positions();
     let mut ticks = tokio::time::interval(SAMPLE_EVERY);
     ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         ticks.tick().await;
         let (at, at_ms) = (Instant::now(), now_ms());
-        let answer = asker.ask(&selector, "marginals").await;
+        let answer = asker.ask(&selector, "positions").await;
         let answered = match answer.error() {
             Some(error) => {
                 tracing::debug!(%error, "no sample of the watermark");
                 None
             }
             None => match serde_json::from_slice::<Watermarked>(&answer.body) {
-                Ok(w) => Some((w.watermark.values().sum(), answer.took.as_secs_f64() * 1e3)),
+                Ok(w) => Some(w.watermark.values().sum()),
                 Err(error) => {
-                    tracing::warn!(%error, "a marginals answer without a watermark");
+                    tracing::warn!(%error, "a positions answer without a watermark");
                     None
                 }
             },
         };
-        history.record(at, at_ms, answered);
+        let latency = asker.take_marginals_latency();
+        history.record(at, at_ms, answered, latency.map(|d| d.as_secs_f64() * 1e3));
     }
 }
 
@@ -179,13 +191,13 @@ mod tests {
         let history = History::new(10);
         let t0 = Instant::now();
         let at = |s: u64| t0 + Duration::from_secs(s);
-        history.record(at(0), 0, Some((100, 2.0)));
-        history.record(at(1), 1000, Some((400, 3.0)));
-        history.record(at(2), 2000, None);
-        history.record(at(3), 3000, Some((900, 2.5)));
-        history.record(at(5), 5000, Some((1100, 2.5)));
+        history.record(at(0), 0, Some(100), Some(2.0));
+        history.record(at(1), 1000, Some(400), Some(3.0));
+        history.record(at(2), 2000, None, None);
+        history.record(at(3), 3000, Some(900), Some(2.5));
+        history.record(at(5), 5000, Some(1100), Some(2.5));
         // A new stream: the watermark starts again from zero.
-        history.record(at(6), 6000, Some((50, 1.0)));
+        history.record(at(6), 6000, Some(50), Some(1.0));
         let ring = history.ring();
         let rates: Vec<Option<f64>> = ring.samples.iter().map(|s| s.rate).collect();
         assert_eq!(
@@ -201,7 +213,7 @@ mod tests {
         let history = History::new(3);
         let t0 = Instant::now();
         for s in 0..7u64 {
-            history.record(t0 + Duration::from_secs(s), s * 1000, Some((s * 10, 1.0)));
+            history.record(t0 + Duration::from_secs(s), s * 1000, Some(s * 10), None);
         }
         let served: serde_json::Value = serde_json::from_slice(&history.to_json()).unwrap();
         let at: Vec<u64> = served["samples"]
