@@ -282,7 +282,9 @@ pub struct QueryArgs {
     /// (default 10,000): more when the answer says the chain has not mixed.
     #[arg(long)]
     pub samples: Option<u64>,
-    /// The coordinator's endpoint.
+    /// The coordinator's endpoint; or every coordinator's, separated by
+    /// commas (the first and its replicas), so that another answers when
+    /// one is gone.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub connect: String,
     /// The deployment's key prefix (the topology's `prefix`).
@@ -385,7 +387,9 @@ pub struct WebArgs {
     /// is printed).
     #[arg(long, default_value = "127.0.0.1:8080")]
     pub listen: String,
-    /// The coordinator's endpoint.
+    /// The coordinator's endpoint; or every coordinator's, separated by
+    /// commas (the first and its replicas), so that another answers when
+    /// one is gone.
     #[arg(long, default_value = "tcp/127.0.0.1:7447")]
     pub connect: String,
     /// The deployment's key prefix (the topology's `prefix`).

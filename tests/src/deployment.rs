@@ -7,8 +7,8 @@ use crate::idmesh;
 use idmesh_deploy::runtime::ports::pick_free_ports;
 pub use idmesh_deploy::runtime::security::SecuritySection;
 pub use idmesh_deploy::runtime::topology::{
-    BeliefKind, FaultSection, LeaderFaultSection, RegionsSetting, Sparsification, SplitSetting,
-    Topology,
+    BeliefKind, FaultSection, LeaderFaultSection, Process, RegionsSetting, Sparsification,
+    SplitSetting, Topology,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -69,6 +69,10 @@ pub struct Settings {
     pub extract: Option<idmesh_extract::ExtractorConfig>,
     /// Bad lines of a sensor's own input it goes past (`max_errors`).
     pub max_errors: usize,
+    /// Coordinators beside the first (`[[coordinator_replica]]`, named
+    /// `coordinator-1`, …); queries are given every coordinator's
+    /// endpoint.
+    pub coordinator_replicas: usize,
 }
 
 /// The factored belief's settings in a topology.
@@ -105,6 +109,8 @@ pub struct Secured {
 
 pub struct Deployment {
     pub dir: PathBuf,
+    /// Every coordinator's endpoint, comma-separated (what `idmesh query
+    /// --connect` takes).
     pub coordinator: String,
     pub prefix: String,
     /// Every process's name and listening endpoint, as the topology has it.
@@ -181,6 +187,18 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
     let ports = pick_free_ports(1 + settings.leaders + sensors).expect("free loopback ports");
     let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
     let mut topology = Topology::loopback(sensor_trace, settings.leaders, sensors, &ports);
+    let replica_ports =
+        pick_free_ports(settings.coordinator_replicas).expect("free loopback ports");
+    topology.coordinator_replicas = replica_ports
+        .iter()
+        .enumerate()
+        .map(|(i, port)| {
+            Process::new(
+                format!("coordinator-{}", i + 1),
+                format!("tcp/127.0.0.1:{port}"),
+            )
+        })
+        .collect();
     if settings.fixed_places {
         topology.regions = RegionsSetting::Fixed;
         for (leader, (x, y)) in topology
@@ -269,6 +287,9 @@ impl Deployment {
     pub fn start_each(name: &str, trace: &Path, settings: &Settings) -> Deployment {
         let mut deployment = Self::configure(name, trace, settings);
         deployment.launch("coordinator", "coordinator");
+        for i in 1..=settings.coordinator_replicas {
+            deployment.launch("coordinator", &format!("coordinator-{i}"));
+        }
         for i in 0..settings.leaders {
             deployment.launch("leader", &format!("leader-{i}"));
         }
@@ -444,7 +465,7 @@ impl Deployment {
         topology.save(&config).unwrap();
         Deployment {
             dir,
-            coordinator: topology.coordinator.listen.clone(),
+            coordinator: topology.coordinator_endpoints(),
             prefix: topology.prefix.clone(),
             endpoints: topology
                 .members()

@@ -277,3 +277,39 @@ fn an_adopted_role_goes_home_when_its_process_returns() {
         handed_back.as_secs_f64()
     );
 }
+
+/// A coordinator and a replica (`[[coordinator_replica]]`): the first is
+/// killed for good mid-stream (SIGKILL, never started again) and queries
+/// given both endpoints go on being answered by the replica, within a
+/// few seconds, to the end; the final answer equals the twin's to 1e-9.
+#[test]
+fn a_coordinator_killed_for_good_is_replaced_by_its_replica() {
+    let dir = std::env::temp_dir().join(format!("idmesh-coordinators-{}", std::process::id()));
+    let trace = crowd(&dir, 16, 4, 60.0, 3);
+    let settings = Settings {
+        leaders: 2,
+        rate: Some(1000.0),
+        factored: Some(idmesh_tests::Factored::default()),
+        coordinator_replicas: 1,
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_each("coordinators", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    deployment.kill("coordinator");
+    let killed = Instant::now();
+    let answered = deployment.answer_when(&["marginals"], Duration::from_secs(30), |_| true);
+    eprintln!(
+        "the first answer after the coordinator's kill came {:.2} s after it, at {} events",
+        killed.elapsed().as_secs_f64(),
+        idmesh_tests::watermark_events(&answered)
+    );
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after the coordinator's loss",
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -156,7 +156,7 @@ pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
         names.join(", "),
         config.display(),
         host.map(|h| format!(" on host {h}")).unwrap_or_default(),
-        topology.coordinator.listen,
+        topology.coordinator_endpoints(),
         if topology.prefix == DEFAULT_PREFIX {
             String::new()
         } else {

@@ -47,6 +47,17 @@ pub struct MeshOptions {
     pub connect_patience: Option<std::time::Duration>,
 }
 
+/// The endpoints of a client's `--connect`: one, or several separated by
+/// commas (a coordinator and its replicas; Zenoh's client keeps to one
+/// and moves to another when that one is gone).
+pub(crate) fn endpoint_list(text: &str) -> Vec<String> {
+    text.split(',')
+        .map(str::trim)
+        .filter(|e| !e.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
 /// How soon a patient client tries its endpoint again, at first and at
 /// most (doubling in between).
 const RETRY_FIRST_MS: u64 = 100;
@@ -188,6 +199,29 @@ mod tests {
     fn free_endpoint() -> String {
         let port = crate::runtime::ports::pick_free_ports(1).expect("a free port")[0];
         format!("tcp/127.0.0.1:{port}")
+    }
+
+    /// A client given every coordinator's endpoint opens on one that
+    /// listens when the first is gone.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_client_given_several_endpoints_opens_on_one_that_listens() {
+        let (gone, there) = (free_endpoint(), free_endpoint());
+        let _server = open(&MeshOptions {
+            listen: vec![there.clone()],
+            ..MeshOptions::default()
+        })
+        .await
+        .expect("the endpoint listens");
+        let client = MeshOptions {
+            client: true,
+            connect: endpoint_list(&format!("{gone},{there}")),
+            ..MeshOptions::default()
+        };
+        assert_eq!(client.connect, vec![gone, there]);
+        tokio::time::timeout(Duration::from_secs(10), open(&client))
+            .await
+            .expect("the client opens at once")
+            .expect("on the endpoint that listens");
     }
 
     /// `idmesh web` started beside a deployment may come up before the

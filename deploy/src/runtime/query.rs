@@ -103,7 +103,7 @@ async fn connect(options: &QueryOptions) -> Result<zenoh::Session> {
     mesh::open(&MeshOptions {
         client: true,
         listen: vec![],
-        connect: vec![options.connect.clone()],
+        connect: mesh::endpoint_list(&options.connect),
         tls: options.tls.clone(),
         ..MeshOptions::default()
     })

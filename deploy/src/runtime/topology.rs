@@ -38,6 +38,10 @@
 //! name = "coordinator"
 //! listen = "tcp/127.0.0.1:7447"
 //!
+//! # [[coordinator_replica]]      # more coordinators, each answering every
+//! # name = "coordinator-b"       # question (clients given every endpoint:
+//! # listen = "tcp/127.0.0.1:7448" # one answers when another is gone)
+//!
 //! [sensor]
 //! name = "sensor-0"
 //! listen = "tcp/127.0.0.1:7452"
@@ -166,6 +170,18 @@ pub struct Topology {
     )]
     pub marginals_timeout_ms: u64,
     pub coordinator: Process,
+    /// Further coordinators (`[[coordinator_replica]]`), best each on a
+    /// host of its own. A coordinator holds no state of the stream, so
+    /// every one answers every question as the first does; clients given
+    /// every coordinator's endpoint (`idmesh query --connect A,B`, the web
+    /// gateway's `--connect`) are answered by another when one's host is
+    /// gone (docs/guide/deploying.md, "A second coordinator").
+    #[serde(
+        default,
+        rename = "coordinator_replica",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub coordinator_replicas: Vec<Process>,
     /// One `[sensor]`, or several `[[sensor]]` (docs/design/architecture.md,
     /// "Several sensors"): each takes its producers' events, and every
     /// sensor merges them all into one order. Written as it is read: one
@@ -578,6 +594,7 @@ impl Topology {
             takeover_after_ms: default_takeover_after(),
             marginals_timeout_ms: default_marginals_timeout(),
             coordinator,
+            coordinator_replicas: Vec::new(),
             sensors,
             leader,
             leader_faults: LeaderFaultSection::default(),
@@ -705,12 +722,15 @@ impl Topology {
     }
 
     pub fn members(&self) -> Vec<Member> {
-        let mut all = vec![Member {
-            role: "coordinator",
-            name: self.coordinator.name.clone(),
-            host: self.coordinator.host.clone(),
-            listen: self.coordinator.listen.clone(),
-        }];
+        let mut all: Vec<Member> = self
+            .coordinators()
+            .map(|c| Member {
+                role: "coordinator",
+                name: c.name.clone(),
+                host: c.host.clone(),
+                listen: c.listen.clone(),
+            })
+            .collect();
         all.extend(self.sensors.iter().map(|s| Member {
             role: "sensor",
             name: s.name.clone(),
@@ -735,6 +755,20 @@ impl Topology {
 
     pub(crate) fn trace_path(&self) -> PathBuf {
         self.dir.join(&self.sensor().trace)
+    }
+
+    /// Every coordinator: the first, then its replicas.
+    pub fn coordinators(&self) -> impl Iterator<Item = &Process> {
+        std::iter::once(&self.coordinator).chain(&self.coordinator_replicas)
+    }
+
+    /// Every coordinator's endpoint, comma-separated: what a client's
+    /// `--connect` takes so that another answers when one is gone.
+    pub fn coordinator_endpoints(&self) -> String {
+        self.coordinators()
+            .map(|c| c.listen.as_str())
+            .collect::<Vec<_>>()
+            .join(",")
     }
 
     /// The first sensor (the only one, mostly).

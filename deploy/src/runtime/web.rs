@@ -33,7 +33,7 @@ pub fn run(options: &WebOptions) -> Result<()> {
         let session = mesh::open(&MeshOptions {
             client: true,
             listen: vec![],
-            connect: vec![options.connect.clone()],
+            connect: mesh::endpoint_list(&options.connect),
             tls: options.tls.clone(),
             // Started beside a deployment, the gateway may come up before
             // the coordinator listens: it waits for it a while.

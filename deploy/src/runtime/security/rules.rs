@@ -69,7 +69,7 @@ struct Parties {
 impl Parties {
     fn of(topology: &Topology) -> Self {
         Parties {
-            coordinator: vec![topology.coordinator.name.clone()],
+            coordinator: topology.coordinators().map(|c| c.name.clone()).collect(),
             sensor: topology.sensors.iter().map(|s| s.name.clone()).collect(),
             leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
             members: topology.members().into_iter().map(|m| m.name).collect(),
