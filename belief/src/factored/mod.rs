@@ -1363,7 +1363,7 @@ fn coupling_weights(
         retilt(tree, counts, prior, exact);
         all = tree.all_leave_one_out(prior).and_then(|a| trusted(tree, a));
     }
-    let by_live: Vec<Option<Vec<f64>>> = match all {
+    let mut by_live: Vec<Option<Vec<f64>>> = match all {
         Some(by_slot) => by_slot
             .into_iter()
             .enumerate()
@@ -1375,12 +1375,53 @@ fn coupling_weights(
             prior.all_leave_one_out(counts)
         }
     };
+    // With k known the components' expected counts must sum to k. Tables
+    // and weights that lean 10^100 a track apart (long streams of
+    // sightings against the truth) can leave a weight the tree computed
+    // with rounding far above its own size where a count vector is huge:
+    // not flushed to 0, but wrong. The log-space evaluation is exact there.
+    if prior.is_point() && tracks <= EAGER_LIMIT && !counts_sum_to(prior.target(), counts, &by_live)
+    {
+        tracing::debug!("factored: the count tree's weights missed k; evaluated in log space");
+        by_live = prior.all_leave_one_out(counts);
+    }
     // Where every component holds a single count no weight was computed,
     // so nothing above has checked their sum against π.
     if by_live.iter().all(Option::is_none) && !fixed_total_allowed(prior, counts) {
         return Err(BeliefError::Degenerate { normalizer: 0.0 });
     }
     Ok(by_live)
+}
+
+/// Whether the components' expected red counts under their weights
+/// (`None`: the one count the component holds) sum to `k`.
+fn counts_sum_to(k: f64, counts: &[&[f64]], weights: &[Option<Vec<f64>>]) -> bool {
+    let mut total = 0.0;
+    for (c, r) in counts.iter().zip(weights) {
+        total += match r {
+            Some(r) => {
+                // Taken as the marginals are (`Component::weighted_marginals`).
+                let scaled: Vec<f64> = c.iter().enumerate().map(|(s, x)| s as f64 * x).collect();
+                let (mass, mean) = match table::drifted(c, r) {
+                    Some(ln_max) => (
+                        table::weighted_sum(c, r, ln_max),
+                        table::weighted_sum(&scaled, r, ln_max),
+                    ),
+                    None => (
+                        c.iter().zip(r).map(|(x, w)| x * w).sum::<f64>(),
+                        scaled.iter().zip(r).map(|(x, w)| x * w).sum::<f64>(),
+                    ),
+                };
+                if !(mass > 0.0 && mass.is_finite()) {
+                    // No mass: a contradiction, which the caller finds.
+                    return true;
+                }
+                mean / mass
+            }
+            None => c.iter().position(|&x| x > 0.0).unwrap_or(0) as f64,
+        };
+    }
+    (total - k).abs() <= 1e-9 * (1.0 + k)
 }
 
 /// Whether π allows the red count of components that each hold a single

@@ -110,6 +110,35 @@ pub(crate) fn balanced(counts: &[f64], w: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// ln of the largest counts[s]·w[s] when it sits 10^100 or more away from
+/// 1 (None: within, where products taken as they come keep their ratios).
+/// There a component's table and its weights span 10^200 and more in
+/// opposite directions, and even [`balanced`] weights can lose the ratio
+/// of a count held at 10^-319 (a subnormal) to one held at 10^-207 (its
+/// factor would pass the cap); a weighted sum is then taken term by term
+/// in log space against this largest product instead, as
+/// [`weighted_sum`] does.
+pub(crate) fn drifted(counts: &[f64], w: &[f64]) -> Option<f64> {
+    let ln_max = counts
+        .iter()
+        .zip(w)
+        .filter(|(c, w)| **c > 0.0 && **w > 0.0)
+        .map(|(c, w)| c.ln() + w.ln())
+        .fold(f64::NEG_INFINITY, f64::max);
+    (ln_max.is_finite() && ln_max.abs() >= BALANCE_NEEDED_LN).then_some(ln_max)
+}
+
+/// Σ_s a[s]·w[s] divided by e^ln_max, each term in log space: a weighted
+/// sum of a drifted component ([`drifted`]), in a scale shared by every
+/// sum taken against the same largest product.
+pub(crate) fn weighted_sum(a: &[f64], w: &[f64], ln_max: f64) -> f64 {
+    a.iter()
+        .zip(w)
+        .filter(|(x, y)| **x > 0.0 && **y > 0.0)
+        .map(|(x, y)| (x.ln() + y.ln() - ln_max).exp())
+        .sum()
+}
+
 /// Σ_{|y| = r} table[y] for r = 0..=bits.
 pub(crate) fn counts_of(table: &[f64], bits: usize) -> Vec<f64> {
     let mut counts = vec![0.0; bits + 1];
@@ -223,6 +252,9 @@ impl Component {
 
     pub(crate) fn weighted_marginals(&self, w: &[f64]) -> (Vec<f64>, f64) {
         let bits = self.len();
+        if let Some(ln_max) = drifted(&self.counts, w) {
+            return self.drifted_marginals(w, ln_max);
+        }
         let w = balanced(&self.counts, w);
         let mut weighted: Vec<f64> = self
             .table
@@ -243,6 +275,42 @@ impl Component {
         }
         weighted.clear();
         (marginals, total)
+    }
+
+    /// [`Component::weighted_marginals`] of a drifted component: from
+    /// each track's weight by count (the coordinator's parts hold the
+    /// same), every weighted sum in log space ([`weighted_sum`]); the
+    /// total in units of e^ln_max.
+    fn drifted_marginals(&self, w: &[f64], ln_max: f64) -> (Vec<f64>, f64) {
+        let total = weighted_sum(&self.counts, w, ln_max);
+        let marginals = self
+            .red_by_count()
+            .iter()
+            .map(|red| {
+                if total > 0.0 {
+                    weighted_sum(red, w, ln_max) / total
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        (marginals, total)
+    }
+
+    /// Per track, Σ_{|y| = s, y ∋ track} table[y] for s = 0..=bits.
+    pub(crate) fn red_by_count(&self) -> Vec<Vec<f64>> {
+        let m = self.len();
+        let mut red = vec![vec![0.0; m + 1]; m];
+        for (y, &g) in self.table.iter().enumerate() {
+            let s = y.count_ones() as usize;
+            // Only the tracks red in y gain its weight.
+            let mut bits = y;
+            while bits != 0 {
+                red[bits.trailing_zeros() as usize][s] += g;
+                bits &= bits - 1;
+            }
+        }
+        red
     }
 
     /// c[r] = Σ_{|y| = r, y ⊇ need} table[y].

@@ -16,6 +16,7 @@ use crate::event::Field;
 use crate::factored::contradiction::repaired_marginals;
 use crate::factored::counts::CountPrior;
 use crate::factored::coupling_weights;
+use crate::factored::table::{drifted, weighted_sum};
 use crate::factored::tree::{balancing_tilt, CountTree};
 use std::sync::Arc;
 
@@ -240,12 +241,20 @@ impl CouplingTree {
         for (p, r) in self.leaves.iter().flatten().zip(weights) {
             match r {
                 Some(r) => {
-                    let total = dot(&p.counts, &r);
+                    // Sums as the centralized belief's query takes them
+                    // (`Component::weighted_marginals`): in log space
+                    // where the part and its weights have drifted apart.
+                    let ln_max = drifted(&p.counts, &r);
+                    let sum = |v: &[f64]| match ln_max {
+                        Some(ln_max) => weighted_sum(v, &r, ln_max),
+                        None => dot(v, &r),
+                    };
+                    let total = sum(&p.counts);
                     if total.is_nan() || total <= 0.0 {
                         return Err(BeliefError::Degenerate { normalizer: total });
                     }
                     for (&t, w) in p.tracks.iter().zip(&p.red) {
-                        out[t as usize] = (dot(w, &r) / total).clamp(0.0, 1.0);
+                        out[t as usize] = (sum(w) / total).clamp(0.0, 1.0);
                     }
                 }
                 None => {

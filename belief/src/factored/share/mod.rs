@@ -607,21 +607,10 @@ fn bad(detail: String) -> BeliefError {
 
 /// The [`CountPart`] of one component.
 pub(super) fn count_part(c: &Component) -> CountPart {
-    let m = c.len();
-    let mut red = vec![vec![0.0; m + 1]; m];
-    for (y, &g) in c.table.iter().enumerate() {
-        let s = y.count_ones() as usize;
-        // Only the tracks red in y gain its weight.
-        let mut bits = y;
-        while bits != 0 {
-            red[bits.trailing_zeros() as usize][s] += g;
-            bits &= bits - 1;
-        }
-    }
     CountPart {
         tracks: c.tracks.clone(),
         counts: c.counts.clone(),
-        red,
+        red: c.red_by_count(),
     }
 }
 
