@@ -104,14 +104,17 @@ pub struct SensorPositions {
     #[serde(default)]
     pub regions: Vec<Option<[f64; 4]>>,
     /// Per track: its last `move` position (None before any), and the
-    /// index in `leaders` of the leader that surveils it.
+    /// index in `leaders` of the leader that surveils it
+    /// ([`UNHELD`](super::sensor_to_leader::UNHELD) until its first item
+    /// adopts it).
     pub positions: Vec<Option<[f64; 2]>>,
     pub owners: Vec<u16>,
 }
 
 impl SensorPositions {
     /// Checks what a reply from the network must be before it is believed:
-    /// one owner per position, owners among the leaders, finite numbers.
+    /// one owner per position, owners among the leaders (or unheld),
+    /// finite numbers.
     pub fn check(&self) -> Result<(), String> {
         if self.places.len() != self.leaders.len() {
             return Err(format!(
@@ -137,7 +140,7 @@ impl SensorPositions {
         if let Some(o) = self
             .owners
             .iter()
-            .find(|&&o| o as usize >= self.leaders.len())
+            .find(|&&o| o as usize >= self.leaders.len() && o != super::sensor_to_leader::UNHELD)
         {
             return Err(format!(
                 "owner {o} is not one of the {} leaders",
@@ -194,6 +197,12 @@ mod tests {
             ..good.clone()
         };
         assert!(owner.check().unwrap_err().contains("owner 2"));
+        // A track no leader surveils yet (early in a stream) is fine.
+        let unheld = SensorPositions {
+            owners: vec![0, super::super::sensor_to_leader::UNHELD],
+            ..good.clone()
+        };
+        assert_eq!(unheld.check(), Ok(()));
         let short = SensorPositions {
             owners: vec![0],
             ..good.clone()
