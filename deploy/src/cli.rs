@@ -518,9 +518,14 @@ pub struct ExtractArgs {
     /// biwi; ETH's obsmat is at 15, the other ETH/UCY files at 25).
     #[arg(long)]
     pub fps: Option<f64>,
-    /// mot: metres per pixel, from the box's bottom centre.
+    /// mot: metres per pixel, from the box's bottom centre; rosbag2:
+    /// metres per unit of the messages' positions (default 1).
     #[arg(long, conflicts_with = "homography")]
     pub scale: Option<f64>,
+    /// rosbag2: read this topic only (default: every topic of a type the
+    /// adapter reads).
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
     /// mot: a 3x3 homography from pixels to metres (ETH/UCY H.txt format).
     #[arg(long, value_name = "H.txt")]
     pub homography: Option<PathBuf>,
@@ -618,6 +623,9 @@ pub enum ReportFormat {
     Biwi,
     /// One move or detect trace line per line, an optional header first.
     Jsonl,
+    /// A rosbag2 bag in MCAP of vision_msgs Detection2DArray /
+    /// Detection3DArray or Autoware TrackedObjects messages.
+    Rosbag2,
 }
 
 /// Roster policies of `extract`.
