@@ -394,11 +394,45 @@ pub struct WebArgs {
     /// How long one question may wait for the coordinator.
     #[arg(long, default_value_t = 15000)]
     pub timeout_ms: u64,
+    /// Publish the beliefs as a visualization_msgs/MarkerArray on this
+    /// ROS 2 topic over rmw_zenoh (docs/guide/ros2.md).
+    #[arg(long, value_name = "TOPIC")]
+    pub ros2_markers: Option<String>,
+    /// The ROS domain id of the markers.
+    #[arg(long, default_value_t = 0)]
+    pub ros2_domain: u32,
+    /// Marker arrays per second.
+    #[arg(long, default_value_t = 2.0)]
+    pub ros2_rate: f64,
+    /// The markers' frame (RViz's fixed frame).
+    #[arg(long, default_value = "map")]
+    pub ros2_frame: String,
     #[command(flatten)]
     pub tls: ClientTlsArgs,
 }
 
 impl WebArgs {
+    fn markers(&self) -> anyhow::Result<Option<idmesh_web::MarkersConfig>> {
+        let Some(topic) = &self.ros2_markers else {
+            return Ok(None);
+        };
+        if !(self.ros2_rate.is_finite() && self.ros2_rate > 0.0 && self.ros2_rate <= 1000.0) {
+            anyhow::bail!("--ros2-rate must be in (0, 1000] arrays a second");
+        }
+        let part = idmesh_extract::adapters::ros2::keys::topic_part(topic);
+        if !topic.starts_with('/') || part.is_empty() || topic.contains(['*', '$', '?', '#']) {
+            anyhow::bail!(
+                "--ros2-markers {topic:?}: a fully qualified ROS topic, like /idmesh/markers"
+            );
+        }
+        Ok(Some(idmesh_web::MarkersConfig {
+            domain: self.ros2_domain,
+            topic: topic.clone(),
+            frame: self.ros2_frame.clone(),
+            every: std::time::Duration::from_secs_f64(1.0 / self.ros2_rate),
+        }))
+    }
+
     pub fn options(&self) -> anyhow::Result<crate::runtime::web::WebOptions> {
         Ok(crate::runtime::web::WebOptions {
             listen: self.listen.clone(),
@@ -406,6 +440,7 @@ impl WebArgs {
             prefix: self.prefix.clone(),
             timeout: std::time::Duration::from_millis(self.timeout_ms),
             tls: self.tls.tls()?,
+            markers: self.markers()?,
         })
     }
 }

@@ -56,6 +56,10 @@
 //! # [sensor.extract]             # the lines are a tracker's reports (move,
 //! # mix_distance = 1.0           # detect): the sensor derives the events
 //! # meeting_model = { constant = 0.5 } # (docs/guide/extracting.md)
+//! # [sensor.ros2]                # read ROS 2 tracker topics over rmw_zenoh
+//! # domain = 0                   # (docs/guide/ros2.md; needs [sensor.extract])
+//! # topics = [{ topic = "/tracker/detections",
+//! #   type = "vision_msgs/msg/Detection2DArray", scale = 0.02, offset = [0, 0] }]
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
@@ -365,6 +369,10 @@ pub struct SensorProcess {
     /// same (docs/guide/extracting.md, "Bad rows").
     #[serde(default, skip_serializing_if = "is_default")]
     pub max_errors: usize,
+    /// ROS 2 tracker topics the sensor reads over rmw_zenoh
+    /// (`[sensor.ros2]`, docs/guide/ros2.md); needs `[sensor.extract]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<idmesh_sensor::ros2::Ros2Config>,
     #[serde(default, skip_serializing_if = "is_default")]
     pub faults: FaultSection,
 }
@@ -391,6 +399,7 @@ impl SensorProcess {
             compact_journal_after: None,
             extract: None,
             max_errors: 0,
+            ros2: None,
             faults: FaultSection::default(),
         }
     }
@@ -448,6 +457,29 @@ impl LeaderProcess {
             sensor: None,
         }
     }
+}
+
+/// A sensor's `[sensor.ros2]`: topics that make sense, on a sensor that
+/// extracts (the messages are a tracker's reports), the only one.
+fn check_ros2(sensor: &SensorProcess, sensors: usize) -> Result<()> {
+    let Some(ros2) = &sensor.ros2 else {
+        return Ok(());
+    };
+    ros2.validate()
+        .map_err(|e| anyhow::anyhow!("sensor {}: {e}", sensor.name))?;
+    if sensor.extract.is_none() {
+        bail!(
+            "sensor {}: [sensor.ros2] reads a tracker's reports: it needs [sensor.extract]",
+            sensor.name
+        );
+    }
+    if sensors > 1 {
+        bail!(
+            "sensor {}: [sensor.ros2] is for a deployment of one sensor",
+            sensor.name
+        );
+    }
+    Ok(())
 }
 
 /// `[sensor]` (one table) or `[[sensor]]` (several), each read as a
@@ -657,6 +689,7 @@ impl Topology {
                     sensor.name
                 );
             }
+            check_ros2(sensor, self.sensors.len())?;
             if let Some(rate) = sensor.rate {
                 if !(rate.is_finite() && rate > 0.0) {
                     bail!(

@@ -34,6 +34,7 @@ pub mod tracks;
 pub mod vision;
 
 use crate::extractor::Report;
+use idmesh_protocol::trace::{Detect, Line, Move};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -218,6 +219,30 @@ impl Decoder {
 /// The label a class score goes to when a detector's scores sum to less
 /// than one (what it does not say).
 pub const OTHER_LABEL: &str = "other";
+
+/// A report as the line of the trace format that carries it: a `detect`
+/// line when it has class scores or an identity read, else a `move` line
+/// — what a sensor takes on its ingest key, and what `idmesh replay
+/// --topology` reads back.
+pub fn report_line(report: &Report) -> Line {
+    if report.scores.is_none() && report.identity.is_none() {
+        return Line::Move(Move {
+            time: report.time,
+            track: report.track,
+            x: report.x,
+            y: report.y,
+        });
+    }
+    Line::Detect(Detect {
+        time: report.time,
+        track: report.track,
+        x: report.x,
+        y: report.y,
+        scores: report.scores.clone(),
+        identity: report.identity.map(|r| r.identity),
+        accuracy: report.identity.map(|r| r.accuracy),
+    })
+}
 
 /// How far from one a sum of scores may be and still be one.
 const ROUNDING: f64 = 1e-9;
