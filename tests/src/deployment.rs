@@ -69,6 +69,8 @@ pub struct Settings {
     pub extract: Option<idmesh_extract::ExtractorConfig>,
     /// Bad lines of a sensor's own input it goes past (`max_errors`).
     pub max_errors: usize,
+    /// The sensor reads these ROS 2 topics (`[sensor.ros2]`).
+    pub ros2: Option<idmesh_sensor::ros2::Ros2Config>,
 }
 
 /// The factored belief's settings in a topology.
@@ -229,6 +231,7 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
         sensor.faults = settings.faults.clone();
         sensor.extract = settings.extract.clone();
         sensor.max_errors = settings.max_errors;
+        sensor.ros2 = settings.ros2.clone();
     }
     topology.leader_faults = settings.leader_faults.clone();
     topology.security = settings.security.as_ref().map(|secured| SecuritySection {
