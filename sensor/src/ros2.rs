@@ -83,7 +83,6 @@ impl Ros2Input {
         config: &Ros2Config,
     ) -> Result<Self, GatewayError> {
         let (sender, messages) = mpsc::channel(QUEUE);
-        let mut topics = Vec::new();
         for (index, options) in config.topics.iter().enumerate() {
             let key = config.key(options);
             let subscriber =
@@ -110,13 +109,22 @@ impl Ros2Input {
                     }
                 }
             });
-            topics.push(Topic {
+        }
+        Ok(Ros2Input::new(messages, config))
+    }
+
+    /// The decoders of `config`'s topics, reading `messages`.
+    fn new(messages: mpsc::Receiver<Message>, config: &Ros2Config) -> Self {
+        let topics = config
+            .topics
+            .iter()
+            .map(|options| Topic {
                 decoder: Decoder::new(options.clone()),
                 producer: format!("ros2:{}", options.topic),
                 seen: 0,
-            });
-        }
-        Ok(Ros2Input { messages, topics })
+            })
+            .collect();
+        Ros2Input { messages, topics }
     }
 
     /// The next message (never `None` while the sensor runs).
@@ -159,5 +167,72 @@ impl Ros2Input {
             producer: topic.producer.clone(),
             text,
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use idmesh_extract::adapters::ros2::vision::{Detection2D, Detection2DArray};
+    use idmesh_extract::adapters::ros2::{cdr, MessageType};
+
+    fn input() -> Ros2Input {
+        let config = Ros2Config {
+            domain: 3,
+            topics: vec![TopicOptions::new("/det", MessageType::Detection2DArray)],
+        };
+        assert_eq!(
+            config.key(&config.topics[0]),
+            "3/det/vision_msgs::msg::dds_::Detection2DArray_/*"
+        );
+        Ros2Input::new(mpsc::channel(1).1, &config)
+    }
+
+    #[test]
+    fn a_message_becomes_its_topics_lines_and_a_bad_one_an_error() {
+        let mut input = input();
+        let message = Detection2DArray {
+            detections: vec![Detection2D {
+                id: "2".into(),
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        let payload = cdr::encode(&message).unwrap();
+        let lines = input
+            .lines(Message {
+                topic: 0,
+                payload: payload.clone(),
+                attachment: None,
+            })
+            .unwrap()
+            .unwrap();
+        assert_eq!(lines.producer, "ros2:/det");
+        assert_eq!(
+            lines.text,
+            "{\"kind\":\"move\",\"time\":0.0,\"track\":2,\"x\":0.0,\"y\":0.0}\n"
+        );
+        let bad = Message {
+            topic: 0,
+            payload: payload[..payload.len() - 3].to_vec(),
+            attachment: None,
+        };
+        assert!(input.lines(bad).is_err());
+        let empty = cdr::encode(&Detection2DArray::default()).unwrap();
+        let none = Message {
+            topic: 0,
+            payload: empty,
+            attachment: None,
+        };
+        assert!(matches!(input.lines(none), Ok(None)));
+    }
+
+    #[test]
+    fn a_config_without_topics_is_refused() {
+        let config = Ros2Config {
+            domain: 0,
+            topics: vec![],
+        };
+        assert!(config.validate().is_err());
     }
 }

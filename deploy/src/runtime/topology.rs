@@ -1123,4 +1123,51 @@ listen = "tcp/127.0.0.1:3"
             "{e}"
         );
     }
+
+    #[test]
+    fn a_ros2_section_loads_on_a_sensor_that_extracts() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-ros2-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let base = r#"
+[coordinator]
+name = "c"
+listen = "tcp/127.0.0.1:1"
+[[leader]]
+name = "l0"
+listen = "tcp/127.0.0.1:3"
+[sensor]
+name = "s"
+listen = "tcp/127.0.0.1:2"
+trace = "x.jsonl"
+live = true
+"#;
+        let ros2 = r#"
+[sensor.ros2]
+domain = 7
+topics = [
+  { topic = "/tracker/detections", type = "vision_msgs/msg/Detection2DArray", scale = 0.02, offset = [1.0, -1.0], labels = { person = "red" } },
+  { topic = "/objects", type = "autoware_perception_msgs/msg/TrackedObjects" },
+]
+"#;
+        std::fs::write(&path, format!("{base}[sensor.extract]\n{ros2}")).unwrap();
+        let t = Topology::load(&path).unwrap();
+        let section = t.sensor().ros2.clone().unwrap();
+        assert_eq!(section.domain, 7);
+        assert_eq!(section.topics[0].scale, 0.02);
+        assert_eq!(section.topics[0].labels["person"], "red");
+        assert_eq!(section.topics[1].offset, [0.0, 0.0]);
+        // Written, it reads back equal.
+        let text = toml::to_string(&t).unwrap();
+        let back: Topology = toml::from_str(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        assert_eq!(back.sensor().ros2, t.sensor().ros2);
+        std::fs::write(&path, format!("{base}{ros2}")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("needs [sensor.extract]"), "{e}");
+        let zero = ros2.replace("scale = 0.02", "scale = 0");
+        std::fs::write(&path, format!("{base}[sensor.extract]\n{zero}")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("scale must be finite and > 0"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -161,3 +161,83 @@ fn rows_options() -> BagOptions {
         mapping: TopicOptions::new("", MessageType::Detection2DArray),
     }
 }
+
+#[test]
+fn a_3d_array_is_read_at_its_boxes_centres() {
+    use super::geometry::{Point, Pose};
+    use super::vision::{BoundingBox3D, Detection3D, Detection3DArray};
+    let detection = |id: &str, x: f64| Detection3D {
+        id: id.to_string(),
+        bbox: BoundingBox3D {
+            center: Pose {
+                position: Point { x, y: -x, z: 9.0 },
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        results: vec![ObjectHypothesisWithPose {
+            hypothesis: ObjectHypothesis {
+                class_id: "red".into(),
+                score: 1.0,
+            },
+            ..Default::default()
+        }],
+        ..Default::default()
+    };
+    let message = Detection3DArray {
+        header: Header {
+            stamp: Time { sec: 4, nanosec: 0 },
+            frame_id: "map".into(),
+        },
+        detections: vec![detection("b", 2.0), detection("a", 1.0)],
+    };
+    let mut options = TopicOptions::new("/det3d", MessageType::Detection3DArray);
+    options.offset = [10.0, 0.0];
+    let mut decoder = Decoder::new(options);
+    let reports = decoder.decode(&cdr::encode(&message).unwrap()).unwrap();
+    // Named ids: "b" came first, so it is track 0.
+    assert_eq!(
+        (reports[0].track, reports[0].x, reports[0].y),
+        (0, 12.0, -2.0)
+    );
+    assert_eq!((reports[1].track, reports[1].x), (1, 11.0));
+    assert_eq!(reports[0].time, 4.0);
+    // A 2-D decoder refuses a 3-D message rather than misreading it.
+    let mut wrong = Decoder::new(TopicOptions::new("/det3d", MessageType::Detection2DArray));
+    assert!(wrong.decode(&cdr::encode(&message).unwrap()).is_err());
+}
+
+#[test]
+fn a_report_is_a_detect_line_with_scores_else_a_move_line() {
+    let plain = Report::at(1.0, 2, 3.0, 4.0);
+    assert_eq!(report_line(&plain).kind(), "move");
+    let scored = Report {
+        scores: Some([("red".to_string(), 1.0)].into()),
+        ..plain
+    };
+    let line = report_line(&scored);
+    assert_eq!(line.kind(), "detect");
+    let text = serde_json::to_string(&line).unwrap();
+    let back = crate::adapters::jsonl::parse_line(&text, 2, None).unwrap();
+    assert_eq!(back, crate::adapters::jsonl::JsonlRow::Report(scored));
+}
+
+#[test]
+fn topic_options_are_checked() {
+    let mut options = TopicOptions::new("/det", MessageType::Detection2DArray);
+    assert_eq!(options.validate(), Ok(()));
+    options.scale = 0.0;
+    assert!(options.validate().is_err());
+    options.scale = 1.0;
+    options.topic = "/det/*".into();
+    assert!(options.validate().is_err());
+    let toml_like: TopicOptions = serde_json::from_str(
+        r#"{"topic":"/objects","type":"autoware_perception_msgs/msg/TrackedObjects"}"#,
+    )
+    .unwrap();
+    assert_eq!(toml_like.scale, 1.0);
+    assert!(
+        serde_json::from_str::<TopicOptions>(r#"{"topic":"/x","type":"std_msgs/msg/String"}"#)
+            .is_err()
+    );
+}
