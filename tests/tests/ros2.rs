@@ -7,7 +7,8 @@
 //! - the same messages published over Zenoh on rmw_zenoh's key to a live
 //!   deployment (one of them truncated: counted, the stream goes on) give
 //!   the answer `idmesh replay --topology` computes from the reports (the
-//!   twin), and the web gateway's `MarkerArray` decodes with rosbags, with
+//!   twin), whether the key carries Jazzy's type hash or Humble's
+//!   `TypeHashNotSupported`, and the web gateway's `MarkerArray` decodes with rosbags, with
 //!   rmw_zenoh's attachment and liveliness tokens, and shows what `idmesh
 //!   query` answers.
 
@@ -209,10 +210,11 @@ fn check_markers(got: &Value, positions: &Value, marginals: &Value) {
 }
 
 /// A live deployment reading [`TOPIC`], fed `frames` by rosbags and the
-/// Python Zenoh client on rmw_zenoh's key, frame `bad` truncated; it
+/// Python Zenoh client on rmw_zenoh's key with `hash` in its last chunk,
+/// frame `bad` truncated; it
 /// checks the answer equals the twin's (`idmesh replay --topology` on the
 /// reports the sensor took) and the bad message was counted.
-fn fed_deployment(name: &str, dir: &Path, frames: &[Value], bad: usize) -> Deployment {
+fn fed_deployment(name: &str, dir: &Path, frames: &[Value], bad: usize, hash: &str) -> Deployment {
     // The twin's reports: every frame the sensor takes (the truncated one
     // is refused) but the last, which a live stream keeps open.
     let header = json!({"kind":"header","format":"idmesh-trace","version":2,"tracks":4,"red":2});
@@ -248,12 +250,7 @@ fn fed_deployment(name: &str, dir: &Path, frames: &[Value], bad: usize) -> Deplo
         .filter(|l| !l.contains("\"kind\":\"header\""))
         .count() as u64;
     let spec = write_frames(dir, frames);
-    // Jazzy's key form; a Humble publisher's `TypeHashNotSupported` in
-    // the last chunk is taken alike (the sensor subscribes with `*`).
-    let key = format!(
-        "0/tracker/detections/vision_msgs::msg::dds_::Detection2DArray_/RIHS01_{}",
-        "0".repeat(64)
-    );
+    let key = format!("0/tracker/detections/vision_msgs::msg::dds_::Detection2DArray_/{hash}");
     let bad = bad.to_string();
     tracker(&[
         "publish",
@@ -276,7 +273,9 @@ fn fed_deployment(name: &str, dir: &Path, frames: &[Value], bad: usize) -> Deplo
 #[test]
 fn a_ros2_topic_feeds_a_deployment_as_its_twin_and_a_bad_message_is_counted() {
     let dir = scratch("live");
-    let deployment = fed_deployment("ros2-live", &dir, &frames(40), 7);
+    // Jazzy's key form (a type hash).
+    let hash = format!("RIHS01_{}", "0".repeat(64));
+    let deployment = fed_deployment("ros2-live", &dir, &frames(40), 7, &hash);
     assert!(
         deployment.log().contains("a ROS 2 message refused"),
         "the bad message is not named in the log"
@@ -288,7 +287,8 @@ fn a_ros2_topic_feeds_a_deployment_as_its_twin_and_a_bad_message_is_counted() {
 #[test]
 fn the_markers_decode_with_rosbags_and_show_what_query_answers() {
     let dir = scratch("markers");
-    let deployment = fed_deployment("ros2-markers", &dir, &frames(30), 3);
+    // Humble's key form: the sensor subscribes with `*` for the hash.
+    let deployment = fed_deployment("ros2-markers", &dir, &frames(30), 3, "TypeHashNotSupported");
     let _gateway = Gateway::start_with(
         &deployment,
         &["--ros2-markers", "/idmesh/markers", "--ros2-rate", "5"],
