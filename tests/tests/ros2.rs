@@ -79,35 +79,33 @@ fn write_frames(dir: &Path, frames: &[Value]) -> PathBuf {
     path
 }
 
+/// Runs `command`; its standard output, or a panic naming `what` and
+/// what it said.
+fn stdout_of(command: &mut Command, what: &str) -> Vec<u8> {
+    let output = command.output().expect("the command starts");
+    assert!(
+        output.status.success(),
+        "{what} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output.stdout
+}
+
 /// Runs `tests/python/ros2_tracker.py` with `args`: the JSON line it prints.
 fn tracker(args: &[&str]) -> Value {
     let tmp = Path::new(env!("CARGO_TARGET_TMPDIR"));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/ros2_tracker.py");
-    let output = Command::new(python_with_zenoh(tmp))
-        .arg(script)
-        .args(args)
-        .output()
-        .expect("python runs");
-    assert!(
-        output.status.success(),
-        "ros2_tracker.py {args:?} failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_slice(&output.stdout).expect("one JSON line")
+    let mut command = Command::new(python_with_zenoh(tmp));
+    command.arg(script).args(args);
+    let out = stdout_of(&mut command, &format!("ros2_tracker.py {args:?}"));
+    serde_json::from_slice(&out).expect("one JSON line")
 }
 
+/// `idmesh extract` with `args`: the trace it prints.
 fn extract(args: &[&str]) -> String {
-    let output = Command::new(idmesh())
-        .arg("extract")
-        .args(args)
-        .output()
-        .expect("idmesh extract runs");
-    assert!(
-        output.status.success(),
-        "idmesh extract {args:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).unwrap()
+    let mut command = Command::new(idmesh());
+    command.arg("extract").args(args);
+    String::from_utf8(stdout_of(&mut command, &format!("idmesh extract {args:?}"))).unwrap()
 }
 
 fn scratch(name: &str) -> PathBuf {

@@ -233,15 +233,7 @@ pub fn report_line(report: &Report) -> Line {
             y: report.y,
         });
     }
-    Line::Detect(Detect {
-        time: report.time,
-        track: report.track,
-        x: report.x,
-        y: report.y,
-        scores: report.scores.clone(),
-        identity: report.identity.map(|r| r.identity),
-        accuracy: report.identity.map(|r| r.accuracy),
-    })
+    Line::Detect(Detect::from(report))
 }
 
 /// How far from one a sum of scores may be and still be one.

@@ -82,24 +82,27 @@ pub struct Detection3DArray {
     pub detections: Vec<Detection3D>,
 }
 
-fn classes(results: &[ObjectHypothesisWithPose]) -> Vec<(String, f64)> {
-    results
-        .iter()
-        .map(|r| (r.hypothesis.class_id.clone(), r.hypothesis.score))
-        .collect()
+/// A detection of either array: its id, its box centre's x and y, its
+/// hypotheses.
+fn detection(id: &str, x: f64, y: f64, results: &[ObjectHypothesisWithPose]) -> Detection {
+    Detection {
+        id: id.to_string(),
+        x,
+        y,
+        classes: results
+            .iter()
+            .map(|r| (r.hypothesis.class_id.clone(), r.hypothesis.score))
+            .collect(),
+    }
 }
 
 impl Detection2DArray {
     /// The detections, each at its box's centre (image units).
     pub fn detections(&self) -> Vec<Detection> {
+        let at = |d: &Detection2D| d.bbox.center.position;
         self.detections
             .iter()
-            .map(|d| Detection {
-                id: d.id.clone(),
-                x: d.bbox.center.position.x,
-                y: d.bbox.center.position.y,
-                classes: classes(&d.results),
-            })
+            .map(|d| detection(&d.id, at(d).x, at(d).y, &d.results))
             .collect()
     }
 }
@@ -107,14 +110,10 @@ impl Detection2DArray {
 impl Detection3DArray {
     /// The detections, each at its box's centre (x and y of the frame).
     pub fn detections(&self) -> Vec<Detection> {
+        let at = |d: &Detection3D| d.bbox.center.position;
         self.detections
             .iter()
-            .map(|d| Detection {
-                id: d.id.clone(),
-                x: d.bbox.center.position.x,
-                y: d.bbox.center.position.y,
-                classes: classes(&d.results),
-            })
+            .map(|d| detection(&d.id, at(d).x, at(d).y, &d.results))
             .collect()
     }
 }
