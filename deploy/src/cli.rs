@@ -407,6 +407,10 @@ pub struct WebArgs {
     /// The markers' frame (RViz's fixed frame).
     #[arg(long, default_value = "map")]
     pub ros2_frame: String,
+    /// For ROS 2 Humble: `TypeHashNotSupported` in the markers' key in
+    /// place of the type hash.
+    #[arg(long)]
+    pub ros2_humble: bool,
     #[command(flatten)]
     pub tls: ClientTlsArgs,
 }
@@ -430,6 +434,7 @@ impl WebArgs {
             topic: topic.clone(),
             frame: self.ros2_frame.clone(),
             every: std::time::Duration::from_secs_f64(1.0 / self.ros2_rate),
+            humble: self.ros2_humble,
         }))
     }
 

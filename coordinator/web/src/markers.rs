@@ -35,7 +35,14 @@ pub struct MarkersConfig {
     pub frame: String,
     /// Time between two arrays.
     pub every: Duration,
+    /// Write Humble's `TypeHashNotSupported` in the key and tokens in
+    /// place of the type hash (Humble's rmw_zenoh subscribes to that).
+    pub humble: bool,
 }
+
+/// What Humble's rmw_zenoh writes where later releases write the type
+/// hash.
+pub const NO_TYPE_HASH: &str = "TypeHashNotSupported";
 
 /// The ROS node the gateway appears as.
 const NODE: &str = "idmesh_web";
@@ -72,7 +79,12 @@ pub(crate) async fn publish(asker: Arc<Asker>, config: MarkersConfig) {
 async fn run(asker: &Asker, config: &MarkersConfig) -> Result<(), zenoh::Error> {
     let session = &asker.session;
     let dds = keys::dds_type_name(MARKER_ARRAY).unwrap_or_default();
-    let key = keys::data_key(config.domain, &config.topic, &dds, MARKER_ARRAY_HASH);
+    let hash = if config.humble {
+        NO_TYPE_HASH
+    } else {
+        MARKER_ARRAY_HASH
+    };
+    let key = keys::data_key(config.domain, &config.topic, &dds, hash);
     let zid = session.zid();
     let graph = Graph {
         domain: config.domain,
@@ -87,7 +99,7 @@ async fn run(asker: &Asker, config: &MarkersConfig) -> Result<(), zenoh::Error> 
         .await?;
     let _publisher = session
         .liveliness()
-        .declare_token(graph.publisher_token(1, &config.topic, &dds, MARKER_ARRAY_HASH))
+        .declare_token(graph.publisher_token(1, &config.topic, &dds, hash))
         .await?;
     tracing::info!(%key, "publishing ROS 2 markers");
     let mut ticks = tokio::time::interval(config.every);
