@@ -4,7 +4,9 @@ without a ROS install. The tests of idmesh's ROS 2 adapter drive it.
 
     ros2_tracker.py bag OUT.mcap FRAMES.json   write a bag of Detection2DArray
     ros2_tracker.py publish ENDPOINT KEY FRAMES.json [--bad N]
-                                               publish them over Zenoh
+                                               publish them over Zenoh, with
+                                               rmw_zenoh's attachment, message
+                                               N cut in half
     ros2_tracker.py markers ENDPOINT KEY SECONDS
                                                print one MarkerArray, decoded
     ros2_tracker.py hash                       print MarkerArray's RIHS01 hash
@@ -15,10 +17,10 @@ prints one JSON line.
 """
 
 import json
-import struct
 import sys
 import time
 
+import numpy
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 VISION = {
@@ -71,7 +73,7 @@ def message(store, frame):
                         position=t["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
                         orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
                     ),
-                    covariance=__import__("numpy").zeros(36),
+                    covariance=numpy.zeros(36),
                 ),
             )
             for c, s in d.get("classes", [])

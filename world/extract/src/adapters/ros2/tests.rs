@@ -241,3 +241,62 @@ fn topic_options_are_checked() {
             .is_err()
     );
 }
+
+/// A reader that counts the bytes taken from it.
+struct Counting<'a> {
+    bytes: &'a [u8],
+    taken: std::rc::Rc<std::cell::Cell<usize>>,
+}
+
+impl std::io::Read for Counting<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = std::io::Read::read(&mut self.bytes, buf)?;
+        self.taken.set(self.taken.get() + n);
+        Ok(n)
+    }
+}
+
+#[test]
+fn a_bag_is_streamed_not_read_whole() {
+    let mut bytes = Vec::new();
+    {
+        let options = mcap::WriteOptions::new()
+            .compression(None)
+            .chunk_size(Some(64 * 1024));
+        let mut writer = options.create(std::io::Cursor::new(&mut bytes)).unwrap();
+        let schema = writer
+            .add_schema("vision_msgs/msg/Detection2DArray", "ros2msg", b"")
+            .unwrap();
+        let channel = writer
+            .add_channel(schema, "/det", "cdr", &Default::default())
+            .unwrap();
+        for sec in 0..20_000 {
+            let message = frame(sec, vec![detection("0", 1.0, 2.0, &[("red", 1.0)])]);
+            let header = mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: sec as u32,
+                log_time: sec as u64,
+                publish_time: sec as u64,
+            };
+            writer
+                .write_to_known_channel(&header, &cdr::encode(&message).unwrap())
+                .unwrap();
+        }
+        writer.finish().unwrap();
+    }
+    let taken = std::rc::Rc::new(std::cell::Cell::new(0));
+    let input = Counting {
+        bytes: &bytes,
+        taken: taken.clone(),
+    };
+    let mut rows = BagRows::new(input, "long.mcap", rows_options());
+    assert!(rows.next().unwrap().is_ok());
+    // The first report came from the first chunk, not the whole file.
+    assert!(
+        taken.get() < bytes.len() / 10,
+        "{} of {} bytes read for the first report",
+        taken.get(),
+        bytes.len()
+    );
+    assert_eq!(rows.count(), 19_999);
+}
