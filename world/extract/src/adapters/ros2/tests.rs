@@ -300,3 +300,18 @@ fn a_bag_is_streamed_not_read_whole() {
     );
     assert_eq!(rows.count(), 19_999);
 }
+
+#[test]
+fn an_absurd_length_is_an_error_at_once() {
+    // Header: stamp (8 bytes), frame_id "" (length 1, a NUL, padding),
+    // then a sequence that claims four billion detections.
+    let mut payload = vec![0, 1, 0, 0];
+    payload.extend_from_slice(&[0; 8]);
+    payload.extend_from_slice(&1u32.to_le_bytes());
+    payload.extend_from_slice(&[0, 0, 0, 0]);
+    payload.extend_from_slice(&u32::MAX.to_le_bytes());
+    let mut decoder = Decoder::new(TopicOptions::new("/det", MessageType::Detection2DArray));
+    let started = std::time::Instant::now();
+    assert!(decoder.decode(&payload).is_err());
+    assert!(started.elapsed() < std::time::Duration::from_secs(1));
+}
