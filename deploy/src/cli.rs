@@ -398,11 +398,50 @@ pub struct WebArgs {
     /// How long one question may wait for the coordinator.
     #[arg(long, default_value_t = 15000)]
     pub timeout_ms: u64,
+    /// Publish the beliefs as a visualization_msgs/MarkerArray on this
+    /// ROS 2 topic over rmw_zenoh (docs/guide/ros2.md).
+    #[arg(long, value_name = "TOPIC")]
+    pub ros2_markers: Option<String>,
+    /// The ROS domain id of the markers.
+    #[arg(long, default_value_t = 0)]
+    pub ros2_domain: u32,
+    /// Marker arrays per second.
+    #[arg(long, default_value_t = 2.0)]
+    pub ros2_rate: f64,
+    /// The markers' frame (RViz's fixed frame).
+    #[arg(long, default_value = "map")]
+    pub ros2_frame: String,
+    /// For ROS 2 Humble: `TypeHashNotSupported` in the markers' key in
+    /// place of the type hash.
+    #[arg(long)]
+    pub ros2_humble: bool,
     #[command(flatten)]
     pub tls: ClientTlsArgs,
 }
 
 impl WebArgs {
+    fn markers(&self) -> anyhow::Result<Option<idmesh_web::MarkersConfig>> {
+        let Some(topic) = &self.ros2_markers else {
+            return Ok(None);
+        };
+        if !(self.ros2_rate.is_finite() && self.ros2_rate > 0.0 && self.ros2_rate <= 1000.0) {
+            anyhow::bail!("--ros2-rate must be in (0, 1000] arrays a second");
+        }
+        let part = idmesh_extract::adapters::ros2::keys::topic_part(topic);
+        if !topic.starts_with('/') || part.is_empty() || topic.contains(['*', '$', '?', '#']) {
+            anyhow::bail!(
+                "--ros2-markers {topic:?}: a fully qualified ROS topic, like /idmesh/markers"
+            );
+        }
+        Ok(Some(idmesh_web::MarkersConfig {
+            domain: self.ros2_domain,
+            topic: topic.clone(),
+            frame: self.ros2_frame.clone(),
+            every: std::time::Duration::from_secs_f64(1.0 / self.ros2_rate),
+            humble: self.ros2_humble,
+        }))
+    }
+
     pub fn options(&self) -> anyhow::Result<crate::runtime::web::WebOptions> {
         Ok(crate::runtime::web::WebOptions {
             listen: self.listen.clone(),
@@ -410,6 +449,7 @@ impl WebArgs {
             prefix: self.prefix.clone(),
             timeout: std::time::Duration::from_millis(self.timeout_ms),
             tls: self.tls.tls()?,
+            markers: self.markers()?,
         })
     }
 }
@@ -522,9 +562,14 @@ pub struct ExtractArgs {
     /// biwi; ETH's obsmat is at 15, the other ETH/UCY files at 25).
     #[arg(long)]
     pub fps: Option<f64>,
-    /// mot: metres per pixel, from the box's bottom centre.
+    /// mot: metres per pixel, from the box's bottom centre; rosbag2:
+    /// metres per unit of the messages' positions (default 1).
     #[arg(long, conflicts_with = "homography")]
     pub scale: Option<f64>,
+    /// rosbag2: read this topic only (default: every topic of a type the
+    /// adapter reads).
+    #[arg(long, value_name = "TOPIC")]
+    pub topic: Option<String>,
     /// mot: a 3x3 homography from pixels to metres (ETH/UCY H.txt format).
     #[arg(long, value_name = "H.txt")]
     pub homography: Option<PathBuf>,
@@ -622,6 +667,9 @@ pub enum ReportFormat {
     Biwi,
     /// One move or detect trace line per line, an optional header first.
     Jsonl,
+    /// A rosbag2 bag in MCAP of vision_msgs Detection2DArray /
+    /// Detection3DArray or Autoware TrackedObjects messages.
+    Rosbag2,
 }
 
 /// Roster policies of `extract`.

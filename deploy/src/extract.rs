@@ -8,6 +8,8 @@ use anyhow::{bail, Context, Result};
 use idmesh_extract::adapters::homography::Homography;
 use idmesh_extract::adapters::jsonl::report_of;
 use idmesh_extract::adapters::mot::{Ground, MotOptions, MotReader, Reads};
+use idmesh_extract::adapters::ros2::bag::{BagOptions, BagRows};
+use idmesh_extract::adapters::ros2::{MessageType, TopicOptions};
 use idmesh_extract::adapters::Located;
 use idmesh_extract::adapters::{eth_ucy, mot};
 use idmesh_extract::{every_id, extract_jsonl, extract_rows, read_reports, Run, Tally};
@@ -94,6 +96,25 @@ pub fn run(args: &ExtractArgs) -> Result<()> {
             let rows = MotReader::new(input, &file, options, reads)?;
             extract_rows(rows, &file, run, policy)?
         }
+        ReportFormat::Rosbag2 => {
+            let options = bag_options(args)?;
+            let policy = match (args.roster, &args.input) {
+                (Some(RosterChoice::FirstFrame), _) => RosterPolicy::FirstFrame,
+                (None, _) if from_stdin => RosterPolicy::FirstFrame,
+                (_, Some(path)) if !from_stdin => {
+                    // A first pass for the ids alone, as for mot.
+                    let rows = BagRows::new(open(Some(path), &file)?, &file, options.clone());
+                    RosterPolicy::Declared(
+                        rows.filter_map(|r| r.ok().map(|l| l.report.track))
+                            .collect(),
+                    )
+                }
+                _ => bail!(
+                    "--roster all reads the input twice: give a file, or --roster first-frame"
+                ),
+            };
+            extract_rows(BagRows::new(input, &file, options), &file, run, policy)?
+        }
         format => {
             let text = read_all(input, &file)?;
             let fps = fps(args)?;
@@ -112,6 +133,20 @@ pub fn run(args: &ExtractArgs) -> Result<()> {
     };
     summary(&file, &sink, &tally);
     Ok(())
+}
+
+/// Which topics of a bag, and their positions' scale.
+fn bag_options(args: &ExtractArgs) -> Result<BagOptions> {
+    let mut mapping = TopicOptions::new("/bag", MessageType::Detection2DArray);
+    mapping.scale = args.scale.unwrap_or(1.0);
+    if let Some(topic) = &args.topic {
+        mapping.topic = topic.clone();
+    }
+    mapping.validate().map_err(anyhow::Error::msg)?;
+    Ok(BagOptions {
+        topic: args.topic.clone(),
+        mapping,
+    })
 }
 
 /// A file, or standard input (`None`), read line by line.

@@ -36,6 +36,7 @@ use crate::journal::{Journal, JournalError, Record};
 use crate::machine::{CutOutcome, Gateway, RestoreError};
 use crate::mesh::MeshConfig;
 use crate::peers::{Fetch, Peers};
+use crate::ros2::{Message, Ros2Input};
 use crate::router::Router;
 use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
@@ -83,6 +84,8 @@ pub struct GatewayConfig {
     /// `idmesh extract` and `idmesh replay --topology` count theirs); 0:
     /// the first one does.
     pub max_errors: usize,
+    /// ROS 2 tracker topics read over rmw_zenoh ([`crate::ros2`]).
+    pub ros2: Option<crate::ros2::Ros2Config>,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -506,6 +509,10 @@ pub async fn run(
         first_time: lines.iter().find_map(line_time).unwrap_or(0.0),
         open: true,
     };
+    let ros2 = match &config.ros2 {
+        Some(ros2) => Some(Ros2Input::start(&session, ros2).await?),
+        None => None,
+    };
     let sensor = Sensor {
         config: &config,
         gateway,
@@ -514,6 +521,7 @@ pub async fn run(
         trace,
         budget,
         held: Vec::new(),
+        ros2,
     };
     serve(sensor, endpoints, input, shutdown).await
 }
@@ -531,6 +539,8 @@ struct Sensor<'a> {
     budget: ErrorBudget,
     /// Peers' intake requests with nothing new to answer yet.
     held: Vec<HeldIntake>,
+    /// ROS 2 topics read, if any.
+    ros2: Option<Ros2Input>,
 }
 
 impl Sensor<'_> {
@@ -646,6 +656,7 @@ async fn serve(
                 ingest(&mut s.gateway, &mut s.wire, query).await?;
                 s.settle().await?;
             }
+            message = next_ros2(&mut s.ros2) => take_ros2(s, message).await?,
             read = next_input(&mut input), if input.is_some() && s.trace.open => {
                 let Some(read) = read else {
                     input = None;
@@ -875,6 +886,55 @@ async fn ingest(
         }
     }
     Ok(())
+}
+
+/// The next ROS 2 message; never, without ROS 2 topics.
+async fn next_ros2(ros2: &mut Option<Ros2Input>) -> Option<Message> {
+    match ros2 {
+        Some(ros2) => ros2.next().await,
+        None => std::future::pending().await,
+    }
+}
+
+/// A ROS 2 message: counted, and its reports offered to ingestion as
+/// its topic's lines, then routed and published like a producer's.
+async fn take_ros2(s: &mut Sensor<'_>, message: Option<Message>) -> Result<(), GatewayError> {
+    let (Some(input), Some(message)) = (s.ros2.as_mut(), message) else {
+        s.ros2 = None;
+        return Ok(());
+    };
+    let lines = input.lines(message);
+    s.gateway.count_ros2(lines.is_err());
+    let Ok(Some(lines)) = lines else {
+        return Ok(());
+    };
+    let counter = s.gateway.producer_next(&lines.producer).to_string();
+    let offer = Offer {
+        producer: Some(&lines.producer),
+        counter: Some(&counter),
+        payload: lines.text.as_bytes(),
+        time: None,
+        finish: false,
+    };
+    match s.gateway.ingest(offer) {
+        Ok((ack, placed)) => {
+            for refused in &ack.errors {
+                tracing::warn!(producer = %lines.producer, reason = %refused.reason,
+                    "a report of a ROS 2 message refused");
+            }
+            if !ack.accepted.is_empty() || !placed.is_empty() {
+                s.wire.flush(&mut s.gateway).await?;
+            }
+            s.wire.sync(&mut s.gateway)?;
+            for p in placed {
+                reply_placed(p).await;
+            }
+        }
+        Err(refusal) => {
+            tracing::warn!(producer = %lines.producer, error = %refusal, "ROS 2 reports refused")
+        }
+    }
+    s.settle().await
 }
 
 /// Places, schedules or refuses the cut `query` asks for. One sensor of

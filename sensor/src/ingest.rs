@@ -156,6 +156,12 @@ impl Ingest {
         taken(text, &self.header, self.extracting)
     }
 
+    /// The counter `producer`'s next line must carry (0 for one not
+    /// heard from).
+    pub(crate) fn next_counter(&self, producer: &str) -> u64 {
+        self.next.get(producer).copied().unwrap_or(0)
+    }
+
     /// Counters with gaps: one sensor of several ([`Ingest::recent`]).
     pub(crate) fn gapped(&mut self) {
         self.gapped = true;

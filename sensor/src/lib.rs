@@ -46,6 +46,7 @@ pub mod journal;
 mod machine;
 mod mesh;
 mod peers;
+pub mod ros2;
 mod router;
 
 // The sensor as a pure state machine, and what it answers a cut.

@@ -513,6 +513,20 @@ impl<Q> Gateway<Q> {
         &self.state.stats
     }
 
+    /// The counter the next line of `producer` must carry.
+    pub(crate) fn producer_next(&self, producer: &str) -> u64 {
+        self.state.ingest.next_counter(producer)
+    }
+
+    /// A ROS 2 message taken (`bad`: refused, it did not decode).
+    pub(crate) fn count_ros2(&mut self, bad: bool) {
+        self.state.stats.ros2_messages += 1;
+        if bad {
+            self.state.stats.ros2_bad += 1;
+            self.state.stats.rejected += 1;
+        }
+    }
+
     /// Batches kept for leader `i` to ask for again.
     #[cfg(test)]
     pub(crate) fn kept(&self, i: usize) -> usize {

@@ -73,6 +73,8 @@ pub struct Settings {
     /// `coordinator-1`, …); queries are given every coordinator's
     /// endpoint.
     pub coordinator_replicas: usize,
+    /// The sensor reads these ROS 2 topics (`[sensor.ros2]`).
+    pub ros2: Option<idmesh_sensor::ros2::Ros2Config>,
 }
 
 /// The factored belief's settings in a topology.
@@ -247,6 +249,7 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
         sensor.faults = settings.faults.clone();
         sensor.extract = settings.extract.clone();
         sensor.max_errors = settings.max_errors;
+        sensor.ros2 = settings.ros2.clone();
     }
     topology.leader_faults = settings.leader_faults.clone();
     topology.security = settings.security.as_ref().map(|secured| SecuritySection {

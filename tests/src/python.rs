@@ -1,5 +1,7 @@
 //! A Python 3 with the Zenoh client the external-client tests need
-//! (`eclipse-zenoh` 1.10.x, the Zenoh release the processes speak), in a
+//! (`eclipse-zenoh` 1.10.x, the Zenoh release the processes speak) and
+//! `rosbags` (ROS 2 messages in CDR and rosbag2 bags, written by an
+//! encoder idmesh did not write, for the ROS 2 tests), in a
 //! virtual environment under the target folder, made on first use: a
 //! newcomer's `cargo test` needs only `python3` on the PATH and access to
 //! PyPI, nothing installed by hand.
@@ -10,6 +12,8 @@ use std::sync::Mutex;
 
 /// The pip requirement: the client's minor version must match the mesh's.
 pub(crate) const ZENOH_CLIENT: &str = "eclipse-zenoh>=1.10,<1.11";
+/// ROS 2 messages without a ROS install.
+pub(crate) const ROSBAGS: &str = "rosbags>=0.10,<0.12";
 
 /// The venv's `python`, made (or found ready) in `target_tmp/python-venv`.
 /// Panics, saying what failed and how to fix it, when it cannot be made.
@@ -37,8 +41,9 @@ pub fn python_with_zenoh(target_tmp: &Path) -> PathBuf {
             "--quiet",
             "--disable-pip-version-check",
             ZENOH_CLIENT,
+            ROSBAGS,
         ]),
-        "pip install eclipse-zenoh (is PyPI reachable?)",
+        "pip install eclipse-zenoh rosbags (is PyPI reachable?)",
     );
     assert!(
         imports_zenoh(&python),
@@ -51,7 +56,7 @@ pub fn python_with_zenoh(target_tmp: &Path) -> PathBuf {
 fn imports_zenoh(python: &Path) -> bool {
     python.exists()
         && Command::new(python)
-            .args(["-c", "import zenoh"])
+            .args(["-c", "import zenoh, rosbags"])
             .output()
             .is_ok_and(|o| o.status.success())
 }

@@ -16,6 +16,11 @@ pub struct Gateway {
 impl Gateway {
     /// Starts the gateway and waits for the address it prints.
     pub fn start(deployment: &Deployment) -> Gateway {
+        Self::start_with(deployment, &[])
+    }
+
+    /// [`Gateway::start`] with `extra` arguments (`--ros2-markers …`).
+    pub fn start_with(deployment: &Deployment, extra: &[&str]) -> Gateway {
         let log = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -26,6 +31,7 @@ impl Gateway {
             .arg(&deployment.coordinator)
             .args(["--prefix", &deployment.prefix])
             .args(deployment.client_tls_args())
+            .args(extra)
             .env("RUST_LOG", "warn")
             .stdout(Stdio::piped())
             .stderr(log)

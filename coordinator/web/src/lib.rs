@@ -19,12 +19,15 @@
 //!   page is open, so a page opened late starts with the recent past.
 //! - `health` — `/healthz` (the gateway is up) and `/readyz` (every role
 //!   of the deployment answers).
+//! - `markers` — beliefs out to RViz: a `visualization_msgs/MarkerArray`
+//!   on a ROS 2 topic over rmw_zenoh, at a fixed rate (`--ros2-markers`).
 //! - `asker` — one get to the coordinator, timed, its outcome turned into
 //!   an HTTP status.
 
 mod asker;
 mod health;
 mod history;
+mod markers;
 mod metrics;
 mod page;
 mod rest;
@@ -39,6 +42,8 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
+pub use markers::MarkersConfig;
+
 /// What the gateway needs to know of the deployment it serves.
 #[derive(Debug, Clone)]
 pub struct WebConfig {
@@ -48,6 +53,8 @@ pub struct WebConfig {
     /// coordinator's own query timeout, so that its `degraded` answer
     /// arrives rather than none).
     pub timeout: Duration,
+    /// Publish the beliefs as ROS 2 markers (None: no).
+    pub markers: Option<MarkersConfig>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -63,15 +70,20 @@ pub async fn serve(
     listener: tokio::net::TcpListener,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<(), WebError> {
+    let markers = config.markers.clone();
     let gateway = Gateway::new(session, config);
     let sampler = tokio::spawn(history::sample(
         gateway.asker.clone(),
         gateway.history.clone(),
     ));
+    let markers = markers.map(|m| tokio::spawn(markers::publish(gateway.asker.clone(), m)));
     let served = axum::serve(listener, app(gateway))
         .with_graceful_shutdown(shutdown)
         .await;
     sampler.abort();
+    if let Some(markers) = markers {
+        markers.abort();
+    }
     Ok(served?)
 }
 

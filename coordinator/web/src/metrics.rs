@@ -160,6 +160,7 @@ impl Collector for Snapshot {
         };
         encode_leaders(&mut encoder, &stats.leaders)?;
         encode_rejected(&mut encoder, stats)?;
+        encode_ros2(&mut encoder, stats)?;
         encode_coordinator(&mut encoder, stats)
     }
 }
@@ -244,6 +245,35 @@ fn encode_rejected(
     ]);
     ConstCounter::new(stats.coordinator.rejected)
         .encode(family.encode_family(&rejected_by_coordinator)?)?;
+    Ok(())
+}
+
+/// Messages every sensor read from ROS 2 topics, and those it refused.
+fn encode_ros2(
+    encoder: &mut DescriptorEncoder<'_>,
+    stats: &StatsAnswer,
+) -> Result<(), std::fmt::Error> {
+    type Field = fn(&idmesh_protocol::wire::coordinator_to_sensor::SensorStats) -> u64;
+    let fields: [(&str, &str, Field); 2] = [
+        (
+            "sensor_ros2_messages",
+            "messages read from ROS 2 topics",
+            |s| s.ros2_messages,
+        ),
+        (
+            "sensor_ros2_bad",
+            "ROS 2 messages refused: they did not decode",
+            |s| s.ros2_bad,
+        ),
+    ];
+    for (name, help, field) in fields {
+        let mut family =
+            encoder.encode_descriptor(name, help, None, ConstCounter::new(0u64).metric_type())?;
+        for s in &stats.sensors {
+            let labels = labels(&[("role", "sensor"), ("process", &s.sensor)]);
+            ConstCounter::new(field(s)).encode(family.encode_family(&labels)?)?;
+        }
+    }
     Ok(())
 }
 

@@ -277,6 +277,7 @@ async fn sensor(
         mesh,
         extraction,
         max_errors,
+        ros2: this.ros2.clone(),
     };
     idmesh_sensor::run(session, config, router, source, journal, shutdown()).await?;
     Ok(())

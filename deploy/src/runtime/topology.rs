@@ -60,6 +60,10 @@
 //! # [sensor.extract]             # the lines are a tracker's reports (move,
 //! # mix_distance = 1.0           # detect): the sensor derives the events
 //! # meeting_model = { constant = 0.5 } # (docs/guide/extracting.md)
+//! # [sensor.ros2]                # read ROS 2 tracker topics over rmw_zenoh
+//! # domain = 0                   # (docs/guide/ros2.md; needs [sensor.extract])
+//! # topics = [{ topic = "/tracker/detections",
+//! #   type = "vision_msgs/msg/Detection2DArray", scale = 0.02, offset = [0, 0] }]
 //! # [sensor.faults]              # tests only: a lossy, doubling network
 //! # duplicate = true             # every batch published twice
 //! # drop_every = 7               # every 7th batch to a leader not published
@@ -381,6 +385,10 @@ pub struct SensorProcess {
     /// same (docs/guide/extracting.md, "Bad rows").
     #[serde(default, skip_serializing_if = "is_default")]
     pub max_errors: usize,
+    /// ROS 2 tracker topics the sensor reads over rmw_zenoh
+    /// (`[sensor.ros2]`, docs/guide/ros2.md); needs `[sensor.extract]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<idmesh_sensor::ros2::Ros2Config>,
     #[serde(default, skip_serializing_if = "is_default")]
     pub faults: FaultSection,
 }
@@ -407,6 +415,7 @@ impl SensorProcess {
             compact_journal_after: None,
             extract: None,
             max_errors: 0,
+            ros2: None,
             faults: FaultSection::default(),
         }
     }
@@ -464,6 +473,29 @@ impl LeaderProcess {
             sensor: None,
         }
     }
+}
+
+/// A sensor's `[sensor.ros2]`: topics that make sense, on a sensor that
+/// extracts (the messages are a tracker's reports), the only one.
+fn check_ros2(sensor: &SensorProcess, sensors: usize) -> Result<()> {
+    let Some(ros2) = &sensor.ros2 else {
+        return Ok(());
+    };
+    ros2.validate()
+        .map_err(|e| anyhow::anyhow!("sensor {}: {e}", sensor.name))?;
+    if sensor.extract.is_none() {
+        bail!(
+            "sensor {}: [sensor.ros2] reads a tracker's reports: it needs [sensor.extract]",
+            sensor.name
+        );
+    }
+    if sensors > 1 {
+        bail!(
+            "sensor {}: [sensor.ros2] is for a deployment of one sensor",
+            sensor.name
+        );
+    }
+    Ok(())
 }
 
 /// `[sensor]` (one table) or `[[sensor]]` (several), each read as a
@@ -674,6 +706,7 @@ impl Topology {
                     sensor.name
                 );
             }
+            check_ros2(sensor, self.sensors.len())?;
             if let Some(rate) = sensor.rate {
                 if !(rate.is_finite() && rate > 0.0) {
                     bail!(
@@ -1123,5 +1156,52 @@ listen = "tcp/127.0.0.1:3"
             e.contains("[security] clients") && e.contains("\"l0\""),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_ros2_section_loads_on_a_sensor_that_extracts() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-ros2-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let base = r#"
+[coordinator]
+name = "c"
+listen = "tcp/127.0.0.1:1"
+[[leader]]
+name = "l0"
+listen = "tcp/127.0.0.1:3"
+[sensor]
+name = "s"
+listen = "tcp/127.0.0.1:2"
+trace = "x.jsonl"
+live = true
+"#;
+        let ros2 = r#"
+[sensor.ros2]
+domain = 7
+topics = [
+  { topic = "/tracker/detections", type = "vision_msgs/msg/Detection2DArray", scale = 0.02, offset = [1.0, -1.0], labels = { person = "red" } },
+  { topic = "/objects", type = "autoware_perception_msgs/msg/TrackedObjects" },
+]
+"#;
+        std::fs::write(&path, format!("{base}[sensor.extract]\n{ros2}")).unwrap();
+        let t = Topology::load(&path).unwrap();
+        let section = t.sensor().ros2.clone().unwrap();
+        assert_eq!(section.domain, 7);
+        assert_eq!(section.topics[0].scale, 0.02);
+        assert_eq!(section.topics[0].labels["person"], "red");
+        assert_eq!(section.topics[1].offset, [0.0, 0.0]);
+        // Written, it reads back equal.
+        let text = toml::to_string(&t).unwrap();
+        let back: Topology = toml::from_str(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        assert_eq!(back.sensor().ros2, t.sensor().ros2);
+        std::fs::write(&path, format!("{base}{ros2}")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("needs [sensor.extract]"), "{e}");
+        let zero = ros2.replace("scale = 0.02", "scale = 0");
+        std::fs::write(&path, format!("{base}[sensor.extract]\n{zero}")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("scale must be finite and > 0"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -18,6 +18,8 @@ pub struct WebOptions {
     pub prefix: String,
     pub timeout: Duration,
     pub tls: Option<Tls>,
+    /// Beliefs out to RViz as ROS 2 markers.
+    pub markers: Option<idmesh_web::MarkersConfig>,
 }
 
 /// How long the gateway waits for the coordinator to listen when it
@@ -46,6 +48,7 @@ pub fn run(options: &WebOptions) -> Result<()> {
         let config = idmesh_web::WebConfig {
             keys: Keys::new(options.prefix.clone()),
             timeout: options.timeout,
+            markers: options.markers.clone(),
         };
         idmesh_web::serve(session.clone(), config, listener, super::roles::shutdown()).await?;
         let _ = session.close().await;
@@ -68,6 +71,7 @@ pub(crate) async fn spawn(session: zenoh::Session, prefix: &str, address: &str) 
     let config = idmesh_web::WebConfig {
         keys: Keys::new(prefix),
         timeout: Duration::from_secs(15),
+        markers: None,
     };
     tokio::spawn(async move {
         if let Err(e) = idmesh_web::serve(session, config, listener, std::future::pending()).await {

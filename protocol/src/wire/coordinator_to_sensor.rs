@@ -81,6 +81,12 @@ pub struct SensorStats {
     /// when it restarted, and taken from the other.
     #[serde(default)]
     pub journal_repaired: u64,
+    /// Messages read from ROS 2 topics (`[sensor.ros2]`), and those
+    /// refused because they did not decode (counted in `rejected` too).
+    #[serde(default)]
+    pub ros2_messages: u64,
+    #[serde(default)]
+    pub ros2_bad: u64,
 }
 
 /// Where every track was last seen and which leader surveils it, at the

@@ -8,11 +8,14 @@
 //!   (`biwi`, `crowds`, `students`) annotation files.
 //! - [`jsonl`] — JSON lines, one `move` or `detect` line of the trace
 //!   format (version 2) per line, with an optional header.
+//! - [`ros2`] — ROS 2 tracker messages (`vision_msgs` detections,
+//!   Autoware's tracked objects) in CDR, live or in rosbag2 MCAP bags.
 
 pub mod eth_ucy;
 pub mod homography;
 pub mod jsonl;
 pub mod mot;
+pub mod ros2;
 
 use crate::extractor::{Report, ReportError};
 use idmesh_protocol::trace::Problem;

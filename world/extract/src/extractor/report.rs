@@ -42,6 +42,22 @@ impl Report {
     }
 }
 
+impl From<&Report> for Detect {
+    /// The `detect` line that carries a report (its scores and identity
+    /// read, when it has them).
+    fn from(r: &Report) -> Self {
+        Detect {
+            time: r.time,
+            track: r.track,
+            x: r.x,
+            y: r.y,
+            scores: r.scores.clone(),
+            identity: r.identity.map(|i| i.identity),
+            accuracy: r.identity.map(|i| i.accuracy),
+        }
+    }
+}
+
 impl From<Move> for Report {
     fn from(m: Move) -> Self {
         Report::at(m.time, m.track, m.x, m.y)

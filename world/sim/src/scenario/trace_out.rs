@@ -116,15 +116,7 @@ fn write_reports<W: Write>(
     header.source = Some(format!("{} (tracker output)", trace.header.source));
     writer.write(&Line::Header(header))?;
     for r in reports {
-        writer.write(&Line::Detect(Detect {
-            time: r.time,
-            track: r.track,
-            x: r.x,
-            y: r.y,
-            scores: r.scores.clone(),
-            identity: r.identity.map(|i| i.identity),
-            accuracy: r.identity.map(|i| i.accuracy),
-        }))?;
+        writer.write(&Line::Detect(Detect::from(r)))?;
     }
     writer.finish()
 }
