@@ -88,12 +88,7 @@ const BALANCE_NEEDED_LN: f64 = 230.0; // ln 10^100
 /// to 0 though their ratios are fine: a split would then cut support the
 /// reads allow, and the next sighting could find no mass.
 pub(crate) fn balanced(counts: &[f64], w: &[f64]) -> Vec<f64> {
-    let ln_max = counts
-        .iter()
-        .zip(w)
-        .filter(|(c, w)| **c > 0.0 && **w > 0.0)
-        .map(|(c, w)| c.ln() + w.ln())
-        .fold(f64::NEG_INFINITY, f64::max);
+    let ln_max = ln_largest_product(counts, w);
     // In range already (every case but drifted tables): left bit for bit
     // as it was, so that the usual answers do not move in their last digit.
     if !ln_max.is_finite() || ln_max.abs() < BALANCE_NEEDED_LN {
@@ -119,13 +114,19 @@ pub(crate) fn balanced(counts: &[f64], w: &[f64]) -> Vec<f64> {
 /// in log space against this largest product instead, as
 /// [`weighted_sum`] does.
 pub(crate) fn drifted(counts: &[f64], w: &[f64]) -> Option<f64> {
-    let ln_max = counts
+    let ln_max = ln_largest_product(counts, w);
+    (ln_max.is_finite() && ln_max.abs() >= BALANCE_NEEDED_LN).then_some(ln_max)
+}
+
+/// ln max_s counts[s]·w[s], found in log space (−∞ where every product
+/// is 0).
+fn ln_largest_product(counts: &[f64], w: &[f64]) -> f64 {
+    counts
         .iter()
         .zip(w)
         .filter(|(c, w)| **c > 0.0 && **w > 0.0)
         .map(|(c, w)| c.ln() + w.ln())
-        .fold(f64::NEG_INFINITY, f64::max);
-    (ln_max.is_finite() && ln_max.abs() >= BALANCE_NEEDED_LN).then_some(ln_max)
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// Σ_s a[s]·w[s] divided by e^ln_max, each term in log space: a weighted
