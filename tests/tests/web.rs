@@ -467,6 +467,23 @@ impl Drawn {
 /// The page's labels as laid out, its markers, and every pair where a
 /// label covers another label or a marker (the selected track's label
 /// may cover a marker: it is shown whatever is there).
+/// [`label_overlaps`] once the page has drawn what `drawn` asks of its
+/// labels (the positions can come a frame before the labels do), or
+/// after 15 s, for the caller's assertions to name what is missing.
+fn settled_labels(
+    tab: &mut Chromium,
+    drawn: impl Fn(&[Drawn]) -> bool,
+) -> (Vec<Drawn>, Vec<String>) {
+    let started = Instant::now();
+    loop {
+        let measured = label_overlaps(tab);
+        if drawn(&measured.0) || started.elapsed() > Duration::from_secs(15) {
+            return measured;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
 fn label_overlaps(tab: &mut Chromium) -> (Vec<Drawn>, Vec<String>) {
     let shown: Value = serde_json::from_str(&tab.eval("JSON.stringify(window.idmesh.labels())"))
         .expect("the page's labels");
@@ -556,7 +573,14 @@ fn the_map_of_a_crowd_places_labels_apart_and_remembers_the_charts() {
 
     // A selected track's label is always shown; no label covers another.
     tab.eval("window.idmesh.select(0), 'ok'");
-    let (labels, overlaps) = label_overlaps(&mut tab);
+    let (labels, overlaps) = settled_labels(&mut tab, |labels| {
+        labels
+            .iter()
+            .filter(|l| l.key.starts_with("leader"))
+            .count()
+            == 4
+            && labels.len() >= 20
+    });
     std::fs::write(out.join("labels.png"), tab.screenshot()).unwrap();
     assert!(overlaps.is_empty(), "{overlaps:#?}");
     assert!(labels.iter().any(|l| l.key == "track 0" && l.selected));
@@ -572,7 +596,7 @@ fn the_map_of_a_crowd_places_labels_apart_and_remembers_the_charts() {
     page_when(&mut tab, Duration::from_secs(30), "the final map", |s| {
         s["positionsAt"] == events
     });
-    let (crowded, overlaps) = label_overlaps(&mut tab);
+    let (crowded, overlaps) = settled_labels(&mut tab, |labels| labels.len() == 40 + 4);
     std::fs::write(out.join("labels-unplaced.png"), tab.screenshot()).unwrap();
     assert_eq!(crowded.len(), 40 + 4);
     assert!(
