@@ -1400,37 +1400,40 @@ fn counts_sum_to(k: f64, counts: &[&[f64]], weights: &[Option<Vec<f64>>]) -> boo
     for (c, r) in counts.iter().zip(weights) {
         total += match r {
             Some(r) => {
-                // Taken as the marginals are (`Component::weighted_marginals`).
-                let scaled: Vec<f64> = c.iter().enumerate().map(|(s, x)| s as f64 * x).collect();
-                let (mass, mean) = match table::drifted(c, r) {
-                    Some(ln_max) => (
-                        table::weighted_sum(c, r, ln_max),
-                        table::weighted_sum(&scaled, r, ln_max),
-                    ),
-                    None => (
-                        c.iter().zip(r).map(|(x, w)| x * w).sum::<f64>(),
-                        scaled.iter().zip(r).map(|(x, w)| x * w).sum::<f64>(),
-                    ),
-                };
+                // Taken as the marginals are (`Component::weighted_marginals`):
+                // term by term in log space where the component drifted.
+                let ln_max = table::drifted(c, r);
+                let (mut mass, mut mean) = (0.0, 0.0);
+                for (s, (&x, &w)) in c.iter().zip(r).enumerate() {
+                    let term = match ln_max {
+                        Some(ln_max) if x > 0.0 && w > 0.0 => (x.ln() + w.ln() - ln_max).exp(),
+                        Some(_) => 0.0,
+                        None => x * w,
+                    };
+                    mass += term;
+                    mean += s as f64 * term;
+                }
                 if !(mass > 0.0 && mass.is_finite()) {
                     // No mass: a contradiction, which the caller finds.
                     return true;
                 }
                 mean / mass
             }
-            None => c.iter().position(|&x| x > 0.0).unwrap_or(0) as f64,
+            None => held_count(c) as f64,
         };
     }
     (total - k).abs() <= 1e-9 * (1.0 + k)
 }
 
+/// The one count a component that holds a single count holds.
+fn held_count(counts: &[f64]) -> usize {
+    counts.iter().position(|&x| x > 0.0).unwrap_or(0)
+}
+
 /// Whether π allows the red count of components that each hold a single
 /// count (the sum of those counts).
 fn fixed_total_allowed(prior: &CountPrior, counts: &[&[f64]]) -> bool {
-    let total: usize = counts
-        .iter()
-        .map(|c| c.iter().position(|&x| x > 0.0).unwrap_or(0))
-        .sum();
+    let total: usize = counts.iter().map(|c| held_count(c)).sum();
     prior.ln_weights().get(total).is_some_and(|l| l.is_finite())
 }
 
