@@ -70,8 +70,14 @@ fn target_dir() -> PathBuf {
 }
 
 /// A fresh clone of the working tree: every file git tracks, with its
-/// working-tree contents and modification time (so the shared target
-/// folder's artifacts stay fresh), and nothing git does not track.
+/// working-tree contents and modification time, and nothing git does not
+/// track. Its folders keep their modification times too: the build scripts
+/// ask to rerun when a source folder changes, and Cargo dates a folder by
+/// the newest entry in it, the folder itself included. A folder dated now
+/// would rerun them, and the clone's build would then rewrite the shared
+/// target folder's libraries in place, from other paths, under the
+/// `cargo test` that runs this test (its doc-tests, built last, would find
+/// their dependencies changed beneath them).
 fn fresh_clone(repository: &Path, clone: &Path) {
     let listed = Command::new("git")
         .args(["ls-files", "-z", "--cached"])
@@ -83,6 +89,7 @@ fn fresh_clone(repository: &Path, clone: &Path) {
         "git ls-files failed: the test needs a git checkout"
     );
     let _ = std::fs::remove_dir_all(clone);
+    let mut folders = std::collections::BTreeSet::new();
     for name in listed.stdout.split(|&b| b == 0).filter(|n| !n.is_empty()) {
         let name = std::str::from_utf8(name).expect("UTF-8 file names");
         let (from, to) = (repository.join(name), clone.join(name));
@@ -93,6 +100,16 @@ fn fresh_clone(repository: &Path, clone: &Path) {
         std::fs::copy(&from, &to).unwrap();
         let file = std::fs::File::options().write(true).open(&to).unwrap();
         file.set_modified(metadata.modified().unwrap()).unwrap();
+        folders.extend(Path::new(name).ancestors().skip(1).map(Path::to_path_buf));
+    }
+    // Deepest first: dating a folder does not change its parent's date.
+    for folder in folders.iter().rev() {
+        let Ok(modified) = std::fs::metadata(repository.join(folder)).and_then(|m| m.modified())
+        else {
+            continue;
+        };
+        let dated = std::fs::File::open(clone.join(folder)).and_then(|f| f.set_modified(modified));
+        dated.unwrap_or_else(|e| panic!("{}: cannot date the folder: {e}", folder.display()));
     }
 }
 
