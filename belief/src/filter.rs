@@ -26,6 +26,13 @@ pub trait PropertyFilter {
     /// particles): the memory figure of the paper's tables.
     fn coefficients(&self) -> usize;
 
+    /// How many sightings the filter took by the repair rule or set aside
+    /// (the `repair` module): 0 on every stream that never contradicts
+    /// itself.
+    fn repairs(&self) -> u64 {
+        0
+    }
+
     /// Applies one event (checked against the field first).
     fn apply(&mut self, event: &Event) -> Result<(), BeliefError> {
         self.field().check(event)?;

@@ -26,6 +26,8 @@
 //!   the low-order Radon filters of order 1, 2, 3 (Table III).
 //! - `particle` — [`ParticleFilter`], sequential Monte Carlo over red
 //!   sets: the yardstick a practitioner would reach for.
+//! - `repair` — the rule every filter follows when a sighting contradicts
+//!   its belief: taken after a small repair, or set aside.
 //! - [`workload`] — seeded random event streams for tests and benchmarks.
 //!
 //! Identity beliefs (who is on which track; Shin et al., IPSN 2005) are
@@ -40,6 +42,7 @@ mod filter;
 mod from_trace;
 mod particle;
 mod radon;
+mod repair;
 mod scoring;
 mod track_set;
 mod weights;

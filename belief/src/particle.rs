@@ -37,9 +37,11 @@
 //! with no such track (all red or all blue) flips t alone if the prior
 //! over the count allows the new count. The weights are kept, the moves
 //! are counted ([`ParticleFilter::moves`]), and the sighting is then
-//! conditioned on as usual. Only when no particle can be moved (no set of
-//! an allowed count has t in the sighted colour, e.g. k = 0 and a certain
-//! red sighting) is the sighting refused (`ImpossibleObservation`).
+//! conditioned on as usual. A sighting the prior rules out (no set of an
+//! allowed count has t in the sighted colour, e.g. k = 0 and a certain red
+//! sighting) is set aside, as by every filter (`crate::repair`). Both count
+//! as repairs ([`PropertyFilter::repairs`]: a sighting that moved
+//! particles counts once).
 //!
 //! [`coefficients`](PropertyFilter::coefficients) reports P: a particle is
 //! one stored set, as a Radon coefficient is one stored set with a number.
@@ -48,6 +50,7 @@ use crate::baseline::MAX_STATES;
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe, RedCount};
 use crate::filter::PropertyFilter;
+use crate::repair;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -78,6 +81,8 @@ pub struct ParticleFilter {
     resamples: u64,
     /// Particles moved by the rule for a sighting every particle rules out.
     moves: u64,
+    /// Sightings that moved particles, and sightings set aside.
+    repairs: u64,
 }
 
 impl ParticleFilter {
@@ -132,6 +137,7 @@ impl ParticleFilter {
             log_evidence: 0.0,
             resamples: 0,
             moves: 0,
+            repairs: 0,
         })
     }
 
@@ -291,6 +297,10 @@ impl PropertyFilter for ParticleFilter {
 
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.field.check_observe(&observe)?;
+        if self.field.rules_out(&observe) {
+            repair::note("particles", &mut self.repairs, &observe, true);
+            return Ok(());
+        }
         let t = observe.track as usize;
         // The predicted probability of the sighting; nothing changes unless
         // it is positive.
@@ -311,6 +321,7 @@ impl PropertyFilter for ParticleFilter {
         // sum to 1 and the likelihoods are finite, one of them positive);
         // the particles missed its sets, see the module documentation.
         if evidence == 0.0 && self.move_to_allowed(t, observe.red > 0.0) {
+            repair::note("particles", &mut self.repairs, &observe, false);
             evidence = predicted(self);
         }
         if !(evidence.is_finite() && evidence > 0.0) {
@@ -351,6 +362,10 @@ impl PropertyFilter for ParticleFilter {
 
     fn coefficients(&self) -> usize {
         self.count
+    }
+
+    fn repairs(&self) -> u64 {
+        self.repairs
     }
 }
 
@@ -615,18 +630,15 @@ mod tests {
 
     /// No set of the count has the sighted colour: refused, nothing moved.
     #[test]
-    fn an_impossible_observation_changes_nothing() {
+    fn a_sighting_the_prior_rules_out_is_set_aside() {
         let mut pf = ParticleFilter::new(Field::known(4, vec![]), 64, 0).unwrap();
         let before = (pf.sets.clone(), pf.weights.clone(), pf.log_evidence());
-        let error = pf.apply(&observe(2, 1.0, 0.0)).unwrap_err();
-        assert!(
-            matches!(error, BeliefError::ImpossibleObservation { probability } if probability == 0.0)
-        );
+        pf.apply(&observe(2, 1.0, 0.0)).unwrap();
         assert_eq!(
             (pf.sets.clone(), pf.weights.clone(), pf.log_evidence()),
             before
         );
-        assert_eq!(pf.moves(), 0);
+        assert_eq!((pf.moves(), pf.repairs()), (0, 1));
     }
 
     #[test]

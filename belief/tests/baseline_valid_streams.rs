@@ -29,7 +29,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 mod common;
-use common::valid::{check_marginals, partner, swap_probability};
+use common::valid::{check_marginals, contradicting_stream, partner, swap_probability};
 
 /// A stream and the truth behind it: `n` tracks, `k` red, `len` events;
 /// returns the red tracks at time 0 and the events.
@@ -257,5 +257,52 @@ proptest! {
         let mut filter =
             ParticleFilter::new(field(n, k, initial, known), particles, seed ^ 0x5eed).unwrap();
         run_colours(&mut filter, k, &events, 8)?;
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// A stream that contradicts itself (sure reads of any colour, drawn
+    /// without a truth) never stops a filter: each sighting the belief
+    /// rules out is taken by the repair rule, each one the prior rules out
+    /// is set aside, and the marginals stay normalized. The exact filter
+    /// and the exact Radon engine follow the one rule, so they still
+    /// answer alike.
+    #[test]
+    fn a_contradicting_stream_never_stops_a_filter(
+        n in 2usize..=10,
+        share in 0.0f64..=1.0,
+        known in any::<bool>(),
+        len in 20usize..=600,
+        seed in any::<u64>(),
+        budget in 1usize..=100,
+        order in 1usize..=3,
+        particles in 1usize..=100,
+    ) {
+        let k = red_count(n, share);
+        let field = field(n, k, (0..k as u32).collect(), known);
+        let events = contradicting_stream(n, len, seed);
+        let mut exact = DenseFilter::new(field.clone()).unwrap();
+        let mut radon = RadonBelief::new(field.clone()).unwrap();
+        for (i, e) in events.iter().enumerate() {
+            exact.apply(e).map_err(|err| TestCaseError::fail(format!("exact, event {i}: {err}")))?;
+            radon.apply(e).map_err(|err| TestCaseError::fail(format!("radon, event {i}: {err}")))?;
+            if i % 16 == 15 || i + 1 == events.len() {
+                let (p, q) = (exact.marginals().unwrap(), radon.marginals().unwrap());
+                check_marginals(&p, k, i)?;
+                for (t, (a, b)) in p.iter().zip(&q).enumerate() {
+                    prop_assert!((a - b).abs() < 1e-6, "event {}, track {}: {} vs {}", i, t, a, b);
+                }
+            }
+        }
+        prop_assert_eq!(exact.repairs(), radon.repairs());
+        let options = RadonOptions { sparsify: Some(Sparsify::threshold(budget)), distributed_rule: seed % 2 == 0, signed: false };
+        let mut budgeted = RadonBelief::with_options(field.clone(), options).unwrap();
+        run_colours(&mut budgeted, k, &events, 8)?;
+        let mut low = LowOrderFilter::with_repair(field.clone(), order, LowOrderRepair::ShrinkToUniform).unwrap();
+        run_colours(&mut low, k, &events, 8)?;
+        let mut pf = ParticleFilter::new(field, particles, seed).unwrap();
+        run_colours(&mut pf, k, &events, 8)?;
     }
 }

@@ -23,7 +23,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 mod common;
-use common::valid::check_marginals;
+use common::valid::{check_marginals, contradicting_stream};
 
 /// A stream and the truth behind it: `n` tracks, `k` red, `len` events.
 fn valid_stream(n: usize, k: usize, len: usize, seed: u64) -> (Vec<u32>, Vec<Event>) {
@@ -230,39 +230,6 @@ proptest! {
         let options = FactoredOptions { max_component: max, coupling, ..FactoredOptions::default() };
         share_takes_every_event(field, options, k, &events)?;
     }
-}
-
-/// A stream no world produced: sightings of any colour at any accuracy,
-/// sure ones included, drawn without a truth behind them, so that they
-/// contradict each other (two sure reds for one red target, a sure red
-/// when no target is red).
-fn contradicting_stream(n: usize, len: usize, seed: u64) -> Vec<Event> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..len)
-        .map(|_| {
-            let a = rng.gen_range(0..n);
-            if n >= 2 && rng.gen_bool(0.5) {
-                let b = (a + rng.gen_range(1..n)) % n;
-                let swap = rng.gen_range(0.0..=1.0);
-                return Event::Mix(Mix {
-                    a: a as u32,
-                    b: b as u32,
-                    swap,
-                });
-            }
-            let (red, blue) = match rng.gen_range(0..4) {
-                0 => (1.0, 0.0),
-                1 => (0.0, 1.0),
-                2 => (rng.gen_range(0.0..1.0), 1.0),
-                _ => (1.0, rng.gen_range(0.0..1.0)),
-            };
-            Event::Observe(Observe {
-                track: a as u32,
-                red,
-                blue,
-            })
-        })
-        .collect()
 }
 
 proptest! {

@@ -28,6 +28,7 @@ use super::{binomial_f64, Binomials};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe, RedCount};
 use crate::filter::PropertyFilter;
+use crate::repair::{self, REPAIR_SHARE};
 use std::ops::Range;
 
 /// The most states a [`DenseFilter`] (and a
@@ -190,6 +191,8 @@ pub struct DenseFilter {
     /// P(x) per state, summing to 1.
     probs: Vec<f64>,
     log_norm: f64,
+    /// Sightings taken by the repair rule or set aside (`crate::repair`).
+    repairs: u64,
 }
 
 impl DenseFilter {
@@ -264,6 +267,7 @@ impl DenseFilter {
             space,
             probs,
             log_norm,
+            repairs: 0,
         })
     }
 
@@ -394,6 +398,81 @@ impl DenseFilter {
         }
         (with_t, without_t)
     }
+
+    /// Bayes' rule for one sighting; refused as impossible, the state
+    /// unchanged, where the belief gives it probability 0.
+    fn condition(&mut self, observe: Observe) -> Result<(), BeliefError> {
+        let t = observe.track as usize;
+        let (with_t, without_t) = self.split_mass(t);
+        let total = with_t + without_t;
+        // Likelihoods scaled to a largest of 1, so that the predicted
+        // probability of a sighting likelier than 1 for one colour does not
+        // overflow, nor one of a floored state underflow.
+        let top = observe.red.max(observe.blue);
+        let (red, blue) = (observe.red / top, observe.blue / top);
+        let evidence = red * with_t + blue * without_t;
+        if !(evidence.is_finite() && evidence > 0.0) {
+            return Err(BeliefError::ImpossibleObservation {
+                probability: top * evidence / total,
+            });
+        }
+        let (red, blue) = (red / evidence, blue / evidence);
+        // Exactly 0 only for a likelihood of 0 (see `SUPPORT_FLOOR`).
+        let scale = |p: &mut f64, factor: f64| {
+            let positive = *p > 0.0 && factor > 0.0;
+            *p = floored(*p * factor, positive);
+        };
+        let probs = &mut self.probs;
+        match &self.space {
+            Space::KSets { k, binom, low } => {
+                let n = self.field.tracks;
+                pieces(binom, low, n, *k, 0, t, &mut |piece| match piece {
+                    Piece::Run(run, holds) => {
+                        let factor = if holds { red } else { blue };
+                        for p in &mut probs[run] {
+                            scale(p, factor);
+                        }
+                    }
+                    Piece::Pattern(at, holds) => {
+                        for (p, &h) in probs[at..at + holds.len()].iter_mut().zip(holds) {
+                            scale(p, if h { red } else { blue });
+                        }
+                    }
+                });
+            }
+            Space::Subsets => {
+                for (mask, p) in probs.iter_mut().enumerate() {
+                    scale(p, if mask >> t & 1 == 1 { red } else { blue });
+                }
+            }
+        }
+        self.log_norm += top.ln() + (evidence / total).ln();
+        Ok(())
+    }
+
+    /// Gives [`REPAIR_SHARE`] of the mass to the uninformed prior: the
+    /// uniform k-sets, or each set as the count prior weighs it.
+    fn smooth(&mut self) {
+        let keep = 1.0 - REPAIR_SHARE;
+        match (&self.space, &self.field.red) {
+            (Space::Subsets, RedCount::Unknown { prior }) => {
+                let n = self.field.tracks;
+                let total: f64 = prior.iter().sum();
+                let per_set: Vec<f64> = (0..=n)
+                    .map(|j| REPAIR_SHARE * prior[j] / total / binomial_f64(n, j))
+                    .collect();
+                for (mask, p) in self.probs.iter_mut().enumerate() {
+                    *p = *p * keep + per_set[mask.count_ones() as usize];
+                }
+            }
+            _ => {
+                let per_set = REPAIR_SHARE / self.probs.len() as f64;
+                for p in &mut self.probs {
+                    *p = *p * keep + per_set;
+                }
+            }
+        }
+    }
 }
 
 impl PropertyFilter for DenseFilter {
@@ -470,54 +549,28 @@ impl PropertyFilter for DenseFilter {
         Ok(())
     }
 
+    /// By the repair rule where the belief rules the sighting out
+    /// (`crate::repair`). After a repair [`DenseFilter::log_normalizer`]
+    /// no longer is the evidence of the stream: the stream had none.
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.field.check_observe(&observe)?;
-        let t = observe.track as usize;
-        let (with_t, without_t) = self.split_mass(t);
-        let total = with_t + without_t;
-        // Likelihoods scaled to a largest of 1, so that the predicted
-        // probability of a sighting likelier than 1 for one colour does not
-        // overflow, nor one of a floored state underflow.
-        let top = observe.red.max(observe.blue);
-        let (red, blue) = (observe.red / top, observe.blue / top);
-        let evidence = red * with_t + blue * without_t;
-        if !(evidence.is_finite() && evidence > 0.0) {
-            return Err(BeliefError::ImpossibleObservation {
-                probability: top * evidence / total,
-            });
+        if self.field.rules_out(&observe) {
+            repair::note("exact", &mut self.repairs, &observe, true);
+            return Ok(());
         }
-        let (red, blue) = (red / evidence, blue / evidence);
-        // Exactly 0 only for a likelihood of 0 (see `SUPPORT_FLOOR`).
-        let scale = |p: &mut f64, factor: f64| {
-            let positive = *p > 0.0 && factor > 0.0;
-            *p = floored(*p * factor, positive);
-        };
-        let probs = &mut self.probs;
-        match &self.space {
-            Space::KSets { k, binom, low } => {
-                let n = self.field.tracks;
-                pieces(binom, low, n, *k, 0, t, &mut |piece| match piece {
-                    Piece::Run(run, holds) => {
-                        let factor = if holds { red } else { blue };
-                        for p in &mut probs[run] {
-                            scale(p, factor);
-                        }
-                    }
-                    Piece::Pattern(at, holds) => {
-                        for (p, &h) in probs[at..at + holds.len()].iter_mut().zip(holds) {
-                            scale(p, if h { red } else { blue });
-                        }
-                    }
-                });
+        match self.condition(observe) {
+            Err(BeliefError::ImpossibleObservation { .. }) => {
+                // The prior allows the sighting, so after the smoothing
+                // its probability is at least REPAIR_SHARE times the
+                // prior's: the second conditioning cannot find it
+                // impossible.
+                self.smooth();
+                self.condition(observe)?;
+                repair::note("exact", &mut self.repairs, &observe, false);
+                Ok(())
             }
-            Space::Subsets => {
-                for (mask, p) in probs.iter_mut().enumerate() {
-                    scale(p, if mask >> t & 1 == 1 { red } else { blue });
-                }
-            }
+            done => done,
         }
-        self.log_norm += top.ln() + (evidence / total).ln();
-        Ok(())
     }
 
     fn marginals(&self) -> Result<Vec<f64>, BeliefError> {
@@ -539,6 +592,10 @@ impl PropertyFilter for DenseFilter {
 
     fn coefficients(&self) -> usize {
         self.probs.len()
+    }
+
+    fn repairs(&self) -> u64 {
+        self.repairs
     }
 }
 
@@ -984,24 +1041,78 @@ mod tests {
     }
 
     #[test]
-    fn impossible_observation_leaves_the_state_unchanged() {
+    fn a_contradicting_sighting_is_taken_by_the_repair_rule() {
         let mut filter = DenseFilter::new(Field::known(4, vec![0, 1])).unwrap();
         filter.mix(mix(0, 2, 0.5)).unwrap();
-        let (probs, log_norm) = (filter.probs.clone(), filter.log_normalizer());
-        let err = filter
+        // Track 3 is surely blue; a sure red on it is taken after the
+        // belief gives 1e-9 of its mass to the uniform k-sets.
+        filter
             .observe(Observe {
                 track: 3,
                 red: 1.0,
                 blue: 0.0,
             })
-            .unwrap_err();
-        assert_eq!(err, BeliefError::ImpossibleObservation { probability: 0.0 });
-        assert_eq!(filter.probs, probs);
-        assert_eq!(filter.log_normalizer(), log_norm);
-        // Bad events are refused before anything changes, too.
+            .unwrap();
+        let p = filter.marginals().unwrap();
+        assert!((p[3] - 1.0).abs() < 1e-12, "{p:?}");
+        assert!((p.iter().sum::<f64>() - 2.0).abs() < 1e-12);
+        // No set the belief held has track 3 red: the uniform share
+        // decides which track is red beside it.
+        assert!(
+            p[..3].iter().all(|q| (q - 1.0 / 3.0).abs() < 1e-12),
+            "{p:?}"
+        );
+        assert_eq!(filter.repairs(), 1);
+        // Bad events are refused before anything changes.
+        let probs = filter.probs.clone();
         assert!(filter.mix(mix(1, 1, 0.5)).is_err());
         assert!(filter.apply(&Event::Mix(mix(0, 9, 0.5))).is_err());
         assert_eq!(filter.probs, probs);
+    }
+
+    #[test]
+    fn a_sighting_the_prior_rules_out_is_set_aside() {
+        let mut filter = DenseFilter::new(Field::uniform(4, 0)).unwrap();
+        let (probs, log_norm) = (filter.probs.clone(), filter.log_normalizer());
+        filter
+            .observe(Observe {
+                track: 3,
+                red: 1.0,
+                blue: 0.0,
+            })
+            .unwrap();
+        assert_eq!(filter.probs, probs);
+        assert_eq!(filter.log_normalizer(), log_norm);
+        assert_eq!(filter.repairs(), 1);
+        // With the count unknown the smoothing follows the count prior.
+        let field = Field {
+            tracks: 3,
+            red: RedCount::Unknown {
+                prior: vec![0.5, 0.5, 0.0, 0.0],
+            },
+            initial_red: Some(vec![]),
+        };
+        let mut filter = DenseFilter::new(field).unwrap();
+        filter
+            .observe(Observe {
+                track: 2,
+                red: 1.0,
+                blue: 0.0,
+            })
+            .unwrap();
+        let p = filter.marginals().unwrap();
+        assert!((p[2] - 1.0).abs() < 1e-12 && p[0] < 1e-12, "{p:?}");
+        assert_eq!(filter.count_posterior().unwrap()[2], 0.0);
+        filter
+            .observe(Observe {
+                track: 0,
+                red: 1.0,
+                blue: 0.0,
+            })
+            .unwrap();
+        assert_eq!(filter.repairs(), 2);
+        let p = filter.marginals().unwrap();
+        assert!((p[0] - 1.0).abs() < 1e-12 && p[2] < 1e-6, "{p:?}");
     }
 
     /// A naive filter over all 2^n masks (zero off the admissible sets).

@@ -44,11 +44,13 @@
 //! with the least ε that brings every marginal into [0, 1] and gives the
 //! observation at least [`OBSERVATION_FLOOR`] of the probability the
 //! uniform belief gives it, then conditions as usual. The mix counts as a
-//! repair ([`LowOrderFilter::repairs`]). The method amplifies rounding by
+//! repair ([`PropertyFilter::repairs`]). The method amplifies rounding by
 //! the sighting's likelihood ratio; numbers that overflow, or marginals
 //! that no longer sum to k (ratios of 10^200 can do either), are replaced
 //! by the uniform belief, ε = 1, a repair too. With k = 0 or k = n the filter is
-//! exact and every observation of a valid stream has positive probability.
+//! exact; a sighting the prior rules out there (a sure red when no target
+//! is red) is set aside, as by every filter (`crate::repair`), and counted
+//! with the repairs.
 //!
 //! The lower marginals M_0, …, M_{j−1} are kept alongside M_j as a cache:
 //! they obey the same rollup and conditioning rules, with M_{u+1} at hand, so
@@ -58,6 +60,7 @@ use super::{binomial_f64, Binomials, MAX_STATES};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
+use crate::repair;
 use crate::weights::ln_binomial;
 use nalgebra::{DMatrix, DVector};
 
@@ -155,7 +158,10 @@ impl LowOrderFilter {
                 what: "order 0",
             });
         }
-        let order = order.min(k);
+        // With every track red the belief is certain, and order 1 holds it
+        // exactly (the fit of a higher order's lift can be inconsistent
+        // there: n = k = 4, order 2).
+        let order = if k == n { order.min(1) } else { order.min(k) };
         let needed: f64 = (0..=order).map(|u| binomial_f64(n, u)).sum();
         if needed > MAX_STATES as f64 {
             return Err(BeliefError::TooLarge {
@@ -215,12 +221,6 @@ impl LowOrderFilter {
     #[cfg(test)]
     pub(crate) fn order(&self) -> usize {
         self.order
-    }
-
-    /// How many conditionings so far needed a [`LowOrderRepair`].
-    #[cfg(test)]
-    pub(crate) fn repairs(&self) -> u64 {
-        self.repairs
     }
 
     /// P(t red) = M_1({t})/M_0 as represented, not clamped: outside [0, 1]
@@ -491,6 +491,10 @@ impl PropertyFilter for LowOrderFilter {
 
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.field.check_observe(&observe)?;
+        if self.field.rules_out(&observe) {
+            repair::note("low-order", &mut self.repairs, &observe, true);
+            return Ok(());
+        }
         let n = self.field.tracks;
         let t = observe.track as usize;
         let j = self.order;
@@ -675,6 +679,12 @@ impl PropertyFilter for LowOrderFilter {
 
     fn coefficients(&self) -> usize {
         self.levels[self.order].len()
+    }
+
+    /// Updates that needed a [`LowOrderRepair`], and sightings the prior
+    /// rules out, set aside (`crate::repair`).
+    fn repairs(&self) -> u64 {
+        self.repairs
     }
 }
 

@@ -17,10 +17,11 @@
 //! (factor)·m·W(i, o+1)/W(i, o) (blue).
 
 use super::atom::Atom;
-use super::sparsify::restore_uniform;
+use super::sparsify::{restore_uniform, RESTORE_SHARE};
 use super::RadonBelief;
 use crate::error::BeliefError;
 use crate::event::Observe;
+use crate::repair::REPAIR_SHARE;
 use crate::weights::Weights;
 use rustc_hash::FxHashMap;
 use std::collections::hash_map::Entry;
@@ -246,12 +247,18 @@ impl RadonBelief {
         // probability is 0: below that noise the observation is impossible.
         let possible = |total: f64, size: f64| total.is_finite() && total > 1e-12 * size;
         let mut restored = None;
-        if !possible(total, size) && self.approximate() {
+        if !possible(total, size) {
             // The approximation may have dropped the sets the observation
-            // allows: the rule of `sparsify`, on a copy until it is known
-            // to help.
+            // allows: the rule of `sparsify`; the exact belief held it
+            // impossible: the repair rule (`crate::repair`), with its
+            // smaller share. On a copy until it is known to help.
+            let share = if self.approximate() {
+                RESTORE_SHARE
+            } else {
+                REPAIR_SHARE
+            };
             let mut masses = self.masses.clone();
-            restore_uniform(&mut masses);
+            restore_uniform(&mut masses, share);
             (total, size) = conditioning.totals(&masses);
             restored = Some(masses);
         }
@@ -262,7 +269,7 @@ impl RadonBelief {
         }
         if let Some(masses) = restored {
             self.masses = masses;
-            self.stats.restorations += 1;
+            crate::repair::note("radon", &mut self.stats.restorations, &observe, false);
         }
         conditioning.apply(&mut self.masses);
         self.log_scale += conditioning.update.scale.ln();
@@ -324,20 +331,29 @@ mod tests {
     }
 
     #[test]
-    fn impossible_observation_leaves_the_belief_unchanged() {
-        let mut belief = RadonBelief::new(Field::known(4, vec![0, 1])).unwrap();
-        let before: Vec<f64> = belief.marginals().unwrap();
-        let err = belief.observe(Observe {
+    fn a_contradicting_sighting_is_taken_as_by_the_exact_filter() {
+        let field = Field::known(4, vec![0, 1]);
+        let mut belief = RadonBelief::new(field.clone()).unwrap();
+        let mut exact = crate::baseline::DenseFilter::new(field).unwrap();
+        let sighting = Observe {
             track: 3,
             red: 1.0,
             blue: 0.0,
-        });
-        assert!(matches!(
-            err,
-            Err(crate::BeliefError::ImpossibleObservation { .. })
-        ));
-        assert_eq!(belief.marginals().unwrap(), before);
-        assert_eq!(belief.coefficients(), 1);
+        };
+        belief.observe(sighting).unwrap();
+        exact.observe(sighting).unwrap();
+        let (p, q) = (belief.marginals().unwrap(), exact.marginals().unwrap());
+        for (a, b) in p.iter().zip(&q) {
+            assert!((a - b).abs() < 1e-12, "{p:?} vs {q:?}");
+        }
+        assert!((p[3] - 1.0).abs() < 1e-12);
+        assert_eq!((belief.repairs(), exact.repairs()), (1, 1));
+        // A sure red with no red target is set aside.
+        let mut none = RadonBelief::new(Field::uniform(4, 0)).unwrap();
+        let before = none.marginals().unwrap();
+        none.observe(sighting).unwrap();
+        assert_eq!(none.marginals().unwrap(), before);
+        assert_eq!(none.repairs(), 1);
     }
 
     /// The example of Section 5.4.2 (track ids as in the paper): the leader

@@ -55,6 +55,7 @@ pub(crate) use sparsify::{OmpSchedule, SparsifyMethod};
 use crate::error::BeliefError;
 use crate::event::{Field, Mix, Observe};
 use crate::filter::PropertyFilter;
+use crate::repair;
 use crate::track_set::TrackSet;
 use crate::weights::Weights;
 use rustc_hash::FxHashMap;
@@ -85,9 +86,11 @@ pub struct RadonStats {
     pub max_coefficients: usize,
     pub thresholdings: u64,
     pub omp_runs: u64,
-    /// Sightings the approximation had ruled out, taken after moving a
-    /// share of the belief to the uniform one (see `sparsify`).
+    /// Sightings the belief had ruled out, taken after moving a share of
+    /// it to the uniform one (see `sparsify`).
     pub restorations: u64,
+    /// Sightings the prior rules out, set aside (`crate::repair`).
+    pub set_aside: u64,
 }
 
 /// A belief over red sets on the overcomplete Radon dictionary.
@@ -294,6 +297,10 @@ impl PropertyFilter for RadonBelief {
 
     fn observe(&mut self, observe: Observe) -> Result<(), BeliefError> {
         self.field.check_observe(&observe)?;
+        if self.field.rules_out(&observe) {
+            repair::note("radon", &mut self.stats.set_aside, &observe, true);
+            return Ok(());
+        }
         self.condition(observe)?;
         self.mixing_log.clear(observe.track);
         self.stats.events += 1;
@@ -309,5 +316,9 @@ impl PropertyFilter for RadonBelief {
 
     fn coefficients(&self) -> usize {
         self.masses.len()
+    }
+
+    fn repairs(&self) -> u64 {
+        self.stats.restorations + self.stats.set_aside
     }
 }

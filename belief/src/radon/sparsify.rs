@@ -22,10 +22,12 @@
 //! uniform one (φ_∅, every admissible set as likely as under the prior,
 //! which the distributed rule grows on every sighting), and the sighting is
 //! conditioned on as usual. Counted in
-//! [`RadonStats::restorations`](super::RadonStats::restorations). Only a sighting the uniform belief rules out
-//! too (e.g. a certain red one with k = 0) is refused. The exact belief
-//! (no budget, exact conditioning) drops nothing and keeps refusing an
-//! impossible sighting.
+//! [`RadonStats::restorations`](super::RadonStats::restorations). The exact
+//! belief (no budget, exact conditioning) drops nothing: a sighting it
+//! rules out contradicts the stream itself, and it follows the repair rule
+//! of every filter (`crate::repair`), the same move with the smaller share
+//! `REPAIR_SHARE`, counted alike. A sighting the prior rules out too (e.g.
+//! a certain red one with k = 0) is set aside.
 
 use super::atom::Atom;
 use super::omp::OmpOptions;
@@ -38,15 +40,15 @@ use rustc_hash::FxHashMap;
 /// the belief keeps what it knew about everything else.
 pub(crate) const RESTORE_SHARE: f64 = 1e-6;
 
-/// Moves [`RESTORE_SHARE`] of the masses to the uniform belief φ_∅.
-pub(super) fn restore_uniform(masses: &mut FxHashMap<Atom, f64>) {
+/// Moves `share` of the masses to the uniform belief φ_∅.
+pub(super) fn restore_uniform(masses: &mut FxHashMap<Atom, f64>, share: f64) {
     let total: f64 = masses.values().sum();
-    let share = RESTORE_SHARE * total;
-    masses.values_mut().for_each(|m| *m *= 1.0 - RESTORE_SHARE);
+    let moved = share * total;
+    masses.values_mut().for_each(|m| *m *= 1.0 - share);
     // φ_∅ even under the distributed rule, which grows it on every
     // sighting (its 1-sets grow only when they meet the mixing log, and a
     // certain sighting of a track that has not mixed would find nothing).
-    *masses.entry(Atom::default()).or_insert(0.0) += share;
+    *masses.entry(Atom::default()).or_insert(0.0) += moved;
 }
 
 /// A coefficient budget and the approximation that enforces it.

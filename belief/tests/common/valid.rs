@@ -4,8 +4,9 @@
 //! identity beliefs' (idmesh-identity's `tests/common`) include this file
 //! for the partners and swap probabilities of their mixes.
 
+use idmesh_belief::{Event, Mix, Observe};
 use proptest::prelude::{prop_assert, TestCaseError};
-use rand::Rng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// A neighbour of `a` most of the time (crowds mix locally), anyone else
@@ -49,4 +50,37 @@ pub fn check_marginals(p: &[f64], k: usize, at: usize) -> Result<(), TestCaseErr
         at
     );
     Ok(())
+}
+
+/// A stream no world produced: sightings of any colour at any accuracy,
+/// sure ones included, drawn without a truth behind them, so that they
+/// contradict each other (two sure reds for one red target, a sure red
+/// when no target is red).
+pub fn contradicting_stream(n: usize, len: usize, seed: u64) -> Vec<Event> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..len)
+        .map(|_| {
+            let a = rng.gen_range(0..n);
+            if n >= 2 && rng.gen_bool(0.5) {
+                let b = (a + rng.gen_range(1..n)) % n;
+                let swap = rng.gen_range(0.0..=1.0);
+                return Event::Mix(Mix {
+                    a: a as u32,
+                    b: b as u32,
+                    swap,
+                });
+            }
+            let (red, blue) = match rng.gen_range(0..4) {
+                0 => (1.0, 0.0),
+                1 => (0.0, 1.0),
+                2 => (rng.gen_range(0.0..1.0), 1.0),
+                _ => (1.0, rng.gen_range(0.0..1.0)),
+            };
+            Event::Observe(Observe {
+                track: a as u32,
+                red,
+                blue,
+            })
+        })
+        .collect()
 }
