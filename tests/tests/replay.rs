@@ -220,7 +220,10 @@ fn a_sighting_the_stream_rules_out_is_taken_by_the_repair_rule() {
         let output = replay(&trace, &["--method", method]);
         let out = lines(&output);
         let p: Vec<f64> = serde_json::from_value(out[0]["final_p_red"].clone()).unwrap();
-        assert!((p.iter().sum::<f64>() - 1.0).abs() < 1e-9, "{method}: {p:?}");
+        assert!(
+            (p.iter().sum::<f64>() - 1.0).abs() < 1e-9,
+            "{method}: {p:?}"
+        );
         if method != "factored" {
             assert!((p[1] - 1.0).abs() < 1e-9, "{method}: {p:?}");
         }
@@ -232,7 +235,11 @@ fn a_sighting_the_stream_rules_out_is_taken_by_the_repair_rule() {
             _ => 1,
         };
         let stderr = String::from_utf8_lossy(&output.stderr);
-        assert_eq!(stderr.matches("logged once").count(), said, "{method}: {stderr}");
+        assert_eq!(
+            stderr.matches("logged once").count(),
+            said,
+            "{method}: {stderr}"
+        );
     }
 }
 

@@ -13,6 +13,24 @@ pub(crate) struct Component {
     pub(crate) counts: Vec<f64>,
 }
 
+/// a·b for a, b ≥ 0, raised to the smallest normal f64 where the exact
+/// product is positive but rounds below it. A table's entries may lean
+/// hundreds of orders of magnitude against the count weights that select
+/// them (sightings against the truth, a known count holding the total
+/// down): a set both factors allow must not vanish from the product by
+/// rounding, or a later sighting of it finds no mass. The floor moves an
+/// entry of a table summing to 1 by at most 2.2·10^-308, as the exact
+/// filter's own floor does.
+#[inline]
+pub(crate) fn floored_product(a: f64, b: f64) -> f64 {
+    let x = a * b;
+    if x < f64::MIN_POSITIVE && a > 0.0 && b > 0.0 {
+        f64::MIN_POSITIVE
+    } else {
+        x
+    }
+}
+
 /// The bits of `table` all but certain under table[y]·w(|y|) (w = 1 if
 /// None): (bit, red?, odds of the other colour against that one), for the
 /// bits whose odds are at most `margin`. The two colours' weights are
@@ -168,7 +186,12 @@ impl Component {
             return Err(BeliefError::Degenerate { normalizer: total });
         }
         for g in &mut table {
-            *g /= total;
+            let x = *g / total;
+            *g = if x < f64::MIN_POSITIVE && *g > 0.0 {
+                f64::MIN_POSITIVE
+            } else {
+                x
+            };
         }
         let counts = counts_of(&table, tracks.len());
         Ok(Component {
@@ -206,7 +229,7 @@ impl Component {
         self.table
             .iter()
             .enumerate()
-            .map(|(y, &g)| g * if y & b != 0 { red } else { blue })
+            .map(|(y, &g)| floored_product(g, if y & b != 0 { red } else { blue }))
             .collect()
     }
 
@@ -217,12 +240,12 @@ impl Component {
         tracks.extend_from_slice(&other.tracks);
         let mut table = Vec::with_capacity(self.table.len() * other.table.len());
         for &h in &other.table {
-            table.extend(self.table.iter().map(|&l| l * h));
+            table.extend(self.table.iter().map(|&l| floored_product(l, h)));
         }
         let mut counts = vec![0.0; tracks.len() + 1];
         for (r, &x) in self.counts.iter().enumerate() {
             for (q, &y) in other.counts.iter().enumerate() {
-                counts[r + q] += x * y;
+                counts[r + q] += floored_product(x, y);
             }
         }
         Component {
