@@ -8,9 +8,10 @@
 //!   deployment (one of them truncated: counted, the stream goes on) give
 //!   the answer `idmesh replay --topology` computes from the reports (the
 //!   twin), whether the key carries Jazzy's type hash or Humble's
-//!   `TypeHashNotSupported`, and the web gateway's `MarkerArray` decodes with rosbags, with
-//!   rmw_zenoh's attachment and liveliness tokens, and shows what `idmesh
-//!   query` answers;
+//!   `TypeHashNotSupported`, and the web gateway's `MarkerArray` — from
+//!   `idmesh web --ros2-markers` and from the `[web]` section `idmesh up`
+//!   serves — decodes with rosbags, with rmw_zenoh's attachment and
+//!   liveliness tokens, and shows what `idmesh query` answers;
 //! - named ids keep their track numbers when the sensor is SIGKILLed and
 //!   restarted from its journal, so the answer is still the twin's of the
 //!   reports a bag of the same messages extracts as.
@@ -21,7 +22,7 @@ use idmesh_extract::ExtractorConfig;
 use idmesh_sensor::ros2::Ros2Config;
 use idmesh_tests::{
     assert_same_marginals, floats, header_only, idmesh, python_with_zenoh, Deployment, Factored,
-    Gateway, Settings,
+    Gateway, MarkerOptions, Settings, WebSection,
 };
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
@@ -185,7 +186,6 @@ fn a_rosbags_bag_extracts_as_its_reports_do_as_json_lines() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The marker array the gateway publishes, as rosbags decoded it.
 /// The marker array on `topic` (no leading slash) whose key ends in
 /// `hash`, as rosbags decoded it.
 fn markers(deployment: &Deployment, topic: &str, hash: &str) -> Value {
@@ -193,7 +193,10 @@ fn markers(deployment: &Deployment, topic: &str, hash: &str) -> Value {
     tracker(&["markers", &deployment.coordinator, &key, "15"])
 }
 
-fn check_markers(got: &Value, positions: &Value, marginals: &Value) {
+/// `got` (see [`markers`]) was published on `topic` (no leading slash)
+/// as rmw_zenoh publishes, and shows the answers `positions` and
+/// `marginals`.
+fn check_markers(got: &Value, topic: &str, positions: &Value, marginals: &Value) {
     assert!(got.get("error").is_none(), "{got}");
     let attachment = &got["attachment"];
     assert_eq!(
@@ -214,7 +217,11 @@ fn check_markers(got: &Value, positions: &Value, marginals: &Value) {
             .any(|t| t.starts_with("@ros2_lv/0/") && t.ends_with("/NN/%/%/idmesh_web")),
         "{tokens:?}"
     );
-    assert!(tokens.iter().any(|t| t.contains("/MP/%/%/idmesh_web/%idmesh%markers/visualization_msgs::msg::dds_::MarkerArray_/RIHS01_")), "{tokens:?}");
+    let publisher = format!(
+        "/MP/%/%/idmesh_web/%{}/visualization_msgs::msg::dds_::MarkerArray_/RIHS01_",
+        topic.replace('/', "%")
+    );
+    assert!(tokens.iter().any(|t| t.contains(&publisher)), "{tokens:?}");
     let markers = got["markers"].as_array().unwrap();
     let p_red = marginals["p_red"].as_array().unwrap();
     for (track, at) in positions["positions"]
@@ -309,8 +316,17 @@ fn publish(deployment: &Deployment, dir: &Path, frames: &[Value], hash: &str, ex
 /// Python Zenoh client on rmw_zenoh's key with `hash` in its last chunk,
 /// frame `bad` truncated; it
 /// checks the answer equals the twin's (`idmesh replay --topology` on the
-/// reports the sensor took) and the bad message was counted.
-fn fed_deployment(name: &str, dir: &Path, frames: &[Value], bad: usize, hash: &str) -> Deployment {
+/// reports the sensor took) and the bad message was counted. With `web`,
+/// the deployment runs under `idmesh up`, which serves that `[web]`
+/// gateway; else each process on its own.
+fn fed_deployment(
+    name: &str,
+    dir: &Path,
+    frames: &[Value],
+    bad: usize,
+    hash: &str,
+    web: Option<WebSection>,
+) -> Deployment {
     // The twin's reports: every frame the sensor takes (the truncated one
     // is refused) but the last, which a live stream keeps open.
     let taken: Vec<&Value> = frames[..frames.len() - 1]
@@ -320,7 +336,14 @@ fn fed_deployment(name: &str, dir: &Path, frames: &[Value], bad: usize, hash: &s
         .map(|(_, f)| f)
         .collect();
     let reports = write_reports(dir, "reports.jsonl", &taken, &numbering(frames));
-    let deployment = Deployment::start_each(name, &reports, &live_settings(&reports, dir));
+    let settings = Settings {
+        web: web.clone(),
+        ..live_settings(&reports, dir)
+    };
+    let deployment = match web {
+        Some(_) => Deployment::start(name, &reports, &settings),
+        None => Deployment::start_each(name, &reports, &settings),
+    };
     deployment.first_answer(Duration::from_secs(30));
     let twin = deployment.twin_summary(&reports);
     let events = events_of(&reports);
@@ -340,7 +363,7 @@ fn a_ros2_topic_feeds_a_deployment_as_its_twin_and_a_bad_message_is_counted() {
     let dir = scratch("live");
     // Jazzy's key form (a type hash).
     let hash = format!("RIHS01_{}", "0".repeat(64));
-    let deployment = fed_deployment("ros2-live", &dir, &frames(40), 7, &hash);
+    let deployment = fed_deployment("ros2-live", &dir, &frames(40), 7, &hash, None);
     assert!(
         deployment.log().contains("a ROS 2 message refused"),
         "the bad message is not named in the log"
@@ -352,8 +375,20 @@ fn a_ros2_topic_feeds_a_deployment_as_its_twin_and_a_bad_message_is_counted() {
 #[test]
 fn the_markers_decode_with_rosbags_and_show_what_query_answers() {
     let dir = scratch("markers");
+    // Under `idmesh up`, whose topology's `[web]` publishes markers too
+    // (its HTTP port any free one: only the markers are looked at).
+    let web = WebSection {
+        markers: MarkerOptions {
+            ros2_markers: Some("/idmesh/up".into()),
+            ros2_rate: 5.0,
+            ..MarkerOptions::default()
+        },
+        ..WebSection::new("127.0.0.1:0")
+    };
     // Humble's key form: the sensor subscribes with `*` for the hash.
-    let deployment = fed_deployment("ros2-markers", &dir, &frames(30), 3, "TypeHashNotSupported");
+    let frames = frames(30);
+    let hash = "TypeHashNotSupported";
+    let deployment = fed_deployment("ros2-markers", &dir, &frames, 3, hash, Some(web));
     let _gateway = Gateway::start_with(
         &deployment,
         &["--ros2-markers", "/idmesh/markers", "--ros2-rate", "5"],
@@ -362,10 +397,13 @@ fn the_markers_decode_with_rosbags_and_show_what_query_answers() {
     // (REP 2011): the gateway's constant must be that hash.
     let hash = tracker(&["hash"])["hash"].as_str().unwrap().to_string();
     assert_eq!(hash, MARKER_ARRAY_HASH);
-    let got = markers(&deployment, "idmesh/markers", &hash);
     let positions = deployment.query(&["positions"]).unwrap().remove(0);
     let marginals = deployment.query(&["marginals"]).unwrap().remove(0);
-    check_markers(&got, &positions, &marginals);
+    // From `idmesh web --ros2-markers`, and from `idmesh up`'s `[web]`.
+    for topic in ["idmesh/markers", "idmesh/up"] {
+        let got = markers(&deployment, topic, &hash);
+        check_markers(&got, topic, &positions, &marginals);
+    }
     // For Humble subscribers: `TypeHashNotSupported` in the key.
     let _humble = Gateway::start_with(
         &deployment,
