@@ -2,6 +2,7 @@
 //! what a subcommand does lives in its own module.
 
 use crate::runtime::topology::BeliefKind;
+use crate::runtime::web::MarkerOptions;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use idmesh_eval::eval::EvalArgs;
 use idmesh_eval::replay::MarginalChoice;
@@ -263,6 +264,29 @@ pub struct DemoArgs {
     /// Where the live map and HTTP API listen ("off": not at all).
     #[arg(long, default_value = "127.0.0.1:8080")]
     pub web: String,
+    /// The web gateway's ROS 2 markers, as `idmesh web` takes them.
+    #[command(flatten)]
+    pub markers: MarkerOptions,
+}
+
+impl DemoArgs {
+    pub fn options(&self) -> anyhow::Result<crate::runtime::launch::DemoOptions> {
+        let web = (self.web != "off").then(|| self.web.clone());
+        let markers = self.markers.config(flag)?;
+        if web.is_none() && markers.is_some() {
+            anyhow::bail!("--ros2-markers: the web gateway publishes them, and --web off has none");
+        }
+        Ok(crate::runtime::launch::DemoOptions {
+            events: self.events,
+            targets: self.targets,
+            red: self.red,
+            seed: self.seed,
+            rate: self.rate,
+            dir: self.dir.clone(),
+            web,
+            markers,
+        })
+    }
 }
 
 #[derive(Debug, Clone, Args)]
@@ -398,50 +422,19 @@ pub struct WebArgs {
     /// How long one question may wait for the coordinator.
     #[arg(long, default_value_t = 15000)]
     pub timeout_ms: u64,
-    /// Publish the beliefs as a visualization_msgs/MarkerArray on this
-    /// ROS 2 topic over rmw_zenoh (docs/guide/ros2.md).
-    #[arg(long, value_name = "TOPIC")]
-    pub ros2_markers: Option<String>,
-    /// The ROS domain id of the markers.
-    #[arg(long, default_value_t = 0)]
-    pub ros2_domain: u32,
-    /// Marker arrays per second.
-    #[arg(long, default_value_t = 2.0)]
-    pub ros2_rate: f64,
-    /// The markers' frame (RViz's fixed frame).
-    #[arg(long, default_value = "map")]
-    pub ros2_frame: String,
-    /// For ROS 2 Humble: `TypeHashNotSupported` in the markers' key in
-    /// place of the type hash.
-    #[arg(long)]
-    pub ros2_humble: bool,
+    #[command(flatten)]
+    pub markers: MarkerOptions,
     #[command(flatten)]
     pub tls: ClientTlsArgs,
 }
 
-impl WebArgs {
-    fn markers(&self) -> anyhow::Result<Option<idmesh_web::MarkersConfig>> {
-        let Some(topic) = &self.ros2_markers else {
-            return Ok(None);
-        };
-        if !(self.ros2_rate.is_finite() && self.ros2_rate > 0.0 && self.ros2_rate <= 1000.0) {
-            anyhow::bail!("--ros2-rate must be in (0, 1000] arrays a second");
-        }
-        let part = idmesh_extract::adapters::ros2::keys::topic_part(topic);
-        if !topic.starts_with('/') || part.is_empty() || topic.contains(['*', '$', '?', '#']) {
-            anyhow::bail!(
-                "--ros2-markers {topic:?}: a fully qualified ROS topic, like /idmesh/markers"
-            );
-        }
-        Ok(Some(idmesh_web::MarkersConfig {
-            domain: self.ros2_domain,
-            topic: topic.clone(),
-            frame: self.ros2_frame.clone(),
-            every: std::time::Duration::from_secs_f64(1.0 / self.ros2_rate),
-            humble: self.ros2_humble,
-        }))
-    }
+/// A field of [`MarkerOptions`] as the command line spells it
+/// (`ros2_rate` is `--ros2-rate`).
+fn flag(field: &str) -> String {
+    format!("--{}", field.replace('_', "-"))
+}
 
+impl WebArgs {
     pub fn options(&self) -> anyhow::Result<crate::runtime::web::WebOptions> {
         Ok(crate::runtime::web::WebOptions {
             listen: self.listen.clone(),
@@ -449,7 +442,7 @@ impl WebArgs {
             prefix: self.prefix.clone(),
             timeout: std::time::Duration::from_millis(self.timeout_ms),
             tls: self.tls.tls()?,
-            markers: self.markers()?,
+            markers: self.markers.config(flag)?,
         })
     }
 }
@@ -779,6 +772,45 @@ mod tests {
             let value = method.to_possible_value().unwrap();
             assert_eq!(value.get_name(), method.name());
         }
+    }
+
+    /// `idmesh web` and `idmesh demo` take the same marker flags, checked
+    /// alike, the error naming the flag.
+    #[test]
+    fn web_and_demo_take_the_same_marker_flags() {
+        let flags = [
+            "--ros2-markers",
+            "/idmesh/markers",
+            "--ros2-rate",
+            "4",
+            "--ros2-humble",
+        ];
+        let web = Cli::try_parse_from(["idmesh", "web"].into_iter().chain(flags)).unwrap();
+        let demo = Cli::try_parse_from(["idmesh", "demo"].into_iter().chain(flags)).unwrap();
+        let (Command::Web(web), Command::Demo(demo)) = (web.command, demo.command) else {
+            panic!("parsed as web and demo")
+        };
+        assert_eq!(web.markers, demo.markers);
+        let markers = demo.options().unwrap().markers.expect("markers asked for");
+        assert_eq!(markers.every, std::time::Duration::from_millis(250));
+        assert!(markers.humble);
+        assert!(web.options().unwrap().markers.is_some());
+        let error = |args: &[&str]| {
+            let cli = Cli::try_parse_from(args).unwrap();
+            match cli.command {
+                Command::Web(web) => web.options().map(|_| ()),
+                Command::Demo(demo) => demo.options().map(|_| ()),
+                _ => panic!("web or demo"),
+            }
+            .unwrap_err()
+            .to_string()
+        };
+        let e = error(&["idmesh", "demo", "--ros2-markers", "/m", "--ros2-rate", "0"]);
+        assert!(e.starts_with("--ros2-rate must be"), "{e}");
+        let e = error(&["idmesh", "web", "--ros2-frame", "odom"]);
+        assert!(e.starts_with("--ros2-frame sets the ROS 2 markers"), "{e}");
+        let e = error(&["idmesh", "demo", "--web", "off", "--ros2-markers", "/m"]);
+        assert!(e.contains("--web off"), "{e}");
     }
 
     #[test]

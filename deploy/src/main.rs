@@ -86,15 +86,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Up(args) if args.emit.is_some() => emit::run(&args),
         Command::Up(args) => runtime::launch::up(&args.config, args.host.as_deref()),
-        Command::Demo(args) => runtime::launch::demo(&runtime::launch::DemoOptions {
-            events: args.events,
-            targets: args.targets,
-            red: args.red,
-            seed: args.seed,
-            rate: args.rate,
-            dir: args.dir,
-            web: (args.web != "off").then_some(args.web),
-        }),
+        Command::Demo(args) => runtime::launch::demo(&args.options()?),
         Command::Query(args) => runtime::query::run(&args.options()?),
         Command::Web(args) => runtime::web::run(&args.options()?),
         Command::Bench(args) => bench::run(&bench::BenchOptions {

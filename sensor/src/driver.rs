@@ -36,7 +36,7 @@ use crate::journal::{Journal, JournalError, Record};
 use crate::machine::{CutOutcome, Gateway, RestoreError};
 use crate::mesh::MeshConfig;
 use crate::peers::{Fetch, Peers};
-use crate::ros2::{Message, Ros2Input};
+use crate::ros2::{Message, Named, Ros2Input};
 use crate::router::Router;
 use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
@@ -107,6 +107,10 @@ pub enum GatewayError {
     Journal(#[from] JournalError),
     #[error("sensor journal {path}: cannot resume from it: {source}")]
     Restore { path: String, source: RestoreError },
+    /// The journal's track numbers of a ROS 2 topic's named ids, which its
+    /// decoder cannot take back.
+    #[error("sensor journal: the track numbers of {producer}'s named ids: {problem}")]
+    TrackIds { producer: String, problem: String },
     #[error(
         "sensor {0}: one sensor of several takes events from producers only \
          (P/sensor/<name>/ingest): its trace may hold the header alone, and it reads no \
@@ -510,7 +514,7 @@ pub async fn run(
         open: true,
     };
     let ros2 = match &config.ros2 {
-        Some(ros2) => Some(Ros2Input::start(&session, ros2).await?),
+        Some(ros2) => Some(Ros2Input::start(&session, ros2, gateway.named_tracks()).await?),
         None => None,
     };
     let sensor = Sensor {
@@ -905,7 +909,27 @@ async fn take_ros2(s: &mut Sensor<'_>, message: Option<Message>) -> Result<(), G
     };
     let lines = input.lines(message);
     s.gateway.count_ros2(lines.is_err());
+    // The numbers it gave named ids for the first time go into the
+    // journal ahead of the offer whose lines carry them (one append).
+    let named = input.newly_named();
+    let newly_named = !named.is_empty();
+    for Named {
+        producer,
+        first,
+        ids,
+    } in named
+    {
+        if let Err(problem) = s.gateway.name_tracks(&producer, first, ids) {
+            // Each decoder numbers its own ids on from the last: never.
+            tracing::error!(%producer, %problem, "track numbers of named ids not kept");
+        }
+    }
     let Ok(Some(lines)) = lines else {
+        if newly_named {
+            // Numbers no offer carries yet are on disk all the same, so
+            // that a restart gives the next id the number it gets now.
+            s.wire.sync(&mut s.gateway)?;
+        }
         return Ok(());
     };
     let counter = s.gateway.producer_next(&lines.producer).to_string();

@@ -82,10 +82,26 @@ pub enum Record {
     Unfollow(Vec<u8>),
     /// The whole state the records before it rebuilt (postcard, written
     /// by [`Gateway::compacted`](crate::machine::Gateway::compacted)): a
-    /// compacted journal is its stream, this, and what happened since.
+    /// compacted journal is its stream, this, the named track ids'
+    /// numbers ([`Record::TrackIds`]), and what happened since.
     Snapshot(Vec<u8>),
     /// One sensor of several: what changed its intake or its merge.
     Mesh(MeshRecord),
+    /// Named track ids of `producer` (a ROS 2 topic's, `ros2:<topic>`)
+    /// given the track numbers `first`, `first + 1`, …: written before the
+    /// first offer whose lines carry them, so that a sensor resumed from
+    /// its journal gives those ids the same numbers, and a new id the next
+    /// one, rather than numbering from 0 again. A compacted journal states
+    /// them all again after its snapshot.
+    ///
+    /// Keep it the last variant, and add any later one after it: a
+    /// record's payload starts with its variant's index (postcard), so
+    /// journals written before a variant was added read as they did.
+    TrackIds {
+        producer: String,
+        first: u32,
+        ids: Vec<String>,
+    },
 }
 
 /// What changed the intake or the merge of one sensor of several
@@ -406,6 +422,47 @@ mod tests {
             to_bytes(&records())
         );
         assert_eq!(read(&path).unwrap(), records());
+    }
+
+    /// A journal holding the named ids' numbers reads them back in
+    /// order after reopening, and the records every earlier journal holds
+    /// keep the bytes they were written with (a variant's index first),
+    /// so those journals read as they did.
+    #[test]
+    fn track_ids_come_back_after_reopening_and_older_records_keep_their_bytes() {
+        let path = path("track-ids");
+        let (mut journal, _) = Journal::open(&path, "test").unwrap();
+        let named = |first: u32, ids: &[&str]| Record::TrackIds {
+            producer: "ros2:/tracker/detections".into(),
+            first,
+            ids: ids.iter().map(|id| id.to_string()).collect(),
+        };
+        let written = [
+            named(0, &["walker", "cart"]),
+            records()[2].clone(),
+            named(2, &["c5e7f0a2-93b1-4d6e-8a40-1f2e3d4c5b6a"]),
+            records()[2].clone(),
+        ];
+        journal.append(&written[..2]).unwrap();
+        drop(journal);
+        let (mut journal, old) = Journal::open(&path, "test").unwrap();
+        assert_eq!(old, written[..2]);
+        journal.append(&written[2..]).unwrap();
+        drop(journal);
+        assert_eq!(read(&path).unwrap(), written);
+        // Records as an idmesh without `TrackIds` wrote them: variant
+        // index, then fields (postcard).
+        let earlier: [(&[u8], Record); 4] = [
+            (&[0, 2, 9, 9], Record::Stream(vec![9, 9])),
+            (&[6], Record::Flush),
+            (&[7], Record::End),
+            (&[8, 1, 5], Record::Unfollow(vec![5])),
+        ];
+        for (bytes, record) in earlier {
+            assert_eq!(encode(&record), bytes, "{record:?}");
+            assert_eq!(postcard::from_bytes::<Record>(bytes).unwrap(), record);
+        }
+        assert_eq!(encode(&named(0, &[]))[0], 11, "the last variant");
     }
 
     #[test]

@@ -20,6 +20,12 @@
 //! marks are not journaled: they only let the gateway forget, and a
 //! restored gateway keeps everything until the leaders publish theirs
 //! again.
+//!
+//! It also keeps the track numbers a producer's decoder gave named track
+//! ids (a ROS 2 topic's names and UUIDs, [`Gateway::name_tracks`]): they
+//! are no part of the routing, but the producer's lines carry them, so a
+//! restored sensor must number those ids as before
+//! ([`Gateway::named_tracks`]).
 
 use crate::batch_log::BatchLog;
 use crate::cuts::{place, CutParameters, Cuts, Placed, Request, Wanted};
@@ -95,6 +101,11 @@ pub struct Gateway<Q> {
     /// ... and then their answers and refusals, for the driver to send.
     answers: Vec<Placed<Q>>,
     refusals: Vec<(Q, String)>,
+    /// The named track ids each producer's decoder numbered, in number
+    /// order. Outside [`Journaled`], so that a snapshot keeps the layout
+    /// older journals hold: a compacted journal states them in records of
+    /// their own after its snapshot.
+    named: BTreeMap<String, Vec<String>>,
 }
 
 /// The part of a gateway's state that its journal's records rebuild, and
@@ -176,6 +187,7 @@ impl<Q> Gateway<Q> {
             waiting: BTreeMap::new(),
             answers: Vec::new(),
             refusals: Vec::new(),
+            named: BTreeMap::new(),
         }
     }
 
@@ -298,18 +310,82 @@ impl<Q> Gateway<Q> {
         postcard::to_stdvec(self.state.router.begin()).unwrap_or_default()
     }
 
-    /// The journal compacted: the stream's record and a snapshot of the
+    /// The journal compacted: the stream's record, a snapshot of the
     /// whole state (what a replay of every record so far rebuilds, less the
-    /// progress marks, which leaders publish again). Take it once every
-    /// record has been taken ([`Gateway::unjournaled`]), and put it in the
+    /// progress marks, which leaders publish again) and the named track
+    /// ids' numbers, one record per producer. Take it once every record
+    /// has been taken ([`Gateway::unjournaled`]), and put it in the
     /// journal's place ([`Journal::compact`](crate::journal::Journal::compact)):
     /// a restart then reads one snapshot instead of the whole stream's
     /// records.
     pub fn compacted(&self) -> Result<Vec<Record>, postcard::Error> {
-        Ok(vec![
+        let mut records = vec![
             Record::Stream(self.stream()),
             Record::Snapshot(postcard::to_stdvec(&self.state)?),
-        ])
+        ];
+        records.extend(self.named.iter().map(|(producer, ids)| Record::TrackIds {
+            producer: producer.clone(),
+            first: 0,
+            ids: ids.clone(),
+        }));
+        Ok(records)
+    }
+
+    /// Named track ids of `producer` given the numbers `first`, `first +
+    /// 1`, … by its decoder: kept, and recorded for the journal, so that
+    /// they are on disk with (before) the offer whose lines carry them.
+    /// Refused if they do not follow the numbers it gave before.
+    pub(crate) fn name_tracks(
+        &mut self,
+        producer: &str,
+        first: u32,
+        ids: Vec<String>,
+    ) -> Result<(), String> {
+        if ids.is_empty() {
+            return Ok(());
+        }
+        self.take_track_ids(producer, first, &ids)?;
+        self.note(Record::TrackIds {
+            producer: producer.to_string(),
+            first,
+            ids,
+        });
+        Ok(())
+    }
+
+    /// The named track ids each producer's decoder numbered, in number
+    /// order: what a restored sensor gives its decoders back.
+    pub(crate) fn named_tracks(&self) -> &BTreeMap<String, Vec<String>> {
+        &self.named
+    }
+
+    /// Adds `ids`, numbered from `first`, to `producer`'s named ids. A
+    /// number it already has must name the same id (a compacted journal
+    /// states them again); the others must come next.
+    fn take_track_ids(&mut self, producer: &str, first: u32, ids: &[String]) -> Result<(), String> {
+        if ids.is_empty() {
+            return Ok(());
+        }
+        let known = self.named.entry(producer.to_string()).or_default();
+        for (number, id) in (first as usize..).zip(ids) {
+            match known.get(number) {
+                Some(had) if had == id => {}
+                Some(had) => {
+                    return Err(format!(
+                        "{producer}: track {number} is id {had:?}, not {id:?}"
+                    ))
+                }
+                None if number == known.len() => known.push(id.clone()),
+                None => {
+                    return Err(format!(
+                        "{producer}: id {id:?} numbered {number}, but only {} ids were numbered \
+                         before it",
+                        known.len()
+                    ))
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Takes the state a [`Record::Snapshot`] holds.
@@ -431,6 +507,11 @@ impl<Q> Gateway<Q> {
                     .map_err(|e| format!("an unfollow it took is refused now: {e}"))?;
             }
             Record::Mesh(record) => self.replay_mesh(record)?,
+            Record::TrackIds {
+                producer,
+                first,
+                ids,
+            } => self.take_track_ids(&producer, first, &ids)?,
         }
         Ok(())
     }

@@ -14,11 +14,21 @@
 //! stats), named in the log with its topic and sequence number (the
 //! attachment's, as the publisher numbered it), and passed over: the topic
 //! goes on.
+//!
+//! Named ids (names, UUIDs) are numbered by each topic's decoder in the
+//! order they first appear, as `idmesh extract` numbers a bag's. Those
+//! numbers are the sensor's state too: each one a message gives for the
+//! first time is handed to the gateway ([`Ros2Input::newly_named`]), which
+//! journals it before the lines that carry it, and a sensor resumed from
+//! its journal gives them back to its decoders ([`Ros2Input::start`]), so
+//! an id seen before a restart keeps its track and a new one gets the
+//! next — not a number another id already has.
 
 use crate::driver::GatewayError;
 use idmesh_extract::adapters::ros2::rmw::Attachment;
 use idmesh_extract::adapters::ros2::{keys, report_line, Decoder, TopicOptions};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use tokio::sync::mpsc;
 use zenoh::Session;
 
@@ -68,6 +78,8 @@ struct Topic {
     producer: String,
     /// Messages seen, for naming one without an attachment.
     seen: u64,
+    /// How many of the decoder's named ids the gateway has been given.
+    handed: usize,
 }
 
 /// A message's reports, as one ingest offer's parts.
@@ -76,13 +88,26 @@ pub(crate) struct Lines {
     pub text: String,
 }
 
+/// Named ids a topic's decoder numbered for the first time: `ids[i]` is
+/// track `first + i`.
+#[derive(Debug, PartialEq)]
+pub(crate) struct Named {
+    pub producer: String,
+    pub first: u32,
+    pub ids: Vec<String>,
+}
+
 impl Ros2Input {
-    /// Subscribes to every topic of `config`.
+    /// Subscribes to every topic of `config`; each topic's decoder first
+    /// takes back the track numbers `named` (by producer, from the
+    /// journal) says it gave.
     pub(crate) async fn start(
         session: &Session,
         config: &Ros2Config,
+        named: &BTreeMap<String, Vec<String>>,
     ) -> Result<Self, GatewayError> {
         let (sender, messages) = mpsc::channel(QUEUE);
+        let input = Ros2Input::new(messages, config, named)?;
         for (index, options) in config.topics.iter().enumerate() {
             let key = config.key(options);
             let subscriber =
@@ -110,21 +135,39 @@ impl Ros2Input {
                 }
             });
         }
-        Ok(Ros2Input::new(messages, config))
+        Ok(input)
     }
 
-    /// The decoders of `config`'s topics, reading `messages`.
-    fn new(messages: mpsc::Receiver<Message>, config: &Ros2Config) -> Self {
-        let topics = config
-            .topics
-            .iter()
-            .map(|options| Topic {
-                decoder: Decoder::new(options.clone()),
-                producer: format!("ros2:{}", options.topic),
+    /// The decoders of `config`'s topics, reading `messages`, each given
+    /// back the numbers `named` lists for its producer.
+    fn new(
+        messages: mpsc::Receiver<Message>,
+        config: &Ros2Config,
+        named: &BTreeMap<String, Vec<String>>,
+    ) -> Result<Self, GatewayError> {
+        let mut topics = Vec::with_capacity(config.topics.len());
+        for options in &config.topics {
+            let producer = format!("ros2:{}", options.topic);
+            let mut decoder = Decoder::new(options.clone());
+            let restored = named.get(&producer).map_or(&[][..], Vec::as_slice);
+            decoder
+                .restore_named(restored)
+                .map_err(|problem| GatewayError::TrackIds {
+                    producer: producer.clone(),
+                    problem,
+                })?;
+            if !restored.is_empty() {
+                tracing::info!(%producer, named = restored.len(),
+                    "the track numbers of named ids, as the journal has them");
+            }
+            topics.push(Topic {
+                decoder,
+                producer,
                 seen: 0,
-            })
-            .collect();
-        Ros2Input { messages, topics }
+                handed: restored.len(),
+            });
+        }
+        Ok(Ros2Input { messages, topics })
     }
 
     /// The next message (never `None` while the sensor runs).
@@ -168,6 +211,26 @@ impl Ros2Input {
             text,
         }))
     }
+
+    /// The named ids numbered since the last call, by topic: journal them
+    /// before the lines that carry them are offered. (A message that did
+    /// not decode may have numbered some too, before the detection that
+    /// failed, as a bag's reader does: they are kept alike.)
+    pub(crate) fn newly_named(&mut self) -> Vec<Named> {
+        let mut out = Vec::new();
+        for topic in &mut self.topics {
+            let named = topic.decoder.named();
+            if named.len() > topic.handed {
+                out.push(Named {
+                    producer: topic.producer.clone(),
+                    first: topic.handed as u32,
+                    ids: named[topic.handed..].to_vec(),
+                });
+                topic.handed = named.len();
+            }
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -176,16 +239,108 @@ mod tests {
     use idmesh_extract::adapters::ros2::vision::{Detection2D, Detection2DArray};
     use idmesh_extract::adapters::ros2::{cdr, MessageType};
 
-    fn input() -> Ros2Input {
-        let config = Ros2Config {
+    fn config() -> Ros2Config {
+        Ros2Config {
             domain: 3,
             topics: vec![TopicOptions::new("/det", MessageType::Detection2DArray)],
-        };
+        }
+    }
+
+    fn input() -> Ros2Input {
+        let config = config();
         assert_eq!(
             config.key(&config.topics[0]),
             "3/det/vision_msgs::msg::dds_::Detection2DArray_/*"
         );
-        Ros2Input::new(mpsc::channel(1).1, &config)
+        Ros2Input::new(mpsc::channel(1).1, &config, &BTreeMap::new()).unwrap()
+    }
+
+    /// A message of detections with these ids, the i-th at x = i.
+    fn of(ids: &[&str]) -> Message {
+        let message = Detection2DArray {
+            detections: ids
+                .iter()
+                .enumerate()
+                .map(|(i, id)| {
+                    let mut d = Detection2D {
+                        id: id.to_string(),
+                        ..Default::default()
+                    };
+                    d.bbox.center.position.x = i as f64;
+                    d
+                })
+                .collect(),
+            ..Default::default()
+        };
+        Message {
+            topic: 0,
+            payload: cdr::encode(&message).unwrap(),
+            attachment: None,
+        }
+    }
+
+    /// The track each id of a message became (found by its x).
+    fn tracks(input: &mut Ros2Input, ids: &[&str]) -> BTreeMap<String, u64> {
+        let lines = input.lines(of(ids)).unwrap().unwrap();
+        lines
+            .text
+            .lines()
+            .map(|l| {
+                let line: serde_json::Value = serde_json::from_str(l).unwrap();
+                let i = line["x"].as_f64().unwrap() as usize;
+                (ids[i].to_string(), line["track"].as_u64().unwrap())
+            })
+            .collect()
+    }
+
+    fn numbered(pairs: &[(&str, u64)]) -> BTreeMap<String, u64> {
+        pairs.iter().map(|&(id, n)| (id.to_string(), n)).collect()
+    }
+
+    /// The named ids' numbers are handed out once each, as they are
+    /// first given; an input started again with them numbers as the first
+    /// would have gone on numbering, whatever order the ids come in now.
+    #[test]
+    fn named_ids_are_handed_out_once_and_an_input_given_them_back_goes_on() {
+        let mut first = input();
+        let given = numbered(&[("walker", 0), ("cart", 1)]);
+        assert_eq!(tracks(&mut first, &["walker", "cart"]), given);
+        let named = first.newly_named();
+        assert_eq!(
+            named,
+            [Named {
+                producer: "ros2:/det".into(),
+                first: 0,
+                ids: vec!["walker".into(), "cart".into()],
+            }]
+        );
+        assert_eq!(tracks(&mut first, &["cart", "walker"]), given);
+        assert!(first.newly_named().is_empty(), "nothing new");
+        let journaled = BTreeMap::from([("ros2:/det".to_string(), named[0].ids.clone())]);
+        let mut again = Ros2Input::new(mpsc::channel(1).1, &config(), &journaled).unwrap();
+        let mut whole = first;
+        // Reports come in track order: a new id first in the message
+        // still takes the next number.
+        let ids = ["late", "cart", "walker"];
+        assert_eq!(tracks(&mut again, &ids), tracks(&mut whole, &ids));
+        let now = numbered(&[("walker", 0), ("cart", 1), ("late", 2)]);
+        assert_eq!(tracks(&mut again, &ids), now);
+        assert_eq!(again.newly_named(), whole.newly_named());
+        // A journal of another topic's names, or none, leaves this one be.
+        let other = BTreeMap::from([("ros2:/other".to_string(), vec!["x".to_string()])]);
+        let mut fresh = Ros2Input::new(mpsc::channel(1).1, &config(), &other).unwrap();
+        assert_eq!(tracks(&mut fresh, &["late"]), numbered(&[("late", 0)]));
+        // Names no decoder gives (a whole number) are refused, naming
+        // the topic.
+        let bad = BTreeMap::from([("ros2:/det".to_string(), vec!["7".to_string()])]);
+        let error = Ros2Input::new(mpsc::channel(1).1, &config(), &bad)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(
+            error.contains("ros2:/det") && error.contains("\"7\""),
+            "{error}"
+        );
     }
 
     #[test]

@@ -950,6 +950,79 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     );
 }
 
+/// The track numbers a producer's decoder gave named ids are recorded
+/// ahead of the offer whose lines carry them, and come back from the
+/// journal whole or compacted (and compacted with records after it); a
+/// record that gives a number another id has, or skips one, is refused.
+#[test]
+fn named_track_ids_come_back_from_the_journal_whole_or_compacted() {
+    use crate::ingest::Offer;
+    use crate::journal::{from_bytes, to_bytes, Record};
+    use std::collections::BTreeMap;
+    let new = || Gateway::<u32>::new("s", router(8, 4, true), false);
+    let ids = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+    let mut gateway = new().journaled();
+    gateway
+        .name_tracks("ros2:/a", 0, ids(&["walker", "cart"]))
+        .unwrap();
+    let payload = "{\"kind\":\"observe\",\"time\":0,\"track\":1,\"red\":0.9,\"blue\":0.3}\n";
+    let offer = Offer {
+        producer: Some("ros2:/a"),
+        counter: Some("0"),
+        payload: payload.as_bytes(),
+        time: None,
+        finish: false,
+    };
+    assert_eq!(gateway.ingest(offer).unwrap().0.accepted, [0]);
+    gateway.name_tracks("ros2:/a", 2, ids(&["late"])).unwrap();
+    gateway.name_tracks("ros2:/b", 0, ids(&["x"])).unwrap();
+    let error = gateway
+        .name_tracks("ros2:/a", 5, ids(&["gap"]))
+        .expect_err("a number skipped");
+    assert!(error.contains("only 3 ids were numbered"), "{error}");
+    let want = BTreeMap::from([
+        ("ros2:/a".to_string(), ids(&["walker", "cart", "late"])),
+        ("ros2:/b".to_string(), ids(&["x"])),
+    ]);
+    assert_eq!(gateway.named_tracks(), &want);
+    let journal = gateway.unjournaled();
+    let at = |want: fn(&Record) -> bool| journal.iter().position(want).unwrap();
+    assert!(
+        at(|r| matches!(r, Record::TrackIds { .. })) < at(|r| matches!(r, Record::Offer { .. })),
+        "{journal:?}"
+    );
+    let restored = |records: Vec<Record>| {
+        let mut gateway = new();
+        gateway
+            .restore(from_bytes(&to_bytes(&records)).unwrap(), &[])
+            .map(|()| gateway.named_tracks().clone())
+            .map_err(|e| e.to_string())
+    };
+    assert_eq!(restored(journal.clone()), Ok(want.clone()));
+    let compacted = gateway.compacted().unwrap();
+    assert_eq!(restored(compacted.clone()), Ok(want.clone()));
+    let mut later = compacted.clone();
+    later.push(Record::TrackIds {
+        producer: "ros2:/a".into(),
+        first: 3,
+        ids: ids(&["later"]),
+    });
+    let mut more = want.clone();
+    more.get_mut("ros2:/a").unwrap().push("later".into());
+    assert_eq!(restored(later), Ok(more));
+    let mut contradicted = journal;
+    contradicted.push(Record::TrackIds {
+        producer: "ros2:/a".into(),
+        first: 0,
+        ids: ids(&["cart"]),
+    });
+    let error = restored(contradicted).expect_err("refused");
+    assert!(
+        error.contains("ros2:/a: track 0 is id \"walker\", not \"cart\""),
+        "{error}"
+    );
+}
+
 fn progress(leader: &str, through: u64, batch: u64) -> Vec<u8> {
     encode(&Progress {
         version: VERSION,

@@ -8,8 +8,9 @@ use idmesh_deploy::runtime::ports::pick_free_ports;
 pub use idmesh_deploy::runtime::security::SecuritySection;
 pub use idmesh_deploy::runtime::topology::{
     BeliefKind, FaultSection, LeaderFaultSection, Process, RegionsSetting, Sparsification,
-    SplitSetting, Topology,
+    SplitSetting, Topology, WebSection,
 };
+pub use idmesh_deploy::runtime::web::MarkerOptions;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
@@ -75,6 +76,8 @@ pub struct Settings {
     pub coordinator_replicas: usize,
     /// The sensor reads these ROS 2 topics (`[sensor.ros2]`).
     pub ros2: Option<idmesh_sensor::ros2::Ros2Config>,
+    /// The web gateway `idmesh up` serves (`[web]`).
+    pub web: Option<WebSection>,
 }
 
 /// The factored belief's settings in a topology.
@@ -252,6 +255,7 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
         sensor.ros2 = settings.ros2.clone();
     }
     topology.leader_faults = settings.leader_faults.clone();
+    topology.web = settings.web.clone();
     topology.security = settings.security.as_ref().map(|secured| SecuritySection {
         access_control: secured.access_control,
         clients: vec![secured.client.clone()],

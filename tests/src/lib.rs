@@ -18,7 +18,7 @@ pub use deployment::{
     assert_truth_points, crowd, crowd_with_identities, grid_over, header_only, hosted_on,
     replay_lines, replay_summary, trace_events, truth_lines, undisturbed_applied,
     valid_identity_trace, watermark_events, waypoint_crowd, Deployment, Factored, FaultSection,
-    LeaderFaultSection, Secured, Settings, SplitSetting, Truth,
+    LeaderFaultSection, MarkerOptions, Secured, Settings, SplitSetting, Truth, WebSection,
 };
 // A deployment over several hosts' worth of processes, as a LAN runs it.
 pub use lan::{Lan, LanDeployment, LanSettings, Member};

@@ -1,6 +1,7 @@
-//! Beliefs out to RViz: with `--ros2-markers TOPIC`, the gateway publishes
-//! at a fixed rate a `visualization_msgs/msg/MarkerArray` on that ROS 2
-//! topic as rmw_zenoh does — the data key
+//! Beliefs out to RViz: with `--ros2-markers TOPIC` (or a topology's
+//! `[web] ros2_markers`, in the gateway `idmesh up` serves), the gateway
+//! publishes at a fixed rate a `visualization_msgs/msg/MarkerArray` on
+//! that ROS 2 topic as rmw_zenoh does — the data key
 //! `<domain>/<topic>/visualization_msgs::msg::dds_::MarkerArray_/<RIHS01 hash>`,
 //! a CDR payload, rmw_zenoh's attachment on every sample, and liveliness
 //! tokens for a node and its publisher, so that `ros2 topic list` lists

@@ -1,6 +1,9 @@
 //! `idmesh up` starts the processes of a topology that run on this host,
 //! each as its own OS process, starts again one that fails (with a backoff:
-//! `supervise`), and stops them all on Ctrl-C. `idmesh demo`
+//! `supervise`), and stops them all on Ctrl-C; on the coordinator's host it
+//! also serves the topology's `[web]` gateway itself, as `demo` does (a
+//! task, not a child: it holds no state, there is nothing to restart).
+//! `idmesh demo`
 //! is `up` on a built-in loopback topology: it simulates a crowd, streams it
 //! through four leaders, and prints live answers.
 
@@ -9,7 +12,7 @@ use super::mesh::{self, MeshOptions};
 use super::query::ask;
 use super::supervise::{Supervisor, Verdict};
 use super::topology::Member;
-use super::topology::Topology;
+use super::topology::{Topology, WebSection};
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::keys::{Keys, DEFAULT_PREFIX};
 use idmesh_protocol::wire::query::{IdentityAnswer, MarginalsAnswer, StatsAnswer};
@@ -169,6 +172,13 @@ pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
         .build()?;
     let mut supervisor = Supervisor::new(names.iter().map(String::as_str), Instant::now());
     runtime.block_on(async {
+        if let Some(web) = topology.web.clone() {
+            if host.is_none_or(|h| h == topology.coordinator.host) {
+                // A task: it waits for the coordinator to listen, and the
+                // processes are watched meanwhile.
+                tokio::spawn(serve_web(topology.clone(), web));
+            }
+        }
         loop {
             tokio::select! {
                 _ = super::roles::shutdown() => return,
@@ -183,6 +193,21 @@ pub fn up(config: &Path, host: Option<&str>) -> Result<()> {
     });
     processes.stop();
     Ok(())
+}
+
+/// The topology's `[web]` gateway, a Zenoh client of its coordinators,
+/// until the runtime stops. One that cannot start is said so, and the
+/// deployment runs on without it (as the demo's map).
+async fn serve_web(topology: Topology, web: WebSection) {
+    let started = async {
+        let markers = web.markers.config(WebSection::field)?;
+        let session = super::web::client(&topology.coordinator_endpoints(), None).await?;
+        super::web::spawn(session, &topology.prefix, &web.listen, markers).await
+    };
+    match started.await {
+        Ok(url) => eprintln!("up: live map and HTTP API on {url}"),
+        Err(e) => eprintln!("up: no web gateway: {e:#}"),
+    }
 }
 
 /// One look at the children: exits judged, due restarts made.
@@ -221,6 +246,8 @@ pub struct DemoOptions {
     pub dir: PathBuf,
     /// Where the web gateway listens; None = no gateway.
     pub web: Option<String>,
+    /// The gateway's ROS 2 markers; None = none.
+    pub markers: Option<idmesh_web::MarkersConfig>,
 }
 
 /// `idmesh demo`: a crowd simulated here (colours and identity reads), four
@@ -266,13 +293,22 @@ pub fn demo(options: &DemoOptions) -> Result<()> {
         .worker_threads(1)
         .enable_all()
         .build()?;
-    let result = runtime.block_on(watch(&mut processes, &coordinator, options.web.as_deref()));
+    let web = options
+        .web
+        .as_deref()
+        .map(|at| (at, options.markers.clone()));
+    let result = runtime.block_on(watch(&mut processes, &coordinator, web));
     processes.stop();
     result
 }
 
-/// Prints a live answer every second until Ctrl-C.
-async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) -> Result<()> {
+/// Prints a live answer every second until Ctrl-C; `web`: where the
+/// gateway listens, and its markers.
+async fn watch(
+    processes: &mut Processes,
+    coordinator: &str,
+    web: Option<(&str, Option<idmesh_web::MarkersConfig>)>,
+) -> Result<()> {
     let session = mesh::open(&MeshOptions {
         client: false,
         listen: vec![],
@@ -282,8 +318,8 @@ async fn watch(processes: &mut Processes, coordinator: &str, web: Option<&str>) 
     .await?;
     let keys = Keys::new(DEFAULT_PREFIX);
     // The live map: a busy port costs the demo its map, not its answers.
-    if let Some(address) = web {
-        match super::web::spawn(session.clone(), DEFAULT_PREFIX, address).await {
+    if let Some((address, markers)) = web {
+        match super::web::spawn(session.clone(), DEFAULT_PREFIX, address, markers).await {
             Ok(url) => eprintln!("demo: live map and HTTP API on {url}"),
             Err(e) => eprintln!("demo: no live map: {e:#}"),
         }

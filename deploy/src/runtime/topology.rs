@@ -80,6 +80,14 @@
 //! # [security]                   # optional: mutual TLS and access control
 //! # certs = "certs"              # ca.pem, <name>.pem, <name>.key
 //! # clients = ["operator"]       # client certificates that may query
+//!
+//! # [web]                        # the HTTP gateway (live map, REST, SSE,
+//! # listen = "127.0.0.1:8080"    # /metrics) `idmesh up` serves on the
+//! #                              # coordinator's host; not with [security]
+//! # ros2_markers = "/idmesh/markers" # beliefs out to RViz, as `idmesh web
+//! # ros2_rate = 2                # --ros2-markers` (docs/guide/ros2.md):
+//! # ros2_frame = "map"           # ros2_domain, ros2_rate, ros2_frame,
+//! # ros2_humble = false          # ros2_humble as its --ros2-* flags
 //! ```
 //!
 //! With `[security]` (see [`super::security`]) every endpoint is reached
@@ -90,6 +98,7 @@
 //! machine; `deploy/examples/lan.toml` and `secure-lan.toml` on three.
 
 use super::security::SecuritySection;
+use super::web::MarkerOptions;
 use anyhow::{bail, Context, Result};
 use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
 use idmesh_protocol::wire::keys::DEFAULT_PREFIX;
@@ -203,6 +212,11 @@ pub struct Topology {
     /// Mutual TLS and access control; None = plain TCP, anyone may connect.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub security: Option<SecuritySection>,
+    /// The web gateway `idmesh up` serves beside the coordinator
+    /// (`[web]`); None = none (`idmesh web` can still be started beside
+    /// the deployment).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub web: Option<WebSection>,
     /// Where the file was read from (relative paths start there); neither
     /// read nor written.
     #[serde(skip)]
@@ -475,6 +489,105 @@ impl LeaderProcess {
     }
 }
 
+/// `[web]`: the HTTP gateway — live map, REST and Server-Sent Events,
+/// `/metrics` (docs/guide/web.md) — that `idmesh up` serves on the
+/// coordinator's host, a Zenoh client of the coordinators, and the ROS 2
+/// markers it publishes: what `idmesh web` is told on its command line
+/// and the topology does not already say (its coordinators and prefix).
+///
+/// Its keys are `listen` and those of [`MarkerOptions`] (`ros2_markers`,
+/// `ros2_rate`, …, the flags of `idmesh web` without their `--`), in one
+/// table; a key neither knows is refused by name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WebSection {
+    /// Where the HTTP server listens (port 0: any free one, printed).
+    pub listen: String,
+    pub markers: MarkerOptions,
+}
+
+impl WebSection {
+    /// Serves the live map on `listen`, without markers.
+    pub fn new(listen: impl Into<String>) -> Self {
+        WebSection {
+            listen: listen.into(),
+            markers: MarkerOptions::default(),
+        }
+    }
+
+    /// A field of the section as a topology says it, for errors
+    /// (`[web] ros2_rate`).
+    pub(crate) fn field(name: &str) -> String {
+        format!("[web] {name}")
+    }
+}
+
+/// `[web] listen` unless the file says.
+fn default_web_listen() -> String {
+    "127.0.0.1:8080".to_string()
+}
+
+// `listen` and the markers' keys share one table: serde's `flatten` would
+// take the markers' keys but pass over a misspelt one silently, so the
+// table is split by hand and the markers read with their own
+// `deny_unknown_fields`.
+
+impl Serialize for WebSection {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::Error;
+        let mut table = match toml::Value::try_from(&self.markers).map_err(S::Error::custom)? {
+            toml::Value::Table(table) => table,
+            _ => {
+                return Err(S::Error::custom(
+                    "[web]: the markers' settings are no table",
+                ))
+            }
+        };
+        table.insert("listen".into(), toml::Value::String(self.listen.clone()));
+        table.serialize(serializer)
+    }
+}
+
+impl<'de> Deserialize<'de> for WebSection {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut table = toml::Table::deserialize(deserializer)?;
+        let listen = match table.remove("listen") {
+            None => default_web_listen(),
+            Some(toml::Value::String(listen)) => listen,
+            Some(other) => {
+                return Err(D::Error::custom(format!(
+                    "[web] listen = {other}: an address and port, like \"127.0.0.1:8080\""
+                )))
+            }
+        };
+        let markers = MarkerOptions::deserialize(toml::Value::Table(table))
+            .map_err(|e| D::Error::custom(format!("[web]: {}", e.to_string().trim_end())))?;
+        Ok(WebSection { listen, markers })
+    }
+}
+
+/// `[web]`: the markers' settings make sense, and the gateway can reach
+/// the deployment as `up` runs it.
+fn check_web(web: &WebSection, secured: bool) -> Result<()> {
+    if web.listen.trim().is_empty() {
+        bail!(
+            "{} is empty: an address and port, like \"127.0.0.1:8080\"",
+            WebSection::field("listen")
+        );
+    }
+    web.markers.config(WebSection::field)?;
+    if secured {
+        // The gateway `up` serves has no client certificate of its own,
+        // and none of the processes' may be lent to it.
+        bail!(
+            "[web] is for a deployment without [security]: on a secured one run `idmesh web` \
+             beside it with the certificate of a client listed in [security] clients \
+             (--ca, --cert, --key; docs/guide/web.md)"
+        );
+    }
+    Ok(())
+}
+
 /// A sensor's `[sensor.ros2]`: topics that make sense, on a sensor that
 /// extracts (the messages are a tracker's reports), the only one.
 fn check_ros2(sensor: &SensorProcess, sensors: usize) -> Result<()> {
@@ -631,6 +744,7 @@ impl Topology {
             leader,
             leader_faults: LeaderFaultSection::default(),
             security: None,
+            web: None,
             dir: PathBuf::new(),
         }
     }
@@ -737,6 +851,9 @@ impl Topology {
         }
         if let Some(security) = &self.security {
             security.check(members.iter().map(|m| m.name.as_str()))?;
+        }
+        if let Some(web) = &self.web {
+            check_web(web, self.security.is_some())?;
         }
         if let Some(factored) = self.factored() {
             factored
@@ -1156,6 +1273,92 @@ listen = "tcp/127.0.0.1:3"
             e.contains("[security] clients") && e.contains("\"l0\""),
             "{e}"
         );
+    }
+
+    /// `[web]` takes `listen` and `idmesh web`'s marker settings under
+    /// their names; written, it reads back equal; a bad or unknown key is
+    /// refused naming it.
+    #[test]
+    fn a_web_section_takes_the_marker_settings_and_a_bad_one_is_named() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-web-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let base = r#"
+[coordinator]
+name = "c"
+listen = "tcp/127.0.0.1:1"
+[sensor]
+name = "s"
+listen = "tcp/127.0.0.1:2"
+trace = "x.jsonl"
+[[leader]]
+name = "l0"
+listen = "tcp/127.0.0.1:3"
+"#;
+        let web = r#"
+[web]
+listen = "127.0.0.1:0"
+ros2_markers = "/idmesh/markers"
+ros2_domain = 3
+ros2_rate = 5
+ros2_frame = "odom"
+ros2_humble = true
+"#;
+        let load = |text: &str| {
+            std::fs::write(&path, format!("{base}{text}")).unwrap();
+            Topology::load(&path).map_err(|e| format!("{e:#}"))
+        };
+        let t = load(web).unwrap();
+        let section = t.web.clone().unwrap();
+        assert_eq!(section.listen, "127.0.0.1:0");
+        let markers = section.markers.config(WebSection::field).unwrap().unwrap();
+        assert_eq!(markers.topic, "/idmesh/markers");
+        assert_eq!((markers.domain, markers.frame.as_str()), (3, "odom"));
+        assert_eq!(markers.every, std::time::Duration::from_millis(200));
+        assert!(markers.humble);
+        assert_eq!(read_back(&t), t);
+        // The defaults: the map on 127.0.0.1:8080, no markers.
+        let plain = load("[web]\n").unwrap().web.unwrap();
+        assert_eq!(plain, WebSection::new("127.0.0.1:8080"));
+        assert!(plain.markers.config(WebSection::field).unwrap().is_none());
+        let bad = |from: &str, to: &str, says: &str| {
+            assert!(web.contains(from), "{from}");
+            let e = load(&web.replace(from, to)).expect_err(to);
+            assert!(e.contains(says), "{to}: {e}");
+        };
+        bad(
+            "ros2_rate = 5",
+            "ros2_rate = 0",
+            "[web] ros2_rate must be in (0, 1000]",
+        );
+        bad("ros2_rate = 5", "ros2_rate = \"fast\"", "ros2_rate");
+        bad(
+            "ros2_markers = \"/idmesh/markers\"",
+            "ros2_markers = \"idmesh\"",
+            "[web] ros2_markers \"idmesh\": a fully qualified ROS topic",
+        );
+        bad(
+            "ros2_markers = \"/idmesh/markers\"",
+            "ros2_marker = \"/idmesh/markers\"",
+            "unknown field `ros2_marker`",
+        );
+        bad(
+            "ros2_markers = \"/idmesh/markers\"\n",
+            "",
+            "[web] ros2_domain sets the ROS 2 markers",
+        );
+        bad(
+            "listen = \"127.0.0.1:0\"",
+            "listen = 8080",
+            "[web] listen = 8080",
+        );
+        let secured = format!("{web}[security]\ncerts = \"certs\"\nclients = [\"operator\"]\n");
+        let e = load(&secured).expect_err("refused");
+        assert!(
+            e.contains("[web] is for a deployment without [security]"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

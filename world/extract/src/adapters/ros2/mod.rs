@@ -172,6 +172,19 @@ impl Decoder {
         &self.options
     }
 
+    /// The named ids given track numbers so far, in number order
+    /// ([`tracks::TrackIds::named`]).
+    pub fn named(&self) -> &[String] {
+        self.tracks.named()
+    }
+
+    /// Takes back the track numbers an earlier decoder of the topic gave
+    /// named ids ([`tracks::TrackIds::restore`]), so that it goes on
+    /// numbering as that one would have.
+    pub fn restore_named(&mut self, ids: &[String]) -> Result<(), String> {
+        self.tracks.restore(ids)
+    }
+
     /// The reports one message (a CDR payload) makes, in track order; a
     /// message that is not one of the topic's type, or one of whose
     /// detections cannot be a report, makes none.
