@@ -89,6 +89,14 @@ fn emit_and_check(config: &Path, out: &Path) {
             assert!(text.contains(&exec), "{host}/{unit} lacks {exec}:\n{text}");
             units.push(unit);
         }
+        if topology.web.is_some() && host == topology.coordinator.host {
+            let unit = "idmesh-web.service".to_string();
+            let text = std::fs::read_to_string(dir.join(&unit))
+                .unwrap_or_else(|e| panic!("{host}: {unit}: {e}"));
+            let exec = format!("\nExecStart={binary} web --listen ");
+            assert!(text.contains(&exec), "{host}/{unit} lacks {exec}:\n{text}");
+            units.push(unit);
+        }
         let mut found: Vec<String> = std::fs::read_dir(&dir)
             .unwrap()
             .flatten()
@@ -182,6 +190,22 @@ fn the_lan_topologys_units_pass_systemd_analyze_verify() {
         let (_, ours, said) = analyze(&bad, &[unit.to_string()]);
         assert!(ours.iter().any(|l| l.contains("RestartEvery")), "{said}");
     }
+}
+
+/// A topology's `[web]` gateway gets a unit of its own on the
+/// coordinator's host, which runs `idmesh web` and verifies.
+#[test]
+fn the_web_gateway_gets_a_unit_that_verifies() {
+    let dir = scratch("lan-web");
+    let config = dir.join("lan.toml");
+    let lan = std::fs::read_to_string(examples().join("lan.toml")).unwrap();
+    let web = "\n[web]\nlisten = \"0.0.0.0:8080\"\nros2_markers = \"/idmesh/markers\"\n";
+    std::fs::write(&config, lan + web).unwrap();
+    std::fs::copy(examples().join("crowd.jsonl"), dir.join("crowd.jsonl")).unwrap();
+    let out = dir.join("units");
+    emit_and_check(&config, &out);
+    let text = std::fs::read_to_string(out.join("gateway/idmesh-web.service")).unwrap();
+    assert!(text.contains(" --ros2-markers /idmesh/markers "), "{text}");
 }
 
 #[test]

@@ -73,6 +73,30 @@ pub struct MarkerOptions {
     pub ros2_humble: bool,
 }
 
+impl MarkerOptions {
+    /// The flags of `idmesh web` that set these options (none without a
+    /// topic): what a unit file runs for a topology's `[web]`.
+    pub fn flags(&self) -> Vec<String> {
+        let Some(topic) = &self.ros2_markers else {
+            return Vec::new();
+        };
+        let mut flags = vec![
+            "--ros2-markers".to_string(),
+            topic.clone(),
+            "--ros2-domain".to_string(),
+            self.ros2_domain.to_string(),
+            "--ros2-rate".to_string(),
+            self.ros2_rate.to_string(),
+            "--ros2-frame".to_string(),
+            self.ros2_frame.clone(),
+        ];
+        if self.ros2_humble {
+            flags.push("--ros2-humble".to_string());
+        }
+        flags
+    }
+}
+
 fn default_rate() -> f64 {
     DEFAULT_RATE
 }

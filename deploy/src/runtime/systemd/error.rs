@@ -22,6 +22,11 @@ pub enum SystemdError {
          '-', '_' and '.', not starting with '.'"
     )]
     BadName { what: &'static str, name: String },
+    #[error(
+        "process {name:?}: its unit would be the [web] gateway's (idmesh-web.service); \
+         rename the process"
+    )]
+    Taken { name: String },
     #[error("{option} {path}: give an absolute path (the units read it on each host)", path = path.display())]
     Relative { option: &'static str, path: PathBuf },
     #[error("{option} {path}: not UTF-8, which a unit file cannot hold", path = path.display())]

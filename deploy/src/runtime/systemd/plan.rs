@@ -13,6 +13,10 @@ use crate::runtime::topology::{Member, Topology};
 use std::collections::BTreeSet;
 use std::path::{Component, Path, PathBuf};
 
+/// The name of the `[web]` gateway's unit (`idmesh-web.service`), on the
+/// coordinator's host.
+pub const WEB: &str = "web";
+
 /// What one host gets.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HostFiles {
@@ -41,6 +45,11 @@ pub fn plan(
     let members = topology.members();
     for m in &members {
         check_name("process", &m.name)?;
+        if topology.web.is_some() && m.name == WEB {
+            return Err(SystemdError::Taken {
+                name: m.name.clone(),
+            });
+        }
     }
     let hosts = hosts(&members, settings.host.as_deref())?;
     hosts
@@ -63,6 +72,31 @@ pub fn plan(
                 };
                 names.push(units::service_name(&m.name));
                 files.push((units::service_name(&m.name), units::service(&service)));
+            }
+            if let Some(web) = topology
+                .web
+                .as_ref()
+                .filter(|_| host == topology.coordinator.host)
+            {
+                // As `idmesh up` serves it, beside the coordinator; as
+                // `idmesh web`, a unit of its own.
+                let mut command = vec![binary.to_string(), "web".to_string()];
+                for (flag, value) in [
+                    ("--listen", web.listen.clone()),
+                    ("--connect", topology.coordinator_endpoints()),
+                    ("--prefix", topology.prefix.clone()),
+                ] {
+                    command.extend([flag.to_string(), value]);
+                }
+                command.extend(web.markers.flags());
+                let service = Service {
+                    name: WEB,
+                    role: "gateway",
+                    host: &host,
+                    command,
+                };
+                names.push(units::service_name(WEB));
+                files.push((units::service_name(WEB), units::service(&service)));
             }
             files.push((TARGET.to_string(), units::target(&host, file_name, &names)));
             let (copies, in_place) = host_reads(topology, &on)?;
@@ -342,5 +376,32 @@ mod tests {
             e.starts_with("sensor sensor-0: trace = \"../crowd.jsonl\""),
             "{e}"
         );
+        let mut taken = lan();
+        taken.web = Some(crate::runtime::topology::WebSection::new("0.0.0.0:8080"));
+        taken.leader[0].name = WEB.into();
+        assert!(error(&taken, &settings()).starts_with("process \"web\": its unit"));
+    }
+
+    /// A topology's `[web]` is a unit of its own on the coordinator's
+    /// host, running `idmesh web` with the section's settings as flags.
+    #[test]
+    fn the_web_gateway_is_a_unit_beside_the_coordinator() {
+        let mut topology = lan();
+        let mut web = crate::runtime::topology::WebSection::new("0.0.0.0:8080");
+        web.markers.ros2_markers = Some("/idmesh/markers".into());
+        web.markers.ros2_humble = true;
+        topology.web = Some(web);
+        let hosts = plan(&topology, "lan.toml", &settings()).unwrap();
+        for host in &hosts {
+            let has = host.units.iter().any(|(n, _)| n == "idmesh-web.service");
+            assert_eq!(has, host.host == "gateway", "{}", host.host);
+        }
+        let gateway = &hosts[1];
+        let text = unit(gateway, "idmesh-web.service");
+        let exec = "ExecStart=/usr/local/bin/idmesh web --listen 0.0.0.0:8080 \
+                    --connect tcp/10.0.0.1:1 --prefix idmesh/default --ros2-markers /idmesh/markers \
+                    --ros2-domain 0 --ros2-rate 2 --ros2-frame map --ros2-humble\n";
+        assert!(text.contains(exec), "{text}");
+        assert!(unit(gateway, TARGET).contains("idmesh-web.service"));
     }
 }
