@@ -1040,19 +1040,21 @@ mod tests {
         assert_eq!(edge.coefficients(), 2016);
     }
 
+    fn sure_red(track: u32) -> Observe {
+        Observe {
+            track,
+            red: 1.0,
+            blue: 0.0,
+        }
+    }
+
     #[test]
     fn a_contradicting_sighting_is_taken_by_the_repair_rule() {
         let mut filter = DenseFilter::new(Field::known(4, vec![0, 1])).unwrap();
         filter.mix(mix(0, 2, 0.5)).unwrap();
         // Track 3 is surely blue; a sure red on it is taken after the
         // belief gives 1e-9 of its mass to the uniform k-sets.
-        filter
-            .observe(Observe {
-                track: 3,
-                red: 1.0,
-                blue: 0.0,
-            })
-            .unwrap();
+        filter.observe(sure_red(3)).unwrap();
         let p = filter.marginals().unwrap();
         assert!((p[3] - 1.0).abs() < 1e-12, "{p:?}");
         assert!((p.iter().sum::<f64>() - 2.0).abs() < 1e-12);
@@ -1074,13 +1076,7 @@ mod tests {
     fn a_sighting_the_prior_rules_out_is_set_aside() {
         let mut filter = DenseFilter::new(Field::uniform(4, 0)).unwrap();
         let (probs, log_norm) = (filter.probs.clone(), filter.log_normalizer());
-        filter
-            .observe(Observe {
-                track: 3,
-                red: 1.0,
-                blue: 0.0,
-            })
-            .unwrap();
+        filter.observe(sure_red(3)).unwrap();
         assert_eq!(filter.probs, probs);
         assert_eq!(filter.log_normalizer(), log_norm);
         assert_eq!(filter.repairs(), 1);

@@ -1239,12 +1239,8 @@ listen = "tcp/127.0.0.1:3"
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    #[test]
-    fn a_topology_with_a_mistake_is_rejected_naming_it() {
-        let dir = std::env::temp_dir().join(format!("idmesh-topology-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("t.toml");
-        let good = r#"
+    /// A coordinator, a sensor and a leader on loopback.
+    const SMALL: &str = r#"
 [coordinator]
 name = "c"
 listen = "tcp/127.0.0.1:1"
@@ -1256,6 +1252,13 @@ trace = "x.jsonl"
 name = "l0"
 listen = "tcp/127.0.0.1:3"
 "#;
+
+    #[test]
+    fn a_topology_with_a_mistake_is_rejected_naming_it() {
+        let dir = std::env::temp_dir().join(format!("idmesh-topology-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let good = SMALL;
         std::fs::write(&path, good).unwrap();
         let t = Topology::load(&path).unwrap();
         assert_eq!(t.members().len(), 3);
@@ -1283,18 +1286,7 @@ listen = "tcp/127.0.0.1:3"
         let dir = std::env::temp_dir().join(format!("idmesh-topology-web-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("t.toml");
-        let base = r#"
-[coordinator]
-name = "c"
-listen = "tcp/127.0.0.1:1"
-[sensor]
-name = "s"
-listen = "tcp/127.0.0.1:2"
-trace = "x.jsonl"
-[[leader]]
-name = "l0"
-listen = "tcp/127.0.0.1:3"
-"#;
+        let base = SMALL;
         let web = r#"
 [web]
 listen = "127.0.0.1:0"
