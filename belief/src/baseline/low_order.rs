@@ -223,6 +223,30 @@ impl LowOrderFilter {
         self.order
     }
 
+    /// The method amplifies rounding by the likelihood ratio (10^200 for a
+    /// contradicting sighting): numbers that overflowed, or whose marginals
+    /// no longer sum to k (an identity of every element of R(Φ_j), so only
+    /// rounding breaks it), are replaced by the uniform belief, the rule's
+    /// ε = 1. Whether they were.
+    fn reset_if_broken(&mut self) -> bool {
+        let m0 = self.levels[0][0];
+        let k = self.field.red.known().unwrap_or(0) as f64;
+        let sum: f64 = if self.order >= 1 {
+            self.levels[1].iter().sum()
+        } else {
+            k * m0
+        };
+        let broken = self.levels.iter().flatten().any(|m| !m.is_finite())
+            || (sum - k * m0).abs() > 1e-6 * (1.0 + k) * m0.abs();
+        if broken {
+            for (level, &w) in self.levels.iter_mut().zip(&self.uniform) {
+                level.fill(w);
+            }
+            self.repairs += 1;
+        }
+        broken
+    }
+
     /// P(t red) = M_1({t})/M_0 as represented, not clamped: outside [0, 1]
     /// once the projection has left the simplex.
     pub fn raw_marginals(&self) -> Result<Vec<f64>, BeliefError> {
@@ -635,25 +659,7 @@ impl PropertyFilter for LowOrderFilter {
                 }
             });
         }
-        // The method amplifies rounding by the likelihood ratio (10^200
-        // for a contradicting sighting): numbers that overflowed, or whose
-        // marginals no longer sum to k (an identity of every element of
-        // R(Φ_j), so only rounding breaks it), are replaced by the uniform
-        // belief, the rule's ε = 1.
-        let m0 = self.levels[0][0];
-        let k = self.field.red.known().unwrap_or(0) as f64;
-        let sum: f64 = if j >= 1 {
-            self.levels[1].iter().sum()
-        } else {
-            k * m0
-        };
-        if self.levels.iter().flatten().any(|m| !m.is_finite())
-            || (sum - k * m0).abs() > 1e-6 * (1.0 + k) * m0.abs()
-        {
-            for (level, &w) in self.levels.iter_mut().zip(&self.uniform) {
-                level.fill(w);
-            }
-            self.repairs += 1;
+        if self.reset_if_broken() {
             return Ok(());
         }
         if ruled {

@@ -413,12 +413,14 @@ mod tests {
     #[test]
     fn refusals_are_counted_and_failures_reported() {
         let mut trace = table_one();
+        // A mix of a track with itself is refused (a sighting the stream
+        // rules out no longer is: the repair rule takes it).
         trace.steps.insert(
             0,
-            Step::Event(Event::Observe(Observe {
-                track: 3,
-                red: 1.0,
-                blue: 0.0,
+            Step::Event(Event::Mix(Mix {
+                a: 3,
+                b: 3,
+                swap: 0.5,
             })),
         );
         let s = score(Method::Exact, &trace, 0);

@@ -532,14 +532,28 @@ pub(super) mod tests {
 
     #[test]
     fn engine_errors_name_their_line() {
+        // The low-order filters need k: the header's line is named.
         let trace = concat!(
+            r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3}"#,
+            "\n",
+            r#"{"kind":"mix","time":0,"a":1,"b":2,"swap":0.5}"#,
+            "\n",
+        );
+        let error = replay_text(&args(Method::Order2, None), trace).unwrap_err();
+        assert!(
+            error.starts_with("mem.jsonl:1: header: ") && error.contains("unknown number"),
+            "{error}"
+        );
+        // A sighting the stream rules out is no error: it is taken by the
+        // repair rule (`idmesh_belief`'s `repair`).
+        let contradicting = concat!(
             r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"initial_red":[0]}"#,
             "\n",
             r#"{"kind":"observe","time":0,"track":1,"red":1,"blue":0}"#,
             "\n",
         );
-        let error = replay_text(&args(Method::Overcomplete, None), trace).unwrap_err();
-        assert!(error.starts_with("mem.jsonl:2: observe: "), "{error}");
+        let out = replay_text(&args(Method::Overcomplete, None), contradicting).unwrap();
+        assert_eq!(out[0]["final_p_red"][1], 1.0);
     }
 
     #[test]
