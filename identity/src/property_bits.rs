@@ -438,7 +438,7 @@ mod tests {
     }
 
     #[test]
-    fn impossible_reads_change_nothing() {
+    fn a_read_the_belief_rules_out_is_taken_by_the_repair_rule() {
         let start = [0, 1, 2, 3];
         let mut f = PropertyBitsFilter::new(
             BitCode::new(4, 2).unwrap(),
@@ -447,14 +447,22 @@ mod tests {
         )
         .unwrap();
         let before = f.bit_marginals().unwrap();
-        // Identity 3 = word 3 is certainly not on track 0 (word 0).
-        let r = f.identify(Identify {
+        // Identity 3 = word 3 is certainly not on track 0 (word 0): each
+        // bit's belief takes the sure read by the property filters' repair
+        // rule, and track 0's bits are then word 3's.
+        f.identify(Identify {
             track: 0,
             identity: 3,
             accuracy: 1.0,
-        });
-        assert!(r.is_err());
-        assert_eq!(f.bit_marginals().unwrap(), before);
+        })
+        .unwrap();
+        let after = f.bit_marginals().unwrap();
+        assert_ne!(after, before);
+        for (j, bits) in after.iter().enumerate() {
+            let want = if f.code.bit(3, j) { 1.0 } else { 0.0 };
+            assert!((bits[0] - want).abs() < 1e-9, "bit {j}: {bits:?}");
+        }
+        // A bad event is still refused.
         assert!(f
             .mix(Mix {
                 a: 0,
