@@ -18,12 +18,18 @@
 //!   with the messages that came, and carries out what it returns, so a
 //!   seeded simulator can drive many of them through any schedule.
 //!
-//! The log lives in raft-rs's `MemStorage`, which a restarted voter gets
-//! back (the simulator keeps it, as a disk would); the map is rebuilt from
-//! the committed log on restart.
+//! - [`DurableLog`] is a voter's log on disk: what each step asks to
+//!   persist, fsynced before the step's messages leave, and the storage
+//!   it gives back after a crash.
+//!
+//! The log lives in raft-rs's `MemStorage`: the simulator keeps it across
+//! a restart, as a disk would; a process reopens its [`DurableLog`]. The
+//! map is rebuilt from the committed log on restart.
 
+mod durable;
 mod role_map;
 mod voter;
 
+pub use durable::{DurableError, DurableLog, KIND};
 pub use role_map::{Command, Holding, Outcome, RoleMap};
-pub use voter::{ConsensusError, Envelope, Voter, VoterConfig};
+pub use voter::{ConsensusError, Envelope, Persist, Ready, Voter, VoterConfig};

@@ -6,7 +6,7 @@
 //! the [`Envelope`]s [`advance`](Voter::advance) returns.
 
 use crate::role_map::{Command, Outcome, RoleMap};
-use raft::eraftpb::{EntryType, Message};
+use raft::eraftpb::{Entry, EntryType, HardState, Message};
 use raft::storage::MemStorage;
 use raft::{Config, RawNode, StateRole};
 use slog::{o, Discard, Logger};
@@ -36,6 +36,30 @@ pub struct Envelope {
     pub from: u64,
     pub to: u64,
     pub message: Message,
+}
+
+/// What one [`Voter::ready`] step asks of its driver: make `persist`
+/// durable, then send `send`. Raft's promises (a vote given once per term,
+/// an entry acknowledged only once stored) hold across a crash only if
+/// nothing in `send` leaves before `persist` is on disk.
+#[derive(Debug, Clone, Default)]
+pub struct Ready {
+    pub persist: Persist,
+    pub send: Vec<Envelope>,
+}
+
+/// The log's new entries (which replace any stored from the first one's
+/// index on) and the hard state (term, vote, commit) if it changed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Persist {
+    pub entries: Vec<Entry>,
+    pub hard_state: Option<HardState>,
+}
+
+impl Persist {
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty() && self.hard_state.is_none()
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -161,15 +185,26 @@ impl Voter {
         Ok(())
     }
 
-    /// Carries the node's ready state through: entries stored, committed
-    /// commands applied to the map, and the messages to send.
+    /// Carries the node's ready state through, for a voter whose log
+    /// lives in memory only (the simulator's, which keeps the storage as a
+    /// disk would): the messages to send.
     pub fn advance(&mut self) -> Vec<Envelope> {
+        self.ready().send
+    }
+
+    /// Carries the node's ready state through: entries stored in the
+    /// in-memory log, committed commands applied to the map; returns what
+    /// the driver must make durable (a [`DurableLog`](crate::DurableLog))
+    /// before it sends the messages.
+    pub fn ready(&mut self) -> Ready {
         let mut out = Vec::new();
         if !self.node.has_ready() {
-            return out;
+            return Ready::default();
         }
         let store = self.storage();
+        let hard_state = store.rl().hard_state().clone();
         let mut ready = self.node.ready();
+        let entries = ready.entries().clone();
         self.send(ready.take_messages(), &mut out);
         if *ready.snapshot() != raft::eraftpb::Snapshot::default() {
             // The log is never compacted, so no snapshot is sent; a store
@@ -191,7 +226,14 @@ impl Voter {
         self.send(light.take_messages(), &mut out);
         self.apply(light.take_committed_entries());
         self.node.advance_apply();
-        out
+        let now = store.rl().hard_state().clone();
+        Ready {
+            persist: Persist {
+                entries,
+                hard_state: (now != hard_state).then_some(now),
+            },
+            send: out,
+        }
     }
 
     fn send(&self, messages: Vec<Message>, out: &mut Vec<Envelope>) {
