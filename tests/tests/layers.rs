@@ -25,6 +25,7 @@ const LAYERS: &[(&str, usize, &str)] = &[
     ("sensor", 3, "the roles"),
     ("leader", 3, "the roles"),
     ("coordinator", 3, "the roles"),
+    ("voter", 3, "the roles"),
     ("deploy", 4, "the binary"),
     ("tests", 5, "the tests"),
 ];

@@ -38,6 +38,43 @@ pub struct Envelope {
     pub message: Message,
 }
 
+impl Envelope {
+    /// The bytes a driver sends: `from`, `to` (u64 little-endian) and the
+    /// message in raft-rs's own protobuf encoding.
+    pub fn encode(&self) -> Result<Vec<u8>, ConsensusError> {
+        use protobuf::Message as _;
+        let mut out = Vec::with_capacity(16 + self.message.compute_size() as usize);
+        out.extend_from_slice(&self.from.to_le_bytes());
+        out.extend_from_slice(&self.to.to_le_bytes());
+        self.message
+            .write_to_vec(&mut out)
+            .map_err(|e| ConsensusError::Wire(e.to_string()))?;
+        Ok(out)
+    }
+
+    /// An envelope from the bytes [`Envelope::encode`] wrote, or why not.
+    pub fn decode(bytes: &[u8]) -> Result<Envelope, ConsensusError> {
+        use protobuf::Message as _;
+        let word = |at: usize| -> Result<u64, ConsensusError> {
+            let b: [u8; 8] = bytes
+                .get(at..at + 8)
+                .and_then(|b| b.try_into().ok())
+                .ok_or_else(|| ConsensusError::Wire(format!("{} bytes: too short", bytes.len())))?;
+            Ok(u64::from_le_bytes(b))
+        };
+        let (from, to) = (word(0)?, word(8)?);
+        let message = Message::parse_from_bytes(&bytes[16..])
+            .map_err(|e| ConsensusError::Wire(e.to_string()))?;
+        if message.from != from || message.to != to {
+            return Err(ConsensusError::Wire(format!(
+                "envelope from {from} to {to} holds a message from {} to {}",
+                message.from, message.to
+            )));
+        }
+        Ok(Envelope { from, to, message })
+    }
+}
+
 /// What one [`Voter::ready`] step asks of its driver: make `persist`
 /// durable, then send `send`. Raft's promises (a vote given once per term,
 /// an entry acknowledged only once stored) hold across a crash only if
@@ -68,6 +105,8 @@ pub enum ConsensusError {
     Raft(#[from] raft::Error),
     #[error("a command that does not encode: {0}")]
     Encode(#[from] postcard::Error),
+    #[error("a raft message that does not decode: {0}")]
+    Wire(String),
     #[error("voter {id}: not among the voters {voters:?}")]
     NotAVoter { id: u64, voters: Vec<u64> },
 }

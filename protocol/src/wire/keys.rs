@@ -175,6 +175,21 @@ impl Keys {
         format!("{}/query/stats", self.prefix)
     }
 
+    /// Raft messages for voter `id` (the role map's consensus).
+    pub fn raft(&self, id: u64) -> String {
+        format!("{}/raft/{id}", self.prefix)
+    }
+
+    /// Commands proposed to the voters: claims and releases of roles.
+    pub fn raft_propose(&self) -> String {
+        format!("{}/raft/propose", self.prefix)
+    }
+
+    /// The role map as each voter's committed log built it.
+    pub fn query_roles(&self) -> String {
+        format!("{}/query/roles", self.prefix)
+    }
+
     pub fn alive(&self, role: &str, name: &str) -> String {
         format!("{}/alive/{role}/{name}", self.prefix)
     }
