@@ -44,6 +44,9 @@ pub enum Command {
     Leader(RoleArgs),
     /// Run the coordinator of a topology: answer queries.
     Coordinator(RoleArgs),
+    /// Run a voter of a topology: one member of the group that decides
+    /// who holds each role.
+    Voter(RoleArgs),
     /// Start every process of a topology on this host; Ctrl-C stops them.
     Up(UpArgs),
     /// A coordinator, four leaders and a sensor on loopback, streaming a
@@ -342,6 +345,7 @@ impl QueryArgs {
         let what = match (self.what.as_str(), self.track) {
             ("marginals", None) => Question::Marginals,
             ("stats", None) => Question::Stats,
+            ("roles", None) => Question::Roles,
             ("positions", None) => Question::Positions,
             ("track", Some(t)) => Question::Track(t),
             ("identity", track) => Question::Identity(track),
@@ -350,11 +354,15 @@ impl QueryArgs {
             }
             (other, _) => {
                 anyhow::bail!(
-                    "unknown query {other:?}: marginals, track T, identity [T], positions or stats"
+                    "unknown query {other:?}: marginals, track T, identity [T], positions, stats or roles"
                 )
             }
         };
-        if matches!(what, Question::Stats | Question::Positions) && !self.at_events.is_empty() {
+        if matches!(
+            what,
+            Question::Stats | Question::Positions | Question::Roles
+        ) && !self.at_events.is_empty()
+        {
             anyhow::bail!("--at-events is for marginals, track and identity");
         }
         if self.marginals.is_some() && !matches!(what, Question::Identity(_)) {

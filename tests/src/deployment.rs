@@ -78,6 +78,9 @@ pub struct Settings {
     pub ros2: Option<idmesh_sensor::ros2::Ros2Config>,
     /// The web gateway `idmesh up` serves (`[web]`).
     pub web: Option<WebSection>,
+    /// Voters (`[[voter]]`, named `voter-1`, …), each with its log in
+    /// the state directory.
+    pub voters: usize,
 }
 
 /// The factored belief's settings in a topology.
@@ -192,6 +195,15 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
     let ports = pick_free_ports(1 + settings.leaders + sensors).expect("free loopback ports");
     let sensor_trace = settings.sensor_trace.as_deref().unwrap_or(trace);
     let mut topology = Topology::loopback(sensor_trace, settings.leaders, sensors, &ports);
+    let voter_ports = pick_free_ports(settings.voters).expect("free loopback ports");
+    topology.voters = voter_ports
+        .iter()
+        .enumerate()
+        .map(|(i, port)| Process::new(format!("voter-{}", i + 1), format!("tcp/127.0.0.1:{port}")))
+        .collect();
+    if settings.voters > 0 {
+        topology.state_dir = Some(PathBuf::from("state"));
+    }
     let replica_ports =
         pick_free_ports(settings.coordinator_replicas).expect("free loopback ports");
     topology.coordinator_replicas = replica_ports
@@ -296,6 +308,9 @@ impl Deployment {
         deployment.launch("coordinator", "coordinator");
         for i in 1..=settings.coordinator_replicas {
             deployment.launch("coordinator", &format!("coordinator-{i}"));
+        }
+        for i in 1..=settings.voters {
+            deployment.launch("voter", &format!("voter-{i}"));
         }
         for i in 0..settings.leaders {
             deployment.launch("leader", &format!("leader-{i}"));

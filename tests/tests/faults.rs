@@ -313,3 +313,58 @@ fn a_coordinator_killed_for_good_is_replaced_by_its_replica() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Three voters beside a deployment elect a leader of their group; with
+/// that voter killed for good the two left agree on another (a majority
+/// still decides); started again, it rejoins from its log in the group's
+/// term. (The roles do not read the voters' map yet.)
+#[test]
+fn voters_keep_a_leader_with_one_gone_and_take_it_back() {
+    let dir = std::env::temp_dir().join(format!("idmesh-voters-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 3, 30.0, 5);
+    let settings = Settings {
+        leaders: 1,
+        rate: Some(200.0),
+        voters: 3,
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_each("voters", &trace, &settings);
+    // (the leader they all name, its term), once `voters` answer and agree.
+    let agreed = |deployment: &Deployment, voters: usize| -> Option<(u64, u64)> {
+        let answers = deployment.query(&["roles"]).ok()?;
+        let leader = answers.first()?["leader"].as_u64()?;
+        let term = answers.first()?["term"].as_u64()?;
+        // The leader among them: followers name a dead one until their
+        // election timeout.
+        let all = answers.len() == voters
+            && answers.iter().any(|a| a["voter"] == leader)
+            && answers
+                .iter()
+                .all(|a| a["leader"] == leader && a["term"] == term);
+        all.then_some((leader, term))
+    };
+    let wait = |deployment: &Deployment, voters: usize, what: &str| -> (u64, u64) {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if let Some(found) = agreed(deployment, voters) {
+                return found;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{what}: {:?}",
+                deployment.query(&["roles"])
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    };
+    let (leader, term) = wait(&deployment, 3, "three voters agreeing on a leader");
+    let gone = format!("voter-{leader}");
+    deployment.kill(&gone);
+    let (next, later) = wait(&deployment, 2, "the two left agreeing on another leader");
+    assert_ne!(next, leader);
+    assert!(later > term, "term {later} after {term}");
+    deployment.launch("voter", &gone);
+    let (_, back) = wait(&deployment, 3, "the voter back from its log");
+    assert!(back >= later);
+    std::fs::remove_dir_all(&dir).ok();
+}

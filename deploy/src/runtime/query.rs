@@ -46,6 +46,8 @@ pub enum Question {
     /// Where every track was last seen, and its leader.
     Positions,
     Stats,
+    /// Who holds each role, as every voter's committed log has it.
+    Roles,
 }
 
 pub fn run(options: &QueryOptions) -> Result<()> {
@@ -63,6 +65,11 @@ pub fn run(options: &QueryOptions) -> Result<()> {
             Question::Identity(Some(t)) => keys.query_identity_track(t),
             Question::Positions => keys.query_positions(),
             Question::Stats => keys.query_stats(),
+            Question::Roles => {
+                let result = roles(&session, &keys, options.timeout).await;
+                let _ = session.close().await;
+                return result;
+            }
         };
         let parameters: Vec<String> = options
             .marginals
@@ -94,6 +101,32 @@ pub fn run(options: &QueryOptions) -> Result<()> {
         }
         Ok(())
     })
+}
+
+/// Every voter's answer on `query/roles`, one JSON line each, by voter id
+/// (each voter answers from its own log: a voter cut off may lag).
+async fn roles(session: &zenoh::Session, keys: &Keys, timeout: Duration) -> Result<()> {
+    let replies = session
+        .get(keys.query_roles())
+        .target(zenoh::query::QueryTarget::All)
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(timeout)
+        .await
+        .map_err(|e| anyhow!("{e}"))?;
+    let mut answers: Vec<idmesh_voter::RolesAnswer> = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.result() {
+            answers.push(serde_json::from_slice(&sample.payload().to_bytes())?);
+        }
+    }
+    if answers.is_empty() {
+        bail!("no voter answered within {timeout:?}: does the topology name [[voter]]s?");
+    }
+    answers.sort_by_key(|a| a.voter);
+    for answer in answers {
+        println!("{}", serde_json::to_string(&answer)?);
+    }
+    Ok(())
 }
 
 /// A client session to the coordinator at `--connect`. Zenoh's own error
@@ -309,6 +342,8 @@ fn print(options: &QueryOptions, body: &[u8], took: Duration) -> Result<()> {
                 )?;
             }
         }
+        // Answered apart (`roles`): every voter's, not one.
+        Question::Roles => {}
     }
     Ok(())
 }

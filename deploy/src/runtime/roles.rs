@@ -8,6 +8,7 @@ use super::mesh::{self, MeshOptions};
 use super::security::rules;
 use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
+use idmesh_consensus::VoterConfig;
 use idmesh_coordinator::CoordinatorConfig;
 use idmesh_extract::read_reports;
 use idmesh_leader::HostConfig;
@@ -18,6 +19,7 @@ use idmesh_sensor::{
     lines_of, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace, MeshConfig, Router,
     RouterConfig, Source,
 };
+use idmesh_voter::VoterProcess;
 use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
@@ -34,6 +36,7 @@ pub enum Role {
     },
     Leader,
     Coordinator,
+    Voter,
 }
 
 /// The runtime's worker threads for a role. A leader's work is one task
@@ -47,7 +50,7 @@ pub enum Role {
 /// couple, and keep two.
 fn workers(role: Role) -> usize {
     match role {
-        Role::Leader => 1,
+        Role::Leader | Role::Voter => 1,
         Role::Sensor { .. } | Role::Coordinator => 2,
     }
 }
@@ -60,6 +63,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
         Role::Sensor { .. } => "sensor",
         Role::Leader => "leader",
         Role::Coordinator => "coordinator",
+        Role::Voter => "voter",
     };
     if member.role != expected {
         return Err(anyhow!(
@@ -141,12 +145,47 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                 )
                 .await
                 .map_err(|e| anyhow!("coordinator: {e}")),
+                Role::Voter => {
+                    let process = voter_process(&topology, name, keys)?;
+                    idmesh_voter::run(session.clone(), process, shutdown())
+                        .await
+                        .map_err(|e| anyhow!("voter: {e}"))
+                }
             };
             let _ = session.close().await;
             result
         }
         .instrument(span),
     )
+}
+
+/// Voter `name`'s place in the group: its id is its place among the
+/// topology's `[[voter]]`s, from 1; its log is `<state_dir>/<name>.raft`.
+/// Elections take 10 ticks of 100 ms (one to two seconds, drawn), a
+/// leader's heartbeat every 2.
+fn voter_process(topology: &Topology, name: &str, keys: Keys) -> Result<VoterProcess> {
+    let index = topology
+        .voters
+        .iter()
+        .position(|v| v.name == name)
+        .ok_or_else(|| anyhow!("no voter named {name:?} in the topology"))?;
+    let dir = topology
+        .state_path()
+        .ok_or_else(|| anyhow!("[[voter]]: give state_dir, where each voter keeps its log"))?;
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| anyhow!("{}: cannot create the state directory: {e}", dir.display()))?;
+    Ok(VoterProcess {
+        voter: VoterConfig {
+            id: index as u64 + 1,
+            voters: (1..=topology.voters.len() as u64).collect(),
+            election_ticks: 10,
+            heartbeat_ticks: 2,
+            fixed_timeouts: false,
+        },
+        keys,
+        log: dir.join(format!("{name}.raft")),
+        tick: Duration::from_millis(100),
+    })
 }
 
 /// Turns transparent huge pages off for this process. The allocator asks

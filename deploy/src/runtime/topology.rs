@@ -195,6 +195,13 @@ pub struct Topology {
         skip_serializing_if = "Vec::is_empty"
     )]
     pub coordinator_replicas: Vec<Process>,
+    /// The voters (`[[voter]]`) that decide who holds each role by Raft
+    /// (`idmesh-voter`): three or five, one per host, so that a majority
+    /// outlives any one host. Each keeps its log in `state_dir`. The roles
+    /// do not read their map yet: the shared-disk lock still decides
+    /// takeovers.
+    #[serde(default, rename = "voter", skip_serializing_if = "Vec::is_empty")]
+    pub voters: Vec<Process>,
     /// One `[sensor]`, or several `[[sensor]]` (docs/design/architecture.md,
     /// "Several sensors"): each takes its producers' events, and every
     /// sensor merges them all into one order. Written as it is read: one
@@ -740,6 +747,7 @@ impl Topology {
             marginals_timeout_ms: default_marginals_timeout(),
             coordinator,
             coordinator_replicas: Vec::new(),
+            voters: Vec::new(),
             sensors,
             leader,
             leader_faults: LeaderFaultSection::default(),
@@ -849,6 +857,7 @@ impl Topology {
                 }
             }
         }
+        self.check_voters()?;
         if let Some(security) = &self.security {
             security.check(members.iter().map(|m| m.name.as_str()))?;
         }
@@ -867,6 +876,24 @@ impl Topology {
                     self.split
                 );
             }
+        }
+        Ok(())
+    }
+
+    /// Voters keep their logs in `state_dir`; the access rules of a
+    /// secured topology do not grant their keys yet.
+    fn check_voters(&self) -> Result<()> {
+        if self.voters.is_empty() {
+            return Ok(());
+        }
+        if self.security.is_some() {
+            bail!(
+                "[[voter]] with [security]: the access rules do not grant the voters' keys \
+                 yet; run voters on an unsecured topology"
+            );
+        }
+        if self.state_dir.is_none() {
+            bail!("[[voter]]: give state_dir, where each voter keeps its log");
         }
         Ok(())
     }
@@ -892,6 +919,12 @@ impl Topology {
             name: l.name.clone(),
             host: l.host.clone(),
             listen: l.listen.clone(),
+        }));
+        all.extend(self.voters.iter().map(|v| Member {
+            role: "voter",
+            name: v.name.clone(),
+            host: v.host.clone(),
+            listen: v.listen.clone(),
         }));
         all
     }
@@ -1276,6 +1309,32 @@ listen = "tcp/127.0.0.1:3"
             e.contains("[security] clients") && e.contains("\"l0\""),
             "{e}"
         );
+    }
+
+    /// `[[voter]]`s are processes of the topology; they need `state_dir`
+    /// (their logs) and are refused beside `[security]`, naming why.
+    #[test]
+    fn voters_are_members_that_need_a_state_dir() {
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-topology-voters-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let voters = "[[voter]]\nname = \"v1\"\nlisten = \"tcp/127.0.0.1:11\"\n\
+                      [[voter]]\nname = \"v2\"\nlisten = \"tcp/127.0.0.1:12\"\n\
+                      [[voter]]\nname = \"v3\"\nlisten = \"tcp/127.0.0.1:13\"\n";
+        std::fs::write(&path, format!("state_dir = \"state\"\n{SMALL}{voters}")).unwrap();
+        let t = Topology::load(&path).unwrap();
+        let roles: Vec<&str> = t.members().iter().map(|m| m.role).collect();
+        assert_eq!(roles.iter().filter(|r| **r == "voter").count(), 3);
+        std::fs::write(&path, format!("{SMALL}{voters}")).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("[[voter]]") && e.contains("state_dir"), "{e}");
+        let secured =
+            format!("state_dir = \"state\"\n{SMALL}{voters}\n[security]\ncerts = \"certs\"\n");
+        std::fs::write(&path, secured).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("[[voter]] with [security]"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     /// `[web]` takes `listen` and `idmesh web`'s marker settings under
