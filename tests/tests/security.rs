@@ -610,3 +610,52 @@ fn with_access_control_only_listed_producers_feed_the_sensor() {
         "only the listed producer: {sensor_stats}"
     );
 }
+
+/// Voters in a secured deployment under the generated access rules: they
+/// elect a leader of their group over mutual TLS, and the listed client
+/// reads every voter's map through the coordinator.
+#[test]
+fn voters_under_access_control_elect_and_answer_the_client() {
+    let dir = std::env::temp_dir().join(format!("idmesh-security-voters-{}", std::process::id()));
+    let mut names = names();
+    names.extend((1..=3).map(|i| format!("voter-{i}")));
+    let certs = certificates(&dir.join("certs"), "idmesh test CA", &names);
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let deployment = Deployment::start(
+        "secured-voters",
+        &trace,
+        &Settings {
+            leaders: LEADERS,
+            voters: 3,
+            security: Some(Secured {
+                certs,
+                access_control: true,
+                client: CLIENT.into(),
+                producers: Vec::new(),
+            }),
+            ..Settings::default()
+        },
+    );
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let answers = deployment.query(&["roles"]).unwrap_or_default();
+        let leader = answers.first().map(|a| a["leader"].clone());
+        let agreed = answers.len() == 3
+            && leader
+                .as_ref()
+                .is_some_and(|l| answers.iter().any(|a| &a["voter"] == l))
+            && answers
+                .iter()
+                .all(|a| Some(&a["leader"]) == leader.as_ref());
+        if agreed {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no leader the three voters agree on: {answers:?}\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -880,17 +880,10 @@ impl Topology {
         Ok(())
     }
 
-    /// Voters keep their logs in `state_dir`; the access rules of a
-    /// secured topology do not grant their keys yet.
+    /// Voters keep their logs in `state_dir`.
     fn check_voters(&self) -> Result<()> {
         if self.voters.is_empty() {
             return Ok(());
-        }
-        if self.security.is_some() {
-            bail!(
-                "[[voter]] with [security]: the access rules do not grant the voters' keys \
-                 yet; run voters on an unsecured topology"
-            );
         }
         if self.state_dir.is_none() {
             bail!("[[voter]]: give state_dir, where each voter keeps its log");
@@ -1312,7 +1305,7 @@ listen = "tcp/127.0.0.1:3"
     }
 
     /// `[[voter]]`s are processes of the topology; they need `state_dir`
-    /// (their logs) and are refused beside `[security]`, naming why.
+    /// (their logs).
     #[test]
     fn voters_are_members_that_need_a_state_dir() {
         let dir =
@@ -1329,11 +1322,6 @@ listen = "tcp/127.0.0.1:3"
         std::fs::write(&path, format!("{SMALL}{voters}")).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
         assert!(e.contains("[[voter]]") && e.contains("state_dir"), "{e}");
-        let secured =
-            format!("state_dir = \"state\"\n{SMALL}{voters}\n[security]\ncerts = \"certs\"\n");
-        std::fs::write(&path, secured).unwrap();
-        let e = format!("{:#}", Topology::load(&path).unwrap_err());
-        assert!(e.contains("[[voter]] with [security]"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -59,6 +59,7 @@ struct Parties {
     coordinator: Vec<String>,
     sensor: Vec<String>,
     leaders: Vec<String>,
+    voters: Vec<String>,
     members: Vec<String>,
     /// Those who may ask the coordinator (none without `[security]`).
     clients: Vec<String>,
@@ -72,6 +73,7 @@ impl Parties {
             coordinator: topology.coordinators().map(|c| c.name.clone()).collect(),
             sensor: topology.sensors.iter().map(|s| s.name.clone()).collect(),
             leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
+            voters: topology.voters.iter().map(|v| v.name.clone()).collect(),
             members: topology.members().into_iter().map(|m| m.name).collect(),
             clients: topology
                 .security
@@ -117,6 +119,7 @@ pub(crate) fn grants(topology: &Topology) -> Vec<Grant> {
         &["query"],
         vec![format!("{}/ping/**", keys.prefix())],
     ));
+    grants.extend(voter_grants(&keys, &parties));
     grants.extend(outside_grants(&keys, &parties));
     // What each process serves, under its own name.
     for m in topology.members() {
@@ -261,6 +264,47 @@ fn coordinator_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
     ]
 }
 
+/// What the voters send one another (raft's messages, each voter
+/// subscribing to its own key), the proposals any process of the
+/// deployment may put to them, and the coordinator's way to their map
+/// (`query/roles`, which clients ask through it).
+fn voter_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
+    if parties.voters.is_empty() {
+        return Vec::new();
+    }
+    let raft = format!("{}/raft/*", keys.prefix());
+    vec![
+        grant(
+            "raft",
+            &parties.voters,
+            &parties.voters,
+            &["put", "declare_subscriber"],
+            vec![raft],
+        ),
+        grant(
+            "propose",
+            &parties.members,
+            &parties.voters,
+            &["put"],
+            vec![keys.raft_propose()],
+        ),
+        grant(
+            "propose-subscriber",
+            &parties.voters,
+            &parties.members,
+            &["declare_subscriber"],
+            vec![keys.raft_propose()],
+        ),
+        grant(
+            "roles",
+            &parties.coordinator,
+            &parties.voters,
+            &["query"],
+            vec![keys.query_roles()],
+        ),
+    ]
+}
+
 /// What clients and producers outside the deployment may ask and send,
 /// and the answers they get.
 fn outside_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
@@ -337,6 +381,10 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
                 &["declare_subscriber"],
                 vec![keys.leader_events("*"), keys.leader_transfer("*")],
             ));
+        }
+        "voter" => {
+            served.push(keys.query_roles());
+            asked_as.push(keys.query_roles());
         }
         _ => served.push(format!("{p}/query/**")),
     }
@@ -642,6 +690,64 @@ producers = ["camera"]
         ));
         assert!(allowed(&s, "ingress", "c", "query", "p/sensor/*/cut"));
         assert!(allowed(&s, "egress", "l0", "put", "p/leader/l0/events"));
+    }
+
+    /// Voters hear raft only from voters, proposals from the deployment's
+    /// processes, and the roles question from the coordinator (a client
+    /// asks it through the coordinator, never a voter directly).
+    #[test]
+    fn voters_hear_raft_from_voters_and_the_roles_question_from_the_coordinator() {
+        let mut t = topology();
+        t.state_dir = Some("state".into());
+        t.voters = (1..=3)
+            .map(|i| {
+                crate::runtime::topology::Process::new(
+                    format!("v{i}"),
+                    format!("tcp/127.0.0.1:{}", 10 + i),
+                )
+            })
+            .collect();
+        let v1 = access_control(&t, "v1");
+        assert!(allowed(&v1, "ingress", "v2", "put", "p/raft/1"));
+        assert!(allowed(&v1, "egress", "v3", "put", "p/raft/3"));
+        assert!(allowed(
+            &v1,
+            "egress",
+            "v2",
+            "declare_subscriber",
+            "p/raft/1"
+        ));
+        assert!(!allowed(&v1, "ingress", "l0", "put", "p/raft/1"));
+        assert!(!allowed(&v1, "ingress", "operator", "put", "p/raft/1"));
+        assert!(allowed(&v1, "ingress", "l0", "put", "p/raft/propose"));
+        assert!(!allowed(
+            &v1,
+            "ingress",
+            "operator",
+            "put",
+            "p/raft/propose"
+        ));
+        assert!(allowed(&v1, "ingress", "c", "query", "p/query/roles"));
+        assert!(allowed(&v1, "egress", "c", "reply", "p/query/roles"));
+        assert!(!allowed(
+            &v1,
+            "ingress",
+            "operator",
+            "query",
+            "p/query/roles"
+        ));
+        assert!(!allowed(
+            &v1,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/query/marginals"
+        ));
+        let c = access_control(&t, "c");
+        assert!(allowed(&c, "ingress", "operator", "query", "p/query/roles"));
+        assert!(allowed(&c, "egress", "v1", "query", "p/query/roles"));
+        assert!(allowed(&c, "ingress", "v1", "reply", "p/query/roles"));
+        assert!(allowed(&c, "egress", "operator", "reply", "p/query/roles"));
     }
 
     #[test]
