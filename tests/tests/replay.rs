@@ -220,6 +220,9 @@ fn a_sighting_the_stream_rules_out_is_taken_by_the_repair_rule() {
         let output = replay(&trace, &["--method", method]);
         let out = lines(&output);
         let p: Vec<f64> = serde_json::from_value(out[0]["final_p_red"].clone()).unwrap();
+        // Counted in the summary: the sighting (and the factored query).
+        let repairs = if method == "factored" { 2 } else { 1 };
+        assert_eq!(out[0]["repairs"], repairs, "{method}");
         assert!(
             (p.iter().sum::<f64>() - 1.0).abs() < 1e-9,
             "{method}: {p:?}"

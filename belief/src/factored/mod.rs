@@ -1292,6 +1292,12 @@ impl PropertyFilter for FactoredBelief {
     fn coefficients(&self) -> usize {
         self.numbers
     }
+
+    /// Sightings taken by the repair rule or set aside, and queries
+    /// answered by the contradiction rule.
+    fn repairs(&self) -> u64 {
+        self.stats.repairs + self.query_repairs()
+    }
 }
 
 impl FactoredBelief {

@@ -52,6 +52,10 @@ struct Summary {
     brier: Option<f64>,
     log_loss: Option<f64>,
     max_coefficients: usize,
+    /// Sightings the filter took by its repair rule or set aside, and (the
+    /// factored belief) queries answered by its contradiction rule: 0 on a
+    /// stream that never contradicts itself (`PropertyFilter::repairs`).
+    repairs: u64,
     /// P(red) of every track after the last event (what a live deployment
     /// answers at the end of the stream).
     final_p_red: Option<Vec<f64>>,
@@ -206,6 +210,9 @@ fn run_engine<R: BufRead, F: PropertyFilter + Moves + ?Sized>(
 ) -> Result<()> {
     drive(reader, &mut engine, &mut out)?;
 
+    // The final marginals first: a factored belief's query may count a
+    // repair (its contradiction rule).
+    let final_p_red = engine.filter.time(|f| f.marginals()).ok();
     let summary = Summary {
         kind: "summary",
         method: args.property_method().name(),
@@ -215,7 +222,8 @@ fn run_engine<R: BufRead, F: PropertyFilter + Moves + ?Sized>(
         brier: mean_error(&engine.briers),
         log_loss: mean_error(&engine.log_losses),
         max_coefficients: engine.max_coefficients,
-        final_p_red: engine.filter.time(|f| f.marginals()).ok(),
+        repairs: engine.filter.filter.repairs(),
+        final_p_red,
     };
     info!(
         events = summary.events,
