@@ -28,6 +28,8 @@
 //!   sets: the yardstick a practitioner would reach for.
 //! - `repair` — the rule every filter follows when a sighting contradicts
 //!   its belief: taken after a small repair, or set aside.
+//! - `support` — the support floor: a mass the events allow never rounds
+//!   to 0 (the Radon engine's and the factored tables').
 //! - [`workload`] — seeded random event streams for tests and benchmarks.
 //!
 //! Identity beliefs (who is on which track; Shin et al., IPSN 2005) are
@@ -44,6 +46,7 @@ mod particle;
 mod radon;
 mod repair;
 mod scoring;
+mod support;
 mod track_set;
 mod weights;
 pub mod workload;

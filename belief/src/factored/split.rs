@@ -19,8 +19,9 @@
 //! pattern), so Sinkhorn converges; it stops at an L1 error of `tolerance` on
 //! the count marginals, which is also the L1 error of P′(x_A) against P(x_A).
 
-use super::table::{floored_product, Component};
+use super::table::Component;
 use crate::error::BeliefError;
+use crate::support::floored;
 
 /// P(x) ∝ g(x)·Q(|x|) over a merged table, with what every projection of it
 /// needs.
@@ -344,11 +345,11 @@ pub(crate) fn fit(
     let (alpha, beta, sweeps) = scale_counts(q, &count_a, &count_b, tolerance, max_sweeps)?;
     let mut ga = pa;
     for (y, g) in ga.iter_mut().enumerate() {
-        *g = floored_product(*g, alpha[y.count_ones() as usize]);
+        *g = floored(*g, alpha[y.count_ones() as usize]);
     }
     let mut gb = pb;
     for (y, g) in gb.iter_mut().enumerate() {
-        *g = floored_product(*g, beta[y.count_ones() as usize]);
+        *g = floored(*g, beta[y.count_ones() as usize]);
     }
     let ln_s_prime = ln_pair_mass(
         &super::table::counts_of(&ga, na),

@@ -1,6 +1,13 @@
 //! One component: an exact dense table over every subset of its tracks.
 
 use crate::error::BeliefError;
+// Products of table entries keep every set both factors allow (the
+// crate's support floor): a table's entries may lean hundreds of orders
+// of magnitude against the count weights that select them (sightings
+// against the truth, a known count holding the total down), and a set that
+// vanished from a product by rounding would leave a later sighting of it
+// no mass.
+use crate::support::{floored, floored_div};
 
 /// g_C over all subsets y of C, indexed by the bit mask of y in the local
 /// order `tracks` (bit i ↔ `tracks[i]`), normalized to sum 1 with the factor
@@ -11,24 +18,6 @@ pub(crate) struct Component {
     pub(crate) table: Vec<f64>,
     pub(crate) log_scale: f64,
     pub(crate) counts: Vec<f64>,
-}
-
-/// a·b for a, b ≥ 0, raised to the smallest normal f64 where the exact
-/// product is positive but rounds below it. A table's entries may lean
-/// hundreds of orders of magnitude against the count weights that select
-/// them (sightings against the truth, a known count holding the total
-/// down): a set both factors allow must not vanish from the product by
-/// rounding, or a later sighting of it finds no mass. The floor moves an
-/// entry of a table summing to 1 by at most 2.2·10^-308, as the exact
-/// filter's own floor does.
-#[inline]
-pub(crate) fn floored_product(a: f64, b: f64) -> f64 {
-    let x = a * b;
-    if x < f64::MIN_POSITIVE && a > 0.0 && b > 0.0 {
-        f64::MIN_POSITIVE
-    } else {
-        x
-    }
 }
 
 /// The bits of `table` all but certain under table[y]·w(|y|) (w = 1 if
@@ -186,12 +175,7 @@ impl Component {
             return Err(BeliefError::Degenerate { normalizer: total });
         }
         for g in &mut table {
-            let x = *g / total;
-            *g = if x < f64::MIN_POSITIVE && *g > 0.0 {
-                f64::MIN_POSITIVE
-            } else {
-                x
-            };
+            *g = floored_div(*g, total);
         }
         let counts = counts_of(&table, tracks.len());
         Ok(Component {
@@ -229,7 +213,7 @@ impl Component {
         self.table
             .iter()
             .enumerate()
-            .map(|(y, &g)| floored_product(g, if y & b != 0 { red } else { blue }))
+            .map(|(y, &g)| floored(g, if y & b != 0 { red } else { blue }))
             .collect()
     }
 
@@ -240,12 +224,12 @@ impl Component {
         tracks.extend_from_slice(&other.tracks);
         let mut table = Vec::with_capacity(self.table.len() * other.table.len());
         for &h in &other.table {
-            table.extend(self.table.iter().map(|&l| floored_product(l, h)));
+            table.extend(self.table.iter().map(|&l| floored(l, h)));
         }
         let mut counts = vec![0.0; tracks.len() + 1];
         for (r, &x) in self.counts.iter().enumerate() {
             for (q, &y) in other.counts.iter().enumerate() {
-                counts[r + q] += floored_product(x, y);
+                counts[r + q] += floored(x, y);
             }
         }
         Component {

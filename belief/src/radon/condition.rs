@@ -192,37 +192,9 @@ impl Conditioning<'_> {
     }
 }
 
-/// The least magnitude a mass the events allow is stored with: the
-/// smallest normal f64. Masses are renormalized to sum 1 after every
-/// conditioning, and sightings 10^200 times likelier for the wrong colour
-/// take an atom below the smallest f64 in two steps; flushed to 0, a later
-/// certain sighting could find no mass on a valid stream. The floor moves
-/// a mass by at most 2.2·10^-308 and keeps the support exact.
-pub(super) const SUPPORT_FLOOR: f64 = f64::MIN_POSITIVE;
-
-/// m·factor, its magnitude raised to [`SUPPORT_FLOOR`] when the exact
-/// product is not 0 but rounds below it.
-#[inline]
-pub(super) fn floored(m: f64, factor: f64) -> f64 {
-    let x = m * factor;
-    if x.abs() < SUPPORT_FLOOR && m != 0.0 && factor != 0.0 {
-        SUPPORT_FLOOR.copysign(x)
-    } else {
-        x
-    }
-}
-
-/// m/total, floored as [`floored`] is: the renormalization of the whole
-/// belief and of a leader's share, bit for bit the same.
-#[inline]
-pub(super) fn floored_div(m: f64, total: f64) -> f64 {
-    let x = m / total;
-    if x.abs() < SUPPORT_FLOOR && m != 0.0 {
-        SUPPORT_FLOOR.copysign(x)
-    } else {
-        x
-    }
-}
+// The support floor is the crate's (`crate::support`): the factored
+// belief's tables keep theirs by the same two functions.
+pub(super) use crate::support::{floored, floored_div};
 
 impl RadonBelief {
     pub(super) fn condition(&mut self, observe: Observe) -> Result<(), BeliefError> {

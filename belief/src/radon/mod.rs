@@ -255,7 +255,7 @@ impl RadonBelief {
             return Err(BeliefError::Degenerate { normalizer: total });
         }
         for m in self.masses.values_mut() {
-            // Floored as conditioning is (`condition::SUPPORT_FLOOR`): an
+            // Floored as conditioning is (`crate::support`): an
             // atom 10^-300 of a total above 1 stays possible.
             *m = condition::floored_div(*m, total);
         }

@@ -33,7 +33,7 @@ pub(super) fn rollup_masses(masses: &mut FxHashMap<Atom, f64>, mix: Mix) {
         // New value of α: p·m_α + (1 − p)·m_{σα}, computed directly (not
         // as a difference) so that swap = 0 or 1 moves values exactly.
         let image_mass = moved.get(&image).copied();
-        // Floored like conditioning (`condition::SUPPORT_FLOOR`): a mass
+        // Floored like conditioning (`crate::support`): a mass
         // the mix keeps possible never rounds to 0. The sum of a kept and
         // a swapped-in mass is not floored: in the signed form it may
         // cancel exactly.
