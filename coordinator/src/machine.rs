@@ -14,10 +14,11 @@ use idmesh_placement::combine;
 use idmesh_protocol::wire::bounds::Bounds;
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
-use idmesh_protocol::wire::decode;
+use idmesh_protocol::wire::epoch::{Fence, Stale};
 use idmesh_protocol::wire::identity::WireTree;
 use idmesh_protocol::wire::leader_to_leader::WireRow;
 use idmesh_protocol::wire::query::{CoordinatorStats, MarginalsAnswer, Watermark};
+use idmesh_protocol::wire::{decode, Versioned};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -158,6 +159,9 @@ pub struct Memory {
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
+    /// The newest epoch each leader role answered at: a former holder's
+    /// answer (cut off, still running) is refused.
+    fence: Mutex<Fence>,
     rejected: AtomicU64,
     bad_replies: AtomicU64,
     degraded: AtomicU64,
@@ -173,6 +177,15 @@ impl Memory {
     }
 
     /// Counts a reply from another process that was no good.
+    /// The fence on an answer of `role` at `epoch`: why not, if it comes
+    /// from a former holder of the role.
+    pub(crate) fn admit_epoch(&self, role: &str, epoch: u64) -> Result<(), Stale> {
+        match self.fence.lock() {
+            Ok(mut fence) => fence.admit(Partial::WHAT, role, epoch),
+            Err(_) => Ok(()),
+        }
+    }
+
     pub(crate) fn note_bad_reply(&self, what: &str, problem: &str) {
         let n = self.bad_replies.fetch_add(1, Ordering::Relaxed) + 1;
         tracing::warn!(what, problem, bad_replies = n, "bad reply");
@@ -431,7 +444,14 @@ impl Partials {
         match reply {
             Ok(bytes) => match decode::<Partial>(&bytes) {
                 Ok(p) if tag.is_none_or(|t| t == p.tag) => {
-                    self.parts.insert(p.leader.clone(), p);
+                    // Two processes answering for one role: the one at
+                    // the newest epoch holds it; the other is fenced off.
+                    match memory.admit_epoch(&p.leader, p.epoch) {
+                        Ok(()) => {
+                            self.parts.insert(p.leader.clone(), p);
+                        }
+                        Err(stale) => memory.note_bad_reply("partial sums", &stale.to_string()),
+                    }
                 }
                 Ok(p) => self.errors.push(format!(
                     "leader {} answered tag {} for {tag:?}",

@@ -29,7 +29,10 @@ pub enum Input {
     Batch(Batch),
     /// What a peer sent at once, in order (one step's transfers for this
     /// leader: [`crate::machine::Output::Send`]).
-    Transfers(Vec<Transfer>),
+    Transfers {
+        epoch: u64,
+        transfers: Vec<Transfer>,
+    },
     Followed(Followed),
 }
 
@@ -65,13 +68,15 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
             Ok(Input::Batch(batch))
         }
         Kind::Transfer => {
-            let transfers = decode::<TransfersSent>(bytes)?.transfers;
+            let TransfersSent {
+                epoch, transfers, ..
+            } = decode::<TransfersSent>(bytes)?;
             if let (Some(bounds), Some(me)) = (leader.bounds(), leader.index()) {
                 for transfer in &transfers {
                     bounds.check_transfer(transfer, me)?;
                 }
             }
-            Ok(Input::Transfers(transfers))
+            Ok(Input::Transfers { epoch, transfers })
         }
         Kind::Followed => {
             let followed = decode::<Followed>(bytes)?;
@@ -94,7 +99,7 @@ pub fn admit(leader: &Leader, kind: Kind, bytes: &[u8]) -> Result<Input, WireErr
 pub fn apply(leader: &mut Leader, input: Input, bytes: usize) -> Result<Vec<Action>, LeaderError> {
     match input {
         Input::Batch(batch) => leader.batch(batch, bytes),
-        Input::Transfers(transfers) => {
+        Input::Transfers { transfers, .. } => {
             let mut actions = Vec::new();
             // The message's bytes are counted once, with its first.
             let mut size = bytes;

@@ -17,7 +17,7 @@ use crate::machine::{Ask, Input, Node, Output, Timers};
 use idmesh_ownership::{Ownership, HANDOVER_PATIENCE};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent};
+use idmesh_protocol::wire::leader_to_leader::TransfersSent;
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode};
@@ -38,6 +38,9 @@ pub(crate) struct LeaderConfig {
     pub name: String,
     /// The process running it (itself, or the one that adopted the role).
     pub host: String,
+    /// The epoch the voters gave `host` for the role (0 without voters),
+    /// on every message it sends.
+    pub epoch: u64,
     /// The role was adopted from a process gone for good: catch up even if
     /// its journal is empty.
     pub adopted: bool,
@@ -247,7 +250,10 @@ fn start_node(
     };
     let (node, first) = Node::recover(
         &config.name,
-        &config.host,
+        crate::Holder {
+            process: &config.host,
+            epoch: config.epoch,
+        },
         recovered.snapshot.as_deref(),
         recovered
             .entries
@@ -562,10 +568,8 @@ impl Driver<'_> {
 }
 
 /// The transfers a peer's reply carries.
-fn transfers_of(bytes: &[u8]) -> Result<Vec<Transfer>, String> {
-    decode::<TransfersSent>(bytes)
-        .map(|t| t.transfers)
-        .map_err(|e| e.to_string())
+fn transfers_of(bytes: &[u8]) -> Result<TransfersSent, String> {
+    decode::<TransfersSent>(bytes).map_err(|e| e.to_string())
 }
 
 /// The batches a resend reply carries.

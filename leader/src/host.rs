@@ -84,6 +84,7 @@ impl HostConfig {
         LeaderConfig {
             name: role.to_string(),
             host: self.name.clone(),
+            epoch: 0,
             adopted,
             keys: self.keys.clone(),
             sensor: self.sensor.clone(),

@@ -38,6 +38,6 @@ mod state;
 pub use error::LeaderError;
 pub use state::{Action, Leader};
 // The leader's timers and recovery policy around it, also pure.
-pub use machine::{Ask, Input, Node, Output, Timers};
+pub use machine::{Ask, Holder, Input, Node, Output, Timers};
 // The leader process.
 pub use host::{run, HostConfig};

@@ -253,6 +253,7 @@ fn a_begin_that_does_not_name_the_leader_is_rejected() {
 /// own.
 fn bundle(transfer: Transfer) -> Vec<u8> {
     encode(&TransfersSent {
+        epoch: 0,
         version: VERSION,
         transfers: vec![transfer],
     })

@@ -71,6 +71,7 @@ mod tests {
 
     fn mark(batch: u64) -> Durable {
         Durable {
+            epoch: 0,
             version: VERSION,
             leader: "l".into(),
             batch,

@@ -43,7 +43,8 @@ use idmesh_protocol::wire::producer_to_sensor::{IngestAck, LineRefused};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use serde::{Deserialize, Serialize};
 
-use idmesh_protocol::wire::{decode, encode, Valid, VERSION};
+use idmesh_protocol::wire::epoch::{Epoched, Fence};
+use idmesh_protocol::wire::{decode, encode, Valid, Versioned, VERSION};
 use std::collections::BTreeMap;
 
 /// What routing lines gives: the cuts they reached, for the journal the
@@ -106,6 +107,11 @@ pub struct Gateway<Q> {
     /// older journals hold: a compacted journal states them in records of
     /// their own after its snapshot.
     named: BTreeMap<String, Vec<String>>,
+    /// The newest epoch heard from each leader role: what a former holder
+    /// (cut off, still running) asks or marks is refused. Not journaled:
+    /// after a restart the holder's next message sets it again (the
+    /// journal's follow records, replayed, set most of it).
+    fence: Fence,
 }
 
 /// The part of a gateway's state that its journal's records rebuild, and
@@ -188,6 +194,7 @@ impl<Q> Gateway<Q> {
             answers: Vec::new(),
             refusals: Vec::new(),
             named: BTreeMap::new(),
+            fence: Fence::default(),
         }
     }
 
@@ -843,6 +850,7 @@ impl<Q> Gateway<Q> {
                         f.leader
                     ));
                 }
+                self.admit_epoch(Follow::WHAT, f.leader as usize, f.epoch)?;
                 let items = self.state.router.follow(&f).map_err(|e| e.to_string())?;
                 Ok((f.leader as usize, items))
             });
@@ -862,7 +870,10 @@ impl<Q> Gateway<Q> {
     pub fn unfollow(&mut self, bytes: &[u8]) -> Result<usize, String> {
         let answer = decode::<Unfollow>(bytes)
             .map_err(|e| e.to_string())
-            .and_then(|u| self.state.router.unfollow(&u).map_err(|e| e.to_string()));
+            .and_then(|u| {
+                self.admit_epoch(Unfollow::WHAT, u.leader as usize, u.epoch)?;
+                self.state.router.unfollow(&u).map_err(|e| e.to_string())
+            });
         self.count("unfollow", &answer);
         if answer.as_ref().is_ok_and(|&dropped| dropped > 0) {
             self.note(Record::Unfollow(bytes.to_vec()));
@@ -875,17 +886,19 @@ impl<Q> Gateway<Q> {
         let answer = decode::<Resend>(bytes)
             .map_err(|e| e.to_string())
             .and_then(|request| {
-                let sent = self
+                let i = self
                     .leader_index(&request.leader)
                     .filter(|&i| self.serves(i))
-                    .map(|i| &self.state.sent[i])
                     .ok_or_else(|| {
                         format!(
                             "resend request from {:?}, which is not a leader this sensor serves",
                             request.leader
                         )
                     })?;
-                sent.from(&request.leader, request.from)
+                self.fence
+                    .admit(Resend::WHAT, &request.leader, request.epoch)
+                    .map_err(|stale| stale.to_string())?;
+                self.state.sent[i].from(&request.leader, request.from)
             })
             .map(|batches| Resent {
                 version: VERSION,
@@ -913,7 +926,7 @@ impl<Q> Gateway<Q> {
     /// it names; None if it cannot be read (counted as rejected) or names a
     /// leader not of this stream (logged). Marks are puts: nobody to
     /// answer.
-    fn mark<M: serde::de::DeserializeOwned + Valid>(
+    fn mark<M: serde::de::DeserializeOwned + Valid + Epoched>(
         &mut self,
         bytes: &[u8],
         origin: &str,
@@ -932,7 +945,23 @@ impl<Q> Gateway<Q> {
             tracing::warn!(leader = %leader(&mark), "{} from a leader not of this stream", M::WHAT);
             return None;
         };
+        if let Err(stale) = self.fence.admit(M::WHAT, leader(&mark), mark.epoch()) {
+            self.state.stats.rejected += 1;
+            tracing::warn!(from = %origin, rejected = self.state.stats.rejected, "{stale}");
+            return None;
+        }
         Some((i, mark))
+    }
+
+    /// The fence on a request of leader `i` at `epoch`: why not, if the
+    /// request comes from a former holder of the role.
+    fn admit_epoch(&mut self, what: &'static str, i: usize, epoch: u64) -> Result<(), String> {
+        let Some(role) = self.state.router.begin().leaders.get(i) else {
+            return Ok(());
+        };
+        self.fence
+            .admit(what, role, epoch)
+            .map_err(|stale| stale.to_string())
     }
 
     /// Whether this sensor sends leader `i` its batches (every leader,

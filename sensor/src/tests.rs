@@ -84,6 +84,7 @@ fn observe(track: u32) -> Line {
 /// Leader a's follow request for `tracks` from item `after` on.
 fn follow_of_a(after: u64, tracks: Vec<u32>) -> Vec<u8> {
     encode(&Follow {
+        epoch: 0,
         version: VERSION,
         leader: 0,
         after,
@@ -196,6 +197,7 @@ fn a_follow_that_may_bring_a_saturated_set_gets_every_observation_missed() {
     // observation it missed, though 4 is not among the tracks it asks for.
     let followed = gateway
         .follow(&encode(&Follow {
+            epoch: 0,
             version: VERSION,
             leader: 0,
             after: 1,
@@ -221,6 +223,7 @@ fn batches_are_sent_again_until_the_leader_says_they_are_safe() {
     }
     let resend = |leader: &str, from| {
         encode(&Resend {
+            epoch: 0,
             version: VERSION,
             leader: leader.into(),
             from,
@@ -232,6 +235,7 @@ fn batches_are_sent_again_until_the_leader_says_they_are_safe() {
         [2, 3]
     );
     let mark = Durable {
+        epoch: 0,
         version: VERSION,
         leader: "b".into(),
         batch: 3,
@@ -404,6 +408,7 @@ fn follows_and_marks_from_leaders_not_of_the_stream_change_nothing() {
     gateway.flush();
     let error = gateway
         .follow(&encode(&Follow {
+            epoch: 0,
             version: VERSION,
             leader: 5,
             after: 0,
@@ -414,6 +419,7 @@ fn follows_and_marks_from_leaders_not_of_the_stream_change_nothing() {
     assert_eq!(gateway.stats().rejected, 1);
     // A mark from nobody of this stream drops nothing.
     let stranger = Durable {
+        epoch: 0,
         version: VERSION,
         leader: "z".into(),
         batch: 2,
@@ -426,6 +432,7 @@ fn follows_and_marks_from_leaders_not_of_the_stream_change_nothing() {
     // A resend from a batch not sent yet is empty, not an error.
     let ahead = gateway
         .resend(&encode(&Resend {
+            epoch: 0,
             version: VERSION,
             leader: "a".into(),
             from: 9,
@@ -443,6 +450,7 @@ fn the_log_is_dropped_only_once_every_leader_is_safe_past_it() {
     gateway.flush();
     assert_eq!(gateway.router().logged(), 2);
     let mark = |leader: &str, position| Durable {
+        epoch: 0,
         version: VERSION,
         leader: leader.into(),
         batch: 2,
@@ -622,6 +630,7 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
     gateway.flush();
     let unfollow = |after, tracks: Vec<u32>| {
         encode(&Unfollow {
+            epoch: 0,
             version: VERSION,
             leader: 0,
             after,
@@ -713,6 +722,7 @@ fn under_the_regional_rule_a_handover_ends_the_old_leaders_interest() {
         assert_eq!(seqs(&a), expected_a, "regional {regional}");
         assert_eq!(seqs(&b), [2, 3]);
         let late = encode(&Unfollow {
+            epoch: 0,
             version: VERSION,
             leader: 0,
             after: 2,
@@ -740,6 +750,7 @@ fn state_of(gateway: &mut Gateway<u32>) -> Vec<Vec<u8>> {
         .iter()
         .map(|leader| {
             let resend = encode(&Resend {
+                epoch: 0,
                 version: VERSION,
                 leader: leader.to_string(),
                 from: 0,
@@ -818,6 +829,7 @@ fn a_gateway_restored_from_its_journal_is_the_gateway_it_was_at_every_point() {
     original.line(&trace[2]);
     original.line(&trace[3]);
     let follow = encode(&Follow {
+        epoch: 0,
         version: VERSION,
         leader: 0,
         after: 2,
@@ -1025,6 +1037,7 @@ fn named_track_ids_come_back_from_the_journal_whole_or_compacted() {
 
 fn progress(leader: &str, through: u64, batch: u64) -> Vec<u8> {
     encode(&Progress {
+        epoch: 0,
         version: VERSION,
         leader: leader.into(),
         through,
@@ -1145,6 +1158,7 @@ fn a_leader_with_nothing_to_apply_is_sent_no_batch_until_it_is_owed_one() {
     let before = gateway.router().seq();
     gateway
         .follow(&encode(&Follow {
+            epoch: 0,
             version: VERSION,
             leader: 1,
             after: before,
@@ -1328,4 +1342,70 @@ fn a_report_behind_another_producers_frame_is_refused_to_its_producer() {
     assert_eq!((refused.counter, refused.line), (1, 2));
     assert!(refused.reason.contains("before"), "{}", refused.reason);
     assert_eq!(gateway.stats().rejected, 1);
+}
+
+/// The fence: once a role's successor (a newer epoch) has been heard, what
+/// its former holder (cut off, still running) marks or asks changes
+/// nothing and is refused: its durable mark does not make the sensor
+/// forget, its resend and follow requests are answered with why not.
+#[test]
+fn a_former_holder_of_a_role_is_fenced_off_once_its_successor_is_heard() {
+    let mut gateway: Gateway<()> = Gateway::new("s", router(4, 2, true), false);
+    gateway.flush();
+    gateway.line(&mix(0, 2)); // seq 2
+    gateway.line(&mix(1, 3)); // seq 3
+    gateway.flush();
+    let mark = |epoch, position| Durable {
+        epoch,
+        version: VERSION,
+        leader: "a".into(),
+        batch: 1,
+        position,
+    };
+    // The successor, at epoch 2, is safe only through its Begin.
+    gateway.durable(&encode(&mark(2, 1)), "successor");
+    let kept = gateway.kept(0);
+    assert!(kept > 0);
+    // The former holder, at epoch 1, says it is safe much further.
+    let rejected = gateway.stats().rejected;
+    let stale = Durable {
+        batch: 9,
+        ..mark(1, 3)
+    };
+    gateway.durable(&encode(&stale), "former holder");
+    assert_eq!(
+        gateway.kept(0),
+        kept,
+        "a fenced mark makes nothing forgotten"
+    );
+    assert_eq!(gateway.stats().rejected, rejected + 1);
+    let resend = |epoch| {
+        encode(&Resend {
+            epoch,
+            version: VERSION,
+            leader: "a".into(),
+            from: 1,
+        })
+    };
+    let refused = gateway.resend(&resend(1)).unwrap_err();
+    assert!(refused.contains("fenced"), "{refused}");
+    assert!(gateway.resend(&resend(2)).is_ok(), "the holder is answered");
+    let follow = |epoch| Follow {
+        epoch,
+        version: VERSION,
+        leader: 0,
+        after: 3,
+        tracks: vec![3],
+    };
+    assert!(gateway.follow(&encode(&follow(1))).is_err());
+    assert!(gateway.follow(&encode(&follow(2))).is_ok());
+    // The other role's epochs are its own.
+    assert!(gateway
+        .resend(&encode(&Resend {
+            epoch: 0,
+            version: VERSION,
+            leader: "b".into(),
+            from: 0,
+        }))
+        .is_ok());
 }

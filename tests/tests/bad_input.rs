@@ -118,6 +118,7 @@ fn garbage() -> (Messages, Messages) {
     // What a peer puts on the transfer key: its transfers in one message.
     let transfer = |red: Vec<u32>, ln_mass: f64, version| {
         encode(&TransfersSent {
+            epoch: 0,
             version,
             transfers: vec![Transfer {
                 trees: Vec::new(),
@@ -218,6 +219,7 @@ fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
             (
                 sensor("follow"),
                 encode(&Follow {
+                    epoch: 0,
                     version: VERSION,
                     leader: 0,
                     after: 1,
@@ -227,6 +229,7 @@ fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
             (
                 sensor("resend"),
                 encode(&Resend {
+                    epoch: 0,
                     version: VERSION,
                     leader: "mallory".into(),
                     from: 0,

@@ -23,6 +23,7 @@ fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
 /// A leader's share: `total` with track `t` fixing `inside`.
 fn part(leader: &str, cut: u64, tag: u64, total: f64, inside: Vec<(u32, f64)>) -> Partial {
     Partial {
+        epoch: 0,
         trees: Vec::new(),
         base: None,
         gone: Vec::new(),
@@ -556,4 +557,32 @@ fn a_passive_part_gives_way_to_the_track_held_elsewhere() {
         .map(|r| (r.track, r.ln_likelihoods[0]))
         .collect();
     assert_eq!(rows, vec![(0, 0.0), (1, 1.0), (2, 2.0)]);
+}
+
+/// Two processes answering for one role (a former holder cut off but
+/// running, and its successor): the answer at the newer epoch is the
+/// role's, in either order, and from then on the former one is refused.
+#[test]
+fn the_answer_of_a_roles_newest_holder_is_kept_and_the_former_fenced() {
+    let memory = Memory::default();
+    let at = |epoch, total| Partial {
+        epoch,
+        ..part("a", 7, 9, total, vec![])
+    };
+    for replies in [
+        vec![Ok(encode(&at(1, 5.0))), Ok(encode(&at(2, 1.0)))],
+        vec![Ok(encode(&at(2, 1.0))), Ok(encode(&at(1, 5.0)))],
+    ] {
+        let (parts, _) = gather(9, replies, &memory).into_parts();
+        assert_eq!(parts["a"].epoch, 2);
+        assert_eq!(parts["a"].total, 1.0);
+    }
+    // First heard before its successor, the former holder's answer was
+    // taken and then replaced; heard after, it was refused and counted.
+    assert_eq!(memory.stats().bad_replies, 1);
+    let (parts, _) = gather(9, vec![Ok(encode(&at(1, 5.0)))], &memory).into_parts();
+    assert!(
+        parts.is_empty(),
+        "alone, the former holder is still refused"
+    );
 }

@@ -52,16 +52,18 @@ mod queries;
 mod recovery;
 
 pub use queries::Ask;
+pub use recovery::Holder;
 
 use crate::door;
 use crate::journal::Kind;
 use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
+use idmesh_protocol::wire::epoch::{Fence, Stale};
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Progress, Resend, Unfollow};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
-use idmesh_protocol::wire::{decode, encode, WireError, VERSION};
-use std::collections::BTreeMap;
+use idmesh_protocol::wire::{decode, encode, Versioned, WireError, VERSION};
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -124,7 +126,7 @@ pub enum Input {
     /// A peer's answer to [`Output::AskTransfers`].
     Transfers {
         peer: String,
-        result: Result<Vec<Transfer>, String>,
+        result: Result<TransfersSent, String>,
     },
     /// A durable mark some leader published (`Durable` bytes).
     Durable { bytes: Vec<u8>, origin: String },
@@ -267,6 +269,11 @@ pub struct Node {
     pushed: Option<u64>,
     /// Inputs journaled since the last snapshot.
     journaled: usize,
+    /// The newest epoch heard from each peer role: a former holder's
+    /// transfers and durable marks are refused.
+    fence: Fence,
+    /// (role, epoch) of the former holders already warned about.
+    fenced_warned: BTreeSet<(String, u64)>,
 }
 
 impl Node {
@@ -293,6 +300,8 @@ impl Node {
             progressed: 0,
             pushed: None,
             journaled: 0,
+            fence: Fence::default(),
+            fenced_warned: BTreeSet::new(),
         }
     }
 
@@ -373,11 +382,12 @@ impl Node {
                     r.peers.retain(|p| *p != peer);
                 }
                 match result {
-                    Ok(transfers) => {
+                    Ok(sent) => {
                         // One input each: one a peer got wrong is refused
                         // alone.
-                        for t in transfers {
+                        for t in sent.transfers {
                             let bytes = encode(&TransfersSent {
+                                epoch: sent.epoch,
                                 version: VERSION,
                                 transfers: vec![t],
                             });
@@ -391,7 +401,12 @@ impl Node {
             }
             Input::Durable { bytes, origin } => match decode::<Durable>(&bytes) {
                 Ok(mark) if mark.leader != self.leader.name() => {
-                    self.leader.forget_sent(&mark.leader, mark.position);
+                    match self.fence.admit(Durable::WHAT, &mark.leader, mark.epoch) {
+                        Ok(()) => {
+                            self.leader.forget_sent(&mark.leader, mark.position);
+                        }
+                        Err(stale) => self.fenced(stale, &origin, &mut out),
+                    }
                 }
                 Ok(_) => {}
                 Err(e) => self.reject("a durable mark", &origin, &e, &mut out),
@@ -399,6 +414,7 @@ impl Node {
             Input::Partial { id, ask, base } => self.partial(now, id, ask, base, &mut out),
             Input::SentWanted { id, bytes, origin } => {
                 let answer = decode::<TransfersWanted>(&bytes).map(|wanted| TransfersSent {
+                    epoch: self.leader.epoch(),
                     version: VERSION,
                     transfers: self.leader.sent_to(wanted.to, wanted.after),
                 });
@@ -437,6 +453,10 @@ impl Node {
                 return;
             }
         };
+        if let Err(stale) = self.admit_epoch(&input) {
+            self.fenced(stale, origin, out);
+            return;
+        }
         let size = bytes.len();
         if self.timers.journal {
             self.journaled += 1;
@@ -448,6 +468,33 @@ impl Node {
                 tracing::error!(leader = %self.leader.name(), error = %e, "leader cannot go on applying its stream");
                 self.failure = Some(e.to_string());
             }
+        }
+    }
+
+    /// The fence on a peer's transfers: refused if their sender is a
+    /// former holder of its role, cut off but still running.
+    fn admit_epoch(&mut self, input: &door::Input) -> Result<(), Stale> {
+        let door::Input::Transfers { epoch, transfers } = input else {
+            return Ok(());
+        };
+        let Some(from) = transfers.first().and_then(|t| self.leader.peer(t.from)) else {
+            return Ok(());
+        };
+        self.fence.admit(TransfersSent::WHAT, from, *epoch)
+    }
+
+    /// A message of a former holder of its role, refused by the fence:
+    /// counted as rejected and logged (once per role and epoch).
+    fn fenced(&mut self, stale: Stale, origin: &str, out: &mut Vec<Output>) {
+        self.leader.note_rejected();
+        if self.timers.journal {
+            out.push(Output::Journal {
+                kind: Kind::Rejected,
+                bytes: Vec::new(),
+            });
+        }
+        if self.fenced_warned.insert((stale.role.clone(), stale.epoch)) {
+            tracing::warn!(leader = %self.leader.name(), from = %origin, "{stale}");
         }
     }
 
@@ -502,6 +549,7 @@ impl Node {
         for (to, transfers) in std::mem::take(&mut self.outgoing) {
             let seqs = transfers.iter().map(|t| t.seq).collect();
             let body = encode(&TransfersSent {
+                epoch: self.leader.epoch(),
                 version: VERSION,
                 transfers,
             });
@@ -556,6 +604,7 @@ impl Node {
         }
         self.resending = true;
         out.push(Output::AskResend(Resend {
+            epoch: self.leader.epoch(),
             version: VERSION,
             leader: self.leader.name().to_string(),
             from: self.leader.next_batch(),
@@ -575,6 +624,7 @@ impl Node {
         out.push(Output::AskTransfers {
             peer: peer.to_string(),
             wanted: TransfersWanted {
+                epoch: self.leader.epoch(),
                 version: VERSION,
                 to: me,
                 after: self.leader.received_through(),
@@ -719,6 +769,7 @@ impl Node {
         }
         self.progressed = through;
         out.push(Output::Progress(Progress {
+            epoch: self.leader.epoch(),
             version: VERSION,
             leader: self.leader.name().to_string(),
             through,

@@ -7,8 +7,28 @@ use crate::error::LeaderError;
 use crate::journal::Kind;
 use crate::state::Leader;
 
+/// Who runs a role: the process, and the epoch it holds the role at (0
+/// without voters; a plain process name means that).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Holder<'a> {
+    pub process: &'a str,
+    pub epoch: u64,
+}
+
+impl<'a> From<&'a str> for Holder<'a> {
+    fn from(process: &'a str) -> Self {
+        Holder { process, epoch: 0 }
+    }
+}
+
+impl<'a> From<&'a String> for Holder<'a> {
+    fn from(process: &'a String) -> Self {
+        Holder::from(process.as_str())
+    }
+}
+
 impl Node {
-    /// The node of leader `name` (run by `host`) as its durable state left
+    /// The node of leader `name` (run by `holder`) as its durable state left
     /// it: `snapshot` (if any) with `entries` (the journal's inputs, in
     /// order) replayed. When there was anything to replay, or the role
     /// was `adopted` from a process gone for good, it then catches up:
@@ -24,7 +44,7 @@ impl Node {
     #[allow(clippy::too_many_arguments)]
     pub fn recover<'a>(
         name: &str,
-        host: &str,
+        holder: impl Into<Holder<'a>>,
         snapshot: Option<&[u8]>,
         entries: impl IntoIterator<Item = (Kind, &'a [u8])>,
         adopted: bool,
@@ -36,7 +56,9 @@ impl Node {
             Some(bytes) => Leader::restore(bytes)?,
             None => Leader::new(name),
         };
-        leader.set_host(host);
+        let holder = holder.into();
+        leader.set_host(holder.process);
+        leader.set_epoch(holder.epoch);
         if let Some(dropped) = damaged {
             leader.note_journal_damage(dropped);
         }

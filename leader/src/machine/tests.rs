@@ -341,7 +341,11 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
         900 * MS,
         Input::Transfers {
             peer: "b".into(),
-            result: Ok(vec![lost]),
+            result: Ok(TransfersSent {
+                epoch: 0,
+                version: VERSION,
+                transfers: vec![lost],
+            }),
         },
     );
     assert_eq!(node.leader().waiting_for_transfer(), None);
@@ -597,7 +601,11 @@ fn a_restarted_leader_catches_up_and_says_it_is_recovering_until_it_has() {
         40 * MS,
         Input::Transfers {
             peer: "b".into(),
-            result: Ok(vec![transfer]),
+            result: Ok(TransfersSent {
+                epoch: 0,
+                version: VERSION,
+                transfers: vec![transfer],
+            }),
         },
     );
     assert!(node.recovering_since().is_none());
@@ -745,6 +753,7 @@ fn a_peers_durable_mark_lets_the_leader_forget_what_it_sent_there() {
     node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
     let sent_to_b = |node: &mut Node, id| {
         let wanted = TransfersWanted {
+            epoch: 0,
             version: VERSION,
             to: 1,
             after: 0,
@@ -768,6 +777,7 @@ fn a_peers_durable_mark_lets_the_leader_forget_what_it_sent_there() {
     // Its own mark, or b's below the transfer, changes nothing.
     let mark = |leader: &str, position| Input::Durable {
         bytes: encode(&Durable {
+            epoch: 0,
             version: VERSION,
             leader: leader.into(),
             batch: 1,
@@ -854,9 +864,19 @@ fn progress_is_published_when_it_moves_and_at_every_sweep() {
 
 /// b's sets of a mix across at item `seq`, as they come from the network.
 fn sets_from_b(seq: u64, sets: Vec<idmesh_protocol::wire::leader_to_leader::WireSet>) -> Input {
+    sets_from_b_at(0, seq, sets)
+}
+
+/// [`sets_from_b`] from b's holder at `epoch`.
+fn sets_from_b_at(
+    epoch: u64,
+    seq: u64,
+    sets: Vec<idmesh_protocol::wire::leader_to_leader::WireSet>,
+) -> Input {
     Input::Message {
         kind: Kind::Transfer,
         bytes: encode(&TransfersSent {
+            epoch,
             version: VERSION,
             transfers: vec![Transfer {
                 trees: Vec::new(),
@@ -934,4 +954,39 @@ fn a_leader_pushes_its_sums_at_every_cut_as_a_change_to_the_last_pushed() {
     assert_eq!(changed.len(), 1, "only the merged component: {changed:?}");
     assert_eq!(changed[0].tracks, vec![0, 2]);
     assert_eq!(answers(&out).len(), 1, "the held query answered too");
+}
+
+/// The fence: once b's successor (epoch 2) has been heard, what b's former
+/// holder (epoch 1, cut off but running) sends is refused, counted, and
+/// never journaled; its durable mark makes nothing forgotten.
+#[test]
+fn a_peers_former_holder_is_fenced_off_once_its_successor_is_heard() {
+    let mut node = started("a", &["a", "b"]);
+    let journaled = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::Journal { kind, .. } if *kind != Kind::Rejected))
+            .count()
+    };
+    let out = node.step(10 * MS, sets_from_b_at(2, 5, Vec::new()));
+    assert_eq!(journaled(&out), 1);
+    let rejected = node.leader().stats().rejected;
+    let out = node.step(20 * MS, sets_from_b_at(1, 6, Vec::new()));
+    assert_eq!(journaled(&out), 0, "refused, not journaled");
+    assert_eq!(node.leader().stats().rejected, rejected + 1);
+    let out = node.step(30 * MS, sets_from_b_at(2, 6, Vec::new()));
+    assert_eq!(journaled(&out), 1, "the holder is heard");
+    let mark = |epoch| Input::Durable {
+        bytes: encode(&Durable {
+            epoch,
+            version: VERSION,
+            leader: "b".into(),
+            batch: 1,
+            position: 9,
+        }),
+        origin: "b".into(),
+    };
+    node.step(40 * MS, mark(1));
+    assert_eq!(node.leader().stats().rejected, rejected + 2);
+    node.step(50 * MS, mark(2));
+    assert_eq!(node.leader().stats().rejected, rejected + 2);
 }

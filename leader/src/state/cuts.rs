@@ -54,6 +54,17 @@ impl Answer {
             .clone()
     }
 
+    /// The same answer from a holder at `epoch`.
+    pub(super) fn restamped(&self, epoch: u64) -> Answer {
+        Answer::new(
+            Partial {
+                epoch,
+                ..self.sums.clone()
+            },
+            self.parts.clone(),
+        )
+    }
+
     fn made_whole(&self) -> Partial {
         Partial {
             components: self
@@ -167,6 +178,7 @@ impl Leader {
             None => sums.coefficients,
         };
         let sums = Partial {
+            epoch: self.epoch,
             trees,
             components: None,
             base: None,

@@ -253,6 +253,12 @@ pub struct Leader {
     /// ([`Leader::send_trees_left`]).
     #[serde(skip)]
     trees_out: Option<(u16, Vec<WireTree>)>,
+    /// The epoch at which this process holds the role (0 without voters),
+    /// stamped on every message it sends ([`idmesh_protocol::wire::epoch`]).
+    /// The holder's, not the state's: a snapshot taken by one holder is
+    /// restored by the next at its own epoch.
+    #[serde(skip)]
+    epoch: u64,
 }
 
 impl Leader {
@@ -288,6 +294,29 @@ impl Leader {
             to_follow: Vec::new(),
             resting: None,
             trees_out: None,
+            epoch: 0,
+        }
+    }
+
+    /// The epoch this process holds the role at.
+    pub(crate) fn epoch(&self) -> u64 {
+        self.epoch
+    }
+
+    /// Holds the role at `epoch` from now on: what is sent from here, the
+    /// follow request still out and the answers kept for late queries
+    /// included (restored from a former holder's snapshot, they carry its
+    /// epoch).
+    pub(crate) fn set_epoch(&mut self, epoch: u64) {
+        self.epoch = epoch;
+        if let Some(asked) = &mut self.asked {
+            asked.epoch = epoch;
+        }
+        self.resting = None;
+        for cut in &mut self.cuts {
+            if cut.sums.epoch != epoch {
+                *cut = Arc::new(cut.restamped(epoch));
+            }
         }
     }
 
@@ -395,6 +424,7 @@ impl Leader {
     /// included (the others keep what they sent after it).
     pub fn durable(&self) -> Durable {
         Durable {
+            epoch: self.epoch,
             version: VERSION,
             leader: self.name.clone(),
             batch: self.next_batch,

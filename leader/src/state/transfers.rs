@@ -411,6 +411,7 @@ impl Leader {
         }
         self.stats.unfollows += 1;
         actions.push(Action::Unfollow(Unfollow {
+            epoch: self.epoch,
             version: VERSION,
             leader: me,
             after: self.unfollow_after,
@@ -431,6 +432,7 @@ impl Leader {
         tracks.sort_unstable();
         self.stats.follows += 1;
         let follow = Follow {
+            epoch: self.epoch,
             version: VERSION,
             leader: me,
             after: seq,

@@ -22,18 +22,21 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
             items: sequenced(5, items()),
         })],
         "follow" => vec![encode(&Follow {
+            epoch: 0,
             version: VERSION,
             leader: 1,
             after: 12,
             tracks: vec![2, 5, 7],
         })],
         "unfollow" => vec![encode(&Unfollow {
+            epoch: 0,
             version: VERSION,
             leader: 2,
             after: 40,
             tracks: vec![1, 6],
         })],
         "resend" => vec![encode(&Resend {
+            epoch: 0,
             version: VERSION,
             leader: "leader-1".into(),
             from: 3,
@@ -43,11 +46,13 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
             batches: batches(),
         })],
         "transfers_wanted" => vec![encode(&TransfersWanted {
+            epoch: 0,
             version: VERSION,
             to: 2,
             after: 40,
         })],
         "transfers_sent" => vec![encode(&TransfersSent {
+            epoch: 0,
             version: VERSION,
             transfers: transfers(),
         })],
@@ -222,6 +227,7 @@ fn transfers() -> Vec<Transfer> {
 
 fn partials() -> Vec<Partial> {
     vec![Partial {
+        epoch: 0,
         trees: Vec::new(),
         components: None,
         base: None,

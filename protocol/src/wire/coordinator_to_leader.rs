@@ -18,6 +18,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Partial {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     pub leader: String,
     /// The seq of the cut item and the query's tag it carried; for a quiet
     /// answer, the seq the leader has applied everything through, tag 0.
@@ -62,6 +64,7 @@ pub struct Partial {
     pub trees: Vec<WireTree>,
 }
 super::versioned!(Partial, "partial sums");
+super::epoch::epoched!(Partial);
 
 /// A leader's counters, also the JSON of `P/query/stats` (one per leader).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -244,6 +247,7 @@ mod tests {
     #[test]
     fn partials_are_checked() {
         let partial = Partial {
+            epoch: 0,
             trees: Vec::new(),
             components: None,
             base: None,

@@ -59,11 +59,14 @@ pub struct WireRow {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TransfersWanted {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     /// The asking leader's index.
     pub to: u16,
     pub after: u64,
 }
 super::versioned!(TransfersWanted, "transfers request");
+super::epoch::epoched!(TransfersWanted);
 
 /// Transfers in order: every transfer one input of the sender made for
 /// this leader, put on `P/leader/<l>/transfer` as one message (a crowd's
@@ -72,9 +75,12 @@ super::versioned!(TransfersWanted, "transfers request");
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TransfersSent {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     pub transfers: Vec<Transfer>,
 }
 super::versioned!(TransfersSent, "transfers reply");
+super::epoch::epoched!(TransfersSent);
 
 impl Valid for Transfer {
     fn problem(&self) -> Option<String> {

@@ -15,11 +15,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Follow {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     pub leader: u16,
     pub after: u64,
     pub tracks: Vec<u32>,
 }
 super::versioned!(Follow, "follow request");
+super::epoch::epoched!(Follow);
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Followed {
@@ -41,11 +44,14 @@ super::versioned!(Followed, "follow reply");
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Unfollow {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     pub leader: u16,
     pub after: u64,
     pub tracks: Vec<u32>,
 }
 super::versioned!(Unfollow, "unfollow request");
+super::epoch::epoched!(Unfollow);
 
 /// A leader that lost batches of its stream (a gap in their numbers, or
 /// the time it was down) asks for them again: every batch numbered `from`
@@ -54,12 +60,15 @@ super::versioned!(Unfollow, "unfollow request");
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Resend {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     /// The leader's name: one that lost the stream's Begin does not know
     /// its index yet.
     pub leader: String,
     pub from: u64,
 }
 super::versioned!(Resend, "resend request");
+super::epoch::epoched!(Resend);
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Resent {
@@ -79,6 +88,8 @@ super::versioned!(Resent, "resend reply");
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Durable {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     pub leader: String,
     /// Every batch numbered below this one is applied and kept.
     pub batch: u64,
@@ -86,6 +97,7 @@ pub struct Durable {
     pub position: u64,
 }
 super::versioned!(Durable, "durable mark");
+super::epoch::epoched!(Durable);
 
 /// How far a leader has got: every item numbered at or before `through`
 /// that the sensor sent it is applied (it waits for nothing before it),
@@ -101,11 +113,14 @@ super::versioned!(Durable, "durable mark");
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Progress {
     pub version: u16,
+    /// The sending role's epoch ([`super::epoch`]).
+    pub epoch: u64,
     pub leader: String,
     pub through: u64,
     pub batch: u64,
 }
 super::versioned!(Progress, "progress mark");
+super::epoch::epoched!(Progress);
 
 impl Valid for Follow {
     fn problem(&self) -> Option<String> {

@@ -15,6 +15,8 @@
 //! - [`sensor_to_sensor`] — several sensors: each one's intake, for the
 //!   others to merge into one order.
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
+//! - [`epoch`] — the fence: the epoch every leader message carries, and
+//!   the receivers' rule that refuses a former holder's.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
 //! - [`query`] — what a user gets back, as JSON.
 //!
@@ -33,6 +35,7 @@
 pub mod bounds;
 pub mod coordinator_to_leader;
 pub mod coordinator_to_sensor;
+pub mod epoch;
 pub mod factored;
 pub mod identity;
 pub mod interest;
@@ -56,7 +59,9 @@ use serde::Serialize;
 /// (`Partial::passive`).
 /// 7: leaders may hold the factored identity belief
 /// (`Begin::factored_identity`); transfers and answers carry its trees.
-pub const VERSION: u16 = 7;
+/// 8: every message a leader role sends carries the role's epoch, which
+/// receivers fence on ([`epoch`]).
+pub const VERSION: u16 = 8;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

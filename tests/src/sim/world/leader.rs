@@ -362,11 +362,8 @@ impl World {
             })),
             AskKind::Transfers(peer) => Input::Transfers {
                 peer,
-                result: reply.and_then(|bytes| {
-                    decode::<TransfersSent>(&bytes)
-                        .map(|t| t.transfers)
-                        .map_err(|e| e.to_string())
-                }),
+                result: reply
+                    .and_then(|bytes| decode::<TransfersSent>(&bytes).map_err(|e| e.to_string())),
             },
         };
         self.step(i, input)
