@@ -140,7 +140,10 @@ fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
     let heir_disk = gone.dir.join("state-leader-2");
     let kept_copy = heir_disk.join("leader-1.standby.snapshot").exists();
     assert!(!heir_disk.join("leader-1.journal").exists(), "disks apart");
-    eprintln!("killing leader-1 {:.2} s after the first answer", started.elapsed().as_secs_f64());
+    eprintln!(
+        "killing leader-1 {:.2} s after the first answer",
+        started.elapsed().as_secs_f64()
+    );
     gone.kill("leader-1");
     let killed = Instant::now();
     let last = gone.final_marginals(Duration::from_secs(60));
@@ -149,7 +152,10 @@ fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
         &floats(&twin["final_p_red"]),
         "after a host lost with its disk",
     );
-    assert!(kept_copy, "leader-2 kept leader-1's snapshot before the kill");
+    assert!(
+        kept_copy,
+        "leader-2 kept leader-1's snapshot before the kill"
+    );
     let adopted = gone.leader("leader-1");
     assert_eq!(adopted["host"], "leader-2", "its standby adopted it");
     assert!(heir_disk.join("leader-1.journal.snapshot").exists());
