@@ -473,7 +473,7 @@ impl Driver<'_> {
                 Output::ToStandby { to, mark } => {
                     // A snapshot that could not be written is not sent.
                     if failed.is_none() {
-                        self.to_standby(to, mark).await;
+                        self.send_standby(to, mark).await;
                     }
                 }
             }
@@ -582,7 +582,7 @@ impl Driver<'_> {
 
     /// Puts the last snapshot, whose mark is `mark`, on standby `to`'s
     /// key; the standby answers on this role's `stored` key.
-    async fn to_standby(&mut self, to: String, mark: Durable) {
+    async fn send_standby(&mut self, to: String, mark: Durable) {
         let name = &self.config.name;
         let Some(state) = &self.last_snapshot else {
             return;
