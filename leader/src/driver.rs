@@ -102,13 +102,7 @@ pub async fn run(
     } = Inbox::declare(&session, keys, &name).await?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
     let started = Instant::now();
-    let (mut journal, recovered) = match owned {
-        Some((options, owner)) => {
-            let (journal, recovered) = Journal::open(options, owner)?;
-            (Some(journal), recovered)
-        }
-        None => (None, Recovered::default()),
-    };
+    let (mut journal, recovered) = open_journal(owned)?;
     // The token claims the role (a process coming back finds it taken);
     // queries meanwhile are told the leader is recovering.
     let token = session
@@ -121,18 +115,7 @@ pub async fn run(
     let mut standby = config.standby.clone().filter(|_| journal.is_some());
     tracing::info!(leader = %name, host = %config.host, "leader up");
 
-    let mut driver = Driver {
-        session: &session,
-        config: &config,
-        journal: &mut journal,
-        queries: HashMap::new(),
-        next_id: 0,
-        reply_tx: &reply_tx,
-        transfers_put: 0,
-        pushes: 0,
-        publishers: HashMap::new(),
-        last_snapshot,
-    };
+    let mut driver = Driver::new(&session, &config, &mut journal, &reply_tx, last_snapshot);
     driver.carry_out(&mut node, first, started).await;
     let mut sweep = tokio::time::interval(node.timers().sweep);
     tokio::pin!(shutdown);
@@ -202,6 +185,19 @@ pub async fn run(
 type Samples =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 type Queries = zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<Query>>;
+
+/// The journal `owned` names (with its lock), opened, and what it held.
+fn open_journal(
+    owned: Option<(&JournalOptions, Ownership)>,
+) -> Result<(Option<Journal>, Recovered), RunError> {
+    Ok(match owned {
+        Some((options, owner)) => {
+            let (journal, recovered) = Journal::open(options, owner)?;
+            (Some(journal), recovered)
+        }
+        None => (None, Recovered::default()),
+    })
+}
 
 /// The standby the host names next (waits for ever without one).
 async fn next_standby(standby: &mut Option<watch::Receiver<Option<String>>>) -> Option<String> {
@@ -380,7 +376,30 @@ fn lost_on_purpose(every: Option<u64>, count: u64) -> bool {
     every.is_some_and(|n| n > 0 && count.is_multiple_of(n))
 }
 
-impl Driver<'_> {
+impl<'a> Driver<'a> {
+    /// A driver with nothing under way; `last_snapshot` is the one the
+    /// journal was recovered from.
+    fn new(
+        session: &'a Session,
+        config: &'a LeaderConfig,
+        journal: &'a mut Option<Journal>,
+        reply_tx: &'a mpsc::UnboundedSender<Reply>,
+        last_snapshot: Option<Vec<u8>>,
+    ) -> Self {
+        Driver {
+            session,
+            config,
+            journal,
+            queries: HashMap::new(),
+            next_id: 0,
+            reply_tx,
+            transfers_put: 0,
+            pushes: 0,
+            publishers: HashMap::new(),
+            last_snapshot,
+        }
+    }
+
     /// Keeps `query` until the node answers it; returns its id.
     fn hold(&mut self, query: Query) -> u64 {
         self.next_id += 1;
