@@ -14,19 +14,21 @@
 use crate::error::{MeshError, RunError};
 use crate::journal::{Journal, JournalError, JournalOptions, Kind, Recovered};
 use crate::machine::{Ask, Input, Node, Output, Timers};
+use crate::standby;
 use idmesh_ownership::{Ownership, HANDOVER_PATIENCE};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::keys::Keys;
-use idmesh_protocol::wire::leader_to_leader::TransfersSent;
+use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, TransfersSent};
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Resent};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
-use idmesh_protocol::wire::{decode, encode};
+use idmesh_protocol::wire::valid::MAX_SNAPSHOT_BYTES;
+use idmesh_protocol::wire::{decode, encode, VERSION};
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::future::Future;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::query::{ConsolidationMode, Query, QueryTarget};
@@ -65,6 +67,10 @@ pub(crate) struct LeaderConfig {
     pub drop_push_every: Option<u64>,
     /// The sensor streams under a window ([`Timers::flow_control`]).
     pub flow_control: bool,
+    /// Which role's process is this role's standby now, as the host
+    /// works it out from the liveliness tokens; None = no standby (one
+    /// leader process, or no journal).
+    pub standby: Option<watch::Receiver<Option<String>>>,
 }
 
 /// Replies to the gets the leader makes, back in its one task.
@@ -94,16 +100,12 @@ pub async fn run(
         stats,
         sent,
         durables,
+        copies,
+        stored,
     } = Inbox::declare(&session, keys, &name).await?;
     let (reply_tx, mut replies) = mpsc::unbounded_channel::<Reply>();
     let started = Instant::now();
-    let (mut journal, recovered) = match owned {
-        Some((options, owner)) => {
-            let (journal, recovered) = Journal::open(options, owner)?;
-            (Some(journal), recovered)
-        }
-        None => (None, Recovered::default()),
-    };
+    let (mut journal, recovered) = open_journal(owned)?;
     // The token claims the role (a process coming back finds it taken);
     // queries meanwhile are told the leader is recovering.
     let token = session
@@ -111,20 +113,12 @@ pub async fn run(
         .declare_token(keys.alive("leader", &name))
         .await
         .map_err(|e| MeshError::new("declare the liveliness token", e))?;
+    let last_snapshot = recovered.snapshot.clone();
     let (mut node, first) = start_node(&config, recovered, journal.is_some(), started)?;
+    let mut standby = config.standby.clone().filter(|_| journal.is_some());
     tracing::info!(leader = %name, host = %config.host, "leader up");
 
-    let mut driver = Driver {
-        session: &session,
-        config: &config,
-        journal: &mut journal,
-        queries: HashMap::new(),
-        next_id: 0,
-        reply_tx: &reply_tx,
-        transfers_put: 0,
-        pushes: 0,
-        publishers: HashMap::new(),
-    };
+    let mut driver = Driver::new(&session, &config, &mut journal, &reply_tx, last_snapshot);
     driver.carry_out(&mut node, first, started).await;
     let mut sweep = tokio::time::interval(node.timers().sweep);
     tokio::pin!(shutdown);
@@ -159,6 +153,16 @@ pub async fn run(
                 let Ok(sample) = sample else { break };
                 Input::Durable { bytes: sample.payload().to_bytes().into_owned(), origin: sample.key_expr().to_string() }
             }
+            sample = stored.recv_async() => {
+                let Ok(sample) = sample else { break };
+                Input::StandbyStored { bytes: sample.payload().to_bytes().into_owned(), origin: sample.key_expr().to_string() }
+            }
+            to = next_standby(&mut standby) => Input::Standby(to),
+            sample = copies.recv_async() => {
+                let Ok(sample) = sample else { break };
+                driver.keep_copy(&sample.payload().to_bytes()).await;
+                continue;
+            }
             _ = sweep.tick() => Input::Tick,
             query = stats.recv_async() => {
                 let Ok(query) = query else { break };
@@ -185,8 +189,35 @@ type Samples =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 type Queries = zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<Query>>;
 
+/// The journal `owned` names (with its lock), opened, and what it held.
+fn open_journal(
+    owned: Option<(&JournalOptions, Ownership)>,
+) -> Result<(Option<Journal>, Recovered), RunError> {
+    Ok(match owned {
+        Some((options, owner)) => {
+            let (journal, recovered) = Journal::open(options, owner)?;
+            (Some(journal), recovered)
+        }
+        None => (None, Recovered::default()),
+    })
+}
+
+/// The standby the host names next (waits for ever without one).
+async fn next_standby(standby: &mut Option<watch::Receiver<Option<String>>>) -> Option<String> {
+    let Some(receiver) = standby else {
+        return std::future::pending().await;
+    };
+    if receiver.changed().await.is_err() {
+        // The host is gone: the role is stopping.
+        *standby = None;
+        return std::future::pending().await;
+    }
+    receiver.borrow_and_update().clone()
+}
+
 /// What reaches a leader from the mesh: the stream's batches, its peers'
-/// transfers and durable marks, and the queries it answers.
+/// transfers and durable marks, the queries it answers, other roles'
+/// snapshots to keep as their standby, and its own standby's word.
 struct Inbox {
     events: Samples,
     transfers: Samples,
@@ -194,6 +225,8 @@ struct Inbox {
     stats: Queries,
     sent: Queries,
     durables: Samples,
+    copies: Samples,
+    stored: Samples,
 }
 
 impl Inbox {
@@ -224,6 +257,14 @@ impl Inbox {
             .declare_subscriber(keys.every_leader_durable())
             .await
             .map_err(|e| MeshError::new("declare the durable-mark subscriber", e))?;
+        let copies = session
+            .declare_subscriber(keys.leader_standby(name))
+            .await
+            .map_err(|e| MeshError::new("declare the standby-copy subscriber", e))?;
+        let stored = session
+            .declare_subscriber(keys.leader_stored(name))
+            .await
+            .map_err(|e| MeshError::new("declare the standby-acknowledgement subscriber", e))?;
         Ok(Inbox {
             events,
             transfers,
@@ -231,6 +272,8 @@ impl Inbox {
             stats,
             sent,
             durables,
+            copies,
+            stored,
         })
     }
 }
@@ -246,6 +289,7 @@ fn start_node(
 ) -> Result<(Node, Vec<Output>), RunError> {
     let timers = Timers {
         flow_control: config.flow_control,
+        standby: config.standby.is_some() && journaled,
         ..Timers::new(config.follow_timeout, journaled, config.snapshot_every)
     };
     let (node, first) = Node::recover(
@@ -327,6 +371,9 @@ struct Driver<'a> {
     /// plain put resolves its key's matches every time (in a profile of
     /// four leaders on the 10,000-target crowd, 3% of their CPU).
     publishers: HashMap<String, Publisher<'static>>,
+    /// The last snapshot written (or recovered from): what goes to the
+    /// standby.
+    last_snapshot: Option<Vec<u8>>,
 }
 
 /// Tests only: whether the `count`-th message of a kind is lost on
@@ -335,7 +382,30 @@ fn lost_on_purpose(every: Option<u64>, count: u64) -> bool {
     every.is_some_and(|n| n > 0 && count.is_multiple_of(n))
 }
 
-impl Driver<'_> {
+impl<'a> Driver<'a> {
+    /// A driver with nothing under way; `last_snapshot` is the one the
+    /// journal was recovered from.
+    fn new(
+        session: &'a Session,
+        config: &'a LeaderConfig,
+        journal: &'a mut Option<Journal>,
+        reply_tx: &'a mpsc::UnboundedSender<Reply>,
+        last_snapshot: Option<Vec<u8>>,
+    ) -> Self {
+        Driver {
+            session,
+            config,
+            journal,
+            queries: HashMap::new(),
+            next_id: 0,
+            reply_tx,
+            transfers_put: 0,
+            pushes: 0,
+            publishers: HashMap::new(),
+            last_snapshot,
+        }
+    }
+
     /// Keeps `query` until the node answers it; returns its id.
     fn hold(&mut self, query: Query) -> u64 {
         self.next_id += 1;
@@ -421,9 +491,14 @@ impl Driver<'_> {
                         tracing::debug!(leader = %name, error = %e, "a progress mark was lost");
                     }
                 }
-                Output::Snapshot(state) => {
-                    if let Err(why) = self.snapshot(&state) {
-                        failed = Some(why);
+                Output::Snapshot(state) => match self.snapshot(&state) {
+                    Ok(()) => self.last_snapshot = Some(state),
+                    Err(why) => failed = Some(why),
+                },
+                Output::ToStandby { to, mark } => {
+                    // A snapshot that could not be written is not sent.
+                    if failed.is_none() {
+                        self.send_standby(to, mark).await;
                     }
                 }
             }
@@ -528,6 +603,70 @@ impl Driver<'_> {
             }
         }
         Ok(())
+    }
+
+    /// Puts the last snapshot, whose mark is `mark`, on standby `to`'s
+    /// key; the standby answers on this role's `stored` key.
+    async fn send_standby(&mut self, to: String, mark: Durable) {
+        let name = &self.config.name;
+        let Some(state) = &self.last_snapshot else {
+            return;
+        };
+        if state.len() > MAX_SNAPSHOT_BYTES {
+            tracing::error!(leader = %name, bytes = state.len(), most = MAX_SNAPSHOT_BYTES,
+                "the snapshot is too large to send to the standby: the role's durable mark stops moving");
+            return;
+        }
+        let copy = StandbyCopy {
+            version: VERSION,
+            role: name.clone(),
+            to: to.clone(),
+            mark,
+            state: state.clone(),
+        };
+        let body = encode(&copy);
+        tracing::debug!(leader = %name, standby = %to, bytes = body.len(), "snapshot to the standby");
+        let key = self.config.keys.leader_standby(&to);
+        if let Err(e) = self.put(key, CongestionControl::Block, body).await {
+            tracing::warn!(leader = %name, standby = %to, error = %e, "could not send the snapshot to the standby");
+        }
+    }
+
+    /// Another role's snapshot, sent here as its standby: written to this
+    /// process's state directory, then acknowledged with its mark.
+    async fn keep_copy(&mut self, bytes: &[u8]) {
+        let name = &self.config.name;
+        let Some(dir) = self.config.journal.as_ref().and_then(|j| j.path.parent()) else {
+            return;
+        };
+        let copy = match decode::<StandbyCopy>(bytes) {
+            Ok(copy) if copy.to == *name => copy,
+            Ok(copy) => {
+                tracing::warn!(leader = %name, role = %copy.role, to = %copy.to, "a standby copy for another role: not kept");
+                return;
+            }
+            Err(e) => {
+                tracing::warn!(leader = %name, error = %e, "a standby copy refused");
+                return;
+            }
+        };
+        let at = Instant::now();
+        let stored = match standby::keep(dir, &copy, &self.config.host) {
+            Ok(stored) => stored,
+            Err(e) => {
+                tracing::error!(leader = %name, role = %copy.role, error = %e, "cannot keep a standby copy");
+                return;
+            }
+        };
+        tracing::debug!(leader = %name, role = %copy.role, bytes = copy.state.len(),
+            seconds = at.elapsed().as_secs_f64(), "standby copy kept");
+        let key = self.config.keys.leader_stored(&copy.role);
+        if let Err(e) = self
+            .put(key, CongestionControl::Block, encode(&stored))
+            .await
+        {
+            tracing::warn!(leader = %name, role = %copy.role, error = %e, "could not acknowledge a standby copy");
+        }
     }
 
     /// Puts `body` on `key` through its publisher, declared (with

@@ -26,6 +26,15 @@
 //! up it answers with a "degraded: recovering" error. Never numbers without
 //! the role's share.
 //!
+//! Hosts need not share a disk. Each role's standby is the process that
+//! would adopt it — the heir as above, counted without the roles its own
+//! process hosts, which die with it — and keeps a copy of the role's last
+//! snapshot under its own state directory (`crate::standby`; the role's
+//! durable mark waits for it, `crate::machine`). A process adopting a
+//! role whose journal it does not find installs that copy as the role's
+//! snapshot and catches up from there; a journal of the role it does find
+//! (a shared disk) is newer, and is used.
+//!
 //! Roles go home. A process that starts and finds its own role's token
 //! held (adopted while it was away, or its old session's token not yet
 //! expired) stands by and says so with a token of its own,
@@ -41,6 +50,7 @@
 use crate::driver::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
+use crate::standby::{self, Source};
 use idmesh_ownership::OwnershipError;
 use idmesh_protocol::wire::keys::Keys;
 use std::collections::{BTreeSet, HashMap};
@@ -79,8 +89,19 @@ pub struct HostConfig {
 }
 
 impl HostConfig {
+    /// Whether every role keeps a standby: more than one leader process,
+    /// and a state directory to keep copies in.
+    fn standbys(&self) -> bool {
+        self.leaders.len() > 1 && self.state_dir.is_some()
+    }
+
     /// The actor settings for `role`, hosted here.
-    fn role(&self, role: &str, adopted: bool) -> LeaderConfig {
+    fn role(
+        &self,
+        role: &str,
+        adopted: bool,
+        standby: Option<watch::Receiver<Option<String>>>,
+    ) -> LeaderConfig {
         LeaderConfig {
             name: role.to_string(),
             host: self.name.clone(),
@@ -97,6 +118,7 @@ impl HostConfig {
             drop_transfer_every: self.drop_transfer_every,
             drop_push_every: self.drop_push_every,
             flow_control: self.flow_control,
+            standby,
         }
     }
 
@@ -135,6 +157,8 @@ struct Hosted<'a> {
     roles: BTreeSet<String>,
     /// One stop signal per hosted role: a role is handed back alone.
     stops: HashMap<String, watch::Sender<bool>>,
+    /// Each hosted role's standby, as its actor is told it.
+    standbys: HashMap<String, watch::Sender<Option<String>>>,
 }
 
 impl Hosted<'_> {
@@ -146,13 +170,40 @@ impl Hosted<'_> {
         let stop = async move {
             let _ = stop_rx.wait_for(|s| *s).await;
         };
-        let (session, role_config) = (self.session.clone(), self.config.role(role, adopted));
+        let standby = self.config.standbys().then(|| {
+            let (tx, rx) = watch::channel(None);
+            self.standbys.insert(role.to_string(), tx);
+            rx
+        });
+        let role_config = self.config.role(role, adopted, standby);
+        let session = self.session.clone();
         let owned = role.to_string();
         self.tasks.spawn(async move {
             let result = driver::run(session, role_config, stop).await;
             (owned, result)
         });
         self.roles.insert(role.to_string());
+    }
+
+    /// Tells every hosted role its standby: the role that would inherit it
+    /// among the live ones other than this process's (which die with it).
+    fn tell_standbys(&self, alive: &BTreeSet<String>) {
+        let others: BTreeSet<String> = alive.difference(&self.roles).cloned().collect();
+        for (role, tx) in &self.standbys {
+            let next = heir(&self.config.leaders, role, &others).map(str::to_owned);
+            tx.send_if_modified(|now| {
+                let changed = *now != next;
+                now.clone_from(&next);
+                changed
+            });
+        }
+    }
+
+    /// A role's actor ended: it is no longer hosted here.
+    fn ended(&mut self, role: &str) {
+        self.roles.remove(role);
+        self.stops.remove(role);
+        self.standbys.remove(role);
     }
 }
 
@@ -180,6 +231,7 @@ pub async fn run(
         tasks: JoinSet::new(),
         roles: BTreeSet::new(),
         stops: HashMap::new(),
+        standbys: HashMap::new(),
     };
 
     // Standing by for its own role: the token that asks for it back.
@@ -229,8 +281,7 @@ pub async fn run(
             }
             done = hosted.tasks.join_next(), if !hosted.tasks.is_empty() => {
                 if let Some(Ok((role, result))) = done {
-                    hosted.roles.remove(&role);
-                    hosted.stops.remove(&role);
+                    hosted.ended(&role);
                     match result {
                         Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
                         Err(RunError::Journal(JournalError::Ownership(OwnershipError::Held { holder, .. }))) if role == config.name => {
@@ -259,10 +310,12 @@ pub async fn run(
                     home = None;
                     hosted.host(&config.name, true);
                 }
-                let Some(patience) = config.takeover_after else { continue };
-                adopt_lost_roles(&mut hosted, &mut tokens, patience).await;
+                if let Some(patience) = config.takeover_after {
+                    adopt_lost_roles(&mut hosted, &mut tokens, patience).await;
+                }
             }
         }
+        hosted.tell_standbys(&tokens.alive);
     }
     for stop in hosted.stops.values() {
         let _ = stop.send(true);
@@ -355,7 +408,34 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
             continue;
         }
         tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
+        adopt_from(config, &role);
         hosted.host(&role, true);
+    }
+}
+
+/// Before adopting `role`: its journal in this state directory if there
+/// is one (a shared disk), else the standby copy this process kept,
+/// installed as the role's snapshot. Says which at info.
+fn adopt_from(config: &HostConfig, role: &str) {
+    let Some(dir) = &config.state_dir else {
+        return;
+    };
+    match standby::prepare_adoption(dir, role) {
+        Ok(Source::Journal) => {
+            tracing::info!(process = %config.name, role, "adopting from the role's own journal")
+        }
+        Ok(Source::StandbyCopy(mark)) => {
+            tracing::info!(process = %config.name, role, batch = mark.batch, position = mark.position,
+                "adopting from this process's standby copy of the role's snapshot")
+        }
+        Ok(Source::Nothing) => {
+            tracing::warn!(process = %config.name, role,
+                "no journal of the role and no standby copy here: it is rebuilt from the stream's beginning, if the sensor still holds it")
+        }
+        Err(e) => {
+            tracing::error!(process = %config.name, role, error = %e,
+                "the standby copy cannot be used: the role is rebuilt from the stream's beginning, if the sensor still holds it")
+        }
     }
 }
 

@@ -21,6 +21,8 @@
 //!   processes gone for good that it adopts ([`run`]).
 //! - [`journal`] — the durable state: a snapshot plus the input log a
 //!   restarted (or adopted) leader replays.
+//! - `standby` — the copy of another role's snapshot a process keeps
+//!   as that role's standby, and the adoption that starts from it.
 //! - The lock that lets one process at a time run a role (a role cut off
 //!   by a partition is not adopted) is `idmesh-ownership`
 //!   (`protocol/ownership/`), which the sensor shares.
@@ -32,6 +34,7 @@ mod error;
 mod host;
 pub mod journal;
 mod machine;
+mod standby;
 mod state;
 
 // The protocol as a pure state machine, and what goes wrong.

@@ -81,6 +81,11 @@ pub struct Settings {
     /// Voters (`[[voter]]`, named `voter-1`, …), each with its log in
     /// the state directory.
     pub voters: usize,
+    /// With `journal`: every leader process has a state directory of its
+    /// own (`state-<name>`), as on hosts that each have their own disk. Each
+    /// is given its own copy of the topology, differing in `state_dir`
+    /// only (processes started one by one: [`Deployment::start_each`]).
+    pub own_disks: bool,
 }
 
 /// The factored belief's settings in a topology.
@@ -127,6 +132,8 @@ pub struct Deployment {
     config: PathBuf,
     /// `idmesh up`, or every process by its name.
     children: Vec<(String, Child)>,
+    /// Processes given a topology of their own ([`Settings::own_disks`]).
+    own_configs: Vec<(String, PathBuf)>,
 }
 
 /// The bounding box of a trace's positions (`move` and `detect` lines).
@@ -451,11 +458,21 @@ impl Deployment {
             .append(true)
             .open(self.dir.join("up.log"))
             .unwrap();
+        // A process with a topology of its own (its own state directory).
+        let name = args
+            .iter()
+            .position(|a| *a == "--name")
+            .and_then(|i| args.get(i + 1));
+        let config = self
+            .own_configs
+            .iter()
+            .find(|(n, _)| Some(&n.as_str()) == name)
+            .map_or(&self.config, |(_, path)| path);
         let mut command = Command::new(idmesh());
         command
             .args(args)
             .arg("--config")
-            .arg(&self.config)
+            .arg(config)
             .env("RUST_LOG", "warn")
             .stdout(Stdio::null())
             .stderr(log);
@@ -485,6 +502,16 @@ impl Deployment {
         let topology = topology(name, trace, settings);
         let config = dir.join("topology.toml");
         topology.save(&config).unwrap();
+        let mut own_configs = Vec::new();
+        if settings.own_disks && settings.journal {
+            for leader in &topology.leader {
+                let mut own = topology.clone();
+                own.state_dir = Some(PathBuf::from(format!("state-{}", leader.name)));
+                let path = dir.join(format!("topology-{}.toml", leader.name));
+                own.save(&path).unwrap();
+                own_configs.push((leader.name.clone(), path));
+            }
+        }
         Deployment {
             dir,
             coordinator: topology.coordinator_endpoints(),
@@ -497,6 +524,7 @@ impl Deployment {
             security: settings.security.clone(),
             config,
             children: Vec::new(),
+            own_configs,
         }
     }
 

@@ -105,6 +105,82 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
     );
 }
 
+/// Hosts with disks of their own: every leader process keeps its state
+/// in its own directory, snapshots often (so the sensor and the peers
+/// have long forgotten the stream's start), and leader-1 is killed for
+/// good. Its heir, leader-2, finds no journal of the role on its disk but
+/// the standby copy of its last snapshot it kept, adopts the role from it
+/// and catches up from the sensor and the peers, who kept what came after
+/// that copy: the final answer is the twin's to 1e-9, and nobody floods
+/// the logs asking for what is gone.
+#[test]
+fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
+    let dir = std::env::temp_dir().join(format!("idmesh-own-disks-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let settings = Settings {
+        leaders: 4,
+        rate: Some(500.0),
+        journal: true,
+        own_disks: true,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        ..Settings::default()
+    };
+    let mut gone = Deployment::start_each("own-disks", &trace, &settings);
+    let twin = gone.twin_summary(&trace);
+    let first = gone.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    let started = Instant::now();
+    // Several snapshots, and so several durable marks, before the kill.
+    let patience = Instant::now() + Duration::from_secs(20);
+    while gone.leader("leader-1")["snapshots"].as_u64().unwrap_or(0) < 5 {
+        assert!(Instant::now() < patience, "leader-1 wrote no snapshots");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let heir_disk = gone.dir.join("state-leader-2");
+    let kept_copy = heir_disk.join("leader-1.standby.snapshot").exists();
+    assert!(!heir_disk.join("leader-1.journal").exists(), "disks apart");
+    eprintln!(
+        "killing leader-1 {:.2} s after the first answer",
+        started.elapsed().as_secs_f64()
+    );
+    gone.kill("leader-1");
+    let killed = Instant::now();
+    let last = gone.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after a host lost with its disk",
+    );
+    assert!(
+        kept_copy,
+        "leader-2 kept leader-1's snapshot before the kill"
+    );
+    let adopted = gone.leader("leader-1");
+    assert_eq!(adopted["host"], "leader-2", "its standby adopted it");
+    assert!(heir_disk.join("leader-1.journal.snapshot").exists());
+    eprintln!(
+        "leader-1 lost with its disk: adopted from the standby copy and caught up {:.3} s \
+         after recovery began; final answer {:.2} s after the kill",
+        adopted["recovery_seconds"].as_f64().unwrap_or(f64::NAN),
+        killed.elapsed().as_secs_f64()
+    );
+    let log = gone.log();
+    let asked_again = log.matches("resend request failed").count();
+    let dropped = log.matches("were dropped").count();
+    let sensor_rejected: u64 = gone
+        .sensor_stats()
+        .iter()
+        .map(|s| s["rejected"].as_u64().unwrap_or(0))
+        .sum();
+    eprintln!("resend refusals logged: {asked_again}; sensor rejected: {sensor_rejected}");
+    assert_eq!(dropped, 0, "nothing the role needed was forgotten:\n{log}");
+    assert!(asked_again <= 4, "{asked_again} resend refusals logged");
+    assert!(sensor_rejected <= 4, "the sensor refused {sensor_rejected}");
+    drop(gone);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `idmesh up` supervises: a leader killed under it (kill -9) is started
 /// again after its backoff while its neighbours run on, and the answer is
 /// the centralized engine's.

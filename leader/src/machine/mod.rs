@@ -40,6 +40,11 @@
 //! came since its last snapshot: at most [`Timers::snapshot_every`]
 //! inputs, and nothing once it rests.
 //!
+//! With more than one leader process, the mark also waits for the role's
+//! standby (the process that would adopt it) to hold a copy of that
+//! snapshot on its own disk ([`standby`]): an adopter on another disk
+//! starts from that copy, and the others still keep what came after it.
+//!
 //! A restarted (or adopted) leader ([`Node::recover`]) replays its
 //! snapshot and journal, sends again every transfer it sent, asks the
 //! sensor for the batches after its journal's last and every peer for the
@@ -50,6 +55,7 @@
 
 mod queries;
 mod recovery;
+mod standby;
 
 pub use queries::Ask;
 pub use recovery::Holder;
@@ -91,6 +97,10 @@ pub struct Timers {
     /// the leader. Without one nobody waits for them, and a mark goes only
     /// at the sweep (a message per batch saved).
     pub flow_control: bool,
+    /// The role keeps a copy of its snapshots with its standby, and its
+    /// durable mark waits for it ([`standby`]): more than one leader
+    /// process, and a journal.
+    pub standby: bool,
 }
 
 impl Timers {
@@ -104,6 +114,7 @@ impl Timers {
             journal,
             snapshot_every,
             flow_control: true,
+            standby: false,
         }
     }
 }
@@ -145,6 +156,12 @@ pub enum Input {
         bytes: Vec<u8>,
         origin: String,
     },
+    /// The process that would adopt this role changed (None: none is
+    /// alive): the role's standby, which keeps its snapshots.
+    Standby(Option<String>),
+    /// The standby's word that it keeps a snapshot (`StandbyStored`
+    /// bytes).
+    StandbyStored { bytes: Vec<u8>, origin: String },
     /// The sweep's clock.
     Tick,
     /// The driver could not write the journal or the snapshot: the leader
@@ -202,6 +219,9 @@ pub enum Output {
     Persist { mark: Option<Durable> },
     /// Replace the journal by this snapshot of the whole state.
     Snapshot(Vec<u8>),
+    /// Put the last snapshot written (whose durable mark is `mark`) on
+    /// the key of standby `to`, for its process to keep.
+    ToStandby { to: String, mark: Durable },
     /// Publish how far the leader has got (the sensor's flow control).
     Progress(Progress),
 }
@@ -274,6 +294,8 @@ pub struct Node {
     fence: Fence,
     /// (role, epoch) of the former holders already warned about.
     fenced_warned: BTreeSet<(String, u64)>,
+    /// The role's standby and what it holds.
+    standby: standby::Standby,
 }
 
 impl Node {
@@ -302,6 +324,7 @@ impl Node {
             journaled: 0,
             fence: Fence::default(),
             fenced_warned: BTreeSet::new(),
+            standby: standby::Standby::default(),
         }
     }
 
@@ -425,6 +448,10 @@ impl Node {
                     id,
                     answer: answer.map_err(|e| e.to_string()),
                 });
+            }
+            Input::Standby(to) => self.standby_changed(now, to, &mut out),
+            Input::StandbyStored { bytes, origin } => {
+                self.standby_stored(&bytes, &origin, &mut out)
             }
             Input::Tick => {
                 self.tick(now, &mut out);
@@ -639,17 +666,24 @@ impl Node {
         // so that the mark below lets the others forget all they keep.
         let resting = self.journaled > 0 && self.journaled == self.journaled_at_sweep;
         if resting && self.failure.is_none() && self.snapshots() {
-            self.snapshot(out);
+            self.snapshot(now, out);
         }
         self.journaled_at_sweep = self.journaled;
         // With a journal, the others may forget what the last snapshot
         // holds (the journal after it may yet be found damaged); without
         // one, what was applied (a leader that dies does not come back).
+        // With a standby, what it also holds, and never a step back.
         let mark = match self.timers.journal {
-            true => self.safe.clone(),
+            true => self.journaled_mark(),
             false => Some(self.leader.durable()),
         };
-        let publish = self.failure.is_none() && mark.is_some() && self.published != mark;
+        let onwards = match (&mark, &self.published) {
+            (Some(mark), Some(published)) if self.timers.standby => {
+                standby::not_behind(mark, published)
+            }
+            _ => true,
+        };
+        let publish = self.failure.is_none() && mark.is_some() && self.published != mark && onwards;
         if publish {
             self.published.clone_from(&mark);
         }
@@ -657,6 +691,9 @@ impl Node {
             out.push(Output::Persist {
                 mark: mark.filter(|_| publish),
             });
+        }
+        if self.timers.standby {
+            self.standby_sweep(now, out);
         }
         self.expire(now, out);
         let late = self
@@ -729,7 +766,7 @@ impl Node {
         // Every input journaled is applied: the state can replace them.
         if let (true, Some(every)) = (self.timers.journal, self.timers.snapshot_every) {
             if self.journaled >= every {
-                self.snapshot(out);
+                self.snapshot(now, out);
             }
         }
     }
@@ -739,14 +776,16 @@ impl Node {
         self.timers.journal && self.timers.snapshot_every.is_some()
     }
 
-    /// The whole state, to replace the journal; its durable mark is
-    /// published from the next sweep on (after the driver wrote it).
-    fn snapshot(&mut self, out: &mut Vec<Output>) {
+    /// The whole state, to replace the journal and to go to the standby;
+    /// its durable mark is published from the next sweep on (after the
+    /// driver wrote it, and the standby holds it).
+    fn snapshot(&mut self, now: Now, out: &mut Vec<Output>) {
         self.journaled = 0;
         self.journaled_at_sweep = 0;
         self.leader.note_snapshot();
         self.safe = Some(self.leader.durable());
         out.push(Output::Snapshot(self.leader.snapshot()));
+        self.offer_standby(now, out);
     }
 
     /// Publishes the leader's progress if it moved and a window waits for

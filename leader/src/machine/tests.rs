@@ -990,3 +990,135 @@ fn a_peers_former_holder_is_fenced_off_once_its_successor_is_heard() {
     node.step(50 * MS, mark(2));
     assert_eq!(node.leader().stats().rejected, rejected + 2);
 }
+
+/// The copies the node asks to send its standby: (to, batch, position).
+fn offers(out: &[Output]) -> Vec<(String, u64, u64)> {
+    out.iter()
+        .filter_map(|o| match o {
+            Output::ToStandby { to, mark } => Some((to.clone(), mark.batch, mark.position)),
+            _ => None,
+        })
+        .collect()
+}
+
+fn stored(role: &str, standby: &str, batch: u64, position: u64) -> Input {
+    Input::StandbyStored {
+        bytes: encode(&idmesh_protocol::wire::leader_to_leader::StandbyStored {
+            version: VERSION,
+            role: role.into(),
+            standby: standby.into(),
+            host: standby.into(),
+            mark: Durable {
+                epoch: 0,
+                version: VERSION,
+                leader: role.into(),
+                batch,
+                position,
+            },
+        }),
+        origin: "test".into(),
+    }
+}
+
+#[test]
+fn the_mark_with_a_standby_is_the_older_of_its_own_and_the_standbys() {
+    let mark = |batch, position| Durable {
+        epoch: 0,
+        version: VERSION,
+        leader: "a".into(),
+        batch,
+        position,
+    };
+    let rule = |own: Option<Durable>, standby: Option<Durable>| {
+        standby::standby_mark(own.as_ref(), standby.as_ref()).map(|m| (m.batch, m.position))
+    };
+    assert_eq!(rule(Some(mark(5, 40)), Some(mark(3, 20))), Some((3, 20)));
+    assert_eq!(rule(Some(mark(3, 20)), Some(mark(5, 40))), Some((3, 20)));
+    assert_eq!(
+        rule(Some(mark(5, 20)), Some(mark(3, 40))),
+        Some((3, 20)),
+        "field-wise"
+    );
+    assert_eq!(
+        rule(Some(mark(5, 40)), None),
+        None,
+        "nothing the standby does not hold"
+    );
+    assert_eq!(rule(None, Some(mark(3, 20))), None);
+}
+
+/// With a standby, every snapshot goes to it, and the published mark is
+/// only ever one the current standby said it holds: an earlier standby's
+/// word, or none yet, holds it back; it never steps back.
+#[test]
+fn the_published_mark_waits_for_the_current_standby() {
+    let timers = Timers {
+        standby: true,
+        ..timers()
+    };
+    let mut node = Node::new(Leader::new("a"), timers);
+    node.step(Duration::ZERO, batch(0, vec![(1, begin(&["a", "b"]))], 1));
+    // At rest: a snapshot at (1, 1), and no standby to send it to.
+    node.step(250 * MS, Input::Tick);
+    let out = node.step(500 * MS, Input::Tick);
+    assert_eq!((snapshots(&out), offers(&out)), (1, vec![]));
+    assert_eq!(marks(&out), vec![None], "no standby holds it");
+    // A standby: the last snapshot goes to it at once.
+    let out = node.step(600 * MS, Input::Standby(Some("b".into())));
+    assert_eq!(offers(&out), vec![("b".into(), 1, 1)]);
+    assert_eq!(marks(&node.step(750 * MS, Input::Tick)), vec![None]);
+    // Another process's word counts for nothing; the standby's does.
+    node.step(800 * MS, stored("a", "c", 1, 1));
+    assert_eq!(marks(&node.step(1000 * MS, Input::Tick)), vec![None]);
+    node.step(1100 * MS, stored("a", "b", 1, 1));
+    assert_eq!(
+        marks(&node.step(1250 * MS, Input::Tick)),
+        vec![Some((1, 1))]
+    );
+    // A new snapshot goes to the standby; the mark waits for its word.
+    node.step(1300 * MS, batch(1, vec![(2, mix(0, 1, 0, 0))], 2));
+    node.step(1500 * MS, Input::Tick);
+    let out = node.step(1750 * MS, Input::Tick);
+    assert_eq!(
+        (snapshots(&out), offers(&out)),
+        (1, vec![("b".into(), 2, 2)])
+    );
+    assert_eq!(marks(&out), vec![None], "still (1, 1), not published again");
+    node.step(1800 * MS, stored("a", "b", 2, 2));
+    assert_eq!(
+        marks(&node.step(2000 * MS, Input::Tick)),
+        vec![Some((2, 2))]
+    );
+    // The standby changes: the new one is sent the last snapshot, and an
+    // older word of it does not move the mark back.
+    let out = node.step(2100 * MS, Input::Standby(Some("c".into())));
+    assert_eq!(offers(&out), vec![("c".into(), 2, 2)]);
+    node.step(2200 * MS, stored("a", "c", 1, 1));
+    assert_eq!(marks(&node.step(2250 * MS, Input::Tick)), vec![None]);
+    // Unanswered, the copy is sent again after the retry's wait.
+    let late = 2100 * MS + standby::STANDBY_RETRY;
+    assert_eq!(offers(&node.step(late - MS, Input::Tick)), vec![]);
+    assert_eq!(
+        offers(&node.step(late, Input::Tick)),
+        vec![("c".into(), 2, 2)]
+    );
+    node.step(late + MS, stored("a", "c", 2, 2));
+    assert_eq!(offers(&node.step(late + 250 * MS, Input::Tick)), vec![]);
+    // No standby at all (no other process alive): nothing is sent.
+    assert_eq!(
+        offers(&node.step(late + 300 * MS, Input::Standby(None))),
+        vec![]
+    );
+}
+
+/// Without a standby (one leader process, or none configured) nothing is
+/// sent and the mark is the snapshot's, as before.
+#[test]
+fn without_a_standby_the_mark_is_the_snapshots() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(250 * MS, Input::Tick);
+    let out = node.step(500 * MS, Input::Tick);
+    assert_eq!(marks(&out), vec![Some((1, 1))]);
+    let out = node.step(600 * MS, Input::Standby(Some("b".into())));
+    assert_eq!(offers(&out), vec![]);
+}

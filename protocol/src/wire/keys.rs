@@ -17,6 +17,8 @@
 //! | `P/sensor/<name>/positions` | sensor queryable | every track's last position and owner where the stream is (JSON) |
 //! | `P/leader/<name>/sent` | leader queryable | transfers it sent a peer, again (for a restarted peer) |
 //! | `P/leader/<name>/durable` | leader publishes; sensor and peers subscribe | how far its state is safe: what others may stop keeping for it |
+//! | `P/leader/<name>/standby` | the process hosting leader role `<name>` subscribes | snapshots of the roles it would adopt, to keep on its disk ([`leader_to_leader`](super::leader_to_leader)) |
+//! | `P/leader/<name>/stored` | a standby puts; leader role `<name>` subscribes | the standby's word that it keeps the role's snapshot |
 //! | `P/leader/<name>/progress` | leader publishes; sensor subscribes | how far it has applied the stream: the sensor's flow control |
 //! | `P/query/marginals`, `P/query/track/<t>`, `P/query/stats` | coordinator queryables | the user API (JSON) |
 //! | `P/query/identity`, `P/query/identity/<t>` | coordinator queryables | identity marginals, all tracks or one (JSON) |
@@ -133,6 +135,16 @@ impl Keys {
 
     pub fn every_leader_durable(&self) -> String {
         format!("{}/leader/*/durable", self.prefix)
+    }
+
+    /// Where snapshots go for the process hosting role `standby` to keep.
+    pub fn leader_standby(&self, standby: &str) -> String {
+        format!("{}/leader/{standby}/standby", self.prefix)
+    }
+
+    /// Where role `leader`'s standby says it keeps its snapshot.
+    pub fn leader_stored(&self, leader: &str) -> String {
+        format!("{}/leader/{leader}/stored", self.prefix)
     }
 
     pub fn leader_progress(&self, leader: &str) -> String {

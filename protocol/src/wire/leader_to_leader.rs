@@ -8,13 +8,21 @@
 //! row of its mixed track as it was before the mix (both then compute the
 //! same fit); at a handover, the row of the track that changes region.
 //!
+//! A leader role also keeps a copy of its state with its standby, the
+//! process that would adopt the role if its own died: every snapshot it
+//! writes goes to the standby ([`StandbyCopy`]), which writes it to its
+//! own disk and acknowledges ([`StandbyStored`]). The role's durable mark
+//! waits for that acknowledgement, so a host lost with its disk never
+//! takes with it state the others have forgotten.
+//!
 //! Each message's rules ([`Valid`], and [`Bounds`] for a transfer) sit
 //! below the types.
 
 use super::bounds::{invalid, Bounds};
 use super::factored::WireComponent;
 use super::identity::WireTree;
-use super::valid::{distinct, require};
+use super::leader_to_sensor::Durable;
+use super::valid::{distinct, require, MAX_SNAPSHOT_BYTES};
 use super::{Valid, WireError};
 use serde::{Deserialize, Serialize};
 
@@ -81,6 +89,86 @@ pub struct TransfersSent {
 }
 super::versioned!(TransfersSent, "transfers reply");
 super::epoch::epoched!(TransfersSent);
+
+/// A leader role's snapshot for its standby to keep: put on
+/// `P/leader/<to>/standby`, where the process hosting role `to` (the one
+/// that would adopt `role`) takes it, writes it to its own disk and
+/// answers with a [`StandbyStored`]. Sent at every snapshot, and again
+/// (the last one) when the standby changes or does not answer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StandbyCopy {
+    pub version: u16,
+    /// The role the snapshot is of.
+    pub role: String,
+    /// The role whose process keeps the copy (the heir of `role`).
+    pub to: String,
+    /// The snapshot's durable mark: what the role may let the others
+    /// forget once the copy is kept.
+    pub mark: Durable,
+    /// The snapshot, as the role wrote it (at most
+    /// [`MAX_SNAPSHOT_BYTES`]).
+    pub state: Vec<u8>,
+}
+super::versioned!(StandbyCopy, "standby copy");
+
+/// A standby's word that it keeps a role's snapshot on its disk (written
+/// whole and fsynced): put on `P/leader/<role>/stored`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StandbyStored {
+    pub version: u16,
+    /// The role whose snapshot is kept.
+    pub role: String,
+    /// The role the copy was sent to (the standby, as the sender named it).
+    pub standby: String,
+    /// The process that stored it.
+    pub host: String,
+    /// The mark of the snapshot it stored.
+    pub mark: Durable,
+}
+super::versioned!(StandbyStored, "standby acknowledgement");
+
+impl Valid for StandbyCopy {
+    fn problem(&self) -> Option<String> {
+        let checks = || -> Result<(), String> {
+            require(!self.role.is_empty(), || "it names no role".into())?;
+            require(!self.to.is_empty(), || "it names no standby".into())?;
+            require(self.role != self.to, || {
+                format!("role {} is its own standby", self.role)
+            })?;
+            require(self.mark.leader == self.role, || {
+                format!(
+                    "the mark is of {}, the copy of {}",
+                    self.mark.leader, self.role
+                )
+            })?;
+            require(!self.state.is_empty(), || "an empty snapshot".into())?;
+            require(self.state.len() <= MAX_SNAPSHOT_BYTES, || {
+                format!(
+                    "a snapshot of {} bytes (at most {MAX_SNAPSHOT_BYTES})",
+                    self.state.len()
+                )
+            })
+        };
+        checks().err()
+    }
+}
+
+impl Valid for StandbyStored {
+    fn problem(&self) -> Option<String> {
+        let checks = || -> Result<(), String> {
+            require(!self.role.is_empty(), || "it names no role".into())?;
+            require(!self.standby.is_empty(), || "it names no standby".into())?;
+            require(!self.host.is_empty(), || "it names no process".into())?;
+            require(self.mark.leader == self.role, || {
+                format!(
+                    "the mark is of {}, the copy of {}",
+                    self.mark.leader, self.role
+                )
+            })
+        };
+        checks().err()
+    }
+}
 
 impl Valid for Transfer {
     fn problem(&self) -> Option<String> {
@@ -247,6 +335,79 @@ mod tests {
             let e = decode::<Transfer>(&encode(&bad)).unwrap_err().to_string();
             assert!(e.starts_with("transfer: ") && e.contains(expected), "{e}");
         }
+    }
+
+    #[test]
+    fn standby_copies_and_their_acknowledgements_are_checked() {
+        let mark = |leader: &str| Durable {
+            epoch: 0,
+            version: VERSION,
+            leader: leader.into(),
+            batch: 4,
+            position: 17,
+        };
+        let copy = StandbyCopy {
+            version: VERSION,
+            role: "l1".into(),
+            to: "l2".into(),
+            mark: mark("l1"),
+            state: vec![1, 2, 3],
+        };
+        assert_eq!(decode::<StandbyCopy>(&encode(&copy)).unwrap(), copy);
+        for (bad, expected) in [
+            (
+                StandbyCopy {
+                    to: "l1".into(),
+                    ..copy.clone()
+                },
+                "its own standby",
+            ),
+            (
+                StandbyCopy {
+                    mark: mark("l0"),
+                    ..copy.clone()
+                },
+                "the mark is of l0",
+            ),
+            (
+                StandbyCopy {
+                    state: vec![],
+                    ..copy.clone()
+                },
+                "an empty snapshot",
+            ),
+            (
+                StandbyCopy {
+                    role: String::new(),
+                    ..copy.clone()
+                },
+                "names no role",
+            ),
+        ] {
+            let e = decode::<StandbyCopy>(&encode(&bad))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with("standby copy: ") && e.contains(expected),
+                "{e}"
+            );
+        }
+        let stored = StandbyStored {
+            version: VERSION,
+            role: "l1".into(),
+            standby: "l2".into(),
+            host: "l2".into(),
+            mark: mark("l1"),
+        };
+        assert_eq!(decode::<StandbyStored>(&encode(&stored)).unwrap(), stored);
+        let bad = StandbyStored {
+            host: String::new(),
+            ..stored
+        };
+        let e = decode::<StandbyStored>(&encode(&bad))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("names no process"), "{e}");
     }
 
     #[test]

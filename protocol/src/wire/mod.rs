@@ -5,7 +5,8 @@
 //! - [`keys`] — every key expression, under a deployment prefix.
 //! - [`sensor_to_leader`] — the sequenced event stream, in batches.
 //! - [`leader_to_leader`] — sets handed over at a cross-leader mix or a move;
-//!   a restarted leader's request for the transfers it missed.
+//!   a restarted leader's request for the transfers it missed; a role's
+//!   snapshot for its standby, and the standby's acknowledgement.
 //! - [`leader_to_sensor`] — a request to follow more tracks, from a seq on;
 //!   a request for lost batches; how far a leader's state is safe (what
 //!   the sensor and peers may stop keeping for it).
@@ -52,6 +53,9 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 /// The version of every postcard message below; a receiver rejects others.
+/// It moves when a message already on the wire changes (a field added,
+/// removed or retyped); a new message alone leaves it (a receiver that
+/// does not know the message has no key it comes on).
 /// 4: the transfer key carries a `TransfersSent`, one input's transfers.
 /// 5: a mix may take a track from another leader (`Item::Mix::handed`).
 /// 6: tracks may start unheld and be adopted at their first item

@@ -30,6 +30,14 @@ pub const MAX_IDENTITY_TRACKS: u32 = 1 << 12;
 /// The most leaders a stream may name: indices are `u16`.
 pub(crate) const MAX_LEADERS: usize = 1 << 16;
 
+/// The largest snapshot a leader role sends its standby
+/// ([`StandbyCopy`](super::leader_to_leader::StandbyCopy)), 512 MiB: under
+/// Zenoh's default largest message (`transport.link.rx.max_message_size`,
+/// 1 GiB) and the journal's largest record, so a copy that passes here is
+/// carried and written whole. A state that grows past it is not sent (the
+/// role says so) and its durable mark stops moving.
+pub const MAX_SNAPSHOT_BYTES: usize = 1 << 29;
+
 /// `Err(sentence)` when `condition` fails: the rules read as a list.
 pub(crate) fn require(condition: bool, problem: impl FnOnce() -> String) -> Result<(), String> {
     if condition {

@@ -257,6 +257,9 @@ impl World {
                     self.tell_leader(i, asker, ToLeader::Reply { ask: id, reply });
                 }
                 Output::Persist { mark } => self.persist(i, mark),
+                // The simulated leaders run without a standby
+                // (`Timers::standby` off): nothing is asked of one.
+                Output::ToStandby { .. } => {}
                 Output::Snapshot(state) => {
                     let disk = &mut self.leaders[i].disk;
                     disk.snapshot = Some(state);

@@ -1,0 +1,248 @@
+//! The standby's copy of another role's snapshot, on its own disk.
+//!
+//! Every leader role sends each snapshot it writes to its standby — the
+//! process that would adopt the role if its own died
+//! ([`crate::machine`] says when, and how the role's durable mark waits
+//! for it). The standby writes it here, under its own `state_dir`, as
+//! `<role>.standby.snapshot`: beside the role's own journal and snapshot
+//! (`<role>.journal`, `<role>.journal.snapshot`) but never over them, so
+//! processes that share a disk do not collide. The file is an
+//! `idmesh-journal` log of kind [`STANDBY`] with two records, the
+//! snapshot's durable mark and the snapshot, written whole (a file beside
+//! it, fsynced, renamed over it): a crash leaves the old copy or the new
+//! one.
+//!
+//! A process that adopts a role and finds none of its journal in its
+//! state directory (the role ran on another disk) installs the copy as
+//! the role's snapshot ([`prepare_adoption`]); the role then recovers
+//! from it as from its own, and fetches what came after it from the
+//! sensor and its peers, who kept it. A real journal of the role (a
+//! shared disk) is newer and wins. A damaged or torn copy is refused
+//! with its file and byte.
+
+use crate::host::journal_path;
+use crate::journal::{snapshot_path, SNAPSHOT};
+use idmesh_journal::{self as log, Ending};
+use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, StandbyStored};
+use idmesh_protocol::wire::leader_to_sensor::Durable;
+use idmesh_protocol::wire::{decode, encode, VERSION};
+use std::path::{Path, PathBuf};
+
+/// What a standby copy's header says it holds.
+pub const STANDBY: &str = "leader-standby";
+
+#[derive(Debug, thiserror::Error)]
+pub enum StandbyError {
+    #[error(transparent)]
+    Log(#[from] log::Error),
+    #[error("standby copy {path}: {problem}")]
+    Refused { path: String, problem: String },
+}
+
+/// Where a process keeps, under `dir`, its standby copy of `role`.
+pub(crate) fn standby_path(dir: &Path, role: &str) -> PathBuf {
+    dir.join(format!("{role}.standby.snapshot"))
+}
+
+/// Writes `copy` under `dir` whole and fsynced, and returns the word that
+/// says so, from process `host`.
+pub(crate) fn keep(
+    dir: &Path,
+    copy: &StandbyCopy,
+    host: &str,
+) -> Result<StandbyStored, StandbyError> {
+    write(&standby_path(dir, &copy.role), &copy.mark, &copy.state)?;
+    Ok(StandbyStored {
+        version: VERSION,
+        role: copy.role.clone(),
+        standby: copy.to.clone(),
+        host: host.to_string(),
+        mark: copy.mark.clone(),
+    })
+}
+
+/// Writes the copy file at `path`: the mark, then the state.
+pub(crate) fn write(path: &Path, mark: &Durable, state: &[u8]) -> Result<u64, StandbyError> {
+    Ok(log::write_file(
+        path,
+        STANDBY,
+        1,
+        &[&encode(mark)[..], state],
+    )?)
+}
+
+/// The copy at `path` — its snapshot's mark and the snapshot — if there
+/// is one; refused, naming the file and the byte, if it is torn or
+/// damaged.
+pub(crate) fn read(path: &Path) -> Result<Option<(Durable, Vec<u8>)>, StandbyError> {
+    let refused = |problem: String| StandbyError::Refused {
+        path: path.display().to_string(),
+        problem,
+    };
+    let contents = match log::read(path, STANDBY) {
+        Ok(contents) => contents,
+        Err(log::Error::Header { .. }) => {
+            return Err(refused(
+                "damaged at byte 0 (its header fails its checksum)".into(),
+            ))
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let Some(contents) = contents else {
+        return Ok(None);
+    };
+    match (&contents.ending, &contents.records[..]) {
+        (Ending::Clean, [mark, state]) => match decode::<Durable>(&mark.payload) {
+            Ok(mark) => Ok(Some((mark, state.payload.clone()))),
+            Err(e) => Err(refused(format!(
+                "its mark at byte {}: {e}",
+                mark_offset(&contents)
+            ))),
+        },
+        (Ending::Clean, records) => Err(refused(format!(
+            "{} records where a standby copy has two",
+            records.len()
+        ))),
+        (Ending::Torn { at, .. }, _) => Err(refused(format!("damaged or cut short at byte {at}"))),
+        (Ending::Damaged(damage), _) => Err(refused(format!(
+            "damaged at byte {} ({})",
+            damage.at, damage.problem
+        ))),
+    }
+}
+
+fn mark_offset(contents: &log::Contents) -> u64 {
+    contents.records.first().map_or(0, |r| r.offset)
+}
+
+/// Where an adopted role's state comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Source {
+    /// Its own journal (or snapshot) in this state directory: a shared
+    /// disk, or the role ran here before.
+    Journal,
+    /// The standby copy this process kept, installed as its snapshot.
+    StandbyCopy(Durable),
+    /// Nothing: the role starts from the stream's beginning.
+    Nothing,
+}
+
+/// Before adopting `role` with state directory `dir`: if the role has no
+/// journal and no snapshot here but this process kept a standby copy of
+/// it, the copy becomes the role's snapshot (with an empty journal after
+/// it). Says which state the role will start from.
+pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, StandbyError> {
+    let journal = journal_path(dir, role);
+    let snapshot = snapshot_path(&journal);
+    if journal.exists() || snapshot.exists() {
+        return Ok(Source::Journal);
+    }
+    let Some((mark, state)) = read(&standby_path(dir, role))? else {
+        return Ok(Source::Nothing);
+    };
+    log::write_file(&snapshot, SNAPSHOT, 1, &[&state])?;
+    Ok(Source::StandbyCopy(mark))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-standby-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn mark(batch: u64) -> Durable {
+        Durable {
+            epoch: 0,
+            version: VERSION,
+            leader: "l1".into(),
+            batch,
+            position: batch * 10,
+        }
+    }
+
+    fn copy(batch: u64, state: Vec<u8>) -> StandbyCopy {
+        StandbyCopy {
+            version: VERSION,
+            role: "l1".into(),
+            to: "l2".into(),
+            mark: mark(batch),
+            state,
+        }
+    }
+
+    #[test]
+    fn a_kept_copy_reads_back_and_the_newest_replaces_the_last() {
+        let dir = dir("keep");
+        let path = standby_path(&dir, "l1");
+        assert_eq!(read(&path).unwrap(), None);
+        let stored = keep(&dir, &copy(3, vec![7; 1000]), "l2").unwrap();
+        assert_eq!((stored.host.as_str(), stored.mark.batch), ("l2", 3));
+        assert_eq!(read(&path).unwrap(), Some((mark(3), vec![7; 1000])));
+        keep(&dir, &copy(5, vec![9; 10]), "l2").unwrap();
+        assert_eq!(read(&path).unwrap(), Some((mark(5), vec![9; 10])));
+        assert!(path.ends_with("l1.standby.snapshot"));
+        assert_ne!(path, snapshot_path(&journal_path(&dir, "l1")));
+    }
+
+    #[test]
+    fn a_torn_or_damaged_copy_is_refused_naming_the_file_and_the_byte() {
+        let dir = dir("damaged");
+        let path = standby_path(&dir, "l1");
+        keep(&dir, &copy(3, vec![7; 200]), "l2").unwrap();
+        let whole = std::fs::read(&path).unwrap();
+
+        std::fs::write(&path, &whole[..whole.len() - 20]).unwrap();
+        let e = read(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("l1.standby.snapshot") && e.contains("cut short at byte"),
+            "{e}"
+        );
+
+        let mut damaged = whole.clone();
+        let at = damaged.len() - 100;
+        damaged[at] ^= 0x10;
+        std::fs::write(&path, &damaged).unwrap();
+        let e = read(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("l1.standby.snapshot") && e.contains("at byte"),
+            "{e}"
+        );
+
+        let mut header = whole.clone();
+        header[20] ^= 1;
+        std::fs::write(&path, &header).unwrap();
+        let e = read(&path).unwrap_err().to_string();
+        assert!(e.contains("damaged at byte 0"), "{e}");
+
+        // Nor is a leader's own snapshot taken for a copy.
+        std::fs::remove_file(&path).unwrap();
+        log::write_file(&path, SNAPSHOT, 1, &[&[1u8, 2][..]]).unwrap();
+        assert!(read(&path).is_err());
+    }
+
+    #[test]
+    fn an_adopter_uses_the_roles_journal_if_there_is_one_else_its_copy() {
+        let dir = dir("adopt");
+        assert_eq!(prepare_adoption(&dir, "l1").unwrap(), Source::Nothing);
+        keep(&dir, &copy(4, vec![5; 64]), "l2").unwrap();
+        assert_eq!(
+            prepare_adoption(&dir, "l1").unwrap(),
+            Source::StandbyCopy(mark(4))
+        );
+        let snapshot = snapshot_path(&journal_path(&dir, "l1"));
+        let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
+        assert_eq!(contents.generation, 1);
+        assert_eq!(contents.records[0].payload, vec![5; 64]);
+        // From then on the role's own files are there: they win.
+        keep(&dir, &copy(6, vec![6; 64]), "l2").unwrap();
+        assert_eq!(prepare_adoption(&dir, "l1").unwrap(), Source::Journal);
+        let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
+        assert_eq!(contents.records[0].payload, vec![5; 64], "left as it was");
+    }
+}
