@@ -640,6 +640,9 @@ impl<'a> Driver<'a> {
             return;
         };
         let copy = match decode::<StandbyCopy>(bytes) {
+            // The role's own snapshot, sent to its process standing by
+            // to take it home: that process's host keeps it, not this.
+            Ok(copy) if copy.role == *name => return,
             Ok(copy) if copy.to == *name => copy,
             Ok(copy) => {
                 tracing::warn!(leader = %name, role = %copy.role, to = %copy.to, "a standby copy for another role: not kept");

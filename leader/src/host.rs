@@ -47,12 +47,15 @@
 //! fetches what that misses as any restarted leader does. Load is back in
 //! balance.
 
+use crate::claims::{self, Claimed, Claims, Verdict};
 use crate::driver::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
 use crate::standby::{self, Source};
 use idmesh_ownership::OwnershipError;
 use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, StandbyStored};
+use idmesh_protocol::wire::{decode, encode};
 use std::collections::{BTreeSet, HashMap};
 use std::future::Future;
 use std::path::PathBuf;
@@ -86,6 +89,11 @@ pub struct HostConfig {
     /// The sensor streams under a window: leaders mark their progress
     /// after every input (else at their sweeps only).
     pub flow_control: bool,
+    /// With voters in the topology: roles are claimed through them
+    /// ([`crate::claims`]), and the roles here stop when no voter has led
+    /// for this long. None: no voters; the tokens and, on a shared disk,
+    /// the journal's lock decide.
+    pub lease: Option<Duration>,
 }
 
 impl HostConfig {
@@ -100,12 +108,13 @@ impl HostConfig {
         &self,
         role: &str,
         adopted: bool,
+        epoch: u64,
         standby: Option<watch::Receiver<Option<String>>>,
     ) -> LeaderConfig {
         LeaderConfig {
             name: role.to_string(),
             host: self.name.clone(),
-            epoch: 0,
+            epoch,
             adopted,
             keys: self.keys.clone(),
             sensor: self.sensor.clone(),
@@ -159,12 +168,34 @@ struct Hosted<'a> {
     stops: HashMap<String, watch::Sender<bool>>,
     /// Each hosted role's standby, as its actor is told it.
     standbys: HashMap<String, watch::Sender<Option<String>>>,
+    /// With voters: the map, the claims, the lease.
+    claims: Option<Claims>,
+    /// The epoch each hosted role runs at (0 without voters).
+    epochs: HashMap<String, u64>,
+    /// Roles being handed home: released to the voters once stopped.
+    handing_back: BTreeSet<String>,
+    /// Roles stopped because the map gave them to another, or the lease
+    /// lapsed (warned once each).
+    superseded: BTreeSet<String>,
+    /// When the roles here first ran (the lease counts from it until the
+    /// map is first read).
+    since: Instant,
+    /// When the map was last read at a sweep.
+    map_read: Option<Instant>,
+    /// Processes standing by for their own roles (their home tokens).
+    homes: BTreeSet<String>,
+    /// Roles adopted here whose process is back, since when: their
+    /// standby is that process until it says it keeps their snapshot,
+    /// then they are stopped and handed home.
+    sending_home: HashMap<String, Instant>,
 }
 
 impl Hosted<'_> {
     /// Starts hosting `role` here (`adopted`: from a process gone for
-    /// good, or taken back).
-    fn host(&mut self, role: &str, adopted: bool) {
+    /// good, or taken back) at `epoch` (what the voters gave; 0 without).
+    fn host(&mut self, role: &str, adopted: bool, epoch: u64) {
+        self.epochs.insert(role.to_string(), epoch);
+        self.superseded.remove(role);
         let (stop_tx, mut stop_rx) = watch::channel(false);
         self.stops.insert(role.to_string(), stop_tx);
         let stop = async move {
@@ -175,7 +206,7 @@ impl Hosted<'_> {
             self.standbys.insert(role.to_string(), tx);
             rx
         });
-        let role_config = self.config.role(role, adopted, standby);
+        let role_config = self.config.role(role, adopted, epoch, standby);
         let session = self.session.clone();
         let owned = role.to_string();
         self.tasks.spawn(async move {
@@ -190,7 +221,11 @@ impl Hosted<'_> {
     fn tell_standbys(&self, alive: &BTreeSet<String>) {
         let others: BTreeSet<String> = alive.difference(&self.roles).cloned().collect();
         for (role, tx) in &self.standbys {
-            let next = heir(&self.config.leaders, role, &others).map(str::to_owned);
+            // A role going home sends its state to its own process.
+            let next = match self.sending_home.contains_key(role) {
+                true => Some(role.clone()),
+                false => heir(&self.config.leaders, role, &others).map(str::to_owned),
+            };
             tx.send_if_modified(|now| {
                 let changed = *now != next;
                 now.clone_from(&next);
@@ -204,6 +239,15 @@ impl Hosted<'_> {
         self.roles.remove(role);
         self.stops.remove(role);
         self.standbys.remove(role);
+        self.epochs.remove(role);
+    }
+
+    /// Stops the actor of `role` (it syncs its journal, then drops the
+    /// role's token).
+    fn stop(&self, role: &str) {
+        if let Some(stop) = self.stops.get(role) {
+            let _ = stop.send(true);
+        }
     }
 }
 
@@ -216,6 +260,11 @@ struct Tokens {
     lost: HashMap<String, Instant>,
     /// Lost roles found still held by their process (warned once per loss).
     fenced: BTreeSet<String>,
+    /// With voters: each lost role's epoch in the map when its token went.
+    /// A role whose epoch has moved since changed hands meanwhile (claimed
+    /// by its process coming home, whose token is not up yet): it is not
+    /// lost, and a takeover would fence off a holder just starting.
+    lost_epochs: HashMap<String, u64>,
 }
 
 /// Runs this process's roles until `shutdown`.
@@ -232,15 +281,28 @@ pub async fn run(
         roles: BTreeSet::new(),
         stops: HashMap::new(),
         standbys: HashMap::new(),
+        claims: config
+            .lease
+            .map(|lease| Claims::new(session.clone(), keys.clone(), &config.name, lease)),
+        epochs: HashMap::new(),
+        handing_back: BTreeSet::new(),
+        superseded: BTreeSet::new(),
+        since: Instant::now(),
+        map_read: None,
+        homes: BTreeSet::new(),
+        sending_home: HashMap::new(),
     };
 
     // Standing by for its own role: the token that asks for it back.
     let mut home: Option<zenoh::liveliness::LivelinessToken> = None;
-    if hosted_elsewhere(&session, keys, &config.name).await {
+    if hosted.claims.is_some() {
+        // The voters decide: the sweep claims the role (and stands by
+        // for it if another holds it).
+    } else if hosted_elsewhere(&session, keys, &config.name).await {
         tracing::warn!(process = %config.name, "its role is hosted by another process (adopted while this one was away, or its old token not yet expired); standing by and asking for it back");
         home = Some(declare_home(&session, keys, &config.name).await?);
     } else {
-        hosted.host(&config.name, false);
+        hosted.host(&config.name, false, 0);
     }
     let homes = session
         .liveliness()
@@ -255,6 +317,17 @@ pub async fn run(
         .history(true)
         .await
         .map_err(|e| MeshError::new("declare the leader liveliness subscriber", e))?;
+    // Going home over the network: the copies of this process's own role
+    // sent here while it stands by, and every standby's word that it
+    // keeps a copy (a role adopted here waits for its process's).
+    let copies_home = session
+        .declare_subscriber(keys.leader_standby(&config.name))
+        .await
+        .map_err(|e| MeshError::new("declare the home-copy subscriber", e))?;
+    let stored = session
+        .declare_subscriber(keys.leader_stored("*"))
+        .await
+        .map_err(|e| MeshError::new("declare the standby-acknowledgement subscriber", e))?;
     let mut tokens = Tokens::default();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
     let standing = Instant::now();
@@ -269,19 +342,26 @@ pub async fn run(
             sample = homes.recv_async() => {
                 let Ok(sample) = sample else { break };
                 let Some(role) = Keys::chunk(sample.key_expr().as_str(), 0) else { continue };
-                // A role adopted here whose own process is back: hand it
-                // back. Stopping the actor syncs its journal, then drops
-                // the role's token, which the home process waits for.
-                if sample.kind() == SampleKind::Put && role != config.name && hosted.roles.contains(role) {
-                    tracing::warn!(process = %config.name, role, "its process is back: handing the role back");
-                    if let Some(stop) = hosted.stops.get(role) {
-                        let _ = stop.send(true);
-                    }
+                on_home(&mut hosted, role, sample.kind());
+            }
+            sample = copies_home.recv_async() => {
+                let Ok(sample) = sample else { break };
+                if home.is_some() {
+                    keep_copy_home(&hosted, &sample.payload().to_bytes()).await;
                 }
+            }
+            sample = stored.recv_async() => {
+                let Ok(sample) = sample else { break };
+                on_stored(&mut hosted, &sample.payload().to_bytes());
             }
             done = hosted.tasks.join_next(), if !hosted.tasks.is_empty() => {
                 if let Some(Ok((role, result))) = done {
                     hosted.ended(&role);
+                    if hosted.handing_back.remove(&role) {
+                        if let Some(claims) = &hosted.claims {
+                            claims.release(&role).await;
+                        }
+                    }
                     match result {
                         Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
                         Err(RunError::Journal(JournalError::Ownership(OwnershipError::Held { holder, .. }))) if role == config.name => {
@@ -297,9 +377,13 @@ pub async fn run(
                 }
             }
             _ = tick.tick() => {
+                if hosted.claims.is_some() {
+                    keep_leases(&mut hosted, &mut home).await?;
+                }
                 // Standing by, and the role's token went away before the
                 // subscriber was there to see it go: take it all the same.
-                if home.is_some()
+                if hosted.claims.is_none()
+                    && home.is_some()
                     && !tokens.alive.contains(&config.name)
                     && !hosted.roles.contains(&config.name)
                     && standing.elapsed() > Duration::from_secs(1)
@@ -308,11 +392,13 @@ pub async fn run(
                 {
                     tracing::warn!(process = %config.name, "its role is free: taking it back");
                     home = None;
-                    hosted.host(&config.name, true);
+                    return_from(&config);
+                    hosted.host(&config.name, true, 0);
                 }
                 if let Some(patience) = config.takeover_after {
                     adopt_lost_roles(&mut hosted, &mut tokens, patience).await;
                 }
+                hand_home_unanswered(&mut hosted);
             }
         }
         hosted.tell_standbys(&tokens.alive);
@@ -355,13 +441,23 @@ fn on_token(
             // when the role is adopted.
             tracing::info!(process = %config.name, role = %role, "leader role lost its token");
             tokens.alive.remove(&role);
-            if role == config.name && home.is_some() && !hosted.roles.contains(&role) {
+            if role == config.name
+                && home.is_some()
+                && !hosted.roles.contains(&role)
+                && hosted.claims.is_none()
+            {
                 // Its own role is free (handed back, or the old
                 // token expired): take it now, takeover or not.
                 tracing::warn!(process = %config.name, "its role is free again: taking it back");
                 *home = None;
-                hosted.host(&role, true);
+                return_from(config);
+                hosted.host(&role, true, 0);
             } else if !hosted.roles.contains(&role) {
+                if let Some(claims) = &hosted.claims {
+                    tokens
+                        .lost_epochs
+                        .insert(role.clone(), claims.last_epoch(&role));
+                }
                 tokens.lost.insert(role, Instant::now());
             }
         }
@@ -397,6 +493,10 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
         if hosted_elsewhere(hosted.session, &config.keys, &role).await {
             continue;
         }
+        if hosted.claims.is_some() {
+            adopt_by_claim(hosted, tokens, &role, patience).await;
+            continue;
+        }
         if let Some(holder) = config.journal_holder(&role) {
             // Its process is alive, only out of reach: the
             // role stays with it; look again later.
@@ -409,7 +509,259 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
         }
         tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
         adopt_from(config, &role);
-        hosted.host(&role, true);
+        hosted.host(&role, true, 0);
+    }
+}
+
+/// Adopts `role` if the voters commit this process's claim on it, fencing
+/// off the epoch of the holder the map names; another claimant that won,
+/// or a holder still there, leaves it alone (looked at again if its token
+/// stays gone).
+async fn adopt_by_claim(
+    hosted: &mut Hosted<'_>,
+    tokens: &mut Tokens,
+    role: &str,
+    patience: Duration,
+) {
+    let config = hosted.config;
+    let Some(claims) = hosted.claims.as_mut() else {
+        return;
+    };
+    let Some(map) = claims.read().await.cloned() else {
+        // No voter leads: nothing can be decided now; try again later.
+        tokens.lost.insert(role.to_string(), Instant::now());
+        return;
+    };
+    let now = map.get(role).map_or(0, |e| e.epoch);
+    let seen = tokens.lost_epochs.insert(role.to_string(), now);
+    if seen.is_some_and(|seen| seen != now) {
+        // Claimed since its token went: wait for the new holder's token.
+        tokens.lost.insert(role.to_string(), Instant::now());
+        return;
+    }
+    match claims
+        .claim(
+            role,
+            claims::fencing(&map, role),
+            patience.max(CLAIM_PATIENCE),
+        )
+        .await
+    {
+        Claimed::Won(epoch) => {
+            tracing::warn!(process = %config.name, role, epoch, "adopting a leader role gone for good: the voters gave it here");
+            adopt_from(config, role);
+            hosted.host(role, true, epoch);
+        }
+        Claimed::Lost { holder, epoch } => {
+            tracing::info!(process = %config.name, role, %holder, epoch, "not adopting: the voters gave the role to another");
+        }
+        Claimed::Undecided => {
+            tracing::warn!(process = %config.name, role, "not adopting yet: the voters did not decide");
+            tokens.lost.insert(role.to_string(), Instant::now());
+        }
+    }
+}
+
+/// How long a claim may wait for the voters to decide.
+const CLAIM_PATIENCE: Duration = Duration::from_secs(5);
+
+/// How often the map is read to keep the leases.
+const MAP_EVERY: Duration = Duration::from_secs(1);
+
+/// With voters, at a sweep (at most every [`MAP_EVERY`]): reads the map,
+/// stops every role it gives to another (or every role, if no voter has
+/// led for the lease), and claims this process's own role when it runs
+/// nowhere (else stands by for it, asking for it back).
+async fn keep_leases(
+    hosted: &mut Hosted<'_>,
+    home: &mut Option<zenoh::liveliness::LivelinessToken>,
+) -> Result<(), RunError> {
+    let config = hosted.config;
+    if hosted.map_read.is_some_and(|at| at.elapsed() < MAP_EVERY) {
+        return Ok(());
+    }
+    hosted.map_read = Some(Instant::now());
+    let since = hosted.since;
+    let Some(claims) = hosted.claims.as_mut() else {
+        return Ok(());
+    };
+    let (map, lapsed, lease) = (
+        claims.read().await.cloned(),
+        claims.lapsed(since),
+        claims.lease,
+    );
+    let Some(map) = map else {
+        if lapsed {
+            for role in hosted.roles.clone() {
+                if hosted.superseded.insert(role.clone()) {
+                    tracing::error!(process = %config.name, %role, ?lease,
+                        "no voter has led for the lease: stopping the role (its answers are missing) until a majority is back");
+                }
+                hosted.stop(&role);
+            }
+        }
+        return Ok(());
+    };
+    for role in hosted.roles.clone() {
+        let epoch = hosted.epochs.get(&role).copied().unwrap_or(0);
+        if let Verdict::Superseded { holder, epoch: now } =
+            claims::verdict(&map, &role, &config.name, epoch)
+        {
+            if hosted.superseded.insert(role.clone()) && !hosted.handing_back.contains(&role) {
+                tracing::warn!(process = %config.name, %role, held_at = epoch, ?holder, epoch = now,
+                    "the voters gave the role to another (this process was cut off): stopping it");
+            }
+            hosted.stop(&role);
+        }
+    }
+    let own = &config.name;
+    if hosted.roles.contains(own) {
+        return Ok(());
+    }
+    match map.get(own).and_then(|e| e.holder.clone()) {
+        Some(holder) if holder != *own => {
+            // Adopted elsewhere: stand by, asking for it back.
+            if home.is_none() {
+                tracing::warn!(process = %own, %holder, "its role is held by another process; standing by and asking for it back");
+                *home = Some(declare_home(hosted.session, &config.keys, own).await?);
+            }
+        }
+        _ => {
+            let Some(claims) = hosted.claims.as_mut() else {
+                return Ok(());
+            };
+            let fencing = claims::fencing(&map, own);
+            match claims.claim(own, fencing, CLAIM_PATIENCE).await {
+                Claimed::Won(epoch) => {
+                    tracing::info!(process = %own, epoch, "the voters gave this process its role");
+                    let back = home.take().is_some() || epoch > 1;
+                    if back {
+                        return_from(config);
+                    }
+                    hosted.host(own, back, epoch);
+                }
+                Claimed::Lost { holder, epoch } => {
+                    tracing::warn!(process = %own, %holder, epoch, "its role went to another process");
+                }
+                Claimed::Undecided => {
+                    tracing::warn!(process = %own, "the voters did not decide its claim; claiming again");
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A process's home token came or went. A role adopted here whose
+/// process is back goes home: with standbys, its standby becomes that
+/// process, and once that process keeps its snapshot the role stops here
+/// ([`on_stored`]); without, it stops at once (the process finds its
+/// journal on the shared disk). Stopping the actor syncs its journal,
+/// then drops the role's token, which the home process waits for.
+fn on_home(hosted: &mut Hosted<'_>, role: &str, kind: SampleKind) {
+    let config = hosted.config;
+    if kind == SampleKind::Delete {
+        hosted.homes.remove(role);
+        hosted.sending_home.remove(role);
+        return;
+    }
+    hosted.homes.insert(role.to_string());
+    if role == config.name || !hosted.roles.contains(role) {
+        return;
+    }
+    if config.standbys() {
+        tracing::warn!(process = %config.name, role, "its process is back: sending it the role's state, then handing the role back");
+        hosted.sending_home.insert(role.to_string(), Instant::now());
+    } else {
+        tracing::warn!(process = %config.name, role, "its process is back: handing the role back");
+        hosted.stop(role);
+        hosted.handing_back.insert(role.to_string());
+    }
+}
+
+/// A standby's word that it keeps a role's snapshot: the word of a role's
+/// own process, for a role going home from here, hands the role back.
+fn on_stored(hosted: &mut Hosted<'_>, bytes: &[u8]) {
+    let Ok(stored) = decode::<StandbyStored>(bytes) else {
+        return;
+    };
+    if stored.host != stored.role || hosted.sending_home.remove(&stored.role).is_none() {
+        return;
+    }
+    tracing::warn!(process = %hosted.config.name, role = %stored.role, batch = stored.mark.batch,
+        "its process keeps the role's state: handing the role back");
+    hosted.stop(&stored.role);
+    hosted.handing_back.insert(stored.role);
+}
+
+/// How long a role going home waits for its process to keep its state
+/// before it is handed back all the same (that process then rebuilds
+/// what it can from its own journal).
+const HOME_PATIENCE: Duration = Duration::from_secs(15);
+
+/// Hands back the roles whose process did not say it keeps their state
+/// within [`HOME_PATIENCE`].
+fn hand_home_unanswered(hosted: &mut Hosted<'_>) {
+    let late: Vec<String> = hosted
+        .sending_home
+        .iter()
+        .filter(|(_, since)| since.elapsed() > HOME_PATIENCE)
+        .map(|(role, _)| role.clone())
+        .collect();
+    for role in late {
+        tracing::warn!(process = %hosted.config.name, %role, "its process did not keep the role's state in time: handing the role back all the same");
+        hosted.sending_home.remove(&role);
+        hosted.stop(&role);
+        hosted.handing_back.insert(role);
+    }
+}
+
+/// Standing by for its own role: the role's snapshot, sent here by the
+/// process running it, kept on this disk and acknowledged; the role
+/// starts from it when it comes home ([`return_from`]).
+async fn keep_copy_home(hosted: &Hosted<'_>, bytes: &[u8]) {
+    let config = hosted.config;
+    let Some(dir) = &config.state_dir else {
+        return;
+    };
+    let copy = match decode::<StandbyCopy>(bytes) {
+        Ok(copy) if copy.role == config.name => copy,
+        Ok(_) => return,
+        Err(e) => {
+            tracing::warn!(process = %config.name, error = %e, "a copy of its role refused");
+            return;
+        }
+    };
+    match standby::keep(dir, &copy, &config.name) {
+        Ok(stored) => {
+            let key = config.keys.leader_stored(&config.name);
+            if let Err(e) = hosted.session.put(key, encode(&stored)).await {
+                tracing::warn!(process = %config.name, error = %e, "could not acknowledge the copy of its role");
+            }
+        }
+        Err(e) => {
+            tracing::error!(process = %config.name, error = %e, "cannot keep the copy of its role")
+        }
+    }
+}
+
+/// Before taking its own role back home: the copy the role's last holder
+/// sent here, if any, replaces the journal the role left. Says which at
+/// info.
+fn return_from(config: &HostConfig) {
+    let Some(dir) = &config.state_dir else {
+        return;
+    };
+    match standby::prepare_return(dir, &config.name) {
+        Ok(Source::StandbyCopy(mark)) => {
+            tracing::info!(process = %config.name, batch = mark.batch, position = mark.position,
+                "taking its role back from the state its last holder sent here")
+        }
+        Ok(_) => {
+            tracing::info!(process = %config.name, "taking its role back from its own journal")
+        }
+        Err(e) => tracing::error!(process = %config.name, error = %e,
+            "the copy its last holder sent cannot be used: the role starts from its own journal"),
     }
 }
 

@@ -144,6 +144,40 @@ pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, Standby
     Ok(Source::StandbyCopy(mark))
 }
 
+/// Before a process takes its own `role` back home: if the process that
+/// ran the role meanwhile sent its snapshot here (a role handed home over
+/// the network), that copy replaces this process's own journal and
+/// snapshot, which stopped when the role left (the others have forgotten
+/// what lies between them and the copy). The copy is then removed: it is
+/// the role's snapshot now.
+pub(crate) fn prepare_return(dir: &Path, role: &str) -> Result<Source, StandbyError> {
+    let copy = standby_path(dir, role);
+    let Some((mark, state)) = read(&copy)? else {
+        let journal = journal_path(dir, role);
+        let kept = journal.exists() || snapshot_path(&journal).exists();
+        return Ok(if kept {
+            Source::Journal
+        } else {
+            Source::Nothing
+        });
+    };
+    let journal = journal_path(dir, role);
+    let snapshot = snapshot_path(&journal);
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| StandbyError::Log(log::Error::Io { path, source })
+    };
+    for old in [&journal, &snapshot] {
+        match std::fs::remove_file(old) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(old)(e)),
+            _ => {}
+        }
+    }
+    log::write_file(&snapshot, SNAPSHOT, 1, &[&state])?;
+    std::fs::remove_file(&copy).map_err(io(&copy))?;
+    Ok(Source::StandbyCopy(mark))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -174,6 +208,37 @@ mod tests {
             mark: mark(batch),
             state,
         }
+    }
+
+    #[test]
+    fn a_role_sent_home_replaces_the_journal_it_left_and_the_copy_is_used_once() {
+        let dir = dir("return");
+        // The role's old journal and snapshot, from before it left.
+        std::fs::write(journal_path(&dir, "l1"), b"old journal").unwrap();
+        std::fs::write(snapshot_path(&journal_path(&dir, "l1")), b"old").unwrap();
+        assert!(matches!(prepare_return(&dir, "l1"), Ok(Source::Journal)));
+        let home = StandbyCopy {
+            to: "l1".into(),
+            ..copy(7, vec![4, 5, 6])
+        };
+        keep(&dir, &home, "l1").unwrap();
+        match prepare_return(&dir, "l1") {
+            Ok(Source::StandbyCopy(mark)) => assert_eq!(mark.batch, 7),
+            other => panic!("{other:?}"),
+        }
+        assert!(
+            !journal_path(&dir, "l1").exists(),
+            "the old journal is gone"
+        );
+        assert!(
+            !standby_path(&dir, "l1").exists(),
+            "the copy is the snapshot now"
+        );
+        let snapshot = snapshot_path(&journal_path(&dir, "l1"));
+        let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
+        let state = contents.records.last().map(|r| r.payload.clone());
+        assert_eq!(state, Some(vec![4u8, 5, 6]));
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -436,6 +436,31 @@ impl Deployment {
         out
     }
 
+    /// SIGSTOP to process `name` (`resume` sends SIGCONT): frozen, it
+    /// neither sends nor answers, but keeps its connections, its state
+    /// and its roles, as a host cut off and later back does.
+    pub fn pause(&self, name: &str) {
+        self.signal(name, "-STOP");
+    }
+
+    /// SIGCONT to process `name`, paused by [`Deployment::pause`].
+    pub fn resume(&self, name: &str) {
+        self.signal(name, "-CONT");
+    }
+
+    fn signal(&self, name: &str, signal: &str) {
+        let (_, child) = self
+            .children
+            .iter()
+            .find(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("no process {name}"));
+        let sent = Command::new("kill")
+            .args([signal, &child.id().to_string()])
+            .status()
+            .expect("kill runs");
+        assert!(sent.success(), "kill {signal} {name}");
+    }
+
     /// SIGKILL to process `name`: no chance to flush or say goodbye.
     pub fn kill(&mut self, name: &str) {
         let i = self
@@ -473,7 +498,10 @@ impl Deployment {
             .args(args)
             .arg("--config")
             .arg(config)
-            .env("RUST_LOG", "warn")
+            .env(
+                "RUST_LOG",
+                std::env::var("IDMESH_TEST_LOG").unwrap_or_else(|_| "warn".into()),
+            )
             .stdout(Stdio::null())
             .stderr(log);
         command

@@ -444,3 +444,97 @@ fn voters_keep_a_leader_with_one_gone_and_take_it_back() {
     assert!(back >= later);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Who holds `role` in the voters' map, and at which epoch (from the
+/// leading voter's answer).
+fn holding(deployment: &Deployment, role: &str) -> Option<(String, u64)> {
+    let answers = deployment.query(&["roles"]).ok()?;
+    let leading = answers
+        .iter()
+        .filter(|a| a["leader"] != 0 && a["leader"] == a["voter"])
+        .max_by_key(|a| a["term"].as_u64())?;
+    let entry = leading["roles"]
+        .as_array()?
+        .iter()
+        .find(|e| e["role"] == role)?;
+    Some((
+        entry["holder"].as_str()?.to_string(),
+        entry["epoch"].as_u64()?,
+    ))
+}
+
+/// Waits until the voters' map gives `role` to `holder`; its epoch.
+fn held_by(deployment: &Deployment, role: &str, holder: &str, within: Duration) -> u64 {
+    let deadline = Instant::now() + within;
+    loop {
+        if let Some((h, epoch)) = holding(deployment, role) {
+            if h == holder {
+                return epoch;
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{role} never held by {holder}: {:?}",
+            deployment.query(&["roles"])
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Three voters decide who holds each leader role, and the leaders keep
+/// their state on disks of their own. leader-1's process is frozen
+/// (SIGSTOP: a host cut off, its process still there) past the takeover
+/// time: the voters give its role to leader-2 at the next epoch, which
+/// runs it from its standby copy. Woken, the former holder finds the map
+/// moved on and stops the role (what it sent at its old epoch is refused
+/// by the fence), stands by, and gets its role back home at a later
+/// epoch. Every epoch has one holder; the final answer equals the twin's.
+#[test]
+fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
+    let dir = std::env::temp_dir().join(format!("idmesh-frozen-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 150.0, 5);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(300.0),
+        journal: true,
+        own_disks: true,
+        voters: 3,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_each("frozen", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let first = held_by(&deployment, "leader-1", "leader-1", Duration::from_secs(30));
+    deployment.first_answer(Duration::from_secs(30));
+    deployment.pause("leader-1");
+    let frozen = Instant::now();
+    let taken = held_by(&deployment, "leader-1", "leader-2", Duration::from_secs(40));
+    assert!(
+        taken > first,
+        "a takeover raises the epoch: {first} then {taken}"
+    );
+    eprintln!(
+        "leader-1 frozen: the voters gave its role to leader-2 at epoch {taken} {:.1} s later",
+        frozen.elapsed().as_secs_f64()
+    );
+    deployment.resume("leader-1");
+    let home = held_by(&deployment, "leader-1", "leader-1", Duration::from_secs(40));
+    assert!(home > taken, "home at a later epoch: {taken} then {home}");
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after a holder superseded and its role back home",
+    );
+    let log = deployment.log();
+    // Woken, it stops the role: its lease lapsed while it was frozen, or
+    // the map it reads gives the role to another.
+    assert!(
+        log.contains("for the lease: stopping the role")
+            || log.contains("the voters gave the role to another"),
+        "the woken holder stopped the role:\n{log}"
+    );
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -7,10 +7,10 @@
 //! could vote twice in a term.
 
 use idmesh_consensus::{
-    Command, ConsensusError, DurableError, DurableLog, Envelope, Outcome, Voter, VoterConfig,
+    Command, ConsensusError, DurableError, DurableLog, Envelope, Outcome, RoleEntry, RolesAnswer,
+    Voter, VoterConfig,
 };
 use idmesh_protocol::wire::keys::Keys;
-use serde::{Deserialize, Serialize};
 use std::future::Future;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -29,23 +29,6 @@ pub struct VoterProcess {
     /// One tick of the machine's clock: elections take
     /// `election_ticks` of them, heartbeats `heartbeat_ticks`.
     pub tick: Duration,
-}
-
-/// What a voter answers on `query/roles`: the map its committed log built.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RolesAnswer {
-    pub voter: u64,
-    /// The group's leader as this voter knows it (0: none).
-    pub leader: u64,
-    pub term: u64,
-    pub roles: Vec<RoleEntry>,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RoleEntry {
-    pub role: String,
-    pub holder: Option<String>,
-    pub epoch: u64,
 }
 
 #[derive(Debug, thiserror::Error)]

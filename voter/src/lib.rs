@@ -16,4 +16,5 @@
 
 pub mod driver;
 
-pub use driver::{propose, run, RoleEntry, RolesAnswer, VoterError, VoterProcess};
+pub use driver::{propose, run, VoterError, VoterProcess};
+pub use idmesh_consensus::{RoleEntry, RolesAnswer};

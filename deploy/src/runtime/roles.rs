@@ -127,6 +127,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                             drop_transfer_every: topology.leader_faults.drop_transfer_every,
                             drop_push_every: topology.leader_faults.drop_push_every,
                             flow_control: sensor.window.is_some(),
+                            lease: (!topology.voters.is_empty()).then_some(VOTERS_LEASE),
                         },
                         shutdown(),
                     )
@@ -158,6 +159,11 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
         .instrument(span),
     )
 }
+
+/// With voters: how long a leader process runs its roles without a map
+/// read from a leading voter. Longer than an election (one to two
+/// seconds), so that a new election does not stop the roles.
+const VOTERS_LEASE: Duration = Duration::from_secs(5);
 
 /// Voter `name`'s place in the group: its id is its place among the
 /// topology's `[[voter]]`s, from 1; its log is `<state_dir>/<name>.raft`.

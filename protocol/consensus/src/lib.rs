@@ -31,5 +31,5 @@ mod role_map;
 mod voter;
 
 pub use durable::{DurableError, DurableLog, KIND};
-pub use role_map::{Command, Holding, Outcome, RoleMap};
+pub use role_map::{Command, Holding, Outcome, RoleEntry, RoleMap, RolesAnswer};
 pub use voter::{ConsensusError, Envelope, Persist, Ready, Voter, VoterConfig};

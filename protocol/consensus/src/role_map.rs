@@ -48,6 +48,45 @@ pub enum Outcome {
     Unchanged { role: String, why: &'static str },
 }
 
+/// What a voter answers on `query/roles` (JSON): the map its committed
+/// log built, with the group's leader and term as it knows them. The
+/// leader's map is the newest; a follower's may lag by what it has not
+/// yet heard committed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RolesAnswer {
+    pub voter: u64,
+    /// The group's leader as this voter knows it (0: none).
+    pub leader: u64,
+    pub term: u64,
+    pub roles: Vec<RoleEntry>,
+}
+
+/// One role's entry in a [`RolesAnswer`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RoleEntry {
+    pub role: String,
+    pub holder: Option<String>,
+    pub epoch: u64,
+}
+
+impl RolesAnswer {
+    /// The entry of `role`, if it was ever claimed.
+    pub fn get(&self, role: &str) -> Option<&RoleEntry> {
+        self.roles.iter().find(|e| e.role == role)
+    }
+
+    /// Of the voters' answers, the one to trust: the group leader's own
+    /// (it knows every committed claim), the newest term's if several
+    /// say they lead (one was deposed and does not know it yet). None
+    /// when no voter leads: the group cannot decide now.
+    pub fn newest(answers: impl IntoIterator<Item = RolesAnswer>) -> Option<RolesAnswer> {
+        answers
+            .into_iter()
+            .filter(|a| a.leader != 0 && a.leader == a.voter)
+            .max_by_key(|a| a.term)
+    }
+}
+
 /// The replicated map (see the module documentation).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RoleMap {

@@ -100,7 +100,9 @@ pub struct StandbyCopy {
     pub version: u16,
     /// The role the snapshot is of.
     pub role: String,
-    /// The role whose process keeps the copy (the heir of `role`).
+    /// The role whose process keeps the copy: the heir of `role`, or
+    /// `role` itself when the role goes home to its own process standing
+    /// by.
     pub to: String,
     /// The snapshot's durable mark: what the role may let the others
     /// forget once the copy is kept.
@@ -132,9 +134,6 @@ impl Valid for StandbyCopy {
         let checks = || -> Result<(), String> {
             require(!self.role.is_empty(), || "it names no role".into())?;
             require(!self.to.is_empty(), || "it names no standby".into())?;
-            require(self.role != self.to, || {
-                format!("role {} is its own standby", self.role)
-            })?;
             require(self.mark.leader == self.role, || {
                 format!(
                     "the mark is of {}, the copy of {}",
@@ -355,13 +354,6 @@ mod tests {
         };
         assert_eq!(decode::<StandbyCopy>(&encode(&copy)).unwrap(), copy);
         for (bad, expected) in [
-            (
-                StandbyCopy {
-                    to: "l1".into(),
-                    ..copy.clone()
-                },
-                "its own standby",
-            ),
             (
                 StandbyCopy {
                     mark: mark("l0"),
