@@ -1,6 +1,8 @@
 //! The deterministic network simulator over many seeded schedules
 //! (`idmesh_tests::sim`): drops, duplicates, delays, reordering,
-//! partitions, crashes and restarts from the journal, queries at random
+//! partitions, crashes and restarts from the journal, hosts lost with
+//! their disk and holders superseded (roles adopted from standby copies
+//! at a newer epoch, former holders fenced off), queries at random
 //! points; every answer checked against the centralized engine (and on
 //! the factored schedules with identities, every answer's rows against
 //! the centralized information matrix).

@@ -9,7 +9,9 @@
 //!
 //! The files mirror the drivers: `sensor.rs` does what
 //! `sensor/src/driver.rs` does, `leader.rs` what `leader/src/driver.rs`
-//! does, `coordinator.rs` what `coordinator/src/driver/` does. This one
+//! does, `coordinator.rs` what `coordinator/src/driver/` does, `hosts.rs`
+//! what `leader/src/host.rs` and the voters do (who holds a role at
+//! which epoch, standbys, adoptions). This one
 //! holds the world itself: its clock and events, the wire between the
 //! roles, and the checks no one role can make.
 
