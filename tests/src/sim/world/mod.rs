@@ -242,25 +242,7 @@ impl World {
             .map_err(|e| Violation::setup(e.to_string()))?;
         let gateway = scenario.gateway(router);
         let net = network::random(&mut rng);
-        let leaders = scenario
-            .leaders
-            .iter()
-            .map(|l| LeaderSlot {
-                name: l.name.clone(),
-                node: None,
-                life: 0,
-                disk: Disk::default(),
-                published: 0,
-                snapshot_every: 0,
-                damaged: None,
-                process: l.name.clone(),
-                epoch: 0,
-                orphaned: false,
-                former: None,
-                standby: None,
-                heard: BTreeMap::new(),
-            })
-            .collect::<Vec<_>>();
+        let leaders = slots(&scenario);
         let count = leaders.len();
         let mut world = World {
             rng,
@@ -334,15 +316,7 @@ impl World {
         }
         network::schedule_faults(&mut world.net, &mut world.rng, span, count);
         if let Some(fault) = host_fault {
-            let (at, role) = (
-                world.hosts.rng.gen_range(0..span),
-                world.hosts.rng.gen_range(0..count),
-            );
-            let event = match fault {
-                HostFault::Lost => Event::HostLoss(role),
-                HostFault::Superseded => Event::Supersede(role),
-            };
-            world.net.at(at, event);
+            world.schedule_host_fault(fault, span);
         }
         let mut calm = span + 100;
         if world.aimed.long_partition > 0 {
@@ -429,6 +403,17 @@ impl World {
             true => HostFault::Lost,
             false => HostFault::Superseded,
         })
+    }
+
+    /// `fault` strikes a random role at a random point before `span`.
+    fn schedule_host_fault(&mut self, fault: HostFault, span: Ms) {
+        let at = self.hosts.rng.gen_range(0..span);
+        let role = self.hosts.rng.gen_range(0..self.leaders.len());
+        let event = match fault {
+            HostFault::Lost => Event::HostLoss(role),
+            HostFault::Superseded => Event::Supersede(role),
+        };
+        self.net.at(at, event);
     }
 
     fn fresh_id(&mut self) -> u64 {
@@ -598,4 +583,27 @@ impl World {
             Msg::Coordinator(what) => self.at_coordinator(what),
         }
     }
+}
+
+/// A slot per leader role, each held by the process of its own name.
+fn slots(scenario: &Scenario) -> Vec<LeaderSlot> {
+    scenario
+        .leaders
+        .iter()
+        .map(|l| LeaderSlot {
+            name: l.name.clone(),
+            node: None,
+            life: 0,
+            disk: Disk::default(),
+            published: 0,
+            snapshot_every: 0,
+            damaged: None,
+            process: l.name.clone(),
+            epoch: 0,
+            orphaned: false,
+            former: None,
+            standby: None,
+            heard: BTreeMap::new(),
+        })
+        .collect()
 }
