@@ -155,10 +155,10 @@ impl World {
                 (id, failed || all)
             }
             ToCoordinator::Partial { id, from, reply } => {
-                if !self
+                if self
                     .queries
                     .get(&id)
-                    .is_some_and(|q| !q.replied.contains(&from))
+                    .is_none_or(|q| q.replied.contains(&from))
                 {
                     // Over, or a duplicate: Zenoh would not deliver it twice.
                     return Ok(());

@@ -163,7 +163,7 @@ impl World {
     /// `who` sends its last snapshot (of mark `mark`) to standby `to`. A
     /// former holder's copies are not modelled: it is cut off from the
     /// map, and its heir holds the role.
-    pub(super) fn to_standby(
+    pub(super) fn send_standby_copy(
         &mut self,
         who: Who,
         to: &str,

@@ -372,7 +372,7 @@ impl World {
                     self.tell_leader(who, asker, ToLeader::Reply { ask: id, reply });
                 }
                 Output::Persist { mark } => self.persist(who, mark),
-                Output::ToStandby { to, mark } => self.to_standby(who, &to, mark)?,
+                Output::ToStandby { to, mark } => self.send_standby_copy(who, &to, mark)?,
                 Output::Snapshot(state) => {
                     if let Some(disk) = self.disk_mut(who) {
                         disk.snapshot = Some(state);
