@@ -45,20 +45,38 @@ pub(crate) fn standby_path(dir: &Path, role: &str) -> PathBuf {
 }
 
 /// Writes `copy` under `dir` whole and fsynced, and returns the word that
-/// says so, from process `host`.
+/// says so, from process `host`. A copy behind the one kept (an older
+/// snapshot that arrived late, reordered on the way) does not replace it:
+/// the role may have been told the newer one is kept, and published its
+/// mark; the word names the copy kept.
 pub(crate) fn keep(
     dir: &Path,
     copy: &StandbyCopy,
     host: &str,
 ) -> Result<StandbyStored, StandbyError> {
-    write(&standby_path(dir, &copy.role), &copy.mark, &copy.state)?;
+    let path = standby_path(dir, &copy.role);
+    let mark = match read(&path) {
+        Ok(Some((kept, _))) if behind(&copy.mark, &kept) => kept,
+        _ => {
+            write(&path, &copy.mark, &copy.state)?;
+            copy.mark.clone()
+        }
+    };
     Ok(StandbyStored {
         version: VERSION,
         role: copy.role.clone(),
         standby: copy.to.clone(),
         host: host.to_string(),
-        mark: copy.mark.clone(),
+        mark,
     })
+}
+
+/// Whether `mark` is behind `than`: not past it in either field, and not
+/// the same.
+pub(crate) fn behind(mark: &Durable, than: &Durable) -> bool {
+    mark.batch <= than.batch
+        && mark.position <= than.position
+        && (mark.batch, mark.position) != (than.batch, than.position)
 }
 
 /// Writes the copy file at `path`: the mark, then the state.
@@ -250,6 +268,10 @@ mod tests {
         assert_eq!((stored.host.as_str(), stored.mark.batch), ("l2", 3));
         assert_eq!(read(&path).unwrap(), Some((mark(3), vec![7; 1000])));
         keep(&dir, &copy(5, vec![9; 10]), "l2").unwrap();
+        assert_eq!(read(&path).unwrap(), Some((mark(5), vec![9; 10])));
+        // An older copy arriving late keeps the newer one, and says so.
+        let stored = keep(&dir, &copy(4, vec![1; 10]), "l2").unwrap();
+        assert_eq!(stored.mark.batch, 5);
         assert_eq!(read(&path).unwrap(), Some((mark(5), vec![9; 10])));
         assert!(path.ends_with("l1.standby.snapshot"));
         assert_ne!(path, snapshot_path(&journal_path(&dir, "l1")));

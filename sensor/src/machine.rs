@@ -597,7 +597,8 @@ impl<Q> Gateway<Q> {
         self.state.finished
     }
 
-    pub(crate) fn stats(&self) -> &SensorStats {
+    /// The gateway's counters (what its stats key serves).
+    pub fn stats(&self) -> &SensorStats {
         &self.state.stats
     }
 

@@ -1,6 +1,8 @@
 //! The deterministic network simulator over many seeded schedules
 //! (`idmesh_tests::sim`): drops, duplicates, delays, reordering,
-//! partitions, crashes and restarts from the journal, queries at random
+//! partitions, crashes and restarts from the journal, hosts lost with
+//! their disk and holders superseded (roles adopted from standby copies
+//! at a newer epoch, former holders fenced off), queries at random
 //! points; every answer checked against the centralized engine (and on
 //! the factored schedules with identities, every answer's rows against
 //! the centralized information matrix).
@@ -51,6 +53,12 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.identity_answers += tally.identity_answers;
                 total.tree_answers += tally.tree_answers;
                 total.identity_repairs += tally.identity_repairs;
+                total.host_losses += tally.host_losses;
+                total.superseded += tally.superseded;
+                total.adoptions += tally.adoptions;
+                total.adopted_from_copies += tally.adopted_from_copies;
+                total.standby_copies += tally.standby_copies;
+                total.fenced += tally.fenced;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -60,7 +68,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -82,7 +90,13 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.identities,
         total.identity_answers,
         total.tree_answers,
-        total.identity_repairs
+        total.identity_repairs,
+        total.host_losses,
+        total.superseded,
+        total.adoptions,
+        total.adopted_from_copies,
+        total.standby_copies,
+        total.fenced
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
@@ -131,6 +145,21 @@ fn every_schedule_answers_like_the_centralized_engine() {
         assert!(total.journal_damages > 0, "no journal was ever damaged");
         // Flow control held the stream, and every schedule still finished.
         assert!(total.window_waits > 0, "the window never held the sensor");
+        // Hosts were lost with their disks and holders superseded, their
+        // roles adopted from standby copies at a newer epoch, and former
+        // holders' messages reached the sensor, peers and coordinator and
+        // were refused.
+        assert!(
+            total.host_losses > 0 && total.superseded > 0,
+            "no host lost ({}) or holder superseded ({})",
+            total.host_losses,
+            total.superseded
+        );
+        assert!(
+            total.adopted_from_copies > 0,
+            "no role was ever adopted from a standby copy"
+        );
+        assert!(total.fenced > 0, "no former holder was ever fenced off");
     }
 }
 

@@ -10,6 +10,19 @@
 //! in a quarter of the crashes from a journal found damaged, cut before a
 //! random entry — and queries come at random points.
 //!
+//! Every role is held by a process at an epoch of the voters' role map
+//! (`idmesh_consensus::RoleMap`: one shared map whose committed claims are
+//! applied at a simulated commit time; the raft voters themselves are not
+//! simulated). In a third of the schedules with more than one leader the
+//! roles keep standbys — each snapshot goes to the heir process through
+//! the network, which keeps it on its own disk and says so — and one
+//! host fault strikes: a host lost for good with its disk, or a holder
+//! cut off long enough to be superseded, which keeps running at its old
+//! epoch, is heard again by the sensor, the peers and the coordinator once
+//! the cut heals, and stops a while later. Either way the role is adopted
+//! by the heir process from its standby copy (no journal, `adopted`) at
+//! the next epoch, by a claim fencing the old one (`world/hosts.rs`).
+//!
 //! Every schedule checks:
 //! - every answer equals the centralized engine's at its watermark to
 //!   1e-9 (exact conditioning, no pruning), and its marginals sum to k;
@@ -22,9 +35,19 @@
 //! - a leader never goes back, comes back no lower than the durable mark
 //!   it published, and a killed leader replays its journal to exactly
 //!   where it was;
+//! - an adopted role comes back no lower than the durable mark the role
+//!   published either (the standby rule: the sensor and the peers never
+//!   forget what the adopter needs);
+//! - no receiver — the sensor, a peer, the coordinator — applies a message
+//!   whose epoch is older than the newest it has heard of that role: each
+//!   such message must be counted refused (the tally's `fenced`);
+//! - no two processes are ever recorded holding one role at one epoch, a
+//!   holder runs only at the epoch the map gives it, and every answer
+//!   carries an epoch the map gave;
 //! - no item is applied twice or lost: each leader applied exactly the
 //!   items routed to it up to its position;
-//! - once the faults stop, the final answer comes (liveness), covering the
+//! - once the faults stop, every orphaned role is adopted and every former
+//!   holder stopped, the final answer comes (liveness), covering the
 //!   whole stream.
 //!
 //! A seed is a schedule: [`run`] it alone to replay a failure.

@@ -12,6 +12,8 @@ use rand_chacha::ChaCha8Rng;
 pub(crate) enum Endpoint {
     Sensor,
     Leader(usize),
+    /// A role's former holder, cut off and superseded, still running.
+    Former(usize),
     Coordinator,
 }
 

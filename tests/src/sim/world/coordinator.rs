@@ -3,7 +3,7 @@
 //! cut and the fresh ones), and every answer checked against the
 //! centralized engine at its watermark.
 
-use super::leader::ToLeader;
+use super::leader::{ToLeader, Who};
 use super::sensor::ToSensor;
 use super::{Event, Msg, World, QUERY_TIMEOUT};
 use crate::sim::network::Endpoint;
@@ -34,7 +34,7 @@ pub(crate) enum ToCoordinator {
     },
     Partial {
         id: u64,
-        leader: usize,
+        from: Who,
         reply: Result<Vec<u8>, String>,
     },
 }
@@ -47,7 +47,10 @@ pub(super) struct Query {
     pub(super) phase: Phase,
     /// Ids of the current phase (messages of an earlier phase are stale).
     pub(super) id: u64,
-    pub(super) replied: BTreeSet<usize>,
+    /// The tag of the current phase's cut (None: at rest).
+    pub(super) tag: Option<u64>,
+    /// Who replied in this phase (a role's former holder answers too).
+    pub(super) replied: BTreeSet<Who>,
     pub(super) partials: Partials,
     pub(super) cut: Option<Result<CutPlaced, GatherError>>,
     pub(super) final_query: bool,
@@ -68,6 +71,7 @@ impl World {
             last: last.clone(),
             phase: Phase::Rest,
             id,
+            tag: None,
             replied: BTreeSet::new(),
             partials: Partials::new(None),
             cut: None,
@@ -92,6 +96,7 @@ impl World {
         let tag = self.rng.gen::<u64>();
         query.phase = Phase::Fresh;
         query.id = id;
+        query.tag = Some(tag);
         query.replied.clear();
         query.partials = Partials::new(Some(tag));
         query.cut = None;
@@ -99,7 +104,8 @@ impl World {
             Endpoint::Coordinator,
             Endpoint::Sensor,
             Msg::Sensor {
-                from: usize::MAX,
+                from: Who::holder(usize::MAX),
+                epoch: 0,
                 what: ToSensor::Cut {
                     id,
                     parameters: CutParameters {
@@ -145,25 +151,23 @@ impl World {
                 }
                 // No cut, no answer: an error there stops the wait.
                 let failed = matches!(query.cut, Some(Err(_)));
-                (id, failed || query.replied.len() == self.leaders.len())
+                let all = holders_replied(&query.replied) == self.leaders.len();
+                (id, failed || all)
             }
-            ToCoordinator::Partial { id, leader, reply } => {
-                let Some(query) = self.queries.get_mut(&id) else {
+            ToCoordinator::Partial { id, from, reply } => {
+                if self
+                    .queries
+                    .get(&id)
+                    .is_none_or(|q| q.replied.contains(&from))
+                {
+                    // Over, or a duplicate: Zenoh would not deliver it twice.
+                    return Ok(());
+                }
+                self.partial_reply(id, from, reply)?;
+                let Some(query) = self.queries.get(&id) else {
                     return Ok(());
                 };
-                if !query.replied.insert(leader) {
-                    // A duplicate: Zenoh would not deliver it twice.
-                    return Ok(());
-                }
-                let change = reply
-                    .as_ref()
-                    .ok()
-                    .and_then(|bytes| decode::<Partial>(bytes).ok());
-                if change.is_some_and(|p| p.base.is_some()) {
-                    self.tally.changes += 1;
-                }
-                query.partials.reply(reply, "sim/partial", &self.memory);
-                let all = query.replied.len() == self.leaders.len();
+                let all = holders_replied(&query.replied) == self.leaders.len();
                 (
                     id,
                     all && (query.phase == Phase::Rest || query.cut.is_some()),
@@ -173,6 +177,61 @@ impl World {
         if done {
             self.complete_query(id)?;
         }
+        Ok(())
+    }
+
+    /// `from`'s reply to query `id` (whose phase it is). Its epoch must be
+    /// one the map gave the role; if the coordinator had been handed a
+    /// newer epoch's answer of that role, it must not keep it (counted as
+    /// fenced).
+    fn partial_reply(
+        &mut self,
+        id: u64,
+        from: Who,
+        reply: Result<Vec<u8>, String>,
+    ) -> Result<(), Violation> {
+        let Some(query) = self.queries.get_mut(&id) else {
+            return Ok(());
+        };
+        query.replied.insert(from);
+        let partial = reply
+            .as_ref()
+            .ok()
+            .and_then(|bytes| decode::<Partial>(bytes).ok());
+        let Some(p) = partial else {
+            query.partials.reply(reply, "sim/partial", &self.memory);
+            return Ok(());
+        };
+        if p.base.is_some() {
+            self.tally.changes += 1;
+        }
+        let role = from.role;
+        if !self.hosts.held.contains_key(&(role, p.epoch)) {
+            return Err(Violation::new(format!(
+                "{} answered at epoch {}, which no process was given",
+                p.leader, p.epoch
+            )));
+        }
+        let tagged = query.tag.is_none_or(|t| t == p.tag);
+        let heard = self.coordinator_heard.get(&p.leader).copied();
+        let Some(newest) = heard.filter(|&h| tagged && p.epoch < h) else {
+            query.partials.reply(reply, "sim/partial", &self.memory);
+            if tagged {
+                let heard = self.coordinator_heard.entry(p.leader).or_insert(p.epoch);
+                *heard = (*heard).max(p.epoch);
+            }
+            return Ok(());
+        };
+        let kept = |partials: &Partials| partials.clone().into_parts().0.remove(&p.leader);
+        let before = kept(&query.partials);
+        query.partials.reply(reply, "sim/partial", &self.memory);
+        if kept(&query.partials) != before {
+            return Err(Violation::new(format!(
+                "the coordinator kept {}'s answer at epoch {}, older than the epoch {newest} it had heard",
+                p.leader, p.epoch
+            )));
+        }
+        self.tally.fenced += 1;
         Ok(())
     }
 
@@ -373,4 +432,10 @@ impl World {
         self.tally.identity_answers += 1;
         Ok(())
     }
+}
+
+/// How many roles' current holders replied (a former holder's reply
+/// counts for nothing: the query waits for the role's holder).
+fn holders_replied(replied: &BTreeSet<Who>) -> usize {
+    replied.iter().filter(|w| !w.former).count()
 }

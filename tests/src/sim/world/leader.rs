@@ -3,6 +3,10 @@
 //! (puts, gets with a timeout, transfers, its journal on a disk that a
 //! crash may cut short), and leaders crashed and started again from their
 //! journal and snapshot.
+//!
+//! A role is acted for by its current holder and, for a while after a
+//! takeover, by a former holder cut off and superseded that still runs
+//! ([`Who`]); `hosts.rs` says how roles change hands.
 
 use super::coordinator::ToCoordinator;
 use super::sensor::ToSensor;
@@ -10,18 +14,29 @@ use super::{Event, Msg, World, ASK_TIMEOUT};
 use crate::sim::network::Endpoint;
 use crate::sim::Violation;
 use idmesh_leader::journal::Kind;
-use idmesh_leader::{Ask, Input, Node, Output, Timers};
+use idmesh_leader::{Ask, Holder, Input, Node, Output, Timers};
 use idmesh_protocol::wire::leader_to_leader::TransfersSent;
 use idmesh_protocol::wire::leader_to_sensor::{Durable, Followed, Resent};
 use idmesh_protocol::wire::{decode, encode};
 use rand::Rng;
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 #[derive(Debug, Clone)]
 pub(crate) enum ToLeader {
     Batch(Vec<u8>),
-    Transfer(Vec<u8>),
-    Durable(Vec<u8>),
+    /// Transfers from role `from`'s holder at `epoch`.
+    Transfer {
+        bytes: Vec<u8>,
+        from: usize,
+        epoch: u64,
+    },
+    /// A durable mark of role `from`'s holder at `epoch`.
+    Durable {
+        bytes: Vec<u8>,
+        from: usize,
+        epoch: u64,
+    },
     Partial {
         id: u64,
         ask: Ask,
@@ -36,11 +51,44 @@ pub(crate) enum ToLeader {
         ask: u64,
         reply: Result<Vec<u8>, String>,
     },
+    /// Role `role`'s last snapshot, for this role's process to keep as
+    /// its standby.
+    StandbyCopy {
+        role: usize,
+        mark: Durable,
+        state: Vec<u8>,
+    },
+    /// The standby's word that it keeps a copy (`StandbyStored` bytes).
+    StandbyStored(Vec<u8>),
+}
+
+/// Who acts: role `role`'s current holder, or its `former` holder (cut
+/// off and superseded, still running until it learns so).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) struct Who {
+    pub(crate) role: usize,
+    pub(crate) former: bool,
+}
+
+impl Who {
+    pub(crate) fn holder(role: usize) -> Who {
+        Who {
+            role,
+            former: false,
+        }
+    }
+
+    pub(crate) fn endpoint(self) -> Endpoint {
+        match self.former {
+            false => Endpoint::Leader(self.role),
+            true => Endpoint::Former(self.role),
+        }
+    }
 }
 
 /// A get a leader made, waiting for its answer.
 pub(super) struct PendingAsk {
-    pub(super) leader: usize,
+    pub(super) leader: Who,
     pub(super) life: u64,
     pub(super) kind: AskKind,
 }
@@ -60,6 +108,15 @@ pub(super) struct Disk {
     pub(super) synced: usize,
 }
 
+/// A former holder of a role: cut off, superseded at a newer epoch, and
+/// still running on its own disk until it stops.
+pub(super) struct Former {
+    pub(super) node: Node,
+    pub(super) life: u64,
+    pub(super) disk: Disk,
+    pub(super) epoch: u64,
+}
+
 pub(super) struct LeaderSlot {
     pub(super) name: String,
     pub(super) node: Option<Node>,
@@ -72,6 +129,19 @@ pub(super) struct LeaderSlot {
     /// Its journal was found damaged at the crash: the restart drops this
     /// many entries (the damaged one and every one after it).
     pub(super) damaged: Option<u64>,
+    /// The process holding the role, and the epoch it holds it at.
+    pub(super) process: String,
+    pub(super) epoch: u64,
+    /// Lost with its host, or cut off and superseded: nobody acts for it
+    /// until the adoption commits (no restart, no calm brings it back).
+    pub(super) orphaned: bool,
+    /// The former holder still running, if there is one.
+    pub(super) former: Option<Former>,
+    /// The standby the holder was last told.
+    pub(super) standby: Option<String>,
+    /// The newest epoch of each peer role whose durable mark reached the
+    /// current holder since it started (its fence is at least this).
+    pub(super) heard: BTreeMap<usize, u64>,
 }
 
 impl World {
@@ -83,23 +153,32 @@ impl World {
         );
         timers.sweep = Duration::from_millis(250);
         timers.flow_control = self.scenario.window.is_some();
+        timers.standby = self.hosts.standbys;
         timers
     }
 
     /// Starts leader `i` (again): from its disk, as `Node::recover` does
-    /// for the actor.
-    pub(super) fn start_leader(&mut self, i: usize) -> Result<(), Violation> {
+    /// for the actor (`adopted`: by another process, from its standby
+    /// copy).
+    pub(super) fn start_leader(&mut self, i: usize, adopted: bool) -> Result<(), Violation> {
         let timers = self.timers(i);
+        let (process, epoch) = (self.leaders[i].process.clone(), self.leaders[i].epoch);
+        self.record_holder(i, epoch, &process)?;
         let slot = &mut self.leaders[i];
         slot.life += 1;
+        slot.heard.clear();
+        slot.standby = None;
         let damaged = slot.damaged.take();
         let disk = &slot.disk;
         let (node, out) = Node::recover(
             &slot.name,
-            &slot.name,
+            Holder {
+                process: &process,
+                epoch,
+            },
             disk.snapshot.as_deref(),
             disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
-            false,
+            adopted,
             damaged,
             timers,
             Duration::from_millis(self.now),
@@ -107,8 +186,9 @@ impl World {
         .map_err(|e| Violation::new(format!("{} cannot recover: {e}", slot.name)))?;
         if node.leader().durable().position < slot.published {
             return Err(Violation::new(format!(
-                "{} came back at position {} below the durable mark {} it published",
+                "{} came back (in {process} at epoch {epoch}{}) at position {} below the durable mark {} it published",
                 slot.name,
+                if adopted { ", adopted" } else { "" },
                 node.leader().durable().position,
                 slot.published
             )));
@@ -118,7 +198,8 @@ impl World {
         let phase = self.rng.gen_range(1..=250);
         self.net
             .at(self.now + phase, Event::Tick { leader: i, life });
-        self.carry_out(i, out)
+        self.carry_out(Who::holder(i), out)?;
+        self.tell_standbys()
     }
 
     pub(super) fn crash(&mut self, i: usize) -> Result<(), Violation> {
@@ -142,7 +223,10 @@ impl World {
             let slot = &self.leaders[i];
             let (probe, _) = Node::recover(
                 &slot.name,
-                &slot.name,
+                Holder {
+                    process: &slot.process,
+                    epoch: slot.epoch,
+                },
                 slot.disk.snapshot.as_deref(),
                 slot.disk.entries.iter().map(|(k, b)| (*k, b.as_slice())),
                 false,
@@ -176,10 +260,46 @@ impl World {
         Ok(())
     }
 
-    /// Hands leader `i` one input and carries out what it asks.
-    pub(super) fn step(&mut self, i: usize, input: Input) -> Result<(), Violation> {
+    pub(super) fn node_mut(&mut self, who: Who) -> Option<&mut Node> {
+        let slot = &mut self.leaders[who.role];
+        match who.former {
+            false => slot.node.as_mut(),
+            true => slot.former.as_mut().map(|f| &mut f.node),
+        }
+    }
+
+    /// The disk `who` journals to (None: a former holder gone since).
+    fn disk_mut(&mut self, who: Who) -> Option<&mut Disk> {
+        let slot = &mut self.leaders[who.role];
+        match who.former {
+            false => Some(&mut slot.disk),
+            true => slot.former.as_mut().map(|f| &mut f.disk),
+        }
+    }
+
+    /// The epoch `who` holds its role at.
+    pub(super) fn epoch_of(&self, who: Who) -> u64 {
+        let slot = &self.leaders[who.role];
+        match who.former {
+            false => slot.epoch,
+            true => slot.former.as_ref().map_or(0, |f| f.epoch),
+        }
+    }
+
+    /// `who`'s incarnation (0: none).
+    pub(super) fn life_of(&self, who: Who) -> u64 {
+        let slot = &self.leaders[who.role];
+        match who.former {
+            false => slot.life,
+            true => slot.former.as_ref().map_or(0, |f| f.life),
+        }
+    }
+
+    /// Hands `who` one input and carries out what it asks.
+    pub(super) fn step(&mut self, who: Who, input: Input) -> Result<(), Violation> {
         let now = Duration::from_millis(self.now);
-        let Some(node) = self.leaders[i].node.as_mut() else {
+        let name = self.leaders[who.role].name.clone();
+        let Some(node) = self.node_mut(who) else {
             return Ok(());
         };
         let before = node.leader().position();
@@ -187,49 +307,47 @@ impl World {
         let after = node.leader().position();
         if after < before {
             return Err(Violation::new(format!(
-                "{} went back from position {before} to {after}",
-                self.leaders[i].name
+                "{name} went back from position {before} to {after}"
             )));
         }
         if let Some(failure) = node.failure() {
             let failure = failure.to_string();
-            return Err(Violation::new(format!(
-                "{} failed: {failure}",
-                self.leaders[i].name
-            )));
+            return Err(Violation::new(format!("{name} failed: {failure}")));
         }
-        self.carry_out(i, out)
+        self.carry_out(who, out)
     }
 
-    /// Does what leader `i`'s node asked for, as its driver does.
-    pub(super) fn carry_out(&mut self, i: usize, outputs: Vec<Output>) -> Result<(), Violation> {
+    /// Does what `who`'s node asked for, as its driver does.
+    pub(super) fn carry_out(&mut self, who: Who, outputs: Vec<Output>) -> Result<(), Violation> {
         for output in outputs {
             match output {
-                Output::Journal { kind, bytes } => self.leaders[i].disk.entries.push((kind, bytes)),
-                Output::Send { to, seqs, body } => self.send_transfer(i, &to, &seqs, body)?,
+                Output::Journal { kind, bytes } => {
+                    if let Some(disk) = self.disk_mut(who) {
+                        disk.entries.push((kind, bytes));
+                    }
+                }
+                Output::Send { to, seqs, body } => self.send_transfer(who, &to, &seqs, body)?,
                 Output::AskFollow(follow) => {
-                    let ask = self.ask(i, AskKind::Follow);
+                    let ask = self.ask(who, AskKind::Follow);
                     let bytes = encode(&follow);
-                    self.tell_sensor(i, ToSensor::Follow { ask, bytes });
+                    self.tell_sensor(who, ToSensor::Follow { ask, bytes });
                 }
                 Output::Progress(progress) => {
-                    self.tell_sensor(i, ToSensor::Progress(encode(&progress)))
+                    self.tell_sensor(who, ToSensor::Progress(encode(&progress)))
                 }
                 Output::Unfollow(unfollow) => {
-                    self.tell_sensor(i, ToSensor::Unfollow(encode(&unfollow)))
+                    self.tell_sensor(who, ToSensor::Unfollow(encode(&unfollow)))
                 }
                 Output::AskResend(resend) => {
-                    let ask = self.ask(i, AskKind::Resend);
+                    let ask = self.ask(who, AskKind::Resend);
                     let bytes = encode(&resend);
-                    self.tell_sensor(i, ToSensor::Resend { ask, bytes });
+                    self.tell_sensor(who, ToSensor::Resend { ask, bytes });
                 }
                 Output::AskTransfers { peer, wanted } => {
-                    let Some(j) = self.leaders.iter().position(|l| l.name == peer) else {
-                        return Err(Violation::new(format!("transfers asked of unknown {peer}")));
-                    };
-                    let ask = self.ask(i, AskKind::Transfers(peer));
+                    let j = self.role_index(&peer)?;
+                    let ask = self.ask(who, AskKind::Transfers(peer));
                     let bytes = encode(&wanted);
-                    self.tell_leader(i, j, ToLeader::SentWanted { ask, bytes });
+                    self.tell_leader(who, Who::holder(j), ToLeader::SentWanted { ask, bytes });
                 }
                 // The simulated coordinator asks for every answer: a push
                 // is a shortcut whose loss the real one mends by asking,
@@ -239,14 +357,11 @@ impl World {
                     let reply = answer.map(|p| encode(&*p));
                     let partial = ToCoordinator::Partial {
                         id,
-                        leader: i,
+                        from: who,
                         reply,
                     };
-                    self.send(
-                        Endpoint::Leader(i),
-                        Endpoint::Coordinator,
-                        Msg::Coordinator(partial),
-                    );
+                    let msg = Msg::Coordinator(partial);
+                    self.send(who.endpoint(), Endpoint::Coordinator, msg);
                 }
                 Output::AnswerSent { id, answer } => {
                     // The asker is whoever made get `id`, if it still waits.
@@ -254,35 +369,41 @@ impl World {
                         continue;
                     };
                     let reply = answer.map(|t| encode(&t));
-                    self.tell_leader(i, asker, ToLeader::Reply { ask: id, reply });
+                    self.tell_leader(who, asker, ToLeader::Reply { ask: id, reply });
                 }
-                Output::Persist { mark } => self.persist(i, mark),
-                // The simulated leaders run without a standby
-                // (`Timers::standby` off): nothing is asked of one.
-                Output::ToStandby { .. } => {}
+                Output::Persist { mark } => self.persist(who, mark),
+                Output::ToStandby { to, mark } => self.send_standby_copy(who, &to, mark)?,
                 Output::Snapshot(state) => {
-                    let disk = &mut self.leaders[i].disk;
-                    disk.snapshot = Some(state);
-                    disk.entries.clear();
-                    disk.synced = 0;
+                    if let Some(disk) = self.disk_mut(who) {
+                        disk.snapshot = Some(state);
+                        disk.entries.clear();
+                        disk.synced = 0;
+                    }
                 }
             }
         }
         Ok(())
     }
 
-    /// Leader `i` sends transfers to leader `to` (the first copy lost when
-    /// the schedule aims at transfers).
+    /// The index of the role named `name`.
+    pub(super) fn role_index(&self, name: &str) -> Result<usize, Violation> {
+        self.leaders
+            .iter()
+            .position(|l| l.name == name)
+            .ok_or_else(|| Violation::new(format!("a message for unknown role {name}")))
+    }
+
+    /// `who` sends transfers to role `to` (the first copy lost when the
+    /// schedule aims at transfers).
     fn send_transfer(
         &mut self,
-        i: usize,
+        who: Who,
         to: &str,
         seqs: &[u64],
         body: Vec<u8>,
     ) -> Result<(), Violation> {
-        let Some(j) = self.leaders.iter().position(|l| l.name == to) else {
-            return Err(Violation::new(format!("transfer to unknown {to}")));
-        };
+        let j = self.role_index(to)?;
+        let i = who.role;
         // Lost once: a message with a transfer not lost before.
         let lost = self.aimed.lose_transfers
             && seqs
@@ -295,44 +416,68 @@ impl World {
             self.tally.dropped += 1;
             return Ok(());
         }
-        self.tell_leader(i, j, ToLeader::Transfer(body));
+        let epoch = self.epoch_of(who);
+        let what = ToLeader::Transfer {
+            bytes: body,
+            from: i,
+            epoch,
+        };
+        self.tell_leader(who, Who::holder(j), what);
         Ok(())
     }
 
-    /// Leader `i`'s journal is synced; a durable mark, if it has one, is
+    /// `who`'s journal is synced; a durable mark, if it has one, is
     /// published to the sensor and the other leaders.
-    fn persist(&mut self, i: usize, mark: Option<Durable>) {
-        let slot = &mut self.leaders[i];
-        slot.disk.synced = slot.disk.entries.len();
+    fn persist(&mut self, who: Who, mark: Option<Durable>) {
+        if let Some(disk) = self.disk_mut(who) {
+            disk.synced = disk.entries.len();
+        }
         let Some(mark) = mark else {
             return;
         };
+        let i = who.role;
+        let slot = &mut self.leaders[i];
         slot.published = slot.published.max(mark.position);
         let bytes = encode(&mark);
-        self.tell_sensor(i, ToSensor::Durable(bytes.clone()));
+        let epoch = self.epoch_of(who);
+        self.tell_sensor(who, ToSensor::Durable(bytes.clone()));
         for j in (0..self.leaders.len()).filter(|&j| j != i) {
-            self.tell_leader(i, j, ToLeader::Durable(bytes.clone()));
+            let what = ToLeader::Durable {
+                bytes: bytes.clone(),
+                from: i,
+                epoch,
+            };
+            self.tell_leader(who, Who::holder(j), what);
         }
     }
 
-    fn tell_sensor(&mut self, i: usize, what: ToSensor) {
-        let msg = Msg::Sensor { from: i, what };
-        self.send(Endpoint::Leader(i), Endpoint::Sensor, msg);
+    fn tell_sensor(&mut self, who: Who, what: ToSensor) {
+        let epoch = self.epoch_of(who);
+        let msg = Msg::Sensor {
+            from: who,
+            epoch,
+            what,
+        };
+        self.send(who.endpoint(), Endpoint::Sensor, msg);
     }
 
-    fn tell_leader(&mut self, i: usize, j: usize, what: ToLeader) {
-        let msg = Msg::Leader { to: j, what };
-        self.send(Endpoint::Leader(i), Endpoint::Leader(j), msg);
+    pub(super) fn tell_leader(&mut self, from: Who, to: Who, what: ToLeader) {
+        let msg = match to.former {
+            false => Msg::Leader { to: to.role, what },
+            true => Msg::Former { to: to.role, what },
+        };
+        self.send(from.endpoint(), to.endpoint(), msg);
     }
 
-    /// Registers a get of leader `i`; it is answered, or times out.
-    pub(super) fn ask(&mut self, i: usize, kind: AskKind) -> u64 {
+    /// Registers a get of `who`; it is answered, or times out.
+    pub(super) fn ask(&mut self, who: Who, kind: AskKind) -> u64 {
         let id = self.fresh_id();
+        let life = self.life_of(who);
         self.asks.insert(
             id,
             PendingAsk {
-                leader: i,
-                life: self.leaders[i].life,
+                leader: who,
+                life,
                 kind,
             },
         );
@@ -346,15 +491,17 @@ impl World {
         pending: PendingAsk,
         reply: Result<Vec<u8>, String>,
     ) -> Result<(), Violation> {
-        let i = pending.leader;
-        if self.leaders[i].life != pending.life {
+        let who = pending.leader;
+        if self.life_of(who) != pending.life {
             return Ok(());
         }
         let input = match pending.kind {
             AskKind::Follow => {
                 if let Ok(followed) = reply.as_deref().map(decode::<Followed>) {
                     let followed = followed.map_err(|e| Violation::new(e.to_string()))?;
-                    self.routed[i].extend(followed.items.iter().map(|s| s.seq));
+                    // Routed to the role, whichever of its holders took
+                    // the reply.
+                    self.routed[who.role].extend(followed.items.iter().map(|s| s.seq));
                 }
                 Input::Followed(reply)
             }
@@ -363,33 +510,49 @@ impl World {
                     .map(|r| r.batches)
                     .map_err(|e| e.to_string())
             })),
-            AskKind::Transfers(peer) => Input::Transfers {
-                peer,
-                result: reply
-                    .and_then(|bytes| decode::<TransfersSent>(&bytes).map_err(|e| e.to_string())),
-            },
+            AskKind::Transfers(peer) => {
+                let result = reply
+                    .and_then(|bytes| decode::<TransfersSent>(&bytes).map_err(|e| e.to_string()));
+                let stale = match &result {
+                    Ok(sent) if !sent.transfers.is_empty() => {
+                        Some((self.role_index(&peer)?, sent.epoch))
+                    }
+                    _ => None,
+                };
+                let input = Input::Transfers { peer, result };
+                return match stale {
+                    Some((from, epoch)) => self.step_fenced(who, from, epoch, false, input),
+                    None => self.step(who, input),
+                };
+            }
         };
-        self.step(i, input)
+        self.step(who, input)
     }
 
-    pub(super) fn at_leader(&mut self, i: usize, what: ToLeader) -> Result<(), Violation> {
-        if self.leaders[i].node.is_none() {
+    pub(super) fn at_leader(&mut self, who: Who, what: ToLeader) -> Result<(), Violation> {
+        if self.node_mut(who).is_none() {
             // Nobody subscribes or answers for a leader that is down.
             return Ok(());
         }
-        let origin = format!("sim/{}", self.leaders[i].name);
+        let origin = format!("sim/{}", self.leaders[who.role].name);
         let input = match what {
             ToLeader::Batch(bytes) => Input::Message {
                 kind: Kind::Batch,
                 bytes,
                 origin,
             },
-            ToLeader::Transfer(bytes) => Input::Message {
-                kind: Kind::Transfer,
-                bytes,
-                origin,
-            },
-            ToLeader::Durable(bytes) => Input::Durable { bytes, origin },
+            ToLeader::Transfer { bytes, from, epoch } => {
+                let input = Input::Message {
+                    kind: Kind::Transfer,
+                    bytes,
+                    origin,
+                };
+                return self.step_fenced(who, from, epoch, false, input);
+            }
+            ToLeader::Durable { bytes, from, epoch } => {
+                let input = Input::Durable { bytes, origin };
+                return self.step_fenced(who, from, epoch, true, input);
+            }
             ToLeader::Partial { id, ask, base } => Input::Partial { id, ask, base },
             ToLeader::SentWanted { ask, bytes } => Input::SentWanted {
                 id: ask,
@@ -402,7 +565,11 @@ impl World {
                     None => Ok(()),
                 };
             }
+            ToLeader::StandbyCopy { role, mark, state } => {
+                return self.keep_copy(who, role, mark, state)
+            }
+            ToLeader::StandbyStored(bytes) => Input::StandbyStored { bytes, origin },
         };
-        self.step(i, input)
+        self.step(who, input)
     }
 }

@@ -9,11 +9,14 @@
 //!
 //! The files mirror the drivers: `sensor.rs` does what
 //! `sensor/src/driver.rs` does, `leader.rs` what `leader/src/driver.rs`
-//! does, `coordinator.rs` what `coordinator/src/driver/` does. This one
+//! does, `coordinator.rs` what `coordinator/src/driver/` does, `hosts.rs`
+//! what `leader/src/host.rs` and the voters do (who holds a role at
+//! which epoch, standbys, adoptions). This one
 //! holds the world itself: its clock and events, the wire between the
 //! roles, and the checks no one role can make.
 
 mod coordinator;
+mod hosts;
 mod leader;
 mod sensor;
 
@@ -21,13 +24,14 @@ use super::network::{self, Endpoint, Network};
 use super::scenario::Scenario;
 use super::Violation;
 use coordinator::{Query, ToCoordinator};
+use hosts::{HostFault, Hosts};
 use idmesh_coordinator::machine::Memory;
 use idmesh_leader::Input;
 use idmesh_protocol::wire::query::MarginalsAnswer;
 use idmesh_sensor::journal::Record;
 use idmesh_sensor::Gateway;
 use idmesh_sensor::Router;
-use leader::{Disk, LeaderSlot, PendingAsk, ToLeader};
+use leader::{Disk, LeaderSlot, PendingAsk, ToLeader, Who};
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -57,8 +61,17 @@ pub(crate) enum Msg {
         to: usize,
         what: ToLeader,
     },
+    /// An input of role `to`'s former holder (cut off and superseded,
+    /// still running).
+    Former {
+        to: usize,
+        what: ToLeader,
+    },
+    /// From `from` holding its role at `epoch` (the coordinator's cuts:
+    /// role `usize::MAX`).
     Sensor {
-        from: usize,
+        from: Who,
+        epoch: u64,
         what: ToSensor,
     },
     Coordinator(ToCoordinator),
@@ -82,6 +95,19 @@ pub(crate) enum Event {
     SensorCrash,
     Isolate(usize),
     Heal(usize),
+    /// A role's process is gone for good, with its disk.
+    HostLoss(usize),
+    /// A role's holder is cut off long enough to be superseded.
+    Supersede(usize),
+    /// The claim adopting an orphaned role commits.
+    Adopt(usize),
+    /// A former holder's cut heals; later it stops.
+    HealFormer(usize),
+    StopFormer(usize),
+    FormerTick {
+        leader: usize,
+        life: u64,
+    },
     /// The faults stop and the final query starts.
     Calm,
 }
@@ -146,6 +172,17 @@ pub struct Tally {
     /// Factored leaders' replies told as a change to an answer the
     /// coordinator keeps (`Partial::base`).
     pub changes: u64,
+    /// Hosts lost with their disk, holders cut off and superseded, and
+    /// the roles adopted after either (of them, from a standby copy).
+    pub host_losses: u64,
+    pub superseded: u64,
+    pub adoptions: u64,
+    pub adopted_from_copies: u64,
+    /// Snapshots sent to a standby.
+    pub standby_copies: u64,
+    /// Messages of a former holder refused by a receiver that had heard
+    /// a newer epoch of the role (the sensor, a peer, the coordinator).
+    pub fenced: u64,
 }
 
 pub(crate) struct World {
@@ -186,6 +223,12 @@ pub(crate) struct World {
     /// Draws whether and where a crashed leader's journal is damaged (its
     /// own stream: the schedule's other draws stay as they were).
     damage: ChaCha8Rng,
+    /// Who holds which role, standbys and their copies.
+    hosts: Hosts,
+    /// The newest epoch of each role the sensor has been handed a
+    /// message of since it started, and the coordinator an answer of.
+    sensor_heard: BTreeMap<usize, u64>,
+    coordinator_heard: BTreeMap<String, u64>,
 }
 
 impl World {
@@ -199,19 +242,7 @@ impl World {
             .map_err(|e| Violation::setup(e.to_string()))?;
         let gateway = scenario.gateway(router);
         let net = network::random(&mut rng);
-        let leaders = scenario
-            .leaders
-            .iter()
-            .map(|l| LeaderSlot {
-                name: l.name.clone(),
-                node: None,
-                life: 0,
-                disk: Disk::default(),
-                published: 0,
-                snapshot_every: 0,
-                damaged: None,
-            })
-            .collect::<Vec<_>>();
+        let leaders = slots(&scenario);
         let count = leaders.len();
         let mut world = World {
             rng,
@@ -241,6 +272,16 @@ impl World {
             lost_once: BTreeSet::new(),
             stall_checked: 0,
             damage: ChaCha8Rng::seed_from_u64(0),
+            hosts: Hosts {
+                map: Default::default(),
+                held: BTreeMap::new(),
+                alive: BTreeSet::new(),
+                copies: BTreeMap::new(),
+                standbys: false,
+                rng: ChaCha8Rng::seed_from_u64(0),
+            },
+            sensor_heard: BTreeMap::new(),
+            coordinator_heard: BTreeMap::new(),
         };
         // Drawn from a copy: the schedule's own draws stay as they were.
         let mut side = world.rng.clone();
@@ -255,9 +296,15 @@ impl World {
                 .net
                 .at(side.gen_range(1..=40 * lines + 1), Event::SensorCrash);
         }
+        let host_fault = world.draw_host_fault(side.gen());
+        for i in 0..count {
+            let name = world.leaders[i].name.clone();
+            world.leaders[i].epoch = world.claim(i, &name, None)?;
+            world.hosts.alive.insert(name);
+        }
         for i in 0..count {
             world.leaders[i].snapshot_every = world.rng.gen_range(3..=30);
-            world.start_leader(i)?;
+            world.start_leader(i, false)?;
         }
         world.flush();
         world.net.at(1, Event::SensorStep);
@@ -268,6 +315,9 @@ impl World {
             world.net.at(at, Event::QueryStart);
         }
         network::schedule_faults(&mut world.net, &mut world.rng, span, count);
+        if let Some(fault) = host_fault {
+            world.schedule_host_fault(fault, span);
+        }
         let mut calm = span + 100;
         if world.aimed.long_partition > 0 {
             let (at, leader) = (world.rng.gen_range(0..span), world.rng.gen_range(0..count));
@@ -338,6 +388,34 @@ impl World {
         40 * self.scenario.lines.len() as Ms + 300 + self.aimed.long_partition + FINAL_PATIENCE
     }
 
+    /// Whether this schedule's roles keep standbys, and the host fault it
+    /// holds if any: a third of the schedules with more than one leader
+    /// (half of them a host lost, half a holder superseded). Drawn from
+    /// its own stream, seeded by `seed`.
+    fn draw_host_fault(&mut self, seed: u64) -> Option<HostFault> {
+        self.hosts.rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_4057);
+        if self.leaders.len() < 2 || !self.hosts.rng.gen_bool(1.0 / 3.0) {
+            return None;
+        }
+        self.hosts.standbys = true;
+
+        Some(match self.hosts.rng.gen_bool(0.5) {
+            true => HostFault::Lost,
+            false => HostFault::Superseded,
+        })
+    }
+
+    /// `fault` strikes a random role at a random point before `span`.
+    fn schedule_host_fault(&mut self, fault: HostFault, span: Ms) {
+        let at = self.hosts.rng.gen_range(0..span);
+        let role = self.hosts.rng.gen_range(0..self.leaders.len());
+        let event = match fault {
+            HostFault::Lost => Event::HostLoss(role),
+            HostFault::Superseded => Event::Supersede(role),
+        };
+        self.net.at(at, event);
+    }
+
     fn fresh_id(&mut self) -> u64 {
         self.next_id += 1;
         self.next_id
@@ -348,7 +426,7 @@ impl World {
             Event::Deliver(msg) => self.deliver(msg),
             Event::Tick { leader, life } => {
                 if self.leaders[leader].life == life && self.leaders[leader].node.is_some() {
-                    self.step(leader, Input::Tick)?;
+                    self.step(Who::holder(leader), Input::Tick)?;
                     let sweep = 250;
                     self.net.at(self.now + sweep, Event::Tick { leader, life });
                 }
@@ -379,11 +457,23 @@ impl World {
                 Ok(())
             }
             Event::Restart(i) => {
-                if self.leaders[i].node.is_none() {
-                    self.start_leader(i)?;
+                if self.leaders[i].node.is_none() && !self.leaders[i].orphaned {
+                    self.start_leader(i, false)?;
                 }
                 Ok(())
             }
+            Event::HostLoss(i) => self.host_lost(i),
+            Event::Supersede(i) => self.superseded(i),
+            Event::Adopt(i) => self.adopt(i),
+            Event::HealFormer(i) => {
+                self.net.heal(Endpoint::Former(i));
+                Ok(())
+            }
+            Event::StopFormer(i) => {
+                self.stop_former(i);
+                Ok(())
+            }
+            Event::FormerTick { leader, life } => self.former_tick(leader, life),
             Event::Isolate(i) => {
                 if !self.calm {
                     self.net.isolate(Endpoint::Leader(i));
@@ -398,15 +488,23 @@ impl World {
                 self.calm = true;
                 self.net.calm();
                 for i in 0..self.leaders.len() {
-                    if self.leaders[i].node.is_none() {
-                        self.start_leader(i)?;
+                    // An orphaned role waits for its adoption.
+                    if self.leaders[i].node.is_none() && !self.leaders[i].orphaned {
+                        self.start_leader(i, false)?;
                     }
                 }
                 // Under flow control the stream may still be going (the
                 // window held it while faults lost marks and batches):
                 // the final question waits for its end, which must come
                 // before the patience runs out.
-                if !self.gateway.finished() {
+                // The final answer is the current holders': it waits for
+                // every orphaned role's adoption and every former holder
+                // to stop.
+                let settled = self
+                    .leaders
+                    .iter()
+                    .all(|l| !l.orphaned && l.former.is_none());
+                if !self.gateway.finished() || !settled {
                     self.net.at(self.now + 250, Event::Calm);
                     return Ok(());
                 }
@@ -444,6 +542,24 @@ impl World {
     // --- the wire -------------------------------------------------------
 
     fn send(&mut self, from: Endpoint, to: Endpoint, msg: Msg) {
+        // A role's subscriptions and queryables are its former holder's
+        // too, while it runs: it hears what the role hears.
+        if let (Endpoint::Leader(j), Msg::Leader { what, .. }) = (to, &msg) {
+            let heard = matches!(
+                what,
+                ToLeader::Batch(_)
+                    | ToLeader::Transfer { .. }
+                    | ToLeader::Durable { .. }
+                    | ToLeader::Partial { .. }
+            );
+            if heard && self.leaders[j].former.is_some() {
+                let copy = Msg::Former {
+                    to: j,
+                    what: what.clone(),
+                };
+                self.send(from, Endpoint::Former(j), copy);
+            }
+        }
         self.tally.messages += 1;
         if !self
             .net
@@ -455,9 +571,39 @@ impl World {
 
     fn deliver(&mut self, msg: Msg) -> Result<(), Violation> {
         match msg {
-            Msg::Leader { to, what } => self.at_leader(to, what),
-            Msg::Sensor { from, what } => self.at_sensor(from, what),
+            Msg::Leader { to, what } => self.at_leader(Who::holder(to), what),
+            Msg::Former { to, what } => self.at_leader(
+                Who {
+                    role: to,
+                    former: true,
+                },
+                what,
+            ),
+            Msg::Sensor { from, epoch, what } => self.at_sensor_fenced(from, epoch, what),
             Msg::Coordinator(what) => self.at_coordinator(what),
         }
     }
+}
+
+/// A slot per leader role, each held by the process of its own name.
+fn slots(scenario: &Scenario) -> Vec<LeaderSlot> {
+    scenario
+        .leaders
+        .iter()
+        .map(|l| LeaderSlot {
+            name: l.name.clone(),
+            node: None,
+            life: 0,
+            disk: Disk::default(),
+            published: 0,
+            snapshot_every: 0,
+            damaged: None,
+            process: l.name.clone(),
+            epoch: 0,
+            orphaned: false,
+            former: None,
+            standby: None,
+            heard: BTreeMap::new(),
+        })
+        .collect()
 }

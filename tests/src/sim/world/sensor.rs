@@ -5,7 +5,7 @@
 //! started again from its journal.
 
 use super::coordinator::ToCoordinator;
-use super::leader::ToLeader;
+use super::leader::{ToLeader, Who};
 use super::{Event, Msg, World, STALL_CHECK};
 use crate::sim::network::Endpoint;
 use crate::sim::Violation;
@@ -199,7 +199,46 @@ impl World {
         );
     }
 
-    pub(super) fn at_sensor(&mut self, from: usize, what: ToSensor) -> Result<(), Violation> {
+    /// A message of `from` (holding its role at `epoch`) reaches the
+    /// sensor: if the sensor has been handed a newer epoch of that role
+    /// since it started, it must refuse it (its refusals grow), and it is
+    /// counted as fenced.
+    pub(super) fn at_sensor_fenced(
+        &mut self,
+        from: Who,
+        epoch: u64,
+        what: ToSensor,
+    ) -> Result<(), Violation> {
+        let aimed =
+            matches!(what, ToSensor::Resend { .. }) && self.now < self.aimed.refuse_resends_until;
+        if matches!(what, ToSensor::Cut { .. }) || aimed {
+            return self.at_sensor(from, what, false);
+        }
+        let heard = self.sensor_heard.get(&from.role).copied();
+        let Some(newest) = heard.filter(|&h| epoch < h) else {
+            let heard = self.sensor_heard.entry(from.role).or_insert(epoch);
+            *heard = (*heard).max(epoch);
+            return self.at_sensor(from, what, false);
+        };
+        let before = self.gateway.stats().rejected;
+        self.at_sensor(from, what, true)?;
+        if self.gateway.stats().rejected <= before {
+            return Err(Violation::new(format!(
+                "the sensor applied a message of {} at epoch {epoch}, older than the epoch {newest} it had heard",
+                self.leaders[from.role].name
+            )));
+        }
+        self.tally.fenced += 1;
+        Ok(())
+    }
+
+    /// `stale`: from a former holder the sensor must refuse.
+    pub(super) fn at_sensor(
+        &mut self,
+        from: Who,
+        what: ToSensor,
+        stale: bool,
+    ) -> Result<(), Violation> {
         match what {
             ToSensor::Follow { ask, bytes } => {
                 let answer = self.gateway.follow(&bytes);
@@ -222,11 +261,15 @@ impl World {
             ToSensor::Durable(bytes) => self.gateway.durable(&bytes, "sim"),
             ToSensor::Progress(bytes) => self.gateway.progress(&bytes, "sim"),
             // A leader's own request is well formed: a refusal is a bug.
-            ToSensor::Unfollow(bytes) => {
-                self.gateway.unfollow(&bytes).map_err(|e| {
-                    Violation::new(format!("the sensor refused leader {from}'s unfollow: {e}"))
-                })?;
-            }
+            ToSensor::Unfollow(bytes) => match self.gateway.unfollow(&bytes) {
+                Err(e) if !stale => {
+                    return Err(Violation::new(format!(
+                        "the sensor refused leader {}'s unfollow: {e}",
+                        from.role
+                    )))
+                }
+                _ => {}
+            },
             ToSensor::Cut { id, parameters } => match self.gateway.cut(id, &parameters) {
                 CutOutcome::Placed(p) => {
                     self.flush();
@@ -239,15 +282,13 @@ impl World {
         Ok(())
     }
 
-    pub(super) fn reply_leader(&mut self, to: usize, ask: u64, reply: Result<Vec<u8>, String>) {
-        self.send(
-            Endpoint::Sensor,
-            Endpoint::Leader(to),
-            Msg::Leader {
-                to,
-                what: ToLeader::Reply { ask, reply },
-            },
-        );
+    pub(super) fn reply_leader(&mut self, to: Who, ask: u64, reply: Result<Vec<u8>, String>) {
+        let what = ToLeader::Reply { ask, reply };
+        let msg = match to.former {
+            false => Msg::Leader { to: to.role, what },
+            true => Msg::Former { to: to.role, what },
+        };
+        self.send(Endpoint::Sensor, to.endpoint(), msg);
     }
 
     /// The sensor killed and started again: a new gateway restored from the
@@ -288,6 +329,8 @@ impl World {
             )));
         }
         self.gateway = restored;
+        // A sensor restarted knows no epoch: it fences from the next.
+        self.sensor_heard.clear();
         Ok(())
     }
 }
