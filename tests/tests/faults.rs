@@ -503,7 +503,7 @@ fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
         takeover_after_ms: Some(1000),
         ..Settings::default()
     };
-    let mut deployment = Deployment::start_each("frozen", &trace, &settings);
+    let deployment = Deployment::start_each("frozen", &trace, &settings);
     let twin = deployment.twin_summary(&trace);
     let first = held_by(&deployment, "leader-1", "leader-1", Duration::from_secs(30));
     deployment.first_answer(Duration::from_secs(30));
