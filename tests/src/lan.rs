@@ -208,6 +208,15 @@ impl Lan {
         }
     }
 
+    /// Host `name`'s cable back to full speed (the token buckets of
+    /// [`Lan::slow`] removed; none there is no error).
+    pub fn fast(&self, name: &str) {
+        let host = self.host(name);
+        for (ns, dev) in [(&host.netns, "eth0"), (&self.switch, &host.port)] {
+            let _ = run("tc", &["-n", ns, "qdisc", "del", "dev", dev, "root"]);
+        }
+    }
+
     /// Runs `program args` in host `name`'s namespace.
     pub(crate) fn command(&self, name: &str, program: &Path) -> Command {
         let mut command = Command::new("ip");
@@ -236,6 +245,39 @@ pub struct Member {
     pub host: String,
 }
 
+/// Asks a LAN deployment's coordinators (the first, then its replicas)
+/// from the coordinator's host.
+#[derive(Debug, Clone)]
+pub struct Asker {
+    netns: String,
+    connect: String,
+    prefix: String,
+}
+
+impl Asker {
+    /// `idmesh query <args> --json`: the parsed replies, or the error text.
+    pub fn query(&self, args: &[&str]) -> Result<Vec<Value>, String> {
+        let output = Command::new("ip")
+            .args(["netns", "exec", &self.netns])
+            .arg(idmesh())
+            .arg("query")
+            .args(args)
+            .args([
+                "--json",
+                "--connect",
+                &self.connect,
+                "--prefix",
+                &self.prefix,
+            ])
+            .output()
+            .expect("idmesh query runs");
+        match query_output(&output) {
+            (answers, _, true) => Ok(answers),
+            (_, errors, false) => Err(errors),
+        }
+    }
+}
+
 /// A deployment across the hosts of a [`Lan`]: one topology file, `idmesh
 /// up --host` on each host.
 pub struct LanDeployment<'a> {
@@ -244,13 +286,17 @@ pub struct LanDeployment<'a> {
     pub prefix: String,
     pub config: PathBuf,
     pub coordinator_host: String,
+    /// Every coordinator's endpoint, comma-separated: the first, then its
+    /// replicas (what `idmesh query --connect` takes).
     pub coordinator: String,
+    /// Each host's own `lan.toml` ([`LanSettings::own_disks`]).
+    own_configs: Vec<(String, PathBuf)>,
     /// `idmesh up` by host.
     ups: Vec<(String, Child)>,
 }
 
 /// What a LAN topology sets beyond where its processes run.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct LanSettings {
     /// The sensor's events per second.
     pub rate: f64,
@@ -258,12 +304,20 @@ pub struct LanSettings {
     /// restarted).
     pub takeover_after_ms: u64,
     pub query_timeout_ms: u64,
+    /// Inputs between a leader's snapshots (`snapshot_every`; 0 = 200).
+    pub snapshot_every: usize,
+    /// Every host has a disk of its own: its own copy of `lan.toml`
+    /// (`<host>/lan.toml` in the deployment's directory), whose relative
+    /// `state_dir` is so `<host>/state`. Otherwise every host's processes
+    /// read the one `lan.toml`, and share its `state` directory.
+    pub own_disks: bool,
 }
 
 impl<'a> LanDeployment<'a> {
     /// Writes `lan.toml` for `members` (the coordinator and sensor on the
     /// first host of theirs, leaders placed on a grid over the trace's
-    /// field) under a fresh directory; starts nothing.
+    /// field; voters named `voter-1`, … and coordinator replicas as the
+    /// members name them) under a fresh directory; starts nothing.
     pub fn configure(
         lan: &'a Lan,
         name: &str,
@@ -275,58 +329,43 @@ impl<'a> LanDeployment<'a> {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let prefix = format!("idmesh/lan-{name}-{}", std::process::id());
-        // Every process listens on its host's address; ports only need to
-        // differ on one host, but differing everywhere reads better.
-        let listen = |i: usize, host: &str| format!("tcp/{}:{}", lan.host(host).addr, 7460 + i);
-        let mut coordinator = None;
-        let mut sensors = Vec::new();
-        let mut leaders = Vec::new();
-        for (i, m) in members.iter().enumerate() {
-            let (name, host) = (m.name.clone(), m.host.clone());
-            match m.role {
-                "coordinator" => {
-                    coordinator = Some(Process {
-                        host,
-                        ..Process::new(name, listen(i, &m.host))
-                    })
-                }
-                "sensor" => sensors.push(SensorProcess {
-                    host,
-                    rate: Some(settings.rate),
-                    ..SensorProcess::new(name, listen(i, &m.host), trace)
-                }),
-                "leader" => leaders.push(LeaderProcess {
-                    host,
-                    ..LeaderProcess::new(name, listen(i, &m.host))
-                }),
-                other => panic!("{}: no role {other:?}", m.name),
-            }
-        }
-        let coordinator = coordinator.expect("a coordinator among the members");
-        let mut topology = Topology::new(coordinator, sensors, leaders);
+        let mut topology = lan_topology(lan, trace, members, settings);
         topology.prefix = prefix.clone();
-        // The Radon belief: the LAN tests compare with `idmesh replay
-        // --method overcomplete` (the topology's default is factored).
-        topology.belief = BeliefKind::Radon;
-        topology.query_timeout_ms = settings.query_timeout_ms;
-        topology.state_dir = Some(PathBuf::from("state"));
-        topology.takeover_after_ms = settings.takeover_after_ms;
-        topology.snapshot_every = 200;
         let config = dir.join("lan.toml");
         topology.save(&config).unwrap();
-        let coordinator = (
-            topology.coordinator.host.clone(),
-            topology.coordinator.listen.clone(),
-        );
+        let mut own_configs = Vec::new();
+        if settings.own_disks {
+            for host in &lan.hosts {
+                let own = dir.join(&host.name).join("lan.toml");
+                std::fs::create_dir_all(own.parent().unwrap()).unwrap();
+                topology.save(&own).unwrap();
+                own_configs.push((host.name.clone(), own));
+            }
+        }
         LanDeployment {
             lan,
             dir,
             prefix,
             config,
-            coordinator_host: coordinator.0,
-            coordinator: coordinator.1,
+            coordinator_host: topology.coordinator.host.clone(),
+            coordinator: topology.coordinator_endpoints(),
+            own_configs,
             ups: Vec::new(),
         }
+    }
+
+    /// Where host `host` keeps its state: its own directory with
+    /// [`LanSettings::own_disks`], the shared one otherwise.
+    pub fn state_dir(&self, host: &str) -> PathBuf {
+        self.config_of(host).parent().unwrap().join("state")
+    }
+
+    /// The topology file host `host`'s processes read.
+    fn config_of(&self, host: &str) -> &Path {
+        self.own_configs
+            .iter()
+            .find(|(h, _)| h == host)
+            .map_or(&self.config, |(_, path)| path)
     }
 
     /// `idmesh up --config lan.toml --host <host>` in the host's namespace
@@ -342,7 +381,7 @@ impl<'a> LanDeployment<'a> {
             .command(host, idmesh())
             .arg("up")
             .arg("--config")
-            .arg(&self.config)
+            .arg(self.config_of(host))
             .arg("--host")
             .arg(host)
             .env(
@@ -370,26 +409,43 @@ impl<'a> LanDeployment<'a> {
         self.ups.retain(|(h, _)| h != host);
     }
 
+    /// SIGKILL to the role process named `name` on `host` (`kill -9`: its
+    /// `idmesh up` starts it again after its backoff); whether one ran.
+    pub fn kill_process(&self, host: &str, name: &str) -> bool {
+        let mut killed = false;
+        for pid in pids(&self.lan.host(host).netns) {
+            let Ok(raw) = std::fs::read(format!("/proc/{pid}/cmdline")) else {
+                continue;
+            };
+            let args: Vec<&[u8]> = raw.split(|&b| b == 0).collect();
+            let named = args
+                .windows(2)
+                .any(|w| w[0] == b"--name" && w[1] == name.as_bytes());
+            if named && !args.iter().any(|a| *a == b"up") {
+                // SAFETY: kill(2) has no memory effects; a pid gone
+                // meanwhile is an error we ignore.
+                unsafe {
+                    libc::kill(pid, libc::SIGKILL);
+                }
+                killed = true;
+            }
+        }
+        killed
+    }
+
     /// `idmesh query <args> --json` from the coordinator's host: the
     /// parsed replies, or the error text.
     pub fn query(&self, args: &[&str]) -> Result<Vec<Value>, String> {
-        let output = self
-            .lan
-            .command(&self.coordinator_host, idmesh())
-            .arg("query")
-            .args(args)
-            .args([
-                "--json",
-                "--connect",
-                &self.coordinator,
-                "--prefix",
-                &self.prefix,
-            ])
-            .output()
-            .expect("idmesh query runs");
-        match query_output(&output) {
-            (answers, _, true) => Ok(answers),
-            (_, errors, false) => Err(errors),
+        self.asker().query(args)
+    }
+
+    /// What asks this deployment's coordinators, as [`LanDeployment::query`]
+    /// does, for a thread that asks while the test strikes.
+    pub fn asker(&self) -> Asker {
+        Asker {
+            netns: self.lan.host(&self.coordinator_host).netns.clone(),
+            connect: self.coordinator.clone(),
+            prefix: self.prefix.clone(),
         }
     }
 
@@ -433,6 +489,55 @@ impl<'a> LanDeployment<'a> {
         }
         all
     }
+}
+
+/// The topology of `members` on `lan` streaming `trace` (no prefix yet):
+/// every process listens on its host's address.
+fn lan_topology(lan: &Lan, trace: &Path, members: &[Member], settings: &LanSettings) -> Topology {
+    // Ports only need to differ on one host, but differing everywhere
+    // reads better.
+    let listen = |i: usize, host: &str| format!("tcp/{}:{}", lan.host(host).addr, 7460 + i);
+    let mut coordinator = None;
+    let (mut replicas, mut voters) = (Vec::new(), Vec::new());
+    let mut sensors = Vec::new();
+    let mut leaders = Vec::new();
+    for (i, m) in members.iter().enumerate() {
+        let (name, host) = (m.name.clone(), m.host.clone());
+        let process = || Process {
+            host: host.clone(),
+            ..Process::new(name.clone(), listen(i, &m.host))
+        };
+        match m.role {
+            "coordinator" => coordinator = Some(process()),
+            "coordinator_replica" => replicas.push(process()),
+            "voter" => voters.push(process()),
+            "sensor" => sensors.push(SensorProcess {
+                host: host.clone(),
+                rate: Some(settings.rate),
+                ..SensorProcess::new(name.clone(), listen(i, &m.host), trace)
+            }),
+            "leader" => leaders.push(LeaderProcess {
+                host: host.clone(),
+                ..LeaderProcess::new(name.clone(), listen(i, &m.host))
+            }),
+            other => panic!("{}: no role {other:?}", m.name),
+        }
+    }
+    let coordinator = coordinator.expect("a coordinator among the members");
+    let mut topology = Topology::new(coordinator, sensors, leaders);
+    topology.coordinator_replicas = replicas;
+    topology.voters = voters;
+    // The Radon belief: the LAN tests compare with `idmesh replay
+    // --method overcomplete` (the topology's default is factored).
+    topology.belief = BeliefKind::Radon;
+    topology.query_timeout_ms = settings.query_timeout_ms;
+    topology.state_dir = Some(PathBuf::from("state"));
+    topology.takeover_after_ms = settings.takeover_after_ms;
+    topology.snapshot_every = match settings.snapshot_every {
+        0 => 200,
+        n => n,
+    };
+    topology
 }
 
 impl Drop for LanDeployment<'_> {

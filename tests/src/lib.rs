@@ -9,6 +9,7 @@ mod browser;
 mod compare;
 mod deployment;
 mod lan;
+pub mod nemesis;
 mod python;
 pub mod sim;
 mod web;
@@ -21,7 +22,7 @@ pub use deployment::{
     LeaderFaultSection, MarkerOptions, Secured, Settings, SplitSetting, Truth, WebSection,
 };
 // A deployment over several hosts' worth of processes, as a LAN runs it.
-pub use lan::{Lan, LanDeployment, LanSettings, Member};
+pub use lan::{Asker, Lan, LanDeployment, LanSettings, Member};
 // Comparing answers: marginals, identity matrices, floats.
 pub use compare::{
     assert_same_marginals, floats, identity_difference, identity_marginals, identity_matrix,

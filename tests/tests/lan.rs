@@ -53,6 +53,7 @@ fn settings(takeover_after_ms: u64) -> LanSettings {
         rate: 150.0,
         takeover_after_ms,
         query_timeout_ms: 2000,
+        ..LanSettings::default()
     }
 }
 
