@@ -174,6 +174,9 @@ struct Hosted<'a> {
     epochs: HashMap<String, u64>,
     /// Roles being handed home: released to the voters once stopped.
     handing_back: BTreeSet<String>,
+    /// Roles handed back whose own process said it keeps their state:
+    /// their journal here is stale once they are gone.
+    copied_home: BTreeSet<String>,
     /// Roles stopped because the map gave them to another, or the lease
     /// lapsed (warned once each).
     superseded: BTreeSet<String>,
@@ -286,6 +289,7 @@ pub async fn run(
             .map(|lease| Claims::new(session.clone(), keys.clone(), &config.name, lease)),
         epochs: HashMap::new(),
         handing_back: BTreeSet::new(),
+        copied_home: BTreeSet::new(),
         superseded: BTreeSet::new(),
         since: Instant::now(),
         map_read: None,
@@ -358,6 +362,9 @@ pub async fn run(
                 if let Some(Ok((role, result))) = done {
                     hosted.ended(&role);
                     if hosted.handing_back.remove(&role) {
+                        if hosted.copied_home.remove(&role) {
+                            forget_handed_back(&config, &role);
+                        }
                         if let Some(claims) = &hosted.claims {
                             claims.release(&role).await;
                         }
@@ -691,7 +698,25 @@ fn on_stored(hosted: &mut Hosted<'_>, bytes: &[u8]) {
     tracing::warn!(process = %hosted.config.name, role = %stored.role, batch = stored.mark.batch,
         "its process keeps the role's state: handing the role back");
     hosted.stop(&stored.role);
+    hosted.copied_home.insert(stored.role.clone());
     hosted.handing_back.insert(stored.role);
+}
+
+/// After handing `role` home to a process that keeps its state: the
+/// role's journal and snapshot this process wrote while it ran the role
+/// stop where the role left, and the sensor forgets what follows as the
+/// role moves on. Left here, a later adoption would start from them
+/// (a journal is preferred to a standby copy) and wait for batches gone
+/// for good; removed, it starts from the standby copy. On a shared disk
+/// the home process starts from the copy it acknowledged all the same.
+fn forget_handed_back(config: &HostConfig, role: &str) {
+    let Some(dir) = &config.state_dir else {
+        return;
+    };
+    if let Err(e) = standby::forget_journal(dir, role) {
+        tracing::warn!(process = %config.name, role, error = %e,
+            "could not remove the journal of a role handed home");
+    }
 }
 
 /// How long a role going home waits for its process to keep its state

@@ -162,6 +162,24 @@ pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, Standby
     Ok(Source::StandbyCopy(mark))
 }
 
+/// Removes `role`'s journal and snapshot from `dir` (none there is no
+/// error): a role handed home leaves them stale here.
+pub(crate) fn forget_journal(dir: &Path, role: &str) -> Result<(), StandbyError> {
+    let journal = journal_path(dir, role);
+    for old in [snapshot_path(&journal), journal] {
+        match std::fs::remove_file(&old) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(StandbyError::Log(log::Error::Io {
+                    path: old,
+                    source: e,
+                }))
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// Before a process takes its own `role` back home: if the process that
 /// ran the role meanwhile sent its snapshot here (a role handed home over
 /// the network), that copy replaces this process's own journal and
