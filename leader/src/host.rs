@@ -174,6 +174,9 @@ struct Hosted<'a> {
     epochs: HashMap<String, u64>,
     /// Roles being handed home: released to the voters once stopped.
     handing_back: BTreeSet<String>,
+    /// Roles released to the voters, until the map shows them released:
+    /// not taken up again as roles the map gives this process.
+    released: BTreeSet<String>,
     /// Roles handed back whose own process said it keeps their state:
     /// their journal here is stale once they are gone.
     copied_home: BTreeSet<String>,
@@ -290,6 +293,7 @@ pub async fn run(
         epochs: HashMap::new(),
         handing_back: BTreeSet::new(),
         copied_home: BTreeSet::new(),
+        released: BTreeSet::new(),
         superseded: BTreeSet::new(),
         since: Instant::now(),
         map_read: None,
@@ -308,30 +312,12 @@ pub async fn run(
     } else {
         hosted.host(&config.name, false, 0);
     }
-    let homes = session
-        .liveliness()
-        .declare_subscriber(keys.alive_role("home"))
-        .history(true)
-        .await
-        .map_err(|e| MeshError::new("declare the home liveliness subscriber", e))?;
-
-    let token_samples = session
-        .liveliness()
-        .declare_subscriber(keys.alive_role("leader"))
-        .history(true)
-        .await
-        .map_err(|e| MeshError::new("declare the leader liveliness subscriber", e))?;
-    // Going home over the network: the copies of this process's own role
-    // sent here while it stands by, and every standby's word that it
-    // keeps a copy (a role adopted here waits for its process's).
-    let copies_home = session
-        .declare_subscriber(keys.leader_standby(&config.name))
-        .await
-        .map_err(|e| MeshError::new("declare the home-copy subscriber", e))?;
-    let stored = session
-        .declare_subscriber(keys.leader_stored("*"))
-        .await
-        .map_err(|e| MeshError::new("declare the standby-acknowledgement subscriber", e))?;
+    let Heard {
+        homes,
+        token_samples,
+        copies_home,
+        stored,
+    } = Heard::declare(&session, &config).await?;
     let mut tokens = Tokens::default();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
     let standing = Instant::now();
@@ -360,53 +346,10 @@ pub async fn run(
             }
             done = hosted.tasks.join_next(), if !hosted.tasks.is_empty() => {
                 if let Some(Ok((role, result))) = done {
-                    hosted.ended(&role);
-                    if hosted.handing_back.remove(&role) {
-                        if hosted.copied_home.remove(&role) {
-                            forget_handed_back(&config, &role);
-                        }
-                        if let Some(claims) = &hosted.claims {
-                            claims.release(&role).await;
-                        }
-                    }
-                    match result {
-                        Ok(()) => tracing::info!(process = %config.name, role = %role, "role stopped"),
-                        Err(RunError::Journal(JournalError::Ownership(OwnershipError::Held { holder, .. }))) if role == config.name => {
-                            // Its own role runs elsewhere and no token said
-                            // so (a partition at start): stand by for it.
-                            tracing::warn!(process = %config.name, %holder, "its role is held by another process; standing by and asking for it back");
-                            if home.is_none() {
-                                home = Some(declare_home(&session, keys, &config.name).await?);
-                            }
-                        }
-                        Err(e) => tracing::error!(process = %config.name, role = %role, error = %e, "role failed"),
-                    }
+                    on_ended(&mut hosted, &role, result, &mut home).await?;
                 }
             }
-            _ = tick.tick() => {
-                if hosted.claims.is_some() {
-                    keep_leases(&mut hosted, &mut home).await?;
-                }
-                // Standing by, and the role's token went away before the
-                // subscriber was there to see it go: take it all the same.
-                if hosted.claims.is_none()
-                    && home.is_some()
-                    && !tokens.alive.contains(&config.name)
-                    && !hosted.roles.contains(&config.name)
-                    && standing.elapsed() > Duration::from_secs(1)
-                    && !hosted_elsewhere(&session, keys, &config.name).await
-                    && config.journal_holder(&config.name).is_none()
-                {
-                    tracing::warn!(process = %config.name, "its role is free: taking it back");
-                    home = None;
-                    return_from(&config);
-                    hosted.host(&config.name, true, 0);
-                }
-                if let Some(patience) = config.takeover_after {
-                    adopt_lost_roles(&mut hosted, &mut tokens, patience).await;
-                }
-                hand_home_unanswered(&mut hosted);
-            }
+            _ = tick.tick() => on_tick(&mut hosted, &mut tokens, &mut home, standing).await?,
         }
         hosted.tell_standbys(&tokens.alive);
     }
@@ -418,6 +361,139 @@ pub async fn run(
         if let Ok((role, Err(e))) = done {
             tracing::error!(process = %config.name, role = %role, error = %e, "role failed");
         }
+    }
+    Ok(())
+}
+
+/// The host's sweep: the leases (with voters), its own role taken back
+/// when free, lost roles adopted, roles going home handed back.
+async fn on_tick(
+    hosted: &mut Hosted<'_>,
+    tokens: &mut Tokens,
+    home: &mut Option<zenoh::liveliness::LivelinessToken>,
+    standing: Instant,
+) -> Result<(), RunError> {
+    let config = hosted.config;
+    if hosted.claims.is_some() {
+        keep_leases(hosted, home).await?;
+    }
+    // Standing by, and the role's token went away before the subscriber
+    // was there to see it go: take it all the same.
+    if hosted.claims.is_none()
+        && home.is_some()
+        && !tokens.alive.contains(&config.name)
+        && !hosted.roles.contains(&config.name)
+        && standing.elapsed() > Duration::from_secs(1)
+        && !hosted_elsewhere(hosted.session, &config.keys, &config.name).await
+        && config.journal_holder(&config.name).is_none()
+    {
+        tracing::warn!(process = %config.name, "its role is free: taking it back");
+        *home = None;
+        return_from(config);
+        hosted.host(&config.name, true, 0);
+    }
+    if let Some(patience) = config.takeover_after {
+        adopt_lost_roles(hosted, tokens, patience).await;
+    }
+    hand_home_unanswered(hosted);
+    Ok(())
+}
+
+/// What the host listens to beside its roles' actors.
+struct Heard {
+    /// Processes standing by for their own roles.
+    homes: Samples,
+    /// The leader roles' tokens.
+    token_samples: Samples,
+    /// Going home over the network: the copies of this process's own role
+    /// sent here while it stands by ...
+    copies_home: Samples,
+    /// ... and every standby's word that it keeps a copy (a role adopted
+    /// here waits for its process's).
+    stored: Samples,
+}
+
+type Samples =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+impl Heard {
+    async fn declare(session: &Session, config: &HostConfig) -> Result<Heard, MeshError> {
+        let keys = &config.keys;
+        let liveliness = |key: String, what: &'static str| async move {
+            session
+                .liveliness()
+                .declare_subscriber(key)
+                .history(true)
+                .await
+                .map_err(|e| MeshError::new(what, e))
+        };
+        let plain = |key: String, what: &'static str| async move {
+            session
+                .declare_subscriber(key)
+                .await
+                .map_err(|e| MeshError::new(what, e))
+        };
+        Ok(Heard {
+            homes: liveliness(
+                keys.alive_role("home"),
+                "declare the home liveliness subscriber",
+            )
+            .await?,
+            token_samples: liveliness(
+                keys.alive_role("leader"),
+                "declare the leader liveliness subscriber",
+            )
+            .await?,
+            copies_home: plain(
+                keys.leader_standby(&config.name),
+                "declare the home-copy subscriber",
+            )
+            .await?,
+            stored: plain(
+                keys.leader_stored("*"),
+                "declare the standby-acknowledgement subscriber",
+            )
+            .await?,
+        })
+    }
+}
+
+/// A role's actor ended (stopped, handed back, or failed): released to
+/// the voters if it was handed back; its own role held elsewhere, with
+/// no token to say so (a partition at start), makes this process stand
+/// by for it.
+async fn on_ended(
+    hosted: &mut Hosted<'_>,
+    role: &str,
+    result: Result<(), RunError>,
+    home: &mut Option<zenoh::liveliness::LivelinessToken>,
+) -> Result<(), RunError> {
+    let config = hosted.config;
+    hosted.ended(role);
+    let copied_home = hosted.copied_home.remove(role);
+    if hosted.handing_back.remove(role) {
+        if let Some(claims) = &hosted.claims {
+            // Before the release: the home process claims the role only
+            // once it is released, so it installs the copy it kept after
+            // this journal is gone, even on a shared disk.
+            if copied_home {
+                forget_handed_back(config, role);
+            }
+            claims.release(role).await;
+            hosted.released.insert(role.to_string());
+        }
+    }
+    match result {
+        Ok(()) => tracing::info!(process = %config.name, role, "role stopped"),
+        Err(RunError::Journal(JournalError::Ownership(OwnershipError::Held {
+            holder, ..
+        }))) if role == config.name => {
+            tracing::warn!(process = %config.name, %holder, "its role is held by another process; standing by and asking for it back");
+            if home.is_none() {
+                *home = Some(declare_home(hosted.session, &config.keys, &config.name).await?);
+            }
+        }
+        Err(e) => tracing::error!(process = %config.name, role, error = %e, "role failed"),
     }
     Ok(())
 }
@@ -621,6 +697,7 @@ async fn keep_leases(
             hosted.stop(&role);
         }
     }
+    take_up_held_roles(hosted, &map);
     let own = &config.name;
     if hosted.roles.contains(own) {
         return Ok(());
@@ -787,6 +864,32 @@ fn return_from(config: &HostConfig) {
         }
         Err(e) => tracing::error!(process = %config.name, error = %e,
             "the copy its last holder sent cannot be used: the role starts from its own journal"),
+    }
+}
+
+/// Takes up every role besides its own that the map gives this process
+/// and that it does not run: it restarted while holding them, or
+/// stopped them when its lease lapsed. Nobody else would adopt them (the
+/// map names a live holder), so their answers would stay missing.
+fn take_up_held_roles(hosted: &mut Hosted<'_>, map: &idmesh_consensus::RolesAnswer) {
+    let config = hosted.config;
+    let mine = |role: &str| {
+        map.get(role)
+            .is_some_and(|e| e.holder.as_deref() == Some(config.name.as_str()))
+    };
+    hosted.released.retain(|role| mine(role));
+    let held: Vec<(String, u64)> = map
+        .roles
+        .iter()
+        .filter(|e| e.role != config.name && mine(&e.role))
+        .filter(|e| !hosted.roles.contains(&e.role) && !hosted.released.contains(&e.role))
+        .map(|e| (e.role.clone(), e.epoch))
+        .collect();
+    for (role, epoch) in held {
+        tracing::warn!(process = %config.name, %role, epoch,
+            "the voters give this process a role it does not run: taking it up again");
+        adopt_from(config, &role);
+        hosted.host(&role, true, epoch);
     }
 }
 

@@ -302,6 +302,22 @@ fn keep_damaged(path: &Path) -> String {
 }
 
 /// The snapshot's generation and state, if there is one.
+/// A one-file log of `kind` (a snapshot, a standby copy) read whole; a
+/// damaged header is refused through `refused`, naming byte 0.
+pub(crate) fn read_whole<E: From<log::Error>>(
+    path: &Path,
+    kind: &'static str,
+    refused: impl Fn(String) -> E,
+) -> Result<Option<log::Contents>, E> {
+    match log::read(path, kind) {
+        Ok(contents) => Ok(contents),
+        Err(log::Error::Header { .. }) => Err(refused(
+            "damaged at byte 0 (its header fails its checksum)".into(),
+        )),
+        Err(e) => Err(e.into()),
+    }
+}
+
 fn read_snapshot(path: &Path) -> Result<Option<(u64, Vec<u8>)>, JournalError> {
     let refused = |problem: String| JournalError::Snapshot {
         path: path.display().to_string(),
@@ -311,16 +327,7 @@ fn read_snapshot(path: &Path) -> Result<Option<(u64, Vec<u8>)>, JournalError> {
              directory to start the stream again from its beginning"
         ),
     };
-    let contents = match log::read(path, SNAPSHOT) {
-        Ok(contents) => contents,
-        Err(log::Error::Header { .. }) => {
-            return Err(refused(
-                "damaged at byte 0 (its header fails its checksum)".into(),
-            ))
-        }
-        Err(e) => return Err(e.into()),
-    };
-    let Some(contents) = contents else {
+    let Some(contents) = read_whole(path, SNAPSHOT, refused)? else {
         return Ok(None);
     };
     match (&contents.ending, &contents.records[..]) {

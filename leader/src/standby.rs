@@ -21,7 +21,7 @@
 //! with its file and byte.
 
 use crate::host::journal_path;
-use crate::journal::{snapshot_path, SNAPSHOT};
+use crate::journal::{read_whole, snapshot_path, SNAPSHOT};
 use idmesh_journal::{self as log, Ending};
 use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, StandbyStored};
 use idmesh_protocol::wire::leader_to_sensor::Durable;
@@ -97,16 +97,7 @@ pub(crate) fn read(path: &Path) -> Result<Option<(Durable, Vec<u8>)>, StandbyErr
         path: path.display().to_string(),
         problem,
     };
-    let contents = match log::read(path, STANDBY) {
-        Ok(contents) => contents,
-        Err(log::Error::Header { .. }) => {
-            return Err(refused(
-                "damaged at byte 0 (its header fails its checksum)".into(),
-            ))
-        }
-        Err(e) => return Err(e.into()),
-    };
-    let Some(contents) = contents else {
+    let Some(contents) = read_whole(path, STANDBY, refused)? else {
         return Ok(None);
     };
     match (&contents.ending, &contents.records[..]) {
@@ -197,20 +188,19 @@ pub(crate) fn prepare_return(dir: &Path, role: &str) -> Result<Source, StandbyEr
             Source::Nothing
         });
     };
-    let journal = journal_path(dir, role);
-    let snapshot = snapshot_path(&journal);
-    let io = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| StandbyError::Log(log::Error::Io { path, source })
-    };
-    for old in [&journal, &snapshot] {
-        match std::fs::remove_file(old) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(old)(e)),
-            _ => {}
-        }
-    }
-    log::write_file(&snapshot, SNAPSHOT, 1, &[&state])?;
-    std::fs::remove_file(&copy).map_err(io(&copy))?;
+    forget_journal(dir, role)?;
+    log::write_file(
+        &snapshot_path(&journal_path(dir, role)),
+        SNAPSHOT,
+        1,
+        &[&state],
+    )?;
+    std::fs::remove_file(&copy).map_err(|source| {
+        StandbyError::Log(log::Error::Io {
+            path: copy.clone(),
+            source,
+        })
+    })?;
     Ok(Source::StandbyCopy(mark))
 }
 
