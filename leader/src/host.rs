@@ -248,6 +248,13 @@ impl Hosted<'_> {
         self.epochs.remove(role);
     }
 
+    /// Stops `role` to hand it back to its own process (released to the
+    /// voters once its actor has ended).
+    fn hand_back(&mut self, role: String) {
+        self.stop(&role);
+        self.handing_back.insert(role);
+    }
+
     /// Stops the actor of `role` (it syncs its journal, then drops the
     /// role's token).
     fn stop(&self, role: &str) {
@@ -353,8 +360,8 @@ pub async fn run(
         }
         hosted.tell_standbys(&tokens.alive);
     }
-    for stop in hosted.stops.values() {
-        let _ = stop.send(true);
+    for role in &hosted.roles {
+        hosted.stop(role);
     }
     drop(home);
     while let Some(done) = hosted.tasks.join_next().await {
@@ -758,8 +765,7 @@ fn on_home(hosted: &mut Hosted<'_>, role: &str, kind: SampleKind) {
         hosted.sending_home.insert(role.to_string(), Instant::now());
     } else {
         tracing::warn!(process = %config.name, role, "its process is back: handing the role back");
-        hosted.stop(role);
-        hosted.handing_back.insert(role.to_string());
+        hosted.hand_back(role.to_string());
     }
 }
 
@@ -774,9 +780,8 @@ fn on_stored(hosted: &mut Hosted<'_>, bytes: &[u8]) {
     }
     tracing::warn!(process = %hosted.config.name, role = %stored.role, batch = stored.mark.batch,
         "its process keeps the role's state: handing the role back");
-    hosted.stop(&stored.role);
     hosted.copied_home.insert(stored.role.clone());
-    hosted.handing_back.insert(stored.role);
+    hosted.hand_back(stored.role);
 }
 
 /// After handing `role` home to a process that keeps its state: the
@@ -813,8 +818,7 @@ fn hand_home_unanswered(hosted: &mut Hosted<'_>) {
     for role in late {
         tracing::warn!(process = %hosted.config.name, %role, "its process did not keep the role's state in time: handing the role back all the same");
         hosted.sending_home.remove(&role);
-        hosted.stop(&role);
-        hosted.handing_back.insert(role);
+        hosted.hand_back(role);
     }
 }
 

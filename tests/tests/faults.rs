@@ -5,6 +5,7 @@
 //! engine's to 1e-9 (exact conditioning, no pruning), so no event was lost
 //! and none applied twice.
 
+use idmesh_consensus::RolesAnswer;
 use idmesh_tests::{assert_same_marginals, floats};
 use idmesh_tests::{
     crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, FaultSection,
@@ -449,18 +450,12 @@ fn voters_keep_a_leader_with_one_gone_and_take_it_back() {
 /// leading voter's answer).
 fn holding(deployment: &Deployment, role: &str) -> Option<(String, u64)> {
     let answers = deployment.query(&["roles"]).ok()?;
-    let leading = answers
-        .iter()
-        .filter(|a| a["leader"] != 0 && a["leader"] == a["voter"])
-        .max_by_key(|a| a["term"].as_u64())?;
-    let entry = leading["roles"]
-        .as_array()?
-        .iter()
-        .find(|e| e["role"] == role)?;
-    Some((
-        entry["holder"].as_str()?.to_string(),
-        entry["epoch"].as_u64()?,
-    ))
+    let answers = answers
+        .into_iter()
+        .map(serde_json::from_value::<RolesAnswer>);
+    let leading = RolesAnswer::newest(answers.collect::<Result<Vec<_>, _>>().ok()?)?;
+    let entry = leading.get(role)?;
+    Some((entry.holder.clone()?, entry.epoch))
 }
 
 /// Waits until the voters' map gives `role` to `holder`; its epoch.

@@ -513,13 +513,7 @@ impl Node {
     /// A message of a former holder of its role, refused by the fence:
     /// counted as rejected and logged (once per role and epoch).
     fn fenced(&mut self, stale: Stale, origin: &str, out: &mut Vec<Output>) {
-        self.leader.note_rejected();
-        if self.timers.journal {
-            out.push(Output::Journal {
-                kind: Kind::Rejected,
-                bytes: Vec::new(),
-            });
-        }
+        self.note_refusal(out);
         if self.fenced_warned.insert((stale.role.clone(), stale.epoch)) {
             tracing::warn!(leader = %self.leader.name(), from = %origin, "{stale}");
         }
@@ -831,14 +825,21 @@ impl Node {
         problem: &dyn std::fmt::Display,
         out: &mut Vec<Output>,
     ) {
-        let rejected = self.leader.note_rejected();
+        let rejected = self.note_refusal(out);
         tracing::warn!(leader = %self.leader.name(), from, what, %problem, rejected, "input rejected");
+    }
+
+    /// Counts a refusal and journals that it happened (not what came), so
+    /// the count survives a restart; the count so far.
+    fn note_refusal(&mut self, out: &mut Vec<Output>) -> u64 {
+        let rejected = self.leader.note_rejected();
         if self.timers.journal {
             out.push(Output::Journal {
                 kind: Kind::Rejected,
                 bytes: Vec::new(),
             });
         }
+        rejected
     }
 }
 
