@@ -194,12 +194,21 @@ struct Hosted<'a> {
     /// standby is that process until it says it keeps their snapshot,
     /// then they are stopped and handed home.
     sending_home: HashMap<String, Instant>,
+    /// Roles going home whose process is late keeping their state
+    /// (warned once each).
+    home_late: BTreeSet<String>,
 }
 
 impl Hosted<'_> {
     /// Starts hosting `role` here (`adopted`: from a process gone for
     /// good, or taken back) at `epoch` (what the voters gave; 0 without).
     fn host(&mut self, role: &str, adopted: bool, epoch: u64) {
+        if let (Some(_), Some(dir)) = (&self.claims, &self.config.state_dir) {
+            if let Err(e) = standby::stamp_epoch(dir, role, epoch) {
+                tracing::error!(process = %self.config.name, role, epoch, error = %e,
+                    "cannot note the epoch the role runs at: a later adoption here will not trust its journal");
+            }
+        }
         self.epochs.insert(role.to_string(), epoch);
         self.superseded.remove(role);
         let (stop_tx, mut stop_rx) = watch::channel(false);
@@ -306,6 +315,7 @@ pub async fn run(
         map_read: None,
         homes: BTreeSet::new(),
         sending_home: HashMap::new(),
+        home_late: BTreeSet::new(),
     };
 
     // Standing by for its own role: the token that asks for it back.
@@ -396,7 +406,7 @@ async fn on_tick(
     {
         tracing::warn!(process = %config.name, "its role is free: taking it back");
         *home = None;
-        return_from(config);
+        return_from(config, None);
         hosted.host(&config.name, true, 0);
     }
     if let Some(patience) = config.takeover_after {
@@ -540,7 +550,7 @@ fn on_token(
                 // token expired): take it now, takeover or not.
                 tracing::warn!(process = %config.name, "its role is free again: taking it back");
                 *home = None;
-                return_from(config);
+                return_from(config, None);
                 hosted.host(&role, true, 0);
             } else if !hosted.roles.contains(&role) {
                 if let Some(claims) = &hosted.claims {
@@ -598,7 +608,7 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
             continue;
         }
         tracing::warn!(process = %config.name, role = %role, "adopting a leader role gone for good");
-        adopt_from(config, &role);
+        adopt_from(config, &role, None);
         hosted.host(&role, true, 0);
     }
 }
@@ -639,7 +649,7 @@ async fn adopt_by_claim(
     {
         Claimed::Won(epoch) => {
             tracing::warn!(process = %config.name, role, epoch, "adopting a leader role gone for good: the voters gave it here");
-            adopt_from(config, role);
+            adopt_from(config, role, Some(now));
             hosted.host(role, true, epoch);
         }
         Claimed::Lost { holder, epoch } => {
@@ -722,12 +732,13 @@ async fn keep_leases(
                 return Ok(());
             };
             let fencing = claims::fencing(&map, own);
+            let last = map.get(own).map_or(0, |e| e.epoch);
             match claims.claim(own, fencing, CLAIM_PATIENCE).await {
                 Claimed::Won(epoch) => {
                     tracing::info!(process = %own, epoch, "the voters gave this process its role");
                     let back = home.take().is_some() || epoch > 1;
                     if back {
-                        return_from(config);
+                        return_from(config, Some(last));
                     }
                     hosted.host(own, back, epoch);
                 }
@@ -754,6 +765,7 @@ fn on_home(hosted: &mut Hosted<'_>, role: &str, kind: SampleKind) {
     if kind == SampleKind::Delete {
         hosted.homes.remove(role);
         hosted.sending_home.remove(role);
+        hosted.home_late.remove(role);
         return;
     }
     hosted.homes.insert(role.to_string());
@@ -780,6 +792,7 @@ fn on_stored(hosted: &mut Hosted<'_>, bytes: &[u8]) {
     }
     tracing::warn!(process = %hosted.config.name, role = %stored.role, batch = stored.mark.batch,
         "its process keeps the role's state: handing the role back");
+    hosted.home_late.remove(&stored.role);
     hosted.copied_home.insert(stored.role.clone());
     hosted.hand_back(stored.role);
 }
@@ -802,12 +815,18 @@ fn forget_handed_back(config: &HostConfig, role: &str) {
 }
 
 /// How long a role going home waits for its process to keep its state
-/// before it is handed back all the same (that process then rebuilds
-/// what it can from its own journal).
+/// before it is handed back all the same (without voters: that process
+/// then rebuilds what it can from its own journal) or, with voters, the
+/// wait is warned about.
 const HOME_PATIENCE: Duration = Duration::from_secs(15);
 
-/// Hands back the roles whose process did not say it keeps their state
-/// within [`HOME_PATIENCE`].
+/// The roles whose process did not say it keeps their state within
+/// [`HOME_PATIENCE`]. Without voters they are handed back all the same.
+/// With voters they stay here, still sending their state home, and the
+/// wait is warned about once: that process's own journal stopped when
+/// the role left it, and it will not use it (see
+/// [`standby::forget_stale_journal`]), so handing the role back without a
+/// copy would leave the role with no state to start from.
 fn hand_home_unanswered(hosted: &mut Hosted<'_>) {
     let late: Vec<String> = hosted
         .sending_home
@@ -816,6 +835,13 @@ fn hand_home_unanswered(hosted: &mut Hosted<'_>) {
         .map(|(role, _)| role.clone())
         .collect();
     for role in late {
+        if hosted.claims.is_some() {
+            if hosted.home_late.insert(role.clone()) {
+                tracing::warn!(process = %hosted.config.name, %role,
+                    "its process has not kept the role's state yet: the role stays here, sending it");
+            }
+            continue;
+        }
         tracing::warn!(process = %hosted.config.name, %role, "its process did not keep the role's state in time: handing the role back all the same");
         hosted.sending_home.remove(&role);
         hosted.hand_back(role);
@@ -852,12 +878,14 @@ async fn keep_copy_home(hosted: &Hosted<'_>, bytes: &[u8]) {
 }
 
 /// Before taking its own role back home: the copy the role's last holder
-/// sent here, if any, replaces the journal the role left. Says which at
-/// info.
-fn return_from(config: &HostConfig) {
+/// sent here, if any, replaces the journal the role left; with voters
+/// (`last`: the role's epoch before this claim), a journal of an earlier
+/// holding is not used in any case. Says which at info.
+fn return_from(config: &HostConfig, last: Option<u64>) {
     let Some(dir) = &config.state_dir else {
         return;
     };
+    forget_stale(config, dir, &config.name, last);
     match standby::prepare_return(dir, &config.name) {
         Ok(Source::StandbyCopy(mark)) => {
             tracing::info!(process = %config.name, batch = mark.batch, position = mark.position,
@@ -892,18 +920,21 @@ fn take_up_held_roles(hosted: &mut Hosted<'_>, map: &idmesh_consensus::RolesAnsw
     for (role, epoch) in held {
         tracing::warn!(process = %config.name, %role, epoch,
             "the voters give this process a role it does not run: taking it up again");
-        adopt_from(config, &role);
+        adopt_from(config, &role, Some(epoch));
         hosted.host(&role, true, epoch);
     }
 }
 
 /// Before adopting `role`: its journal in this state directory if there
-/// is one (a shared disk), else the standby copy this process kept,
-/// installed as the role's snapshot. Says which at info.
-fn adopt_from(config: &HostConfig, role: &str) {
+/// is one (a shared disk, or this process held the role last: `last` is
+/// the role's epoch before this holding, with voters), else the standby
+/// copy this process kept, installed as the role's snapshot. Says which
+/// at info.
+fn adopt_from(config: &HostConfig, role: &str, last: Option<u64>) {
     let Some(dir) = &config.state_dir else {
         return;
     };
+    forget_stale(config, dir, role, last);
     match standby::prepare_adoption(dir, role) {
         Ok(Source::Journal) => {
             tracing::info!(process = %config.name, role, "adopting from the role's own journal")
@@ -920,6 +951,22 @@ fn adopt_from(config: &HostConfig, role: &str) {
             tracing::error!(process = %config.name, role, error = %e,
                 "the standby copy cannot be used: the role is rebuilt from the stream's beginning, if the sensor still holds it")
         }
+    }
+}
+
+/// With voters: removes this process's journal of `role` if it was
+/// written in an earlier holding than the last (`last`), which the role's
+/// holders since have left behind (see [`standby::forget_stale_journal`]).
+fn forget_stale(config: &HostConfig, dir: &std::path::Path, role: &str, last: Option<u64>) {
+    let Some(last) = last else {
+        return;
+    };
+    match standby::forget_stale_journal(dir, role, last) {
+        Ok(Some(written)) => tracing::warn!(process = %config.name, role, written, last,
+            "this process's journal of the role is of an earlier holding: not used"),
+        Ok(None) => {}
+        Err(e) => tracing::error!(process = %config.name, role, error = %e,
+            "cannot remove a journal of an earlier holding of the role"),
     }
 }
 

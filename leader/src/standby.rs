@@ -153,6 +153,74 @@ pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, Standby
     Ok(Source::StandbyCopy(mark))
 }
 
+/// What an epoch stamp's header says it holds.
+pub const EPOCH: &str = "leader-epoch";
+
+/// Where a process keeps, under `dir`, the epoch at which it last held
+/// `role` (with voters): the holding its journal of the role was written in.
+pub(crate) fn epoch_path(dir: &Path, role: &str) -> PathBuf {
+    dir.join(format!("{role}.journal.epoch"))
+}
+
+/// Notes, whole and fsynced, that this process holds `role` at `epoch`
+/// from now on: what it journals of the role belongs to that holding.
+pub(crate) fn stamp_epoch(dir: &Path, role: &str, epoch: u64) -> Result<(), StandbyError> {
+    log::write_file(
+        &epoch_path(dir, role),
+        EPOCH,
+        1,
+        &[&epoch.to_le_bytes()[..]],
+    )?;
+    Ok(())
+}
+
+/// The epoch `role`'s journal here was written at; 0 when none was noted
+/// (a journal from before the deployment had voters).
+pub(crate) fn stamped_epoch(dir: &Path, role: &str) -> Result<u64, StandbyError> {
+    let path = epoch_path(dir, role);
+    let refused = |problem: String| StandbyError::Refused {
+        path: path.display().to_string(),
+        problem,
+    };
+    let Some(contents) = read_whole(&path, EPOCH, refused)? else {
+        return Ok(0);
+    };
+    let bytes = match (&contents.ending, &contents.records[..]) {
+        (Ending::Clean, [record]) => <[u8; 8]>::try_from(&record.payload[..]).ok(),
+        _ => None,
+    };
+    bytes
+        .map(u64::from_le_bytes)
+        .ok_or_else(|| refused("not one whole epoch".to_string()))
+}
+
+/// Before this process runs `role` again, with voters: its journal of the
+/// role here is the role's newest state only if it was written in the
+/// holding the map named last (`last`, its epoch before this claim) —
+/// this process was then the last to act for the role. Written in an
+/// earlier holding, it stopped where the role left this process, and the
+/// holders since have moved on: the sensor and the peers forgot what lies
+/// between (they keep only what follows the published mark), so a role
+/// started from it would wait for inputs gone for good. Such a journal is
+/// removed (the standby copy, if any, is used instead). Returns the epoch
+/// of the journal forgotten, if one was.
+pub(crate) fn forget_stale_journal(
+    dir: &Path,
+    role: &str,
+    last: u64,
+) -> Result<Option<u64>, StandbyError> {
+    let journal = journal_path(dir, role);
+    if !journal.exists() && !snapshot_path(&journal).exists() {
+        return Ok(None);
+    }
+    let written = stamped_epoch(dir, role).unwrap_or(u64::MAX);
+    if written == last {
+        return Ok(None);
+    }
+    forget_journal(dir, role)?;
+    Ok(Some(written))
+}
+
 /// Removes `role`'s journal and snapshot from `dir` (none there is no
 /// error): a role handed home leaves them stale here.
 pub(crate) fn forget_journal(dir: &Path, role: &str) -> Result<(), StandbyError> {
@@ -339,5 +407,36 @@ mod tests {
         assert_eq!(prepare_adoption(&dir, "l1").unwrap(), Source::Journal);
         let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
         assert_eq!(contents.records[0].payload, vec![5; 64], "left as it was");
+    }
+
+    #[test]
+    fn a_journal_of_an_earlier_holding_is_forgotten_and_the_copy_used() {
+        let dir = dir("stale");
+        let journal = journal_path(&dir, "l1");
+        // No journal: nothing to forget, whatever the epoch.
+        assert_eq!(forget_stale_journal(&dir, "l1", 3).unwrap(), None);
+        // Written while this process held the role at epoch 3: the map's
+        // last holding is that one, so it is the newest state.
+        std::fs::write(&journal, b"journal").unwrap();
+        stamp_epoch(&dir, "l1", 3).unwrap();
+        assert_eq!(stamped_epoch(&dir, "l1").unwrap(), 3);
+        assert_eq!(forget_stale_journal(&dir, "l1", 3).unwrap(), None);
+        assert!(journal.exists());
+        // Another held it at 4 since: this journal stopped where the role
+        // left, and the copy this process keeps is used instead.
+        keep(&dir, &copy(9, vec![9; 16]), "l2").unwrap();
+        assert_eq!(forget_stale_journal(&dir, "l1", 4).unwrap(), Some(3));
+        assert!(!journal.exists());
+        assert_eq!(
+            prepare_adoption(&dir, "l1").unwrap(),
+            Source::StandbyCopy(mark(9))
+        );
+        // A journal never stamped (kept from before the voters) counts as
+        // written at epoch 0.
+        std::fs::remove_file(epoch_path(&dir, "l1")).unwrap();
+        assert_eq!(stamped_epoch(&dir, "l1").unwrap(), 0);
+        assert_eq!(forget_stale_journal(&dir, "l1", 0).unwrap(), None);
+        assert_eq!(forget_stale_journal(&dir, "l1", 1).unwrap(), Some(0));
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
