@@ -180,7 +180,12 @@ fn take(voter: &mut Voter, incoming: Incoming) {
 fn roles_answer(voter: &Voter) -> RolesAnswer {
     RolesAnswer {
         voter: voter.id(),
-        leader: voter.leader(),
+        // A leader whose map may still lack its predecessor's last claims
+        // does not say it leads: readers wait for one that holds them.
+        leader: match voter.is_leader() && !voter.leads_with_current_map() {
+            true => 0,
+            false => voter.leader(),
+        },
         term: voter.term(),
         roles: voter
             .map()

@@ -185,6 +185,15 @@ impl Voter {
         self.node.raft.state == StateRole::Leader
     }
 
+    /// Whether this voter leads with a map that holds every claim
+    /// committed so far: a new leader learns where the last one's commits
+    /// end only once it commits an entry of its own term (its empty
+    /// entry), and its map may lack some of them until then. Only such a
+    /// voter's map is to be trusted as the group's.
+    pub fn leads_with_current_map(&self) -> bool {
+        self.is_leader() && self.node.raft.apply_to_current_term()
+    }
+
     /// The leader this voter knows of (0: none).
     pub fn leader(&self) -> u64 {
         self.node.raft.leader_id

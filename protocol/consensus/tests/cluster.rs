@@ -175,9 +175,26 @@ impl Cluster {
     }
 
     /// Every two voters' applied outcomes agree on their common prefix,
-    /// and the longest holds no repeated or falling epoch.
+    /// and the longest holds no repeated or falling epoch. The voter of
+    /// the newest term that says its map is current (what a reader of
+    /// the map trusts) has applied every outcome any voter has.
     fn check(&self, seed: u64) {
         let longest = self.applied.iter().max_by_key(|a| a.len()).unwrap();
+        let trusted = (0..self.voters.len())
+            .filter_map(|i| self.voters[i].as_ref().map(|v| (i, v)))
+            .filter(|(_, v)| v.leads_with_current_map())
+            .max_by_key(|(_, v)| v.term());
+        if let Some((i, v)) = trusted {
+            assert_eq!(
+                self.applied[i].len(),
+                longest.len(),
+                "seed {seed}, step {}: voter {} leads at term {} with a map that lacks \
+                 committed claims",
+                self.step,
+                i + 1,
+                v.term()
+            );
+        }
         for (i, a) in self.applied.iter().enumerate() {
             assert!(
                 longest.starts_with(a),
