@@ -161,6 +161,11 @@ pub struct BenchArgs {
     /// size, and the live answer against the offline one.
     #[arg(long, conflicts_with_all = ["ingest", "accuracy", "extraction"])]
     pub identity: bool,
+    /// Only the replication figures: three journaling leaders with their
+    /// standbys off and on, in alternating rounds (--repeat): events per
+    /// second, and the leaders' bytes sent and fsyncs per event.
+    #[arg(long, conflicts_with_all = ["ingest", "accuracy", "extraction", "identity"])]
+    pub replication: bool,
     /// With --accuracy: the Table III n to run, comma-separated.
     #[arg(
         long,

@@ -115,6 +115,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }),
             extraction: args.extraction,
             identity: args.identity,
+            replication: args.replication,
+            standbys: true,
         }),
     }
 }

@@ -498,7 +498,9 @@ impl<'a> Driver<'a> {
                 Output::ToStandby { to, mark } => {
                     // A snapshot that could not be written is not sent.
                     if failed.is_none() {
-                        self.send_standby(to, mark).await;
+                        if let Some(bytes) = self.send_standby(to, mark).await {
+                            node.note_standby_sent(bytes);
+                        }
                     }
                 }
             }
@@ -606,16 +608,15 @@ impl<'a> Driver<'a> {
     }
 
     /// Puts the last snapshot, whose mark is `mark`, on standby `to`'s
-    /// key; the standby answers on this role's `stored` key.
-    async fn send_standby(&mut self, to: String, mark: Durable) {
+    /// key; the standby answers on this role's `stored` key. Returns the
+    /// bytes sent.
+    async fn send_standby(&mut self, to: String, mark: Durable) -> Option<usize> {
         let name = &self.config.name;
-        let Some(state) = &self.last_snapshot else {
-            return;
-        };
+        let state = self.last_snapshot.as_ref()?;
         if state.len() > MAX_SNAPSHOT_BYTES {
             tracing::error!(leader = %name, bytes = state.len(), most = MAX_SNAPSHOT_BYTES,
                 "the snapshot is too large to send to the standby: the role's durable mark stops moving");
-            return;
+            return None;
         }
         let copy = StandbyCopy {
             version: VERSION,
@@ -625,10 +626,15 @@ impl<'a> Driver<'a> {
             state: state.clone(),
         };
         let body = encode(&copy);
-        tracing::debug!(leader = %name, standby = %to, bytes = body.len(), "snapshot to the standby");
+        let bytes = body.len();
+        tracing::debug!(leader = %name, standby = %to, bytes, "snapshot to the standby");
         let key = self.config.keys.leader_standby(&to);
-        if let Err(e) = self.put(key, CongestionControl::Block, body).await {
-            tracing::warn!(leader = %name, standby = %to, error = %e, "could not send the snapshot to the standby");
+        match self.put(key, CongestionControl::Block, body).await {
+            Ok(()) => Some(bytes),
+            Err(e) => {
+                tracing::warn!(leader = %name, standby = %to, error = %e, "could not send the snapshot to the standby");
+                None
+            }
         }
     }
 

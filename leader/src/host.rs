@@ -94,13 +94,18 @@ pub struct HostConfig {
     /// for this long. None: no voters; the tokens and, on a shared disk,
     /// the journal's lock decide.
     pub lease: Option<Duration>,
+    /// Every role sends its snapshots to a standby on another leader
+    /// process's disk (with more than one leader and a state directory).
+    /// Off only where the leaders share a disk that survives any host:
+    /// the role's own journal is then there for its adopter.
+    pub standbys: bool,
 }
 
 impl HostConfig {
-    /// Whether every role keeps a standby: more than one leader process,
-    /// and a state directory to keep copies in.
+    /// Whether every role keeps a standby: asked for, more than one leader
+    /// process, and a state directory to keep copies in.
     fn standbys(&self) -> bool {
-        self.leaders.len() > 1 && self.state_dir.is_some()
+        self.standbys && self.leaders.len() > 1 && self.state_dir.is_some()
     }
 
     /// The actor settings for `role`, hosted here.

@@ -23,6 +23,9 @@
 //!   1,000 and 10,000 tracks, offline and through four leaders: memory,
 //!   query time, the answer's size, live against offline.
 //!
+//! - [`replication`] (`--replication`, on its own): what the leaders'
+//!   standbys cost in events per second, bytes and fsyncs per event.
+//!
 //! - [`accuracy`] (`--accuracy`, on its own): the live answers' tracking
 //!   error on the Table III crowds against the centralized engine's, asked
 //!   at every truth line.
@@ -38,6 +41,7 @@ mod ingest;
 mod interval;
 mod latency;
 mod regions;
+mod replication;
 mod sensors;
 mod throughput;
 
@@ -92,6 +96,12 @@ pub struct BenchOptions {
     /// Only the identity figures (`identity`): memory and query time of
     /// the identity belief at 1,000 and 10,000 tracks, offline and live.
     pub identity: bool,
+    /// Only the replication figures (`replication`): three journaling
+    /// leaders with standbys off and on.
+    pub replication: bool,
+    /// With `journal`: every leader role keeps a standby (the topology's
+    /// `standbys`; the default).
+    pub standbys: bool,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
@@ -132,6 +142,9 @@ pub fn run(options: &BenchOptions) -> Result<()> {
             false,
             &trace,
         )?;
+    }
+    if options.replication {
+        return replication::run(&runtime, options, &trace);
     }
     let report = if options.ingest {
         ingestion(&runtime, options, &trace)?
@@ -529,6 +542,7 @@ impl Deployment {
         // Beside the topology; a journal of an earlier run would be
         // resumed, so it goes first.
         topology.state_dir = options.journal.then(|| PathBuf::from("state"));
+        topology.standbys = options.standbys;
         for sensor in &mut topology.sensors {
             sensor.rate = rate;
             sensor.live = live;
@@ -701,6 +715,8 @@ mod tests {
             accuracy: None,
             extraction: false,
             identity: false,
+            replication: false,
+            standbys: true,
         }
     }
 

@@ -128,6 +128,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                             drop_push_every: topology.leader_faults.drop_push_every,
                             flow_control: sensor.window.is_some(),
                             lease: (!topology.voters.is_empty()).then_some(VOTERS_LEASE),
+                            standbys: topology.standbys,
                         },
                         shutdown(),
                     )

@@ -33,6 +33,9 @@
 //! takeover_after_ms = 3000       # a leader process gone this long has its
 //!                                # role adopted by a live one (0 = never;
 //!                                # needs state_dir shared by the leaders)
+//! standbys = true                # with state_dir: each leader role's
+//!                                # snapshots also go to another leader's
+//!                                # disk (false: the leaders share one)
 //!
 //! [coordinator]
 //! name = "coordinator"
@@ -175,6 +178,12 @@ pub struct Topology {
         skip_serializing_if = "is_default_takeover_after"
     )]
     pub takeover_after_ms: u64,
+    /// With `state_dir` and more than one leader: every leader role sends
+    /// its snapshots to a standby on another leader process's disk, which
+    /// an adopter starts from when the role's host is gone for good. Off
+    /// (false) only where the leaders share a disk that outlives any host.
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub standbys: bool,
     /// How long the coordinator may compute one identity answer's
     /// marginals before it stops the computation and answers why.
     #[serde(
@@ -744,6 +753,7 @@ impl Topology {
             fsync_ms: default_fsync(),
             snapshot_every: default_snapshot_every(),
             takeover_after_ms: default_takeover_after(),
+            standbys: true,
             marginals_timeout_ms: default_marginals_timeout(),
             coordinator,
             coordinator_replicas: Vec::new(),

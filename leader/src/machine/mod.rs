@@ -332,6 +332,11 @@ impl Node {
         &self.leader
     }
 
+    /// Counts the bytes of a snapshot the driver sent to the standby.
+    pub(crate) fn note_standby_sent(&mut self, bytes: usize) {
+        self.leader.note_standby_sent(bytes);
+    }
+
     pub(crate) fn timers(&self) -> &Timers {
         &self.timers
     }

@@ -34,6 +34,7 @@ impl Leader {
         stats.stream_finished = self.finished;
         stats.quiet = self.is_quiet();
         stats.transfers_kept = self.sent.len() as u64;
+        stats.fsyncs = idmesh_journal::fsyncs();
         if let Some(s) = &self.started {
             stats.coefficients = match &s.factored {
                 Some(held) => held.coefficients() as u64,
@@ -63,6 +64,11 @@ impl Leader {
     pub fn note_rejected(&mut self) -> u64 {
         self.stats.rejected += 1;
         self.stats.rejected
+    }
+
+    /// Counts bytes of a snapshot sent to the role's standby.
+    pub(crate) fn note_standby_sent(&mut self, bytes: usize) {
+        self.stats.standby_bytes += bytes as u64;
     }
 
     /// Counts bytes the actor sent for this leader.

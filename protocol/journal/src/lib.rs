@@ -108,4 +108,4 @@ mod tests;
 pub use error::{Damage, Error, Problem};
 pub use format::{encode_record, header, FORMAT, HEADER_LEN, MAGIC, MAX_RECORD, RECORD_HEAD};
 pub use read::{parse, read, read_copies, Contents, Ending, Merged, Record, Repair};
-pub use write::{write_file, Writer};
+pub use write::{fsyncs, write_file, Writer};

@@ -7,6 +7,7 @@ use crate::format::{encode_record, header, HEADER_LEN, MAX_RECORD};
 use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// A log open for appending: one file, or a file and its copy written
 /// alike (read back with [`crate::read_copies`]).
@@ -152,6 +153,7 @@ impl Writer {
         if self.dirty {
             for (file, path) in &self.files {
                 file.sync_data().map_err(Error::io(path))?;
+                counted_fsync();
             }
             self.dirty = false;
         }
@@ -223,9 +225,24 @@ fn write_durably(path: &Path, body: &[u8]) -> std::io::Result<()> {
     let mut file = File::create(&temporary)?;
     file.write_all(body)?;
     file.sync_all()?;
+    counted_fsync();
     std::fs::rename(&temporary, path)?;
     if let Some(dir) = dir {
         File::open(dir)?.sync_all()?;
+        counted_fsync();
     }
     Ok(())
+}
+
+/// fsyncs this process made through this crate (files and their
+/// folders), for the counters a deployment's cost is measured by.
+static FSYNCS: AtomicU64 = AtomicU64::new(0);
+
+fn counted_fsync() {
+    FSYNCS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// How many fsyncs this process has made through this crate so far.
+pub fn fsyncs() -> u64 {
+    FSYNCS.load(Ordering::Relaxed)
 }

@@ -164,6 +164,15 @@ pub struct LeaderStats {
     pub journal_damage: u64,
     #[serde(default)]
     pub journal_dropped: u64,
+    /// Bytes of snapshots sent to this role's standby (counted in no other
+    /// byte counter).
+    #[serde(default)]
+    pub standby_bytes: u64,
+    /// fsyncs of journals, snapshots and standby copies by the process
+    /// running this leader since it started (every role it runs, and the
+    /// copies it keeps for others).
+    #[serde(default)]
+    pub fsyncs: u64,
 }
 super::versioned!(LeaderStats, "leader stats");
 
