@@ -117,6 +117,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             identity: args.identity,
             replication: args.replication,
             standbys: true,
+            snapshot_every: None,
         }),
     }
 }

@@ -102,6 +102,9 @@ pub struct BenchOptions {
     /// With `journal`: every leader role keeps a standby (the topology's
     /// `standbys`; the default).
     pub standbys: bool,
+    /// With `journal`: inputs between a leader's snapshots (None: the
+    /// topology's default).
+    pub snapshot_every: Option<usize>,
 }
 
 pub fn run(options: &BenchOptions) -> Result<()> {
@@ -543,6 +546,9 @@ impl Deployment {
         // resumed, so it goes first.
         topology.state_dir = options.journal.then(|| PathBuf::from("state"));
         topology.standbys = options.standbys;
+        if let Some(every) = options.snapshot_every {
+            topology.snapshot_every = every;
+        }
         for sensor in &mut topology.sensors {
             sensor.rate = rate;
             sensor.live = live;
@@ -717,6 +723,7 @@ mod tests {
             identity: false,
             replication: false,
             standbys: true,
+            snapshot_every: None,
         }
     }
 
