@@ -208,6 +208,12 @@ impl Hosted<'_> {
     /// Starts hosting `role` here (`adopted`: from a process gone for
     /// good, or taken back) at `epoch` (what the voters gave; 0 without).
     fn host(&mut self, role: &str, adopted: bool, epoch: u64) {
+        if self.roles.contains(role) {
+            // One actor per role: a second would find the journal locked,
+            // and its end would orphan the first.
+            tracing::warn!(process = %self.config.name, role, epoch, "the role runs here already");
+            return;
+        }
         if let (Some(_), Some(dir)) = (&self.claims, &self.config.state_dir) {
             if let Err(e) = standby::stamp_epoch(dir, role, epoch) {
                 tracing::error!(process = %self.config.name, role, epoch, error = %e,
@@ -581,6 +587,13 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
         .map(|(role, _)| role.clone())
         .collect();
     for role in due {
+        if hosted.roles.contains(&role) || role == config.name {
+            // Run here since its token went (taken up again, or back
+            // home), or this process's own role, which it claims or takes
+            // back itself: never adopted as another's.
+            tokens.lost.remove(&role);
+            continue;
+        }
         let live: BTreeSet<String> = tokens.alive.union(&hosted.roles).cloned().collect();
         let Some(heir) = heir(&config.leaders, &role, &live) else {
             continue;
