@@ -47,11 +47,11 @@
 //! fetches what that misses as any restarted leader does. Load is back in
 //! balance.
 
-use idmesh_claims::{self as claims, Claimed, Claims, Verdict};
 use crate::driver::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
 use crate::standby::{self, Source};
+use idmesh_claims::{self as claims, Claimed, Claims, Verdict};
 use idmesh_ownership::OwnershipError;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, StandbyStored};

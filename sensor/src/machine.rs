@@ -52,6 +52,7 @@ use std::collections::BTreeMap;
 type Routed<Q> = (Vec<Placed<Q>>, Vec<(u32, Wanted)>, Vec<(usize, String)>);
 
 mod meshed;
+pub(crate) mod replication;
 
 /// What became of a cut request.
 pub enum CutOutcome<Q> {

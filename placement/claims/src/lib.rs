@@ -146,12 +146,7 @@ impl Claims {
     /// the holder it replaces; None if it believes the role unheld), and
     /// waits until the map shows who won, or until `patience` runs out.
     /// A proposal lost (no leader, or a leader change) is made again.
-    pub async fn claim(
-        &mut self,
-        role: &str,
-        fencing: Option<u64>,
-        patience: Duration,
-    ) -> Claimed {
+    pub async fn claim(&mut self, role: &str, fencing: Option<u64>, patience: Duration) -> Claimed {
         let command = Command::Claim {
             role: role.to_string(),
             holder: self.me.clone(),

@@ -15,6 +15,8 @@
 //!   producer, and the acknowledgement (JSON).
 //! - [`sensor_to_sensor`] — several sensors: each one's intake, for the
 //!   others to merge into one order.
+//! - [`sensor_to_standby`] — the sensor's journal, replicated to its
+//!   standby, and the standby's acknowledgement.
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
 //! - [`epoch`] — the fence: the epoch every leader message carries, and
 //!   the receivers' rule that refuses a former holder's.
@@ -47,6 +49,7 @@ pub mod producer_to_sensor;
 pub mod query;
 pub mod sensor_to_leader;
 pub mod sensor_to_sensor;
+pub mod sensor_to_standby;
 pub mod valid;
 
 use serde::de::DeserializeOwned;
