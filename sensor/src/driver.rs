@@ -90,6 +90,9 @@ pub struct GatewayConfig {
     /// The process standing by for this sensor, which every record of
     /// the journal is replicated to ([`crate::standby`]); None: none.
     pub standby: Option<String>,
+    /// The epoch at which this process holds the sensor role (the
+    /// voters' claim; 0 without voters), on every batch and reply.
+    pub epoch: u64,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -317,7 +320,8 @@ fn start_gateway(
     ends: bool,
     end: u64,
 ) -> Gateway<Query> {
-    let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
+    let mut gateway: Gateway<Query> =
+        Gateway::new(&config.name, router, lines.is_empty() && ends).at_epoch(config.epoch);
     // How many events the reports make is known only once they are
     // extracted: a cut asked for beyond the end waits, and is refused
     // when the stream ends.

@@ -571,7 +571,10 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
         if answered * 5 >= total * 2 {
             break;
         }
-        assert!(Instant::now() < patience, "the stream did not get two fifths in");
+        assert!(
+            Instant::now() < patience,
+            "the stream did not get two fifths in"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     let copy = deployment

@@ -111,6 +111,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                         input,
                         journal,
                         standby,
+                        epoch: lease.as_ref().map_or(0, |l| l.epoch),
                     };
                     let stop = lease_or_shutdown(lease);
                     sensor(session.clone(), &topology, name, keys, run, stop).await
@@ -265,12 +266,14 @@ struct Input {
     max_errors: Option<usize>,
 }
 
-/// How a sensor runs: its input, its journal, and the standby its
-/// journal is replicated to.
+/// How a sensor runs: its input, its journal, the standby its journal
+/// is replicated to, and the epoch it holds the role at (0 without
+/// voters).
 struct SensorRun {
     input: Input,
     journal: Option<(Journal, Vec<Record>)>,
     standby: Option<String>,
+    epoch: u64,
 }
 
 /// The sensor role held through the voters: what keeps its lease.
@@ -363,6 +366,7 @@ async fn sensor_standby(
         },
         journal: Some((journal, records)),
         standby: None,
+        epoch,
     };
     let stop = lease_or_shutdown(Some(Lease {
         claims,
@@ -385,6 +389,7 @@ async fn sensor(
         input,
         journal,
         standby,
+        epoch,
     } = run;
     let this = topology.sensor_named(name)?;
     let max_errors = input.max_errors.unwrap_or(this.max_errors);
@@ -450,6 +455,7 @@ async fn sensor(
         max_errors,
         ros2: this.ros2.clone(),
         standby,
+        epoch,
     };
     idmesh_sensor::run(session, config, router, source, journal, stop).await?;
     Ok(())
