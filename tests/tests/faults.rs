@@ -581,7 +581,8 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
         .dir
         .join("state-sensor-0-standby")
         .join("sensor-0.standby.journal");
-    assert!(copy.exists(), "the standby keeps a copy on its own disk");
+    let held = idmesh_sensor::journal::read(&copy).map_or(0, |records| records.len());
+    assert!(held > 0, "the standby keeps a copy on its own disk");
     assert!(
         !deployment
             .dir
@@ -590,8 +591,20 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
             .exists(),
         "disks apart"
     );
+    let first = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(10));
     deployment.kill("sensor-0");
     let killed = Instant::now();
+    let taken = held_by(
+        &deployment,
+        "sensor-0",
+        "sensor-0-standby",
+        Duration::from_secs(30),
+    );
+    let takeover = killed.elapsed().as_secs_f64();
+    assert!(
+        taken > first,
+        "a takeover raises the epoch: {first} then {taken}"
+    );
     let last = deployment.final_marginals(Duration::from_secs(60));
     assert_same_marginals(
         &last,
@@ -601,11 +614,12 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
     let log = deployment.log();
     assert!(
         log.contains("taking over from the copy"),
-        "the standby took the sensor role over:\n{log}"
+        "the standby took the sensor role over from its copy:\n{log}"
     );
     eprintln!(
-        "sensor-0 killed at two fifths of {total} events; final answer {:.2} s after the \
-         kill; test {:.1} s",
+        "sensor-0 killed at two fifths of {total} events ({held} records in the standby's \
+         copy); held by its standby at epoch {taken} {takeover:.2} s after the kill; final \
+         answer {:.2} s after the kill; test {:.1} s",
         killed.elapsed().as_secs_f64(),
         started.elapsed().as_secs_f64()
     );
