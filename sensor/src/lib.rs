@@ -67,7 +67,7 @@ pub use driver::{run, Faults, GatewayConfig};
 pub use mesh::MeshConfig;
 // The sensor's standby: its copy of the journal, its takeover, the lease.
 pub use standby::{
-    claim_own, keep_lease, stand_by, standby_path, StandbyConfig, StandbyError, Standing,
+    claim_own, keep_lease, stand_by, standby_path, StandbyConfig, StandbyError, Standing, TookOver,
     STANDBY_ROLE,
 };
 #[cfg(test)]

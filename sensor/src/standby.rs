@@ -242,12 +242,17 @@ pub enum Standing {
     /// The voters gave this process the sensor role at `epoch`: it serves
     /// as the sensor from its copy (`journal`, holding `records`), and
     /// keeps the lease with `claims`.
-    TookOver {
-        epoch: u64,
-        journal: Journal,
-        records: Vec<Record>,
-        claims: Claims,
-    },
+    TookOver(Box<TookOver>),
+}
+
+/// The sensor role won: its epoch, the copy opened as the sensor's
+/// journal with the records it holds, and the voters' client that keeps
+/// the lease.
+pub struct TookOver {
+    pub epoch: u64,
+    pub journal: Journal,
+    pub records: Vec<Record>,
+    pub claims: Claims,
 }
 
 /// Keeps the copy of the sensor's journal and watches the sensor, until
@@ -312,7 +317,7 @@ pub async fn stand_by(
                         let Some(claims) = claims.take() else {
                             return Ok(Standing::Shutdown);
                         };
-                        return Ok(Standing::TookOver { epoch, journal, records, claims });
+                        return Ok(Standing::TookOver(Box::new(TookOver { epoch, journal, records, claims })));
                     }
                     // Another holds it: it came back, or another process
                     // won. Looked at again after another takeover time.

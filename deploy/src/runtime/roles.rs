@@ -18,7 +18,7 @@ use idmesh_protocol::wire::keys::Keys;
 use idmesh_sensor::journal::{Journal, Record};
 use idmesh_sensor::{
     lines_of, stand_by, standby_path, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace,
-    MeshConfig, Router, RouterConfig, Source, StandbyConfig, Standing,
+    MeshConfig, Router, RouterConfig, Source, StandbyConfig, Standing, TookOver,
 };
 use idmesh_voter::VoterProcess;
 use std::fs::File;
@@ -346,15 +346,15 @@ async fn sensor_standby(
         lease: (!topology.voters.is_empty() && topology.takeover_after_ms > 0)
             .then_some(VOTERS_LEASE),
     };
-    let Standing::TookOver {
+    let Standing::TookOver(took) = stand_by(&session, &config, shutdown()).await? else {
+        return Ok(());
+    };
+    let TookOver {
         epoch,
         journal,
         records,
         claims,
-    } = stand_by(&session, &config, shutdown()).await?
-    else {
-        return Ok(());
-    };
+    } = *took;
     let journal = match topology.sensor_named(&this.sensor)?.compact_journal_after {
         Some(bytes) => journal.compact_after(bytes),
         None => journal,
