@@ -42,6 +42,19 @@ pub enum Role {
     SensorStandby,
 }
 
+impl Role {
+    /// The kind of topology member that runs this role.
+    fn member(self) -> &'static str {
+        match self {
+            Role::Sensor { .. } => "sensor",
+            Role::Leader => "leader",
+            Role::Coordinator => "coordinator",
+            Role::Voter => "voter",
+            Role::SensorStandby => "sensor-standby",
+        }
+    }
+}
+
 /// The runtime's worker threads for a role. A leader's work is one task
 /// that owns its node (and, after a takeover, one per role it adopted),
 /// woken by every batch and transfer: a second worker has nothing to run
@@ -62,13 +75,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
     without_huge_pages();
     let topology = Topology::load(config)?;
     let member = topology.member(name)?;
-    let expected = match role {
-        Role::Sensor { .. } => "sensor",
-        Role::Leader => "leader",
-        Role::Coordinator => "coordinator",
-        Role::Voter => "voter",
-        Role::SensorStandby => "sensor-standby",
-    };
+    let expected = role.member();
     if member.role != expected {
         return Err(anyhow!(
             "{name:?} is a {} in the topology, not a {expected}",
@@ -105,16 +112,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             let result = match role {
                 Role::Sensor { stdin, max_errors } => {
                     let input = Input { stdin, max_errors };
-                    let lease = claim_own(&session, &topology, &keys, name).await?;
-                    let standby = topology.standby_of(name).map(|s| s.name.clone());
-                    let run = SensorRun {
-                        input,
-                        journal,
-                        standby,
-                        epoch: lease.as_ref().map_or(0, |l| l.epoch),
-                    };
-                    let stop = lease_or_shutdown(lease);
-                    sensor(session.clone(), &topology, name, keys, run, stop).await
+                    own_sensor(session.clone(), &topology, name, keys, input, journal).await
                 }
                 Role::SensorStandby => sensor_standby(session.clone(), &topology, name, keys).await,
                 Role::Leader => {
@@ -282,6 +280,28 @@ struct Lease {
     role: String,
     me: String,
     epoch: u64,
+}
+
+/// Sensor `name` in its own process: with voters, once it holds its role
+/// (and until its lease is lost); its journal replicated to its standby,
+/// if it has one.
+async fn own_sensor(
+    session: zenoh::Session,
+    topology: &Topology,
+    name: &str,
+    keys: Keys,
+    input: Input,
+    journal: Option<(Journal, Vec<Record>)>,
+) -> Result<()> {
+    let lease = claim_own(&session, topology, &keys, name).await?;
+    let run = SensorRun {
+        input,
+        journal,
+        standby: topology.standby_of(name).map(|s| s.name.clone()),
+        epoch: lease.as_ref().map_or(0, |l| l.epoch),
+    };
+    let stop = lease_or_shutdown(lease);
+    sensor(session, topology, name, keys, run, stop).await
 }
 
 /// With voters: sensor `name` claims its own role before it serves (it
