@@ -282,9 +282,9 @@ struct Lease {
     epoch: u64,
 }
 
-/// Sensor `name` in its own process: with voters, once it holds its role
-/// (and until its lease is lost); its journal replicated to its standby,
-/// if it has one.
+/// Sensor `name` in its own process. With a standby its journal is
+/// replicated to it, and with voters too the sensor serves once it holds
+/// its role, until its lease is lost.
 async fn own_sensor(
     session: zenoh::Session,
     topology: &Topology,
@@ -293,11 +293,18 @@ async fn own_sensor(
     input: Input,
     journal: Option<(Journal, Vec<Record>)>,
 ) -> Result<()> {
-    let lease = claim_own(&session, topology, &keys, name).await?;
+    let standby = topology.standby_of(name).map(|s| s.name.clone());
+    // Without a standby nothing could take the role over: the sensor
+    // neither claims it nor keeps a lease (a cut-off sensor that stopped
+    // would stop the stream for good).
+    let lease = match standby {
+        Some(_) => claim_own(&session, topology, &keys, name).await?,
+        None => None,
+    };
     let run = SensorRun {
         input,
         journal,
-        standby: topology.standby_of(name).map(|s| s.name.clone()),
+        standby,
         epoch: lease.as_ref().map_or(0, |l| l.epoch),
     };
     let stop = lease_or_shutdown(lease);

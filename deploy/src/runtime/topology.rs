@@ -1398,6 +1398,49 @@ listen = "tcp/127.0.0.1:3"
         std::fs::remove_dir_all(&dir).ok();
     }
 
+    /// A `[[sensor_standby]]` is a member that stands by for a sensor of
+    /// the topology, needs `state_dir`, and reads back as written.
+    #[test]
+    fn a_sensor_standby_names_its_sensor_and_needs_a_state_dir() {
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-topology-standby-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let standby = |sensor: &str| {
+            format!(
+                "[[sensor_standby]]\nname = \"s-standby\"\nsensor = \"{sensor}\"\n\
+                 listen = \"tcp/127.0.0.1:14\"\n"
+            )
+        };
+        std::fs::write(
+            &path,
+            format!("state_dir = \"state\"\n{SMALL}{}", standby("s")),
+        )
+        .unwrap();
+        let t = Topology::load(&path).unwrap();
+        let member = t.member("s-standby").unwrap();
+        assert_eq!(member.role, "sensor-standby");
+        assert_eq!(
+            t.standby_of("s").map(|s| s.name.as_str()),
+            Some("s-standby")
+        );
+        assert_eq!(read_back(&t), t);
+        std::fs::write(&path, format!("{SMALL}{}", standby("s"))).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(
+            e.contains("[[sensor_standby]]") && e.contains("state_dir"),
+            "{e}"
+        );
+        std::fs::write(
+            &path,
+            format!("state_dir = \"state\"\n{SMALL}{}", standby("t")),
+        )
+        .unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("sensor \"t\" is not in the topology"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
     /// `[web]` takes `listen` and `idmesh web`'s marker settings under
     /// their names; written, it reads back equal; a bad or unknown key is
     /// refused naming it.
