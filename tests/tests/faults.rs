@@ -626,3 +626,64 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
     drop(deployment);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The sensor's process frozen (SIGSTOP: its host cut off, the process
+/// still there) past the takeover time: the voters give the sensor role
+/// to its standby at the next epoch, which serves from its copy. Woken,
+/// the former sensor finds the map moved on (or its lease lapsed) and
+/// stops serving; what it sends meanwhile at its old epoch is refused by
+/// the leaders' fence. The final answer is the offline twin's.
+#[test]
+fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
+    let dir = std::env::temp_dir().join(format!("idmesh-sensor-frozen-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(200.0),
+        journal: true,
+        own_disks: true,
+        voters: 3,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        sensor_standby: true,
+        ..Settings::default()
+    };
+    let started = Instant::now();
+    let deployment = Deployment::start_each("sensor-frozen", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let first = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
+    deployment.first_answer(Duration::from_secs(30));
+    deployment.pause("sensor-0");
+    let frozen = Instant::now();
+    let taken = held_by(
+        &deployment,
+        "sensor-0",
+        "sensor-0-standby",
+        Duration::from_secs(40),
+    );
+    assert!(
+        taken > first,
+        "a takeover raises the epoch: {first} then {taken}"
+    );
+    let takeover = frozen.elapsed().as_secs_f64();
+    deployment.resume("sensor-0");
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after the sensor was superseded by its standby",
+    );
+    let log = deployment.log();
+    assert!(
+        log.contains("the voters gave the sensor role to another: stopping")
+            || log.contains("no leading voter for the lease: stopping the sensor role"),
+        "the woken sensor stopped serving:\n{log}"
+    );
+    eprintln!(
+        "sensor-0 frozen: held by its standby at epoch {taken} {takeover:.1} s later; test \
+         {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
