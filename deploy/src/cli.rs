@@ -47,6 +47,10 @@ pub enum Command {
     /// Run a voter of a topology: one member of the group that decides
     /// who holds each role.
     Voter(RoleArgs),
+    /// Run a sensor's standby of a topology: keep a copy of the sensor's
+    /// journal and, with voters, take the sensor role over when the
+    /// sensor's host is lost.
+    SensorStandby(RoleArgs),
     /// Start every process of a topology on this host; Ctrl-C stops them.
     Up(UpArgs),
     /// A coordinator, four leaders and a sensor on loopback, streaming a

@@ -87,6 +87,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Voter(args) => {
             runtime::roles::run(runtime::roles::Role::Voter, &args.config, &args.name)
         }
+        Command::SensorStandby(args) => runtime::roles::run(
+            runtime::roles::Role::SensorStandby,
+            &args.config,
+            &args.name,
+        ),
         Command::Up(args) if args.emit.is_some() => emit::run(&args),
         Command::Up(args) => runtime::launch::up(&args.config, args.host.as_deref()),
         Command::Demo(args) => runtime::launch::demo(&args.options()?),

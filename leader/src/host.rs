@@ -47,11 +47,11 @@
 //! fetches what that misses as any restarted leader does. Load is back in
 //! balance.
 
-use crate::claims::{self, Claimed, Claims, Verdict};
 use crate::driver::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
 use crate::standby::{self, Source};
+use idmesh_claims::{self as claims, Claimed, Claims, Verdict};
 use idmesh_ownership::OwnershipError;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, StandbyStored};
@@ -90,7 +90,7 @@ pub struct HostConfig {
     /// after every input (else at their sweeps only).
     pub flow_control: bool,
     /// With voters in the topology: roles are claimed through them
-    /// ([`crate::claims`]), and the roles here stop when no voter has led
+    /// ([`idmesh_claims`]), and the roles here stop when no voter has led
     /// for this long. None: no voters; the tokens and, on a shared disk,
     /// the journal's lock decide.
     pub lease: Option<Duration>,

@@ -23,15 +23,15 @@
 //!   restarted (or adopted) leader replays.
 //! - `standby` — the copy of another role's snapshot a process keeps
 //!   as that role's standby, and the adoption that starts from it.
-//! - `claims` — with voters in the topology: who holds each role,
-//!   claimed through them at an epoch, and the lease that stops a role
-//!   the map gave to another.
+//! - With voters in the topology, who holds each role, claimed through
+//!   them at an epoch, and the lease that stops a role the map gave to
+//!   another, is `idmesh-claims` (`placement/claims/`), which the
+//!   sensor's standby shares.
 //! - The lock that lets one process at a time run a role (a role cut off
 //!   by a partition is not adopted) is `idmesh-ownership`
 //!   (`protocol/ownership/`), which the sensor shares.
 //! - `error` — [`LeaderError`].
 
-mod claims;
 pub mod door;
 mod driver;
 mod error;

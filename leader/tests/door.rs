@@ -33,6 +33,7 @@ fn begin() -> Item {
 fn batch(number: u64, items: Vec<(u64, Item)>, through: u64) -> Batch {
     Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "sensor-0".into(),
         number,
         through,
@@ -170,6 +171,7 @@ fn bad_inputs_are_rejected_counted_and_change_nothing() {
             Kind::Followed,
             encode(&Followed {
                 version: VERSION,
+                epoch: 0,
                 items: vec![Sequenced {
                     seq: 5,
                     item: observe(12, 0.5, 0.5),

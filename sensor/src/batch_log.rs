@@ -60,6 +60,7 @@ mod tests {
     fn batch(number: u64) -> Batch {
         Batch {
             version: VERSION,
+            epoch: 0,
             sensor: "s".into(),
             number,
             through: number,

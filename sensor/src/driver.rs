@@ -38,6 +38,7 @@ use crate::mesh::MeshConfig;
 use crate::peers::{Fetch, Peers};
 use crate::ros2::{Message, Named, Ros2Input};
 use crate::router::Router;
+use crate::standby::Replicator;
 use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
 use idmesh_protocol::wire::encode;
@@ -86,6 +87,12 @@ pub struct GatewayConfig {
     pub max_errors: usize,
     /// ROS 2 tracker topics read over rmw_zenoh ([`crate::ros2`]).
     pub ros2: Option<crate::ros2::Ros2Config>,
+    /// The process standing by for this sensor, which every record of
+    /// the journal is replicated to ([`crate::standby`]); None: none.
+    pub standby: Option<String>,
+    /// The epoch at which this process holds the sensor role (the
+    /// voters' claim; 0 without voters), on every batch and reply.
+    pub epoch: u64,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -105,6 +112,8 @@ pub enum GatewayError {
     Mesh { what: &'static str, message: String },
     #[error(transparent)]
     Journal(#[from] JournalError),
+    #[error(transparent)]
+    Standby(#[from] crate::standby::StandbyError),
     #[error("sensor journal {path}: cannot resume from it: {source}")]
     Restore { path: String, source: RestoreError },
     /// The journal's track numbers of a ROS 2 topic's named ids, which its
@@ -311,7 +320,8 @@ fn start_gateway(
     ends: bool,
     end: u64,
 ) -> Gateway<Query> {
-    let mut gateway: Gateway<Query> = Gateway::new(&config.name, router, lines.is_empty() && ends);
+    let mut gateway: Gateway<Query> =
+        Gateway::new(&config.name, router, lines.is_empty() && ends).at_epoch(config.epoch);
     // How many events the reports make is known only once they are
     // extracted: a cut asked for beyond the end waits, and is refused
     // when the stream ends.
@@ -495,10 +505,17 @@ pub async fn run(
         // It died after its last line, before saying the stream is over.
         gateway.end();
     }
+    let replicator = match (&config.standby, &journal) {
+        (Some(standby), Some(_)) => {
+            Some(Replicator::start(&session, keys, &config.name, standby).await?)
+        }
+        _ => None,
+    };
     let mut wire = Wire {
         faults: config.faults,
         publishers,
         journal,
+        replicator,
     };
     wire.flush(&mut gateway).await?;
     let peers = config
@@ -661,6 +678,10 @@ async fn serve(
                 s.settle().await?;
             }
             message = next_ros2(&mut s.ros2) => take_ros2(s, message).await?,
+            sample = standby_changed(&s.wire.replicator) => {
+                let Some(sample) = sample else { continue };
+                s.wire.standby_token(&sample, &mut s.gateway).await?;
+            }
             read = next_input(&mut input), if input.is_some() && s.trace.open => {
                 let Some(read) = read else {
                     input = None;
@@ -735,7 +756,7 @@ async fn follow(
     let followed = answer.is_ok();
     // The interests it grew are on disk before the leader
     // counts on them.
-    wire.sync(gateway)?;
+    wire.sync(gateway).await?;
     reply_to(query, answer, "follow").await;
     if followed {
         wire.flush(gateway).await?;
@@ -868,7 +889,7 @@ async fn ingest(
                 wire.flush(gateway).await?;
             }
             // What it judged (counters used up) is on disk before it says so.
-            wire.sync(gateway)?;
+            wire.sync(gateway).await?;
             let body = serde_json::to_vec(&ack).unwrap_or_default();
             if let Some(Err(e)) = bounded(
                 "an ingest acknowledgement",
@@ -928,7 +949,7 @@ async fn take_ros2(s: &mut Sensor<'_>, message: Option<Message>) -> Result<(), G
         if newly_named {
             // Numbers no offer carries yet are on disk all the same, so
             // that a restart gives the next id the number it gets now.
-            s.wire.sync(&mut s.gateway)?;
+            s.wire.sync(&mut s.gateway).await?;
         }
         return Ok(());
     };
@@ -949,7 +970,7 @@ async fn take_ros2(s: &mut Sensor<'_>, message: Option<Message>) -> Result<(), G
             if !ack.accepted.is_empty() || !placed.is_empty() {
                 s.wire.flush(&mut s.gateway).await?;
             }
-            s.wire.sync(&mut s.gateway)?;
+            s.wire.sync(&mut s.gateway).await?;
             for p in placed {
                 reply_placed(p).await;
             }
@@ -1079,7 +1100,7 @@ async fn answer_intakes(
     }
     *held = kept;
     // A watermark a request moved is on disk before a peer merges by it.
-    wire.sync(gateway)?;
+    wire.sync(gateway).await?;
     for (query, answer) in answers {
         reply_to(&query, answer, "intake").await;
     }
@@ -1176,23 +1197,55 @@ fn compact(journal: &mut Journal, gateway: &Gateway<Query>) -> Result<(), Gatewa
     Ok(())
 }
 
-/// The event keys, the faults injected on them, and the journal.
+/// The next change of the standby's token (never, without a standby).
+async fn standby_changed(replicator: &Option<Replicator>) -> Option<Sample> {
+    match replicator {
+        Some(replicator) => replicator.changed().await,
+        None => std::future::pending().await,
+    }
+}
+
+/// The event keys, the faults injected on them, the journal and its
+/// replication to the standby.
 struct Wire {
     faults: Faults,
     publishers: Vec<Publisher<'static>>,
     journal: Option<Journal>,
+    replicator: Option<Replicator>,
 }
 
 impl Wire {
     /// Puts what changed the gateway's state on disk (fsynced), if it
-    /// keeps a journal.
-    fn sync(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
+    /// keeps a journal, and on the standby's disk, if it has one up.
+    async fn sync(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
         let records = gateway.unjournaled();
-        if let Some(journal) = &mut self.journal {
-            journal.append(&records)?;
-            if journal.due() {
-                compact(journal, gateway)?;
-            }
+        let Some(journal) = &mut self.journal else {
+            return Ok(());
+        };
+        journal.append(&records)?;
+        let compacted = journal.due();
+        if compacted {
+            compact(journal, gateway)?;
+        }
+        if let Some(replicator) = &mut self.replicator {
+            replicator.replicate(&records, compacted, gateway).await;
+        }
+        Ok(())
+    }
+
+    /// The standby's token changed: one that is back is sent the whole
+    /// journal now, not at the next record.
+    async fn standby_token(
+        &mut self,
+        sample: &Sample,
+        gateway: &mut Gateway<Query>,
+    ) -> Result<(), GatewayError> {
+        let back = self
+            .replicator
+            .as_mut()
+            .is_some_and(|replicator| replicator.token(sample));
+        if back {
+            self.sync(gateway).await?;
         }
         Ok(())
     }
@@ -1201,7 +1254,7 @@ impl Wire {
     /// the journal holds them.
     async fn flush(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
         let batches = gateway.flush();
-        self.sync(gateway)?;
+        self.sync(gateway).await?;
         for (i, batch) in batches {
             let Some(publisher) = self.publishers.get(i) else {
                 continue;

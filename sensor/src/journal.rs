@@ -253,6 +253,26 @@ impl Journal {
         Ok(())
     }
 
+    /// Appends records already encoded (a standby's copy: as the sensor
+    /// sent them) and fsyncs them.
+    pub(crate) fn append_encoded(&mut self, payloads: &[Vec<u8>]) -> Result<(), JournalError> {
+        if payloads.is_empty() {
+            return Ok(());
+        }
+        self.writer.append_all(payloads)?;
+        self.writer.sync()?;
+        Ok(())
+    }
+
+    /// Replaces the journal by records already encoded (a standby's copy
+    /// made whole again), atomically as [`Journal::compact`] does.
+    pub(crate) fn replace_encoded(&mut self, payloads: &[Vec<u8>]) -> Result<(), JournalError> {
+        self.generation += 1;
+        self.writer.replace(self.generation, payloads)?;
+        self.base = self.bytes();
+        Ok(())
+    }
+
     /// Compacts after `bytes` more bytes instead of [`COMPACT_AFTER`].
     pub fn compact_after(mut self, bytes: u64) -> Self {
         self.compact_after = bytes.max(1);
@@ -302,8 +322,13 @@ impl Journal {
 }
 
 /// `record` as a journal record's payload.
-fn encode(record: &Record) -> Vec<u8> {
+pub(crate) fn encode(record: &Record) -> Vec<u8> {
     postcard::to_stdvec(record).unwrap_or_default()
+}
+
+/// A record's payload back to the record (a standby checks what it is sent).
+pub(crate) fn decode_record(payload: &[u8]) -> Result<Record, postcard::Error> {
+    postcard::from_bytes(payload)
 }
 
 /// The records of a log's contents, or where one does not decode.

@@ -35,6 +35,9 @@
 //!   killed and restarted resumes where it was.
 //! - `batch_log` — the batches sent each leader, kept until it says its
 //!   state is safe past them.
+//! - `standby` — the sensor's journal replicated to its standby on
+//!   another host (the pure rules in `machine::replication`), and the
+//!   standby that takes the sensor role over through the voters.
 
 mod batch_log;
 mod cuts;
@@ -48,6 +51,7 @@ mod mesh;
 mod peers;
 pub mod ros2;
 mod router;
+mod standby;
 
 // The sensor as a pure state machine, and what it answers a cut.
 pub use cuts::{CutParameters, Placed};
@@ -61,6 +65,10 @@ pub use ingest::Offer;
 // The process: its I/O loop, its settings and the other sensors.
 pub use driver::{run, Faults, GatewayConfig};
 pub use mesh::MeshConfig;
-
+// The sensor's standby: its copy of the journal, its takeover, the lease.
+pub use standby::{
+    claim_own, keep_lease, stand_by, standby_path, StandbyConfig, StandbyError, Standing, TookOver,
+    STANDBY_ROLE,
+};
 #[cfg(test)]
 mod tests;

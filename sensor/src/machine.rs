@@ -52,6 +52,7 @@ use std::collections::BTreeMap;
 type Routed<Q> = (Vec<Placed<Q>>, Vec<(u32, Wanted)>, Vec<(usize, String)>);
 
 mod meshed;
+pub(crate) mod replication;
 
 /// What became of a cut request.
 pub enum CutOutcome<Q> {
@@ -80,6 +81,10 @@ struct Mark {
 
 pub struct Gateway<Q> {
     name: String,
+    /// The epoch at which this process holds the sensor role (0 without
+    /// voters), stamped on every batch and reply to a leader, so that the
+    /// leaders refuse a former holder once they have heard its successor.
+    epoch: u64,
     /// Everything the journal rebuilds (and a snapshot holds).
     state: Journaled,
     /// How far each leader has got (its progress marks).
@@ -195,7 +200,14 @@ impl<Q> Gateway<Q> {
             refusals: Vec::new(),
             named: BTreeMap::new(),
             fence: Fence::default(),
+            epoch: 0,
         }
+    }
+
+    /// Holds the sensor role at `epoch` (the voters' claim).
+    pub fn at_epoch(mut self, epoch: u64) -> Self {
+        self.epoch = epoch;
+        self
     }
 
     /// Routes at most `window` seqs past the slowest leader's progress
@@ -272,10 +284,20 @@ impl<Q> Gateway<Q> {
             };
             let name = &self.state.router.begin().leaders[i];
             if let Ok(batches) = self.state.sent[i].from(name, mark.batch) {
+                let batches = self.restamped(batches);
                 again.extend(batches.into_iter().map(|b| (i, b)));
             }
         }
         again
+    }
+
+    /// Batches kept from earlier, as this holder sends them again: at its
+    /// epoch (they may have been sent first by a former holder).
+    fn restamped(&self, mut batches: Vec<Batch>) -> Vec<Batch> {
+        for batch in &mut batches {
+            batch.epoch = self.epoch;
+        }
+        batches
     }
 
     /// Counts journal records that were damaged in one copy of the
@@ -795,6 +817,7 @@ impl<Q> Gateway<Q> {
             let log = &mut self.state.sent[i];
             let batch = Batch {
                 version: VERSION,
+                epoch: self.epoch,
                 sensor: self.name.clone(),
                 number: log.next_number(),
                 through,
@@ -861,6 +884,7 @@ impl<Q> Gateway<Q> {
         self.state.owed[leader] = true;
         Ok(Followed {
             version: VERSION,
+            epoch: self.epoch,
             items,
         })
     }
@@ -903,7 +927,8 @@ impl<Q> Gateway<Q> {
             })
             .map(|batches| Resent {
                 version: VERSION,
-                batches,
+                epoch: self.epoch,
+                batches: self.restamped(batches),
             });
         self.count("resend", &answer);
         answer

@@ -101,6 +101,7 @@ fn seqs(batch: &Batch) -> Vec<u64> {
 fn flushed<Q, const N: usize>(gateway: &mut Gateway<Q>) -> [Batch; N] {
     let mut each: [Batch; N] = std::array::from_fn(|_| Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "none sent".into(),
         number: u64::MAX,
         through: 0,
@@ -1408,4 +1409,43 @@ fn a_former_holder_of_a_role_is_fenced_off_once_its_successor_is_heard() {
             from: 0,
         }))
         .is_ok());
+}
+
+/// A sensor role held at an epoch stamps it on every batch and reply to a
+/// leader; batches kept from a former holder and sent again carry the
+/// epoch of the holder that resends them.
+#[test]
+fn batches_and_replies_carry_the_sensor_roles_epoch() {
+    let mut former: Gateway<()> = Gateway::new("s", router(4, 2, true), false).at_epoch(1);
+    let first = former.flush();
+    assert!(!first.is_empty());
+    assert!(first.iter().all(|(_, b)| b.epoch == 1));
+    // The successor restored from the former holder's journal (its
+    // standby's copy), at epoch 2.
+    let records = former.compacted().unwrap();
+    let mut successor: Gateway<()> = Gateway::new("s", router(4, 2, true), false).at_epoch(2);
+    successor.restore(records, &[]).unwrap();
+    let resent = successor
+        .resend(&encode(&Resend {
+            epoch: 0,
+            version: VERSION,
+            leader: "a".into(),
+            from: 0,
+        }))
+        .unwrap();
+    assert_eq!(resent.epoch, 2);
+    assert!(!resent.batches.is_empty());
+    assert!(resent.batches.iter().all(|b| b.epoch == 2), "restamped");
+    successor.line(&mix(0, 2));
+    assert!(successor.flush().iter().all(|(_, b)| b.epoch == 2));
+    let followed = successor
+        .follow(&encode(&Follow {
+            epoch: 0,
+            version: VERSION,
+            leader: 0,
+            after: 0,
+            tracks: vec![3],
+        }))
+        .unwrap();
+    assert_eq!(followed.epoch, 2);
 }

@@ -7,8 +7,8 @@ use crate::idmesh;
 use idmesh_deploy::runtime::ports::pick_free_ports;
 pub use idmesh_deploy::runtime::security::SecuritySection;
 pub use idmesh_deploy::runtime::topology::{
-    BeliefKind, FaultSection, LeaderFaultSection, Process, RegionsSetting, Sparsification,
-    SplitSetting, Topology, WebSection,
+    BeliefKind, FaultSection, LeaderFaultSection, Process, RegionsSetting, SensorStandbyProcess,
+    Sparsification, SplitSetting, Topology, WebSection,
 };
 pub use idmesh_deploy::runtime::web::MarkerOptions;
 use serde_json::Value;
@@ -86,6 +86,10 @@ pub struct Settings {
     /// is given its own copy of the topology, differing in `state_dir`
     /// only (processes started one by one: [`Deployment::start_each`]).
     pub own_disks: bool,
+    /// The (first) sensor has a standby (`[[sensor_standby]]`, named
+    /// `<sensor>-standby`), started before it; with `own_disks` both the
+    /// sensor and its standby have a state directory of their own too.
+    pub sensor_standby: bool,
 }
 
 /// The factored belief's settings in a topology.
@@ -211,6 +215,16 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
     if settings.voters > 0 {
         topology.state_dir = Some(PathBuf::from("state"));
     }
+    if settings.sensor_standby {
+        let port = pick_free_ports(1).expect("free loopback ports")[0];
+        let sensor = topology.sensor().name.clone();
+        topology.sensor_standbys = vec![SensorStandbyProcess {
+            name: format!("{sensor}-standby"),
+            host: "local".into(),
+            listen: format!("tcp/127.0.0.1:{port}"),
+            sensor,
+        }];
+    }
     let replica_ports =
         pick_free_ports(settings.coordinator_replicas).expect("free loopback ports");
     topology.coordinator_replicas = replica_ports
@@ -321,6 +335,9 @@ impl Deployment {
         }
         for i in 0..settings.leaders {
             deployment.launch("leader", &format!("leader-{i}"));
+        }
+        if settings.sensor_standby {
+            deployment.launch("sensor-standby", "sensor-0-standby");
         }
         for s in 0..settings.sensors.max(1) {
             deployment.launch("sensor", &format!("sensor-{s}"));
@@ -532,12 +549,17 @@ impl Deployment {
         topology.save(&config).unwrap();
         let mut own_configs = Vec::new();
         if settings.own_disks && settings.journal {
-            for leader in &topology.leader {
+            let mut names: Vec<String> = topology.leader.iter().map(|l| l.name.clone()).collect();
+            if settings.sensor_standby {
+                names.push(topology.sensor().name.clone());
+                names.extend(topology.sensor_standbys.iter().map(|s| s.name.clone()));
+            }
+            for name in names {
                 let mut own = topology.clone();
-                own.state_dir = Some(PathBuf::from(format!("state-{}", leader.name)));
-                let path = dir.join(format!("topology-{}.toml", leader.name));
+                own.state_dir = Some(PathBuf::from(format!("state-{name}")));
+                let path = dir.join(format!("topology-{name}.toml"));
                 own.save(&path).unwrap();
-                own_configs.push((leader.name.clone(), path));
+                own_configs.push((name, path));
             }
         }
         Deployment {

@@ -60,6 +60,7 @@ async fn intruder(deployment: &Deployment) -> Session {
 fn batch(items: Vec<Item>) -> Batch {
     Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "sensor-0".into(),
         number: 3,
         through: 1_000,

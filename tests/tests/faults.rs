@@ -8,8 +8,8 @@
 use idmesh_consensus::RolesAnswer;
 use idmesh_tests::{assert_same_marginals, floats};
 use idmesh_tests::{
-    crowd, hosted_on, replay_summary, undisturbed_applied, Deployment, FaultSection,
-    LeaderFaultSection, Settings,
+    crowd, hosted_on, replay_summary, trace_events, undisturbed_applied, watermark_events,
+    Deployment, FaultSection, LeaderFaultSection, Settings,
 };
 use std::time::{Duration, Instant};
 
@@ -529,6 +529,160 @@ fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
         log.contains("for the lease: stopping the role")
             || log.contains("the voters gave the role to another"),
         "the woken holder stopped the role:\n{log}"
+    );
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The sensor's host lost for good (kill -9, its disk gone with it) about
+/// two fifths into the stream: its standby, on another disk, holds every
+/// record the sensor acted on (the sensor waited for it before anything
+/// left), claims the sensor role through the voters once the sensor's
+/// token has been gone for the takeover time, and serves as the sensor
+/// from its copy. Producers and leaders follow without change, and the
+/// final answer is the offline twin's.
+#[test]
+fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
+    let dir = std::env::temp_dir().join(format!("idmesh-sensor-standby-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(400.0),
+        journal: true,
+        own_disks: true,
+        voters: 3,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        sensor_standby: true,
+        ..Settings::default()
+    };
+    let started = Instant::now();
+    let mut deployment = Deployment::start_each("sensor-standby", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let total = trace_events(&trace).len() as u64;
+    deployment.first_answer(Duration::from_secs(30));
+    let patience = Instant::now() + Duration::from_secs(30);
+    loop {
+        let answered = deployment
+            .query(&["marginals"])
+            .ok()
+            .and_then(|answers| answers.last().map(watermark_events))
+            .unwrap_or(0);
+        if answered * 5 >= total * 2 {
+            break;
+        }
+        assert!(
+            Instant::now() < patience,
+            "the stream did not get two fifths in"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let copy = deployment
+        .dir
+        .join("state-sensor-0-standby")
+        .join("sensor-0.standby.journal");
+    let held = idmesh_sensor::journal::read(&copy).map_or(0, |records| records.len());
+    assert!(held > 0, "the standby keeps a copy on its own disk");
+    assert!(
+        !deployment
+            .dir
+            .join("state-sensor-0-standby")
+            .join("sensor-0.journal")
+            .exists(),
+        "disks apart"
+    );
+    let first = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(10));
+    deployment.kill("sensor-0");
+    let killed = Instant::now();
+    let taken = held_by(
+        &deployment,
+        "sensor-0",
+        "sensor-0-standby",
+        Duration::from_secs(30),
+    );
+    let takeover = killed.elapsed().as_secs_f64();
+    assert!(
+        taken > first,
+        "a takeover raises the epoch: {first} then {taken}"
+    );
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after the sensor's host was lost",
+    );
+    let log = deployment.log();
+    assert!(
+        log.contains("taking over from the copy"),
+        "the standby took the sensor role over from its copy:\n{log}"
+    );
+    eprintln!(
+        "sensor-0 killed at two fifths of {total} events ({held} records in the standby's \
+         copy); held by its standby at epoch {taken} {takeover:.2} s after the kill; final \
+         answer {:.2} s after the kill; test {:.1} s",
+        killed.elapsed().as_secs_f64(),
+        started.elapsed().as_secs_f64()
+    );
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The sensor's process frozen (SIGSTOP: its host cut off, the process
+/// still there) past the takeover time: the voters give the sensor role
+/// to its standby at the next epoch, which serves from its copy. Woken,
+/// the former sensor finds the map moved on (or its lease lapsed) and
+/// stops serving; what it sends meanwhile at its old epoch is refused by
+/// the leaders' fence. The final answer is the offline twin's.
+#[test]
+fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
+    let dir = std::env::temp_dir().join(format!("idmesh-sensor-frozen-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(200.0),
+        journal: true,
+        own_disks: true,
+        voters: 3,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        sensor_standby: true,
+        ..Settings::default()
+    };
+    let started = Instant::now();
+    let deployment = Deployment::start_each("sensor-frozen", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let first = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
+    deployment.first_answer(Duration::from_secs(30));
+    deployment.pause("sensor-0");
+    let frozen = Instant::now();
+    let taken = held_by(
+        &deployment,
+        "sensor-0",
+        "sensor-0-standby",
+        Duration::from_secs(40),
+    );
+    assert!(
+        taken > first,
+        "a takeover raises the epoch: {first} then {taken}"
+    );
+    let takeover = frozen.elapsed().as_secs_f64();
+    deployment.resume("sensor-0");
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after the sensor was superseded by its standby",
+    );
+    let log = deployment.log();
+    assert!(
+        log.contains("the voters gave the sensor role to another: stopping")
+            || log.contains("no leading voter for the lease: stopping the sensor role"),
+        "the woken sensor stopped serving:\n{log}"
+    );
+    eprintln!(
+        "sensor-0 frozen: held by its standby at epoch {taken} {takeover:.1} s later; test \
+         {:.1} s",
+        started.elapsed().as_secs_f64()
     );
     drop(deployment);
     std::fs::remove_dir_all(&dir).ok();

@@ -203,6 +203,7 @@ async fn put_mix(session: &Session, prefix: &str, number: u64) -> bool {
     let seq = 1 << 40;
     let batch = Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "sensor-0".into(),
         number,
         through: seq,

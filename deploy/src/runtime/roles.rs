@@ -8,6 +8,7 @@ use super::mesh::{self, MeshOptions};
 use super::security::rules;
 use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
+use idmesh_claims::Claims;
 use idmesh_consensus::VoterConfig;
 use idmesh_coordinator::CoordinatorConfig;
 use idmesh_extract::read_reports;
@@ -16,8 +17,8 @@ use idmesh_protocol::trace::{Header, Line, Problem, TraceReader};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_sensor::journal::{Journal, Record};
 use idmesh_sensor::{
-    lines_of, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace, MeshConfig, Router,
-    RouterConfig, Source,
+    lines_of, stand_by, standby_path, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace,
+    MeshConfig, Router, RouterConfig, Source, StandbyConfig, Standing, TookOver,
 };
 use idmesh_voter::VoterProcess;
 use std::fs::File;
@@ -37,6 +38,21 @@ pub enum Role {
     Leader,
     Coordinator,
     Voter,
+    /// A sensor's standby (`[[sensor_standby]]`).
+    SensorStandby,
+}
+
+impl Role {
+    /// The kind of topology member that runs this role.
+    fn member(self) -> &'static str {
+        match self {
+            Role::Sensor { .. } => "sensor",
+            Role::Leader => "leader",
+            Role::Coordinator => "coordinator",
+            Role::Voter => "voter",
+            Role::SensorStandby => "sensor-standby",
+        }
+    }
 }
 
 /// The runtime's worker threads for a role. A leader's work is one task
@@ -51,7 +67,7 @@ pub enum Role {
 fn workers(role: Role) -> usize {
     match role {
         Role::Leader | Role::Voter => 1,
-        Role::Sensor { .. } | Role::Coordinator => 2,
+        Role::Sensor { .. } | Role::Coordinator | Role::SensorStandby => 2,
     }
 }
 
@@ -59,12 +75,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
     without_huge_pages();
     let topology = Topology::load(config)?;
     let member = topology.member(name)?;
-    let expected = match role {
-        Role::Sensor { .. } => "sensor",
-        Role::Leader => "leader",
-        Role::Coordinator => "coordinator",
-        Role::Voter => "voter",
-    };
+    let expected = role.member();
     if member.role != expected {
         return Err(anyhow!(
             "{name:?} is a {} in the topology, not a {expected}",
@@ -101,8 +112,9 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
             let result = match role {
                 Role::Sensor { stdin, max_errors } => {
                     let input = Input { stdin, max_errors };
-                    sensor(session.clone(), &topology, name, keys, input, journal).await
+                    own_sensor(session.clone(), &topology, name, keys, input, journal).await
                 }
+                Role::SensorStandby => sensor_standby(session.clone(), &topology, name, keys).await,
                 Role::Leader => {
                     let index = topology
                         .leader
@@ -253,7 +265,28 @@ struct Input {
     max_errors: Option<usize>,
 }
 
-async fn sensor(
+/// How a sensor runs: its input, its journal, the standby its journal
+/// is replicated to, and the epoch it holds the role at (0 without
+/// voters).
+struct SensorRun {
+    input: Input,
+    journal: Option<(Journal, Vec<Record>)>,
+    standby: Option<String>,
+    epoch: u64,
+}
+
+/// The sensor role held through the voters: what keeps its lease.
+struct Lease {
+    claims: Claims,
+    role: String,
+    me: String,
+    epoch: u64,
+}
+
+/// Sensor `name` in its own process. With a standby its journal is
+/// replicated to it, and with voters too the sensor serves once it holds
+/// its role, until its lease is lost.
+async fn own_sensor(
     session: zenoh::Session,
     topology: &Topology,
     name: &str,
@@ -261,6 +294,131 @@ async fn sensor(
     input: Input,
     journal: Option<(Journal, Vec<Record>)>,
 ) -> Result<()> {
+    let standby = topology.standby_of(name).map(|s| s.name.clone());
+    // Without a standby nothing could take the role over: the sensor
+    // neither claims it nor keeps a lease (a cut-off sensor that stopped
+    // would stop the stream for good).
+    let lease = match standby {
+        Some(_) => claim_own(&session, topology, &keys, name).await?,
+        None => None,
+    };
+    let run = SensorRun {
+        input,
+        journal,
+        standby,
+        epoch: lease.as_ref().map_or(0, |l| l.epoch),
+    };
+    let stop = lease_or_shutdown(lease);
+    sensor(session, topology, name, keys, run, stop).await
+}
+
+/// With voters: sensor `name` claims its own role before it serves (it
+/// does not start when the voters gave it to its standby).
+async fn claim_own(
+    session: &zenoh::Session,
+    topology: &Topology,
+    keys: &Keys,
+    name: &str,
+) -> Result<Option<Lease>> {
+    if topology.voters.is_empty() {
+        return Ok(None);
+    }
+    let mut claims = Claims::new(session.clone(), keys.clone(), name, VOTERS_LEASE);
+    let epoch = idmesh_sensor::claim_own(&mut claims, name, name).await?;
+    tracing::info!(sensor = %name, epoch, "the voters give this process its sensor role");
+    Ok(Some(Lease {
+        claims,
+        role: name.to_string(),
+        me: name.to_string(),
+        epoch,
+    }))
+}
+
+/// Until Ctrl-C or SIGTERM, or until the sensor role's lease is lost.
+async fn lease_or_shutdown(lease: Option<Lease>) {
+    match lease {
+        Some(l) => {
+            tokio::select! {
+                _ = shutdown() => {}
+                _ = idmesh_sensor::keep_lease(l.claims, l.role, l.me, l.epoch) => {}
+            }
+        }
+        None => shutdown().await,
+    }
+}
+
+/// A sensor's standby: keeps its copy of the sensor's journal and, once
+/// the voters give it the sensor role, serves as the sensor from it.
+async fn sensor_standby(
+    session: zenoh::Session,
+    topology: &Topology,
+    name: &str,
+    keys: Keys,
+) -> Result<()> {
+    let this = topology
+        .sensor_standbys
+        .iter()
+        .find(|s| s.name == name)
+        .ok_or_else(|| anyhow!("no sensor standby named {name:?} in the topology"))?;
+    let dir = topology.state_path().ok_or_else(|| {
+        anyhow!("[[sensor_standby]]: give state_dir, where it keeps its copy of the journal")
+    })?;
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| anyhow!("{}: cannot create the state directory: {e}", dir.display()))?;
+    let config = StandbyConfig {
+        name: name.to_string(),
+        sensor: this.sensor.clone(),
+        keys: keys.clone(),
+        journal: standby_path(&dir, &this.sensor),
+        takeover_after: Duration::from_millis(topology.takeover_after_ms),
+        lease: (!topology.voters.is_empty() && topology.takeover_after_ms > 0)
+            .then_some(VOTERS_LEASE),
+    };
+    let Standing::TookOver(took) = stand_by(&session, &config, shutdown()).await? else {
+        return Ok(());
+    };
+    let TookOver {
+        epoch,
+        journal,
+        records,
+        claims,
+    } = *took;
+    let journal = match topology.sensor_named(&this.sensor)?.compact_journal_after {
+        Some(bytes) => journal.compact_after(bytes),
+        None => journal,
+    };
+    let run = SensorRun {
+        input: Input {
+            stdin: false,
+            max_errors: None,
+        },
+        journal: Some((journal, records)),
+        standby: None,
+        epoch,
+    };
+    let stop = lease_or_shutdown(Some(Lease {
+        claims,
+        role: this.sensor.clone(),
+        me: name.to_string(),
+        epoch,
+    }));
+    sensor(session, topology, &this.sensor, keys, run, stop).await
+}
+
+async fn sensor(
+    session: zenoh::Session,
+    topology: &Topology,
+    name: &str,
+    keys: Keys,
+    run: SensorRun,
+    stop: impl std::future::Future<Output = ()>,
+) -> Result<()> {
+    let SensorRun {
+        input,
+        journal,
+        standby,
+        epoch,
+    } = run;
     let this = topology.sensor_named(name)?;
     let max_errors = input.max_errors.unwrap_or(this.max_errors);
     let (header, source) = sensor_source(topology, this, input.stdin, max_errors)?;
@@ -324,8 +482,10 @@ async fn sensor(
         extraction,
         max_errors,
         ros2: this.ros2.clone(),
+        standby,
+        epoch,
     };
-    idmesh_sensor::run(session, config, router, source, journal, shutdown()).await?;
+    idmesh_sensor::run(session, config, router, source, journal, stop).await?;
     Ok(())
 }
 

@@ -41,6 +41,11 @@
 //! name = "coordinator"
 //! listen = "tcp/127.0.0.1:7447"
 //!
+//! # [[sensor_standby]]          # a copy of the sensor's journal on another
+//! # name = "sensor-0-standby"    # host's disk; with [[voter]]s it takes the
+//! # sensor = "sensor-0"          # sensor role over when the sensor's host
+//! # listen = "tcp/127.0.0.1:7453" # is lost (needs state_dir)
+//!
 //! # [[coordinator_replica]]      # more coordinators, each answering every
 //! # name = "coordinator-b"       # question (clients given every endpoint:
 //! # listen = "tcp/127.0.0.1:7448" # one answers when another is gone)
@@ -211,6 +216,17 @@ pub struct Topology {
     /// takeovers.
     #[serde(default, rename = "voter", skip_serializing_if = "Vec::is_empty")]
     pub voters: Vec<Process>,
+    /// Processes standing by for a sensor (`[[sensor_standby]]`), each on
+    /// another host than its sensor, with its own disk: the sensor's
+    /// journal is replicated to it, and with voters it takes the sensor
+    /// role over when the sensor's host is lost
+    /// (docs/guide/deploying.md, "A standby for the sensor").
+    #[serde(
+        default,
+        rename = "sensor_standby",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub sensor_standbys: Vec<SensorStandbyProcess>,
     /// One `[sensor]`, or several `[[sensor]]` (docs/design/architecture.md,
     /// "Several sensors"): each takes its producers' events, and every
     /// sensor merges them all into one order. Written as it is read: one
@@ -372,6 +388,20 @@ impl Process {
             listen: listen.into(),
         }
     }
+}
+
+/// A process standing by for sensor `sensor`: it keeps a copy of its
+/// journal under its own `state_dir` and, with voters, takes the sensor
+/// role over when the sensor has been gone for `takeover_after_ms`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorStandbyProcess {
+    pub name: String,
+    #[serde(default = "default_host", skip_serializing_if = "is_default_host")]
+    pub host: String,
+    pub listen: String,
+    /// The sensor it stands by for.
+    pub sensor: String,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -758,6 +788,7 @@ impl Topology {
             coordinator,
             coordinator_replicas: Vec::new(),
             voters: Vec::new(),
+            sensor_standbys: Vec::new(),
             sensors,
             leader,
             leader_faults: LeaderFaultSection::default(),
@@ -868,6 +899,7 @@ impl Topology {
             }
         }
         self.check_voters()?;
+        self.check_sensor_standbys()?;
         if let Some(security) = &self.security {
             security.check(members.iter().map(|m| m.name.as_str()))?;
         }
@@ -901,6 +933,41 @@ impl Topology {
         Ok(())
     }
 
+    /// A standby stands by for a sensor of the topology, one at most for
+    /// each, and keeps its copy in `state_dir`.
+    fn check_sensor_standbys(&self) -> Result<()> {
+        for (i, standby) in self.sensor_standbys.iter().enumerate() {
+            let name = &standby.name;
+            if !self.sensors.iter().any(|s| s.name == standby.sensor) {
+                bail!(
+                    "[[sensor_standby]] {name}: sensor {:?} is not in the topology",
+                    standby.sensor
+                );
+            }
+            if self.sensor_standbys[..i]
+                .iter()
+                .any(|o| o.sensor == standby.sensor)
+            {
+                bail!(
+                    "[[sensor_standby]] {name}: sensor {:?} has a standby already",
+                    standby.sensor
+                );
+            }
+            if self.state_dir.is_none() {
+                bail!("[[sensor_standby]] {name}: give state_dir, where it keeps its copy of the sensor's journal");
+            }
+            if self.security.as_ref().is_some_and(|s| s.access_control) {
+                bail!("[[sensor_standby]] {name}: not with [security] access_control (its rules do not let a standby serve the sensor's keys yet)");
+            }
+        }
+        Ok(())
+    }
+
+    /// The process standing by for sensor `sensor`, if any.
+    pub(crate) fn standby_of(&self, sensor: &str) -> Option<&SensorStandbyProcess> {
+        self.sensor_standbys.iter().find(|s| s.sensor == sensor)
+    }
+
     pub fn members(&self) -> Vec<Member> {
         let mut all: Vec<Member> = self
             .coordinators()
@@ -928,6 +995,12 @@ impl Topology {
             name: v.name.clone(),
             host: v.host.clone(),
             listen: v.listen.clone(),
+        }));
+        all.extend(self.sensor_standbys.iter().map(|s| Member {
+            role: "sensor-standby",
+            name: s.name.clone(),
+            host: s.host.clone(),
+            listen: s.listen.clone(),
         }));
         all
     }
@@ -1332,6 +1405,49 @@ listen = "tcp/127.0.0.1:3"
         std::fs::write(&path, format!("{SMALL}{voters}")).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());
         assert!(e.contains("[[voter]]") && e.contains("state_dir"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A `[[sensor_standby]]` is a member that stands by for a sensor of
+    /// the topology, needs `state_dir`, and reads back as written.
+    #[test]
+    fn a_sensor_standby_names_its_sensor_and_needs_a_state_dir() {
+        let dir =
+            std::env::temp_dir().join(format!("idmesh-topology-standby-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.toml");
+        let standby = |sensor: &str| {
+            format!(
+                "[[sensor_standby]]\nname = \"s-standby\"\nsensor = \"{sensor}\"\n\
+                 listen = \"tcp/127.0.0.1:14\"\n"
+            )
+        };
+        std::fs::write(
+            &path,
+            format!("state_dir = \"state\"\n{SMALL}{}", standby("s")),
+        )
+        .unwrap();
+        let t = Topology::load(&path).unwrap();
+        let member = t.member("s-standby").unwrap();
+        assert_eq!(member.role, "sensor-standby");
+        assert_eq!(
+            t.standby_of("s").map(|s| s.name.as_str()),
+            Some("s-standby")
+        );
+        assert_eq!(read_back(&t), t);
+        std::fs::write(&path, format!("{SMALL}{}", standby("s"))).unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(
+            e.contains("[[sensor_standby]]") && e.contains("state_dir"),
+            "{e}"
+        );
+        std::fs::write(
+            &path,
+            format!("state_dir = \"state\"\n{SMALL}{}", standby("t")),
+        )
+        .unwrap();
+        let e = format!("{:#}", Topology::load(&path).unwrap_err());
+        assert!(e.contains("sensor \"t\" is not in the topology"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -66,7 +66,9 @@ use crate::state::{Action, Leader};
 use idmesh_protocol::wire::coordinator_to_leader::Partial;
 use idmesh_protocol::wire::epoch::{Fence, Stale};
 use idmesh_protocol::wire::leader_to_leader::{Transfer, TransfersSent, TransfersWanted};
-use idmesh_protocol::wire::leader_to_sensor::{Durable, Follow, Progress, Resend, Unfollow};
+use idmesh_protocol::wire::leader_to_sensor::{
+    Durable, Follow, Followed, Progress, Resend, Unfollow,
+};
 use idmesh_protocol::wire::sensor_to_leader::Batch;
 use idmesh_protocol::wire::{decode, encode, Versioned, WireError, VERSION};
 use std::collections::{BTreeMap, BTreeSet};
@@ -503,16 +505,25 @@ impl Node {
         }
     }
 
-    /// The fence on a peer's transfers: refused if their sender is a
-    /// former holder of its role, cut off but still running.
+    /// The fence on a peer's transfers, and on the sensor's batches and
+    /// follow replies: refused if their sender is a former holder of its
+    /// role (a peer's, or the sensor's), cut off but still running.
     fn admit_epoch(&mut self, input: &door::Input) -> Result<(), Stale> {
-        let door::Input::Transfers { epoch, transfers } = input else {
-            return Ok(());
-        };
-        let Some(from) = transfers.first().and_then(|t| self.leader.peer(t.from)) else {
-            return Ok(());
-        };
-        self.fence.admit(TransfersSent::WHAT, from, *epoch)
+        match input {
+            door::Input::Batch(batch) => self.fence.admit(Batch::WHAT, &batch.sensor, batch.epoch),
+            // A leader's follow replies come from the one sensor that
+            // sends it batches; fenced on their own.
+            door::Input::Followed(followed) => {
+                self.fence
+                    .admit(Followed::WHAT, SENSOR_FOLLOWS, followed.epoch)
+            }
+            door::Input::Transfers { epoch, transfers } => {
+                let Some(from) = transfers.first().and_then(|t| self.leader.peer(t.from)) else {
+                    return Ok(());
+                };
+                self.fence.admit(TransfersSent::WHAT, from, *epoch)
+            }
+        }
     }
 
     /// A message of a former holder of its role, refused by the fence:
@@ -849,6 +860,10 @@ impl Node {
 }
 
 /// The most a refused resend request waits before it is asked again.
+/// The name the fence keeps the sensor's follow replies under (they
+/// name no sensor; a leader has one that it follows through).
+const SENSOR_FOLLOWS: &str = "the sensor's follow replies";
+
 pub const MAX_RESEND_BACKOFF: Duration = Duration::from_secs(30);
 
 /// The wait before asking again after `refusals` refused resend requests

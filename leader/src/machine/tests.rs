@@ -31,6 +31,7 @@ fn begin(leaders: &[&str]) -> Item {
 fn batch(number: u64, items: Vec<(u64, Item)>, through: u64) -> Input {
     let batch = Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "s".into(),
         number,
         through,
@@ -225,6 +226,7 @@ fn a_late_cut_asks_for_the_batches_again_once_at_a_time() {
     // The resent batch carries the cut: the query is answered.
     let resent = Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "s".into(),
         number: 1,
         through: 2,
@@ -1121,4 +1123,46 @@ fn without_a_standby_the_mark_is_the_snapshots() {
     assert_eq!(marks(&out), vec![Some((1, 1))]);
     let out = node.step(600 * MS, Input::Standby(Some("b".into())));
     assert_eq!(offers(&out), vec![]);
+}
+
+/// The fence on the sensor role: once a batch of the sensor's successor
+/// (its standby, at epoch 2) has been heard, a batch of the former holder
+/// (epoch 1, cut off but running) is refused, counted and never
+/// journaled; so is a follow reply of an older epoch.
+#[test]
+fn a_former_sensor_holder_is_fenced_off_once_its_successor_is_heard() {
+    let mut node = started("a", &["a", "b"]);
+    let journaled = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::Journal { kind, .. } if *kind != Kind::Rejected))
+            .count()
+    };
+    let at = |epoch, number: u64| {
+        let Input::Message { bytes, .. } = batch(number, Vec::new(), number + 1) else {
+            unreachable!("a batch is a message")
+        };
+        let mut b: Batch = idmesh_protocol::wire::decode(&bytes).unwrap();
+        b.epoch = epoch;
+        Input::Message {
+            kind: Kind::Batch,
+            bytes: encode(&b),
+            origin: "sensor".into(),
+        }
+    };
+    let out = node.step(10 * MS, at(2, 1));
+    assert_eq!(journaled(&out), 1, "the successor is heard");
+    let rejected = node.leader().stats().rejected;
+    let out = node.step(20 * MS, at(1, 2));
+    assert_eq!(journaled(&out), 0, "refused, not journaled");
+    assert_eq!(node.leader().stats().rejected, rejected + 1);
+    let followed = |epoch| {
+        encode(&idmesh_protocol::wire::leader_to_sensor::Followed {
+            version: VERSION,
+            epoch,
+            items: Vec::new(),
+        })
+    };
+    node.step(30 * MS, Input::Followed(Ok(followed(2))));
+    node.step(40 * MS, Input::Followed(Ok(followed(1))));
+    assert_eq!(node.leader().stats().rejected, rejected + 2);
 }

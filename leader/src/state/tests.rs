@@ -25,6 +25,7 @@ fn begin(leaders: &[&str], owners: Vec<u16>) -> Item {
 fn batch(number: u64, items: Vec<(u64, Item)>, through: u64, finished: bool) -> Batch {
     Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "sensor-0".into(),
         number,
         through,

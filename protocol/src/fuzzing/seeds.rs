@@ -19,6 +19,7 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
         "transfer" => transfers().iter().map(encode).collect(),
         "followed" => vec![encode(&Followed {
             version: VERSION,
+            epoch: 0,
             items: sequenced(5, items()),
         })],
         "follow" => vec![encode(&Follow {
@@ -43,6 +44,7 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
         })],
         "resent" => vec![encode(&Resent {
             version: VERSION,
+            epoch: 0,
             batches: batches(),
         })],
         "transfers_wanted" => vec![encode(&TransfersWanted {
@@ -174,6 +176,7 @@ fn batches() -> Vec<Batch> {
     opening.extend(items().into_iter().take(2));
     let batch = |number, items: Vec<Sequenced>, finished| Batch {
         version: VERSION,
+        epoch: 0,
         sensor: "sensor-0".into(),
         number,
         through: items.last().map_or(20, |s| s.seq),

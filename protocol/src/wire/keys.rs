@@ -121,6 +121,11 @@ impl Keys {
         format!("{}/sensor/{sensor}/resend", self.prefix)
     }
 
+    /// Where the sensor's standby takes the journal's records.
+    pub fn sensor_replicate(&self, sensor: &str) -> String {
+        format!("{}/sensor/{sensor}/replicate", self.prefix)
+    }
+
     pub fn sensor_intake(&self, sensor: &str) -> String {
         format!("{}/sensor/{sensor}/intake", self.prefix)
     }

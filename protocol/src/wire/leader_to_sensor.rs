@@ -27,11 +27,14 @@ super::epoch::epoched!(Follow);
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Followed {
     pub version: u16,
+    /// The epoch of the sensor role's holder that answered.
+    pub epoch: u64,
     /// Every item after `after` that touches the tracks (as the interest
     /// rule grows them), up to the stream's head when the sensor answered.
     pub items: Vec<Sequenced>,
 }
 super::versioned!(Followed, "follow reply");
+super::epoch::epoched!(Followed);
 
 /// A leader of a factored stream no longer needs these tracks' events: it
 /// neither surveils them nor holds a component with them, since item
@@ -73,10 +76,14 @@ super::epoch::epoched!(Resend);
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Resent {
     pub version: u16,
+    /// The epoch of the sensor role's holder that answered (its batches
+    /// carry it too).
+    pub epoch: u64,
     /// The batches, in number order, as first sent.
     pub batches: Vec<Batch>,
 }
 super::versioned!(Resent, "resend reply");
+super::epoch::epoched!(Resent);
 
 /// How far a leader's state is safe on disk (or, with no journal, applied):
 /// it will never ask for batches numbered below `batch` again, nor for the

@@ -15,9 +15,12 @@
 //!   producer, and the acknowledgement (JSON).
 //! - [`sensor_to_sensor`] — several sensors: each one's intake, for the
 //!   others to merge into one order.
+//! - [`sensor_to_standby`] — the sensor's journal, replicated to its
+//!   standby, and the standby's acknowledgement.
 //! - [`coordinator_to_leader`] — partial sums at a cut, and counters.
-//! - [`epoch`] — the fence: the epoch every leader message carries, and
-//!   the receivers' rule that refuses a former holder's.
+//! - [`epoch`] — the fence: the epoch every leader message (and every
+//!   batch and reply of the sensor) carries, and the receivers' rule that
+//!   refuses a former holder's.
 //! - [`interest`] — the routing rule both ends of the event stream apply.
 //! - [`query`] — what a user gets back, as JSON.
 //!
@@ -47,6 +50,7 @@ pub mod producer_to_sensor;
 pub mod query;
 pub mod sensor_to_leader;
 pub mod sensor_to_sensor;
+pub mod sensor_to_standby;
 pub mod valid;
 
 use serde::de::DeserializeOwned;
@@ -65,7 +69,9 @@ use serde::Serialize;
 /// (`Begin::factored_identity`); transfers and answers carry its trees.
 /// 8: every message a leader role sends carries the role's epoch, which
 /// receivers fence on ([`epoch`]).
-pub const VERSION: u16 = 8;
+/// 9: what the sensor sends leaders (`Batch`, `Followed`, `Resent`)
+/// carries the sensor role's epoch too: a sensor's standby may hold it.
+pub const VERSION: u16 = 9;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

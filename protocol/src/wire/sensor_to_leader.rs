@@ -22,6 +22,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Batch {
     pub version: u16,
+    /// The epoch at which the sending process holds the sensor role
+    /// ([`super::epoch`]; 0 without voters): a batch resent carries the
+    /// epoch of the holder that resends it.
+    pub epoch: u64,
     pub sensor: String,
     /// Counts batches to this leader from 0: a gap is a lost batch.
     pub number: u64,
@@ -35,6 +39,7 @@ pub struct Batch {
     pub items: Vec<Sequenced>,
 }
 super::versioned!(Batch, "event batch");
+super::epoch::epoched!(Batch);
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Sequenced {
@@ -573,6 +578,7 @@ mod tests {
         let first = if number == 0 { 1 } else { 2 };
         Batch {
             version: VERSION,
+            epoch: 0,
             sensor: "s".into(),
             number,
             through: first + items.len() as u64,

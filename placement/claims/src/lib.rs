@@ -1,6 +1,8 @@
-//! A leader process's word with the voters: who holds each leader role,
-//! at which epoch, decided by consensus (`idmesh-consensus`) rather than
-//! by a lock on a shared disk.
+//! A process's word with the voters: who holds each role (a leader role,
+//! a sensor), at which epoch, decided by consensus (`idmesh-consensus`)
+//! rather than by a lock on a shared disk. The leader processes and the
+//! sensor's standby both claim through it; it sits below the roles so
+//! that neither depends on the other's crate.
 //!
 //! With `[[voter]]`s in the topology a process runs a role only once the
 //! voters have committed its claim: its own role at start (or back from a
@@ -27,7 +29,7 @@ use zenoh::Session;
 
 /// How a claim ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) enum Claimed {
+pub enum Claimed {
     /// The role is this process's, at this epoch.
     Won(u64),
     /// Another process holds it (it won the race, or never lost it).
@@ -38,7 +40,7 @@ pub(crate) enum Claimed {
 
 /// What the map says of a role this process runs at `epoch`.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) enum Verdict {
+pub enum Verdict {
     /// Still this process's, at its epoch.
     Holds,
     /// Taken over (or released) since: stop running it.
@@ -46,7 +48,7 @@ pub(crate) enum Verdict {
 }
 
 /// The verdict on `role`, run here (`me`) at `epoch`, by `map`.
-pub(crate) fn verdict(map: &RolesAnswer, role: &str, me: &str, epoch: u64) -> Verdict {
+pub fn verdict(map: &RolesAnswer, role: &str, me: &str, epoch: u64) -> Verdict {
     match map.get(role) {
         Some(e) if e.holder.as_deref() == Some(me) && e.epoch == epoch => Verdict::Holds,
         Some(e) => Verdict::Superseded {
@@ -64,25 +66,25 @@ pub(crate) fn verdict(map: &RolesAnswer, role: &str, me: &str, epoch: u64) -> Ve
 
 /// The epoch a takeover of `role` must name: that of its holder in `map`,
 /// None when nobody holds it (never claimed, or released).
-pub(crate) fn fencing(map: &RolesAnswer, role: &str) -> Option<u64> {
+pub fn fencing(map: &RolesAnswer, role: &str) -> Option<u64> {
     map.get(role)
         .filter(|e| e.holder.is_some())
         .map(|e| e.epoch)
 }
 
 /// The voters as one process sees them.
-pub(crate) struct Claims {
+pub struct Claims {
     session: Session,
     keys: Keys,
     me: String,
     /// How long the map may go unread before the roles here stop.
-    pub(crate) lease: Duration,
+    pub lease: Duration,
     /// The newest map read, and when.
     last: Option<(RolesAnswer, Instant)>,
 }
 
 impl Claims {
-    pub(crate) fn new(session: Session, keys: Keys, me: &str, lease: Duration) -> Self {
+    pub fn new(session: Session, keys: Keys, me: &str, lease: Duration) -> Self {
         Claims {
             session,
             keys,
@@ -94,7 +96,7 @@ impl Claims {
 
     /// Reads the map from the voters now: the leading voter's (None if no
     /// voter leads or none answered).
-    pub(crate) async fn read(&mut self) -> Option<&RolesAnswer> {
+    pub async fn read(&mut self) -> Option<&RolesAnswer> {
         let asked = Instant::now();
         let replies = self
             .session
@@ -126,7 +128,7 @@ impl Claims {
 
     /// The epoch of `role` in the map last read (0: never claimed, or no
     /// map read yet).
-    pub(crate) fn last_epoch(&self, role: &str) -> u64 {
+    pub fn last_epoch(&self, role: &str) -> u64 {
         self.last
             .as_ref()
             .and_then(|(map, _)| map.get(role))
@@ -135,7 +137,7 @@ impl Claims {
 
     /// Whether the map has gone unread longer than the lease (never read
     /// counts from `since`, when the roles were first run).
-    pub(crate) fn lapsed(&self, since: Instant) -> bool {
+    pub fn lapsed(&self, since: Instant) -> bool {
         let read = self.last.as_ref().map_or(since, |(_, at)| *at);
         read.elapsed() > self.lease
     }
@@ -144,12 +146,7 @@ impl Claims {
     /// the holder it replaces; None if it believes the role unheld), and
     /// waits until the map shows who won, or until `patience` runs out.
     /// A proposal lost (no leader, or a leader change) is made again.
-    pub(crate) async fn claim(
-        &mut self,
-        role: &str,
-        fencing: Option<u64>,
-        patience: Duration,
-    ) -> Claimed {
+    pub async fn claim(&mut self, role: &str, fencing: Option<u64>, patience: Duration) -> Claimed {
         let command = Command::Claim {
             role: role.to_string(),
             holder: self.me.clone(),
@@ -186,7 +183,7 @@ impl Claims {
     /// Gives `role` up (its actor has stopped: handed home, or this
     /// process is stopping). Fire and forget: a release lost leaves the
     /// role to be taken over by fencing, as after a loss.
-    pub(crate) async fn release(&self, role: &str) {
+    pub async fn release(&self, role: &str) {
         let command = Command::Release {
             role: role.to_string(),
             holder: self.me.clone(),

@@ -1,0 +1,443 @@
+//! The sensor's standby, and the sensor's side of it: the I/O around the
+//! pure replication machine (`crate::machine::replication`).
+//!
+//! On the sensor: a [`Replicator`] sends every group of records the
+//! sensor appends to its journal to the standby (a get on
+//! `P/sensor/<name>/replicate`) and waits for its answer before what
+//! depends on them leaves, while the standby's liveliness token is
+//! present; without it the sensor goes on alone, and sends the whole
+//! journal, compacted, when it is back.
+//!
+//! On the standby's process (its own host, its own disk): [`stand_by`]
+//! keeps the copy, `<state_dir>/<sensor>.standby.journal` (a sensor
+//! journal like the sensor's own, under another name so that processes
+//! sharing a disk never collide), and watches the sensor's token. Once it
+//! has been gone for the takeover time, and the topology has voters, it
+//! claims the sensor role through them naming the epoch it fences off
+//! (`idmesh-claims`); won, it hands its copy back as the sensor's journal,
+//! and the process serves as the sensor from it ([`crate::run`]).
+//!
+//! The lease ([`keep_lease`]): a holder of the sensor role that cannot
+//! read the map from a leading voter for the lease time, or reads that
+//! the role is another's, stops serving, so that a cut-off former sensor
+//! never acts beside its successor.
+
+use crate::journal::{self, Journal, JournalError, Record};
+use crate::machine::replication::{Apply, Copy, Presence, Replication, Step};
+use crate::machine::Gateway;
+use idmesh_claims::{fencing, verdict, Claimed, Claims, Verdict};
+use idmesh_protocol::wire::keys::Keys;
+use idmesh_protocol::wire::sensor_to_standby::{Position, Replicate, Replicated};
+use idmesh_protocol::wire::{decode, encode, VERSION};
+use std::future::Future;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use zenoh::handlers::FifoChannelHandler;
+use zenoh::pubsub::Subscriber;
+use zenoh::query::Query;
+use zenoh::sample::{Sample, SampleKind};
+use zenoh::Session;
+
+/// The role a sensor's standby declares its liveliness token under
+/// (`P/alive/sensor-standby/<name>`).
+pub const STANDBY_ROLE: &str = "sensor-standby";
+
+/// How long the sensor waits for its standby's answer before it sends
+/// the same records again (the token still present).
+const ANSWER_PATIENCE: Duration = Duration::from_secs(1);
+
+/// How often the standby looks whether the takeover is due, and a holder
+/// reads the map to keep its lease.
+const LOOK_EVERY: Duration = Duration::from_millis(250);
+
+/// How long one claim may wait for the voters' decision.
+const CLAIM_PATIENCE: Duration = Duration::from_secs(5);
+
+#[derive(Debug, thiserror::Error)]
+pub enum StandbyError {
+    #[error("zenoh: {what}: {message}")]
+    Mesh { what: &'static str, message: String },
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    #[error("sensor {role}: the voters give it to {holder} at epoch {epoch}, not to {me}")]
+    Held {
+        role: String,
+        me: String,
+        holder: String,
+        epoch: u64,
+    },
+}
+
+fn mesh(what: &'static str) -> impl FnOnce(zenoh::Error) -> StandbyError {
+    move |e| StandbyError::Mesh {
+        what,
+        message: e.to_string(),
+    }
+}
+
+/// Where a standby keeps, under `dir`, its copy of `sensor`'s journal.
+pub fn standby_path(dir: &Path, sensor: &str) -> PathBuf {
+    dir.join(format!("{sensor}.standby.journal"))
+}
+
+type Tokens = Subscriber<FifoChannelHandler<Sample>>;
+
+/// The sensor's side: its standby's token watched, its records sent.
+pub(crate) struct Replicator {
+    session: Session,
+    key: String,
+    standby: String,
+    machine: Replication,
+    tokens: Tokens,
+}
+
+impl Replicator {
+    /// Replicates sensor `sensor`'s journal to process `standby`.
+    pub(crate) async fn start(
+        session: &Session,
+        keys: &Keys,
+        sensor: &str,
+        standby: &str,
+    ) -> Result<Self, StandbyError> {
+        let tokens = session
+            .liveliness()
+            .declare_subscriber(keys.alive(STANDBY_ROLE, standby))
+            .history(true)
+            .await
+            .map_err(mesh("watch the standby's token"))?;
+        // Drawn at start: positions of an earlier run of this sensor mean
+        // nothing to this one.
+        let incarnation = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        let mut replicator = Replicator {
+            session: session.clone(),
+            key: keys.sensor_replicate(sensor),
+            standby: standby.to_string(),
+            machine: Replication::new(sensor, incarnation),
+            tokens,
+        };
+        replicator.drain();
+        Ok(replicator)
+    }
+
+    /// The next change of the standby's token.
+    pub(crate) async fn changed(&self) -> Option<Sample> {
+        self.tokens.recv_async().await.ok()
+    }
+
+    /// A change of the standby's token: whether it is back (it is then
+    /// sent the whole journal at once, not at the next append).
+    pub(crate) fn token(&mut self, sample: &Sample) -> bool {
+        let present = sample.kind() == SampleKind::Put;
+        match self.machine.standby(present) {
+            Some(Presence::Gone) => {
+                tracing::warn!(standby = %self.standby,
+                    "the sensor's standby is gone: the sensor goes on alone, its journal on one disk");
+                false
+            }
+            Some(Presence::Back) => {
+                tracing::info!(standby = %self.standby, "the sensor's standby is up: sending it the journal");
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Every token change that has come.
+    fn drain(&mut self) {
+        while let Ok(Some(sample)) = self.tokens.try_recv() {
+            self.token(&sample);
+        }
+    }
+
+    /// Records `appended` to the journal (and fsynced; `compacted`: the
+    /// journal was compacted right after): returns once the standby holds
+    /// them, or once it is gone.
+    pub(crate) async fn replicate(
+        &mut self,
+        appended: &[Record],
+        compacted: bool,
+        gateway: &Gateway<Query>,
+    ) {
+        self.drain();
+        if compacted {
+            self.machine.compacted();
+        }
+        let started = Instant::now();
+        let mut step = self
+            .machine
+            .appended(appended.iter().map(journal::encode).collect());
+        loop {
+            let message = match step {
+                Step::Release => break,
+                Step::Send(message) => message,
+                Step::NeedWhole => match gateway.compacted() {
+                    Ok(records) => self
+                        .machine
+                        .whole(records.iter().map(journal::encode).collect()),
+                    Err(e) => {
+                        // Tried again at the next append.
+                        tracing::error!(error = %e, "could not snapshot the sensor's state for its standby");
+                        break;
+                    }
+                },
+            };
+            let answer = self.ask(&message).await;
+            self.drain();
+            step = self.machine.answered(answer);
+        }
+        let waited = started.elapsed();
+        if waited > ANSWER_PATIENCE {
+            tracing::info!(standby = %self.standby, seconds = waited.as_secs_f64(),
+                present = self.machine.present(), "a slow replication to the standby");
+        }
+    }
+
+    /// Sends `message` and waits for the answer: the copy's position
+    /// (`Some(None)`: none of this run), `None` if none came in time.
+    async fn ask(&self, message: &Replicate) -> Option<Option<Position>> {
+        let replies = self
+            .session
+            .get(&self.key)
+            .payload(encode(message))
+            .timeout(ANSWER_PATIENCE)
+            .await
+            .ok()?;
+        while let Ok(reply) = replies.recv_async().await {
+            let Ok(sample) = reply.result() else { continue };
+            match decode::<Replicated>(&sample.payload().to_bytes()) {
+                Ok(answer) if answer.standby == self.standby => return Some(answer.position),
+                Ok(answer) => {
+                    tracing::warn!(from = %answer.standby, "a replication answer from a process that is not the standby")
+                }
+                Err(e) => tracing::warn!(error = %e, "a replication answer that does not read"),
+            }
+        }
+        None
+    }
+}
+
+/// The standby process's settings.
+#[derive(Debug, Clone)]
+pub struct StandbyConfig {
+    /// This process.
+    pub name: String,
+    /// The sensor it stands by for.
+    pub sensor: String,
+    pub keys: Keys,
+    /// Its copy of the sensor's journal ([`standby_path`]).
+    pub journal: PathBuf,
+    /// How long the sensor's token must be gone before the takeover.
+    pub takeover_after: Duration,
+    /// With voters, the lease; None: no voters, and no takeover (the
+    /// copy is kept all the same).
+    pub lease: Option<Duration>,
+}
+
+/// How standing by ended.
+pub enum Standing {
+    /// Shut down while standing by.
+    Shutdown,
+    /// The voters gave this process the sensor role at `epoch`: it serves
+    /// as the sensor from its copy (`journal`, holding `records`), and
+    /// keeps the lease with `claims`.
+    TookOver(Box<TookOver>),
+}
+
+/// The sensor role won: its epoch, the copy opened as the sensor's
+/// journal with the records it holds, and the voters' client that keeps
+/// the lease.
+pub struct TookOver {
+    pub epoch: u64,
+    pub journal: Journal,
+    pub records: Vec<Record>,
+    pub claims: Claims,
+}
+
+/// Keeps the copy of the sensor's journal and watches the sensor, until
+/// `shutdown` or until this process has won the sensor role.
+pub async fn stand_by(
+    session: &Session,
+    config: &StandbyConfig,
+    shutdown: impl Future<Output = ()>,
+) -> Result<Standing, StandbyError> {
+    let keys = &config.keys;
+    let (mut journal, records) = Journal::open(&config.journal, &config.name)?;
+    let queries = session
+        .declare_queryable(keys.sensor_replicate(&config.sensor))
+        .await
+        .map_err(mesh("declare the replication queryable"))?;
+    let sensor = session
+        .liveliness()
+        .declare_subscriber(keys.alive("sensor", &config.sensor))
+        .history(true)
+        .await
+        .map_err(mesh("watch the sensor's token"))?;
+    let token = session
+        .liveliness()
+        .declare_token(keys.alive(STANDBY_ROLE, &config.name))
+        .await
+        .map_err(mesh("declare the liveliness token"))?;
+    let mut claims = config
+        .lease
+        .map(|lease| Claims::new(session.clone(), keys.clone(), &config.name, lease));
+    let mut copy = Copy::default();
+    // A copy kept from before counts the sensor gone from now; with none,
+    // the sensor has not been up yet and nothing is to be taken over.
+    let mut gone_since = (!records.is_empty()).then(Instant::now);
+    drop(records);
+    let mut look = tokio::time::interval(LOOK_EVERY);
+    tokio::pin!(shutdown);
+    tracing::info!(sensor = %config.sensor, copy = %config.journal.display(), "standing by for the sensor");
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => return Ok(Standing::Shutdown),
+            query = queries.recv_async() => {
+                let Ok(query) = query else { return Ok(Standing::Shutdown) };
+                keep(&query, config, &mut copy, &mut journal).await?;
+            }
+            sample = sensor.recv_async() => {
+                let Ok(sample) = sample else { continue };
+                gone_since = match sample.kind() {
+                    SampleKind::Put => None,
+                    SampleKind::Delete => {
+                        tracing::warn!(sensor = %config.sensor, "the sensor's token is gone");
+                        Some(Instant::now())
+                    }
+                };
+            }
+            _ = look.tick() => {
+                let due = gone_since.is_some_and(|at| at.elapsed() >= config.takeover_after);
+                let (true, Some(voters)) = (due, claims.as_mut()) else { continue };
+                match take_over(voters, &config.sensor).await {
+                    Some(epoch) => {
+                        drop((queries, sensor, token, journal));
+                        let (journal, records) = Journal::open(&config.journal, &config.name)?;
+                        let Some(claims) = claims.take() else {
+                            return Ok(Standing::Shutdown);
+                        };
+                        return Ok(Standing::TookOver(Box::new(TookOver { epoch, journal, records, claims })));
+                    }
+                    // Another holds it: it came back, or another process
+                    // won. Looked at again after another takeover time.
+                    None => gone_since = gone_since.map(|_| Instant::now()),
+                }
+            }
+        }
+    }
+}
+
+/// Claims `role`, fencing off its holder's epoch: the epoch won, or None.
+async fn take_over(claims: &mut Claims, role: &str) -> Option<u64> {
+    let map = claims.read().await?.clone();
+    let fenced = fencing(&map, role);
+    tracing::warn!(sensor = %role, fencing = ?fenced, "the sensor has been gone for the takeover time: claiming its role");
+    match claims.claim(role, fenced, CLAIM_PATIENCE).await {
+        Claimed::Won(epoch) => {
+            tracing::warn!(sensor = %role, epoch, "the voters gave this process the sensor role: taking over from the copy");
+            Some(epoch)
+        }
+        Claimed::Lost { holder, epoch } => {
+            tracing::info!(sensor = %role, %holder, epoch, "the sensor role is held: standing by");
+            None
+        }
+        Claimed::Undecided => None,
+    }
+}
+
+/// A replication request: its records on the copy's disk, then the
+/// copy's position as the answer.
+async fn keep(
+    query: &Query,
+    config: &StandbyConfig,
+    copy: &mut Copy,
+    journal: &mut Journal,
+) -> Result<(), StandbyError> {
+    let bytes = query
+        .payload()
+        .map(|p| p.to_bytes().into_owned())
+        .unwrap_or_default();
+    let message = match decode::<Replicate>(&bytes) {
+        Ok(m) if m.sensor == config.sensor => m,
+        Ok(m) => {
+            return refuse(
+                query,
+                format!("records of {}, not {}", m.sensor, config.sensor),
+            )
+            .await
+        }
+        Err(e) => return refuse(query, e.to_string()).await,
+    };
+    // Records that do not read are not kept: the copy must restore.
+    if let Some(e) = message
+        .records
+        .iter()
+        .find_map(|r| journal::decode_record(r).err())
+    {
+        return refuse(query, format!("a record that does not decode: {e}")).await;
+    }
+    match copy.take(&message) {
+        Apply::Replace(records) => journal.replace_encoded(records)?,
+        Apply::Append(records) => journal.append_encoded(records)?,
+        Apply::Nothing => {}
+    }
+    let answer = Replicated {
+        version: VERSION,
+        standby: config.name.clone(),
+        position: copy.position,
+    };
+    if let Err(e) = query.reply(query.key_expr().clone(), encode(&answer)).await {
+        tracing::debug!(error = %e, "a replication answer was not sent");
+    }
+    Ok(())
+}
+
+async fn refuse(query: &Query, reason: String) -> Result<(), StandbyError> {
+    tracing::warn!(%reason, "a replication request refused");
+    let _ = query.reply_err(reason).await;
+    Ok(())
+}
+
+/// With voters, before a sensor serves its own role: claims it (a
+/// sensor coming back to a role it holds keeps its epoch). Refused when
+/// the voters give it to another (its standby took over).
+pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Result<u64, StandbyError> {
+    loop {
+        match claims.claim(role, None, CLAIM_PATIENCE).await {
+            Claimed::Won(epoch) => return Ok(epoch),
+            Claimed::Lost { holder, epoch } => {
+                return Err(StandbyError::Held {
+                    role: role.to_string(),
+                    me: me.to_string(),
+                    holder,
+                    epoch,
+                })
+            }
+            Claimed::Undecided => {
+                tracing::warn!(sensor = %role, "no leading voter answered the sensor's claim: asking again")
+            }
+        }
+    }
+}
+
+/// Returns once this process (`me`) may no longer serve `role`, held at
+/// `epoch`: the map gives the role to another, or no voter has led for
+/// the lease. The holder then stops serving.
+pub async fn keep_lease(mut claims: Claims, role: String, me: String, epoch: u64) {
+    let since = Instant::now();
+    loop {
+        tokio::time::sleep(LOOK_EVERY).await;
+        if let Some(map) = claims.read().await {
+            if let Verdict::Superseded { holder, epoch: now } = verdict(map, &role, &me, epoch) {
+                tracing::warn!(sensor = %role, ?holder, epoch = now, "the voters gave the sensor role to another: stopping");
+                return;
+            }
+        }
+        if claims.lapsed(since) {
+            tracing::warn!(sensor = %role, lease = ?claims.lease,
+                "no leading voter for the lease: stopping the sensor role");
+            return;
+        }
+    }
+}
