@@ -55,6 +55,7 @@ use idmesh_claims::{self as claims, Claimed, Claims, Verdict};
 use idmesh_ownership::OwnershipError;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::leader_to_leader::{StandbyCopy, StandbyStored};
+use idmesh_protocol::wire::leader_to_sensor::Durable;
 use idmesh_protocol::wire::{decode, encode};
 use std::collections::{BTreeSet, HashMap};
 use std::future::Future;
@@ -298,6 +299,29 @@ struct Tokens {
     /// by its process coming home, whose token is not up yet): it is not
     /// lost, and a takeover would fence off a holder just starting.
     lost_epochs: HashMap<String, u64>,
+    /// Each role's newest durable mark heard (by epoch, then batch and
+    /// position): the sensor and the peers have forgotten what lies
+    /// before it, so a role started from a state behind it waits for
+    /// inputs gone for good.
+    published: HashMap<String, Durable>,
+    /// Lost roles this process declined to adopt, its state of them being
+    /// behind their mark (warned once per loss).
+    declined: BTreeSet<String>,
+}
+
+impl Tokens {
+    /// A role's durable mark heard: kept if newer than the one kept.
+    fn note_published(&mut self, bytes: &[u8]) {
+        let Ok(mark) = decode::<Durable>(bytes) else {
+            return;
+        };
+        let newer = self.published.get(&mark.leader).is_none_or(|kept| {
+            (mark.epoch, mark.batch, mark.position) > (kept.epoch, kept.batch, kept.position)
+        });
+        if newer {
+            self.published.insert(mark.leader.clone(), mark);
+        }
+    }
 }
 
 /// Runs this process's roles until `shutdown`.
@@ -345,6 +369,7 @@ pub async fn run(
         token_samples,
         copies_home,
         stored,
+        durable,
     } = Heard::declare(&session, &config).await?;
     let mut tokens = Tokens::default();
     let mut tick = tokio::time::interval(Duration::from_millis(250));
@@ -371,6 +396,10 @@ pub async fn run(
             sample = stored.recv_async() => {
                 let Ok(sample) = sample else { break };
                 on_stored(&mut hosted, &sample.payload().to_bytes());
+            }
+            sample = durable.recv_async() => {
+                let Ok(sample) = sample else { break };
+                tokens.note_published(&sample.payload().to_bytes());
             }
             done = hosted.tasks.join_next(), if !hosted.tasks.is_empty() => {
                 if let Some(Ok((role, result))) = done {
@@ -439,6 +468,9 @@ struct Heard {
     /// ... and every standby's word that it keeps a copy (a role adopted
     /// here waits for its process's).
     stored: Samples,
+    /// Every role's durable marks: an adoption must not start behind the
+    /// last one.
+    durable: Samples,
 }
 
 type Samples =
@@ -480,6 +512,11 @@ impl Heard {
             stored: plain(
                 keys.leader_stored("*"),
                 "declare the standby-acknowledgement subscriber",
+            )
+            .await?,
+            durable: plain(
+                keys.every_leader_durable(),
+                "declare the durable-mark subscriber",
             )
             .await?,
         })
@@ -657,6 +694,18 @@ async fn adopt_by_claim(
         tokens.lost.insert(role.to_string(), Instant::now());
         return;
     }
+    if let Some(behind) = behind_published(config, tokens, role, now) {
+        // Another process holds a newer copy (the role's standby, cut off
+        // or slow to show its token now): it adopts the role once it is
+        // heir again. Adopted from here, the role would wait for ever.
+        if tokens.declined.insert(role.to_string()) {
+            tracing::warn!(process = %config.name, role, %behind,
+                "not adopting: this process's state of the role is behind the role's last durable mark; waiting for a process that holds a newer one");
+        }
+        tokens.lost.insert(role.to_string(), Instant::now());
+        return;
+    }
+    tokens.declined.remove(role);
     match claims
         .claim(
             role,
@@ -678,6 +727,29 @@ async fn adopt_by_claim(
             tokens.lost.insert(role.to_string(), Instant::now());
         }
     }
+}
+
+/// Why this process's state of `role` is behind the role's last durable
+/// mark heard (None: it is not, or no mark was heard): what an adoption
+/// here would start from, with the role's epoch `last` in the map.
+fn behind_published(config: &HostConfig, tokens: &Tokens, role: &str, last: u64) -> Option<String> {
+    let dir = config.state_dir.as_ref()?;
+    let published = tokens.published.get(role)?;
+    let from = match standby::adoption_source(dir, role, last) {
+        Ok(Source::Journal) => return None,
+        Ok(Source::StandbyCopy(mark)) => mark,
+        Ok(Source::Nothing) | Err(_) => Durable {
+            batch: 0,
+            position: 0,
+            ..published.clone()
+        },
+    };
+    standby::behind(&from, published).then(|| {
+        format!(
+            "its copy at batch {} and position {}, the mark at batch {} and position {}",
+            from.batch, from.position, published.batch, published.position
+        )
+    })
 }
 
 /// How long a claim may wait for the voters to decide.

@@ -153,6 +153,21 @@ pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, Standby
     Ok(Source::StandbyCopy(mark))
 }
 
+/// What an adoption of `role` here would start from, without changing
+/// anything: this process's journal of it if it was written in the
+/// holding the map names last (`last`), else the standby copy kept here.
+pub(crate) fn adoption_source(dir: &Path, role: &str, last: u64) -> Result<Source, StandbyError> {
+    let journal = journal_path(dir, role);
+    let kept = journal.exists() || snapshot_path(&journal).exists();
+    if kept && stamped_epoch(dir, role).unwrap_or(u64::MAX) == last {
+        return Ok(Source::Journal);
+    }
+    Ok(match read(&standby_path(dir, role))? {
+        Some((mark, _)) => Source::StandbyCopy(mark),
+        None => Source::Nothing,
+    })
+}
+
 /// What an epoch stamp's header says it holds.
 pub const EPOCH: &str = "leader-epoch";
 
@@ -437,6 +452,28 @@ mod tests {
         assert_eq!(stamped_epoch(&dir, "l1").unwrap(), 0);
         assert_eq!(forget_stale_journal(&dir, "l1", 0).unwrap(), None);
         assert_eq!(forget_stale_journal(&dir, "l1", 1).unwrap(), Some(0));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn the_adoption_source_is_read_without_changing_anything() {
+        let dir = dir("source");
+        assert_eq!(adoption_source(&dir, "l1", 0).unwrap(), Source::Nothing);
+        keep(&dir, &copy(5, vec![1; 8]), "l2").unwrap();
+        assert_eq!(
+            adoption_source(&dir, "l1", 2).unwrap(),
+            Source::StandbyCopy(mark(5))
+        );
+        // A journal of the last holding wins; of an earlier one, the copy.
+        let journal = journal_path(&dir, "l1");
+        std::fs::write(&journal, b"journal").unwrap();
+        stamp_epoch(&dir, "l1", 2).unwrap();
+        assert_eq!(adoption_source(&dir, "l1", 2).unwrap(), Source::Journal);
+        assert_eq!(
+            adoption_source(&dir, "l1", 3).unwrap(),
+            Source::StandbyCopy(mark(5))
+        );
+        assert!(journal.exists(), "nothing is removed");
         std::fs::remove_dir_all(&dir).ok();
     }
 }
