@@ -50,6 +50,9 @@ const ANSWER_PATIENCE: Duration = Duration::from_secs(1);
 /// reads the map to keep its lease.
 const LOOK_EVERY: Duration = Duration::from_millis(250);
 
+/// How often a sensor whose role another holds asks for it again.
+const HELD_WAIT: Duration = Duration::from_secs(2);
+
 /// How long one claim may wait for the voters' decision.
 const CLAIM_PATIENCE: Duration = Duration::from_secs(5);
 
@@ -400,19 +403,29 @@ async fn refuse(query: &Query, reason: String) -> Result<(), StandbyError> {
 }
 
 /// With voters, before a sensor serves its own role: claims it (a
-/// sensor coming back to a role it holds keeps its epoch). Refused when
-/// the voters give it to another (its standby took over).
+/// sensor coming back to a role it holds keeps its epoch). While the
+/// voters give it to another (its standby took over), it waits, saying
+/// so once, and serves nothing: its journal stopped where the role left
+/// it, so it never fences the holder off; it claims only a role released
+/// or still its own. (Ending instead would have `idmesh up` start it
+/// again and again.)
 pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Result<u64, StandbyError> {
+    let mut told = false;
     loop {
         match claims.claim(role, None, CLAIM_PATIENCE).await {
             Claimed::Won(epoch) => return Ok(epoch),
             Claimed::Lost { holder, epoch } => {
-                return Err(StandbyError::Held {
-                    role: role.to_string(),
-                    me: me.to_string(),
-                    holder,
-                    epoch,
-                })
+                if !told {
+                    let held = StandbyError::Held {
+                        role: role.to_string(),
+                        me: me.to_string(),
+                        holder,
+                        epoch,
+                    };
+                    tracing::warn!(sensor = %role, "{held}: not serving, waiting until it is released");
+                    told = true;
+                }
+                tokio::time::sleep(HELD_WAIT).await;
             }
             Claimed::Undecided => {
                 tracing::warn!(sensor = %role, "no leading voter answered the sensor's claim: asking again")

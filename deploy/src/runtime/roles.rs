@@ -308,8 +308,10 @@ async fn own_sensor(
         standby,
         epoch: lease.as_ref().map_or(0, |l| l.epoch),
     };
-    let stop = lease_or_shutdown(lease);
-    sensor(session, topology, name, keys, run, stop).await
+    let lost = LeaseLost::default();
+    let stop = lease_or_shutdown(lease, lost.clone());
+    sensor(session, topology, name, keys, run, stop).await?;
+    lost.check(name)
 }
 
 /// With voters: sensor `name` claims its own role before it serves (it
@@ -334,13 +336,38 @@ async fn claim_own(
     }))
 }
 
-/// Until Ctrl-C or SIGTERM, or until the sensor role's lease is lost.
-async fn lease_or_shutdown(lease: Option<Lease>) {
+/// Set when a sensor stopped because its role's lease was lost.
+#[derive(Clone, Default)]
+struct LeaseLost(std::sync::Arc<std::sync::atomic::AtomicBool>);
+
+impl LeaseLost {
+    /// A sensor that stopped for its lease ends its process with an
+    /// error, not as one told to stop: `idmesh up` then starts it again,
+    /// and it claims the role anew once a voter leads (the same holder
+    /// keeps its epoch and its journal), or waits while another holds
+    /// it. Ended cleanly, it would stay down, and a second loss of the
+    /// voters' majority would stop the stream for good.
+    fn check(&self, role: &str) -> Result<()> {
+        match self.0.load(std::sync::atomic::Ordering::Relaxed) {
+            true => Err(anyhow!(
+                "sensor {role}: stopped serving, its lease on the role lost (no leading voter, \
+                 or the role given to another); to be started again, to claim it anew"
+            )),
+            false => Ok(()),
+        }
+    }
+}
+
+/// Until Ctrl-C or SIGTERM, or until the sensor role's lease is lost
+/// (then `lost` says so).
+async fn lease_or_shutdown(lease: Option<Lease>, lost: LeaseLost) {
     match lease {
         Some(l) => {
             tokio::select! {
                 _ = shutdown() => {}
-                _ = idmesh_sensor::keep_lease(l.claims, l.role, l.me, l.epoch) => {}
+                _ = idmesh_sensor::keep_lease(l.claims, l.role, l.me, l.epoch) => {
+                    lost.0.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
             }
         }
         None => shutdown().await,
@@ -396,13 +423,18 @@ async fn sensor_standby(
         standby: None,
         epoch,
     };
-    let stop = lease_or_shutdown(Some(Lease {
-        claims,
-        role: this.sensor.clone(),
-        me: name.to_string(),
-        epoch,
-    }));
-    sensor(session, topology, &this.sensor, keys, run, stop).await
+    let lost = LeaseLost::default();
+    let stop = lease_or_shutdown(
+        Some(Lease {
+            claims,
+            role: this.sensor.clone(),
+            me: name.to_string(),
+            epoch,
+        }),
+        lost.clone(),
+    );
+    sensor(session, topology, &this.sensor, keys, run, stop).await?;
+    lost.check(&this.sensor)
 }
 
 async fn sensor(
