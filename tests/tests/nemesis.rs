@@ -404,8 +404,8 @@ fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[(&str, f6
         "# Host losses and cut-offs under the nemesis\n\n\
          Generated on {date} by `tests/tests/nemesis.rs` (do not edit by hand) — \
          regenerate with\n\n```sh\n{command}\n```\n\n\
-         Seed {seed}, {} s of faults on a LAN of five network namespaces \
-         (two cores); {} faults in all. Time from a host's loss or cut-off \
+         Seed {seed}, {} s of faults on a LAN of five hosts and a client \
+         (network namespaces, two cores); {} faults in all. Time from a host's loss or cut-off \
          to the first answer again equal to the replay, by kind of host (a \
          leader's, or the sensor's and coordinator's, h0: its loss or \
          cut-off hands the sensor role to its standby on h4):\n\n\
