@@ -22,13 +22,17 @@
 //! journal; the coordinator's replica on h4 answers while h0's
 //! coordinator cannot. A cut-off sensor loses its lease (it cannot read
 //! the map from a leading voter) and stops; back, it reads that the role
-//! is its standby's and stops; started again, its claim is refused — a
-//! former sensor never goes home, so the sensor role moves once a run.
-//! The standby then serving on h4 is killed and restarted like any
-//! process (with h4's restarts): it comes back as the sensor from its
-//! journal (its copy, claimed again over its own epoch). h4 itself is
-//! never cut off or lost: it holds the only copy of the sensor's journal
-//! besides h0's, and the coordinator's replica.
+//! is its standby's and stops; started again, its claim is refused (its
+//! process exits, and `idmesh up` tries it again after a growing
+//! backoff) — a former sensor never goes home, so the sensor role moves
+//! once a run at most. (A cut-off shorter than the mesh's link lease
+//! leaves the sensor's token in the standby's view: the takeover then
+//! comes once the cut-off sensor, back, finds its lease lapsed and
+//! stops.) The standby then serving on h4 is killed and restarted like
+//! any process, alone or with h4: it comes back as the sensor from its
+//! journal (its copy), its claim over its own epoch given back at that
+//! epoch. h4 itself is never cut off or lost: it holds the only copy of
+//! the sensor's journal besides h0's, and the coordinator's replica.
 //!
 //! A stream runs throughout (a trace fed at a rate, with a truth line
 //! after every event so that the offline replay has an answer at every
