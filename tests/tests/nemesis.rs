@@ -338,10 +338,17 @@ fn kind_of(host: &str) -> Option<&'static str> {
     }
 }
 
-/// For each loss or cut-off of a leader host or the sensor's: its kind
-/// of host, and seconds from the fault to the first exact answer asked
-/// after it.
-fn recoveries(struck: &[Struck], asked: &[Asked], twin: &[Value]) -> Vec<(&'static str, f64)> {
+/// A loss or cut-off timed: the fault, its kind of host ([`KINDS`]), and
+/// seconds from it to the first exact answer asked after it.
+struct Recovery {
+    fault: Fault,
+    kind: &'static str,
+    seconds: f64,
+}
+
+/// For each loss or cut-off of a leader host or the sensor's: how long
+/// until the first exact answer asked after it.
+fn recoveries(struck: &[Struck], asked: &[Asked], twin: &[Value]) -> Vec<Recovery> {
     struck
         .iter()
         .filter(|s| matches!(s.fault, Fault::Lose { .. } | Fault::CutOff { .. }))
@@ -357,17 +364,21 @@ fn recoveries(struck: &[Struck], asked: &[Asked], twin: &[Value]) -> Vec<(&'stat
                             .is_some_and(|e| difference(answer, e) < 1e-9)
                     })
                 })
-                .map(|a| (kind, a.came.duration_since(s.at).as_secs_f64()))
+                .map(|a| Recovery {
+                    fault: s.fault.clone(),
+                    kind,
+                    seconds: a.came.duration_since(s.at).as_secs_f64(),
+                })
         })
         .collect()
 }
 
 /// The times of `kind` among `times`.
-fn of_kind(times: &[(&str, f64)], kind: &str) -> Vec<f64> {
+fn of_kind(times: &[Recovery], kind: &str) -> Vec<f64> {
     times
         .iter()
-        .filter(|(k, _)| *k == kind)
-        .map(|&(_, t)| t)
+        .filter(|r| r.kind == kind)
+        .map(|r| r.seconds)
         .collect()
 }
 
@@ -385,7 +396,7 @@ fn quantile(values: &[f64], q: f64) -> f64 {
 /// With `IDMESH_NEMESIS_OUT` (a path from the workspace's root, e.g.
 /// `docs/host-loss.md`): writes the run's figures there as a generated
 /// page, stamped with the command that wrote it and the date.
-fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[(&str, f64)], t: &Tally) {
+fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[Recovery], t: &Tally) {
     let Ok(out) = std::env::var("IDMESH_NEMESIS_OUT") else {
         return;
     };
@@ -551,6 +562,12 @@ fn a_lan_struck_by_a_seeded_nemesis_answers_exactly_or_says_what_is_missing() {
         t.unanswered.first(),
         seen.holders.len()
     );
+    for r in &times {
+        eprintln!(
+            "nemesis: {:?}: first exact answer after {:.2} s",
+            r.fault, r.seconds
+        );
+    }
     for kind in KINDS {
         let times = of_kind(&times, kind);
         eprintln!(
