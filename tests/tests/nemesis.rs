@@ -37,7 +37,10 @@
 //! A stream runs throughout (a trace fed at a rate, with a truth line
 //! after every event so that the offline replay has an answer at every
 //! watermark), and `idmesh query marginals` runs throughout from the
-//! coordinator's host, with the replica's endpoint beside the first's.
+//! client's host, h5, given both coordinators' endpoints, the replica's
+//! first (a client waits out the mesh's open timeout, 10 s, on an
+//! endpoint whose host is gone before it tries the next; h4 is never
+//! gone).
 //! Every answer is recorded and checked: it is `degraded` naming who is
 //! missing, or it equals the replay (`idmesh replay --topology`, the
 //! centralized twin) at its watermark to 1e-9; the final answer equals the
