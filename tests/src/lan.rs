@@ -8,7 +8,8 @@
 //!
 //! On it, [`LanDeployment`] runs a topology the way a user runs one on
 //! real machines: `idmesh up --config lan.toml --host <name>` on every
-//! host (`ip netns exec`), and `idmesh query` from the coordinator's host.
+//! host (`ip netns exec`), and `idmesh query` from the coordinator's host
+//! (or a client host of its own, [`LanDeployment::ask_from`]).
 //! The faults a LAN has: a host's switch port down then up
 //! ([`Lan::link`]), a whole host killed and started again
 //! ([`LanDeployment::kill_host`], [`LanDeployment::start_host`]), a slow
@@ -21,7 +22,7 @@
 use crate::deployment::{answer_until, query_output};
 use crate::idmesh;
 use idmesh_deploy::runtime::topology::{
-    BeliefKind, LeaderProcess, Process, SensorProcess, Topology,
+    BeliefKind, LeaderProcess, Process, SensorProcess, SensorStandbyProcess, Topology,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -240,13 +241,19 @@ impl Drop for Lan {
 /// A process of a LAN topology: its role, name and host.
 #[derive(Debug, Clone)]
 pub struct Member {
+    /// `coordinator`, `coordinator_replica`, `voter`, `sensor`, `leader`,
+    /// or `sensor_standby` (a `[[sensor_standby]]` for the sensor named
+    /// by `stands_by`).
     pub role: &'static str,
     pub name: String,
     pub host: String,
+    /// The sensor a `sensor_standby` stands by for (None for the others).
+    pub stands_by: Option<String>,
 }
 
 /// Asks a LAN deployment's coordinators (the first, then its replicas)
-/// from the coordinator's host.
+/// from the asking host (the coordinator's, unless
+/// [`LanDeployment::ask_from`] names another).
 #[derive(Debug, Clone)]
 pub struct Asker {
     netns: String,
@@ -286,6 +293,9 @@ pub struct LanDeployment<'a> {
     pub prefix: String,
     pub config: PathBuf,
     pub coordinator_host: String,
+    /// The host `idmesh query` runs on: the coordinator's, or the one
+    /// [`LanDeployment::ask_from`] names.
+    pub asking_host: String,
     /// Every coordinator's endpoint, comma-separated: the first, then its
     /// replicas (what `idmesh query --connect` takes).
     pub coordinator: String,
@@ -316,8 +326,9 @@ pub struct LanSettings {
 impl<'a> LanDeployment<'a> {
     /// Writes `lan.toml` for `members` (the coordinator and sensor on the
     /// first host of theirs, leaders placed on a grid over the trace's
-    /// field; voters named `voter-1`, … and coordinator replicas as the
-    /// members name them) under a fresh directory; starts nothing.
+    /// field; voters named `voter-1`, …, coordinator replicas and sensor
+    /// standbys as the members name them) under a fresh directory; starts
+    /// nothing.
     pub fn configure(
         lan: &'a Lan,
         name: &str,
@@ -348,6 +359,7 @@ impl<'a> LanDeployment<'a> {
             prefix,
             config,
             coordinator_host: topology.coordinator.host.clone(),
+            asking_host: topology.coordinator.host.clone(),
             coordinator: topology.coordinator_endpoints(),
             own_configs,
             ups: Vec::new(),
@@ -433,8 +445,14 @@ impl<'a> LanDeployment<'a> {
         killed
     }
 
-    /// `idmesh query <args> --json` from the coordinator's host: the
-    /// parsed replies, or the error text.
+    /// `idmesh query` runs from `host` from now on (a client host of its
+    /// own, which survives the coordinator's host being lost or cut off).
+    pub fn ask_from(&mut self, host: &str) {
+        self.asking_host = self.lan.host(host).name.clone();
+    }
+
+    /// `idmesh query <args> --json` from the asking host: the parsed
+    /// replies, or the error text.
     pub fn query(&self, args: &[&str]) -> Result<Vec<Value>, String> {
         self.asker().query(args)
     }
@@ -443,7 +461,7 @@ impl<'a> LanDeployment<'a> {
     /// does, for a thread that asks while the test strikes.
     pub fn asker(&self) -> Asker {
         Asker {
-            netns: self.lan.host(&self.coordinator_host).netns.clone(),
+            netns: self.lan.host(&self.asking_host).netns.clone(),
             connect: self.coordinator.clone(),
             prefix: self.prefix.clone(),
         }
@@ -500,6 +518,7 @@ fn lan_topology(lan: &Lan, trace: &Path, members: &[Member], settings: &LanSetti
     let mut coordinator = None;
     let (mut replicas, mut voters) = (Vec::new(), Vec::new());
     let mut sensors = Vec::new();
+    let mut sensor_standbys = Vec::new();
     let mut leaders = Vec::new();
     for (i, m) in members.iter().enumerate() {
         let (name, host) = (m.name.clone(), m.host.clone());
@@ -516,6 +535,15 @@ fn lan_topology(lan: &Lan, trace: &Path, members: &[Member], settings: &LanSetti
                 rate: Some(settings.rate),
                 ..SensorProcess::new(name.clone(), listen(i, &m.host), trace)
             }),
+            "sensor_standby" => sensor_standbys.push(SensorStandbyProcess {
+                name: name.clone(),
+                host: host.clone(),
+                listen: listen(i, &m.host),
+                sensor: m
+                    .stands_by
+                    .clone()
+                    .unwrap_or_else(|| panic!("{name}: a sensor_standby names its sensor")),
+            }),
             "leader" => leaders.push(LeaderProcess {
                 host: host.clone(),
                 ..LeaderProcess::new(name.clone(), listen(i, &m.host))
@@ -527,6 +555,7 @@ fn lan_topology(lan: &Lan, trace: &Path, members: &[Member], settings: &LanSetti
     let mut topology = Topology::new(coordinator, sensors, leaders);
     topology.coordinator_replicas = replicas;
     topology.voters = voters;
+    topology.sensor_standbys = sensor_standbys;
     // The Radon belief: the LAN tests compare with `idmesh replay
     // --method overcomplete` (the topology's default is factored).
     topology.belief = BeliefKind::Radon;

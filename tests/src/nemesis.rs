@@ -4,6 +4,13 @@
 //! one at a time, each healed (or, for a host lost for good, left lost)
 //! before the next, with a quiet gap between them; what the run checks is
 //! in `tests/tests/nemesis.rs`.
+//!
+//! A host whose processes all have a standby or replica elsewhere (such
+//! as the sensor's and coordinator's host, once the sensor has a
+//! `[[sensor_standby]]`) is a [`Cast::sensor_hosts`] entry: it is struck
+//! as a leader host is — cut off, slowed, restarted, or the run's one
+//! loss — and with an empty list the schedule is the one a cast without
+//! such hosts always had.
 
 use rand::{Rng, SeedableRng};
 use std::time::Duration;
@@ -13,8 +20,9 @@ use std::time::Duration;
 pub enum Fault {
     /// `kill -9` of one process (`idmesh up` on its host starts it again).
     Kill { host: String, process: String },
-    /// A leader host lost for good: every process killed, its cable
-    /// pulled and never put back, its state directory gone.
+    /// A leader host or a sensor's host lost for good: every process
+    /// killed, its cable pulled and never put back, its state directory
+    /// gone.
     Lose { host: String },
     /// A host's switch port down for `down`, then up again.
     CutOff { host: String, down: Duration },
@@ -65,18 +73,23 @@ pub struct Cast {
     /// Hosts of leaders (and voters): each may be cut off, slowed,
     /// restarted, or — one per run at most — lost for good.
     pub leader_hosts: Vec<String>,
-    /// Other hosts that may be cut off, slowed or restarted (a host whose
-    /// loss the deployment cannot survive, such as the sensor's, is in
-    /// neither list: only its processes are killed).
+    /// Other hosts that may be slowed or restarted (a host whose loss
+    /// the deployment cannot survive, such as a sensor's without a
+    /// standby, is in no list: only its processes are killed).
     pub other_hosts: Vec<String>,
+    /// Hosts of a sensor whose standby runs on another host: each may be
+    /// cut off, slowed, restarted or — instead of a leader host, one loss
+    /// per run at most — lost for good. A sensor's standby takes over
+    /// once; its host must so be in none of the lists that lose it.
+    pub sensor_hosts: Vec<String>,
     /// Every process that may be killed: (host, name).
     pub processes: Vec<(String, String)>,
 }
 
 /// The seeded schedule of faults over `length`: the first after a few
 /// quiet seconds, each next one after the last has healed and a gap of 2
-/// to 5 s. At most one leader host is lost for good, and none strikes a
-/// lost host afterwards.
+/// to 5 s. At most one host (a leader's or a sensor's) is lost for good,
+/// and none strikes a lost host afterwards.
 pub fn schedule(seed: u64, length: Duration, cast: &Cast) -> Vec<Step> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut steps = Vec::new();
@@ -95,14 +108,19 @@ pub fn schedule(seed: u64, length: Duration, cast: &Cast) -> Vec<Step> {
 }
 
 /// One fault, by weight: kills most often, then cut-offs, slow links,
-/// restarts, and the one loss.
+/// restarts, and the one loss. Sensor hosts come after the others in
+/// every list they are in, so that without them the draws are the same.
 fn pick(rng: &mut impl Rng, cast: &Cast, lost: Option<&str>) -> Fault {
     let alive = |h: &&String| Some(h.as_str()) != lost;
     let leaders: Vec<&String> = cast.leader_hosts.iter().filter(alive).collect();
+    let sensors: Vec<&String> = cast.sensor_hosts.iter().filter(alive).collect();
+    // Cut off, or lost: a leader host or a sensor's.
+    let fragile: Vec<&String> = leaders.iter().chain(&sensors).copied().collect();
     let hosts: Vec<&String> = leaders
         .iter()
         .copied()
         .chain(cast.other_hosts.iter().filter(alive))
+        .chain(sensors.iter().copied())
         .collect();
     let processes: Vec<&(String, String)> = cast
         .processes
@@ -120,7 +138,7 @@ fn pick(rng: &mut impl Rng, cast: &Cast, lost: Option<&str>) -> Fault {
                 Fault::Kill { host, process }
             }
             35..=59 => Fault::CutOff {
-                host: leaders[rng.gen_range(0..leaders.len())].clone(),
+                host: fragile[rng.gen_range(0..fragile.len())].clone(),
                 down: secs(rng, 3, 9),
             },
             60..=74 => Fault::Slow {
@@ -133,7 +151,7 @@ fn pick(rng: &mut impl Rng, cast: &Cast, lost: Option<&str>) -> Fault {
                 down: secs(rng, 1, 4),
             },
             _ if lost.is_none() && leaders.len() > 2 => Fault::Lose {
-                host: leaders[rng.gen_range(0..leaders.len())].clone(),
+                host: fragile[rng.gen_range(0..fragile.len())].clone(),
             },
             _ => continue,
         };
@@ -159,8 +177,66 @@ mod tests {
         Cast {
             leader_hosts: s(&["h1", "h2", "h3"]),
             other_hosts: s(&["h4"]),
+            sensor_hosts: Vec::new(),
             processes,
         }
+    }
+
+    /// The nemesis's cast (`tests/tests/nemesis.rs`) since the sensor has
+    /// a standby on h4: h0 is a sensor host.
+    fn cast_with_standby() -> Cast {
+        let mut cast = cast();
+        cast.sensor_hosts = vec!["h0".to_string()];
+        // Where `tests/tests/nemesis.rs` lists it: after the replica.
+        cast.processes
+            .insert(3, ("h4".to_string(), "sensor-0-standby".to_string()));
+        cast
+    }
+
+    /// Seed 25's 45 s for [`cast`], as `schedule` drew them before sensor
+    /// hosts were.
+    const SEED_25: [&str; 8] = [
+        "3000 Kill { host: \"h0\", process: \"coordinator\" }",
+        "7273 CutOff { host: \"h1\", down: 5.469s }",
+        "15227 Kill { host: \"h3\", process: \"voter-3\" }",
+        "17344 Lose { host: \"h2\" }",
+        "22183 Kill { host: \"h1\", process: \"leader-0\" }",
+        "24532 Slow { host: \"h3\", rate: \"256kbit\", lasting: 4.29s }",
+        "32717 CutOff { host: \"h1\", down: 7.139s }",
+        "43368 Restart { host: \"h3\", down: 1.974s }",
+    ];
+
+    /// The schedule of seed 25 over 45 s for the cast without sensor
+    /// hosts, as it was before they were: sensor hosts change nothing
+    /// when there are none.
+    #[test]
+    fn a_cast_without_sensor_hosts_keeps_its_schedule() {
+        let steps = schedule(25, Duration::from_secs(45), &cast());
+        let seen: Vec<String> = steps
+            .iter()
+            .map(|s| format!("{} {:?}", s.at.as_millis(), s.fault))
+            .collect();
+        assert_eq!(seen, SEED_25, "{seen:#?}");
+    }
+
+    #[test]
+    fn a_sensor_host_is_lost_in_some_runs_and_never_beside_a_leader_host() {
+        let length = Duration::from_secs(45);
+        let mut sensor_lost = Vec::new();
+        for seed in 0..200 {
+            let steps = schedule(seed, length, &cast_with_standby());
+            let lost: Vec<&str> = steps
+                .iter()
+                .filter(|s| matches!(s.fault, Fault::Lose { .. }))
+                .map(|s| s.fault.host())
+                .collect();
+            assert!(lost.len() <= 1, "seed {seed}: {lost:?}");
+            if lost == ["h0"] {
+                sensor_lost.push(seed);
+            }
+        }
+        assert!(sensor_lost.len() > 3, "h0 lost with seeds {sensor_lost:?}");
+        eprintln!("h0 lost within 45 s with seeds {sensor_lost:?}");
     }
 
     #[test]
@@ -201,5 +277,34 @@ mod tests {
             assert!(steps.iter().all(|s| s.at < length));
         }
         assert!(losses > 10, "ten minutes lose a host most times: {losses}");
+    }
+
+    #[test]
+    fn with_a_sensor_host_one_host_at_most_is_lost() {
+        let length = Duration::from_secs(600);
+        let (mut leaders, mut sensors) = (0, 0);
+        for seed in 0..50 {
+            let steps = schedule(seed, length, &cast_with_standby());
+            let lost: Vec<usize> = (0..steps.len())
+                .filter(|&i| matches!(steps[i].fault, Fault::Lose { .. }))
+                .collect();
+            assert!(lost.len() <= 1, "seed {seed}: {lost:?}");
+            if let Some(&i) = lost.first() {
+                let host = steps[i].fault.host();
+                assert!(steps[i + 1..].iter().all(|s| s.fault.host() != host));
+                match host {
+                    "h0" => sensors += 1,
+                    _ => leaders += 1,
+                }
+            }
+            for pair in steps.windows(2) {
+                assert!(pair[0].at + pair[0].fault.lasting() < pair[1].at);
+            }
+            assert!(steps.iter().all(|s| s.at < length));
+        }
+        assert!(
+            leaders > 5 && sensors > 2,
+            "losses: {leaders} of leader hosts, {sensors} of h0"
+        );
     }
 }

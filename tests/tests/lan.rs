@@ -35,6 +35,7 @@ fn members() -> Vec<Member> {
         role,
         name: name.to_string(),
         host: host.to_string(),
+        stands_by: None,
     };
     vec![
         m("coordinator", "coordinator", "h0"),

@@ -1,22 +1,46 @@
 //! The nemesis: a deployment on a LAN of five hosts (network namespaces on
 //! a bridge, `idmesh_tests::lan`), each host with a disk of its own —
 //! h0 the sensor's and the coordinator's, h1 to h3 one leader and one
-//! voter each, h4 the coordinator's replica — struck for a bounded time
-//! by faults a seeded schedule picks at random
+//! voter each, h4 the coordinator's replica and the sensor's standby
+//! (`[[sensor_standby]]`) — and a sixth, h5, the client's, which runs
+//! nothing but the queries and is never struck. They are struck for a
+//! bounded time by faults a seeded schedule picks at random
 //! (`idmesh_tests::nemesis::schedule`): `kill -9` of one process (its
-//! `idmesh up` starts it again), a leader host lost for good (every
-//! process killed, its cable pulled, its state directory deleted; one per
-//! run at most, so that two of the three voters remain), a host cut off
-//! for a while and back (the holder it was is fenced, its role goes
+//! `idmesh up` starts it again), a leader host or h0 lost for good (every
+//! process killed, its cable pulled, its state directory deleted; one
+//! per run at most, so that two of the three voters remain, and the
+//! sensor's standby never has to take over twice), a host cut off for a
+//! while and back (the holder it was is fenced, a leader role goes
 //! home), a slow link (a token bucket on its cable), a whole host
-//! restarted. The sensor's host is never cut off, restarted or lost:
-//! the sensor has no standby yet, and its journal is on that host alone;
-//! its processes are killed like any other.
+//! restarted.
+//!
+//! h0 is struck as a leader host is: its processes killed, the host cut
+//! off, slowed, restarted or lost. When the sensor's token has been gone
+//! for the takeover time (h0 lost, cut off or restarted, or the sensor
+//! killed and not back in time), the standby on h4 claims the sensor
+//! role through the voters and serves as the sensor from its copy of the
+//! journal; the coordinator's replica on h4 answers while h0's
+//! coordinator cannot. A cut-off sensor loses its lease (it cannot read
+//! the map from a leading voter) and stops; back, it reads that the role
+//! is its standby's and stops; started again, its claim is refused (its
+//! process exits, and `idmesh up` tries it again after a growing
+//! backoff) — a former sensor never goes home, so the sensor role moves
+//! once a run at most. (A cut-off shorter than the mesh's link lease
+//! leaves the sensor's token in the standby's view: the takeover then
+//! comes once the cut-off sensor, back, finds its lease lapsed and
+//! stops.) The standby then serving on h4 is killed and restarted like
+//! any process, alone or with h4: it comes back as the sensor from its
+//! journal (its copy), its claim over its own epoch given back at that
+//! epoch. h4 itself is never cut off or lost: it holds the only copy of
+//! the sensor's journal besides h0's, and the coordinator's replica.
 //!
 //! A stream runs throughout (a trace fed at a rate, with a truth line
 //! after every event so that the offline replay has an answer at every
 //! watermark), and `idmesh query marginals` runs throughout from the
-//! coordinator's host, with the replica's endpoint beside the first's.
+//! client's host, h5, given both coordinators' endpoints, the replica's
+//! first (a client waits out the mesh's open timeout, 10 s, on an
+//! endpoint whose host is gone before it tries the next; h4 is never
+//! gone).
 //! Every answer is recorded and checked: it is `degraded` naming who is
 //! missing, or it equals the replay (`idmesh replay --topology`, the
 //! centralized twin) at its watermark to 1e-9; the final answer equals the
@@ -27,9 +51,10 @@
 //! By default it strikes for 45 s (some 90 s in all); with
 //! `IDMESH_LONG_TESTS=1` for ten minutes. `IDMESH_NEMESIS_SEED` picks the
 //! schedule (default: 25; the long run draws one, and prints it). It
-//! prints, over the run's losses and cut-offs of leader hosts, the time
-//! from the fault to the first exact answer again (p50, p99), and how
-//! many answers were degraded.
+//! prints, over the run's losses and cut-offs of a host, the time from
+//! the fault to the first exact answer again (p50, p99, and how many),
+//! for leader hosts and for the sensor's host apart, and how many answers
+//! were degraded.
 //!
 //! Needs root for the namespaces; without it the test says why in one
 //! line and passes (CI runs as root).
@@ -45,23 +70,35 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-const HOSTS: [&str; 5] = ["h0", "h1", "h2", "h3", "h4"];
+/// h0 to h4 run the deployment; h5 only asks.
+const HOSTS: [&str; 6] = ["h0", "h1", "h2", "h3", "h4", "h5"];
+
+/// The client's host: it runs the queries and is never struck.
+const CLIENT: &str = "h5";
+
+/// The sensor's (and the coordinator's) host.
+const SENSOR_HOST: &str = "h0";
 
 /// The sensor's lines per second (events and their truth lines).
 const RATE: f64 = 50.0;
 
 /// Coordinator and sensor on h0; leader-i and voter-(i+1) on h(i+1); the
-/// coordinator's replica on h4.
+/// coordinator's replica and the sensor's standby on h4.
 fn members() -> Vec<Member> {
     let m = |role, name: String, host: &str| Member {
         role,
         name,
         host: host.to_string(),
+        stands_by: None,
     };
     let mut members = vec![
-        m("coordinator", "coordinator".into(), "h0"),
-        m("sensor", "sensor-0".into(), "h0"),
+        m("coordinator", "coordinator".into(), SENSOR_HOST),
+        m("sensor", "sensor-0".into(), SENSOR_HOST),
         m("coordinator_replica", "coordinator-1".into(), "h4"),
+        Member {
+            stands_by: Some("sensor-0".into()),
+            ..m("sensor_standby", "sensor-0-standby".into(), "h4")
+        },
     ];
     for i in 1..=3 {
         let host = format!("h{i}");
@@ -71,12 +108,13 @@ fn members() -> Vec<Member> {
     members
 }
 
-/// What the nemesis may strike: the leader hosts wholly, h4 but for a
-/// loss, h0's processes alone.
+/// What the nemesis may strike: the leader hosts and h0 wholly, h4 but
+/// for a cut-off or a loss.
 fn cast() -> Cast {
     Cast {
         leader_hosts: vec!["h1".into(), "h2".into(), "h3".into()],
         other_hosts: vec!["h4".into()],
+        sensor_hosts: vec![SENSOR_HOST.into()],
         processes: members().into_iter().map(|m| (m.host, m.name)).collect(),
     }
 }
@@ -288,27 +326,73 @@ fn tally(asked: &[Asked], twin: &[Value]) -> Tally {
     t
 }
 
-/// For each loss or cut-off of a leader host: seconds from the fault to
-/// the first exact answer asked after it.
-fn recoveries(struck: &[Struck], asked: &[Asked], twin: &[Value]) -> Vec<f64> {
-    let leader_hosts = cast().leader_hosts;
+/// The kinds of host whose losses and cut-offs are timed apart.
+const KINDS: [&str; 2] = ["leader host", "sensor host"];
+
+/// The kind of host `host` is (one of [`KINDS`]), None for the others.
+fn kind_of(host: &str) -> Option<&'static str> {
+    let cast = cast();
+    if cast.leader_hosts.iter().any(|h| h == host) {
+        Some(KINDS[0])
+    } else if cast.sensor_hosts.iter().any(|h| h == host) {
+        Some(KINDS[1])
+    } else {
+        None
+    }
+}
+
+/// A loss or cut-off timed: the fault, its kind of host ([`KINDS`]), and
+/// seconds from it to the first exact answer asked after it.
+struct Recovery {
+    fault: Fault,
+    kind: &'static str,
+    seconds: f64,
+    /// Seconds to the first exact answer past every watermark answered
+    /// before the fault (the stream moving again), if one came.
+    moving: Option<f64>,
+}
+
+/// For each loss or cut-off of a leader host or the sensor's: how long
+/// until the first exact answer asked after it.
+fn recoveries(struck: &[Struck], asked: &[Asked], twin: &[Value]) -> Vec<Recovery> {
     struck
         .iter()
         .filter(|s| matches!(s.fault, Fault::Lose { .. } | Fault::CutOff { .. }))
-        .filter(|s| leader_hosts.iter().any(|h| h == s.fault.host()))
-        .filter_map(|s| {
-            asked
-                .iter()
-                .filter(|a| a.sent >= s.at)
-                .find(|a| {
-                    a.reply.as_ref().is_ok_and(|answer| {
-                        let events = watermark_events(answer) as usize;
-                        twin.get(events)
-                            .is_some_and(|e| difference(answer, e) < 1e-9)
-                    })
+        .filter_map(|s| Some((s, kind_of(s.fault.host())?)))
+        .filter_map(|(s, kind)| {
+            let exact = |a: &&Asked| {
+                a.reply.as_ref().is_ok_and(|answer| {
+                    let events = watermark_events(answer) as usize;
+                    twin.get(events)
+                        .is_some_and(|e| difference(answer, e) < 1e-9)
                 })
-                .map(|a| a.came.duration_since(s.at).as_secs_f64())
+            };
+            let events = |a: &Asked| a.reply.as_ref().map_or(0, watermark_events);
+            let before = asked
+                .iter()
+                .filter(|a| a.came < s.at)
+                .filter(exact)
+                .map(events)
+                .max()
+                .unwrap_or(0);
+            let after = || asked.iter().filter(|a| a.sent >= s.at).filter(exact);
+            let since = |a: &Asked| a.came.duration_since(s.at).as_secs_f64();
+            after().next().map(|a| Recovery {
+                fault: s.fault.clone(),
+                kind,
+                seconds: since(a),
+                moving: after().find(|a| events(a) > before).map(since),
+            })
         })
+        .collect()
+}
+
+/// The times of `kind` among `times`.
+fn of_kind(times: &[Recovery], kind: &str) -> Vec<f64> {
+    times
+        .iter()
+        .filter(|r| r.kind == kind)
+        .map(|r| r.seconds)
         .collect()
 }
 
@@ -326,7 +410,7 @@ fn quantile(values: &[f64], q: f64) -> f64 {
 /// With `IDMESH_NEMESIS_OUT` (a path from the workspace's root, e.g.
 /// `docs/host-loss.md`): writes the run's figures there as a generated
 /// page, stamped with the command that wrote it and the date.
-fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[f64], t: &Tally) {
+fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[Recovery], t: &Tally) {
     let Ok(out) = std::env::var("IDMESH_NEMESIS_OUT") else {
         return;
     };
@@ -349,23 +433,33 @@ fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[f64], t: 
         "# Host losses and cut-offs under the nemesis\n\n\
          Generated on {date} by `tests/tests/nemesis.rs` (do not edit by hand) — \
          regenerate with\n\n```sh\n{command}\n```\n\n\
-         Seed {seed}, {} s of faults on a LAN of five network namespaces \
-         (two cores); {} faults in all. Time from a leader host's loss or \
-         cut-off to the first answer again equal to the replay:\n\n\
-         | faults | p50 (s) | p99 (s) | answers | exact | degraded | unanswered |\n\
-         |---|---|---|---|---|---|---|\n\
-         | {} | {:.2} | {:.2} | {} | {} | {} | {} |\n\n\
-         | fault | host | lasting (s) |\n|---|---|---|\n",
+         Seed {seed}, {} s of faults on a LAN of five hosts and a client \
+         (network namespaces, two cores); {} faults in all. Time from a host's loss or cut-off \
+         to the first answer again equal to the replay, by kind of host (a \
+         leader's, or the sensor's and coordinator's, h0: its loss or \
+         cut-off hands the sensor role to its standby on h4):\n\n\
+         | host | faults | p50 (s) | p99 (s) |\n|---|---|---|---|\n",
         length.as_secs(),
         struck.len(),
-        times.len(),
-        quantile(times, 0.5),
-        quantile(times, 0.99),
+    );
+    for kind in KINDS {
+        let times = of_kind(times, kind);
+        page.push_str(&format!(
+            "| {kind} | {} | {:.2} | {:.2} |\n",
+            times.len(),
+            quantile(&times, 0.5),
+            quantile(&times, 0.99),
+        ));
+    }
+    page.push_str(&format!(
+        "\n| answers | exact | degraded | unanswered |\n|---|---|---|---|\n\
+         | {} | {} | {} | {} |\n\n\
+         | fault | host | lasting (s) |\n|---|---|---|\n",
         t.exact + t.degraded + t.unanswered.len() + t.wrong.len(),
         t.exact,
         t.degraded,
         t.unanswered.len(),
-    );
+    ));
     for s in struck {
         let kind = format!("{:?}", s.fault);
         let kind = kind.split([' ', '{']).next().unwrap_or("");
@@ -442,6 +536,19 @@ fn a_lan_struck_by_a_seeded_nemesis_answers_exactly_or_says_what_is_missing() {
         own_disks: true,
     };
     let mut deployment = LanDeployment::configure(&lan, "nemesis", &trace, &members(), &settings);
+    // Asked from a host of its own: h0, the coordinator's, may be lost.
+    deployment.ask_from(CLIENT);
+    // `idmesh query` opens its session on the first of its endpoints
+    // that opens, and waits out the mesh's open timeout (10 s) on one
+    // whose host is gone or cut off before it tries the next: the
+    // replica's (h4, never cut off or lost) comes first, so that the
+    // times measured are the deployment's, not the client's.
+    deployment.coordinator = deployment
+        .coordinator
+        .split(',')
+        .rev()
+        .collect::<Vec<_>>()
+        .join(",");
     for host in ["h1", "h2", "h3", "h4", "h0"] {
         deployment.start_host(host);
     }
@@ -480,12 +587,48 @@ fn a_lan_struck_by_a_seeded_nemesis_answers_exactly_or_says_what_is_missing() {
         t.unanswered.first(),
         seen.holders.len()
     );
+    let took: Vec<f64> = seen
+        .asked
+        .iter()
+        .map(|a| a.came.duration_since(a.sent).as_secs_f64())
+        .collect();
     eprintln!(
-        "nemesis: first exact answer after a leader host's loss or cut-off: p50 {:.2} s, p99 {:.2} s over {} faults",
-        quantile(&times, 0.5),
-        quantile(&times, 0.99),
-        times.len()
+        "nemesis: a query took p50 {:.2} s, p99 {:.2} s, at most {:.2} s",
+        quantile(&took, 0.5),
+        quantile(&took, 0.99),
+        quantile(&took, 1.0)
     );
+    if std::env::var_os("IDMESH_NEMESIS_TRACE").is_some() {
+        let start = struck.first().map_or(Instant::now(), |s| s.at);
+        for a in &seen.asked {
+            let kind = match &a.reply {
+                Ok(_) => "answer".to_string(),
+                Err(e) => e.lines().next().unwrap_or("").chars().take(80).collect(),
+            };
+            eprintln!(
+                "asked {:>7.2} took {:>6.2} {kind}",
+                a.sent.saturating_duration_since(start).as_secs_f64(),
+                a.came.duration_since(a.sent).as_secs_f64()
+            );
+        }
+    }
+    for r in &times {
+        eprintln!(
+            "nemesis: {:?}: first exact answer after {:.2} s, the stream moving again after {:?} s",
+            r.fault,
+            r.seconds,
+            r.moving.map(|m| (m * 100.0).round() / 100.0)
+        );
+    }
+    for kind in KINDS {
+        let times = of_kind(&times, kind);
+        eprintln!(
+            "nemesis: first exact answer after a {kind}'s loss or cut-off: p50 {:.2} s, p99 {:.2} s over {} faults",
+            quantile(&times, 0.5),
+            quantile(&times, 0.99),
+            times.len()
+        );
+    }
     write_page(seed, length, &struck, &times, &t);
     assert!(t.wrong.is_empty(), "wrong answers: {:?}", t.wrong);
     assert!(doubled.is_empty(), "two holders at one epoch: {doubled:?}");
