@@ -63,6 +63,10 @@ pub(crate) fn endpoint_list(text: &str) -> Vec<String> {
 const RETRY_FIRST_MS: u64 = 100;
 const RETRY_MOST_MS: u64 = 1000;
 
+/// How long a one-off client with several endpoints waits for one to
+/// open before it tries the next (a LAN link opens in milliseconds).
+const ONE_OFF_OPEN_TIMEOUT_MS: u64 = 2000;
+
 pub(crate) fn config(options: &MeshOptions) -> Result<Config> {
     let mut config = Config::default();
     let set = |config: &mut Config, key: &str, value: String| {
@@ -99,6 +103,17 @@ pub(crate) fn config(options: &MeshOptions) -> Result<Config> {
             &mut config,
             "connect/retry",
             format!("{{period_init_ms: {RETRY_FIRST_MS}, period_max_ms: {RETRY_MOST_MS}}}"),
+        )?;
+    }
+    if options.client && options.connect.len() > 1 && options.connect_patience.is_none() {
+        // A one-off client given several coordinators opens its session
+        // on the first that answers, in turn: on one whose host is gone
+        // (no refusal comes back) it would wait out the default open
+        // timeout, 10 s, before it tried the next.
+        set(
+            &mut config,
+            "transport/unicast/open_timeout",
+            ONE_OFF_OPEN_TIMEOUT_MS.to_string(),
         )?;
     }
     if options.unbatched {
