@@ -141,14 +141,13 @@ pub(crate) enum Source {
 /// it, the copy becomes the role's snapshot (with an empty journal after
 /// it). Says which state the role will start from.
 pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, StandbyError> {
-    let journal = journal_path(dir, role);
-    let snapshot = snapshot_path(&journal);
-    if journal.exists() || snapshot.exists() {
+    if journal_kept(dir, role) {
         return Ok(Source::Journal);
     }
     let Some((mark, state)) = read(&standby_path(dir, role))? else {
         return Ok(Source::Nothing);
     };
+    let snapshot = snapshot_path(&journal_path(dir, role));
     log::write_file(&snapshot, SNAPSHOT, 1, &[&state])?;
     Ok(Source::StandbyCopy(mark))
 }
@@ -157,9 +156,7 @@ pub(crate) fn prepare_adoption(dir: &Path, role: &str) -> Result<Source, Standby
 /// anything: this process's journal of it if it was written in the
 /// holding the map names last (`last`), else the standby copy kept here.
 pub(crate) fn adoption_source(dir: &Path, role: &str, last: u64) -> Result<Source, StandbyError> {
-    let journal = journal_path(dir, role);
-    let kept = journal.exists() || snapshot_path(&journal).exists();
-    if kept && stamped_epoch(dir, role).unwrap_or(u64::MAX) == last {
+    if journal_kept(dir, role) && written_at(dir, role) == last {
         return Ok(Source::Journal);
     }
     Ok(match read(&standby_path(dir, role))? {
@@ -224,16 +221,27 @@ pub(crate) fn forget_stale_journal(
     role: &str,
     last: u64,
 ) -> Result<Option<u64>, StandbyError> {
-    let journal = journal_path(dir, role);
-    if !journal.exists() && !snapshot_path(&journal).exists() {
+    if !journal_kept(dir, role) {
         return Ok(None);
     }
-    let written = stamped_epoch(dir, role).unwrap_or(u64::MAX);
+    let written = written_at(dir, role);
     if written == last {
         return Ok(None);
     }
     forget_journal(dir, role)?;
     Ok(Some(written))
+}
+
+/// Whether this process keeps a journal or a snapshot of `role` in `dir`.
+fn journal_kept(dir: &Path, role: &str) -> bool {
+    let journal = journal_path(dir, role);
+    journal.exists() || snapshot_path(&journal).exists()
+}
+
+/// The epoch of the holding `role`'s journal here was written in; a
+/// stamp that does not read matches no holding (u64::MAX).
+fn written_at(dir: &Path, role: &str) -> u64 {
+    stamped_epoch(dir, role).unwrap_or(u64::MAX)
 }
 
 /// Removes `role`'s journal and snapshot from `dir` (none there is no
@@ -263,9 +271,7 @@ pub(crate) fn forget_journal(dir: &Path, role: &str) -> Result<(), StandbyError>
 pub(crate) fn prepare_return(dir: &Path, role: &str) -> Result<Source, StandbyError> {
     let copy = standby_path(dir, role);
     let Some((mark, state)) = read(&copy)? else {
-        let journal = journal_path(dir, role);
-        let kept = journal.exists() || snapshot_path(&journal).exists();
-        return Ok(if kept {
+        return Ok(if journal_kept(dir, role) {
             Source::Journal
         } else {
             Source::Nothing

@@ -15,7 +15,7 @@
 //! in `docs/host-loss.md`.
 
 use super::interval::{median, median_interval, CONFIDENCE};
-use super::throughput::{self, Stream};
+use super::throughput::{self, lower_median, Stream};
 use super::{page_of, write, BenchOptions, Deployment, Made};
 use anyhow::Result;
 use std::fmt::Write as _;
@@ -39,15 +39,9 @@ struct Setting {
 }
 
 impl Setting {
-    fn rate(stream: &Stream) -> f64 {
-        stream.events as f64 / stream.seconds.max(1e-9)
-    }
-
     /// The round with the median events per second.
     fn median_round(&self) -> Option<&Stream> {
-        let mut by_rate: Vec<&Stream> = self.rounds.iter().collect();
-        by_rate.sort_by(|a, b| Self::rate(a).total_cmp(&Self::rate(b)));
-        by_rate.get(by_rate.len() / 2).copied()
+        lower_median(self.rounds.iter().collect(), |s| s.events_per_second())
     }
 }
 
@@ -140,7 +134,7 @@ fn report(options: &BenchOptions, settings: &[Setting; 2]) -> Result<String> {
             "| {} | {} | {:.0} | {:.0} | {:.0} | {fsyncs} | {:.3} | {snapshots} |",
             if setting.standbys { "on" } else { "off" },
             stream.events,
-            Setting::rate(stream),
+            stream.events_per_second(),
             per_1000(bytes),
             per_1000(copies),
             per_1000(fsyncs),
@@ -150,7 +144,7 @@ fn report(options: &BenchOptions, settings: &[Setting; 2]) -> Result<String> {
         .rounds
         .iter()
         .zip(&settings[1].rounds)
-        .map(|(off, on)| Setting::rate(on) / Setting::rate(off))
+        .map(|(off, on)| on.events_per_second() / off.events_per_second())
         .collect();
     let interval = match median_interval(&ratios) {
         Some((low, high, confidence)) => format!(

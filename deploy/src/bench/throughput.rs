@@ -76,7 +76,7 @@ pub fn median_by_cpu(streams: Vec<Stream>) -> Option<Stream> {
 
 /// The value whose `key` is the median of all (the lower of the middle
 /// two), None of none.
-fn lower_median<T>(mut values: Vec<T>, key: impl Fn(&T) -> f64) -> Option<T> {
+pub(super) fn lower_median<T>(mut values: Vec<T>, key: impl Fn(&T) -> f64) -> Option<T> {
     values.sort_by(|a, b| key(a).total_cmp(&key(b)));
     let middle = values.len().checked_sub(1)? / 2;
     Some(values.swap_remove(middle))
