@@ -93,6 +93,9 @@ pub struct GatewayConfig {
     /// The epoch at which this process holds the sensor role (the
     /// voters' claim; 0 without voters), on every batch and reply.
     pub epoch: u64,
+    /// With voters, the role's lease as the lease task keeps it: what the
+    /// standby did not acknowledge leaves only under it ([`crate::lease`]).
+    pub lease: Option<crate::LeaseClock>,
 }
 
 /// Faults injected on purpose (tests): the network losing or doubling
@@ -506,9 +509,9 @@ pub async fn run(
         gateway.end();
     }
     let replicator = match (&config.standby, &journal) {
-        (Some(standby), Some(_)) => {
-            Some(Replicator::start(&session, keys, &config.name, standby).await?)
-        }
+        (Some(standby), Some(_)) => Some(
+            Replicator::start(&session, keys, &config.name, standby, config.lease.clone()).await?,
+        ),
         _ => None,
     };
     let mut wire = Wire {
@@ -1228,7 +1231,7 @@ impl Wire {
             compact(journal, gateway)?;
         }
         if let Some(replicator) = &mut self.replicator {
-            replicator.replicate(&records, compacted, gateway).await;
+            replicator.replicate(&records, compacted, gateway).await?;
         }
         Ok(())
     }

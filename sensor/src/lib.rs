@@ -46,6 +46,7 @@ mod extraction;
 mod feed;
 mod ingest;
 pub mod journal;
+mod lease;
 mod machine;
 mod mesh;
 mod peers;
@@ -66,6 +67,7 @@ pub use ingest::Offer;
 pub use driver::{run, Faults, GatewayConfig};
 pub use mesh::MeshConfig;
 // The sensor's standby: its copy of the journal, its takeover, the lease.
+pub use lease::LeaseClock;
 pub use standby::{
     claim_own, keep_lease, stand_by, standby_path, StandbyConfig, StandbyError, Standing, TookOver,
     STANDBY_ROLE,

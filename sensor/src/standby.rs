@@ -23,6 +23,7 @@
 //! never acts beside its successor.
 
 use crate::journal::{self, Journal, JournalError, Record};
+use crate::lease::LeaseClock;
 use crate::machine::replication::{Apply, Copy, Presence, Replication, Step};
 use crate::machine::Gateway;
 use idmesh_claims::{fencing, verdict, Claimed, Claims, Verdict};
@@ -62,6 +63,13 @@ pub enum StandbyError {
     Mesh { what: &'static str, message: String },
     #[error(transparent)]
     Journal(#[from] JournalError),
+    /// Records the standby did not acknowledge, and no read of the map
+    /// since the standby went confirmed that the role is still held here.
+    #[error(
+        "sensor {role}: its standby is gone and the voters did not confirm the role is still \
+         held here: what the standby does not hold is not released"
+    )]
+    Unconfirmed { role: String },
     #[error("sensor {role}: the voters give it to {holder} at epoch {epoch}, not to {me}")]
     Held {
         role: String,
@@ -92,15 +100,23 @@ pub(crate) struct Replicator {
     standby: String,
     machine: Replication,
     tokens: Tokens,
+    /// With voters: the role's lease ([`crate::lease`]).
+    lease: Option<LeaseClock>,
+    /// When the standby was last seen gone (or the start, before its token
+    /// was seen): records it did not acknowledge leave only under a
+    /// confirmation of the lease asked since.
+    gone_since: Instant,
 }
 
 impl Replicator {
-    /// Replicates sensor `sensor`'s journal to process `standby`.
+    /// Replicates sensor `sensor`'s journal to process `standby`; with
+    /// voters, under the role's `lease`.
     pub(crate) async fn start(
         session: &Session,
         keys: &Keys,
         sensor: &str,
         standby: &str,
+        lease: Option<LeaseClock>,
     ) -> Result<Self, StandbyError> {
         let tokens = session
             .liveliness()
@@ -119,6 +135,8 @@ impl Replicator {
             standby: standby.to_string(),
             machine: Replication::new(sensor, incarnation),
             tokens,
+            lease,
+            gone_since: Instant::now(),
         };
         replicator.drain();
         Ok(replicator)
@@ -135,6 +153,7 @@ impl Replicator {
         let present = sample.kind() == SampleKind::Put;
         match self.machine.standby(present) {
             Some(Presence::Gone) => {
+                self.gone_since = Instant::now();
                 tracing::warn!(standby = %self.standby,
                     "the sensor's standby is gone: the sensor goes on alone, its journal on one disk");
                 false
@@ -156,13 +175,15 @@ impl Replicator {
 
     /// Records `appended` to the journal (and fsynced; `compacted`: the
     /// journal was compacted right after): returns once the standby holds
-    /// them, or once it is gone.
+    /// them, or once it is gone — with voters, once the lease is also
+    /// confirmed since it went, and an error if the hold is lost instead
+    /// (then nothing that depends on them may leave).
     pub(crate) async fn replicate(
         &mut self,
         appended: &[Record],
         compacted: bool,
         gateway: &Gateway<Query>,
-    ) {
+    ) -> Result<(), StandbyError> {
         self.drain();
         if compacted {
             self.machine.compacted();
@@ -190,11 +211,21 @@ impl Replicator {
             self.drain();
             step = self.machine.answered(answer);
         }
+        // Gone, the standby may have gone because the voters gave it the
+        // role: only a read asked since then says this process holds it.
+        if let (false, Some(lease)) = (self.machine.present(), &self.lease) {
+            if !lease.confirmed_since(self.gone_since).await {
+                return Err(StandbyError::Unconfirmed {
+                    role: self.machine.sensor().to_string(),
+                });
+            }
+        }
         let waited = started.elapsed();
         if waited > ANSWER_PATIENCE {
             tracing::info!(standby = %self.standby, seconds = waited.as_secs_f64(),
                 present = self.machine.present(), "a slow replication to the standby");
         }
+        Ok(())
     }
 
     /// Sends `message` and waits for the answer: the copy's position
@@ -436,20 +467,33 @@ pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Result<u64,
 
 /// Returns once this process (`me`) may no longer serve `role`, held at
 /// `epoch`: the map gives the role to another, or no voter has led for
-/// the lease. The holder then stops serving.
-pub async fn keep_lease(mut claims: Claims, role: String, me: String, epoch: u64) {
+/// the lease. The holder then stops serving. Every read that finds the
+/// role still held here is noted on `clock`, and the loss too.
+pub async fn keep_lease(
+    mut claims: Claims,
+    role: String,
+    me: String,
+    epoch: u64,
+    clock: LeaseClock,
+) {
     let since = Instant::now();
     loop {
         tokio::time::sleep(LOOK_EVERY).await;
+        let asked = Instant::now();
         if let Some(map) = claims.read().await {
-            if let Verdict::Superseded { holder, epoch: now } = verdict(map, &role, &me, epoch) {
-                tracing::warn!(sensor = %role, ?holder, epoch = now, "the voters gave the sensor role to another: stopping");
-                return;
+            match verdict(map, &role, &me, epoch) {
+                Verdict::Holds => clock.confirm(asked),
+                Verdict::Superseded { holder, epoch: now } => {
+                    tracing::warn!(sensor = %role, ?holder, epoch = now, "the voters gave the sensor role to another: stopping");
+                    clock.lose();
+                    return;
+                }
             }
         }
         if claims.lapsed(since) {
             tracing::warn!(sensor = %role, lease = ?claims.lease,
                 "no leading voter for the lease: stopping the sensor role");
+            clock.lose();
             return;
         }
     }

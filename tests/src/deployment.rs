@@ -797,6 +797,10 @@ impl Drop for Deployment {
             let _ = child.kill();
             let _ = child.wait();
         }
+        // Kept after a failure, for its logs and state; gone otherwise.
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
     }
 }
 

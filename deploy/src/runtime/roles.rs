@@ -18,7 +18,7 @@ use idmesh_protocol::wire::keys::Keys;
 use idmesh_sensor::journal::{Journal, Record};
 use idmesh_sensor::{
     lines_of, stand_by, standby_path, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace,
-    MeshConfig, Router, RouterConfig, Source, StandbyConfig, Standing, TookOver,
+    LeaseClock, MeshConfig, Router, RouterConfig, Source, StandbyConfig, Standing, TookOver,
 };
 use idmesh_voter::VoterProcess;
 use std::fs::File;
@@ -273,14 +273,17 @@ struct SensorRun {
     journal: Option<(Journal, Vec<Record>)>,
     standby: Option<String>,
     epoch: u64,
+    lease: Option<LeaseClock>,
 }
 
-/// The sensor role held through the voters: what keeps its lease.
+/// The sensor role held through the voters: what keeps its lease, and
+/// the clock the sensor's I/O reads it on.
 struct Lease {
     claims: Claims,
     role: String,
     me: String,
     epoch: u64,
+    clock: LeaseClock,
 }
 
 /// Sensor `name` in its own process. With a standby its journal is
@@ -307,6 +310,7 @@ async fn own_sensor(
         journal,
         standby,
         epoch: lease.as_ref().map_or(0, |l| l.epoch),
+        lease: lease.as_ref().map(|l| l.clock.clone()),
     };
     let lost = LeaseLost::default();
     let stop = lease_or_shutdown(lease, lost.clone());
@@ -333,6 +337,7 @@ async fn claim_own(
         role: name.to_string(),
         me: name.to_string(),
         epoch,
+        clock: LeaseClock::default(),
     }))
 }
 
@@ -359,13 +364,18 @@ impl LeaseLost {
 }
 
 /// Until Ctrl-C or SIGTERM, or until the sensor role's lease is lost
-/// (then `lost` says so).
+/// (then `lost` says so). The lease is kept by a task of its own: the
+/// sensor's I/O may wait on its clock (`idmesh_sensor::LeaseClock`)
+/// while it is not polling this future.
 async fn lease_or_shutdown(lease: Option<Lease>, lost: LeaseLost) {
     match lease {
         Some(l) => {
+            let mut kept = tokio::spawn(idmesh_sensor::keep_lease(
+                l.claims, l.role, l.me, l.epoch, l.clock,
+            ));
             tokio::select! {
-                _ = shutdown() => {}
-                _ = idmesh_sensor::keep_lease(l.claims, l.role, l.me, l.epoch) => {
+                _ = shutdown() => kept.abort(),
+                _ = &mut kept => {
                     lost.0.store(true, std::sync::atomic::Ordering::Relaxed);
                 }
             }
@@ -422,6 +432,7 @@ async fn sensor_standby(
         journal: Some((journal, records)),
         standby: None,
         epoch,
+        lease: None,
     };
     let lost = LeaseLost::default();
     let stop = lease_or_shutdown(
@@ -430,6 +441,7 @@ async fn sensor_standby(
             role: this.sensor.clone(),
             me: name.to_string(),
             epoch,
+            clock: LeaseClock::default(),
         }),
         lost.clone(),
     );
@@ -450,6 +462,7 @@ async fn sensor(
         journal,
         standby,
         epoch,
+        lease,
     } = run;
     let this = topology.sensor_named(name)?;
     let max_errors = input.max_errors.unwrap_or(this.max_errors);
@@ -516,6 +529,7 @@ async fn sensor(
         ros2: this.ros2.clone(),
         standby,
         epoch,
+        lease,
     };
     idmesh_sensor::run(session, config, router, source, journal, stop).await?;
     Ok(())

@@ -74,6 +74,11 @@ impl Replication {
     }
 
     /// Whether the standby is up as far as the sensor knows.
+    /// The sensor whose journal this replicates.
+    pub(crate) fn sensor(&self) -> &str {
+        &self.sensor
+    }
+
     pub(crate) fn present(&self) -> bool {
         self.present
     }
