@@ -51,7 +51,8 @@ const ANSWER_PATIENCE: Duration = Duration::from_secs(1);
 /// reads the map to keep its lease.
 const LOOK_EVERY: Duration = Duration::from_millis(250);
 
-/// How often a sensor whose role another holds asks for it again.
+/// How long a sensor waits before it claims its role again when no
+/// voter decided.
 const HELD_WAIT: Duration = Duration::from_secs(2);
 
 /// How long one claim may wait for the voters' decision.
@@ -267,6 +268,13 @@ pub struct StandbyConfig {
     /// With voters, the lease; None: no voters, and no takeover (the
     /// copy is kept all the same).
     pub lease: Option<Duration>,
+    /// `journal` is this process's own journal, left by its earlier
+    /// holding of the role (a former sensor standing by for the process
+    /// that took its role over): emptied before it stands by. Past where
+    /// the role left it, it holds records its successor never had, so the
+    /// role must never be taken over from it; the holder sends its whole
+    /// journal in its place.
+    pub earlier_holding: bool,
 }
 
 /// How standing by ended.
@@ -317,10 +325,17 @@ pub async fn stand_by(
         .lease
         .map(|lease| Claims::new(session.clone(), keys.clone(), &config.name, lease));
     let mut copy = Copy::default();
+    let kept = !records.is_empty() && !config.earlier_holding;
+    if config.earlier_holding && !records.is_empty() {
+        journal.replace_encoded(&[])?;
+        tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(),
+            "this process's journal of the sensor role is of an earlier holding: emptied, standing by for the holder");
+    }
+    drop(records);
     // A copy kept from before counts the sensor gone from now; with none,
     // the sensor has not been up yet and nothing is to be taken over.
-    let mut gone_since = (!records.is_empty()).then(Instant::now);
-    drop(records);
+    let mut gone_since = kept.then(Instant::now);
+    let mut told_empty = false;
     let mut look = tokio::time::interval(LOOK_EVERY);
     tokio::pin!(shutdown);
     tracing::info!(sensor = %config.sensor, copy = %config.journal.display(), "standing by for the sensor");
@@ -343,6 +358,17 @@ pub async fn stand_by(
             }
             _ = look.tick() => {
                 let due = gone_since.is_some_and(|at| at.elapsed() >= config.takeover_after);
+                // A copy that holds nothing of the sensor's: the sensor went
+                // on alone while this process was away, and what it sent
+                // then is nowhere here.
+                if due && !kept && copy.position.is_none() {
+                    if !told_empty {
+                        tracing::warn!(sensor = %config.sensor,
+                            "the sensor is gone, but this standby holds nothing of its journal: not taking it over");
+                        told_empty = true;
+                    }
+                    continue;
+                }
                 let (true, Some(voters)) = (due, claims.as_mut()) else { continue };
                 match take_over(voters, &config.sensor).await {
                     Some(epoch) => {
@@ -433,33 +459,37 @@ async fn refuse(query: &Query, reason: String) -> Result<(), StandbyError> {
     Ok(())
 }
 
+/// Who serves a sensor role, as its own process found when it started.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Owned {
+    /// This process, at this epoch.
+    Here(u64),
+    /// Another process (its standby took it over): this one stands by for
+    /// it ([`stand_by`] with [`StandbyConfig::earlier_holding`]).
+    Elsewhere { holder: String, epoch: u64 },
+}
+
 /// With voters, before a sensor serves its own role: claims it (a
-/// sensor coming back to a role it holds keeps its epoch). While the
-/// voters give it to another (its standby took over), it waits, saying
-/// so once, and serves nothing: its journal stopped where the role left
-/// it, so it never fences the holder off; it claims only a role released
-/// or still its own. (Ending instead would have `idmesh up` start it
-/// again and again.)
-pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Result<u64, StandbyError> {
-    let mut told = false;
+/// sensor coming back to a role it holds keeps its epoch). A role the
+/// voters give to another is not fenced off: this process's journal
+/// stopped where the role left it. Asks again while no voter decides.
+pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Owned {
     loop {
         match claims.claim(role, None, CLAIM_PATIENCE).await {
-            Claimed::Won(epoch) => return Ok(epoch),
+            Claimed::Won(epoch) => return Owned::Here(epoch),
             Claimed::Lost { holder, epoch } => {
-                if !told {
-                    let held = StandbyError::Held {
-                        role: role.to_string(),
-                        me: me.to_string(),
-                        holder,
-                        epoch,
-                    };
-                    tracing::warn!(sensor = %role, "{held}: not serving, waiting until it is released");
-                    told = true;
-                }
-                tokio::time::sleep(HELD_WAIT).await;
+                let held = StandbyError::Held {
+                    role: role.to_string(),
+                    me: me.to_string(),
+                    holder: holder.clone(),
+                    epoch,
+                };
+                tracing::warn!(sensor = %role, "{held}: standing by for it");
+                return Owned::Elsewhere { holder, epoch };
             }
             Claimed::Undecided => {
-                tracing::warn!(sensor = %role, "no leading voter answered the sensor's claim: asking again")
+                tracing::warn!(sensor = %role, "no leading voter answered the sensor's claim: asking again");
+                tokio::time::sleep(HELD_WAIT).await;
             }
         }
     }

@@ -400,6 +400,30 @@ impl Deployment {
         self.children.push((name.to_string(), child));
     }
 
+    /// Starts process `name` in `role` again once it has ended by itself
+    /// (as `idmesh up` would), waiting for that up to `patience`: the
+    /// status it ended with.
+    pub fn relaunch(&mut self, role: &str, name: &str, patience: Duration) -> ExitStatus {
+        let status = self.wait_for(name, patience);
+        self.children.retain(|(n, _)| n != name);
+        self.launch(role, name);
+        status
+    }
+
+    /// Waits until the deployment's log holds `needle`; panics with the
+    /// log after `patience`.
+    pub fn await_log(&self, needle: &str, patience: Duration) {
+        let started = Instant::now();
+        while !self.log().contains(needle) {
+            assert!(
+                started.elapsed() < patience,
+                "no {needle:?} in the log within {patience:?}:\n{}",
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
     /// Runs process `name` in `role` and waits for it to end by itself (one
     /// expected to refuse to start); its exit status, or a panic after
     /// `patience`. What it said is in [`Deployment::log`].

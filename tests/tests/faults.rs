@@ -615,6 +615,80 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The sensor role moves to its standby and back. The sensor frozen past
+/// the takeover time: its standby takes the role over. Woken, the former
+/// sensor ends (its hold is gone); started again, it finds the role held
+/// by its standby and stands by for it, its own journal emptied and
+/// filled again with the holder's. Then the holder's host is lost
+/// (kill -9): the former sensor takes the role back from that copy, at
+/// the next epoch. The final answer is the offline twin's.
+#[test]
+fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_lost() {
+    let dir = std::env::temp_dir().join(format!("idmesh-sensor-back-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(60.0),
+        journal: true,
+        own_disks: true,
+        voters: 3,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        sensor_standby: true,
+        ..Settings::default()
+    };
+    let mut deployment = Deployment::start_each("sensor-back", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let first = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
+    deployment.first_answer(Duration::from_secs(30));
+    deployment.pause("sensor-0");
+    let taken = held_by(
+        &deployment,
+        "sensor-0",
+        "sensor-0-standby",
+        Duration::from_secs(40),
+    );
+    assert!(taken > first, "a takeover raises the epoch");
+    deployment.resume("sensor-0");
+    let ended = deployment.relaunch("sensor", "sensor-0", Duration::from_secs(30));
+    assert!(
+        !ended.success(),
+        "the woken former sensor ends with an error"
+    );
+    deployment.await_log(
+        "of an earlier holding: emptied, standing by for the holder",
+        Duration::from_secs(30),
+    );
+    // The holder sends it its whole journal once it sees it stand by.
+    let own = deployment
+        .dir
+        .join("state-sensor-0")
+        .join("sensor-0.journal");
+    let started = Instant::now();
+    while idmesh_sensor::journal::read(&own).map_or(0, |records| records.len()) == 0 {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the holder never sent its journal to the former sensor:\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    deployment.kill("sensor-0-standby");
+    let back = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
+    assert!(
+        back > taken,
+        "back home at a later epoch: {taken} then {back}"
+    );
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after the sensor role moved to its standby and back",
+    );
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The sensor's process frozen (SIGSTOP: its host cut off, the process
 /// still there) past the takeover time: the voters give the sensor role
 /// to its standby at the next epoch, which serves from its copy. Woken,

@@ -18,7 +18,7 @@ use idmesh_protocol::wire::keys::Keys;
 use idmesh_sensor::journal::{Journal, Record};
 use idmesh_sensor::{
     lines_of, stand_by, standby_path, Extraction, Faults, GatewayConfig, InputLine, LeaderPlace,
-    LeaseClock, MeshConfig, Router, RouterConfig, Source, StandbyConfig, Standing, TookOver,
+    LeaseClock, MeshConfig, Owned, Router, RouterConfig, Source, StandbyConfig, Standing, TookOver,
 };
 use idmesh_voter::VoterProcess;
 use std::fs::File;
@@ -288,7 +288,9 @@ struct Lease {
 
 /// Sensor `name` in its own process. With a standby its journal is
 /// replicated to it, and with voters too the sensor serves once it holds
-/// its role, until its lease is lost.
+/// its role, until its lease is lost. A role its standby took over is
+/// not taken back: this process stands by for the holder instead, and
+/// serves again only if that one goes.
 async fn own_sensor(
     session: zenoh::Session,
     topology: &Topology,
@@ -301,9 +303,22 @@ async fn own_sensor(
     // Without a standby nothing could take the role over: the sensor
     // neither claims it nor keeps a lease (a cut-off sensor that stopped
     // would stop the stream for good).
-    let lease = match standby {
-        Some(_) => claim_own(&session, topology, &keys, name).await?,
-        None => None,
+    let lease = match (&standby, topology.voters.is_empty()) {
+        (Some(_), false) => {
+            let mut claims = Claims::new(session.clone(), keys.clone(), name, VOTERS_LEASE);
+            match idmesh_sensor::claim_own(&mut claims, name, name).await {
+                Owned::Here(epoch) => {
+                    tracing::info!(sensor = %name, epoch, "the voters give this process its sensor role");
+                    Some(Lease::new(claims, name, name, epoch))
+                }
+                Owned::Elsewhere { .. } => {
+                    // Its journal is the copy it keeps from now on.
+                    drop(journal);
+                    return sensor_standby_for(session, topology, name, name, keys).await;
+                }
+            }
+        }
+        _ => None,
     };
     let run = SensorRun {
         input,
@@ -318,27 +333,16 @@ async fn own_sensor(
     lost.check(name)
 }
 
-/// With voters: sensor `name` claims its own role before it serves (it
-/// does not start when the voters gave it to its standby).
-async fn claim_own(
-    session: &zenoh::Session,
-    topology: &Topology,
-    keys: &Keys,
-    name: &str,
-) -> Result<Option<Lease>> {
-    if topology.voters.is_empty() {
-        return Ok(None);
+impl Lease {
+    fn new(claims: Claims, role: &str, me: &str, epoch: u64) -> Self {
+        Lease {
+            claims,
+            role: role.to_string(),
+            me: me.to_string(),
+            epoch,
+            clock: LeaseClock::default(),
+        }
     }
-    let mut claims = Claims::new(session.clone(), keys.clone(), name, VOTERS_LEASE);
-    let epoch = idmesh_sensor::claim_own(&mut claims, name, name).await?;
-    tracing::info!(sensor = %name, epoch, "the voters give this process its sensor role");
-    Ok(Some(Lease {
-        claims,
-        role: name.to_string(),
-        me: name.to_string(),
-        epoch,
-        clock: LeaseClock::default(),
-    }))
 }
 
 /// Set when a sensor stopped because its role's lease was lost.
@@ -364,23 +368,31 @@ impl LeaseLost {
 }
 
 /// Until Ctrl-C or SIGTERM, or until the sensor role's lease is lost
-/// (then `lost` says so). The lease is kept by a task of its own: the
-/// sensor's I/O may wait on its clock (`idmesh_sensor::LeaseClock`)
-/// while it is not polling this future.
-async fn lease_or_shutdown(lease: Option<Lease>, lost: LeaseLost) {
-    match lease {
-        Some(l) => {
-            let mut kept = tokio::spawn(idmesh_sensor::keep_lease(
-                l.claims, l.role, l.me, l.epoch, l.clock,
-            ));
-            tokio::select! {
-                _ = shutdown() => kept.abort(),
-                _ = &mut kept => {
-                    lost.0.store(true, std::sync::atomic::Ordering::Relaxed);
+/// (then `lost` says so). The lease is kept by a task of its own, started
+/// here and now: the sensor's I/O waits on its clock
+/// (`idmesh_sensor::LeaseClock`) before it first polls this future, and
+/// whenever it is not polling it.
+fn lease_or_shutdown(
+    lease: Option<Lease>,
+    lost: LeaseLost,
+) -> impl std::future::Future<Output = ()> {
+    let kept = lease.map(|l| {
+        tokio::spawn(idmesh_sensor::keep_lease(
+            l.claims, l.role, l.me, l.epoch, l.clock,
+        ))
+    });
+    async move {
+        match kept {
+            Some(mut kept) => {
+                tokio::select! {
+                    _ = shutdown() => kept.abort(),
+                    _ = &mut kept => {
+                        lost.0.store(true, std::sync::atomic::Ordering::Relaxed);
+                    }
                 }
             }
+            None => shutdown().await,
         }
-        None => shutdown().await,
     }
 }
 
@@ -397,19 +409,39 @@ async fn sensor_standby(
         .iter()
         .find(|s| s.name == name)
         .ok_or_else(|| anyhow!("no sensor standby named {name:?} in the topology"))?;
+    sensor_standby_for(session, topology, name, &this.sensor, keys).await
+}
+
+/// Process `me` standing by for sensor role `role`: the role's
+/// `[[sensor_standby]]`, or the role's own process once its standby took
+/// the role over (its own journal, of that earlier holding, becomes the
+/// copy). Whichever of the two serves replicates its journal to the
+/// other, so the role keeps a standby through every takeover.
+async fn sensor_standby_for(
+    session: zenoh::Session,
+    topology: &Topology,
+    me: &str,
+    role: &str,
+    keys: Keys,
+) -> Result<()> {
     let dir = topology.state_path().ok_or_else(|| {
         anyhow!("[[sensor_standby]]: give state_dir, where it keeps its copy of the journal")
     })?;
     std::fs::create_dir_all(&dir)
         .map_err(|e| anyhow!("{}: cannot create the state directory: {e}", dir.display()))?;
+    let home = me == role;
     let config = StandbyConfig {
-        name: name.to_string(),
-        sensor: this.sensor.clone(),
+        name: me.to_string(),
+        sensor: role.to_string(),
         keys: keys.clone(),
-        journal: standby_path(&dir, &this.sensor),
+        journal: match home {
+            true => dir.join(format!("{role}.journal")),
+            false => standby_path(&dir, role),
+        },
         takeover_after: Duration::from_millis(topology.takeover_after_ms),
         lease: (!topology.voters.is_empty() && topology.takeover_after_ms > 0)
             .then_some(VOTERS_LEASE),
+        earlier_holding: home,
     };
     let Standing::TookOver(took) = stand_by(&session, &config, shutdown()).await? else {
         return Ok(());
@@ -420,33 +452,29 @@ async fn sensor_standby(
         records,
         claims,
     } = *took;
-    let journal = match topology.sensor_named(&this.sensor)?.compact_journal_after {
+    let journal = match topology.sensor_named(role)?.compact_journal_after {
         Some(bytes) => journal.compact_after(bytes),
         None => journal,
     };
+    let lease = Lease::new(claims, role, me, epoch);
     let run = SensorRun {
         input: Input {
             stdin: false,
             max_errors: None,
         },
         journal: Some((journal, records)),
-        standby: None,
+        // The other of the two stands by now.
+        standby: match home {
+            true => topology.standby_of(role).map(|s| s.name.clone()),
+            false => Some(role.to_string()),
+        },
         epoch,
-        lease: None,
+        lease: Some(lease.clock.clone()),
     };
     let lost = LeaseLost::default();
-    let stop = lease_or_shutdown(
-        Some(Lease {
-            claims,
-            role: this.sensor.clone(),
-            me: name.to_string(),
-            epoch,
-            clock: LeaseClock::default(),
-        }),
-        lost.clone(),
-    );
-    sensor(session, topology, &this.sensor, keys, run, stop).await?;
-    lost.check(&this.sensor)
+    let stop = lease_or_shutdown(Some(lease), lost.clone());
+    sensor(session, topology, role, keys, run, stop).await?;
+    lost.check(role)
 }
 
 async fn sensor(
