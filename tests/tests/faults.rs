@@ -147,12 +147,7 @@ fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
     );
     gone.kill("leader-1");
     let killed = Instant::now();
-    let last = gone.final_marginals(Duration::from_secs(60));
-    assert_same_marginals(
-        &last,
-        &floats(&twin["final_p_red"]),
-        "after a host lost with its disk",
-    );
+    final_is_twins(&gone, &twin, "after a host lost with its disk");
     assert!(
         kept_copy,
         "leader-2 kept leader-1's snapshot before the kill"
@@ -382,12 +377,7 @@ fn a_coordinator_killed_for_good_is_replaced_by_its_replica() {
         killed.elapsed().as_secs_f64(),
         idmesh_tests::watermark_events(&answered)
     );
-    let last = deployment.final_marginals(Duration::from_secs(60));
-    assert_same_marginals(
-        &last,
-        &floats(&twin["final_p_red"]),
-        "after the coordinator's loss",
-    );
+    final_is_twins(&deployment, &twin, "after the coordinator's loss");
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -446,6 +436,29 @@ fn voters_keep_a_leader_with_one_gone_and_take_it_back() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The final answer, within 60 s, equals the offline twin's (`twin`, its
+/// summary); `after` says after what, should it not.
+fn final_is_twins(deployment: &Deployment, twin: &serde_json::Value, after: &str) {
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(&last, &floats(&twin["final_p_red"]), after);
+}
+
+/// Three leaders, each on a disk of its own, under three voters, with a
+/// snapshot every 10 inputs and a takeover after 1 s at `rate` events per
+/// second: the deployment the host-loss tests strike.
+fn apart_under_voters(rate: f64) -> Settings {
+    Settings {
+        leaders: 3,
+        rate: Some(rate),
+        journal: true,
+        own_disks: true,
+        voters: 3,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(1000),
+        ..Settings::default()
+    }
+}
+
 /// Who holds `role` in the voters' map, and at which epoch (from the
 /// leading voter's answer).
 fn holding(deployment: &Deployment, role: &str) -> Option<(String, u64)> {
@@ -488,16 +501,7 @@ fn held_by(deployment: &Deployment, role: &str, holder: &str, within: Duration) 
 fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
     let dir = std::env::temp_dir().join(format!("idmesh-frozen-{}", std::process::id()));
     let trace = crowd(&dir, 12, 4, 150.0, 5);
-    let settings = Settings {
-        leaders: 3,
-        rate: Some(300.0),
-        journal: true,
-        own_disks: true,
-        voters: 3,
-        snapshot_every: Some(10),
-        takeover_after_ms: Some(1000),
-        ..Settings::default()
-    };
+    let settings = apart_under_voters(300.0);
     let deployment = Deployment::start_each("frozen", &trace, &settings);
     let twin = deployment.twin_summary(&trace);
     let first = held_by(&deployment, "leader-1", "leader-1", Duration::from_secs(30));
@@ -516,10 +520,9 @@ fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
     deployment.resume("leader-1");
     let home = held_by(&deployment, "leader-1", "leader-1", Duration::from_secs(40));
     assert!(home > taken, "home at a later epoch: {taken} then {home}");
-    let last = deployment.final_marginals(Duration::from_secs(60));
-    assert_same_marginals(
-        &last,
-        &floats(&twin["final_p_red"]),
+    final_is_twins(
+        &deployment,
+        &twin,
         "after a holder superseded and its role back home",
     );
     let log = deployment.log();
@@ -546,15 +549,8 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
     let dir = std::env::temp_dir().join(format!("idmesh-sensor-standby-{}", std::process::id()));
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        leaders: 3,
-        rate: Some(400.0),
-        journal: true,
-        own_disks: true,
-        voters: 3,
-        snapshot_every: Some(10),
-        takeover_after_ms: Some(1000),
         sensor_standby: true,
-        ..Settings::default()
+        ..apart_under_voters(400.0)
     };
     let started = Instant::now();
     let mut deployment = Deployment::start_each("sensor-standby", &trace, &settings);
@@ -593,12 +589,7 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
         taken > first,
         "a takeover raises the epoch: {first} then {taken}"
     );
-    let last = deployment.final_marginals(Duration::from_secs(60));
-    assert_same_marginals(
-        &last,
-        &floats(&twin["final_p_red"]),
-        "after the sensor's host was lost",
-    );
+    final_is_twins(&deployment, &twin, "after the sensor's host was lost");
     let log = deployment.log();
     assert!(
         log.contains("taking over from the copy"),
@@ -627,15 +618,8 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
     let dir = std::env::temp_dir().join(format!("idmesh-sensor-back-{}", std::process::id()));
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        leaders: 3,
-        rate: Some(60.0),
-        journal: true,
-        own_disks: true,
-        voters: 3,
-        snapshot_every: Some(10),
-        takeover_after_ms: Some(1000),
         sensor_standby: true,
-        ..Settings::default()
+        ..apart_under_voters(60.0)
     };
     let mut deployment = Deployment::start_each("sensor-back", &trace, &settings);
     let twin = deployment.twin_summary(&trace);
@@ -679,10 +663,9 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
         back > taken,
         "back home at a later epoch: {taken} then {back}"
     );
-    let last = deployment.final_marginals(Duration::from_secs(60));
-    assert_same_marginals(
-        &last,
-        &floats(&twin["final_p_red"]),
+    final_is_twins(
+        &deployment,
+        &twin,
         "after the sensor role moved to its standby and back",
     );
     drop(deployment);
@@ -700,15 +683,8 @@ fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
     let dir = std::env::temp_dir().join(format!("idmesh-sensor-frozen-{}", std::process::id()));
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        leaders: 3,
-        rate: Some(200.0),
-        journal: true,
-        own_disks: true,
-        voters: 3,
-        snapshot_every: Some(10),
-        takeover_after_ms: Some(1000),
         sensor_standby: true,
-        ..Settings::default()
+        ..apart_under_voters(200.0)
     };
     let started = Instant::now();
     let deployment = Deployment::start_each("sensor-frozen", &trace, &settings);
@@ -729,10 +705,9 @@ fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
     );
     let takeover = frozen.elapsed().as_secs_f64();
     deployment.resume("sensor-0");
-    let last = deployment.final_marginals(Duration::from_secs(60));
-    assert_same_marginals(
-        &last,
-        &floats(&twin["final_p_red"]),
+    final_is_twins(
+        &deployment,
+        &twin,
         "after the sensor was superseded by its standby",
     );
     let log = deployment.log();
