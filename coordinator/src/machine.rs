@@ -159,8 +159,9 @@ pub struct Memory {
     /// Every sensor that has placed a cut: who is missing when none
     /// answers.
     sensors: Mutex<std::collections::BTreeSet<String>>,
-    /// The newest epoch each leader role answered at: a former holder's
-    /// answer (cut off, still running) is refused.
+    /// The newest epoch each leader role answered at, and each sensor
+    /// role placed a cut at: a former holder's answer (cut off, still
+    /// running) is refused.
     fence: Mutex<Fence>,
     rejected: AtomicU64,
     bad_replies: AtomicU64,
@@ -176,16 +177,21 @@ impl Memory {
         self.rejected.fetch_add(1, Ordering::Relaxed);
     }
 
-    /// Counts a reply from another process that was no good.
-    /// The fence on an answer of `role` at `epoch`: why not, if it comes
-    /// from a former holder of the role.
-    pub(crate) fn admit_epoch(&self, role: &str, epoch: u64) -> Result<(), Stale> {
+    /// The fence on an answer (`what`) of `role` at `epoch`: why not, if
+    /// it comes from a former holder of the role.
+    pub(crate) fn admit_epoch(
+        &self,
+        what: &'static str,
+        role: &str,
+        epoch: u64,
+    ) -> Result<(), Stale> {
         match self.fence.lock() {
-            Ok(mut fence) => fence.admit(Partial::WHAT, role, epoch),
+            Ok(mut fence) => fence.admit(what, role, epoch),
             Err(_) => Ok(()),
         }
     }
 
+    /// Counts a reply from another process that was no good.
     pub(crate) fn note_bad_reply(&self, what: &str, problem: &str) {
         let n = self.bad_replies.fetch_add(1, Ordering::Relaxed) + 1;
         tracing::warn!(what, problem, bad_replies = n, "bad reply");
@@ -446,7 +452,7 @@ impl Partials {
                 Ok(p) if tag.is_none_or(|t| t == p.tag) => {
                     // Two processes answering for one role: the one at
                     // the newest epoch holds it; the other is fenced off.
-                    match memory.admit_epoch(&p.leader, p.epoch) {
+                    match memory.admit_epoch(Partial::WHAT, &p.leader, p.epoch) {
                         Ok(()) => {
                             self.parts.insert(p.leader.clone(), p);
                         }

@@ -207,6 +207,7 @@ pub(crate) fn place<Q>(
         wanted,
         answer: CutPlaced {
             version: VERSION,
+            epoch: 0,
             sensor: name.to_string(),
             seq,
             events,

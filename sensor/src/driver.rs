@@ -41,6 +41,7 @@ use crate::router::Router;
 use crate::standby::Replicator;
 use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::producer_to_sensor::{COUNTER, FINISH, PRODUCER, TIME};
@@ -455,7 +456,7 @@ impl TraceCursor<'_> {
             ))
             .await?;
         for p in placed {
-            reply_placed(p).await;
+            reply_placed(p, gateway.epoch()).await;
         }
         if gateway.finished() {
             tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = self.started.elapsed().as_secs_f64(), "source exhausted");
@@ -823,7 +824,7 @@ async fn take_stdin(
     }
     wire.flush(gateway).await?;
     for p in placed {
-        reply_placed(p).await;
+        reply_placed(p, gateway.epoch()).await;
     }
     Ok(())
 }
@@ -905,7 +906,7 @@ async fn ingest(
                 tracing::warn!(error = %e, "could not acknowledge an ingest request");
             }
             for p in placed {
-                reply_placed(p).await;
+                reply_placed(p, gateway.epoch()).await;
             }
         }
         Err(refusal) => {
@@ -975,7 +976,7 @@ async fn take_ros2(s: &mut Sensor<'_>, message: Option<Message>) -> Result<(), G
             }
             s.wire.sync(&mut s.gateway).await?;
             for p in placed {
-                reply_placed(p).await;
+                reply_placed(p, s.gateway.epoch()).await;
             }
         }
         Err(refusal) => {
@@ -1008,7 +1009,7 @@ async fn cut(
     match gateway.cut(query, &parameters) {
         CutOutcome::Placed(p) => {
             wire.flush(gateway).await?;
-            reply_placed(p).await;
+            reply_placed(p, gateway.epoch()).await;
         }
         CutOutcome::Scheduled => {}
         CutOutcome::Refused(query, reason) => {
@@ -1049,7 +1050,7 @@ async fn settle(
     };
     wire.flush(gateway).await?;
     for placed in gateway.answered() {
-        reply_placed(placed).await;
+        reply_placed(placed, gateway.epoch()).await;
     }
     for (query, reason) in gateway.refused() {
         let _ = bounded("a refusal", query.reply_err(reason)).await;
@@ -1148,11 +1149,18 @@ async fn reply_to<R: serde::Serialize>(
     }
 }
 
-async fn reply_placed(placed: Placed<Query>) {
+/// Answers a cut query with the cut placed, stamped with the epoch this
+/// process holds the sensor role at: the coordinator refuses a former
+/// holder's.
+async fn reply_placed(placed: Placed<Query>, epoch: u64) {
     let query = placed.query;
+    let answer = CutPlaced {
+        epoch,
+        ..placed.answer
+    };
     if let Some(Err(e)) = bounded(
         "a cut",
-        query.reply(query.key_expr().clone(), encode(&placed.answer)),
+        query.reply(query.key_expr().clone(), encode(&answer)),
     )
     .await
     {

@@ -210,6 +210,11 @@ impl<Q> Gateway<Q> {
         self
     }
 
+    /// The epoch at which this process holds the sensor role.
+    pub fn epoch(&self) -> u64 {
+        self.epoch
+    }
+
     /// Routes at most `window` seqs past the slowest leader's progress
     /// ([`Gateway::room`]).
     pub fn windowed(mut self, window: u64) -> Self {

@@ -12,6 +12,7 @@ use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
 use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStats};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{LeaderPlace, PositionsAnswer, Watermark};
+use idmesh_protocol::wire::Versioned;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Duration;
@@ -249,14 +250,30 @@ async fn place_cut(
 ) -> Result<CutPlaced, GatherError> {
     let selector = format!("{}?{parameters}", keys.every_sensor_cut());
     let replies = ask_everyone(session, selector, timeout, "ask for a cut").await?;
-    // The first reply decides: one sensor places the cut.
-    let Ok(reply) = replies.recv_async().await else {
-        return Err(memory.no_sensor());
-    };
-    let key = reply
-        .result()
-        .map_or_else(|_| String::new(), |sample| sample.key_expr().to_string());
-    read_cut(reply_bytes(&reply), &key, memory)
+    // The first reply decides: one sensor places the cut. But a former
+    // holder of the sensor role (cut off, still running) may answer
+    // beside its successor: one at an older epoch than the role's newest
+    // is passed over.
+    let mut fenced = None;
+    while let Ok(reply) = replies.recv_async().await {
+        let key = reply
+            .result()
+            .map_or_else(|_| String::new(), |sample| sample.key_expr().to_string());
+        let cut = read_cut(reply_bytes(&reply), &key, memory)?;
+        match memory.admit_epoch(CutPlaced::WHAT, &cut.sensor, cut.epoch) {
+            Ok(()) => return Ok(cut),
+            Err(stale) => {
+                memory.note_bad_reply("cut", &stale.to_string());
+                fenced = Some(stale);
+            }
+        }
+    }
+    Err(match fenced {
+        Some(stale) => {
+            GatherError::Failed(format!("degraded: {stale}; no holder since placed the cut"))
+        }
+        None => memory.no_sensor(),
+    })
 }
 
 /// Every leader's counters.

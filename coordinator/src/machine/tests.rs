@@ -8,6 +8,7 @@ use idmesh_protocol::wire::{encode, VERSION};
 fn cut(seq: u64, leaders: &[&str]) -> CutPlaced {
     CutPlaced {
         version: VERSION,
+        epoch: 0,
         sensor: "sensor-0".into(),
         seq,
         events: seq * 2,
@@ -584,5 +585,35 @@ fn the_answer_of_a_roles_newest_holder_is_kept_and_the_former_fenced() {
     assert!(
         parts.is_empty(),
         "alone, the former holder is still refused"
+    );
+}
+
+/// A cut placed by a former holder of the sensor role (cut off, still
+/// answering) is refused once its successor's has been admitted, and the
+/// sensor's fence leaves the leaders' alone.
+#[test]
+fn a_cut_from_a_former_sensor_holder_is_refused() {
+    let memory = Memory::default();
+    let placed_at = |epoch| CutPlaced {
+        epoch,
+        ..cut(5, &["a"])
+    };
+    let what = CutPlaced::WHAT;
+    let successor = placed_at(2);
+    assert!(memory
+        .admit_epoch(what, &successor.sensor, successor.epoch)
+        .is_ok());
+    let former = placed_at(1);
+    let refused = memory
+        .admit_epoch(what, &former.sensor, former.epoch)
+        .expect_err("a former holder's cut");
+    assert_eq!((refused.epoch, refused.current), (1, 2));
+    assert!(
+        memory.admit_epoch(what, "sensor-0", 2).is_ok(),
+        "the holder's next"
+    );
+    assert!(
+        memory.admit_epoch(Partial::WHAT, "a", 1).is_ok(),
+        "a leader role's epochs are its own"
     );
 }

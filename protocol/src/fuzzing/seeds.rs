@@ -61,6 +61,7 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
         "partial" => partials().iter().map(encode).collect(),
         "cut_placed" => vec![encode(&CutPlaced {
             version: VERSION,
+            epoch: 0,
             sensor: "sensor-0".into(),
             seq: 33,
             events: 30,

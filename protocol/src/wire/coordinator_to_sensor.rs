@@ -14,6 +14,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CutPlaced {
     pub version: u16,
+    /// The epoch of the sensor role's holder that placed it
+    /// ([`super::epoch`]; 0 without voters).
+    pub epoch: u64,
     pub sensor: String,
     /// The seq of the cut item.
     pub seq: u64,
@@ -32,6 +35,7 @@ pub struct CutPlaced {
     pub origins: Vec<(String, u64)>,
 }
 super::versioned!(CutPlaced, "cut");
+super::epoch::epoched!(CutPlaced);
 
 /// A sensor gateway's counters (JSON, `P/sensor/<name>/stats`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -243,6 +247,7 @@ mod tests {
     fn cuts_are_checked() {
         let cut = CutPlaced {
             version: VERSION,
+            epoch: 0,
             sensor: "s".into(),
             seq: 1,
             events: 0,

@@ -71,7 +71,9 @@ use serde::Serialize;
 /// receivers fence on ([`epoch`]).
 /// 9: what the sensor sends leaders (`Batch`, `Followed`, `Resent`)
 /// carries the sensor role's epoch too: a sensor's standby may hold it.
-pub const VERSION: u16 = 9;
+/// 10: a cut's answer (`CutPlaced`) carries the sensor role's epoch,
+/// which the coordinator fences on.
+pub const VERSION: u16 = 10;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]
