@@ -307,6 +307,8 @@ struct Tokens {
     /// Lost roles this process declined to adopt, its state of them being
     /// behind their mark (warned once per loss).
     declined: BTreeSet<String>,
+    /// A mark heard since `published` was last kept on disk.
+    unkept: bool,
 }
 
 impl Tokens {
@@ -320,7 +322,38 @@ impl Tokens {
         });
         if newer {
             self.published.insert(mark.leader.clone(), mark);
+            self.unkept = true;
         }
+    }
+
+    /// The marks heard, kept in `dir` (at most once a sweep): see
+    /// [`standby::keep_marks`].
+    fn keep_published(&mut self, config: &HostConfig) {
+        let (true, Some(dir)) = (self.unkept, &config.state_dir) else {
+            return;
+        };
+        self.unkept = false;
+        if let Err(e) = standby::keep_marks(dir, self.published.values()) {
+            tracing::warn!(process = %config.name, error = %e, "could not keep the durable marks heard");
+        }
+    }
+
+    /// The marks this process kept before it was started again.
+    fn heard_before(config: &HostConfig) -> Self {
+        let mut tokens = Tokens::default();
+        let Some(dir) = &config.state_dir else {
+            return tokens;
+        };
+        match standby::heard_marks(dir) {
+            Ok(marks) => {
+                for mark in marks {
+                    tokens.published.insert(mark.leader.clone(), mark);
+                }
+            }
+            Err(e) => tracing::warn!(process = %config.name, error = %e,
+                "the durable marks heard before cannot be read: only those heard from now on count"),
+        }
+        tokens
     }
 }
 
@@ -371,7 +404,7 @@ pub async fn run(
         stored,
         durable,
     } = Heard::declare(&session, &config).await?;
-    let mut tokens = Tokens::default();
+    let mut tokens = Tokens::heard_before(&config);
     let mut tick = tokio::time::interval(Duration::from_millis(250));
     let standing = Instant::now();
     tokio::pin!(shutdown);
@@ -406,7 +439,10 @@ pub async fn run(
                     on_ended(&mut hosted, &role, result, &mut home).await?;
                 }
             }
-            _ = tick.tick() => on_tick(&mut hosted, &mut tokens, &mut home, standing).await?,
+            _ = tick.tick() => {
+                on_tick(&mut hosted, &mut tokens, &mut home, standing).await?;
+                tokens.keep_published(hosted.config);
+            }
         }
         hosted.tell_standbys(&tokens.alive);
     }

@@ -206,6 +206,48 @@ pub(crate) fn stamped_epoch(dir: &Path, role: &str) -> Result<u64, StandbyError>
         .ok_or_else(|| refused("not one whole epoch".to_string()))
 }
 
+/// What a file of heard durable marks' header says it holds.
+pub const MARKS: &str = "leader-marks";
+
+/// Where a process keeps, under `dir`, the newest durable mark it heard of
+/// each leader role.
+pub(crate) fn marks_path(dir: &Path) -> PathBuf {
+    dir.join("heard.marks")
+}
+
+/// Keeps, whole and fsynced, the newest durable mark heard of each role:
+/// started again, the process knows them before any holder publishes
+/// anew — and a role whose holder is gone never does, which is when an
+/// adoption must tell whether its copy is behind the mark.
+pub(crate) fn keep_marks<'a>(
+    dir: &Path,
+    marks: impl Iterator<Item = &'a Durable>,
+) -> Result<(), StandbyError> {
+    let records: Vec<Vec<u8>> = marks.map(encode).collect();
+    log::write_file(&marks_path(dir), MARKS, 1, &records)?;
+    Ok(())
+}
+
+/// The marks [`keep_marks`] kept here (none without the file).
+pub(crate) fn heard_marks(dir: &Path) -> Result<Vec<Durable>, StandbyError> {
+    let path = marks_path(dir);
+    let refused = |problem: String| StandbyError::Refused {
+        path: path.display().to_string(),
+        problem,
+    };
+    let Some(contents) = read_whole(&path, MARKS, refused)? else {
+        return Ok(Vec::new());
+    };
+    if !matches!(contents.ending, Ending::Clean) {
+        return Err(refused("not whole".to_string()));
+    }
+    contents
+        .records
+        .iter()
+        .map(|r| decode::<Durable>(&r.payload).map_err(|e| refused(e.to_string())))
+        .collect()
+}
+
 /// Before this process runs `role` again, with voters: its journal of the
 /// role here is the role's newest state only if it was written in the
 /// holding the map named last (`last`, its epoch before this claim) —
@@ -480,6 +522,31 @@ mod tests {
             Source::StandbyCopy(mark(5))
         );
         assert!(journal.exists(), "nothing is removed");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn the_marks_heard_are_read_back_as_kept_and_a_damaged_file_is_refused() {
+        let dir = dir("marks");
+        assert!(heard_marks(&dir).unwrap().is_empty(), "none kept yet");
+        let other = Durable {
+            leader: "l2".into(),
+            epoch: 3,
+            ..mark(9)
+        };
+        keep_marks(&dir, [mark(4), other.clone()].iter()).unwrap();
+        assert_eq!(heard_marks(&dir).unwrap(), vec![mark(4), other.clone()]);
+        keep_marks(&dir, [other.clone()].iter()).unwrap();
+        assert_eq!(heard_marks(&dir).unwrap(), vec![other], "replaced whole");
+        let path = marks_path(&dir);
+        let mut bytes = std::fs::read(&path).unwrap();
+        let last = bytes.len() - 3;
+        bytes[last] ^= 0xff;
+        std::fs::write(&path, bytes).unwrap();
+        assert!(
+            heard_marks(&dir).is_err(),
+            "a damaged file is said, not read"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }
