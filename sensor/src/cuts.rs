@@ -159,15 +159,20 @@ impl<Q> Cuts<Q> {
     }
 
     /// Places the cuts whose point the router has reached (call after each
-    /// line), adding them to `placed`.
-    pub(crate) fn reached(&mut self, router: &mut Router, name: &str, placed: &mut Vec<Placed<Q>>) {
+    /// line), adding them to `placed`, as sensor `name` at `epoch`.
+    pub(crate) fn reached(
+        &mut self,
+        router: &mut Router,
+        (name, epoch): (&str, u64),
+        placed: &mut Vec<Placed<Q>>,
+    ) {
         while let Some(entry) = self.scheduled.first_entry() {
             if *entry.key() > router.events() {
                 return;
             }
             for (wanted, query) in entry.remove() {
                 self.held -= 1;
-                placed.push(place(router, name, wanted, query, false));
+                placed.push(place(router, (name, epoch), wanted, query, false));
             }
         }
     }
@@ -192,10 +197,11 @@ impl<Q> Cuts<Q> {
     }
 }
 
-/// Places the cut a query wants in every leader's stream now.
+/// Places the cut a query wants in every leader's stream now, as sensor
+/// `name` holding its role at `epoch` (the coordinator fences on it).
 pub(crate) fn place<Q>(
     router: &mut Router,
-    name: &str,
+    (name, epoch): (&str, u64),
     wanted: Wanted,
     query: Q,
     finished: bool,
@@ -207,7 +213,7 @@ pub(crate) fn place<Q>(
         wanted,
         answer: CutPlaced {
             version: VERSION,
-            epoch: 0,
+            epoch,
             sensor: name.to_string(),
             seq,
             events,

@@ -41,7 +41,6 @@ use crate::router::Router;
 use crate::standby::Replicator;
 use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
-use idmesh_protocol::wire::coordinator_to_sensor::CutPlaced;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::producer_to_sensor::{COUNTER, FINISH, PRODUCER, TIME};
@@ -456,7 +455,7 @@ impl TraceCursor<'_> {
             ))
             .await?;
         for p in placed {
-            reply_placed(p, gateway.epoch()).await;
+            reply_placed(p).await;
         }
         if gateway.finished() {
             tracing::info!(sensor = %config.name, events = gateway.router().events(), seconds = self.started.elapsed().as_secs_f64(), "source exhausted");
@@ -824,7 +823,7 @@ async fn take_stdin(
     }
     wire.flush(gateway).await?;
     for p in placed {
-        reply_placed(p, gateway.epoch()).await;
+        reply_placed(p).await;
     }
     Ok(())
 }
@@ -906,7 +905,7 @@ async fn ingest(
                 tracing::warn!(error = %e, "could not acknowledge an ingest request");
             }
             for p in placed {
-                reply_placed(p, gateway.epoch()).await;
+                reply_placed(p).await;
             }
         }
         Err(refusal) => {
@@ -976,7 +975,7 @@ async fn take_ros2(s: &mut Sensor<'_>, message: Option<Message>) -> Result<(), G
             }
             s.wire.sync(&mut s.gateway).await?;
             for p in placed {
-                reply_placed(p, s.gateway.epoch()).await;
+                reply_placed(p).await;
             }
         }
         Err(refusal) => {
@@ -1009,7 +1008,7 @@ async fn cut(
     match gateway.cut(query, &parameters) {
         CutOutcome::Placed(p) => {
             wire.flush(gateway).await?;
-            reply_placed(p, gateway.epoch()).await;
+            reply_placed(p).await;
         }
         CutOutcome::Scheduled => {}
         CutOutcome::Refused(query, reason) => {
@@ -1050,7 +1049,7 @@ async fn settle(
     };
     wire.flush(gateway).await?;
     for placed in gateway.answered() {
-        reply_placed(placed, gateway.epoch()).await;
+        reply_placed(placed).await;
     }
     for (query, reason) in gateway.refused() {
         let _ = bounded("a refusal", query.reply_err(reason)).await;
@@ -1149,18 +1148,11 @@ async fn reply_to<R: serde::Serialize>(
     }
 }
 
-/// Answers a cut query with the cut placed, stamped with the epoch this
-/// process holds the sensor role at: the coordinator refuses a former
-/// holder's.
-async fn reply_placed(placed: Placed<Query>, epoch: u64) {
+async fn reply_placed(placed: Placed<Query>) {
     let query = placed.query;
-    let answer = CutPlaced {
-        epoch,
-        ..placed.answer
-    };
     if let Some(Err(e)) = bounded(
         "a cut",
-        query.reply(query.key_expr().clone(), encode(&answer)),
+        query.reply(query.key_expr().clone(), encode(&placed.answer)),
     )
     .await
     {

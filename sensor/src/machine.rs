@@ -210,11 +210,6 @@ impl<Q> Gateway<Q> {
         self
     }
 
-    /// The epoch at which this process holds the sensor role.
-    pub fn epoch(&self) -> u64 {
-        self.epoch
-    }
-
     /// Routes at most `window` seqs past the slowest leader's progress
     /// ([`Gateway::room`]).
     pub fn windowed(mut self, window: u64) -> Self {
@@ -602,8 +597,11 @@ impl<Q> Gateway<Q> {
                 refused.push((i, reason));
             }
             let before = placed.len();
-            self.cuts
-                .reached(&mut self.state.router, &self.name, &mut placed);
+            self.cuts.reached(
+                &mut self.state.router,
+                (&self.name, self.epoch),
+                &mut placed,
+            );
             cuts.extend(placed[before..].iter().map(|p| (i as u32, p.wanted)));
         }
         (placed, cuts, refused)
@@ -851,7 +849,7 @@ impl<Q> Gateway<Q> {
                 self.note(Record::Cut(wanted));
                 CutOutcome::Placed(place(
                     &mut self.state.router,
-                    &self.name,
+                    (&self.name, self.epoch),
                     wanted,
                     query,
                     self.state.finished,

@@ -1412,7 +1412,7 @@ fn a_former_holder_of_a_role_is_fenced_off_once_its_successor_is_heard() {
 }
 
 /// A sensor role held at an epoch stamps it on every batch and reply to a
-/// leader; batches kept from a former holder and sent again carry the
+/// leader, and on every cut's answer to the coordinator; batches kept from a former holder and sent again carry the
 /// epoch of the holder that resends them.
 #[test]
 fn batches_and_replies_carry_the_sensor_roles_epoch() {
@@ -1448,4 +1448,21 @@ fn batches_and_replies_carry_the_sensor_roles_epoch() {
         }))
         .unwrap();
     assert_eq!(followed.epoch, 2);
+    // A cut's answer too, placed now or once the stream reaches it.
+    let at = |tag: &str, events: Option<&str>| CutParameters {
+        tag: Some(tag.into()),
+        rows: false,
+        events: events.map(str::to_owned),
+    };
+    match successor.cut((), &at("7", None)) {
+        CutOutcome::Placed(p) => assert_eq!(p.answer.epoch, 2),
+        _ => panic!("placed now"),
+    }
+    assert!(matches!(
+        successor.cut((), &at("8", Some("2"))),
+        CutOutcome::Scheduled
+    ));
+    let placed = successor.line(&mix(1, 2));
+    assert_eq!(placed.len(), 1, "placed once its point is reached");
+    assert_eq!(placed[0].answer.epoch, 2);
 }

@@ -270,6 +270,7 @@ impl<Q> Gateway<Q> {
     /// once every sensor finished and all is merged, the stream's end.
     pub(super) fn drain(&mut self) {
         let name = self.name.clone();
+        let epoch = self.epoch;
         loop {
             let Some(mesh) = self.state.mesh.as_mut() else {
                 return;
@@ -291,7 +292,7 @@ impl<Q> Gateway<Q> {
                             };
                             let mut placed = Vec::new();
                             mesh.cuts
-                                .reached(&mut self.state.router, &name, &mut placed);
+                                .reached(&mut self.state.router, (&name, epoch), &mut placed);
                             for p in placed {
                                 self.answer_tag(p);
                             }
@@ -314,8 +315,13 @@ impl<Q> Gateway<Q> {
                         .sort(tag, wanted, events, &self.state.router, finished)
                     {
                         Request::Now { wanted, query } => {
-                            let placed =
-                                place(&mut self.state.router, &name, wanted, query, finished);
+                            let placed = place(
+                                &mut self.state.router,
+                                (&name, epoch),
+                                wanted,
+                                query,
+                                finished,
+                            );
                             self.answer_tag(placed);
                         }
                         Request::Scheduled => {}

@@ -73,12 +73,12 @@ impl Replication {
         }
     }
 
-    /// Whether the standby is up as far as the sensor knows.
     /// The sensor whose journal this replicates.
     pub(crate) fn sensor(&self) -> &str {
         &self.sensor
     }
 
+    /// Whether the standby is up as far as the sensor knows.
     pub(crate) fn present(&self) -> bool {
         self.present
     }
