@@ -464,9 +464,10 @@ async fn refuse(query: &Query, reason: String) -> Result<(), StandbyError> {
 pub enum Owned {
     /// This process, at this epoch.
     Here(u64),
-    /// Another process (its standby took it over): this one stands by for
-    /// it ([`stand_by`] with [`StandbyConfig::earlier_holding`]).
-    Elsewhere { holder: String, epoch: u64 },
+    /// Another process (its standby took it over, said at warn level):
+    /// this one stands by for it ([`stand_by`] with
+    /// [`StandbyConfig::earlier_holding`]).
+    Elsewhere,
 }
 
 /// With voters, before a sensor serves its own role: claims it (a
@@ -481,11 +482,11 @@ pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Owned {
                 let held = StandbyError::Held {
                     role: role.to_string(),
                     me: me.to_string(),
-                    holder: holder.clone(),
+                    holder,
                     epoch,
                 };
                 tracing::warn!(sensor = %role, "{held}: standing by for it");
-                return Owned::Elsewhere { holder, epoch };
+                return Owned::Elsewhere;
             }
             Claimed::Undecided => {
                 tracing::warn!(sensor = %role, "no leading voter answered the sensor's claim: asking again");

@@ -266,14 +266,13 @@ struct Input {
 }
 
 /// How a sensor runs: its input, its journal, the standby its journal
-/// is replicated to, and the epoch it holds the role at (0 without
-/// voters).
+/// is replicated to, and with voters the lease it holds the role under
+/// (its epoch; without voters 0).
 struct SensorRun {
     input: Input,
     journal: Option<(Journal, Vec<Record>)>,
     standby: Option<String>,
-    epoch: u64,
-    lease: Option<LeaseClock>,
+    lease: Option<Lease>,
 }
 
 /// The sensor role held through the voters: what keeps its lease, and
@@ -311,7 +310,7 @@ async fn own_sensor(
                     tracing::info!(sensor = %name, epoch, "the voters give this process its sensor role");
                     Some(Lease::new(claims, name, name, epoch))
                 }
-                Owned::Elsewhere { .. } => {
+                Owned::Elsewhere => {
                     // Its journal is the copy it keeps from now on.
                     drop(journal);
                     return sensor_standby_for(session, topology, name, name, keys).await;
@@ -324,13 +323,9 @@ async fn own_sensor(
         input,
         journal,
         standby,
-        epoch: lease.as_ref().map_or(0, |l| l.epoch),
-        lease: lease.as_ref().map(|l| l.clock.clone()),
+        lease,
     };
-    let lost = LeaseLost::default();
-    let stop = lease_or_shutdown(lease, lost.clone());
-    sensor(session, topology, name, keys, run, stop).await?;
-    lost.check(name)
+    sensor(session, topology, name, keys, run).await
 }
 
 impl Lease {
@@ -456,7 +451,6 @@ async fn sensor_standby_for(
         Some(bytes) => journal.compact_after(bytes),
         None => journal,
     };
-    let lease = Lease::new(claims, role, me, epoch);
     let run = SensorRun {
         input: Input {
             stdin: false,
@@ -468,30 +462,30 @@ async fn sensor_standby_for(
             true => topology.standby_of(role).map(|s| s.name.clone()),
             false => Some(role.to_string()),
         },
-        epoch,
-        lease: Some(lease.clock.clone()),
+        lease: Some(Lease::new(claims, role, me, epoch)),
     };
-    let lost = LeaseLost::default();
-    let stop = lease_or_shutdown(Some(lease), lost.clone());
-    sensor(session, topology, role, keys, run, stop).await?;
-    lost.check(role)
+    sensor(session, topology, role, keys, run).await
 }
 
+/// Serves sensor role `name` until shut down or, with voters, until its
+/// lease is lost (an error then, see [`LeaseLost`]).
 async fn sensor(
     session: zenoh::Session,
     topology: &Topology,
     name: &str,
     keys: Keys,
     run: SensorRun,
-    stop: impl std::future::Future<Output = ()>,
 ) -> Result<()> {
     let SensorRun {
         input,
         journal,
         standby,
-        epoch,
         lease,
     } = run;
+    let epoch = lease.as_ref().map_or(0, |l| l.epoch);
+    let clock = lease.as_ref().map(|l| l.clock.clone());
+    let lost = LeaseLost::default();
+    let stop = lease_or_shutdown(lease, lost.clone());
     let this = topology.sensor_named(name)?;
     let max_errors = input.max_errors.unwrap_or(this.max_errors);
     let (header, source) = sensor_source(topology, this, input.stdin, max_errors)?;
@@ -557,10 +551,10 @@ async fn sensor(
         ros2: this.ros2.clone(),
         standby,
         epoch,
-        lease,
+        lease: clock,
     };
     idmesh_sensor::run(session, config, router, source, journal, stop).await?;
-    Ok(())
+    lost.check(name)
 }
 
 /// The sensor's trace: its header and lines, from standard input as they
