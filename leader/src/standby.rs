@@ -177,12 +177,7 @@ pub(crate) fn epoch_path(dir: &Path, role: &str) -> PathBuf {
 /// Notes, whole and fsynced, that this process holds `role` at `epoch`
 /// from now on: what it journals of the role belongs to that holding.
 pub(crate) fn stamp_epoch(dir: &Path, role: &str, epoch: u64) -> Result<(), StandbyError> {
-    log::write_file(
-        &epoch_path(dir, role),
-        EPOCH,
-        1,
-        &[&epoch.to_le_bytes()[..]],
-    )?;
+    log::write_number(&epoch_path(dir, role), EPOCH, epoch)?;
     Ok(())
 }
 
@@ -190,20 +185,16 @@ pub(crate) fn stamp_epoch(dir: &Path, role: &str, epoch: u64) -> Result<(), Stan
 /// (a journal from before the deployment had voters).
 pub(crate) fn stamped_epoch(dir: &Path, role: &str) -> Result<u64, StandbyError> {
     let path = epoch_path(dir, role);
-    let refused = |problem: String| StandbyError::Refused {
-        path: path.display().to_string(),
-        problem,
-    };
-    let Some(contents) = read_whole(&path, EPOCH, refused)? else {
-        return Ok(0);
-    };
-    let bytes = match (&contents.ending, &contents.records[..]) {
-        (Ending::Clean, [record]) => <[u8; 8]>::try_from(&record.payload[..]).ok(),
-        _ => None,
-    };
-    bytes
-        .map(u64::from_le_bytes)
-        .ok_or_else(|| refused("not one whole epoch".to_string()))
+    match log::read_number(&path, EPOCH) {
+        Ok(epoch) => Ok(epoch.unwrap_or(0)),
+        Err(log::Error::Header { .. } | log::Error::NotANumber { .. }) => {
+            Err(StandbyError::Refused {
+                path: path.display().to_string(),
+                problem: "not one whole epoch".to_string(),
+            })
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// What a file of heard durable marks' header says it holds.

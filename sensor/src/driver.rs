@@ -1231,7 +1231,9 @@ impl Wire {
             compact(journal, gateway)?;
         }
         if let Some(replicator) = &mut self.replicator {
-            replicator.replicate(&records, compacted, gateway).await?;
+            if let Some(epoch) = replicator.replicate(&records, compacted, gateway).await? {
+                gateway.advance_epoch(epoch);
+            }
         }
         Ok(())
     }
@@ -1256,8 +1258,9 @@ impl Wire {
     /// Sends the leaders their queued items ([`Gateway::flush`]) — once
     /// the journal holds them.
     async fn flush(&mut self, gateway: &mut Gateway<Query>) -> Result<(), GatewayError> {
-        let batches = gateway.flush();
+        let mut batches = gateway.flush();
         self.sync(gateway).await?;
+        gateway.restamp(&mut batches);
         for (i, batch) in batches {
             let Some(publisher) = self.publishers.get(i) else {
                 continue;

@@ -210,6 +210,21 @@ impl<Q> Gateway<Q> {
         self
     }
 
+    /// The voters moved the role held here to `epoch` (the sensor went on
+    /// without its standby): what leaves from now on carries it, batches
+    /// already flushed too ([`Gateway::restamp`]).
+    pub fn advance_epoch(&mut self, epoch: u64) {
+        self.epoch = self.epoch.max(epoch);
+    }
+
+    /// `batches` flushed before the role moved to its current epoch, as
+    /// they leave now: at that epoch.
+    pub fn restamp(&self, batches: &mut [(usize, Batch)]) {
+        for (_, batch) in batches {
+            batch.epoch = self.epoch;
+        }
+    }
+
     /// Routes at most `window` seqs past the slowest leader's progress
     /// ([`Gateway::room`]).
     pub fn windowed(mut self, window: u64) -> Self {

@@ -26,7 +26,7 @@ use crate::journal::{self, Journal, JournalError, Record};
 use crate::lease::LeaseClock;
 use crate::machine::replication::{Apply, Copy, Presence, Replication, Step};
 use crate::machine::Gateway;
-use idmesh_claims::{fencing, verdict, Claimed, Claims, Verdict};
+use idmesh_claims::{verdict, Claimed, Claims, Verdict};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::sensor_to_standby::{Position, Replicate, Replicated};
 use idmesh_protocol::wire::{decode, encode, VERSION};
@@ -64,11 +64,11 @@ pub enum StandbyError {
     Mesh { what: &'static str, message: String },
     #[error(transparent)]
     Journal(#[from] JournalError),
-    /// Records the standby did not acknowledge, and no read of the map
-    /// since the standby went confirmed that the role is still held here.
+    /// Records the standby did not acknowledge, and the voters did not
+    /// move the role here to a new epoch since the standby went.
     #[error(
-        "sensor {role}: its standby is gone and the voters did not confirm the role is still \
-         held here: what the standby does not hold is not released"
+        "sensor {role}: its standby is gone and the voters did not move the role here to a new \
+         epoch: what the standby does not hold is not released"
     )]
     Unconfirmed { role: String },
     #[error("sensor {role}: the voters give it to {holder} at epoch {epoch}, not to {me}")]
@@ -130,11 +130,13 @@ impl Replicator {
         let incarnation = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as u64);
+        let mut machine = Replication::new(sensor, incarnation);
+        machine.at_epoch(lease.as_ref().map_or(0, LeaseClock::epoch));
         let mut replicator = Replicator {
             session: session.clone(),
             key: keys.sensor_replicate(sensor),
             standby: standby.to_string(),
-            machine: Replication::new(sensor, incarnation),
+            machine,
             tokens,
             lease,
             gone_since: Instant::now(),
@@ -176,15 +178,16 @@ impl Replicator {
 
     /// Records `appended` to the journal (and fsynced; `compacted`: the
     /// journal was compacted right after): returns once the standby holds
-    /// them, or once it is gone — with voters, once the lease is also
-    /// confirmed since it went, and an error if the hold is lost instead
-    /// (then nothing that depends on them may leave).
+    /// them, or once it is gone — with voters, once the role is also moved
+    /// to an epoch past the standby's copy since it went (that epoch: what
+    /// leaves the sensor from then on carries it), and an error if the hold
+    /// is lost instead (then nothing that depends on them may leave).
     pub(crate) async fn replicate(
         &mut self,
         appended: &[Record],
         compacted: bool,
         gateway: &Gateway<Query>,
-    ) -> Result<(), StandbyError> {
+    ) -> Result<Option<u64>, StandbyError> {
         self.drain();
         if compacted {
             self.machine.compacted();
@@ -213,20 +216,27 @@ impl Replicator {
             step = self.machine.answered(answer);
         }
         // Gone, the standby may have gone because the voters gave it the
-        // role: only a read asked since then says this process holds it.
+        // role, or only be cut off from here while its copy could still
+        // win it: the records it did not acknowledge leave only once the
+        // voters have moved the role here to an epoch past its copy's (an
+        // advance asked since it went, which also says the role is held
+        // here). Without voters it cannot take the role over.
+        let mut moved = None;
         if let (false, Some(lease)) = (self.machine.present(), &self.lease) {
-            if !lease.confirmed_since(self.gone_since).await {
+            let Some(epoch) = lease.advanced_since(self.gone_since).await else {
                 return Err(StandbyError::Unconfirmed {
                     role: self.machine.sensor().to_string(),
                 });
-            }
+            };
+            self.machine.at_epoch(epoch);
+            moved = Some(epoch);
         }
         let waited = started.elapsed();
         if waited > ANSWER_PATIENCE {
             tracing::info!(standby = %self.standby, seconds = waited.as_secs_f64(),
                 present = self.machine.present(), "a slow replication to the standby");
         }
-        Ok(())
+        Ok(moved)
     }
 
     /// Sends `message` and waits for the answer: the copy's position
@@ -305,7 +315,7 @@ pub async fn stand_by(
     shutdown: impl Future<Output = ()>,
 ) -> Result<Standing, StandbyError> {
     let keys = &config.keys;
-    let (mut journal, records) = Journal::open(&config.journal, &config.name)?;
+    let (mut journal, mut copy, kept) = open_copy(config)?;
     let queries = session
         .declare_queryable(keys.sensor_replicate(&config.sensor))
         .await
@@ -324,14 +334,6 @@ pub async fn stand_by(
     let mut claims = config
         .lease
         .map(|lease| Claims::new(session.clone(), keys.clone(), &config.name, lease));
-    let mut copy = Copy::default();
-    let kept = !records.is_empty() && !config.earlier_holding;
-    if config.earlier_holding && !records.is_empty() {
-        journal.replace_encoded(&[])?;
-        tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(),
-            "this process's journal of the sensor role is of an earlier holding: emptied, standing by for the holder");
-    }
-    drop(records);
     // A copy kept from before counts the sensor gone from now; with none,
     // the sensor has not been up yet and nothing is to be taken over.
     let mut gone_since = kept.then(Instant::now);
@@ -370,7 +372,15 @@ pub async fn stand_by(
                     continue;
                 }
                 let (true, Some(voters)) = (due, claims.as_mut()) else { continue };
-                match take_over(voters, &config.sensor).await {
+                let Some(in_sync) = copy.epoch else {
+                    if !told_empty {
+                        tracing::warn!(sensor = %config.sensor, copy = %epoch_path(&config.journal).display(),
+                            "the sensor is gone, but this standby's copy does not say at which epoch it was in sync: not taking it over");
+                        told_empty = true;
+                    }
+                    continue;
+                };
+                match take_over(voters, &config.sensor, in_sync).await {
                     Some(epoch) => {
                         drop((queries, sensor, token, journal));
                         let (journal, records) = Journal::open(&config.journal, &config.name)?;
@@ -388,15 +398,21 @@ pub async fn stand_by(
     }
 }
 
-/// Claims `role`, fencing off its holder's epoch: the epoch won, or None.
-async fn take_over(claims: &mut Claims, role: &str) -> Option<u64> {
-    let map = claims.read().await?.clone();
-    let fenced = fencing(&map, role);
-    tracing::warn!(sensor = %role, fencing = ?fenced, "the sensor has been gone for the takeover time: claiming its role");
-    match claims.claim(role, fenced, CLAIM_PATIENCE).await {
+/// Claims `role` naming `in_sync`, the epoch at which the copy holds
+/// every record the sensor sent: the epoch won, or None. It loses once
+/// the sensor has moved its role on (it went on without this copy), or
+/// another process holds it.
+async fn take_over(claims: &mut Claims, role: &str, in_sync: u64) -> Option<u64> {
+    tracing::warn!(sensor = %role, fencing = in_sync, "the sensor has been gone for the takeover time: claiming its role");
+    match claims.claim(role, Some(in_sync), CLAIM_PATIENCE).await {
         Claimed::Won(epoch) => {
             tracing::warn!(sensor = %role, epoch, "the voters gave this process the sensor role: taking over from the copy");
             Some(epoch)
+        }
+        Claimed::Lost { holder, epoch } if epoch > in_sync => {
+            tracing::warn!(sensor = %role, %holder, epoch, in_sync,
+                "the sensor role moved past the epoch this copy is in sync at (the sensor went on without it, or another took over): standing by");
+            None
         }
         Claimed::Lost { holder, epoch } => {
             tracing::info!(sensor = %role, %holder, epoch, "the sensor role is held: standing by");
@@ -404,6 +420,47 @@ async fn take_over(claims: &mut Claims, role: &str) -> Option<u64> {
         }
         Claimed::Undecided => None,
     }
+}
+
+/// Where the epoch a standby's copy at `journal` is in sync at is kept.
+pub fn epoch_path(journal: &Path) -> PathBuf {
+    let mut path = journal.as_os_str().to_owned();
+    path.push(".epoch");
+    PathBuf::from(path)
+}
+
+/// What a copy's epoch file's header says it holds.
+const COPY_EPOCH: &str = "sensor-epoch";
+
+/// Opens the standby's copy: its journal, where it is (the epoch it was
+/// last in sync at, from its file), and whether it holds records kept
+/// from before. A journal of this process's earlier holding is emptied
+/// first, and its epoch forgotten: it is not a copy of the holder's.
+fn open_copy(config: &StandbyConfig) -> Result<(Journal, Copy, bool), StandbyError> {
+    let (mut journal, records) = Journal::open(&config.journal, &config.name)?;
+    let epoch_file = epoch_path(&config.journal);
+    if config.earlier_holding {
+        if !records.is_empty() {
+            journal.replace_encoded(&[])?;
+            tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(),
+                "this process's journal of the sensor role is of an earlier holding: emptied, standing by for the holder");
+        }
+        if let Err(e) = std::fs::remove_file(&epoch_file) {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                return Err(JournalError::from(idmesh_journal::Error::Io {
+                    path: epoch_file,
+                    source: e,
+                })
+                .into());
+            }
+        }
+        return Ok((journal, Copy::default(), false));
+    }
+    let copy = Copy {
+        position: None,
+        epoch: idmesh_journal::read_number(&epoch_file, COPY_EPOCH).map_err(JournalError::from)?,
+    };
+    Ok((journal, copy, !records.is_empty()))
 }
 
 /// A replication request: its records on the copy's disk, then the
@@ -437,10 +494,16 @@ async fn keep(
     {
         return refuse(query, format!("a record that does not decode: {e}")).await;
     }
+    let in_sync = copy.epoch;
     match copy.take(&message) {
         Apply::Replace(records) => journal.replace_encoded(records)?,
         Apply::Append(records) => journal.append_encoded(records)?,
         Apply::Nothing => {}
+    }
+    // On disk before the answer: a takeover after a restart names it.
+    if let (Some(epoch), true) = (copy.epoch, copy.epoch != in_sync) {
+        idmesh_journal::write_number(&epoch_path(&config.journal), COPY_EPOCH, epoch)
+            .map_err(JournalError::from)?;
     }
     let answer = Replicated {
         version: VERSION,
@@ -496,29 +559,51 @@ pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Owned {
     }
 }
 
-/// Returns once this process (`me`) may no longer serve `role`, held at
-/// `epoch`: the map gives the role to another, or no voter has led for
-/// the lease. The holder then stops serving. Every read that finds the
-/// role still held here is noted on `clock`, and the loss too.
-pub async fn keep_lease(
-    mut claims: Claims,
-    role: String,
-    me: String,
-    epoch: u64,
-    clock: LeaseClock,
-) {
+/// Returns once this process (`me`) may no longer serve `role` (held at
+/// the epoch on `clock`): the map gives the role to another, or no voter
+/// has led for the lease. The holder then stops serving. Every read that
+/// finds the role still held here is noted on `clock`, and the loss too;
+/// an advance the replication asks for ([`LeaseClock::advanced_since`])
+/// is made here, through the voters.
+pub async fn keep_lease(mut claims: Claims, role: String, me: String, clock: LeaseClock) {
     let since = Instant::now();
+    // When the last advance was asked: one the voters made after its
+    // proposer stopped waiting shows as the role here past the epoch.
+    let mut proposed: Option<Instant> = None;
     loop {
         tokio::time::sleep(LOOK_EVERY).await;
-        let asked = Instant::now();
         if let Some(map) = claims.read().await {
-            match verdict(map, &role, &me, epoch) {
-                Verdict::Holds => clock.confirm(asked),
+            if let (Some(asked), Some(entry)) = (proposed, map.get(&role)) {
+                if entry.holder.as_deref() == Some(me.as_str()) && entry.epoch > clock.epoch() {
+                    clock.advanced(asked, entry.epoch);
+                }
+            }
+            match verdict(map, &role, &me, clock.epoch()) {
+                Verdict::Holds => {}
                 Verdict::Superseded { holder, epoch: now } => {
                     tracing::warn!(sensor = %role, ?holder, epoch = now, "the voters gave the sensor role to another: stopping");
                     clock.lose();
                     return;
                 }
+            }
+        }
+        if clock.advance_due() {
+            let asked = Instant::now();
+            proposed = Some(asked);
+            let from = clock.epoch();
+            match claims.advance(&role, from, CLAIM_PATIENCE).await {
+                Claimed::Won(epoch) => {
+                    tracing::warn!(sensor = %role, from, epoch,
+                        "the sensor goes on without its standby: its role moved to a new epoch, which the standby's copy cannot take over");
+                    clock.advanced(asked, epoch);
+                }
+                Claimed::Lost { holder, epoch } => {
+                    tracing::warn!(sensor = %role, %holder, epoch, "the voters gave the sensor role to another: stopping");
+                    clock.lose();
+                    return;
+                }
+                // Asked again at the next look, while the lease holds.
+                Claimed::Undecided => {}
             }
         }
         if claims.lapsed(since) {

@@ -714,13 +714,95 @@ fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
     assert!(
         log.contains("the voters gave the sensor role to another: stopping")
             || log.contains("no leading voter for the lease: stopping the sensor role")
-            || log.contains("the voters did not confirm the role is still held here"),
+            || log.contains("the voters did not move the role here to a new epoch"),
         "the woken sensor stopped serving:\n{log}"
     );
     eprintln!(
         "sensor-0 frozen: held by its standby at epoch {taken} {takeover:.1} s later; test \
          {:.1} s",
         started.elapsed().as_secs_f64()
+    );
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The sensor's standby cut off from the sensor while the voters still
+/// reach both (here: frozen, which the sensor cannot tell from cut off).
+/// The sensor goes on without it only once the voters have moved the
+/// sensor role to a new epoch, and publishes what the copy lacks. Then
+/// the sensor's host is lost and the standby wakes: its copy is in sync
+/// only at the old epoch, so its claim loses and the role waits for the
+/// sensor rather than going on from a copy that misses what leaders
+/// already applied. Back from its own disk, the sensor serves again and
+/// the final answer is the offline twin's.
+#[test]
+fn a_sensor_going_on_without_its_standby_fences_off_the_standbys_copy() {
+    let dir = std::env::temp_dir().join(format!("idmesh-sensor-alone-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let settings = Settings {
+        sensor_standby: true,
+        ..apart_under_voters(60.0)
+    };
+    let mut deployment = Deployment::start_each("sensor-alone", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    let before = watermark_events(&deployment.first_answer(Duration::from_secs(30)));
+    // Once the copy is in sync at the epoch the sensor holds now (it may
+    // have moved on once already, if it started before its standby).
+    let copy_epoch = deployment
+        .dir
+        .join("state-sensor-0-standby")
+        .join("sensor-0.standby.journal.epoch");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let first = loop {
+        let held = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
+        let in_sync = idmesh_journal::read_number(&copy_epoch, "sensor-epoch");
+        if matches!(in_sync, Ok(Some(epoch)) if epoch == held) {
+            break held;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the standby's copy never in sync at epoch {held} ({in_sync:?}):\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    deployment.pause("sensor-0-standby");
+    let deadline = Instant::now() + Duration::from_secs(40);
+    let moved = loop {
+        match holding(&deployment, "sensor-0") {
+            Some((holder, epoch)) if epoch > first => {
+                assert_eq!(holder, "sensor-0", "the standby was frozen");
+                break epoch;
+            }
+            _ => assert!(
+                Instant::now() < deadline,
+                "the sensor never moved its role on without its standby:\n{}",
+                deployment.log()
+            ),
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    // What the standby's copy lacks reaches the leaders.
+    deployment.answer_when(&["marginals"], Duration::from_secs(30), |a| {
+        watermark_events(a) > before
+    });
+    deployment.kill("sensor-0");
+    deployment.resume("sensor-0-standby");
+    deployment.await_log(
+        "moved past the epoch this copy is in sync at",
+        Duration::from_secs(40),
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(
+        holding(&deployment, "sensor-0"),
+        Some(("sensor-0".to_string(), moved)),
+        "the standby's stale copy must not win the role"
+    );
+    deployment.launch("sensor", "sensor-0");
+    final_is_twins(
+        &deployment,
+        &twin,
+        "after the sensor went on alone and came back",
     );
     drop(deployment);
     std::fs::remove_dir_all(&dir).ok();

@@ -281,7 +281,8 @@ struct Lease {
     claims: Claims,
     role: String,
     me: String,
-    epoch: u64,
+    /// The epoch the role is held at (moved on when the sensor goes on
+    /// without its standby).
     clock: LeaseClock,
 }
 
@@ -334,8 +335,7 @@ impl Lease {
             claims,
             role: role.to_string(),
             me: me.to_string(),
-            epoch,
-            clock: LeaseClock::default(),
+            clock: LeaseClock::new(epoch),
         }
     }
 }
@@ -371,11 +371,8 @@ fn lease_or_shutdown(
     lease: Option<Lease>,
     lost: LeaseLost,
 ) -> impl std::future::Future<Output = ()> {
-    let kept = lease.map(|l| {
-        tokio::spawn(idmesh_sensor::keep_lease(
-            l.claims, l.role, l.me, l.epoch, l.clock,
-        ))
-    });
+    let kept =
+        lease.map(|l| tokio::spawn(idmesh_sensor::keep_lease(l.claims, l.role, l.me, l.clock)));
     async move {
         match kept {
             Some(mut kept) => {
@@ -482,7 +479,7 @@ async fn sensor(
         standby,
         lease,
     } = run;
-    let epoch = lease.as_ref().map_or(0, |l| l.epoch);
+    let epoch = lease.as_ref().map_or(0, |l| l.clock.epoch());
     let clock = lease.as_ref().map(|l| l.clock.clone());
     let lost = LeaseLost::default();
     let stop = lease_or_shutdown(lease, lost.clone());

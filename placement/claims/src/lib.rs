@@ -21,7 +21,7 @@
 //! voters is back and the roles are claimed again: nothing is lost, since
 //! every role comes back from its journal or its standby's copy.
 
-use idmesh_consensus::{Command, RolesAnswer};
+use idmesh_consensus::{Command, RoleEntry, RolesAnswer};
 use idmesh_protocol::wire::keys::Keys;
 use std::time::{Duration, Instant};
 use zenoh::query::{ConsolidationMode, QueryTarget};
@@ -152,29 +152,71 @@ impl Claims {
             holder: self.me.clone(),
             fencing,
         };
+        let me = self.me.clone();
+        self.decide(&command, role, patience, |e| match e {
+            Some(e) if e.holder.as_deref() == Some(me.as_str()) => Some(Claimed::Won(e.epoch)),
+            // Someone else holds it at an epoch past the one this claim
+            // fences off: it won, or never lost it.
+            Some(e) if e.holder.is_some() && Some(e.epoch) != fencing => Some(Claimed::Lost {
+                holder: e.holder.clone().unwrap_or_default(),
+                epoch: e.epoch,
+            }),
+            // Released past the epoch this claim names: it moved on
+            // without what the claimant holds.
+            Some(e) if fencing.is_some_and(|f| f != e.epoch) => Some(Claimed::Lost {
+                holder: "nobody (released)".to_string(),
+                epoch: e.epoch,
+            }),
+            _ => None,
+        })
+        .await
+    }
+
+    /// Moves `role`, held here at epoch `from`, to the next epoch
+    /// (`Command::Advance`): every claim naming `from` loses from then on.
+    /// Waits until the map shows the role here past `from` (won, at the
+    /// new epoch), held by another (lost), or `patience` runs out.
+    pub async fn advance(&mut self, role: &str, from: u64, patience: Duration) -> Claimed {
+        let command = Command::Advance {
+            role: role.to_string(),
+            holder: self.me.clone(),
+            from,
+        };
+        let me = self.me.clone();
+        self.decide(&command, role, patience, |e| match e {
+            Some(e) if e.holder.as_deref() == Some(me.as_str()) && e.epoch > from => {
+                Some(Claimed::Won(e.epoch))
+            }
+            Some(e) if e.holder.as_deref() != Some(me.as_str()) => Some(Claimed::Lost {
+                holder: e.holder.clone().unwrap_or_default(),
+                epoch: e.epoch,
+            }),
+            _ => None,
+        })
+        .await
+    }
+
+    /// Proposes `command` until the map's entry of `role` decides it
+    /// (`decided`), or `patience` runs out. A proposal lost (no leader, or
+    /// a leader change) is made again.
+    async fn decide(
+        &mut self,
+        command: &Command,
+        role: &str,
+        patience: Duration,
+        decided: impl Fn(Option<&RoleEntry>) -> Option<Claimed>,
+    ) -> Claimed {
         let deadline = Instant::now() + patience;
         let mut wait = Duration::from_millis(100);
         while Instant::now() < deadline {
-            self.propose(&command).await;
+            self.propose(command).await;
             tokio::time::sleep(wait).await;
             wait = (wait * 2).min(Duration::from_secs(1));
-            let me = self.me.clone();
             let Some(map) = self.read().await else {
                 continue;
             };
-            match map.get(role) {
-                Some(e) if e.holder.as_deref() == Some(me.as_str()) => {
-                    return Claimed::Won(e.epoch)
-                }
-                // Someone else holds it at an epoch past the one this
-                // claim fences off: it won, or never lost it.
-                Some(e) if e.holder.is_some() && Some(e.epoch) != fencing => {
-                    return Claimed::Lost {
-                        holder: e.holder.clone().unwrap_or_default(),
-                        epoch: e.epoch,
-                    }
-                }
-                _ => {}
+            if let Some(outcome) = decided(map.get(role)) {
+                return outcome;
             }
         }
         Claimed::Undecided
@@ -204,7 +246,6 @@ impl Claims {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use idmesh_consensus::RoleEntry;
 
     fn map(entries: &[(&str, Option<&str>, u64)]) -> RolesAnswer {
         RolesAnswer {

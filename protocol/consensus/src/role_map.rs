@@ -6,10 +6,14 @@
 //! claimant saw that holder's lease lapse at that epoch): it takes the
 //! role at the next epoch only if that is still the role's epoch, so two
 //! takeovers racing for one lapse cannot both win, and a claim made on
-//! stale knowledge loses. A holder's own claim again changes nothing. A
-//! release by the holder leaves the role unheld at its epoch, so the next
-//! claim raises it. Epochs never go down and never repeat for two
-//! holders.
+//! stale knowledge loses; a claim that names an epoch wins only at that
+//! epoch, held or released. A holder's own claim again changes nothing,
+//! but a holder may *advance* its role to the next epoch (naming the one
+//! it holds), fencing off every claim that names the old one: the sensor
+//! does so before it goes on without its standby, whose copy then no
+//! longer suffices to take the role over. A release by the holder leaves
+//! the role unheld at its epoch, so the next claim raises it. Epochs never
+//! go down and never repeat for two holders.
 
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -36,6 +40,14 @@ pub enum Command {
     /// `holder` gives `role` up (its process stopping cleanly, or handing
     /// the role home).
     Release { role: String, holder: String },
+    /// `holder`, holding `role` at epoch `from`, moves it to the next
+    /// epoch: a claim naming `from` loses from then on. (Last, so that
+    /// the logs of voters from before it still read.)
+    Advance {
+        role: String,
+        holder: String,
+        from: u64,
+    },
 }
 
 /// What a command did.
@@ -113,6 +125,7 @@ impl RoleMap {
                 fencing,
             } => self.claim(role, holder, *fencing),
             Command::Release { role, holder } => self.release(role, holder),
+            Command::Advance { role, holder, from } => self.advance(role, holder, *from),
         }
     }
 
@@ -128,6 +141,9 @@ impl RoleMap {
             Some(_) if fencing != Some(epoch) => {
                 return unchanged("held by another at an epoch the claim did not name")
             }
+            None if fencing.is_some_and(|f| f != epoch) => {
+                return unchanged("released at an epoch the claim did not name")
+            }
             _ => {}
         }
         let holding = Holding {
@@ -138,6 +154,22 @@ impl RoleMap {
         Outcome::Changed {
             role: role.to_string(),
             holding,
+        }
+    }
+
+    fn advance(&mut self, role: &str, holder: &str, from: u64) -> Outcome {
+        match self.roles.get_mut(role) {
+            Some(h) if h.holder.as_deref() == Some(holder) && h.epoch == from => {
+                h.epoch += 1;
+                Outcome::Changed {
+                    role: role.to_string(),
+                    holding: h.clone(),
+                }
+            }
+            _ => Outcome::Unchanged {
+                role: role.to_string(),
+                why: "advanced by one who does not hold it at that epoch",
+            },
         }
     }
 
@@ -215,5 +247,37 @@ mod tests {
         assert_eq!(map.get("sensor-0").unwrap().holder, None);
         map.apply(&claim("sensor-0", "a", None));
         assert_eq!(map.get("sensor-0").unwrap().epoch, 2);
+    }
+
+    #[test]
+    fn a_holder_advancing_fences_off_claims_on_its_old_epoch() {
+        let mut map = RoleMap::default();
+        map.apply(&claim("sensor-0", "a", None));
+        let advance = |holder: &str, from| Command::Advance {
+            role: "sensor-0".into(),
+            holder: holder.into(),
+            from,
+        };
+        // Only the holder, and only from the epoch it holds.
+        assert!(!changed(&mut map, advance("b", 1)));
+        assert!(!changed(&mut map, advance("a", 0)));
+        assert!(changed(&mut map, advance("a", 1)));
+        assert_eq!(
+            map.get("sensor-0").unwrap(),
+            &Holding {
+                holder: Some("a".into()),
+                epoch: 2
+            }
+        );
+        // A standby whose copy was in sync at epoch 1 can no longer win,
+        // nor once the role is released at epoch 2.
+        assert!(!changed(&mut map, claim("sensor-0", "b", Some(1))));
+        map.apply(&Command::Release {
+            role: "sensor-0".into(),
+            holder: "a".into(),
+        });
+        assert!(!changed(&mut map, claim("sensor-0", "b", Some(1))));
+        assert!(changed(&mut map, claim("sensor-0", "b", Some(2))));
+        assert_eq!(map.get("sensor-0").unwrap().epoch, 3);
     }
 }

@@ -117,6 +117,10 @@ pub enum Error {
         copy: PathBuf,
         at: u64,
     },
+    /// A file of one number ([`crate::write_number`]) that holds
+    /// something else.
+    #[error("{path} does not hold one whole number")]
+    NotANumber { path: PathBuf },
     /// A record too large for the format (the caller's bug, or a state
     /// that outgrew it).
     #[error("{path}: a record of {bytes} bytes, more than a record may hold")]

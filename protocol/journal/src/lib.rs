@@ -99,6 +99,7 @@
 
 mod error;
 mod format;
+mod number;
 mod read;
 mod write;
 
@@ -107,5 +108,6 @@ mod tests;
 
 pub use error::{Damage, Error, Problem};
 pub use format::{encode_record, header, FORMAT, HEADER_LEN, MAGIC, MAX_RECORD, RECORD_HEAD};
+pub use number::{read_number, write_number};
 pub use read::{parse, read, read_copies, Contents, Ending, Merged, Record, Repair};
 pub use write::{fsyncs, write_file, Writer};

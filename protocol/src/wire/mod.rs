@@ -73,7 +73,9 @@ use serde::Serialize;
 /// carries the sensor role's epoch too: a sensor's standby may hold it.
 /// 10: a cut's answer (`CutPlaced`) carries the sensor role's epoch,
 /// which the coordinator fences on.
-pub const VERSION: u16 = 10;
+/// 11: the sensor's records for its standby (`Replicate`) carry the
+/// sensor role's epoch, which the standby's takeover names.
+pub const VERSION: u16 = 11;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

@@ -26,6 +26,11 @@ pub struct Replicate {
     pub version: u16,
     /// The sensor whose journal this is.
     pub sensor: String,
+    /// The epoch at which the sender holds the sensor role (0 without
+    /// voters). The standby notes the newest it holds every record of:
+    /// a takeover names that epoch, and loses once the sensor has moved
+    /// past it (as it does before it goes on without the standby).
+    pub epoch: u64,
     /// The sensor process's run (drawn at its start): positions of one
     /// run mean nothing to another.
     pub incarnation: u64,

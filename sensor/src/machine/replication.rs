@@ -14,6 +14,14 @@
 //! is gone would stop the stream); when it comes back it is sent the
 //! whole journal, compacted, before any append, and after a compaction
 //! too (the sensor's journal then starts again from the compacted form).
+//!
+//! With voters, going on alone is safe only once the standby's copy can no
+//! longer take the role over: every message carries the sensor's epoch,
+//! the copy notes the newest epoch it holds every record of
+//! ([`Copy::epoch`]), and a takeover names that epoch; the sensor moves
+//! its role to a new epoch before it releases what the standby did not
+//! acknowledge (the driver's business: `crate::standby`), so a copy left
+//! behind while both still reached the voters loses its claim.
 
 use idmesh_protocol::wire::sensor_to_standby::{Position, Replicate};
 use idmesh_protocol::wire::VERSION;
@@ -45,6 +53,8 @@ pub(crate) enum Presence {
 pub(crate) struct Replication {
     sensor: String,
     incarnation: u64,
+    /// The epoch the sensor holds its role at (0 without voters).
+    epoch: u64,
     /// The standby's token is present.
     present: bool,
     /// The current reset, and the records sent in it.
@@ -65,6 +75,7 @@ impl Replication {
         Replication {
             sensor: sensor.to_string(),
             incarnation,
+            epoch: 0,
             present: false,
             reset: 0,
             sent: 0,
@@ -76,6 +87,13 @@ impl Replication {
     /// The sensor whose journal this replicates.
     pub(crate) fn sensor(&self) -> &str {
         &self.sensor
+    }
+
+    /// The sensor holds its role at `epoch` from now on: what is sent
+    /// next says so. A copy that then holds everything sent is in sync
+    /// at it.
+    pub(crate) fn at_epoch(&mut self, epoch: u64) {
+        self.epoch = epoch;
     }
 
     /// Whether the standby is up as far as the sensor knows.
@@ -177,6 +195,7 @@ impl Replication {
         Replicate {
             version: VERSION,
             sensor: self.sensor.clone(),
+            epoch: self.epoch,
             incarnation: self.incarnation,
             reset: self.reset,
             whole,
@@ -204,6 +223,10 @@ pub(crate) struct Copy {
     /// None: it holds nothing of the sensor's current run (it just
     /// started, or only an earlier run's journal).
     pub(crate) position: Option<Position>,
+    /// The newest epoch of the sensor role at which the copy held every
+    /// record sent (the driver keeps it on disk beside the copy): a
+    /// takeover from the copy names it. None: not known.
+    pub(crate) epoch: Option<u64>,
 }
 
 impl Copy {
@@ -212,12 +235,18 @@ impl Copy {
     pub(crate) fn take<'a>(&mut self, message: &'a Replicate) -> Apply<'a> {
         let records = &message.records[..];
         let count = records.len() as u64;
+        // From a holder the voters have since superseded (a former sensor
+        // not yet stopped): its records are not the role's.
+        if self.epoch.is_some_and(|e| message.epoch < e) {
+            return Apply::Nothing;
+        }
         if message.whole {
             self.position = Some(Position {
                 incarnation: message.incarnation,
                 reset: message.reset,
                 count,
             });
+            self.epoch = Some(message.epoch);
             return Apply::Replace(records);
         }
         let Some(at) = &mut self.position else {
@@ -228,6 +257,10 @@ impl Copy {
         }
         if at.count == message.first {
             at.count += count;
+            // Held whole up to here: in sync at the sender's epoch. (An
+            // epoch is never lowered: one process holds it at a time, and
+            // a later one starts with a whole journal.)
+            self.epoch = self.epoch.max(Some(message.epoch));
             Apply::Append(records)
         } else {
             // Held already (a message sent again), or a gap: either way
@@ -368,5 +401,40 @@ mod tests {
             panic!("an append")
         };
         assert_eq!(copy.take(&theirs), Apply::Nothing);
+    }
+
+    #[test]
+    fn a_copy_is_in_sync_at_the_epoch_of_what_it_holds_whole() {
+        let mut r = up();
+        r.at_epoch(3);
+        let mut copy = Copy::default();
+        let Step::Send(early) = ({
+            let at = deliver(&mut copy, &r.whole(records(2)));
+            r.answered(Some(at));
+            r.appended(records(1))
+        }) else {
+            panic!("an append")
+        };
+        assert_eq!((copy.epoch, early.epoch), (Some(3), 3));
+        // The sensor moves on (its standby gone): what it sends at the new
+        // epoch counts only once the copy holds it whole.
+        r.at_epoch(4);
+        let Step::Send(gap) = r.appended(records(1)) else {
+            panic!("an append")
+        };
+        assert_eq!(copy.take(&gap), Apply::Nothing);
+        assert_eq!(copy.epoch, Some(3), "a copy with a gap is not in sync");
+        copy.take(&early);
+        copy.take(&gap);
+        assert_eq!(copy.epoch, Some(4));
+        // A new holder's whole journal replaces the copy; a superseded
+        // one's is refused.
+        let mut later = Replication::new("sensor-0", 8);
+        later.standby(true);
+        later.at_epoch(5);
+        copy.take(&later.whole(records(1)));
+        assert_eq!(copy.epoch, Some(5));
+        assert_eq!(copy.take(&r.whole(records(6))), Apply::Nothing);
+        assert_eq!(copy.position.map(|p| p.incarnation), Some(8));
     }
 }
