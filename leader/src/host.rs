@@ -671,11 +671,15 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
         let Some(heir) = heir(&config.leaders, &role, &live) else {
             continue;
         };
-        tokens.lost.remove(&role);
         if !hosted.roles.contains(heir) {
-            // Another process adopts it.
+            // Another process adopts it (or, its home, takes it back).
+            // Looked at again while its token stays gone: that process may
+            // be lost before it does (a role handed home, then its home
+            // host lost), and then the heir is another.
+            tokens.lost.insert(role, Instant::now());
             continue;
         }
+        tokens.lost.remove(&role);
         if config.state_dir.is_none() {
             tracing::error!(process = %config.name, role = %role,
                 "cannot adopt: no state_dir, the role's state is lost; its answers stay missing");

@@ -296,7 +296,8 @@ impl Journal {
         self.writer.len()
     }
 
-    pub(crate) fn path(&self) -> &Path {
+    /// Where the journal is on disk.
+    pub fn path(&self) -> &Path {
         &self.path
     }
 

@@ -69,8 +69,8 @@ pub use mesh::MeshConfig;
 // The sensor's standby: its copy of the journal, its takeover, the lease.
 pub use lease::LeaseClock;
 pub use standby::{
-    claim_own, keep_lease, stand_by, standby_path, Owned, StandbyConfig, StandbyError, Standing,
-    TookOver, STANDBY_ROLE,
+    claim_own, keep_lease, serving_from, stand_by, standby_path, Owned, StandbyConfig,
+    StandbyError, Standing, TookOver, STANDBY_ROLE,
 };
 #[cfg(test)]
 mod tests;

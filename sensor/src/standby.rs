@@ -383,6 +383,7 @@ pub async fn stand_by(
                 match take_over(voters, &config.sensor, in_sync).await {
                     Some(epoch) => {
                         drop((queries, sensor, token, journal));
+                        serving_from(&config.journal, epoch)?;
                         let (journal, records) = Journal::open(&config.journal, &config.name)?;
                         let Some(claims) = claims.take() else {
                             return Ok(Standing::Shutdown);
@@ -422,45 +423,99 @@ async fn take_over(claims: &mut Claims, role: &str, in_sync: u64) -> Option<u64>
     }
 }
 
-/// Where the epoch a standby's copy at `journal` is in sync at is kept.
+/// Where the epoch of the sensor journal at `journal` is kept: the newest
+/// epoch at which it held every record the role released (a copy's, in
+/// sync; a holder's own, held). A takeover from the journal names it.
 pub fn epoch_path(journal: &Path) -> PathBuf {
     let mut path = journal.as_os_str().to_owned();
     path.push(".epoch");
     PathBuf::from(path)
 }
 
-/// What a copy's epoch file's header says it holds.
-const COPY_EPOCH: &str = "sensor-epoch";
+/// What an epoch file's header says it holds: the epoch of a copy of the
+/// holder's journal ([`keep`]) …
+const COPY_EPOCH: &str = "sensor-copy";
+/// … or the epoch at which this process held the role itself
+/// ([`serving_from`]).
+const HELD_EPOCH: &str = "sensor-held";
 
-/// Opens the standby's copy: its journal, where it is (the epoch it was
-/// last in sync at, from its file), and whether it holds records kept
-/// from before. A journal of this process's earlier holding is emptied
-/// first, and its epoch forgotten: it is not a copy of the holder's.
+/// Whose a journal is, by its epoch file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kept {
+    /// A copy of the holder's, in sync at this epoch.
+    Copy(u64),
+    /// This process's own, written holding the role at this epoch.
+    Held(u64),
+}
+
+fn read_kept(journal: &Path) -> Result<Option<Kept>, StandbyError> {
+    let path = epoch_path(journal);
+    let read = |kind| idmesh_journal::read_number(&path, kind);
+    let kept = match read(COPY_EPOCH) {
+        Err(idmesh_journal::Error::WrongKind { .. }) => read(HELD_EPOCH).map(|e| e.map(Kept::Held)),
+        copy => copy.map(|e| e.map(Kept::Copy)),
+    };
+    Ok(kept.map_err(JournalError::from)?)
+}
+
+/// Opens the standby's copy: its journal, where it is (the epoch it holds
+/// every record of, from its epoch file), and whether it holds records
+/// kept from before.
+///
+/// A journal of this process's own earlier holding, standing by for the
+/// process that took the role over from it, is emptied first: past where
+/// the role left it, it holds records the holder never had. One that is
+/// a copy of the holder's (it stood by already, and restarted) is kept.
 fn open_copy(config: &StandbyConfig) -> Result<(Journal, Copy, bool), StandbyError> {
     let (mut journal, records) = Journal::open(&config.journal, &config.name)?;
-    let epoch_file = epoch_path(&config.journal);
-    if config.earlier_holding {
-        if !records.is_empty() {
-            journal.replace_encoded(&[])?;
-            tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(),
-                "this process's journal of the sensor role is of an earlier holding: emptied, standing by for the holder");
-        }
-        if let Err(e) = std::fs::remove_file(&epoch_file) {
-            if e.kind() != std::io::ErrorKind::NotFound {
-                return Err(JournalError::from(idmesh_journal::Error::Io {
-                    path: epoch_file,
-                    source: e,
-                })
-                .into());
+    let kept = read_kept(&config.journal)?;
+    let epoch = match (config.earlier_holding, kept) {
+        (true, Some(Kept::Copy(epoch))) => {
+            if !records.is_empty() {
+                tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(), epoch,
+                    "this process's journal of the sensor role is its copy of the holder's: kept, standing by for the holder");
             }
+            Some(epoch)
         }
-        return Ok((journal, Copy::default(), false));
-    }
+        (true, _) => {
+            if !records.is_empty() {
+                journal.replace_encoded(&[])?;
+                tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(),
+                    "this process's journal of the sensor role is of an earlier holding: emptied, standing by for the holder");
+            }
+            forget_epoch(&config.journal)?;
+            return Ok((journal, Copy::default(), false));
+        }
+        // A dedicated standby's: its copy, or the journal of its own
+        // holding (it held the role, and restarted): a claim naming that
+        // epoch gives the role back while it is still its own.
+        (false, Some(Kept::Copy(epoch) | Kept::Held(epoch))) => Some(epoch),
+        (false, None) => None,
+    };
     let copy = Copy {
         position: None,
-        epoch: idmesh_journal::read_number(&epoch_file, COPY_EPOCH).map_err(JournalError::from)?,
+        epoch,
     };
     Ok((journal, copy, !records.is_empty()))
+}
+
+fn forget_epoch(journal: &Path) -> Result<(), StandbyError> {
+    let path = epoch_path(journal);
+    match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(JournalError::from(idmesh_journal::Error::Io { path, source: e }).into())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// This process serves the sensor role at `epoch` from the journal at
+/// `journal` (its own, or a copy it took the role over from): noted in the
+/// epoch file, whole, before it serves ([`open_copy`] reads it).
+pub fn serving_from(journal: &Path, epoch: u64) -> Result<(), StandbyError> {
+    idmesh_journal::write_number(&epoch_path(journal), HELD_EPOCH, epoch)
+        .map_err(JournalError::from)?;
+    Ok(())
 }
 
 /// A replication request: its records on the copy's disk, then the

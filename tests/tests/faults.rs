@@ -11,6 +11,7 @@ use idmesh_tests::{
     crowd, hosted_on, replay_summary, trace_events, undisturbed_applied, watermark_events,
     Deployment, FaultSection, LeaderFaultSection, Settings,
 };
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// SIGKILL to a leader while the stream runs: queries meanwhile get an
@@ -443,6 +444,27 @@ fn final_is_twins(deployment: &Deployment, twin: &serde_json::Value, after: &str
     assert_same_marginals(&last, &floats(&twin["final_p_red"]), after);
 }
 
+/// Waits until the sensor standby's copy at `copy` is in sync at the
+/// epoch `holder` holds the sensor role at now; that epoch.
+fn copy_in_sync(deployment: &Deployment, copy: &Path, holder: &str) -> u64 {
+    let in_sync = copy.with_extension("journal.epoch");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let held = held_by(deployment, "sensor-0", holder, Duration::from_secs(30));
+        let at = idmesh_journal::read_number(&in_sync, "sensor-copy");
+        if matches!(at, Ok(Some(epoch)) if epoch == held) {
+            return held;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the copy {} never in sync at epoch {held} ({at:?}):\n{}",
+            copy.display(),
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
 /// Three leaders, each on a disk of its own, under three voters, with a
 /// snapshot every 10 inputs and a takeover after 1 s at `rate` events per
 /// second: the deployment the host-loss tests strike.
@@ -610,9 +632,10 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
 /// the takeover time: its standby takes the role over. Woken, the former
 /// sensor ends (its hold is gone); started again, it finds the role held
 /// by its standby and stands by for it, its own journal emptied and
-/// filled again with the holder's. Then the holder's host is lost
-/// (kill -9): the former sensor takes the role back from that copy, at
-/// the next epoch. The final answer is the offline twin's.
+/// filled again with the holder's; started again, it keeps that copy.
+/// Then the holder's host is lost (kill -9): the former sensor takes the
+/// role back from that copy, at the next epoch. The final answer is the
+/// offline twin's.
 #[test]
 fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_lost() {
     let dir = std::env::temp_dir().join(format!("idmesh-sensor-back-{}", std::process::id()));
@@ -648,8 +671,11 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
         .dir
         .join("state-sensor-0")
         .join("sensor-0.journal");
+    let in_sync = own.with_extension("journal.epoch");
     let started = Instant::now();
-    while idmesh_sensor::journal::read(&own).map_or(0, |records| records.len()) == 0 {
+    while idmesh_sensor::journal::read(&own).map_or(0, |records| records.len()) == 0
+        || !in_sync.exists()
+    {
         assert!(
             started.elapsed() < Duration::from_secs(30),
             "the holder never sent its journal to the former sensor:\n{}",
@@ -657,6 +683,21 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
         );
         std::thread::sleep(Duration::from_millis(100));
     }
+    // Started again while standing by, it keeps that copy: it is the
+    // holder's, not its own earlier holding.
+    deployment.kill("sensor-0");
+    deployment.launch("sensor", "sensor-0");
+    deployment.await_log(
+        "its copy of the holder's: kept, standing by for the holder",
+        Duration::from_secs(30),
+    );
+    assert!(
+        idmesh_sensor::journal::read(&own).is_ok_and(|records| !records.is_empty()),
+        "the copy survived the restart"
+    );
+    // The holder went on without it meanwhile (a new epoch): only once the
+    // copy has caught up can it take the role.
+    copy_in_sync(&deployment, &own, "sensor-0-standby");
     deployment.kill("sensor-0-standby");
     let back = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
     assert!(
@@ -748,24 +789,11 @@ fn a_sensor_going_on_without_its_standby_fences_off_the_standbys_copy() {
     let before = watermark_events(&deployment.first_answer(Duration::from_secs(30)));
     // Once the copy is in sync at the epoch the sensor holds now (it may
     // have moved on once already, if it started before its standby).
-    let copy_epoch = deployment
+    let copy = deployment
         .dir
         .join("state-sensor-0-standby")
-        .join("sensor-0.standby.journal.epoch");
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let first = loop {
-        let held = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
-        let in_sync = idmesh_journal::read_number(&copy_epoch, "sensor-epoch");
-        if matches!(in_sync, Ok(Some(epoch)) if epoch == held) {
-            break held;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "the standby's copy never in sync at epoch {held} ({in_sync:?}):\n{}",
-            deployment.log()
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    };
+        .join("sensor-0.standby.journal");
+    let first = copy_in_sync(&deployment, &copy, "sensor-0");
     deployment.pause("sensor-0-standby");
     let deadline = Instant::now() + Duration::from_secs(40);
     let moved = loop {

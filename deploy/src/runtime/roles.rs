@@ -309,6 +309,9 @@ async fn own_sensor(
             match idmesh_sensor::claim_own(&mut claims, name, name).await {
                 Owned::Here(epoch) => {
                     tracing::info!(sensor = %name, epoch, "the voters give this process its sensor role");
+                    if let Some((journal, _)) = &journal {
+                        idmesh_sensor::serving_from(journal.path(), epoch)?;
+                    }
                     Some(Lease::new(claims, name, name, epoch))
                 }
                 Owned::Elsewhere => {
