@@ -612,22 +612,32 @@ fn with_access_control_only_listed_producers_feed_the_sensor() {
     );
 }
 
-/// Voters in a secured deployment under the generated access rules: they
-/// elect a leader of their group over mutual TLS, and the listed client
-/// reads every voter's map through the coordinator.
+/// Voters and a sensor standby in a secured deployment under the
+/// generated access rules: the voters elect a leader of their group over
+/// mutual TLS, the listed client reads every voter's map through the
+/// coordinator, every role is claimed through them, and when the sensor
+/// is killed its standby takes the role over (its rules let it serve the
+/// sensor's keys, the sensor's replicate its journal to it) and the
+/// stream ends as the offline twin does.
 #[test]
-fn voters_under_access_control_elect_and_answer_the_client() {
+fn voters_and_a_sensor_standby_under_access_control_take_over_and_answer() {
     let dir = std::env::temp_dir().join(format!("idmesh-security-voters-{}", std::process::id()));
     let mut names = names();
     names.extend((1..=3).map(|i| format!("voter-{i}")));
+    names.push("sensor-0-standby".into());
     let certs = certificates(&dir.join("certs"), "idmesh test CA", &names);
     let trace = crowd(&dir, 12, 4, 60.0, 5);
-    let deployment = Deployment::start(
+    let mut deployment = Deployment::start_each(
         "secured-voters",
         &trace,
         &Settings {
             leaders: LEADERS,
             voters: 3,
+            sensor_standby: true,
+            journal: true,
+            own_disks: true,
+            rate: Some(300.0),
+            takeover_after_ms: Some(1000),
             security: Some(Secured {
                 certs,
                 access_control: true,
@@ -637,6 +647,7 @@ fn voters_under_access_control_elect_and_answer_the_client() {
             ..Settings::default()
         },
     );
+    let twin = deployment.twin_summary(&trace);
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
         let answers = deployment.query(&["roles"]).unwrap_or_default();
@@ -648,15 +659,49 @@ fn voters_under_access_control_elect_and_answer_the_client() {
             && answers
                 .iter()
                 .all(|a| Some(&a["leader"]) == leader.as_ref());
-        if agreed {
+        let held = |role: &str| {
+            answers.first().is_some_and(|a| {
+                a["roles"]
+                    .as_array()
+                    .is_some_and(|r| r.iter().any(|e| e["role"] == role && e["holder"] == role))
+            })
+        };
+        if agreed && held("sensor-0") && held("leader-0") {
             break;
         }
         assert!(
             Instant::now() < deadline,
-            "no leader the three voters agree on: {answers:?}\n{}",
+            "no leader the three voters agree on, or roles not claimed: {answers:?}\n{}",
             deployment.log()
         );
         std::thread::sleep(Duration::from_millis(200));
     }
+    deployment.first_answer(Duration::from_secs(30));
+    let copy = deployment
+        .dir
+        .join("state-sensor-0-standby")
+        .join("sensor-0.standby.journal");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while idmesh_sensor::journal::read(&copy).map_or(0, |r| r.len()) == 0 {
+        assert!(
+            Instant::now() < deadline,
+            "the sensor never replicated to its standby:\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    deployment.kill("sensor-0");
+    let last = deployment.final_marginals(Duration::from_secs(60));
+    assert_same_marginals(
+        &last,
+        &floats(&twin["final_p_red"]),
+        "after the standby took the sensor role over",
+    );
+    assert!(
+        deployment.log().contains("taking over from the copy"),
+        "the standby took the role over:\n{}",
+        deployment.log()
+    );
+    drop(deployment);
     std::fs::remove_dir_all(&dir).ok();
 }

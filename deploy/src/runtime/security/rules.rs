@@ -9,7 +9,13 @@
 //! rules. Keys carry the sender's own name where the key names a process,
 //! so a sensor serves only its own keys; a leader may serve any leader
 //! role's, because a leader process adopts the role of one gone for good
-//! (`idmesh_leader::host`) — and nothing but leader roles.
+//! (`idmesh_leader::host`) — and nothing but leader roles. A sensor's
+//! standby (`[[sensor_standby]]`) may take the sensor's role over, so it
+//! counts among the sensors below and serves that sensor's keys (and no
+//! other's); the sensor and its standby replicate the journal to each
+//! other and watch each other's tokens, in whichever direction the role
+//! stands. Every process with a role may read the voters' map
+//! (`query/roles`), through which it claims and keeps its role.
 //!
 //! | from | to | messages | keys |
 //! |---|---|---|---|
@@ -26,18 +32,23 @@
 //! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership), `P/alive/home/*` (a process back for its adopted role) |
 //! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
 //! | coordinator | sensor | query | `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions` |
+//! | sensor, its standby | each other | query | `P/sensor/*/replicate` (the journal's records) |
+//! | sensor, its standby | each other | liveliness subscriber, liveliness query | `P/alive/sensor/*`, `P/alive/sensor-standby/*` |
+//! | every process | voters | put, query | `P/raft/propose` (claims), `P/query/roles` (the map) |
 //! | clients | coordinator | query | `P/query/**` |
 //! | coordinator | clients | declare queryable, reply | `P/query/**` |
 //! | producers | sensor | query | `P/sensor/S/ingest` |
 //! | sensor | producers | declare queryable, reply | `P/sensor/S/ingest` |
-//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) and its home token `P/alive/home/N` |
+//! | every process N | every process | declare what it serves, reply, liveliness token | its own keys (`P/sensor/N/**`, `P/query/**`, `P/ping/<role>/N`, `P/alive/<role>/N`); for a leader, every leader role's (`P/leader/*/**`, `P/alive/leader/*`) and its home token `P/alive/home/N`; for a sensor's standby, that sensor's (`P/sensor/S/**`, `P/alive/sensor/S`) and a sensor with a standby stands by under `P/alive/sensor-standby/N` |
 //! | leader, sensor | coordinator | reply | the wildcard keys it asks them all on (`P/leader/*/partial`, `P/leader/*/stats`, `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions`): Zenoh replies on the asker's key |
+//! | voters | every process | reply | `P/query/roles` |
 //! | every process | every process | query | `P/ping/**` |
 
 use crate::runtime::topology::{Member, Topology};
 use idmesh_protocol::wire::keys::Keys;
+use idmesh_sensor::STANDBY_ROLE;
 use serde_json::{json, Value};
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// Processes named `from` may send `messages` on `keys` to processes
 /// named `to` (certificate common names).
@@ -57,7 +68,16 @@ const SERVE: &[&str] = &["declare_queryable", "reply"];
 /// Who takes part, by certificate common name.
 struct Parties {
     coordinator: Vec<String>,
+    /// The processes that may act as a sensor: the sensors and their
+    /// standbys.
     sensor: Vec<String>,
+    /// The sensor roles (whose keys, such as the ingest key, are named
+    /// after them).
+    sensor_roles: Vec<String>,
+    /// Each sensor standby, and the sensor it stands by for.
+    stands_by: BTreeMap<String, String>,
+    /// The sensors that have a standby (and so may stand by for it).
+    with_standby: BTreeSet<String>,
     leaders: Vec<String>,
     voters: Vec<String>,
     members: Vec<String>,
@@ -71,7 +91,23 @@ impl Parties {
     fn of(topology: &Topology) -> Self {
         Parties {
             coordinator: topology.coordinators().map(|c| c.name.clone()).collect(),
-            sensor: topology.sensors.iter().map(|s| s.name.clone()).collect(),
+            sensor: topology
+                .sensors
+                .iter()
+                .map(|s| s.name.clone())
+                .chain(topology.sensor_standbys.iter().map(|s| s.name.clone()))
+                .collect(),
+            sensor_roles: topology.sensors.iter().map(|s| s.name.clone()).collect(),
+            stands_by: topology
+                .sensor_standbys
+                .iter()
+                .map(|s| (s.name.clone(), s.sensor.clone()))
+                .collect(),
+            with_standby: topology
+                .sensor_standbys
+                .iter()
+                .map(|s| s.sensor.clone())
+                .collect(),
             leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
             voters: topology.voters.iter().map(|v| v.name.clone()).collect(),
             members: topology.members().into_iter().map(|m| m.name).collect(),
@@ -120,6 +156,7 @@ pub(crate) fn grants(topology: &Topology) -> Vec<Grant> {
         vec![format!("{}/ping/**", keys.prefix())],
     ));
     grants.extend(voter_grants(&keys, &parties));
+    grants.extend(standby_grants(&keys, &parties));
     grants.extend(outside_grants(&keys, &parties));
     // What each process serves, under its own name.
     for m in topology.members() {
@@ -295,12 +332,39 @@ fn voter_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
             &["declare_subscriber"],
             vec![keys.raft_propose()],
         ),
+        // The coordinator, for its clients; every other process, to claim
+        // and keep its role.
         grant(
             "roles",
-            &parties.coordinator,
+            &parties.members,
             &parties.voters,
             &["query"],
             vec![keys.query_roles()],
+        ),
+    ]
+}
+
+/// What a sensor and its standby send each other: the journal's records
+/// (from whichever holds the role to the other) and the watch on each
+/// other's tokens.
+fn standby_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
+    if parties.stands_by.is_empty() {
+        return Vec::new();
+    }
+    vec![
+        grant(
+            "replicate",
+            &parties.sensor,
+            &parties.sensor,
+            &["query"],
+            vec![keys.sensor_replicate("*")],
+        ),
+        grant(
+            "standby-watch",
+            &parties.sensor,
+            &parties.sensor,
+            &["declare_liveliness_subscriber", "liveliness_query"],
+            vec![keys.alive_role("sensor"), keys.alive_role(STANDBY_ROLE)],
         ),
     ]
 }
@@ -328,7 +392,7 @@ fn outside_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
     }
     if !parties.producers.is_empty() {
         let ingest: Vec<String> = parties
-            .sensor
+            .sensor_roles
             .iter()
             .map(|s| keys.sensor_ingest(s))
             .collect();
@@ -361,9 +425,14 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
     // error reply always does): the coordinator asks every leader, and
     // every sensor, at once.
     let mut asked_as = Vec::new();
+    // Who asks it on wildcard keys: the coordinator (the voters are asked
+    // by every process).
+    let mut askers = &parties.coordinator;
     match m.role {
-        "sensor" => {
-            served.push(format!("{p}/sensor/{}/**", m.name));
+        "sensor" | STANDBY_ROLE => {
+            // A standby serves as its sensor once it takes the role over.
+            let sensor = parties.stands_by.get(&m.name).unwrap_or(&m.name);
+            served.push(format!("{p}/sensor/{sensor}/**"));
             asked_as.extend([
                 keys.every_sensor_cut(),
                 keys.every_sensor_stats(),
@@ -385,6 +454,7 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
         "voter" => {
             served.push(keys.query_roles());
             asked_as.push(keys.query_roles());
+            askers = &parties.members;
         }
         _ => served.push(format!("{p}/query/**")),
     }
@@ -399,7 +469,7 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
         grants.push(grant(
             &format!("{}-answers", m.name),
             &me,
-            &parties.coordinator,
+            askers,
             &["reply"],
             asked_as,
         ));
@@ -408,6 +478,20 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
         // Any leader role's, and its own home token (standing by
         // for its role).
         "leader" => vec![keys.alive_role("leader"), keys.alive("home", &m.name)],
+        // Its own, and its sensor's once it holds that role.
+        STANDBY_ROLE => {
+            let sensor = parties.stands_by.get(&m.name).unwrap_or(&m.name);
+            vec![
+                keys.alive(STANDBY_ROLE, &m.name),
+                keys.alive("sensor", sensor),
+            ]
+        }
+        // Its own, and with a standby its token standing by for it once
+        // the standby holds the role.
+        "sensor" if parties.with_standby.contains(&m.name) => vec![
+            keys.alive("sensor", &m.name),
+            keys.alive(STANDBY_ROLE, &m.name),
+        ],
         role => vec![keys.alive(role, &m.name)],
     };
     grants.push(grant(
@@ -692,11 +776,8 @@ producers = ["camera"]
         assert!(allowed(&s, "egress", "l0", "put", "p/leader/l0/events"));
     }
 
-    /// Voters hear raft only from voters, proposals from the deployment's
-    /// processes, and the roles question from the coordinator (a client
-    /// asks it through the coordinator, never a voter directly).
-    #[test]
-    fn voters_hear_raft_from_voters_and_the_roles_question_from_the_coordinator() {
+    /// The test topology with three voters.
+    fn with_voters() -> Topology {
         let mut t = topology();
         t.state_dir = Some("state".into());
         t.voters = (1..=3)
@@ -707,6 +788,30 @@ producers = ["camera"]
                 )
             })
             .collect();
+        t
+    }
+
+    /// Voters hear raft only from voters, proposals from the deployment's
+    /// processes, and the roles question from them too (each claims its
+    /// role through it; a client asks it through the coordinator, never a
+    /// voter directly).
+    #[test]
+    fn voters_hear_raft_from_voters_and_the_roles_question_from_the_processes() {
+        let t = with_voters();
+        assert!(allowed(
+            &access_control(&t, "v2"),
+            "ingress",
+            "l0",
+            "query",
+            "p/query/roles"
+        ));
+        assert!(allowed(
+            &access_control(&t, "l0"),
+            "ingress",
+            "v2",
+            "reply",
+            "p/query/roles"
+        ));
         let v1 = access_control(&t, "v1");
         assert!(allowed(&v1, "ingress", "v2", "put", "p/raft/1"));
         assert!(allowed(&v1, "egress", "v3", "put", "p/raft/3"));
@@ -748,6 +853,85 @@ producers = ["camera"]
         assert!(allowed(&c, "egress", "v1", "query", "p/query/roles"));
         assert!(allowed(&c, "ingress", "v1", "reply", "p/query/roles"));
         assert!(allowed(&c, "egress", "operator", "reply", "p/query/roles"));
+    }
+
+    /// A sensor's standby acts as its sensor, on that sensor's keys only,
+    /// and the two replicate to and watch each other.
+    #[test]
+    fn a_sensor_standby_serves_its_sensor_s_keys_and_no_other_s() {
+        let mut t = with_voters();
+        t.sensor_standbys = vec![crate::runtime::topology::SensorStandbyProcess {
+            name: "sb".into(),
+            sensor: "s".into(),
+            host: "local".into(),
+            listen: "tcp/127.0.0.1:20".into(),
+        }];
+        let sb = access_control(&t, "sb");
+        for (peer, message, key) in [
+            ("l0", "put", "p/leader/l0/events"),
+            ("l0", "liveliness_query", "p/alive/leader/l0"),
+            ("c", "reply", "p/sensor/s/cut"),
+            ("c", "declare_queryable", "p/sensor/s/cut"),
+            ("l0", "liveliness_token", "p/alive/sensor/s"),
+            ("s", "liveliness_token", "p/alive/sensor-standby/sb"),
+            ("s", "query", "p/sensor/s/replicate"),
+            ("s", "declare_liveliness_subscriber", "p/alive/sensor/s"),
+            ("v1", "query", "p/query/roles"),
+            ("v1", "put", "p/raft/propose"),
+        ] {
+            assert!(
+                allowed(&sb, "egress", peer, message, key),
+                "{message} {key}"
+            );
+        }
+        assert!(!allowed(
+            &sb,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/sensor/other/cut"
+        ));
+        assert!(!allowed(
+            &sb,
+            "egress",
+            "l0",
+            "liveliness_token",
+            "p/alive/sensor/other"
+        ));
+        assert!(allowed(
+            &sb,
+            "ingress",
+            "s",
+            "query",
+            "p/sensor/s/replicate"
+        ));
+        assert!(allowed(&sb, "ingress", "l0", "query", "p/sensor/s/follow"));
+        assert!(!allowed(
+            &sb,
+            "ingress",
+            "operator",
+            "query",
+            "p/sensor/s/replicate"
+        ));
+        let s = access_control(&t, "s");
+        assert!(allowed(&s, "egress", "sb", "query", "p/sensor/s/replicate"));
+        assert!(allowed(&s, "egress", "sb", "reply", "p/sensor/s/replicate"));
+        assert!(allowed(
+            &s,
+            "egress",
+            "l0",
+            "liveliness_token",
+            "p/alive/sensor-standby/s"
+        ));
+        let l0 = access_control(&t, "l0");
+        assert!(allowed(&l0, "ingress", "sb", "put", "p/leader/l0/events"));
+        assert!(!allowed(
+            &l0,
+            "ingress",
+            "sb",
+            "put",
+            "p/leader/l0/transfer"
+        ));
     }
 
     #[test]
