@@ -22,16 +22,20 @@
 //! journal; the coordinator's replica on h4 answers while h0's
 //! coordinator cannot. A cut-off sensor loses its lease (it cannot read
 //! the map from a leading voter) and stops; back, it reads that the role
-//! is its standby's and stops; started again, its claim is refused and
-//! it waits, serving nothing — a former sensor never goes home, so the
-//! sensor role moves once a run at most. (A cut-off shorter than the mesh's link lease
+//! is its standby's and stops; started again, it stands by for the
+//! holder, whose journal it copies from then on (and takes the role back
+//! if h4 is then restarted and slow to come back). (A cut-off shorter than the mesh's link lease
 //! leaves the sensor's token in the standby's view: the takeover then
 //! comes once the cut-off sensor, back, finds its lease lapsed and
 //! stops.) The standby then serving on h4 is killed and restarted like
 //! any process, alone or with h4: it comes back as the sensor from its
-//! journal (its copy), its claim over its own epoch given back at that
-//! epoch. h4 itself is never cut off or lost: it holds the only copy of
-//! the sensor's journal besides h0's, and the coordinator's replica.
+//! journal, its claim naming the epoch it held the role at given back at
+//! that epoch. Whichever holds the role and finds the other gone moves
+//! the role to a new epoch before it goes on alone, so the other's copy,
+//! behind, never takes over. h4 itself is never cut off or lost: after a
+//! fault that left h0's copy behind, h4's would be the only whole journal,
+//! and losing it would end the stream (nothing is then taken over from a
+//! copy that misses records, by design).
 //!
 //! A stream runs throughout (a trace fed at a rate, with a truth line
 //! after every event so that the offline replay has an answer at every
