@@ -20,7 +20,13 @@ const KIND_LEN: usize = 16;
 /// The header of a file holding `kind` (at most 16 ASCII bytes) at
 /// `generation`.
 pub fn header(kind: &str, generation: u64) -> [u8; HEADER_LEN] {
-    debug_assert!(kind.len() <= KIND_LEN && kind.is_ascii());
+    // A kind is the code's own constant: a longer one would be written cut
+    // short and then refused on every read as another file's, so it stops
+    // the first write of it instead, in every build.
+    assert!(
+        kind.len() <= KIND_LEN && kind.is_ascii(),
+        "a journal kind of at most {KIND_LEN} ASCII bytes, not {kind:?}"
+    );
     let mut head = [0u8; HEADER_LEN];
     head[..8].copy_from_slice(&MAGIC);
     head[8..10].copy_from_slice(&FORMAT.to_le_bytes());

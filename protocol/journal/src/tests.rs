@@ -430,3 +430,9 @@ proptest! {
         }
     }
 }
+
+#[test]
+#[should_panic(expected = "a journal kind of at most 16 ASCII bytes")]
+fn a_kind_too_long_for_the_header_stops_the_write_rather_than_cut_short() {
+    crate::header("sensor-copy-epoch", 1);
+}
