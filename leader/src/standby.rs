@@ -185,14 +185,16 @@ pub(crate) fn stamp_epoch(dir: &Path, role: &str, epoch: u64) -> Result<(), Stan
 /// (a journal from before the deployment had voters).
 pub(crate) fn stamped_epoch(dir: &Path, role: &str) -> Result<u64, StandbyError> {
     let path = epoch_path(dir, role);
+    let refused = |problem: &str| StandbyError::Refused {
+        path: path.display().to_string(),
+        problem: problem.to_string(),
+    };
     match log::read_number(&path, EPOCH) {
         Ok(epoch) => Ok(epoch.unwrap_or(0)),
-        Err(log::Error::Header { .. } | log::Error::NotANumber { .. }) => {
-            Err(StandbyError::Refused {
-                path: path.display().to_string(),
-                problem: "not one whole epoch".to_string(),
-            })
+        Err(log::Error::Header { .. }) => {
+            Err(refused("damaged at byte 0 (its header fails its checksum)"))
         }
+        Err(log::Error::NotANumber { .. }) => Err(refused("not one whole epoch")),
         Err(e) => Err(e.into()),
     }
 }
@@ -282,15 +284,7 @@ fn written_at(dir: &Path, role: &str) -> u64 {
 pub(crate) fn forget_journal(dir: &Path, role: &str) -> Result<(), StandbyError> {
     let journal = journal_path(dir, role);
     for old in [snapshot_path(&journal), journal] {
-        match std::fs::remove_file(&old) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                return Err(StandbyError::Log(log::Error::Io {
-                    path: old,
-                    source: e,
-                }))
-            }
-            _ => {}
-        }
+        log::remove_file(&old)?;
     }
     Ok(())
 }

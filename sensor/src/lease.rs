@@ -93,7 +93,7 @@ impl LeaseClock {
         (!hold.lost).then_some(hold.epoch)
     }
 
-    /// The hold is lost: whatever waits for a confirmation gives up.
+    /// The hold is lost: whatever waits for an advance gives up.
     pub fn lose(&self) {
         self.state.send_modify(|hold| hold.lost = true);
     }

@@ -220,9 +220,7 @@ impl<Q> Gateway<Q> {
     /// `batches` flushed before the role moved to its current epoch, as
     /// they leave now: at that epoch.
     pub fn restamp(&self, batches: &mut [(usize, Batch)]) {
-        for (_, batch) in batches {
-            batch.epoch = self.epoch;
-        }
+        self.stamp(batches.iter_mut().map(|(_, batch)| batch));
     }
 
     /// Routes at most `window` seqs past the slowest leader's progress
@@ -309,10 +307,15 @@ impl<Q> Gateway<Q> {
     /// Batches kept from earlier, as this holder sends them again: at its
     /// epoch (they may have been sent first by a former holder).
     fn restamped(&self, mut batches: Vec<Batch>) -> Vec<Batch> {
-        for batch in &mut batches {
+        self.stamp(&mut batches);
+        batches
+    }
+
+    /// Stamps `batches` with the epoch the role is held at here.
+    fn stamp<'a>(&self, batches: impl IntoIterator<Item = &'a mut Batch>) {
+        for batch in batches {
             batch.epoch = self.epoch;
         }
-        batches
     }
 
     /// Counts journal records that were damaged in one copy of the

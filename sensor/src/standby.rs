@@ -337,7 +337,7 @@ pub async fn stand_by(
     // A copy kept from before counts the sensor gone from now; with none,
     // the sensor has not been up yet and nothing is to be taken over.
     let mut gone_since = kept.then(Instant::now);
-    let mut told_empty = false;
+    let mut told_why = false;
     let mut look = tokio::time::interval(LOOK_EVERY);
     tokio::pin!(shutdown);
     tracing::info!(sensor = %config.sensor, copy = %config.journal.display(), "standing by for the sensor");
@@ -364,19 +364,19 @@ pub async fn stand_by(
                 // on alone while this process was away, and what it sent
                 // then is nowhere here.
                 if due && !kept && copy.position.is_none() {
-                    if !told_empty {
+                    if !told_why {
                         tracing::warn!(sensor = %config.sensor,
                             "the sensor is gone, but this standby holds nothing of its journal: not taking it over");
-                        told_empty = true;
+                        told_why = true;
                     }
                     continue;
                 }
                 let (true, Some(voters)) = (due, claims.as_mut()) else { continue };
                 let Some(in_sync) = copy.epoch else {
-                    if !told_empty {
+                    if !told_why {
                         tracing::warn!(sensor = %config.sensor, copy = %epoch_path(&config.journal).display(),
                             "the sensor is gone, but this standby's copy does not say at which epoch it was in sync: not taking it over");
-                        told_empty = true;
+                        told_why = true;
                     }
                     continue;
                 };
@@ -483,7 +483,8 @@ fn open_copy(config: &StandbyConfig) -> Result<(Journal, Copy, bool), StandbyErr
                 tracing::warn!(sensor = %config.sensor, journal = %config.journal.display(),
                     "this process's journal of the sensor role is of an earlier holding: emptied, standing by for the holder");
             }
-            forget_epoch(&config.journal)?;
+            idmesh_journal::remove_file(&epoch_path(&config.journal))
+                .map_err(JournalError::from)?;
             return Ok((journal, Copy::default(), false));
         }
         // A dedicated standby's: its copy, or the journal of its own
@@ -497,16 +498,6 @@ fn open_copy(config: &StandbyConfig) -> Result<(Journal, Copy, bool), StandbyErr
         epoch,
     };
     Ok((journal, copy, !records.is_empty()))
-}
-
-fn forget_epoch(journal: &Path) -> Result<(), StandbyError> {
-    let path = epoch_path(journal);
-    match std::fs::remove_file(&path) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-            Err(JournalError::from(idmesh_journal::Error::Io { path, source: e }).into())
-        }
-        _ => Ok(()),
-    }
 }
 
 /// This process serves the sensor role at `epoch` from the journal at
@@ -556,7 +547,7 @@ async fn keep(
         Apply::Nothing => {}
     }
     // On disk before the answer: a takeover after a restart names it.
-    if let (Some(epoch), true) = (copy.epoch, copy.epoch != in_sync) {
+    if let Some(epoch) = copy.epoch.filter(|_| copy.epoch != in_sync) {
         idmesh_journal::write_number(&epoch_path(&config.journal), COPY_EPOCH, epoch)
             .map_err(JournalError::from)?;
     }
@@ -616,10 +607,10 @@ pub async fn claim_own(claims: &mut Claims, role: &str, me: &str) -> Owned {
 
 /// Returns once this process (`me`) may no longer serve `role` (held at
 /// the epoch on `clock`): the map gives the role to another, or no voter
-/// has led for the lease. The holder then stops serving. Every read that
-/// finds the role still held here is noted on `clock`, and the loss too;
-/// an advance the replication asks for ([`LeaseClock::advanced_since`])
-/// is made here, through the voters.
+/// has led for the lease. The holder then stops serving, and the loss is
+/// noted on `clock`; an advance the replication asks for
+/// ([`LeaseClock::advanced_since`]) is made here, through the voters, and
+/// noted there too.
 pub async fn keep_lease(mut claims: Claims, role: String, me: String, clock: LeaseClock) {
     let since = Instant::now();
     // When the last advance was asked: one the voters made after its

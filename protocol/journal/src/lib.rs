@@ -110,4 +110,4 @@ pub use error::{Damage, Error, Problem};
 pub use format::{encode_record, header, FORMAT, HEADER_LEN, MAGIC, MAX_RECORD, RECORD_HEAD};
 pub use number::{read_number, write_number};
 pub use read::{parse, read, read_copies, Contents, Ending, Merged, Record, Repair};
-pub use write::{fsyncs, write_file, Writer};
+pub use write::{fsyncs, remove_file, write_file, Writer};

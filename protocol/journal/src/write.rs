@@ -197,6 +197,15 @@ fn body<P: AsRef<[u8]>>(
     Ok(body)
 }
 
+/// Removes the file at `path`; none there is no error (a role's file
+/// forgotten whether or not it was ever written).
+pub fn remove_file(path: &Path) -> Result<(), Error> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(path)(e)),
+        _ => Ok(()),
+    }
+}
+
 /// Writes `path` whole — a header of `kind` at `generation` and
 /// `payloads` as records — so that a crash leaves the old file or the new
 /// one; returns its size. A snapshot is one such file of one record.
