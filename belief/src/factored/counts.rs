@@ -375,7 +375,10 @@ impl CountPrior {
         Some(out)
     }
 
-    fn ln_all(&self, counts: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
+    /// [`all_leave_one_out`](Self::all_leave_one_out) in log space only:
+    /// for weights the fast path computed within its own checks yet wrong
+    /// (the caller's sum test found them out).
+    pub(crate) fn ln_all(&self, counts: &[&[f64]]) -> Vec<Option<Vec<f64>>> {
         let k = counts.len();
         let logs: Vec<Vec<f64>> = counts.iter().map(|c| ln_vec(c)).collect();
         let mut prefix = Vec::with_capacity(k);

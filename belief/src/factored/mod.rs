@@ -1389,7 +1389,8 @@ fn coupling_weights(
     if prior.is_point() && tracks <= EAGER_LIMIT && !counts_sum_to(prior.target(), counts, &by_live)
     {
         tracing::debug!("factored: the count tree's weights missed k; evaluated in log space");
-        by_live = prior.all_leave_one_out(counts);
+        // Not the eager fast path first: it rounds as the tree does.
+        by_live = prior.ln_all(counts);
     }
     // Where every component holds a single count no weight was computed,
     // so nothing above has checked their sum against π.
