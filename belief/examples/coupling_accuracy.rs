@@ -85,8 +85,18 @@ fn main() {
     let (max, split) = (defaults.max_component, defaults.split);
     let (original, least) = (SplitRule::Original, SplitRule::LeastLoss { rounds: 1 });
     let mut configs = vec![
-        config("local (the default)", Coupling::Local, max, split),
-        config("coupled", Coupling::Coupled, max, split),
+        config(
+            "coupled (the default: replay, one leader)",
+            Coupling::Coupled,
+            max,
+            split,
+        ),
+        config(
+            "local (each of several leaders)",
+            Coupling::Local,
+            max,
+            split,
+        ),
         config("flat (an older local rule)", Coupling::Flat, max, split),
         config(
             "local, max 7, original (the former default)",
@@ -171,9 +181,10 @@ fn main() {
          tracks, least-loss splits: the old cut or, where one loses less, the best cut one \
          exchange of tracks away from it) unless the row says otherwise; µs/event is the time per event of the \
          whole run (CPU, this machine, shared with other work: compare rows, not runs). \
-         \"local\" is what leaders run (and `idmesh replay` by default), \"flat\" a local \
-         rule they ran before, \"coupled\" the rule that needs the whole belief at every \
-         split.\n",
+         \"coupled\" weighs every split by the whole belief: what `idmesh replay` and a \
+         deployment of one leader, which holds the whole belief, run by default. \"local\" is \
+         what each leader runs where several share the belief, \"flat\" a local rule they ran \
+         before.\n",
         if extra { " --extra" } else { "" },
         started.elapsed().as_secs_f64(),
         seeds as usize * SIZES.len(),

@@ -208,9 +208,8 @@ proptest! {
     fn a_share_takes_every_long_valid_stream(
         (k, field, events) in long_case(),
         max in 4usize..=8,
-        flat in any::<bool>(),
+        coupling in coupling(),
     ) {
-        let coupling = if flat { Coupling::Flat } else { Coupling::Local };
         let options = FactoredOptions { max_component: max, coupling, ..FactoredOptions::default() };
         share_takes_every_event(field, options, k, &events)?;
     }
@@ -219,9 +218,8 @@ proptest! {
     fn a_share_takes_every_valid_stream(
         (k, field, events) in valid_case(),
         max in 1usize..=8,
-        flat in any::<bool>(),
+        coupling in coupling(),
     ) {
-        let coupling = if flat { Coupling::Flat } else { Coupling::Local };
         let options = FactoredOptions { max_component: max, coupling, ..FactoredOptions::default() };
         share_takes_every_event(field, options, k, &events)?;
     }
@@ -252,7 +250,8 @@ proptest! {
         let events = contradicting_stream(n, len, seed);
         let options = FactoredOptions { max_component: max, split, coupling, ..FactoredOptions::default() };
         takes_every_event(field.clone(), options.clone(), k, &events)?;
-        if coupling.is_local() {
+        {
+            // The one holder of the whole belief, under every rule.
             let mut belief = FactoredBelief::with_options(field.clone(), options.clone()).unwrap();
             let mut share = FactoredShare::start(field.clone(), options, |_| true).unwrap();
             for (i, e) in events.iter().enumerate() {

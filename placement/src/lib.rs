@@ -119,11 +119,14 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
     Ok((share, interest))
 }
 
-/// The factored belief's options a `Begin`'s settings name: the local
-/// coupling, which needs nothing beyond the components an event touches
-/// (what leaders can run, and what `idmesh replay --method factored
-/// --coupling local` runs with the same settings).
-pub fn factored_options(start: &FactoredStart) -> FactoredOptions {
+/// The factored belief's options a `Begin`'s settings name, on a stream
+/// of `leaders` leaders. The count coupling of the splits is the best its
+/// holders can compute: with one leader, which holds the whole belief, the
+/// coupled rule (what `idmesh replay` runs by default); with several, the
+/// local rule, which needs nothing beyond the components an event touches
+/// (what `idmesh replay --leaders N` runs). docs/design/beliefs.md, "Who
+/// weighs a split", says why and what each costs.
+pub fn factored_options(start: &FactoredStart, leaders: usize) -> FactoredOptions {
     FactoredOptions {
         max_component: start.max_component as usize,
         split: match start.split {
@@ -133,7 +136,10 @@ pub fn factored_options(start: &FactoredStart) -> FactoredOptions {
                 rounds: rounds as usize,
             },
         },
-        coupling: Coupling::Local,
+        coupling: match leaders {
+            1 => Coupling::Coupled,
+            _ => Coupling::Local,
+        },
         ..FactoredOptions::default()
     }
 }
@@ -145,9 +151,8 @@ pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, P
     let Some(settings) = &begin.factored else {
         return Ok(None);
     };
-    let share = FactoredShare::start(field_of(begin), factored_options(settings), |t| {
-        begin.holds_at_start(t, me)
-    })?;
+    let options = factored_options(settings, begin.leaders.len());
+    let share = FactoredShare::start(field_of(begin), options, |t| begin.holds_at_start(t, me))?;
     Ok(Some(share))
 }
 

@@ -10,7 +10,8 @@
 //! the items: the busiest applies at most 1.5× an even share at 2, 4 and
 //! 8 leaders on a random-waypoint crowd of 200. Under `regional = false` it equals
 //! `idmesh replay --method factored --coupling local` with the same
-//! options, from a known start and from the uniform prior; and a leader
+//! options (one leader, which holds the whole belief: `--coupling
+//! coupled`), from a known start and from the uniform prior; and a leader
 //! killed mid-stream and restarted from its journal changes no answer,
 //! while the flow-control window holds the stream for it. A stream of
 //! colours and identities runs the factored belief too, with the
@@ -42,14 +43,24 @@ fn exact() -> Factored {
     }
 }
 
-/// `idmesh replay` of the exact rule with the options of [`exact`].
+/// `idmesh replay` of the exact rule with the options of [`exact`], as
+/// several leaders run it.
 fn central(trace: &Path) -> Vec<Value> {
+    central_of(trace, 2)
+}
+
+/// The same as `leaders` leaders run it: one weighs its splits by the
+/// whole belief, several by the local rule.
+fn central_of(trace: &Path, leaders: usize) -> Vec<Value> {
     let max = MAX_COMPONENT.to_string();
     let args = vec![
         "--method",
         "factored",
         "--coupling",
-        "local",
+        match leaders {
+            1 => "coupled",
+            _ => "local",
+        },
         "--max-component",
         &max,
         "--split",
@@ -194,7 +205,7 @@ fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders(
 }
 
 #[test]
-fn exact_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
+fn exact_leaders_equal_the_centralized_belief_through_1_2_4_8_leaders() {
     let dir = std::env::temp_dir().join(format!("idmesh-factored-{}", std::process::id()));
     let known = crowd(&dir, 12, 4, 60.0, 5);
     for (s, (start, trace)) in [
@@ -204,11 +215,11 @@ fn exact_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
     .into_iter()
     .enumerate()
     {
-        let central = central(&trace);
         let truths = truth_lines(&trace);
-        assert_eq!(central.len(), truths.len());
         // Two leader counts per start, all four over both.
         for leaders in [[2, 8], [1, 4]][s] {
+            let central = central_of(&trace, leaders);
+            assert_eq!(central.len(), truths.len());
             let name = format!("exact{leaders}{}", start.len());
             let deployment = Deployment::start(&name, &trace, &settings(leaders));
             deployment.first_answer(Duration::from_secs(30));
@@ -245,18 +256,26 @@ fn exact_leaders_equal_the_centralized_local_rule_through_1_2_4_8_leaders() {
 /// nothing): the final answer still equals the centralized one.
 #[test]
 fn a_factored_leader_killed_and_restarted_changes_no_answer() {
-    killed_and_restarted(false);
+    killed_and_restarted(false, 4);
 }
 
 /// The same at the default settings, against `idmesh replay --topology`.
 #[test]
 fn a_regional_leader_killed_and_restarted_changes_no_answer() {
-    killed_and_restarted(true);
+    killed_and_restarted(true, 4);
 }
 
-fn killed_and_restarted(regional: bool) {
+/// The same with one leader, which holds the whole belief and so weighs
+/// its splits by all of it (the coupled rule): back from its snapshot and
+/// journal it still computes what `idmesh replay --topology` computes.
+#[test]
+fn the_one_leader_killed_and_restarted_changes_no_answer() {
+    killed_and_restarted(true, 1);
+}
+
+fn killed_and_restarted(regional: bool, leaders: usize) {
     let dir = std::env::temp_dir().join(format!(
-        "idmesh-factored-crash-{regional}-{}",
+        "idmesh-factored-crash-{regional}-{leaders}-{}",
         std::process::id()
     ));
     // The regional rule at the defaults on a crowd long enough for the
@@ -265,8 +284,9 @@ fn killed_and_restarted(regional: bool) {
         true => (waypoint_crowd(&dir, 40, 12, 1200, 3), Factored::default()),
         false => (crowd(&dir, 12, 4, 90.0, 5), exact()),
     };
+    let victim = format!("leader-{}", leaders - 1);
     let settings = Settings {
-        leaders: 4,
+        leaders,
         rate: Some(500.0),
         journal: true,
         snapshot_every: Some(40),
@@ -275,7 +295,7 @@ fn killed_and_restarted(regional: bool) {
         window: Some(WINDOW),
         ..Settings::default()
     };
-    let name = format!("factored-crash-{regional}");
+    let name = format!("factored-crash-{regional}-{leaders}");
     let mut crashed = Deployment::start_each(&name, &trace, &settings);
     let central = match regional {
         true => crashed.twin(&trace),
@@ -285,18 +305,18 @@ fn killed_and_restarted(regional: bool) {
     let first = crashed.first_answer(Duration::from_secs(30));
     assert_eq!(first["finished"], false, "the stream has begun, not ended");
     std::thread::sleep(Duration::from_millis(400));
-    crashed.kill("leader-1");
+    crashed.kill(&victim);
     let error = crashed
         .query(&["marginals"])
-        .expect_err("no answer without leader-1");
-    assert!(error.contains("leader-1"), "the error names it: {error}");
+        .expect_err("no answer without the leader killed");
+    assert!(error.contains(&victim), "the error names {victim}: {error}");
     std::thread::sleep(Duration::from_millis(600));
-    crashed.launch("leader", "leader-1");
+    crashed.launch("leader", &victim);
     let last = crashed.final_marginals(Duration::from_secs(60));
     for (t, (g, w)) in floats(&last["p_red"]).iter().zip(&want).enumerate() {
         assert!((g - w).abs() < 1e-9, "after a crash, track {t}: {g} vs {w}");
     }
-    // The window held the stream while leader-1 was away (the stream
+    // The window held the stream while the leader was away (the stream
     // could not run more than it past it).
     let stats = crashed.query(&["stats"]).expect("stats");
     let holds = stats[0]["sensors"][0]["window_holds"].as_u64().unwrap();
@@ -305,7 +325,7 @@ fn killed_and_restarted(regional: bool) {
         crashed.leaders_total("snapshots") > 0,
         "leaders wrote snapshots"
     );
-    assert!(crashed.leader("leader-1")["recoveries"].as_u64().unwrap() > 0);
+    assert!(crashed.leader(&victim)["recoveries"].as_u64().unwrap() > 0);
 }
 
 /// Leaders push their sums at each fresh cut and the coordinator answers

@@ -207,34 +207,49 @@ fn malformed_json_names_its_line() {
 #[test]
 fn a_sighting_the_stream_rules_out_is_taken_by_the_repair_rule() {
     // Track 0 is known red and k = 1: nothing else can be red, yet a sure
-    // read says track 1 is. Every filter takes it by the repair rule (the
-    // factored one by its contradiction rule at the query) and says so
-    // once on stderr; none stops.
+    // read says track 1 is. Every filter takes it by the repair rule and
+    // says so once on stderr; none stops. The factored belief by default
+    // weighs by the whole belief, so it finds the contradiction at the
+    // sighting as the exact filter does; under the local rule (what each
+    // of several leaders runs) only the query finds it, and answers by
+    // the contradiction rule.
     let trace = trace_file(
         "contradicting",
         r#"{"kind":"header","format":"idmesh-trace","version":1,"tracks":3,"initial_red":[0]}
 {"kind":"observe","time":0,"track":1,"red":1,"blue":0}
 "#,
     );
-    for method in ["overcomplete", "exact", "particles", "order1", "factored"] {
-        let output = replay(&trace, &["--method", method]);
+    let factored_local: &[&str] = &["--method", "factored", "--coupling", "local"];
+    for method in [
+        "overcomplete",
+        "exact",
+        "particles",
+        "order1",
+        "factored",
+        "local",
+    ] {
+        let args: &[&str] = match method {
+            "local" => factored_local,
+            _ => &["--method", method],
+        };
+        let output = replay(&trace, args);
         let out = lines(&output);
         let p: Vec<f64> = serde_json::from_value(out[0]["final_p_red"].clone()).unwrap();
-        // Counted in the summary: the sighting (and the factored query).
-        let repairs = if method == "factored" { 2 } else { 1 };
+        // Counted in the summary: the sighting (and the local rule's query).
+        let repairs = if method == "local" { 2 } else { 1 };
         assert_eq!(out[0]["repairs"], repairs, "{method}");
         assert!(
             (p.iter().sum::<f64>() - 1.0).abs() < 1e-9,
             "{method}: {p:?}"
         );
-        if method != "factored" {
+        if method != "local" {
             assert!((p[1] - 1.0).abs() < 1e-9, "{method}: {p:?}");
         }
         // Said once: the sighting's repair (the low-order filter's shrink
-        // is its nature and silent), and the factored query's.
+        // is its nature and silent), and the local rule's query.
         let said = match method {
             "order1" => 0,
-            "factored" => 2,
+            "local" => 2,
             _ => 1,
         };
         let stderr = String::from_utf8_lossy(&output.stderr);

@@ -290,7 +290,7 @@ fn regional(written: &Written, trace: &Path, topology: &Topology) -> Result<Vec<
     };
     written.regional(
         trace,
-        factored_options(&start),
+        factored_options(&start, topology.leader.len()),
         &rule,
         topology.leader.len(),
     )

@@ -20,7 +20,7 @@ impl Topology {
     pub fn replay_twin(&self, args: &mut ReplayArgs) -> Result<()> {
         let given = [
             (args.method.is_some(), "--method"),
-            (args.coupling != CouplingChoice::Local, "--coupling"),
+            (args.coupling.is_some(), "--coupling"),
             (args.max_component.is_some(), "--max-component"),
             (args.split != SplitChoice::LeastLoss, "--split"),
             (args.regions.is_some(), "--regions"),
@@ -52,6 +52,12 @@ impl Topology {
             BeliefKind::Factored => {
                 args.method = Some(Method::Factored);
                 args.max_component = Some(self.max_component as usize);
+                // What the leaders weigh their splits by: the whole belief
+                // where one holds it all (`idmesh_placement::factored_options`).
+                args.coupling = Some(match self.leader.len() {
+                    1 => CouplingChoice::Coupled,
+                    _ => CouplingChoice::Local,
+                });
                 args.split = match self.split {
                     SplitSetting::Original => SplitChoice::Original,
                     SplitSetting::Recent => SplitChoice::Recent,

@@ -39,13 +39,14 @@ pub enum Method {
     Particles(usize),
     /// The factored belief: exact tables over groups of tracks.
     Factored,
-    /// The factored belief with [`Coupling::Local`] splits: what a leader
-    /// can run, measured beside the coupled default.
+    /// The factored belief with [`Coupling::Local`] splits: what each of
+    /// several leaders can run, measured beside the coupled default.
     FactoredLocal,
     /// What a deployment of this many leaders computes at the default
-    /// settings: the factored belief with the local rule under the
-    /// regional rule, regions fitted to the crowd from the trace's `move`
-    /// lines (`idmesh_placement::Regional`; `idmesh replay --leaders L`).
+    /// settings: with one, the factored belief (coupled splits); with
+    /// several, the factored belief with the local rule under the regional
+    /// rule, regions fitted to the crowd from the trace's `move` lines
+    /// (`idmesh_placement::Regional`; `idmesh replay --leaders L`).
     Deployed(usize),
 }
 
@@ -141,8 +142,11 @@ impl Method {
             Method::Particles(count) => Recipe::Particles { count, seed },
             Method::Factored => Recipe::factored(Coupling::Coupled),
             Method::FactoredLocal => Recipe::factored(Coupling::Local),
-            // Its regions wrap the belief where the trace is replayed
+            // One leader holds the whole belief and weighs by all of it
+            // (`idmesh_placement::factored_options`); several share it by
+            // regions, which wrap the belief where the trace is replayed
             // (`Method::leaders`).
+            Method::Deployed(1) => Recipe::factored(Coupling::Coupled),
             Method::Deployed(_) => Recipe::factored(Coupling::Local),
         }
     }

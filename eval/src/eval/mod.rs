@@ -451,7 +451,9 @@ fn body(results: &Results, plots: &[Plot]) -> String {
          \"factored, as deployed on L leaders\" are what a deployment of L leaders computes \
          at the default settings (local split rule, regional rule, regions fitted to the \
          crowd from its `move` lines, one a second): `idmesh replay --leaders L`, which \
-         tests/tests/factored.rs holds live deployments to.\n",
+         tests/tests/factored.rs holds live deployments to; the rows \"factored\" are what \
+         `idmesh replay` and a deployment of one leader compute by default (splits weighed \
+         by the whole belief).\n",
         results.events,
         results.seeds,
         ns.join("/")

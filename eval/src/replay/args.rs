@@ -59,15 +59,16 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "C")]
     pub known_start_confidence: Option<f64>,
 
-    /// --method factored: how splits weigh the red count: `local` (the
-    /// weight an uninformed rest of the field gives the pair being split,
-    /// and every sighting reads only its component: what a deployment's
-    /// leaders run, hence the default), `coupled` (the whole belief's
-    /// weight, which no leader can compute alone; an option) or `flat`
-    /// (every count the pair can hold alike: the local rule leaders ran
-    /// before, kept to compare).
-    #[arg(long, value_enum, default_value_t = CouplingChoice::Local)]
-    pub coupling: CouplingChoice,
+    /// --method factored: how splits weigh the red count: `coupled` (the
+    /// whole belief's weight) or `local` (the weight an uninformed rest of
+    /// the field gives the pair being split, and every sighting reads only
+    /// its component), or `flat` (every count the pair can hold alike: the
+    /// local rule leaders ran before, kept to compare). Default: what the
+    /// holders of the belief can compute, so that a deployment of the same
+    /// shape computes what replay does: `coupled` for one holder, `local`
+    /// with --leaders N (N > 1) or --regions.
+    #[arg(long, value_enum)]
+    pub coupling: Option<CouplingChoice>,
 
     /// --method factored: the most tracks of one component (default 6);
     /// --method factored-identity: the most tracks of one group (2 to 9,
@@ -111,6 +112,18 @@ impl ReplayArgs {
     /// The property method asked for, or the default for property traces.
     pub(crate) fn property_method(&self) -> Method {
         self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
+    }
+
+    /// The coupling of the factored belief's splits: the one named, or the
+    /// best its holders can compute: the whole belief's weight for one
+    /// holder, the local rule where regions share the belief among leaders
+    /// (as `idmesh_placement::factored_options` gives the leaders).
+    pub(crate) fn coupling(&self) -> CouplingChoice {
+        let shared = self.regions.is_some() || self.leaders.is_some_and(|l| l > 1);
+        self.coupling.unwrap_or(match shared {
+            true => CouplingChoice::Local,
+            false => CouplingChoice::Coupled,
+        })
     }
 }
 

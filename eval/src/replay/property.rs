@@ -115,7 +115,7 @@ pub(crate) fn check_options(args: &ReplayArgs) -> Result<()> {
             );
         }
     }
-    let factored_options = args.coupling != CouplingChoice::Local
+    let factored_options = args.coupling.is_some()
         || args.max_component.is_some()
         || args.split != SplitChoice::LeastLoss
         || args.regions.is_some()
@@ -304,7 +304,7 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
         Method::Order2 => Recipe::Order(2),
         Method::Order3 => Recipe::Order(3),
         Method::Factored => Recipe::Factored(FactoredOptions {
-            coupling: match args.coupling {
+            coupling: match args.coupling() {
                 CouplingChoice::Coupled => Coupling::Coupled,
                 CouplingChoice::Local => Coupling::Local,
                 CouplingChoice::Flat => Coupling::Flat,
@@ -425,7 +425,7 @@ pub(super) mod tests {
             samples: None,
             force: false,
             known_start_confidence: None,
-            coupling: CouplingChoice::Local,
+            coupling: None,
             max_component: None,
             split: SplitChoice::LeastLoss,
             regions: None,

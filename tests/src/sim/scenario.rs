@@ -298,7 +298,7 @@ fn centralized(
     // belief with the local rule (and the regional rule where the leaders
     // run it), or the Radon belief.
     if let Some(start) = factored.filter(|f| f.regional) {
-        let belief = FactoredBelief::with_options(field, factored_options(&start))
+        let belief = FactoredBelief::with_options(field, factored_options(&start, leaders))
             .map_err(|e| e.to_string())?;
         let mut engine = Regional::new(belief, Regions::new(rule, leaders, header.tracks));
         let mut out = vec![engine.marginals().map_err(|e| e.to_string())?];
@@ -310,7 +310,7 @@ fn centralized(
     }
     let mut engine: Box<dyn PropertyFilter> = match &factored {
         Some(start) => Box::new(
-            FactoredBelief::with_options(field, factored_options(start))
+            FactoredBelief::with_options(field, factored_options(start, leaders))
                 .map_err(|e| e.to_string())?,
         ),
         None => Box::new(RadonBelief::with_options(field, options).map_err(|e| e.to_string())?),

@@ -18,6 +18,11 @@
 //! A share is a whole [`FactoredBelief`] whose components not held here are
 //! placeholders: never read (the local coupling reads no other component),
 //! replaced when the real component arrives.
+//!
+//! A share that holds every track (the one leader of a deployment) is the
+//! whole belief, and may weigh its splits by all of it
+//! ([`Coupling::Coupled`](super::Coupling::Coupled)): then it computes
+//! what the centralized belief with that rule computes, step for step.
 
 mod coupling;
 
@@ -181,38 +186,53 @@ impl From<FactoredShare> for ShareForm {
 impl TryFrom<ShareForm> for FactoredShare {
     type Error = BeliefError;
     fn try_from(form: ShareForm) -> Result<Self, BeliefError> {
-        let mut share = FactoredShare::start(form.field, form.options, |_| false)?;
+        let n = form.field.tracks;
+        let mut share = FactoredShare::start_holding(form.field, form.options, vec![false; n])?;
         share.put(form.components)?;
+        share.check_whole()?;
         Ok(share)
     }
 }
 
 impl FactoredShare {
     /// The start belief's components of the tracks `held` says are this
-    /// leader's (every track starts alone). The options must use the local
-    /// coupling and no `max_numbers`: both would need the whole belief.
+    /// leader's (every track starts alone). The options must use no
+    /// `max_numbers`, which would need the whole belief, and a local
+    /// coupling unless this share holds every track: the one holder of
+    /// the whole belief (a deployment of one leader) weighs its splits by
+    /// all of it, as `idmesh replay` does ([`Coupling::Coupled`](super::Coupling::Coupled)), and so
+    /// gives no component away.
     pub fn start(
         field: Field,
         options: FactoredOptions,
         held: impl Fn(u32) -> bool,
     ) -> Result<Self, BeliefError> {
-        let unsupported = |what| {
-            Err(BeliefError::Unsupported {
-                method: "a leader's factored belief",
-                what,
-            })
-        };
-        if !options.coupling.is_local() {
-            return unsupported("a split weighed by the whole belief (the coupled rule)");
+        let n = field.tracks;
+        let held: Vec<bool> = (0..n as u32).map(held).collect();
+        if !options.coupling.is_local() && held.contains(&false) {
+            return Err(unsupported(
+                "a split weighed by the whole belief (the coupled rule) on a share of part of it",
+            ));
         }
+        Self::start_holding(field, options, held)
+    }
+
+    fn start_holding(
+        field: Field,
+        options: FactoredOptions,
+        held: Vec<bool>,
+    ) -> Result<Self, BeliefError> {
         if options.max_numbers.is_some() {
-            return unsupported("a limit on the numbers of all components together");
+            return Err(unsupported(
+                "a limit on the numbers of all components together",
+            ));
         }
         let n = field.tracks;
         let mut belief = FactoredBelief::with_options(field, options)?;
-        // Its components are coupled at the coordinator, never here.
-        belief.leave_tree();
-        let held: Vec<bool> = (0..n as u32).map(held).collect();
+        if belief.options.coupling.is_local() {
+            // Its components are coupled at the coordinator, never here.
+            belief.leave_tree();
+        }
         let held_set: BTreeSet<u32> = (0..n as u32).filter(|&t| held[t as usize]).collect();
         // Nothing is known of the components yet: the first look reads all.
         let mut changed = Changed::new(n);
@@ -321,6 +341,7 @@ impl FactoredShare {
 
     fn mix_with(&mut self, mix: Mix, when: u64, may_merge: bool) -> Result<(), BeliefError> {
         self.belief.field.check_mix(&mix)?;
+        self.check_whole()?;
         let (a, b) = (mix.a as usize, mix.b as usize);
         if mix.swap != 1.0 && mix.swap != 0.0 && !(self.held[a] && self.held[b]) {
             return Err(BeliefError::BadComponent {
@@ -399,9 +420,21 @@ impl FactoredShare {
                 ),
             });
         }
+        self.check_whole()?;
         // Tracks it makes certain split off its component.
         self.note_changed(observe.track);
         self.belief.observe(observe)
+    }
+
+    /// A share whose splits are weighed by the whole belief must hold all
+    /// of it: a placeholder would weigh as if it were the component.
+    fn check_whole(&self) -> Result<(), BeliefError> {
+        if self.belief.options.coupling.is_local() || self.held_set.len() == self.held.len() {
+            return Ok(());
+        }
+        Err(unsupported(
+            "a split weighed by the whole belief (the coupled rule) on a share of part of it",
+        ))
     }
 
     /// Takes out the components held here whose tracks `pick` chooses
@@ -603,6 +636,13 @@ impl FactoredShare {
 
 fn bad(detail: String) -> BeliefError {
     BeliefError::BadComponent { detail }
+}
+
+fn unsupported(what: &'static str) -> BeliefError {
+    BeliefError::Unsupported {
+        method: "a leader's factored belief",
+        what,
+    }
 }
 
 /// The [`CountPart`] of one component.

@@ -209,7 +209,87 @@ fn leaders_holding_the_components_answer_as_the_whole() {
             for leaders in [1, 2, 4] {
                 shares_equal_the_whole(field.clone(), options.clone(), &events, leaders);
             }
+            // The one holder of the whole belief weighs by all of it.
+            let coupled = FactoredOptions {
+                coupling: Coupling::Coupled,
+                ..options.clone()
+            };
+            shares_equal_the_whole(field, coupled, &events, 1);
         }
+    }
+}
+
+/// The one holder of the whole belief runs the coupled rule: step for step
+/// the centralized belief with it (not the local rule's answers), also
+/// after its snapshot is read back midway, as a leader restarted from its
+/// snapshot goes on; and once it has given a component away it refuses to
+/// split by weights it no longer holds.
+#[test]
+fn the_one_holder_splits_by_the_whole_belief_also_from_its_snapshot() {
+    let n = 16;
+    let (initial, events) = workload(n, 400, 7);
+    let options = FactoredOptions {
+        max_component: 3,
+        coupling: Coupling::Coupled,
+        ..FactoredOptions::default()
+    };
+    let local = FactoredOptions {
+        coupling: Coupling::Local,
+        ..options.clone()
+    };
+    for field in [Field::known(n, initial.clone()), Field::uniform(n, 5)] {
+        let mut whole = FactoredBelief::with_options(field.clone(), options.clone()).unwrap();
+        let mut other = FactoredBelief::with_options(field.clone(), local.clone()).unwrap();
+        let mut share = FactoredShare::start(field.clone(), options.clone(), |_| true).unwrap();
+        let mut restored: Option<FactoredShare> = None;
+        let mut apart = 0.0f64;
+        for (i, event) in events.iter().enumerate() {
+            let when = i as u64 + 1;
+            let ok = whole.apply(event).is_ok();
+            let _ = other.apply(event);
+            if i == events.len() / 2 {
+                let bytes = postcard::to_allocvec(&share).unwrap();
+                restored = Some(postcard::from_bytes(&bytes).unwrap());
+            }
+            for s in std::iter::once(&mut share).chain(restored.as_mut()) {
+                let applied = match *event {
+                    Event::Mix(mix) => s.mix(mix, when),
+                    Event::Observe(o) => s.observe(o),
+                };
+                assert_eq!(applied.is_ok(), ok, "event {i}");
+            }
+            let want = whole.marginals().unwrap();
+            let local = other.marginals().unwrap();
+            for s in std::iter::once(&share).chain(restored.as_ref()) {
+                let got = coupled_marginals(&field, &s.parts()).unwrap();
+                for (t, (g, w)) in got.iter().zip(&want).enumerate() {
+                    assert!((g - w).abs() < 1e-9, "event {i}, track {t}: {g} vs {w}");
+                }
+            }
+            apart = want
+                .iter()
+                .zip(&local)
+                .map(|(w, l)| (w - l).abs())
+                .fold(apart, f64::max);
+        }
+        assert!(restored.is_some());
+        assert!(whole.stats().splits > 0, "the stream never split");
+        assert!(apart > 1e-6, "the coupled and the local rule never parted");
+        // Given away, a component leaves the share without the whole.
+        let gone = share.take(|c| c.contains(&0));
+        assert!(!gone.is_empty());
+        let e = share
+            .mix(
+                Mix {
+                    a: 1,
+                    b: 2,
+                    swap: 0.5,
+                },
+                1_000,
+            )
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("coupled rule"), "{e}");
     }
 }
 
@@ -220,7 +300,7 @@ fn a_share_refuses_what_does_not_fit_by_name() {
         coupling: Coupling::Local,
         ..FactoredOptions::default()
     };
-    let coupled = FactoredShare::start(field.clone(), FactoredOptions::default(), |_| true);
+    let coupled = FactoredShare::start(field.clone(), FactoredOptions::default(), |t| t < 2);
     assert!(coupled.unwrap_err().to_string().contains("coupled rule"));
     let mut share = FactoredShare::start(field.clone(), options, |t| t < 2).unwrap();
     let comp = |tracks: Vec<u32>, table: Vec<f64>| HeldComponent {
