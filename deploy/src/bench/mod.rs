@@ -298,7 +298,7 @@ fn report(options: &BenchOptions, measured: &Measured) -> Result<String> {
         options.duration,
         match options.belief {
             BeliefKind::Factored => format!(
-                "the factored belief at the default settings (components of at most {} tracks, least-loss splits, local split rule, regional rule, regions fitted to the crowd)",
+                "the factored belief at the default settings (components of at most {} tracks, least-loss splits; one leader weighs its splits by the whole belief, several by the local rule under the regional rule, regions fitted to the crowd)",
                 default_max_component(),
             ),
             BeliefKind::Radon => format!(

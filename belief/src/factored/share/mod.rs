@@ -41,6 +41,10 @@ use std::sync::Arc;
 /// own limit, [`super::MAX_COMPONENT_LIMIT`]).
 const MOST_TRACKS: usize = super::MAX_COMPONENT_LIMIT;
 
+/// What a share of part of the belief cannot run.
+const PART_COUPLED: &str =
+    "a split weighed by the whole belief (the coupled rule) on a share of part of it";
+
 /// One component as it moves between leaders: its table over the subsets
 /// of `tracks` (bit i ↔ `tracks[i]`), the table's log scale, and when each
 /// track last mixed (for [`SplitRule::Recent`](super::SplitRule::Recent):
@@ -210,9 +214,7 @@ impl FactoredShare {
         let n = field.tracks;
         let held: Vec<bool> = (0..n as u32).map(held).collect();
         if !options.coupling.is_local() && held.contains(&false) {
-            return Err(unsupported(
-                "a split weighed by the whole belief (the coupled rule) on a share of part of it",
-            ));
+            return Err(unsupported(PART_COUPLED));
         }
         Self::start_holding(field, options, held)
     }
@@ -432,9 +434,7 @@ impl FactoredShare {
         if self.belief.options.coupling.is_local() || self.held_set.len() == self.held.len() {
             return Ok(());
         }
-        Err(unsupported(
-            "a split weighed by the whole belief (the coupled rule) on a share of part of it",
-        ))
+        Err(unsupported(PART_COUPLED))
     }
 
     /// Takes out the components held here whose tracks `pick` chooses
