@@ -119,13 +119,22 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
     Ok((share, interest))
 }
 
+/// The count coupling of the factored belief's splits when `leaders`
+/// leaders share it: the best its holders can compute. One leader holds
+/// the whole belief and weighs by all of it (the coupled rule, what
+/// `idmesh replay` runs by default); each of several runs the local rule,
+/// which needs nothing beyond the components an event touches (what
+/// `idmesh replay --leaders N` runs). docs/design/beliefs.md, "Who weighs
+/// a split", says why and what each costs.
+pub fn split_coupling(leaders: usize) -> Coupling {
+    match leaders {
+        1 => Coupling::Coupled,
+        _ => Coupling::Local,
+    }
+}
+
 /// The factored belief's options a `Begin`'s settings name, on a stream
-/// of `leaders` leaders. The count coupling of the splits is the best its
-/// holders can compute: with one leader, which holds the whole belief, the
-/// coupled rule (what `idmesh replay` runs by default); with several, the
-/// local rule, which needs nothing beyond the components an event touches
-/// (what `idmesh replay --leaders N` runs). docs/design/beliefs.md, "Who
-/// weighs a split", says why and what each costs.
+/// of `leaders` leaders (its coupling: [`split_coupling`]).
 pub fn factored_options(start: &FactoredStart, leaders: usize) -> FactoredOptions {
     FactoredOptions {
         max_component: start.max_component as usize,
@@ -136,10 +145,7 @@ pub fn factored_options(start: &FactoredStart, leaders: usize) -> FactoredOption
                 rounds: rounds as usize,
             },
         },
-        coupling: match leaders {
-            1 => Coupling::Coupled,
-            _ => Coupling::Local,
-        },
+        coupling: split_coupling(leaders),
         ..FactoredOptions::default()
     }
 }

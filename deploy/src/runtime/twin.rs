@@ -8,8 +8,9 @@
 
 use super::topology::{BeliefKind, RegionsSetting, Sparsification, SplitSetting, Topology};
 use anyhow::{bail, Result};
-use idmesh_eval::replay::{CouplingChoice, Places, SplitChoice};
 use idmesh_eval::replay::{Method, ReplayArgs};
+use idmesh_eval::replay::{Places, SplitChoice};
+use idmesh_placement::split_coupling;
 use idmesh_protocol::trace::TraceReader;
 
 impl Topology {
@@ -52,12 +53,9 @@ impl Topology {
             BeliefKind::Factored => {
                 args.method = Some(Method::Factored);
                 args.max_component = Some(self.max_component as usize);
-                // What the leaders weigh their splits by: the whole belief
-                // where one holds it all (`idmesh_placement::factored_options`).
-                args.coupling = Some(match self.leader.len() {
-                    1 => CouplingChoice::Coupled,
-                    _ => CouplingChoice::Local,
-                });
+                // What the leaders weigh their splits by, whether or not
+                // regions share the belief among them.
+                args.coupling = Some(split_coupling(self.leader.len()).into());
                 args.split = match self.split {
                     SplitSetting::Original => SplitChoice::Original,
                     SplitSetting::Recent => SplitChoice::Recent,

@@ -10,6 +10,7 @@ use crate::filters::Recipe;
 use anyhow::{bail, Context, Result};
 use idmesh_belief::MAX_STATES;
 use idmesh_belief::{BeliefError, Coupling, Field, PropertyFilter, Sparsify};
+use idmesh_placement::split_coupling;
 use std::fmt;
 
 /// The largest n at which the exact filter runs in the grid (C(20, 10) =
@@ -142,12 +143,9 @@ impl Method {
             Method::Particles(count) => Recipe::Particles { count, seed },
             Method::Factored => Recipe::factored(Coupling::Coupled),
             Method::FactoredLocal => Recipe::factored(Coupling::Local),
-            // One leader holds the whole belief and weighs by all of it
-            // (`idmesh_placement::factored_options`); several share it by
-            // regions, which wrap the belief where the trace is replayed
+            // Its regions wrap the belief where the trace is replayed
             // (`Method::leaders`).
-            Method::Deployed(1) => Recipe::factored(Coupling::Coupled),
-            Method::Deployed(_) => Recipe::factored(Coupling::Local),
+            Method::Deployed(leaders) => Recipe::factored(split_coupling(leaders)),
         }
     }
 

@@ -3,6 +3,8 @@
 
 use super::identity::{IdentityMethod, MarginalChoice};
 use clap::{Args, ValueEnum};
+use idmesh_belief::Coupling;
+use idmesh_placement::split_coupling;
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, Args)]
@@ -115,15 +117,16 @@ impl ReplayArgs {
     }
 
     /// The coupling of the factored belief's splits: the one named, or the
-    /// best its holders can compute: the whole belief's weight for one
-    /// holder, the local rule where regions share the belief among leaders
-    /// (as `idmesh_placement::factored_options` gives the leaders).
-    pub(crate) fn coupling(&self) -> CouplingChoice {
-        let shared = self.regions.is_some() || self.leaders.is_some_and(|l| l > 1);
-        self.coupling.unwrap_or(match shared {
-            true => CouplingChoice::Local,
-            false => CouplingChoice::Coupled,
-        })
+    /// one the leaders whose regions replay runs under would compute
+    /// (`idmesh_placement::split_coupling`; none given: one holder).
+    pub(crate) fn coupling(&self) -> Coupling {
+        let leaders = match (&self.regions, self.leaders) {
+            (Some(places), _) => places.0.len(),
+            (None, Some(leaders)) => usize::from(leaders),
+            (None, None) => 1,
+        };
+        self.coupling
+            .map_or_else(|| split_coupling(leaders), Coupling::from)
     }
 }
 
@@ -159,6 +162,26 @@ pub enum CouplingChoice {
     Coupled,
     Local,
     Flat,
+}
+
+impl From<CouplingChoice> for Coupling {
+    fn from(choice: CouplingChoice) -> Self {
+        match choice {
+            CouplingChoice::Coupled => Coupling::Coupled,
+            CouplingChoice::Local => Coupling::Local,
+            CouplingChoice::Flat => Coupling::Flat,
+        }
+    }
+}
+
+impl From<Coupling> for CouplingChoice {
+    fn from(coupling: Coupling) -> Self {
+        match coupling {
+            Coupling::Coupled => CouplingChoice::Coupled,
+            Coupling::Local => CouplingChoice::Local,
+            Coupling::Flat => CouplingChoice::Flat,
+        }
+    }
 }
 
 /// The factored belief's split rule (`belief::SplitRule`; least-loss

@@ -12,7 +12,7 @@
 //! Every error — a bad line, an event the engine rejects — is reported as
 //! `FILE:LINE: reason` and ends the replay.
 
-use super::args::{CouplingChoice, Method, Places, ReplayArgs, SplitChoice};
+use super::args::{Method, Places, ReplayArgs, SplitChoice};
 use super::driver::{drive, finish, line_error, mean_error, Replay, Timed};
 use super::limits::binomial;
 use crate::filters::Recipe;
@@ -20,7 +20,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use idmesh_belief::MAX_STATES;
 use idmesh_belief::{
     brier_score, event_of, expected_tracking_error, field_of, log_loss, predict_red, BeliefError,
-    Coupling, Event, FactoredBelief, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
+    Event, FactoredBelief, FactoredOptions, Field, PropertyFilter, Sparsify, SplitRule,
 };
 use idmesh_placement::{RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader, Truth};
@@ -304,11 +304,7 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
         Method::Order2 => Recipe::Order(2),
         Method::Order3 => Recipe::Order(3),
         Method::Factored => Recipe::Factored(FactoredOptions {
-            coupling: match args.coupling() {
-                CouplingChoice::Coupled => Coupling::Coupled,
-                CouplingChoice::Local => Coupling::Local,
-                CouplingChoice::Flat => Coupling::Flat,
-            },
+            coupling: args.coupling(),
             max_component: args
                 .max_component
                 .unwrap_or(FactoredOptions::default().max_component),
@@ -407,8 +403,9 @@ impl<F: PropertyFilter + Moves + ?Sized> Replay for Engine<F> {
 #[cfg(test)]
 pub(super) mod tests {
     use super::*;
-    use crate::replay::args::parse_places;
+    use crate::replay::args::{parse_places, CouplingChoice};
     use crate::replay::driver::output_lines;
+    use idmesh_belief::Coupling;
     use std::path::PathBuf;
 
     /// Replay arguments naming `method` and `budget`, nothing else.
@@ -456,6 +453,28 @@ pub(super) mod tests {
         r#"{"kind":"truth","time":3,"red":[1,2]}"#,
         "\n",
     );
+
+    /// Without `--coupling`, the factored belief splits as the leaders of
+    /// the same shape would: by the whole belief for one holder (also
+    /// under the regions of one place), by the local rule for several.
+    #[test]
+    fn the_default_coupling_is_what_the_leaders_of_that_shape_compute() {
+        let with = |leaders: Option<u16>, places: Option<&str>| ReplayArgs {
+            leaders,
+            regions: places.map(|p| parse_places(p).unwrap()),
+            ..args(Method::Factored, None)
+        };
+        assert_eq!(with(None, None).coupling(), Coupling::Coupled);
+        assert_eq!(with(Some(1), None).coupling(), Coupling::Coupled);
+        assert_eq!(with(Some(4), None).coupling(), Coupling::Local);
+        assert_eq!(with(None, Some("0,0")).coupling(), Coupling::Coupled);
+        assert_eq!(with(None, Some("0,0;5,0")).coupling(), Coupling::Local);
+        let named = ReplayArgs {
+            coupling: Some(CouplingChoice::Flat),
+            ..with(Some(4), None)
+        };
+        assert_eq!(named.coupling(), Coupling::Flat);
+    }
 
     #[test]
     fn an_exact_radon_belief_too_big_for_the_machine_is_refused_with_an_estimate() {
