@@ -76,8 +76,6 @@ struct Parties {
     sensor_roles: Vec<String>,
     /// Each sensor standby, and the sensor it stands by for.
     stands_by: BTreeMap<String, String>,
-    /// The sensors that have a standby (and so may stand by for it).
-    with_standby: BTreeSet<String>,
     leaders: Vec<String>,
     voters: Vec<String>,
     members: Vec<String>,
@@ -103,11 +101,6 @@ impl Parties {
                 .iter()
                 .map(|s| (s.name.clone(), s.sensor.clone()))
                 .collect(),
-            with_standby: topology
-                .sensor_standbys
-                .iter()
-                .map(|s| s.sensor.clone())
-                .collect(),
             leaders: topology.leader.iter().map(|l| l.name.clone()).collect(),
             voters: topology.voters.iter().map(|v| v.name.clone()).collect(),
             members: topology.members().into_iter().map(|m| m.name).collect(),
@@ -122,6 +115,17 @@ impl Parties {
                 .map(|s| s.producers.clone())
                 .unwrap_or_default(),
         }
+    }
+
+    /// The sensor role process `name` acts as: the one it stands by for,
+    /// once it takes it over; a sensor's own otherwise.
+    fn sensor_of<'a>(&'a self, name: &'a str) -> &'a str {
+        self.stands_by.get(name).map_or(name, String::as_str)
+    }
+
+    /// Whether sensor `name` has a standby (and so may stand by for it).
+    fn has_standby(&self, name: &str) -> bool {
+        self.stands_by.values().any(|sensor| sensor == name)
     }
 }
 
@@ -431,8 +435,7 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
     match m.role {
         "sensor" | STANDBY_ROLE => {
             // A standby serves as its sensor once it takes the role over.
-            let sensor = parties.stands_by.get(&m.name).unwrap_or(&m.name);
-            served.push(format!("{p}/sensor/{sensor}/**"));
+            served.push(format!("{p}/sensor/{}/**", parties.sensor_of(&m.name)));
             asked_as.extend([
                 keys.every_sensor_cut(),
                 keys.every_sensor_stats(),
@@ -479,16 +482,13 @@ fn member_grants(keys: &Keys, parties: &Parties, m: &Member) -> Vec<Grant> {
         // for its role).
         "leader" => vec![keys.alive_role("leader"), keys.alive("home", &m.name)],
         // Its own, and its sensor's once it holds that role.
-        STANDBY_ROLE => {
-            let sensor = parties.stands_by.get(&m.name).unwrap_or(&m.name);
-            vec![
-                keys.alive(STANDBY_ROLE, &m.name),
-                keys.alive("sensor", sensor),
-            ]
-        }
+        STANDBY_ROLE => vec![
+            keys.alive(STANDBY_ROLE, &m.name),
+            keys.alive("sensor", parties.sensor_of(&m.name)),
+        ],
         // Its own, and with a standby its token standing by for it once
         // the standby holds the role.
-        "sensor" if parties.with_standby.contains(&m.name) => vec![
+        "sensor" if parties.has_standby(&m.name) => vec![
             keys.alive("sensor", &m.name),
             keys.alive(STANDBY_ROLE, &m.name),
         ],
