@@ -24,8 +24,8 @@
 //! Every stream is seeded: the numbers are the same on every run, except the
 //! time per event.
 
-use idmesh_belief::expected_tracking_error;
 use idmesh_belief::workload::{generate, WorkloadSpec};
+use idmesh_belief::{expected_tracking_error, mean_with_interval};
 use idmesh_belief::{
     Coupling, DenseFilter, FactoredBelief, FactoredOptions, Field, PropertyFilter, SplitRule,
 };
@@ -59,13 +59,6 @@ struct Runs {
     error: Vec<f64>,
     seconds: f64,
     events: usize,
-}
-
-fn mean_ci(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    (mean, 1.96 * (var / n).sqrt())
 }
 
 fn main() {
@@ -190,7 +183,7 @@ fn main() {
         seeds as usize * SIZES.len(),
     );
     for (swap, known, runs, exact_error) in &cases {
-        let (e, ci) = mean_ci(exact_error);
+        let (e, ci) = mean_with_interval(exact_error);
         let _ = writeln!(
             md,
             "\n## swap {swap}, {} (exact filter's tracking error {e:.4} ± {ci:.4})\n\n\
@@ -203,15 +196,15 @@ fn main() {
             },
         );
         for (c, r) in configs.iter().zip(runs) {
-            let (d, dci) = mean_ci(&r.delta);
-            let (t, tci) = mean_ci(&r.error);
+            let (d, dci) = mean_with_interval(&r.delta);
+            let (t, tci) = mean_with_interval(&r.error);
             let paired: Vec<f64> = r
                 .delta
                 .iter()
                 .zip(&runs[reference].delta)
                 .map(|(a, b)| a - b)
                 .collect();
-            let (p, pci) = mean_ci(&paired);
+            let (p, pci) = mean_with_interval(&paired);
             let _ = writeln!(
                 md,
                 "| {} | {d:.4} ± {dci:.4} | {p:+.4} ± {pci:.4} | {t:.4} ± {tci:.4} | {:.1} |",
@@ -237,9 +230,9 @@ fn main() {
             .zip(all(|r| &r.delta, reference))
             .map(|(a, b)| a - b)
             .collect();
-        let (d, dci) = mean_ci(&delta);
-        let (p, pci) = mean_ci(&paired);
-        let (t, tci) = mean_ci(&all(|r| &r.error, i));
+        let (d, dci) = mean_with_interval(&delta);
+        let (p, pci) = mean_with_interval(&paired);
+        let (t, tci) = mean_with_interval(&all(|r| &r.error, i));
         let _ = writeln!(
             md,
             "| {} | {d:.4} ± {dci:.4} | {p:+.4} ± {pci:.4} | {t:.4} ± {tci:.4} |",
@@ -247,7 +240,7 @@ fn main() {
         );
     }
     let exact: Vec<f64> = cases.iter().flat_map(|x| x.3.clone()).collect();
-    let (e, eci) = mean_ci(&exact);
+    let (e, eci) = mean_with_interval(&exact);
     let _ = writeln!(md, "| exact filter | 0 | | {e:.4} ± {eci:.4} |");
     print!("{md}");
     if let Some(path) = out {

@@ -59,7 +59,9 @@ pub use track_set::TrackSet;
 pub use from_trace::{event_of, field_of, mix_of};
 // The interface of every property filter, and the spec's scores.
 pub use filter::{predict_red, tracking_error, PropertyFilter};
-pub use scoring::{brier_score, expected_tracking_error, log_loss, Reliability, LOG_LOSS_FLOOR};
+pub use scoring::{
+    brier_score, expected_tracking_error, log_loss, mean_with_interval, Reliability, LOG_LOSS_FLOOR,
+};
 // The Radon belief, and what leaders exchange of it.
 pub use radon::{
     Atom, Growth, MixingLog, PartialSums, RadonBelief, RadonOptions, RadonShare, RadonStats,

@@ -57,6 +57,16 @@ pub(crate) fn red_shares(marginals: &[f64], k: Option<usize>) -> Vec<f64> {
     share
 }
 
+/// The mean of per-run scores and the half-width of its 95 % interval
+/// (1.96 standard errors; 0 for a single run): how the accuracy studies
+/// give every figure.
+pub fn mean_with_interval(scores: &[f64]) -> (f64, f64) {
+    let n = scores.len() as f64;
+    let mean = scores.iter().sum::<f64>() / n;
+    let var = scores.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, 1.96 * (var / n).sqrt())
+}
+
 /// 0/1 truth labels of n tracks from the list of red ones.
 fn truth_labels(tracks: usize, truth: &[u32]) -> Vec<f64> {
     let mut y = vec![0.0; tracks];
@@ -182,6 +192,14 @@ impl Reliability {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_interval_is_1_96_standard_errors_and_none_for_one_run() {
+        let (mean, half) = mean_with_interval(&[1.0, 2.0, 3.0]);
+        assert_eq!(mean, 2.0);
+        assert!((half - 1.96 * (1.0f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert_eq!(mean_with_interval(&[0.25]), (0.25, 0.0));
+    }
 
     #[test]
     fn ties_share_the_slots_they_compete_for() {

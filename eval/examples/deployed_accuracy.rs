@@ -22,7 +22,8 @@
 
 use anyhow::{bail, Context, Result};
 use idmesh_belief::{
-    event_of, field_of, Coupling, DenseFilter, FactoredBelief, FactoredOptions, PropertyFilter,
+    event_of, field_of, mean_with_interval, Coupling, DenseFilter, FactoredBelief, FactoredOptions,
+    PropertyFilter,
 };
 use idmesh_eval::eval::table3_crowds;
 use idmesh_placement::{RegionRule, Regional, Regions};
@@ -184,17 +185,6 @@ fn distance(got: &[Vec<f64>], exact: &[Vec<f64>]) -> Result<f64> {
     Ok(per_line.sum::<f64>() / got.len() as f64)
 }
 
-/// Mean and 1.96 standard errors.
-fn mean_ci(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    if xs.len() < 2 {
-        return (mean, 0.0);
-    }
-    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, 1.96 * (var / n).sqrt())
-}
-
 fn report(cases: &[(String, Vec<Vec<f64>>)], seeds: usize, seconds: f64) -> String {
     let mut md = String::new();
     let _ = writeln!(
@@ -237,9 +227,9 @@ fn table(md: &mut String, rows: &[Vec<f64>]) {
         "| belief | mean \\|ΔP(red)\\| | − one holder |\n|---|---|---|"
     );
     for (config, row) in CONFIGS.iter().zip(rows) {
-        let (d, dci) = mean_ci(row);
+        let (d, dci) = mean_with_interval(row);
         let paired: Vec<f64> = row.iter().zip(&rows[0]).map(|(a, b)| a - b).collect();
-        let (p, pci) = mean_ci(&paired);
+        let (p, pci) = mean_with_interval(&paired);
         let _ = writeln!(
             md,
             "| {} | {d:.4} ± {dci:.4} | {p:+.4} ± {pci:.4} |",
