@@ -518,8 +518,24 @@ impl Node {
                     .admit(Followed::WHAT, SENSOR_FOLLOWS, followed.epoch)
             }
             door::Input::Transfers { epoch, transfers } => {
-                let Some(from) = transfers.first().and_then(|t| self.leader.peer(t.from)) else {
+                let Some(first) = transfers.first() else {
                     return Ok(());
+                };
+                let Some(from) = self.leader.peer(first.from) else {
+                    // Before the Begin a sender's index names no role yet.
+                    // A transfer older than the newest epoch heard of any
+                    // role may be a former holder's: refused, and asked
+                    // for again once begun. No role could fence another.
+                    let newest = self.fence.newest();
+                    return match *epoch < newest {
+                        true => Err(Stale {
+                            what: TransfersSent::WHAT,
+                            role: format!("leader #{}", first.from),
+                            epoch: *epoch,
+                            current: newest,
+                        }),
+                        false => Ok(()),
+                    };
                 };
                 self.fence.admit(TransfersSent::WHAT, from, *epoch)
             }

@@ -993,6 +993,42 @@ fn a_peers_former_holder_is_fenced_off_once_its_successor_is_heard() {
     assert_eq!(node.leader().stats().rejected, rejected + 2);
 }
 
+/// Before its Begin a leader cannot tell which role a transfer's sender
+/// index names: one older than the newest epoch it heard of any role
+/// (here b's successor's durable mark) may be a former holder's, and is
+/// refused, counted and not journaled; one at that epoch is taken.
+#[test]
+fn a_transfer_before_the_begin_older_than_any_epoch_heard_is_refused() {
+    let mut node = Node::new(Leader::new("a"), timers());
+    let journaled = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::Journal { kind, .. } if *kind != Kind::Rejected))
+            .count()
+    };
+    let out = node.step(MS, sets_from_b_at(1, 5, Vec::new()));
+    assert_eq!(journaled(&out), 1, "no epoch heard yet: taken");
+    node.step(
+        2 * MS,
+        Input::Durable {
+            bytes: encode(&Durable {
+                epoch: 2,
+                version: VERSION,
+                leader: "b".into(),
+                batch: 1,
+                position: 3,
+            }),
+            origin: "b".into(),
+        },
+    );
+    let rejected = node.leader().stats().rejected;
+    let out = node.step(3 * MS, sets_from_b_at(1, 6, Vec::new()));
+    assert_eq!(journaled(&out), 0, "refused, not journaled");
+    assert_eq!(node.leader().stats().rejected, rejected + 1);
+    let out = node.step(4 * MS, sets_from_b_at(2, 6, Vec::new()));
+    assert_eq!(journaled(&out), 1, "the successor is heard");
+    assert_eq!(node.leader().stats().rejected, rejected + 1);
+}
+
 /// The copies the node asks to send its standby: (to, batch, position).
 fn offers(out: &[Output]) -> Vec<(String, u64, u64)> {
     out.iter()

@@ -62,6 +62,11 @@ impl Fence {
         }
     }
 
+    /// The newest epoch seen from any role (0 if none).
+    pub fn newest(&self) -> u64 {
+        self.seen.values().copied().max().unwrap_or(0)
+    }
+
     /// The newest epoch seen from `role` (0 if none).
     pub fn current(&self, role: &str) -> u64 {
         self.seen.get(role).copied().unwrap_or(0)
