@@ -323,12 +323,12 @@ impl Journal {
 }
 
 /// `record` as a journal record's payload.
-pub(crate) fn encode(record: &Record) -> Vec<u8> {
+pub fn encode(record: &Record) -> Vec<u8> {
     postcard::to_stdvec(record).unwrap_or_default()
 }
 
 /// A record's payload back to the record (a standby checks what it is sent).
-pub(crate) fn decode_record(payload: &[u8]) -> Result<Record, postcard::Error> {
+pub fn decode_record(payload: &[u8]) -> Result<Record, postcard::Error> {
     postcard::from_bytes(payload)
 }
 

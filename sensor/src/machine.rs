@@ -52,7 +52,7 @@ use std::collections::BTreeMap;
 type Routed<Q> = (Vec<Placed<Q>>, Vec<(u32, Wanted)>, Vec<(usize, String)>);
 
 mod meshed;
-pub(crate) mod replication;
+pub mod replication;
 
 /// What became of a cut request.
 pub enum CutOutcome<Q> {
@@ -215,6 +215,12 @@ impl<Q> Gateway<Q> {
     /// already flushed too ([`Gateway::restamp`]).
     pub fn advance_epoch(&mut self, epoch: u64) {
         self.epoch = self.epoch.max(epoch);
+    }
+
+    /// The epoch at which this gateway holds the sensor role (0 without
+    /// voters).
+    pub fn epoch(&self) -> u64 {
+        self.epoch
     }
 
     /// `batches` flushed before the role moved to its current epoch, as
@@ -646,7 +652,7 @@ impl<Q> Gateway<Q> {
     }
 
     /// The counter the next line of `producer` must carry.
-    pub(crate) fn producer_next(&self, producer: &str) -> u64 {
+    pub fn producer_next(&self, producer: &str) -> u64 {
         self.state.ingest.next_counter(producer)
     }
 

@@ -2,7 +2,9 @@
 //! (`idmesh_tests::sim`): drops, duplicates, delays, reordering,
 //! partitions, crashes and restarts from the journal, hosts lost with
 //! their disk and holders superseded (roles adopted from standby copies
-//! at a newer epoch, former holders fenced off), queries at random
+//! at a newer epoch, former holders fenced off), the sensor's journal
+//! replicated to its standby and its host lost (the role served from the
+//! standby's copy), queries at random
 //! points; every answer checked against the centralized engine (and on
 //! the factored schedules with identities, every answer's rows against
 //! the centralized information matrix).
@@ -59,6 +61,13 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.adopted_from_copies += tally.adopted_from_copies;
                 total.standby_copies += tally.standby_copies;
                 total.fenced += tally.fenced;
+                total.sensor_standbys += tally.sensor_standbys;
+                total.replications += tally.replications;
+                total.standby_wholes += tally.standby_wholes;
+                total.standby_restarts += tally.standby_restarts;
+                total.sensor_advances += tally.sensor_advances;
+                total.sensor_host_losses += tally.sensor_host_losses;
+                total.sensor_adoptions += tally.sensor_adoptions;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -68,7 +77,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby: {} replication messages ({} whole journals), {} standby restarts, {} epochs moved to go on alone, {} sensor hosts lost, {} sensor roles adopted from the copy",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -96,7 +105,14 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.adoptions,
         total.adopted_from_copies,
         total.standby_copies,
-        total.fenced
+        total.fenced,
+        total.sensor_standbys,
+        total.replications,
+        total.standby_wholes,
+        total.standby_restarts,
+        total.sensor_advances,
+        total.sensor_host_losses,
+        total.sensor_adoptions
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
@@ -160,6 +176,16 @@ fn every_schedule_answers_like_the_centralized_engine() {
             "no role was ever adopted from a standby copy"
         );
         assert!(total.fenced > 0, "no former holder was ever fenced off");
+        // The sensor's host was lost and its standby served from its copy
+        // where the lost sensor stood; the sensor went on alone while its
+        // standby was away, at an epoch the copy could not claim.
+        assert!(
+            total.sensor_adoptions > 0 && total.sensor_advances > 0 && total.standby_restarts > 0,
+            "no sensor role adopted ({}), moved to go on alone ({}) or standby restarted ({})",
+            total.sensor_adoptions,
+            total.sensor_advances,
+            total.standby_restarts
+        );
     }
 }
 

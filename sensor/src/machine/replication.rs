@@ -28,7 +28,7 @@ use idmesh_protocol::wire::VERSION;
 
 /// What the driver does next with the records it appended.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) enum Step {
+pub enum Step {
     /// They may leave: the standby holds them, or there is none up.
     Release,
     /// Send this to the standby and wait for its answer.
@@ -41,7 +41,7 @@ pub(crate) enum Step {
 /// The standby's liveliness changed, for the driver to log (once per
 /// change, not once per batch).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Presence {
+pub enum Presence {
     /// It went away: the sensor goes on alone.
     Gone,
     /// It is back (or up for the first time): it gets the whole journal.
@@ -50,7 +50,7 @@ pub(crate) enum Presence {
 
 /// The sensor's side of the replication.
 #[derive(Debug, Clone)]
-pub(crate) struct Replication {
+pub struct Replication {
     sensor: String,
     incarnation: u64,
     /// The epoch the sensor holds its role at (0 without voters).
@@ -71,7 +71,7 @@ pub(crate) struct Replication {
 impl Replication {
     /// The replication of sensor `sensor`'s journal in the run drawn as
     /// `incarnation`; the standby is not known to be up yet.
-    pub(crate) fn new(sensor: &str, incarnation: u64) -> Self {
+    pub fn new(sensor: &str, incarnation: u64) -> Self {
         Replication {
             sensor: sensor.to_string(),
             incarnation,
@@ -85,24 +85,24 @@ impl Replication {
     }
 
     /// The sensor whose journal this replicates.
-    pub(crate) fn sensor(&self) -> &str {
+    pub fn sensor(&self) -> &str {
         &self.sensor
     }
 
     /// The sensor holds its role at `epoch` from now on: what is sent
     /// next says so. A copy that then holds everything sent is in sync
     /// at it.
-    pub(crate) fn at_epoch(&mut self, epoch: u64) {
+    pub fn at_epoch(&mut self, epoch: u64) {
         self.epoch = epoch;
     }
 
     /// Whether the standby is up as far as the sensor knows.
-    pub(crate) fn present(&self) -> bool {
+    pub fn present(&self) -> bool {
         self.present
     }
 
     /// The standby's liveliness token appeared (`true`) or went away.
-    pub(crate) fn standby(&mut self, present: bool) -> Option<Presence> {
+    pub fn standby(&mut self, present: bool) -> Option<Presence> {
         if present == self.present {
             return None;
         }
@@ -120,13 +120,13 @@ impl Replication {
 
     /// The journal was compacted: its compacted form goes to the standby
     /// next, in place of the appends that led to it.
-    pub(crate) fn compacted(&mut self) {
+    pub fn compacted(&mut self) {
         self.whole_due = true;
     }
 
     /// Records (`appended`, each as the journal holds it) were just
     /// appended to the sensor's journal and fsynced.
-    pub(crate) fn appended(&mut self, appended: Vec<Vec<u8>>) -> Step {
+    pub fn appended(&mut self, appended: Vec<Vec<u8>>) -> Step {
         if !self.present {
             return Step::Release;
         }
@@ -144,7 +144,7 @@ impl Replication {
 
     /// The whole journal (`records`, its compacted form) for the standby:
     /// a new reset, which appends then follow.
-    pub(crate) fn whole(&mut self, records: Vec<Vec<u8>>) -> Replicate {
+    pub fn whole(&mut self, records: Vec<Vec<u8>>) -> Replicate {
         self.reset += 1;
         self.sent = records.len() as u64;
         self.whole_due = false;
@@ -156,7 +156,7 @@ impl Replication {
     /// The standby's answer to what is in flight: its copy's position
     /// (`Some(None)`: it holds nothing of this run), or `None` when it did
     /// not answer in time.
-    pub(crate) fn answered(&mut self, answer: Option<Option<Position>>) -> Step {
+    pub fn answered(&mut self, answer: Option<Option<Position>>) -> Step {
         if !self.present {
             self.in_flight = None;
             return Step::Release;
@@ -207,7 +207,7 @@ impl Replication {
 
 /// What the standby does with a [`Replicate`] to its copy.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) enum Apply<'a> {
+pub enum Apply<'a> {
     /// Replace the copy by these records (a compaction of it).
     Replace(&'a [Vec<u8>]),
     /// Append these records.
@@ -219,20 +219,20 @@ pub(crate) enum Apply<'a> {
 
 /// The standby's side: where its copy is in the sensor's replication.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub(crate) struct Copy {
+pub struct Copy {
     /// None: it holds nothing of the sensor's current run (it just
     /// started, or only an earlier run's journal).
-    pub(crate) position: Option<Position>,
+    pub position: Option<Position>,
     /// The newest epoch of the sensor role at which the copy held every
     /// record sent (the driver keeps it on disk beside the copy): a
     /// takeover from the copy names it. None: not known.
-    pub(crate) epoch: Option<u64>,
+    pub epoch: Option<u64>,
 }
 
 impl Copy {
     /// What to do with `message`; the position moves as if it is done
     /// (the driver answers only once it is on disk).
-    pub(crate) fn take<'a>(&mut self, message: &'a Replicate) -> Apply<'a> {
+    pub fn take<'a>(&mut self, message: &'a Replicate) -> Apply<'a> {
         let records = &message.records[..];
         let count = records.len() as u64;
         // From a holder the voters have since superseded (a former sensor

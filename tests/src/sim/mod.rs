@@ -22,6 +22,11 @@
 //! the cut heals, and stops a while later. Either way the role is adopted
 //! by the heir process from its standby copy (no journal, `adopted`) at
 //! the next epoch, by a claim fencing the old one (`world/hosts.rs`).
+//! In a quarter of the schedules the sensor keeps a standby
+//! (`world/sensor_standby.rs`): its journal replicated as the driver does
+//! it, the standby going away, coming back and restarting, and in half
+//! of those the sensor's host lost for good, the role then served from
+//! the standby's copy at the next epoch.
 //!
 //! Every schedule checks:
 //! - every answer equals the centralized engine's at its watermark to
@@ -46,6 +51,10 @@
 //!   carries an epoch the map gave;
 //! - no item is applied twice or lost: each leader applied exactly the
 //!   items routed to it up to its position;
+//! - a sensor role taken over from the standby's copy stands exactly
+//!   where the lost sensor stood, and expects the producer's next line;
+//!   a sensor going on without its standby first moves its role to an
+//!   epoch the copy can no longer claim;
 //! - once the faults stop, every orphaned role is adopted and every former
 //!   holder stopped, the final answer comes (liveness), covering the
 //!   whole stream.

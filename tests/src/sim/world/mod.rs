@@ -19,6 +19,7 @@ mod coordinator;
 mod hosts;
 mod leader;
 mod sensor;
+mod sensor_standby;
 
 use super::network::{self, Endpoint, Network};
 use super::scenario::Scenario;
@@ -36,6 +37,7 @@ use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sensor::ToSensor;
+use sensor_standby::SensorStandby;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 /// Virtual milliseconds.
@@ -108,6 +110,15 @@ pub(crate) enum Event {
         leader: usize,
         life: u64,
     },
+    /// The sensor's standby goes away (its token gone), comes back, or
+    /// restarts without its token being missed.
+    StandbyAway,
+    StandbyBack,
+    StandbyRestart,
+    /// The sensor's host is gone for good, with its disk.
+    SensorHostLoss,
+    /// The standby's claim of the sensor role commits.
+    SensorAdopt,
     /// The faults stop and the final query starts.
     Calm,
 }
@@ -183,6 +194,17 @@ pub struct Tally {
     /// Messages of a former holder refused by a receiver that had heard
     /// a newer epoch of the role (the sensor, a peer, the coordinator).
     pub fenced: u64,
+    /// Schedules whose sensor kept a standby; replication messages sent
+    /// to it, of them whole journals; the standby's restarts; the
+    /// sensor's role moved to a new epoch to go on alone; the sensor's
+    /// host lost, and its role adopted from the standby's copy.
+    pub sensor_standbys: u64,
+    pub replications: u64,
+    pub standby_wholes: u64,
+    pub standby_restarts: u64,
+    pub sensor_advances: u64,
+    pub sensor_host_losses: u64,
+    pub sensor_adoptions: u64,
 }
 
 pub(crate) struct World {
@@ -229,6 +251,8 @@ pub(crate) struct World {
     /// message of since it started, and the coordinator an answer of.
     sensor_heard: BTreeMap<usize, u64>,
     coordinator_heard: BTreeMap<String, u64>,
+    /// The sensor's standby, in the schedules that keep one.
+    sensor_standby: Option<SensorStandby>,
 }
 
 impl World {
@@ -282,6 +306,7 @@ impl World {
             },
             sensor_heard: BTreeMap::new(),
             coordinator_heard: BTreeMap::new(),
+            sensor_standby: None,
         };
         // Drawn from a copy: the schedule's own draws stay as they were.
         let mut side = world.rng.clone();
@@ -297,6 +322,8 @@ impl World {
                 .at(side.gen_range(1..=40 * lines + 1), Event::SensorCrash);
         }
         let host_fault = world.draw_host_fault(side.gen());
+        let span = 40 * world.scenario.lines.len() as Ms + 200;
+        world.draw_sensor_standby(side.gen(), span)?;
         for i in 0..count {
             let name = world.leaders[i].name.clone();
             world.leaders[i].epoch = world.claim(i, &name, None)?;
@@ -306,10 +333,9 @@ impl World {
             world.leaders[i].snapshot_every = world.rng.gen_range(3..=30);
             world.start_leader(i, false)?;
         }
-        world.flush();
+        world.flush()?;
         world.net.at(1, Event::SensorStep);
         // Queries at random points of the stream, and the faults.
-        let span = 40 * world.scenario.lines.len() as Ms + 200;
         for _ in 0..world.rng.gen_range(0..=4) {
             let at = world.rng.gen_range(0..span);
             world.net.at(at, Event::QueryStart);
@@ -451,7 +477,7 @@ impl World {
                 Ok(())
             }
             Event::SensorCrash => {
-                if !self.calm {
+                if !self.calm && !self.sensor_down() {
                     self.sensor_crash()?;
                 }
                 Ok(())
@@ -474,6 +500,17 @@ impl World {
                 Ok(())
             }
             Event::FormerTick { leader, life } => self.former_tick(leader, life),
+            Event::StandbyAway => {
+                self.standby_away();
+                Ok(())
+            }
+            Event::StandbyBack => self.standby_back(),
+            Event::StandbyRestart => {
+                self.standby_restart();
+                Ok(())
+            }
+            Event::SensorHostLoss => self.sensor_host_lost(),
+            Event::SensorAdopt => self.sensor_adopted(),
             Event::Isolate(i) => {
                 if !self.calm {
                     self.net.isolate(Endpoint::Leader(i));
@@ -504,7 +541,7 @@ impl World {
                     .leaders
                     .iter()
                     .all(|l| !l.orphaned && l.former.is_none());
-                if !self.gateway.finished() || !settled {
+                if !self.gateway.finished() || !settled || self.sensor_down() {
                     self.net.at(self.now + 250, Event::Calm);
                     return Ok(());
                 }
@@ -579,6 +616,8 @@ impl World {
                 },
                 what,
             ),
+            // A sensor whose host is gone hears nothing.
+            Msg::Sensor { .. } if self.sensor_down() => Ok(()),
             Msg::Sensor { from, epoch, what } => self.at_sensor_fenced(from, epoch, what),
             Msg::Coordinator(what) => self.at_coordinator(what),
         }

@@ -6,6 +6,7 @@
 
 use super::coordinator::ToCoordinator;
 use super::leader::{ToLeader, Who};
+use super::sensor_standby::standing;
 use super::{Event, Msg, World, STALL_CHECK};
 use crate::sim::network::Endpoint;
 use crate::sim::Violation;
@@ -42,6 +43,10 @@ pub(crate) enum ToSensor {
 impl World {
     /// Reads the next few lines, as the gateway's actor does by chunks.
     pub(super) fn sensor_step(&mut self) -> Result<(), Violation> {
+        // Gone with its host: its standby's adoption starts the steps again.
+        if self.sensor_down() {
+            return Ok(());
+        }
         let lines = self.scenario.lines.len();
         let mut chunk = self.rng.gen_range(1..=4usize);
         // Flow control: held, the sensor looks again later, as the actor
@@ -78,7 +83,7 @@ impl World {
         } else {
             Vec::new()
         };
-        self.flush();
+        self.flush()?;
         for p in placed {
             self.reply_cut(p.query, Ok(encode(&p.answer)));
         }
@@ -167,12 +172,19 @@ impl World {
         Ok(placed)
     }
 
-    /// The leaders' next batches, on their way.
-    pub(super) fn flush(&mut self) {
-        for (i, batch) in self.gateway.flush() {
+    /// The leaders' next batches, on their way once the journal (and the
+    /// standby, if one is up) holds what they depend on
+    /// (`Wire::flush` in sensor/src/driver.rs).
+    pub(super) fn flush(&mut self) -> Result<(), Violation> {
+        let mut batches = self.gateway.flush();
+        self.sync()?;
+        // The role may have moved to a new epoch meanwhile.
+        self.gateway.restamp(&mut batches);
+        for (i, batch) in batches {
             self.note_routed(i, &batch);
             self.send_batch(i, &batch);
         }
+        Ok(())
     }
 
     /// The sensor puts `batch` on leader `i`'s event key.
@@ -246,7 +258,7 @@ impl World {
                 // reply ([`World::answer_ask`]): one lost on the way, or a
                 // duplicate request's, never reaches it.
                 if answer.is_ok() {
-                    self.flush();
+                    self.flush()?;
                 }
                 self.reply_leader(from, ask, answer.map(|f| encode(&f)));
             }
@@ -256,6 +268,7 @@ impl World {
                 } else {
                     self.gateway.resend(&bytes).map(|r| encode(&r))
                 };
+                self.sync()?;
                 self.reply_leader(from, ask, answer);
             }
             ToSensor::Durable(bytes) => self.gateway.durable(&bytes, "sim"),
@@ -272,14 +285,19 @@ impl World {
             },
             ToSensor::Cut { id, parameters } => match self.gateway.cut(id, &parameters) {
                 CutOutcome::Placed(p) => {
-                    self.flush();
+                    self.flush()?;
                     self.reply_cut(id, Ok(encode(&p.answer)));
                 }
                 CutOutcome::Scheduled => {}
-                CutOutcome::Refused(id, why) => self.reply_cut(id, Err(why)),
+                CutOutcome::Refused(id, why) => {
+                    self.sync()?;
+                    self.reply_cut(id, Err(why))
+                }
             },
         }
-        Ok(())
+        // What the message changed (a durable mark, progress, interests)
+        // on disk before the next thing leaves.
+        self.sync()
     }
 
     pub(super) fn reply_leader(&mut self, to: Who, ask: u64, reply: Result<Vec<u8>, String>) {
@@ -313,24 +331,19 @@ impl World {
         restored
             .restore(self.journal.clone(), &self.scenario.lines)
             .map_err(|e| Violation::new(format!("the sensor cannot restore: {e}")))?;
-        let where_ = |g: &Gateway<u64>| {
-            (
-                g.router().seq(),
-                g.router().events(),
-                g.finished(),
-                g.traced(),
-            )
-        };
-        if where_(&restored) != where_(&self.gateway) {
+        // It holds its role at the epoch it held it at.
+        restored.advance_epoch(self.gateway.epoch());
+        if standing(&restored) != standing(&self.gateway) {
             return Err(Violation::new(format!(
                 "the sensor restored from its journal at (seq, events, finished, trace lines) {:?}, not {:?}",
-                where_(&restored),
-                where_(&self.gateway)
+                standing(&restored),
+                standing(&self.gateway)
             )));
         }
         self.gateway = restored;
         // A sensor restarted knows no epoch: it fences from the next.
         self.sensor_heard.clear();
+        self.sensor_restarted();
         Ok(())
     }
 }
