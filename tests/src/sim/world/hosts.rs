@@ -77,8 +77,19 @@ impl World {
         fencing: Option<u64>,
     ) -> Result<u64, Violation> {
         let role = self.leaders[i].name.clone();
+        self.claim_role(&role, process, fencing)
+    }
+
+    /// Commits `process`'s claim of `role` (a leader's or the sensor's),
+    /// fencing off `fencing`, and returns the epoch it wins.
+    pub(super) fn claim_role(
+        &mut self,
+        role: &str,
+        process: &str,
+        fencing: Option<u64>,
+    ) -> Result<u64, Violation> {
         let command = Command::Claim {
-            role: role.clone(),
+            role: role.to_string(),
             holder: process.to_string(),
             fencing,
         };

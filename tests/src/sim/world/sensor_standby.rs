@@ -106,7 +106,7 @@ impl World {
         if rng.gen_bool(0.5) {
             self.net.at(rng.gen_range(0..span), Event::SensorHostLoss);
         }
-        let epoch = self.claim_sensor(SENSOR, None)?;
+        let epoch = self.claim_role(ROLE, SENSOR, None)?;
         self.gateway.advance_epoch(epoch);
         let mut replication = Replication::new(SENSOR, 1);
         replication.at_epoch(epoch);
@@ -130,22 +130,6 @@ impl World {
     /// nothing reaches it, it reads nothing.
     pub(super) fn sensor_down(&self) -> bool {
         self.sensor_standby.as_ref().is_some_and(|s| s.down())
-    }
-
-    /// Commits `process`'s claim of the sensor role (fencing off
-    /// `fencing`), and returns the epoch it wins.
-    fn claim_sensor(&mut self, process: &str, fencing: Option<u64>) -> Result<u64, Violation> {
-        let command = Command::Claim {
-            role: ROLE.into(),
-            holder: process.into(),
-            fencing,
-        };
-        match self.hosts.map.apply(&command) {
-            Outcome::Changed { holding, .. } => Ok(holding.epoch),
-            Outcome::Unchanged { why, .. } => Err(Violation::new(format!(
-                "{process}'s claim of the sensor role fencing {fencing:?} did not commit: {why}"
-            ))),
-        }
     }
 
     /// What changed the gateway's state, on the sensor's disk and then on
@@ -340,7 +324,7 @@ impl World {
         let Some(lost) = s.lost else {
             return Ok(());
         };
-        let epoch = self.claim_sensor(STANDBY, s.copy.epoch)?;
+        let epoch = self.claim_role(ROLE, STANDBY, s.copy.epoch)?;
         let records = s
             .records
             .iter()
