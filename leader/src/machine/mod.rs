@@ -272,6 +272,10 @@ pub struct Node {
     outgoing: Vec<(String, Vec<Transfer>)>,
     /// Transfer requests out, by peer, and when they were made.
     asking: BTreeMap<String, Now>,
+    /// Transfer requests a peer failed in a row (down, or its role not
+    /// yet adopted), and the time before which it is not asked again
+    /// ([`transfers_backoff`]).
+    transfers_failed: BTreeMap<String, (u32, Now)>,
     /// When the leader started waiting for the transfer it waits for.
     waiting_since: Option<((u64, u16), Now)>,
     /// When the leader started waiting for the components of the mix at
@@ -316,6 +320,7 @@ impl Node {
             following: false,
             outgoing: Vec::new(),
             asking: BTreeMap::new(),
+            transfers_failed: BTreeMap::new(),
             waiting_since: None,
             components_since: None,
             published: None,
@@ -411,6 +416,9 @@ impl Node {
                     // when it comes back.
                     r.peers.retain(|p| *p != peer);
                 }
+                if result.is_ok() {
+                    self.transfers_failed.remove(&peer);
+                }
                 match result {
                     Ok(sent) => {
                         // One input each: one a peer got wrong is refused
@@ -424,9 +432,7 @@ impl Node {
                             self.input(Kind::Transfer, bytes, "a peer's sent transfers", &mut out);
                         }
                     }
-                    Err(e) => {
-                        tracing::warn!(leader = %self.leader.name(), %peer, error = %e, "a peer did not resend its transfers")
-                    }
+                    Err(e) => self.transfers_refused(now, &peer, &e),
                 }
             }
             Input::Durable { bytes, origin } => match decode::<Durable>(&bytes) {
@@ -649,6 +655,25 @@ impl Node {
         }
     }
 
+    /// A peer did not answer a transfer request: asked again at once the
+    /// first time (a reply lost), then after a backoff that doubles with
+    /// each failure in a row (a peer that is down, its role not adopted
+    /// yet, is not asked four times a second), logged when the count of
+    /// failures reaches a power of two.
+    fn transfers_refused(&mut self, now: Now, peer: &str, error: &str) {
+        let failed = self
+            .transfers_failed
+            .entry(peer.to_string())
+            .or_insert((0, now));
+        failed.0 += 1;
+        failed.1 = now + transfers_backoff(failed.0, self.timers.late);
+        if failed.0.is_power_of_two() {
+            tracing::warn!(leader = %self.leader.name(), %peer, %error, failures = failed.0,
+                retry_in_ms = (failed.1 - now).as_millis() as u64,
+                "a peer did not resend its transfers; asking again");
+        }
+    }
+
     /// Asks the sensor for every batch from the next one expected, unless
     /// a request is already out or a refusal's backoff still runs.
     fn ask_resend(&mut self, now: Now, out: &mut Vec<Output>) {
@@ -670,7 +695,12 @@ impl Node {
         let Some(me) = self.leader.index() else {
             return;
         };
-        if self.asking.contains_key(peer) {
+        if self.asking.contains_key(peer)
+            || self
+                .transfers_failed
+                .get(peer)
+                .is_some_and(|&(_, not_before)| now < not_before)
+        {
             return;
         }
         self.asking.insert(peer.to_string(), now);
@@ -881,6 +911,18 @@ impl Node {
 const SENSOR_FOLLOWS: &str = "the sensor's follow replies";
 
 pub const MAX_RESEND_BACKOFF: Duration = Duration::from_secs(30);
+
+/// The longest wait before a peer that failed transfer requests is asked
+/// again: short, since its role is adopted within the takeover time and
+/// then answers.
+pub const MAX_TRANSFERS_BACKOFF: Duration = Duration::from_secs(4);
+
+/// The wait before asking a peer for transfers again after `failures`
+/// failed requests in a row: as [`resend_backoff`], at most
+/// [`MAX_TRANSFERS_BACKOFF`].
+pub(crate) fn transfers_backoff(failures: u32, late: Duration) -> Duration {
+    resend_backoff(failures, late).min(MAX_TRANSFERS_BACKOFF)
+}
 
 /// The wait before asking again after `refusals` refused resend requests
 /// in a row: none after one (a reply lost on the way), then `late`,

@@ -354,6 +354,63 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
     assert_eq!(node.leader().position(), 2);
 }
 
+/// A peer that fails transfer requests (down, its role not adopted yet)
+/// is asked again at once after the first failure, then after a wait
+/// that doubles with each failure in a row, at most a few seconds; an
+/// answer ends the wait.
+#[test]
+fn failed_transfer_requests_back_off() {
+    let mut node = started("a", &["a", "b"]);
+    node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
+    let asked = |out: &[Output]| {
+        out.iter()
+            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
+            .count()
+    };
+    let failed = |node: &mut Node, at: Duration| {
+        node.step(
+            at,
+            Input::Transfers {
+                peer: "b".into(),
+                result: Err("nobody answered".into()),
+            },
+        );
+    };
+    assert_eq!(asked(&node.step(600 * MS, Input::Tick)), 1, "late: asked");
+    failed(&mut node, 700 * MS);
+    assert_eq!(asked(&node.step(850 * MS, Input::Tick)), 1, "again at once");
+    failed(&mut node, 900 * MS);
+    // Two failures in a row: not before `late` (500 ms) has passed.
+    assert_eq!(asked(&node.step(1100 * MS, Input::Tick)), 0, "backing off");
+    assert_eq!(
+        asked(&node.step(1450 * MS, Input::Tick)),
+        1,
+        "after the wait"
+    );
+    let mut at = 1500 * MS;
+    for _ in 0..8 {
+        at += 10 * MS;
+        failed(&mut node, at);
+    }
+    let wait = super::transfers_backoff(10, Duration::from_millis(500));
+    assert_eq!(wait, super::MAX_TRANSFERS_BACKOFF, "capped");
+    assert_eq!(asked(&node.step(at + wait - MS, Input::Tick)), 0);
+    assert_eq!(asked(&node.step(at + wait, Input::Tick)), 1);
+    // An answer, if empty, ends the backoff.
+    node.step(
+        at + wait + MS,
+        Input::Transfers {
+            peer: "b".into(),
+            result: Ok(TransfersSent {
+                epoch: 0,
+                version: VERSION,
+                transfers: Vec::new(),
+            }),
+        },
+    );
+    assert_eq!(asked(&node.step(at + wait + 2 * MS, Input::Tick)), 1);
+}
+
 #[test]
 fn a_failed_follow_request_is_made_again() {
     let mut node = started("a", &["a", "b"]);
