@@ -157,11 +157,39 @@ pub(crate) fn heir<'a>(
     dead: &str,
     alive: &BTreeSet<String>,
 ) -> Option<&'a str> {
+    heir_in_turn(leaders, dead, alive, 0)
+}
+
+/// Whose turn it is to adopt `dead` after `turn` turns passed without an
+/// adoption: the heir first, then the live roles after it in order,
+/// cyclically. A process that never saw the role's token (it started
+/// after the role was lost) does not know to adopt it; in the next turn
+/// the next in line does.
+pub(crate) fn heir_in_turn<'a>(
+    leaders: &'a [String],
+    dead: &str,
+    alive: &BTreeSet<String>,
+    turn: usize,
+) -> Option<&'a str> {
     let at = leaders.iter().position(|l| l == dead)?;
-    (1..leaders.len())
+    let live: Vec<&String> = (1..leaders.len())
         .map(|k| &leaders[(at + k) % leaders.len()])
-        .find(|l| alive.contains(*l))
-        .map(String::as_str)
+        .filter(|l| alive.contains(*l))
+        .collect();
+    (!live.is_empty()).then(|| live[turn % live.len()].as_str())
+}
+
+/// The turns that passed for a role lost `waited` ago with a takeover time
+/// of `patience`: each lasts `patience`, the first begins once the role
+/// has been lost for `patience`.
+fn turns_passed(waited: Duration, patience: Duration) -> usize {
+    if patience.is_zero() {
+        return 0;
+    }
+    (waited.as_secs_f64() / patience.as_secs_f64())
+        .floor()
+        .max(1.0) as usize
+        - 1
 }
 
 /// The roles this process hosts, each an actor with its own stop signal.
@@ -309,6 +337,9 @@ struct Tokens {
     declined: BTreeSet<String>,
     /// A mark heard since `published` was last kept on disk.
     unkept: bool,
+    /// The roles this process heard marks of before it started, and finds
+    /// without a token once started, were presumed lost (once).
+    presumed: bool,
 }
 
 impl Tokens {
@@ -338,6 +369,42 @@ impl Tokens {
         }
     }
 
+    /// Once, a moment after the start (the tokens up then have been
+    /// heard): every role this process knows ran — it heard a durable
+    /// mark of it before it started, or keeps a standby copy of it — that
+    /// has no token now, nor runs here, is lost since `started`. A process
+    /// never sees the token of a role lost while it was down go away, and
+    /// would otherwise never adopt it in its turn (and with its standby
+    /// copy, it may be the only one that can).
+    fn presume_lost(&mut self, config: &HostConfig, hosted: &BTreeSet<String>, started: Instant) {
+        if self.presumed || started.elapsed() < PRESUME_AFTER {
+            return;
+        }
+        self.presumed = true;
+        let own = config.name.as_str();
+        let copied = config.leaders.iter().filter(|r| {
+            config
+                .state_dir
+                .as_ref()
+                .is_some_and(|dir| standby::standby_path(dir, r).exists())
+        });
+        let known: BTreeSet<&String> = self.published.keys().chain(copied).collect();
+        let gone: Vec<String> = known
+            .into_iter()
+            .filter(|r| {
+                !self.alive.contains(*r)
+                    && !hosted.contains(*r)
+                    && r.as_str() != own
+                    && !self.lost.contains_key(*r)
+            })
+            .cloned()
+            .collect();
+        for role in gone {
+            tracing::info!(%role, "a role heard of before the start has no token: presumed lost");
+            self.lost.insert(role, started);
+        }
+    }
+
     /// The marks this process kept before it was started again.
     fn heard_before(config: &HostConfig) -> Self {
         let mut tokens = Tokens::default();
@@ -356,6 +423,10 @@ impl Tokens {
         tokens
     }
 }
+
+/// How long after its start a process presumes lost the roles it heard
+/// of before and finds without a token ([`Tokens::presume_lost`]).
+const PRESUME_AFTER: Duration = Duration::from_secs(1);
 
 /// Runs this process's roles until `shutdown`.
 pub async fn run(
@@ -486,6 +557,7 @@ async fn on_tick(
         hosted.host(&config.name, true, 0);
     }
     if let Some(patience) = config.takeover_after {
+        tokens.presume_lost(config, &hosted.roles, standing);
         adopt_lost_roles(hosted, tokens, patience).await;
     }
     hand_home_unanswered(hosted);
@@ -668,15 +740,18 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
             continue;
         }
         let live: BTreeSet<String> = tokens.alive.union(&hosted.roles).cloned().collect();
-        let Some(heir) = heir(&config.leaders, &role, &live) else {
+        let waited = tokens.lost.get(&role).map_or(patience, Instant::elapsed);
+        let turn = turns_passed(waited, patience);
+        let Some(heir) = heir_in_turn(&config.leaders, &role, &live, turn) else {
             continue;
         };
         if !hosted.roles.contains(heir) {
             // Another process adopts it (or, its home, takes it back).
             // Looked at again while its token stays gone: that process may
             // be lost before it does (a role handed home, then its home
-            // host lost), and then the heir is another.
-            tokens.lost.insert(role, Instant::now());
+            // host lost), and then the heir is another; or it may never
+            // have seen the role's token (started after the loss), and
+            // then the next turn is another's.
             continue;
         }
         tokens.lost.remove(&role);
@@ -1146,5 +1221,23 @@ mod tests {
         assert_eq!(heir(&leaders, "l3", &alive(&["l1", "l2"])), Some("l1"));
         assert_eq!(heir(&leaders, "l2", &alive(&[])), None);
         assert_eq!(heir(&leaders, "nobody", &alive(&["l0"])), None);
+    }
+
+    /// A role not adopted in its heir's turn passes to the next live role
+    /// in line, and round again.
+    #[test]
+    fn each_turn_passes_the_adoption_to_the_next_in_line() {
+        let leaders: Vec<String> = ["l0", "l1", "l2", "l3"].map(String::from).to_vec();
+        let alive: BTreeSet<String> = ["l0", "l2", "l3"].map(String::from).into();
+        let turn = |k| heir_in_turn(&leaders, "l1", &alive, k);
+        assert_eq!(
+            [turn(0), turn(1), turn(2), turn(3)],
+            [Some("l2"), Some("l3"), Some("l0"), Some("l2")]
+        );
+        let second = Duration::from_secs(1);
+        assert_eq!(turns_passed(second, second), 0, "the heir's turn");
+        assert_eq!(turns_passed(Duration::from_millis(1999), second), 0);
+        assert_eq!(turns_passed(2 * second, second), 1, "the next one's");
+        assert_eq!(turns_passed(7 * second / 2, second), 2);
     }
 }

@@ -178,6 +178,113 @@ fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Four leaders on disks of their own, a snapshot every 10 inputs, a
+/// takeover after 2 s, at `rate` events per second.
+fn own_disks(rate: f64) -> Settings {
+    Settings {
+        leaders: 4,
+        rate: Some(rate),
+        journal: true,
+        own_disks: true,
+        snapshot_every: Some(10),
+        takeover_after_ms: Some(2000),
+        ..Settings::default()
+    }
+}
+
+/// Waits until `role` has written `snapshots` snapshots.
+fn snapshots_written(deployment: &Deployment, role: &str, snapshots: u64) {
+    let patience = Instant::now() + Duration::from_secs(20);
+    while deployment.leader(role)["snapshots"].as_u64().unwrap_or(0) < snapshots {
+        assert!(Instant::now() < patience, "{role} wrote no snapshots");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Two leader processes killed at once, and the heir of one's role — its
+/// standby, the one process with a copy of it — started again before the
+/// takeover time is up: it never saw that role's token go, but it knows
+/// the role ran (its copy, the marks it heard), presumes it lost and
+/// adopts it from its copy; the final answer is the offline twin's.
+#[test]
+fn a_role_lost_while_its_heir_was_down_is_adopted_by_the_heir() {
+    let dir = std::env::temp_dir().join(format!("idmesh-heir-down-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let mut deployment = Deployment::start_each("heir-down", &trace, &own_disks(300.0));
+    let twin = deployment.twin_summary(&trace);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    snapshots_written(&deployment, "leader-1", 3);
+    // leader-2 is next in line for leader-1's role, and its standby.
+    deployment.kill("leader-1");
+    deployment.kill("leader-2");
+    deployment.launch("leader", "leader-2");
+    final_is_twins(
+        &deployment,
+        &twin,
+        "after a role lost while its heir was down",
+    );
+    let adopted = deployment.leader("leader-1");
+    assert_eq!(
+        adopted["host"], "leader-2",
+        "its heir adopted it: {adopted}"
+    );
+    assert_eq!(deployment.log().matches("were dropped").count(), 0);
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A role's heir started afresh (an empty disk) just as the role is lost:
+/// it knows nothing of the role and lets its turn pass; the next in line,
+/// which took the role's standby copies while the heir was down, adopts
+/// it in the next turn, and the final answer is the offline twin's.
+#[test]
+fn a_role_its_fresh_heir_knows_nothing_of_is_adopted_in_the_next_turn() {
+    let dir = std::env::temp_dir().join(format!("idmesh-fresh-heir-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let mut deployment = Deployment::start_each("fresh-heir", &trace, &own_disks(150.0));
+    let twin = deployment.twin_summary(&trace);
+    deployment.first_answer(Duration::from_secs(30));
+    deployment.kill("leader-2");
+    let fresh = deployment.dir.join("state-leader-2");
+    std::fs::remove_dir_all(&fresh).expect("the heir's disk wiped");
+    std::fs::create_dir_all(&fresh).expect("an empty disk");
+    // leader-3 now keeps leader-1's copies, and adopts leader-2's role.
+    let copy = deployment
+        .dir
+        .join("state-leader-3/leader-1.standby.snapshot");
+    let patience = Instant::now() + Duration::from_secs(20);
+    let hosted_by_3 = |d: &Deployment| {
+        d.leader_stats()
+            .iter()
+            .any(|l| l["leader"] == "leader-2" && l["host"] == "leader-3")
+    };
+    while !copy.exists() || !hosted_by_3(&deployment) {
+        assert!(
+            Instant::now() < patience,
+            "leader-3 took over neither:\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    snapshots_written(&deployment, "leader-1", 3);
+    deployment.kill("leader-1");
+    deployment.launch("leader", "leader-2");
+    final_is_twins(
+        &deployment,
+        &twin,
+        "after a role lost as its heir started afresh",
+    );
+    let adopted = deployment.leader("leader-1");
+    assert_eq!(
+        adopted["host"], "leader-3",
+        "the next in line adopted it: {adopted}"
+    );
+    assert_eq!(deployment.log().matches("were dropped").count(), 0);
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `idmesh up` supervises: a leader killed under it (kill -9) is started
 /// again after its backoff while its neighbours run on, and the answer is
 /// the centralized engine's.
