@@ -310,11 +310,7 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
         .iter()
         .any(|o| matches!(o, Output::Send { to, seqs, .. } if to == "b" && seqs == &[2])));
     assert_eq!(node.leader().waiting_for_transfer(), Some((2, 1)));
-    let asked = |out: &[Output]| {
-        out.iter()
-            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
-            .count()
-    };
+    let asked = |out: &[Output]| transfer_requests_to(out, "b");
     assert_eq!(asked(&node.step(300 * MS, Input::Tick)), 0, "not late yet");
     let out = node.step(600 * MS, Input::Tick);
     assert_eq!(asked(&out), 1);
@@ -354,6 +350,13 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
     assert_eq!(node.leader().position(), 2);
 }
 
+/// The transfer requests in `out` to `to`.
+fn transfer_requests_to(out: &[Output], to: &str) -> usize {
+    out.iter()
+        .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == to))
+        .count()
+}
+
 /// A peer that fails transfer requests (down, its role not adopted yet)
 /// is asked again at once after the first failure, then after a wait
 /// that doubles with each failure in a row, at most a few seconds; an
@@ -362,11 +365,7 @@ fn a_transfer_waited_for_too_long_is_asked_of_its_sender() {
 fn failed_transfer_requests_back_off() {
     let mut node = started("a", &["a", "b"]);
     node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
-    let asked = |out: &[Output]| {
-        out.iter()
-            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
-            .count()
-    };
+    let asked = |out: &[Output]| transfer_requests_to(out, "b");
     let failed = |node: &mut Node, at: Duration| {
         node.step(
             at,
@@ -740,11 +739,7 @@ fn the_rejected_count_survives_a_restart() {
 fn a_transfer_request_never_answered_is_made_again_once_it_is_stale() {
     let mut node = started("a", &["a", "b"]);
     node.step(10 * MS, batch(1, vec![(2, mix(0, 2, 0, 1))], 2));
-    let asked = |out: &[Output]| {
-        out.iter()
-            .filter(|o| matches!(o, Output::AskTransfers { peer, .. } if peer == "b"))
-            .count()
-    };
+    let asked = |out: &[Output]| transfer_requests_to(out, "b");
     assert_eq!(asked(&node.step(600 * MS, Input::Tick)), 1);
     // The answer is lost: no second request while the first may still
     // come (query timeout + late = 2.5 s) …
