@@ -24,8 +24,8 @@ use idmesh_placement::{items_sent, RegionRule};
 use idmesh_protocol::trace::TraceReader;
 use idmesh_tests::identity_matrix;
 use idmesh_tests::{
-    crowd, crowd_with_identities, replay_lines, truth_lines, waypoint_crowd, Deployment, Factored,
-    LeaderFaultSection, Settings, SplitSetting, Truth,
+    crowd, crowd_with_identities, replay_lines, trace_events, truth_lines, watermark_events,
+    waypoint_crowd, Deployment, Factored, LeaderFaultSection, Settings, SplitSetting, Truth,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -317,10 +317,17 @@ fn killed_and_restarted(regional: bool, leaders: usize) {
         assert!((g - w).abs() < 1e-9, "after a crash, track {t}: {g} vs {w}");
     }
     // The window held the stream while the leader was away (the stream
-    // could not run more than it past it).
+    // could not run more than it past it) — if the stream had a second
+    // or more left when the leader was killed (a machine under load may
+    // give the first answer only near the stream's end).
     let stats = crashed.query(&["stats"]).expect("stats");
     let holds = stats[0]["sensors"][0]["window_holds"].as_u64().unwrap();
-    assert!(holds > 0, "the window never held the stream: {stats:?}");
+    let left = (trace_events(&trace).len() as u64).saturating_sub(watermark_events(&first));
+    if left > 1000 {
+        assert!(holds > 0, "the window never held the stream: {stats:?}");
+    } else {
+        eprintln!("the first answer came {left} events before the stream's end: the window is not checked");
+    }
     assert!(
         crashed.leaders_total("snapshots") > 0,
         "leaders wrote snapshots"
