@@ -47,6 +47,7 @@
 //! fetches what that misses as any restarted leader does. Load is back in
 //! balance.
 
+use crate::copies;
 use crate::driver::{self, LeaderConfig};
 use crate::error::{MeshError, RunError};
 use crate::journal::{JournalError, JournalOptions};
@@ -474,6 +475,7 @@ pub async fn run(
         copies_home,
         stored,
         durable,
+        copies_asked,
     } = Heard::declare(&session, &config).await?;
     let mut tokens = Tokens::heard_before(&config);
     let mut tick = tokio::time::interval(Duration::from_millis(250));
@@ -504,6 +506,10 @@ pub async fn run(
             sample = durable.recv_async() => {
                 let Ok(sample) = sample else { break };
                 tokens.note_published(&sample.payload().to_bytes());
+            }
+            query = copies_asked.recv_async() => {
+                let Ok(query) = query else { break };
+                copies::answer(&config, &query).await;
             }
             done = hosted.tasks.join_next(), if !hosted.tasks.is_empty() => {
                 if let Some(Ok((role, result))) = done {
@@ -579,6 +585,8 @@ struct Heard {
     /// Every role's durable marks: an adoption must not start behind the
     /// last one.
     durable: Samples,
+    /// Adopters asking for the standby copies this process keeps.
+    copies_asked: copies::Asked,
 }
 
 type Samples =
@@ -627,6 +635,9 @@ impl Heard {
                 "declare the durable-mark subscriber",
             )
             .await?,
+            copies_asked: copies::declare(session, config)
+                .await
+                .map_err(|e| MeshError::new("declare the standby-copy queryable", e))?,
         })
     }
 }
@@ -763,6 +774,9 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
         if hosted_elsewhere(hosted.session, &config.keys, &role).await {
             continue;
         }
+        // Another process may keep a newer copy of the role than this
+        // one (the heir changed since the role's last snapshot went out).
+        copies::take_newest(hosted.session, config, &role).await;
         if hosted.claims.is_some() {
             adopt_by_claim(hosted, tokens, &role, patience).await;
             continue;

@@ -32,6 +32,7 @@
 //!   (`protocol/ownership/`), which the sensor shares.
 //! - `error` — [`LeaderError`].
 
+mod copies;
 pub mod door;
 mod driver;
 mod error;

@@ -268,7 +268,7 @@ pub(crate) fn forget_stale_journal(
 }
 
 /// Whether this process keeps a journal or a snapshot of `role` in `dir`.
-fn journal_kept(dir: &Path, role: &str) -> bool {
+pub(crate) fn journal_kept(dir: &Path, role: &str) -> bool {
     let journal = journal_path(dir, role);
     journal.exists() || snapshot_path(&journal).exists()
 }

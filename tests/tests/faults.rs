@@ -285,6 +285,56 @@ fn a_role_its_fresh_heir_knows_nothing_of_is_adopted_in_the_next_turn() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A role's heir down for a while (its disk kept), the role's copies
+/// going to the next in line meanwhile, and the role lost just as the
+/// heir comes back: the heir's own copy is older than what the sensor
+/// still holds, so it asks the others for theirs, takes the newer one,
+/// adopts the role from it, and the final answer is the offline twin's.
+#[test]
+fn an_heir_with_an_old_copy_takes_the_newest_from_another_process() {
+    let dir = std::env::temp_dir().join(format!("idmesh-copy-asked-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let mut deployment = Deployment::start_each("copy-asked", &trace, &own_disks(150.0));
+    let twin = deployment.twin_summary(&trace);
+    deployment.first_answer(Duration::from_secs(30));
+    snapshots_written(&deployment, "leader-1", 2);
+    deployment.kill("leader-2");
+    // leader-3 keeps leader-1's copies now; leader-1 moves on.
+    let copy = deployment
+        .dir
+        .join("state-leader-3/leader-1.standby.snapshot");
+    let patience = Instant::now() + Duration::from_secs(20);
+    while !copy.exists() {
+        assert!(
+            Instant::now() < patience,
+            "leader-3 kept no copy:\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let written = deployment.leader("leader-1")["snapshots"]
+        .as_u64()
+        .unwrap_or(0);
+    snapshots_written(&deployment, "leader-1", written + 3);
+    deployment.kill("leader-1");
+    deployment.launch("leader", "leader-2");
+    final_is_twins(
+        &deployment,
+        &twin,
+        "after a role lost as its heir came back with an old copy",
+    );
+    let adopted = deployment.leader("leader-1");
+    assert_eq!(
+        adopted["host"], "leader-2",
+        "its heir adopted it: {adopted}"
+    );
+    let log = deployment.log();
+    assert!(log.contains("took a newer standby copy"), "{log}");
+    assert_eq!(log.matches("were dropped").count(), 0, "{log}");
+    drop(deployment);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `idmesh up` supervises: a leader killed under it (kill -9) is started
 /// again after its backoff while its neighbours run on, and the answer is
 /// the centralized engine's.

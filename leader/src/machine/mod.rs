@@ -410,30 +410,7 @@ impl Node {
                 }
             }
             Input::Transfers { peer, result } => {
-                self.asking.remove(&peer);
-                if let Some(r) = &mut self.recovery {
-                    // A peer that is down itself sends its transfers again
-                    // when it comes back.
-                    r.peers.retain(|p| *p != peer);
-                }
-                if result.is_ok() {
-                    self.transfers_failed.remove(&peer);
-                }
-                match result {
-                    Ok(sent) => {
-                        // One input each: one a peer got wrong is refused
-                        // alone.
-                        for t in sent.transfers {
-                            let bytes = encode(&TransfersSent {
-                                epoch: sent.epoch,
-                                version: VERSION,
-                                transfers: vec![t],
-                            });
-                            self.input(Kind::Transfer, bytes, "a peer's sent transfers", &mut out);
-                        }
-                    }
-                    Err(e) => self.transfers_refused(now, &peer, &e),
-                }
+                self.transfers_answered(now, &peer, result, &mut out)
             }
             Input::Durable { bytes, origin } => match decode::<Durable>(&bytes) {
                 Ok(mark) if mark.leader != self.leader.name() => {
@@ -652,6 +629,38 @@ impl Node {
         } else if self.resend_refusals.is_power_of_two() {
             tracing::warn!(leader = %name, %error, refusals = self.resend_refusals,
                 retry_in_ms = wait.as_millis() as u64, "resend request failed; asking again");
+        }
+    }
+
+    /// A peer's answer to a transfer request (or why there was none): its
+    /// transfers taken one by one, or the request asked again later.
+    fn transfers_answered(
+        &mut self,
+        now: Now,
+        peer: &str,
+        result: Result<TransfersSent, String>,
+        out: &mut Vec<Output>,
+    ) {
+        self.asking.remove(peer);
+        if let Some(r) = &mut self.recovery {
+            // A peer that is down itself sends its transfers again when it
+            // comes back.
+            r.peers.retain(|p| *p != peer);
+        }
+        match result {
+            Ok(sent) => {
+                self.transfers_failed.remove(peer);
+                // One input each: one a peer got wrong is refused alone.
+                for t in sent.transfers {
+                    let bytes = encode(&TransfersSent {
+                        epoch: sent.epoch,
+                        version: VERSION,
+                        transfers: vec![t],
+                    });
+                    self.input(Kind::Transfer, bytes, "a peer's sent transfers", out);
+                }
+            }
+            Err(e) => self.transfers_refused(now, peer, &e),
         }
     }
 

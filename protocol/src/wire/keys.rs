@@ -147,6 +147,17 @@ impl Keys {
         format!("{}/leader/{standby}/standby", self.prefix)
     }
 
+    /// Where process `process` answers with the standby copy it keeps of
+    /// role `role`.
+    pub fn leader_copy(&self, role: &str, process: &str) -> String {
+        format!("{}/leader/{role}/copy/{process}", self.prefix)
+    }
+
+    /// Every process's standby copy of role `role` (an adopter's question).
+    pub fn every_leader_copy(&self, role: &str) -> String {
+        self.leader_copy(role, "*")
+    }
+
     /// Where role `leader`'s standby says it keeps its snapshot.
     pub fn leader_stored(&self, leader: &str) -> String {
         format!("{}/leader/{leader}/stored", self.prefix)

@@ -22,6 +22,7 @@
 //! | sensor S | leaders | put | `P/leader/*/events` |
 //! | sensor S | leaders | liveliness query | `P/alive/leader/*` |
 //! | leader L | leaders | put, query | `P/leader/*/transfer`, `P/leader/*/sent` |
+//! | leader L | leaders | query | `P/leader/*/copy/*` (an adopter asks for the standby copies the others keep) |
 //! | leader L | sensor | query | `P/sensor/*/follow`, `P/sensor/*/resend` |
 //! | leader L | sensor | put | `P/sensor/*/unfollow` (tracks it no longer needs) |
 //! | sensor | leaders | declare subscriber | `P/sensor/*/unfollow` |
@@ -201,6 +202,13 @@ fn stream_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
             &parties.leaders,
             &["put", "query"],
             vec![keys.leader_transfer("*"), keys.leader_sent("*")],
+        ),
+        grant(
+            "standby-copies",
+            &parties.leaders,
+            &parties.leaders,
+            &["query"],
+            vec![keys.every_leader_copy("*")],
         ),
         grant(
             "follow",
@@ -713,6 +721,10 @@ producers = ["camera"]
         assert!(!allowed(&s, "ingress", "c", "put", "p/leader/l1/durable"));
         let l1 = access_control(&t, "l1");
         assert!(allowed(&l1, "ingress", "l0", "reply", "p/leader/l0/sent"));
+        // An adopter asks the other leader processes for their copies.
+        assert!(allowed(&l1, "ingress", "l0", "query", "p/leader/l2/copy/*"));
+        assert!(allowed(&l1, "egress", "l0", "reply", "p/leader/l2/copy/*"));
+        assert!(!allowed(&l1, "ingress", "c", "query", "p/leader/l2/copy/*"));
         // The coordinator may ask the sensor for its counters (once,
         // `query/stats` had `"sensors": []` under `[security]`).
         let c = access_control(&t, "c");
