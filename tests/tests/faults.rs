@@ -11,7 +11,7 @@ use idmesh_tests::{
     crowd, hosted_on, replay_summary, trace_events, undisturbed_applied, watermark_events,
     Deployment, FaultSection, LeaderFaultSection, Settings,
 };
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// SIGKILL to a leader while the stream runs: queries meanwhile get an
@@ -192,6 +192,26 @@ fn own_disks(rate: f64) -> Settings {
     }
 }
 
+/// A deployment of [`own_disks`] leaders at `rate` streaming a small
+/// crowd, under way: its folder, its trace, the deployment and its
+/// offline twin's summary.
+fn under_way(name: &str, rate: f64) -> (PathBuf, Deployment, serde_json::Value) {
+    let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+    let trace = crowd(&dir, 12, 4, 90.0, 5);
+    let deployment = Deployment::start_each(name, &trace, &own_disks(rate));
+    let twin = deployment.twin_summary(&trace);
+    let first = deployment.first_answer(Duration::from_secs(30));
+    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    (dir, deployment, twin)
+}
+
+/// The heir's disk is gone: its state folder emptied.
+fn wipe(deployment: &Deployment, process: &str) {
+    let disk = deployment.dir.join(format!("state-{process}"));
+    std::fs::remove_dir_all(&disk).expect("the disk wiped");
+    std::fs::create_dir_all(&disk).expect("an empty disk");
+}
+
 /// Waits until `role` has written `snapshots` snapshots.
 fn snapshots_written(deployment: &Deployment, role: &str, snapshots: u64) {
     let patience = Instant::now() + Duration::from_secs(20);
@@ -208,12 +228,7 @@ fn snapshots_written(deployment: &Deployment, role: &str, snapshots: u64) {
 /// adopts it from its copy; the final answer is the offline twin's.
 #[test]
 fn a_role_lost_while_its_heir_was_down_is_adopted_by_the_heir() {
-    let dir = std::env::temp_dir().join(format!("idmesh-heir-down-{}", std::process::id()));
-    let trace = crowd(&dir, 12, 4, 90.0, 5);
-    let mut deployment = Deployment::start_each("heir-down", &trace, &own_disks(300.0));
-    let twin = deployment.twin_summary(&trace);
-    let first = deployment.first_answer(Duration::from_secs(30));
-    assert_eq!(first["finished"], false, "the stream has begun, not ended");
+    let (dir, mut deployment, twin) = under_way("heir-down", 300.0);
     snapshots_written(&deployment, "leader-1", 3);
     // leader-2 is next in line for leader-1's role, and its standby.
     deployment.kill("leader-1");
@@ -240,15 +255,9 @@ fn a_role_lost_while_its_heir_was_down_is_adopted_by_the_heir() {
 /// it in the next turn, and the final answer is the offline twin's.
 #[test]
 fn a_role_its_fresh_heir_knows_nothing_of_is_adopted_in_the_next_turn() {
-    let dir = std::env::temp_dir().join(format!("idmesh-fresh-heir-{}", std::process::id()));
-    let trace = crowd(&dir, 12, 4, 90.0, 5);
-    let mut deployment = Deployment::start_each("fresh-heir", &trace, &own_disks(150.0));
-    let twin = deployment.twin_summary(&trace);
-    deployment.first_answer(Duration::from_secs(30));
+    let (dir, mut deployment, twin) = under_way("fresh-heir", 150.0);
     deployment.kill("leader-2");
-    let fresh = deployment.dir.join("state-leader-2");
-    std::fs::remove_dir_all(&fresh).expect("the heir's disk wiped");
-    std::fs::create_dir_all(&fresh).expect("an empty disk");
+    wipe(&deployment, "leader-2");
     // leader-3 now keeps leader-1's copies, and adopts leader-2's role.
     let copy = deployment
         .dir
@@ -292,11 +301,7 @@ fn a_role_its_fresh_heir_knows_nothing_of_is_adopted_in_the_next_turn() {
 /// adopts the role from it, and the final answer is the offline twin's.
 #[test]
 fn an_heir_with_an_old_copy_takes_the_newest_from_another_process() {
-    let dir = std::env::temp_dir().join(format!("idmesh-copy-asked-{}", std::process::id()));
-    let trace = crowd(&dir, 12, 4, 90.0, 5);
-    let mut deployment = Deployment::start_each("copy-asked", &trace, &own_disks(150.0));
-    let twin = deployment.twin_summary(&trace);
-    deployment.first_answer(Duration::from_secs(30));
+    let (dir, mut deployment, twin) = under_way("copy-asked", 150.0);
     snapshots_written(&deployment, "leader-1", 2);
     deployment.kill("leader-2");
     // leader-3 keeps leader-1's copies now; leader-1 moves on.
