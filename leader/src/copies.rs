@@ -73,12 +73,26 @@ pub(crate) async fn answer(config: &HostConfig, query: &Query) {
 }
 
 /// Before adopting `role`: asks every live process for the copy it keeps
-/// and keeps the newest here if it is newer than this process's own.
-pub(crate) async fn take_newest(session: &Session, config: &HostConfig, role: &str) {
+/// and keeps the newest here if it is newer than this process's own. A
+/// journal of the role the adoption would start from wins over any copy
+/// (with voters, `last`: one written in the holding the map names last).
+pub(crate) async fn take_newest(
+    session: &Session,
+    config: &HostConfig,
+    role: &str,
+    last: Option<u64>,
+) {
     let Some(dir) = &config.state_dir else {
         return;
     };
-    if standby::journal_kept(dir, role) {
+    let journal = match last {
+        Some(last) => matches!(
+            standby::adoption_source(dir, role, last),
+            Ok(standby::Source::Journal)
+        ),
+        None => standby::journal_kept(dir, role),
+    };
+    if journal {
         return;
     }
     let own = match standby::read(&standby_path(dir, role)) {

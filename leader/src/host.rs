@@ -774,13 +774,13 @@ async fn adopt_lost_roles(hosted: &mut Hosted<'_>, tokens: &mut Tokens, patience
         if hosted_elsewhere(hosted.session, &config.keys, &role).await {
             continue;
         }
-        // Another process may keep a newer copy of the role than this
-        // one (the heir changed since the role's last snapshot went out).
-        copies::take_newest(hosted.session, config, &role).await;
         if hosted.claims.is_some() {
             adopt_by_claim(hosted, tokens, &role, patience).await;
             continue;
         }
+        // Another process may keep a newer copy of the role than this
+        // one (the heir changed since the role's last snapshot went out).
+        copies::take_newest(hosted.session, config, &role, None).await;
         if let Some(holder) = config.journal_holder(&role) {
             // Its process is alive, only out of reach: the
             // role stays with it; look again later.
@@ -823,6 +823,7 @@ async fn adopt_by_claim(
         tokens.lost.insert(role.to_string(), Instant::now());
         return;
     }
+    copies::take_newest(hosted.session, config, role, Some(now)).await;
     if let Some(behind) = behind_published(config, tokens, role, now) {
         // Another process holds a newer copy (the role's standby, cut off
         // or slow to show its token now): it adopts the role once it is
@@ -933,7 +934,7 @@ async fn keep_leases(
             hosted.stop(&role);
         }
     }
-    take_up_held_roles(hosted, &map);
+    take_up_held_roles(hosted, &map).await;
     let own = &config.name;
     if hosted.roles.contains(own) {
         return Ok(());
@@ -1122,7 +1123,7 @@ fn return_from(config: &HostConfig, last: Option<u64>) {
 /// and that it does not run: it restarted while holding them, or
 /// stopped them when its lease lapsed. Nobody else would adopt them (the
 /// map names a live holder), so their answers would stay missing.
-fn take_up_held_roles(hosted: &mut Hosted<'_>, map: &idmesh_consensus::RolesAnswer) {
+async fn take_up_held_roles(hosted: &mut Hosted<'_>, map: &idmesh_consensus::RolesAnswer) {
     let config = hosted.config;
     let mine = |role: &str| {
         map.get(role)
@@ -1139,6 +1140,9 @@ fn take_up_held_roles(hosted: &mut Hosted<'_>, map: &idmesh_consensus::RolesAnsw
     for (role, epoch) in held {
         tracing::warn!(process = %config.name, %role, epoch,
             "the voters give this process a role it does not run: taking it up again");
+        // Its copy may be older than another process's (the role went
+        // home, and its home keeps the state it was sent).
+        copies::take_newest(hosted.session, config, &role, Some(epoch)).await;
         adopt_from(config, &role, Some(epoch));
         hosted.host(&role, true, epoch);
     }
