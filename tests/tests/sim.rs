@@ -68,6 +68,9 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.sensor_advances += tally.sensor_advances;
                 total.sensor_host_losses += tally.sensor_host_losses;
                 total.sensor_adoptions += tally.sensor_adoptions;
+                total.voter_messages += tally.voter_messages;
+                total.voter_faults += tally.voter_faults;
+                total.claims += tally.claims;
             }
             Err(violation) => {
                 eprintln!("seed {seed}: {violation}\n  replay: IDMESH_SIM_SEED={seed} cargo test --release -p idmesh-tests --test sim");
@@ -77,7 +80,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby: {} replication messages ({} whole journals), {} standby restarts, {} epochs moved to go on alone, {} sensor hosts lost, {} sensor roles adopted from the copy",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby: {} replication messages ({} whole journals), {} standby restarts, {} epochs moved to go on alone, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voters crashed or cut off, {} claims made through them mid-stream",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -112,7 +115,10 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.standby_restarts,
         total.sensor_advances,
         total.sensor_host_losses,
-        total.sensor_adoptions
+        total.sensor_adoptions,
+        total.voter_messages,
+        total.voter_faults,
+        total.claims
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
     assert!(
@@ -185,6 +191,14 @@ fn every_schedule_answers_like_the_centralized_engine() {
             total.sensor_adoptions,
             total.sensor_advances,
             total.standby_restarts
+        );
+        // Roles were claimed mid-stream through raft voters on the
+        // simulated wire, some while a voter was down or cut off.
+        assert!(
+            total.claims > 0 && total.voter_faults > 0,
+            "no claim made through the voters ({}) or voter failed ({})",
+            total.claims,
+            total.voter_faults
         );
     }
 }

@@ -7,8 +7,7 @@
 //! could vote twice in a term.
 
 use idmesh_consensus::{
-    Command, ConsensusError, DurableError, DurableLog, Envelope, Outcome, RoleEntry, RolesAnswer,
-    Voter, VoterConfig,
+    Command, ConsensusError, DurableError, DurableLog, Envelope, Outcome, Voter, VoterConfig,
 };
 use idmesh_protocol::wire::keys::Keys;
 use std::future::Future;
@@ -90,7 +89,7 @@ pub async fn run(
         })
         .await
         .map_err(VoterError::Zenoh)?;
-    let answer = Arc::new(Mutex::new(roles_answer(&voter)));
+    let answer = Arc::new(Mutex::new(voter.roles_answer()));
     let shown = answer.clone();
     let roles_key = config.keys.query_roles();
     let reply_key = roles_key.clone();
@@ -141,7 +140,7 @@ pub async fn run(
             }
         }
         if let Ok(mut shown) = answer.lock() {
-            *shown = roles_answer(&voter);
+            *shown = voter.roles_answer();
         }
     }
     Ok(())
@@ -174,27 +173,5 @@ fn take(voter: &mut Voter, incoming: Incoming) {
             }
             Err(e) => tracing::warn!(error = %e, "a proposal that does not decode"),
         },
-    }
-}
-
-fn roles_answer(voter: &Voter) -> RolesAnswer {
-    RolesAnswer {
-        voter: voter.id(),
-        // A leader whose map may still lack its predecessor's last claims
-        // does not say it leads: readers wait for one that holds them.
-        leader: match voter.is_leader() && !voter.leads_with_current_map() {
-            true => 0,
-            false => voter.leader(),
-        },
-        term: voter.term(),
-        roles: voter
-            .map()
-            .roles()
-            .map(|(role, holding)| RoleEntry {
-                role: role.clone(),
-                holder: holding.holder.clone(),
-                epoch: holding.epoch,
-            })
-            .collect(),
     }
 }

@@ -72,6 +72,46 @@ pub fn fencing(map: &RolesAnswer, role: &str) -> Option<u64> {
         .map(|e| e.epoch)
 }
 
+/// What the map's entry of a role (`entry`) says of a claim of it by
+/// `me` fencing off `fencing`: won, lost, or not decided yet (propose
+/// again). [`Claims::claim`] decides by it, and so does the simulator.
+pub fn claim_decision(
+    entry: Option<&RoleEntry>,
+    me: &str,
+    fencing: Option<u64>,
+) -> Option<Claimed> {
+    match entry {
+        Some(e) if e.holder.as_deref() == Some(me) => Some(Claimed::Won(e.epoch)),
+        // Someone else holds it at an epoch past the one this claim
+        // fences off: it won, or never lost it.
+        Some(e) if e.holder.is_some() && Some(e.epoch) != fencing => Some(Claimed::Lost {
+            holder: e.holder.clone().unwrap_or_default(),
+            epoch: e.epoch,
+        }),
+        // Released past the epoch this claim names: it moved on without
+        // what the claimant holds.
+        Some(e) if fencing.is_some_and(|f| f != e.epoch) => Some(Claimed::Lost {
+            holder: "nobody (released)".to_string(),
+            epoch: e.epoch,
+        }),
+        _ => None,
+    }
+}
+
+/// What the map's entry of a role says of `me` moving it past epoch
+/// `from` ([`Claims::advance`]): won at the new epoch, lost to another
+/// holder, or not decided yet.
+pub fn advance_decision(entry: Option<&RoleEntry>, me: &str, from: u64) -> Option<Claimed> {
+    match entry {
+        Some(e) if e.holder.as_deref() == Some(me) && e.epoch > from => Some(Claimed::Won(e.epoch)),
+        Some(e) if e.holder.as_deref() != Some(me) => Some(Claimed::Lost {
+            holder: e.holder.clone().unwrap_or_default(),
+            epoch: e.epoch,
+        }),
+        _ => None,
+    }
+}
+
 /// The voters as one process sees them.
 pub struct Claims {
     session: Session,
@@ -153,21 +193,8 @@ impl Claims {
             fencing,
         };
         let me = self.me.clone();
-        self.decide(&command, role, patience, |e| match e {
-            Some(e) if e.holder.as_deref() == Some(me.as_str()) => Some(Claimed::Won(e.epoch)),
-            // Someone else holds it at an epoch past the one this claim
-            // fences off: it won, or never lost it.
-            Some(e) if e.holder.is_some() && Some(e.epoch) != fencing => Some(Claimed::Lost {
-                holder: e.holder.clone().unwrap_or_default(),
-                epoch: e.epoch,
-            }),
-            // Released past the epoch this claim names: it moved on
-            // without what the claimant holds.
-            Some(e) if fencing.is_some_and(|f| f != e.epoch) => Some(Claimed::Lost {
-                holder: "nobody (released)".to_string(),
-                epoch: e.epoch,
-            }),
-            _ => None,
+        self.decide(&command, role, patience, |e| {
+            claim_decision(e, &me, fencing)
         })
         .await
     }
@@ -183,17 +210,8 @@ impl Claims {
             from,
         };
         let me = self.me.clone();
-        self.decide(&command, role, patience, |e| match e {
-            Some(e) if e.holder.as_deref() == Some(me.as_str()) && e.epoch > from => {
-                Some(Claimed::Won(e.epoch))
-            }
-            Some(e) if e.holder.as_deref() != Some(me.as_str()) => Some(Claimed::Lost {
-                holder: e.holder.clone().unwrap_or_default(),
-                epoch: e.epoch,
-            }),
-            _ => None,
-        })
-        .await
+        self.decide(&command, role, patience, |e| advance_decision(e, &me, from))
+            .await
     }
 
     /// Proposes `command` until the map's entry of `role` decides it
@@ -261,6 +279,46 @@ mod tests {
                 })
                 .collect(),
         }
+    }
+
+    /// A claim is won once the map names its claimant, lost once it names
+    /// another past the fenced epoch (or nobody, released past it), and
+    /// undecided while the fenced holding stands: proposed again.
+    #[test]
+    fn a_claim_is_decided_only_by_a_map_past_the_epoch_it_fences() {
+        let m = map(&[
+            ("l1", Some("p1"), 2),
+            ("l2", Some("p2"), 5),
+            ("l3", None, 4),
+        ]);
+        assert_eq!(
+            claim_decision(m.get("l1"), "p1", Some(1)),
+            Some(Claimed::Won(2))
+        );
+        assert_eq!(claim_decision(m.get("l2"), "p1", Some(5)), None);
+        assert_eq!(
+            claim_decision(m.get("l2"), "p1", Some(4)),
+            Some(Claimed::Lost {
+                holder: "p2".into(),
+                epoch: 5
+            })
+        );
+        assert!(matches!(
+            claim_decision(m.get("l3"), "p1", Some(3)),
+            Some(Claimed::Lost { epoch: 4, .. })
+        ));
+        assert_eq!(claim_decision(m.get("l3"), "p1", Some(4)), None);
+        assert_eq!(claim_decision(None, "p1", None), None);
+        // An advance from epoch 2 is won only past it.
+        assert_eq!(advance_decision(m.get("l1"), "p1", 2), None);
+        assert_eq!(
+            advance_decision(m.get("l1"), "p1", 1),
+            Some(Claimed::Won(2))
+        );
+        assert!(matches!(
+            advance_decision(m.get("l2"), "p1", 5),
+            Some(Claimed::Lost { epoch: 5, .. })
+        ));
     }
 
     #[test]

@@ -31,5 +31,8 @@ mod role_map;
 mod voter;
 
 pub use durable::{DurableError, DurableLog, KIND};
+/// A voter's log in memory (raft-rs's): what [`DurableLog::open`] gives
+/// back, and what a simulator keeps across a voter's restart as its disk.
+pub use raft::storage::MemStorage;
 pub use role_map::{Command, Holding, Outcome, RoleEntry, RoleMap, RolesAnswer};
 pub use voter::{ConsensusError, Envelope, Persist, Ready, Voter, VoterConfig};

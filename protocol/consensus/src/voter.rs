@@ -5,7 +5,7 @@
 //! [`propose`](Voter::propose)s commands, and after each of those sends
 //! the [`Envelope`]s [`advance`](Voter::advance) returns.
 
-use crate::role_map::{Command, Outcome, RoleMap};
+use crate::role_map::{Command, Outcome, RoleEntry, RoleMap, RolesAnswer};
 use raft::eraftpb::{Entry, EntryType, HardState, Message};
 use raft::storage::MemStorage;
 use raft::{Config, RawNode, StateRole};
@@ -206,6 +206,30 @@ impl Voter {
     /// The map as this voter's committed log built it.
     pub fn map(&self) -> &RoleMap {
         &self.map
+    }
+
+    /// What this voter answers on `query/roles`: its map, with the group's
+    /// leader and term as it knows them. A leader whose map may still
+    /// lack its predecessor's last claims does not say it leads, so that
+    /// readers wait for one that holds them.
+    pub fn roles_answer(&self) -> RolesAnswer {
+        RolesAnswer {
+            voter: self.id(),
+            leader: match self.is_leader() && !self.leads_with_current_map() {
+                true => 0,
+                false => self.leader(),
+            },
+            term: self.term(),
+            roles: self
+                .map
+                .roles()
+                .map(|(role, holding)| RoleEntry {
+                    role: role.clone(),
+                    holder: holding.holder.clone(),
+                    epoch: holding.epoch,
+                })
+                .collect(),
+        }
     }
 
     /// What committed commands did since the last call.

@@ -10,10 +10,11 @@
 //! in a quarter of the crashes from a journal found damaged, cut before a
 //! random entry — and queries come at random points.
 //!
-//! Every role is held by a process at an epoch of the voters' role map
-//! (`idmesh_consensus::RoleMap`: one shared map whose committed claims are
-//! applied at a simulated commit time; the raft voters themselves are not
-//! simulated). In a third of the schedules with more than one leader the
+//! Every role is held by a process at an epoch of the voters' role map,
+//! decided by three raft-rs voters (`world/voters.rs`): in the schedules
+//! that claim a role mid-stream they run on the simulated clock, their
+//! messages on the same faulty wire, one of them crashed or cut off for a
+//! while, and an adopter claims through them as a process does. In a third of the schedules with more than one leader the
 //! roles keep standbys — each snapshot goes to the heir process through
 //! the network, which keeps it on its own disk and says so — and one
 //! host fault strikes: a host lost for good with its disk, or a holder
@@ -46,6 +47,8 @@
 //! - no receiver — the sensor, a peer, the coordinator — applies a message
 //!   whose epoch is older than the newest it has heard of that role: each
 //!   such message must be counted refused (the tally's `fenced`);
+//! - every voter applies one history of commands, in one order (also
+//!   again from its log after a restart);
 //! - no two processes are ever recorded holding one role at one epoch, a
 //!   holder runs only at the epoch the map gives it, and every answer
 //!   carries an epoch the map gave;

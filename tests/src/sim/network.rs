@@ -15,6 +15,11 @@ pub(crate) enum Endpoint {
     /// A role's former holder, cut off and superseded, still running.
     Former(usize),
     Coordinator,
+    /// A voter (1 and up).
+    Voter(u64),
+    /// A process's word with the voters: its claims and its reads of the
+    /// map.
+    Claimant,
 }
 
 /// The queue of the simulation's events, and the wire deliveries take.

@@ -1,8 +1,6 @@
-//! Hosts, standbys and epochs, as `leader/src/host.rs` and the voters
-//! run them: every role is held by a process at an epoch of the voters'
-//! map (`idmesh_consensus::RoleMap`, one shared map whose committed
-//! claims are applied at a simulated commit time: the voters themselves
-//! are not simulated); each role sends its snapshots to its standby (the
+//! Hosts, standbys and epochs, as `leader/src/host.rs` runs them: every
+//! role is held by a process at an epoch of the voters' map (`voters.rs`:
+//! raft-rs voters on the simulated wire); each role sends its snapshots to its standby (the
 //! process that would adopt it) through the simulated network and hears
 //! back what it holds; and two faults change who holds a role:
 //!
@@ -24,10 +22,12 @@
 //! the sensor forgot.
 
 use super::leader::{Disk, Former, ToLeader, Who};
+use super::voters::Purpose;
 use super::{Event, Ms, World};
 use crate::sim::network::Endpoint;
 use crate::sim::Violation;
-use idmesh_consensus::{Command, Outcome, RoleMap};
+use idmesh_claims::Claimed;
+use idmesh_consensus::{Command, RoleMap};
 use idmesh_leader::Input;
 use idmesh_protocol::wire::leader_to_leader::StandbyStored;
 use idmesh_protocol::wire::leader_to_sensor::Durable;
@@ -36,13 +36,14 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::collections::{BTreeMap, BTreeSet};
 
-/// How long after its holder is gone a role's adoption commits: the lease
-/// lapsing, the claim proposed and committed (ms).
+/// How long after its holder is gone its heir claims the role: its token
+/// gone, the takeover time passed (ms).
 const TAKEOVER: (Ms, Ms) = (300, 1500);
 
 /// Who holds what, and where standby copies are kept.
 pub(super) struct Hosts {
-    /// The voters' committed map, role → (holder, epoch).
+    /// The voters' committed map, role → (holder, epoch): that of the
+    /// longest history a voter applied.
     pub(super) map: RoleMap,
     /// Every (role, epoch) a holder was started at, and its process.
     pub(super) held: BTreeMap<(usize, u64), String>,
@@ -81,7 +82,8 @@ impl World {
     }
 
     /// Commits `process`'s claim of `role` (a leader's or the sensor's),
-    /// fencing off `fencing`, and returns the epoch it wins.
+    /// fencing off `fencing`, in one step (`World::commit_now`: the
+    /// roles' first claims), and returns the epoch it wins.
     pub(super) fn claim_role(
         &mut self,
         role: &str,
@@ -93,10 +95,10 @@ impl World {
             holder: process.to_string(),
             fencing,
         };
-        match self.hosts.map.apply(&command) {
-            Outcome::Changed { holding, .. } => Ok(holding.epoch),
-            Outcome::Unchanged { why, .. } => Err(Violation::new(format!(
-                "{process}'s claim of {role} fencing {fencing:?} did not commit: {why}"
+        match self.commit_now(&command)? {
+            Claimed::Won(epoch) => Ok(epoch),
+            other => Err(Violation::new(format!(
+                "{process}'s claim of {role} fencing {fencing:?} was not won: {other:?}"
             ))),
         }
     }
@@ -306,19 +308,15 @@ impl World {
         let rng = &mut self.hosts.rng;
         let phase = rng.gen_range(1..=250);
         let adopt = self.now + rng.gen_range(TAKEOVER.0..=TAKEOVER.1);
-        let heal = adopt + rng.gen_range(200..=2000);
-        let stop = heal + rng.gen_range(500..=3000);
         self.net
             .at(self.now + phase, Event::FormerTick { leader: p, life });
+        // Its cut heals only once the claim is won (`adopted`).
         self.net.at(adopt, Event::Adopt(p));
-        self.net.at(heal, Event::HealFormer(p));
-        self.net.at(stop, Event::StopFormer(p));
         self.tell_standbys()
     }
 
-    /// The claim of orphaned role `p` by its heir's process commits: the
-    /// role starts there at the next epoch, from the standby copy that
-    /// process keeps (or from nothing, if it keeps none).
+    /// The heir's process claims orphaned role `p` through the voters,
+    /// fencing off the epoch it was held at.
     pub(super) fn adopt(&mut self, p: usize) -> Result<(), Violation> {
         if !self.leaders[p].orphaned {
             return Ok(());
@@ -330,7 +328,24 @@ impl World {
             )));
         };
         let adopter = self.leaders[heir].process.clone();
-        let epoch = self.claim(p, &adopter, Some(self.leaders[p].epoch))?;
+        let command = Command::Claim {
+            role: self.leaders[p].name.clone(),
+            holder: adopter.clone(),
+            fencing: Some(self.leaders[p].epoch),
+        };
+        self.start_claim(command, Purpose::Adopt { role: p, adopter });
+        Ok(())
+    }
+
+    /// `adopter`'s claim of orphaned role `p` was won at `epoch`: the role
+    /// starts there, from the standby copy that process keeps (or from
+    /// nothing, if it keeps none).
+    pub(super) fn adopted(
+        &mut self,
+        p: usize,
+        adopter: String,
+        epoch: u64,
+    ) -> Result<(), Violation> {
         let copy = self.hosts.copies.get(&(adopter.clone(), p)).cloned();
         self.tally.adoptions += 1;
         self.tally.adopted_from_copies += copy.is_some() as u64;
@@ -342,6 +357,15 @@ impl World {
             ..Disk::default()
         };
         slot.orphaned = false;
+        if slot.former.is_some() {
+            // The former holder's cut heals, and a while later it learns
+            // that the map moved on.
+            let rng = &mut self.hosts.rng;
+            let heal = self.now + rng.gen_range(200..=2000);
+            let stop = heal + rng.gen_range(500..=3000);
+            self.net.at(heal, Event::HealFormer(p));
+            self.net.at(stop, Event::StopFormer(p));
+        }
         self.start_leader(p, true)
     }
 

@@ -10,8 +10,9 @@
 //! The files mirror the drivers: `sensor.rs` does what
 //! `sensor/src/driver.rs` does, `leader.rs` what `leader/src/driver.rs`
 //! does, `coordinator.rs` what `coordinator/src/driver/` does, `hosts.rs`
-//! what `leader/src/host.rs` and the voters do (who holds a role at
-//! which epoch, standbys, adoptions). This one
+//! what `leader/src/host.rs` does (who holds a role at which epoch,
+//! standbys, adoptions), `voters.rs` what `voter/src/driver.rs` and a
+//! claimant (`idmesh-claims`) do. This one
 //! holds the world itself: its clock and events, the wire between the
 //! roles, and the checks no one role can make.
 
@@ -20,6 +21,7 @@ mod hosts;
 mod leader;
 mod sensor;
 mod sensor_standby;
+mod voters;
 
 use super::network::{self, Endpoint, Network};
 use super::scenario::Scenario;
@@ -39,6 +41,7 @@ use rand_chacha::ChaCha8Rng;
 use sensor::ToSensor;
 use sensor_standby::SensorStandby;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
+use voters::{ToVoter, VoterEvent, Voters};
 
 /// Virtual milliseconds.
 pub(crate) type Ms = u64;
@@ -77,6 +80,16 @@ pub(crate) enum Msg {
         what: ToSensor,
     },
     Coordinator(ToCoordinator),
+    /// For voter `to`.
+    Voter {
+        to: u64,
+        what: ToVoter,
+    },
+    /// A voter's map, for the claimant of claim `claim`.
+    Claimant {
+        claim: u64,
+        answer: idmesh_consensus::RolesAnswer,
+    },
 }
 
 /// What happens at a point of virtual time.
@@ -101,7 +114,8 @@ pub(crate) enum Event {
     HostLoss(usize),
     /// A role's holder is cut off long enough to be superseded.
     Supersede(usize),
-    /// The claim adopting an orphaned role commits.
+    /// The heir of an orphaned role claims it (its token gone for the
+    /// takeover time).
     Adopt(usize),
     /// A former holder's cut heals; later it stops.
     HealFormer(usize),
@@ -117,8 +131,11 @@ pub(crate) enum Event {
     StandbyRestart,
     /// The sensor's host is gone for good, with its disk.
     SensorHostLoss,
-    /// The standby's claim of the sensor role commits.
+    /// The sensor's standby claims the sensor role (its token gone for
+    /// the takeover time).
     SensorAdopt,
+    /// The voters' clock, their faults, a claimant's reads.
+    Voters(VoterEvent),
     /// The faults stop and the final query starts.
     Calm,
 }
@@ -205,6 +222,11 @@ pub struct Tally {
     pub sensor_advances: u64,
     pub sensor_host_losses: u64,
     pub sensor_adoptions: u64,
+    /// Raft messages the voters sent; voters crashed or cut off; claims
+    /// made through the voters on the clock.
+    pub voter_messages: u64,
+    pub voter_faults: u64,
+    pub claims: u64,
 }
 
 pub(crate) struct World {
@@ -253,6 +275,8 @@ pub(crate) struct World {
     coordinator_heard: BTreeMap<String, u64>,
     /// The sensor's standby, in the schedules that keep one.
     sensor_standby: Option<SensorStandby>,
+    /// The voters, who decide who holds each role.
+    voters: Voters,
 }
 
 impl World {
@@ -307,6 +331,7 @@ impl World {
             sensor_heard: BTreeMap::new(),
             coordinator_heard: BTreeMap::new(),
             sensor_standby: None,
+            voters: Voters::new()?,
         };
         // Drawn from a copy: the schedule's own draws stay as they were.
         let mut side = world.rng.clone();
@@ -324,6 +349,11 @@ impl World {
         let host_fault = world.draw_host_fault(side.gen());
         let span = 40 * world.scenario.lines.len() as Ms + 200;
         world.draw_sensor_standby(side.gen(), span)?;
+        // Claims mid-stream go through voters on the clock.
+        let voters_seed = side.gen();
+        if world.hosts.standbys || world.sensor_standby.is_some() {
+            world.clock_voters(voters_seed, span);
+        }
         for i in 0..count {
             let name = world.leaders[i].name.clone();
             world.leaders[i].epoch = world.claim(i, &name, None)?;
@@ -510,7 +540,11 @@ impl World {
                 Ok(())
             }
             Event::SensorHostLoss => self.sensor_host_lost(),
-            Event::SensorAdopt => self.sensor_adopted(),
+            Event::SensorAdopt => {
+                self.sensor_adopt();
+                Ok(())
+            }
+            Event::Voters(event) => self.voters_event(event),
             Event::Isolate(i) => {
                 if !self.calm {
                     self.net.isolate(Endpoint::Leader(i));
@@ -620,6 +654,11 @@ impl World {
             Msg::Sensor { .. } if self.sensor_down() => Ok(()),
             Msg::Sensor { from, epoch, what } => self.at_sensor_fenced(from, epoch, what),
             Msg::Coordinator(what) => self.at_coordinator(what),
+            Msg::Voter { to, what } => self.at_voter(to, what),
+            Msg::Claimant { claim, answer } => {
+                self.claimant_heard(claim, answer);
+                Ok(())
+            }
         }
     }
 }

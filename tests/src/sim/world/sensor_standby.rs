@@ -17,14 +17,17 @@
 //!
 //! And the fault the standby is for: the sensor's host lost for good
 //! with its disk. After the takeover time the standby claims the role
-//! naming its copy's epoch, wins the next epoch, and serves from its copy:
+//! through the voters (`voters.rs`) naming its copy's epoch, wins the
+//! next epoch, and serves from its copy:
 //! the gateway it restores must stand exactly where the lost one stood
 //! (nothing that left it, nothing acknowledged to a producer, is lost),
 //! and its batches, at the new epoch, fence off whatever the lost sensor
 //! still had on the wire.
 
+use super::voters::Purpose;
 use super::{Event, Ms, World};
 use crate::sim::Violation;
+use idmesh_claims::Claimed;
 use idmesh_consensus::{Command, Outcome};
 use idmesh_sensor::journal::{self, Record};
 use idmesh_sensor::{Apply, Copy, Gateway, Replication, Router, Step};
@@ -37,8 +40,8 @@ const ROLE: &str = "sensor-0";
 const SENSOR: &str = "sensor-0";
 const STANDBY: &str = "sensor-0-standby";
 
-/// How long after the sensor's host is gone its standby's claim commits
-/// (the token gone for the takeover time, the claim committed; ms).
+/// How long after the sensor's host is gone its standby claims the role
+/// (its token gone for the takeover time; ms).
 const TAKEOVER: (Ms, Ms) = (300, 1500);
 
 /// Where a gateway stands: seq, events, finished, trace lines read.
@@ -205,11 +208,11 @@ impl World {
             holder: SENSOR.into(),
             from,
         };
-        let epoch = match self.hosts.map.apply(&command) {
-            Outcome::Changed { holding, .. } => holding.epoch,
-            Outcome::Unchanged { why, .. } => {
+        let epoch = match self.commit_now(&command)? {
+            Claimed::Won(epoch) => epoch,
+            other => {
                 return Err(Violation::new(format!(
-                    "the sensor could not move its role past epoch {from}: {why}"
+                    "the sensor could not move its role past epoch {from}: {other:?}"
                 )))
             }
         };
@@ -307,24 +310,37 @@ impl World {
         Ok(())
     }
 
-    /// The standby claims the sensor role naming its copy's epoch, wins
-    /// the next, and serves from its copy: its gateway must stand where
-    /// the lost one stood, and a producer's next line must be the one
-    /// after what it was told was taken.
-    pub(super) fn sensor_adopted(&mut self) -> Result<(), Violation> {
+    /// The standby claims the sensor role through the voters, naming its
+    /// copy's epoch.
+    pub(super) fn sensor_adopt(&mut self) {
+        let Some(s) = self.sensor_standby.as_ref().filter(|s| s.down()) else {
+            return;
+        };
+        let command = Command::Claim {
+            role: ROLE.into(),
+            holder: STANDBY.into(),
+            fencing: s.copy.epoch,
+        };
+        self.start_claim(command, Purpose::SensorAdopt);
+    }
+
+    /// The standby won the sensor role at `epoch` and serves from its
+    /// copy: its gateway must stand where the lost one stood, and a
+    /// producer's next line must be the one after what it was told was
+    /// taken.
+    pub(super) fn sensor_adopted_at(&mut self, epoch: u64) -> Result<(), Violation> {
         let Some(mut s) = self.sensor_standby.take() else {
             return Ok(());
         };
-        let adopted = self.adopt_sensor(&mut s);
+        let adopted = self.serve_from_copy(&mut s, epoch);
         self.sensor_standby = Some(s);
         adopted
     }
 
-    fn adopt_sensor(&mut self, s: &mut SensorStandby) -> Result<(), Violation> {
+    fn serve_from_copy(&mut self, s: &mut SensorStandby, epoch: u64) -> Result<(), Violation> {
         let Some(lost) = s.lost else {
             return Ok(());
         };
-        let epoch = self.claim_role(ROLE, STANDBY, s.copy.epoch)?;
         let records = s
             .records
             .iter()
