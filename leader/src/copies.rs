@@ -85,20 +85,20 @@ pub(crate) async fn take_newest(
     let Some(dir) = &config.state_dir else {
         return;
     };
-    let journal = match last {
-        Some(last) => matches!(
-            standby::adoption_source(dir, role, last),
-            Ok(standby::Source::Journal)
-        ),
-        None => standby::journal_kept(dir, role),
-    };
-    if journal {
-        return;
-    }
-    let own = match standby::read(&standby_path(dir, role)) {
-        Ok(copy) => copy.map(|(mark, _)| mark),
-        // A damaged copy of its own: any other is better.
-        Err(_) => None,
+    // This process's own state of the role: a journal wins over any copy;
+    // with voters the standby copy's mark comes from the same read.
+    let own = match last {
+        Some(last) => match standby::adoption_source(dir, role, last) {
+            Ok(standby::Source::Journal) => return,
+            Ok(standby::Source::StandbyCopy(mark)) => Some(mark),
+            // None kept, or a damaged one: any other is better.
+            Ok(standby::Source::Nothing) | Err(_) => None,
+        },
+        None if standby::journal_kept(dir, role) => return,
+        None => match standby::read(&standby_path(dir, role)) {
+            Ok(copy) => copy.map(|(mark, _)| mark),
+            Err(_) => None,
+        },
     };
     let Ok(replies) = session
         .get(config.keys.every_leader_copy(role))
