@@ -1,8 +1,13 @@
 //! Diagnostics: `tracing` events to stderr, filtered by `RUST_LOG`
-//! (default [`DEFAULT_FILTER`]), so stdout stays clean JSON Lines.
+//! (default [`DEFAULT_FILTER`]), so stdout stays clean JSON Lines; and
+//! Zenoh's errors to the watcher of a session that drops what its peers
+//! send (`idmesh_deploy::runtime::routing_loss`).
 
+use idmesh_deploy::runtime::routing_loss;
 use std::io::IsTerminal;
-use tracing_subscriber::EnvFilter;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+use tracing_subscriber::{EnvFilter, Layer};
 
 /// Our warnings, and Zenoh's errors only: Zenoh warns about things a user
 /// cannot act on (scouting delays, every failed reconnection of a link that
@@ -23,10 +28,16 @@ pub fn init() {
         },
         _ => (EnvFilter::new(DEFAULT_FILTER), None),
     };
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let log = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         .with_ansi(std::io::stderr().is_terminal())
+        .with_filter(filter);
+    // Beside the log's filter: Zenoh's errors reach the watcher of a
+    // session that lost its peers' key expressions whatever `RUST_LOG`
+    // says.
+    tracing_subscriber::registry()
+        .with(log)
+        .with(routing_loss::layer())
         .init();
     if let Some((spec, error)) = bad {
         tracing::warn!("ignoring RUST_LOG={spec:?} ({error}); using {DEFAULT_FILTER:?}");

@@ -11,6 +11,7 @@ pub mod mesh;
 pub mod ports;
 pub mod query;
 pub mod roles;
+pub mod routing_loss;
 pub mod security;
 mod supervise;
 pub mod systemd;

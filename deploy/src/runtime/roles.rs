@@ -5,6 +5,7 @@
 //! after it, and stops cleanly on Ctrl-C or SIGTERM.
 
 use super::mesh::{self, MeshOptions};
+use super::routing_loss;
 use super::security::rules;
 use super::topology::{SensorProcess, Sparsification, Topology};
 use anyhow::{anyhow, Context, Result};
@@ -167,7 +168,7 @@ pub fn run(role: Role, config: &Path, name: &str) -> Result<()> {
                 }
             };
             let _ = session.close().await;
-            result
+            result.and(routing_loss::check())
         }
         .instrument(span),
     )
@@ -650,5 +651,8 @@ pub(crate) async fn shutdown() {
     tokio::select! {
         _ = tokio::signal::ctrl_c() => {}
         _ = term.recv() => {}
+        // The session drops what its peers send: stopped, to be started
+        // again with a new one.
+        _ = routing_loss::lost() => {}
     }
 }
