@@ -579,5 +579,12 @@ impl Drop for LanDeployment<'_> {
         for (_, child) in &mut self.ups {
             let _ = child.wait();
         }
+        // Its folder (topology, state, logs) goes with a passing test; a
+        // failing one keeps it to be read, as does
+        // `IDMESH_KEEP_TEST_DIRS=1`.
+        let keep = std::env::var("IDMESH_KEEP_TEST_DIRS").is_ok_and(|v| v == "1");
+        if !std::thread::panicking() && !keep {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
     }
 }

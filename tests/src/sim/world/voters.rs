@@ -7,7 +7,8 @@
 //! sensor standby) the voters run on the simulated clock: ticked every
 //! [`TICK`] ms, their raft messages on the schedule's faulty wire (lost,
 //! doubled, delayed), one of them crashed or cut off for a while and back
-//! now and then (a majority always up, so that no holder's lease lapses:
+//! now and then, or lost for good (a majority always up, so that no
+//! holder's lease lapses:
 //! a lost majority stops every role, which the simulator does not model).
 //! A claim is made as a process makes it: proposed to every voter (the
 //! leader alone takes it), then, after a wait that doubles, every voter's
@@ -164,7 +165,8 @@ impl Voters {
 impl World {
     /// The voters run on the clock from `seed`'s stream, with one fault
     /// drawn before `span`: a voter (the leader, half the time) crashed
-    /// and restarted, or cut off and healed.
+    /// and restarted, or cut off and healed; half the crashes are for
+    /// good, its host lost (the other two decide from then on).
     pub(super) fn clock_voters(&mut self, seed: u64, span: Ms) {
         let v = &mut self.voters;
         v.clocked = true;
@@ -176,7 +178,9 @@ impl World {
             let back = at + v.rng.gen_range(200..=3000);
             let crash = v.rng.gen_bool(0.5);
             self.net.at(at, Event::Voters(VoterEvent::Fault { crash }));
-            self.net.at(back, Event::Voters(VoterEvent::Back));
+            if !crash || v.rng.gen_bool(0.5) {
+                self.net.at(back, Event::Voters(VoterEvent::Back));
+            }
         }
     }
 
