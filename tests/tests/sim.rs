@@ -70,6 +70,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.sensor_adoptions += tally.sensor_adoptions;
                 total.voter_messages += tally.voter_messages;
                 total.voter_faults += tally.voter_faults;
+                total.voter_majority_losses += tally.voter_majority_losses;
                 total.claims += tally.claims;
             }
             Err(violation) => {
@@ -80,7 +81,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby: {} replication messages ({} whole journals), {} standby restarts, {} epochs moved to go on alone, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voters crashed or cut off, {} claims made through them mid-stream",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby: {} replication messages ({} whole journals), {} standby restarts, {} epochs moved to go on alone, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voter faults ({} of them the majority's, for a while), {} claims made through them mid-stream",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -118,6 +119,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.sensor_adoptions,
         total.voter_messages,
         total.voter_faults,
+        total.voter_majority_losses,
         total.claims
     );
     assert!(failures.is_empty(), "failing seeds: {failures:?}");
@@ -193,12 +195,14 @@ fn every_schedule_answers_like_the_centralized_engine() {
             total.standby_restarts
         );
         // Roles were claimed mid-stream through raft voters on the
-        // simulated wire, some while a voter was down or cut off.
+        // simulated wire, some while a voter was down or cut off, or the
+        // majority for a while.
         assert!(
-            total.claims > 0 && total.voter_faults > 0,
-            "no claim made through the voters ({}) or voter failed ({})",
+            total.claims > 0 && total.voter_faults > 0 && total.voter_majority_losses > 0,
+            "no claim made through the voters ({}), voter failed ({}) or majority lost ({})",
             total.claims,
-            total.voter_faults
+            total.voter_faults,
+            total.voter_majority_losses
         );
     }
 }

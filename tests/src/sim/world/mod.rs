@@ -222,10 +222,12 @@ pub struct Tally {
     pub sensor_advances: u64,
     pub sensor_host_losses: u64,
     pub sensor_adoptions: u64,
-    /// Raft messages the voters sent; voters crashed or cut off; claims
-    /// made through the voters on the clock.
+    /// Raft messages the voters sent; voter faults; claims made through
+    /// the voters on the clock.
     pub voter_messages: u64,
     pub voter_faults: u64,
+    /// Of those, faults that took two voters, the majority, for a while.
+    pub voter_majority_losses: u64,
     pub claims: u64,
 }
 
@@ -352,7 +354,8 @@ impl World {
         // Claims mid-stream go through voters on the clock.
         let voters_seed = side.gen();
         if world.hosts.standbys || world.sensor_standby.is_some() {
-            world.clock_voters(voters_seed, span);
+            let majority_may_go = world.sensor_standby.is_none();
+            world.clock_voters(voters_seed, span, majority_may_go);
         }
         for i in 0..count {
             let name = world.leaders[i].name.clone();

@@ -7,9 +7,11 @@
 //! sensor standby) the voters run on the simulated clock: ticked every
 //! [`TICK`] ms, their raft messages on the schedule's faulty wire (lost,
 //! doubled, delayed), one of them crashed or cut off for a while and back
-//! now and then, or lost for good (a majority always up, so that no
-//! holder's lease lapses:
-//! a lost majority stops every role, which the simulator does not model).
+//! now and then, or lost for good; in some schedules two of them, the
+//! majority, for a while, and no claim is decided until one is back. The
+//! holders' leases are not modelled (a holder that reads no map for five
+//! seconds stops its role): the roles run on through such a loss, which
+//! is safe, since no successor can win a claim without a majority.
 //! A claim is made as a process makes it: proposed to every voter (the
 //! leader alone takes it), then, after a wait that doubles, every voter's
 //! map read back through the wire, the newest leading one's kept
@@ -65,9 +67,11 @@ pub(super) enum Purpose {
 pub(crate) enum VoterEvent {
     /// A period of their clock.
     Tick,
-    /// A voter crashes (`crash`) or is cut off; it is back.
+    /// `voters` voters (one, or two: the majority) crash (`crash`) or are
+    /// cut off; they are back.
     Fault {
         crash: bool,
+        voters: usize,
     },
     Back,
     /// A claimant reads the map back, and decides on what it read.
@@ -105,8 +109,8 @@ pub(super) struct Voters {
     history: Vec<Outcome>,
     /// They run on the clock (this schedule claims mid-stream).
     clocked: bool,
-    /// The voter cut off now, if any.
-    cut: Option<u64>,
+    /// The voters cut off now.
+    cut: Vec<u64>,
     claims: BTreeMap<u64, Claim>,
     /// Raft messages carried at once by `commit_now`.
     instant: Option<VecDeque<Envelope>>,
@@ -145,7 +149,7 @@ impl Voters {
             applied: vec![0; VOTERS as usize],
             history: Vec::new(),
             clocked: false,
-            cut: None,
+            cut: Vec::new(),
             claims: BTreeMap::new(),
             instant: None,
             rng: ChaCha8Rng::seed_from_u64(0),
@@ -166,8 +170,11 @@ impl World {
     /// The voters run on the clock from `seed`'s stream, with one fault
     /// drawn before `span`: a voter (the leader, half the time) crashed
     /// and restarted, or cut off and healed; half the crashes are for
-    /// good, its host lost (the other two decide from then on).
-    pub(super) fn clock_voters(&mut self, seed: u64, span: Ms) {
+    /// good, its host lost (the other two decide from then on). Where
+    /// `majority_may_go`, a quarter of the faults strike two voters for a
+    /// while: no claim is decided until one is back (not where the
+    /// sensor's advance, committed within one step, may need them).
+    pub(super) fn clock_voters(&mut self, seed: u64, span: Ms, majority_may_go: bool) {
         let v = &mut self.voters;
         v.clocked = true;
         v.rng = ChaCha8Rng::seed_from_u64(seed ^ 0x0070_7e55);
@@ -177,8 +184,13 @@ impl World {
             let at = v.rng.gen_range(0..span);
             let back = at + v.rng.gen_range(200..=3000);
             let crash = v.rng.gen_bool(0.5);
-            self.net.at(at, Event::Voters(VoterEvent::Fault { crash }));
-            if !crash || v.rng.gen_bool(0.5) {
+            let voters = match majority_may_go && v.rng.gen_bool(0.25) {
+                true => 2,
+                false => 1,
+            };
+            self.net
+                .at(at, Event::Voters(VoterEvent::Fault { crash, voters }));
+            if !crash || voters > 1 || v.rng.gen_bool(0.5) {
                 self.net.at(back, Event::Voters(VoterEvent::Back));
             }
         }
@@ -188,9 +200,9 @@ impl World {
     pub(super) fn voters_event(&mut self, event: VoterEvent) -> Result<(), Violation> {
         match event {
             VoterEvent::Tick => self.voter_tick(),
-            VoterEvent::Fault { crash } => {
+            VoterEvent::Fault { crash, voters } => {
                 if !self.calm {
-                    self.voter_fault(crash);
+                    self.voter_fault(crash, voters);
                 }
                 Ok(())
             }
@@ -203,27 +215,31 @@ impl World {
         }
     }
 
-    /// A voter fails: the leader, or one drawn.
-    fn voter_fault(&mut self, crash: bool) {
+    /// `count` voters fail: the leader or one drawn, and the next ones.
+    fn voter_fault(&mut self, crash: bool, count: usize) {
         let v = &mut self.voters;
         let leader = v.leading_map().map(|m| m.voter);
-        let id = match leader.filter(|_| v.rng.gen_bool(0.5)) {
+        let first = match leader.filter(|_| v.rng.gen_bool(0.5)) {
             Some(id) => id,
             None => v.rng.gen_range(1..=VOTERS),
         };
         self.tally.voter_faults += 1;
-        match crash {
-            true => v.machines[id as usize - 1] = None,
-            false => {
-                v.cut = Some(id);
-                self.net.isolate(Endpoint::Voter(id));
+        self.tally.voter_majority_losses += (count > 1) as u64;
+        for k in 0..count as u64 {
+            let id = (first - 1 + k) % VOTERS + 1;
+            match crash {
+                true => v.machines[id as usize - 1] = None,
+                false => {
+                    v.cut.push(id);
+                    self.net.isolate(Endpoint::Voter(id));
+                }
             }
         }
     }
 
-    /// The failed voter is back: restarted from its log, or healed.
+    /// The failed voters are back: restarted from their logs, or healed.
     fn voter_back(&mut self) -> Result<(), Violation> {
-        if let Some(id) = self.voters.cut.take() {
+        for id in std::mem::take(&mut self.voters.cut) {
             self.net.heal(Endpoint::Voter(id));
         }
         for i in 0..VOTERS as usize {
@@ -484,7 +500,8 @@ impl World {
                 || self
                     .voters
                     .cut
-                    .is_some_and(|c| c == to || c == envelope.from)
+                    .iter()
+                    .any(|&c| c == to || c == envelope.from)
             {
                 continue;
             }
