@@ -582,8 +582,7 @@ impl Drop for LanDeployment<'_> {
         // Its folder (topology, state, logs) goes with a passing test; a
         // failing one keeps it to be read, as does
         // `IDMESH_KEEP_TEST_DIRS=1`.
-        let keep = std::env::var("IDMESH_KEEP_TEST_DIRS").is_ok_and(|v| v == "1");
-        if !std::thread::panicking() && !keep {
+        if !std::thread::panicking() && !crate::keep_test_dirs() {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
     }

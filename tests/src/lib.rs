@@ -38,6 +38,32 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
+/// Whether the tests keep their folders under the temporary directory
+/// even when they pass: `IDMESH_KEEP_TEST_DIRS=1`.
+pub fn keep_test_dirs() -> bool {
+    std::env::var("IDMESH_KEEP_TEST_DIRS").is_ok_and(|v| v == "1")
+}
+
+/// A test's folder under the temporary directory, `<name>-<pid>`, and the
+/// guard that removes it once the test has passed (kept by it to the end
+/// of the test). A failing test keeps it to be read, as does
+/// [`keep_test_dirs`].
+pub fn scratch(name: &str) -> (std::path::PathBuf, Scratch) {
+    let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
+    (dir.clone(), Scratch(dir))
+}
+
+/// Removes a test's folder when dropped, unless the test is failing.
+pub struct Scratch(std::path::PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !std::thread::panicking() && !keep_test_dirs() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
 /// Whether the long runs run at their full lengths: `IDMESH_LONG_TESTS=1`
 /// (CI sets it). Without it they run shorter, so a newcomer's `cargo test`
 /// finishes in about a quarter of an hour; what they check is the same.

@@ -175,7 +175,7 @@ async fn get(
 
 #[test]
 fn garbage_on_the_wire_is_refused_counted_and_changes_no_answer() {
-    let dir = std::env::temp_dir().join(format!("idmesh-garbage-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-garbage");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);

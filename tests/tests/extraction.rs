@@ -94,7 +94,7 @@ fn assert_close(what: &str, got: &Value, want: &Value) {
 /// replay of `idmesh extract`'s trace with the deployment's settings.
 #[test]
 fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction");
     let (_, reports) = scene_reports(&dir, "zara01", 150, 4, &[]);
     let extracted = dir.join("extracted.jsonl");
     let events = extracted_events(&reports, &extracted);
@@ -131,7 +131,7 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
 #[test]
 fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     use std::io::Write;
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-stdin-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction-stdin");
     let (_, reports) = scene_reports(&dir, "hotel", 150, 6, &[]);
     let extracted = dir.join("extracted.jsonl");
     let events = extracted_events(&reports, &extracted);
@@ -184,7 +184,7 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
 #[test]
 fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     use idmesh_tests::header_only;
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-py-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction-py");
     let (_, reports) = scene_reports(&dir, "eth", 120, 7, &[]);
     let text = std::fs::read_to_string(&reports).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -244,7 +244,7 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
 #[test]
 fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     use idmesh_tests::{grid_over, header_only};
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-2s-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction-2s");
     let (_, reports) = scene_reports(&dir, "zara02", 120, 8, &[]);
     let extracted = dir.join("extracted.jsonl");
     extracted_events(&reports, &extracted);
@@ -305,7 +305,7 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
 /// events and answers out.
 #[test]
 fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-scene-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction-scene");
     let model = [
         "--meeting-model",
         "approach",
@@ -389,7 +389,7 @@ fn reason_at(text: &str, line: usize) -> String {
 #[test]
 fn the_twin_and_the_deployment_take_and_refuse_the_same_reports() {
     use std::io::Write;
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-agree-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction-agree");
     let tmp = dir.join("tmp");
     let (_, reports) = scene_reports(&dir, "zara01", 40, 3, &[]);
     std::fs::create_dir_all(&tmp).unwrap();
@@ -630,7 +630,7 @@ fn the_twin_and_the_deployment_take_and_refuse_the_same_reports() {
 /// column, the answer moves. On standard input the file reads the same.
 #[test]
 fn a_mot_file_with_class_scores_moves_the_answer_and_one_without_is_warned_about() {
-    let dir = std::env::temp_dir().join(format!("idmesh-extraction-mot-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-extraction-mot");
     std::fs::create_dir_all(&dir).unwrap();
     let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/mot");
     let results = examples.join("results.txt");

@@ -154,7 +154,7 @@ fn assert_final(what: &str, deployment: &Deployment, central: &[Value]) {
 /// alone applies.
 #[test]
 fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-defaults-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-defaults");
     let trace = waypoint_crowd(&dir, 200, 100, 3000, 1);
     let truths = truth_lines(&trace);
     let (header, lines) = TraceReader::open(&trace)
@@ -206,7 +206,7 @@ fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders(
 
 #[test]
 fn exact_leaders_equal_the_centralized_belief_through_1_2_4_8_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-factored-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-factored");
     let known = crowd(&dir, 12, 4, 60.0, 5);
     for (s, (start, trace)) in [
         ("known start", known.clone()),
@@ -341,7 +341,7 @@ fn killed_and_restarted(regional: bool, leaders: usize) {
 /// centralized engine's to 1e-9.
 #[test]
 fn answers_pushed_at_a_cut_or_lost_and_asked_for_change_no_answer() {
-    let dir = std::env::temp_dir().join(format!("idmesh-factored-pushed-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-factored-pushed");
     let trace = crowd(&dir, 12, 4, 60.0, 7);
     let central = central(&trace);
     let truths = truth_lines(&trace);
@@ -492,7 +492,7 @@ fn colours_and_identities_through_a_crash(adopted: bool) {
 /// counts its repaired answers, and the stream finishes.
 #[test]
 fn a_colour_stream_that_contradicts_itself_never_stops_a_leader() {
-    let dir = std::env::temp_dir().join(format!("idmesh-contradicting-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-contradicting");
     let crowd = waypoint_crowd(&dir, 40, 3, 1200, 5);
     let trace = with_sure_reds(&crowd, 25);
     let truths = truth_lines(&trace);

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 /// same deployment without the crash.
 #[test]
 fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
-    let dir = std::env::temp_dir().join(format!("idmesh-crash-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-crash");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
@@ -117,7 +117,7 @@ fn a_leader_killed_mid_stream_and_restarted_changes_no_answer() {
 /// the logs asking for what is gone.
 #[test]
 fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
-    let dir = std::env::temp_dir().join(format!("idmesh-own-disks-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-own-disks");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let settings = Settings {
         leaders: 4,
@@ -345,7 +345,7 @@ fn an_heir_with_an_old_copy_takes_the_newest_from_another_process() {
 /// the centralized engine's.
 #[test]
 fn up_starts_a_killed_process_again_and_leaves_its_neighbours() {
-    let dir = std::env::temp_dir().join(format!("idmesh-supervised-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-supervised");
     let trace = crowd(&dir, 12, 4, 60.0, 8);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
@@ -402,7 +402,7 @@ fn up_starts_a_killed_process_again_and_leaves_its_neighbours() {
 /// centralized engine's.
 #[test]
 fn lost_and_doubled_batches_change_no_answer() {
-    let dir = std::env::temp_dir().join(format!("idmesh-lossy-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-lossy");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
@@ -440,7 +440,7 @@ fn lost_and_doubled_batches_change_no_answer() {
 /// engine's, with nothing kept for anyone at the end.
 #[test]
 fn transfers_lost_on_a_live_link_are_fetched_again() {
-    let dir = std::env::temp_dir().join(format!("idmesh-lost-transfers-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-lost-transfers");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
@@ -475,7 +475,7 @@ fn transfers_lost_on_a_live_link_are_fetched_again() {
 /// in balance — with the final answer still the centralized engine's.
 #[test]
 fn an_adopted_role_goes_home_when_its_process_returns() {
-    let dir = std::env::temp_dir().join(format!("idmesh-home-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-home");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
@@ -519,7 +519,7 @@ fn an_adopted_role_goes_home_when_its_process_returns() {
 /// few seconds, to the end; the final answer equals the twin's to 1e-9.
 #[test]
 fn a_coordinator_killed_for_good_is_replaced_by_its_replica() {
-    let dir = std::env::temp_dir().join(format!("idmesh-coordinators-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-coordinators");
     let trace = crowd(&dir, 16, 4, 60.0, 3);
     let settings = Settings {
         leaders: 2,
@@ -550,7 +550,7 @@ fn a_coordinator_killed_for_good_is_replaced_by_its_replica() {
 /// term. (The roles do not read the voters' map yet.)
 #[test]
 fn voters_keep_a_leader_with_one_gone_and_take_it_back() {
-    let dir = std::env::temp_dir().join(format!("idmesh-voters-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-voters");
     let trace = crowd(&dir, 12, 3, 30.0, 5);
     let settings = Settings {
         leaders: 1,
@@ -683,7 +683,7 @@ fn held_by(deployment: &Deployment, role: &str, holder: &str, within: Duration) 
 /// epoch. Every epoch has one holder; the final answer equals the twin's.
 #[test]
 fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
-    let dir = std::env::temp_dir().join(format!("idmesh-frozen-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-frozen");
     let trace = crowd(&dir, 12, 4, 150.0, 5);
     let settings = apart_under_voters(300.0);
     let deployment = Deployment::start_each("frozen", &trace, &settings);
@@ -730,7 +730,7 @@ fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
 /// final answer is the offline twin's.
 #[test]
 fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
-    let dir = std::env::temp_dir().join(format!("idmesh-sensor-standby-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-standby");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
         sensor_standby: true,
@@ -800,7 +800,7 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
 /// offline twin's.
 #[test]
 fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_lost() {
-    let dir = std::env::temp_dir().join(format!("idmesh-sensor-back-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-back");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
         sensor_standby: true,
@@ -883,7 +883,7 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
 /// the leaders' fence. The final answer is the offline twin's.
 #[test]
 fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
-    let dir = std::env::temp_dir().join(format!("idmesh-sensor-frozen-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-frozen");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
         sensor_standby: true,
@@ -940,7 +940,7 @@ fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
 /// the final answer is the offline twin's.
 #[test]
 fn a_sensor_going_on_without_its_standby_fences_off_the_standbys_copy() {
-    let dir = std::env::temp_dir().join(format!("idmesh-sensor-alone-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-alone");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
         sensor_standby: true,

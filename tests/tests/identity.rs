@@ -83,7 +83,7 @@ fn settings(leaders: usize, rate: Option<f64>) -> Settings {
 /// once, and a one-track question agrees with the whole answer.
 #[test]
 fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-identity-trees-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-identity-trees");
     let trace = crowd_with_identities(&dir, 12, 4, 90.0, 7);
     // The trace has colours too, so replay's default is the colours';
     // its identity default (a trace of identities alone) is named.
@@ -147,7 +147,7 @@ fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders
 /// default to 1e-9, to the end.
 #[test]
 fn valid_identity_streams_never_stop_a_leader_and_repairs_equal_replay() {
-    let dir = std::env::temp_dir().join(format!("idmesh-identity-repairs-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-identity-repairs");
     let generated = valid_identity_trace(&dir, 60, 1500, 11);
     let outside = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/repro/identity-n200-no-mass.jsonl");
@@ -200,7 +200,7 @@ fn valid_identity_streams_never_stop_a_leader_and_repairs_equal_replay() {
 /// same assignment.
 #[test]
 fn identity_answers_at_ten_thousand_tracks_equal_replay_through_4_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-identity-10000-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-identity-10000");
     let trace = crowd_with_identities(&dir, 10_000, 1, 8.0, 21);
     let central = replay_lines(&trace, &["--method", "factored-identity"]);
     let want = central.last().expect("a truth line");
@@ -239,7 +239,7 @@ fn identity_answers_at_ten_thousand_tracks_equal_replay_through_4_leaders() {
 /// one-track question agrees with the whole answer.
 #[test]
 fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-identity-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-identity");
     let trace = crowd_with_identities(&dir, 12, 4, 90.0, 5);
     let central = replay_lines(&trace, &["--method", "information-matrix"]);
     let truths = truth_lines(&trace);
@@ -283,7 +283,7 @@ fn identity_answers_equal_the_centralized_information_matrix_through_1_and_4_lea
 /// messages carry them, at two bytes of framing each.)
 #[test]
 fn identity_reads_cost_no_messages_between_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-reads-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-reads");
     let trace = crowd_with_identities(&dir, 12, 4, 90.0, 11);
     let unread = dir.join("no-reads.jsonl");
     let text = std::fs::read_to_string(&trace).unwrap();
@@ -346,7 +346,7 @@ fn identity_reads_cost_no_messages_between_leaders() {
 /// kept the coordinator busy for minutes and every query timed out.
 #[test]
 fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-identity-1000-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-identity-1000");
     let trace = crowd_with_identities(&dir, 1000, 1, 20.0, 21);
     // The colour side runs too: one red target and a budget keep its
     // property belief small (exact over 1,000 tracks it would not be).
@@ -398,7 +398,7 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
 /// questions asked while it runs.
 #[test]
 fn a_question_that_would_take_hours_is_stopped_at_its_deadline() {
-    let dir = std::env::temp_dir().join(format!("idmesh-deadline-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-deadline");
     let trace = crowd_with_identities(&dir, 12, 4, 30.0, 3);
     let deployment = Deployment::start(
         "deadline",

@@ -36,7 +36,7 @@ fn sensor_stats(deployment: &Deployment) -> Value {
 /// 1e-9, once the input ends.
 #[test]
 fn a_trace_piped_into_the_sensor_gives_the_answer_of_the_trace_file() {
-    let dir = std::env::temp_dir().join(format!("idmesh-stdin-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-stdin");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let settings = Settings {
@@ -86,7 +86,7 @@ fn a_trace_piped_into_the_sensor_gives_the_answer_of_the_trace_file() {
 /// to 1e-9.
 #[test]
 fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
-    let dir = std::env::temp_dir().join(format!("idmesh-ingest-py-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-ingest-py");
     let trace = crowd(&dir, 12, 4, 90.0, 6);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let central_lines = replay_lines(&trace, &["--method", "overcomplete"]);
@@ -156,7 +156,7 @@ fn a_python_producer_on_the_ingest_key_gives_the_answer_of_replay() {
 /// still `idmesh replay`'s to 1e-9.
 #[test]
 fn what_a_producer_gets_wrong_is_refused_or_deduplicated_counted_and_changes_nothing() {
-    let dir = std::env::temp_dir().join(format!("idmesh-ingest-bad-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-ingest-bad");
     let trace = crowd(&dir, 10, 3, 60.0, 8);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let settings = Settings {
@@ -403,7 +403,7 @@ async fn feed_until_acknowledged(
 /// the next test for one that does.)
 #[test]
 fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
-    let dir = std::env::temp_dir().join(format!("idmesh-ingest-down-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-ingest-down");
     let trace = crowd(&dir, 10, 3, 30.0, 4);
     let settings = Settings {
         leaders: 2,
@@ -445,7 +445,7 @@ fn queries_while_the_sensor_is_down_say_degraded_naming_it() {
 /// to one journal would interleave two streams in it.
 #[test]
 fn a_second_sensor_on_a_journal_in_use_refuses_to_start_and_the_first_goes_on() {
-    let dir = std::env::temp_dir().join(format!("idmesh-ingest-twice-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-ingest-twice");
     let trace = crowd(&dir, 10, 3, 60.0, 6);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);

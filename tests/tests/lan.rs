@@ -101,7 +101,7 @@ fn a_lan_heals_a_partition_a_host_restart_and_a_slow_link() {
             return;
         }
     };
-    let dir = std::env::temp_dir().join(format!("idmesh-lan-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-lan");
     // About 1,700 events: some 11 s at 150 events/s.
     let trace = crowd(&dir, 16, 4, 120.0, 16);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);

@@ -558,7 +558,7 @@ fn a_lan_struck_by_a_seeded_nemesis_answers_exactly_or_says_what_is_missing() {
         steps.len()
     );
 
-    let dir = std::env::temp_dir().join(format!("idmesh-nemesis-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-nemesis");
     // Some 19 events per simulated second, each followed by its truth
     // line: the sensor's rate counts both, so the stream lasts about as
     // long as the strikes at full speed, longer as the faults hold it

@@ -29,7 +29,7 @@ fn array<T>(v: &Value, item: impl Fn(&Value) -> Option<T>) -> Vec<T> {
 /// across borders; the defaults' fitted regions are tests/tests/factored.rs's).
 #[test]
 fn exact_answers_equal_the_centralized_engine_through_1_2_4_8_leaders() {
-    let dir = std::env::temp_dir().join(format!("idmesh-exact-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-exact");
     let trace = crowd(&dir, 12, 4, 90.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);
@@ -91,7 +91,7 @@ fn overcomplete_leaders_stay_within_two_points_of_the_centralized_run() {
 /// answer right after the events that precede each truth line (where the
 /// centralized replay answers); compares the mean errors over the points.
 fn scored_against_the_centralized_run(name: &str, method: &str, overcomplete: bool) {
-    let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch(&format!("idmesh-{name}"));
     let trace = crowd(&dir, 50, 10, 120.0, 9);
     let central = replay_lines(
         &trace,
@@ -172,7 +172,7 @@ fn error(predicted: &[u64], truth: &[u64], tracks: usize) -> f64 {
 /// watermark that only moves forward.
 #[test]
 fn queries_during_the_stream_sum_to_k_and_the_watermark_only_grows() {
-    let dir = std::env::temp_dir().join(format!("idmesh-live-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-live");
     let trace = crowd(&dir, 20, 6, 200.0, 2);
     let deployment = Deployment::start(
         "live",
@@ -212,7 +212,7 @@ fn queries_during_the_stream_sum_to_k_and_the_watermark_only_grows() {
 /// with Zenoh's JSON encoding.
 #[test]
 fn a_python_zenoh_client_gets_the_marginals_as_json() {
-    let dir = std::env::temp_dir().join(format!("idmesh-python-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-python");
     let trace = crowd(&dir, 10, 3, 60.0, 4);
     let deployment = Deployment::start(
         "python",

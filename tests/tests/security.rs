@@ -278,7 +278,7 @@ fn endpoint(deployment: &Deployment, name: &str) -> String {
 #[test]
 fn a_long_secured_stream_finishes_every_time() {
     let runs = if idmesh_tests::long_tests() { 12 } else { 3 };
-    let dir = std::env::temp_dir().join(format!("idmesh-security-long-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-security-long");
     let mut names = vec!["coordinator".to_string(), "sensor-0".to_string()];
     names.extend((0..4).map(|i| format!("leader-{i}")));
     names.push(CLIENT.to_string());
@@ -540,7 +540,7 @@ async fn ingest(
 /// lines to the same key, get no reply and nothing of theirs is taken.
 #[test]
 fn with_access_control_only_listed_producers_feed_the_sensor() {
-    let dir = std::env::temp_dir().join(format!("idmesh-security-feed-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-security-feed");
     let certs = certificates(&dir.join("certs"), "idmesh test CA", &names());
     let trace = crowd(&dir, 12, 4, 40.0, 6);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
@@ -621,7 +621,7 @@ fn with_access_control_only_listed_producers_feed_the_sensor() {
 /// stream ends as the offline twin does.
 #[test]
 fn voters_and_a_sensor_standby_under_access_control_take_over_and_answer() {
-    let dir = std::env::temp_dir().join(format!("idmesh-security-voters-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-security-voters");
     let mut names = names();
     names.extend((1..=3).map(|i| format!("voter-{i}")));
     names.push("sensor-0-standby".into());

@@ -37,7 +37,7 @@ const FACTORED_REPLAY: &[&str] = &[
 const RADON_REPLAY: &[&str] = &["--method", "overcomplete"];
 
 fn fed_by_region(name: &str, sensors: usize, factored: bool, seed: u64) {
-    let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch(&format!("idmesh-{name}"));
     let trace = crowd(&dir, 12, 4, 90.0, seed);
     let replay = if factored {
         FACTORED_REPLAY
@@ -166,7 +166,7 @@ fn report_of(producer: std::process::Child) -> Value {
 #[test]
 fn a_sensor_of_two_killed_mid_stream_comes_back_and_nothing_is_lost_or_doubled() {
     let name = "sensors-kill";
-    let dir = std::env::temp_dir().join(format!("idmesh-{name}-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch(&format!("idmesh-{name}"));
     let trace = crowd(&dir, 12, 4, 150.0, 11);
     let central = replay_summary(&trace, RADON_REPLAY);
     let settings = Settings {

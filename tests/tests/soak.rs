@@ -48,7 +48,7 @@ fn ten_minutes_at_a_steady_load_keep_memory_flat_and_sets_within_budget() {
         });
     let target_rate = 200.0;
     let budget = 300;
-    let dir = std::env::temp_dir().join(format!("idmesh-soak-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-soak");
     // 24 targets make about 30 lines per simulated second.
     let trace = crowd(&dir, 24, 8, seconds * target_rate / 30.0, 11);
     let lines = std::fs::read_to_string(&trace).unwrap().lines().count() as f64;

@@ -305,7 +305,7 @@ fn functions_and_files_stay_within_their_limits() {
 /// skips test code; the comparison reports each kind of problem.
 #[test]
 fn tidy_reports_what_it_should() {
-    let dir = std::env::temp_dir().join(format!("idmesh-tidy-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-tidy");
     let src = dir.join("demo").join("src");
     std::fs::create_dir_all(&src).expect("a scratch folder");
     let body = |n: usize| "    let _x = 1;\n".repeat(n);

@@ -148,7 +148,7 @@ fn percentile(mut xs: Vec<f64>, q: f64) -> f64 {
 #[test]
 fn the_live_map_rest_sse_and_metrics_show_what_the_zenoh_api_answers() {
     let out = output_dir();
-    let dir = std::env::temp_dir().join(format!("idmesh-web-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-web");
     let trace = crowd_with_identities(&dir, TRACKS, 4, 120.0, 3);
     let settings = Settings {
         leaders: 4,
@@ -520,7 +520,7 @@ fn label_overlaps(tab: &mut Chromium) -> (Vec<Drawn>, Vec<String>) {
 #[test]
 fn the_map_of_a_crowd_places_labels_apart_and_remembers_the_charts() {
     let out = output_dir();
-    let dir = std::env::temp_dir().join(format!("idmesh-web-map-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-web-map");
     let trace = crowd_with_identities(&dir, 40, 10, 60.0, 1);
     // The demo's settings: the factored belief, regions fitted.
     let settings = Settings {
