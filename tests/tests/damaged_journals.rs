@@ -12,7 +12,7 @@
 use idmesh_journal::{Ending, Record, RECORD_HEAD};
 use idmesh_tests::{assert_same_marginals, crowd, floats, replay_summary, Deployment, Settings};
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// The whole records of the log at `path` now (it may be being written).
@@ -265,7 +265,7 @@ fn sensor_case(trace: &Path, expected: &[f64]) -> String {
 #[test]
 fn roles_whose_journals_were_damaged_recover_and_the_answer_is_the_centralized_one() {
     let started = Instant::now();
-    let dir: PathBuf = std::env::temp_dir().join(format!("idmesh-damaged-{}", std::process::id()));
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-damaged");
     let trace = crowd(&dir, 16, 5, 110.0, 7);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
     let expected = floats(&central["final_p_red"]);

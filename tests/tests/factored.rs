@@ -274,10 +274,8 @@ fn the_one_leader_killed_and_restarted_changes_no_answer() {
 }
 
 fn killed_and_restarted(regional: bool, leaders: usize) {
-    let dir = std::env::temp_dir().join(format!(
-        "idmesh-factored-crash-{regional}-{leaders}-{}",
-        std::process::id()
-    ));
+    let (dir, _scratch) =
+        idmesh_tests::scratch(&format!("idmesh-factored-crash-{regional}-{leaders}"));
     // The regional rule at the defaults on a crowd long enough for the
     // fitted regions to be redrawn; the exact rule on a small one.
     let (trace, factored) = match regional {
@@ -398,10 +396,7 @@ fn colours_and_identities_under_the_factored_belief_survive_a_takeover() {
 }
 
 fn colours_and_identities_through_a_crash(adopted: bool) {
-    let dir = std::env::temp_dir().join(format!(
-        "idmesh-factored-ids-{adopted}-{}",
-        std::process::id()
-    ));
+    let (dir, _scratch) = idmesh_tests::scratch(&format!("idmesh-factored-ids-{adopted}"));
     let trace = crowd_with_identities(&dir, 12, 4, 90.0, 5);
     // At the default settings: the twin is `idmesh replay --topology`.
     let settings = Settings {
