@@ -86,12 +86,6 @@ fn watch() -> &'static Watch {
     })
 }
 
-/// Whether an event is one of Zenoh's reports of a message it dropped
-/// for a scope it does not know.
-fn is_loss(metadata: &Metadata<'_>) -> bool {
-    *metadata.level() == Level::ERROR && metadata.target().starts_with("zenoh")
-}
-
 /// Reads an event's message.
 struct Message(String);
 
@@ -117,7 +111,7 @@ pub struct ZenohErrors;
 
 impl<S> Filter<S> for ZenohErrors {
     fn enabled(&self, metadata: &Metadata<'_>, _: &Context<'_, S>) -> bool {
-        is_loss(metadata)
+        *metadata.level() == Level::ERROR && metadata.target().starts_with("zenoh")
     }
 
     fn max_level_hint(&self) -> Option<tracing::level_filters::LevelFilter> {
@@ -126,10 +120,8 @@ impl<S> Filter<S> for ZenohErrors {
 }
 
 impl<S: Subscriber> Layer<S> for Watcher {
+    // Only Zenoh's errors come here ([`ZenohErrors`], in [`layer`]).
     fn on_event(&self, event: &Event<'_>, _: Context<'_, S>) {
-        if !is_loss(event.metadata()) {
-            return;
-        }
         let mut message = Message(String::new());
         event.record(&mut message);
         if !message.0.contains("with unknown scope") {

@@ -258,14 +258,20 @@ impl World {
 
     /// One period of the voters' clock.
     fn voter_tick(&mut self) -> Result<(), Violation> {
+        self.tick_voters()?;
+        self.net
+            .at(self.now + TICK, Event::Voters(VoterEvent::Tick));
+        Ok(())
+    }
+
+    /// Every voter up ticks once and carries its ready state through.
+    fn tick_voters(&mut self) -> Result<(), Violation> {
         for id in 1..=VOTERS {
             if let Some(voter) = self.voters.machines[id as usize - 1].as_mut() {
                 voter.tick();
                 self.pump(id)?;
             }
         }
-        self.net
-            .at(self.now + TICK, Event::Voters(VoterEvent::Tick));
         Ok(())
     }
 
@@ -305,7 +311,6 @@ impl World {
         };
         let sent = voter.advance();
         let outcomes = voter.take_outcomes();
-        let map = voter.map().clone();
         let mut extended = false;
         for outcome in outcomes {
             let at = self.voters.applied[i];
@@ -324,7 +329,9 @@ impl World {
             self.voters.applied[i] += 1;
         }
         if extended {
-            self.hosts.map = map;
+            if let Some(voter) = &self.voters.machines[i] {
+                self.hosts.map = voter.map().clone();
+            }
         }
         for envelope in sent {
             self.tally.voter_messages += 1;
@@ -475,14 +482,7 @@ impl World {
                 }
                 // None, or one that cannot commit (cut off): time passes
                 // for the voters until another is elected.
-                _ => {
-                    for id in 1..=VOTERS {
-                        if let Some(voter) = self.voters.machines[id as usize - 1].as_mut() {
-                            voter.tick();
-                            self.pump(id)?;
-                        }
-                    }
-                }
+                _ => self.tick_voters()?,
             }
             self.carry_instantly()?;
         }
