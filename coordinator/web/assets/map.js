@@ -131,7 +131,13 @@ function start() {
 
 let pending = false;
 function schedule() {
-  if (!pending) { pending = true; requestAnimationFrame(() => { pending = false; render(); }); }
+  if (!pending) { pending = true; requestAnimationFrame(flush); }
+}
+// A render asked for and not yet drawn, drawn now: the next frame's, or a
+// snapshot's, which must show the state it reports (a busy or hidden
+// page can hold its frames back for seconds).
+function flush() {
+  if (pending) { pending = false; render(); }
 }
 
 // Who is missing: leaders of the stream that query/stats did not hear from.
@@ -505,6 +511,7 @@ window.idmesh = {
   labels: shownLabels,
   select(track) { state.selected = track; render(); },
   snapshot() {
+    flush();
     return {
       watermark: state.marginals ? eventsOf(state.marginals.watermark) : null,
       positionsAt: state.positions ? eventsOf(state.positions.watermark) : null,
