@@ -87,9 +87,10 @@ pub struct GatewayConfig {
     pub max_errors: usize,
     /// ROS 2 tracker topics read over rmw_zenoh ([`crate::ros2`]).
     pub ros2: Option<crate::ros2::Ros2Config>,
-    /// The process standing by for this sensor, which every record of
-    /// the journal is replicated to ([`crate::standby`]); None: none.
-    pub standby: Option<String>,
+    /// The processes standing by for this sensor, in order of
+    /// preference: every record of the journal is replicated to one of
+    /// them ([`crate::standby`]); empty: none.
+    pub standbys: Vec<String>,
     /// The epoch at which this process holds the sensor role (the
     /// voters' claim; 0 without voters), on every batch and reply.
     pub epoch: u64,
@@ -508,9 +509,16 @@ pub async fn run(
         // It died after its last line, before saying the stream is over.
         gateway.end();
     }
-    let replicator = match (&config.standby, &journal) {
-        (Some(standby), Some(_)) => Some(
-            Replicator::start(&session, keys, &config.name, standby, config.lease.clone()).await?,
+    let replicator = match (config.standbys.is_empty(), &journal) {
+        (false, Some(_)) => Some(
+            Replicator::start(
+                &session,
+                keys,
+                &config.name,
+                &config.standbys,
+                config.lease.clone(),
+            )
+            .await?,
         ),
         _ => None,
     };

@@ -71,6 +71,7 @@ pub use lease::LeaseClock;
 // The replication of the journal to the standby, as a pure machine (the
 // network simulator drives it as the driver does).
 pub use machine::replication::{Apply, Copy, Presence, Replication, Step};
+pub use machine::standbys::{Change, Standbys};
 pub use standby::{
     claim_own, keep_lease, serving_from, stand_by, standby_path, Owned, StandbyConfig,
     StandbyError, Standing, TookOver, STANDBY_ROLE,

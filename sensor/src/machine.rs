@@ -53,6 +53,7 @@ type Routed<Q> = (Vec<Placed<Q>>, Vec<(u32, Wanted)>, Vec<(usize, String)>);
 
 mod meshed;
 pub mod replication;
+pub mod standbys;
 
 /// What became of a cut request.
 pub enum CutOutcome<Q> {

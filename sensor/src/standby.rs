@@ -2,13 +2,16 @@
 //! pure replication machine (`crate::machine::replication`).
 //!
 //! On the sensor: a [`Replicator`] sends every group of records the
-//! sensor appends to its journal to the standby (a get on
-//! `P/sensor/<name>/replicate`) and waits for its answer before what
-//! depends on them leaves, while the standby's liveliness token is
-//! present; without it the sensor goes on alone, and sends the whole
-//! journal, compacted, when it is back.
+//! sensor appends to its journal to one of its standbys (a get on
+//! `P/sensor/<name>/replicate/<standby>`) and waits for its answer before
+//! what depends on them leaves, while that standby's liveliness token is
+//! present. Which standby, among several, is the pure machine
+//! `crate::machine::standbys`'s choice: the first present, kept while it
+//! stays; when it goes, with voters, the role moves to a new epoch before
+//! the next is chosen and sent the whole journal, compacted. With none
+//! present the sensor goes on alone.
 //!
-//! On the standby's process (its own host, its own disk): [`stand_by`]
+//! On a standby's process (its own host, its own disk): [`stand_by`]
 //! keeps the copy, `<state_dir>/<sensor>.standby.journal` (a sensor
 //! journal like the sensor's own, under another name so that processes
 //! sharing a disk never collide), and watches the sensor's token. Once it
@@ -25,6 +28,7 @@
 use crate::journal::{self, Journal, JournalError, Record};
 use crate::lease::LeaseClock;
 use crate::machine::replication::{Apply, Copy, Presence, Replication, Step};
+use crate::machine::standbys::{Change, Standbys};
 use crate::machine::Gateway;
 use idmesh_claims::{verdict, Claimed, Claims, Verdict};
 use idmesh_protocol::wire::keys::Keys;
@@ -94,37 +98,39 @@ pub fn standby_path(dir: &Path, sensor: &str) -> PathBuf {
 
 type Tokens = Subscriber<FifoChannelHandler<Sample>>;
 
-/// The sensor's side: its standby's token watched, its records sent.
+/// The sensor's side: its standbys' tokens watched, its records sent to
+/// the one chosen.
 pub(crate) struct Replicator {
     session: Session,
-    key: String,
-    standby: String,
+    keys: Keys,
+    choice: Standbys,
     machine: Replication,
     tokens: Tokens,
     /// With voters: the role's lease ([`crate::lease`]).
     lease: Option<LeaseClock>,
-    /// When the standby was last seen gone (or the start, before its token
-    /// was seen): records it did not acknowledge leave only under a
-    /// confirmation of the lease asked since.
+    /// When the standby replicated to was last seen gone (or the start):
+    /// records it did not acknowledge leave only under an advance of the
+    /// role asked since.
     gone_since: Instant,
 }
 
 impl Replicator {
-    /// Replicates sensor `sensor`'s journal to process `standby`; with
-    /// voters, under the role's `lease`.
+    /// Replicates sensor `sensor`'s journal to one of the processes
+    /// `standbys` (in order of preference); with voters, under the role's
+    /// `lease`.
     pub(crate) async fn start(
         session: &Session,
         keys: &Keys,
         sensor: &str,
-        standby: &str,
+        standbys: &[String],
         lease: Option<LeaseClock>,
     ) -> Result<Self, StandbyError> {
         let tokens = session
             .liveliness()
-            .declare_subscriber(keys.alive(STANDBY_ROLE, standby))
+            .declare_subscriber(keys.alive_role(STANDBY_ROLE))
             .history(true)
             .await
-            .map_err(mesh("watch the standby's token"))?;
+            .map_err(mesh("watch the standbys' tokens"))?;
         // Drawn at start: positions of an earlier run of this sensor mean
         // nothing to this one.
         let incarnation = std::time::SystemTime::now()
@@ -134,8 +140,8 @@ impl Replicator {
         machine.at_epoch(lease.as_ref().map_or(0, LeaseClock::epoch));
         let mut replicator = Replicator {
             session: session.clone(),
-            key: keys.sensor_replicate(sensor),
-            standby: standby.to_string(),
+            keys: keys.clone(),
+            choice: Standbys::new(standbys.to_vec(), lease.is_some()),
             machine,
             tokens,
             lease,
@@ -145,27 +151,47 @@ impl Replicator {
         Ok(replicator)
     }
 
-    /// The next change of the standby's token.
+    /// The next change of a standby's token.
     pub(crate) async fn changed(&self) -> Option<Sample> {
         self.tokens.recv_async().await.ok()
     }
 
-    /// A change of the standby's token: whether it is back (it is then
-    /// sent the whole journal at once, not at the next append).
+    /// A change of a standby's token: whether the journal is to be sent
+    /// at once, not at the next append (a standby was chosen, or one is
+    /// there to be chosen once the role has moved on).
     pub(crate) fn token(&mut self, sample: &Sample) -> bool {
         let present = sample.kind() == SampleKind::Put;
-        match self.machine.standby(present) {
-            Some(Presence::Gone) => {
-                self.gone_since = Instant::now();
-                tracing::warn!(standby = %self.standby,
-                    "the sensor's standby is gone: the sensor goes on alone, its journal on one disk");
+        let name = sample
+            .key_expr()
+            .as_str()
+            .rsplit('/')
+            .next()
+            .unwrap_or_default();
+        let mut chosen = false;
+        for change in self.choice.token(name, present) {
+            chosen |= self.apply(change);
+        }
+        chosen || self.choice.waiting()
+    }
+
+    /// A change of the standby replicated to, told to the replication:
+    /// whether one was chosen.
+    fn apply(&mut self, change: Change) -> bool {
+        match change {
+            Change::Gone(standby) => {
+                if self.machine.standby(false) == Some(Presence::Gone) {
+                    self.gone_since = Instant::now();
+                    tracing::warn!(%standby,
+                        "the sensor's standby is gone: the sensor goes on without it until another is chosen");
+                }
                 false
             }
-            Some(Presence::Back) => {
-                tracing::info!(standby = %self.standby, "the sensor's standby is up: sending it the journal");
+            Change::Chosen(standby) => {
+                if self.machine.standby(true) == Some(Presence::Back) {
+                    tracing::info!(%standby, "the sensor replicates to this standby: sending it the journal");
+                }
                 true
             }
-            None => false,
         }
     }
 
@@ -196,9 +222,48 @@ impl Replicator {
         let mut step = self
             .machine
             .appended(appended.iter().map(journal::encode).collect());
+        let mut moved = None;
+        loop {
+            self.send(step, gateway).await;
+            // Gone, the standby may have gone because the voters gave it
+            // the role, or only be cut off from here while its copy could
+            // still win it: the records it did not acknowledge leave only
+            // once the voters have moved the role here to an epoch past its
+            // copy's (an advance asked since it went, which also says the
+            // role is held here); and only then is another standby chosen.
+            // Without voters none can take the role over.
+            let (true, Some(lease)) = (self.choice.fence_due(), &self.lease) else {
+                break;
+            };
+            let Some(epoch) = lease.advanced_since(self.gone_since).await else {
+                return Err(StandbyError::Unconfirmed {
+                    role: self.machine.sensor().to_string(),
+                });
+            };
+            self.machine.at_epoch(epoch);
+            moved = Some(epoch);
+            let Some(change) = self.choice.fenced() else {
+                break;
+            };
+            // The standby chosen takes the whole journal, in sync at the
+            // new epoch, before anything leaves.
+            self.apply(change);
+            step = self.machine.appended(Vec::new());
+        }
+        let waited = started.elapsed();
+        if waited > ANSWER_PATIENCE {
+            tracing::info!(standby = ?self.choice.current(), seconds = waited.as_secs_f64(),
+                present = self.machine.present(), "a slow replication to the standby");
+        }
+        Ok(moved)
+    }
+
+    /// Drives the replication from `step` until what was appended may
+    /// leave: the standby holds it, or none is replicated to.
+    async fn send(&mut self, mut step: Step, gateway: &Gateway<Query>) {
         loop {
             let message = match step {
-                Step::Release => break,
+                Step::Release => return,
                 Step::Send(message) => message,
                 Step::NeedWhole => match gateway.compacted() {
                     Ok(records) => self
@@ -207,7 +272,7 @@ impl Replicator {
                     Err(e) => {
                         // Tried again at the next append.
                         tracing::error!(error = %e, "could not snapshot the sensor's state for its standby");
-                        break;
+                        return;
                     }
                 },
             };
@@ -215,36 +280,15 @@ impl Replicator {
             self.drain();
             step = self.machine.answered(answer);
         }
-        // Gone, the standby may have gone because the voters gave it the
-        // role, or only be cut off from here while its copy could still
-        // win it: the records it did not acknowledge leave only once the
-        // voters have moved the role here to an epoch past its copy's (an
-        // advance asked since it went, which also says the role is held
-        // here). Without voters it cannot take the role over.
-        let mut moved = None;
-        if let (false, Some(lease)) = (self.machine.present(), &self.lease) {
-            let Some(epoch) = lease.advanced_since(self.gone_since).await else {
-                return Err(StandbyError::Unconfirmed {
-                    role: self.machine.sensor().to_string(),
-                });
-            };
-            self.machine.at_epoch(epoch);
-            moved = Some(epoch);
-        }
-        let waited = started.elapsed();
-        if waited > ANSWER_PATIENCE {
-            tracing::info!(standby = %self.standby, seconds = waited.as_secs_f64(),
-                present = self.machine.present(), "a slow replication to the standby");
-        }
-        Ok(moved)
     }
 
     /// Sends `message` and waits for the answer: the copy's position
     /// (`Some(None)`: none of this run), `None` if none came in time.
     async fn ask(&self, message: &Replicate) -> Option<Option<Position>> {
+        let standby = self.choice.current()?;
         let replies = self
             .session
-            .get(&self.key)
+            .get(self.keys.sensor_replicate(self.machine.sensor(), standby))
             .payload(encode(message))
             .timeout(ANSWER_PATIENCE)
             .await
@@ -252,7 +296,7 @@ impl Replicator {
         while let Ok(reply) = replies.recv_async().await {
             let Ok(sample) = reply.result() else { continue };
             match decode::<Replicated>(&sample.payload().to_bytes()) {
-                Ok(answer) if answer.standby == self.standby => return Some(answer.position),
+                Ok(answer) if answer.standby == standby => return Some(answer.position),
                 Ok(answer) => {
                     tracing::warn!(from = %answer.standby, "a replication answer from a process that is not the standby")
                 }
@@ -317,7 +361,7 @@ pub async fn stand_by(
     let keys = &config.keys;
     let (mut journal, mut copy, kept) = open_copy(config)?;
     let queries = session
-        .declare_queryable(keys.sensor_replicate(&config.sensor))
+        .declare_queryable(keys.sensor_replicate(&config.sensor, &config.name))
         .await
         .map_err(mesh("declare the replication queryable"))?;
     let sensor = session

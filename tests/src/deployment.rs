@@ -86,10 +86,11 @@ pub struct Settings {
     /// is given its own copy of the topology, differing in `state_dir`
     /// only (processes started one by one: [`Deployment::start_each`]).
     pub own_disks: bool,
-    /// The (first) sensor has a standby (`[[sensor_standby]]`, named
-    /// `<sensor>-standby`), started before it; with `own_disks` both the
-    /// sensor and its standby have a state directory of their own too.
-    pub sensor_standby: bool,
+    /// How many standbys the (first) sensor has (`[[sensor_standby]]`,
+    /// in order [`standby_name`]), started before it; with `own_disks`
+    /// the sensor and its standbys have a state directory of their own
+    /// too.
+    pub sensor_standbys: usize,
 }
 
 /// The factored belief's settings in a topology.
@@ -184,6 +185,15 @@ pub fn assert_truth_points(
     }
 }
 
+/// The name of sensor `sensor`'s standby number `i` (from 0) in a test
+/// deployment: `<sensor>-standby`, then `<sensor>-standby-2`, ….
+pub fn standby_name(sensor: &str, i: usize) -> String {
+    match i {
+        0 => format!("{sensor}-standby"),
+        i => format!("{sensor}-standby-{}", i + 1),
+    }
+}
+
 /// The events an answer includes: its watermark's, summed over the
 /// sensors (one sensor of several counts the events of its intake).
 pub fn watermark_events(answer: &Value) -> u64 {
@@ -215,16 +225,16 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
     if settings.voters > 0 {
         topology.state_dir = Some(PathBuf::from("state"));
     }
-    if settings.sensor_standby {
-        let port = pick_free_ports(1).expect("free loopback ports")[0];
-        let sensor = topology.sensor().name.clone();
-        topology.sensor_standbys = vec![SensorStandbyProcess {
-            name: format!("{sensor}-standby"),
+    let ports = pick_free_ports(settings.sensor_standbys).expect("free loopback ports");
+    let sensor = topology.sensor().name.clone();
+    topology.sensor_standbys = (0..settings.sensor_standbys)
+        .map(|i| SensorStandbyProcess {
+            name: standby_name(&sensor, i),
             host: "local".into(),
-            listen: format!("tcp/127.0.0.1:{port}"),
-            sensor,
-        }];
-    }
+            listen: format!("tcp/127.0.0.1:{}", ports[i]),
+            sensor: sensor.clone(),
+        })
+        .collect();
     let replica_ports =
         pick_free_ports(settings.coordinator_replicas).expect("free loopback ports");
     topology.coordinator_replicas = replica_ports
@@ -336,8 +346,8 @@ impl Deployment {
         for i in 0..settings.leaders {
             deployment.launch("leader", &format!("leader-{i}"));
         }
-        if settings.sensor_standby {
-            deployment.launch("sensor-standby", "sensor-0-standby");
+        for i in 0..settings.sensor_standbys {
+            deployment.launch("sensor-standby", &standby_name("sensor-0", i));
         }
         for s in 0..settings.sensors.max(1) {
             deployment.launch("sensor", &format!("sensor-{s}"));
@@ -574,7 +584,7 @@ impl Deployment {
         let mut own_configs = Vec::new();
         if settings.own_disks && settings.journal {
             let mut names: Vec<String> = topology.leader.iter().map(|l| l.name.clone()).collect();
-            if settings.sensor_standby {
+            if settings.sensor_standbys > 0 {
                 names.push(topology.sensor().name.clone());
                 names.extend(topology.sensor_standbys.iter().map(|s| s.name.clone()));
             }

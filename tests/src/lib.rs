@@ -17,7 +17,7 @@ mod web;
 // Deployments on loopback: settings, traces to feed them, what to check.
 pub use deployment::{
     assert_truth_points, crowd, crowd_with_identities, grid_over, header_only, hosted_on,
-    replay_lines, replay_summary, trace_events, truth_lines, undisturbed_applied,
+    replay_lines, replay_summary, standby_name, trace_events, truth_lines, undisturbed_applied,
     valid_identity_trace, watermark_events, waypoint_crowd, Deployment, Factored, FaultSection,
     LeaderFaultSection, MarkerOptions, Secured, Settings, SplitSetting, Truth, WebSection,
 };

@@ -8,8 +8,8 @@
 use idmesh_consensus::RolesAnswer;
 use idmesh_tests::{assert_same_marginals, floats};
 use idmesh_tests::{
-    crowd, hosted_on, replay_summary, trace_events, undisturbed_applied, watermark_events,
-    Deployment, FaultSection, LeaderFaultSection, Settings,
+    crowd, hosted_on, replay_summary, standby_name, trace_events, undisturbed_applied,
+    watermark_events, Deployment, FaultSection, LeaderFaultSection, Settings,
 };
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -733,7 +733,7 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
     let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-standby");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        sensor_standby: true,
+        sensor_standbys: 1,
         ..apart_under_voters(400.0)
     };
     let started = Instant::now();
@@ -803,7 +803,7 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
     let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-back");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        sensor_standby: true,
+        sensor_standbys: 1,
         ..apart_under_voters(60.0)
     };
     let mut deployment = Deployment::start_each("sensor-back", &trace, &settings);
@@ -886,7 +886,7 @@ fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
     let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-frozen");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        sensor_standby: true,
+        sensor_standbys: 1,
         ..apart_under_voters(200.0)
     };
     let started = Instant::now();
@@ -943,7 +943,7 @@ fn a_sensor_going_on_without_its_standby_fences_off_the_standbys_copy() {
     let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-alone");
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let settings = Settings {
-        sensor_standby: true,
+        sensor_standbys: 1,
         ..apart_under_voters(60.0)
     };
     let mut deployment = Deployment::start_each("sensor-alone", &trace, &settings);
@@ -996,4 +996,75 @@ fn a_sensor_going_on_without_its_standby_fences_off_the_standbys_copy() {
     );
     drop(deployment);
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A sensor with two standbys, each on a disk of its own. The one the
+/// sensor replicates to is lost for good (kill -9): the sensor moves its
+/// role to a new epoch, so that copy, behind from then on, can never win
+/// it, and sends its whole journal to the other, which is in sync at that
+/// epoch before anything more leaves. Then the sensor's host is lost too:
+/// the second standby takes the role over from its copy, and the final
+/// answer is the offline twin's. Two hosts lost one after the other, and
+/// the stream goes on.
+#[test]
+fn a_sensor_with_two_standbys_outlives_the_loss_of_one_and_then_its_own_host() {
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-sensor-two-standbys");
+    let trace = crowd(&dir, 12, 4, 60.0, 5);
+    let settings = Settings {
+        sensor_standbys: 2,
+        ..apart_under_voters(60.0)
+    };
+    let mut deployment = Deployment::start_each("sensor-two-standbys", &trace, &settings);
+    let twin = deployment.twin_summary(&trace);
+    deployment.first_answer(Duration::from_secs(30));
+    let state = deployment.dir.clone();
+    let copy_of = |name: &str| {
+        state
+            .join(format!("state-{name}"))
+            .join("sensor-0.standby.journal")
+    };
+    let names = [standby_name("sensor-0", 0), standby_name("sensor-0", 1)];
+    // The standby replicated to: its copy in sync at the epoch held now.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let (first, chosen) = loop {
+        let held = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
+        let in_sync = names.iter().position(|name| {
+            let epoch = copy_of(name).with_extension("journal.epoch");
+            idmesh_journal::read_number(&epoch, "sensor-copy").is_ok_and(|e| e == Some(held))
+        });
+        if let Some(i) = in_sync {
+            break (held, i);
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no standby's copy in sync at epoch {held}:\n{}",
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let (lost, other) = (&names[chosen], &names[1 - chosen]);
+    deployment.kill(lost);
+    let moved = copy_in_sync(&deployment, &copy_of(other), "sensor-0");
+    assert!(
+        moved > first,
+        "the sensor moved its role on before it replicated to {other}: epoch {first}, then {moved}"
+    );
+    deployment.kill("sensor-0");
+    let taken = held_by(&deployment, "sensor-0", other, Duration::from_secs(30));
+    assert!(
+        taken > moved,
+        "a takeover raises the epoch: {moved} then {taken}"
+    );
+    final_is_twins(
+        &deployment,
+        &twin,
+        "after the sensor's standby and then its host were lost",
+    );
+    let log = deployment.log();
+    assert!(
+        log.contains(&format!(
+            "the sensor goes on without it until another is chosen standby={lost}"
+        )),
+        "the sensor said which standby it lost:\n{log}"
+    );
 }

@@ -633,7 +633,7 @@ fn voters_and_a_sensor_standby_under_access_control_take_over_and_answer() {
         &Settings {
             leaders: LEADERS,
             voters: 3,
-            sensor_standby: true,
+            sensor_standbys: 1,
             journal: true,
             own_disks: true,
             rate: Some(300.0),

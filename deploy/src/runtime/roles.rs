@@ -266,13 +266,13 @@ struct Input {
     max_errors: Option<usize>,
 }
 
-/// How a sensor runs: its input, its journal, the standby its journal
-/// is replicated to, and with voters the lease it holds the role under
+/// How a sensor runs: its input, its journal, the standbys its journal
+/// is replicated to (one at a time), and with voters the lease it holds the role under
 /// (its epoch; without voters 0).
 struct SensorRun {
     input: Input,
     journal: Option<(Journal, Vec<Record>)>,
-    standby: Option<String>,
+    standbys: Vec<String>,
     lease: Option<Lease>,
 }
 
@@ -300,12 +300,12 @@ async fn own_sensor(
     input: Input,
     journal: Option<(Journal, Vec<Record>)>,
 ) -> Result<()> {
-    let standby = topology.standby_of(name).map(|s| s.name.clone());
+    let standbys = topology.replicas_of(name, name);
     // Without a standby nothing could take the role over: the sensor
     // neither claims it nor keeps a lease (a cut-off sensor that stopped
     // would stop the stream for good).
-    let lease = match (&standby, topology.voters.is_empty()) {
-        (Some(_), false) => {
+    let lease = match (standbys.is_empty(), topology.voters.is_empty()) {
+        (false, false) => {
             let mut claims = Claims::new(session.clone(), keys.clone(), name, VOTERS_LEASE);
             match idmesh_sensor::claim_own(&mut claims, name, name).await {
                 Owned::Here(epoch) => {
@@ -327,7 +327,7 @@ async fn own_sensor(
     let run = SensorRun {
         input,
         journal,
-        standby,
+        standbys,
         lease,
     };
     sensor(session, topology, name, keys, run).await
@@ -408,11 +408,11 @@ async fn sensor_standby(
     sensor_standby_for(session, topology, name, &this.sensor, keys).await
 }
 
-/// Process `me` standing by for sensor role `role`: the role's
-/// `[[sensor_standby]]`, or the role's own process once its standby took
+/// Process `me` standing by for sensor role `role`: one of the role's
+/// `[[sensor_standby]]`, or the role's own process once a standby took
 /// the role over (its own journal, of that earlier holding, becomes the
-/// copy). Whichever of the two serves replicates its journal to the
-/// other, so the role keeps a standby through every takeover.
+/// copy). Whichever serves replicates its journal to one of the others,
+/// so the role keeps a standby through every takeover.
 async fn sensor_standby_for(
     session: zenoh::Session,
     topology: &Topology,
@@ -458,11 +458,8 @@ async fn sensor_standby_for(
             max_errors: None,
         },
         journal: Some((journal, records)),
-        // The other of the two stands by now.
-        standby: match home {
-            true => topology.standby_of(role).map(|s| s.name.clone()),
-            false => Some(role.to_string()),
-        },
+        // The others stand by now, the role's own process first.
+        standbys: topology.replicas_of(role, me),
         lease: Some(Lease::new(claims, role, me, epoch)),
     };
     sensor(session, topology, role, keys, run).await
@@ -480,7 +477,7 @@ async fn sensor(
     let SensorRun {
         input,
         journal,
-        standby,
+        standbys,
         lease,
     } = run;
     let epoch = lease.as_ref().map_or(0, |l| l.clock.epoch());
@@ -550,7 +547,7 @@ async fn sensor(
         extraction,
         max_errors,
         ros2: this.ros2.clone(),
-        standby,
+        standbys,
         epoch,
         lease: clock,
     };

@@ -933,23 +933,14 @@ impl Topology {
         Ok(())
     }
 
-    /// A standby stands by for a sensor of the topology, one at most for
-    /// each, and keeps its copy in `state_dir`.
+    /// A standby stands by for a sensor of the topology (a sensor may have
+    /// several, in the order given) and keeps its copy in `state_dir`.
     fn check_sensor_standbys(&self) -> Result<()> {
-        for (i, standby) in self.sensor_standbys.iter().enumerate() {
+        for standby in &self.sensor_standbys {
             let name = &standby.name;
             if !self.sensors.iter().any(|s| s.name == standby.sensor) {
                 bail!(
                     "[[sensor_standby]] {name}: sensor {:?} is not in the topology",
-                    standby.sensor
-                );
-            }
-            if self.sensor_standbys[..i]
-                .iter()
-                .any(|o| o.sensor == standby.sensor)
-            {
-                bail!(
-                    "[[sensor_standby]] {name}: sensor {:?} has a standby already",
                     standby.sensor
                 );
             }
@@ -960,9 +951,24 @@ impl Topology {
         Ok(())
     }
 
-    /// The process standing by for sensor `sensor`, if any.
-    pub(crate) fn standby_of(&self, sensor: &str) -> Option<&SensorStandbyProcess> {
-        self.sensor_standbys.iter().find(|s| s.sensor == sensor)
+    /// The processes standing by for sensor `sensor`, in the topology's
+    /// order.
+    pub(crate) fn standbys_of(&self, sensor: &str) -> Vec<String> {
+        self.sensor_standbys
+            .iter()
+            .filter(|s| s.sensor == sensor)
+            .map(|s| s.name.clone())
+            .collect()
+    }
+
+    /// Where process `me`, holding sensor role `sensor`, replicates its
+    /// journal: the role's own process and its standbys, in that order,
+    /// but for `me`.
+    pub(crate) fn replicas_of(&self, sensor: &str, me: &str) -> Vec<String> {
+        std::iter::once(sensor.to_string())
+            .chain(self.standbys_of(sensor))
+            .filter(|name| name != me)
+            .collect()
     }
 
     pub fn members(&self) -> Vec<Member> {
@@ -1413,24 +1419,30 @@ listen = "tcp/127.0.0.1:3"
             std::env::temp_dir().join(format!("idmesh-topology-standby-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("t.toml");
-        let standby = |sensor: &str| {
+        let named = |name: &str, sensor: &str, port: u16| {
             format!(
-                "[[sensor_standby]]\nname = \"s-standby\"\nsensor = \"{sensor}\"\n\
-                 listen = \"tcp/127.0.0.1:14\"\n"
+                "[[sensor_standby]]\nname = \"{name}\"\nsensor = \"{sensor}\"\n\
+                 listen = \"tcp/127.0.0.1:{port}\"\n"
             )
         };
+        let standby = |sensor: &str| named("s-standby", sensor, 14);
         std::fs::write(
             &path,
-            format!("state_dir = \"state\"\n{SMALL}{}", standby("s")),
+            format!(
+                "state_dir = \"state\"\n{SMALL}{}{}",
+                standby("s"),
+                named("s-second", "s", 15)
+            ),
         )
         .unwrap();
         let t = Topology::load(&path).unwrap();
         let member = t.member("s-standby").unwrap();
         assert_eq!(member.role, "sensor-standby");
-        assert_eq!(
-            t.standby_of("s").map(|s| s.name.as_str()),
-            Some("s-standby")
-        );
+        // Several, in the order given; whoever holds the role replicates
+        // to the others.
+        assert_eq!(t.standbys_of("s"), ["s-standby", "s-second"]);
+        assert_eq!(t.replicas_of("s", "s"), ["s-standby", "s-second"]);
+        assert_eq!(t.replicas_of("s", "s-standby"), ["s", "s-second"]);
         assert_eq!(read_back(&t), t);
         std::fs::write(&path, format!("{SMALL}{}", standby("s"))).unwrap();
         let e = format!("{:#}", Topology::load(&path).unwrap_err());

@@ -121,9 +121,11 @@ impl Keys {
         format!("{}/sensor/{sensor}/resend", self.prefix)
     }
 
-    /// Where the sensor's standby takes the journal's records.
-    pub fn sensor_replicate(&self, sensor: &str) -> String {
-        format!("{}/sensor/{sensor}/replicate", self.prefix)
+    /// Where process `standby`, standing by for sensor role `sensor`,
+    /// takes the journal's records (one key per standby: the holder
+    /// replicates to one of them at a time).
+    pub fn sensor_replicate(&self, sensor: &str, standby: &str) -> String {
+        format!("{}/sensor/{sensor}/replicate/{standby}", self.prefix)
     }
 
     pub fn sensor_intake(&self, sensor: &str) -> String {

@@ -12,7 +12,7 @@
 //! (`idmesh_leader::host`) — and nothing but leader roles. A sensor's
 //! standby (`[[sensor_standby]]`) may take the sensor's role over, so it
 //! counts among the sensors below and serves that sensor's keys (and no
-//! other's); the sensor and its standby replicate the journal to each
+//! other's); the sensor and its standbys replicate the journal to each
 //! other and watch each other's tokens, in whichever direction the role
 //! stands. Every process with a role may read the voters' map
 //! (`query/roles`), through which it claims and keeps its role.
@@ -33,7 +33,7 @@
 //! | leader L | leaders | liveliness subscriber, liveliness query | `P/alive/leader/*` (membership), `P/alive/home/*` (a process back for its adopted role) |
 //! | coordinator | leaders | query | `P/leader/*/partial`, `P/leader/*/stats` |
 //! | coordinator | sensor | query | `P/sensor/*/cut`, `P/sensor/*/stats`, `P/sensor/*/positions` |
-//! | sensor, its standby | each other | query | `P/sensor/*/replicate` (the journal's records) |
+//! | sensor, its standby | each other | query | `P/sensor/*/replicate/*` (the journal's records) |
 //! | sensor, its standby | each other | liveliness subscriber, liveliness query | `P/alive/sensor/*`, `P/alive/sensor-standby/*` |
 //! | every process | voters | put, query | `P/raft/propose` (claims), `P/query/roles` (the map) |
 //! | clients | coordinator | query | `P/query/**` |
@@ -369,7 +369,7 @@ fn standby_grants(keys: &Keys, parties: &Parties) -> Vec<Grant> {
             &parties.sensor,
             &parties.sensor,
             &["query"],
-            vec![keys.sensor_replicate("*")],
+            vec![keys.sensor_replicate("*", "*")],
         ),
         grant(
             "standby-watch",
@@ -886,7 +886,7 @@ producers = ["camera"]
             ("c", "declare_queryable", "p/sensor/s/cut"),
             ("l0", "liveliness_token", "p/alive/sensor/s"),
             ("s", "liveliness_token", "p/alive/sensor-standby/sb"),
-            ("s", "query", "p/sensor/s/replicate"),
+            ("s", "query", "p/sensor/s/replicate/sb"),
             ("s", "declare_liveliness_subscriber", "p/alive/sensor/s"),
             ("v1", "query", "p/query/roles"),
             ("v1", "put", "p/raft/propose"),
@@ -915,7 +915,7 @@ producers = ["camera"]
             "ingress",
             "s",
             "query",
-            "p/sensor/s/replicate"
+            "p/sensor/s/replicate/sb"
         ));
         assert!(allowed(&sb, "ingress", "l0", "query", "p/sensor/s/follow"));
         assert!(!allowed(
@@ -923,11 +923,23 @@ producers = ["camera"]
             "ingress",
             "operator",
             "query",
-            "p/sensor/s/replicate"
+            "p/sensor/s/replicate/sb"
         ));
         let s = access_control(&t, "s");
-        assert!(allowed(&s, "egress", "sb", "query", "p/sensor/s/replicate"));
-        assert!(allowed(&s, "egress", "sb", "reply", "p/sensor/s/replicate"));
+        assert!(allowed(
+            &s,
+            "egress",
+            "sb",
+            "query",
+            "p/sensor/s/replicate/sb"
+        ));
+        assert!(allowed(
+            &s,
+            "egress",
+            "sb",
+            "reply",
+            "p/sensor/s/replicate/sb"
+        ));
         assert!(allowed(
             &s,
             "egress",
