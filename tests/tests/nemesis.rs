@@ -1,41 +1,38 @@
 //! The nemesis: a deployment on a LAN of five hosts (network namespaces on
 //! a bridge, `idmesh_tests::lan`), each host with a disk of its own —
 //! h0 the sensor's and the coordinator's, h1 to h3 one leader and one
-//! voter each, h4 the coordinator's replica and the sensor's standby
-//! (`[[sensor_standby]]`) — and a sixth, h5, the client's, which runs
-//! nothing but the queries and is never struck. They are struck for a
-//! bounded time by faults a seeded schedule picks at random
-//! (`idmesh_tests::nemesis::schedule`): `kill -9` of one process (its
-//! `idmesh up` starts it again), a leader host or h0 lost for good (every
+//! voter each, h4 the coordinator's replica and the sensor's first
+//! standby, h1 also its second (`[[sensor_standby]]`) — and a sixth, h5,
+//! the client's, which runs nothing but the queries and is never struck.
+//! They are struck for a bounded time by faults a seeded schedule picks at
+//! random (`idmesh_tests::nemesis::schedule`): `kill -9` of one process
+//! (its `idmesh up` starts it again), a host lost for good (every
 //! process killed, its cable pulled, its state directory deleted; one
-//! per run at most, so that two of the three voters remain, and the
-//! sensor's standby never has to take over twice), a host cut off for a
-//! while and back (the holder it was is fenced, a leader role goes
-//! home), a slow link (a token bucket on its cable), a whole host
+//! per run at most, so that two of the three voters remain), a host cut
+//! off for a while and back (the holder it was is fenced, a leader role
+//! goes home), a slow link (a token bucket on its cable), a whole host
 //! restarted.
 //!
-//! h0 is struck as a leader host is: its processes killed, the host cut
-//! off, slowed, restarted or lost. When the sensor's token has been gone
-//! for the takeover time (h0 lost, cut off or restarted, or the sensor
-//! killed and not back in time), the standby on h4 claims the sensor
-//! role through the voters and serves as the sensor from its copy of the
-//! journal; the coordinator's replica on h4 answers while h0's
-//! coordinator cannot. A cut-off sensor loses its lease (it cannot read
-//! the map from a leading voter) and stops; back, it reads that the role
-//! is its standby's and stops; started again, it stands by for the
-//! holder, whose journal it copies from then on (and takes the role back
-//! if h4 is then restarted and slow to come back). (A cut-off shorter than the mesh's link lease
-//! leaves the sensor's token in the standby's view: the takeover then
-//! comes once the cut-off sensor, back, finds its lease lapsed and
-//! stops.) The standby then serving on h4 is killed and restarted like
-//! any process, alone or with h4: it comes back as the sensor from its
-//! journal, its claim naming the epoch it held the role at given back at
-//! that epoch. Whichever holds the role and finds the other gone moves
-//! the role to a new epoch before it goes on alone, so the other's copy,
-//! behind, never takes over. h4 itself is never cut off or lost: after a
-//! fault that left h0's copy behind, h4's would be the only whole journal,
-//! and losing it would end the stream (nothing is then taken over from a
-//! copy that misses records, by design).
+//! Every host is struck wholly: its processes killed, the host cut off,
+//! slowed, restarted or lost. When the sensor role's holder has been gone
+//! for the takeover time (its host lost, cut off or restarted, or the
+//! process killed and not back in time), the standby in sync with it
+//! claims the sensor role through the voters and serves as the sensor
+//! from its copy of the journal; the coordinator's replica on h4 answers
+//! while h0's coordinator cannot, and the other way round. A cut-off
+//! holder loses its lease (it cannot read the map from a leading voter)
+//! and stops; back, it reads that the role is another's and stops;
+//! started again, it stands by for the holder. (A cut-off shorter than
+//! the mesh's link lease leaves the holder's token in the standbys'
+//! view: the takeover then comes once the cut-off holder, back, finds
+//! its lease lapsed and stops.) A holder restarted alone comes back as
+//! the sensor from its journal, its claim naming the epoch it held the
+//! role at given back at that epoch. The holder replicates to one
+//! standby at a time; when that one goes, it moves the role to a new
+//! epoch before it chooses the next (or goes on alone), so a copy left
+//! behind never takes over, and a takeover always finds a copy in sync
+//! but while faults follow one another faster than the holder can bring
+//! the next standby up to date.
 //!
 //! A stream runs throughout (a trace fed at a rate, with a truth line
 //! after every event so that the offline replay has an answer at every
@@ -81,11 +78,16 @@ const CLIENT: &str = "h5";
 /// The sensor's (and the coordinator's) host.
 const SENSOR_HOST: &str = "h0";
 
+/// The host of the sensor's first standby (and the coordinator's
+/// replica).
+const STANDBY_HOST: &str = "h4";
+
 /// The sensor's lines per second (events and their truth lines).
 const RATE: f64 = 50.0;
 
 /// Coordinator and sensor on h0; leader-i and voter-(i+1) on h(i+1); the
-/// coordinator's replica and the sensor's standby on h4.
+/// coordinator's replica and the sensor's first standby on h4, its second
+/// on h1.
 fn members() -> Vec<Member> {
     let m = |role, name: String, host: &str| Member {
         role,
@@ -101,6 +103,10 @@ fn members() -> Vec<Member> {
             stands_by: Some("sensor-0".into()),
             ..m("sensor_standby", "sensor-0-standby".into(), "h4")
         },
+        Member {
+            stands_by: Some("sensor-0".into()),
+            ..m("sensor_standby", "sensor-0-standby-2".into(), "h1")
+        },
     ];
     for i in 1..=3 {
         let host = format!("h{i}");
@@ -110,13 +116,14 @@ fn members() -> Vec<Member> {
     members
 }
 
-/// What the nemesis may strike: the leader hosts and h0 wholly, h4 but
-/// for a cut-off or a loss.
+/// What the nemesis may strike: every host of the deployment wholly (h0
+/// and h4 as hosts of the sensor role, each with a copy of its journal
+/// elsewhere).
 fn cast() -> Cast {
     Cast {
         leader_hosts: vec!["h1".into(), "h2".into(), "h3".into()],
-        other_hosts: vec!["h4".into()],
-        sensor_hosts: vec![SENSOR_HOST.into()],
+        other_hosts: Vec::new(),
+        sensor_hosts: vec![SENSOR_HOST.into(), STANDBY_HOST.into()],
         processes: members().into_iter().map(|m| (m.host, m.name)).collect(),
     }
 }
@@ -438,8 +445,9 @@ fn write_page(seed: u64, length: Duration, struck: &[Struck], times: &[Recovery]
          Seed {seed}, {} s of faults on a LAN of five hosts and a client \
          (network namespaces, two cores); {} faults in all. Time from a host's loss or cut-off \
          to the first answer again equal to the replay, by kind of host (a \
-         leader's, or the sensor's and coordinator's, h0: its loss or \
-         cut-off hands the sensor role to its standby on h4):\n\n\
+         leader's, or a host of the sensor role and a coordinator, h0 \
+         or h4: the loss or cut-off of the role's holder hands it to a \
+         standby):\n\n\
          | host | faults | p50 (s) | p99 (s) |\n|---|---|---|---|\n",
         length.as_secs(),
         struck.len(),
