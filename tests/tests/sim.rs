@@ -62,6 +62,8 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.standby_copies += tally.standby_copies;
                 total.fenced += tally.fenced;
                 total.sensor_standbys += tally.sensor_standbys;
+                total.two_standbys += tally.two_standbys;
+                total.standby_switches += tally.standby_switches;
                 total.replications += tally.replications;
                 total.standby_wholes += tally.standby_wholes;
                 total.standby_restarts += tally.standby_restarts;
@@ -81,7 +83,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby: {} replication messages ({} whole journals), {} standby restarts, {} epochs moved to go on alone, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voter faults ({} of them the majority's, for a while), {} claims made through them mid-stream",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby ({} with two): {} replication messages ({} whole journals), {} standby restarts, {} epochs moved (going on without a standby, or choosing one), {} switches to the other standby, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voter faults ({} of them the majority's, for a while), {} claims made through them mid-stream",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -111,10 +113,12 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.standby_copies,
         total.fenced,
         total.sensor_standbys,
+        total.two_standbys,
         total.replications,
         total.standby_wholes,
         total.standby_restarts,
         total.sensor_advances,
+        total.standby_switches,
         total.sensor_host_losses,
         total.sensor_adoptions,
         total.voter_messages,
@@ -186,13 +190,18 @@ fn every_schedule_answers_like_the_centralized_engine() {
         assert!(total.fenced > 0, "no former holder was ever fenced off");
         // The sensor's host was lost and its standby served from its copy
         // where the lost sensor stood; the sensor went on alone while its
-        // standby was away, at an epoch the copy could not claim.
+        // standby was away, at an epoch the copy could not claim, or with
+        // the other standby, made whole at that epoch.
         assert!(
             total.sensor_adoptions > 0 && total.sensor_advances > 0 && total.standby_restarts > 0,
             "no sensor role adopted ({}), moved to go on alone ({}) or standby restarted ({})",
             total.sensor_adoptions,
             total.sensor_advances,
             total.standby_restarts
+        );
+        assert!(
+            total.standby_switches > 0,
+            "the sensor never went on with its other standby"
         );
         // Roles were claimed mid-stream through raft voters on the
         // simulated wire, some while a voter was down or cut off, or the

@@ -124,11 +124,11 @@ pub(crate) enum Event {
         leader: usize,
         life: u64,
     },
-    /// The sensor's standby goes away (its token gone), comes back, or
+    /// A sensor's standby goes away (its token gone), comes back, or
     /// restarts without its token being missed.
-    StandbyAway,
-    StandbyBack,
-    StandbyRestart,
+    StandbyAway(usize),
+    StandbyBack(usize),
+    StandbyRestart(usize),
     /// The sensor's host is gone for good, with its disk.
     SensorHostLoss,
     /// The sensor's standby claims the sensor role (its token gone for
@@ -211,15 +211,19 @@ pub struct Tally {
     /// Messages of a former holder refused by a receiver that had heard
     /// a newer epoch of the role (the sensor, a peer, the coordinator).
     pub fenced: u64,
-    /// Schedules whose sensor kept a standby; replication messages sent
-    /// to it, of them whole journals; the standby's restarts; the
-    /// sensor's role moved to a new epoch to go on alone; the sensor's
-    /// host lost, and its role adopted from the standby's copy.
+    /// Schedules whose sensor kept a standby, of them two; replication
+    /// messages sent to them, of them whole journals; the standbys'
+    /// restarts; the sensor's role moved to a new epoch (to go on without
+    /// the standby that went, or before a run chooses among two); the
+    /// other standby chosen after one went; the sensor's host lost, and
+    /// its role adopted from a standby's copy.
     pub sensor_standbys: u64,
+    pub two_standbys: u64,
     pub replications: u64,
     pub standby_wholes: u64,
     pub standby_restarts: u64,
     pub sensor_advances: u64,
+    pub standby_switches: u64,
     pub sensor_host_losses: u64,
     pub sensor_adoptions: u64,
     /// Raft messages the voters sent; voter faults; claims made through
@@ -533,20 +537,17 @@ impl World {
                 Ok(())
             }
             Event::FormerTick { leader, life } => self.former_tick(leader, life),
-            Event::StandbyAway => {
-                self.standby_away();
+            Event::StandbyAway(i) => {
+                self.standby_away(i);
                 Ok(())
             }
-            Event::StandbyBack => self.standby_back(),
-            Event::StandbyRestart => {
-                self.standby_restart();
+            Event::StandbyBack(i) => self.standby_back(i),
+            Event::StandbyRestart(i) => {
+                self.standby_restart(i);
                 Ok(())
             }
             Event::SensorHostLoss => self.sensor_host_lost(),
-            Event::SensorAdopt => {
-                self.sensor_adopt();
-                Ok(())
-            }
+            Event::SensorAdopt => self.sensor_adopt(),
             Event::Voters(event) => self.voters_event(event),
             Event::Isolate(i) => {
                 if !self.calm {

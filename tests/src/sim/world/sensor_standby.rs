@@ -1,12 +1,13 @@
-//! The sensor's standby, as `sensor/src/standby.rs` and the sensor's
-//! driver run it: the sensor holds its role at an epoch of the voters'
-//! map; every group of records it appends to its journal goes to the
-//! standby ([`Replication`]), whose copy takes it ([`Copy`]), and nothing
-//! that depends on them leaves before the standby said it holds them.
-//! While the standby is away the sensor goes on alone, once the voters
-//! have moved its role to a new epoch (an advance), so that the copy left
-//! behind could no longer win a claim. When it is back it is sent the
-//! whole journal, compacted.
+//! The sensor's standbys, as `sensor/src/standby.rs` and the sensor's
+//! driver run them: the sensor holds its role at an epoch of the voters'
+//! map; it has one standby or two, and replicates to one at a time, as
+//! [`Standbys`] chooses: every group of records it appends to its journal
+//! goes to that standby ([`Replication`]), whose copy takes it ([`Copy`]),
+//! and nothing that depends on them leaves before the standby said it
+//! holds them. When that standby goes away the voters move the role to a
+//! new epoch (an advance) before anything more leaves, so that the copy
+//! left behind could no longer win a claim; then the sensor goes on with
+//! the other standby, sent the whole journal, compacted, or alone.
 //!
 //! The exchange is one blocking step of the driver (`Wire::sync` waits
 //! for the answer before anything leaves), so it is run here inside the
@@ -15,10 +16,11 @@
 //! forgotten: the whole journal again), the journal compacted (the whole
 //! journal again).
 //!
-//! And the fault the standby is for: the sensor's host lost for good
-//! with its disk. After the takeover time the standby claims the role
-//! through the voters (`voters.rs`) naming its copy's epoch, wins the
-//! next epoch, and serves from its copy:
+//! And the fault the standbys are for: the sensor's host lost for good
+//! with its disk. After the takeover time the standby replicated to
+//! claims the role through the voters (`voters.rs`) naming its copy's
+//! epoch (the other's claim must lose), wins the next epoch, and serves
+//! from its copy:
 //! the gateway it restores must stand exactly where the lost one stood
 //! (nothing that left it, nothing acknowledged to a producer, is lost),
 //! and its batches, at the new epoch, fence off whatever the lost sensor
@@ -30,7 +32,7 @@ use crate::sim::Violation;
 use idmesh_claims::Claimed;
 use idmesh_consensus::{Command, Outcome};
 use idmesh_sensor::journal::{self, Record};
-use idmesh_sensor::{Apply, Copy, Gateway, Replication, Router, Step};
+use idmesh_sensor::{Apply, Change, Copy, Gateway, Replication, Router, Standbys, Step};
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -38,7 +40,9 @@ use rand_chacha::ChaCha8Rng;
 /// The sensor role in the voters' map, and the processes that hold it.
 const ROLE: &str = "sensor-0";
 const SENSOR: &str = "sensor-0";
-const STANDBY: &str = "sensor-0-standby";
+/// The sensor's standbys, in order (a schedule keeps the first, or
+/// both).
+const STANDBYS: [&str; 2] = ["sensor-0-standby", "sensor-0-standby-2"];
 
 /// How long after the sensor's host is gone its standby claims the role
 /// (its token gone for the takeover time; ms).
@@ -57,32 +61,81 @@ pub(super) fn standing(gateway: &Gateway<u64>) -> Standing {
     )
 }
 
-/// The sensor's standby in a schedule that keeps one.
+/// One standby: its copy, where it is and its records as its disk holds
+/// them, and whether its token is present (it is up and reachable).
+struct Kept {
+    copy: Copy,
+    records: Vec<Vec<u8>>,
+    up: bool,
+}
+
+/// The sensor's standbys in a schedule that keeps them.
 pub(crate) struct SensorStandby {
     /// The sensor's side of the replication, for its current run.
     replication: Replication,
+    /// Which standby it replicates to, for its current run.
+    choice: Standbys,
     /// Runs of the sensor so far: each restart is a new incarnation.
     incarnation: u64,
-    /// The standby's copy: where it is, and its records as its disk holds
-    /// them.
-    copy: Copy,
-    records: Vec<Vec<u8>>,
-    /// The standby's token is present (it is up and reachable).
-    up: bool,
-    /// The voters moved the role to a new epoch since the standby went.
-    advanced: bool,
-    /// The sensor's host is gone: where its gateway stood.
-    lost: Option<Standing>,
-    /// The standby holds the role now (it keeps no standby of its own).
-    adopted: bool,
-    /// The standby's draws (their own stream).
+    /// Each standby's copy, in [`STANDBYS`]' order.
+    kept: Vec<Kept>,
+    /// The sensor's host is gone: where its gateway stood, and the
+    /// standby that claims the role.
+    lost: Option<(Standing, usize)>,
+    /// The standby that holds the role now (it keeps no standby of its
+    /// own).
+    adopted: Option<usize>,
+    /// The standby last chosen, in any run.
+    last: Option<usize>,
+    /// The standbys' draws (their own stream).
     rng: ChaCha8Rng,
 }
 
 impl SensorStandby {
     /// Whether the sensor's host is gone and the role not yet adopted.
     pub(super) fn down(&self) -> bool {
-        self.lost.is_some() && !self.adopted
+        self.lost.is_some() && self.adopted.is_none()
+    }
+
+    /// A new run of the replication, at `epoch`, knowing which standbys
+    /// are up: with two, none is chosen before the role has moved on.
+    fn start_run(&mut self, epoch: u64) {
+        let names = STANDBYS[..self.kept.len()].iter().map(|n| n.to_string());
+        self.replication = Replication::new(SENSOR, self.incarnation);
+        self.replication.at_epoch(epoch);
+        self.choice = Standbys::new(names.collect(), true);
+        for i in 0..self.kept.len() {
+            if self.kept[i].up {
+                self.token(i, true);
+            }
+        }
+    }
+
+    /// Standby `i`'s token came or went: told to the choice, and what
+    /// changed to the replication. Whether one was chosen, or one is
+    /// there to be chosen once the role has moved on.
+    fn token(&mut self, i: usize, up: bool) -> bool {
+        self.kept[i].up = up;
+        let mut chosen = false;
+        for change in self.choice.token(STANDBYS[i], up) {
+            chosen |= self.apply(change);
+        }
+        chosen || self.choice.waiting()
+    }
+
+    fn apply(&mut self, change: Change) -> bool {
+        let chosen = matches!(change, Change::Chosen(_));
+        self.replication.standby(chosen);
+        if chosen {
+            self.last = self.current();
+        }
+        chosen
+    }
+
+    /// The standby replicated to, by its index.
+    fn current(&self) -> Option<usize> {
+        let name = self.choice.current()?;
+        STANDBYS.iter().position(|n| *n == name)
     }
 }
 
@@ -97,35 +150,42 @@ impl World {
         {
             return Ok(());
         }
-        for _ in 0..rng.gen_range(0..=2) {
-            let at = rng.gen_range(0..span);
-            self.net.at(at, Event::StandbyAway);
+        let standbys = rng.gen_range(1..=2);
+        for _ in 0..rng.gen_range(0..=2 * standbys) {
+            let (at, i) = (rng.gen_range(0..span), rng.gen_range(0..standbys));
+            self.net.at(at, Event::StandbyAway(i));
             self.net
-                .at(at + rng.gen_range(50..=1500), Event::StandbyBack);
+                .at(at + rng.gen_range(50..=1500), Event::StandbyBack(i));
         }
         for _ in 0..rng.gen_range(0..=2) {
-            self.net.at(rng.gen_range(0..span), Event::StandbyRestart);
+            let (at, i) = (rng.gen_range(0..span), rng.gen_range(0..standbys));
+            self.net.at(at, Event::StandbyRestart(i));
         }
         if rng.gen_bool(0.5) {
             self.net.at(rng.gen_range(0..span), Event::SensorHostLoss);
         }
         let epoch = self.claim_role(ROLE, SENSOR, None)?;
         self.gateway.advance_epoch(epoch);
-        let mut replication = Replication::new(SENSOR, 1);
-        replication.at_epoch(epoch);
-        replication.standby(true);
         self.tally.sensor_standbys += 1;
-        self.sensor_standby = Some(SensorStandby {
-            replication,
+        self.tally.two_standbys += u64::from(standbys == 2);
+        let mut s = SensorStandby {
+            replication: Replication::new(SENSOR, 1),
+            choice: Standbys::new(Vec::new(), true),
             incarnation: 1,
-            copy: Copy::default(),
-            records: Vec::new(),
-            up: true,
-            advanced: false,
+            kept: (0..standbys)
+                .map(|_| Kept {
+                    copy: Copy::default(),
+                    records: Vec::new(),
+                    up: true,
+                })
+                .collect(),
             lost: None,
-            adopted: false,
+            adopted: None,
+            last: None,
             rng,
-        });
+        };
+        s.start_run(epoch);
+        self.sensor_standby = Some(s);
         Ok(())
     }
 
@@ -152,7 +212,7 @@ impl World {
     /// `records`, just appended, to the standby and back, until they may
     /// leave (`Replicator::replicate`).
     fn replicate(&mut self, s: &mut SensorStandby, records: &[Record]) -> Result<(), Violation> {
-        if s.adopted || s.lost.is_some() {
+        if s.adopted.is_some() || s.lost.is_some() {
             return Ok(());
         }
         // Now and then the journal has grown enough to be compacted: its
@@ -165,7 +225,24 @@ impl World {
         let mut step = s.replication.appended(encoded);
         for _ in 0..1000 {
             let message = match step {
-                Step::Release => return self.going_alone(s),
+                Step::Release if s.choice.fence_due() => {
+                    self.fence(s)?;
+                    match s.choice.fenced() {
+                        Some(change) => {
+                            // The next standby, made whole at the new
+                            // epoch before anything leaves.
+                            let before = s.last;
+                            s.apply(change);
+                            if before.is_some_and(|b| Some(b) != s.last) {
+                                self.tally.standby_switches += 1;
+                            }
+                            step = s.replication.appended(Vec::new());
+                            continue;
+                        }
+                        None => return Ok(()),
+                    }
+                }
+                Step::Release => return Ok(()),
                 Step::Send(message) => message,
                 Step::NeedWhole => {
                     self.tally.standby_wholes += 1;
@@ -175,17 +252,20 @@ impl World {
                 }
             };
             self.tally.replications += 1;
-            let answer = match s.up && !s.rng.gen_bool(0.1) {
+            let to = s.current();
+            let answer = match to.filter(|_| !s.rng.gen_bool(0.1)) {
                 // Lost on the way: no answer in time.
-                false => None,
-                true => {
-                    match s.copy.take(&message) {
-                        Apply::Replace(records) => s.records = records.to_vec(),
-                        Apply::Append(records) => s.records.extend_from_slice(records),
+                None => None,
+                Some(i) => {
+                    let kept = &mut s.kept[i];
+                    match kept.copy.take(&message) {
+                        Apply::Replace(records) => kept.records = records.to_vec(),
+                        Apply::Append(records) => kept.records.extend_from_slice(records),
                         Apply::Nothing => {}
                     }
                     // Its answer lost on the way back, or given.
-                    (!s.rng.gen_bool(0.1)).then_some(s.copy.position)
+                    let position = kept.copy.position;
+                    (!s.rng.gen_bool(0.1)).then_some(position)
                 }
             };
             step = s.replication.answered(answer);
@@ -195,13 +275,11 @@ impl World {
         ))
     }
 
-    /// The records may leave. Without its standby the sensor first has the
-    /// voters move its role to a new epoch (once per absence), and the
-    /// copy left behind must then lose any claim naming its epoch.
-    fn going_alone(&mut self, s: &mut SensorStandby) -> Result<(), Violation> {
-        if s.replication.present() || s.advanced {
-            return Ok(());
-        }
+    /// Before anything the standby that went did not acknowledge may
+    /// leave (or, with two, before the run chooses one) the sensor has the
+    /// voters move its role to a new epoch; no copy may then win a claim
+    /// naming its epoch.
+    fn fence(&mut self, s: &mut SensorStandby) -> Result<(), Violation> {
         let from = self.gateway.epoch();
         let command = Command::Advance {
             role: ROLE.into(),
@@ -216,23 +294,30 @@ impl World {
                 )))
             }
         };
-        s.advanced = true;
         s.replication.at_epoch(epoch);
         self.gateway.advance_epoch(epoch);
         self.tally.sensor_advances += 1;
+        for (i, kept) in s.kept.iter().enumerate() {
+            if self.could_claim(i, kept.copy.epoch) {
+                return Err(Violation::new(format!(
+                    "the sensor moved its role to epoch {epoch}, but {}'s copy (in sync at {:?}) could still claim it",
+                    STANDBYS[i], kept.copy.epoch
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether standby `i`, its copy in sync at `epoch`, would win a claim
+    /// of the role on the map as it stands.
+    fn could_claim(&self, i: usize, epoch: Option<u64>) -> bool {
         let mut map = self.hosts.map.clone();
         let claim = Command::Claim {
             role: ROLE.into(),
-            holder: STANDBY.into(),
-            fencing: s.copy.epoch,
+            holder: STANDBYS[i].into(),
+            fencing: epoch,
         };
-        if let Outcome::Changed { .. } = map.apply(&claim) {
-            return Err(Violation::new(format!(
-                "the sensor went on alone at epoch {epoch}, but its standby's copy (in sync at {:?}) could still claim the role",
-                s.copy.epoch
-            )));
-        }
-        Ok(())
+        matches!(map.apply(&claim), Outcome::Changed { .. })
     }
 
     fn compacted(&self) -> Result<Vec<Record>, Violation> {
@@ -246,63 +331,65 @@ impl World {
     /// whole journal first.
     pub(super) fn sensor_restarted(&mut self) {
         let epoch = self.gateway.epoch();
-        if let Some(s) = self.sensor_standby.as_mut().filter(|s| !s.adopted) {
+        if let Some(s) = self.sensor_standby.as_mut().filter(|s| s.adopted.is_none()) {
             s.incarnation += 1;
-            s.replication = Replication::new(SENSOR, s.incarnation);
-            s.replication.at_epoch(epoch);
-            if s.up {
-                s.replication.standby(true);
+            s.start_run(epoch);
+        }
+    }
+
+    /// Standby `i`'s token went away (its host cut off, or down).
+    pub(super) fn standby_away(&mut self, i: usize) {
+        if let Some(s) = self.sensor_standby.as_mut().filter(|s| s.adopted.is_none()) {
+            if s.kept[i].up {
+                s.token(i, false);
             }
         }
     }
 
-    /// The standby's token went away (its host cut off, or down).
-    pub(super) fn standby_away(&mut self) {
-        if let Some(s) = self.sensor_standby.as_mut().filter(|s| !s.adopted && s.up) {
-            s.up = false;
-            s.advanced = false;
-            s.replication.standby(false);
-        }
-    }
-
-    /// The standby's token is back: it is sent the whole journal now.
-    pub(super) fn standby_back(&mut self) -> Result<(), Violation> {
-        let Some(s) = self.sensor_standby.as_mut().filter(|s| !s.adopted && !s.up) else {
+    /// Standby `i`'s token is back: if chosen, or to be chosen once the
+    /// role moved on, it is sent the whole journal now.
+    pub(super) fn standby_back(&mut self, i: usize) -> Result<(), Violation> {
+        let Some(s) = self.sensor_standby.as_mut().filter(|s| s.adopted.is_none()) else {
             return Ok(());
         };
-        s.up = true;
-        if s.lost.is_some() {
+        if s.kept[i].up {
             return Ok(());
         }
-        s.replication.standby(true);
-        self.sync()
+        if s.lost.is_some() {
+            s.kept[i].up = true;
+            return Ok(());
+        }
+        match s.token(i, true) {
+            true => self.sync(),
+            false => Ok(()),
+        }
     }
 
-    /// The standby's process restarted too quickly for its token to be
+    /// Standby `i`'s process restarted too quickly for its token to be
     /// missed: its copy is on its disk, but where it stands in the
     /// sensor's run is not.
-    pub(super) fn standby_restart(&mut self) {
-        if let Some(s) = self.sensor_standby.as_mut().filter(|s| !s.adopted) {
+    pub(super) fn standby_restart(&mut self, i: usize) {
+        if let Some(s) = self.sensor_standby.as_mut().filter(|s| s.adopted.is_none()) {
             self.tally.standby_restarts += 1;
-            s.copy.position = None;
+            s.kept[i].copy.position = None;
         }
     }
 
     /// The sensor's host is gone for good with its disk. Struck only while
-    /// the standby is up (its copy then holds everything that left): one
-    /// away waits for its return.
+    /// a standby is replicated to (its copy then holds everything that
+    /// left): otherwise it waits until one is.
     pub(super) fn sensor_host_lost(&mut self) -> Result<(), Violation> {
         let Some(s) = self.sensor_standby.as_mut() else {
             return Ok(());
         };
-        if self.calm || s.adopted || s.lost.is_some() {
+        if self.calm || s.adopted.is_some() || s.lost.is_some() {
             return Ok(());
         }
-        if !s.up {
+        let Some(claimant) = s.current() else {
             self.net.at(self.now + 100, Event::SensorHostLoss);
             return Ok(());
-        }
-        s.lost = Some(standing(&self.gateway));
+        };
+        s.lost = Some((standing(&self.gateway), claimant));
         let delay = s.rng.gen_range(TAKEOVER.0..=TAKEOVER.1);
         self.tally.sensor_host_losses += 1;
         self.journal.clear();
@@ -310,18 +397,31 @@ impl World {
         Ok(())
     }
 
-    /// The standby claims the sensor role through the voters, naming its
-    /// copy's epoch.
-    pub(super) fn sensor_adopt(&mut self) {
+    /// The standby replicated to claims the sensor role through the
+    /// voters, naming its copy's epoch; the other's claim, naming its
+    /// own, must lose.
+    pub(super) fn sensor_adopt(&mut self) -> Result<(), Violation> {
         let Some(s) = self.sensor_standby.as_ref().filter(|s| s.down()) else {
-            return;
+            return Ok(());
         };
+        let Some((_, claimant)) = s.lost else {
+            return Ok(());
+        };
+        for (i, kept) in s.kept.iter().enumerate().filter(|(i, _)| *i != claimant) {
+            if self.could_claim(i, kept.copy.epoch) {
+                return Err(Violation::new(format!(
+                    "{} was replicated to, but {}'s copy (in sync at {:?}) could claim the sensor role",
+                    STANDBYS[claimant], STANDBYS[i], kept.copy.epoch
+                )));
+            }
+        }
         let command = Command::Claim {
             role: ROLE.into(),
-            holder: STANDBY.into(),
-            fencing: s.copy.epoch,
+            holder: STANDBYS[claimant].into(),
+            fencing: s.kept[claimant].copy.epoch,
         };
         self.start_claim(command, Purpose::SensorAdopt);
+        Ok(())
     }
 
     /// The standby won the sensor role at `epoch` and serves from its
@@ -338,10 +438,10 @@ impl World {
     }
 
     fn serve_from_copy(&mut self, s: &mut SensorStandby, epoch: u64) -> Result<(), Violation> {
-        let Some(lost) = s.lost else {
+        let Some((lost, claimant)) = s.lost else {
             return Ok(());
         };
-        let records = s
+        let records = s.kept[claimant]
             .records
             .iter()
             .map(|r| journal::decode_record(r))
@@ -367,7 +467,7 @@ impl World {
                 restored.producer_next("sim")
             )));
         }
-        s.adopted = true;
+        s.adopted = Some(claimant);
         self.tally.sensor_adoptions += 1;
         self.gateway = restored;
         self.journal = records;
