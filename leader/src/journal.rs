@@ -348,16 +348,19 @@ fn read_snapshot(path: &Path) -> Result<Option<(u64, Vec<u8>)>, JournalError> {
 mod tests {
     use super::*;
 
-    fn options(name: &str) -> JournalOptions {
-        let dir = std::env::temp_dir().join(format!("idmesh-journal-{}", std::process::id()));
-        let path = dir.join(name);
-        let _ = std::fs::remove_file(&path);
-        let _ = std::fs::remove_file(snapshot_path(&path));
-        let _ = std::fs::remove_file(with_suffix(&path, ".damaged"));
-        JournalOptions {
+    /// A journal's options in a fresh folder, removed when the folder is
+    /// dropped.
+    fn options(name: &str) -> (tempfile::TempDir, JournalOptions) {
+        let dir = tempfile::Builder::new()
+            .prefix("idmesh-journal-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join(name);
+        let options = JournalOptions {
             path,
             fsync_every: Duration::from_millis(100),
-        }
+        };
+        (dir, options)
     }
 
     /// Opens as the one owner (an earlier journal on the path must be
@@ -381,7 +384,7 @@ mod tests {
 
     #[test]
     fn entries_come_back_in_order_after_reopening() {
-        let options = options("order");
+        let (_dir, options) = options("order");
         let (mut journal, old) = open(&options).unwrap();
         assert!(old.is_empty());
         let _ = std::fs::remove_file(snapshot_path(&options.path));
@@ -401,7 +404,7 @@ mod tests {
 
     #[test]
     fn a_torn_last_entry_is_cut_off_and_appending_goes_on_after_the_last_whole_one() {
-        let options = options("torn");
+        let (_dir, options) = options("torn");
         let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"whole").unwrap();
         journal.append(Kind::Batch, b"half written").unwrap();
@@ -426,7 +429,7 @@ mod tests {
 
     #[test]
     fn a_damaged_entry_is_dropped_with_everything_after_it_and_reported() {
-        let options = options("damaged");
+        let (_dir, options) = options("damaged");
         let (mut journal, _) = open(&options).unwrap();
         for i in 0..6u8 {
             journal.append(Kind::Batch, &[i; 40]).unwrap();
@@ -468,7 +471,7 @@ mod tests {
 
     #[test]
     fn a_record_of_unknown_kind_is_an_error_naming_where() {
-        let options = options("corrupt");
+        let (_dir, options) = options("corrupt");
         let (journal, _) = open(&options).unwrap();
         drop(journal);
         let mut writer = Writer::resume(
@@ -485,7 +488,7 @@ mod tests {
 
     #[test]
     fn a_snapshot_replaces_the_entries_before_it() {
-        let options = options("compact");
+        let (_dir, options) = options("compact");
         let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"one").unwrap();
         journal.append(Kind::Batch, b"two").unwrap();
@@ -512,7 +515,7 @@ mod tests {
 
     #[test]
     fn a_crash_between_snapshot_and_new_journal_applies_nothing_twice() {
-        let options = options("between");
+        let (_dir, options) = options("between");
         let (mut journal, _) = open(&options).unwrap();
         journal.append(Kind::Batch, b"one").unwrap();
         journal.append(Kind::Batch, b"two").unwrap();
@@ -534,7 +537,7 @@ mod tests {
 
     #[test]
     fn a_snapshot_that_is_not_ours_or_is_damaged_is_an_error_naming_it() {
-        let options = options("foreign");
+        let (_dir, options) = options("foreign");
         std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
         std::fs::write(
             snapshot_path(&options.path),
@@ -562,7 +565,7 @@ mod tests {
 
     #[test]
     fn files_of_the_format_before_checksums_are_refused_saying_what_to_do() {
-        let options = options("old");
+        let (_dir, options) = options("old");
         std::fs::create_dir_all(options.path.parent().unwrap()).unwrap();
         // The old journal's first frame: its snapshot's generation.
         let mut old = vec![4u8, 8, 0, 0, 0];

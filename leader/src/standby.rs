@@ -324,12 +324,12 @@ pub(crate) fn prepare_return(dir: &Path, role: &str) -> Result<Source, StandbyEr
 mod tests {
     use super::*;
 
-    fn dir(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("idmesh-standby-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    /// A fresh folder for one test's files, removed when dropped.
+    fn dir(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("idmesh-standby-{name}-"))
+            .tempdir()
+            .unwrap()
     }
 
     fn mark(batch: u64) -> Durable {
@@ -354,58 +354,58 @@ mod tests {
 
     #[test]
     fn a_role_sent_home_replaces_the_journal_it_left_and_the_copy_is_used_once() {
-        let dir = dir("return");
+        let scratch = dir("return");
+        let dir = scratch.path();
         // The role's old journal and snapshot, from before it left.
-        std::fs::write(journal_path(&dir, "l1"), b"old journal").unwrap();
-        std::fs::write(snapshot_path(&journal_path(&dir, "l1")), b"old").unwrap();
-        assert!(matches!(prepare_return(&dir, "l1"), Ok(Source::Journal)));
+        std::fs::write(journal_path(dir, "l1"), b"old journal").unwrap();
+        std::fs::write(snapshot_path(&journal_path(dir, "l1")), b"old").unwrap();
+        assert!(matches!(prepare_return(dir, "l1"), Ok(Source::Journal)));
         let home = StandbyCopy {
             to: "l1".into(),
             ..copy(7, vec![4, 5, 6])
         };
-        keep(&dir, &home, "l1").unwrap();
-        match prepare_return(&dir, "l1") {
+        keep(dir, &home, "l1").unwrap();
+        match prepare_return(dir, "l1") {
             Ok(Source::StandbyCopy(mark)) => assert_eq!(mark.batch, 7),
             other => panic!("{other:?}"),
         }
+        assert!(!journal_path(dir, "l1").exists(), "the old journal is gone");
         assert!(
-            !journal_path(&dir, "l1").exists(),
-            "the old journal is gone"
-        );
-        assert!(
-            !standby_path(&dir, "l1").exists(),
+            !standby_path(dir, "l1").exists(),
             "the copy is the snapshot now"
         );
-        let snapshot = snapshot_path(&journal_path(&dir, "l1"));
+        let snapshot = snapshot_path(&journal_path(dir, "l1"));
         let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
         let state = contents.records.last().map(|r| r.payload.clone());
         assert_eq!(state, Some(vec![4u8, 5, 6]));
-        std::fs::remove_dir_all(&dir).ok();
+        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]
     fn a_kept_copy_reads_back_and_the_newest_replaces_the_last() {
-        let dir = dir("keep");
-        let path = standby_path(&dir, "l1");
+        let scratch = dir("keep");
+        let dir = scratch.path();
+        let path = standby_path(dir, "l1");
         assert_eq!(read(&path).unwrap(), None);
-        let stored = keep(&dir, &copy(3, vec![7; 1000]), "l2").unwrap();
+        let stored = keep(dir, &copy(3, vec![7; 1000]), "l2").unwrap();
         assert_eq!((stored.host.as_str(), stored.mark.batch), ("l2", 3));
         assert_eq!(read(&path).unwrap(), Some((mark(3), vec![7; 1000])));
-        keep(&dir, &copy(5, vec![9; 10]), "l2").unwrap();
+        keep(dir, &copy(5, vec![9; 10]), "l2").unwrap();
         assert_eq!(read(&path).unwrap(), Some((mark(5), vec![9; 10])));
         // An older copy arriving late keeps the newer one, and says so.
-        let stored = keep(&dir, &copy(4, vec![1; 10]), "l2").unwrap();
+        let stored = keep(dir, &copy(4, vec![1; 10]), "l2").unwrap();
         assert_eq!(stored.mark.batch, 5);
         assert_eq!(read(&path).unwrap(), Some((mark(5), vec![9; 10])));
         assert!(path.ends_with("l1.standby.snapshot"));
-        assert_ne!(path, snapshot_path(&journal_path(&dir, "l1")));
+        assert_ne!(path, snapshot_path(&journal_path(dir, "l1")));
     }
 
     #[test]
     fn a_torn_or_damaged_copy_is_refused_naming_the_file_and_the_byte() {
-        let dir = dir("damaged");
-        let path = standby_path(&dir, "l1");
-        keep(&dir, &copy(3, vec![7; 200]), "l2").unwrap();
+        let scratch = dir("damaged");
+        let dir = scratch.path();
+        let path = standby_path(dir, "l1");
+        keep(dir, &copy(3, vec![7; 200]), "l2").unwrap();
         let whole = std::fs::read(&path).unwrap();
 
         std::fs::write(&path, &whole[..whole.len() - 20]).unwrap();
@@ -439,99 +439,103 @@ mod tests {
 
     #[test]
     fn an_adopter_uses_the_roles_journal_if_there_is_one_else_its_copy() {
-        let dir = dir("adopt");
-        assert_eq!(prepare_adoption(&dir, "l1").unwrap(), Source::Nothing);
-        keep(&dir, &copy(4, vec![5; 64]), "l2").unwrap();
+        let scratch = dir("adopt");
+        let dir = scratch.path();
+        assert_eq!(prepare_adoption(dir, "l1").unwrap(), Source::Nothing);
+        keep(dir, &copy(4, vec![5; 64]), "l2").unwrap();
         assert_eq!(
-            prepare_adoption(&dir, "l1").unwrap(),
+            prepare_adoption(dir, "l1").unwrap(),
             Source::StandbyCopy(mark(4))
         );
-        let snapshot = snapshot_path(&journal_path(&dir, "l1"));
+        let snapshot = snapshot_path(&journal_path(dir, "l1"));
         let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
         assert_eq!(contents.generation, 1);
         assert_eq!(contents.records[0].payload, vec![5; 64]);
         // From then on the role's own files are there: they win.
-        keep(&dir, &copy(6, vec![6; 64]), "l2").unwrap();
-        assert_eq!(prepare_adoption(&dir, "l1").unwrap(), Source::Journal);
+        keep(dir, &copy(6, vec![6; 64]), "l2").unwrap();
+        assert_eq!(prepare_adoption(dir, "l1").unwrap(), Source::Journal);
         let contents = log::read(&snapshot, SNAPSHOT).unwrap().unwrap();
         assert_eq!(contents.records[0].payload, vec![5; 64], "left as it was");
     }
 
     #[test]
     fn a_journal_of_an_earlier_holding_is_forgotten_and_the_copy_used() {
-        let dir = dir("stale");
-        let journal = journal_path(&dir, "l1");
+        let scratch = dir("stale");
+        let dir = scratch.path();
+        let journal = journal_path(dir, "l1");
         // No journal: nothing to forget, whatever the epoch.
-        assert_eq!(forget_stale_journal(&dir, "l1", 3).unwrap(), None);
+        assert_eq!(forget_stale_journal(dir, "l1", 3).unwrap(), None);
         // Written while this process held the role at epoch 3: the map's
         // last holding is that one, so it is the newest state.
         std::fs::write(&journal, b"journal").unwrap();
-        stamp_epoch(&dir, "l1", 3).unwrap();
-        assert_eq!(stamped_epoch(&dir, "l1").unwrap(), 3);
-        assert_eq!(forget_stale_journal(&dir, "l1", 3).unwrap(), None);
+        stamp_epoch(dir, "l1", 3).unwrap();
+        assert_eq!(stamped_epoch(dir, "l1").unwrap(), 3);
+        assert_eq!(forget_stale_journal(dir, "l1", 3).unwrap(), None);
         assert!(journal.exists());
         // Another held it at 4 since: this journal stopped where the role
         // left, and the copy this process keeps is used instead.
-        keep(&dir, &copy(9, vec![9; 16]), "l2").unwrap();
-        assert_eq!(forget_stale_journal(&dir, "l1", 4).unwrap(), Some(3));
+        keep(dir, &copy(9, vec![9; 16]), "l2").unwrap();
+        assert_eq!(forget_stale_journal(dir, "l1", 4).unwrap(), Some(3));
         assert!(!journal.exists());
         assert_eq!(
-            prepare_adoption(&dir, "l1").unwrap(),
+            prepare_adoption(dir, "l1").unwrap(),
             Source::StandbyCopy(mark(9))
         );
         // A journal never stamped (kept from before the voters) counts as
         // written at epoch 0.
-        std::fs::remove_file(epoch_path(&dir, "l1")).unwrap();
-        assert_eq!(stamped_epoch(&dir, "l1").unwrap(), 0);
-        assert_eq!(forget_stale_journal(&dir, "l1", 0).unwrap(), None);
-        assert_eq!(forget_stale_journal(&dir, "l1", 1).unwrap(), Some(0));
-        std::fs::remove_dir_all(&dir).ok();
+        std::fs::remove_file(epoch_path(dir, "l1")).unwrap();
+        assert_eq!(stamped_epoch(dir, "l1").unwrap(), 0);
+        assert_eq!(forget_stale_journal(dir, "l1", 0).unwrap(), None);
+        assert_eq!(forget_stale_journal(dir, "l1", 1).unwrap(), Some(0));
+        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]
     fn the_adoption_source_is_read_without_changing_anything() {
-        let dir = dir("source");
-        assert_eq!(adoption_source(&dir, "l1", 0).unwrap(), Source::Nothing);
-        keep(&dir, &copy(5, vec![1; 8]), "l2").unwrap();
+        let scratch = dir("source");
+        let dir = scratch.path();
+        assert_eq!(adoption_source(dir, "l1", 0).unwrap(), Source::Nothing);
+        keep(dir, &copy(5, vec![1; 8]), "l2").unwrap();
         assert_eq!(
-            adoption_source(&dir, "l1", 2).unwrap(),
+            adoption_source(dir, "l1", 2).unwrap(),
             Source::StandbyCopy(mark(5))
         );
         // A journal of the last holding wins; of an earlier one, the copy.
-        let journal = journal_path(&dir, "l1");
+        let journal = journal_path(dir, "l1");
         std::fs::write(&journal, b"journal").unwrap();
-        stamp_epoch(&dir, "l1", 2).unwrap();
-        assert_eq!(adoption_source(&dir, "l1", 2).unwrap(), Source::Journal);
+        stamp_epoch(dir, "l1", 2).unwrap();
+        assert_eq!(adoption_source(dir, "l1", 2).unwrap(), Source::Journal);
         assert_eq!(
-            adoption_source(&dir, "l1", 3).unwrap(),
+            adoption_source(dir, "l1", 3).unwrap(),
             Source::StandbyCopy(mark(5))
         );
         assert!(journal.exists(), "nothing is removed");
-        std::fs::remove_dir_all(&dir).ok();
+        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]
     fn the_marks_heard_are_read_back_as_kept_and_a_damaged_file_is_refused() {
-        let dir = dir("marks");
-        assert!(heard_marks(&dir).unwrap().is_empty(), "none kept yet");
+        let scratch = dir("marks");
+        let dir = scratch.path();
+        assert!(heard_marks(dir).unwrap().is_empty(), "none kept yet");
         let other = Durable {
             leader: "l2".into(),
             epoch: 3,
             ..mark(9)
         };
-        keep_marks(&dir, [mark(4), other.clone()].iter()).unwrap();
-        assert_eq!(heard_marks(&dir).unwrap(), vec![mark(4), other.clone()]);
-        keep_marks(&dir, [other.clone()].iter()).unwrap();
-        assert_eq!(heard_marks(&dir).unwrap(), vec![other], "replaced whole");
-        let path = marks_path(&dir);
+        keep_marks(dir, [mark(4), other.clone()].iter()).unwrap();
+        assert_eq!(heard_marks(dir).unwrap(), vec![mark(4), other.clone()]);
+        keep_marks(dir, [other.clone()].iter()).unwrap();
+        assert_eq!(heard_marks(dir).unwrap(), vec![other], "replaced whole");
+        let path = marks_path(dir);
         let mut bytes = std::fs::read(&path).unwrap();
         let last = bytes.len() - 3;
         bytes[last] ^= 0xff;
         std::fs::write(&path, bytes).unwrap();
         assert!(
-            heard_marks(&dir).is_err(),
+            heard_marks(dir).is_err(),
             "a damaged file is said, not read"
         );
-        std::fs::remove_dir_all(&dir).ok();
+        std::fs::remove_dir_all(dir).ok();
     }
 }

@@ -409,13 +409,15 @@ mod tests {
         ]
     }
 
-    fn path(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("idmesh-sensor-journal-{}", std::process::id()));
-        let path = dir.join(name);
-        let _ = std::fs::remove_file(&path);
-        let _ = std::fs::remove_file(copy_path(&path));
-        path
+    /// A journal's path in a fresh folder, removed when the folder is
+    /// dropped.
+    fn path(name: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::Builder::new()
+            .prefix("idmesh-sensor-journal-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join(name);
+        (dir, path)
     }
 
     /// Where each record starts in a journal holding `records`.
@@ -431,7 +433,7 @@ mod tests {
 
     #[test]
     fn records_come_back_in_order_after_reopening_and_appending_goes_on() {
-        let path = path("order");
+        let (_dir, path) = path("order");
         let (mut journal, old) = Journal::open(&path, "test").unwrap();
         assert!(old.is_empty());
         journal.append(&records()[..2]).unwrap();
@@ -456,7 +458,7 @@ mod tests {
     /// so those journals read as they did.
     #[test]
     fn track_ids_come_back_after_reopening_and_older_records_keep_their_bytes() {
-        let path = path("track-ids");
+        let (_dir, path) = path("track-ids");
         let (mut journal, _) = Journal::open(&path, "test").unwrap();
         let named = |first: u32, ids: &[&str]| Record::TrackIds {
             producer: "ros2:/tracker/detections".into(),
@@ -493,7 +495,7 @@ mod tests {
 
     #[test]
     fn one_process_at_a_time_writes_a_journal_and_a_refusal_names_the_holder() {
-        let path = path("owned");
+        let (_dir, path) = path("owned");
         let (journal, _) = Journal::open(&path, "sensor-0").unwrap();
         let error = Journal::open(&path, "sensor-0 again")
             .err()
@@ -507,7 +509,7 @@ mod tests {
 
     #[test]
     fn a_torn_tail_is_dropped_and_the_whole_records_before_it_kept() {
-        let path = path("torn");
+        let (_dir, path) = path("torn");
         std::fs::create_dir_all(path.parent().unwrap()).unwrap();
         let full = to_bytes(&records());
         // The process died writing the last record: in the first copy,
@@ -525,7 +527,7 @@ mod tests {
 
     #[test]
     fn a_record_damaged_in_one_copy_is_taken_from_the_other_and_both_made_whole() {
-        let path = path("repaired");
+        let (_dir, path) = path("repaired");
         let (mut journal, _) = Journal::open(&path, "test").unwrap();
         journal.append(&records()).unwrap();
         drop(journal);
@@ -548,7 +550,7 @@ mod tests {
 
     #[test]
     fn a_record_damaged_in_both_copies_stops_the_sensor_naming_the_file_and_the_byte() {
-        let path = path("damaged");
+        let (_dir, path) = path("damaged");
         let (mut journal, _) = Journal::open(&path, "test").unwrap();
         journal.append(&records()).unwrap();
         drop(journal);
@@ -583,7 +585,7 @@ mod tests {
 
     #[test]
     fn compaction_replaces_both_copies_and_a_crash_between_them_keeps_the_newer() {
-        let path = path("compacted");
+        let (_dir, path) = path("compacted");
         let (mut journal, _) = Journal::open(&path, "test").unwrap();
         journal.append(&records()).unwrap();
         let old = std::fs::read(copy_path(&path)).unwrap();
@@ -603,7 +605,7 @@ mod tests {
 
     #[test]
     fn a_journal_of_an_earlier_format_or_another_kind_is_refused_naming_it() {
-        let path = path("old");
+        let (_dir, path) = path("old");
         std::fs::create_dir_all(path.parent().unwrap()).unwrap();
         std::fs::write(&path, b"idmesh-sensor-journal/1\n\x01\0\0\0").unwrap();
         let error = Journal::open(&path, "test")

@@ -478,6 +478,8 @@ fn a_second_sensor_on_a_journal_in_use_refuses_to_start_and_the_first_goes_on() 
 /// moves place them; a live feed cannot), so each test measures it for
 /// its own feed.
 struct Restart {
+    /// Removes `dir` once the test passes.
+    scratch: idmesh_tests::Scratch,
     dir: PathBuf,
     trace: PathBuf,
     expected: Vec<f64>,
@@ -487,8 +489,7 @@ struct Restart {
 
 impl Restart {
     fn case(name: &str, seed: u64) -> Restart {
-        let dir =
-            std::env::temp_dir().join(format!("idmesh-{name}-restart-{}", std::process::id()));
+        let (dir, scratch) = idmesh_tests::scratch(&format!("idmesh-{name}-restart"));
         let trace = crowd(&dir, 10, 3, 60.0, seed);
         let central = replay_summary(&trace, &["--method", "overcomplete"]);
         let expected = floats(&central["final_p_red"]);
@@ -501,6 +502,7 @@ impl Restart {
             ..Settings::default()
         };
         Restart {
+            scratch,
             history: trace_events(&trace),
             dir,
             trace,
@@ -539,6 +541,7 @@ fn assert_compacted(deployment: &Deployment) {
 #[test]
 fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
     let Restart {
+        scratch: _scratch,
         dir,
         trace,
         expected,
@@ -655,6 +658,7 @@ fn a_sensor_killed_mid_stream_and_restarted_resumes_where_it_was() {
 #[test]
 fn a_sensor_killed_while_reading_standard_input_and_fed_it_again_reads_each_line_once() {
     let Restart {
+        scratch: _scratch,
         trace,
         expected,
         history,

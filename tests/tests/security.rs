@@ -79,8 +79,11 @@ fn names() -> Vec<String> {
 
 /// A secured deployment of `LEADERS` leaders streaming a small crowd as
 /// fast as it goes, and the centralized engine's final marginals.
-fn deployment(name: &str, access_control: bool) -> (Deployment, PathBuf, Vec<f64>) {
-    let dir = std::env::temp_dir().join(format!("idmesh-security-{name}-{}", std::process::id()));
+fn deployment(
+    name: &str,
+    access_control: bool,
+) -> (idmesh_tests::Scratch, Deployment, PathBuf, Vec<f64>) {
+    let (dir, scratch) = idmesh_tests::scratch(&format!("idmesh-security-{name}"));
     let certs = certificates(&dir.join("certs"), "idmesh test CA", &names());
     let trace = crowd(&dir, 12, 4, 60.0, 5);
     let central = replay_summary(&trace, &["--method", "overcomplete"]);
@@ -99,7 +102,7 @@ fn deployment(name: &str, access_control: bool) -> (Deployment, PathBuf, Vec<f64
             ..Settings::default()
         },
     );
-    (deployment, certs, expected)
+    (scratch, deployment, certs, expected)
 }
 
 /// Every leader's counters of what it received and applied, as the
@@ -332,7 +335,7 @@ fn a_long_secured_stream_finishes_every_time() {
 
 #[test]
 fn without_access_control_a_certified_intruder_reads_leaders_and_is_applied() {
-    let (deployment, certs, expected) = deployment("tls-only", false);
+    let (_scratch, deployment, certs, expected) = deployment("tls-only", false);
     assert_same_marginals(
         &deployment.final_marginals(Duration::from_secs(90)),
         &expected,
@@ -374,7 +377,7 @@ fn without_access_control_a_certified_intruder_reads_leaders_and_is_applied() {
 /// connect at all.
 #[test]
 fn with_access_control_only_listed_identities_are_heard() {
-    let (deployment, certs, expected) = deployment("acl", true);
+    let (_scratch, deployment, certs, expected) = deployment("acl", true);
     let rogue = certificates(
         &deployment.dir.join("rogue"),
         "some other CA",
@@ -470,7 +473,7 @@ fn http_get(url: &str) -> (u16, String) {
 /// its metrics and readiness come through the coordinator's API.
 #[test]
 fn the_web_gateway_connects_as_the_listed_client_and_answers_as_the_api_does() {
-    let (deployment, _certs, expected) = deployment("web", true);
+    let (_scratch, deployment, _certs, expected) = deployment("web", true);
     let zenoh = deployment.final_marginals(Duration::from_secs(60));
     assert_same_marginals(&zenoh, &expected, "secured, asked over Zenoh");
     let gateway = idmesh_tests::Gateway::start(&deployment);

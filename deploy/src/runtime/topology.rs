@@ -1367,9 +1367,11 @@ listen = "tcp/127.0.0.1:3"
 
     #[test]
     fn a_topology_with_a_mistake_is_rejected_naming_it() {
-        let dir = std::env::temp_dir().join(format!("idmesh-topology-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("t.toml");
+        let dir = tempfile::Builder::new()
+            .prefix("idmesh-topology-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join("t.toml");
         let good = SMALL;
         std::fs::write(&path, good).unwrap();
         let t = Topology::load(&path).unwrap();

@@ -1,15 +1,15 @@
 use super::*;
 use proptest::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const KIND: &str = "test-log";
 
-/// A fresh folder for one test's files.
-fn dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("idmesh-journal-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh folder for one test's files, removed when dropped.
+fn dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("idmesh-journal-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// The bytes of a log of `payloads`.
@@ -56,7 +56,8 @@ fn parse_ok(bytes: &[u8]) -> Contents {
 
 #[test]
 fn records_come_back_in_order_and_appending_goes_on_after_them() {
-    let dir = dir("order");
+    let scratch = dir("order");
+    let dir = scratch.path();
     let path = dir.join("log");
     let mut writer = Writer::create(&[&path], KIND, 3, &[b"one".as_slice()]).unwrap();
     writer.append(&[b"tw", b"o"]).unwrap();
@@ -130,7 +131,8 @@ fn every_torn_tail_is_cut_and_the_whole_records_before_it_kept() {
         }
     }
     // On disk: cut off, and the next record goes after the whole ones.
-    let dir = dir("torn");
+    let scratch = dir("torn");
+    let dir = scratch.path();
     let path = dir.join("log");
     std::fs::write(&path, &bytes[..bytes.len() - 2]).unwrap();
     let contents = read(&path, KIND).unwrap().unwrap();
@@ -242,7 +244,8 @@ fn a_damaged_header_and_other_formats_are_errors_naming_the_file() {
 
 #[test]
 fn a_record_damaged_in_one_copy_is_taken_from_the_other() {
-    let dir = dir("copies");
+    let scratch = dir("copies");
+    let dir = scratch.path();
     let (path, copy) = (dir.join("log"), dir.join("log.copy"));
     let payloads = sample();
     let starts = offsets(&payloads);
@@ -369,7 +372,8 @@ proptest! {
     /// Any records, any generation: back as written, through a file.
     #[test]
     fn random_records_survive_writing_and_reading(payloads in payloads_strategy(), generation: u64) {
-        let dir = dir("prop-roundtrip");
+        let scratch = dir("prop-roundtrip");
+        let dir = scratch.path();
         let path = dir.join("log");
         let (first, rest) = payloads.split_at(payloads.len() / 2);
         let mut writer = Writer::create(&[&path], KIND, generation, first).unwrap();

@@ -133,15 +133,20 @@ pub(crate) fn lock_path(journal: &Path) -> PathBuf {
 mod tests {
     use super::*;
 
-    fn journal(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("idmesh-ownership-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(format!("{name}.journal"))
+    /// A journal's path in a fresh folder, removed when the folder is
+    /// dropped.
+    fn journal(name: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::Builder::new()
+            .prefix("idmesh-ownership-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join(format!("{name}.journal"));
+        (dir, path)
     }
 
     #[test]
     fn a_role_has_one_owner_at_a_time_and_is_free_once_it_lets_go() {
-        let path = journal("one-owner");
+        let (_dir, path) = journal("one-owner");
         let first = Ownership::try_take(&path, "leader-0").unwrap();
         assert!(first.is_some());
         // Another open file description is another owner, as another
@@ -158,7 +163,7 @@ mod tests {
 
     #[test]
     fn a_refusal_names_the_holder_and_the_lock() {
-        let path = journal("refusal");
+        let (_dir, path) = journal("refusal");
         let _held = Ownership::try_take(&path, "leader-3").unwrap();
         let text = Ownership::refused(&path).to_string();
         assert!(text.contains("leader-3"), "{text}");

@@ -562,13 +562,12 @@ mod tests {
     use zenoh::key_expr::keyexpr;
 
     fn topology() -> Topology {
-        let dir = std::env::temp_dir().join(format!("idmesh-rules-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        // One file per call: the tests run at once and must not read one
-        // another's half-written file.
-        static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let path = dir.join(format!("t{call}.toml"));
+        // A folder per call, removed once the topology is read.
+        let dir = tempfile::Builder::new()
+            .prefix("idmesh-rules-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join("t.toml");
         std::fs::write(
             &path,
             r#"

@@ -118,8 +118,11 @@ mod tests {
 
     #[test]
     fn a_missing_or_garbled_file_is_named() {
-        let dir = std::env::temp_dir().join(format!("idmesh-tls-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("idmesh-tls-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let pem = dir.join("ok.pem");
         std::fs::write(&pem, "-----BEGIN CERTIFICATE-----\n").unwrap();
         let junk = dir.join("junk.key");
