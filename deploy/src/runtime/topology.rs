@@ -1292,6 +1292,30 @@ listen = "tcp/127.0.0.1:3"
             assert_eq!((on("gateway"), on("east"), on("west")), (2, 2, 2), "{name}");
             assert_eq!(topology.security.is_some(), name.starts_with("secure"));
         }
+        // Five machines, each with a disk of its own: whichever is lost, a
+        // majority of voters, a coordinator, a holder or standby of the
+        // sensor role and two leader processes remain elsewhere.
+        let ha = Topology::load(&examples.join("host-loss.toml")).unwrap();
+        assert!(ha.trace_path().exists(), "host-loss.toml: no trace");
+        let members = ha.members();
+        let hosts: std::collections::BTreeSet<&str> =
+            members.iter().map(|m| m.host.as_str()).collect();
+        assert_eq!(hosts.len(), 5);
+        for lost in hosts {
+            let left = |role: &str| {
+                members
+                    .iter()
+                    .filter(|m| m.role == role && m.host != lost)
+                    .count()
+            };
+            assert!(left("voter") * 2 > ha.voters.len(), "{lost}: voters");
+            assert!(left("coordinator") >= 1, "{lost}: coordinators");
+            assert!(
+                left("sensor") + left("sensor-standby") >= 2,
+                "{lost}: sensor"
+            );
+            assert!(left("leader") >= 2, "{lost}: leaders");
+        }
     }
 
     #[test]
