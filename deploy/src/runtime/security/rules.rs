@@ -957,6 +957,55 @@ producers = ["camera"]
         ));
     }
 
+    /// A sensor's second standby acts as its sensor too, and whichever of
+    /// the three holds the role replicates to the others.
+    #[test]
+    fn a_second_sensor_standby_serves_the_same_keys_and_replicates_to_the_first() {
+        let mut t = with_voters();
+        let standby = |name: &str, port: u16| crate::runtime::topology::SensorStandbyProcess {
+            name: name.into(),
+            sensor: "s".into(),
+            host: "local".into(),
+            listen: format!("tcp/127.0.0.1:{port}"),
+        };
+        t.sensor_standbys = vec![standby("sb", 20), standby("sb2", 21)];
+        let sb2 = access_control(&t, "sb2");
+        for (peer, message, key) in [
+            ("l0", "put", "p/leader/l0/events"),
+            ("c", "declare_queryable", "p/sensor/s/cut"),
+            ("sb", "query", "p/sensor/s/replicate/sb"),
+            ("s", "query", "p/sensor/s/replicate/s"),
+            ("sb", "liveliness_token", "p/alive/sensor-standby/sb2"),
+        ] {
+            assert!(
+                allowed(&sb2, "egress", peer, message, key),
+                "{message} {key}"
+            );
+        }
+        assert!(allowed(
+            &sb2,
+            "ingress",
+            "sb",
+            "query",
+            "p/sensor/s/replicate/sb2"
+        ));
+        let sb = access_control(&t, "sb");
+        assert!(allowed(
+            &sb,
+            "ingress",
+            "sb2",
+            "query",
+            "p/sensor/s/replicate/sb"
+        ));
+        assert!(!allowed(
+            &sb2,
+            "egress",
+            "c",
+            "declare_queryable",
+            "p/sensor/other/cut"
+        ));
+    }
+
     #[test]
     fn producers_may_only_feed_the_sensor() {
         let t = topology();
