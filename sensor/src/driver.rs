@@ -41,6 +41,7 @@ use crate::router::Router;
 use crate::standby::Replicator;
 use idmesh_extract::adapters::ErrorBudget;
 use idmesh_protocol::trace::Line;
+use idmesh_protocol::wire::coordinator_to_sensor::SensorStatus;
 use idmesh_protocol::wire::encode;
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::producer_to_sensor::{COUNTER, FINISH, PRODUCER, TIME};
@@ -677,7 +678,8 @@ async fn serve(
             }
             query = ep.stats.recv_async() => {
                 let Ok(query) = query else { break };
-                answer_stats(&s.gateway, &query).await;
+                let standby = s.wire.replicator.as_ref().and_then(Replicator::current);
+                answer_stats(&s.gateway, standby, &query).await;
             }
             query = ep.positions.recv_async() => {
                 let Ok(query) = query else { break };
@@ -775,9 +777,15 @@ async fn follow(
     Ok(())
 }
 
-/// Answers a stats query with the sensor's counters.
-async fn answer_stats(gateway: &Gateway<Query>, query: &Query) {
-    let body = serde_json::to_vec(gateway.stats()).unwrap_or_default();
+/// Answers a stats query with the sensor's counters, the epoch it holds
+/// its role at and the standby its journal is replicated to.
+async fn answer_stats(gateway: &Gateway<Query>, standby: Option<&str>, query: &Query) {
+    let stats = SensorStatus {
+        counters: gateway.stats().clone(),
+        epoch: gateway.epoch(),
+        standby: standby.map(str::to_string),
+    };
+    let body = serde_json::to_vec(&stats).unwrap_or_default();
     if let Some(Err(e)) = bounded(
         "stats",
         query

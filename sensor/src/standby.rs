@@ -151,6 +151,11 @@ impl Replicator {
         Ok(replicator)
     }
 
+    /// The standby the journal is replicated to now, if one is up.
+    pub(crate) fn current(&self) -> Option<&str> {
+        self.choice.current().filter(|_| self.machine.present())
+    }
+
     /// The next change of a standby's token.
     pub(crate) async fn changed(&self) -> Option<Sample> {
         self.tokens.recv_async().await.ok()

@@ -1043,8 +1043,21 @@ fn a_sensor_with_two_standbys_outlives_the_loss_of_one_and_then_its_own_host() {
         std::thread::sleep(Duration::from_millis(200));
     };
     let (lost, other) = (&names[chosen], &names[1 - chosen]);
+    // The sensor's stats name the standby it replicates to, and its epoch.
+    let stats = deployment.sensor_stats()[0].clone();
+    assert_eq!(stats["standby"], lost.as_str(), "{stats}");
+    assert!(stats["epoch"].as_u64() >= Some(first), "{stats}");
     deployment.kill(lost);
     let moved = copy_in_sync(&deployment, &copy_of(other), "sensor-0");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while deployment.sensor_stats()[0]["standby"] != other.as_str() {
+        assert!(
+            Instant::now() < deadline,
+            "the stats never named {other}: {}",
+            deployment.sensor_stats()[0]
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
     assert!(
         moved > first,
         "the sensor moved its role on before it replicated to {other}: epoch {first}, then {moved}"

@@ -9,7 +9,7 @@ use crate::machine::{at_rest_of, check, cut_parameters, marginals_of, read_cut, 
 pub use crate::machine::{At, GatherError, Memory, Share};
 use crate::pushed::Pushes;
 use idmesh_protocol::wire::coordinator_to_leader::{LeaderStats, Partial};
-use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStats};
+use idmesh_protocol::wire::coordinator_to_sensor::{CutPlaced, SensorPositions, SensorStatus};
 use idmesh_protocol::wire::keys::Keys;
 use idmesh_protocol::wire::query::{LeaderPlace, PositionsAnswer, Watermark};
 use idmesh_protocol::wire::Versioned;
@@ -310,7 +310,7 @@ pub(crate) async fn sensor_stats(
     session: &Session,
     keys: &Keys,
     timeout: Duration,
-) -> Vec<SensorStats> {
+) -> Vec<SensorStatus> {
     let Ok(replies) = ask_everyone(
         session,
         keys.every_sensor_stats(),
@@ -324,12 +324,13 @@ pub(crate) async fn sensor_stats(
     let mut all = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
         if let Ok(sample) = reply.result() {
-            if let Ok(stats) = serde_json::from_slice::<SensorStats>(&sample.payload().to_bytes()) {
+            if let Ok(stats) = serde_json::from_slice::<SensorStatus>(&sample.payload().to_bytes())
+            {
                 all.push(stats);
             }
         }
     }
-    all.sort_by(|a, b| a.sensor.cmp(&b.sensor));
+    all.sort_by(|a, b| a.counters.sensor.cmp(&b.counters.sensor));
     all
 }
 

@@ -15,6 +15,7 @@ use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
 use idmesh_protocol::wire::coordinator_to_leader::LeaderStats;
+use idmesh_protocol::wire::coordinator_to_sensor::SensorStatus;
 use idmesh_protocol::wire::query::{PositionsAnswer, StatsAnswer};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
@@ -161,6 +162,7 @@ impl Collector for Snapshot {
         encode_leaders(&mut encoder, &stats.leaders)?;
         encode_rejected(&mut encoder, stats)?;
         encode_ros2(&mut encoder, stats)?;
+        encode_sensor_roles(&mut encoder, stats)?;
         encode_coordinator(&mut encoder, stats)
     }
 }
@@ -235,8 +237,12 @@ fn encode_rejected(
     // One label set per family (parsers insist): `leader` is empty for
     // the roles that are not leaders.
     for s in &stats.sensors {
-        let labels = labels(&[("role", "sensor"), ("leader", ""), ("process", &s.sensor)]);
-        ConstCounter::new(s.rejected).encode(family.encode_family(&labels)?)?;
+        let labels = labels(&[
+            ("role", "sensor"),
+            ("leader", ""),
+            ("process", &s.counters.sensor),
+        ]);
+        ConstCounter::new(s.counters.rejected).encode(family.encode_family(&labels)?)?;
     }
     let rejected_by_coordinator = labels(&[
         ("role", "coordinator"),
@@ -253,25 +259,55 @@ fn encode_ros2(
     encoder: &mut DescriptorEncoder<'_>,
     stats: &StatsAnswer,
 ) -> Result<(), std::fmt::Error> {
-    type Field = fn(&idmesh_protocol::wire::coordinator_to_sensor::SensorStats) -> u64;
+    type Field = fn(&SensorStatus) -> u64;
     let fields: [(&str, &str, Field); 2] = [
         (
             "sensor_ros2_messages",
             "messages read from ROS 2 topics",
-            |s| s.ros2_messages,
+            |s| s.counters.ros2_messages,
         ),
         (
             "sensor_ros2_bad",
             "ROS 2 messages refused: they did not decode",
-            |s| s.ros2_bad,
+            |s| s.counters.ros2_bad,
         ),
     ];
     for (name, help, field) in fields {
         let mut family =
             encoder.encode_descriptor(name, help, None, ConstCounter::new(0u64).metric_type())?;
         for s in &stats.sensors {
-            let labels = labels(&[("role", "sensor"), ("process", &s.sensor)]);
+            let labels = labels(&[("role", "sensor"), ("process", &s.counters.sensor)]);
             ConstCounter::new(field(s)).encode(family.encode_family(&labels)?)?;
+        }
+    }
+    Ok(())
+}
+
+/// Each sensor role: the epoch its process holds it at, and whether its
+/// journal is replicated to a standby now (0: on one disk alone).
+fn encode_sensor_roles(
+    encoder: &mut DescriptorEncoder<'_>,
+    stats: &StatsAnswer,
+) -> Result<(), std::fmt::Error> {
+    type Field = fn(&SensorStatus) -> i64;
+    let fields: [(&str, &str, Field); 2] = [
+        (
+            "sensor_epoch",
+            "the epoch the sensor role is held at (0 without voters)",
+            |s| s.epoch as i64,
+        ),
+        (
+            "sensor_replicated",
+            "1 while the sensor's journal is replicated to a standby, 0 while it is on one disk",
+            |s| i64::from(s.standby.is_some()),
+        ),
+    ];
+    for (name, help, field) in fields {
+        let mut family =
+            encoder.encode_descriptor(name, help, None, ConstGauge::new(0i64).metric_type())?;
+        for s in &stats.sensors {
+            let labels = labels(&[("role", "sensor"), ("process", &s.counters.sensor)]);
+            ConstGauge::new(field(s)).encode(family.encode_family(&labels)?)?;
         }
     }
     Ok(())
@@ -414,10 +450,14 @@ mod tests {
                 leader("leader-0", "", 40, 1),
                 leader("leader-1", "leader-0", 7, 0),
             ],
-            sensors: vec![SensorStats {
-                sensor: "sensor-0".into(),
-                rejected: 2,
-                ..SensorStats::default()
+            sensors: vec![SensorStatus {
+                counters: SensorStats {
+                    sensor: "sensor-0".into(),
+                    rejected: 2,
+                    ..SensorStats::default()
+                },
+                epoch: 4,
+                standby: Some("sensor-0-standby".into()),
             }],
             coordinator: CoordinatorStats {
                 rejected: 3,
@@ -449,6 +489,14 @@ mod tests {
         );
         assert_eq!(value(&text, "idmesh_rejected", ("role", "leader")), 1.0);
         assert_eq!(value(&text, "idmesh_rejected", ("role", "sensor")), 2.0);
+        assert_eq!(
+            value(&text, "idmesh_sensor_epoch", ("process", "sensor-0")),
+            4.0
+        );
+        assert_eq!(
+            value(&text, "idmesh_sensor_replicated", ("process", "sensor-0")),
+            1.0
+        );
         assert_eq!(
             value(&text, "idmesh_rejected", ("role", "coordinator")),
             3.0

@@ -37,7 +37,8 @@ pub struct CutPlaced {
 super::versioned!(CutPlaced, "cut");
 super::epoch::epoched!(CutPlaced);
 
-/// A sensor gateway's counters (JSON, `P/sensor/<name>/stats`).
+/// A sensor gateway's counters (in its stats answer, [`SensorStatus`];
+/// its compacted journal keeps them).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SensorStats {
     pub sensor: String,
@@ -91,6 +92,24 @@ pub struct SensorStats {
     pub ros2_messages: u64,
     #[serde(default)]
     pub ros2_bad: u64,
+}
+
+/// What a sensor's stats key answers (JSON, `P/sensor/<name>/stats`): its
+/// counters, which its journal keeps, and where its role stands now,
+/// which it does not.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SensorStatus {
+    #[serde(flatten)]
+    pub counters: SensorStats,
+    /// With voters, the epoch at which the answering process holds the
+    /// sensor role (0 without voters).
+    #[serde(default)]
+    pub epoch: u64,
+    /// The standby the sensor's journal is replicated to now; None: no
+    /// standby is up (the journal is on this process's disk alone), or
+    /// the topology names none.
+    #[serde(default)]
+    pub standby: Option<String>,
 }
 
 /// Where every track was last seen and which leader surveils it, at the

@@ -4,7 +4,7 @@
 //! given is an error reply carrying [`QueryError`].
 
 use super::coordinator_to_leader::LeaderStats;
-use super::coordinator_to_sensor::SensorStats;
+use super::coordinator_to_sensor::SensorStatus;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -176,7 +176,7 @@ pub struct StatsAnswer {
     pub leaders: Vec<LeaderStats>,
     /// Each sensor gateway's count of bad requests.
     #[serde(default)]
-    pub sensors: Vec<SensorStats>,
+    pub sensors: Vec<SensorStatus>,
     #[serde(default)]
     pub coordinator: CoordinatorStats,
 }
