@@ -121,7 +121,6 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
         &replayed["final_p_red"],
     );
     drop(deployment);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A scene's reports (hotel) piped into `idmesh sensor --stdin
@@ -172,7 +171,6 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
         "the event is refused with why"
     );
     drop(deployment);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The Python tracker loop (`examples/tracker.py`, eclipse-zenoh) sends
@@ -233,7 +231,6 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     });
     assert_close("python tracker", &answer["p_red"], &replayed["final_p_red"]);
     drop(deployment);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Two live sensors, each fed the reports of a scene (zara02) in its own region by
@@ -295,7 +292,6 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     );
     assert_close("two sensors", &answer["p_red"], &replayed["final_p_red"]);
     drop(deployment);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A real scene, as a tracker that confuses close, slow meetings would
@@ -341,7 +337,6 @@ fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
         &simulator["final_p_red"],
     );
     drop(deployment);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `idmesh <args>` with the temporary folder `tmp`: its exit status and
@@ -620,7 +615,6 @@ fn the_twin_and_the_deployment_take_and_refuse_the_same_reports() {
     assert_eq!(stats[0]["bad_lines"], 1, "{stats:?}");
     drop(piped);
     empty_tmp("every run");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A MOTChallenge file teaches the belief only with what comes beside
@@ -717,5 +711,4 @@ fn a_mot_file_with_class_scores_moves_the_answer_and_one_without_is_warned_about
     assert!(lines_of_kind(&by_class, "observe") >= 4);
     let p = answer(&by_class);
     assert!(p[2] > 0.9 && p[3] < 0.1, "{p:?}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

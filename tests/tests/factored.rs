@@ -510,7 +510,6 @@ fn a_colour_stream_that_contradicts_itself_never_stops_a_leader() {
         "no answer needed the contradiction rule: the trace tests nothing: {}",
         stats[0]["coordinator"]
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// `trace` with a sure red sighting of a track drawn from a fixed

@@ -135,7 +135,6 @@ fn identity_answers_at_the_default_settings_equal_replay_through_1_and_4_leaders
             );
         }
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// Valid identity streams that the trees cannot take as they stand (sure
@@ -190,7 +189,6 @@ fn valid_identity_streams_never_stop_a_leader_and_repairs_equal_replay() {
             trace.display()
         );
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// Ten thousand people, at the default settings through 4 leaders: past
@@ -229,7 +227,6 @@ fn identity_answers_at_ten_thousand_tracks_equal_replay_through_4_leaders() {
     let d = got.max_abs_difference(&wanted);
     assert!(d < 1e-9, "live against replay: {d}");
     assert_eq!(last["predicted_identity"], want["predicted_identity"]);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// On the Radon belief, through 1 and 4 leaders at fixed places (tracks crossing regions, mixes
@@ -388,7 +385,6 @@ fn identity_queries_answer_at_a_thousand_tracks_through_4_leaders() {
     let row = identity_row(&one[0]["p_identity"], p.len());
     assert!(max_abs_difference(&[row], &p[7..8]) < 1e-12);
     assert_eq!(deployment.leaders_total("rows_held"), 1000);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A question whose marginals would take hours (Metropolis with 10^12
@@ -446,5 +442,4 @@ fn a_question_that_would_take_hours_is_stopped_at_its_deadline() {
         sampled[0]["sampling"]["blocks"].as_u64() >= Some(1),
         "{sampled:?}"
     );
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -706,5 +706,4 @@ fn voters_and_a_sensor_standby_under_access_control_take_over_and_answer() {
         deployment.log()
     );
     drop(deployment);
-    std::fs::remove_dir_all(&dir).ok();
 }
