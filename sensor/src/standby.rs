@@ -151,9 +151,10 @@ impl Replicator {
         Ok(replicator)
     }
 
-    /// The standby the journal is replicated to now, if one is up.
+    /// The standby the journal is replicated to now, if one is up (the
+    /// replication is told every change of the choice: [`Self::apply`]).
     pub(crate) fn current(&self) -> Option<&str> {
-        self.choice.current().filter(|_| self.machine.present())
+        self.choice.current()
     }
 
     /// The next change of a standby's token.
@@ -166,12 +167,7 @@ impl Replicator {
     /// there to be chosen once the role has moved on).
     pub(crate) fn token(&mut self, sample: &Sample) -> bool {
         let present = sample.kind() == SampleKind::Put;
-        let name = sample
-            .key_expr()
-            .as_str()
-            .rsplit('/')
-            .next()
-            .unwrap_or_default();
+        let name = Keys::chunk(sample.key_expr().as_str(), 0).unwrap_or_default();
         let mut chosen = false;
         for change in self.choice.token(name, present) {
             chosen |= self.apply(change);

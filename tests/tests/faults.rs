@@ -175,7 +175,6 @@ fn a_leader_lost_with_its_disk_is_adopted_from_its_standby_copy() {
     assert!(asked_again <= 4, "{asked_again} resend refusals logged");
     assert!(sensor_rejected <= 4, "the sensor refused {sensor_rejected}");
     drop(gone);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// Four leaders on disks of their own, a snapshot every 10 inputs, a
@@ -541,7 +540,6 @@ fn a_coordinator_killed_for_good_is_replaced_by_its_replica() {
         idmesh_tests::watermark_events(&answered)
     );
     final_is_twins(&deployment, &twin, "after the coordinator's loss");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// Three voters beside a deployment elect a leader of their group; with
@@ -596,7 +594,6 @@ fn voters_keep_a_leader_with_one_gone_and_take_it_back() {
     deployment.launch("voter", &gone);
     let (_, back) = wait(&deployment, 3, "the voter back from its log");
     assert!(back >= later);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The final answer, within 60 s, equals the offline twin's (`twin`, its
@@ -621,6 +618,24 @@ fn copy_in_sync(deployment: &Deployment, copy: &Path, holder: &str) -> u64 {
             Instant::now() < deadline,
             "the copy {} never in sync at epoch {held} ({at:?}):\n{}",
             copy.display(),
+            deployment.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Waits until the first sensor's stats name one of `standbys` as the one
+/// its journal is replicated to; that one.
+fn replicated_to<'a>(deployment: &Deployment, standbys: &'a [String]) -> &'a str {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let stats = deployment.sensor_stats()[0].clone();
+        if let Some(name) = standbys.iter().find(|n| stats["standby"] == n.as_str()) {
+            return name;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the stats never named a standby of {standbys:?}: {stats}\n{}",
             deployment.log()
         );
         std::thread::sleep(Duration::from_millis(200));
@@ -718,7 +733,6 @@ fn a_frozen_leader_is_superseded_through_the_voters_and_its_role_goes_home() {
         "the woken holder stopped the role:\n{log}"
     );
     drop(deployment);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The sensor's host lost for good (kill -9, its disk gone with it) about
@@ -787,7 +801,6 @@ fn a_sensor_lost_with_its_host_is_taken_over_by_its_standby() {
         started.elapsed().as_secs_f64()
     );
     drop(deployment);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The sensor role moves to its standby and back. The sensor frozen past
@@ -872,7 +885,6 @@ fn a_sensor_role_taken_over_keeps_a_standby_and_moves_back_when_that_host_is_los
         "after the sensor role moved to its standby and back",
     );
     drop(deployment);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The sensor's process frozen (SIGSTOP: its host cut off, the process
@@ -926,7 +938,6 @@ fn a_frozen_sensor_is_superseded_by_its_standby_and_stops_when_woken() {
         started.elapsed().as_secs_f64()
     );
     drop(deployment);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The sensor's standby cut off from the sensor while the voters still
@@ -995,7 +1006,6 @@ fn a_sensor_going_on_without_its_standby_fences_off_the_standbys_copy() {
         "after the sensor went on alone and came back",
     );
     drop(deployment);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A sensor with two standbys, each on a disk of its own. The one the
@@ -1024,40 +1034,16 @@ fn a_sensor_with_two_standbys_outlives_the_loss_of_one_and_then_its_own_host() {
             .join("sensor-0.standby.journal")
     };
     let names = [standby_name("sensor-0", 0), standby_name("sensor-0", 1)];
-    // The standby replicated to: its copy in sync at the epoch held now.
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let (first, chosen) = loop {
-        let held = held_by(&deployment, "sensor-0", "sensor-0", Duration::from_secs(30));
-        let in_sync = names.iter().position(|name| {
-            let epoch = copy_of(name).with_extension("journal.epoch");
-            idmesh_journal::read_number(&epoch, "sensor-copy").is_ok_and(|e| e == Some(held))
-        });
-        if let Some(i) = in_sync {
-            break (held, i);
-        }
-        assert!(
-            Instant::now() < deadline,
-            "no standby's copy in sync at epoch {held}:\n{}",
-            deployment.log()
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    };
-    let (lost, other) = (&names[chosen], &names[1 - chosen]);
-    // The sensor's stats name the standby it replicates to, and its epoch.
+    // The standby replicated to, as the sensor's stats name it: its copy
+    // is in sync at the epoch the sensor holds its role at.
+    let lost = replicated_to(&deployment, &names);
+    let first = copy_in_sync(&deployment, &copy_of(lost), "sensor-0");
     let stats = deployment.sensor_stats()[0].clone();
-    assert_eq!(stats["standby"], lost.as_str(), "{stats}");
     assert!(stats["epoch"].as_u64() >= Some(first), "{stats}");
+    let other = names.iter().find(|n| *n != lost).expect("two standbys");
     deployment.kill(lost);
     let moved = copy_in_sync(&deployment, &copy_of(other), "sensor-0");
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while deployment.sensor_stats()[0]["standby"] != other.as_str() {
-        assert!(
-            Instant::now() < deadline,
-            "the stats never named {other}: {}",
-            deployment.sensor_stats()[0]
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    assert_eq!(replicated_to(&deployment, &names), other);
     assert!(
         moved > first,
         "the sensor moved its role on before it replicated to {other}: epoch {first}, then {moved}"
