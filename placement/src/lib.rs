@@ -119,23 +119,25 @@ pub fn start(begin: &Begin, me: u16) -> Result<(RadonShare, Interest), Placement
     Ok((share, interest))
 }
 
-/// The count coupling of the factored belief's splits when `leaders`
-/// leaders share it: the best its holders can compute. One leader holds
-/// the whole belief and weighs by all of it (the coupled rule, what
-/// `idmesh replay` runs by default); each of several runs the local rule,
-/// which needs nothing beyond the components an event touches (what
-/// `idmesh replay --leaders N` runs). docs/design/beliefs.md, "Who weighs
-/// a split", says why and what each costs.
-pub fn split_coupling(leaders: usize) -> Coupling {
-    match leaders {
-        1 => Coupling::Coupled,
-        _ => Coupling::Local,
+/// The count coupling of the factored belief's splits: the best their
+/// holders can compute. One holder of the whole belief (a deployment of
+/// one leader, or of a crowd small enough to be held whole:
+/// [`FactoredStart::whole`]) weighs by all of it (the coupled rule, what
+/// `idmesh replay` runs by default); each of several leaders sharing it
+/// runs the local rule, which needs nothing beyond the components an
+/// event touches (what `idmesh replay --leaders N` runs on a crowd it
+/// spreads). docs/design/beliefs.md, "Who weighs a split", says why and
+/// what each costs.
+pub fn split_coupling(whole: bool) -> Coupling {
+    match whole {
+        true => Coupling::Coupled,
+        false => Coupling::Local,
     }
 }
 
-/// The factored belief's options a `Begin`'s settings name, on a stream
-/// of `leaders` leaders (its coupling: [`split_coupling`]).
-pub fn factored_options(start: &FactoredStart, leaders: usize) -> FactoredOptions {
+/// The factored belief's options a `Begin`'s settings name, held `whole`
+/// or shared (its coupling: [`split_coupling`]).
+pub fn factored_options(start: &FactoredStart, whole: bool) -> FactoredOptions {
     FactoredOptions {
         max_component: start.max_component as usize,
         split: match start.split {
@@ -145,7 +147,7 @@ pub fn factored_options(start: &FactoredStart, leaders: usize) -> FactoredOption
                 rounds: rounds as usize,
             },
         },
-        coupling: split_coupling(leaders),
+        coupling: split_coupling(whole),
         ..FactoredOptions::default()
     }
 }
@@ -157,7 +159,8 @@ pub fn start_factored(begin: &Begin, me: u16) -> Result<Option<FactoredShare>, P
     let Some(settings) = &begin.factored else {
         return Ok(None);
     };
-    let options = factored_options(settings, begin.leaders.len());
+    // Held whole, the first leader holds every track and the others none.
+    let options = factored_options(settings, begin.held_whole() && me == 0);
     let share = FactoredShare::start(field_of(begin), options, |t| begin.holds_at_start(t, me))?;
     Ok(Some(share))
 }

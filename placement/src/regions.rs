@@ -126,6 +126,13 @@ impl Regions {
         }
     }
 
+    /// A crowd held whole by the first leader
+    /// ([`FactoredStart::whole`](idmesh_protocol::wire::factored::FactoredStart::whole)):
+    /// every track with leader 0 from the start and for good.
+    pub fn whole(tracks: usize) -> Self {
+        Regions::new(&RegionRule::Fixed(vec![None]), 1, tracks)
+    }
+
     /// Every track held from the start, by leader `track mod L` (the one
     /// that would keep it unheld).
     fn held_round_robin(mut self, leaders: usize) -> Self {

@@ -141,7 +141,11 @@ impl Router {
         } else {
             RegionRule::fitted()
         };
-        let mut regions = Regions::starting(&rule, leaders, tracks, &config.placed);
+        let whole = (config.factored.as_ref()).is_some_and(|f| f.whole(tracks as u32, leaders));
+        let mut regions = match whole {
+            true => Regions::whole(tracks),
+            false => Regions::starting(&rule, leaders, tracks, &config.placed),
+        };
         // Only leaders that keep regional components take a mix's track.
         if !config.factored.as_ref().is_some_and(|f| f.regional) {
             regions = regions.keeping_mixes_across();

@@ -345,6 +345,7 @@ fn an_identity_stream_beyond_the_leaders_limit_is_refused_at_the_start() {
         split: idmesh_protocol::wire::factored::WireSplit::Original,
         shrink: true,
         regional: false,
+        spread_above: 0,
     });
     if let Err(e) = Router::new(factored, &header) {
         panic!("a known start of {} tracks: {e}", limit + 1);
@@ -590,6 +591,7 @@ fn an_identity_stream_under_the_factored_setting_is_factored() {
             split: WireSplit::Original,
             shrink: true,
             regional: false,
+            spread_above: 0,
         }));
         let router = Router::new(config, &header).unwrap();
         assert!(
@@ -621,6 +623,7 @@ fn a_factored_interest_shrinks_by_unfollow_requests_that_are_not_stale() {
         split: WireSplit::Original,
         shrink: true,
         regional: false,
+        spread_above: 0,
     });
     // Placed as in `router`: a at (0, 0), b at (10, 0).
     let mut config = unplaced(factored);
@@ -709,6 +712,7 @@ fn under_the_regional_rule_a_handover_ends_the_old_leaders_interest() {
             split: WireSplit::Original,
             shrink: true,
             regional,
+            spread_above: 0,
         }));
         config.leaders[0].at = Some((0.0, 0.0));
         config.leaders[1].at = Some((10.0, 0.0));

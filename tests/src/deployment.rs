@@ -99,15 +99,20 @@ pub struct Factored {
     pub max_component: u32,
     pub split: SplitSetting,
     pub regional: bool,
+    /// `spread_above`: 0 here unless a test says, since the tests' small
+    /// crowds are there to exercise leaders sharing a crowd, which a
+    /// topology's default holds whole.
+    pub spread_above: u32,
 }
 
 impl Default for Factored {
-    /// A topology's defaults.
+    /// A topology's defaults, but every crowd spread.
     fn default() -> Self {
         Factored {
             max_component: idmesh_deploy::runtime::topology::default_max_component(),
             split: SplitSetting::default(),
             regional: true,
+            spread_above: 0,
         }
     }
 }
@@ -272,6 +277,7 @@ pub(crate) fn topology(name: &str, trace: &Path, settings: &Settings) -> Topolog
             topology.max_component = factored.max_component;
             topology.split = factored.split;
             topology.regional = factored.regional;
+            topology.spread_above = factored.spread_above;
         }
         None => topology.belief = BeliefKind::Radon,
     }

@@ -114,7 +114,7 @@ fn a_sensor_fed_positions_serves_what_replay_of_the_extracted_trace_computes() {
     assert_eq!(watermark_events(&last), events, "the sensor's events");
     let twin = deployment.twin_summary(&reports);
     assert_close("the twin", &last["p_red"], &twin["final_p_red"]);
-    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    let replayed = replay_summary(&extracted, &["--leaders", "2", "--spread-above", "0"]);
     assert_close(
         "replay of idmesh extract's trace",
         &last["p_red"],
@@ -164,7 +164,7 @@ fn reports_piped_into_an_extracting_sensor_give_replays_answer() {
     drop(pipe);
     let answer = deployment.final_marginals(Duration::from_secs(60));
     assert_eq!(watermark_events(&answer), events, "the sensor's events");
-    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    let replayed = replay_summary(&extracted, &["--leaders", "2", "--spread-above", "0"]);
     assert_close("piped reports", &answer["p_red"], &replayed["final_p_red"]);
     assert!(
         deployment.log().contains("send move and detect lines"),
@@ -197,7 +197,7 @@ fn a_python_tracker_loop_on_the_ingest_key_gives_replays_answer() {
     let extracted = dir.join("extracted.jsonl");
     extract(&closed, &extracted);
     let events = trace_events(&extracted).len() as u64;
-    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    let replayed = replay_summary(&extracted, &["--leaders", "2", "--spread-above", "0"]);
 
     let settings = Settings {
         leaders: 2,
@@ -247,7 +247,7 @@ fn two_extracting_sensors_fed_by_region_give_replays_answer() {
     extracted_events(&reports, &extracted);
     let mixes = lines_of_kind(&extracted, "mix");
     assert!(mixes >= 20, "{mixes} mixes extracted");
-    let replayed = replay_summary(&extracted, &["--leaders", "2"]);
+    let replayed = replay_summary(&extracted, &["--leaders", "2", "--spread-above", "0"]);
     let settings = Settings {
         leaders: 2,
         sensors: 2,
@@ -330,7 +330,7 @@ fn a_real_scenes_tracker_output_served_live_answers_as_the_simulator() {
     };
     let deployment = Deployment::start("extraction-scene", &reports, &settings);
     let last = deployment.final_marginals(Duration::from_secs(90));
-    let simulator = replay_summary(&simulated, &["--leaders", "2"]);
+    let simulator = replay_summary(&simulated, &["--leaders", "2", "--spread-above", "0"]);
     assert_close(
         "replay of the simulator's trace",
         &last["p_red"],

@@ -40,6 +40,7 @@ fn exact() -> Factored {
         max_component: MAX_COMPONENT as u32,
         split: SplitSetting::Original,
         regional: false,
+        spread_above: 0,
     }
 }
 

@@ -23,6 +23,7 @@ const FACTORED: Factored = Factored {
     max_component: 3,
     split: SplitSetting::Original,
     regional: false,
+    spread_above: 0,
 };
 const FACTORED_REPLAY: &[&str] = &[
     "--method",

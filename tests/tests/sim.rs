@@ -50,6 +50,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
                 total.tracks_taken += tally.tracks_taken;
                 total.window_waits += tally.window_waits;
                 total.factored += tally.factored;
+                total.held_whole += tally.held_whole;
                 total.changes += tally.changes;
                 total.identities += tally.identities;
                 total.identity_answers += tally.identity_answers;
@@ -83,7 +84,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
     }
     let seconds = started.elapsed().as_secs_f64();
     eprintln!(
-        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief, {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby ({} with two): {} replication messages ({} whole journals), {} standby restarts, {} epochs moved (going on without a standby, or choosing one), {} switches to the other standby, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voter faults ({} of them the majority's, for a while), {} claims made through them mid-stream",
+        "{} schedules in {seconds:.2} s ({:.0} schedules/s): {} answers checked, {} queries refused, {} leader crashes ({} found their journal damaged), {} sensor crashes ({} from a compacted journal), {} messages ({} lost), {} transfers, {} follows, {} unfollows, {} handovers, {} tracks taken by mixes, {} waits for the window; {} schedules of the factored belief ({} of several leaders held whole by the first), {} of their leaders' replies told as changes; {} of them with identities, {} identity answers checked ({} made of trees), {} identity events repaired; {} hosts lost with their disk, {} holders cut off and superseded, {} roles adopted ({} from a standby copy), {} snapshots sent to standbys, {} messages of former holders fenced off; {} schedules with a sensor's standby ({} with two): {} replication messages ({} whole journals), {} standby restarts, {} epochs moved (going on without a standby, or choosing one), {} switches to the other standby, {} sensor hosts lost, {} sensor roles adopted from the copy; {} raft messages among the voters, {} voter faults ({} of them the majority's, for a while), {} claims made through them mid-stream",
         seeds.len(),
         seeds.len() as f64 / seconds,
         total.answered,
@@ -101,6 +102,7 @@ fn every_schedule_answers_like_the_centralized_engine() {
         total.tracks_taken,
         total.window_waits,
         total.factored,
+        total.held_whole,
         total.changes,
         total.identities,
         total.identity_answers,

@@ -250,6 +250,10 @@ fn plan(kind: Kind, leaders: usize, n: usize, trace: &Path) -> Result<Topology> 
     topology.prefix = format!("idmesh/accuracy-{}-{}", kind.tag(), std::process::id());
     topology.belief = kind.belief();
     topology.regional = kind == Kind::Regional;
+    // It measures the leaders sharing a crowd, so every crowd is spread;
+    // a crowd held whole is one leader's, the one holder's belief
+    // (tests/tests/factored.rs holds such a deployment to replay).
+    topology.spread_above = 0;
     // The Radon belief's settings (only `belief = "radon"` reads
     // them): the distributed rule, the
     // overcomplete pruning at the Table III budget per leader.
@@ -290,7 +294,7 @@ fn regional(written: &Written, trace: &Path, topology: &Topology) -> Result<Vec<
     };
     written.regional(
         trace,
-        factored_options(&start, topology.leader.len()),
+        factored_options(&start, false),
         &rule,
         topology.leader.len(),
     )

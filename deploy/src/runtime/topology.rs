@@ -151,6 +151,15 @@ pub struct Topology {
     /// --topology` runs it too.
     #[serde(default = "yes", skip_serializing_if = "is_true")]
     pub regional: bool,
+    /// Factored: a crowd of more tracks than this is spread over the
+    /// leaders; one of at most this many is held whole by the first leader,
+    /// whose splits weigh the whole belief (docs/guide/deploying.md,
+    /// "Belief settings"). 0 spreads every crowd.
+    #[serde(
+        default = "default_spread_above",
+        skip_serializing_if = "is_default_spread_above"
+    )]
+    pub spread_above: u32,
     /// How tracks are shared among leaders by where they are.
     #[serde(default, skip_serializing_if = "is_default")]
     pub regions: RegionsSetting,
@@ -329,6 +338,11 @@ pub enum SplitSetting {
     LeastLoss,
 }
 
+/// The crowd size a factored stream spreads above unless the topology says.
+pub fn default_spread_above() -> u32 {
+    idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE
+}
+
 /// The most tracks of a factored component unless the topology says.
 pub fn default_max_component() -> u32 {
     idmesh_belief::FactoredOptions::default().max_component as u32
@@ -355,6 +369,7 @@ impl Topology {
             // it they follow every track a component ever brought them.
             shrink: true,
             regional: self.regional,
+            spread_above: self.spread_above,
         })
     }
 }
@@ -725,6 +740,10 @@ fn is_default_host(host: &str) -> bool {
     host == default_host()
 }
 
+fn is_default_spread_above(size: &u32) -> bool {
+    *size == default_spread_above()
+}
+
 fn is_default_max_component(max: &u32) -> bool {
     *max == default_max_component()
 }
@@ -774,6 +793,7 @@ impl Topology {
             split: SplitSetting::default(),
             removed_shrink_interest: None,
             regional: true,
+            spread_above: default_spread_above(),
             regions: RegionsSetting::default(),
             distributed_rule: false,
             budget: 0,

@@ -26,6 +26,7 @@ impl Topology {
             (args.split != SplitChoice::LeastLoss, "--split"),
             (args.regions.is_some(), "--regions"),
             (args.leaders.is_some(), "--leaders"),
+            (args.spread_above.is_some(), "--spread-above"),
             (args.budget.is_some(), "--budget"),
             (args.distributed_rule, "--distributed-rule"),
         ];
@@ -37,6 +38,7 @@ impl Topology {
         let header = TraceReader::open(&args.trace)
             .ok()
             .and_then(|mut r| r.read_header().ok());
+        let tracks = header.as_ref().map(|h| h.tracks);
         if let Some(header) = header {
             if header.identities.is_some() && header.red_count().is_none() {
                 let trees = self.belief == BeliefKind::Factored
@@ -54,14 +56,20 @@ impl Topology {
                 args.method = Some(Method::Factored);
                 args.max_component = Some(self.max_component as usize);
                 // What the leaders weigh their splits by, whether or not
-                // regions share the belief among them.
-                args.coupling = Some(split_coupling(self.leader.len()).into());
+                // regions share the belief among them: a crowd held whole
+                // by the first leader (an unreadable header is left to
+                // replay, which names it) is one holder's.
+                let whole = self
+                    .factored()
+                    .is_some_and(|f| tracks.is_some_and(|n| f.whole(n as u32, self.leader.len())));
+                args.coupling = Some(split_coupling(whole).into());
+                args.spread_above = Some(self.spread_above);
                 args.split = match self.split {
                     SplitSetting::Original => SplitChoice::Original,
                     SplitSetting::Recent => SplitChoice::Recent,
                     SplitSetting::LeastLoss => SplitChoice::LeastLoss,
                 };
-                if self.regional && self.leader.len() > 1 {
+                if self.regional && !whole {
                     match self.regions {
                         RegionsSetting::Fitted => args.leaders = Some(self.leader.len() as u16),
                         RegionsSetting::Fixed => {

@@ -260,7 +260,7 @@ mod tests {
     fn a_deployed_row_is_the_regional_replay_of_the_written_file() {
         let crowd = table3_crowds(1)
             .into_iter()
-            .find(|c| c.n == 60 && c.swap == 0.5 && c.start == Start::Known)
+            .find(|c| c.n == 100 && c.swap == 0.5 && c.start == Start::Known)
             .unwrap();
         let dir = std::env::temp_dir().join(format!("idmesh-deployed-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
@@ -279,7 +279,6 @@ mod tests {
                 .unwrap();
             assert_eq!(written.tracking_error(&regional).unwrap(), scored(leaders));
         }
-        std::fs::remove_dir_all(&dir).unwrap();
         // The regions matter: one leader holds the whole belief and weighs
         // its splits by all of it, and eight keep components apart at
         // other events.
@@ -287,5 +286,14 @@ mod tests {
         let local = super::super::score::score(Method::FactoredLocal, &written.trace, 0).error;
         assert_eq!(scored(1), coupled);
         assert_ne!(scored(8), local);
+        // A crowd of 20 is held whole by one of the leaders.
+        let small = table3_crowds(1)
+            .into_iter()
+            .find(|c| c.n == 20 && c.swap == 0.5 && c.start == Start::Known)
+            .unwrap();
+        let small = small.write(&dir.join("small.jsonl")).unwrap();
+        let score = |method| super::super::score::score(method, &small.trace, 0).error;
+        assert_eq!(score(Method::Deployed(4)), score(Method::Factored));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -144,8 +144,9 @@ impl Method {
             Method::Factored => Recipe::factored(Coupling::Coupled),
             Method::FactoredLocal => Recipe::factored(Coupling::Local),
             // Its regions wrap the belief where the trace is replayed
-            // (`Method::leaders`).
-            Method::Deployed(leaders) => Recipe::factored(split_coupling(leaders)),
+            // (`Method::leaders`), on a crowd it spreads; a crowd held
+            // whole is one holder's ([`Running::new`](super::score)).
+            Method::Deployed(leaders) => Recipe::factored(split_coupling(leaders <= 1)),
         }
     }
 

@@ -34,7 +34,8 @@ use idmesh_belief::{
     brier_score, expected_tracking_error, log_loss, predict_red, BeliefError, FactoredBelief,
     Field, PropertyFilter, Reliability,
 };
-use idmesh_placement::{RegionRule, Regional, Regions};
+use idmesh_placement::{split_coupling, RegionRule, Regional, Regions};
+use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
 use std::time::Instant;
 
 /// Seconds of CPU time this thread has used (`CLOCK_THREAD_CPUTIME_ID`), or
@@ -206,6 +207,11 @@ impl Running {
         let Some(leaders) = method.leaders() else {
             return Ok(Running::Plain(built));
         };
+        // A crowd the deployment holds whole: one holder's belief.
+        if leaders <= 1 || field.tracks <= DEFAULT_SPREAD_ABOVE as usize {
+            let whole = Recipe::factored(split_coupling(true)).build(field.clone())?;
+            return Ok(Running::Plain(whole));
+        }
         let Recipe::Factored(options) = method.recipe(0) else {
             return Err(BeliefError::Unsupported {
                 method: "deployed",

@@ -5,6 +5,7 @@ use super::identity::{IdentityMethod, MarginalChoice};
 use clap::{Args, ValueEnum};
 use idmesh_belief::Coupling;
 use idmesh_placement::split_coupling;
+use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, Args)]
@@ -98,6 +99,13 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "L", value_parser = clap::value_parser!(u16).range(1..))]
     pub leaders: Option<u16>,
 
+    /// --method factored with --leaders or --regions: a crowd of at most
+    /// this many tracks is held whole by one leader, as a deployment holds
+    /// it (splits weighed by the whole belief, no regions); a larger one is
+    /// spread. Default: a deployment's (64); 0 spreads every crowd.
+    #[arg(long, value_name = "N")]
+    pub spread_above: Option<u32>,
+
     /// Compute what the deployment this topology file describes computes:
     /// its belief settings and its leaders (`idmesh` reads the file and
     /// sets the options above from it; they may not be given as well).
@@ -116,17 +124,29 @@ impl ReplayArgs {
         self.method.unwrap_or(DEFAULT_PROPERTY_METHOD)
     }
 
-    /// The coupling of the factored belief's splits: the one named, or the
-    /// one the leaders whose regions replay runs under would compute
-    /// (`idmesh_placement::split_coupling`; none given: one holder).
-    pub(crate) fn coupling(&self) -> Coupling {
-        let leaders = match (&self.regions, self.leaders) {
+    /// How many leaders replay runs the factored belief under: one unless
+    /// --leaders or --regions say.
+    pub(crate) fn leaders(&self) -> usize {
+        match (&self.regions, self.leaders) {
             (Some(places), _) => places.0.len(),
             (None, Some(leaders)) => usize::from(leaders),
             (None, None) => 1,
-        };
+        }
+    }
+
+    /// Whether those leaders hold a crowd of `tracks` tracks whole, as a
+    /// deployment does (`FactoredStart::whole`): one holder, no regions.
+    pub(crate) fn whole(&self, tracks: usize) -> bool {
+        let spread_above = self.spread_above.unwrap_or(DEFAULT_SPREAD_ABOVE);
+        self.leaders() <= 1 || tracks <= spread_above as usize
+    }
+
+    /// The coupling of the factored belief's splits on a crowd of
+    /// `tracks` tracks: the one named, or the one its holders compute
+    /// (`idmesh_placement::split_coupling`; none given: one holder).
+    pub(crate) fn coupling(&self, tracks: usize) -> Coupling {
         self.coupling
-            .map_or_else(|| split_coupling(leaders), Coupling::from)
+            .map_or_else(|| split_coupling(self.whole(tracks)), Coupling::from)
     }
 }
 

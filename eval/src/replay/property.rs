@@ -119,10 +119,11 @@ pub(crate) fn check_options(args: &ReplayArgs) -> Result<()> {
         || args.max_component.is_some()
         || args.split != SplitChoice::LeastLoss
         || args.regions.is_some()
-        || args.leaders.is_some_and(|l| l > 1);
+        || args.leaders.is_some_and(|l| l > 1)
+        || args.spread_above.is_some();
     if method != Method::Factored && factored_options {
         bail!(
-            "--coupling, --max-component, --split, --regions and --leaders apply to --method factored, not to --method {}",
+            "--coupling, --max-component, --split, --regions, --leaders and --spread-above apply to --method factored, not to --method {}",
             method.name()
         );
     }
@@ -169,7 +170,8 @@ pub(crate) fn replay<R: BufRead>(
     debug!(tracks = field.tracks, red = ?field.red.known(), known_start = field.initial_red.is_some(), "field");
     let red = field.red.known();
     let built = |e| line_error(&source)(1, "header", e);
-    match (region_rule(args), recipe(args).map_err(built)?) {
+    let recipe = recipe(args, field.tracks).map_err(built)?;
+    match (region_rule(args, field.tracks), recipe) {
         (Some((rule, leaders)), Recipe::Factored(options)) => {
             let filter = Timed::start(|| {
                 let belief = FactoredBelief::with_options(field.clone(), options)?;
@@ -188,15 +190,19 @@ pub(crate) fn replay<R: BufRead>(
     }
 }
 
-/// The regional rule `args` ask for, with its leader count: fixed places
-/// (`--regions`) or cells fitted to the crowd (`--leaders`, more than one).
-fn region_rule(args: &ReplayArgs) -> Option<(RegionRule, usize)> {
+/// The regional rule `args` ask for on a crowd of `tracks` tracks, with
+/// its leader count: fixed places (`--regions`) or cells fitted to the
+/// crowd (`--leaders`, more than one); none for a crowd held whole.
+fn region_rule(args: &ReplayArgs, tracks: usize) -> Option<(RegionRule, usize)> {
+    if args.whole(tracks) {
+        return None;
+    }
     match (&args.regions, args.leaders) {
         (Some(Places(places)), _) => Some((
             RegionRule::Fixed(places.iter().map(|&p| Some(p)).collect()),
             places.len(),
         )),
-        (None, Some(leaders)) if leaders > 1 => Some((RegionRule::fitted(), usize::from(leaders))),
+        (None, Some(leaders)) => Some((RegionRule::fitted(), usize::from(leaders))),
         _ => None,
     }
 }
@@ -288,7 +294,7 @@ fn check_size(args: &ReplayArgs, field: &Field) -> Result<()> {
 
 /// The filter `args.method` names, for the one factory; an identity method
 /// is not one (`replay::dispatch` sends those to `replay::identity`).
-fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
+fn recipe(args: &ReplayArgs, tracks: usize) -> Result<Recipe, BeliefError> {
     let radon = |sparsify: fn(usize) -> Sparsify| Recipe::Radon {
         sparsify: args.budget.map(sparsify),
         distributed_rule: args.distributed_rule,
@@ -304,7 +310,7 @@ fn recipe(args: &ReplayArgs) -> Result<Recipe, BeliefError> {
         Method::Order2 => Recipe::Order(2),
         Method::Order3 => Recipe::Order(3),
         Method::Factored => Recipe::Factored(FactoredOptions {
-            coupling: args.coupling(),
+            coupling: args.coupling(tracks),
             max_component: args
                 .max_component
                 .unwrap_or(FactoredOptions::default().max_component),
@@ -406,6 +412,7 @@ pub(super) mod tests {
     use crate::replay::args::{parse_places, CouplingChoice};
     use crate::replay::driver::output_lines;
     use idmesh_belief::Coupling;
+    use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
     use std::path::PathBuf;
 
     /// Replay arguments naming `method` and `budget`, nothing else.
@@ -427,6 +434,7 @@ pub(super) mod tests {
             split: SplitChoice::LeastLoss,
             regions: None,
             leaders: None,
+            spread_above: None,
             topology: None,
         }
     }
@@ -456,7 +464,8 @@ pub(super) mod tests {
 
     /// Without `--coupling`, the factored belief splits as the leaders of
     /// the same shape would: by the whole belief for one holder (also
-    /// under the regions of one place), by the local rule for several.
+    /// under the regions of one place, and on a crowd small enough to be
+    /// held whole), by the local rule for several sharing a larger crowd.
     #[test]
     fn the_default_coupling_is_what_the_leaders_of_that_shape_compute() {
         let with = |leaders: Option<u16>, places: Option<&str>| ReplayArgs {
@@ -464,16 +473,32 @@ pub(super) mod tests {
             regions: places.map(|p| parse_places(p).unwrap()),
             ..args(Method::Factored, None)
         };
-        assert_eq!(with(None, None).coupling(), Coupling::Coupled);
-        assert_eq!(with(Some(1), None).coupling(), Coupling::Coupled);
-        assert_eq!(with(Some(4), None).coupling(), Coupling::Local);
-        assert_eq!(with(None, Some("0,0")).coupling(), Coupling::Coupled);
-        assert_eq!(with(None, Some("0,0;5,0")).coupling(), Coupling::Local);
+        let large = DEFAULT_SPREAD_ABOVE as usize + 1;
+        assert_eq!(with(None, None).coupling(large), Coupling::Coupled);
+        assert_eq!(with(Some(1), None).coupling(large), Coupling::Coupled);
+        assert_eq!(with(Some(4), None).coupling(large), Coupling::Local);
+        assert_eq!(with(None, Some("0,0")).coupling(large), Coupling::Coupled);
+        assert_eq!(with(None, Some("0,0;5,0")).coupling(large), Coupling::Local);
+        // A small crowd is held whole by one of the leaders.
+        let small = DEFAULT_SPREAD_ABOVE as usize;
+        assert_eq!(with(Some(4), None).coupling(small), Coupling::Coupled);
+        assert_eq!(
+            with(None, Some("0,0;5,0")).coupling(small),
+            Coupling::Coupled
+        );
+        assert!(region_rule(&with(Some(4), None), small).is_none());
+        assert!(region_rule(&with(Some(4), None), large).is_some());
+        let spread = ReplayArgs {
+            spread_above: Some(0),
+            ..with(Some(4), None)
+        };
+        assert_eq!(spread.coupling(small), Coupling::Local);
+        assert!(region_rule(&spread, small).is_some());
         let named = ReplayArgs {
             coupling: Some(CouplingChoice::Flat),
             ..with(Some(4), None)
         };
-        assert_eq!(named.coupling(), Coupling::Flat);
+        assert_eq!(named.coupling(large), Coupling::Flat);
     }
 
     #[test]
@@ -541,6 +566,8 @@ pub(super) mod tests {
         let factored = |regions: Option<&str>| {
             let mut a = args(Method::Factored, None);
             a.regions = regions.map(|r| parse_places(r).unwrap());
+            // So small a crowd is held whole unless told to spread.
+            a.spread_above = Some(0);
             let out = replay_text(&a, trace).unwrap();
             out[0]["p_red"].clone()
         };

@@ -978,6 +978,7 @@ fn a_leader_pushes_its_sums_at_every_cut_as_a_change_to_the_last_pushed() {
         split: WireSplit::Original,
         shrink: false,
         regional: false,
+        spread_above: 0,
     });
     let mut node = Node::new(Leader::new("a"), timers());
     node.step(Duration::ZERO, batch(0, vec![(1, Item::Begin(start))], 1));

@@ -79,6 +79,7 @@ fn factored_leader_with(leaders: &[&str], owners: Vec<u16>, regional: bool) -> L
         split: WireSplit::Original,
         shrink: true,
         regional,
+        spread_above: 0,
     });
     let mut leader = Leader::new("a");
     leader
@@ -1072,6 +1073,7 @@ fn factored_leaders_carry_the_rows_through_mixes_exchanges_handovers_and_snapsho
             split: WireSplit::Original,
             shrink: true,
             regional,
+            spread_above: 0,
         });
         let mut central = InformationMatrix::from_assignment(
             &start,
@@ -1142,6 +1144,7 @@ fn factored_identity_leader(owners: Vec<u16>, regional: bool) -> Leader {
         split: WireSplit::Original,
         shrink: true,
         regional,
+        spread_above: 0,
     });
     let mut leader = Leader::new("a");
     leader
@@ -1479,6 +1482,7 @@ fn factored_leaders_carry_identity_trees_through_mixes_swaps_handovers_and_snaps
             split: WireSplit::Original,
             shrink: true,
             regional,
+            spread_above: 0,
         });
         let mut central = FactoredIdentity::from_assignment(&start, identity_options(cap)).unwrap();
         let mut hand = Hand::new(Item::Begin(begin), &["a", "b", "c"]);

@@ -30,7 +30,17 @@ pub struct FactoredStart {
     /// stays where its holder surveils it. An approximation that
     /// `idmesh replay --regions` runs too.
     pub regional: bool,
+    /// A crowd of more tracks than this is spread over the leaders; one of
+    /// at most this many is held whole by the first leader, which weighs
+    /// every split by the whole belief (docs/design/beliefs.md, "Who weighs
+    /// a split"): what `idmesh replay` computes. A stream of one leader is
+    /// held whole whatever its size ([`FactoredStart::whole`]).
+    pub spread_above: u32,
 }
+
+/// The crowd size a deployment spreads above unless its topology says
+/// (docs/design/beliefs.md, "Who weighs a split", says why this size).
+pub const DEFAULT_SPREAD_ABOVE: u32 = 64;
 
 /// How a component too large to keep is split (`belief::SplitRule`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -85,6 +95,13 @@ impl FactoredStart {
             ));
         }
         Ok(())
+    }
+
+    /// Whether the first leader holds the whole belief of a stream of
+    /// `tracks` tracks among `leaders` leaders: it surveils every track,
+    /// the others none, and its splits are weighed by all of it.
+    pub fn whole(&self, tracks: u32, leaders: usize) -> bool {
+        leaders <= 1 || tracks <= self.spread_above
     }
 
     /// Whether each leader follows exactly the tracks it surveils: under

@@ -75,7 +75,9 @@ use serde::Serialize;
 /// which the coordinator fences on.
 /// 11: the sensor's records for its standby (`Replicate`) carry the
 /// sensor role's epoch, which the standby's takeover names.
-pub const VERSION: u16 = 11;
+/// 12: a factored stream's `Begin` says the crowd size it spreads above
+/// (`FactoredStart::spread_above`); a smaller one is held whole.
+pub const VERSION: u16 = 12;
 
 /// Why bytes from the network were not a message.
 #[derive(Debug, thiserror::Error)]

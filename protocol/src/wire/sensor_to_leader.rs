@@ -180,6 +180,14 @@ impl Begin {
         self.owners.get(track as usize) == Some(&UNHELD)
     }
 
+    /// Whether the first leader holds the whole factored belief
+    /// ([`FactoredStart::whole`]): false on a Radon stream.
+    pub fn held_whole(&self) -> bool {
+        self.factored
+            .as_ref()
+            .is_some_and(|f| f.whole(self.tracks, self.leaders.len()))
+    }
+
     /// Whether leader `me` holds the start component (and row) of `track`:
     /// it surveils the track, or keeps it unheld.
     pub fn holds_at_start(&self, track: u32, me: u16) -> bool {
@@ -447,6 +455,19 @@ impl Begin {
         }
         if let Some(factored) = &self.factored {
             factored.check()?;
+        }
+        if let Some(t) = self
+            .held_whole()
+            .then(|| self.owners.iter().position(|&o| o != 0))
+        {
+            if let Some(t) = t {
+                return Err(format!(
+                    "begin owners[{t}] = {}: a crowd of {n} tracks (spread_above = {}) is held \
+                     whole by the first leader",
+                    self.owners[t],
+                    self.factored.as_ref().map_or(0, |f| f.spread_above)
+                ));
+            }
         }
         if let Some(cap) = self.factored_identity {
             require((2..=IDENTITY_GROUP).contains(&cap), || {

@@ -33,6 +33,7 @@ pub(super) fn router(factored: bool) -> Router {
             split: idmesh_protocol::wire::factored::WireSplit::Original,
             shrink: false,
             regional: false,
+            spread_above: 0,
         }),
         sensor: "s".into(),
         leaders: (0..LEADERS)

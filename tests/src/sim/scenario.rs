@@ -18,7 +18,7 @@ use idmesh_identity::{
 };
 use idmesh_placement::{factored_options, identity_options, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Header, Identify, Line, Mix, Move, Observe};
-use idmesh_protocol::wire::factored::{FactoredStart, WireSplit};
+use idmesh_protocol::wire::factored::{FactoredStart, WireSplit, DEFAULT_SPREAD_ABOVE};
 use idmesh_sensor::{Gateway, LeaderPlace, Router, RouterConfig};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -272,6 +272,12 @@ fn random_factored(rng: &mut ChaCha8Rng) -> Option<FactoredStart> {
         ][rng.gen_range(0..3)],
         shrink: true,
         regional: rng.gen_bool(0.5),
+        // A third of them held whole by the first leader (the default
+        // for crowds this small), the others spread.
+        spread_above: match rng.gen_bool(1.0 / 3.0) {
+            true => DEFAULT_SPREAD_ABOVE,
+            false => 0,
+        },
     })
 }
 
@@ -297,8 +303,9 @@ fn centralized(
     // The centralized engine with the leaders' options: the factored
     // belief with the local rule (and the regional rule where the leaders
     // run it), or the Radon belief.
-    if let Some(start) = factored.filter(|f| f.regional) {
-        let belief = FactoredBelief::with_options(field, factored_options(&start, leaders))
+    let whole = (factored.as_ref()).is_some_and(|f| f.whole(header.tracks as u32, leaders));
+    if let Some(start) = factored.filter(|f| f.regional && !whole) {
+        let belief = FactoredBelief::with_options(field, factored_options(&start, whole))
             .map_err(|e| e.to_string())?;
         let mut engine = Regional::new(belief, Regions::new(rule, leaders, header.tracks));
         let mut out = vec![engine.marginals().map_err(|e| e.to_string())?];
@@ -310,7 +317,7 @@ fn centralized(
     }
     let mut engine: Box<dyn PropertyFilter> = match &factored {
         Some(start) => Box::new(
-            FactoredBelief::with_options(field, factored_options(start, leaders))
+            FactoredBelief::with_options(field, factored_options(start, whole))
                 .map_err(|e| e.to_string())?,
         ),
         None => Box::new(RadonBelief::with_options(field, options).map_err(|e| e.to_string())?),

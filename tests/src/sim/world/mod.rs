@@ -187,6 +187,9 @@ pub struct Tally {
     pub window_waits: u64,
     /// Schedules whose leaders held the factored belief.
     pub factored: u64,
+    /// Of them, schedules of several leaders whose crowd the first held
+    /// whole (splits weighed by all of it).
+    pub held_whole: u64,
     /// Schedules with identities (factored), and identity answers checked.
     pub identities: u64,
     pub identity_answers: u64,
@@ -291,6 +294,9 @@ impl World {
     pub(crate) fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
         let scenario_factored = scenario.factored.is_some();
+        let held_whole = scenario.leaders.len() > 1
+            && (scenario.factored.as_ref())
+                .is_some_and(|f| f.whole(scenario.header.tracks as u32, scenario.leaders.len()));
         let scenario_identities = scenario.identity.is_some();
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
@@ -318,6 +324,7 @@ impl World {
             calm: false,
             tally: Tally {
                 factored: scenario_factored as u64,
+                held_whole: held_whole as u64,
                 identities: scenario_identities as u64,
                 ..Tally::default()
             },
