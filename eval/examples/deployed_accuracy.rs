@@ -26,8 +26,9 @@ use idmesh_belief::{
     PropertyFilter,
 };
 use idmesh_eval::eval::table3_crowds;
-use idmesh_placement::{RegionRule, Regional, Regions};
+use idmesh_placement::{split_coupling, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader};
+use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -36,46 +37,73 @@ use std::time::Instant;
 /// runs at.
 const N: usize = 20;
 
-/// One belief of the study: its row label, its coupling, and the leaders
-/// whose regions it runs under (1: no regions).
+/// One belief of the study: its row label, its coupling (None: what a
+/// deployment of that many leaders decides at its defaults), and the
+/// leaders whose regions it runs under (1: no regions).
 struct Config {
     name: &'static str,
-    coupling: Coupling,
+    coupling: Option<Coupling>,
     leaders: usize,
 }
 
-const CONFIGS: [Config; 6] = [
+const CONFIGS: [Config; 8] = [
     Config {
         name: "one holder: coupled (replay, one leader)",
-        coupling: Coupling::Coupled,
+        coupling: Some(Coupling::Coupled),
         leaders: 1,
     },
     Config {
         name: "one holder: local",
-        coupling: Coupling::Local,
+        coupling: Some(Coupling::Local),
         leaders: 1,
     },
     Config {
-        name: "2 leaders, regional: local (as deployed)",
-        coupling: Coupling::Local,
+        name: "2 leaders as deployed (default: held whole)",
+        coupling: None,
         leaders: 2,
     },
     Config {
-        name: "2 leaders, regional: coupled (no leader can)",
-        coupling: Coupling::Coupled,
+        name: "2 leaders spread, regional: local (spread_above = 0)",
+        coupling: Some(Coupling::Local),
         leaders: 2,
     },
     Config {
-        name: "4 leaders, regional: local (as deployed)",
-        coupling: Coupling::Local,
+        name: "2 leaders spread, regional: coupled (no leader can)",
+        coupling: Some(Coupling::Coupled),
+        leaders: 2,
+    },
+    Config {
+        name: "4 leaders as deployed (default: held whole)",
+        coupling: None,
         leaders: 4,
     },
     Config {
-        name: "4 leaders, regional: coupled (no leader can)",
-        coupling: Coupling::Coupled,
+        name: "4 leaders spread, regional: local (spread_above = 0)",
+        coupling: Some(Coupling::Local),
+        leaders: 4,
+    },
+    Config {
+        name: "4 leaders spread, regional: coupled (no leader can)",
+        coupling: Some(Coupling::Coupled),
         leaders: 4,
     },
 ];
+
+impl Config {
+    /// The coupling and the leaders the belief runs under: a row "as
+    /// deployed" takes what a deployment of its leaders decides for a
+    /// crowd of `tracks` at the default `spread_above` (held whole: one
+    /// holder, the coupled rule; spread: the local rule under regions).
+    fn resolved(&self, tracks: usize) -> (Coupling, usize) {
+        match self.coupling {
+            Some(coupling) => (coupling, self.leaders),
+            None => match self.leaders <= 1 || tracks <= DEFAULT_SPREAD_ABOVE as usize {
+                true => (split_coupling(true), 1),
+                false => (split_coupling(false), self.leaders),
+            },
+        }
+    }
+}
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -142,12 +170,13 @@ fn answers(path: &Path, config: Option<&Config>) -> Result<Vec<Vec<f64>>> {
     let mut filter = match config {
         None => Filter::Plain(Box::new(DenseFilter::new(field)?)),
         Some(c) => {
+            let (coupling, leaders) = c.resolved(tracks);
             let options = FactoredOptions {
-                coupling: c.coupling,
+                coupling,
                 ..FactoredOptions::default()
             };
             let belief = FactoredBelief::with_options(field, options)?;
-            match c.leaders {
+            match leaders {
                 1 => Filter::Plain(Box::new(belief)),
                 l => Filter::Regional(Box::new(Regional::new(
                     belief,
@@ -201,11 +230,14 @@ fn report(cases: &[(String, Vec<Vec<f64>>)], seeds: usize, seconds: f64) -> Stri
          errors, and \"− one holder\" the mean paired difference from the first row on the \
          same crowds. Every belief runs the default options (components of at most 6 tracks, \
          least-loss splits). The first row is what `idmesh replay` and a deployment of one \
-         leader compute; \"as deployed\" rows are what a deployment of that many leaders \
-         computes at the default settings (`idmesh replay --leaders L`: the local rule under \
-         the regional rule, regions fitted to the crowd); the \"coupled\" rows under the \
-         regional rule weigh every split by the whole belief, which no leader of several can: \
-         they part what the regional rule costs from what the local rule costs.",
+         leader compute. \"As deployed\" rows are what a deployment of that many leaders \
+         computes at the default settings (`idmesh replay --leaders L`): a crowd of at most \
+         {DEFAULT_SPREAD_ABOVE} tracks is held whole by the first leader, so they are the first \
+         row. The \"spread\" rows are what those leaders compute when told to share so small \
+         a crowd (`spread_above = 0`, `idmesh replay --leaders L --spread-above 0`: the local \
+         rule under the regional rule, regions fitted to the crowd), beside the regional rule \
+         with every split weighed by the whole belief, which no leader of several can: they \
+         part what the regional rule costs from what the local rule costs.",
         seeds.saturating_sub(1)
     );
     let mut all: Vec<Vec<f64>> = vec![Vec::new(); CONFIGS.len()];

@@ -18,7 +18,9 @@
 //! information matrix's rows beside it, and answers both as replay does
 //! through a leader's crash. A colour stream that contradicts itself
 //! (sure reds on more tracks than there are red targets) stops no leader
-//! and is answered as the twin answers it.
+//! and is answered as the twin answers it. A crowd small enough to be
+//! held whole (at most `spread_above` tracks) is the first leader's
+//! alone, and equals plain `idmesh replay`.
 
 use idmesh_placement::{items_sent, RegionRule};
 use idmesh_protocol::trace::TraceReader;
@@ -203,6 +205,52 @@ fn default_leaders_equal_their_twin_and_share_the_items_through_1_2_4_8_leaders(
     // apply is what one leader alone applies, but for the mixes across
     // regions and the handovers.
     assert!(alone >= 3000, "one leader applied {alone} items");
+}
+
+/// A crowd of 30 among three leaders at a topology's own defaults: the
+/// first leader surveils every track and weighs its splits by the whole
+/// belief, the others apply nothing; every answer equals plain `idmesh
+/// replay` (one holder), which the twin is too.
+#[test]
+fn a_small_crowd_among_several_leaders_is_held_whole_as_replay_holds_it() {
+    let (dir, _scratch) = idmesh_tests::scratch("idmesh-whole");
+    let trace = waypoint_crowd(&dir, 30, 10, 800, 2);
+    let truths = truth_lines(&trace);
+    let settings = Settings {
+        leaders: 3,
+        rate: Some(2000.0),
+        factored: Some(Factored {
+            spread_above: idmesh_deploy::runtime::topology::default_spread_above(),
+            ..Factored::default()
+        }),
+        ..Settings::default()
+    };
+    let deployment = Deployment::start("whole", &trace, &settings);
+    let plain = replay_lines(&trace, &[]);
+    let twin = deployment.twin(&trace);
+    let p_red = |lines: &[Value]| {
+        lines
+            .iter()
+            .map(|l| floats(&l["p_red"]))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        p_red(&twin),
+        p_red(&plain),
+        "the twin of a crowd held whole is plain replay"
+    );
+    deployment.first_answer(Duration::from_secs(30));
+    check_points("held whole", &deployment, &truths, &plain);
+    assert_final("held whole", &deployment, &plain);
+    let items = deployment.items_per_leader();
+    let events = trace_events(&trace)
+        .iter()
+        .filter(|l| serde_json::from_str::<Value>(l).unwrap()["kind"] != "move")
+        .count() as u64;
+    assert!(
+        items[0] == events && items[1..].iter().all(|&i| i == 0),
+        "the first leader applies every event, the others none: {items:?}"
+    );
 }
 
 #[test]

@@ -298,7 +298,7 @@ fn report(options: &BenchOptions, measured: &Measured) -> Result<String> {
         options.duration,
         match options.belief {
             BeliefKind::Factored => format!(
-                "the factored belief at the default settings (components of at most {} tracks, least-loss splits; one leader weighs its splits by the whole belief, several by the local rule under the regional rule, regions fitted to the crowd)",
+                "the factored belief at the default settings (components of at most {} tracks, least-loss splits; one leader weighs its splits by the whole belief, several by the local rule under the regional rule, regions fitted to the crowd; the crowd is spread over several leaders whatever its size, `spread_above = 0`, since the bench measures them sharing it)",
                 default_max_component(),
             ),
             BeliefKind::Radon => format!(
@@ -538,6 +538,9 @@ impl Deployment {
         )?;
         topology.prefix = format!("idmesh/bench-{leaders}-{}", std::process::id());
         topology.belief = options.belief;
+        // It measures leaders sharing a crowd: every crowd is spread (a
+        // small one would otherwise be held whole by the first leader).
+        topology.spread_above = 0;
         topology.distributed_rule = true;
         topology.budget = options.budget;
         // Streaming flat out, leaders can be seconds behind the sensor.

@@ -44,8 +44,9 @@ pub enum Method {
     /// several leaders can run, measured beside the coupled default.
     FactoredLocal,
     /// What a deployment of this many leaders computes at the default
-    /// settings: with one, the factored belief (coupled splits); with
-    /// several, the factored belief with the local rule under the regional
+    /// settings: with one, or on a crowd small enough to be held whole,
+    /// the factored belief (coupled splits); with several sharing a larger
+    /// crowd, the factored belief with the local rule under the regional
     /// rule, regions fitted to the crowd from the trace's `move` lines
     /// (`idmesh_placement::Regional`; `idmesh replay --leaders L`).
     Deployed(usize),

@@ -46,6 +46,7 @@ mod table;
 
 use anyhow::{Context, Result};
 use grid::{parallel_map, Cell};
+use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use methods::Method;
 use plan::{Experiment, Plan, PARTICLES};
@@ -449,9 +450,11 @@ fn body(results: &Results, plots: &[Plot]) -> String {
          traces, nothing revealed at time 0). Rows marked equal memory / equal time are \
          particle filters sized to the overcomplete method. \"factored\" is what `idmesh replay` \
          and one leader compute by default (splits weighed by the whole belief); \"factored, as \
-         deployed on L leaders\" what L leaders compute at the default settings (local split \
-         rule, regional rule, regions fitted to the crowd from its `move` lines, one a second): \
-         `idmesh replay --leaders L`, which tests/tests/factored.rs holds deployments to.\n",
+         deployed on L leaders\" what L leaders compute at the default settings (a crowd of at \
+         most {DEFAULT_SPREAD_ABOVE} tracks held whole by the first leader, the \"factored\" row; a larger one \
+         spread: local split rule, regional rule, regions fitted to the crowd from its `move` \
+         lines, one a second): `idmesh replay --leaders L`, which tests/tests/factored.rs holds \
+         deployments to.\n",
         results.events,
         results.seeds,
         ns.join("/")

@@ -9,6 +9,7 @@ use super::plan::{budget, paper_table3, Experiment, STARTS};
 use super::results::{PointResult, Results, Summary};
 use super::scenarios::Start;
 use super::table::{coefficients, distributed_pair, runs_changed, seconds};
+use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
 use std::fmt::Write;
 
 /// Goal 1: within this of the exact filter's error at [`GOAL_N`] tracks…
@@ -787,7 +788,9 @@ fn deployed_cost(results: &Results) -> Option<String> {
     (!parts.is_empty()).then(|| {
         format!(
             "- **What a deployment computes** (the \"as deployed\" rows: the default settings, \
-             regions fitted to the crowd) against the centralized local rule, tracking error: {}.",
+             a crowd of at most {DEFAULT_SPREAD_ABOVE} tracks held whole by the first leader, a larger one spread \
+             over regions fitted to the crowd) against the centralized local rule, tracking \
+             error: {}.",
             parts.join("; ")
         )
     })
