@@ -376,17 +376,17 @@ impl Router {
     /// Where every track was last seen and who surveils it, after the
     /// events routed so far.
     pub fn positions(&self, sensor: &str, finished: bool) -> SensorPositions {
+        let mut places: Vec<_> = (self.regions.places().into_iter())
+            .map(|p| p.map(|(x, y)| [x, y]))
+            .collect();
+        // One per leader: a crowd held whole places none of them.
+        places.resize(self.begin.leaders.len(), None);
         SensorPositions {
             sensor: sensor.to_string(),
             events: self.events,
             finished,
             leaders: self.begin.leaders.clone(),
-            places: self
-                .regions
-                .places()
-                .into_iter()
-                .map(|p| p.map(|(x, y)| [x, y]))
-                .collect(),
+            places,
             regions: self.regions.cells(),
             positions: self.positions.clone(),
             owners: self.regions.owners().to_vec(),

@@ -1470,3 +1470,39 @@ fn batches_and_replies_carry_the_sensor_roles_epoch() {
     assert_eq!(placed.len(), 1, "placed once its point is reached");
     assert_eq!(placed[0].answer.epoch, 2);
 }
+
+/// A factored crowd of at most `spread_above` tracks among several
+/// leaders is the first leader's alone, from its `Begin` on and for good
+/// (moves included), and its positions answer names a place slot for
+/// every leader, as the coordinator checks; a larger one is spread.
+#[test]
+fn a_small_factored_crowd_is_held_whole_by_the_first_leader() {
+    use idmesh_protocol::wire::factored::{FactoredStart, WireSplit, DEFAULT_SPREAD_ABOVE};
+    let router = |tracks: usize| {
+        let config = unplaced(Some(FactoredStart {
+            max_component: 6,
+            split: WireSplit::LeastLoss { rounds: 1 },
+            shrink: true,
+            regional: true,
+            spread_above: DEFAULT_SPREAD_ABOVE,
+        }));
+        Router::new(config, &Header::new(tracks)).unwrap()
+    };
+    let small = DEFAULT_SPREAD_ABOVE as usize;
+    let mut whole = router(small);
+    assert!(whole.begin().held_whole());
+    assert!(whole.begin().owners.iter().all(|&o| o == 0));
+    for (track, x) in [(3u32, 0.0), (40, 90.0), (7, -50.0)] {
+        whole.line(&Line::Move(Move {
+            time: 1.0,
+            track,
+            x,
+            y: 0.0,
+        }));
+        whole.line(&mix(track, track + 1));
+    }
+    let positions = whole.positions("s", false);
+    assert!(positions.owners.iter().all(|&o| o == 0), "{positions:?}");
+    assert_eq!(positions.check(), Ok(()));
+    assert!(!router(small + 1).begin().held_whole());
+}

@@ -448,13 +448,9 @@ fn body(results: &Results, plots: &[Plot]) -> String {
          is given at swap 0.5 and at swap 0.1 (where our exact filter lands near the paper's \
          errors), each from the known red tracks and from the uniform prior (the same \
          traces, nothing revealed at time 0). Rows marked equal memory / equal time are \
-         particle filters sized to the overcomplete method. \"factored\" is what `idmesh replay` \
-         and one leader compute by default (splits weighed by the whole belief); \"factored, as \
-         deployed on L leaders\" what L leaders compute at the default settings (a crowd of at \
-         most {DEFAULT_SPREAD_ABOVE} tracks held whole by the first leader, the \"factored\" row; a larger one \
-         spread: local split rule, regional rule, regions fitted to the crowd from its `move` \
-         lines, one a second): `idmesh replay --leaders L`, which tests/tests/factored.rs holds \
-         deployments to.\n",
+         particle filters sized to the overcomplete method. \"factored\" is what `idmesh replay` and one leader compute by default (splits weighed by the whole belief); \
+         \"factored, as deployed on L leaders\" what L leaders compute at the default settings (a crowd of at most {DEFAULT_SPREAD_ABOVE} tracks held whole by the first leader, \
+         the \"factored\" row; a larger one spread: local split rule, regional rule, regions fitted to the crowd from its `move` lines, one a second): `idmesh replay --leaders L`, which tests/tests/factored.rs holds deployments to.\n",
         results.events,
         results.seeds,
         ns.join("/")

@@ -153,6 +153,13 @@ impl Scenario {
         }
     }
 
+    /// Whether several leaders hold the factored belief and the first
+    /// holds it whole (`FactoredStart::whole`).
+    pub(crate) fn held_whole(&self) -> bool {
+        let (tracks, leaders) = (self.header.tracks as u32, self.leaders.len());
+        leaders > 1 && (self.factored.as_ref()).is_some_and(|f| f.whole(tracks, leaders))
+    }
+
     /// The router's settings: no pruning (the setting in which the
     /// deployment must equal the centralized engine to 1e-9).
     pub(crate) fn router(&self) -> RouterConfig {

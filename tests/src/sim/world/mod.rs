@@ -238,6 +238,18 @@ pub struct Tally {
     pub claims: u64,
 }
 
+impl Tally {
+    /// The tally of a schedule before it runs: what its scenario is.
+    fn of(scenario: &Scenario) -> Tally {
+        Tally {
+            factored: scenario.factored.is_some() as u64,
+            held_whole: scenario.held_whole() as u64,
+            identities: scenario.identity.is_some() as u64,
+            ..Tally::default()
+        }
+    }
+}
+
 pub(crate) struct World {
     rng: ChaCha8Rng,
     now: Ms,
@@ -293,16 +305,12 @@ impl World {
     /// (none: [`Aimed::default`]).
     pub(crate) fn aimed(mut rng: ChaCha8Rng, aimed: Aimed) -> Result<World, Violation> {
         let scenario = Scenario::random(&mut rng).map_err(Violation::setup)?;
-        let scenario_factored = scenario.factored.is_some();
-        let held_whole = scenario.leaders.len() > 1
-            && (scenario.factored.as_ref())
-                .is_some_and(|f| f.whole(scenario.header.tracks as u32, scenario.leaders.len()));
-        let scenario_identities = scenario.identity.is_some();
         let router = Router::new(scenario.router(), &scenario.header)
             .map_err(|e| Violation::setup(e.to_string()))?;
         let gateway = scenario.gateway(router);
         let net = network::random(&mut rng);
         let leaders = slots(&scenario);
+        let tally = Tally::of(&scenario);
         let count = leaders.len();
         let mut world = World {
             rng,
@@ -322,12 +330,7 @@ impl World {
             routed: vec![BTreeSet::new(); count],
             final_answer: None,
             calm: false,
-            tally: Tally {
-                factored: scenario_factored as u64,
-                held_whole: held_whole as u64,
-                identities: scenario_identities as u64,
-                ..Tally::default()
-            },
+            tally,
             last_error: String::new(),
             aimed,
             lost_once: BTreeSet::new(),
