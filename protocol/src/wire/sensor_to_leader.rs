@@ -456,18 +456,14 @@ impl Begin {
         if let Some(factored) = &self.factored {
             factored.check()?;
         }
-        if let Some(t) = self
-            .held_whole()
-            .then(|| self.owners.iter().position(|&o| o != 0))
-        {
-            if let Some(t) = t {
-                return Err(format!(
-                    "begin owners[{t}] = {}: a crowd of {n} tracks (spread_above = {}) is held \
-                     whole by the first leader",
-                    self.owners[t],
-                    self.factored.as_ref().map_or(0, |f| f.spread_above)
-                ));
-            }
+        let elsewhere = self.owners.iter().position(|&o| o != 0);
+        if let Some(t) = elsewhere.filter(|_| self.held_whole()) {
+            return Err(format!(
+                "begin owners[{t}] = {}: a crowd of {n} tracks (spread_above = {}) is held \
+                 whole by the first leader",
+                self.owners[t],
+                self.factored.as_ref().map_or(0, |f| f.spread_above)
+            ));
         }
         if let Some(cap) = self.factored_identity {
             require((2..=IDENTITY_GROUP).contains(&cap), || {
@@ -686,6 +682,47 @@ mod tests {
             }],
         ));
         assert!(e.contains("accuracy = 0"), "{e}");
+    }
+
+    /// A factored crowd of at most `spread_above` tracks among several
+    /// leaders is the first leader's: a `Begin` giving a track to another
+    /// is refused; spread, it is not; one leader holds any crowd whole.
+    #[test]
+    fn a_crowd_held_whole_is_the_first_leaders_alone() {
+        let factored = |spread_above| crate::wire::factored::FactoredStart {
+            max_component: 6,
+            split: crate::wire::factored::WireSplit::Original,
+            shrink: true,
+            regional: true,
+            spread_above,
+        };
+        let whole = Begin {
+            factored: Some(factored(4)),
+            ..begin()
+        };
+        assert!(whole.held_whole());
+        let e = whole.check().unwrap_err();
+        assert!(
+            e.contains("owners[2] = 1") && e.contains("held whole"),
+            "{e}"
+        );
+        let gathered = Begin {
+            owners: vec![0; 4],
+            ..whole
+        };
+        assert_eq!(gathered.check(), Ok(()));
+        let spread = Begin {
+            factored: Some(factored(3)),
+            ..begin()
+        };
+        assert!(!spread.held_whole() && spread.check().is_ok());
+        let one = Begin {
+            leaders: vec!["a".into()],
+            owners: vec![0; 4],
+            ..spread
+        };
+        assert!(one.held_whole());
+        assert!(!begin().held_whole(), "a Radon stream is never held whole");
     }
 
     #[test]
