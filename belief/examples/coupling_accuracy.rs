@@ -79,13 +79,13 @@ fn main() {
     let (original, least) = (SplitRule::Original, SplitRule::LeastLoss { rounds: 1 });
     let mut configs = vec![
         config(
-            "coupled (the default: replay, one leader)",
+            "coupled (the default: replay, a crowd held whole)",
             Coupling::Coupled,
             max,
             split,
         ),
         config(
-            "local (each of several leaders)",
+            "local (each of several sharing a crowd)",
             Coupling::Local,
             max,
             split,
@@ -174,9 +174,9 @@ fn main() {
          tracks, least-loss splits: the old cut or, where one loses less, the best cut one \
          exchange of tracks away from it) unless the row says otherwise; µs/event is the time per event of the \
          whole run (CPU, this machine, shared with other work: compare rows, not runs). \
-         \"coupled\" weighs every split by the whole belief: what `idmesh replay` and a \
-         deployment of one leader, which holds the whole belief, run by default. \"local\" is \
-         what each leader runs where several share the belief, \"flat\" a local rule they ran \
+         \"coupled\" weighs every split by the whole belief: what `idmesh replay` and a deployment holding the crowd whole \
+         (one leader, or several on a crowd of at most `spread_above` tracks, 64 by default) run by default. \"local\" is \
+         what each leader runs where several share a larger crowd, \"flat\" a local rule they ran \
          before.\n",
         if extra { " --extra" } else { "" },
         started.elapsed().as_secs_f64(),
