@@ -28,7 +28,7 @@ use idmesh_belief::{
 use idmesh_eval::eval::table3_crowds;
 use idmesh_placement::{split_coupling, RegionRule, Regional, Regions};
 use idmesh_protocol::trace::{Line, TraceReader};
-use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
+use idmesh_protocol::wire::factored::{held_whole, DEFAULT_SPREAD_ABOVE};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -97,7 +97,7 @@ impl Config {
     fn resolved(&self, tracks: usize) -> (Coupling, usize) {
         match self.coupling {
             Some(coupling) => (coupling, self.leaders),
-            None => match self.leaders <= 1 || tracks <= DEFAULT_SPREAD_ABOVE as usize {
+            None => match held_whole(tracks as u32, self.leaders, DEFAULT_SPREAD_ABOVE) {
                 true => (split_coupling(true), 1),
                 false => (split_coupling(false), self.leaders),
             },

@@ -35,7 +35,7 @@ use idmesh_belief::{
     Field, PropertyFilter, Reliability,
 };
 use idmesh_placement::{split_coupling, RegionRule, Regional, Regions};
-use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
+use idmesh_protocol::wire::factored::{held_whole, DEFAULT_SPREAD_ABOVE};
 use std::time::Instant;
 
 /// Seconds of CPU time this thread has used (`CLOCK_THREAD_CPUTIME_ID`), or
@@ -208,7 +208,7 @@ impl Running {
             return Ok(Running::Plain(built));
         };
         // A crowd the deployment holds whole: one holder's belief.
-        if leaders <= 1 || field.tracks <= DEFAULT_SPREAD_ABOVE as usize {
+        if held_whole(field.tracks as u32, leaders, DEFAULT_SPREAD_ABOVE) {
             let whole = Recipe::factored(split_coupling(true)).build(field.clone())?;
             return Ok(Running::Plain(whole));
         }

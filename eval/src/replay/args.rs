@@ -5,7 +5,7 @@ use super::identity::{IdentityMethod, MarginalChoice};
 use clap::{Args, ValueEnum};
 use idmesh_belief::Coupling;
 use idmesh_placement::split_coupling;
-use idmesh_protocol::wire::factored::DEFAULT_SPREAD_ABOVE;
+use idmesh_protocol::wire::factored::{held_whole, DEFAULT_SPREAD_ABOVE};
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, Args)]
@@ -138,7 +138,7 @@ impl ReplayArgs {
     /// deployment does (`FactoredStart::whole`): one holder, no regions.
     pub(crate) fn whole(&self, tracks: usize) -> bool {
         let spread_above = self.spread_above.unwrap_or(DEFAULT_SPREAD_ABOVE);
-        self.leaders() <= 1 || tracks <= spread_above as usize
+        held_whole(tracks as u32, self.leaders(), spread_above)
     }
 
     /// The coupling of the factored belief's splits on a crowd of

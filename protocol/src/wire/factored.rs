@@ -42,6 +42,14 @@ pub struct FactoredStart {
 /// (docs/design/beliefs.md, "Who weighs a split", says why this size).
 pub const DEFAULT_SPREAD_ABOVE: u32 = 64;
 
+/// Whether the first of `leaders` leaders holds a crowd of `tracks`
+/// tracks whole on a stream that spreads crowds above `spread_above`: one
+/// leader holds any crowd whole ([`FactoredStart::whole`]; replay and the
+/// evaluation decide by it too).
+pub fn held_whole(tracks: u32, leaders: usize, spread_above: u32) -> bool {
+    leaders <= 1 || tracks <= spread_above
+}
+
 /// How a component too large to keep is split (`belief::SplitRule`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum WireSplit {
@@ -101,7 +109,7 @@ impl FactoredStart {
     /// `tracks` tracks among `leaders` leaders: it surveils every track,
     /// the others none, and its splits are weighed by all of it.
     pub fn whole(&self, tracks: u32, leaders: usize) -> bool {
-        leaders <= 1 || tracks <= self.spread_above
+        held_whole(tracks, leaders, self.spread_above)
     }
 
     /// Whether each leader follows exactly the tracks it surveils: under
