@@ -21,6 +21,7 @@ use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
 use prometheus_client::metrics::counter::ConstCounter;
 use prometheus_client::metrics::gauge::ConstGauge;
+use prometheus_client::metrics::MetricType;
 use prometheus_client::registry::Registry;
 use std::sync::Arc;
 
@@ -259,28 +260,20 @@ fn encode_ros2(
     encoder: &mut DescriptorEncoder<'_>,
     stats: &StatsAnswer,
 ) -> Result<(), std::fmt::Error> {
-    type Field = fn(&SensorStatus) -> u64;
-    let fields: [(&str, &str, Field); 2] = [
+    let fields: [SensorField<ConstCounter<u64>>; 2] = [
         (
             "sensor_ros2_messages",
             "messages read from ROS 2 topics",
-            |s| s.counters.ros2_messages,
+            |s| ConstCounter::new(s.counters.ros2_messages),
         ),
         (
             "sensor_ros2_bad",
             "ROS 2 messages refused: they did not decode",
-            |s| s.counters.ros2_bad,
+            |s| ConstCounter::new(s.counters.ros2_bad),
         ),
     ];
-    for (name, help, field) in fields {
-        let mut family =
-            encoder.encode_descriptor(name, help, None, ConstCounter::new(0u64).metric_type())?;
-        for s in &stats.sensors {
-            let labels = labels(&[("role", "sensor"), ("process", &s.counters.sensor)]);
-            ConstCounter::new(field(s)).encode(family.encode_family(&labels)?)?;
-        }
-    }
-    Ok(())
+    let kind = ConstCounter::new(0u64).metric_type();
+    encode_per_sensor(encoder, stats, kind, fields)
 }
 
 /// Each sensor role: the epoch its process holds it at, and whether its
@@ -289,25 +282,38 @@ fn encode_sensor_roles(
     encoder: &mut DescriptorEncoder<'_>,
     stats: &StatsAnswer,
 ) -> Result<(), std::fmt::Error> {
-    type Field = fn(&SensorStatus) -> i64;
-    let fields: [(&str, &str, Field); 2] = [
+    let fields: [SensorField<ConstGauge<i64>>; 2] = [
         (
             "sensor_epoch",
             "the epoch the sensor role is held at (0 without voters)",
-            |s| s.epoch as i64,
+            |s| ConstGauge::new(s.epoch as i64),
         ),
         (
             "sensor_replicated",
             "1 while the sensor's journal is replicated to a standby, 0 while it is on one disk",
-            |s| i64::from(s.standby.is_some()),
+            |s| ConstGauge::new(i64::from(s.standby.is_some())),
         ),
     ];
+    encode_per_sensor(encoder, stats, ConstGauge::new(0i64).metric_type(), fields)
+}
+
+/// A family of one metric per sensor: its name, its help, and the
+/// sensor's metric.
+type SensorField<M> = (&'static str, &'static str, fn(&SensorStatus) -> M);
+
+/// Each field's family, of metrics of `kind`, with one metric per sensor
+/// labelled by its process.
+fn encode_per_sensor<M: EncodeMetric>(
+    encoder: &mut DescriptorEncoder<'_>,
+    stats: &StatsAnswer,
+    kind: MetricType,
+    fields: impl IntoIterator<Item = SensorField<M>>,
+) -> Result<(), std::fmt::Error> {
     for (name, help, field) in fields {
-        let mut family =
-            encoder.encode_descriptor(name, help, None, ConstGauge::new(0i64).metric_type())?;
+        let mut family = encoder.encode_descriptor(name, help, None, kind)?;
         for s in &stats.sensors {
             let labels = labels(&[("role", "sensor"), ("process", &s.counters.sensor)]);
-            ConstGauge::new(field(s)).encode(family.encode_family(&labels)?)?;
+            field(s).encode(family.encode_family(&labels)?)?;
         }
     }
     Ok(())
@@ -454,6 +460,7 @@ mod tests {
                 counters: SensorStats {
                     sensor: "sensor-0".into(),
                     rejected: 2,
+                    ros2_messages: 9,
                     ..SensorStats::default()
                 },
                 epoch: 4,
@@ -496,6 +503,14 @@ mod tests {
         assert_eq!(
             value(&text, "idmesh_sensor_replicated", ("process", "sensor-0")),
             1.0
+        );
+        assert_eq!(
+            value(
+                &text,
+                "idmesh_sensor_ros2_messages",
+                ("process", "sensor-0")
+            ),
+            9.0
         );
         assert_eq!(
             value(&text, "idmesh_rejected", ("role", "coordinator")),
